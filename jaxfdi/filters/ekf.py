@@ -1,0 +1,48 @@
+"""Extended Kalman filter: the KF on Jacobians of ``f`` and ``h`` taken by ``jax.jacfwd``.
+
+``H = dh/dx (m, u)``, ``r = y - h(m, u)``, Joseph update as in ``kalman``;
+``F = df/dx (m+, u)``, ``m' = f(m+, u)``, ``P' = F P+ F^T + Q`` (Jazwinski 1970).
+Jacobians are never hand-typed (printed Jacobians in papers carry typos).
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax
+from jax import Array
+
+from jaxfdi import _checks, _linalg
+from jaxfdi.filters._base import Filter, GaussianState, check_step_inputs, gaussian_init
+from jaxfdi.filters.kalman import finish_step, joseph_update
+
+
+def extended_kalman_filter(
+    f: Callable[[Array, Array, Any], Array],
+    h: Callable[[Array, Array, Any], Array],
+    Q: Array,
+    R: Array,
+    params: Any = None,
+) -> Filter:
+    """EKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
+
+    Args:
+      f, h: pure functions of ``(x (n,), u (nu,), params)``.
+      Q: (n, n) process-noise covariance; R: (m, m) measurement-noise covariance.
+      params: any pytree passed to ``f`` and ``h`` (tunable, vmappable).
+    """
+    n = _checks.check_covariance("Q", Q)
+    m = _checks.check_covariance("R", R)
+
+    def step(state: GaussianState, y: Array, u: Array):
+        check_step_inputs(y, u, m, None)
+        y_pred = h(state.mean, u, params)
+        _checks.check_shape("h(x, u, params)", y_pred, (m,), "one predicted measurement")
+        H = jax.jacfwd(h)(state.mean, u, params)
+        post = joseph_update(state.mean, state.cov, y, y_pred, H, R)
+        next_mean = f(post.mean, u, params)
+        _checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
+        F = jax.jacfwd(f)(post.mean, u, params)
+        next_cov = _linalg.symmetrize(F @ post.cov @ F.T + Q)
+        return finish_step(state, post, next_mean, next_cov)
+
+    return Filter(gaussian_init(n), step)

@@ -1,0 +1,43 @@
+"""Rigid-body angular rates (Euler's equations), a small nonlinear model.
+
+``I w' = tau - w x (I w)`` with principal inertias ``I = diag(Ixx, Iyy, Izz)``, state
+``w = [p, q, r]`` (rad/s), input torque ``tau`` (N m), integrated by one classical RK4
+step per sample. Measurement: the rates themselves (rate gyros). The gyroscopic term is
+quadratic in ``w``, so the UKF and the EKF differ from each other and from a KF.
+Default inertias are the F-16's (Stevens & Lewis), in kg m^2.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+
+class RigidBodyParams(NamedTuple):
+    inertia: Array  # (3,) principal moments of inertia
+    dt: Array       # () sample period
+
+
+def rigid_body_params(dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dtype=None) -> RigidBodyParams:
+    dtype = dtype or jnp.result_type(float)
+    return RigidBodyParams(jnp.asarray(inertia, dtype), jnp.asarray(dt, dtype))
+
+
+def _rate_derivative(w: Array, tau: Array, inertia: Array) -> Array:
+    return (tau - jnp.cross(w, inertia * w)) / inertia
+
+
+def rigid_body_transition(w: Array, tau: Array, params: RigidBodyParams) -> Array:
+    """One RK4 step of Euler's rotation equations."""
+    dt = params.dt
+    k1 = _rate_derivative(w, tau, params.inertia)
+    k2 = _rate_derivative(w + 0.5 * dt * k1, tau, params.inertia)
+    k3 = _rate_derivative(w + 0.5 * dt * k2, tau, params.inertia)
+    k4 = _rate_derivative(w + dt * k3, tau, params.inertia)
+    return w + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def rigid_body_observation(w: Array, tau: Array, params: RigidBodyParams) -> Array:
+    """Rate gyros: ``y = w``."""
+    return w

@@ -18,3 +18,11 @@ def enable_x64(enable: bool = True) -> None:
     import jax
 
     jax.config.update("jax_enable_x64", enable)
+
+from jaxfdi import detection, faults, metrics, models  # noqa: E402
+from jaxfdi.detection import chi2_detector, chi2_threshold  # noqa: E402
+from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault, stack_faults  # noqa: E402
+from jaxfdi.metrics import DetectionRecord, DetectionSummary, confusion_matrix, summarize_detection  # noqa: E402
+from jaxfdi.montecarlo import monte_carlo  # noqa: E402
+from jaxfdi.monitor import MonitorHistory, MonitorResult, monitor  # noqa: E402
+from jaxfdi.simulate import SimStep, Simulator, linear_simulator, simulate, simulator  # noqa: E402

@@ -1,0 +1,4 @@
+from jaxfdi.cli import main
+import sys
+
+sys.exit(main())

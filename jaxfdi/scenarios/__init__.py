@@ -1,0 +1,6 @@
+"""Paper scenarios: short compositions of library pieces, each runnable from the CLI."""
+from jaxfdi.scenarios.engine_chi2 import EngineChi2Result, engine_chi2_study, engine_faults
+
+SCENARIOS = {"engine-chi2": engine_chi2_study}
+
+__all__ = ["SCENARIOS", "EngineChi2Result", "engine_chi2_study", "engine_faults"]

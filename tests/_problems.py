@@ -1,0 +1,41 @@
+"""Shared small test problems (fixed shapes, so compiled functions are reused)."""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxfdi
+from jaxfdi.models import (
+    engine_model,
+    linear_observation,
+    linear_transition,
+    rigid_body_observation,
+    rigid_body_params,
+    rigid_body_transition,
+)
+
+
+def engine_data(T: int = 120, seed: int = 0):
+    """Engine model with a simulated fault-free sequence: (model, ys, us, m0, P0)."""
+    model = engine_model()
+    us = jnp.full((T, 1), 0.01)
+    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.zeros(7), us, jax.random.key(seed))
+    return model, np.asarray(truth.measurement), np.asarray(us), np.zeros(7), 10.0 * np.asarray(model.Q)
+
+
+def rigid_body_data(T: int = 150, seed: int = 1, dtype=jnp.float64):
+    """3-state rigid-body rates with torques; returns (params, Q, R, ys, us, m0, P0)."""
+    params = rigid_body_params(dtype=dtype)
+    k = np.arange(T)
+    us = np.stack([2000 * np.sin(0.05 * k), 5000 * np.cos(0.03 * k), 3000 * np.ones(T)], 1)
+    Q = np.eye(3) * 1e-6
+    R = np.eye(3) * 1e-4
+    sim = jaxfdi.simulator(rigid_body_transition, rigid_body_observation, Q, R, params)
+    _, truth = jaxfdi.simulate(sim, jnp.array([0.5, -0.3, 0.4], dtype), jnp.asarray(us, dtype), jax.random.key(seed))
+    return params, Q, R, np.asarray(truth.measurement), us, np.zeros(3), 0.1 * np.eye(3)
+
+
+def linear_as_nonlinear(model):
+    """The (f, h, Q, R, params) of a linear model, for EKF/UKF-equals-KF tests."""
+    return linear_transition, linear_observation, model.Q, model.R, model

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -24,10 +25,23 @@ def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
     return path
 
 
+def _strict(value: Any) -> Any:
+    """NaN/inf -> None (JSON null), recursively, so the file is standard JSON."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    return value
+
+
 def write_json(path: str | Path, data: Any) -> Path:
+    """Write ``data`` as strict JSON (undefined numbers such as a NaN rate become null)."""
+
     def write(tmp: str) -> None:
         with open(tmp, "w") as fh:
-            json.dump(data, fh, indent=2, allow_nan=True)
+            json.dump(_strict(data), fh, indent=2, allow_nan=False)
             fh.write("\n")
 
     return atomic_write(path, write)

@@ -5,8 +5,10 @@ for every run, where ``key_i`` is the i-th of ``jax.random.split(key, num_runs)`
 ``per_run_i`` the i-th slice of any pytree of per-run data (faults, magnitudes, initial
 states, models). Runs are evaluated ``chunk_size`` at a time by one compiled
 ``jit(vmap(run_one))``; each chunk's run axis is sharded over all local devices with
-``jax.sharding`` (``NamedSharding(Mesh(devices, ("runs",)), P("runs"))``), so results do
-not depend on the number of devices or the chunk size. Outputs come back as NumPy.
+``jax.sharding`` (``NamedSharding(Mesh(devices, ("runs",)), P("runs"))``). Each run's
+randomness depends only on its own key, so results do not depend on the number of
+devices or the chunk size (up to floating-point rounding: XLA may vectorise a batch of
+different width differently). Outputs come back as NumPy.
 """
 from __future__ import annotations
 

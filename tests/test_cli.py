@@ -1,0 +1,47 @@
+"""The command line end to end at small size: table on stdout, JSON and PNG written."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+from scipy import stats
+
+FAULTS = ["actuator", "RPM", "P2", "T2", "P4", "T4", "none"]
+
+
+@pytest.fixture(scope="module")
+def cli_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cli")
+    env = dict(os.environ, JAXFDI_CACHE_DIR=str(tmp / "cache"))
+    proc = subprocess.run(
+        [sys.executable, "-m", "jaxfdi", "run", "engine-chi2", "--runs", "4", "--seed", "3", "--out", str(tmp / "out")],
+        capture_output=True, text=True, env=env, timeout=600,
+    )
+    return proc, tmp
+
+
+def test_engine_chi2_writes_table_json_and_png(cli_run):
+    proc, tmp = cli_run
+    assert proc.returncode == 0, proc.stderr
+    for name in FAULTS:
+        assert f"\n{name} " in proc.stdout
+    assert "monte carlo: 28/28 runs" in proc.stderr  # the progress display
+    data = json.loads((tmp / "out" / "engine-chi2.json").read_text())
+    assert [row["fault"] for row in data["rows"]] == FAULTS
+    assert data["config"]["runs_per_fault"] == 4 and data["config"]["seed"] == 3
+    assert data["config"]["threshold"] == pytest.approx(stats.chi2.isf(0.005, 4 * 5), rel=1e-9)
+    for row in data["rows"][:-1]:
+        assert row["runs"] == 4 and 0.0 <= row["detection_rate"] <= 1.0
+    assert data["rows"][-1]["detection_rate"] is None  # strict JSON: no fault to detect -> null, not NaN
+    png = (tmp / "out" / "engine-chi2.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    assert sorted(p.name for p in (tmp / "out").iterdir()) == ["engine-chi2.json", "engine-chi2.png"]
+    assert any((tmp / "cache").iterdir()), "persistent compilation cache not written"
+
+
+@pytest.mark.parametrize("args", [["--runs", "0"], ["--pfa", "1.5"]])
+def test_bad_options_exit_with_usage_error(args):
+    proc = subprocess.run([sys.executable, "-m", "jaxfdi", "run", "engine-chi2", *args],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "must" in proc.stderr

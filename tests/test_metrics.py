@@ -1,0 +1,110 @@
+"""Detection metrics and window statistics against brute-force Python references."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum, normalized_innovation_squared
+from jaxfdi.faults import NEVER
+from jaxfdi.metrics import (
+    DetectionRecord,
+    confusion_matrix,
+    isolation_accuracy,
+    record_from_alarms,
+    record_init,
+    record_update,
+    summarize_detection,
+)
+
+
+def reference_record(alarms, onset):
+    first = next((k for k, a in enumerate(alarms) if a), -1)
+    detection = next((k for k, a in enumerate(alarms) if a and k >= onset), -1)
+    false_alarms = sum(1 for k, a in enumerate(alarms) if a and k < onset)
+    return onset, first, detection, false_alarms, sum(1 for k in range(len(alarms)) if k < onset)
+
+
+@pytest.fixture(scope="module")
+def random_alarms():
+    rng = np.random.default_rng(0)
+    alarms = rng.random((200, 30)) < rng.uniform(0.0, 0.2, size=(200, 1))
+    onsets = rng.integers(0, 40, size=200)  # some beyond the horizon: fault-free runs
+    onsets[:10] = NEVER
+    return alarms, onsets
+
+
+def test_streaming_record_equals_batch_record_equals_brute_force(random_alarms):
+    alarms, onsets = random_alarms
+
+    def streaming(alarm_row, onset):
+        def body(record, ka):
+            return record_update(record, *ka), None
+        return jax.lax.scan(body, record_init(onset), (jnp.arange(alarm_row.shape[0]), alarm_row))[0]
+
+    stream = jax.jit(jax.vmap(streaming))(alarms, onsets)
+    batch = jax.jit(jax.vmap(record_from_alarms))(alarms, onsets)
+    for i in range(alarms.shape[0]):
+        ref = reference_record(list(alarms[i]), int(onsets[i]))
+        assert tuple(int(x[i]) for x in stream) == ref
+        assert tuple(int(x[i]) for x in batch) == ref
+
+
+def test_summary_on_hand_made_records():
+    # 4 runs of 100 steps, Ts = 0.1 s: onsets 50, 50, 60 and a fault-free run
+    onset = np.array([50, 50, 60, NEVER])
+    records = DetectionRecord(
+        onset=onset,
+        first_alarm=np.array([10, 55, -1, 70]),
+        detection_step=np.array([52, 55, -1, -1]),
+        false_alarms=np.array([1, 0, 0, 3]),
+        pre_onset_steps=np.array([50, 50, 60, 100]),
+    )
+    s = summarize_detection(records, horizon=100, Ts=0.1)
+    assert s.runs == 4 and s.faulty_runs == 3
+    assert s.detection_rate == pytest.approx(2 / 3) and s.missed_detection_rate == pytest.approx(1 / 3)
+    assert s.false_alarm_rate == pytest.approx(2 / 4)
+    assert s.false_alarm_rate_per_step == pytest.approx(4 / 260)
+    assert s.delay_median == pytest.approx(0.35) and s.delay_mean == pytest.approx(0.35)
+    assert s.delay_p90 == pytest.approx(np.percentile([0.2, 0.5], 90))
+
+
+def test_confusion_matrix_and_isolation_accuracy_equal_counting():
+    rng = np.random.default_rng(1)
+    true = rng.integers(0, 4, 500)
+    predicted = np.where(rng.random(500) < 0.7, true, rng.integers(-1, 4, 500))
+    M = np.asarray(confusion_matrix(true, predicted, 4))
+    brute = np.zeros((4, 5), int)
+    for t, p in zip(true, predicted):
+        brute[t, 4 if p < 0 else p] += 1
+    np.testing.assert_array_equal(M, brute)
+    np.testing.assert_allclose(isolation_accuracy(M), np.diag(brute[:, :4]) / brute.sum(1))
+
+
+def test_window_sum_first_crossing_and_online_detector_equal_references():
+    rng = np.random.default_rng(2)
+    x = rng.chisquare(3, size=(50, 4))
+    for window in (1, 3, 7):
+        expected = np.stack([x[max(0, k - window + 1):k + 1].sum(0) for k in range(50)])
+        np.testing.assert_allclose(moving_window_sum(jnp.asarray(x), window), expected, rtol=1e-12)
+        threshold = 3.0 * window + 4.0
+        crossing = np.asarray(first_crossing(jnp.asarray(expected), threshold, start=5))
+        for j in range(4):
+            hits = [k for k in range(5, 50) if expected[k, j] > threshold]
+            assert crossing[j] == (hits[0] if hits else -1)
+        detector = chi2_detector(threshold, window)
+
+        def body(state, value):
+            return detector.step(state, value)
+
+        _, (statistic, alarm) = jax.lax.scan(body, detector.init(), jnp.asarray(x[:, 0]))
+        np.testing.assert_allclose(statistic, expected[:, 0], rtol=1e-12)
+        np.testing.assert_array_equal(alarm, expected[:, 0] > threshold)
+
+
+def test_nis_equals_explicit_inverse():
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(10, 4, 4))
+    S = A @ np.swapaxes(A, 1, 2) + np.eye(4)
+    r = rng.normal(size=(10, 4))
+    expected = np.einsum("ki,kij,kj->k", r, np.linalg.inv(S), r)
+    np.testing.assert_allclose(normalized_innovation_squared(jnp.asarray(r), jnp.asarray(S)), expected, rtol=1e-10)

@@ -1,0 +1,136 @@
+"""Execute the example notebooks end to end with nbclient and check their outputs.
+
+The notebook runs in a fresh ``python3`` Jupyter kernel with ``notebooks/`` as its
+working directory and ``JAXFDI_NB_RUNS=5`` (a small Monte Carlo). If no usable
+``python3`` kernelspec exists (a fresh CI machine after ``pip install -e ".[dev]"``), one
+for the current interpreter is installed first.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+from jupyter_client.kernelspec import KernelSpecManager, NoSuchKernel
+from nbclient import NotebookClient
+
+NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
+KERNEL = "python3"
+CELL_TIMEOUT_S = 300
+FAULT_NAMES = ("actuator", "RPM", "P2", "T2", "P4", "T4", "none")
+# jupyter_client replaces these argv[0] values by sys.executable when it starts a kernel
+_PYTHON_ALIASES = {"python", f"python{sys.version_info[0]}", "python{}.{}".format(*sys.version_info[:2])}
+
+
+def _runs_this_interpreter(argv: list[str]) -> bool:
+    if not argv:
+        return False
+    if argv[0] in _PYTHON_ALIASES:
+        return True
+    exe = shutil.which(argv[0]) or argv[0]
+    try:
+        return os.path.samefile(exe, sys.executable)
+    except OSError:
+        return False
+
+
+def _usable_kernel() -> bool:
+    try:
+        spec = KernelSpecManager().get_kernel_spec(KERNEL)
+    except NoSuchKernel:
+        return False
+    return _runs_this_interpreter(spec.argv)
+
+
+@pytest.fixture
+def python3_kernel(tmp_path_factory, monkeypatch) -> str:
+    """Make sure the ``python3`` kernelspec starts *this* interpreter (with jaxfdi)."""
+    if _usable_kernel():
+        return KERNEL
+    from ipykernel import kernelspec
+
+    try:
+        KernelSpecManager().get_kernel_spec(KERNEL)
+        missing = False
+    except NoSuchKernel:
+        missing = True
+    if missing:
+        try:  # the usual fix on a fresh machine: a user-level kernelspec
+            kernelspec.install(user=True, kernel_name=KERNEL)
+        except Exception:  # e.g. read-only home: fall through to a private one
+            pass
+    if not _usable_kernel():
+        # Missing and not installable, or a python3 spec of another interpreter: install
+        # a private one for sys.executable and put it first on JUPYTER_PATH (this test only).
+        prefix = tmp_path_factory.mktemp("jupyter-prefix")
+        kernelspec.install(prefix=str(prefix), kernel_name=KERNEL)
+        data_dir = prefix / "share" / "jupyter"
+        monkeypatch.setenv("JUPYTER_PATH", os.pathsep.join(filter(None, [str(data_dir), os.environ.get("JUPYTER_PATH")])))
+    assert _usable_kernel(), "could not provide a python3 Jupyter kernel for this interpreter"
+    return KERNEL
+
+
+def _execute(name: str, kernel: str) -> nbformat.NotebookNode:
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    client = NotebookClient(
+        nb,
+        timeout=CELL_TIMEOUT_S,
+        kernel_name=kernel,
+        resources={"metadata": {"path": str(NOTEBOOKS)}},  # cells run with notebooks/ as cwd
+    )
+    client.execute()
+    return nb
+
+
+def _outputs(nb: nbformat.NotebookNode):
+    for cell in nb.cells:
+        if cell.cell_type == "code":
+            yield from cell.get("outputs", [])
+
+
+def _text(output) -> str:
+    if output.output_type == "stream":
+        return output.text
+    return output.get("data", {}).get("text/plain", "")
+
+
+def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch):
+    name = "01_kalman_monte_carlo.ipynb"
+    stored = nbformat.read(NOTEBOOKS / name, as_version=4)
+    # the notebook is kept in the repo without outputs
+    assert all(not c.get("outputs") for c in stored.cells if c.cell_type == "code")
+
+    monkeypatch.setenv("JAXFDI_NB_RUNS", "5")  # inherited by the kernel process
+    before = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
+    nb = _execute(name, python3_kernel)
+    after = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
+    assert after == before, f"the notebook wrote files into the repo: {sorted(set(after) - set(before))}"
+
+    outputs = list(_outputs(nb))
+    errors = [o for o in outputs if o.output_type == "error"]
+    assert not errors, f"{errors[0].ename}: {errors[0].evalue}"
+    stderr = "".join(o.text for o in outputs if o.output_type == "stream" and o.name == "stderr")
+    assert "Traceback" not in stderr, stderr
+
+    text = "\n".join(_text(o) for o in outputs)
+    assert "runs per fault: 5" in text  # the kernel saw JAXFDI_NB_RUNS
+    assert "spectral radius of Phi = 0.9858" in text
+
+    # the Monte Carlo table: header, then one line per fault in the seed-003 order
+    table_lines = text[text.index("fault      magnitude"):].splitlines()
+    assert "det. rate" in table_lines[0] and "FA/step" in table_lines[0]
+    rows = table_lines[2:2 + len(FAULT_NAMES)]
+    assert [r.split()[0] for r in rows] == list(FAULT_NAMES)
+    for row in rows[:-1]:  # faulty rows: these faults are detected, within a fraction of a second
+        fields = row.split()
+        det_rate, fa_rate, delay_median = float(fields[2]), float(fields[3]), float(fields[5])
+        assert det_rate >= 0.8, row
+        assert 0.0 <= fa_rate <= 1.0, row
+        assert 0.0 <= delay_median < 0.5, row
+    assert rows[-1].split()[2] == "-"  # fault-free: no detection rate
+
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) >= 2, f"expected the run figure and the Monte Carlo figure, got {len(images)} PNG outputs"

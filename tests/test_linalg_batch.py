@@ -1,0 +1,99 @@
+"""The element-wise small-matrix linear algebra against NumPy/SciPy, and the batch driver
+``run_filter_batch`` against the loop over ``run_filter``."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg
+
+import jaxfdi
+from _problems import engine_data, rigid_body_data
+from jaxfdi import _linalg
+from jaxfdi.models import rigid_body_observation, rigid_body_transition
+
+
+def random_spd(rng, n):
+    a = rng.normal(size=(n, n))
+    return a @ a.T + n * np.eye(n)
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 8, 11])  # 11 > UNROLL_MAX: the LAPACK path
+def test_cholesky_and_solves_equal_scipy(n):
+    rng = np.random.default_rng(n)
+    A, b, B = random_spd(rng, n), rng.normal(size=n), rng.normal(size=(n, 3))
+    L = np.asarray(_linalg.cholesky(jnp.asarray(A)))
+    L_ref = np.linalg.cholesky(A)
+    np.testing.assert_allclose(L, L_ref, rtol=1e-13, atol=1e-13)
+    assert np.all(np.triu(L, 1) == 0)
+    np.testing.assert_allclose(_linalg.solve_lower(L_ref, b), scipy.linalg.solve_triangular(L_ref, b, lower=True), rtol=1e-12)
+    np.testing.assert_allclose(_linalg.solve_lower(L_ref, B), scipy.linalg.solve_triangular(L_ref, B, lower=True), rtol=1e-12)
+    np.testing.assert_allclose(_linalg.solve_lower_transposed(L_ref, B),
+                               scipy.linalg.solve_triangular(L_ref, B, lower=True, trans="T"), rtol=1e-12)
+    np.testing.assert_allclose(_linalg.cho_solve(L_ref, B), np.linalg.solve(A, B), rtol=1e-11)
+    np.testing.assert_allclose(_linalg.psd_solve(A, b), np.linalg.solve(A, b), rtol=1e-11)
+
+
+def test_cholesky_vmapped_and_not_positive_definite_gives_nan():
+    rng = np.random.default_rng(0)
+    batch = np.stack([random_spd(rng, 5) for _ in range(4)])
+    batch[2, 3, 3] = -50.0  # not positive definite
+    L = np.asarray(jax.vmap(_linalg.cholesky)(jnp.asarray(batch)))
+    for i in (0, 1, 3):
+        np.testing.assert_allclose(L[i], np.linalg.cholesky(batch[i]), rtol=1e-13)
+    finite = np.asarray(jax.vmap(_linalg.cholesky_is_finite)(jnp.asarray(L)))
+    assert finite.tolist() == [True, True, False, True]
+
+
+@pytest.fixture(scope="module")
+def engine_batch():
+    model, ys, us, m0, P0 = engine_data(T=60)
+    ys_b = np.stack([ys, ys + 3.0, 0.9 * ys])
+    return model, ys_b, us, m0, P0
+
+
+def test_batch_driver_equals_loop_and_shares_the_covariance(engine_batch):
+    model, ys_b, us, m0, P0 = engine_batch
+    kf = jaxfdi.kalman_filter(model)
+    final, info = jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys_b, us)
+    assert info.filtered_cov.shape == (60, 7, 7) and final.cov.shape == (7, 7)  # once, no run axis
+    assert info.filtered_mean.shape == (3, 60, 7)
+    for i in range(3):
+        final_i, ref = jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b[i], us)
+        for name in ("filtered_mean", "innovation", "log_likelihood", "nis"):
+            np.testing.assert_allclose(getattr(info, name)[i], getattr(ref, name), rtol=1e-12, atol=1e-9)
+        for name in ("filtered_cov", "predicted_cov", "innovation_cov"):
+            np.testing.assert_allclose(getattr(info, name), getattr(ref, name), rtol=1e-12)
+        np.testing.assert_allclose(final.mean[i], final_i.mean, rtol=1e-12)
+    # per-run inputs, and covariances kept per run on request
+    _, per_run = jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys_b, np.stack([us] * 3), shared_covariance=False)
+    assert per_run.filtered_cov.shape == (3, 60, 7, 7)
+    np.testing.assert_allclose(per_run.filtered_cov[1], info.filtered_cov, rtol=1e-12)
+
+
+def test_batch_driver_keeps_data_dependent_covariances_per_run(engine_batch):
+    model, ys_b, us, m0, P0 = engine_batch
+    kf = jaxfdi.kalman_filter(model, missing_measurements=True)
+    _, info = jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys_b, us)  # "auto"
+    assert info.filtered_cov.shape == (3, 60, 7, 7)
+    with pytest.raises(ValueError, match="shared_covariance"):
+        jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys_b, us, shared_covariance=True)
+    params, Q, R, ys, us_rb, m0_rb, P0_rb = rigid_body_data(T=30)
+    ukf = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
+    _, info = jaxfdi.run_filter_batch(ukf, ukf.init(m0_rb, P0_rb), np.stack([ys, ys]), us_rb)
+    _, ref = jaxfdi.run_filter(ukf, ukf.init(m0_rb, P0_rb), ys, us_rb)
+    assert info.filtered_cov.shape == (2, 30, 3, 3)
+    np.testing.assert_allclose(info.filtered_mean[1], ref.filtered_mean, rtol=1e-9)
+
+
+@pytest.mark.parametrize("bad, match", [
+    (dict(ys=np.zeros((60, 5))), r"ys: expected shape \(N, T, m\)"),
+    (dict(us=np.zeros((2, 60, 1))), r"us: expected 3 runs"),
+    (dict(us=np.zeros(60)), r"us: expected shape \(T, nu\)"),
+    (dict(shared_covariance="yes"), "shared_covariance"),
+])
+def test_batch_driver_bad_input(engine_batch, bad, match):
+    model, ys_b, us, m0, P0 = engine_batch
+    kf = jaxfdi.kalman_filter(model)
+    kwargs = dict(ys=ys_b, us=us) | bad
+    with pytest.raises(ValueError, match=match):
+        jaxfdi.run_filter_batch(kf, kf.init(m0, P0), **kwargs)

@@ -6,6 +6,7 @@ from jaxfdi.filters import (
     extended_kalman_filter,
     kalman_filter,
     run_filter,
+    run_filter_batch,
     unscented_kalman_filter,
 )
 from jaxfdi.models import LinearGaussianModel, c2d

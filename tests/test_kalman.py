@@ -45,9 +45,22 @@ def engine():
     return engine_data()
 
 
+def _runner(missing_measurements):
+    def run(model, m0, P0, ys, us):
+        kf = jaxfdi.kalman_filter(model, missing_measurements=missing_measurements)
+        return jaxfdi.run_filter(kf, kf.init(m0, P0), ys, us)
+
+    return jax.jit(run)
+
+
 @pytest.fixture(scope="module")
 def run_kf():
-    return jax.jit(lambda model, m0, P0, ys, us: jaxfdi.run_filter(jaxfdi.kalman_filter(model), jaxfdi.kalman_filter(model).init(m0, P0), ys, us))
+    return _runner(False)
+
+
+@pytest.fixture(scope="module")
+def run_kf_missing():
+    return _runner(True)
 
 
 def assert_rel(actual, expected, rtol, name):
@@ -66,16 +79,34 @@ def test_kf_equals_filterpy(engine, run_kf):
     assert np.all(np.asarray(info.num_observed) == 5)
 
 
-def test_missing_measurements_equal_filterpy_predict_only(engine, run_kf):
+def test_missing_measurements_equal_filterpy_predict_only(engine, run_kf_missing):
     model, ys, us, m0, P0 = engine
     missing = {3, 4, 50}
     ys_missing = ys.copy()
     ys_missing[list(missing)] = np.nan
-    _, info = run_kf(model, m0, P0, ys_missing, us)
+    _, info = run_kf_missing(model, m0, P0, ys_missing, us)
     ref = filterpy_reference(model, ys, us, m0, P0, missing)
     for name in ("filtered_mean", "filtered_cov", "log_likelihood"):
         assert_rel(getattr(info, name), ref[name], RTOL, name)
     assert np.all(np.asarray(info.num_observed)[list(missing)] == 0)
+
+
+def test_complete_data_is_the_same_with_or_without_missing_support(engine, run_kf, run_kf_missing):
+    model, ys, us, m0, P0 = engine
+    _, info = run_kf(model, m0, P0, ys, us)
+    _, info_missing = run_kf_missing(model, m0, P0, ys, us)
+    for name in ("filtered_mean", "filtered_cov", "log_likelihood", "nis"):
+        assert_rel(getattr(info, name), np.asarray(getattr(info_missing, name)), 1e-14, name)
+
+
+def test_nan_without_missing_support_is_flagged_unhealthy(engine, run_kf):
+    """A NaN is not silently propagated: the step that meets it reports healthy=False."""
+    model, ys, us, m0, P0 = engine
+    ys_nan = ys.copy()
+    ys_nan[10, 1] = np.nan
+    _, info = run_kf(model, m0, P0, ys_nan, us)
+    healthy = np.asarray(info.healthy)
+    assert healthy[:10].all() and not healthy[10]
 
 
 def test_partially_missing_equals_filter_on_observed_rows(engine):
@@ -84,7 +115,7 @@ def test_partially_missing_equals_filter_on_observed_rows(engine):
     k_missing, j_missing = 7, 2
     ys_nan = ys.copy()
     ys_nan[k_missing, j_missing] = np.nan
-    kf = jaxfdi.kalman_filter(model)
+    kf = jaxfdi.kalman_filter(model, missing_measurements=True)
     state = kf.init(m0, P0)
     keep = np.array([j for j in range(5) if j != j_missing])
     reduced = model._replace(C=model.C[keep], D=model.D[keep], R=model.R[np.ix_(keep, keep)])

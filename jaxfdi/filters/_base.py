@@ -7,13 +7,14 @@ conditions it on ``y[k]`` and then predicts ``x[k+1|k]`` with ``u[k]``. This mat
 """
 from __future__ import annotations
 
+from functools import partial
 from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import _checks, _linalg
 
 
 class GaussianState(NamedTuple):
@@ -39,15 +40,69 @@ class FilterInfo(NamedTuple):
     healthy: Array          # ()     bool: S and P[k|k] positive definite and all finite
 
 
+class ConditionedGaussian(NamedTuple):
+    """Result of one measurement update: the posterior and what the update saw."""
+
+    mean: Array            # (n,)   x[k|k]
+    cov: Array             # (n, n) P[k|k]
+    innovation: Array      # (m,)
+    innovation_cov: Array  # (m, m)
+    log_likelihood: Array  # ()
+    nis: Array             # ()
+    num_observed: Array    # ()
+    healthy: Array         # () bool
+
+
 class Filter(NamedTuple):
-    """A filter as two pure functions.
+    """A filter as pure functions.
 
     ``init(mean, cov) -> state`` builds the prior of the first step;
     ``step(state, y, u) -> (state, info)`` conditions on ``y[k]`` and predicts with ``u[k]``.
+
+    Gaussian filters (KF, EKF, UKF) also expose the two halves of ``step``, which is
+    what multiple-model filters need to mix between them:
+    ``update(state, y, u) -> ConditionedGaussian`` and
+    ``predict(posterior: GaussianState, u) -> GaussianState``; ``step`` is
+    ``predict(update(...))`` plus the ``FilterInfo``.
     """
 
     init: Callable[..., Any]
     step: Callable[[Any, Array, Array], tuple[Any, Any]]
+    update: Callable[[Any, Array, Array], ConditionedGaussian] | None = None
+    predict: Callable[[GaussianState, Array], GaussianState] | None = None
+
+
+def finish_step(prior: GaussianState, post: ConditionedGaussian, prediction: GaussianState):
+    """Assemble the next state and the step's ``FilterInfo``; checks ``P[k|k]`` is PD."""
+    chol_P = _linalg.cholesky(post.cov)
+    healthy = post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
+    info = FilterInfo(
+        predicted_mean=prior.mean,
+        predicted_cov=prior.cov,
+        filtered_mean=post.mean,
+        filtered_cov=post.cov,
+        innovation=post.innovation,
+        innovation_cov=post.innovation_cov,
+        log_likelihood=post.log_likelihood,
+        nis=post.nis,
+        num_observed=post.num_observed,
+        healthy=healthy,
+    )
+    return prediction, info
+
+
+def gaussian_filter(
+    n: int,
+    update: Callable[[GaussianState, Array, Array], ConditionedGaussian],
+    predict: Callable[[GaussianState, Array], GaussianState],
+) -> Filter:
+    """A ``Filter`` from its measurement update and time update (state size ``n``)."""
+
+    def step(state: GaussianState, y: Array, u: Array):
+        post = update(state, y, u)
+        return finish_step(state, post, predict(GaussianState(post.mean, post.cov), u))
+
+    return Filter(gaussian_init(n), step, update, predict)
 
 
 def gaussian_init(n: int, name: str = "filter") -> Callable[[Array, Array], GaussianState]:
@@ -91,7 +146,8 @@ def run_filter(
     Args:
       filt: a ``Filter``.
       init_state: ``filt.init(mean, cov)``, the prior of the first step.
-      ys: (T, m) measurements; NaN entries are treated as missing.
+      ys: (T, m) measurements (NaN = missing for filters built with
+        ``missing_measurements=True``).
       us: (T, nu) inputs, or ``None`` for a model without inputs.
 
     Returns:
@@ -107,6 +163,82 @@ def run_filter(
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
     _checks.check_same_length(("ys", "us"), ys, us)
+    return _scan_filter(filt, init_state, ys, us)
+
+
+_COVARIANCE_FIELDS = ("predicted_cov", "filtered_cov", "innovation_cov")
+
+
+def run_filter_batch(
+    filt: Filter,
+    init_state: Any,
+    ys: Array,
+    us: Array | None = None,
+    shared_covariance: bool | str = "auto",
+) -> tuple[Any, Any]:
+    """Run a filter over a batch of sequences (Monte Carlo runs) with ``vmap``.
+
+    When every run shares the model and the initial covariance, a linear Kalman filter's
+    covariances, gains and innovation covariances do not depend on the data: XLA then
+    computes them once for the whole batch, and this driver returns them once (no run
+    axis) instead of ``N`` identical copies — for 100 engine runs of 1000 steps the
+    copies alone are 39 MB and half the run time.
+
+    Args:
+      filt: a ``Filter``.
+      init_state: the prior of the first step, shared by all runs.
+      ys: (N, T, m) measurements of N runs.
+      us: (T, nu) inputs shared by the runs, (N, T, nu) per run, or ``None``.
+      shared_covariance: ``True``: return ``predicted_cov``, ``filtered_cov``,
+        ``innovation_cov`` and the final covariance without the run axis (a
+        ``ValueError`` if they depend on the run: a nonlinear filter, or
+        ``missing_measurements=True``); ``False``: with the run axis, always;
+        ``"auto"``: shared when they are, else with the run axis.
+
+    Returns:
+      ``(final_state, info)`` with a leading run axis N on every per-run field.
+    """
+    ys = jnp.asarray(ys)
+    if ys.ndim != 3:
+        raise ValueError(f"ys: expected shape (N, T, m) for N runs, got {tuple(ys.shape)}")
+    if us is None:
+        us = jnp.zeros(ys.shape[1:2] + (0,), ys.dtype)
+    us = jnp.asarray(us)
+    if us.ndim not in (2, 3):
+        raise ValueError(f"us: expected shape (T, nu) shared or (N, T, nu) per run, got {tuple(us.shape)}")
+    if us.ndim == 3 and us.shape[0] != ys.shape[0]:
+        raise ValueError(f"us: expected {ys.shape[0]} runs like ys, got shape {tuple(us.shape)}")
+    if shared_covariance not in (True, False, "auto"):
+        raise ValueError(f"shared_covariance: expected True, False or 'auto', got {shared_covariance!r}")
+    us_axis = 0 if us.ndim == 3 else None
+    if shared_covariance is False:
+        return _batch_scan(filt, init_state, ys, us, us_axis, False)
+    try:
+        return _batch_scan(filt, init_state, ys, us, us_axis, True)
+    except ValueError as error:  # vmap: "mapped output but out_axes is None"
+        if "out_axes" not in str(error):
+            raise
+        if shared_covariance is True:
+            raise ValueError(
+                "shared_covariance: the covariances depend on the run (nonlinear filter, "
+                "missing_measurements=True or per-run model); use shared_covariance=False"
+            ) from None
+    return _batch_scan(filt, init_state, ys, us, us_axis, False)
+
+
+@partial(jax.jit, static_argnums=(0, 4, 5))
+def _batch_scan(filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, shared: bool):
+    final_axes = type(init_state)(*(None if shared and name == "cov" else 0 for name in init_state._fields)) \
+        if isinstance(init_state, GaussianState) else 0
+    info_axes = FilterInfo(*(None if shared and name in _COVARIANCE_FIELDS else 0 for name in FilterInfo._fields))
+    run_one = partial(_scan_filter.__wrapped__, filt, init_state)
+    return jax.vmap(run_one, in_axes=(0, us_axis), out_axes=(final_axes, info_axes))(ys, us)
+
+
+@partial(jax.jit, static_argnums=0)
+def _scan_filter(filt: Filter, init_state: Any, ys: Array, us: Array) -> tuple[Any, Any]:
+    """The scan itself, compiled once per ``Filter`` object (called eagerly, a fresh
+    scan body would otherwise be traced and compiled on every call)."""
 
     def body(state, yu):
         return filt.step(state, *yu)

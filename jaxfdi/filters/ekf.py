@@ -12,8 +12,8 @@ import jax
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, GaussianState, check_step_inputs, gaussian_init
-from jaxfdi.filters.kalman import finish_step, joseph_update
+from jaxfdi.filters._base import Filter, GaussianState, check_step_inputs, gaussian_filter
+from jaxfdi.filters.kalman import joseph_update
 
 
 def extended_kalman_filter(
@@ -22,6 +22,7 @@ def extended_kalman_filter(
     Q: Array,
     R: Array,
     params: Any = None,
+    missing_measurements: bool = False,
 ) -> Filter:
     """EKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
@@ -29,20 +30,22 @@ def extended_kalman_filter(
       f, h: pure functions of ``(x (n,), u (nu,), params)``.
       Q: (n, n) process-noise covariance; R: (m, m) measurement-noise covariance.
       params: any pytree passed to ``f`` and ``h`` (tunable, vmappable).
+      missing_measurements: treat NaN components of ``y`` as not measured (static).
     """
     n = _checks.check_covariance("Q", Q)
     m = _checks.check_covariance("R", R)
 
-    def step(state: GaussianState, y: Array, u: Array):
+    def update(state: GaussianState, y: Array, u: Array):
         check_step_inputs(y, u, m, None)
         y_pred = h(state.mean, u, params)
         _checks.check_shape("h(x, u, params)", y_pred, (m,), "one predicted measurement")
         H = jax.jacfwd(h)(state.mean, u, params)
-        post = joseph_update(state.mean, state.cov, y, y_pred, H, R)
+        return joseph_update(state.mean, state.cov, y, y_pred, H, R, missing_measurements)
+
+    def predict(post: GaussianState, u: Array) -> GaussianState:
         next_mean = f(post.mean, u, params)
         _checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
         F = jax.jacfwd(f)(post.mean, u, params)
-        next_cov = _linalg.symmetrize(F @ post.cov @ F.T + Q)
-        return finish_step(state, post, next_mean, next_cov)
+        return GaussianState(next_mean, _linalg.symmetrize(F @ post.cov @ F.T + Q))
 
-    return Filter(gaussian_init(n), step)
+    return gaussian_filter(n, update, predict)

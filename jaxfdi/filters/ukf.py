@@ -29,18 +29,17 @@ from typing import Any, Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 from jax import Array
-from jax.scipy.linalg import cholesky
 
 from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import (
+    ConditionedGaussian,
     Filter,
     GaussianState,
     check_step_inputs,
-    gaussian_init,
+    gaussian_filter,
     mask_innovation_cov,
     observed_mask,
 )
-from jaxfdi.filters.kalman import ConditionedGaussian, finish_step
 
 
 class SigmaPoints(NamedTuple):
@@ -60,7 +59,7 @@ def unscented_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[
 
 def sigma_points(mean: Array, cov: Array, scale: float) -> tuple[SigmaPoints, Array]:
     """Centred sigma points ``m +/- scale * col_i(chol P)``; also returns ``chol P``."""
-    chol = cholesky(cov, lower=True)
+    chol = _linalg.cholesky(cov)
     plus = mean[None, :] + scale * chol.T        # rows = m + s_i
     s = plus - mean[None, :]                      # symmetric rounding
     return SigmaPoints(mean, jnp.concatenate([s, -s], axis=0)), chol
@@ -124,6 +123,7 @@ def unscented_kalman_filter(
     beta: float = 2.0,
     kappa: float = 0.0,
     sigma_differences: str = "auto",
+    missing_measurements: bool = False,
 ) -> Filter:
     """UKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
@@ -143,6 +143,7 @@ def unscented_kalman_filter(
         ``alpha * sigma`` apart lose most of their digits. ``"auto"`` (default) picks
         ``"taylor"`` for float32 and narrower states with ``alpha <= 1e-2``, else
         ``"direct"``.
+      missing_measurements: treat NaN components of ``y`` as not measured (static).
     """
     n = _checks.check_covariance("Q", Q)
     m = _checks.check_covariance("R", R)
@@ -161,22 +162,26 @@ def unscented_kalman_filter(
             return sigma_differences == "taylor"
         return bool(jnp.finfo(mean.dtype).eps > 1e-10 and alpha <= 1e-2)
 
-    def step(state: GaussianState, y: Array, u: Array):
+    def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
         check_step_inputs(y, u, m, None)
         taylor = use_taylor(state.mean)
         points, _ = sigma_points(state.mean, state.cov, scale)
         y_pred, Pyy, Pxy = unscented_moments(points, lambda x: h(x, u, params), w, cross_w, taylor)
         _checks.check_shape("h(x, u, params)", y_pred, (m,), "one predicted measurement")
-        mask, y_obs, num_observed = observed_mask(y)
-        innovation = jnp.where(mask, y_obs - y_pred, 0.0)
-        S = mask_innovation_cov(_linalg.symmetrize(Pyy + R), mask)
-        Pxy = jnp.where(mask[None, :], Pxy, 0.0)
-        chol_S = cholesky(S, lower=True)
+        S = _linalg.symmetrize(Pyy + R)
+        if missing_measurements:
+            mask, y_obs, num_observed = observed_mask(y)
+            innovation = jnp.where(mask, y_obs - y_pred, 0.0)
+            S = mask_innovation_cov(S, mask)
+            Pxy = jnp.where(mask[None, :], Pxy, 0.0)
+        else:
+            innovation, num_observed = y - y_pred, jnp.asarray(m, jnp.int32)
+        chol_S = _linalg.cholesky(S)
         gain = _linalg.gain_from_cross_cov(Pxy, chol_S)
         whitened = _linalg.whiten(chol_S, innovation)
         # P - K S K^T = P - (L^-1 Pxy^T)^T (L^-1 Pxy^T)
         half = _linalg.whiten(chol_S, Pxy.T)
-        post = ConditionedGaussian(
+        return ConditionedGaussian(
             mean=state.mean + gain @ innovation,
             cov=_linalg.symmetrize(state.cov - half.T @ half),
             innovation=innovation,
@@ -186,9 +191,11 @@ def unscented_kalman_filter(
             num_observed=num_observed,
             healthy=_linalg.cholesky_is_finite(chol_S),
         )
-        points, _ = sigma_points(post.mean, post.cov, scale)
-        next_mean, next_cov, _ = unscented_moments(points, lambda x: f(x, u, params), w, cross_w, taylor)
-        _checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
-        return finish_step(state, post, next_mean, _linalg.symmetrize(next_cov + Q))
 
-    return Filter(gaussian_init(n), step)
+    def predict(post: GaussianState, u: Array) -> GaussianState:
+        points, _ = sigma_points(post.mean, post.cov, scale)
+        next_mean, next_cov, _ = unscented_moments(points, lambda x: f(x, u, params), w, cross_w, use_taylor(post.mean))
+        _checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
+        return GaussianState(next_mean, _linalg.symmetrize(next_cov + Q))
+
+    return gaussian_filter(n, update, predict)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jax import Array
@@ -73,8 +74,14 @@ def c2d(A: Array, B: Array, Ts: float) -> tuple[Array, Array]:
     if ts is not None and not (ts.shape == () and ts > 0):
         raise ValueError(f"Ts: expected a positive scalar sample period, got {Ts}")
     A = jnp.asarray(A)
-    B = jnp.asarray(B, dtype=A.dtype)
-    nu = B.shape[1]
+    return _zoh(A, jnp.asarray(B, dtype=A.dtype), jnp.asarray(Ts, dtype=A.dtype))
+
+
+@jax.jit
+def _zoh(A: Array, B: Array, Ts: Array) -> tuple[Array, Array]:
+    """One compiled executable for the whole discretisation (called eagerly, ``expm``
+    would otherwise dispatch and compile dozens of small operations one by one)."""
+    n, nu = B.shape
     block = jnp.zeros((n + nu, n + nu), A.dtype).at[:n, :n].set(A).at[:n, n:].set(B)
     expm = jsl.expm(block * Ts)
     return expm[:n, :n], expm[:n, n:]

@@ -7,7 +7,11 @@ after the fault onset whose decision is "fault", minus the onset; a false alarm 
 Isolation is correct when the isolated label equals the injected one.
 
 ``DetectionRecord`` is a tiny per-run carry, so a Monte Carlo study of 10^5 runs keeps
-five integers a run instead of whole histories.
+a handful of numbers a run instead of whole histories. A detector that also isolates
+(IMM mode probabilities, GLRT, signature matching) reports a label with each decision;
+the record keeps the label at the detection step (isolation = the first mode that
+crosses) and the detector's estimate (e.g. a fault magnitude) ``estimate_delay`` steps
+after it.
 """
 from __future__ import annotations
 
@@ -24,26 +28,42 @@ class DetectionRecord(NamedTuple):
     detection_step: Array   # () int, first alarm at/after onset, -1 if none
     false_alarms: Array     # () int, number of alarm steps before the onset
     pre_onset_steps: Array  # () int, number of steps seen before the onset
+    isolated: Array = -1    # () int, label at the detection step (-1: none / not isolating)
+    first_label: Array = -1  # () int, label at the first alarm (a false alarm's label)
+    estimate: Array = float("nan")  # () float, detector's estimate estimate_delay steps after detection
 
 
-def record_init(onset: Array) -> DetectionRecord:
+def record_init(onset: Array, dtype=None) -> DetectionRecord:
     minus_one = jnp.asarray(-1, jnp.int32)
     zero = jnp.asarray(0, jnp.int32)
-    return DetectionRecord(jnp.asarray(onset, jnp.int32), minus_one, minus_one, zero, zero)
+    nan = jnp.asarray(jnp.nan, dtype or jnp.result_type(float))
+    return DetectionRecord(jnp.asarray(onset, jnp.int32), minus_one, minus_one, zero, zero, minus_one, minus_one, nan)
 
 
-def record_update(record: DetectionRecord, k: Array, alarm: Array) -> DetectionRecord:
-    """Fold the decision of step ``k`` into the record."""
+def record_update(
+    record: DetectionRecord, k: Array, alarm: Array, label: Array = -1, estimate: Array | None = None,
+    estimate_delay: int = 0,
+) -> DetectionRecord:
+    """Fold the decision of step ``k`` (alarm, isolated label, estimate) into the record."""
     k = jnp.asarray(k, jnp.int32)
+    label = jnp.asarray(label, jnp.int32)
     before = k < record.onset
-    first_alarm = jnp.where((record.first_alarm < 0) & alarm, k, record.first_alarm)
-    detection = jnp.where((record.detection_step < 0) & alarm & ~before, k, record.detection_step)
+    new_first = (record.first_alarm < 0) & alarm
+    new_detection = (record.detection_step < 0) & alarm & ~before
+    detection = jnp.where(new_detection, k, record.detection_step)
+    estimate_value = record.estimate
+    if estimate is not None:
+        keep_updating = (detection >= 0) & (k <= detection + estimate_delay)
+        estimate_value = jnp.where(keep_updating, jnp.asarray(estimate, record.estimate.dtype), record.estimate)
     return DetectionRecord(
         record.onset,
-        first_alarm,
+        jnp.where(new_first, k, record.first_alarm),
         detection,
         record.false_alarms + (alarm & before).astype(jnp.int32),
         record.pre_onset_steps + before.astype(jnp.int32),
+        jnp.where(new_detection, label, record.isolated),
+        jnp.where(new_first, label, record.first_label),
+        estimate_value,
     )
 
 
@@ -56,12 +76,16 @@ def record_from_alarms(alarms: Array, onset: Array) -> DetectionRecord:
     def first(mask):
         return jnp.where(jnp.any(mask), jnp.argmax(mask), -1).astype(jnp.int32)
 
+    minus_one = jnp.asarray(-1, jnp.int32)
     return DetectionRecord(
         jnp.asarray(onset, jnp.int32),
         first(alarms),
         first(after),
         jnp.sum(alarms & before).astype(jnp.int32),
         jnp.sum(before).astype(jnp.int32),
+        minus_one,
+        minus_one,
+        jnp.asarray(jnp.nan),
     )
 
 

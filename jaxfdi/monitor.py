@@ -1,18 +1,20 @@
 """One Monte Carlo run as one fused scan: plant -> filter -> detector -> metrics.
 
 Fusing the four in a single ``lax.scan`` means nothing of length T is stored unless
-asked (``keep_history=True``): a run costs a ``DetectionRecord`` of five integers, which
-is what lets 10^5 runs fit in memory.
+asked (``keep_history=True``): a run costs a ``DetectionRecord`` of a few numbers, which
+is what lets 10^5 runs fit in memory. The filter may be any ``Filter`` (KF, IMM, ...) and
+the detector any ``Detector``; ``detector_input`` picks what the detector reads from the
+filter's info (the NIS by default; innovations for a GLRT, mode probabilities for an IMM).
 """
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi.detection.chi2 import Detector
+from jaxfdi.detection.chi2 import Detector, as_decision
 from jaxfdi.filters._base import Filter, FilterInfo
 from jaxfdi.metrics import DetectionRecord, record_init, record_update
 from jaxfdi.simulate import SimStep, Simulator
@@ -23,6 +25,8 @@ class MonitorHistory(NamedTuple):
     info: FilterInfo     # (T, ...) filter outputs
     statistic: Array     # (T,) test statistic
     alarm: Array         # (T,) bool decision
+    label: Array         # (T,) int isolated label (-1: the detector does not isolate)
+    estimate: Array      # (T,) the detector's fault estimate (NaN: none)
 
 
 class MonitorResult(NamedTuple):
@@ -40,6 +44,8 @@ def monitor(
     key: Array,
     onset: Array,
     keep_history: bool = False,
+    detector_input: Callable[[Any], Array] | None = None,
+    estimate_delay: int = 0,
 ) -> MonitorResult:
     """Simulate, filter and test one run; return its detection record (and history).
 
@@ -49,7 +55,12 @@ def monitor(
       us: (T, nu) commanded inputs; key: PRNG key of the run.
       onset: () fault onset step used for the metrics (``faults.NEVER`` if none).
       keep_history: also return the (T, ...) history (memory grows with T).
+      detector_input: ``info -> detector input``; default ``lambda info: info.nis``.
+      estimate_delay: the record keeps the detector's estimate this many steps after
+        the detection step (an estimate taken at the alarm itself is biased by the
+        selection: the noise that crossed the threshold is in it).
     """
+    detector_input = detector_input or (lambda info: info.nis)
     us = jnp.asarray(us)
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
@@ -59,12 +70,13 @@ def monitor(
         k, u = ku
         sim_state, truth = sim.step(sim_state, k, u, key)
         filt_state, info = filt.step(filt_state, truth.measurement, u)
-        det_state, (statistic, alarm) = detector.step(det_state, info.nis)
-        record = record_update(record, k, alarm)
-        out = MonitorHistory(truth, info, statistic, alarm) if keep_history else None
+        det_state, decision = detector.step(det_state, detector_input(info))
+        decision = as_decision(decision)
+        record = record_update(record, k, decision.alarm, decision.label, decision.estimate, estimate_delay)
+        out = MonitorHistory(truth, info, *decision) if keep_history else None
         return (sim_state, filt_state, det_state, record), out
 
-    carry0 = (sim.init(x0), filter_state0, detector.init(), record_init(onset))
+    carry0 = (sim.init(x0), filter_state0, detector.init(), record_init(onset, jnp.asarray(x0).dtype))
     steps = jnp.arange(us.shape[0])
     (_, _, _, record), history = jax.lax.scan(body, carry0, (steps, us))
     return MonitorResult(record, history)

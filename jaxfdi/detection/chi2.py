@@ -82,8 +82,32 @@ class WindowState(NamedTuple):
     index: Array   # () next slot
 
 
+class Decision(NamedTuple):
+    """One step's output of an online detector.
+
+    ``label`` is the isolated fault label (the simulator's mode label: 0 none, then
+    actuators, then sensors; -1 for a detector that does not isolate) and ``estimate``
+    the detector's estimate of the fault (e.g. a magnitude; NaN if it has none).
+    Detectors that only detect may return the plain pair ``(statistic, alarm)``.
+    """
+
+    statistic: Array  # ()
+    alarm: Array      # () bool
+    label: Array      # () int
+    estimate: Array   # ()
+
+
+def as_decision(output) -> Decision:
+    """A detector step's output as a ``Decision`` (a plain ``(statistic, alarm)`` pair gets
+    ``label = -1`` and ``estimate = NaN``)."""
+    if isinstance(output, Decision):
+        return output
+    statistic, alarm = output
+    return Decision(statistic, alarm, jnp.asarray(-1, jnp.int32), jnp.full((), jnp.nan, jnp.result_type(statistic)))
+
+
 class Detector(NamedTuple):
-    """Online detector: ``step(state, value) -> (state, (statistic, alarm))``."""
+    """Online detector: ``step(state, value) -> (state, Decision or (statistic, alarm))``."""
 
     init: Callable[[], WindowState]
     step: Callable[[WindowState, Array], tuple[WindowState, tuple[Array, Array]]]

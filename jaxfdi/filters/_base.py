@@ -213,7 +213,13 @@ def run_filter_batch(
     if shared_covariance not in (True, False, "auto"):
         raise ValueError(f"shared_covariance: expected True, False or 'auto', got {shared_covariance!r}")
     us_axis = 0 if us.ndim == 3 else None
-    if shared_covariance is False:
+    gaussian = isinstance(init_state, GaussianState)
+    if shared_covariance is True and not gaussian:
+        raise ValueError(
+            f"shared_covariance: only Gaussian filters (KF) can share covariances across runs, "
+            f"got a {type(init_state).__name__}; use shared_covariance=False or 'auto'"
+        )
+    if shared_covariance is False or not gaussian:
         return _batch_scan(filt, init_state, ys, us, us_axis, False)
     try:
         return _batch_scan(filt, init_state, ys, us, us_axis, True)
@@ -230,9 +236,11 @@ def run_filter_batch(
 
 @partial(jax.jit, static_argnums=(0, 4, 5))
 def _batch_scan(filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, shared: bool):
-    final_axes = type(init_state)(*(None if shared and name == "cov" else 0 for name in init_state._fields)) \
-        if isinstance(init_state, GaussianState) else 0
-    info_axes = FilterInfo(*(None if shared and name in _COVARIANCE_FIELDS else 0 for name in FilterInfo._fields))
+    if shared:
+        final_axes = GaussianState(0, None)
+        info_axes = FilterInfo(*(None if name in _COVARIANCE_FIELDS else 0 for name in FilterInfo._fields))
+    else:
+        final_axes = info_axes = 0
     run_one = partial(_scan_filter.__wrapped__, filt, init_state)
     return jax.vmap(run_one, in_axes=(0, us_axis), out_axes=(final_axes, info_axes))(ys, us)
 

@@ -1,6 +1,7 @@
 """Plant models: linear ones as ``LinearGaussianModel`` data, nonlinear ones as pure
 ``f(x, u, params)`` / ``h(x, u, params)`` with a params pytree."""
 from jaxfdi.models.engine import engine_model
+from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.models.linear import (
     LinearGaussianModel,
     c2d,
@@ -22,6 +23,9 @@ __all__ = [
     "linear_transition",
     "validate_linear_model",
     "engine_model",
+    "noise_inflation_modes",
+    "bias_modes",
+    "bias_mode_initial_state",
     "RigidBodyParams",
     "rigid_body_observation",
     "rigid_body_params",

@@ -1,0 +1,171 @@
+"""What the multiple-model filters (IMM, static MM) share: state, info, the vmapped
+mode bank, the Bayes update of the mode probabilities in log space, moment matching.
+
+A bank of M mode-matched filters is ONE Gaussian filter vmapped over a params pytree
+whose leaves carry a leading mode axis M (STYLE.md rule 3), never a Python list.
+
+Mode probabilities are kept as logarithms and normalised with log-sum-exp: the mode
+likelihoods ``L_j = N(r_j; 0, S_j)`` of a 5-output engine are routinely below 1e-300
+(and below 1e-38 in float32) for the wrong modes, so raw densities would underflow.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks, _linalg
+from jaxfdi.filters._base import ConditionedGaussian, Filter, GaussianState
+
+
+class IMMState(NamedTuple):
+    """State carried between steps by the IMM and the static MM filter: the per-mode
+    priors of step k and the log prior mode probabilities (IMM: the predicted
+    ``log cbar_j(k)``; MM: the posterior of step k-1)."""
+
+    mode_mean: Array      # (M, n)    x_j[k|k-1]
+    mode_cov: Array       # (M, n, n) P_j[k|k-1]
+    log_mode_prob: Array  # (M,)      log P(mode j at k | y[:k-1])
+
+
+class IMMInfo(NamedTuple):
+    """Per-step outputs of the IMM and the static MM filter (posteriors at step k)."""
+
+    mode_prob: Array            # (M,)      mu_j(k) = P(mode j | y[:k])
+    log_mode_prob: Array        # (M,)      log mu_j(k)
+    mean: Array                 # (n,)      combined x[k|k] (moment matched)
+    cov: Array                  # (n, n)    combined P[k|k]
+    mode_mean: Array            # (M, n)    mode-matched x_j[k|k]
+    mode_cov: Array             # (M, n, n) mode-matched P_j[k|k]
+    mode_log_likelihood: Array  # (M,)      log L_j(k) = log N(r_j; 0, S_j)
+    log_likelihood: Array       # ()        log sum_j prior_j L_j, the mixture likelihood
+    healthy: Array              # ()        bool: every mode update sound, all finite
+
+
+def num_modes(mode_params: Any, expected: int | None = None) -> int:
+    """The common leading (mode) axis of every leaf of ``mode_params``; trace-time checks."""
+    leaves = jax.tree.leaves(mode_params)
+    if not leaves:
+        raise ValueError("mode_params: expected a pytree of arrays with a leading mode axis M, got no arrays")
+    shapes = [_checks.shape_of(leaf) for leaf in leaves]
+    size = expected if expected is not None else (shapes[0][0] if shapes[0] else None)
+    for shape in shapes:
+        if not shape or shape[0] != size:
+            where = f" (the size of transition, ({size}, {size}))" if expected is not None else ""
+            raise ValueError(
+                f"mode_params: expected every leaf to have a leading mode axis of size M = {size}{where}, "
+                f"got a leaf of shape {shape}"
+            )
+    return size
+
+
+def check_mode_filter(mode_filter: Callable[[Any], Filter], mode_params: Any) -> None:
+    """``mode_filter`` must build a Gaussian filter (with ``update`` and ``predict``)."""
+    if not callable(mode_filter):
+        raise ValueError(f"mode_filter: expected a callable params -> Filter, got {type(mode_filter).__name__}")
+    filt = mode_filter(first_mode(mode_params))
+    if not isinstance(filt, Filter) or filt.update is None or filt.predict is None:
+        raise ValueError(
+            "mode_filter: expected it to return a Gaussian Filter with update and predict "
+            "(kalman_filter, extended_kalman_filter, unscented_kalman_filter)"
+        )
+
+
+def first_mode(mode_params: Any) -> Any:
+    return jax.tree.map(lambda leaf: leaf[0], mode_params)
+
+
+def bank_init(mode_filter, mode_params, M: int, mean: Array, cov: Array, mode_prob: Array) -> IMMState:
+    """Per-mode priors from a shared ``(n,), (n, n)`` or per-mode ``(M, n), (M, n, n)``
+    initial Gaussian, validated by the mode filter's own ``init``; ``log mode_prob``."""
+    ndim = len(_checks.shape_of(mean))
+    if ndim not in (1, 2) or (ndim == 2 and _checks.shape_of(mean)[0] != M):
+        raise ValueError(f"mean: expected shape (n,) shared by the modes or ({M}, n) per mode, got {_checks.shape_of(mean)}")
+    if ndim == 2:
+        _checks.check_shape("cov", cov, (M, None, None), "one covariance per mode")
+    axis = 0 if ndim == 2 else None
+    prior = jax.vmap(lambda p, m, c: mode_filter(p).init(m, c), in_axes=(0, axis, axis))(mode_params, mean, cov)
+    _checks.check_shape("mode_prob", mode_prob, (M,), "one prior probability per mode")
+    check_distribution("mode_prob", mode_prob)
+    dtype = prior.mean.dtype
+    return IMMState(prior.mean, prior.cov, safe_log(jnp.asarray(mode_prob, dtype)))
+
+
+def check_distribution(name: str, prob: Any, axis: int = -1) -> None:
+    """When concrete: no negative entries, and sums along ``axis`` equal to 1."""
+    value = _checks.concrete(prob)
+    if value is None:
+        return
+    eps = np.finfo(value.dtype if value.dtype.kind == "f" else np.float64).eps
+    if not np.all(np.isfinite(value)) or np.any(value < 0):
+        raise ValueError(f"{name}: expected non-negative finite probabilities, got {value}")
+    if np.max(np.abs(np.sum(value, axis=axis) - 1.0)) > np.sqrt(eps):
+        what = "every row to sum to 1 (row-stochastic)" if value.ndim == 2 else "entries summing to 1"
+        raise ValueError(f"{name}: expected {what}, got sums {np.sum(value, axis=axis)}")
+
+
+def safe_log(prob: Array) -> Array:
+    """``log p`` with ``log 0 = -inf`` and a finite (zero) gradient at ``p = 0``."""
+    positive = prob > 0
+    return jnp.where(positive, jnp.log(jnp.where(positive, prob, 1.0)), -jnp.inf)
+
+
+def log_normalizer(logits: Array, axis: int = -1) -> Array:
+    """``log sum exp(logits)`` along ``axis``: ``-inf`` (not NaN) when every term is
+    ``-inf``, with finite gradients there."""
+    top = jax.lax.stop_gradient(jnp.max(logits, axis=axis, keepdims=True))
+    top = jnp.where(jnp.isfinite(top), top, 0.0)
+    total = jnp.sum(jnp.exp(logits - top), axis=axis)
+    positive = total > 0
+    return jnp.where(positive, jnp.log(jnp.where(positive, total, 1.0)) + jnp.squeeze(top, axis), -jnp.inf)
+
+
+def bayes_mode_update(log_prior: Array, log_likelihood: Array) -> tuple[Array, Array]:
+    """``log mu_j = log L_j + log prior_j - log sum_i L_i prior_i``; also returns the
+    mixture log-likelihood ``log sum_i L_i prior_i`` (Bar-Shalom et al. 2001, eq. 11.6.6-19)."""
+    joint = log_likelihood + log_prior
+    log_mix = log_normalizer(joint)
+    return joint - log_mix, log_mix
+
+
+def moment_match(weights: Array, means: Array, covs: Array) -> tuple[Array, Array]:
+    """Gaussian with the moments of ``sum_i w_i N(x_i, P_i)`` (weights summing to 1):
+    ``x = sum_i w_i x_i``, ``P = sum_i w_i [P_i + (x_i - x)(x_i - x)^T]``."""
+    mean = weights @ means
+    deviation = means - mean
+    cov = jnp.einsum("i,ijk->jk", weights, covs) + jnp.einsum("i,ij,ik->jk", weights, deviation, deviation)
+    return mean, _linalg.symmetrize(cov)
+
+
+def bank_update(mode_filter, mode_params, state: IMMState, y: Array, u: Array) -> ConditionedGaussian:
+    """Every mode's measurement update with ``y[k]``: one filter vmapped over the params."""
+    prior = GaussianState(state.mode_mean, state.mode_cov)
+    return jax.vmap(lambda p, s: mode_filter(p).update(s, y, u))(mode_params, prior)
+
+
+def bank_predict(mode_filter, mode_params, means: Array, covs: Array, u: Array) -> GaussianState:
+    """Every mode's time update with ``u[k]`` from its own (mixed) posterior."""
+    return jax.vmap(lambda p, s: mode_filter(p).predict(s, u))(mode_params, GaussianState(means, covs))
+
+
+def finish_mixture_step(
+    post: ConditionedGaussian, log_mode_prob: Array, log_likelihood: Array, prediction: GaussianState, log_next_prob: Array
+) -> tuple[IMMState, IMMInfo]:
+    """Combine the mode posteriors by moment matching, check health, build state and info."""
+    mode_prob = jnp.exp(log_mode_prob)
+    mean, cov = moment_match(mode_prob, post.mean, post.cov)
+    posterior_pd = jax.vmap(lambda c: _linalg.cholesky_is_finite(_linalg.cholesky(c)))(post.cov)
+    healthy = (
+        jnp.all(post.healthy)
+        & jnp.all(posterior_pd)
+        & jnp.isfinite(log_likelihood)
+        & ~jnp.any(jnp.isnan(log_next_prob))
+        & jnp.all(jnp.isfinite(mean))
+        & jnp.all(jnp.isfinite(prediction.mean))
+    )
+    info = IMMInfo(mode_prob, log_mode_prob, mean, cov, post.mean, post.cov, post.log_likelihood, log_likelihood, healthy)
+    next_state = IMMState(prediction.mean, prediction.cov, log_next_prob.astype(log_mode_prob.dtype))
+    return next_state, info

@@ -4,7 +4,9 @@ from jaxfdi.filters import (
     FilterInfo,
     GaussianState,
     extended_kalman_filter,
+    interacting_multiple_model,
     kalman_filter,
+    multiple_model,
     run_filter,
     run_filter_batch,
     unscented_kalman_filter,
@@ -21,9 +23,10 @@ def enable_x64(enable: bool = True) -> None:
     jax.config.update("jax_enable_x64", enable)
 
 from jaxfdi import detection, faults, metrics, models  # noqa: E402
-from jaxfdi.detection import chi2_detector, chi2_threshold  # noqa: E402
+from jaxfdi.detection import chi2_detector, chi2_threshold, glrt_detector, mode_probability_detector  # noqa: E402
 from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault, stack_faults  # noqa: E402
 from jaxfdi.metrics import DetectionRecord, DetectionSummary, confusion_matrix, summarize_detection  # noqa: E402
 from jaxfdi.montecarlo import monte_carlo  # noqa: E402
+from jaxfdi.riccati import solve_discrete_are, steady_state_kalman  # noqa: E402
 from jaxfdi.monitor import MonitorHistory, MonitorResult, monitor  # noqa: E402
 from jaxfdi.simulate import SimStep, Simulator, linear_simulator, simulate, simulator  # noqa: E402

@@ -7,9 +7,31 @@ from jaxfdi.detection.chi2 import (
     moving_window_sum,
     normalized_innovation_squared,
 )
+from jaxfdi.detection.glrt import (
+    PAPER_USED_THRESHOLD,
+    FaultDirections,
+    GLRResult,
+    fault_directions,
+    fault_signatures,
+    glr_by_onset,
+    glr_statistic,
+    glrt_detector,
+    glrt_threshold,
+)
+from jaxfdi.detection.mode_probability import mode_probability_detector
 
 __all__ = [
+    "PAPER_USED_THRESHOLD",
     "Detector",
+    "FaultDirections",
+    "GLRResult",
+    "fault_directions",
+    "fault_signatures",
+    "glr_by_onset",
+    "glr_statistic",
+    "glrt_detector",
+    "glrt_threshold",
+    "mode_probability_detector",
     "chi2_detector",
     "chi2_threshold",
     "first_crossing",

@@ -1,0 +1,334 @@
+"""Windowed generalised likelihood ratio test for step faults (Willsky & Jones 1976).
+
+A step fault of unknown size ``nu`` in direction ``i`` with onset ``theta`` adds a known
+signature to the innovations of a fault-blind steady-state Kalman filter:
+``eps_k = eps0_k + G_i[k - theta] nu`` (``G[l] = 0`` for ``l < 0``), ``eps0_k ~ N(0, S)``
+white. Over the last ``N`` steps, for every direction ``i`` and candidate onset ``theta``
+(Willsky & Jones 1976, eqs. 3.10-3.14; seed 003 eqs. 14-23)::
+
+    d_i(theta) = sum_j G_i[j - theta]^T S^-1 eps_j
+    R_i(theta) = sum_j G_i[j - theta]^T S^-1 G_i[j - theta]
+    nu_hat     = d / R,      l_i(theta) = d^2 / R   (chi2(1) under no fault)
+
+and the GLR of direction ``i`` is ``max_theta l_i(theta)``.
+
+Signatures (derived here; seed 003's printed eqs. 18-19 are garbled). The plant is
+``x[k+1] = Phi x[k] + Gamma (u[k] + f_u[k]) + w``, ``y[k] = C x[k] + D u[k] + f_y[k] + v``
+(seed 003 eq. 4, ``jaxfdi.simulate``: the feed-through sees the *commanded* input). A unit
+step in direction ``i`` from step ``theta`` is ``f[k] = 1 (k >= theta)`` and enters the
+state update as ``g_i`` and the output as ``h_i`` (``FaultDirections``). The filter of
+``jaxfdi.filters.kalman`` conditions on ``y[k]`` then predicts with ``u[k]``:
+``eps_k = y_k - C m_k - D u_k``, ``m_{k+1} = Phi (m_k + K eps_k) + Gamma u_k``. The
+fault's share of the prediction error ``e_k = dx_k - dm_k`` then obeys
+``e_{k+1} = Phi (I - K C) e_k + (g - Phi K h) f_k`` with ``e_theta = 0``, and its share
+of the innovation is ``G[l] = C e_{theta+l} + h`` for lag ``l = k - theta >= 0``::
+
+    G[0] = h,   E[1] = g - Phi K h
+    G[l] = C E[l] + h,   E[l+1] = Phi (I - K C) E[l] + g - Phi K h
+
+So a sensor fault shows at its onset step (``G[0] = e_j``); an actuator fault shows one
+step later (``G[0] = 0``, ``G[1] = C Gamma_i``) unless it also passes through ``D``.
+
+Timing. The window ends at the current step ``k``; an onset *offset* ``o`` in
+``0..N-1`` stands for ``theta = k - o`` (``o = 0``: the fault began at this step). The
+onset estimate of a decision at step ``k`` is therefore ``k - onset_offset``.
+"""
+from __future__ import annotations
+
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks, _linalg
+from jaxfdi.detection.chi2 import Decision, Detector, chi2_threshold
+from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
+
+#: the threshold seed 003 uses (set by simulation to suppress T4 false alarms, sec. 3.3).
+PAPER_USED_THRESHOLD = 200.0
+
+
+class FaultDirections(NamedTuple):
+    """How a unit step fault enters the plant, one column per fault direction.
+
+    Columns are ordered actuators then sensors, so direction ``i`` has the simulator's
+    fault label ``1 + i``.
+    """
+
+    state: Array   # (n, d) added to x[k+1] = Phi x + Gamma u + ...
+    output: Array  # (m, d) added to y[k] = C x + D u + ...
+
+
+class GLRResult(NamedTuple):
+    """GLR of each direction, maximised over the onsets in the window."""
+
+    statistic: Array     # (d,) max_theta l_i(theta)
+    onset_offset: Array  # (d,) int, o with theta_hat = k - o (k: last step of the window)
+    magnitude: Array     # (d,) nu_hat at theta_hat
+
+
+class OnsetGLR(NamedTuple):
+    """GLR for every candidate onset offset ``o`` (rows) and direction (columns)."""
+
+    statistic: Array  # (N, d) l_i(k - o); -inf for onsets before the data
+    magnitude: Array  # (N, d) nu_hat_i(k - o); 0 where the window holds no information
+
+
+class GLRTState(NamedTuple):
+    window: Array        # (N, m) last N whitened innovations L^-1 eps, oldest first
+    count: Array         # () int32, steps seen (saturates at N)
+    onset_offset: Array  # () int32, onset offset of the last decision's isolated direction
+
+
+def fault_directions(model: LinearGaussianModel, actuator_feedthrough: bool = False) -> FaultDirections:
+    """Unit step-fault directions ``(g, h)``: actuators ``1..nu``, then sensors ``1..m``.
+
+    Actuator ``i``: ``g = Gamma[:, i]`` and ``h = 0``, because seed 003 eq. (4) and
+    ``jaxfdi.simulate`` feed the commanded input through ``D`` (``y = C x + D u``); with
+    ``actuator_feedthrough=True``, ``h = D[:, i]`` (a plant whose faulty input also
+    passes through ``D``). Sensor ``j``: ``g = 0``, ``h = e_j``.
+    """
+    validate_linear_model(model)
+    return _directions(model.Gamma, model.D, bool(actuator_feedthrough))
+
+
+@partial(jax.jit, static_argnums=2)
+def _directions(Gamma: Array, D: Array, actuator_feedthrough: bool) -> FaultDirections:
+    (n, nu), m = Gamma.shape, D.shape[0]
+    output_act = D.astype(Gamma.dtype) if actuator_feedthrough else jnp.zeros((m, nu), Gamma.dtype)
+    state = jnp.concatenate([Gamma, jnp.zeros((n, m), Gamma.dtype)], axis=1)
+    output = jnp.concatenate([output_act, jnp.eye(m, dtype=Gamma.dtype)], axis=1)
+    return FaultDirections(state, output)
+
+
+def fault_signatures(model: LinearGaussianModel, gain: Array, directions: FaultDirections, window: int) -> Array:
+    """(window, m, d) innovation signatures ``G[l]`` of a unit step fault, lag ``l = k - theta``.
+
+    ``G[0] = h``, ``E[1] = g - Phi K h``, ``G[l] = C E[l] + h``,
+    ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h`` (derived in the module docstring from the
+    filter of ``jaxfdi.filters.kalman`` with its steady-state gain ``K``, (n, m)).
+    """
+    n, _, m = validate_linear_model(model)
+    window = _check_window(window)
+    _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
+    _checks.check_shape("directions.state", directions.state, (n, None), "n states x d directions")
+    d = _checks.shape_of(directions.state)[1]
+    _checks.check_shape("directions.output", directions.output, (m, d), "m outputs x d directions")
+    dtype = jnp.result_type(gain)
+    return _signatures(*(jnp.asarray(a, dtype) for a in (model.Phi, model.C, gain, directions.state,
+                                                          directions.output)), window)
+
+
+@partial(jax.jit, static_argnums=5)
+def _signatures(Phi: Array, C: Array, gain: Array, g: Array, h: Array, window: int) -> Array:
+    closed_loop = Phi @ (jnp.eye(Phi.shape[0], dtype=Phi.dtype) - gain @ C)
+    forcing = g - Phi @ (gain @ h)
+
+    def lag(E, _):
+        return closed_loop @ E + forcing, C @ E + h
+
+    _, signatures = jax.lax.scan(lag, jnp.zeros_like(g), None, length=window)
+    return signatures
+
+
+def glr_by_onset(innovations: Array, signatures: Array, innovation_cov: Array | None = None,
+                 num_valid=None) -> OnsetGLR:
+    """GLR ``l_i(theta)`` and ``nu_hat_i(theta)`` for every onset ``theta = k - o`` of the window.
+
+    Args:
+      innovations: (N, m) innovations of the last N steps, oldest first (row N-1 is step k).
+      signatures: (N, m, d) ``G[l]`` from ``fault_signatures``.
+      innovation_cov: (m, m) steady-state ``S``; ``None`` when ``innovations`` and
+        ``signatures`` are already whitened (``L^-1 eps``, ``L^-1 G`` with ``S = L L^T``).
+      num_valid: () number of most recent rows that are data (onsets older than that are
+        not considered); default N.
+    """
+    innovations, signatures, innovation_cov = _check_glr_inputs(innovations, signatures, innovation_cov)
+    num_valid = innovations.shape[0] if num_valid is None else num_valid
+    return _glr_by_onset(innovations, signatures, innovation_cov, num_valid)
+
+
+@jax.jit
+def _glr_by_onset(innovations, signatures, innovation_cov, num_valid) -> OnsetGLR:
+    if innovation_cov is not None:
+        whitener = _whitener(innovation_cov)
+        innovations, signatures = innovations @ whitener.T, jnp.einsum("ab,lbd->lad", whitener, signatures)
+    return _glr_core(innovations, *_onset_tensors(signatures), num_valid)
+
+
+def glr_statistic(innovations: Array, signatures: Array, innovation_cov: Array | None = None,
+                  num_valid=None) -> GLRResult:
+    """GLR of each direction maximised over the onsets of the window (Willsky & Jones 1976).
+
+    Same arguments as ``glr_by_onset``; returns ``GLRResult(statistic (d,),
+    onset_offset (d,), magnitude (d,))`` with ``theta_hat = k - onset_offset``.
+    """
+    return _maximise(glr_by_onset(innovations, signatures, innovation_cov, num_valid))
+
+
+def glrt_threshold(pfa, num_directions: int, window: int, method: str = "paper") -> Array:
+    """A threshold for the GLR statistic at false-alarm probability ``pfa`` per step.
+
+    ``"paper"``: ``chi2_threshold(num_directions * window, pfa)``, seed 003's theoretical
+    value (6 directions x N = 10, pfa = 0.005 -> 91.95); the paper then uses
+    ``PAPER_USED_THRESHOLD = 200``, set by simulation. ``"bonferroni"``: each
+    ``l_i(theta)`` is ``chi2(1)`` under no fault, so
+    ``chi2_threshold(1, pfa / (num_directions * window))`` bounds the per-step false-alarm
+    probability of the maximum by ``pfa``.
+    """
+    if method not in ("paper", "bonferroni"):
+        raise ValueError(f"method: expected 'paper' or 'bonferroni', got {method!r}")
+    _checks.check_probability("pfa", pfa)
+    if isinstance(num_directions, bool) or int(num_directions) != num_directions or int(num_directions) < 1:
+        raise ValueError(f"num_directions: expected a positive integer, got {num_directions}")
+    tests = int(num_directions) * _check_window(window)
+    dtype = jnp.result_type(float)
+    if method == "paper":
+        return _chi2_isf(jnp.asarray(tests, dtype), jnp.asarray(pfa, dtype))
+    return _chi2_isf(jnp.asarray(1, dtype), jnp.asarray(pfa, dtype) / tests)
+
+
+#: compiled once (called eagerly, ``chi2_threshold``'s Newton loop recompiles per call);
+#: the arguments are validated before.
+_chi2_isf = jax.jit(chi2_threshold)
+
+
+def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
+                  isolation: str = "max", actuator_feedthrough: bool = False, overlap_sensor: int = -1) -> Detector:
+    """Online windowed GLRT on the innovations of a fault-blind steady-state Kalman filter.
+
+    ``step(state, innovation (m,)) -> (state, Decision)`` at step ``k``: statistic =
+    ``max_i max_theta l_i(theta)`` over the onsets within the data seen, alarm =
+    statistic > threshold, label = ``1 + i`` for the isolated direction ``i`` (the
+    simulator's fault label; given at every step, alarm or not), estimate = its
+    ``nu_hat``. The state's ``onset_offset`` gives ``theta_hat = k - onset_offset``.
+
+    Isolation:
+      ``"max"``: the direction with the largest GLR.
+      ``"paper"``: seed 003 eq. (24), read as: actuator when the largest actuator GLR and
+        the ``overlap_sensor`` GLR (T4, the last sensor) both exceed the threshold;
+        otherwise the sensor with the largest GLR if some sensor exceeds it; otherwise an
+        actuator if one alone exceeds it; with no alarm, the largest GLR as for ``"max"``.
+
+    Args:
+      model: the plant the filter assumes (``Phi``, ``Gamma``, ``C``, ``D``).
+      gain: (n, m) steady-state measurement-update gain ``K`` (``steady_state_kalman``).
+      innovation_cov: (m, m) steady-state ``S``.
+      window: N >= 1 steps.
+      threshold: > 0, e.g. ``PAPER_USED_THRESHOLD`` or ``glrt_threshold(...)``.
+      isolation: ``"max"`` or ``"paper"``.
+      actuator_feedthrough: see ``fault_directions``.
+      overlap_sensor: sensor index (into the outputs) of eq. (24)'s T4.
+    """
+    n, nu, m = validate_linear_model(model)
+    window = _check_window(window)
+    _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
+    _checks.check_covariance("innovation_cov", innovation_cov, m)
+    value = _checks.concrete(threshold)
+    if value is not None and not (value.shape == () and np.isfinite(value) and value > 0):
+        raise ValueError(f"threshold: expected a positive scalar, got {threshold}")
+    if isolation not in ("max", "paper"):
+        raise ValueError(f"isolation: expected 'max' or 'paper', got {isolation!r}")
+    if not -m <= int(overlap_sensor) < m:
+        raise ValueError(f"overlap_sensor: expected a sensor index in [-{m}, {m}), got {overlap_sensor}")
+    dtype = jnp.result_type(gain, innovation_cov)
+    signatures = fault_signatures(model, jnp.asarray(gain, dtype), fault_directions(model, actuator_feedthrough), window)
+    whitener, onset_signatures, information = _detector_tensors(signatures, jnp.asarray(innovation_cov, dtype))
+    sensor_t4 = nu + int(overlap_sensor) % m
+
+    def init() -> GLRTState:
+        zero = jnp.zeros((), jnp.int32)
+        return GLRTState(jnp.zeros((window, m), dtype), zero, zero)
+
+    def step(state: GLRTState, innovation: Array):
+        _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
+        white = whitener @ jnp.asarray(innovation, dtype)
+        buffer = jnp.concatenate([state.window[1:], white[None]], axis=0)
+        count = jnp.minimum(state.count + 1, window)
+        result = _maximise(_glr_core(buffer, onset_signatures, information, count))
+        statistic = jnp.max(result.statistic)
+        alarm = statistic > threshold
+        direction = jnp.argmax(result.statistic)
+        if isolation == "paper":
+            direction = _paper_isolation(result.statistic, threshold, nu, sensor_t4, direction)
+        decision = Decision(statistic, alarm, (1 + direction).astype(jnp.int32), result.magnitude[direction])
+        return GLRTState(buffer, count, result.onset_offset[direction]), decision
+
+    return Detector(init, step)
+
+
+def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallback: Array) -> Array:
+    """Seed 003 eq. (24): index of the isolated direction (see ``glrt_detector``)."""
+    actuator = jnp.argmax(statistic[:nu])
+    sensor = nu + jnp.argmax(statistic[nu:])
+    actuator_over = statistic[actuator] > threshold
+    sensor_over = statistic[sensor] > threshold
+    return jnp.where(
+        actuator_over & (statistic[sensor_t4] > threshold),
+        actuator,
+        jnp.where(sensor_over, sensor, jnp.where(actuator_over, actuator, fallback)),
+    )
+
+
+def _check_window(window) -> int:
+    if isinstance(window, bool) or int(window) != window or int(window) < 1:
+        raise ValueError(f"window: expected a positive integer number of steps N, got {window}")
+    return int(window)
+
+
+def _check_glr_inputs(innovations, signatures, innovation_cov):
+    _checks.check_shape("signatures", signatures, (None, None, None), "(N, m, d) from fault_signatures")
+    N, m, _ = _checks.shape_of(signatures)
+    _checks.check_shape("innovations", innovations, (N, m), "N steps x m outputs, oldest first")
+    dtype = jnp.result_type(innovations, signatures)
+    if innovation_cov is not None:
+        _checks.check_covariance("innovation_cov", innovation_cov, m)
+        innovation_cov = jnp.asarray(innovation_cov, dtype)
+    return jnp.asarray(innovations, dtype), jnp.asarray(signatures, dtype), innovation_cov
+
+
+def _whitener(innovation_cov: Array) -> Array:
+    """``L^-1`` with ``S = L L^T``: whitened innovations ``L^-1 eps`` are N(0, I)."""
+    chol = jsl.cholesky(_linalg.symmetrize(innovation_cov), lower=True)  # one-off: LAPACK compiles faster
+    return jsl.solve_triangular(chol, jnp.eye(innovation_cov.shape[0], dtype=innovation_cov.dtype), lower=True)
+
+
+@jax.jit
+def _detector_tensors(signatures: Array, innovation_cov: Array) -> tuple[Array, Array, Array]:
+    whitener = _whitener(innovation_cov)
+    return (whitener, *_onset_tensors(jnp.einsum("ab,lbd->lad", whitener, signatures)))
+
+
+def _onset_tensors(white_signatures: Array) -> tuple[Array, Array]:
+    """``T[o, p] = Gw[p - (N-1-o)]`` (0 for a negative lag), (N, N, m, d), and the
+    information ``I[o] = sum_{l<=o} ||Gw[l]||^2`` per column, (N, d)."""
+    N = white_signatures.shape[0]
+    offset = jnp.arange(N)[:, None]
+    position = jnp.arange(N)[None, :]
+    lag = position + offset - (N - 1)
+    onset_signatures = jnp.where((lag >= 0)[..., None, None], white_signatures[jnp.maximum(lag, 0)], 0.0)
+    information = jnp.cumsum(jnp.sum(white_signatures**2, axis=1), axis=0)
+    return onset_signatures, information
+
+
+def _glr_core(white_window: Array, onset_signatures: Array, information: Array, num_valid) -> OnsetGLR:
+    """``d[o, i] = sum_p T[o, p]^T w_p``, ``nu_hat = d / I``, ``l = d^2 / I`` for all onsets."""
+    N = white_window.shape[0]
+    correlation = jnp.einsum("opmi,pm->oi", onset_signatures, white_window)
+    informative = information > 0
+    safe = jnp.where(informative, information, 1.0)
+    magnitude = jnp.where(informative, correlation / safe, 0.0)
+    statistic = magnitude * correlation
+    valid = (jnp.arange(N) < num_valid)[:, None]
+    return OnsetGLR(jnp.where(valid, statistic, -jnp.inf), jnp.where(valid, magnitude, 0.0))
+
+
+def _maximise(by_onset: OnsetGLR) -> GLRResult:
+    offset = jnp.argmax(by_onset.statistic, axis=0)
+    statistic = jnp.take_along_axis(by_onset.statistic, offset[None], axis=0)[0]
+    magnitude = jnp.take_along_axis(by_onset.magnitude, offset[None], axis=0)[0]
+    return GLRResult(statistic, offset.astype(jnp.int32), magnitude)

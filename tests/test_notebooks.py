@@ -134,3 +134,29 @@ def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch):
 
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) >= 2, f"expected the run figure and the Monte Carlo figure, got {len(images)} PNG outputs"
+
+
+def test_engine_imm_glrt_notebook(python3_kernel, monkeypatch):
+    name = "02_engine_imm_glrt.ipynb"
+    stored = nbformat.read(NOTEBOOKS / name, as_version=4)
+    assert all(not c.get("outputs") for c in stored.cells if c.cell_type == "code")
+
+    monkeypatch.setenv("JAXFDI_NB_RUNS", "5")
+    before = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
+    nb = _execute(name, python3_kernel)
+    assert sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*")) == before
+
+    outputs = list(_outputs(nb))
+    errors = [o for o in outputs if o.output_type == "error"]
+    assert not errors, f"{errors[0].ename}: {errors[0].evalue}"
+    text = "\n".join(_text(o) for o in outputs)
+    assert "runs per fault: 5" in text
+    assert "paper pi: stationary P(normal)" in text
+    assert "theoretical threshold chi2.isf(0.005, 60) = 91.95" in text
+    overview = text[text.index("method  "):].splitlines()
+    methods = [line.split("  ")[0] for line in overview[2:11]]
+    assert methods[:3] == ["MM", "IMM", "IMM hand-pi"] and methods[-1].startswith("GLRT")
+    for fault in FAULT_NAMES:
+        assert f"\n{fault} " in text
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) == 3, f"expected the three study figures, got {len(images)}"

@@ -1,0 +1,417 @@
+"""Seed 003 engine fault diagnosis: MM, IMM (two mode designs) and GLRT on the same runs.
+
+Scenario (seed-003 note): steady state, a 0.01 kg/s fuel step at t = 0, one step fault
+at t = 2 s (actuator 0.0005 kg/s; sensors 0.5 % of their operating point), 4 s at
+100 Hz, and a fault-free case. Every method sees the same simulated runs (the noise of
+a run depends only on its key) and is scored by the same record: detection = first
+alarm at or after the onset, isolation = the label at that step, false alarm = an alarm
+before the onset.
+
+Methods (each a filter + an online detector fused with the plant in one scan):
+
+* ``MM`` / ``IMM`` on the Zhang & Li noise-inflation modes (``noise_inflation_modes``),
+  decision ``max_j mu_j >= mu_T`` (eq. 13), the mode that crosses first is isolated;
+* ``MM-bias`` / ``IMM-bias`` on the augmented fault-bias modes (``bias_modes``), which
+  also estimate the fault's size;
+* IMMs with the paper's transition matrix and with a hand-set one (``sticky_transition``);
+* ``GLRT``: the fault-blind steady-state KF's innovations tested by the windowed GLR
+  (Willsky & Jones), threshold ``l_T`` (the paper's 200, and a Bonferroni threshold
+  derived from a per-step false-alarm probability), isolation by the largest GLR;
+* a confirmed variant of the hand-set bias IMM: the same top fault mode must hold
+  ``mu_T`` for ``confirm_steps`` consecutive steps (not in the paper; see
+  ``mode_probability_detector`` for why the actuator fault needs it).
+"""
+from __future__ import annotations
+
+import sys
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfdi.detection.glrt import (
+    PAPER_USED_THRESHOLD,
+    fault_directions,
+    fault_signatures,
+    glr_statistic,
+    glrt_detector,
+    glrt_threshold,
+)
+from jaxfdi.detection.mode_probability import mode_probability_detector
+from jaxfdi.faults import stack_faults
+from jaxfdi.filters.imm import interacting_multiple_model
+from jaxfdi.filters.kalman import kalman_filter
+from jaxfdi.filters.mm import multiple_model
+from jaxfdi.metrics import DetectionRecord, summarize_detection
+from jaxfdi.models.engine import TS, engine_model
+from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi.monitor import monitor
+from jaxfdi.montecarlo import monte_carlo
+from jaxfdi.riccati import steady_state_kalman
+from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
+from jaxfdi.simulate import linear_simulator
+
+MODE_NAMES = ("normal", "actuator", "RPM", "P2", "T2", "P4", "T4")
+
+#: seed 003's transition matrix, rows = from-mode (normal, actuator, RPM, P2, T2, P4, T4).
+PAPER_TRANSITION = np.array([
+    [0.940, 0.010, 0.010, 0.010, 0.010, 0.010, 0.010],
+    [0.001, 0.989, 0.000, 0.000, 0.000, 0.000, 0.010],
+    [0.010, 0.001, 0.989, 0.000, 0.000, 0.000, 0.000],
+    [0.050, 0.000, 0.000, 0.950, 0.000, 0.000, 0.000],
+    [0.010, 0.001, 0.000, 0.000, 0.989, 0.000, 0.000],
+    [0.010, 0.001, 0.000, 0.000, 0.000, 0.989, 0.000],
+    [0.001, 0.001, 0.000, 0.000, 0.000, 0.000, 0.998],
+])
+
+#: Table 3 of seed 003: detection delay [s] at mu_T = 0.5 / l_T = 200 (actuator, RPM, P2, T2, P4, T4).
+PAPER_DELAY = {
+    "MM": [0.190, 0.000, 0.000, 0.002, 0.000, 0.002],
+    "IMM": [0.020, 0.000, 0.000, 0.000, 0.000, 0.006],
+    "GLRT": [0.069, 0.027, 0.058, 0.040, 0.042, 0.046],
+}
+
+
+def sticky_transition(num_modes: int, to_fault, stay) -> np.ndarray:
+    """Row-stochastic matrix: normal -> fault j with ``to_fault[j-1]`` (a scalar: the same
+    for all); fault mode j stays with ``stay[j-1]`` and otherwise returns to normal."""
+    to_fault = np.broadcast_to(np.asarray(to_fault, float), (num_modes - 1,))
+    stay = np.broadcast_to(np.asarray(stay, float), (num_modes - 1,))
+    pi = np.zeros((num_modes, num_modes))
+    pi[0, 1:] = to_fault
+    pi[0, 0] = 1.0 - to_fault.sum()
+    pi[1:, 0] = 1.0 - stay
+    pi[np.arange(1, num_modes), np.arange(1, num_modes)] = stay
+    return pi
+
+
+
+
+class EngineSettings(NamedTuple):
+    """Hand-set parameters of the methods (issue 4 tunes them by gradient)."""
+
+    mu_threshold: float = 0.5              # mu_T (paper)
+    confirm_steps: int = 3                 # the confirmed variant (the paper's rule is 1)
+    sensor_inflation: float = 1e4          # Zhang & Li: R_jj factor in the sensor-j mode
+    actuator_noise: float = 0.008          # Zhang & Li: extra input noise std in the actuator mode [kg/s]
+    mm_floor: float = 1e-4                 # MM probability floor
+    bias_walk: tuple = (1e-12, 1e-6, 1e-8, 1e-10, 1e-8, 1e-8)  # per-step variance of the active bias
+    bias_prior: tuple = (1e-6, 1e4, 400.0, 4.0, 100.0, 36.0)   # variance of a bias when its mode is entered
+    to_fault: float = 5e-5                 # hand-set pi: P(normal -> each fault mode) per step
+    stay: float = 0.999                    # hand-set pi: P(fault mode stays)
+    glr_window: int = 10                   # N (paper)
+    glr_threshold: float = PAPER_USED_THRESHOLD  # l_T (paper; theory: chi2.isf(0.005, 60) = 91.95)
+    glr_pfa: float = 1e-4                  # per-step false-alarm probability of the Bonferroni threshold
+    glr_estimate_delay: int = 5            # GLRT magnitude read this many steps after the alarm (< N)
+    bias_estimate_delay: int = 50          # bias IMM's estimate read 0.5 s after the alarm
+
+
+class Method(NamedTuple):
+    """A filter + detector pair run on the plant by ``monitor``."""
+
+    filter: Any
+    init_state: Any
+    detector: Any
+    detector_input: Callable[[Any], Any]
+    estimate_delay: int = 0
+    paper: str | None = None  # the paper's column this method reproduces (Table 3)
+
+
+def _bias_estimates(info):
+    """Per-mode fault estimate of the bias design: mode j's own bias (NaN for normal)."""
+    n_b = info.mode_mean.shape[0] - 1
+    own = jnp.diagonal(info.mode_mean[1:, -n_b:])
+    return info.mode_prob, jnp.concatenate([jnp.full((1,), jnp.nan, own.dtype), own])
+
+
+def _mode_prob(info):
+    return info.mode_prob
+
+
+def _innovation(info):
+    return info.innovation
+
+
+def confirmed_name(settings: "EngineSettings") -> str:
+    return f"IMM-bias hand-pi confirm {settings.confirm_steps}"
+
+
+def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Method]:
+    """Every method of the study, by name, in table order."""
+    model = engine_model()
+    M = len(MODE_NAMES)
+    x0, P0 = jnp.zeros(7), model.Q
+    mu0 = jnp.asarray(PAPER_TRANSITION[0])  # the normal row: P(mode at step 0)
+    hand = sticky_transition(M, settings.to_fault, settings.stay)
+    paper_rule = mode_probability_detector(settings.mu_threshold)
+    confirmed = mode_probability_detector(settings.mu_threshold, confirm_steps=settings.confirm_steps)
+
+    zl = noise_inflation_modes(model, settings.sensor_inflation, settings.actuator_noise)
+    bm = bias_modes(model, jnp.asarray(settings.bias_walk), jnp.asarray(settings.bias_prior))
+    z0, Z0 = bias_mode_initial_state(model, x0, P0, jnp.asarray(settings.bias_prior))
+
+    def zhang_li(filt, paper):
+        return Method(filt, filt.init(x0, P0, mu0), paper_rule, _mode_prob, 0, paper)
+
+    def bias(filt, paper, detector=paper_rule):
+        return Method(filt, filt.init(z0, Z0, mu0), detector, _bias_estimates, settings.bias_estimate_delay, paper)
+
+    steady = steady_state_kalman(model)
+    kf = kalman_filter(model)
+    kf0 = kf.init(x0, steady.predicted_cov)  # the GLR signatures assume the steady-state gain
+
+    def glrt(threshold):
+        det = glrt_detector(model, steady.gain, steady.innovation_cov, settings.glr_window, threshold)
+        return Method(kf, kf0, det, _innovation, settings.glr_estimate_delay, "GLRT")
+
+    bonferroni = float(glrt_threshold(settings.glr_pfa, 6, settings.glr_window, "bonferroni"))
+    return {
+        "MM": zhang_li(multiple_model(kalman_filter, zl, settings.mm_floor), "MM"),
+        "IMM": zhang_li(interacting_multiple_model(kalman_filter, zl, PAPER_TRANSITION), "IMM"),
+        "IMM hand-pi": zhang_li(interacting_multiple_model(kalman_filter, zl, hand), "IMM"),
+        "MM-bias": bias(multiple_model(kalman_filter, bm, settings.mm_floor), "MM"),
+        "IMM-bias": bias(interacting_multiple_model(kalman_filter, bm, PAPER_TRANSITION), "IMM"),
+        "IMM-bias hand-pi": bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM"),
+        confirmed_name(settings): bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM", confirmed),
+        f"GLRT l_T={settings.glr_threshold:g}": glrt(settings.glr_threshold),
+        f"GLRT l_T={bonferroni:.1f}": glrt(bonferroni),
+    }
+
+
+def _run(method: Method, model, us, key, f, keep_history=False):
+    return monitor(linear_simulator(model, f), method.filter, method.detector, jnp.zeros(7), method.init_state,
+                   us, key, f.onset, keep_history, method.detector_input, method.estimate_delay)
+
+
+def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, onset_time: float = 2.0,
+               chunk_size: int = 1024, progress: bool = False) -> DetectionRecord:
+    """Records of ``runs`` runs of each engine fault (and fault-free), fault-major in
+    ``engine_faults`` order. Run ``i`` gets the same key, hence the same noise, for
+    every method."""
+    model = engine_model()
+    steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
+    us = jnp.full((steps, 1), FUEL_STEP)
+    _, faults = engine_faults(onset)
+    batch = stack_faults([f for f in faults for _ in range(runs)])
+    return monte_carlo(lambda key, f: _run(method, model, us, key, f).record, jax.random.key(seed),
+                       len(faults) * runs, batch, chunk_size=chunk_size, progress=progress)
+
+
+def summarize_method(name: str, method: Method, records: DetectionRecord, runs: int, steps: int) -> list[dict]:
+    """One row per fault: rates, delays (s), the paper's delay, the estimate's error."""
+    names, faults = engine_faults(0)
+    rows = []
+    for i, (fault_name, f) in enumerate(zip(names, faults)):
+        part = jax.tree_util.tree_map(lambda x: np.asarray(x)[i * runs:(i + 1) * runs], records)
+        s = summarize_detection(part, steps, TS)
+        faulty = fault_name != "none"
+        correct = part.isolated == i + 1
+        magnitude = float(f.magnitude) if faulty else float("nan")
+        estimates = part.estimate[correct] if faulty else np.zeros(0)
+        estimates = estimates[np.isfinite(estimates)]
+        estimate = float(np.median(estimates)) if estimates.size else float("nan")
+        paper = PAPER_DELAY[method.paper][i] if (faulty and method.paper) else float("nan")
+        rows.append({
+            "method": name, "fault": fault_name, "magnitude": magnitude, "runs": s.runs,
+            "detection_rate": s.detection_rate,
+            "isolation_rate": float(np.mean(correct)) if faulty else float("nan"),
+            "false_alarm_rate": s.false_alarm_rate,
+            "false_alarm_steps_per_run": float(np.mean(part.false_alarms)),
+            "delay_median_s": s.delay_median, "delay_p90_s": s.delay_p90, "paper_delay_s": paper,
+            "estimate_median": estimate,
+            "estimate_error": (estimate - magnitude) / magnitude if faulty else float("nan"),
+        })
+    return rows
+
+
+class EngineStudy(NamedTuple):
+    config: dict[str, Any]
+    rows: list[dict[str, Any]]             # one per (method, fault)
+    records: dict[str, DetectionRecord]    # per method, (7 * runs,) fault-major
+    figures: dict[str, Any]                # arrays behind the figures
+
+    def overview(self) -> str:
+        """One line per method: the issue's acceptance quantities over the six faults."""
+        head = (f"{'method':<26} {'min det':>7} {'min iso':>7} {'FA (no fault)':>13} {'FA (all)':>8} "
+                f"{'max med delay [s]':>17}  worst-isolated")
+        lines = [head, "-" * len(head)]
+        for name in self.records:
+            rows = [r for r in self.rows if r["method"] == name]
+            faulty = [r for r in rows if r["fault"] != "none"]
+            worst = min(faulty, key=lambda r: r["isolation_rate"])
+            fa_all = np.mean([r["false_alarm_rate"] for r in rows])
+            lines.append(
+                f"{name:<26} {min(r['detection_rate'] for r in faulty):>7.2f} {worst['isolation_rate']:>7.2f} "
+                f"{rows[-1]['false_alarm_rate']:>13.2f} {fa_all:>8.3f} "
+                f"{_fmt(_nanmax([r['delay_median_s'] for r in faulty]), 17)}  {worst['fault']}"
+            )
+        return "\n".join(lines)
+
+    def table(self) -> str:
+        """Per method and fault, beside seed 003's Table 3 (median delay)."""
+        head = (f"{'fault':<9} {'det':>5} {'iso':>5} {'FA':>5} {'delay med':>9} {'p90':>6} {'paper':>6} "
+                f"{'estimate':>10} {'true':>9} {'err %':>6}")
+        blocks = []
+        for name in self.records:
+            lines = [f"{name}", head, "-" * len(head)]
+            for r in (r for r in self.rows if r["method"] == name):
+                lines.append(
+                    f"{r['fault']:<9} {_fmt(r['detection_rate'], 5, 2)} {_fmt(r['isolation_rate'], 5, 2)} "
+                    f"{r['false_alarm_rate']:>5.2f} {_fmt(r['delay_median_s'], 9)} {_fmt(r['delay_p90_s'], 6)} "
+                    f"{_fmt(r['paper_delay_s'], 6)} {_fmt(r['estimate_median'], 10, 4, 'g')} "
+                    f"{_fmt(r['magnitude'], 9, 4, 'g')} {_fmt(100 * r['estimate_error'], 6, 1)}"
+                )
+            blocks.append("\n".join(lines))
+        return "\n\n".join(blocks)
+
+
+def _nanmax(values: list[float]) -> float:
+    finite = [v for v in values if v == v]
+    return max(finite) if finite else float("nan")
+
+
+def _fmt(x: float, width: int, digits: int = 3, kind: str = "f") -> str:
+    return f"{'-':>{width}}" if x != x else f"{x:>{width}.{digits}{kind}}"
+
+
+def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = EngineSettings(),
+                 methods: list[str] | None = None, figure_runs: int = 20, duration: float = 4.0,
+                 onset_time: float = 2.0, progress: bool = False) -> EngineStudy:
+    """Run every method (or ``methods``) on the same ``runs`` runs per fault.
+
+    Needs float64 (``jaxfdi.enable_x64()``): the engine is stiff. ``figure_runs`` runs per
+    fault (another seed) give the averaged mode probabilities and GLR statistics."""
+    if not jax.config.jax_enable_x64:
+        raise ValueError("engine_study: enable float64 first (jaxfdi.enable_x64()); the engine model is stiff")
+    every = engine_methods(settings)
+    chosen = list(every) if methods is None else methods
+    unknown = [m for m in chosen if m not in every]
+    if unknown:
+        raise ValueError(f"methods: unknown {unknown}; expected names from {list(every)}")
+    steps = int(round(duration / TS))
+    records, rows = {}, []
+    for name in chosen:
+        if progress:
+            print(f"{name}:", file=sys.stderr, flush=True)
+        records[name] = run_method(every[name], runs, seed, duration, onset_time, progress=progress)
+        rows += summarize_method(name, every[name], records[name], runs, steps)
+    figures = {} if figure_runs < 1 else _figure_data(every, chosen, settings, figure_runs, seed + 1, duration,
+                                                      onset_time)
+    bonferroni = float(glrt_threshold(settings.glr_pfa, 6, settings.glr_window, "bonferroni"))
+    config = {
+        "scenario": "engine", "runs_per_fault": runs, "seed": seed, "Ts": TS, "steps": steps,
+        "onset_step": int(round(onset_time / TS)), "fuel_step": FUEL_STEP, "methods": chosen,
+        "settings": settings._asdict(), "paper_transition": PAPER_TRANSITION.tolist(),
+        "hand_transition": sticky_transition(len(MODE_NAMES), settings.to_fault, settings.stay).tolist(),
+        "glr_threshold_theory": float(glrt_threshold(0.005, 6, settings.glr_window)),
+        "glr_threshold_bonferroni": bonferroni, "figure_runs": figure_runs,
+    }
+    return EngineStudy(config, rows, records, figures)
+
+
+def _figure_data(every, chosen, settings, runs, seed, duration, onset_time) -> dict[str, Any]:
+    """Mean mode probabilities (faults, T, M) of two IMMs and mean per-direction GLR
+    statistics (faults, T, 6) over ``runs`` runs per fault."""
+    model = engine_model()
+    steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
+    us = jnp.full((steps, 1), FUEL_STEP)
+    _, faults = engine_faults(onset)
+    batch = stack_faults([f for f in faults for _ in range(runs)])
+    keys = jax.random.split(jax.random.key(seed), len(faults) * runs)
+
+    def mean_over_runs(history_of):
+        out = jax.jit(jax.vmap(history_of))(keys, batch)
+        return np.asarray(out).reshape(len(faults), runs, *out.shape[1:]).mean(axis=1)
+
+    data = {}
+    for name in ("IMM", confirmed_name(settings)):
+        if name in chosen:
+            data[f"mode_prob/{name}"] = mean_over_runs(
+                lambda k, f, m=every[name]: _run(m, model, us, k, f, True).history.info.mode_prob)
+    glrt_name = next((n for n in chosen if n.startswith("GLRT")), None)
+    if glrt_name is not None:
+        method = every[glrt_name]
+        steady = steady_state_kalman(model)
+        signatures = fault_signatures(model, steady.gain, fault_directions(model), settings.glr_window)
+        N = settings.glr_window
+
+        def glr_history(k, f):
+            innovation = _run(method, model, us, k, f, True).history.info.innovation
+            padded = jnp.concatenate([jnp.zeros((N - 1, innovation.shape[1]), innovation.dtype), innovation])
+            windows = padded[jnp.arange(steps)[:, None] + jnp.arange(N)[None, :]]
+            valid = jnp.minimum(jnp.arange(steps) + 1, N)
+            return jax.vmap(lambda w, v: glr_statistic(w, signatures, steady.innovation_cov, v).statistic)(
+                windows, valid)
+
+        data["glr"] = mean_over_runs(glr_history)
+    return data
+
+
+def plot_engine(study: EngineStudy, out_dir) -> list[str]:
+    """Figures like seed 003's Figs. 3-1/3-2 (mode probabilities), 4 (GLR statistics) and
+    the magnitude estimates against truth; written atomically; returns the paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jaxfdi._io import atomic_write
+
+    cfg, paths = study.config, []
+    t = np.arange(cfg["steps"]) * cfg["Ts"]
+    fault_names = engine_faults(0)[0][:-1]
+
+    def save(fig, name):
+        path = atomic_write(f"{out_dir}/{name}", lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        plt.close(fig)
+        paths.append(str(path))
+
+    prob_keys = [k for k in study.figures if k.startswith("mode_prob/")]
+    if prob_keys:
+        fig, axes = plt.subplots(len(prob_keys), 6, figsize=(18, 3.2 * len(prob_keys)), sharey=True, squeeze=False)
+        for row, key in zip(axes, prob_keys):
+            for i, ax in enumerate(row):
+                for j, mode in enumerate(MODE_NAMES):
+                    ax.plot(t, study.figures[key][i, :, j], lw=1.2 if j in (0, i + 1) else 0.7, label=mode)
+                ax.axhline(cfg["settings"]["mu_threshold"], color="k", ls="--", lw=0.8)
+                ax.set(title=f"{fault_names[i]} fault", xlabel="time [s]")
+            row[0].set_ylabel(f"{key.split('/', 1)[1]}\nmean mode probability ({cfg['figure_runs']} runs)")
+        axes[0, -1].legend(fontsize=7)
+        fig.tight_layout()
+        save(fig, "engine-mode-probabilities.png")
+
+    if "glr" in study.figures:
+        fig, axes = plt.subplots(2, 3, figsize=(15, 7), sharex=True)
+        for i, ax in enumerate(axes.flat):
+            for j, direction in enumerate(MODE_NAMES[1:]):
+                ax.semilogy(t, np.maximum(study.figures["glr"][i, :, j], 1e-2), lw=1.2 if j == i else 0.7,
+                            label=direction)
+            for value, style in ((cfg["settings"]["glr_threshold"], "--"), (cfg["glr_threshold_theory"], ":"),
+                                 (cfg["glr_threshold_bonferroni"], "-.")):
+                ax.axhline(value, color="k", ls=style, lw=0.8, label=f"l_T = {value:.1f}")
+            ax.set(title=f"{fault_names[i]} fault", xlabel="time [s]", ylabel="mean GLR l_i")
+        axes[0, 0].legend(fontsize=7, ncol=2)
+        fig.tight_layout()
+        save(fig, "engine-glrt.png")
+
+    with_estimates = [m for m in study.records if any(
+        r["method"] == m and r["estimate_median"] == r["estimate_median"] for r in study.rows)]
+    if with_estimates:
+        runs = cfg["runs_per_fault"]
+        fig, axes = plt.subplots(1, 6, figsize=(18, 3.8))
+        for i, ax in enumerate(axes):
+            true = engine_faults(0)[1][i].magnitude
+            data = []
+            for m in with_estimates:
+                rec = study.records[m]
+                part = slice(i * runs, (i + 1) * runs)
+                ok = (np.asarray(rec.isolated)[part] == i + 1) & np.isfinite(np.asarray(rec.estimate)[part])
+                data.append(np.asarray(rec.estimate)[part][ok] / float(true))
+            ax.boxplot(data, tick_labels=[m.replace(" ", "\n", 1) for m in with_estimates])
+            ax.axhline(1.0, color="k", lw=0.8)
+            ax.set(title=f"{fault_names[i]}: estimate / true", ylim=(0.0, 2.0))
+            ax.tick_params(axis="x", labelsize=6)
+        fig.tight_layout()
+        save(fig, "engine-estimates.png")
+    return paths

@@ -30,7 +30,7 @@ class DetectionRecord(NamedTuple):
     pre_onset_steps: Array  # () int, number of steps seen before the onset
     isolated: Array = -1    # () int, label at the detection step (-1: none / not isolating)
     first_label: Array = -1  # () int, label at the first alarm (a false alarm's label)
-    estimate: Array = float("nan")  # () float, detector's estimate estimate_delay steps after detection
+    estimate: Array = float("nan")  # () float, estimate of the isolated fault, latest within estimate_delay steps after detection
 
 
 def record_init(onset: Array, dtype=None) -> DetectionRecord:
@@ -53,7 +53,9 @@ def record_update(
     detection = jnp.where(new_detection, k, record.detection_step)
     estimate_value = record.estimate
     if estimate is not None:
-        keep_updating = (detection >= 0) & (k <= detection + estimate_delay)
+        # the estimate of the isolated fault: steps whose label has moved on do not count
+        isolated = jnp.where(new_detection, label, record.isolated)
+        keep_updating = (detection >= 0) & (k <= detection + estimate_delay) & (label == isolated)
         estimate_value = jnp.where(keep_updating, jnp.asarray(estimate, record.estimate.dtype), record.estimate)
     return DetectionRecord(
         record.onset,

@@ -56,9 +56,10 @@ def monitor(
       onset: () fault onset step used for the metrics (``faults.NEVER`` if none).
       keep_history: also return the (T, ...) history (memory grows with T).
       detector_input: ``info -> detector input``; default ``lambda info: info.nis``.
-      estimate_delay: the record keeps the detector's estimate this many steps after
-        the detection step (an estimate taken at the alarm itself is biased by the
-        selection: the noise that crossed the threshold is in it).
+      estimate_delay: the record keeps the detector's estimate of the isolated fault,
+        the latest within this many steps after the detection step (an estimate taken
+        at the alarm itself is biased by the selection: the noise that crossed the
+        threshold is in it; steps whose label differs from the isolated one are skipped).
     """
     detector_input = detector_input or (lambda info: info.nis)
     us = jnp.asarray(us)

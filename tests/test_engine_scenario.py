@@ -15,7 +15,7 @@ RUNS = 30
 FAULTS = ["actuator", "RPM", "P2", "T2", "P4", "T4"]
 DESIGN = "IMM-bias hand-pi confirm 3"  # the better of the two mode designs (hand-set pi)
 METHODS = ["MM", "IMM", "IMM hand-pi", "MM-bias", "IMM-bias", "IMM-bias hand-pi", DESIGN, "GLRT l_T=200",
-           "GLRT l_T=22.9"]
+           "GLRT l_T=22.9", "GLRT l_T=22.9 eq. 24"]
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,8 @@ Methods (each a filter + an online detector fused with the plant in one scan):
 * IMMs with the paper's transition matrix and with a hand-set one (``sticky_transition``);
 * ``GLRT``: the fault-blind steady-state KF's innovations tested by the windowed GLR
   (Willsky & Jones), threshold ``l_T`` (the paper's 200, and a Bonferroni threshold
-  derived from a per-step false-alarm probability), isolation by the largest GLR;
+  derived from a per-step false-alarm probability), isolation by the largest GLR or by
+  the paper's eq. (24) (actuator only when the actuator and T4 GLRs both cross);
 * a confirmed variant of the hand-set bias IMM: the same top fault mode must hold
   ``mu_T`` for ``confirm_steps`` consecutive steps (not in the paper; see
   ``mode_probability_detector`` for why the actuator fault needs it).
@@ -161,8 +162,8 @@ def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Met
     kf = kalman_filter(model)
     kf0 = kf.init(x0, steady.predicted_cov)  # the GLR signatures assume the steady-state gain
 
-    def glrt(threshold):
-        det = glrt_detector(model, steady.gain, steady.innovation_cov, settings.glr_window, threshold)
+    def glrt(threshold, isolation="max"):
+        det = glrt_detector(model, steady.gain, steady.innovation_cov, settings.glr_window, threshold, isolation)
         return Method(kf, kf0, det, _innovation, settings.glr_estimate_delay, "GLRT")
 
     bonferroni = float(glrt_threshold(settings.glr_pfa, 6, settings.glr_window, "bonferroni"))
@@ -176,6 +177,7 @@ def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Met
         confirmed_name(settings): bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM", confirmed),
         f"GLRT l_T={settings.glr_threshold:g}": glrt(settings.glr_threshold),
         f"GLRT l_T={bonferroni:.1f}": glrt(bonferroni),
+        f"GLRT l_T={bonferroni:.1f} eq. 24": glrt(bonferroni, "paper"),
     }
 
 

@@ -401,7 +401,7 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
         r["method"] == m and r["estimate_median"] == r["estimate_median"] for r in study.rows)]
     if with_estimates:
         runs = cfg["runs_per_fault"]
-        fig, axes = plt.subplots(1, 6, figsize=(18, 3.8))
+        fig, axes = plt.subplots(1, 6, figsize=(18, 0.45 * len(with_estimates) + 1.6), sharey=True)
         for i, ax in enumerate(axes):
             true = engine_faults(0)[1][i].magnitude
             data = []
@@ -410,10 +410,10 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
                 part = slice(i * runs, (i + 1) * runs)
                 ok = (np.asarray(rec.isolated)[part] == i + 1) & np.isfinite(np.asarray(rec.estimate)[part])
                 data.append(np.asarray(rec.estimate)[part][ok] / float(true))
-            ax.boxplot(data, tick_labels=[m.replace(" ", "\n", 1) for m in with_estimates])
-            ax.axhline(1.0, color="k", lw=0.8)
-            ax.set(title=f"{fault_names[i]}: estimate / true", ylim=(0.0, 2.0))
-            ax.tick_params(axis="x", labelsize=6)
+            ax.boxplot(data, orientation="horizontal", tick_labels=with_estimates)
+            ax.axvline(1.0, color="k", lw=0.8)
+            ax.set(title=f"{fault_names[i]}: estimate / true", xlim=(0.0, 2.0))
+        axes[0].invert_yaxis()
         fig.tight_layout()
         save(fig, "engine-estimates.png")
     return paths

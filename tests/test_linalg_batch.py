@@ -33,6 +33,18 @@ def test_cholesky_and_solves_equal_scipy(n):
     np.testing.assert_allclose(_linalg.psd_solve(A, b), np.linalg.solve(A, b), rtol=1e-11)
 
 
+@pytest.mark.parametrize("shapes", [((7, 7), (7, 7)), ((7, 5), (5, 7)), ((5,), (5, 7)), ((7, 5), (5,)),
+                                    ((4,), (4,)), ((1, 1), (1, 3)), ((13, 5), (5, 13)), ((3, 20), (20, 2))])
+def test_matmul_equals_numpy_unrolled_or_not(shapes):
+    rng = np.random.default_rng(len(shapes[0]) + shapes[0][0])
+    a, b = rng.normal(size=shapes[0]), rng.normal(size=shapes[1])
+    out = _linalg.matmul(jnp.asarray(a), jnp.asarray(b))
+    assert out.shape == (a @ b).shape
+    np.testing.assert_allclose(out, a @ b, rtol=1e-13, atol=1e-13)
+    batched = jax.vmap(_linalg.matmul)(jnp.asarray(np.stack([a, 2 * a])), jnp.asarray(np.stack([b, b])))
+    np.testing.assert_allclose(batched[1], 2 * (a @ b), rtol=1e-13, atol=1e-13)
+
+
 def test_cholesky_vmapped_and_not_positive_definite_gives_nan():
     rng = np.random.default_rng(0)
     batch = np.stack([random_spd(rng, 5) for _ in range(4)])

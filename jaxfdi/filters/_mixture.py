@@ -134,16 +134,25 @@ def bayes_mode_update(log_prior: Array, log_likelihood: Array) -> tuple[Array, A
 def moment_match(weights: Array, means: Array, covs: Array) -> tuple[Array, Array]:
     """Gaussian with the moments of ``sum_i w_i N(x_i, P_i)`` (weights summing to 1):
     ``x = sum_i w_i x_i``, ``P = sum_i w_i [P_i + (x_i - x)(x_i - x)^T]``."""
-    mean = weights @ means
+    mean = _linalg.matmul(weights, means)
     deviation = means - mean
-    cov = jnp.einsum("i,ijk->jk", weights, covs) + jnp.einsum("i,ij,ik->jk", weights, deviation, deviation)
+    cov = _linalg.matmul((weights[:, None] * deviation).T, deviation)
+    if _linalg.is_small(means):  # sum_i w_i P_i unrolled, for the reason _linalg.matmul is
+        for i in range(covs.shape[0]):
+            cov = cov + weights[i] * covs[i]
+    else:
+        cov = cov + jnp.einsum("i,ijk->jk", weights, covs)
     return mean, _linalg.symmetrize(cov)
 
 
 def bank_update(mode_filter, mode_params, state: IMMState, y: Array, u: Array) -> ConditionedGaussian:
     """Every mode's measurement update with ``y[k]``: one filter vmapped over the params."""
     prior = GaussianState(state.mode_mean, state.mode_cov)
-    return jax.vmap(lambda p, s: mode_filter(p).update(s, y, u))(mode_params, prior)
+    post = jax.vmap(lambda p, s: mode_filter(p).update(s, y, u))(mode_params, prior)
+    # Materialise the posteriors: otherwise XLA fuses each mode's update into the mixing
+    # that reads it M times and recomputes it there (measured 10-20 % slower at 7 modes).
+    mean, cov = jax.lax.optimization_barrier((post.mean, post.cov))
+    return post._replace(mean=mean, cov=cov)
 
 
 def bank_predict(mode_filter, mode_params, means: Array, covs: Array, u: Array) -> GaussianState:

@@ -44,16 +44,17 @@ def joseph_update(
     else:
         num_observed = jnp.asarray(y.shape[0], jnp.int32)
         innovation = y - y_pred
-    cross_cov = cov @ H.T
-    S = _linalg.symmetrize(H @ cross_cov + R)
+    mm = _linalg.matmul
+    cross_cov = mm(cov, H.T)
+    S = _linalg.symmetrize(mm(H, cross_cov) + R)
     if missing_measurements:
         S = mask_innovation_cov(S, mask)
     chol_S = _linalg.cholesky(S)
     gain = _linalg.gain_from_cross_cov(cross_cov, chol_S)
     whitened = _linalg.whiten(chol_S, innovation)
-    I_KH = jnp.eye(mean.shape[0], dtype=cov.dtype) - gain @ H
-    new_cov = _linalg.symmetrize(I_KH @ cov @ I_KH.T + gain @ R @ gain.T)
-    new_mean = mean + gain @ innovation
+    I_KH = jnp.eye(mean.shape[0], dtype=cov.dtype) - mm(gain, H)
+    new_cov = _linalg.symmetrize(mm(mm(I_KH, cov), I_KH.T) + mm(mm(gain, R), gain.T))
+    new_mean = mean + mm(gain, innovation)
     log_lik = _linalg.gaussian_log_likelihood(whitened, chol_S, num_observed)
     healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(new_mean))
     return ConditionedGaussian(new_mean, new_cov, innovation, S, log_lik, jnp.sum(whitened**2), num_observed, healthy)
@@ -75,11 +76,12 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
 
     def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
         check_step_inputs(y, u, m, nu)
-        y_pred = model.C @ state.mean + model.D @ u
+        y_pred = _linalg.matmul(model.C, state.mean) + _linalg.matmul(model.D, u)
         return joseph_update(state.mean, state.cov, y, y_pred, model.C, model.R, missing_measurements)
 
     def predict(post: GaussianState, u: Array) -> GaussianState:
-        next_mean = model.Phi @ post.mean + model.Gamma @ u
-        return GaussianState(next_mean, _linalg.symmetrize(model.Phi @ post.cov @ model.Phi.T + model.Q))
+        mm = _linalg.matmul
+        next_mean = mm(model.Phi, post.mean) + mm(model.Gamma, u)
+        return GaussianState(next_mean, _linalg.symmetrize(mm(mm(model.Phi, post.cov), model.Phi.T) + model.Q))
 
     return gaussian_filter(n, update, predict)

@@ -22,7 +22,7 @@ def enable_x64(enable: bool = True) -> None:
 
     jax.config.update("jax_enable_x64", enable)
 
-from jaxfdi import detection, faults, metrics, models  # noqa: E402
+from jaxfdi import detection, faults, metrics, models, tuning  # noqa: E402
 from jaxfdi.detection import chi2_detector, chi2_threshold, glrt_detector, mode_probability_detector  # noqa: E402
 from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault, stack_faults  # noqa: E402
 from jaxfdi.metrics import DetectionRecord, DetectionSummary, confusion_matrix, summarize_detection  # noqa: E402

@@ -1,0 +1,94 @@
+"""Differentiable losses on labelled runs (labels from the simulator: ``SimStep.mode``
+per step, the fault onset per run).
+
+* ``mode_cross_entropy``: mean over steps of ``-log mu_{true mode}(k)``, for IMM/MM
+  mode probabilities (the log-loss of a probabilistic classifier, Bishop 2006 eq. 4.108);
+* ``soft_detection_loss``: a threshold test ``alarm_k = [s_k >= h]`` relaxed to
+  ``a_k = sigmoid((s_k - h) / temperature)`` and read as independent per-step alarm
+  probabilities; then ``P(no alarm before the onset) = prod_{k<onset} (1 - a_k)``,
+  ``P(first alarm at k >= onset) = a_k prod_{onset<=j<k} (1 - a_j)``, and the loss is
+  ``w_fa P(false alarm) + w_miss P(missed) + w_delay E[delay] / horizon`` with the
+  missed runs counted at the full horizon. As ``temperature -> 0`` it becomes the hard
+  rates of ``metrics`` (tested);
+* ``innovation_nll``: ``-(1/T) sum_k log N(r_k; 0, S_k)``, whose minimiser over ``Q, R``
+  is the maximum-likelihood estimate (Mehra 1970; Shumway & Stoffer 1982).
+All are per run; average them over a batch with ``jax.vmap`` and ``jnp.mean``.
+"""
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+
+
+def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e-12) -> Array:
+    """``mean_k -log(mu_{true_mode[k]}(k) + floor)``.
+
+    Args:
+      log_mode_prob: (T, M) log mode probabilities (``IMMInfo.log_mode_prob``).
+      true_mode: (T,) int true mode per step (``SimStep.mode``).
+      floor: probability floor, so that a structurally impossible mode costs
+        ``-log(floor)`` (finite, with a finite gradient) rather than infinity.
+    """
+    _checks.check_shape("log_mode_prob", log_mode_prob, (None, None), "(T, M) log mode probabilities")
+    T = log_mode_prob.shape[0]
+    _checks.check_shape("true_mode", true_mode, (T,), "one int mode label per step")
+    picked = jnp.take_along_axis(log_mode_prob, jnp.asarray(true_mode)[:, None].astype(jnp.int32), axis=1)[:, 0]
+    return -jnp.mean(jnp.logaddexp(picked, math.log(floor)))
+
+
+def soft_alarm_log_prob(statistic: Array, threshold: Array, temperature: Array) -> tuple[Array, Array]:
+    """``(log a_k, log(1 - a_k))`` with ``a_k = sigmoid((s_k - h) / temperature)``."""
+    z = (statistic - threshold) / temperature
+    return jax.nn.log_sigmoid(z), jax.nn.log_sigmoid(-z)
+
+
+def soft_detection_loss(
+    statistic: Array,
+    threshold: Array,
+    onset: Array,
+    temperature: Array = 1.0,
+    false_alarm_weight: float = 1.0,
+    miss_weight: float = 1.0,
+    delay_weight: float = 1.0,
+) -> tuple[Array, dict[str, Array]]:
+    """Smoothed false-alarm / missed-detection / delay loss of one run (module doc).
+
+    Args:
+      statistic: (T,) test statistic ``s_k`` (alarm when ``s_k >= threshold``).
+      threshold, temperature: () scalars (may be traced and tuned).
+      onset: () int fault onset step (``faults.NEVER`` or >= T: fault-free run).
+
+    Returns:
+      ``(loss, parts)``; ``parts`` has ``false_alarm``, ``missed`` (probabilities) and
+      ``delay`` (expected, in steps; missed runs count ``T - onset``).
+    """
+    _checks.check_shape("statistic", statistic, (None,), "(T,) test statistic")
+    T = statistic.shape[0]
+    k = jnp.arange(T)
+    onset = jnp.minimum(jnp.asarray(onset), T)
+    log_a, log_not = soft_alarm_log_prob(statistic, threshold, temperature)
+    before = k < onset
+    log_quiet_before = jnp.sum(jnp.where(before, log_not, 0.0))
+    false_alarm = -jnp.expm1(log_quiet_before)
+    after_not = jnp.where(before, 0.0, log_not)
+    log_quiet_until = jnp.cumsum(after_not) - after_not  # log prod_{onset <= j < k} (1 - a_j)
+    first = jnp.where(before, 0.0, jnp.exp(log_a + log_quiet_until))  # P(first alarm after onset at k)
+    missed = jnp.exp(jnp.sum(after_not))
+    faulty = onset < T
+    horizon = jnp.maximum(T - onset, 1)
+    delay = jnp.sum(first * (k - onset)) + missed * horizon
+    loss = false_alarm_weight * false_alarm + jnp.where(
+        faulty, miss_weight * missed + delay_weight * delay / horizon, 0.0)
+    return loss, {"false_alarm": false_alarm, "missed": jnp.where(faulty, missed, 0.0),
+                  "delay": jnp.where(faulty, delay, 0.0)}
+
+
+def innovation_nll(log_likelihood: Array) -> Array:
+    """``-(1/T) sum_k log N(r_k; 0, S_k)`` from the (T,) per-step ``FilterInfo.log_likelihood``."""
+    _checks.check_shape("log_likelihood", log_likelihood, (None,), "(T,) per-step log-likelihoods")
+    return -jnp.mean(log_likelihood)

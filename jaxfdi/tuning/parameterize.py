@@ -1,0 +1,175 @@
+"""Unconstrained parameterisations of the quantities a tuner may change.
+
+A gradient step moves parameters anywhere in R^d; these maps turn any such point into a
+valid object, and back (``inverse(forward(x)) = x`` up to round-off, and
+``forward(inverse(p)) = p`` for every valid ``p``):
+
+* ``stochastic_rows(mask)``: a row-stochastic matrix from logits, ``pi_ij = exp(l_ij) /
+  sum_k exp(l_ik)`` over the allowed entries; ``mask`` (static, bool) marks structural
+  zeros, which stay exactly 0 with zero gradient (log-space softmax, Bishop 2006 sec. 4.3.4);
+* ``log_diagonal()``: a diagonal covariance ``diag(exp(d))``;
+* ``cholesky_factor()``: a full covariance ``L L^T`` with ``L`` lower triangular whose
+  diagonal is ``exp`` of the parameters (Pinheiro & Bates 1996, the log-Cholesky form);
+* ``positive()``: ``softplus(x)``, for thresholds, inflation factors and noise levels;
+* ``identity()``: unconstrained reals.
+
+A *parameterisation* is a dict ``name -> Transform``; ``constrain``/``unconstrain`` map
+whole parameter dicts, and ``partition`` splits the trainable entries from the frozen
+ones (static mask). The transform names and options are what ``save_params`` records,
+so a file can be read back into the same parameterisation.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks, _linalg
+
+
+class Transform(NamedTuple):
+    """``forward: unconstrained -> constrained`` and its ``inverse``, with a name and
+    static options (recorded when parameters are saved)."""
+
+    forward: Callable[[Array], Array]
+    inverse: Callable[[Array], Array]
+    name: str
+    options: dict
+
+
+def identity() -> Transform:
+    return Transform(lambda x: x, lambda p: jnp.asarray(p), "identity", {})
+
+
+def positive(floor: float = 0.0) -> Transform:
+    """``p = floor + softplus(x)``; inverse ``x = log(expm1(p - floor))`` written stably."""
+
+    def forward(x):
+        return floor + jax.nn.softplus(x)
+
+    def inverse(p):
+        excess = jnp.asarray(p) - floor
+        # log(expm1(e)) = e + log(1 - exp(-e)), exact for large e, finite for small e > 0
+        return excess + jnp.log(-jnp.expm1(-excess))
+
+    return Transform(forward, inverse, "positive", {"floor": floor})
+
+
+def stochastic_rows(mask: Any = None) -> Transform:
+    """Row-stochastic (M, M) matrix from (M, M) logits; ``mask[i, j] = False`` fixes
+    ``pi_ij = 0``; every row needs an allowed entry. The logits of a row are defined up
+    to a constant; ``inverse`` returns ``log pi`` (row log-sum-exp 0), and 0 at zeros."""
+    mask_np = None if mask is None else np.asarray(mask, bool)
+    if mask_np is not None:
+        if mask_np.ndim != 2 or mask_np.shape[0] != mask_np.shape[1]:
+            raise ValueError(f"mask: expected a square (M, M) boolean array, got shape {mask_np.shape}")
+        if not np.all(mask_np.any(axis=1)):
+            raise ValueError("mask: expected at least one allowed (True) entry in every row")
+
+    def allowed(shape):
+        return jnp.ones(shape, bool) if mask_np is None else jnp.asarray(mask_np)
+
+    def forward(logits):
+        logits = jnp.asarray(logits)
+        _checks.check_shape("logits", logits, (None, None), "square (M, M) transition logits")
+        ok = allowed(logits.shape)
+        if logits.shape != ok.shape:
+            raise ValueError(f"logits: expected shape {ok.shape} (the mask's), got {logits.shape}")
+        masked = jnp.where(ok, logits, -jnp.inf)
+        return jnp.where(ok, jax.nn.softmax(masked, axis=1), 0.0)
+
+    def inverse(pi):
+        pi = jnp.asarray(pi)
+        ok = allowed(pi.shape) & (pi > 0)
+        return jnp.where(ok, jnp.log(jnp.where(ok, pi, 1.0)), 0.0)
+
+    return Transform(forward, inverse, "stochastic_rows", {"mask": None if mask_np is None else mask_np.tolist()})
+
+
+def log_diagonal() -> Transform:
+    """Diagonal covariance ``diag(exp(d))`` from (n,) log-variances."""
+
+    def forward(log_var):
+        return jnp.diag(jnp.exp(jnp.asarray(log_var)))
+
+    def inverse(cov):
+        return jnp.log(jnp.diagonal(jnp.asarray(cov)))
+
+    return Transform(forward, inverse, "log_diagonal", {})
+
+
+def cholesky_factor() -> Transform:
+    """Full covariance ``L L^T`` from an (n, n) array: its strict lower triangle is the
+    off-diagonal of ``L``, its diagonal the log of ``L``'s diagonal (upper triangle
+    ignored). Symmetric positive definite for every finite input."""
+
+    def forward(raw):
+        raw = jnp.asarray(raw)
+        _checks.check_shape("raw", raw, (None, None), "square (n, n) log-Cholesky parameters")
+        L = jnp.tril(raw, -1) + jnp.diag(jnp.exp(jnp.diagonal(raw)))
+        return _linalg.symmetrize(L @ L.T)
+
+    def inverse(cov):
+        L = jnp.linalg.cholesky(jnp.asarray(cov))
+        return jnp.tril(L, -1) + jnp.diag(jnp.log(jnp.diagonal(L)))
+
+    return Transform(forward, inverse, "cholesky_factor", {})
+
+
+def sticky_log_prior(pi: Array, target: Array, concentration: float) -> Array:
+    """Dirichlet log-density (up to a constant) of each row of ``pi`` around ``target``:
+    ``sum_ij (c target_ij) log pi_ij`` (Dirichlet with ``alpha = 1 + c target``, mode at
+    ``target``), summed over rows; entries where ``target`` is 0 do not count. Added to
+    a tuning loss (negated) it keeps a learned transition matrix near a sticky design."""
+    target = jnp.asarray(target, jnp.result_type(pi))
+    weight = concentration * target
+    return jnp.sum(jnp.where(weight > 0, weight * jnp.log(jnp.where(pi > 0, pi, 1.0)), 0.0))
+
+
+TRANSFORMS = {
+    "identity": identity,
+    "positive": positive,
+    "stochastic_rows": stochastic_rows,
+    "log_diagonal": log_diagonal,
+    "cholesky_factor": cholesky_factor,
+}
+
+
+def from_record(name: str, options: dict) -> Transform:
+    """The transform a saved file names (``Transform.name`` and ``.options``)."""
+    if name not in TRANSFORMS:
+        raise ValueError(f"transform: unknown name {name!r}; expected one of {sorted(TRANSFORMS)}")
+    return TRANSFORMS[name](**options)
+
+
+def constrain(parameterization: dict[str, Transform], raw: dict[str, Array]) -> dict[str, Array]:
+    """Unconstrained -> constrained, entry by entry."""
+    _check_keys(parameterization, raw, "raw")
+    return {k: parameterization[k].forward(v) for k, v in raw.items()}
+
+
+def unconstrain(parameterization: dict[str, Transform], params: dict[str, Any]) -> dict[str, Array]:
+    """Constrained -> unconstrained, entry by entry."""
+    _check_keys(parameterization, params, "params")
+    return {k: parameterization[k].inverse(v) for k, v in params.items()}
+
+
+def partition(raw: dict[str, Array], trainable: set[str] | list[str]) -> tuple[dict, dict]:
+    """``(trainable entries, frozen entries)``; ``merge`` puts them back together."""
+    unknown = set(trainable) - set(raw)
+    if unknown:
+        raise ValueError(f"trainable: unknown names {sorted(unknown)}; expected names from {sorted(raw)}")
+    return {k: v for k, v in raw.items() if k in trainable}, {k: v for k, v in raw.items() if k not in trainable}
+
+
+def merge(trained: dict, frozen: dict) -> dict:
+    return {**frozen, **trained}
+
+
+def _check_keys(parameterization: dict, values: dict, name: str) -> None:
+    missing = set(values) - set(parameterization)
+    if missing:
+        raise ValueError(f"{name}: no transform for {sorted(missing)}; the parameterisation has {sorted(parameterization)}")

@@ -1,0 +1,178 @@
+"""Gradient-based tuning with optax: a jitted training step, mini-batches, a validation
+set, early stopping, progress, and parameters saved with their parameterisation.
+
+The loss is any ``loss(raw, batch) -> scalar`` of the *unconstrained* parameters
+``raw`` (a dict; map them with ``parameterize.constrain`` inside the loss). Batches come
+from ``train_batch(step)``: freshly simulated labelled runs (``fresh_batches``: run keys
+folded from a training seed, so validation and test data, drawn from other seeds, are
+never trained on) or slices of a fixed dataset (``fixed_batches``). Only the names in
+``trainable`` move; the others are passed to the loss unchanged.
+
+Long runs: ``checkpointed(filter)`` wraps a filter's step in ``jax.checkpoint``, so the
+reverse pass recomputes each step's internals instead of storing them (memory per step
+falls to the carried state; see benchmarks/RESULTS.md for the measured peak memory).
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from jaxfdi._io import atomic_write
+from jaxfdi.filters._base import Filter
+from jaxfdi.tuning.parameterize import Transform, constrain, from_record, merge, partition, unconstrain
+
+
+class TrainHistory(NamedTuple):
+    step: np.ndarray        # (E,) training step of each evaluation
+    train_loss: np.ndarray  # (E,) training mini-batch loss at that step
+    val_loss: np.ndarray    # (E,) validation loss at that step
+    best_step: int          # the step whose parameters are returned
+    stopped_early: bool
+
+
+class TrainResult(NamedTuple):
+    raw: dict               # best unconstrained parameters (trainable and frozen)
+    history: TrainHistory
+
+
+def checkpointed(filt: Filter) -> Filter:
+    """The same filter with its ``step`` rematerialised in the reverse pass."""
+    return filt._replace(step=jax.checkpoint(filt.step))
+
+
+def fresh_batches(make_batch: Callable[[jax.Array], Any], key: jax.Array) -> Callable[[int], Any]:
+    """``step -> make_batch(fold_in(key, step))``: a new simulated mini-batch per step."""
+    return lambda step: make_batch(jax.random.fold_in(key, step))
+
+
+def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[int], Any]:
+    """``step -> batch_size`` runs of ``dataset`` (leading run axis), reshuffled each epoch."""
+    num = {np.shape(leaf)[0] for leaf in jax.tree.leaves(dataset)}
+    if len(num) != 1:
+        raise ValueError(f"dataset: expected every leaf to have the same leading run axis, got sizes {sorted(num)}")
+    (num,) = num
+    if not 1 <= batch_size <= num:
+        raise ValueError(f"batch_size: expected 1..{num} (the dataset's runs), got {batch_size}")
+    per_epoch = num // batch_size
+
+    def batch(step: int):
+        epoch, i = divmod(step, per_epoch)
+        order = jax.random.permutation(jax.random.fold_in(key, epoch), num)[i * batch_size:(i + 1) * batch_size]
+        return jax.tree.map(lambda leaf: leaf[order], dataset)
+
+    return batch
+
+
+def fit(
+    loss: Callable[[dict, Any], jax.Array],
+    raw0: dict,
+    optimizer: optax.GradientTransformation,
+    train_batch: Callable[[int], Any],
+    val_batch: Any,
+    steps: int,
+    trainable: list[str] | None = None,
+    eval_every: int = 10,
+    patience: int = 5,
+    progress: bool = False,
+) -> TrainResult:
+    """Minimise ``loss`` over the ``trainable`` entries of ``raw0`` (default: all).
+
+    Every ``eval_every`` steps (and at step 0 and the end) the validation loss is
+    computed; the parameters with the lowest one are returned, and training stops after
+    ``patience`` evaluations without improvement. Non-finite losses or gradients stop
+    training (the best parameters so far are kept) rather than poisoning the state.
+    """
+    if steps < 0 or eval_every < 1 or patience < 1:
+        raise ValueError(f"steps, eval_every, patience: expected >= 0, >= 1, >= 1, got {steps}, {eval_every}, {patience}")
+    params, frozen = partition(raw0, list(raw0) if trainable is None else trainable)
+    if not params:
+        raise ValueError("trainable: expected at least one parameter to train")
+
+    def full_loss(p, batch):
+        return loss(merge(p, frozen), batch)
+
+    @jax.jit
+    def update(p, opt_state, batch):
+        value, grads = jax.value_and_grad(full_loss)(p, batch)
+        updates, opt_state = optimizer.update(grads, opt_state, p)
+        finite = jnp.isfinite(value) & jnp.all(jnp.asarray([jnp.all(jnp.isfinite(g)) for g in jax.tree.leaves(grads)]))
+        return optax.apply_updates(p, updates), opt_state, value, finite
+
+    val_loss_fn = jax.jit(full_loss)
+    opt_state = optimizer.init(params)
+    best, best_val, best_step, bad = params, float(val_loss_fn(params, val_batch)), 0, 0
+    log = {"step": [0], "train": [float("nan")], "val": [best_val]}
+    start, stopped = time.perf_counter(), False
+    for step in range(1, steps + 1):
+        new, new_state, value, finite = update(params, opt_state, train_batch(step - 1))
+        if not bool(finite):
+            stopped = True
+            if progress:
+                print(f"\ntuning: non-finite loss or gradient at step {step}; keeping step {best_step}", file=sys.stderr)
+            break
+        params, opt_state = new, new_state
+        if step % eval_every == 0 or step == steps:
+            val = float(val_loss_fn(params, val_batch))
+            log["step"].append(step), log["train"].append(float(value)), log["val"].append(val)
+            if val < best_val:
+                best, best_val, best_step, bad = params, val, step, 0
+            else:
+                bad += 1
+            if progress:
+                print(f"\rtuning: step {step}/{steps}, train {float(value):.4g}, val {val:.4g} "
+                      f"(best {best_val:.4g} at {best_step}), {time.perf_counter() - start:.0f} s",
+                      end="", file=sys.stderr, flush=True)
+            if bad >= patience:
+                stopped = True
+                break
+    if progress:
+        print(file=sys.stderr)
+    history = TrainHistory(np.asarray(log["step"]), np.asarray(log["train"]), np.asarray(log["val"]), best_step, stopped)
+    return TrainResult(merge(best, frozen), history)
+
+
+def save_params(path: str | Path, raw: dict, parameterization: dict[str, Transform], meta: dict | None = None) -> Path:
+    """Write the constrained parameters, the parameterisation (transform names and
+    options) and ``meta`` to ``.npz`` or ``.json``, completely or not at all."""
+    path = Path(path)
+    params = {k: np.asarray(v).tolist() if path.suffix == ".json" else np.asarray(v)
+              for k, v in constrain(parameterization, raw).items()}
+    record = {k: {"transform": t.name, "options": t.options} for k, t in parameterization.items() if k in raw}
+    if path.suffix == ".json":
+        def write(tmp):
+            with open(tmp, "w") as fh:
+                json.dump({"params": params, "parameterization": record, "meta": meta or {}}, fh, indent=1)
+    elif path.suffix == ".npz":
+        def write(tmp):
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **{f"param/{k}": v for k, v in params.items()},
+                         __record__=json.dumps({"parameterization": record, "meta": meta or {}}))
+    else:
+        raise ValueError(f"path: expected a .json or .npz file name, got {path.name!r}")
+    return atomic_write(path, write)
+
+
+def load_params(path: str | Path) -> tuple[dict, dict[str, Transform], dict]:
+    """``(raw, parameterization, meta)`` from a file written by ``save_params``."""
+    path = Path(path)
+    if path.suffix == ".json":
+        data = json.loads(path.read_text())
+        params, record, meta = data["params"], data["parameterization"], data["meta"]
+    elif path.suffix == ".npz":
+        with np.load(path) as data:
+            extra = json.loads(str(data["__record__"]))
+            params = {k[len("param/"):]: data[k] for k in data.files if k.startswith("param/")}
+        record, meta = extra["parameterization"], extra["meta"]
+    else:
+        raise ValueError(f"path: expected a .json or .npz file name, got {path.name!r}")
+    parameterization = {k: from_record(v["transform"], v["options"]) for k, v in record.items()}
+    params = {k: jnp.asarray(v) for k, v in params.items()}
+    return unconstrain(parameterization, params), parameterization, meta

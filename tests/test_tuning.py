@@ -45,6 +45,7 @@ def test_every_transform_round_trips():
         (tuning.positive(), np.array([1e-8, 0.5, 30.0, 1e3])),
         (tuning.positive(floor=1.0), np.array([1.0 + 1e-6, 2.0, 1e4])),
         (tuning.identity(), np.array([-3.0, 4.0])),
+        (tuning.unit_interval(), np.array([1e-9, 0.5, 1 - 1e-9])),
     ]
     for t, value in cases:
         np.testing.assert_allclose(t.forward(t.inverse(jnp.asarray(value))), value, rtol=1e-9, atol=1e-14,

@@ -12,6 +12,7 @@ from jaxfdi.tuning.parameterize import (
     sticky_log_prior,
     stochastic_rows,
     unconstrain,
+    unit_interval,
 )
 from jaxfdi.tuning.train import (
     TrainHistory,
@@ -28,5 +29,5 @@ __all__ = [
     "Transform", "TrainHistory", "TrainResult", "checkpointed", "cholesky_factor", "constrain", "fit",
     "fixed_batches", "fresh_batches", "identity", "innovation_nll", "load_params", "log_diagonal", "merge",
     "mode_cross_entropy", "partition", "positive", "save_params", "soft_alarm_log_prob", "soft_detection_loss",
-    "sticky_log_prior", "stochastic_rows", "unconstrain",
+    "sticky_log_prior", "stochastic_rows", "unconstrain", "unit_interval",
 ]

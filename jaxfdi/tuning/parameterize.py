@@ -11,6 +11,7 @@ valid object, and back (``inverse(forward(x)) = x`` up to round-off, and
 * ``cholesky_factor()``: a full covariance ``L L^T`` with ``L`` lower triangular whose
   diagonal is ``exp`` of the parameters (Pinheiro & Bates 1996, the log-Cholesky form);
 * ``positive()``: ``softplus(x)``, for thresholds, inflation factors and noise levels;
+* ``unit_interval()``: ``sigmoid(x)``, for probability thresholds;
 * ``identity()``: unconstrained reals.
 
 A *parameterisation* is a dict ``name -> Transform``; ``constrain``/``unconstrain`` map
@@ -56,6 +57,16 @@ def positive(floor: float = 0.0) -> Transform:
         return excess + jnp.log(-jnp.expm1(-excess))
 
     return Transform(forward, inverse, "positive", {"floor": floor})
+
+
+def unit_interval() -> Transform:
+    """``p = sigmoid(x)`` in (0, 1) (a probability threshold such as ``mu_T``); inverse logit."""
+
+    def inverse(p):
+        p = jnp.asarray(p)
+        return jnp.log(p) - jnp.log1p(-p)
+
+    return Transform(jax.nn.sigmoid, inverse, "unit_interval", {})
 
 
 def stochastic_rows(mask: Any = None) -> Transform:
@@ -132,6 +143,7 @@ def sticky_log_prior(pi: Array, target: Array, concentration: float) -> Array:
 TRANSFORMS = {
     "identity": identity,
     "positive": positive,
+    "unit_interval": unit_interval,
     "stochastic_rows": stochastic_rows,
     "log_diagonal": log_diagonal,
     "cholesky_factor": cholesky_factor,

@@ -186,16 +186,29 @@ def _run(method: Method, model, us, key, f, keep_history=False):
                    us, key, f.onset, keep_history, method.detector_input, method.estimate_delay)
 
 
+class ScenarioRuns(NamedTuple):
+    model: Any          # the engine's LinearGaussianModel
+    us: jax.Array       # (T, 1) commanded fuel flow
+    faults: list        # the seven cases, ``engine_faults`` order
+    batch: Any          # stacked Fault, ``runs`` of each case, fault-major
+    keys: jax.Array     # (7 * runs,) PRNG keys split from ``seed``
+
+
+def scenario_runs(runs: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> ScenarioRuns:
+    """The study's runs: ``runs`` of each engine case (fault-major) with inputs and keys."""
+    steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
+    _, faults = engine_faults(onset)
+    batch = stack_faults([f for f in faults for _ in range(runs)])
+    keys = jax.random.split(jax.random.key(seed), len(faults) * runs)
+    return ScenarioRuns(engine_model(), jnp.full((steps, 1), FUEL_STEP), faults, batch, keys)
+
+
 def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, onset_time: float = 2.0,
                chunk_size: int = 1024, progress: bool = False) -> DetectionRecord:
     """Records of ``runs`` runs of each engine fault (and fault-free), fault-major in
     ``engine_faults`` order. Run ``i`` gets the same key, hence the same noise, for
     every method."""
-    model = engine_model()
-    steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
-    us = jnp.full((steps, 1), FUEL_STEP)
-    _, faults = engine_faults(onset)
-    batch = stack_faults([f for f in faults for _ in range(runs)])
+    model, us, faults, batch, _ = scenario_runs(runs, seed, duration, onset_time)
     return monte_carlo(lambda key, f: _run(method, model, us, key, f).record, jax.random.key(seed),
                        len(faults) * runs, batch, chunk_size=chunk_size, progress=progress)
 
@@ -315,12 +328,8 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
 def _figure_data(every, chosen, settings, runs, seed, duration, onset_time) -> dict[str, Any]:
     """Mean mode probabilities (faults, T, M) of two IMMs and mean per-direction GLR
     statistics (faults, T, 6) over ``runs`` runs per fault."""
-    model = engine_model()
-    steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
-    us = jnp.full((steps, 1), FUEL_STEP)
-    _, faults = engine_faults(onset)
-    batch = stack_faults([f for f in faults for _ in range(runs)])
-    keys = jax.random.split(jax.random.key(seed), len(faults) * runs)
+    model, us, faults, batch, keys = scenario_runs(runs, seed, duration, onset_time)
+    steps = us.shape[0]
 
     def mean_over_runs(history_of):
         out = jax.jit(jax.vmap(history_of))(keys, batch)

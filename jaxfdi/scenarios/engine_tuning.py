@@ -21,14 +21,21 @@ import numpy as np
 import optax
 
 from jaxfdi.detection.mode_probability import mode_probability_detector
-from jaxfdi.faults import stack_faults
 from jaxfdi.filters._base import run_filter
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.models.engine import TS, engine_model
 from jaxfdi.models.fault_modes import noise_inflation_modes
-from jaxfdi.scenarios.engine import PAPER_TRANSITION, EngineSettings, Method, _mode_prob, run_method, summarize_method
-from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
+from jaxfdi.scenarios.engine import (
+    PAPER_TRANSITION,
+    EngineSettings,
+    Method,
+    _mode_prob,
+    run_method,
+    scenario_runs,
+    summarize_method,
+)
+from jaxfdi.scenarios.engine_chi2 import FUEL_STEP
 from jaxfdi.simulate import linear_simulator, simulate
 from jaxfdi.tuning import losses
 from jaxfdi.tuning.parameterize import Transform, constrain, positive, stochastic_rows, unconstrain, unit_interval
@@ -46,12 +53,7 @@ class LabelledRuns(NamedTuple):
 
 def labelled_runs(runs_per_fault: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> LabelledRuns:
     """``runs_per_fault`` simulated runs of each engine case, fault-major."""
-    model = engine_model()
-    steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
-    us = jnp.full((steps, 1), FUEL_STEP)
-    _, faults = engine_faults(onset)
-    batch = stack_faults([f for f in faults for _ in range(runs_per_fault)])
-    keys = jax.random.split(jax.random.key(seed), len(faults) * runs_per_fault)
+    model, us, faults, batch, keys = scenario_runs(runs_per_fault, seed, duration, onset_time)
 
     @jax.jit
     def one(key, f):

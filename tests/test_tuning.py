@@ -44,6 +44,7 @@ def test_every_transform_round_trips():
         (tuning.cholesky_factor(), cov),
         (tuning.positive(), np.array([1e-8, 0.5, 30.0, 1e3])),
         (tuning.positive(floor=1.0), np.array([1.0 + 1e-6, 2.0, 1e4])),
+        (tuning.log_scale(), np.array([1e-12, 1.0, 1e4])),
         (tuning.identity(), np.array([-3.0, 4.0])),
         (tuning.unit_interval(), np.array([1e-9, 0.5, 1 - 1e-9])),
     ]
@@ -53,8 +54,9 @@ def test_every_transform_round_trips():
     raw = rng.normal(size=(4, 4))  # unconstrained -> constrained -> unconstrained
     t = tuning.cholesky_factor()
     np.testing.assert_allclose(t.inverse(t.forward(raw)), np.tril(raw), rtol=1e-10, atol=1e-12)
-    t = tuning.positive()
-    np.testing.assert_allclose(t.inverse(t.forward(jnp.array([-20.0, 0.0, 30.0]))), [-20.0, 0.0, 30.0], rtol=1e-9)
+    for t in (tuning.positive(), tuning.log_scale()):
+        np.testing.assert_allclose(t.inverse(t.forward(jnp.array([-20.0, 0.0, 30.0]))), [-20.0, 0.0, 30.0],
+                                   rtol=1e-9, err_msg=t.name)
 
 
 @pytest.mark.parametrize("scale", [1.0, 10.0])
@@ -156,13 +158,14 @@ def test_mode_cross_entropy_matches_direct_formula_and_gradients_through_an_imm(
         tuning.mode_cross_entropy(info.log_mode_prob, labels[:5])
 
 
-def brute_force_rates(alarms, onset):
+def brute_force_rates(alarms, onset, wrong_label):
     T = alarms.size
     false_alarm = float(alarms[:onset].any())
     after = np.flatnonzero(alarms[onset:])
     missed = float(after.size == 0) if onset < T else 0.0
     delay = (after[0] if after.size else T - onset) if onset < T else 0.0
-    return false_alarm, missed, delay
+    misisolated = float(after.size > 0 and wrong_label[onset + after[0]]) if onset < T else 0.0
+    return false_alarm, missed, delay, misisolated
 
 
 def test_soft_detection_loss_tends_to_the_hard_counts_and_has_correct_gradients():
@@ -173,16 +176,20 @@ def test_soft_detection_loss_tends_to_the_hard_counts_and_has_correct_gradients(
         onset = int(rng.choice([30, 10_000]))  # faulty or fault-free
         h = 1.5
         statistic[np.abs(statistic - h) < 1e-3] += 0.01  # keep away from the threshold itself
-        _, parts = tuning.soft_detection_loss(jnp.asarray(statistic), h, onset, temperature=1e-6)
-        fa, missed, delay = brute_force_rates(statistic >= h, min(onset, T))
-        np.testing.assert_allclose([parts["false_alarm"], parts["missed"], parts["delay"]], [fa, missed, delay],
+        margin = rng.normal(size=T)  # the label an alarm would carry is wrong where margin > 0
+        margin[np.abs(margin) < 1e-3] += 0.01
+        _, parts = tuning.soft_detection_loss(jnp.asarray(statistic), h, onset, temperature=1e-6,
+                                              wrong_label_margin=jnp.asarray(margin))
+        expected = brute_force_rates(statistic >= h, min(onset, T), margin > 0)
+        np.testing.assert_allclose([parts[k] for k in ("false_alarm", "missed", "delay", "misisolated")], expected,
                                    atol=1e-6, err_msg=f"trial {trial}")
     s = jnp.asarray(rng.normal(size=T) + np.where(np.arange(T) >= 30, 1.0, 0.0))
+    margin = jnp.asarray(rng.normal(size=T))
 
-    def loss(h, temp, s):
-        return tuning.soft_detection_loss(s, h, 30, temp, 2.0, 1.0, 0.5)[0]
+    def loss(h, temp, s, margin):
+        return tuning.soft_detection_loss(s, h, 30, temp, 2.0, 1.0, 0.5, margin, 3.0)[0]
 
-    check_grads(loss, (1.2, 0.7, s), order=1, modes=["rev"], atol=1e-7, rtol=1e-6)
+    check_grads(loss, (1.2, 0.7, s, margin), order=1, modes=["rev"], atol=1e-7, rtol=1e-6)
 
 
 def test_soft_detection_expected_delay_matches_monte_carlo_of_independent_alarms():

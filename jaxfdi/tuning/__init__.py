@@ -6,6 +6,7 @@ from jaxfdi.tuning.parameterize import (
     constrain,
     identity,
     log_diagonal,
+    log_scale,
     merge,
     partition,
     positive,
@@ -27,7 +28,7 @@ from jaxfdi.tuning.train import (
 
 __all__ = [
     "Transform", "TrainHistory", "TrainResult", "checkpointed", "cholesky_factor", "constrain", "fit",
-    "fixed_batches", "fresh_batches", "identity", "innovation_nll", "load_params", "log_diagonal", "merge",
+    "fixed_batches", "fresh_batches", "identity", "innovation_nll", "load_params", "log_diagonal", "log_scale", "merge",
     "mode_cross_entropy", "partition", "positive", "save_params", "soft_alarm_log_prob", "soft_detection_loss",
     "sticky_log_prior", "stochastic_rows", "unconstrain", "unit_interval",
 ]

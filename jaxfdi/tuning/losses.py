@@ -8,8 +8,11 @@ per step, the fault onset per run).
   probabilities; then ``P(no alarm before the onset) = prod_{k<onset} (1 - a_k)``,
   ``P(first alarm at k >= onset) = a_k prod_{onset<=j<k} (1 - a_j)``, and the loss is
   ``w_fa P(false alarm) + w_miss P(missed) + w_delay E[delay] / horizon`` with the
-  missed runs counted at the full horizon. As ``temperature -> 0`` it becomes the hard
-  rates of ``metrics`` (tested);
+  missed runs counted at the full horizon. With an isolation margin ``m_k`` (> 0 when
+  the label the detector would give at step k is wrong, e.g. ``max_{j != true} mu_j -
+  mu_true``) it adds ``w_iso P(misisolated)``, ``P(misisolated) = sum_{k >= onset}
+  P(first alarm at k) sigmoid(m_k / temperature)``. As ``temperature -> 0`` these become
+  the hard rates of ``metrics`` (tested);
 * ``innovation_nll``: ``-(1/T) sum_k log N(r_k; 0, S_k)``, whose minimiser over ``Q, R``
   is the maximum-likelihood estimate (Mehra 1970; Shumway & Stoffer 1982).
 All are per run; average them over a batch with ``jax.vmap`` and ``jnp.mean``.
@@ -55,6 +58,8 @@ def soft_detection_loss(
     false_alarm_weight: float = 1.0,
     miss_weight: float = 1.0,
     delay_weight: float = 1.0,
+    wrong_label_margin: Array | None = None,
+    isolation_weight: float = 1.0,
 ) -> tuple[Array, dict[str, Array]]:
     """Smoothed false-alarm / missed-detection / delay loss of one run (module doc).
 
@@ -62,10 +67,13 @@ def soft_detection_loss(
       statistic: (T,) test statistic ``s_k`` (alarm when ``s_k >= threshold``).
       threshold, temperature: () scalars (may be traced and tuned).
       onset: () int fault onset step (``faults.NEVER`` or >= T: fault-free run).
+      wrong_label_margin: optional (T,) margin ``m_k``, > 0 where an alarm at step k
+        would isolate the wrong fault.
 
     Returns:
       ``(loss, parts)``; ``parts`` has ``false_alarm``, ``missed`` (probabilities) and
-      ``delay`` (expected, in steps; missed runs count ``T - onset``).
+      ``delay`` (expected, in steps; missed runs count ``T - onset``), and
+      ``misisolated`` (probability) when a margin is given.
     """
     _checks.check_shape("statistic", statistic, (None,), "(T,) test statistic")
     T = statistic.shape[0]
@@ -84,8 +92,14 @@ def soft_detection_loss(
     delay = jnp.sum(first * (k - onset)) + missed * horizon
     loss = false_alarm_weight * false_alarm + jnp.where(
         faulty, miss_weight * missed + delay_weight * delay / horizon, 0.0)
-    return loss, {"false_alarm": false_alarm, "missed": jnp.where(faulty, missed, 0.0),
-                  "delay": jnp.where(faulty, delay, 0.0)}
+    parts = {"false_alarm": false_alarm, "missed": jnp.where(faulty, missed, 0.0),
+             "delay": jnp.where(faulty, delay, 0.0)}
+    if wrong_label_margin is not None:
+        _checks.check_shape("wrong_label_margin", wrong_label_margin, (T,), "(T,) margin, > 0 where the label is wrong")
+        misisolated = jnp.where(faulty, jnp.sum(first * jax.nn.sigmoid(wrong_label_margin / temperature)), 0.0)
+        loss = loss + isolation_weight * misisolated
+        parts["misisolated"] = misisolated
+    return loss, parts
 
 
 def innovation_nll(log_likelihood: Array) -> Array:

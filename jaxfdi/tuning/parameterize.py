@@ -10,7 +10,9 @@ valid object, and back (``inverse(forward(x)) = x`` up to round-off, and
 * ``log_diagonal()``: a diagonal covariance ``diag(exp(d))``;
 * ``cholesky_factor()``: a full covariance ``L L^T`` with ``L`` lower triangular whose
   diagonal is ``exp`` of the parameters (Pinheiro & Bates 1996, the log-Cholesky form);
-* ``positive()``: ``softplus(x)``, for thresholds, inflation factors and noise levels;
+* ``positive()``: ``softplus(x)``, for thresholds and noise levels of order one;
+* ``log_scale()``: ``exp(x)``, for positive quantities that span decades (an inflation
+  factor of 1e4, a bias random walk of 1e-12): a gradient step is a relative change;
 * ``unit_interval()``: ``sigmoid(x)``, for probability thresholds;
 * ``identity()``: unconstrained reals.
 
@@ -57,6 +59,12 @@ def positive(floor: float = 0.0) -> Transform:
         return excess + jnp.log(-jnp.expm1(-excess))
 
     return Transform(forward, inverse, "positive", {"floor": floor})
+
+
+def log_scale() -> Transform:
+    """``p = exp(x)`` elementwise, any shape; inverse ``log p``. A step of size ``eta``
+    changes ``p`` by the factor ``exp(eta)`` whatever its magnitude."""
+    return Transform(jnp.exp, lambda p: jnp.log(jnp.asarray(p)), "log_scale", {})
 
 
 def unit_interval() -> Transform:
@@ -143,6 +151,7 @@ def sticky_log_prior(pi: Array, target: Array, concentration: float) -> Array:
 TRANSFORMS = {
     "identity": identity,
     "positive": positive,
+    "log_scale": log_scale,
     "unit_interval": unit_interval,
     "stochastic_rows": stochastic_rows,
     "log_diagonal": log_diagonal,

@@ -81,12 +81,12 @@ def kf_rows(args, log):
 def imm_rows(args, log):
     runs = max(1, args.imm_sequences // 7)
     data = et.labelled_runs(runs, seed=0)
-    parameterization = et.imm_parameterization()
-    raw = tuning.unconstrain(parameterization, et.hand_params())
+    design = et.imm_design("zhang-li")
+    raw = tuning.unconstrain(design.parameterization, design.hand())
     rows = []
     for remat in (False, True):
         def loss(r, remat=remat):
-            return et.imm_loss(tuning.constrain(parameterization, r), data, remat=remat)[0]
+            return et.imm_loss(design, tuning.constrain(design.parameterization, r), data, remat=remat)[0]
 
         fwd, _ = timed(loss, (raw,), args.repeats)
         grad, _ = timed(jax.grad(loss), (raw,), args.repeats)

@@ -22,6 +22,22 @@ def enable_x64(enable: bool = True) -> None:
 
     jax.config.update("jax_enable_x64", enable)
 
+
+def enable_compilation_cache(path: str | None = None) -> str:
+    """Keep compiled XLA programs on disk so that a repeated run (a CLI call, a notebook
+    re-run) skips most compilation. ``path`` defaults to ``$JAXFDI_CACHE_DIR`` or
+    ``~/.cache/jaxfdi/xla``; returns the folder used."""
+    import os
+    from pathlib import Path
+
+    import jax
+
+    cache = path or os.environ.get("JAXFDI_CACHE_DIR", str(Path.home() / ".cache" / "jaxfdi" / "xla"))
+    jax.config.update("jax_compilation_cache_dir", cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+    return cache
+
 from jaxfdi import detection, faults, metrics, models, tuning  # noqa: E402
 from jaxfdi.detection import chi2_detector, chi2_threshold, glrt_detector, mode_probability_detector  # noqa: E402
 from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault, stack_faults  # noqa: E402

@@ -2,20 +2,11 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 
-
-def _enable_compilation_cache() -> None:
-    """Persistent XLA cache so a repeated run skips most compilation."""
-    import jax
-
-    cache = os.environ.get("JAXFDI_CACHE_DIR", str(Path.home() / ".cache" / "jaxfdi" / "xla"))
-    jax.config.update("jax_compilation_cache_dir", cache)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+import numpy as np
 
 
 def _run_engine_chi2(args: argparse.Namespace) -> int:
@@ -63,30 +54,81 @@ def _tune_engine_imm(args: argparse.Namespace) -> int:
     from jaxfdi.scenarios import engine_tuning as et
     from jaxfdi.tuning import constrain, save_params
 
-    start = time.perf_counter()
-    result, parameterization = et.tune_engine_imm(
-        steps=args.steps, train_runs=args.train_runs, seed=args.seed, progress=not args.quiet)
-    tuned = constrain(parameterization, result.raw)
+    out = Path(args.out)
     test_seed = args.seed + 1000
-    hand_rows, hand_ce = et.evaluate_engine_imm(et.hand_params(), args.runs, test_seed)
-    tuned_rows, tuned_ce = et.evaluate_engine_imm(tuned, args.runs, test_seed)
+    names = sorted(et.DESIGNS) if args.design == "all" else [args.design]
+    report, paths = {}, []
+    for name in names:
+        start = time.perf_counter()
+        design = et.imm_design(name)
+        if not args.quiet:
+            print(f"{name}: training", file=sys.stderr, flush=True)
+        weights = et.LossWeights(false_alarm=args.false_alarm_weight, delay=args.delay_weight,
+                                 isolation=args.isolation_weight)
+        result = et.tune_engine_imm(design, steps=args.steps, train_runs=args.train_runs, seed=args.seed,
+                                    weights=weights, progress=not args.quiet)
+        tuned = constrain(design.parameterization, result.raw)
+        hand_rows, hand_ce = et.evaluate_engine_imm(design, design.hand(), args.runs, test_seed)
+        tuned_rows, tuned_ce = et.evaluate_engine_imm(design, tuned, args.runs, test_seed)
+        worse = et.worse_metrics(hand_rows, tuned_rows, hand_ce, tuned_ce)
+        elapsed = time.perf_counter() - start
+        print(f"tune engine-imm, design {name} ({design.method}): {args.steps} Adam steps on {args.train_runs} "
+              f"runs per fault (seed {args.seed}, best step {result.history.best_step}); held-out test: "
+              f"{args.runs} runs per fault (seed {test_seed}); loss weights {dict(weights._asdict())}")
+        print(et.comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce))
+        print(f"worse than the paper's: {', '.join(worse) if worse else 'none'}\n")
+        paths.append(save_params(out / f"engine-imm-{name}-tuned.npz", result.raw, design.parameterization,
+                                 {"best_step": result.history.best_step, "seed": args.seed, "design": name}))
+        report[name] = {
+            "paper": hand_rows, "tuned": tuned_rows, "cross_entropy": {"paper": hand_ce, "tuned": tuned_ce},
+            "worse": worse,
+            "history": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in result.history._asdict().items()},
+            "paper_params": {k: np.asarray(v).tolist() for k, v in design.hand().items()},
+            "tuned_params": {k: np.asarray(v).tolist() for k, v in tuned.items()}, "seconds": elapsed}
+    config = {"steps": args.steps, "train_runs": args.train_runs, "test_runs": args.runs, "seed": args.seed,
+              "test_seed": test_seed, "weights": weights._asdict()}
+    _io.write_json(out / "engine-imm-tuning.json", {"config": config, "designs": report})
+    print(f"wrote {', '.join(map(str, paths))} and {out / 'engine-imm-tuning.json'}")
+    return 0
+
+
+def _tune_engine_chi2(args: argparse.Namespace) -> int:
+    from jaxfdi import _io
+    from jaxfdi.scenarios import engine_chi2_tuning as ct
+    from jaxfdi.tuning import constrain, save_params
+
+    start = time.perf_counter()
+    windows = tuple(int(w) for w in args.windows.split(","))
+    weights = ct.Chi2Weights(false_alarm=args.false_alarm_weight, delay=args.delay_weight)
+    tuning = ct.tune_engine_chi2(windows, steps=args.steps, train_runs=args.train_runs, seed=args.seed,
+                                 weights=weights, progress=not args.quiet)
+    tuned = constrain(ct.PARAMETERIZATION, tuning.result.raw)
+    test_seed = args.seed + 1000
+    hand_rows, hand_loss = ct.evaluate_engine_chi2(ct.hand_params(), ct.HAND_WINDOW, args.runs, test_seed, weights)
+    tuned_rows, tuned_loss = ct.evaluate_engine_chi2(tuned, tuning.window, args.runs, test_seed, weights)
     elapsed = time.perf_counter() - start
     out = Path(args.out)
-    print(f"tune engine-imm: Zhang & Li IMM, {args.steps} Adam steps on {args.train_runs} runs per fault "
-          f"(seed {args.seed}); held-out test: {args.runs} runs per fault (seed {test_seed})")
-    print(et.comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce))
-    params_path = save_params(out / "engine-imm-tuned.npz", result.raw, parameterization,
-                              {"best_step": result.history.best_step, "seed": args.seed})
-    _io.write_json(out / "engine-imm-tuning.json", {
-        "paper": hand_rows, "tuned": tuned_rows, "cross_entropy": {"paper": hand_ce, "tuned": tuned_ce},
-        "history": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in result.history._asdict().items()},
-        "tuned_params": {k: v.tolist() for k, v in tuned.items()}, "seconds": elapsed})
-    print(f"wrote {params_path} and {out / 'engine-imm-tuning.json'} ({elapsed:.1f} s)")
+    print(f"tune engine-chi2: KF chi-square test, Q, R and threshold by {args.steps} Adam steps on "
+          f"{args.train_runs} runs per fault (seed {args.seed}) for windows {list(windows)}; validation loss "
+          + ", ".join(f"L={w}: {v:.4f}" for w, v in tuning.val_loss.items())
+          + f"; held-out test: {args.runs} runs per fault (seed {test_seed})")
+    print(ct.comparison_table(hand_rows, tuned_rows, ct.HAND_WINDOW, tuning.window, hand_loss, tuned_loss))
+    path = save_params(out / "engine-chi2-tuned.npz", tuning.result.raw, ct.PARAMETERIZATION,
+                       {"best_step": tuning.result.history.best_step, "seed": args.seed, "window": tuning.window})
+    _io.write_json(out / "engine-chi2-tuning.json", {
+        "config": {"steps": args.steps, "train_runs": args.train_runs, "test_runs": args.runs, "seed": args.seed,
+                   "test_seed": test_seed, "windows": list(windows), "weights": weights._asdict()},
+        "window": tuning.window, "val_loss": {str(w): v for w, v in tuning.val_loss.items()},
+        "hand": hand_rows, "tuned": tuned_rows, "held_out_loss": {"hand": hand_loss, "tuned": tuned_loss},
+        "history": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in tuning.result.history._asdict().items()},
+        "hand_params": {k: np.asarray(v).tolist() for k, v in ct.hand_params().items()},
+        "tuned_params": {k: np.asarray(v).tolist() for k, v in tuned.items()}, "seconds": elapsed})
+    print(f"wrote {path} and {out / 'engine-chi2-tuning.json'} ({elapsed:.1f} s)")
     return 0
 
 
 RUNNERS = {"engine": _run_engine, "engine-chi2": _run_engine_chi2}
-TUNERS = {"engine-imm": _tune_engine_imm}
+TUNERS = {"engine-chi2": _tune_engine_chi2, "engine-imm": _tune_engine_imm}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -107,6 +149,16 @@ def build_parser() -> argparse.ArgumentParser:
     tune.add_argument("--runs", type=int, default=100, help="held-out test runs per fault (default 100)")
     tune.add_argument("--seed", type=int, default=0, help="training seed; validation seed+1, test seed+1000")
     tune.add_argument("--out", default="results", help="output folder (default ./results)")
+    tune.add_argument("--design", default="all", choices=["all", "bias", "zhang-li"],
+                      help="engine-imm: which IMM mode design (default all)")
+    tune.add_argument("--false-alarm-weight", type=float, default=5.0,
+                      help="loss weight of P(alarm before the onset) (default 5)")
+    tune.add_argument("--delay-weight", type=float, default=1.0,
+                      help="loss weight of the expected delay / steps after the onset (default 1)")
+    tune.add_argument("--isolation-weight", type=float, default=5.0,
+                      help="engine-imm: loss weight of P(first alarm names the wrong fault) (default 5)")
+    tune.add_argument("--windows", default="1,2,4,8",
+                      help="engine-chi2: window lengths to try, comma-separated (default 1,2,4,8)")
     tune.add_argument("--quiet", action="store_true", help="no progress display")
     sub.add_parser("list", help="list the scenarios")
     return parser
@@ -124,18 +176,25 @@ def main(argv: list[str] | None = None) -> int:
         if args.steps < 0 or args.train_runs < 1:
             print("jaxfdi: --steps must be >= 0 and --train-runs >= 1", file=sys.stderr)
             return 2
-        import jax
+        if min(args.false_alarm_weight, args.delay_weight, args.isolation_weight) < 0:
+            print("jaxfdi: the loss weights must be >= 0", file=sys.stderr)
+            return 2
+        if not all(w.strip().isdigit() and int(w) >= 1 for w in args.windows.split(",")):
+            print(f"jaxfdi: --windows must be positive integers separated by commas, got {args.windows!r}",
+                  file=sys.stderr)
+            return 2
+        import jaxfdi
 
-        jax.config.update("jax_enable_x64", True)
-        _enable_compilation_cache()
+        jaxfdi.enable_x64()
+        jaxfdi.enable_compilation_cache()
         return TUNERS[args.target](args)
     if not (0.0 < args.pfa < 1.0):
         print("jaxfdi: --pfa must lie in (0, 1)", file=sys.stderr)
         return 2
-    import jax
+    import jaxfdi
 
-    jax.config.update("jax_enable_x64", True)
-    _enable_compilation_cache()
+    jaxfdi.enable_x64()
+    jaxfdi.enable_compilation_cache()
     return RUNNERS[args.scenario](args)
 
 

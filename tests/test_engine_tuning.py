@@ -1,43 +1,87 @@
-"""`jaxfdi tune engine-imm` at a reduced size (the CLI default is 16 training runs per
-fault, 150 steps, 100 held-out runs per fault): the tuned IMM's mean per-step mode
-cross-entropy on held-out runs (other seeds than training and validation) is at least
-30 % below the paper's hand-set IMM, and the saved parameters are valid and reload."""
+"""`jaxfdi tune engine-imm` and `jaxfdi tune engine-chi2` at a reduced size (the CLI
+defaults are 16 training runs per fault, 150 steps, 100 held-out runs per fault).
+
+References are the hand-set detectors run on the same held-out runs (other seeds than
+training and validation): for each IMM design the tuned mean per-step mode
+cross-entropy is at least 30 % below the paper's, no fault goes undetected and the
+fault-free false-alarm rate does not rise; the tuned chi-square test has a lower
+held-out loss and fewer false alarms; saved parameters are valid and reload."""
 import json
 
 import numpy as np
 import pytest
 
 from jaxfdi.cli import main
-from jaxfdi.scenarios.engine_tuning import TRANSITION_MASK
+from jaxfdi.scenarios import engine_tuning as et
 from jaxfdi.tuning import constrain, load_params
+
+SMALL = ["--steps", "20", "--train-runs", "2", "--runs", "10", "--quiet"]
 
 
 @pytest.fixture(scope="module")
-def tuned(tmp_path_factory):
-    out = tmp_path_factory.mktemp("tune")
-    assert main(["tune", "engine-imm", "--steps", "20", "--train-runs", "2", "--runs", "10", "--out", str(out),
-                 "--quiet"]) == 0
+def imm_tuned(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tune-imm")
+    assert main(["tune", "engine-imm", *SMALL, "--out", str(out)]) == 0
     return out, json.loads((out / "engine-imm-tuning.json").read_text())
 
 
-def test_held_out_mode_cross_entropy_at_least_30_percent_lower(tuned):
-    _, result = tuned
+@pytest.fixture(scope="module")
+def chi2_tuned(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tune-chi2")
+    assert main(["tune", "engine-chi2", *SMALL, "--windows", "2,4", "--out", str(out)]) == 0
+    return out, json.loads((out / "engine-chi2-tuning.json").read_text())
+
+
+@pytest.mark.parametrize("design", sorted(et.DESIGNS))
+def test_each_imm_design_held_out_cross_entropy_at_least_30_percent_lower(imm_tuned, design):
+    _, report = imm_tuned
+    result = report["designs"][design]
     ce = result["cross_entropy"]
     assert ce["tuned"] <= 0.7 * ce["paper"], ce
     history = result["history"]
     assert history["best_step"] > 0 and min(history["val_loss"]) < history["val_loss"][0]
-    # every fault still detected in every held-out run
-    assert all(r["detection_rate"] == 1.0 for r in result["tuned"] if r["fault"] != "none")
+    paper = {r["fault"]: r for r in result["paper"]}
+    tuned = {r["fault"]: r for r in result["tuned"]}
+    assert all(tuned[f]["detection_rate"] == 1.0 for f in tuned if f != "none"), result["tuned"]
+    assert tuned["none"]["false_alarm_rate"] <= paper["none"]["false_alarm_rate"]
+    # the report's list of worse metrics is the comparison of the two tables
+    assert result["worse"] == et.worse_metrics(result["paper"], result["tuned"], ce["paper"], ce["tuned"])
 
 
-def test_saved_parameters_are_valid_and_reload(tuned):
-    out, result = tuned
-    raw, parameterization, meta = load_params(out / "engine-imm-tuned.npz")
+@pytest.mark.parametrize("design", sorted(et.DESIGNS))
+def test_saved_imm_parameters_are_valid_and_reload(imm_tuned, design):
+    out, report = imm_tuned
+    result = report["designs"][design]
+    raw, parameterization, meta = load_params(out / f"engine-imm-{design}-tuned.npz")
     params = constrain(parameterization, raw)
     pi = np.asarray(params["transition"])
     np.testing.assert_allclose(pi.sum(axis=1), 1.0, atol=1e-12)
-    assert np.all(pi[~TRANSITION_MASK] == 0.0) and np.all(pi >= 0)
-    assert 0.0 < float(params["mu_threshold"]) < 1.0 and np.all(np.asarray(params["sensor_inflation"]) > 1.0)
+    assert np.all(pi[~et.imm_design(design).transition_mask] == 0.0) and np.all(pi >= 0)
+    assert 0.0 < float(params["mu_threshold"]) < 1.0
+    assert all(np.all(np.asarray(v) > 0) for k, v in params.items() if k not in ("transition", "mu_threshold"))
     for name, value in result["tuned_params"].items():
         np.testing.assert_allclose(np.asarray(params[name]), value, rtol=1e-12)
-    assert meta["best_step"] == result["history"]["best_step"]
+    assert meta["best_step"] == result["history"]["best_step"] and meta["design"] == design
+
+
+def test_tuned_chi2_test_has_lower_held_out_loss_and_fewer_false_alarms(chi2_tuned):
+    out, result = chi2_tuned
+    assert result["window"] in (2, 4) and set(result["val_loss"]) == {"2", "4"}
+    loss = result["held_out_loss"]
+    assert loss["tuned"] < loss["hand"], loss
+    hand = {r["fault"]: r for r in result["hand"]}
+    tuned = {r["fault"]: r for r in result["tuned"]}
+    assert tuned["none"]["false_alarm_rate"] < hand["none"]["false_alarm_rate"], (hand["none"], tuned["none"])
+    raw, parameterization, meta = load_params(out / "engine-chi2-tuned.npz")
+    params = constrain(parameterization, raw)
+    for name in ("Q", "R"):
+        cov = np.asarray(params[name])
+        np.testing.assert_array_equal(cov, np.diag(np.diag(cov)))
+        assert np.all(np.diag(cov) > 0)
+        np.testing.assert_allclose(cov, result["tuned_params"][name], rtol=1e-12)
+    assert float(params["threshold"]) > 0 and meta["window"] == result["window"]
+
+
+def test_tune_rejects_bad_windows(capsys):
+    assert main(["tune", "engine-chi2", "--windows", "4,0"]) == 2
+    assert "--windows must be positive integers" in capsys.readouterr().err

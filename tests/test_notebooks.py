@@ -160,3 +160,30 @@ def test_engine_imm_glrt_notebook(python3_kernel, monkeypatch):
         assert f"\n{fault} " in text
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) == 3, f"expected the three study figures, got {len(images)}"
+
+
+def test_tuning_notebook(python3_kernel, monkeypatch):
+    name = "03_tuning.ipynb"
+    stored = nbformat.read(NOTEBOOKS / name, as_version=4)
+    assert all(not c.get("outputs") for c in stored.cells if c.cell_type == "code")
+
+    # the sizes of test_engine_tuning's CLI run, so that its compiled programs are reused
+    for var, value in (("JAXFDI_NB_STEPS", "20"), ("JAXFDI_NB_TRAIN_RUNS", "2"), ("JAXFDI_NB_RUNS", "10")):
+        monkeypatch.setenv(var, value)
+    before = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
+    nb = _execute(name, python3_kernel)
+    assert sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*")) == before
+
+    outputs = list(_outputs(nb))
+    errors = [o for o in outputs if o.output_type == "error"]
+    assert not errors, f"{errors[0].ename}: {errors[0].evalue}"
+    text = "\n".join(_text(o) for o in outputs)
+    assert "Adam steps: 20, training runs per fault: 2, held-out runs per fault: 10" in text
+    assert "rows sum to one: True | structural zeros kept: True" in text
+    table = text[text.index("fault     "):].splitlines()
+    assert [line.split()[:2] for line in table[2:16]] == [[f, label] for f in FAULT_NAMES for label in ("paper", "tuned")]
+    ce_line = next(line for line in table if line.startswith("mean per-step mode cross-entropy"))
+    paper_ce, tuned_ce = (float(part.split()[-1].rstrip(",")) for part in ce_line.split(":")[1].split("(")[0].split(","))
+    assert tuned_ce < paper_ce, ce_line
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) == 2, f"expected the loss curves and the transition matrices, got {len(images)}"

@@ -51,7 +51,8 @@ from jaxfdi.monitor import monitor
 from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
-from jaxfdi.simulate import linear_simulator
+from jaxfdi.simulate import linear_simulator, simulate
+from jaxfdi.tuning.train import fixed_batches
 
 MODE_NAMES = ("normal", "actuator", "RPM", "P2", "T2", "P4", "T4")
 
@@ -201,6 +202,42 @@ def scenario_runs(runs: int, seed: int, duration: float = 4.0, onset_time: float
     batch = stack_faults([f for f in faults for _ in range(runs)])
     keys = jax.random.split(jax.random.key(seed), len(faults) * runs)
     return ScenarioRuns(engine_model(), jnp.full((steps, 1), FUEL_STEP), faults, batch, keys)
+
+
+class LabelledRuns(NamedTuple):
+    ys: jax.Array      # (R, T, 5) measurements
+    modes: jax.Array   # (R, T) true mode per step (0 normal, 1 actuator, 2.. sensors)
+    onsets: jax.Array  # (R,) fault onset step (NEVER for fault-free)
+    fault: jax.Array   # (R,) index into engine_faults (6 = fault-free)
+
+
+def labelled_runs(runs_per_fault: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> LabelledRuns:
+    """``runs_per_fault`` simulated runs of each engine case, fault-major."""
+    model, us, faults, batch, keys = scenario_runs(runs_per_fault, seed, duration, onset_time)
+
+    @jax.jit
+    def one(key, f):
+        _, truth = simulate(linear_simulator(model, f), jnp.zeros(7), us, key)
+        return truth.measurement, truth.mode
+
+    ys, modes = jax.vmap(one)(keys, batch)
+    fault_index = jnp.repeat(jnp.arange(len(faults)), runs_per_fault)
+    return LabelledRuns(ys, modes, batch.onset, fault_index)
+
+
+def balanced_batches(data: LabelledRuns, runs_per_fault: int, batch_runs: int, key: jax.Array):
+    """``step -> batch``: ``batch_runs`` runs of each of the seven cases of the fault-major
+    ``data``, reshuffled every epoch (``tuning.fixed_batches`` over run indices)."""
+    batch_runs = min(batch_runs, runs_per_fault)
+    index_batches = fixed_batches(jnp.arange(runs_per_fault), batch_runs, key)
+    per_fault = jnp.arange(data.ys.shape[0]) % runs_per_fault
+    cases = data.ys.shape[0] // runs_per_fault
+
+    def batch(step):
+        take = jnp.flatnonzero(jnp.isin(per_fault, index_batches(step)), size=cases * batch_runs)
+        return jax.tree.map(lambda leaf: leaf[take], data)
+
+    return batch
 
 
 def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, onset_time: float = 2.0,

@@ -72,8 +72,14 @@ def engine_chi2_study(
     onset_time: float = 2.0,
     chunk_size: int = 8192,
     progress: bool = False,
+    threshold: float | None = None,
+    filter_noise: tuple[Any, Any] | None = None,
 ) -> EngineChi2Result:
-    """Run the study; needs float64 (``jaxfdi.enable_x64()``): the engine is stiff."""
+    """Run the study; needs float64 (``jaxfdi.enable_x64()``): the engine is stiff.
+
+    ``threshold`` (default ``chi2_threshold(window * 5, pfa)``) and ``filter_noise = (Q,
+    R)`` (default the plant's) set the detector a tuner changed; the plant is always
+    simulated with its own noise."""
     if not jax.config.jax_enable_x64:
         raise ValueError("engine_chi2_study: enable float64 first (jaxfdi.enable_x64()); the engine model is stiff")
     model = engine_model()
@@ -81,14 +87,16 @@ def engine_chi2_study(
     onset = int(round(onset_time / TS))
     us = jnp.full((steps, 1), FUEL_STEP)
     dof = window * model.C.shape[0]
-    threshold = chi2_threshold(dof, pfa)
+    threshold = chi2_threshold(dof, pfa) if threshold is None else jnp.asarray(threshold)
+    filter_model = model if filter_noise is None else model._replace(Q=jnp.asarray(filter_noise[0]),
+                                                                     R=jnp.asarray(filter_noise[1]))
     names, faults = engine_faults(onset)
     x0 = jnp.zeros(7)
 
     def run(key, f, keep_history=False):
-        kf = kalman_filter(model)
+        kf = kalman_filter(filter_model)
         return monitor(
-            linear_simulator(model, f), kf, chi2_detector(threshold, window), x0, kf.init(x0, model.Q),
+            linear_simulator(model, f), kf, chi2_detector(threshold, window), x0, kf.init(x0, filter_model.Q),
             us, key, f.onset, keep_history,
         )
 

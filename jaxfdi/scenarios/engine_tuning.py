@@ -1,19 +1,30 @@
-"""Seed 003 engine: the Zhang & Li IMM tuned by gradient against labelled runs.
+"""Seed 003 engine: the IMMs tuned by gradient against labelled runs.
 
 The paper sets its IMM by hand (transition matrix "adjusted experimentally", mu_T = 0.5).
-Here the transition matrix (its structural zeros kept), the sensor-mode inflation
-factors, the actuator-mode noise and mu_T are trained with optax on labelled Monte Carlo
-runs of the paper's scenario (6 faults + fault-free, onset 2 s, 4 s at 100 Hz), seeds
-apart for training, validation and the held-out test. Loss per run:
+Here each engine IMM design is trained with optax on labelled Monte Carlo runs of the
+paper's scenario (6 faults + fault-free, onset 2 s, 4 s at 100 Hz), seeds apart for
+training, validation and the held-out test, starting from its hand-set parameters:
 
-    mode cross-entropy  +  detection_weight * soft detection loss of max_{j>0} mu_j vs mu_T
+* ``zhang-li`` (``noise_inflation_modes``): the transition matrix (its structural zeros
+  kept), the five sensor-mode inflation factors, the actuator-mode noise, mu_T;
+* ``bias`` (``bias_modes``, 13 states): the transition matrix, the six bias random-walk
+  and six bias-prior variances, mu_T. With the paper's matrix this design raises an
+  alarm before the onset in nearly every run, so its near-zero delays are an artefact
+  that a tuning which removes the false alarms cannot keep (``IMM-bias hand-pi`` in
+  ``jaxfdi run engine`` is the hand-made fix: a sticky matrix).
 
-(``tuning.mode_cross_entropy``, ``tuning.soft_detection_loss``). The held-out comparison
-uses the same records and summaries as ``jaxfdi run engine``.
+Loss per run (``imm_loss``):
+
+    mode cross-entropy + detection_weight * soft detection loss of max_{j>0} mu_j vs mu_T
+
+where the soft detection loss (``tuning.soft_detection_loss``) counts false alarms,
+misses, delay and misisolation (the label at the first alarm, ``argmax_{j>0} mu_j``, is
+not the fault: margin ``max_{j != fault} mu_j - mu_fault``). The held-out comparison uses
+the same records and summaries as ``jaxfdi run engine``.
 """
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -25,134 +36,166 @@ from jaxfdi.filters._base import run_filter
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.models.engine import TS, engine_model
-from jaxfdi.models.fault_modes import noise_inflation_modes
+from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.scenarios.engine import (
     PAPER_TRANSITION,
     EngineSettings,
+    LabelledRuns,
     Method,
+    _bias_estimates,
+    _fmt,
     _mode_prob,
+    balanced_batches,
+    labelled_runs,
     run_method,
-    scenario_runs,
     summarize_method,
 )
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP
-from jaxfdi.simulate import linear_simulator, simulate
 from jaxfdi.tuning import losses
-from jaxfdi.tuning.parameterize import Transform, constrain, positive, stochastic_rows, unconstrain, unit_interval
-from jaxfdi.tuning.train import TrainResult, checkpointed, fit, fixed_batches
+from jaxfdi.tuning.parameterize import Transform, constrain, log_scale, stochastic_rows, unconstrain, unit_interval
+from jaxfdi.tuning.train import TrainResult, checkpointed, fit
 
 TRANSITION_MASK = (PAPER_TRANSITION > 0) | np.eye(len(PAPER_TRANSITION), dtype=bool)
+NUM_FAULTS = len(PAPER_TRANSITION) - 1
 
 
-class LabelledRuns(NamedTuple):
-    ys: jax.Array      # (R, T, 5) measurements
-    modes: jax.Array   # (R, T) true mode per step (0 normal, 1 actuator, 2.. sensors)
-    onsets: jax.Array  # (R,) fault onset step (NEVER for fault-free)
-    fault: jax.Array   # (R,) index into engine_faults (6 = fault-free)
+class ImmDesign(NamedTuple):
+    """One engine IMM design: what is tuned, its hand-set values, how to build it."""
+
+    name: str
+    method: str                                  # its column in ``jaxfdi run engine``
+    transition_mask: np.ndarray                  # (M, M) allowed transitions
+    parameterization: dict[str, Transform]
+    hand: Callable[[], dict[str, Any]]           # the paper's / hand-set parameters
+    modes: Callable[[dict[str, Any]], Any]       # params -> stacked mode models
+    initial: Callable[[dict[str, Any]], tuple]   # params -> (mean, cov) of the state at step 0
+    detector_input: Callable[[Any], Any]
+    estimate_delay: int
 
 
-def labelled_runs(runs_per_fault: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> LabelledRuns:
-    """``runs_per_fault`` simulated runs of each engine case, fault-major."""
-    model, us, faults, batch, keys = scenario_runs(runs_per_fault, seed, duration, onset_time)
-
-    @jax.jit
-    def one(key, f):
-        _, truth = simulate(linear_simulator(model, f), jnp.zeros(7), us, key)
-        return truth.measurement, truth.mode
-
-    ys, modes = jax.vmap(one)(keys, batch)
-    fault_index = jnp.repeat(jnp.arange(len(faults)), runs_per_fault)
-    return LabelledRuns(ys, modes, batch.onset, fault_index)
-
-
-def imm_parameterization() -> dict[str, Transform]:
-    return {
-        "transition": stochastic_rows(TRANSITION_MASK),
-        "sensor_inflation": positive(floor=1.0),
-        "actuator_noise": positive(),
-        "mu_threshold": unit_interval(),
-    }
-
-
-def hand_params(settings: EngineSettings = EngineSettings()) -> dict[str, Any]:
-    """The paper's IMM: its transition matrix, mu_T = 0.5, the Zhang & Li mode settings."""
-    return {
-        "transition": jnp.asarray(PAPER_TRANSITION),
-        "sensor_inflation": jnp.full(5, settings.sensor_inflation),
-        "actuator_noise": jnp.full(1, settings.actuator_noise),
-        "mu_threshold": jnp.asarray(settings.mu_threshold),
-    }
-
-
-def imm_filter(params: dict[str, Any]):
+def _zhang_li() -> ImmDesign:
+    settings = EngineSettings()
     model = engine_model()
-    modes = noise_inflation_modes(model, params["sensor_inflation"], params["actuator_noise"])
-    return interacting_multiple_model(kalman_filter, modes, params["transition"])
+    return ImmDesign(
+        "zhang-li", "IMM", TRANSITION_MASK,
+        {"transition": stochastic_rows(TRANSITION_MASK), "sensor_inflation": log_scale(),
+         "actuator_noise": log_scale(), "mu_threshold": unit_interval()},
+        lambda: {"transition": jnp.asarray(PAPER_TRANSITION),
+                 "sensor_inflation": jnp.full(5, settings.sensor_inflation),
+                 "actuator_noise": jnp.full(1, settings.actuator_noise),
+                 "mu_threshold": jnp.asarray(settings.mu_threshold)},
+        lambda p: noise_inflation_modes(model, p["sensor_inflation"], p["actuator_noise"]),
+        lambda p: (jnp.zeros(7), model.Q),
+        _mode_prob, 0)
 
 
-def _initial_state(filt):
-    return filt.init(jnp.zeros(7), engine_model().Q, jnp.asarray(PAPER_TRANSITION[0]))
+def _bias() -> ImmDesign:
+    settings = EngineSettings()
+    model = engine_model()
+    return ImmDesign(
+        "bias", "IMM-bias", TRANSITION_MASK,
+        {"transition": stochastic_rows(TRANSITION_MASK), "bias_walk": log_scale(), "bias_prior": log_scale(),
+         "mu_threshold": unit_interval()},
+        lambda: {"transition": jnp.asarray(PAPER_TRANSITION), "bias_walk": jnp.asarray(settings.bias_walk),
+                 "bias_prior": jnp.asarray(settings.bias_prior), "mu_threshold": jnp.asarray(settings.mu_threshold)},
+        lambda p: bias_modes(model, p["bias_walk"], p["bias_prior"]),
+        lambda p: bias_mode_initial_state(model, jnp.zeros(7), model.Q, p["bias_prior"]),
+        _bias_estimates, settings.bias_estimate_delay)
 
 
-def mode_log_probs(params: dict[str, Any], ys: jax.Array, remat: bool = False) -> jax.Array:
-    """(R, T, M) log mode probabilities of the IMM with ``params`` on ``ys`` (R, T, 5)."""
-    filt = imm_filter(params)
+DESIGNS: dict[str, Callable[[], ImmDesign]] = {"zhang-li": _zhang_li, "bias": _bias}
+
+
+def imm_design(name: str) -> ImmDesign:
+    if name not in DESIGNS:
+        raise ValueError(f"design: unknown {name!r}; expected one of {sorted(DESIGNS)}")
+    return DESIGNS[name]()
+
+
+def imm_filter(design: ImmDesign, params: dict[str, Any]):
+    """``(filter, initial state)`` of the design's IMM with ``params``; the initial mode
+    probabilities are the paper's normal row."""
+    filt = interacting_multiple_model(kalman_filter, design.modes(params), params["transition"])
+    mean, cov = design.initial(params)
+    return filt, filt.init(mean, cov, jnp.asarray(PAPER_TRANSITION[0]))
+
+
+def mode_log_probs(design: ImmDesign, params: dict[str, Any], ys: jax.Array, remat: bool = False) -> jax.Array:
+    """(R, T, M) log mode probabilities of the design's IMM with ``params`` on ``ys`` (R, T, 5)."""
+    filt, state0 = imm_filter(design, params)
     filt = checkpointed(filt) if remat else filt
     us = jnp.full((ys.shape[1], 1), FUEL_STEP)
-    return jax.vmap(lambda y: run_filter(filt, _initial_state(filt), y, us)[1].log_mode_prob)(ys)
+    return jax.vmap(lambda y: run_filter(filt, state0, y, us)[1].log_mode_prob)(ys)
 
 
-def imm_loss(params: dict[str, Any], data: LabelledRuns, detection_weight: float = 1.0,
-             false_alarm_weight: float = 5.0, temperature: float = 0.05,
+class LossWeights(NamedTuple):
+    detection: float = 1.0      # the soft detection loss against the cross-entropy
+    false_alarm: float = 5.0    # within it: P(alarm before the onset)
+    miss: float = 1.0           # P(no alarm after the onset)
+    delay: float = 1.0          # expected delay / steps after the onset
+    isolation: float = 5.0      # P(the first alarm names the wrong fault)
+    temperature: float = 0.05   # of the sigmoid alarm, in units of mu
+
+
+def imm_loss(design: ImmDesign, params: dict[str, Any], data: LabelledRuns, weights: LossWeights = LossWeights(),
              remat: bool = True) -> tuple[jax.Array, dict[str, jax.Array]]:
     """Mean over runs of the mode cross-entropy plus the weighted soft detection loss."""
-    log_mu = mode_log_probs(params, data.ys, remat)
+    log_mu = mode_log_probs(design, params, data.ys, remat)
     cross_entropy = jax.vmap(losses.mode_cross_entropy)(log_mu, data.modes)
-    statistic = jnp.max(jnp.exp(log_mu[..., 1:]), axis=-1)  # eq. 13: the largest fault-mode probability
-    detection, parts = jax.vmap(lambda s, o: losses.soft_detection_loss(
-        s, params["mu_threshold"], o, temperature, false_alarm_weight))(statistic, data.onsets)
-    total = jnp.mean(cross_entropy + detection_weight * detection)
+    fault_mu = jnp.exp(log_mu[..., 1:])                   # (R, T, 6)
+    statistic = jnp.max(fault_mu, axis=-1)                # eq. 13: the largest fault-mode probability
+    own = jax.nn.one_hot(data.fault, NUM_FAULTS, dtype=bool)[:, None, :]  # all False for fault-free runs
+    correct = jnp.sum(jnp.where(own, fault_mu, 0.0), axis=-1)
+    wrong = jnp.max(jnp.where(own, -1.0, fault_mu), axis=-1)
+    detection, parts = jax.vmap(lambda s, o, m: losses.soft_detection_loss(
+        s, params["mu_threshold"], o, weights.temperature, weights.false_alarm, weights.miss, weights.delay,
+        wrong_label_margin=m, isolation_weight=weights.isolation))(statistic, data.onsets, wrong - correct)
+    total = jnp.mean(cross_entropy + weights.detection * detection)
     return total, {"cross_entropy": jnp.mean(cross_entropy), **{k: jnp.mean(v) for k, v in parts.items()}}
 
 
-def tune_engine_imm(steps: int = 150, train_runs: int = 16, val_runs: int = 4, batch_runs: int = 4,
-                    seed: int = 0, learning_rate: float = 0.05, detection_weight: float = 1.0,
-                    false_alarm_weight: float = 5.0, progress: bool = False) -> tuple[TrainResult, dict[str, Transform]]:
-    """Train from the hand-set parameters. Training runs come from ``seed``, validation
-    from ``seed + 1`` (the test set uses other seeds, see ``compare_engine_imm``)."""
-    parameterization = imm_parameterization()
-    batch_runs = min(batch_runs, train_runs)
+def tune_engine_imm(design: ImmDesign, steps: int = 150, train_runs: int = 16, val_runs: int = 4,
+                    batch_runs: int = 4, seed: int = 0, learning_rate: float = 0.05,
+                    weights: LossWeights = LossWeights(), progress: bool = False) -> TrainResult:
+    """Train ``design`` from its hand-set parameters. Training runs come from ``seed``,
+    validation from ``seed + 1`` (the CLI tests on ``seed + 1000``)."""
     train = labelled_runs(train_runs, seed)
     val = labelled_runs(val_runs, seed + 1)
-    per_fault = jnp.arange(train.ys.shape[0]) % train_runs
-    # mini-batches with every fault: batch_runs runs of each of the 7 cases
-    index_batches = fixed_batches(jnp.arange(train_runs), batch_runs, jax.random.key(seed))
-
-    def train_batch(step):
-        chosen = index_batches(step)
-        take = jnp.flatnonzero(jnp.isin(per_fault, chosen), size=7 * batch_runs)
-        return jax.tree.map(lambda leaf: leaf[take], train)
+    train_batch = balanced_batches(train, train_runs, batch_runs, jax.random.key(seed))
 
     def loss(raw, data):
-        return imm_loss(constrain(parameterization, raw), data, detection_weight, false_alarm_weight)[0]
+        return imm_loss(design, constrain(design.parameterization, raw), data, weights)[0]
 
-    raw0 = unconstrain(parameterization, hand_params())
-    result = fit(loss, raw0, optax.adam(learning_rate), train_batch, val, steps, eval_every=10, patience=4,
-                 progress=progress)
-    return result, parameterization
+    raw0 = unconstrain(design.parameterization, design.hand())
+    return fit(loss, raw0, optax.adam(learning_rate), train_batch, val, steps, eval_every=10, patience=4,
+               progress=progress)
 
 
-def evaluate_engine_imm(params: dict[str, Any], runs: int, seed: int) -> tuple[list[dict], float]:
+def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, seed: int) -> tuple[list[dict], float]:
     """Held-out rows (``summarize_method``: rates, delays) and the mean mode cross-entropy."""
-    filt = imm_filter(params)
-    method = Method(filt, _initial_state(filt), mode_probability_detector(float(params["mu_threshold"])),
-                    _mode_prob, 0, "IMM")
+    filt, state0 = imm_filter(design, params)
+    method = Method(filt, state0, mode_probability_detector(float(params["mu_threshold"])),
+                    design.detector_input, design.estimate_delay, "IMM")
     records = run_method(method, runs, seed)
-    rows = summarize_method("IMM", method, records, runs, int(round(4.0 / TS)))
+    rows = summarize_method(design.method, method, records, runs, int(round(4.0 / TS)))
     test = labelled_runs(runs, seed + 1)
-    log_mu = jax.jit(mode_log_probs)(params, test.ys)
+    log_mu = jax.jit(lambda p, y: mode_log_probs(design, p, y))(params, test.ys)
     cross_entropy = float(jnp.mean(jax.vmap(losses.mode_cross_entropy)(log_mu, test.modes)))
     return rows, cross_entropy
+
+
+def worse_metrics(hand_rows: list[dict], tuned_rows: list[dict], hand_ce: float, tuned_ce: float) -> list[str]:
+    """The reported metrics on which the tuned design is worse than the hand-set one
+    (rows as ``summarize_method`` makes them, or read back from JSON: NaN as ``None``)."""
+    worse = [] if tuned_ce <= hand_ce else ["cross-entropy"]
+    directions = {"detection_rate": 1, "isolation_rate": 1, "false_alarm_rate": -1, "delay_median_s": -1,
+                  "delay_p90_s": -1}
+    for h, t in zip(hand_rows, tuned_rows):
+        for key, sign in directions.items():
+            hand, tuned = (float("nan") if r[key] is None else r[key] for r in (h, t))
+            if hand == hand and not sign * tuned >= sign * hand:  # a NaN tuned value counts as worse
+                worse.append(f"{h['fault']} {key}")
+    return worse
 
 
 def comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce) -> str:
@@ -161,12 +204,9 @@ def comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce) -> str:
     for h, t in zip(hand_rows, tuned_rows):
         for label, r in (("paper", h), ("tuned", t)):
             lines.append(
-                f"{r['fault']:<9} {label:<6} {_num(r['detection_rate'], 5, 2)} {_num(r['isolation_rate'], 5, 2)} "
-                f"{r['false_alarm_rate']:>5.2f} {_num(r['delay_median_s'], 13)} {_num(r['delay_p90_s'], 8)}")
+                f"{r['fault']:<9} {label:<6} {_fmt(r['detection_rate'], 5, 2)} {_fmt(r['isolation_rate'], 5, 2)} "
+                f"{r['false_alarm_rate']:>5.2f} {_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 8)}")
     lines.append(f"mean per-step mode cross-entropy: paper {hand_ce:.4f}, tuned {tuned_ce:.4f} "
                  f"({100 * (1 - tuned_ce / hand_ce):.0f} % lower)")
     return "\n".join(lines)
 
-
-def _num(x: float, width: int, digits: int = 3) -> str:
-    return f"{'-':>{width}}" if x != x else f"{x:>{width}.{digits}f}"

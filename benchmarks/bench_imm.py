@@ -34,7 +34,7 @@ import numpy as np  # noqa: E402
 from filterpy.kalman import IMMEstimator, KalmanFilter  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_filters import block, cpu_model, rel_diff, repeat_timing, time_jax, write_json_atomic  # noqa: E402
+from bench_filters import cpu_model, rel_diff, time_jax, write_json_atomic  # noqa: E402
 
 import jaxfdi  # noqa: E402
 from jaxfdi.models import bias_mode_initial_state, bias_modes, engine_model, noise_inflation_modes  # noqa: E402

@@ -1,4 +1,4 @@
-"""Command line: ``jaxfdi run <scenario>``, ``jaxfdi list``."""
+"""Command line: ``jaxfdi run <scenario>``, ``jaxfdi tune <target>``, ``jaxfdi list``."""
 from __future__ import annotations
 
 import argparse

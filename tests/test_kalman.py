@@ -1,6 +1,5 @@
 """Linear Kalman filter against filterpy's KalmanFilter (Joseph form, same model)."""
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter

@@ -1,6 +1,5 @@
 """Monte Carlo driver: equals a loop, independent of chunking and of the device count,
 and the chi-square test's false-alarm rate is statistically the design Pfa."""
-import json
 import os
 import subprocess
 import sys

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.filters._base import Filter, GaussianState
+from jaxfdi.filters._base import Filter
 from jaxfdi.filters._mixture import (
     IMMInfo,
     IMMState,

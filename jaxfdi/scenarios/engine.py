@@ -182,7 +182,8 @@ def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Met
     }
 
 
-def _run(method: Method, model, us, key, f, keep_history=False):
+def run_monitor(method: Method, model, us, key, f, keep_history=False):
+    """One run of ``method`` on the engine with fault ``f`` (``monitor``: plant, filter, detector)."""
     return monitor(linear_simulator(model, f), method.filter, method.detector, jnp.zeros(7), method.init_state,
                    us, key, f.onset, keep_history, method.detector_input, method.estimate_delay)
 
@@ -246,12 +247,12 @@ def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, 
     ``engine_faults`` order. Run ``i`` gets the same key, hence the same noise, for
     every method."""
     model, us, faults, batch, _ = scenario_runs(runs, seed, duration, onset_time)
-    return monte_carlo(lambda key, f: _run(method, model, us, key, f).record, jax.random.key(seed),
+    return monte_carlo(lambda key, f: run_monitor(method, model, us, key, f).record, jax.random.key(seed),
                        len(faults) * runs, batch, chunk_size=chunk_size, progress=progress)
 
 
-def summarize_method(name: str, method: Method, records: DetectionRecord, runs: int, steps: int) -> list[dict]:
-    """One row per fault: rates, delays (s), the paper's delay, the estimate's error."""
+def summarize_method(name: str, paper: str | None, records: DetectionRecord, runs: int, steps: int) -> list[dict]:
+    """One row per fault: rates, delays (s), the paper's delay (``PAPER_DELAY[paper]``), the estimate's error."""
     names, faults = engine_faults(0)
     rows = []
     for i, (fault_name, f) in enumerate(zip(names, faults)):
@@ -263,14 +264,14 @@ def summarize_method(name: str, method: Method, records: DetectionRecord, runs: 
         estimates = part.estimate[correct] if faulty else np.zeros(0)
         estimates = estimates[np.isfinite(estimates)]
         estimate = float(np.median(estimates)) if estimates.size else float("nan")
-        paper = PAPER_DELAY[method.paper][i] if (faulty and method.paper) else float("nan")
+        paper_delay = PAPER_DELAY[paper][i] if (faulty and paper) else float("nan")
         rows.append({
             "method": name, "fault": fault_name, "magnitude": magnitude, "runs": s.runs,
             "detection_rate": s.detection_rate,
             "isolation_rate": float(np.mean(correct)) if faulty else float("nan"),
             "false_alarm_rate": s.false_alarm_rate,
             "false_alarm_steps_per_run": float(np.mean(part.false_alarms)),
-            "delay_median_s": s.delay_median, "delay_p90_s": s.delay_p90, "paper_delay_s": paper,
+            "delay_median_s": s.delay_median, "delay_p90_s": s.delay_p90, "paper_delay_s": paper_delay,
             "estimate_median": estimate,
             "estimate_error": (estimate - magnitude) / magnitude if faulty else float("nan"),
         })
@@ -347,7 +348,7 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
         if progress:
             print(f"{name}:", file=sys.stderr, flush=True)
         records[name] = run_method(every[name], runs, seed, duration, onset_time, progress=progress)
-        rows += summarize_method(name, every[name], records[name], runs, steps)
+        rows += summarize_method(name, every[name].paper, records[name], runs, steps)
     figures = {} if figure_runs < 1 else _figure_data(every, chosen, settings, figure_runs, seed + 1, duration,
                                                       onset_time)
     bonferroni = float(glrt_threshold(settings.glr_pfa, 6, settings.glr_window, "bonferroni"))
@@ -376,7 +377,7 @@ def _figure_data(every, chosen, settings, runs, seed, duration, onset_time) -> d
     for name in ("IMM", confirmed_name(settings)):
         if name in chosen:
             data[f"mode_prob/{name}"] = mean_over_runs(
-                lambda k, f, m=every[name]: _run(m, model, us, k, f, True).history.info.mode_prob)
+                lambda k, f, m=every[name]: run_monitor(m, model, us, k, f, True).history.info.mode_prob)
     glrt_name = next((n for n in chosen if n.startswith("GLRT")), None)
     if glrt_name is not None:
         method = every[glrt_name]
@@ -385,7 +386,7 @@ def _figure_data(every, chosen, settings, runs, seed, duration, onset_time) -> d
         N = settings.glr_window
 
         def glr_history(k, f):
-            innovation = _run(method, model, us, k, f, True).history.info.innovation
+            innovation = run_monitor(method, model, us, k, f, True).history.info.innovation
             padded = jnp.concatenate([jnp.zeros((N - 1, innovation.shape[1]), innovation.dtype), innovation])
             windows = padded[jnp.arange(steps)[:, None] + jnp.arange(N)[None, :]]
             valid = jnp.minimum(jnp.arange(steps) + 1, N)

@@ -97,25 +97,28 @@ def _text(output) -> str:
     return output.get("data", {}).get("text/plain", "")
 
 
-def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch):
-    name = "01_kalman_monte_carlo.ipynb"
+def _run_clean(name: str, kernel: str, monkeypatch, env: dict[str, str]):
+    """Execute a stored notebook (kept without outputs) with ``env`` in the kernel's
+    environment; check it wrote nothing into the repo and raised no error. Returns
+    ``(outputs, text)``."""
     stored = nbformat.read(NOTEBOOKS / name, as_version=4)
-    # the notebook is kept in the repo without outputs
     assert all(not c.get("outputs") for c in stored.cells if c.cell_type == "code")
-
-    monkeypatch.setenv("JAXFDI_NB_RUNS", "5")  # inherited by the kernel process
+    for var, value in env.items():
+        monkeypatch.setenv(var, value)  # inherited by the kernel process
     before = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
-    nb = _execute(name, python3_kernel)
+    nb = _execute(name, kernel)
     after = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
     assert after == before, f"the notebook wrote files into the repo: {sorted(set(after) - set(before))}"
-
     outputs = list(_outputs(nb))
     errors = [o for o in outputs if o.output_type == "error"]
     assert not errors, f"{errors[0].ename}: {errors[0].evalue}"
+    return outputs, "\n".join(_text(o) for o in outputs)
+
+
+def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch):
+    outputs, text = _run_clean("01_kalman_monte_carlo.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": "5"})
     stderr = "".join(o.text for o in outputs if o.output_type == "stream" and o.name == "stderr")
     assert "Traceback" not in stderr, stderr
-
-    text = "\n".join(_text(o) for o in outputs)
     assert "runs per fault: 5" in text  # the kernel saw JAXFDI_NB_RUNS
     assert "spectral radius of Phi = 0.9858" in text
 
@@ -137,19 +140,7 @@ def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch):
 
 
 def test_engine_imm_glrt_notebook(python3_kernel, monkeypatch):
-    name = "02_engine_imm_glrt.ipynb"
-    stored = nbformat.read(NOTEBOOKS / name, as_version=4)
-    assert all(not c.get("outputs") for c in stored.cells if c.cell_type == "code")
-
-    monkeypatch.setenv("JAXFDI_NB_RUNS", "5")
-    before = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
-    nb = _execute(name, python3_kernel)
-    assert sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*")) == before
-
-    outputs = list(_outputs(nb))
-    errors = [o for o in outputs if o.output_type == "error"]
-    assert not errors, f"{errors[0].ename}: {errors[0].evalue}"
-    text = "\n".join(_text(o) for o in outputs)
+    outputs, text = _run_clean("02_engine_imm_glrt.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": "5"})
     assert "runs per fault: 5" in text
     assert "paper pi: stationary P(normal)" in text
     assert "theoretical threshold chi2.isf(0.005, 60) = 91.95" in text
@@ -163,21 +154,9 @@ def test_engine_imm_glrt_notebook(python3_kernel, monkeypatch):
 
 
 def test_tuning_notebook(python3_kernel, monkeypatch):
-    name = "03_tuning.ipynb"
-    stored = nbformat.read(NOTEBOOKS / name, as_version=4)
-    assert all(not c.get("outputs") for c in stored.cells if c.cell_type == "code")
-
     # the sizes of test_engine_tuning's CLI run, so that its compiled programs are reused
-    for var, value in (("JAXFDI_NB_STEPS", "20"), ("JAXFDI_NB_TRAIN_RUNS", "2"), ("JAXFDI_NB_RUNS", "10")):
-        monkeypatch.setenv(var, value)
-    before = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
-    nb = _execute(name, python3_kernel)
-    assert sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*")) == before
-
-    outputs = list(_outputs(nb))
-    errors = [o for o in outputs if o.output_type == "error"]
-    assert not errors, f"{errors[0].ename}: {errors[0].evalue}"
-    text = "\n".join(_text(o) for o in outputs)
+    env = {"JAXFDI_NB_STEPS": "20", "JAXFDI_NB_TRAIN_RUNS": "2", "JAXFDI_NB_RUNS": "10"}
+    outputs, text = _run_clean("03_tuning.ipynb", python3_kernel, monkeypatch, env)
     assert "Adam steps: 20, training runs per fault: 2, held-out runs per fault: 10" in text
     assert "rows sum to one: True | structural zeros kept: True" in text
     table = text[text.index("fault     "):].splitlines()

@@ -9,6 +9,7 @@ from jaxfdi.filters import (
     multiple_model,
     run_filter,
     run_filter_batch,
+    two_stage_kalman_filter,
     unscented_kalman_filter,
 )
 from jaxfdi.models import LinearGaussianModel, c2d

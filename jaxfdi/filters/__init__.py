@@ -1,6 +1,7 @@
 """Filters: each a factory returning ``Filter(init, step)``; ``run_filter`` scans it.
 
-Gaussian filters (KF, EKF, UKF) and the multiple-model filters built on them (IMM, MM).
+Gaussian filters (KF, EKF, UKF), the multiple-model filters built on them (IMM, MM),
+and the two-stage (bias) Kalman filter, optimal or robust to an unknown input.
 """
 from jaxfdi.filters._base import ConditionedGaussian, Filter, FilterInfo, GaussianState, gaussian_filter, run_filter, run_filter_batch
 from jaxfdi.filters._mixture import IMMInfo, IMMState
@@ -8,6 +9,15 @@ from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.mm import multiple_model
+from jaxfdi.filters.tskf import (
+    FaultDirection,
+    TSKFInfo,
+    TSKFState,
+    actuator_direction,
+    sensor_direction,
+    stack_directions,
+    two_stage_kalman_filter,
+)
 from jaxfdi.filters.ukf import unscented_kalman_filter
 
 __all__ = [
@@ -25,4 +35,11 @@ __all__ = [
     "multiple_model",
     "IMMInfo",
     "IMMState",
+    "FaultDirection",
+    "TSKFInfo",
+    "TSKFState",
+    "actuator_direction",
+    "sensor_direction",
+    "stack_directions",
+    "two_stage_kalman_filter",
 ]

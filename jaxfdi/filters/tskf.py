@@ -1,0 +1,313 @@
+"""Two-stage Kalman filter (TSKF) for a random-walk fault bias, optimal or robust to an
+unknown input (Keller & Darouach 1997; Hsieh & Chen 1999; Keller, Darouach & Caramelle
+1998; seed 001, Section III).
+
+Plant, with ``b`` the fault bias (``p`` components) and ``d`` an unknown input::
+
+    x[k+1] = Phi x[k] + Gamma u[k] + Fa[k] b[k] + E d[k] + w[k],   w ~ N(0, Q)
+    b[k+1] = b[k] + wb[k],                                          wb ~ N(0, Qb)
+    y[k]   = C x[k] + D u[k] + Fs[k] b[k] + v[k],                   v ~ N(0, R)
+
+The filter keeps the augmented prior of ``[x; b]`` factored as ``x = x_bar + V b`` with
+``x_bar`` independent of ``b`` — a *bias-free* filter ``(x_bar, P_bar)``, a *bias
+filter* ``(b, Pb)`` and the coupling ``V`` — which is exactly the Kalman filter on the
+augmented state (the test of this module), at the cost of an n-state and a p-state
+filter. One step, with ``H_b = C V + Fs`` the bias's effect on ``y`` through the
+coupling:
+
+* bias-free update: ``r_bar = y - C x_bar - D u``, ``S_bar = C P_bar C^T + R``, gain
+  ``K_bar`` (Kalman; with an unknown input the unbiased minimum-variance gain of
+  Kitanidis 1987, ``(I - K_bar C) E = 0``), ``x_bar += K_bar r_bar``, Joseph ``P_bar``,
+  ``V -= K_bar H_b``;
+* bias update, in whitened coordinates ``e = N^T L^-1 (r_bar - H_b b)``
+  (``S_bar = L L^T``; ``N`` an orthonormal basis of the complement of ``L^-1 C E``, the
+  identity without unknown input): ``G = N^T L^-1 H_b``, ``S_b = G Pb G^T + I``,
+  ``b += Pb G^T S_b^-1 e``;
+* predict (the optimal coupling of Hsieh & Chen): ``U = Phi V + Fa``,
+  ``Pb' = Pb + Qb``, ``V' = U Pb Pb'^-1``, ``x_bar' = Phi x_bar + Gamma u + (U - V') b``,
+  ``P_bar' = Phi P_bar Phi^T + Q + U Pb U^T - V' Pb' V'^T``.
+
+The unknown input is treated as having an infinite (diffuse) variance: that limit of
+the augmented Kalman filter is Kitanidis's unbiased minimum-variance filter, and it
+factors into the two stages exactly as above, the bias filter seeing only the part of
+``y`` that ``C E d`` cannot reach. Decoupling needs ``rank(C E) = rank(E) = q <= m``
+(seed 001, eq. 5), checked when the filter is built.
+
+Test statistic: ``lambda = e^T S_b^-1 e``, chi-square with ``m - q`` degrees of freedom
+when the filter's fault hypothesis holds. It equals ``r^T W^+ r`` for the paper's
+residual ``r = y - C x[k|k] - D u - Fs b[k|k]`` (eqs. 13, 15) with ``W`` its exact
+covariance (eq. 17 is misprinted; ``W = T S T^T``, ``T`` the linear map from the
+augmented innovation to ``r``), and, without unknown input, the augmented filter's
+normalised innovation squared.
+
+Time-varying fault distributions (``FaultDirection``): an actuator effectiveness loss
+``Gamma (I - diag(xi)) u`` has ``Fa[k] = -Gamma diag(u[k])`` (its columns are selected
+by ``input_scaled``), a sensor scaling ``(I + diag(xi)) C x`` has
+``Fs[k] = diag(C x_hat)`` (``output_scaled``), evaluated at the prior mean
+``x[k|k-1]`` — the paper writes ``x[k|k]``, which the update has not produced yet.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks, _linalg
+from jaxfdi.filters._base import Filter
+from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
+
+
+class FaultDirection(NamedTuple):
+    """How a bias ``b`` (p,) enters the plant; ``Fa[k]`` (n, p) and ``Fs[k]`` (m, p) are
+
+    ``Fa[k] = state + Gamma (input_scaled * u[k][:, None])`` and
+    ``Fs[k] = output + (C x_hat + D u)[:, None] * output_scaled``.
+
+    A pytree of arrays: a bank of filters is a vmap over stacked directions.
+    """
+
+    state: Array          # (n, p) constant actuator distribution
+    input_scaled: Array   # (nu, p) Fa gains proportional to u (effectiveness: -e_i)
+    output: Array         # (m, p) constant sensor distribution
+    output_scaled: Array  # (m, p) Fs gains proportional to the predicted output (scaling: e_j)
+
+
+def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "effectiveness") -> FaultDirection:
+    """One actuator's fault direction: ``"effectiveness"`` (``Fa = -Gamma[:, i] u_i``, the
+    bias is the lost fraction) or ``"additive"`` (``Fa = -Gamma[:, i]``, the bias is the
+    amount subtracted from ``u_i``)."""
+    n, nu, m = validate_linear_model(model)
+    if not 0 <= component < nu:
+        raise ValueError(f"component: expected an input index in [0, {nu}), got {component}")
+    e = jnp.zeros((nu, 1), model.Phi.dtype).at[component, 0].set(-1.0)
+    zeros_m = jnp.zeros((m, 1), model.Phi.dtype)
+    if kind == "effectiveness":
+        return FaultDirection(jnp.zeros((n, 1), model.Phi.dtype), e, zeros_m, zeros_m)
+    if kind == "additive":
+        return FaultDirection(jnp.asarray(model.Gamma) @ e, jnp.zeros_like(e), zeros_m, zeros_m)
+    raise ValueError(f"kind: expected 'effectiveness' or 'additive', got {kind!r}")
+
+
+def sensor_direction(model: LinearGaussianModel, component: int, kind: str = "scaling") -> FaultDirection:
+    """One sensor's fault direction: ``"scaling"`` (``Fs = e_j (C x_hat)_j``, the bias is the
+    relative gain error) or ``"additive"`` (``Fs = e_j``, the bias is added to ``y_j``)."""
+    n, nu, m = validate_linear_model(model)
+    if not 0 <= component < m:
+        raise ValueError(f"component: expected an output index in [0, {m}), got {component}")
+    e = jnp.zeros((m, 1), model.Phi.dtype).at[component, 0].set(1.0)
+    zeros = (jnp.zeros((n, 1), model.Phi.dtype), jnp.zeros((nu, 1), model.Phi.dtype))
+    if kind == "scaling":
+        return FaultDirection(*zeros, jnp.zeros_like(e), e)
+    if kind == "additive":
+        return FaultDirection(*zeros, e, jnp.zeros_like(e))
+    raise ValueError(f"kind: expected 'scaling' or 'additive', got {kind!r}")
+
+
+def stack_directions(directions: list[FaultDirection]) -> FaultDirection:
+    """Stack directions with the same bias size along a leading bank axis."""
+    return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *directions)
+
+
+def actuator_matrix(direction: FaultDirection, model: LinearGaussianModel, u: Array) -> Array:
+    """``Fa[k]`` (n, p) for the input ``u[k]``."""
+    return direction.state + _linalg.matmul(model.Gamma, direction.input_scaled * u[:, None])
+
+
+def sensor_matrix(direction: FaultDirection, model: LinearGaussianModel, x_hat: Array, u: Array) -> Array:
+    """``Fs[k]`` (m, p) at the state estimate ``x_hat``."""
+    y_hat = _linalg.matmul(model.C, x_hat) + _linalg.matmul(model.D, u)
+    return direction.output + y_hat[:, None] * direction.output_scaled
+
+
+class TSKFState(NamedTuple):
+    """Prior of step k in two-stage form: ``x = x_bar + coupling b``."""
+
+    bias_free_mean: Array  # (n,)   x_bar[k|k-1]
+    bias_free_cov: Array   # (n, n) P_bar[k|k-1]
+    bias_mean: Array       # (p,)   b[k|k-1]
+    bias_cov: Array        # (p, p) Pb[k|k-1]
+    coupling: Array        # (n, p) V[k|k-1]
+
+
+class TSKFInfo(NamedTuple):
+    """Per-step outputs of the two-stage filter."""
+
+    filtered_mean: Array   # (n,)   x[k|k] = x_bar + V b
+    filtered_cov: Array    # (n, n) P[k|k] = P_bar + V Pb V^T
+    bias_mean: Array       # (p,)   b[k|k], the fault estimate
+    bias_cov: Array        # (p, p) Pb[k|k]
+    residual: Array        # (m,)   r = y - C x[k|k] - D u - Fs b[k|k]  (eqs. 13, 15)
+    residual_cov: Array    # (m, m) W, its exact covariance (rank m - q)
+    statistic: Array       # ()     lambda = r^T W^+ r ~ chi2(m - q) under the filter's hypothesis
+    log_likelihood: Array  # ()     log-density of the decoupled innovation
+    healthy: Array         # ()     bool: S_bar, S_b, P[k|k] positive definite, all finite
+
+
+class TwoStageFilter(NamedTuple):
+    """A ``Filter``-shaped TSKF with its static degrees of freedom."""
+
+    init: callable
+    step: callable
+    dof: int  # m - q: degrees of freedom of the statistic
+
+
+def check_decoupling(model: LinearGaussianModel, unknown_input: Array) -> int:
+    """Check ``rank(C E) = rank(E) = q <= m`` (seed 001, eq. 5) and return ``q``.
+
+    Raises a ``ValueError`` naming the failed condition; ``E`` must be concrete.
+    """
+    n, _, m = validate_linear_model(model)
+    _checks.check_shape("unknown_input", unknown_input, (n, None), "E: n states x q unknown inputs")
+    E = _checks.concrete(unknown_input)
+    C = _checks.concrete(model.C)
+    if E is None or C is None:
+        raise ValueError("unknown_input: E and model.C must be concrete (not traced) to check decoupling")
+    q = E.shape[1]
+    rank_E = np.linalg.matrix_rank(E) if q else 0
+    rank_CE = np.linalg.matrix_rank(C @ E) if q else 0
+    if q > m:
+        raise ValueError(f"unknown_input: q = {q} unknown inputs cannot be decoupled with m = {m} outputs (need q <= m)")
+    if rank_E != q:
+        raise ValueError(f"unknown_input: E must have full column rank q = {q}, got rank {rank_E}")
+    if rank_CE != q:
+        raise ValueError(
+            f"unknown_input: decoupling needs rank(C E) = rank(E) = {q}, got rank(C E) = {rank_CE} "
+            "(the unknown input does not reach the outputs in every direction)"
+        )
+    return q
+
+
+def two_stage_kalman_filter(
+    model: LinearGaussianModel,
+    direction: FaultDirection,
+    bias_walk: Array,
+    unknown_input: Array | None = None,
+) -> TwoStageFilter:
+    """Two-stage Kalman filter for the bias along ``direction``; robust to ``E d`` if given.
+
+    Args:
+      model: the nominal ``LinearGaussianModel`` (``Q``, ``R`` of ``w``, ``v``).
+      direction: a ``FaultDirection`` (a bias of size p).
+      bias_walk: (p, p) covariance ``Qb`` of the bias random walk.
+      unknown_input: (n, q) distribution ``E`` of an unknown input to decouple, or ``None``
+        (the optimal TSKF). Must satisfy ``rank(C E) = rank(E) = q <= m``.
+
+    Returns:
+      ``TwoStageFilter(init, step, dof)``: ``init(mean, cov, bias_mean, bias_cov)`` (the
+      prior of the first step, ``x`` and ``b`` independent), ``step(state, y, u)``
+      returning ``(state, TSKFInfo)``; run it with ``run_filter``.
+    """
+    n, nu, m = validate_linear_model(model)
+    _checks.check_shape("direction.state", direction.state, (n, None), "n states x p biases")
+    p = _checks.shape_of(direction.state)[1]
+    _checks.check_shape("direction.input_scaled", direction.input_scaled, (nu, p), "nu inputs x p biases")
+    _checks.check_shape("direction.output", direction.output, (m, p), "m outputs x p biases")
+    _checks.check_shape("direction.output_scaled", direction.output_scaled, (m, p), "m outputs x p biases")
+    _checks.check_covariance("bias_walk", bias_walk, p)
+    q = 0 if unknown_input is None else check_decoupling(model, unknown_input)
+    dof = m - q
+    mm = _linalg.matmul
+    identity_n = jnp.eye(n, dtype=model.Phi.dtype)
+
+    def init(mean: Array, cov: Array, bias_mean: Array, bias_cov: Array) -> TSKFState:
+        _checks.check_shape("mean", mean, (n,), "initial state mean")
+        _checks.check_covariance("cov", cov, n)
+        _checks.check_shape("bias_mean", bias_mean, (p,), "initial bias mean")
+        _checks.check_covariance("bias_cov", bias_cov, p)
+        mean = jnp.asarray(mean)
+        dtype = mean.dtype
+        return TSKFState(mean, jnp.asarray(cov, dtype), jnp.asarray(bias_mean, dtype),
+                         jnp.asarray(bias_cov, dtype), jnp.zeros((n, p), dtype))
+
+    def bias_free_gain(P_bar: Array, chol_S: Array, cross_cov: Array) -> tuple[Array, Array]:
+        """Gain and the (m, m - q) basis N of the whitened complement of C E."""
+        gain = _linalg.gain_from_cross_cov(cross_cov, chol_S)  # K0 = P C^T S^-1
+        if q == 0:
+            return gain, jnp.eye(m, dtype=P_bar.dtype)
+        E = jnp.asarray(unknown_input, P_bar.dtype)
+        F_white = _linalg.solve_lower(chol_S, mm(model.C, E))          # L^-1 C E   (m, q)
+        # K = K0 + (I - K0 C) E (F^T S^-1 F)^-1 F^T S^-1, F = C E  (Kitanidis 1987)
+        Q_full, R_f = jnp.linalg.qr(F_white, mode="complete")
+        coeff = jax.scipy.linalg.solve_triangular(R_f[:q], Q_full[:, :q].T, lower=False)  # (F~^T F~)^-1 F~^T
+        correction = mm(mm(identity_n - mm(gain, model.C), E), coeff)  # (n, m) acting on L^-1 r
+        gain = gain + _linalg.solve_lower_transposed(chol_S, correction.T).T
+        return gain, Q_full[:, q:]
+
+    def diffuse_log_likelihood(statistic: Array, S_aug: Array) -> Array:
+        """``-0.5 (lambda + log det S + log det(F^T S^-1 F) + (m - q) log 2 pi)``, F = C E:
+        the augmented filter's log-likelihood, and with an unknown input the diffuse
+        log-likelihood of de Jong (1991), which does not depend on ``d``."""
+        chol = _linalg.cholesky(S_aug)
+        log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol)))
+        if q:
+            F_white = _linalg.solve_lower(chol, mm(model.C, jnp.asarray(unknown_input, S_aug.dtype)))
+            log_det = log_det + jnp.linalg.slogdet(F_white.T @ F_white)[1]
+        return -0.5 * (statistic + log_det + dof * np.log(2.0 * np.pi))
+
+    def step(state: TSKFState, y: Array, u: Array):
+        _checks.check_shape("y", y, (m,), "one measurement")
+        _checks.check_shape("u", u, (nu,), "one input")
+        x_bar, P_bar, b, Pb, V = state
+        prior_mean = x_bar + mm(V, b)
+        Fs = sensor_matrix(direction, model, prior_mean, u)
+        H_b = mm(model.C, V) + Fs                                          # (m, p)
+
+        # bias-free filter
+        r_bar = y - mm(model.C, x_bar) - mm(model.D, u)
+        cross_cov = mm(P_bar, model.C.T)
+        S_bar = _linalg.symmetrize(mm(model.C, cross_cov) + model.R)
+        chol_S = _linalg.cholesky(S_bar)
+        K_bar, basis = bias_free_gain(P_bar, chol_S, cross_cov)
+        x_bar_post = x_bar + mm(K_bar, r_bar)
+        I_KC = identity_n - mm(K_bar, model.C)
+        P_bar_post = _linalg.symmetrize(mm(mm(I_KC, P_bar), I_KC.T) + mm(mm(K_bar, model.R), K_bar.T))
+        V_post = V - mm(K_bar, H_b)
+
+        # bias filter on the decoupled, whitened innovation
+        G = mm(basis.T, _linalg.solve_lower(chol_S, H_b))                  # (m - q, p)
+        e = mm(basis.T, _linalg.whiten(chol_S, r_bar - mm(H_b, b)))        # (m - q,)
+        S_b = _linalg.symmetrize(mm(mm(G, Pb), G.T) + jnp.eye(dof, dtype=Pb.dtype))
+        chol_Sb = _linalg.cholesky(S_b)
+        K_b = _linalg.gain_from_cross_cov(mm(Pb, G.T), chol_Sb)           # (p, m - q)
+        b_post = b + mm(K_b, e)
+        I_KG = jnp.eye(p, dtype=Pb.dtype) - mm(K_b, G)
+        Pb_post = _linalg.symmetrize(mm(mm(I_KG, Pb), I_KG.T) + mm(K_b, K_b.T))
+        statistic = jnp.sum(_linalg.whiten(chol_Sb, e) ** 2)
+        S_aug = _linalg.symmetrize(S_bar + mm(mm(H_b, Pb), H_b.T))       # augmented S, without d
+        log_lik = diffuse_log_likelihood(statistic, S_aug)
+
+        mean_post = x_bar_post + mm(V_post, b_post)
+        cov_post = _linalg.symmetrize(P_bar_post + mm(mm(V_post, Pb_post), V_post.T))
+        residual = y - mm(model.C, mean_post) - mm(model.D, u) - mm(Fs, b_post)
+
+        # W = T S T^T, T the (linear) map from the augmented innovation to the residual
+        def residual_of(innovation):
+            db = mm(K_b, mm(basis.T, _linalg.whiten(chol_S, innovation)))
+            dx = mm(K_bar, innovation) + mm(V_post, db)
+            return innovation - mm(model.C, dx) - mm(Fs, db)
+
+        T = jax.vmap(residual_of, in_axes=1, out_axes=1)(jnp.eye(m, dtype=y.dtype))
+        residual_cov = _linalg.symmetrize(mm(mm(T, S_aug), T.T))
+
+        # predict
+        Fa = actuator_matrix(direction, model, u)
+        U = mm(model.Phi, V_post) + Fa
+        Pb_next = _linalg.symmetrize(Pb_post + bias_walk)
+        V_next = _linalg.psd_solve(Pb_next, mm(U, Pb_post).T).T
+        x_bar_next = mm(model.Phi, x_bar_post) + mm(model.Gamma, u) + mm(U - V_next, b_post)
+        P_bar_next = _linalg.symmetrize(
+            mm(mm(model.Phi, P_bar_post), model.Phi.T) + model.Q
+            + mm(mm(U, Pb_post), U.T) - mm(mm(V_next, Pb_next), V_next.T)
+        )
+        healthy = (
+            _linalg.cholesky_is_finite(chol_S) & _linalg.cholesky_is_finite(chol_Sb)
+            & _linalg.cholesky_is_finite(_linalg.cholesky(cov_post))
+            & jnp.all(jnp.isfinite(x_bar_next)) & jnp.all(jnp.isfinite(b_post))
+        )
+        info = TSKFInfo(mean_post, cov_post, b_post, Pb_post, residual, residual_cov, statistic, log_lik, healthy)
+        return TSKFState(x_bar_next, P_bar_next, b_post, Pb_next, V_next), info
+
+    return TwoStageFilter(init, step, dof)

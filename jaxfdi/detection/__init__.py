@@ -19,6 +19,15 @@ from jaxfdi.detection.glrt import (
     glrt_threshold,
 )
 from jaxfdi.detection.mode_probability import mode_probability_detector
+from jaxfdi.detection.signature import UNMATCHED, isolate, signature_matrix
+from jaxfdi.detection.wavelet import (
+    block_alarms,
+    chi2_detail_sigma,
+    haar_decompose,
+    haar_denoise,
+    haar_reconstruct,
+    soft_threshold,
+)
 
 __all__ = [
     "PAPER_USED_THRESHOLD",
@@ -37,4 +46,13 @@ __all__ = [
     "first_crossing",
     "moving_window_sum",
     "normalized_innovation_squared",
+    "UNMATCHED",
+    "isolate",
+    "signature_matrix",
+    "block_alarms",
+    "chi2_detail_sigma",
+    "haar_decompose",
+    "haar_denoise",
+    "haar_reconstruct",
+    "soft_threshold",
 ]

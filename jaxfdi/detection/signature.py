@@ -1,0 +1,41 @@
+"""Fault signature matrix and isolation by matching the symptom vector (seed 001,
+eq. 20, Table 2).
+
+A bank has one filter per fault hypothesis. Filter i estimates fault i correctly, so
+under fault i its statistic stays low while every other filter's grows. The symptom
+vector ``S`` has one bit per filter (statistic over threshold). The signature matrix
+has a "no fault" column of zeros and, for fault i, a column of ones with a 0 in row i;
+isolation returns the column equal to ``S``.
+"""
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+#: isolation result when the symptom vector matches no column (e.g. a transient in
+#: which only some filters have crossed yet, or a fault outside the hypotheses).
+UNMATCHED = -1
+
+
+def signature_matrix(num_filters: int) -> np.ndarray:
+    """(F, F + 1) bool: column 0 "no fault", column ``i + 1`` fault i (all ones but row i)."""
+    if not isinstance(num_filters, int) or num_filters < 1:
+        raise ValueError(f"num_filters: expected a positive integer, got {num_filters!r}")
+    faults = ~np.eye(num_filters, dtype=bool)
+    return np.hstack([np.zeros((num_filters, 1), bool), faults])
+
+
+def isolate(symptoms: Array, matrix: Array | None = None) -> Array:
+    """Match the symptom vector(s) ``symptoms`` (..., F) bool against ``matrix`` (F, K).
+
+    Returns the index (...) of the matching column: 0 no fault, ``i + 1`` fault of filter
+    i for the default matrix, ``UNMATCHED`` (-1) when no column matches.
+    """
+    symptoms = jnp.asarray(symptoms, bool)
+    F = symptoms.shape[-1]
+    matrix = jnp.asarray(signature_matrix(F) if matrix is None else matrix, bool)
+    if matrix.ndim != 2 or matrix.shape[0] != F:
+        raise ValueError(f"matrix: expected shape ({F}, K) for {F} filters, got {tuple(matrix.shape)}")
+    match = jnp.all(symptoms[..., :, None] == matrix, axis=-2)  # (..., K)
+    return jnp.where(jnp.any(match, axis=-1), jnp.argmax(match, axis=-1), UNMATCHED)

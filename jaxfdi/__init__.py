@@ -39,7 +39,7 @@ def enable_compilation_cache(path: str | None = None) -> str:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
     return cache
 
-from jaxfdi import detection, faults, metrics, models, tuning  # noqa: E402
+from jaxfdi import control, detection, faults, metrics, models, tuning  # noqa: E402
 from jaxfdi.detection import chi2_detector, chi2_threshold, glrt_detector, mode_probability_detector  # noqa: E402
 from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault, stack_faults  # noqa: E402
 from jaxfdi.metrics import DetectionRecord, DetectionSummary, confusion_matrix, summarize_detection  # noqa: E402

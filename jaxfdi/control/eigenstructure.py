@@ -1,0 +1,115 @@
+"""Eigenstructure assignment of a reconfigured state-feedback gain for a faulty actuator
+(seed 001, eqs. 23-29; Zhang & Jiang 1999, 2000).
+
+Given the nominal closed loop ``A_bar + B_bar K_n`` with eigenvalues ``lambda_i`` and
+eigenvectors ``v_i``, and the faulty input matrix ``B_f``, find ``K_f`` such that
+``A_bar + B_f K_f`` keeps every ``lambda_i`` (eq. 23) with eigenvectors as close as
+possible to the nominal ones. An eigenvector of the faulty loop must lie in the span of
+``E_i = (lambda_i I - A_bar)^-1 B_f`` (eq. 24); the closest one (eq. 25, ``W_i = I``)
+is the projection ``v_i^f = E_i alpha_i``, ``alpha_i = E_i^+ v_i`` (eq. 26). The span
+is computed as the null space of ``[lambda_i I - A_bar, -B_f]`` by SVD — the "SVD-based"
+assignment of the paper, which stays defined when ``lambda_i`` is also an eigenvalue of
+``A_bar`` (the integrators put 1 in both). Then
+``(lambda_i I - A_bar) v_i^f = B_f alpha_i`` and ``K_f v_i^f = alpha_i`` for all i, i.e.
+``K_f = [alpha_1 ... alpha_N] (V^f)^-1``, which is the paper's eq. 29
+``K_f = B_f^+ (V^f Lambda - A_bar V^f) (V^f)^-1`` whenever ``B_f`` has full column rank
+(the SVDs of eq. 28 are the pseudo-inverses). Complex-conjugate eigenvalues give
+conjugate columns, so ``K_f`` is real up to round-off (its imaginary part is reported).
+
+A totally failed actuator (a zero column of ``B_f``) makes ``E_i`` rank-deficient: the
+pseudo-inverse gives the minimum-norm ``alpha_i``, whose component on the dead input is
+0, so that input's row of ``K_f`` is 0 and the remaining inputs assign the eigenvalues
+if ``(A_bar, B_f)`` can still move them. When it cannot (on the VTOL tracking
+``v_h`` and ``theta``, one actuator cannot hold two integrators: a mode at 1 becomes
+uncontrollable), ``V^f`` is singular, ``K_f`` is the least-squares (pseudo-inverse)
+solution of ``K_f V^f = [alpha_i]``, and ``assignment_residual`` says which eigenvalues
+were kept. (The paper's design, tracking ``v_h`` and ``q``, has that mode at 1 already
+in the nominal loop, so there either actuator alone keeps every eigenvalue.)
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+import jax
+from jax import Array
+
+from jaxfdi import _checks
+
+
+#: relative singular-value cut-off for null spaces and pseudo-inverses.
+NULL_RTOL = 1e-10
+
+
+class EigenstructureResult(NamedTuple):
+    gain: Array                    # (p, N) real K_f
+    eigenvectors: Array            # (N, N) complex V^f, columns v_i^f (eq. 26)
+    gain_imaginary: Array          # () max |Im K_f| before taking the real part
+    eigenvector_matrix_cond: Array  # () condition number of V^f (huge: not every eigenvalue is assignable)
+    assignment_residual: Array      # (N,) |(A_bar + B_f K_f) v_i^f - lambda_i v_i^f| / |v_i^f|: ~0 where assigned
+
+
+def effectiveness_input(B: Array, loss: Array) -> Array:
+    """``B_f = B (I - diag(loss))``: each input's effectiveness loss (0 healthy, 1 dead)."""
+    return jnp.asarray(B) * (1.0 - jnp.asarray(loss))[None, :]
+
+
+def nominal_eigenstructure(A_bar, B_bar, K_nominal) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (N,) and eigenvectors (N, N) of the nominal loop ``A_bar + B_bar K_n``
+    (NumPy, concrete arrays: computed once per design, outside the hot loop)."""
+    closed = np.asarray(A_bar) + np.asarray(B_bar) @ np.asarray(K_nominal)
+    return np.linalg.eig(closed)
+
+
+def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eigenvectors: Array) -> EigenstructureResult:
+    """Reconfigured gain ``K_f`` keeping ``eigenvalues`` with eigenvectors projected onto
+    the faulty system's admissible subspaces (eq. 26, ``W_i = I``).
+
+    Args:
+      A_bar: (N, N) open-loop (augmented) state matrix.
+      B_faulty: (N, p) faulty input matrix ``B_f``.
+      eigenvalues: (N,) complex nominal closed-loop eigenvalues (distinct).
+      eigenvectors: (N, N) complex nominal eigenvectors (columns), e.g. from
+        ``nominal_eigenstructure``.
+
+    Traceable (``jit``/``vmap`` over ``B_faulty``), so a closed loop can reconfigure
+    from an online fault estimate.
+    """
+    N = _checks.check_square("A_bar", A_bar, None, "augmented state matrix")
+    _checks.check_shape("B_faulty", B_faulty, (N, None), "N states x p inputs")
+    _checks.check_shape("eigenvalues", eigenvalues, (N,), "nominal closed-loop eigenvalues")
+    _checks.check_shape("eigenvectors", eigenvectors, (N, N), "nominal eigenvectors as columns")
+    A_bar = jnp.asarray(A_bar)
+    ctype = jnp.result_type(A_bar.dtype, jnp.complex64)
+    lam = jnp.asarray(eigenvalues, ctype)
+    V = jnp.asarray(eigenvectors, ctype)
+    B_f = jnp.asarray(B_faulty, ctype)
+    eye = jnp.eye(N, dtype=ctype)
+    p = B_f.shape[1]
+
+    def column(lam_i, v_i):
+        # admissible pairs (v, w) with (lambda I - A_bar) v = B_f w: the null space of
+        # [lambda I - A_bar, -B_f], by SVD (defined also where lambda is an eigenvalue of
+        # A_bar, e.g. the integrators' 1, where E_i = (lambda I - A_bar)^-1 B_f is not);
+        # its dimension is p, more where the pair (A_bar, B_f) loses rank at lambda
+        S = jnp.concatenate([lam_i * eye - A_bar.astype(ctype), -B_f], axis=1)
+        _, sv, Vh = jnp.linalg.svd(S, full_matrices=True)
+        in_null = jnp.concatenate([sv <= NULL_RTOL * sv[0], jnp.ones((p,), bool)])
+        null = Vh.conj().T * in_null[None, :]                          # (N + p, N + p), zero columns off the null space
+        beta = jnp.linalg.pinv(null[:N], rtol=NULL_RTOL) @ v_i          # eq. 26 with W_i = I
+        return null[:N] @ beta, null[N:] @ beta
+
+    V_f, alphas = jax.vmap(column, in_axes=(0, 1), out_axes=(1, 1))(lam, V)
+    # K_f V^f = [alpha_i]; least squares (pseudo-inverse) where V^f is singular
+    K_complex = alphas @ jnp.linalg.pinv(V_f, rtol=NULL_RTOL)
+    closed = A_bar.astype(ctype) + B_f @ K_complex.real.astype(ctype)
+    residual = jnp.linalg.norm(closed @ V_f - V_f * lam[None, :], axis=0) / jnp.maximum(jnp.linalg.norm(V_f, axis=0), 1e-300)
+    singular = jnp.linalg.svd(V_f, compute_uv=False)
+    return EigenstructureResult(
+        gain=K_complex.real,
+        eigenvectors=V_f,
+        gain_imaginary=jnp.max(jnp.abs(K_complex.imag)),
+        eigenvector_matrix_cond=singular[0] / singular[-1],
+        assignment_residual=residual,
+    )

@@ -1,0 +1,75 @@
+"""Discrete LQR and proportional-integral state feedback (seed 001, eqs. 21-22).
+
+Integral action: the tracking error ``e = r - H x`` is integrated, ``z[k+1] = z[k] + Ts e``,
+and the augmented system ``x_a = [x; z]``::
+
+    x_a[k+1] = A_bar x_a[k] + B_bar u[k] + G r[k],
+    A_bar = [[A, 0], [-Ts H, I]],  B_bar = [B; 0],  G = [0; Ts I]
+
+is stabilised by ``u = K x_a = [K_p K_I] x_a``, ``K`` the discrete LQR gain
+``K = -(R + B^T X B)^-1 B^T X A`` with ``X`` the stabilising solution of the discrete
+algebraic Riccati equation (``jaxfdi.riccati``, structure-preserving doubling). The
+sign follows the paper's ``u = K x`` (the closed loop is ``A_bar + B_bar K``).
+
+A stabilising gain needs ``(A_bar, B_bar)`` stabilisable, i.e. no transmission zero of
+``(A, B, H)`` at ``z = 1``. The paper's VTOL choice (track ``v_h`` and the pitch rate
+``q = d theta / dt``) has one — the derivative puts a zero at ``s = 0`` — so one
+closed-loop eigenvalue stays at exactly 1 (``spectral_radius``; SciPy's
+``solve_discrete_are`` refuses this case): a constant pitch-rate command makes the
+pitch angle ramp, which the loop follows without diverging elsewhere.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.riccati import solve_discrete_are_info
+
+
+class PIDesign(NamedTuple):
+    """A proportional-integral LQR design on the integrator-augmented system."""
+
+    A_bar: Array      # (n + g, n + g)
+    B_bar: Array      # (n + g, p)
+    G: Array          # (n + g, g) command input of the integrator
+    gain: Array       # (p, n + g) K = [K_p K_I], u = K [x; z]
+    riccati: Array    # (n + g, n + g) X
+    converged: Array  # () bool, from the Riccati solver
+    spectral_radius: Array  # () max |eig(A_bar + B_bar K)|: >= 1 means no stabilising gain exists
+
+
+def lqr_gain(A: Array, B: Array, Q: Array, R: Array) -> tuple[Array, Array, Array]:
+    """``(K, X, converged)``: ``K = -(R + B^T X B)^-1 B^T X A`` minimises
+    ``sum x^T Q x + u^T R u`` for ``x[k+1] = A x + B u``, ``u = K x``."""
+    solution = solve_discrete_are_info(A, B, Q, R)
+    X = solution.solution
+    A, B, R = (jnp.asarray(a, X.dtype) for a in (A, B, R))
+    K = -jnp.linalg.solve(R + B.T @ X @ B, B.T @ X @ A)
+    return K, X, solution.converged
+
+
+def integral_augmentation(A: Array, B: Array, H: Array, Ts: float) -> tuple[Array, Array, Array]:
+    """``(A_bar, B_bar, G)`` of eq. 21 for tracking ``r = H x`` with integral action."""
+    n = _checks.check_square("A", A, None, "discrete state matrix")
+    _checks.check_shape("B", B, (n, None), "n states x p inputs")
+    _checks.check_shape("H", H, (None, n), "g tracked outputs x n states")
+    g = _checks.shape_of(H)[0]
+    A, B, H = (jnp.asarray(a) for a in (A, B, H))
+    eye = jnp.eye(g, dtype=A.dtype)
+    A_bar = jnp.block([[A, jnp.zeros((n, g), A.dtype)], [-Ts * H, eye]])
+    B_bar = jnp.concatenate([B, jnp.zeros((g, B.shape[1]), A.dtype)])
+    G = jnp.concatenate([jnp.zeros((n, g), A.dtype), Ts * eye])
+    return A_bar, B_bar, G
+
+
+def lqr_pi(A: Array, B: Array, H: Array, Q: Array, R: Array, Ts: float) -> PIDesign:
+    """LQR-PI design of eqs. 21-22: ``Q`` (n + g, n + g), ``R`` (p, p)."""
+    A_bar, B_bar, G = integral_augmentation(A, B, H, Ts)
+    _checks.check_covariance("Q", Q, A_bar.shape[0])
+    _checks.check_covariance("R", R, B_bar.shape[1])
+    K, X, converged = lqr_gain(A_bar, B_bar, Q, R)
+    radius = jnp.max(jnp.abs(jnp.linalg.eigvals(A_bar + B_bar @ K)))
+    return PIDesign(A_bar, B_bar, G, K, X, converged, radius)

@@ -41,7 +41,6 @@ def _data(model, seed=0, bias_fn=None, d_scale=0.0, E=None):
         x = Phi @ x + Gamma @ u + 0.01 * rng.standard_normal(4)
         if E is not None:
             x = x + E @ (d_scale * np.array([np.sin(0.7 * k) + 0.5 * k / T] * E.shape[1]))
-        x = x  # noqa: PLW0127
     return np.array(ys), us
 
 

@@ -56,7 +56,6 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 

@@ -281,3 +281,23 @@ def test_decoupling_conditions_are_checked(model):
         tskf.two_stage_kalman_filter(model, direction, jnp.eye(2))
     with pytest.raises(ValueError, match="component"):
         tskf.sensor_direction(model, 4)
+
+
+def test_bank_is_the_filters_side_by_side(model):
+    """The vmapped bank returns, filter by filter, what each TSKF returns alone."""
+    E = vtol.vtol_unknown_input()
+    directions = [tskf.actuator_direction(model, i) for i in range(2)] + [tskf.sensor_direction(model, j) for j in range(4)]
+    ys, us = _data(model, seed=5, bias_fn=_sensor_step)
+    bank = tskf.run_tskf_bank(model, tskf.stack_directions(directions), QB * jnp.eye(1), jnp.asarray(0.1 * vtol.X0),
+                              P0 * jnp.eye(4), PB0 * jnp.eye(1), jnp.asarray(ys), jnp.asarray(us), E)
+    assert bank.statistic.shape == (6, T)
+    for i in (1, 4):  # one actuator and one sensor filter (each alone is a new compilation)
+        _, alone = _run_tskf(model, directions[i], ys, us, E)
+        np.testing.assert_allclose(bank.statistic[i], alone.statistic, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(bank.bias_mean[i], alone.bias_mean, rtol=1e-9, atol=1e-12)
+    # an s3 step (0.7 from k = 20): the s3 scaling filter absorbs it as a gain error, so
+    # its statistic stays lowest while the other five rise
+    late = np.asarray(bank.statistic[:, 30:]).mean(axis=1)
+    assert np.argmin(late) == 4, late
+    with pytest.raises(ValueError, match="stack_directions"):
+        tskf.run_tskf_bank(model, directions[0], QB * jnp.eye(1), jnp.zeros(4), jnp.eye(4), jnp.eye(1), ys, us)

@@ -310,3 +310,44 @@ def two_stage_kalman_filter(
         return TSKFState(x_bar_next, P_bar_next, b_post, Pb_next, V_next), info
 
     return TwoStageFilter(init, step, dof)
+
+
+def run_tskf_bank(
+    model: LinearGaussianModel,
+    directions: FaultDirection,
+    bias_walk: Array,
+    init_mean: Array,
+    init_cov: Array,
+    init_bias_cov: Array,
+    ys: Array,
+    us: Array,
+    unknown_input: Array | None = None,
+) -> TSKFInfo:
+    """Run a bank of TSKFs, one per stacked fault direction, on the same data.
+
+    The bank is one filter vmapped over ``directions`` (leaves with a leading axis F,
+    from ``stack_directions``): seed 001's ``l + r`` actuator and sensor filters.
+
+    Args:
+      model, bias_walk, unknown_input: as in ``two_stage_kalman_filter`` (shared).
+      directions: ``FaultDirection`` with leaves (F, ...).
+      init_mean (n,), init_cov (n, n): prior of ``x[0]``; init_bias_cov (p, p): prior of
+        ``b[0]`` (mean 0: no fault).
+      ys: (T, m) measurements; us: (T, nu) inputs.
+
+    Returns:
+      ``TSKFInfo`` with leading axes (F, T).
+    """
+    from jaxfdi.filters._base import run_filter
+
+    leaves = jax.tree_util.tree_leaves(directions)
+    if any(np.ndim(leaf) != 3 for leaf in leaves) or len({np.shape(leaf)[0] for leaf in leaves}) != 1:
+        raise ValueError("directions: expected a stack of FaultDirection (leaves of shape (F, *, p)); use stack_directions")
+    p = np.shape(directions.state)[-1]
+
+    def one(direction):
+        filt = two_stage_kalman_filter(model, direction, bias_walk, unknown_input)
+        init = filt.init(init_mean, init_cov, jnp.zeros((p,), jnp.asarray(init_mean).dtype), init_bias_cov)
+        return run_filter(filt, init, ys, us)[1]
+
+    return jax.vmap(one)(directions)

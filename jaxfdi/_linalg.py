@@ -149,6 +149,13 @@ def gaussian_log_likelihood(whitened: Array, chol: Array, num_observed: Array | 
     return -0.5 * (jnp.sum(whitened**2) + log_det + num_observed * math.log(2.0 * math.pi))
 
 
+def joseph_cov(cov: Array, gain: Array, H: Array, noise_cov: Array) -> Array:
+    """Joseph-form posterior covariance ``(I - K H) P (I - K H)^T + K R K^T`` (Bucy &
+    Joseph 1968): symmetric positive semi-definite for any gain ``K``."""
+    I_KH = jnp.eye(cov.shape[0], dtype=cov.dtype) - matmul(gain, H)
+    return symmetrize(matmul(matmul(I_KH, cov), I_KH.T) + matmul(matmul(gain, noise_cov), gain.T))
+
+
 def gain_from_cross_cov(cross_cov: Array, chol: Array) -> Array:
     """Kalman gain ``K = P_xy S^{-1}`` by a Cholesky solve (``S = L L^T``)."""
     return cho_solve(chol, cross_cov.T).T

@@ -56,6 +56,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
+from jaxfdi.filters._base import run_filter
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -261,8 +262,7 @@ def two_stage_kalman_filter(
         chol_S = _linalg.cholesky(S_bar)
         K_bar, basis = bias_free_gain(P_bar, chol_S, cross_cov)
         x_bar_post = x_bar + mm(K_bar, r_bar)
-        I_KC = identity_n - mm(K_bar, model.C)
-        P_bar_post = _linalg.symmetrize(mm(mm(I_KC, P_bar), I_KC.T) + mm(mm(K_bar, model.R), K_bar.T))
+        P_bar_post = _linalg.joseph_cov(P_bar, K_bar, model.C, model.R)
         V_post = V - mm(K_bar, H_b)
 
         # bias filter on the decoupled, whitened innovation
@@ -272,8 +272,7 @@ def two_stage_kalman_filter(
         chol_Sb = _linalg.cholesky(S_b)
         K_b = _linalg.gain_from_cross_cov(mm(Pb, G.T), chol_Sb)           # (p, m - q)
         b_post = b + mm(K_b, e)
-        I_KG = jnp.eye(p, dtype=Pb.dtype) - mm(K_b, G)
-        Pb_post = _linalg.symmetrize(mm(mm(I_KG, Pb), I_KG.T) + mm(K_b, K_b.T))
+        Pb_post = _linalg.joseph_cov(Pb, K_b, G, jnp.eye(dof, dtype=Pb.dtype))
         statistic = jnp.sum(_linalg.whiten(chol_Sb, e) ** 2)
         S_aug = _linalg.symmetrize(S_bar + mm(mm(H_b, Pb), H_b.T))       # augmented S, without d
         log_lik = diffuse_log_likelihood(statistic, S_aug)
@@ -338,8 +337,6 @@ def run_tskf_bank(
     Returns:
       ``TSKFInfo`` with leading axes (F, T).
     """
-    from jaxfdi.filters._base import run_filter
-
     leaves = jax.tree_util.tree_leaves(directions)
     if any(np.ndim(leaf) != 3 for leaf in leaves) or len({np.shape(leaf)[0] for leaf in leaves}) != 1:
         raise ValueError("directions: expected a stack of FaultDirection (leaves of shape (F, *, p)); use stack_directions")

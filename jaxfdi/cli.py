@@ -9,6 +9,11 @@ from pathlib import Path
 import numpy as np
 
 
+def _as_lists(mapping: dict) -> dict:
+    """A mapping of arrays (and scalars) as JSON-ready nested lists."""
+    return {k: np.asarray(v).tolist() for k, v in mapping.items()}
+
+
 def _run_engine_chi2(args: argparse.Namespace) -> int:
     from jaxfdi import _io
     from jaxfdi.scenarios.engine_chi2 import engine_chi2_study, plot_engine_chi2
@@ -82,9 +87,8 @@ def _tune_engine_imm(args: argparse.Namespace) -> int:
         report[name] = {
             "paper": hand_rows, "tuned": tuned_rows, "cross_entropy": {"paper": hand_ce, "tuned": tuned_ce},
             "worse": worse,
-            "history": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in result.history._asdict().items()},
-            "paper_params": {k: np.asarray(v).tolist() for k, v in design.hand().items()},
-            "tuned_params": {k: np.asarray(v).tolist() for k, v in tuned.items()}, "seconds": elapsed}
+            "history": _as_lists(result.history._asdict()), "paper_params": _as_lists(design.hand()),
+            "tuned_params": _as_lists(tuned), "seconds": elapsed}
     config = {"steps": args.steps, "train_runs": args.train_runs, "test_runs": args.runs, "seed": args.seed,
               "test_seed": test_seed, "weights": weights._asdict()}
     _io.write_json(out / "engine-imm-tuning.json", {"config": config, "designs": report})
@@ -120,9 +124,8 @@ def _tune_engine_chi2(args: argparse.Namespace) -> int:
                    "test_seed": test_seed, "windows": list(windows), "weights": weights._asdict()},
         "window": tuning.window, "val_loss": {str(w): v for w, v in tuning.val_loss.items()},
         "hand": hand_rows, "tuned": tuned_rows, "held_out_loss": {"hand": hand_loss, "tuned": tuned_loss},
-        "history": {k: v.tolist() if hasattr(v, "tolist") else v for k, v in tuning.result.history._asdict().items()},
-        "hand_params": {k: np.asarray(v).tolist() for k, v in ct.hand_params().items()},
-        "tuned_params": {k: np.asarray(v).tolist() for k, v in tuned.items()}, "seconds": elapsed})
+        "history": _as_lists(tuning.result.history._asdict()), "hand_params": _as_lists(ct.hand_params()),
+        "tuned_params": _as_lists(tuned), "seconds": elapsed})
     print(f"wrote {path} and {out / 'engine-chi2-tuning.json'} ({elapsed:.1f} s)")
     return 0
 

@@ -1,14 +1,29 @@
-"""Fault-tolerant control: discrete LQR with integral action, and eigenstructure
-assignment of a reconfigured gain for a faulty actuator (seed 001, Section IV)."""
-from jaxfdi.control.eigenstructure import EigenstructureResult, assign_eigenstructure, effectiveness_input
+"""Fault-tolerant control: discrete LQR with integral action, eigenstructure assignment
+of a reconfigured gain for a faulty actuator, and the closed loop that switches to it
+when the FDD isolates a fault (seed 001, Section IV)."""
+from jaxfdi.control.closed_loop import LoopDesign, LoopStep, run_closed_loop
+from jaxfdi.control.eigenstructure import (
+    EigenstructureResult,
+    GainSchedule,
+    assign_eigenstructure,
+    effectiveness_gain_schedule,
+    effectiveness_input,
+    scheduled_gain,
+)
 from jaxfdi.control.lqr import PIDesign, integral_augmentation, lqr_gain, lqr_pi
 
 __all__ = [
     "EigenstructureResult",
+    "GainSchedule",
+    "LoopDesign",
+    "LoopStep",
     "PIDesign",
     "assign_eigenstructure",
+    "effectiveness_gain_schedule",
     "effectiveness_input",
     "integral_augmentation",
     "lqr_gain",
     "lqr_pi",
+    "run_closed_loop",
+    "scheduled_gain",
 ]

@@ -113,3 +113,42 @@ def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eig
         eigenvector_matrix_cond=singular[0] / singular[-1],
         assignment_residual=residual,
     )
+
+
+class GainSchedule(NamedTuple):
+    """Reconfigured gains tabulated over one actuator's effectiveness loss at a time."""
+
+    losses: Array  # (G,) grid of losses in [0, 1], increasing
+    gains: Array   # (p, G, p, N): gains[i, g] = K_f for input i with loss losses[g]
+    max_residual: Array  # (p, G) largest assignment residual of each entry (~0 where every eigenvalue is kept)
+
+
+def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, eigenvectors: Array,
+                                num_losses: int = 201) -> GainSchedule:
+    """``assign_eigenstructure`` for each input's loss on a uniform grid over [0, 1].
+
+    A closed loop that reconfigures from an online loss estimate looks the gain up
+    (``scheduled_gain``) instead of solving ``2 (N + 1)`` SVDs every step: exact at the
+    grid points, linear in between (the gain is smooth in the loss away from 1).
+    """
+    p = _checks.shape_of(B_bar)[1]
+    losses = jnp.linspace(0.0, 1.0, num_losses, dtype=jnp.asarray(A_bar).dtype)
+
+    def one(i, loss):
+        B_f = effectiveness_input(B_bar, loss * jax.nn.one_hot(i, p, dtype=losses.dtype))
+        result = assign_eigenstructure(A_bar, B_f, eigenvalues, eigenvectors)
+        return result.gain, jnp.max(result.assignment_residual)
+
+    gains, residual = jax.jit(jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None)))(jnp.arange(p), losses)
+    return GainSchedule(losses, gains, residual)
+
+
+def scheduled_gain(schedule: GainSchedule, component: Array, loss: Array) -> Array:
+    """The gain for input ``component`` with effectiveness ``loss`` (clipped to [0, 1]),
+    linearly interpolated in ``schedule``. Traceable."""
+    losses = schedule.losses
+    position = jnp.clip(loss, 0.0, 1.0) * (losses.shape[0] - 1)
+    lower = jnp.clip(jnp.floor(position).astype(jnp.int32), 0, losses.shape[0] - 2)
+    weight = position - lower
+    table = schedule.gains[component]
+    return (1.0 - weight) * table[lower] + weight * table[lower + 1]

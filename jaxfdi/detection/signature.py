@@ -39,3 +39,14 @@ def isolate(symptoms: Array, matrix: Array | None = None) -> Array:
         raise ValueError(f"matrix: expected shape ({F}, K) for {F} filters, got {tuple(matrix.shape)}")
     match = jnp.all(symptoms[..., :, None] == matrix, axis=-2)  # (..., K)
     return jnp.where(jnp.any(match, axis=-1), jnp.argmax(match, axis=-1), UNMATCHED)
+
+
+def location_symptoms(alarms: Array, location: Array, num_locations: int) -> Array:
+    """Symptoms per fault location (..., L) from per-filter alarms (..., F) when a bank has
+    several filters per location (e.g. multiplicative and additive hypotheses): a
+    location's symptom is set when every one of its filters alarms, so a fault there
+    leaves it clear as long as one of its hypotheses explains the data."""
+    alarms = jnp.asarray(alarms, bool)
+    location = jnp.asarray(location, jnp.int32)
+    hit = location[:, None] == jnp.arange(num_locations)[None, :]               # (F, L)
+    return jnp.all(alarms[..., :, None] | ~hit, axis=-2)

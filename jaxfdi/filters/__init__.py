@@ -1,7 +1,8 @@
 """Filters: each a factory returning ``Filter(init, step)``; ``run_filter`` scans it.
 
 Gaussian filters (KF, EKF, UKF), the multiple-model filters built on them (IMM, MM),
-and the two-stage (bias) Kalman filter, optimal or robust to an unknown input.
+the two-stage (bias) Kalman filter, optimal or robust to an unknown input, and the
+unbiased minimum-variance filter that decouples an unknown input.
 """
 from jaxfdi.filters._base import ConditionedGaussian, Filter, FilterInfo, GaussianState, gaussian_filter, run_filter, run_filter_batch
 from jaxfdi.filters._mixture import IMMInfo, IMMState
@@ -19,6 +20,7 @@ from jaxfdi.filters.tskf import (
     two_stage_kalman_filter,
 )
 from jaxfdi.filters.ukf import unscented_kalman_filter
+from jaxfdi.filters.unknown_input import unknown_input_filter
 
 __all__ = [
     "ConditionedGaussian",
@@ -42,4 +44,5 @@ __all__ = [
     "sensor_direction",
     "stack_directions",
     "two_stage_kalman_filter",
+    "unknown_input_filter",
 ]

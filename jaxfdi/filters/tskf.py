@@ -57,6 +57,7 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import run_filter
+from jaxfdi.filters.unknown_input import check_decoupling, diffuse_log_likelihood, unbiased_minimum_variance_gain
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -154,32 +155,6 @@ class TwoStageFilter(NamedTuple):
     dof: int  # m - q: degrees of freedom of the statistic
 
 
-def check_decoupling(model: LinearGaussianModel, unknown_input: Array) -> int:
-    """Check ``rank(C E) = rank(E) = q <= m`` (seed 001, eq. 5) and return ``q``.
-
-    Raises a ``ValueError`` naming the failed condition; ``E`` must be concrete.
-    """
-    n, _, m = validate_linear_model(model)
-    _checks.check_shape("unknown_input", unknown_input, (n, None), "E: n states x q unknown inputs")
-    E = _checks.concrete(unknown_input)
-    C = _checks.concrete(model.C)
-    if E is None or C is None:
-        raise ValueError("unknown_input: E and model.C must be concrete (not traced) to check decoupling")
-    q = E.shape[1]
-    rank_E = np.linalg.matrix_rank(E) if q else 0
-    rank_CE = np.linalg.matrix_rank(C @ E) if q else 0
-    if q > m:
-        raise ValueError(f"unknown_input: q = {q} unknown inputs cannot be decoupled with m = {m} outputs (need q <= m)")
-    if rank_E != q:
-        raise ValueError(f"unknown_input: E must have full column rank q = {q}, got rank {rank_E}")
-    if rank_CE != q:
-        raise ValueError(
-            f"unknown_input: decoupling needs rank(C E) = rank(E) = {q}, got rank(C E) = {rank_CE} "
-            "(the unknown input does not reach the outputs in every direction)"
-        )
-    return q
-
-
 def two_stage_kalman_filter(
     model: LinearGaussianModel,
     direction: FaultDirection,
@@ -210,7 +185,6 @@ def two_stage_kalman_filter(
     q = 0 if unknown_input is None else check_decoupling(model, unknown_input)
     dof = m - q
     mm = _linalg.matmul
-    identity_n = jnp.eye(n, dtype=model.Phi.dtype)
 
     def init(mean: Array, cov: Array, bias_mean: Array, bias_cov: Array) -> TSKFState:
         _checks.check_shape("mean", mean, (n,), "initial state mean")
@@ -221,31 +195,6 @@ def two_stage_kalman_filter(
         dtype = mean.dtype
         return TSKFState(mean, jnp.asarray(cov, dtype), jnp.asarray(bias_mean, dtype),
                          jnp.asarray(bias_cov, dtype), jnp.zeros((n, p), dtype))
-
-    def bias_free_gain(P_bar: Array, chol_S: Array, cross_cov: Array) -> tuple[Array, Array]:
-        """Gain and the (m, m - q) basis N of the whitened complement of C E."""
-        gain = _linalg.gain_from_cross_cov(cross_cov, chol_S)  # K0 = P C^T S^-1
-        if q == 0:
-            return gain, jnp.eye(m, dtype=P_bar.dtype)
-        E = jnp.asarray(unknown_input, P_bar.dtype)
-        F_white = _linalg.solve_lower(chol_S, mm(model.C, E))          # L^-1 C E   (m, q)
-        # K = K0 + (I - K0 C) E (F^T S^-1 F)^-1 F^T S^-1, F = C E  (Kitanidis 1987)
-        Q_full, R_f = jnp.linalg.qr(F_white, mode="complete")
-        coeff = jax.scipy.linalg.solve_triangular(R_f[:q], Q_full[:, :q].T, lower=False)  # (F~^T F~)^-1 F~^T
-        correction = mm(mm(identity_n - mm(gain, model.C), E), coeff)  # (n, m) acting on L^-1 r
-        gain = gain + _linalg.solve_lower_transposed(chol_S, correction.T).T
-        return gain, Q_full[:, q:]
-
-    def diffuse_log_likelihood(statistic: Array, S_aug: Array) -> Array:
-        """``-0.5 (lambda + log det S + log det(F^T S^-1 F) + (m - q) log 2 pi)``, F = C E:
-        the augmented filter's log-likelihood, and with an unknown input the diffuse
-        log-likelihood of de Jong (1991), which does not depend on ``d``."""
-        chol = _linalg.cholesky(S_aug)
-        log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol)))
-        if q:
-            F_white = _linalg.solve_lower(chol, mm(model.C, jnp.asarray(unknown_input, S_aug.dtype)))
-            log_det = log_det + jnp.linalg.slogdet(F_white.T @ F_white)[1]
-        return -0.5 * (statistic + log_det + dof * np.log(2.0 * np.pi))
 
     def step(state: TSKFState, y: Array, u: Array):
         _checks.check_shape("y", y, (m,), "one measurement")
@@ -260,7 +209,7 @@ def two_stage_kalman_filter(
         cross_cov = mm(P_bar, model.C.T)
         S_bar = _linalg.symmetrize(mm(model.C, cross_cov) + model.R)
         chol_S = _linalg.cholesky(S_bar)
-        K_bar, basis = bias_free_gain(P_bar, chol_S, cross_cov)
+        K_bar, basis = unbiased_minimum_variance_gain(cross_cov, chol_S, model.C, unknown_input)
         x_bar_post = x_bar + mm(K_bar, r_bar)
         P_bar_post = _linalg.joseph_cov(P_bar, K_bar, model.C, model.R)
         V_post = V - mm(K_bar, H_b)
@@ -275,7 +224,7 @@ def two_stage_kalman_filter(
         Pb_post = _linalg.joseph_cov(Pb, K_b, G, jnp.eye(dof, dtype=Pb.dtype))
         statistic = jnp.sum(_linalg.whiten(chol_Sb, e) ** 2)
         S_aug = _linalg.symmetrize(S_bar + mm(mm(H_b, Pb), H_b.T))       # augmented S, without d
-        log_lik = diffuse_log_likelihood(statistic, S_aug)
+        log_lik = diffuse_log_likelihood(statistic, _linalg.cholesky(S_aug), model.C, unknown_input, dof)
 
         mean_post = x_bar_post + mm(V_post, b_post)
         cov_post = _linalg.symmetrize(P_bar_post + mm(mm(V_post, Pb_post), V_post.T))

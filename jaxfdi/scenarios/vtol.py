@@ -1,0 +1,429 @@
+"""Seed 001 VTOL scenario: robust TSKF bank, wavelet-denoised chi-square tests, signature
+isolation and fault-tolerant control, Monte Carlo over every fault kind.
+
+Setup (seed-001 note, Section V): the VTOL model at ``Ts = 0.1 s``; the true plant has
+the airspeed uncertainty (``Delta a32 = 0.5``, ``Delta a34 = 1``) and the disturbance
+``3 sin 10t`` on ``v_v``; ``Q = 0.01^2 I``, ``R = 0.1^2 I``, ``x0 = [50, 1, 5, 1]``,
+``P0 = 10 I``, ``P_b0 = 10``, bias random walk ``0.2^2``; LQR-PI tracking ``H_r = (v_h,
+q)`` with ``Q = diag(1, 1, 1, 1, 10, 10)``, ``R = I``, command ``r = [-50, -5]``.
+
+The bank has, for each of the 6 fault locations (a1, a2, s1..s4), the paper's
+multiplicative filter (effectiveness ``Fa = -B diag(u)``, scaling ``Fs = diag(C x)``)
+and an additive one (``-B e_i``, ``e_j``: the step and ramp faults), 12 TSKFs in one
+vmap. Each run is one closed loop (``jaxfdi.control.closed_loop``); the bank's
+statistics are then evaluated four ways (raw, 4-step window, MDWT hard and soft).
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfdi.control.closed_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
+from jaxfdi.control.eigenstructure import effectiveness_gain_schedule, nominal_eigenstructure
+from jaxfdi.control.lqr import lqr_pi
+from jaxfdi.detection.chi2 import chi2_threshold, moving_window_sum
+from jaxfdi.detection.signature import isolate, location_symptoms
+from jaxfdi.detection.wavelet import block_alarms, chi2_detail_sigma, haar_denoise
+from jaxfdi.faults import Fault, fault, fault_label, no_fault, stack_faults
+from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
+from jaxfdi.models import vtol
+
+LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
+TRACKED = {"paper": np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]]),   # v_h and q (eq. 35)
+           "theta": np.array([[1.0, 0, 0, 0], [0, 0, 0, 1.0]])}  # v_h and theta
+COMMAND = np.array([-50.0, -5.0])
+LQR_Q = np.diag([1.0, 1, 1, 1, 10, 10])
+LQR_R = np.eye(2)
+INIT_COV = 10.0
+INIT_BIAS_COV = 10.0
+BIAS_WALK = 0.2**2
+PFA = 0.005
+PAPER_THRESHOLD = 14.86       # chi2(4), Pfa 0.005 (the paper's, for m = 4)
+PAPER_WINDOW_THRESHOLD = 34.27  # chi2(16)
+METHODS = ("raw", "window", "MDWT-HT", "MDWT-ST")
+
+
+def vtol_design(tracked: str = "paper", decouple_disturbance: bool = False, levels: int = 2,
+                c_mult: float = 2.0, pfa: float = PFA, dtype=None) -> LoopDesign:
+    """The closed-loop design of seed 001's example (see the module docstring)."""
+    dtype = dtype or jnp.result_type(float)
+    model = vtol.vtol_model(dtype=dtype)
+    E = vtol.vtol_unknown_input(include_disturbance=decouple_disturbance, dtype=dtype)
+    Phi6, Gamma6, C6 = vtol.vtol_true_plant(dtype=dtype)
+    H = jnp.asarray(TRACKED[tracked], dtype)
+    pi = lqr_pi(model.Phi, model.Gamma, H, jnp.asarray(LQR_Q, dtype), jnp.asarray(LQR_R, dtype), vtol.TS)
+    lam, V = nominal_eigenstructure(pi.A_bar, pi.B_bar, pi.gain)
+    multiplicative = [actuator_direction(model, i, "effectiveness") for i in range(2)]
+    multiplicative += [sensor_direction(model, j, "scaling") for j in range(4)]
+    additive = [actuator_direction(model, i, "additive") for i in range(2)]
+    additive += [sensor_direction(model, j, "additive") for j in range(4)]
+    dof = 4 - E.shape[1]
+    return LoopDesign(
+        model=model, unknown_input=E,
+        plant_Phi=Phi6, plant_Gamma=Gamma6, plant_C=C6,
+        plant_x0=jnp.asarray(np.r_[vtol.X0, 0.0, 1.0], dtype),
+        H=H, command=jnp.asarray(COMMAND, dtype), gain=pi.gain,
+        schedule=effectiveness_gain_schedule(pi.A_bar, pi.B_bar, lam, V),
+        directions=stack_directions(multiplicative + additive),
+        location=jnp.asarray(np.tile(np.arange(6), 2), jnp.int32),
+        multiplicative=jnp.asarray(np.repeat([True, False], 6)),
+        location_is_actuator=jnp.asarray([True, True, False, False, False, False]),
+        location_component=jnp.asarray([0, 1, 0, 1, 2, 3], jnp.int32),
+        bias_walk=jnp.full((1, 1), BIAS_WALK, dtype),
+        init_cov=INIT_COV * jnp.eye(4, dtype=dtype),
+        init_bias_cov=jnp.full((1, 1), INIT_BIAS_COV, dtype),
+        threshold=jnp.asarray(float(chi2_threshold(dof, pfa)), dtype),
+        detail_sigma=jnp.asarray(chi2_detail_sigma(dof, levels), dtype),
+        c_mult=c_mult, levels=levels, Ts=vtol.TS,
+    )
+
+STEPS = 300
+ONSET = 100
+ESTIMATE_AFTER = 30  # steps after the onset at which the fault estimate is scored
+
+
+def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
+    """Faults of every kind in the spec, one at a time, and the fault-free case. The two
+    headline cases are seed 001's: s3 step 0.7 from k = 120 and a2 effectiveness 0.5
+    from k = 100. The paper's actuator step/ramp is ``u_i - delta`` / ``u_i - rho k Ts``
+    (negative magnitudes here); ramp slopes are per second (``Ts`` per step)."""
+    Ts = vtol.TS
+    return [
+        ("a1 effectiveness 0.3", fault("effectiveness", "actuator", 0, onset, 0.3)),
+        ("a2 effectiveness 0.5", fault("effectiveness", "actuator", 1, onset, 0.5)),
+        ("a1 step 1.0", fault("bias", "actuator", 0, onset, -1.0)),
+        ("a2 ramp 0.5/s", fault("ramp", "actuator", 1, onset, 0.0, slope=-0.5 * Ts)),
+        ("s1 scaling 0.05", fault("scale", "sensor", 0, onset, 0.05)),
+        ("s2 scaling 0.05", fault("scale", "sensor", 1, onset, 0.05)),
+        ("s3 step 0.7", fault("bias", "sensor", 2, 120, 0.7)),
+        ("s4 ramp 0.5/s", fault("ramp", "sensor", 3, onset, 0.0, slope=0.5 * Ts)),
+        ("none", no_fault()),
+    ]
+
+
+def true_bias(f: Fault, k) -> jnp.ndarray:
+    """The value the matched filter's bias ``b`` should estimate at step ``k``: the loss or
+    scaling fraction, or the additive size (``u_i - b``, ``y_j + b``); 0 before the onset."""
+    from jaxfdi.faults import FaultKind, Target, is_active
+
+    sign = jnp.where(f.target == Target.ACTUATOR, -1.0, 1.0)
+    elapsed = k - f.onset
+    value = jnp.select(
+        [f.kind == FaultKind.EFFECTIVENESS, f.kind == FaultKind.SCALE, f.kind == FaultKind.BIAS,
+         f.kind == FaultKind.RAMP],
+        [f.magnitude, f.magnitude, sign * f.magnitude, sign * (f.magnitude + f.slope * elapsed)], 0.0)
+    return jnp.where(is_active(f, k), value, 0.0)
+
+
+def method_alarms(statistic, design: LoopDesign, thresholds) -> jnp.ndarray:
+    """Per-filter alarms (4, T, F) of the four evaluations of a (T, F) statistic history:
+    raw, 4-step window sum, MDWT hard and soft (decided once per block);
+    ``thresholds = (single-step, window)``."""
+    single, window = thresholds
+    raw = statistic >= single
+    windowed = moving_window_sum(statistic, 4) >= window
+    hard = block_alarms(haar_denoise(statistic, design.levels, "hard"), single, design.levels)
+    soft = block_alarms(haar_denoise(statistic, design.levels, "soft", design.detail_sigma, design.c_mult),
+                        single, design.levels)
+    return jnp.stack([raw, windowed, hard, soft])
+
+
+class RunRecord(NamedTuple):
+    """Small per-run summary of one closed-loop run."""
+
+    first_alarm: Any          # (2, 4) per threshold set (ours, paper's) and method: first step whose symptoms
+                              #        match a fault column (any fault), -1 none
+    detection_step: Any       # (2, 4) the first such step at/after the onset
+    isolation_step: Any       # (2, 4) first step at/after the onset whose signature names the true location
+    online_isolated: Any      # () latched location + 1 of the closed loop (0 none)
+    online_step: Any          # () step at which it latched (-1 none)
+    online_kind_right: Any    # () bool: latched kind (multiplicative/additive) is the fault's
+    bias_estimate: Any        # (2,) matched filter's estimate at onset + ESTIMATE_AFTER and at the end
+    bias_true: Any            # (2,) the true values there
+    tracking_error: Any       # () RMS of |r - H x| (eq. 21's e_k) over k >= the scoring start
+    vh_error: Any             # () the same for v_h alone (the channel the nominal loop tracks well)
+    states: Any               # (T, n) float32 true states (for the deviation from the fault-free twin)
+
+
+def vtol_run(design: LoopDesign, key, f: Fault, ftc, steps: int = STEPS) -> RunRecord:
+    """One closed-loop run and its evaluation (pure; vmap it over runs)."""
+
+    history = run_closed_loop(design, key, f, ftc, steps)
+    L = design.location_component.shape[0]
+    label_true = fault_label(f, 2)
+    dof = 4 - design.unknown_input.shape[1]
+    ours = (design.threshold, chi2_threshold(4 * dof, PFA))
+    paper = (PAPER_THRESHOLD, PAPER_WINDOW_THRESHOLD)
+    k = jnp.arange(steps)
+    after = k >= f.onset
+
+    def first(mask):
+        return jnp.where(jnp.any(mask), jnp.argmax(mask), -1).astype(jnp.int32)
+
+    def evaluate(thresholds):
+        alarms = method_alarms(history.statistic, design, thresholds)             # (4, T, F)
+        labels = isolate(location_symptoms(alarms, design.location, L))           # (4, T)
+        fired = labels > 0   # the symptoms match a fault's column (an unmatched vector declares nothing)
+        return (jax.vmap(first)(fired), jax.vmap(first)(fired & after),
+                jax.vmap(first)((labels == label_true) & after))
+
+    first_alarm, detection, isolation = (jnp.stack(parts) for parts in zip(evaluate(ours), evaluate(paper)))
+    latched = history.isolated[-1]
+    matched = jnp.argmax((design.location == label_true - 1) & (design.multiplicative == is_multiplicative(f)))
+    when = jnp.array([jnp.minimum(f.onset + ESTIMATE_AFTER, steps - 1), steps - 1])
+    start = jnp.where(f.onset < steps, f.onset, ONSET)
+    error = design.command[None, :] - history.state @ design.H.T                  # (T, g)
+
+    def rms(e2):
+        return jnp.sqrt(jnp.sum(jnp.where(k >= start, e2, 0.0)) / jnp.sum(k >= start))
+    return RunRecord(
+        first_alarm, detection, isolation, latched, first(history.isolated > 0),
+        history.isolated_kind[-1] == is_multiplicative(f),
+        history.bias[when, matched], jax.vmap(lambda s: true_bias(f, s))(when),
+        rms(jnp.sum(error**2, axis=1)), rms(error[:, 0] ** 2),
+        history.state.astype(jnp.float32),
+    )
+
+
+PAPER_HEADLINE = {  # seed 001, Section V: first detection step of the s3 step (onset 120)
+    "s3 step 0.7": {"raw": 123, "window": 123, "MDWT-HT": 128, "MDWT-ST": 124},
+}
+
+
+class VTOLStudy(NamedTuple):
+    config: dict[str, Any]
+    rows: list[dict[str, Any]]   # one per fault case
+    records: RunRecord           # leaves (cases, 2 [FTC off, on], runs, ...)
+
+    def table(self) -> str:
+        return "\n\n".join(_case_table(row) for row in self.rows)
+
+    def headline(self) -> str:
+        return _headline(self)
+
+
+def _median(x) -> float:
+    x = np.asarray(x, float)
+    return float(np.median(x)) if x.size else float("nan")
+
+
+def _summarise(name: str, f: Fault, records: RunRecord, twin_states: np.ndarray, steps: int) -> dict[str, Any]:
+    """Rows of one fault case from its (2, runs) records (FTC off, on)."""
+    onset = int(f.onset)
+    faulty = onset < steps
+    label = int(fault_label(f, 2))
+    off = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[0], records)
+    on = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[1], records)
+    methods = {}
+    for s, thresholds in enumerate(("ours", "paper")):
+        for m, method in enumerate(METHODS):
+            first, det, iso = off.first_alarm[:, s, m], off.detection_step[:, s, m], off.isolation_step[:, s, m]
+            false_alarm = (first >= 0) & ((first < onset) if faulty else True)
+            methods[f"{method}|{thresholds}"] = {
+                "false_alarm_rate": float(np.mean(false_alarm)),
+                "detection_rate": float(np.mean(det >= 0)) if faulty else float("nan"),
+                "delay_median": _median(det[det >= 0] - onset) if faulty else float("nan"),
+                "first_detection_run0": int(det[0]) if faulty else -1,
+                "isolation_rate": float(np.mean(iso >= 0)) if faulty else float("nan"),
+                "isolation_delay_median": _median(iso[iso >= 0] - onset) if faulty else float("nan"),
+            }
+    start = onset if faulty else ONSET
+    k = np.arange(steps)
+
+    def deviation(states):
+        d = np.linalg.norm(states - twin_states, axis=-1)[:, k >= start]
+        return np.sqrt(np.mean(d**2, axis=-1))
+
+    right = on.online_isolated == label
+    row = {
+        "fault": name, "onset": onset if faulty else None, "methods": methods,
+        "online_isolation_rate": float(np.mean(right)) if faulty else float("nan"),
+        "online_false_isolation_rate": float(np.mean((on.online_step >= 0) & ((on.online_step < onset) | ~right)))
+        if faulty else float(np.mean(on.online_step >= 0)),
+        "online_delay_median": _median(on.online_step[right] - onset) if faulty else float("nan"),
+        "online_kind_rate": float(np.mean(on.online_kind_right[right])) if faulty and right.any() else float("nan"),
+        "bias_true": [float(v) for v in np.median(off.bias_true, axis=0)],
+        "bias_estimate_median": [float(v) for v in np.median(off.bias_estimate, axis=0)],
+        "bias_error_median": [float(v) for v in np.median(np.abs(off.bias_estimate - off.bias_true), axis=0)],
+        "tracking_error_no_ftc": _median(off.tracking_error),
+        "tracking_error_ftc": _median(on.tracking_error),
+        "vh_error_no_ftc": _median(off.vh_error),
+        "vh_error_ftc": _median(on.vh_error),
+        "deviation_no_ftc": _median(deviation(off.states)),
+        "deviation_ftc": _median(deviation(on.states)),
+    }
+    return row
+
+
+def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopDesign | None = None,
+               cases: list[tuple[str, Fault]] | None = None, chunk_size: int = 4096,
+               progress: bool = False) -> VTOLStudy:
+    """Every fault case with FTC off and on, ``runs`` runs each, on common random numbers
+    (run i of every case has the same noise, so the fault-free run i is its twin).
+    Needs float64 (``jaxfdi.enable_x64()``)."""
+    from jaxfdi.montecarlo import monte_carlo
+
+    design = design or vtol_design()
+    cases = cases or vtol_faults()
+    names = [name for name, _ in cases]
+    if "none" not in names:
+        raise ValueError("cases: the fault-free case 'none' is needed as every run's twin")
+    num_cases = len(cases)
+    faults = stack_faults([f for _, f in cases])
+    keys = jax.random.split(jax.random.PRNGKey(seed), runs)
+    shape = (num_cases, 2, runs)
+    index_case = np.broadcast_to(np.arange(num_cases)[:, None, None], shape).ravel()
+    per_run = (
+        jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[index_case], faults),
+        np.broadcast_to(np.array([False, True])[None, :, None], shape).ravel(),
+        np.asarray(keys)[np.broadcast_to(np.arange(runs)[None, None, :], shape).ravel()],
+    )
+    records = monte_carlo(lambda _, data: vtol_run(design, data[2], data[0], data[1], steps),
+                          jax.random.PRNGKey(seed), num_cases * 2 * runs, per_run,
+                          chunk_size=chunk_size, progress=progress)
+    records = jax.tree_util.tree_map(lambda leaf: leaf.reshape(shape + leaf.shape[1:]), records)
+    twin = np.asarray(records.states)[names.index("none"), 0]
+    rows = [_summarise(name, f, jax.tree_util.tree_map(lambda leaf: leaf[c], records), twin, steps)
+            for c, (name, f) in enumerate(cases)]
+    dof = 4 - design.unknown_input.shape[1]
+    config = {
+        "runs_per_case": runs, "seed": seed, "steps": steps, "Ts": vtol.TS, "levels": design.levels,
+        "c_mult": design.c_mult, "pfa": PFA, "dof": dof,
+        "threshold": float(design.threshold), "window_threshold": float(chi2_threshold(4 * dof, PFA)),
+        "paper_threshold": PAPER_THRESHOLD, "paper_window_threshold": PAPER_WINDOW_THRESHOLD,
+        "unknown_inputs_decoupled": int(design.unknown_input.shape[1]),
+    }
+    return VTOLStudy(config, rows, records)
+
+
+def _fmt(x: float, spec: str = ".2f", width: int = 7) -> str:
+    return f"{'-':>{width}}" if x != x else f"{x:>{width}{spec}}"
+
+
+def _case_table(row: dict[str, Any]) -> str:
+    onset = row["onset"]
+    head = (f"{row['fault']}" + (f" from k = {onset}" if onset is not None else " (fault-free)")
+            + "\n  method   thresholds   FA rate  det rate  det delay  iso rate  iso delay")
+    lines = [head]
+    for key, m in row["methods"].items():
+        method, which = key.split("|")
+        lines.append(f"  {method:<8} {which:<10} {_fmt(m['false_alarm_rate'])}  {_fmt(m['detection_rate'])}  "
+                     f"{_fmt(m['delay_median'], '.1f', 9)}  {_fmt(m['isolation_rate'])}  "
+                     f"{_fmt(m['isolation_delay_median'], '.1f', 9)}")
+    if onset is not None:
+        lines.append(f"  closed loop (MDWT-ST, latched): isolated {row['online_isolation_rate']:.2f} "
+                     f"(kind right {_fmt(row['online_kind_rate'], '.2f', 4)}), median delay "
+                     f"{_fmt(row['online_delay_median'], '.0f', 3)} steps, wrong/early {row['online_false_isolation_rate']:.2f}")
+        lines.append(f"  fault estimate (matched filter), median: {row['bias_estimate_median'][0]:.3f} at onset+"
+                     f"{ESTIMATE_AFTER} (true {row['bias_true'][0]:.3f}, |error| {row['bias_error_median'][0]:.3f}); "
+                     f"{row['bias_estimate_median'][1]:.3f} at the end (true {row['bias_true'][1]:.3f})")
+    else:
+        lines.append(f"  closed loop (MDWT-ST, latched): false isolations {row['online_false_isolation_rate']:.2f}")
+    lines.append(f"  tracking error |r - H x| RMS after onset: no FTC {row['tracking_error_no_ftc']:.3f}, "
+                 f"FTC {row['tracking_error_ftc']:.3f}; v_h alone: no FTC {row['vh_error_no_ftc']:.3f}, FTC {row['vh_error_ftc']:.3f}; "
+                 f"state deviation from the fault-free twin: no FTC {row['deviation_no_ftc']:.3f}, "
+                 f"FTC {row['deviation_ftc']:.3f}")
+    return "\n".join(lines)
+
+
+def _headline(study: VTOLStudy) -> str:
+    rows = {row["fault"]: row for row in study.rows}
+    out = ["Headline cases beside seed 001 (paper's numbers from one run; ours: run 0 and the median over runs)"]
+    s3 = rows.get("s3 step 0.7")
+    if s3:
+        out.append("  s3 step 0.7 from k = 120, first detection step: method  paper | ours (T_D 14.86/34.27): run 0, "
+                   "median | ours (dof-adjusted): run 0, median")
+        for method in METHODS:
+            p, o = s3["methods"][f"{method}|paper"], s3["methods"][f"{method}|ours"]
+            out.append(f"    {method:<8} {PAPER_HEADLINE['s3 step 0.7'][method]:>5} | {p['first_detection_run0']:>5}, "
+                       f"{120 + p['delay_median']:>6.1f}, FA {p['false_alarm_rate']:.2f} | "
+                       f"{o['first_detection_run0']:>5}, {120 + o['delay_median']:>6.1f}, FA {o['false_alarm_rate']:.2f}")
+    a2 = rows.get("a2 effectiveness 0.5")
+    if a2:
+        out.append(f"  a2 effectiveness 0.5 from k = 100: paper: estimate converges to 0.5 | ours: median "
+                   f"{a2['bias_estimate_median'][0]:.3f} at k = 130, {a2['bias_estimate_median'][1]:.3f} at the end")
+        out.append(f"    paper: with FTC the states stay near the fault-free ones, without they diverge | ours: deviation "
+                   f"from the fault-free twin {a2['deviation_ftc']:.2f} with FTC, {a2['deviation_no_ftc']:.2f} without")
+    return "\n".join(out)
+
+
+def vtol_examples(design: LoopDesign, seed: int = 0, steps: int = STEPS) -> dict[str, LoopStep]:
+    """Run 0's full histories for the figures: the s3 step and the a2 effectiveness loss,
+    each with FTC off and on, and the fault-free run (same noise)."""
+    cases = dict(vtol_faults())
+    chosen = [("s3 step 0.7", False), ("a2 effectiveness 0.5", False), ("a2 effectiveness 0.5", True),
+              ("none", False)]
+    faults = stack_faults([cases[name] for name, _ in chosen])
+    ftc = jnp.asarray([on for _, on in chosen])
+    key = jax.random.split(jax.random.PRNGKey(seed), 1)[0]   # run 0's key in vtol_study
+    histories = jax.jit(jax.vmap(lambda f, on: run_closed_loop(design, key, f, on, steps)))(faults, ftc)
+    names = ["s3 step", "a2 no FTC", "a2 FTC", "none"]
+    return {name: jax.tree_util.tree_map(lambda leaf, i=i: np.asarray(leaf)[i], histories)
+            for i, name in enumerate(names)}
+
+
+def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesign, out) -> list[str]:
+    """Figures like seed 001's Figs. 3-5; returns the paths written (each atomically)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pathlib import Path
+
+    from jaxfdi import _io
+
+    out = Path(out)
+    cfg = study.config
+    t = np.arange(cfg["steps"])
+    threshold = cfg["threshold"]
+    paths = []
+
+    def save(fig, name):
+        path = _io.atomic_write(out / name, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        plt.close(fig)
+        paths.append(str(path))
+
+    # Fig. 3: one filter's statistic under the s3 step, raw and denoised
+    stat = examples["s3 step"].statistic[:, 0]                 # filter a1 (effectiveness)
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    series = [("raw", stat), ("MDWT-HT (block mean)", np.asarray(haar_denoise(stat, design.levels, "hard"))),
+              ("MDWT-ST", np.asarray(haar_denoise(stat, design.levels, "soft", design.detail_sigma, design.c_mult)))]
+    for ax, (label, values) in zip(axes, series):
+        ax.plot(t, values, lw=0.8)
+        ax.axhline(threshold, color="r", ls="--", lw=1, label=f"threshold {threshold:.2f} (chi2({cfg['dof']}))")
+        ax.axhline(PAPER_THRESHOLD, color="grey", ls=":", lw=1, label=f"paper's {PAPER_THRESHOLD}")
+        ax.axvline(120, color="k", ls=":", lw=1)
+        ax.set(ylabel=label, ylim=(0, max(60.0, threshold * 3)))
+    axes[0].legend(fontsize=7)
+    axes[0].set_title("Fig. 3: s3 step 0.7 from k = 120, statistic of filter a1 (run 0)")
+    axes[-1].set(xlabel="step k")
+    save(fig, "vtol-fig3-s3-statistics.png")
+
+    # Fig. 4: the a2 effectiveness estimate of the matched filter
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    ax.plot(t, examples["a2 no FTC"].bias[:, 1], lw=1, label="a2 filter estimate, no FTC")
+    ax.plot(t, examples["a2 FTC"].bias[:, 1], lw=1, label="a2 filter estimate, FTC")
+    ax.plot(t, np.where(t >= 100, 0.5, 0.0), "k--", lw=1, label="true loss")
+    ax.set(xlabel="step k", ylabel="effectiveness loss", ylim=(-0.5, 1.0),
+           title="Fig. 4: a2 effectiveness 0.5 from k = 100 (run 0)")
+    ax.legend(fontsize=8)
+    save(fig, "vtol-fig4-a2-estimate.png")
+
+    # Fig. 5: states with and without FTC against the fault-free run
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    for i, (ax, label) in enumerate(zip(axes.ravel(), ["v_h", "v_v", "q", "theta"])):
+        ax.plot(t, examples["none"].state[:, i], "k", lw=1, label="fault-free")
+        ax.plot(t, examples["a2 no FTC"].state[:, i], lw=1, label="a2 fault, no FTC")
+        ax.plot(t, examples["a2 FTC"].state[:, i], lw=1, label="a2 fault, FTC")
+        ax.axvline(100, color="grey", ls=":", lw=1)
+        ax.set(ylabel=label)
+    axes[0, 0].legend(fontsize=7)
+    axes[1, 0].set(xlabel="step k")
+    axes[1, 1].set(xlabel="step k")
+    fig.suptitle("Fig. 5: a2 effectiveness 0.5 from k = 100, states (run 0)")
+    save(fig, "vtol-fig5-a2-ftc.png")
+    return paths

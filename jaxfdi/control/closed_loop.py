@@ -67,7 +67,7 @@ class LoopDesign(NamedTuple):
     bias_walk: Array             # (1, 1) Qb
     init_cov: Array              # (n, n) prior covariance of x[0]
     init_bias_cov: Array         # (1, 1)
-    threshold: Array             # () chi-square threshold for the denoised statistic
+    threshold: Array             # (F,) per-filter threshold of the denoised statistic
     detail_sigma: Array          # (M,) detail standard deviations for soft thresholding
     c_mult: float
     levels: int

@@ -95,7 +95,7 @@ def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
     return [
         ("a1 effectiveness 0.3", fault("effectiveness", "actuator", 0, onset, 0.3)),
         ("a2 effectiveness 0.5", fault("effectiveness", "actuator", 1, onset, 0.5)),
-        ("a1 step 1.0", fault("bias", "actuator", 0, onset, -1.0)),
+        ("a1 step 2.0", fault("bias", "actuator", 0, onset, -2.0)),
         ("a2 ramp 0.5/s", fault("ramp", "actuator", 1, onset, 0.0, slope=-0.5 * Ts)),
         ("s1 scaling 0.05", fault("scale", "sensor", 0, onset, 0.05)),
         ("s2 scaling 0.05", fault("scale", "sensor", 1, onset, 0.05)),

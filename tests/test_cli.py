@@ -45,3 +45,19 @@ def test_bad_options_exit_with_usage_error(args):
     proc = subprocess.run([sys.executable, "-m", "jaxfdi", "run", "engine-chi2", *args],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "must" in proc.stderr
+
+
+def test_vtol_prints_tables_and_writes_figures(tmp_path):
+    env = dict(os.environ, JAXFDI_CACHE_DIR=str(tmp_path / "cache"))
+    proc = subprocess.run(
+        [sys.executable, "-m", "jaxfdi", "run", "vtol", "--runs", "2", "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, env=env, timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    for name in ("a1 effectiveness 0.3 from k = 100", "s3 step 0.7 from k = 120", "none (fault-free)"):
+        assert name in proc.stdout
+    assert "MDWT-ST  paper" in proc.stdout and "Headline cases beside seed 001" in proc.stdout
+    data = json.loads((tmp_path / "out" / "vtol.json").read_text())
+    assert data["config"]["runs_per_case"] == 2 and len(data["rows"]) == 9
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        "vtol-fig3-s3-statistics.png", "vtol-fig4-a2-estimate.png", "vtol-fig5-a2-ftc.png", "vtol.json"]

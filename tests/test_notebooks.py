@@ -166,3 +166,16 @@ def test_tuning_notebook(python3_kernel, monkeypatch):
     assert tuned_ce < paper_ce, ce_line
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) == 2, f"expected the loss curves and the transition matrices, got {len(images)}"
+
+
+def test_vtol_notebook(python3_kernel, monkeypatch):
+    outputs, text = _run_clean("04_vtol_tskf_ftc.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": "5"})
+    assert "runs per fault: 5" in text
+    assert "nominal closed-loop spectral radius: 1.000000" in text   # the paper's q tracking: eigenvalue 1
+    assert "statistic dof: 3" in text
+    for name in ("a2 effectiveness 0.5 from k = 100", "s3 step 0.7 from k = 120", "none (fault-free)"):
+        assert name in text
+    assert "Headline cases beside seed 001" in text
+    assert "online isolation of the a2 fault (location + 1): 2" in text
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) == 2, f"expected Fig. 3 and Figs. 4-5, got {len(images)}"

@@ -351,6 +351,20 @@ def block(tree):
     return jax.tree_util.tree_map(lambda x: x.block_until_ready() if hasattr(x, "block_until_ready") else x, tree)
 
 
+def compiled_timing(fn: Callable[..., Any], args: tuple, repeats: int, budget_s: float = 60.0) -> tuple[dict, Any]:
+    """Compile ``jit(fn)`` for ``args`` (timed apart), run it once for its output, then time
+    it (``repeat_timing``); adds XLA's temporary and output buffer sizes in bytes."""
+    t0 = time.perf_counter()
+    compiled = jax.jit(fn).lower(*args).compile()
+    compile_s = time.perf_counter() - t0
+    out = block(compiled(*args))
+    timing = repeat_timing(lambda: block(compiled(*args)), repeats, budget_s)
+    memory = compiled.memory_analysis()
+    timing.update(compile_s=compile_s, temp_bytes=int(getattr(memory, "temp_size_in_bytes", -1)),
+                  output_bytes=int(getattr(memory, "output_size_in_bytes", -1)))
+    return timing, out
+
+
 def repeat_timing(fn: Callable[[], Any], repeats: int, budget_s: float) -> dict:
     """Median and min wall time of ``fn()`` over ``repeats`` calls (fewer, but at least 3,
     once ``budget_s`` is spent)."""

@@ -12,7 +12,6 @@ import argparse
 import datetime
 import os
 import sys
-import time
 
 import jax
 
@@ -22,23 +21,12 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_filters import block, cpu_model, dynamax_kf, repeat_timing, write_json_atomic  # noqa: E402
+from bench_filters import compiled_timing, cpu_model, dynamax_kf, write_json_atomic  # noqa: E402
 from bench_imm import engine_data  # noqa: E402
 
 import jaxfdi  # noqa: E402
 from jaxfdi import tuning  # noqa: E402
 from jaxfdi.scenarios import engine_tuning as et  # noqa: E402
-
-
-def timed(fn, args, repeats):
-    t0 = time.perf_counter()
-    compiled = jax.jit(fn).lower(*args).compile()
-    compile_s = time.perf_counter() - t0
-    out = block(compiled(*args))
-    timing = repeat_timing(lambda: block(compiled(*args)), repeats, 60.0)
-    memory = compiled.memory_analysis()
-    timing.update(compile_s=compile_s, temp_bytes=int(getattr(memory, "temp_size_in_bytes", -1)))
-    return timing, out
 
 
 def kf_rows(args, log):
@@ -62,8 +50,8 @@ def kf_rows(args, log):
     impls = {"jaxfdi": jaxfdi_total, "jaxfdi remat": lambda t: jaxfdi_total(t, True), "dynamax": dynamax_total}
     values = {}
     for name, total in impls.items():
-        fwd, v = timed(total, (theta,), args.repeats)
-        grad, g = timed(jax.grad(total), (theta,), args.repeats)
+        fwd, v = compiled_timing(total, (theta,), args.repeats)
+        grad, g = compiled_timing(jax.grad(total), (theta,), args.repeats)
         values[name] = (float(v), np.concatenate([np.asarray(x) for x in g]))
         rows.append({"implementation": name, "forward_s": fwd["run_s"], "grad_s": grad["run_s"],
                      "grad_over_forward": grad["run_s"] / fwd["run_s"], "forward_compile_s": fwd["compile_s"],
@@ -88,8 +76,8 @@ def imm_rows(args, log):
         def loss(r, remat=remat):
             return et.imm_loss(design, tuning.constrain(design.parameterization, r), data, remat=remat)[0]
 
-        fwd, _ = timed(loss, (raw,), args.repeats)
-        grad, _ = timed(jax.grad(loss), (raw,), args.repeats)
+        fwd, _ = compiled_timing(loss, (raw,), args.repeats)
+        grad, _ = compiled_timing(jax.grad(loss), (raw,), args.repeats)
         rows.append({"remat": remat, "runs": 7 * runs, "steps": int(data.ys.shape[1]), "forward_s": fwd["run_s"],
                      "grad_s": grad["run_s"], "grad_over_forward": grad["run_s"] / fwd["run_s"],
                      "forward_compile_s": fwd["compile_s"], "grad_compile_s": grad["compile_s"],

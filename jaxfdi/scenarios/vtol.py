@@ -12,6 +12,20 @@ multiplicative filter (effectiveness ``Fa = -B diag(u)``, scaling ``Fs = diag(C 
 and an additive one (``-B e_i``, ``e_j``: the step and ramp faults), 12 TSKFs in one
 vmap. Each run is one closed loop (``jaxfdi.control.closed_loop``); the bank's
 statistics are then evaluated four ways (raw, 4-step window, MDWT hard and soft).
+
+Departures and findings (see also the closing notes of issue 5):
+
+* the filters decouple the uncertainty input only (q = 1, chi2(3) statistics, so the
+  paper's 14.86 = chi2(4) is not this statistic's threshold). Decoupling the disturbance
+  too (q = 2) leaves the actuator faults nearly invisible; undecoupled, ``3 sin 10t``
+  leaks into some filters (fault-free means up to 8.6 instead of 3), so "our"
+  thresholds are calibrated per filter on fault-free runs (``calibrate_thresholds``);
+* tracking ``q`` (the paper's ``H_r``) leaves a closed-loop eigenvalue at 1 (the pitch
+  angle ramps under the -5 command); tracking ``theta`` instead has a stabilising LQR
+  gain for the nominal model but the true plant (with the uncertainty) diverges, so the
+  paper's choice is kept;
+* with the pitch-acceleration input decoupled, an additive collective (a1) fault is
+  also explained by an s4 bias: the bank isolates it only up to {a1, s4}.
 """
 from __future__ import annotations
 
@@ -27,14 +41,14 @@ from jaxfdi.control.lqr import lqr_pi
 from jaxfdi.detection.chi2 import chi2_threshold, moving_window_sum
 from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.detection.wavelet import block_alarms, chi2_detail_sigma, haar_denoise
-from jaxfdi.faults import Fault, fault, fault_label, no_fault, stack_faults
+from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
 from jaxfdi.models import vtol
 
 LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
 FILTER_NAMES = tuple(f"{loc}-{kind}" for kind in ("mult", "add") for loc in LOCATIONS)
 TRACKED = {"paper": np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]]),   # v_h and q (eq. 35)
-           "theta": np.array([[1.0, 0, 0, 0], [0, 0, 0, 1.0]])}  # v_h and theta
+           "theta": np.array([[1.0, 0, 0, 0], [0, 0, 0, 1.0]])}  # v_h and theta: unstable on the true plant
 COMMAND = np.array([-50.0, -5.0])
 LQR_Q = np.diag([1.0, 1, 1, 1, 10, 10])
 LQR_R = np.eye(2)
@@ -108,8 +122,6 @@ def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
 def true_bias(f: Fault, k) -> jnp.ndarray:
     """The value the matched filter's bias ``b`` should estimate at step ``k``: the loss or
     scaling fraction, or the additive size (``u_i - b``, ``y_j + b``); 0 before the onset."""
-    from jaxfdi.faults import FaultKind, Target, is_active
-
     sign = jnp.where(f.target == Target.ACTUATOR, -1.0, 1.0)
     elapsed = k - f.onset
     value = jnp.select(
@@ -164,7 +176,6 @@ def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_
     leaves the actuator faults almost invisible), so it leaks into some filters'
     statistics (fault-free means up to 8.6 for chi2(3)); the quantile absorbs that leak.
     Raw and window values count per step, MDWT values per block (the block's maximum)."""
-    from jaxfdi.faults import no_fault
     from jaxfdi.montecarlo import monte_carlo
 
     histories = monte_carlo(lambda key, _: run_closed_loop(design, key, no_fault(), jnp.asarray(False), steps).statistic,

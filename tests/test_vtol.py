@@ -253,9 +253,9 @@ def test_study_rows_and_calibration(study):
     for method in ("raw", "MDWT-HT", "MDWT-ST"):
         assert all(v >= chi2 - 1e-9 for v in thresholds[method].values())
     assert set(name.split("-")[0] for name in thresholds["raw"]) == set(LOCATIONS)
-    # calibration at Pfa 0.005 per decision: the fault-free false-alarm fraction per
-    # decision is near 0.005 (a binomial bound over 20 runs x 75 blocks, with slack for
-    # the correlated filters and another seed)
+    # calibration at Pfa 0.005 per filter and decision: a location's symptom (6 of them)
+    # fires on about 1.3 % of fault-free decisions (measured at 100 runs); 0.03 is a loose
+    # ceiling, and the paper's thresholds fire far more often on the same runs
     none = _row(study, "none")["methods"]
     assert none["MDWT-ST|ours"]["false_alarm_per_decision"] < 0.03
     assert none["MDWT-ST|paper"]["false_alarm_per_decision"] > none["MDWT-ST|ours"]["false_alarm_per_decision"]

@@ -43,6 +43,7 @@ from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.detection.wavelet import block_alarms, chi2_detail_sigma, haar_denoise
 from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
+from jaxfdi.metrics import record_from_alarms
 from jaxfdi.models import vtol
 
 LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
@@ -211,22 +212,18 @@ class RunRecord(NamedTuple):
 def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = STEPS) -> RunRecord:
     """One closed-loop run and its evaluation against ``thresholds`` (2, 4, F): our
     calibrated set and the paper's (pure; vmap it over runs)."""
-
     history = run_closed_loop(design, key, f, ftc, steps)
     L = design.location_component.shape[0]
     label_true = fault_label(f, 2)
     k = jnp.arange(steps)
-    after = k >= f.onset
-
-    def first(mask):
-        return jnp.where(jnp.any(mask), jnp.argmax(mask), -1).astype(jnp.int32)
 
     def evaluate(thresholds):
         alarms = method_alarms(history.statistic, design, thresholds)             # (4, T, F)
         labels = isolate(location_symptoms(alarms, design.location, L))           # (4, T)
         fired = labels != 0   # some location inconsistent: the symptoms leave the no-fault column
-        return (jax.vmap(first)(fired), jax.vmap(first)(fired & after),
-                jax.vmap(first)((labels == label_true) & after), jnp.sum(fired & ~after, axis=1))
+        detected = jax.vmap(record_from_alarms, in_axes=(0, None))(fired, f.onset)
+        isolated = jax.vmap(record_from_alarms, in_axes=(0, None))(labels == label_true, f.onset)
+        return detected.first_alarm, detected.detection_step, isolated.detection_step, detected.false_alarms
 
     first_alarm, detection, isolation, false_decisions = (
         jnp.stack(parts) for parts in zip(*(evaluate(t) for t in thresholds)))
@@ -238,8 +235,11 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
 
     def rms(e2):
         return jnp.sqrt(jnp.sum(jnp.where(k >= start, e2, 0.0)) / jnp.sum(k >= start))
+
     return RunRecord(
-        first_alarm, detection, isolation, false_decisions, latched, first(history.isolated > 0), history.isolated_kind[-1] == is_multiplicative(f),
+        first_alarm, detection, isolation, false_decisions, latched,
+        record_from_alarms(history.isolated > 0, f.onset).first_alarm,
+        history.isolated_kind[-1] == is_multiplicative(f),
         history.bias[when, matched], jax.vmap(lambda s: true_bias(f, s))(when),
         rms(jnp.sum(error**2, axis=1)), rms(error[:, 0] ** 2),
         history.state.astype(jnp.float32),

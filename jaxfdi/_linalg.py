@@ -117,6 +117,23 @@ def psd_solve(matrix: Array, rhs: Array) -> Array:
     return cho_solve(cholesky(symmetrize(matrix)), rhs)
 
 
+def det(matrix: Array) -> Array:
+    """Determinant; 1x1 to 3x3 written out (cofactor expansion), so a vmapped batch is
+    element-wise code rather than one LU call per matrix."""
+    matrix = jnp.asarray(matrix)
+    n = matrix.shape[-1]
+    if n == 1:
+        return matrix[..., 0, 0]
+    if n == 2:
+        return matrix[..., 0, 0] * matrix[..., 1, 1] - matrix[..., 0, 1] * matrix[..., 1, 0]
+    if n == 3:
+        a = matrix
+        return (a[..., 0, 0] * (a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1])
+                - a[..., 0, 1] * (a[..., 1, 0] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 0])
+                + a[..., 0, 2] * (a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0]))
+    return jnp.linalg.det(matrix)
+
+
 def cholesky_is_finite(chol: Array) -> Array:
     """True when a Cholesky factor is finite, i.e. its matrix was positive definite."""
     return jnp.all(jnp.isfinite(chol))

@@ -16,8 +16,13 @@ RAMP          ``s + magnitude + slope (k - onset)``  drift, ``slope`` per step
 IMPULSE       ``s + magnitude`` at ``k == onset`` only  a single-sample spike
 SCALE         ``(1 + magnitude) s``               multiplicative (sensor scaling)
 EFFECTIVENESS ``(1 - magnitude) s``               actuator effectiveness loss, 0..1
-STUCK         ``s(onset)``                        stuck/stop at the value at onset
+STUCK         ``s(onset)``                        stuck at the value at onset
+STOP          ``0``                               the component stops (no output)
 ============  ==================================  =====================================
+
+A plant model may give a kind more physics than the signal change: the reaction-wheel
+scenario reads STOP as "the wheel's speed goes to 0 and its momentum to the body" and
+STUCK as "the wheel's speed freezes" (``scenarios.reaction_wheels.wheel_fault``).
 """
 from __future__ import annotations
 
@@ -40,6 +45,7 @@ class FaultKind(enum.IntEnum):
     SCALE = 4
     EFFECTIVENESS = 5
     STUCK = 6
+    STOP = 7
 
 
 class Target(enum.IntEnum):
@@ -133,6 +139,7 @@ def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> 
             f.kind == FaultKind.SCALE,
             f.kind == FaultKind.EFFECTIVENESS,
             f.kind == FaultKind.STUCK,
+            f.kind == FaultKind.STOP,
         ],
         [
             s + f.magnitude,
@@ -141,6 +148,7 @@ def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> 
             (1 + f.magnitude) * s,
             (1 - f.magnitude) * s,
             held,
+            jnp.zeros_like(s),
         ],
         s,
     ).astype(signal.dtype)

@@ -1,0 +1,94 @@
+"""Attitude control with reaction wheels: a rest-to-rest slew, quaternion PD with
+feed-forward, and minimum-norm wheel torque allocation (seed 004 leaves the law open).
+
+Reference: a slew by ``angle`` about a fixed body axis ``e`` with the versine profile
+``theta(s) = angle (s - sin(2 pi s) / (2 pi))``, ``s = (t - start) / duration`` in
+``[0, 1]`` (zero rate and acceleration at both ends; Wie 2008, sec. 7.3), so
+``q_ref = [cos(theta/2), sin(theta/2) e]``, ``w_ref = theta' e``, ``alpha_ref = theta'' e``.
+
+Law (Wie, Weiss & Arapostathis 1989, with gyroscopic feed-forward): with the attitude
+error ``dq = q_ref^* (x) q`` (sign chosen so that ``dq_0 >= 0``, the short way round) and
+the rate error ``dw = w - R(dq)^T w_ref``,
+
+    T_c = I alpha_ref + w x (I w + h_w) - 2 K_p dq_vec - K_d dw,
+
+``K_p = I w_n^2``, ``K_d = 2 zeta w_n I``. The wheels deliver ``-H^T tau`` to the body
+(``tau`` the motor torques), so ``tau = -H (H^T H)^-1 T_c``, the minimum-norm
+allocation (pseudo-inverse of ``H^T``), scaled down as a whole if any wheel would exceed
+``max_wheel_torque`` (the direction of the torque is kept).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.models.reaction_wheels import quaternion_conjugate, quaternion_multiply, rotate_to_inertial
+
+
+class Slew(NamedTuple):
+    axis: Array      # (3,) unit rotation axis in the body (= initial inertial) frame
+    angle: Array     # () rad
+    start: Array     # () s
+    duration: Array  # () s
+
+
+class AttitudeGains(NamedTuple):
+    kp: Array                # (3, 3)
+    kd: Array                # (3, 3)
+    max_wheel_torque: Array  # () N m
+
+
+def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, duration: float = 40.0, dtype=None) -> Slew:
+    dtype = dtype or jnp.result_type(float)
+    axis = jnp.asarray(axis, dtype)
+    _checks.check_shape("axis", axis, (3,), "rotation axis")
+    if not duration > 0:
+        raise ValueError(f"duration: expected a positive slew time in seconds, got {duration}")
+    return Slew(axis / jnp.linalg.norm(axis), jnp.asarray(math.radians(angle_deg), dtype),
+                jnp.asarray(start, dtype), jnp.asarray(duration, dtype))
+
+
+def pd_gains(inertia: Array, natural_frequency: float = 0.1, damping: float = 0.9,
+             max_wheel_torque: float = 0.02) -> AttitudeGains:
+    """``K_p = I w_n^2``, ``K_d = 2 zeta w_n I`` (decoupled second-order axes)."""
+    inertia = jnp.asarray(inertia)
+    _checks.check_shape("inertia", inertia, (3, 3), "body inertia")
+    return AttitudeGains(inertia * natural_frequency**2, 2.0 * damping * natural_frequency * inertia,
+                         jnp.asarray(max_wheel_torque, inertia.dtype))
+
+
+def slew_reference(t: Array, profile: Slew) -> tuple[Array, Array, Array]:
+    """``(q_ref (4,), w_ref (3,), alpha_ref (3,))`` at time ``t``."""
+    s = jnp.clip((t - profile.start) / profile.duration, 0.0, 1.0)
+    inside = (t >= profile.start) & (t <= profile.start + profile.duration)
+    two_pi = 2.0 * jnp.pi
+    theta = profile.angle * (s - jnp.sin(two_pi * s) / two_pi)
+    rate = jnp.where(inside, profile.angle / profile.duration * (1.0 - jnp.cos(two_pi * s)), 0.0)
+    accel = jnp.where(inside, profile.angle / profile.duration**2 * two_pi * jnp.sin(two_pi * s), 0.0)
+    q_ref = jnp.concatenate([jnp.cos(0.5 * theta)[None], jnp.sin(0.5 * theta) * profile.axis])
+    return q_ref, rate * profile.axis, accel * profile.axis
+
+
+def control_torque(q: Array, w: Array, wheel_momentum: Array, t: Array, profile: Slew, gains: AttitudeGains,
+                   inertia: Array) -> Array:
+    """Commanded body torque ``T_c`` (3,) from the attitude ``q``, the rate ``w`` (gyros)
+    and the wheels' momentum ``h_w`` as the flight software believes it."""
+    q_ref, w_ref, alpha_ref = slew_reference(t, profile)
+    dq = quaternion_multiply(quaternion_conjugate(q_ref), q)
+    dq = jnp.where(dq[0] < 0, -dq, dq)
+    w_ref_body = rotate_to_inertial(quaternion_conjugate(dq), w_ref)
+    return (inertia @ alpha_ref + jnp.cross(w, inertia @ w + wheel_momentum)
+            - 2.0 * gains.kp @ dq[1:] - gains.kd @ (w - w_ref_body))
+
+
+def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: Array) -> Array:
+    """Motor torques ``tau`` (N,) with ``-H^T tau = T_c``, minimum norm, saturated by
+    uniform scaling."""
+    gram = wheel_axes.T @ wheel_axes
+    tau = -wheel_axes @ jnp.linalg.solve(gram, torque)
+    peak = jnp.max(jnp.abs(tau))
+    return tau * jnp.minimum(1.0, max_wheel_torque / jnp.maximum(peak, 1e-30))

@@ -1,0 +1,71 @@
+"""Multi-hypothesis isolation by credits (seed 004, Section III, eq. 10).
+
+A bank of dual filters, one per fault hypothesis (for the reaction wheels: wheel ``x``
+stopped), gives one fault detection parameter ``F_x`` per hypothesis. The hypothesis
+that matches the plant predicts it well, so its ``F_x`` stays small while the others
+grow. The credit of hypothesis ``x`` is
+
+    C_x = max(F_mean - F_x, 0),    F_mean = (1/M) sum_x F_x,
+
+and the fault is isolated to the hypothesis with the largest credit once that credit is
+large enough. ``F`` scales with the operating point (rates, wheel momentum, fault size),
+so besides the paper's absolute threshold the isolator offers a scale-free one on the
+relative credit ``C_x / F_mean`` in ``[0, 1]``: 1 when ``F_x = 0``.
+"""
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.detection.chi2 import Decision, Detector
+
+
+def hypothesis_credits(detection_parameters: Array) -> Array:
+    """``C_x = max(F_mean - F_x, 0)`` for ``F`` (..., M) along the last axis (eq. 10)."""
+    detection_parameters = jnp.asarray(detection_parameters)
+    mean = jnp.mean(detection_parameters, axis=-1, keepdims=True)
+    return jnp.maximum(mean - detection_parameters, 0.0)
+
+
+def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, confirm_steps: int = 1) -> Detector:
+    """Online isolator on the bank's ``F`` (M,): names ``argmax C_x`` once it is above
+    ``threshold``.
+
+    Args:
+      threshold: on ``C_x / F_mean`` (``relative=True``, default; in ``(0, 1]`` for a
+        meaningful test: 1 means ``F_x = 0``) or on ``C_x`` itself (the paper's form).
+      relative: which credit the threshold applies to.
+      label_offset: added to the hypothesis index to give the decision's label (1 when
+        hypothesis ``x`` is the simulator's label ``1 + x``).
+      confirm_steps: consecutive steps the same hypothesis must lead above the threshold.
+
+    ``step(state, F) -> (state, Decision(statistic, alarm, label, estimate))`` with the
+    leading (relative) credit as statistic and ``F_mean`` as estimate.
+    """
+    value = _checks.concrete(threshold)
+    if value is not None and not (value.shape == () and value > 0):
+        raise ValueError(f"threshold: expected a positive scalar credit threshold, got {threshold}")
+    if int(confirm_steps) != confirm_steps or confirm_steps < 1:
+        raise ValueError(f"confirm_steps: expected an integer >= 1, got {confirm_steps}")
+
+    def init() -> tuple[Array, Array]:
+        return jnp.asarray(-1, jnp.int32), jnp.zeros((), jnp.int32)
+
+    def step(state, detection_parameters: Array):
+        detection_parameters = jnp.asarray(detection_parameters)
+        if detection_parameters.ndim != 1:
+            raise ValueError(f"detection_parameters: expected shape (M,), got {tuple(detection_parameters.shape)}")
+        credit = hypothesis_credits(detection_parameters)
+        mean = jnp.mean(detection_parameters)
+        if relative:
+            credit = jnp.where(mean > 0, credit / jnp.where(mean > 0, mean, 1.0), 0.0)
+        best = jnp.argmax(credit).astype(jnp.int32)
+        statistic = credit[best]
+        above = statistic >= threshold
+        candidate, held = state
+        held = jnp.where(above, jnp.where(best == candidate, held + 1, 1), 0)
+        candidate = jnp.where(above, best, -1)
+        return (candidate, held), Decision(statistic, held >= confirm_steps, best + label_offset, mean)
+
+    return Detector(init, step)

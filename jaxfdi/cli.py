@@ -165,8 +165,8 @@ def _run_reaction_wheels(args: argparse.Namespace) -> int:
     from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_examples, wheel_study
 
     start = time.perf_counter()
-    study = wheel_study(runs=args.runs, seed=args.seed, estimator=args.estimator, engage_on=args.engage_on,
-                        progress=not args.quiet)
+    study = wheel_study(runs=args.runs, seed=args.seed, calibration_runs=max(20, 2 * args.runs),
+                        estimator=args.estimator, engage_on=args.engage_on, progress=not args.quiet)
     design = wheel_design()._replace(detection_threshold=study.config["fdp_threshold"])
     examples = wheel_examples(design, seed=args.seed, estimator=args.estimator, engage_on=args.engage_on)
     elapsed = time.perf_counter() - start

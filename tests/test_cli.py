@@ -61,3 +61,24 @@ def test_vtol_prints_tables_and_writes_figures(tmp_path):
     assert data["config"]["runs_per_case"] == 2 and len(data["rows"]) == 9
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
         "vtol-fig3-s3-statistics.png", "vtol-fig4-a2-estimate.png", "vtol-fig5-a2-ftc.png", "vtol.json"]
+
+
+def test_reaction_wheels_prints_every_case_and_writes_figures(tmp_path):
+    env = dict(os.environ, JAXFDI_CACHE_DIR=str(tmp_path / "cache"))
+    proc = subprocess.run(
+        [sys.executable, "-m", "jaxfdi", "run", "reaction-wheels", "--runs", "2", "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, env=env, timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((tmp_path / "out" / "reaction-wheels.json").read_text())
+    cases = ["none"] + [f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain") for w in range(1, 5)]
+    assert [row["case"] for row in data["rows"]] == cases
+    for case in cases:
+        for method in ("dual filter F (paper)", "NIS chi-square", "credit isolator (paper)", "MM likelihood"):
+            assert f"\n{case:<10} {method}" in proc.stdout
+    assert "Wheel stops (seed 004 reports" in proc.stdout
+    assert data["config"]["runs"] == 2 and data["config"]["calibration_runs"] == 20
+    assert data["config"]["fdp_threshold"] > 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        "reaction-wheels-fig3-5-attitude.png", "reaction-wheels-fig4-6-detection.png",
+        "reaction-wheels-fig8-9-isolation.png", "reaction-wheels.json"]

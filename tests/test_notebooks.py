@@ -179,3 +179,18 @@ def test_vtol_notebook(python3_kernel, monkeypatch):
     assert "online isolation of the a2 fault (location + 1): 2" in text
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) == 2, f"expected Fig. 3 and Figs. 4-5, got {len(images)}"
+
+
+def test_reaction_wheels_notebook(python3_kernel, monkeypatch):
+    outputs, text = _run_clean("05_reaction_wheels.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": "5"})
+    assert "runs per case: 5" in text
+    difference = float(text.split("AD vs closed-form Jacobian, largest difference: ")[1].split()[0])
+    assert difference < 1e-15
+    zero_total_det = float(text.split("zero total momentum")[1].split("det A = ")[1].split()[0])
+    bias_det = float(text.split("wheels at bias speed:")[1].split("det A = ")[1].split()[0])
+    assert abs(zero_total_det) < 1e-6 * abs(bias_det)
+    for case in ["none"] + [f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain") for w in range(1, 5)]:
+        assert f"\n{case:<10} MM likelihood" in text
+    assert "Wheel stops (seed 004 reports" in text
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) == 3, f"expected Figs. 3/5, 4/6 and 8/9, got {len(images)}"

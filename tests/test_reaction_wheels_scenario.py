@@ -1,0 +1,122 @@
+"""Seed 004 scenario at reduced size: wheel fault semantics against hand-written
+formulas, and the issue's claims on a closed-loop Monte Carlo batch.
+
+One batch of 160 runs (one compilation): 80 fault-free calibration runs, 40 fault-free
+test runs, and a stop of each wheel (spinning near its 2000 rpm bias speed) in 10 runs
+each, onsets uniform in 15-25 s. The banks engage on the NIS test, so the isolators do
+not depend on ``F_T``; ``F_T`` is calibrated on the calibration runs and checked on the
+test runs. Rates are checked with one-sided binomial bounds at the stated sizes.
+"""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+from jaxfdi.faults import FaultKind, no_fault
+from jaxfdi.models.reaction_wheels import kitsat3_params, stop_hypotheses, wheel_momentum
+from jaxfdi.scenarios import reaction_wheels as rw
+
+CALIBRATION, FREE, PER_WHEEL = 80, 40, 10
+
+
+@pytest.fixture(scope="module")
+def batch():
+    design = rw.wheel_design()
+    cases = [("none", -1)] + [("stop", w) for w in range(4)]
+    free = rw.case_faults([("none", -1)], CALIBRATION + FREE, jax.random.key(11))
+    stops = rw.case_faults(cases[1:], PER_WHEEL, jax.random.key(12))
+    faults = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), free, stops)
+    out = rw.monte_carlo_wheels(design, faults, seed=5, chunk_size=160)
+    return design, jax.tree_util.tree_map(np.asarray, out)
+
+
+def test_delivered_torque_follows_each_fault_kind():
+    command = jnp.array([1e-3, -2e-3, 3e-3, 4e-3])
+    expected_after = {  # wheel 2 from the onset (k = 10), by hand
+        "stop": [1e-3, -2e-3, 0.0, 4e-3],
+        "stuck": [1e-3, -2e-3, 0.0, 4e-3],
+        "bias": [1e-3, -2e-3, 3e-3 + 5e-4, 4e-3],
+        "gain": [1e-3, -2e-3, 3e-3 * (1 - 0.4), 4e-3],
+    }
+    magnitude = {"stop": 0.0, "stuck": 0.0, "bias": 5e-4, "gain": 0.4}
+    for kind, after in expected_after.items():
+        f = rw.wheel_fault(kind, 2, 10, magnitude[kind])
+        np.testing.assert_allclose(rw.delivered_torque(f, 9, command), command, atol=0)
+        np.testing.assert_allclose(rw.delivered_torque(f, 10, command), after, rtol=1e-15)
+        np.testing.assert_allclose(rw.delivered_torque(f, 500, command), after, rtol=1e-15)
+    assert int(rw.wheel_fault("stop", 0, 1).kind) == FaultKind.STOP
+    with pytest.raises(ValueError, match="kind"):
+        rw.wheel_fault("explode", 0, 1)
+
+
+def test_only_a_stop_moves_the_wheel_momentum_to_the_body():
+    params = kitsat3_params()
+    state = jnp.concatenate([jnp.array([1.0, 0, 0, 0]), jnp.array([0.01, -0.02, 0.005]),
+                             jnp.array([200.0, -180.0, 220.0, -210.0])])
+    for kind in ("stuck", "bias", "gain"):
+        f = rw.wheel_fault(kind, 1, 7, 0.1)
+        np.testing.assert_array_equal(rw.stop_transfer(state, f, 7, params), state)
+    f = rw.wheel_fault("stop", 1, 7)
+    np.testing.assert_array_equal(rw.stop_transfer(state, f, 6, params), state)
+    moved = rw.stop_transfer(state, f, 7, params)
+    assert moved[7 + 1] == 0.0
+    # the body's rate change is exactly the wheel's momentum I_w Omega a_1 through I^-1
+    dw_expected = np.linalg.solve(np.asarray(params.inertia), 0.000239 * -180.0 * np.asarray(params.wheel_axes[1]))
+    np.testing.assert_allclose(moved[4:7] - state[4:7], dw_expected, rtol=1e-12)
+
+
+def test_stop_hypotheses_switch_off_one_wheel_each():
+    params = kitsat3_params()
+    speeds = jnp.array([100.0, 200.0, 300.0, 400.0])
+    bank = stop_hypotheses(params, include_nominal=True)
+    for mode in range(5):
+        p = jax.tree_util.tree_map(lambda leaf: leaf[mode], bank)
+        kept = [i for i in range(4) if i != mode - 1]
+        expected = 0.000239 * np.asarray(speeds)[kept] @ np.asarray(params.wheel_axes)[kept]
+        np.testing.assert_allclose(wheel_momentum(speeds, p), expected, rtol=1e-14, atol=1e-15)
+
+
+def test_fault_free_f_stays_under_the_calibrated_threshold(batch):
+    """The issue: F stays under its threshold in >= 99 % of fault-free runs. ``F_T`` is
+    FDP_MARGIN x the largest F of the 80 calibration runs; on 40 other runs, 2 or more
+    exceedances would reject 'exceedance rate <= 1 %' at the 6 % level (binomial)."""
+    _, out = batch
+    threshold = rw.FDP_MARGIN * out.max_fault_free_fdp[:CALIBRATION].max()
+    exceed = int(np.sum(out.max_fault_free_fdp[CALIBRATION:CALIBRATION + FREE] > threshold))
+    assert stats.binom.sf(1, FREE, 0.01) < 0.07
+    assert exceed <= 1, exceed
+    # the NIS test's design rate (chi2, Pfa 1e-5 a step) gives a 0.6 % per-run false-alarm rate
+    nis_false = int(np.sum(out.nis.false_alarms[:CALIBRATION + FREE] > 0))
+    assert nis_false <= 3, nis_false  # P(X >= 4 | n = 120, p = 0.006) = 0.5 %
+    assert out.healthy.all()
+
+
+def test_each_wheel_stop_is_detected_at_once_and_isolated_within_two_seconds(batch):
+    """The issue: for a stop of each wheel, the better isolator names the right wheel in
+    >= 95 % of runs within 2 s. With 10 runs a wheel, 2 misses would reject a 95 % rate
+    at the 8.6 % level, so at most 1 is allowed; the credit isolator's rates are computed
+    alongside (it is not the better one: it cannot tell wheels 2 and 4 from 3 and 1)."""
+    design, out = batch
+    dt = float(design.params.dt)
+    stops = slice(CALIBRATION + FREE, None)
+    onset = out.nis.onset[stops]
+    wheel = np.repeat(np.arange(4), PER_WHEEL)
+    detected = out.nis.detection_step[stops]
+    assert np.all(detected >= 0) and np.all((detected - onset) * dt <= 0.5)
+    rates = {}
+    for name in ("likelihood", "credit"):
+        rec = jax.tree_util.tree_map(lambda leaf: leaf[stops], getattr(out, name))
+        in_time = (rec.detection_step >= 0) & (rec.isolated == wheel + 1) & ((rec.detection_step - onset) * dt <= 2.0)
+        rates[name] = [float(in_time[wheel == w].mean()) for w in range(4)]
+        assert np.all(rec.false_alarms == 0)  # no isolation before the onset
+    assert stats.binom.cdf(8, PER_WHEEL, 0.95) < 0.09
+    assert min(rates["likelihood"]) >= 0.9, rates
+
+
+def test_run_wheels_rejects_unknown_options():
+    design = rw.wheel_design()
+    with pytest.raises(ValueError, match="engage_on"):
+        rw.run_wheels(design, jax.random.key(0), no_fault(), steps=3, engage_on="never")
+    with pytest.raises(ValueError, match="estimator"):
+        rw.run_wheels(design, jax.random.key(0), no_fault(), steps=3, estimator="pf")

@@ -1,6 +1,15 @@
-"""Fault-tolerant control: discrete LQR with integral action, eigenstructure assignment
-of a reconfigured gain for a faulty actuator, and the closed loop that switches to it
-when the FDD isolates a fault (seed 001, Section IV)."""
+"""Control: discrete LQR with integral action, eigenstructure assignment of a
+reconfigured gain for a faulty actuator, and the closed loop that switches to it when
+the FDD isolates a fault (seed 001, Section IV); reaction-wheel attitude control (seed 004)."""
+from jaxfdi.control.attitude import (
+    AttitudeGains,
+    Slew,
+    allocate_wheel_torques,
+    control_torque,
+    pd_gains,
+    slew,
+    slew_reference,
+)
 from jaxfdi.control.closed_loop import LoopDesign, LoopStep, run_closed_loop
 from jaxfdi.control.eigenstructure import (
     EigenstructureResult,
@@ -13,6 +22,13 @@ from jaxfdi.control.eigenstructure import (
 from jaxfdi.control.lqr import PIDesign, integral_augmentation, lqr_gain, lqr_pi
 
 __all__ = [
+    "AttitudeGains",
+    "Slew",
+    "allocate_wheel_torques",
+    "control_torque",
+    "pd_gains",
+    "slew",
+    "slew_reference",
     "EigenstructureResult",
     "GainSchedule",
     "LoopDesign",

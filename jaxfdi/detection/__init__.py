@@ -7,6 +7,8 @@ from jaxfdi.detection.chi2 import (
     moving_window_sum,
     normalized_innovation_squared,
 )
+from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
+from jaxfdi.detection.dual_filter import DualFilterInfo, DualFilterState, dual_filter, system_matrix_det
 from jaxfdi.detection.glrt import (
     PAPER_USED_THRESHOLD,
     FaultDirections,
@@ -30,6 +32,12 @@ from jaxfdi.detection.wavelet import (
 )
 
 __all__ = [
+    "DualFilterInfo",
+    "DualFilterState",
+    "credit_isolator",
+    "dual_filter",
+    "hypothesis_credits",
+    "system_matrix_det",
     "PAPER_USED_THRESHOLD",
     "Detector",
     "FaultDirections",

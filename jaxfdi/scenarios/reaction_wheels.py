@@ -155,7 +155,7 @@ def stop_transfer(state: Array, f: Fault, k: Array, params: SpacecraftParams) ->
     new_speeds = jnp.where(stopped & jax.nn.one_hot(f.component, speeds.shape[0], dtype=bool), 0.0, speeds)
     body_momentum = params.inertia @ state[4:7] + wheel_momentum(speeds, params)
     w = jnp.linalg.solve(params.inertia, body_momentum - wheel_momentum(new_speeds, params))
-    return jnp.concatenate([state[:4], w, new_speeds])
+    return jnp.where(stopped, jnp.concatenate([state[:4], w, new_speeds]), state)
 
 
 def estimation_filter(params: SpacecraftParams, q_sigma: Array, gyro_sigma: Array, kind: str = "ekf"):

@@ -96,7 +96,8 @@ def test_each_wheel_stop_is_detected_at_once_and_isolated_within_two_seconds(bat
     """The issue: for a stop of each wheel, the better isolator names the right wheel in
     >= 95 % of runs within 2 s. With 10 runs a wheel, 2 misses would reject a 95 % rate
     at the 8.6 % level, so at most 1 is allowed; the credit isolator's rates are computed
-    alongside (it is not the better one: it cannot tell wheels 2 and 4 from 3 and 1)."""
+    alongside (it is not the better one: it confuses opposite wheels of the pyramid, 2 with
+    4 and 1 with 3)."""
     design, out = batch
     dt = float(design.params.dt)
     stops = slice(CALIBRATION + FREE, None)

@@ -19,6 +19,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.detection.chi2 import Decision, Detector
+from jaxfdi.detection.mode_probability import confirm, confirmation_init
 
 
 def hypothesis_credits(detection_parameters: Array) -> Array:
@@ -49,9 +50,6 @@ def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, con
     if int(confirm_steps) != confirm_steps or confirm_steps < 1:
         raise ValueError(f"confirm_steps: expected an integer >= 1, got {confirm_steps}")
 
-    def init() -> tuple[Array, Array]:
-        return jnp.asarray(-1, jnp.int32), jnp.zeros((), jnp.int32)
-
     def step(state, detection_parameters: Array):
         detection_parameters = jnp.asarray(detection_parameters)
         if detection_parameters.ndim != 1:
@@ -62,10 +60,7 @@ def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, con
             credit = jnp.where(mean > 0, credit / jnp.where(mean > 0, mean, 1.0), 0.0)
         best = jnp.argmax(credit).astype(jnp.int32)
         statistic = credit[best]
-        above = statistic >= threshold
-        candidate, held = state
-        held = jnp.where(above, jnp.where(best == candidate, held + 1, 1), 0)
-        candidate = jnp.where(above, best, -1)
-        return (candidate, held), Decision(statistic, held >= confirm_steps, best + label_offset, mean)
+        state, alarm = confirm(state, best, statistic >= threshold, confirm_steps)
+        return state, Decision(statistic, alarm, best + label_offset, mean)
 
-    return Detector(init, step)
+    return Detector(confirmation_init, step)

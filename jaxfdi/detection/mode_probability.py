@@ -20,6 +20,19 @@ from jaxfdi import _checks
 from jaxfdi.detection.chi2 import Decision, Detector
 
 
+def confirmation_init() -> tuple[Array, Array]:
+    """``(candidate label, steps it has led above the threshold)`` before any step."""
+    return jnp.asarray(-1, jnp.int32), jnp.zeros((), jnp.int32)
+
+
+def confirm(state: tuple[Array, Array], label: Array, above: Array, confirm_steps: int):
+    """k-step confirmation of an isolating decision: alarm once the same ``label`` has led
+    above its threshold for ``confirm_steps`` consecutive steps; returns ``(state, alarm)``."""
+    candidate, held = state
+    held = jnp.where(above, jnp.where(label == candidate, held + 1, 1), 0)
+    return (jnp.where(above, label, -1), held), held >= confirm_steps
+
+
 def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps: int = 1) -> Detector:
     """Online detector on mode probabilities ``mu`` (M,).
 
@@ -39,9 +52,6 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps: in
     if int(confirm_steps) != confirm_steps or confirm_steps < 1:
         raise ValueError(f"confirm_steps: expected an integer >= 1, got {confirm_steps}")
 
-    def init() -> tuple[Array, Array]:
-        return jnp.asarray(-1, jnp.int32), jnp.zeros((), jnp.int32)  # candidate mode, steps it has held
-
     def step(state, inputs):
         mode_prob, estimates = inputs if isinstance(inputs, tuple) else (inputs, None)
         mode_prob = jnp.asarray(mode_prob)
@@ -52,11 +62,8 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps: in
         fault_prob = mode_prob.at[normal_mode].set(-jnp.inf)
         label = jnp.argmax(fault_prob).astype(jnp.int32)
         statistic = fault_prob[label]
-        above = statistic >= threshold
-        candidate, held = state
-        held = jnp.where(above, jnp.where(label == candidate, held + 1, 1), 0)
-        candidate = jnp.where(above, label, -1)
+        state, alarm = confirm(state, label, statistic >= threshold, confirm_steps)
         estimate = jnp.full((), jnp.nan, mode_prob.dtype) if estimates is None else jnp.asarray(estimates)[label]
-        return (candidate, held), Decision(statistic, held >= confirm_steps, label, estimate)
+        return state, Decision(statistic, alarm, label, estimate)
 
-    return Detector(init, step)
+    return Detector(confirmation_init, step)

@@ -38,8 +38,8 @@ def kf_rows(args, log):
     def with_noise(t):
         return model._replace(Q=jnp.diag(jnp.exp(t[0])), R=jnp.diag(jnp.exp(t[1])))
 
-    def jaxfdi_total(t, remat=False):
-        kf = jaxfdi.kalman_filter(with_noise(t))
+    def jaxfdi_total(t, remat=False, unroll=True):
+        kf = jaxfdi.kalman_filter(with_noise(t), unroll_factorizations=unroll)
         kf = tuning.checkpointed(kf) if remat else kf
         return jnp.sum(jax.vmap(lambda y: jaxfdi.run_filter(kf, kf.init(m0, P0), y, us)[1].log_likelihood.sum())(ys))
 
@@ -47,7 +47,9 @@ def kf_rows(args, log):
         return jnp.sum(jax.vmap(lambda y: dynamax_kf(with_noise(t), m0, P0, y, us)[2])(ys))
 
     rows = []
-    impls = {"jaxfdi": jaxfdi_total, "jaxfdi remat": lambda t: jaxfdi_total(t, True), "dynamax": dynamax_total}
+    impls = {"jaxfdi": jaxfdi_total, "jaxfdi remat": lambda t: jaxfdi_total(t, True),
+             "jaxfdi lapack": lambda t: jaxfdi_total(t, unroll=False),
+             "jaxfdi lapack remat": lambda t: jaxfdi_total(t, True, False), "dynamax": dynamax_total}
     values = {}
     for name, total in impls.items():
         fwd, v = compiled_timing(total, (theta,), args.repeats)

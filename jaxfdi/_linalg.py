@@ -59,7 +59,7 @@ def matmul(a: Array, b: Array) -> Array:
     return total if b.ndim == 2 else total[..., 0]
 
 
-def cholesky(matrix: Array) -> Array:
+def cholesky(matrix: Array, unroll: bool = True) -> Array:
     """Lower Cholesky factor ``L`` (``L L^T = A``) of one (n, n) matrix.
 
     Cholesky-Banachiewicz order, element by element for ``n <= UNROLL_MAX``: a matrix
@@ -67,7 +67,7 @@ def cholesky(matrix: Array) -> Array:
     LAPACK path does, so ``cholesky_is_finite`` reports it.
     """
     n = matrix.shape[-1]
-    if matrix.ndim != 2 or n > UNROLL_MAX:
+    if matrix.ndim != 2 or n > UNROLL_MAX or not unroll:
         return jsl.cholesky(matrix, lower=True)
     zero = jnp.zeros((), matrix.dtype)
     L = [[zero] * n for _ in range(n)]
@@ -79,10 +79,10 @@ def cholesky(matrix: Array) -> Array:
     return jnp.stack([jnp.stack(row) for row in L])
 
 
-def solve_lower(chol: Array, rhs: Array) -> Array:
+def solve_lower(chol: Array, rhs: Array, unroll: bool = True) -> Array:
     """``L^{-1} b`` for lower-triangular ``L`` (n, n) and ``b`` (n,) or (n, p)."""
     n = chol.shape[-1]
-    if chol.ndim != 2 or n > UNROLL_MAX:
+    if chol.ndim != 2 or n > UNROLL_MAX or not unroll:
         return jsl.solve_triangular(chol, rhs, lower=True)
     rows = []
     for i in range(n):
@@ -93,10 +93,10 @@ def solve_lower(chol: Array, rhs: Array) -> Array:
     return jnp.stack(rows)
 
 
-def solve_lower_transposed(chol: Array, rhs: Array) -> Array:
+def solve_lower_transposed(chol: Array, rhs: Array, unroll: bool = True) -> Array:
     """``L^{-T} b`` for lower-triangular ``L`` (n, n) and ``b`` (n,) or (n, p)."""
     n = chol.shape[-1]
-    if chol.ndim != 2 or n > UNROLL_MAX:
+    if chol.ndim != 2 or n > UNROLL_MAX or not unroll:
         return jsl.solve_triangular(chol, rhs, lower=True, trans="T")
     rows = [None] * n
     for i in reversed(range(n)):
@@ -107,9 +107,9 @@ def solve_lower_transposed(chol: Array, rhs: Array) -> Array:
     return jnp.stack(rows)
 
 
-def cho_solve(chol: Array, rhs: Array) -> Array:
+def cho_solve(chol: Array, rhs: Array, unroll: bool = True) -> Array:
     """``A^{-1} b`` from the lower Cholesky factor ``L`` of ``A = L L^T``."""
-    return solve_lower_transposed(chol, solve_lower(chol, rhs))
+    return solve_lower_transposed(chol, solve_lower(chol, rhs, unroll), unroll)
 
 
 def psd_solve(matrix: Array, rhs: Array) -> Array:
@@ -150,9 +150,9 @@ def psd_sqrt(cov: Array) -> Array:
     return eigvec * jnp.sqrt(jnp.clip(eigval, 0.0, None))
 
 
-def whiten(chol: Array, innovation: Array) -> Array:
+def whiten(chol: Array, innovation: Array, unroll: bool = True) -> Array:
     """``L^{-1} r`` for ``S = L L^T``; its squared norm is the normalised innovation."""
-    return solve_lower(chol, innovation)
+    return solve_lower(chol, innovation, unroll)
 
 
 def gaussian_log_likelihood(whitened: Array, chol: Array, num_observed: Array | int) -> Array:
@@ -173,6 +173,6 @@ def joseph_cov(cov: Array, gain: Array, H: Array, noise_cov: Array) -> Array:
     return symmetrize(matmul(matmul(I_KH, cov), I_KH.T) + matmul(matmul(gain, noise_cov), gain.T))
 
 
-def gain_from_cross_cov(cross_cov: Array, chol: Array) -> Array:
+def gain_from_cross_cov(cross_cov: Array, chol: Array, unroll: bool = True) -> Array:
     """Kalman gain ``K = P_xy S^{-1}`` by a Cholesky solve (``S = L L^T``)."""
-    return cho_solve(chol, cross_cov.T).T
+    return cho_solve(chol, cross_cov.T, unroll).T

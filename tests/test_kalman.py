@@ -44,9 +44,10 @@ def engine():
     return engine_data()
 
 
-def _runner(missing_measurements):
+def _runner(missing_measurements, unroll_factorizations=True):
     def run(model, m0, P0, ys, us):
-        kf = jaxfdi.kalman_filter(model, missing_measurements=missing_measurements)
+        kf = jaxfdi.kalman_filter(model, missing_measurements=missing_measurements,
+                                  unroll_factorizations=unroll_factorizations)
         return jaxfdi.run_filter(kf, kf.init(m0, P0), ys, us)
 
     return jax.jit(run)
@@ -68,9 +69,11 @@ def assert_rel(actual, expected, rtol, name):
     assert err < rtol, f"{name}: relative error {err:.2e} > {rtol:.0e}"
 
 
-def test_kf_equals_filterpy(engine, run_kf):
+@pytest.mark.parametrize("unroll", [True, False], ids=["unrolled", "lapack"])
+def test_kf_equals_filterpy(engine, run_kf, unroll):
+    """Both small-matrix paths (element-wise factorisations, LAPACK) against filterpy."""
     model, ys, us, m0, P0 = engine
-    _, info = run_kf(model, m0, P0, ys, us)
+    _, info = (run_kf if unroll else _runner(False, False))(model, m0, P0, ys, us)
     ref = filterpy_reference(model, ys, us, m0, P0)
     for name in ref:
         assert_rel(getattr(info, name), ref[name], RTOL, name)

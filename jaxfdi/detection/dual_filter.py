@@ -12,12 +12,15 @@ the two filters' system matrices ``A = dg/dx`` of the continuous model ``x' = g(
 with ``A`` by ``jax.jacfwd`` (never the paper's printed Jacobians). A fault is declared
 when ``F`` exceeds a threshold (calibrated on fault-free runs).
 
-Why it is weak (measured in the reaction-wheel scenario, notebook 05): for the
-spacecraft ``A = -I^-1 ([w]x I - [I w + h_w]x)`` and ``[h]x`` is singular, so
-``det A`` is a cubic in ``(w, h_w)`` that vanishes for a spherical body and is
-``O(|w| |h|^2 (anisotropy))`` otherwise: ``F`` is a scalar, non-monotone projection of
-the rate discrepancy ``x_PF - x_EKF`` that is blind along directions where
-``grad det A`` is small, and ``F`` is zero whenever the two determinants happen to cross.
+Why it is weak (notebook 05; ``tests/test_reaction_wheels_model.py``): for the
+spacecraft ``A = -I^-1 ([w]x I - [L]x)`` with ``L = I w + h_w`` the total body momentum,
+and a cross-product matrix is singular, so ``det A = 0`` whenever ``L = 0`` (and whenever
+``w = 0``, or for a spherical body). A wheel cluster with zero net momentum keeps
+``L = 0`` on the true trajectory whatever the fault (a stop conserves momentum), so ``F``
+sees a fault only through the *model's* momentum error combined with the rate
+discrepancy ``x_PF - x_EKF``: a scalar cubic projection of it that is blind along
+directions where ``grad det A`` is small (in the scenario, a stop of the wheel whose
+axis is nearest the slew axis leaves ``F`` unchanged for seconds).
 """
 from __future__ import annotations
 

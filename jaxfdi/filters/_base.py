@@ -72,9 +72,9 @@ class Filter(NamedTuple):
     predict: Callable[[GaussianState, Array], GaussianState] | None = None
 
 
-def finish_step(prior: GaussianState, post: ConditionedGaussian, prediction: GaussianState):
+def finish_step(prior: GaussianState, post: ConditionedGaussian, prediction: GaussianState, unroll: bool = True):
     """Assemble the next state and the step's ``FilterInfo``; checks ``P[k|k]`` is PD."""
-    chol_P = _linalg.cholesky(post.cov)
+    chol_P = _linalg.cholesky(post.cov, unroll)
     healthy = post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
     info = FilterInfo(
         predicted_mean=prior.mean,
@@ -95,12 +95,14 @@ def gaussian_filter(
     n: int,
     update: Callable[[GaussianState, Array, Array], ConditionedGaussian],
     predict: Callable[[GaussianState, Array], GaussianState],
+    unroll_factorizations: bool = True,
 ) -> Filter:
-    """A ``Filter`` from its measurement update and time update (state size ``n``)."""
+    """A ``Filter`` from its measurement update and time update (state size ``n``);
+    ``unroll_factorizations`` as for the positive-definiteness check of ``P[k|k]``."""
 
     def step(state: GaussianState, y: Array, u: Array):
         post = update(state, y, u)
-        return finish_step(state, post, predict(GaussianState(post.mean, post.cov), u))
+        return finish_step(state, post, predict(GaussianState(post.mean, post.cov), u), unroll_factorizations)
 
     return Filter(gaussian_init(n), step, update, predict)
 

@@ -109,3 +109,11 @@ def test_batch_driver_bad_input(engine_batch, bad, match):
     kwargs = dict(ys=ys_b, us=us) | bad
     with pytest.raises(ValueError, match=match):
         jaxfdi.run_filter_batch(kf, kf.init(m0, P0), **kwargs)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4])
+def test_det_equals_numpy_and_vmaps(n):
+    """The written-out determinant (n <= 3; LU past that) against numpy, one matrix and a batch."""
+    A = np.random.default_rng(n).normal(size=(6, n, n))
+    np.testing.assert_allclose(_linalg.det(jnp.asarray(A[0])), np.linalg.det(A[0]), rtol=1e-13)
+    np.testing.assert_allclose(jax.vmap(_linalg.det)(jnp.asarray(A)), np.linalg.det(A), rtol=1e-13)

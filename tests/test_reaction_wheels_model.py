@@ -569,3 +569,14 @@ def test_bad_input_names_the_argument(params):
             body_rate_field(w, jnp.zeros(size), params)
         with pytest.raises(ValueError, match=r"^u: expected shape \(8,\)"):
             wheel_rate_transition(w, jnp.zeros(size), params)
+
+
+def test_dual_filter_rejects_a_model_of_another_size(params):
+    ekf = estimation_filter(params, Q_SIGMA, GYRO_SIGMA)
+    with pytest.raises(ValueError, match="estimator"):
+        dual_filter(lambda x: x, wheel_rate_transition, body_rate_field, params)
+    bad_field = lambda x, u, p: jnp.concatenate([body_rate_field(x, u, p), jnp.zeros(1)])  # noqa: E731
+    filt = dual_filter(ekf, wheel_rate_transition, bad_field, params)
+    state = filt.init(jnp.zeros(3), 1e-6 * jnp.eye(3))
+    with pytest.raises(ValueError, match=r"^field\(x, u, params\): expected shape \(3,\)"):
+        filt.step(state, jnp.zeros(3), jnp.zeros(8))

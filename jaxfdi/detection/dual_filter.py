@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg
+from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import Filter
 
 
@@ -80,6 +80,9 @@ def dual_filter(
         return DualFilterState(estimator.init(mean, cov), jnp.asarray(mean))
 
     def step(state: DualFilterState, y: Array, u: Array) -> tuple[DualFilterState, DualFilterInfo]:
+        n = _checks.shape_of(state.prediction)
+        for name, fn in (("field(x, u, params)", field), ("transition(x, u, params)", transition)):
+            _checks.check_shape(name, jax.eval_shape(fn, state.prediction, u, params), n, "the state's shape")
         estimator_state, info = estimator.step(state.estimator, y, u)
         det_prediction = system_matrix_det(field, state.prediction, u, params)
         det_estimation = system_matrix_det(field, info.filtered_mean, u, params)

@@ -109,7 +109,7 @@ class WheelDesign(NamedTuple):
 
 
 def wheel_design(dt: float = 0.1, bias_rpm: float = 2000.0, detection_threshold: float = 6e-9,
-                 nis_window: int = NIS_WINDOW, nis_pfa: float = 1e-5, credit_threshold: float = 0.5,
+                 nis_pfa: float = 1e-5, credit_threshold: float = 0.5,
                  mode_threshold: float = 0.9, dtype=None) -> WheelDesign:
     """The scenario's defaults (see the module doc for each choice). ``detection_threshold``
     ``F_T`` is what ``calibrate_fdp_threshold`` gave on 200 fault-free runs (5.95e-9, seed
@@ -125,7 +125,7 @@ def wheel_design(dt: float = 0.1, bias_rpm: float = 2000.0, detection_threshold:
         initial_speeds=bias_rpm * RPM * null,
         gyro_sigma=arr(3e-4), disturbance_sigma=arr(1e-5), wheel_noise_sigma=arr(2e-5),
         estimator_q=arr(1e-4), bank_q=arr(1e-5), initial_sigma=arr(1e-3), engage_sigma=arr(2e-3),
-        detection_threshold=arr(detection_threshold), nis_threshold=chi2_threshold(3 * nis_window, nis_pfa).astype(dtype),
+        detection_threshold=arr(detection_threshold), nis_threshold=chi2_threshold(3 * NIS_WINDOW, nis_pfa).astype(dtype),
         credit_threshold=arr(credit_threshold),
         mode_threshold=arr(mode_threshold), mm_floor=arr(1e-6),
     )

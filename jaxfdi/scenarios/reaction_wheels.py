@@ -332,13 +332,13 @@ def study_cases() -> list[tuple[str, int]]:
 
 
 def case_faults(cases: list[tuple[str, int]], runs: int, key: Array) -> Fault:
-    """A stacked batch of ``len(cases) * runs`` faults, case-major, random onsets."""
+    """A stacked batch of ``len(cases) * runs`` faults, case-major, random onsets (a
+    fault-free run's onset is ``faults.NEVER``: all of it counts for false alarms)."""
     onsets = np.asarray(jax.random.randint(key, (len(cases), runs), ONSET_RANGE[0], ONSET_RANGE[1] + 1))
     faults = []
     for (kind, wheel), onset_row in zip(cases, onsets):
         for onset in onset_row:
-            faults.append(no_fault()._replace(onset=jnp.asarray(int(onset), jnp.int32)) if kind == "none"
-                          else wheel_fault(kind, wheel, int(onset), KINDS[kind]))
+            faults.append(no_fault() if kind == "none" else wheel_fault(kind, wheel, int(onset), KINDS[kind]))
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *faults)
 
 

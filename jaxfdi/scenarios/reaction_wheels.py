@@ -45,7 +45,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg
 from jaxfdi.control.attitude import (
     AttitudeGains,
     Slew,
@@ -55,7 +54,7 @@ from jaxfdi.control.attitude import (
     slew,
     slew_reference,
 )
-from jaxfdi.detection.chi2 import as_decision, chi2_detector, chi2_threshold
+from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
 from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
 from jaxfdi.detection.dual_filter import DualFilterState, dual_filter
 from jaxfdi.detection.mode_probability import mode_probability_detector

@@ -48,44 +48,67 @@ def matmul(a: Array, b: Array) -> Array:
     a, b = jnp.asarray(a), jnp.asarray(b)
     if not is_small(a, b) or a.shape[-1] != b.shape[0]:
         return a @ b
-    k = b.shape[0]
     left = a if a.ndim == 2 else a[None, :]
     right = b if b.ndim == 2 else b[:, None]
-    total = left[:, 0, None] * right[None, 0, :]
-    for j in range(1, k):
-        total = total + left[:, j, None] * right[None, j, :]
+    total = soa_matmul(left, right)
     if a.ndim == 1:
         total = total[0]
     return total if b.ndim == 2 else total[..., 0]
 
 
-def cholesky(matrix: Array, unroll: bool = True) -> Array:
-    """Lower Cholesky factor ``L`` (``L L^T = A``) of one (n, n) matrix.
+# Structure-of-arrays forms. A batch of matrices stored matrix-axes-first, (rows, cols,
+# *batch), makes every element A[i, j] one contiguous batch vector, so the written-out
+# algorithms below are element-wise operations over whole batch vectors, which XLA:CPU
+# vectorises (the vmapped layout, batch first, leaves it 5-element strided rows). The
+# 2-D case (no batch axes) is what ``matmul``, ``cholesky`` and the solves unroll.
 
-    Cholesky-Banachiewicz order, element by element for ``n <= UNROLL_MAX``: a matrix
-    that is not positive definite yields NaN (square root of a negative pivot), as the
-    LAPACK path does, so ``cholesky_is_finite`` reports it.
-    """
-    n = matrix.shape[-1]
-    if matrix.ndim != 2 or n > UNROLL_MAX or not unroll:
-        return jsl.cholesky(matrix, lower=True)
-    zero = jnp.zeros((), matrix.dtype)
-    L = [[zero] * n for _ in range(n)]
+def soa_transpose(a: Array) -> Array:
+    """Per-matrix transpose of a (rows, cols, *batch) stack."""
+    return jnp.swapaxes(a, 0, 1)
+
+
+def soa_matmul(a: Array, b: Array) -> Array:
+    """``a @ b`` per batch element: (p, k, *batch) x (k, q, *batch) -> (p, q, *batch), as
+    ``sum_j a[:, j] b[j, :]`` (batch axes broadcast)."""
+    total = a[:, 0, None] * b[None, 0]
+    for j in range(1, b.shape[0]):
+        total = total + a[:, j, None] * b[None, j]
+    return total
+
+
+def soa_matvec(a: Array, x: Array) -> Array:
+    """``a @ x`` per batch element: (p, k, *batch) x (k, *batch) -> (p, *batch)."""
+    total = a[:, 0] * x[0]
+    for j in range(1, x.shape[0]):
+        total = total + a[:, j] * x[j]
+    return total
+
+
+def soa_cholesky(matrix: Array) -> Array:
+    """Lower Cholesky factor of every matrix of a (n, n, *batch) stack, element by
+    element (Cholesky-Banachiewicz): a matrix that is not positive definite yields NaN
+    (square root of a negative pivot), which ``cholesky_is_finite`` reports."""
+    n = matrix.shape[0]
+    L = [[None] * n for _ in range(n)]
     for j in range(n):
-        pivot = matrix[j, j] - sum((L[j][k] * L[j][k] for k in range(j)), zero)
+        pivot = matrix[j, j]
+        for k in range(j):
+            pivot = pivot - L[j][k] * L[j][k]
         L[j][j] = jnp.sqrt(pivot)
         for i in range(j + 1, n):
-            L[i][j] = (matrix[i, j] - sum((L[i][k] * L[j][k] for k in range(j)), zero)) / L[j][j]
-    return jnp.stack([jnp.stack(row) for row in L])
+            acc = matrix[i, j]
+            for k in range(j):
+                acc = acc - L[i][k] * L[j][k]
+            L[i][j] = acc / L[j][j]
+    zero = jnp.zeros_like(L[0][0])
+    return jnp.stack([jnp.stack([L[i][j] if j <= i else zero for j in range(n)]) for i in range(n)])
 
 
-def solve_lower(chol: Array, rhs: Array, unroll: bool = True) -> Array:
-    """``L^{-1} b`` for lower-triangular ``L`` (n, n) and ``b`` (n,) or (n, p)."""
-    n = chol.shape[-1]
-    if chol.ndim != 2 or n > UNROLL_MAX or not unroll:
-        return jsl.solve_triangular(chol, rhs, lower=True)
+def soa_solve_lower(chol: Array, rhs: Array) -> Array:
+    """``L^{-1} b`` per batch element: ``L`` (n, n, *batch), ``b`` (n, ...) with the
+    batch axes last (forward substitution)."""
     rows = []
-    for i in range(n):
+    for i in range(chol.shape[0]):
         acc = rhs[i]
         for k in range(i):
             acc = acc - chol[i, k] * rows[k]
@@ -93,11 +116,9 @@ def solve_lower(chol: Array, rhs: Array, unroll: bool = True) -> Array:
     return jnp.stack(rows)
 
 
-def solve_lower_transposed(chol: Array, rhs: Array, unroll: bool = True) -> Array:
-    """``L^{-T} b`` for lower-triangular ``L`` (n, n) and ``b`` (n,) or (n, p)."""
-    n = chol.shape[-1]
-    if chol.ndim != 2 or n > UNROLL_MAX or not unroll:
-        return jsl.solve_triangular(chol, rhs, lower=True, trans="T")
+def soa_solve_lower_transposed(chol: Array, rhs: Array) -> Array:
+    """``L^{-T} b`` per batch element, as ``soa_solve_lower`` (back substitution)."""
+    n = chol.shape[0]
     rows = [None] * n
     for i in reversed(range(n)):
         acc = rhs[i]
@@ -105,6 +126,32 @@ def solve_lower_transposed(chol: Array, rhs: Array, unroll: bool = True) -> Arra
             acc = acc - chol[k, i] * rows[k]
         rows[i] = acc / chol[i, i]
     return jnp.stack(rows)
+
+
+def cholesky(matrix: Array, unroll: bool = True) -> Array:
+    """Lower Cholesky factor ``L`` (``L L^T = A``) of one (n, n) matrix: written out
+    (``soa_cholesky``) for ``n <= UNROLL_MAX``, else LAPACK. Either way a matrix that is
+    not positive definite yields NaN, so ``cholesky_is_finite`` reports it."""
+    n = matrix.shape[-1]
+    if matrix.ndim != 2 or n > UNROLL_MAX or not unroll:
+        return jsl.cholesky(matrix, lower=True)
+    return soa_cholesky(matrix)
+
+
+def solve_lower(chol: Array, rhs: Array, unroll: bool = True) -> Array:
+    """``L^{-1} b`` for lower-triangular ``L`` (n, n) and ``b`` (n,) or (n, p)."""
+    n = chol.shape[-1]
+    if chol.ndim != 2 or n > UNROLL_MAX or not unroll:
+        return jsl.solve_triangular(chol, rhs, lower=True)
+    return soa_solve_lower(chol, rhs)
+
+
+def solve_lower_transposed(chol: Array, rhs: Array, unroll: bool = True) -> Array:
+    """``L^{-T} b`` for lower-triangular ``L`` (n, n) and ``b`` (n,) or (n, p)."""
+    n = chol.shape[-1]
+    if chol.ndim != 2 or n > UNROLL_MAX or not unroll:
+        return jsl.solve_triangular(chol, rhs, lower=True, trans="T")
+    return soa_solve_lower_transposed(chol, rhs)
 
 
 def cho_solve(chol: Array, rhs: Array, unroll: bool = True) -> Array:

@@ -225,3 +225,67 @@ def test_bad_input(problem):
         imm.init(np.zeros((2, 3)), P0, np.ones(3) / 3)
     with pytest.raises(ValueError, match=r"y: expected shape \(2,\)"):
         imm.step(imm.init(m0, P0, np.ones(3) / 3), np.zeros(3), us[0])
+
+
+@pytest.fixture(scope="module")
+def batch_problem(problem):
+    """Three runs (the data, reversed, halved) with per-run inputs, and the IMM."""
+    modes, ys, us, m0, P0 = problem
+    imm = interacting_multiple_model(kalman_filter, modes, TRANSITION)
+    ys_batch = np.stack([ys, ys[::-1], 0.5 * ys])
+    us_batch = np.stack([us, -us, us[::-1]])
+    return imm, imm.init(m0, P0, np.array([0.8, 0.1, 0.1]) @ TRANSITION), ys_batch, us_batch
+
+
+def test_batch_kernel_equals_vmap_and_filterpy(problem, batch_problem):
+    """run_filter_batch runs the structure-of-arrays kernel (standard-form covariance
+    update); every output equals vmap(run_filter) (Joseph form) and filterpy's IMM."""
+    modes, _, _, m0, P0 = problem
+    imm, init, ys, us = batch_problem
+    assert imm.batch is not None
+    final, info = run_filter_batch(imm, init, ys, us)
+    ref_final, ref_info = jax.vmap(lambda y, u: run_filter(imm, init, y, u))(ys, us)
+    for name, got, want in zip(info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)):
+        assert got.shape == want.shape, name
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, err_msg=name)
+    assert bool(info.healthy.all())
+    for run in range(3):
+        ref = IMMEstimator(filterpy_bank(modes, m0, P0), np.array([0.8, 0.1, 0.1]), TRANSITION)
+        ref_mu, ref_P = [], []
+        for k in range(T):
+            ref.update(ys[run, k])
+            ref_mu.append(ref.mu.copy()), ref_P.append(ref.P.copy())
+            ref.predict(us[run, k])
+        np.testing.assert_allclose(info.mode_prob[run], ref_mu, rtol=1e-8, atol=1e-12)
+        np.testing.assert_allclose(info.cov[run], ref_P, rtol=1e-8, atol=1e-12)
+
+
+def test_batch_kernel_shared_inputs_gradient_and_health(problem, batch_problem):
+    modes, _, us_shared, m0, P0 = problem
+    imm, init, ys, _ = batch_problem
+    _, info = run_filter_batch(imm, init, ys, us_shared)               # (T, nu) shared by the runs
+    _, ref = jax.vmap(lambda y: run_filter(imm, init, y, us_shared))(ys)
+    np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)
+
+    bad = ys.copy()
+    bad[1, 25, 0] = np.nan                                              # numerical trouble in run 1
+    _, info = run_filter_batch(imm, init, bad, us_shared)
+    _, ref = jax.vmap(lambda y: run_filter(imm, init, y, us_shared))(bad)
+    np.testing.assert_array_equal(info.healthy, ref.healthy)
+    assert not bool(info.healthy[1, 25]) and bool(info.healthy[0].all()) and bool(info.healthy[1, :25].all())
+
+    def mean_log_likelihood(logits):
+        filt = interacting_multiple_model(kalman_filter, modes, jax.nn.softmax(logits, axis=1))
+        return jnp.mean(run_filter_batch(filt, init, ys, us_shared)[1].log_likelihood)
+
+    chex.assert_numerical_grads(mean_log_likelihood, (jnp.log(TRANSITION + 0.02),), order=1, atol=1e-6, rtol=1e-5)
+
+
+def test_batch_kernel_only_for_small_kalman_modes(problem):
+    modes, *_ = problem
+    big = jax.tree.map(lambda a: a, modes)._replace(
+        Phi=jnp.broadcast_to(jnp.eye(9) * 0.9, (3, 9, 9)), Gamma=jnp.zeros((3, 9, 1)), C=jnp.zeros((3, 2, 9)),
+        Q=jnp.broadcast_to(jnp.eye(9), (3, 9, 9)))
+    assert interacting_multiple_model(kalman_filter, big, TRANSITION).batch is None  # 9 > UNROLL_MAX states
+    masked = interacting_multiple_model(lambda p: kalman_filter(p, missing_measurements=True), modes, TRANSITION)
+    assert masked.batch is None  # any other mode filter runs under vmap

@@ -53,6 +53,22 @@ class ConditionedGaussian(NamedTuple):
     healthy: Array         # () bool
 
 
+class BatchKernel(NamedTuple):
+    """A filter's step for a whole batch of runs in a layout of its own (e.g. structure of
+    arrays), which ``run_filter_batch`` uses instead of ``vmap`` when a filter has one.
+
+    ``pack(state, N)`` lays out the prior shared by the N runs; ``step(carry, y, u)``
+    takes ``y`` (m, N) and ``u`` (nu, N) or (nu, 1); ``unpack_state(carry)`` and
+    ``unpack_info(info)`` (the step's info stacked over time) give back what
+    ``vmap(run_filter)`` gives: a leading run axis on every field.
+    """
+
+    pack: Callable[[Any, int], Any]
+    step: Callable[[Any, Array, Array], tuple[Any, Any]]
+    unpack_state: Callable[[Any], Any]
+    unpack_info: Callable[[Any], Any]
+
+
 class Filter(NamedTuple):
     """A filter as pure functions.
 
@@ -64,12 +80,16 @@ class Filter(NamedTuple):
     ``update(state, y, u) -> ConditionedGaussian`` and
     ``predict(posterior: GaussianState, u) -> GaussianState``; ``step`` is
     ``predict(update(...))`` plus the ``FilterInfo``.
+
+    ``batch``, when present, is the same step for a batch of runs (``BatchKernel``),
+    what ``run_filter_batch`` runs.
     """
 
     init: Callable[..., Any]
     step: Callable[[Any, Array, Array], tuple[Any, Any]]
     update: Callable[[Any, Array, Array], ConditionedGaussian] | None = None
     predict: Callable[[GaussianState, Array], GaussianState] | None = None
+    batch: BatchKernel | None = None
 
 
 def finish_step(prior: GaussianState, post: ConditionedGaussian, prediction: GaussianState, unroll: bool = True):
@@ -182,6 +202,9 @@ def run_filter_batch(
 ) -> tuple[Any, Any]:
     """Run a filter over a batch of sequences (Monte Carlo runs) with ``vmap``.
 
+    A filter with a ``batch`` kernel (the IMM over ``kalman_filter`` modes) runs it: one
+    step for all runs in its own layout, with the same results as ``vmap``.
+
     When every run shares the model and the initial covariance, a linear Kalman filter's
     covariances, gains and innovation covariances do not depend on the data: XLA then
     computes them once for the whole batch, and this driver returns them once (no run
@@ -221,6 +244,8 @@ def run_filter_batch(
             f"shared_covariance: only Gaussian filters (KF) can share covariances across runs, "
             f"got a {type(init_state).__name__}; use shared_covariance=False or 'auto'"
         )
+    if filt.batch is not None:
+        return _kernel_scan(filt.batch, init_state, ys, us)
     if shared_covariance is False or not gaussian:
         return _batch_scan(filt, init_state, ys, us, us_axis, False)
     try:
@@ -245,6 +270,15 @@ def _batch_scan(filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, sh
         final_axes = info_axes = 0
     run_one = partial(_scan_filter.__wrapped__, filt, init_state)
     return jax.vmap(run_one, in_axes=(0, us_axis), out_axes=(final_axes, info_axes))(ys, us)
+
+
+@partial(jax.jit, static_argnums=0)
+def _kernel_scan(kernel: BatchKernel, init_state: Any, ys: Array, us: Array):
+    num_runs = ys.shape[0]
+    ys = jnp.moveaxis(ys, 0, -1)                                          # (T, m, N)
+    us = jnp.moveaxis(us, 0, -1) if us.ndim == 3 else us[..., None]       # (T, nu, N or 1)
+    final, info = jax.lax.scan(lambda state, yu: kernel.step(state, *yu), kernel.pack(init_state, num_runs), (ys, us))
+    return kernel.unpack_state(final), kernel.unpack_info(info)
 
 
 @partial(jax.jit, static_argnums=0)

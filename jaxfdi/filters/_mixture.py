@@ -123,12 +123,23 @@ def log_normalizer(logits: Array, axis: int = -1) -> Array:
     return jnp.where(positive, jnp.log(jnp.where(positive, total, 1.0)) + jnp.squeeze(top, axis), -jnp.inf)
 
 
-def bayes_mode_update(log_prior: Array, log_likelihood: Array) -> tuple[Array, Array]:
-    """``log mu_j = log L_j + log prior_j - log sum_i L_i prior_i``; also returns the
-    mixture log-likelihood ``log sum_i L_i prior_i`` (Bar-Shalom et al. 2001, eq. 11.6.6-19)."""
+def bayes_mode_update(log_prior: Array, log_likelihood: Array, axis: int = -1) -> tuple[Array, Array]:
+    """``log mu_j = log L_j + log prior_j - log sum_i L_i prior_i`` (modes along ``axis``);
+    also returns the mixture log-likelihood ``log sum_i L_i prior_i`` (Bar-Shalom et al.
+    2001, eq. 11.6.6-19)."""
     joint = log_likelihood + log_prior
-    log_mix = log_normalizer(joint)
-    return joint - log_mix, log_mix
+    log_mix = log_normalizer(joint, axis=axis)
+    return joint - jnp.expand_dims(log_mix, axis), log_mix
+
+
+def mixing(log_mode_prob: Array, log_transition: Array) -> tuple[Array, Array]:
+    """``(log cbar (M,), mixing weights mu_{i|j} (M, M))`` in log space: columns ``j``
+    of the weights sum to 1 (a column of ``-inf`` logits gives zeros, not NaN). Trailing
+    batch axes broadcast: ``(M, N)`` and ``(M, M, 1)`` give ``(M, N)``, ``(M, M, N)``."""
+    joint = log_mode_prob[:, None] + log_transition  # log pi_ij mu_i
+    log_cbar = log_normalizer(joint, axis=0)
+    weights = jnp.exp(joint - jnp.where(jnp.isfinite(log_cbar), log_cbar, 0.0)[None, :])
+    return log_cbar, jnp.where(jnp.isfinite(log_cbar)[None, :], weights, 0.0)
 
 
 def moment_match(weights: Array, means: Array, covs: Array) -> tuple[Array, Array]:

@@ -145,7 +145,8 @@ def _run_vtol(args: argparse.Namespace) -> int:
           f"{args.runs} closed-loop runs per fault with FTC off and on; statistic chi2({cfg['dof']}): "
           f"chi2 thresholds {cfg['chi2_threshold']:.2f} / window {cfg['chi2_window_threshold']:.2f}, paper's "
           f"{cfg['paper_threshold']} / {cfg['paper_window_threshold']}; MDWT M = {cfg['levels']}, c = {cfg['c_mult']}")
-    print("'ours' thresholds: per filter, the larger of the chi2 one and the fault-free 99.5 % quantile "
+    print("'ours' thresholds: per filter, the larger of the chi2 one and the fault-free 99.5 % quantile, then "
+          f"per method scaled so that at most {cfg['run_false_alarm']:.0%} of the fault-free runs show a symptom "
           f"({cfg['calibration_runs']} calibration runs, another seed):")
     for method, row in cfg["thresholds"].items():
         print(f"  {method:<8} " + " ".join(f"{name} {value:.1f}" for name, value in row.items()))

@@ -289,3 +289,11 @@ def test_batch_kernel_only_for_small_kalman_modes(problem):
     assert interacting_multiple_model(kalman_filter, big, TRANSITION).batch is None  # 9 > UNROLL_MAX states
     masked = interacting_multiple_model(lambda p: kalman_filter(p, missing_measurements=True), modes, TRANSITION)
     assert masked.batch is None  # any other mode filter runs under vmap
+
+
+def test_batch_kernel_rejects_bad_shapes(batch_problem):
+    imm, init, ys, us = batch_problem
+    with pytest.raises(ValueError, match=r"y: expected shape \(2,\)"):
+        run_filter_batch(imm, init, ys[..., :1], us)
+    with pytest.raises(ValueError, match=r"u: expected shape \(1,\)"):
+        run_filter_batch(imm, init, ys, np.concatenate([us, us], axis=-1))

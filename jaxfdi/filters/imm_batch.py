@@ -31,7 +31,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _linalg
-from jaxfdi.filters._base import BatchKernel
+from jaxfdi.filters._base import BatchKernel, check_step_inputs
 from jaxfdi.filters._mixture import IMMInfo, IMMState, bayes_mode_update, mixing
 from jaxfdi.models.linear import LinearGaussianModel
 
@@ -75,7 +75,7 @@ def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -
     """``BatchKernel`` of the IMM over ``kalman_filter`` modes (``modes`` stacked on a
     leading axis M, ``log_transition`` (M, M) = ``log pi``)."""
     soa = soa_modes(modes)
-    n, m = soa.Phi.shape[0], soa.C.shape[0]
+    n, nu, m = soa.Phi.shape[0], soa.Gamma.shape[1], soa.C.shape[0]
     log_pi = log_transition[:, :, None]  # (M_i, M_j, 1)
 
     def pack(state: IMMState, num_runs: int) -> IMMState:
@@ -86,6 +86,7 @@ def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -
 
     def step(state: IMMState, y: Array, u: Array) -> tuple[IMMState, IMMInfo]:
         """``y`` (m, N), ``u`` (nu, N) or (nu, 1)."""
+        check_step_inputs(y[:, 0], u[:, 0], m, nu)
         x, P = state.mode_mean, state.mode_cov
         u = u[:, None]
         # 1. every mode's measurement update (standard form, see the module doc)

@@ -20,8 +20,12 @@ SMALL = ["--steps", "20", "--train-runs", "2", "--runs", "10", "--quiet"]
 @pytest.fixture(scope="module")
 def imm_tuned(tmp_path_factory):
     out = tmp_path_factory.mktemp("tune-imm")
-    assert main(["tune", "engine-imm", *SMALL, "--out", str(out)]) == 0
-    return out, json.loads((out / "engine-imm-tuning.json").read_text())
+    # the tuned detector confirms over 2 steps (trained for it, confirmed_probabilities);
+    # the paper's reference keeps its 1-step rule
+    assert main(["tune", "engine-imm", *SMALL, "--confirm-steps", "2", "--out", str(out)]) == 0
+    report = json.loads((out / "engine-imm-tuning.json").read_text())
+    assert report["config"]["confirm_steps"] == 2
+    return out, report
 
 
 @pytest.mark.parametrize("design", sorted(et.DESIGNS))
@@ -54,3 +58,33 @@ def test_saved_imm_parameters_are_valid_and_reload(imm_tuned, design):
     for name, value in result["tuned_params"].items():
         np.testing.assert_allclose(np.asarray(params[name]), value, rtol=1e-12)
     assert meta["best_step"] == result["history"]["best_step"] and meta["design"] == design
+
+
+def test_bad_confirm_steps_exit_2():
+    assert main(["tune", "engine-imm", "--confirm-steps", "0"]) == 2
+
+
+@pytest.mark.parametrize("confirm_steps", [1, 2, 3])
+def test_confirmed_probabilities_reproduce_the_confirming_detector(confirm_steps):
+    """The loss's surrogate of the k-step confirmation against the detector itself (brute
+    force over random mode-probability sequences): for mu_T >= 0.5 the detector alarms at
+    k exactly when max_j min_{i<c} mu_j(k - i) >= mu_T, and labels that j."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxfdi.detection.mode_probability import mode_probability_detector
+
+    rng = np.random.default_rng(confirm_steps)
+    mu = rng.dirichlet(np.full(7, 0.3), size=(20, 30))                     # (R, T, M), spiky
+    for k in range(1, mu.shape[1]):                                         # and persistent
+        mu[:, k] = 0.7 * mu[:, k - 1] + 0.3 * mu[:, k]
+    confirmed = np.asarray(et.confirmed_probabilities(jnp.asarray(mu[..., 1:]), confirm_steps))
+    for threshold in (0.5, 0.7):
+        detector = mode_probability_detector(threshold, confirm_steps=confirm_steps)
+        decisions = jax.vmap(lambda m: jax.lax.scan(detector.step, detector.init(), m)[1])(jnp.asarray(mu))
+        expected_alarm = confirmed.max(-1) >= threshold
+        np.testing.assert_array_equal(np.asarray(decisions.alarm), expected_alarm)
+        label = 1 + confirmed.argmax(-1)
+        np.testing.assert_array_equal(np.asarray(decisions.label)[expected_alarm], label[expected_alarm])
+        if threshold == 0.5:  # the comparison is not vacuous
+            assert expected_alarm.any() and not expected_alarm.all()

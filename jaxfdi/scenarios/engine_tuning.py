@@ -19,8 +19,11 @@ Loss per run (``imm_loss``):
 
 where the soft detection loss (``tuning.soft_detection_loss``) counts false alarms,
 misses, delay and misisolation (the label at the first alarm, ``argmax_{j>0} mu_j``, is
-not the fault: margin ``max_{j != fault} mu_j - mu_fault``). The held-out comparison uses
-the same records and summaries as ``jaxfdi run engine``.
+not the fault: margin ``max_{j != fault} mu_j - mu_fault``). With ``confirm_steps = c``
+the detector is ``mode_probability_detector(mu_T, confirm_steps=c)`` and the loss sees its
+surrogate, the fault-mode probabilities' minimum over the last c steps
+(``confirmed_probabilities``). The held-out comparison uses the same records and
+summaries as ``jaxfdi run engine``.
 """
 from __future__ import annotations
 
@@ -139,12 +142,25 @@ class LossWeights(NamedTuple):
     temperature: float = 0.05   # of the sigmoid alarm, in units of mu
 
 
+def confirmed_probabilities(fault_mu: jax.Array, confirm_steps: int) -> jax.Array:
+    """``min_{0 <= i < c} mu_j(k - i)`` per fault mode (R, T, J), 0 for ``k < c - 1``:
+    the surrogate of ``mode_probability_detector(mu_T, confirm_steps=c)``, exact for
+    ``mu_T >= 0.5`` (a mode at or above 0.5 is the top fault mode): the confirmed alarm
+    at k is ``max_j min_i mu_j(k - i) >= mu_T``, labelled with that j."""
+    confirmed = fault_mu
+    for lag in range(1, confirm_steps):
+        shifted = jnp.pad(fault_mu[:, :-lag], ((0, 0), (lag, 0), (0, 0)))
+        confirmed = jnp.minimum(confirmed, shifted)
+    return confirmed
+
+
 def imm_loss(design: ImmDesign, params: dict[str, Any], data: LabelledRuns, weights: LossWeights = LossWeights(),
-             remat: bool = True) -> tuple[jax.Array, dict[str, jax.Array]]:
-    """Mean over runs of the mode cross-entropy plus the weighted soft detection loss."""
+             remat: bool = True, confirm_steps: int = 1) -> tuple[jax.Array, dict[str, jax.Array]]:
+    """Mean over runs of the mode cross-entropy plus the weighted soft detection loss of
+    the detector with ``confirm_steps`` (``confirmed_probabilities``)."""
     log_mu = mode_log_probs(design, params, data.ys, remat)
     cross_entropy = jax.vmap(losses.mode_cross_entropy)(log_mu, data.modes)
-    fault_mu = jnp.exp(log_mu[..., 1:])                   # (R, T, 6)
+    fault_mu = confirmed_probabilities(jnp.exp(log_mu[..., 1:]), confirm_steps)   # (R, T, 6)
     statistic = jnp.max(fault_mu, axis=-1)                # eq. 13: the largest fault-mode probability
     own = jax.nn.one_hot(data.fault, NUM_FAULTS, dtype=bool)[:, None, :]  # all False for fault-free runs
     correct = jnp.sum(jnp.where(own, fault_mu, 0.0), axis=-1)
@@ -158,23 +174,27 @@ def imm_loss(design: ImmDesign, params: dict[str, Any], data: LabelledRuns, weig
 
 def tune_engine_imm(design: ImmDesign, steps: int = 150, train_runs: int = 16, val_runs: int = 4,
                     batch_runs: int = 4, seed: int = 0, learning_rate: float = 0.05,
-                    weights: LossWeights = LossWeights(), progress: bool = False) -> TrainResult:
-    """Train ``design`` from its hand-set parameters. Training runs come from ``seed``,
-    validation from ``seed + 1`` (the CLI tests on ``seed + 1000``)."""
+                    weights: LossWeights = LossWeights(), progress: bool = False,
+                    confirm_steps: int = 1) -> TrainResult:
+    """Train ``design`` from its hand-set parameters for the detector with
+    ``confirm_steps``. Training runs come from ``seed``, validation from ``seed + 1`` (the
+    CLI tests on ``seed + 1000``)."""
     train = labelled_runs(train_runs, seed)
     val = labelled_runs(val_runs, seed + 1)
     train_batch = balanced_batches(train, train_runs, batch_runs, jax.random.key(seed))
 
     def loss(raw, data):
-        return imm_loss(design, constrain(design.parameterization, raw), data, weights)[0]
+        return imm_loss(design, constrain(design.parameterization, raw), data, weights, confirm_steps=confirm_steps)[0]
 
     raw0 = unconstrain(design.parameterization, design.hand())
     return fit(loss, raw0, optax.adam(learning_rate), train_batch, val, steps, eval_every=10, patience=4,
                progress=progress)
 
 
-def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, seed: int) -> tuple[list[dict], float]:
-    """Held-out rows (``summarize_method``: rates, delays) and the mean mode cross-entropy.
+def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, seed: int,
+                        confirm_steps: int = 1) -> tuple[list[dict], float]:
+    """Held-out rows (``summarize_method``: rates, delays) of the detector with
+    ``confirm_steps`` (1: the paper's rule) and the mean mode cross-entropy.
 
     The runs and their keys are ``run_method``'s; ``params`` enter the compiled program
     as data (not constants), so that evaluating the hand-set and the tuned parameters
@@ -186,8 +206,8 @@ def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, se
     def run_one(key, data):
         f, p = data
         filt, state0 = imm_filter(design, p)
-        method = Method(filt, state0, mode_probability_detector(p["mu_threshold"]), design.detector_input,
-                        design.estimate_delay, "IMM")
+        detector = mode_probability_detector(p["mu_threshold"], confirm_steps=confirm_steps)
+        method = Method(filt, state0, detector, design.detector_input, design.estimate_delay, "IMM")
         return run_monitor(method, model, us, key, f).record
 
     records = monte_carlo(run_one, jax.random.key(seed), num_runs, per_run, chunk_size=1024)

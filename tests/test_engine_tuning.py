@@ -21,10 +21,12 @@ SMALL = ["--steps", "20", "--train-runs", "2", "--runs", "10", "--quiet"]
 def imm_tuned(tmp_path_factory):
     out = tmp_path_factory.mktemp("tune-imm")
     # the tuned detector confirms over 2 steps (trained for it, confirmed_probabilities);
-    # the paper's reference keeps its 1-step rule
-    assert main(["tune", "engine-imm", *SMALL, "--confirm-steps", "2", "--out", str(out)]) == 0
+    # the paper's reference keeps its 1-step rule; mu_T is frozen in training and then
+    # chosen per mode on selection runs
+    assert main(["tune", "engine-imm", *SMALL, "--confirm-steps", "2", "--freeze", "mu_threshold",
+                 "--select-thresholds", "--selection-runs", "4", "--out", str(out)]) == 0
     report = json.loads((out / "engine-imm-tuning.json").read_text())
-    assert report["config"]["confirm_steps"] == 2
+    assert report["config"]["confirm_steps"] == 2 and report["config"]["select_thresholds"]
     return out, report
 
 
@@ -42,6 +44,10 @@ def test_each_imm_design_held_out_cross_entropy_at_least_30_percent_lower(imm_tu
     assert tuned["none"]["false_alarm_rate"] <= paper["none"]["false_alarm_rate"]
     # the report's list of worse metrics is the comparison of the two tables
     assert result["worse"] == et.worse_metrics(result["paper"], result["tuned"], ce["paper"], ce["tuned"])
+    # the per-mode thresholds never do worse on their own selection runs than the trained scalar
+    selection = result["threshold_selection"]["shortfall"]
+    assert selection["selected"] <= selection["trained"]
+    assert (result["shortfall"] == 0.0) == (not [w for w in result["worse"] if w != "cross-entropy"])
 
 
 @pytest.mark.parametrize("design", sorted(et.DESIGNS))
@@ -53,15 +59,54 @@ def test_saved_imm_parameters_are_valid_and_reload(imm_tuned, design):
     pi = np.asarray(params["transition"])
     np.testing.assert_allclose(pi.sum(axis=1), 1.0, atol=1e-12)
     assert np.all(pi[~et.imm_design(design).transition_mask] == 0.0) and np.all(pi >= 0)
-    assert 0.0 < float(params["mu_threshold"]) < 1.0
+    thresholds = np.asarray(params["mu_threshold"])
+    assert thresholds.shape == (7,) and np.all((thresholds > 0) & (thresholds < 1))
+    assert float(thresholds[0]) == et.imm_design(design).hand()["mu_threshold"]  # frozen; normal entry unused
     assert all(np.all(np.asarray(v) > 0) for k, v in params.items() if k not in ("transition", "mu_threshold"))
     for name, value in result["tuned_params"].items():
         np.testing.assert_allclose(np.asarray(params[name]), value, rtol=1e-12)
     assert meta["best_step"] == result["history"]["best_step"] and meta["design"] == design
 
 
-def test_bad_confirm_steps_exit_2():
+def test_bad_confirm_steps_freeze_and_selection_runs_exit_2():
     assert main(["tune", "engine-imm", "--confirm-steps", "0"]) == 2
+    assert main(["tune", "engine-imm", "--selection-runs", "0"]) == 2
+    assert main(["tune", "engine-imm", "--design", "zhang-li", "--freeze", "bias_walk", "--quiet"]) == 2
+
+
+def test_replayed_detector_records_equal_the_monitored_runs():
+    """select_mode_thresholds replays the detector on stored mode probabilities; on the
+    same runs its rows equal those of the full closed simulation + filter + detector
+    (evaluate_engine_imm, i.e. run_monitor), for a scalar and a per-mode mu_T."""
+    import jax.numpy as jnp
+
+    from jaxfdi.scenarios.engine import labelled_runs, summarize_method
+
+    design = et.imm_design("zhang-li")
+    runs, seed = 3, 11
+    data = labelled_runs(runs, seed)
+    mode_prob = jnp.exp(et.mode_log_probs(design, design.hand(), data.ys))
+    for threshold in (0.5, jnp.array([0.5, 0.35, 0.6, 0.9, 0.5, 0.7, 0.45])):
+        params = dict(design.hand(), mu_threshold=jnp.asarray(threshold))
+        monitored, _ = et.evaluate_engine_imm(design, params, runs, seed)
+        replayed = summarize_method(design.method, "IMM", et.detector_records(mode_prob, data.onsets, threshold),
+                                    runs, data.ys.shape[1])
+        keys = ("detection_rate", "isolation_rate", "false_alarm_rate", "delay_median_s", "delay_p90_s")
+        for a, b in zip(monitored, replayed):
+            for key in keys:
+                np.testing.assert_equal(a[key], b[key], err_msg=f"{a['fault']} {key}")
+
+
+def test_loss_with_equal_per_mode_thresholds_equals_the_scalar_one():
+    import jax.numpy as jnp
+
+    from jaxfdi.scenarios.engine import labelled_runs
+
+    design = et.imm_design("zhang-li")
+    data = labelled_runs(1, 3)
+    scalar = et.imm_loss(design, dict(design.hand(), mu_threshold=jnp.asarray(0.6)), data, remat=False)[0]
+    vector = et.imm_loss(design, dict(design.hand(), mu_threshold=jnp.full(7, 0.6)), data, remat=False)[0]
+    np.testing.assert_allclose(float(vector), float(scalar), rtol=1e-12)
 
 
 @pytest.mark.parametrize("confirm_steps", [1, 2, 3])

@@ -9,13 +9,13 @@ from jaxfdi.detection.mode_probability import mode_probability_detector
 
 
 def _reference(mu, estimates, threshold, confirm, normal=0):
-    """Step by step: the top fault mode, how long it has stayed >= threshold, the alarm."""
+    """Step by step: the top fault mode, how long it has stayed >= its threshold, the alarm."""
     candidate, held, out = -1, 0, []
     for p, e in zip(mu, estimates):
         fault = p.copy()
         fault[normal] = -np.inf
         label = int(np.argmax(fault))
-        if fault[label] >= threshold:
+        if fault[label] >= np.broadcast_to(threshold, p.shape)[label]:
             held = held + 1 if label == candidate else 1
             candidate = label
         else:
@@ -44,6 +44,24 @@ def test_equals_reference_loop(confirm, normal):
     np.testing.assert_allclose(decision.estimate, estimate, rtol=1e-12)
 
 
+@pytest.mark.parametrize("confirm", [1, 2])
+def test_per_mode_thresholds_equal_reference_loop(confirm):
+    rng = np.random.default_rng(confirm)
+    T, M = 300, 5
+    mu = rng.dirichlet(np.full(M, 0.5), size=T)              # persistent, mid-range probabilities
+    for k in range(1, T):
+        mu[k] = 0.7 * mu[k - 1] + 0.3 * mu[k]
+    estimates = rng.normal(size=(T, M))
+    threshold = np.array([1.0, 0.35, 0.6, 0.9, 0.5])   # the normal mode's entry is not used
+    det = mode_probability_detector(jnp.asarray(threshold), confirm_steps=confirm)
+    _, decision = jax.jit(lambda xs: jax.lax.scan(det.step, det.init(), xs))((jnp.asarray(mu), jnp.asarray(estimates)))
+    _, alarm, label, _ = _reference(mu, estimates, threshold, confirm)
+    scalar = _reference(mu, estimates, 0.5, confirm)[1]
+    assert alarm.any() and not np.array_equal(alarm, scalar)   # the per-mode levels matter here
+    np.testing.assert_array_equal(decision.alarm, alarm)
+    np.testing.assert_array_equal(decision.label, label)
+
+
 def test_confirmation_delays_and_filters_flicker():
     """A fault mode above mu_T for 2 steps, then another for 3: confirm 3 alarms only on
     the third step of the second, confirm 1 at once."""
@@ -66,6 +84,11 @@ def test_bad_input():
     for confirm in (0, 2.5):
         with pytest.raises(ValueError, match="^confirm_steps:"):
             mode_probability_detector(0.5, confirm_steps=confirm)
+    with pytest.raises(ValueError, match="^threshold:"):
+        mode_probability_detector(np.array([0.5, 0.0, 0.7]))
+    det = mode_probability_detector(jnp.full(4, 0.5))
+    with pytest.raises(ValueError, match=r"^threshold: expected shape \(3,\)"):
+        det.step(det.init(), jnp.ones(3) / 3)
     det = mode_probability_detector(0.5)
     with pytest.raises(ValueError, match="^mode_prob:"):
         det.step(det.init(), jnp.ones((2, 3)) / 3)

@@ -14,6 +14,7 @@ runs; ``c`` steps of confirmation let the slower T4 and RPM responses decide.
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
@@ -41,14 +42,16 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps: in
     ``estimate`` is that of the isolated mode.
 
     Args:
-      threshold: ``mu_T`` in (0, 1] (seed 003 uses 0.5).
+      threshold: ``mu_T`` in (0, 1] (seed 003 uses 0.5), or (M,) one per mode: the top
+        fault mode j alarms when ``mu_j >= threshold[j]`` (the normal mode's entry is
+        not used).
       normal_mode: index of the fault-free mode.
       confirm_steps: consecutive steps the same mode must stay the top fault mode at or
         above ``mu_T`` before an alarm (1: the paper's memoryless rule).
     """
     value = _checks.concrete(threshold)
-    if value is not None and not (value.shape == () and 0.0 < value <= 1.0):
-        raise ValueError(f"threshold: expected a probability mu_T in (0, 1], got {threshold}")
+    if value is not None and not (value.ndim <= 1 and np.all((0.0 < value) & (value <= 1.0))):
+        raise ValueError(f"threshold: expected a probability mu_T in (0, 1], or one per mode (M,), got {threshold}")
     if int(confirm_steps) != confirm_steps or confirm_steps < 1:
         raise ValueError(f"confirm_steps: expected an integer >= 1, got {confirm_steps}")
 
@@ -62,7 +65,11 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps: in
         fault_prob = mode_prob.at[normal_mode].set(-jnp.inf)
         label = jnp.argmax(fault_prob).astype(jnp.int32)
         statistic = fault_prob[label]
-        state, alarm = confirm(state, label, statistic >= threshold, confirm_steps)
+        level = jnp.asarray(threshold)
+        if level.ndim == 1:
+            _checks.check_shape("threshold", level, mode_prob.shape, "one mu_T per mode, or a scalar")
+            level = level[label]
+        state, alarm = confirm(state, label, statistic >= level, confirm_steps)
         estimate = jnp.full((), jnp.nan, mode_prob.dtype) if estimates is None else jnp.asarray(estimates)[label]
         return state, Decision(statistic, alarm, label, estimate)
 

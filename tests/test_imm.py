@@ -15,6 +15,7 @@ from jaxfdi.filters import (
     unscented_kalman_filter,
 )
 from jaxfdi.models import LinearGaussianModel
+from jaxfdi.tuning import checkpointed
 from jaxfdi.models.fault_modes import noise_inflation_modes
 
 T = 40
@@ -279,6 +280,14 @@ def test_batch_kernel_shared_inputs_gradient_and_health(problem, batch_problem):
         return jnp.mean(run_filter_batch(filt, init, ys, us_shared)[1].log_likelihood)
 
     chex.assert_numerical_grads(mean_log_likelihood, (jnp.log(TRANSITION + 0.02),), order=1, atol=1e-6, rtol=1e-5)
+
+    def remat_mean_log_likelihood(logits):   # the kernel's step rematerialised: same gradient
+        filt = checkpointed(interacting_multiple_model(kalman_filter, modes, jax.nn.softmax(logits, axis=1)))
+        return jnp.mean(run_filter_batch(filt, init, ys, us_shared)[1].log_likelihood)
+
+    logits = jnp.log(TRANSITION + 0.02)
+    np.testing.assert_allclose(jax.grad(remat_mean_log_likelihood)(logits), jax.grad(mean_log_likelihood)(logits),
+                               rtol=1e-10, atol=1e-12)
 
 
 def test_batch_kernel_only_for_small_kalman_modes(problem):

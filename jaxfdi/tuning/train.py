@@ -44,7 +44,10 @@ class TrainResult(NamedTuple):
 
 
 def checkpointed(filt: Filter) -> Filter:
-    """The same filter with its ``step`` rematerialised in the reverse pass."""
+    """The same filter with its ``step`` (and its batch kernel's) rematerialised in the
+    reverse pass."""
+    if getattr(filt, "batch", None) is not None:
+        filt = filt._replace(batch=filt.batch._replace(step=jax.checkpoint(filt.batch.step)))
     return filt._replace(step=jax.checkpoint(filt.step))
 
 

@@ -27,7 +27,9 @@ Departures and findings (see also the closing notes of issue 5):
   gain for the nominal model but the true plant (with the uncertainty) diverges, so the
   paper's choice is kept;
 * with the pitch-acceleration input decoupled, an additive collective (a1) fault is
-  also explained by an s4 bias: the bank isolates it only up to {a1, s4}.
+  also explained by an s4 bias in steady state (its direction lies within 0.4 % of what
+  an s4 bias and the decoupled input can produce); the signature decisions still isolate
+  it, in the transient after the onset (MDWT-ST 1.00 over 100 runs, median 7 steps).
 """
 from __future__ import annotations
 

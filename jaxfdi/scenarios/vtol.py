@@ -214,6 +214,9 @@ def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_
         return thresholds
     rates = jax.jit(lambda scale: runs_with_symptoms(values, design, thresholds * scale[:, None]))
     low, high = np.ones(len(METHODS)), np.full(len(METHODS), 16.0)
+    if np.any(np.asarray(rates(high)) > run_false_alarm):
+        raise ValueError(f"run_false_alarm: {run_false_alarm} is not reached on these {runs} runs even with the "
+                         f"per-decision thresholds scaled by 16 (rates {np.asarray(rates(high))})")
     done = np.asarray(rates(low)) <= run_false_alarm
     high[done] = 1.0
     for _ in range(40):  # bisection on the factor, per method: rate(high) <= target < rate(low)

@@ -45,5 +45,5 @@ from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault, stack_fault
 from jaxfdi.metrics import DetectionRecord, DetectionSummary, confusion_matrix, summarize_detection  # noqa: E402
 from jaxfdi.montecarlo import monte_carlo  # noqa: E402
 from jaxfdi.riccati import solve_discrete_are, steady_state_kalman  # noqa: E402
-from jaxfdi.monitor import MonitorHistory, MonitorResult, monitor  # noqa: E402
+from jaxfdi.monitor import MonitorHistory, MonitorResult, monitor, replay_detector  # noqa: E402
 from jaxfdi.simulate import SimStep, Simulator, linear_simulator, simulate, simulator  # noqa: E402

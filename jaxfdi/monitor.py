@@ -81,3 +81,22 @@ def monitor(
     steps = jnp.arange(us.shape[0])
     (_, _, _, record), history = jax.lax.scan(body, carry0, (steps, us))
     return MonitorResult(record, history)
+
+
+def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_delay: int = 0) -> DetectionRecord:
+    """The detection record of ``detector`` over a stored (T, ...) input sequence, the
+    detector half of ``monitor`` without the plant and filter (e.g. to try thresholds on
+    mode probabilities computed once)."""
+    steps = jnp.arange(jax.tree.leaves(inputs)[0].shape[0])
+
+    def body(carry, k_input):
+        det_state, record = carry
+        k, x = k_input
+        det_state, decision = detector.step(det_state, x)
+        decision = as_decision(decision)
+        return (det_state, record_update(record, k, decision.alarm, decision.label, decision.estimate,
+                                         estimate_delay)), None
+
+    dtype = jnp.result_type(*jax.tree.leaves(inputs))
+    (_, record), _ = jax.lax.scan(body, (detector.init(), record_init(onset, dtype)), (steps, inputs))
+    return record

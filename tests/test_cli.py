@@ -10,15 +10,18 @@ from scipy import stats
 FAULTS = ["actuator", "RPM", "P2", "T2", "P4", "T4", "none"]
 
 
+def run_cli(tmp, *args):
+    """``python -m jaxfdi run ...`` in a subprocess with its own XLA cache under ``tmp``;
+    the output folder is ``tmp / "out"``."""
+    env = dict(os.environ, JAXFDI_CACHE_DIR=str(tmp / "cache"))
+    return subprocess.run([sys.executable, "-m", "jaxfdi", "run", *args, "--out", str(tmp / "out")],
+                          capture_output=True, text=True, env=env, timeout=600)
+
+
 @pytest.fixture(scope="module")
 def cli_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cli")
-    env = dict(os.environ, JAXFDI_CACHE_DIR=str(tmp / "cache"))
-    proc = subprocess.run(
-        [sys.executable, "-m", "jaxfdi", "run", "engine-chi2", "--runs", "4", "--seed", "3", "--out", str(tmp / "out")],
-        capture_output=True, text=True, env=env, timeout=600,
-    )
-    return proc, tmp
+    return run_cli(tmp, "engine-chi2", "--runs", "4", "--seed", "3"), tmp
 
 
 def test_engine_chi2_writes_table_json_and_png(cli_run):
@@ -48,11 +51,7 @@ def test_bad_options_exit_with_usage_error(args):
 
 
 def test_vtol_prints_tables_and_writes_figures(tmp_path):
-    env = dict(os.environ, JAXFDI_CACHE_DIR=str(tmp_path / "cache"))
-    proc = subprocess.run(
-        [sys.executable, "-m", "jaxfdi", "run", "vtol", "--runs", "2", "--out", str(tmp_path / "out")],
-        capture_output=True, text=True, env=env, timeout=600,
-    )
+    proc = run_cli(tmp_path, "vtol", "--runs", "2")
     assert proc.returncode == 0, proc.stderr
     for name in ("a1 effectiveness 0.3 from k = 100", "s3 step 0.7 from k = 120", "none (fault-free)"):
         assert name in proc.stdout
@@ -64,11 +63,7 @@ def test_vtol_prints_tables_and_writes_figures(tmp_path):
 
 
 def test_reaction_wheels_prints_every_case_and_writes_figures(tmp_path):
-    env = dict(os.environ, JAXFDI_CACHE_DIR=str(tmp_path / "cache"))
-    proc = subprocess.run(
-        [sys.executable, "-m", "jaxfdi", "run", "reaction-wheels", "--runs", "2", "--out", str(tmp_path / "out")],
-        capture_output=True, text=True, env=env, timeout=600,
-    )
+    proc = run_cli(tmp_path, "reaction-wheels", "--runs", "2")
     assert proc.returncode == 0, proc.stderr
     data = json.loads((tmp_path / "out" / "reaction-wheels.json").read_text())
     cases = ["none"] + [f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain") for w in range(1, 5)]

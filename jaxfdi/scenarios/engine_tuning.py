@@ -40,7 +40,8 @@ from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.models.engine import engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
-from jaxfdi.metrics import DetectionRecord, record_init, record_update
+from jaxfdi.metrics import DetectionRecord
+from jaxfdi.monitor import replay_detector
 from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.scenarios.engine import (
     PAPER_TRANSITION,
@@ -229,22 +230,11 @@ def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, se
 
 
 def detector_records(mode_prob: jax.Array, onsets: jax.Array, threshold, confirm_steps: int = 1) -> DetectionRecord:
-    """Per-run records (``metrics.record_update``) of ``mode_probability_detector(threshold,
-    confirm_steps)`` on stored mode probabilities (R, T, M): the records ``run_monitor``
+    """Per-run records of ``mode_probability_detector(threshold, confirm_steps)`` on stored
+    mode probabilities (R, T, M) (``monitor.replay_detector``): the records ``run_monitor``
     would give without rerunning the filter, for searching thresholds."""
     detector = mode_probability_detector(threshold, confirm_steps=confirm_steps)
-
-    def one(mu, onset):
-        def body(carry, inputs):
-            state, record = carry
-            k, m = inputs
-            state, decision = detector.step(state, m)
-            return (state, record_update(record, k, decision.alarm, decision.label)), None
-
-        init = (detector.init(), record_init(onset, mu.dtype))
-        return jax.lax.scan(body, init, (jnp.arange(mu.shape[0]), mu))[0][1]
-
-    return jax.vmap(one)(mode_prob, onsets)
+    return jax.vmap(lambda mu, onset: replay_detector(detector, mu, onset))(mode_prob, onsets)
 
 
 _BETTER = {"detection_rate": 1, "isolation_rate": 1, "false_alarm_rate": -1, "delay_median_s": -1, "delay_p90_s": -1}

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import Callable
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,17 @@ import numpy as np
 def _as_lists(mapping: dict) -> dict:
     """A mapping of arrays (and scalars) as JSON-ready nested lists."""
     return {k: np.asarray(v).tolist() for k, v in mapping.items()}
+
+
+def _write_study(study, json_path: Path, plot: Callable[[], list[str]], elapsed: float) -> int:
+    """A scenario study's JSON (config, rows, seconds; written whole or not at all) and
+    figures, and the line that names them."""
+    from jaxfdi import _io
+
+    _io.write_json(json_path, {"config": study.config, "rows": study.rows, "seconds": elapsed})
+    paths = plot()
+    print(f"wrote {json_path} and {', '.join(paths)} ({elapsed:.1f} s)")
+    return 0
 
 
 def _run_engine_chi2(args: argparse.Namespace) -> int:
@@ -34,7 +46,6 @@ def _run_engine_chi2(args: argparse.Namespace) -> int:
 
 
 def _run_engine(args: argparse.Namespace) -> int:
-    from jaxfdi import _io
     from jaxfdi.scenarios.engine import engine_study, plot_engine
 
     start = time.perf_counter()
@@ -48,10 +59,7 @@ def _run_engine(args: argparse.Namespace) -> int:
     print("Per method and fault; 'paper' = seed 003 Table 3 median delay [s]; FA = share of runs with an alarm "
           "before the onset; estimate = median over correctly isolated runs")
     print(study.table())
-    _io.write_json(out / "engine.json", {"config": study.config, "rows": study.rows, "seconds": elapsed})
-    paths = plot_engine(study, out)
-    print(f"wrote {out / 'engine.json'} and {', '.join(paths)} ({elapsed:.1f} s)")
-    return 0
+    return _write_study(study, out / "engine.json", lambda: plot_engine(study, out), elapsed)
 
 
 def _tune_engine_imm(args: argparse.Namespace) -> int:
@@ -155,7 +163,6 @@ def _tune_engine_chi2(args: argparse.Namespace) -> int:
 
 
 def _run_vtol(args: argparse.Namespace) -> int:
-    from jaxfdi import _io
     from jaxfdi.scenarios.vtol import plot_vtol, vtol_design, vtol_examples, vtol_study
 
     start = time.perf_counter()
@@ -179,14 +186,10 @@ def _run_vtol(args: argparse.Namespace) -> int:
     print(study.table())
     print()
     print(study.headline())
-    _io.write_json(out / "vtol.json", {"config": cfg, "rows": study.rows, "seconds": elapsed})
-    paths = plot_vtol(study, examples, study.design, out)
-    print(f"wrote {out / 'vtol.json'} and {', '.join(paths)} ({elapsed:.1f} s)")
-    return 0
+    return _write_study(study, out / "vtol.json", lambda: plot_vtol(study, examples, study.design, out), elapsed)
 
 
 def _run_reaction_wheels(args: argparse.Namespace) -> int:
-    from jaxfdi import _io
     from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_examples, wheel_study
 
     start = time.perf_counter()
@@ -209,10 +212,7 @@ def _run_reaction_wheels(args: argparse.Namespace) -> int:
     print(study.table())
     print()
     print(study.headline())
-    _io.write_json(out / "reaction-wheels.json", {"config": cfg, "rows": study.rows, "seconds": elapsed})
-    paths = plot_wheels(study, examples, out)
-    print(f"wrote {out / 'reaction-wheels.json'} and {', '.join(paths)} ({elapsed:.1f} s)")
-    return 0
+    return _write_study(study, out / "reaction-wheels.json", lambda: plot_wheels(study, examples, out), elapsed)
 
 
 RUNNERS = {"engine": _run_engine, "engine-chi2": _run_engine_chi2, "reaction-wheels": _run_reaction_wheels,

@@ -18,14 +18,18 @@ while the same product as a sum of ``k`` outer products is fused element-wise co
 faster for one 7x7 product, 8x for a batch of 700 (the IMM bank over 100 runs). Only
 matrices with every dimension ``<= UNROLL_MAX`` are unrolled: past that, XLA fuses
 chains of unrolled products into consumers that recompute them (the 13-state IMM got
-2.5x slower; benchmarks/RESULTS.md).
+2.5x slower; benchmarks/RESULTS.md). Their derivative is one broadcast multiply-and-reduce
+rather than the transpose of ``k`` sliced products (``_written_out_matmul``): the engine
+IMM tuning gradient went from 6.0x to 4.9x its forward pass.
 """
 from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 from jax import Array
+from jax.custom_derivatives import SymbolicZero
 from jax.scipy import linalg as jsl
 
 #: largest static size factorised element by element; larger ones go to LAPACK.
@@ -50,10 +54,43 @@ def matmul(a: Array, b: Array) -> Array:
         return a @ b
     left = a if a.ndim == 2 else a[None, :]
     right = b if b.ndim == 2 else b[:, None]
-    total = soa_matmul(left, right)
+    total = _written_out_matmul(left, right)
     if a.ndim == 1:
         total = total[0]
     return total if b.ndim == 2 else total[..., 0]
+
+
+@jax.custom_jvp
+def _written_out_matmul(a: Array, b: Array) -> Array:
+    """``soa_matmul`` of two 2-D matrices, with a tangent rule whose transpose is cheap.
+
+    Differentiated as written, each term ``a[:, j] b[j, :]`` slices its operands, and the
+    reverse pass transposes every slice into a zero-padded full-size array (``k`` pads
+    per product). The tangent here is the same bilinear form as one broadcast
+    multiply-and-reduce, ``sum_j da[:, j, None] * b[None, j, :]``, whose transpose is
+    again a broadcast multiply-and-reduce: no pads. Forward mode (``jvp``, ``jacfwd``)
+    is kept, which a ``custom_vjp`` would lose. Measured on the engine IMM tuning
+    gradient in ``benchmarks/RESULTS.md``.
+    """
+    return soa_matmul(a, b)
+
+
+def _broadcast_matmul(a: Array, b: Array) -> Array:
+    return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
+
+
+def _written_out_matmul_jvp(primals, tangents):
+    (a, b), (da, db) = primals, tangents
+    out = soa_matmul(a, b)
+    terms = []
+    if not isinstance(da, SymbolicZero):
+        terms.append(_broadcast_matmul(da, b))
+    if not isinstance(db, SymbolicZero):
+        terms.append(_broadcast_matmul(a, db))
+    return out, sum(terms[1:], terms[0]) if terms else jnp.zeros_like(out)
+
+
+_written_out_matmul.defjvp(_written_out_matmul_jvp, symbolic_zeros=True)
 
 
 # Structure-of-arrays forms. A batch of matrices stored matrix-axes-first, (rows, cols,

@@ -45,6 +45,29 @@ def test_matmul_equals_numpy_unrolled_or_not(shapes):
     np.testing.assert_allclose(batched[1], 2 * (a @ b), rtol=1e-13, atol=1e-13)
 
 
+def test_matmul_derivatives_equal_the_closed_form_in_both_modes():
+    """The written-out product carries its own tangent rule; reverse mode, forward mode,
+    second order and vmapped gradients must equal those of ``a @ b``:
+    d/dA sum(W * (A B)) = W B^T, d/dB = A^T W, and the loss is bilinear so the
+    Hessian's (A, A) block is zero."""
+    rng = np.random.default_rng(3)
+    a, b, w = (jnp.asarray(rng.normal(size=s)) for s in ((5, 4), (4, 6), (5, 6)))
+
+    def loss(x, y):
+        return jnp.sum(w * _linalg.matmul(x, y))
+
+    ga, gb = jax.grad(loss, argnums=(0, 1))(a, b)
+    np.testing.assert_allclose(ga, w @ b.T, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(gb, a.T @ w, rtol=1e-13, atol=1e-13)
+    jac = jax.jacfwd(_linalg.matmul)(a, b)  # (5, 6, 5, 4): d(AB)_ij / dA_kl = delta_ik B_lj
+    np.testing.assert_allclose(jac, np.einsum("ik,lj->ijkl", np.eye(5), b), rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(jax.hessian(loss)(a, b), np.zeros((5, 4, 5, 4)), atol=1e-13)
+    cross = jax.jacfwd(jax.grad(loss, argnums=0), argnums=1)(a, b)  # d(W B^T)_kl / dB_mn = W_kn delta_lm
+    np.testing.assert_allclose(cross, np.einsum("kn,lm->klmn", w, np.eye(4)), rtol=1e-13, atol=1e-13)
+    batched = jax.vmap(jax.grad(loss), in_axes=(0, None))(jnp.stack([a, 2 * a]), b)
+    np.testing.assert_allclose(batched[1], w @ b.T, rtol=1e-13, atol=1e-13)
+
+
 def test_cholesky_vmapped_and_not_positive_definite_gives_nan():
     rng = np.random.default_rng(0)
     batch = np.stack([random_spd(rng, 5) for _ in range(4)])

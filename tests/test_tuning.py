@@ -40,6 +40,7 @@ def test_every_transform_round_trips():
     cases = [
         (tuning.stochastic_rows(PAPER_PI > 0), PAPER_PI),
         (tuning.stochastic_rows(), np.full((3, 3), 1 / 3)),
+        (tuning.stochastic_rows(), np.array([[0.9, 0.1, 0.0], [0.0, 1.0, 0.0], [0.2, 0.0, 0.8]])),  # allowed zeros
         (tuning.log_diagonal(), np.diag([1e-8, 1.0, 1e6])),
         (tuning.cholesky_factor(), cov),
         (tuning.positive(), np.array([1e-8, 0.5, 30.0, 1e3])),

@@ -80,7 +80,10 @@ def unit_interval() -> Transform:
 def stochastic_rows(mask: Any = None) -> Transform:
     """Row-stochastic (M, M) matrix from (M, M) logits; ``mask[i, j] = False`` fixes
     ``pi_ij = 0``; every row needs an allowed entry. The logits of a row are defined up
-    to a constant; ``inverse`` returns ``log pi`` (row log-sum-exp 0), and 0 at zeros."""
+    to a constant; ``inverse`` returns ``log pi`` (row log-sum-exp 0), 0 where the mask
+    forbids, and ``log(tiny)`` (about -708 in float64) at a zero the mask allows, which
+    ``forward`` maps back to ~1e-308: such an entry stays zero in training (its gradient
+    vanishes with it); start it at a small positive value to let it be learned."""
     mask_np = None if mask is None else np.asarray(mask, bool)
     if mask_np is not None:
         if mask_np.ndim != 2 or mask_np.shape[0] != mask_np.shape[1]:
@@ -102,8 +105,10 @@ def stochastic_rows(mask: Any = None) -> Transform:
 
     def inverse(pi):
         pi = jnp.asarray(pi)
-        ok = allowed(pi.shape) & (pi > 0)
-        return jnp.where(ok, jnp.log(jnp.where(ok, pi, 1.0)), 0.0)
+        ok = allowed(pi.shape)
+        positive = ok & (pi > 0)
+        zero_logit = jnp.log(jnp.finfo(pi.dtype).tiny)
+        return jnp.where(positive, jnp.log(jnp.where(positive, pi, 1.0)), jnp.where(ok, zero_logit, 0.0))
 
     return Transform(forward, inverse, "stochastic_rows", {"mask": None if mask_np is None else mask_np.tolist()})
 

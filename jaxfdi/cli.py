@@ -82,8 +82,8 @@ def _tune_engine_imm(args: argparse.Namespace) -> int:
         design = et.imm_design(name)
         if not args.quiet:
             print(f"{name}: training", file=sys.stderr, flush=True)
-        weights = et.LossWeights(false_alarm=args.false_alarm_weight, delay=args.delay_weight,
-                                 isolation=args.isolation_weight)
+        weights = et.LossWeights(detection=args.detection_weight, false_alarm=args.false_alarm_weight,
+                                 delay=args.delay_weight, isolation=args.isolation_weight)
         frozen = tuple(name for name in args.freeze.split(",") if name)
         if set(frozen) - set(design.parameterization):
             print(f"jaxfdi: --freeze: design {name} has no parameter(s) {sorted(set(frozen) - set(design.parameterization))}; "
@@ -251,6 +251,9 @@ def build_parser() -> argparse.ArgumentParser:
     tune.add_argument("--out", default="results", help="output folder (default ./results)")
     tune.add_argument("--design", default="all", choices=["all", "bias", "zhang-li"],
                       help="engine-imm: which IMM mode design (default all)")
+    tune.add_argument("--detection-weight", type=float, default=1.0,
+                      help="engine-imm: weight of the soft detection loss against the mode cross-entropy "
+                           "(default 1; 0 trains on the cross-entropy alone)")
     tune.add_argument("--false-alarm-weight", type=float, default=5.0,
                       help="loss weight of P(alarm before the onset) (default 5)")
     tune.add_argument("--delay-weight", type=float, default=1.0,
@@ -288,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.steps < 0 or args.train_runs < 1:
             print("jaxfdi: --steps must be >= 0 and --train-runs >= 1", file=sys.stderr)
             return 2
-        if min(args.false_alarm_weight, args.delay_weight, args.isolation_weight) < 0:
+        if min(args.detection_weight, args.false_alarm_weight, args.delay_weight, args.isolation_weight) < 0:
             print("jaxfdi: the loss weights must be >= 0", file=sys.stderr)
             return 2
         if args.selection_runs < 1:

@@ -155,7 +155,7 @@ def test_engine_imm_glrt_notebook(python3_kernel, monkeypatch):
 
 def test_tuning_notebook(python3_kernel, monkeypatch):
     # the sizes of test_engine_tuning's CLI run, so that its compiled programs are reused
-    env = {"JAXFDI_NB_STEPS": "20", "JAXFDI_NB_TRAIN_RUNS": "2", "JAXFDI_NB_RUNS": "10"}
+    env = {"JAXFDI_NB_STEPS": "20", "JAXFDI_NB_TRAIN_RUNS": "2", "JAXFDI_NB_RUNS": "10", "JAXFDI_NB_SELECTION_RUNS": "4"}
     outputs, text = _run_clean("03_tuning.ipynb", python3_kernel, monkeypatch, env)
     assert "Adam steps: 20, training runs per fault: 2, held-out runs per fault: 10" in text
     assert "rows sum to one: True | structural zeros kept: True" in text
@@ -164,6 +164,13 @@ def test_tuning_notebook(python3_kernel, monkeypatch):
     ce_line = next(line for line in table if line.startswith("mean per-step mode cross-entropy"))
     paper_ce, tuned_ce = (float(part.split()[-1].rstrip(",")) for part in ce_line.split(":")[1].split("(")[0].split(","))
     assert tuned_ce < paper_ce, ce_line
+    # the per-mode thresholds: seven values in (0, 1), chosen to shrink the shortfall on the selection runs
+    line = next(line for line in text.splitlines() if line.startswith("mu_T per mode:"))
+    assert [k for k in FAULT_NAMES[:-1] if f"'{k}':" in line] == list(FAULT_NAMES[:-1]), line
+    shortfall = next(line for line in text.splitlines() if line.startswith("shortfall against the paper's"))
+    trained, selected = (float(part.split()[0]) for part in shortfall.split(": ")[1].split("->"))
+    assert selected <= trained, shortfall
+    assert text.count("mean per-step mode cross-entropy") == 2 and "worse than the paper's (per-mode mu_T):" in text
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) == 2, f"expected the loss curves and the transition matrices, got {len(images)}"
 

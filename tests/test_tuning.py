@@ -31,6 +31,8 @@ def test_stochastic_rows_valid_at_extreme_logits_and_structural_zeros_stay_zero(
     assert np.all(pi[~mask] == 0.0)
     grads = jax.grad(lambda l: jnp.sum(t.forward(l) ** 2))(jnp.asarray(rng.normal(size=(3, 3))))
     assert np.all(np.isfinite(grads)) and np.all(np.asarray(grads)[~mask] == 0.0)
+    p = np.asarray(tuning.simplex().forward(jnp.asarray(scale * rng.normal(size=7))))
+    assert np.all(np.isfinite(p)) and np.all(p >= 0) and abs(p.sum() - 1.0) < 1e-12
 
 
 def test_every_transform_round_trips():
@@ -41,6 +43,7 @@ def test_every_transform_round_trips():
         (tuning.stochastic_rows(PAPER_PI > 0), PAPER_PI),
         (tuning.stochastic_rows(), np.full((3, 3), 1 / 3)),
         (tuning.stochastic_rows(), np.array([[0.9, 0.1, 0.0], [0.0, 1.0, 0.0], [0.2, 0.0, 0.8]])),  # allowed zeros
+        (tuning.simplex(), np.array([0.94, 0.01, 0.05, 0.0])),
         (tuning.log_diagonal(), np.diag([1e-8, 1.0, 1e6])),
         (tuning.cholesky_factor(), cov),
         (tuning.positive(), np.array([1e-8, 0.5, 30.0, 1e3])),

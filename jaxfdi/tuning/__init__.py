@@ -10,6 +10,7 @@ from jaxfdi.tuning.parameterize import (
     merge,
     partition,
     positive,
+    simplex,
     sticky_log_prior,
     stochastic_rows,
     unconstrain,
@@ -29,6 +30,6 @@ from jaxfdi.tuning.train import (
 __all__ = [
     "Transform", "TrainHistory", "TrainResult", "checkpointed", "cholesky_factor", "constrain", "fit",
     "fixed_batches", "fresh_batches", "identity", "innovation_nll", "load_params", "log_diagonal", "log_scale", "merge",
-    "mode_cross_entropy", "partition", "positive", "save_params", "soft_alarm_log_prob", "soft_detection_loss",
+    "mode_cross_entropy", "partition", "positive", "save_params", "simplex", "soft_alarm_log_prob", "soft_detection_loss",
     "sticky_log_prior", "stochastic_rows", "unconstrain", "unit_interval",
 ]

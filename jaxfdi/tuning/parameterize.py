@@ -77,6 +77,22 @@ def unit_interval() -> Transform:
     return Transform(jax.nn.sigmoid, inverse, "unit_interval", {})
 
 
+def simplex() -> Transform:
+    """Probability vector ``p = softmax(x)`` (e.g. an IMM's initial mode probabilities);
+    ``inverse`` returns ``log p`` (log-sum-exp 0), ``log(tiny)`` at a zero."""
+
+    def forward(logits):
+        logits = jnp.asarray(logits)
+        _checks.check_shape("logits", logits, (None,), "(M,) logits of a probability vector")
+        return jax.nn.softmax(logits)
+
+    def inverse(p):
+        p = jnp.asarray(p)
+        return jnp.where(p > 0, jnp.log(jnp.where(p > 0, p, 1.0)), jnp.log(jnp.finfo(p.dtype).tiny))
+
+    return Transform(forward, inverse, "simplex", {})
+
+
 def stochastic_rows(mask: Any = None) -> Transform:
     """Row-stochastic (M, M) matrix from (M, M) logits; ``mask[i, j] = False`` fixes
     ``pi_ij = 0``; every row needs an allowed entry. The logits of a row are defined up
@@ -159,6 +175,7 @@ TRANSFORMS = {
     "log_scale": log_scale,
     "unit_interval": unit_interval,
     "stochastic_rows": stochastic_rows,
+    "simplex": simplex,
     "log_diagonal": log_diagonal,
     "cholesky_factor": cholesky_factor,
 }

@@ -275,39 +275,47 @@ def shortfall(hand_rows: list[dict], tuned_rows: list[dict]) -> float:
 
 
 def select_mode_thresholds(design: ImmDesign, params: dict[str, Any], runs: int, seed: int, confirm_steps=1,
-                           grid=np.round(np.arange(0.30, 0.99, 0.02), 2), sweeps: int = 3) -> tuple[jax.Array, dict]:
+                           grid=np.round(np.arange(0.30, 0.99, 0.02), 2), sweeps: int = 3,
+                           cost: Callable[[list[dict]], float] | None = None) -> tuple[jax.Array, dict]:
     """One ``mu_T`` per fault mode for the tuned ``params``, chosen on selection runs
     (``runs`` per fault, ``seed``; neither training nor test data) so that no reported
-    metric is worse than the hand-set design's on the same runs.
+    metric is worse than the hand-set design's on the same runs, or to minimise ``cost``
+    of the rows (``summarize_method``'s) if given.
 
-    Coordinate descent over ``grid`` from the trained scalar ``mu_T``: each sweep
-    sets each mode's threshold in turn to the grid value with the smallest ``shortfall``
-    against the hand-set rows (ties keep the current value). The filter runs once per
-    design; the detector is replayed on its mode probabilities (``detector_records``).
+    Coordinate descent over ``grid`` from the trained ``mu_T``: each sweep sets each
+    mode's threshold in turn to the grid value with the smallest cost, by default the
+    ``shortfall`` against the hand-set rows (ties keep the current value). The filter
+    runs once per design; the detector is replayed on its mode probabilities
+    (``detector_records``).
 
-    Returns ``((M,) thresholds, {"shortfall": before, after})``; the normal mode's entry
-    (not used by the detector) keeps the trained value.
+    Returns ``((M,) thresholds, {"shortfall": before, after})`` (the cost before and
+    after); the normal mode's entry (not used by the detector) keeps the trained value.
     """
     data = labelled_runs(runs, seed)
     steps = data.ys.shape[1]
     log_probs = jax.jit(lambda p, y: mode_log_probs(design, p, y))
-    hand = design.hand()
-    hand_records = detector_records(jnp.exp(log_probs(hand, data.ys)), data.onsets, hand["mu_threshold"])
-    hand_rows = summarize_method(design.method, "IMM", hand_records, runs, steps)
+    if cost is None:
+        hand = design.hand()
+        hand_records = detector_records(jnp.exp(log_probs(hand, data.ys)), data.onsets, hand["mu_threshold"])
+        hand_rows = summarize_method(design.method, "IMM", hand_records, runs, steps)
+
+        def cost(rows):
+            return shortfall(hand_rows, rows)
+
     mode_prob = jnp.exp(log_probs(params, data.ys))
     replay = jax.jit(lambda thresholds: detector_records(mode_prob, data.onsets, thresholds, confirm_steps))
 
-    def cost(thresholds):
-        return shortfall(hand_rows, summarize_method(design.method, "IMM", replay(thresholds), runs, steps))
+    def cost_of(thresholds):
+        return cost(summarize_method(design.method, "IMM", replay(thresholds), runs, steps))
 
     thresholds = np.broadcast_to(np.asarray(params["mu_threshold"], float), (NUM_FAULTS + 1,)).copy()
-    before = best = cost(jnp.asarray(thresholds))
+    before = best = cost_of(jnp.asarray(thresholds))
     for _ in range(sweeps):
         for mode in range(1, NUM_FAULTS + 1):
             for value in grid:
                 trial = thresholds.copy()
                 trial[mode] = value
-                value_cost = cost(jnp.asarray(trial))
+                value_cost = cost_of(jnp.asarray(trial))
                 if value_cost < best - 1e-12:
                     best, thresholds = value_cost, trial
     return jnp.asarray(thresholds), {"shortfall": {"trained": before, "selected": best}}

@@ -10,8 +10,6 @@ these runs equals the closed-loop monitor), then replays the detector
 (``engine_tuning.detector_records``) for every operating point:
 
 * a scalar ``mu_T`` on a grid, times the confirmation lengths ``--confirm``;
-* the file's own thresholds (per mode after ``--select-thresholds``), times the same
-  confirmation lengths;
 * for reference, the same grid for the paper's hand-set parameters of each design.
 
 It prints, per design, the points not dominated in (fault-free false-alarm rate, lowest
@@ -20,17 +18,18 @@ all to ``--out`` (JSON, written completely or not at all).
 
 The front is drawn on the held-out runs themselves, so a point on it that meets the
 target is an optimistic claim. The claim is made by choosing the tuned operating point
-on selection runs (``--select-seed``, default 2, the seed ``--select-thresholds`` uses;
-neither training nor test): for each confirmation length, the best scalar ``mu_T`` there
-and then one ``mu_T`` per mode and one confirmation length per mode (coordinate descent
-with ``target_cost``: the widest margin to every target condition, in units of its
-sampling resolution, so that the choice survives new runs); the candidate with the
-lowest cost is scored once on the held-out runs.
+on selection runs (``--select-runs`` per fault, default 300, ``--select-seed``, default
+2, the seed ``--select-thresholds`` uses; neither training nor test): for each
+confirmation length, the best scalar ``mu_T`` there, then one ``mu_T`` per mode, one
+confirmation length per mode and the thresholds again (coordinate descent on
+``target_cost``: the widest margin to every target condition, in units of its sampling
+resolution, so that the choice survives new runs); the candidate with the lowest cost
+is scored once on the held-out runs.
 
     jaxfdi tune engine-imm --design zhang-li --delay-weight 20 --freeze mu_threshold \\
         --select-thresholds --out results
-    jaxfdi tune engine-imm --design bias --freeze mu_threshold --select-thresholds --out results
-    python benchmarks/engine_imm_front.py results/engine-imm-*-tuned.npz
+    jaxfdi tune engine-imm --design bias --confirm-steps 2 --delay-weight 20 --out results
+    python benchmarks/engine_imm_front.py results/engine-imm-*-tuned.npz [--seed 3000]
 """
 from __future__ import annotations
 
@@ -68,12 +67,6 @@ def operating_point(rows: list[dict]) -> dict:
                                  and point["isolation_min"] >= TARGET["isolation"]
                                  and point["delay_median_max_s"] <= TARGET["delay_median_s"])
     return point
-
-
-def target_score(point: dict) -> float:
-    """``max(FA / 0.01, (1 - iso min) / 0.03, delay max / 0.05)``: <= 1 iff the target is met."""
-    return max(point["false_alarm"] / TARGET["false_alarm"], (1.0 - point["isolation_min"]) / (1.0 - TARGET["isolation"]),
-               point["delay_median_max_s"] / TARGET["delay_median_s"])
 
 
 def target_margins(point: dict) -> np.ndarray:

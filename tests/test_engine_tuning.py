@@ -73,6 +73,7 @@ def test_bad_confirm_steps_freeze_and_selection_runs_exit_2():
     assert main(["tune", "engine-imm", "--confirm-steps", "3,2"]) == 2          # one per mode: 7 of them
     assert main(["tune", "engine-imm", "--confirm-steps", "1,3,3,0,3,3,3"]) == 2
     assert main(["tune", "engine-imm", "--selection-runs", "0"]) == 2
+    assert main(["tune", "engine-imm", "--detection-weight", "-1"]) == 2
     assert main(["tune", "engine-imm", "--design", "zhang-li", "--freeze", "bias_walk", "--quiet"]) == 2
 
 

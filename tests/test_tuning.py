@@ -84,6 +84,8 @@ def test_partition_constrain_and_bad_names():
         tuning.constrain({"h": tuning.positive()}, raw)
     with pytest.raises(ValueError, match="mask: expected at least one allowed"):
         tuning.stochastic_rows(np.eye(3, dtype=bool) & False)
+    with pytest.raises(ValueError, match="logits"):
+        tuning.simplex().forward(jnp.zeros((3, 3)))
 
 
 # ---------------------------------------------------------------- losses

@@ -77,6 +77,12 @@ def unit_interval() -> Transform:
     return Transform(jax.nn.sigmoid, inverse, "unit_interval", {})
 
 
+def _log_probability(p: Array) -> Array:
+    """``log p``, and ``log(tiny)`` (about -708 in float64) where ``p == 0``: a finite
+    logit that softmax maps back to ~0."""
+    return jnp.where(p > 0, jnp.log(jnp.where(p > 0, p, 1.0)), jnp.log(jnp.finfo(p.dtype).tiny))
+
+
 def simplex() -> Transform:
     """Probability vector ``p = softmax(x)`` (e.g. an IMM's initial mode probabilities);
     ``inverse`` returns ``log p`` (log-sum-exp 0), ``log(tiny)`` at a zero."""
@@ -87,8 +93,7 @@ def simplex() -> Transform:
         return jax.nn.softmax(logits)
 
     def inverse(p):
-        p = jnp.asarray(p)
-        return jnp.where(p > 0, jnp.log(jnp.where(p > 0, p, 1.0)), jnp.log(jnp.finfo(p.dtype).tiny))
+        return _log_probability(jnp.asarray(p))
 
     return Transform(forward, inverse, "simplex", {})
 
@@ -121,10 +126,7 @@ def stochastic_rows(mask: Any = None) -> Transform:
 
     def inverse(pi):
         pi = jnp.asarray(pi)
-        ok = allowed(pi.shape)
-        positive = ok & (pi > 0)
-        zero_logit = jnp.log(jnp.finfo(pi.dtype).tiny)
-        return jnp.where(positive, jnp.log(jnp.where(positive, pi, 1.0)), jnp.where(ok, zero_logit, 0.0))
+        return jnp.where(allowed(pi.shape), _log_probability(pi), 0.0)
 
     return Transform(forward, inverse, "stochastic_rows", {"mask": None if mask_np is None else mask_np.tolist()})
 

@@ -20,6 +20,13 @@ STUCK         ``s(onset)``                        stuck at the value at onset
 STOP          ``0``                               the component stops (no output)
 ============  ==================================  =====================================
 
+A fault on a *group* of components (both axes of a 2-DOF rate sensor, the pseudorange of
+one satellite) is a stack of single-component faults that share one explicit ``label``
+(``fault_group``); ``label = -1`` (the default) means "the label ``fault_label`` derives
+from target and component". Several faults with different ``onset``/``end`` in one
+stack (``concat_faults``) are several episodes of one run (``episodes``); the mode of a
+step is the label of the first active fault of the stack (``active_label``).
+
 A plant model may give a kind more physics than the signal change: the reaction-wheel
 scenario reads STOP as "the wheel's speed goes to 0 and its momentum to the body" and
 STUCK as "the wheel's speed freezes" (``scenarios.reaction_wheels.wheel_fault``).
@@ -63,18 +70,34 @@ class Fault(NamedTuple):
     magnitude: Array  # float
     slope: Array      # float, per step (RAMP)
     end: Array        # int, first step after the fault (NEVER = permanent)
+    label: Array = -1  # int, mode label; -1: derived from target and component (``fault_label``)
 
 
-def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER) -> Fault:
-    """Build a ``Fault``; ``kind`` and ``target`` take the enums or their names."""
-    if isinstance(kind, str):
-        kind = FaultKind[kind.upper()]
-    if isinstance(target, str):
-        target = Target[target.upper()]
-    for name, value in (("kind", kind), ("target", target)):
-        enum_type = FaultKind if name == "kind" else Target
-        if not isinstance(value, jax.Array) and int(value) not in {e.value for e in enum_type}:
-            raise ValueError(f"{name}: expected one of {[e.name for e in enum_type]}, got {value}")
+def _enum_value(name: str, value, enum_type):
+    """``value`` (an enum, its name or its integer) as an integer of ``enum_type``."""
+    expected = [e.name.lower() for e in enum_type]
+    if isinstance(value, str):
+        if value.upper() not in enum_type.__members__:
+            raise ValueError(f"{name}: expected one of {expected}, got {value!r}")
+        return enum_type[value.upper()]
+    if jnp.ndim(value) == 0:
+        try:
+            concrete = int(value)
+        except jax.errors.ConcretizationTypeError:  # traced: checked by whoever made it
+            return value
+        if concrete not in {e.value for e in enum_type}:
+            raise ValueError(f"{name}: expected one of {expected} (or their integers), got {value}")
+    return value
+
+
+def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, label=-1) -> Fault:
+    """Build a ``Fault``; ``kind`` and ``target`` take the enums or their names.
+
+    ``label`` >= 0 sets the fault's mode label explicitly (e.g. a sensor group's);
+    -1 (default) lets ``fault_label`` derive it from target and component.
+    """
+    kind = _enum_value("kind", kind, FaultKind)
+    target = _enum_value("target", target, Target)
     return Fault(
         kind=jnp.asarray(kind, jnp.int32),
         target=jnp.asarray(target, jnp.int32),
@@ -83,7 +106,36 @@ def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER) -
         magnitude=jnp.asarray(magnitude, dtype=jnp.result_type(float)),
         slope=jnp.asarray(slope, dtype=jnp.result_type(float)),
         end=jnp.asarray(end, jnp.int32),
+        label=jnp.asarray(label, jnp.int32),
     )
+
+
+def fault_group(kind, target, components, onset, magnitudes, slopes=0.0, end=NEVER, label=-1) -> Fault:
+    """One fault on a group of components, labelled as one: a stack (leading axis G).
+
+    Entry ``g`` acts on ``components[g]`` with ``magnitudes[g]`` and ``slopes[g]``
+    (scalars broadcast), all with the same kind, target, onset, end and ``label``; a
+    fault "in any direction of the sensor's plane" is ``magnitudes = size * direction``.
+
+    Args:
+      components: (G,) component indices, G >= 1.
+      magnitudes, slopes: (G,) or scalar.
+      label: the group's mode label (>= 0), shared by every entry; -1 keeps the derived
+        per-component labels (each entry then isolates as its own component).
+    """
+    components = jnp.asarray(components, jnp.int32)
+    if components.ndim != 1 or components.shape[0] < 1:
+        raise ValueError(f"components: expected shape (G,) with G >= 1, got {tuple(components.shape)}")
+    size = components.shape[0]
+    for name, value in (("magnitudes", magnitudes), ("slopes", slopes)):
+        if jnp.ndim(value) not in (0, 1) or (jnp.ndim(value) == 1 and jnp.shape(value)[0] != size):
+            raise ValueError(f"{name}: expected a scalar or shape ({size},) like components, got {jnp.shape(value)}")
+    entries = [
+        fault(kind, target, components[g], onset, jnp.broadcast_to(jnp.asarray(magnitudes), (size,))[g],
+              jnp.broadcast_to(jnp.asarray(slopes), (size,))[g], end, label)
+        for g in range(size)
+    ]
+    return stack_faults(entries)
 
 
 def no_fault() -> Fault:
@@ -96,6 +148,14 @@ def stack_faults(faults: list[Fault]) -> Fault:
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *faults)
 
 
+def concat_faults(*faults: Fault) -> Fault:
+    """One stack (leading axis F) of single faults and stacks, in order: the faults of one
+    run (e.g. a ``fault_group`` and later episodes)."""
+    if not faults:
+        raise ValueError("faults: expected at least one Fault")
+    return jax.tree_util.tree_map(lambda *leaves: jnp.concatenate(leaves), *(_as_stack(f) for f in faults))
+
+
 def is_active(f: Fault, k: Array) -> Array:
     """Whether fault ``f`` (scalar leaves) acts at step ``k``."""
     live = (f.kind != FaultKind.NONE) & (k >= f.onset) & (k < f.end)
@@ -106,10 +166,49 @@ def fault_label(f: Fault, num_inputs: int) -> Array:
     """Integer mode label: 0 no fault, ``1 + i`` actuator i, ``1 + num_inputs + j`` sensor j.
 
     For the engine (one input) this is the seed-003 order: normal, actuator, RPM, P2, T2,
-    P4, T4.
+    P4, T4. An explicit ``f.label`` (>= 0) takes precedence (a ``fault_group``'s label).
     """
-    label = jnp.where(f.target == Target.ACTUATOR, 1 + f.component, 1 + num_inputs + f.component)
-    return jnp.where(f.kind == FaultKind.NONE, 0, label)
+    derived = jnp.where(f.target == Target.ACTUATOR, 1 + f.component, 1 + num_inputs + f.component)
+    label = jnp.where(jnp.asarray(f.label) >= 0, f.label, derived)
+    return jnp.where(f.kind == FaultKind.NONE, 0, label).astype(jnp.int32)
+
+
+def active_label(faults: Fault, k: Array, num_inputs: int) -> Array:
+    """() int: the label (``fault_label``) of the first fault of the stack ``faults``
+    (leaves (F,), or scalar leaves) active at step ``k``; 0 when none is."""
+    faults = _as_stack(faults)
+    active = jax.vmap(is_active, in_axes=(0, None))(faults, k)
+    labels = jax.vmap(fault_label, in_axes=(0, None))(faults, num_inputs)
+    return jnp.where(jnp.any(active), labels[jnp.argmax(active)], 0).astype(jnp.int32)
+
+
+def episodes(faults: Fault, num_inputs: int) -> tuple[Array, Array, Array]:
+    """The fault episodes of one run: ``(onsets, ends, labels)``, each (F,) int.
+
+    Entry ``i`` is fault ``i`` of the stack: its onset, its end (``onset + 1`` for an
+    IMPULSE) and its ``fault_label``. Entries that are not an episode of their own carry
+    ``onset = end = NEVER`` and label 0: NONE faults, and repeats of an earlier entry's
+    (onset, end, label), i.e. the further components of a ``fault_group``. Fixed shapes,
+    so it jits and vmaps over runs; ``metrics.episode_record_init`` takes the result.
+    """
+    faults = _as_stack(faults)
+    ends = jnp.where(faults.kind == FaultKind.IMPULSE, jnp.minimum(faults.end, faults.onset + 1), faults.end)
+    labels = jax.vmap(fault_label, in_axes=(0, None))(faults, num_inputs)
+    count = faults.kind.shape[0]
+    same = ((faults.onset[:, None] == faults.onset[None, :]) & (ends[:, None] == ends[None, :])
+            & (labels[:, None] == labels[None, :]) & (faults.kind != FaultKind.NONE)[None, :])
+    earlier = jnp.arange(count)[None, :] < jnp.arange(count)[:, None]
+    valid = (faults.kind != FaultKind.NONE) & ~jnp.any(same & earlier, axis=1)
+    never = jnp.asarray(NEVER, jnp.int32)
+    return (jnp.where(valid, faults.onset, never).astype(jnp.int32), jnp.where(valid, ends, never).astype(jnp.int32),
+            jnp.where(valid, labels, 0).astype(jnp.int32))
+
+
+def _as_stack(f: Fault) -> Fault:
+    """Leaves (F,): scalar faults become a stack of one; a scalar leaf of a stack (a
+    ``Fault`` built by hand without ``label``) is broadcast to the stack."""
+    shape = jnp.shape(f.kind) if jnp.ndim(f.kind) else (1,)
+    return jax.tree_util.tree_map(lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), shape) if jnp.ndim(leaf) == 0 else leaf, f)
 
 
 def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> tuple[Array, Array]:

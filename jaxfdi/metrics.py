@@ -12,6 +12,25 @@ a handful of numbers a run instead of whole histories. A detector that also isol
 the record keeps the label at the detection step (isolation = the first mode that
 crosses) and the detector's estimate (e.g. a fault magnitude) ``estimate_delay`` steps
 after it.
+
+Health: a run whose filter lost positive-definiteness or whose statistic went non-finite
+is *unhealthy* from its first such step (``first_unhealthy``; callers pass ``healthy =
+info.healthy & isfinite(statistic)``, see ``step_health``). Its alarms mean nothing (a
+NaN statistic never crosses a threshold), so the summaries count it in ``runs`` and in
+``unhealthy_runs`` and leave it out of every rate and delay: an all-NaN run is never a
+clean "no false alarm, missed detection" run.
+
+Several episodes in one run (``EpisodeRecord``; a GPS/INS flight with four satellite
+faults): episode ``e`` (``faults.episodes``: onset, end, label) owns the detection window
+``[onset_e, close_e)`` with ``close_e = min(end_e + grace, next onset)``, the next onset
+being the earliest later onset of another episode. An alarm in the window detects the
+episode (first such step; delay = step - onset; isolated = the label then). ``grace``
+(steps, default 0) is the detector's memory: a windowed test keeps alarming for about a
+window after a transient fault clears, which is not a false alarm. A window never runs
+into the next episode, so a late alarm is credited to the episode that is active then.
+Every alarm step outside all windows is a false alarm (count and first step). Episodes
+with the same onset share their window (simultaneous faults); each is detected by the
+same alarm and isolated only if the label is its own.
 """
 from __future__ import annotations
 
@@ -19,7 +38,10 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
+import jax
 from jax import Array
+
+from jaxfdi.faults import NEVER
 
 
 class DetectionRecord(NamedTuple):
@@ -31,20 +53,32 @@ class DetectionRecord(NamedTuple):
     isolated: Array = -1    # () int, label at the detection step (-1: none / not isolating)
     first_label: Array = -1  # () int, label at the first alarm (a false alarm's label)
     estimate: Array = float("nan")  # () float, estimate of the isolated fault, latest within estimate_delay steps after detection
+    first_unhealthy: Array = -1  # () int, first step that was not healthy, -1 if the run stayed healthy
+
+
+def step_health(healthy: Array, *values) -> Array:
+    """() bool: ``healthy`` and every element of every leaf of ``values`` finite (e.g.
+    ``step_health(info.healthy, statistic)``)."""
+    ok = jnp.asarray(healthy, bool)
+    for leaf in jax.tree.leaves(values):
+        ok = ok & jnp.all(jnp.isfinite(jnp.asarray(leaf)))
+    return ok
 
 
 def record_init(onset: Array, dtype=None) -> DetectionRecord:
     minus_one = jnp.asarray(-1, jnp.int32)
     zero = jnp.asarray(0, jnp.int32)
     nan = jnp.asarray(jnp.nan, dtype or jnp.result_type(float))
-    return DetectionRecord(jnp.asarray(onset, jnp.int32), minus_one, minus_one, zero, zero, minus_one, minus_one, nan)
+    return DetectionRecord(jnp.asarray(onset, jnp.int32), minus_one, minus_one, zero, zero, minus_one, minus_one, nan,
+                           minus_one)
 
 
 def record_update(
     record: DetectionRecord, k: Array, alarm: Array, label: Array = -1, estimate: Array | None = None,
-    estimate_delay: int = 0,
+    estimate_delay: int = 0, healthy: Array = True,
 ) -> DetectionRecord:
-    """Fold the decision of step ``k`` (alarm, isolated label, estimate) into the record."""
+    """Fold the decision of step ``k`` (alarm, isolated label, estimate) into the record;
+    ``healthy`` False marks the run unhealthy from ``k`` on (``step_health``)."""
     k = jnp.asarray(k, jnp.int32)
     label = jnp.asarray(label, jnp.int32)
     before = k < record.onset
@@ -66,11 +100,18 @@ def record_update(
         jnp.where(new_detection, label, record.isolated),
         jnp.where(new_first, label, record.first_label),
         estimate_value,
+        _first_unhealthy(record.first_unhealthy, k, healthy),
     )
 
 
-def record_from_alarms(alarms: Array, onset: Array) -> DetectionRecord:
-    """The same record computed from a whole (T,) alarm history at once."""
+def _first_unhealthy(first: Array, k: Array, healthy: Array) -> Array:
+    first = jnp.asarray(first, jnp.int32)
+    return jnp.where((first < 0) & ~jnp.asarray(healthy, bool), k, first)
+
+
+def record_from_alarms(alarms: Array, onset: Array, healthy: Array | None = None) -> DetectionRecord:
+    """The same record computed from a whole (T,) alarm history (and optional (T,) bool
+    ``healthy``) at once."""
     k = jnp.arange(alarms.shape[0])
     before = k < onset
     after = alarms & ~before
@@ -88,32 +129,38 @@ def record_from_alarms(alarms: Array, onset: Array) -> DetectionRecord:
         minus_one,
         minus_one,
         jnp.asarray(jnp.nan),
+        minus_one if healthy is None else first(~jnp.asarray(healthy, bool)),
     )
 
 
 class DetectionSummary(NamedTuple):
-    """Summary over runs (host-side NumPy). Delays in the unit of ``Ts``."""
+    """Summary over runs (host-side NumPy). Delays in the unit of ``Ts``. Every rate and
+    delay is over the healthy runs only; ``runs`` counts all of them."""
 
-    runs: int
-    faulty_runs: int
+    runs: int                      # all runs, healthy or not
+    faulty_runs: int               # healthy runs with an onset within the horizon
     detection_rate: float          # detected / faulty runs
     missed_detection_rate: float   # 1 - detection_rate
-    false_alarm_rate: float        # runs with >= 1 alarm before onset / runs
-    false_alarm_rate_per_step: float  # alarm steps before onset / steps before onset
+    false_alarm_rate: float        # healthy runs with >= 1 alarm before onset / healthy runs
+    false_alarm_rate_per_step: float  # alarm steps before onset / steps before onset (healthy runs)
     delay_mean: float
     delay_median: float
     delay_p90: float
+    unhealthy_runs: int = 0        # runs with a step that was not healthy (left out of the rates)
 
 
 def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) -> DetectionSummary:
-    """Summarise stacked records (leading run axis) of runs ``horizon`` steps long."""
+    """Summarise stacked records (leading run axis) of runs ``horizon`` steps long; an
+    unhealthy run (``first_unhealthy >= 0``) counts in ``runs`` and ``unhealthy_runs`` only."""
     onset = np.asarray(record.onset)
+    healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
     detection = np.asarray(record.detection_step)
-    faulty = onset < horizon
+    false_alarms = np.broadcast_to(np.asarray(record.false_alarms), onset.shape)[healthy]
+    faulty = (onset < horizon) & healthy
     detected = faulty & (detection >= 0)
     delays = (detection[detected] - onset[detected]) * Ts
     n_faulty = int(faulty.sum())
-    pre_steps = int(np.asarray(record.pre_onset_steps).sum())
+    pre_steps = int(np.broadcast_to(np.asarray(record.pre_onset_steps), onset.shape)[healthy].sum())
     nan = float("nan")
     rate = detected.sum() / n_faulty if n_faulty else nan
     return DetectionSummary(
@@ -121,12 +168,23 @@ def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) 
         faulty_runs=n_faulty,
         detection_rate=float(rate),
         missed_detection_rate=float(1 - rate) if n_faulty else nan,
-        false_alarm_rate=float(np.mean(np.asarray(record.false_alarms) > 0)) if onset.size else nan,
-        false_alarm_rate_per_step=float(np.asarray(record.false_alarms).sum() / pre_steps) if pre_steps else nan,
+        false_alarm_rate=float(np.mean(false_alarms > 0)) if false_alarms.size else nan,
+        false_alarm_rate_per_step=float(false_alarms.sum() / pre_steps) if pre_steps else nan,
         delay_mean=float(delays.mean()) if delays.size else nan,
         delay_median=float(np.median(delays)) if delays.size else nan,
         delay_p90=float(np.percentile(delays, 90)) if delays.size else nan,
+        unhealthy_runs=int((~healthy).sum()),
     )
+
+
+def unhealthy_warning(unhealthy: int, runs: int, detail: str = "") -> str:
+    """The console line a study prints when runs went numerically bad ("" when none did);
+    ``detail`` (e.g. per fault) goes in brackets after the count."""
+    if not unhealthy:
+        return ""
+    detail = f" ({detail})" if detail else ""
+    return (f"WARNING: {unhealthy} of {runs} runs went numerically bad{detail} (filter unhealthy or non-finite "
+            f"statistic); they are excluded from the rates above")
 
 
 def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: int) -> Array:
@@ -148,3 +206,117 @@ def isolation_accuracy(confusion: Array) -> Array:
     confusion = jnp.asarray(confusion)
     diagonal = jnp.diagonal(confusion[:, : confusion.shape[0]])
     return diagonal / jnp.maximum(confusion.sum(axis=1), 1)
+
+
+class EpisodeRecord(NamedTuple):
+    """Per-run record of several fault episodes (E of them; see the module docstring)."""
+
+    onset: Array             # (E,) int, episode onsets (NEVER: no episode)
+    close: Array             # (E,) int, first step after each episode's detection window
+    label: Array             # (E,) int, true label of each episode
+    detection_step: Array    # (E,) int, first alarm in [onset, close), -1 if none
+    isolated: Array          # (E,) int, label at the detection step, -1 if none
+    false_alarms: Array      # () int, alarm steps outside every window
+    first_false_alarm: Array  # () int, first such step, -1 if none
+    outside_steps: Array     # () int, steps seen outside every window
+    steps: Array             # () int, steps seen
+    first_unhealthy: Array   # () int, first step that was not healthy, -1 if none
+
+    @property
+    def delay(self) -> Array:
+        """(E,) int: detection step - onset, -1 where the episode was not detected."""
+        return jnp.where(self.detection_step >= 0, self.detection_step - self.onset, -1)
+
+
+def episode_record_init(onsets: Array, ends: Array, labels: Array, grace: int = 0) -> EpisodeRecord:
+    """An empty record for episodes ``(onsets, ends, labels)``, each (E,) (``faults.episodes``).
+
+    Window of episode ``e``: ``[onset_e, min(end_e + grace, min{onset_j > onset_e}))``.
+    """
+    onsets, ends, labels = (jnp.asarray(a, jnp.int32) for a in (onsets, ends, labels))
+    if onsets.ndim != 1 or ends.shape != onsets.shape or labels.shape != onsets.shape:
+        raise ValueError(f"onsets, ends, labels: expected three (E,) arrays, got shapes "
+                         f"{onsets.shape}, {ends.shape}, {labels.shape}")
+    if isinstance(grace, (int, np.integer)) and grace < 0:
+        raise ValueError(f"grace: expected an integer >= 0 (steps), got {grace}")
+    later = onsets[None, :] > onsets[:, None]
+    next_onset = jnp.min(jnp.where(later, onsets[None, :], NEVER), axis=1, initial=NEVER)
+    close = jnp.minimum(jnp.minimum(ends, NEVER) + jnp.asarray(grace, jnp.int32), next_onset)
+    minus_one, zero = jnp.asarray(-1, jnp.int32), jnp.asarray(0, jnp.int32)
+    none = jnp.full(onsets.shape, -1, jnp.int32)
+    return EpisodeRecord(onsets, close.astype(jnp.int32), labels, none, none, zero, minus_one, zero, zero, minus_one)
+
+
+def episode_record_update(record: EpisodeRecord, k: Array, alarm: Array, label: Array = -1,
+                          healthy: Array = True) -> EpisodeRecord:
+    """Fold the decision of step ``k`` (alarm, isolated label, health) into the record."""
+    k = jnp.asarray(k, jnp.int32)
+    alarm = jnp.asarray(alarm, bool)
+    inside = (k >= record.onset) & (k < record.close)
+    new_detection = (record.detection_step < 0) & alarm & inside
+    outside = ~jnp.any(inside)
+    false_alarm = alarm & outside
+    return EpisodeRecord(
+        record.onset, record.close, record.label,
+        jnp.where(new_detection, k, record.detection_step),
+        jnp.where(new_detection, jnp.asarray(label, jnp.int32), record.isolated),
+        record.false_alarms + false_alarm.astype(jnp.int32),
+        jnp.where((record.first_false_alarm < 0) & false_alarm, k, record.first_false_alarm),
+        record.outside_steps + outside.astype(jnp.int32),
+        record.steps + 1,
+        _first_unhealthy(record.first_unhealthy, k, healthy),
+    )
+
+
+class EpisodeSummary(NamedTuple):
+    """Summary of stacked ``EpisodeRecord``s (host-side NumPy), per episode index ``e``
+    ((E,) arrays) over the healthy runs in which episode ``e`` began; delays in the unit
+    of ``Ts``. Unhealthy runs count in ``runs`` and ``unhealthy_runs`` only."""
+
+    runs: int                       # all runs
+    unhealthy_runs: int
+    episodes: np.ndarray            # (E,) healthy runs in which episode e began (onset < steps)
+    detection_rate: np.ndarray      # (E,) detected / episodes
+    isolation_rate: np.ndarray      # (E,) isolated as its label / episodes
+    delay_mean: np.ndarray          # (E,) over detected episodes
+    delay_median: np.ndarray        # (E,)
+    delay_p90: np.ndarray           # (E,)
+    false_alarm_runs: int           # healthy runs with >= 1 alarm outside every window
+    false_alarm_rate: float         # false_alarm_runs / healthy runs
+    false_alarm_rate_per_step: float  # false-alarm steps / steps outside every window (healthy runs)
+
+
+def summarize_episodes(records: EpisodeRecord, Ts: float = 1.0) -> EpisodeSummary:
+    """Summarise stacked records (leading run axis R; episode leaves (R, E))."""
+    onset, label = np.asarray(records.onset), np.asarray(records.label)
+    detection, isolated = np.asarray(records.detection_step), np.asarray(records.isolated)
+    runs = onset.shape[0]
+    healthy = np.asarray(records.first_unhealthy) < 0
+    began = (onset < np.asarray(records.steps)[:, None]) & healthy[:, None]
+    detected = began & (detection >= 0)
+    correct = began & detected & (isolated == label)
+    count = began.sum(axis=0)
+    nan = float("nan")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        detection_rate = np.where(count > 0, detected.sum(axis=0) / np.maximum(count, 1), nan)
+        isolation_rate = np.where(count > 0, correct.sum(axis=0) / np.maximum(count, 1), nan)
+    stats = []
+    for e in range(onset.shape[1]):
+        delays = (detection[detected[:, e], e] - onset[detected[:, e], e]) * Ts
+        stats.append((delays.mean(), np.median(delays), np.percentile(delays, 90)) if delays.size else (nan,) * 3)
+    stats = np.asarray(stats, float).reshape(onset.shape[1], 3)
+    false_alarms = np.asarray(records.false_alarms)[healthy]
+    outside = int(np.asarray(records.outside_steps)[healthy].sum())
+    return EpisodeSummary(
+        runs=int(runs),
+        unhealthy_runs=int((~healthy).sum()),
+        episodes=count,
+        detection_rate=detection_rate,
+        isolation_rate=isolation_rate,
+        delay_mean=stats[:, 0],
+        delay_median=stats[:, 1],
+        delay_p90=stats[:, 2],
+        false_alarm_runs=int((false_alarms > 0).sum()),
+        false_alarm_rate=float(np.mean(false_alarms > 0)) if false_alarms.size else nan,
+        false_alarm_rate_per_step=float(false_alarms.sum() / outside) if outside else nan,
+    )

@@ -4,6 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxfdi
 from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum, normalized_innovation_squared
 from jaxfdi.faults import NEVER
 from jaxfdi.metrics import (
@@ -13,7 +14,9 @@ from jaxfdi.metrics import (
     record_from_alarms,
     record_init,
     record_update,
+    step_health,
     summarize_detection,
+    unhealthy_warning,
 )
 
 
@@ -47,6 +50,37 @@ def test_streaming_record_equals_batch_record_equals_brute_force(random_alarms):
         ref = reference_record(list(alarms[i]), int(onsets[i]))
         assert tuple(int(x[i]) for x in stream[:5]) == ref
         assert tuple(int(x[i]) for x in batch[:5]) == ref
+
+
+def test_first_unhealthy_streaming_and_batch_equal_first_bad_step(random_alarms):
+    alarms, onsets = random_alarms
+    rng = np.random.default_rng(4)
+    healthy = rng.random(alarms.shape) > rng.choice([0.0, 0.0, 0.05], size=(alarms.shape[0], 1))
+
+    def streaming(alarm_row, healthy_row, onset):
+        def body(record, step):
+            k, alarm, ok = step
+            return record_update(record, k, alarm, -1, None, 0, ok), None
+        return jax.lax.scan(body, record_init(onset), (jnp.arange(alarm_row.shape[0]), alarm_row, healthy_row))[0]
+
+    stream = jax.jit(jax.vmap(streaming))(alarms, healthy, onsets)
+    batch = jax.jit(jax.vmap(record_from_alarms))(alarms, onsets, healthy)
+    assert int(record_init(5).first_unhealthy) == -1 and int(record_from_alarms(alarms[0], 5).first_unhealthy) == -1
+    for i in range(alarms.shape[0]):
+        first_bad = next((k for k, ok in enumerate(healthy[i]) if not ok), -1)
+        assert int(stream.first_unhealthy[i]) == first_bad == int(batch.first_unhealthy[i])
+        # health does not change the detection fields
+        assert tuple(int(x[i]) for x in stream[:5]) == reference_record(list(alarms[i]), int(onsets[i]))
+    assert 0 < np.sum(np.asarray(stream.first_unhealthy) >= 0) < alarms.shape[0]
+
+
+def test_step_health_is_healthy_and_every_value_finite():
+    finite = (jnp.ones(3), {"s": jnp.asarray(2.0)}, jnp.arange(2))
+    assert bool(step_health(True, *finite)) and not bool(step_health(False, *finite))
+    for bad in (jnp.nan, jnp.inf, -jnp.inf):
+        assert not bool(step_health(True, jnp.ones(3).at[1].set(bad), 1.0))
+        assert not bool(step_health(jnp.asarray(True), {"s": jnp.asarray(bad)}))
+    assert bool(jax.jit(step_health)(True, jnp.zeros(2))) and bool(step_health(True))
 
 
 def test_record_keeps_label_at_detection_and_estimate_after_a_delay():
@@ -88,6 +122,68 @@ def test_summary_on_hand_made_records():
     assert s.false_alarm_rate_per_step == pytest.approx(4 / 260)
     assert s.delay_median == pytest.approx(0.35) and s.delay_mean == pytest.approx(0.35)
     assert s.delay_p90 == pytest.approx(np.percentile([0.2, 0.5], 90))
+    assert s.unhealthy_runs == 0
+
+
+def test_unhealthy_runs_are_counted_apart_and_never_scored_clean():
+    """The same four runs plus two unhealthy ones: an all-NaN run that shows no alarm
+    (which would otherwise be a clean missed detection and no false alarm) and an
+    unhealthy fault-free run. Every rate and delay equals the healthy four's."""
+    onset = np.array([50, 50, 60, NEVER, 50, NEVER])
+    records = DetectionRecord(
+        onset=onset,
+        first_alarm=np.array([10, 55, -1, 70, -1, -1]),
+        detection_step=np.array([52, 55, -1, -1, -1, -1]),
+        false_alarms=np.array([1, 0, 0, 3, 0, 0]),
+        pre_onset_steps=np.array([50, 50, 60, 100, 50, 100]),
+        first_unhealthy=np.array([-1, -1, -1, -1, 0, 37]),
+    )
+    s = summarize_detection(records, horizon=100, Ts=0.1)
+    healthy_only = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[:4] if np.ndim(a) else a, records), horizon=100, Ts=0.1)
+    assert s.runs == 6 and s.unhealthy_runs == 2 and s.faulty_runs == 3
+    assert s._replace(runs=4, unhealthy_runs=0) == healthy_only
+    assert s.detection_rate == pytest.approx(2 / 3) and s.false_alarm_rate == pytest.approx(2 / 4)
+    assert s.false_alarm_rate_per_step == pytest.approx(4 / 260)
+    all_bad = summarize_detection(records._replace(first_unhealthy=np.zeros(6, int)), horizon=100)
+    assert all_bad.unhealthy_runs == 6 and all_bad.faulty_runs == 0
+    assert all(np.isnan(getattr(all_bad, name)) for name in ("detection_rate", "false_alarm_rate", "delay_median"))
+    assert unhealthy_warning(0, 6) == ""
+    assert unhealthy_warning(2, 6).startswith("WARNING: 2 of 6 runs went numerically bad")
+
+
+@pytest.fixture(scope="module")
+def nan_run():
+    """A KF (no missing_measurements) chi-square monitor on the engine fed one NaN
+    measurement at step 20 (a one-step sensor bias of NaN), with its history."""
+    from jaxfdi.faults import fault
+    from jaxfdi.models import engine_model
+    from jaxfdi.monitor import monitor
+
+    model = engine_model()
+    kf = jaxfdi.kalman_filter(model)
+    f = fault("bias", "sensor", 2, 20, float("nan"), end=21)
+    run = jax.jit(lambda key: monitor(jaxfdi.linear_simulator(model, f), kf, chi2_detector(30.0, 2), jnp.zeros(7),
+                                      kf.init(jnp.zeros(7), model.Q), jnp.full((40, 1), 0.01), key, 20, True))
+    return run(jax.random.key(0))
+
+
+def test_nan_mid_run_is_reported_unhealthy_and_never_clean(nan_run):
+    record, history = nan_run
+    statistic = np.asarray(history.statistic)
+    assert np.all(np.isfinite(statistic[:20])) and np.all(np.isnan(statistic[20:]))  # the premise
+    assert not np.any(np.asarray(history.alarm)[20:])  # a NaN statistic never alarms ...
+    # ... so, scored as before, it would be a clean run: no false alarm, missed detection
+    blind = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[None], record._replace(first_unhealthy=-1)), 40)
+    assert blind.faulty_runs == 1 and blind.detection_rate == 0.0
+    # the history folded by hand with step_health and the monitor's own record agree
+    folded = record_init(20)
+    for k in range(40):
+        ok = step_health(history.info.healthy[k], history.statistic[k])
+        folded = record_update(folded, k, history.alarm[k], history.label[k], None, 0, ok)
+    assert int(folded.first_unhealthy) == 20 and int(record.first_unhealthy) == 20
+    s = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[None], record), 40)
+    assert s.runs == 1 and s.unhealthy_runs == 1 and s.faulty_runs == 0 and np.isnan(s.detection_rate)
+    assert np.isnan(s.false_alarm_rate) and np.isnan(s.delay_median)
 
 
 def test_confusion_matrix_and_isolation_accuracy_equal_counting():

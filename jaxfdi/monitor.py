@@ -1,4 +1,4 @@
-"""One Monte Carlo run as one fused scan: plant -> filter -> detector -> metrics.
+"""One open-loop Monte Carlo run as one fused scan: plant -> filter -> detector -> metrics.
 
 Fusing the four in a single ``lax.scan`` means nothing of length T is stored unless
 asked (``keep_history=True``): a run costs a ``DetectionRecord`` of a few numbers, which
@@ -16,6 +16,7 @@ from jax import Array
 
 from jaxfdi.detection.chi2 import Detector, as_decision
 from jaxfdi.filters._base import Filter, FilterInfo
+from jaxfdi.loop import FDI, detection_scorer, feedforward, run_loop
 from jaxfdi.metrics import DetectionRecord, record_init, record_update
 from jaxfdi.simulate import SimStep, Simulator
 
@@ -34,6 +35,21 @@ class MonitorResult(NamedTuple):
     history: MonitorHistory | None
 
 
+def filter_detector(filt: Filter, detector: Detector, detector_input: Callable[[Any], Array] | None = None) -> FDI:
+    """The open-loop FDI: a fault-blind filter and a detector reading its info
+    (``detector_input``; the NIS by default). Its state is ``(filter state, detector
+    state)``; its output ``(info, Decision)``."""
+    detector_input = detector_input or (lambda info: info.nis)
+
+    def step(state, k, y, u):
+        filt_state, det_state = state
+        filt_state, info = filt.step(filt_state, y, u)
+        det_state, decision = detector.step(det_state, detector_input(info))
+        return (filt_state, det_state), (info, as_decision(decision))
+
+    return FDI(step)
+
+
 def monitor(
     sim: Simulator,
     filt: Filter,
@@ -49,6 +65,9 @@ def monitor(
 ) -> MonitorResult:
     """Simulate, filter and test one run; return its detection record (and history).
 
+    The open-loop case of ``loop.run_loop``: ``feedforward()`` controller, the
+    ``filter_detector`` FDI, a ``detection_scorer``.
+
     Args:
       sim: the (faulty) plant; filt: the fault-blind filter; detector: fed ``info.nis``.
       x0: (n,) true initial state; filter_state0: ``filt.init(...)``.
@@ -60,27 +79,25 @@ def monitor(
         the latest within this many steps after the detection step (an estimate taken
         at the alarm itself is biased by the selection: the noise that crossed the
         threshold is in it; steps whose label differs from the isolated one are skipped).
+        A step whose filter is unhealthy or whose statistic is not finite marks the
+        record's ``first_unhealthy``.
     """
-    detector_input = detector_input or (lambda info: info.nis)
     us = jnp.asarray(us)
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
-
-    def body(carry, ku):
-        sim_state, filt_state, det_state, record = carry
-        k, u = ku
-        sim_state, truth = sim.step(sim_state, k, u, key)
-        filt_state, info = filt.step(filt_state, truth.measurement, u)
-        det_state, decision = detector.step(det_state, detector_input(info))
-        decision = as_decision(decision)
-        record = record_update(record, k, decision.alarm, decision.label, decision.estimate, estimate_delay)
-        out = MonitorHistory(truth, info, *decision) if keep_history else None
-        return (sim_state, filt_state, det_state, record), out
-
-    carry0 = (sim.init(x0), filter_state0, detector.init(), record_init(onset, jnp.asarray(x0).dtype))
-    steps = jnp.arange(us.shape[0])
-    (_, _, _, record), history = jax.lax.scan(body, carry0, (steps, us))
-    return MonitorResult(record, history)
+    scorer = detection_scorer(onset, lambda out: out[1], lambda out: out[0].healthy, estimate_delay,
+                              jnp.asarray(x0).dtype)
+    result = run_loop(sim, filter_detector(filt, detector, detector_input), feedforward(), x0,
+                      (filter_state0, detector.init()), key, exogenous=us, scorer=scorer, keep_history=keep_history)
+    history = None
+    if keep_history:
+        trace = result.history
+        sensed, moved = trace.sensed, trace.moved
+        truth = SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
+                        sensed.sensor_fault, sensed.fault_active, sensed.mode)
+        info, decision = trace.output
+        history = MonitorHistory(truth, info, *decision)
+    return MonitorResult(result.score, history)
 
 
 def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_delay: int = 0) -> DetectionRecord:

@@ -1,13 +1,27 @@
 """Scan simulator of a (linear or nonlinear) plant with noise and faults.
 
-``x[k+1] = f(x[k], u_f[k], params) + w[k]``, ``y[k] = h(x[k], u[k], params) + v[k]``
+``x[k+1] = f(x[k], u_f[k] + w_u[k], params) + G w[k]``, ``y[k] = h(x[k], u[k], params) + v[k]``
 then sensor faults act on ``y[k]``; ``u_f`` is the commanded ``u`` after actuator
-faults. The feed-through in ``h`` sees the *commanded* input, as in seed 003 eq. (4)
-(``y = C x + D u + v + nu_y``). Noise for step ``k`` comes from ``fold_in(key, k)``,
-so a run is reproducible step by step and independent of chunking or sharding.
+faults, ``w_u ~ N(0, Q_u)`` optional input noise (IMU noise driving an INS, motor torque
+noise), ``G`` an optional process-noise gain (default identity). The feed-through in ``h``
+sees the input given to ``measure`` (seed 003 eq. (4), ``y = C x + D u + v + nu_y``).
 
-Like a filter, the simulator is a ``Simulator(init, step)`` pair, so a Monte Carlo run
-can fuse simulation, filtering, detection and metrics in one scan (see ``monitor``).
+Time enters in three ways, each optional:
+
+- ``time_varying=True``: the plant functions are ``f(x, u, k, params)``, ``h(x, u, k, params)``;
+- ``Q``, ``R``, ``input_noise`` are constant (n, n) arrays, per-step (T, n, n) arrays, or
+  callables ``k -> (n, n)``;
+- ``available``: which measurement components exist at step ``k`` (a (T, m) bool array
+  or a callable ``(k, x) -> (m,)``); the others are NaN, which the filters built with
+  ``missing_measurements=True`` skip: a satellite that sets is a NaN pseudorange.
+
+Noise for step ``k`` comes from ``fold_in(key, k)``, so a run is reproducible step by step
+and independent of chunking or sharding.
+
+The simulator is a ``Simulator(init, step, measure, advance)``: ``measure`` reads the
+sensors at step ``k`` and ``advance`` moves the plant with the input applied at ``k``,
+which is what a closed loop needs (``jaxfdi.loop``: the controller acts between the two);
+``step`` is the two together, for open-loop runs (``simulate``).
 """
 from __future__ import annotations
 
@@ -18,13 +32,30 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.faults import Fault, Target, apply_faults, fault_label, is_active, no_fault
+from jaxfdi.faults import Fault, Target, active_label, apply_faults, is_active, no_fault
 from jaxfdi.models.linear import LinearGaussianModel, linear_observation, linear_transition, validate_linear_model
 
 
 class SimState(NamedTuple):
     state: Array  # (n,) true state x[k]
     held: Array   # (F,) values held by STUCK faults
+
+
+class Sensed(NamedTuple):
+    """What ``measure`` returns besides the state: the sensor half of a ``SimStep``."""
+
+    state: Array           # (n,)  true x[k]
+    measurement: Array     # (m,)  y[k], noisy and faulty (NaN where not available)
+    sensor_fault: Array    # (m,)  fault added to y[k]
+    fault_active: Array    # (F,)  bool per fault
+    mode: Array            # ()    int label of the first active fault, 0 if none
+
+
+class Actuated(NamedTuple):
+    """What ``advance`` returns besides the state: the actuator half of a ``SimStep``."""
+
+    applied_input: Array   # (nu,) u after actuator faults (and input noise)
+    actuator_fault: Array  # (nu,) applied - commanded input
 
 
 class SimStep(NamedTuple):
@@ -40,66 +71,158 @@ class SimStep(NamedTuple):
 
 
 class Simulator(NamedTuple):
+    """``init(x0)``; ``step(state, k, u, key) -> (state, SimStep)``; and its halves
+    ``measure(state, k, u, key) -> (state, Sensed)`` (``u``: the input the feed-through
+    sees) and ``advance(state, k, u, key) -> (state, Actuated)``."""
+
     init: Callable[[Array], SimState]
     step: Callable[[SimState, Array, Array, Array], tuple[SimState, SimStep]]
+    measure: Callable[[SimState, Array, Array, Array], tuple[SimState, Sensed]] | None = None
+    advance: Callable[[SimState, Array, Array, Array], tuple[SimState, Actuated]] | None = None
 
 
 def _as_stack(f: Fault) -> Fault:
     return jax.tree_util.tree_map(lambda leaf: jnp.reshape(leaf, (-1,)) if jnp.ndim(leaf) == 0 else leaf, f)
 
 
+def per_step(name: str, value: Any, size: int) -> Callable[[Array], Array]:
+    """``k -> (size, size)`` from a constant matrix, a (T, size, size) array or a callable
+    (checked once at trace time, on step 0)."""
+    if callable(value):
+        _checks.check_covariance(f"{name}(0)", value(jnp.asarray(0)), size)
+        return value
+    shape = _checks.shape_of(value)
+    if len(shape) == 3:
+        _checks.check_shape(name, value, (None, size, size), f"T per-step ({size}, {size}) covariances")
+        value = jnp.asarray(value)
+        return lambda k: value[k]
+    _checks.check_covariance(name, value, size)
+    value = jnp.asarray(value)
+    return lambda k: value
+
+
+def _noise_sqrt(name: str, value: Any, size: int) -> Callable[[Array], Array]:
+    """``k -> L`` with ``L L^T`` the step's covariance; computed once when constant."""
+    if callable(value) or len(_checks.shape_of(value)) == 3:
+        cov = per_step(name, value, size)
+        return lambda k: _linalg.psd_sqrt(cov(k))
+    _checks.check_covariance(name, value, size)
+    sqrt = _linalg.psd_sqrt(jnp.asarray(value))
+    return lambda k: sqrt
+
+
+def _matrix_size(name: str, value: Any) -> int:
+    sample = value(jnp.asarray(0)) if callable(value) else value
+    shape = _checks.shape_of(sample)
+    if len(shape) not in (2, 3) or shape[-1] != shape[-2]:
+        raise ValueError(f"{name}: expected a (d, d) covariance, a (T, d, d) array or a callable k -> (d, d), "
+                         f"got shape {shape}")
+    return shape[-1]
+
+
 def simulator(
-    f: Callable[[Array, Array, Any], Array],
-    h: Callable[[Array, Array, Any], Array],
-    Q: Array,
-    R: Array,
+    f: Callable[..., Array],
+    h: Callable[..., Array],
+    Q: Any,
+    R: Any,
     params: Any = None,
     fault: Fault | None = None,
+    *,
+    time_varying: bool = False,
+    noise_gain: Array | None = None,
+    input_noise: Any = None,
+    available: Any = None,
 ) -> Simulator:
     """Simulator of ``f``/``h`` with additive Gaussian noise ``N(0, Q)``, ``N(0, R)``.
 
     Args:
-      f, h: plant functions of ``(x, u, params)``.
-      Q: (n, n), R: (m, m) noise covariances (positive semi-definite; zero = noise-free).
+      f, h: plant functions of ``(x, u, params)``, or ``(x, u, k, params)`` with
+        ``time_varying=True``.
+      Q: process-noise covariance (n, n) — or (nw, nw) with ``noise_gain`` — constant,
+        (T, ., .) per step, or a callable of the step (positive semi-definite).
+      R: (m, m) measurement-noise covariance, in the same three forms.
       params: pytree for ``f`` and ``h``.
-      fault: a ``Fault`` with scalar leaves, or a stack (leading axis F) acting together;
-        ``None`` for a fault-free plant.
+      fault: a ``Fault`` with scalar leaves, or a stack (leading axis F: several
+        components of a group, several episodes) acting together; ``None`` for a
+        fault-free plant.
+      noise_gain: (n, nw) ``G`` of ``G w``, or ``None`` for the identity.
+      input_noise: (nu, nu) covariance of noise added to the applied input (same forms
+        as ``Q``), or ``None``.
+      available: (T, m) bool array or callable ``(k, x) -> (m,) bool``: components that
+        are measured at step ``k`` (the others are NaN), or ``None`` (all, always).
     """
-    n = _checks.check_covariance("Q", Q)
-    m = _checks.check_covariance("R", R)
+    nw = _matrix_size("Q", Q)
+    m = _matrix_size("R", R)
+    if noise_gain is not None:
+        G = jnp.asarray(noise_gain)
+        _checks.check_shape("noise_gain", G, (None, nw), f"n states x {nw} noise inputs (Q is {nw} x {nw})")
+        n = G.shape[0]
+    else:
+        G, n = None, nw
+    sqrt_Q = _noise_sqrt("Q", Q, nw)
+    sqrt_R = _noise_sqrt("R", R, m)
+    sqrt_U = None if input_noise is None else _noise_sqrt("input_noise", input_noise, _matrix_size("input_noise", input_noise))
+    if available is not None and not callable(available):
+        _checks.check_shape("available", available, (None, m), f"T steps x {m} measurement components")
+        available_table = jnp.asarray(available, bool)
+        available = lambda k, x: available_table[k]  # noqa: E731
     faults = _as_stack(no_fault() if fault is None else fault)
     if any(jnp.ndim(leaf) != 1 for leaf in faults):
         raise ValueError("fault: expected scalar leaves or a stack with shape (F,) leaves")
     num_faults = faults.kind.shape[0]
-    sqrt_Q = _linalg.psd_sqrt(jnp.asarray(Q))
-    sqrt_R = _linalg.psd_sqrt(jnp.asarray(R))
+    plant_f = f if time_varying else (lambda x, u, k, p: f(x, u, p))
+    plant_h = h if time_varying else (lambda x, u, k, p: h(x, u, p))
 
     def init(x0: Array) -> SimState:
         _checks.check_shape("x0", x0, (n,), "initial true state")
         x0 = jnp.asarray(x0)
         return SimState(x0, jnp.zeros((num_faults,), x0.dtype))
 
-    def step(sim: SimState, k: Array, u: Array, key: Array):
+    def keys(key: Array, k: Array) -> tuple[Array, Array]:
+        return jax.random.split(jax.random.fold_in(key, k))  # (process, measurement)
+
+    def measure(sim: SimState, k: Array, u: Array, key: Array):
         _checks.check_shape("u", u, (None,), "one commanded input")
-        key_w, key_v = jax.random.split(jax.random.fold_in(key, k))
         x = sim.state
-        u_applied, held = apply_faults(faults, k, u, Target.ACTUATOR, sim.held)
-        y_clean = h(x, u, params) + sqrt_R @ jax.random.normal(key_v, (m,), x.dtype)
-        y, held = apply_faults(faults, k, y_clean, Target.SENSOR, held)
-        x_next = f(x, u_applied, params) + sqrt_Q @ jax.random.normal(key_w, (n,), x.dtype)
+        _, key_v = keys(key, k)
+        y_clean = plant_h(x, u, k, params) + sqrt_R(k) @ jax.random.normal(key_v, (m,), x.dtype)
+        y, held = apply_faults(faults, k, y_clean, Target.SENSOR, sim.held)
+        if available is not None:
+            y = jnp.where(available(k, x), y, jnp.nan)
         active = jax.vmap(is_active, in_axes=(0, None))(faults, k)
-        labels = jax.vmap(fault_label, in_axes=(0, None))(faults, u.shape[0])
-        mode = jnp.where(jnp.any(active), labels[jnp.argmax(active)], 0)
-        out = SimStep(x, y, u_applied, u_applied - u, y - y_clean, active, mode)
-        return SimState(x_next, held), out
+        mode = active_label(faults, k, u.shape[0])
+        return SimState(x, held), Sensed(x, y, y - y_clean, active, mode)
 
-    return Simulator(init, step)
+    def advance(sim: SimState, k: Array, u: Array, key: Array):
+        _checks.check_shape("u", u, (None,), "one commanded input")
+        x = sim.state
+        key_w, _ = keys(key, k)
+        if u.shape[0]:
+            u_applied, held = apply_faults(faults, k, u, Target.ACTUATOR, sim.held)
+        else:  # a plant without inputs: nothing for an actuator fault to act on
+            u_applied, held = u, sim.held
+        if sqrt_U is not None:
+            key_u = jax.random.fold_in(key_w, 1)
+            u_applied = u_applied + sqrt_U(k) @ jax.random.normal(key_u, (u.shape[0],), x.dtype)
+        w = sqrt_Q(k) @ jax.random.normal(key_w, (nw,), x.dtype)
+        x_next = plant_f(x, u_applied, k, params) + (w if G is None else G @ w)
+        return SimState(x_next, held), Actuated(u_applied, u_applied - u)
+
+    def step(sim: SimState, k: Array, u: Array, key: Array):
+        sim, sensed = measure(sim, k, u, key)
+        sim, moved = advance(sim, k, u, key)
+        out = SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
+                      sensed.sensor_fault, sensed.fault_active, sensed.mode)
+        return sim, out
+
+    return Simulator(init, step, measure, advance)
 
 
-def linear_simulator(model: LinearGaussianModel, fault: Fault | None = None) -> Simulator:
-    """``simulator`` for a ``LinearGaussianModel`` (its own ``Q`` and ``R``)."""
+def linear_simulator(model: LinearGaussianModel, fault: Fault | None = None, **options) -> Simulator:
+    """``simulator`` for a ``LinearGaussianModel`` (its own ``Q`` and ``R``); ``options``
+    as for ``simulator`` (``input_noise``, ``available``, ...)."""
     validate_linear_model(model)
-    return simulator(linear_transition, linear_observation, model.Q, model.R, model, fault)
+    return simulator(linear_transition, linear_observation, model.Q, model.R, model, fault, **options)
 
 
 def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState, SimStep]:

@@ -19,6 +19,7 @@ from jaxfdi.filters.tskf import (
     stack_directions,
     two_stage_kalman_filter,
 )
+from jaxfdi.filters.time_varying import TimedState, model_at, time_varying
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.filters.unknown_input import unknown_input_filter
 
@@ -45,4 +46,7 @@ __all__ = [
     "stack_directions",
     "two_stage_kalman_filter",
     "unknown_input_filter",
+    "time_varying",
+    "model_at",
+    "TimedState",
 ]

@@ -1,0 +1,72 @@
+"""Time-varying filters: any filter whose model changes with the step.
+
+``time_varying(filter_at)`` turns a factory ``k -> Filter`` (``kalman_filter`` of the
+step's matrices, an EKF of ``f(x, u, k, params)``, ...) into one ``Filter`` whose state
+carries the step counter: ``step`` at step ``k`` conditions on ``y[k]`` with the step-``k``
+measurement model (``C_k``, ``R_k``, ``h(., ., k)``) and predicts ``x[k+1|k]`` with the
+step-``k`` transition (``Phi_k``, ``Gamma_k``, ``Q_k``): ``x[k+1] = Phi_k x[k] + Gamma_k u[k]
++ w[k]``, ``w[k] ~ N(0, Q_k)``, ``y[k] = C_k x[k] + D_k u[k] + v[k]``, ``v[k] ~ N(0, R_k)``.
+
+The factory is called with a traced step inside the scan, so it must build its filter
+from arrays (index a (T, ...) table, or compute from ``k``); shapes are checked at trace
+time as for any filter. Per-step matrices of a linear model: ``model_at(model, Q=Qs, ...)``.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.filters._base import Filter
+from jaxfdi.models.linear import LinearGaussianModel
+
+
+class TimedState(NamedTuple):
+    step: Array  # () int, the step the inner state is the prior of
+    inner: Any   # the wrapped filter's state
+
+
+def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter:
+    """A ``Filter`` running ``filter_at(k)`` at step ``k`` (counted from ``start``).
+
+    ``init(*args)`` is ``filter_at(start).init(*args)`` with the counter; ``step(state, y,
+    u)`` is the step-``k`` filter's ``step``. The halves ``update``/``predict`` are not
+    exposed (a multiple-model filter over time-varying modes is built from modes that
+    read the step themselves).
+    """
+
+    def init(*args, **kwargs) -> TimedState:
+        return TimedState(jnp.asarray(start, jnp.int32), filter_at(jnp.asarray(start, jnp.int32)).init(*args, **kwargs))
+
+    def step(state: TimedState, y: Array, u: Array):
+        inner, info = filter_at(state.step).step(state.inner, y, u)
+        return TimedState(state.step + 1, inner), info
+
+    return Filter(init, step)
+
+
+def model_at(model: LinearGaussianModel, **per_step: Array) -> Callable[[Array], LinearGaussianModel]:
+    """``k -> model`` with the named fields (``Phi``, ``Gamma``, ``C``, ``D``, ``Q``, ``R``)
+    taken from (T, ...) per-step arrays; the other fields stay constant.
+
+    Example: ``time_varying(lambda k: kalman_filter(at(k)))`` with
+    ``at = model_at(model, Q=Qs, R=Rs, C=Cs)``.
+    """
+    fields = LinearGaussianModel._fields
+    lengths = set()
+    for name, table in per_step.items():
+        if name not in fields:
+            raise ValueError(f"{name}: not a LinearGaussianModel field; expected one of {list(fields)}")
+        constant = _checks.shape_of(getattr(model, name))
+        _checks.check_shape(name, table, (None,) + constant, f"T per-step copies of model.{name} {constant}")
+        lengths.add(_checks.shape_of(table)[0])
+    if len(lengths) > 1:
+        raise ValueError(f"per-step tables: expected the same number of steps T, got {sorted(lengths)}")
+    tables = {name: jnp.asarray(table) for name, table in per_step.items()}
+
+    def at(k: Array) -> LinearGaussianModel:
+        return model._replace(**{name: table[k] for name, table in tables.items()})
+
+    return at

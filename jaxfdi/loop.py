@@ -1,0 +1,317 @@
+"""One closed-loop run as one ``lax.scan``: plant -> sensors -> FDI -> controller -> plant.
+
+Every scenario of jaxfdi, open or closed loop, is this scan with its own three parts:
+
+- a **plant** ``(init, measure, advance)`` — a ``Simulator`` is one; a model with more
+  physics (the reaction wheels) writes its own two halves;
+- an **FDI** ``(step, observe)`` — estimator, detector, isolator and reconfiguration;
+- a **controller** ``(init, step)`` — what flies on the FDI's outputs.
+
+Step ``k`` (``Ts`` apart):
+
+1. ``measure(plant, k, u_s, key) -> (plant, sensed)``: the sensors read ``x[k]`` (noise,
+   sensor faults); ``sensed.measurement`` (or ``measurement_of(sensed)``) is ``y[k]``.
+   ``u_s``, the input a feed-through term sees, is ``u[k]`` for a feed-forward
+   controller (computed first) and otherwise ``u[k-1]``, the value the zero-order hold
+   still applies when the sensors sample (no algebraic loop);
+2. ``observe(fdi, k, y) -> (fdi, view)``: the part of the FDI the controller waits for
+   (estimator update, selected or compensated measurements, the isolated label, the
+   reconfiguration). Without ``observe`` the view is ``y`` itself;
+3. ``controller.step(ctrl, k, view, exogenous[k]) -> (ctrl, u[k])``;
+4. ``fdi.step(fdi, k, y, u) -> (fdi, output)``: the rest (time update with the input the
+   plant is believed to get, filter banks, detectors, decisions);
+5. ``advance(plant, k, u, key) -> (plant, moved)``: actuator faults, dynamics;
+6. ``scorer.update(score, k, output)``: metrics folded into the carry (a
+   ``DetectionRecord`` per decision, peaks, ...), so a run keeps a handful of numbers
+   unless ``keep_history=True`` asks for the (T, ...) trace.
+
+``monitor`` (open loop: precomputed inputs, one filter, one detector) is this scan with
+``feedforward()`` as the controller. A component that must re-run a filter over its last
+``L`` steps (seed 000's UKF restarts 2-3 steps before the detection) keeps a fixed-size
+``RingBuffer`` in its own state and replays it with ``replay_filter``: bounded, and
+``jit``/``vmap`` friendly.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.detection.chi2 import Decision, as_decision
+from jaxfdi.metrics import DetectionRecord, record_init, record_update
+
+
+class Plant(NamedTuple):
+    """``init(x0) -> state``; ``measure(state, k, u, key) -> (state, sensed)``;
+    ``advance(state, k, u, key) -> (state, moved)``. ``Simulator`` has these fields."""
+
+    init: Callable[[Array], Any]
+    measure: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
+    advance: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
+
+
+class FDI(NamedTuple):
+    """``step(state, k, y, u) -> (state, output)``; optional ``observe(state, k, y) ->
+    (state, view)`` runs before the controller (``None``: the controller sees ``y``)."""
+
+    step: Callable[[Any, Array, Any, Array], tuple[Any, Any]]
+    observe: Callable[[Any, Array, Any], tuple[Any, Any]] | None = None
+
+
+class Controller(NamedTuple):
+    """``init() -> state``; ``step(state, k, view, exogenous) -> (state, u)``.
+
+    ``feedforward=True``: ``u`` does not depend on ``view`` (it is called with ``None``
+    before the sensors read), so the sensors' feed-through sees this step's ``u``."""
+
+    init: Callable[[], Any]
+    step: Callable[[Any, Array, Any, Any], tuple[Any, Array]]
+    feedforward: bool = False
+
+
+class Scorer(NamedTuple):
+    """Metrics folded over a run: ``init(example_output) -> score`` (the example has the
+    FDI output's structure, ``jax.ShapeDtypeStruct`` leaves); ``update(score, k, output)
+    -> score``."""
+
+    init: Callable[[Any], Any]
+    update: Callable[[Any, Array, Any], Any]
+
+
+class LoopTrace(NamedTuple):
+    """One step of a run (stacked over time with ``keep_history=True``)."""
+
+    sensed: Any    # what ``measure`` returned (e.g. ``simulate.Sensed``)
+    view: Any      # what the controller saw
+    control: Array  # u[k]
+    output: Any    # what ``fdi.step`` returned
+    moved: Any     # what ``advance`` returned (e.g. ``simulate.Actuated``)
+
+
+class LoopResult(NamedTuple):
+    score: Any                 # ``scorer``'s final value (``None`` without a scorer)
+    history: LoopTrace | None  # (T, ...) with ``keep_history=True``
+    final: Any = None          # (plant, fdi, controller) states after the last step
+
+
+def feedforward(dtype=None) -> Controller:
+    """The open-loop controller: ``u[k] = exogenous[k]`` (precomputed inputs)."""
+    del dtype
+    return Controller(lambda: None, lambda state, k, view, u: (state, jnp.asarray(u)), feedforward=True)
+
+
+def state_feedback(gain: Array, reference: Callable[[Array], Array] | None = None) -> Controller:
+    """``u[k] = -K (x_hat[k] - x_ref[k])`` on the view (an estimate; ``u = -K x`` as SciPy's
+    LQR), with ``x_ref`` from ``reference(exogenous)`` or zero."""
+    gain = jnp.asarray(gain)
+
+    def step(state, k, view, exogenous):
+        error = view if reference is None else view - reference(exogenous)
+        return state, -gain @ error
+
+    return Controller(lambda: None, step)
+
+
+def measurement_of(sensed: Any) -> Any:
+    """``y[k]`` of what a plant's ``measure`` returned: its ``measurement`` field if it
+    has one, else the value itself."""
+    return getattr(sensed, "measurement", sensed)
+
+
+def run_loop(
+    plant: Plant,
+    fdi: FDI,
+    controller: Controller,
+    x0: Any,
+    fdi_state0: Any,
+    key: Array,
+    steps: int | None = None,
+    *,
+    exogenous: Any = None,
+    controller_state0: Any = None,
+    u0: Array | None = None,
+    scorer: Scorer | None = None,
+    keep_history: bool = False,
+) -> LoopResult:
+    """Run ``steps`` steps of the closed loop (module doc) and return its ``LoopResult``.
+
+    Args:
+      plant, fdi, controller: the three parts (``Plant``, ``FDI``, ``Controller``).
+      x0: the plant's initial state (``plant.init(x0)``).
+      fdi_state0: the FDI's initial state (e.g. ``(filt.init(...), detector.init())``).
+      key: PRNG key of the run (the plant draws step ``k``'s noise from it).
+      steps: number of steps T; may be omitted when ``exogenous`` is given.
+      exogenous: pytree of (T, ...) per-step data for the controller (feed-forward
+        inputs, references), or ``None``.
+      controller_state0: the controller's initial state (default ``controller.init()``).
+      u0: the input held before step 0 (what the feed-through sees at step 0 in closed
+        loop); required unless the controller is feed-forward.
+      scorer: ``Scorer`` of the FDI outputs (e.g. ``detection_scorer``), or ``None``.
+      keep_history: also return the stacked ``LoopTrace`` (memory grows with T).
+    """
+    lengths = {leaf.shape[0] for leaf in jax.tree_util.tree_leaves(exogenous)}
+    if len(lengths) > 1:
+        raise ValueError(f"exogenous: every leaf needs the same leading number of steps T, got {sorted(lengths)}")
+    if steps is None:
+        if not lengths:
+            raise ValueError("steps: expected the number of steps (no exogenous data to take it from)")
+        steps = lengths.pop()
+    elif lengths and lengths != {int(steps)}:
+        raise ValueError(f"exogenous: expected {steps} steps along axis 0, got {sorted(lengths)}")
+    if int(steps) < 1:
+        raise ValueError(f"steps: expected a positive number of steps, got {steps}")
+    if not controller.feedforward and u0 is None:
+        raise ValueError("u0: a closed loop needs the input held before step 0 (e.g. jnp.zeros(nu))")
+    ctrl0 = controller.init() if controller_state0 is None else controller_state0
+    held0 = None if controller.feedforward else jnp.asarray(u0)
+
+    def one_step(plant_state, fdi_state, ctrl_state, held, k, exo):
+        if controller.feedforward:
+            ctrl_state, u = controller.step(ctrl_state, k, None, exo)
+            plant_state, sensed = plant.measure(plant_state, k, u, key)
+            y = measurement_of(sensed)
+            fdi_state, view = (fdi_state, y) if fdi.observe is None else fdi.observe(fdi_state, k, y)
+        else:
+            plant_state, sensed = plant.measure(plant_state, k, held, key)
+            y = measurement_of(sensed)
+            fdi_state, view = (fdi_state, y) if fdi.observe is None else fdi.observe(fdi_state, k, y)
+            ctrl_state, u = controller.step(ctrl_state, k, view, exo)
+        fdi_state, output = fdi.step(fdi_state, k, y, u)
+        plant_state, moved = plant.advance(plant_state, k, u, key)
+        return (plant_state, fdi_state, ctrl_state, None if held is None else u), LoopTrace(sensed, view, u, output, moved)
+
+    plant0 = plant.init(x0)
+    score0 = None
+    if scorer is not None:  # the scorer sizes its records from the output's structure
+        exo0 = jax.tree_util.tree_map(lambda leaf: leaf[0], exogenous)
+        example = jax.eval_shape(lambda: one_step(plant0, fdi_state0, ctrl0, held0, jnp.arange(1)[0], exo0)[1])
+        score0 = scorer.init(example.output)
+
+    def body(carry, k_exo):
+        states, score = carry
+        states, trace = one_step(*states, *k_exo)
+        if scorer is not None:
+            score = scorer.update(score, k_exo[0], trace.output)
+        return (states, score), (trace if keep_history else None)
+
+    ((plant_state, fdi_state, ctrl_state, _), score), history = jax.lax.scan(
+        body, ((plant0, fdi_state0, ctrl0, held0), score0), (jnp.arange(int(steps)), exogenous))
+    return LoopResult(score, history, (plant_state, fdi_state, ctrl_state))
+
+
+# --- scoring ----------------------------------------------------------------------
+
+def _decisions(value: Any) -> Any:
+    """A ``Decision``, a ``(statistic, alarm)`` pair, or a tuple / named tuple / dict of
+    them, with every decision as a ``Decision``."""
+    if isinstance(value, Decision):
+        return value
+    if isinstance(value, dict):
+        return {name: _decisions(v) for name, v in value.items()}
+    if isinstance(value, (tuple, list)) and all(isinstance(v, (tuple, list, dict)) for v in value):
+        items = [_decisions(v) for v in value]
+        return type(value)(*items) if hasattr(value, "_fields") else type(value)(items)
+    return as_decision(value)
+
+
+def detection_scorer(
+    onset: Array,
+    decisions: Callable[[Any], Any],
+    healthy: Callable[[Any], Array] | None = None,
+    estimate_delay: int = 0,
+    dtype=None,
+) -> Scorer:
+    """One ``DetectionRecord`` per decision of the FDI output (``metrics``).
+
+    Args:
+      onset: () fault onset step (``faults.NEVER`` for a fault-free run).
+      decisions: ``output -> Decision`` (or a ``(statistic, alarm)`` pair), or a tuple /
+        dict of them: the score is the same structure of records.
+      healthy: ``output -> () bool``: the step's numerics were sound (default: the
+        output's ``healthy`` field when it has one); with the decision's statistic
+        finite, it decides the record's ``first_unhealthy``.
+      estimate_delay: as for ``monitor``.
+    """
+    dtype = dtype or jnp.result_type(float)
+
+    def is_healthy(output):
+        if healthy is not None:
+            return healthy(output)
+        return getattr(output, "healthy", jnp.ones((), bool))
+
+    def init(example):
+        found = jax.eval_shape(lambda out: _decisions(decisions(out)), example)
+        return jax.tree_util.tree_map(lambda _: record_init(onset, dtype), found,
+                                      is_leaf=lambda x: isinstance(x, Decision))
+
+    def update(score, k, output):
+        found = _decisions(decisions(output))
+        ok = jnp.all(is_healthy(output))
+
+        def one(record: DetectionRecord, decision: Decision) -> DetectionRecord:
+            good = ok & jnp.all(jnp.isfinite(decision.statistic))
+            return record_update(record, k, decision.alarm, decision.label, decision.estimate, estimate_delay,
+                                 healthy=good)
+
+        return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, DetectionRecord)))
+
+    return Scorer(init, update)
+
+
+# --- history ------------------------------------------------------------------------
+
+class RingBuffer(NamedTuple):
+    """The last ``L`` entries of a stream, fixed-size (a pytree: lives in a scan carry)."""
+
+    data: Any      # pytree, leaves (L, ...)
+    count: Array   # () int, entries pushed so far
+
+    @property
+    def length(self) -> int:
+        return jax.tree_util.tree_leaves(self.data)[0].shape[0]
+
+
+def ring_buffer(length: int, example: Any) -> RingBuffer:
+    """An empty buffer of ``length`` entries shaped like ``example``."""
+    if int(length) < 1:
+        raise ValueError(f"length: expected a positive number of entries, got {length}")
+    data = jax.tree_util.tree_map(lambda leaf: jnp.zeros((int(length),) + jnp.shape(leaf), jnp.result_type(leaf)),
+                                  example)
+    return RingBuffer(data, jnp.zeros((), jnp.int32))
+
+
+def push(buffer: RingBuffer, entry: Any) -> RingBuffer:
+    """Append ``entry``, overwriting the oldest once full."""
+    slot = buffer.count % buffer.length
+    data = jax.tree_util.tree_map(lambda store, leaf: store.at[slot].set(leaf), buffer.data, entry)
+    return RingBuffer(data, buffer.count + 1)
+
+
+def ordered(buffer: RingBuffer) -> tuple[Any, Array]:
+    """``(entries, valid)``: the stored entries oldest first, (L, ...), and which of the L
+    slots hold an entry ((L,) bool; fewer than L before the buffer first fills)."""
+    L = buffer.length
+    start = jnp.where(buffer.count >= L, buffer.count % L, 0)
+    index = (start + jnp.arange(L)) % L
+    entries = jax.tree_util.tree_map(lambda store: store[index], buffer.data)
+    return entries, jnp.arange(L) < jnp.minimum(buffer.count, L)
+
+
+def replay_filter(filt, state: Any, ys: Array, us: Array, valid: Array | None = None) -> tuple[Any, Any]:
+    """Re-run ``filt`` from ``state`` (the prior of the first entry) over (L, ...) stored
+    ``ys``, ``us``; steps with ``valid == False`` leave the state unchanged. Returns the
+    final state and the (L, ...) infos (a fixed-length scan: jit/vmap friendly)."""
+    ys, us = jnp.asarray(ys), jnp.asarray(us)
+    _checks.check_same_length(("ys", "us"), ys, us)
+    valid = jnp.ones((ys.shape[0],), bool) if valid is None else jnp.asarray(valid, bool)
+    _checks.check_shape("valid", valid, (ys.shape[0],), "one flag per stored step")
+
+    def body(s, entry):
+        y, u, ok = entry
+        new, info = filt.step(s, y, u)
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, s), info
+
+    return jax.lax.scan(body, state, (ys, us, valid))

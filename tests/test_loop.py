@@ -1,0 +1,282 @@
+"""The closed-loop scan (``jaxfdi.loop``) and the time-varying simulator and filter,
+against independent references: the open-loop pipeline written step by step in Python,
+the closed-form closed-loop response, the original filter run, filterpy driven matrix by
+matrix, and sample statistics."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg
+from filterpy.kalman import KalmanFilter
+from scipy import stats
+
+import jaxfdi
+from jaxfdi import loop
+from jaxfdi.filters import model_at, time_varying
+from jaxfdi.models import engine_model
+from jaxfdi.models.linear import LinearGaussianModel
+from jaxfdi.monitor import filter_detector
+
+T = 60
+ONSET = 30
+
+
+@pytest.fixture(scope="module")
+def engine():
+    model = engine_model()
+    kf = jaxfdi.kalman_filter(model)
+    threshold = jaxfdi.chi2_threshold(2 * 5, 0.01)
+    detector = jaxfdi.chi2_detector(threshold, 2)
+    return model, kf, detector, threshold
+
+
+def test_feedforward_loop_equals_the_open_loop_pipeline(engine):
+    """run_loop(feedforward) == simulate, then run_filter, then the windowed test and the
+    record computed in plain Python from the alarm sequence (identical integers)."""
+    model, kf, detector, threshold = engine
+    us = jnp.full((T, 1), 0.01)
+    for seed, f in enumerate([jaxfdi.fault("bias", "sensor", 1, ONSET, 30.0), jaxfdi.fault("bias", "actuator", 0, ONSET, 2e-3)]):
+        key = jax.random.key(seed)
+        sim = jaxfdi.linear_simulator(model, f)
+        scorer = loop.detection_scorer(ONSET, lambda out: out[1], lambda out: out[0].healthy)
+        result = loop.run_loop(sim, filter_detector(kf, detector), loop.feedforward(),
+                               jnp.zeros(7), (kf.init(jnp.zeros(7), model.Q), detector.init()), key,
+                               exogenous=us, scorer=scorer, keep_history=True)
+        _, truth = jaxfdi.simulate(sim, jnp.zeros(7), us, key)
+        _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), model.Q), truth.measurement, us)
+        nis = np.asarray(info.nis)
+        statistic = np.array([nis[max(0, k - 1): k + 1].sum() for k in range(T)])
+        alarms = statistic > float(threshold)
+        np.testing.assert_array_equal(result.history.sensed.measurement, truth.measurement)
+        np.testing.assert_allclose(result.history.output[1].statistic, statistic, rtol=1e-12)
+        record = result.score
+        first = lambda mask: int(np.argmax(mask)) if mask.any() else -1  # noqa: E731
+        after = alarms & (np.arange(T) >= ONSET)
+        assert int(record.first_alarm) == first(alarms)
+        assert int(record.detection_step) == first(after)
+        assert int(record.false_alarms) == int(alarms[:ONSET].sum())
+        assert int(record.pre_onset_steps) == ONSET
+        assert int(record.first_unhealthy) == -1
+        assert int(record.detection_step) >= ONSET  # the faults are large: detected
+
+
+def test_monitor_is_the_feedforward_loop(engine):
+    model, kf, detector, _ = engine
+    us = jnp.full((T, 1), 0.01)
+    f = jaxfdi.fault("bias", "sensor", 1, ONSET, 30.0)
+    result = jaxfdi.monitor(jaxfdi.linear_simulator(model, f), kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q),
+                            us, jax.random.key(0), ONSET, keep_history=True)
+    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model, f), jnp.zeros(7), us, jax.random.key(0))
+    for field in truth._fields:
+        np.testing.assert_array_equal(getattr(result.history.truth, field), getattr(truth, field))
+    assert int(result.record.detection_step) >= ONSET
+
+
+def _lqr(Phi, Gamma, Qx, Ru):
+    """SciPy's discrete LQR: u = -K x, K = (R + B'XB)^-1 B'XA."""
+    X = scipy.linalg.solve_discrete_are(Phi, Gamma, Qx, Ru)
+    return np.linalg.solve(Ru + Gamma.T @ X @ Gamma, Gamma.T @ X @ Phi)
+
+
+def test_closed_loop_lqr_with_a_perfect_sensor_is_the_closed_form_response():
+    rng = np.random.default_rng(0)
+    n, nu = 4, 2
+    Phi = rng.normal(size=(n, n)) * 0.6
+    Gamma = rng.normal(size=(n, nu))
+    K = _lqr(Phi, Gamma, np.eye(n), np.eye(nu))
+    model = LinearGaussianModel(jnp.asarray(Phi), jnp.asarray(Gamma), jnp.eye(n), jnp.zeros((n, nu)),
+                                jnp.zeros((n, n)), jnp.zeros((n, n)))
+    passthrough = loop.FDI(lambda state, k, y, u: (state, None))
+    x0 = jnp.asarray(rng.normal(size=n))
+    result = loop.run_loop(jaxfdi.linear_simulator(model), passthrough, loop.state_feedback(K), x0, None,
+                           jax.random.key(0), 40, u0=jnp.zeros(nu), keep_history=True)
+    expected = [np.asarray(x0)]
+    for _ in range(39):
+        expected.append((Phi - Gamma @ K) @ expected[-1])
+    np.testing.assert_allclose(result.history.sensed.state, np.array(expected), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(result.history.control, -np.array(expected) @ K.T, rtol=0, atol=1e-12)
+    assert np.max(np.abs(np.linalg.eigvals(Phi))) > 1  # open loop unstable: the loop is what holds it
+
+
+def test_closed_loop_feedthrough_sees_the_held_input():
+    """In closed loop the sensors sample before the controller acts: the feed-through
+    term of y[k] carries u[k-1] (zero-order hold), u0 at step 0."""
+    model = LinearGaussianModel(jnp.eye(1) * 0.5, jnp.eye(1), jnp.eye(1), jnp.eye(1) * 2.0,
+                                jnp.zeros((1, 1)), jnp.zeros((1, 1)))
+    counter = loop.Controller(lambda: jnp.zeros(1), lambda s, k, view, exo: (s + 1.0, s + 1.0))
+    result = loop.run_loop(jaxfdi.linear_simulator(model), loop.FDI(lambda s, k, y, u: (s, None)), counter,
+                           jnp.zeros(1), None, jax.random.key(0), 5, u0=jnp.full(1, 7.0), keep_history=True)
+    u = np.asarray(result.history.control)[:, 0]
+    x = np.asarray(result.history.sensed.state)[:, 0]
+    held = np.concatenate([[7.0], u[:-1]])
+    np.testing.assert_allclose(np.asarray(result.history.sensed.measurement)[:, 0], x + 2.0 * held, rtol=1e-15)
+
+
+def test_replay_over_the_ring_buffer_equals_the_original_estimates():
+    """An FDI that keeps (y, u, prior) of its last L steps re-runs its KF from the prior L
+    steps back; with nothing changed it lands on the filter's own estimate (1e-12)."""
+    L = 3
+    rng = np.random.default_rng(1)
+    n, m = 3, 2
+    model = LinearGaussianModel(jnp.asarray(np.eye(n) * 0.9 + 0.05 * rng.normal(size=(n, n))), jnp.ones((n, 1)),
+                                jnp.asarray(rng.normal(size=(m, n))), jnp.zeros((m, 1)), 0.01 * jnp.eye(n), 0.1 * jnp.eye(m))
+    kf = jaxfdi.kalman_filter(model)
+    prior0 = kf.init(jnp.zeros(n), jnp.eye(n))
+    example = (jnp.zeros(m), jnp.zeros(1), prior0)
+
+    def step(state, k, y, u):
+        prior, buffer = state
+        buffer = loop.push(buffer, (y, u, prior))
+        post, info = kf.step(prior, y, u)
+        (ys, us, priors), valid = loop.ordered(buffer)
+        start = jax.tree_util.tree_map(lambda leaf: leaf[0], priors)
+        _, replayed = loop.replay_filter(kf, start, ys, us, valid)
+        last = jnp.sum(valid) - 1
+        return (post, buffer), (info.filtered_mean, replayed.filtered_mean[last], buffer.count)
+
+    fdi = loop.FDI(step)
+    us = jnp.asarray(rng.normal(size=(25, 1)))
+    result = loop.run_loop(jaxfdi.linear_simulator(model), fdi, loop.feedforward(), jnp.zeros(n),
+                           (prior0, loop.ring_buffer(L, example)), jax.random.key(3), exogenous=us, keep_history=True)
+    original, replayed, count = result.history.output
+    np.testing.assert_allclose(replayed, original, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(count, np.arange(1, 26))
+    # and the buffer really holds the last L steps, oldest first
+    _, buffer = result.final[1]
+    (ys, _, _), valid = loop.ordered(buffer)
+    np.testing.assert_array_equal(ys, result.history.sensed.measurement[-L:])
+    assert bool(jnp.all(valid))
+
+
+def test_ring_buffer_before_it_fills():
+    buffer = loop.ring_buffer(4, jnp.zeros(()))
+    for value in (1.0, 2.0):
+        buffer = loop.push(buffer, jnp.asarray(value))
+    entries, valid = loop.ordered(buffer)
+    np.testing.assert_array_equal(valid, [True, True, False, False])
+    np.testing.assert_array_equal(entries[:2], [1.0, 2.0])
+    for value in (3.0, 4.0, 5.0, 6.0, 7.0):
+        buffer = loop.push(buffer, jnp.asarray(value))
+    entries, valid = loop.ordered(buffer)
+    np.testing.assert_array_equal(entries, [4.0, 5.0, 6.0, 7.0])
+    with pytest.raises(ValueError, match="length"):
+        loop.ring_buffer(0, jnp.zeros(()))
+
+
+def test_time_varying_kalman_filter_matches_filterpy_matrix_by_matrix():
+    rng = np.random.default_rng(2)
+    n, m, nu, steps = 3, 2, 1, 30
+    model = LinearGaussianModel(jnp.asarray(np.eye(n) + 0.1 * rng.normal(size=(n, n))), jnp.asarray(rng.normal(size=(n, nu))),
+                                jnp.zeros((m, n)), jnp.zeros((m, nu)), jnp.eye(n), jnp.eye(m))
+    Cs = rng.normal(size=(steps, m, n))
+    Qs = np.stack([np.diag(rng.uniform(0.01, 0.2, n)) for _ in range(steps)])
+    Rs = np.stack([np.diag(rng.uniform(0.05, 1.0, m)) for _ in range(steps)])
+    ys = rng.normal(size=(steps, m))
+    us = rng.normal(size=(steps, nu))
+    at = model_at(model, C=Cs, Q=Qs, R=Rs)
+    filt = time_varying(lambda k: jaxfdi.kalman_filter(at(k)))
+    _, info = jaxfdi.run_filter(filt, filt.init(jnp.zeros(n), jnp.eye(n)), jnp.asarray(ys), jnp.asarray(us))
+
+    kf = KalmanFilter(dim_x=n, dim_z=m, dim_u=nu)
+    kf.F, kf.B = np.asarray(model.Phi), np.asarray(model.Gamma)
+    kf.x, kf.P = np.zeros((n, 1)), np.eye(n)
+    means, covs = [], []
+    for k in range(steps):
+        kf.H, kf.R = Cs[k], Rs[k]
+        kf.update(ys[k].reshape(m, 1))
+        means.append(kf.x.ravel().copy())
+        covs.append(kf.P.copy())
+        kf.Q = Qs[k]
+        kf.predict(u=us[k].reshape(nu, 1))
+    np.testing.assert_allclose(info.filtered_mean, np.array(means), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(info.filtered_cov, np.array(covs), rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match="Q"):
+        model_at(model, Q=Qs[:, :2])
+
+
+@pytest.fixture(scope="module")
+def small_plant():
+    model = LinearGaussianModel(0.5 * jnp.eye(2), jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2)), jnp.zeros((2, 2)),
+                                jnp.eye(2))
+    return model
+
+
+def test_per_step_covariances_as_tables_and_callables_agree(small_plant):
+    steps = 20
+    Rs = jnp.stack([jnp.eye(2) * (1.0 + k) for k in range(steps)])
+    us = jnp.zeros((steps, 2))
+    table = jaxfdi.simulator(lambda x, u, p: 0.5 * x + u, lambda x, u, p: x, jnp.zeros((2, 2)), Rs)
+    function = jaxfdi.simulator(lambda x, u, p: 0.5 * x + u, lambda x, u, p: x, jnp.zeros((2, 2)),
+                                lambda k: jnp.eye(2) * (1.0 + k))
+    _, a = jaxfdi.simulate(table, jnp.zeros(2), us, jax.random.key(0))
+    _, b = jaxfdi.simulate(function, jnp.zeros(2), us, jax.random.key(0))
+    np.testing.assert_allclose(a.measurement, b.measurement, rtol=1e-13)
+    with pytest.raises(ValueError, match="R"):
+        jaxfdi.simulator(lambda x, u, p: x, lambda x, u, p: x, jnp.zeros((2, 2)), jnp.zeros((steps, 2, 3)))
+
+
+def test_per_step_measurement_noise_has_its_step_variance():
+    """Sample variance of y[k] across 4000 runs vs R_k = (1 + k) I: chi-square bounds (1e-3 each)."""
+    steps, runs = 4, 4000
+    sim = jaxfdi.simulator(lambda x, u, p: x, lambda x, u, p: x, jnp.zeros((1, 1)), lambda k: jnp.eye(1) * (1.0 + k))
+    keys = jax.random.split(jax.random.key(9), runs)
+    _, truth = jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(1), jnp.zeros((steps, 0)), key))(keys)
+    y = np.asarray(truth.measurement)[:, :, 0]
+    for k in range(steps):
+        scaled = (runs - 1) * y[:, k].var(ddof=1) / (1.0 + k)
+        assert stats.chi2.ppf(5e-4, runs - 1) < scaled < stats.chi2.ppf(1 - 5e-4, runs - 1), k
+
+
+def test_input_noise_time_argument_noise_gain_and_availability():
+    """The applied input carries N(0, Q_u) noise (sample covariance within chi-square
+    bounds); f sees k; G routes process noise to the first state only; unavailable
+    components are NaN."""
+    runs = 3000
+    Qu = jnp.array([[0.04, 0.01], [0.01, 0.09]])
+    sim = jaxfdi.simulator(lambda x, u, k, p: jnp.array([x[0] + u[0], x[1] + k]), lambda x, u, k, p: x,
+                           jnp.eye(1), jnp.zeros((2, 2)), time_varying=True, noise_gain=jnp.array([[1.0], [0.0]]),
+                           input_noise=Qu, available=lambda k, x: jnp.array([True, k % 2 == 0]))
+    us = jnp.ones((3, 2))
+    keys = jax.random.split(jax.random.key(4), runs)
+    _, truth = jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(2), us, key))(keys)
+    noise = np.asarray(truth.actuator_fault)[:, 0, :]                    # applied - commanded
+    for i in range(2):
+        scaled = (runs - 1) * noise[:, i].var(ddof=1) / float(Qu[i, i])
+        assert stats.chi2.ppf(5e-4, runs - 1) < scaled < stats.chi2.ppf(1 - 5e-4, runs - 1)
+    corr = np.corrcoef(noise.T)[0, 1]
+    assert abs(np.arctanh(corr) - np.arctanh(0.01 / 0.06)) < 3.3 / np.sqrt(runs - 3)
+    x = np.asarray(truth.state)
+    np.testing.assert_array_equal(x[:, :, 1], np.broadcast_to([0.0, 0.0, 1.0], (runs, 3)))  # x1 += k, no noise
+    y = np.asarray(truth.measurement)
+    assert np.all(np.isnan(y[:, 1, 1])) and np.all(np.isfinite(y[:, [0, 2], 1])) and np.all(np.isfinite(y[:, :, 0]))
+
+
+def test_a_nan_mid_run_marks_the_record_unhealthy(engine):
+    """A measurement that goes NaN at step 40 (a filter without missing-data handling):
+    the record names step 40 as the first unhealthy one, and the summary does not count
+    the run as a clean detection or a clean fault-free run."""
+    model, kf, detector, _ = engine
+    us = jnp.full((T, 1), 0.01)
+    sim = jaxfdi.linear_simulator(model, available=lambda k, x: jnp.full((5,), k != 40))
+    records = []
+    for onset in (ONSET, jaxfdi.faults.NEVER):
+        result = jaxfdi.monitor(sim, kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q), us,
+                                jax.random.key(0), onset)
+        assert int(result.record.first_unhealthy) == 40
+        records.append(result.record)
+    stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *records)
+    summary = jaxfdi.summarize_detection(stacked, T)
+    assert summary.unhealthy_runs == 2
+    assert np.isnan(summary.detection_rate) and np.isnan(summary.false_alarm_rate)
+
+
+def test_loop_input_errors():
+    model = engine_model()
+    sim = jaxfdi.linear_simulator(model)
+    fdi = loop.FDI(lambda s, k, y, u: (s, None))
+    with pytest.raises(ValueError, match="u0"):
+        loop.run_loop(sim, fdi, loop.state_feedback(jnp.zeros((1, 7))), jnp.zeros(7), None, jax.random.key(0), 5)
+    with pytest.raises(ValueError, match="steps"):
+        loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(7), None, jax.random.key(0))
+    with pytest.raises(ValueError, match="exogenous"):
+        loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(7), None, jax.random.key(0), 5, exogenous=jnp.zeros((4, 1)))

@@ -37,10 +37,12 @@ def engine_model(Ts: float = TS, dtype=None) -> LinearGaussianModel:
     """Discrete engine model ``(Phi, Gamma, C, D, Q, R)`` at sample period ``Ts``.
 
     Uses float64 when x64 is enabled (recommended: the model is stiff and its states
-    span five orders of magnitude), else float32, unless ``dtype`` is given.
+    span five orders of magnitude), else float32, unless ``dtype`` is given. ``Phi`` and
+    ``Gamma`` are computed in float64 either way (``c2d``) and then cast, so the float32
+    model is the float64 one rounded (the float32 exponential of this stiff block is NaN).
     """
     dtype = dtype or jnp.result_type(float)
-    Phi, Gamma = c2d(jnp.asarray(A, dtype), jnp.asarray(B, dtype), Ts)
+    Phi, Gamma = c2d(A, B, Ts, dtype=dtype)
     return LinearGaussianModel(
         Phi, Gamma, jnp.asarray(C, dtype), jnp.asarray(D, dtype), jnp.asarray(Q, dtype), jnp.asarray(R, dtype)
     )

@@ -10,6 +10,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
@@ -54,16 +55,26 @@ def linear_observation(x: Array, u: Array, model: LinearGaussianModel) -> Array:
     return model.C @ x + model.D @ u
 
 
-def c2d(A: Array, B: Array, Ts: float) -> tuple[Array, Array]:
+def c2d(A: Array, B: Array, Ts: float, dtype=None) -> tuple[Array, Array]:
     """Zero-order-hold discretisation by one matrix exponential.
 
     ``expm([[A, B], [0, 0]] Ts) = [[Phi, Gamma], [0, I]]`` (Van Loan 1978), the same
     result as ``scipy.signal.cont2discrete(..., method="zoh")``.
 
+    With concrete inputs (NumPy or JAX arrays known at trace time: every model
+    constructor) the exponential is computed in float64 whether or not x64 is enabled,
+    and only the result is cast to ``dtype``: a stiff block (the engine's ``[A, B] Ts``
+    has a 1-norm near 7e5) overflows float32's scaling and squaring into NaN. Under
+    x64 with float64 inputs this is the same computation as before, bit for bit. A
+    non-finite result raises a ``ValueError``. With traced inputs (``jit``/``vmap``
+    over ``A``, ``B`` or ``Ts``) it runs in the inputs' dtype, traceable.
+
     Args:
       A: (n, n) continuous state matrix.
       B: (n, nu) continuous input matrix.
       Ts: sample period in seconds (> 0).
+      dtype: dtype of the result; default that of ``jnp.asarray(A)`` (the default
+        float dtype for NumPy float64 input without x64).
 
     Returns:
       ``(Phi, Gamma)`` of shapes (n, n) and (n, nu).
@@ -73,8 +84,44 @@ def c2d(A: Array, B: Array, Ts: float) -> tuple[Array, Array]:
     ts = _checks.concrete(Ts)
     if ts is not None and not (ts.shape == () and ts > 0):
         raise ValueError(f"Ts: expected a positive scalar sample period, got {Ts}")
-    A = jnp.asarray(A)
-    return _zoh(A, jnp.asarray(B, dtype=A.dtype), jnp.asarray(Ts, dtype=A.dtype))
+    if dtype is None:
+        dtype = jnp.asarray(A).dtype
+        dtype = dtype if jnp.issubdtype(dtype, jnp.floating) else jnp.result_type(float)
+    A_value, B_value = _checks.concrete(A), _checks.concrete(B)
+    if A_value is None or B_value is None or ts is None:  # traced: stay in the caller's dtype
+        A = jnp.asarray(A, dtype)
+        return _zoh(A, jnp.asarray(B, dtype=dtype), jnp.asarray(Ts, dtype=dtype))
+    Phi, Gamma = zoh_float64(A_value, B_value, ts)
+    if not (np.all(np.isfinite(Phi)) and np.all(np.isfinite(Gamma))):
+        raise ValueError(f"c2d: Phi and Gamma are not finite even in float64 (A Ts has 1-norm "
+                         f"{np.linalg.norm(A_value * ts, 1):.3g}); check A, B and Ts")
+    if max(np.max(np.abs(Phi)), np.max(np.abs(Gamma), initial=0.0)) > np.finfo(dtype).max:
+        raise ValueError(f"c2d: Phi and Gamma are finite in float64 but overflow {jnp.dtype(dtype).name}; "
+                         "use dtype=float64 (jaxfdi.enable_x64())")
+    return jnp.asarray(Phi, dtype), jnp.asarray(Gamma, dtype)
+
+
+def zoh_float64(A, B, Ts) -> tuple[np.ndarray, np.ndarray]:
+    """``(Phi, Gamma)`` of concrete ``A``, ``B``, ``Ts`` as float64 NumPy arrays, whatever
+    the x64 flag: JAX's own ``expm`` (Higham 2005 scaling and squaring, the one c2d has
+    always used and its tests compare with SciPy), run eagerly in a scoped
+    ``jax.enable_x64`` context, so that under x64 the numbers are those of ``c2d`` in
+    float64 exactly. (A NumPy Pade would differ from it in the last bits.)"""
+    args = (np.asarray(A, np.float64), np.asarray(B, np.float64), np.asarray(Ts, np.float64))
+    with jax.ensure_compile_time_eval(), _x64():
+        Phi, Gamma = _zoh(*(jnp.asarray(a, jnp.float64) for a in args))
+        return np.asarray(Phi), np.asarray(Gamma)
+
+
+def _x64():
+    """A scoped float64 context (``jax.enable_x64(True)``; ``jax.experimental.enable_x64``
+    on older JAX): the global flag is left as the caller set it."""
+    state = getattr(jax, "enable_x64", None)
+    if callable(state):
+        return state(True)
+    from jax.experimental import enable_x64  # pragma: no cover - JAX < 0.5
+
+    return enable_x64()
 
 
 @jax.jit

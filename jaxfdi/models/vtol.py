@@ -39,7 +39,7 @@ def vtol_model(Ts: float = TS, dtype=None):
     from jaxfdi.models.linear import LinearGaussianModel, c2d
 
     dtype = dtype or jnp.result_type(float)
-    Phi, Gamma = c2d(jnp.asarray(A, dtype), jnp.asarray(B, dtype), Ts)
+    Phi, Gamma = c2d(A, B, Ts, dtype=dtype)  # float64 inside, then cast
     return LinearGaussianModel(
         Phi, Gamma, jnp.asarray(C, dtype), jnp.zeros((4, 2), dtype),
         PROCESS_NOISE_STD**2 * jnp.eye(4, dtype=dtype), MEASUREMENT_NOISE_STD**2 * jnp.eye(4, dtype=dtype),
@@ -55,7 +55,7 @@ def vtol_unknown_input(Ts: float = TS, include_disturbance: bool = False, dtype=
 
     dtype = dtype or jnp.result_type(float)
     columns = np.hstack([UNCERTAINTY_INPUT, DISTURBANCE_INPUT]) if include_disturbance else UNCERTAINTY_INPUT
-    return c2d(jnp.asarray(A, dtype), jnp.asarray(columns, dtype), Ts)[1]
+    return c2d(A, columns, Ts, dtype=dtype)[1]
 
 
 def vtol_true_plant(Ts: float = TS, uncertainty: float = 1.0, disturbance: float = 1.0, dtype=None):
@@ -74,6 +74,6 @@ def vtol_true_plant(Ts: float = TS, uncertainty: float = 1.0, disturbance: float
     A6[:4, 4:5] = disturbance * DISTURBANCE_AMPLITUDE * DISTURBANCE_INPUT
     A6[4:, 4:] = [[0.0, f], [-f, 0.0]]
     B6 = np.vstack([B, np.zeros((2, 2))])
-    Phi6, Gamma6 = c2d(jnp.asarray(A6, dtype), jnp.asarray(B6, dtype), Ts)
+    Phi6, Gamma6 = c2d(A6, B6, Ts, dtype=dtype)
     C6 = jnp.asarray(np.hstack([C, np.zeros((4, 2))]), dtype)
     return Phi6, Gamma6, C6

@@ -211,7 +211,13 @@ class ScenarioRuns(NamedTuple):
 
 
 def scenario_runs(runs: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> ScenarioRuns:
-    """The study's runs: ``runs`` of each engine case (fault-major) with inputs and keys."""
+    """The study's runs: ``runs`` of each engine case (fault-major) with inputs and keys.
+
+    Needs float64 (``jaxfdi.enable_x64()``; the CLI enables it): every engine study,
+    tuning and evaluation starts here."""
+    if not jax.config.jax_enable_x64:
+        raise ValueError("engine scenarios need float64: call jaxfdi.enable_x64() first (the engine model is "
+                         "stiff; its float32 runs are not the paper's)")
     steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
     _, faults = engine_faults(onset)
     batch = stack_faults([f for f in faults for _ in range(runs)])

@@ -64,7 +64,7 @@ def vtol_data(runs: int, seed: int = 0):
     ys, us = np.empty((runs, T, 4)), np.empty((runs, T, 2))
     for k in range(T):
         ys[:, k] = x @ C.T + vtol.MEASUREMENT_NOISE_STD * rng.standard_normal((runs, 4))
-        u = np.concatenate([x, z], axis=1) @ K.T
+        u = -np.concatenate([x, z], axis=1) @ K.T                      # u = -K [x; z]
         us[:, k] = u
         z = z + vtol.TS * (COMMAND - x @ H.T)
         d = x @ vtol.UNCERTAINTY_GAIN.T                                   # (runs, 1)

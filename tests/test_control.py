@@ -1,4 +1,5 @@
-"""LQR-PI against SciPy's DARE, and eigenstructure assignment: the faulty closed loop
+"""LQR-PI against SciPy's DARE and the textbook gain (u = -K x, SciPy/MATLAB's sign), and
+eigenstructure assignment: the faulty closed loop
 keeps the nominal eigenvalues (1e-8), the eigenvectors are the eq. 26 projections, the
 gain is real, and a dead actuator gets a zero row."""
 from __future__ import annotations
@@ -24,9 +25,10 @@ def model():
 
 
 def _scipy_gain(A, B, Q, R):
+    """SciPy's DARE and the textbook gain ``K = (R + B^T X B)^-1 B^T X A``, ``u = -K x``."""
     A, B = np.asarray(A), np.asarray(B)
     X = sl.solve_discrete_are(A, B, Q, R)
-    return -np.linalg.solve(R + B.T @ X @ B, B.T @ X @ A), X
+    return np.linalg.solve(R + B.T @ X @ B, B.T @ X @ A), X
 
 
 def test_lqr_gain_equals_scipy(model):
@@ -37,11 +39,30 @@ def test_lqr_gain_equals_scipy(model):
     np.testing.assert_allclose(K, K_ref, rtol=1e-9, atol=1e-12)
 
 
+def test_lqr_gain_sign_is_u_minus_K_x(model):
+    """``u = -K x`` stabilises the open-loop unstable VTOL and attains the cost
+    ``x0^T X x0`` (summed over a long simulated horizon); ``u = +K x`` diverges."""
+    A, B = np.asarray(model.Phi), np.asarray(model.Gamma)
+    assert np.max(np.abs(np.linalg.eigvals(A))) > 1.0
+    K, X, _ = (np.asarray(a) for a in lqr_gain(A, B, np.eye(4), np.eye(2)))
+    assert np.max(np.abs(np.linalg.eigvals(A - B @ K))) < 1.0
+    assert np.max(np.abs(np.linalg.eigvals(A + B @ K))) > 1.0
+    x0 = np.array([1.0, -0.5, 0.2, 0.3])
+    x, cost = x0, 0.0
+    for _ in range(2000):
+        u = -K @ x
+        cost += x @ x + u @ u
+        x = A @ x + B @ u
+    np.testing.assert_allclose(cost, x0 @ X @ x0, rtol=1e-9)
+
+
 def test_lqr_pi_equals_scipy_on_the_augmented_system(model):
     design = lqr_pi(model.Phi, model.Gamma, H_ANGLE, Q_PI, R_PI, vtol.TS)
     K_ref, _ = _scipy_gain(design.A_bar, design.B_bar, Q_PI, R_PI)
     np.testing.assert_allclose(design.gain, K_ref, rtol=1e-9, atol=1e-11)
     assert float(design.spectral_radius) < 1.0
+    closed = np.asarray(design.A_bar) - np.asarray(design.B_bar) @ K_ref  # u = -K [x; z]
+    np.testing.assert_allclose(float(design.spectral_radius), np.max(np.abs(np.linalg.eigvals(closed))), rtol=1e-9)
     # eq. 21 blocks
     np.testing.assert_allclose(design.A_bar[4:, :4], -vtol.TS * H_ANGLE)
     np.testing.assert_allclose(design.G[4:], vtol.TS * np.eye(2))
@@ -59,7 +80,7 @@ def test_paper_pi_design_keeps_an_eigenvalue_at_one(model):
     except (ValueError, np.linalg.LinAlgError):
         pass  # SciPy < 1.17: LinAlgError ("eigenvalues too close to the unit circle")
     else:
-        assert np.min(np.abs(np.linalg.eigvals(A_bar + B_bar @ K_ref) - 1.0)) < 1e-6
+        assert np.min(np.abs(np.linalg.eigvals(A_bar - B_bar @ K_ref) - 1.0)) < 1e-6
     design = lqr_pi(model.Phi, model.Gamma, H_PAPER, Q_PI, R_PI, vtol.TS)
     assert abs(float(design.spectral_radius) - 1.0) < 1e-9
 
@@ -75,7 +96,7 @@ def test_eigenstructure_assignment_keeps_the_nominal_eigenvalues(model, H, loss)
     lam, V = nominal_eigenstructure(design.A_bar, design.B_bar, design.gain)
     B_f = effectiveness_input(design.B_bar, jnp.asarray(LOSSES[loss]))
     result = jax.jit(assign_eigenstructure)(design.A_bar, B_f, lam, V)
-    closed = np.asarray(design.A_bar + B_f @ result.gain)
+    closed = np.asarray(design.A_bar - B_f @ result.gain)  # u = -K_f x
     eig = np.linalg.eigvals(closed)
     dead = [j for j, value in enumerate(LOSSES[loss]) if value == 1.0]
     for j in dead:
@@ -115,7 +136,7 @@ def test_eigenvectors_are_the_eq26_projections(model, loss):
     # the projection is the closest admissible vector: the residual is orthogonal to span(E_i)
     # (checked above by equality), and K_f agrees with the paper's eq. 29 (B_f full rank)
     Vf = np.asarray(result.eigenvectors)
-    K29 = np.linalg.pinv(B_f) @ (Vf @ np.diag(lam) - A_bar @ Vf) @ np.linalg.inv(Vf)
+    K29 = -np.linalg.pinv(B_f) @ (Vf @ np.diag(lam) - A_bar @ Vf) @ np.linalg.inv(Vf)  # the paper's u = K x, negated
     np.testing.assert_allclose(np.asarray(result.gain), K29.real, atol=1e-8)
 
 

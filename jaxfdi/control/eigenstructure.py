@@ -1,18 +1,21 @@
 """Eigenstructure assignment of a reconfigured state-feedback gain for a faulty actuator
 (seed 001, eqs. 23-29; Zhang & Jiang 1999, 2000).
 
-Given the nominal closed loop ``A_bar + B_bar K_n`` with eigenvalues ``lambda_i`` and
+Sign convention: ``u = -K x`` as in ``lqr_gain`` (SciPy, MATLAB), so closed loops are
+``A_bar - B K``; the paper's ``u = K x`` gains are the negatives of these.
+
+Given the nominal closed loop ``A_bar - B_bar K_n`` with eigenvalues ``lambda_i`` and
 eigenvectors ``v_i``, and the faulty input matrix ``B_f``, find ``K_f`` such that
-``A_bar + B_f K_f`` keeps every ``lambda_i`` (eq. 23) with eigenvectors as close as
+``A_bar - B_f K_f`` keeps every ``lambda_i`` (eq. 23) with eigenvectors as close as
 possible to the nominal ones. An eigenvector of the faulty loop must lie in the span of
 ``E_i = (lambda_i I - A_bar)^-1 B_f`` (eq. 24); the closest one (eq. 25, ``W_i = I``)
 is the projection ``v_i^f = E_i alpha_i``, ``alpha_i = E_i^+ v_i`` (eq. 26). The span
 is computed as the null space of ``[lambda_i I - A_bar, -B_f]`` by SVD — the "SVD-based"
 assignment of the paper, which stays defined when ``lambda_i`` is also an eigenvalue of
 ``A_bar`` (the integrators put 1 in both). Then
-``(lambda_i I - A_bar) v_i^f = B_f alpha_i`` and ``K_f v_i^f = alpha_i`` for all i, i.e.
-``K_f = [alpha_1 ... alpha_N] (V^f)^-1``, which is the paper's eq. 29
-``K_f = B_f^+ (V^f Lambda - A_bar V^f) (V^f)^-1`` whenever ``B_f`` has full column rank
+``(lambda_i I - A_bar) v_i^f = B_f alpha_i`` and ``K_f v_i^f = -alpha_i`` for all i, i.e.
+``K_f = -[alpha_1 ... alpha_N] (V^f)^-1``, which is minus the paper's eq. 29
+``B_f^+ (V^f Lambda - A_bar V^f) (V^f)^-1`` whenever ``B_f`` has full column rank
 (the SVDs of eq. 28 are the pseudo-inverses). Complex-conjugate eigenvalues give
 conjugate columns, so ``K_f`` is real up to round-off (its imaginary part is reported).
 
@@ -22,7 +25,7 @@ pseudo-inverse gives the minimum-norm ``alpha_i``, whose component on the dead i
 if ``(A_bar, B_f)`` can still move them. When it cannot (on the VTOL tracking
 ``v_h`` and ``theta``, one actuator cannot hold two integrators: a mode at 1 becomes
 uncontrollable), ``V^f`` is singular, ``K_f`` is the least-squares (pseudo-inverse)
-solution of ``K_f V^f = [alpha_i]``, and ``assignment_residual`` says which eigenvalues
+solution of ``K_f V^f = -[alpha_i]``, and ``assignment_residual`` says which eigenvalues
 were kept. (The paper's design, tracking ``v_h`` and ``q``, has that mode at 1 already
 in the nominal loop, so there either actuator alone keeps every eigenvalue.)
 """
@@ -43,11 +46,11 @@ NULL_RTOL = 1e-10
 
 
 class EigenstructureResult(NamedTuple):
-    gain: Array                    # (p, N) real K_f
+    gain: Array                    # (p, N) real K_f: u = -K_f x, closed loop A_bar - B_f K_f
     eigenvectors: Array            # (N, N) complex V^f, columns v_i^f (eq. 26)
     gain_imaginary: Array          # () max |Im K_f| before taking the real part
     eigenvector_matrix_cond: Array  # () condition number of V^f (huge: not every eigenvalue is assignable)
-    assignment_residual: Array      # (N,) |(A_bar + B_f K_f) v_i^f - lambda_i v_i^f| / |v_i^f|: ~0 where assigned
+    assignment_residual: Array      # (N,) |(A_bar - B_f K_f) v_i^f - lambda_i v_i^f| / |v_i^f|: ~0 where assigned
 
 
 def effectiveness_input(B: Array, loss: Array) -> Array:
@@ -56,15 +59,16 @@ def effectiveness_input(B: Array, loss: Array) -> Array:
 
 
 def nominal_eigenstructure(A_bar, B_bar, K_nominal) -> tuple[np.ndarray, np.ndarray]:
-    """Eigenvalues (N,) and eigenvectors (N, N) of the nominal loop ``A_bar + B_bar K_n``
-    (NumPy, concrete arrays: computed once per design, outside the hot loop)."""
-    closed = np.asarray(A_bar) + np.asarray(B_bar) @ np.asarray(K_nominal)
+    """Eigenvalues (N,) and eigenvectors (N, N) of the nominal loop ``A_bar - B_bar K_n``
+    (``u = -K_n x``; NumPy, concrete arrays: computed once per design, outside the hot loop)."""
+    closed = np.asarray(A_bar) - np.asarray(B_bar) @ np.asarray(K_nominal)
     return np.linalg.eig(closed)
 
 
 def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eigenvectors: Array) -> EigenstructureResult:
-    """Reconfigured gain ``K_f`` keeping ``eigenvalues`` with eigenvectors projected onto
-    the faulty system's admissible subspaces (eq. 26, ``W_i = I``).
+    """Reconfigured gain ``K_f`` (``u = -K_f x``) such that ``A_bar - B_f K_f`` keeps
+    ``eigenvalues``, with eigenvectors projected onto the faulty system's admissible
+    subspaces (eq. 26, ``W_i = I``).
 
     Args:
       A_bar: (N, N) open-loop (augmented) state matrix.
@@ -101,9 +105,9 @@ def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eig
         return null[:N] @ beta, null[N:] @ beta
 
     V_f, alphas = jax.vmap(column, in_axes=(0, 1), out_axes=(1, 1))(lam, V)
-    # K_f V^f = [alpha_i]; least squares (pseudo-inverse) where V^f is singular
-    K_complex = alphas @ jnp.linalg.pinv(V_f, rtol=NULL_RTOL)
-    closed = A_bar.astype(ctype) + B_f @ K_complex.real.astype(ctype)
+    # K_f V^f = -[alpha_i] (u = -K x); least squares (pseudo-inverse) where V^f is singular
+    K_complex = -alphas @ jnp.linalg.pinv(V_f, rtol=NULL_RTOL)
+    closed = A_bar.astype(ctype) - B_f @ K_complex.real.astype(ctype)
     residual = jnp.linalg.norm(closed @ V_f - V_f * lam[None, :], axis=0) / jnp.maximum(jnp.linalg.norm(V_f, axis=0), 1e-300)
     singular = jnp.linalg.svd(V_f, compute_uv=False)
     return EigenstructureResult(
@@ -119,7 +123,7 @@ class GainSchedule(NamedTuple):
     """Reconfigured gains tabulated over one actuator's effectiveness loss at a time."""
 
     losses: Array  # (G,) grid of losses in [0, 1], increasing
-    gains: Array   # (p, G, p, N): gains[i, g] = K_f for input i with loss losses[g]
+    gains: Array   # (p, G, p, N): gains[i, g] = K_f (u = -K_f x) for input i with loss losses[g]
     max_residual: Array  # (p, G) largest assignment residual of each entry (~0 where every eigenvalue is kept)
 
 
@@ -144,8 +148,8 @@ def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, 
 
 
 def scheduled_gain(schedule: GainSchedule, component: Array, loss: Array) -> Array:
-    """The gain for input ``component`` with effectiveness ``loss`` (clipped to [0, 1]),
-    linearly interpolated in ``schedule``. Traceable."""
+    """The gain ``K_f`` (``u = -K_f x``) for input ``component`` with effectiveness ``loss``
+    (clipped to [0, 1]), linearly interpolated in ``schedule``. Traceable."""
     losses = schedule.losses
     position = jnp.clip(loss, 0.0, 1.0) * (losses.shape[0] - 1)
     lower = jnp.clip(jnp.floor(position).astype(jnp.int32), 0, losses.shape[0] - 2)

@@ -6,10 +6,13 @@ and the augmented system ``x_a = [x; z]``::
     x_a[k+1] = A_bar x_a[k] + B_bar u[k] + G r[k],
     A_bar = [[A, 0], [-Ts H, I]],  B_bar = [B; 0],  G = [0; Ts I]
 
-is stabilised by ``u = K x_a = [K_p K_I] x_a``, ``K`` the discrete LQR gain
-``K = -(R + B^T X B)^-1 B^T X A`` with ``X`` the stabilising solution of the discrete
-algebraic Riccati equation (``jaxfdi.riccati``, structure-preserving doubling). The
-sign follows the paper's ``u = K x`` (the closed loop is ``A_bar + B_bar K``).
+is stabilised by ``u = -K x_a = -[K_p K_I] x_a``, ``K`` the discrete LQR gain
+``K = (R + B^T X B)^-1 B^T X A`` with ``X`` the stabilising solution of the discrete
+algebraic Riccati equation (``jaxfdi.riccati``, structure-preserving doubling).
+
+Sign convention: ``u = -K x`` and the closed loop ``A - B K``, as SciPy
+(``scipy.signal.place_poles``), MATLAB (``dlqr``) and python-control (``dlqr``). Seed 001
+writes ``u = K x``; its ``K`` is the negative of ours.
 
 A stabilising gain needs ``(A_bar, B_bar)`` stabilisable, i.e. no transmission zero of
 ``(A, B, H)`` at ``z = 1``. The paper's VTOL choice (track ``v_h`` and the pitch rate
@@ -35,19 +38,33 @@ class PIDesign(NamedTuple):
     A_bar: Array      # (n + g, n + g)
     B_bar: Array      # (n + g, p)
     G: Array          # (n + g, g) command input of the integrator
-    gain: Array       # (p, n + g) K = [K_p K_I], u = K [x; z]
+    gain: Array       # (p, n + g) K = [K_p K_I]; the control is u = -K [x; z] (closed loop A_bar - B_bar K)
     riccati: Array    # (n + g, n + g) X
     converged: Array  # () bool, from the Riccati solver
-    spectral_radius: Array  # () max |eig(A_bar + B_bar K)|: >= 1 means no stabilising gain exists
+    spectral_radius: Array  # () max |eig(A_bar - B_bar K)|: >= 1 means no stabilising gain exists
 
 
 def lqr_gain(A: Array, B: Array, Q: Array, R: Array) -> tuple[Array, Array, Array]:
-    """``(K, X, converged)``: ``K = -(R + B^T X B)^-1 B^T X A`` minimises
-    ``sum x^T Q x + u^T R u`` for ``x[k+1] = A x + B u``, ``u = K x``."""
+    """Discrete LQR: ``(K, X, converged)`` with ``u = -K x`` (SciPy/MATLAB sign).
+
+    ``K = (R + B^T X B)^-1 B^T X A`` minimises ``sum x^T Q x + u^T R u`` for
+    ``x[k+1] = A x + B u``, ``X`` the stabilising solution of the DARE
+    ``X = A^T X A - A^T X B (R + B^T X B)^-1 B^T X A + Q``; the closed loop is ``A - B K``
+    (e.g. Lewis, Vrabie & Syrmos 2012, sec. 2.4).
+
+    Args:
+      A: (n, n) discrete state matrix.
+      B: (n, p) input matrix.
+      Q: (n, n) state weight (positive semi-definite).
+      R: (p, p) input weight (positive definite).
+
+    Returns:
+      ``K`` (p, n), ``X`` (n, n) and the Riccati solver's ``converged`` flag.
+    """
     solution = solve_discrete_are_info(A, B, Q, R)
     X = solution.solution
     A, B, R = (jnp.asarray(a, X.dtype) for a in (A, B, R))
-    K = -jnp.linalg.solve(R + B.T @ X @ B, B.T @ X @ A)
+    K = jnp.linalg.solve(R + B.T @ X @ B, B.T @ X @ A)
     return K, X, solution.converged
 
 
@@ -66,10 +83,13 @@ def integral_augmentation(A: Array, B: Array, H: Array, Ts: float) -> tuple[Arra
 
 
 def lqr_pi(A: Array, B: Array, H: Array, Q: Array, R: Array, Ts: float) -> PIDesign:
-    """LQR-PI design of eqs. 21-22: ``Q`` (n + g, n + g), ``R`` (p, p)."""
+    """LQR-PI design of eqs. 21-22: ``Q`` (n + g, n + g), ``R`` (p, p).
+
+    The control is ``u = -design.gain @ [x; z]`` (``u = -K x``, as ``lqr_gain``; the
+    paper's eq. 22 ``u = K [x; z]`` uses ``-design.gain``)."""
     A_bar, B_bar, G = integral_augmentation(A, B, H, Ts)
     _checks.check_covariance("Q", Q, A_bar.shape[0])
     _checks.check_covariance("R", R, B_bar.shape[1])
     K, X, converged = lqr_gain(A_bar, B_bar, Q, R)
-    radius = jnp.max(jnp.abs(jnp.linalg.eigvals(A_bar + B_bar @ K)))
+    radius = jnp.max(jnp.abs(jnp.linalg.eigvals(A_bar - B_bar @ K)))
     return PIDesign(A_bar, B_bar, G, K, X, converged, radius)

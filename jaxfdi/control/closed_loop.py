@@ -1,12 +1,15 @@
 """Closed-loop fault detection, isolation and fault-tolerant control (seed 001, Fig. 2).
 
-One ``lax.scan`` step ``k``:
+Three ``jaxfdi.loop`` parts, composed by ``run_closed_loop`` into one ``run_loop``:
+``true_plant`` (a ``Simulator``), ``tskf_bank_fdi`` (estimator, TSKF bank, MDWT
+decision, signature isolation, reconfiguration) and ``reconfigurable_pi`` (the
+controller). Step ``k``:
 
 1. the true plant (its own matrices: uncertainty and disturbance states included) is
    measured, ``y = C_t x_t + v``, and a sensor fault acts on ``y``;
 2. a robust state estimator (``unknown_input_filter``) updates with ``y``, after the
    sensor compensation ``y_c = y - Fs b`` (eq. 31) once a sensor fault is isolated;
-3. the PI state feedback ``u = K [x_hat; z]`` (eq. 22) with the nominal LQR gain, or,
+3. the PI state feedback ``u = -K [x_hat; z]`` (eq. 22) with the nominal LQR gain, or,
    once an actuator effectiveness loss is isolated, the eigenstructure-assignment gain
    for ``B_f = B (I - diag(b))`` at the current estimate ``b`` (eqs. 23-29), looked up
    in a ``GainSchedule`` tabulated once (solving the assignment every step would be 8x
@@ -29,7 +32,7 @@ different faults, keys and FTC switches through one compiled scan.
 """
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -39,11 +42,13 @@ from jaxfdi import _linalg
 from jaxfdi.control.eigenstructure import GainSchedule, scheduled_gain
 from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.detection.wavelet import haar_denoise
-from jaxfdi.faults import Fault, FaultKind, Target, apply_fault
+from jaxfdi.faults import Fault, FaultKind
 from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters.tskf import FaultDirection, sensor_matrix, two_stage_kalman_filter
 from jaxfdi.filters.unknown_input import unknown_input_filter
+from jaxfdi.loop import FDI, Controller, run_loop
 from jaxfdi.models.linear import LinearGaussianModel
+from jaxfdi.simulate import Simulator, simulator
 
 
 class LoopDesign(NamedTuple):
@@ -87,99 +92,155 @@ class LoopStep(NamedTuple):
     healthy: Array      # () bool: every filter healthy
 
 
-def _noise(key: Array, k: Array, model: LinearGaussianModel) -> tuple[Array, Array]:
-    kw, kv = jax.random.split(jax.random.fold_in(key, k))
-    n, m = model.Q.shape[0], model.R.shape[0]
-    w = _linalg.matmul(_linalg.psd_sqrt(model.Q), jax.random.normal(kw, (n,), model.Q.dtype))
-    v = _linalg.matmul(_linalg.psd_sqrt(model.R), jax.random.normal(kv, (m,), model.R.dtype))
-    return w, v
+class Reconfiguration(NamedTuple):
+    """What the seed-001 FDI gives the controller at step ``k`` (``tskf_bank_fdi.observe``)."""
+
+    estimate: Array   # (n,) x_hat[k|k] from the (compensated) measurement
+    loss: Array       # () isolated effectiveness loss of ``component`` (0: none / FTC off)
+    component: Array  # () int, the isolated input (meaningful when ``loss > 0`` or ``additive != 0``)
+    additive: Array   # (nu,) estimate of an isolated additive actuator fault, to add to u
 
 
-def run_closed_loop(design: LoopDesign, key: Array, fault: Fault, ftc: Array, steps: int) -> LoopStep:
-    """Simulate ``steps`` steps of the closed loop under ``fault`` (scalar leaves);
-    ``ftc`` (bool) turns the reconfiguration on. Returns the stacked ``LoopStep``."""
+class BankState(NamedTuple):
+    """The FDI's carry: estimator prior, bank, block buffer, latched decision and the
+    step's reconfiguration (set by ``observe``, used by ``step``)."""
+
+    estimator: GaussianState
+    bank: Any
+    buffer: Array       # (2^levels, F) statistics of the current block
+    isolated: Array     # () int: latched location + 1 (0: none yet)
+    kind: Array         # () bool: latched fault is multiplicative
+    posterior: GaussianState
+    reconfiguration: Reconfiguration
+
+
+class BankOutput(NamedTuple):
+    estimate: Array       # (n,) x_hat[k|k]
+    statistic: Array      # (F,)
+    bias: Array           # (F,)
+    isolated: Array       # () int
+    isolated_kind: Array  # () bool
+    healthy: Array        # () bool
+
+
+def _estimator(design: LoopDesign):
+    return unknown_input_filter(design.model, design.unknown_input)
+
+
+def _bank_filter(design: LoopDesign, direction: FaultDirection):
+    return two_stage_kalman_filter(design.model, direction, design.bias_walk, design.unknown_input)
+
+
+def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
+    """Seed 001's FDD + reconfiguration as a ``loop.FDI`` (module doc, steps 2 and 5);
+    ``ftc`` (bool, traced) turns the reconfiguration on."""
     model = design.model
-    n = model.Phi.shape[0]
     nu = model.Gamma.shape[1]
-    g = design.H.shape[0]
     F = design.location.shape[0]
     L = design.location_component.shape[0]
     block = 2**design.levels
     dtype = model.Phi.dtype
-    estimator = unknown_input_filter(model, design.unknown_input)
-    mm = _linalg.matmul
+    estimator = _estimator(design)
 
-    def bank_filter(direction):
-        return two_stage_kalman_filter(model, direction, design.bias_walk, design.unknown_input)
-
-    def bank_init(direction):
-        return bank_filter(direction).init(design.plant_x0[:n], design.init_cov, jnp.zeros((1,), dtype),
-                                           design.init_bias_cov)
-
-    def bank_step(direction, state, y, u):
-        return bank_filter(direction).step(state, y, u)
-
-    init = (
-        design.plant_x0,
-        jnp.zeros((g,), dtype),
-        estimator.init(design.plant_x0[:n], design.init_cov),
-        jax.vmap(bank_init)(design.directions),
-        jnp.zeros((block, F), dtype),
-        jnp.zeros((), jnp.int32),
-        jnp.zeros((), bool),
-        jnp.zeros((2,), dtype),
-    )
-
-    def step(carry, k):
-        x_true, z, est, bank, buffer, isolated, kind, held = carry
-        w, v = _noise(key, k, model)
+    def observe(state: BankState, k: Array, y: Array):
+        isolated, kind, est = state.isolated, state.kind, state.estimator
         location = jnp.maximum(isolated - 1, 0)
         on = ftc & (isolated > 0)
         is_actuator = design.location_is_actuator[location]
         component = design.location_component[location]
         matched = jnp.argmax((design.location == location) & (design.multiplicative == kind))
-        b_hat = bank.bias_mean[matched, 0]
-
-        # 1. measure (sensor fault on y)
-        y, held_s = apply_fault(fault, k, mm(design.plant_C, x_true) + v, Target.SENSOR, held[1])
-        # 2. estimator update, with sensor compensation y_c = -Fs b (eq. 31)
+        b_hat = state.bank.bias_mean[matched, 0]
+        # sensor compensation y_c = y - Fs b (eq. 31)
         direction = jax.tree_util.tree_map(lambda leaf: leaf[matched], design.directions)
         Fs = sensor_matrix(direction, model, est.mean, jnp.zeros((nu,), dtype))[:, 0]
         y_used = jnp.where(on & ~is_actuator, y - Fs * b_hat, y)
         post = estimator.update(est, y_used, jnp.zeros((nu,), dtype))
-        # 3. control: nominal, or reconfigured for an isolated actuator fault
         loss = jnp.where(on & is_actuator & kind, jnp.clip(b_hat, 0.0, 1.0), 0.0)
-        one_hot = jax.nn.one_hot(component, nu, dtype=dtype)
-        gain = jnp.where(loss > 0, scheduled_gain(design.schedule, component, loss), design.gain)
-        u = mm(gain, jnp.concatenate([post.mean, z]))
-        additive_fix = jnp.where(on & is_actuator & ~kind, b_hat, 0.0) * one_hot
-        u = u + additive_fix
-        # 4. integrator, actuator fault, plant, estimator predict
-        z_next = z + design.Ts * (design.command - mm(design.H, post.mean))
-        u_plant, held_a = apply_fault(fault, k, u, Target.ACTUATOR, held[0])
-        w_full = jnp.zeros_like(x_true).at[:n].set(w)
-        x_next = mm(design.plant_Phi, x_true) + mm(design.plant_Gamma, u_plant) + w_full
-        u_believed = u * (1.0 - loss * one_hot) - additive_fix
-        est_next = estimator.predict(GaussianState(post.mean, post.cov), u_believed)
-        # 5. bank, block buffer, decision at the block's end
-        bank_next, info = jax.vmap(bank_step, in_axes=(0, 0, None, None))(design.directions, bank, y, u)
-        buffer = buffer.at[k % block].set(info.statistic)
+        additive = jnp.where(on & is_actuator & ~kind, b_hat, 0.0) * jax.nn.one_hot(component, nu, dtype=dtype)
+        view = Reconfiguration(post.mean, loss, component, additive)
+        posterior = GaussianState(post.mean, post.cov)
+        return state._replace(posterior=posterior, reconfiguration=view), (view, post.healthy)
+
+    def step(state: BankState, k: Array, y: Array, u: Array):
+        view = state.reconfiguration
+        one_hot = jax.nn.one_hot(view.component, nu, dtype=dtype)
+        u_believed = u * (1.0 - view.loss * one_hot) - view.additive
+        est_next = estimator.predict(state.posterior, u_believed)
+        bank_next, info = jax.vmap(lambda d, s: _bank_filter(design, d).step(s, y, u))(design.directions, state.bank)
+        buffer = state.buffer.at[k % block].set(info.statistic)
         denoised = haar_denoise(buffer, design.levels, "soft", design.detail_sigma, design.c_mult)
         alarms = jnp.any(denoised >= design.threshold, axis=0)                       # (F,)
         label = isolate(location_symptoms(alarms, design.location, L))
-        decide = (k % block == block - 1) & (isolated == 0) & (label > 0)
-        block_mean = jnp.mean(buffer, axis=0)
+        decide = (k % block == block - 1) & (state.isolated == 0) & (label > 0)
         of_location = design.location == (label - 1)
-        best = jnp.argmin(jnp.where(of_location, block_mean, jnp.inf))
-        isolated_next = jnp.where(decide, label, isolated).astype(jnp.int32)
-        kind_next = jnp.where(decide, design.multiplicative[best], kind)
-        record = LoopStep(x_true[:n], post.mean, u, info.statistic, info.bias_mean[:, 0], isolated_next, kind_next,
-                          jnp.all(info.healthy) & post.healthy)
-        carry = (x_next, z_next, est_next, bank_next, buffer, isolated_next, kind_next, jnp.stack([held_a, held_s]))
-        return carry, record
+        best = jnp.argmin(jnp.where(of_location, jnp.mean(buffer, axis=0), jnp.inf))
+        isolated = jnp.where(decide, label, state.isolated).astype(jnp.int32)
+        kind = jnp.where(decide, design.multiplicative[best], state.kind)
+        output = BankOutput(state.posterior.mean, info.statistic, info.bias_mean[:, 0], isolated, kind,
+                            jnp.all(info.healthy))
+        return state._replace(estimator=est_next, bank=bank_next, buffer=buffer, isolated=isolated, kind=kind), output
 
-    _, history = jax.lax.scan(step, init, jnp.arange(steps))
-    return history
+    return FDI(step, observe)
+
+
+def tskf_bank_init(design: LoopDesign) -> BankState:
+    """The FDI's initial state: estimator and bank started at the plant's ``x0``."""
+    model = design.model
+    n, nu = model.Phi.shape[0], model.Gamma.shape[1]
+    dtype = model.Phi.dtype
+    x0 = design.plant_x0[:n]
+
+    def bank_init(direction):
+        return _bank_filter(design, direction).init(x0, design.init_cov, jnp.zeros((1,), dtype), design.init_bias_cov)
+
+    prior = _estimator(design).init(x0, design.init_cov)
+    idle = Reconfiguration(x0, jnp.zeros((), dtype), jnp.zeros((), jnp.int32), jnp.zeros((nu,), dtype))
+    return BankState(prior, jax.vmap(bank_init)(design.directions),
+                     jnp.zeros((2**design.levels, design.location.shape[0]), dtype),
+                     jnp.zeros((), jnp.int32), jnp.zeros((), bool), GaussianState(prior.mean, prior.cov), idle)
+
+
+def reconfigurable_pi(design: LoopDesign) -> Controller:
+    """The PI state feedback of eq. 22, ``u = -K [x_hat; z] (+ additive fix)``, with the
+    eigenstructure-assignment gain ``scheduled_gain`` while an effectiveness loss is
+    isolated; integrator ``z[k+1] = z[k] + Ts (r - H x_hat[k|k])``. Its state is ``z``."""
+    g = design.H.shape[0]
+    mm = _linalg.matmul
+
+    def step(z: Array, k: Array, observed, exogenous):
+        view, _ = observed
+        gain = jnp.where(view.loss > 0, scheduled_gain(design.schedule, view.component, view.loss), design.gain)
+        u = -mm(gain, jnp.concatenate([view.estimate, z])) + view.additive
+        return z + design.Ts * (design.command - mm(design.H, view.estimate)), u
+
+    return Controller(lambda: jnp.zeros((g,), design.model.Phi.dtype), step)
+
+
+def true_plant(design: LoopDesign, fault: Fault) -> Simulator:
+    """The true plant (uncertainty and disturbance states included) with the nominal
+    model's noise on its first ``n`` states and on the outputs, and ``fault``."""
+    model = design.model
+    n = model.Phi.shape[0]
+    nt = design.plant_Phi.shape[0]
+    mm = _linalg.matmul
+    G = jnp.eye(nt, n, dtype=model.Phi.dtype)
+    return simulator(lambda x, u, p: mm(design.plant_Phi, x) + mm(design.plant_Gamma, u),
+                     lambda x, u, p: mm(design.plant_C, x), model.Q, model.R, fault=fault, noise_gain=G)
+
+
+def run_closed_loop(design: LoopDesign, key: Array, fault: Fault, ftc: Array, steps: int) -> LoopStep:
+    """Simulate ``steps`` steps of the closed loop under ``fault`` (scalar leaves);
+    ``ftc`` (bool) turns the reconfiguration on. Returns the stacked ``LoopStep``.
+
+    The composition ``run_loop(true_plant, tskf_bank_fdi, reconfigurable_pi)``."""
+    n, nu = design.model.Phi.shape[0], design.model.Gamma.shape[1]
+    result = run_loop(true_plant(design, fault), tskf_bank_fdi(design, ftc), reconfigurable_pi(design),
+                      design.plant_x0, tskf_bank_init(design), key, steps,
+                      u0=jnp.zeros((nu,), design.model.Phi.dtype), keep_history=True)
+    trace = result.history
+    (_, estimator_healthy), out = trace.view, trace.output
+    return LoopStep(trace.sensed.state[:, :n], out.estimate, trace.control, out.statistic, out.bias, out.isolated,
+                    out.isolated_kind, out.healthy & estimator_healthy)
 
 
 def is_multiplicative(fault: Fault) -> Array:

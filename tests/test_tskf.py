@@ -49,14 +49,14 @@ def _rel_err(ours, ref) -> float:
     return float(np.max(np.abs(np.asarray(ours) - ref))) / max(1.0, float(np.max(np.abs(ref))))
 
 
-def _filterpy_augmented(model, direction, ys, us):
+def _filterpy_augmented(model, direction, ys, us, pb0=PB0):
     """Augmented-state KF with per-step F and H (filterpy), same update/predict order."""
     Phi, Gamma, C, Q, R = (np.asarray(a) for a in (model.Phi, model.Gamma, model.C, model.Q, model.R))
     d = jax.tree_util.tree_map(np.asarray, direction)
     n, p = d.state.shape
     kf = KalmanFilter(dim_x=n + p, dim_z=4, dim_u=2)
     kf.x = np.concatenate([0.1 * vtol.X0, np.zeros(p)])
-    kf.P = np.diag([P0] * n + [PB0] * p)
+    kf.P = np.diag([P0] * n + [pb0] * p)
     kf.R = R
     kf.Q = np.block([[Q, np.zeros((n, p))], [np.zeros((p, n)), QB * np.eye(p)]])
     kf.B = np.vstack([Gamma, np.zeros((p, 2))])
@@ -123,6 +123,21 @@ def test_optimal_tskf_equals_augmented_kalman_filter(model, case):
     assert bool(jnp.all(info.healthy))
 
 
+def test_tskf_is_a_filter_and_its_bias_prior_defaults_to_a_known_zero(model):
+    """``two_stage_kalman_filter`` returns a plain ``Filter``; ``init(mean, cov)`` starts the
+    bias at 0 with zero covariance: the augmented KF (filterpy) with that prior."""
+    direction = tskf.actuator_direction(model, 0, "additive")
+    filt = tskf.two_stage_kalman_filter(model, direction, QB * jnp.eye(1))
+    assert type(filt) is jaxfdi.Filter and tskf.tskf_statistic_dof(model) == 4
+    ys, us = _data(model, seed=4, bias_fn=_actuator_step)
+    _, info = jaxfdi.run_filter(filt, filt.init(jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4)), ys, us)
+    ref = _filterpy_augmented(model, direction, ys, us, pb0=0.0)
+    for name, ours in (("mean", info.filtered_mean), ("bias", info.bias_mean), ("nis", info.statistic)):
+        err = _rel_err(ours, ref[name])
+        assert err < TOL, f"{name} differs from the augmented KF by {err:.2e}"
+    assert bool(jnp.all(info.healthy))
+
+
 def test_two_bias_directions_stack(model):
     """A bias with p = 2 (both actuators, additive) also equals the augmented KF."""
     d0, d1 = tskf.actuator_direction(model, 0, "additive"), tskf.actuator_direction(model, 1, "additive")
@@ -180,7 +195,7 @@ def test_robust_tskf_equals_augmented_umv_filter(model, case, q):
     E = vtol.vtol_unknown_input(include_disturbance=(q == 2))
     ys, us = _data(model, seed=3, bias_fn=fault, d_scale=5.0, E=np.asarray(E))
     filt, info = _run_tskf(model, direction, ys, us, E)
-    assert filt.dof == 4 - q
+    assert isinstance(filt, jaxfdi.Filter) and tskf.tskf_statistic_dof(model, E) == 4 - q
     ref = _umv_augmented(model, direction, E, ys, us)
     for name, ours in (("mean", info.filtered_mean), ("cov", info.filtered_cov), ("bias", info.bias_mean),
                        ("residual", info.residual), ("W", info.residual_cov), ("stat", info.statistic)):

@@ -17,6 +17,7 @@ from jaxfdi.filters.tskf import (
     actuator_direction,
     sensor_direction,
     stack_directions,
+    tskf_statistic_dof,
     two_stage_kalman_filter,
 )
 from jaxfdi.filters.time_varying import TimedState, model_at, time_varying
@@ -44,6 +45,7 @@ __all__ = [
     "actuator_direction",
     "sensor_direction",
     "stack_directions",
+    "tskf_statistic_dof",
     "two_stage_kalman_filter",
     "unknown_input_filter",
     "time_varying",

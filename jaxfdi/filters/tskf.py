@@ -56,7 +56,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import run_filter
+from jaxfdi.filters._base import Filter, run_filter
 from jaxfdi.filters.unknown_input import check_decoupling, diffuse_log_likelihood, unbiased_minimum_variance_gain
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
@@ -147,12 +147,14 @@ class TSKFInfo(NamedTuple):
     healthy: Array         # ()     bool: S_bar, S_b, P[k|k] positive definite, all finite
 
 
-class TwoStageFilter(NamedTuple):
-    """A ``Filter``-shaped TSKF with its static degrees of freedom."""
-
-    init: callable
-    step: callable
-    dof: int  # m - q: degrees of freedom of the statistic
+def tskf_statistic_dof(model: LinearGaussianModel, unknown_input: Array | None = None) -> int:
+    """Degrees of freedom ``m - q`` of the TSKF statistic ``lambda`` (``TSKFInfo.statistic``):
+    chi-square with ``m - q`` degrees of freedom under the filter's hypothesis, ``m``
+    outputs and ``q = rank(E)`` decoupled unknown inputs (0 without ``unknown_input``);
+    e.g. ``chi2_threshold(tskf_statistic_dof(model, E), pfa)``. Checks the decoupling
+    conditions as ``two_stage_kalman_filter`` does."""
+    _, _, m = validate_linear_model(model)
+    return m - (0 if unknown_input is None else check_decoupling(model, unknown_input))
 
 
 def two_stage_kalman_filter(
@@ -160,7 +162,7 @@ def two_stage_kalman_filter(
     direction: FaultDirection,
     bias_walk: Array,
     unknown_input: Array | None = None,
-) -> TwoStageFilter:
+) -> Filter:
     """Two-stage Kalman filter for the bias along ``direction``; robust to ``E d`` if given.
 
     Args:
@@ -171,9 +173,12 @@ def two_stage_kalman_filter(
         (the optimal TSKF). Must satisfy ``rank(C E) = rank(E) = q <= m``.
 
     Returns:
-      ``TwoStageFilter(init, step, dof)``: ``init(mean, cov, bias_mean, bias_cov)`` (the
-      prior of the first step, ``x`` and ``b`` independent), ``step(state, y, u)``
-      returning ``(state, TSKFInfo)``; run it with ``run_filter``.
+      ``Filter(init, step)``: ``init(mean, cov, bias_mean=None, bias_cov=None)`` (the
+      prior of the first step, ``x`` and ``b`` independent; the bias defaults to 0 with
+      zero covariance: fault-free at the start, the walk ``bias_walk`` opens it), and
+      ``step(state, y, u)`` returning ``(state, TSKFInfo)``; run it with ``run_filter``.
+      ``TSKFInfo.statistic`` is chi-square with ``tskf_statistic_dof(model,
+      unknown_input)`` (``m - q``) degrees of freedom under the filter's hypothesis.
     """
     n, nu, m = validate_linear_model(model)
     _checks.check_shape("direction.state", direction.state, (n, None), "n states x p biases")
@@ -186,13 +191,15 @@ def two_stage_kalman_filter(
     dof = m - q
     mm = _linalg.matmul
 
-    def init(mean: Array, cov: Array, bias_mean: Array, bias_cov: Array) -> TSKFState:
+    def init(mean: Array, cov: Array, bias_mean: Array | None = None, bias_cov: Array | None = None) -> TSKFState:
         _checks.check_shape("mean", mean, (n,), "initial state mean")
         _checks.check_covariance("cov", cov, n)
-        _checks.check_shape("bias_mean", bias_mean, (p,), "initial bias mean")
-        _checks.check_covariance("bias_cov", bias_cov, p)
         mean = jnp.asarray(mean)
         dtype = mean.dtype
+        bias_mean = jnp.zeros((p,), dtype) if bias_mean is None else bias_mean
+        bias_cov = jnp.zeros((p, p), dtype) if bias_cov is None else bias_cov
+        _checks.check_shape("bias_mean", bias_mean, (p,), "initial bias mean")
+        _checks.check_covariance("bias_cov", bias_cov, p)
         return TSKFState(mean, jnp.asarray(cov, dtype), jnp.asarray(bias_mean, dtype),
                          jnp.asarray(bias_cov, dtype), jnp.zeros((n, p), dtype))
 
@@ -257,7 +264,7 @@ def two_stage_kalman_filter(
         info = TSKFInfo(mean_post, cov_post, b_post, Pb_post, residual, residual_cov, statistic, log_lik, healthy)
         return TSKFState(x_bar_next, P_bar_next, b_post, Pb_next, V_next), info
 
-    return TwoStageFilter(init, step, dof)
+    return Filter(init, step)
 
 
 def run_tskf_bank(

@@ -177,14 +177,24 @@ def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) 
     )
 
 
-def unhealthy_warning(unhealthy: int, runs: int, detail: str = "") -> str:
+def unhealthy_warning(unhealthy: int, runs: int, detail: str = "", what: str = "") -> str:
     """The console line a study prints when runs went numerically bad ("" when none did);
-    ``detail`` (e.g. per fault) goes in brackets after the count."""
+    ``detail`` (e.g. the count per fault) goes in the brackets, ``what`` (e.g. the
+    method) before the count."""
     if not unhealthy:
         return ""
-    detail = f" ({detail})" if detail else ""
-    return (f"WARNING: {unhealthy} of {runs} runs went numerically bad{detail} (filter unhealthy or non-finite "
-            f"statistic); they are excluded from the rates above")
+    detail = f": {detail}" if detail else ""
+    what = f"{what}: " if what else ""
+    return (f"WARNING: {what}{unhealthy} of {runs} runs went numerically bad (filter unhealthy or non-finite "
+            f"statistic{detail}); they are excluded from the rates above")
+
+
+def unhealthy_rows_warning(rows: list[dict], what: str = "") -> str:
+    """``unhealthy_warning`` for table rows (dicts with ``runs``, ``fault`` and, in newer
+    rows, ``unhealthy_runs``), with the count per fault."""
+    bad = [r for r in rows if r.get("unhealthy_runs")]
+    return unhealthy_warning(sum(r["unhealthy_runs"] for r in bad), sum(r["runs"] for r in rows),
+                             ", ".join(f"{r['fault']} {r['unhealthy_runs']}" for r in bad), what)
 
 
 def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: int) -> Array:

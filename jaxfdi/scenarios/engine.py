@@ -48,7 +48,7 @@ from jaxfdi.faults import stack_faults
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.mm import multiple_model
-from jaxfdi.metrics import DetectionRecord, summarize_detection
+from jaxfdi.metrics import DetectionRecord, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.monitor import monitor
@@ -279,21 +279,23 @@ def summarize_method(name: str, paper: str | None, records: DetectionRecord, run
         part = jax.tree_util.tree_map(lambda x: np.asarray(x)[i * runs:(i + 1) * runs], records)
         s = summarize_detection(part, steps, TS)
         faulty = fault_name != "none"
-        correct = part.isolated == i + 1
+        healthy = part.first_unhealthy < 0  # unhealthy runs: counted apart, in no rate
+        correct = part.isolated[healthy] == i + 1
         magnitude = float(f.magnitude) if faulty else float("nan")
-        estimates = part.estimate[correct] if faulty else np.zeros(0)
+        estimates = part.estimate[healthy][correct] if faulty else np.zeros(0)
         estimates = estimates[np.isfinite(estimates)]
         estimate = float(np.median(estimates)) if estimates.size else float("nan")
         paper_delay = PAPER_DELAY[paper][i] if (faulty and paper) else float("nan")
         rows.append({
             "method": name, "fault": fault_name, "magnitude": magnitude, "runs": s.runs,
             "detection_rate": s.detection_rate,
-            "isolation_rate": float(np.mean(correct)) if faulty else float("nan"),
+            "isolation_rate": float(np.mean(correct)) if faulty and correct.size else float("nan"),
             "false_alarm_rate": s.false_alarm_rate,
-            "false_alarm_steps_per_run": float(np.mean(part.false_alarms)),
+            "false_alarm_steps_per_run": float(np.mean(part.false_alarms[healthy])) if healthy.any() else float("nan"),
             "delay_median_s": s.delay_median, "delay_p90_s": s.delay_p90, "paper_delay_s": paper_delay,
             "estimate_median": estimate,
             "estimate_error": (estimate - magnitude) / magnitude if faulty else float("nan"),
+            "unhealthy_runs": s.unhealthy_runs,
         })
     return rows
 
@@ -336,7 +338,8 @@ class EngineStudy(NamedTuple):
                     f"{_fmt(r['paper_delay_s'], 6)} {_fmt(r['estimate_median'], 10, 4, 'g')} "
                     f"{_fmt(r['magnitude'], 9, 4, 'g')} {_fmt(100 * r['estimate_error'], 6, 1)}"
                 )
-            blocks.append("\n".join(lines))
+            warning = unhealthy_rows_warning([r for r in self.rows if r["method"] == name], name)
+            blocks.append("\n".join(lines + ([warning] if warning else [])))
         return "\n\n".join(blocks)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
 from jaxfdi.faults import Fault, fault, no_fault, stack_faults
 from jaxfdi.filters.kalman import kalman_filter
-from jaxfdi.metrics import DetectionRecord, summarize_detection
+from jaxfdi.metrics import DetectionRecord, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi.monitor import MonitorHistory, monitor
 from jaxfdi.montecarlo import monte_carlo
@@ -56,7 +56,8 @@ class EngineChi2Result(NamedTuple):
                 f"{r['fault']:<9} {r['magnitude']:>10.4g} {_fmt(r['detection_rate'])} {r['false_alarm_rate']:>8.3f} "
                 f"{r['false_alarm_rate_per_step']:>8.4f} {_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 13)}"
             )
-        return "\n".join(lines)
+        warning = unhealthy_rows_warning(self.rows)
+        return "\n".join(lines + ([warning] if warning else []))
 
 
 def _fmt(x: float, width: int = 9) -> str:
@@ -121,6 +122,7 @@ def engine_chi2_study(
             "delay_mean_s": s.delay_mean,
             "delay_median_s": s.delay_median,
             "delay_p90_s": s.delay_p90,
+            "unhealthy_runs": s.unhealthy_runs,
         })
     config = {
         "scenario": "engine-chi2", "runs_per_fault": runs, "seed": seed, "window": window, "pfa": pfa,
@@ -150,10 +152,11 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
     runs = cfg["runs_per_fault"]
     onset = np.asarray(result.records.onset)
     det = np.asarray(result.records.detection_step)
+    healthy = np.asarray(result.records.first_unhealthy) < 0
     delays, labels = [], []
     for i, row in enumerate(result.rows[:-1]):
         sl = slice(i * runs, (i + 1) * runs)
-        ok = det[sl] >= 0
+        ok = (det[sl] >= 0) & healthy[sl]
         delays.append((det[sl][ok] - onset[sl][ok]) * cfg["Ts"])
         labels.append(row["fault"])
     ax1.boxplot(delays, tick_labels=labels)

@@ -25,6 +25,7 @@ import optax
 from jaxfdi.detection.chi2 import chi2_threshold, moving_window_sum
 from jaxfdi.filters._base import run_filter
 from jaxfdi.filters.kalman import kalman_filter
+from jaxfdi.metrics import unhealthy_rows_warning
 from jaxfdi.models.engine import engine_model
 from jaxfdi.scenarios.engine import LabelledRuns, _fmt, balanced_batches, labelled_runs
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_chi2_study
@@ -117,5 +118,6 @@ def comparison_table(hand_rows: list[dict], tuned_rows: list[dict], hand_window:
             lines.append(f"{r['fault']:<9} {label:<16} {_fmt(r['detection_rate'], 5, 2)} {r['false_alarm_rate']:>5.2f} "
                          f"{_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 8)}")
     lines.append(f"held-out tuning loss: hand {hand_loss:.4f}, tuned {tuned_loss:.4f}")
+    lines += [w for w in (unhealthy_rows_warning(hand_rows, "hand"), unhealthy_rows_warning(tuned_rows, "tuned")) if w]
     return "\n".join(lines)
 

@@ -46,7 +46,7 @@ from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.models.engine import engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
-from jaxfdi.metrics import DetectionRecord
+from jaxfdi.metrics import DetectionRecord, unhealthy_rows_warning
 from jaxfdi.monitor import replay_detector
 from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.scenarios.engine import (
@@ -343,5 +343,6 @@ def comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce) -> str:
                 f"{r['false_alarm_rate']:>5.2f} {_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 8)}")
     lines.append(f"mean per-step mode cross-entropy: paper {hand_ce:.4f}, tuned {tuned_ce:.4f} "
                  f"({100 * (1 - tuned_ce / hand_ce):.0f} % lower)")
+    lines += [w for w in (unhealthy_rows_warning(hand_rows, "paper"), unhealthy_rows_warning(tuned_rows, "tuned")) if w]
     return "\n".join(lines)
 

@@ -166,7 +166,7 @@ def run_loop(
     if not controller.feedforward and u0 is None:
         raise ValueError("u0: a closed loop needs the input held before step 0 (e.g. jnp.zeros(nu))")
     ctrl0 = controller.init() if controller_state0 is None else controller_state0
-    held0 = None if controller.feedforward else jnp.asarray(u0)
+    held0 = None if controller.feedforward else jax.tree_util.tree_map(jnp.asarray, u0)
 
     def one_step(plant_state, fdi_state, ctrl_state, held, k, exo):
         if controller.feedforward:
@@ -257,6 +257,38 @@ def detection_scorer(
                                  healthy=good)
 
         return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, DetectionRecord)))
+
+    return Scorer(init, update)
+
+
+def peak_scorer(values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None) -> Scorer:
+    """Running maxima: ``score[i] = max over the steps k with active(k)[i] of values(output)[i]``
+    (0 before any such step), e.g. the largest statistic before the onset."""
+    dtype = dtype or jnp.result_type(float)
+
+    def init(example):
+        return jnp.zeros(jax.eval_shape(values, example).shape, dtype)
+
+    def update(score, k, output):
+        return jnp.where(active(k), jnp.maximum(score, values(output)), score)
+
+    return Scorer(init, update)
+
+
+def health_scorer(healthy: Callable[[Any], Array] | None = None) -> Scorer:
+    """() bool: every step healthy (default: the output's ``healthy`` field)."""
+    healthy = healthy or (lambda output: output.healthy)
+    return Scorer(lambda example: jnp.ones((), bool), lambda score, k, output: score & jnp.all(healthy(output)))
+
+
+def combine_scorers(**scorers: Scorer) -> Scorer:
+    """Several scorers side by side; the score is a dict by name."""
+
+    def init(example):
+        return {name: scorer.init(example) for name, scorer in scorers.items()}
+
+    def update(score, k, output):
+        return {name: scorer.update(score[name], k, output) for name, scorer in scorers.items()}
 
     return Scorer(init, update)
 

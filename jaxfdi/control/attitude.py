@@ -92,3 +92,22 @@ def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: A
     tau = -wheel_axes @ jnp.linalg.solve(gram, torque)
     peak = jnp.max(jnp.abs(tau))
     return tau * jnp.minimum(1.0, max_wheel_torque / jnp.maximum(peak, 1e-30))
+
+
+def wheel_attitude_controller(params, gains: AttitudeGains, profile: Slew, initial_speeds: Array):
+    """The attitude loop as a ``loop.Controller``: quaternion PD with gyroscopic
+    feed-forward on the sensed ``AttitudeReading`` (``control_torque``), minimum-norm
+    allocation to the wheels (``allocate_wheel_torques``); its state is the commanded
+    wheel speeds, which the flight software integrates from the torques it commands,
+    ``Omega_cmd[k+1] = Omega_cmd[k] + dt tau[k] / I_w``. Returns a ``WheelCommand``."""
+    from jaxfdi.loop import Controller
+    from jaxfdi.models.reaction_wheels import WheelCommand, wheel_momentum
+
+    def step(commanded: Array, k: Array, reading, exogenous):
+        t = k * params.dt
+        torque = control_torque(reading.quaternion, reading.rate, wheel_momentum(commanded, params), t, profile, gains,
+                                params.inertia)
+        tau = allocate_wheel_torques(torque, params.wheel_axes, gains.max_wheel_torque)
+        return commanded + params.dt * tau / params.wheel_inertia, WheelCommand(commanded, tau)
+
+    return Controller(lambda: jnp.asarray(initial_speeds), step)

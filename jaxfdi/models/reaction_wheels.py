@@ -193,3 +193,90 @@ def total_momentum(state: Array, params: SpacecraftParams) -> Array:
     """Inertial-frame angular momentum ``R(q) (I w + h_w)`` (3,): constant without ``T_ext``."""
     q, w, speeds = state[:4], state[4:7], state[7:]
     return rotate_to_inertial(q, params.inertia @ w + wheel_momentum(speeds, params))
+
+
+# --- the truth as a closed-loop plant (jaxfdi.loop) ----------------------------------
+
+class AttitudeReading(NamedTuple):
+    """What the attitude sensors give at step ``k``: the attitude (taken as exact) and the
+    gyros' body rates."""
+
+    quaternion: Array  # (4,) true attitude, scalar first
+    rate: Array        # (3,) gyro reading w + v, rad/s
+
+
+class WheelSensed(NamedTuple):
+    state: Array                   # (7 + N,) true [q, w, Omega] at step k
+    measurement: AttitudeReading
+
+
+class WheelCommand(NamedTuple):
+    """The flight software's command at step ``k``: the commanded wheel speeds (its
+    integral of the torques) and the motor torques."""
+
+    speeds: Array  # (N,) rad/s
+    torque: Array  # (N,) N m
+
+
+def filter_input(command: WheelCommand, params: SpacecraftParams) -> Array:
+    """The filters' input ``u = [Omega_cmd, tau_cmd / I_w]`` (``wheel_rate_transition``)."""
+    return jnp.concatenate([command.speeds, command.torque / params.wheel_inertia])
+
+
+def delivered_torque(f, k: Array, command: Array) -> Array:
+    """The motor torques the wheels deliver under fault ``f`` (scalar leaves): the
+    fault acts on the command (bias, gain loss), and a STOP or STUCK wheel delivers none."""
+    from jaxfdi.faults import FaultKind, Target, apply_fault, is_active
+
+    faulty, _ = apply_fault(f, k, command, Target.ACTUATOR, jnp.zeros((), command.dtype))
+    no_torque = is_active(f, k) & ((f.kind == FaultKind.STOP) | (f.kind == FaultKind.STUCK))
+    wheel = jax.nn.one_hot(f.component, command.shape[0], dtype=bool)
+    return jnp.where(no_torque & wheel, 0.0, faulty)
+
+
+def stop_transfer(state: Array, f, k: Array, params: SpacecraftParams) -> Array:
+    """At a stop's onset: the wheel's speed -> 0 and its momentum to the body rates."""
+    from jaxfdi.faults import FaultKind
+
+    speeds = state[7:]
+    stopped = (f.kind == FaultKind.STOP) & (k == f.onset)
+    new_speeds = jnp.where(stopped & jax.nn.one_hot(f.component, speeds.shape[0], dtype=bool), 0.0, speeds)
+    body_momentum = params.inertia @ state[4:7] + wheel_momentum(speeds, params)
+    w = jnp.linalg.solve(params.inertia, body_momentum - wheel_momentum(new_speeds, params))
+    return jnp.where(stopped, jnp.concatenate([state[:4], w, new_speeds]), state)
+
+
+def wheel_plant(params: SpacecraftParams, fault, gyro_sigma: Array, disturbance_sigma: Array,
+                wheel_noise_sigma: Array):
+    """The spacecraft truth as a ``loop.Plant`` under a wheel ``fault`` (scalar leaves).
+
+    ``measure``: ``AttitudeReading(q, w + v)``, ``v ~ N(0, gyro_sigma^2 I)``;
+    ``advance`` with a ``WheelCommand``: the wheels deliver ``delivered_torque`` plus
+    white torque noise (``wheel_noise_sigma``), a stop moves its wheel's momentum to the
+    body (``stop_transfer``), and the truth moves one RK4 step with a white external
+    torque (``disturbance_sigma``). Step ``k``'s draws come from ``fold_in(key, k)``.
+    """
+    from jaxfdi.loop import Plant
+
+    dtype = params.inertia.dtype
+    N = params.wheel_axes.shape[0]
+
+    def keys(key, k):
+        return jax.random.split(jax.random.fold_in(key, k), 3)  # gyro, disturbance, wheel torque
+
+    def init(x0: Array) -> Array:
+        _checks.check_shape("x0", x0, (7 + N,), "[q (4), w (3), Omega (N)]")
+        return jnp.asarray(x0)
+
+    def measure(state: Array, k: Array, command: WheelCommand, key: Array):
+        k_gyro, _, _ = keys(key, k)
+        rate = state[4:7] + gyro_sigma * jax.random.normal(k_gyro, (3,), dtype)
+        return state, WheelSensed(state, AttitudeReading(state[:4], rate))
+
+    def advance(state: Array, k: Array, command: WheelCommand, key: Array):
+        _, k_dist, k_wheel = keys(key, k)
+        delivered = delivered_torque(fault, k, command.torque) + wheel_noise_sigma * jax.random.normal(k_wheel, (N,), dtype)
+        disturbance = disturbance_sigma * jax.random.normal(k_dist, (3,), dtype)
+        return spacecraft_step(stop_transfer(state, fault, k, params), delivered, disturbance, params), delivered
+
+    return Plant(init, measure, advance)

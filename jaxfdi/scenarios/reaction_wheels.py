@@ -45,33 +45,29 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi.control.attitude import (
-    AttitudeGains,
-    Slew,
-    allocate_wheel_torques,
-    control_torque,
-    pd_gains,
-    slew,
-    slew_reference,
-)
-from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
+from jaxfdi.control.attitude import AttitudeGains, Slew, pd_gains, slew, slew_reference, wheel_attitude_controller
+from jaxfdi.detection.chi2 import Decision, chi2_detector, chi2_threshold
 from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
 from jaxfdi.detection.dual_filter import DualFilterState, dual_filter
 from jaxfdi.detection.mode_probability import mode_probability_detector
-from jaxfdi.faults import Fault, FaultKind, Target, apply_fault, fault, is_active, no_fault
+from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault
 from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.mm import multiple_model
 from jaxfdi.filters.ukf import unscented_kalman_filter
-from jaxfdi.metrics import DetectionRecord, record_init, record_update
+from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
+from jaxfdi.metrics import DetectionRecord
 from jaxfdi.models.reaction_wheels import (
     SpacecraftParams,
+    WheelCommand,
     body_rate_field,
+    delivered_torque,
+    filter_input,
     gyro_observation,
     kitsat3_params,
-    spacecraft_step,
     stop_hypotheses,
-    wheel_momentum,
+    stop_transfer,
+    wheel_plant,
     wheel_rate_transition,
 )
 
@@ -146,24 +142,6 @@ def wheel_fault(kind: str, wheel: int, onset: int, magnitude: float = 0.0) -> Fa
     return fault(kinds[kind], Target.ACTUATOR, wheel, onset, magnitude)
 
 
-def delivered_torque(f: Fault, k: Array, command: Array) -> Array:
-    """The motor torques the wheels deliver under fault ``f`` (scalar leaves)."""
-    faulty, _ = apply_fault(f, k, command, Target.ACTUATOR, jnp.zeros((), command.dtype))
-    no_torque = is_active(f, k) & ((f.kind == FaultKind.STOP) | (f.kind == FaultKind.STUCK))
-    wheel = jax.nn.one_hot(f.component, command.shape[0], dtype=bool)
-    return jnp.where(no_torque & wheel, 0.0, faulty)
-
-
-def stop_transfer(state: Array, f: Fault, k: Array, params: SpacecraftParams) -> Array:
-    """At a stop's onset: the wheel's speed -> 0 and its momentum to the body rates."""
-    speeds = state[7:]
-    stopped = (f.kind == FaultKind.STOP) & (k == f.onset)
-    new_speeds = jnp.where(stopped & jax.nn.one_hot(f.component, speeds.shape[0], dtype=bool), 0.0, speeds)
-    body_momentum = params.inertia @ state[4:7] + wheel_momentum(speeds, params)
-    w = jnp.linalg.solve(params.inertia, body_momentum - wheel_momentum(new_speeds, params))
-    return jnp.where(stopped, jnp.concatenate([state[:4], w, new_speeds]), state)
-
-
 def estimation_filter(params: SpacecraftParams, q_sigma: Array, gyro_sigma: Array, kind: str = "ekf"):
     """The estimation filter on the rate model: EKF (seed 004) or UKF."""
     eye = jnp.eye(3, dtype=params.inertia.dtype)
@@ -201,13 +179,21 @@ class WheelHistory(NamedTuple):
     engaged: Array           # (T,) bool: the banks run on their own
 
 
-def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, estimator: str = "ekf",
-               engage_on: str = "nis", history: bool = False):
-    """One closed-loop run; returns ``RunOutput`` (and ``WheelHistory`` if ``history``).
+class WheelOutput(NamedTuple):
+    """What the FDI gives at step ``k`` (``wheel_fdi``)."""
 
-    ``engage_on``: the detector whose first alarm engages the hypothesis banks, ``"nis"``
-    (default) or ``"fdp"`` (the paper's ``F``); ``estimator``: ``"ekf"`` or ``"ukf"``.
-    """
+    decisions: tuple             # (fdp, nis, credit, likelihood) ``Decision``s
+    peaks: Array                 # (2,) F and the windowed NIS (for their peak statistics)
+    healthy: Array               # () bool: every filter healthy
+    hypothesis_parameter: Array  # (M,) F_x of the credit bank
+    mode_prob: Array             # (M + 1,) MM, normal mode first
+    engaged: Array               # () bool: the banks ran on their own at this step
+
+
+def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis"):
+    """Seed 004's two-stage FDI as a ``loop.FDI`` and its initial state (module doc,
+    steps 3-4): the dual filter's ``F``, the windowed NIS test of a nominal EKF, and the
+    credit and likelihood banks slaved to the nominal filter until the engaging alarm."""
     if engage_on not in ("nis", "fdp"):
         raise ValueError(f"engage_on: expected 'nis' or 'fdp', got {engage_on!r}")
     if estimator not in ("ekf", "ukf"):
@@ -240,27 +226,19 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
         uniform = jnp.full((N + 1,), 1.0 / (N + 1), dtype)
         return DualFilterState(bank_prior, bank_prior.mean), mm.init(mode_prior.mean, mode_prior.cov, uniform)
 
-    x0 = jnp.concatenate([jnp.array([1.0, 0, 0, 0], dtype), jnp.zeros(3, dtype), design.initial_speeds])
     P0 = design.initial_sigma**2 * jnp.eye(3, dtype=dtype)
     bank0, mm0 = slaved(GaussianState(jnp.zeros(3, dtype), P0), jnp.concatenate([design.initial_speeds, jnp.zeros(N, dtype)]))
-    carry0 = dict(
-        truth=x0, commanded=design.initial_speeds, dual=detector.init(jnp.zeros(3, dtype), P0),
-        nis_filter=nis_filter.init(jnp.zeros(3, dtype), P0), nis=nis_test.init(),
-        bank=bank0, mm=mm0, engaged=jnp.zeros((), bool), credit=credits.init(), mode=mode_decision.init(),
-        records=(record_init(f.onset, dtype),) * 4, peaks=jnp.zeros((3,), dtype), healthy=jnp.ones((), bool),
+    state0 = dict(
+        dual=detector.init(jnp.zeros(3, dtype), P0), nis_filter=nis_filter.init(jnp.zeros(3, dtype), P0),
+        nis=nis_test.init(), bank=bank0, mm=mm0, engaged=jnp.zeros((), bool), credit=credits.init(),
+        mode=mode_decision.init(),
     )
     no_label = jnp.asarray(-1, jnp.int32)
+    nan = jnp.full((), jnp.nan, dtype)
 
-    def step(c, k):
-        t = k * params.dt
-        k_gyro, k_dist, k_wheel = jax.random.split(jax.random.fold_in(key, k), 3)
-        truth = c["truth"]
-        y = truth[4:7] + design.gyro_sigma * jax.random.normal(k_gyro, (3,), dtype)
-        torque_cmd = control_torque(truth[:4], y, wheel_momentum(c["commanded"], params), t, design.profile,
-                                    design.gains, params.inertia)
-        tau = allocate_wheel_torques(torque_cmd, params.wheel_axes, design.gains.max_wheel_torque)
-        u = jnp.concatenate([c["commanded"], tau / params.wheel_inertia])
-
+    def step(c, k, reading, command):
+        y = reading.rate
+        u = filter_input(command, params)
         # detection: the dual filter's F, and the windowed NIS of a nominal EKF
         dual, dual_info = detector.step(c["dual"], y, u)
         fdp = dual_info.detection_parameter
@@ -281,37 +259,59 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
         mode_state, mode_out = mode_decision.step(c["mode"], mm_info.mode_prob)
         idle = lambda new, fresh: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged_before, a, b), new, fresh)  # noqa: E731
         credit_state, mode_state = idle(credit_state, credits.init()), idle(mode_state, mode_decision.init())
-        fdp_rec, nis_rec, credit_rec, mode_rec = c["records"]
-        records = (
-            record_update(fdp_rec, k, fdp_alarm, no_label),
-            record_update(nis_rec, k, nis_alarm, no_label),
-            record_update(credit_rec, k, engaged_before & credit_out.alarm, credit_out.label),
-            record_update(mode_rec, k, engaged_before & mode_out.alarm, mode_out.label),
+        decisions = (
+            Decision(fdp, fdp_alarm, no_label, nan),
+            Decision(nis_stat, nis_alarm, no_label, nan),
+            Decision(credit_out.statistic, engaged_before & credit_out.alarm, credit_out.label, nan),
+            Decision(mode_out.statistic, engaged_before & mode_out.alarm, mode_out.label, nan),
         )
+        healthy = dual_info.healthy & nis_info.healthy & jnp.all(bank_info.healthy) & mm_info.healthy
+        new = dict(dual=dual, nis_filter=nis_filter_state, nis=nis_state, bank=bank, mm=mm_state, engaged=engaged,
+                   credit=credit_state, mode=mode_state)
+        return new, WheelOutput(decisions, jnp.stack([fdp, nis_stat]), healthy, bank_info.detection_parameter,
+                                mm_info.mode_prob, engaged_before)
 
-        delivered = delivered_torque(f, k, tau) + design.wheel_noise_sigma * jax.random.normal(k_wheel, (N,), dtype)
-        disturbance = design.disturbance_sigma * jax.random.normal(k_dist, (3,), dtype)
-        truth_next = spacecraft_step(stop_transfer(truth, f, k, params), delivered, disturbance, params)
-        healthy = c["healthy"] & dual_info.healthy & nis_info.healthy & jnp.all(bank_info.healthy) & mm_info.healthy
-        # peaks of F and NIS before the onset, and of F within the deadline after it
-        early = (k >= f.onset) & ((k - f.onset) * params.dt < ISOLATION_DEADLINE_S)
-        peaks = jnp.where(jnp.stack([k < f.onset, k < f.onset, early]),
-                          jnp.maximum(c["peaks"], jnp.stack([fdp, nis_stat, fdp])), c["peaks"])
-        new = dict(
-            truth=truth_next, commanded=c["commanded"] + params.dt * tau / params.wheel_inertia, dual=dual,
-            nis_filter=nis_filter_state, nis=nis_state, bank=bank, mm=mm_state, engaged=engaged, credit=credit_state, mode=mode_state,
-            records=records, peaks=peaks, healthy=healthy,
-        )
-        trace = None
-        if history:
-            trace = WheelHistory(truth[:4], truth[4:7], slew_reference(t, design.profile)[1], y, truth[7:],
-                                 c["commanded"], fdp, nis_stat, bank_info.detection_parameter,
-                                 hypothesis_credits(bank_info.detection_parameter), mm_info.mode_prob, engaged_before)
-        return new, trace
+    return FDI(step), state0
 
-    final, trace = jax.lax.scan(step, carry0, jnp.arange(steps))
-    out = RunOutput(*final["records"], *final["peaks"], final["healthy"])
-    return (out, trace) if history else out
+
+def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, estimator: str = "ekf",
+               engage_on: str = "nis", history: bool = False):
+    """One closed-loop run; returns ``RunOutput`` (and ``WheelHistory`` if ``history``).
+
+    The composition ``run_loop(wheel_plant, wheel_fdi, wheel_attitude_controller)``.
+    ``engage_on``: the detector whose first alarm engages the hypothesis banks, ``"nis"``
+    (default) or ``"fdp"`` (the paper's ``F``); ``estimator``: ``"ekf"`` or ``"ukf"``.
+    """
+    params = design.params
+    dtype = params.inertia.dtype
+    N = params.wheel_axes.shape[0]
+    fdi, fdi0 = wheel_fdi(design, estimator, engage_on)
+    plant = wheel_plant(params, f, design.gyro_sigma, design.disturbance_sigma, design.wheel_noise_sigma)
+    controller = wheel_attitude_controller(params, design.gains, design.profile, design.initial_speeds)
+
+    def early(k):  # within the isolation deadline after the onset
+        return (k >= f.onset) & ((k - f.onset) * params.dt < ISOLATION_DEADLINE_S)
+
+    scorer = combine_scorers(
+        records=detection_scorer(f.onset, lambda out: out.decisions, dtype=dtype),
+        peaks=peak_scorer(lambda out: jnp.concatenate([out.peaks, out.peaks[:1]]),
+                          lambda k: jnp.stack([k < f.onset, k < f.onset, early(k)]), dtype),
+        healthy=health_scorer(),
+    )
+    x0 = jnp.concatenate([jnp.array([1.0, 0, 0, 0], dtype), jnp.zeros(3, dtype), design.initial_speeds])
+    u0 = WheelCommand(design.initial_speeds, jnp.zeros(N, dtype))
+    result = run_loop(plant, fdi, controller, x0, fdi0, key, steps, u0=u0, scorer=scorer, keep_history=history)
+    score = result.score
+    out = RunOutput(*score["records"], *score["peaks"], score["healthy"])
+    if not history:
+        return out
+    trace = result.history
+    truth, reading, o = trace.sensed.state, trace.sensed.measurement, trace.output
+    t = jnp.arange(steps) * params.dt
+    reference = jax.vmap(lambda s: slew_reference(s, design.profile)[1])(t)
+    return out, WheelHistory(truth[:, :4], truth[:, 4:7], reference, reading.rate, truth[:, 7:], trace.control.speeds,
+                             o.peaks[:, 0], o.peaks[:, 1], o.hypothesis_parameter,
+                             jax.vmap(hypothesis_credits)(o.hypothesis_parameter), o.mode_prob, o.engaged)
 
 
 # --- the Monte Carlo study -------------------------------------------------------

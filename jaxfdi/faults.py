@@ -153,7 +153,7 @@ def concat_faults(*faults: Fault) -> Fault:
     run (e.g. a ``fault_group`` and later episodes)."""
     if not faults:
         raise ValueError("faults: expected at least one Fault")
-    return jax.tree_util.tree_map(lambda *leaves: jnp.concatenate(leaves), *(_as_stack(f) for f in faults))
+    return jax.tree_util.tree_map(lambda *leaves: jnp.concatenate(leaves), *(as_stack(f) for f in faults))
 
 
 def is_active(f: Fault, k: Array) -> Array:
@@ -176,7 +176,7 @@ def fault_label(f: Fault, num_inputs: int) -> Array:
 def active_label(faults: Fault, k: Array, num_inputs: int) -> Array:
     """() int: the label (``fault_label``) of the first fault of the stack ``faults``
     (leaves (F,), or scalar leaves) active at step ``k``; 0 when none is."""
-    faults = _as_stack(faults)
+    faults = as_stack(faults)
     active = jax.vmap(is_active, in_axes=(0, None))(faults, k)
     labels = jax.vmap(fault_label, in_axes=(0, None))(faults, num_inputs)
     return jnp.where(jnp.any(active), labels[jnp.argmax(active)], 0).astype(jnp.int32)
@@ -191,7 +191,7 @@ def episodes(faults: Fault, num_inputs: int) -> tuple[Array, Array, Array]:
     (onset, end, label), i.e. the further components of a ``fault_group``. Fixed shapes,
     so it jits and vmaps over runs; ``metrics.episode_record_init`` takes the result.
     """
-    faults = _as_stack(faults)
+    faults = as_stack(faults)
     ends = jnp.where(faults.kind == FaultKind.IMPULSE, jnp.minimum(faults.end, faults.onset + 1), faults.end)
     labels = jax.vmap(fault_label, in_axes=(0, None))(faults, num_inputs)
     count = faults.kind.shape[0]
@@ -204,7 +204,7 @@ def episodes(faults: Fault, num_inputs: int) -> tuple[Array, Array, Array]:
             jnp.where(valid, labels, 0).astype(jnp.int32))
 
 
-def _as_stack(f: Fault) -> Fault:
+def as_stack(f: Fault) -> Fault:
     """Leaves (F,): scalar faults become a stack of one; a scalar leaf of a stack (a
     ``Fault`` built by hand without ``label``) is broadcast to the stack."""
     shape = jnp.shape(f.kind) if jnp.ndim(f.kind) else (1,)

@@ -10,6 +10,7 @@ from jaxfdi.faults import (
     NEVER,
     FaultKind,
     active_label,
+    as_stack,
     concat_faults,
     episodes,
     fault,
@@ -44,6 +45,12 @@ def test_existing_constructions_keep_working():
     assert f.label == -1 and int(fault_label(f, 1)) == 4
     assert int(fault_label(f._replace(label=9), 1)) == 9
     assert int(fault("bias", "sensor", 2, 5).label) == -1
+    # a stack built by hand without label: the scalar default is broadcast over the stack
+    hand = jaxfdi.Fault(*(jnp.asarray(v) for v in ([1, 1], [1, 0], [2, 0], [5, 8], [0.3, 0.1], [0.0, 0.0],
+                                                   [NEVER, NEVER])))
+    assert as_stack(hand).label.tolist() == [-1, -1]
+    assert [int(active_label(hand, k, 1)) for k in (4, 5, 8)] == [0, 4, 4]
+    assert np.asarray(episodes(hand, 1)[2]).tolist() == [4, 1]
 
 
 def test_group_fault_applies_each_component_and_is_labelled_as_one():

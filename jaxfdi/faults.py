@@ -208,7 +208,8 @@ def as_stack(f: Fault) -> Fault:
     """Leaves (F,): scalar faults become a stack of one; a scalar leaf of a stack (a
     ``Fault`` built by hand without ``label``) is broadcast to the stack."""
     shape = jnp.shape(f.kind) if jnp.ndim(f.kind) else (1,)
-    return jax.tree_util.tree_map(lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), shape) if jnp.ndim(leaf) == 0 else leaf, f)
+    return jax.tree_util.tree_map(
+        lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), shape) if jnp.ndim(leaf) == 0 else leaf, f)
 
 
 def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> tuple[Array, Array]:

@@ -50,10 +50,10 @@ def test_engine_rows_and_table_leave_unhealthy_runs_out():
     isolated = np.repeat(np.arange(1, 8), runs)
     isolated[1] = 3
     records = DetectionRecord(
-        onset=onsets, first_alarm=np.where(onsets < NEVER, onset + 2, -1), detection_step=np.where(onsets < NEVER, onset + 2, -1),
+        onset=onsets, first_alarm=np.where(onsets < NEVER, onset + 2, -1),
+        detection_step=np.where(onsets < NEVER, onset + 2, -1),
         false_alarms=np.zeros(cases * runs, int), pre_onset_steps=np.minimum(onsets, 400), isolated=isolated,
         first_label=isolated, estimate=np.full(cases * runs, np.nan), first_unhealthy=first_unhealthy)
-    records = records._replace(first_alarm=records.first_alarm.copy(), false_alarms=records.false_alarms.copy())
     records.first_alarm[13], records.false_alarms[13] = 10, 4
     rows = summarize_method("M", None, records, runs, 400)
     by_fault = {r["fault"]: r for r in rows}

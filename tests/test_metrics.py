@@ -139,7 +139,8 @@ def test_unhealthy_runs_are_counted_apart_and_never_scored_clean():
         first_unhealthy=np.array([-1, -1, -1, -1, 0, 37]),
     )
     s = summarize_detection(records, horizon=100, Ts=0.1)
-    healthy_only = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[:4] if np.ndim(a) else a, records), horizon=100, Ts=0.1)
+    first_four = jax.tree.map(lambda a: np.asarray(a)[:4] if np.ndim(a) else a, records)
+    healthy_only = summarize_detection(first_four, horizon=100, Ts=0.1)
     assert s.runs == 6 and s.unhealthy_runs == 2 and s.faulty_runs == 3
     assert s._replace(runs=4, unhealthy_runs=0) == healthy_only
     assert s.detection_rate == pytest.approx(2 / 3) and s.false_alarm_rate == pytest.approx(2 / 4)

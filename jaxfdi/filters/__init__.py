@@ -10,6 +10,7 @@ from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.mm import multiple_model
+from jaxfdi.filters.posterior import init_from_posterior
 from jaxfdi.filters.tskf import (
     FaultDirection,
     TSKFInfo,
@@ -37,6 +38,7 @@ __all__ = [
     "unscented_kalman_filter",
     "interacting_multiple_model",
     "multiple_model",
+    "init_from_posterior",
     "IMMInfo",
     "IMMState",
     "FaultDirection",

@@ -44,6 +44,7 @@ from jaxfdi.filters._mixture import (
 )
 from jaxfdi.filters.imm_batch import kalman_imm_batch_kernel
 from jaxfdi.filters.kalman import kalman_filter
+from jaxfdi.filters.posterior import posterior_input
 from jaxfdi.models.linear import LinearGaussianModel
 
 
@@ -64,7 +65,12 @@ def interacting_multiple_model(
 
     Returns:
       ``Filter``; ``init(mean, cov, mode_prob)`` takes a shared ``(n,), (n, n)`` or per-mode
-      ``(M, n), (M, n, n)`` prior of ``x[0]`` and ``mode_prob`` (M,) = ``P(mode at step 0)``;
+      ``(M, n), (M, n, n)`` prior of ``x[0]`` and ``mode_prob`` (M,) = ``P(mode at step 0)``
+      (filterpy's ``IMMEstimator(filters, mu, M)`` followed by ``update`` is
+      ``init(x, P, mu @ M)``); ``init(mean, cov, mode_prob, posterior=True, u=u)`` starts
+      from a posterior of step -1 instead (the predict-first convention; ``mode_prob`` the
+      posterior ``mu0``, ``u`` the input before ``y[0]``, ``None`` without inputs): mixing
+      and mode-matched prediction, as ``init_from_posterior(imm, mean, cov, u, mode_prob)``;
       ``step(state, y, u) -> (IMMState, IMMInfo)``. Over ``kalman_filter`` modes of
       up to ``_linalg.UNROLL_MAX`` states and outputs, ``run_filter_batch`` runs the
       structure-of-arrays step of ``imm_batch.py`` (2.5x faster than ``vmap`` on 100
@@ -82,8 +88,19 @@ def interacting_multiple_model(
             _linalg.is_small(leaf[0]) for leaf in mode_params):
         batch = kalman_imm_batch_kernel(mode_params, log_transition)  # run_filter_batch's path
 
-    def init(mean: Array, cov: Array, mode_prob: Array) -> IMMState:
-        return bank_init(mode_filter, mode_params, M, mean, cov, mode_prob)
+    def init(mean: Array, cov: Array, mode_prob: Array, *, posterior: bool = False, u: Array | None = None) -> IMMState:
+        state = bank_init(mode_filter, mode_params, M, mean, cov, mode_prob)
+        if not posterior:
+            if u is not None:
+                raise ValueError("u: only used with posterior=True (the input of the first prediction)")
+            return state
+        # steps 3-4 of the cycle from the posteriors (state holds them): mix, then predict
+        dtype = state.mode_mean.dtype
+        log_cbar, weights = mixing(state.log_mode_prob, log_transition.astype(dtype))
+        mixed_mean, mixed_cov = jax.vmap(moment_match, in_axes=(1, None, None))(weights, state.mode_mean,
+                                                                                 state.mode_cov)
+        prediction = bank_predict(mode_filter, mode_params, mixed_mean, mixed_cov, posterior_input(u, dtype))
+        return IMMState(prediction.mean, prediction.cov, log_cbar.astype(dtype))
 
     def step(state: IMMState, y: Array, u: Array) -> tuple[IMMState, IMMInfo]:
         post = bank_update(mode_filter, mode_params, state, y, u)

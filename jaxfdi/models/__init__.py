@@ -5,6 +5,7 @@ from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise
 from jaxfdi.models.linear import (
     LinearGaussianModel,
     c2d,
+    linear_gaussian_model,
     linear_observation,
     linear_transition,
     validate_linear_model,
@@ -31,6 +32,7 @@ from jaxfdi.models.rigid_body import (
 __all__ = [
     "LinearGaussianModel",
     "c2d",
+    "linear_gaussian_model",
     "linear_observation",
     "linear_transition",
     "validate_linear_model",

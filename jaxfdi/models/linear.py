@@ -32,6 +32,36 @@ class LinearGaussianModel(NamedTuple):
         return self.Phi.shape[-1], self.Gamma.shape[-1], self.C.shape[-2]
 
 
+def linear_gaussian_model(Phi: Array, C: Array, Q: Array, R: Array, Gamma: Array | None = None,
+                          D: Array | None = None) -> LinearGaussianModel:
+    """A ``LinearGaussianModel``, with ``Gamma``/``D`` optional for a model without inputs.
+
+    ``x[k+1] = Phi x[k] + Gamma u[k] + w[k]``, ``y[k] = C x[k] + D u[k] + v[k]``. A missing
+    ``Gamma`` is the zero-width (n, 0) input matrix (no inputs: run filters and
+    simulators with ``us=None`` or ``jnp.zeros((T, 0))``); a missing ``D`` is zeros
+    (m, nu). Every block takes ``Phi``'s dtype; shapes are checked
+    (``validate_linear_model``).
+
+    Example::
+
+        model = linear_gaussian_model(Phi, C, Q, R)   # no inputs
+        kf = kalman_filter(model)
+        _, info = run_filter(kf, kf.init(x0, P0), ys)  # us=None
+    """
+    n = _checks.check_square("Phi", Phi, None, "state transition")
+    _checks.check_shape("C", C, (None, n), "m outputs x n states")
+    m = _checks.shape_of(C)[0]
+    Phi = jnp.asarray(Phi)
+    dtype = Phi.dtype if jnp.issubdtype(Phi.dtype, jnp.floating) else jnp.result_type(float)
+    Gamma = jnp.zeros((n, 0), dtype) if Gamma is None else jnp.asarray(Gamma, dtype)
+    _checks.check_shape("Gamma", Gamma, (n, None), "n states x nu inputs")
+    D = jnp.zeros((m, Gamma.shape[1]), dtype) if D is None else jnp.asarray(D, dtype)
+    model = LinearGaussianModel(jnp.asarray(Phi, dtype), Gamma, jnp.asarray(C, dtype), D, jnp.asarray(Q, dtype),
+                                jnp.asarray(R, dtype))
+    validate_linear_model(model)
+    return model
+
+
 def validate_linear_model(model: LinearGaussianModel, name: str = "model") -> tuple[int, int, int]:
     """Check every block's shape against ``Phi`` and ``C``; return ``(n, nu, m)``."""
     n = _checks.check_square(f"{name}.Phi", model.Phi, None, "state transition")

@@ -51,11 +51,46 @@ def _run_engine_chi2(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_engine(args: argparse.Namespace) -> int:
-    from jaxfdi.scenarios.engine import engine_study, plot_engine
+def split_methods(text: str, valid: list[str]) -> tuple[list[str], list[str]]:
+    """``--methods a,b`` -> ``(chosen, unknown)``; a valid name may itself hold commas
+    (``IMM-bias hand-pi confirm 3, P2 2``): the longest valid name at each position wins."""
+    chosen, unknown, rest = [], [], text.strip()
+    by_length = sorted(valid, key=len, reverse=True)
+    while rest:
+        name = next((v for v in by_length if rest == v or rest.startswith(v + ",")), None)
+        if name is None:
+            name = rest.split(",", 1)[0]
+            if name.strip():
+                unknown.append(name.strip())
+        else:
+            chosen.append(name)
+        rest = rest[len(name):].lstrip(",").strip()
+    return chosen, unknown
 
+
+def _methods_option(args: argparse.Namespace) -> dict:
+    """``{"methods": [...]}`` when the user gave ``--methods``, else ``{}`` (so a study
+    without that keyword still runs)."""
+    if args.methods is None:
+        return {}
+    return {"methods": [name.strip() for name in args.methods.split(",") if name.strip()]}
+
+
+def _run_engine(args: argparse.Namespace) -> int:
+    from jaxfdi.scenarios.engine import engine_methods, engine_study, plot_engine
+
+    options = {}
+    if args.methods is not None:
+        valid = list(engine_methods())
+        chosen, unknown = split_methods(args.methods, valid)
+        if unknown or not chosen:
+            print(f"jaxfdi: --methods: unknown {unknown or repr(args.methods)}; valid names (comma-separated): "
+                  + "; ".join(valid), file=sys.stderr)
+            return 2
+        options["methods"] = chosen
     start = time.perf_counter()
-    study = engine_study(runs=args.runs, seed=args.seed, figure_runs=min(args.runs, 20), progress=not args.quiet)
+    study = engine_study(runs=args.runs, seed=args.seed, figure_runs=min(args.runs, 20), progress=not args.quiet,
+                         **options)
     elapsed = time.perf_counter() - start
     out = Path(args.out)
     print(f"engine: seed-003 turbojet, MM / IMM (two mode designs) / GLRT on the same {args.runs} runs per fault, "
@@ -173,7 +208,7 @@ def _run_vtol(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     design = vtol_design()
-    study = vtol_study(runs=args.runs, seed=args.seed, design=design, progress=not args.quiet)
+    study = vtol_study(runs=args.runs, seed=args.seed, design=design, progress=not args.quiet, **_methods_option(args))
     examples = vtol_examples(study.design, seed=args.seed)
     elapsed = time.perf_counter() - start
     cfg = study.config
@@ -200,7 +235,8 @@ def _run_reaction_wheels(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     study = wheel_study(runs=args.runs, seed=args.seed, calibration_runs=max(20, 2 * args.runs),
-                        estimator=args.estimator, engage_on=args.engage_on, progress=not args.quiet)
+                        estimator=args.estimator, engage_on=args.engage_on, progress=not args.quiet,
+                        **_methods_option(args))
     design = wheel_design()._replace(detection_threshold=study.config["fdp_threshold"])
     examples = wheel_examples(design, seed=args.seed, estimator=args.estimator, engage_on=args.engage_on)
     elapsed = time.perf_counter() - start
@@ -224,13 +260,39 @@ def _run_reaction_wheels(args: argparse.Namespace) -> int:
 RUNNERS = {"engine": _run_engine, "engine-chi2": _run_engine_chi2, "reaction-wheels": _run_reaction_wheels,
            "vtol": _run_vtol}
 TUNERS = {"engine-chi2": _tune_engine_chi2, "engine-imm": _tune_engine_imm}
+#: one line per scenario and tuning target, for ``jaxfdi --help``
+RUN_HELP = {
+    "engine": "seed-003 turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside the paper's Table 3",
+    "engine-chi2": "seed-003 turbojet: the Kalman-filter chi-square test (--window, --pfa)",
+    "reaction-wheels": "seed-004 satellite, 4-wheel pyramid: dual filter F, NIS, credits, MM isolator "
+                       "(--estimator, --engage-on)",
+    "vtol": "seed-001 VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI fault-tolerant control",
+}
+TUNE_HELP = {
+    "engine-chi2": "Q, R and the threshold of the engine chi-square test by gradient, window by validation",
+    "engine-imm": "the engine IMMs' transition matrix, mode noise and mu_T by gradient (--design)",
+}
+
+
+def _listing(title: str, entries: dict[str, str]) -> str:
+    width = max(map(len, entries)) + 2
+    return "\n".join([title, *(f"  {name:<{width}}{text}" for name, text in sorted(entries.items()))])
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="jaxfdi", description="Fault detection and isolation studies in JAX")
+    parser = argparse.ArgumentParser(
+        prog="jaxfdi", description="Fault detection and isolation studies in JAX",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="\n\n".join([_listing("scenarios (jaxfdi run <scenario>):", RUN_HELP),
+                             _listing("tuning targets (jaxfdi tune <target>):", TUNE_HELP),
+                             "jaxfdi run -h / jaxfdi tune -h: the options"]))
     sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run a paper scenario end to end")
+    run = sub.add_parser("run", help="run a paper scenario end to end", formatter_class=argparse.RawDescriptionHelpFormatter,
+                         epilog=_listing("scenarios:", RUN_HELP))
     run.add_argument("scenario", choices=sorted(RUNNERS))
+    run.add_argument("--methods", default=None,
+                     help="run only these methods, comma-separated (engine, vtol, reaction-wheels; default all; "
+                          "an unknown name lists the valid ones)")
     run.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per fault (default 100)")
     run.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
     run.add_argument("--out", default="results", help="output folder for JSON and PNG (default ./results)")
@@ -242,7 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="reaction-wheels: the detector that engages the hypothesis banks (default nis; fdp = "
                           "the paper's F)")
     run.add_argument("--quiet", action="store_true", help="no progress display")
-    tune = sub.add_parser("tune", help="tune a scenario's filter and detector by gradient, then compare on held-out runs")
+    tune = sub.add_parser("tune", help="tune a scenario's filter and detector by gradient, then compare on held-out runs",
+                          formatter_class=argparse.RawDescriptionHelpFormatter,
+                          epilog=_listing("tuning targets:", TUNE_HELP))
     tune.add_argument("target", choices=sorted(TUNERS))
     tune.add_argument("--steps", type=int, default=150, help="optimiser steps (default 150)")
     tune.add_argument("--train-runs", type=int, default=16, help="training runs per fault (default 16)")
@@ -312,6 +376,9 @@ def main(argv: list[str] | None = None) -> int:
         return TUNERS[args.target](args)
     if not (0.0 < args.pfa < 1.0):
         print("jaxfdi: --pfa must lie in (0, 1)", file=sys.stderr)
+        return 2
+    if args.methods is not None and args.scenario == "engine-chi2":
+        print("jaxfdi: --methods: engine-chi2 has one method (the KF chi-square test)", file=sys.stderr)
         return 2
     import jaxfdi
 

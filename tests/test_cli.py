@@ -1,6 +1,7 @@
 """The command line end to end at small size: table on stdout, JSON and PNG written."""
 import json
 import os
+import pathlib
 import subprocess
 import sys
 
@@ -50,6 +51,34 @@ def test_bad_options_exit_with_usage_error(args):
     assert proc.returncode == 2 and "must" in proc.stderr
 
 
+DATA = pathlib.Path(__file__).parent / "data"
+
+
+def assert_same_as_before(name: str, data: dict) -> None:
+    """The study's JSON equals the one its private scan wrote before the scenario moved
+    onto ``jaxfdi.loop`` (``tests/data``): every key it had, exactly (floats to 1e-12
+    relative, for a possible change of floating-point order; none was needed here);
+    keys added since (``unhealthy_runs``) are not compared."""
+    before = json.loads((DATA / f"{name}-runs2-before-loop.json").read_text())
+
+    def same(old, new, path):
+        if isinstance(old, dict):
+            for key in old:
+                assert key in new, f"{path}/{key} missing"
+                same(old[key], new[key], f"{path}/{key}")
+        elif isinstance(old, list):
+            assert len(old) == len(new), path
+            for i, (a, b) in enumerate(zip(old, new)):
+                same(a, b, f"{path}[{i}]")
+        elif isinstance(old, float) and isinstance(new, float):
+            assert new == pytest.approx(old, rel=1e-12, abs=0, nan_ok=True), path
+        else:
+            assert old == new, f"{path}: {old!r} before, {new!r} now"
+
+    same(before["config"], data["config"], "config")
+    same(before["rows"], data["rows"], "rows")
+
+
 def test_vtol_prints_tables_and_writes_figures(tmp_path):
     proc = run_cli(tmp_path, "vtol", "--runs", "2")
     assert proc.returncode == 0, proc.stderr
@@ -58,6 +87,8 @@ def test_vtol_prints_tables_and_writes_figures(tmp_path):
     assert "MDWT-ST  paper" in proc.stdout and "Headline cases beside seed 001" in proc.stdout
     data = json.loads((tmp_path / "out" / "vtol.json").read_text())
     assert data["config"]["runs_per_case"] == 2 and len(data["rows"]) == 9
+    assert_same_as_before("vtol", data)
+    assert "WARNING" not in proc.stdout and all(sum(row["unhealthy_runs"].values()) == 0 for row in data["rows"])
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
         "vtol-fig3-s3-statistics.png", "vtol-fig4-a2-estimate.png", "vtol-fig5-a2-ftc.png", "vtol.json"]
 
@@ -66,6 +97,8 @@ def test_reaction_wheels_prints_every_case_and_writes_figures(tmp_path):
     proc = run_cli(tmp_path, "reaction-wheels", "--runs", "2")
     assert proc.returncode == 0, proc.stderr
     data = json.loads((tmp_path / "out" / "reaction-wheels.json").read_text())
+    assert_same_as_before("reaction-wheels", data)
+    assert "WARNING" not in proc.stdout and all(row["unhealthy_runs"] == 0 for row in data["rows"])
     cases = ["none"] + [f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain") for w in range(1, 5)]
     assert [row["case"] for row in data["rows"]] == cases
     for case in cases:
@@ -77,3 +110,44 @@ def test_reaction_wheels_prints_every_case_and_writes_figures(tmp_path):
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
         "reaction-wheels-fig3-5-attitude.png", "reaction-wheels-fig4-6-detection.png",
         "reaction-wheels-fig8-9-isolation.png", "reaction-wheels.json"]
+
+
+def test_help_lists_every_scenario_and_tuning_target():
+    from jaxfdi.cli import RUNNERS, TUNERS
+
+    proc = subprocess.run([sys.executable, "-m", "jaxfdi", "--help"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    run_at = lines.index("scenarios (jaxfdi run <scenario>):")
+    tune_at = lines.index("tuning targets (jaxfdi tune <target>):")
+    listed_runs = [line.split()[0] for line in lines[run_at + 1:tune_at] if line.strip()]
+    listed_tunes = [line.split()[0] for line in lines[tune_at + 1:] if line.startswith("  ")]
+    assert listed_runs == sorted(RUNNERS) and listed_tunes == sorted(TUNERS)
+    for line in lines[run_at + 1:tune_at] + lines[tune_at + 1:tune_at + 1 + len(TUNERS)]:
+        if line.strip():
+            assert len(line.split()) > 3, f"no description: {line!r}"  # one line each, with what it runs
+
+
+def test_engine_methods_runs_only_those(tmp_path):
+    proc = run_cli(tmp_path, "engine", "--runs", "2", "--methods", "GLRT l_T=200", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((tmp_path / "out" / "engine.json").read_text())
+    assert data["config"]["methods"] == ["GLRT l_T=200"]
+    assert {row["method"] for row in data["rows"]} == {"GLRT l_T=200"} and len(data["rows"]) == len(FAULTS)
+
+
+def test_unknown_method_exits_2_listing_the_valid_names(tmp_path):
+    proc = run_cli(tmp_path, "engine", "--runs", "2", "--methods", "MM,Kalman", "--quiet")
+    assert proc.returncode == 2
+    assert "unknown ['Kalman']" in proc.stderr and "MM; IMM; IMM hand-pi;" in proc.stderr
+    assert not (tmp_path / "out").exists()
+    proc = run_cli(tmp_path, "engine-chi2", "--methods", "KF")
+    assert proc.returncode == 2 and "one method" in proc.stderr
+
+
+def test_split_methods_keeps_names_with_commas():
+    from jaxfdi.cli import split_methods
+
+    valid = ["MM", "IMM-bias hand-pi confirm 3", "IMM-bias hand-pi confirm 3, P2 2"]
+    assert split_methods("IMM-bias hand-pi confirm 3, P2 2,MM", valid) == (["IMM-bias hand-pi confirm 3, P2 2", "MM"], [])
+    assert split_methods("IMM-bias hand-pi confirm 3,MM, X", valid) == (["IMM-bias hand-pi confirm 3", "MM"], ["X"])

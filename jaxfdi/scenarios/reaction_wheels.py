@@ -38,7 +38,7 @@ confirm over ``CONFIRM_STEPS``; a fault's onset uniform in 15-25 s.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -56,7 +56,8 @@ from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.mm import multiple_model
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
-from jaxfdi.metrics import DetectionRecord
+from jaxfdi.metrics import DetectionRecord, unhealthy_warning
+from jaxfdi.scenarios._common import check_methods, require_x64
 from jaxfdi.models.reaction_wheels import (
     SpacecraftParams,
     WheelCommand,
@@ -364,6 +365,12 @@ def calibrate_fdp_threshold(design: WheelDesign, runs: int, seed: int, margin: f
     return float(margin * np.max(np.asarray(out.max_fault_free_fdp)))
 
 
+def run_is_healthy(out: RunOutput) -> np.ndarray:
+    """(runs,) bool: every filter healthy at every step and every method's statistic finite."""
+    records = (out.fdp, out.nis, out.credit, out.likelihood)
+    return np.asarray(out.healthy) & np.all([np.asarray(r.first_unhealthy) < 0 for r in records], axis=0)
+
+
 def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: bool) -> dict:
     """Rates and delays of one method over the runs of one case."""
     onset = np.asarray(record.onset)
@@ -395,19 +402,22 @@ class WheelStudy(NamedTuple):
         head = (f"{'case':<10} {'method':<24} {'rate':>6} {'<=2s':>6} {'med [s]':>8} {'p90 [s]':>8} {'FA':>6}")
         lines = [head, "-" * len(head)]
         for row in self.rows:
-            for method in METHODS:
+            for method in (m for m in METHODS if m in row):
                 r = row[method]
                 lines.append(f"{row['case']:<10} {METHOD_NAMES[method]:<24} {_fmt(r.get('rate'))} "
                              f"{_fmt(r.get('rate_within_deadline'))} {_fmt(r.get('delay_median_s'), 8, 2)} "
                              f"{_fmt(r.get('delay_p90_s'), 8, 2)} {_fmt(r['false_alarm_rate'])}")
-        return "\n".join(lines)
+        bad = [row for row in self.rows if row.get("unhealthy_runs")]
+        warning = unhealthy_warning(sum(row["unhealthy_runs"] for row in bad), sum(row["runs"] for row in self.rows),
+                                    ", ".join(f"{row['case']} {row['unhealthy_runs']}" for row in bad))
+        return "\n".join(lines + ([warning] if warning else []))
 
     def headline(self) -> str:
         """The stop cases beside what the paper reports (qualitatively: it gives no numbers)."""
         lines = ["Wheel stops (seed 004 reports one run: F jumps by orders of magnitude at the stop of wheel 1, and",
                  "credit 1 separates from the others immediately):"]
         for row in self.rows:
-            if row["kind"] != "stop":
+            if row["kind"] != "stop" or not all(m in row for m in ("fdp", "credit", "likelihood")):
                 continue
             lines.append(
                 f"  wheel {row['wheel'] + 1}: F detects {row['fdp']['rate']:.2f} (median {row['fdp']['delay_median_s']:.1f} s, "
@@ -423,10 +433,15 @@ def _fmt(x, width: int = 6, digits: int = 2) -> str:
 
 
 def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, estimator: str = "ekf",
-                engage_on: str = "nis", steps: int = 600, chunk_size: int = 512, progress: bool = False) -> WheelStudy:
+                engage_on: str = "nis", steps: int = 600, chunk_size: int = 512, progress: bool = False,
+                methods: Sequence[str] | None = None) -> WheelStudy:
     """Every case of ``study_cases`` with ``runs`` Monte Carlo runs (noise and onset);
     ``F_T`` calibrated first on ``calibration_runs`` fault-free runs of seed ``seed + 1``.
-    Needs float64 (``jaxfdi.enable_x64()``)."""
+    ``methods``: the subset of ``METHODS`` to report (all by default; every method runs
+    anyway: the banks are engaged by the detectors). Needs float64 (``jaxfdi.enable_x64()``);
+    unhealthy runs are left out of every rate and counted in the row's ``unhealthy_runs``."""
+    selected = check_methods(methods, METHODS)
+    require_x64("wheel_study")
     design = wheel_design()
     kwargs = dict(steps=steps, estimator=estimator, engage_on=engage_on, chunk_size=chunk_size, progress=progress)
     threshold = calibrate_fdp_threshold(design, calibration_runs, seed + 1, **kwargs)
@@ -438,13 +453,16 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
     rows = []
     for i, (kind, wheel) in enumerate(cases):
         part = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[i * runs:(i + 1) * runs], out)
+        healthy = run_is_healthy(part)
+        clean = jax.tree_util.tree_map(lambda leaf: leaf[healthy], part)  # unhealthy runs: counted apart, in no rate
         row = {"case": "none" if kind == "none" else f"{kind} w{wheel + 1}", "kind": kind, "wheel": wheel,
                "magnitude": KINDS.get(kind, 0.0)}
-        for method in METHODS:
-            row[method] = summarize_method(getattr(part, method), wheel, dt, method in ("credit", "likelihood"))
+        for method in selected:
+            row[method] = summarize_method(getattr(clean, method), wheel, dt, method in ("credit", "likelihood"))
         if wheel >= 0:
-            row["fdp_ratio_median"] = float(np.median(part.max_early_fdp / part.max_fault_free_fdp))
+            row["fdp_ratio_median"] = float(np.median(clean.max_early_fdp / clean.max_fault_free_fdp))
         row["healthy_rate"] = float(np.mean(part.healthy))
+        row["runs"], row["unhealthy_runs"] = runs, int(np.sum(~healthy))
         rows.append(row)
     config = {
         "runs": runs, "seed": seed, "calibration_runs": calibration_runs, "estimator": estimator,

@@ -47,8 +47,9 @@ from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.detection.wavelet import block_alarms, chi2_detail_sigma, haar_denoise
 from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
-from jaxfdi.metrics import record_from_alarms
+from jaxfdi.metrics import record_from_alarms, unhealthy_warning
 from jaxfdi.models import vtol
+from jaxfdi.scenarios._common import check_methods, require_x64
 
 LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
 FILTER_NAMES = tuple(f"{loc}-{kind}" for kind in ("mult", "add") for loc in LOCATIONS)
@@ -252,6 +253,7 @@ class RunRecord(NamedTuple):
     tracking_error: Any       # () RMS of |r - H x| (eq. 21's e_k) over k >= the scoring start
     vh_error: Any             # () the same for v_h alone (the channel the nominal loop tracks well)
     states: Any               # (T, n) float32 true states (for the deviation from the fault-free twin)
+    first_unhealthy: Any = -1  # () first step with a filter unhealthy or a statistic not finite, -1 none
 
 
 def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = STEPS) -> RunRecord:
@@ -288,7 +290,13 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
         history.bias[when, matched], jax.vmap(lambda s: true_bias(f, s))(when),
         rms(jnp.sum(error**2, axis=1)), rms(error[:, 0] ** 2),
         history.state.astype(jnp.float32),
+        record_from_alarms(~step_health_series(history), 0).first_alarm,
     )
+
+
+def step_health_series(history: LoopStep) -> jnp.ndarray:
+    """(T,) bool: the loop's filters healthy and every bank statistic finite."""
+    return history.healthy & jnp.all(jnp.isfinite(history.statistic), axis=-1)
 
 
 PAPER_HEADLINE = {  # seed 001, Section V: first detection step of the s3 step (onset 120)
@@ -303,7 +311,12 @@ class VTOLStudy(NamedTuple):
     design: LoopDesign           # with the calibrated MDWT-ST thresholds the closed loop used
 
     def table(self) -> str:
-        return "\n\n".join(_case_table(row) for row in self.rows)
+        bad = [row for row in self.rows if sum(row.get("unhealthy_runs", {}).values())]
+        warning = unhealthy_warning(
+            sum(sum(row["unhealthy_runs"].values()) for row in bad), 2 * sum(row["runs"] for row in self.rows),
+            ", ".join(f"{row['fault']} no FTC {row['unhealthy_runs']['no_ftc']}, FTC {row['unhealthy_runs']['ftc']}"
+                      for row in bad))
+        return "\n\n".join([_case_table(row) for row in self.rows] + ([warning] if warning else []))
 
     def headline(self) -> str:
         return _headline(self)
@@ -315,16 +328,20 @@ def _median(x) -> float:
 
 
 def _summarise(name: str, f: Fault, records: RunRecord, twin_states: np.ndarray, steps: int,
-               levels: int) -> dict[str, Any]:
+               levels: int, selected=METHODS) -> dict[str, Any]:
     """Rows of one fault case from its (2, runs) records (FTC off, on)."""
     onset = int(f.onset)
     faulty = onset < steps
     label = int(fault_label(f, 2))
-    off = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[0], records)
-    on = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[1], records)
+    # unhealthy runs are counted apart and left out of every rate (with their twins)
+    healthy_off, healthy_on = (np.asarray(records.first_unhealthy)[i] < 0 for i in (0, 1))
+    off = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[0][healthy_off], records)
+    on = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[1][healthy_on], records)
     methods = {}
     for s, thresholds in enumerate(("ours", "paper")):
         for m, method in enumerate(METHODS):
+            if method not in selected:
+                continue
             first, det, iso = off.first_alarm[:, s, m], off.detection_step[:, s, m], off.isolation_step[:, s, m]
             false_alarm = (first >= 0) & ((first < onset) if faulty else True)
             decisions = min(onset, steps) // (1 if m < 2 else 2**levels)   # decisions before the onset
@@ -340,8 +357,8 @@ def _summarise(name: str, f: Fault, records: RunRecord, twin_states: np.ndarray,
     start = onset if faulty else ONSET
     k = np.arange(steps)
 
-    def deviation(states):
-        d = np.linalg.norm(states - twin_states, axis=-1)[:, k >= start]
+    def deviation(states, healthy):
+        d = np.linalg.norm(states - twin_states[healthy], axis=-1)[:, k >= start]
         return np.sqrt(np.mean(d**2, axis=-1))
 
     right = on.online_isolated == label
@@ -359,23 +376,31 @@ def _summarise(name: str, f: Fault, records: RunRecord, twin_states: np.ndarray,
         "tracking_error_ftc": _median(on.tracking_error),
         "vh_error_no_ftc": _median(off.vh_error),
         "vh_error_ftc": _median(on.vh_error),
-        "deviation_no_ftc": _median(deviation(off.states)),
-        "deviation_ftc": _median(deviation(on.states)),
+        "deviation_no_ftc": _median(deviation(off.states, healthy_off)),
+        "deviation_ftc": _median(deviation(on.states, healthy_on)),
+        "runs": int(healthy_off.size), "unhealthy_runs": {"no_ftc": int(np.sum(~healthy_off)),
+                                                          "ftc": int(np.sum(~healthy_on))},
     }
     return row
 
 
 def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopDesign | None = None,
                cases: list[tuple[str, Fault]] | None = None, calibration_runs: int = 200,
-               chunk_size: int = 4096, progress: bool = False) -> VTOLStudy:
+               chunk_size: int = 4096, progress: bool = False, methods=None) -> VTOLStudy:
     """Every fault case with FTC off and on, ``runs`` runs each, on common random numbers
     (run i of every case has the same noise, so the fault-free run i is its twin).
 
     Thresholds ("ours") are calibrated first on ``calibration_runs`` fault-free runs of
     another seed (``calibrate_thresholds``); the closed loop decides with the MDWT-ST
     row. Every run is also evaluated with the paper's 14.86 / 34.27. The design used is
-    returned in ``config`` via its thresholds. Needs float64 (``jaxfdi.enable_x64()``)."""
+    returned in ``config`` via its thresholds. ``methods``: the subset of ``METHODS`` to
+    report (all by default; the closed loop always decides with MDWT-ST). Runs whose
+    filters went unhealthy are counted in each row's ``unhealthy_runs`` and left out of
+    its rates. Needs float64 (``jaxfdi.enable_x64()``)."""
     from jaxfdi.montecarlo import monte_carlo
+
+    selected = check_methods(methods, METHODS)
+    require_x64("vtol_study")
 
     design = design or vtol_design()
     calibrated = calibrate_thresholds(design, calibration_runs, seed + 1_000_003, steps)
@@ -401,7 +426,8 @@ def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopD
                           chunk_size=chunk_size, progress=progress)
     records = jax.tree_util.tree_map(lambda leaf: leaf.reshape(shape + leaf.shape[1:]), records)
     twin = np.asarray(records.states)[names.index("none"), 0]
-    rows = [_summarise(name, f, jax.tree_util.tree_map(lambda leaf: leaf[c], records), twin, steps, design.levels)
+    rows = [_summarise(name, f, jax.tree_util.tree_map(lambda leaf: leaf[c], records), twin, steps, design.levels,
+                       selected)
             for c, (name, f) in enumerate(cases)]
     dof = 4 - design.unknown_input.shape[1]
     config = {
@@ -454,7 +480,7 @@ def _headline(study: VTOLStudy) -> str:
     if s3:
         out.append("  s3 step 0.7 from k = 120, first detection step: method  paper | ours (T_D 14.86/34.27): run 0, "
                    "median | ours (calibrated): run 0, median")
-        for method in METHODS:
+        for method in (m for m in METHODS if f"{m}|paper" in s3["methods"]):
             p, o = s3["methods"][f"{method}|paper"], s3["methods"][f"{method}|ours"]
             out.append(f"    {method:<8} {PAPER_HEADLINE['s3 step 0.7'][method]:>5} | {p['first_detection_run0']:>5}, "
                        f"{120 + p['delay_median']:>6.1f}, FA {p['false_alarm_rate']:.2f} | "

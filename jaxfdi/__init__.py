@@ -39,10 +39,43 @@ def enable_compilation_cache(path: str | None = None) -> str:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
     return cache
 
-from jaxfdi import control, detection, faults, metrics, models, tuning  # noqa: E402
+from jaxfdi import control, detection, faults, loop, metrics, models, tuning  # noqa: E402
 from jaxfdi.detection import chi2_detector, chi2_threshold, glrt_detector, mode_probability_detector  # noqa: E402
-from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault, stack_faults  # noqa: E402
-from jaxfdi.metrics import DetectionRecord, DetectionSummary, confusion_matrix, summarize_detection  # noqa: E402
+from jaxfdi.faults import (  # noqa: E402
+    Fault,
+    FaultKind,
+    Target,
+    active_label,
+    concat_faults,
+    episodes,
+    fault,
+    fault_group,
+    no_fault,
+    stack_faults,
+)
+from jaxfdi.loop import (  # noqa: E402
+    FDI,
+    Controller,
+    LoopResult,
+    LoopTrace,
+    Plant,
+    Scorer,
+    detection_scorer,
+    episode_scorer,
+    feedforward,
+    run_loop,
+    state_feedback,
+)
+from jaxfdi.metrics import (  # noqa: E402
+    DetectionRecord,
+    DetectionSummary,
+    EpisodeRecord,
+    EpisodeSummary,
+    confusion_matrix,
+    step_health,
+    summarize_detection,
+    summarize_episodes,
+)
 from jaxfdi.montecarlo import monte_carlo  # noqa: E402
 from jaxfdi.riccati import solve_discrete_are, steady_state_kalman  # noqa: E402
 from jaxfdi.monitor import MonitorHistory, MonitorResult, monitor, replay_detector  # noqa: E402

@@ -41,7 +41,14 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.detection.chi2 import Decision, as_decision
-from jaxfdi.metrics import DetectionRecord, record_init, record_update
+from jaxfdi.metrics import (
+    DetectionRecord,
+    EpisodeRecord,
+    episode_record_init,
+    episode_record_update,
+    record_init,
+    record_update,
+)
 
 
 class Plant(NamedTuple):
@@ -257,6 +264,41 @@ def detection_scorer(
                                  healthy=good)
 
         return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, DetectionRecord)))
+
+    return Scorer(init, update)
+
+
+def episode_scorer(
+    episodes: tuple[Array, Array, Array],
+    decisions: Callable[[Any], Any],
+    healthy: Callable[[Any], Array] | None = None,
+    grace: int = 0,
+) -> Scorer:
+    """One ``EpisodeRecord`` per decision, for a run with several fault episodes.
+
+    Args:
+      episodes: ``(onsets, ends, labels)``, each (E,) (``faults.episodes(fault, nu)``).
+      decisions, healthy: as for ``detection_scorer``.
+      grace: steps after an episode's end still credited to it (``metrics``).
+    """
+
+    def is_healthy(output):
+        return healthy(output) if healthy is not None else getattr(output, "healthy", jnp.ones((), bool))
+
+    def init(example):
+        found = jax.eval_shape(lambda out: _decisions(decisions(out)), example)
+        return jax.tree_util.tree_map(lambda _: episode_record_init(*episodes, grace), found,
+                                      is_leaf=lambda x: isinstance(x, Decision))
+
+    def update(score, k, output):
+        found = _decisions(decisions(output))
+        ok = jnp.all(is_healthy(output))
+
+        def one(record: EpisodeRecord, decision: Decision) -> EpisodeRecord:
+            good = ok & jnp.all(jnp.isfinite(decision.statistic))
+            return episode_record_update(record, k, decision.alarm, decision.label, healthy=good)
+
+        return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, EpisodeRecord)))
 
     return Scorer(init, update)
 

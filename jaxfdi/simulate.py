@@ -32,7 +32,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.faults import Fault, Target, active_label, apply_faults, is_active, no_fault
+from jaxfdi.faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
 from jaxfdi.models.linear import LinearGaussianModel, linear_observation, linear_transition, validate_linear_model
 
 
@@ -79,10 +79,6 @@ class Simulator(NamedTuple):
     step: Callable[[SimState, Array, Array, Array], tuple[SimState, SimStep]]
     measure: Callable[[SimState, Array, Array, Array], tuple[SimState, Sensed]] | None = None
     advance: Callable[[SimState, Array, Array, Array], tuple[SimState, Actuated]] | None = None
-
-
-def _as_stack(f: Fault) -> Fault:
-    return jax.tree_util.tree_map(lambda leaf: jnp.reshape(leaf, (-1,)) if jnp.ndim(leaf) == 0 else leaf, f)
 
 
 def per_step(name: str, value: Any, size: int) -> Callable[[Array], Array]:
@@ -166,7 +162,7 @@ def simulator(
         _checks.check_shape("available", available, (None, m), f"T steps x {m} measurement components")
         available_table = jnp.asarray(available, bool)
         available = lambda k, x: available_table[k]  # noqa: E731
-    faults = _as_stack(no_fault() if fault is None else fault)
+    faults = as_stack(no_fault() if fault is None else fault)
     if any(jnp.ndim(leaf) != 1 for leaf in faults):
         raise ValueError("fault: expected scalar leaves or a stack with shape (F,) leaves")
     num_faults = faults.kind.shape[0]

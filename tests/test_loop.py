@@ -280,3 +280,40 @@ def test_loop_input_errors():
         loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(7), None, jax.random.key(0))
     with pytest.raises(ValueError, match="exogenous"):
         loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(7), None, jax.random.key(0), 5, exogenous=jnp.zeros((4, 1)))
+
+
+def test_episode_scorer_over_a_flight_with_three_fault_episodes(engine):
+    """Three episodes in one run (a group of two sensors, an actuator bias, a sensor
+    ramp), scored inside the scan; against windows and first alarms found in plain
+    Python from the stored alarm sequence."""
+    model, kf, detector, _ = engine
+    steps, grace = 150, 3
+    group = jaxfdi.fault_group("bias", "sensor", [1, 3], 20, [25.0, 4.0], end=45, label=9)
+    flight = jaxfdi.concat_faults(group, jaxfdi.fault("bias", "actuator", 0, 70, 2e-3, end=95),
+                                  jaxfdi.fault("ramp", "sensor", 2, 110, 0.0, slope=0.5))
+    onsets, ends, labels = jaxfdi.episodes(flight, 1)
+    us = jnp.full((steps, 1), 0.01)
+    result = loop.run_loop(jaxfdi.linear_simulator(model, flight), filter_detector(kf, detector), loop.feedforward(),
+                           jnp.zeros(7), (kf.init(jnp.zeros(7), model.Q), detector.init()), jax.random.key(7),
+                           exogenous=us, scorer=loop.episode_scorer((onsets, ends, labels), lambda out: out[1],
+                                                                    lambda out: out[0].healthy, grace),
+                           keep_history=True)
+    alarms = np.asarray(result.history.output[1].alarm)
+    mode = np.asarray(result.history.sensed.mode)
+    record = result.score
+    real = [(int(o), int(e), int(l)) for o, e, l in zip(onsets, ends, labels) if o < steps]
+    assert [r[2] for r in real] == [9, 1, 4]
+    assert set(mode[20:45]) == {9} and set(mode[70:95]) == {1} and set(mode[110:]) == {4} and mode[50] == 0
+    starts = sorted(o for o, _, _ in real)
+    inside_any = np.zeros(steps, bool)
+    for e, (o, end, _) in enumerate(real):
+        later = [s for s in starts if s > o]
+        close = min(end + grace, later[0] if later else 2**30)
+        window = np.arange(steps)[(np.arange(steps) >= o) & (np.arange(steps) < close)]
+        inside_any[window] = True
+        hits = window[alarms[window]]
+        index = [int(x) for x in np.asarray(onsets)].index(o)
+        assert int(record.detection_step[index]) == (int(hits[0]) if hits.size else -1)
+        assert hits.size, "each episode is large enough to be detected"
+    assert int(record.false_alarms) == int(np.sum(alarms & ~inside_any))
+    assert int(record.first_unhealthy) == -1

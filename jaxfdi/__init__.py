@@ -12,7 +12,8 @@ from jaxfdi.filters import (
     two_stage_kalman_filter,
     unscented_kalman_filter,
 )
-from jaxfdi.models import LinearGaussianModel, c2d
+from jaxfdi.filters import init_from_posterior
+from jaxfdi.models import LinearGaussianModel, c2d, linear_gaussian_model
 
 __version__ = "0.1.0"
 

@@ -138,8 +138,8 @@ def test_gain_schedule_is_the_eigenstructure_assignment(design):
     from jaxfdi.control.lqr import integral_augmentation
 
     A_bar, B_bar, _ = integral_augmentation(design.model.Phi, design.model.Gamma, design.H, vtol.TS)
-    lam = np.linalg.eigvals(np.asarray(A_bar) + np.asarray(B_bar) @ np.asarray(design.gain))
-    V = np.linalg.eig(np.asarray(A_bar) + np.asarray(B_bar) @ np.asarray(design.gain))[1]
+    lam = np.linalg.eigvals(np.asarray(A_bar) - np.asarray(B_bar) @ np.asarray(design.gain))
+    V = np.linalg.eig(np.asarray(A_bar) - np.asarray(B_bar) @ np.asarray(design.gain))[1]
     for component, loss in ((1, 0.5), (0, 0.3), (1, 0.123), (0, 0.777)):
         B_f = np.asarray(B_bar) * (1 - loss * np.eye(2)[component])[None, :]
         exact = assign_eigenstructure(A_bar, B_f, jnp.asarray(lam), jnp.asarray(V)).gain
@@ -147,7 +147,7 @@ def test_gain_schedule_is_the_eigenstructure_assignment(design):
         on_grid = abs(loss * 200 - round(loss * 200)) < 1e-9
         if on_grid:
             np.testing.assert_allclose(np.asarray(table), np.asarray(exact), rtol=0, atol=1e-8)
-        closed = np.linalg.eigvals(np.asarray(A_bar) + B_f @ np.asarray(table))
+        closed = np.linalg.eigvals(np.asarray(A_bar) - B_f @ np.asarray(table))
         distance = max(np.min(np.abs(closed - target)) for target in lam)
         assert distance < (1e-8 if on_grid else 1e-3), (component, loss, distance)
 

@@ -9,8 +9,8 @@ Every scenario of jaxfdi, open or closed loop, is this scan with its own three p
 
 Step ``k`` (``Ts`` apart):
 
-1. ``measure(plant, k, u_s, key) -> (plant, sensed)``: the sensors read ``x[k]`` (noise,
-   sensor faults); ``sensed.measurement`` (or ``measurement_of(sensed)``) is ``y[k]``.
+1. ``measure(plant, k, u_s, step_key) -> (plant, sensed)``, ``step_key = fold_in(key, k)``:
+   the sensors read ``x[k]`` (noise, sensor faults); ``sensed.measurement`` is ``y[k]``.
    ``u_s``, the input a feed-through term sees, is ``u[k]`` for a feed-forward
    controller (computed first) and otherwise ``u[k-1]``, the value the zero-order hold
    still applies when the sensors sample (no algebraic loop);
@@ -20,7 +20,7 @@ Step ``k`` (``Ts`` apart):
 3. ``controller.step(ctrl, k, view, exogenous[k]) -> (ctrl, u[k])``;
 4. ``fdi.step(fdi, k, y, u) -> (fdi, output)``: the rest (time update with the input the
    plant is believed to get, filter banks, detectors, decisions);
-5. ``advance(plant, k, u, key) -> (plant, moved)``: actuator faults, dynamics;
+5. ``advance(plant, k, u, step_key) -> (plant, moved)``: actuator faults, dynamics;
 6. ``scorer.update(score, k, output)``: metrics folded into the carry (a
    ``DetectionRecord`` per decision, peaks, ...), so a run keeps a handful of numbers
    unless ``keep_history=True`` asks for the (T, ...) trace.
@@ -52,8 +52,9 @@ from jaxfdi.metrics import (
 
 
 class Plant(NamedTuple):
-    """``init(x0) -> state``; ``measure(state, k, u, key) -> (state, sensed)``;
-    ``advance(state, k, u, key) -> (state, moved)``. ``Simulator`` has these fields."""
+    """``init(x0) -> state``; ``measure(state, k, u, step_key) -> (state, sensed)``;
+    ``advance(state, k, u, step_key) -> (state, moved)``, with ``step_key = fold_in(key, k)``
+    (the loop folds the run's key once per step). ``Simulator`` has these fields."""
 
     init: Callable[[Array], Any]
     measure: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
@@ -104,9 +105,8 @@ class LoopResult(NamedTuple):
     final: Any = None          # (plant, fdi, controller) states after the last step
 
 
-def feedforward(dtype=None) -> Controller:
+def feedforward() -> Controller:
     """The open-loop controller: ``u[k] = exogenous[k]`` (precomputed inputs)."""
-    del dtype
     return Controller(lambda: None, lambda state, k, view, u: (state, jnp.asarray(u)), feedforward=True)
 
 
@@ -176,18 +176,19 @@ def run_loop(
     held0 = None if controller.feedforward else jax.tree_util.tree_map(jnp.asarray, u0)
 
     def one_step(plant_state, fdi_state, ctrl_state, held, k, exo):
+        step_key = jax.random.fold_in(key, k)
         if controller.feedforward:
             ctrl_state, u = controller.step(ctrl_state, k, None, exo)
-            plant_state, sensed = plant.measure(plant_state, k, u, key)
+            plant_state, sensed = plant.measure(plant_state, k, u, step_key)
             y = measurement_of(sensed)
             fdi_state, view = (fdi_state, y) if fdi.observe is None else fdi.observe(fdi_state, k, y)
         else:
-            plant_state, sensed = plant.measure(plant_state, k, held, key)
+            plant_state, sensed = plant.measure(plant_state, k, held, step_key)
             y = measurement_of(sensed)
             fdi_state, view = (fdi_state, y) if fdi.observe is None else fdi.observe(fdi_state, k, y)
             ctrl_state, u = controller.step(ctrl_state, k, view, exo)
         fdi_state, output = fdi.step(fdi_state, k, y, u)
-        plant_state, moved = plant.advance(plant_state, k, u, key)
+        plant_state, moved = plant.advance(plant_state, k, u, step_key)
         return (plant_state, fdi_state, ctrl_state, None if held is None else u), LoopTrace(sensed, view, u, output, moved)
 
     plant0 = plant.init(x0)
@@ -224,6 +225,31 @@ def _decisions(value: Any) -> Any:
     return as_decision(value)
 
 
+def _per_decision_scorer(decisions: Callable[[Any], Any], healthy: Callable[[Any], Array] | None,
+                         new_record: Callable[[], Any], fold: Callable[..., Any], record_type: type) -> Scorer:
+    """A record (``new_record()``) per decision of the output, each folded with
+    ``fold(record, k, decision, good)``, ``good`` = the step healthy and the decision's
+    statistic finite."""
+
+    def is_healthy(output):
+        return healthy(output) if healthy is not None else getattr(output, "healthy", jnp.ones((), bool))
+
+    def init(example):
+        found = jax.eval_shape(lambda out: _decisions(decisions(out)), example)
+        return jax.tree_util.tree_map(lambda _: new_record(), found, is_leaf=lambda x: isinstance(x, Decision))
+
+    def update(score, k, output):
+        found = _decisions(decisions(output))
+        ok = jnp.all(is_healthy(output))
+
+        def one(record, decision: Decision):
+            return fold(record, k, decision, ok & jnp.all(jnp.isfinite(decision.statistic)))
+
+        return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, record_type)))
+
+    return Scorer(init, update)
+
+
 def detection_scorer(
     onset: Array,
     decisions: Callable[[Any], Any],
@@ -244,28 +270,10 @@ def detection_scorer(
     """
     dtype = dtype or jnp.result_type(float)
 
-    def is_healthy(output):
-        if healthy is not None:
-            return healthy(output)
-        return getattr(output, "healthy", jnp.ones((), bool))
+    def fold(record: DetectionRecord, k, decision: Decision, good) -> DetectionRecord:
+        return record_update(record, k, decision.alarm, decision.label, decision.estimate, estimate_delay, healthy=good)
 
-    def init(example):
-        found = jax.eval_shape(lambda out: _decisions(decisions(out)), example)
-        return jax.tree_util.tree_map(lambda _: record_init(onset, dtype), found,
-                                      is_leaf=lambda x: isinstance(x, Decision))
-
-    def update(score, k, output):
-        found = _decisions(decisions(output))
-        ok = jnp.all(is_healthy(output))
-
-        def one(record: DetectionRecord, decision: Decision) -> DetectionRecord:
-            good = ok & jnp.all(jnp.isfinite(decision.statistic))
-            return record_update(record, k, decision.alarm, decision.label, decision.estimate, estimate_delay,
-                                 healthy=good)
-
-        return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, DetectionRecord)))
-
-    return Scorer(init, update)
+    return _per_decision_scorer(decisions, healthy, lambda: record_init(onset, dtype), fold, DetectionRecord)
 
 
 def episode_scorer(
@@ -282,25 +290,10 @@ def episode_scorer(
       grace: steps after an episode's end still credited to it (``metrics``).
     """
 
-    def is_healthy(output):
-        return healthy(output) if healthy is not None else getattr(output, "healthy", jnp.ones((), bool))
+    def fold(record: EpisodeRecord, k, decision: Decision, good) -> EpisodeRecord:
+        return episode_record_update(record, k, decision.alarm, decision.label, healthy=good)
 
-    def init(example):
-        found = jax.eval_shape(lambda out: _decisions(decisions(out)), example)
-        return jax.tree_util.tree_map(lambda _: episode_record_init(*episodes, grace), found,
-                                      is_leaf=lambda x: isinstance(x, Decision))
-
-    def update(score, k, output):
-        found = _decisions(decisions(output))
-        ok = jnp.all(is_healthy(output))
-
-        def one(record: EpisodeRecord, decision: Decision) -> EpisodeRecord:
-            good = ok & jnp.all(jnp.isfinite(decision.statistic))
-            return episode_record_update(record, k, decision.alarm, decision.label, healthy=good)
-
-        return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, EpisodeRecord)))
-
-    return Scorer(init, update)
+    return _per_decision_scorer(decisions, healthy, lambda: episode_record_init(*episodes, grace), fold, EpisodeRecord)
 
 
 def peak_scorer(values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None) -> Scorer:

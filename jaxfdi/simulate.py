@@ -71,9 +71,11 @@ class SimStep(NamedTuple):
 
 
 class Simulator(NamedTuple):
-    """``init(x0)``; ``step(state, k, u, key) -> (state, SimStep)``; and its halves
-    ``measure(state, k, u, key) -> (state, Sensed)`` (``u``: the input the feed-through
-    sees) and ``advance(state, k, u, key) -> (state, Actuated)``."""
+    """``init(x0)``; ``step(state, k, u, key) -> (state, SimStep)`` with the run's key;
+    and its halves ``measure(state, k, u, step_key) -> (state, Sensed)`` (``u``: the
+    input the feed-through sees) and ``advance(state, k, u, step_key) -> (state,
+    Actuated)``, which take the step's key ``fold_in(key, k)`` (a closed loop folds it
+    once for both)."""
 
     init: Callable[[Array], SimState]
     step: Callable[[SimState, Array, Array, Array], tuple[SimState, SimStep]]
@@ -174,13 +176,10 @@ def simulator(
         x0 = jnp.asarray(x0)
         return SimState(x0, jnp.zeros((num_faults,), x0.dtype))
 
-    def keys(key: Array, k: Array) -> tuple[Array, Array]:
-        return jax.random.split(jax.random.fold_in(key, k))  # (process, measurement)
-
-    def measure(sim: SimState, k: Array, u: Array, key: Array):
+    def measure(sim: SimState, k: Array, u: Array, step_key: Array):
         _checks.check_shape("u", u, (None,), "one commanded input")
         x = sim.state
-        _, key_v = keys(key, k)
+        _, key_v = jax.random.split(step_key)  # (process, measurement)
         y_clean = plant_h(x, u, k, params) + sqrt_R(k) @ jax.random.normal(key_v, (m,), x.dtype)
         y, held = apply_faults(faults, k, y_clean, Target.SENSOR, sim.held)
         if available is not None:
@@ -189,10 +188,10 @@ def simulator(
         mode = active_label(faults, k, u.shape[0])
         return SimState(x, held), Sensed(x, y, y - y_clean, active, mode)
 
-    def advance(sim: SimState, k: Array, u: Array, key: Array):
+    def advance(sim: SimState, k: Array, u: Array, step_key: Array):
         _checks.check_shape("u", u, (None,), "one commanded input")
         x = sim.state
-        key_w, _ = keys(key, k)
+        key_w, _ = jax.random.split(step_key)
         if u.shape[0]:
             u_applied, held = apply_faults(faults, k, u, Target.ACTUATOR, sim.held)
         else:  # a plant without inputs: nothing for an actuator fault to act on
@@ -205,8 +204,9 @@ def simulator(
         return SimState(x_next, held), Actuated(u_applied, u_applied - u)
 
     def step(sim: SimState, k: Array, u: Array, key: Array):
-        sim, sensed = measure(sim, k, u, key)
-        sim, moved = advance(sim, k, u, key)
+        step_key = jax.random.fold_in(key, k)
+        sim, sensed = measure(sim, k, u, step_key)
+        sim, moved = advance(sim, k, u, step_key)
         out = SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
                       sensed.sensor_fault, sensed.fault_active, sensed.mode)
         return sim, out

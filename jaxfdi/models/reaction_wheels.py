@@ -254,27 +254,27 @@ def wheel_plant(params: SpacecraftParams, fault, gyro_sigma: Array, disturbance_
     ``advance`` with a ``WheelCommand``: the wheels deliver ``delivered_torque`` plus
     white torque noise (``wheel_noise_sigma``), a stop moves its wheel's momentum to the
     body (``stop_transfer``), and the truth moves one RK4 step with a white external
-    torque (``disturbance_sigma``). Step ``k``'s draws come from ``fold_in(key, k)``.
+    torque (``disturbance_sigma``). Step ``k``'s draws come from its key ``fold_in(key, k)``.
     """
     from jaxfdi.loop import Plant
 
     dtype = params.inertia.dtype
     N = params.wheel_axes.shape[0]
 
-    def keys(key, k):
-        return jax.random.split(jax.random.fold_in(key, k), 3)  # gyro, disturbance, wheel torque
+    def keys(step_key):
+        return jax.random.split(step_key, 3)  # gyro, disturbance, wheel torque
 
     def init(x0: Array) -> Array:
         _checks.check_shape("x0", x0, (7 + N,), "[q (4), w (3), Omega (N)]")
         return jnp.asarray(x0)
 
-    def measure(state: Array, k: Array, command: WheelCommand, key: Array):
-        k_gyro, _, _ = keys(key, k)
+    def measure(state: Array, k: Array, command: WheelCommand, step_key: Array):
+        k_gyro, _, _ = keys(step_key)
         rate = state[4:7] + gyro_sigma * jax.random.normal(k_gyro, (3,), dtype)
         return state, WheelSensed(state, AttitudeReading(state[:4], rate))
 
-    def advance(state: Array, k: Array, command: WheelCommand, key: Array):
-        _, k_dist, k_wheel = keys(key, k)
+    def advance(state: Array, k: Array, command: WheelCommand, step_key: Array):
+        _, k_dist, k_wheel = keys(step_key)
         delivered = delivered_torque(fault, k, command.torque) + wheel_noise_sigma * jax.random.normal(k_wheel, (N,), dtype)
         disturbance = disturbance_sigma * jax.random.normal(k_dist, (3,), dtype)
         return spacecraft_step(stop_transfer(state, fault, k, params), delivered, disturbance, params), delivered

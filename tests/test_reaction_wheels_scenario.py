@@ -141,3 +141,24 @@ def test_ukf_estimator_agrees_with_the_ekf_on_the_closed_loop():
         e, u = getattr(out_e, name), getattr(out_u, name)
         assert int(e.detection_step) == int(u.detection_step) and int(e.isolated) == int(u.isolated)
     assert int(out_u.likelihood.isolated) == 2 and bool(out_u.healthy)
+
+
+def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table():
+    """A torque bias of NaN on wheel 2 from step 20 makes the truth, the gyros and every
+    filter NaN: the run is reported unhealthy (first_unhealthy = 21, the first NaN
+    reading), left out of the row's rates, and the table says so; its healthy twin is
+    scored as usual."""
+    design = rw.wheel_design()
+    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), rw.wheel_fault("bias", 1, 20, float("nan")),
+                                    rw.wheel_fault("bias", 1, 20, 2e-3))
+    out = jax.jit(jax.vmap(lambda f: rw.run_wheels(design, jax.random.key(0), f, steps=40)))(faults)
+    out = jax.tree_util.tree_map(np.asarray, out)
+    assert list(out.healthy) == [False, True]
+    assert out.nis.first_unhealthy[0] == 21 and out.nis.first_unhealthy[1] == -1
+    row = rw.summarize_case(out, "bias", 1, 0.1)
+    assert row["unhealthy_runs"] == 1 and row["runs"] == 2
+    only_good = rw.summarize_case(jax.tree_util.tree_map(lambda leaf: leaf[1:], out), "bias", 1, 0.1)
+    for method in rw.METHODS:
+        np.testing.assert_equal(row[method], only_good[method])  # NaN == NaN here
+    table = rw.WheelStudy({}, [row], out).table()
+    assert "WARNING: 1 of 2 runs went numerically bad" in table and "bias w2 1" in table

@@ -22,6 +22,7 @@ from jaxfdi.scenarios.vtol import (
     method_alarms,
     vtol_design,
     vtol_faults,
+    vtol_run,
     vtol_study,
 )
 
@@ -325,3 +326,32 @@ def test_calibrate_rejects_nothing_silently(design):
         calibrate_thresholds(design, runs=0)
     with pytest.raises(ValueError, match="run_false_alarm"):
         calibrate_thresholds(design, runs=2, run_false_alarm=1.5)
+
+
+def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table(design):
+    """Run 0 gets a NaN sensor bias at step 100 (every filter goes NaN), run 1 a finite
+    one: run 0 is reported unhealthy at step 100 with FTC off and on, left out of the
+    row's rates (they equal those of run 1 alone), and the table says so."""
+    from jaxfdi import fault
+    from jaxfdi.scenarios import vtol as scenario
+
+    steps = 160
+    thresholds = jnp.asarray(np.stack([scenario.paper_thresholds(12)] * 2))
+    f = fault("bias", "sensor", 2, 100, 0.7)
+    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), fault("bias", "sensor", 2, 100, float("nan")), f,
+                                    no_fault(), no_fault())       # runs 2, 3: the fault-free twins of 0, 1
+    keys = jnp.concatenate([jax.random.split(jax.random.PRNGKey(0), 2)] * 2)
+    run = jax.jit(jax.vmap(jax.vmap(lambda f, key, ftc: vtol_run(design, thresholds, key, f, ftc, steps),
+                                    in_axes=(0, 0, None)), in_axes=(None, None, 0)))
+    every = jax.tree_util.tree_map(np.asarray, run(faults, keys, jnp.array([False, True])))   # (ftc, run)
+    assert every.first_unhealthy.tolist() == [[100, -1, -1, -1], [100, -1, -1, -1]]
+    records = jax.tree_util.tree_map(lambda leaf: leaf[:, :2], every)
+    twin = every.states[0, 2:]
+    row = scenario._summarise("s3 bias", f, records, np.asarray(twin), steps, design.levels)
+    alone = scenario._summarise("s3 bias", f, jax.tree_util.tree_map(lambda leaf: leaf[:, 1:], records),
+                                np.asarray(twin)[1:], steps, design.levels)
+    assert row["unhealthy_runs"] == {"no_ftc": 1, "ftc": 1} and row["runs"] == 2
+    for key in ("methods", "online_isolation_rate", "tracking_error_ftc", "deviation_no_ftc"):
+        np.testing.assert_equal(row[key], alone[key])
+    table = scenario.VTOLStudy({}, [row], records, design).table()
+    assert "WARNING: 2 of 4 runs went numerically bad" in table

@@ -393,6 +393,22 @@ def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: 
     return row
 
 
+def summarize_case(part: RunOutput, kind: str, wheel: int, dt: float, methods=METHODS) -> dict:
+    """The table row of one case from its runs' outputs; unhealthy runs are counted in
+    ``unhealthy_runs`` and left out of every rate."""
+    healthy = run_is_healthy(part)
+    clean = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[healthy], part)
+    row = {"case": "none" if kind == "none" else f"{kind} w{wheel + 1}", "kind": kind, "wheel": wheel,
+           "magnitude": KINDS.get(kind, 0.0)}
+    for method in methods:
+        row[method] = summarize_method(getattr(clean, method), wheel, dt, method in ("credit", "likelihood"))
+    if wheel >= 0:
+        row["fdp_ratio_median"] = float(np.median(clean.max_early_fdp / clean.max_fault_free_fdp))
+    row["healthy_rate"] = float(np.mean(part.healthy))
+    row["runs"], row["unhealthy_runs"] = int(healthy.size), int(np.sum(~healthy))
+    return row
+
+
 class WheelStudy(NamedTuple):
     config: dict
     rows: list[dict]
@@ -453,17 +469,7 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
     rows = []
     for i, (kind, wheel) in enumerate(cases):
         part = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[i * runs:(i + 1) * runs], out)
-        healthy = run_is_healthy(part)
-        clean = jax.tree_util.tree_map(lambda leaf: leaf[healthy], part)  # unhealthy runs: counted apart, in no rate
-        row = {"case": "none" if kind == "none" else f"{kind} w{wheel + 1}", "kind": kind, "wheel": wheel,
-               "magnitude": KINDS.get(kind, 0.0)}
-        for method in selected:
-            row[method] = summarize_method(getattr(clean, method), wheel, dt, method in ("credit", "likelihood"))
-        if wheel >= 0:
-            row["fdp_ratio_median"] = float(np.median(clean.max_early_fdp / clean.max_fault_free_fdp))
-        row["healthy_rate"] = float(np.mean(part.healthy))
-        row["runs"], row["unhealthy_runs"] = runs, int(np.sum(~healthy))
-        rows.append(row)
+        rows.append(summarize_case(part, kind, wheel, dt, selected))
     config = {
         "runs": runs, "seed": seed, "calibration_runs": calibration_runs, "estimator": estimator,
         "engage_on": engage_on, "steps": steps, "dt": dt, "onset_range_steps": list(ONSET_RANGE),

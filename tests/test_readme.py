@@ -22,3 +22,13 @@ def test_example_runs_and_detects_the_fault():
     exec(compile(code, "README.md", "exec"), namespace)
     assert 200 <= int(namespace["alarm_step"]) < 220  # a 3.4-sigma P2 bias, seen within 0.2 s
     assert bool(np.all(namespace["info"].healthy))
+
+
+def test_closed_loop_example_runs_and_holds_the_unstable_plant():
+    code = re.findall(r"```python\n(.*?)```", README, re.S)[1]
+    namespace = {}
+    exec(compile(code, "README.md", "exec"), namespace)
+    states = np.asarray(namespace["true_states"])
+    assert states.shape == (200, 2) and abs(states[0, 0]) == 1.0
+    assert np.max(np.abs(states[100:])) < 0.1                            # regulated ...
+    assert np.max(np.abs(np.linalg.eigvals(np.asarray(namespace["Phi"])))) > 1  # ... an unstable plant

@@ -6,6 +6,8 @@ f54c9a7, the last commit with the private loops) in the same run:
   * ``engine-monitor``: the fused open-loop engine study's run (plant -> KF -> 4-step
     windowed chi-square -> detection record), ``jit(vmap(monitor))`` over N runs,
     T = 400, P2 bias at step 200 (``monitor`` is now the loop's feed-forward case);
+  * ``engine-imm-monitor``: the same with the engine study's IMM (7 noise-inflation
+    modes, mode-probability detector), whose health check is now live (item 4);
   * ``vtol-closed-loop``: seed 001's closed loop (TSKF bank, MDWT, reconfiguring PI),
     ``jit(vmap(run_closed_loop))`` over N runs, T = 300, a2 effectiveness loss, FTC on.
 
@@ -53,6 +55,17 @@ def worker(workload: str, runs: int, repeats: int, out: str) -> None:
         def one(key):
             return jaxfdi.monitor(jaxfdi.linear_simulator(model, f), kf, detector, jnp.zeros(7),
                                   kf.init(jnp.zeros(7), model.Q), us, key, 200).record
+    elif workload == "engine-imm-monitor":
+        from jaxfdi.models import engine_model
+        from jaxfdi.scenarios.engine import engine_methods, run_monitor
+
+        model = engine_model()
+        method = engine_methods()["IMM"]
+        f = jaxfdi.fault("bias", "sensor", 1, 200, 16.99)
+        us = jnp.full((400, 1), 0.01)
+
+        def one(key):
+            return run_monitor(method, model, us, key, f).record
     else:
         from jaxfdi.control.closed_loop import run_closed_loop
         from jaxfdi.scenarios.vtol import vtol_design
@@ -99,7 +112,7 @@ def main() -> None:
     try:
         report = {"runs": args.runs, "baseline": args.baseline, "repeats": args.repeats, "rounds": args.rounds,
                   "workloads": {}}
-        for workload in ("engine-monitor", "vtol-closed-loop"):
+        for workload in ("engine-monitor", "engine-imm-monitor", "vtol-closed-loop"):
             samples = {"old": [], "new": []}
             for _ in range(args.rounds):
                 for which, path in (("old", baseline_dir), ("new", ROOT)):

@@ -81,8 +81,9 @@ class Controller(NamedTuple):
 
 
 class Scorer(NamedTuple):
-    """Metrics folded over a run: ``init(example_output) -> score`` (the example has the
-    FDI output's structure, ``jax.ShapeDtypeStruct`` leaves); ``update(score, k, output)
+    """Metrics folded over a run: ``init(example) -> score``, where ``example()`` gives the
+    FDI output's structure (``jax.ShapeDtypeStruct`` leaves; it traces one step, so call
+    it only when the score's shape depends on the output); ``update(score, k, output)
     -> score``."""
 
     init: Callable[[Any], Any]
@@ -195,8 +196,15 @@ def run_loop(
     score0 = None
     if scorer is not None:  # the scorer sizes its records from the output's structure
         exo0 = jax.tree_util.tree_map(lambda leaf: leaf[0], exogenous)
-        example = jax.eval_shape(lambda: one_step(plant0, fdi_state0, ctrl0, held0, jnp.arange(1)[0], exo0)[1])
-        score0 = scorer.init(example.output)
+        cache = []
+
+        def example():
+            if not cache:
+                cache.append(jax.eval_shape(
+                    lambda: one_step(plant0, fdi_state0, ctrl0, held0, jnp.arange(1)[0], exo0)[1].output))
+            return cache[0]
+
+        score0 = scorer.init(example)
 
     def body(carry, k_exo):
         states, score = carry
@@ -226,16 +234,19 @@ def _decisions(value: Any) -> Any:
 
 
 def _per_decision_scorer(decisions: Callable[[Any], Any], healthy: Callable[[Any], Array] | None,
-                         new_record: Callable[[], Any], fold: Callable[..., Any], record_type: type) -> Scorer:
+                         new_record: Callable[[], Any], fold: Callable[..., Any], record_type: type,
+                         single: bool) -> Scorer:
     """A record (``new_record()``) per decision of the output, each folded with
     ``fold(record, k, decision, good)``, ``good`` = the step healthy and the decision's
-    statistic finite."""
+    statistic finite. ``single``: ``decisions`` gives one decision (no trace to find out)."""
 
     def is_healthy(output):
         return healthy(output) if healthy is not None else getattr(output, "healthy", jnp.ones((), bool))
 
     def init(example):
-        found = jax.eval_shape(lambda out: _decisions(decisions(out)), example)
+        if single:
+            return new_record()
+        found = jax.eval_shape(lambda out: _decisions(decisions(out)), example())
         return jax.tree_util.tree_map(lambda _: new_record(), found, is_leaf=lambda x: isinstance(x, Decision))
 
     def update(score, k, output):
@@ -256,6 +267,7 @@ def detection_scorer(
     healthy: Callable[[Any], Array] | None = None,
     estimate_delay: int = 0,
     dtype=None,
+    single: bool = False,
 ) -> Scorer:
     """One ``DetectionRecord`` per decision of the FDI output (``metrics``).
 
@@ -267,13 +279,15 @@ def detection_scorer(
         output's ``healthy`` field when it has one); with the decision's statistic
         finite, it decides the record's ``first_unhealthy``.
       estimate_delay: as for ``monitor``.
+      single: ``decisions`` returns one decision: the record is built without tracing a
+        step to find the structure (a structure of several is found by one extra trace).
     """
     dtype = dtype or jnp.result_type(float)
 
     def fold(record: DetectionRecord, k, decision: Decision, good) -> DetectionRecord:
         return record_update(record, k, decision.alarm, decision.label, decision.estimate, estimate_delay, healthy=good)
 
-    return _per_decision_scorer(decisions, healthy, lambda: record_init(onset, dtype), fold, DetectionRecord)
+    return _per_decision_scorer(decisions, healthy, lambda: record_init(onset, dtype), fold, DetectionRecord, single)
 
 
 def episode_scorer(
@@ -281,19 +295,21 @@ def episode_scorer(
     decisions: Callable[[Any], Any],
     healthy: Callable[[Any], Array] | None = None,
     grace: int = 0,
+    single: bool = False,
 ) -> Scorer:
     """One ``EpisodeRecord`` per decision, for a run with several fault episodes.
 
     Args:
       episodes: ``(onsets, ends, labels)``, each (E,) (``faults.episodes(fault, nu)``).
-      decisions, healthy: as for ``detection_scorer``.
+      decisions, healthy, single: as for ``detection_scorer``.
       grace: steps after an episode's end still credited to it (``metrics``).
     """
 
     def fold(record: EpisodeRecord, k, decision: Decision, good) -> EpisodeRecord:
         return episode_record_update(record, k, decision.alarm, decision.label, healthy=good)
 
-    return _per_decision_scorer(decisions, healthy, lambda: episode_record_init(*episodes, grace), fold, EpisodeRecord)
+    return _per_decision_scorer(decisions, healthy, lambda: episode_record_init(*episodes, grace), fold, EpisodeRecord,
+                                single)
 
 
 def peak_scorer(values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None) -> Scorer:
@@ -302,7 +318,7 @@ def peak_scorer(values: Callable[[Any], Array], active: Callable[[Array], Array]
     dtype = dtype or jnp.result_type(float)
 
     def init(example):
-        return jnp.zeros(jax.eval_shape(values, example).shape, dtype)
+        return jnp.zeros(jax.eval_shape(values, example()).shape, dtype)
 
     def update(score, k, output):
         return jnp.where(active(k), jnp.maximum(score, values(output)), score)

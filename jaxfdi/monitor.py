@@ -86,7 +86,7 @@ def monitor(
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
     scorer = detection_scorer(onset, lambda out: out[1], lambda out: out[0].healthy, estimate_delay,
-                              jnp.asarray(x0).dtype)
+                              jnp.asarray(x0).dtype, single=True)
     result = run_loop(sim, filter_detector(filt, detector, detector_input), feedforward(), x0,
                       (filter_state0, detector.init()), key, exogenous=us, scorer=scorer, keep_history=keep_history)
     history = None

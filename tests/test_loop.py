@@ -35,14 +35,22 @@ def test_feedforward_loop_equals_the_open_loop_pipeline(engine):
     record computed in plain Python from the alarm sequence (identical integers)."""
     model, kf, detector, threshold = engine
     us = jnp.full((T, 1), 0.01)
-    for seed, f in enumerate([jaxfdi.fault("bias", "sensor", 1, ONSET, 30.0), jaxfdi.fault("bias", "actuator", 0, ONSET, 2e-3)]):
-        key = jax.random.key(seed)
-        sim = jaxfdi.linear_simulator(model, f)
-        scorer = loop.detection_scorer(ONSET, lambda out: out[1], lambda out: out[0].healthy)
-        result = loop.run_loop(sim, filter_detector(kf, detector), loop.feedforward(),
-                               jnp.zeros(7), (kf.init(jnp.zeros(7), model.Q), detector.init()), key,
-                               exogenous=us, scorer=scorer, keep_history=True)
-        _, truth = jaxfdi.simulate(sim, jnp.zeros(7), us, key)
+    faults = jaxfdi.stack_faults([jaxfdi.fault("bias", "sensor", 1, ONSET, 30.0),
+                                  jaxfdi.fault("bias", "actuator", 0, ONSET, 2e-3)])
+    keys = jax.random.split(jax.random.key(0), 2)
+    scorer = loop.detection_scorer(ONSET, lambda out: out[1], lambda out: out[0].healthy)
+
+    def closed(f, key):
+        return loop.run_loop(jaxfdi.linear_simulator(model, f), filter_detector(kf, detector), loop.feedforward(),
+                             jnp.zeros(7), (kf.init(jnp.zeros(7), model.Q), detector.init()), key,
+                             exogenous=us, scorer=scorer, keep_history=True)
+
+    results = jax.jit(jax.vmap(closed))(faults, keys)
+    truths = jax.jit(jax.vmap(lambda f, key: jaxfdi.simulate(jaxfdi.linear_simulator(model, f), jnp.zeros(7), us,
+                                                              key)[1]))(faults, keys)
+    for run in range(2):
+        result = jax.tree_util.tree_map(lambda leaf: leaf[run], results)
+        truth = jax.tree_util.tree_map(lambda leaf: leaf[run], truths)
         _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), model.Q), truth.measurement, us)
         nis = np.asarray(info.nis)
         statistic = np.array([nis[max(0, k - 1): k + 1].sum() for k in range(T)])

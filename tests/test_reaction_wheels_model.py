@@ -36,7 +36,8 @@ from jaxfdi.models.reaction_wheels import (
     total_momentum,
     wheel_rate_transition,
 )
-from jaxfdi.scenarios.reaction_wheels import delivered_torque, estimation_filter, stop_transfer, wheel_fault
+from jaxfdi.models.reaction_wheels import delivered_torque, stop_transfer
+from jaxfdi.scenarios.reaction_wheels import estimation_filter, wheel_fault
 
 jax.config.update("jax_enable_x64", True)
 

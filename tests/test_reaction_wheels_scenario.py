@@ -14,7 +14,7 @@ import pytest
 from scipy import stats
 
 from jaxfdi.faults import FaultKind, no_fault
-from jaxfdi.models.reaction_wheels import kitsat3_params, stop_hypotheses, wheel_momentum
+from jaxfdi.models.reaction_wheels import delivered_torque, kitsat3_params, stop_hypotheses, stop_transfer, wheel_momentum
 from jaxfdi.scenarios import reaction_wheels as rw
 
 CALIBRATION, FREE, PER_WHEEL = 80, 40, 10
@@ -42,9 +42,9 @@ def test_delivered_torque_follows_each_fault_kind():
     magnitude = {"stop": 0.0, "stuck": 0.0, "bias": 5e-4, "gain": 0.4}
     for kind, after in expected_after.items():
         f = rw.wheel_fault(kind, 2, 10, magnitude[kind])
-        np.testing.assert_allclose(rw.delivered_torque(f, 9, command), command, atol=0)
-        np.testing.assert_allclose(rw.delivered_torque(f, 10, command), after, rtol=1e-15)
-        np.testing.assert_allclose(rw.delivered_torque(f, 500, command), after, rtol=1e-15)
+        np.testing.assert_allclose(delivered_torque(f, 9, command), command, atol=0)
+        np.testing.assert_allclose(delivered_torque(f, 10, command), after, rtol=1e-15)
+        np.testing.assert_allclose(delivered_torque(f, 500, command), after, rtol=1e-15)
     assert int(rw.wheel_fault("stop", 0, 1).kind) == FaultKind.STOP
     with pytest.raises(ValueError, match="kind"):
         rw.wheel_fault("explode", 0, 1)
@@ -56,10 +56,10 @@ def test_only_a_stop_moves_the_wheel_momentum_to_the_body():
                              jnp.array([200.0, -180.0, 220.0, -210.0])])
     for kind in ("stuck", "bias", "gain"):
         f = rw.wheel_fault(kind, 1, 7, 0.1)
-        np.testing.assert_array_equal(rw.stop_transfer(state, f, 7, params), state)
+        np.testing.assert_array_equal(stop_transfer(state, f, 7, params), state)
     f = rw.wheel_fault("stop", 1, 7)
-    np.testing.assert_array_equal(rw.stop_transfer(state, f, 6, params), state)
-    moved = rw.stop_transfer(state, f, 7, params)
+    np.testing.assert_array_equal(stop_transfer(state, f, 6, params), state)
+    moved = stop_transfer(state, f, 7, params)
     assert moved[7 + 1] == 0.0
     # the body's rate change is exactly the wheel's momentum I_w Omega a_1 through I^-1
     dw_expected = np.linalg.solve(np.asarray(params.inertia), 0.000239 * -180.0 * np.asarray(params.wheel_axes[1]))

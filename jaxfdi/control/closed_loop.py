@@ -136,7 +136,6 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
     ``ftc`` (bool, traced) turns the reconfiguration on."""
     model = design.model
     nu = model.Gamma.shape[1]
-    F = design.location.shape[0]
     L = design.location_component.shape[0]
     block = 2**design.levels
     dtype = model.Phi.dtype

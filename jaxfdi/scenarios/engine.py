@@ -48,6 +48,7 @@ from jaxfdi.faults import stack_faults
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.mm import multiple_model
+from jaxfdi.scenarios._common import require_x64
 from jaxfdi.metrics import DetectionRecord, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
@@ -215,9 +216,7 @@ def scenario_runs(runs: int, seed: int, duration: float = 4.0, onset_time: float
 
     Needs float64 (``jaxfdi.enable_x64()``; the CLI enables it): every engine study,
     tuning and evaluation starts here."""
-    if not jax.config.jax_enable_x64:
-        raise ValueError("engine scenarios need float64: call jaxfdi.enable_x64() first (the engine model is "
-                         "stiff; its float32 runs are not the paper's)")
+    require_x64("engine scenarios (the engine model is stiff)")
     steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
     _, faults = engine_faults(onset)
     batch = stack_faults([f for f in faults for _ in range(runs)])
@@ -359,8 +358,7 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
 
     Needs float64 (``jaxfdi.enable_x64()``): the engine is stiff. ``figure_runs`` runs per
     fault (another seed) give the averaged mode probabilities and GLR statistics."""
-    if not jax.config.jax_enable_x64:
-        raise ValueError("engine_study: enable float64 first (jaxfdi.enable_x64()); the engine model is stiff")
+    require_x64("engine_study (the engine model is stiff)")
     every = engine_methods(settings)
     chosen = list(every) if methods is None else methods
     unknown = [m for m in chosen if m not in every]

@@ -19,6 +19,7 @@ import numpy as np
 from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
 from jaxfdi.faults import Fault, fault, no_fault, stack_faults
 from jaxfdi.filters.kalman import kalman_filter
+from jaxfdi.scenarios._common import require_x64
 from jaxfdi.metrics import DetectionRecord, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi.monitor import MonitorHistory, monitor
@@ -81,8 +82,7 @@ def engine_chi2_study(
     ``threshold`` (default ``chi2_threshold(window * 5, pfa)``) and ``filter_noise = (Q,
     R)`` (default the plant's) set the detector a tuner changed; the plant is always
     simulated with its own noise."""
-    if not jax.config.jax_enable_x64:
-        raise ValueError("engine_chi2_study: enable float64 first (jaxfdi.enable_x64()); the engine model is stiff")
+    require_x64("engine_chi2_study (the engine model is stiff)")
     model = engine_model()
     steps = int(round(duration / TS))
     onset = int(round(onset_time / TS))

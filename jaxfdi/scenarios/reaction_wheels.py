@@ -1,7 +1,9 @@
 """Seed 004: satellite reaction-wheel fault isolation with a dual filter and a bank of
 multi-hypothesis EKFs, in closed loop, Monte Carlo.
 
-One ``lax.scan`` step of a run (``run_wheels``), at ``t = k dt``:
+A run (``run_wheels``) is the library's closed loop, ``loop.run_loop`` of three parts:
+the truth ``models.reaction_wheels.wheel_plant``, the FDI ``wheel_fdi`` (steps 3-4) and
+the controller ``control.attitude.wheel_attitude_controller``. Step ``k``, ``t = k dt``:
 
 1. gyros measure the true body rates, ``y = w + v``;
 2. the attitude controller (``control.attitude``: a 10 deg slew about (1, 1, 1) in 40 s,
@@ -62,12 +64,10 @@ from jaxfdi.models.reaction_wheels import (
     SpacecraftParams,
     WheelCommand,
     body_rate_field,
-    delivered_torque,
     filter_input,
     gyro_observation,
     kitsat3_params,
     stop_hypotheses,
-    stop_transfer,
     wheel_plant,
     wheel_rate_transition,
 )

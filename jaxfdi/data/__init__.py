@@ -1,0 +1,16 @@
+"""Public reference data shipped with jaxfdi (provenance and how to read each file:
+``README.md`` beside this module). The files are byte-exact copies of ``shared/data``."""
+from __future__ import annotations
+
+from pathlib import Path
+
+DATA_DIR = Path(__file__).resolve().parent
+
+
+def data_path(name: str) -> Path:
+    """The path of a shipped data file, e.g. ``data_path("f16_stevens_lewis.json")``."""
+    path = DATA_DIR / name
+    if not path.is_file():
+        available = sorted(p.name for p in DATA_DIR.iterdir() if p.suffix in (".json", ".txt", ".20n"))
+        raise ValueError(f"name: expected one of {available}, got {name!r}")
+    return path

@@ -1,16 +1,44 @@
-"""Trace-time validation: clear ``ValueError``s that name the argument and the shape.
+"""The one validation layer: clear errors that name the argument, what was expected and
+what was received, raised at trace time.
 
-These run in Python while JAX traces, so a wrong shape is reported once, before any
-compilation, with the name the caller used. Value checks (symmetry, ranges) run only on
-concrete arrays: under ``jit``/``vmap`` the values are unknown at trace time and the
-filters report numerical trouble through their ``healthy`` flag instead.
+Every public constructor and function of jaxfdi checks its arguments with these helpers.
+They run in Python while JAX traces, so a wrong argument is reported once, before any
+compilation, with the name the caller used:
+
+- ``TypeError`` when the *kind* of value is wrong: a float where a count is meant, a
+  complex or string array where real numbers are, a non-callable where a function is;
+- ``ValueError`` when the kind is right but the value is not: a shape, a non-finite
+  entry, an indefinite covariance, a probability outside (0, 1), an index out of range,
+  an unknown name.
+
+Shape and dtype checks always run. Value checks (finiteness, symmetry, definiteness,
+ranges) run on concrete arrays only: under ``jit``/``vmap`` values are unknown at trace
+time, and the filters report numerical trouble through their ``healthy`` flag instead.
+
+Tolerances (stated once, used everywhere):
+
+- symmetry: ``max |X - X^T| <= 1e3 eps max |X|`` (``eps`` of the array's float dtype);
+- positive semi-definite: ``lambda_min >= -100 n eps lambda_max`` (eigenvalues of the
+  symmetric part, in float64); positive definite: ``lambda_min > 100 n eps lambda_max``
+  and ``lambda_max > 0``. A relative test, so that a covariance of 1e-24 is as valid as
+  one of 1e24.
 """
 from __future__ import annotations
 
-from typing import Any
+import numbers
+from typing import Any, Iterable
 
 import jax
+import jax.numpy as jnp
 import numpy as np
+
+#: how many entries of a received value an error message prints
+_SHOWN = 6
+#: the largest seed a study or the CLI takes. ``jax.random.key`` takes any int64 and, with
+#: float64 enabled, gives distinct keys for 0 .. 2**63 - 1; without it, seeds are taken
+#: modulo 2**32. 0 .. 2**32 - 1 gives the same key either way and leaves room for the
+#: seeds studies derive (seed + 1, + 2, + 1000, + 1_000_003).
+MAX_SEED = 2**32 - 1
 
 
 def concrete(x: Any) -> np.ndarray | None:
@@ -31,6 +59,82 @@ def _fmt(shape: tuple) -> str:
     return "(" + ", ".join(str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
 
 
+def received(value: Any) -> str:
+    """A short description of a received value for an error message."""
+    if isinstance(value, jax.core.Tracer):
+        return f"a traced array of shape {_fmt(value.shape)} and dtype {value.dtype}"
+    if isinstance(value, (str, bool, numbers.Number)) or value is None:
+        return repr(value)
+    try:
+        array = np.asarray(value)
+    except Exception:
+        return f"a {type(value).__name__}"
+    if array.dtype == object:
+        return f"a {type(value).__name__}"
+    if array.ndim == 0:
+        return repr(array.item())
+    flat = array.ravel()
+    head = np.array2string(flat[:_SHOWN], precision=6, separator=", ")
+    more = ", ..." if flat.size > _SHOWN else ""
+    return f"shape {_fmt(array.shape)} {array.dtype} {head[:-1]}{more}]"
+
+
+def _kind(x: Any) -> str:
+    """The dtype kind of ``x`` ('f', 'i', 'u', 'b', 'c', 'U', 'O', ...)."""
+    dtype = getattr(x, "dtype", None)
+    if dtype is None:
+        if isinstance(x, bool):
+            return "b"
+        if isinstance(x, numbers.Integral):
+            return "i"
+        if isinstance(x, numbers.Real):
+            return "f"
+        if isinstance(x, numbers.Complex):
+            return "c"
+        try:
+            dtype = np.asarray(x).dtype
+        except Exception:
+            return "O"
+    return np.dtype(dtype).kind
+
+
+def check_real(name: str, x: Any, meaning: str = "real numbers") -> None:
+    """Raise ``TypeError`` unless ``x`` holds real numbers (float, int or bool)."""
+    kind = _kind(x)
+    if kind not in "fiub":
+        raise TypeError(f"{name}: expected {meaning}, got {received(x)} (dtype kind {kind!r})")
+
+
+def check_finite(name: str, x: Any, meaning: str = "") -> None:
+    """Raise ``ValueError`` if concrete ``x`` has a NaN or infinite entry."""
+    value = concrete(x)
+    if value is None or value.dtype.kind not in "fc":
+        return
+    if not np.all(np.isfinite(value)):
+        where = tuple(int(i) for i in np.argwhere(~np.isfinite(value))[0]) if value.ndim else ()
+        at = f" at index {where}" if where else ""
+        extra = f" ({meaning})" if meaning else ""
+        raise ValueError(f"{name}: expected finite values{extra}, got {received(value)} (non-finite{at})")
+
+
+def float_dtype(*arrays: Any):
+    """The float dtype a result takes: the promoted dtype of the float arguments, or JAX's
+    default float when every argument is an integer (an integer initial mean must not turn
+    the covariance into integers)."""
+    floats = [a for a in arrays if _kind(a) == "f"]
+    if not floats:
+        return jnp.result_type(float)
+    return jnp.result_type(*floats)
+
+
+def as_real_array(name: str, x: Any, dtype=None, meaning: str = "real numbers", finite: bool = True):
+    """``x`` as a JAX float array (integers become floats): real, and finite when concrete."""
+    check_real(name, x, meaning)
+    if finite:
+        check_finite(name, x, meaning if meaning != "real numbers" else "")
+    return jnp.asarray(x, dtype=dtype or float_dtype(x))
+
+
 def check_shape(name: str, x: Any, expected: tuple, meaning: str = "") -> None:
     """Raise if ``x`` does not have shape ``expected`` (``None`` entries match anything)."""
     shape = shape_of(x)
@@ -43,39 +147,145 @@ def check_shape(name: str, x: Any, expected: tuple, meaning: str = "") -> None:
         raise ValueError(f"{name}: expected shape {exp}{extra}, got {_fmt(shape)}")
 
 
+def check_matrix(name: str, x: Any, expected: tuple, meaning: str = "") -> None:
+    """A real, finite (when concrete) array of shape ``expected``."""
+    check_real(name, x, f"a real matrix{f' ({meaning})' if meaning else ''}")
+    check_shape(name, x, expected, meaning)
+    check_finite(name, x, meaning)
+
+
 def check_square(name: str, x: Any, size: int | None = None, meaning: str = "") -> int:
+    """A real, finite (when concrete) square matrix; returns its size."""
     shape = shape_of(x)
+    check_real(name, x, f"a real square matrix{f' ({meaning})' if meaning else ''}")
     if len(shape) != 2 or shape[0] != shape[1] or (size is not None and shape[0] != size):
         n = size if size is not None else "n"
         extra = f" ({meaning})" if meaning else ""
         raise ValueError(f"{name}: expected a square matrix of shape ({n}, {n}){extra}, got {_fmt(shape)}")
+    check_finite(name, x, meaning)
     return shape[0]
 
 
-def check_covariance(name: str, x: Any, size: int | None = None) -> int:
-    """Square, and (when concrete) symmetric with no negative diagonal."""
+def _eps(value: np.ndarray) -> float:
+    return float(np.finfo(value.dtype if value.dtype.kind == "f" else np.float64).eps)
+
+
+def check_covariance(name: str, x: Any, size: int | None = None, definite: bool = False) -> int:
+    """A covariance: real, square, finite, symmetric and positive semi-definite (``definite``:
+    positive definite), by the eigenvalue test with the tolerances of the module doc.
+    Returns its size."""
     n = check_square(name, x, size, "a covariance")
     value = concrete(x)
-    if value is not None:
-        if not np.all(np.isfinite(value)):
-            raise ValueError(f"{name}: covariance of shape ({n}, {n}) has non-finite entries")
-        scale = max(float(np.max(np.abs(value))), np.finfo(value.dtype if value.dtype.kind == "f" else np.float64).tiny)
-        tol = 1e3 * np.finfo(value.dtype if value.dtype.kind == "f" else np.float64).eps * scale
-        if np.max(np.abs(value - value.T)) > tol:
-            raise ValueError(f"{name}: covariance of shape ({n}, {n}) must be symmetric")
-        if np.any(np.diagonal(value) < 0):
-            raise ValueError(f"{name}: covariance of shape ({n}, {n}) has a negative variance on its diagonal")
+    if value is None or n == 0:
+        return n
+    eps = _eps(value)
+    scale = float(np.max(np.abs(value)))
+    if np.max(np.abs(value - value.T)) > 1e3 * eps * scale:
+        raise ValueError(f"{name}: covariance of shape ({n}, {n}) must be symmetric, got {received(value)} "
+                         f"(max |X - X^T| = {np.max(np.abs(value - value.T)):.3g})")
+    if np.any(np.diagonal(value) < 0):
+        raise ValueError(f"{name}: covariance of shape ({n}, {n}) has a negative variance on its diagonal, got "
+                         f"{received(np.diagonal(value))}")
+    eig = np.linalg.eigvalsh(0.5 * (value + value.T).astype(np.float64))
+    top = max(float(eig[-1]), 0.0)
+    tol = 100.0 * n * eps * top
+    if definite and not (eig[0] > tol and top > 0):
+        raise ValueError(f"{name}: expected a positive definite covariance of shape ({n}, {n}), got smallest "
+                         f"eigenvalue {eig[0]:.3g} (largest {eig[-1]:.3g}; tolerance {tol:.3g})")
+    if eig[0] < -tol:
+        raise ValueError(f"{name}: expected a positive semi-definite covariance of shape ({n}, {n}), got smallest "
+                         f"eigenvalue {eig[0]:.3g} (largest {eig[-1]:.3g}; tolerance {tol:.3g})")
     return n
 
 
 def check_probability(name: str, p: Any, open_interval: bool = True) -> None:
+    """A real probability (scalar or array) in (0, 1) (``open_interval``) or [0, 1]."""
+    check_real(name, p, "a probability")
     value = concrete(p)
     if value is None:
         return
     bad = (value <= 0) | (value >= 1) if open_interval else (value < 0) | (value > 1)
     if np.any(bad) or not np.all(np.isfinite(value)):
         rng = "(0, 1)" if open_interval else "[0, 1]"
-        raise ValueError(f"{name}: expected a probability in {rng}, got {value}")
+        raise ValueError(f"{name}: expected a probability in {rng}, got {received(value)}")
+
+
+def check_int(name: str, value: Any, minimum: int | None = None, maximum: int | None = None,
+              meaning: str = "an integer") -> int:
+    """A concrete integer count or index (Python or NumPy integer, or a 0-d integer array;
+    not a bool, not a float even if integral) in ``[minimum, maximum]``; returned as int."""
+    kind = _kind(value)
+    if isinstance(value, jax.core.Tracer):
+        raise TypeError(f"{name}: expected {meaning} known at trace time (a Python int), got {received(value)}")
+    if kind not in "iu" or np.ndim(value) != 0:
+        raise TypeError(f"{name}: expected {meaning} (a Python int), got {received(value)}")
+    number = int(value)
+    if (minimum is not None and number < minimum) or (maximum is not None and number > maximum):
+        low = "-inf" if minimum is None else minimum
+        high = "inf" if maximum is None else maximum
+        raise ValueError(f"{name}: expected {meaning} in [{low}, {high}], got {number}")
+    return number
+
+
+def check_int_array(name: str, value: Any, minimum: int | None = None, maximum: int | None = None,
+                    meaning: str = "integers") -> None:
+    """Integer entries (any shape; floats are refused), within ``[minimum, maximum]`` when
+    concrete (traced integer arrays pass: checked by whoever made them)."""
+    kind = _kind(value)
+    if kind not in "iu":
+        raise TypeError(f"{name}: expected {meaning}, got {received(value)}")
+    array = concrete(value)
+    if array is None or array.size == 0:
+        return
+    if (minimum is not None and array.min() < minimum) or (maximum is not None and array.max() > maximum):
+        low = "-inf" if minimum is None else minimum
+        high = "inf" if maximum is None else maximum
+        raise ValueError(f"{name}: expected {meaning} in [{low}, {high}], got {received(array)}")
+
+
+def check_scalar(name: str, value: Any, low: float | None = None, high: float | None = None, *,
+                 low_open: bool = False, high_open: bool = False, meaning: str = "a real scalar") -> None:
+    """A real scalar, finite, in the interval ``low .. high`` (open or closed ends), when
+    concrete; a traced scalar passes (its value is unknown at trace time)."""
+    check_real(name, value, meaning)
+    if np.ndim(value) != 0:
+        raise ValueError(f"{name}: expected {meaning} (shape ()), got shape {_fmt(shape_of(value))}")
+    array = concrete(value)
+    if array is None:
+        return
+    number = float(array)
+    below = low is not None and (number <= low if low_open else number < low)
+    above = high is not None and (number >= high if high_open else number > high)
+    if not np.isfinite(number) or below or above:
+        left = "(" if low_open else "["
+        right = ")" if high_open else "]"
+        interval = f"{left}{'-inf' if low is None else low}, {'inf' if high is None else high}{right}"
+        raise ValueError(f"{name}: expected {meaning}, finite, in {interval}, got {received(value)}")
+
+
+def check_positive(name: str, value: Any, meaning: str = "a positive real scalar") -> None:
+    check_scalar(name, value, 0.0, low_open=True, meaning=meaning)
+
+
+def check_index(name: str, value: Any, size: int, meaning: str = "an index") -> None:
+    """Integer index (or array of them) in ``[0, size)`` when concrete."""
+    check_int_array(name, value, 0, size - 1, f"{meaning} in range for size {size}")
+
+
+def check_choice(name: str, value: Any, options: Iterable[Any]) -> None:
+    """``value`` is one of ``options`` (listed in the message)."""
+    options = list(options)
+    try:
+        ok = value in options
+    except Exception:
+        ok = False
+    if not ok:
+        raise ValueError(f"{name}: expected one of {options}, got {value!r}")
+
+
+def check_callable(name: str, value: Any, meaning: str = "a function") -> None:
+    if not callable(value):
+        raise TypeError(f"{name}: expected {meaning}, got {received(value)}")
 
 
 def check_same_length(names: tuple[str, str], a: Any, b: Any) -> None:

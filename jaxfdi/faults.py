@@ -38,7 +38,10 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
+
+from jaxfdi import _checks
 
 #: an ``end`` far beyond any simulation: the fault never clears.
 NEVER = 2**30
@@ -80,24 +83,47 @@ def _enum_value(name: str, value, enum_type):
         if value.upper() not in enum_type.__members__:
             raise ValueError(f"{name}: expected one of {expected}, got {value!r}")
         return enum_type[value.upper()]
-    if jnp.ndim(value) == 0:
-        try:
-            concrete = int(value)
-        except jax.errors.ConcretizationTypeError:  # traced: checked by whoever made it
-            return value
-        if concrete not in {e.value for e in enum_type}:
-            raise ValueError(f"{name}: expected one of {expected} (or their integers), got {value}")
+    if isinstance(value, enum_type):
+        return value
+    _checks.check_int_array(name, value, meaning=f"one of {expected} (a name, the enum or its integer)")
+    concrete = _checks.concrete(value)
+    if concrete is not None and not np.all(np.isin(concrete, [e.value for e in enum_type])):
+        raise ValueError(f"{name}: expected one of {expected} (or their integers "
+                         f"{[e.value for e in enum_type]}), got {_checks.received(concrete)}")
     return value
 
 
 def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, label=-1) -> Fault:
     """Build a ``Fault``; ``kind`` and ``target`` take the enums or their names.
 
+    Arguments may be arrays (a batch of faults). Checked at trace time: integer
+    ``component >= 0``, ``onset >= 0``, ``end > onset`` and ``label >= -1``; finite real
+    ``magnitude`` and ``slope``; an EFFECTIVENESS loss ``magnitude`` in [0, 1] (a loss
+    above 1 would reverse the input's sign). Whether ``component`` exists in the signal
+    is checked by the simulator, which knows its size.
+
     ``label`` >= 0 sets the fault's mode label explicitly (e.g. a sensor group's);
     -1 (default) lets ``fault_label`` derive it from target and component.
     """
     kind = _enum_value("kind", kind, FaultKind)
     target = _enum_value("target", target, Target)
+    _checks.check_int_array("component", component, 0, meaning="a component index >= 0")
+    _checks.check_int_array("onset", onset, 0, meaning="a step index >= 0")
+    _checks.check_int_array("end", end, meaning="a step index after the onset")
+    _checks.check_int_array("label", label, -1, meaning="a mode label >= 0, or -1 (derived)")
+    for name, value in (("magnitude", magnitude), ("slope", slope)):
+        _checks.check_real(name, value, "real numbers")
+        _checks.check_finite(name, value)
+    onsets, ends = _checks.concrete(onset), _checks.concrete(end)
+    if onsets is not None and ends is not None and np.any((ends <= onsets) & (onsets < NEVER)):
+        raise ValueError(f"end: expected a step after the onset (end > onset), got end {_checks.received(ends)} "
+                         f"for onset {_checks.received(onsets)}")
+    kinds, sizes = _checks.concrete(kind), _checks.concrete(magnitude)
+    if kinds is not None and sizes is not None:
+        loss = np.broadcast_to(kinds == FaultKind.EFFECTIVENESS, np.broadcast_shapes(np.shape(kinds), np.shape(sizes)))
+        if np.any(loss & ((sizes < 0) | (sizes > 1))):
+            raise ValueError(f"magnitude: expected an effectiveness loss in [0, 1] (1 = no effect at all), got "
+                             f"{_checks.received(sizes)}")
     return Fault(
         kind=jnp.asarray(kind, jnp.int32),
         target=jnp.asarray(target, jnp.int32),
@@ -123,6 +149,9 @@ def fault_group(kind, target, components, onset, magnitudes, slopes=0.0, end=NEV
       label: the group's mode label (>= 0), shared by every entry; -1 keeps the derived
         per-component labels (each entry then isolates as its own component).
     """
+    if np.size(components) == 0:
+        raise ValueError(f"components: expected shape (G,) with G >= 1, got {_checks.received(components)}")
+    _checks.check_int_array("components", components, 0, meaning="component indices >= 0")
     components = jnp.asarray(components, jnp.int32)
     if components.ndim != 1 or components.shape[0] < 1:
         raise ValueError(f"components: expected shape (G,) with G >= 1, got {tuple(components.shape)}")
@@ -152,7 +181,11 @@ def concat_faults(*faults: Fault) -> Fault:
     """One stack (leading axis F) of single faults and stacks, in order: the faults of one
     run (e.g. a ``fault_group`` and later episodes)."""
     if not faults:
-        raise ValueError("faults: expected at least one Fault")
+        raise ValueError("faults: expected at least one Fault, got none")
+    for i, f in enumerate(faults):
+        if not isinstance(f, Fault):
+            raise TypeError(f"faults: expected Fault arguments (fault, fault_group, ...), got {_checks.received(f)} "
+                            f"at position {i}")
     return jax.tree_util.tree_map(lambda *leaves: jnp.concatenate(leaves), *(as_stack(f) for f in faults))
 
 

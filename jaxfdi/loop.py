@@ -114,6 +114,7 @@ def feedforward() -> Controller:
 def state_feedback(gain: Array, reference: Callable[[Array], Array] | None = None) -> Controller:
     """``u[k] = -K (x_hat[k] - x_ref[k])`` on the view (an estimate; ``u = -K x`` as SciPy's
     LQR), with ``x_ref`` from ``reference(exogenous)`` or zero."""
+    _checks.check_matrix("gain", gain, (None, None), "K: nu inputs x n states, u = -K x")
     gain = jnp.asarray(gain)
 
     def step(state, k, view, exogenous):
@@ -160,6 +161,12 @@ def run_loop(
       scorer: ``Scorer`` of the FDI outputs (e.g. ``detection_scorer``), or ``None``.
       keep_history: also return the stacked ``LoopTrace`` (memory grows with T).
     """
+    for name, part, needed in (("plant", plant, ("init", "measure", "advance")), ("fdi", fdi, ("step",)),
+                               ("controller", controller, ("init", "step")),
+                               ("scorer", scorer, () if scorer is None else ("init", "update"))):
+        if not all(callable(getattr(part, field, None)) for field in needed):
+            raise TypeError(f"{name}: expected an object with callable {', '.join(needed)} (a "
+                            f"{name.capitalize() if name != 'fdi' else 'FDI'}), got {_checks.received(part)}")
     lengths = {leaf.shape[0] for leaf in jax.tree_util.tree_leaves(exogenous)}
     if len(lengths) > 1:
         raise ValueError(f"exogenous: every leaf needs the same leading number of steps T, got {sorted(lengths)}")
@@ -167,10 +174,9 @@ def run_loop(
         if not lengths:
             raise ValueError("steps: expected the number of steps (no exogenous data to take it from)")
         steps = lengths.pop()
-    elif lengths and lengths != {int(steps)}:
+    steps = _checks.check_int("steps", steps, 1, meaning="a positive number of steps")
+    if lengths and lengths != {steps}:
         raise ValueError(f"exogenous: expected {steps} steps along axis 0, got {sorted(lengths)}")
-    if int(steps) < 1:
-        raise ValueError(f"steps: expected a positive number of steps, got {steps}")
     if not controller.feedforward and u0 is None:
         raise ValueError("u0: a closed loop needs the input held before step 0 (e.g. jnp.zeros(nu))")
     ctrl0 = controller.init() if controller_state0 is None else controller_state0
@@ -282,6 +288,7 @@ def detection_scorer(
       single: ``decisions`` returns one decision: the record is built without tracing a
         step to find the structure (a structure of several is found by one extra trace).
     """
+    _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     dtype = dtype or jnp.result_type(float)
 
     def fold(record: DetectionRecord, k, decision: Decision, good) -> DetectionRecord:
@@ -304,6 +311,7 @@ def episode_scorer(
       decisions, healthy, single: as for ``detection_scorer``.
       grace: steps after an episode's end still credited to it (``metrics``).
     """
+    _checks.check_int_array("grace", grace, 0, meaning="a number of steps >= 0")
 
     def fold(record: EpisodeRecord, k, decision: Decision, good) -> EpisodeRecord:
         return episode_record_update(record, k, decision.alarm, decision.label, healthy=good)
@@ -359,8 +367,7 @@ class RingBuffer(NamedTuple):
 
 def ring_buffer(length: int, example: Any) -> RingBuffer:
     """An empty buffer of ``length`` entries shaped like ``example``."""
-    if int(length) < 1:
-        raise ValueError(f"length: expected a positive number of entries, got {length}")
+    length = _checks.check_int("length", length, 1, meaning="a positive number of entries")
     data = jax.tree_util.tree_map(lambda leaf: jnp.zeros((int(length),) + jnp.shape(leaf), jnp.result_type(leaf)),
                                   example)
     return RingBuffer(data, jnp.zeros((), jnp.int32))

@@ -41,6 +41,7 @@ import numpy as np
 import jax
 from jax import Array
 
+from jaxfdi import _checks
 from jaxfdi.faults import NEVER
 
 
@@ -79,6 +80,7 @@ def record_update(
 ) -> DetectionRecord:
     """Fold the decision of step ``k`` (alarm, isolated label, estimate) into the record;
     ``healthy`` False marks the run unhealthy from ``k`` on (``step_health``)."""
+    _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     k = jnp.asarray(k, jnp.int32)
     label = jnp.asarray(label, jnp.int32)
     before = k < record.onset
@@ -152,6 +154,8 @@ class DetectionSummary(NamedTuple):
 def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) -> DetectionSummary:
     """Summarise stacked records (leading run axis) of runs ``horizon`` steps long; an
     unhealthy run (``first_unhealthy >= 0``) counts in ``runs`` and ``unhealthy_runs`` only."""
+    _checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
+    _checks.check_positive("Ts", Ts, "a positive sample period")
     onset = np.asarray(record.onset)
     healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
     detection = np.asarray(record.detection_step)
@@ -201,8 +205,17 @@ def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: i
     """``M[i, j]`` = number of runs with true label ``i`` isolated as ``j``.
 
     Negative predictions (nothing isolated) are counted in an extra last column, so
-    ``M`` is (num_classes, num_classes + 1).
+    ``M`` is (num_classes, num_classes + 1). A label outside ``[0, num_classes)`` (a
+    true label, or a prediction >= num_classes) is refused, not dropped: every run is
+    counted once.
     """
+    num_classes = _checks.check_int("num_classes", num_classes, 1, meaning="a positive number of classes")
+    _checks.check_int_array("true_labels", true_labels, 0, num_classes - 1, "class labels")
+    _checks.check_int_array("predicted_labels", predicted_labels, None, num_classes - 1,
+                            "class labels (negative: nothing isolated)")
+    if _checks.shape_of(true_labels) != _checks.shape_of(predicted_labels):
+        raise ValueError(f"predicted_labels: expected the shape of true_labels {_checks.shape_of(true_labels)}, got "
+                         f"{_checks.shape_of(predicted_labels)}")
     true_labels = jnp.asarray(true_labels, jnp.int32)
     predicted = jnp.asarray(predicted_labels, jnp.int32)
     predicted = jnp.where(predicted < 0, num_classes, predicted)
@@ -243,6 +256,7 @@ def episode_record_init(onsets: Array, ends: Array, labels: Array, grace: int = 
 
     Window of episode ``e``: ``[onset_e, min(end_e + grace, min{onset_j > onset_e}))``.
     """
+    _checks.check_int_array("grace", grace, 0, meaning="a number of steps >= 0")
     onsets, ends, labels = (jnp.asarray(a, jnp.int32) for a in (onsets, ends, labels))
     if onsets.ndim != 1 or ends.shape != onsets.shape or labels.shape != onsets.shape:
         raise ValueError(f"onsets, ends, labels: expected three (E,) arrays, got shapes "
@@ -298,6 +312,7 @@ class EpisodeSummary(NamedTuple):
 
 def summarize_episodes(records: EpisodeRecord, Ts: float = 1.0) -> EpisodeSummary:
     """Summarise stacked records (leading run axis R; episode leaves (R, E))."""
+    _checks.check_positive("Ts", Ts, "a positive sample period")
     onset, label = np.asarray(records.onset), np.asarray(records.label)
     detection, isolated = np.asarray(records.detection_step), np.asarray(records.isolated)
     runs = onset.shape[0]

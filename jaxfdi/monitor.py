@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi import _checks
 from jaxfdi.detection.chi2 import Detector, as_decision
 from jaxfdi.filters._base import Filter, FilterInfo
 from jaxfdi.loop import FDI, detection_scorer, feedforward, run_loop
@@ -82,6 +83,8 @@ def monitor(
         A step whose filter is unhealthy or whose statistic is not finite marks the
         record's ``first_unhealthy``.
     """
+    _checks.check_real("us", us, "real inputs of shape (T, nu)")
+    _checks.check_finite("us", us, "inputs")
     us = jnp.asarray(us)
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
@@ -104,6 +107,7 @@ def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_dela
     """The detection record of ``detector`` over a stored (T, ...) input sequence, the
     detector half of ``monitor`` without the plant and filter (e.g. to try thresholds on
     mode probabilities computed once)."""
+    _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     steps = jnp.arange(jax.tree.leaves(inputs)[0].shape[0])
 
     def body(carry, k_input):

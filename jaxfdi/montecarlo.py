@@ -21,6 +21,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from jaxfdi import _checks
+
 ProgressFn = Callable[[int, int, float], None]
 
 
@@ -57,8 +59,15 @@ def monte_carlo(
       devices: devices to shard the run axis over (default: all local devices).
       progress: ``True`` for a line on stderr, or a callable ``(done, total, seconds)``.
     """
-    if int(num_runs) < 1:
-        raise ValueError(f"num_runs: expected a positive number of runs, got {num_runs}")
+    _checks.check_callable("run_one", run_one, "a function (key, per_run_slice) -> outputs")
+    num_runs = _checks.check_int("num_runs", num_runs, 1, meaning="a positive number of runs")
+    chunk_size = _checks.check_int("chunk_size", chunk_size, 1, meaning="a positive number of runs per call")
+    if not (isinstance(key, jax.Array) and (jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+                                             or (key.dtype == jnp.uint32 and key.shape == (2,)))):
+        raise TypeError(f"key: expected a PRNG key (jax.random.key(seed)), got {_checks.received(key)}")
+    if not (progress is None or isinstance(progress, bool) or callable(progress)):
+        raise TypeError(f"progress: expected True/False or a callable (done, total, seconds), got "
+                        f"{_checks.received(progress)}")
     sizes = _num_runs_of(per_run)
     if sizes and sizes != {num_runs}:
         raise ValueError(f"per_run: every leaf needs leading axis num_runs = {num_runs}, got leading sizes {sorted(sizes)}")

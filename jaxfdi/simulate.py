@@ -29,6 +29,7 @@ from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
@@ -91,7 +92,10 @@ def per_step(name: str, value: Any, size: int) -> Callable[[Array], Array]:
         return value
     shape = _checks.shape_of(value)
     if len(shape) == 3:
-        _checks.check_shape(name, value, (None, size, size), f"T per-step ({size}, {size}) covariances")
+        _checks.check_matrix(name, value, (None, size, size), f"T per-step ({size}, {size}) covariances")
+        table = _checks.concrete(value)
+        for k in range(table.shape[0] if table is not None else 0):
+            _checks.check_covariance(f"{name}[{k}]", table[k], size)
         value = jnp.asarray(value)
         return lambda k: value[k]
     _checks.check_covariance(name, value, size)
@@ -149,11 +153,13 @@ def simulator(
       available: (T, m) bool array or callable ``(k, x) -> (m,) bool``: components that
         are measured at step ``k`` (the others are NaN), or ``None`` (all, always).
     """
+    _checks.check_callable("f", f, "a plant function f(x, u, params) -> next state")
+    _checks.check_callable("h", h, "a sensor function h(x, u, params) -> measurement")
     nw = _matrix_size("Q", Q)
     m = _matrix_size("R", R)
     if noise_gain is not None:
+        _checks.check_matrix("noise_gain", noise_gain, (None, nw), f"n states x {nw} noise inputs (Q is {nw} x {nw})")
         G = jnp.asarray(noise_gain)
-        _checks.check_shape("noise_gain", G, (None, nw), f"n states x {nw} noise inputs (Q is {nw} x {nw})")
         n = G.shape[0]
     else:
         G, n = None, nw
@@ -164,16 +170,22 @@ def simulator(
         _checks.check_shape("available", available, (None, m), f"T steps x {m} measurement components")
         available_table = jnp.asarray(available, bool)
         available = lambda k, x: available_table[k]  # noqa: E731
+    if fault is not None and not isinstance(fault, Fault):
+        raise TypeError(f"fault: expected a Fault (jaxfdi.fault, fault_group, concat_faults) or None, got "
+                        f"{_checks.received(fault)}")
     faults = as_stack(no_fault() if fault is None else fault)
     if any(jnp.ndim(leaf) != 1 for leaf in faults):
         raise ValueError("fault: expected scalar leaves or a stack with shape (F,) leaves")
+    check_fault_components(faults, Target.SENSOR, m)
     num_faults = faults.kind.shape[0]
     plant_f = f if time_varying else (lambda x, u, k, p: f(x, u, p))
     plant_h = h if time_varying else (lambda x, u, k, p: h(x, u, p))
 
     def init(x0: Array) -> SimState:
+        _checks.check_real("x0", x0, "a real initial state")
         _checks.check_shape("x0", x0, (n,), "initial true state")
-        x0 = jnp.asarray(x0)
+        _checks.check_finite("x0", x0, "initial true state")
+        x0 = jnp.asarray(x0, _checks.float_dtype(x0))
         return SimState(x0, jnp.zeros((num_faults,), x0.dtype))
 
     def measure(sim: SimState, k: Array, u: Array, step_key: Array):
@@ -192,6 +204,7 @@ def simulator(
         _checks.check_shape("u", u, (None,), "one commanded input")
         x = sim.state
         key_w, _ = jax.random.split(step_key)
+        check_fault_components(faults, Target.ACTUATOR, u.shape[0])
         if u.shape[0]:
             u_applied, held = apply_faults(faults, k, u, Target.ACTUATOR, sim.held)
         else:  # a plant without inputs: nothing for an actuator fault to act on
@@ -214,6 +227,21 @@ def simulator(
     return Simulator(init, step, measure, advance)
 
 
+def check_fault_components(faults: Fault, target: int, size: int) -> None:
+    """Every (concrete) fault of the stack on ``target`` acts on a component in
+    ``[0, size)``: a fault on a sensor that does not exist would label the run as faulty
+    and change nothing."""
+    kinds, targets, components = (_checks.concrete(leaf) for leaf in (faults.kind, faults.target, faults.component))
+    if kinds is None or targets is None or components is None:
+        return
+    mine = (targets == target) & (kinds != 0)
+    if np.any(mine & ((components < 0) | (components >= size))):
+        what = "sensor" if target == Target.SENSOR else "actuator"
+        signal = "y has" if target == Target.SENSOR else "u has"
+        raise ValueError(f"fault: expected {what} components in [0, {size}) ({signal} {size} components), got "
+                         f"component(s) {sorted(set(components[mine].tolist()))}")
+
+
 def linear_simulator(model: LinearGaussianModel, fault: Fault | None = None, **options) -> Simulator:
     """``simulator`` for a ``LinearGaussianModel`` (its own ``Q`` and ``R``); ``options``
     as for ``simulator`` (``input_noise``, ``available``, ...)."""
@@ -223,6 +251,8 @@ def linear_simulator(model: LinearGaussianModel, fault: Fault | None = None, **o
 
 def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState, SimStep]:
     """Run a simulator over ``us`` (T, nu); returns the final state and the (T, ...) truth."""
+    _checks.check_real("us", us, "real inputs of shape (T, nu)")
+    _checks.check_finite("us", us, "inputs")
     us = jnp.asarray(us)
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")

@@ -79,9 +79,10 @@ def random_stack(rng, size):
             if d["label"] < 0:
                 d["label"] = int(rng.integers(0, 9))
         else:
-            end = NEVER if rng.random() < 0.3 else int(rng.integers(0, 45))
+            onset = int(rng.integers(0, 45))  # a fault ends after its onset (fault() refuses end <= onset)
+            end = NEVER if rng.random() < 0.3 else onset + int(rng.integers(1, 45))
             d = dict(kind=str(rng.choice(KINDS)), target=str(rng.choice(["actuator", "sensor"])),
-                     component=int(rng.integers(0, 2)), onset=int(rng.integers(0, 45)), end=end,
+                     component=int(rng.integers(0, 2)), onset=onset, end=end,
                      label=int(rng.choice([-1, -1, 3, 7])))
         spec.append(d)
     return spec, stack_faults([fault(magnitude=0.5, **d) for d in spec])

@@ -162,7 +162,8 @@ def nan_run():
 
     model = engine_model()
     kf = jaxfdi.kalman_filter(model)
-    f = fault("bias", "sensor", 2, 20, float("nan"), end=21)
+    # fault() refuses a NaN magnitude; the corrupted sensor is built by hand on purpose
+    f = fault("bias", "sensor", 2, 20, 0.0, end=21)._replace(magnitude=jnp.asarray(jnp.nan))
     run = jax.jit(lambda key: monitor(jaxfdi.linear_simulator(model, f), kf, chi2_detector(30.0, 2), jnp.zeros(7),
                                       kf.init(jnp.zeros(7), model.Q), jnp.full((40, 1), 0.01), key, 20, True))
     return run(jax.random.key(0))

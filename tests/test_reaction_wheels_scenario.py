@@ -149,7 +149,7 @@ def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table():
     reading), left out of the row's rates, and the table says so; its healthy twin is
     scored as usual."""
     design = rw.wheel_design()
-    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), rw.wheel_fault("bias", 1, 20, float("nan")),
+    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), rw.wheel_fault("bias", 1, 20, 0.0)._replace(magnitude=jnp.asarray(jnp.nan)),
                                     rw.wheel_fault("bias", 1, 20, 2e-3))
     out = jax.jit(jax.vmap(lambda f: rw.run_wheels(design, jax.random.key(0), f, steps=40)))(faults)
     out = jax.tree_util.tree_map(np.asarray, out)

@@ -338,7 +338,7 @@ def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table(design):
     steps = 160
     thresholds = jnp.asarray(np.stack([scenario.paper_thresholds(12)] * 2))
     f = fault("bias", "sensor", 2, 100, 0.7)
-    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), fault("bias", "sensor", 2, 100, float("nan")), f,
+    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), fault("bias", "sensor", 2, 100, 0.0)._replace(magnitude=jnp.asarray(jnp.nan)), f,
                                     no_fault(), no_fault())       # runs 2, 3: the fault-free twins of 0, 1
     keys = jnp.concatenate([jax.random.split(jax.random.PRNGKey(0), 2)] * 2)
     run = jax.jit(jax.vmap(jax.vmap(lambda f, key, ftc: vtol_run(design, thresholds, key, f, ftc, steps),

@@ -44,10 +44,13 @@ class AttitudeGains(NamedTuple):
 
 def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, duration: float = 40.0, dtype=None) -> Slew:
     dtype = dtype or jnp.result_type(float)
+    _checks.check_matrix("axis", axis, (3,), "rotation axis")
     axis = jnp.asarray(axis, dtype)
-    _checks.check_shape("axis", axis, (3,), "rotation axis")
-    if not duration > 0:
-        raise ValueError(f"duration: expected a positive slew time in seconds, got {duration}")
+    if float(jnp.linalg.norm(axis)) == 0.0:
+        raise ValueError(f"axis: expected a non-zero rotation axis, got {_checks.received(axis)}")
+    _checks.check_scalar("angle_deg", angle_deg, meaning="a slew angle in degrees")
+    _checks.check_scalar("start", start, meaning="a start time in seconds")
+    _checks.check_positive("duration", duration, "a positive slew time in seconds")
     return Slew(axis / jnp.linalg.norm(axis), jnp.asarray(math.radians(angle_deg), dtype),
                 jnp.asarray(start, dtype), jnp.asarray(duration, dtype))
 
@@ -55,8 +58,11 @@ def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, dura
 def pd_gains(inertia: Array, natural_frequency: float = 0.1, damping: float = 0.9,
              max_wheel_torque: float = 0.02) -> AttitudeGains:
     """``K_p = I w_n^2``, ``K_d = 2 zeta w_n I`` (decoupled second-order axes)."""
-    inertia = jnp.asarray(inertia)
-    _checks.check_shape("inertia", inertia, (3, 3), "body inertia")
+    _checks.check_covariance("inertia", inertia, 3, definite=True)  # symmetric positive definite, like a covariance
+    inertia = jnp.asarray(inertia, _checks.float_dtype(inertia))
+    _checks.check_positive("natural_frequency", natural_frequency, "a positive natural frequency in rad/s")
+    _checks.check_positive("damping", damping, "a positive damping ratio")
+    _checks.check_positive("max_wheel_torque", max_wheel_torque, "a positive torque limit in N m")
     return AttitudeGains(inertia * natural_frequency**2, 2.0 * damping * natural_frequency * inertia,
                          jnp.asarray(max_wheel_torque, inertia.dtype))
 
@@ -88,6 +94,9 @@ def control_torque(q: Array, w: Array, wheel_momentum: Array, t: Array, profile:
 def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: Array) -> Array:
     """Motor torques ``tau`` (N,) with ``-H^T tau = T_c``, minimum norm, saturated by
     uniform scaling."""
+    _checks.check_shape("torque", torque, (None,), "the commanded body torque (3,)")
+    size = _checks.shape_of(torque)[0]
+    _checks.check_shape("wheel_axes", wheel_axes, (None, size), f"H: N wheels x {size} body axes")
     gram = wheel_axes.T @ wheel_axes
     tau = -wheel_axes @ jnp.linalg.solve(gram, torque)
     peak = jnp.max(jnp.abs(tau))

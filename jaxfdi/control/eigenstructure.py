@@ -135,6 +135,7 @@ def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, 
     (``scheduled_gain``) instead of solving ``2 (N + 1)`` SVDs every step: exact at the
     grid points, linear in between (the gain is smooth in the loss away from 1).
     """
+    num_losses = _checks.check_int("num_losses", num_losses, 2, meaning="a number of grid points >= 2 over [0, 1]")
     p = _checks.shape_of(B_bar)[1]
     losses = jnp.linspace(0.0, 1.0, num_losses, dtype=jnp.asarray(A_bar).dtype)
 

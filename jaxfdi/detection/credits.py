@@ -44,11 +44,9 @@ def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, con
     ``step(state, F) -> (state, Decision(statistic, alarm, label, estimate))`` with the
     leading (relative) credit as statistic and ``F_mean`` as estimate.
     """
-    value = _checks.concrete(threshold)
-    if value is not None and not (value.shape == () and value > 0):
-        raise ValueError(f"threshold: expected a positive scalar credit threshold, got {threshold}")
-    if int(confirm_steps) != confirm_steps or confirm_steps < 1:
-        raise ValueError(f"confirm_steps: expected an integer >= 1, got {confirm_steps}")
+    _checks.check_positive("threshold", threshold, "a positive scalar credit threshold")
+    _checks.check_int("confirm_steps", confirm_steps, 1, meaning="an integer number of steps >= 1")
+    _checks.check_int("label_offset", label_offset, meaning="an integer label offset")
 
     def step(state, detection_parameters: Array):
         detection_parameters = jnp.asarray(detection_parameters)

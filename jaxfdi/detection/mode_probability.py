@@ -40,9 +40,13 @@ def confirm(state: tuple[Array, Array], label: Array, above: Array, confirm_step
 
 
 def check_confirm_steps(confirm_steps) -> None:
-    """``ValueError`` unless ``confirm_steps`` is an integer >= 1 or a 1-D sequence of them."""
+    """``TypeError`` unless ``confirm_steps`` holds integers, ``ValueError`` unless it is
+    one integer >= 1 or a 1-D sequence of them."""
+    if isinstance(confirm_steps, (list, tuple)):
+        confirm_steps = np.asarray(confirm_steps)
+    _checks.check_int_array("confirm_steps", confirm_steps, 1, meaning="an integer >= 1, or one per mode (M,)")
     steps = np.asarray(confirm_steps)
-    if steps.ndim > 1 or steps.size == 0 or not np.all(np.equal(np.mod(steps, 1), 0)) or np.any(steps < 1):
+    if steps.ndim > 1 or steps.size == 0:
         raise ValueError(f"confirm_steps: expected an integer >= 1, or one per mode (M,), got {confirm_steps}")
 
 
@@ -62,9 +66,11 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
         above ``mu_T`` before an alarm (1: the paper's memoryless rule), or (M,) one per
         mode (the normal mode's entry is not used).
     """
+    _checks.check_real("threshold", threshold, "a probability mu_T in (0, 1], or one per mode (M,)")
     value = _checks.concrete(threshold)
     if value is not None and not (value.ndim <= 1 and np.all((0.0 < value) & (value <= 1.0))):
         raise ValueError(f"threshold: expected a probability mu_T in (0, 1], or one per mode (M,), got {threshold}")
+    _checks.check_int("normal_mode", normal_mode, 0, meaning="the index of the fault-free mode")
     check_confirm_steps(confirm_steps)
     steps = int(confirm_steps) if np.ndim(confirm_steps) == 0 else np.asarray(confirm_steps, np.int32)
 

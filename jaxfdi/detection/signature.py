@@ -13,6 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from jaxfdi import _checks
+
 #: isolation result when the symptom vector matches no column (e.g. a transient in
 #: which only some filters have crossed yet, or a fault outside the hypotheses).
 UNMATCHED = -1
@@ -20,8 +22,7 @@ UNMATCHED = -1
 
 def signature_matrix(num_filters: int) -> np.ndarray:
     """(F, F + 1) bool: column 0 "no fault", column ``i + 1`` fault i (all ones but row i)."""
-    if not isinstance(num_filters, int) or num_filters < 1:
-        raise ValueError(f"num_filters: expected a positive integer, got {num_filters!r}")
+    num_filters = _checks.check_int("num_filters", num_filters, 1, meaning="a positive number of filters")
     faults = ~np.eye(num_filters, dtype=bool)
     return np.hstack([np.zeros((num_filters, 1), bool), faults])
 
@@ -46,6 +47,8 @@ def location_symptoms(alarms: Array, location: Array, num_locations: int) -> Arr
     several filters per location (e.g. multiplicative and additive hypotheses): a
     location's symptom is set when every one of its filters alarms, so a fault there
     leaves it clear as long as one of its hypotheses explains the data."""
+    num_locations = _checks.check_int("num_locations", num_locations, 1, meaning="a positive number of locations")
+    _checks.check_index("location", location, num_locations, "a location index per filter")
     alarms = jnp.asarray(alarms, bool)
     location = jnp.asarray(location, jnp.int32)
     hit = location[:, None] == jnp.arange(num_locations)[None, :]               # (F, L)

@@ -26,12 +26,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from jaxfdi import _checks
+
 MODES = ("hard", "soft", "none")
 
 
 def _check(statistic: Array, levels: int) -> Array:
-    if not isinstance(levels, int) or levels < 1:
-        raise ValueError(f"levels: expected an integer M >= 1 (blocks of 2^M samples), got {levels!r}")
+    levels = _checks.check_int("levels", levels, 1, meaning="an integer M >= 1 (blocks of 2^M samples)")
+    _checks.check_real("statistic", statistic, "a real statistic of shape (T, ...)")
     statistic = jnp.asarray(statistic)
     if statistic.ndim < 1 or statistic.shape[0] % (2**levels):
         raise ValueError(
@@ -90,8 +92,8 @@ def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: A
       sigma: (M,) or (M, channels) detail standard deviations for ``"soft"``.
       c_mult: the sigma multiple (paper: 2).
     """
-    if mode not in MODES:
-        raise ValueError(f"mode: expected one of {MODES}, got {mode!r}")
+    _checks.check_choice("mode", mode, MODES)
+    _checks.check_positive("c_mult", c_mult, "a positive multiple of the detail sigma")
     approx, details = haar_decompose(statistic, levels)
     if mode == "hard":
         details = [jnp.zeros_like(d) for d in details]

@@ -95,7 +95,8 @@ class Filter(NamedTuple):
 def finish_step(prior: GaussianState, post: ConditionedGaussian, prediction: GaussianState, unroll: bool = True):
     """Assemble the next state and the step's ``FilterInfo``; checks ``P[k|k]`` is PD."""
     chol_P = _linalg.cholesky(post.cov, unroll)
-    healthy = post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
+    healthy = (post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
+               & jnp.isfinite(post.nis) & jnp.isfinite(post.log_likelihood))  # an overflowing outlier
     info = FilterInfo(
         predicted_mean=prior.mean,
         predicted_cov=prior.cov,
@@ -131,18 +132,45 @@ def gaussian_init(n: int, name: str = "filter") -> Callable[[Array, Array], Gaus
     """An ``init`` that validates ``(mean, cov)`` against the state size ``n``."""
 
     def init(mean: Array, cov: Array) -> GaussianState:
-        _checks.check_shape("mean", mean, (n,), "initial state mean")
-        _checks.check_covariance("cov", cov, n)
-        mean = jnp.asarray(mean)
-        return GaussianState(mean, jnp.asarray(cov, dtype=mean.dtype))
+        return GaussianState(*check_gaussian(mean, cov, n))
 
     return init
 
 
+def check_gaussian(mean: Array, cov: Array, n: int, names: tuple[str, str] = ("mean", "cov")) -> tuple[Array, Array]:
+    """A Gaussian prior ``N(mean, cov)`` of size ``n``: real finite ``mean`` (n,), a
+    covariance ``cov`` (n, n); both returned in one float dtype (an integer mean must not
+    make the covariance integer)."""
+    _checks.check_real(names[0], mean, "a real initial state mean")
+    _checks.check_shape(names[0], mean, (n,), "initial state mean")
+    _checks.check_finite(names[0], mean, "initial state mean")
+    _checks.check_covariance(names[1], cov, n)
+    dtype = _checks.float_dtype(mean, cov)
+    return jnp.asarray(mean, dtype), jnp.asarray(cov, dtype)
+
+
 def check_step_inputs(y: Array, u: Array, m: int, nu: int | None) -> None:
-    """Trace-time shape checks of one step's measurement and input."""
+    """Trace-time checks of one step's measurement and input (real, of the right shape)."""
+    _checks.check_real("y", y, "a real measurement")
     _checks.check_shape("y", y, (m,), "one measurement; use NaN for a missing one")
+    _checks.check_real("u", u, "a real input")
     _checks.check_shape("u", u, (nu,), "one input")
+
+
+def check_filter(filt: Any, name: str = "filt") -> None:
+    """``filt`` is a ``Filter`` (what ``kalman_filter`` and friends return)."""
+    if not isinstance(filt, Filter):
+        raise TypeError(f"{name}: expected a Filter(init, step, ...) such as kalman_filter(model) returns, "
+                        f"got {_checks.received(filt)}")
+
+
+def check_sequences(ys: Any, us: Any, ys_shape: str, us_shapes: str) -> None:
+    """Trace-time checks of a driver's measurement and input sequences: real numbers
+    (NaN in ``ys`` means 'missing'; ``us`` must be finite when concrete)."""
+    _checks.check_real("ys", ys, f"real measurements of shape {ys_shape}")
+    if us is not None:
+        _checks.check_real("us", us, f"real inputs of shape {us_shapes}")
+        _checks.check_finite("us", us, "inputs")
 
 
 def observed_mask(y: Array) -> tuple[Array, Array, Array]:
@@ -176,6 +204,8 @@ def run_filter(
       ``(final_state, info)``: the prior for step T and the per-step outputs stacked
       along a leading time axis (e.g. ``info.filtered_mean`` is (T, n)).
     """
+    check_filter(filt)
+    check_sequences(ys, us, "(T, m)", "(T, nu)")
     ys = jnp.asarray(ys)
     if ys.ndim != 2:
         raise ValueError(f"ys: expected shape (T, m), got {tuple(ys.shape)}")
@@ -225,6 +255,8 @@ def run_filter_batch(
     Returns:
       ``(final_state, info)`` with a leading run axis N on every per-run field.
     """
+    check_filter(filt)
+    check_sequences(ys, us, "(N, T, m)", "(T, nu) or (N, T, nu)")
     ys = jnp.asarray(ys)
     if ys.ndim != 3:
         raise ValueError(f"ys: expected shape (N, T, m) for N runs, got {tuple(ys.shape)}")

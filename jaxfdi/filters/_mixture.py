@@ -64,8 +64,7 @@ def num_modes(mode_params: Any, expected: int | None = None) -> int:
 
 def check_mode_filter(mode_filter: Callable[[Any], Filter], mode_params: Any) -> None:
     """``mode_filter`` must build a Gaussian filter (with ``update`` and ``predict``)."""
-    if not callable(mode_filter):
-        raise ValueError(f"mode_filter: expected a callable params -> Filter, got {type(mode_filter).__name__}")
+    _checks.check_callable("mode_filter", mode_filter, "a callable params -> Filter (e.g. kalman_filter)")
     filt = mode_filter(first_mode(mode_params))
     if not isinstance(filt, Filter) or filt.update is None or filt.predict is None:
         raise ValueError(
@@ -95,7 +94,9 @@ def bank_init(mode_filter, mode_params, M: int, mean: Array, cov: Array, mode_pr
 
 
 def check_distribution(name: str, prob: Any, axis: int = -1) -> None:
-    """When concrete: no negative entries, and sums along ``axis`` equal to 1."""
+    """Real probabilities; when concrete: finite, no negative entries, and sums along
+    ``axis`` equal to 1 (to ``sqrt(eps)``)."""
+    _checks.check_real(name, prob, "real probabilities")
     value = _checks.concrete(prob)
     if value is None:
         return

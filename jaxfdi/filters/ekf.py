@@ -32,6 +32,8 @@ def extended_kalman_filter(
       params: any pytree passed to ``f`` and ``h`` (tunable, vmappable).
       missing_measurements: treat NaN components of ``y`` as not measured (static).
     """
+    _checks.check_callable("f", f, "a function f(x, u, params) -> next state")
+    _checks.check_callable("h", h, "a function h(x, u, params) -> measurement")
     n = _checks.check_covariance("Q", Q)
     m = _checks.check_covariance("R", R)
 

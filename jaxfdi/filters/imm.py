@@ -76,6 +76,7 @@ def interacting_multiple_model(
       structure-of-arrays step of ``imm_batch.py`` (2.5x faster than ``vmap`` on 100
       engine runs), with the same results.
     """
+    _checks.check_real("transition", transition, "a real row-stochastic matrix")
     transition = jnp.asarray(transition)
     M = transition.shape[0] if transition.ndim == 2 else None
     _checks.check_shape("transition", transition, (M, M), "row-stochastic mode transition matrix pi[i, j]")

@@ -36,6 +36,8 @@ def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter
     exposed (a multiple-model filter over time-varying modes is built from modes that
     read the step themselves).
     """
+    _checks.check_callable("filter_at", filter_at, "a function k -> Filter (e.g. lambda k: kalman_filter(at(k)))")
+    start = _checks.check_int("start", start, 0, meaning="the first step's index")
 
     def init(*args, **kwargs) -> TimedState:
         return TimedState(jnp.asarray(start, jnp.int32), filter_at(jnp.asarray(start, jnp.int32)).init(*args, **kwargs))
@@ -60,7 +62,11 @@ def model_at(model: LinearGaussianModel, **per_step: Array) -> Callable[[Array],
         if name not in fields:
             raise ValueError(f"{name}: not a LinearGaussianModel field; expected one of {list(fields)}")
         constant = _checks.shape_of(getattr(model, name))
-        _checks.check_shape(name, table, (None,) + constant, f"T per-step copies of model.{name} {constant}")
+        _checks.check_matrix(name, table, (None,) + constant, f"T per-step copies of model.{name} {constant}")
+        if name in ("Q", "R"):
+            value = _checks.concrete(table)
+            for k in range(value.shape[0] if value is not None else 0):
+                _checks.check_covariance(f"{name}[{k}]", value[k], constant[0])
         lengths.add(_checks.shape_of(table)[0])
     if len(lengths) > 1:
         raise ValueError(f"per-step tables: expected the same number of steps T, got {sorted(lengths)}")

@@ -56,7 +56,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, run_filter
+from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, run_filter
 from jaxfdi.filters.unknown_input import check_decoupling, diffuse_log_likelihood, unbiased_minimum_variance_gain
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
@@ -81,8 +81,8 @@ def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "
     bias is the lost fraction) or ``"additive"`` (``Fa = -Gamma[:, i]``, the bias is the
     amount subtracted from ``u_i``)."""
     n, nu, m = validate_linear_model(model)
-    if not 0 <= component < nu:
-        raise ValueError(f"component: expected an input index in [0, {nu}), got {component}")
+    _checks.check_choice("kind", kind, ["effectiveness", "additive"])
+    component = _checks.check_int("component", component, 0, nu - 1, "an input index")
     e = jnp.zeros((nu, 1), model.Phi.dtype).at[component, 0].set(-1.0)
     zeros_m = jnp.zeros((m, 1), model.Phi.dtype)
     if kind == "effectiveness":
@@ -96,8 +96,8 @@ def sensor_direction(model: LinearGaussianModel, component: int, kind: str = "sc
     """One sensor's fault direction: ``"scaling"`` (``Fs = e_j (C x_hat)_j``, the bias is the
     relative gain error) or ``"additive"`` (``Fs = e_j``, the bias is added to ``y_j``)."""
     n, nu, m = validate_linear_model(model)
-    if not 0 <= component < m:
-        raise ValueError(f"component: expected an output index in [0, {m}), got {component}")
+    _checks.check_choice("kind", kind, ["scaling", "additive"])
+    component = _checks.check_int("component", component, 0, m - 1, "an output index")
     e = jnp.zeros((m, 1), model.Phi.dtype).at[component, 0].set(1.0)
     zeros = (jnp.zeros((n, 1), model.Phi.dtype), jnp.zeros((nu, 1), model.Phi.dtype))
     if kind == "scaling":
@@ -192,20 +192,16 @@ def two_stage_kalman_filter(
     mm = _linalg.matmul
 
     def init(mean: Array, cov: Array, bias_mean: Array | None = None, bias_cov: Array | None = None) -> TSKFState:
-        _checks.check_shape("mean", mean, (n,), "initial state mean")
-        _checks.check_covariance("cov", cov, n)
-        mean = jnp.asarray(mean)
+        mean, cov = check_gaussian(mean, cov, n)
         dtype = mean.dtype
         bias_mean = jnp.zeros((p,), dtype) if bias_mean is None else bias_mean
         bias_cov = jnp.zeros((p, p), dtype) if bias_cov is None else bias_cov
-        _checks.check_shape("bias_mean", bias_mean, (p,), "initial bias mean")
-        _checks.check_covariance("bias_cov", bias_cov, p)
-        return TSKFState(mean, jnp.asarray(cov, dtype), jnp.asarray(bias_mean, dtype),
-                         jnp.asarray(bias_cov, dtype), jnp.zeros((n, p), dtype))
+        bias_mean, bias_cov = check_gaussian(bias_mean, bias_cov, p, ("bias_mean", "bias_cov"))
+        return TSKFState(mean, cov, jnp.asarray(bias_mean, dtype), jnp.asarray(bias_cov, dtype),
+                         jnp.zeros((n, p), dtype))
 
     def step(state: TSKFState, y: Array, u: Array):
-        _checks.check_shape("y", y, (m,), "one measurement")
-        _checks.check_shape("u", u, (nu,), "one input")
+        check_step_inputs(y, u, m, nu)
         x_bar, P_bar, b, Pb, V = state
         prior_mean = x_bar + mm(V, b)
         Fs = sensor_matrix(direction, model, prior_mean, u)
@@ -260,6 +256,7 @@ def two_stage_kalman_filter(
             _linalg.cholesky_is_finite(chol_S) & _linalg.cholesky_is_finite(chol_Sb)
             & _linalg.cholesky_is_finite(_linalg.cholesky(cov_post))
             & jnp.all(jnp.isfinite(x_bar_next)) & jnp.all(jnp.isfinite(b_post))
+            & jnp.isfinite(statistic) & jnp.isfinite(log_lik)
         )
         info = TSKFInfo(mean_post, cov_post, b_post, Pb_post, residual, residual_cov, statistic, log_lik, healthy)
         return TSKFState(x_bar_next, P_bar_next, b_post, Pb_next, V_next), info

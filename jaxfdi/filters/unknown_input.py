@@ -36,7 +36,7 @@ def check_decoupling(model: LinearGaussianModel, unknown_input: Array) -> int:
     Raises a ``ValueError`` naming the failed condition; ``E`` must be concrete.
     """
     n, _, m = validate_linear_model(model)
-    _checks.check_shape("unknown_input", unknown_input, (n, None), "E: n states x q unknown inputs")
+    _checks.check_matrix("unknown_input", unknown_input, (n, None), "E: n states x q unknown inputs")
     E = _checks.concrete(unknown_input)
     C = _checks.concrete(model.C)
     if E is None or C is None:

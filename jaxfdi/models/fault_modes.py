@@ -22,13 +22,23 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
-def _per_component(name: str, value, size: int, dtype) -> Array:
+def _per_component(name: str, value, size: int, dtype, positive: bool = False) -> Array:
+    """() or (size,) real, finite values, ``>= 0`` (``> 0`` with ``positive``) when concrete,
+    as a (size,) array."""
+    _checks.check_real(name, value, "real values")
+    _checks.check_finite(name, value)
+    concrete = _checks.concrete(value)
+    if concrete is not None and (np.any(concrete <= 0) if positive else np.any(concrete < 0)):
+        bound = "> 0" if positive else ">= 0"
+        raise ValueError(f"{name}: expected values {bound} (a variance factor or a standard deviation), got "
+                         f"{_checks.received(concrete)}")
     value = jnp.broadcast_to(jnp.asarray(value, dtype), (size,)) if jnp.ndim(value) == 0 else jnp.asarray(value, dtype)
     _checks.check_shape(name, value, (size,), "one value per component, or a scalar")
     return value
@@ -39,7 +49,8 @@ def noise_inflation_modes(model: LinearGaussianModel, sensor_inflation, actuator
 
     Args:
       model: the fault-free plant model.
-      sensor_inflation: () or (m,) factor on ``R[j, j]`` in the sensor-j mode (> 1).
+      sensor_inflation: () or (m,) factor on ``R[j, j]`` in the sensor-j mode (> 0; an
+        inflation is > 1).
       actuator_noise: () or (nu,) standard deviation ``s_i`` of the extra input noise of
         the actuator-i mode (input units per step).
 
@@ -49,7 +60,7 @@ def noise_inflation_modes(model: LinearGaussianModel, sensor_inflation, actuator
     n, nu, m = validate_linear_model(model)
     dtype = jnp.result_type(model.Phi)
     model = jax.tree.map(lambda a: jnp.asarray(a, dtype), model)
-    inflation = _per_component("sensor_inflation", sensor_inflation, m, dtype)
+    inflation = _per_component("sensor_inflation", sensor_inflation, m, dtype, positive=True)
     noise = _per_component("actuator_noise", actuator_noise, nu, dtype)
     input_noise = jnp.einsum("i,ai,bi->iab", noise**2, model.Gamma, model.Gamma)  # s_i^2 Gamma e_i e_i^T Gamma^T
     Qs = jnp.concatenate([model.Q[None], model.Q + input_noise, jnp.broadcast_to(model.Q, (m, n, n))])

@@ -49,13 +49,17 @@ def linear_gaussian_model(Phi: Array, C: Array, Q: Array, R: Array, Gamma: Array
         _, info = run_filter(kf, kf.init(x0, P0), ys)  # us=None
     """
     n = _checks.check_square("Phi", Phi, None, "state transition")
-    _checks.check_shape("C", C, (None, n), "m outputs x n states")
+    _checks.check_matrix("C", C, (None, n), "m outputs x n states")
     m = _checks.shape_of(C)[0]
-    Phi = jnp.asarray(Phi)
-    dtype = Phi.dtype if jnp.issubdtype(Phi.dtype, jnp.floating) else jnp.result_type(float)
+    dtype = _checks.float_dtype(Phi)
+    if Gamma is not None:
+        _checks.check_matrix("Gamma", Gamma, (n, None), "n states x nu inputs")
     Gamma = jnp.zeros((n, 0), dtype) if Gamma is None else jnp.asarray(Gamma, dtype)
-    _checks.check_shape("Gamma", Gamma, (n, None), "n states x nu inputs")
+    if D is not None:
+        _checks.check_matrix("D", D, (m, Gamma.shape[1]), "m outputs x nu inputs")
     D = jnp.zeros((m, Gamma.shape[1]), dtype) if D is None else jnp.asarray(D, dtype)
+    _checks.check_covariance("Q", Q, n)
+    _checks.check_covariance("R", R, m)
     model = LinearGaussianModel(jnp.asarray(Phi, dtype), Gamma, jnp.asarray(C, dtype), D, jnp.asarray(Q, dtype),
                                 jnp.asarray(R, dtype))
     validate_linear_model(model)
@@ -63,13 +67,17 @@ def linear_gaussian_model(Phi: Array, C: Array, Q: Array, R: Array, Gamma: Array
 
 
 def validate_linear_model(model: LinearGaussianModel, name: str = "model") -> tuple[int, int, int]:
-    """Check every block's shape against ``Phi`` and ``C``; return ``(n, nu, m)``."""
+    """Check every block of ``model`` (shapes against ``Phi`` and ``C``, real and finite
+    entries, ``Q`` and ``R`` symmetric positive semi-definite); return ``(n, nu, m)``."""
+    if not isinstance(model, LinearGaussianModel):
+        raise TypeError(f"{name}: expected a LinearGaussianModel (linear_gaussian_model(Phi, C, Q, R, Gamma, D)), "
+                        f"got {_checks.received(model)}")
     n = _checks.check_square(f"{name}.Phi", model.Phi, None, "state transition")
-    _checks.check_shape(f"{name}.Gamma", model.Gamma, (n, None), "n states x nu inputs")
+    _checks.check_matrix(f"{name}.Gamma", model.Gamma, (n, None), "n states x nu inputs")
     nu = _checks.shape_of(model.Gamma)[1]
-    _checks.check_shape(f"{name}.C", model.C, (None, n), "m outputs x n states")
+    _checks.check_matrix(f"{name}.C", model.C, (None, n), "m outputs x n states")
     m = _checks.shape_of(model.C)[0]
-    _checks.check_shape(f"{name}.D", model.D, (m, nu), "m outputs x nu inputs")
+    _checks.check_matrix(f"{name}.D", model.D, (m, nu), "m outputs x nu inputs")
     _checks.check_covariance(f"{name}.Q", model.Q, n)
     _checks.check_covariance(f"{name}.R", model.R, m)
     return n, nu, m
@@ -110,10 +118,9 @@ def c2d(A: Array, B: Array, Ts: float, dtype=None) -> tuple[Array, Array]:
       ``(Phi, Gamma)`` of shapes (n, n) and (n, nu).
     """
     n = _checks.check_square("A", A, None, "continuous state matrix")
-    _checks.check_shape("B", B, (n, None), "n states x nu inputs")
+    _checks.check_matrix("B", B, (n, None), "n states x nu inputs")
+    _checks.check_positive("Ts", Ts, "a positive scalar sample period")
     ts = _checks.concrete(Ts)
-    if ts is not None and not (ts.shape == () and ts > 0):
-        raise ValueError(f"Ts: expected a positive scalar sample period, got {Ts}")
     if dtype is None:
         dtype = jnp.asarray(A).dtype
         dtype = dtype if jnp.issubdtype(dtype, jnp.floating) else jnp.result_type(float)

@@ -32,6 +32,7 @@ from typing import Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
@@ -50,6 +51,8 @@ class SpacecraftParams(NamedTuple):
 def pyramid_axes(beta_deg: float = 45.0, sigma_deg: float = 45.0, dtype=None) -> Array:
     """Seed 004 eq. 4: four wheels on a cone of half-angle ``beta`` about body z, at
     azimuths ``+/-sigma``, ``180 -/+ sigma``; rows are the spin axes."""
+    _checks.check_scalar("beta_deg", beta_deg, meaning="a cone half-angle in degrees")
+    _checks.check_scalar("sigma_deg", sigma_deg, meaning="an azimuth in degrees")
     dtype = dtype or jnp.result_type(float)
     sb, cb = math.sin(math.radians(beta_deg)), math.cos(math.radians(beta_deg))
     cs, ss = math.cos(math.radians(sigma_deg)), math.sin(math.radians(sigma_deg))
@@ -63,13 +66,21 @@ def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.05
     """KITSAT-3 (seed 004 Table 1): ``I = diag(3.118, 3.050, 4.055)`` kg m^2,
     ``I_w = 0.000239`` kg m^2, the 45/45 deg pyramid unless ``wheel_axes`` (N, 3) is given
     (any geometry: the rows are normalised)."""
+    _checks.check_positive("dt", dt, "a positive sample period in seconds")
+    _checks.check_positive("wheel_inertia", wheel_inertia, "a positive wheel inertia in kg m^2")
     dtype = dtype or jnp.result_type(float)
+    if wheel_axes is not None:
+        _checks.check_matrix("wheel_axes", wheel_axes, (None, 3), "one spin axis per row")
+        if np.any(np.linalg.norm(np.asarray(wheel_axes, float), axis=1) == 0):
+            raise ValueError(f"wheel_axes: expected non-zero spin axes, got {_checks.received(wheel_axes)}")
     axes = pyramid_axes(dtype=dtype) if wheel_axes is None else jnp.asarray(wheel_axes, dtype)
-    _checks.check_shape("wheel_axes", axes, (None, 3), "one spin axis per row")
     axes = axes / jnp.linalg.norm(axes, axis=1, keepdims=True)
+    _checks.check_real("inertia", inertia, "a real body inertia")
+    if np.ndim(inertia) == 1:
+        _checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
+        inertia = np.diag(np.asarray(inertia, float))
+    _checks.check_covariance("inertia", inertia, 3, definite=True)  # symmetric positive definite
     inertia = jnp.asarray(inertia, dtype)
-    inertia = jnp.diag(inertia) if inertia.ndim == 1 else inertia
-    _checks.check_shape("inertia", inertia, (3, 3), "body inertia, or its 3 principal moments")
     return SpacecraftParams(inertia, jnp.asarray(wheel_inertia, dtype), axes,
                             jnp.ones(axes.shape[0], dtype), jnp.asarray(dt, dtype))
 

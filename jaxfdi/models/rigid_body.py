@@ -11,7 +11,10 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
+
+from jaxfdi import _checks
 
 
 class RigidBodyParams(NamedTuple):
@@ -20,6 +23,11 @@ class RigidBodyParams(NamedTuple):
 
 
 def rigid_body_params(dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dtype=None) -> RigidBodyParams:
+    """Principal moments of inertia ``inertia`` (3,) > 0 and the step ``dt`` > 0 (s)."""
+    _checks.check_positive("dt", dt, "a positive step in seconds")
+    _checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
+    if np.any(np.asarray(inertia) <= 0):
+        raise ValueError(f"inertia: expected positive principal moments, got {_checks.received(inertia)}")
     dtype = dtype or jnp.result_type(float)
     return RigidBodyParams(jnp.asarray(inertia, dtype), jnp.asarray(dt, dtype))
 

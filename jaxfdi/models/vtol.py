@@ -67,6 +67,10 @@ def vtol_true_plant(Ts: float = TS, uncertainty: float = 1.0, disturbance: float
 
     from jaxfdi.models.linear import c2d
 
+    from jaxfdi import _checks
+
+    _checks.check_scalar("uncertainty", uncertainty, meaning="a real scale of the model uncertainty")
+    _checks.check_scalar("disturbance", disturbance, meaning="a real scale of the disturbance")
     dtype = dtype or jnp.result_type(float)
     f = DISTURBANCE_FREQUENCY
     A6 = np.zeros((6, 6))

@@ -1,9 +1,13 @@
-"""What every scenario study checks before it computes: precision and method names."""
+"""What every scenario study checks before it computes: precision, run counts, seeds and
+method names."""
 from __future__ import annotations
 
 from typing import Sequence
 
 import jax
+
+from jaxfdi import _checks
+
 
 
 def require_x64(study: str) -> None:
@@ -23,3 +27,12 @@ def check_methods(methods: Sequence[str] | None, valid: Sequence[str]) -> tuple[
     if unknown or not methods:
         raise ValueError(f"methods: expected a non-empty subset of {list(valid)}, got unknown {unknown or 'none'}")
     return tuple(m for m in valid if m in methods)
+
+
+def check_study(runs: int, seed: int, runs_name: str = "runs", **counts: int) -> None:
+    """``runs`` a positive int, ``seed`` an int in [0, ``_checks.MAX_SEED``] = [0, 2^32 - 1], and
+    each further keyword a positive count (e.g. ``calibration_runs``, ``steps``)."""
+    _checks.check_int(runs_name, runs, 1, meaning="a positive number of runs")
+    _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
+    for name, value in counts.items():
+        _checks.check_int(name, value, 1, meaning="a positive count")

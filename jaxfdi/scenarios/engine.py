@@ -48,7 +48,7 @@ from jaxfdi.faults import stack_faults
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.mm import multiple_model
-from jaxfdi.scenarios._common import require_x64
+from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.metrics import DetectionRecord, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
@@ -152,8 +152,21 @@ def mode_confirmed_name(settings: "EngineSettings") -> str:
     return ", ".join([f"IMM-bias hand-pi confirm {common}", *rest])
 
 
+def _bonferroni_threshold(settings: EngineSettings) -> float:
+    return float(glrt_threshold(settings.glr_pfa, 6, settings.glr_window, "bonferroni"))
+
+
+def engine_method_names(settings: EngineSettings = EngineSettings()) -> list[str]:
+    """The names of ``engine_methods(settings)`` in table order, without building the
+    methods (what the CLI checks ``--methods`` against before computing)."""
+    bonferroni = _bonferroni_threshold(settings)
+    return ["MM", "IMM", "IMM hand-pi", "MM-bias", "IMM-bias", "IMM-bias hand-pi", confirmed_name(settings),
+            mode_confirmed_name(settings), f"GLRT l_T={settings.glr_threshold:g}", f"GLRT l_T={bonferroni:.1f}",
+            f"GLRT l_T={bonferroni:.1f} eq. 24"]
+
+
 def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Method]:
-    """Every method of the study, by name, in table order."""
+    """Every method of the study, by name (``engine_method_names``), in table order."""
     model = engine_model()
     M = len(MODE_NAMES)
     x0, P0 = jnp.zeros(7), model.Q
@@ -181,20 +194,21 @@ def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Met
         det = glrt_detector(model, steady.gain, steady.innovation_cov, settings.glr_window, threshold, isolation)
         return Method(kf, kf0, det, _innovation, settings.glr_estimate_delay, "GLRT")
 
-    bonferroni = float(glrt_threshold(settings.glr_pfa, 6, settings.glr_window, "bonferroni"))
-    return {
-        "MM": zhang_li(multiple_model(kalman_filter, zl, settings.mm_floor), "MM"),
-        "IMM": zhang_li(interacting_multiple_model(kalman_filter, zl, PAPER_TRANSITION), "IMM"),
-        "IMM hand-pi": zhang_li(interacting_multiple_model(kalman_filter, zl, hand), "IMM"),
-        "MM-bias": bias(multiple_model(kalman_filter, bm, settings.mm_floor), "MM"),
-        "IMM-bias": bias(interacting_multiple_model(kalman_filter, bm, PAPER_TRANSITION), "IMM"),
-        "IMM-bias hand-pi": bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM"),
-        confirmed_name(settings): bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM", confirmed),
-        mode_confirmed_name(settings): bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM", mode_confirmed),
-        f"GLRT l_T={settings.glr_threshold:g}": glrt(settings.glr_threshold),
-        f"GLRT l_T={bonferroni:.1f}": glrt(bonferroni),
-        f"GLRT l_T={bonferroni:.1f} eq. 24": glrt(bonferroni, "paper"),
-    }
+    bonferroni = _bonferroni_threshold(settings)
+    methods = [
+        zhang_li(multiple_model(kalman_filter, zl, settings.mm_floor), "MM"),
+        zhang_li(interacting_multiple_model(kalman_filter, zl, PAPER_TRANSITION), "IMM"),
+        zhang_li(interacting_multiple_model(kalman_filter, zl, hand), "IMM"),
+        bias(multiple_model(kalman_filter, bm, settings.mm_floor), "MM"),
+        bias(interacting_multiple_model(kalman_filter, bm, PAPER_TRANSITION), "IMM"),
+        bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM"),
+        bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM", confirmed),
+        bias(interacting_multiple_model(kalman_filter, bm, hand), "IMM", mode_confirmed),
+        glrt(settings.glr_threshold),
+        glrt(bonferroni),
+        glrt(bonferroni, "paper"),
+    ]
+    return dict(zip(engine_method_names(settings), methods, strict=True))
 
 
 def run_monitor(method: Method, model, us, key, f, keep_history=False):
@@ -359,11 +373,13 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
     Needs float64 (``jaxfdi.enable_x64()``): the engine is stiff. ``figure_runs`` runs per
     fault (another seed) give the averaged mode probabilities and GLR statistics."""
     require_x64("engine_study (the engine model is stiff)")
+    check_study(runs, seed, figure_runs=figure_runs)
+    names = engine_method_names(settings)
+    chosen = names if methods is None else list(methods)
+    unknown = [m for m in chosen if m not in names]
+    if unknown or not chosen:
+        raise ValueError(f"methods: expected a non-empty list of names from {names}, got unknown {unknown or 'none'}")
     every = engine_methods(settings)
-    chosen = list(every) if methods is None else methods
-    unknown = [m for m in chosen if m not in every]
-    if unknown:
-        raise ValueError(f"methods: unknown {unknown}; expected names from {list(every)}")
     steps = int(round(duration / TS))
     records, rows = {}, []
     for name in chosen:

@@ -16,10 +16,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxfdi import _checks
 from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
 from jaxfdi.faults import Fault, fault, no_fault, stack_faults
 from jaxfdi.filters.kalman import kalman_filter
-from jaxfdi.scenarios._common import require_x64
+from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.metrics import DetectionRecord, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi.monitor import MonitorHistory, monitor
@@ -83,9 +84,18 @@ def engine_chi2_study(
     R)`` (default the plant's) set the detector a tuner changed; the plant is always
     simulated with its own noise."""
     require_x64("engine_chi2_study (the engine model is stiff)")
+    check_study(runs, seed, window=window, chunk_size=chunk_size)
+    _checks.check_probability("pfa", pfa)
+    _checks.check_positive("duration", duration, "a positive run length in seconds")
+    _checks.check_scalar("onset_time", onset_time, 0.0, duration, high_open=True,
+                         meaning="a fault onset time in [0, duration) seconds")
+    if threshold is not None:
+        _checks.check_positive("threshold", threshold, "a positive chi-square threshold")
     model = engine_model()
     steps = int(round(duration / TS))
     onset = int(round(onset_time / TS))
+    if window > steps:
+        raise ValueError(f"window: expected at most the {steps} steps of a run, got {window}")
     us = jnp.full((steps, 1), FUEL_STEP)
     dof = window * model.C.shape[0]
     threshold = chi2_threshold(dof, pfa) if threshold is None else jnp.asarray(threshold)

@@ -22,11 +22,13 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from jaxfdi import _checks
 from jaxfdi.detection.chi2 import chi2_threshold, moving_window_sum
 from jaxfdi.filters._base import run_filter
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.metrics import unhealthy_rows_warning
-from jaxfdi.models.engine import engine_model
+from jaxfdi.models.engine import TS, engine_model
+from jaxfdi.scenarios._common import check_study
 from jaxfdi.scenarios.engine import LabelledRuns, _fmt, balanced_batches, labelled_runs
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_chi2_study
 from jaxfdi.tuning import losses
@@ -79,8 +81,13 @@ def tune_engine_chi2(windows: tuple[int, ...] = (1, 2, 4, 8), steps: int = 150, 
                      weights: Chi2Weights = Chi2Weights(), progress: bool = False) -> Chi2Tuning:
     """For each window, train ``Q``, ``R`` and the threshold from the hand-set values
     (threshold ``chi2.isf(0.005, 5 L)``); keep the window with the lowest validation loss."""
-    if not windows or any(int(w) != w or w < 1 for w in windows):
-        raise ValueError(f"windows: expected positive integers, got {windows}")
+    if not windows:
+        raise ValueError(f"windows: expected at least one window length, got {windows!r}")
+    steps_per_run = int(round(4.0 / TS))  # labelled_runs' default duration
+    for w in windows:
+        _checks.check_int("windows", w, 1, steps_per_run, "window lengths in steps, within a run")
+    check_study(train_runs, seed, steps=steps, val_runs=val_runs, batch_runs=batch_runs, runs_name="train_runs")
+    _checks.check_positive("learning_rate", learning_rate, "a positive learning rate")
     train = labelled_runs(train_runs, seed)
     val = labelled_runs(val_runs, seed + 1)
     train_batch = balanced_batches(train, train_runs, batch_runs, jax.random.key(seed))

@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from jaxfdi import _checks
 from jaxfdi.detection.mode_probability import mode_probability_detector
 from jaxfdi.filters._base import run_filter
 from jaxfdi.filters.imm import interacting_multiple_model
@@ -49,6 +50,7 @@ from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise
 from jaxfdi.metrics import DetectionRecord, unhealthy_rows_warning
 from jaxfdi.monitor import replay_detector
 from jaxfdi.montecarlo import monte_carlo
+from jaxfdi.scenarios._common import check_study
 from jaxfdi.scenarios.engine import (
     PAPER_TRANSITION,
     EngineSettings,
@@ -210,6 +212,8 @@ def tune_engine_imm(design: ImmDesign, steps: int = 150, train_runs: int = 16, v
     if unknown:
         raise ValueError(f"frozen: unknown parameters {sorted(unknown)}; design {design.name!r} has "
                          f"{sorted(design.parameterization)}")
+    check_study(train_runs, seed, steps=steps, val_runs=val_runs, batch_runs=batch_runs, runs_name="train_runs")
+    _checks.check_positive("learning_rate", learning_rate, "a positive learning rate")
     train = labelled_runs(train_runs, seed)
     val = labelled_runs(val_runs, seed + 1)
     train_batch = balanced_batches(train, train_runs, batch_runs, jax.random.key(seed))

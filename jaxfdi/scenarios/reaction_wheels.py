@@ -47,6 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from jaxfdi import _checks
 from jaxfdi.control.attitude import AttitudeGains, Slew, pd_gains, slew, slew_reference, wheel_attitude_controller
 from jaxfdi.detection.chi2 import Decision, chi2_detector, chi2_threshold
 from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
@@ -59,7 +60,7 @@ from jaxfdi.filters.mm import multiple_model
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
 from jaxfdi.metrics import DetectionRecord, unhealthy_warning
-from jaxfdi.scenarios._common import check_methods, require_x64
+from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.models.reaction_wheels import (
     SpacecraftParams,
     WheelCommand,
@@ -458,6 +459,9 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
     unhealthy runs are left out of every rate and counted in the row's ``unhealthy_runs``."""
     selected = check_methods(methods, METHODS)
     require_x64("wheel_study")
+    check_study(runs, seed, calibration_runs=calibration_runs, steps=steps, chunk_size=chunk_size)
+    _checks.check_choice("estimator", estimator, ["ekf", "ukf"])
+    _checks.check_choice("engage_on", engage_on, ["nis", "fdp"])
     design = wheel_design()
     kwargs = dict(steps=steps, estimator=estimator, engage_on=engage_on, chunk_size=chunk_size, progress=progress)
     threshold = calibrate_fdp_threshold(design, calibration_runs, seed + 1, **kwargs)

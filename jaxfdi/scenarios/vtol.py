@@ -49,7 +49,7 @@ from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_activ
 from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
 from jaxfdi.metrics import record_from_alarms, unhealthy_warning
 from jaxfdi.models import vtol
-from jaxfdi.scenarios._common import check_methods, require_x64
+from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 
 LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
 FILTER_NAMES = tuple(f"{loc}-{kind}" for kind in ("mult", "add") for loc in LOCATIONS)
@@ -401,6 +401,7 @@ def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopD
 
     selected = check_methods(methods, METHODS)
     require_x64("vtol_study")
+    check_study(runs, seed, steps=steps, calibration_runs=calibration_runs, chunk_size=chunk_size)
 
     design = design or vtol_design()
     calibrated = calibrate_thresholds(design, calibration_runs, seed + 1_000_003, steps)

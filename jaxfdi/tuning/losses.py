@@ -37,6 +37,7 @@ def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e
       floor: probability floor, so that a structurally impossible mode costs
         ``-log(floor)`` (finite, with a finite gradient) rather than infinity.
     """
+    _checks.check_scalar("floor", floor, 0.0, 1.0, low_open=True, meaning="a probability floor in (0, 1]")
     _checks.check_shape("log_mode_prob", log_mode_prob, (None, None), "(T, M) log mode probabilities")
     T = log_mode_prob.shape[0]
     _checks.check_shape("true_mode", true_mode, (T,), "one int mode label per step")
@@ -75,6 +76,10 @@ def soft_detection_loss(
       ``delay`` (expected, in steps; missed runs count ``T - onset``), and
       ``misisolated`` (probability) when a margin is given.
     """
+    _checks.check_positive("temperature", temperature, "a positive temperature")
+    for name, weight in (("false_alarm_weight", false_alarm_weight), ("miss_weight", miss_weight),
+                         ("delay_weight", delay_weight), ("isolation_weight", isolation_weight)):
+        _checks.check_scalar(name, weight, 0.0, meaning="a loss weight >= 0")
     _checks.check_shape("statistic", statistic, (None,), "(T,) test statistic")
     T = statistic.shape[0]
     k = jnp.arange(T)

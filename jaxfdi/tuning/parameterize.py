@@ -48,7 +48,9 @@ def identity() -> Transform:
 
 
 def positive(floor: float = 0.0) -> Transform:
-    """``p = floor + softplus(x)``; inverse ``x = log(expm1(p - floor))`` written stably."""
+    """``p = floor + softplus(x)``; inverse ``x = log(expm1(p - floor))`` written stably.
+    ``floor`` >= 0, finite."""
+    _checks.check_scalar("floor", floor, 0.0, meaning="a lower bound >= 0")
 
     def forward(x):
         return floor + jax.nn.softplus(x)
@@ -105,6 +107,8 @@ def stochastic_rows(mask: Any = None) -> Transform:
     forbids, and ``log(tiny)`` (about -708 in float64) at a zero the mask allows, which
     ``forward`` maps back to ~1e-308: such an entry stays zero in training (its gradient
     vanishes with it); start it at a small positive value to let it be learned."""
+    if mask is not None and _checks.shape_of(mask) and np.asarray(mask).dtype != bool:
+        raise TypeError(f"mask: expected a boolean (M, M) array, got {_checks.received(mask)}")
     mask_np = None if mask is None else np.asarray(mask, bool)
     if mask_np is not None:
         if mask_np.ndim != 2 or mask_np.shape[0] != mask_np.shape[1]:
@@ -166,6 +170,7 @@ def sticky_log_prior(pi: Array, target: Array, concentration: float) -> Array:
     ``sum_ij (c target_ij) log pi_ij`` (Dirichlet with ``alpha = 1 + c target``, mode at
     ``target``), summed over rows; entries where ``target`` is 0 do not count. Added to
     a tuning loss (negated) it keeps a learned transition matrix near a sticky design."""
+    _checks.check_scalar("concentration", concentration, 0.0, meaning="a concentration >= 0")
     target = jnp.asarray(target, jnp.result_type(pi))
     weight = concentration * target
     return jnp.sum(jnp.where(weight > 0, weight * jnp.log(jnp.where(pi > 0, pi, 1.0)), 0.0))
@@ -186,7 +191,7 @@ TRANSFORMS = {
 def from_record(name: str, options: dict) -> Transform:
     """The transform a saved file names (``Transform.name`` and ``.options``)."""
     if name not in TRANSFORMS:
-        raise ValueError(f"transform: unknown name {name!r}; expected one of {sorted(TRANSFORMS)}")
+        raise ValueError(f"name: expected a transform name, one of {sorted(TRANSFORMS)}, got {name!r}")
     return TRANSFORMS[name](**options)
 
 

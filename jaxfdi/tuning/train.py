@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from jaxfdi import _checks
 from jaxfdi._io import atomic_write
 from jaxfdi.filters._base import Filter
 from jaxfdi.tuning.parameterize import Transform, constrain, from_record, merge, partition, unconstrain
@@ -62,6 +63,7 @@ def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[in
     if len(num) != 1:
         raise ValueError(f"dataset: expected every leaf to have the same leading run axis, got sizes {sorted(num)}")
     (num,) = num
+    batch_size = _checks.check_int("batch_size", batch_size, 1, num, "a number of runs per batch")
     if not 1 <= batch_size <= num:
         raise ValueError(f"batch_size: expected 1..{num} (the dataset's runs), got {batch_size}")
     per_epoch = num // batch_size
@@ -93,8 +95,11 @@ def fit(
     ``patience`` evaluations without improvement. Non-finite losses or gradients stop
     training (the best parameters so far are kept) rather than poisoning the state.
     """
-    if steps < 0 or eval_every < 1 or patience < 1:
-        raise ValueError(f"steps, eval_every, patience: expected >= 0, >= 1, >= 1, got {steps}, {eval_every}, {patience}")
+    _checks.check_callable("loss", loss, "a function (raw params, batch) -> scalar loss")
+    _checks.check_callable("train_batch", train_batch, "a function step -> batch")
+    steps = _checks.check_int("steps", steps, 0, meaning="a number of optimiser steps >= 0")
+    eval_every = _checks.check_int("eval_every", eval_every, 1, meaning="a number of steps >= 1")
+    patience = _checks.check_int("patience", patience, 1, meaning="a number of evaluations >= 1")
     params, frozen = partition(raw0, list(raw0) if trainable is None else trainable)
     if not params:
         raise ValueError("trainable: expected at least one parameter to train")

@@ -1,0 +1,458 @@
+"""Malformed calls across the public API are refused, never answered (issue 22).
+
+A table of calls a hostile user makes: NaN/inf, complex and string arrays, indefinite
+covariances, probabilities out of range, floats where counts are meant, indices out of
+range, unknown names, wrong callables. Each case asserts the exception type
+(``TypeError`` for the wrong kind of value, ``ValueError`` for a wrong value) and that the
+message names the argument. No case may return a result: ``pytest.raises`` fails if the
+call returns. Array cases run under ``jax.eval_shape`` where the call would compute, so
+an error must come at trace time, before anything is compiled.
+
+The valid counterpart of every family is in ``test_valid_neighbours_pass``: the checks
+are not over-eager (a covariance of 1e-24, a singular but semi-definite Q, NaN
+measurements in a filter that skips them, an integer initial mean).
+"""
+from __future__ import annotations
+
+import re
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+
+import jaxfdi
+from jaxfdi import control, detection, faults, loop, metrics, models, tuning
+from jaxfdi.filters import tskf
+from jaxfdi.models.vtol import vtol_model, vtol_true_plant
+from jaxfdi.monitor import filter_detector
+from jaxfdi.scenarios.engine import engine_study
+from jaxfdi.scenarios.engine_chi2 import engine_chi2_study
+from jaxfdi.scenarios.engine_chi2_tuning import tune_engine_chi2
+from jaxfdi.scenarios.engine_tuning import imm_design, tune_engine_imm
+from jaxfdi.scenarios.reaction_wheels import wheel_study
+from jaxfdi.scenarios.vtol import vtol_study
+from jaxfdi.tuning.parameterize import from_record
+from jaxfdi.models import engine_model, linear_observation, linear_transition
+
+MODEL = engine_model()                       # n = 7, nu = 1, m = 5
+N, NU, M = 7, 1, 5
+T = 4
+YS, US = jnp.zeros((T, M)), jnp.zeros((T, NU))
+NAN_7 = jnp.eye(N).at[2, 3].set(jnp.nan)
+INDEFINITE_2 = jnp.array([[1.0, 2.0], [2.0, 1.0]])    # symmetric, eigenvalues -1 and 3
+KEY = jax.random.key(0)
+SMALL = jaxfdi.linear_gaussian_model(jnp.array([[0.9, 0.1], [0.0, 0.8]]), jnp.eye(2), 0.01 * jnp.eye(2),
+                                     0.1 * jnp.eye(2), Gamma=jnp.array([[0.0], [1.0]]))
+
+
+def indefinite(n: int) -> jnp.ndarray:
+    """Symmetric, non-negative diagonal, one negative eigenvalue."""
+    a = np.eye(n)
+    a[0, 1] = a[1, 0] = 2.0
+    return jnp.asarray(a)
+
+
+def kf_run(model=MODEL, mean=jnp.zeros(N), cov=jnp.eye(N), ys=YS, us=US, filt=None):
+    def go(ys, us):
+        f = filt or jaxfdi.kalman_filter(model)
+        return jaxfdi.run_filter(f, f.init(mean, cov), ys, us)[1]
+    return jax.eval_shape(go, ys, us)
+
+
+def ekf(**kw):
+    args = dict(f=linear_transition, h=linear_observation, Q=MODEL.Q, R=MODEL.R, params=MODEL)
+    args.update(kw)
+    return jaxfdi.extended_kalman_filter(**args)
+
+
+def ukf(**kw):
+    args = dict(f=linear_transition, h=linear_observation, Q=MODEL.Q, R=MODEL.R, params=MODEL)
+    args.update(kw)
+    return jaxfdi.unscented_kalman_filter(**args)
+
+
+def two_modes():
+    return jax.tree.map(lambda a: jnp.stack([a, a]), SMALL)
+
+
+def imm(transition=jnp.array([[0.9, 0.1], [0.2, 0.8]]), mode_filter=jaxfdi.kalman_filter):
+    return jaxfdi.interacting_multiple_model(mode_filter, two_modes(), transition)
+
+
+def sim_run(sim=None, x0=jnp.zeros(N), us=US):
+    sim = sim or jaxfdi.linear_simulator(MODEL)
+    return jax.eval_shape(lambda us: jaxfdi.simulate(sim, x0, us, KEY), us)
+
+
+def sim_with(fault):
+    return sim_run(jaxfdi.linear_simulator(MODEL, fault))
+
+
+def fault(**kw):
+    args = dict(kind="bias", target="sensor", component=0, onset=10, magnitude=1.0)
+    args.update(kw)
+    return jaxfdi.fault(**args)
+
+
+def loop_run(steps=T, plant=None):
+    sim = plant or jaxfdi.linear_simulator(SMALL)
+    kf = jaxfdi.kalman_filter(SMALL)
+    fdi = filter_detector(kf, detection.chi2_detector(10.0))
+    return loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(2), kf.init(jnp.zeros(2), jnp.eye(2)), KEY, steps,
+                         exogenous=jnp.zeros((4, 1)))
+
+
+def monte(num_runs=2, chunk_size=8192, run_one=lambda key, x: 0.0, key=KEY, progress=False):
+    return jaxfdi.monte_carlo(run_one, key, num_runs, chunk_size=chunk_size, progress=progress)
+
+
+DIRECTION = tskf.actuator_direction(MODEL, 0)
+
+V, T_ = ValueError, TypeError
+# id: (thunk, exception type, the argument the message must name)
+CASES = {
+    # --- models.linear -------------------------------------------------------------
+    "model Phi NaN": (lambda: jaxfdi.linear_gaussian_model(NAN_7, MODEL.C, MODEL.Q, MODEL.R, MODEL.Gamma), V, "Phi"),
+    "model Phi inf": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(N).at[0, 0].set(jnp.inf), MODEL.C, MODEL.Q,
+                                                           MODEL.R, MODEL.Gamma), V, "Phi"),
+    "model Gamma NaN": (lambda: jaxfdi.linear_gaussian_model(MODEL.Phi, MODEL.C, MODEL.Q, MODEL.R,
+                                                             MODEL.Gamma.at[0, 0].set(jnp.nan)), V, "Gamma"),
+    "model C NaN": (lambda: jaxfdi.linear_gaussian_model(MODEL.Phi, MODEL.C.at[1, 1].set(jnp.nan), MODEL.Q, MODEL.R),
+                    V, "C"),
+    "model D inf": (lambda: jaxfdi.linear_gaussian_model(MODEL.Phi, MODEL.C, MODEL.Q, MODEL.R, MODEL.Gamma,
+                                                         jnp.full((M, NU), jnp.inf)), V, "D"),
+    "model Q indefinite": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(2), jnp.eye(2), INDEFINITE_2, jnp.eye(2)),
+                           V, "Q"),
+    "model R indefinite": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.eye(2), INDEFINITE_2),
+                           V, "R"),
+    "model Q complex": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.eye(2) * (1 + 1j),
+                                                             jnp.eye(2)), T_, "Q"),
+    "model Phi complex": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(2) * 1j, jnp.eye(2), jnp.eye(2), jnp.eye(2)),
+                          T_, "Phi"),
+    "model Phi strings": (lambda: jaxfdi.linear_gaussian_model(np.array([["a", "b"], ["c", "d"]]), jnp.eye(2),
+                                                               jnp.eye(2), jnp.eye(2)), T_, "Phi"),
+    "model R NaN (replace)": (lambda: kf_run(MODEL._replace(R=MODEL.R.at[0, 0].set(jnp.nan))), V, "model.R"),
+    "model Q indefinite (replace)": (lambda: kf_run(MODEL._replace(Q=indefinite(N))), V, "model.Q"),
+    "model Phi NaN (replace)": (lambda: kf_run(MODEL._replace(Phi=NAN_7)), V, "model.Phi"),
+    "c2d Ts NaN": (lambda: jaxfdi.c2d(jnp.zeros((2, 2)), jnp.zeros((2, 1)), float("nan")), V, "Ts"),
+    "c2d Ts inf": (lambda: jaxfdi.c2d(jnp.zeros((2, 2)), jnp.zeros((2, 1)), float("inf")), V, "Ts"),
+    "c2d A NaN": (lambda: jaxfdi.c2d(jnp.full((2, 2), jnp.nan), jnp.zeros((2, 1)), 0.1), V, "A"),
+    "c2d A complex": (lambda: jaxfdi.c2d(1j * jnp.eye(2), jnp.zeros((2, 1)), 0.1), T_, "A"),
+    "c2d B inf": (lambda: jaxfdi.c2d(jnp.eye(2), jnp.full((2, 1), jnp.inf), 0.1), V, "B"),
+    # --- Kalman filter and the drivers --------------------------------------------
+    "kf init mean NaN": (lambda: kf_run(mean=jnp.zeros(N).at[0].set(jnp.nan)), V, "mean"),
+    "kf init mean complex": (lambda: kf_run(mean=jnp.zeros(N, complex)), T_, "mean"),
+    "kf init cov indefinite": (lambda: kf_run(cov=indefinite(N)), V, "cov"),
+    "kf init cov NaN": (lambda: kf_run(cov=NAN_7), V, "cov"),
+    "run_filter ys complex": (lambda: kf_run(ys=jnp.zeros((T, M), complex)), T_, "ys"),
+    "run_filter us complex": (lambda: kf_run(us=jnp.zeros((T, NU), complex)), T_, "us"),
+    "run_filter ys strings": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None,
+                                                        np.array([["a"] * M] * T), US), T_, "ys"),
+    "run_filter filt not a Filter": (lambda: jaxfdi.run_filter(lambda s, y, u: (s, y), None, YS, US), T_, "filt"),
+    "run_filter_batch ys 2-D": (lambda: jaxfdi.run_filter_batch(jaxfdi.kalman_filter(MODEL), None, YS, US), V, "ys"),
+    "run_filter_batch shared_covariance": (lambda: jaxfdi.run_filter_batch(
+        jaxfdi.kalman_filter(MODEL), None, YS[None], US, shared_covariance="yes"), V, "shared_covariance"),
+    "run_filter_batch ys complex": (lambda: jaxfdi.run_filter_batch(jaxfdi.kalman_filter(MODEL), None,
+                                                                    jnp.zeros((2, T, M), complex), US), T_, "ys"),
+    "kalman_filter model not a model": (lambda: jaxfdi.kalman_filter((MODEL.Phi, MODEL.C)), T_, "model"),
+    # --- EKF / UKF -----------------------------------------------------------------
+    "ekf f not callable": (lambda: ekf(f=MODEL.Phi), T_, "f"),
+    "ekf h not callable": (lambda: ekf(h=None), T_, "h"),
+    "ekf Q indefinite": (lambda: ekf(Q=indefinite(N)), V, "Q"),
+    "ekf R NaN": (lambda: ekf(R=MODEL.R.at[0, 0].set(jnp.nan)), V, "R"),
+    "ekf R complex": (lambda: ekf(R=MODEL.R.astype(complex)), T_, "R"),
+    "ukf alpha NaN": (lambda: ukf(alpha=float("nan")), V, "alpha"),
+    "ukf alpha inf": (lambda: ukf(alpha=float("inf")), V, "alpha"),
+    "ukf kappa inf": (lambda: ukf(kappa=float("inf")), V, "kappa"),
+    "ukf kappa NaN": (lambda: ukf(kappa=float("nan")), V, "kappa"),
+    "ukf beta NaN": (lambda: ukf(beta=float("nan")), V, "beta"),
+    "ukf f not callable": (lambda: ukf(f="transition"), T_, "f"),
+    "ukf Q indefinite": (lambda: ukf(Q=indefinite(N)), V, "Q"),
+    # --- IMM / MM --------------------------------------------------------------------
+    "imm rows do not sum to 1": (lambda: imm(jnp.array([[0.9, 0.2], [0.2, 0.8]])), V, "transition"),
+    "imm negative transition": (lambda: imm(jnp.array([[1.1, -0.1], [0.2, 0.8]])), V, "transition"),
+    "imm NaN transition": (lambda: imm(jnp.array([[jnp.nan, 0.1], [0.2, 0.8]])), V, "transition"),
+    "imm complex transition": (lambda: imm(jnp.eye(2, dtype=complex)), T_, "transition"),
+    "imm mode_filter not callable": (lambda: imm(mode_filter=jaxfdi.kalman_filter(SMALL)), T_, "mode_filter"),
+    "imm init mode_prob sum": (lambda: imm().init(jnp.zeros(2), jnp.eye(2), jnp.array([0.7, 0.7])), V, "mode_prob"),
+    "imm init mode_prob negative": (lambda: imm().init(jnp.zeros(2), jnp.eye(2), jnp.array([1.5, -0.5])), V,
+                                    "mode_prob"),
+    "imm init cov indefinite": (lambda: imm().init(jnp.zeros(2), INDEFINITE_2, jnp.array([0.5, 0.5])), V, "cov"),
+    "mm floor above 1/M": (lambda: jaxfdi.multiple_model(jaxfdi.kalman_filter, two_modes(), 0.6), V, "floor"),
+    "mm floor NaN": (lambda: jaxfdi.multiple_model(jaxfdi.kalman_filter, two_modes(), float("nan")), V, "floor"),
+    "mm init mode_prob NaN": (lambda: jaxfdi.multiple_model(jaxfdi.kalman_filter, two_modes()).init(
+        jnp.zeros(2), jnp.eye(2), jnp.array([jnp.nan, 0.5])), V, "mode_prob"),
+    # --- two-stage / unknown-input / time-varying / posterior -----------------------
+    "tskf bias_walk indefinite": (lambda: jaxfdi.two_stage_kalman_filter(
+        MODEL, tskf.stack_directions([DIRECTION, DIRECTION])._replace(
+            state=jnp.concatenate([DIRECTION.state] * 2, 1), input_scaled=jnp.concatenate([DIRECTION.input_scaled] * 2, 1),
+            output=jnp.concatenate([DIRECTION.output] * 2, 1),
+            output_scaled=jnp.concatenate([DIRECTION.output_scaled] * 2, 1)), INDEFINITE_2), V, "bias_walk"),
+    "tskf bias_walk NaN": (lambda: jaxfdi.two_stage_kalman_filter(MODEL, DIRECTION, jnp.full((1, 1), jnp.nan)), V,
+                           "bias_walk"),
+    "actuator_direction component": (lambda: tskf.actuator_direction(MODEL, 5), V, "component"),
+    "actuator_direction component float": (lambda: tskf.actuator_direction(MODEL, 0.0), T_, "component"),
+    "actuator_direction kind": (lambda: tskf.actuator_direction(MODEL, 0, "stuck"), V, "kind"),
+    "sensor_direction component negative": (lambda: tskf.sensor_direction(MODEL, -1), V, "component"),
+    "unknown_input rank": (lambda: jaxfdi.filters.unknown_input_filter(MODEL, jnp.zeros((N, 1))), V,
+                           "unknown_input"),
+    "unknown_input NaN": (lambda: jaxfdi.filters.unknown_input_filter(MODEL, jnp.full((N, 1), jnp.nan)), V,
+                          "unknown_input"),
+    "time_varying not callable": (lambda: jaxfdi.filters.time_varying(jaxfdi.kalman_filter(MODEL)), T_,
+                                  "filter_at"),
+    "time_varying start negative": (lambda: jaxfdi.filters.time_varying(lambda k: jaxfdi.kalman_filter(MODEL), -1), V,
+                                    "start"),
+    "model_at unknown field": (lambda: jaxfdi.filters.model_at(MODEL, S=jnp.zeros((T, M, M))), V, "S"),
+    "model_at table NaN": (lambda: jaxfdi.filters.model_at(MODEL, R=jnp.full((T, M, M), jnp.nan)), V, "R"),
+    "model_at table indefinite": (lambda: jaxfdi.filters.model_at(
+        SMALL, Q=jnp.stack([jnp.eye(2), INDEFINITE_2])), V, "Q"),
+    "init_from_posterior not Gaussian": (lambda: jaxfdi.init_from_posterior(
+        jaxfdi.filters.Filter(lambda m, c: (m, c), lambda s, y, u: (s, y)), jnp.zeros(N), jnp.eye(N)), V, "filt"),
+    "init_from_posterior cov indefinite": (lambda: jaxfdi.init_from_posterior(
+        jaxfdi.kalman_filter(SMALL), jnp.zeros(2), INDEFINITE_2, jnp.zeros(1)), V, "cov"),
+    # --- fault-mode designs ----------------------------------------------------------
+    "noise_inflation negative": (lambda: models.noise_inflation_modes(MODEL, -5.0, 1.0), V, "sensor_inflation"),
+    "noise_inflation zero": (lambda: models.noise_inflation_modes(MODEL, 0.0, 1.0), V, "sensor_inflation"),
+    "noise_inflation NaN": (lambda: models.noise_inflation_modes(MODEL, float("nan"), 1.0), V, "sensor_inflation"),
+    "noise_inflation actuator negative": (lambda: models.noise_inflation_modes(MODEL, 10.0, -1.0), V,
+                                          "actuator_noise"),
+    "noise_inflation wrong length": (lambda: models.noise_inflation_modes(MODEL, jnp.ones(3) * 10, 1.0), V,
+                                     "sensor_inflation"),
+    "bias_modes walk negative": (lambda: models.bias_modes(MODEL, -1.0, 1.0), V, "bias_walk"),
+    "bias_modes prior NaN": (lambda: models.bias_modes(MODEL, 1.0, float("nan")), V, "bias_prior"),
+    # --- faults ---------------------------------------------------------------------
+    "fault unknown kind name": (lambda: fault(kind="drift"), V, "kind"),
+    "fault unknown kind int": (lambda: fault(kind=9), V, "kind"),
+    "fault kind float": (lambda: fault(kind=1.0), T_, "kind"),
+    "fault unknown target": (lambda: fault(target="both"), V, "target"),
+    "fault negative component": (lambda: fault(component=-1), V, "component"),
+    "fault component float": (lambda: fault(component=1.5), T_, "component"),
+    "fault negative onset": (lambda: fault(kind="stuck", onset=-5), V, "onset"),
+    "fault onset float": (lambda: fault(onset=2.5), T_, "onset"),
+    "fault magnitude NaN": (lambda: fault(magnitude=float("nan")), V, "magnitude"),
+    "fault slope inf": (lambda: fault(kind="ramp", slope=float("inf")), V, "slope"),
+    "fault magnitude complex": (lambda: fault(magnitude=1j), T_, "magnitude"),
+    "fault effectiveness above 1": (lambda: fault(kind="effectiveness", target="actuator", magnitude=3.0), V,
+                                    "magnitude"),
+    "fault effectiveness negative": (lambda: fault(kind="effectiveness", target="actuator", magnitude=-0.5), V,
+                                     "magnitude"),
+    "fault end before onset": (lambda: fault(onset=10, end=5), V, "end"),
+    "fault label below -1": (lambda: fault(label=-2), V, "label"),
+    "fault_group no components": (lambda: jaxfdi.fault_group("bias", "sensor", [], 10, 1.0), V, "components"),
+    "fault_group magnitudes length": (lambda: jaxfdi.fault_group("bias", "sensor", [0, 1], 10, [1.0, 2.0, 3.0]), V,
+                                      "magnitudes"),
+    "fault_group components float": (lambda: jaxfdi.fault_group("bias", "sensor", [0.5, 1.0], 10, 1.0), T_,
+                                     "components"),
+    "concat_faults none": (lambda: jaxfdi.concat_faults(), V, "faults"),
+    "concat_faults not a Fault": (lambda: jaxfdi.concat_faults(fault(), (1, 2)), T_, "faults"),
+    # --- simulator ------------------------------------------------------------------
+    "sim sensor fault component out of range": (lambda: sim_with(fault(component=10)), V, "fault"),
+    "sim actuator fault component out of range": (lambda: sim_with(fault(target="actuator", component=3)), V, "fault"),
+    "sim Q indefinite": (lambda: jaxfdi.simulator(linear_transition, linear_observation, indefinite(N), MODEL.R,
+                                                  MODEL), V, "Q"),
+    "sim R NaN": (lambda: jaxfdi.simulator(linear_transition, linear_observation, MODEL.Q,
+                                           MODEL.R.at[0, 0].set(jnp.nan), MODEL), V, "R"),
+    "sim per-step Q indefinite": (lambda: jaxfdi.simulator(linear_transition, linear_observation,
+                                                           jnp.stack([jnp.eye(2), INDEFINITE_2]), jnp.eye(2), SMALL),
+                                  V, "Q"),
+    "sim f not callable": (lambda: jaxfdi.simulator(MODEL.Phi, linear_observation, MODEL.Q, MODEL.R, MODEL), T_, "f"),
+    "sim noise_gain NaN": (lambda: jaxfdi.simulator(linear_transition, linear_observation, jnp.eye(1), MODEL.R,
+                                                    MODEL, noise_gain=jnp.full((N, 1), jnp.nan)), V, "noise_gain"),
+    "sim available wrong width": (lambda: jaxfdi.linear_simulator(MODEL, available=jnp.ones((T, 3), bool)), V,
+                                  "available"),
+    "sim input_noise indefinite": (lambda: jaxfdi.linear_simulator(SMALL, input_noise=-jnp.eye(1)), V,
+                                   "input_noise"),
+    "simulate x0 NaN": (lambda: sim_run(x0=jnp.full(N, jnp.nan)), V, "x0"),
+    "simulate x0 complex": (lambda: sim_run(x0=jnp.zeros(N, complex)), T_, "x0"),
+    "simulate us complex": (lambda: sim_run(us=jnp.zeros((T, NU), complex)), T_, "us"),
+    "simulate us NaN": (lambda: jaxfdi.simulate(jaxfdi.linear_simulator(MODEL), jnp.zeros(N),
+                                                jnp.full((T, NU), jnp.nan), KEY), V, "us"),
+    "linear_simulator model Q indefinite": (lambda: jaxfdi.linear_simulator(MODEL._replace(Q=indefinite(N))), V,
+                                            "model.Q"),
+    # --- Monte Carlo ------------------------------------------------------------------
+    "monte_carlo num_runs float": (lambda: monte(num_runs=4.0), T_, "num_runs"),
+    "monte_carlo num_runs negative": (lambda: monte(num_runs=-1), V, "num_runs"),
+    "monte_carlo num_runs bool": (lambda: monte(num_runs=True), T_, "num_runs"),
+    "monte_carlo chunk_size zero": (lambda: monte(chunk_size=0), V, "chunk_size"),
+    "monte_carlo chunk_size float": (lambda: monte(chunk_size=2.5), T_, "chunk_size"),
+    "monte_carlo run_one not callable": (lambda: monte(run_one=3), T_, "run_one"),
+    "monte_carlo key int": (lambda: monte(key=0), T_, "key"),
+    "monte_carlo progress string": (lambda: monte(progress="yes"), T_, "progress"),
+    # --- detection --------------------------------------------------------------------
+    "chi2_threshold dof NaN": (lambda: detection.chi2_threshold(float("nan"), 0.01), V, "dof"),
+    "chi2_threshold dof inf": (lambda: detection.chi2_threshold(float("inf"), 0.01), V, "dof"),
+    "chi2_threshold pfa NaN": (lambda: detection.chi2_threshold(4, float("nan")), V, "pfa"),
+    "chi2_threshold pfa complex": (lambda: detection.chi2_threshold(4, 0.01j), T_, "pfa"),
+    "chi2_detector window float": (lambda: detection.chi2_detector(10.0, window=2.5), T_, "window"),
+    "chi2_detector window zero": (lambda: detection.chi2_detector(10.0, window=0), V, "window"),
+    "chi2_detector threshold NaN": (lambda: detection.chi2_detector(float("nan")), V, "threshold"),
+    "moving_window_sum window bool": (lambda: detection.moving_window_sum(jnp.ones(5), True), T_, "window"),
+    "glrt_threshold pfa zero": (lambda: detection.glrt_threshold(0.0, 2, 5), V, "pfa"),
+    "glrt_threshold window zero": (lambda: detection.glrt_threshold(0.01, 2, 0), V, "window"),
+    "glrt_threshold method": (lambda: detection.glrt_threshold(0.01, 2, 5, method="exact"), V, "method"),
+    "mode_probability threshold above 1": (lambda: detection.mode_probability_detector(1.5), V, "threshold"),
+    "mode_probability threshold NaN": (lambda: detection.mode_probability_detector(float("nan")), V, "threshold"),
+    "mode_probability confirm_steps zero": (lambda: detection.mode_probability_detector(0.9, confirm_steps=0), V,
+                                            "confirm_steps"),
+    "mode_probability confirm_steps float": (lambda: detection.mode_probability_detector(0.9, confirm_steps=2.0), T_,
+                                             "confirm_steps"),
+    "mode_probability normal_mode negative": (lambda: detection.mode_probability_detector(0.9, normal_mode=-1), V,
+                                              "normal_mode"),
+    "credit_isolator confirm_steps zero": (lambda: detection.credit_isolator(0.5, confirm_steps=0), V,
+                                           "confirm_steps"),
+    "credit_isolator threshold NaN": (lambda: detection.credit_isolator(float("nan")), V, "threshold"),
+    "haar_denoise levels zero": (lambda: detection.haar_denoise(jnp.ones(16), levels=0), V, "levels"),
+    "haar_denoise levels float": (lambda: detection.haar_denoise(jnp.ones(16), levels=2.0), T_, "levels"),
+    "haar_denoise mode": (lambda: detection.haar_denoise(jnp.ones(16), mode="hard2"), V, "mode"),
+    "haar_denoise c_mult NaN": (lambda: detection.haar_denoise(jnp.ones(16), c_mult=float("nan")), V, "c_mult"),
+    "signature_matrix zero filters": (lambda: detection.signature_matrix(0), V, "num_filters"),
+    "location_symptoms num_locations zero": (lambda: detection.signature.location_symptoms(jnp.ones(4, bool), jnp.zeros(4, int),
+                                                                                 0), V, "num_locations"),
+    # --- metrics ------------------------------------------------------------------------
+    "confusion_matrix true label out of range": (lambda: metrics.confusion_matrix(jnp.array([0, 3]),
+                                                                                  jnp.array([0, 1]), 3), V,
+                                                 "true_labels"),
+    "confusion_matrix prediction out of range": (lambda: metrics.confusion_matrix(jnp.array([0, 1]),
+                                                                                  jnp.array([0, 7]), 3), V,
+                                                 "predicted_labels"),
+    "confusion_matrix negative true label": (lambda: metrics.confusion_matrix(jnp.array([-1, 1]), jnp.array([0, 1]),
+                                                                              3), V, "true_labels"),
+    "confusion_matrix num_classes zero": (lambda: metrics.confusion_matrix(jnp.array([0]), jnp.array([0]), 0), V,
+                                          "num_classes"),
+    "confusion_matrix float labels": (lambda: metrics.confusion_matrix(jnp.array([0.0, 1.0]), jnp.array([0, 1]), 3),
+                                      T_, "true_labels"),
+    "summarize_detection horizon zero": (lambda: metrics.summarize_detection(metrics.record_init(5), 0), V,
+                                         "horizon"),
+    "summarize_detection Ts NaN": (lambda: metrics.summarize_detection(metrics.record_init(5), 10, float("nan")), V,
+                                   "Ts"),
+    "record_update estimate_delay negative": (lambda: metrics.record_update(metrics.record_init(5), 0, True,
+                                                                            estimate_delay=-1), V, "estimate_delay"),
+    "episode_record_init grace negative": (lambda: metrics.episode_record_init(jnp.array([1]), jnp.array([3]),
+                                                                               jnp.array([1]), grace=-1), V, "grace"),
+    "summarize_episodes Ts zero": (lambda: metrics.summarize_episodes(
+        jax.tree.map(lambda a: a[None], metrics.episode_record_init(jnp.array([1]), jnp.array([3]), jnp.array([1]))),
+        Ts=0.0), V, "Ts"),
+    # --- loop ---------------------------------------------------------------------------
+    "run_loop steps zero": (lambda: loop_run(steps=0), V, "steps"),
+    "run_loop steps float": (lambda: loop_run(steps=2.5), T_, "steps"),
+    "run_loop plant not a plant": (lambda: loop_run(plant=lambda x: x), T_, "plant"),
+    "ring_buffer length zero": (lambda: loop.ring_buffer(0, jnp.zeros(2)), V, "length"),
+    "ring_buffer length float": (lambda: loop.ring_buffer(3.0, jnp.zeros(2)), T_, "length"),
+    "state_feedback gain NaN": (lambda: loop.state_feedback(jnp.full((1, 2), jnp.nan)), V, "gain"),
+    "detection_scorer estimate_delay negative": (lambda: loop.detection_scorer(5, lambda o: o, estimate_delay=-1), V,
+                                                 "estimate_delay"),
+    "episode_scorer grace negative": (lambda: loop.episode_scorer(
+        (jnp.array([1]), jnp.array([3]), jnp.array([1])), lambda o: o, grace=-1), V, "grace"),
+    "monitor estimate_delay negative": (lambda: jaxfdi.monitor(
+        jaxfdi.linear_simulator(SMALL), jaxfdi.kalman_filter(SMALL), detection.chi2_detector(10.0), jnp.zeros(2),
+        jaxfdi.kalman_filter(SMALL).init(jnp.zeros(2), jnp.eye(2)), jnp.zeros((T, 1)), KEY, 2, estimate_delay=-2), V,
+                                        "estimate_delay"),
+    "monitor us complex": (lambda: jaxfdi.monitor(
+        jaxfdi.linear_simulator(SMALL), jaxfdi.kalman_filter(SMALL), detection.chi2_detector(10.0), jnp.zeros(2),
+        jaxfdi.kalman_filter(SMALL).init(jnp.zeros(2), jnp.eye(2)), jnp.zeros((T, 1), complex), KEY, 2), T_, "us"),
+    # --- Riccati and control --------------------------------------------------------
+    "dare A NaN": (lambda: jaxfdi.solve_discrete_are(jnp.full((2, 2), jnp.nan), jnp.eye(2), jnp.eye(2), jnp.eye(2)), V,
+                   "A"),
+    "dare R singular": (lambda: jaxfdi.solve_discrete_are(jnp.eye(2), jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2))), V,
+                        "R"),
+    "dare Q indefinite": (lambda: jaxfdi.solve_discrete_are(jnp.eye(2), jnp.eye(2), INDEFINITE_2, jnp.eye(2)), V, "Q"),
+    "lqr not stabilisable": (lambda: control.lqr_gain(jnp.diag(jnp.array([1.5, 0.5])), jnp.array([[0.0], [1.0]]),
+                                                      jnp.eye(2), jnp.eye(1)), V, "A"),
+    "steady_state_kalman undetectable": (lambda: jaxfdi.steady_state_kalman(jaxfdi.linear_gaussian_model(
+        jnp.diag(jnp.array([1.5, 0.5])), jnp.zeros((1, 2)), jnp.eye(2), jnp.eye(1))), V, "model"),
+    "effectiveness_gain_schedule num_losses": (lambda: control.effectiveness_gain_schedule(
+        jnp.eye(2), jnp.eye(2), jnp.array([0.5, 0.4]), jnp.eye(2), num_losses=1), V, "num_losses"),
+    "pd_gains natural_frequency negative": (lambda: control.pd_gains(jnp.eye(3), natural_frequency=-0.1), V,
+                                            "natural_frequency"),
+    "pd_gains damping NaN": (lambda: control.pd_gains(jnp.eye(3), damping=float("nan")), V, "damping"),
+    "pd_gains inertia indefinite": (lambda: control.pd_gains(-jnp.eye(3)), V, "inertia"),
+    "slew angle NaN": (lambda: control.slew(angle_deg=float("nan")), V, "angle_deg"),
+    "slew duration zero": (lambda: control.slew(duration=0.0), V, "duration"),
+    "slew axis zero": (lambda: control.slew(axis=(0.0, 0.0, 0.0)), V, "axis"),
+    "allocate wheel_axes shape": (lambda: control.allocate_wheel_torques(jnp.zeros(3), jnp.zeros((4, 2)), 0.1), V,
+                                  "wheel_axes"),
+    # --- model constructors ---------------------------------------------------------
+    "engine_model Ts negative": (lambda: engine_model(Ts=-0.01), V, "Ts"),
+    "engine_model Ts NaN": (lambda: engine_model(Ts=float("nan")), V, "Ts"),
+    "vtol_model Ts zero": (lambda: vtol_model(Ts=0.0), V, "Ts"),
+    "vtol_true_plant uncertainty NaN": (lambda: vtol_true_plant(uncertainty=float("nan")), V,
+                                        "uncertainty"),
+    "kitsat3_params dt zero": (lambda: models.kitsat3_params(dt=0.0), V, "dt"),
+    "kitsat3_params inertia negative": (lambda: models.kitsat3_params(inertia=(3.0, -1.0, 4.0)), V, "inertia"),
+    "kitsat3_params wheel_inertia NaN": (lambda: models.kitsat3_params(wheel_inertia=float("nan")), V,
+                                         "wheel_inertia"),
+    "pyramid_axes beta NaN": (lambda: models.pyramid_axes(beta_deg=float("nan")), V, "beta_deg"),
+    "rigid_body_params dt negative": (lambda: models.rigid_body_params(dt=-0.02), V, "dt"),
+    "rigid_body_params inertia zero": (lambda: models.rigid_body_params(inertia=(0.0, 1.0, 1.0)), V, "inertia"),
+    # --- tuning --------------------------------------------------------------------------
+    "positive floor negative": (lambda: tuning.positive(floor=-1.0), V, "floor"),
+    "stochastic_rows empty row": (lambda: tuning.stochastic_rows(jnp.array([[True, False], [False, False]])), V,
+                                  "mask"),
+    "sticky_log_prior concentration negative": (lambda: tuning.sticky_log_prior(
+        jnp.eye(2), jnp.eye(2), -1.0), V, "concentration"),
+    "fit steps negative": (lambda: tuning.fit(lambda raw, b: 0.0, {"a": jnp.zeros(1)}, optax.adam(1e-2),
+                                              lambda i: None, None, steps=-1), V, "steps"),
+    "fit eval_every zero": (lambda: tuning.fit(lambda raw, b: 0.0, {"a": jnp.zeros(1)}, optax.adam(1e-2),
+                                               lambda i: None, None, steps=3, eval_every=0), V, "eval_every"),
+    "fixed_batches batch_size zero": (lambda: tuning.fixed_batches(jnp.zeros((4, 2)), 0, KEY), V, "batch_size"),
+    "mode_cross_entropy floor zero": (lambda: tuning.mode_cross_entropy(jnp.zeros((3, 2)), jnp.zeros(3, int), 0.0), V,
+                                      "floor"),
+    "soft_detection temperature zero": (lambda: tuning.soft_detection_loss(jnp.ones(5), 2.0, 3, temperature=0.0), V,
+                                        "temperature"),
+    "soft_detection weight NaN": (lambda: tuning.soft_detection_loss(jnp.ones(5), 2.0, 3,
+                                                                     false_alarm_weight=float("nan")), V,
+                                  "false_alarm_weight"),
+    "constrain missing key": (lambda: tuning.constrain({"a": tuning.identity()}, {"b": jnp.zeros(1)}), V, "raw"),
+    "from_record unknown transform": (lambda: from_record("exp_map", {}), V, "name"),
+    # --- scenario studies (refused before any computation) ---------------------
+    "engine_study runs zero": (lambda: engine_study(runs=0), V, "runs"),
+    "engine_study seed negative": (lambda: engine_study(runs=2, seed=-1), V, "seed"),
+    "engine_study seed too large": (lambda: engine_study(runs=2, seed=2**64), V, "seed"),
+    "engine_study unknown method": (lambda: engine_study(runs=2, methods=["IMM-magic"]), V, "methods"),
+    "engine_chi2_study pfa zero": (lambda: engine_chi2_study(runs=2, pfa=0.0), V, "pfa"),
+    "engine_chi2_study window float": (lambda: engine_chi2_study(runs=2, window=2.0), T_, "window"),
+    "engine_chi2_study onset after the end": (lambda: engine_chi2_study(runs=2, onset_time=5.0), V, "onset_time"),
+    "engine_chi2_study window longer than a run": (lambda: engine_chi2_study(runs=2, window=500), V, "window"),
+    "tune_engine_chi2 window longer than a run": (lambda: tune_engine_chi2(windows=(1, 1000)), V, "windows"),
+    "tune_engine_chi2 learning_rate NaN": (lambda: tune_engine_chi2(learning_rate=float("nan")), V, "learning_rate"),
+    "tune_engine_imm train_runs zero": (lambda: tune_engine_imm(imm_design("bias"), train_runs=0), V, "train_runs"),
+    "vtol_study runs float": (lambda: vtol_study(runs=2.5), T_, "runs"),
+    "vtol_study unknown method": (lambda: vtol_study(runs=2, methods=["kalman"]), V, "methods"),
+    "wheel_study estimator": (lambda: wheel_study(runs=2, estimator="pf"), V, "estimator"),
+    "wheel_study calibration_runs zero": (lambda: wheel_study(runs=2, calibration_runs=0), V, "calibration_runs"),
+}
+
+
+def test_at_least_100_cases():
+    assert len(CASES) >= 100
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_malformed_call_is_refused(name):
+    thunk, error, argument = CASES[name]
+    with pytest.raises((ValueError, TypeError)) as excinfo:
+        thunk()
+    message = str(excinfo.value)
+    assert type(excinfo.value) is error or isinstance(excinfo.value, error), (
+        f"raised {type(excinfo.value).__name__}, expected {error.__name__}: {message}")
+    assert re.search(rf"(^|[^\w.]){re.escape(argument)}([^\w]|$)", message), (
+        f"message does not name {argument!r}: {message!r}")
+
+
+def test_valid_neighbours_pass():
+    """The checks are not over-eager: valid values at the edge of each family trace."""
+    tiny = jaxfdi.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2)), 1e-24 * jnp.eye(2))
+    assert kf_run(tiny, jnp.zeros(2), jnp.eye(2), jnp.zeros((T, 2)), jnp.zeros((T, 0))).nis.shape == (T,)
+    info = kf_run(mean=jnp.zeros(N, int))                     # an integer mean is promoted, not the cov demoted
+    assert info.filtered_cov.dtype == jnp.result_type(float)
+    skipping = jaxfdi.kalman_filter(MODEL, missing_measurements=True)
+    assert kf_run(ys=YS.at[1, 2].set(jnp.nan), filt=skipping).nis.shape == (T,)   # NaN = missing is valid there
+    assert models.noise_inflation_modes(MODEL, 1.0, 0.0).Q.shape == (1 + NU + M, N, N)
+    assert jaxfdi.fault("stuck", "sensor", 4, 0).onset == 0
+    assert jaxfdi.fault("effectiveness", "actuator", 0, 3, 1.0).magnitude == 1.0
+    assert sim_with(fault(component=M - 1))[1].measurement.shape == (T, M)
+    assert int(metrics.confusion_matrix(jnp.array([0, 2]), jnp.array([-1, 2]), 3).sum()) == 2
+    assert jaxfdi.monte_carlo(lambda key, x: x, KEY, 2, jnp.arange(2), chunk_size=1).shape == (2,)
+    assert float(detection.chi2_threshold(np.int64(4), 0.005)) == pytest.approx(14.86, abs=5e-3)

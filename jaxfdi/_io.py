@@ -1,12 +1,65 @@
-"""Results files are written completely or not at all (temp file + atomic rename)."""
+"""Results files: each written completely or not at all, a study's files published together.
+
+Guarantees (POSIX, one file system):
+
+- ``atomic_write`` / ``write_json``: a file is written to a temporary name in its own
+  folder, then renamed onto its name (``os.replace``, atomic): a reader sees the old
+  file or the new one, never a part. The temporary file is removed on any exception,
+  ``KeyboardInterrupt`` included. The file gets the permissions of a newly created file,
+  ``0o666 & ~umask`` (``mkstemp`` alone would leave 0600).
+- ``study_output(out)``: a study writes into a temporary folder ``out/.jaxfdi-tmp-*``;
+  when it returns, every file is moved into ``out`` (same relative path) by
+  ``os.replace``, JSON files last, with SIGINT/SIGTERM/SIGHUP held back during the moves;
+  when it raises (an error, Ctrl-C, or SIGTERM turned into an exception by the caller),
+  the temporary folder and any folder it created are removed, so ``out`` is left as it
+  was.
+
+What remains non-atomic: several files cannot be replaced in one step on POSIX (only a
+folder rename can, and the output layout is ``out/engine.json``, ``out/engine-*.png``):
+the moves take microseconds, but a process killed by SIGKILL during them leaves some new
+files beside old ones (never a partial file; the JSON, moved last, is new only if every
+other file is). A signal that arrives during the moves is acted on after them (the study
+is then complete in ``out``). SIGKILL during the study itself leaves its
+``.jaxfdi-tmp-*`` folder behind (nothing can run then), never a file under a result name.
+Nothing is fsynced: durability across a power cut is not promised.
+"""
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import shutil
+import signal
 import tempfile
+import threading
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
+
+#: prefix of a study's temporary folder inside its output folder
+TEMP_PREFIX = ".jaxfdi-tmp-"
+#: signals held back while files are published or a temporary folder is removed
+_HELD = tuple(s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s is not None)
+
+
+def current_umask() -> int:
+    """The process umask (from ``/proc/self/status`` where there is one, so that it is
+    read without being changed)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except OSError:
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def file_mode() -> int:
+    """The permissions of a newly created file: ``0o666 & ~umask``."""
+    return 0o666 & ~current_umask()
 
 
 def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
@@ -17,6 +70,7 @@ def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
     os.close(fd)
     try:
         write(tmp)
+        os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -45,3 +99,105 @@ def write_json(path: str | Path, data: Any) -> Path:
             fh.write("\n")
 
     return atomic_write(path, write)
+
+
+def check_output_dir(out: str | Path, name: str = "out") -> None:
+    """Raise ``ValueError`` (``"<name>: expected ..., got ..."``) unless ``out`` can be a
+    study's output folder: a writable folder, or a path that does not exist yet below a
+    writable folder (``study_output`` creates it). Writability is tested by creating and
+    removing a probe file (``os.access`` says yes to root, whatever the permissions);
+    nothing else is created."""
+    out = Path(out)
+    base = out
+    while not base.exists():
+        if base.is_symlink():
+            raise ValueError(f"{name}: expected a folder, got {str(out)!r} ({str(base)!r} is a broken link)")
+        if base.parent == base:
+            break
+        base = base.parent
+    if not base.is_dir():
+        where = "a file" if base == out else f"below the file {str(base)!r}"
+        raise ValueError(f"{name}: expected a folder, got {str(out)!r}, which is {where}")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".jaxfdi-probe-", dir=base)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        where = "" if base == out else f" (to be created in {str(base)!r})"
+        raise ValueError(f"{name}: expected a writable folder, got {str(out)!r}{where}: "
+                         f"{e.strerror or e}") from None
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT/SIGTERM/SIGHUP back (delivered on exit) in the main thread, so that a
+    publication or a clean-up is not cut in half; elsewhere a no-op."""
+    if not _HELD or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _publish(tmp: Path, out: Path) -> list[Path]:
+    """Move every file under ``tmp`` to the same place under ``out``, JSON last; checks
+    first that no target is a folder, so that a clash fails before any move."""
+    files = sorted((p for p in tmp.rglob("*") if not p.is_dir()), key=lambda p: (p.suffix == ".json", str(p)))
+    targets = [out / p.relative_to(tmp) for p in files]
+    clash = [str(t) for t in targets if t.is_dir() and not t.is_symlink()]
+    if clash:
+        raise IsADirectoryError(f"cannot write the study's files: {clash} are folders")
+    mode = file_mode()
+    for source, target in zip(files, targets):
+        os.chmod(source, mode)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(source, target)
+    return targets
+
+
+@contextlib.contextmanager
+def study_output(out: str | Path) -> Iterator[Path]:
+    """A temporary folder inside ``out`` for a study's files, published together.
+
+    ``with study_output("results") as folder:`` write the study's files into
+    ``folder``; on a normal exit they are moved into ``results`` (created if needed;
+    JSON files last, signals held back during the moves); on an exception (``KeyboardInterrupt``
+    included) nothing is moved, and the temporary folder and the folders this call
+    created are removed: ``out`` is as it was. See the module docstring for what is
+    atomic and what is not.
+    """
+    out = Path(out)
+    created = []
+    missing = out
+    while not missing.exists():
+        created.append(missing)
+        missing = missing.parent
+    tmp = None
+    try:
+        with _signals_held():
+            out.mkdir(parents=True, exist_ok=True)
+            tmp = Path(tempfile.mkdtemp(prefix=TEMP_PREFIX, dir=out))
+        yield tmp
+    except BaseException:
+        with _signals_held():
+            _remove(tmp, created)
+        raise
+    with _signals_held():
+        try:
+            _publish(tmp, out)
+        except BaseException:
+            _remove(tmp, created)  # a folder that received a file before the failure stays
+            raise
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _remove(tmp: Path | None, created: list[Path]) -> None:
+    """The temporary folder, and the folders ``study_output`` created if still empty."""
+    if tmp is not None:
+        shutil.rmtree(tmp, ignore_errors=True)
+    for folder in created:  # innermost first
+        with contextlib.suppress(OSError):
+            folder.rmdir()

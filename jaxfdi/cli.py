@@ -1,13 +1,87 @@
-"""Command line: ``jaxfdi run <scenario>``, ``jaxfdi tune <target>``, ``jaxfdi list``."""
+"""Command line: ``jaxfdi run <scenario>``, ``jaxfdi tune <target>``, ``jaxfdi list``.
+
+Every option is checked before anything is computed (``check_options``, then the
+scenario's method or parameter names); a bad one ends the command with exit status 2
+and one line on stderr, ``jaxfdi: --option: expected ..., got ...``. A study writes its
+files into a temporary folder inside ``--out``, published together when it is done
+(``jaxfdi._io.study_output``); SIGINT, SIGTERM and SIGHUP leave ``--out`` as it was.
+A new scenario is a ``Runner`` in ``RUNNERS`` (a tuning target one in ``TUNERS``): its
+``run(args, folder)`` writes into ``folder`` and gets all of this for free.
+"""
 from __future__ import annotations
 
+import _thread
 import argparse
+import contextlib
+import linecache
+import math
+import os
+import signal
 import sys
+import threading
 import time
-from typing import Callable
 from pathlib import Path
+from typing import Callable, Iterator, NamedTuple, Sequence
 
 import numpy as np
+
+from jaxfdi import _io
+from jaxfdi._checks import MAX_SEED  # seeds: see its comment
+
+#: the largest count an option takes (runs, steps, windows: JAX indexes them in int32)
+MAX_COUNT = 2**31 - 1
+#: integer options: dest -> (lowest, highest)
+INTEGER_RANGES = {"runs": (1, MAX_COUNT), "seed": (0, MAX_SEED), "window": (1, MAX_COUNT), "steps": (1, MAX_COUNT),
+                  "train_runs": (1, MAX_COUNT), "selection_runs": (1, MAX_COUNT)}
+#: real options: dest -> (lowest, highest, lowest allowed, highest allowed); NaN and inf never
+FLOAT_RANGES = {"pfa": (0.0, 1.0, False, False), "detection_weight": (0.0, math.inf, True, False),
+                "false_alarm_weight": (0.0, math.inf, True, False), "delay_weight": (0.0, math.inf, True, False),
+                "isolation_weight": (0.0, math.inf, True, False)}
+#: options only some scenarios read: dest -> default. The parser's default is None, so that
+#: an option given to a scenario that does not read it is refused rather than ignored.
+RUN_SPECIFIC = {"methods": None, "window": 4, "pfa": 0.005, "estimator": "ekf", "engage_on": "nis"}
+TUNE_SPECIFIC = {"design": "all", "detection_weight": 1.0, "isolation_weight": 5.0, "confirm_steps": 1,
+                 "freeze": "", "select_thresholds": False, "selection_runs": 100, "windows": "1,2,4,8"}
+#: engine-imm's --confirm-steps: one length, or one per mode (normal, actuator, RPM, P2, T2, P4, T4)
+NUM_ENGINE_MODES = 7
+
+
+class Runner(NamedTuple):
+    """A ``jaxfdi run`` scenario or ``jaxfdi tune`` target.
+
+    ``run(args, folder)`` computes, prints its tables, writes its files into ``folder``
+    (a temporary folder, published into ``--out`` once ``run`` returns) and returns the
+    line that names them under ``--out`` (printed once they are in place). ``options``:
+    the scenario-specific options it reads (dest names of ``RUN_SPECIFIC`` or
+    ``TUNE_SPECIFIC``; the others are refused). ``methods``: the valid ``--methods``
+    names (imported lazily; ``None``: one method, no ``--methods``). ``check(args)``:
+    further checks that need the scenario's module, raising ``UsageError`` (``expected``)."""
+    run: Callable[[argparse.Namespace, Path], str]
+    help: str
+    options: tuple[str, ...] = ()
+    methods: Callable[[], Sequence[str]] | None = None
+    check: Callable[[argparse.Namespace], None] | None = None
+
+
+class UsageError(Exception):
+    """A bad option value, exit status 2; the message reads ``--option: expected ..., got ...``."""
+
+
+def expected(option: str, what: str, got) -> UsageError:
+    """``UsageError("<option>: expected <what>, got <got>")``."""
+    return UsageError(f"{option}: expected {what}, got {got}")
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised in the main thread like Ctrl-C, so that clean-up runs."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _flag(dest: str) -> str:
+    return "--" + dest.replace("_", "-")
 
 
 def _confirm_steps(text: str):
@@ -21,19 +95,21 @@ def _as_lists(mapping: dict) -> dict:
     return {k: np.asarray(v).tolist() for k, v in mapping.items()}
 
 
-def _write_study(study, json_path: Path, plot: Callable[[], list[str]], elapsed: float) -> int:
-    """A scenario study's JSON (config, rows, seconds; written whole or not at all) and
-    figures, and the line that names them."""
-    from jaxfdi import _io
-
-    _io.write_json(json_path, {"config": study.config, "rows": study.rows, "seconds": elapsed})
-    paths = plot()
-    print(f"wrote {json_path} and {', '.join(paths)} ({elapsed:.1f} s)")
-    return 0
+def _named(args: argparse.Namespace, folder: Path, path) -> Path:
+    """Where a file written into ``folder`` lands under ``--out``."""
+    return Path(args.out) / Path(path).relative_to(folder)
 
 
-def _run_engine_chi2(args: argparse.Namespace) -> int:
-    from jaxfdi import _io
+def _write_study(study, args: argparse.Namespace, folder: Path, name: str, plot: Callable[[Path], list[str]],
+                 elapsed: float) -> str:
+    """A scenario study's JSON (config, rows, seconds) and figures, and the line that
+    names them."""
+    _io.write_json(folder / name, {"config": study.config, "rows": study.rows, "seconds": elapsed})
+    paths = [str(_named(args, folder, p)) for p in plot(folder)]
+    return f"wrote {Path(args.out) / name} and {', '.join(paths)} ({elapsed:.1f} s)"
+
+
+def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
     from jaxfdi.scenarios.engine_chi2 import engine_chi2_study, plot_engine_chi2
 
     start = time.perf_counter()
@@ -45,10 +121,9 @@ def _run_engine_chi2(args: argparse.Namespace) -> int:
     print(f"engine-chi2: KF chi-square test on the seed-003 turbojet, {args.runs} runs per fault, "
           f"window {result.config['window']}, Pfa {result.config['pfa']}, threshold {result.config['threshold']:.2f}")
     print(result.table())
-    _io.write_json(out / "engine-chi2.json", {"config": result.config, "rows": result.rows, "seconds": elapsed})
-    _io.atomic_write(out / "engine-chi2.png", lambda tmp: plot_engine_chi2(result, tmp))
-    print(f"wrote {out / 'engine-chi2.json'} and {out / 'engine-chi2.png'} ({elapsed:.1f} s)")
-    return 0
+    _io.write_json(folder / "engine-chi2.json", {"config": result.config, "rows": result.rows, "seconds": elapsed})
+    _io.atomic_write(folder / "engine-chi2.png", lambda tmp: plot_engine_chi2(result, tmp))
+    return f"wrote {out / 'engine-chi2.json'} and {out / 'engine-chi2.png'} ({elapsed:.1f} s)"
 
 
 def split_methods(text: str, valid: list[str]) -> tuple[list[str], list[str]]:
@@ -69,30 +144,36 @@ def split_methods(text: str, valid: list[str]) -> tuple[list[str], list[str]]:
 
 
 def _methods_option(args: argparse.Namespace) -> dict:
-    """``{"methods": [...]}`` when the user gave ``--methods``, else ``{}`` (so a study
-    without that keyword still runs)."""
-    if args.methods is None:
-        return {}
-    return {"methods": [name.strip() for name in args.methods.split(",") if name.strip()]}
+    """``{"methods": [...]}`` when the user gave ``--methods`` (checked by ``main``),
+    else ``{}`` (so a study without that keyword still runs)."""
+    return {} if args.methods is None else {"methods": list(args.methods)}
 
 
-def _run_engine(args: argparse.Namespace) -> int:
-    from jaxfdi.scenarios.engine import engine_methods, engine_study, plot_engine
+def _engine_method_names() -> list[str]:
+    from jaxfdi.scenarios.engine import engine_method_names
 
-    options = {}
-    if args.methods is not None:
-        valid = list(engine_methods())
-        chosen, unknown = split_methods(args.methods, valid)
-        if unknown or not chosen:
-            print(f"jaxfdi: --methods: unknown {unknown or repr(args.methods)}; valid names (comma-separated): "
-                  + "; ".join(valid), file=sys.stderr)
-            return 2
-        options["methods"] = chosen
+    return engine_method_names()
+
+
+def _vtol_method_names() -> list[str]:
+    from jaxfdi.scenarios.vtol import METHODS
+
+    return list(METHODS)
+
+
+def _wheel_method_names() -> list[str]:
+    from jaxfdi.scenarios.reaction_wheels import METHODS
+
+    return list(METHODS)
+
+
+def _run_engine(args: argparse.Namespace, folder: Path) -> str:
+    from jaxfdi.scenarios.engine import engine_study, plot_engine
+
     start = time.perf_counter()
     study = engine_study(runs=args.runs, seed=args.seed, figure_runs=min(args.runs, 20), progress=not args.quiet,
-                         **options)
+                         **_methods_option(args))
     elapsed = time.perf_counter() - start
-    out = Path(args.out)
     print(f"engine: seed-003 turbojet, MM / IMM (two mode designs) / GLRT on the same {args.runs} runs per fault, "
           f"mu_T = {study.config['settings']['mu_threshold']}")
     print(study.overview())
@@ -100,30 +181,45 @@ def _run_engine(args: argparse.Namespace) -> int:
     print("Per method and fault; 'paper' = seed 003 Table 3 median delay [s]; FA = share of runs with an alarm "
           "before the onset; estimate = median over correctly isolated runs")
     print(study.table())
-    return _write_study(study, out / "engine.json", lambda: plot_engine(study, out), elapsed)
+    return _write_study(study, args, folder, "engine.json", lambda where: plot_engine(study, where), elapsed)
 
 
-def _tune_engine_imm(args: argparse.Namespace) -> int:
-    from jaxfdi import _io
+def _engine_imm_designs(args: argparse.Namespace) -> list[str]:
+    from jaxfdi.scenarios import engine_tuning as et
+
+    return sorted(et.DESIGNS) if args.design == "all" else [args.design]
+
+
+def _check_engine_imm(args: argparse.Namespace) -> None:
+    """``--freeze``: parameter names of every chosen design, leaving one to train."""
+    from jaxfdi.scenarios import engine_tuning as et
+
+    frozen = tuple(name.strip() for name in args.freeze.split(",") if name.strip())
+    for name in _engine_imm_designs(args):
+        params = sorted(et.imm_design(name).parameterization)
+        unknown = sorted(set(frozen) - set(params))
+        if unknown:
+            raise expected("--freeze", f"parameter names of design {name}, comma-separated, among {params}",
+                             f"unknown {unknown}")
+        if set(params) <= set(frozen):
+            raise expected("--freeze", f"at least one parameter of design {name} left to train", repr(args.freeze))
+    args.freeze = frozen
+
+
+def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
     from jaxfdi.scenarios import engine_tuning as et
     from jaxfdi.tuning import constrain, save_params, unconstrain
 
-    out = Path(args.out)
     test_seed = args.seed + 1000
-    names = sorted(et.DESIGNS) if args.design == "all" else [args.design]
+    frozen = args.freeze
     report, paths = {}, []
-    for name in names:
+    weights = et.LossWeights(detection=args.detection_weight, false_alarm=args.false_alarm_weight,
+                             delay=args.delay_weight, isolation=args.isolation_weight)
+    for name in _engine_imm_designs(args):
         start = time.perf_counter()
         design = et.imm_design(name)
         if not args.quiet:
             print(f"{name}: training", file=sys.stderr, flush=True)
-        weights = et.LossWeights(detection=args.detection_weight, false_alarm=args.false_alarm_weight,
-                                 delay=args.delay_weight, isolation=args.isolation_weight)
-        frozen = tuple(name for name in args.freeze.split(",") if name)
-        if set(frozen) - set(design.parameterization):
-            print(f"jaxfdi: --freeze: design {name} has no parameter(s) {sorted(set(frozen) - set(design.parameterization))}; "
-                  f"it has {sorted(design.parameterization)}", file=sys.stderr)
-            return 2
         result = et.tune_engine_imm(design, steps=args.steps, train_runs=args.train_runs, seed=args.seed,
                                     weights=weights, progress=not args.quiet, confirm_steps=args.confirm_steps,
                                     frozen=frozen)
@@ -152,7 +248,7 @@ def _tune_engine_imm(args: argparse.Namespace) -> int:
                   f"{selection['shortfall']['selected']:.3f}")
         print(et.comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce))
         print(f"worse than the paper's: {', '.join(worse) if worse else 'none'}\n")
-        paths.append(save_params(out / f"engine-imm-{name}-tuned.npz", result.raw, design.parameterization,
+        paths.append(save_params(folder / f"engine-imm-{name}-tuned.npz", result.raw, design.parameterization,
                                  {"best_step": result.history.best_step, "seed": args.seed, "design": name,
                                   "confirm_steps": args.confirm_steps}))
         report[name] = {
@@ -164,18 +260,17 @@ def _tune_engine_imm(args: argparse.Namespace) -> int:
     config = {"steps": args.steps, "train_runs": args.train_runs, "test_runs": args.runs, "seed": args.seed,
               "test_seed": test_seed, "weights": weights._asdict(), "confirm_steps": args.confirm_steps,
               "select_thresholds": args.select_thresholds, "selection_runs": args.selection_runs}
-    _io.write_json(out / "engine-imm-tuning.json", {"config": config, "designs": report})
-    print(f"wrote {', '.join(map(str, paths))} and {out / 'engine-imm-tuning.json'}")
-    return 0
+    _io.write_json(folder / "engine-imm-tuning.json", {"config": config, "designs": report})
+    named = ", ".join(str(_named(args, folder, p)) for p in paths)
+    return f"wrote {named} and {Path(args.out) / 'engine-imm-tuning.json'}"
 
 
-def _tune_engine_chi2(args: argparse.Namespace) -> int:
-    from jaxfdi import _io
+def _tune_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
     from jaxfdi.scenarios import engine_chi2_tuning as ct
     from jaxfdi.tuning import constrain, save_params
 
     start = time.perf_counter()
-    windows = tuple(int(w) for w in args.windows.split(","))
+    windows = args.windows
     weights = ct.Chi2Weights(false_alarm=args.false_alarm_weight, delay=args.delay_weight)
     tuning = ct.tune_engine_chi2(windows, steps=args.steps, train_runs=args.train_runs, seed=args.seed,
                                  weights=weights, progress=not args.quiet)
@@ -190,20 +285,19 @@ def _tune_engine_chi2(args: argparse.Namespace) -> int:
           + ", ".join(f"L={w}: {v:.4f}" for w, v in tuning.val_loss.items())
           + f"; held-out test: {args.runs} runs per fault (seed {test_seed})")
     print(ct.comparison_table(hand_rows, tuned_rows, ct.HAND_WINDOW, tuning.window, hand_loss, tuned_loss))
-    path = save_params(out / "engine-chi2-tuned.npz", tuning.result.raw, ct.PARAMETERIZATION,
-                       {"best_step": tuning.result.history.best_step, "seed": args.seed, "window": tuning.window})
-    _io.write_json(out / "engine-chi2-tuning.json", {
+    save_params(folder / "engine-chi2-tuned.npz", tuning.result.raw, ct.PARAMETERIZATION,
+                {"best_step": tuning.result.history.best_step, "seed": args.seed, "window": tuning.window})
+    _io.write_json(folder / "engine-chi2-tuning.json", {
         "config": {"steps": args.steps, "train_runs": args.train_runs, "test_runs": args.runs, "seed": args.seed,
                    "test_seed": test_seed, "windows": list(windows), "weights": weights._asdict()},
         "window": tuning.window, "val_loss": {str(w): v for w, v in tuning.val_loss.items()},
         "hand": hand_rows, "tuned": tuned_rows, "held_out_loss": {"hand": hand_loss, "tuned": tuned_loss},
         "history": _as_lists(tuning.result.history._asdict()), "hand_params": _as_lists(ct.hand_params()),
         "tuned_params": _as_lists(tuned), "seconds": elapsed})
-    print(f"wrote {path} and {out / 'engine-chi2-tuning.json'} ({elapsed:.1f} s)")
-    return 0
+    return f"wrote {out / 'engine-chi2-tuned.npz'} and {out / 'engine-chi2-tuning.json'} ({elapsed:.1f} s)"
 
 
-def _run_vtol(args: argparse.Namespace) -> int:
+def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
     from jaxfdi.scenarios.vtol import plot_vtol, vtol_design, vtol_examples, vtol_study
 
     start = time.perf_counter()
@@ -212,7 +306,6 @@ def _run_vtol(args: argparse.Namespace) -> int:
     examples = vtol_examples(study.design, seed=args.seed)
     elapsed = time.perf_counter() - start
     cfg = study.config
-    out = Path(args.out)
     print(f"vtol: seed-001 VTOL, bank of 12 robust TSKFs (multiplicative + additive per location), "
           f"{args.runs} closed-loop runs per fault with FTC off and on; statistic chi2({cfg['dof']}): "
           f"chi2 thresholds {cfg['chi2_threshold']:.2f} / window {cfg['chi2_window_threshold']:.2f}, paper's "
@@ -227,10 +320,11 @@ def _run_vtol(args: argparse.Namespace) -> int:
     print(study.table())
     print()
     print(study.headline())
-    return _write_study(study, out / "vtol.json", lambda: plot_vtol(study, examples, study.design, out), elapsed)
+    return _write_study(study, args, folder, "vtol.json",
+                        lambda where: plot_vtol(study, examples, study.design, where), elapsed)
 
 
-def _run_reaction_wheels(args: argparse.Namespace) -> int:
+def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
     from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_examples, wheel_study
 
     start = time.perf_counter()
@@ -241,7 +335,6 @@ def _run_reaction_wheels(args: argparse.Namespace) -> int:
     examples = wheel_examples(design, seed=args.seed, estimator=args.estimator, engage_on=args.engage_on)
     elapsed = time.perf_counter() - start
     cfg = study.config
-    out = Path(args.out)
     print(f"reaction-wheels: seed-004 KITSAT-3 with a 4-wheel pyramid, {cfg['slew_deg']:.0f} deg slew in 40 s, "
           f"60 s at 10 Hz, {args.runs} runs per case (noise and onset uniform in 15-25 s); estimation filter "
           f"{args.estimator.upper()}, banks engaged on the {'NIS test' if args.engage_on == 'nis' else 'dual filter F'}")
@@ -254,24 +347,49 @@ def _run_reaction_wheels(args: argparse.Namespace) -> int:
     print(study.table())
     print()
     print(study.headline())
-    return _write_study(study, out / "reaction-wheels.json", lambda: plot_wheels(study, examples, out), elapsed)
+    return _write_study(study, args, folder, "reaction-wheels.json",
+                        lambda where: plot_wheels(study, examples, where), elapsed)
 
 
-RUNNERS = {"engine": _run_engine, "engine-chi2": _run_engine_chi2, "reaction-wheels": _run_reaction_wheels,
-           "vtol": _run_vtol}
-TUNERS = {"engine-chi2": _tune_engine_chi2, "engine-imm": _tune_engine_imm}
+RUNNERS = {
+    "engine": Runner(_run_engine, "seed-003 turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
+                                  "the paper's Table 3", methods=_engine_method_names),
+    "engine-chi2": Runner(_run_engine_chi2, "seed-003 turbojet: the Kalman-filter chi-square test (--window, --pfa)",
+                          options=("window", "pfa")),
+    "reaction-wheels": Runner(_run_reaction_wheels, "seed-004 satellite, 4-wheel pyramid: dual filter F, NIS, "
+                              "credits, MM isolator (--estimator, --engage-on)", options=("estimator", "engage_on"),
+                              methods=_wheel_method_names),
+    "vtol": Runner(_run_vtol, "seed-001 VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
+                              "fault-tolerant control", methods=_vtol_method_names),
+}
+TUNERS = {
+    "engine-chi2": Runner(_tune_engine_chi2, "Q, R and the threshold of the engine chi-square test by gradient, "
+                                             "window by validation", options=("windows",)),
+    "engine-imm": Runner(_tune_engine_imm, "the engine IMMs' transition matrix, mode noise and mu_T by gradient "
+                                           "(--design)",
+                         options=("design", "detection_weight", "isolation_weight", "confirm_steps", "freeze",
+                                  "select_thresholds", "selection_runs"), check=_check_engine_imm),
+}
 #: one line per scenario and tuning target, for ``jaxfdi --help``
-RUN_HELP = {
-    "engine": "seed-003 turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside the paper's Table 3",
-    "engine-chi2": "seed-003 turbojet: the Kalman-filter chi-square test (--window, --pfa)",
-    "reaction-wheels": "seed-004 satellite, 4-wheel pyramid: dual filter F, NIS, credits, MM isolator "
-                       "(--estimator, --engage-on)",
-    "vtol": "seed-001 VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI fault-tolerant control",
-}
-TUNE_HELP = {
-    "engine-chi2": "Q, R and the threshold of the engine chi-square test by gradient, window by validation",
-    "engine-imm": "the engine IMMs' transition matrix, mode noise and mu_T by gradient (--design)",
-}
+RUN_HELP = {name: runner.help for name, runner in RUNNERS.items()}
+TUNE_HELP = {name: runner.help for name, runner in TUNERS.items()}
+
+#: ``jaxfdi --help``'s account of the checks and exit statuses (no line may start with
+#: two spaces: the help test reads those as tuning targets)
+CHECKS_HELP = """\
+Options are checked before anything is computed: integers in range (--runs, --train-runs,
+--selection-runs, --steps, --window, --windows, --confirm-steps >= 1; --seed in
+[0, 4294967295]), real numbers finite (--pfa in (0, 1), loss weights >= 0), --methods and
+--freeze names, --out a writable folder or one that can be created (not a file), and
+options the scenario does not read are refused; so are values the library rejects.
+
+Exit status: 0 done; 2 bad usage or option value, one line on stderr
+'jaxfdi: --option: expected ..., got ...', nothing computed or written; 1 an error (a
+traceback). On SIGINT, SIGTERM or SIGHUP it cleans up, prints one line and ends by that
+signal (a shell shows 130, 143, 129). A study's files are written into a temporary
+folder inside --out and moved into place together when it is done (JSON last), with the
+usual permissions (0666 minus the umask); an interrupted or failed study leaves --out as
+it was. --traceback: a traceback instead of the one line."""
 
 
 def _listing(title: str, entries: dict[str, str]) -> str:
@@ -285,106 +403,250 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="\n\n".join([_listing("scenarios (jaxfdi run <scenario>):", RUN_HELP),
                              _listing("tuning targets (jaxfdi tune <target>):", TUNE_HELP),
-                             "jaxfdi run -h / jaxfdi tune -h: the options"]))
+                             "jaxfdi run -h / jaxfdi tune -h: the options", CHECKS_HELP]))
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a paper scenario end to end", formatter_class=argparse.RawDescriptionHelpFormatter,
-                         epilog=_listing("scenarios:", RUN_HELP))
+                         epilog="\n\n".join([_listing("scenarios:", RUN_HELP), CHECKS_HELP]))
     run.add_argument("scenario", choices=sorted(RUNNERS))
     run.add_argument("--methods", default=None,
                      help="run only these methods, comma-separated (engine, vtol, reaction-wheels; default all; "
                           "an unknown name lists the valid ones)")
-    run.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per fault (default 100)")
-    run.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+    run.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per fault, >= 1 (default 100)")
+    run.add_argument("--seed", type=int, default=0, help="PRNG seed in [0, 2**32 - 1] (default 0)")
     run.add_argument("--out", default="results", help="output folder for JSON and PNG (default ./results)")
-    run.add_argument("--window", type=int, default=4, help="engine-chi2: window length in steps (default 4)")
-    run.add_argument("--pfa", type=float, default=0.005, help="engine-chi2: design false-alarm probability (default 0.005)")
-    run.add_argument("--estimator", default="ekf", choices=["ekf", "ukf"],
+    run.add_argument("--window", type=int, default=None, help="engine-chi2: window length in steps, >= 1 (default 4)")
+    run.add_argument("--pfa", type=float, default=None,
+                     help="engine-chi2: design false-alarm probability in (0, 1) (default 0.005)")
+    run.add_argument("--estimator", default=None, choices=["ekf", "ukf"],
                      help="reaction-wheels: the estimation filter (default ekf, the paper's)")
-    run.add_argument("--engage-on", default="nis", choices=["nis", "fdp"],
+    run.add_argument("--engage-on", default=None, choices=["nis", "fdp"],
                      help="reaction-wheels: the detector that engages the hypothesis banks (default nis; fdp = "
                           "the paper's F)")
     run.add_argument("--quiet", action="store_true", help="no progress display")
+    run.add_argument("--traceback", action="store_true",
+                     help="on an error the library reports as a bad argument, a traceback instead of one line")
     tune = sub.add_parser("tune", help="tune a scenario's filter and detector by gradient, then compare on held-out runs",
                           formatter_class=argparse.RawDescriptionHelpFormatter,
-                          epilog=_listing("tuning targets:", TUNE_HELP))
+                          epilog="\n\n".join([_listing("tuning targets:", TUNE_HELP), CHECKS_HELP]))
     tune.add_argument("target", choices=sorted(TUNERS))
-    tune.add_argument("--steps", type=int, default=150, help="optimiser steps (default 150)")
-    tune.add_argument("--train-runs", type=int, default=16, help="training runs per fault (default 16)")
-    tune.add_argument("--runs", type=int, default=100, help="held-out test runs per fault (default 100)")
-    tune.add_argument("--seed", type=int, default=0, help="training seed; validation seed+1, test seed+1000")
+    tune.add_argument("--steps", type=int, default=150, help="optimiser steps, >= 1 (default 150)")
+    tune.add_argument("--train-runs", type=int, default=16, help="training runs per fault, >= 1 (default 16)")
+    tune.add_argument("--runs", type=int, default=100, help="held-out test runs per fault, >= 1 (default 100)")
+    tune.add_argument("--seed", type=int, default=0,
+                      help="training seed in [0, 2**32 - 1]; validation seed+1, test seed+1000")
     tune.add_argument("--out", default="results", help="output folder (default ./results)")
-    tune.add_argument("--design", default="all", choices=["all", "bias", "zhang-li"],
+    tune.add_argument("--design", default=None, choices=["all", "bias", "zhang-li"],
                       help="engine-imm: which IMM mode design (default all)")
-    tune.add_argument("--detection-weight", type=float, default=1.0,
+    tune.add_argument("--detection-weight", type=float, default=None,
                       help="engine-imm: weight of the soft detection loss against the mode cross-entropy "
                            "(default 1; 0 trains on the cross-entropy alone)")
     tune.add_argument("--false-alarm-weight", type=float, default=5.0,
-                      help="loss weight of P(alarm before the onset) (default 5)")
+                      help="loss weight of P(alarm before the onset), finite, >= 0 (default 5)")
     tune.add_argument("--delay-weight", type=float, default=1.0,
-                      help="loss weight of the expected delay / steps after the onset (default 1)")
-    tune.add_argument("--confirm-steps", type=_confirm_steps, default=1,
+                      help="loss weight of the expected delay / steps after the onset, finite, >= 0 (default 1)")
+    tune.add_argument("--confirm-steps", type=_confirm_steps, default=None,
                       help="engine-imm: the tuned detector alarms once the same fault mode has led at or above "
                            "mu_T for this many steps; trained for it (default 1, the paper's rule); or 7 "
                            "comma-separated lengths, one per mode (normal, actuator, RPM, P2, T2, P4, T4)")
-    tune.add_argument("--freeze", default="",
+    tune.add_argument("--freeze", default=None,
                       help="engine-imm: parameters kept at their hand-set values, comma-separated "
                            "(e.g. mu_threshold)")
-    tune.add_argument("--select-thresholds", action="store_true",
+    tune.add_argument("--select-thresholds", action="store_true", default=None,
                       help="engine-imm: after training, choose one mu_T per fault mode on selection runs "
                            "(seed+2) so that no reported metric is worse than the paper's there")
-    tune.add_argument("--selection-runs", type=int, default=100,
-                      help="engine-imm: runs per fault for --select-thresholds (default 100)")
-    tune.add_argument("--isolation-weight", type=float, default=5.0,
-                      help="engine-imm: loss weight of P(first alarm names the wrong fault) (default 5)")
-    tune.add_argument("--windows", default="1,2,4,8",
+    tune.add_argument("--selection-runs", type=int, default=None,
+                      help="engine-imm: runs per fault for --select-thresholds, >= 1 (default 100)")
+    tune.add_argument("--isolation-weight", type=float, default=None,
+                      help="engine-imm: loss weight of P(first alarm names the wrong fault), finite, >= 0 (default 5)")
+    tune.add_argument("--windows", default=None,
                       help="engine-chi2: window lengths to try, comma-separated (default 1,2,4,8)")
     tune.add_argument("--quiet", action="store_true", help="no progress display")
+    tune.add_argument("--traceback", action="store_true",
+                      help="on an error the library reports as a bad argument, a traceback instead of one line")
     sub.add_parser("list", help="list the scenarios")
     return parser
 
 
+def _interval(low: float, high: float, low_ok: bool, high_ok: bool) -> str:
+    if high == math.inf:
+        return f">= {low:g}" if low_ok else f"> {low:g}"
+    return f"{'[' if low_ok else '('}{low:g}, {high:g}{']' if high_ok else ')'}"
+
+
+def _counts(option: str, text: str) -> tuple[int, ...]:
+    """Comma-separated integers in [1, MAX_COUNT] (``--windows``)."""
+    parts = [part.strip() for part in text.split(",")]
+    if not all(part.isdigit() and 1 <= int(part) <= MAX_COUNT for part in parts):
+        raise expected(option, f"integers in [1, {MAX_COUNT}] separated by commas", repr(text))
+    return tuple(int(part) for part in parts)
+
+
+def check_options(args: argparse.Namespace, kind: str, name: str, runner: Runner) -> None:
+    """Refuse what ``jaxfdi <kind> <name>`` cannot use (``UsageError``): an option the
+    scenario does not read, an integer out of range, a real number that is not finite
+    or out of range, a malformed list, an output folder that cannot be written. Fills
+    in the defaults of the scenario-specific options. Pure Python: nothing imported,
+    nothing computed, nothing left behind (a probe file tests ``--out``)."""
+    specific = RUN_SPECIFIC if kind == "run" else TUNE_SPECIFIC
+    registry = RUNNERS if kind == "run" else TUNERS
+    reads = set(runner.options) | ({"methods"} if runner.methods is not None else set())
+    for dest, default in specific.items():
+        value = getattr(args, dest)
+        if value is None:
+            setattr(args, dest, default)
+        elif dest not in reads:
+            if dest == "methods":
+                raise expected("--methods", f"none: {name} has one method", repr(value))
+            users = sorted(n for n, r in registry.items() if dest in r.options)
+            raise expected(_flag(dest), f"no value: {kind} {name} does not read it (read by {', '.join(users)})",
+                           repr(value))
+    for dest, (low, high) in INTEGER_RANGES.items():
+        value = getattr(args, dest, None)
+        if value is not None and not low <= value <= high:
+            raise expected(_flag(dest), f"an integer in [{low}, {high}]", value)
+    for dest, bounds in FLOAT_RANGES.items():
+        value = getattr(args, dest, None)
+        if value is None:
+            continue
+        low, high, low_ok, high_ok = bounds
+        inside = (value >= low if low_ok else value > low) and (value <= high if high_ok else value < high)
+        if not (math.isfinite(value) and inside):
+            raise expected(_flag(dest), f"a finite number {'in ' if high < math.inf else ''}"
+                                        f"{_interval(*bounds)}", value)
+    if kind == "tune":
+        steps = args.confirm_steps
+        values = steps if isinstance(steps, tuple) else (steps,)
+        if len(values) not in (1, NUM_ENGINE_MODES) or not all(1 <= v <= MAX_COUNT for v in values):
+            raise expected("--confirm-steps", f"one integer >= 1 or {NUM_ENGINE_MODES} of them, comma-separated "
+                                              "(one per mode)", repr(",".join(map(str, values))))
+        args.windows = _counts("--windows", args.windows)
+    try:
+        _io.check_output_dir(args.out, "--out")
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+
+
+def _raised_by_jaxfdi(error: BaseException) -> bool:
+    """Whether ``error`` comes from a ``raise`` statement in jaxfdi's own code (its
+    argument checks), not from inside JAX, NumPy or Python (a bug: shown as a traceback)."""
+    tb = error.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    path = Path(tb.tb_frame.f_code.co_filename)
+    package = Path(__file__).resolve().parent
+    inside = path.resolve().is_relative_to(package) if path.is_absolute() else False
+    return inside and linecache.getline(str(path), tb.tb_lineno).lstrip().startswith("raise")
+
+
+@contextlib.contextmanager
+def _signals_raise() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise ``Terminated`` (SIGINT raises ``KeyboardInterrupt`` as
+    usual) in the main thread, so that the clean-up in ``_io.study_output`` runs; a signal
+    set to be ignored (``nohup``) stays ignored. The previous handlers come back on exit.
+
+    Python runs a signal handler at the next bytecode of the main thread, which may be a
+    garbage-collector callback or a ``__del__`` (JAX's ``_xla_gc_callback``): there the
+    exception is printed and dropped, and the study would go on to publish its files. So
+    while this is active, a dropped ``KeyboardInterrupt`` (``Terminated`` included) is
+    delivered again 10 ms later (``_thread.interrupt_main`` from a timer thread), until it
+    lands in ordinary code."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def raise_terminated(signum, frame):
+        raise Terminated(signum)
+
+    def deliver_again(unraisable):
+        error = unraisable.exc_value
+        if isinstance(error, KeyboardInterrupt):  # from another thread: not inside this hook again
+            signum = error.signum if isinstance(error, Terminated) else signal.SIGINT
+            threading.Timer(0.01, _thread.interrupt_main, (signum,)).start()
+        else:
+            previous_hook(unraisable)
+
+    previous = {}
+    for name in ("SIGTERM", "SIGHUP"):
+        signum = getattr(signal, name, None)
+        if signum is not None and signal.getsignal(signum) == signal.SIG_DFL:
+            previous[signum] = signal.signal(signum, raise_terminated)
+    previous_hook, sys.unraisablehook = sys.unraisablehook, deliver_again
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous_hook
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _fail(message: str, status: int) -> int:
+    print(f"jaxfdi: {' '.join(message.split())}", file=sys.stderr)
+    return status
+
+
+def _die_by(signum: int) -> None:
+    """End the process by ``signum``'s default action, now: the parent sees it killed by
+    the signal (a shell: status 128 + signum), as the convention for SIGINT asks, and the
+    interpreter does not shut down while XLA may still be compiling in a worker thread
+    (that shutdown can crash: the worker calls back into a finalised interpreter)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    signal.signal(signum, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signum})
+    os.kill(os.getpid(), signum)
+    os._exit(128 + signum)  # not reached unless the signal is ignored after all
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The command line; returns the exit status (0 done, 2 bad usage or option value).
+
+    Interrupted by SIGINT, SIGTERM or SIGHUP, it cleans up (``--out`` as it was), prints
+    one line, then: run as the program (``argv`` None: ``jaxfdi``, ``python -m jaxfdi``)
+    it ends by that signal (``_die_by``); called with ``argv`` it returns 128 + signum."""
     args = build_parser().parse_args(argv)
     if args.command == "list":
         print("\n".join([*sorted(RUNNERS), *(f"tune {name}" for name in sorted(TUNERS))]))
         return 0
-    if args.runs < 1:
-        print("jaxfdi: --runs must be a positive integer", file=sys.stderr)
-        return 2
-    if args.command == "tune":
-        if args.steps < 0 or args.train_runs < 1:
-            print("jaxfdi: --steps must be >= 0 and --train-runs >= 1", file=sys.stderr)
-            return 2
-        if min(args.detection_weight, args.false_alarm_weight, args.delay_weight, args.isolation_weight) < 0:
-            print("jaxfdi: the loss weights must be >= 0", file=sys.stderr)
-            return 2
-        if args.selection_runs < 1:
-            print(f"jaxfdi: --selection-runs must be >= 1, got {args.selection_runs}", file=sys.stderr)
-            return 2
-        if min(np.atleast_1d(args.confirm_steps)) < 1 or np.size(args.confirm_steps) not in (1, 7):
-            print(f"jaxfdi: --confirm-steps must be one integer >= 1 or 7 of them (one per mode), got "
-                  f"{args.confirm_steps}", file=sys.stderr)
-            return 2
-        if not all(w.strip().isdigit() and int(w) >= 1 for w in args.windows.split(",")):
-            print(f"jaxfdi: --windows must be positive integers separated by commas, got {args.windows!r}",
-                  file=sys.stderr)
-            return 2
-        import jaxfdi
-
-        jaxfdi.enable_x64()
-        jaxfdi.enable_compilation_cache()
-        return TUNERS[args.target](args)
-    if not (0.0 < args.pfa < 1.0):
-        print("jaxfdi: --pfa must lie in (0, 1)", file=sys.stderr)
-        return 2
-    if args.methods is not None and args.scenario == "engine-chi2":
-        print("jaxfdi: --methods: engine-chi2 has one method (the KF chi-square test)", file=sys.stderr)
-        return 2
+    kind, name = ("run", args.scenario) if args.command == "run" else ("tune", args.target)
+    runner = (RUNNERS if kind == "run" else TUNERS)[name]
+    try:
+        check_options(args, kind, name, runner)
+    except UsageError as e:
+        return _fail(str(e), 2)
     import jaxfdi
 
     jaxfdi.enable_x64()
     jaxfdi.enable_compilation_cache()
-    return RUNNERS[args.scenario](args)
+    try:
+        with _signals_raise():
+            if runner.methods is not None and args.methods is not None:
+                valid = list(runner.methods())
+                chosen, unknown = split_methods(args.methods, valid)
+                if unknown or not chosen:
+                    raise expected("--methods", "names among " + "; ".join(valid) + " (comma-separated)",
+                                   f"unknown {unknown}" if unknown else repr(args.methods))
+                args.methods = chosen
+            if runner.check is not None:
+                runner.check(args)
+            with _io.study_output(args.out) as folder:
+                wrote = runner.run(args, folder)
+    except UsageError as e:
+        return _fail(str(e), 2)
+    except KeyboardInterrupt as e:
+        signum = e.signum if isinstance(e, Terminated) else signal.SIGINT
+        status = _fail(f"interrupted by {signal.Signals(signum).name}; {args.out} left as it was", 128 + signum)
+        if argv is None:
+            _die_by(signum)
+        return status
+    except (ValueError, TypeError) as e:
+        if args.traceback or not _raised_by_jaxfdi(e):
+            raise
+        return _fail(f"{e} (nothing written to {args.out}; --traceback for where)", 2)
+    if wrote:
+        print(wrote)
+    return 0
 
 
 if __name__ == "__main__":

@@ -41,4 +41,4 @@ def test_tuned_chi2_test_has_lower_held_out_loss_and_fewer_false_alarms(chi2_tun
 
 def test_tune_rejects_bad_windows(capsys):
     assert main(["tune", "engine-chi2", "--windows", "4,0"]) == 2
-    assert "--windows must be positive integers" in capsys.readouterr().err
+    assert "--windows: expected integers in [1, 2147483647] separated by commas" in capsys.readouterr().err

@@ -23,7 +23,7 @@ import optax
 import pytest
 
 import jaxfdi
-from jaxfdi import control, detection, faults, loop, metrics, models, tuning
+from jaxfdi import control, detection, loop, metrics, models, tuning
 from jaxfdi.filters import tskf
 from jaxfdi.models.vtol import vtol_model, vtol_true_plant
 from jaxfdi.monitor import filter_detector

@@ -12,6 +12,7 @@ from typing import Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 from jax.scipy.special import gammaincc, gammaln, ndtri
 
@@ -21,37 +22,133 @@ from jaxfdi import _checks
 def chi2_threshold(dof, pfa) -> Array:
     """Upper quantile ``x`` with ``P(chi2(dof) > x) = pfa``, computed in JAX.
 
-    Wilson-Hilferty start, then Newton steps on ``log Q(dof/2, x/2) = log pfa``
-    (``Q`` the regularised upper incomplete gamma), which converge quadratically;
-    agrees with ``scipy.stats.chi2.isf`` to ~1e-12 in float64. Differentiable in
-    ``pfa`` and vmappable over ``dof``/``pfa``.
+    ``P(chi2(dof) > x) = Q(dof/2, x/2)``, ``Q`` the regularised upper incomplete gamma
+    function. Start: Wilson-Hilferty with the upper normal quantile ``-ndtri(pfa)``
+    (``ndtri(1 - pfa)`` would round to ``inf`` below ``pfa ~ eps``); then Newton steps
+    on ``log Q(dof/2, x/2) = log pfa`` with ``log Q`` evaluated in log space
+    (``log_upper_gamma``), so that every ``pfa`` down to ``finfo(dtype).tiny``
+    (``2.2e-308`` in float64, ``1.2e-38`` in float32) has a finite threshold. Agrees with
+    ``scipy.stats.chi2.isf`` to ~1e-12 relative in float64 (``tests/test_chi2_tail.py``).
+
+    Differentiable in ``pfa`` and ``dof`` (the Newton iterations are not differentiated;
+    one last Newton step is, which gives the implicit derivative
+    ``dx/dpfa = -1 / pdf(x)``), vmappable and jit-compatible. The result has the float
+    dtype of the arguments (JAX's default float for Python numbers).
 
     Args:
-      dof: degrees of freedom (> 0), scalar or array.
-      pfa: false-alarm probability in (0, 1), scalar or array.
+      dof: degrees of freedom (> 0, finite), scalar or array.
+      pfa: false-alarm probability in ``[finfo(dtype).tiny, 1)``, scalar or array.
+
+    Raises:
+      ValueError: naming ``dof`` or ``pfa`` when a concrete value is out of range, in
+        particular a ``pfa`` below the smallest normal number of the dtype. Under
+        ``jit``/``vmap`` such a value gives NaN.
     """
-    _checks.check_probability("pfa", pfa)
+    _checks.check_real("dof", dof, "degrees of freedom")
+    _checks.check_finite("dof", dof, "degrees of freedom")
     dof_value = _checks.concrete(dof)
-    if dof_value is not None and bool((dof_value <= 0).any()):
-        raise ValueError(f"dof: expected positive degrees of freedom, got {dof_value}")
-    dtype = jnp.result_type(float)
-    dof = jnp.asarray(dof, dtype)
-    pfa = jnp.asarray(pfa, dtype)
+    if dof_value is not None and np.any(dof_value <= 0):
+        raise ValueError(f"dof: expected positive degrees of freedom, got {_checks.received(dof_value)}")
+    _checks.check_probability("pfa", pfa)
+    dtype = _checks.float_dtype(dof, pfa)
+    _check_representable(pfa, dtype)
+    return _chi2_isf(jnp.asarray(dof, dtype), jnp.asarray(pfa, dtype))
+
+
+def _check_representable(pfa, dtype, what: str = "pfa") -> None:
+    """A concrete ``pfa`` must be a normal number of ``dtype`` below 1 once cast to it;
+    ``what`` says which probability (e.g. a per-test ``pfa / tests``) in the message."""
+    value = _checks.concrete(pfa)
+    if value is None:
+        return
+    info, name = np.finfo(dtype), np.dtype(dtype).name
+    cast = np.asarray(value, dtype)
+    if np.any(cast < info.tiny):
+        advice = "; a smaller pfa needs float64 (jaxfdi.enable_x64())" if info.bits < 64 else ""
+        raise ValueError(f"pfa: expected {what} >= {info.tiny:.4g} (np.finfo({name}).tiny, the smallest normal "
+                         f"{name}), got {_checks.received(value)}{advice}")
+    if np.any(cast >= 1):
+        raise ValueError(f"pfa: expected {what} that stays below 1 in {name}, got {_checks.received(value)}")
+
+
+#: Newton steps on ``log Q`` (quadratic convergence; 30 cover every dof and pfa tested)
+_NEWTON_STEPS = 30
+#: Lentz steps of the continued fraction, used only far in the tail where it converges fast
+_LENTZ_STEPS = 40
+
+
+def log_upper_gamma(a: Array, x: Array) -> Array:
+    """``log Q(a, x)``, ``Q(a, x) = Gamma(a, x) / Gamma(a)``, accurate where ``Q`` underflows.
+
+    Where ``Q`` is a normal number of the dtype, ``log(gammaincc(a, x))``. Far in the
+    upper tail (``x > a + 1`` and ``x^a e^-x / Gamma(a) < tiny^(1/2)``), Legendre's
+    continued fraction ``Gamma(a, x) = e^-x x^a / (x + 1 - a - 1 (1 - a) / (x + 3 - a - ...))``
+    evaluated by the modified Lentz method (Press et al. 2007, *Numerical Recipes* 3rd
+    ed., sec. 6.2) in log space: ``log Q = a log x - x - lgamma(a) + log CF``.
+    """
+    dtype = jnp.result_type(a, x)
+    tiny = jnp.finfo(dtype).tiny
+    log_prefactor = a * jnp.log(x) - x - gammaln(a)
+    use_fraction = (x > a + 1.0) & (log_prefactor < 0.5 * jnp.log(tiny))
+    x_fraction = jnp.where(use_fraction, x, 2.0 * a + 50.0)   # safe inputs for the branch not taken
+    x_series = jnp.where(use_fraction, a, x)
+    log_q_fraction = a * jnp.log(x_fraction) - x_fraction - gammaln(a) + jnp.log(_legendre_fraction(a, x_fraction))
+    log_q_series = jnp.log(gammaincc(a, x_series))
+    return jnp.where(use_fraction, log_q_fraction, log_q_series)
+
+
+def _legendre_fraction(a: Array, x: Array) -> Array:
+    """``Gamma(a, x) e^x x^-a`` by the modified Lentz method (``x > a + 1``)."""
+    floor = jnp.finfo(jnp.result_type(a, x)).tiny / jnp.finfo(jnp.result_type(a, x)).eps
+    b = x + 1.0 - a
+    c = jnp.full_like(b, 1.0 / floor)
+    d = 1.0 / b
+
+    def lentz(i, carry):
+        b, c, d, h = carry
+        an = -i * (i - a)
+        b = b + 2.0
+        d = an * d + b
+        d = 1.0 / jnp.where(jnp.abs(d) < floor, floor, d)
+        c = b + an / c
+        c = jnp.where(jnp.abs(c) < floor, floor, c)
+        return b, c, d, h * d * c
+
+    *_, h = jax.lax.fori_loop(1, _LENTZ_STEPS + 1, lentz, (b, c, d, d))
+    return h
+
+
+@jax.jit
+def _chi2_isf(dof: Array, pfa: Array) -> Array:
+    """``chi2.isf(pfa, dof)`` for validated arguments of one float dtype (module doc)."""
+    dof, pfa = jnp.broadcast_arrays(dof, pfa)
     a = 0.5 * dof
-    z = ndtri(1.0 - pfa)
-    c = 2.0 / (9.0 * dof)
-    x = dof * jnp.maximum(1.0 - c + z * jnp.sqrt(c), 0.1) ** 3
     log_pfa = jnp.log(pfa)
+    tiny = jnp.finfo(pfa.dtype).tiny
+
+    def log_q_and_slope(x, a):
+        """``log Q(a, x/2)`` and its derivative in ``x``, ``-pdf(x) / Q``."""
+        log_q = log_upper_gamma(a, 0.5 * x)
+        log_pdf = (a - 1.0) * jnp.log(0.5 * x) - 0.5 * x - gammaln(a) - jnp.log(2.0)
+        return log_q, -jnp.exp(log_pdf - log_q)
 
     def newton(_, x):
-        x = jnp.maximum(x, 1e-12)
-        log_q = jnp.log(gammaincc(a, 0.5 * x))
-        log_pdf = (a - 1.0) * jnp.log(0.5 * x) - 0.5 * x - gammaln(a) - jnp.log(2.0)
-        # d/dx log Q = -pdf / Q
-        step = (log_q - log_pfa) / (-jnp.exp(log_pdf - log_q))
-        return jnp.maximum(x - step, 0.5 * x)
+        log_q, slope = log_q_and_slope(x, a_fixed)
+        return jnp.maximum(x - (log_q - log_pfa_fixed) / slope, 0.5 * x)
 
-    return jax.lax.fori_loop(0, 30, newton, x)
+    a_fixed, log_pfa_fixed = jax.lax.stop_gradient(a), jax.lax.stop_gradient(log_pfa)
+    z = -ndtri(jax.lax.stop_gradient(pfa))  # upper normal quantile, finite for any normal pfa
+    c = 2.0 / (9.0 * jax.lax.stop_gradient(dof))
+    cube_root = 1.0 - c + z * jnp.sqrt(c)
+    # near pfa = 1 (cube_root small) x is small and P(a, x/2) ~ (x/2)^a / Gamma(a + 1)
+    small_x = 2.0 * jnp.exp((jnp.log1p(-jax.lax.stop_gradient(pfa)) + gammaln(a_fixed + 1.0)) / a_fixed)
+    start = jnp.where(cube_root > 0.1, jax.lax.stop_gradient(dof) * cube_root**3, small_x)
+    x = jax.lax.stop_gradient(jax.lax.fori_loop(0, _NEWTON_STEPS, newton, jnp.maximum(start, tiny)))
+    # one differentiated Newton step: its derivative is the implicit one, -d(log Q - log pfa) / slope
+    log_q, slope = log_q_and_slope(x, a)
+    x = x - (log_q - log_pfa) / jax.lax.stop_gradient(slope)
+    valid = (pfa >= tiny) & (pfa < 1.0) & (dof > 0) & jnp.isfinite(dof)
+    return jnp.where(valid, x, jnp.nan)
 
 
 def normalized_innovation_squared(innovation: Array, innovation_cov: Array) -> Array:
@@ -63,8 +160,9 @@ def normalized_innovation_squared(innovation: Array, innovation_cov: Array) -> A
 
 def moving_window_sum(x: Array, window: int) -> Array:
     """Sum of the last ``window`` values along axis 0 (fewer at the start)."""
-    if int(window) < 1:
-        raise ValueError(f"window: expected a positive integer number of steps, got {window}")
+    window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
+    _checks.check_real("x", x, "real statistics")
+    x = jnp.asarray(x)
     c = jnp.cumsum(x, axis=0)
     shifted = jnp.concatenate([jnp.zeros((window,) + x.shape[1:], c.dtype), c[:-window]], axis=0)[: x.shape[0]]
     return c - shifted
@@ -120,8 +218,9 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
     steps); alarm when ``statistic[k] > threshold``. Use
     ``chi2_threshold(window * m, pfa)`` for a design false-alarm rate ``pfa``.
     """
-    if int(window) < 1:
-        raise ValueError(f"window: expected a positive integer number of steps, got {window}")
+    window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
+    _checks.check_real("threshold", threshold, "a real threshold")
+    _checks.check_finite("threshold", threshold, "a detection threshold")
     dtype = dtype or jnp.result_type(float)
 
     def init() -> WindowState:

@@ -45,7 +45,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection.chi2 import Decision, Detector, chi2_threshold
+from jaxfdi.detection.chi2 import Decision, Detector, _check_representable, chi2_threshold
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 #: the threshold seed 003 uses (set by simulation to suppress T4 false alarms, sec. 3.3).
@@ -180,21 +180,17 @@ def glrt_threshold(pfa, num_directions: int, window: int, method: str = "paper")
     ``chi2_threshold(1, pfa / (num_directions * window))`` bounds the per-step false-alarm
     probability of the maximum by ``pfa``.
     """
-    if method not in ("paper", "bonferroni"):
-        raise ValueError(f"method: expected 'paper' or 'bonferroni', got {method!r}")
+    _checks.check_choice("method", method, ("paper", "bonferroni"))
     _checks.check_probability("pfa", pfa)
-    if isinstance(num_directions, bool) or int(num_directions) != num_directions or int(num_directions) < 1:
-        raise ValueError(f"num_directions: expected a positive integer, got {num_directions}")
-    tests = int(num_directions) * _check_window(window)
-    dtype = jnp.result_type(float)
+    tests = _checks.check_int("num_directions", num_directions, minimum=1, meaning="a positive number of directions")
+    tests *= _check_window(window)
+    dtype = _checks.float_dtype(pfa)
     if method == "paper":
-        return _chi2_isf(jnp.asarray(tests, dtype), jnp.asarray(pfa, dtype))
-    return _chi2_isf(jnp.asarray(1, dtype), jnp.asarray(pfa, dtype) / tests)
-
-
-#: compiled once (called eagerly, ``chi2_threshold``'s Newton loop recompiles per call);
-#: the arguments are validated before.
-_chi2_isf = jax.jit(chi2_threshold)
+        return chi2_threshold(jnp.asarray(tests, dtype), pfa)
+    value = _checks.concrete(pfa)
+    _check_representable(None if value is None else value / tests, dtype,
+                         f"the Bonferroni per-test probability pfa / (num_directions * window) = pfa / {tests}")
+    return chi2_threshold(jnp.asarray(1, dtype), jnp.asarray(pfa, dtype) / tests)
 
 
 def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
@@ -275,9 +271,7 @@ def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallb
 
 
 def _check_window(window) -> int:
-    if isinstance(window, bool) or int(window) != window or int(window) < 1:
-        raise ValueError(f"window: expected a positive integer number of steps N, got {window}")
-    return int(window)
+    return _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps N")
 
 
 def _check_glr_inputs(innovations, signatures, innovation_cov):

@@ -4,7 +4,8 @@ Wan & van der Merwe 2000), additive noise, Cholesky sigma points.
 Sigma points ``X0 = m``, ``X(+/-)i = m +/- sqrt(L + lambda) col_i(chol P)``,
 ``lambda = alpha^2 (L + kappa) - L``, weights ``Wm0 = lambda / (L + lambda)``,
 ``Wc0 = Wm0 + 1 - alpha^2 + beta``, ``Wi = 1 / (2 (L + lambda))``.
-Measurement update ``P+ = P - K S K^T`` (seed 000, eq. 29 corrected).
+Measurement update ``K = Pxy S^-1``, ``P+ = P - K S K^T`` (seed 000, eq. 29 corrected),
+computed in a Joseph-like form (below).
 
 Centred form (the float32 fix). With small ``alpha`` the centre weights are huge and
 negative (``alpha = 1e-3`` gives ``Wc0 ~ -1e6``), and the textbook sums
@@ -21,6 +22,26 @@ same moments are, exactly in real arithmetic,
 weights of moderate size: positive semi-definite by construction for ``beta >= alpha^2``.
 The +/- offsets are rounded symmetrically (``s = (m + s) - m``) so that the linear part
 of a map cancels exactly in ``delta``.
+
+Joseph-like update (positive semi-definite by construction). ``P - K S K^T`` subtracts
+nearly equal matrices when the measurement is much more precise than the prior (a
+measurement variance of 1e-24, or ``P0 = 1e12 I``): round-off of size ``eps ||P||`` then
+exceeds the true posterior variance and ``P+`` loses positive definiteness. The
+statistical linearisation of ``h`` over the sigma points, ``H = Pxy^T P^-1`` (Lefebvre,
+Bruyninckx & De Schutter 2002), and its residuals ``e_i = d_i - H dx_i`` split the
+predicted-measurement covariance exactly into ``Pyy = H P H^T + Lambda`` with
+
+    Lambda = sum_{i>0} W_i e_i e_i^T + (beta - alpha^2) delta delta^T   (PSD),
+
+so that, exactly in real arithmetic,
+
+    P+ = P - K S K^T = (I - K H) P (I - K H)^T + K (R + Lambda) K^T,
+
+the Joseph form of the EKF (Bucy & Joseph 1968) with ``R + Lambda`` as the noise. It is
+formed as ``F F^T + G G^T + (beta - alpha^2) (K delta)(K delta)^T + K R K^T``
+(``F = (I - K H) chol P``, ``G = K [sqrt(W_i) e_i]``): for ``beta >= alpha^2`` a sum of
+Gram matrices, which round-off cannot make indefinite beyond ``eps`` of its own size.
+For a linear ``h``, ``Lambda = 0`` and it is the EKF's/KF's Joseph update.
 """
 from __future__ import annotations
 
@@ -50,10 +71,14 @@ class SigmaPoints(NamedTuple):
 
 
 def unscented_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, float, float]:
-    """``(Wi, Wm0, Wc0)`` of the scaled unscented transform for state size ``n``."""
-    lam = alpha**2 * (n + kappa) - n
-    w = 1.0 / (2.0 * (n + lam))
-    wm0 = lam / (n + lam)
+    """``(Wi, Wm0, Wc0)`` of the scaled unscented transform for state size ``n``.
+
+    ``n + lambda = alpha^2 (n + kappa)`` is formed directly: computed as ``n + lambda``
+    it cancels (``alpha = 1e-3``: ``3 + (3e-6 - 3)``) and the weights lose ~1e-10.
+    """
+    spread = alpha**2 * (n + kappa)  # n + lambda
+    w = 1.0 / (2.0 * spread)
+    wm0 = 1.0 - n / spread           # lambda / (n + lambda)
     return w, wm0, wm0 + 1.0 - alpha**2 + beta
 
 
@@ -102,8 +127,17 @@ def unscented_moments(
     ``cross_w = beta - alpha^2`` weights the ``delta delta^T`` correction; ``taylor``
     selects the AD differences (see ``_centred_differences_taylor``).
     """
+    y0, dy = _propagate(points, g, taylor)
+    return _moments(points, y0, dy, w, cross_w)
+
+
+def _propagate(points: SigmaPoints, g: Callable[[Array], Array], taylor: bool) -> tuple[Array, Array]:
+    """``(g(c), d_i = g(c + s_i) - g(c))`` by direct evaluation or by the Taylor form."""
     differences = _centred_differences_taylor if taylor else _centred_differences_direct
-    y0, dy = differences(points, g)
+    return differences(points, g)
+
+
+def _moments(points: SigmaPoints, y0: Array, dy: Array, w: float, cross_w: float) -> tuple[Array, Array, Array]:
     dx = points.offsets
     delta_y = w * jnp.sum(dy, axis=0)
     delta_x = w * jnp.sum(dx, axis=0)
@@ -111,6 +145,31 @@ def unscented_moments(
     cov = w * dy.T @ dy + cross_w * jnp.outer(delta_y, delta_y)
     cross = w * dx.T @ dy + cross_w * jnp.outer(delta_x, delta_y)
     return mean, _linalg.symmetrize(cov), cross
+
+
+def joseph_like_cov(chol: Array, points: SigmaPoints, dy: Array, cross_cov: Array, gain: Array, R: Array,
+                    w: float, cross_w: float) -> Array:
+    """``P - K S K^T`` as ``(I - K H) P (I - K H)^T + K (R + Lambda) K^T`` (module doc).
+
+    Args:
+      chol: (n, n) lower Cholesky factor of the prior ``P`` (the sigma points' factor).
+      points: the sigma points (offsets ``dx_i``, (2n, n)).
+      dy: (2n, m) measurement differences ``d_i``.
+      cross_cov: (n, m) ``Pxy`` (columns of missing measurements zeroed).
+      gain: (n, m) ``K = Pxy S^-1``.
+      R: (m, m) measurement-noise covariance.
+      w, cross_w: ``W_i`` and ``beta - alpha^2``.
+    """
+    mm = _linalg.matmul
+    whitened_cross = _linalg.solve_lower(chol, cross_cov)                       # B = L^-1 Pxy, so H L = B^T
+    linearisation_t = _linalg.solve_lower_transposed(chol, whitened_cross)     # H^T = P^-1 Pxy, (n, m)
+    residuals = dy - mm(points.offsets, linearisation_t)                       # e_i = d_i - H dx_i, (2n, m)
+    contraction = chol - mm(gain, whitened_cross.T)                            # (I - K H) L = L - K B^T
+    spread = mm(jnp.sqrt(w) * residuals, gain.T)                               # rows sqrt(W_i) K e_i
+    centre = mm(gain, w * jnp.sum(dy, axis=0))                                 # K delta
+    cov = (mm(contraction, contraction.T) + mm(spread.T, spread) + cross_w * jnp.outer(centre, centre)
+           + mm(mm(gain, R), gain.T))
+    return _linalg.symmetrize(cov)
 
 
 def unscented_kalman_filter(
@@ -145,11 +204,20 @@ def unscented_kalman_filter(
         ``"direct"``.
       missing_measurements: treat NaN components of ``y`` as not measured (static).
     """
+    _checks.check_callable("f", f, "a transition function f(x, u, params)")
+    _checks.check_callable("h", h, "a measurement function h(x, u, params)")
     n = _checks.check_covariance("Q", Q)
     m = _checks.check_covariance("R", R)
-    if not (alpha > 0):
-        raise ValueError(f"alpha: expected a positive scalar, got {alpha}")
-    if n + alpha**2 * (n + kappa) - n <= 0:
+    for name, value in (("alpha", alpha), ("beta", beta), ("kappa", kappa)):
+        _checks.check_real(name, value, "a real scalar (static)")
+        if _checks.concrete(value) is None:
+            raise TypeError(f"{name}: expected a Python float (a static scaled-UT parameter), "
+                            f"got {_checks.received(value)}")
+    _checks.check_positive("alpha", alpha, "a positive scalar")
+    _checks.check_scalar("beta", beta, meaning="a real scalar")
+    _checks.check_scalar("kappa", kappa, meaning="a real scalar")
+    alpha, beta, kappa = float(alpha), float(beta), float(kappa)
+    if alpha**2 * (n + kappa) <= 0:
         raise ValueError(f"kappa: expected alpha^2 (n + kappa) > 0 for n = {n}, got kappa = {kappa}")
     w, _, _ = unscented_weights(n, alpha, beta, kappa)
     scale = (alpha**2 * (n + kappa)) ** 0.5
@@ -165,8 +233,9 @@ def unscented_kalman_filter(
     def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
         check_step_inputs(y, u, m, None)
         taylor = use_taylor(state.mean)
-        points, _ = sigma_points(state.mean, state.cov, scale)
-        y_pred, Pyy, Pxy = unscented_moments(points, lambda x: h(x, u, params), w, cross_w, taylor)
+        points, chol = sigma_points(state.mean, state.cov, scale)
+        y0, dy = _propagate(points, lambda x: h(x, u, params), taylor)
+        y_pred, Pyy, Pxy = _moments(points, y0, dy, w, cross_w)
         _checks.check_shape("h(x, u, params)", y_pred, (m,), "one predicted measurement")
         S = _linalg.symmetrize(Pyy + R)
         if missing_measurements:
@@ -179,17 +248,17 @@ def unscented_kalman_filter(
         chol_S = _linalg.cholesky(S)
         gain = _linalg.gain_from_cross_cov(Pxy, chol_S)
         whitened = _linalg.whiten(chol_S, innovation)
-        # P - K S K^T = P - (L^-1 Pxy^T)^T (L^-1 Pxy^T)
-        half = _linalg.whiten(chol_S, Pxy.T)
+        mean = state.mean + gain @ innovation
         return ConditionedGaussian(
-            mean=state.mean + gain @ innovation,
-            cov=_linalg.symmetrize(state.cov - half.T @ half),
+            mean=mean,
+            cov=joseph_like_cov(chol, points, dy, Pxy, gain, R, w, cross_w),
             innovation=innovation,
             innovation_cov=S,
             log_likelihood=_linalg.gaussian_log_likelihood(whitened, chol_S, num_observed),
             nis=jnp.sum(whitened**2),
             num_observed=num_observed,
-            healthy=_linalg.cholesky_is_finite(chol_S),
+            healthy=(_linalg.cholesky_is_finite(chol_S) & _linalg.cholesky_is_finite(chol)
+                     & jnp.all(jnp.isfinite(mean))),
         )
 
     def predict(post: GaussianState, u: Array) -> GaussianState:

@@ -56,9 +56,14 @@ DATA = pathlib.Path(__file__).parent / "data"
 
 def assert_same_as_before(name: str, data: dict) -> None:
     """The study's JSON equals the one its private scan wrote before the scenario moved
-    onto ``jaxfdi.loop`` (``tests/data``): every key it had, exactly (floats to 1e-12
-    relative, for a possible change of floating-point order; none was needed here);
-    keys added since (``unhealthy_runs``) are not compared."""
+    onto ``jaxfdi.loop`` (``tests/data``): every key it had, integers and strings exactly,
+    floats to 1e-4 relative; keys added since (``unhealthy_runs``) are not compared. The
+    float tolerance is for another CPU, not another algorithm: on an AMD EPYC VM the
+    landed commit 2e3097e itself gives a VTOL calibrated threshold 3.5e-9 and a median
+    bias error 2e-6 relative away from the file (written on an Intel VM): XLA's CPU
+    kernels differ in floating-point order, and a 200-run closed-loop calibration, its
+    40-step bisection and the closed loops carry that into the outputs; every count and
+    rate stays equal."""
     before = json.loads((DATA / f"{name}-runs2-before-loop.json").read_text())
 
     def same(old, new, path):
@@ -71,7 +76,7 @@ def assert_same_as_before(name: str, data: dict) -> None:
             for i, (a, b) in enumerate(zip(old, new)):
                 same(a, b, f"{path}[{i}]")
         elif isinstance(old, float) and isinstance(new, float):
-            assert new == pytest.approx(old, rel=1e-12, abs=0, nan_ok=True), path
+            assert new == pytest.approx(old, rel=1e-4, abs=0, nan_ok=True), path
         else:
             assert old == new, f"{path}: {old!r} before, {new!r} now"
 

@@ -351,6 +351,21 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
                         lambda where: plot_wheels(study, examples, where), elapsed)
 
 
+def _run_gnss_campus(args: argparse.Namespace, folder: Path) -> str:
+    from jaxfdi.scenarios.gnss_campus import gnss_campus_study, plot_gnss_campus
+
+    start = time.perf_counter()
+    study = gnss_campus_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
+    elapsed = time.perf_counter() - start
+    cfg = study.config
+    print(f"gnss-campus: seed-002 GPS RAIM from {cfg['start']} (broadcast ephemerides {cfg['ephemeris']}), 1 Hz, "
+          f"{cfg['mask_deg']:.0f} deg mask, P_fa {cfg['pfa']:.2e}, P_md {cfg['pmd']:g}, NPA HAL 556 m; "
+          f"{args.runs} runs per case")
+    print(study.table())
+    return _write_study(study, args, folder, "gnss-campus.json", lambda where: plot_gnss_campus(study, where),
+                        elapsed)
+
+
 RUNNERS = {
     "engine": Runner(_run_engine, "seed-003 turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
                                   "the paper's Table 3", methods=_engine_method_names),
@@ -359,6 +374,8 @@ RUNNERS = {
     "reaction-wheels": Runner(_run_reaction_wheels, "seed-004 satellite, 4-wheel pyramid: dual filter F, NIS, "
                               "credits, MM isolator (--estimator, --engage-on)", options=("estimator", "engage_on"),
                               methods=_wheel_method_names),
+    "gnss-campus": Runner(_run_gnss_campus, "seed-002 GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
+                                            "park satellite faults detected, isolated and excluded"),
     "vtol": Runner(_run_vtol, "seed-001 VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
                               "fault-tolerant control", methods=_vtol_method_names),
 }

@@ -21,6 +21,7 @@ from jaxfdi.detection.glrt import (
     glrt_threshold,
 )
 from jaxfdi.detection.mode_probability import mode_probability_detector
+from jaxfdi.detection.noncentral_chi2 import ncx2_cdf, ncx2_quantile, noncentrality_for_missed_detection
 from jaxfdi.detection.signature import UNMATCHED, isolate, signature_matrix
 from jaxfdi.detection.wavelet import (
     block_alarms,
@@ -49,6 +50,9 @@ __all__ = [
     "glrt_detector",
     "glrt_threshold",
     "mode_probability_detector",
+    "ncx2_cdf",
+    "ncx2_quantile",
+    "noncentrality_for_missed_detection",
     "chi2_detector",
     "chi2_threshold",
     "first_crossing",

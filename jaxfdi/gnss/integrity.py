@@ -1,0 +1,197 @@
+"""One epoch of GPS integrity monitoring, and the same as an FDI stage of the loop.
+
+``monitor_epoch`` chains the pieces of seed 002's GPS half (Fig. 3): the least-squares
+fix (``positioning``), the parity test and isolation (``raim``), the protection levels
+and availability (``protection``), and, when the test alarms and a satellite is
+isolated, the exclusion: the fix, test and protection levels again without it. It is a
+snapshot method, so epochs and Monte Carlo runs are ``vmap``s of it (``monitor_epochs``);
+``raim_fdi`` wraps it as ``loop.FDI`` for ``loop.run_loop``, whose per-step output
+carries a ``Decision`` (alarm, isolated label ``1 + slot``: the label the foundation's
+faults give a sensor fault on that slot in a plant without inputs). ``geometry_fix`` and
+``availability_grid`` give the same protection levels without measurements (they depend
+on geometry and noise model only), over grids of receivers and epochs.
+"""
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi.detection.chi2 import Decision
+from jaxfdi.gnss.frames import elevation_azimuth, line_of_sight_ned
+from jaxfdi.gnss.least_squares import masked_qr
+from jaxfdi.gnss.orbits import OrbitTable, satellite_position, select_orbits
+from jaxfdi.gnss.positioning import Dops, PositionFix, dops, solve_position, transmit_states
+from jaxfdi.gnss.protection import ProtectionLevels, protection_levels
+from jaxfdi.gnss.raim import ParityCheck, RaimTables, parity_check, whitened
+from jaxfdi.loop import FDI
+
+#: Gauss-Newton steps of the re-solve without the excluded satellite (from the full fix)
+EXCLUSION_ITERATIONS = 3
+
+
+class EpochIntegrity(NamedTuple):
+    fix: PositionFix
+    check: ParityCheck
+    protection: ProtectionLevels
+    excluded: Array            # () int, the excluded slot (-1: none)
+    fix_excluded: PositionFix  # the fix without it (the full fix when none)
+    check_excluded: ParityCheck
+    protection_excluded: ProtectionLevels
+
+
+def assess(fix: PositionFix, tables: RaimTables, operation="npa") -> tuple[ParityCheck, ProtectionLevels]:
+    """Parity check and protection levels of a fix (one QR of the whitened geometry)."""
+    h, _ = whitened(fix)
+    qr = masked_qr(h, fix.used)
+    return parity_check(fix, tables, qr), protection_levels(fix, tables, operation, qr)
+
+
+def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array, tables: RaimTables,
+                  sigma: Array | Callable[[Array], Array] | None = None, operation="npa",
+                  exclude: bool = True, transmit: tuple[Array, Array] | None = None) -> EpochIntegrity:
+    """Fix, RAIM, protection levels and exclusion of one epoch (module doc).
+
+    Args:
+      orbit: (S,) slot elements at this epoch; available: (S,) slots with a usable orbit.
+      t_receive: () time tag; pseudoranges: (S,) [m], NaN where not measured.
+      tables: ``raim.raim_tables``; sigma: as for ``positioning.solve_position``.
+      operation: alert limits (``protection.ALERT_LIMITS`` key or (HAL, VAL)).
+      exclude: re-solve without the isolated satellite after an alarm.
+      transmit: satellite positions and clocks at transmission
+        (``positioning.transmit_states``) when already known (``orbit`` is then unused).
+    """
+    transmit = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
+    fix = solve_position(orbit, t_receive, pseudoranges, available, sigma, transmit=transmit)
+    check, protection = assess(fix, tables, operation)
+    if not exclude:
+        none = jnp.asarray(-1, jnp.int32)
+        return EpochIntegrity(fix, check, protection, none, fix, check, protection)
+    excluded = jnp.where(check.alarm & (check.isolated >= 0), check.isolated, -1).astype(jnp.int32)
+    keep = available & (jnp.arange(available.shape[0]) != excluded)
+    initial = jnp.concatenate([fix.position, fix.clock_bias[None]])
+    refit = solve_position(orbit, t_receive, pseudoranges, keep, sigma if not callable(sigma) else fix.sigma,
+                           initial=initial, iterations=EXCLUSION_ITERATIONS, unweighted_iterations=0,
+                           transmit=transmit)
+    check_x, protection_x = assess(refit, tables, operation)
+    pick = lambda a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(excluded >= 0, u, v), a, b)  # noqa: E731
+    return EpochIntegrity(fix, check, protection, excluded, pick(refit, fix), pick(check_x, check),
+                          pick(protection_x, protection))
+
+
+def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables: RaimTables,
+                   sigma=None, operation="npa", exclude: bool = True, batch_size: int | None = None) -> EpochIntegrity:
+    """``monitor_epoch`` vmapped over epochs: ``times`` (T,), ``pseudoranges`` (T, S) (NaN:
+    not measured; a fixed sigma array is (T, S)). Leaves gain a leading T axis.
+
+    ``batch_size``: vmap over chunks of that many epochs, one chunk after another
+    (``lax.map``), so the intermediates stay in cache: ~1.7x faster for 10^4-10^5 epochs on
+    CPU at 128 (``benchmarks/bench_gnss_raim.py``); ``None`` vmaps all epochs at once."""
+
+    def one(t, rho, sig):
+        orbit, available = select_orbits(table, t)
+        return monitor_epoch(orbit, available, t, rho, tables, sig if sigma is not None and not callable(sigma)
+                             else sigma, operation, exclude)
+
+    sig = jnp.zeros(jnp.shape(pseudoranges)) if sigma is None or callable(sigma) else jnp.asarray(sigma)
+    args = (jnp.asarray(times), jnp.asarray(pseudoranges), sig)
+    if batch_size is None:
+        return jax.vmap(one)(*args)
+    return jax.lax.map(lambda a: one(*a), args, batch_size=int(batch_size))
+
+
+class RaimOutput(NamedTuple):
+    """What ``raim_fdi`` reports each step (a lean summary of ``EpochIntegrity``)."""
+
+    decision: Decision          # statistic, alarm, label 1 + isolated slot (0: none), estimate = max |TS_j|
+    threshold: Array            # ()
+    dof: Array                  # () int
+    num_used: Array             # () int
+    dops: Dops
+    hpl: Array
+    vpl: Array
+    available: Array            # () bool (HPL, VPL within the alert limits)
+    position: Array             # (3,) ECEF, all satellites
+    clock_bias: Array           # ()
+    excluded: Array             # () int slot (-1: none)
+    position_excluded: Array    # (3,) after exclusion (= position when none)
+    statistic_excluded: Array   # ()
+    threshold_excluded: Array   # ()
+    hpl_excluded: Array         # ()
+    healthy: Array              # () bool: a finite, converged fix and statistic
+
+
+def raim_output(result: EpochIntegrity) -> RaimOutput:
+    check = result.check
+    label = jnp.where(check.alarm & (check.isolated >= 0), 1 + check.isolated, jnp.where(check.alarm, -1, 0))
+    decision = Decision(check.statistic, check.alarm, label.astype(jnp.int32), jnp.max(jnp.abs(check.isolation)))
+    return RaimOutput(decision, check.threshold, check.dof, result.fix.num_used, result.fix.dops,
+                      result.protection.hpl, result.protection.vpl, result.protection.available,
+                      result.fix.position, result.fix.clock_bias, result.excluded, result.fix_excluded.position,
+                      result.check_excluded.statistic, result.check_excluded.threshold,
+                      result.protection_excluded.hpl, result.fix.healthy & check.healthy)
+
+
+def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=None, operation="npa",
+             exclude: bool = True) -> FDI:
+    """``monitor_epoch`` as a stateless ``loop.FDI``: step ``k`` takes the (S,)
+    pseudoranges time-tagged ``t0 + k dt`` and returns a ``RaimOutput``."""
+
+    def step(state, k, y, u):
+        t = t0 + k * dt
+        orbit, available = select_orbits(table, t)
+        return state, raim_output(monitor_epoch(orbit, available, t, y, tables, sigma, operation, exclude))
+
+    return FDI(step)
+
+
+# --- geometry-only studies: protection levels without measurements ---------------------
+
+def geometry_fix(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: float,
+                 sigma: Callable[[Array], Array]) -> PositionFix:
+    """The fix a receiver at ``receiver_ecef`` (3,) would have at ``t`` with error-free
+    pseudoranges: its true position, zero residuals, the geometry of the satellites
+    above ``mask_angle`` [rad] and ``sigma(elevation)`` weights. DOPs, protection levels
+    and minimum detectable biases depend on nothing else."""
+    orbit, has_orbit = select_orbits(table, t)
+    sat = satellite_position(orbit, t)
+    receiver_ecef = jnp.asarray(receiver_ecef)
+    los = line_of_sight_ned(receiver_ecef, sat)
+    elevation, azimuth = elevation_azimuth(receiver_ecef, sat)
+    used = has_orbit & (elevation > mask_angle)
+    geometry = jnp.where(used[:, None], jnp.concatenate([-los, jnp.ones_like(elevation)[:, None]], axis=1), 0.0)
+    return PositionFix(receiver_ecef, jnp.zeros((), receiver_ecef.dtype), jnp.zeros_like(elevation), geometry,
+                       jnp.where(used, sigma(elevation), 1.0), used, jnp.sum(used), elevation, azimuth,
+                       dops(geometry, used), jnp.sum(used) >= 4)
+
+
+class GridAvailability(NamedTuple):
+    """Geometry-only integrity over P receivers x T epochs (leaves (P, T), MDB (P, T, S))."""
+
+    num_visible: Array
+    hdop: Array
+    hpl: Array
+    vpl: Array
+    available: Array
+    minimum_detectable_bias: Array   # (P, T, S) m (inf where not visible)
+
+
+def availability_grid(table: OrbitTable, times: Array, receivers_ecef: Array, tables: RaimTables,
+                      mask_angle: float, sigma: Callable[[Array], Array], operation="npa",
+                      batch_size: int = 64) -> GridAvailability:
+    """Protection levels and availability for every receiver (P, 3) at every epoch (T,):
+    ``geometry_fix`` then ``protection_levels``, vmapped over epochs and mapped over the
+    receivers ``batch_size`` at a time (bounded memory for large grids)."""
+    times = jnp.asarray(times)
+
+    def at(receiver, t):
+        fix = geometry_fix(table, t, receiver, mask_angle, sigma)
+        _, pl = assess(fix, tables, operation)
+        return GridAvailability(fix.num_used, fix.dops.hdop, pl.hpl, pl.vpl, pl.available, pl.minimum_detectable_bias)
+
+    def receiver_row(receiver):
+        return jax.vmap(at, in_axes=(None, 0))(receiver, times)
+
+    return jax.lax.map(receiver_row, jnp.asarray(receivers_ecef), batch_size=int(batch_size))

@@ -1,0 +1,117 @@
+"""Masked Householder QR of a tall geometry matrix, with a fixed number of rows.
+
+A snapshot GNSS solution has one row per satellite *slot* (S of them, e.g. 32 PRNs),
+of which only the ``n`` visible ones count. Rows of unused slots are zeroed and the
+``m`` Householder reflections (Golub & Van Loan 2013, alg. 5.1.1) pivot on the first
+``m`` used rows and act on used rows only — the textbook algorithm on the used rows
+moved to the top, written with masks instead of a permutation — so they are the
+identity on the unused ones. Hence, for every ``n >= m``, with the same shapes:
+
+- the thin factor ``Q1`` (S, m) has zero rows at unused slots and ``R`` (m, m) is the
+  triangular factor of the used rows: ``H = Q1 R``;
+- the columns ``m..n-1`` of the full ``Q`` span the parity space of the used rows
+  (Brown & Chin 1992): ``P`` ((S - m), S) with its first ``n - m`` rows valid, so that
+  ``P H = 0`` and ``P P^T = I`` on them, and zero columns at unused slots.
+
+Everything is element-wise code over the S rows (no LAPACK call per epoch), which XLA
+vectorises when the functions are vmapped over epochs and Monte Carlo runs.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+
+class MaskedQR(NamedTuple):
+    """Householder factorisation of the used rows of an (S, m) matrix."""
+
+    reflectors: Array  # (m, S) unit Householder vectors (zero at unused slots)
+    r: Array           # (m, m) upper triangular factor
+    rank: Array        # (S,) int: position of each used slot among the used ones (-1: unused)
+    num_used: Array    # () int
+
+
+def masked_qr(matrix: Array, used: Array) -> MaskedQR:
+    """Householder QR of the rows of ``matrix`` (S, m) where ``used`` (S,) is true.
+
+    Reflection ``j`` pivots on the ``j``-th used slot and acts on the used slots from it
+    on, which is the textbook algorithm on the used rows moved to the top in slot order,
+    written with masks instead of a permutation. A column that is zero below its pivot
+    gives an identity reflection; with fewer than ``m`` used rows ``R`` is singular
+    (callers check ``num_used``).
+    """
+    matrix = jnp.asarray(matrix)
+    used = jnp.asarray(used, bool)
+    num_cols = matrix.shape[1]
+    rank = jnp.where(used, jnp.cumsum(used) - 1, -1)
+    work = jnp.where(used[:, None], matrix, 0.0)
+    reflectors, rows = [], []
+    for j in range(num_cols):
+        pivot = rank == j
+        x = jnp.where(rank >= j, work[:, j], 0.0)
+        x_pivot = jnp.sum(jnp.where(pivot, x, 0.0))
+        alpha = -jnp.where(x_pivot >= 0, 1.0, -1.0) * jnp.linalg.norm(x)
+        v = x - jnp.where(pivot, alpha, 0.0)
+        v_norm = jnp.linalg.norm(v)
+        v = jnp.where(v_norm > 0, v / jnp.where(v_norm > 0, v_norm, 1.0), 0.0)
+        work = work - 2.0 * v[:, None] * (v @ work)[None, :]
+        reflectors.append(v)
+        rows.append(jnp.sum(jnp.where(pivot[:, None], work, 0.0), axis=0))
+    r = jnp.triu(jnp.stack(rows))
+    return MaskedQR(jnp.stack(reflectors), r, rank, jnp.sum(used))
+
+
+def _apply_q(qr: MaskedQR, columns: Array) -> Array:
+    """``Q @ columns`` for (S, k) columns: the reflections in reverse order."""
+    for v in qr.reflectors[::-1]:
+        columns = columns - 2.0 * v[:, None] * (v @ columns)[None, :]
+    return columns
+
+
+def apply_qt(qr: MaskedQR, vector: Array) -> Array:
+    """``Q^T y`` for a (S,) vector, in slot order: the entry of the ``i``-th used slot is
+    entry ``i`` of ``Q^T`` times the used rows — ``Q1^T y`` at the m pivot slots
+    (``leading``), the parity vector at the other used slots, zero at unused ones."""
+    work = jnp.where(qr.rank >= 0, jnp.asarray(vector), 0.0)
+    for v in qr.reflectors:
+        work = work - 2.0 * v * (v @ work)
+    return work
+
+
+def leading(qr: MaskedQR, rotated: Array) -> Array:
+    """(m,) the pivot slots' entries of ``apply_qt``'s result (``Q1^T y``), in pivot order."""
+    num_cols = qr.reflectors.shape[0]
+    return jnp.stack([jnp.sum(jnp.where(qr.rank == j, rotated, 0.0)) for j in range(num_cols)])
+
+
+def thin_q(qr: MaskedQR) -> Array:
+    """(S, m) ``Q1`` (zero rows at unused slots): ``Q`` applied to the pivots' unit vectors."""
+    num_cols = qr.reflectors.shape[0]
+    pivots = (qr.rank[:, None] == jnp.arange(num_cols)[None, :]).astype(qr.r.dtype)
+    return _apply_q(qr, pivots)
+
+
+def parity_rows(qr: MaskedQR) -> tuple[Array, Array]:
+    """``(P, valid)``: P ((S - m), S), the orthonormal parity matrix of the used rows in its
+    first ``n - m`` rows (``valid``, (S - m,) bool); the other rows are zero."""
+    num_rows, num_cols = qr.reflectors.shape[1], qr.reflectors.shape[0]
+    index = jnp.arange(num_cols, num_rows)
+    units = (qr.rank[:, None] == index[None, :]).astype(qr.r.dtype)      # (S, S - m)
+    complement = _apply_q(qr, units).T
+    valid = index < qr.num_used
+    return jnp.where(valid[:, None], complement, 0.0), valid
+
+
+def solve_upper(r: Array, rhs: Array) -> Array:
+    """``R^{-1} b`` for upper-triangular ``R`` (m, m), ``b`` (m,) or (m, k), written out
+    (back substitution; m is 4 here)."""
+    m = r.shape[0]
+    rows = [None] * m
+    for i in reversed(range(m)):
+        acc = rhs[i]
+        for k in range(i + 1, m):
+            acc = acc - r[i, k] * rows[k]
+        rows[i] = acc / r[i, i]
+    return jnp.stack(rows)

@@ -1,0 +1,90 @@
+"""Protection levels by the slope method and availability against alert limits
+(Brown & Chin 1992; seed 002 eqs. 10-11, Table 1).
+
+A bias ``b`` on satellite ``i`` moves the position by ``A[:, i] b`` with
+``A = (H^T W H)^{-1} H^T W`` and the test statistic's noncentrality by
+``S_ii b^2 / sigma_i^2`` (``S = P^T P`` of the whitened geometry). The horizontal slope,
+position error per unit ``sqrt(noncentrality)``, is
+
+``SLOPE_H(i) = sqrt(A_N,i^2 + A_E,i^2) sigma_i / sqrt(S_ii)``
+
+(eq. 10 times ``sigma``: with equal sigmas ``SLOPE(i) sigma``), the vertical one uses
+``|A_D,i|``. The bias the test misses with probability ``P_md`` has noncentrality
+``lambda`` (``noncentral_chi2.noncentrality_for_missed_detection`` at the detection
+threshold, ``n - 4`` degrees of freedom), so the protection levels are
+
+``HPL = max_i SLOPE_H(i) sqrt(lambda)``, ``VPL = max_i SLOPE_V(i) sqrt(lambda)``
+
+(eq. 11: ``SLOPE_max sqrt(mu) sigma_pr``), and the minimum detectable bias of satellite
+``i`` is ``MDB_i = sigma_i sqrt(lambda / S_ii)``. GPS is available for an operation when
+``HPL <= HAL`` (and ``VPL <= VAL`` where a vertical limit applies); with 4 satellites
+or fewer there is no test and the levels are infinite.
+
+Alert limits (``ALERT_LIMITS``, RTCA DO-229 / ICAO Annex 10): non-precision approach
+HAL 556 m (the paper's Table 1, accuracy 220 m), terminal 1852 m, en route 3704 m,
+oceanic 7408 m, LNAV/VNAV 556 m / 50 m, LPV 40 m / 50 m.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi.gnss.least_squares import MaskedQR, masked_qr, solve_upper, thin_q
+from jaxfdi.gnss.positioning import PositionFix
+from jaxfdi.gnss.raim import RaimTables, whitened
+
+#: (horizontal, vertical) alert limits [m]; inf: no vertical requirement
+ALERT_LIMITS = {
+    "npa": (556.0, math.inf),
+    "terminal": (1852.0, math.inf),
+    "enroute": (3704.0, math.inf),
+    "oceanic": (7408.0, math.inf),
+    "lnav-vnav": (556.0, 50.0),
+    "lpv": (40.0, 50.0),
+}
+
+
+class ProtectionLevels(NamedTuple):
+    slope_horizontal: Array   # (S,) m per sqrt(noncentrality), 0 at unused slots
+    slope_vertical: Array     # (S,)
+    hpl: Array                # () m (inf without a test)
+    vpl: Array                # () m
+    minimum_detectable_bias: Array  # (S,) m (inf at unused or unobservable slots)
+    available: Array          # () bool: HPL <= HAL and VPL <= VAL
+
+
+def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tuple[float, float] = "npa",
+                      qr: MaskedQR | None = None) -> ProtectionLevels:
+    """Slopes, HPL, VPL, minimum detectable biases and availability of one fix.
+
+    Args:
+      fix: the epoch's least-squares fix (NED geometry, sigmas, used slots).
+      tables: ``raim.raim_tables`` (threshold and noncentrality per degrees of freedom).
+      operation: a key of ``ALERT_LIMITS`` or ``(HAL, VAL)`` in metres.
+      qr: the whitened geometry's ``masked_qr`` when already computed.
+    """
+    if isinstance(operation, str):
+        if operation not in ALERT_LIMITS:
+            raise ValueError(f"operation: expected one of {sorted(ALERT_LIMITS)} or (HAL, VAL), got {operation!r}")
+        hal, val = ALERT_LIMITS[operation]
+    else:
+        hal, val = operation
+    h, _ = whitened(fix)
+    qr = masked_qr(h, fix.used) if qr is None else qr
+    q1 = thin_q(qr)
+    gain = solve_upper(qr.r, q1.T)                         # (4, S) = (H_w^T H_w)^-1 H_w^T
+    diag = jnp.where(fix.used, 1.0 - jnp.sum(q1**2, axis=1), 0.0)
+    observable = fix.used & (diag > 1e-9)
+    root = jnp.sqrt(jnp.where(observable, diag, 1.0))
+    slope_h = jnp.where(observable, jnp.hypot(gain[0], gain[1]) / root, 0.0)
+    slope_v = jnp.where(observable, jnp.abs(gain[2]) / root, 0.0)
+    dof = jnp.maximum(qr.num_used - 4, 0)
+    lam = tables.noncentrality[jnp.minimum(dof, tables.noncentrality.shape[0] - 1)]
+    scale = jnp.where(dof > 0, jnp.sqrt(lam), jnp.inf)
+    hpl = jnp.where(dof > 0, jnp.max(slope_h) * scale, jnp.inf)
+    vpl = jnp.where(dof > 0, jnp.max(slope_v) * scale, jnp.inf)
+    mdb = jnp.where(observable & (dof > 0), fix.sigma * scale / root, jnp.inf)
+    return ProtectionLevels(slope_h, slope_v, hpl, vpl, mdb, (hpl <= hal) & (vpl <= val))

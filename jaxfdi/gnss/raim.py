@@ -1,0 +1,132 @@
+"""Parity-space RAIM: detection, isolation (Brown & Chin 1992; seed 002 eqs. 5-9).
+
+Linearised at the least-squares fix, ``y = H x + eps`` (``H`` n x 4). With the QR
+decomposition of the *whitened* geometry ``W^(1/2) H = Q R`` (``W = diag(1/sigma_i^2)``),
+the last ``n - 4`` columns of ``Q`` give the parity matrix ``P`` ((n - 4) x n):
+``P H_w = 0``, ``P P^T = I``, and the parity vector ``p = P y_w = P eps_w``. Fault-free,
+``p ~ N(0, I)``, so the detection statistic ``TS_D = p^T p`` is chi-square with
+``n - 4`` degrees of freedom (the weighted sum of squared residuals, Walter & Enge
+1995); equal sigmas give the paper's ``||p||^2 / sigma^2``.
+
+- **Threshold** ``chi2_threshold(n - 4, P_fa)`` (``rule="chi2"``). ``rule="paper"`` uses
+  seed 002 eq. 8, ``sqrt(2 ln(1/r) sigma^2 / (n - 4))``, read as a bound on the RMS parity
+  ``sqrt(p^T p / (n - 4))`` (the reading whose units agree): on ``TS_D`` it is
+  ``2 ln(1/P_fa)`` whatever ``n``, the exact chi-square quantile for 2 degrees of freedom
+  only; with 1 it is conservative, from 3 on its false-alarm rate exceeds ``P_fa``
+  (``paper_threshold``; tested).
+- **Isolation** (eq. 9): ``TS_j = p . P[:, j] / ||P[:, j]||``; the satellite with the largest
+  ``|TS_j|`` is the faulty one. ``P^T p = S y_w`` with ``S = P^T P = I - Q1 Q1^T``, so the
+  statistics come from the thin factor ``Q1`` without forming ``P`` (``parity_matrix``
+  forms it, for the paper's equations and the tests). Isolation needs ``n >= 6``: with 5
+  satellites every column of ``P`` is parallel to ``p``.
+- **Exclusion**: re-solve without the isolated satellite (``integrity.monitor_epoch``).
+
+Arrays have one entry per satellite slot (S); unused slots are masked, never dropped,
+so one compiled function serves every number of visible satellites.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.detection.chi2 import chi2_threshold
+from jaxfdi.detection.noncentral_chi2 import noncentrality_for_missed_detection
+from jaxfdi.gnss.least_squares import MaskedQR, apply_qt, masked_qr, parity_rows, thin_q
+from jaxfdi.gnss.positioning import PositionFix
+
+#: Brown & Chin (1992), RTCA DO-208 for non-precision approach: P_fa = 1/15000 per test
+DEFAULT_PFA = 1.0 / 15000.0
+#: missed-detection probability of the protection level (Brown & Chin 1992)
+DEFAULT_PMD = 1e-3
+RULES = ("chi2", "paper")
+
+
+class RaimTables(NamedTuple):
+    """Per degrees of freedom ``k = 0..S-4``: the threshold on ``TS_D`` and the
+    noncentrality ``lambda`` missed with probability ``P_md`` (entry 0: no test)."""
+
+    threshold: Array       # (S - 3,)
+    noncentrality: Array   # (S - 3,)
+
+
+class ParityCheck(NamedTuple):
+    """Detection and isolation of one epoch."""
+
+    statistic: Array   # () TS_D = p^T p (whitened), 0 with fewer than 5 satellites
+    dof: Array         # () int, n - 4 (0: no test)
+    threshold: Array   # () on TS_D (inf when dof == 0)
+    alarm: Array       # () bool
+    isolation: Array   # (S,) TS_j (0 at unused slots)
+    isolated: Array    # () int, slot with the largest |TS_j| (-1: none; needs n >= 6)
+    healthy: Array     # () bool: finite statistic
+
+
+def paper_threshold(num_visible, pfa, sigma) -> Array:
+    """Seed 002 eq. 8: ``sqrt(2 ln(1/pfa) sigma^2 / (n - 4))`` [m], a bound on the RMS
+    parity ``sqrt(p^T p / (n - 4))`` (NaN for ``n <= 4``)."""
+    _checks.check_probability("pfa", pfa)
+    dof = jnp.asarray(num_visible) - 4.0
+    return jnp.where(dof > 0, jnp.sqrt(2.0 * jnp.log(1.0 / jnp.asarray(pfa)) * jnp.asarray(sigma) ** 2
+                                       / jnp.where(dof > 0, dof, 1.0)), jnp.nan)
+
+
+def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_PMD, rule: str = "chi2",
+                dtype=None) -> RaimTables:
+    """Thresholds on ``TS_D`` and protection-level noncentralities for ``k = 0..S-4``.
+
+    Args:
+      num_slots: S, the number of satellite slots.
+      pfa: false-alarm probability per test; pmd: missed-detection probability.
+      rule: "chi2" (``chi2_threshold(k, pfa)``) or "paper" (eq. 8: ``2 ln(1/pfa)``).
+    """
+    if rule not in RULES:
+        raise ValueError(f"rule: expected one of {list(RULES)}, got {rule!r}")
+    if int(num_slots) < 5:
+        raise ValueError(f"num_slots: expected at least 5 satellite slots, got {num_slots}")
+    _checks.check_probability("pfa", pfa)
+    _checks.check_probability("pmd", pmd)
+    dtype = dtype or jnp.result_type(float)
+    dof = jnp.arange(1, int(num_slots) - 3, dtype=dtype)
+    if rule == "chi2":
+        threshold = chi2_threshold(dof, jnp.asarray(pfa, dtype))
+    else:
+        threshold = jnp.full(dof.shape, 2.0 * np.log(1.0 / pfa), dtype)
+    lam = noncentrality_for_missed_detection(threshold, dof, jnp.asarray(pmd, dtype))
+    inf = jnp.full((1,), jnp.inf, dtype)
+    return RaimTables(jnp.concatenate([inf, threshold]), jnp.concatenate([jnp.full((1,), jnp.nan, dtype), lam]))
+
+
+def whitened(fix: PositionFix) -> tuple[Array, Array]:
+    """``(H_w, y_w)``: geometry and residuals divided by sigma, zero at unused slots."""
+    h = jnp.where(fix.used[:, None], fix.geometry / fix.sigma[:, None], 0.0)
+    return h, jnp.where(fix.used, fix.residuals / fix.sigma, 0.0)
+
+
+def parity_matrix(fix: PositionFix) -> tuple[Array, Array]:
+    """``(P, valid)``: the explicit parity matrix ((S - 4), S) of the whitened geometry from
+    its QR decomposition (rows ``valid`` hold the ``n - 4`` parity rows)."""
+    h, _ = whitened(fix)
+    return parity_rows(masked_qr(h, fix.used))
+
+
+def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = None) -> ParityCheck:
+    """Detection statistic, threshold and isolation statistics of one fix (module doc)."""
+    h, y = whitened(fix)
+    qr = masked_qr(h, fix.used) if qr is None else qr
+    q1 = thin_q(qr)
+    rotated = apply_qt(qr, y)                            # parity vector at used non-pivot slots
+    num = qr.num_used
+    dof = jnp.maximum(num - 4, 0)
+    statistic = jnp.where(dof > 0, jnp.sum(jnp.where(qr.rank >= 4, rotated**2, 0.0)), 0.0)
+    projected = y - q1 @ (q1.T @ y)                       # S y_w = P^T p
+    diag = jnp.where(fix.used, 1.0 - jnp.sum(q1**2, axis=1), 0.0)  # S_jj = ||P[:, j]||^2
+    observable = fix.used & (diag > 1e-9)
+    isolation = jnp.where(observable, projected / jnp.sqrt(jnp.where(observable, diag, 1.0)), 0.0)
+    threshold = tables.threshold[jnp.minimum(dof, tables.threshold.shape[0] - 1)]
+    isolated = jnp.where(num >= 6, jnp.argmax(jnp.abs(isolation)), -1).astype(jnp.int32)
+    return ParityCheck(statistic, dof.astype(jnp.int32), threshold, statistic > threshold, isolation, isolated,
+                       jnp.isfinite(statistic))

@@ -1,0 +1,146 @@
+"""YUMA almanac reader (NumPy): one record per satellite, checked field by field.
+
+A YUMA file is a list of blocks, one per satellite, each a header line of asterisks and
+13 ``Key: value`` lines (ID, Health, Eccentricity, Time of Applicability, Orbital
+Inclination, Rate of Right Ascen, SQRT(A), Right Ascen at Week (or "at TOA"), Argument
+of Perigee, Mean Anom, Af0, Af1, week), as published by the US Coast Guard Navigation
+Center. Angles are radians (the inclination is the full angle, not the offset from
+0.3 semicircles of the broadcast almanac, IS-GPS-200 Table 20-VI); the week field is
+the 10-bit week, so ``rollovers`` (how many times the 1024-week counter wrapped) gives
+the full GPS week.
+
+The reader accepts LF and CRLF line endings and raises a ``ValueError`` naming the file
+and line of the first malformed, missing or repeated field.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Almanac(NamedTuple):
+    """Almanac of N satellites; every field is an (N,) NumPy array."""
+
+    prn: np.ndarray            # int, PRN number
+    health: np.ndarray         # int, 0 = healthy
+    eccentricity: np.ndarray
+    toa: np.ndarray            # s, time of applicability (seconds of ``week``)
+    inclination: np.ndarray    # rad
+    omega_dot: np.ndarray      # rad/s, rate of right ascension
+    sqrt_a: np.ndarray         # m^0.5
+    omega0: np.ndarray         # rad, longitude of the ascending node at the weekly epoch
+    argument_of_perigee: np.ndarray  # rad
+    mean_anomaly: np.ndarray   # rad, at toa
+    af0: np.ndarray            # s
+    af1: np.ndarray            # s/s
+    week: np.ndarray           # int, full GPS week (file week + 1024 * rollovers)
+
+
+#: (key prefix as written in YUMA files, lower case; field; parser)
+_FIELDS = (
+    ("id", "prn", int),
+    ("health", "health", int),
+    ("eccentricity", "eccentricity", float),
+    ("time of applicability", "toa", float),
+    ("orbital inclination", "inclination", float),
+    ("rate of right ascen", "omega_dot", float),
+    ("sqrt(a)", "sqrt_a", float),
+    ("right ascen at", "omega0", float),
+    ("argument of perigee", "argument_of_perigee", float),
+    ("mean anom", "mean_anomaly", float),
+    ("af0", "af0", float),
+    ("af1", "af1", float),
+    ("week", "week", int),
+)
+
+
+def _field_of(key: str):
+    key = key.strip().lower()
+    for prefix, name, parse in _FIELDS:
+        if key.startswith(prefix):
+            return name, parse
+    return None, None
+
+
+def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac:
+    """Parse the text of a YUMA almanac.
+
+    Args:
+      text: the file's contents (LF or CRLF line endings).
+      name: what error messages call the source (a file name).
+      rollovers: 1024-week rollovers to add to the file's 10-bit week (2 since April
+        2019: file week 38 is GPS week 2086).
+
+    Raises:
+      ValueError: naming ``name`` and the line of a malformed record.
+    """
+    if int(rollovers) < 0:
+        raise ValueError(f"rollovers: expected an integer >= 0, got {rollovers}")
+    records: list[dict] = []
+    current: dict | None = None
+    header_line = 0
+
+    def close(record, line_no):
+        missing = [n for _, n, _ in _FIELDS if n not in record]
+        if missing:
+            raise ValueError(f"{name}:{line_no}: almanac record starting on this line lacks {missing}")
+
+    for line_no, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("*"):
+            if current is not None:
+                close(current, header_line)
+                records.append(current)
+            current, header_line = {}, line_no
+            continue
+        if current is None:
+            raise ValueError(f"{name}:{line_no}: expected a '******** ... almanac for PRN-nn ********' header "
+                             f"before the fields, got {line!r}")
+        key, sep, value = line.partition(":")
+        field, parse = _field_of(key)
+        if not sep or field is None:
+            raise ValueError(f"{name}:{line_no}: expected 'Key: value' with a YUMA key "
+                             f"({', '.join(p for p, _, _ in _FIELDS)}), got {line!r}")
+        if field in current:
+            raise ValueError(f"{name}:{line_no}: field {key.strip()!r} repeated in the record starting on line "
+                             f"{header_line}")
+        try:
+            number = float(value.strip().replace("D", "E").replace("d", "e"))
+            if parse is int:
+                if number != int(number):
+                    raise ValueError
+                number = int(number)
+            elif not np.isfinite(number):
+                raise ValueError
+        except ValueError:
+            raise ValueError(f"{name}:{line_no}: field {key.strip()!r}: expected a "
+                             f"{'whole number' if parse is int else 'finite number'}, got {value.strip()!r}") from None
+        current[field] = number
+    if current is not None:
+        close(current, header_line)
+        records.append(current)
+    if not records:
+        raise ValueError(f"{name}: no almanac record found")
+    prns = [r["prn"] for r in records]
+    repeated = sorted({p for p in prns if prns.count(p) > 1})
+    if repeated:
+        raise ValueError(f"{name}: PRN(s) {repeated} appear in more than one record")
+    columns = {field: np.asarray([r[field] for r in records], dtype=int if parse is int else float)
+               for _, field, parse in _FIELDS}
+    columns["week"] = columns["week"] + 1024 * int(rollovers)
+    return Almanac(**columns)
+
+
+def read_yuma(path: str | Path, rollovers: int = 0) -> Almanac:
+    """Read a YUMA almanac file (``parse_yuma`` on its ASCII text)."""
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("ascii")
+    except UnicodeDecodeError as err:
+        line = path.read_bytes()[: err.start].count(b"\n") + 1
+        raise ValueError(f"{path}:{line}: expected ASCII text, got byte {path.read_bytes()[err.start]:#04x}") from None
+    return parse_yuma(text, str(path), rollovers)

@@ -1,0 +1,442 @@
+"""Seed 002, GPS half: RAIM availability on a campus with a blocked sky, and the park
+case's satellite faults detected, isolated and excluded.
+
+Both cases fly a UAV on a racetrack from 2020-01-01 00:45:00 GPS time (week 2086, the day
+of the shipped RINEX navigation file, whose broadcast ephemerides give the real
+constellation), sampled at 1 Hz. A run is the foundation's loop
+(``loop.run_loop``): the plant ``gnss.receiver_plant`` (pseudoranges with the light time,
+Earth rotation, broadcast satellite clocks, a TCXO receiver clock, elevation-dependent
+noise ``sqrt(3^2 + 3^2 / sin^2 el)`` m, a 5 deg mask) and the stateless FDI
+``gnss.raim_fdi`` (least-squares fix, parity test at ``P_fa = 1/15000``, isolation,
+exclusion, protection levels at ``P_md = 1e-3``, NPA alert limit 556 m); Monte Carlo runs
+are a ``vmap`` over keys.
+
+- **Campus** (the paper's Konkuk University run, Fig. 6-7; Seoul, 37.5419 N 127.0782 E):
+  the circuit's east leg passes 6 m west of a 50 m building (a wall 60 m long; the UAV
+  flies 20 m above ground), which hides the eastern sky for a few seconds each lap
+  (every 310 s). No fault. The paper's point: there HDOP exceeds 4 and HPL the 556 m
+  alert limit, while the parity statistic stays quiet (it cannot see geometry).
+- **Park** (Haneul Park, 37.5684 N 126.8851 E, open sky): Table 2's pseudorange faults on
+  one satellite — impulse 100 m at 100 s, bias 100 m over 300-400 s, drift 1 m/s over
+  500-600 s — as one run's three episodes (``faults.concat_faults``), on each satellite
+  in view for the whole run in turn; the headline row is the highest satellite at the
+  start (the paper does not say which it used).
+"""
+from __future__ import annotations
+
+import math
+import sys
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfdi import faults as flt
+from jaxfdi.data import data_path
+from jaxfdi.gnss import frames, integrity, measurements, orbits, paths, raim, rinex, yuma
+from jaxfdi.gnss.protection import ALERT_LIMITS
+from jaxfdi.loop import episode_scorer, feedforward, run_loop
+from jaxfdi.metrics import summarize_episodes
+from jaxfdi.scenarios._common import check_study, require_x64
+
+WEEK = 2086
+START_TOW = 259200.0 + 2700.0        # 2020-01-01 00:45:00 GPST
+DT = 1.0
+MASK_DEG = 5.0
+CAMPUS = (37.5419, 127.0782, 60.0)   # deg, deg, m (ellipsoidal)
+PARK = (37.5684, 126.8851, 70.0)
+CAMPUS_STEPS = PARK_STEPS = 1000   # one compiled program for both cases
+#: racetrack (straight, radius, speed, height above the origin, phase)
+CAMPUS_PATH = (800.0, 140.0, 8.0, 20.0, 400.0 - 8.0 * 170.0)
+PARK_PATH = (600.0, 200.0, 12.0, 60.0, 0.0)
+#: the building beside the campus circuit's east leg (NED about CAMPUS)
+CAMPUS_WALL = measurements.Wall(jnp.asarray([-30.0, 6.0]), jnp.asarray([30.0, 6.0]), jnp.asarray(50.0))
+#: seed 002 Table 2 (steps at 1 Hz): (name, kind, onset, end, magnitude, slope per step)
+PARK_FAULTS = (("impulse 100 m at 100 s", "impulse", 100, 101, 100.0, 0.0),
+               ("bias 100 m, 300-400 s", "bias", 300, 400, 100.0, 0.0),
+               ("drift 1 m/s, 500-600 s", "ramp", 500, 600, 0.0, 1.0))
+#: beyond the paper: MDB over the day (open sky at the campus) and availability maps
+MDB_STEP_S = 300.0
+MAP_LAT = (-75.0, 75.0, 15.0)       # first, last, step [deg]
+MAP_LON = (-180.0, 165.0, 15.0)
+MAP_STEP_S = 900.0
+MAP_OPERATIONS = ("npa", "lnav-vnav")
+#: constellation name -> (almanac file, 1024-week rollovers)
+CONSTELLATIONS = {"real 2020-01-01 (31 SVs)": ("gps_almanac_2086.yuma.txt", 2),
+                  "RTCA DO-229 standard 24": ("gps_almanac_0703_rtca_mops24.yuma.txt", 0)}
+PAPER = {"campus": "HDOP > 4 at epochs 480 and 790 (east sky hidden by a rooftop structure), HPL > 556 m "
+                   "there, test statistic quiet (Figs. 6-7)",
+         "park": "HDOP <= 1.8 and HPL < 556 m throughout; impulse, bias and drift detected (Figs. 8-9)"}
+
+
+class Case(NamedTuple):
+    """Everything a case's runs share."""
+
+    origin: jax.Array     # (3,) ECEF
+    path: jax.Array       # (T, 3) ECEF
+    visible: jax.Array    # (T, S) bool
+    sigma: jax.Array      # (T, S) m
+    elevation: jax.Array  # (T, S) rad
+    azimuth: jax.Array    # (T, S) rad
+
+
+class GnssCampusStudy(NamedTuple):
+    config: dict
+    rows: list
+    campus: dict          # per-epoch series (NumPy) for the figures
+    park: dict
+    beyond: dict
+
+    def table(self) -> str:
+        return gnss_table(self)
+
+
+def _case(table, site, path_args, steps, walls=()) -> Case:
+    origin = frames.geodetic_to_ecef(math.radians(site[0]), math.radians(site[1]), site[2])
+    path = paths.racetrack_ecef(jnp.arange(steps) * DT, origin, *path_args)
+    times = START_TOW + jnp.arange(steps) * DT
+    visible, elevation, azimuth = jax.vmap(
+        lambda t, x: measurements.visibility(table, t, x, math.radians(MASK_DEG), origin, walls))(times, path)
+    return Case(origin, path, visible, measurements.elevation_sigma(elevation), elevation, azimuth)
+
+
+@jax.jit
+def _runs(table, paths, visible, sigma, case, fault, keys):
+    """Monte Carlo runs of the loop (plant + RAIM FDI): run ``r`` flies case ``case[r]``
+    (``paths`` (C, T, 3), ``visible`` and ``sigma`` (C, T, S)) with ``fault[r]`` and
+    ``keys[r]``; one compiled program for every case."""
+    steps = paths.shape[1]
+    fdi = integrity.raim_fdi(table, START_TOW, DT, raim.raim_tables(table.prn.shape[0]), measurements.elevation_sigma)
+    x0 = jnp.asarray([measurements.ClockModel().bias, measurements.ClockModel().drift])
+
+    def run(key, c, one_fault):
+        plant = measurements.receiver_plant(table, START_TOW, DT, paths[c], visible[c], sigma[c], fault=one_fault)
+        scorer = episode_scorer(flt.episodes(one_fault, 0), lambda o: o.decision, single=True)
+        return run_loop(plant, fdi, feedforward(), x0, None, key, steps, exogenous=jnp.zeros((steps, 0)),
+                        scorer=scorer, keep_history=True)
+
+    return jax.vmap(run)(keys, case, fault)
+
+
+def _park_fault(slot):
+    return flt.concat_faults(*(flt.fault(kind, "sensor", slot, onset, magnitude, slope, end)
+                               for _, kind, onset, end, magnitude, slope in PARK_FAULTS))
+
+
+def _horizontal_error(positions, case: Case):
+    ned = frames.ecef_to_ned(positions, case.path)
+    return np.asarray(jnp.hypot(ned[..., 0], ned[..., 1]))
+
+
+def gnss_campus_study(runs: int = 100, seed: int = 0, progress: bool = False, all_satellites: bool = True,
+                      beyond: bool = True) -> GnssCampusStudy:
+    """Both cases with ``runs`` Monte Carlo runs (campus) and ``runs`` runs per faulted
+    satellite (park); see the module doc.
+
+    Args:
+      all_satellites: fault every satellite in view in turn (False: the headline one only).
+      beyond: also the day's minimum detectable biases and the availability maps.
+    """
+    require_x64("gnss-campus")
+    check_study(runs, seed)
+    if int(runs) < 1:
+        raise ValueError(f"runs: expected a positive number of runs, got {runs}")
+    table = orbits.ephemeris_table(rinex.read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), WEEK)
+    # campus: `runs` fault-free runs; park: the faults on every satellite in view for the
+    # whole run, `runs` runs each; all in one call
+    campus = _case(table, CAMPUS, CAMPUS_PATH, CAMPUS_STEPS, (CAMPUS_WALL,))
+    park = _case(table, PARK, PARK_PATH, PARK_STEPS)
+    candidates = np.flatnonzero(np.asarray(park.visible).all(axis=0))
+    headline = int(candidates[np.argmax(np.asarray(park.elevation)[0, candidates])])
+    if not all_satellites:
+        candidates = np.asarray([headline])
+    slots = np.repeat(candidates, runs)
+    no_fault = flt.concat_faults(*[flt.no_fault()] * len(PARK_FAULTS))
+    faults = jax.vmap(_park_fault)(jnp.asarray(np.concatenate([np.zeros(runs, int), slots])))
+    faults = jax.tree_util.tree_map(lambda f, n: f.at[:runs].set(n), faults, no_fault)
+    case_index = jnp.asarray(np.concatenate([np.zeros(runs, int), np.ones(slots.size, int)]))
+    if progress:
+        print(f"gnss-campus: {runs} campus runs and {slots.size} park runs ({len(candidates)} satellites) of "
+              f"{CAMPUS_STEPS} s", file=sys.stderr, flush=True)
+    result = _runs(table, jnp.stack([campus.path, park.path]), jnp.stack([campus.visible, park.visible]),
+                   jnp.stack([campus.sigma, park.sigma]), case_index, faults,
+                   jax.random.split(jax.random.key(seed), runs + slots.size))
+    campus_out = jax.tree_util.tree_map(lambda a: a[:runs], result.history.output)
+    campus_series = _campus_series(campus_out, campus)
+    park_result = jax.tree_util.tree_map(lambda a: a[runs:], result)
+    park_series, park_rows = _park_summary(park_result, park, slots, candidates, headline, table)
+    extra = _beyond(table) if beyond else {"rows": []}
+    config = {
+        "start": "2020-01-01 00:45:00 GPST", "week": WEEK, "start_tow_s": START_TOW, "dt_s": DT,
+        "ephemeris": "gps_nav_rinex2_sugl0010.20n", "mask_deg": MASK_DEG, "pfa": raim.DEFAULT_PFA,
+        "pmd": raim.DEFAULT_PMD, "threshold_rule": "chi2", "horizontal_alert_limit_m": 556.0,
+        "sigma_model_m": "sqrt(3^2 + 3^2 / sin^2 el)", "runs": int(runs), "seed": int(seed),
+        "campus": {"site_deg_m": CAMPUS, "steps": CAMPUS_STEPS, "racetrack": dict(zip(
+            ("straight_m", "radius_m", "speed_mps", "height_m", "phase_m"), CAMPUS_PATH)),
+            "wall": {"start_ne_m": [-30.0, 6.0], "end_ne_m": [30.0, 6.0], "height_m": 50.0}},
+        "park": {"site_deg_m": PARK, "steps": PARK_STEPS, "racetrack": dict(zip(
+            ("straight_m", "radius_m", "speed_mps", "height_m", "phase_m"), PARK_PATH)),
+            "faulted_prns": [int(table.prn[s]) for s in candidates], "headline_prn": int(table.prn[headline]),
+            "faults": [name for name, *_ in PARK_FAULTS]},
+    }
+    config["beyond"] = None if not beyond else {
+        "mdb_site_deg_m": CAMPUS, "mdb_step_s": MDB_STEP_S, "map_lat_deg": MAP_LAT, "map_lon_deg": MAP_LON,
+        "map_step_s": MAP_STEP_S, "map_operations": list(MAP_OPERATIONS),
+        "constellations": {name: file for name, (file, _) in CONSTELLATIONS.items()}}
+    rows = [_campus_row(campus_series)] + park_rows + extra.pop("rows")
+    return GnssCampusStudy(config, rows, campus_series, park_series, extra)
+
+
+def _beyond(ephemeris) -> dict:
+    """Minimum detectable bias of every satellite over the day at the campus (open sky,
+    broadcast ephemerides) and NPA / LNAV-VNAV availability over a world grid over a day
+    for the real almanac and the 24-satellite standard constellation (geometry only)."""
+    mask = math.radians(MASK_DEG)
+    tables = raim.raim_tables(int(ephemeris.prn.shape[0]))
+    site = frames.geodetic_to_ecef(math.radians(CAMPUS[0]), math.radians(CAMPUS[1]), CAMPUS[2])
+    day = START_TOW - 2700.0 + jnp.arange(0.0, 86400.0, MDB_STEP_S)
+    mdb = np.asarray(integrity.availability_grid(ephemeris, day, site[None], tables, mask,
+                                                 measurements.elevation_sigma).minimum_detectable_bias[0])
+    rows = []
+    for slot, prn in enumerate(np.asarray(ephemeris.prn)):
+        seen = np.isfinite(mdb[:, slot])
+        if seen.any():
+            rows.append({"case": "mdb", "prn": int(prn), "epochs_visible": int(seen.sum()),
+                         "mdb_median_m": float(np.median(mdb[seen, slot])), "mdb_min_m": float(mdb[seen, slot].min()),
+                         "mdb_max_m": float(mdb[seen, slot].max())})
+    lats = np.arange(MAP_LAT[0], MAP_LAT[1] + 1e-9, MAP_LAT[2])
+    lons = np.arange(MAP_LON[0], MAP_LON[1] + 1e-9, MAP_LON[2])
+    grid_lat, grid_lon = np.meshgrid(lats, lons, indexing="ij")
+    receivers = frames.geodetic_to_ecef(jnp.radians(grid_lat.ravel()), jnp.radians(grid_lon.ravel()), 0.0)
+    maps = {}
+    grid = jax.jit(lambda tab, times: integrity.availability_grid(tab, times, receivers, tables, mask,
+                                                                  measurements.elevation_sigma))
+    for name, (file, rollovers) in CONSTELLATIONS.items():
+        almanac = yuma.read_yuma(data_path(file), rollovers)
+        table = orbits.almanac_table(almanac, slot_prns=np.arange(1, 33))
+        start = float(np.min(almanac.toa)) - 43200.0 if name.startswith("RTCA") else START_TOW - 2700.0 - \
+            (int(almanac.week[0]) - WEEK) * 604800.0
+        times = start + jnp.arange(0.0, 86400.0, MAP_STEP_S)
+        levels = grid(table, times)     # one compiled program for both constellations
+        hpl, vpl = np.asarray(levels.hpl), np.asarray(levels.vpl)
+        for operation in MAP_OPERATIONS:
+            hal, val = ALERT_LIMITS[operation]
+            fraction = ((hpl <= hal) & (vpl <= val)).mean(axis=1).reshape(grid_lat.shape)
+            maps[(name, operation)] = fraction
+            rows.append({"case": "availability", "constellation": name, "operation": operation,
+                         "hal_vals_m": [hal, val], "grid_points": int(fraction.size),
+                         "epochs": int(times.size), "mean": float(fraction.mean()), "min": float(fraction.min()),
+                         "points_always_available": float(np.mean(fraction == 1.0))})
+    return {"rows": rows, "mdb": mdb, "mdb_hours": np.asarray(day - day[0]) / 3600.0,
+            "prn": np.asarray(ephemeris.prn), "maps": maps, "lats": lats, "lons": lons}
+
+
+def _campus_series(out, case: Case) -> dict:
+    hdop = np.asarray(out.dops.hdop[0])
+    hpl = np.asarray(out.hpl[0])
+    alarm = np.asarray(out.decision.alarm)
+    error = _horizontal_error(out.position, case)
+    return {"hdop": hdop, "hpl": hpl, "num_used": np.asarray(out.num_used[0]), "statistic": np.asarray(
+        out.decision.statistic[0]), "threshold": np.asarray(out.threshold[0]), "alarm_rate": alarm.mean(axis=0),
+        "horizontal_error": error, "healthy": np.asarray(out.healthy), "elevation": np.asarray(case.elevation),
+        "azimuth": np.asarray(case.azimuth), "visible": np.asarray(case.visible)}
+
+
+def _campus_row(series: dict) -> dict:
+    high = series["hdop"] > 4.0
+    over = series["hpl"] > 556.0
+    error = series["horizontal_error"]
+    quiet = ~high & ~over
+    return {
+        "case": "campus", "epochs": int(high.size), "hdop_over_4_epochs": np.flatnonzero(high).tolist(),
+        "hpl_over_556_epochs": np.flatnonzero(over).tolist(), "max_hdop": float(series["hdop"].max()),
+        "max_hpl_m": float(np.max(np.where(np.isfinite(series["hpl"]), series["hpl"], 0.0))),
+        "availability_npa": float(np.mean(~over)),
+        "alarm_rate_where_hpl_over": float(series["alarm_rate"][over].mean()) if over.any() else None,
+        "alarm_rate_elsewhere": float(series["alarm_rate"][quiet].mean()),
+        "horizontal_error_p95_where_hpl_over_m": float(np.percentile(error[:, over], 95)) if over.any() else None,
+        "horizontal_error_p95_elsewhere_m": float(np.percentile(error[:, quiet], 95)),
+        "unhealthy_epochs": int((~series["healthy"]).sum()), "paper": PAPER["campus"],
+    }
+
+
+def _park_summary(result, case: Case, slots, candidates, headline, table):
+    out = result.history.output
+    records = result.score
+    rows = []
+    excluded = np.asarray(out.excluded)
+    stat_x, thr_x = np.asarray(out.statistic_excluded), np.asarray(out.threshold_excluded)
+    error_x = _horizontal_error(out.position_excluded, case)
+    for slot in candidates:
+        pick = slots == slot
+        summary = summarize_episodes(jax.tree_util.tree_map(lambda a: np.asarray(a)[pick], records), DT)
+        det = np.asarray(records.detection_step)[pick]
+        for e, (name, _, onset, end, _, _) in enumerate(PARK_FAULTS):
+            steps = det[:, e]
+            hit = steps >= 0
+            at = np.where(hit, steps, 0)
+            runs_idx = np.arange(steps.size)
+            ex = excluded[pick][runs_idx, at]
+            right = hit & (ex == slot) & (stat_x[pick][runs_idx, at] <= thr_x[pick][runs_idx, at])
+            rows.append({
+                "case": "park", "prn": int(table.prn[slot]), "headline": bool(slot == headline), "fault": name,
+                "runs": int(summary.runs), "detected": float(summary.detection_rate[e]),
+                "isolated": float(summary.isolation_rate[e]), "excluded": float(right.mean()),
+                "delay_median_s": float(summary.delay_median[e]), "delay_p90_s": float(summary.delay_p90[e]),
+                "horizontal_error_after_exclusion_p95_m": float(np.percentile(
+                    error_x[pick][runs_idx[right], at[right]], 95)) if right.any() else None,
+                "false_alarm_runs": int(summary.false_alarm_runs),
+                "false_alarm_rate_per_epoch": float(summary.false_alarm_rate_per_step),
+                "paper": "detected",
+            })
+    first = int(np.flatnonzero(slots == headline)[0])
+    series = {"hdop": np.asarray(out.dops.hdop[first]), "hpl": np.asarray(out.hpl[first]),
+              "statistic": np.asarray(out.decision.statistic[first]), "threshold": np.asarray(out.threshold[first]),
+              "statistic_excluded": stat_x[first], "threshold_excluded": thr_x[first],
+              "excluded": excluded[first], "headline_prn": int(table.prn[headline])}
+    return series, rows
+
+
+def gnss_table(study: GnssCampusStudy) -> str:
+    """The console table: campus availability and the park faults beside the paper."""
+    campus = study.rows[0]
+    lines = ["Campus (no fault; the east sky hidden beside a building at each lap's pass):",
+             f"  HDOP > 4 at epochs {_spans(campus['hdop_over_4_epochs'])} (max {campus['max_hdop']:.1f}); "
+             f"HPL > 556 m at {_spans(campus['hpl_over_556_epochs'])} (max {campus['max_hpl_m']:.0f} m); "
+             f"NPA availability {campus['availability_npa']:.1%}",
+             f"  parity test alarm rate there {_fmt(campus['alarm_rate_where_hpl_over'])}, elsewhere "
+             f"{_fmt(campus['alarm_rate_elsewhere'])} (design P_fa {study.config['pfa']:.1e}); horizontal error p95 "
+             f"there {_fmt(campus['horizontal_error_p95_where_hpl_over_m'], '.1f')} m, elsewhere "
+             f"{_fmt(campus['horizontal_error_p95_elsewhere_m'], '.1f')} m",
+             f"  paper: {PAPER['campus']}", "",
+             "Park (Table 2 faults on one satellite; rates over runs; 'excluded' = isolated satellite removed and "
+             "the re-solved test passes):",
+             f"  {'PRN':>4} {'fault':<24} {'detected':>8} {'isolated':>8} {'excluded':>8} {'delay med/p90 s':>16} "
+             f"{'FA runs':>7}  paper"]
+    for row in (r for r in study.rows if r["case"] == "park"):
+        mark = "*" if row["headline"] else " "
+        lines.append(f" {mark}{row['prn']:>3} {row['fault']:<24} {row['detected']:>8.2f} {row['isolated']:>8.2f} "
+                     f"{row['excluded']:>8.2f} {_fmt(row['delay_median_s'], '.0f'):>7} / "
+                     f"{_fmt(row['delay_p90_s'], '.0f'):<6} {row['false_alarm_runs']:>7}  {row['paper']}")
+    lines.append(f"  * the headline satellite (highest at the start); paper: {PAPER['park']}")
+    mdb = [r for r in study.rows if r["case"] == "mdb"]
+    if mdb:
+        lines += ["", f"Beyond the paper: minimum detectable bias over the day at the campus (open sky, "
+                      f"P_md {study.config['pmd']:g}), median per satellite [m]:",
+                  "  " + "  ".join(f"{r['prn']:02d}:{r['mdb_median_m']:.0f}" for r in mdb)]
+    maps = [r for r in study.rows if r["case"] == "availability"]
+    if maps:
+        lines.append("Availability over a day on a world grid (geometry only, 5 deg mask): mean / worst point")
+        lines += [f"  {r['constellation']:<26} {r['operation']:<10} {r['mean']:.4f} / {r['min']:.3f}" for r in maps]
+    return "\n".join(lines)
+
+
+def _fmt(value, spec=".3f") -> str:
+    return "n/a" if value is None or (isinstance(value, float) and not np.isfinite(value)) else format(value, spec)
+
+
+def _spans(indices) -> str:
+    if not indices:
+        return "none"
+    spans, start = [], indices[0]
+    for a, b in zip(indices, indices[1:] + [None]):
+        if b != a + 1:
+            spans.append(f"{start}-{a}" if a > start else f"{a}")
+            start = b
+    return ", ".join(spans)
+
+
+def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
+    """Sky plot, HDOP / HPL and statistic / threshold (campus and park), MDB over the day
+    and availability maps, as PNG files in ``out_dir``; returns their paths."""
+    from pathlib import Path
+
+    from matplotlib.figure import Figure
+
+    from jaxfdi import _io
+
+    out_dir = Path(out_dir)
+    paths_out = []
+
+    def save(fig, name):
+        path = out_dir / name
+        _io.atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        paths_out.append(str(path))
+
+    campus = study.campus
+    over = np.flatnonzero(campus["hpl"] > 556.0)
+    blocked = int(over[0]) if over.size else int(np.argmax(campus["hdop"]))
+    fig = Figure(figsize=(10, 5))
+    for i, (k, title) in enumerate(((0, "campus, t = 0 s (open)"), (blocked, f"campus, t = {blocked} s (beside the wall)"))):
+        ax = fig.add_subplot(1, 2, i + 1, projection="polar")
+        ax.set_theta_zero_location("N")
+        ax.set_theta_direction(-1)
+        above = campus["elevation"][k] > math.radians(MASK_DEG)
+        for seen, style, label in ((campus["visible"][k] & above, "o", "used"),
+                                   (~campus["visible"][k] & above, "x", "blocked")):
+            ax.plot(campus["azimuth"][k][seen], 90.0 - np.degrees(campus["elevation"][k][seen]), style, label=label)
+        ax.set_rlim(0, 90)
+        ax.set_yticks([0, 30, 60, 90], ["90", "60", "30", "0"])
+        ax.set_title(title)
+        ax.legend(loc="lower left", fontsize=8)
+    save(fig, "gnss-campus-sky.png")
+
+    fig = Figure(figsize=(10, 7))
+    for i, (series, name) in enumerate(((campus, "campus"), (study.park, "park"))):
+        ax = fig.add_subplot(2, 1, i + 1)
+        t = np.arange(series["hdop"].size) * DT
+        ax.plot(t, series["hdop"], label="HDOP")
+        ax.set_ylabel("HDOP")
+        ax.axhline(4.0, color="gray", lw=0.8, ls=":")
+        twin = ax.twinx()
+        twin.semilogy(t, np.where(np.isfinite(series["hpl"]), series["hpl"], np.nan), color="C1", label="HPL")
+        twin.axhline(556.0, color="C3", lw=1.5, label="NPA HAL 556 m")
+        twin.set_ylabel("HPL [m]")
+        ax.set_title(f"{name}: HDOP and HPL (seed 002 Figs. 6 and 8)")
+        twin.legend(loc="upper right", fontsize=8)
+    ax.set_xlabel("time [s]")
+    save(fig, "gnss-campus-dop-hpl.png")
+
+    fig = Figure(figsize=(10, 7))
+    for i, (series, name) in enumerate(((campus, "campus (no fault)"), (study.park, f"park, faults on PRN "
+                                                                          f"{study.park['headline_prn']:02d}"))):
+        ax = fig.add_subplot(2, 1, i + 1)
+        t = np.arange(series["statistic"].size) * DT
+        ax.semilogy(t, np.maximum(series["statistic"], 1e-3), label="TS_D = p^T p")
+        ax.semilogy(t, series["threshold"], color="C3", label="threshold chi2(n-4), P_fa 1/15000")
+        if "statistic_excluded" in series:
+            ax.semilogy(t, np.where(series["excluded"] >= 0, np.maximum(series["statistic_excluded"], 1e-3), np.nan),
+                        ".", ms=3, color="C2", label="after exclusion")
+            for _, _, onset, end, _, _ in PARK_FAULTS:
+                ax.axvspan(onset, max(end, onset + 3), color="gray", alpha=0.2)
+        ax.set_title(f"{name}: parity statistic vs threshold (seed 002 Figs. 7 and 9)")
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_xlabel("time [s]")
+    save(fig, "gnss-campus-statistic.png")
+
+    beyond = study.beyond
+    if "mdb" not in beyond:
+        return paths_out
+    fig = Figure(figsize=(10, 5))
+    ax = fig.add_subplot(1, 1, 1)
+    for slot, prn in enumerate(beyond["prn"]):
+        if np.isfinite(beyond["mdb"][:, slot]).any():
+            ax.plot(beyond["mdb_hours"], beyond["mdb"][:, slot], lw=0.8)
+    ax.set_yscale("log")
+    ax.set_xlabel("hours from 2020-01-01 00:00 GPST")
+    ax.set_ylabel("minimum detectable bias [m]")
+    ax.set_title("MDB of every satellite at the campus, open sky (one line per PRN)")
+    save(fig, "gnss-campus-mdb.png")
+
+    fig = Figure(figsize=(11, 3.2 * len(MAP_OPERATIONS)))
+    keys = list(beyond["maps"])
+    for i, key in enumerate(keys):
+        ax = fig.add_subplot(len(MAP_OPERATIONS), len(CONSTELLATIONS), 1 + (i % len(MAP_OPERATIONS)) *
+                             len(CONSTELLATIONS) + i // len(MAP_OPERATIONS))
+        image = ax.imshow(beyond["maps"][key], origin="lower", vmin=0.0, vmax=1.0, aspect="auto",
+                          extent=(beyond["lons"][0], beyond["lons"][-1], beyond["lats"][0], beyond["lats"][-1]))
+        ax.set_title(f"{key[0]}: {key[1]}", fontsize=9)
+        fig.colorbar(image, ax=ax, fraction=0.04)
+    save(fig, "gnss-campus-availability.png")
+    return paths_out

@@ -1,0 +1,281 @@
+"""Parity RAIM and protection levels against NumPy/SciPy references and statistically:
+P H = 0 and P P^T = I, the fault-free statistic chi-square(n - 4) (KS test), a bias
+detected and isolated at the rate its noncentrality predicts, the HPL bounding the
+horizontal error at P_md with the worst-case bias on the worst satellite, eq. 8 against
+the chi-square threshold, exclusion, and one compiled program for every satellite count."""
+import math
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import optimize, stats
+
+from jaxfdi.data import data_path
+from jaxfdi.gnss import (ecef_to_ned, elevation_sigma, ephemeris_table, geodetic_to_ecef, geometry_fix,
+                         monitor_epochs, paper_threshold, parity_check, parity_matrix, protection_levels,
+                         raim_tables, read_rinex_nav, receiver_plant, select_orbits, solve_position,
+                         transmission_geometry)
+from jaxfdi.gnss.orbits import SPEED_OF_LIGHT
+from jaxfdi.gnss.positioning import PositionFix, dops
+from jaxfdi.simulate import simulate
+from jaxfdi import faults
+
+N = 2048                      # epochs per batched call (one compiled program for every test)
+SITE = geodetic_to_ecef(math.radians(37.5419), math.radians(127.0782), 60.0)
+MASK = math.radians(5.0)
+T0 = 259200.0 + 2700.0
+CLOCK = 1234.5                # receiver clock bias [m]
+
+
+@pytest.fixture(scope="module")
+def table():
+    return ephemeris_table(read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
+
+
+@pytest.fixture(scope="module")
+def measure(table):
+    """(times (N,), bias (N, S), key) -> pseudoranges (N, S): the receiver at SITE, clock
+    CLOCK, noise sigma(el), NaN below the mask; sigma (N, S) too."""
+
+    def one(t, bias, key):
+        orbit, ok = select_orbits(table, t)
+        _, ranges, _, clock = transmission_geometry(orbit, t - CLOCK / SPEED_OF_LIGHT, SITE)
+        fix = geometry_fix(table, t, SITE, MASK, elevation_sigma)
+        rho = ranges + CLOCK - SPEED_OF_LIGHT * clock + fix.sigma * jax.random.normal(key, ranges.shape) + bias
+        return jnp.where(fix.used & ok, rho, jnp.nan), fix.sigma
+
+    return jax.jit(lambda times, bias, key: jax.vmap(one)(times, bias, jax.random.split(key, times.shape[0])))
+
+
+@pytest.fixture(scope="module")
+def monitor(table):
+    return jax.jit(lambda times, rho, tables: monitor_epochs(table, times, rho, tables, elevation_sigma))
+
+
+@pytest.fixture(scope="module")
+def default_tables():
+    return raim_tables(32)
+
+
+def test_fault_free_statistic_is_chi_square(measure, monitor, default_tables):
+    times = T0 + jnp.arange(N) * 40.0                     # 23 h of geometries, 5-12 satellites
+    rho, _ = measure(times, jnp.zeros((N, 32)), jax.random.key(0))
+    result = monitor(times, rho, default_tables)
+    dof = np.asarray(result.check.dof)
+    assert dof.min() >= 1 and np.all(np.asarray(result.fix.healthy))
+    u = stats.chi2.cdf(np.asarray(result.check.statistic), dof)
+    assert stats.kstest(u, "uniform").pvalue > 1e-3
+    assert stats.kstest(np.asarray(result.check.statistic)[dof == 4], stats.chi2(4).cdf).pvalue > 1e-3
+    assert np.mean(result.check.alarm) < 0.005                          # P_fa 1/15000
+    error = np.asarray(ecef_to_ned(result.fix.position, SITE))
+    # the weighted fix is unbiased with the covariance its geometry predicts: chi-square(3)
+    assert abs(np.mean(error[:, 0])) < 0.2 and abs(np.mean(np.asarray(result.fix.clock_bias) - CLOCK)) < 1.0
+
+
+def synthetic_fix(h, used, residual):
+    """A fix with geometry ``h`` (S, 4), unit sigmas and whitened residuals."""
+    return PositionFix(jnp.zeros(3), jnp.zeros(()), jnp.where(used, residual, 0.0), jnp.where(used[:, None], h, 0.0),
+                       jnp.ones(used.shape), used, jnp.sum(used), jnp.zeros(used.shape), jnp.zeros(used.shape),
+                       dops(jnp.where(used[:, None], h, 0.0), used), jnp.asarray(True))
+
+
+def random_geometry(rng, n, slots=32):
+    el = rng.uniform(0.1, 1.5, slots)
+    az = rng.uniform(0, 2 * np.pi, slots)
+    h = np.concatenate([-np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)], 1),
+                        np.ones((slots, 1))], axis=1)
+    used = np.zeros(slots, bool)
+    used[rng.choice(slots, n, replace=False)] = True
+    return h, used
+
+
+def test_parity_matrix_and_statistics_match_numpy():
+    rng = np.random.default_rng(3)
+    tables = raim_tables(32)
+    explicit = jax.jit(lambda h, used, y: parity_matrix(synthetic_fix(h, used, y)))
+    check = jax.jit(lambda h, used, y: parity_check(synthetic_fix(h, used, y), tables))
+    levels = jax.jit(lambda h, used, y: protection_levels(synthetic_fix(h, used, y), tables))
+    for n in (5, 6, 9, 13, 32):
+        h, used = random_geometry(rng, n)
+        y = rng.normal(size=32) * 3.0
+        P, valid = map(np.asarray, explicit(h, used, y))
+        Pv = P[valid]
+        assert Pv.shape == (n - 4, 32)
+        np.testing.assert_allclose(Pv @ (h * used[:, None]), 0.0, atol=1e-12)       # P H = 0
+        np.testing.assert_allclose(Pv @ Pv.T, np.eye(n - 4), atol=1e-12)            # P P^T = I
+        assert np.all(Pv[:, ~used] == 0.0) and np.all(P[~valid] == 0.0)
+        # NumPy reference on the visible rows only (complete QR, the paper's construction)
+        hv, yv = h[used], y[used]
+        q, _ = np.linalg.qr(hv, mode="complete")
+        p_ref = q[:, 4:].T @ yv
+        result = check(h, used, y)
+        assert float(result.statistic) == pytest.approx(p_ref @ p_ref, rel=1e-10)
+        assert int(result.dof) == n - 4
+        cols = q[:, 4:].T
+        ts_ref = (p_ref @ cols) / np.linalg.norm(cols, axis=0)                       # eq. 9
+        np.testing.assert_allclose(np.asarray(result.isolation)[used], ts_ref, atol=1e-10)
+        assert int(result.isolated) == (np.flatnonzero(used)[np.argmax(np.abs(ts_ref))] if n >= 6 else -1)
+        # protection level by eqs. 10-11 with sigma = 1: A = (H^T H)^-1 H^T, S = P^T P
+        A = np.linalg.solve(hv.T @ hv, hv.T)
+        S = cols.T @ cols
+        slope = np.hypot(A[0], A[1]) / np.sqrt(np.diag(S))
+        threshold = stats.chi2.isf(1.0 / 15000.0, n - 4)
+        lam = optimize.brentq(lambda v: stats.ncx2.cdf(threshold, n - 4, v) - 1e-3, 1e-6, 500.0, xtol=1e-13)
+        pl = levels(h, used, y)
+        assert float(pl.hpl) == pytest.approx(slope.max() * np.sqrt(lam), rel=1e-8)
+        assert float(pl.vpl) == pytest.approx(np.max(np.abs(A[2]) / np.sqrt(np.diag(S))) * np.sqrt(lam), rel=1e-8)
+        np.testing.assert_allclose(np.asarray(pl.minimum_detectable_bias)[used], np.sqrt(lam / np.diag(S)),
+                                   rtol=1e-8)
+
+
+def test_one_program_for_every_satellite_count():
+    rng = np.random.default_rng(4)
+    tables = raim_tables(32)
+
+    @jax.jit
+    @chex.assert_max_traces(n=1)
+    def check(h, used, y):
+        return parity_check(synthetic_fix(h, used, y), tables).statistic
+
+    for n in (4, 5, 8, 20):
+        h, used = random_geometry(rng, n)
+        assert np.isfinite(float(check(h, used, rng.normal(size=32))))
+
+
+def test_paper_threshold_against_chi_square():
+    pfa = 0.02
+    chi2_rule, paper_rule = raim_tables(32, pfa, rule="chi2"), raim_tables(32, pfa, rule="paper")
+    dof = np.arange(1, 29)
+    np.testing.assert_allclose(np.asarray(chi2_rule.threshold)[1:], stats.chi2.isf(pfa, dof), rtol=1e-10)
+    # eq. 8 bounds the RMS parity: on p^T p it is 2 ln(1/pfa) for every n; exact for n - 4 = 2 only
+    n = dof + 4
+    np.testing.assert_allclose(np.asarray(paper_threshold(n, pfa, 3.0)) ** 2 * (n - 4) / 9.0, 2 * np.log(1 / pfa))
+    np.testing.assert_allclose(np.asarray(paper_rule.threshold)[1:], 2 * np.log(1 / pfa))
+    assert float(paper_rule.threshold[2]) == pytest.approx(float(chi2_rule.threshold[2]), rel=1e-10)
+    # Monte Carlo false-alarm rates of both rules, fault-free, n = 5, 6, 9 (dof 1, 2, 5)
+    rng = np.random.default_rng(5)
+    runs = 4000
+    alarms = jax.jit(jax.vmap(lambda h, used, y, tab: parity_check(synthetic_fix(h, used, y), tab).alarm,
+                              in_axes=(None, None, 0, None)))
+    for n in (5, 6, 9):
+        h, used = random_geometry(rng, n)
+        y = rng.normal(size=(runs, 32))
+        for tab, expected in ((chi2_rule, pfa), (paper_rule, stats.chi2.sf(2 * np.log(1 / pfa), n - 4))):
+            rate = float(np.mean(alarms(h, used, y, tab)))
+            low, high = stats.binomtest(int(rate * runs), runs, expected).proportion_ci(0.999)
+            assert stats.binomtest(int(round(rate * runs)), runs, expected).pvalue > 1e-3, (n, rate, expected)
+    # the paper's rule is conservative at dof 1 and lax from dof 3 on
+    assert stats.chi2.sf(2 * np.log(1 / pfa), 1) < pfa < stats.chi2.sf(2 * np.log(1 / pfa), 3)
+
+
+@pytest.fixture(scope="module")
+def fixed_epoch(table):
+    """One geometry (T0) seen N times: its fault-free fix, whitened S, sigmas and slots."""
+    fix = geometry_fix(table, T0, SITE, MASK, elevation_sigma)
+    used = np.asarray(fix.used)
+    hw = np.asarray(fix.geometry)[used] / np.asarray(fix.sigma)[used][:, None]
+    S = np.eye(used.sum()) - hw @ np.linalg.solve(hw.T @ hw, hw.T)
+    return fix, used, np.asarray(fix.sigma)[used], S
+
+
+def test_bias_detected_and_isolated_at_the_predicted_rate(measure, monitor, default_tables, fixed_epoch):
+    fix, used, sigma, S = fixed_epoch
+    slots = np.flatnonzero(used)
+    n = slots.size
+    j = int(np.argmax(np.diag(S)))                      # the best-observed satellite
+    lam = 16.0                                          # noncentrality of the injected bias
+    bias_m = math.sqrt(lam / S[j, j]) * sigma[j]
+    bias = jnp.zeros((N, 32)).at[:, slots[j]].set(bias_m)
+    times = jnp.full(N, T0)
+    rho, _ = measure(times, bias, jax.random.key(1))
+    result = monitor(times, rho, default_tables)
+    alarm = np.asarray(result.check.alarm)
+    threshold = stats.chi2.isf(1.0 / 15000.0, n - 4)
+    p_detect = stats.ncx2.sf(threshold, n - 4, lam)
+    assert stats.binomtest(int(alarm.sum()), N, p_detect).pvalue > 1e-3, (alarm.mean(), p_detect)
+    # detection and correct isolation: the Gaussian isolation vector of eq. 9 drawn with NumPy
+    rng = np.random.default_rng(6)
+    e = rng.normal(size=(400000, n))
+    e[:, j] += bias_m / sigma[j]
+    projected = e @ S
+    ts = projected / np.sqrt(np.diag(S))
+    predicted = np.mean((np.sum(e * projected, axis=1) > threshold) & (np.argmax(np.abs(ts), axis=1) == j))
+    correct = alarm & (np.asarray(result.check.isolated) == slots[j])
+    assert stats.binomtest(int(correct.sum()), N, predicted).pvalue > 1e-3, (correct.mean(), predicted)
+    assert np.all(np.asarray(result.excluded)[correct] == slots[j])
+
+
+def test_protection_level_bounds_the_error_at_pmd(table, measure, monitor, fixed_epoch):
+    pmd = 0.01
+    tables = raim_tables(32, pmd=pmd)
+    fix, used, sigma, S = fixed_epoch
+    slots = np.flatnonzero(used)
+    n = slots.size
+    levels = protection_levels(fix, tables)
+    worst = int(np.argmax(np.asarray(levels.slope_horizontal)[used]))
+    lam = float(tables.noncentrality[n - 4])
+    bias_m = math.sqrt(lam / S[worst, worst]) * sigma[worst]       # the bias missed with probability P_md
+    times = jnp.full(N, T0)
+    missed = hazardous = total = 0
+    errors = []
+    for seed in range(3):
+        rho, _ = measure(times, jnp.zeros((N, 32)).at[:, slots[worst]].set(bias_m), jax.random.key(10 + seed))
+        result = monitor(times, rho, tables)
+        ned = np.asarray(ecef_to_ned(result.fix.position, SITE))
+        horizontal = np.hypot(ned[:, 0], ned[:, 1])
+        no_alarm = ~np.asarray(result.check.alarm)
+        missed += int(no_alarm.sum())
+        hazardous += int((no_alarm & (horizontal > np.asarray(result.protection.hpl))).sum())
+        total += N
+        errors.append(horizontal)
+    assert stats.binomtest(missed, total, pmd).pvalue > 1e-3, (missed / total, pmd)
+    assert stats.binomtest(hazardous, total, pmd, alternative="greater").pvalue > 1e-3, hazardous / total
+    assert 0 < hazardous < missed
+    # the worst bias moves the fix by HPL (its slope times sqrt(lambda)) on average
+    assert float(np.mean(np.concatenate(errors))) == pytest.approx(float(levels.hpl), rel=0.05)
+
+
+def test_exclusion_removes_a_large_fault(measure, monitor, default_tables, fixed_epoch):
+    fix, used, sigma, S = fixed_epoch
+    slots = np.flatnonzero(used)
+    target = slots[int(np.argmax(np.diag(S)))]
+    times = jnp.full(N, T0)
+    rho, _ = measure(times, jnp.zeros((N, 32)).at[:, target].set(300.0), jax.random.key(2))
+    result = monitor(times, rho, default_tables)
+    assert np.all(np.asarray(result.check.alarm)) and np.all(np.asarray(result.excluded) == target)
+    after = np.asarray(result.check_excluded.alarm)
+    assert after.mean() < 0.01
+    ned = np.asarray(ecef_to_ned(result.fix_excluded.position, SITE))
+    before = np.asarray(ecef_to_ned(result.fix.position, SITE))
+    after_error, before_error = np.hypot(ned[:, 0], ned[:, 1]), np.hypot(before[:, 0], before[:, 1])
+    assert np.percentile(after_error, 95) < 20.0 and np.median(after_error) < np.median(before_error)
+    assert int(result.check_excluded.dof[0]) == int(result.check.dof[0]) - 1
+
+
+def test_plant_and_solver_agree_and_faults_hit_their_slot(table):
+    """The receiver plant (time tags in receiver time, light time, Sagnac, satellite clocks)
+    and the solver invert each other to < 1 mm without noise; Table 2's faults act on
+    their slot as the foundation's fault table says."""
+    steps = 8
+    path = jnp.tile(SITE, (steps, 1))
+    visible = jnp.stack([geometry_fix(table, T0 + k, SITE, MASK, elevation_sigma).used for k in range(steps)])
+    slot = int(np.flatnonzero(np.asarray(visible[0]))[0])
+    fault = faults.concat_faults(faults.fault("impulse", "sensor", slot, 1, 100.0),
+                                 faults.fault("bias", "sensor", slot, 3, 100.0, end=5),
+                                 faults.fault("ramp", "sensor", slot, 5, 0.0, 1.0, end=7))
+    us = jnp.zeros((steps, 0))
+    x0 = jnp.asarray([CLOCK, 0.3])
+    _, clean = simulate(receiver_plant(table, T0, 1.0, path, visible, jnp.zeros((steps, 32))), x0, us,
+                        jax.random.key(0))
+    _, faulty = simulate(receiver_plant(table, T0, 1.0, path, visible, jnp.zeros((steps, 32)), fault=fault), x0, us,
+                         jax.random.key(0))
+    added = np.asarray(faulty.measurement - clean.measurement)[:, slot]
+    np.testing.assert_allclose(added, [0, 100, 0, 100, 100, 0, 1, 0], atol=1e-6)
+    assert np.all(np.asarray(faulty.mode) == [0, 1 + slot, 0, 1 + slot, 1 + slot, 1 + slot, 1 + slot, 0])
+    for k in (0, 6):
+        orbit, ok = select_orbits(table, T0 + k)
+        sol = solve_position(orbit, T0 + k, clean.measurement[k], ok)
+        assert np.max(np.abs(np.asarray(sol.position - SITE))) < 1e-3
+        assert float(sol.clock_bias) == pytest.approx(float(clean.state[k, 0]), abs=1e-3)

@@ -351,6 +351,21 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
                         lambda where: plot_wheels(study, examples, where), elapsed)
 
 
+def _run_f16_flight(args: argparse.Namespace, folder: Path) -> str:
+    from jaxfdi.scenarios.f16_flight import f16_flight_study, plot_f16_flight
+
+    start = time.perf_counter()
+    study = f16_flight_study(flights=args.runs, seed=args.seed, progress=not args.quiet)
+    elapsed = time.perf_counter() - start
+    cfg, trim = study.config, study.config["design_trim"]
+    print(f"f16-flight: seed-000 F-16 (Stevens & Lewis 2nd-ed. tables), climb {cfg['plan']['climb_rate_ft_s']:.0f} "
+          f"ft/s for 0-5 s, then altitude hold and a {cfg['plan']['bank_angle_deg']:.0f} deg bank turn to "
+          f"{cfg['duration_s']:.0f} s; design trim {trim['airspeed_ft_s']:.0f} ft/s, sea level, xcg {trim['xcg']}; "
+          f"{cfg['flights']} flights, RK4 at {cfg['dt_s']} s")
+    print(study.table())
+    return _write_study(study, args, folder, "f16-flight.json", lambda where: plot_f16_flight(study, where), elapsed)
+
+
 def _run_gnss_campus(args: argparse.Namespace, folder: Path) -> str:
     from jaxfdi.scenarios.gnss_campus import gnss_campus_study, plot_gnss_campus
 
@@ -374,6 +389,8 @@ RUNNERS = {
     "reaction-wheels": Runner(_run_reaction_wheels, "seed-004 satellite, 4-wheel pyramid: dual filter F, NIS, "
                               "credits, MM isolator (--estimator, --engage-on)", options=("estimator", "engage_on"),
                               methods=_wheel_method_names),
+    "f16-flight": Runner(_run_f16_flight, "seed-000 F-16: book trim tables beside ours, modes, LQR SAS with "
+                                          "altitude and bank hold flying the paper's climb and bank turn"),
     "gnss-campus": Runner(_run_gnss_campus, "seed-002 GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
                                             "park satellite faults detected, isolated and excluded"),
     "vtol": Runner(_run_vtol, "seed-001 VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "

@@ -1,6 +1,7 @@
 """Control: discrete LQR with integral action, eigenstructure assignment of a
 reconfigured gain for a faulty actuator, and the closed loop that switches to it when
-the FDD isolates a fault (seed 001, Section IV); reaction-wheel attitude control (seed 004)."""
+the FDD isolates a fault (seed 001, Section IV); reaction-wheel attitude control (seed 004);
+F-16 stability augmentation with altitude and bank-angle hold (seed 000)."""
 from jaxfdi.control.attitude import (
     AttitudeGains,
     Slew,
@@ -18,6 +19,22 @@ from jaxfdi.control.eigenstructure import (
     effectiveness_gain_schedule,
     effectiveness_input,
     scheduled_gain,
+)
+from jaxfdi.control.flight import (
+    FlightDesign,
+    FlightGains,
+    FlightPlan,
+    FlightReference,
+    FlightWeights,
+    bryson_weights,
+    commanded_profile,
+    default_weights,
+    design_flight_control,
+    flight_controller,
+    flight_plan,
+    flight_reference,
+    initial_condition,
+    plan_trims,
 )
 from jaxfdi.control.lqr import PIDesign, integral_augmentation, lqr_gain, lqr_pi
 
@@ -42,4 +59,18 @@ __all__ = [
     "lqr_pi",
     "run_closed_loop",
     "scheduled_gain",
+    "FlightDesign",
+    "FlightGains",
+    "FlightPlan",
+    "FlightReference",
+    "FlightWeights",
+    "bryson_weights",
+    "commanded_profile",
+    "default_weights",
+    "design_flight_control",
+    "flight_controller",
+    "flight_plan",
+    "flight_reference",
+    "initial_condition",
+    "plan_trims",
 ]

@@ -1,6 +1,8 @@
 """Plant models: linear ones as ``LinearGaussianModel`` data, nonlinear ones as pure
 ``f(x, u, params)`` / ``h(x, u, params)`` with a params pytree."""
+from jaxfdi.models import f16
 from jaxfdi.models.engine import engine_model
+from jaxfdi.models.f16 import F16Params, f16_dynamics, f16_params, f16_plant, f16_sensors
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.models.linear import (
     LinearGaussianModel,
@@ -37,6 +39,12 @@ __all__ = [
     "linear_transition",
     "validate_linear_model",
     "engine_model",
+    "f16",
+    "F16Params",
+    "f16_dynamics",
+    "f16_params",
+    "f16_plant",
+    "f16_sensors",
     "noise_inflation_modes",
     "bias_modes",
     "bias_mode_initial_state",

@@ -1,0 +1,226 @@
+"""Linear models of the F-16 about a trim by ``jax.jacfwd``, its longitudinal and lateral
+parts, and their modes (Stevens & Lewis 2003, sec. 3.7 and 4.4).
+
+``A = df/dx``, ``B = df/du`` of ``f16_dynamics`` at ``(x_trim, u_trim)``: exact
+derivatives of the piecewise-linear tables (forward mode), no finite-difference step to
+choose. About a wings-level symmetric trim the 13 states split into
+
+- longitudinal ``[VT, alpha, theta, Q]`` (with ``h`` and ``pow`` when the altitude and the
+  engine are part of a design), inputs ``[thtl, el]``;
+- lateral-directional ``[beta, phi, P, R]``, inputs ``[ail, rdr]``,
+
+(``psi``, ``pn``, ``pe`` feed nothing back). Modes are named from the eigenvalues of the
+4-state blocks: longitudinally the two of largest modulus are the short period and the
+two smallest the phugoid (a complex pair each, or two real roots when the c.g. is aft
+of the manoeuvre point); laterally the complex pair is the Dutch roll, and of the two
+real roots the faster is the roll subsidence and the slower the spiral (without a
+complex pair: the fastest root is the roll, the slowest the spiral, the middle two the
+Dutch roll). Each mode reports its roots, natural frequency ``|lambda|``, damping ratio
+``-Re(lambda)/|lambda|``, for real roots the time constant ``-1/lambda`` (negative:
+unstable, with time to double ``ln 2 / lambda``), and each root's eigenvector magnitudes
+(``shapes``), since near the neutral point the names by speed stop saying what moves: at
+xcg = 0.35 the unstable root's eigenvector is mostly pitch attitude and airspeed
+(``theta`` 1, ``VT/V0`` 0.53, ``alpha`` 0.14), a divergence of the phugoid's kind, while
+the -1.91 root is the short period's angle of attack and pitch rate.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.models.f16.dynamics import (
+    AIL,
+    ALPHA,
+    BETA,
+    EL,
+    H,
+    PHI,
+    POW,
+    RDR,
+    THETA,
+    THTL,
+    VT,
+    F16Params,
+    P,
+    Q,
+    R,
+    STATE_NAMES,
+    CONTROL_NAMES,
+    f16_dynamics,
+)
+
+#: the longitudinal and lateral state and input indices (the 4-state blocks of the modes)
+LONGITUDINAL_STATES = (VT, ALPHA, THETA, Q)
+LONGITUDINAL_INPUTS = (THTL, EL)
+LATERAL_STATES = (BETA, PHI, P, R)
+LATERAL_INPUTS = (AIL, RDR)
+#: the longitudinal states of a design that holds altitude with the engine in the model
+LONGITUDINAL_DESIGN_STATES = (VT, ALPHA, THETA, Q, H, POW)
+
+
+class LinearF16(NamedTuple):
+    """``x' = A dx + B du`` about ``(x, u)``."""
+
+    A: Array  # (13, 13)
+    B: Array  # (13, 4)
+    x: Array  # (13,) the trim state
+    u: Array  # (4,) the trim controls
+
+
+class Mode(NamedTuple):
+    name: str
+    roots: tuple[complex, ...]
+    natural_frequency: float    # rad/s, |lambda| (of the first root for two real roots)
+    damping_ratio: float        # -Re/|lambda| (nan for two real roots)
+    time_constant: float        # s, -1/lambda of the slowest real root (nan for a complex pair)
+    stable: bool
+    shapes: tuple[tuple[float, ...], ...] = ()  # per root: |eigenvector| over the block's states, max 1
+                                                # (VT divided by the trim airspeed)
+
+    def describe(self, names: tuple[str, ...] | None = None) -> str:
+        """One line: roots, frequency and damping (or time constant), and with ``names``
+        (the block's states) the largest components of each root's eigenvector."""
+        roots = ", ".join(_fmt_root(r) for r in self.roots)
+        if len(self.roots) == 2 and abs(self.roots[0].imag) > 0:
+            extra = f"wn {self.natural_frequency:.3f} rad/s, zeta {self.damping_ratio:.3f}"
+        else:
+            slow = max(self.roots, key=lambda r: r.real).real
+            extra = (f"time to double {math.log(2) / slow:.1f} s" if slow > 0 else
+                     f"time constant {self.time_constant:.2f} s")
+        text = f"{self.name:<15} {roots:<36} {extra}{'' if self.stable else '  UNSTABLE'}"
+        if names and self.shapes:
+            parts = []
+            for root, shape in zip(self.roots, self.shapes):
+                if root.imag < 0:
+                    continue
+                top = sorted(zip(shape, names), reverse=True)[:2]
+                parts.append(f"{_fmt_root(root)}: " + " ".join(f"{n} {v:.2f}" for v, n in top))
+            text += "  [" + "; ".join(parts) + "]"
+        return text
+
+
+def _fmt_root(r: complex) -> str:
+    return f"{r.real:.4f}" if r.imag == 0 else f"{r.real:.4f} {'+' if r.imag > 0 else '-'} {abs(r.imag):.4f}j"
+
+
+def linearize(params: F16Params, x: Array, u: Array) -> LinearF16:
+    """Jacobians of ``f16_dynamics`` at ``(x, u)`` (``jax.jacfwd``)."""
+    _checks.check_shape("x", x, (13,), "trim state")
+    _checks.check_shape("u", u, (4,), "trim controls")
+    A, B = jax.jacfwd(f16_dynamics, argnums=(0, 1))(x, u, params)
+    return LinearF16(A, B, x, u)
+
+
+def submodel(model: LinearF16, states: tuple[int, ...], inputs: tuple[int, ...]) -> tuple[Array, Array]:
+    """``(A[states, states], B[states, inputs])``."""
+    s, i = np.asarray(states), np.asarray(inputs)
+    return model.A[s[:, None], s[None, :]], model.B[s[:, None], i[None, :]]
+
+
+def longitudinal(model: LinearF16, states: tuple[int, ...] = LONGITUDINAL_STATES) -> tuple[Array, Array]:
+    """The longitudinal block, inputs ``[thtl, el]``."""
+    return submodel(model, states, LONGITUDINAL_INPUTS)
+
+
+def lateral(model: LinearF16, states: tuple[int, ...] = LATERAL_STATES) -> tuple[Array, Array]:
+    """The lateral-directional block, inputs ``[ail, rdr]``."""
+    return submodel(model, states, LATERAL_INPUTS)
+
+
+def _mode(name: str, roots, shapes=()) -> Mode:
+    roots = tuple(complex(r) for r in roots)
+    first = roots[0]
+    wn = abs(first)
+    complex_pair = len(roots) == 2 and abs(first.imag) > 0
+    zeta = -first.real / wn if complex_pair and wn > 0 else float("nan")
+    real_parts = [r.real for r in roots]
+    tau = -1.0 / max(real_parts) if not complex_pair and max(real_parts) != 0 else float("nan")
+    return Mode(name, roots, wn, zeta, tau, all(r.real < 0 for r in roots), tuple(shapes))
+
+
+def _canonical(roots: np.ndarray) -> np.ndarray:
+    """Round-off imaginary parts of real roots to exactly 0."""
+    roots = np.asarray(roots, complex)
+    scale = np.maximum(np.abs(roots), 1e-300)
+    return np.where(np.abs(roots.imag) <= 1e-9 * scale, roots.real + 0j, roots)
+
+
+def _shapes(A: Array, roots: np.ndarray, scale: np.ndarray) -> list[tuple[float, ...]]:
+    """|eigenvector| of each root over the block's states (divided by ``scale``), max 1."""
+    values, vectors = np.linalg.eig(np.asarray(A, np.float64))
+    out = []
+    for r in roots:
+        v = np.abs(vectors[:, np.argmin(np.abs(values - r))]) / scale
+        out.append(tuple(float(c) for c in v / np.max(v)))
+    return out
+
+
+def longitudinal_modes(A_lon: Array, airspeed: float = 1.0) -> list[Mode]:
+    """Short period and phugoid of the (4, 4) ``[VT, alpha, theta, Q]`` block: two complex
+    pairs, the faster is the short period; one pair and two real roots, the pair is the
+    phugoid unless it is faster than both real roots (then the short period); four real
+    roots, the two of largest modulus are the short period."""
+    _checks.check_shape("A_lon", A_lon, (4, 4), "[VT, alpha, theta, Q] block")
+    roots = _canonical(np.linalg.eigvals(np.asarray(A_lon, np.float64)))
+    is_complex = np.abs(roots.imag) > 0
+    real = roots[~is_complex]
+    if np.count_nonzero(is_complex) == 4:
+        order = np.argsort(np.abs(roots))
+        short, phugoid = roots[order[2:]], roots[order[:2]]
+    elif np.count_nonzero(is_complex) == 2:
+        pair = roots[is_complex]
+        faster = np.abs(pair[0]) > np.max(np.abs(real))
+        short, phugoid = (pair, real) if faster else (real, pair)
+    else:
+        order = np.argsort(np.abs(roots))
+        short, phugoid = roots[order[2:]], roots[order[:2]]
+    scale = np.array([airspeed, 1.0, 1.0, 1.0])
+    short, phugoid = _pair(short), _pair(phugoid)
+    return [_mode("short period", short, _shapes(A_lon, short, scale)),
+            _mode("phugoid", phugoid, _shapes(A_lon, phugoid, scale))]
+
+
+def lateral_modes(A_lat: Array) -> list[Mode]:
+    """Roll subsidence, spiral and Dutch roll of the (4, 4) ``[beta, phi, P, R]`` block."""
+    _checks.check_shape("A_lat", A_lat, (4, 4), "[beta, phi, P, R] block")
+    roots = _canonical(np.linalg.eigvals(np.asarray(A_lat, np.float64)))
+    is_complex = np.abs(roots.imag) > 0
+    if np.count_nonzero(is_complex) == 2:
+        dutch = roots[is_complex]
+        real = np.sort_complex(roots[~is_complex].real + 0j)
+        real = real[np.argsort(np.abs(real))]
+        spiral, roll = real[0], real[1]
+    else:
+        order = np.argsort(np.abs(roots))
+        spiral, dutch, roll = roots[order[0]], roots[order[1:3]], roots[order[3]]
+    one = np.ones(4)
+    dutch = _pair(dutch)
+    return [_mode("roll", [roll], _shapes(A_lat, [roll], one)),
+            _mode("spiral", [spiral], _shapes(A_lat, [spiral], one)),
+            _mode("Dutch roll", dutch, _shapes(A_lat, dutch, one))]
+
+
+def _pair(roots: np.ndarray) -> np.ndarray:
+    """A complex pair with the positive imaginary part first; real roots fastest first."""
+    if np.any(np.abs(roots.imag) > 0):
+        return roots[np.argsort(-roots.imag)]
+    return roots[np.argsort(roots.real)]
+
+
+def flight_modes(model: LinearF16) -> list[Mode]:
+    """The five classical modes about a wings-level trim (module doc)."""
+    A_lon, _ = longitudinal(model)
+    A_lat, _ = lateral(model)
+    return longitudinal_modes(A_lon, float(model.x[VT])) + lateral_modes(A_lat)
+
+
+__all__ = [
+    "LinearF16", "Mode", "linearize", "submodel", "longitudinal", "lateral", "longitudinal_modes", "lateral_modes",
+    "flight_modes", "LONGITUDINAL_STATES", "LONGITUDINAL_INPUTS", "LATERAL_STATES", "LATERAL_INPUTS",
+    "LONGITUDINAL_DESIGN_STATES", "STATE_NAMES", "CONTROL_NAMES", "AIL", "RDR", "PHI", "POW",
+]

@@ -1,0 +1,228 @@
+"""The Stevens & Lewis F-16 data as JAX arrays, and the book's table interpolation.
+
+Data: ``jaxfdi.data.data_path("f16_stevens_lewis.json")`` (aerodynamic tables after NASA
+TP-1538, engine, atmosphere, mass and geometry of Stevens & Lewis 2003, *Aircraft Control
+and Simulation*, 2nd ed., Appendix A; provenance of every number in the data README).
+``values`` are the 2nd-edition book tables; a *profile* overrides cells to reproduce
+another published version (``PROFILES``): ``nasa_morelli_tm2003_212145`` (Morelli's NASA
+TM-2003-212145 / the 3rd edition: fixes the book's Cmq at alpha = -5 deg and CYp at 45 deg
+and has other CL cells at alpha 15-25 deg) or ``aerobench_python``.
+
+Interpolation (the book's Fortran, e.g. ``FUNCTION CX``): on a uniform grid
+``x_0 < ... < x_{n-1}`` with step ``h``, ``i = clip(floor((x - x_0) / h), 0, n - 2)`` and
+``f = (x - x_0) / h - i``::
+
+    T(x) = (1 - f) T_i + f T_{i+1}
+
+linear between neighbouring breakpoints and, beyond the ends (``f < 0`` or ``f > 1``),
+linear extrapolation from the end segment; 2-D tables are bilinear (``interpolate2``).
+The segment of each argument is found once (``segment``) and shared by every table
+indexed by it; a lookup reads its two cells (2x2 block) with one ``dynamic_slice``. Under
+``vmap`` on CPU that is 10x faster than writing the lookup as a product with a one-hot
+weight vector (measured on 10^4 points). ``CL`` and
+``CN`` are tabulated against ``|beta|`` and multiplied by ``sign(beta)`` (``aero.py``).
+"""
+from __future__ import annotations
+
+import functools
+import json
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+#: cell-override profiles of ``f16_stevens_lewis.json`` (``"stevens_lewis_2nd_ed"`` = the book)
+PROFILES = ("stevens_lewis_2nd_ed", "nasa_morelli_tm2003_212145", "aerobench_python")
+
+#: the aerodynamic tables and the breakpoint axis of their rows (columns are alpha)
+AERO_TABLES = ("CX", "CZ", "CM", "CL", "CN", "DLDA", "DLDR", "DNDA", "DNDR", "DAMP")
+
+
+class AeroTables(NamedTuple):
+    """Stevens & Lewis aerodynamic tables (rows x alpha columns) and the CY/CZ formula
+    constants (``CY = cy_beta beta + cy_ail ail/ail_norm + cy_rdr rdr/rdr_norm``,
+    ``CZ = CZ(alpha) (1 - (beta/cz_beta_factor)^2) + cz_el el/el_norm``; angles in deg)."""
+
+    alpha_deg: Array     # (12,) breakpoints -10..45
+    elevator_deg: Array  # (5,)  -24..24
+    beta_abs_deg: Array  # (7,)  0..30 (CL, CN)
+    beta_deg: Array      # (7,)  -30..30 (DLDA, DLDR, DNDA, DNDR)
+    CX: Array            # (5, 12) elevator x alpha
+    CZ: Array            # (12,)
+    CM: Array            # (5, 12) elevator x alpha
+    CL: Array            # (7, 12) |beta| x alpha
+    CN: Array            # (7, 12) |beta| x alpha
+    DLDA: Array          # (7, 12) beta x alpha, per unit ail/20
+    DLDR: Array          # (7, 12) beta x alpha, per unit rdr/30
+    DNDA: Array          # (7, 12)
+    DNDR: Array          # (7, 12)
+    DAMP: Array          # (9, 12) CXq CYr CYp CZq Clr Clp Cmq Cnr Cnp
+    cy_beta: Array       # () per deg
+    cy_ail: Array        # ()
+    cy_rdr: Array        # ()
+    cz_beta_factor: Array  # () deg (57.3)
+    cz_el: Array         # ()
+    ail_norm: Array      # () deg (20)
+    rdr_norm: Array      # () deg (30)
+    el_norm: Array       # () deg (25)
+
+
+class EngineData(NamedTuple):
+    """F100 thrust tables (Mach rows x altitude columns), throttle gearing and power lag."""
+
+    mach: Array          # (6,) 0..1
+    altitude_ft: Array   # (6,) 0..50000
+    idle: Array          # (6, 6) lbf
+    military: Array      # (6, 6)
+    maximum: Array       # (6, 6)
+    gear_break: Array    # () throttle 0.77
+    gear_low: Array      # () 64.94 % per unit throttle
+    gear_high: Array     # () 217.38
+    gear_offset: Array   # () -117.38
+    afterburner: Array   # () 50 %
+    fast_rate: Array     # () 5 1/s
+    lit_target: Array    # () 60 %
+    unlit_target: Array  # () 40 %
+    rtau: Array          # (6,) dp_low, rtau_low, dp_high, rtau_high, intercept, slope
+
+
+class AtmosphereData(NamedTuple):
+    """Stevens & Lewis air data computer constants (``atmosphere.py``)."""
+
+    rho0: Array          # () slug/ft^3
+    tfac_slope: Array    # () 1/ft
+    T0: Array            # () deg R
+    T_strat: Array       # () deg R
+    strat_alt: Array     # () ft
+    exponent: Array      # () 4.14
+    gamma: Array         # () 1.4
+    gas_constant: Array  # () ft lbf / (slug deg R)
+
+
+@functools.lru_cache(maxsize=None)
+def _raw(name: str = "f16_stevens_lewis.json") -> dict:
+    from jaxfdi.data import data_path
+
+    with open(data_path(name)) as fh:
+        return json.load(fh)
+
+
+def stevens_lewis_data() -> dict:
+    """The parsed ``f16_stevens_lewis.json`` (shared, do not mutate)."""
+    return _raw("f16_stevens_lewis.json")
+
+
+def _grid(values, name: str) -> np.ndarray:
+    grid = np.asarray(values, np.float64)
+    steps = np.diff(grid)
+    if grid.ndim != 1 or grid.size < 2 or np.any(steps <= 0) or np.ptp(steps) > 1e-9 * abs(steps[0]):
+        raise ValueError(f"{name}: expected a uniform increasing breakpoint grid, got {grid.tolist()}")
+    return grid
+
+
+def table_arrays(profile: str = "stevens_lewis_2nd_ed") -> dict[str, np.ndarray]:
+    """Every table of the data file as float64 NumPy, with ``profile``'s cell overrides
+    applied (keys: the aero table names, ``thrust_idle``, ``thrust_military``,
+    ``thrust_maximum`` and the breakpoint grids)."""
+    if profile not in PROFILES:
+        raise ValueError(f"profile: expected one of {list(PROFILES)}, got {profile!r}")
+    data = stevens_lewis_data()
+    bp = data["breakpoints"]
+    out = {name: np.array(data["aero_tables"][name]["values"], np.float64) for name in AERO_TABLES}
+    thrust = data["engine"]["thrust_tables"]
+    out["thrust_idle"] = np.array(thrust["idle"], np.float64)
+    out["thrust_military"] = np.array(thrust["military"], np.float64)
+    out["thrust_maximum"] = np.array(thrust["maximum"], np.float64)
+    for cell in data["profiles"][profile]["overrides"] or []:
+        table = out[cell["table"]]
+        index = tuple(cell["index"])
+        if not np.isclose(table[index], cell["baseline"]):
+            raise ValueError(f"profile {profile}: {cell['table']}{list(index)} is {table[index]}, expected the "
+                             f"baseline {cell['baseline']} before the override")
+        table[index] = cell["value"]
+    for axis in ("alpha_deg", "elevator_deg", "beta_abs_deg", "beta_deg", "thrust_mach", "thrust_altitude_ft"):
+        out[axis] = _grid(bp[axis]["values"], axis)
+    return out
+
+
+def aero_tables(profile: str = "stevens_lewis_2nd_ed", dtype=None) -> AeroTables:
+    """The aerodynamic tables of ``profile`` as an ``AeroTables`` pytree in ``dtype``."""
+    dtype = dtype or jnp.result_type(float)
+    t = table_arrays(profile)
+    formulas = stevens_lewis_data()["coefficient_formulas"]
+    cy, cz = formulas["CY"], formulas["CZ"]
+    a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
+    return AeroTables(
+        a(t["alpha_deg"]), a(t["elevator_deg"]), a(t["beta_abs_deg"]), a(t["beta_deg"]),
+        *(a(t[name]) for name in AERO_TABLES),
+        a(cy["beta_coef_per_deg"]), a(cy["ail_coef"]), a(cy["rdr_coef"]), a(cz["beta_factor_deg"]),
+        a(cz["el_coef"]), a(cy["ail_norm_deg"]), a(cy["rdr_norm_deg"]), a(cz["el_norm_deg"]),
+    )
+
+
+def engine_data(profile: str = "stevens_lewis_2nd_ed", dtype=None) -> EngineData:
+    """Thrust tables (with ``profile``'s overrides), gearing and lag constants."""
+    dtype = dtype or jnp.result_type(float)
+    t = table_arrays(profile)
+    eng = stevens_lewis_data()["engine"]
+    gear, lag = eng["throttle_gearing"], eng["power_lag"]
+    r = lag["rtau"]
+    a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
+    return EngineData(
+        a(t["thrust_mach"]), a(t["thrust_altitude_ft"]), a(t["thrust_idle"]), a(t["thrust_military"]),
+        a(t["thrust_maximum"]), a(gear["breakpoint_throttle"]), a(gear["slope_low"]), a(gear["slope_high"]),
+        a(gear["offset_high"]), a(lag["afterburner_threshold_pct"]), a(lag["fast_rate_per_s"]),
+        a(lag["lit_target_pct"]), a(lag["unlit_target_pct"]),
+        a([r["dp_low"], r["rtau_low"], r["dp_high"], r["rtau_high"], r["intercept"], r["slope"]]),
+    )
+
+
+def atmosphere_data(dtype=None) -> AtmosphereData:
+    """The air data computer's constants."""
+    dtype = dtype or jnp.result_type(float)
+    atm = stevens_lewis_data()["atmosphere"]
+    keys = ("rho0_slug_ft3", "tfac_slope_per_ft", "T0_rankine", "T_strat_rankine", "strat_alt_ft",
+            "density_exponent", "gamma", "R_ft_lbf_per_slug_R")
+    return AtmosphereData(*(jnp.asarray(atm[k], dtype) for k in keys))
+
+
+# --- the book's interpolation -----------------------------------------------------
+
+def segment(x: Array, grid: Array) -> tuple[Array, Array]:
+    """``(i, f)`` of the book's interpolation on the uniform ``grid`` (n,):
+    ``i = clip(floor((x - x_0)/h), 0, n - 2)`` (int32) and ``f = (x - x_0)/h - i``, which
+    lies outside [0, 1] beyond the ends (extrapolation from the end segment)."""
+    n = grid.shape[0]
+    position = (x - grid[0]) / (grid[1] - grid[0])
+    index = jnp.clip(jnp.floor(position), 0, n - 2)
+    return index.astype(jnp.int32), position - index
+
+
+def interpolate1(values: Array, i: Array, f: Array) -> Array:
+    """``(1 - f) T_i + f T_{i+1}`` along the last axis of ``values`` (n,) or (m, n)."""
+    lead = values.shape[:-1]
+    start = (jnp.zeros((), i.dtype),) * len(lead) + (i,)
+    pair = jax.lax.dynamic_slice(values, start, lead + (2,))  # one gather of the two columns
+    return pair[..., 0] + f * (pair[..., 1] - pair[..., 0])
+
+
+def interpolate2(values: Array, i: Array, f: Array, j: Array, g: Array) -> Array:
+    """Bilinear ``T(row, col)`` of ``values`` (rows, cols) from the row segment ``(i, f)``
+    and the column segment ``(j, g)``: along the columns first, then the rows (the book's
+    order). The 2x2 block is one ``dynamic_slice`` (one gather under ``vmap``: 17 % faster
+    than four single-cell gathers, 3x faster than gathering whole rows)."""
+    block = jax.lax.dynamic_slice(values, (i, j), (2, 2))
+    low = block[0, 0] + g * (block[0, 1] - block[0, 0])
+    return low + f * (block[1, 0] + g * (block[1, 1] - block[1, 0]) - low)
+
+
+def lookup1(x: Array, grid: Array, values: Array) -> Array:
+    """1-D table lookup ``T(x)`` (``values`` (n,) or (m, n): m tables on the same grid)."""
+    return interpolate1(values, *segment(x, grid))
+
+
+def lookup2(row: Array, row_grid: Array, col: Array, col_grid: Array, values: Array) -> Array:
+    """2-D table lookup ``T(row, col)``, bilinear, extrapolated from the end segments."""
+    return interpolate2(values, *segment(row, row_grid), *segment(col, col_grid))

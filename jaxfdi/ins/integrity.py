@@ -1,0 +1,156 @@
+"""Seed 002's GPS/INS integrity monitor (Fig. 3) as an FDI stage of the foundation's loop.
+
+Each GPS epoch:
+
+1. **RAIM** on the pseudoranges (``gnss.integrity.monitor_epoch``: least-squares fix,
+   parity test, protection levels; no exclusion). The fix is the INS's reference only
+   when RAIM *passes*: a test was possible (``n >= 5``), it did not alarm, HPL and VPL are
+   within the alert limits and the fix converged. Otherwise the epoch is coasted.
+2. **EKF** (``loosely_coupled_filter``): update with the fix (position covariance from
+   the weighted least-squares geometry, ``(G^T W G)^-1`` in NED; velocity covariance
+   ``velocity_sigma^2 I``), feedback, then the INS through the epoch's IMU samples.
+3. **Windowed chi-square test** (seed 002 eq. 1; ``detection.chi2_detector``): the NIS
+   of the epochs that were updated, summed over the last ``window`` of them (10: 60 dof,
+   91.95 at 0.005). A coasted epoch leaves the window as it was and decides nothing.
+4. **SCST** (``scst.state_chi2_test``) on the filter's corrections and covariances,
+   every epoch.
+
+GPS and INS are never fused before the check: the chi-square test sees GPS minus INS,
+so a simultaneous GPS and INS fault cannot cancel in it (the paper's argument).
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _linalg
+from jaxfdi.detection.chi2 import Decision, Detector, WindowState
+from jaxfdi.filters._base import Filter
+from jaxfdi.gnss import frames
+from jaxfdi.gnss.integrity import monitor_epoch
+from jaxfdi.gnss.measurements import elevation_sigma
+from jaxfdi.gnss.orbits import OrbitTable, select_orbits
+from jaxfdi.gnss.positioning import PositionFix
+from jaxfdi.gnss.raim import RaimTables
+from jaxfdi.ins.loosely_coupled import GpsFix, InsState
+from jaxfdi.ins.mechanization import NavState
+from jaxfdi.ins.scst import ScstState, StateChi2Test
+from jaxfdi.loop import FDI
+
+
+class GpsInsFdiState(NamedTuple):
+    ins: InsState
+    chi2: WindowState
+    scst: ScstState
+
+
+class InsTestOutput(NamedTuple):
+    """One epoch of the INS tests (``ins_monitor_step``)."""
+
+    gps_used: Array         # () bool: the EKF was updated
+    chi2: Decision          # windowed NIS (statistic held, alarm False on coasted epochs)
+    scst: Decision
+    scst_valid: Array       # () bool
+    scst_condition: Array   # ()
+    scst_age: Array         # () int
+    nis: Array              # ()
+    nav: NavState           # the estimate at t_k (after the feedback)
+    accel_bias: Array       # (3,)
+    gyro_bias: Array        # (3,)
+    cov: Array              # (15, 15) P[k|k]
+    healthy: Array          # () bool
+
+
+class GpsInsOutput(NamedTuple):
+    """One epoch of the GPS/INS monitor (stacked over time with ``keep_history``)."""
+
+    raim: Decision          # parity statistic, alarm, label 1 + isolated slot
+    raim_threshold: Array   # ()
+    hpl: Array              # () m
+    hdop: Array             # ()
+    num_used: Array         # () satellites in the fix
+    ins: InsTestOutput
+    healthy: Array          # () bool
+
+    # the INS fields at the top level, for scorers and plots
+    gps_used = property(lambda self: self.ins.gps_used)
+    chi2 = property(lambda self: self.ins.chi2)
+    scst = property(lambda self: self.ins.scst)
+    scst_valid = property(lambda self: self.ins.scst_valid)
+    nav = property(lambda self: self.ins.nav)
+    cov = property(lambda self: self.ins.cov)
+
+
+def fix_covariance(fix: PositionFix) -> Array:
+    """(3, 3) NED position covariance [m^2] of a weighted least-squares fix."""
+    h = jnp.where(fix.used[:, None], fix.geometry / fix.sigma[:, None], 0.0)
+    normal = h.T @ h
+    inverse = _linalg.cho_solve(_linalg.cholesky(normal), jnp.eye(4, dtype=h.dtype))
+    return _linalg.symmetrize(inverse[:3, :3])
+
+
+def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, state: GpsInsFdiState, fix: GpsFix,
+                     samples: Array) -> tuple[GpsInsFdiState, InsTestOutput]:
+    """Steps 2-4 of the module doc for one epoch: the EKF with ``fix`` and the epoch's IMU
+    ``samples`` (n, 6), then both tests."""
+    ins, info = ins_filter.step(state.ins, fix, samples)
+    window, (statistic, alarm) = chi2.step(state.chi2, info.nis)
+    window = WindowState(jnp.where(info.used, window.buffer, state.chi2.buffer),
+                         jnp.where(info.used, window.index, state.chi2.index))
+    held = jnp.sum(state.chi2.buffer)
+    dtype = state.ins.cov.dtype
+    chi2_decision = Decision(jnp.where(info.used, statistic, held), info.used & alarm, jnp.asarray(-1, jnp.int32),
+                             jnp.full((), jnp.nan, dtype))
+    scst_state, scst_out = scst.step(state.scst, info.correction, info.filtered_cov, info.transition,
+                                     info.process_cov)
+    healthy = info.healthy & jnp.isfinite(chi2_decision.statistic) & jnp.isfinite(scst_out.decision.statistic)
+    out = InsTestOutput(info.used, chi2_decision, scst_out.decision, scst_out.valid, scst_out.condition, scst_out.age,
+                        info.nis, info.filtered_nav, info.accel_bias, info.gyro_bias, info.filtered_cov, healthy)
+    return GpsInsFdiState(ins, window, scst_state), out
+
+
+def ins_fdi(ins_filter: Filter, chi2: Detector, scst: StateChi2Test) -> FDI:
+    """The INS tests alone as a ``loop.FDI``: step ``k`` takes ``(GpsFix, samples (n, 6))``
+    (a receiver's validated solution, e.g. read from a log) and returns an
+    ``InsTestOutput``."""
+
+    def step(state: GpsInsFdiState, k, y, u):
+        fix, samples = y
+        return ins_monitor_step(ins_filter, chi2, scst, state, fix, samples)
+
+    return FDI(step)
+
+
+def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Filter, chi2: Detector,
+                scst: StateChi2Test, velocity_sigma: float, operation="npa") -> FDI:
+    """The monitor of the module doc as a ``loop.FDI``; step ``k`` takes a
+    ``plant.GpsInsMeasurement`` time-tagged ``t0 + k`` s and returns a ``GpsInsOutput``.
+    Its state is ``GpsInsFdiState(ins_filter.init(...), chi2.init(), scst.init(15))``."""
+
+    def step(state: GpsInsFdiState, k, y, u):
+        t = t0 + k
+        orbit, available = select_orbits(table, t)
+        epoch = monitor_epoch(orbit, available, t, y.pseudoranges, tables, elevation_sigma, operation, exclude=False)
+        fix, check, protection = epoch.fix, epoch.check, epoch.protection
+        passes = fix.healthy & check.healthy & (check.dof > 0) & ~check.alarm & protection.available
+        lat, lon, height = frames.ecef_to_geodetic(fix.position)
+        gps = GpsFix(jnp.stack([lat, lon, height]), y.velocity, fix_covariance(fix),
+                     velocity_sigma**2 * jnp.eye(3, dtype=state.ins.cov.dtype), passes)
+        state, ins = ins_monitor_step(ins_filter, chi2, scst, state, gps, y.imu)
+        label = jnp.where(check.alarm & (check.isolated >= 0), 1 + check.isolated, jnp.where(check.alarm, -1, 0))
+        raim = Decision(check.statistic, check.alarm, label.astype(jnp.int32), jnp.max(jnp.abs(check.isolation)))
+        return state, GpsInsOutput(raim, check.threshold, protection.hpl, fix.dops.hdop, fix.num_used, ins,
+                                   ins.healthy)
+
+    return FDI(step)
+
+
+def initial_covariance(position_sigma: float, velocity_sigma: float, tilt_sigma: float, heading_sigma: float,
+                       accel_bias_sigma: float, gyro_bias_sigma: float, dtype=None) -> Array:
+    """(15, 15) diagonal ``P0`` from 1-sigma errors [m, m/s, rad, rad, m/s^2, rad/s]."""
+    dtype = dtype or jnp.result_type(float)
+    sigmas = jnp.asarray([position_sigma] * 3 + [velocity_sigma] * 3 + [tilt_sigma] * 2 + [heading_sigma]
+                         + [accel_bias_sigma] * 3 + [gyro_bias_sigma] * 3, dtype)
+    return jnp.diag(sigmas**2)

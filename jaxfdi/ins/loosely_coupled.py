@@ -1,0 +1,158 @@
+"""The 15-state loosely coupled INS/GPS error-state EKF with feedback (seed 002, Appendix).
+
+A ``Filter(init, step)`` whose state is the INS itself (navigation state, IMU bias
+estimates) and the error covariance ``P[k|k-1]``; one ``step`` is one GPS epoch:
+
+1. **update** with the GPS fix at ``t_k`` when it is valid (RAIM passed):
+   ``z = [p_INS - p_GPS; v_INS - v_GPS]`` (position as NED metres,
+   ``error_state.navigation_error`` against the fix), ``H = [I_6 0]``,
+   ``R = blkdiag(R_p, R_v)`` from the receiver's least-squares covariance; Joseph form
+   (``filters.kalman.joseph_update``), NIS ``z^T S^-1 z``;
+2. **feedback and reset** (Groves 2013, sec. 14.1.2): the INS becomes
+   ``error_state.correct(INS, dx_hat)``, the bias estimates ``b_hat + db_hat``, and the
+   error estimate returns to zero (``P`` is kept: a first-order reset);
+3. **predict** over the epoch's ``n`` IMU samples (``u``: (n, 6), e.g. 100 at 100 Hz):
+   ``n`` strapdown steps (``mechanization.step``) with the bias-corrected samples, in
+   ``chunks`` equal chunks; ``F`` by ``jax.jacfwd`` of the mechanisation's error rate
+   (``error_state.error_jacobian``) at each chunk's midpoint state and mean sample, their
+   mean discretised to ``(Phi, Q_d)`` (``error_state.discretize``),
+   ``P[k+1|k] = Phi P[k|k] Phi^T + Q_d``.
+
+``info`` carries what the state chi-square test needs (the correction, ``P[k|k]``,
+``Phi``, ``Q_d``) besides the innovation and NIS, and ``healthy`` (``S`` and
+``P[k|k]`` positive definite, everything finite). One IMU step per strapdown update and
+one covariance step per GPS epoch: the 15 x 15 algebra runs at 1 Hz, the 100 Hz work is
+the mechanisation alone (and ``chunks`` Jacobians).
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks, _linalg
+from jaxfdi.filters._base import Filter
+from jaxfdi.filters.kalman import joseph_update
+from jaxfdi.ins import error_state, mechanization
+from jaxfdi.ins.error_state import STATE_SIZE, ImuNoise
+from jaxfdi.ins.mechanization import NavState
+
+MEASUREMENT_SIZE = 6
+
+
+class InsState(NamedTuple):
+    """The filter's state at ``t_k`` before the update: the INS and ``P[k|k-1]``."""
+
+    nav: NavState
+    accel_bias: Array   # (3,) estimate b_hat_a [m/s^2]
+    gyro_bias: Array    # (3,) estimate b_hat_g [rad/s]
+    cov: Array          # (15, 15)
+
+
+class GpsFix(NamedTuple):
+    """One epoch's GPS solution as the filter uses it."""
+
+    position: Array        # (3,) lat, lon [rad], h [m]
+    velocity: Array        # (3,) NED [m/s]
+    position_cov: Array    # (3, 3) NED [m^2]
+    velocity_cov: Array    # (3, 3) [m^2/s^2]
+    valid: Array           # () bool: use it (RAIM passed)
+
+
+class InsInfo(NamedTuple):
+    innovation: Array       # (6,) z (0 when not used)
+    innovation_cov: Array   # (6, 6) S
+    nis: Array              # () z^T S^-1 z (0 when not used)
+    used: Array             # () bool
+    correction: Array       # (15,) dx_hat[k|k] fed back (0 when not used)
+    predicted_cov: Array    # (15, 15) P[k|k-1]
+    filtered_cov: Array     # (15, 15) P[k|k]
+    filtered_nav: NavState  # the INS after the feedback (the estimate at t_k)
+    accel_bias: Array       # (3,) estimate after the feedback
+    gyro_bias: Array        # (3,)
+    transition: Array       # (15, 15) Phi from t_k to t_k+1
+    process_cov: Array      # (15, 15) Q_d
+    healthy: Array          # () bool
+
+
+def measurement_matrix(dtype) -> Array:
+    return jnp.eye(MEASUREMENT_SIZE, STATE_SIZE, dtype=dtype)
+
+
+def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filter:
+    """The error-state EKF (module doc) for IMU samples ``dt`` [s] apart.
+
+    Args:
+      noise: the IMU's noise densities the filter assumes (``imu.noise_model``).
+      dt: IMU sample interval [s]; an epoch is ``u.shape[0]`` samples.
+      chunks: Jacobian evaluations per epoch (it must divide the samples per epoch; each
+        at the midpoint sample of its chunk).
+    """
+    _checks.check_positive("dt", dt, "the IMU sample interval in seconds")
+    chunks = _checks.check_int("chunks", chunks, 1, meaning="a positive number of Jacobians per epoch")
+
+    def init(nav: NavState, cov: Array, accel_bias: Array | None = None, gyro_bias: Array | None = None) -> InsState:
+        _checks.check_shape("nav.position", nav.position, (3,), "lat, lon [rad], h [m]")
+        _checks.check_shape("nav.velocity", nav.velocity, (3,), "NED velocity")
+        _checks.check_shape("nav.attitude", nav.attitude, (4,), "a unit quaternion")
+        _checks.check_covariance("cov", cov, STATE_SIZE)
+        dtype = _checks.float_dtype(nav.position, cov)
+        zero = jnp.zeros((3,), dtype)
+        return InsState(jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), nav),
+                        zero if accel_bias is None else jnp.asarray(accel_bias, dtype),
+                        zero if gyro_bias is None else jnp.asarray(gyro_bias, dtype), jnp.asarray(cov, dtype))
+
+    def update(state: InsState, fix: GpsFix):
+        dtype = state.cov.dtype
+        reference = NavState(fix.position, fix.velocity, state.nav.attitude)
+        z = error_state.navigation_error(state.nav, reference)[:MEASUREMENT_SIZE]
+        zero = jnp.zeros((3, 3), dtype)
+        R = jnp.block([[fix.position_cov, zero], [zero, fix.velocity_cov]])
+        post = joseph_update(jnp.zeros((STATE_SIZE,), dtype), state.cov, z, jnp.zeros_like(z),
+                             measurement_matrix(dtype), R)
+        used = jnp.asarray(fix.valid, bool) & jnp.all(jnp.isfinite(z))
+        correction = jnp.where(used, post.mean, 0.0)
+        cov = jnp.where(used, post.cov, state.cov)
+        return post, used, correction, cov
+
+    def propagate(nav: NavState, samples: Array, accel_bias: Array, gyro_bias: Array):
+        """``n`` strapdown steps and the mean ``F`` of the chunks' midpoints."""
+        corrected = samples - jnp.concatenate([accel_bias, gyro_bias])
+        per_chunk = corrected.shape[0] // chunks
+        first = per_chunk // 2
+
+        def strapdown(nav, sample):
+            return mechanization.step(nav, sample[:3], sample[3:], dt), None
+
+        def chunk(nav, part):
+            nav, _ = jax.lax.scan(strapdown, nav, part[:first])
+            mean = jnp.mean(part, axis=0)
+            jacobian = error_state.error_jacobian(nav, mean[:3], mean[3:])
+            nav, _ = jax.lax.scan(strapdown, nav, part[first:])
+            return nav, jacobian
+
+        nav, jacobians = jax.lax.scan(chunk, nav, corrected.reshape(chunks, per_chunk, 6))
+        return nav, jnp.mean(jacobians, axis=0)
+
+    def step(state: InsState, fix: GpsFix, samples: Array):
+        samples = jnp.asarray(samples)
+        if samples.ndim != 2 or samples.shape[1] != 6 or samples.shape[0] % chunks or samples.shape[0] < 2 * chunks:
+            raise ValueError(f"u: expected (n, 6) IMU samples with n a multiple of chunks = {chunks} and at least "
+                             f"{2 * chunks}, got shape {tuple(samples.shape)}")
+        post, used, correction, cov = update(state, fix)
+        nav = error_state.correct(state.nav, correction)
+        accel_bias = state.accel_bias + correction[error_state.ACCEL_BIAS]
+        gyro_bias = state.gyro_bias + correction[error_state.GYRO_BIAS]
+        next_nav, jacobian = propagate(nav, samples, accel_bias, gyro_bias)
+        transition, process = error_state.discretize(jacobian, noise, samples.shape[0] * dt)
+        predicted = _linalg.symmetrize(transition @ cov @ transition.T + process)
+        chol = jnp.linalg.cholesky(cov)
+        healthy = (jnp.where(used, post.healthy, True) & jnp.all(jnp.isfinite(chol)) & jnp.all(jnp.isfinite(predicted))
+                   & jnp.all(jnp.isfinite(next_nav.position)))
+        info = InsInfo(jnp.where(used, post.innovation, 0.0), post.innovation_cov, jnp.where(used, post.nis, 0.0), used,
+                       correction, state.cov, cov, nav, accel_bias, gyro_bias, transition, process, healthy)
+        return InsState(next_nav, accel_bias, gyro_bias, predicted), info
+
+    return Filter(init, step)

@@ -1,0 +1,696 @@
+"""Seed 002, INS half: the park flight's GPS/INS integrity monitor and Table 3.
+
+A UAV flies the park case (Haneul Park, from 2020-01-01 00:45:00 GPST, the GPS half's site,
+orbits and receiver: ``scenarios.gnss_campus``) for 1200 s: a 60 m climb, then the GPS
+half's racetrack (600 m legs, 200 m turns, 12 m/s) with a climb and a descent on the way
+(``ins.trajectory.park_flight``). Its HG1900-class IMU (``ins.imu.hg1900``) runs at 100 Hz,
+its receiver at 1 Hz. One run is the foundation's loop (``loop.run_loop``) of the plant
+``ins.plant.gps_ins_plant`` (pseudoranges with Table 2's satellite faults, the velocity
+solution, IMU samples with the IMU fault) and the FDI ``ins.integrity.gps_ins_fdi``
+(RAIM -> 15-state error-state EKF -> windowed chi-square test over 10 epochs at 60 dof,
+91.95, and Da's SCST at 15 dof, 32.80, with two propagators reset every ``SCST_PERIOD``
+s); Monte Carlo runs are a ``vmap`` over keys and faults, one compiled program for every
+case of both flights.
+
+- **Table 3**: a roll-gyro bias of 30, 60, 90 deg/h from 800 s
+  (``fault("bias", "sensor", 3, 800, ...)``) on top of Table 2's satellite faults
+  (impulse, bias, drift on the highest satellite, as in the GPS half); detection time
+  of each test = first alarm at or after 800 s, minus 800 (mean and standard deviation,
+  as the paper's figures are means; median and 10-90 % spread), beside the paper's
+  159/59/44 s (chi-square) and 149/49/39 s (SCST); RAIM's decisions on the satellite
+  faults in the same runs.
+- **Fault-free flights**: false alarms of both tests, at every epoch and at independent
+  decisions (chi-square: non-overlapping windows; SCST: one propagator window in two),
+  with their binomial intervals; navigation errors.
+- **Beyond the paper**: detection time against the size of a roll-gyro and an
+  x-accelerometer bias for both tests, and a strong-manoeuvre flight (25 m/s, S-turns at
+  20 deg/s with 42 deg of bank, pull-ups and dives; ``ins.trajectory.manoeuvre_legs``)
+  fault-free and with the roll-gyro biases: where SCST degrades, measured.
+
+``StudySize`` shortens the flights, moves the onset and lowers the IMU rate for tests
+and the notebook (the satellite faults that would end after the onset are then left out);
+``PAPER_SIZE`` (1200 s, 800 s, 100 Hz) is the CLI's.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy import stats as _scipy_stats
+
+from jaxfdi.progress import progress_bar
+from jaxfdi import faults as flt
+from jaxfdi.data import data_path
+from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
+from jaxfdi.gnss import frames, measurements, orbits, raim, rinex
+from jaxfdi.ins import error_state, imu, integrity, plant, scst, trajectory
+from jaxfdi.ins.loosely_coupled import loosely_coupled_filter
+from jaxfdi.ins.mechanization import NavState
+from jaxfdi.loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
+from jaxfdi.metrics import summarize_detection, summarize_episodes
+from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, PARK_FAULTS, START_TOW, WEEK
+
+FLIGHT_S = 1200
+IMU_RATE = 100
+ONSET_S = 800
+ROLL_GYRO = 3              # IMU channel: [f_x, f_y, f_z, w_x, w_y, w_z]
+X_ACCEL = 0
+TABLE3_DEG_H = (30.0, 60.0, 90.0)
+#: seed 002 Table 3: detection time [s] (chi-square, SCST)
+PAPER_TABLE3 = {30.0: (159.0, 149.0), 60.0: (59.0, 49.0), 90.0: (44.0, 39.0)}
+CHI2_WINDOW = 10
+PFA = 0.005
+SCST_PERIOD = 60
+VELOCITY_SIGMA = 0.1       # m/s, receiver velocity solution per axis
+#: initial INS errors (1 sigma): position m, velocity m/s, tilt deg, heading deg
+INITIAL_SIGMA = (3.0, 0.1, 0.05, 0.5)
+BEYOND_GYRO_DEG_H = (15.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0)
+BEYOND_ACCEL_MG = (2.0, 5.0, 10.0, 20.0, 50.0)
+MANOEUVRE_HEIGHT = 200.0   # m above the park site
+CHUNK = 32                 # runs per compiled call (one program for every case)
+
+
+class StudySize(NamedTuple):
+    """Flight length, IMU-fault onset [s] and IMU rate [Hz] of a study. The paper's case is
+    ``PAPER_SIZE``; tests and the notebook fly shorter flights at a lower IMU rate (the
+    strapdown step is exact for the trajectory at any rate, so the filter sees the same
+    errors; only the cost changes)."""
+
+    flight_s: int = FLIGHT_S
+    onset_s: int = ONSET_S
+    imu_rate: int = IMU_RATE
+
+
+PAPER_SIZE = StudySize()
+
+
+class World(NamedTuple):
+    """What every run of one flight shares (arguments of the compiled program)."""
+
+    table: orbits.OrbitTable
+    tables: raim.RaimTables  # thresholds and noncentralities per degrees of freedom
+    flight: plant.FlightTables
+    visible: jax.Array    # (T, S)
+    sigma: jax.Array      # (T, S)
+
+
+class RunCase(NamedTuple):
+    satellite_fault: flt.Fault   # stack of 3 (Table 2's episodes, or none)
+    imu_fault: flt.Fault         # stack of 1
+    onset: jax.Array             # () int, the IMU fault's onset (faults.NEVER when none)
+
+
+class Series(NamedTuple):
+    """Per-epoch traces of a run (float32: figures and independent samples)."""
+
+    chi2: jax.Array
+    scst: jax.Array
+    scst_valid: jax.Array
+    scst_condition: jax.Array    # condition estimate of the scaled B (inf when not PD)
+    gps_used: jax.Array
+    raim: jax.Array
+    raim_threshold: jax.Array
+    hpl: jax.Array
+    hdop: jax.Array
+    position_error: jax.Array    # (T, 3) NED m
+    attitude_error: jax.Array    # (T, 3) psi NED deg
+    sigma: jax.Array             # (T, 6) filter 1-sigma: position m (3), attitude deg (3)
+    nees: jax.Array              # (T,) normalised estimation error squared of the 15 states
+
+
+class RunOutput(NamedTuple):
+    chi2: object                 # DetectionRecord
+    scst: object                 # DetectionRecord
+    raim: object                 # EpisodeRecord
+    series: Series
+
+
+class GpsInsStudy(NamedTuple):
+    config: dict
+    rows: list
+    series: dict                 # case name -> Series of its first run (NumPy), for the figures
+    curves: dict                 # (flight, sensor) -> rows of the detection-time curves
+    results: dict                # case name -> RunOutput of all its runs (NumPy)
+
+    def table(self) -> str:
+        return gps_ins_table(self)
+
+
+def thresholds() -> tuple[float, float]:
+    """``(chi2 over 10 epochs at 60 dof, SCST at 15 dof)`` for ``PFA``: 91.95, 32.80."""
+    with jax.ensure_compile_time_eval():     # concrete numbers, also while a run is traced
+        return (float(chi2_threshold(6 * CHI2_WINDOW, PFA)), float(chi2_threshold(error_state.STATE_SIZE, PFA)))
+
+
+def design(model: imu.ImuModel, dt: float):
+    """The filter and both tests of the study: ``(filter, chi2 detector, SCST)``."""
+    chi2_limit, scst_limit = thresholds()
+    return (loosely_coupled_filter(imu.noise_model(model), dt), chi2_detector(chi2_limit, CHI2_WINDOW),
+            scst.state_chi2_test(SCST_PERIOD, scst_limit))
+
+
+def initial_covariance(model: imu.ImuModel):
+    p, v, tilt, heading = INITIAL_SIGMA
+    return integrity.initial_covariance(p, v, math.radians(tilt), math.radians(heading), model.accel_bias,
+                                        model.gyro_bias)
+
+
+def _run(world: World, case: RunCase, key: jax.Array) -> RunOutput:
+    """One flight: the loop of plant and FDI, its scores and its traces."""
+    model = imu.hg1900()
+    epochs, per_epoch = world.flight.imu.shape[:2]
+    ins_filter, chi2, test = design(model, 1.0 / per_epoch)
+    monitor = integrity.gps_ins_fdi(world.table, START_TOW, world.tables, ins_filter, chi2, test,
+                                    VELOCITY_SIGMA)
+    gps_ins = plant.gps_ins_plant(world.table, START_TOW, world.flight, world.visible, world.sigma, model,
+                                  VELOCITY_SIGMA, satellite_fault=case.satellite_fault, imu_fault=case.imu_fault)
+    key_loop, key_imu, key_init = jax.random.split(key, 3)
+    errors = imu.draw_errors(key_imu, model)
+    cov0 = initial_covariance(model)
+    nav_error = jnp.linalg.cholesky(cov0[:9, :9]) @ jax.random.normal(key_init, (9,), cov0.dtype)
+    truth0 = NavState(world.flight.position[0], world.flight.velocity[0], world.flight.attitude[0])
+    ins0 = ins_filter.init(error_state.correct(truth0, -nav_error), cov0)   # INS = truth + error; biases unknown
+    fdi0 = integrity.GpsInsFdiState(ins0, chi2.init(), test.init(error_state.STATE_SIZE))
+    clock = measurements.ClockModel()
+    scorer = combine_scorers(
+        chi2=detection_scorer(case.onset, lambda o: o.chi2, single=True),
+        scst=detection_scorer(case.onset, lambda o: o.scst, single=True),
+        raim=episode_scorer(flt.episodes(case.satellite_fault, 0), lambda o: o.raim, single=True))
+    result = run_loop(gps_ins, monitor, feedforward(), (jnp.asarray([clock.bias, clock.drift]), errors), fdi0,
+                      key_loop, epochs, exogenous=jnp.zeros((epochs, 0)), scorer=scorer, keep_history=True)
+    out, truth = result.history.output, result.history.sensed.state
+    errors9 = jax.vmap(error_state.navigation_error)(out.nav, truth.nav)
+    errors15 = jnp.concatenate([errors9, truth.accel_bias - out.ins.accel_bias, truth.gyro_bias - out.ins.gyro_bias],
+                               axis=1)
+    nees = jax.vmap(lambda e, p: e @ jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(p), True), e))(errors15, out.cov)
+    sigma = jnp.sqrt(jnp.diagonal(out.cov, axis1=1, axis2=2))
+    f32 = jnp.float32
+    series = Series(out.chi2.statistic.astype(f32), out.scst.statistic.astype(f32), out.scst_valid,
+                    out.ins.scst_condition.astype(f32), out.gps_used,
+                    out.raim.statistic.astype(f32), out.raim_threshold.astype(f32), out.hpl.astype(f32),
+                    out.hdop.astype(f32), errors9[:, :3].astype(f32), jnp.degrees(errors9[:, 6:9]).astype(f32),
+                    jnp.concatenate([sigma[:, :3], jnp.degrees(sigma[:, 6:9])], axis=1).astype(f32), nees.astype(f32))
+    return RunOutput(result.score["chi2"], result.score["scst"], result.score["raim"], series)
+
+
+_simulate = jax.jit(jax.vmap(_run, in_axes=(None, 0, 0)))
+
+
+def simulate_runs(world: World, cases: RunCase, key: jax.Array, progress=None) -> RunOutput:
+    """Every run of ``cases`` (leaves with a leading run axis) on ``world``, ``CHUNK`` runs
+    per call of one compiled program (the last chunk padded); outputs as NumPy."""
+    num = int(np.shape(cases.onset)[0])
+    keys = jax.random.split(key, num)
+    parts = []
+    for start in range(0, num, CHUNK):
+        index = np.minimum(np.arange(start, start + CHUNK), num - 1)
+        chunk_cases, chunk_keys = jax.tree_util.tree_map(lambda a: jnp.asarray(a)[index], (cases, keys))
+        out = _simulate(world, chunk_cases, chunk_keys)
+        parts.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[: min(CHUNK, num - start)], out))
+        if progress:
+            progress(min(start + CHUNK, num), num)
+    return jax.tree_util.tree_map(lambda *a: np.concatenate(a), *parts)
+
+
+def build_world(legs, start, speed: float, blend: float, table=None, size: StudySize = PAPER_SIZE) -> World:
+    """The tables of a flight: truth and IMU per epoch, the sky seen from its path."""
+    table = _ephemeris() if table is None else table
+    flight = plant.flight_tables(trajectory.fly(legs, start, speed, blend=blend, rate=size.imu_rate), size.flight_s)
+    path = frames.geodetic_to_ecef(flight.position[:, 0], flight.position[:, 1], flight.position[:, 2])
+    times = START_TOW + jnp.arange(size.flight_s, dtype=path.dtype)
+    visible, elevation, _ = jax.vmap(
+        lambda t, x: measurements.visibility(table, t, x, math.radians(MASK_DEG)))(times, path)
+    return World(table, raim.raim_tables(int(table.prn.shape[0])), flight, visible,
+                 measurements.elevation_sigma(elevation))
+
+
+def receiver_slots(table, flight_s: int = FLIGHT_S) -> orbits.OrbitTable:
+    """The table reduced to the receiver's channels: the satellites above the mask less 1 deg
+    seen from the park site at some epoch of the flights' window (both flights stay within
+    a few km of it, which moves an elevation by < 0.02 deg); the other slots would be
+    masked at every epoch. Every world of the study then has the same slots, and one
+    compiled program serves them all."""
+    site = frames.geodetic_to_ecef(math.radians(PARK[0]), math.radians(PARK[1]), PARK[2])
+    times = START_TOW + jnp.arange(flight_s, dtype=site.dtype)
+    seen, _, _ = jax.vmap(lambda t: measurements.visibility(table, t, site, math.radians(MASK_DEG - 1.0)))(times)
+    return jax.tree_util.tree_map(lambda leaf: leaf[np.flatnonzero(np.asarray(seen).any(axis=0))], table)
+
+
+#: the two flights: legs, start (lat deg, lon deg, h m), speed m/s, blend s
+_FLIGHTS = {"park": (trajectory.park_legs, PARK, 12.0, 5.0),
+            "manoeuvre": (trajectory.manoeuvre_legs, (PARK[0], PARK[1], PARK[2] + MANOEUVRE_HEIGHT), 25.0, 2.0)}
+
+
+def flight_world(name: str, table=None, size: StudySize = PAPER_SIZE) -> World:
+    """The world of the ``park`` or ``manoeuvre`` flight on the receiver's slots."""
+    legs, start, speed, blend = _FLIGHTS[name]
+    table = receiver_slots(_ephemeris(), size.flight_s) if table is None else table
+    return build_world(legs(size.flight_s), start, speed, blend, table, size)
+
+
+def park_world(table=None, size: StudySize = PAPER_SIZE) -> World:
+    return flight_world("park", table, size)
+
+
+def manoeuvre_world(table=None, size: StudySize = PAPER_SIZE) -> World:
+    return flight_world("manoeuvre", table, size)
+
+
+def _ephemeris():
+    return orbits.ephemeris_table(rinex.read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), WEEK)
+
+
+def headline_slot(world: World) -> int:
+    """The satellite of Table 2's faults: the highest at the start among those in view for
+    the whole flight (the GPS half's choice)."""
+    visible = np.asarray(world.visible)
+    candidates = np.flatnonzero(visible.all(axis=0))
+    path = world.flight.position[0]
+    origin = frames.geodetic_to_ecef(path[0], path[1], path[2])
+    elevation, _ = measurements.sky_geometry(world.table, START_TOW, origin)[:2]
+    return int(candidates[np.argmax(np.asarray(elevation)[candidates])])
+
+
+def satellite_faults(slot: int | None, before: int | None = None) -> flt.Fault:
+    """Table 2's three pseudorange episodes on ``slot`` (none when ``None``; only those that
+    end before epoch ``before`` when given, the others replaced by no fault)."""
+    episodes = [flt.no_fault() if slot is None or (before is not None and end >= before)
+                else flt.fault(kind, "sensor", slot, onset, magnitude, slope, end)
+                for _, kind, onset, end, magnitude, slope in PARK_FAULTS]
+    return flt.concat_faults(*episodes)
+
+
+def imu_fault(channel: int | None, magnitude: float, onset_s: int = ONSET_S) -> flt.Fault:
+    """A bias on one IMU channel from ``onset_s`` (none when ``channel`` is ``None``)."""
+    if channel is None:
+        return flt.as_stack(flt.no_fault())
+    return flt.as_stack(plant.imu_bias_fault(channel, onset_s, magnitude))
+
+
+def cases_of(specs, onset_s: int = ONSET_S) -> RunCase:
+    """Stack ``(satellite slot or None, IMU channel or None, magnitude)`` specs as cases;
+    the satellite faults are Table 2's that end before ``onset_s``."""
+    built = [RunCase(satellite_faults(slot, onset_s), imu_fault(channel, size, onset_s),
+                     jnp.asarray(flt.NEVER if channel is None else onset_s, jnp.int32))
+             for slot, channel, size in specs]
+    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *built)
+
+
+def gyro_rad_s(deg_h: float) -> float:
+    return deg_h * imu.DEG_PER_HOUR
+
+
+def accel_m_s2(mg: float) -> float:
+    return mg * imu.MILLI_G
+
+
+def gps_ins_study(runs: int = 100, seed: int = 0, progress: bool = False, beyond: bool = True,
+                  size: StudySize = PAPER_SIZE, beyond_runs: int | None = None) -> GpsInsStudy:
+    """Table 3 and the fault-free false alarms over ``runs`` flights per case, and (with
+    ``beyond``) the detection-time curves and the manoeuvre flight over ``beyond_runs``
+    (default ``max(runs // 4, 2)``) flights per point; see the module doc. ``size``: the
+    flights' length, the IMU fault's onset and the IMU rate (``PAPER_SIZE``: 1200 s, 800 s,
+    100 Hz)."""
+    require_x64("gps-ins")
+    check_study(runs, seed)
+    size = StudySize(*(int(v) for v in size))
+    if not (0 < size.onset_s < size.flight_s and size.imu_rate >= 2):
+        raise ValueError(f"size: expected 0 < onset_s < flight_s and imu_rate >= 2, got {size}")
+    table = receiver_slots(_ephemeris(), size.flight_s)
+    park = park_world(table, size)
+    slot = headline_slot(park)
+    small = max(int(runs) // 4, 2) if beyond_runs is None else int(beyond_runs)
+    groups = [("fault-free", None, None, 0.0, runs)]
+    groups += [(f"table3 {b:g} deg/h", slot, ROLL_GYRO, gyro_rad_s(b), runs) for b in TABLE3_DEG_H]
+    if beyond:
+        groups += [(f"park gyro {b:g} deg/h", None, ROLL_GYRO, gyro_rad_s(b), small) for b in BEYOND_GYRO_DEG_H]
+        groups += [(f"park accel {a:g} mg", None, X_ACCEL, accel_m_s2(a), small) for a in BEYOND_ACCEL_MG]
+    worlds = {"park": park}
+    plan = [("park", g) for g in groups]
+    if beyond:
+        worlds["manoeuvre"] = manoeuvre_world(table, size)
+        plan += [("manoeuvre", ("manoeuvre fault-free", None, None, 0.0, small))]
+        plan += [("manoeuvre", (f"manoeuvre gyro {b:g} deg/h", None, ROLL_GYRO, gyro_rad_s(b), small))
+                 for b in TABLE3_DEG_H]
+    results = {}
+    key = jax.random.key(seed)
+    for flight, world in worlds.items():
+        mine = [g for f, g in plan if f == flight]
+        specs = [(s, c, m) for _, s, c, m, n in mine for _ in range(n)]
+        report = None
+        if progress:
+            print(f"gps-ins: {len(specs)} {flight} flights of {size.flight_s} s at {size.imu_rate} Hz", file=sys.stderr,
+                  flush=True)
+
+            bar = progress_bar(f"gps-ins {flight}", "flights")
+
+            def report(done, total):
+                bar(done, total)  # tqdm.auto bar, or log lines (jaxfdi.progress)
+
+        out = simulate_runs(world, cases_of(specs, size.onset_s), jax.random.fold_in(key, len(results)), report)
+        start = 0
+        for name, _, _, _, n in mine:
+            results[name] = jax.tree_util.tree_map(lambda a: a[start:start + n], out)
+            start += n
+    config = _config(runs, seed, small, beyond, slot, park.table, size)
+    rows = _rows(results, size)
+    curves = {}
+    for row in rows:
+        if row["case"] == "curve":
+            curves.setdefault((row["flight"], row["sensor"]), []).append(row)
+    series = {name: jax.tree_util.tree_map(lambda a: a[0], out.series) for name, out in results.items()}
+    return GpsInsStudy(config, rows, series, curves, results)
+
+
+def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE) -> dict:
+    model = imu.hg1900()
+    chi2_limit, scst_limit = thresholds()
+    return {
+        "site_deg_m": PARK, "start": "2020-01-01 00:45:00 GPST", "week": WEEK, "start_tow_s": START_TOW,
+        "flight_s": size.flight_s, "imu_rate_hz": size.imu_rate, "gps_rate_hz": 1, "runs": int(runs),
+        "seed": int(seed), "beyond_runs": int(small) if beyond else None, "fault_onset_s": size.onset_s,
+        "paper_size": size == PAPER_SIZE,
+        "imu": {"model": "HG1900 class (Honeywell tactical-grade brochure values; ins.imu)",
+                "accel_bias_mg": model.accel_bias / imu.MILLI_G, "gyro_bias_deg_h": model.gyro_bias / imu.DEG_PER_HOUR,
+                "vrw_m_s_sqrt_h": model.velocity_random_walk * 60.0,
+                "arw_deg_sqrt_h": math.degrees(model.angle_random_walk) * 60.0,
+                "accel_bias_walk_mg_per_h": model.accel_bias_walk * 60.0 / imu.MILLI_G,
+                "gyro_bias_walk_deg_h_per_h": model.gyro_bias_walk * 60.0 / imu.DEG_PER_HOUR,
+                "scale_factors": "none (the 15-state filter does not model them)"},
+        "velocity_sigma_m_s": VELOCITY_SIGMA, "initial_sigma": dict(zip(
+            ("position_m", "velocity_m_s", "tilt_deg", "heading_deg"), INITIAL_SIGMA)),
+        "chi2": {"window": CHI2_WINDOW, "dof": 6 * CHI2_WINDOW, "pfa": PFA, "threshold": chi2_limit},
+        "scst": {"dof": error_state.STATE_SIZE, "pfa": PFA, "threshold": scst_limit, "period_s": SCST_PERIOD,
+                 "max_condition": scst.DEFAULT_MAX_CONDITION},
+        "raim": {"pfa": raim.DEFAULT_PFA, "pmd": raim.DEFAULT_PMD, "mask_deg": MASK_DEG, "operation": "npa"},
+        "satellite_faults_prn": int(table.prn[slot]), "satellite_faults": [name for name, *_ in PARK_FAULTS],
+        "table3_gyro_deg_h": list(TABLE3_DEG_H), "paper_table3_s": {f"{k:g}": list(v) for k, v in PAPER_TABLE3.items()},
+        "beyond_gyro_deg_h": list(BEYOND_GYRO_DEG_H) if beyond else [],
+        "beyond_accel_mg": list(BEYOND_ACCEL_MG) if beyond else [],
+    }
+
+
+def _delays(record, name, size: StudySize = PAPER_SIZE) -> dict:
+    """Detection time = first alarm at or after the onset minus the onset, over the healthy
+    runs that detected: mean and standard deviation (the paper's delays are means), median,
+    10-90 % and range."""
+    summary = summarize_detection(record, size.flight_s)
+    delays = np.where(np.asarray(record.detection_step) >= 0, np.asarray(record.detection_step) - size.onset_s,
+                      np.nan)
+    healthy = np.asarray(record.first_unhealthy) < 0
+    found = delays[healthy & np.isfinite(delays)]
+    pct = (lambda q: float(np.percentile(found, q)) if found.size else None)
+    return {f"{name}_detected": summary.detection_rate, f"{name}_mean_s": float(found.mean()) if found.size else None,
+            f"{name}_std_s": float(found.std(ddof=1)) if found.size > 1 else None,
+            f"{name}_median_s": pct(50), f"{name}_p10_s": pct(10),
+            f"{name}_p90_s": pct(90), f"{name}_min_s": float(found.min()) if found.size else None,
+            f"{name}_max_s": float(found.max()) if found.size else None,
+            f"{name}_false_alarm_runs": int(np.sum(np.asarray(record.false_alarms)[healthy] > 0)),
+            f"{name}_unhealthy_runs": summary.unhealthy_runs}
+
+
+def independent_decisions(series: Series) -> tuple[np.ndarray, np.ndarray]:
+    """Samples of each statistic that are independent fault-free: the chi-square sum of
+    non-overlapping windows (every ``CHI2_WINDOW``-th epoch once the window is full) and the
+    SCST of every second propagator window (the epochs where propagator ``a`` is tested at
+    the full age ``SCST_PERIOD``), (runs, samples) each."""
+    chi2 = np.asarray(series.chi2)[:, 2 * CHI2_WINDOW - 1::CHI2_WINDOW]
+    index = np.arange(SCST_PERIOD, np.shape(series.scst)[1], SCST_PERIOD)
+    valid = np.asarray(series.scst_valid)[:, index]
+    return chi2, np.where(valid, np.asarray(series.scst)[:, index], np.nan)
+
+
+def binomial_interval(count: int, trials: int, level: float = 0.99) -> tuple[int, int]:
+    """The central ``level`` interval of Binomial(trials, PFA) counts."""
+    lower = _scipy_stats.binom.ppf((1 - level) / 2, trials, PFA)
+    upper = _scipy_stats.binom.isf((1 - level) / 2, trials, PFA)
+    return int(lower), int(upper)
+
+
+def _rows(results: dict, size: StudySize = PAPER_SIZE) -> list:
+    rows = []
+    chi2_limit, scst_limit = thresholds()
+    free = results["fault-free"]
+    chi2_samples, scst_samples = independent_decisions(free.series)
+    for name, samples, limit, dof in (("chi2", chi2_samples, chi2_limit, 6 * CHI2_WINDOW),
+                                      ("scst", scst_samples, scst_limit, error_state.STATE_SIZE)):
+        finite = samples[np.isfinite(samples)]
+        alarms = int(np.sum(finite > limit))
+        low, high = binomial_interval(alarms, finite.size)
+        all_epochs = np.asarray(getattr(free.series, name))
+        valid = np.asarray(free.series.scst_valid) if name == "scst" else np.asarray(free.series.gps_used)
+        rows.append({"case": "false-alarm", "test": name, "runs": int(all_epochs.shape[0]),
+                     "independent_decisions": int(finite.size), "alarms": alarms, "rate": alarms / finite.size,
+                     "binomial_99_interval": [low, high], "design_pfa": PFA,
+                     "mean_statistic": float(finite.mean()), "dof": dof,
+                     "ks_pvalue_vs_chi2": float(_scipy_stats.kstest(finite, "chi2", args=(dof,)).pvalue),
+                     "alarm_rate_all_epochs": float(np.mean(all_epochs[valid] > limit)),
+                     "runs_with_an_alarm": int(np.sum(np.any((all_epochs > limit) & valid, axis=1)))})
+    rows.append(_error_row("fault-free", free.series))
+    for name, out in results.items():
+        base = {"runs": int(np.shape(out.chi2.onset)[0]),
+                "scst_invalid_epochs": int(np.sum(~np.asarray(out.series.scst_valid)))}
+        if name.startswith("table3"):
+            bias = float(name.split()[1])
+            row = {"case": "table3", "gyro_deg_h": bias, **base, **_delays(out.chi2, "chi2", size),
+                   **_delays(out.scst, "scst", size), "paper_chi2_s": PAPER_TABLE3[bias][0],
+                   "paper_scst_s": PAPER_TABLE3[bias][1]}
+            summary = summarize_episodes(out.raim, 1.0)
+            row["raim"] = [{"fault": fault[0], "detected": float(summary.detection_rate[e]),
+                            "isolated": float(summary.isolation_rate[e]),
+                            "delay_median_s": float(summary.delay_median[e])}
+                           for e, fault in enumerate(PARK_FAULTS) if fault[3] < size.onset_s]
+            row["raim_false_alarm_runs"] = int(summary.false_alarm_runs)
+            row["ins_alarm_runs_during_gps_faults"] = _alarms_in_gps_windows(out.series, size.onset_s)
+            rows.append(row)
+        elif name != "fault-free":
+            flight, sensor, *magnitude = name.split()
+            if sensor == "fault-free":
+                rows.append({"case": "manoeuvre-false-alarm", "flight": flight, **base,
+                             **_false_alarms(out.series, chi2_limit, scst_limit)})
+                rows.append(_error_row("manoeuvre fault-free", out.series))
+                continue
+            rows.append({"case": "curve", "flight": flight, "sensor": sensor, "size": float(magnitude[0]),
+                         "unit": "deg/h" if sensor == "gyro" else "mg", **base,
+                         **_delays(out.chi2, "chi2", size), **_delays(out.scst, "scst", size)})
+    return rows
+
+
+def _false_alarms(series: Series, chi2_limit: float, scst_limit: float) -> dict:
+    chi2, scst_samples = independent_decisions(series)
+    scst_finite = scst_samples[np.isfinite(scst_samples)]
+    return {"chi2_independent_rate": float(np.mean(chi2 > chi2_limit)), "chi2_decisions": int(chi2.size),
+            "scst_independent_rate": float(np.mean(scst_finite > scst_limit)), "scst_decisions": int(scst_finite.size),
+            "chi2_mean": float(chi2.mean()), "scst_mean": float(scst_finite.mean()),
+            "chi2_runs_with_an_alarm": int(np.sum(np.any(np.asarray(series.chi2) > chi2_limit, axis=1))),
+            "scst_runs_with_an_alarm": int(np.sum(np.any((np.asarray(series.scst) > scst_limit)
+                                                         & np.asarray(series.scst_valid), axis=1)))}
+
+
+def _alarms_in_gps_windows(series: Series, onset_s: int = ONSET_S) -> dict:
+    chi2_limit, scst_limit = thresholds()
+    found = {}
+    for fault in PARK_FAULTS:
+        name, _, onset, end = fault[:4]
+        if end >= onset_s:                                # not flown (a short study)
+            continue
+        window = slice(onset, min(end + 60, onset_s))     # the fault and the minute after it
+        found[name] = {"chi2": int(np.sum(np.any(np.asarray(series.chi2)[:, window] > chi2_limit, axis=1))),
+                       "scst": int(np.sum(np.any((np.asarray(series.scst)[:, window] > scst_limit)
+                                                 & np.asarray(series.scst_valid)[:, window], axis=1)))}
+    return found
+
+
+def _error_row(name: str, series: Series) -> dict:
+    settled = slice(60, None)
+    position = np.asarray(series.position_error)[:, settled]
+    attitude = np.asarray(series.attitude_error)[:, settled]
+    return {"case": "navigation-error", "flight": name,
+            "horizontal_rms_m": float(np.sqrt(np.mean(position[..., 0] ** 2 + position[..., 1] ** 2))),
+            "vertical_rms_m": float(np.sqrt(np.mean(position[..., 2] ** 2))),
+            "tilt_rms_deg": float(np.sqrt(np.mean(attitude[..., 0] ** 2 + attitude[..., 1] ** 2))),
+            "heading_rms_deg": float(np.sqrt(np.mean(attitude[..., 2] ** 2))),
+            "gps_used_fraction": float(np.mean(np.asarray(series.gps_used))),
+            "nees_mean": float(np.mean(np.asarray(series.nees)[:, settled])), "nees_dof": error_state.STATE_SIZE}
+
+
+def _fmt(value, spec=".0f") -> str:
+    return "n/a" if value is None or (isinstance(value, float) and not np.isfinite(value)) else format(value, spec)
+
+
+def gps_ins_table(study: GpsInsStudy) -> str:
+    """Table 3 beside the paper's, RAIM's decisions, false alarms, the curves."""
+    cfg = study.config
+    onset = cfg["fault_onset_s"]
+    size_note = "" if cfg.get("paper_size", True) else (f" [reduced size: {cfg['flight_s']} s flights, IMU "
+                                                        f"{cfg['imu_rate_hz']} Hz]")
+    lines = [f"Table 3: roll-gyro bias from {onset} s; detection time [s] = first alarm at or after the onset "
+             f"minus {onset} over {cfg['runs']} flights: mean +- sd (the paper's figure is a mean), median "
+             f"[10-90 %]; paper beside{size_note}",
+             f"  {'bias':>9}  {'chi-square mean':>15} {'paper':>6} {'median [10-90]':>16}   {'SCST mean':>15} "
+             f"{'paper':>6} {'median [10-90]':>16}   detected chi2/SCST"]
+    for row in (r for r in study.rows if r["case"] == "table3"):
+        def mean(t):
+            return f"{_fmt(row[t + '_mean_s'], '.1f')} +- {_fmt(row[t + '_std_s'], '.1f')}"
+
+        def spread(t):
+            return f"{_fmt(row[t + '_median_s'])} [{_fmt(row[t + '_p10_s'])}-{_fmt(row[t + '_p90_s'])}]"
+
+        lines.append(f"  {row['gyro_deg_h']:>5g} d/h  {mean('chi2'):>15} {row['paper_chi2_s']:>6g} {spread('chi2'):>16}   "
+                     f"{mean('scst'):>15} {row['paper_scst_s']:>6g} {spread('scst'):>16}   "
+                     f"{row['chi2_detected']:.2f}/{row['scst_detected']:.2f}")
+    first = next(r for r in study.rows if r["case"] == "table3")
+    lines.append(f"RAIM on Table 2's satellite faults (PRN {cfg['satellite_faults_prn']:02d}), same flights: " + ("; ".join(
+        f"{r['fault']} detected {r['detected']:.2f}, median {_fmt(r['delay_median_s'])} s" for r in first["raim"])
+        or "none flown before the onset"))
+    alarms = "; ".join(f"{k}: chi2 {v['chi2']}, SCST {v['scst']}" for k, v in first["ins_alarm_runs_during_gps_faults"].items())
+    lines.append(f"  runs of those {first['runs']} ({first['gyro_deg_h']:g} deg/h) with an INS-test alarm during a satellite "
+                 f"fault or the minute after: {alarms}")
+    lines.append("Fault-free park flights (independent decisions: chi2 every 10th epoch, SCST one propagator window in "
+                 "two; 99 % binomial interval of the alarm count at P_fa 0.005):")
+    for row in (r for r in study.rows if r["case"] == "false-alarm"):
+        lines.append(f"  {row['test']:<5} {row['alarms']:>3} alarms in {row['independent_decisions']} decisions "
+                     f"(interval {row['binomial_99_interval'][0]}-{row['binomial_99_interval'][1]}), mean statistic "
+                     f"{row['mean_statistic']:.1f} (dof {row['dof']}), KS p {row['ks_pvalue_vs_chi2']:.2f}; all epochs "
+                     f"{row['alarm_rate_all_epochs']:.4f}, runs with an alarm {row['runs_with_an_alarm']}/{row['runs']}")
+    free = study.results.get("fault-free") if study.results else None
+    if free is not None:
+        valid = np.asarray(free.series.scst_valid)
+        condition = np.asarray(free.series.scst_condition)
+        lines.append(f"  SCST matrix B = P_m - P_f checked every epoch: {int(np.sum(~valid))} of {valid.size} fault-free "
+                     f"epochs flagged invalid (singular at a reset: {int(np.sum(np.isinf(condition)))}; condition > "
+                     f"{study.config['scst']['max_condition']:.0e}: {int(np.sum(~valid & np.isfinite(condition)))}); "
+                     f"no decision there")
+    for row in (r for r in study.rows if r["case"] == "navigation-error"):
+        lines.append(f"  {row['flight']}: RMS horizontal {row['horizontal_rms_m']:.2f} m, vertical "
+                     f"{row['vertical_rms_m']:.2f} m, tilt {row['tilt_rms_deg']:.4f} deg, heading "
+                     f"{row['heading_rms_deg']:.3f} deg, mean NEES {row['nees_mean']:.1f} (15 states) after 60 s")
+    if study.curves:
+        lines.append(f"Beyond the paper: detection time [s] vs bias size, median over {cfg['beyond_runs']} flights "
+                     f"(detected fraction), chi-square / SCST")
+        for (flight, sensor), rows in study.curves.items():
+            cells = ", ".join(f"{r['size']:g}: {_fmt(r['chi2_median_s'])} ({r['chi2_detected']:.2f}) / "
+                              f"{_fmt(r['scst_median_s'])} ({r['scst_detected']:.2f})" for r in rows)
+            lines.append(f"  {flight} {sensor} [{rows[0]['unit']}]: {cells}")
+        for row in (r for r in study.rows if r["case"] == "manoeuvre-false-alarm"):
+            lines.append(f"  manoeuvre flight, fault-free: chi2 false-alarm rate {row['chi2_independent_rate']:.4f} "
+                         f"(mean {row['chi2_mean']:.1f}), SCST {row['scst_independent_rate']:.4f} "
+                         f"(mean {row['scst_mean']:.1f}); runs with an alarm chi2 {row['chi2_runs_with_an_alarm']}, "
+                         f"SCST {row['scst_runs_with_an_alarm']} of {row['runs']}")
+    unhealthy = sum(r.get("chi2_unhealthy_runs", 0) for r in study.rows)
+    if unhealthy:
+        lines.append(f"WARNING: {unhealthy} runs went numerically bad; they are left out of the rates above")
+    return "\n".join(lines)
+
+
+def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
+    """Statistics vs thresholds (seed 002 Figs. 10-11), RAIM (Figs. 8-9), navigation errors,
+    and detection time vs bias size, as PNG files in ``out_dir``; returns their paths."""
+    from pathlib import Path
+
+    from matplotlib.figure import Figure
+
+    from jaxfdi import _io
+
+    out_dir = Path(out_dir)
+    written = []
+    chi2_limit, scst_limit = thresholds()
+
+    def save(fig, name):
+        path = out_dir / name
+        _io.atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        written.append(str(path))
+
+    t = np.arange(study.config["flight_s"])
+    onset = study.config["fault_onset_s"]
+    fig = Figure(figsize=(10, 7))
+    for i, (field, limit, title) in enumerate((("chi2", chi2_limit, "windowed chi-square (10 epochs, 60 dof)"),
+                                               ("scst", scst_limit, "SCST (15 dof)"))):
+        ax = fig.add_subplot(2, 1, i + 1)
+        for b in TABLE3_DEG_H:
+            s = study.series[f"table3 {b:g} deg/h"]
+            ax.semilogy(t, np.maximum(getattr(s, field), 1e-2), lw=0.8, label=f"{b:g} deg/h roll gyro from {onset} s")
+        ax.axhline(limit, color="k", lw=1.2, label=f"threshold {limit:.2f}")
+        ax.axvline(onset, color="gray", ls=":")
+        ax.set_title(f"{title} vs threshold (seed 002 Fig. {10 + i})")
+        ax.legend(fontsize=8, loc="upper left")
+    ax.set_xlabel("time [s]")
+    save(fig, "gps-ins-statistics.png")
+
+    s = study.series[f"table3 {TABLE3_DEG_H[0]:g} deg/h"]
+    fig = Figure(figsize=(10, 7))
+    ax = fig.add_subplot(2, 1, 1)
+    ax.plot(t, s.hdop, label="HDOP")
+    twin = ax.twinx()
+    twin.semilogy(t, s.hpl, color="C1", label="HPL")
+    twin.axhline(556.0, color="C3", label="NPA HAL 556 m")
+    twin.legend(fontsize=8)
+    ax.set_title("park flight: HDOP and HPL (seed 002 Fig. 8)")
+    ax = fig.add_subplot(2, 1, 2)
+    ax.semilogy(t, np.maximum(s.raim, 1e-3), label="TS_D")
+    ax.semilogy(t, s.raim_threshold, color="C3", label="threshold")
+    ax.plot(t, np.where(s.gps_used, np.nan, 1e-2), "k|", label="epoch not used by the EKF")
+    for _, _, onset, end, _, _ in PARK_FAULTS:
+        ax.axvspan(onset, max(end, onset + 3), color="gray", alpha=0.2)
+    ax.set_title(f"RAIM statistic, satellite faults on PRN {study.config['satellite_faults_prn']:02d} (seed 002 Fig. 9)")
+    ax.legend(fontsize=8)
+    ax.set_xlabel("time [s]")
+    save(fig, "gps-ins-raim.png")
+
+    fig = Figure(figsize=(10, 8))
+    for i, (name, label) in enumerate((("fault-free", "fault-free"), ("table3 60 deg/h", "60 deg/h roll gyro"))):
+        s = study.series[name]
+        ax = fig.add_subplot(2, 2, 1 + i)
+        ax.plot(t, np.hypot(s.position_error[:, 0], s.position_error[:, 1]), lw=0.8, label="horizontal error")
+        ax.plot(t, np.hypot(s.sigma[:, 0], s.sigma[:, 1]), "k--", lw=0.8, label="filter sigma")
+        ax.set_ylabel("m")
+        ax.set_title(f"position, {label}")
+        ax.legend(fontsize=8)
+        ax = fig.add_subplot(2, 2, 3 + i)
+        for j, axis in enumerate("NED"):
+            ax.plot(t, s.attitude_error[:, j], lw=0.8, label=f"psi_{axis}")
+        ax.plot(t, s.sigma[:, 3], "k--", lw=0.8, label="sigma psi_N")
+        ax.set_ylabel("deg")
+        ax.set_xlabel("time [s]")
+        ax.set_title(f"attitude error, {label}")
+        ax.legend(fontsize=8)
+    save(fig, "gps-ins-errors.png")
+
+    fig = Figure(figsize=(11, 4.5))
+    ax = fig.add_subplot(1, 2, 1)
+    sizes = list(TABLE3_DEG_H)
+    rows = [r for r in study.rows if r["case"] == "table3"]
+    for test, marker in (("chi2", "o"), ("scst", "s")):
+        ax.plot(sizes, [r[f"{test}_mean_s"] or np.nan for r in rows], marker + "-", label=f"{test} (mean)")
+        ax.plot(sizes, [r[f"paper_{test}_s"] for r in rows], marker + "--", mfc="none", label=f"{test} paper")
+    for (flight, sensor), curve in study.curves.items():
+        if sensor == "gyro":
+            for test in ("chi2", "scst"):
+                ax.plot([r["size"] for r in curve], [r[f"{test}_median_s"] or np.nan for r in curve], ":",
+                        marker=".", label=f"{test}, {flight} curve")
+    ax.set_xlabel("roll-gyro bias [deg/h]")
+    ax.set_ylabel("detection time [s]")
+    ax.set_title("detection time vs gyro bias")
+    ax.legend(fontsize=7)
+    ax = fig.add_subplot(1, 2, 2)
+    for (flight, sensor), curve in study.curves.items():
+        if sensor == "accel":
+            for test in ("chi2", "scst"):
+                ax.plot([r["size"] for r in curve], [r[f"{test}_median_s"] or np.nan for r in curve], "o-",
+                        label=f"{test}, {flight}")
+    ax.set_xscale("log")
+    ax.set_xticks(BEYOND_ACCEL_MG, [f"{a:g}" for a in BEYOND_ACCEL_MG])
+    ax.minorticks_off()
+    ax.set_xlabel("x-accelerometer bias [mg]")
+    ax.set_title("detection time vs accelerometer bias (beyond the paper)")
+    if study.curves:
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "not computed (beyond=False)", ha="center", transform=ax.transAxes)
+    save(fig, "gps-ins-detection-times.png")
+    return written

@@ -21,10 +21,18 @@ chains of unrolled products into consumers that recompute them (the 13-state IMM
 2.5x slower; benchmarks/RESULTS.md). Their derivative is one broadcast multiply-and-reduce
 rather than the transpose of ``k`` sliced products (``_written_out_matmul``): the engine
 IMM tuning gradient went from 6.0x to 4.9x its forward pass.
+
+All of this pays for batches. A single sequence run eagerly (``run_filter`` outside any
+transformation, what a one-shot script does) has no batch to vectorise over, and the
+written-out algebra only makes its program large: the engine KF's scan was 13.6k HLO
+lines and compiled in 1.4-2.6 s. ``library_calls()`` makes every helper here use
+``dot`` and LAPACK while such a trace is made (2.5k lines; see ``benchmarks/RESULTS.md``).
 """
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -34,6 +42,24 @@ from jax.scipy import linalg as jsl
 
 #: largest static size factorised element by element; larger ones go to LAPACK.
 UNROLL_MAX = 8
+
+_TRACE_STATE = threading.local()
+
+
+@contextlib.contextmanager
+def library_calls():
+    """While active (a trace of one unbatched sequence), ``matmul``, ``cholesky`` and the
+    triangular solves use ``dot`` and LAPACK whatever their size and ``unroll`` flag."""
+    previous = getattr(_TRACE_STATE, "library", False)
+    _TRACE_STATE.library = True
+    try:
+        yield
+    finally:
+        _TRACE_STATE.library = previous
+
+
+def _library() -> bool:
+    return getattr(_TRACE_STATE, "library", False)
 
 
 def symmetrize(matrix: Array) -> Array:
@@ -50,7 +76,7 @@ def matmul(a: Array, b: Array) -> Array:
     """``a @ b`` for 1-D or 2-D operands; small ones (``is_small``) are written out as
     ``sum_j a[:, j] b[j, :]`` so that XLA fuses the product (see the module doc)."""
     a, b = jnp.asarray(a), jnp.asarray(b)
-    if not is_small(a, b) or a.shape[-1] != b.shape[0]:
+    if _library() or not is_small(a, b) or a.shape[-1] != b.shape[0]:
         return a @ b
     left = a if a.ndim == 2 else a[None, :]
     right = b if b.ndim == 2 else b[:, None]
@@ -93,6 +119,25 @@ def _written_out_matmul_jvp(primals, tangents):
 _written_out_matmul.defjvp(_written_out_matmul_jvp, symbolic_zeros=True)
 
 
+def materialize(tree):
+    """``tree``, computed once and stored (a structure-of-arrays kernel's intermediate).
+
+    XLA:CPU fuses cheap element-wise producers into every consumer; for a chain of
+    written-out products or factorisations that means the inner computation is redone
+    for every element of the outer one (13-state models: 4-10x slower), and
+    ``optimization_barrier`` does not stop it on CPU. A ``lax.cond`` is a fusion
+    boundary: its true branch returns ``tree``, its predicate (a bit of the first
+    element's bit pattern OR 1, never zero) is always true but not known to the
+    compiler; the false branch (zeros) is never taken. Were XLA to fold the predicate
+    it would inline the true branch: same values, only slower.
+    """
+    leaves = jax.tree.leaves(tree)
+    first = jnp.ravel(leaves[0])[0]
+    bits = jax.lax.bitcast_convert_type(first, {2: jnp.uint16, 4: jnp.uint32, 8: jnp.uint64}[first.dtype.itemsize])
+    always = (bits | jnp.ones((), bits.dtype)) != 0
+    return jax.lax.cond(always, lambda t: t, lambda t: jax.tree.map(jnp.zeros_like, t), tree)
+
+
 # Structure-of-arrays forms. A batch of matrices stored matrix-axes-first, (rows, cols,
 # *batch), makes every element A[i, j] one contiguous batch vector, so the written-out
 # algorithms below are element-wise operations over whole batch vectors, which XLA:CPU
@@ -102,6 +147,11 @@ _written_out_matmul.defjvp(_written_out_matmul_jvp, symbolic_zeros=True)
 def soa_transpose(a: Array) -> Array:
     """Per-matrix transpose of a (rows, cols, *batch) stack."""
     return jnp.swapaxes(a, 0, 1)
+
+
+def soa_symmetrize(a: Array) -> Array:
+    """``(A + A^T) / 2`` per matrix of a (n, n, *batch) stack."""
+    return 0.5 * (a + soa_transpose(a))
 
 
 def soa_matmul(a: Array, b: Array) -> Array:
@@ -170,7 +220,7 @@ def cholesky(matrix: Array, unroll: bool = True) -> Array:
     (``soa_cholesky``) for ``n <= UNROLL_MAX``, else LAPACK. Either way a matrix that is
     not positive definite yields NaN, so ``cholesky_is_finite`` reports it."""
     n = matrix.shape[-1]
-    if matrix.ndim != 2 or n > UNROLL_MAX or not unroll:
+    if matrix.ndim != 2 or n > UNROLL_MAX or not unroll or _library():
         return jsl.cholesky(matrix, lower=True)
     return soa_cholesky(matrix)
 
@@ -178,7 +228,7 @@ def cholesky(matrix: Array, unroll: bool = True) -> Array:
 def solve_lower(chol: Array, rhs: Array, unroll: bool = True) -> Array:
     """``L^{-1} b`` for lower-triangular ``L`` (n, n) and ``b`` (n,) or (n, p)."""
     n = chol.shape[-1]
-    if chol.ndim != 2 or n > UNROLL_MAX or not unroll:
+    if chol.ndim != 2 or n > UNROLL_MAX or not unroll or _library():
         return jsl.solve_triangular(chol, rhs, lower=True)
     return soa_solve_lower(chol, rhs)
 
@@ -186,7 +236,7 @@ def solve_lower(chol: Array, rhs: Array, unroll: bool = True) -> Array:
 def solve_lower_transposed(chol: Array, rhs: Array, unroll: bool = True) -> Array:
     """``L^{-T} b`` for lower-triangular ``L`` (n, n) and ``b`` (n,) or (n, p)."""
     n = chol.shape[-1]
-    if chol.ndim != 2 or n > UNROLL_MAX or not unroll:
+    if chol.ndim != 2 or n > UNROLL_MAX or not unroll or _library():
         return jsl.solve_triangular(chol, rhs, lower=True, trans="T")
     return soa_solve_lower_transposed(chol, rhs)
 

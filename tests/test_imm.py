@@ -169,6 +169,7 @@ def test_gradient_wrt_transition_logits_and_inflation_matches_finite_differences
     plant = small_plant()
     mu0 = np.ones(3) / 3
 
+    @jax.jit  # compiled once for every evaluation chex makes (same shapes)
     def mean_log_likelihood(logits, log_inflation):
         full = noise_inflation_modes(plant, jnp.exp(log_inflation), 0.8)
         modes = jax.tree.map(lambda a: a[:3], full)
@@ -275,6 +276,7 @@ def test_batch_kernel_shared_inputs_gradient_and_health(problem, batch_problem):
     np.testing.assert_array_equal(info.healthy, ref.healthy)
     assert not bool(info.healthy[1, 25]) and bool(info.healthy[0].all()) and bool(info.healthy[1, :25].all())
 
+    @jax.jit  # compiled once for every evaluation chex makes (same shapes)
     def mean_log_likelihood(logits):
         filt = interacting_multiple_model(kalman_filter, modes, jax.nn.softmax(logits, axis=1))
         return jnp.mean(run_filter_batch(filt, init, ys, us_shared)[1].log_likelihood)
@@ -293,9 +295,9 @@ def test_batch_kernel_shared_inputs_gradient_and_health(problem, batch_problem):
 def test_batch_kernel_only_for_small_kalman_modes(problem):
     modes, *_ = problem
     big = jax.tree.map(lambda a: a, modes)._replace(
-        Phi=jnp.broadcast_to(jnp.eye(9) * 0.9, (3, 9, 9)), Gamma=jnp.zeros((3, 9, 1)), C=jnp.zeros((3, 2, 9)),
-        Q=jnp.broadcast_to(jnp.eye(9), (3, 9, 9)))
-    assert interacting_multiple_model(kalman_filter, big, TRANSITION).batch is None  # 9 > UNROLL_MAX states
+        Phi=jnp.broadcast_to(jnp.eye(17) * 0.9, (3, 17, 17)), Gamma=jnp.zeros((3, 17, 1)), C=jnp.zeros((3, 2, 17)),
+        Q=jnp.broadcast_to(jnp.eye(17), (3, 17, 17)))
+    assert interacting_multiple_model(kalman_filter, big, TRANSITION).batch is None  # 17 > 16 states
     masked = interacting_multiple_model(lambda p: kalman_filter(p, missing_measurements=True), modes, TRANSITION)
     assert masked.batch is None  # any other mode filter runs under vmap
 

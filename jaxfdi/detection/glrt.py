@@ -36,7 +36,7 @@ onset estimate of a decision at step ``k`` is therefore ``k - onset_offset``.
 from __future__ import annotations
 
 from functools import partial
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -202,6 +202,8 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
     statistic > threshold, label = ``1 + i`` for the isolated direction ``i`` (the
     simulator's fault label; given at every step, alarm or not), estimate = its
     ``nu_hat``. The state's ``onset_offset`` gives ``theta_hat = k - onset_offset``.
+    Each step correlates the whole window with every onset: O(N^2) per step;
+    ``recursive_glrt_detector`` gives the same decisions in O(N).
 
     Isolation:
       ``"max"``: the direction with the largest GLR.
@@ -220,6 +222,41 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
       actuator_feedthrough: see ``fault_directions``.
       overlap_sensor: sensor index (into the outputs) of eq. (24)'s T4.
     """
+    setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
+                           overlap_sensor)
+    whitener, onset_signatures, information = _detector_tensors(setup.signatures, setup.innovation_cov)
+    m, dtype = setup.innovation_cov.shape[0], setup.innovation_cov.dtype
+
+    def init() -> GLRTState:
+        zero = jnp.zeros((), jnp.int32)
+        return GLRTState(jnp.zeros((window, m), dtype), zero, zero)
+
+    def step(state: GLRTState, innovation: Array):
+        _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
+        white = whitener @ jnp.asarray(innovation, dtype)
+        buffer = jnp.concatenate([state.window[1:], white[None]], axis=0)
+        count = jnp.minimum(state.count + 1, window)
+        result = _maximise(_glr_core(buffer, onset_signatures, information, count))
+        decision, onset_offset = decide(setup, result)
+        return GLRTState(buffer, count, onset_offset), decision
+
+    return Detector(init, step)
+
+
+class DetectorSetup(NamedTuple):
+    """What a GLRT detector is built from (checked by ``detector_setup``)."""
+
+    signatures: Array       # (N, m, d) fault_signatures, in the detector's dtype
+    innovation_cov: Array   # (m, m)
+    threshold: Any
+    isolation: str
+    num_inputs: int         # nu: directions 0..nu-1 are actuators
+    sensor_t4: int          # direction index of eq. (24)'s T4
+
+
+def detector_setup(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
+                   isolation: str, actuator_feedthrough: bool, overlap_sensor: int) -> DetectorSetup:
+    """Check a GLRT detector's arguments (``glrt_detector``) and compute its signatures."""
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)
     _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
@@ -233,28 +270,20 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
         raise ValueError(f"overlap_sensor: expected a sensor index in [-{m}, {m}), got {overlap_sensor}")
     dtype = jnp.result_type(gain, innovation_cov)
     signatures = fault_signatures(model, jnp.asarray(gain, dtype), fault_directions(model, actuator_feedthrough), window)
-    whitener, onset_signatures, information = _detector_tensors(signatures, jnp.asarray(innovation_cov, dtype))
-    sensor_t4 = nu + int(overlap_sensor) % m
+    return DetectorSetup(signatures, jnp.asarray(innovation_cov, dtype), threshold, isolation, nu,
+                         nu + int(overlap_sensor) % m)
 
-    def init() -> GLRTState:
-        zero = jnp.zeros((), jnp.int32)
-        return GLRTState(jnp.zeros((window, m), dtype), zero, zero)
 
-    def step(state: GLRTState, innovation: Array):
-        _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
-        white = whitener @ jnp.asarray(innovation, dtype)
-        buffer = jnp.concatenate([state.window[1:], white[None]], axis=0)
-        count = jnp.minimum(state.count + 1, window)
-        result = _maximise(_glr_core(buffer, onset_signatures, information, count))
-        statistic = jnp.max(result.statistic)
-        alarm = statistic > threshold
-        direction = jnp.argmax(result.statistic)
-        if isolation == "paper":
-            direction = _paper_isolation(result.statistic, threshold, nu, sensor_t4, direction)
-        decision = Decision(statistic, alarm, (1 + direction).astype(jnp.int32), result.magnitude[direction])
-        return GLRTState(buffer, count, result.onset_offset[direction]), decision
-
-    return Detector(init, step)
+def decide(setup: DetectorSetup, result: GLRResult) -> tuple[Decision, Array]:
+    """The step's decision from the GLR of every direction, and the isolated direction's
+    onset offset."""
+    statistic = jnp.max(result.statistic)
+    alarm = statistic > setup.threshold
+    direction = jnp.argmax(result.statistic)
+    if setup.isolation == "paper":
+        direction = _paper_isolation(result.statistic, setup.threshold, setup.num_inputs, setup.sensor_t4, direction)
+    decision = Decision(statistic, alarm, (1 + direction).astype(jnp.int32), result.magnitude[direction])
+    return decision, result.onset_offset[direction]
 
 
 def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallback: Array) -> Array:
@@ -311,8 +340,14 @@ def _onset_tensors(white_signatures: Array) -> tuple[Array, Array]:
 
 def _glr_core(white_window: Array, onset_signatures: Array, information: Array, num_valid) -> OnsetGLR:
     """``d[o, i] = sum_p T[o, p]^T w_p``, ``nu_hat = d / I``, ``l = d^2 / I`` for all onsets."""
-    N = white_window.shape[0]
     correlation = jnp.einsum("opmi,pm->oi", onset_signatures, white_window)
+    return glr_from_correlation(correlation, information, num_valid)
+
+
+def glr_from_correlation(correlation: Array, information: Array, num_valid) -> OnsetGLR:
+    """``nu_hat = d / I``, ``l = d^2 / I`` from the correlations ``d`` (N, d) and the
+    information ``I`` (N, d) of every onset offset; offsets ``>= num_valid`` are -inf."""
+    N = correlation.shape[0]
     informative = information > 0
     safe = jnp.where(informative, information, 1.0)
     magnitude = jnp.where(informative, correlation / safe, 0.0)

@@ -9,7 +9,9 @@ from jaxfdi.filters._mixture import IMMInfo, IMMState
 from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
+from jaxfdi.filters.kalman_batch import run_kalman_batch
 from jaxfdi.filters.mm import multiple_model
+from jaxfdi.filters.parallel import parallel_kalman_filter
 from jaxfdi.filters.posterior import init_from_posterior
 from jaxfdi.filters.tskf import (
     FaultDirection,
@@ -21,6 +23,9 @@ from jaxfdi.filters.tskf import (
     tskf_statistic_dof,
     two_stage_kalman_filter,
 )
+from jaxfdi.filters.sqrt_kalman import SqrtGaussianState, sqrt_kalman_filter
+from jaxfdi.filters.sqrt_ukf import sqrt_unscented_kalman_filter
+from jaxfdi.filters.smoother import SmootherResult, parallel_rts_smoother, rts_smoother
 from jaxfdi.filters.time_varying import TimedState, model_at, time_varying
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.filters.unknown_input import unknown_input_filter
@@ -34,6 +39,14 @@ __all__ = [
     "run_filter",
     "run_filter_batch",
     "kalman_filter",
+    "run_kalman_batch",
+    "parallel_kalman_filter",
+    "rts_smoother",
+    "parallel_rts_smoother",
+    "SmootherResult",
+    "sqrt_kalman_filter",
+    "sqrt_unscented_kalman_filter",
+    "SqrtGaussianState",
     "extended_kalman_filter",
     "unscented_kalman_filter",
     "interacting_multiple_model",
@@ -54,3 +67,9 @@ __all__ = [
     "model_at",
     "TimedState",
 ]
+
+# ``jaxfdi.filters.time_varying`` is the module; its function is
+# ``jaxfdi.filters.time_varying.time_varying`` (calling the module still works, deprecated)
+from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
+
+_unshadow(__name__, "time_varying")

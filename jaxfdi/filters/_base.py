@@ -61,12 +61,23 @@ class BatchKernel(NamedTuple):
     takes ``y`` (m, N) and ``u`` (nu, N) or (nu, 1); ``unpack_state(carry)`` and
     ``unpack_info(info)`` (the step's info stacked over time) give back what
     ``vmap(run_filter)`` gives: a leading run axis on every field.
+
+    ``per_run_only``: the kernel is for runs with their own prior (``pack`` then also
+    takes a ``GaussianState`` with a leading run axis); runs that share the prior keep
+    the ``vmap`` path (the linear KF's, whose covariances XLA computes once).
+
+    ``info_runs_first``: ``step`` returns its info with the run axis first, (N, ...);
+    the driver then writes each step into (N, T, ...) buffers and ``unpack_info`` is not
+    used (a transpose of the stacked info's innermost axis costs as much as a Kalman
+    filter on 100 runs of 1000 steps).
     """
 
     pack: Callable[[Any, int], Any]
     step: Callable[[Any, Array, Array], tuple[Any, Any]]
     unpack_state: Callable[[Any], Any]
     unpack_info: Callable[[Any], Any]
+    per_run_only: bool = False
+    info_runs_first: bool = False
 
 
 class Filter(NamedTuple):
@@ -217,7 +228,8 @@ def run_filter(
     _checks.check_same_length(("ys", "us"), ys, us)
     if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((init_state, ys, us))):
         return _scan_filter.__wrapped__(filt, init_state, ys, us)  # inside jit/vmap: inline the scan
-    return _scan_filter(filt, init_state, ys, us)
+    with _linalg.library_calls():  # one sequence, no batch: dot and LAPACK (_linalg's module doc)
+        return _scan_filter(filt, init_state, ys, us)
 
 
 _COVARIANCE_FIELDS = ("predicted_cov", "filtered_cov", "innovation_cov")
@@ -232,8 +244,9 @@ def run_filter_batch(
 ) -> tuple[Any, Any]:
     """Run a filter over a batch of sequences (Monte Carlo runs) with ``vmap``.
 
-    A filter with a ``batch`` kernel (the IMM over ``kalman_filter`` modes) runs it: one
-    step for all runs in its own layout, with the same results as ``vmap``.
+    A filter with a ``batch`` kernel (the IMM over ``kalman_filter`` modes; the linear KF
+    when the runs have their own prior) runs it: one step for all runs in its own
+    layout, with the same results as ``vmap`` (to round-off).
 
     When every run shares the model and the initial covariance, a linear Kalman filter's
     covariances, gains and innovation covariances do not depend on the data: XLA then
@@ -243,7 +256,9 @@ def run_filter_batch(
 
     Args:
       filt: a ``Filter``.
-      init_state: the prior of the first step, shared by all runs.
+      init_state: the prior of the first step, shared by all runs; for a Gaussian filter
+        also one per run, ``GaussianState(mean (N, n), cov (N, n, n))`` (either of the two
+        may be shared). Runs with their own model: ``filters.run_kalman_batch``.
       ys: (N, T, m) measurements of N runs.
       us: (T, nu) inputs shared by the runs, (N, T, nu) per run, or ``None``.
       shared_covariance: ``True``: return ``predicted_cov``, ``filtered_cov``,
@@ -276,12 +291,18 @@ def run_filter_batch(
             f"shared_covariance: only Gaussian filters (KF) can share covariances across runs, "
             f"got a {type(init_state).__name__}; use shared_covariance=False or 'auto'"
         )
-    if filt.batch is not None:
+    init_axes = _prior_axes(init_state, ys.shape[0]) if gaussian else None
+    per_run_prior = init_axes is not None and init_axes != GaussianState(None, None)
+    if per_run_prior and shared_covariance is True and init_axes.cov is not None:
+        raise ValueError("shared_covariance: the runs have their own initial covariance, so their covariances "
+                         "differ; use shared_covariance=False or 'auto'")
+    if filt.batch is not None and (per_run_prior or not filt.batch.per_run_only):
         return _kernel_scan(filt.batch, init_state, ys, us)
-    if shared_covariance is False or not gaussian:
-        return _batch_scan(filt, init_state, ys, us, us_axis, False)
+    init_axes = init_axes if per_run_prior else None
+    if shared_covariance is False or not gaussian or (per_run_prior and init_axes.cov is not None):
+        return _batch_scan(filt, init_state, ys, us, us_axis, False, init_axes)
     try:
-        return _batch_scan(filt, init_state, ys, us, us_axis, True)
+        return _batch_scan(filt, init_state, ys, us, us_axis, True, init_axes)
     except ValueError as error:  # vmap: "mapped output but out_axes is None"
         if "out_axes" not in str(error):
             raise
@@ -290,27 +311,64 @@ def run_filter_batch(
                 "shared_covariance: the covariances depend on the run (nonlinear filter, "
                 "missing_measurements=True or per-run model); use shared_covariance=False"
             ) from None
-    return _batch_scan(filt, init_state, ys, us, us_axis, False)
+    return _batch_scan(filt, init_state, ys, us, us_axis, False, init_axes)
 
 
-@partial(jax.jit, static_argnums=(0, 4, 5))
-def _batch_scan(filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, shared: bool):
+def _prior_axes(init_state: GaussianState, num_runs: int) -> GaussianState:
+    """Which of ``mean``/``cov`` carry a leading run axis (0) or are shared (None);
+    checked against the number of runs."""
+    mean_shape, cov_shape = _checks.shape_of(init_state.mean), _checks.shape_of(init_state.cov)
+    if len(mean_shape) not in (1, 2) or len(cov_shape) not in (2, 3):
+        raise ValueError(f"init_state: expected mean (n,) or (N, n) and cov (n, n) or (N, n, n), got shapes "
+                         f"{mean_shape} and {cov_shape}")
+    for name, shape, per_run_ndim in (("mean", mean_shape, 2), ("cov", cov_shape, 3)):
+        if len(shape) == per_run_ndim and shape[0] != num_runs:
+            raise ValueError(f"init_state.{name}: a per-run prior needs a leading axis of {num_runs} runs (as ys), "
+                             f"got shape {shape}")
+    return GaussianState(0 if len(mean_shape) == 2 else None, 0 if len(cov_shape) == 3 else None)
+
+
+@partial(jax.jit, static_argnums=(0, 4, 5, 6))
+def _batch_scan(filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, shared: bool, init_axes=None):
     if shared:
         final_axes = GaussianState(0, None)
         info_axes = FilterInfo(*(None if name in _COVARIANCE_FIELDS else 0 for name in FilterInfo._fields))
     else:
         final_axes = info_axes = 0
-    run_one = partial(_scan_filter.__wrapped__, filt, init_state)
-    return jax.vmap(run_one, in_axes=(0, us_axis), out_axes=(final_axes, info_axes))(ys, us)
+    if init_axes is None:
+        run_one = partial(_scan_filter.__wrapped__, filt, init_state)
+        return jax.vmap(run_one, in_axes=(0, us_axis), out_axes=(final_axes, info_axes))(ys, us)
+    run_one = partial(_scan_filter.__wrapped__, filt)
+    return jax.vmap(run_one, in_axes=(init_axes, 0, us_axis), out_axes=(final_axes, info_axes))(init_state, ys, us)
 
 
 @partial(jax.jit, static_argnums=0)
 def _kernel_scan(kernel: BatchKernel, init_state: Any, ys: Array, us: Array):
-    num_runs = ys.shape[0]
+    return kernel_scan(kernel, init_state, ys, us)
+
+
+def kernel_scan(kernel: BatchKernel, init_state: Any, ys: Array, us: Array):
+    """The scan of a ``BatchKernel`` over ``ys`` (N, T, m) and ``us`` (T, nu) or
+    (N, T, nu); returns what ``vmap(run_filter)`` returns (not jitted: callers jit)."""
+    num_runs, num_steps = ys.shape[:2]
     ys = jnp.moveaxis(ys, 0, -1)                                          # (T, m, N)
     us = jnp.moveaxis(us, 0, -1) if us.ndim == 3 else us[..., None]       # (T, nu, N or 1)
-    final, info = jax.lax.scan(lambda state, yu: kernel.step(state, *yu), kernel.pack(init_state, num_runs), (ys, us))
-    return kernel.unpack_state(final), kernel.unpack_info(info)
+    carry = kernel.pack(init_state, num_runs)
+    if not kernel.info_runs_first:
+        final, info = jax.lax.scan(lambda state, yu: kernel.step(state, *yu), carry, (ys, us))
+        return kernel.unpack_state(final), kernel.unpack_info(info)
+    info_shapes = jax.eval_shape(lambda state, y, u: kernel.step(state, y, u)[1], carry, ys[0], us[0])
+    buffers = jax.tree.map(lambda a: jnp.zeros((a.shape[0], num_steps) + a.shape[1:], a.dtype), info_shapes)
+
+    def body(state_and_buffers, yuk):
+        state, buffers = state_and_buffers
+        y, u, k = yuk
+        state, info = kernel.step(state, y, u)
+        buffers = jax.tree.map(lambda b, v: jax.lax.dynamic_update_index_in_dim(b, v, k, 1), buffers, info)
+        return (state, buffers), None
+
+    (final, info), _ = jax.lax.scan(body, (carry, buffers), (ys, us, jnp.arange(num_steps)))
+    return kernel.unpack_state(final), info
 
 
 @partial(jax.jit, static_argnums=0)

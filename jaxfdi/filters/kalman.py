@@ -21,6 +21,7 @@ from jaxfdi.filters._base import (
     mask_innovation_cov,
     observed_mask,
 )
+from jaxfdi.filters.kalman_batch import kalman_batch_kernel, supports
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -80,6 +81,9 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
         much faster: ``False`` on the engine's log-likelihood gradient over 100 runs cut
         its cost from 42 to 30 ms and its compile time from 4.4 to 2.0 s
         (``benchmarks/bench_tuning.py``).
+
+    ``run_filter_batch`` over runs with their own prior runs the structure-of-arrays
+    step of ``kalman_batch.py``; runs with their own model: ``run_kalman_batch``.
     """
     n, nu, m = validate_linear_model(model)
 
@@ -94,4 +98,7 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
         next_mean = mm(model.Phi, post.mean) + mm(model.Gamma, u)
         return GaussianState(next_mean, _linalg.symmetrize(mm(mm(model.Phi, post.cov), model.Phi.T) + model.Q))
 
-    return gaussian_filter(n, update, predict, unroll_factorizations)
+    filt = gaussian_filter(n, update, predict, unroll_factorizations)
+    if missing_measurements or not supports(model):
+        return filt
+    return filt._replace(batch=kalman_batch_kernel(model))  # run_filter_batch, runs with their own prior

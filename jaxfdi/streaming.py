@@ -1,0 +1,209 @@
+"""Streaming detection summaries: exact counts and a delay histogram, merged across
+Monte Carlo chunks and hosts, for studies too large to keep every run's record.
+
+``detection_counts`` folds a chunk of ``DetectionRecord`` s (leading run axis) into
+integer counts (runs, unhealthy runs, faulty runs, detections, correct isolations,
+false-alarm runs and steps, steps before the onset) and the histogram of the detection
+delays in steps, with bins ``[b w, (b + 1) w)`` of ``w = bin_width`` steps over
+``[0, horizon)`` (every delay of a run ``horizon`` steps long falls in one). Counts merge
+by addition (``merge_counts``), so the summary of a whole study is the same whatever its
+chunks and hosts were, and ``summarize_counts`` gives the ``DetectionSummary`` of
+``metrics.summarize_detection``: every count and rate exactly, the mean delay exactly
+(an integer sum), and the median and 90th percentile from the histogram; as there,
+delays are those of the clean detected runs (no alarm before the onset).
+
+Quantiles (NumPy's default "linear" definition on the sorted delays ``d_0 <= ... <=
+d_{n-1}``: ``d_j + (h - j)(d_{j+1} - d_j)``, ``h = (n - 1) q``, ``j = floor(h)``): the
+histogram tells exactly which bin holds each order statistic ``d_j``; it is taken as
+the middle of the integer delays of its bin, ``b w + (w - 1) / 2``. The result is within
+``(w - 1) / 2`` steps of NumPy's (``quantile_resolution``), and exact for ``w = 1``.
+
+``detection_reducer`` packages this for ``monte_carlo(..., reduce=...)``.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import numpy as np
+
+from jaxfdi import _checks
+from jaxfdi.metrics import DetectionRecord, DetectionSummary
+
+
+class DetectionCounts(NamedTuple):
+    """Exact counts over runs (host-side NumPy int64); merge with ``merge_counts``."""
+
+    runs: np.ndarray               # () all runs
+    unhealthy_runs: np.ndarray     # () runs with a step that was not healthy
+    faulty_runs: np.ndarray        # () healthy runs with an onset within the horizon
+    detected_runs: np.ndarray      # () of those, with an alarm at or after the onset
+    labelled_runs: np.ndarray      # () faulty runs whose true label was given
+    isolated_runs: np.ndarray      # () of those, detected and isolated as their label
+    false_alarm_runs: np.ndarray   # () healthy runs with an alarm before the onset
+    false_alarm_steps: np.ndarray  # () alarm steps before the onset (healthy runs)
+    pre_onset_steps: np.ndarray    # () steps before the onset (healthy runs)
+    delay_sum: np.ndarray          # () sum of the detection delays of clean detected runs, in steps
+    delay_histogram: np.ndarray    # (B,) clean detected runs with delay in [b w, (b + 1) w) steps
+    pre_alarm_runs: np.ndarray     # () faulty runs with an alarm before the onset (not clean)
+    delay_runs: np.ndarray         # () clean detected runs (the delays' sample size)
+    horizon: np.ndarray            # () steps per run
+    bin_width: np.ndarray          # () w, steps per bin
+
+
+class Reducer(NamedTuple):
+    """How ``monte_carlo`` folds outputs instead of stacking them: ``init() -> state``,
+    ``update(state, outputs) -> state`` for a chunk's outputs (NumPy, leading run axis),
+    ``merge(states) -> state`` for the states of several hosts (associative)."""
+
+    init: Callable[[], Any]
+    update: Callable[[Any, Any], Any]
+    merge: Callable[[list], Any]
+
+
+def empty_counts(horizon: int, bin_width: int = 1) -> DetectionCounts:
+    """Counts of no runs, for runs ``horizon`` steps long and delay bins ``bin_width`` wide."""
+    horizon = _checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
+    bin_width = _checks.check_int("bin_width", bin_width, 1, meaning="a positive number of steps per delay bin")
+    zero = np.zeros((), np.int64)
+    return DetectionCounts(*(zero,) * 10, np.zeros(-(-horizon // bin_width), np.int64), zero, zero,
+                           np.int64(horizon), np.int64(bin_width))
+
+
+def detection_counts(record: DetectionRecord, horizon: int, bin_width: int = 1, labels: Any = None) -> DetectionCounts:
+    """Counts of stacked records (leading run axis), definitions as ``summarize_detection``.
+
+    Args:
+      record: ``DetectionRecord`` with a leading run axis.
+      horizon: steps per run (delays fall in ``[0, horizon)``).
+      bin_width: steps per delay-histogram bin.
+      labels: optional (runs,) true fault labels; a detected faulty run counts in
+        ``isolated_runs`` when ``record.isolated`` equals its label.
+    """
+    counts = empty_counts(horizon, bin_width)
+    onset = np.asarray(record.onset).astype(np.int64)
+    healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
+    detection = np.broadcast_to(np.asarray(record.detection_step), onset.shape).astype(np.int64)
+    false_alarms = np.broadcast_to(np.asarray(record.false_alarms), onset.shape).astype(np.int64)
+    pre_steps = np.broadcast_to(np.asarray(record.pre_onset_steps), onset.shape).astype(np.int64)
+    faulty = (onset < horizon) & healthy
+    detected = faulty & (detection >= 0)
+    pre_alarm = faulty & (false_alarms > 0)
+    scored = detected & ~pre_alarm   # delays of clean runs only (metrics.summarize_detection)
+    delays = detection[scored] - onset[scored]
+    if delays.size and (delays.min() < 0 or delays.max() >= horizon):
+        raise ValueError(f"record: detection delays must lie in [0, horizon = {horizon}), got "
+                         f"[{delays.min()}, {delays.max()}]; is horizon the runs' length?")
+    if labels is None:
+        labelled = np.zeros((), np.int64)
+        isolated = np.zeros((), np.int64)
+    else:
+        labels = np.asarray(labels)
+        if labels.shape != onset.shape:
+            raise ValueError(f"labels: expected one label per run, shape {onset.shape}, got {labels.shape}")
+        labelled = np.int64(faulty.sum())
+        isolated = np.int64((detected & (np.broadcast_to(np.asarray(record.isolated), onset.shape) == labels)).sum())
+    histogram = np.bincount(delays // int(counts.bin_width), minlength=counts.delay_histogram.size).astype(np.int64)
+    return counts._replace(
+        runs=np.int64(onset.size),
+        unhealthy_runs=np.int64((~healthy).sum()),
+        faulty_runs=np.int64(faulty.sum()),
+        detected_runs=np.int64(detected.sum()),
+        labelled_runs=labelled,
+        isolated_runs=isolated,
+        false_alarm_runs=np.int64((false_alarms[healthy] > 0).sum()),
+        false_alarm_steps=np.int64(false_alarms[healthy].sum()),
+        pre_onset_steps=np.int64(pre_steps[healthy].sum()),
+        delay_sum=np.int64(delays.sum()),
+        delay_histogram=histogram,
+        pre_alarm_runs=np.int64(pre_alarm.sum()),
+        delay_runs=np.int64(scored.sum()),
+    )
+
+
+def merge_counts(*parts: DetectionCounts) -> DetectionCounts:
+    """The counts of the union of the runs of ``parts`` (same horizon and bin width)."""
+    if not parts:
+        raise ValueError("parts: expected at least one DetectionCounts")
+    first = parts[0]
+    for part in parts[1:]:
+        if int(part.horizon) != int(first.horizon) or int(part.bin_width) != int(first.bin_width):
+            raise ValueError(f"parts: counts of runs of {int(first.horizon)} steps in bins of {int(first.bin_width)} "
+                             f"cannot be merged with {int(part.horizon)} steps in bins of {int(part.bin_width)}")
+    summed = [np.sum([np.asarray(getattr(p, name), np.int64) for p in parts], axis=0)
+              for name in DetectionCounts._fields[:-2]]
+    return DetectionCounts(*summed, first.horizon, first.bin_width)
+
+
+def quantile_resolution(counts: DetectionCounts, Ts: float = 1.0) -> float:
+    """Largest difference between ``delay_quantile`` and NumPy's quantile of the same
+    delays: ``(bin_width - 1) / 2`` steps, in the unit of ``Ts``."""
+    return (int(counts.bin_width) - 1) / 2 * Ts
+
+
+def delay_quantile(counts: DetectionCounts, q: float, Ts: float = 1.0) -> float:
+    """The ``q`` quantile of the detection delays from the histogram (module doc); NaN
+    when nothing was detected."""
+    _checks.check_scalar("q", q, 0.0, 1.0, meaning="a quantile level in [0, 1]")
+    histogram = np.asarray(counts.delay_histogram, np.int64)
+    total = int(histogram.sum())
+    if total == 0:
+        return float("nan")
+    width = int(counts.bin_width)
+    cumulative = np.cumsum(histogram)
+
+    def order_statistic(j: int) -> float:   # d_j, j = 0..total-1, as the middle of its bin
+        bin_index = int(np.searchsorted(cumulative, j, side="right"))
+        return bin_index * width + (width - 1) / 2
+
+    h = (total - 1) * float(q)
+    j = int(np.floor(h))
+    low = order_statistic(j)
+    high = order_statistic(min(j + 1, total - 1))
+    return float(low + (h - j) * (high - low)) * Ts
+
+
+def summarize_counts(counts: DetectionCounts, Ts: float = 1.0) -> DetectionSummary:
+    """``DetectionSummary`` of the counts: the same numbers as ``summarize_detection`` of
+    the records (median and p90 within ``quantile_resolution``)."""
+    _checks.check_positive("Ts", Ts, "a positive sample period")
+    nan = float("nan")
+    faulty, detected, scored = int(counts.faulty_runs), int(counts.detected_runs), int(counts.delay_runs)
+    healthy = int(counts.runs) - int(counts.unhealthy_runs)
+    pre_steps = int(counts.pre_onset_steps)
+    rate = detected / faulty if faulty else nan
+    return DetectionSummary(
+        runs=int(counts.runs),
+        faulty_runs=faulty,
+        detection_rate=float(rate),
+        missed_detection_rate=float(1 - rate) if faulty else nan,
+        false_alarm_rate=int(counts.false_alarm_runs) / healthy if healthy else nan,
+        false_alarm_rate_per_step=int(counts.false_alarm_steps) / pre_steps if pre_steps else nan,
+        delay_mean=int(counts.delay_sum) / scored * Ts if scored else nan,
+        delay_median=delay_quantile(counts, 0.5, Ts),
+        delay_p90=delay_quantile(counts, 0.9, Ts),
+        unhealthy_runs=int(counts.unhealthy_runs),
+        pre_onset_alarm_rate=int(counts.pre_alarm_runs) / faulty if faulty else nan,
+        clean_runs=faulty - int(counts.pre_alarm_runs),
+        delay_runs=scored,
+    )
+
+
+def isolation_rate(counts: DetectionCounts) -> float:
+    """Correctly isolated / labelled faulty runs (NaN when no labels were given)."""
+    labelled = int(counts.labelled_runs)
+    return int(counts.isolated_runs) / labelled if labelled else float("nan")
+
+
+def detection_reducer(horizon: int, bin_width: int = 1, record: Callable[[Any], DetectionRecord] | None = None,
+                      label: Callable[[Any], Any] | None = None) -> Reducer:
+    """A ``Reducer`` of ``DetectionCounts`` for ``monte_carlo(..., reduce=...)``:
+    ``record(outputs)`` picks the records from ``run_one``'s outputs (default: the
+    outputs are the record), ``label(outputs)`` the true labels (optional)."""
+    empty_counts(horizon, bin_width)  # checks the arguments now
+    pick = record or (lambda outputs: outputs)
+
+    def update(counts: DetectionCounts, outputs) -> DetectionCounts:
+        labels = None if label is None else label(outputs)
+        return merge_counts(counts, detection_counts(pick(outputs), horizon, bin_width, labels))
+
+    return Reducer(lambda: empty_counts(horizon, bin_width), update, lambda states: merge_counts(*states))

@@ -69,11 +69,13 @@ class FlightWeights(NamedTuple):
 
 
 class FlightGains(NamedTuple):
+    """The F-16 SAS gains: longitudinal and lateral LQR gains with integral states."""
     longitudinal: Array  # (2, 8) u_lon = -K [dx_lon (6); z_lon (2)]
     lateral: Array       # (2, 5) u_lat = -K [dx_lat (4); z_lat (1)]
 
 
 class FlightDesign(NamedTuple):
+    """An F-16 flight-control design: gains, closed-loop spectral radii and Riccati convergence flags."""
     gains: FlightGains
     spectral_radius: Array  # (2,) max |eig| of the discrete closed loops (lon, lat): < 1 is stable
     converged: Array        # (2,) Riccati solver flags

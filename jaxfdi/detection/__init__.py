@@ -20,6 +20,7 @@ from jaxfdi.detection.glrt import (
     glrt_detector,
     glrt_threshold,
 )
+from jaxfdi.detection.glrt_recursive import RecursiveGLRTState, recursive_glrt_detector
 from jaxfdi.detection.mode_probability import mode_probability_detector
 from jaxfdi.detection.noncentral_chi2 import ncx2_cdf, ncx2_quantile, noncentrality_for_missed_detection
 from jaxfdi.detection.signature import UNMATCHED, isolate, signature_matrix
@@ -49,6 +50,8 @@ __all__ = [
     "glr_statistic",
     "glrt_detector",
     "glrt_threshold",
+    "recursive_glrt_detector",
+    "RecursiveGLRTState",
     "mode_probability_detector",
     "ncx2_cdf",
     "ncx2_quantile",
@@ -67,4 +70,42 @@ __all__ = [
     "haar_denoise",
     "haar_reconstruct",
     "soft_threshold",
+]
+
+# ``jaxfdi.detection.dual_filter`` is the module; its function is
+# ``jaxfdi.detection.dual_filter.dual_filter`` (calling the module still works, deprecated)
+from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
+
+_unshadow(__name__, "dual_filter")
+
+# seed 000: parity space of redundant sensor groups, the hybrid PSA + on-demand filter FDI,
+# and the sensor arrangement by gradient
+from jaxfdi.detection.hybrid_psa import (  # noqa: E402
+    HybridDecision,
+    HybridPSAConfig,
+    HybridPSAOutput,
+    HybridPSAState,
+    hybrid_psa_config,
+    hybrid_psa_fdi,
+    hybrid_psa_init,
+)
+from jaxfdi.detection.parity import (  # noqa: E402
+    ParitySpace,
+    detection_threshold,
+    fault_detection_statistic,
+    isolation_functions,
+    isolation_threshold,
+    parity_space,
+    parity_vector,
+    singular_directions,
+    singular_faults,
+    subspace_angles,
+)
+from jaxfdi.detection.sensor_configuration import isolability, optimize_configuration  # noqa: E402
+
+__all__ += [
+    "HybridDecision", "HybridPSAConfig", "HybridPSAOutput", "HybridPSAState", "hybrid_psa_config", "hybrid_psa_fdi",
+    "hybrid_psa_init", "ParitySpace", "detection_threshold", "fault_detection_statistic", "isolation_functions",
+    "isolation_threshold", "parity_space", "parity_vector", "singular_directions", "singular_faults",
+    "subspace_angles", "isolability", "optimize_configuration",
 ]

@@ -29,7 +29,7 @@ Park, Kim, Park & Roh (2004), seed 000.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -108,12 +108,15 @@ class FlightHistory(NamedTuple):
     state: Array           # (T, 15) true [x (13), w_g, v_g]
     control: Array         # (T, 4)
     measured_rates: Array  # (T, 3) the rates the controller flew on
+    measurement: Any = None  # (T, 8 + m_r) y
+    fdi: Any = None          # the FDI stage's per-step outputs (None for the rate pass-through)
 
 
 class Outcome(NamedTuple):
     tracking: TrackingScore  # (len(ERRORS),) components
     final_state: Array       # (15,)
     healthy: Array           # () bool: the flight stayed finite
+    fdi: Any = None          # the FDI stage's final state (None for the rate pass-through)
 
 
 class Design(NamedTuple):
@@ -126,6 +129,11 @@ class Design(NamedTuple):
     weights: FlightWeights
 
 
+_linearize = jax.jit(linearize)
+_design = jax.jit(design_flight_control, static_argnums=1)
+_reference = jax.jit(flight_reference, static_argnums=(1, 3, 4))
+
+
 def flight_setup(plan: FlightPlan | None = None, weights: FlightWeights | None = None, params: F16Params | None = None,
                  sensors: F16Sensors | None = None, gust_sigma: float = 0.0, dtype=None) -> tuple[FlightSetup, Design]:
     """Trims, linearisation, LQR design and reference of the flight (module doc)."""
@@ -135,10 +143,15 @@ def flight_setup(plan: FlightPlan | None = None, weights: FlightWeights | None =
     weights = weights or default_weights(dtype)
     sensors = sensors or f16_sensors(dtype=dtype)
     trims = plan_trims(params, plan)
-    linear = linearize(params, trims.state[0], trims.control[0])
-    design = design_flight_control(linear, DT, weights)
+    # compiled once (eager, the Jacobians and the Riccati solves dispatch op by op: 3x slower)
+    linear = _linearize(params, trims.state[0], trims.control[0])
+    design = _design(linear, DT, weights)
+    radius = np.asarray(design.spectral_radius)
+    if not np.all(radius <= 1.0):
+        raise ValueError(f"weights: expected LQR weights whose design stabilises both axes, got closed-loop spectral "
+                         f"radii {radius.tolist()} (longitudinal, lateral)")
     steps = int(round(plan.duration / DT))
-    reference = flight_reference(params, plan, trims, DT, steps)
+    reference = _reference(params, plan, trims, DT, steps)
     x0, u0 = initial_condition(plan, trims)
     phases = jnp.asarray([plan.climb_time - 0.5 * plan.level_off, plan.climb_time + 0.5 * plan.level_off,
                           plan.bank_start + plan.roll_in], dtype)
@@ -152,11 +165,19 @@ def cast_setup(setup: FlightSetup, dtype) -> FlightSetup:
     return jax.tree_util.tree_map(lambda a: a.astype(dtype) if jnp.issubdtype(a.dtype, jnp.floating) else a, setup)
 
 
-def run_flight(setup: FlightSetup, key: Array, dispersion: Dispersion, keep_history: bool = False):
-    """One closed-loop flight; returns an ``Outcome`` (and a ``FlightHistory``)."""
+def run_flight(setup: FlightSetup, key: Array, dispersion: Dispersion, keep_history: bool = False, fdi=None,
+               fdi_state0: Any = None, fault=None):
+    """One closed-loop flight; returns an ``Outcome`` (and a ``FlightHistory``).
+
+    ``fdi``/``fdi_state0``: the FDI stage (a ``loop.FDI`` whose ``observe`` returns a
+    ``FlightView``) and its initial state; default the rate pass-through (every rate
+    channel trusted). ``fault``: sensor or actuator faults of the plant (``f16_plant``),
+    e.g. a ``faults.fault_group`` on both axes of one rate sensor."""
     dtype = setup.x0.dtype
     params = setup.params._replace(xcg=dispersion.xcg)
-    plant = f16_plant(params, setup.sensors, DT, gust_sigma=setup.gust_sigma)
+    plant = f16_plant(params, setup.sensors, DT, gust_sigma=setup.gust_sigma, fault=fault)
+    if fdi is None:
+        fdi, fdi_state0 = rate_passthrough_fdi(setup.sensors.rate_axes), None
     steps = setup.reference.state.shape[0]
     reference = setup.reference
     degrees = 180.0 / math.pi
@@ -176,14 +197,15 @@ def run_flight(setup: FlightSetup, key: Array, dispersion: Dispersion, keep_hist
     tracked = tracked_plant(plant, error, len(ERRORS), active, dtype)
     controller = flight_controller(setup.gains, DT, params.control_lower, params.control_upper)
     x0 = jnp.concatenate([setup.x0 + dispersion.initial, jnp.zeros(2, dtype)])
-    result = run_loop(tracked, rate_passthrough_fdi(setup.sensors.rate_axes), controller, x0, None, key, steps,
+    result = run_loop(tracked, fdi, controller, x0, fdi_state0, key, steps,
                       exogenous=(reference.state, reference.control), u0=setup.u0, keep_history=keep_history)
-    (sim_state, score), _, _ = result.final
-    outcome = Outcome(score, sim_state.state, jnp.all(jnp.isfinite(sim_state.state)))
+    (sim_state, score), fdi_state, _ = result.final
+    outcome = Outcome(score, sim_state.state, jnp.all(jnp.isfinite(sim_state.state)), fdi_state)
     if not keep_history:
         return outcome
     trace = result.history
-    return outcome, FlightHistory(trace.sensed.state, trace.control, trace.view.rates)
+    return outcome, FlightHistory(trace.sensed.state, trace.control, trace.view.rates, trace.sensed.measurement,
+                                  trace.output)
 
 
 def run_flights(setup: FlightSetup, keys: Array, dispersions: Dispersion, keep_history: bool = False):

@@ -77,3 +77,24 @@ __all__ = [
     "lookup1", "lookup2", "table_arrays", "TrimCondition", "TrimResult", "climb", "coordinated_turn", "level_flight",
     "pull_up", "trim", "trim_batch", "trim_condition",
 ]
+
+# ``linearize`` and ``trim`` name the modules; their functions are ``linearize.linearize``
+# and ``trim.trim`` (calling the module still works, deprecated)
+from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
+
+_unshadow(__name__, "linearize", "trim")
+
+# seed 000's UKF process model: the body rates alone (moment equations 34-36)
+from jaxfdi.models.f16.dynamics import moment_equations  # noqa: E402
+from jaxfdi.models.f16.rates import (  # noqa: E402
+    RATE_INPUT_NAMES,
+    RateModel,
+    rate_derivative,
+    rate_model,
+    rate_model_input,
+    rate_observation,
+    rate_transition,
+)
+
+__all__ += ["moment_equations", "RATE_INPUT_NAMES", "RateModel", "rate_derivative", "rate_model", "rate_model_input",
+            "rate_observation", "rate_transition"]

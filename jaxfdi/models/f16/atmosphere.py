@@ -18,6 +18,7 @@ from jaxfdi.models.f16.tables import AtmosphereData
 
 
 class AirData(NamedTuple):
+    """Air data: Mach number, dynamic pressure, density and temperature."""
     mach: Array            # ()
     dynamic_pressure: Array  # () lbf/ft^2
     density: Array         # () slug/ft^3

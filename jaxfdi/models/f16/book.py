@@ -33,6 +33,7 @@ SYMMETRIC_ZEROS = ("ail_deg", "rdr_deg", "beta_rad")
 
 
 class BookCase(NamedTuple):
+    """One row of Stevens & Lewis Tables 3.6-2/3.6-3: the flight condition and the book's trim."""
     table: str          # "3.6-2" or "3.6-3"
     label: str
     airspeed: float     # ft/s

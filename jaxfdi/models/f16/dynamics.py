@@ -48,7 +48,10 @@ from jaxfdi.models.f16.tables import (
     stevens_lewis_data,
 )
 
+#: the 13 states, in order: airspeed, angles of attack and sideslip, Euler angles, body rates,
+#: north and east position, altitude, engine power
 STATE_NAMES = ("VT", "alpha", "beta", "phi", "theta", "psi", "P", "Q", "R", "pn", "pe", "h", "pow")
+#: the 4 controls, in order: throttle, elevator, aileron, rudder
 CONTROL_NAMES = ("thtl", "el", "ail", "rdr")
 VT, ALPHA, BETA, PHI, THETA, PSI, P, Q, R, PN, PE, H, POW = range(13)
 THTL, EL, AIL, RDR = range(4)
@@ -135,6 +138,21 @@ def aero_coefficients(params: F16Params, x: Array, u: Array, gust: Array | None 
     return c._replace(Cm=c.Cm + c.CZ * shift, Cn=c.Cn - c.CY * shift * params.chord / params.span)
 
 
+def moment_equations(p: Array, q: Array, r: Array, c: AeroCoefficients, qs: Array,
+                     params: F16Params) -> tuple[Array, Array, Array]:
+    """``(P', Q', R')`` of the body rates (seed 000 eqs. 34-36; Stevens & Lewis eq. 2.5-16
+    with the engine's angular momentum ``hx``) from the coefficients ``c`` and
+    ``qs = qbar S``: the part of ``f16_dynamics`` that ``models.f16.rates`` (the UKF's
+    model) also uses."""
+    c1, c2, c3, c4, c5, c6, c7, c8, c9 = inertia_constants(params.inertia)
+    hx = params.engine_momentum
+    qsb = qs * params.span
+    p_dot = (c2 * p + c1 * r + c4 * hx) * q + qsb * (c3 * c.Cl + c4 * c.Cn)
+    q_dot = (c5 * p - c7 * hx) * r + c6 * (r * r - p * p) + qs * params.chord * c7 * c.Cm
+    r_dot = (c8 * p - c2 * r + c9 * hx) * q + qsb * (c4 * c.Cl + c9 * c.Cn)
+    return p_dot, q_dot, r_dot
+
+
 def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = None) -> Array:
     """``x'`` (13,) of the state ``x`` (13,) under the controls ``u`` (4,) (module doc).
 
@@ -157,7 +175,6 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
     sph, cph = jnp.sin(phi), jnp.cos(phi)
     spsi, cpsi = jnp.sin(psi), jnp.cos(psi)
     qs = air.dynamic_pressure * params.area
-    qsb = qs * params.span
     g, inv_mass = params.gravity, 1.0 / params.mass
 
     u_dot = r * v_b - q * w_b - g * sth + inv_mass * (qs * c.CX + engine_thrust)
@@ -172,11 +189,7 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
     theta_dot = q * cph - r * sph
     psi_dot = (q * sph + r * cph) / cth
 
-    c1, c2, c3, c4, c5, c6, c7, c8, c9 = inertia_constants(params.inertia)
-    hx = params.engine_momentum
-    p_dot = (c2 * p + c1 * r + c4 * hx) * q + qsb * (c3 * c.Cl + c4 * c.Cn)
-    q_dot = (c5 * p - c7 * hx) * r + c6 * (r * r - p * p) + qs * params.chord * c7 * c.Cm
-    r_dot = (c8 * p - c2 * r + c9 * hx) * q + qsb * (c4 * c.Cl + c9 * c.Cn)
+    p_dot, q_dot, r_dot = moment_equations(p, q, r, c, qs, params)
 
     # navigation: body velocities rotated to north-east-up (Stevens & Lewis eq. 2.5-18)
     north = (u_b * cth * cpsi + v_b * (sph * sth * cpsi - cph * spsi) + w_b * (cph * sth * cpsi + sph * spsi))

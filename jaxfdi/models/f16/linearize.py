@@ -73,6 +73,7 @@ class LinearF16(NamedTuple):
 
 
 class Mode(NamedTuple):
+    """A flight mode: name, roots, natural frequency, damping ratio and time constant."""
     name: str
     roots: tuple[complex, ...]
     natural_frequency: float    # rad/s, |lambda| (of the first root for two real roots)

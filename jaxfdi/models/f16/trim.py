@@ -58,6 +58,7 @@ class TrimCondition(NamedTuple):
 
 
 class TrimResult(NamedTuple):
+    """A trim: state, controls, residual, convergence and whether the controls are within limits."""
     state: Array          # (13,) trimmed state
     control: Array        # (4,) [thtl, el, ail, rdr]
     residual: Array       # (6,) [VT', alpha', beta', P', Q', R'] at the trim
@@ -76,18 +77,22 @@ def trim_condition(airspeed, altitude=0.0, climb_angle=0.0, turn_rate=0.0, pull_
 
 
 def level_flight(airspeed, altitude=0.0, dtype=None) -> TrimCondition:
+    """Steady wings-level flight at ``airspeed`` [ft/s] and ``altitude`` [ft]."""
     return trim_condition(airspeed, altitude, dtype=dtype)
 
 
 def climb(airspeed, climb_angle, altitude=0.0, dtype=None) -> TrimCondition:
+    """A steady climb at ``climb_angle`` [rad] and ``airspeed`` [ft/s]."""
     return trim_condition(airspeed, altitude, climb_angle=climb_angle, dtype=dtype)
 
 
 def coordinated_turn(airspeed, turn_rate, altitude=0.0, climb_angle=0.0, dtype=None) -> TrimCondition:
+    """A steady coordinated turn at ``turn_rate`` [rad/s] and ``airspeed`` [ft/s]."""
     return trim_condition(airspeed, altitude, climb_angle=climb_angle, turn_rate=turn_rate, dtype=dtype)
 
 
 def pull_up(airspeed, pull_up_rate, altitude=0.0, climb_angle=0.0, dtype=None) -> TrimCondition:
+    """A steady pull-up at ``pull_up_rate`` [rad/s] and ``airspeed`` [ft/s]."""
     return trim_condition(airspeed, altitude, climb_angle=climb_angle, pull_up_rate=pull_up_rate, dtype=dtype)
 
 

@@ -1,0 +1,306 @@
+"""Hybrid FDI: the parity space, and analytic redundancy from a filter restarted on demand
+(seed 000: Park, Kim, Park & Roh 2004, Sec. 2.2), as a ``loop.FDI`` stage.
+
+At every step ``k`` (``observe``, before the controller):
+
+1. **Detection** (PSA): ``p = V m``, ``FD = p^T p``, alarm when ``FD > T_D``.
+2. **Isolation** (PSA): the suspects are the groups with ``FI_g > T_I`` (``parity``). One
+   suspect: it is isolated. Two or more (the parity lies near a singular direction):
+3. **Analytic redundancy**: the filter restarts from the state ``L`` steps before ``k``
+   (``restart_lag``; "2-3 steps before the detection, so that the estimate is not yet
+   corrupted"), the least-squares estimate from every channel with its covariance
+   ``sigma^2 (H^T H)^-1``, and runs to ``k`` updating only with the channels of the
+   groups PSA judged healthy (the suspects' channels are NaN: ``missing_measurements``);
+   the residuals ``r_g = m_g - H_g x_hat[k|k]`` (eq. 30) of the suspects are compared:
+4. the suspect with the larger ``||r_g||`` is isolated.
+
+The decision is made once, at the first alarm with at least one suspect, and latched.
+The controller's view then uses the least-squares state from the channels left
+(``exclusion_estimators``; before any decision, from all of them). ``follow`` says which
+decision the selection obeys (``"hybrid"``, ``"psa"``: PSA alone, the suspect with the
+largest ``FI``, or ``"none"``: never exclude); it is an array in the state, so one
+compiled flight serves all three, and both decisions are always reported.
+
+The history the filter replays is a ``loop.RingBuffer`` of the last ``L`` steps
+(channels, filter inputs, the least-squares estimate) in the FDI's own state, and the
+replay is ``loop.replay_filter``: bounded, inside the scan, so the whole hybrid runs
+vmapped over Monte Carlo flights. Under ``vmap`` a ``lax.cond`` on a per-flight
+predicate computes both branches; with ``batch_axis`` (the name of the ``vmap`` axis:
+``jax.vmap(..., axis_name=...)``, e.g. inside ``monte_carlo(..., batched=True)``) the
+replay runs only at the steps where some flight of the batch needs it (``psum`` of the
+predicate), and each flight keeps its own result: the same numbers, the filter's cost
+paid a few steps per batch instead of every step.
+
+The filter is any Gaussian ``Filter`` with ``init``, ``update`` and ``predict`` whose
+state is the rate-like state ``x`` (n,) and whose measurement is every channel ``H x``
+(m,), built with ``missing_measurements=True``; this module does not import
+``jaxfdi.filters`` (they meet here as a function argument).
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.detection.chi2 import Decision
+from jaxfdi.detection.parity import (
+    ParitySpace,
+    fault_detection_statistic,
+    isolation_functions,
+    parity_vector,
+)
+
+#: ``follow`` names and their codes
+FOLLOW = {"none": 0, "psa": 1, "hybrid": 2}
+
+
+class HybridPSAConfig(NamedTuple):
+    """Arrays of the hybrid FDI (a pytree: pass it into ``jit``)."""
+
+    space: ParitySpace
+    detection_threshold: Array  # () T_D on FD = p^T p
+    isolation_threshold: Array  # () T_I on FI
+    estimators: Array           # (G + 1, n, m) least-squares state: [0] all channels, [g + 1] without group g
+    restart_cov: Array          # (n, n) sigma^2 (H^T H)^-1, the restart state's covariance
+    channel_group: Array        # (m,) int: the group of each channel (-1: none)
+
+
+class HistoryEntry(NamedTuple):
+    """One step kept for the replay."""
+
+    channels: Array  # (m,)
+    inputs: Array    # (nu,) the filter's input of that step
+    estimate: Array  # (n,) least-squares state from every channel (a restart point)
+
+
+class StepValues(NamedTuple):
+    """What ``observe`` found at the current step (reported by ``step``)."""
+
+    statistic: Array            # () FD
+    alarm: Array                # () bool FD > T_D
+    isolation_functions: Array  # (G,)
+    suspects: Array             # (G,) bool FI > T_I
+    analytic_residuals: Array   # (G,) ||r_g|| if the filter ran at this step, else NaN
+    filter_ran: Array           # () bool
+
+
+class HybridDecision(NamedTuple):
+    """The latched decision of a run (its FDI summary)."""
+
+    detection_step: Array       # () int first step with FD > T_D (-1: none)
+    decision_step: Array        # () int step of the isolation decision (-1: none)
+    psa: Array                  # () int PSA alone: isolated group + 1 (0: none)
+    hybrid: Array               # () int hybrid: isolated group + 1 (0: none)
+    suspects: Array             # (G,) bool at the decision
+    isolation_functions: Array  # (G,) FI at the decision
+    analytic_residuals: Array   # (G,) ||r_g|| at the decision (NaN: the filter was not needed)
+    filter_used: Array          # () bool: two or more suspects, the filter decided
+    filter_healthy: Array       # () bool: the replayed filter stayed healthy
+
+
+class HybridPSAState(NamedTuple):
+    """The FDI's state in the scan carry (``hybrid_psa_init``)."""
+
+    history: Any               # loop.RingBuffer of HistoryEntry, the last L steps
+    current: StepValues
+    decision: HybridDecision
+    follow: Array              # () int, FOLLOW code
+
+
+class HybridPSAOutput(NamedTuple):
+    """One step's output (``fdi.step``)."""
+
+    statistic: Array            # () FD
+    alarm: Array                # () bool
+    isolation_functions: Array  # (G,)
+    suspects: Array             # (G,) bool
+    analytic_residuals: Array   # (G,) NaN unless the filter ran at this step
+    detection: Decision         # FD alarm of this step (label -1)
+    psa: Decision               # latched: isolated by PSA alone (label group + 1)
+    hybrid: Decision            # latched: isolated by the hybrid (label group + 1)
+    excluded: Array             # () int group + 1 whose channels the view leaves out (0: none)
+    healthy: Array              # () bool
+
+
+def exclusion_estimators(space: ParitySpace) -> Array:
+    """(G + 1, n, m): ``(H^T H)^-1 H^T`` from every channel ([0]) and from the channels
+    left when group ``g`` is excluded ([g + 1]; zero columns for the excluded ones)."""
+    H = space.H
+    m = H.shape[0]
+    G = space.groups.shape[0]
+    keep = jnp.ones((G + 1, m), H.dtype).at[jnp.arange(1, G + 1)[:, None], space.groups].set(0.0)
+    Hk = keep[:, :, None] * H[None]
+    return jnp.linalg.solve(jnp.swapaxes(Hk, 1, 2) @ Hk, jnp.swapaxes(Hk, 1, 2))
+
+
+def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_threshold) -> HybridPSAConfig:
+    """The arrays of the hybrid FDI for ``space``, channel noise ``sigma`` and the two
+    thresholds (``parity.detection_threshold``, ``parity.isolation_threshold``)."""
+    _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
+    _checks.check_scalar("detection_threshold", detection_threshold, 0.0, low_open=True, meaning="T_D > 0")
+    _checks.check_scalar("isolation_threshold", isolation_threshold, 0.0, 1.0, meaning="T_I in [0, 1]")
+    H = space.H
+    dtype = H.dtype
+    m = H.shape[0]
+    G, d = space.groups.shape
+    channel_group = jnp.full((m,), -1, jnp.int32).at[space.groups.ravel()].set(jnp.repeat(jnp.arange(G, dtype=jnp.int32), d))
+    restart_cov = jnp.square(jnp.asarray(sigma, dtype)) * jnp.linalg.inv(H.T @ H)
+    return HybridPSAConfig(space, jnp.asarray(detection_threshold, dtype), jnp.asarray(isolation_threshold, dtype),
+                           exclusion_estimators(space), 0.5 * (restart_cov + restart_cov.T), channel_group)
+
+
+def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: int = 3,
+                    follow: str | Array = "hybrid") -> HybridPSAState:
+    """The FDI's initial state: an empty history of ``restart_lag`` steps (the filter
+    restarts that many steps before the decision; seed 000: 2-3), no decision.
+    ``input_example``: an array shaped like the filter's input (nu,). ``follow``: a name
+    of ``FOLLOW`` or its code (an array, for one compiled flight of every mode)."""
+    from jaxfdi.loop import ring_buffer
+
+    restart_lag = _checks.check_int("restart_lag", restart_lag, 1, meaning="a number of steps >= 1")
+    if isinstance(follow, str):
+        _checks.check_choice("follow", follow, list(FOLLOW))
+        follow = FOLLOW[follow]
+    else:
+        _checks.check_int_array("follow", follow, 0, 2, "a FOLLOW code (0 none, 1 psa, 2 hybrid)")
+    dtype = config.space.H.dtype
+    m, n = config.space.H.shape
+    G = config.space.groups.shape[0]
+    example = HistoryEntry(jnp.zeros((m,), dtype), jnp.zeros(jnp.shape(input_example), dtype), jnp.zeros((n,), dtype))
+    nan_g = jnp.full((G,), jnp.nan, dtype)
+    false_g = jnp.zeros((G,), bool)
+    minus_one = jnp.asarray(-1, jnp.int32)
+    zero = jnp.asarray(0, jnp.int32)
+    current = StepValues(jnp.zeros((), dtype), jnp.zeros((), bool), jnp.zeros((G,), dtype), false_g, nan_g,
+                         jnp.zeros((), bool))
+    decision = HybridDecision(minus_one, minus_one, zero, zero, false_g, nan_g, nan_g, jnp.zeros((), bool),
+                              jnp.ones((), bool))
+    return HybridPSAState(ring_buffer(restart_lag, example), current, decision, jnp.asarray(follow, jnp.int32))
+
+
+def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, valid: Array, channels: Array,
+                       trusted: Array) -> tuple[Array, Array, Array, Array]:
+    """Restart ``filt`` from the oldest stored step and run it to the current one with
+    the ``trusted`` channels only (seed 000 eq. 30).
+
+    Args:
+      filt: a Gaussian ``Filter`` (state x (n,), measurement all m channels, NaN = not used).
+      config: ``hybrid_psa_config(...)``.
+      entries, valid: the history oldest first, (L, ...), and which entries are stored
+        (``loop.ordered``): the restart point is ``entries[0]``, the least-squares
+        estimate of that step with covariance ``config.restart_cov``.
+      channels: (m,) the current step's channels.
+      trusted: (m,) bool, the channels the filter may use.
+
+    Returns:
+      ``(norms (G,), residual (m,), mean (n,), healthy ())``: ``||r_g||`` per group,
+      ``r = m - H x_hat[k|k]``, the filtered state and whether every step stayed healthy.
+    """
+    from jaxfdi.loop import replay_filter
+
+    # the restart point is the prior of its own step with nothing measured (every channel
+    # NaN: the update leaves it as it is), so one scan does every prediction
+    restart = filt.init(entries.estimate[0], config.restart_cov)
+    masked = jnp.where(trusted[None, :] & (jnp.arange(valid.shape[0]) > 0)[:, None], entries.channels, jnp.nan)
+    state, infos = replay_filter(filt, restart, masked, entries.inputs, valid)
+    post = filt.update(state, jnp.where(trusted, channels, jnp.nan), entries.inputs[-1])
+    residual = channels - config.space.H @ post.mean
+    norms = jnp.linalg.norm(residual[config.space.groups], axis=-1)
+    healthy = post.healthy & jnp.all(infos.healthy | ~valid) & jnp.all(jnp.isfinite(norms))
+    return norms, residual, post.mean, healthy
+
+
+def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[[Array], Array],
+                   filter_input: Callable[[Array, Array], Array], view: Callable[[Array, Array], Any],
+                   batch_axis: str | None = None):
+    """The hybrid FDI as a ``loop.FDI(step, observe)`` (module doc); its state is
+    ``hybrid_psa_init(config, ...)``.
+
+    Args:
+      config: ``hybrid_psa_config(...)``.
+      analytic_filter: the Gaussian filter of the analytic redundancy (e.g. a UKF on the
+        F-16's moment equations, ``missing_measurements=True``).
+      channels: ``y -> m`` (m,), the redundant channels in the plant's measurement.
+      filter_input: ``(y, u) -> v`` (nu,), the filter's input of a step (``u``: the
+        control the controller sent at that step).
+      view: ``(y, x_selected) -> view``, what the controller reads, from the
+        least-squares state of the channels the decision left.
+      batch_axis: name of the ``vmap`` axis of a batch of runs, or ``None`` (module doc).
+    """
+    from jaxfdi.loop import FDI, ordered, push
+
+    for name, fn in (("channels", channels), ("filter_input", filter_input), ("view", view)):
+        _checks.check_callable(name, fn)
+    if not all(callable(getattr(analytic_filter, f, None)) for f in ("init", "update", "predict")):
+        raise TypeError(f"analytic_filter: expected a Gaussian Filter with init, update and predict (e.g. "
+                        f"unscented_kalman_filter(...)), got {_checks.received(analytic_filter)}")
+    space = config.space
+    G = space.groups.shape[0]
+
+    def observe(state: HybridPSAState, k, y):
+        m = channels(y)
+        parity = parity_vector(space, m)
+        statistic = fault_detection_statistic(parity)
+        fi = isolation_functions(space, parity)
+        alarm = statistic > config.detection_threshold
+        suspects = fi > config.isolation_threshold
+        count = jnp.sum(suspects)
+        d = state.decision
+        decide = (d.decision_step < 0) & alarm & (count >= 1)
+        need = decide & (count >= 2)
+        run = need if batch_axis is None else jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
+        trusted = (config.channel_group < 0) | ~suspects[jnp.clip(config.channel_group, 0, G - 1)]
+        entries, valid = ordered(state.history)
+        nan_g = jnp.full((G,), jnp.nan, m.dtype)
+
+        def replay(_):
+            norms, _, _, healthy = analytic_residuals(analytic_filter, config, entries, valid, m, trusted)
+            return norms, healthy
+
+        norms, healthy = jax.lax.cond(run, replay, lambda _: (nan_g, jnp.ones((), bool)), None)
+        norms = jnp.where(need, norms, nan_g)
+        healthy = jnp.where(need, healthy, True)
+        psa = jnp.argmax(jnp.where(suspects, fi, -jnp.inf)).astype(jnp.int32) + 1
+        by_residual = jnp.argmax(jnp.where(suspects, jnp.nan_to_num(norms, nan=-jnp.inf), -jnp.inf)).astype(jnp.int32) + 1
+        hybrid = jnp.where(need & healthy, by_residual, psa)
+        pick = lambda new, old: jnp.where(decide, new, old)  # noqa: E731
+        decision = HybridDecision(
+            jnp.where((d.detection_step < 0) & alarm, jnp.asarray(k, jnp.int32), d.detection_step),
+            pick(jnp.asarray(k, jnp.int32), d.decision_step), pick(psa, d.psa), pick(hybrid, d.hybrid),
+            pick(suspects, d.suspects), pick(fi, d.isolation_functions), pick(norms, d.analytic_residuals),
+            pick(need, d.filter_used), pick(healthy, d.filter_healthy))
+        excluded = _excluded(decision, state.follow)
+        x_selected = config.estimators[excluded].astype(m.dtype) @ m
+        current = StepValues(statistic, alarm, fi, suspects, norms, need)
+        return state._replace(current=current, decision=decision), view(y, x_selected)
+
+    def step(state: HybridPSAState, k, y, u):
+        m = channels(y)
+        entry = HistoryEntry(m, filter_input(y, u), config.estimators[0].astype(m.dtype) @ m)
+        c, d = state.current, state.decision
+        decided = d.decision_step >= 0
+        nan = jnp.full((), jnp.nan, m.dtype)
+        output = HybridPSAOutput(
+            c.statistic, c.alarm, c.isolation_functions, c.suspects, c.analytic_residuals,
+            Decision(c.statistic, c.alarm, jnp.asarray(-1, jnp.int32), nan),
+            Decision(c.statistic, decided, d.psa, nan),
+            Decision(c.statistic, decided, d.hybrid, nan),
+            _excluded(d, state.follow),
+            jnp.isfinite(c.statistic) & d.filter_healthy)
+        return state._replace(history=push(state.history, entry)), output
+
+    return FDI(step, observe)
+
+
+def _excluded(decision: HybridDecision, follow: Array) -> Array:
+    """The group + 1 the view leaves out under ``follow`` (0: none)."""
+    return jnp.where(follow == FOLLOW["hybrid"], decision.hybrid,
+                     jnp.where(follow == FOLLOW["psa"], decision.psa, 0)).astype(jnp.int32)
+
+
+__all__ = ["FOLLOW", "HybridPSAConfig", "HistoryEntry", "StepValues", "HybridDecision", "HybridPSAState",
+           "HybridPSAOutput", "exclusion_estimators", "hybrid_psa_config", "hybrid_psa_init", "analytic_residuals",
+           "hybrid_psa_fdi"]

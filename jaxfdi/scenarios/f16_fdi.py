@@ -1,0 +1,814 @@
+"""Seed 000 end to end: three 2-DOF rate sensors on the closed-loop F-16, the parity space,
+the UKF's analytic redundancy on demand, and the controller flying on the FDI-selected
+rates (Park, Kim, Park & Roh 2004; issue 24).
+
+A flight (``run_fdi_flight``) is ``scenarios.f16_flight.run_flight`` (the F-16, its
+sensors with noise and gusts, the LQR SAS with altitude and bank hold, the paper's climb
+and bank turn) with two changes: a fault on both axes of one rate sensor
+(``sensor_fault``: bias, drift, stuck or scale, in any direction of the sensor's plane,
+labelled by sensor), and the FDI stage ``detection.hybrid_psa_fdi`` in place of the rate
+pass-through:
+
+- parity space of the spec's ``H`` (6x3, ``models.f16.seed000_rate_axes``), the three
+  sensors as groups (``detection.parity``); ``T_D`` from a per-step false-alarm
+  probability (``PFA``), ``T_I`` by Monte Carlo from a missed-isolation probability
+  (``MISSED_ISOLATION`` at the design fault-to-noise ratio ``DESIGN_FNR``);
+- when PSA leaves two suspects, a UKF on the moment equations 34-36 with
+  aerodynamic-coefficient errors (``models.f16.rates``, ``COEFFICIENT_ERROR``) restarts
+  ``RESTART_LAG`` steps before the decision from the least-squares rates, updates with
+  the healthy sensor only and isolates the suspect with the larger residual;
+- after the decision the controller flies on the least-squares rates of the four axes
+  left.
+
+Fault-to-noise ratio (FNR): the fault's RMS over the sensor's two axes divided by the
+per-axis noise sigma = 0.01 rad/s (the paper's case, a bias of 0.1 rad/s on both axes of
+sensor 1, is FNR 10). The fault's direction ``angle`` is measured in the sensor's own
+axes: ``f = FNR sigma sqrt(2) (cos angle, sin angle)``; Table 1's singular directions are
+at 45, 135, 225 and 315 deg for every sensor.
+"""
+from __future__ import annotations
+
+import math
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi.detection.hybrid_psa import (
+    FOLLOW,
+    HybridPSAConfig,
+    hybrid_psa_config,
+    hybrid_psa_fdi,
+    hybrid_psa_init,
+)
+from jaxfdi.detection.parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
+from jaxfdi.faults import Fault, FaultKind, Target
+from jaxfdi.filters.ukf import unscented_kalman_filter
+from jaxfdi.models.f16.plant import RATE_OFFSET, flight_view
+from jaxfdi.models.f16.rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
+    rate_transition
+from jaxfdi.scenarios.f16_flight import DT, Dispersion, FlightSetup, run_flight
+
+#: per-step false-alarm probability of the FD test (a 15 s flight, 1500 steps: 1.5e-3 per flight)
+PFA = 1e-6
+#: missed-isolation probability that sets T_I, at the design fault-to-noise ratio
+MISSED_ISOLATION = 0.01
+DESIGN_FNR = 10.0
+#: steps before the decision the UKF restarts from (the paper: 2-3)
+RESTART_LAG = 3
+#: relative errors of the UKF model's Cl, Cm, Cn
+COEFFICIENT_ERROR = (0.1, -0.1, 0.1)
+#: UKF process noise standard deviation per step on P, Q, R (rad/s): the model's errors
+PROCESS_STD = 2e-3
+#: scaled-UT parameters of the UKF (alpha small, beta = 2 for Gaussians, kappa = 3 - L = 0)
+UKF_ALPHA, UKF_BETA, UKF_KAPPA = 0.1, 2.0, 0.0
+#: the paper's case: fault at 3 s on both axes of sensor 1, a bias of similar size (FNR 10)
+FAULT_ONSET_S = 3.0
+PAPER_SENSOR = 0
+PAPER_FNR = 10.0
+PAPER_ANGLE_DEG = 45.0
+#: the fault kinds a case may have
+KINDS = {"bias": FaultKind.BIAS, "drift": FaultKind.RAMP, "stuck": FaultKind.STUCK, "scale": FaultKind.SCALE}
+#: the rate sensors as parity groups: sensor i owns channels 2i, 2i + 1
+SENSOR_GROUPS = ((0, 1), (2, 3), (4, 5))
+
+
+class FDISetup(NamedTuple):
+    """The arrays of seed 000's FDI (a pytree: pass it into ``jit``)."""
+
+    hybrid: HybridPSAConfig
+    rates: RateModel
+    process_cov: Array  # (3, 3) UKF Q
+    noise_cov: Array    # (6, 6) UKF R
+
+
+class FaultCase(NamedTuple):
+    """One flight's rate-sensor fault (stack them to vmap). ``size``: FNR for a bias, the
+    FNR reached one second after the onset for a drift, the relative scale error for a
+    scale fault, unused for a stuck sensor (it holds both axes' values at the onset)."""
+
+    kind: Array    # () int FaultKind (BIAS, RAMP, STUCK, SCALE; NONE: fault-free)
+    sensor: Array  # () int 0, 1, 2
+    size: Array    # ()
+    angle: Array   # () rad, direction in the sensor's axes
+    onset: Array   # () int step
+
+
+def fdi_setup(setup: FlightSetup, pfa: float = PFA, missed_isolation: float = MISSED_ISOLATION,
+              design_fnr: float = DESIGN_FNR, coefficient_error=COEFFICIENT_ERROR, process_std: float = PROCESS_STD,
+              key: Array | None = None, samples: int = 200_000) -> tuple[FDISetup, IsolationCalibration]:
+    """Thresholds (``T_I`` by ``samples`` Monte Carlo draws), the UKF's model and noise."""
+    from jaxfdi import _checks
+
+    sensors = setup.sensors
+    dtype = setup.x0.dtype
+    _checks.check_probability("pfa", pfa)
+    _checks.check_probability("missed_isolation", missed_isolation)
+    _checks.check_positive("design_fnr", design_fnr, "a fault-to-noise ratio")
+    _checks.check_positive("process_std", process_std, "a standard deviation (rad/s)")
+    parity_space(sensors.rate_axes, jnp.asarray(SENSOR_GROUPS))  # checks the layout eagerly
+    key = jax.random.key(20040) if key is None else key
+    hybrid, calibration = _thresholds(sensors.rate_axes, sensors.rate_sigma, jnp.asarray(pfa, dtype),
+                                      jnp.asarray(missed_isolation, dtype), jnp.asarray(design_fnr, dtype), key,
+                                      int(samples))
+    rates = rate_model(setup.params, sensors.rate_axes, DT, coefficient_error)
+    m = sensors.rate_axes.shape[0]
+    process_cov = jnp.asarray(process_std, dtype) ** 2 * jnp.eye(3, dtype=dtype)
+    noise_cov = jnp.square(sensors.rate_sigma) * jnp.eye(m, dtype=dtype)
+    return FDISetup(hybrid, rates, process_cov, noise_cov), calibration
+
+
+@partial(jax.jit, static_argnums=6)
+def _thresholds(axes, sigma, pfa, missed_isolation, design_fnr, key, samples):
+    space = parity_space(axes, jnp.asarray(SENSOR_GROUPS))
+    t_d = detection_threshold(space, sigma, pfa)
+    calibration = isolation_threshold(space, sigma, design_fnr, missed_isolation, t_d, key, samples)
+    return hybrid_psa_config(space, sigma, t_d, calibration.threshold), calibration
+
+
+def f16_hybrid_fdi(fdi: FDISetup, batch_axis: str | None = None):
+    """The hybrid FDI on the F-16's measurement: a ``loop.FDI`` whose view is a ``FlightView``."""
+    return hybrid_psa_fdi(fdi.hybrid, f16_rate_ukf(fdi), lambda y: y[RATE_OFFSET:], rate_model_input, flight_view,
+                          batch_axis)
+
+
+def fdi_state0(fdi: FDISetup, follow="hybrid"):
+    """The FDI's initial state (``follow``: ``"hybrid"``, ``"psa"``, ``"none"`` or its code)."""
+    return hybrid_psa_init(fdi.hybrid, jnp.zeros((len(RATE_INPUT_NAMES),), fdi.hybrid.space.H.dtype), RESTART_LAG,
+                           follow)
+
+
+def fault_case(kind: str = "bias", sensor: int = PAPER_SENSOR, size: float = PAPER_FNR,
+               angle_deg: float = PAPER_ANGLE_DEG, onset_s: float = FAULT_ONSET_S, dtype=None) -> FaultCase:
+    """A ``FaultCase`` by name (``kind``: ``"none"`` or a key of ``KINDS``)."""
+    dtype = dtype or jnp.result_type(float)
+    code = FaultKind.NONE if kind == "none" else KINDS[kind]
+    return FaultCase(jnp.asarray(int(code), jnp.int32), jnp.asarray(sensor, jnp.int32), jnp.asarray(size, dtype),
+                     jnp.asarray(math.radians(angle_deg), dtype), jnp.asarray(int(round(onset_s / DT)), jnp.int32))
+
+
+def sensor_fault(case: FaultCase, sigma: Array) -> Fault:
+    """The ``Fault`` stack (2,) of ``case`` on both axes of its sensor, labelled sensor + 1
+    (``fault_group`` with traced values: the case may be a vmapped array)."""
+    dtype = case.size.dtype
+    direction = jnp.stack([jnp.cos(case.angle), jnp.sin(case.angle)])
+    amplitude = case.size * sigma * math.sqrt(2.0) * direction  # FNR: RMS over the two axes / sigma
+    magnitude = jnp.select([case.kind == FaultKind.BIAS, case.kind == FaultKind.SCALE],
+                           [amplitude, case.size * direction], jnp.zeros(2, dtype))
+    slope = jnp.where(case.kind == FaultKind.RAMP, amplitude * DT, 0.0)  # FNR `size` after one second
+    components = RATE_OFFSET + 2 * case.sensor + jnp.arange(2, dtype=jnp.int32)
+    return Fault(jnp.broadcast_to(case.kind, (2,)), jnp.full((2,), int(Target.SENSOR), jnp.int32), components,
+                 jnp.broadcast_to(case.onset, (2,)), magnitude, slope, jnp.full((2,), 2**30, jnp.int32),
+                 jnp.broadcast_to(case.sensor + 1, (2,)))
+
+
+def run_fdi_flight(setup: FlightSetup, fdi: FDISetup, key: Array, dispersion: Dispersion, case: FaultCase,
+                   follow: Array, keep_history: bool = False, batch_axis: str | None = None):
+    """One closed-loop flight with the rate-sensor fault ``case`` and the hybrid FDI, the
+    view following ``follow`` (a ``FOLLOW`` code: 0 none, 1 PSA alone, 2 hybrid)."""
+    fault = sensor_fault(case, setup.sensors.rate_sigma)
+    return run_flight(setup, key, dispersion, keep_history, fdi=f16_hybrid_fdi(fdi, batch_axis),
+                      fdi_state0=fdi_state0(fdi, follow), fault=fault)
+
+
+# --- the study ---------------------------------------------------------------------
+
+#: the sweep: fault-to-noise ratios, and directions every 360 / SWEEP_DIRECTIONS deg
+#: from 0 (so Table 1's singular directions, 45 + 90 j deg, are among them)
+SWEEP_FNR = (5.0, 10.0, 20.0)
+SWEEP_DIRECTIONS = 24
+#: the sweep's flights end this long after the onset (the decision comes within steps)
+SWEEP_AFTER_ONSET_S = 0.5
+#: a direction within this angle of a singular direction is "near singular"
+NEAR_SINGULAR_DEG = 15.0
+#: the fault kinds of the full flights and their sizes (FNR; scale: relative error)
+KIND_SIZES = {"bias": 10.0, "drift": 10.0, "stuck": 0.0, "scale": 0.5}
+#: larger biases for the envelope question (the paper's FNR 10 barely moves the aircraft)
+ENVELOPE_BIAS_FNR = (30.0, 100.0)
+#: the safe envelope: largest |h - h_cmd| (ft), |phi - phi_cmd| once rolled in (deg), |beta| (deg)
+ENVELOPE = {"altitude_ft": 30.0, "bank_hold_deg": 3.0, "sideslip_deg": 2.0}
+#: fault-free flights per --runs
+FAULT_FREE_PER_RUN = 10
+#: the vmap axis name the hybrid's replay condition reduces over
+BATCH_AXIS = "flights"
+#: the view modes compared (``FOLLOW`` codes)
+FOLLOWS = ("none", "psa", "hybrid")
+#: what the paper reports for its case (seed 000, Figs. 5-8)
+PAPER_REPORTS = {
+    "detection": "FD crosses its threshold at the fault (t = 3 s)",
+    "psa_suspects": [1, 3],
+    "psa": "sensors 1 and 3 flagged: the parity lies near the FP1/FP3 boundary (type-2 fault)",
+    "ukf": "the analytic residual is large only for sensor 1",
+    "isolated": 1,
+    "rates": "the estimated rate tracks the true rate after isolation",
+}
+
+
+class F16FDIStudy(NamedTuple):
+    config: dict
+    rows: list[dict]
+    history: dict  # the paper case's flights (NumPy), for the figures
+
+    def table(self) -> str:
+        return study_table(self)
+
+
+def _stack(cases: list[FaultCase]) -> FaultCase:
+    # on the host: jnp.stack of n arrays compiles a program with n arguments (minutes for 10^4)
+    return jax.tree_util.tree_map(lambda *a: jnp.asarray(np.stack([np.asarray(v) for v in a])), *cases)
+
+
+def _layout_fdi(setup: FlightSetup, fdi: FDISetup, layouts: FDISetup | None, index: Array):
+    """The setup and FDI of sensor layout ``index`` (0: the spec's; 1: ``layouts``' second)."""
+    if layouts is None:
+        return setup, fdi
+    chosen = jax.tree_util.tree_map(lambda a: a[index], layouts.hybrid)
+    axes = chosen.space.H
+    return (setup._replace(sensors=setup.sensors._replace(rate_axes=axes)),
+            fdi._replace(hybrid=chosen, rates=fdi.rates._replace(rate_axes=axes)))
+
+
+def _fly(setup, fdi, key, per_run, layouts=None, chunk_size=1024, progress=False):
+    """Flights of ``per_run = (dispersions, cases, follows, layout indices)`` through
+    ``monte_carlo`` (one compiled program; a chunk is ``vmap`` with the axis named
+    ``BATCH_AXIS``), each keeping its outcome and the FDI's decision."""
+    from jaxfdi.montecarlo import monte_carlo
+
+    def one(k, per):
+        d, case, follow, layout = per
+        s, f = _layout_fdi(setup, fdi, layouts, layout)
+        out = run_fdi_flight(s, f, k, d, case, follow, batch_axis=BATCH_AXIS)
+        return out._replace(fdi=out.fdi.decision)
+
+    def chunk(keys, per):  # the run axis named, so that the hybrid's replay condition spans the chunk
+        return jax.vmap(one, axis_name=BATCH_AXIS)(keys, per)
+
+    n = int(per_run[2].shape[0])
+    return monte_carlo(chunk, key, n, per_run, chunk_size=chunk_size, progress=progress, batched=True)
+
+
+def _binomial_interval(n: int, p: float, level: float = 0.99) -> tuple[int, int]:
+    """Central ``level`` interval of Binomial(n, p) (by its CDF, computed in log space)."""
+    from math import exp, lgamma, log
+
+    if p <= 0:
+        return 0, 0
+    logs = [lgamma(n + 1) - lgamma(k + 1) - lgamma(n - k + 1) + k * log(p) + (n - k) * math.log1p(-p)
+            for k in range(n + 1)]
+    top = max(logs)
+    pmf = [exp(v - top) for v in logs]
+    total = sum(pmf)
+    cdf, low, high, acc = [], None, None, 0.0
+    for k, v in enumerate(pmf):
+        acc += v / total
+        cdf.append(acc)
+        if low is None and acc > (1 - level) / 2:
+            low = k
+        if high is None and acc >= 1 - (1 - level) / 2:
+            high = k
+    return int(low), int(high)
+
+
+def _angle_from_singular(angle_deg: np.ndarray) -> np.ndarray:
+    return np.abs((np.asarray(angle_deg) - 45.0 + 45.0) % 90.0 - 45.0)
+
+
+def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_sigma: float | None = None,
+                  directions: int = SWEEP_DIRECTIONS, sweep_fnr=SWEEP_FNR, optimizer_steps: int = 400,
+                  chunk_size: int = 1024) -> F16FDIStudy:
+    """Seed 000 end to end (module doc): the paper's case beside the paper, the parity
+    geometry and Table 1, the direction x magnitude sweep (``runs`` flights per sensor,
+    FNR and direction; PSA alone vs the hybrid), fault kinds and the safe envelope with
+    and without FDI (``runs`` flights per kind and mode), ``FAULT_FREE_PER_RUN * runs``
+    fault-free flights, and the sensor arrangement optimised by gradient. Needs float64."""
+    from jaxfdi import _checks
+    from jaxfdi.detection import sensor_configuration as sc
+    from jaxfdi.scenarios._common import check_study, require_x64
+    from jaxfdi.scenarios.f16_flight import GUST_SIGMA, dispersions, flight_setup
+
+    require_x64("f16_fdi_study")
+    check_study(runs, seed, runs_name="runs", directions=directions, optimizer_steps=optimizer_steps,
+                chunk_size=chunk_size)
+    sweep_fnr = tuple(float(v) for v in np.atleast_1d(sweep_fnr))
+    for v in sweep_fnr:
+        _checks.check_positive("sweep_fnr", v, "positive fault-to-noise ratios")
+    gust_sigma = GUST_SIGMA if gust_sigma is None else gust_sigma
+    setup, _ = flight_setup(gust_sigma=gust_sigma)
+    dtype = setup.x0.dtype
+    keys = jax.random.split(jax.random.key(seed), 9)
+    fdi, calibration = fdi_setup(setup, key=keys[0])
+    space = fdi.hybrid.space
+    sigma = float(setup.sensors.rate_sigma)
+    onset = int(round(FAULT_ONSET_S / DT))
+    rows: list[dict] = []
+
+    # the parity geometry and Table 1
+    rows += _geometry_rows(space, fdi, calibration)
+
+    # the paper's case: one flight per view mode, same noise, with history
+    history, paper_row = _paper_case(setup, fdi, keys[1])
+    rows.append(paper_row)
+
+    # the sweep (short flights), and the optimised sensor layout checked in the same program
+    optimisation = sc.optimize_configuration(keys[2], steps=optimizer_steps, objective="isolation")
+    separation = sc.optimize_configuration(keys[3], steps=optimizer_steps, objective="separation")
+    optimised_axes = optimisation.axes[optimisation.best]
+    optimised_fdi, _ = fdi_setup(setup._replace(sensors=setup.sensors._replace(rate_axes=optimised_axes)), key=keys[0])
+    layouts = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), fdi, optimised_fdi)
+    angles = np.arange(int(directions)) * 360.0 / int(directions)
+    grid = [(s, v, a) for s in range(3) for v in sweep_fnr for a in angles]
+    rng = np.random.default_rng(seed)
+    check_cases = [(int(rng.integers(3)), DESIGN_FNR, float(rng.uniform(0.0, 360.0))) for _ in range(2 * int(runs))]
+    cases = [fault_case("bias", s, v, a, dtype=dtype) for (s, v, a) in grid for _ in range(int(runs))]
+    cases += [fault_case("bias", s, v, a, dtype=dtype) for (s, v, a) in check_cases] * 2
+    n_sweep = len(grid) * int(runs)
+    layout = np.concatenate([np.zeros(n_sweep + 2 * int(runs), np.int32), np.ones(2 * int(runs), np.int32)])
+    short = setup._replace(reference=jax.tree_util.tree_map(
+        lambda a: a[:onset + int(round(SWEEP_AFTER_ONSET_S / DT))], setup.reference))
+    n = len(cases)
+    per_run = (dispersions(keys[4], setup, n), _stack(cases), jnp.full((n,), FOLLOW["hybrid"], jnp.int32),
+               jnp.asarray(layout))
+    out = _fly(short, fdi, keys[5], per_run, layouts, chunk_size, progress)
+    decision = out.fdi
+    sensor = np.asarray(per_run[1].sensor)
+    rows += _sweep_rows(decision, sensor, grid, int(runs), onset, n_sweep)
+    rows += _configuration_rows(space, optimisation, separation, decision, sensor, n_sweep, int(runs), sigma, keys[6])
+
+    # full flights: fault kinds x view modes, larger biases, and fault-free flights
+    full_cases, labels = [], []
+    kinds = list(KIND_SIZES.items()) + [("bias", v) for v in ENVELOPE_BIAS_FNR]
+    for kind, size in kinds:
+        draws = [(int(rng.integers(3)), float(rng.uniform(0.0, 360.0))) for _ in range(int(runs))]
+        for follow in FOLLOWS:
+            full_cases += [fault_case(kind, s, size, a, dtype=dtype) for s, a in draws]
+            labels += [(kind, size, follow)] * int(runs)
+    free = FAULT_FREE_PER_RUN * int(runs)
+    full_cases += [fault_case("none", 0, 0.0, 0.0, dtype=dtype)] * free
+    labels += [("none", 0.0, "hybrid")] * free
+    n = len(full_cases)
+    follows = jnp.asarray([FOLLOW[f] for _, _, f in labels], jnp.int32)
+    per_run = (dispersions(keys[7], setup, n), _stack(full_cases), follows, jnp.zeros((n,), jnp.int32))
+    out = _fly(setup, fdi, keys[8], per_run, None, chunk_size, progress)
+    rows += _full_flight_rows(out, labels, np.asarray(per_run[1].sensor), onset, setup)
+    steps = int(setup.reference.state.shape[0])
+    config = {
+        "runs": int(runs), "seed": int(seed), "dt_s": DT, "duration_s": steps * DT, "gust_sigma_ft_s": float(gust_sigma),
+        "rate_sigma_rad_s": sigma, "rate_axes": np.asarray(setup.sensors.rate_axes).tolist(),
+        "sensor_groups": [list(g) for g in SENSOR_GROUPS], "pfa_per_step": PFA,
+        "detection_threshold": float(fdi.hybrid.detection_threshold),
+        "detection_threshold_over_sigma2": float(fdi.hybrid.detection_threshold) / sigma**2,
+        "missed_isolation": MISSED_ISOLATION, "design_fnr": DESIGN_FNR,
+        "isolation_threshold": float(fdi.hybrid.isolation_threshold),
+        "isolation_calibration_samples": int(calibration.samples), "restart_lag_steps": RESTART_LAG,
+        "coefficient_error_Cl_Cm_Cn": list(COEFFICIENT_ERROR), "ukf_process_std_rad_s": PROCESS_STD,
+        "ukf_alpha_beta_kappa": [UKF_ALPHA, UKF_BETA, UKF_KAPPA], "fault_onset_s": FAULT_ONSET_S,
+        "fnr_definition": "RMS of the fault over the sensor's two axes / sigma",
+        "sweep": {"fnr": list(sweep_fnr), "directions_deg": angles.tolist(), "flights_per_cell": int(runs),
+                  "duration_s": FAULT_ONSET_S + SWEEP_AFTER_ONSET_S, "near_singular_deg": NEAR_SINGULAR_DEG},
+        "kind_sizes": KIND_SIZES, "envelope_bias_fnr": list(ENVELOPE_BIAS_FNR), "envelope": ENVELOPE,
+        "fault_free_flights": free, "paper_reports": PAPER_REPORTS,
+    }
+    return F16FDIStudy(config, rows, history)
+
+
+def f16_rate_ukf(fdi: FDISetup):
+    """The UKF of the analytic redundancy: moment equations 34-36 with the coefficient
+    errors (``models.f16.rates``), every rate channel measured, NaN = not used."""
+    return unscented_kalman_filter(rate_transition, rate_observation, fdi.process_cov, fdi.noise_cov, fdi.rates,
+                                   UKF_ALPHA, UKF_BETA, UKF_KAPPA, missing_measurements=True)
+
+
+def analytic_residual_trace(fdi: FDISetup, measurement: Array, control: Array, restart: int, trusted: Array,
+                            steps: int) -> tuple[Array, Array]:
+    """The UKF restarted at step ``restart`` of a recorded flight (least-squares rates of
+    every channel, covariance ``sigma^2 (H^T H)^-1``) and run ``steps`` steps on, updated
+    with the ``trusted`` (6,) channels only: ``(norms (steps, 3), filtered rates (steps,
+    3))``, ``norms[j]`` the per-sensor ``||m_i - H_i x_hat||`` at step ``restart + 1 + j``
+    (eq. 30; at the decision step it is what the FDI computed by its bounded replay)."""
+    from jaxfdi.filters import init_from_posterior, run_filter
+
+    ukf = f16_rate_ukf(fdi)
+    channels = measurement[:, RATE_OFFSET:]
+    inputs = jax.vmap(rate_model_input)(measurement, control)
+    estimate = fdi.hybrid.estimators[0] @ channels[restart]
+    prior = init_from_posterior(ukf, estimate, fdi.hybrid.restart_cov, inputs[restart])
+    window = slice(restart + 1, restart + 1 + int(steps))
+    ys = jnp.where(trusted[None, :], channels[window], jnp.nan)
+    _, info = run_filter(ukf, prior, ys, inputs[window])
+    residual = channels[window] - info.filtered_mean @ fdi.hybrid.space.H.T
+    groups = fdi.hybrid.space.groups
+    return jnp.linalg.norm(residual[:, groups], axis=-1), info.filtered_mean
+
+
+def _paper_case(setup: FlightSetup, fdi: FDISetup, key: Array) -> tuple[dict, dict]:
+    """The paper's case flown three times (same noise and gusts): the view never
+    excluding (``none``), following PSA alone, following the hybrid."""
+    from jaxfdi.scenarios.f16_flight import nominal_dispersion
+
+    case = fault_case(dtype=setup.x0.dtype)
+    disp = jax.tree_util.tree_map(lambda a: a[0], nominal_dispersion(setup))
+
+    @jax.jit
+    def fly(s, f, k):
+        return jax.vmap(lambda follow: run_fdi_flight(s, f, k, disp, case, follow, keep_history=True))(
+            jnp.arange(3, dtype=jnp.int32))
+
+    outs, hists = fly(setup, fdi, key)
+    outs, hists = jax.tree_util.tree_map(np.asarray, (outs, hists))
+    d = jax.tree_util.tree_map(lambda a: a[FOLLOW["hybrid"]], outs.fdi.decision)
+    step = int(d.decision_step)
+    out = hists.fdi
+    hybrid = FOLLOW["hybrid"]
+    trusted = ~np.repeat(d.suspects, 2)
+    window = int(round(1.0 / DT))
+    norms, _ = analytic_residual_trace(fdi, jnp.asarray(hists.measurement[hybrid]), jnp.asarray(hists.control[hybrid]),
+                                       step - RESTART_LAG, jnp.asarray(trusted), window)
+    norms = np.asarray(norms)
+    onset = int(round(FAULT_ONSET_S / DT))
+    true_rates = hists.state[:, :, 6:9]
+    after = slice(step + 1, None)
+    rate_rms = {name: np.sqrt(np.mean((hists.measured_rates[i, after] - true_rates[i, after]) ** 2, axis=0)).tolist()
+                for name, i in FOLLOW.items()}
+    sigma2 = float(setup.sensors.rate_sigma) ** 2
+    row = {
+        "section": "paper_case", "fault": "bias on both axes of sensor 1, FNR 10 (0.1 rad/s per axis), from t = 3 s",
+        "onset_step": onset, "detection_step": int(d.detection_step), "decision_step": step,
+        "detection_time_s": int(d.detection_step) * DT,
+        "fd_over_sigma2_at_decision": float(out.statistic[hybrid, step]) / sigma2,
+        "td_over_sigma2": float(fdi.hybrid.detection_threshold) / sigma2,
+        "isolation_functions": d.isolation_functions.tolist(), "isolation_threshold": float(fdi.hybrid.isolation_threshold),
+        "psa_suspects": [int(i) + 1 for i in np.nonzero(d.suspects)[0]], "psa_alone_isolates": int(d.psa),
+        "analytic_residuals": d.analytic_residuals.tolist(), "filter_used": bool(d.filter_used),
+        "hybrid_isolates": int(d.hybrid), "replay_matches_fresh_ukf": float(np.max(np.abs(
+            norms[RESTART_LAG - 1] - d.analytic_residuals))),
+        "rate_rms_error_after_decision_rad_s": rate_rms,
+        "max_errors": {name: {"altitude_ft": float(outs.tracking.max_abs[i, 0]),
+                              "bank_hold_deg": float(outs.tracking.max_abs[i, 4]),
+                              "sideslip_deg": float(outs.tracking.max_abs[i, 5])} for name, i in FOLLOW.items()},
+        "paper": PAPER_REPORTS,
+    }
+    t = np.arange(hists.state.shape[1]) * DT
+    history = {"t": t, "state": hists.state, "rates": hists.measured_rates, "fd": out.statistic[hybrid],
+               "fi": out.isolation_functions[hybrid], "td": float(fdi.hybrid.detection_threshold),
+               "ti": float(fdi.hybrid.isolation_threshold), "decision_step": step, "onset_step": onset,
+               "suspects": d.suspects, "residual_t": t[step - RESTART_LAG + 1: step - RESTART_LAG + 1 + window],
+               "residuals": norms, "reference_state": np.asarray(setup.reference.state), "follows": list(FOLLOW)}
+    return history, row
+
+
+#: seed 000 Table 1: (type, the two sensors, sensor i's fault, sensor k's fault, the rate affected)
+TABLE_1 = ((1, (0, 1), (1.0, -1.0), (-1.0, 1.0), "p"), (2, (0, 2), (1.0, 1.0), (-1.0, 1.0), "q"),
+           (3, (1, 2), (1.0, 1.0), (1.0, 1.0), "r"))
+
+
+def _geometry_rows(space, fdi: FDISetup, calibration) -> list[dict]:
+    from jaxfdi.detection import parity as ps
+
+    angles = np.degrees(np.asarray(ps.subspace_angles(space)))
+    faults = np.asarray(ps.singular_faults(space))
+    H = np.asarray(space.H)
+    rows = [{"section": "thresholds", "detection_threshold": float(fdi.hybrid.detection_threshold),
+             "isolation_threshold": float(fdi.hybrid.isolation_threshold),
+             "calibration_missed_isolation": float(calibration.missed_isolation),
+             "calibration_detected": int(calibration.detected), "calibration_samples": int(calibration.samples)}]
+    for kind, (i, k), f_i, f_k, rate in TABLE_1:
+        fi = []
+        for sensor, f in ((i, f_i), (k, f_k)):
+            full = np.zeros(H.shape[0])
+            full[list(SENSOR_GROUPS[sensor])] = f
+            fi.append(np.asarray(ps.isolation_functions(space, ps.parity_vector(space, jnp.asarray(full)))).tolist())
+        ours_i, ours_k = faults[i, k], faults[k, i]
+        aligned = [float(abs(np.dot(ours_i, f_i)) / np.linalg.norm(f_i)), float(abs(np.dot(ours_k, f_k)) / np.linalg.norm(f_k))]
+        axis = H[list(SENSOR_GROUPS[i])].T @ np.asarray(f_i)
+        rows.append({"section": "table1", "type": kind, "sensors": [i + 1, k + 1], "dihedral_deg": float(angles[i, k, 1]),
+                     "shared_line_angle_deg": float(angles[i, k, 0]), "spec_faults": [list(f_i), list(f_k)],
+                     "singular_faults": [ours_i.tolist(), ours_k.tolist()], "alignment": aligned,
+                     "isolation_functions": fi, "rate_affected": "pqr"[int(np.argmax(np.abs(axis)))],
+                     "spec_rate": rate})
+    return rows
+
+
+def _rate(x) -> float:
+    x = np.asarray(x)
+    return float(np.mean(x)) if x.size else float("nan")
+
+
+def _sweep_rows(decision, sensor, grid, runs: int, onset: int, n_sweep: int) -> list[dict]:
+    rows = []
+    step = np.asarray(decision.decision_step)[:n_sweep]
+    psa_ok = np.asarray(decision.psa)[:n_sweep] == sensor[:n_sweep] + 1
+    hyb_ok = np.asarray(decision.hybrid)[:n_sweep] == sensor[:n_sweep] + 1
+    used = np.asarray(decision.filter_used)[:n_sweep]
+    for c, (s, v, a) in enumerate(grid):
+        sl = slice(c * runs, (c + 1) * runs)
+        decided = step[sl] >= onset
+        delays = step[sl][decided] - onset
+        rows.append({"section": "sweep", "sensor": s + 1, "fnr": v, "angle_deg": float(a),
+                     "from_singular_deg": float(_angle_from_singular(a)), "flights": runs,
+                     "decided": int(decided.sum()), "early_decisions": int(np.sum((step[sl] >= 0) & (step[sl] < onset))),
+                     "psa_isolated": int(np.sum(psa_ok[sl] & decided)), "hybrid_isolated": int(np.sum(hyb_ok[sl] & decided)),
+                     "filter_used": int(np.sum(used[sl] & decided)),
+                     "median_delay_steps": float(np.median(delays)) if delays.size else float("nan")})
+    for v in sorted({g[1] for g in grid}):
+        for band, test in (("near singular", lambda d: d <= NEAR_SINGULAR_DEG + 1e-9),
+                           ("elsewhere", lambda d: d > NEAR_SINGULAR_DEG + 1e-9), ("all", lambda d: d >= 0)):
+            cells = [r for r in rows if r["section"] == "sweep" and r["fnr"] == v and test(r["from_singular_deg"])]
+            flights = sum(r["flights"] for r in cells)
+            rows.append({"section": "sweep_summary", "fnr": v, "directions": band, "flights": flights,
+                         "decided": sum(r["decided"] for r in cells),
+                         "psa_isolated": sum(r["psa_isolated"] for r in cells),
+                         "hybrid_isolated": sum(r["hybrid_isolated"] for r in cells),
+                         "filter_used": sum(r["filter_used"] for r in cells)})
+    return rows
+
+
+def _configuration_rows(space, optimisation, separation, decision, sensor, n_sweep: int, runs: int, sigma: float,
+                        key: Array) -> list[dict]:
+    from jaxfdi.detection import sensor_configuration as sc
+
+    groups = space.groups
+    layouts = {"spec": space.H, "optimised (isolation rate)": optimisation.axes[optimisation.best],
+               "optimised (fault-plane separation)": separation.axes[separation.best]}
+    rows = []
+    for name, H in layouts.items():
+        iso = sc.isolability(H, groups)
+        rates = {str(v): float(sc.isolation_rate(H, groups, sigma, v, key)) for v in (5.0, 10.0, 20.0)}
+        upper = np.triu_indices(3, 1)
+        rows.append({"section": "sensor_configuration", "layout": name, "rate_axes": np.asarray(H).tolist(),
+                     "dihedral_deg": np.degrees(np.asarray(iso.dihedral)[upper]).tolist(),
+                     "min_dihedral_deg": float(np.degrees(iso.min_dihedral)),
+                     "detectability": np.asarray(iso.detectability).tolist(), "isotropy": float(iso.isotropy),
+                     "rate_std_rad_s": (sigma * np.sqrt(np.diag(np.linalg.inv(np.asarray(H).T @ np.asarray(H))))).tolist(),
+                     "psa_isolation_rate_by_fnr": rates})
+    for name, result in (("isolation rate", optimisation), ("fault-plane separation", separation)):
+        rows.append({"section": "optimisation", "objective": name, "starts": int(result.objective.shape[0]),
+                     "steps": int(result.objective.shape[1]), "best_start": int(result.best),
+                     "final_objective": np.asarray(result.objective[:, -1]).tolist(),
+                     "curve": np.asarray(result.objective[result.best]).tolist()})
+    first = n_sweep
+    for name, sl in (("spec", slice(first, first + 2 * runs)), ("optimised (isolation rate)",
+                                                                 slice(first + 2 * runs, first + 4 * runs))):
+        rows.append({"section": "configuration_flights", "layout": name, "flights": 2 * runs, "fnr": DESIGN_FNR,
+                     "decided": int(np.sum(np.asarray(decision.decision_step)[sl] >= 0)),
+                     "psa_isolated": int(np.sum(np.asarray(decision.psa)[sl] == sensor[sl] + 1)),
+                     "hybrid_isolated": int(np.sum(np.asarray(decision.hybrid)[sl] == sensor[sl] + 1))})
+    return rows
+
+
+def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> list[dict]:
+    from jaxfdi.scenarios.f16_flight import ERRORS
+
+    index = {name: i for i, name in enumerate(ERRORS)}
+    peak = np.asarray(out.tracking.max_abs)
+    healthy = np.asarray(out.healthy)
+    within = healthy.copy()
+    for name, limit in ENVELOPE.items():
+        within &= np.nan_to_num(peak[:, index[name]], nan=np.inf) <= limit
+    d = out.fdi
+    step, det = np.asarray(d.decision_step), np.asarray(d.detection_step)
+    rows = []
+    for group in dict.fromkeys(labels):
+        sel = np.asarray([lab == group for lab in labels])
+        kind, size, follow = group
+        row = {"section": "full_flights", "kind": kind, "size": size, "follow": follow, "flights": int(sel.sum()),
+               "healthy": int(healthy[sel].sum()), "within_envelope": int(within[sel].sum())}
+        for name in ENVELOPE:
+            values = peak[sel & healthy, index[name]]
+            row[f"{name}_median"] = float(np.median(values)) if values.size else float("nan")
+            row[f"{name}_max"] = float(np.max(values)) if values.size else float("nan")
+        if kind == "none":
+            steps = int(setup.reference.state.shape[0])
+            per_flight = 1.0 - (1.0 - PFA) ** steps
+            low, high = _binomial_interval(int(sel.sum()), per_flight, 0.99)
+            row.update(fd_false_alarm_flights=int(np.sum(det[sel] >= 0)), decisions=int(np.sum(step[sel] >= 0)),
+                       expected_per_flight=per_flight, binomial_99_interval=[low, high])
+        else:
+            decided = step[sel] >= onset
+            row.update(decided=int(decided.sum()), early_decisions=int(np.sum((step[sel] >= 0) & (step[sel] < onset))),
+                       psa_isolated=int(np.sum(decided & (np.asarray(d.psa)[sel] == sensor[sel] + 1))),
+                       hybrid_isolated=int(np.sum(decided & (np.asarray(d.hybrid)[sel] == sensor[sel] + 1))),
+                       filter_used=int(np.sum(decided & np.asarray(d.filter_used)[sel])),
+                       median_delay_s=float(np.median(step[sel][decided] - onset) * DT) if decided.any() else float("nan"))
+        rows.append(row)
+    return rows
+
+
+def _pct(part: int, whole: int) -> str:
+    return f"{100.0 * part / whole:5.1f}%" if whole else "   - "
+
+
+def study_table(study: F16FDIStudy) -> str:
+    """The text the CLI prints: the paper's case beside the paper, Table 1, the sweep,
+    the fault kinds and the envelope, false alarms, the sensor arrangement."""
+    cfg, rows = study.config, study.rows
+    by = lambda section: [r for r in rows if r["section"] == section]  # noqa: E731
+    p = by("paper_case")[0]
+    lines = [f"Paper's case: {p['fault']}; T_D = {p['td_over_sigma2']:.2f} sigma^2 (P_fa {cfg['pfa_per_step']:g} "
+             f"per step), T_I = {p['isolation_threshold']:.3f} (missed isolation {cfg['missed_isolation']:g} at FNR "
+             f"{cfg['design_fnr']:g})"]
+    fi = ", ".join(f"{v:.3f}" for v in p["isolation_functions"])
+    res = ", ".join("-" if not np.isfinite(v) else f"{v:.4f}" for v in p["analytic_residuals"])
+    rms = p["rate_rms_error_after_decision_rad_s"]
+    lines += [f"  {'':<22} {'ours':<58} paper",
+              f"  {'detection':<22} {'FD = %.1f sigma^2 at t = %.2f s (onset %.2f s)' % (p['fd_over_sigma2_at_decision'], p['detection_time_s'], p['onset_step'] * cfg['dt_s']):<58} "
+              f"{p['paper']['detection']}",
+              f"  {'PSA isolation':<22} {'FI = [%s]: suspects %s' % (fi, p['psa_suspects']):<58} sensors 1 and 3 flagged",
+              f"  {'PSA alone would pick':<22} {'sensor %d' % p['psa_alone_isolates']:<58} (cannot decide)",
+              f"  {'UKF residuals':<22} {'||r_i|| = [%s] rad/s' % res:<58} large only for sensor 1",
+              f"  {'hybrid isolates':<22} {'sensor %d' % p['hybrid_isolates']:<58} sensor {p['paper']['isolated']}",
+              f"  {'rates after isolation':<22} "
+              f"{'RMS error %s rad/s (P, Q, R)' % ', '.join(f'{v:.4f}' for v in rms['hybrid']):<58} track the true rates",
+              f"  replayed UKF vs a fresh UKF from the buffered state: {p['replay_matches_fresh_ukf']:.1e}",
+              "  the same noise, view never excluding / PSA alone / hybrid: rate RMS error after the decision "
+              + " / ".join(f"{np.sqrt(np.mean(np.square(rms[f]))):.4f}" for f in FOLLOWS) + " rad/s", ""]
+    lines.append("Table 1 (singular directions of the spec's arrangement; noise-free FI of the type's faults):")
+    for r in by("table1"):
+        lines.append(f"  type {r['type']}: sensors {r['sensors'][0]} and {r['sensors'][1]}, dihedral "
+                     f"{r['dihedral_deg']:.1f} deg, singular faults {np.round(r['singular_faults'][0], 3).tolist()} / "
+                     f"{np.round(r['singular_faults'][1], 3).tolist()} (spec {r['spec_faults'][0]} / "
+                     f"{r['spec_faults'][1]}), FI = {np.round(r['isolation_functions'][0], 6).tolist()}, rate "
+                     f"{r['rate_affected']} (spec {r['spec_rate']})")
+    lines.append("")
+    sweep = by("sweep")
+    lines.append(f"Sweep: bias faults in {len(cfg['sweep']['directions_deg'])} directions of each sensor's plane, "
+                 f"{cfg['sweep']['flights_per_cell']} flights per sensor, FNR and direction ({len(sweep) * cfg['sweep']['flights_per_cell']} "
+                 f"flights of {cfg['sweep']['duration_s']:.1f} s); isolation rate, PSA alone | hybrid, over the 3 sensors:")
+    fnrs = cfg["sweep"]["fnr"]
+    lines.append("  angle " + "".join(f"{'FNR %g' % v:>20}" for v in fnrs) + "   (singular: 45, 135, 225, 315 deg)")
+    for a in cfg["sweep"]["directions_deg"]:
+        cells = []
+        for v in fnrs:
+            sel = [r for r in sweep if r["angle_deg"] == a and r["fnr"] == v]
+            n = sum(r["flights"] for r in sel)
+            cells.append(f"{_pct(sum(r['psa_isolated'] for r in sel), n)} | {_pct(sum(r['hybrid_isolated'] for r in sel), n)}")
+        mark = "  *" if _angle_from_singular(a) < 1e-9 else ""
+        lines.append(f"  {a:5.0f} " + "".join(f"{c:>20}" for c in cells) + mark)
+    for r in by("sweep_summary"):
+        lines.append(f"  FNR {r['fnr']:<4g} {r['directions']:<14} {r['flights']:>6} flights: decided "
+                     f"{_pct(r['decided'], r['flights'])}, PSA alone {_pct(r['psa_isolated'], r['flights'])}, hybrid "
+                     f"{_pct(r['hybrid_isolated'], r['flights'])} (UKF used in {_pct(r['filter_used'], r['flights'])})")
+    lines.append("")
+    lines.append(f"Full flights ({cfg['duration_s']:.0f} s), fault at {cfg['fault_onset_s']:g} s on a random sensor and "
+                 f"direction; view: never excluding / PSA alone / hybrid. Envelope: |h - h_cmd| <= "
+                 f"{ENVELOPE['altitude_ft']:g} ft, |phi - phi_cmd| <= {ENVELOPE['bank_hold_deg']:g} deg once rolled in, "
+                 f"|beta| <= {ENVELOPE['sideslip_deg']:g} deg, finite")
+    lines.append(f"  {'fault':<16} {'view':<7} {'flights':>7} {'decided':>8} {'PSA ok':>7} {'hybrid ok':>9} "
+                 f"{'in envelope':>11} {'max alt ft':>10} {'max bank':>8} {'max beta':>8}")
+    for r in by("full_flights"):
+        name = "fault-free" if r["kind"] == "none" else (
+            f"{r['kind']} {r['size']:g}" if r["kind"] != "stuck" else "stuck")
+        if r["kind"] == "none":
+            mid = f"{'-':>8} {'-':>7} {'-':>9}"
+        else:
+            mid = f"{_pct(r['decided'], r['flights']):>8} {_pct(r['psa_isolated'], r['flights']):>7} " \
+                  f"{_pct(r['hybrid_isolated'], r['flights']):>9}"
+        lines.append(f"  {name:<16} {r['follow']:<7} {r['flights']:>7} {mid} "
+                     f"{_pct(r['within_envelope'], r['flights']):>11} {r['altitude_ft_max']:>10.1f} "
+                     f"{r['bank_hold_deg_max']:>8.2f} {r['sideslip_deg_max']:>8.2f}")
+        if r["kind"] == "none":
+            lo, hi = r["binomial_99_interval"]
+            lines.append(f"  {'':<16} fault-free: {r['fd_false_alarm_flights']} flights with an FD alarm, "
+                         f"{r['decisions']} isolation decisions (expected {r['expected_per_flight'] * r['flights']:.2f}; "
+                         f"99 % binomial interval [{lo}, {hi}])")
+    lines.append("")
+    lines.append("Sensor arrangement (three 2-DOF sensors, axes by optax from random starts):")
+    for r in by("sensor_configuration"):
+        rates = ", ".join(f"{float(k):g}: {v:.4f}" for k, v in r["psa_isolation_rate_by_fnr"].items())
+        lines.append(f"  {r['layout']:<36} min dihedral {r['min_dihedral_deg']:5.1f} deg, detectability "
+                     f"{min(r['detectability']):.3f}, rate std {max(r['rate_std_rad_s']):.4f} rad/s; "
+                     f"PSA alone detects and isolates (FNR: rate) {rates}")
+    for r in by("configuration_flights"):
+        lines.append(f"  closed loop, {r['layout']:<28} {r['flights']} flights at FNR {r['fnr']:g}: PSA alone "
+                     f"{_pct(r['psa_isolated'], r['flights'])}, hybrid {_pct(r['hybrid_isolated'], r['flights'])}")
+    return "\n".join(lines)
+
+
+def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
+    """The paper's Figs. 5-8 for its case, the trajectory, the sweep as polar plots, the
+    envelope and the sensor arrangement (PNG, written atomically); returns the paths."""
+    from pathlib import Path
+
+    from matplotlib.figure import Figure
+
+    from jaxfdi import _io
+
+    out = Path(out_dir)
+    h, cfg, rows = study.history, study.config, study.rows
+    paths = []
+    deg = 180.0 / math.pi
+
+    def save(fig, name):
+        fig.tight_layout()
+        paths.append(str(_io.atomic_write(out / name, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))))
+
+    t, step = h["t"], h["decision_step"]
+    fig = Figure(figsize=(12, 8))
+    axes = fig.subplots(2, 2)
+    ax = axes[0, 0]
+    ax.semilogy(t, np.maximum(h["fd"], 1e-12), lw=0.7)
+    ax.axhline(h["td"], color="k", ls="--", lw=1, label="T_D")
+    ax.axvline(t[h["onset_step"]], color="grey", ls=":", lw=1)
+    ax.set(xlabel="time [s]", ylabel="FD = p^T p", title="Fig. 5: fault detection function")
+    ax.legend(fontsize=8)
+    ax = axes[0, 1]
+    window = slice(max(h["onset_step"] - 100, 0), min(h["onset_step"] + 100, len(t)))
+    for i in range(3):
+        ax.plot(t[window], h["fi"][window, i], lw=1, label=f"FI_{i + 1}")
+    ax.axhline(h["ti"], color="k", ls="--", lw=1, label="T_I")
+    ax.axvline(t[step], color="grey", ls=":", lw=1)
+    ax.set(xlabel="time [s]", ylabel="FI_k", title=f"Fig. 6: isolation functions (suspects at the decision: "
+                                                     f"{[int(i) + 1 for i in np.nonzero(h['suspects'])[0]]})")
+    ax.legend(fontsize=8)
+    ax = axes[1, 0]
+    for i in range(3):
+        style = "-" if h["suspects"][i] else ":"
+        ax.plot(h["residual_t"], h["residuals"][:, i], style, lw=1, label=f"||r_{i + 1}||" + (
+            "" if h["suspects"][i] else " (healthy: updates the UKF)"))
+    ax.axvline(t[step], color="grey", ls=":", lw=1)
+    ax.set(xlabel="time [s]", ylabel="rad/s", title=f"Fig. 7: UKF analytic residuals (restart {RESTART_LAG} steps "
+                                                      "before the decision)")
+    ax.legend(fontsize=8)
+    ax = axes[1, 1]
+    hybrid = FOLLOW["hybrid"]
+    for j, name in enumerate("PQR"):
+        ax.plot(t, h["rates"][hybrid, :, j] * deg, color=f"C{j}", lw=0.4, alpha=0.6, label=f"{name} selected")
+        ax.plot(t, h["state"][hybrid, :, 6 + j] * deg, color=f"C{j}", lw=1.3, label=f"{name} true")
+    ax.axvline(t[step], color="grey", ls=":", lw=1)
+    ax.set(xlabel="time [s]", ylabel="deg/s", title="Fig. 8: true and FDI-selected body rates (hybrid)")
+    ax.legend(fontsize=7, ncol=3)
+    fig.suptitle("Seed 000's case: bias on both axes of sensor 1 from t = 3 s, FNR 10")
+    save(fig, "f16-fdi-paper-case.png")
+
+    fig = Figure(figsize=(12, 5))
+    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
+    ax = fig.add_subplot(1, 2, 2)
+    for name, i in FOLLOW.items():
+        x = h["state"][i]
+        ax3.plot(x[:, 10], x[:, 9], x[:, 11], lw=1.2, label=name)
+        ax.plot(t, (x[:, 3] - h["reference_state"][:, 3]) * deg, lw=1, label=f"bank error, view: {name}")
+    ax3.set(xlabel="east [ft]", ylabel="north [ft]", zlabel="altitude [ft]", title="trajectory")
+    ax3.legend(fontsize=8)
+    ax.set(xlabel="time [s]", ylabel="deg", title="bank-angle error of the paper's case")
+    ax.legend(fontsize=8)
+    save(fig, "f16-fdi-trajectory.png")
+
+    sweep = [r for r in rows if r["section"] == "sweep"]
+    fnrs = cfg["sweep"]["fnr"]
+    fig = Figure(figsize=(14, 5))
+    for s in range(3):
+        ax = fig.add_subplot(1, 3, s + 1, projection="polar")
+        for c, v in enumerate(fnrs):
+            cells = sorted((r for r in sweep if r["sensor"] == s + 1 and r["fnr"] == v), key=lambda r: r["angle_deg"])
+            theta = np.radians([r["angle_deg"] for r in cells] + [cells[0]["angle_deg"]])
+            for key, style in (("psa_isolated", "--"), ("hybrid_isolated", "-")):
+                rate = [r[key] / r["flights"] for r in cells]
+                ax.plot(theta, rate + rate[:1], style, color=f"C{c}", lw=1.2,
+                        label=f"{'PSA alone' if key.startswith('psa') else 'hybrid'}, FNR {v:g}")
+        for a in (45, 135, 225, 315):
+            ax.plot([math.radians(a)] * 2, [0, 1], color="grey", lw=0.6, ls=":")
+        ax.set_ylim(0, 1.02)
+        ax.set_title(f"sensor {s + 1}: isolation rate vs fault direction")
+        if s == 2:
+            ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.85, -0.1))
+    save(fig, "f16-fdi-sweep-polar.png")
+
+    full = [r for r in rows if r["section"] == "full_flights"]
+    fig = Figure(figsize=(12, 4.5))
+    ax = fig.add_subplot(1, 1, 1)
+    groups = list(dict.fromkeys((r["kind"], r["size"]) for r in full))
+    width = 0.27
+    for j, follow in enumerate(FOLLOWS):
+        values = []
+        for kind, size in groups:
+            match = [r for r in full if (r["kind"], r["size"]) == (kind, size) and r["follow"] == follow]
+            values.append(match[0]["within_envelope"] / match[0]["flights"] if match else np.nan)
+        ax.bar(np.arange(len(groups)) + (j - 1) * width, values, width, label=f"view: {follow}")
+    ax.set_xticks(np.arange(len(groups)))
+    ax.set_xticklabels(["fault-free" if k == "none" else (k if k == "stuck" else f"{k} {s:g}") for k, s in groups])
+    ax.set(ylabel="flights within the envelope", ylim=(0, 1.05), title="Safe envelope with and without FDI")
+    ax.legend(fontsize=8)
+    save(fig, "f16-fdi-envelope.png")
+
+    fig = Figure(figsize=(12, 4.5))
+    axes = fig.subplots(1, 2)
+    for r in (r for r in rows if r["section"] == "optimisation"):
+        axes[0].plot(r["curve"], label=f"objective: {r['objective']}")
+    axes[0].set(xlabel="Adam step", ylabel="objective (best start)", title="sensor arrangement by gradient")
+    axes[0].legend(fontsize=8)
+    for r in (r for r in rows if r["section"] == "sensor_configuration"):
+        fnr = [float(k) for k in r["psa_isolation_rate_by_fnr"]]
+        axes[1].plot(fnr, list(r["psa_isolation_rate_by_fnr"].values()), "o-", label=r["layout"])
+    axes[1].set(xlabel="fault-to-noise ratio", ylabel="detected and isolated by PSA alone",
+                title="Monte Carlo isolation rate of the arrangements")
+    axes[1].legend(fontsize=8)
+    save(fig, "f16-fdi-sensor-configuration.png")
+    return paths
+
+
+__all__ = ["PFA", "MISSED_ISOLATION", "DESIGN_FNR", "RESTART_LAG", "COEFFICIENT_ERROR", "FOLLOW", "FOLLOWS",
+           "FDISetup", "FaultCase", "F16FDIStudy", "TABLE_1", "fdi_setup", "f16_hybrid_fdi", "f16_rate_ukf",
+           "fdi_state0", "fault_case", "sensor_fault", "run_fdi_flight", "analytic_residual_trace",
+           "f16_fdi_study", "study_table", "plot_f16_fdi"]

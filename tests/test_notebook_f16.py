@@ -1,0 +1,17 @@
+"""Notebook 06 (seed 000: hybrid PSA + UKF on the closed-loop F-16) end to end in a fresh
+kernel, one run per case (the programs of ``jaxfdi run f16 --runs 1``: 24 directions per
+sensor plane, 400 optimiser steps; compilation dominates, so fewer would not be cheaper);
+its Table 1 check, printed paper comparison and figures checked."""
+from _notebooks import images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
+
+
+def test_f16_hybrid_notebook(python3_kernel, monkeypatch, tmp_path):
+    outputs, text = run_clean("06_f16_hybrid_psa_ukf.ipynb", python3_kernel, monkeypatch,
+                              {"JAXFDI_NB_RUNS": "1", "JAXFDI_CACHE_DIR": str(tmp_path / "xla-cache")})
+    assert "runs per case: 1, directions per sensor plane: 24, optimiser steps: 400" in text
+    for kind in (1, 2, 3):
+        assert f"type {kind}: sensors" in text
+    assert "Headline case beside seed 000" in text
+    assert "PSA suspects: ours [1, 3] | paper: [1, 3]" in text
+    assert "isolated sensor: ours 1 | paper: 1" in text
+    assert len(images(outputs)) == 5, f"expected 5 figures, got {len(images(outputs))}"

@@ -1,10 +1,25 @@
 """Detection and isolation metrics, accumulated inside the scan or summarised over runs.
 
-Definitions (``../shared/spec/README.md``): the detection delay is the first step at or
-after the fault onset whose decision is "fault", minus the onset; a false alarm is a
-"fault" decision before the onset (or anywhere in a fault-free run, whose onset is
-``faults.NEVER``); a run with no alarm at or after the onset is a missed detection.
-Isolation is correct when the isolated label equals the injected one.
+Definitions (``../shared/spec/README.md``; issue 27 for the delay): the detection delay is
+the first step at or after the fault onset whose decision is "fault", minus the onset; a
+false alarm is a "fault" decision before the onset (or anywhere in a fault-free run,
+whose onset is ``faults.NEVER``); a run with no alarm at or after the onset is a missed
+detection. Isolation is correct when the isolated label equals the injected one.
+
+**Delays are scored only in clean runs**, runs with no alarm before the onset: in a run
+whose alarm already stands at the onset the "detection" at the onset is the false alarm
+still standing, not a zero-delay detection. Per fault every table reports (``fault_row``,
+the one place these are defined):
+
+* ``detection_rate``: faulty runs with an alarm at or after the onset / faulty runs;
+* ``isolation_rate``: faulty runs isolated as their label / faulty runs (when labelled);
+* ``pre_onset_alarm_rate``: faulty runs with an alarm before the onset / faulty runs;
+* ``delay_mean``, ``delay_median``, ``delay_p90``: over the *clean* detected runs;
+* ``clean_runs``: faulty runs without a pre-onset alarm; ``delay_runs``: of those, the
+  detected ones, whose delays the three statistics summarise.
+
+A fault-free run has no onset, so every alarm in it is a false alarm
+(``false_alarm_rate``).
 
 ``DetectionRecord`` is a tiny per-run carry, so a Monte Carlo study of 10^5 runs keeps
 a handful of numbers a run instead of whole histories. A detector that also isolates
@@ -46,6 +61,7 @@ from jaxfdi.faults import NEVER
 
 
 class DetectionRecord(NamedTuple):
+    """One run's detection outcome: onset, first alarm, detection step, false alarms, isolation and health."""
     onset: Array            # () int, fault onset step (NEVER when fault-free)
     first_alarm: Array      # () int, first alarm anywhere, -1 if none
     detection_step: Array   # () int, first alarm at/after onset, -1 if none
@@ -145,10 +161,13 @@ class DetectionSummary(NamedTuple):
     missed_detection_rate: float   # 1 - detection_rate
     false_alarm_rate: float        # healthy runs with >= 1 alarm before onset / healthy runs
     false_alarm_rate_per_step: float  # alarm steps before onset / steps before onset (healthy runs)
-    delay_mean: float
+    delay_mean: float              # over the clean detected runs (no alarm before the onset)
     delay_median: float
     delay_p90: float
     unhealthy_runs: int = 0        # runs with a step that was not healthy (left out of the rates)
+    pre_onset_alarm_rate: float = float("nan")  # faulty runs with an alarm before the onset / faulty runs
+    clean_runs: int = 0            # faulty runs with no alarm before the onset
+    delay_runs: int = 0            # clean runs that were detected: the delays' sample size
 
 
 def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) -> DetectionSummary:
@@ -162,7 +181,10 @@ def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) 
     false_alarms = np.broadcast_to(np.asarray(record.false_alarms), onset.shape)[healthy]
     faulty = (onset < horizon) & healthy
     detected = faulty & (detection >= 0)
-    delays = (detection[detected] - onset[detected]) * Ts
+    pre_alarm = faulty & (np.broadcast_to(np.asarray(record.false_alarms), onset.shape) > 0)
+    clean = faulty & ~pre_alarm
+    scored = clean & detected
+    delays = (detection[scored] - onset[scored]) * Ts
     n_faulty = int(faulty.sum())
     pre_steps = int(np.broadcast_to(np.asarray(record.pre_onset_steps), onset.shape)[healthy].sum())
     nan = float("nan")
@@ -178,7 +200,62 @@ def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) 
         delay_median=float(np.median(delays)) if delays.size else nan,
         delay_p90=float(np.percentile(delays, 90)) if delays.size else nan,
         unhealthy_runs=int((~healthy).sum()),
+        pre_onset_alarm_rate=float(pre_alarm.sum() / n_faulty) if n_faulty else nan,
+        clean_runs=int(clean.sum()),
+        delay_runs=int(scored.sum()),
     )
+
+
+def delay_statistics(onset, first_alarm, detection_step, Ts: float = 1.0) -> dict:
+    """The delay columns from per-run arrays (host-side, for studies that keep their own
+    records): ``onset`` (R,), ``first_alarm`` (R,) (first alarm anywhere, -1 none),
+    ``detection_step`` (R,) (first alarm at/after the onset, -1 none), all faulty runs.
+
+    Returns ``pre_onset_alarm_rate``, ``clean_runs``, ``delay_runs`` and ``delay_mean``,
+    ``delay_median``, ``delay_p90`` (unit of ``Ts``) over the clean detected runs (module
+    docstring); NaN where there are none."""
+    _checks.check_positive("Ts", Ts, "a positive sample period")
+    onset, first, detection = (np.asarray(a).astype(np.int64).ravel() for a in (onset, first_alarm, detection_step))
+    if not onset.shape == first.shape == detection.shape:
+        raise ValueError(f"onset, first_alarm, detection_step: expected three (R,) arrays, got shapes "
+                         f"{onset.shape}, {first.shape}, {detection.shape}")
+    pre_alarm = (first >= 0) & (first < onset)
+    scored = ~pre_alarm & (detection >= 0)
+    delays = (detection[scored] - onset[scored]) * Ts
+    nan = float("nan")
+    return {
+        "pre_onset_alarm_rate": float(pre_alarm.mean()) if onset.size else nan,
+        "clean_runs": int((~pre_alarm).sum()),
+        "delay_runs": int(scored.sum()),
+        "delay_mean": float(delays.mean()) if delays.size else nan,
+        "delay_median": float(np.median(delays)) if delays.size else nan,
+        "delay_p90": float(np.percentile(delays, 90)) if delays.size else nan,
+    }
+
+
+def fault_row(record: DetectionRecord, horizon: int, Ts: float = 1.0, label: int | None = None) -> dict:
+    """The per-fault columns every table reports (module docstring), from stacked records
+    of the runs of one fault (or of the fault-free case): ``runs``, ``unhealthy_runs``,
+    ``detection_rate``, ``isolation_rate`` (``record.isolated == label`` over the faulty
+    runs; NaN without ``label`` or for fault-free runs), ``false_alarm_rate`` (runs with
+    an alarm before the onset / healthy runs: for a fault's runs the same as
+    ``pre_onset_alarm_rate``), ``pre_onset_alarm_rate``, ``clean_runs``, ``delay_runs``,
+    ``delay_mean_s``, ``delay_median_s``, ``delay_p90_s`` (unit of ``Ts``)."""
+    s = summarize_detection(record, horizon, Ts)
+    onset = np.asarray(record.onset)
+    healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
+    faulty = (onset < horizon) & healthy
+    isolation = float("nan")
+    if label is not None and faulty.any():
+        isolated = np.broadcast_to(np.asarray(record.isolated), onset.shape)
+        detected = np.broadcast_to(np.asarray(record.detection_step), onset.shape) >= 0
+        isolation = float(np.mean((isolated == label) & detected, where=faulty))
+    return {
+        "runs": s.runs, "unhealthy_runs": s.unhealthy_runs, "detection_rate": s.detection_rate,
+        "isolation_rate": isolation, "false_alarm_rate": s.false_alarm_rate,
+        "pre_onset_alarm_rate": s.pre_onset_alarm_rate, "clean_runs": s.clean_runs, "delay_runs": s.delay_runs,
+        "delay_mean_s": s.delay_mean, "delay_median_s": s.delay_median, "delay_p90_s": s.delay_p90,
+    }
 
 
 def unhealthy_warning(unhealthy: int, runs: int, detail: str = "", what: str = "") -> str:

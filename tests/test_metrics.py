@@ -15,6 +15,8 @@ from jaxfdi.metrics import (
     record_init,
     record_update,
     step_health,
+    delay_statistics,
+    fault_row,
     summarize_detection,
     unhealthy_warning,
 )
@@ -120,8 +122,10 @@ def test_summary_on_hand_made_records():
     assert s.detection_rate == pytest.approx(2 / 3) and s.missed_detection_rate == pytest.approx(1 / 3)
     assert s.false_alarm_rate == pytest.approx(2 / 4)
     assert s.false_alarm_rate_per_step == pytest.approx(4 / 260)
-    assert s.delay_median == pytest.approx(0.35) and s.delay_mean == pytest.approx(0.35)
-    assert s.delay_p90 == pytest.approx(np.percentile([0.2, 0.5], 90))
+    # run 0's alarm stood before its onset: a false-alarm run, its "delay" 0.2 s is not scored
+    assert s.pre_onset_alarm_rate == pytest.approx(1 / 3) and s.clean_runs == 2 and s.delay_runs == 1
+    assert s.delay_median == pytest.approx(0.5) and s.delay_mean == pytest.approx(0.5)
+    assert s.delay_p90 == pytest.approx(0.5)
     assert s.unhealthy_runs == 0
 
 
@@ -228,3 +232,79 @@ def test_nis_equals_explicit_inverse():
     r = rng.normal(size=(10, 4))
     expected = np.einsum("ki,kij,kj->k", r, np.linalg.inv(S), r)
     np.testing.assert_allclose(normalized_innovation_squared(jnp.asarray(r), jnp.asarray(S)), expected, rtol=1e-10)
+
+
+def brute_force_columns(alarms, onset, labels, true_label, horizon, Ts):
+    """Issue 27's per-fault columns by a plain loop over each run's alarm sequence."""
+    faulty = detected = isolated = pre = 0
+    delays = []
+    for row, o, lab in zip(alarms, onset, labels):
+        if o >= horizon:
+            continue
+        faulty += 1
+        before = any(row[k] for k in range(min(o, len(row))))
+        after = [k for k in range(o, len(row)) if row[k]]
+        pre += before
+        if after:
+            detected += 1
+            isolated += lab[after[0]] == true_label
+            if not before:
+                delays.append((after[0] - o) * Ts)
+    nan = float("nan")
+    return {
+        "detection_rate": detected / faulty, "isolation_rate": isolated / faulty, "pre_onset_alarm_rate": pre / faulty,
+        "clean_runs": faulty - pre, "delay_runs": len(delays),
+        "delay_mean_s": float(np.mean(delays)) if delays else nan,
+        "delay_median_s": float(np.median(delays)) if delays else nan,
+        "delay_p90_s": float(np.percentile(delays, 90)) if delays else nan,
+    }
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_delays_scored_only_in_runs_without_a_pre_onset_alarm_equal_brute_force(seed):
+    """Random alarm sequences (alarm rates 0-30 % a step, some runs alarming from step 0),
+    random onsets and labels: ``fault_row`` (through the scan's ``record_update``) and
+    ``delay_statistics`` equal a plain loop that scores a delay only in runs with no alarm
+    before the onset."""
+    rng = np.random.default_rng(seed)
+    runs, T, Ts, true_label = 300, 40, 0.01, 2
+    alarms = rng.random((runs, T)) < rng.uniform(0.0, 0.3, size=(runs, 1))
+    alarms[:20, 0] = True  # an alarm standing from the first step
+    onset = rng.integers(0, T, size=runs)
+    labels = rng.integers(0, 4, size=(runs, T))
+
+    def streaming(alarm_row, label_row, o):
+        def body(record, kal):
+            return record_update(record, *kal), None
+        return jax.lax.scan(body, record_init(o), (jnp.arange(T), alarm_row, label_row))[0]
+
+    records = jax.jit(jax.vmap(streaming))(alarms, labels, onset)
+    got = fault_row(records, T, Ts, label=true_label)
+    want = brute_force_columns(alarms, onset, labels, true_label, T, Ts)
+    assert 0 < want["pre_onset_alarm_rate"] < 1 and want["delay_runs"] > 10  # both kinds of run are there
+    for key, value in want.items():
+        assert got[key] == pytest.approx(value, rel=1e-12), key
+    stats = delay_statistics(onset, records.first_alarm, records.detection_step, Ts)
+    for key in ("pre_onset_alarm_rate", "clean_runs", "delay_runs"):
+        assert stats[key] == want[key], key
+    for key in ("delay_mean", "delay_median", "delay_p90"):
+        assert stats[key] == pytest.approx(want[key + "_s"], rel=1e-12), key
+    # the old definition (every detected run) differs on these runs: the change is real
+    old = [(int(d) - o) * Ts for d, o in zip(records.detection_step, onset) if d >= 0]
+    assert np.mean(old) < want["delay_mean_s"]
+
+
+def test_fault_row_of_fault_free_runs_and_of_runs_all_alarming_before_the_onset():
+    never = np.full(5, NEVER)
+    alarms = np.zeros((5, 20), bool)
+    alarms[:2, 3] = True
+    records = jax.vmap(record_from_alarms)(jnp.asarray(alarms), jnp.asarray(never))
+    row = fault_row(records, 20, label=1)
+    assert row["false_alarm_rate"] == pytest.approx(0.4) and np.isnan(row["isolation_rate"])
+    assert np.isnan(row["detection_rate"]) and row["clean_runs"] == 0 and np.isnan(row["delay_mean_s"])
+    standing = jax.vmap(record_from_alarms)(jnp.ones((4, 20), bool), jnp.full(4, 10))
+    row = fault_row(standing, 20, 0.1)
+    assert row["detection_rate"] == 1.0 and row["pre_onset_alarm_rate"] == 1.0
+    assert row["clean_runs"] == 0 and row["delay_runs"] == 0 and np.isnan(row["delay_median_s"])
+    with pytest.raises(ValueError, match="onset, first_alarm, detection_step"):
+        delay_statistics(np.zeros(3), np.zeros(2), np.zeros(3))

@@ -162,3 +162,25 @@ def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table():
         np.testing.assert_equal(row[method], only_good[method])  # NaN == NaN here
     table = rw.WheelStudy({}, [row], out).table()
     assert "WARNING: 1 of 2 runs went numerically bad" in table and "bias w2 1" in table
+
+
+def test_momentum_patterns_give_the_closed_form_net_wheel_momentum():
+    """Issue 27: the default biases every wheel the same way, so the body carries
+    ``h_w = I_w H^T Omega = 4 I_w Omega cos(beta) e_z`` (45/45 pyramid, beta = 45 deg);
+    the ``zero`` pattern (+, -, +, -) has ``H^T Omega = 0``."""
+    Omega = 2000.0 * rw.RPM
+    net, zero = rw.wheel_design(), rw.wheel_design(momentum="zero")
+    np.testing.assert_allclose(wheel_momentum(net.initial_speeds, net.params),
+                               [0.0, 0.0, 4 * 0.000239 * Omega * np.cos(np.radians(45.0))], atol=1e-15)
+    np.testing.assert_allclose(wheel_momentum(zero.initial_speeds, zero.params), np.zeros(3), atol=1e-15)
+    np.testing.assert_allclose(np.abs(np.asarray(net.initial_speeds)), np.full(4, Omega), rtol=1e-15)
+    with pytest.raises(ValueError, match="momentum"):
+        rw.wheel_design(momentum="some")
+
+
+
+def test_binomial_lower_bound_equals_scipys_clopper_pearson():
+    for successes, trials in [(9, 10), (10, 10), (37, 50), (1, 3)]:
+        want = stats.binomtest(successes, trials, alternative="greater").proportion_ci(0.95).low
+        assert rw.binomial_lower_bound(successes, trials) == pytest.approx(want, rel=1e-9)
+    assert rw.binomial_lower_bound(0, 10) == 0.0 and np.isnan(rw.binomial_lower_bound(0, 0))

@@ -355,3 +355,35 @@ def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table(design):
         np.testing.assert_equal(row[key], alone[key])
     table = scenario.VTOLStudy({}, [row], records, design).table()
     assert "WARNING: 2 of 4 runs went numerically bad" in table
+
+
+def test_sample_sigma_soft_threshold_row_is_the_papers_causal_estimate():
+    """Issue 27, item 5: the fifth evaluation ``MDWT-ST-SV`` is the soft-thresholded MDWT
+    with each detail scale's sigma from the sample deviation of the run's first
+    ``SIGMA_WINDOW`` steps (NumPy reference), the chi-square sigma before the window ends;
+    on a statistic whose fault-free part is not chi2(3) (here 3 x chi2(3): variance 9x),
+    the two soft rows differ after the window and agree inside it."""
+    from jaxfdi.scenarios.vtol import SIGMA_WINDOW, decision_values
+
+    design = vtol_design()
+    rng = np.random.default_rng(0)
+    stat = 3.0 * rng.chisquare(3, size=(300, 12))
+    values = np.asarray(jax.jit(lambda s: decision_values(s, design))(jnp.asarray(stat)))
+    assert values.shape == (len(METHODS), 300, 12) and METHODS[-1] == "MDWT-ST-SV"
+    blocks = stat[:SIGMA_WINDOW].reshape(-1, 4, 12)
+    d1 = np.concatenate([(blocks[:, 0] - blocks[:, 1]) / 2, (blocks[:, 2] - blocks[:, 3]) / 2])
+    d2 = ((blocks[:, 0] + blocks[:, 1]) / 2 - (blocks[:, 2] + blocks[:, 3]) / 2) / 2
+    sigma = np.stack([d1.std(0, ddof=1), d2.std(0, ddof=1)])
+    mean = stat.reshape(-1, 4, 12).mean(1)
+    c = design.c_mult
+    later = stat.reshape(-1, 4, 12)[SIGMA_WINDOW // 4:]
+    # reconstruct by hand: block mean +- shrunk scale-2 detail +- shrunk scale-1 details
+    shrink = lambda x, t: np.sign(x) * np.maximum(np.abs(x) - t, 0.0)  # noqa: E731
+    e1a = shrink((later[:, 0] - later[:, 1]) / 2, c * sigma[0])
+    e1b = shrink((later[:, 2] - later[:, 3]) / 2, c * sigma[0])
+    e2 = shrink(((later[:, 0] + later[:, 1]) - (later[:, 2] + later[:, 3])) / 4, c * sigma[1])
+    m = mean[SIGMA_WINDOW // 4:]
+    want = np.stack([m + e2 + e1a, m + e2 - e1a, m - e2 + e1b, m - e2 - e1b], axis=1).reshape(-1, 12)
+    np.testing.assert_allclose(values[4, SIGMA_WINDOW:], want, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(values[4, :SIGMA_WINDOW], values[3, :SIGMA_WINDOW])
+    assert np.any(np.abs(values[4, SIGMA_WINDOW:] - values[3, SIGMA_WINDOW:]) > 1e-6)

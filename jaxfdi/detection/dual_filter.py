@@ -35,11 +35,13 @@ from jaxfdi.filters._base import Filter
 
 
 class DualFilterState(NamedTuple):
+    """The dual filter's state: the estimation filter's state and the prediction filter's state."""
     estimator: Any     # the estimation filter's state (its prior of step k)
     prediction: Array  # (n,) the prediction filter's x_PF[k]
 
 
 class DualFilterInfo(NamedTuple):
+    """Per-step output of the dual filter: estimator info, prediction, both Jacobian determinants and F."""
     estimator: Any           # the estimation filter's info of step k (e.g. FilterInfo)
     prediction: Array        # (n,) x_PF[k]
     det_prediction: Array    # () det A(x_PF[k], u[k])

@@ -13,8 +13,11 @@ Denoising thresholds the details and reconstructs:
 * ``"hard"`` (HT, as the paper uses the word): every detail dropped, each sample becomes
   the block mean;
 * ``"soft"`` (ST): each detail shrunk toward 0 by ``c_mult * sigma_j``
-  (``sign(d) max(|d| - t, 0)``), ``sigma_j`` the detail's standard deviation at scale j
-  (``chi2_detail_sigma`` for a chi-square statistic, or measured on fault-free data).
+  (``sign(d) max(|d| - t, 0)``), ``sigma_j`` the detail's standard deviation at scale j:
+  ``chi2_detail_sigma`` for a chi-square statistic, or, as seed 001 does, the sample
+  standard deviation of the details themselves (``sample_detail_sigma``: from a
+  fault-free calibration window at the start of the run, used from the first block after
+  it, so the denoiser stays causal; ``causal_detail_sigma`` gives the per-block sigma).
 
 A block is complete only at its last sample, so decisions are made once per block
 (``block_alarms``): detection lags the onset by at most ``2^M`` steps. A block uses
@@ -75,6 +78,36 @@ def chi2_detail_sigma(dof: int, levels: int) -> np.ndarray:
     return np.sqrt(2.0 * dof / 2.0 ** np.arange(1, levels + 1))
 
 
+def sample_detail_sigma(statistic: Array, levels: int, window: int) -> Array:
+    """(M, ...) sample standard deviation (``ddof = 1``, about the sample mean) of each
+    scale's details over the blocks inside the first ``window`` steps of ``statistic``
+    (T, ...): seed 001's sigma, estimated on a fault-free calibration window."""
+    x = _check(statistic, levels)
+    window = _checks.check_int("window", window, 2**levels, x.shape[0],
+                               meaning=f"a number of steps in [2^levels = {2**levels}, T = {x.shape[0]}]")
+    blocks = window // 2**levels
+    if blocks < 2:
+        raise ValueError(f"window: expected at least two blocks of {2**levels} steps, got {window}")
+    _, details = haar_decompose(x[: blocks * 2**levels], levels)
+    return jnp.stack([jnp.std(d.reshape((-1,) + d.shape[2:]), axis=0, ddof=1) for d in details])
+
+
+def causal_detail_sigma(statistic: Array, levels: int, window: int, prior_sigma: Array) -> Array:
+    """(B, M, ...) per-block sigma: ``prior_sigma`` (M,) or (M, ...) (e.g. the chi-square
+    value) for the blocks that end inside the calibration window, the window's
+    ``sample_detail_sigma`` from the first block after it (a block never uses its own or
+    later samples to set its threshold)."""
+    x = _check(statistic, levels)
+    estimate = sample_detail_sigma(x, levels, window)
+    size = 2**levels
+    B = x.shape[0] // size
+    block_end = (jnp.arange(B) + 1) * size          # a block's decision is made at its last step
+    prior = jnp.broadcast_to(jnp.asarray(prior_sigma, estimate.dtype).reshape(
+        (levels,) + (1,) * (estimate.ndim - 1)), estimate.shape)
+    after = (block_end > (window // size) * size).reshape((B,) + (1,) * estimate.ndim)
+    return jnp.where(after, estimate[None], prior[None])
+
+
 def soft_threshold(x: Array, threshold: Array) -> Array:
     """``sign(x) max(|x| - t, 0)``."""
     return jnp.sign(x) * jnp.maximum(jnp.abs(x) - threshold, 0.0)
@@ -89,7 +122,8 @@ def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: A
       levels: M, the number of scales.
       mode: ``"hard"`` (block mean), ``"soft"`` (details shrunk by ``c_mult * sigma_j``)
         or ``"none"`` (reconstruction without thresholding: the input).
-      sigma: (M,) or (M, channels) detail standard deviations for ``"soft"``.
+      sigma: (M,) or (M, channels) detail standard deviations for ``"soft"``, or
+        (B, M) / (B, M, channels) one set per block (``causal_detail_sigma``).
       c_mult: the sigma multiple (paper: 2).
     """
     _checks.check_choice("mode", mode, MODES)
@@ -101,9 +135,15 @@ def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: A
         if sigma is None:
             raise ValueError("sigma: soft thresholding needs the (M,) detail standard deviations (see chi2_detail_sigma)")
         sigma = jnp.asarray(sigma, approx.dtype)
-        if sigma.shape[0] != levels or sigma.shape[1:] not in ((), approx.shape[1:]):
-            raise ValueError(f"sigma: expected shape ({levels},) or ({levels}, *{approx.shape[1:]}), got {tuple(sigma.shape)}")
-        details = [soft_threshold(d, c_mult * sigma[j]) for j, d in enumerate(details)]
+        B = approx.shape[0]
+        per_block = sigma.ndim >= 2 and sigma.shape[:2] == (B, levels) and sigma.shape[2:] in ((), approx.shape[1:])
+        if not per_block and (sigma.shape[:1] != (levels,) or sigma.shape[1:] not in ((), approx.shape[1:])):
+            raise ValueError(f"sigma: expected shape ({levels},), ({levels}, *{approx.shape[1:]}) or per block "
+                             f"({B}, {levels}[, *{approx.shape[1:]}]), got {tuple(sigma.shape)}")
+        if per_block:  # (B, M, ...) -> scale j's threshold broadcast over that block's details
+            details = [soft_threshold(d, c_mult * sigma[:, j][:, None]) for j, d in enumerate(details)]
+        else:
+            details = [soft_threshold(d, c_mult * sigma[j]) for j, d in enumerate(details)]
     return haar_reconstruct(approx, details)
 
 

@@ -21,7 +21,7 @@ from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
 from jaxfdi.faults import Fault, fault, no_fault, stack_faults
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.metrics import DetectionRecord, summarize_detection, unhealthy_rows_warning
+from jaxfdi.metrics import DetectionRecord, fault_row, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi.monitor import MonitorHistory, monitor
 from jaxfdi.montecarlo import monte_carlo
@@ -45,25 +45,32 @@ def engine_faults(onset_step: int) -> tuple[list[str], list[Fault]]:
 
 
 class EngineChi2Result(NamedTuple):
+    """The engine chi-square study: configuration, table rows, per-run records and one example run per fault."""
     config: dict[str, Any]
     rows: list[dict[str, Any]]          # one per fault: the summary in seconds
     records: DetectionRecord            # (faults * runs,) per-run records
     examples: MonitorHistory            # (faults, T, ...) one run of each fault
 
     def table(self) -> str:
-        head = f"{'fault':<9} {'magnitude':>10} {'det. rate':>9} {'FA rate':>8} {'FA/step':>8} {'delay med [s]':>13} {'delay p90 [s]':>13}"
+        """Per fault: ``FA rate`` is the share of runs with an alarm before the onset (for
+        ``none``: any alarm); delays (mean, median, p90) over the ``clean`` runs, those
+        without one (``metrics.fault_row``)."""
+        head = (f"{'fault':<9} {'magnitude':>10} {'det. rate':>9} {'FA rate':>8} {'FA/step':>8} {'clean':>5} "
+                f"{'delay mean [s]':>14} {'delay med [s]':>13} {'delay p90 [s]':>13}")
         lines = [head, "-" * len(head)]
         for r in self.rows:
+            clean = "-" if r["fault"] == "none" else str(r.get("clean_runs", "-"))
             lines.append(
-                f"{r['fault']:<9} {r['magnitude']:>10.4g} {_fmt(r['detection_rate'])} {r['false_alarm_rate']:>8.3f} "
-                f"{r['false_alarm_rate_per_step']:>8.4f} {_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 13)}"
+                f"{r['fault']:<9} {r['magnitude']:>10.4g} {_fmt(r['detection_rate'])} {_fmt(r['false_alarm_rate'], 8, 3)} "
+                f"{_fmt(r['false_alarm_rate_per_step'], 8, 4)} {clean:>5} {_fmt(r.get('delay_mean_s', float('nan')), 14)} "
+                f"{_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 13)}"
             )
         warning = unhealthy_rows_warning(self.rows)
         return "\n".join(lines + ([warning] if warning else []))
 
 
-def _fmt(x: float, width: int = 9) -> str:
-    return f"{'-':>{width}}" if x != x else f"{x:>{width}.3f}"
+def _fmt(x: float, width: int = 9, digits: int = 3) -> str:
+    return f"{'-':>{width}}" if x is None or x != x else f"{x:>{width}.{digits}f}"
 
 
 def engine_chi2_study(
@@ -121,6 +128,7 @@ def engine_chi2_study(
     for i, (name, f) in enumerate(zip(names, faults)):
         part = jax.tree_util.tree_map(lambda x: x[i * runs:(i + 1) * runs], records)
         s = summarize_detection(part, steps, TS)
+        columns = fault_row(part, steps, TS)
         rows.append({
             "fault": name,
             "magnitude": float(f.magnitude),
@@ -133,6 +141,9 @@ def engine_chi2_study(
             "delay_median_s": s.delay_median,
             "delay_p90_s": s.delay_p90,
             "unhealthy_runs": s.unhealthy_runs,
+            "pre_onset_alarm_rate": columns["pre_onset_alarm_rate"],
+            "clean_runs": columns["clean_runs"],
+            "delay_runs": columns["delay_runs"],
         })
     config = {
         "scenario": "engine-chi2", "runs_per_fault": runs, "seed": seed, "window": window, "pfa": pfa,
@@ -144,9 +155,6 @@ def engine_chi2_study(
 
 def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
     """Two panels: one run's windowed statistic per fault, and the delay distributions."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     cfg = result.config

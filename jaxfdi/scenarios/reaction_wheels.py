@@ -28,9 +28,13 @@ Every run records, for the detector and each isolator, the first decision at or 
 the onset, false alarms before it and the isolated wheel (``metrics.DetectionRecord``).
 
 Choices the paper leaves open (documented, tested): 10 Hz gyros with 3e-4 rad/s noise
-(0.017 deg/s, a small satellite's MEMS/FOG class); wheel bias speeds +/-2000 rpm in the
-null space of ``H^T`` (zero net momentum; a 10 deg slew keeps every wheel within about
-45 % of it, so stops happen at speed); disturbance torque 1e-5 N m and wheel torque
+(0.017 deg/s, a small satellite's MEMS/FOG class); wheel bias speeds 2000 rpm, all the
+same way by default (``momentum="net"``, issue 27: the body carries a net wheel momentum
+``I_w H^T Omega``, so ``det A`` is not structurally zero and seed 004's result, F rising
+by orders of magnitude at a stop, can be checked), or +/-2000 rpm in the null space of
+``H^T`` (``momentum="zero"``: zero net momentum, ``det A = 0`` on the true trajectory,
+reported as the headline's second row); a 10 deg slew keeps every wheel within about
+45 % of its bias, so stops happen at speed; disturbance torque 1e-5 N m and wheel torque
 noise 2e-5 N m (white, per sample); the estimation EKF's process noise 1e-4 rad/s per
 step (it must follow a fault for ``F`` to see it; a matched ``Q`` ~ 1e-6 leaves it as
 blind as the prediction); the banks' EKFs and the NIS test's use 1e-5; banks engaged with
@@ -69,6 +73,7 @@ from jaxfdi.models.reaction_wheels import (
     gyro_observation,
     kitsat3_params,
     stop_hypotheses,
+    wheel_momentum,
     wheel_plant,
     wheel_rate_transition,
 )
@@ -105,15 +110,24 @@ class WheelDesign(NamedTuple):
     mm_floor: Array               # () MM probability floor
 
 
+#: wheel bias-speed patterns (signs per wheel): ``net`` all the same way, so the body carries
+#: a net wheel momentum ``I_w H^T Omega`` (along +z for the pyramid) and ``det A`` is not
+#: structurally zero (issue 27, the default); ``zero`` in the null space of ``H^T``, zero
+#: net momentum, ``det A = 0`` on the true trajectory (notebook 05)
+MOMENTUM_PATTERNS = {"net": (1.0, 1.0, 1.0, 1.0), "zero": (1.0, -1.0, 1.0, -1.0)}
+
+
 def wheel_design(dt: float = 0.1, bias_rpm: float = 2000.0, detection_threshold: float = 6e-9,
                  nis_pfa: float = 1e-5, credit_threshold: float = 0.5,
-                 mode_threshold: float = 0.9, dtype=None) -> WheelDesign:
+                 mode_threshold: float = 0.9, momentum: str = "net", dtype=None) -> WheelDesign:
     """The scenario's defaults (see the module doc for each choice). ``detection_threshold``
-    ``F_T`` is what ``calibrate_fdp_threshold`` gave on 200 fault-free runs (5.95e-9, seed
-    1); ``wheel_study`` recalibrates it."""
+    ``F_T`` is a placeholder: ``wheel_study`` calibrates it on fault-free runs.
+    ``momentum`` (``MOMENTUM_PATTERNS``): ``"net"`` (default) biases every wheel the same
+    way, ``"zero"`` puts the bias speeds in the null space of ``H^T``."""
+    _checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
     dtype = dtype or jnp.result_type(float)
     params = kitsat3_params(dt=dt, dtype=dtype)
-    null = jnp.asarray([1.0, -1.0, 1.0, -1.0], dtype)  # H^T null = 0 for the 45/45 pyramid
+    null = jnp.asarray(MOMENTUM_PATTERNS[momentum], dtype)
     arr = lambda v: jnp.asarray(v, dtype)  # noqa: E731
     return WheelDesign(
         params=params,
@@ -373,23 +387,36 @@ def run_is_healthy(out: RunOutput) -> np.ndarray:
 
 
 def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: bool) -> dict:
-    """Rates and delays of one method over the runs of one case."""
+    """Rates and delays of one method over the runs of one case.
+
+    ``rate``: runs detected (detectors) or isolated to the faulty wheel (isolators) at or
+    after the onset; ``pre_onset_alarm_rate``: runs with a decision before the onset
+    (issue 27: false-alarm runs, whose delays are not scored); ``clean_runs``: the others;
+    the delays (mean, median, p90) and ``rate_within_deadline`` (right and within
+    ``ISOLATION_DEADLINE_S``, over all runs) count only clean runs."""
     onset = np.asarray(record.onset)
     detection = np.asarray(record.detection_step)
     detected = detection >= 0
     delay = (detection - onset) * dt
-    false_alarm = float(np.mean(np.asarray(record.false_alarms) > 0))
+    pre_alarm = np.asarray(record.false_alarms) > 0
+    false_alarm = float(np.mean(pre_alarm))
     row = {"false_alarm_rate": false_alarm}
     if wheel < 0:
         return row
     correct = detected & (np.asarray(record.isolated) == wheel + 1) if isolating else detected
-    in_time = correct & (delay <= ISOLATION_DEADLINE_S + 1e-9)
+    scored = correct & ~pre_alarm
+    in_time = scored & (delay <= ISOLATION_DEADLINE_S + 1e-9)
+    nan = float("nan")
     row.update({
         "rate": float(np.mean(correct)),
         "rate_within_deadline": float(np.mean(in_time)),
-        "delay_median_s": float(np.median(delay[correct])) if correct.any() else float("nan"),
-        "delay_p90_s": float(np.percentile(delay[correct], 90)) if correct.any() else float("nan"),
+        "delay_mean_s": float(np.mean(delay[scored])) if scored.any() else nan,
+        "delay_median_s": float(np.median(delay[scored])) if scored.any() else nan,
+        "delay_p90_s": float(np.percentile(delay[scored], 90)) if scored.any() else nan,
         "decided_rate": float(np.mean(detected)),
+        "pre_onset_alarm_rate": false_alarm,
+        "clean_runs": int(np.sum(~pre_alarm)),
+        "delay_runs": int(np.sum(scored)),
     })
     return row
 
@@ -416,31 +443,65 @@ class WheelStudy(NamedTuple):
     outputs: RunOutput  # (cases * runs,) per-run records, case-major
 
     def table(self) -> str:
-        head = (f"{'case':<10} {'method':<24} {'rate':>6} {'<=2s':>6} {'med [s]':>8} {'p90 [s]':>8} {'FA':>6}")
+        """Per case and method: ``rate`` (detected, or isolated to the right wheel), ``<=2s``
+        (that within 2 s, clean runs only), ``FA`` (runs with a decision before the onset:
+        false-alarm runs), ``clean`` (the others) and the delays over the clean runs."""
+        head = (f"{'case':<10} {'method':<24} {'rate':>6} {'<=2s':>6} {'FA':>6} {'clean':>5} {'mean [s]':>8} "
+                f"{'med [s]':>8} {'p90 [s]':>8}")
         lines = [head, "-" * len(head)]
         for row in self.rows:
             for method in (m for m in METHODS if m in row):
                 r = row[method]
                 lines.append(f"{row['case']:<10} {METHOD_NAMES[method]:<24} {_fmt(r.get('rate'))} "
-                             f"{_fmt(r.get('rate_within_deadline'))} {_fmt(r.get('delay_median_s'), 8, 2)} "
-                             f"{_fmt(r.get('delay_p90_s'), 8, 2)} {_fmt(r['false_alarm_rate'])}")
+                             f"{_fmt(r.get('rate_within_deadline'))} {_fmt(r['false_alarm_rate'])} "
+                             f"{r.get('clean_runs', ''):>5} {_fmt(r.get('delay_mean_s'), 8, 2)} "
+                             f"{_fmt(r.get('delay_median_s'), 8, 2)} {_fmt(r.get('delay_p90_s'), 8, 2)}")
         bad = [row for row in self.rows if row.get("unhealthy_runs")]
         warning = unhealthy_warning(sum(row["unhealthy_runs"] for row in bad), sum(row["runs"] for row in self.rows),
                                     ", ".join(f"{row['case']} {row['unhealthy_runs']}" for row in bad))
         return "\n".join(lines + ([warning] if warning else []))
 
     def headline(self) -> str:
-        """The stop cases beside what the paper reports (qualitatively: it gives no numbers)."""
+        """The stop cases beside what the paper reports (qualitatively: it gives no numbers),
+        in the default momentum-biased configuration and, second, with zero net momentum;
+        the credit isolator's rate per wheel with its one-sided 95 % lower bound
+        (Clopper-Pearson)."""
         lines = ["Wheel stops (seed 004 reports one run: F jumps by orders of magnitude at the stop of wheel 1, and",
                  "credit 1 separates from the others immediately):"]
-        for row in self.rows:
-            if row["kind"] != "stop" or not all(m in row for m in ("fdp", "credit", "likelihood")):
-                continue
-            lines.append(
-                f"  wheel {row['wheel'] + 1}: F detects {row['fdp']['rate']:.2f} (median {row['fdp']['delay_median_s']:.1f} s, "
-                f"F after/before {row['fdp_ratio_median']:.1f}x), credits isolate {row['credit']['rate_within_deadline']:.2f} "
-                f"within 2 s, MM {row['likelihood']['rate_within_deadline']:.2f}")
+        blocks = [(self.config.get("momentum", "net"), self.rows)]
+        zero = self.config.get("zero_momentum")
+        if zero:
+            blocks.append(("zero", zero["rows"]))
+        for momentum, rows in blocks:
+            lines.append("  net wheel momentum (all wheels biased +2000 rpm; det A not structurally 0):"
+                         if momentum == "net" else
+                         "  zero net momentum (bias speeds in the null space of H^T: det A = 0 on the true trajectory, "
+                         "so F sees a stop only through the model's momentum error):")
+            for row in rows:
+                if row["kind"] != "stop" or not all(m in row for m in ("fdp", "credit", "likelihood")):
+                    continue
+                credit = row["credit"]
+                right = round(credit["rate"] * (row["runs"] - row.get("unhealthy_runs", 0)))
+                lines.append(
+                    f"    wheel {row['wheel'] + 1}: F detects {row['fdp']['rate']:.2f} (median "
+                    f"{_fmt(row['fdp']['delay_median_s'], 4, 1).strip()} s, F after/before "
+                    f"{row['fdp_ratio_median']:.1f}x), credits isolate {credit['rate']:.2f} (>= "
+                    f"{binomial_lower_bound(right, row['runs'] - row.get('unhealthy_runs', 0)):.2f} at 95 %), "
+                    f"{credit['rate_within_deadline']:.2f} within 2 s; MM {row['likelihood']['rate_within_deadline']:.2f}"
+                    f" within 2 s")
         return "\n".join(lines)
+
+
+def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
+    """One-sided Clopper-Pearson lower bound of a rate from ``successes`` of ``trials``
+    (0 when none succeeded; NaN without trials)."""
+    from scipy import stats
+
+    if trials <= 0:
+        return float("nan")
+    if successes <= 0:
+        return 0.0
+    return float(stats.beta.ppf(1.0 - confidence, successes, trials - successes + 1))
 
 
 def _fmt(x, width: int = 6, digits: int = 2) -> str:
@@ -449,24 +510,9 @@ def _fmt(x, width: int = 6, digits: int = 2) -> str:
     return f"{'-':>{width}}" if x != x else f"{x:>{width}.{digits}f}"
 
 
-def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, estimator: str = "ekf",
-                engage_on: str = "nis", steps: int = 600, chunk_size: int = 512, progress: bool = False,
-                methods: Sequence[str] | None = None) -> WheelStudy:
-    """Every case of ``study_cases`` with ``runs`` Monte Carlo runs (noise and onset);
-    ``F_T`` calibrated first on ``calibration_runs`` fault-free runs of seed ``seed + 1``.
-    ``methods``: the subset of ``METHODS`` to report (all by default; every method runs
-    anyway: the banks are engaged by the detectors). Needs float64 (``jaxfdi.enable_x64()``);
-    unhealthy runs are left out of every rate and counted in the row's ``unhealthy_runs``."""
-    selected = check_methods(methods, METHODS)
-    require_x64("wheel_study")
-    check_study(runs, seed, calibration_runs=calibration_runs, steps=steps, chunk_size=chunk_size)
-    _checks.check_choice("estimator", estimator, ["ekf", "ukf"])
-    _checks.check_choice("engage_on", engage_on, ["nis", "fdp"])
-    design = wheel_design()
-    kwargs = dict(steps=steps, estimator=estimator, engage_on=engage_on, chunk_size=chunk_size, progress=progress)
+def _cases_study(design: WheelDesign, cases, runs: int, seed: int, calibration_runs: int, selected, kwargs):
     threshold = calibrate_fdp_threshold(design, calibration_runs, seed + 1, **kwargs)
     design = design._replace(detection_threshold=jnp.asarray(threshold, design.detection_threshold.dtype))
-    cases = study_cases()
     faults = case_faults(cases, runs, jax.random.key(seed + 2))
     out = monte_carlo_wheels(design, faults, seed, **kwargs)
     dt = float(design.params.dt)
@@ -474,14 +520,51 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
     for i, (kind, wheel) in enumerate(cases):
         part = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[i * runs:(i + 1) * runs], out)
         rows.append(summarize_case(part, kind, wheel, dt, selected))
+    return threshold, rows, out
+
+
+def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, estimator: str = "ekf",
+                engage_on: str = "nis", steps: int = 600, chunk_size: int = 512, progress: bool = False,
+                methods: Sequence[str] | None = None, momentum: str = "net",
+                zero_momentum_row: bool = True) -> WheelStudy:
+    """Every case of ``study_cases`` with ``runs`` Monte Carlo runs (noise and onset);
+    ``F_T`` calibrated first on ``calibration_runs`` fault-free runs of seed ``seed + 1``.
+    ``methods``: the subset of ``METHODS`` to report (all by default; every method runs
+    anyway: the banks are engaged by the detectors). ``momentum``: the wheels' bias
+    pattern (``MOMENTUM_PATTERNS``; default ``"net"``, the configuration in which seed
+    004's result can be checked). With ``zero_momentum_row`` (and ``momentum="net"``) the
+    four stop cases are also run with zero net momentum (its own ``F_T``), reported in
+    ``config["zero_momentum"]`` and in the headline as the second row: there ``det A`` is
+    structurally ~0 on the true trajectory. Needs float64 (``jaxfdi.enable_x64()``);
+    unhealthy runs are left out of every rate and counted in the row's ``unhealthy_runs``."""
+    selected = check_methods(methods, METHODS)
+    require_x64("wheel_study")
+    check_study(runs, seed, calibration_runs=calibration_runs, steps=steps, chunk_size=chunk_size)
+    _checks.check_choice("estimator", estimator, ["ekf", "ukf"])
+    _checks.check_choice("engage_on", engage_on, ["nis", "fdp"])
+    _checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
+    design = wheel_design(momentum=momentum)
+    kwargs = dict(steps=steps, estimator=estimator, engage_on=engage_on, chunk_size=chunk_size, progress=progress)
+    cases = study_cases()
+    threshold, rows, out = _cases_study(design, cases, runs, seed, calibration_runs, selected, kwargs)
+    dt = float(design.params.dt)
+    zero = None
+    if zero_momentum_row and momentum != "zero":
+        zero_threshold, zero_rows, _ = _cases_study(wheel_design(momentum="zero"), [("stop", w) for w in range(4)],
+                                                     runs, seed, calibration_runs, selected, kwargs)
+        zero = {"fdp_threshold": zero_threshold, "rows": zero_rows}
     config = {
         "runs": runs, "seed": seed, "calibration_runs": calibration_runs, "estimator": estimator,
         "engage_on": engage_on, "steps": steps, "dt": dt, "onset_range_steps": list(ONSET_RANGE),
         "fdp_threshold": threshold, "nis_threshold": float(design.nis_threshold), "nis_window": NIS_WINDOW,
         "credit_threshold": float(design.credit_threshold), "mode_threshold": float(design.mode_threshold),
         "confirm_steps": CONFIRM_STEPS, "fdp_margin": FDP_MARGIN, "kinds": KINDS, "slew_deg": SLEW_DEG,
-        "bias_rpm": float(design.initial_speeds[0] / RPM),
+        "bias_rpm": float(design.initial_speeds[0] / RPM), "momentum": momentum,
+        "wheel_bias_speeds_rpm": [float(v) for v in np.asarray(design.initial_speeds) / RPM],
+        "net_wheel_momentum_Nms": [float(v) for v in np.asarray(wheel_momentum(design.initial_speeds, design.params))],
     }
+    if zero is not None:
+        config["zero_momentum"] = zero
     return WheelStudy(config, rows, out)
 
 
@@ -498,9 +581,6 @@ def wheel_examples(design: WheelDesign, seed: int = 0, wheel: int = 0, onset: in
 def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel: int = 0, onset: int = 200) -> list[str]:
     """Figures like seed 004's Figs. 3-9 (attitude, F, the bank's F_x, credits) and the
     MM's mode probabilities; returns the paths written (each atomically)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from pathlib import Path

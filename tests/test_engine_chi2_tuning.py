@@ -4,6 +4,9 @@ hand-set test (plant Q and R, L = 4, chi2.isf(0.005, 20)) on the same held-out r
 tuned test has a lower held-out loss and fewer false alarms; saved parameters are valid
 and reload."""
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -16,8 +19,14 @@ SMALL = ["--steps", "20", "--train-runs", "2", "--runs", "10", "--quiet"]
 
 @pytest.fixture(scope="module")
 def chi2_tuned(tmp_path_factory):
-    out = tmp_path_factory.mktemp("tune-chi2")
-    assert main(["tune", "engine-chi2", *SMALL, "--windows", "2,4", "--out", str(out)]) == 0
+    tmp = tmp_path_factory.mktemp("tune-chi2")
+    out = tmp / "out"
+    # a fresh process with its own XLA cache (as test_engine_tuning): the CLI's persistent
+    # cache is on from its first compilation, whatever the test worker compiled before
+    proc = subprocess.run([sys.executable, "-m", "jaxfdi", "tune", "engine-chi2", *SMALL, "--windows", "2,4", "--out", str(out)],
+                          capture_output=True, text=True, env=dict(os.environ, JAXFDI_CACHE_DIR=str(tmp / "xla-cache")),
+                          timeout=1800)
+    assert proc.returncode == 0, proc.stderr[-3000:]
     return out, json.loads((out / "engine-chi2-tuning.json").read_text())
 
 

@@ -6,6 +6,9 @@ than training and validation): for each IMM design the tuned mean per-step mode
 cross-entropy is at least 30 % below the paper's, no fault goes undetected and the
 fault-free false-alarm rate does not rise; saved parameters are valid and reload."""
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -19,12 +22,18 @@ SMALL = ["--steps", "20", "--train-runs", "2", "--runs", "10", "--quiet"]
 
 @pytest.fixture(scope="module")
 def imm_tuned(tmp_path_factory):
-    out = tmp_path_factory.mktemp("tune-imm")
+    tmp = tmp_path_factory.mktemp("tune-imm")
+    out = tmp / "out"
     # the tuned detector confirms over 2 steps (trained for it, confirmed_probabilities);
     # the paper's reference keeps its 1-step rule; mu_T is frozen in training and then
-    # chosen per mode on selection runs
-    assert main(["tune", "engine-imm", *SMALL, "--confirm-steps", "2", "--freeze", "mu_threshold",
-                 "--select-thresholds", "--selection-runs", "4", "--out", str(out)]) == 0
+    # chosen per mode on selection runs. A fresh process with its own XLA cache, so that
+    # the CLI's persistent cache is on from its first compilation (in a test worker that
+    # compiled before, main() could not turn it on) and repeated programs compile once.
+    proc = subprocess.run(
+        [sys.executable, "-m", "jaxfdi", "tune", "engine-imm", *SMALL, "--confirm-steps", "2", "--freeze", "mu_threshold",
+         "--select-thresholds", "--selection-runs", "4", "--out", str(out)],
+        capture_output=True, text=True, env=dict(os.environ, JAXFDI_CACHE_DIR=str(tmp / "xla-cache")), timeout=1800)
+    assert proc.returncode == 0, proc.stderr[-3000:]
     report = json.loads((out / "engine-imm-tuning.json").read_text())
     assert report["config"]["confirm_steps"] == 2 and report["config"]["select_thresholds"]
     return out, report
@@ -77,36 +86,60 @@ def test_bad_confirm_steps_freeze_and_selection_runs_exit_2():
     assert main(["tune", "engine-imm", "--design", "zhang-li", "--freeze", "bias_walk", "--quiet"]) == 2
 
 
-def test_replayed_detector_records_equal_the_monitored_runs():
-    """select_mode_thresholds replays the detector on stored mode probabilities; on the
-    same runs its rows equal those of the full closed simulation + filter + detector
-    (evaluate_engine_imm, i.e. run_monitor), for a scalar and a per-mode mu_T."""
-    import jax.numpy as jnp
-
-    from jaxfdi.scenarios.engine import labelled_runs, summarize_method
-
-    design = et.imm_design("zhang-li")
-    runs, seed = 3, 11
-    data = labelled_runs(runs, seed)
-    mode_prob = jnp.exp(et.mode_log_probs(design, design.hand(), data.ys))
-    for threshold in (0.5, jnp.array([0.5, 0.35, 0.6, 0.9, 0.5, 0.7, 0.45])):
-        params = dict(design.hand(), mu_threshold=jnp.asarray(threshold))
-        monitored, _ = et.evaluate_engine_imm(design, params, runs, seed)
-        replayed = summarize_method(design.method, "IMM", et.detector_records(mode_prob, data.onsets, threshold),
-                                    runs, data.ys.shape[1])
-        keys = ("detection_rate", "isolation_rate", "false_alarm_rate", "delay_median_s", "delay_p90_s")
-        for a, b in zip(monitored, replayed):
-            for key in keys:
-                np.testing.assert_equal(a[key], b[key], err_msg=f"{a['fault']} {key}")
-
-
-def test_loss_with_equal_per_mode_thresholds_equals_the_scalar_one():
+@pytest.fixture(scope="module")
+def held_out():
+    """The CLI run's held-out runs (10 per fault, seed 1000: ``evaluate_engine_imm``'s keys)
+    and one compiled ``mode_log_probs`` of the Zhang & Li design for any parameters
+    (given as float64 arrays, so that the hand-set and the tuned ones share it)."""
+    import jax
     import jax.numpy as jnp
 
     from jaxfdi.scenarios.engine import labelled_runs
 
     design = et.imm_design("zhang-li")
-    data = labelled_runs(1, 3)
+    log_probs = jax.jit(lambda p, ys: et.mode_log_probs(design, p, ys))
+
+    def mode_prob(params, ys):
+        return jnp.exp(log_probs({k: jnp.asarray(v, jnp.float64) for k, v in params.items()}, ys))
+
+    return design, labelled_runs(10, 1000), mode_prob
+
+
+def _json_rows(rows):
+    """Rows as the JSON report holds them, NaN for ``None``."""
+    return [{k: float("nan") if v is None else v for k, v in row.items()} for row in rows]
+
+
+def test_replayed_detector_records_equal_the_monitored_runs(imm_tuned, held_out):
+    """select_mode_thresholds replays the detector on stored mode probabilities; on the
+    same runs its rows equal those of the full closed simulation + filter + detector
+    (evaluate_engine_imm, i.e. run_monitor): here the CLI run's held-out rows of the
+    Zhang & Li design, the paper's IMM (scalar mu_T 0.5, 1-step rule) and the tuned one
+    (per-mode mu_T, 2-step confirmation), replayed on the same 10 runs per fault."""
+    from jaxfdi.scenarios.engine import summarize_method
+
+    _, report = imm_tuned
+    design, data, mode_prob = held_out
+    result = report["designs"]["zhang-li"]
+    assert report["config"]["test_runs"] == 10 and report["config"]["test_seed"] == 1000
+    tuned = {k: np.asarray(v) for k, v in result["tuned_params"].items()}
+    assert tuned["mu_threshold"].shape == (7,)  # one per mode
+    cases = [(design.hand(), 1, result["paper"]), (tuned, report["config"]["confirm_steps"], result["tuned"])]
+    keys = ("detection_rate", "isolation_rate", "false_alarm_rate", "delay_median_s", "delay_p90_s")
+    for params, confirm_steps, monitored in cases:
+        records = et.detector_records(mode_prob(params, data.ys), data.onsets, params["mu_threshold"], confirm_steps)
+        replayed = summarize_method(design.method, "IMM", records, 10, data.ys.shape[1])
+        for a, b in zip(_json_rows(monitored), replayed, strict=True):
+            for key in keys:
+                np.testing.assert_equal(a[key], b[key], err_msg=f"{a['fault']} {key} (confirm {confirm_steps})")
+
+
+def test_loss_with_equal_per_mode_thresholds_equals_the_scalar_one(held_out):
+    import jax
+    import jax.numpy as jnp
+
+    design, runs, _ = held_out
+    data = jax.tree.map(lambda leaf: leaf[::10], runs)  # one run of each case
     scalar = et.imm_loss(design, dict(design.hand(), mu_threshold=jnp.asarray(0.6)), data, remat=False)[0]
     vector = et.imm_loss(design, dict(design.hand(), mu_threshold=jnp.full(7, 0.6)), data, remat=False)[0]
     np.testing.assert_allclose(float(vector), float(scalar), rtol=1e-12)
@@ -138,16 +171,14 @@ def test_confirmed_probabilities_reproduce_the_confirming_detector(confirm_steps
             assert expected_alarm.any() and not expected_alarm.all()
 
 
-def test_select_mode_thresholds_minimises_a_given_cost():
+def test_select_mode_thresholds_minimises_a_given_cost(held_out):
     """With ``cost`` given, the coordinate descent minimises it instead of the shortfall:
     the reported cost after selection is that of the returned thresholds, recomputed
     here from the replayed records, and no higher than the starting one."""
-    import jax.numpy as jnp
+    from jaxfdi.scenarios.engine import summarize_method
 
-    from jaxfdi.scenarios.engine import labelled_runs, summarize_method
-
-    design = et.imm_design("zhang-li")
-    runs, seed = 2, 5
+    design, data, mode_prob = held_out
+    runs, seed = 10, 1000  # held_out's runs
 
     def cost(rows):  # isolation misses plus 10 x fault-free alarms
         return sum(1 - r["isolation_rate"] for r in rows if r["fault"] != "none") + \
@@ -155,10 +186,8 @@ def test_select_mode_thresholds_minimises_a_given_cost():
 
     thresholds, info = et.select_mode_thresholds(design, design.hand(), runs, seed, grid=np.array([0.3, 0.6, 0.9]),
                                                  sweeps=1, cost=cost)
-    data = labelled_runs(runs, seed)
-    mode_prob = jnp.exp(et.mode_log_probs(design, design.hand(), data.ys))
-    rows = summarize_method(design.method, "IMM", et.detector_records(mode_prob, data.onsets, thresholds),
-                            runs, data.ys.shape[1])
+    rows = summarize_method(design.method, "IMM", et.detector_records(mode_prob(design.hand(), data.ys), data.onsets,
+                                                                      thresholds), runs, data.ys.shape[1])
     assert info["shortfall"]["selected"] == pytest.approx(cost(rows), abs=1e-12)
     assert info["shortfall"]["selected"] <= info["shortfall"]["trained"]
     assert set(np.round(np.asarray(thresholds)[1:], 2)) <= {0.3, 0.5, 0.6, 0.9}

@@ -16,16 +16,19 @@ SMALL = dict(runs=1, seed=0, duration=0.2, onset_time=0.1, chunk_size=8)
 @pytest.fixture(scope="module")
 def broken_chi2_study():
     """The smallest engine-chi2 study (1 run per fault, 20 steps) with a valid but absurd
-    filter Q = 1e300 I: P[1|0] ~ 1e300 and the products of the next update overflow
-    float64, so every run's filter goes bad at step 1. (An indefinite R, which this test
-    used before, is now refused at trace time: issue 22.)"""
+    filter Q = 1e300 * ones(7, 7) (rank one, positive semi-definite; the study also starts
+    the filter from P0 = Q): the plant's R (~1e-4) is lost in the rounding of 1e300, so the
+    first innovation covariance S = C P C^T + R is exactly rank one and its Cholesky factor
+    is not finite: every run's filter goes bad at step 0, on any CPU. (Q = 1e300 I, used
+    before, overflowed on an Intel VM but gave finite, tiny statistics on an AMD one; an
+    indefinite R, used before that, is refused at trace time: issue 22.)"""
     model = engine_model()
-    return engine_chi2_study(**SMALL, filter_noise=(1e300 * jnp.eye(7), model.R))
+    return engine_chi2_study(**SMALL, filter_noise=(1e300 * jnp.ones((7, 7)), model.R))
 
 
 def test_engine_chi2_table_reports_unhealthy_runs(broken_chi2_study):
     broken = broken_chi2_study
-    assert np.all(np.asarray(broken.records.first_unhealthy) == 1)
+    assert np.all(np.asarray(broken.records.first_unhealthy) == 0)
     assert [r["unhealthy_runs"] for r in broken.rows] == [1] * 7 and [r["runs"] for r in broken.rows] == [1] * 7
     for r in broken.rows:  # never a clean run: no rate, no delay
         assert all(np.isnan(r[k]) for k in ("detection_rate", "false_alarm_rate", "delay_median_s"))

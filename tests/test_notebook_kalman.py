@@ -1,0 +1,28 @@
+"""Notebook 01 (the engine Kalman filter and its chi-square Monte Carlo) end to end in a
+fresh kernel, 5 runs per fault, and its printed results checked."""
+from _notebooks import FAULT_NAMES, images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
+
+
+def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch, tmp_path):
+    outputs, text = run_clean("01_kalman_monte_carlo.ipynb", python3_kernel, monkeypatch,
+                              {"JAXFDI_NB_RUNS": "5", "JAXFDI_CACHE_DIR": str(tmp_path / "xla-cache")})
+    stderr = "".join(o.text for o in outputs if o.output_type == "stream" and o.name == "stderr")
+    assert "Traceback" not in stderr, stderr
+    assert "runs per fault: 5" in text  # the kernel saw JAXFDI_NB_RUNS
+    assert "spectral radius of Phi = 0.9858" in text
+
+    # the Monte Carlo table: header, then one line per fault in the seed-003 order
+    table_lines = text[text.index("fault      magnitude"):].splitlines()
+    assert "det. rate" in table_lines[0] and "FA/step" in table_lines[0]
+    rows = table_lines[2:2 + len(FAULT_NAMES)]
+    assert [r.split()[0] for r in rows] == list(FAULT_NAMES)
+    for row in rows[:-1]:  # faulty rows: these faults are detected, within a fraction of a second
+        fields = row.split()
+        det_rate, fa_rate, delay_median = float(fields[2]), float(fields[3]), float(fields[5])
+        assert det_rate >= 0.8, row
+        assert 0.0 <= fa_rate <= 1.0, row
+        assert 0.0 <= delay_median < 0.5, row
+    assert rows[-1].split()[2] == "-"  # fault-free: no detection rate
+
+    figures = images(outputs)
+    assert len(figures) >= 2, f"expected the run figure and the Monte Carlo figure, got {len(figures)} PNG outputs"

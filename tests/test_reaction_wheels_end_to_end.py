@@ -1,0 +1,54 @@
+"""Seed 004 end to end: `jaxfdi run reaction-wheels --runs 2` (table, JSON equal to the
+one written before the scenario moved onto `jaxfdi.loop`, figures) and notebook 05.
+
+At 2 runs per case the notebook's study and examples are the CLI's (``wheel_study(runs=2,
+seed=0, calibration_runs=20)``, ``wheel_examples(..., seed=0)``): both run on one XLA
+compilation cache, so the closed loops are compiled once in this file."""
+import json
+
+import pytest
+
+from _notebooks import images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
+from test_cli import assert_same_as_before, run_cli
+
+RUNS = 2
+CASES = ["none"] + [f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain") for w in range(1, 5)]
+
+
+@pytest.fixture(scope="module")
+def shared(tmp_path_factory):
+    """A folder whose ``cache`` holds this file's XLA cache (``run_cli`` puts its cache there)."""
+    return tmp_path_factory.mktemp("wheels")
+
+
+def test_reaction_wheels_prints_every_case_and_writes_figures(shared):
+    proc = run_cli(shared, "reaction-wheels", "--runs", str(RUNS))
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((shared / "out" / "reaction-wheels.json").read_text())
+    assert_same_as_before("reaction-wheels", data)
+    assert "WARNING" not in proc.stdout and all(row["unhealthy_runs"] == 0 for row in data["rows"])
+    assert [row["case"] for row in data["rows"]] == CASES
+    for case in CASES:
+        for method in ("dual filter F (paper)", "NIS chi-square", "credit isolator (paper)", "MM likelihood"):
+            assert f"\n{case:<10} {method}" in proc.stdout
+    assert "Wheel stops (seed 004 reports" in proc.stdout
+    assert data["config"]["runs"] == RUNS and data["config"]["calibration_runs"] == 20
+    assert data["config"]["fdp_threshold"] > 0
+    assert sorted(p.name for p in (shared / "out").iterdir()) == [
+        "reaction-wheels-fig3-5-attitude.png", "reaction-wheels-fig4-6-detection.png",
+        "reaction-wheels-fig8-9-isolation.png", "reaction-wheels.json"]
+
+
+def test_reaction_wheels_notebook(shared, python3_kernel, monkeypatch):
+    outputs, text = run_clean("05_reaction_wheels.ipynb", python3_kernel, monkeypatch,
+                              {"JAXFDI_NB_RUNS": str(RUNS), "JAXFDI_CACHE_DIR": str(shared / "cache")})
+    assert f"runs per case: {RUNS}" in text
+    difference = float(text.split("AD vs closed-form Jacobian, largest difference: ")[1].split()[0])
+    assert difference < 1e-15
+    zero_total_det = float(text.split("zero total momentum")[1].split("det A = ")[1].split()[0])
+    bias_det = float(text.split("wheels at bias speed:")[1].split("det A = ")[1].split()[0])
+    assert abs(zero_total_det) < 1e-6 * abs(bias_det)
+    for case in CASES:
+        assert f"\n{case:<10} MM likelihood" in text
+    assert "Wheel stops (seed 004 reports" in text
+    assert len(images(outputs)) == 3, f"expected Figs. 3/5, 4/6 and 8/9, got {len(images(outputs))}"

@@ -40,7 +40,7 @@ def enable_compilation_cache(path: str | None = None) -> str:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
     return cache
 
-from jaxfdi import control, detection, faults, loop, metrics, models, tuning  # noqa: E402
+from jaxfdi import detection, faults, loop, metrics, models  # noqa: E402
 from jaxfdi.detection import chi2_detector, chi2_threshold, glrt_detector, mode_probability_detector  # noqa: E402
 from jaxfdi.faults import (  # noqa: E402
     Fault,
@@ -81,3 +81,50 @@ from jaxfdi.montecarlo import monte_carlo  # noqa: E402
 from jaxfdi.riccati import solve_discrete_are, steady_state_kalman  # noqa: E402
 from jaxfdi.monitor import MonitorHistory, MonitorResult, monitor, replay_detector  # noqa: E402
 from jaxfdi.simulate import SimStep, Simulator, linear_simulator, simulate, simulator  # noqa: E402
+
+
+_LAZY_SUBMODULES = ("control", "tuning", "streaming", "distributed", "plotting")
+
+
+def __getattr__(name: str):
+    """``jaxfdi.control`` and ``jaxfdi.tuning`` (which import optax, ~0.1 s) and the
+    multi-host helpers are imported on first use, not by ``import jaxfdi``."""
+    if name in _LAZY_SUBMODULES:
+        import importlib
+
+        return importlib.import_module(f"jaxfdi.{name}")
+    raise AttributeError(f"module 'jaxfdi' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY_SUBMODULES))
+
+
+# ``jaxfdi.monitor`` and ``jaxfdi.simulate`` are the modules (``import jaxfdi.monitor as m``);
+# the functions are ``jaxfdi.monitor.monitor`` and ``jaxfdi.simulate.simulate``. Calling the
+# module, the old ``jaxfdi.monitor(...)``, still works with a DeprecationWarning (_shadow).
+from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
+
+_unshadow(__name__, "monitor", "simulate")
+
+__all__ = [
+    # filters and models
+    "Filter", "FilterInfo", "GaussianState", "LinearGaussianModel", "c2d", "extended_kalman_filter",
+    "init_from_posterior", "interacting_multiple_model", "kalman_filter", "linear_gaussian_model",
+    "multiple_model", "run_filter", "run_filter_batch", "two_stage_kalman_filter", "unscented_kalman_filter",
+    "solve_discrete_are", "steady_state_kalman",
+    # faults and simulation
+    "Fault", "FaultKind", "Target", "active_label", "concat_faults", "episodes", "fault", "fault_group",
+    "no_fault", "stack_faults", "SimStep", "Simulator", "linear_simulator", "simulator",
+    # detection, loop, Monte Carlo, metrics
+    "chi2_detector", "chi2_threshold", "glrt_detector", "mode_probability_detector",
+    "FDI", "Controller", "LoopResult", "LoopTrace", "Plant", "Scorer", "detection_scorer", "episode_scorer",
+    "feedforward", "run_loop", "state_feedback", "MonitorHistory", "MonitorResult", "replay_detector",
+    "monte_carlo", "DetectionRecord", "DetectionSummary", "EpisodeRecord", "EpisodeSummary",
+    "confusion_matrix", "step_health", "summarize_detection", "summarize_episodes",
+    # set-up
+    "enable_x64", "enable_compilation_cache",
+    # subpackages and modules
+    "control", "detection", "faults", "filters", "loop", "metrics", "models", "monitor", "montecarlo",
+    "plotting", "progress", "riccati", "simulate", "streaming", "tuning", "distributed",
+]

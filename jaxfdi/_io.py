@@ -22,15 +22,23 @@ other file is). A signal that arrives during the moves is acted on after them (t
 is then complete in ``out``). SIGKILL during the study itself leaves its
 ``.jaxfdi-tmp-*`` folder behind (nothing can run then), never a file under a result name.
 Nothing is fsynced: durability across a power cut is not promised.
+
+Provenance: every JSON object written by ``write_json`` gets a ``"provenance"`` entry
+(``provenance()``: jaxfdi, jax, jaxlib, numpy and Python versions, backend, device kind
+and count, x64 on/off, command line, seed, UTC time); the CLI names the command line and
+seed with ``recording(argv, seed)``, and its ``.npz`` files carry the same record.
 """
 from __future__ import annotations
 
 import contextlib
+import datetime
 import json
 import math
 import os
+import shlex
 import shutil
 import signal
+import sys
 import tempfile
 import threading
 from pathlib import Path
@@ -90,8 +98,65 @@ def _strict(value: Any) -> Any:
     return value
 
 
+#: the command line and seed of the CLI command being run (``recording``); None outside it
+_RECORDING: dict | None = None
+
+
+@contextlib.contextmanager
+def recording(argv: list[str] | None, seed: int | None) -> Iterator[None]:
+    """Within this block, ``provenance()`` names the command line ``jaxfdi <argv...>``
+    (``argv`` None: ``sys.argv[1:]``) and ``seed``; the CLI wraps each command in it."""
+    global _RECORDING
+    previous = _RECORDING
+    _RECORDING = {"argv": ["jaxfdi", *(sys.argv[1:] if argv is None else argv)], "seed": seed}
+    try:
+        yield
+    finally:
+        _RECORDING = previous
+
+
+def provenance(seed: int | None = None) -> dict:
+    """How a result was made: a JSON-ready dict with ``jaxfdi``, ``jax``, ``jaxlib``,
+    ``numpy`` and ``python`` versions, ``backend`` (``jax.default_backend()``),
+    ``device_kind`` and ``device_count`` (local devices), ``x64`` (``jax_enable_x64``),
+    ``command`` (the command line, shell-quoted), ``seed`` (the argument, else the one
+    named by ``recording``, else None) and ``created`` (UTC, ISO 8601)."""
+    import jax
+    import jaxlib
+    import numpy
+
+    import jaxfdi
+
+    active = _RECORDING or {"argv": list(sys.argv), "seed": None}
+    devices = jax.local_devices()
+    return {
+        "jaxfdi": jaxfdi.__version__,
+        "jax": jax.__version__,
+        "jaxlib": getattr(jaxlib, "__version__", None) or jaxlib.version.__version__,
+        "numpy": numpy.__version__,
+        "python": sys.version.split()[0],
+        "backend": jax.default_backend(),
+        "device_kind": devices[0].device_kind if devices else None,
+        "device_count": len(devices),
+        "x64": bool(jax.config.jax_enable_x64),
+        "command": shlex.join(str(a) for a in active["argv"]),
+        "seed": active["seed"] if seed is None else seed,
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def with_provenance(data: Any) -> Any:
+    """``data`` (a dict) with a ``"provenance"`` entry added (kept if it has one);
+    anything else unchanged."""
+    if isinstance(data, dict) and "provenance" not in data:
+        return {**data, "provenance": provenance()}
+    return data
+
+
 def write_json(path: str | Path, data: Any) -> Path:
-    """Write ``data`` as strict JSON (undefined numbers such as a NaN rate become null)."""
+    """Write ``data`` as strict JSON (undefined numbers such as a NaN rate become null);
+    a dict gets its ``"provenance"`` entry (``with_provenance``)."""
+    data = with_provenance(data)
 
     def write(tmp: str) -> None:
         with open(tmp, "w") as fh:

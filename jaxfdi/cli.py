@@ -14,10 +14,13 @@ import _thread
 import argparse
 import contextlib
 import linecache
+import logging
 import math
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -27,6 +30,9 @@ import numpy as np
 
 from jaxfdi import _io
 from jaxfdi._checks import MAX_SEED  # seeds: see its comment
+
+#: the CLI's messages (jaxfdi.progress.configure_logging sends them to stderr; --quiet drops INFO)
+logger = logging.getLogger("jaxfdi")
 
 #: the largest count an option takes (runs, steps, windows: JAX indexes them in int32)
 MAX_COUNT = 2**31 - 1
@@ -178,8 +184,9 @@ def _run_engine(args: argparse.Namespace, folder: Path) -> str:
           f"mu_T = {study.config['settings']['mu_threshold']}")
     print(study.overview())
     print()
-    print("Per method and fault; 'paper' = seed 003 Table 3 median delay [s]; FA = share of runs with an alarm "
-          "before the onset; estimate = median over correctly isolated runs")
+    print("Per method and fault; pre-FA = share of runs with an alarm before the onset (false-alarm runs); delays "
+          "[s] over the 'clean' runs only, those without one; 'paper' = seed 003 Table 3, a mean delay (beside our "
+          "mean); estimate = median over correctly isolated runs")
     print(study.table())
     return _write_study(study, args, folder, "engine.json", lambda where: plot_engine(study, where), elapsed)
 
@@ -218,17 +225,15 @@ def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
     for name in _engine_imm_designs(args):
         start = time.perf_counter()
         design = et.imm_design(name)
-        if not args.quiet:
-            print(f"{name}: training", file=sys.stderr, flush=True)
+        logger.info("%s: training", name)  # logging: --quiet drops it
         result = et.tune_engine_imm(design, steps=args.steps, train_runs=args.train_runs, seed=args.seed,
                                     weights=weights, progress=not args.quiet, confirm_steps=args.confirm_steps,
                                     frozen=frozen)
         tuned = constrain(design.parameterization, result.raw)
         selection = None
         if args.select_thresholds:
-            if not args.quiet:
-                print(f"{name}: selecting one mu_T per mode on {args.selection_runs} runs per fault "
-                      f"(seed {args.seed + 2})", file=sys.stderr, flush=True)
+            logger.info(f"{name}: selecting one mu_T per mode on {args.selection_runs} runs per fault "
+                        f"(seed {args.seed + 2})")
             tuned["mu_threshold"], selection = et.select_mode_thresholds(
                 design, tuned, args.selection_runs, args.seed + 2, args.confirm_steps)
             result = result._replace(raw=unconstrain(design.parameterization, tuned))
@@ -250,7 +255,7 @@ def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
         print(f"worse than the paper's: {', '.join(worse) if worse else 'none'}\n")
         paths.append(save_params(folder / f"engine-imm-{name}-tuned.npz", result.raw, design.parameterization,
                                  {"best_step": result.history.best_step, "seed": args.seed, "design": name,
-                                  "confirm_steps": args.confirm_steps}))
+                                  "confirm_steps": args.confirm_steps, "provenance": _io.provenance()}))
         report[name] = {
             "paper": hand_rows, "tuned": tuned_rows, "cross_entropy": {"paper": hand_ce, "tuned": tuned_ce},
             "worse": worse, "shortfall": et.shortfall(hand_rows, tuned_rows), "frozen": list(frozen),
@@ -286,7 +291,8 @@ def _tune_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
           + f"; held-out test: {args.runs} runs per fault (seed {test_seed})")
     print(ct.comparison_table(hand_rows, tuned_rows, ct.HAND_WINDOW, tuning.window, hand_loss, tuned_loss))
     save_params(folder / "engine-chi2-tuned.npz", tuning.result.raw, ct.PARAMETERIZATION,
-                {"best_step": tuning.result.history.best_step, "seed": args.seed, "window": tuning.window})
+                {"best_step": tuning.result.history.best_step, "seed": args.seed, "window": tuning.window,
+                 "provenance": _io.provenance()})
     _io.write_json(folder / "engine-chi2-tuning.json", {
         "config": {"steps": args.steps, "train_runs": args.train_runs, "test_runs": args.runs, "seed": args.seed,
                    "test_seed": test_seed, "windows": list(windows), "weights": weights._asdict()},
@@ -315,8 +321,9 @@ def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
           f"({cfg['calibration_runs']} calibration runs, another seed):")
     for method, row in cfg["thresholds"].items():
         print(f"  {method:<8} " + " ".join(f"{name} {value:.1f}" for name, value in row.items()))
-    print("Rates over runs; delays in steps (median); detection = some location's filters all alarm (the "
-          "symptom vector leaves the no-fault column), isolation = it matches the true fault's column\n")
+    print("Rates over runs; delays in steps (median over the 'clean' runs, those with no symptom before the onset); "
+          "detection = some location's filters all alarm (the symptom vector leaves the no-fault column), isolation "
+          "= it matches the true fault's column\n")
     print(study.table())
     print()
     print(study.headline())
@@ -343,7 +350,8 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
           f"{cfg['nis_threshold']:.2f} (chi2, Pfa 1e-5); relative credit {cfg['credit_threshold']}; "
           f"mu_T {cfg['mode_threshold']}; isolators confirm over {cfg['confirm_steps']} steps")
     print("rate = detected (F, NIS) or isolated to the right wheel (credit, MM); <=2s = the same within 2 s of "
-          "the onset; delays over those runs; FA = share of runs with a decision before the onset\n")
+          "the onset, in the runs with no decision before it; delays over those runs (mean, median, p90); FA = share "
+          "of runs with a decision before the onset, clean = the others\n")
     print(study.table())
     print()
     print(study.headline())
@@ -366,6 +374,20 @@ def _run_f16_flight(args: argparse.Namespace, folder: Path) -> str:
     return _write_study(study, args, folder, "f16-flight.json", lambda where: plot_f16_flight(study, where), elapsed)
 
 
+def _run_f16(args: argparse.Namespace, folder: Path) -> str:
+    from jaxfdi.scenarios.f16_fdi import f16_fdi_study, plot_f16_fdi
+
+    start = time.perf_counter()
+    study = f16_fdi_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
+    elapsed = time.perf_counter() - start
+    cfg = study.config
+    print(f"f16: seed-000 hybrid FDI, three 2-DOF rate sensors (sigma {cfg['rate_sigma_rad_s']:g} rad/s) on the "
+          f"closed-loop F-16, parity space + UKF on demand (restart {cfg['restart_lag_steps']} steps back, Cl/Cm/Cn "
+          f"errors {cfg['coefficient_error_Cl_Cm_Cn']}); {args.runs} runs per case")
+    print(study.table())
+    return _write_study(study, args, folder, "f16.json", lambda where: plot_f16_fdi(study, where), elapsed)
+
+
 def _run_gnss_campus(args: argparse.Namespace, folder: Path) -> str:
     from jaxfdi.scenarios.gnss_campus import gnss_campus_study, plot_gnss_campus
 
@@ -381,6 +403,21 @@ def _run_gnss_campus(args: argparse.Namespace, folder: Path) -> str:
                         elapsed)
 
 
+def _run_gps_ins(args: argparse.Namespace, folder: Path) -> str:
+    from jaxfdi.scenarios.gps_ins import gps_ins_study, plot_gps_ins
+
+    start = time.perf_counter()
+    study = gps_ins_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
+    elapsed = time.perf_counter() - start
+    cfg = study.config
+    print(f"gps-ins: seed-002 INS/GPS integrity, park flight {cfg['flight_s']} s from {cfg['start']}, HG1900-class "
+          f"IMU {cfg['imu_rate_hz']} Hz, GPS 1 Hz (RAIM-passed fixes only), 15-state error-state EKF; chi-square "
+          f"{cfg['chi2']['threshold']:.2f} (60 dof), SCST {cfg['scst']['threshold']:.2f} (15 dof, propagators reset "
+          f"every {cfg['scst']['period_s']} s); {args.runs} runs per case")
+    print(study.table())
+    return _write_study(study, args, folder, "gps-ins.json", lambda where: plot_gps_ins(study, where), elapsed)
+
+
 RUNNERS = {
     "engine": Runner(_run_engine, "seed-003 turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
                                   "the paper's Table 3", methods=_engine_method_names),
@@ -389,8 +426,11 @@ RUNNERS = {
     "reaction-wheels": Runner(_run_reaction_wheels, "seed-004 satellite, 4-wheel pyramid: dual filter F, NIS, "
                               "credits, MM isolator (--estimator, --engage-on)", options=("estimator", "engage_on"),
                               methods=_wheel_method_names),
+    "f16": Runner(_run_f16, "seed-000 F-16 rate sensors: parity space with the UKF's analytic redundancy on "
+                            "demand, the paper's case, direction x magnitude sweep, envelope, sensor layout"),
     "f16-flight": Runner(_run_f16_flight, "seed-000 F-16: book trim tables beside ours, modes, LQR SAS with "
                                           "altitude and bank hold flying the paper's climb and bank turn"),
+    "gps-ins": Runner(_run_gps_ins, "seed-002 INS/GPS: 15-state EKF, windowed chi-square and SCST, Table 3 (gyro bias)"),
     "gnss-campus": Runner(_run_gnss_campus, "seed-002 GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
                                             "park satellite faults detected, isolated and excluded"),
     "vtol": Runner(_run_vtol, "seed-001 VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
@@ -431,6 +471,43 @@ def _listing(title: str, entries: dict[str, str]) -> str:
     return "\n".join([title, *(f"  {name:<{width}}{text}" for name, text in sorted(entries.items()))])
 
 
+def _version_line() -> str:
+    """``jaxfdi --version``: jaxfdi's version (from the package metadata, without
+    importing JAX)."""
+    from importlib import metadata
+
+    try:
+        version = metadata.version("jaxfdi")
+    except metadata.PackageNotFoundError:
+        version = "unknown"
+    return f"jaxfdi {version}"
+
+
+def _select_agg_backend() -> None:
+    """The CLI draws figures into files: select matplotlib's Agg backend unless a
+    backend was chosen explicitly (``MPLBACKEND``); the library's plotting functions
+    never change the backend themselves."""
+    if os.environ.get("MPLBACKEND"):
+        return
+    try:
+        import matplotlib
+    except ImportError:
+        return
+    matplotlib.use("Agg")
+
+
+def _add_process_options(run: argparse.ArgumentParser) -> None:
+    """Multi-host Monte Carlo (``jaxfdi.distributed``): every process runs the same
+    command; only process 0 writes ``--out``."""
+    group = run.add_argument_group("several processes (one study over hosts; jaxfdi.distributed)")
+    group.add_argument("--num-processes", default=None,
+                       help="processes of the study (default: JAXFDI_NUM_PROCESSES, else 1)")
+    group.add_argument("--process-id", default=None,
+                       help="this process's index in [0, N) (default: JAXFDI_PROCESS_ID)")
+    group.add_argument("--coordinator", default=None,
+                       help="HOST:PORT of process 0 (default: JAX_COORDINATOR_ADDRESS)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="jaxfdi", description="Fault detection and isolation studies in JAX",
@@ -438,6 +515,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="\n\n".join([_listing("scenarios (jaxfdi run <scenario>):", RUN_HELP),
                              _listing("tuning targets (jaxfdi tune <target>):", TUNE_HELP),
                              "jaxfdi run -h / jaxfdi tune -h: the options", CHECKS_HELP]))
+    parser.add_argument("--version", action="version", version=_version_line())
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a paper scenario end to end", formatter_class=argparse.RawDescriptionHelpFormatter,
                          epilog="\n\n".join([_listing("scenarios:", RUN_HELP), CHECKS_HELP]))
@@ -459,6 +537,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress display")
     run.add_argument("--traceback", action="store_true",
                      help="on an error the library reports as a bad argument, a traceback instead of one line")
+    _add_process_options(run)
     tune = sub.add_parser("tune", help="tune a scenario's filter and detector by gradient, then compare on held-out runs",
                           formatter_class=argparse.RawDescriptionHelpFormatter,
                           epilog="\n\n".join([_listing("tuning targets:", TUNE_HELP), CHECKS_HELP]))
@@ -647,14 +726,19 @@ def main(argv: list[str] | None = None) -> int:
     runner = (RUNNERS if kind == "run" else TUNERS)[name]
     try:
         check_options(args, kind, name, runner)
+        processes = _process_options(args) if kind == "run" else None
     except UsageError as e:
         return _fail(str(e), 2)
     import jaxfdi
+    from jaxfdi import progress as _progress
 
     jaxfdi.enable_x64()
     jaxfdi.enable_compilation_cache()
+    _select_agg_backend()
+    _progress.configure_logging(quiet=args.quiet)
+    scratch = _join_processes(args, processes)
     try:
-        with _signals_raise():
+        with _signals_raise(), _io.recording(argv, args.seed):
             if runner.methods is not None and args.methods is not None:
                 valid = list(runner.methods())
                 chosen, unknown = split_methods(args.methods, valid)
@@ -678,9 +762,39 @@ def main(argv: list[str] | None = None) -> int:
         if args.traceback or not _raised_by_jaxfdi(e):
             raise
         return _fail(f"{e} (nothing written to {args.out}; --traceback for where)", 2)
-    if wrote:
+    finally:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+    if wrote and scratch is None:
         print(wrote)
     return 0
+
+
+def _process_options(args: argparse.Namespace) -> tuple:
+    """``--num-processes/--process-id/--coordinator`` (or the environment), checked
+    (pure Python); ``(None, None, None)`` for one process."""
+    from jaxfdi import distributed
+
+    try:
+        return distributed.resolve_options(args.num_processes, args.process_id, args.coordinator)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+
+
+def _join_processes(args: argparse.Namespace, processes) -> str | None:
+    """Join the other processes (``jax.distributed``, before any JAX work); processes
+    other than 0 write into a scratch folder, removed at the end (process 0 writes
+    ``--out``: every process has the whole gathered study). Returns that folder."""
+    if processes is None or processes[0] is None or processes[0] <= 1:
+        return None
+    from jaxfdi import distributed
+
+    distributed.initialize(*processes)
+    if processes[1] == 0:
+        return None
+    scratch = tempfile.mkdtemp(prefix=f"jaxfdi-process{processes[1]}-")
+    args.out = os.path.join(scratch, "out")
+    return scratch
 
 
 if __name__ == "__main__":

@@ -48,6 +48,7 @@ NEVER = 2**30
 
 
 class FaultKind(enum.IntEnum):
+    """How a fault acts: none, a bias (step), a ramp, an impulse or a scale (effectiveness) change."""
     NONE = 0
     BIAS = 1
     RAMP = 2
@@ -59,6 +60,7 @@ class FaultKind(enum.IntEnum):
 
 
 class Target(enum.IntEnum):
+    """Where a fault acts: on an actuator (input) or a sensor (measurement) component."""
     ACTUATOR = 0
     SENSOR = 1
 

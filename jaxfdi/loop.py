@@ -101,6 +101,7 @@ class LoopTrace(NamedTuple):
 
 
 class LoopResult(NamedTuple):
+    """What ``run_loop`` returns: the scorer's final value, the history (optional) and the final states."""
     score: Any                 # ``scorer``'s final value (``None`` without a scorer)
     history: LoopTrace | None  # (T, ...) with ``keep_history=True``
     final: Any = None          # (plant, fdi, controller) states after the last step

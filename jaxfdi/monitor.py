@@ -23,6 +23,7 @@ from jaxfdi.simulate import SimStep, Simulator
 
 
 class MonitorHistory(NamedTuple):
+    """Per-step history of a monitored run: labelled truth, filter outputs, statistic, alarm and label."""
     truth: SimStep       # (T, ...) labelled truth
     info: FilterInfo     # (T, ...) filter outputs
     statistic: Array     # (T,) test statistic
@@ -32,6 +33,7 @@ class MonitorHistory(NamedTuple):
 
 
 class MonitorResult(NamedTuple):
+    """What ``monitor`` returns: the run's detection record and, optionally, its history."""
     record: DetectionRecord
     history: MonitorHistory | None
 

@@ -199,7 +199,9 @@ def test_study_files_appear_together_json_last_with_normal_permissions(monkeypat
     after = snapshot(results)
     assert sorted(after) == ["fake-fig.png", "fake-params.npz", "fake.json", "notes.txt"]  # no temp folder left
     assert after["fake-fig.png"] == (b"\x89PNG new", 0o640) and after["fake-params.npz"][1] == 0o640
-    assert json.loads(after["fake.json"][0]) == {"rows": [1.0, None]} and after["fake.json"][1] == 0o640
+    written = json.loads(after["fake.json"][0])
+    assert written.pop("provenance")["command"].startswith("jaxfdi run fake")  # issue 28: every JSON says how
+    assert written == {"rows": [1.0, None]} and after["fake.json"][1] == 0o640
     assert after["notes.txt"] == (b"mine", 0o600)
 
 

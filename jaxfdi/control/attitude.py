@@ -30,6 +30,7 @@ from jaxfdi.models.reaction_wheels import quaternion_conjugate, quaternion_multi
 
 
 class Slew(NamedTuple):
+    """An eigen-axis slew manoeuvre: rotation axis, angle, start time and duration."""
     axis: Array      # (3,) unit rotation axis in the body (= initial inertial) frame
     angle: Array     # () rad
     start: Array     # () s
@@ -37,12 +38,14 @@ class Slew(NamedTuple):
 
 
 class AttitudeGains(NamedTuple):
+    """Quaternion PD attitude gains and the wheel torque limit."""
     kp: Array                # (3, 3)
     kd: Array                # (3, 3)
     max_wheel_torque: Array  # () N m
 
 
 def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, duration: float = 40.0, dtype=None) -> Slew:
+    """An eigen-axis slew of ``angle_deg`` degrees about ``axis`` from ``start`` over ``duration`` seconds."""
     dtype = dtype or jnp.result_type(float)
     _checks.check_matrix("axis", axis, (3,), "rotation axis")
     axis = jnp.asarray(axis, dtype)

@@ -46,6 +46,7 @@ NULL_RTOL = 1e-10
 
 
 class EigenstructureResult(NamedTuple):
+    """Eigenstructure assignment's gain with its diagnostics (eigenvectors, imaginary part, conditioning, residual)."""
     gain: Array                    # (p, N) real K_f: u = -K_f x, closed loop A_bar - B_f K_f
     eigenvectors: Array            # (N, N) complex V^f, columns v_i^f (eq. 26)
     gain_imaginary: Array          # () max |Im K_f| before taking the real part

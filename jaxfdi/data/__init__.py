@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+__all__ = ["DATA_DIR", "data_path"]
+
+#: the folder of the shipped data files
 DATA_DIR = Path(__file__).resolve().parent
 
 

@@ -24,6 +24,7 @@ from jaxfdi.models.linear import LinearGaussianModel
 
 
 class TimedState(NamedTuple):
+    """A time-varying filter's state: the step index and the wrapped filter's state."""
     step: Array  # () int, the step the inner state is the prior of
     inner: Any   # the wrapped filter's state
 

@@ -33,6 +33,7 @@ EXCLUSION_ITERATIONS = 3
 
 
 class EpochIntegrity(NamedTuple):
+    """One epoch's integrity: the fix, the parity check, protection levels and the exclusion."""
     fix: PositionFix
     check: ParityCheck
     protection: ProtectionLevels

@@ -36,6 +36,7 @@ UNWEIGHTED_ITERATIONS = 3
 
 
 class Dops(NamedTuple):
+    """Dilutions of precision: geometric, position, horizontal, vertical and time."""
     gdop: Array
     pdop: Array
     hdop: Array

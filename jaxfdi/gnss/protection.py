@@ -48,6 +48,7 @@ ALERT_LIMITS = {
 
 
 class ProtectionLevels(NamedTuple):
+    """Slope-method protection levels: slopes per satellite, HPL, VPL and minimum detectable biases."""
     slope_horizontal: Array   # (S,) m per sqrt(noncentrality), 0 at unused slots
     slope_vertical: Array     # (S,)
     hpl: Array                # () m (inf without a test)

@@ -18,6 +18,7 @@ from jaxfdi import _checks
 
 
 class RigidBodyParams(NamedTuple):
+    """Rigid-body parameters: principal moments of inertia and the sample period."""
     inertia: Array  # (3,) principal moments of inertia
     dt: Array       # () sample period
 

@@ -37,6 +37,7 @@ from jaxfdi import _linalg
 
 
 class LeastSquaresResult(NamedTuple):
+    """Levenberg-Marquardt's result: solution, residual, cost, gradient, iterations and flags."""
     x: Array          # (n,) the solution
     residual: Array   # (m,) r(x)
     cost: Array       # () 1/2 ||r(x)||^2

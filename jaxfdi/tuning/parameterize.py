@@ -44,6 +44,7 @@ class Transform(NamedTuple):
 
 
 def identity() -> Transform:
+    """The unconstrained parameterisation: the parameter is its own raw value."""
     return Transform(lambda x: x, lambda p: jnp.asarray(p), "identity", {})
 
 
@@ -216,6 +217,7 @@ def partition(raw: dict[str, Array], trainable: set[str] | list[str]) -> tuple[d
 
 
 def merge(trained: dict, frozen: dict) -> dict:
+    """Trained and frozen raw parameters in one dict (trained values win)."""
     return {**frozen, **trained}
 
 

@@ -15,7 +15,6 @@ falls to the carried state; see benchmarks/RESULTS.md for the measured peak memo
 from __future__ import annotations
 
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
@@ -27,11 +26,13 @@ import optax
 
 from jaxfdi import _checks
 from jaxfdi._io import atomic_write
+from jaxfdi.progress import logger, progress_bar
 from jaxfdi.filters._base import Filter
 from jaxfdi.tuning.parameterize import Transform, constrain, from_record, merge, partition, unconstrain
 
 
 class TrainHistory(NamedTuple):
+    """Training history: evaluated steps, training and validation losses, best step, early stop."""
     step: np.ndarray        # (E,) training step of each evaluation
     train_loss: np.ndarray  # (E,) training mini-batch loss at that step
     val_loss: np.ndarray    # (E,) validation loss at that step
@@ -40,6 +41,7 @@ class TrainHistory(NamedTuple):
 
 
 class TrainResult(NamedTuple):
+    """What ``fit`` returns: the best unconstrained parameters and the training history."""
     raw: dict               # best unconstrained parameters (trainable and frozen)
     history: TrainHistory
 
@@ -119,12 +121,13 @@ def fit(
     best, best_val, best_step, bad = params, float(val_loss_fn(params, val_batch)), 0, 0
     log = {"step": [0], "train": [float("nan")], "val": [best_val]}
     start, stopped = time.perf_counter(), False
+    bar = progress_bar("tuning", "steps") if progress else None  # tqdm.auto, or log lines
     for step in range(1, steps + 1):
         new, new_state, value, finite = update(params, opt_state, train_batch(step - 1))
         if not bool(finite):
             stopped = True
             if progress:
-                print(f"\ntuning: non-finite loss or gradient at step {step}; keeping step {best_step}", file=sys.stderr)
+                logger.warning("tuning: non-finite loss or gradient at step %d; keeping step %d", step, best_step)
             break
         params, opt_state = new, new_state
         if step % eval_every == 0 or step == steps:
@@ -135,14 +138,13 @@ def fit(
             else:
                 bad += 1
             if progress:
-                print(f"\rtuning: step {step}/{steps}, train {float(value):.4g}, val {val:.4g} "
-                      f"(best {best_val:.4g} at {best_step}), {time.perf_counter() - start:.0f} s",
-                      end="", file=sys.stderr, flush=True)
+                bar(step, steps, time.perf_counter() - start,
+                    postfix=f"train {float(value):.4g}, val {val:.4g} (best {best_val:.4g} at {best_step})")
             if bad >= patience:
                 stopped = True
                 break
     if progress:
-        print(file=sys.stderr)
+        bar.close()
     history = TrainHistory(np.asarray(log["step"]), np.asarray(log["train"]), np.asarray(log["val"]), best_step, stopped)
     return TrainResult(merge(best, frozen), history)
 

@@ -1,0 +1,230 @@
+"""Figures of FDI results, for notebooks and scripts.
+
+Every function draws on ``ax`` when one is given (and returns ``ax.figure``), otherwise
+on a new ``matplotlib.figure.Figure`` that it returns. Figures are made without pyplot,
+so no function selects or changes the matplotlib backend, opens a window or keeps a
+figure alive in pyplot's registry: in Jupyter a returned figure shows as the cell's
+value (or with ``display(fig)``); in a script, ``fig.savefig(path)``. The CLI selects
+the Agg backend itself before its scenarios draw their figures.
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+__all__ = [
+    "new_axes",
+    "plot_confusion",
+    "plot_delays",
+    "plot_estimate",
+    "plot_loss_history",
+    "plot_mode_probabilities",
+    "plot_statistic",
+]
+
+
+def new_axes(ax=None, figsize: tuple[float, float] = (7.0, 3.5)):
+    """``(figure, ax)``: ``ax`` and its figure when given, else a new ``Figure`` (not
+    registered with pyplot) with one axes of size ``figsize`` inches."""
+    if ax is not None:
+        return ax.figure, ax
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    return fig, fig.add_subplot()
+
+
+def _time(t, n: int) -> np.ndarray:
+    return np.arange(n) if t is None else np.asarray(t)
+
+
+def plot_statistic(statistic, threshold=None, *, t=None, onset=None, label: str = "statistic",
+                   log: bool = False, ax=None):
+    """A detection statistic over time with its threshold and the fault onset.
+
+    Args:
+      statistic: ``(T,)`` one run, or ``(R, T)`` several runs (drawn thin).
+      threshold: scalar or ``(T,)`` alarm threshold (dashed), or ``None``.
+      t: ``(T,)`` times (default: step indices).
+      onset: time of the fault onset (dotted vertical line), or ``None``.
+      label: the statistic's name (legend and y label).
+      log: logarithmic y axis.
+      ax: axes to draw on (default: a new figure).
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
+    """
+    values = np.asarray(statistic, dtype=float)
+    if values.ndim not in (1, 2):
+        raise ValueError(f"statistic: expected shape (T,) or (R, T), got {values.shape}")
+    runs = values[None] if values.ndim == 1 else values
+    time = _time(t, runs.shape[1])
+    fig, ax = new_axes(ax)
+    for i, run in enumerate(runs):
+        ax.plot(time, run, color="C0", lw=1.2 if len(runs) == 1 else 0.6, alpha=1.0 if len(runs) == 1 else 0.5,
+                label=label if i == 0 else None)
+    if threshold is not None:
+        level = np.broadcast_to(np.asarray(threshold, dtype=float), time.shape)
+        ax.plot(time, level, color="C3", ls="--", lw=1.0, label="threshold")
+    if onset is not None:
+        ax.axvline(onset, color="k", ls=":", lw=1.0, label="onset")
+    if log:
+        ax.set_yscale("log")
+    ax.set(xlabel="time" if t is not None else "step", ylabel=label)
+    ax.legend(loc="best", fontsize="small")
+    return fig
+
+
+def plot_mode_probabilities(mode_prob, names: Sequence[str] | None = None, *, t=None, onset=None,
+                            threshold=None, ax=None):
+    """Mode probabilities over time (an IMM's or a multiple-model filter's ``mode_prob``).
+
+    Args:
+      mode_prob: ``(T, M)`` probabilities of M modes.
+      names: M mode names (default ``mode 0`` ...).
+      t: ``(T,)`` times (default: step indices).
+      onset: fault onset (dotted vertical line), or ``None``.
+      threshold: the decision threshold ``mu_T`` (dashed), or ``None``.
+      ax: axes to draw on (default: a new figure).
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
+    """
+    prob = np.asarray(mode_prob, dtype=float)
+    if prob.ndim != 2:
+        raise ValueError(f"mode_prob: expected shape (T, M), got {prob.shape}")
+    names = list(names) if names is not None else [f"mode {j}" for j in range(prob.shape[1])]
+    if len(names) != prob.shape[1]:
+        raise ValueError(f"names: expected {prob.shape[1]} names (one per mode), got {len(names)}")
+    time = _time(t, prob.shape[0])
+    fig, ax = new_axes(ax)
+    for j, name in enumerate(names):
+        ax.plot(time, prob[:, j], lw=1.2, label=name)
+    if threshold is not None:
+        ax.axhline(float(threshold), color="k", ls="--", lw=0.8, label="threshold")
+    if onset is not None:
+        ax.axvline(onset, color="k", ls=":", lw=1.0)
+    ax.set(xlabel="time" if t is not None else "step", ylabel="mode probability", ylim=(-0.02, 1.02))
+    ax.legend(loc="best", fontsize="small", ncol=2)
+    return fig
+
+
+def plot_estimate(estimate, truth=None, std=None, *, t=None, label: str = "estimate", ax=None):
+    """One estimated quantity with its +-2 standard-deviation band and the truth.
+
+    Args:
+      estimate: ``(T,)`` estimates.
+      truth: ``(T,)`` true values, or ``None``.
+      std: ``(T,)`` standard deviations (e.g. ``sqrt(cov[:, i, i])``), or ``None``.
+      t: ``(T,)`` times (default: step indices).
+      label: the quantity's name.
+      ax: axes to draw on (default: a new figure).
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
+    """
+    est = np.asarray(estimate, dtype=float)
+    if est.ndim != 1:
+        raise ValueError(f"estimate: expected shape (T,), got {est.shape}")
+    time = _time(t, est.shape[0])
+    fig, ax = new_axes(ax)
+    if truth is not None:
+        ax.plot(time, np.asarray(truth, dtype=float), color="k", lw=1.0, label="truth")
+    ax.plot(time, est, color="C0", lw=1.2, label=label)
+    if std is not None:
+        s = np.asarray(std, dtype=float)
+        ax.fill_between(time, est - 2 * s, est + 2 * s, color="C0", alpha=0.2, label="+-2 sigma")
+    ax.set(xlabel="time" if t is not None else "step", ylabel=label)
+    ax.legend(loc="best", fontsize="small")
+    return fig
+
+
+def plot_delays(delays: Mapping[str, Sequence[float]], *, unit: str = "s", ax=None):
+    """Detection delays per fault (or per method) as box plots; NaN (not detected) left out
+    and counted in the label.
+
+    Args:
+      delays: name -> delays of the runs (NaN for a run never detected).
+      unit: the delays' unit (axis label).
+      ax: axes to draw on (default: a new figure).
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
+    """
+    if not delays:
+        raise ValueError("delays: expected at least one name -> delays entry, got none")
+    fig, ax = new_axes(ax, figsize=(max(4.0, 1.1 * len(delays) + 2), 3.5))
+    data, labels = [], []
+    for name, values in delays.items():
+        v = np.asarray(values, dtype=float).ravel()
+        finite = v[np.isfinite(v)]
+        data.append(finite)
+        missed = v.size - finite.size
+        labels.append(f"{name}\n({missed} missed)" if missed else str(name))
+    ax.boxplot(data, tick_labels=labels, showfliers=True)
+    ax.set(ylabel=f"detection delay [{unit}]")
+    ax.tick_params(axis="x", labelsize="small")
+    return fig
+
+
+def plot_confusion(matrix, labels: Sequence[str], *, normalize: bool = True, ax=None):
+    """A confusion matrix (rows: true fault, columns: decided) as an annotated image.
+
+    Args:
+      matrix: ``(K, K)`` counts, e.g. ``jaxfdi.confusion_matrix``.
+      labels: K class names.
+      normalize: show each row as shares of its runs.
+      ax: axes to draw on (default: a new figure).
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
+    """
+    m = np.asarray(matrix, dtype=float)
+    if m.ndim != 2 or m.shape[0] != m.shape[1]:
+        raise ValueError(f"matrix: expected a square (K, K) matrix, got shape {m.shape}")
+    if len(labels) != m.shape[0]:
+        raise ValueError(f"labels: expected {m.shape[0]} names, got {len(labels)}")
+    shown = m / np.maximum(m.sum(axis=1, keepdims=True), 1) if normalize else m
+    size = 1.0 + 0.6 * m.shape[0]
+    fig, ax = new_axes(ax, figsize=(size + 1.0, size))
+    image = ax.imshow(shown, cmap="Blues", vmin=0.0, vmax=1.0 if normalize else None)
+    for i in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            ax.text(j, i, f"{shown[i, j]:.2f}" if normalize else f"{m[i, j]:.0f}", ha="center", va="center",
+                    fontsize="small", color="white" if shown[i, j] > 0.6 * np.nanmax(shown) else "black")
+    ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right")
+    ax.set_yticks(range(len(labels)), labels)
+    ax.set(xlabel="decided", ylabel="true")
+    fig.colorbar(image, ax=ax, shrink=0.8)
+    return fig
+
+
+def plot_loss_history(step, train=None, validation=None, *, best_step: int | None = None, log: bool = True,
+                      ax=None):
+    """Training and validation loss against the optimiser step (``tuning.fit``'s history).
+
+    Args:
+      step: ``(N,)`` steps at which the losses were recorded.
+      train: ``(N,)`` training losses (NaN where not recorded), or ``None``.
+      validation: ``(N,)`` validation losses, or ``None``.
+      best_step: the step kept (dotted vertical line), or ``None``.
+      log: logarithmic y axis.
+      ax: axes to draw on (default: a new figure).
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
+    """
+    steps = np.asarray(step)
+    fig, ax = new_axes(ax)
+    if train is not None:
+        ax.plot(steps, np.asarray(train, dtype=float), marker=".", lw=1.0, label="train")
+    if validation is not None:
+        ax.plot(steps, np.asarray(validation, dtype=float), marker=".", lw=1.0, label="validation")
+    if best_step is not None:
+        ax.axvline(best_step, color="k", ls=":", lw=1.0, label="kept")
+    if log:
+        ax.set_yscale("log")
+    ax.set(xlabel="optimiser step", ylabel="loss")
+    ax.legend(loc="best", fontsize="small")
+    return fig

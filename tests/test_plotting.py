@@ -1,0 +1,113 @@
+"""jaxfdi.plotting draws on the caller's axes or a new Figure, returns the Figure, and
+never changes matplotlib's backend (issue 28). The drawn data are read back from the
+artists and compared with the inputs."""
+import matplotlib
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from jaxfdi import plotting
+
+T = 50
+t = np.arange(T) * 0.01
+statistic = np.linspace(0.0, 30.0, T)
+
+
+@pytest.fixture
+def non_agg_backend():
+    """A non-interactive backend other than Agg ("svg"), restored afterwards."""
+    before = matplotlib.get_backend()
+    matplotlib.use("svg", force=True)
+    yield "svg"
+    matplotlib.use(before, force=True)
+
+
+def calls():
+    prob = np.stack([np.linspace(1, 0, T), np.linspace(0, 1, T)], axis=1)
+    return {
+        "statistic": lambda ax=None: plotting.plot_statistic(statistic, 14.86, t=t, onset=0.2, ax=ax),
+        "statistic runs": lambda ax=None: plotting.plot_statistic(np.stack([statistic, statistic / 2]), ax=ax, log=True),
+        "mode probabilities": lambda ax=None: plotting.plot_mode_probabilities(prob, ["normal", "P2"], t=t,
+                                                                               threshold=0.9, onset=0.2, ax=ax),
+        "estimate": lambda ax=None: plotting.plot_estimate(statistic, statistic + 0.1, np.ones(T), t=t, ax=ax),
+        "delays": lambda ax=None: plotting.plot_delays({"RPM": [0.01, 0.02, np.nan], "P2": [0.03, 0.05]}, ax=ax),
+        "confusion": lambda ax=None: plotting.plot_confusion(np.array([[9, 1], [2, 8]]), ["none", "P2"], ax=ax),
+        "loss history": lambda ax=None: plotting.plot_loss_history([0, 10, 20], [np.nan, 2.0, 1.0], [3.0, 2.5, 1.5],
+                                                                   best_step=20, ax=ax),
+    }
+
+
+@pytest.mark.parametrize("name", sorted(calls()))
+def test_returns_a_figure_and_leaves_the_backend(non_agg_backend, name):
+    import matplotlib.pyplot as plt
+
+    open_before = plt.get_fignums()
+    fig = calls()[name]()
+    assert isinstance(fig, Figure)
+    assert matplotlib.get_backend() == non_agg_backend
+    assert plt.get_fignums() == open_before  # not registered with pyplot
+    fig.savefig(__import__("io").BytesIO(), format="png")  # draws with the figure's own canvas
+    assert matplotlib.get_backend() == non_agg_backend
+
+
+@pytest.mark.parametrize("name", sorted(calls()))
+def test_draws_on_the_given_axes(non_agg_backend, name):
+    fig = Figure()
+    ax = fig.add_subplot(1, 2, 2)
+    assert calls()[name](ax=ax) is fig
+    assert len(ax.get_children()) > 0 and matplotlib.get_backend() == non_agg_backend
+
+
+def test_statistic_lines_hold_the_data():
+    fig = plotting.plot_statistic(statistic, 14.86, t=t, onset=0.2)
+    lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
+    np.testing.assert_array_equal(lines["statistic"].get_xdata(), t)
+    np.testing.assert_array_equal(lines["statistic"].get_ydata(), statistic)
+    np.testing.assert_array_equal(lines["threshold"].get_ydata(), np.full(T, 14.86))
+    assert list(lines["onset"].get_xdata()) == [0.2, 0.2]
+
+
+def test_confusion_shows_row_shares():
+    fig = plotting.plot_confusion(np.array([[9, 1], [2, 8]]), ["none", "P2"])
+    np.testing.assert_allclose(fig.axes[0].images[0].get_array(), [[0.9, 0.1], [0.2, 0.8]])
+    assert sorted(text.get_text() for text in fig.axes[0].texts) == ["0.10", "0.20", "0.80", "0.90"]
+
+
+def test_delays_leave_out_and_count_the_missed():
+    fig = plotting.plot_delays({"RPM": [0.01, 0.03, np.nan]})
+    assert [tick.get_text() for tick in fig.axes[0].get_xticklabels()] == ["RPM\n(1 missed)"]
+    median = [line for line in fig.axes[0].get_lines() if line.get_color() in ("C1", "#ff7f0e")][0]
+    assert median.get_ydata()[0] == pytest.approx(0.02)
+
+
+@pytest.mark.parametrize("call,argument", [
+    (lambda: plotting.plot_statistic(np.zeros((2, 2, 2))), "statistic"),
+    (lambda: plotting.plot_mode_probabilities(np.zeros((5, 2)), ["a"]), "names"),
+    (lambda: plotting.plot_confusion(np.zeros((2, 3)), ["a", "b"]), "matrix"),
+    (lambda: plotting.plot_delays({}), "delays"),
+])
+def test_bad_input_names_the_argument(call, argument):
+    with pytest.raises(ValueError, match=f"^{argument}:"):
+        call()
+
+
+def test_library_never_selects_a_backend():
+    """No ``matplotlib.use`` outside the CLI (which selects Agg to write files)."""
+    from pathlib import Path
+
+    import jaxfdi
+
+    offenders = [str(p) for p in Path(jaxfdi.__file__).parent.rglob("*.py")
+                 if "matplotlib.use(" in p.read_text() and p.name != "cli.py"]
+    assert offenders == []
+
+
+def test_cli_selects_agg_unless_a_backend_is_named(non_agg_backend, monkeypatch):
+    from jaxfdi import cli
+
+    monkeypatch.setenv("MPLBACKEND", "svg")
+    cli._select_agg_backend()
+    assert matplotlib.get_backend() == "svg"
+    monkeypatch.delenv("MPLBACKEND")
+    cli._select_agg_backend()
+    assert matplotlib.get_backend().lower() == "agg"

@@ -1,0 +1,89 @@
+"""Progress: a tqdm.auto bar when tqdm is installed, log lines otherwise, the callable hook
+unchanged, and --quiet silencing the logger (issue 28)."""
+import io
+import logging
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxfdi
+from jaxfdi import progress
+
+
+def run_one(key, scale):
+    return scale * jax.random.normal(key, ())
+
+
+def test_callable_hook_sees_every_chunk():
+    seen = []
+    out = jaxfdi.monte_carlo(run_one, jax.random.key(0), 10, jnp.ones(10), chunk_size=4,
+                             progress=lambda done, total, seconds: seen.append((done, total)))
+    assert seen == [(4, 10), (8, 10), (10, 10)] and out.shape == (10,)
+
+
+def test_tqdm_bar_counts_to_the_total():
+    pytest.importorskip("tqdm")
+    stream = io.StringIO()
+    bar = progress.progress_bar("monte carlo", "runs", use_tqdm=True, file=stream)
+    for done in (4, 8, 10):
+        bar(done, 10, 0.1 * done)
+    assert bar.bar is None  # closed at the total
+    text = stream.getvalue()
+    assert "monte carlo" in text and "10/10" in text
+
+
+def test_default_progress_uses_tqdm_when_installed(monkeypatch):
+    created = []
+    monkeypatch.setattr(progress, "tqdm_available", lambda: True)
+    real = progress._Bar.__call__
+
+    def spy(self, *args, **kwargs):
+        created.append(args[:2])
+        self.options.setdefault("file", io.StringIO())
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(progress._Bar, "__call__", spy)
+    pytest.importorskip("tqdm")
+    jaxfdi.monte_carlo(run_one, jax.random.key(0), 6, jnp.ones(6), chunk_size=3, progress=True)
+    assert created == [(3, 6), (6, 6)]
+
+
+def test_log_lines_without_tqdm(caplog):
+    caplog.set_level(logging.INFO, logger="jaxfdi")
+    hook = progress.progress_bar("tuning", "steps", use_tqdm=False, interval=3600.0)
+    for done in range(1, 6):
+        hook(done, 5, float(done))
+    messages = [r.getMessage() for r in caplog.records if r.name == "jaxfdi"]
+    assert messages == ["tuning: 1/5 steps, 1.0 s, 1 steps/s", "tuning: 5/5 steps, 5.0 s, 1 steps/s"]
+
+
+def test_quiet_logging_drops_info_keeps_warnings():
+    stream = io.StringIO()
+    handler = progress.configure_logging(quiet=True, stream=stream)
+    try:
+        progress.logger.info("progress line")
+        progress.logger.warning("a warning")
+        assert stream.getvalue() == "a warning\n"
+        progress.configure_logging(quiet=False, stream=stream)
+        progress.logger.info("now shown")
+        assert stream.getvalue().endswith("now shown\n")
+        assert sum(getattr(h, "_jaxfdi_cli", False) for h in progress.logger.handlers) == 1
+    finally:
+        for h in list(progress.logger.handlers):
+            if getattr(h, "_jaxfdi_cli", False):
+                progress.logger.removeHandler(h)
+        progress.logger.setLevel(logging.NOTSET)
+        del handler
+
+
+def test_without_tqdm_or_logging_setup_plain_lines_on_stderr(monkeypatch, capfd):
+    """monte_carlo(progress=True) with no tqdm and no handler on the jaxfdi logger: whole
+    lines on stderr (no carriage returns, which Jupyter renders badly)."""
+    monkeypatch.setattr(progress, "tqdm_available", lambda: False)
+    monkeypatch.setattr(progress.logger, "handlers", [])
+    monkeypatch.setattr(progress.logger, "propagate", False)
+    jaxfdi.monte_carlo(run_one, jax.random.key(0), 6, jnp.ones(6), chunk_size=3, progress=True)
+    err = capfd.readouterr().err
+    assert "\r" not in err and err.startswith("monte carlo: 3/6 runs") and "monte carlo: 6/6 runs" in err

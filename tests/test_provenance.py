@@ -1,0 +1,167 @@
+"""Every results file the CLI writes records how it was made (issue 28), ``jaxfdi
+--version``, and module names that no function shadows.
+
+The scenarios are not run (each costs a minute or more): a fake runner goes through the
+same writers (``cli._write_study``, ``_io.write_json``, ``tuning.save_params`` with the
+CLI's meta), and every real runner is checked to write its JSON through them only."""
+import ast
+import inspect
+import json
+import subprocess
+import sys
+import textwrap
+import types
+import warnings
+
+import jax
+import jaxlib
+import numpy as np
+import pytest
+
+import jaxfdi
+from jaxfdi import _io, cli
+
+FIELDS = {"jaxfdi", "jax", "jaxlib", "numpy", "python", "backend", "device_kind", "device_count", "x64", "command",
+          "seed", "created"}
+
+
+@pytest.fixture(autouse=True)
+def xla_cache_in_tmp(monkeypatch, tmp_path_factory):
+    """``main`` turns the persistent XLA cache on: here in a tmp folder of its own."""
+    monkeypatch.setenv("JAXFDI_CACHE_DIR", str(tmp_path_factory.mktemp("xla-cache")))
+
+
+def check_provenance(record, argv, seed):
+    assert set(record) == FIELDS
+    assert record["jaxfdi"] == jaxfdi.__version__ and record["jax"] == jax.__version__
+    assert record["jaxlib"] == jaxlib.__version__ and record["numpy"] == np.__version__
+    assert record["backend"] == jax.default_backend()
+    assert record["device_kind"] == jax.local_devices()[0].device_kind
+    assert record["x64"] is True  # main turns float64 on
+    assert record["command"] == "jaxfdi " + " ".join(argv) and record["seed"] == seed
+
+
+def fake_study(args, folder):
+    """A study written the way the scenario runners write theirs."""
+    study = types.SimpleNamespace(config={"runs": args.runs, "seed": args.seed}, rows=[{"rate": 1.0}])
+    return cli._write_study(study, args, folder, "fake.json", lambda where: [], 0.5)
+
+
+def test_study_json_written_by_the_cli_carries_provenance(monkeypatch, tmp_path):
+    monkeypatch.setitem(cli.RUNNERS, "fake", cli.Runner(fake_study, "fake"))
+    argv = ["run", "fake", "--runs", "3", "--seed", "17", "--quiet", "--out", str(tmp_path / "out")]
+    assert cli.main(argv) == 0
+    data = json.loads((tmp_path / "out" / "fake.json").read_text())
+    assert data["config"] == {"runs": 3, "seed": 17} and data["rows"] == [{"rate": 1.0}]
+    check_provenance(data["provenance"], argv, 17)
+
+
+def test_tuned_parameters_npz_and_json_carry_provenance(monkeypatch, tmp_path):
+    """The tuners' meta holds ``_io.provenance()``, written into the .npz by save_params."""
+    from jaxfdi.tuning import load_params, positive, save_params
+
+    def fake_tune(args, folder):
+        save_params(folder / "fake-tuned.npz", {"q": np.zeros(2)}, {"q": positive()},
+                    {"seed": args.seed, "provenance": _io.provenance()})
+        _io.write_json(folder / "fake-tuning.json", {"config": {"seed": args.seed}})
+        return "wrote"
+
+    monkeypatch.setitem(cli.TUNERS, "fake", cli.Runner(fake_tune, "fake"))
+    argv = ["tune", "fake", "--seed", "5", "--quiet", "--out", str(tmp_path / "out")]
+    assert cli.main(argv) == 0
+    _, _, meta = load_params(tmp_path / "out" / "fake-tuned.npz")
+    check_provenance(meta["provenance"], argv, 5)
+    check_provenance(json.loads((tmp_path / "out" / "fake-tuning.json").read_text())["provenance"], argv, 5)
+
+
+def _calls(function):
+    """Names of the functions called in ``function``'s source (``a.b.c(...)`` -> ``c``)."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(function)))
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            f = node.func
+            names.add(f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", None))
+    return names, tree
+
+
+@pytest.mark.parametrize("kind,name", [("run", n) for n in sorted(cli.RUNNERS)] + [("tune", n) for n in sorted(cli.TUNERS)])
+def test_every_cli_command_writes_json_through_the_provenance_writer(kind, name):
+    """Each runner writes its JSON with ``_io.write_json`` (directly or by
+    ``_write_study``), never ``json.dump``; a tuner's ``save_params`` meta names
+    ``provenance``."""
+    runner = (cli.RUNNERS if kind == "run" else cli.TUNERS)[name]
+    calls, tree = _calls(runner.run)
+    assert calls & {"write_json", "_write_study"}, f"{kind} {name} writes no JSON through _io.write_json"
+    assert not calls & {"dump", "dumps", "savez", "savez_compressed", "save"}, f"{kind} {name} writes files itself"
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "save_params":
+            meta = node.args[3] if len(node.args) > 3 else None
+            assert isinstance(meta, ast.Dict) and "provenance" in [getattr(k, "value", None) for k in meta.keys]
+
+
+def test_write_json_keeps_an_existing_provenance_and_leaves_non_dicts_alone(tmp_path):
+    mine = {"jaxfdi": "x"}
+    _io.write_json(tmp_path / "a.json", {"provenance": mine})
+    assert json.loads((tmp_path / "a.json").read_text()) == {"provenance": mine}
+    _io.write_json(tmp_path / "b.json", [1, 2])
+    assert json.loads((tmp_path / "b.json").read_text()) == [1, 2]
+
+
+def test_version_option():
+    proc = subprocess.run([sys.executable, "-m", "jaxfdi", "--version"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and proc.stdout.strip() == f"jaxfdi {jaxfdi.__version__}"
+
+
+# --- module names that no function shadows -------------------------------------------------
+
+SHADOWED = [("jaxfdi", "monitor"), ("jaxfdi", "simulate"), ("jaxfdi.filters", "time_varying"),
+            ("jaxfdi.detection", "dual_filter"), ("jaxfdi.models.f16", "linearize"), ("jaxfdi.models.f16", "trim")]
+
+
+@pytest.mark.parametrize("package,name", SHADOWED)
+def test_module_attribute_is_the_module_and_the_function_keeps_its_path(package, name):
+    import importlib
+
+    module = importlib.import_module(f"{package}.{name}")
+    assert isinstance(module, types.ModuleType) and module.__name__ == f"{package}.{name}"
+    assert getattr(importlib.import_module(package), name) is module
+    function = getattr(module, name)
+    assert inspect.isfunction(function) and function.__module__ == module.__name__
+
+
+def test_import_as_gives_the_module_and_calling_it_is_deprecated():
+    import jax.numpy as jnp
+
+    import jaxfdi.monitor as m
+    import jaxfdi.simulate as s
+    from jaxfdi.monitor import monitor
+    from jaxfdi.simulate import simulate
+
+    assert isinstance(m, types.ModuleType) and isinstance(s, types.ModuleType)
+    assert m.monitor is monitor and s.simulate is simulate
+    model = jaxfdi.linear_gaussian_model(jnp.eye(1) * 0.9, jnp.eye(1), 0.01 * jnp.eye(1), 0.01 * jnp.eye(1))
+    args = (jaxfdi.linear_simulator(model), jnp.ones(1), jnp.zeros((4, 0)), jax.random.key(0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = jaxfdi.simulate(*args)
+    assert [w.category for w in caught] == [DeprecationWarning]
+    assert "jaxfdi.simulate.simulate" in str(caught[0].message)
+    new = simulate(*args)
+    np.testing.assert_array_equal(old[1].measurement, new[1].measurement)
+
+
+def test_no_module_is_shadowed_by_a_name_of_its_package():
+    """Every submodule of jaxfdi is what its package's attribute of that name holds."""
+    import importlib
+    import pkgutil
+
+    shadowed = []
+    for info in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi."):
+        if info.name.endswith("__main__"):
+            continue
+        module = importlib.import_module(info.name)
+        package, _, short = info.name.rpartition(".")
+        if getattr(importlib.import_module(package), short, module) is not module:
+            shadowed.append(info.name)
+    assert shadowed == []

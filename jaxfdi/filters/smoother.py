@@ -24,6 +24,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.filters._base import FilterInfo
+from jaxfdi.filters.parallel import _mT, _mv, _sym  # batched transpose, symmetric part, matrix-vector
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -39,18 +40,6 @@ class SmoothingElement(NamedTuple):
     E: Array  # (n, n)
     g: Array  # (n,)
     L: Array  # (n, n)
-
-
-def _mT(a: Array) -> Array:
-    return jnp.swapaxes(a, -1, -2)
-
-
-def _sym(a: Array) -> Array:
-    return 0.5 * (a + _mT(a))
-
-
-def _mv(a: Array, x: Array) -> Array:
-    return jnp.einsum("...ij,...j->...i", a, x)
 
 
 def smoother_gains(Phi: Array, filtered_cov: Array, next_predicted_cov: Array) -> Array:

@@ -32,7 +32,6 @@ Methods (each a filter + an online detector fused with the plant in one scan):
 """
 from __future__ import annotations
 
-import sys
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -58,6 +57,7 @@ from jaxfdi.models.engine import TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.monitor import monitor
 from jaxfdi.montecarlo import monte_carlo
+from jaxfdi.progress import logger
 from jaxfdi.riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi.simulate import linear_simulator, simulate
@@ -403,7 +403,7 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
     records, rows = {}, []
     for name in chosen:
         if progress:
-            print(f"{name}:", file=sys.stderr, flush=True)
+            logger.info("%s:", name)
         records[name] = run_method(every[name], runs, seed, duration, onset_time, progress=progress)
         rows += summarize_method(name, every[name].paper, records[name], runs, steps)
     figures = {} if figure_runs < 1 else _figure_data(every, chosen, settings, figure_runs, seed + 1, duration,

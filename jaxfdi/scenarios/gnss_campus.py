@@ -25,7 +25,6 @@ are a ``vmap`` over keys.
 from __future__ import annotations
 
 import math
-import sys
 from typing import NamedTuple
 
 import jax
@@ -39,6 +38,7 @@ from jaxfdi.gnss.protection import ALERT_LIMITS
 from jaxfdi.loop import episode_scorer, feedforward, run_loop
 from jaxfdi.metrics import summarize_episodes
 from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.progress import logger
 
 WEEK = 2086
 START_TOW = 259200.0 + 2700.0        # 2020-01-01 00:45:00 GPST
@@ -157,8 +157,8 @@ def gnss_campus_study(runs: int = 100, seed: int = 0, progress: bool = False, al
     faults = jax.tree_util.tree_map(lambda f, n: f.at[:runs].set(n), faults, no_fault)
     case_index = jnp.asarray(np.concatenate([np.zeros(runs, int), np.ones(slots.size, int)]))
     if progress:
-        print(f"gnss-campus: {runs} campus runs and {slots.size} park runs ({len(candidates)} satellites) of "
-              f"{CAMPUS_STEPS} s", file=sys.stderr, flush=True)
+        logger.info("gnss-campus: %d campus runs and %d park runs (%d satellites) of %d s", runs, slots.size,
+                    len(candidates), CAMPUS_STEPS)
     result = _runs(table, jnp.stack([campus.path, park.path]), jnp.stack([campus.visible, park.visible]),
                    jnp.stack([campus.sigma, park.sigma]), case_index, faults,
                    jax.random.split(jax.random.key(seed), runs + slots.size))

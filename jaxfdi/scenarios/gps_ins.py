@@ -34,7 +34,6 @@ and the notebook (the satellite faults that would end after the onset are then l
 from __future__ import annotations
 
 import math
-import sys
 from typing import NamedTuple
 
 import jax
@@ -42,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats as _scipy_stats
 
-from jaxfdi.progress import progress_bar
+from jaxfdi.progress import logger, progress_bar
 from jaxfdi import faults as flt
 from jaxfdi.data import data_path
 from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
@@ -344,8 +343,7 @@ def gps_ins_study(runs: int = 100, seed: int = 0, progress: bool = False, beyond
         specs = [(s, c, m) for _, s, c, m, n in mine for _ in range(n)]
         report = None
         if progress:
-            print(f"gps-ins: {len(specs)} {flight} flights of {size.flight_s} s at {size.imu_rate} Hz", file=sys.stderr,
-                  flush=True)
+            logger.info("gps-ins: %d %s flights of %s s at %s Hz", len(specs), flight, size.flight_s, size.imu_rate)
 
             bar = progress_bar(f"gps-ins {flight}", "flights")
 

@@ -29,6 +29,9 @@ Methods (each a filter + an online detector fused with the plant in one scan):
   the slowest to cross, confirms over 2 steps, the others over 3. This one is the
   library's answer to the paper's IMM claim (no false alarm, every fault isolated, delays
   within 0.05 s); the lengths were chosen by hand on runs of seed 2, not the study's.
+
+Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
+Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
 """
 from __future__ import annotations
 

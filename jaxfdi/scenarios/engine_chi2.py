@@ -7,6 +7,9 @@ point of that output (RPM 135, P2 16.99, T2 2.21 K, P4 8.285, T4 5.125 K). Plus 
 fault-free case for the false-alarm rate. The fault-blind KF starts at the true
 (zero) perturbation with ``P0 = Q``; the test is the windowed NIS sum against
 ``chi2_threshold(window * 5, pfa)``.
+
+Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
+Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
 """
 from __future__ import annotations
 

@@ -12,6 +12,9 @@ after it; on the log scale the temperature is relative, the same for every windo
 The window is an integer, so it is chosen by the validation loss over a grid, the
 continuous parameters trained for each. The test alone does not isolate; its table has
 detection, false-alarm and delay columns.
+
+Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
+Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
 """
 from __future__ import annotations
 

@@ -31,6 +31,9 @@ the detector is ``mode_probability_detector(mu_T, confirm_steps=c)`` and the los
 surrogate, the fault-mode probabilities' minimum over the last c steps
 (``confirmed_probabilities``). The held-out comparison uses the same records and
 summaries as ``jaxfdi run engine``.
+
+Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
+Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
 """
 from __future__ import annotations
 

@@ -25,6 +25,9 @@ per-axis noise sigma = 0.01 rad/s (the paper's case, a bias of 0.1 rad/s on both
 sensor 1, is FNR 10). The fault's direction ``angle`` is measured in the sensor's own
 axes: ``f = FNR sigma sqrt(2) (cos angle, sin angle)``; Table 1's singular directions are
 at 45, 135, 225 and 315 deg for every sensor.
+
+Reference: Park, Kim, Park & Roh (2004), "Hybrid Fault Detection and Isolation Method for Inertial
+Sensors Using Unscented Kalman Filter" (seed 000; CITATION.cff).
 """
 from __future__ import annotations
 

@@ -21,6 +21,10 @@ are a ``vmap`` over keys.
   500-600 s — as one run's three episodes (``faults.concat_faults``), on each satellite
   in view for the whole run in turn; the headline row is the highest satellite at the
   start (the paper does not say which it used).
+
+Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection
+Algorithm for UAV using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781
+(seed 002; CITATION.cff).
 """
 from __future__ import annotations
 

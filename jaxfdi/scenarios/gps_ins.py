@@ -30,6 +30,10 @@ case of both flights.
 ``StudySize`` shortens the flights, moves the onset and lowers the IMU rate for tests
 and the notebook (the satellite faults that would end after the onset are then left out);
 ``PAPER_SIZE`` (1200 s, 800 s, 100 Hz) is the CLI's.
+
+Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection
+Algorithm for UAV using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781
+(seed 002; CITATION.cff).
 """
 from __future__ import annotations
 

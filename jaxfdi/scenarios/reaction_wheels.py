@@ -40,6 +40,9 @@ step (it must follow a fault for ``F`` to see it; a matched ``Q`` ~ 1e-6 leaves 
 blind as the prediction); the banks' EKFs and the NIS test's use 1e-5; banks engaged with
 their prior widened by 2e-3 rad/s (the nominal filter lags a stop's rate jump); isolators
 confirm over ``CONFIRM_STEPS``; a fault's onset uniform in 15-25 s.
+
+Reference: Choi & Park (2009), "Design of Fault Isolator of Satellite Reaction Wheel System Using Dual
+Filter and Multi-hypothesis Extended Kalman Filter" (seed 004; CITATION.cff).
 """
 from __future__ import annotations
 

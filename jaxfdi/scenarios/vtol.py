@@ -34,6 +34,9 @@ Departures and findings (see also the closing notes of issue 5):
   also explained by an s4 bias in steady state (its direction lies within 0.4 % of what
   an s4 bias and the decoupled input can produce); the signature decisions still isolate
   it, in the transient after the onset (MDWT-ST 1.00 over 100 runs, median 7 steps).
+
+Reference: Lee & Lyou, "Fault Tolerant Controller Design for Linear Stochastic Systems with
+Uncertainties" (seed 001; CITATION.cff).
 """
 from __future__ import annotations
 

@@ -11,6 +11,14 @@ and the fault is isolated to the hypothesis with the largest credit once that cr
 large enough. ``F`` scales with the operating point (rates, wheel momentum, fault size),
 so besides the paper's absolute threshold the isolator offers a scale-free one on the
 relative credit ``C_x / F_mean`` in ``[0, 1]``: 1 when ``F_x = 0``.
+
+Limit (issue 27 item 8; ``benchmarks/wheels_credit.py``): a dual filter's ``F`` is a
+scalar, ``F_x ~ |g_x . (x_PF - x_EKF)|`` with ``g_x = grad det A_x``, so it sees a
+hypothesis's state discrepancy only along ``g_x``. A wrong hypothesis whose prediction
+drifts nearly orthogonally to its ``g_x`` keeps an ``F`` as small as the right one's (in
+the reaction-wheel pyramid: a stop of wheel 1 against hypothesis 3, the opposite wheel),
+and noise decides between them; a likelihood bank on the innovation vectors does not
+have this blind direction.
 """
 from __future__ import annotations
 

@@ -16,10 +16,12 @@ the controller ``control.attitude.wheel_attitude_controller``. Step ``k``, ``t =
    by default (``engage_on``: the paper's ``F`` is blind to some stops, notebook 05);
 4. two banks over the stop hypotheses (wheel ``i`` stopped, seed 004 eq. 9) run slaved
    to the nominal filter (re-initialised from its posterior every step) until the
-   detection, then on their own — the paper's two-stage architecture (Fig. 10): the
-   credit bank (a dual filter per hypothesis, credits ``C_x``, eq. 10) and the
-   likelihood bank (the static MM filter over the nominal model and the four stop
-   hypotheses, mode probabilities from the innovations' likelihoods);
+   detection, then on their own (each hypothesis's prediction filter starting from its
+   EKF's posterior: ``wheel_fdi``, ``restart_prediction``) — the paper's two-stage
+   architecture (Fig. 10): the credit bank (a dual filter per hypothesis, credits
+   ``C_x``, eq. 10) and the likelihood bank (the static MM filter over the nominal
+   model and the four stop hypotheses, mode probabilities from the innovations'
+   likelihoods);
 5. the wheels deliver the commanded torques, with the fault (``wheel_fault``: stop,
    stuck, torque bias, gain loss) and torque noise, and the truth
    (attitude quaternion, rates, wheel speeds) moves one RK4 step with a disturbance torque.
@@ -209,10 +211,19 @@ class WheelOutput(NamedTuple):
     engaged: Array               # () bool: the banks ran on their own at this step
 
 
-def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis"):
+def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis", restart_prediction: bool = True):
     """Seed 004's two-stage FDI as a ``loop.FDI`` and its initial state (module doc,
     steps 3-4): the dual filter's ``F``, the windowed NIS test of a nominal EKF, and the
-    credit and likelihood banks slaved to the nominal filter until the engaging alarm."""
+    credit and likelihood banks slaved to the nominal filter until the engaging alarm.
+
+    ``restart_prediction`` (default, issue 27 item 8): at the engaging step each
+    hypothesis's prediction filter starts from its own EKF's posterior of that step, not
+    from the nominal filter's predicted mean. The nominal filter lags a stop's rate jump
+    (``I^-1 I_w Omega_i a_i``, ~0.017 rad/s), and a prediction started there carries the
+    lag for good: every ``F_x`` is then the same lag projected on ``grad det A_x``, and
+    the credits rank the hypotheses by that geometry, whichever wheel stopped
+    (``benchmarks/wheels_credit.py``). ``False`` keeps the former start (for comparison).
+    """
     if engage_on not in ("nis", "fdp"):
         raise ValueError(f"engage_on: expected 'nis' or 'fdp', got {engage_on!r}")
     if estimator not in ("ekf", "ukf"):
@@ -273,6 +284,9 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
         post = GaussianState(dual_info.estimator.filtered_mean, dual_info.estimator.filtered_cov)
         reset_bank, reset_mm = slaved(post, u)
         keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged, a, b), new, old)  # noqa: E731
+        if restart_prediction:  # the prediction of a bank that was slaved until now starts from its EKF's posterior
+            restart = jax.vmap(lambda p, m: wheel_rate_transition(m, u, p))(hypotheses, bank_info.estimator.filtered_mean)
+            bank = bank._replace(prediction=jnp.where(engaged_before, bank.prediction, restart))
         bank, mm_state = keep(bank, reset_bank), keep(mm_state, reset_mm)
         credit_state, credit_out = credits.step(c["credit"], bank_info.detection_parameter)
         mode_state, mode_out = mode_decision.step(c["mode"], mm_info.mode_prob)

@@ -109,3 +109,20 @@ __all__ += [
     "isolation_threshold", "parity_space", "parity_vector", "singular_directions", "singular_faults",
     "subspace_angles", "isolability", "optimize_configuration",
 ]
+
+# issue 27 item 6: the GLRT's steady-state check and the Willsky-Jones correction
+from jaxfdi.detection.glrt import check_steady_state, steady_state_tolerance  # noqa: E402
+from jaxfdi.detection.glrt_correction import (  # noqa: E402
+    CorrectedGLRT,
+    CorrectedGLRTInfo,
+    CorrectedGLRTState,
+    corrected_glrt,
+)
+from jaxfdi.detection.glrt_transient import (  # noqa: E402
+    TransientGLRTState,
+    time_varying_signatures,
+    transient_glrt_detector,
+)
+
+__all__ += ["CorrectedGLRT", "CorrectedGLRTInfo", "CorrectedGLRTState", "check_steady_state", "corrected_glrt",
+            "steady_state_tolerance", "TransientGLRTState", "time_varying_signatures", "transient_glrt_detector"]

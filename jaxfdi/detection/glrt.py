@@ -29,6 +29,22 @@ of the innovation is ``G[l] = C e_{theta+l} + h`` for lag ``l = k - theta >= 0``
 So a sensor fault shows at its onset step (``G[0] = e_j``); an actuator fault shows one
 step later (``G[0] = 0``, ``G[1] = C Gamma_i``) unless it also passes through ``D``.
 
+Steady state (an assumption made explicit). The signatures above and the ``chi2(1)`` law
+need a *constant* gain ``K`` and innovation covariance ``S``: the filter must run in
+steady state, ``P[k|k-1] = P_ss`` (the DARE solution, ``steady_state_kalman``).
+``glrt_detector``, ``recursive_glrt_detector`` (``glrt_recursive``) and ``corrected_glrt``
+(``glrt_correction``) take the steady state only: they raise ``ValueError`` (naming
+``gain``, ``innovation_cov`` or ``cov`` and the expected ``steady_state_kalman(model)``
+field) when a concrete value differs from the model's steady state by more than
+``steady_state_tolerance(dtype)`` (relative, Frobenius norm: ``1e-6`` in float64,
+``sqrt(eps)`` in float32). Under ``jit``/``vmap`` of the construction the values are
+unknown and the check is skipped. A filter started from another prior is served by
+``transient_glrt_detector`` (``glrt_transient``: time-varying gains and signatures).
+
+The forms share the interface here: ``detector_setup`` (checked arguments and
+signatures), ``GLREngine`` (the window: ``windowed_engine`` here, ``recursive_engine`` in
+``glrt_recursive``), ``engine_detector`` and ``decide``.
+
 Timing. The window ends at the current step ``k``; an onset *offset* ``o`` in
 ``0..N-1`` stands for ``theta = k - o`` (``o = 0``: the fault began at this step). The
 onset estimate of a decision at step ``k`` is therefore ``k - onset_offset``.
@@ -36,7 +52,7 @@ onset estimate of a decision at step ``k`` is therefore ``k - onset_offset``.
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -47,6 +63,7 @@ from jax import Array
 from jaxfdi import _checks, _linalg
 from jaxfdi.detection.chi2 import Decision, Detector, _check_representable, chi2_threshold
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.riccati import steady_state_kalman
 
 #: the threshold seed 003 uses (set by simulation to suppress T4 false alarms, sec. 3.3).
 PAPER_USED_THRESHOLD = 200.0
@@ -115,24 +132,24 @@ def fault_signatures(model: LinearGaussianModel, gain: Array, directions: FaultD
     n, _, m = validate_linear_model(model)
     window = _check_window(window)
     _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
-    _checks.check_shape("directions.state", directions.state, (n, None), "n states x d directions")
-    d = _checks.shape_of(directions.state)[1]
-    _checks.check_shape("directions.output", directions.output, (m, d), "m outputs x d directions")
+    _check_directions(directions, n, m)
     dtype = jnp.result_type(gain)
-    return _signatures(*(jnp.asarray(a, dtype) for a in (model.Phi, model.C, gain, directions.state,
-                                                          directions.output)), window)
+    return step_response(*(jnp.asarray(a, dtype) for a in (model.Phi, model.C, gain, directions.state,
+                                                            directions.output)), window)[1]
 
 
 @partial(jax.jit, static_argnums=5)
-def _signatures(Phi: Array, C: Array, gain: Array, g: Array, h: Array, window: int) -> Array:
+def step_response(Phi: Array, C: Array, gain: Array, g: Array, h: Array, length: int) -> tuple[Array, Array]:
+    """A unit step's share of the steady-state filter's prediction error ``E[l]``,
+    (length, n, d), and of its innovation ``G[l] = C E[l] + h``, (length, m, d), at lags
+    ``l = 0..length-1``: ``E[0] = 0``, ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h``."""
     closed_loop = Phi @ (jnp.eye(Phi.shape[0], dtype=Phi.dtype) - gain @ C)
     forcing = g - Phi @ (gain @ h)
 
     def lag(E, _):
-        return closed_loop @ E + forcing, C @ E + h
+        return closed_loop @ E + forcing, (E, C @ E + h)
 
-    _, signatures = jax.lax.scan(lag, jnp.zeros_like(g), None, length=window)
-    return signatures
+    return jax.lax.scan(lag, jnp.zeros_like(g), None, length=length)[1]
 
 
 def glr_by_onset(innovations: Array, signatures: Array, innovation_cov: Array | None = None,
@@ -224,23 +241,21 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
     """
     setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
                            overlap_sensor)
-    whitener, onset_signatures, information = _detector_tensors(setup.signatures, setup.innovation_cov)
+    whitener, engine = windowed_engine(setup)
+    return engine_detector(setup, whitener, engine)
+
+
+def engine_detector(setup: DetectorSetup, whitener: Array, engine: GLREngine) -> Detector:
+    """The online ``Detector`` of an engine (windowed or recursive): whiten, update, decide."""
     m, dtype = setup.innovation_cov.shape[0], setup.innovation_cov.dtype
 
-    def init() -> GLRTState:
-        zero = jnp.zeros((), jnp.int32)
-        return GLRTState(jnp.zeros((window, m), dtype), zero, zero)
-
-    def step(state: GLRTState, innovation: Array):
+    def step(state, innovation: Array):
         _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
-        white = whitener @ jnp.asarray(innovation, dtype)
-        buffer = jnp.concatenate([state.window[1:], white[None]], axis=0)
-        count = jnp.minimum(state.count + 1, window)
-        result = _maximise(_glr_core(buffer, onset_signatures, information, count))
+        state, result = engine.update(state, whitener @ jnp.asarray(innovation, dtype))
         decision, onset_offset = decide(setup, result)
-        return GLRTState(buffer, count, onset_offset), decision
+        return state._replace(onset_offset=onset_offset), decision
 
-    return Detector(init, step)
+    return Detector(engine.init, step)
 
 
 class DetectorSetup(NamedTuple):
@@ -256,11 +271,22 @@ class DetectorSetup(NamedTuple):
 
 def detector_setup(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
                    isolation: str, actuator_feedthrough: bool, overlap_sensor: int) -> DetectorSetup:
-    """Check a GLRT detector's arguments (``glrt_detector``) and compute its signatures."""
+    """Check a GLRT detector's arguments (``glrt_detector``) and compute its signatures.
+
+    ``gain`` and ``innovation_cov`` must be the model's steady state (``check_steady_state``)."""
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)
     _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
     _checks.check_covariance("innovation_cov", innovation_cov, m)
+    check_steady_state(model, gain=gain, innovation_cov=innovation_cov)
+    _check_decision_args(threshold, isolation, overlap_sensor, m)
+    dtype = jnp.result_type(gain, innovation_cov)
+    signatures = fault_signatures(model, jnp.asarray(gain, dtype), fault_directions(model, actuator_feedthrough), window)
+    return DetectorSetup(signatures, jnp.asarray(innovation_cov, dtype), threshold, isolation, nu,
+                         nu + int(overlap_sensor) % m)
+
+
+def _check_decision_args(threshold, isolation: str, overlap_sensor: int, m: int) -> None:
     value = _checks.concrete(threshold)
     if value is not None and not (value.shape == () and np.isfinite(value) and value > 0):
         raise ValueError(f"threshold: expected a positive scalar, got {threshold}")
@@ -268,10 +294,6 @@ def detector_setup(model: LinearGaussianModel, gain: Array, innovation_cov: Arra
         raise ValueError(f"isolation: expected 'max' or 'paper', got {isolation!r}")
     if not -m <= int(overlap_sensor) < m:
         raise ValueError(f"overlap_sensor: expected a sensor index in [-{m}, {m}), got {overlap_sensor}")
-    dtype = jnp.result_type(gain, innovation_cov)
-    signatures = fault_signatures(model, jnp.asarray(gain, dtype), fault_directions(model, actuator_feedthrough), window)
-    return DetectorSetup(signatures, jnp.asarray(innovation_cov, dtype), threshold, isolation, nu,
-                         nu + int(overlap_sensor) % m)
 
 
 def decide(setup: DetectorSetup, result: GLRResult) -> tuple[Decision, Array]:
@@ -284,6 +306,80 @@ def decide(setup: DetectorSetup, result: GLRResult) -> tuple[Decision, Array]:
         direction = _paper_isolation(result.statistic, setup.threshold, setup.num_inputs, setup.sensor_t4, direction)
     decision = Decision(statistic, alarm, (1 + direction).astype(jnp.int32), result.magnitude[direction])
     return decision, result.onset_offset[direction]
+
+
+def steady_state_tolerance(dtype) -> float:
+    """Relative (Frobenius) tolerance of ``check_steady_state``: ``max(1e-6, sqrt(eps))``
+    (``1e-6`` in float64, ``3.5e-4`` in float32)."""
+    return max(1e-6, float(np.sqrt(np.finfo(dtype).eps)))
+
+
+def check_steady_state(model: LinearGaussianModel, gain=None, innovation_cov=None, cov=None) -> None:
+    """Raise ``ValueError`` unless the given filter quantities are the model's steady state.
+
+    ``gain`` (K), ``innovation_cov`` (S) and ``cov`` (the filter's prior ``P[0|-1]``) are
+    compared with ``steady_state_kalman(model)``: relative Frobenius difference at most
+    ``steady_state_tolerance(dtype)``. The GLR signatures assume a constant gain (module
+    docstring, "Steady state"). Skipped for values unknown at trace time.
+    """
+    given = {name: value for name, value in (("gain", gain), ("innovation_cov", innovation_cov), ("cov", cov))
+             if value is not None}
+    values = {name: _checks.concrete(value) for name, value in given.items()}
+    fixed = [_checks.concrete(a) for a in (model.Phi, model.C, model.Q, model.R)]
+    if not values or any(v is None for v in values.values()) or any(a is None for a in fixed):
+        return
+    steady = steady_state_kalman(model)
+    expected = {"gain": (steady.gain, "steady_state_kalman(model).gain"),
+                "innovation_cov": (steady.innovation_cov, "steady_state_kalman(model).innovation_cov"),
+                "cov": (steady.predicted_cov, "steady_state_kalman(model).predicted_cov (P_ss, the DARE solution)")}
+    for name, value in values.items():
+        reference, what = expected[name]
+        reference = np.asarray(reference, np.float64)
+        dtype = value.dtype if np.issubdtype(value.dtype, np.floating) else np.float64
+        tol = steady_state_tolerance(dtype)
+        scale = max(float(np.linalg.norm(reference)), np.finfo(np.float64).tiny)
+        difference = float(np.linalg.norm(value.astype(np.float64) - reference)) / scale
+        if not difference <= tol:
+            raise ValueError(
+                f"{name}: expected {what}: the GLR signatures assume a filter in steady state "
+                f"(constant gain, P[k|k-1] = P_ss); got one that differs from it by {difference:.3g} relative "
+                f"(Frobenius), over the tolerance {tol:.3g}. Start the filter at "
+                "kf.init(mean, steady_state_kalman(model).predicted_cov), or test a filter started from "
+                "another prior with transient_glrt_detector(model, prior_cov, ...)")
+
+
+class GLREngine(NamedTuple):
+    """The GLR's window of one detector form: ``update(state, white (m,)) -> (state,
+    GLRResult)``, ``remove(state, direction, offset, size) -> state`` takes the whitened
+    signature of a step of ``size`` in ``direction`` with onset offset ``offset`` out of
+    the window (the data seen), and ``information`` (N, d) is ``R_i(k - o)``."""
+
+    init: Callable[[], Any]
+    update: Callable[[Any, Array], tuple[Any, GLRResult]]
+    remove: Callable[[Any, Array, Array, Array], Any]
+    information: Array
+
+
+def windowed_engine(setup: DetectorSetup) -> tuple[Array, GLREngine]:
+    """The whitener ``L^-1`` and the windowed (O(N^2) a step) engine of ``glrt_detector``."""
+    whitener, onset_signatures, information = _detector_tensors(setup.signatures, setup.innovation_cov)
+    window, m = setup.signatures.shape[:2]
+    dtype = setup.innovation_cov.dtype
+
+    def init() -> GLRTState:
+        zero = jnp.zeros((), jnp.int32)
+        return GLRTState(jnp.zeros((window, m), dtype), zero, zero)
+
+    def update(state: GLRTState, white: Array) -> tuple[GLRTState, GLRResult]:
+        buffer = jnp.concatenate([state.window[1:], white[None]], axis=0)
+        count = jnp.minimum(state.count + 1, window)
+        result = _maximise(_glr_core(buffer, onset_signatures, information, count))
+        return state._replace(window=buffer, count=count), result
+
+    def remove(state: GLRTState, direction, offset, size) -> GLRTState:
+        return state._replace(window=state.window - size * onset_signatures[offset, :, :, direction])
+
+    return whitener, GLREngine(init, update, remove, information)
 
 
 def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallback: Array) -> Array:
@@ -301,6 +397,13 @@ def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallb
 
 def _check_window(window) -> int:
     return _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps N")
+
+
+def _check_directions(directions: FaultDirections, n: int, m: int) -> None:
+    """Check ``directions`` against ``n`` states and ``m`` outputs (``d`` columns each)."""
+    _checks.check_shape("directions.state", directions.state, (n, None), "n states x d directions")
+    d = _checks.shape_of(directions.state)[1]
+    _checks.check_shape("directions.output", directions.output, (m, d), "m outputs x d directions")
 
 
 def _check_glr_inputs(innovations, signatures, innovation_cov):

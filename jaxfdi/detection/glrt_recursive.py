@@ -19,6 +19,13 @@ information ``R_i(theta) = sum_{l<=o} ||Gw_i[l]||^2`` depends only on the offset
 the windowed form, and the statistic, estimate, isolation and alarms are the same
 functions of ``d`` (``glrt.glr_from_correlation``, ``glrt.decide``): the two detectors
 agree to round-off (the sums are added in another order).
+
+Removing a detected fault (the Willsky-Jones correction of ``glrt_correction``)
+subtracts ``nu_hat Gw_i[j - theta_hat]`` from the window's ``w_j``; in the running sums
+that is ``d_i'(k - o') -= nu_hat X[o', o_hat, i', i]`` with the cross-information
+``X[o', o, i', i] = sum_p T[o', p, :, i'] . T[o, p, :, i]`` of the onsets' whitened
+signatures ``T`` over the window positions ``p`` (``glrt._onset_tensors``), (N, N, d, d).
+The steady-state assumption is the windowed form's (``glrt`` module docstring).
 """
 from __future__ import annotations
 
@@ -28,9 +35,18 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
 from jaxfdi.detection.chi2 import Detector
-from jaxfdi.detection.glrt import _maximise, _whitener, decide, detector_setup, glr_from_correlation
+from jaxfdi.detection.glrt import (
+    DetectorSetup,
+    GLREngine,
+    GLRResult,
+    _maximise,
+    _onset_tensors,
+    _whitener,
+    detector_setup,
+    engine_detector,
+    glr_from_correlation,
+)
 from jaxfdi.models.linear import LinearGaussianModel
 
 
@@ -49,25 +65,42 @@ def recursive_glrt_detector(model: LinearGaussianModel, gain: Array, innovation_
     meaning (``onset_offset``: ``theta_hat = k - onset_offset``)."""
     setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
                            overlap_sensor)
+    whitener, engine = recursive_engine(setup)
+    return engine_detector(setup, whitener, engine)
+
+
+def recursive_engine(setup: DetectorSetup, removable: bool = False) -> tuple[Array, GLREngine]:
+    """The whitener ``L^-1`` and the running-sum engine; ``removable`` builds the
+    cross-information ``X`` (N, N, d, d) that ``remove`` needs (else ``remove`` raises)."""
     whitener, white_signatures, information = _recursive_tensors(setup.signatures, setup.innovation_cov)
-    num_directions = white_signatures.shape[-1]
-    m, dtype = setup.innovation_cov.shape[0], setup.innovation_cov.dtype
+    window, _, num_directions = white_signatures.shape
+    dtype = setup.innovation_cov.dtype
+    cross = _cross_information(white_signatures) if removable else None
 
     def init() -> RecursiveGLRTState:
         zero = jnp.zeros((), jnp.int32)
         return RecursiveGLRTState(jnp.zeros((window, num_directions), dtype), zero, zero)
 
-    def step(state: RecursiveGLRTState, innovation: Array):
-        _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
-        white = whitener @ jnp.asarray(innovation, dtype)
+    def update(state: RecursiveGLRTState, white: Array) -> tuple[RecursiveGLRTState, GLRResult]:
         older = jnp.concatenate([jnp.zeros((1, num_directions), dtype), state.correlation[:-1]], axis=0)
         correlation = older + jnp.einsum("lmd,m->ld", white_signatures, white)
         count = jnp.minimum(state.count + 1, window)
         result = _maximise(glr_from_correlation(correlation, information, count))
-        decision, onset_offset = decide(setup, result)
-        return RecursiveGLRTState(correlation, count, onset_offset), decision
+        return state._replace(correlation=correlation, count=count), result
 
-    return Detector(init, step)
+    def remove(state: RecursiveGLRTState, direction, offset, size) -> RecursiveGLRTState:
+        if cross is None:
+            raise ValueError("remove: build the engine with removable=True")
+        return state._replace(correlation=state.correlation - size * cross[:, offset, :, direction])
+
+    return whitener, GLREngine(init, update, remove, information)
+
+
+@jax.jit
+def _cross_information(white_signatures: Array) -> Array:
+    """``X[o', o, i', i] = sum_p T[o', p, :, i'] . T[o, p, :, i]`` (N, N, d, d)."""
+    onset_signatures, _ = _onset_tensors(white_signatures)
+    return jnp.einsum("apmi,bpmj->abij", onset_signatures, onset_signatures)
 
 
 @jax.jit

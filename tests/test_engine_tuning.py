@@ -6,7 +6,6 @@ than training and validation): for each IMM design the tuned mean per-step mode
 cross-entropy is at least 30 % below the paper's, no fault goes undetected and the
 fault-free false-alarm rate does not rise; saved parameters are valid and reload."""
 import json
-import os
 import subprocess
 import sys
 
@@ -26,13 +25,13 @@ def imm_tuned(tmp_path_factory):
     out = tmp / "out"
     # the tuned detector confirms over 2 steps (trained for it, confirmed_probabilities);
     # the paper's reference keeps its 1-step rule; mu_T is frozen in training and then
-    # chosen per mode on selection runs. A fresh process with its own XLA cache, so that
-    # the CLI's persistent cache is on from its first compilation (in a test worker that
-    # compiled before, main() could not turn it on) and repeated programs compile once.
+    # chosen per mode on selection runs. A fresh process, so that the CLI's persistent cache
+    # (the run's shared one, see conftest; notebook 03 runs the same sizes) is on from its
+    # first compilation and repeated programs compile once.
     proc = subprocess.run(
         [sys.executable, "-m", "jaxfdi", "tune", "engine-imm", *SMALL, "--confirm-steps", "2", "--freeze", "mu_threshold",
          "--select-thresholds", "--selection-runs", "4", "--out", str(out)],
-        capture_output=True, text=True, env=dict(os.environ, JAXFDI_CACHE_DIR=str(tmp / "xla-cache")), timeout=1800)
+        capture_output=True, text=True, timeout=1800)
     assert proc.returncode == 0, proc.stderr[-3000:]
     report = json.loads((out / "engine-imm-tuning.json").read_text())
     assert report["config"]["confirm_steps"] == 2 and report["config"]["select_thresholds"]
@@ -166,6 +165,18 @@ def test_confirmed_probabilities_reproduce_the_confirming_detector(confirm_steps
         expected_alarm = confirmed.max(-1) >= threshold
         np.testing.assert_array_equal(np.asarray(decisions.alarm), expected_alarm)
         label = 1 + confirmed.argmax(-1)
+        np.testing.assert_array_equal(np.asarray(decisions.label)[expected_alarm], label[expected_alarm])
+
+        # the lengths as data of the compiled program (one per mode, traced), as
+        # evaluate_engine_imm passes them: the same decisions
+        @jax.jit
+        def traced(m, steps):
+            det = mode_probability_detector(threshold, confirm_steps=steps)
+            return jax.vmap(lambda x: jax.lax.scan(det.step, det.init(), x)[1])(m)
+
+        per_mode = jnp.broadcast_to(jnp.asarray(confirm_steps, jnp.int32), (7,))
+        decisions = traced(jnp.asarray(mu), per_mode)
+        np.testing.assert_array_equal(np.asarray(decisions.alarm), expected_alarm)
         np.testing.assert_array_equal(np.asarray(decisions.label)[expected_alarm], label[expected_alarm])
         if threshold == 0.5:  # the comparison is not vacuous
             assert expected_alarm.any() and not expected_alarm.all()

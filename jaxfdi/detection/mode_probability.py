@@ -45,8 +45,7 @@ def check_confirm_steps(confirm_steps) -> None:
     if isinstance(confirm_steps, (list, tuple)):
         confirm_steps = np.asarray(confirm_steps)
     _checks.check_int_array("confirm_steps", confirm_steps, 1, meaning="an integer >= 1, or one per mode (M,)")
-    steps = np.asarray(confirm_steps)
-    if steps.ndim > 1 or steps.size == 0:
+    if np.ndim(confirm_steps) > 1 or np.size(confirm_steps) == 0:
         raise ValueError(f"confirm_steps: expected an integer >= 1, or one per mode (M,), got {confirm_steps}")
 
 
@@ -64,7 +63,9 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
       normal_mode: index of the fault-free mode.
       confirm_steps: consecutive steps the same mode must stay the top fault mode at or
         above ``mu_T`` before an alarm (1: the paper's memoryless rule), or (M,) one per
-        mode (the normal mode's entry is not used).
+        mode (the normal mode's entry is not used). A traced (M,) integer array is
+        accepted (its values are then checked by whoever made it), so that detectors with
+        different lengths can share one compiled program.
     """
     _checks.check_real("threshold", threshold, "a probability mu_T in (0, 1], or one per mode (M,)")
     value = _checks.concrete(threshold)
@@ -72,7 +73,10 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
         raise ValueError(f"threshold: expected a probability mu_T in (0, 1], or one per mode (M,), got {threshold}")
     _checks.check_int("normal_mode", normal_mode, 0, meaning="the index of the fault-free mode")
     check_confirm_steps(confirm_steps)
-    steps = int(confirm_steps) if np.ndim(confirm_steps) == 0 else np.asarray(confirm_steps, np.int32)
+    if _checks.concrete(confirm_steps) is None:  # traced: data of the compiled program
+        steps = jnp.asarray(confirm_steps, jnp.int32)
+    else:
+        steps = int(confirm_steps) if np.ndim(confirm_steps) == 0 else np.asarray(confirm_steps, np.int32)
 
     def step(state, inputs):
         mode_prob, estimates = inputs if isinstance(inputs, tuple) else (inputs, None)

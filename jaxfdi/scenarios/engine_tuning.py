@@ -80,7 +80,7 @@ from jaxfdi.tuning.parameterize import (
     unconstrain,
     unit_interval,
 )
-from jaxfdi.tuning.train import TrainResult, checkpointed, fit
+from jaxfdi.tuning.train import TrainResult, checkpointed, fit, strongly_typed
 
 TRANSITION_MASK = (PAPER_TRANSITION > 0) | np.eye(len(PAPER_TRANSITION), dtype=bool)
 NUM_FAULTS = len(PAPER_TRANSITION) - 1
@@ -147,6 +147,13 @@ def imm_filter(design: ImmDesign, params: dict[str, Any]):
     filt = interacting_multiple_model(kalman_filter, design.modes(params), params["transition"])
     mean, cov = design.initial(params)
     return filt, filt.init(mean, cov, params.get("initial_mode", jnp.asarray(PAPER_TRANSITION[0])))
+
+
+def filter_params(params: dict[str, Any]) -> dict[str, Any]:
+    """The filter's share of ``params`` (without the detector's ``mu_threshold`` and
+    ``confirm_steps``), strongly typed: the key of one compiled ``mode_log_probs`` for the
+    hand-set and the tuned parameters alike."""
+    return strongly_typed({k: v for k, v in params.items() if k not in ("mu_threshold", "confirm_steps")})
 
 
 def mode_log_probs(design: ImmDesign, params: dict[str, Any], ys: jax.Array, remat: bool = False) -> jax.Array:
@@ -236,24 +243,27 @@ def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, se
     """Held-out rows (``summarize_method``: rates, delays) of the detector with
     ``confirm_steps`` (1: the paper's rule) and the mean mode cross-entropy.
 
-    The runs and their keys are ``run_method``'s; ``params`` enter the compiled program
-    as data (not constants), so that evaluating the hand-set and the tuned parameters
-    compiles once (with ``jaxfdi.enable_compilation_cache``)."""
+    The runs and their keys are ``run_method``'s; ``params``, the thresholds (as one per
+    mode) and ``confirm_steps`` (as one per mode) enter the compiled program as data
+    of fixed types, so that evaluating the hand-set and the tuned detector compiles once
+    (with ``jaxfdi.enable_compilation_cache``: also across processes)."""
     model, us, faults, batch, _ = scenario_runs(runs, seed)
     num_runs = len(faults) * runs
+    params = strongly_typed(dict(params, mu_threshold=jnp.broadcast_to(params["mu_threshold"], (NUM_FAULTS + 1,)),
+                                 confirm_steps=jnp.broadcast_to(jnp.asarray(confirm_steps, jnp.int32), (NUM_FAULTS + 1,))))
     per_run = (batch, jax.tree.map(lambda p: jnp.broadcast_to(p, (num_runs,) + jnp.shape(p)), params))
 
     def run_one(key, data):
         f, p = data
         filt, state0 = imm_filter(design, p)
-        detector = mode_probability_detector(p["mu_threshold"], confirm_steps=confirm_steps)
+        detector = mode_probability_detector(p["mu_threshold"], confirm_steps=p["confirm_steps"])
         method = Method(filt, state0, detector, design.detector_input, design.estimate_delay, "IMM")
         return run_monitor(method, model, us, key, f).record
 
     records = monte_carlo(run_one, jax.random.key(seed), num_runs, per_run, chunk_size=1024)
     rows = summarize_method(design.method, "IMM", records, runs, us.shape[0])
     test = labelled_runs(runs, seed + 1)
-    log_mu = jax.jit(lambda p, y: mode_log_probs(design, p, y))(params, test.ys)
+    log_mu = jax.jit(lambda p, y: mode_log_probs(design, p, y))(filter_params(params), test.ys)
     cross_entropy = float(jnp.mean(jax.vmap(losses.mode_cross_entropy)(log_mu, test.modes)))
     return rows, cross_entropy
 
@@ -308,13 +318,14 @@ def select_mode_thresholds(design: ImmDesign, params: dict[str, Any], runs: int,
     log_probs = jax.jit(lambda p, y: mode_log_probs(design, p, y))
     if cost is None:
         hand = design.hand()
-        hand_records = detector_records(jnp.exp(log_probs(hand, data.ys)), data.onsets, hand["mu_threshold"])
+        hand_records = detector_records(jnp.exp(log_probs(filter_params(hand), data.ys)), data.onsets,
+                                        hand["mu_threshold"])
         hand_rows = summarize_method(design.method, "IMM", hand_records, runs, steps)
 
         def cost(rows):
             return shortfall(hand_rows, rows)
 
-    mode_prob = jnp.exp(log_probs(params, data.ys))
+    mode_prob = jnp.exp(log_probs(filter_params(params), data.ys))
     replay = jax.jit(lambda thresholds: detector_records(mode_prob, data.onsets, thresholds, confirm_steps))
 
     def cost_of(thresholds):

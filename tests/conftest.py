@@ -8,10 +8,28 @@ notebook, one to ten tests each) to the end of the run, where one of them keeps 
 busy while the other idles. Here the reordering is off and the files below start first,
 the longest first (a longest-processing-time-first schedule); every other file follows
 in its usual order. The list is a scheduling hint only: a file missing from it still
-runs, a name that no longer exists is ignored."""
+runs, a name that no longer exists is ignored.
+
+Compilation (most of the suite's time): one persistent XLA compilation cache serves the
+whole run, every worker and every process a test starts (CLI runs, notebook kernels:
+``JAXFDI_CACHE_DIR``), so that a program compiled anywhere in the run, e.g. a scenario's
+Monte Carlo that a CLI test and its notebook both run at the same size, is compiled once.
+The cache starts empty in a temporary folder made by the controller and is deleted at
+the end: nothing is carried between runs, so a CI run still compiles everything it uses
+once."""
+import os
+import shutil
+import tempfile
+
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+#: the run's shared XLA cache folder (set by the controller, inherited by the workers)
+_CACHE_ENV = "JAXFDI_TEST_XLA_CACHE"
+#: programs that compile faster than this in a test process are not written to the cache
+#: (the CLI and the notebooks write every program: ``jaxfdi.enable_compilation_cache``)
+_CACHE_MIN_COMPILE_S = 0.2
 
 #: the most expensive test files, longest first (seconds on 2 cores; see .ci/run)
 HEAVY_FIRST = (
@@ -39,6 +57,21 @@ HEAVY_FIRST = (
 def pytest_configure(config):
     if hasattr(config.option, "loadscopereorder"):  # pytest-xdist >= 3.7
         config.option.loadscopereorder = False
+    if not hasattr(config, "workerinput") and _CACHE_ENV not in os.environ:  # the controller
+        config._jaxfdi_xla_cache = os.environ[_CACHE_ENV] = tempfile.mkdtemp(prefix="jaxfdi-test-xla-")
+    cache = os.environ.get(_CACHE_ENV)
+    if cache:
+        import jaxfdi
+
+        os.environ["JAXFDI_CACHE_DIR"] = cache  # every subprocess (CLI, notebook kernel)
+        jaxfdi.enable_compilation_cache(cache)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", _CACHE_MIN_COMPILE_S)
+
+
+def pytest_unconfigure(config):
+    cache = getattr(config, "_jaxfdi_xla_cache", None)
+    if cache:
+        shutil.rmtree(cache, ignore_errors=True)
 
 
 def pytest_collection_modifyitems(session, config, items):

@@ -31,12 +31,6 @@ def snapshot(folder):
             for p in sorted(folder.rglob("*"))}
 
 
-@pytest.fixture(autouse=True)
-def xla_cache_in_tmp(monkeypatch, tmp_path_factory):
-    """``main`` turns the persistent XLA cache on: here in a tmp folder of its own."""
-    monkeypatch.setenv("JAXFDI_CACHE_DIR", str(tmp_path_factory.mktemp("xla-cache")))
-
-
 @pytest.fixture
 def no_compute(monkeypatch):
     """Every runner fails the test if called; the engine's 7-second method builder is a
@@ -349,9 +343,8 @@ def test_signal_mid_run_leaves_out_as_it_was(tmp_path, signum):
     (out / "engine-chi2.json").write_text('{"an": "older study"}\n')
     (out / "keep.txt").write_text("mine")
     before = snapshot(out)
-    env = dict(os.environ, JAXFDI_CACHE_DIR=str(tmp_path / "cache"))
     proc = subprocess.Popen([sys.executable, "-m", "jaxfdi", "run", "engine-chi2", "--runs", "2", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
         while not any(p.name.startswith(_io.TEMP_PREFIX) for p in out.iterdir()):

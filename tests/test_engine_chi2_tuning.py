@@ -4,7 +4,6 @@ hand-set test (plant Q and R, L = 4, chi2.isf(0.005, 20)) on the same held-out r
 tuned test has a lower held-out loss and fewer false alarms; saved parameters are valid
 and reload."""
 import json
-import os
 import subprocess
 import sys
 
@@ -21,11 +20,10 @@ SMALL = ["--steps", "20", "--train-runs", "2", "--runs", "10", "--quiet"]
 def chi2_tuned(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("tune-chi2")
     out = tmp / "out"
-    # a fresh process with its own XLA cache (as test_engine_tuning): the CLI's persistent
-    # cache is on from its first compilation, whatever the test worker compiled before
+    # a fresh process (as test_engine_tuning): the CLI's persistent cache (the run's shared
+    # one, see conftest) is on from its first compilation
     proc = subprocess.run([sys.executable, "-m", "jaxfdi", "tune", "engine-chi2", *SMALL, "--windows", "2,4", "--out", str(out)],
-                          capture_output=True, text=True, env=dict(os.environ, JAXFDI_CACHE_DIR=str(tmp / "xla-cache")),
-                          timeout=1800)
+                          capture_output=True, text=True, timeout=1800)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, json.loads((out / "engine-chi2-tuning.json").read_text())
 

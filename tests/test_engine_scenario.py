@@ -11,10 +11,9 @@ is rejected at <= 24 of 30 (probability 0.07 if the true rate is 90 %, 0.57 at 8
 default size).
 
 The same file runs `--methods` and notebook 02 on the programs the full run compiled
-(one XLA cache for the file, same sizes: 30 runs per fault, 20 figure runs), so that the
-eleven engine monitors are compiled once here."""
+(the run's shared XLA cache, see conftest; same sizes: 30 runs per fault, 20 figure
+runs), so that the eleven engine monitors are compiled once."""
 import json
-import os
 import subprocess
 import sys
 
@@ -31,22 +30,17 @@ METHODS = ["MM", "IMM", "IMM hand-pi", "MM-bias", "IMM-bias", "IMM-bias hand-pi"
            "GLRT l_T=200", "GLRT l_T=22.9", "GLRT l_T=22.9 eq. 24"]
 
 
-@pytest.fixture(scope="module")
-def xla_cache(tmp_path_factory):
-    """The XLA compilation cache of this file (``JAXFDI_CACHE_DIR`` of every process it starts)."""
-    return tmp_path_factory.mktemp("engine-xla-cache")
-
-
-def run_engine(out, *args, cache):
-    """``python -m jaxfdi run engine ... --out out`` in a subprocess on the file's XLA cache."""
+def run_engine(out, *args):
+    """``python -m jaxfdi run engine ... --out out`` in a subprocess (on the run's shared XLA
+    cache, see conftest)."""
     return subprocess.run([sys.executable, "-m", "jaxfdi", "run", "engine", *args, "--out", str(out)],
-                          capture_output=True, text=True, env=dict(os.environ, JAXFDI_CACHE_DIR=str(cache)), timeout=900)
+                          capture_output=True, text=True, timeout=900)
 
 
 @pytest.fixture(scope="module")
-def engine_run(tmp_path_factory, xla_cache):
+def engine_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("engine")
-    proc = run_engine(tmp / "out", "--runs", str(RUNS), "--seed", "5", cache=xla_cache)
+    proc = run_engine(tmp / "out", "--runs", str(RUNS), "--seed", "5")
     assert proc.returncode == 0, proc.stderr[-3000:]
     data = json.loads((tmp / "out" / "engine.json").read_text())
     rows = {(r["method"], r["fault"]): r for r in data["rows"]}
@@ -121,19 +115,19 @@ def test_paper_matrix_makes_the_bias_design_raise_false_alarms(engine_run):
     assert rows[("IMM", "P2")]["estimate_median"] is None  # Zhang & Li modes estimate no size (JSON null)
 
 
-def test_methods_runs_only_those(engine_run, xla_cache, tmp_path):
-    """``--methods`` (after the full run: its GLRT programs are in the file's cache)."""
-    proc = run_engine(tmp_path / "out", "--runs", str(RUNS), "--methods", "GLRT l_T=200", "--quiet", cache=xla_cache)
+def test_methods_runs_only_those(engine_run, tmp_path):
+    """``--methods`` (after the full run: its GLRT programs are in the run's cache)."""
+    proc = run_engine(tmp_path / "out", "--runs", str(RUNS), "--methods", "GLRT l_T=200", "--quiet")
     assert proc.returncode == 0, proc.stderr
     data = json.loads((tmp_path / "out" / "engine.json").read_text())
     assert data["config"]["methods"] == ["GLRT l_T=200"]
     assert {row["method"] for row in data["rows"]} == {"GLRT l_T=200"} and len(data["rows"]) == len(FAULTS) + 1
 
 
-def test_engine_imm_glrt_notebook(engine_run, xla_cache, python3_kernel, monkeypatch):
+def test_engine_imm_glrt_notebook(engine_run, python3_kernel, monkeypatch):
     """Notebook 02 end to end at the CLI run's size (its study compiles to the same programs)."""
     outputs, text = run_clean("02_engine_imm_glrt.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": str(RUNS), "JAXFDI_CACHE_DIR": str(xla_cache)})
+                              {"JAXFDI_NB_RUNS": str(RUNS)})
     assert f"runs per fault: {RUNS}" in text
     assert "paper pi: stationary P(normal)" in text
     assert "theoretical threshold chi2.isf(0.005, 60) = 91.95" in text

@@ -7,7 +7,7 @@ from _notebooks import images, python3_kernel, run_clean  # noqa: F401 (python3_
 
 def test_f16_hybrid_notebook(python3_kernel, monkeypatch, tmp_path):
     outputs, text = run_clean("06_f16_hybrid_psa_ukf.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": "1", "JAXFDI_CACHE_DIR": str(tmp_path / "xla-cache")})
+                              {"JAXFDI_NB_RUNS": "1"})
     assert "runs per case: 1, directions per sensor plane: 24, optimiser steps: 400" in text
     for kind in (1, 2, 3):
         assert f"type {kind}: sensors" in text

@@ -11,8 +11,7 @@ def test_gps_ins_integrity_notebook(python3_kernel, monkeypatch, tmp_path):
     # about 1.5 CPU-minutes, more than the shared 300 s per cell on a loaded 2-core machine
     monkeypatch.setattr(_notebooks, "CELL_TIMEOUT_S", 1200)
     outputs, text = run_clean("07_gps_ins_integrity.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": "2", "JAXFDI_NB_GPS_INS_SIZE": "400,200,20",
-                               "JAXFDI_CACHE_DIR": str(tmp_path / "xla-cache")})
+                              {"JAXFDI_NB_RUNS": "2", "JAXFDI_NB_GPS_INS_SIZE": "400,200,20"})
     assert "runs per case: 2; flights of 400 s, IMU fault from 200 s, IMU at 20 Hz" in text
     assert "Campus (no fault" in text and "impulse 100 m at 100 s" in text
     drift = float(text.split("perfect IMU, 300 s of the park flight: drift ")[1].split()[0])

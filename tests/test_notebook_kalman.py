@@ -5,7 +5,7 @@ from _notebooks import FAULT_NAMES, images, python3_kernel, run_clean  # noqa: F
 
 def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch, tmp_path):
     outputs, text = run_clean("01_kalman_monte_carlo.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": "5", "JAXFDI_CACHE_DIR": str(tmp_path / "xla-cache")})
+                              {"JAXFDI_NB_RUNS": "5"})
     stderr = "".join(o.text for o in outputs if o.output_type == "stream" and o.name == "stderr")
     assert "Traceback" not in stderr, stderr
     assert "runs per fault: 5" in text  # the kernel saw JAXFDI_NB_RUNS

@@ -5,8 +5,7 @@ from _notebooks import FAULT_NAMES, images, python3_kernel, run_clean  # noqa: F
 
 
 def test_tuning_notebook(python3_kernel, monkeypatch, tmp_path):
-    env = {"JAXFDI_NB_STEPS": "20", "JAXFDI_NB_TRAIN_RUNS": "2", "JAXFDI_NB_RUNS": "10", "JAXFDI_NB_SELECTION_RUNS": "4",
-           "JAXFDI_CACHE_DIR": str(tmp_path / "xla-cache")}
+    env = {"JAXFDI_NB_STEPS": "20", "JAXFDI_NB_TRAIN_RUNS": "2", "JAXFDI_NB_RUNS": "10", "JAXFDI_NB_SELECTION_RUNS": "4"}
     outputs, text = run_clean("03_tuning.ipynb", python3_kernel, monkeypatch, env)
     assert "Adam steps: 20, training runs per fault: 2, held-out runs per fault: 10" in text
     assert "rows sum to one: True | structural zeros kept: True" in text

@@ -25,12 +25,6 @@ FIELDS = {"jaxfdi", "jax", "jaxlib", "numpy", "python", "backend", "device_kind"
           "seed", "created"}
 
 
-@pytest.fixture(autouse=True)
-def xla_cache_in_tmp(monkeypatch, tmp_path_factory):
-    """``main`` turns the persistent XLA cache on: here in a tmp folder of its own."""
-    monkeypatch.setenv("JAXFDI_CACHE_DIR", str(tmp_path_factory.mktemp("xla-cache")))
-
-
 def check_provenance(record, argv, seed):
     assert set(record) == FIELDS
     assert record["jaxfdi"] == jaxfdi.__version__ and record["jax"] == jax.__version__

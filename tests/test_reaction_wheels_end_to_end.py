@@ -2,8 +2,8 @@
 one written before the scenario moved onto `jaxfdi.loop`, figures) and notebook 05.
 
 At 2 runs per case the notebook's study and examples are the CLI's (``wheel_study(runs=2,
-seed=0, calibration_runs=20)``, ``wheel_examples(..., seed=0)``): both run on one XLA
-compilation cache, so the closed loops are compiled once in this file."""
+seed=0, calibration_runs=20)``, ``wheel_examples(..., seed=0)``): both run on the run's
+shared XLA compilation cache (conftest), so the closed loops are compiled once."""
 import json
 
 import pytest
@@ -17,7 +17,7 @@ CASES = ["none"] + [f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain")
 
 @pytest.fixture(scope="module")
 def shared(tmp_path_factory):
-    """A folder whose ``cache`` holds this file's XLA cache (``run_cli`` puts its cache there)."""
+    """The CLI run's folder (its output is ``shared / "out"``)."""
     return tmp_path_factory.mktemp("wheels")
 
 
@@ -41,7 +41,7 @@ def test_reaction_wheels_prints_every_case_and_writes_figures(shared):
 
 def test_reaction_wheels_notebook(shared, python3_kernel, monkeypatch):
     outputs, text = run_clean("05_reaction_wheels.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": str(RUNS), "JAXFDI_CACHE_DIR": str(shared / "cache")})
+                              {"JAXFDI_NB_RUNS": str(RUNS)})
     assert f"runs per case: {RUNS}" in text
     difference = float(text.split("AD vs closed-form Jacobian, largest difference: ")[1].split()[0])
     assert difference < 1e-15

@@ -41,7 +41,6 @@ HEAVY_FIRST = (
     "test_notebook_gps_ins.py",
     "test_notebook_f16.py",
     "test_reaction_wheels_end_to_end.py",
-    "test_notebook_tuning.py",
     "test_engine_chi2_tuning.py",
     "test_tuning.py",
     "test_reaction_wheels_model.py",

@@ -126,3 +126,16 @@ from jaxfdi.detection.glrt_transient import (  # noqa: E402
 
 __all__ += ["CorrectedGLRT", "CorrectedGLRTInfo", "CorrectedGLRTState", "check_steady_state", "corrected_glrt",
             "steady_state_tolerance", "TransientGLRTState", "time_varying_signatures", "transient_glrt_detector"]
+
+# issue 27 item 2: the known-change GLR / CUSUM bank (signature and size known), the limit's detector
+from jaxfdi.detection.known_change import (  # noqa: E402
+    KnownChangeState,
+    KnownChangeTerms,
+    known_change_bank,
+    known_change_by_onset,
+    known_change_detector,
+    known_change_terms,
+)
+
+__all__ += ["KnownChangeState", "KnownChangeTerms", "known_change_bank", "known_change_by_onset",
+            "known_change_detector", "known_change_terms"]

@@ -13,8 +13,10 @@ a quiet 2-core VM) and checks its ``engine-imm-tuning.json``:
 * the run used the full sizes (150, 16, 100, 100);
 * the tuned mean per-step mode cross-entropy is at least 30 % below the paper's;
 * the report's list of worse metrics is ``engine_tuning.worse_metrics`` of its tables;
-* no reported metric (detection, isolation and false-alarm rates, median and 90th
-  percentile delays, per fault) is worse than the paper's by more than one step of its
+* no reported metric (detection and isolation rates, the false-alarm rate and, per fault,
+  the share of runs with a pre-onset alarm, and the delay's mean, median and 90th
+  percentile over the runs with no pre-onset alarm: issue 27's definitions, from
+  ``metrics.fault_row``) is worse than the paper's by more than one step of its
   resolution: one run (0.01) for a rate, one sample (0.01 s) for a delay, so that a
   single run decided differently on another CPU (float rounding in a tuned filter) does
   not count; at the seeds used the CLI prints "worse than the paper's: none";
@@ -48,7 +50,7 @@ COMMAND = ["tune", "engine-imm", "--design", "zhang-li", "--delay-weight", "20",
            "--select-thresholds", "--quiet"]
 FULL_SIZE = {"steps": 150, "train_runs": 16, "test_runs": 100, "selection_runs": 100}
 RATES = ("detection_rate", "isolation_rate", "false_alarm_rate")
-DELAYS = ("delay_median_s", "delay_p90_s")
+DELAYS = ("delay_mean_s", "delay_median_s", "delay_p90_s")  # issue 27: over the clean runs
 STEP = 0.01  # one run of 100 for a rate, one sample (Ts = 0.01 s) for a delay
 CE_REDUCTION = 0.30
 

@@ -74,9 +74,7 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi.detection.chi2 import Decision, Detector
-# the package's public names (glrt's modules are being reorganised); the package imports
-# this module last, after them
-from jaxfdi.detection import check_steady_state, fault_directions, fault_signatures
+from jaxfdi.detection.glrt import check_steady_state, fault_directions, fault_signatures
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 

@@ -16,25 +16,15 @@ whole run, every worker and every process a test starts (CLI runs, notebook kern
 Monte Carlo that a CLI test and its notebook both run at the same size, is compiled once.
 The cache starts empty in a temporary folder made by the controller and is deleted at
 the end: nothing is carried between runs, so a CI run still compiles everything it uses
-once.
-
-XLA's CPU backend compiles the tests' programs at LLVM optimisation level 0
-(``--xla_backend_optimization_level=0`` in ``XLA_FLAGS``, inherited by the processes the
-tests start; a flag already in ``XLA_FLAGS`` is kept): compilation is most of the suite's
-time and the tests' runs are small, so the cheaper compile wins (``jaxfdi run engine-chi2
---runs 4``: 29.1 -> 21.0 CPU-s). The numbers change at most in the last bit, as on another
-CPU: that run's table rows are identical and its chi-square threshold differs by one ulp
-(39.996846312938644 vs ...864: the code generated for a transcendental function), since XLA
-adds no fast-math or contraction flags at any level and the dense linear algebra runs in the
-same library kernels; every test's tolerance is for another CPU already."""
+once. (Compiling at LLVM optimisation level 0, ``--xla_backend_optimization_level=0``,
+was tried and made the suite slower: 1727 s and 54.7 CPU-minutes for a fresh-clone run,
+the programs' runs being slower by more than their compilation got cheaper, and a float32
+square-root UKF test moved by 4 %.)"""
 import os
 import shutil
 import tempfile
 
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
-
-import jax  # noqa: E402
+import jax
 
 jax.config.update("jax_enable_x64", True)
 

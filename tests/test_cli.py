@@ -83,7 +83,7 @@ def assert_same_as_before(name: str, data: dict) -> None:
             for i, (a, b) in enumerate(zip(old, new)):
                 same(a, b, f"{path}[{i}]")
         elif isinstance(old, float) and isinstance(new, float):
-            assert new == pytest.approx(old, rel=1e-4, abs=0, nan_ok=True), path
+            assert new == pytest.approx(old, rel=1e-4, abs=1e-15, nan_ok=True), path  # abs: rounding about an exact 0
         else:
             assert old == new, f"{path}: {old!r} before, {new!r} now"
 

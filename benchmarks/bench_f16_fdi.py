@@ -336,6 +336,7 @@ def time_jaxfdi(setup, fdi, flights: int, repeats: int) -> dict:
 
 def main() -> int:
     args = _parse() if __name__ == "__main__" else _parse([])
+    print(f"jax {jax.__version__} on {jax.default_backend()}: {[d.device_kind for d in jax.devices()]}", flush=True)
     setup, _ = flight_setup(gust_sigma=GUST_SIGMA)
     fdi, _ = sf.fdi_setup(setup)
     tables = baseline.Tables(data_path("f16_stevens_lewis.json"))
@@ -370,6 +371,7 @@ def main() -> int:
     _io.write_json(args.out, {
         "date": datetime.datetime.now().isoformat(timespec="seconds"), "command": " ".join(sys.argv),
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__,
+                    "backend": jax.default_backend(), "devices": [d.device_kind for d in jax.devices()],
                     "load_average": list(os.getloadavg())},
         "agreement": agreement, "numpy": numpy_row, "jaxfdi": rows,
     })

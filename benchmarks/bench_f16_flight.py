@@ -195,6 +195,7 @@ def gradient_benchmark(setup, design, flights: int, repeats: int) -> dict:
 
 def main() -> int:
     args = ARGS or _parse([])
+    print(f"jax {jax.__version__} on {jax.default_backend()}: {[d.device_kind for d in jax.devices()]}", flush=True)
     setup, design = flight_setup(gust_sigma=GUST_SIGMA)
     tables = baseline.Tables(data_path("f16_stevens_lewis.json"))
     np_design = numpy_design(setup)
@@ -231,6 +232,7 @@ def main() -> int:
     _io.write_json(args.out, {
         "date": datetime.datetime.now().isoformat(timespec="seconds"), "command": " ".join(sys.argv),
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__,
+                    "backend": jax.default_backend(), "devices": [d.device_kind for d in jax.devices()],
                     "load_average": list(os.getloadavg())},
         "agreement_max_relative": agreement, "numpy": numpy_row, "jaxfdi": rows, "gradient": grad_row,
     })

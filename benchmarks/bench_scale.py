@@ -76,7 +76,7 @@ def engine_sequences(num: int, T: int, seed: int = 0):
     return model, ys, us
 
 
-def bench_parallel(cases, repeats, budget, log) -> list[dict]:
+def bench_parallel(cases, repeats, budget, log, eager=True, on_case=None) -> list[dict]:
     rows = []
     for batch, T in cases:
         model, ys, us = engine_sequences(batch, T)
@@ -112,10 +112,12 @@ def bench_parallel(cases, repeats, budget, log) -> list[dict]:
         agree_smooth = max(rel_diff(a, b) for a, b in zip(results["parallel KF+RTS"], results["sequential KF+RTS"]))
         rows[-1]["agreement"] = max(agree_filter, agree_smooth)
         log(f"  batch {batch:4d} T {T:7d} agreement (max rel diff, filter and smoother): {agree_filter:.1e} {agree_smooth:.1e}")
-        if batch == 1:  # one sequence eagerly: the library-call driver, as a one-shot script runs it
-            eager = repeat_timing(lambda: block(jaxfdi.run_filter(kf, prior, ys[0], us)), repeats, budget)
-            rows.append({"batch": 1, "T": T, "impl": "sequential KF eager run_filter", **eager, "compile_s": float("nan")})
-            log(f"  batch    1 T {T:7d} {'eager run_filter':<18} run {eager['run_s'] * 1e3:10.1f} ms")
+        if batch == 1 and eager:  # one sequence eagerly: the library-call driver, as a one-shot script runs it
+            timing = repeat_timing(lambda: block(jaxfdi.run_filter(kf, prior, ys[0], us)), repeats, budget)
+            rows.append({"batch": 1, "T": T, "impl": "sequential KF eager run_filter", **timing, "compile_s": float("nan")})
+            log(f"  batch    1 T {T:7d} {'eager run_filter':<18} run {timing['run_s'] * 1e3:10.1f} ms")
+        if on_case is not None:
+            on_case(rows)
     return rows
 
 
@@ -363,6 +365,9 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="benchmarks/results_scale.json")
     parser.add_argument("--only", choices=["parallel", "glrt", "mc", "startup"], action="append",
                         help="run only these sections (repeatable; default all)")
+    parser.add_argument("--cases", default=None,
+                        help="--parallel: BATCHxT cases, comma-separated (e.g. 1x1000,1x100000,100x10000)")
+    parser.add_argument("--skip-eager", action="store_true", help="--parallel: no eager run_filter row")
     parser.add_argument("--mc-runs", type=int, default=2000, help="--mc: runs of the study")
     parser.add_argument("--mc-steps", type=int, default=200, help="--mc: steps per run")
     parser.add_argument("--mc-per-device", type=int, default=500, help="--mc: runs per device per chunk")
@@ -378,6 +383,8 @@ def main(argv=None) -> int:
     else:
         cases = [(1, 1000), (1, 10_000), (1, 100_000), (10, 1000), (10, 10_000), (100, 1000)]
         windows = [5, 10, 20, 40, 80, 160]
+    if args.cases:
+        cases = [tuple(int(v) for v in case.split("x")) for case in args.cases.split(",")]
 
     def log(msg):
         print(msg, flush=True)
@@ -391,7 +398,10 @@ def main(argv=None) -> int:
     payload = {"meta": meta}
     if "parallel" in sections:
         log("[parallel-in-time KF and RTS smoother]")
-        payload["parallel"] = bench_parallel(cases, repeats, args.budget, log)
+        def save(rows):  # after each case, so that a stopped run keeps what it measured (each write complete)
+            write_json_atomic(args.out, {**payload, "parallel": rows})
+
+        payload["parallel"] = bench_parallel(cases, repeats, args.budget, log, eager=not args.skip_eager, on_case=save)
         write_json_atomic(args.out, payload)
     if "glrt" in sections:
         log("[GLRT: windowed vs recursive]")

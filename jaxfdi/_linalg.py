@@ -251,6 +251,69 @@ def psd_solve(matrix: Array, rhs: Array) -> Array:
     return cho_solve(cholesky(symmetrize(matrix)), rhs)
 
 
+def _to_soa(a: Array) -> Array:
+    return jnp.moveaxis(a, (-2, -1), (0, 1))
+
+
+def _from_soa(a: Array) -> Array:
+    return jnp.moveaxis(a, (0, 1), (-2, -1))
+
+
+def stack_cholesky(matrix: Array) -> Array:
+    """Lower Cholesky factors of a stack (..., n, n): written out (``soa_cholesky``) for
+    ``n <= UNROLL_MAX``, else LAPACK (see ``solve_pivoted`` for why the associative scan
+    avoids LAPACK on CPU)."""
+    if matrix.shape[-1] > UNROLL_MAX:
+        return jnp.linalg.cholesky(matrix)
+    return _from_soa(soa_cholesky(_to_soa(matrix)))
+
+
+def stack_cho_solve(chol: Array, rhs: Array) -> Array:
+    """``A^{-1} B`` for stacks of lower factors ``L`` (..., n, n) of ``A`` and ``B``
+    (..., n, k): substitutions written out for ``n <= UNROLL_MAX``, else LAPACK."""
+    if chol.shape[-1] > UNROLL_MAX:
+        return jsl.cho_solve((chol, True), rhs)
+    L = _to_soa(chol)
+    return _from_soa(soa_solve_lower_transposed(L, soa_solve_lower(L, _to_soa(rhs))))
+
+
+def stack_solve_lower(chol: Array, rhs: Array) -> Array:
+    """``L^{-1} B`` for stacks ``L`` (..., n, n) lower triangular, ``B`` (..., n, k)."""
+    if chol.shape[-1] > UNROLL_MAX:
+        return jsl.solve_triangular(chol, rhs, lower=True)
+    return _from_soa(soa_solve_lower(_to_soa(chol), _to_soa(rhs)))
+
+
+def solve_pivoted(matrix: Array, rhs: Array) -> Array:
+    """``A^{-1} B`` for stacks ``A`` (..., n, n) and ``B`` (..., n, k): Gauss-Jordan
+    elimination with partial pivoting (Golub & Van Loan, 4th ed., sec. 3.4) as a
+    ``fori_loop`` over the n columns, element-wise over the stack, with no LAPACK call.
+
+    For the associative scan of ``filters.parallel``: on XLA:CPU (jaxlib 0.10.2) a
+    program holding the scan's 2 log2 T levels of batched ``getrf`` calls
+    (``jnp.linalg.solve``) never completes from T = 2048-4096 steps on (every worker
+    thread idle, the result never ready; ``tests/test_parallel_kalman.py``); this form
+    has no custom call to wedge. A singular ``A`` gives inf/NaN, as LU would.
+    """
+    n = matrix.shape[-1]
+    augmented = jnp.concatenate([matrix, rhs.astype(matrix.dtype)], axis=-1)   # (..., n, n + k)
+    rows = jnp.arange(n)
+
+    def eliminate(k, a):
+        column = jnp.where(rows >= k, jnp.abs(a[..., :, k]), -1.0)          # candidates: rows k..n-1
+        pivot = jnp.argmax(column, axis=-1)                                  # (...,)
+        is_pivot = (rows == pivot[..., None]).astype(a.dtype)[..., None]     # (..., n, 1)
+        is_k = (rows == k).astype(a.dtype)[:, None]                          # (n, 1)
+        row_pivot = jnp.sum(is_pivot * a, axis=-2)                           # (..., n + k)
+        row_k = a[..., k, :]
+        a = a + (is_k - is_pivot) * (row_pivot - row_k)[..., None, :]        # swap rows k and pivot
+        normalised = row_pivot / row_pivot[..., k, None]
+        a = a - a[..., :, k, None] * normalised[..., None, :]              # zero column k off row k
+        return a + is_k * normalised[..., None, :]                           # row k = the normalised pivot row
+
+    return jax.lax.fori_loop(0, n, eliminate, augmented)[..., n:]
+
+
 def det(matrix: Array) -> Array:
     """Determinant; 1x1 to 3x3 written out (cofactor expansion), so a vmapped batch is
     element-wise code rather than one LU call per matrix."""

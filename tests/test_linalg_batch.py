@@ -33,6 +33,26 @@ def test_cholesky_and_solves_equal_scipy(n):
     np.testing.assert_allclose(_linalg.psd_solve(A, b), np.linalg.solve(A, b), rtol=1e-11)
 
 
+@pytest.mark.parametrize("n", [1, 2, 7, 11])  # 11 > UNROLL_MAX: LAPACK for the Cholesky stack
+def test_stack_forms_equal_numpy(n):
+    """``solve_pivoted`` (Gauss-Jordan, partial pivoting), ``stack_cholesky`` and
+    ``stack_cho_solve`` on a (4, 3) stack against NumPy; the general matrices have a
+    tiny leading pivot, so that only a pivoting elimination is accurate."""
+    rng = np.random.default_rng(100 + n)
+    M, B = rng.normal(size=(4, 3, n, n)), rng.normal(size=(4, 3, n, 2))
+    M[..., 0, 0] = 1e-14
+    np.testing.assert_allclose(jax.jit(_linalg.solve_pivoted)(M, B), np.linalg.solve(M, B), rtol=1e-9, atol=1e-11)
+    A = np.stack([[random_spd(rng, n) for _ in range(3)] for _ in range(4)])
+    L = np.asarray(jax.jit(_linalg.stack_cholesky)(A))
+    np.testing.assert_allclose(L, np.linalg.cholesky(A), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(jax.jit(_linalg.stack_cho_solve)(L, B), np.linalg.solve(A, B), rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(jax.jit(_linalg.stack_solve_lower)(L, B),
+                               np.stack([[scipy.linalg.solve_triangular(L[i, j], B[i, j], lower=True) for j in range(3)]
+                                         for i in range(4)]), rtol=1e-11, atol=1e-13)
+    singular = np.zeros((n, n))
+    assert not np.all(np.isfinite(np.asarray(_linalg.solve_pivoted(singular, np.ones((n, 1))))))
+
+
 @pytest.mark.parametrize("shapes", [((7, 7), (7, 7)), ((7, 5), (5, 7)), ((5,), (5, 7)), ((7, 5), (5,)),
                                     ((4,), (4,)), ((1, 1), (1, 3)), ((13, 5), (5, 13)), ((3, 20), (20, 2))])
 def test_matmul_equals_numpy_unrolled_or_not(shapes):

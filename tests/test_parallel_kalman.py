@@ -55,3 +55,44 @@ def test_bad_input():
         parallel_kalman_filter(model, (jnp.zeros(3), jnp.eye(3)), ys, us)
     with pytest.raises(ValueError, match="init_state.cov"):
         parallel_kalman_filter(model, GaussianState(jnp.zeros(3), -jnp.eye(3)), ys, us)
+
+
+_LONG_SEQUENCE = r"""
+import sys
+import jax
+jax.config.update("jax_enable_x64", True)
+import jax.numpy as jnp
+import numpy as np
+import jaxfdi
+from jaxfdi.filters import GaussianState, parallel_kalman_filter, parallel_rts_smoother, rts_smoother
+from jaxfdi.models import engine_model
+
+model, T = engine_model(), int(sys.argv[1])
+us = jnp.full((T, 1), 0.01)
+ys = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.zeros(7), us, jax.random.key(0))[1].measurement
+prior = GaussianState(jnp.zeros(7), 10.0 * model.Q)
+kf = jaxfdi.kalman_filter(model, unroll_factorizations=False)
+parallel = jax.jit(lambda y: (lambda info: (info, parallel_rts_smoother(model, info)))(
+    parallel_kalman_filter(model, prior, y, us)[1]))
+for _ in range(3):  # with LAPACK inside, the 2nd or 1st call never returned
+    info, smooth = jax.block_until_ready(parallel(ys))
+ref = jaxfdi.run_filter(kf, prior, ys, us)[1]
+ref_smooth = rts_smoother(model, ref)
+rel = lambda a, b: float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / np.max(np.abs(np.asarray(b))))
+print(max(rel(info.filtered_mean, ref.filtered_mean), rel(info.filtered_cov, ref.filtered_cov),
+          rel(smooth.mean, ref_smooth.mean), rel(smooth.cov, ref_smooth.cov)))
+"""
+
+
+def test_long_sequence_completes_on_cpu():
+    """T = 4096 steps, filter and smoother in one program, three calls: with the
+    combination's LU solves and the Cholesky factors as batched LAPACK calls, XLA:CPU
+    (jaxlib 0.10.2) never returned from the first or second call at T = 2048-10^4 (every
+    worker idle); ``_linalg.solve_pivoted`` / ``stack_cholesky`` have no custom call. In a
+    subprocess, so that a hang fails this test instead of stopping the suite."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", _LONG_SEQUENCE, "4096"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert float(proc.stdout.strip().splitlines()[-1]) < 1e-9

@@ -29,6 +29,10 @@ Where it wins: it does about 4x the arithmetic of the sequential filter (n x n s
 in each combination, ``2T`` combinations), in ``2 log2 T`` rounds; so it pays where a
 round is cheap relative to a step of the sequential scan, i.e. on a GPU for long
 sequences, and loses on a CPU (``benchmarks/RESULTS.md``).
+
+The combination's solves and the Cholesky factors are ``_linalg``'s loop and written-out
+forms, not LAPACK: with batched LAPACK calls in every level, XLA:CPU (jaxlib 0.10.2) never
+returned from programs of T >= 2048-4096 steps (``tests/test_parallel_kalman.py``).
 """
 from __future__ import annotations
 
@@ -39,7 +43,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import FilterInfo, GaussianState, check_gaussian, check_sequences
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
@@ -68,8 +72,7 @@ def _mv(a: Array, x: Array) -> Array:
 
 def _psd_solve(S: Array, rhs: Array) -> Array:
     """``S^-1 rhs`` for a stack of symmetric positive definite ``S`` (Cholesky)."""
-    chol = jnp.linalg.cholesky(_sym(S))
-    return jax.scipy.linalg.cho_solve((chol, True), rhs)
+    return _linalg.stack_cho_solve(_linalg.stack_cholesky(_sym(S)), rhs)
 
 
 def filtering_elements(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array, us: Array) -> FilteringElement:
@@ -99,8 +102,8 @@ def combine_filtering(earlier: FilteringElement, later: FilteringElement) -> Fil
     A1, b1, C1, eta1, J1 = earlier
     A2, b2, C2, eta2, J2 = later
     M = jnp.eye(A1.shape[-1], dtype=A1.dtype) + C1 @ J2
-    A2_Minv = _mT(jnp.linalg.solve(_mT(M), _mT(A2)))                           # A_j M^-1
-    Minv_A1 = jnp.linalg.solve(M, A1)                                           # M^-1 A_i; A_i^T M^-T = its transpose
+    A2_Minv = _mT(_linalg.solve_pivoted(_mT(M), _mT(A2)))                      # A_j M^-1 (no LAPACK: _linalg)
+    Minv_A1 = _linalg.solve_pivoted(M, A1)                                      # M^-1 A_i; A_i^T M^-T = its transpose
     return FilteringElement(
         A=A2_Minv @ A1,
         b=_mv(A2_Minv, b1 + _mv(C1, eta2)) + b2,
@@ -154,14 +157,14 @@ def _parallel_filter(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array
     predicted_cov = jnp.concatenate([P0[None], next_cov[:-1]])
     innovation = ys - predicted_mean @ C.T - us @ D.T
     S = _sym(C @ predicted_cov @ C.T + R)
-    chol_S = jnp.linalg.cholesky(S)
-    whitened = jax.scipy.linalg.solve_triangular(chol_S, innovation[..., None], lower=True)[..., 0]
+    chol_S = _linalg.stack_cholesky(S)
+    whitened = _linalg.stack_solve_lower(chol_S, innovation[..., None])[..., 0]
     nis = jnp.sum(whitened**2, axis=-1)
     m = C.shape[0]
     log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol_S, axis1=-2, axis2=-1)), axis=-1)
     log_likelihood = -0.5 * (nis + log_det + m * math.log(2.0 * math.pi))
     healthy = (jnp.all(jnp.isfinite(chol_S), axis=(-2, -1)) & jnp.all(jnp.isfinite(mean), axis=-1)
-               & jnp.all(jnp.isfinite(jnp.linalg.cholesky(cov)), axis=(-2, -1))
+               & jnp.all(jnp.isfinite(_linalg.stack_cholesky(cov)), axis=(-2, -1))
                & jnp.all(jnp.isfinite(next_mean), axis=-1) & jnp.isfinite(nis) & jnp.isfinite(log_likelihood))
     num_observed = jnp.full(nis.shape, m, jnp.int32)
     info = FilterInfo(predicted_mean, predicted_cov, mean, cov, innovation, S, log_likelihood, nis, num_observed,

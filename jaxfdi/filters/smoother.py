@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import FilterInfo
 from jaxfdi.filters.parallel import _mT, _mv, _sym  # batched transpose, symmetric part, matrix-vector
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
@@ -45,8 +45,8 @@ class SmoothingElement(NamedTuple):
 def smoother_gains(Phi: Array, filtered_cov: Array, next_predicted_cov: Array) -> Array:
     """``G_k = P_k Phi^T (P_{k+1}^-)^-1`` for stacks (T - 1, n, n), by a Cholesky solve of
     the symmetric ``P_{k+1}^-``: ``G^T = (P^-)^-1 Phi P_k``."""
-    chol = jnp.linalg.cholesky(_sym(next_predicted_cov))
-    return _mT(jax.scipy.linalg.cho_solve((chol, True), Phi @ filtered_cov))
+    chol = _linalg.stack_cholesky(_sym(next_predicted_cov))    # no LAPACK for small n: _linalg.solve_pivoted
+    return _mT(_linalg.stack_cho_solve(chol, Phi @ filtered_cov))
 
 
 def rts_smoother(model: LinearGaussianModel, info: FilterInfo) -> SmootherResult:

@@ -33,6 +33,8 @@ sequences, and loses on a CPU (``benchmarks/RESULTS.md``).
 The combination's solves and the Cholesky factors are ``_linalg``'s loop and written-out
 forms, not LAPACK: with batched LAPACK calls in every level, XLA:CPU (jaxlib 0.10.2) never
 returned from programs of T >= 2048-4096 steps (``tests/test_parallel_kalman.py``).
+Above ``_linalg.UNROLL_MAX`` (8) states the Cholesky factors are LAPACK calls again;
+long sequences of such models have not been tested on CPU.
 """
 from __future__ import annotations
 

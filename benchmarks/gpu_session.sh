@@ -1,8 +1,13 @@
 #!/usr/bin/env bash
-# The benchmarks that need a GPU, as one prepared run on a lent machine (no registries
-# there: filterpy/dynamax and their missing needs travel as wheels in .whl/, see
-# benchmarks/RESULTS.md). Each part has its own time limit so that one slow part cannot
-# take the others' time; results go to $OUT (or benchmarks/gpu/ when OUT is unset).
+# The benchmarks that need a GPU, as one prepared run on a lent machine. It has no package
+# registry, and bench_scale.py imports bench_filters.py, which imports filterpy and dynamax:
+# they and dynamax's needs that machine lacks travel as wheels in .whl/ (git-ignored), made
+# beforehand where pip works (the 2026-11-26 run used exactly these):
+#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+#     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 \
+#     -d .whl filterpy==2.0.0 dynamax==1.0.3 tfp-nightly fastprogress==1.0.3 decorator gast dm-tree
+# Each part has its own time limit so that one slow part cannot take the others' time;
+# results go to $OUT (or benchmarks/gpu/ when OUT is unset).
 #   bash benchmarks/gpu_session.sh
 set -u
 export PYTHONUNBUFFERED=1

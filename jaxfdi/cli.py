@@ -177,7 +177,7 @@ def _run_engine(args: argparse.Namespace, folder: Path) -> str:
     from jaxfdi.scenarios.engine import engine_study, plot_engine
 
     start = time.perf_counter()
-    study = engine_study(runs=args.runs, seed=args.seed, figure_runs=min(args.runs, 20), progress=not args.quiet,
+    study = engine_study(runs=args.runs, seed=args.seed, progress=not args.quiet,
                          **_methods_option(args))
     elapsed = time.perf_counter() - start
     print(f"engine: seed-003 turbojet, MM / IMM (two mode designs) / GLRT on the same {args.runs} runs per fault, "

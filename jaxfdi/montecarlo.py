@@ -19,6 +19,14 @@ each process computes the runs its devices hold, and the outputs are gathered on
 the end, so every process returns the whole result. With ``reduce`` (e.g.
 ``streaming.detection_reducer``), each chunk's outputs are folded into a summary
 instead of kept, and the processes' summaries are merged at the end.
+
+The device never waits for the host: chunk ``c + 1`` is dispatched before chunk ``c``'s
+outputs are looked at, outputs stay on the device until one transfer at the end, and
+``summary`` (counts, sums, histograms: anything additive) is computed inside the chunk's
+program and added up on the device. Progress counts finished chunks. With the default
+``chunk_size=None`` the chunk is sized for the backend (``default_chunk_size``) and
+rounded up to a power of two, so a study that fills a chunk compiles the same program
+whatever its number of runs or seed; the first chunk's compilation is reported.
 """
 from __future__ import annotations
 
@@ -33,7 +41,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from jaxfdi import _checks
-from jaxfdi.progress import progress_bar
+from jaxfdi.progress import logger, progress_bar
 
 ProgressFn = Callable[[int, int, float], None]
 
@@ -89,17 +97,32 @@ def run_keys(key: jax.Array, index: np.ndarray, num_runs: int) -> jax.Array:
     return jax.random.wrap_key_data(bits, impl=jax.random.key_impl(key)) if typed else bits
 
 
+#: runs per chunk by backend (``default_chunk_size``): on a CPU a few hundred runs keep
+#: every core busy and bound the padding of the last chunk; an accelerator wants wide
+#: batches (its memory bounds them: a chunk's outputs and scratch are per run)
+CHUNK_BY_PLATFORM = {"cpu": 64, "gpu": 16384, "cuda": 16384, "rocm": 16384, "tpu": 16384}
+
+
+def default_chunk_size(devices: list | None = None) -> int:
+    """Runs per chunk for the devices' backend (``CHUNK_BY_PLATFORM``), times their count."""
+    devices = devices or jax.local_devices()
+    return CHUNK_BY_PLATFORM.get(devices[0].platform, 1024) * len(devices)
+
+
 def monte_carlo(
     run_one: Callable[[jax.Array, Any], Any],
     key: jax.Array,
     num_runs: int,
     per_run: Any = None,
     *,
-    chunk_size: int = 8192,
+    chunk_size: int | None = None,
     devices: list | None = None,
     progress: bool | ProgressFn = False,
     batched: bool = False,
     reduce: Any = None,
+    summary: Callable[[Any, jax.Array], Any] | None = None,
+    shared: Any = None,
+    label: str = "monte carlo",
 ) -> Any:
     """Evaluate ``run_one`` over ``num_runs`` runs; return outputs stacked over runs.
 
@@ -111,19 +134,32 @@ def monte_carlo(
       per_run: pytree whose leaves have leading axis ``num_runs`` (or ``None``); with
         several processes, the same on every process.
       chunk_size: runs per compiled call (memory bound); rounded up to a multiple of the
-        number of devices.
+        number of devices. ``None``: ``default_chunk_size(devices)``, and a smaller study
+        gets the next power of two (a few program shapes, whatever ``num_runs``).
       devices: devices to shard the run axis over (default: all devices of all
         processes after ``jaxfdi.distributed.initialize``, else the local ones).
       progress: ``True`` for a line on stderr, or a callable ``(done, total, seconds)``.
       batched: ``run_one`` takes a whole chunk, ``(keys (B,), per_run (B, ...)) ->
         outputs (B, ...)`` (e.g. to run a batch kernel such as ``run_kalman_batch``
         over runs that differ in their model), instead of one run under ``vmap``.
-      reduce: a ``streaming.Reducer``: fold each chunk's outputs into its state and
-        return the state (merged across processes) instead of the stacked outputs.
+      reduce: a ``streaming.Reducer``: fold each chunk's outputs into its state on the
+        host and return the state (merged across processes) instead of the stacked
+        outputs.
+      summary: ``(outputs (B, ...), weight (B,)) -> (kept, totals)``: ``kept`` the
+        outputs to return per run (e.g. ``outputs`` less the histories it summed),
+        ``totals`` additive over runs (sums, counts, histograms; ``weight`` is 1 for a
+        run and 0 for the padding of the last chunk). Computed on the device inside the
+        chunk's program and summed over chunks (and processes); the call returns
+        ``(kept, totals)``.
+      shared: a pytree every run reads whole (``run_one(key, per_run_slice, shared)``):
+        arguments of the compiled program, not constants in it, so that studies that
+        differ only in these numbers (thresholds, transition matrices) share one program.
+      label: what the progress display and the compilation message call this study.
     """
     _checks.check_callable("run_one", run_one, "a function (key, per_run_slice) -> outputs")
     num_runs = _checks.check_int("num_runs", num_runs, 1, meaning="a positive number of runs")
-    chunk_size = _checks.check_int("chunk_size", chunk_size, 1, meaning="a positive number of runs per call")
+    if chunk_size is not None:
+        chunk_size = _checks.check_int("chunk_size", chunk_size, 1, meaning="a positive number of runs per call")
     if not _is_key(key):
         raise TypeError(f"key: expected a PRNG key (jax.random.key(seed)), got {_checks.received(key)}")
     if not (progress is None or isinstance(progress, bool) or callable(progress)):
@@ -132,6 +168,10 @@ def monte_carlo(
     if reduce is not None and not all(callable(getattr(reduce, name, None)) for name in ("init", "update", "merge")):
         raise TypeError(f"reduce: expected a Reducer(init, update, merge) such as streaming.detection_reducer(...), "
                         f"got {_checks.received(reduce)}")
+    if summary is not None:
+        _checks.check_callable("summary", summary, "a function (outputs, weight) -> additive pytree")
+        if reduce is not None:
+            raise ValueError("summary: expected None with reduce (one way to fold the outputs)")
     sizes = _num_runs_of(per_run)
     if sizes and sizes != {num_runs}:
         raise ValueError(f"per_run: every leaf needs leading axis num_runs = {num_runs}, got leading sizes {sorted(sizes)}")
@@ -143,36 +183,66 @@ def monte_carlo(
         if len(set(per_process.values())) != 1:
             raise ValueError(f"devices: every process needs the same number of devices, got {per_process}")
     n_dev = len(devices)
-    chunk = min(int(chunk_size), int(num_runs))
+    if chunk_size is None:
+        chunk = min(default_chunk_size(devices), 1 << max(int(num_runs) - 1, 0).bit_length())
+    else:
+        chunk = min(int(chunk_size), int(num_runs))
     chunk = -(-chunk // n_dev) * n_dev
     sharding = NamedSharding(Mesh(np.array(devices), ("runs",)), PartitionSpec("runs"))
     try:
-        compiled = _compiled(run_one, bool(batched))
+        compiled = _compiled(run_one, bool(batched), summary, shared is not None)
     except TypeError:  # an unhashable callable object
-        compiled = jax.jit(run_one if batched else jax.vmap(run_one))
-    report = progress_bar("monte carlo", "runs") if progress is True else (progress or None)  # tqdm.auto or log lines
+        compiled = _chunk_program(run_one, bool(batched), summary, shared is not None)
+    shared = () if shared is None else (jax.tree_util.tree_map(jnp.asarray, shared),)
+    report = progress_bar(label, "runs") if progress is True else (progress or None)  # tqdm.auto or log lines
     rows = _local_rows(devices, chunk) if multiprocess else slice(0, chunk)
 
     state = reduce.init() if reduce is not None else None
-    outputs = []
+    outputs, total, pending = [], None, None
     start_time = time.perf_counter()
+
+    def finish(chunk_result):
+        """Wait for a dispatched chunk, fold it in, report it (the pipeline's tail)."""
+        nonlocal state, total
+        result, part, valid, stop = chunk_result
+        if reduce is not None:
+            host = jax.tree_util.tree_map(_to_host if multiprocess else np.asarray, result)
+            state = reduce.update(state, jax.tree_util.tree_map(lambda leaf: leaf[valid], host))
+        else:
+            jax.block_until_ready(result)
+            outputs.append(result)
+        if part is not None:
+            total = part if total is None else jax.tree_util.tree_map(jnp.add, total, part)
+        if report:
+            report(stop, num_runs, time.perf_counter() - start_time)
+
     for start in range(0, num_runs, chunk):
         stop = min(start + chunk, num_runs)
         index = np.minimum(np.arange(start, start + chunk), num_runs - 1)  # pad by repeating the last run
+        valid = np.arange(start, start + chunk)[rows] < stop
+        weight = jax.device_put(np.arange(start, start + chunk) < stop, sharding) if not multiprocess else None
+        first = start == 0
+        if first and progress:
+            programs = _cache_size(compiled)
+            if programs == 0:
+                logger.info("%s: compiling", label)
         if multiprocess:
-            result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk)
+            result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk,
+                                         valid, shared)
         else:
             chunk_keys = run_keys(key, index, num_runs)
-            chunk_data = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[index], per_run)
+            chunk_data = jax.tree_util.tree_map(lambda leaf: _take(leaf, index), per_run)
             chunk_keys, chunk_data = jax.device_put((chunk_keys, chunk_data), sharding)
-            result = jax.tree_util.tree_map(np.asarray, compiled(chunk_keys, chunk_data))
-        valid = np.arange(start, start + chunk)[rows] < stop
-        if reduce is not None:
-            state = reduce.update(state, jax.tree_util.tree_map(lambda leaf: leaf[valid], result))
-        else:
-            outputs.append(result)
-        if report:
-            report(stop, num_runs, time.perf_counter() - start_time)
+            result = compiled(chunk_keys, chunk_data, weight, *shared)  # dispatched: the device works on
+        if first and progress and _cache_size(compiled) > programs:
+            logger.info("%s: compiled in %.1f s", label, time.perf_counter() - start_time)
+        result, part = result if summary is not None else (result, None)
+        if pending is not None:
+            finish(pending)  # the previous chunk, while this one runs
+        pending = (result, part, valid, stop)
+    finish(pending)
+    if total is not None:  # the program summed over the global chunk: replicated on every process
+        total = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf.addressable_data(0)), total)
     if reduce is not None:
         if multiprocess:
             from jaxfdi.distributed import allgather
@@ -180,15 +250,46 @@ def monte_carlo(
             state = reduce.merge(allgather(state))
         return state
     if multiprocess:
-        return _gather_runs(outputs, num_runs)
-    return jax.tree_util.tree_map(lambda *parts: np.concatenate(parts, axis=0)[:num_runs], *outputs)
+        stacked = _gather_runs([jax.tree_util.tree_map(_to_host, o) for o in outputs], num_runs)
+    elif len(outputs) == 1:
+        stacked = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[:num_runs], outputs[0])
+    else:  # one transfer of every chunk, joined on the host (no program per number of chunks)
+        stacked = jax.tree_util.tree_map(lambda *parts: np.concatenate(parts, axis=0)[:num_runs],
+                                         *jax.device_get(outputs))
+    return (stacked, total) if summary is not None else stacked
+
+
+def _take(leaf: Any, index: np.ndarray) -> Any:
+    """Rows ``index`` of a per-run leaf: NumPy data stays on the host (no program per
+    shape), device data is gathered where it is."""
+    return leaf[index] if isinstance(leaf, jax.Array) else np.asarray(leaf)[index]
+
+
+def _cache_size(compiled) -> int:
+    """How many programs a ``jax.jit`` function holds (0 when it cannot tell)."""
+    try:
+        return int(compiled._cache_size())
+    except (AttributeError, TypeError):
+        return 0
+
+
+def _chunk_program(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
+    """``jit`` of one chunk: ``(keys, per_run, weight[, shared]) -> outputs`` or, with
+    ``summary``, ``summary(outputs, weight) = (kept, totals)``."""
+    runs = run_one if batched else jax.vmap(run_one, in_axes=(0, 0, None) if with_shared else (0, 0))
+
+    def chunk(keys, data, weight, *shared):
+        out = runs(keys, data, *shared)
+        return out if summary is None else summary(out, weight)
+
+    return jax.jit(chunk)
 
 
 @functools.lru_cache(maxsize=8)
-def _compiled(run_one: Callable, batched: bool) -> Callable:
-    """``jit(vmap(run_one))``, one per ``run_one``: a second study with the same function
+def _compiled(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
+    """``_chunk_program``, one per ``run_one``: a second study with the same function
     (e.g. its streaming summary after its records) reuses the compiled executables."""
-    return jax.jit(run_one if batched else jax.vmap(run_one))
+    return _chunk_program(run_one, batched, summary, with_shared)
 
 
 def _local_rows(devices: list, chunk: int) -> slice:
@@ -201,20 +302,21 @@ def _local_rows(devices: list, chunk: int) -> slice:
     return slice(mine[0] * per_device, (mine[-1] + 1) * per_device)
 
 
-def _chunk_multiprocess(compiled, sharding, key, local_index, num_runs, per_run, chunk):
+def _chunk_multiprocess(compiled, sharding, key, local_index, num_runs, per_run, chunk, local_valid, shared):
     """One chunk over the global mesh: this process builds its rows only, every process
-    runs the same program, and the rows its devices computed come back as NumPy."""
+    runs the same program (dispatched; ``_to_host`` takes this process's rows)."""
     local_keys = run_keys(key, local_index, num_runs)
     local_data = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[local_index], per_run)
 
     def global_array(local):
         return jax.make_array_from_process_local_data(sharding, local, (chunk,) + tuple(np.shape(local)[1:]))
 
-    result = compiled(global_array(local_keys), jax.tree_util.tree_map(global_array, local_data))
-    return jax.tree_util.tree_map(_local_part, result)
+    return compiled(global_array(local_keys), jax.tree_util.tree_map(global_array, local_data),
+                    global_array(np.asarray(local_valid)), *shared)
 
 
-def _local_part(array: jax.Array) -> np.ndarray:
+def _to_host(array: jax.Array) -> np.ndarray:
+    """This process's rows of a global array, as NumPy."""
     shards = sorted(array.addressable_shards, key=lambda shard: shard.index[0].start or 0)
     return np.concatenate([np.asarray(shard.data) for shard in shards], axis=0)
 

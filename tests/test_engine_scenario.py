@@ -17,6 +17,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from scipy import stats
 
@@ -54,7 +55,13 @@ def test_prints_every_method_and_writes_json_and_figures(engine_run):
         assert f"\n{method}\n" in proc.stdout
         for fault in FAULTS + ["none"]:
             assert rows[(method, fault)]["runs"] == RUNS
-    assert "monte carlo:" in proc.stderr and ("210/210 runs" in proc.stderr or "| 210/210 [" in proc.stderr)
+    # progress: which structure compiles (k of 5), then the runs
+    for k, structure in enumerate(data["config"]["programs"], start=1):
+        assert f"engine: {structure} ({k} of 5): compiling" in proc.stderr or f"({k} of 5): compiled" in proc.stderr
+    assert "210/210 runs" in proc.stderr or "| 210/210 [" in proc.stderr
+    # eleven methods, five programs (MMs and IMMs of each mode design, GLRTs)
+    assert sorted(m for ms in data["config"]["programs"].values() for m in ms) == sorted(METHODS)
+    assert len(data["config"]["programs"]) == 5
     # the paper's Table 3 beside ours
     assert rows[("IMM", "actuator")]["paper_delay_s"] == 0.020 and rows[("GLRT l_T=200", "P2")]["paper_delay_s"] == 0.058
     assert sorted(p.name for p in out.iterdir()) == [
@@ -137,3 +144,40 @@ def test_engine_imm_glrt_notebook(engine_run, python3_kernel, monkeypatch):
     for fault in FAULT_NAMES:
         assert f"\n{fault} " in text
     assert len(images(outputs)) == 3, f"expected the three study figures, got {len(images(outputs))}"
+
+
+#: one method per grid structure, each a cell that shares its program with others
+SHARED_CELLS = ["IMM hand-pi", PER_MODE, "GLRT l_T=22.9 eq. 24"]
+
+
+def test_methods_as_data_equal_the_methods_run_one_by_one():
+    """The study engine's grid programs (the structure's filters and decision rules as
+    arrays, one program per structure) give each method's records as its own program
+    does (``run_method``: ``engine_methods``' filter and detector, on the same keys):
+    integer fields exactly, the estimate to 1e-12; a second seed compiles nothing new."""
+    import jax
+
+    from jaxfdi.scenarios.engine import engine_methods, engine_study, run_method
+
+    runs, seed = 3, 11
+    study = engine_study(runs=runs, seed=seed, methods=SHARED_CELLS)
+    every = engine_methods()
+    for name in SHARED_CELLS:
+        alone = run_method(every[name], runs, seed)
+        grid = study.records[name]
+        for field in ("onset", "first_alarm", "detection_step", "false_alarms", "isolated", "first_label",
+                      "first_unhealthy"):
+            np.testing.assert_array_equal(getattr(grid, field), getattr(alone, field), err_msg=f"{name} {field}")
+        np.testing.assert_allclose(grid.estimate, alone.estimate, rtol=1e-12, atol=0, equal_nan=True)
+    compiles = []
+
+    def listener(event, duration, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(event)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        engine_study(runs=runs, seed=seed + 1, methods=SHARED_CELLS)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert compiles == []

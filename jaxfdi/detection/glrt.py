@@ -235,7 +235,8 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
       innovation_cov: (m, m) steady-state ``S``.
       window: N >= 1 steps.
       threshold: > 0, e.g. ``PAPER_USED_THRESHOLD`` or ``glrt_threshold(...)``.
-      isolation: ``"max"`` or ``"paper"``.
+      isolation: ``"max"`` or ``"paper"``, or a () bool array (``True``: ``"paper"``) so
+        that detectors with either rule share one compiled program.
       actuator_feedthrough: see ``fault_directions``.
       overlap_sensor: sensor index (into the outputs) of eq. (24)'s T4.
     """
@@ -264,7 +265,7 @@ class DetectorSetup(NamedTuple):
     signatures: Array       # (N, m, d) fault_signatures, in the detector's dtype
     innovation_cov: Array   # (m, m)
     threshold: Any
-    isolation: str
+    isolation: Any          # "max", "paper" or a () bool array (True: "paper")
     num_inputs: int         # nu: directions 0..nu-1 are actuators
     sensor_t4: int          # direction index of eq. (24)'s T4
 
@@ -290,8 +291,11 @@ def _check_decision_args(threshold, isolation: str, overlap_sensor: int, m: int)
     value = _checks.concrete(threshold)
     if value is not None and not (value.shape == () and np.isfinite(value) and value > 0):
         raise ValueError(f"threshold: expected a positive scalar, got {threshold}")
-    if isolation not in ("max", "paper"):
-        raise ValueError(f"isolation: expected 'max' or 'paper', got {isolation!r}")
+    if isinstance(isolation, str):
+        if isolation not in ("max", "paper"):
+            raise ValueError(f"isolation: expected 'max' or 'paper', got {isolation!r}")
+    elif not (hasattr(isolation, "dtype") and jnp.asarray(isolation).dtype == bool and jnp.ndim(isolation) == 0):
+        raise ValueError(f"isolation: expected 'max', 'paper' or a () bool array (True: 'paper'), got {isolation!r}")
     if not -m <= int(overlap_sensor) < m:
         raise ValueError(f"overlap_sensor: expected a sensor index in [-{m}, {m}), got {overlap_sensor}")
 
@@ -302,7 +306,10 @@ def decide(setup: DetectorSetup, result: GLRResult) -> tuple[Decision, Array]:
     statistic = jnp.max(result.statistic)
     alarm = statistic > setup.threshold
     direction = jnp.argmax(result.statistic)
-    if setup.isolation == "paper":
+    if not isinstance(setup.isolation, str):  # data: both rules in one program
+        paper = _paper_isolation(result.statistic, setup.threshold, setup.num_inputs, setup.sensor_t4, direction)
+        direction = jnp.where(setup.isolation, paper, direction)
+    elif setup.isolation == "paper":
         direction = _paper_isolation(result.statistic, setup.threshold, setup.num_inputs, setup.sensor_t4, direction)
     decision = Decision(statistic, alarm, (1 + direction).astype(jnp.int32), result.magnitude[direction])
     return decision, result.onset_offset[direction]
@@ -328,7 +335,8 @@ def check_steady_state(model: LinearGaussianModel, gain=None, innovation_cov=Non
     fixed = [_checks.concrete(a) for a in (model.Phi, model.C, model.Q, model.R)]
     if not values or any(v is None for v in values.values()) or any(a is None for a in fixed):
         return
-    steady = steady_state_kalman(model)
+    with jax.ensure_compile_time_eval():  # concrete inputs, also while a caller traces
+        steady = steady_state_kalman(model)
     expected = {"gain": (steady.gain, "steady_state_kalman(model).gain"),
                 "innovation_cov": (steady.innovation_cov, "steady_state_kalman(model).innovation_cov"),
                 "cov": (steady.predicted_cov, "steady_state_kalman(model).predicted_cov (P_ss, the DARE solution)")}

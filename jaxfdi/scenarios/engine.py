@@ -35,6 +35,7 @@ Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
 """
 from __future__ import annotations
 
+import functools
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -64,6 +65,7 @@ from jaxfdi.progress import logger
 from jaxfdi.riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi.simulate import linear_simulator, simulate
+from jaxfdi.study import Structure, Study, run_study
 from jaxfdi.tuning.train import fixed_batches
 
 MODE_NAMES = ("normal", "actuator", "RPM", "P2", "T2", "P4", "T4")
@@ -387,74 +389,183 @@ def _fmt(x: float | None, width: int, digits: int = 3, kind: str = "f") -> str:
     return f"{'-':>{width}}" if x is None or x != x else f"{x:>{width}.{digits}{kind}}"
 
 
-def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = EngineSettings(),
-                 methods: list[str] | None = None, figure_runs: int = 20, duration: float = 4.0,
-                 onset_time: float = 2.0, progress: bool = False) -> EngineStudy:
-    """Run every method (or ``methods``) on the same ``runs`` runs per fault.
+class ModeRule(NamedTuple):
+    """The mode-probability decision (eq. 13, with confirmation) as data: one per method."""
+    threshold: Any       # (M,) mu_T per mode
+    confirm_steps: Any   # (M,) int consecutive steps per mode
 
-    Needs float64 (``jaxfdi.enable_x64()``): the engine is stiff. ``figure_runs`` runs per
-    fault (another seed) give the averaged mode probabilities and GLR statistics."""
-    require_x64("engine_study (the engine model is stiff)")
-    check_study(runs, seed, figure_runs=figure_runs)
+
+class GLRTRule(NamedTuple):
+    """The GLRT decision as data: threshold l_T and eq. (24) isolation (else the largest GLR)."""
+    threshold: Any         # ()
+    paper_isolation: Any   # () bool
+
+
+class ZhangLiFilter(NamedTuple):
+    """Numbers of a Zhang & Li noise-inflation bank: MM floor or IMM transition."""
+    mixing: Any            # () MM probability floor, or (M, M) IMM transition
+    sensor_inflation: Any  # ()
+    actuator_noise: Any    # ()
+
+
+class BiasFilter(NamedTuple):
+    """Numbers of a fault-bias bank: MM floor or IMM transition, and the bias statistics."""
+    mixing: Any      # () MM probability floor, or (M, M) IMM transition
+    bias_walk: Any   # (6,)
+    bias_prior: Any  # (6,)
+
+
+def _mode_rule(settings: EngineSettings, confirm) -> ModeRule:
+    M = len(MODE_NAMES)
+    return ModeRule(np.full(M, settings.mu_threshold), np.broadcast_to(np.asarray(confirm, np.int32), (M,)).copy())
+
+
+def _stack(items):
+    return jax.tree_util.tree_map(lambda *leaves: np.stack([np.asarray(leaf) for leaf in leaves]), *items)
+
+
+@functools.lru_cache(maxsize=16)
+def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_estimate_delay: int,
+                    unrolled: bool) -> dict:
+    """The run functions of the engine study's structures (``study.Structure.run``), one
+    object per static setting so that every study of these sizes reuses their programs.
+    Each returns ``(DetectionRecord, trace)``: the trace is averaged over each fault's runs
+    for the figures (mode probabilities; per-direction GLR statistics)."""
+    model = engine_model()
+    us = jnp.full((steps, 1), FUEL_STEP)
+    x0, P0 = jnp.zeros(7), model.Q
+    mu0 = jnp.asarray(PAPER_TRANSITION[0])  # the normal row: P(mode at step 0)
+
+    mode_kf = functools.partial(kalman_filter, unroll_factorizations=unrolled)
+
+    def bank(modes, mixing, imm):
+        return (interacting_multiple_model(mode_kf, modes, mixing) if imm
+                else multiple_model(mode_kf, modes, mixing))
+
+    def mode_run(design: str, imm: bool):
+        def run(key, f, filt: ZhangLiFilter | BiasFilter, rule: ModeRule):
+            if design == "zhang-li":
+                modes = noise_inflation_modes(model, filt.sensor_inflation, filt.actuator_noise)
+                prior, detector_input, delay = (x0, P0), _mode_prob, 0
+            else:
+                modes = bias_modes(model, filt.bias_walk, filt.bias_prior)
+                prior = bias_mode_initial_state(model, x0, P0, filt.bias_prior)
+                detector_input, delay = _bias_estimates, bias_estimate_delay
+            method = Method(bank(modes, filt.mixing, imm), None,
+                            mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps),
+                            detector_input, delay)
+            method = method._replace(init_state=method.filter.init(*prior, mu0))
+            result = run_monitor(method, model, us, key, f, keep_history=imm)
+            return (result.record, result.history.info.mode_prob) if imm else result.record
+        return run
+
+    steady = steady_state_kalman(model)
+    signatures = fault_signatures(model, steady.gain, fault_directions(model), glr_window)
+    kf = kalman_filter(model, unroll_factorizations=unrolled)
+    kf0 = kf.init(x0, steady.predicted_cov)  # the GLR signatures assume the steady-state gain
+
+    def glrt_run(key, f, rule: GLRTRule):
+        detector = glrt_detector(model, steady.gain, steady.innovation_cov, glr_window, rule.threshold,
+                                 rule.paper_isolation)
+        method = Method(kf, kf0, detector, _innovation, glr_estimate_delay)
+        result = run_monitor(method, model, us, key, f, keep_history=True)
+        innovation = result.history.info.innovation
+        N = glr_window
+        padded = jnp.concatenate([jnp.zeros((N - 1, innovation.shape[1]), innovation.dtype), innovation])
+        windows = padded[jnp.arange(steps)[:, None] + jnp.arange(N)[None, :]]
+        valid = jnp.minimum(jnp.arange(steps) + 1, N)
+        glr = jax.vmap(lambda w, v: glr_statistic(w, signatures, steady.innovation_cov, v).statistic)(windows, valid)
+        return result.record, glr
+
+    return {"MM (Zhang & Li modes)": mode_run("zhang-li", False), "IMM (Zhang & Li modes)": mode_run("zhang-li", True),
+            "MM (bias modes)": mode_run("bias", False), "IMM (bias modes)": mode_run("bias", True), "GLRT": glrt_run}
+
+
+def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] | None = None,
+                duration: float = 4.0, onset_time: float = 2.0, unrolled: bool = False) -> Study:
+    """The engine study as data (``jaxfdi.study``): the seven cases and every method of
+    ``engine_method_names`` (or ``methods``) in five structures, one compiled program
+    each: the MMs and IMMs of each mode design, and the GLRTs. Within a structure the
+    methods are cells of a (filter x decision rule) grid: the IMMs that share a
+    transition matrix run one filter for their rules."""
     names = engine_method_names(settings)
     chosen = names if methods is None else list(methods)
     unknown = [m for m in chosen if m not in names]
     if unknown or not chosen:
         raise ValueError(f"methods: expected a non-empty list of names from {names}, got unknown {unknown or 'none'}")
-    every = engine_methods(settings)
+    steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
+    runs = _structure_runs(steps, settings.glr_window, settings.bias_estimate_delay, settings.glr_estimate_delay,
+                           bool(unrolled))
+    hand = sticky_transition(len(MODE_NAMES), settings.to_fault, settings.stay)
+    paper_rule = _mode_rule(settings, 1)
+    zl = [ZhangLiFilter(np.float64(settings.mm_floor), settings.sensor_inflation, settings.actuator_noise)]
+    zl_imm = [ZhangLiFilter(m, settings.sensor_inflation, settings.actuator_noise) for m in (PAPER_TRANSITION, hand)]
+    walk, prior = np.asarray(settings.bias_walk), np.asarray(settings.bias_prior)
+    bias_mm = [BiasFilter(np.float64(settings.mm_floor), walk, prior)]
+    bias_imm = [BiasFilter(m, walk, prior) for m in (PAPER_TRANSITION, hand)]
+    rules = [paper_rule, _mode_rule(settings, settings.confirm_steps), _mode_rule(settings, settings.mode_confirm_steps)]
+    bonferroni = _bonferroni_threshold(settings)
+    glrt_rules = [GLRTRule(np.float64(t), np.bool_(p)) for t, p in
+                  ((settings.glr_threshold, False), (bonferroni, False), (bonferroni, True))]
+    n = dict(enumerate(names))
+    grids = [
+        ("MM (Zhang & Li modes)", (_stack(zl), _stack([paper_rule])), {n[0]: (0, 0)}),
+        ("IMM (Zhang & Li modes)", (_stack(zl_imm), _stack([paper_rule])), {n[1]: (0, 0), n[2]: (1, 0)}),
+        ("MM (bias modes)", (_stack(bias_mm), _stack([paper_rule])), {n[3]: (0, 0)}),
+        ("IMM (bias modes)", (_stack(bias_imm), _stack(rules)),
+         {n[4]: (0, 0), n[5]: (1, 0), n[6]: (1, 1), n[7]: (1, 2)}),
+        ("GLRT", (_stack(glrt_rules),), {n[8]: (0,), n[9]: (1,), n[10]: (2,)}),
+    ]
+    structures = []
+    for name, axes, cells in grids:
+        cells = {m: c for m, c in cells.items() if m in chosen}
+        if cells:
+            structures.append(Structure(name, runs[name], axes, cells, averaged=name.startswith(("IMM", "GLRT"))))
+    fault_names, faults = engine_faults(onset)
+    return Study("engine", stack_faults(faults), tuple(fault_names), tuple(structures))
+
+
+def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = EngineSettings(),
+                 methods: list[str] | None = None, duration: float = 4.0, onset_time: float = 2.0,
+                 progress: bool = False, chunk_size: int | None = None, unrolled: bool = False) -> EngineStudy:
+    """Run every method (or ``methods``) on the same ``runs`` runs per fault
+    (``engine_spec`` through ``study.run_study``: five programs).
+
+    Needs float64 (``jaxfdi.enable_x64()``): the engine is stiff. The figures' mean mode
+    probabilities and GLR statistics are averaged over the same runs, on the device."""
+    require_x64("engine_study (the engine model is stiff)")
+    check_study(runs, seed)
+    spec = engine_spec(settings, methods, duration, onset_time, unrolled)
+    chosen = [m for m in engine_method_names(settings) if any(m in s.methods for s in spec.structures)]
+    result = run_study(spec, runs, seed, progress=progress, chunk_size=chunk_size)
     steps = int(round(duration / TS))
-    records, rows = {}, []
-    for name in chosen:
-        if progress:
-            logger.info("%s:", name)
-        records[name] = run_method(every[name], runs, seed, duration, onset_time, progress=progress)
-        rows += summarize_method(name, every[name].paper, records[name], runs, steps)
-    figures = {} if figure_runs < 1 else _figure_data(every, chosen, settings, figure_runs, seed + 1, duration,
-                                                      onset_time)
-    bonferroni = float(glrt_threshold(settings.glr_pfa, 6, settings.glr_window, "bonferroni"))
+    paper = {name: method_paper(name) for name in chosen}
+    records = {name: result.outputs[name] for name in chosen}
+    rows = [row for name in chosen for row in summarize_method(name, paper[name], records[name], runs, steps)]
+    figures = {}
+    for name in ("IMM", confirmed_name(settings)):
+        if name in result.means:
+            figures[f"mode_prob/{name}"] = result.means[name]
+    glrt_name = next((n for n in chosen if n.startswith("GLRT")), None)
+    if glrt_name is not None:
+        figures["glr"] = result.means[glrt_name]
+    bonferroni = _bonferroni_threshold(settings)
     config = {
         "scenario": "engine", "runs_per_fault": runs, "seed": seed, "Ts": TS, "steps": steps,
         "onset_step": int(round(onset_time / TS)), "fuel_step": FUEL_STEP, "methods": chosen,
         "settings": settings._asdict(), "paper_transition": PAPER_TRANSITION.tolist(),
         "hand_transition": sticky_transition(len(MODE_NAMES), settings.to_fault, settings.stay).tolist(),
         "glr_threshold_theory": float(glrt_threshold(0.005, 6, settings.glr_window)),
-        "glr_threshold_bonferroni": bonferroni, "figure_runs": figure_runs,
+        "glr_threshold_bonferroni": bonferroni, "figure_runs": runs,
+        "programs": {s.name: sorted(s.methods, key=chosen.index) for s in spec.structures},
+        "seconds": {"structures": result.seconds, "compile": result.compile_seconds},
     }
     return EngineStudy(config, rows, records, figures)
 
 
-def _figure_data(every, chosen, settings, runs, seed, duration, onset_time) -> dict[str, Any]:
-    """Mean mode probabilities (faults, T, M) of two IMMs and mean per-direction GLR
-    statistics (faults, T, 6) over ``runs`` runs per fault."""
-    model, us, faults, batch, keys = scenario_runs(runs, seed, duration, onset_time)
-    steps = us.shape[0]
-
-    def mean_over_runs(history_of):
-        out = jax.jit(jax.vmap(history_of))(keys, batch)
-        return np.asarray(out).reshape(len(faults), runs, *out.shape[1:]).mean(axis=1)
-
-    data = {}
-    for name in ("IMM", confirmed_name(settings)):
-        if name in chosen:
-            data[f"mode_prob/{name}"] = mean_over_runs(
-                lambda k, f, m=every[name]: run_monitor(m, model, us, k, f, True).history.info.mode_prob)
-    glrt_name = next((n for n in chosen if n.startswith("GLRT")), None)
-    if glrt_name is not None:
-        method = every[glrt_name]
-        steady = steady_state_kalman(model)
-        signatures = fault_signatures(model, steady.gain, fault_directions(model), settings.glr_window)
-        N = settings.glr_window
-
-        def glr_history(k, f):
-            innovation = run_monitor(method, model, us, k, f, True).history.info.innovation
-            padded = jnp.concatenate([jnp.zeros((N - 1, innovation.shape[1]), innovation.dtype), innovation])
-            windows = padded[jnp.arange(steps)[:, None] + jnp.arange(N)[None, :]]
-            valid = jnp.minimum(jnp.arange(steps) + 1, N)
-            return jax.vmap(lambda w, v: glr_statistic(w, signatures, steady.innovation_cov, v).statistic)(
-                windows, valid)
-
-        data["glr"] = mean_over_runs(glr_history)
-    return data
+def method_paper(name: str) -> str | None:
+    """The paper's Table 3 column a method reproduces (``MM``, ``IMM``, ``GLRT``)."""
+    return "GLRT" if name.startswith("GLRT") else ("MM" if name.startswith("MM") else "IMM")
 
 
 def plot_engine(study: EngineStudy, out_dir) -> list[str]:

@@ -1,0 +1,110 @@
+"""Whole studies, as a user meets them: `jaxfdi run <study>` from a fresh process, with an
+empty XLA cache (cold) and again with the cache it filled (warm), compile and run apart.
+
+    python benchmarks/bench_studies.py                       # the engine study, CLI default size
+    python benchmarks/bench_studies.py --studies engine vtol --runs 20
+    python benchmarks/bench_studies.py --linalg              # the engine with library calls vs
+                                                             # written-out factorisations
+
+Each case runs in its own subprocess (`JAXFDI_CACHE_DIR` a new temporary folder for the
+cold run, the same folder for the warm run), so nothing is shared with this process.
+Per case: wall seconds of the process, and where the study reports them (the study
+engine's ``config["seconds"]``) the seconds per structure and the XLA compile seconds.
+``--linalg`` runs ``engine_study(unrolled=...)`` both ways (issue 36 item 5: the default
+is the smaller program unless the other wins by 1.5x). Results go to
+``benchmarks/results_studies.json`` (written whole or not at all).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+
+from jaxfdi._io import write_json  # noqa: E402
+
+ENGINE_IN_PROCESS = """
+import json, sys, time
+import jaxfdi
+jaxfdi.enable_x64(); jaxfdi.enable_compilation_cache()
+from jaxfdi.scenarios.engine import engine_study
+start = time.perf_counter()
+study = engine_study(runs={runs}, seed=0, unrolled={unrolled})
+print(json.dumps({{"wall_in_process_s": time.perf_counter() - start, "seconds": study.config["seconds"]}}))
+"""
+
+
+def _run(command: list[str], cache: str) -> dict:
+    env = {**os.environ, "JAXFDI_CACHE_DIR": cache}
+    start = time.perf_counter()
+    proc = subprocess.run(command, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(command)} failed:\n{proc.stderr[-3000:]}")
+    return {"wall_s": wall, "stdout_tail": proc.stdout[-400:]}
+
+
+def _study_case(study: str, runs: int | None, cache: str) -> dict:
+    with tempfile.TemporaryDirectory() as out:
+        command = [sys.executable, "-m", "jaxfdi", "run", study, "--quiet", "--out", out]
+        if runs is not None:
+            command += ["--runs", str(runs)]
+        result = _run(command, cache)
+        files = list(Path(out).glob("*.json"))
+        if files:
+            data = json.loads(files[0].read_text())
+            result["study_seconds"] = data.get("seconds")
+            result["structures"] = data.get("config", {}).get("seconds")
+    result.pop("stdout_tail")
+    return result
+
+
+def _engine_linalg(unrolled: bool, runs: int, cache: str) -> dict:
+    result = _run([sys.executable, "-c", ENGINE_IN_PROCESS.format(runs=runs, unrolled=unrolled)], cache)
+    result.update(json.loads(result.pop("stdout_tail").strip().splitlines()[-1]))
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--studies", nargs="+", default=["engine"])
+    parser.add_argument("--runs", type=int, default=None, help="--runs for every study (default: the CLI's)")
+    parser.add_argument("--linalg", action="store_true", help="only the engine's linear-algebra comparison")
+    parser.add_argument("--out", default=str(HERE / "results_studies.json"))
+    args = parser.parse_args()
+    import jax
+
+    report = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version(),
+                          "jax": jax.__version__, "backend": jax.default_backend(),
+                          "device": str(jax.devices()[0].device_kind)},
+              "date": time.strftime("%Y-%m-%d %H:%M"), "cases": {}}
+    if args.linalg:
+        for unrolled in (False, True):
+            with tempfile.TemporaryDirectory() as cache:
+                name = f"engine {'written-out' if unrolled else 'library calls'}"
+                cold = _engine_linalg(unrolled, args.runs or 100, cache)
+                warm = _engine_linalg(unrolled, args.runs or 100, cache)
+            report["cases"][name] = {"cold": cold, "warm": warm}
+            print(f"{name}: cold {cold['wall_s']:.1f} s, warm {warm['wall_s']:.1f} s", flush=True)
+    else:
+        for study in args.studies:
+            with tempfile.TemporaryDirectory() as cache:
+                cold = _study_case(study, args.runs, cache)
+                warm = _study_case(study, args.runs, cache)
+            report["cases"][study] = {"runs": args.runs, "cold": cold, "warm": warm}
+            print(f"{study}: cold {cold['wall_s']:.1f} s, warm {warm['wall_s']:.1f} s", flush=True)
+    previous = json.loads(Path(args.out).read_text()) if Path(args.out).exists() else {}
+    previous.setdefault("runs", []).append(report)
+    write_json(args.out, previous)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,242 @@
+"""The study engine: a Monte Carlo study is data, and one function runs it.
+
+A study names its cases (what each run simulates: a fault, a magnitude), the number of
+runs of each, and its methods, grouped by **structure**: methods that differ only in
+numbers (a transition matrix, a threshold, a confirmation length) are one compiled
+program with those numbers as arrays. A structure's ``run(key, case, *params)`` is one
+run of one method; its ``axes`` are parameter pytrees with a leading axis each, and the
+engine ``vmap`` s ``run`` over them in turn, outer axis first, so one program runs the
+whole grid ``axes[0] x axes[1] x ...`` on the same simulated run. What does not depend
+on an axis is computed once for it: with ``axes = (filter_params (F,), detector_params
+(D,))`` the plant is simulated once per run and each of the F filters runs once, feeding
+its D detectors. A method is a cell of the grid (``methods``: name -> index tuple).
+
+``run_study(study, runs, seed)`` runs every structure through ``monte_carlo`` on the same
+keys (run ``i`` of the study gets ``split(key(seed), cases * runs)[i]`` in every
+structure, so every method sees the same noise), case-major, and returns a
+``StudyResult``: per method the runs' outputs (host NumPy, one transfer per structure)
+and, where a structure is ``averaged``, the per-case mean of its runs' traces, summed
+on the device (``monte_carlo``'s ``summary``): what a figure of mean
+histories needs without keeping any history. A study compiles one program per
+structure, whatever ``runs`` and ``seed`` (``monte_carlo``'s chunk sizing); progress
+says which structure compiles (k of n) and how fast the runs go.
+
+Example (two thresholds of one chi-square detector on one Kalman filter, one program)::
+
+    structure = Structure("kf-chi2", run, axes=(jnp.array([9.2, 11.3]),),
+                          methods={"chi2 1%": (0,), "chi2 0.1%": (1,)})
+    study = Study("toy", cases=stack_faults(faults), case_names=names, structures=(structure,))
+    result = run_study(study, runs=100, seed=0)
+    result.outputs["chi2 1%"]          # (cases * runs, ...) case-major
+"""
+from __future__ import annotations
+
+import functools
+import time
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfdi import _checks
+from jaxfdi.montecarlo import monte_carlo
+from jaxfdi.progress import logger
+
+__all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_slices"]
+
+
+class Structure(NamedTuple):
+    """Methods that share one compiled program.
+
+    ``run(key, case, *params) -> output`` is one run of one method, ``params`` one slice
+    of each of ``axes``; ``methods`` maps each method's name to its cell of the grid (one
+    index per axis). ``averaged``: ``run`` returns ``(output, trace)`` and ``trace`` (e.g.
+    the run's mode-probability history, for a figure) is averaged over the runs of each
+    case on the device instead of kept; a trace that does not depend on an axis is
+    computed once for it."""
+
+    name: str
+    run: Callable[..., Any]
+    axes: tuple
+    methods: dict
+    averaged: bool = False
+
+
+class Study(NamedTuple):
+    """A study's specification: ``cases`` a pytree with a leading case axis C (e.g. a
+    stacked ``Fault``), their names, and the structures that run the methods."""
+
+    name: str
+    cases: Any
+    case_names: tuple
+    structures: tuple
+
+
+class StudyResult(NamedTuple):
+    """What ``run_study`` returns.
+
+    ``outputs[method]``: the method's output of every run, leading axis ``C * runs``,
+    case-major (``case_slices``). ``means[method]``: (C, ...) per-case mean of the
+    traces of an ``averaged`` structure. ``seconds[structure]``: wall time of its
+    Monte Carlo, compilation included (``compile_seconds``: the compilation alone, 0.0 when
+    the program came from a cache)."""
+
+    name: str
+    runs: int
+    seed: int
+    case_names: tuple
+    outputs: dict
+    means: dict
+    seconds: dict
+    compile_seconds: dict
+
+
+def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
+    """``(key, case) -> output`` with a leading axis per ``structure.axes`` (outer first):
+    ``structure.run`` vmapped over each axis in turn, key and case shared."""
+    count = len(structure.axes)
+
+    def run(key, case):
+        fn = structure.run
+        for axis in reversed(range(count)):
+            fn = jax.vmap(fn, in_axes=(None, None, *(0 if j == axis else None for j in range(count))))
+        return fn(key, case, *structure.axes)
+
+    return run
+
+
+def case_slices(runs: int, num_cases: int) -> list[slice]:
+    """The run ranges of each case in a case-major study output."""
+    return [slice(i * runs, (i + 1) * runs) for i in range(num_cases)]
+
+
+def _check_study(study: Study) -> int:
+    if not isinstance(study, Study):
+        raise TypeError(f"study: expected a jaxfdi.study.Study, got {_checks.received(study)}")
+    sizes = {np.shape(leaf)[0] if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(study.cases)}
+    if len(sizes) != 1 or -1 in sizes:
+        raise ValueError(f"study.cases: expected leaves with one leading case axis, got leading sizes {sorted(sizes)}")
+    num_cases = sizes.pop()
+    if len(study.case_names) != num_cases:
+        raise ValueError(f"study.case_names: expected {num_cases} names (one per case), got {len(study.case_names)}")
+    if not study.structures:
+        raise ValueError("study.structures: expected at least one Structure")
+    seen = set()
+    for s in study.structures:
+        if not isinstance(s, Structure):
+            raise TypeError(f"study.structures: expected Structure entries, got {_checks.received(s)}")
+        lengths = []
+        for a, axis in enumerate(s.axes):
+            leading = {np.shape(leaf)[0] if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(axis)}
+            if len(leading) != 1 or -1 in leading:
+                raise ValueError(f"{s.name}.axes[{a}]: expected leaves with one leading axis, got {sorted(leading)}")
+            lengths.append(leading.pop())
+        for method, cell in s.methods.items():
+            if method in seen:
+                raise ValueError(f"{s.name}.methods: method {method!r} named twice in the study")
+            seen.add(method)
+            if len(cell) != len(lengths) or not all(0 <= i < n for i, n in zip(cell, lengths)):
+                raise ValueError(f"{s.name}.methods[{method!r}]: expected one index per axis within {lengths}, got {cell}")
+    return num_cases
+
+
+def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chunk_size: int | None = None,
+              structures: list[str] | None = None) -> StudyResult:
+    """Run ``runs`` runs of every case of ``study`` through each structure.
+
+    Args:
+      study: the ``Study``.
+      runs: runs per case.
+      seed: PRNG seed; run ``i`` (case-major) gets ``split(key(seed), C * runs)[i]`` in every
+        structure.
+      progress: log which structure compiles and show the runs' progress.
+      chunk_size: runs per compiled call (default: ``monte_carlo``'s, sized for the
+        backend; it does not change any result).
+      structures: run only these structures (by name; default all).
+    """
+    num_cases = _check_study(study)
+    runs = _checks.check_int("runs", runs, 1, meaning="a positive number of runs per case")
+    seed = _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
+    chosen = [s for s in study.structures if structures is None or s.name in structures]
+    total = num_cases * runs
+    per_run = (jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), study.cases),
+               np.repeat(np.arange(num_cases, dtype=np.int32), runs))
+    outputs, means, seconds, compile_seconds = {}, {}, {}, {}
+    for k, structure in enumerate(chosen, start=1):
+        label = f"{study.name}: {structure.name} ({k} of {len(chosen)})"
+        program = _program(structure)
+        summary = _case_mean_summary(num_cases) if structure.averaged else None
+        compile_before = _compile_time_probe()
+        start = time.perf_counter()
+        result = monte_carlo(program, jax.random.key(seed), total, per_run, chunk_size=chunk_size,
+                             progress=progress, summary=summary, shared=structure.axes, label=label)
+        seconds[structure.name] = time.perf_counter() - start
+        compile_seconds[structure.name] = _compile_time_probe() - compile_before
+        out, sums = result if summary is not None else (result, None)
+        for method, cell in structure.methods.items():
+            outputs[method] = jax.tree_util.tree_map(lambda leaf, c=cell: leaf[(slice(None), *c)], out)
+            if sums is not None:
+                totals, counts = sums
+                means[method] = jax.tree_util.tree_map(
+                    lambda leaf, c=cell: leaf[(slice(None), *c)] / counts.reshape((-1,) + (1,) * (leaf.ndim - 1 - len(c))),
+                    totals)
+        if progress:
+            logger.info("%s: %d runs in %.1f s", label, total, seconds[structure.name])
+    return StudyResult(study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds)
+
+
+_PROGRAMS: dict = {}
+
+
+def _program(structure: Structure) -> Callable:
+    """``(key, (case, case_index), axes) -> output`` of a structure (``grid_run``; an
+    ``averaged`` one's ``(output, trace, case_index)``). One function object per
+    ``(run, averaged)``, so that a second study of the same structure, with other runs,
+    seed or parameter values, reuses ``monte_carlo``'s compiled chunk."""
+    signature = (structure.run, structure.averaged)
+    if signature not in _PROGRAMS:
+        run, averaged = signature
+
+        def one(key, data, axes):
+            case, case_index = data
+            out = grid_run(Structure("", run, axes, {}))(key, case)
+            return (*out, case_index) if averaged else out
+
+        _PROGRAMS[signature] = one
+    return _PROGRAMS[signature]
+
+
+@functools.lru_cache(maxsize=64)
+def _case_mean_summary(num_cases: int):
+    """``summary`` for ``monte_carlo``: keep the runs' outputs; total the runs' traces
+    per case and count the runs."""
+
+    def summary(outputs, weight):
+        out, values, case_index = outputs
+        w = weight.astype(jnp.result_type(float))
+
+        def per_case(leaf):
+            weighted = leaf * w.reshape((-1,) + (1,) * (leaf.ndim - 1))
+            return jax.ops.segment_sum(weighted, case_index, num_segments=num_cases)
+
+        totals = jax.tree_util.tree_map(per_case, values), jax.ops.segment_sum(w, case_index, num_segments=num_cases)
+        return out, totals
+
+    return summary
+
+
+def _compile_time_probe() -> float:
+    """Seconds XLA has spent compiling in this process so far (``jax.monitoring``)."""
+    return _COMPILE_SECONDS[0]
+
+
+_COMPILE_SECONDS = [0.0]
+
+
+def _record_duration(event: str, duration: float, **_: Any) -> None:
+    if event == "/jax/core/compile/backend_compile_duration":
+        _COMPILE_SECONDS[0] += duration
+
+
+jax.monitoring.register_event_duration_secs_listener(_record_duration)

@@ -1,0 +1,167 @@
+"""The study engine (``jaxfdi.study``): one program per structure whatever the runs and
+seed, methods-as-data equal to the same methods run one by one, on-device per-case
+means equal to host-side means of the same runs, and decisions independent of the chunk
+size and of the device count.
+
+The toy study: a 2-state tracking model, a bias fault on one sensor, a Kalman filter
+whose measurement noise is a filter parameter, and the windowed chi-square detector with
+its threshold as a detector parameter, so the grid is (2 filters) x (3 thresholds)."""
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxfdi
+from jaxfdi import montecarlo, study
+from jaxfdi.faults import fault, no_fault, stack_faults
+from jaxfdi.models.linear import LinearGaussianModel
+
+HERE = Path(__file__).parent
+T = 60
+MODEL = LinearGaussianModel(Phi=np.array([[1.0, 0.1], [0.0, 1.0]]), Gamma=np.array([[0.005], [0.1]]),
+                            C=np.eye(2), D=np.zeros((2, 1)), Q=1e-4 * np.eye(2), R=1e-2 * np.eye(2))
+R_SCALES = np.array([1.0, 1.5])
+THRESHOLDS = np.array([6.0, 9.2, 13.8])
+
+
+def toy_run(key, f, r_scale, threshold):
+    """One run: the plant with fault ``f``, a KF with R scaled, a chi-square detector."""
+    us = jnp.ones((T, 1))
+    model = MODEL._replace(R=MODEL.R * r_scale)
+    kf = jaxfdi.kalman_filter(model, unroll_factorizations=False)
+    result = jaxfdi.monitor(jaxfdi.linear_simulator(MODEL, f), kf, jaxfdi.chi2_detector(threshold, 2), jnp.zeros(2),
+                            kf.init(jnp.zeros(2), MODEL.Q), us, key, f.onset, keep_history=True)
+    return result.record, result.history.statistic
+
+
+def toy_study(averaged=True) -> study.Study:
+    cases = stack_faults([fault("bias", "sensor", 1, 30, 0.15), no_fault()])
+    methods = {f"R x{r} chi2 {t}": (i, j) for i, r in enumerate(R_SCALES) for j, t in enumerate(THRESHOLDS)}
+    run = toy_run if averaged else _record_only
+    return study.Study("toy", cases, ("sensor 1", "none"),
+                       (study.Structure("kf-chi2", run, (R_SCALES, THRESHOLDS), methods, averaged=averaged),))
+
+
+def _record_only(key, f, r_scale, threshold):
+    return toy_run(key, f, r_scale, threshold)[0]
+
+
+def _program(spec):
+    s = spec.structures[0]
+    summary = study._case_mean_summary(len(spec.case_names)) if s.averaged else None
+    return montecarlo._compiled(study._program(s), False, summary, True)
+
+
+def test_one_program_per_structure_whatever_runs_and_seed():
+    """Six methods, one compiled program; other seeds and run counts (filling a chunk)
+    compile nothing new: the chunk program holds one executable, and no backend
+    compilation happens after the first study."""
+    spec = toy_study()
+    compiles = []
+
+    def listener(event, duration, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        study.run_study(spec, 200, 0, chunk_size=64)
+        first = len(compiles)
+        for runs, seed in ((200, 1), (333, 7), (64, 12)):
+            study.run_study(spec, runs, seed, chunk_size=64)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert _program(spec)._cache_size() == 1
+    assert len(compiles) == first  # nothing compiled after the first study
+    # the default chunk (backend-sized, a power of two below it) gives few shapes: runs above it compile nothing
+    assert montecarlo.default_chunk_size() == montecarlo.CHUNK_BY_PLATFORM["cpu"]
+
+
+def test_methods_as_data_equal_one_by_one():
+    """Each method of the grid equals the same filter and detector run alone through
+    ``monte_carlo`` on the same keys: integer fields exactly, float fields to 1e-12."""
+    spec = toy_study()
+    runs, seed = 20, 3
+    result = study.run_study(spec, runs, seed)
+    cases = jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), spec.cases)
+    for name, (i, j) in spec.structures[0].methods.items():
+        alone = jaxfdi.monte_carlo(lambda k, f, i=i, j=j: toy_run(k, f, R_SCALES[i], THRESHOLDS[j])[0],
+                                   jax.random.key(seed), 2 * runs, cases, chunk_size=2 * runs)
+        grid = result.outputs[name]
+        for field in ("onset", "first_alarm", "detection_step", "false_alarms", "isolated", "first_unhealthy"):
+            np.testing.assert_array_equal(getattr(grid, field), getattr(alone, field), err_msg=f"{name} {field}")
+        np.testing.assert_allclose(grid.estimate, alone.estimate, rtol=1e-12, atol=0, equal_nan=True)
+    detections = [tuple(result.outputs[n].detection_step[:runs]) for n in spec.structures[0].methods]
+    assert len(set(detections)) > 1, "the thresholds and noise scales must make a difference"
+
+
+def test_device_means_equal_host_means():
+    """The per-case mean of the traces, summed on the device in chunks with padding,
+    equals the mean of the same runs' traces kept and averaged on the host (1e-12)."""
+    spec = toy_study()
+    runs, seed = 30, 5
+    result = study.run_study(spec, runs, seed, chunk_size=16)  # 60 runs: 4 chunks, the last padded
+    cases = jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), spec.cases)
+    grid = study.grid_run(spec.structures[0])
+    _, traces = jaxfdi.monte_carlo(grid, jax.random.key(seed), 2 * runs, cases, chunk_size=60)
+    for name, (i, j) in spec.structures[0].methods.items():
+        host = traces[:, i, j].reshape(2, runs, T).mean(axis=1)
+        np.testing.assert_allclose(result.means[name], host, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("chunk_size", [7, 64])
+def test_chunk_size_does_not_change_decisions(chunk_size):
+    spec = toy_study(averaged=False)
+    reference = study.run_study(spec, 25, 9, chunk_size=50)
+    other = study.run_study(spec, 25, 9, chunk_size=chunk_size)
+    for name in reference.outputs:
+        for field in ("first_alarm", "detection_step", "false_alarms", "isolated"):
+            np.testing.assert_array_equal(getattr(other.outputs[name], field), getattr(reference.outputs[name], field))
+
+
+def test_two_devices_give_the_same_decisions(tmp_path):
+    """The toy study in a process with two (virtual CPU) devices, runs sharded over both,
+    gives the same integer records and means equal to rounding."""
+    out = tmp_path / "two.npz"
+    script = textwrap.dedent(f"""
+        import sys, numpy as np, jax
+        jax.config.update("jax_enable_x64", True)
+        sys.path.insert(0, {str(HERE)!r})
+        from test_study import toy_study
+        from jaxfdi import study
+        assert len(jax.local_devices()) == 2, jax.local_devices()
+        r = study.run_study(toy_study(), 25, 9, chunk_size=16)
+        np.savez({str(out)!r}, **{{n + "|" + f: np.asarray(getattr(r.outputs[n], f)) for n in r.outputs
+                                  for f in ("detection_step", "isolated", "false_alarms")}},
+                 **{{n + "|mean": r.means[n] for n in r.means}})
+    """)
+    env = {**__import__("os").environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
+           "JAX_PLATFORMS": "cpu"}
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    two = np.load(out)
+    one = study.run_study(toy_study(), 25, 9, chunk_size=16)
+    for key in two.files:
+        name, field = key.split("|")
+        if field == "mean":
+            np.testing.assert_allclose(two[key], one.means[name], rtol=1e-12, atol=1e-12)
+        else:
+            np.testing.assert_array_equal(two[key], getattr(one.outputs[name], field))
+
+
+def test_bad_study_is_refused_with_the_argument_named():
+    spec = toy_study()
+    with pytest.raises(ValueError, match="study.case_names"):
+        study.run_study(spec._replace(case_names=("one",)), 2, 0)
+    bad = spec.structures[0]._replace(methods={"x": (0, 5)})
+    with pytest.raises(ValueError, match=r"kf-chi2.methods\['x'\]"):
+        study.run_study(spec._replace(structures=(bad,)), 2, 0)
+    with pytest.raises(ValueError, match="runs"):
+        study.run_study(spec, 0, 0)
+    with pytest.raises(TypeError, match="study"):
+        study.run_study({"name": "x"}, 2, 0)

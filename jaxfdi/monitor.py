@@ -105,21 +105,27 @@ def monitor(
     return MonitorResult(result.score, history)
 
 
-def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_delay: int = 0) -> DetectionRecord:
+def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_delay: int = 0,
+                    healthy: Array | None = None) -> DetectionRecord:
     """The detection record of ``detector`` over a stored (T, ...) input sequence, the
     detector half of ``monitor`` without the plant and filter (e.g. to try thresholds on
-    mode probabilities computed once)."""
+    mode probabilities computed once, or after a batch filter kernel). ``healthy`` (T,)
+    bool, the filter's health per step (``info.healthy``): with ``None`` only the
+    statistic's finiteness marks ``first_unhealthy``; given, the record is ``monitor``'s."""
     _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     steps = jnp.arange(jax.tree.leaves(inputs)[0].shape[0])
+    healthy = jnp.ones(steps.shape, bool) if healthy is None else jnp.asarray(healthy, bool)
+    _checks.check_shape("healthy", healthy, steps.shape, "one flag per step of inputs (T,)")
 
     def body(carry, k_input):
         det_state, record = carry
-        k, x = k_input
+        k, x, ok = k_input
         det_state, decision = detector.step(det_state, x)
         decision = as_decision(decision)
+        ok = ok & jnp.all(jnp.isfinite(decision.statistic))
         return (det_state, record_update(record, k, decision.alarm, decision.label, decision.estimate,
-                                         estimate_delay)), None
+                                         estimate_delay, healthy=ok)), None
 
     dtype = jnp.result_type(*jax.tree.leaves(inputs))
-    (_, record), _ = jax.lax.scan(body, (detector.init(), record_init(onset, dtype)), (steps, inputs))
+    (_, record), _ = jax.lax.scan(body, (detector.init(), record_init(onset, dtype)), (steps, inputs, healthy))
     return record

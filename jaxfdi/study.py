@@ -54,13 +54,16 @@ class Structure(NamedTuple):
     index per axis). ``averaged``: ``run`` returns ``(output, trace)`` and ``trace`` (e.g.
     the run's mode-probability history, for a figure) is averaged over the runs of each
     case on the device instead of kept; a trace that does not depend on an axis is
-    computed once for it."""
+    computed once for it. ``batched``: ``run(keys (B,), cases (B, ...), *params)`` runs a
+    whole chunk and returns a leading run axis (B, ...), e.g. to drive a filter's batch
+    kernel (``run_filter_batch``) instead of ``vmap``."""
 
     name: str
     run: Callable[..., Any]
     axes: tuple
     methods: dict
     averaged: bool = False
+    batched: bool = False
 
 
 class Study(NamedTuple):
@@ -94,14 +97,18 @@ class StudyResult(NamedTuple):
 
 def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
     """``(key, case) -> output`` with a leading axis per ``structure.axes`` (outer first):
-    ``structure.run`` vmapped over each axis in turn, key and case shared."""
+    ``structure.run`` vmapped over each axis in turn, key and case shared. A ``batched``
+    structure's ``(keys, cases)`` give ``(B, *grid, ...)``: the run axis stays first."""
     count = len(structure.axes)
 
     def run(key, case):
         fn = structure.run
         for axis in reversed(range(count)):
             fn = jax.vmap(fn, in_axes=(None, None, *(0 if j == axis else None for j in range(count))))
-        return fn(key, case, *structure.axes)
+        out = fn(key, case, *structure.axes)
+        if structure.batched:
+            out = jax.tree_util.tree_map(lambda leaf: jnp.moveaxis(leaf, count, 0), out)
+        return out
 
     return run
 
@@ -170,7 +177,8 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
         compile_before = _compile_time_probe()
         start = time.perf_counter()
         result = monte_carlo(program, jax.random.key(seed), total, per_run, chunk_size=chunk_size,
-                             progress=progress, summary=summary, shared=structure.axes, label=label)
+                             progress=progress, summary=summary, shared=structure.axes, label=label,
+                             batched=structure.batched)
         seconds[structure.name] = time.perf_counter() - start
         compile_seconds[structure.name] = _compile_time_probe() - compile_before
         out, sums = result if summary is not None else (result, None)
@@ -194,13 +202,13 @@ def _program(structure: Structure) -> Callable:
     ``averaged`` one's ``(output, trace, case_index)``). One function object per
     ``(run, averaged)``, so that a second study of the same structure, with other runs,
     seed or parameter values, reuses ``monte_carlo``'s compiled chunk."""
-    signature = (structure.run, structure.averaged)
+    signature = (structure.run, structure.averaged, structure.batched)
     if signature not in _PROGRAMS:
-        run, averaged = signature
+        run, averaged, batched = signature
 
         def one(key, data, axes):
             case, case_index = data
-            out = grid_run(Structure("", run, axes, {}))(key, case)
+            out = grid_run(Structure("", run, axes, {}, averaged, batched))(key, case)
             return (*out, case_index) if averaged else out
 
         _PROGRAMS[signature] = one

@@ -59,7 +59,8 @@ from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.metrics import DetectionRecord, fault_row, unhealthy_rows_warning
 from jaxfdi.models.engine import TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
-from jaxfdi.monitor import monitor
+from jaxfdi.filters._base import run_filter_batch
+from jaxfdi.monitor import monitor, replay_detector
 from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.progress import logger
 from jaxfdi.riccati import steady_state_kalman
@@ -426,7 +427,7 @@ def _stack(items):
 
 @functools.lru_cache(maxsize=16)
 def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_estimate_delay: int,
-                    unrolled: bool) -> dict:
+                    unrolled: bool, kernel: bool) -> dict:
     """The run functions of the engine study's structures (``study.Structure.run``), one
     object per static setting so that every study of these sizes reuses their programs.
     Each returns ``(DetectionRecord, trace)``: the trace is averaged over each fault's runs
@@ -459,6 +460,30 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
             return (result.record, result.history.info.mode_prob) if imm else result.record
         return run
 
+    def imm_chunk(design: str):
+        """The IMM structures over a whole chunk: the plant simulated per run, the IMM
+        bank through its structure-of-arrays kernel (``run_filter_batch``), then each
+        decision rule replayed on the stored mode probabilities with the filter's health:
+        the records ``monitor`` gives (to round-off: the kernel's covariance update is the
+        standard form)."""
+        def run(keys, faults, filt: ZhangLiFilter | BiasFilter, rule: ModeRule):
+            if design == "zhang-li":
+                modes = noise_inflation_modes(model, filt.sensor_inflation, filt.actuator_noise)
+                prior, detector_input, delay = (x0, P0), _mode_prob, 0
+            else:
+                modes = bias_modes(model, filt.bias_walk, filt.bias_prior)
+                prior = bias_mode_initial_state(model, x0, P0, filt.bias_prior)
+                detector_input, delay = _bias_estimates, bias_estimate_delay
+            imm = interacting_multiple_model(kalman_filter, modes, filt.mixing)
+            ys = jax.vmap(lambda k, f: simulate(linear_simulator(model, f), x0, us, k)[1].measurement)(keys, faults)
+            _, info = run_filter_batch(imm, imm.init(*prior, mu0), ys, us)
+            detector = mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps)
+            inputs = jax.vmap(jax.vmap(detector_input))(info)
+            records = jax.vmap(lambda x, onset, ok: replay_detector(detector, x, onset, delay, ok))(
+                inputs, faults.onset, info.healthy)
+            return records, info.mode_prob
+        return run
+
     steady = steady_state_kalman(model)
     signatures = fault_signatures(model, steady.gain, fault_directions(model), glr_window)
     kf = kalman_filter(model, unroll_factorizations=unrolled)
@@ -477,12 +502,15 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
         glr = jax.vmap(lambda w, v: glr_statistic(w, signatures, steady.innovation_cov, v).statistic)(windows, valid)
         return result.record, glr
 
-    return {"MM (Zhang & Li modes)": mode_run("zhang-li", False), "IMM (Zhang & Li modes)": mode_run("zhang-li", True),
-            "MM (bias modes)": mode_run("bias", False), "IMM (bias modes)": mode_run("bias", True), "GLRT": glrt_run}
+    return {"MM (Zhang & Li modes)": mode_run("zhang-li", False),
+            "IMM (Zhang & Li modes)": imm_chunk("zhang-li") if kernel else mode_run("zhang-li", True),
+            "MM (bias modes)": mode_run("bias", False),
+            "IMM (bias modes)": imm_chunk("bias") if kernel else mode_run("bias", True), "GLRT": glrt_run}
 
 
 def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] | None = None,
-                duration: float = 4.0, onset_time: float = 2.0, unrolled: bool = False) -> Study:
+                duration: float = 4.0, onset_time: float = 2.0, unrolled: bool = False,
+                kernel: bool = True) -> Study:
     """The engine study as data (``jaxfdi.study``): the seven cases and every method of
     ``engine_method_names`` (or ``methods``) in five structures, one compiled program
     each: the MMs and IMMs of each mode design, and the GLRTs. Within a structure the
@@ -495,7 +523,7 @@ def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] 
         raise ValueError(f"methods: expected a non-empty list of names from {names}, got unknown {unknown or 'none'}")
     steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
     runs = _structure_runs(steps, settings.glr_window, settings.bias_estimate_delay, settings.glr_estimate_delay,
-                           bool(unrolled))
+                           bool(unrolled), bool(kernel))
     hand = sticky_transition(len(MODE_NAMES), settings.to_fault, settings.stay)
     paper_rule = _mode_rule(settings, 1)
     zl = [ZhangLiFilter(np.float64(settings.mm_floor), settings.sensor_inflation, settings.actuator_noise)]
@@ -520,14 +548,16 @@ def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] 
     for name, axes, cells in grids:
         cells = {m: c for m, c in cells.items() if m in chosen}
         if cells:
-            structures.append(Structure(name, runs[name], axes, cells, averaged=name.startswith(("IMM", "GLRT"))))
+            structures.append(Structure(name, runs[name], axes, cells, averaged=name.startswith(("IMM", "GLRT")),
+                                        batched=kernel and name.startswith("IMM")))
     fault_names, faults = engine_faults(onset)
     return Study("engine", stack_faults(faults), tuple(fault_names), tuple(structures))
 
 
 def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = EngineSettings(),
                  methods: list[str] | None = None, duration: float = 4.0, onset_time: float = 2.0,
-                 progress: bool = False, chunk_size: int | None = None, unrolled: bool = False) -> EngineStudy:
+                 progress: bool = False, chunk_size: int | None = None, unrolled: bool = False,
+                 kernel: bool = True) -> EngineStudy:
     """Run every method (or ``methods``) on the same ``runs`` runs per fault
     (``engine_spec`` through ``study.run_study``: five programs).
 
@@ -535,7 +565,7 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
     probabilities and GLR statistics are averaged over the same runs, on the device."""
     require_x64("engine_study (the engine model is stiff)")
     check_study(runs, seed)
-    spec = engine_spec(settings, methods, duration, onset_time, unrolled)
+    spec = engine_spec(settings, methods, duration, onset_time, unrolled, kernel)
     chosen = [m for m in engine_method_names(settings) if any(m in s.methods for s in spec.structures)]
     result = run_study(spec, runs, seed, progress=progress, chunk_size=chunk_size)
     steps = int(round(duration / TS))

@@ -47,6 +47,7 @@ jax.config.update("jax_enable_x64", True)
 from jaxfdi import _io  # noqa: E402
 from jaxfdi.control.attitude import wheel_attitude_controller  # noqa: E402
 from jaxfdi.loop import detection_scorer, run_loop  # noqa: E402
+from jaxfdi.metrics import binomial_lower_bound  # noqa: E402
 from jaxfdi.models.reaction_wheels import WheelCommand, filter_input, wheel_plant  # noqa: E402
 from jaxfdi.montecarlo import monte_carlo  # noqa: E402
 from jaxfdi.scenarios import reaction_wheels as rw  # noqa: E402
@@ -108,7 +109,7 @@ def per_wheel_rates(out, runs):
         k = int(np.sum(right[sel]))
         rows.append({
             "wheel": w + 1, "runs": n, "unhealthy_runs": int(np.sum(sel & ~out["healthy"])), "isolated": k,
-            "rate": k / n if n else float("nan"), "lower_95": rw.binomial_lower_bound(k, n),
+            "rate": k / n if n else float("nan"), "lower_95": binomial_lower_bound(k, n),
             "named_opposite": int(np.sum(opposite[sel])), "opposite_wheel": OPPOSITE[w] + 1,
             "named_counts": {str(x): int(np.sum(rec.isolated[sel] == x)) for x in range(-1, 5) if np.any(rec.isolated[sel] == x)},
             "decided": int(np.sum(rec.detection_step[sel] >= 0)),

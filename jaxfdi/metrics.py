@@ -422,3 +422,27 @@ def summarize_episodes(records: EpisodeRecord, Ts: float = 1.0) -> EpisodeSummar
         false_alarm_rate=float(np.mean(false_alarms > 0)) if false_alarms.size else nan,
         false_alarm_rate_per_step=float(false_alarms.sum() / outside) if outside else nan,
     )
+
+
+def binomial_interval(trials: int, p: float, level: float = 0.99) -> tuple[int, int]:
+    """Central ``level`` interval ``[low, high]`` of a Binomial(``trials``, ``p``) count:
+    ``low`` the smallest k with ``P(X <= k) >= (1 - level) / 2``, ``high`` the smallest k
+    with ``P(X <= k) >= 1 - (1 - level) / 2`` (``scipy.stats.binom``), e.g. the alarm
+    counts a detector with design false-alarm probability ``p`` should give."""
+    from scipy import stats
+
+    tail = (1.0 - level) / 2.0
+    return int(stats.binom.ppf(tail, trials, p)), int(stats.binom.ppf(1.0 - tail, trials, p))
+
+
+def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
+    """One-sided Clopper-Pearson lower bound of a rate from ``successes`` of ``trials``,
+    ``Beta.ppf(1 - confidence; successes, trials - successes + 1)`` (0 when none
+    succeeded; NaN without trials)."""
+    from scipy import stats
+
+    if trials <= 0:
+        return float("nan")
+    if successes <= 0:
+        return 0.0
+    return float(stats.beta.ppf(1.0 - confidence, successes, trials - successes + 1))

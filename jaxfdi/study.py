@@ -149,7 +149,7 @@ def _check_study(study: Study) -> int:
 
 
 def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chunk_size: int | None = None,
-              structures: list[str] | None = None) -> StudyResult:
+              structures: list[str] | None = None, key: jax.Array | None = None) -> StudyResult:
     """Run ``runs`` runs of every case of ``study`` through each structure.
 
     Args:
@@ -161,6 +161,8 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
       chunk_size: runs per compiled call (default: ``monte_carlo``'s, sized for the
         backend; it does not change any result).
       structures: run only these structures (by name; default all).
+      key: the PRNG key to split instead of ``jax.random.key(seed)`` (a study whose runs
+        come from a key derived from its seed).
     """
     num_cases = _check_study(study)
     runs = _checks.check_int("runs", runs, 1, meaning="a positive number of runs per case")
@@ -176,7 +178,7 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
         summary = _case_mean_summary(num_cases) if structure.averaged else None
         compile_before = _compile_time_probe()
         start = time.perf_counter()
-        result = monte_carlo(program, jax.random.key(seed), total, per_run, chunk_size=chunk_size,
+        result = monte_carlo(program, jax.random.key(seed) if key is None else key, total, per_run, chunk_size=chunk_size,
                              progress=progress, summary=summary, shared=structure.axes, label=label,
                              batched=structure.batched)
         seconds[structure.name] = time.perf_counter() - start

@@ -308,3 +308,22 @@ def test_fault_row_of_fault_free_runs_and_of_runs_all_alarming_before_the_onset(
     assert row["clean_runs"] == 0 and row["delay_runs"] == 0 and np.isnan(row["delay_median_s"])
     with pytest.raises(ValueError, match="onset, first_alarm, detection_step"):
         delay_statistics(np.zeros(3), np.zeros(2), np.zeros(3))
+
+
+@pytest.mark.parametrize("trials, p", [(50, 0.1), (1000, 0.005), (7, 0.5), (200, 0.9)])
+def test_binomial_interval_equals_the_brute_force_cdf(trials, p):
+    """``binomial_interval`` against the exact CDF summed term by term in fractions of
+    ``math.comb`` (no SciPy): the smallest counts at which it reaches each tail level."""
+    import math
+    from fractions import Fraction
+
+    from jaxfdi.metrics import binomial_interval
+
+    q = Fraction(p).limit_denominator(10**6)
+    cdf, acc = [], Fraction(0)
+    for k in range(trials + 1):
+        acc += math.comb(trials, k) * q**k * (1 - q) ** (trials - k)
+        cdf.append(acc)
+    low = next(k for k, c in enumerate(cdf) if c >= Fraction(5, 1000))
+    high = next(k for k, c in enumerate(cdf) if c >= Fraction(995, 1000))
+    assert binomial_interval(trials, p, 0.99) == (low, high)

@@ -15,6 +15,7 @@ from scipy import stats
 
 from jaxfdi.faults import FaultKind, no_fault
 from jaxfdi.models.reaction_wheels import delivered_torque, kitsat3_params, stop_hypotheses, stop_transfer, wheel_momentum
+from jaxfdi.metrics import binomial_lower_bound
 from jaxfdi.scenarios import reaction_wheels as rw
 
 CALIBRATION, FREE, PER_WHEEL = 80, 40, 10
@@ -182,5 +183,5 @@ def test_momentum_patterns_give_the_closed_form_net_wheel_momentum():
 def test_binomial_lower_bound_equals_scipys_clopper_pearson():
     for successes, trials in [(9, 10), (10, 10), (37, 50), (1, 3)]:
         want = stats.binomtest(successes, trials, alternative="greater").proportion_ci(0.95).low
-        assert rw.binomial_lower_bound(successes, trials) == pytest.approx(want, rel=1e-9)
-    assert rw.binomial_lower_bound(0, 10) == 0.0 and np.isnan(rw.binomial_lower_bound(0, 0))
+        assert binomial_lower_bound(successes, trials) == pytest.approx(want, rel=1e-9)
+    assert binomial_lower_bound(0, 10) == 0.0 and np.isnan(binomial_lower_bound(0, 0))

@@ -32,3 +32,14 @@ def test_closed_loop_example_runs_and_holds_the_unstable_plant():
     assert states.shape == (200, 2) and abs(states[0, 0]) == 1.0
     assert np.max(np.abs(states[100:])) < 0.1                            # regulated ...
     assert np.max(np.abs(np.linalg.eigvals(np.asarray(namespace["Phi"])))) > 1  # ... an unstable plant
+
+
+def test_study_example_runs_one_program_and_orders_the_methods():
+    """The study-engine example: three methods of one structure; the lower threshold
+    detects the 1.5-sigma sensor bias in more runs, the inflated R in fewer (measured:
+    0.98, 0.65, 0.16 of 500 runs; the ordering is far outside the binomial noise)."""
+    code = re.findall(r"```python\n(.*?)```", README, re.S)[2]
+    namespace = {}
+    exec(compile(code, "README.md", "exec"), namespace)
+    detected = namespace["detected"]
+    assert detected["R x1, 9.2"] > detected["R x1, 13.8"] > detected["R x1.5, 13.8"] > 0

@@ -24,6 +24,7 @@ from scipy import stats
 from jaxfdi.control.attitude import wheel_attitude_controller
 from jaxfdi.loop import detection_scorer, run_loop
 from jaxfdi.models.reaction_wheels import WheelCommand, filter_input, wheel_plant
+from jaxfdi.metrics import binomial_lower_bound
 from jaxfdi.scenarios import reaction_wheels as rw
 
 RUNS, STEPS, ONSET = 20, 300, 200
@@ -225,5 +226,5 @@ def test_credit_isolator_rates_per_wheel(batch):
         assert bounds["isolated"][w] > 0.10, bounds
         assert bounds["top_at_4s"][w] > 0.70, bounds
     k = int(right[wheel == 1].sum())
-    assert rw.binomial_lower_bound(k, RUNS) == pytest.approx(clopper_pearson_lower(k, RUNS), rel=1e-12)
+    assert binomial_lower_bound(k, RUNS) == pytest.approx(clopper_pearson_lower(k, RUNS), rel=1e-12)
     assert stats.binom.sf(4, RUNS, 0.54) > 0.997 and stats.binom.cdf(17, RUNS, 0.97) < 0.03

@@ -13,6 +13,7 @@ Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
 """
 from __future__ import annotations
 
+import functools
 from typing import Any, NamedTuple
 
 import jax
@@ -27,8 +28,8 @@ from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.metrics import DetectionRecord, fault_row, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi.monitor import MonitorHistory, monitor
-from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.simulate import linear_simulator
+from jaxfdi.study import Structure, Study, run_study
 
 FUEL_STEP = 0.01  # kg/s
 ACTUATOR_BIAS = 0.05 * FUEL_STEP
@@ -83,7 +84,7 @@ def engine_chi2_study(
     pfa: float = 0.005,
     duration: float = 4.0,
     onset_time: float = 2.0,
-    chunk_size: int = 8192,
+    chunk_size: int | None = None,
     progress: bool = False,
     threshold: float | None = None,
     filter_noise: tuple[Any, Any] | None = None,
@@ -94,7 +95,9 @@ def engine_chi2_study(
     R)`` (default the plant's) set the detector a tuner changed; the plant is always
     simulated with its own noise."""
     require_x64("engine_chi2_study (the engine model is stiff)")
-    check_study(runs, seed, window=window, chunk_size=chunk_size)
+    check_study(runs, seed, window=window)
+    if chunk_size is not None:
+        check_study(runs, seed, chunk_size=chunk_size)
     _checks.check_probability("pfa", pfa)
     _checks.check_positive("duration", duration, "a positive run length in seconds")
     _checks.check_scalar("onset_time", onset_time, 0.0, duration, high_open=True,
@@ -112,20 +115,14 @@ def engine_chi2_study(
     filter_model = model if filter_noise is None else model._replace(Q=jnp.asarray(filter_noise[0]),
                                                                      R=jnp.asarray(filter_noise[1]))
     names, faults = engine_faults(onset)
-    x0 = jnp.zeros(7)
-
-    def run(key, f, keep_history=False):
-        kf = kalman_filter(filter_model)
-        return monitor(
-            linear_simulator(model, f), kf, chi2_detector(threshold, window), x0, kf.init(x0, filter_model.Q),
-            us, key, f.onset, keep_history,
-        )
-
-    batch = stack_faults([f for f in faults for _ in range(runs)])
+    run = _chi2_run(steps, window)
+    noise = (filter_model.Q[None], filter_model.R[None])
+    spec = Study("engine-chi2", stack_faults(faults), tuple(names),
+                 (Structure("KF chi-square", run, (noise, jnp.reshape(threshold, (1,))), {"chi2": (0, 0)}),))
     key_mc, key_example = jax.random.split(jax.random.key(seed))
-    records = monte_carlo(lambda k, f: run(k, f).record, key_mc, len(faults) * runs, batch,
-                          chunk_size=chunk_size, progress=progress)
-    examples = jax.jit(jax.vmap(lambda f: run(key_example, f, True).history))(stack_faults(faults))
+    records = run_study(spec, runs, seed, key=key_mc, chunk_size=chunk_size, progress=progress).outputs["chi2"]
+    examples = jax.jit(jax.vmap(lambda f: run(key_example, f, (filter_model.Q, filter_model.R), threshold,
+                                              keep_history=True).history))(stack_faults(faults))
 
     rows = []
     for i, (name, f) in enumerate(zip(names, faults)):
@@ -154,6 +151,25 @@ def engine_chi2_study(
         "fuel_step": FUEL_STEP,
     }
     return EngineChi2Result(config, rows, records, examples)
+
+
+@functools.lru_cache(maxsize=16)
+def _chi2_run(steps: int, window: int):
+    """One run of the KF chi-square detector on the engine (``study.Structure.run``): the
+    filter's ``(Q, R)`` and the threshold are arguments, so a tuner's values share the
+    program; one function per (steps, window)."""
+    model = engine_model()
+    us = jnp.full((steps, 1), FUEL_STEP)
+    x0 = jnp.zeros(7)
+
+    def run(key, f, noise, threshold, keep_history=False):
+        filter_model = model._replace(Q=noise[0], R=noise[1])
+        kf = kalman_filter(filter_model)
+        result = monitor(linear_simulator(model, f), kf, chi2_detector(threshold, window), x0,
+                         kf.init(x0, filter_model.Q), us, key, f.onset, keep_history)
+        return result if keep_history else result.record
+
+    return run
 
 
 def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:

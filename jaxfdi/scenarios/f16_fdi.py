@@ -49,6 +49,7 @@ from jaxfdi.detection.hybrid_psa import (
 )
 from jaxfdi.detection.parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
 from jaxfdi.faults import Fault, FaultKind, Target
+from jaxfdi.metrics import binomial_interval
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.models.f16.plant import RATE_OFFSET, flight_view
 from jaxfdi.models.f16.rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
@@ -251,28 +252,6 @@ def _fly(setup, fdi, key, per_run, layouts=None, chunk_size=1024, progress=False
 
     n = int(per_run[2].shape[0])
     return monte_carlo(chunk, key, n, per_run, chunk_size=chunk_size, progress=progress, batched=True)
-
-
-def _binomial_interval(n: int, p: float, level: float = 0.99) -> tuple[int, int]:
-    """Central ``level`` interval of Binomial(n, p) (by its CDF, computed in log space)."""
-    from math import exp, lgamma, log
-
-    if p <= 0:
-        return 0, 0
-    logs = [lgamma(n + 1) - lgamma(k + 1) - lgamma(n - k + 1) + k * log(p) + (n - k) * math.log1p(-p)
-            for k in range(n + 1)]
-    top = max(logs)
-    pmf = [exp(v - top) for v in logs]
-    total = sum(pmf)
-    cdf, low, high, acc = [], None, None, 0.0
-    for k, v in enumerate(pmf):
-        acc += v / total
-        cdf.append(acc)
-        if low is None and acc > (1 - level) / 2:
-            low = k
-        if high is None and acc >= 1 - (1 - level) / 2:
-            high = k
-    return int(low), int(high)
 
 
 def _angle_from_singular(angle_deg: np.ndarray) -> np.ndarray:
@@ -585,7 +564,7 @@ def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> li
         if kind == "none":
             steps = int(setup.reference.state.shape[0])
             per_flight = 1.0 - (1.0 - PFA) ** steps
-            low, high = _binomial_interval(int(sel.sum()), per_flight, 0.99)
+            low, high = binomial_interval(int(sel.sum()), per_flight, 0.99)
             row.update(fd_false_alarm_flights=int(np.sum(det[sel] >= 0)), decisions=int(np.sum(step[sel] >= 0)),
                        expected_per_flight=per_flight, binomial_99_interval=[low, high])
         else:

@@ -54,7 +54,7 @@ from jaxfdi.ins import error_state, imu, integrity, plant, scst, trajectory
 from jaxfdi.ins.loosely_coupled import loosely_coupled_filter
 from jaxfdi.ins.mechanization import NavState
 from jaxfdi.loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
-from jaxfdi.metrics import summarize_detection, summarize_episodes
+from jaxfdi.metrics import binomial_interval, summarize_detection, summarize_episodes
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, PARK_FAULTS, START_TOW, WEEK
 
@@ -427,13 +427,6 @@ def independent_decisions(series: Series) -> tuple[np.ndarray, np.ndarray]:
     return chi2, np.where(valid, np.asarray(series.scst)[:, index], np.nan)
 
 
-def binomial_interval(count: int, trials: int, level: float = 0.99) -> tuple[int, int]:
-    """The central ``level`` interval of Binomial(trials, PFA) counts."""
-    lower = _scipy_stats.binom.ppf((1 - level) / 2, trials, PFA)
-    upper = _scipy_stats.binom.isf((1 - level) / 2, trials, PFA)
-    return int(lower), int(upper)
-
-
 def _rows(results: dict, size: StudySize = PAPER_SIZE) -> list:
     rows = []
     chi2_limit, scst_limit = thresholds()
@@ -443,7 +436,7 @@ def _rows(results: dict, size: StudySize = PAPER_SIZE) -> list:
                                       ("scst", scst_samples, scst_limit, error_state.STATE_SIZE)):
         finite = samples[np.isfinite(samples)]
         alarms = int(np.sum(finite > limit))
-        low, high = binomial_interval(alarms, finite.size)
+        low, high = binomial_interval(finite.size, PFA)
         all_epochs = np.asarray(getattr(free.series, name))
         valid = np.asarray(free.series.scst_valid) if name == "scst" else np.asarray(free.series.gps_used)
         rows.append({"case": "false-alarm", "test": name, "runs": int(all_epochs.shape[0]),

@@ -68,7 +68,7 @@ from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.mm import multiple_model
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
-from jaxfdi.metrics import DetectionRecord, unhealthy_warning
+from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, unhealthy_warning
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.models.reaction_wheels import (
     SpacecraftParams,
@@ -507,18 +507,6 @@ class WheelStudy(NamedTuple):
                     f"{credit['rate_within_deadline']:.2f} within 2 s; MM {row['likelihood']['rate_within_deadline']:.2f}"
                     f" within 2 s")
         return "\n".join(lines)
-
-
-def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
-    """One-sided Clopper-Pearson lower bound of a rate from ``successes`` of ``trials``
-    (0 when none succeeded; NaN without trials)."""
-    from scipy import stats
-
-    if trials <= 0:
-        return float("nan")
-    if successes <= 0:
-        return 0.0
-    return float(stats.beta.ppf(1.0 - confidence, successes, trials - successes + 1))
 
 
 def _fmt(x, width: int = 6, digits: int = 2) -> str:

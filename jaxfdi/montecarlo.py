@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import functools
 import sys
+import threading
 import time
 from typing import Any, Callable
 
@@ -222,18 +223,24 @@ def monte_carlo(
         valid = np.arange(start, start + chunk)[rows] < stop
         weight = jax.device_put(np.arange(start, start + chunk) < stop, sharding) if not multiprocess else None
         first = start == 0
+        heartbeat = None
         if first and progress:
             programs = _cache_size(compiled)
             if programs == 0:
                 logger.info("%s: compiling", label)
-        if multiprocess:
-            result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk,
-                                         valid, shared)
-        else:
-            chunk_keys = run_keys(key, index, num_runs)
-            chunk_data = jax.tree_util.tree_map(lambda leaf: _take(leaf, index), per_run)
-            chunk_keys, chunk_data = jax.device_put((chunk_keys, chunk_data), sharding)
-            result = compiled(chunk_keys, chunk_data, weight, *shared)  # dispatched: the device works on
+                heartbeat = _Heartbeat(f"{label}: still compiling", start_time)
+        try:
+            if multiprocess:
+                result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk,
+                                             valid, shared)
+            else:
+                chunk_keys = run_keys(key, index, num_runs)
+                chunk_data = jax.tree_util.tree_map(lambda leaf: _take(leaf, index), per_run)
+                chunk_keys, chunk_data = jax.device_put((chunk_keys, chunk_data), sharding)
+                result = compiled(chunk_keys, chunk_data, weight, *shared)  # dispatched: the device works on
+        finally:
+            if heartbeat is not None:
+                heartbeat.stop()
         if first and progress and _cache_size(compiled) > programs:
             logger.info("%s: compiled in %.1f s", label, time.perf_counter() - start_time)
         result, part = result if summary is not None else (result, None)
@@ -257,6 +264,23 @@ def monte_carlo(
         stacked = jax.tree_util.tree_map(lambda *parts: np.concatenate(parts, axis=0)[:num_runs],
                                          *jax.device_get(outputs))
     return (stacked, total) if summary is not None else stacked
+
+
+class _Heartbeat:
+    """Logs ``message`` with the seconds since ``start`` every ``interval`` seconds from a
+    daemon thread until ``stop()``: a long compilation is never silent."""
+
+    def __init__(self, message: str, start: float, interval: float = 5.0) -> None:
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._beat, args=(message, start, interval), daemon=True)
+        self._thread.start()
+
+    def _beat(self, message: str, start: float, interval: float) -> None:
+        while not self._done.wait(interval):
+            logger.info("%s (%.0f s)", message, time.perf_counter() - start)
+
+    def stop(self) -> None:
+        self._done.set()
 
 
 def _take(leaf: Any, index: np.ndarray) -> Any:
@@ -285,7 +309,7 @@ def _chunk_program(run_one: Callable, batched: bool, summary: Callable | None, w
     return jax.jit(chunk)
 
 
-@functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=64)
 def _compiled(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
     """``_chunk_program``, one per ``run_one``: a second study with the same function
     (e.g. its streaming summary after its records) reuses the compiled executables."""

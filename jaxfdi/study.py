@@ -167,8 +167,12 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
     num_cases = _check_study(study)
     runs = _checks.check_int("runs", runs, 1, meaning="a positive number of runs per case")
     seed = _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
+    names = [s.name for s in study.structures]
+    if structures is not None and (not structures or set(structures) - set(names)):
+        raise ValueError(f"structures: expected names among {names}, got {list(structures)}")
     chosen = [s for s in study.structures if structures is None or s.name in structures]
     total = num_cases * runs
+    key = jax.random.key(seed) if key is None else key
     per_run = (jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), study.cases),
                np.repeat(np.arange(num_cases, dtype=np.int32), runs))
     outputs, means, seconds, compile_seconds = {}, {}, {}, {}
@@ -178,8 +182,7 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
         summary = _case_mean_summary(num_cases) if structure.averaged else None
         compile_before = _compile_time_probe()
         start = time.perf_counter()
-        result = monte_carlo(program, jax.random.key(seed) if key is None else key, total, per_run, chunk_size=chunk_size,
-                             progress=progress, summary=summary, shared=structure.axes, label=label,
+        result = monte_carlo(program, key, total, per_run, chunk_size=chunk_size, progress=progress, summary=summary, shared=structure.axes, label=label,
                              batched=structure.batched)
         seconds[structure.name] = time.perf_counter() - start
         compile_seconds[structure.name] = _compile_time_probe() - compile_before

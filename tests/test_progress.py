@@ -87,3 +87,28 @@ def test_without_tqdm_or_logging_setup_plain_lines_on_stderr(monkeypatch, capfd)
     jaxfdi.monte_carlo(run_one, jax.random.key(0), 6, jnp.ones(6), chunk_size=3, progress=True)
     err = capfd.readouterr().err
     assert "\r" not in err and err.startswith("monte carlo: 3/6 runs") and "monte carlo: 6/6 runs" in err
+
+
+def test_compilation_is_announced_and_never_silent(caplog, monkeypatch):
+    """A study's first chunk logs 'compiling', a heartbeat while XLA works (every 5 s;
+    here 0.05 s), then 'compiled in'; a second study of the same function compiles
+    nothing and says nothing of it."""
+    from jaxfdi import montecarlo
+
+    monkeypatch.setattr(montecarlo._Heartbeat.__init__, "__defaults__", (0.05,))
+    caplog.set_level(logging.INFO, logger="jaxfdi")
+
+    def slow_to_compile(key, scale):  # 300 unrolled steps: a compilation of a good fraction of a second
+        x = scale * jax.random.normal(key, (4,))
+        for i in range(300):
+            x = jnp.sin(x + i) * jnp.cos(x)
+        return x
+
+    jaxfdi.monte_carlo(slow_to_compile, jax.random.key(0), 8, jnp.ones(8), progress=lambda *a: None,
+                       label="toy")
+    messages = [r.getMessage() for r in caplog.records if r.name == "jaxfdi"]
+    assert messages[0] == "toy: compiling" and messages[-1].startswith("toy: compiled in ")
+    assert any(m.startswith("toy: still compiling") for m in messages[1:-1]), messages
+    caplog.clear()
+    jaxfdi.monte_carlo(slow_to_compile, jax.random.key(1), 8, jnp.ones(8), progress=lambda *a: None, label="toy")
+    assert not [r for r in caplog.records if "compil" in r.getMessage()]

@@ -165,3 +165,5 @@ def test_bad_study_is_refused_with_the_argument_named():
         study.run_study(spec, 0, 0)
     with pytest.raises(TypeError, match="study"):
         study.run_study({"name": "x"}, 2, 0)
+    with pytest.raises(ValueError, match="structures"):
+        study.run_study(spec, 2, 0, structures=["no such structure"])

@@ -144,7 +144,8 @@ def _check_study(study: Study) -> int:
                 raise ValueError(f"{s.name}.methods: method {method!r} named twice in the study")
             seen.add(method)
             if len(cell) != len(lengths) or not all(0 <= i < n for i, n in zip(cell, lengths)):
-                raise ValueError(f"{s.name}.methods[{method!r}]: expected one index per axis within {lengths}, got {cell}")
+                raise ValueError(f"{s.name}.methods[{method!r}]: expected one index per axis within {lengths}, "
+                                 f"got {cell}")
     return num_cases
 
 
@@ -182,8 +183,8 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
         summary = _case_mean_summary(num_cases) if structure.averaged else None
         compile_before = _compile_time_probe()
         start = time.perf_counter()
-        result = monte_carlo(program, key, total, per_run, chunk_size=chunk_size, progress=progress, summary=summary, shared=structure.axes, label=label,
-                             batched=structure.batched)
+        result = monte_carlo(program, key, total, per_run, chunk_size=chunk_size, progress=progress, summary=summary,
+                             shared=structure.axes, label=label, batched=structure.batched)
         seconds[structure.name] = time.perf_counter() - start
         compile_seconds[structure.name] = _compile_time_probe() - compile_before
         out, sums = result if summary is not None else (result, None)
@@ -191,12 +192,16 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
             outputs[method] = jax.tree_util.tree_map(lambda leaf, c=cell: leaf[(slice(None), *c)], out)
             if sums is not None:
                 totals, counts = sums
-                means[method] = jax.tree_util.tree_map(
-                    lambda leaf, c=cell: leaf[(slice(None), *c)] / counts.reshape((-1,) + (1,) * (leaf.ndim - 1 - len(c))),
-                    totals)
+                means[method] = jax.tree_util.tree_map(lambda leaf, c=cell: _per_case_mean(leaf, c, counts), totals)
         if progress:
             logger.info("%s: %d runs in %.1f s", label, total, seconds[structure.name])
     return StudyResult(study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds)
+
+
+def _per_case_mean(total, cell: tuple, counts):
+    """(C, ...) mean of one grid cell from its per-case ``total`` (C, *grid, ...) and the runs per case."""
+    part = total[(slice(None), *cell)]
+    return part / counts.reshape((-1,) + (1,) * (part.ndim - 1))
 
 
 _PROGRAMS: dict = {}

@@ -443,15 +443,16 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
         return (interacting_multiple_model(mode_kf, modes, mixing) if imm
                 else multiple_model(mode_kf, modes, mixing))
 
+    def mode_bank(design: str, filt: ZhangLiFilter | BiasFilter):
+        """A design's mode models, prior, detector input and estimate delay."""
+        if design == "zhang-li":
+            return noise_inflation_modes(model, filt.sensor_inflation, filt.actuator_noise), (x0, P0), _mode_prob, 0
+        return (bias_modes(model, filt.bias_walk, filt.bias_prior),
+                bias_mode_initial_state(model, x0, P0, filt.bias_prior), _bias_estimates, bias_estimate_delay)
+
     def mode_run(design: str, imm: bool):
         def run(key, f, filt: ZhangLiFilter | BiasFilter, rule: ModeRule):
-            if design == "zhang-li":
-                modes = noise_inflation_modes(model, filt.sensor_inflation, filt.actuator_noise)
-                prior, detector_input, delay = (x0, P0), _mode_prob, 0
-            else:
-                modes = bias_modes(model, filt.bias_walk, filt.bias_prior)
-                prior = bias_mode_initial_state(model, x0, P0, filt.bias_prior)
-                detector_input, delay = _bias_estimates, bias_estimate_delay
+            modes, prior, detector_input, delay = mode_bank(design, filt)
             method = Method(bank(modes, filt.mixing, imm), None,
                             mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps),
                             detector_input, delay)
@@ -467,13 +468,7 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
         the records ``monitor`` gives (to round-off: the kernel's covariance update is the
         standard form)."""
         def run(keys, faults, filt: ZhangLiFilter | BiasFilter, rule: ModeRule):
-            if design == "zhang-li":
-                modes = noise_inflation_modes(model, filt.sensor_inflation, filt.actuator_noise)
-                prior, detector_input, delay = (x0, P0), _mode_prob, 0
-            else:
-                modes = bias_modes(model, filt.bias_walk, filt.bias_prior)
-                prior = bias_mode_initial_state(model, x0, P0, filt.bias_prior)
-                detector_input, delay = _bias_estimates, bias_estimate_delay
+            modes, prior, detector_input, delay = mode_bank(design, filt)
             imm = interacting_multiple_model(kalman_filter, modes, filt.mixing)
             ys = jax.vmap(lambda k, f: simulate(linear_simulator(model, f), x0, us, k)[1].measurement)(keys, faults)
             _, info = run_filter_batch(imm, imm.init(*prior, mu0), ys, us)
@@ -531,7 +526,8 @@ def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] 
     walk, prior = np.asarray(settings.bias_walk), np.asarray(settings.bias_prior)
     bias_mm = [BiasFilter(np.float64(settings.mm_floor), walk, prior)]
     bias_imm = [BiasFilter(m, walk, prior) for m in (PAPER_TRANSITION, hand)]
-    rules = [paper_rule, _mode_rule(settings, settings.confirm_steps), _mode_rule(settings, settings.mode_confirm_steps)]
+    rules = [paper_rule, _mode_rule(settings, settings.confirm_steps),
+             _mode_rule(settings, settings.mode_confirm_steps)]
     bonferroni = _bonferroni_threshold(settings)
     glrt_rules = [GLRTRule(np.float64(t), np.bool_(p)) for t, p in
                   ((settings.glr_threshold, False), (bonferroni, False), (bonferroni, True))]

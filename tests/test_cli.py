@@ -30,7 +30,7 @@ def test_engine_chi2_writes_table_json_and_png(cli_run):
     for name in FAULTS:
         assert f"\n{name} " in proc.stdout
     # the progress display: a tqdm bar ("monte carlo: 100%|...| 28/28") or, without tqdm, log lines
-    assert "monte carlo:" in proc.stderr and ("28/28 runs" in proc.stderr or "| 28/28 [" in proc.stderr)
+    assert "engine-chi2: KF chi-square (1 of 1):" in proc.stderr and ("28/28 runs" in proc.stderr or "| 28/28 [" in proc.stderr)
     assert data_provenance_ok(tmp / "out" / "engine-chi2.json")
     data = json.loads((tmp / "out" / "engine-chi2.json").read_text())
     assert [row["fault"] for row in data["rows"]] == FAULTS

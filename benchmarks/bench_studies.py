@@ -49,7 +49,7 @@ def _run(command: list[str], cache: str) -> dict:
     wall = time.perf_counter() - start
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(command)} failed:\n{proc.stderr[-3000:]}")
-    return {"wall_s": wall, "stdout_tail": proc.stdout[-400:]}
+    return {"wall_s": wall, "stdout_tail": proc.stdout}
 
 
 def _study_case(study: str, runs: int | None, cache: str) -> dict:

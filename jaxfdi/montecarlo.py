@@ -176,25 +176,8 @@ def monte_carlo(
     sizes = _num_runs_of(per_run)
     if sizes and sizes != {num_runs}:
         raise ValueError(f"per_run: every leaf needs leading axis num_runs = {num_runs}, got leading sizes {sorted(sizes)}")
-    devices = list(devices or (jax.devices() if jax.process_count() > 1 else jax.local_devices()))
-    multiprocess = len({d.process_index for d in devices}) > 1
-    if multiprocess:
-        devices = sorted(devices, key=lambda d: (d.process_index, d.id))
-        per_process = {p: sum(d.process_index == p for d in devices) for p in {d.process_index for d in devices}}
-        if len(set(per_process.values())) != 1:
-            raise ValueError(f"devices: every process needs the same number of devices, got {per_process}")
-    n_dev = len(devices)
-    if chunk_size is None:
-        chunk = min(default_chunk_size(devices), 1 << max(int(num_runs) - 1, 0).bit_length())
-    else:
-        chunk = min(int(chunk_size), int(num_runs))
-    chunk = -(-chunk // n_dev) * n_dev
-    sharding = NamedSharding(Mesh(np.array(devices), ("runs",)), PartitionSpec("runs"))
-    try:
-        compiled = _compiled(run_one, bool(batched), summary, shared is not None)
-    except TypeError:  # an unhashable callable object
-        compiled = _chunk_program(run_one, bool(batched), summary, shared is not None)
-    shared = () if shared is None else (jax.tree_util.tree_map(jnp.asarray, shared),)
+    devices, multiprocess, chunk, sharding, compiled, shared = _plan(run_one, num_runs, chunk_size, devices, batched,
+                                                                      summary, shared)
     report = progress_bar(label, "runs") if progress is True else (progress or None)  # tqdm.auto or log lines
     rows = _local_rows(devices, chunk) if multiprocess else slice(0, chunk)
 
@@ -221,7 +204,7 @@ def monte_carlo(
         stop = min(start + chunk, num_runs)
         index = np.minimum(np.arange(start, start + chunk), num_runs - 1)  # pad by repeating the last run
         valid = np.arange(start, start + chunk)[rows] < stop
-        weight = jax.device_put(np.arange(start, start + chunk) < stop, sharding) if not multiprocess else None
+        weight = np.arange(start, start + chunk) < stop
         first = start == 0
         heartbeat = None
         if first and progress:
@@ -233,11 +216,8 @@ def monte_carlo(
             if multiprocess:
                 result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk,
                                              valid, shared)
-            else:
-                chunk_keys = run_keys(key, index, num_runs)
-                chunk_data = jax.tree_util.tree_map(lambda leaf: _take(leaf, index), per_run)
-                chunk_keys, chunk_data = jax.device_put((chunk_keys, chunk_data), sharding)
-                result = compiled(chunk_keys, chunk_data, weight, *shared)  # dispatched: the device works on
+            else:  # dispatched: the device works on
+                result = compiled(*_chunk_args(key, index, num_runs, per_run, weight, sharding), *shared)
         finally:
             if heartbeat is not None:
                 heartbeat.stop()
@@ -281,6 +261,38 @@ class _Heartbeat:
 
     def stop(self) -> None:
         self._done.set()
+
+
+def _plan(run_one, num_runs, chunk_size, devices, batched, summary, shared):
+    """The devices (and whether they span processes), the chunk, its sharding, the
+    compiled chunk program and the ``shared`` arguments of a ``monte_carlo`` call."""
+    devices = list(devices or (jax.devices() if jax.process_count() > 1 else jax.local_devices()))
+    multiprocess = len({d.process_index for d in devices}) > 1
+    if multiprocess:
+        devices = sorted(devices, key=lambda d: (d.process_index, d.id))
+        per_process = {p: sum(d.process_index == p for d in devices) for p in {d.process_index for d in devices}}
+        if len(set(per_process.values())) != 1:
+            raise ValueError(f"devices: every process needs the same number of devices, got {per_process}")
+    n_dev = len(devices)
+    if chunk_size is None:
+        chunk = min(default_chunk_size(devices), 1 << max(int(num_runs) - 1, 0).bit_length())
+    else:
+        chunk = min(int(chunk_size), int(num_runs))
+    chunk = -(-chunk // n_dev) * n_dev
+    sharding = NamedSharding(Mesh(np.array(devices), ("runs",)), PartitionSpec("runs"))
+    try:
+        compiled = _compiled(run_one, bool(batched), summary, shared is not None)
+    except TypeError:  # an unhashable callable object
+        compiled = _chunk_program(run_one, bool(batched), summary, shared is not None)
+    shared = () if shared is None else (jax.tree_util.tree_map(jnp.asarray, shared),)
+    return devices, multiprocess, chunk, sharding, compiled, shared
+
+
+def _chunk_args(key, index: np.ndarray, num_runs: int, per_run: Any, weight: np.ndarray, sharding) -> tuple:
+    """A chunk's keys, per-run data and weights, on the devices (one process)."""
+    chunk_keys = run_keys(key, index, num_runs)
+    chunk_data = jax.tree_util.tree_map(lambda leaf: _take(leaf, index), per_run)
+    return jax.device_put((chunk_keys, chunk_data, weight), sharding)
 
 
 def _take(leaf: Any, index: np.ndarray) -> Any:

@@ -42,10 +42,16 @@ print(json.dumps({{"wall_in_process_s": time.perf_counter() - start, "seconds": 
 """
 
 
+TIMEOUT_S = None  # --timeout
+
+
 def _run(command: list[str], cache: str) -> dict:
     env = {**os.environ, "JAXFDI_CACHE_DIR": cache}
     start = time.perf_counter()
-    proc = subprocess.run(command, env=env, capture_output=True, text=True)
+    try:
+        proc = subprocess.run(command, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        return {"wall_s": None, "timed_out_after_s": TIMEOUT_S, "stdout_tail": ""}
     wall = time.perf_counter() - start
     if proc.returncode != 0:
         raise SystemExit(f"{' '.join(command)} failed:\n{proc.stderr[-3000:]}")
@@ -58,7 +64,7 @@ def _study_case(study: str, runs: int | None, cache: str) -> dict:
         if runs is not None:
             command += ["--runs", str(runs)]
         result = _run(command, cache)
-        files = list(Path(out).glob("*.json"))
+        files = list(Path(out).glob("*.json")) if result["wall_s"] is not None else []
         if files:
             data = json.loads(files[0].read_text())
             result["study_seconds"] = data.get("seconds")
@@ -73,6 +79,10 @@ def _engine_linalg(unrolled: bool, runs: int, cache: str) -> dict:
     return result
 
 
+def _seconds(case: dict) -> str:
+    return f"{case['wall_s']:.1f} s" if case["wall_s"] is not None else f"> {case['timed_out_after_s']:.0f} s (stopped)"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--studies", nargs="+", default=["engine"])
@@ -80,7 +90,10 @@ def main() -> None:
     parser.add_argument("--linalg", action="store_true", help="only the engine's linear-algebra comparison")
     parser.add_argument("--cold-only", action="store_true", help="no warm run (the issue's target for the other studies)")
     parser.add_argument("--out", default=str(HERE / "results_studies.json"))
+    parser.add_argument("--timeout", type=float, default=None, help="give a study up after this many seconds")
     args = parser.parse_args()
+    global TIMEOUT_S
+    TIMEOUT_S = args.timeout
     import jax
 
     report = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version(),
@@ -101,8 +114,7 @@ def main() -> None:
                 cold = _study_case(study, args.runs, cache)
                 warm = None if args.cold_only else _study_case(study, args.runs, cache)
             report["cases"][study] = {"runs": args.runs, "cold": cold, "warm": warm}
-            print(f"{study}: cold {cold['wall_s']:.1f} s" + ("" if warm is None else f", warm {warm['wall_s']:.1f} s"),
-                  flush=True)
+            print(f"{study}: cold {_seconds(cold)}" + ("" if warm is None else f", warm {_seconds(warm)}"), flush=True)
     previous = json.loads(Path(args.out).read_text()) if Path(args.out).exists() else {}
     previous.setdefault("runs", []).append(report)
     write_json(args.out, previous)

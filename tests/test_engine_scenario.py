@@ -155,8 +155,7 @@ def test_methods_as_data_equal_the_methods_run_one_by_one():
     arrays, one program per structure) give each method's records as its own program
     does (``run_method``: ``engine_methods``' filter and detector, on the same keys):
     integer fields exactly, the estimate to 1e-12; a second seed compiles nothing new."""
-    import jax
-
+    from _compiles import counting_compiles
     from jaxfdi.scenarios.engine import engine_methods, engine_study, run_method
 
     runs, seed = 10, 11  # 70 runs: the CLI run's chunk of 64, so the grid programs come from the run's cache
@@ -169,15 +168,6 @@ def test_methods_as_data_equal_the_methods_run_one_by_one():
                       "first_unhealthy"):
             np.testing.assert_array_equal(getattr(grid, field), getattr(alone, field), err_msg=f"{name} {field}")
         np.testing.assert_allclose(grid.estimate, alone.estimate, rtol=1e-12, atol=0, equal_nan=True)
-    compiles = []
-
-    def listener(event, duration, **_):
-        if event == "/jax/core/compile/backend_compile_duration":
-            compiles.append(event)
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with counting_compiles() as compiles:
         engine_study(runs=runs, seed=seed + 1, methods=SHARED_CELLS)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
     assert compiles == []

@@ -20,6 +20,7 @@ import jaxfdi
 from jaxfdi import montecarlo, study
 from jaxfdi.faults import fault, no_fault, stack_faults
 from jaxfdi.models.linear import LinearGaussianModel
+from _compiles import counting_compiles
 
 HERE = Path(__file__).parent
 T = 60
@@ -62,20 +63,11 @@ def test_one_program_per_structure_whatever_runs_and_seed():
     compile nothing new: the chunk program holds one executable, and no backend
     compilation happens after the first study."""
     spec = toy_study()
-    compiles = []
-
-    def listener(event, duration, **_):
-        if event == "/jax/core/compile/backend_compile_duration":
-            compiles.append(duration)
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
+    with counting_compiles() as compiles:
         study.run_study(spec, 200, 0, chunk_size=64)
         first = len(compiles)
         for runs, seed in ((200, 1), (333, 7), (64, 12)):
             study.run_study(spec, runs, seed, chunk_size=64)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
     assert _program(spec)._cache_size() == 1
     assert len(compiles) == first  # nothing compiled after the first study
     # the default chunk (backend-sized, a power of two below it) gives few shapes: runs above it compile nothing

@@ -95,9 +95,7 @@ def engine_chi2_study(
     R)`` (default the plant's) set the detector a tuner changed; the plant is always
     simulated with its own noise."""
     require_x64("engine_chi2_study (the engine model is stiff)")
-    check_study(runs, seed, window=window)
-    if chunk_size is not None:
-        check_study(runs, seed, chunk_size=chunk_size)
+    check_study(runs, seed, window=window, **({} if chunk_size is None else {"chunk_size": chunk_size}))
     _checks.check_probability("pfa", pfa)
     _checks.check_positive("duration", duration, "a positive run length in seconds")
     _checks.check_scalar("onset_time", onset_time, 0.0, duration, high_open=True,

@@ -42,7 +42,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from jaxfdi import _checks
-from jaxfdi.progress import logger, progress_bar
+from jaxfdi.progress import progress_bar, status
 
 ProgressFn = Callable[[int, int, float], None]
 
@@ -210,7 +210,7 @@ def monte_carlo(
         if first and progress:
             programs = _cache_size(compiled)
             if programs == 0:
-                logger.info("%s: compiling", label)
+                status(f"{label}: compiling")
                 heartbeat = _Heartbeat(f"{label}: still compiling", start_time)
         try:
             if multiprocess:
@@ -222,7 +222,7 @@ def monte_carlo(
             if heartbeat is not None:
                 heartbeat.stop()
         if first and progress and _cache_size(compiled) > programs:
-            logger.info("%s: compiled in %.1f s", label, time.perf_counter() - start_time)
+            status(f"{label}: compiled in {time.perf_counter() - start_time:.1f} s")
         result, part = result if summary is not None else (result, None)
         if pending is not None:
             finish(pending)  # the previous chunk, while this one runs
@@ -257,7 +257,7 @@ class _Heartbeat:
 
     def _beat(self, message: str, start: float, interval: float) -> None:
         while not self._done.wait(interval):
-            logger.info("%s (%.0f s)", message, time.perf_counter() - start)
+            status(f"{message} ({time.perf_counter() - start:.0f} s)")
 
     def stop(self) -> None:
         self._done.set()

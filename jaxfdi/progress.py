@@ -16,7 +16,7 @@ import sys
 import time
 from typing import Callable
 
-__all__ = ["ProgressFn", "configure_logging", "logger", "progress_bar", "tqdm_available"]
+__all__ = ["ProgressFn", "configure_logging", "logger", "progress_bar", "status", "tqdm_available"]
 
 #: a progress hook: ``(done, total, seconds)``
 ProgressFn = Callable[[int, int, float], None]
@@ -76,14 +76,19 @@ class _LogLines:
         self.last = now
         rate = f", {done / seconds:.0f} {self.unit}/s" if seconds > 0 else ""
         extra = f", {postfix}" if postfix else ""
-        message = f"{self.description}: {done}/{total} {self.unit}, {seconds:.1f} s{rate}{extra}"
-        if logger.hasHandlers():
-            logger.info(message)
-        else:  # logging not configured (a plain script or notebook): one line on stderr
-            print(message, file=sys.stderr, flush=True)
+        status(f"{self.description}: {done}/{total} {self.unit}, {seconds:.1f} s{rate}{extra}")
 
     def close(self) -> None:
         """Nothing to close."""
+
+
+def status(message: str) -> None:
+    """A progress message (what is compiling, what ran): INFO on the ``"jaxfdi"`` logger,
+    or, when logging is not configured (a plain script or a notebook), one line on stderr."""
+    if logger.hasHandlers():
+        logger.info(message)
+    else:
+        print(message, file=sys.stderr, flush=True)
 
 
 def progress_bar(description: str = "monte carlo", unit: str = "runs", *, interval: float = 5.0,

@@ -41,7 +41,7 @@ import numpy as np
 
 from jaxfdi import _checks
 from jaxfdi.montecarlo import monte_carlo
-from jaxfdi.progress import logger
+from jaxfdi.progress import status
 
 __all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_slices"]
 
@@ -194,7 +194,7 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
                 totals, counts = sums
                 means[method] = jax.tree_util.tree_map(lambda leaf, c=cell: _per_case_mean(leaf, c, counts), totals)
         if progress:
-            logger.info("%s: %d runs in %.1f s", label, total, seconds[structure.name])
+            status(f"{label}: {total} runs in {seconds[structure.name]:.1f} s")
     return StudyResult(study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds)
 
 

@@ -323,7 +323,7 @@ def test_pfa_the_threshold_cannot_represent_exits_2_before_computing(monkeypatch
         refusal = str(e)
     else:
         pytest.skip(f"chi2_threshold(20, {pfa}) gives {threshold} rather than a ValueError")
-    monkeypatch.setattr(engine_chi2, "monte_carlo", lambda *a, **k: pytest.fail("the study ran"))
+    monkeypatch.setattr(engine_chi2, "run_study", lambda *a, **k: pytest.fail("the study ran"))
     out = tmp_path / "out"
     assert main(["run", "engine-chi2", "--pfa", str(pfa), "--out", str(out)]) == 2
     err = capsys.readouterr().err.splitlines()

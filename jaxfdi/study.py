@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import _checks
-from jaxfdi.montecarlo import monte_carlo
+from jaxfdi.montecarlo import _num_runs_of, monte_carlo
 from jaxfdi.progress import status
 
 __all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_slices"]
@@ -121,7 +121,7 @@ def case_slices(runs: int, num_cases: int) -> list[slice]:
 def _check_study(study: Study) -> int:
     if not isinstance(study, Study):
         raise TypeError(f"study: expected a jaxfdi.study.Study, got {_checks.received(study)}")
-    sizes = {np.shape(leaf)[0] if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(study.cases)}
+    sizes = _num_runs_of(study.cases)
     if len(sizes) != 1 or -1 in sizes:
         raise ValueError(f"study.cases: expected leaves with one leading case axis, got leading sizes {sorted(sizes)}")
     num_cases = sizes.pop()
@@ -135,7 +135,7 @@ def _check_study(study: Study) -> int:
             raise TypeError(f"study.structures: expected Structure entries, got {_checks.received(s)}")
         lengths = []
         for a, axis in enumerate(s.axes):
-            leading = {np.shape(leaf)[0] if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(axis)}
+            leading = _num_runs_of(axis)
             if len(leading) != 1 or -1 in leading:
                 raise ValueError(f"{s.name}.axes[{a}]: expected leaves with one leading axis, got {sorted(leading)}")
             lengths.append(leading.pop())

@@ -69,3 +69,38 @@ def test_engine_rows_and_table_leave_unhealthy_runs_out():
     assert "statistic: actuator 1, none 1); they are excluded" in table
     clean = EngineStudy({}, [dict(r, unhealthy_runs=0) for r in rows], {"M": records}, {}).table()
     assert "WARNING" not in clean and clean.splitlines() == table.splitlines()[:-1]
+
+
+def test_a_dead_sensor_marks_the_imm_kernel_runs_unhealthy_from_its_first_nan():
+    """The engine study's IMM path (the batch kernel, then the rules replayed with the
+    filter's health): a P2 channel that turns NaN at step 30 in runs 1 and 3 marks those
+    runs unhealthy from exactly that step (the first non-finite measurement, found by
+    brute force), and the table counts them apart and out of every rate; the clean runs
+    stay clean. (An alarm and isolation for a dead sensor is issue 37's.)"""
+    import jax
+
+    from jaxfdi import linear_simulator, simulate
+    from jaxfdi.detection.mode_probability import mode_probability_detector
+    from jaxfdi.filters._base import run_filter_batch
+    from jaxfdi.filters.imm import interacting_multiple_model
+    from jaxfdi.filters.kalman import kalman_filter
+    from jaxfdi.metrics import fault_row
+    from jaxfdi.models.fault_modes import noise_inflation_modes
+    from jaxfdi.monitor import replay_detector
+    from jaxfdi.scenarios.engine import PAPER_TRANSITION
+
+    model, steps = engine_model(), 80
+    us = jnp.full((steps, 1), 0.01)
+    keys = jax.random.split(jax.random.key(3), 4)
+    ys = jax.vmap(lambda k: simulate(linear_simulator(model), jnp.zeros(7), us, k)[1].measurement)(keys)
+    ys = np.array(ys)
+    ys[[1, 3], 30:, 2] = np.nan
+    imm = interacting_multiple_model(kalman_filter, noise_inflation_modes(model, 1e4, 0.008), PAPER_TRANSITION)
+    _, info = run_filter_batch(imm, imm.init(jnp.zeros(7), model.Q, jnp.asarray(PAPER_TRANSITION[0])), ys, us)
+    detector = mode_probability_detector(0.5)
+    records = jax.vmap(lambda mu, ok: replay_detector(detector, mu, NEVER, 0, ok))(info.mode_prob, info.healthy)
+    first_bad = [int(np.argmax(~np.isfinite(y).all(axis=1))) if not np.isfinite(y).all() else -1 for y in ys]
+    assert first_bad == [-1, 30, -1, 30]
+    np.testing.assert_array_equal(records.first_unhealthy, first_bad)
+    row = fault_row(jax.tree_util.tree_map(np.asarray, records), steps)
+    assert row["unhealthy_runs"] == 2 and row["runs"] == 4 and row["clean_runs"] <= 2

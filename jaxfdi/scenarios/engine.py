@@ -501,7 +501,12 @@ def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] 
     ``engine_method_names`` (or ``methods``) in five structures, one compiled program
     each: the MMs and IMMs of each mode design, and the GLRTs. Within a structure the
     methods are cells of a (filter x decision rule) grid: the IMMs that share a
-    transition matrix run one filter for their rules."""
+    transition matrix run one filter for their rules.
+
+    ``kernel``: the IMM structures run the IMM batch kernel over each chunk (default;
+    2.8x faster on CPU) instead of ``vmap(monitor)``; ``unrolled``: the other filters use
+    written-out factorisations instead of library calls. Both change speed only
+    (``benchmarks/bench_studies.py --linalg`` measures the second)."""
     names = engine_method_names(settings)
     chosen = names if methods is None else list(methods)
     unknown = [m for m in chosen if m not in names]

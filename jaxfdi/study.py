@@ -67,8 +67,11 @@ class Structure(NamedTuple):
 
 
 class Study(NamedTuple):
-    """A study's specification: ``cases`` a pytree with a leading case axis C (e.g. a
-    stacked ``Fault``), their names, and the structures that run the methods."""
+    """A study's specification: its cases, their names, and the structures that run the
+    methods. ``cases``: a pytree with a leading case axis C (e.g. a stacked ``Fault``;
+    every run of case ``c`` gets slice ``c``), or, where a case's runs differ beyond
+    their noise (a random onset, a dispersion), ``draw(runs, seed)`` returning a pytree
+    with a leading axis ``C * runs``, case-major (run ``i`` gets slice ``i``)."""
 
     name: str
     cases: Any
@@ -121,10 +124,15 @@ def case_slices(runs: int, num_cases: int) -> list[slice]:
 def _check_study(study: Study) -> int:
     if not isinstance(study, Study):
         raise TypeError(f"study: expected a jaxfdi.study.Study, got {_checks.received(study)}")
-    sizes = _num_runs_of(study.cases)
-    if len(sizes) != 1 or -1 in sizes:
-        raise ValueError(f"study.cases: expected leaves with one leading case axis, got leading sizes {sorted(sizes)}")
-    num_cases = sizes.pop()
+    if callable(study.cases):
+        num_cases = len(study.case_names)
+    else:
+        sizes = _num_runs_of(study.cases)
+        if len(sizes) != 1 or -1 in sizes:
+            raise ValueError(f"study.cases: expected leaves with one leading case axis, got leading sizes {sorted(sizes)}")
+        num_cases = sizes.pop()
+    if not num_cases:
+        raise ValueError("study.case_names: expected at least one case")
     if len(study.case_names) != num_cases:
         raise ValueError(f"study.case_names: expected {num_cases} names (one per case), got {len(study.case_names)}")
     if not study.structures:
@@ -174,8 +182,7 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
     chosen = [s for s in study.structures if structures is None or s.name in structures]
     total = num_cases * runs
     key = jax.random.key(seed) if key is None else key
-    per_run = (jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), study.cases),
-               np.repeat(np.arange(num_cases, dtype=np.int32), runs))
+    per_run = (_per_run_cases(study, runs, seed, num_cases), np.repeat(np.arange(num_cases, dtype=np.int32), runs))
     outputs, means, seconds, compile_seconds = {}, {}, {}, {}
     for k, structure in enumerate(chosen, start=1):
         label = f"{study.name}: {structure.name} ({k} of {len(chosen)})"
@@ -196,6 +203,18 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
         if progress:
             status(f"{label}: {total} runs in {seconds[structure.name]:.1f} s")
     return StudyResult(study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds)
+
+
+def _per_run_cases(study: Study, runs: int, seed: int, num_cases: int):
+    """Every run's case: the study's cases repeated ``runs`` times each, or its ``draw``."""
+    if not callable(study.cases):
+        return jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), study.cases)
+    drawn = study.cases(runs, seed)
+    sizes = _num_runs_of(drawn)
+    if sizes != {num_cases * runs}:
+        raise ValueError(f"study.cases: the draw(runs={runs}, seed={seed}) must give leaves with a leading axis of "
+                         f"{num_cases * runs} (cases x runs), got leading sizes {sorted(sizes)}")
+    return drawn
 
 
 def _per_case_mean(total, cell: tuple, counts):

@@ -1,9 +1,10 @@
 """Seed 004 scenario at reduced size: wheel fault semantics against hand-written
 formulas, and the issue's claims on a closed-loop Monte Carlo batch.
 
-One batch of 160 runs (one compilation): 80 fault-free calibration runs, 40 fault-free
-test runs, and a stop of each wheel (spinning near its 2000 rpm bias speed) in 10 runs
-each, onsets uniform in 15-25 s. The banks engage on the NIS test, so the isolators do
+One batch of 160 runs (the study's one closed-loop program, ``wheel_spec``, with the
+batch's faults as its cases): 80 fault-free calibration runs, 40 fault-free test runs,
+and a stop of each wheel (spinning near its 2000 rpm bias speed) in 10 runs each, onsets
+uniform in 15-25 s. The banks engage on the NIS test, so the isolators do
 not depend on ``F_T``; ``F_T`` is calibrated on the calibration runs and checked on the
 test runs. Rates are checked with one-sided binomial bounds at the stated sizes.
 """
@@ -17,6 +18,7 @@ from jaxfdi.faults import FaultKind, no_fault
 from jaxfdi.models.reaction_wheels import delivered_torque, kitsat3_params, stop_hypotheses, stop_transfer, wheel_momentum
 from jaxfdi.metrics import binomial_lower_bound
 from jaxfdi.scenarios import reaction_wheels as rw
+from jaxfdi.study import run_study
 
 CALIBRATION, FREE, PER_WHEEL = 80, 40, 10
 
@@ -28,8 +30,8 @@ def batch():
     free = rw.case_faults([("none", -1)], CALIBRATION + FREE, jax.random.key(11))
     stops = rw.case_faults(cases[1:], PER_WHEEL, jax.random.key(12))
     faults = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), free, stops)
-    out = rw.monte_carlo_wheels(design, faults, seed=5, chunk_size=160)
-    return design, jax.tree_util.tree_map(np.asarray, out)
+    spec = rw.wheel_spec(design, cases)._replace(cases=faults, case_names=tuple(map(str, range(160))))
+    return design, run_study(spec, runs=1, seed=5).outputs["closed loop"]
 
 
 def test_delivered_torque_follows_each_fault_kind():
@@ -147,13 +149,13 @@ def test_ukf_estimator_agrees_with_the_ekf_on_the_closed_loop():
 def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table():
     """A torque bias of NaN on wheel 2 from step 20 makes the truth, the gyros and every
     filter NaN: the run is reported unhealthy (first_unhealthy = 21, the first NaN
-    reading), left out of the row's rates, and the table says so; its healthy twin is
-    scored as usual."""
+    reading), left out of the row's rates, and the table says so; the finite run beside
+    it is scored as usual. (Both through the study's closed-loop program, the batch's.)"""
     design = rw.wheel_design()
     faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), rw.wheel_fault("bias", 1, 20, 0.0)._replace(magnitude=jnp.asarray(jnp.nan)),
                                     rw.wheel_fault("bias", 1, 20, 2e-3))
-    out = jax.jit(jax.vmap(lambda f: rw.run_wheels(design, jax.random.key(0), f, steps=40)))(faults)
-    out = jax.tree_util.tree_map(np.asarray, out)
+    spec = rw.wheel_spec(design, [("bias", 1)])._replace(cases=faults, case_names=("bias NaN w2", "bias w2"))
+    out = run_study(spec, runs=1, seed=0).outputs["closed loop"]
     assert list(out.healthy) == [False, True]
     assert out.nis.first_unhealthy[0] == 21 and out.nis.first_unhealthy[1] == -1
     row = rw.summarize_case(out, "bias", 1, 0.1)

@@ -70,8 +70,14 @@ def test_one_program_per_structure_whatever_runs_and_seed():
             study.run_study(spec, runs, seed, chunk_size=64)
     assert _program(spec)._cache_size() == 1
     assert len(compiles) == first  # nothing compiled after the first study
-    # the default chunk (backend-sized, a power of two below it) gives few shapes: runs above it compile nothing
-    assert montecarlo.default_chunk_size() == montecarlo.CHUNK_BY_PLATFORM["cpu"]
+    # the default chunk on a CPU is one shape whatever the runs: a small study is padded up to it
+    assert montecarlo.default_chunk_size() == montecarlo.CHUNK_BY_PLATFORM["cpu"] == montecarlo.MIN_CHUNK
+    with counting_compiles() as compiles:
+        study.run_study(spec, 3, 0)
+        first = len(compiles)
+        for runs, seed in ((40, 1), (150, 2)):
+            study.run_study(spec, runs, seed)
+    assert len(compiles) == first
 
 
 def test_methods_as_data_equal_one_by_one():
@@ -90,6 +96,32 @@ def test_methods_as_data_equal_one_by_one():
         np.testing.assert_allclose(grid.estimate, alone.estimate, rtol=1e-12, atol=0, equal_nan=True)
     detections = [tuple(result.outputs[n].detection_step[:runs]) for n in spec.structures[0].methods]
     assert len(set(detections)) > 1, "the thresholds and noise scales must make a difference"
+
+
+def test_drawn_cases_give_each_run_its_own_case():
+    """A study whose runs differ beyond their noise (here a random onset per run) draws
+    its cases: run ``i`` (case-major) gets slice ``i`` of ``draw(runs, seed)``, so its
+    records equal the runs' loop on those per-run faults; the onsets drawn come back in
+    the records. A draw of the wrong length is refused, naming the argument."""
+    runs, seed = 6, 4
+
+    def draw(runs, seed):
+        onsets = np.asarray(jax.random.randint(jax.random.key(seed + 2), (2 * runs,), 10, 50))
+        return stack_faults([fault("bias", "sensor", 1, int(k), 0.15) if i < runs else no_fault()
+                             for i, k in enumerate(onsets)])
+
+    spec = toy_study(averaged=False)._replace(cases=draw)
+    result = study.run_study(spec, runs, seed)
+    faults = draw(runs, seed)
+    for name, (i, j) in spec.structures[0].methods.items():
+        alone = jaxfdi.monte_carlo(lambda k, f, i=i, j=j: toy_run(k, f, R_SCALES[i], THRESHOLDS[j])[0],
+                                   jax.random.key(seed), 2 * runs, faults, chunk_size=2 * runs)
+        for field in ("onset", "first_alarm", "detection_step", "false_alarms"):
+            np.testing.assert_array_equal(getattr(result.outputs[name], field), getattr(alone, field))
+    np.testing.assert_array_equal(result.outputs["R x1.0 chi2 9.2"].onset[:runs], faults.onset[:runs])
+    assert len(set(faults.onset[:runs].tolist())) > 1
+    with pytest.raises(ValueError, match="study.cases: the draw"):
+        study.run_study(spec._replace(cases=lambda runs, seed: draw(runs + 1, seed)), runs, seed)
 
 
 def test_device_means_equal_host_means():

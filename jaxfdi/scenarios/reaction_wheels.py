@@ -48,6 +48,7 @@ Filter and Multi-hypothesis Extended Kalman Filter" (seed 004; CITATION.cff).
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple, Sequence
 
@@ -70,6 +71,7 @@ from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
 from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, unhealthy_warning
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
+from jaxfdi.study import Structure, Study, run_study
 from jaxfdi.models.reaction_wheels import (
     SpacecraftParams,
     WheelCommand,
@@ -374,27 +376,47 @@ def case_faults(cases: list[tuple[str, int]], runs: int, key: Array) -> Fault:
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *faults)
 
 
-def monte_carlo_wheels(design: WheelDesign, faults: Fault, seed: int, steps: int = 600, estimator: str = "ekf",
-                       engage_on: str = "nis", chunk_size: int = 512, progress: bool = False) -> RunOutput:
-    """``run_wheels`` over a batch of faults (one run each), vmapped and chunked."""
-    from jaxfdi.montecarlo import monte_carlo
+@functools.lru_cache(maxsize=None)
+def _closed_loop(steps: int, estimator: str, engage_on: str):
+    """``run(key, fault, design)``: ``run_wheels`` with the design as data. One function
+    per option set, so one compiled program serves every design (the calibration, the
+    study, the zero-momentum row) and every run count and seed."""
 
-    num = int(faults.kind.shape[0])
-    return monte_carlo(lambda key, f: run_wheels(design, key, f, steps, estimator, engage_on), jax.random.key(seed),
-                       num, faults, chunk_size=chunk_size, progress=progress)
+    def run(key, f, design):
+        return run_wheels(design, key, f, steps, estimator, engage_on)
+
+    return run
+
+
+def wheel_spec(design: WheelDesign, cases: Sequence[tuple[str, int]], steps: int = 600, estimator: str = "ekf",
+               engage_on: str = "nis", name: str = "reaction-wheels") -> Study:
+    """The study of ``cases`` ((kind, wheel) pairs, as ``study_cases``) on ``design``: one
+    structure, the closed loop (``run_wheels``) with the design as data; run ``i`` of a
+    case has the fault of ``case_faults(cases, runs, key(seed + 2))``, its onset uniform
+    in ``ONSET_RANGE``. Every method of ``METHODS`` comes out of the same run
+    (``outputs["closed loop"]``, a ``RunOutput``)."""
+    cases = tuple(cases)
+    names = tuple("none" if kind == "none" else f"{kind} w{wheel + 1}" for kind, wheel in cases)
+    design_axis = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[None], design)
+    loop = Structure("closed loop", _closed_loop(steps, estimator, engage_on), (design_axis,), {"closed loop": (0,)})
+    return Study(name, lambda runs, seed: case_faults(cases, runs, jax.random.key(seed + 2)), names, (loop,))
 
 
 #: F_T = FDP_MARGIN x the largest F of the fault-free calibration runs
 FDP_MARGIN = 1.5
 
 
-def calibrate_fdp_threshold(design: WheelDesign, runs: int, seed: int, margin: float = FDP_MARGIN, **kwargs) -> float:
-    """``F_T = margin * max F`` over ``runs`` fault-free runs (the paper sets its threshold
-    by eye; ``F`` has no known distribution, and the largest of ``n`` runs alone is
-    exceeded by a new run with probability ``1 / (n + 1)``)."""
-    faults = case_faults([("none", -1)], runs, jax.random.key(seed))
-    out = monte_carlo_wheels(design, faults, seed, **kwargs)
-    return float(margin * np.max(np.asarray(out.max_fault_free_fdp)))
+def calibrate_fdp_threshold(design: WheelDesign, runs: int, seed: int, margin: float = FDP_MARGIN,
+                            **options) -> float:
+    """``F_T = margin * max F`` over ``runs`` fault-free runs of ``seed`` (the paper sets its
+    threshold by eye; ``F`` has no known distribution, and the largest of ``n`` runs alone
+    is exceeded by a new run with probability ``1 / (n + 1)``). ``options``: ``steps``,
+    ``estimator``, ``engage_on`` (``wheel_spec``), ``chunk_size``, ``progress``
+    (``run_study``)."""
+    spec_options = {k: options.pop(k) for k in ("steps", "estimator", "engage_on") if k in options}
+    spec = wheel_spec(design, [("none", -1)], name="reaction-wheels F_T calibration", **spec_options)
+    out = run_study(spec, runs, seed, **options).outputs["closed loop"]
+    return float(margin * np.max(out.max_fault_free_fdp))
 
 
 def run_is_healthy(out: RunOutput) -> np.ndarray:
@@ -515,11 +537,12 @@ def _fmt(x, width: int = 6, digits: int = 2) -> str:
     return f"{'-':>{width}}" if x != x else f"{x:>{width}.{digits}f}"
 
 
-def _cases_study(design: WheelDesign, cases, runs: int, seed: int, calibration_runs: int, selected, kwargs):
-    threshold = calibrate_fdp_threshold(design, calibration_runs, seed + 1, **kwargs)
+def _cases_study(design: WheelDesign, cases, runs: int, seed: int, calibration_runs: int, selected, options):
+    threshold = calibrate_fdp_threshold(design, calibration_runs, seed + 1, **options)
     design = design._replace(detection_threshold=jnp.asarray(threshold, design.detection_threshold.dtype))
-    faults = case_faults(cases, runs, jax.random.key(seed + 2))
-    out = monte_carlo_wheels(design, faults, seed, **kwargs)
+    spec_options = {k: v for k, v in options.items() if k in ("steps", "estimator", "engage_on")}
+    run_options = {k: v for k, v in options.items() if k in ("chunk_size", "progress")}
+    out = run_study(wheel_spec(design, cases, **spec_options), runs, seed, **run_options).outputs["closed loop"]
     dt = float(design.params.dt)
     rows = []
     for i, (kind, wheel) in enumerate(cases):
@@ -529,7 +552,7 @@ def _cases_study(design: WheelDesign, cases, runs: int, seed: int, calibration_r
 
 
 def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, estimator: str = "ekf",
-                engage_on: str = "nis", steps: int = 600, chunk_size: int = 512, progress: bool = False,
+                engage_on: str = "nis", steps: int = 600, chunk_size: int | None = None, progress: bool = False,
                 methods: Sequence[str] | None = None, momentum: str = "net",
                 zero_momentum_row: bool = True) -> WheelStudy:
     """Every case of ``study_cases`` with ``runs`` Monte Carlo runs (noise and onset);
@@ -540,11 +563,14 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
     004's result can be checked). With ``zero_momentum_row`` (and ``momentum="net"``) the
     four stop cases are also run with zero net momentum (its own ``F_T``), reported in
     ``config["zero_momentum"]`` and in the headline as the second row: there ``det A`` is
-    structurally ~0 on the true trajectory. Needs float64 (``jaxfdi.enable_x64()``);
-    unhealthy runs are left out of every rate and counted in the row's ``unhealthy_runs``."""
+    structurally ~0 on the true trajectory. Every part runs on the study engine
+    (``wheel_spec``, ``run_study``; ``chunk_size`` its runs per compiled call, default
+    the backend's) and shares one compiled program. Needs float64
+    (``jaxfdi.enable_x64()``); unhealthy runs are left out of every rate and counted in
+    the row's ``unhealthy_runs``."""
     selected = check_methods(methods, METHODS)
     require_x64("wheel_study")
-    check_study(runs, seed, calibration_runs=calibration_runs, steps=steps, chunk_size=chunk_size)
+    check_study(runs, seed, calibration_runs=calibration_runs, steps=steps)
     _checks.check_choice("estimator", estimator, ["ekf", "ukf"])
     _checks.check_choice("engage_on", engage_on, ["nis", "fdp"])
     _checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))

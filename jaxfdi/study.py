@@ -56,7 +56,10 @@ class Structure(NamedTuple):
     case on the device instead of kept; a trace that does not depend on an axis is
     computed once for it. ``batched``: ``run(keys (B,), cases (B, ...), *params)`` runs a
     whole chunk and returns a leading run axis (B, ...), e.g. to drive a filter's batch
-    kernel (``run_filter_batch``) instead of ``vmap``."""
+    kernel (``run_filter_batch``) instead of ``vmap``. ``shared``: data that every run of
+    every cell reads as it is (a design, an ephemeris, a flight's tables: not vmapped),
+    passed to ``run`` after the parameters, ``run(key, case, *params, shared)``; as data,
+    not a closure, so that other values compile nothing new."""
 
     name: str
     run: Callable[..., Any]
@@ -64,6 +67,7 @@ class Structure(NamedTuple):
     methods: dict
     averaged: bool = False
     batched: bool = False
+    shared: Any = None
 
 
 class Study(NamedTuple):
@@ -71,7 +75,8 @@ class Study(NamedTuple):
     methods. ``cases``: a pytree with a leading case axis C (e.g. a stacked ``Fault``;
     every run of case ``c`` gets slice ``c``), or, where a case's runs differ beyond
     their noise (a random onset, a dispersion), ``draw(runs, seed)`` returning a pytree
-    with a leading axis ``C * runs``, case-major (run ``i`` gets slice ``i``)."""
+    with a leading axis of the total number of runs (``C * runs``, or the sum of the
+    per-case ``runs``), case-major (run ``i`` gets slice ``i``)."""
 
     name: str
     cases: Any
@@ -82,14 +87,14 @@ class Study(NamedTuple):
 class StudyResult(NamedTuple):
     """What ``run_study`` returns.
 
-    ``outputs[method]``: the method's output of every run, leading axis ``C * runs``,
-    case-major (``case_slices``). ``means[method]``: (C, ...) per-case mean of the
-    traces of an ``averaged`` structure. ``seconds[structure]``: wall time of its
+    ``outputs[method]``: the method's output of every run, leading axis ``C * runs`` (or
+    the sum of the per-case runs), case-major (``case_slices``). ``means[method]``:
+    (C, ...) per-case mean of the traces of an ``averaged`` structure. ``seconds[structure]``: wall time of its
     Monte Carlo, compilation included (``compile_seconds``: the compilation alone, 0.0 when
     the program came from a cache)."""
 
     name: str
-    runs: int
+    runs: Any        # int, or a tuple of one count per case
     seed: int
     case_names: tuple
     outputs: dict
@@ -103,12 +108,14 @@ def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
     ``structure.run`` vmapped over each axis in turn, key and case shared. A ``batched``
     structure's ``(keys, cases)`` give ``(B, *grid, ...)``: the run axis stays first."""
     count = len(structure.axes)
+    extra = () if structure.shared is None else (structure.shared,)
 
     def run(key, case):
         fn = structure.run
         for axis in reversed(range(count)):
-            fn = jax.vmap(fn, in_axes=(None, None, *(0 if j == axis else None for j in range(count))))
-        out = fn(key, case, *structure.axes)
+            fn = jax.vmap(fn, in_axes=(None, None, *(0 if j == axis else None for j in range(count)),
+                                       *(None for _ in extra)))
+        out = fn(key, case, *structure.axes, *extra)
         if structure.batched:
             out = jax.tree_util.tree_map(lambda leaf: jnp.moveaxis(leaf, count, 0), out)
         return out
@@ -116,9 +123,22 @@ def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
     return run
 
 
-def case_slices(runs: int, num_cases: int) -> list[slice]:
-    """The run ranges of each case in a case-major study output."""
-    return [slice(i * runs, (i + 1) * runs) for i in range(num_cases)]
+def case_slices(runs, num_cases: int) -> list[slice]:
+    """The run ranges of each case in a case-major study output (``runs``: per case, or
+    one count for every case)."""
+    counts = np.broadcast_to(np.asarray(runs, int), (num_cases,))
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:])]
+
+
+def _run_counts(runs, num_cases: int) -> tuple[int, ...]:
+    """``runs`` (one count, or one per case) as a count per case, each checked positive."""
+    if np.ndim(runs) == 0:
+        return (_checks.check_int("runs", runs, 1, meaning="a positive number of runs per case"),) * num_cases
+    counts = tuple(runs)
+    if len(counts) != num_cases:
+        raise ValueError(f"runs: expected one count or {num_cases} counts (one per case), got {len(counts)}")
+    return tuple(_checks.check_int(f"runs[{i}]", n, 1, meaning="a positive number of runs") for i, n in enumerate(counts))
 
 
 def _check_study(study: Study) -> int:
@@ -157,15 +177,15 @@ def _check_study(study: Study) -> int:
     return num_cases
 
 
-def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chunk_size: int | None = None,
+def run_study(study: Study, runs, seed: int, *, progress: bool = False, chunk_size: int | None = None,
               structures: list[str] | None = None, key: jax.Array | None = None) -> StudyResult:
     """Run ``runs`` runs of every case of ``study`` through each structure.
 
     Args:
       study: the ``Study``.
-      runs: runs per case.
-      seed: PRNG seed; run ``i`` (case-major) gets ``split(key(seed), C * runs)[i]`` in every
-        structure.
+      runs: runs per case: one count for every case, or a sequence of one per case.
+      seed: PRNG seed; run ``i`` (case-major) gets ``split(key(seed), total)[i]`` in every
+        structure (``total``: ``C * runs``, or the sum of the per-case counts).
       progress: log which structure compiles and show the runs' progress.
       chunk_size: runs per compiled call (default: ``monte_carlo``'s, sized for the
         backend; it does not change any result).
@@ -174,15 +194,16 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
         come from a key derived from its seed).
     """
     num_cases = _check_study(study)
-    runs = _checks.check_int("runs", runs, 1, meaning="a positive number of runs per case")
+    counts = _run_counts(runs, num_cases)
+    runs = counts[0] if np.ndim(runs) == 0 else counts
     seed = _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
     names = [s.name for s in study.structures]
     if structures is not None and (not structures or set(structures) - set(names)):
         raise ValueError(f"structures: expected names among {names}, got {list(structures)}")
     chosen = [s for s in study.structures if structures is None or s.name in structures]
-    total = num_cases * runs
+    total = sum(counts)
     key = jax.random.key(seed) if key is None else key
-    per_run = (_per_run_cases(study, runs, seed, num_cases), np.repeat(np.arange(num_cases, dtype=np.int32), runs))
+    per_run = (_per_run_cases(study, runs, counts, seed), np.repeat(np.arange(num_cases, dtype=np.int32), counts))
     outputs, means, seconds, compile_seconds = {}, {}, {}, {}
     for k, structure in enumerate(chosen, start=1):
         label = f"{study.name}: {structure.name} ({k} of {len(chosen)})"
@@ -191,7 +212,7 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
         compile_before = _compile_time_probe()
         start = time.perf_counter()
         result = monte_carlo(program, key, total, per_run, chunk_size=chunk_size, progress=progress, summary=summary,
-                             shared=structure.axes, label=label, batched=structure.batched)
+                             shared=(structure.axes, structure.shared), label=label, batched=structure.batched)
         seconds[structure.name] = time.perf_counter() - start
         compile_seconds[structure.name] = _compile_time_probe() - compile_before
         out, sums = result if summary is not None else (result, None)
@@ -205,15 +226,15 @@ def run_study(study: Study, runs: int, seed: int, *, progress: bool = False, chu
     return StudyResult(study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds)
 
 
-def _per_run_cases(study: Study, runs: int, seed: int, num_cases: int):
-    """Every run's case: the study's cases repeated ``runs`` times each, or its ``draw``."""
+def _per_run_cases(study: Study, runs, counts: tuple[int, ...], seed: int):
+    """Every run's case: the study's cases repeated ``counts`` times each, or its ``draw``."""
     if not callable(study.cases):
-        return jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), study.cases)
+        return jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), counts, axis=0), study.cases)
     drawn = study.cases(runs, seed)
     sizes = _num_runs_of(drawn)
-    if sizes != {num_cases * runs}:
+    if sizes != {sum(counts)}:
         raise ValueError(f"study.cases: the draw(runs={runs}, seed={seed}) must give leaves with a leading axis of "
-                         f"{num_cases * runs} (cases x runs), got leading sizes {sorted(sizes)}")
+                         f"{sum(counts)} (the runs of every case), got leading sizes {sorted(sizes)}")
     return drawn
 
 
@@ -227,17 +248,18 @@ _PROGRAMS: dict = {}
 
 
 def _program(structure: Structure) -> Callable:
-    """``(key, (case, case_index), axes) -> output`` of a structure (``grid_run``; an
-    ``averaged`` one's ``(output, trace, case_index)``). One function object per
-    ``(run, averaged)``, so that a second study of the same structure, with other runs,
-    seed or parameter values, reuses ``monte_carlo``'s compiled chunk."""
+    """``(key, (case, case_index), (axes, shared)) -> output`` of a structure (``grid_run``;
+    an ``averaged`` one's ``(output, trace, case_index)``). One function object per
+    ``(run, averaged, batched)``, so that a second study of the same structure, with other
+    runs, seed, parameter values or shared data, reuses ``monte_carlo``'s compiled chunk."""
     signature = (structure.run, structure.averaged, structure.batched)
     if signature not in _PROGRAMS:
         run, averaged, batched = signature
 
-        def one(key, data, axes):
+        def one(key, data, arguments):
             case, case_index = data
-            out = grid_run(Structure("", run, axes, {}, averaged, batched))(key, case)
+            axes, shared = arguments
+            out = grid_run(Structure("", run, axes, {}, averaged, batched, shared))(key, case)
             return (*out, case_index) if averaged else out
 
         _PROGRAMS[signature] = one

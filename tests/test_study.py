@@ -124,6 +124,58 @@ def test_drawn_cases_give_each_run_its_own_case():
         study.run_study(spec._replace(cases=lambda runs, seed: draw(runs + 1, seed)), runs, seed)
 
 
+def _shared_model_run(key, f, threshold, model):
+    us = jnp.ones((T, 1))
+    kf = jaxfdi.kalman_filter(model, unroll_factorizations=False)
+    return jaxfdi.monitor(jaxfdi.linear_simulator(model, f), kf, jaxfdi.chi2_detector(threshold, 2), jnp.zeros(2),
+                          kf.init(jnp.zeros(2), model.Q), us, key, f.onset).record
+
+
+def test_shared_data_is_an_argument_not_a_constant():
+    """A structure's ``shared`` data (here the whole model) reaches every run as it is:
+    the records equal the runs with the model closed over, and another model's values
+    compile nothing new."""
+    base = toy_study(averaged=False)
+    methods = {f"chi2 {t}": (j,) for j, t in enumerate(THRESHOLDS)}
+    spec = base._replace(structures=(study.Structure("shared model", _shared_model_run, (THRESHOLDS,), methods,
+                                                     shared=MODEL),))
+    result = study.run_study(spec, 8, 2)
+    cases = jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), 8, axis=0), spec.cases)
+    for name, (j,) in methods.items():
+        alone = jaxfdi.monte_carlo(lambda k, f, j=j: _shared_model_run(k, f, THRESHOLDS[j], MODEL), jax.random.key(2),
+                                   16, cases, chunk_size=16)
+        np.testing.assert_array_equal(result.outputs[name].detection_step, alone.detection_step)
+        np.testing.assert_array_equal(result.outputs[name].false_alarms, alone.false_alarms)
+    with counting_compiles() as compiles:
+        noisier = spec.structures[0]._replace(shared=MODEL._replace(R=4.0 * MODEL.R))
+        other = study.run_study(spec._replace(structures=(noisier,)), 8, 2)
+    assert not compiles
+    assert any((other.outputs[n].detection_step != result.outputs[n].detection_step).any() for n in methods)
+
+
+def test_cases_may_have_their_own_run_counts():
+    """``runs`` per case: case ``c`` gets ``runs[c]`` runs, case-major (``case_slices``),
+    on the keys of one split over all of them, and its per-case mean counts only its own
+    runs (host means of the same runs, 1e-12)."""
+    spec = toy_study()
+    counts = (3, 7)
+    result = study.run_study(spec, counts, 6)
+    assert result.runs == counts
+    assert study.case_slices(counts, 2) == [slice(0, 3), slice(3, 10)]
+    assert study.case_slices(4, 2) == [slice(0, 4), slice(4, 8)]
+    cases = jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), counts, axis=0), spec.cases)
+    records, traces = jaxfdi.monte_carlo(study.grid_run(spec.structures[0]), jax.random.key(6), 10, cases,
+                                         chunk_size=10)
+    for name, (i, j) in spec.structures[0].methods.items():
+        np.testing.assert_array_equal(result.outputs[name].detection_step, records.detection_step[:, i, j])
+        host = [traces[part, i, j].mean(axis=0) for part in study.case_slices(counts, 2)]
+        np.testing.assert_allclose(result.means[name], np.stack(host), rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="runs: expected one count or 2 counts"):
+        study.run_study(spec, (3, 4, 5), 0)
+    with pytest.raises(ValueError, match=r"runs\[1\]"):
+        study.run_study(spec, (3, 0), 0)
+
+
 def test_device_means_equal_host_means():
     """The per-case mean of the traces, summed on the device in chunks with padding,
     equals the mean of the same runs' traces kept and averaged on the host (1e-12)."""

@@ -45,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats as _scipy_stats
 
-from jaxfdi.progress import logger, progress_bar
+from jaxfdi.progress import status
 from jaxfdi import faults as flt
 from jaxfdi.data import data_path
 from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
@@ -57,6 +57,7 @@ from jaxfdi.loop import combine_scorers, detection_scorer, episode_scorer, feedf
 from jaxfdi.metrics import binomial_interval, summarize_detection, summarize_episodes
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, PARK_FAULTS, START_TOW, WEEK
+from jaxfdi.study import Structure, Study, case_slices, run_study
 
 FLIGHT_S = 1200
 IMU_RATE = 100
@@ -75,7 +76,6 @@ INITIAL_SIGMA = (3.0, 0.1, 0.05, 0.5)
 BEYOND_GYRO_DEG_H = (15.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0)
 BEYOND_ACCEL_MG = (2.0, 5.0, 10.0, 20.0, 50.0)
 MANOEUVRE_HEIGHT = 200.0   # m above the park site
-CHUNK = 32                 # runs per compiled call (one program for every case)
 
 
 class StudySize(NamedTuple):
@@ -201,23 +201,19 @@ def _run(world: World, case: RunCase, key: jax.Array) -> RunOutput:
     return RunOutput(result.score["chi2"], result.score["scst"], result.score["raim"], series)
 
 
-_simulate = jax.jit(jax.vmap(_run, in_axes=(None, 0, 0)))
+def _flight(key: jax.Array, case: RunCase, world: World) -> RunOutput:
+    """One flight (``_run``) in the study engine's order, the world shared by every run."""
+    return _run(world, case, key)
 
 
-def simulate_runs(world: World, cases: RunCase, key: jax.Array, progress=None) -> RunOutput:
-    """Every run of ``cases`` (leaves with a leading run axis) on ``world``, ``CHUNK`` runs
-    per call of one compiled program (the last chunk padded); outputs as NumPy."""
-    num = int(np.shape(cases.onset)[0])
-    keys = jax.random.split(key, num)
-    parts = []
-    for start in range(0, num, CHUNK):
-        index = np.minimum(np.arange(start, start + CHUNK), num - 1)
-        chunk_cases, chunk_keys = jax.tree_util.tree_map(lambda a: jnp.asarray(a)[index], (cases, keys))
-        out = _simulate(world, chunk_cases, chunk_keys)
-        parts.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[: min(CHUNK, num - start)], out))
-        if progress:
-            progress(min(start + CHUNK, num), num)
-    return jax.tree_util.tree_map(lambda *a: np.concatenate(a), *parts)
+def flights_spec(world: World, groups: list[tuple[str, RunCase]], name: str) -> Study:
+    """A study of flights over one ``world``: ``groups`` of (name, stacked ``RunCase``, one
+    per run), each a case with its own number of runs (run it with those counts); the
+    world is the structure's shared data (one compiled program for every world and seed)."""
+    names = tuple(group for group, _ in groups)
+    stacked = jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *(cases for _, cases in groups))
+    flights = Structure("flights", _flight, (), {"flights": ()}, shared=world)
+    return Study(name, lambda runs, seed: stacked, names, (flights,))
 
 
 def build_world(legs, start, speed: float, blend: float, table=None, size: StudySize = PAPER_SIZE) -> World:
@@ -344,21 +340,14 @@ def gps_ins_study(runs: int = 100, seed: int = 0, progress: bool = False, beyond
     key = jax.random.key(seed)
     for flight, world in worlds.items():
         mine = [g for f, g in plan if f == flight]
-        specs = [(s, c, m) for _, s, c, m, n in mine for _ in range(n)]
-        report = None
+        groups = [(name, cases_of([(s, c, m)] * n, size.onset_s)) for name, s, c, m, n in mine]
+        counts = tuple(n for *_, n in mine)
+        spec = flights_spec(world, groups, f"gps-ins {flight}")
         if progress:
-            logger.info("gps-ins: %d %s flights of %s s at %s Hz", len(specs), flight, size.flight_s, size.imu_rate)
-
-            bar = progress_bar(f"gps-ins {flight}", "flights")
-
-            def report(done, total):
-                bar(done, total)  # tqdm.auto bar, or log lines (jaxfdi.progress)
-
-        out = simulate_runs(world, cases_of(specs, size.onset_s), jax.random.fold_in(key, len(results)), report)
-        start = 0
-        for name, _, _, _, n in mine:
-            results[name] = jax.tree_util.tree_map(lambda a: a[start:start + n], out)
-            start += n
+            status(f"gps-ins: {sum(counts)} {flight} flights of {size.flight_s} s at {size.imu_rate} Hz")
+        result = run_study(spec, counts, seed, progress=progress, key=jax.random.fold_in(key, len(results)))
+        for (name, *_), part in zip(mine, case_slices(counts, len(mine))):
+            results[name] = jax.tree_util.tree_map(lambda a: a[part], result.outputs["flights"])
     config = _config(runs, seed, small, beyond, slot, park.table, size)
     rows = _rows(results, size)
     curves = {}

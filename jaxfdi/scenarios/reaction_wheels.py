@@ -397,8 +397,7 @@ def wheel_spec(design: WheelDesign, cases: Sequence[tuple[str, int]], steps: int
     (``outputs["closed loop"]``, a ``RunOutput``)."""
     cases = tuple(cases)
     names = tuple("none" if kind == "none" else f"{kind} w{wheel + 1}" for kind, wheel in cases)
-    design_axis = jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf)[None], design)
-    loop = Structure("closed loop", _closed_loop(steps, estimator, engage_on), (design_axis,), {"closed loop": (0,)})
+    loop = Structure("closed loop", _closed_loop(steps, estimator, engage_on), (), {"closed loop": ()}, shared=design)
     return Study(name, lambda runs, seed: case_faults(cases, runs, jax.random.key(seed + 2)), names, (loop,))
 
 

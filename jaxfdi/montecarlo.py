@@ -192,6 +192,8 @@ def monte_carlo(
     state = reduce.init() if reduce is not None else None
     outputs, total, pending = [], None, None
     start_time = time.perf_counter()
+    done = [0]  # runs reported finished
+    running = None  # after the first dispatch: a long chunk is reported while it runs
 
     def finish(chunk_result):
         """Wait for a dispatched chunk, fold it in, report it (the pipeline's tail)."""
@@ -207,35 +209,44 @@ def monte_carlo(
             total = part if total is None else jax.tree_util.tree_map(jnp.add, total, part)
         if report:
             report(stop, num_runs, time.perf_counter() - start_time)
+            done[0] = stop
+            if running is not None:
+                running.touch()
 
-    for start in range(0, num_runs, chunk):
-        stop = min(start + chunk, num_runs)
-        index = np.minimum(np.arange(start, start + chunk), num_runs - 1)  # pad by repeating the last run
-        valid = np.arange(start, start + chunk)[rows] < stop
-        weight = np.arange(start, start + chunk) < stop
-        first = start == 0
-        heartbeat = None
-        if first and progress:
-            programs = _cache_size(compiled)
-            if programs == 0:
-                status(f"{label}: compiling")
-                heartbeat = _Heartbeat(f"{label}: still compiling", start_time)
-        try:
-            if multiprocess:
-                result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk,
-                                             valid, shared)
-            else:  # dispatched: the device works on
-                result = compiled(*_chunk_args(key, index, num_runs, per_run, weight, sharding), *shared)
-        finally:
-            if heartbeat is not None:
-                heartbeat.stop()
-        if first and progress and _cache_size(compiled) > programs:
-            status(f"{label}: compiled in {time.perf_counter() - start_time:.1f} s")
-        result, part = result if summary is not None else (result, None)
-        if pending is not None:
-            finish(pending)  # the previous chunk, while this one runs
-        pending = (result, part, valid, stop)
-    finish(pending)
+    try:
+        for start in range(0, num_runs, chunk):
+            stop = min(start + chunk, num_runs)
+            index = np.minimum(np.arange(start, start + chunk), num_runs - 1)  # pad by repeating the last run
+            valid = np.arange(start, start + chunk)[rows] < stop
+            weight = np.arange(start, start + chunk) < stop
+            first = start == 0
+            heartbeat = None
+            if first and progress:
+                programs = _cache_size(compiled)
+                if programs == 0:
+                    status(f"{label}: compiling")
+                    heartbeat = _Heartbeat(f"{label}: still compiling", start_time)
+            try:
+                if multiprocess:
+                    result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk,
+                                                 valid, shared)
+                else:  # dispatched: the device works on
+                    result = compiled(*_chunk_args(key, index, num_runs, per_run, weight, sharding), *shared)
+            finally:
+                if heartbeat is not None:
+                    heartbeat.stop()
+            if first and progress and _cache_size(compiled) > programs:
+                status(f"{label}: compiled in {time.perf_counter() - start_time:.1f} s")
+            if first and report:
+                running = _Heartbeat(lambda: f"{label}: running, {done[0]}/{num_runs} runs done", start_time)
+            result, part = result if summary is not None else (result, None)
+            if pending is not None:
+                finish(pending)  # the previous chunk, while this one runs
+            pending = (result, part, valid, stop)
+        finish(pending)
+    finally:
+        if running is not None:
+            running.stop()
     if total is not None:  # the program summed over the global chunk: replicated on every process
         total = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf.addressable_data(0)), total)
     if reduce is not None:
@@ -255,17 +266,26 @@ def monte_carlo(
 
 
 class _Heartbeat:
-    """Logs ``message`` with the seconds since ``start`` every ``interval`` seconds from a
-    daemon thread until ``stop()``: a long compilation is never silent."""
+    """Logs ``message`` (a string, or a callable giving one) with the seconds since
+    ``start`` from a daemon thread whenever ``interval`` seconds pass with neither a beat
+    nor a ``touch()`` (the progress display's own report), until ``stop()``: a long
+    compilation, or a long chunk, is never silent."""
 
-    def __init__(self, message: str, start: float, interval: float = 5.0) -> None:
+    def __init__(self, message, start: float, interval: float = 5.0) -> None:
         self._done = threading.Event()
+        self._last = time.perf_counter()
         self._thread = threading.Thread(target=self._beat, args=(message, start, interval), daemon=True)
         self._thread.start()
 
-    def _beat(self, message: str, start: float, interval: float) -> None:
-        while not self._done.wait(interval):
-            status(f"{message} ({time.perf_counter() - start:.0f} s)")
+    def _beat(self, message, start: float, interval: float) -> None:
+        while not self._done.wait(min(1.0, interval)):
+            now = time.perf_counter()
+            if now - self._last >= interval:
+                self._last = now
+                status(f"{message() if callable(message) else message} ({now - start:.0f} s)")
+
+    def touch(self) -> None:
+        self._last = time.perf_counter()
 
     def stop(self) -> None:
         self._done.set()

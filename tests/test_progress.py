@@ -2,6 +2,7 @@
 unchanged, and --quiet silencing the logger (issue 28)."""
 import io
 import logging
+import time
 
 import jax
 import jax.numpy as jnp
@@ -106,9 +107,31 @@ def test_compilation_is_announced_and_never_silent(caplog, monkeypatch):
 
     jaxfdi.monte_carlo(slow_to_compile, jax.random.key(0), 8, jnp.ones(8), progress=lambda *a: None,
                        label="toy")
-    messages = [r.getMessage() for r in caplog.records if r.name == "jaxfdi"]
+    messages = [r.getMessage() for r in caplog.records if r.name == "jaxfdi" and "running" not in r.getMessage()]
     assert messages[0] == "toy: compiling" and messages[-1].startswith("toy: compiled in ")
     assert any(m.startswith("toy: still compiling") for m in messages[1:-1]), messages
     caplog.clear()
     jaxfdi.monte_carlo(slow_to_compile, jax.random.key(1), 8, jnp.ones(8), progress=lambda *a: None, label="toy")
     assert not [r for r in caplog.records if "compil" in r.getMessage()]
+
+
+def test_a_long_chunk_is_never_silent(caplog, monkeypatch):
+    """While a chunk runs longer than the heartbeat's interval (5 s; here 0.05 s) with no
+    progress report, the runs done so far are logged; the display's own reports reset
+    the silence."""
+    from jaxfdi import montecarlo
+
+    monkeypatch.setattr(montecarlo._Heartbeat.__init__, "__defaults__", (0.05,))
+    caplog.set_level(logging.INFO, logger="jaxfdi")
+
+    def slow_run(key, x):  # 0.4 s a chunk, on the host
+        wait = lambda v: (time.sleep(0.4), v)[1]  # noqa: E731
+        return jax.pure_callback(wait, jax.ShapeDtypeStruct((), x.dtype), x, vmap_method="broadcast_all")
+
+    reports = []
+    jaxfdi.monte_carlo(slow_run, jax.random.key(0), 8, jnp.ones(8), chunk_size=4, label="slow",
+                       progress=lambda done, total, seconds: reports.append(done))
+    running = [r.getMessage() for r in caplog.records if "running" in r.getMessage()]
+    assert reports == [4, 8]
+    assert any(m.startswith("slow: running, 0/8 runs done (") for m in running), running
+    assert all(m.startswith(("slow: running, 0/8", "slow: running, 4/8")) for m in running), running

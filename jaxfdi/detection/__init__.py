@@ -1,4 +1,5 @@
 """Residual evaluation: tests that turn filter outputs into fault decisions."""
+from jaxfdi.detection.calibration import empirical_threshold, scale_to_run_false_alarm
 from jaxfdi.detection.chi2 import (
     Detector,
     chi2_detector,
@@ -70,6 +71,8 @@ __all__ = [
     "haar_denoise",
     "haar_reconstruct",
     "soft_threshold",
+    "empirical_threshold",
+    "scale_to_run_false_alarm",
 ]
 
 # ``jaxfdi.detection.dual_filter`` is the module; its function is

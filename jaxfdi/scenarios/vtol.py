@@ -49,6 +49,7 @@ import numpy as np
 from jaxfdi.control.closed_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
 from jaxfdi.control.eigenstructure import effectiveness_gain_schedule, nominal_eigenstructure
 from jaxfdi.control.lqr import lqr_pi
+from jaxfdi.detection.calibration import empirical_threshold, scale_to_run_false_alarm
 from jaxfdi.detection.chi2 import chi2_threshold, moving_window_sum
 from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.detection.wavelet import block_alarms, causal_detail_sigma, chi2_detail_sigma, haar_denoise
@@ -198,9 +199,10 @@ def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_
                          pfa: float = PFA, run_false_alarm: float | None = RUN_FALSE_ALARM) -> np.ndarray:
     """(4, F) thresholds, calibrated on fault-free closed-loop runs of their own seed.
 
-    Per decision: per method and filter, the larger of the chi-square threshold and the
-    empirical ``1 - pfa`` quantile of the decision value (raw and window values count
-    per step, MDWT values per block, the block's maximum). The disturbance ``3 sin 10t``
+    Per decision (``detection.calibration.empirical_threshold``): per method and filter,
+    the larger of the chi-square threshold and the empirical ``1 - pfa`` quantile of the
+    decision value (raw and window values count per step, MDWT values per block, the
+    block's maximum). The disturbance ``3 sin 10t``
     is not decoupled (decoupling it too leaves the actuator faults almost invisible), so
     it leaks into some filters' statistics (fault-free means up to 8.6 for chi2(3)); the
     quantile absorbs that leak.
@@ -210,7 +212,8 @@ def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_
     of fault-free runs showed a symptom before step 120). Each method's row is then
     scaled by the smallest common factor >= 1 (bisection) for which at most
     ``run_false_alarm`` of the calibration runs show any symptom (``isolate`` leaving the
-    no-fault column) in all ``steps``: a family-wise false-alarm rate per run.
+    no-fault column) in all ``steps``: a family-wise false-alarm rate per run
+    (``detection.calibration.scale_to_run_false_alarm``).
     """
     from jaxfdi.montecarlo import monte_carlo
 
@@ -221,26 +224,21 @@ def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_
     values = jax.jit(jax.vmap(lambda st: decision_values(st, design)))(histories)   # (R, 5, T, F)
     values_np = np.asarray(values)
     block = 2**design.levels
-    per_step = [np.quantile(values_np[:, m].reshape(-1, values_np.shape[-1]), 1 - pfa, axis=0) for m in (0, 1)]
     wavelet = len(METHODS) - 2
     blocks = values_np[:, 2:].reshape(runs, wavelet, steps // block, block, -1).max(axis=3)    # (R, 3, B, F)
-    per_block = [np.quantile(blocks[:, m].reshape(-1, blocks.shape[-1]), 1 - pfa, axis=0) for m in range(wavelet)]
+    samples = [values_np[:, m].reshape(-1, values_np.shape[-1]) for m in (0, 1)]              # per step
+    samples += [blocks[:, m].reshape(-1, blocks.shape[-1]) for m in range(wavelet)]           # per block
     dof = 4 - design.unknown_input.shape[1]
-    thresholds = np.maximum(chi2_thresholds(dof, values_np.shape[-1], pfa), np.stack(per_step + per_block))
+    floor = chi2_thresholds(dof, values_np.shape[-1], pfa)
+    thresholds = np.stack([empirical_threshold(v, pfa, f) for v, f in zip(samples, floor)])
     if run_false_alarm is None:
         return thresholds
     rates = jax.jit(lambda scale: runs_with_symptoms(values, design, thresholds * scale[:, None]))
-    low, high = np.ones(len(METHODS)), np.full(len(METHODS), 16.0)
-    if np.any(np.asarray(rates(high)) > run_false_alarm):
-        raise ValueError(f"run_false_alarm: {run_false_alarm} is not reached on these {runs} runs even with the "
-                         f"per-decision thresholds scaled by 16 (rates {np.asarray(rates(high))})")
-    done = np.asarray(rates(low)) <= run_false_alarm
-    high[done] = 1.0
-    for _ in range(40):  # bisection on the factor, per method: rate(high) <= target < rate(low)
-        mid = 0.5 * (low + high)
-        ok = np.asarray(rates(mid)) <= run_false_alarm
-        high, low = np.where(ok, mid, high), np.where(ok, low, mid)
-    return thresholds * high[:, None]
+    try:
+        scale = scale_to_run_false_alarm(rates, run_false_alarm, len(METHODS))
+    except ValueError as error:
+        raise ValueError(f"run_false_alarm: not reached on these {runs} runs ({error})") from None
+    return thresholds * scale[:, None]
 
 
 def runs_with_symptoms(values, design: LoopDesign, thresholds) -> jnp.ndarray:

@@ -1,0 +1,65 @@
+"""Thresholds calibrated on fault-free runs, where the statistic's law is only approximate.
+
+A chi-square threshold assumes white Gaussian innovations; a closed loop, an unmodelled
+disturbance or a wavelet denoiser leaves the fault-free statistic heavier-tailed than
+that. Two calibrations close the gap:
+
+* per decision, ``T = max(T_law, q_{1 - P_fa})``: the law's threshold, raised to the
+  empirical ``1 - P_fa`` quantile of the fault-free decision values where they leak above
+  it (``empirical_threshold``);
+* per run, a run of ``K`` decisions alarms with probability up to ``K P_fa``, so a
+  family-wise rate needs a larger threshold: the smallest common factor ``s >= 1`` with
+  ``rate(s T) <= alpha`` on the calibration runs, found by bisection on the monotone
+  ``rate`` (``scale_to_run_false_alarm``).
+
+Used by the VTOL study (Park et al. 2004, seed 001), whose bank of two-stage filters
+sees the ``3 sin 10 t`` disturbance leak into some statistics.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["empirical_threshold", "scale_to_run_false_alarm"]
+
+
+def empirical_threshold(values, pfa: float, floor=None) -> np.ndarray:
+    """``max(floor, q_{1 - pfa})``: the empirical upper ``pfa`` quantile of fault-free
+    decision ``values`` over their leading (sample) axis, raised to ``floor`` (the law's
+    threshold, broadcast against the quantile; ``None``: no floor). Quantiles by linear
+    interpolation (``numpy.quantile``'s default)."""
+    if not 0.0 < pfa < 1.0:
+        raise ValueError(f"pfa: expected a probability in (0, 1), got {pfa}")
+    values = np.asarray(values)
+    if values.ndim == 0 or values.shape[0] < 1:
+        raise ValueError(f"values: expected samples along a leading axis, got shape {values.shape}")
+    quantile = np.quantile(values, 1.0 - pfa, axis=0)
+    return quantile if floor is None else np.maximum(np.asarray(floor), quantile)
+
+
+def scale_to_run_false_alarm(rate: Callable[[np.ndarray], np.ndarray], target: float, groups: int,
+                             upper: float = 16.0, iterations: int = 40) -> np.ndarray:
+    """(groups,) the smallest factors ``s >= 1`` with ``rate(s)[g] <= target``, by bisection.
+
+    ``rate(scales (groups,)) -> (groups,)`` is each group's share of fault-free runs with
+    any alarm when its thresholds are multiplied by ``scales[g]`` (non-increasing in the
+    scale). A group already within ``target`` at 1 keeps 1; otherwise the bracket
+    ``[1, upper]`` is halved ``iterations`` times and its upper end returned (within
+    ``(upper - 1) 2^-iterations`` of the smallest factor, on the rate's steps). A
+    ``ValueError`` when some group exceeds ``target`` even at ``upper``."""
+    if not 0.0 <= target < 1.0:
+        raise ValueError(f"target: expected a rate in [0, 1), got {target}")
+    if not upper > 1.0:
+        raise ValueError(f"upper: expected a factor above 1, got {upper}")
+    low, high = np.ones(groups), np.full(groups, float(upper))
+    at_upper = np.asarray(rate(high))
+    if np.any(at_upper > target):
+        raise ValueError(f"target: {target} is not reached even with the thresholds scaled by {upper} "
+                         f"(rates {at_upper})")
+    high[np.asarray(rate(low)) <= target] = 1.0
+    for _ in range(int(iterations)):  # invariant: rate(high) <= target < rate(low), where high > 1
+        mid = 0.5 * (low + high)
+        ok = np.asarray(rate(mid)) <= target
+        high, low = np.where(ok, mid, high), np.where(ok, low, mid)
+    return high

@@ -158,6 +158,27 @@ def study():
     return vtol_study(runs=RUNS, seed=0, calibration_runs=CALIBRATION_RUNS)
 
 
+def test_other_thresholds_seeds_and_runs_compile_no_new_closed_loop(study):
+    """The closed-loop Monte Carlo is one program per design (by value) with the
+    thresholds as data: after the study, its design scored against the paper's
+    thresholds, and a fresh design of the same value with another seed and run count,
+    compile nothing new; the paper-threshold decisions equal the study's own evaluation
+    of the same runs against the paper's thresholds."""
+    from jaxfdi import montecarlo
+    from jaxfdi import study as engine
+    from jaxfdi.scenarios.vtol import paper_thresholds, vtol_spec
+
+    filters = study.design.location.shape[0]
+    paper = jnp.asarray(np.stack([paper_thresholds(filters)] * 2))
+    spec = vtol_spec(study.design, paper, vtol_faults())
+    again = engine.run_study(spec, RUNS, 0)
+    engine.run_study(vtol_spec(vtol_design()._replace(threshold=paper[0, 3]), paper, vtol_faults()), 3, 7)
+    program = montecarlo._compiled(engine._program(spec.structures[0]), False, None, True)
+    assert program._cache_size() == 1   # the study's chunk program, reused by both
+    first = again.outputs["closed loop"].first_alarm.reshape(study.records.first_alarm.shape)
+    np.testing.assert_array_equal(first[..., 0, :], study.records.first_alarm[..., 1, :])
+
+
 @pytest.fixture(scope="module")
 def histories(study):
     """Full closed-loop histories (FTC off) of every fault case, 20 runs each (same keys as the study)."""

@@ -40,6 +40,7 @@ Uncertainties" (seed 001; CITATION.cff).
 """
 from __future__ import annotations
 
+import hashlib
 from typing import Any, NamedTuple
 
 import jax
@@ -57,7 +58,9 @@ from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_activ
 from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
 from jaxfdi.metrics import delay_statistics, record_from_alarms, unhealthy_warning
 from jaxfdi.models import vtol
+from jaxfdi import _checks
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
+from jaxfdi.study import Structure, Study, run_study
 
 LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
 FILTER_NAMES = tuple(f"{loc}-{kind}" for kind in ("mult", "add") for loc in LOCATIONS)
@@ -196,7 +199,8 @@ def paper_thresholds(num_filters: int) -> np.ndarray:
 
 
 def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_003, steps: int = STEPS,
-                         pfa: float = PFA, run_false_alarm: float | None = RUN_FALSE_ALARM) -> np.ndarray:
+                         pfa: float = PFA, run_false_alarm: float | None = RUN_FALSE_ALARM,
+                         progress: bool = False) -> np.ndarray:
     """(4, F) thresholds, calibrated on fault-free closed-loop runs of their own seed.
 
     Per decision (``detection.calibration.empirical_threshold``): per method and filter,
@@ -215,12 +219,13 @@ def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_
     no-fault column) in all ``steps``: a family-wise false-alarm rate per run
     (``detection.calibration.scale_to_run_false_alarm``).
     """
-    from jaxfdi.montecarlo import monte_carlo
-
     if run_false_alarm is not None and not 0.0 <= run_false_alarm < 1.0:
         raise ValueError(f"run_false_alarm: expected a rate in [0, 1) or None, got {run_false_alarm}")
-    histories = monte_carlo(lambda key, _: run_closed_loop(design, key, no_fault(), jnp.asarray(False), steps).statistic,
-                            jax.random.PRNGKey(seed), runs)
+    runs = _checks.check_int("num_runs", runs, 1, meaning="a positive number of calibration runs")
+    statistic = Structure("fault-free statistics", _loop_program(design, steps, "statistic"), (), {"statistics": ()},
+                          shared=design.threshold)
+    spec = Study("vtol calibration", np.zeros(1), ("none",), (statistic,))
+    histories = run_study(spec, runs, seed, key=jax.random.PRNGKey(seed), progress=progress).outputs["statistics"]
     values = jax.jit(jax.vmap(lambda st: decision_values(st, design)))(histories)   # (R, 5, T, F)
     values_np = np.asarray(values)
     block = 2**design.levels
@@ -423,9 +428,60 @@ def _summarise(name: str, f: Fault, records: RunRecord, twin_states: np.ndarray,
     return row
 
 
+_PROGRAMS: dict = {}
+
+
+def _loop_program(design: LoopDesign, steps: int, output: str):
+    """A closed-loop run of ``design`` with its thresholds as data: ``"statistic"``,
+    ``run(key, _, threshold)`` -> the bank's statistic history of a fault-free run (the
+    calibration); ``"record"``, ``run(_, (fault, ftc, key), (threshold, thresholds))`` ->
+    ``vtol_run`` on the run's own key (common random numbers). The rest of the design
+    stays a constant (the bank's decoupling is checked on concrete matrices when traced);
+    one function per design by value, so other thresholds, seeds and run counts compile
+    nothing new."""
+    fixed = design._replace(threshold=None)
+    leaves = [np.asarray(leaf) for leaf in jax.tree_util.tree_leaves(fixed)]
+    fingerprint = hashlib.sha256(b"".join(leaf.tobytes() + str((leaf.dtype, leaf.shape)).encode()
+                                          for leaf in leaves)).hexdigest()
+    signature = (fingerprint, steps, output)
+    if signature not in _PROGRAMS:
+        if output == "statistic":
+            def run(key, _, threshold):
+                chosen = fixed._replace(threshold=threshold)
+                return run_closed_loop(chosen, key, no_fault(), jnp.asarray(False), steps).statistic
+        else:
+            def run(_, data, shared):
+                (f, ftc, key), (threshold, thresholds) = data, shared
+                return vtol_run(fixed._replace(threshold=threshold), thresholds, key, f, ftc, steps)
+        _PROGRAMS[signature] = run
+    return _PROGRAMS[signature]
+
+
+def vtol_spec(design: LoopDesign, thresholds, cases: list[tuple[str, Fault]], steps: int = STEPS) -> Study:
+    """The study of ``cases`` with FTC off and on (cases ``"<name> ftc off"``, ``"... on"``,
+    case-major), on common random numbers: run ``i`` of every case flies with key ``i`` of
+    ``split(PRNGKey(seed), runs)``, so the fault-free run ``i`` is its twin. One structure,
+    the closed loop scored by ``vtol_run`` against ``thresholds`` (2, 5, F)."""
+    faults = stack_faults([f for _, f in cases])
+    num_cases = len(cases)
+    names = tuple(f"{name} ftc {state}" for name, _ in cases for state in ("off", "on"))
+
+    def draw(runs, seed):
+        shape = (num_cases, 2, runs)
+        keys = jax.random.split(jax.random.PRNGKey(seed), runs)
+        index_case = np.broadcast_to(np.arange(num_cases)[:, None, None], shape).ravel()
+        return (jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[index_case], faults),
+                np.broadcast_to(np.array([False, True])[None, :, None], shape).ravel(),
+                np.asarray(keys)[np.broadcast_to(np.arange(runs)[None, None, :], shape).ravel()])
+
+    loop = Structure("closed loop", _loop_program(design, steps, "record"), (), {"closed loop": ()},
+                     shared=(design.threshold, thresholds))
+    return Study("vtol", draw, names, (loop,))
+
+
 def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopDesign | None = None,
                cases: list[tuple[str, Fault]] | None = None, calibration_runs: int = 200,
-               chunk_size: int = 4096, progress: bool = False, methods=None) -> VTOLStudy:
+               chunk_size: int | None = None, progress: bool = False, methods=None) -> VTOLStudy:
     """Every fault case with FTC off and on, ``runs`` runs each, on common random numbers
     (run i of every case has the same noise, so the fault-free run i is its twin).
 
@@ -435,15 +491,15 @@ def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopD
     returned in ``config`` via its thresholds. ``methods``: the subset of ``METHODS`` to
     report (all by default; the closed loop always decides with MDWT-ST). Runs whose
     filters went unhealthy are counted in each row's ``unhealthy_runs`` and left out of
-    its rates. Needs float64 (``jaxfdi.enable_x64()``)."""
-    from jaxfdi.montecarlo import monte_carlo
-
+    its rates. Both Monte Carlos run on the study engine (``vtol_spec``; ``chunk_size``
+    its runs per compiled call, default the backend's). Needs float64
+    (``jaxfdi.enable_x64()``)."""
     selected = check_methods(methods, METHODS)
     require_x64("vtol_study")
-    check_study(runs, seed, steps=steps, calibration_runs=calibration_runs, chunk_size=chunk_size)
+    check_study(runs, seed, steps=steps, calibration_runs=calibration_runs)
 
     design = design or vtol_design()
-    calibrated = calibrate_thresholds(design, calibration_runs, seed + 1_000_003, steps)
+    calibrated = calibrate_thresholds(design, calibration_runs, seed + 1_000_003, steps, progress=progress)
     design = design._replace(threshold=jnp.asarray(calibrated[3], design.model.Phi.dtype))
     num_filters = calibrated.shape[1]
     thresholds = jnp.asarray(np.stack([calibrated, paper_thresholds(num_filters)]), design.model.Phi.dtype)
@@ -452,19 +508,10 @@ def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopD
     if "none" not in names:
         raise ValueError("cases: the fault-free case 'none' is needed as every run's twin")
     num_cases = len(cases)
-    faults = stack_faults([f for _, f in cases])
-    keys = jax.random.split(jax.random.PRNGKey(seed), runs)
-    shape = (num_cases, 2, runs)
-    index_case = np.broadcast_to(np.arange(num_cases)[:, None, None], shape).ravel()
-    per_run = (
-        jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[index_case], faults),
-        np.broadcast_to(np.array([False, True])[None, :, None], shape).ravel(),
-        np.asarray(keys)[np.broadcast_to(np.arange(runs)[None, None, :], shape).ravel()],
-    )
-    records = monte_carlo(lambda _, data: vtol_run(design, thresholds, data[2], data[0], data[1], steps),
-                          jax.random.PRNGKey(seed), num_cases * 2 * runs, per_run,
-                          chunk_size=chunk_size, progress=progress)
-    records = jax.tree_util.tree_map(lambda leaf: leaf.reshape(shape + leaf.shape[1:]), records)
+    result = run_study(vtol_spec(design, thresholds, cases, steps), runs, seed, chunk_size=chunk_size,
+                       progress=progress)
+    records = jax.tree_util.tree_map(lambda leaf: leaf.reshape((num_cases, 2, runs) + leaf.shape[1:]),
+                                     result.outputs["closed loop"])
     twin = np.asarray(records.states)[names.index("none"), 0]
     rows = [_summarise(name, f, jax.tree_util.tree_map(lambda leaf: leaf[c], records), twin, steps, design.levels,
                        selected)

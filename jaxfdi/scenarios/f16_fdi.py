@@ -55,6 +55,7 @@ from jaxfdi.models.f16.plant import RATE_OFFSET, flight_view
 from jaxfdi.models.f16.rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
     rate_transition
 from jaxfdi.scenarios.f16_flight import DT, Dispersion, FlightSetup, run_flight
+from jaxfdi.study import Structure, Study, run_study
 
 #: per-step false-alarm probability of the FD test (a 15 s flight, 1500 steps: 1.5e-3 per flight)
 PFA = 1e-6
@@ -235,23 +236,29 @@ def _layout_fdi(setup: FlightSetup, fdi: FDISetup, layouts: FDISetup | None, ind
             fdi._replace(hybrid=chosen, rates=fdi.rates._replace(rate_axes=axes)))
 
 
-def _fly(setup, fdi, key, per_run, layouts=None, chunk_size=1024, progress=False):
-    """Flights of ``per_run = (dispersions, cases, follows, layout indices)`` through
-    ``monte_carlo`` (one compiled program; a chunk is ``vmap`` with the axis named
-    ``BATCH_AXIS``), each keeping its outcome and the FDI's decision."""
-    from jaxfdi.montecarlo import monte_carlo
+def _flights(keys, per, shared):
+    """A chunk of flights of ``per = (dispersions, cases, follows, layout indices)`` on
+    ``shared = (setup, fdi, layouts)``: ``vmap`` with the run axis named ``BATCH_AXIS``, so
+    that the hybrid's replay condition spans the chunk; each keeps its outcome and the
+    FDI's decision."""
+    setup, fdi, layouts = shared
 
-    def one(k, per):
-        d, case, follow, layout = per
+    def one(k, p):
+        d, case, follow, layout = p
         s, f = _layout_fdi(setup, fdi, layouts, layout)
         out = run_fdi_flight(s, f, k, d, case, follow, batch_axis=BATCH_AXIS)
         return out._replace(fdi=out.fdi.decision)
 
-    def chunk(keys, per):  # the run axis named, so that the hybrid's replay condition spans the chunk
-        return jax.vmap(one, axis_name=BATCH_AXIS)(keys, per)
+    return jax.vmap(one, axis_name=BATCH_AXIS)(keys, per)
 
+
+def _fly(setup, fdi, key, per_run, layouts=None, chunk_size=None, progress=False, name="flights"):
+    """Flights of ``per_run`` (``_flights``) on the study engine: one batched structure with
+    the setup, the FDI and the layouts as shared data (one program per flight length)."""
     n = int(per_run[2].shape[0])
-    return monte_carlo(chunk, key, n, per_run, chunk_size=chunk_size, progress=progress, batched=True)
+    structure = Structure(name, _flights, (), {name: ()}, batched=True, shared=(setup, fdi, layouts))
+    spec = Study("f16", lambda runs, seed: per_run, (name,), (structure,))
+    return run_study(spec, n, 0, key=key, chunk_size=chunk_size, progress=progress).outputs[name]
 
 
 def _angle_from_singular(angle_deg: np.ndarray) -> np.ndarray:
@@ -260,7 +267,7 @@ def _angle_from_singular(angle_deg: np.ndarray) -> np.ndarray:
 
 def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_sigma: float | None = None,
                   directions: int = SWEEP_DIRECTIONS, sweep_fnr=SWEEP_FNR, optimizer_steps: int = 400,
-                  chunk_size: int = 1024) -> F16FDIStudy:
+                  chunk_size: int | None = None) -> F16FDIStudy:
     """Seed 000 end to end (module doc): the paper's case beside the paper, the parity
     geometry and Table 1, the direction x magnitude sweep (``runs`` flights per sensor,
     FNR and direction; PSA alone vs the hybrid), fault kinds and the safe envelope with
@@ -272,8 +279,7 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     from jaxfdi.scenarios.f16_flight import GUST_SIGMA, dispersions, flight_setup
 
     require_x64("f16_fdi_study")
-    check_study(runs, seed, runs_name="runs", directions=directions, optimizer_steps=optimizer_steps,
-                chunk_size=chunk_size)
+    check_study(runs, seed, runs_name="runs", directions=directions, optimizer_steps=optimizer_steps)
     sweep_fnr = tuple(float(v) for v in np.atleast_1d(sweep_fnr))
     for v in sweep_fnr:
         _checks.check_positive("sweep_fnr", v, "positive fault-to-noise ratios")
@@ -313,7 +319,7 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     n = len(cases)
     per_run = (dispersions(keys[4], setup, n), _stack(cases), jnp.full((n,), FOLLOW["hybrid"], jnp.int32),
                jnp.asarray(layout))
-    out = _fly(short, fdi, keys[5], per_run, layouts, chunk_size, progress)
+    out = _fly(short, fdi, keys[5], per_run, layouts, chunk_size, progress, "sweep flights")
     decision = out.fdi
     sensor = np.asarray(per_run[1].sensor)
     rows += _sweep_rows(decision, sensor, grid, int(runs), onset, n_sweep)
@@ -333,7 +339,7 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     n = len(full_cases)
     follows = jnp.asarray([FOLLOW[f] for _, _, f in labels], jnp.int32)
     per_run = (dispersions(keys[7], setup, n), _stack(full_cases), follows, jnp.zeros((n,), jnp.int32))
-    out = _fly(setup, fdi, keys[8], per_run, None, chunk_size, progress)
+    out = _fly(setup, fdi, keys[8], per_run, None, chunk_size, progress, "full flights")
     rows += _full_flight_rows(out, labels, np.asarray(per_run[1].sensor), onset, setup)
     steps = int(setup.reference.state.shape[0])
     config = {

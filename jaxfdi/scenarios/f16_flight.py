@@ -290,16 +290,21 @@ def _tracking_rows(out: Outcome, plan: FlightPlan) -> list[dict]:
     return rows
 
 
+def _dispersed_flight(key: Array, dispersion: Dispersion, setup: FlightSetup):
+    """One flight (``run_flight``) in the study engine's order, the setup shared data."""
+    return run_flight(setup, key, dispersion)
+
+
 def f16_flight_study(flights: int = 100, seed: int = 0, progress: bool = False, gust_sigma: float = GUST_SIGMA,
-                     sample_flights: int = 8, chunk_size: int = 1024) -> F16FlightStudy:
+                     sample_flights: int = 8, chunk_size: int | None = None) -> F16FlightStudy:
     """Trim table beside the book's, modes, the LQR design and ``flights`` closed-loop
     flights (module doc). Needs float64 (``jaxfdi.enable_x64()``)."""
     from jaxfdi import _checks
-    from jaxfdi.montecarlo import monte_carlo
     from jaxfdi.scenarios._common import check_study, require_x64
+    from jaxfdi.study import Structure, Study, run_study
 
     require_x64("f16_flight_study")
-    check_study(flights, seed, runs_name="flights", sample_flights=sample_flights, chunk_size=chunk_size)
+    check_study(flights, seed, runs_name="flights", sample_flights=sample_flights)
     _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
     setup, design = flight_setup(gust_sigma=gust_sigma)
     params = setup.params
@@ -308,8 +313,9 @@ def f16_flight_study(flights: int = 100, seed: int = 0, progress: bool = False, 
     modes = [_mode_row(m, "open loop, level 502 ft/s, sea level, xcg 0.35") for m in flight_modes(design.linear)]
     key_disp, key_noise = jax.random.split(jax.random.key(seed))
     disp = dispersions(key_disp, setup, int(flights))
-    out = monte_carlo(lambda key, d: run_flight(setup, key, d), key_noise, int(flights), disp,
-                      chunk_size=chunk_size, progress=progress)
+    spec = Study("f16-flight", lambda runs, seed: disp, ("dispersed flights",),
+                 (Structure("closed loop", _dispersed_flight, (), {"flights": ()}, shared=setup),))
+    out = run_study(spec, int(flights), seed, key=key_noise, chunk_size=chunk_size, progress=progress).outputs["flights"]
     rows = book_rows + modes + _closed_loop_rows(design) + _tracking_rows(out, design.plan)
     k = min(int(sample_flights), int(flights))
     keys = jax.random.split(key_noise, int(flights))[:k]

@@ -107,7 +107,7 @@ def run_keys(key: jax.Array, index: np.ndarray, num_runs: int) -> jax.Array:
 CHUNK_BY_PLATFORM = {"cpu": 64, "gpu": 16384, "cuda": 16384, "rocm": 16384, "tpu": 16384}
 #: the smallest default chunk per device: a study of fewer runs is padded up to it, so
 #: that its calibration, its main runs and a test's few runs share one program (the
-#: reaction-wheel study's closed loop: 16 s to compile, 24 ms a padded run on a CPU)
+#: reaction-wheel study's closed loop: 16 s to compile, 25-46 ms a padded run on a CPU)
 MIN_CHUNK = 64
 
 

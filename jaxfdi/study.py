@@ -89,9 +89,9 @@ class StudyResult(NamedTuple):
 
     ``outputs[method]``: the method's output of every run, leading axis ``C * runs`` (or
     the sum of the per-case runs), case-major (``case_slices``). ``means[method]``:
-    (C, ...) per-case mean of the traces of an ``averaged`` structure. ``seconds[structure]``: wall time of its
-    Monte Carlo, compilation included (``compile_seconds``: the compilation alone, 0.0 when
-    the program came from a cache)."""
+    (C, ...) per-case mean of the traces of an ``averaged`` structure.
+    ``seconds[structure]``: wall time of its Monte Carlo, compilation included
+    (``compile_seconds``: the compilation alone, 0.0 when the program came from a cache)."""
 
     name: str
     runs: Any        # int, or a tuple of one count per case

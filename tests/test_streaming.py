@@ -100,6 +100,39 @@ def test_monte_carlo_reduce_equals_the_records():
     assert int(counts.runs) == 130
 
 
+@pytest.mark.parametrize("chunk_size", [37, 512])
+def test_device_summary_equals_the_host_counts_of_the_same_records(chunk_size):
+    """The counts summed on the device (``detection_summary``: inside each chunk's
+    program, padded runs weighted 0, one transfer at the end) equal ``detection_counts``
+    of the same runs' records exactly, for any chunking, labels included (synthetic
+    records with unhealthy, fault-free and false-alarm runs); so do the quantiles read
+    from the histogram (exact with 1-step bins, within ``quantile_resolution`` with
+    4-step bins against NumPy's on the records)."""
+    record, labels = synthetic_records(3000, seed=4)
+    data = (record, labels)
+    for width in (1, 4):
+        device = streaming.detection_summary(HORIZON, width, record=lambda out: out[0], label=lambda out: out[1])
+        kept, totals = jaxfdi.monte_carlo(lambda key, d: d, jax.random.key(0), 3000, data, chunk_size=chunk_size,
+                                          summary=device.summary)
+        assert kept is None
+        got, want = device.counts(totals), streaming.detection_counts(record, HORIZON, width, labels)
+        for name, a, b in zip(streaming.DetectionCounts._fields, got, want):
+            np.testing.assert_array_equal(a, b, err_msg=name)
+        full = summarize_detection(record, HORIZON)
+        resolution = streaming.quantile_resolution(got)
+        assert resolution == (width - 1) / 2
+        summary = streaming.summarize_counts(got)
+        assert abs(summary.delay_median - full.delay_median) <= resolution
+        assert abs(summary.delay_p90 - full.delay_p90) <= resolution
+    late = record._replace(onset=np.zeros(3000, np.int32), detection_step=np.full(3000, 450, np.int32),
+                           first_unhealthy=-np.ones(3000, np.int32), false_alarms=np.zeros(3000, np.int32))
+    device = streaming.detection_summary(HORIZON)
+    _, totals = jaxfdi.monte_carlo(lambda key, d: d, jax.random.key(0), 3000, late, chunk_size=chunk_size,
+                                   summary=device.summary)
+    with pytest.raises(ValueError, match="outside"):
+        device.counts(totals)
+
+
 def test_bad_input():
     record, _ = synthetic_records(10)
     with pytest.raises(ValueError, match="bin_width"):

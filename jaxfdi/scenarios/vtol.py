@@ -47,6 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxfdi import _checks
 from jaxfdi.control.closed_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
 from jaxfdi.control.eigenstructure import effectiveness_gain_schedule, nominal_eigenstructure
 from jaxfdi.control.lqr import lqr_pi
@@ -58,7 +59,6 @@ from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_activ
 from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
 from jaxfdi.metrics import delay_statistics, record_from_alarms, unhealthy_warning
 from jaxfdi.models import vtol
-from jaxfdi import _checks
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.study import Structure, Study, run_study
 
@@ -206,10 +206,9 @@ def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_
     Per decision (``detection.calibration.empirical_threshold``): per method and filter,
     the larger of the chi-square threshold and the empirical ``1 - pfa`` quantile of the
     decision value (raw and window values count per step, MDWT values per block, the
-    block's maximum). The disturbance ``3 sin 10t``
-    is not decoupled (decoupling it too leaves the actuator faults almost invisible), so
-    it leaks into some filters' statistics (fault-free means up to 8.6 for chi2(3)); the
-    quantile absorbs that leak.
+    block's maximum). The disturbance ``3 sin 10t`` is not decoupled (decoupling it too
+    leaves the actuator faults almost invisible), so it leaks into some filters'
+    statistics (fault-free means up to 8.6 for chi2(3)); the quantile absorbs that leak.
 
     Per run (``run_false_alarm``, default ``RUN_FALSE_ALARM``; ``None`` skips it): a run
     makes ``steps // block`` decisions, so per-decision levels add up (at Pfa 0.005, 30 %

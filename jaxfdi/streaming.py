@@ -85,45 +85,63 @@ def detection_counts(record: DetectionRecord, horizon: int, bin_width: int = 1, 
       labels: optional (runs,) true fault labels; a detected faulty run counts in
         ``isolated_runs`` when ``record.isolated`` equals its label.
     """
-    counts = empty_counts(horizon, bin_width)
-    onset = np.asarray(record.onset).astype(np.int64)
-    healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
-    detection = np.broadcast_to(np.asarray(record.detection_step), onset.shape).astype(np.int64)
-    false_alarms = np.broadcast_to(np.asarray(record.false_alarms), onset.shape).astype(np.int64)
-    pre_steps = np.broadcast_to(np.asarray(record.pre_onset_steps), onset.shape).astype(np.int64)
+    empty = empty_counts(horizon, bin_width)
+    onset = np.asarray(record.onset)
+    if labels is not None and np.shape(labels) != onset.shape:
+        raise ValueError(f"labels: expected one label per run, shape {onset.shape}, got {np.shape(labels)}")
+    totals = _counts(np, record, np.ones(onset.shape, bool), labels, horizon, bin_width, np.int64)
+    return _finish(totals, empty)
+
+
+def _counts(xp, record: DetectionRecord, valid, labels, horizon: int, bin_width: int, integer) -> dict:
+    """The counts of ``DetectionCounts`` (and ``delays_outside``) of the ``valid`` runs of
+    ``record``, with ``xp`` NumPy (host, int64) or ``jax.numpy`` (inside a program)."""
+    onset = xp.asarray(record.onset).astype(integer)
+    valid = xp.asarray(valid, bool)
+    healthy = valid & (xp.broadcast_to(xp.asarray(record.first_unhealthy), onset.shape) < 0)
+    detection = xp.broadcast_to(xp.asarray(record.detection_step), onset.shape).astype(integer)
+    false_alarms = xp.broadcast_to(xp.asarray(record.false_alarms), onset.shape).astype(integer)
+    pre_steps = xp.broadcast_to(xp.asarray(record.pre_onset_steps), onset.shape).astype(integer)
     faulty = (onset < horizon) & healthy
     detected = faulty & (detection >= 0)
     pre_alarm = faulty & (false_alarms > 0)
     scored = detected & ~pre_alarm   # delays of clean runs only (metrics.summarize_detection)
-    delays = detection[scored] - onset[scored]
-    if delays.size and (delays.min() < 0 or delays.max() >= horizon):
-        raise ValueError(f"record: detection delays must lie in [0, horizon = {horizon}), got "
-                         f"[{delays.min()}, {delays.max()}]; is horizon the runs' length?")
+    delay = xp.where(scored, detection - onset, 0)
+    inside = scored & (delay >= 0) & (delay < horizon)
+
+    def count(mask):
+        return xp.sum(mask, dtype=integer)
+
+    def total(values, mask):
+        return xp.sum(xp.where(mask, values, 0), dtype=integer)
+
     if labels is None:
-        labelled = np.zeros((), np.int64)
-        isolated = np.zeros((), np.int64)
+        labelled = isolated = xp.zeros((), integer)
     else:
-        labels = np.asarray(labels)
-        if labels.shape != onset.shape:
-            raise ValueError(f"labels: expected one label per run, shape {onset.shape}, got {labels.shape}")
-        labelled = np.int64(faulty.sum())
-        isolated = np.int64((detected & (np.broadcast_to(np.asarray(record.isolated), onset.shape) == labels)).sum())
-    histogram = np.bincount(delays // int(counts.bin_width), minlength=counts.delay_histogram.size).astype(np.int64)
-    return counts._replace(
-        runs=np.int64(onset.size),
-        unhealthy_runs=np.int64((~healthy).sum()),
-        faulty_runs=np.int64(faulty.sum()),
-        detected_runs=np.int64(detected.sum()),
-        labelled_runs=labelled,
-        isolated_runs=isolated,
-        false_alarm_runs=np.int64((false_alarms[healthy] > 0).sum()),
-        false_alarm_steps=np.int64(false_alarms[healthy].sum()),
-        pre_onset_steps=np.int64(pre_steps[healthy].sum()),
-        delay_sum=np.int64(delays.sum()),
-        delay_histogram=histogram,
-        pre_alarm_runs=np.int64(pre_alarm.sum()),
-        delay_runs=np.int64(scored.sum()),
-    )
+        labelled = count(faulty)
+        same = xp.broadcast_to(xp.asarray(record.isolated), onset.shape) == xp.asarray(labels)
+        isolated = count(detected & same)
+    bins = -(-horizon // bin_width)
+    index = xp.where(inside, delay // bin_width, 0)
+    histogram = (np.bincount(index, weights=inside, minlength=bins).astype(integer) if xp is np
+                 else jax.ops.segment_sum(inside.astype(integer), index, num_segments=bins))
+    return dict(
+        runs=count(valid), unhealthy_runs=count(valid & ~healthy), faulty_runs=count(faulty),
+        detected_runs=count(detected), labelled_runs=labelled, isolated_runs=isolated,
+        false_alarm_runs=count(healthy & (false_alarms > 0)), false_alarm_steps=total(false_alarms, healthy),
+        pre_onset_steps=total(pre_steps, healthy), delay_sum=total(delay, inside), delay_histogram=histogram,
+        pre_alarm_runs=count(pre_alarm), delay_runs=count(scored), delays_outside=count(scored & ~inside))
+
+
+def _finish(totals: dict, empty: DetectionCounts) -> DetectionCounts:
+    """``DetectionCounts`` of ``_counts``' totals (host int64); a delay outside the
+    horizon is an error (the runs are not ``horizon`` steps long)."""
+    host = {name: np.asarray(value, np.int64) for name, value in totals.items()}
+    outside = int(host.pop("delays_outside"))
+    if outside:
+        raise ValueError(f"record: {outside} detection delays outside [0, horizon = {int(empty.horizon)}); is "
+                         f"horizon the runs' length?")
+    return DetectionCounts(**host, horizon=empty.horizon, bin_width=empty.bin_width)
 
 
 def merge_counts(*parts: DetectionCounts) -> DetectionCounts:
@@ -235,47 +253,10 @@ def detection_summary(horizon: int, bin_width: int = 1, record: Callable[[Any], 
     it is counted apart and ``counts`` raises the ``ValueError`` ``detection_counts``
     would."""
     empty = empty_counts(horizon, bin_width)  # checks the arguments now
-    bins = int(empty.delay_histogram.size)
     pick = record or (lambda outputs: outputs)
 
     def summary(outputs, weight):
-        rec = pick(outputs)
-        integer = jnp.result_type(int)
-        onset = jnp.asarray(rec.onset).astype(integer)
-        valid = jnp.asarray(weight, bool)
-        healthy = valid & (jnp.asarray(rec.first_unhealthy) < 0)
-        detection = jnp.asarray(rec.detection_step).astype(integer)
-        false_alarms = jnp.asarray(rec.false_alarms).astype(integer)
-        faulty = (onset < horizon) & healthy
-        detected = faulty & (detection >= 0)
-        pre_alarm = faulty & (false_alarms > 0)
-        scored = detected & ~pre_alarm
-        delay = jnp.where(scored, detection - onset, 0)
-        inside = scored & (delay >= 0) & (delay < horizon)
-        count = lambda mask: jnp.sum(mask, dtype=integer)  # noqa: E731
-        total = lambda values, mask: jnp.sum(jnp.where(mask, values, 0), dtype=integer)  # noqa: E731
-        if label is None:
-            labelled = isolated = jnp.zeros((), integer)
-        else:
-            labelled = count(faulty)
-            isolated = count(detected & (jnp.asarray(rec.isolated) == jnp.asarray(label(outputs))))
-        histogram = jax.ops.segment_sum(inside.astype(integer), jnp.where(inside, delay // bin_width, 0),
-                                        num_segments=bins)
-        totals = dict(
-            runs=count(valid), unhealthy_runs=count(valid & ~healthy), faulty_runs=count(faulty),
-            detected_runs=count(detected), labelled_runs=labelled, isolated_runs=isolated,
-            false_alarm_runs=count(healthy & (false_alarms > 0)), false_alarm_steps=total(false_alarms, healthy),
-            pre_onset_steps=total(jnp.asarray(rec.pre_onset_steps).astype(integer), healthy),
-            delay_sum=total(delay, inside), delay_histogram=histogram, pre_alarm_runs=count(pre_alarm),
-            delay_runs=count(scored), delays_outside=count(scored & ~inside))
-        return None, totals
+        labels = None if label is None else label(outputs)
+        return None, _counts(jnp, pick(outputs), weight, labels, horizon, bin_width, jnp.result_type(int))
 
-    def counts(totals) -> DetectionCounts:
-        host = {name: np.asarray(value, np.int64) for name, value in totals.items()}
-        outside = int(host.pop("delays_outside"))
-        if outside:
-            raise ValueError(f"record: {outside} detection delays outside [0, horizon = {horizon}); is horizon the "
-                             f"runs' length?")
-        return DetectionCounts(**host, horizon=empty.horizon, bin_width=empty.bin_width)
-
-    return DeviceSummary(summary, counts)
+    return DeviceSummary(summary, lambda totals: _finish(totals, empty))

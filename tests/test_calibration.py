@@ -26,6 +26,10 @@ def test_empirical_threshold_estimates_the_laws_quantile_and_keeps_the_floor():
         empirical_threshold(values, 1.5)
     with pytest.raises(ValueError, match="values"):
         empirical_threshold(np.float64(3.0), 0.1)
+    dead = values.copy()
+    dead[17, 1] = np.nan   # one calibration run's channel went NaN: refused, not a NaN threshold
+    with pytest.raises(ValueError, match="values: expected finite .* 1 non-finite"):
+        empirical_threshold(dead, pfa)
 
 
 def test_run_scaling_is_the_smallest_factor_meeting_the_rate():
@@ -55,5 +59,7 @@ def test_run_scaling_refuses_what_it_cannot_reach():
         scale_to_run_false_alarm(lambda s: np.full(2, 0.5), 0.01, 2)
     with pytest.raises(ValueError, match="target"):
         scale_to_run_false_alarm(lambda s: np.zeros(2), 1.0, 2)
+    with pytest.raises(ValueError, match="rate: expected rates in"):   # a NaN rate is not "within the target"
+        scale_to_run_false_alarm(lambda s: np.array([0.0, np.nan]), 0.1, 2)
     with pytest.raises(ValueError, match="upper"):
         scale_to_run_false_alarm(lambda s: np.zeros(2), 0.1, 2, upper=1.0)

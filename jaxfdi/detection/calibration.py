@@ -28,12 +28,16 @@ def empirical_threshold(values, pfa: float, floor=None) -> np.ndarray:
     """``max(floor, q_{1 - pfa})``: the empirical upper ``pfa`` quantile of fault-free
     decision ``values`` over their leading (sample) axis, raised to ``floor`` (the law's
     threshold, broadcast against the quantile; ``None``: no floor). Quantiles by linear
-    interpolation (``numpy.quantile``'s default)."""
+    interpolation (``numpy.quantile``'s default). Non-finite values (a calibration run
+    that went bad) are refused: a NaN threshold would never alarm."""
     if not 0.0 < pfa < 1.0:
         raise ValueError(f"pfa: expected a probability in (0, 1), got {pfa}")
     values = np.asarray(values)
     if values.ndim == 0 or values.shape[0] < 1:
         raise ValueError(f"values: expected samples along a leading axis, got shape {values.shape}")
+    if not np.all(np.isfinite(values)):  # a NaN would make the threshold NaN: a detector that never alarms
+        raise ValueError(f"values: expected finite fault-free decision values, got {int(np.sum(~np.isfinite(values)))} "
+                         f"non-finite (a calibration run went bad)")
     quantile = np.quantile(values, 1.0 - pfa, axis=0)
     return quantile if floor is None else np.maximum(np.asarray(floor), quantile)
 
@@ -47,19 +51,27 @@ def scale_to_run_false_alarm(rate: Callable[[np.ndarray], np.ndarray], target: f
     scale). A group already within ``target`` at 1 keeps 1; otherwise the bracket
     ``[1, upper]`` is halved ``iterations`` times and its upper end returned (within
     ``(upper - 1) 2^-iterations`` of the smallest factor, on the rate's steps). A
-    ``ValueError`` when some group exceeds ``target`` even at ``upper``."""
+    ``ValueError`` when some group exceeds ``target`` even at ``upper``, or a rate is not
+    in [0, 1] (a NaN from a bad run is never read as meeting the target)."""
     if not 0.0 <= target < 1.0:
         raise ValueError(f"target: expected a rate in [0, 1), got {target}")
     if not upper > 1.0:
         raise ValueError(f"upper: expected a factor above 1, got {upper}")
     low, high = np.ones(groups), np.full(groups, float(upper))
-    at_upper = np.asarray(rate(high))
+
+    def rate(scale, _rate=rate):
+        rates = np.asarray(_rate(scale))
+        if not np.all((rates >= 0.0) & (rates <= 1.0)):  # NaN included: never read as "within the target"
+            raise ValueError(f"rate: expected rates in [0, 1], got {rates}")
+        return rates
+
+    at_upper = rate(high)
     if np.any(at_upper > target):
         raise ValueError(f"target: {target} is not reached even with the thresholds scaled by {upper} "
                          f"(rates {at_upper})")
-    high[np.asarray(rate(low)) <= target] = 1.0
+    high[rate(low) <= target] = 1.0
     for _ in range(int(iterations)):  # invariant: rate(high) <= target < rate(low), where high > 1
         mid = 0.5 * (low + high)
-        ok = np.asarray(rate(mid)) <= target
+        ok = rate(mid) <= target
         high, low = np.where(ok, mid, high), np.where(ok, low, mid)
     return high

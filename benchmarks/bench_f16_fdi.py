@@ -255,9 +255,9 @@ def timed(fn, repeats):
 
 def random_cases(n: int, seed: int, dtype):
     rng = np.random.default_rng(seed)
-    cases = [sf.fault_case("bias", int(rng.integers(3)), 10.0, float(rng.uniform(0, 360)), dtype=dtype)
-             for _ in range(n)]
-    return jax.tree_util.tree_map(lambda *a: jnp.asarray(np.stack([np.asarray(v) for v in a])), *cases)
+    draws = [(int(rng.integers(3)), float(rng.uniform(0, 360))) for _ in range(n)]  # the same draws as before
+    sensor, angle = (np.asarray(column) for column in zip(*draws))
+    return sf.fault_case("bias", sensor, 10.0, angle, dtype=dtype)
 
 
 def fdi_flights(setup, fdi, keys, disp, cases):

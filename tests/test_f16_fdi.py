@@ -7,6 +7,8 @@ squares, binomial intervals of the false-alarm and isolation counts. One compile
 closed-loop program (144 flights of 3.2 s, vmapped with the replay condition over the
 batch) serves the closed-loop tests; the other tests replay a recorded sequence.
 """
+import math
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -269,6 +271,28 @@ def test_sensor_faults_act_on_both_axes_with_their_label_and_size(env):
     _, held = apply_faults(stuck, 10, y, Target.SENSOR, jnp.zeros(2))
     out, _ = apply_faults(stuck, 11, y + 1.0, Target.SENSOR, held)
     np.testing.assert_allclose(out[RATE_OFFSET:RATE_OFFSET + 2], y[RATE_OFFSET:RATE_OFFSET + 2], rtol=1e-15)
+
+
+def test_fault_cases_from_arrays_are_the_cases_one_by_one():
+    """``fault_case`` on arrays (one host transfer per field: how 10^5 flights are set up)
+    gives, row by row, the kind's code, the sensor, the FNR, the angle in radians
+    (``math.radians``) and the onset step (``round(onset_s / DT)``) of each flight; a
+    scalar call gives the 0-d case; an unknown kind is refused."""
+    rng = np.random.default_rng(5)
+    kinds = np.array(["bias", "drift", "stuck", "scale", "none"])[rng.integers(0, 5, 200)]
+    sensor, size = rng.integers(0, 3, 200), rng.uniform(0.0, 20.0, 200)
+    angle, onset = rng.uniform(0.0, 360.0, 200), rng.uniform(0.0, 10.0, 200)
+    cases = sf.fault_case(kinds, sensor, size, angle, onset, dtype=jnp.float64)
+    codes = [int(sf.FaultKind.NONE if k == "none" else sf.KINDS[k]) for k in kinds]
+    assert np.asarray(cases.kind).tolist() == codes and np.asarray(cases.sensor).tolist() == sensor.tolist()
+    assert np.asarray(cases.size).tolist() == size.tolist()
+    assert np.asarray(cases.angle).tolist() == [math.radians(a) for a in angle]
+    assert np.asarray(cases.onset).tolist() == [int(round(t / sf.DT)) for t in onset]
+    assert cases.kind.dtype == jnp.int32 and cases.angle.dtype == jnp.float64
+    one = sf.fault_case("drift", 2, 4.0, 30.0, 1.5)
+    assert [np.shape(f) for f in one] == [()] * 5 and int(one.onset) == 150 and int(one.kind) == int(sf.KINDS["drift"])
+    with pytest.raises(KeyError):
+        sf.fault_case(np.array(["bias", "melt"]), 0, 1.0, 0.0)
 
 
 def test_exclusion_estimators_and_bad_input(env):

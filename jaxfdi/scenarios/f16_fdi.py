@@ -146,13 +146,17 @@ def fdi_state0(fdi: FDISetup, follow="hybrid"):
                            follow)
 
 
-def fault_case(kind: str = "bias", sensor: int = PAPER_SENSOR, size: float = PAPER_FNR,
-               angle_deg: float = PAPER_ANGLE_DEG, onset_s: float = FAULT_ONSET_S, dtype=None) -> FaultCase:
-    """A ``FaultCase`` by name (``kind``: ``"none"`` or a key of ``KINDS``)."""
+def fault_case(kind="bias", sensor=PAPER_SENSOR, size=PAPER_FNR, angle_deg=PAPER_ANGLE_DEG, onset_s=FAULT_ONSET_S,
+               dtype=None) -> FaultCase:
+    """A ``FaultCase`` by name (``kind``: ``"none"`` or a key of ``KINDS``), or, from
+    arrays broadcast together, a stack of them with a leading flight axis: built on the
+    host, one transfer per field (a Python list of 10^5 single cases, each field a device
+    array copied back to be stacked, kept a GPU busy for minutes before the flights)."""
     dtype = dtype or jnp.result_type(float)
-    code = FaultKind.NONE if kind == "none" else KINDS[kind]
-    return FaultCase(jnp.asarray(int(code), jnp.int32), jnp.asarray(sensor, jnp.int32), jnp.asarray(size, dtype),
-                     jnp.asarray(math.radians(angle_deg), dtype), jnp.asarray(int(round(onset_s / DT)), jnp.int32))
+    code = np.vectorize(lambda k: int(FaultKind.NONE if k == "none" else KINDS[k]), otypes=[np.int32])(kind)
+    fields = np.broadcast_arrays(code, np.asarray(sensor), np.asarray(size, float),
+                                 np.radians(np.asarray(angle_deg, float)), np.rint(np.asarray(onset_s, float) / DT))
+    return FaultCase(*(jnp.asarray(f, t) for f, t in zip(fields, (jnp.int32, jnp.int32, dtype, dtype, jnp.int32))))
 
 
 def sensor_fault(case: FaultCase, sigma: Array) -> Fault:
@@ -221,9 +225,9 @@ class F16FDIStudy(NamedTuple):
         return study_table(self)
 
 
-def _stack(cases: list[FaultCase]) -> FaultCase:
-    # on the host: jnp.stack of n arrays compiles a program with n arguments (minutes for 10^4)
-    return jax.tree_util.tree_map(lambda *a: jnp.asarray(np.stack([np.asarray(v) for v in a])), *cases)
+def _cases(rows: list[tuple], dtype) -> FaultCase:
+    """The stacked ``FaultCase`` of ``(kind, sensor, size, angle_deg)`` rows."""
+    return fault_case(*(np.asarray(column) for column in zip(*rows)), dtype=dtype)
 
 
 def _layout_fdi(setup: FlightSetup, fdi: FDISetup, layouts: FDISetup | None, index: Array):
@@ -312,14 +316,14 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     grid = [(s, v, a) for s in range(3) for v in sweep_fnr for a in angles]
     rng = np.random.default_rng(seed)
     check_cases = [(int(rng.integers(3)), DESIGN_FNR, float(rng.uniform(0.0, 360.0))) for _ in range(2 * int(runs))]
-    cases = [fault_case("bias", s, v, a, dtype=dtype) for (s, v, a) in grid for _ in range(int(runs))]
-    cases += [fault_case("bias", s, v, a, dtype=dtype) for (s, v, a) in check_cases] * 2
+    cases = [("bias", s, v, a) for (s, v, a) in grid for _ in range(int(runs))]
+    cases += [("bias", s, v, a) for (s, v, a) in check_cases] * 2
     n_sweep = len(grid) * int(runs)
     layout = np.concatenate([np.zeros(n_sweep + 2 * int(runs), np.int32), np.ones(2 * int(runs), np.int32)])
     short = setup._replace(reference=jax.tree_util.tree_map(
         lambda a: a[:onset + int(round(SWEEP_AFTER_ONSET_S / DT))], setup.reference))
     n = len(cases)
-    per_run = (dispersions(keys[4], setup, n), _stack(cases), jnp.full((n,), FOLLOW["hybrid"], jnp.int32),
+    per_run = (dispersions(keys[4], setup, n), _cases(cases, dtype), jnp.full((n,), FOLLOW["hybrid"], jnp.int32),
                jnp.asarray(layout))
     out = _fly(short, fdi, keys[5], per_run, layouts, chunk_size, progress, "sweep flights")
     decision = out.fdi
@@ -333,14 +337,14 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     for kind, size in kinds:
         draws = [(int(rng.integers(3)), float(rng.uniform(0.0, 360.0))) for _ in range(int(runs))]
         for follow in FOLLOWS:
-            full_cases += [fault_case(kind, s, size, a, dtype=dtype) for s, a in draws]
+            full_cases += [(kind, s, size, a) for s, a in draws]
             labels += [(kind, size, follow)] * int(runs)
     free = FAULT_FREE_PER_RUN * int(runs)
-    full_cases += [fault_case("none", 0, 0.0, 0.0, dtype=dtype)] * free
+    full_cases += [("none", 0, 0.0, 0.0)] * free
     labels += [("none", 0.0, "hybrid")] * free
     n = len(full_cases)
     follows = jnp.asarray([FOLLOW[f] for _, _, f in labels], jnp.int32)
-    per_run = (dispersions(keys[7], setup, n), _stack(full_cases), follows, jnp.zeros((n,), jnp.int32))
+    per_run = (dispersions(keys[7], setup, n), _cases(full_cases, dtype), follows, jnp.zeros((n,), jnp.int32))
     out = _fly(setup, fdi, keys[8], per_run, None, chunk_size, progress, "full flights")
     rows += _full_flight_rows(out, labels, np.asarray(per_run[1].sensor), onset, setup)
     steps = int(setup.reference.state.shape[0])

@@ -287,19 +287,27 @@ def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, 
                        len(faults) * runs, batch, chunk_size=chunk_size, progress=progress)
 
 
+@functools.lru_cache(maxsize=2)
+def _fault_magnitudes(x64: bool) -> tuple[tuple[str, ...], tuple[float, ...]]:
+    """The faults' names and magnitudes (NaN for 'none'), once per precision: the threshold
+    search summarises thousands of replays, and building the faults cost 8 ms each time."""
+    names, faults = engine_faults(0)
+    return tuple(names), tuple(float(f.magnitude) if n != "none" else float("nan") for n, f in zip(names, faults))
+
+
 def summarize_method(name: str, paper: str | None, records: DetectionRecord, runs: int, steps: int) -> list[dict]:
     """One row per fault: ``metrics.fault_row``'s columns (rates; delays in s over the runs
     with no pre-onset alarm), the paper's mean delay (``PAPER_DELAY[paper]``), the
     estimate's error."""
-    names, faults = engine_faults(0)
+    names, magnitudes = _fault_magnitudes(bool(jax.config.jax_enable_x64))
+    records = jax.tree_util.tree_map(np.asarray, records)  # one transfer, not one per fault
     rows = []
-    for i, (fault_name, f) in enumerate(zip(names, faults)):
-        part = jax.tree_util.tree_map(lambda x: np.asarray(x)[i * runs:(i + 1) * runs], records)
+    for i, (fault_name, magnitude) in enumerate(zip(names, magnitudes)):
+        part = jax.tree_util.tree_map(lambda x: x[i * runs:(i + 1) * runs], records)
         faulty = fault_name != "none"
         columns = fault_row(part, steps, TS, label=i + 1 if faulty else None)
         healthy = part.first_unhealthy < 0  # unhealthy runs: counted apart, in no rate
         correct = part.isolated[healthy] == i + 1
-        magnitude = float(f.magnitude) if faulty else float("nan")
         estimates = part.estimate[healthy][correct] if faulty else np.zeros(0)
         estimates = estimates[np.isfinite(estimates)]
         estimate = float(np.median(estimates)) if estimates.size else float("nan")

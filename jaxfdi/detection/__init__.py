@@ -25,6 +25,7 @@ from jaxfdi.detection.glrt_recursive import RecursiveGLRTState, recursive_glrt_d
 from jaxfdi.detection.mode_probability import mode_probability_detector
 from jaxfdi.detection.noncentral_chi2 import ncx2_cdf, ncx2_quantile, noncentrality_for_missed_detection
 from jaxfdi.detection.signature import UNMATCHED, isolate, signature_matrix
+from jaxfdi.detection.two_stage import TwoStageOutput, two_stage_isolation
 from jaxfdi.detection.wavelet import (
     block_alarms,
     chi2_detail_sigma,
@@ -41,6 +42,8 @@ __all__ = [
     "dual_filter",
     "hypothesis_credits",
     "system_matrix_det",
+    "TwoStageOutput",
+    "two_stage_isolation",
     "PAPER_USED_THRESHOLD",
     "Detector",
     "FaultDirections",

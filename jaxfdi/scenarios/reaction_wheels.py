@@ -59,14 +59,11 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.control.attitude import AttitudeGains, Slew, pd_gains, slew, slew_reference, wheel_attitude_controller
-from jaxfdi.detection.chi2 import Decision, chi2_detector, chi2_threshold
-from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
-from jaxfdi.detection.dual_filter import DualFilterState, dual_filter
-from jaxfdi.detection.mode_probability import mode_probability_detector
+from jaxfdi.detection.chi2 import chi2_threshold
+from jaxfdi.detection.credits import hypothesis_credits
+from jaxfdi.detection.two_stage import two_stage_isolation
 from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault
-from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters.ekf import extended_kalman_filter
-from jaxfdi.filters.mm import multiple_model
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
 from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, unhealthy_warning
@@ -202,21 +199,11 @@ class WheelHistory(NamedTuple):
     engaged: Array           # (T,) bool: the banks run on their own
 
 
-class WheelOutput(NamedTuple):
-    """What the FDI gives at step ``k`` (``wheel_fdi``)."""
-
-    decisions: tuple             # (fdp, nis, credit, likelihood) ``Decision``s
-    peaks: Array                 # (2,) F and the windowed NIS (for their peak statistics)
-    healthy: Array               # () bool: every filter healthy
-    hypothesis_parameter: Array  # (M,) F_x of the credit bank
-    mode_prob: Array             # (M + 1,) MM, normal mode first
-    engaged: Array               # () bool: the banks ran on their own at this step
-
-
 def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis", restart_prediction: bool = True):
-    """Seed 004's two-stage FDI as a ``loop.FDI`` and its initial state (module doc,
-    steps 3-4): the dual filter's ``F``, the windowed NIS test of a nominal EKF, and the
-    credit and likelihood banks slaved to the nominal filter until the engaging alarm.
+    """Seed 004's two-stage FDI (``detection.two_stage``: the dual filter's ``F``, the
+    windowed NIS test of a nominal EKF, and the credit and likelihood banks over the stop
+    hypotheses, slaved to the nominal filter until the engaging alarm) as a ``loop.FDI``
+    on the gyro readings and the wheel commands, and its initial state.
 
     ``restart_prediction`` (default, issue 27 item 8): at the engaging step each
     hypothesis's prediction filter starts from its own EKF's posterior of that step, not
@@ -226,85 +213,25 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
     the credits rank the hypotheses by that geometry, whichever wheel stopped
     (``benchmarks/wheels_credit.py``). ``False`` keeps the former start (for comparison).
     """
-    if engage_on not in ("nis", "fdp"):
-        raise ValueError(f"engage_on: expected 'nis' or 'fdp', got {engage_on!r}")
     if estimator not in ("ekf", "ukf"):
         raise ValueError(f"estimator: expected 'ekf' or 'ukf', got {estimator!r}")
     params = design.params
     dtype = params.inertia.dtype
     N = params.wheel_axes.shape[0]
-    hypotheses = stop_hypotheses(params)
-    modes = stop_hypotheses(params, include_nominal=True)
-    nominal = estimation_filter(params, design.estimator_q, design.gyro_sigma, estimator)
-    detector = dual_filter(nominal, wheel_rate_transition, body_rate_field, params)
-    nis_filter = estimation_filter(params, design.bank_q, design.gyro_sigma, estimator)  # tighter: the NIS test's
-    nis_test = chi2_detector(design.nis_threshold, NIS_WINDOW, dtype)
-
-    def bank_filter(p):
-        return estimation_filter(p, design.bank_q, design.gyro_sigma, estimator)
-
-    def bank_dual(p):
-        return dual_filter(bank_filter(p), wheel_rate_transition, body_rate_field, p)
-
-    mm = multiple_model(bank_filter, modes, design.mm_floor)
-    credits = credit_isolator(design.credit_threshold, relative=True, label_offset=1, confirm_steps=CONFIRM_STEPS)
-    mode_decision = mode_probability_detector(design.mode_threshold, confirm_steps=CONFIRM_STEPS)
-
-    def slaved(post: GaussianState, u: Array):
-        """The banks' next states, started from the nominal posterior ``post`` at k."""
-        start = GaussianState(post.mean, post.cov + design.engage_sigma**2 * jnp.eye(3, dtype=dtype))
-        bank_prior = jax.vmap(lambda p: bank_filter(p).predict(start, u))(hypotheses)
-        mode_prior = jax.vmap(lambda p: bank_filter(p).predict(start, u))(modes)
-        uniform = jnp.full((N + 1,), 1.0 / (N + 1), dtype)
-        return DualFilterState(bank_prior, bank_prior.mean), mm.init(mode_prior.mean, mode_prior.cov, uniform)
-
-    P0 = design.initial_sigma**2 * jnp.eye(3, dtype=dtype)
-    bank0, mm0 = slaved(GaussianState(jnp.zeros(3, dtype), P0), jnp.concatenate([design.initial_speeds, jnp.zeros(N, dtype)]))
-    state0 = dict(
-        dual=detector.init(jnp.zeros(3, dtype), P0), nis_filter=nis_filter.init(jnp.zeros(3, dtype), P0),
-        nis=nis_test.init(), bank=bank0, mm=mm0, engaged=jnp.zeros((), bool), credit=credits.init(),
-        mode=mode_decision.init(),
-    )
-    no_label = jnp.asarray(-1, jnp.int32)
-    nan = jnp.full((), jnp.nan, dtype)
+    eye = jnp.eye(3, dtype=dtype)
+    stages = two_stage_isolation(
+        estimation_filter(params, design.estimator_q, design.gyro_sigma, estimator),
+        lambda p: estimation_filter(p, design.bank_q, design.gyro_sigma, estimator),  # tighter: the NIS test's and banks'
+        wheel_rate_transition, body_rate_field, params, stop_hypotheses(params),
+        stop_hypotheses(params, include_nominal=True), detection_threshold=design.detection_threshold,
+        nis_threshold=design.nis_threshold, nis_window=NIS_WINDOW, credit_threshold=design.credit_threshold,
+        mode_threshold=design.mode_threshold, mm_floor=design.mm_floor, engage_cov=design.engage_sigma**2 * eye,
+        confirm_steps=CONFIRM_STEPS, engage_on=engage_on, restart_prediction=restart_prediction)
+    state0 = stages.init(jnp.zeros(3, dtype), design.initial_sigma**2 * eye,
+                         jnp.concatenate([design.initial_speeds, jnp.zeros(N, dtype)]))
 
     def step(c, k, reading, command):
-        y = reading.rate
-        u = filter_input(command, params)
-        # detection: the dual filter's F, and the windowed NIS of a nominal EKF
-        dual, dual_info = detector.step(c["dual"], y, u)
-        fdp = dual_info.detection_parameter
-        fdp_alarm = fdp > design.detection_threshold
-        nis_filter_state, nis_info = nis_filter.step(c["nis_filter"], y, u)
-        nis_state, (nis_stat, nis_alarm) = nis_test.step(c["nis"], nis_info.nis)
-
-        # isolation: the two banks, slaved to the nominal filter until the engaging alarm
-        bank, bank_info = jax.vmap(lambda p, s: bank_dual(p).step(s, y, u))(hypotheses, c["bank"])
-        mm_state, mm_info = mm.step(c["mm"], y, u)
-        engaged_before = c["engaged"]
-        engaged = engaged_before | (nis_alarm if engage_on == "nis" else fdp_alarm)
-        post = GaussianState(dual_info.estimator.filtered_mean, dual_info.estimator.filtered_cov)
-        reset_bank, reset_mm = slaved(post, u)
-        keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged, a, b), new, old)  # noqa: E731
-        if restart_prediction:  # the prediction of a bank that was slaved until now starts from its EKF's posterior
-            restart = jax.vmap(lambda p, m: wheel_rate_transition(m, u, p))(hypotheses, bank_info.estimator.filtered_mean)
-            bank = bank._replace(prediction=jnp.where(engaged_before, bank.prediction, restart))
-        bank, mm_state = keep(bank, reset_bank), keep(mm_state, reset_mm)
-        credit_state, credit_out = credits.step(c["credit"], bank_info.detection_parameter)
-        mode_state, mode_out = mode_decision.step(c["mode"], mm_info.mode_prob)
-        idle = lambda new, fresh: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged_before, a, b), new, fresh)  # noqa: E731
-        credit_state, mode_state = idle(credit_state, credits.init()), idle(mode_state, mode_decision.init())
-        decisions = (
-            Decision(fdp, fdp_alarm, no_label, nan),
-            Decision(nis_stat, nis_alarm, no_label, nan),
-            Decision(credit_out.statistic, engaged_before & credit_out.alarm, credit_out.label, nan),
-            Decision(mode_out.statistic, engaged_before & mode_out.alarm, mode_out.label, nan),
-        )
-        healthy = dual_info.healthy & nis_info.healthy & jnp.all(bank_info.healthy) & mm_info.healthy
-        new = dict(dual=dual, nis_filter=nis_filter_state, nis=nis_state, bank=bank, mm=mm_state, engaged=engaged,
-                   credit=credit_state, mode=mode_state)
-        return new, WheelOutput(decisions, jnp.stack([fdp, nis_stat]), healthy, bank_info.detection_parameter,
-                                mm_info.mode_prob, engaged_before)
+        return stages.step(c, reading.rate, filter_input(command, params))
 
     return FDI(step), state0
 

@@ -9,9 +9,11 @@ import scipy.stats
 
 import jaxfdi
 from jaxfdi.detection.glrt import (
+    detector_setup,
     fault_directions,
     fault_signatures,
     glr_by_onset,
+    glr_sequence,
     glr_statistic,
     glrt_detector,
     glrt_threshold,
@@ -198,7 +200,8 @@ def detect(engine):
 
 def test_detector_matches_glr_statistic(engine, monte_carlo, detect):
     """The online detector (shifted window, count of steps) equals glr_statistic on the
-    window of data seen, onsets restricted to the data during the first N - 1 steps."""
+    window of data seen, onsets restricted to the data during the first N - 1 steps; so
+    does every direction's statistic from ``glr_sequence``."""
     _, steady, signatures = engine
     innovations = monte_carlo[5, 0]
     decisions = jax.tree.map(lambda a: np.asarray(a)[0], detect(monte_carlo[5, :3]))  # the shape compiled below
@@ -212,6 +215,12 @@ def test_detector_matches_glr_statistic(engine, monte_carlo, detect):
     np.testing.assert_allclose(decisions.statistic, pick(ref.statistic), rtol=1e-10)
     np.testing.assert_array_equal(decisions.label, 1 + best)
     np.testing.assert_allclose(decisions.estimate, pick(ref.magnitude), rtol=1e-10)
+    # every direction's statistic per step (the engine study's GLR figure): the same batch reference
+    model, _, _ = engine
+    setup = detector_setup(model, steady.gain, steady.innovation_cov, WINDOW, 200.0, "max", False, -1)
+    every = glr_sequence(setup, jnp.asarray(innovations))
+    np.testing.assert_allclose(every.statistic, ref.statistic, rtol=1e-10, atol=1e-12)
+    np.testing.assert_array_equal(every.onset_offset, ref.onset_offset)
 
 
 @pytest.mark.parametrize("index", [4, 0])

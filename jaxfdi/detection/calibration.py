@@ -21,6 +21,8 @@ from typing import Callable
 
 import numpy as np
 
+from jaxfdi import _checks
+
 __all__ = ["empirical_threshold", "scale_to_run_false_alarm"]
 
 
@@ -30,8 +32,7 @@ def empirical_threshold(values, pfa: float, floor=None) -> np.ndarray:
     threshold, broadcast against the quantile; ``None``: no floor). Quantiles by linear
     interpolation (``numpy.quantile``'s default). Non-finite values (a calibration run
     that went bad) are refused: a NaN threshold would never alarm."""
-    if not 0.0 < pfa < 1.0:
-        raise ValueError(f"pfa: expected a probability in (0, 1), got {pfa}")
+    _checks.check_probability("pfa", pfa)
     values = np.asarray(values)
     if values.ndim == 0 or values.shape[0] < 1:
         raise ValueError(f"values: expected samples along a leading axis, got shape {values.shape}")

@@ -390,6 +390,15 @@ def windowed_engine(setup: DetectorSetup) -> tuple[Array, GLREngine]:
     return whitener, GLREngine(init, update, remove, information)
 
 
+def glr_sequence(setup: DetectorSetup, innovations: Array) -> GLRResult:
+    """Every direction's windowed GLR at every step of ``innovations`` (T, m): the
+    ``GLRResult`` (T, d) that ``glrt_detector`` maximises over directions at each step
+    (for figures of each direction's statistic)."""
+    whitener, engine = windowed_engine(setup)
+    _, result = jax.lax.scan(lambda state, e: engine.update(state, whitener @ e), engine.init(), innovations)
+    return result
+
+
 def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallback: Array) -> Array:
     """Seed 003 eq. (24): index of the isolated direction (see ``glrt_detector``)."""
     actuator = jnp.argmax(statistic[:nu])

@@ -42,7 +42,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi.detection.glrt import PAPER_USED_THRESHOLD, detector_setup, glrt_detector, glrt_threshold, windowed_engine
+from jaxfdi.detection.glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_detector, glrt_threshold
 from jaxfdi.detection.mode_probability import mode_probability_detector
 from jaxfdi.faults import stack_faults
 from jaxfdi.filters.imm import interacting_multiple_model
@@ -481,8 +481,8 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
         return run
 
     steady = steady_state_kalman(model)
-    whitener, glr_engine = windowed_engine(detector_setup(model, steady.gain, steady.innovation_cov, glr_window,
-                                                          PAPER_USED_THRESHOLD, "max", False, -1))
+    glr_setup = detector_setup(model, steady.gain, steady.innovation_cov, glr_window, PAPER_USED_THRESHOLD, "max",
+                               False, -1)
     kf = kalman_filter(model, unroll_factorizations=unrolled)
     kf0 = kf.init(x0, steady.predicted_cov)  # the GLR signatures assume the steady-state gain
 
@@ -491,10 +491,8 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
                                  rule.paper_isolation)
         method = Method(kf, kf0, detector, _innovation, glr_estimate_delay)
         result = run_monitor(method, model, us, key, f, keep_history=True)
-        # every direction's GLR per step, for the figure: the detector's own windowed engine
-        _, glr = jax.lax.scan(lambda state, e: glr_engine.update(state, whitener @ e), glr_engine.init(),
-                              result.history.info.innovation)
-        return result.record, glr.statistic
+        # every direction's GLR per step, for the figure (the detector keeps only the largest)
+        return result.record, glr_sequence(glr_setup, result.history.info.innovation).statistic
 
     return {"MM (Zhang & Li modes)": mode_run("zhang-li", False),
             "IMM (Zhang & Li modes)": imm_chunk("zhang-li") if kernel else mode_run("zhang-li", True),

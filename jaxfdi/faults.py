@@ -18,6 +18,7 @@ SCALE         ``(1 + magnitude) s``               multiplicative (sensor scaling
 EFFECTIVENESS ``(1 - magnitude) s``               actuator effectiveness loss, 0..1
 STUCK         ``s(onset)``                        stuck at the value at onset
 STOP          ``0``                               the component stops (no output)
+DEAD          ``NaN``                             a dead or disconnected sensor
 ============  ==================================  =====================================
 
 A fault on a *group* of components (both axes of a 2-DOF rate sensor, the pseudorange of
@@ -48,7 +49,8 @@ NEVER = 2**30
 
 
 class FaultKind(enum.IntEnum):
-    """How a fault acts: none, a bias (step), a ramp, an impulse or a scale (effectiveness) change."""
+    """How a fault acts (module doc): none, a bias (step), a ramp, an impulse, a scale or
+    effectiveness change, stuck, stopped, or dead (NaN)."""
     NONE = 0
     BIAS = 1
     RAMP = 2
@@ -57,6 +59,7 @@ class FaultKind(enum.IntEnum):
     EFFECTIVENESS = 5
     STUCK = 6
     STOP = 7
+    DEAD = 8
 
 
 class Target(enum.IntEnum):
@@ -120,7 +123,10 @@ def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, l
     if onsets is not None and ends is not None and np.any((ends <= onsets) & (onsets < NEVER)):
         raise ValueError(f"end: expected a step after the onset (end > onset), got end {_checks.received(ends)} "
                          f"for onset {_checks.received(onsets)}")
-    kinds, sizes = _checks.concrete(kind), _checks.concrete(magnitude)
+    kinds, sizes, targets = _checks.concrete(kind), _checks.concrete(magnitude), _checks.concrete(target)
+    if kinds is not None and targets is not None and np.any((kinds == FaultKind.DEAD) & (targets == Target.ACTUATOR)):
+        raise ValueError("kind: DEAD (a NaN output) is a sensor fault; an actuator that stops is STOP, got DEAD on "
+                         "an actuator")
     if kinds is not None and sizes is not None:
         loss = np.broadcast_to(kinds == FaultKind.EFFECTIVENESS, np.broadcast_shapes(np.shape(kinds), np.shape(sizes)))
         if np.any(loss & ((sizes < 0) | (sizes > 1))):
@@ -287,7 +293,10 @@ def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> 
         ],
         s,
     ).astype(signal.dtype)
-    return jnp.where(on_this, signal + one_hot * (faulty - s), signal), held
+    faulty_signal = jnp.where(on_this, signal + one_hot * (faulty - s), signal)
+    # a dead component is NaN alone (one_hot * NaN would spread it over every component)
+    dead = on_this & (f.kind == FaultKind.DEAD) & (jnp.arange(signal.shape[0]) == f.component)
+    return jnp.where(dead, jnp.nan, faulty_signal).astype(signal.dtype), held
 
 
 def apply_faults(faults: Fault, k: Array, signal: Array, target: int, held: Array) -> tuple[Array, Array]:

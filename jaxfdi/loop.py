@@ -48,6 +48,7 @@ from jaxfdi.metrics import (
     episode_record_update,
     record_init,
     record_update,
+    step_health,
 )
 
 
@@ -245,7 +246,7 @@ def _per_decision_scorer(decisions: Callable[[Any], Any], healthy: Callable[[Any
                          single: bool) -> Scorer:
     """A record (``new_record()``) per decision of the output, each folded with
     ``fold(record, k, decision, good)``, ``good`` = the step healthy and the decision's
-    statistic finite. ``single``: ``decisions`` gives one decision (no trace to find out)."""
+    statistic not NaN (``metrics.step_health``). ``single``: ``decisions`` gives one decision (no trace to find out)."""
 
     def is_healthy(output):
         return healthy(output) if healthy is not None else getattr(output, "healthy", jnp.ones((), bool))
@@ -261,7 +262,7 @@ def _per_decision_scorer(decisions: Callable[[Any], Any], healthy: Callable[[Any
         ok = jnp.all(is_healthy(output))
 
         def one(record, decision: Decision):
-            return fold(record, k, decision, ok & jnp.all(jnp.isfinite(decision.statistic)))
+            return fold(record, k, decision, step_health(ok, decision.statistic))
 
         return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, record_type)))
 
@@ -284,7 +285,7 @@ def detection_scorer(
         dict of them: the score is the same structure of records.
       healthy: ``output -> () bool``: the step's numerics were sound (default: the
         output's ``healthy`` field when it has one); with the decision's statistic
-        finite, it decides the record's ``first_unhealthy``.
+        not NaN, it decides the record's ``first_unhealthy``.
       estimate_delay: as for ``monitor``.
       single: ``decisions`` returns one decision: the record is built without tracing a
         step to find the structure (a structure of several is found by one extra trace).

@@ -28,12 +28,15 @@ the record keeps the label at the detection step (isolation = the first mode tha
 crosses) and the detector's estimate (e.g. a fault magnitude) ``estimate_delay`` steps
 after it.
 
-Health: a run whose filter lost positive-definiteness or whose statistic went non-finite
-is *unhealthy* from its first such step (``first_unhealthy``; callers pass ``healthy =
-info.healthy & isfinite(statistic)``, see ``step_health``). Its alarms mean nothing (a
-NaN statistic never crosses a threshold), so the summaries count it in ``runs`` and in
-``unhealthy_runs`` and leave it out of every rate and delay: an all-NaN run is never a
-clean "no false alarm, missed detection" run.
+Health: a run whose filter lost positive-definiteness or whose statistic went NaN is
+*unhealthy* from its first such step (``first_unhealthy``; callers pass ``healthy =
+step_health(info.healthy, statistic)``). Its alarms mean nothing (a NaN statistic never
+crosses a threshold), so the summaries count it in ``runs`` and in ``unhealthy_runs`` and
+leave it out of every rate and delay: an all-NaN run is never a clean "no false alarm,
+missed detection" run. An *infinite* statistic is not ill health but evidence: the
+filters report a dead sensor (a non-finite measurement) as ``nis = +inf``
+(``filters._base``) and detectors alarm on it, so a dead-sensor fault is scored like any
+other fault: detected, isolated, with its delay.
 
 Several episodes in one run (``EpisodeRecord``; a GPS/INS flight with four satellite
 faults): episode ``e`` (``faults.episodes``: onset, end, label) owns the detection window
@@ -74,11 +77,12 @@ class DetectionRecord(NamedTuple):
 
 
 def step_health(healthy: Array, *values) -> Array:
-    """() bool: ``healthy`` and every element of every leaf of ``values`` finite (e.g.
-    ``step_health(info.healthy, statistic)``)."""
+    """() bool: ``healthy`` and no element of any leaf of ``values`` NaN (e.g.
+    ``step_health(info.healthy, statistic)``); an infinite value is evidence (a dead
+    sensor's statistic), not ill health."""
     ok = jnp.asarray(healthy, bool)
     for leaf in jax.tree.leaves(values):
-        ok = ok & jnp.all(jnp.isfinite(jnp.asarray(leaf)))
+        ok = ok & ~jnp.any(jnp.isnan(jnp.asarray(leaf)))
     return ok
 
 

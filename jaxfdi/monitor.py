@@ -15,10 +15,10 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import Detector, as_decision
+from jaxfdi.detection.chi2 import Detector, as_decision, flag_dead
 from jaxfdi.filters._base import Filter, FilterInfo
 from jaxfdi.loop import FDI, detection_scorer, feedforward, run_loop
-from jaxfdi.metrics import DetectionRecord, record_init, record_update
+from jaxfdi.metrics import DetectionRecord, record_init, record_update, step_health
 from jaxfdi.simulate import SimStep, Simulator
 
 
@@ -38,17 +38,32 @@ class MonitorResult(NamedTuple):
     history: MonitorHistory | None
 
 
-def filter_detector(filt: Filter, detector: Detector, detector_input: Callable[[Any], Array] | None = None) -> FDI:
+def dead_channels(info: Any) -> Array | None:
+    """(m,) bool, the channels a filter step reported dead (``filters._base``): NaN in a
+    ``FilterInfo``'s innovation, an ``IMMInfo``'s ``dead``; ``None`` for other infos."""
+    if isinstance(info, FilterInfo):
+        return jnp.isnan(info.innovation)
+    return getattr(info, "dead", None)
+
+
+def filter_detector(filt: Filter, detector: Detector, detector_input: Callable[[Any], Array] | None = None,
+                    channel_labels: Array | None = None) -> FDI:
     """The open-loop FDI: a fault-blind filter and a detector reading its info
     (``detector_input``; the NIS by default). Its state is ``(filter state, detector
-    state)``; its output ``(info, Decision)``."""
+    state)``; its output ``(info, Decision)``. A step whose filter reports a dead channel
+    ``j`` alarms, with label ``channel_labels[j]`` (``chi2.flag_dead``; ``None``: the
+    detector's own label), whatever the detector reads."""
     detector_input = detector_input or (lambda info: info.nis)
 
     def step(state, k, y, u):
         filt_state, det_state = state
         filt_state, info = filt.step(filt_state, y, u)
         det_state, decision = detector.step(det_state, detector_input(info))
-        return (filt_state, det_state), (info, as_decision(decision))
+        decision = as_decision(decision)
+        dead = dead_channels(info)
+        if dead is not None:
+            decision = flag_dead(decision, dead, channel_labels)
+        return (filt_state, det_state), (info, decision)
 
     return FDI(step)
 
@@ -65,6 +80,7 @@ def monitor(
     keep_history: bool = False,
     detector_input: Callable[[Any], Array] | None = None,
     estimate_delay: int = 0,
+    channel_labels: Array | None = None,
 ) -> MonitorResult:
     """Simulate, filter and test one run; return its detection record (and history).
 
@@ -82,8 +98,10 @@ def monitor(
         the latest within this many steps after the detection step (an estimate taken
         at the alarm itself is biased by the selection: the noise that crossed the
         threshold is in it; steps whose label differs from the isolated one are skipped).
-        A step whose filter is unhealthy or whose statistic is not finite marks the
-        record's ``first_unhealthy``.
+        A step whose filter is unhealthy or whose statistic is NaN marks the record's
+        ``first_unhealthy`` (an infinite statistic, a dead sensor, is an alarm).
+      channel_labels: (m,) the fault label of each measurement channel, which a step with
+        a dead channel isolates (``filter_detector``).
     """
     _checks.check_real("us", us, "real inputs of shape (T, nu)")
     _checks.check_finite("us", us, "inputs")
@@ -92,7 +110,7 @@ def monitor(
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
     scorer = detection_scorer(onset, lambda out: out[1], lambda out: out[0].healthy, estimate_delay,
                               jnp.asarray(x0).dtype, single=True)
-    result = run_loop(sim, filter_detector(filt, detector, detector_input), feedforward(), x0,
+    result = run_loop(sim, filter_detector(filt, detector, detector_input, channel_labels), feedforward(), x0,
                       (filter_state0, detector.init()), key, exogenous=us, scorer=scorer, keep_history=keep_history)
     history = None
     if keep_history:
@@ -106,26 +124,31 @@ def monitor(
 
 
 def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_delay: int = 0,
-                    healthy: Array | None = None) -> DetectionRecord:
+                    healthy: Array | None = None, dead: Array | None = None,
+                    channel_labels: Array | None = None) -> DetectionRecord:
     """The detection record of ``detector`` over a stored (T, ...) input sequence, the
     detector half of ``monitor`` without the plant and filter (e.g. to try thresholds on
     mode probabilities computed once, or after a batch filter kernel). ``healthy`` (T,)
     bool, the filter's health per step (``info.healthy``): with ``None`` only the
-    statistic's finiteness marks ``first_unhealthy``; given, the record is ``monitor``'s."""
+    statistic (NaN: ``metrics.step_health``) marks ``first_unhealthy``; given, the record
+    is ``monitor``'s. ``dead`` (T, m) bool, the channels the filter reported dead at each
+    step (``dead_channels``), alarm with ``channel_labels`` as in ``filter_detector``."""
     _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     steps = jnp.arange(jax.tree.leaves(inputs)[0].shape[0])
     healthy = jnp.ones(steps.shape, bool) if healthy is None else jnp.asarray(healthy, bool)
     _checks.check_shape("healthy", healthy, steps.shape, "one flag per step of inputs (T,)")
 
+    dead = jnp.zeros(steps.shape + (0,), bool) if dead is None else jnp.asarray(dead, bool)
+
     def body(carry, k_input):
         det_state, record = carry
-        k, x, ok = k_input
+        k, x, ok, dead_k = k_input
         det_state, decision = detector.step(det_state, x)
-        decision = as_decision(decision)
-        ok = ok & jnp.all(jnp.isfinite(decision.statistic))
+        decision = flag_dead(as_decision(decision), dead_k, channel_labels)
+        ok = step_health(ok, decision.statistic)
         return (det_state, record_update(record, k, decision.alarm, decision.label, decision.estimate,
                                          estimate_delay, healthy=ok)), None
 
     dtype = jnp.result_type(*jax.tree.leaves(inputs))
-    (_, record), _ = jax.lax.scan(body, (detector.init(), record_init(onset, dtype)), (steps, inputs, healthy))
+    (_, record), _ = jax.lax.scan(body, (detector.init(), record_init(onset, dtype)), (steps, inputs, healthy, dead))
     return record

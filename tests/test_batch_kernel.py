@@ -110,8 +110,13 @@ def test_health_float32_and_gradient(data):
     bad[1, 10, 0] = np.nan
     _, info = run_filter_batch(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
     _, ref = _vmapped(model, None, means, covs, bad, us)
-    np.testing.assert_array_equal(info.healthy, ref.healthy)
-    assert not bool(info.healthy[1, 10]) and bool(info.healthy[0].all())
+    np.testing.assert_array_equal(info.healthy, ref.healthy)   # a dead channel: evidence, the same as vmap's
+    for name in ("filtered_mean", "filtered_cov", "innovation", "nis", "num_observed"):
+        np.testing.assert_allclose(getattr(info, name), getattr(ref, name), rtol=1e-9, atol=1e-12, err_msg=name)
+    assert bool(info.healthy.all()) and float(info.nis[1, 10]) == np.inf and np.isnan(info.innovation[1, 10, 0])
+    bad[0, 3, 1] = 1e250                                       # an overflowing outlier is ill health
+    _, info = run_filter_batch(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
+    assert not bool(info.healthy[0, 3]) and bool(info.healthy[0, :3].all()) and bool(info.healthy[1].all())
     model32 = LinearGaussianModel(*(jnp.asarray(a, jnp.float32) for a in model))
     _, info32 = run_kalman_batch(model32, GaussianState(jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32)),
                                  jnp.asarray(ys, jnp.float32), jnp.asarray(us, jnp.float32))

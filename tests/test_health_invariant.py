@@ -239,18 +239,28 @@ FILTERS = {
     "time varying": _time_varying,
 }
 
+#: filters whose update keeps a dead channel (non-finite y) out of the state and reports it
+DEAD_CHANNEL_FILTERS = ("kalman unrolled", "kalman lapack", "kalman unrolled missing", "kalman lapack missing",
+                        "ekf", "ukf", "imm", "imm batch kernel", "mm", "time varying")
+
 #: fields where -inf is a value (log of a zero probability), not a failure
 LOG_PROBABILITIES = ("log_mode_prob",)
 
 
-def _nonfinite_steps(info) -> dict[str, np.ndarray]:
-    """(cases, T) bool per floating field: the step's value of that field is not finite."""
+def _nonfinite_steps(info, dead: np.ndarray) -> dict[str, np.ndarray]:
+    """(cases, T) bool per floating field: the step's value of that field is not finite,
+    other than a dead channel's evidence (``filters._base``): NaN in the innovation
+    exactly where ``y`` was not finite (``dead`` (cases, T, m)), ``nis = +inf`` there."""
     bad = {}
     for name, value in info._asdict().items():
         value = np.asarray(value)
         if name == "healthy" or value.dtype.kind != "f":
             continue
         value = np.where(np.isneginf(value), 0.0, value) if name in LOG_PROBABILITIES else value
+        if name == "innovation" and value.shape == dead.shape:
+            value = np.where(dead & np.isnan(value), 0.0, value)
+        if name == "nis":
+            value = np.where(dead.any(axis=-1) & np.isposinf(value), 0.0, value)
         bad[name] = ~np.all(np.isfinite(value.reshape(value.shape[:2] + (-1,))), axis=-1)
     return bad
 
@@ -260,7 +270,7 @@ def test_non_finite_output_implies_unhealthy(name):
     info = jax.jit(jax.vmap(FILTERS[name]))(jax.tree_util.tree_map(jnp.asarray, CASES))
     healthy = np.asarray(info.healthy)
     assert healthy.shape == (len(NAMES), T)
-    bad = _nonfinite_steps(info)
+    bad = _nonfinite_steps(info, ~np.isfinite(CASES.ys))
     violations = [f"{NAMES[i]} step {k}: {', '.join(f for f, b in bad.items() if b[i, k])}"
                   for i in range(len(NAMES)) for k in range(T)
                   if healthy[i, k] and any(b[i, k] for b in bad.values())]
@@ -271,3 +281,11 @@ def test_non_finite_output_implies_unhealthy(name):
             assert healthy[i].all(), f"{name}: {case_name} flagged unhealthy at steps {np.flatnonzero(~healthy[i])}"
         if case_name.startswith(("Phi NaN", "P0 NaN", "R NaN")):
             assert not healthy[i].all(), f"{name}: {case_name} never flagged"
+        if name in DEAD_CHANNEL_FILTERS and case_name.startswith(("y NaN", "y inf")):
+            # a dead sensor is evidence, not ill health: reported, and the state stays sound
+            assert healthy[i].all(), f"{name}: {case_name}: a dead channel made the filter unhealthy"
+            step = np.flatnonzero(~np.isfinite(CASES.ys[i]).all(axis=-1))[0]
+            evidence = (np.asarray(info.nis)[i, step] == np.inf if hasattr(info, "nis")
+                        else np.asarray(info.dead)[i, step].any())
+            if not (name.endswith("missing") and case_name.startswith("y NaN")):  # there NaN is 'not measured'
+                assert evidence, f"{name}: {case_name}: the dead channel at step {step} is not reported"

@@ -71,23 +71,26 @@ def test_engine_rows_and_table_leave_unhealthy_runs_out():
     assert "WARNING" not in clean and clean.splitlines() == table.splitlines()[:-1]
 
 
-def test_a_dead_sensor_marks_the_imm_kernel_runs_unhealthy_from_its_first_nan():
+def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     """The engine study's IMM path (the batch kernel, then the rules replayed with the
-    filter's health): a P2 channel that turns NaN at step 30 in runs 1 and 3 marks those
-    runs unhealthy from exactly that step (the first non-finite measurement, found by
-    brute force), and the table counts them apart and out of every rate; the clean runs
-    stay clean. (An alarm and isolation for a dead sensor is issue 37's.)"""
+    filter's health and its dead channels): a P2 channel that turns NaN at step 30 in
+    runs 1 and 3 leaves the IMM healthy (the channel never reaches the state), and those
+    runs alarm at exactly that step (the first non-finite measurement, found by brute
+    force) with the simulator's label of a P2 sensor fault; the table scores them as
+    alarms, not as unhealthy runs. The clean runs' records equal those replayed without
+    the dead-channel rule."""
     import jax
 
     from jaxfdi import linear_simulator, simulate
     from jaxfdi.detection.mode_probability import mode_probability_detector
+    from jaxfdi.faults import fault
     from jaxfdi.filters._base import run_filter_batch
     from jaxfdi.filters.imm import interacting_multiple_model
     from jaxfdi.filters.kalman import kalman_filter
     from jaxfdi.metrics import fault_row
     from jaxfdi.models.fault_modes import noise_inflation_modes
     from jaxfdi.monitor import replay_detector
-    from jaxfdi.scenarios.engine import PAPER_TRANSITION
+    from jaxfdi.scenarios.engine import PAPER_TRANSITION, sensor_labels
 
     model, steps = engine_model(), 80
     us = jnp.full((steps, 1), 0.01)
@@ -97,10 +100,21 @@ def test_a_dead_sensor_marks_the_imm_kernel_runs_unhealthy_from_its_first_nan():
     ys[[1, 3], 30:, 2] = np.nan
     imm = interacting_multiple_model(kalman_filter, noise_inflation_modes(model, 1e4, 0.008), PAPER_TRANSITION)
     _, info = run_filter_batch(imm, imm.init(jnp.zeros(7), model.Q, jnp.asarray(PAPER_TRANSITION[0])), ys, us)
+    assert np.asarray(info.healthy).all()
     detector = mode_probability_detector(0.5)
-    records = jax.vmap(lambda mu, ok: replay_detector(detector, mu, NEVER, 0, ok))(info.mode_prob, info.healthy)
+    records = jax.vmap(lambda mu, ok, dead: replay_detector(detector, mu, NEVER, 0, ok, dead, sensor_labels(model)))(
+        info.mode_prob, info.healthy, info.dead)
+    blind = jax.vmap(lambda mu, ok: replay_detector(detector, mu, NEVER, 0, ok))(info.mode_prob, info.healthy)
     first_bad = [int(np.argmax(~np.isfinite(y).all(axis=1))) if not np.isfinite(y).all() else -1 for y in ys]
     assert first_bad == [-1, 30, -1, 30]
-    np.testing.assert_array_equal(records.first_unhealthy, first_bad)
+    np.testing.assert_array_equal(records.first_unhealthy, -1)
+    p2_label = int(simulate(linear_simulator(model, fault("bias", "sensor", 2, 0, 1.0)), jnp.zeros(7), us[:1],
+                            keys[0])[1].mode[0])
+    for run in (1, 3):
+        assert int(records.first_alarm[run]) <= 30 and int(records.false_alarms[run]) >= 1
+        assert int(records.first_label[run]) == p2_label or int(blind.first_alarm[run]) < 30
+    for run in (0, 2):
+        for a, b in zip(records, blind):
+            np.testing.assert_array_equal(np.asarray(a)[run], np.asarray(b)[run])  # NaN estimates equal
     row = fault_row(jax.tree_util.tree_map(np.asarray, records), steps)
-    assert row["unhealthy_runs"] == 2 and row["runs"] == 4 and row["clean_runs"] <= 2
+    assert row["unhealthy_runs"] == 0 and row["runs"] == 4

@@ -270,11 +270,16 @@ def test_batch_kernel_shared_inputs_gradient_and_health(problem, batch_problem):
     np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)
 
     bad = ys.copy()
-    bad[1, 25, 0] = np.nan                                              # numerical trouble in run 1
+    bad[1, 25, 0] = np.nan                                              # a dead channel in run 1
     _, info = run_filter_batch(imm, init, bad, us_shared)
     _, ref = jax.vmap(lambda y: run_filter(imm, init, y, us_shared))(bad)
     np.testing.assert_array_equal(info.healthy, ref.healthy)
-    assert not bool(info.healthy[1, 25]) and bool(info.healthy[0].all()) and bool(info.healthy[1, :25].all())
+    np.testing.assert_array_equal(info.dead, ref.dead)
+    np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)
+    assert bool(info.healthy.all()) and np.array_equal(np.argwhere(np.asarray(info.dead)), [[1, 25, 0]])
+    bad[0, 5, 1] = 1e250                                                # an overflowing outlier is ill health
+    _, info = run_filter_batch(imm, init, bad, us_shared)
+    assert not bool(info.healthy[0, 5]) and bool(info.healthy[0, :5].all()) and bool(info.healthy[1].all())
 
     @jax.jit  # compiled once for every evaluation chex makes (same shapes)
     def mean_log_likelihood(logits):

@@ -101,14 +101,39 @@ def test_complete_data_is_the_same_with_or_without_missing_support(engine, run_k
         assert_rel(getattr(info, name), np.asarray(getattr(info_missing, name)), 1e-14, name)
 
 
-def test_nan_without_missing_support_is_flagged_unhealthy(engine, run_kf):
-    """A NaN is not silently propagated: the step that meets it reports healthy=False."""
+def test_dead_channel_is_reported_and_never_reaches_the_state(engine, run_kf):
+    """A dead sensor (NaN on channel 1 from step 10, +inf on channel 2 at step 20) is
+    evidence, not poison: those steps report ``nis = +inf`` and a NaN innovation on the
+    dead channel, the filter stays healthy, and its state equals filterpy's KF fed the
+    prediction ``(C x[k|k-1])_j`` in place of each dead component (the default path's
+    rule: a zero innovation, covariance updated as measured), to RTOL."""
     model, ys, us, m0, P0 = engine
-    ys_nan = ys.copy()
-    ys_nan[10, 1] = np.nan
-    _, info = run_kf(model, m0, P0, ys_nan, us)
-    healthy = np.asarray(info.healthy)
-    assert healthy[:10].all() and not healthy[10]
+    bad = ys.copy()
+    bad[10:, 1] = np.nan
+    bad[20, 2] = np.inf
+    _, info = run_kf(model, m0, P0, bad, us)
+    n, nu, m = model.dims
+    kf = KalmanFilter(dim_x=n, dim_z=m, dim_u=nu)
+    kf.F, kf.B, kf.H = (np.asarray(a) for a in (model.Phi, model.Gamma, model.C))
+    kf.Q, kf.R = np.asarray(model.Q), np.asarray(model.R)
+    kf.x, kf.P = m0.reshape(n, 1).copy(), P0.copy()
+    D = np.asarray(model.D)
+    means, covs = [], []
+    for k in range(len(ys)):
+        z = bad[k] - D @ us[k]
+        dead = ~np.isfinite(z)
+        z[dead] = (kf.H @ kf.x).ravel()[dead]
+        kf.update(z.reshape(m, 1))
+        means.append(kf.x.ravel().copy())
+        covs.append(kf.P.copy())
+        kf.predict(u=us[k].reshape(nu, 1))
+    assert_rel(info.filtered_mean, np.array(means), RTOL, "filtered_mean")
+    assert_rel(info.filtered_cov, np.array(covs), RTOL, "filtered_cov")
+    nis, innovation = np.asarray(info.nis), np.asarray(info.innovation)
+    assert np.all(np.isfinite(nis[:10])) and np.all(nis[10:] == np.inf)
+    assert np.array_equal(np.isnan(innovation), ~np.isfinite(bad)) and not np.any(np.isinf(innovation))
+    assert np.asarray(info.healthy).all()
+    assert list(np.asarray(info.num_observed)[8:12]) == [m, m, m - 1, m - 1] and int(info.num_observed[20]) == m - 2
 
 
 def test_partially_missing_equals_filter_on_observed_rows(engine):

@@ -259,23 +259,27 @@ def test_input_noise_time_argument_noise_gain_and_availability():
     assert np.all(np.isnan(y[:, 1, 1])) and np.all(np.isfinite(y[:, [0, 2], 1])) and np.all(np.isfinite(y[:, :, 0]))
 
 
-def test_a_nan_mid_run_marks_the_record_unhealthy(engine):
-    """A measurement that goes NaN at step 40 (a filter without missing-data handling):
-    the record names step 40 as the first unhealthy one, and the summary does not count
-    the run as a clean detection or a clean fault-free run."""
+def test_a_dead_sensor_mid_run_is_an_alarm_not_ill_health(engine):
+    """Every sensor reads NaN at step 40 (``available`` False: a filter without
+    missing-data handling): the monitor alarms at step 40 with the first channel's label,
+    the record stays healthy, and the summary scores it: a detection in the faulty run
+    (its onset 30 is before; an earlier alarm may have come first) and a false alarm in
+    the fault-free one (a dead sensor is a fault, whatever the simulator's label)."""
     model, kf, detector, _ = engine
     us = jnp.full((T, 1), 0.01)
     sim = jaxfdi.linear_simulator(model, available=lambda k, x: jnp.full((5,), k != 40))
+    labels = 10 + jnp.arange(5)
     records = []
     for onset in (ONSET, jaxfdi.faults.NEVER):
         result = jaxfdi.monitor(sim, kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q), us,
-                                jax.random.key(0), onset)
-        assert int(result.record.first_unhealthy) == 40
+                                jax.random.key(0), onset, keep_history=True, channel_labels=labels)
+        assert int(result.record.first_unhealthy) == -1
+        assert bool(result.history.alarm[40]) and float(result.history.statistic[40]) == np.inf
+        assert int(result.history.label[40]) == 10
         records.append(result.record)
-    stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *records)
-    summary = jaxfdi.summarize_detection(stacked, T)
-    assert summary.unhealthy_runs == 2
-    assert np.isnan(summary.detection_rate) and np.isnan(summary.false_alarm_rate)
+    faulty, fault_free = (jaxfdi.summarize_detection(jax.tree_util.tree_map(lambda a: a[None], r), T) for r in records)
+    assert faulty.unhealthy_runs == fault_free.unhealthy_runs == 0
+    assert faulty.detection_rate == 1.0 and fault_free.false_alarm_rate == 1.0
 
 
 def test_loop_input_errors():

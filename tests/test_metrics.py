@@ -76,12 +76,14 @@ def test_first_unhealthy_streaming_and_batch_equal_first_bad_step(random_alarms)
     assert 0 < np.sum(np.asarray(stream.first_unhealthy) >= 0) < alarms.shape[0]
 
 
-def test_step_health_is_healthy_and_every_value_finite():
+def test_step_health_is_healthy_and_no_value_nan():
+    """NaN is ill health; an infinite statistic is a dead sensor's evidence (an alarm)."""
     finite = (jnp.ones(3), {"s": jnp.asarray(2.0)}, jnp.arange(2))
     assert bool(step_health(True, *finite)) and not bool(step_health(False, *finite))
-    for bad in (jnp.nan, jnp.inf, -jnp.inf):
-        assert not bool(step_health(True, jnp.ones(3).at[1].set(bad), 1.0))
-        assert not bool(step_health(jnp.asarray(True), {"s": jnp.asarray(bad)}))
+    assert not bool(step_health(True, jnp.ones(3).at[1].set(jnp.nan), 1.0))
+    assert not bool(step_health(jnp.asarray(True), {"s": jnp.asarray(jnp.nan)}))
+    for evidence in (jnp.inf, -jnp.inf):
+        assert bool(step_health(True, jnp.ones(3).at[1].set(evidence), 1.0))
     assert bool(jax.jit(step_health)(True, jnp.zeros(2))) and bool(step_health(True))
 
 
@@ -158,35 +160,55 @@ def test_unhealthy_runs_are_counted_apart_and_never_scored_clean():
 
 @pytest.fixture(scope="module")
 def nan_run():
-    """A KF (no missing_measurements) chi-square monitor on the engine fed one NaN
-    measurement at step 20 (a one-step sensor bias of NaN), with its history."""
+    """A KF (no missing_measurements) chi-square monitor (window 2) on the engine fed one
+    NaN measurement on sensor 2 at step 20 (a one-step dead sensor), with its history."""
     from jaxfdi.faults import fault
     from jaxfdi.models import engine_model
     from jaxfdi.monitor import monitor
+    from jaxfdi.scenarios.engine import sensor_labels
 
     model = engine_model()
     kf = jaxfdi.kalman_filter(model)
     # fault() refuses a NaN magnitude; the corrupted sensor is built by hand on purpose
     f = fault("bias", "sensor", 2, 20, 0.0, end=21)._replace(magnitude=jnp.asarray(jnp.nan))
     run = jax.jit(lambda key: monitor(jaxfdi.linear_simulator(model, f), kf, chi2_detector(30.0, 2), jnp.zeros(7),
-                                      kf.init(jnp.zeros(7), model.Q), jnp.full((40, 1), 0.01), key, 20, True))
+                                      kf.init(jnp.zeros(7), model.Q), jnp.full((40, 1), 0.01), key, 20, True,
+                                      channel_labels=sensor_labels(model)))
     return run(jax.random.key(0))
 
 
-def test_nan_mid_run_is_reported_unhealthy_and_never_clean(nan_run):
+def test_a_dead_sensor_sample_is_a_detected_and_isolated_fault(nan_run):
+    """The NaN sample is evidence: the filter stays healthy, the step alarms with
+    ``statistic = +inf`` and the simulator's label of the dead sensor, the window holds
+    the alarm one more step and then recovers; scored, the run is a healthy detection
+    with delay 0 and the dead sensor isolated (the record folded by hand agrees)."""
     record, history = nan_run
-    statistic = np.asarray(history.statistic)
-    assert np.all(np.isfinite(statistic[:20])) and np.all(np.isnan(statistic[20:]))  # the premise
-    assert not np.any(np.asarray(history.alarm)[20:])  # a NaN statistic never alarms ...
-    # ... so, scored as before, it would be a clean run: no false alarm, missed detection
-    blind = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[None], record._replace(first_unhealthy=-1)), 40)
-    assert blind.faulty_runs == 1 and blind.detection_rate == 0.0
-    # the history folded by hand with step_health and the monitor's own record agree
+    statistic, alarm = np.asarray(history.statistic), np.asarray(history.alarm)
+    assert np.isnan(np.asarray(history.truth.measurement)[20, 2])                       # the premise
+    assert np.asarray(history.info.healthy).all()
+    assert np.all(statistic[20:22] == np.inf) and alarm[20:22].all()
+    assert np.all(np.isfinite(statistic[:20])) and np.all(np.isfinite(statistic[22:]))  # recovered
+    assert int(history.label[20]) == int(history.truth.mode[20]) > 0
     folded = record_init(20)
     for k in range(40):
         ok = step_health(history.info.healthy[k], history.statistic[k])
         folded = record_update(folded, k, history.alarm[k], history.label[k], None, 0, ok)
-    assert int(folded.first_unhealthy) == 20 and int(record.first_unhealthy) == 20
+    assert int(folded.first_unhealthy) == int(record.first_unhealthy) == -1
+    assert int(folded.first_alarm) == int(record.first_alarm) == 20 and int(record.isolated) == int(history.truth.mode[20])
+    s = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[None], record), 40)
+    assert s.runs == 1 and s.unhealthy_runs == 0 and s.faulty_runs == 1 and s.detection_rate == 1.0
+    assert s.delay_median == 0.0
+
+
+def test_a_nan_statistic_is_unhealthy_and_never_clean():
+    """A NaN statistic (broken numerics, not data) never alarms, so scored as an alarm
+    sequence it would be a clean run; step_health marks the run unhealthy from that step
+    and the summary leaves it out of every rate."""
+    statistic = np.concatenate([np.full(20, 1.0), np.full(20, np.nan)])
+    record = record_init(20)
+    for k in range(40):
+        record = record_update(record, k, statistic[k] > 30.0, -1, None, 0, step_health(True, statistic[k]))
+    assert int(record.first_unhealthy) == 20 and int(record.first_alarm) == -1
     s = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[None], record), 40)
     assert s.runs == 1 and s.unhealthy_runs == 1 and s.faulty_runs == 0 and np.isnan(s.detection_rate)
     assert np.isnan(s.false_alarm_rate) and np.isnan(s.delay_median)

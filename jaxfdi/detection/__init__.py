@@ -5,11 +5,13 @@ from jaxfdi.detection.chi2 import (
     chi2_detector,
     chi2_threshold,
     first_crossing,
+    flag_dead,
     moving_window_sum,
     normalized_innovation_squared,
 )
 from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
 from jaxfdi.detection.dual_filter import DualFilterInfo, DualFilterState, dual_filter, system_matrix_det
+from jaxfdi.detection.frozen import frozen_channel_detector, frozen_threshold
 from jaxfdi.detection.glrt import (
     PAPER_USED_THRESHOLD,
     FaultDirections,
@@ -63,6 +65,9 @@ __all__ = [
     "chi2_detector",
     "chi2_threshold",
     "first_crossing",
+    "flag_dead",
+    "frozen_channel_detector",
+    "frozen_threshold",
     "moving_window_sum",
     "normalized_innovation_squared",
     "UNMATCHED",

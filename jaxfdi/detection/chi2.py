@@ -159,13 +159,20 @@ def normalized_innovation_squared(innovation: Array, innovation_cov: Array) -> A
 
 
 def moving_window_sum(x: Array, window: int) -> Array:
-    """Sum of the last ``window`` values along axis 0 (fewer at the start)."""
+    """Sum of the last ``window`` values along axis 0 (fewer at the start); ``+inf`` for
+    a window that holds a non-finite value (a dead sensor's statistic is evidence), and
+    finite again once it has left the window."""
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
     _checks.check_real("x", x, "real statistics")
     x = jnp.asarray(x)
-    c = jnp.cumsum(x, axis=0)
-    shifted = jnp.concatenate([jnp.zeros((window,) + x.shape[1:], c.dtype), c[:-window]], axis=0)[: x.shape[0]]
-    return c - shifted
+    bad = ~jnp.isfinite(x)
+
+    def windowed(values):
+        c = jnp.cumsum(values, axis=0)
+        shifted = jnp.concatenate([jnp.zeros((window,) + x.shape[1:], c.dtype), c[:-window]], axis=0)[: x.shape[0]]
+        return c - shifted
+
+    return jnp.where(windowed(bad.astype(jnp.int32)) > 0, jnp.inf, windowed(jnp.where(bad, 0.0, x)))
 
 
 def first_crossing(statistic: Array, threshold: Array, start: Array | int = 0) -> Array:
@@ -195,6 +202,23 @@ class Decision(NamedTuple):
     estimate: Array   # ()
 
 
+def flag_dead(decision: Decision, dead: Array, labels: Array | None = None) -> Decision:
+    """The one rule for a dead sensor: a step whose input has a non-finite component
+    (``dead`` (m,) bool, e.g. ``isnan(info.innovation)``, ``filters._base``) alarms with
+    ``statistic = +inf`` and the label ``labels[j]`` of the first dead channel ``j``
+    (``labels`` (m,) int, the simulator's fault label of each channel; ``None``: the
+    detector's own label), estimate NaN. Other steps keep ``decision``."""
+    dead = jnp.asarray(dead, bool)
+    if dead.size == 0:
+        return decision
+    any_dead = jnp.any(dead)
+    label = decision.label if labels is None else jnp.where(
+        any_dead, jnp.asarray(labels, jnp.int32)[jnp.argmax(dead)], decision.label)
+    statistic = jnp.asarray(decision.statistic)
+    return Decision(jnp.where(any_dead, jnp.inf, statistic), decision.alarm | any_dead, label.astype(jnp.int32),
+                    jnp.where(any_dead, jnp.nan, decision.estimate).astype(statistic.dtype))
+
+
 def as_decision(output) -> Decision:
     """A detector step's output as a ``Decision`` (a plain ``(statistic, alarm)`` pair gets
     ``label = -1`` and ``estimate = NaN``)."""
@@ -216,7 +240,9 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
 
     ``statistic[k] = sum_{j=k-L+1..k} nis[j]`` (fewer terms during the first ``L - 1``
     steps); alarm when ``statistic[k] > threshold``. Use
-    ``chi2_threshold(window * m, pfa)`` for a design false-alarm rate ``pfa``.
+    ``chi2_threshold(window * m, pfa)`` for a design false-alarm rate ``pfa``. A
+    non-finite NIS (a dead sensor: ``+inf`` from the filters) enters as ``+inf``: the
+    alarm holds while it is in the window, and the test recovers when it leaves.
     """
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
     _checks.check_real("threshold", threshold, "a real threshold")
@@ -227,7 +253,8 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
         return WindowState(jnp.zeros((window,), dtype), jnp.zeros((), jnp.int32))
 
     def step(state: WindowState, nis: Array):
-        buffer = state.buffer.at[state.index].set(nis)
+        nis = jnp.asarray(nis)
+        buffer = state.buffer.at[state.index].set(jnp.where(jnp.isnan(nis), jnp.inf, nis))
         statistic = jnp.sum(buffer)
         return WindowState(buffer, (state.index + 1) % window), (statistic, statistic > threshold)
 

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import Decision, Detector
+from jaxfdi.detection.chi2 import Decision, Detector, flag_dead
 from jaxfdi.detection.mode_probability import confirm, confirmation_init
 
 
@@ -50,7 +50,9 @@ def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, con
       confirm_steps: consecutive steps the same hypothesis must lead above the threshold.
 
     ``step(state, F) -> (state, Decision(statistic, alarm, label, estimate))`` with the
-    leading (relative) credit as statistic and ``F_mean`` as estimate.
+    leading (relative) credit as statistic and ``F_mean`` as estimate. A non-finite
+    ``F_x`` is evidence, not a zero credit: the step alarms with ``statistic = +inf`` and
+    label -1 (the credits cannot say which hypothesis), ``chi2.flag_dead``.
     """
     _checks.check_positive("threshold", threshold, "a positive scalar credit threshold")
     _checks.check_int("confirm_steps", confirm_steps, 1, meaning="an integer number of steps >= 1")
@@ -67,6 +69,8 @@ def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, con
         best = jnp.argmax(credit).astype(jnp.int32)
         statistic = credit[best]
         state, alarm = confirm(state, best, statistic >= threshold, confirm_steps)
-        return state, Decision(statistic, alarm, best + label_offset, mean)
+        decision = Decision(statistic, alarm, best + label_offset, mean)
+        return state, flag_dead(decision, ~jnp.isfinite(detection_parameters),
+                                jnp.full(detection_parameters.shape, -1, jnp.int32))
 
     return Detector(confirmation_init, step)

@@ -61,7 +61,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection.chi2 import Decision, Detector, _check_representable, chi2_threshold
+from jaxfdi.detection.chi2 import Decision, Detector, _check_representable, chi2_threshold, flag_dead
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 from jaxfdi.riccati import steady_state_kalman
 
@@ -246,15 +246,27 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
     return engine_detector(setup, whitener, engine)
 
 
+def whiten_finite(whitener: Array, innovation: Array) -> Array:
+    """``L^-1 eps`` with a non-finite component of ``eps`` (a dead sensor) taken as 0, its
+    fault-free mean: the step enters the statistics as one without a fault, so they
+    recover as soon as the sensor does."""
+    return whitener @ jnp.where(jnp.isfinite(innovation), innovation, 0.0)
+
+
 def engine_detector(setup: DetectorSetup, whitener: Array, engine: GLREngine) -> Detector:
-    """The online ``Detector`` of an engine (windowed or recursive): whiten, update, decide."""
+    """The online ``Detector`` of an engine (windowed or recursive): whiten, update, decide.
+    A step with a non-finite innovation component ``j`` alarms and isolates sensor ``j``
+    (label ``1 + nu + j``, ``chi2.flag_dead``)."""
     m, dtype = setup.innovation_cov.shape[0], setup.innovation_cov.dtype
+
+    sensor_labels = 1 + setup.num_inputs + jnp.arange(m, dtype=jnp.int32)
 
     def step(state, innovation: Array):
         _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
-        state, result = engine.update(state, whitener @ jnp.asarray(innovation, dtype))
+        innovation = jnp.asarray(innovation, dtype)
+        state, result = engine.update(state, whiten_finite(whitener, innovation))
         decision, onset_offset = decide(setup, result)
-        return state._replace(onset_offset=onset_offset), decision
+        return state._replace(onset_offset=onset_offset), flag_dead(decision, ~jnp.isfinite(innovation), sensor_labels)
 
     return Detector(engine.init, step)
 
@@ -395,7 +407,8 @@ def glr_sequence(setup: DetectorSetup, innovations: Array) -> GLRResult:
     ``GLRResult`` (T, d) that ``glrt_detector`` maximises over directions at each step
     (for figures of each direction's statistic)."""
     whitener, engine = windowed_engine(setup)
-    _, result = jax.lax.scan(lambda state, e: engine.update(state, whitener @ e), engine.init(), innovations)
+    _, result = jax.lax.scan(lambda state, e: engine.update(state, whiten_finite(whitener, e)), engine.init(),
+                             innovations)
     return result
 
 

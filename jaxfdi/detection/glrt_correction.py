@@ -30,7 +30,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import Decision
+from jaxfdi.detection.chi2 import Decision, flag_dead
 from jaxfdi.detection.glrt import (
     _check_window,
     check_steady_state,
@@ -133,9 +133,11 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
         _checks.check_shape("y", y, (m,), "one step's measurement")
         _checks.check_shape("u", u, (nu,), "one step's input")
         y, u = jnp.asarray(y, dtype), jnp.asarray(u, dtype)
-        innovation = y - C @ state.mean - D @ u - h @ state.fault
+        dead = ~jnp.isfinite(y)
+        innovation = jnp.where(dead, 0.0, y - C @ state.mean - D @ u - h @ state.fault)  # a dead sensor: the prediction
         detector, result = engine.update(state.detector, whitener @ innovation)
         decision, offset = decide(setup, result)
+        dead_decision = flag_dead(decision, dead, 1 + nu + jnp.arange(m, dtype=jnp.int32))
         direction = decision.label - 1
         alarm_run = jnp.where(decision.alarm, state.alarm_run + 1, 0)
         confirmed = alarm_run == confirm
@@ -146,8 +148,8 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
         detector = engine.remove(detector, direction, offset, size)._replace(onset_offset=offset)
         if correct:
             alarm_run = jnp.where(confirmed, 0, alarm_run)
-        info = CorrectedGLRTInfo(decision, state.step - offset, engine.information[offset, direction], confirmed,
-                                 innovation, mean, fault, jnp.all(jnp.isfinite(mean)))
+        info = CorrectedGLRTInfo(dead_decision, state.step - offset, engine.information[offset, direction], confirmed,
+                                 jnp.where(dead, jnp.nan, innovation), mean, fault, jnp.all(jnp.isfinite(mean)))
         return CorrectedGLRTState(mean, fault, detector, state.step + 1, alarm_run), info
 
     return CorrectedGLRT(init, step)

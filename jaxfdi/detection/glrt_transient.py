@@ -36,7 +36,7 @@ import jax.scipy.linalg as jsl
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection.chi2 import Detector
+from jaxfdi.detection.chi2 import Detector, flag_dead
 from jaxfdi.detection.glrt import (
     DetectorSetup,
     FaultDirections,
@@ -47,6 +47,7 @@ from jaxfdi.detection.glrt import (
     decide,
     fault_directions,
     glr_from_correlation,
+    whiten_finite,
 )
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
@@ -148,7 +149,8 @@ def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window
         gain, whitener, P_next = _riccati_step(Phi, C, Q, R, state.cov)
         errors = jnp.concatenate([jnp.zeros((1, n, d), dtype), state.errors[:-1]], axis=0)  # E[k] of onset k - o
         white_signatures = jnp.einsum("ab,obd->oad", whitener, jnp.einsum("ab,obd->oad", C, errors) + h)
-        white = whitener @ jnp.asarray(innovation, dtype)
+        innovation = jnp.asarray(innovation, dtype)
+        white = whiten_finite(whitener, innovation)
         count = jnp.minimum(state.count + 1, N)
         if recursive:
             older = lambda a: jnp.concatenate([jnp.zeros((1, d), dtype), a[:-1]], axis=0)  # noqa: E731
@@ -165,6 +167,7 @@ def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window
         decision, onset_offset = decide(setup, result)
         closed = Phi @ (jnp.eye(n, dtype=dtype) - gain @ C)
         errors_next = jnp.einsum("ab,obd->oad", closed, errors) + (g - Phi @ (gain @ h))
+        decision = flag_dead(decision, ~jnp.isfinite(innovation), 1 + nu + jnp.arange(m, dtype=jnp.int32))
         return TransientGLRTState(P_next, errors_next, buffer, table, correlation, information, count,
                                   onset_offset), decision
 

@@ -46,12 +46,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.detection.chi2 import Decision
-from jaxfdi.detection.parity import (
-    ParitySpace,
-    fault_detection_statistic,
-    isolation_functions,
-    parity_vector,
-)
+from jaxfdi.detection.parity import ParitySpace, parity_tests
 
 #: ``follow`` names and their codes
 FOLLOW = {"none": 0, "psa": 1, "hybrid": 2}
@@ -242,9 +237,7 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
 
     def observe(state: HybridPSAState, k, y):
         m = channels(y)
-        parity = parity_vector(space, m)
-        statistic = fault_detection_statistic(parity)
-        fi = isolation_functions(space, parity)
+        statistic, fi = parity_tests(space, m)  # a dead channel: FD = +inf, its group the one suspect
         alarm = statistic > config.detection_threshold
         suspects = fi > config.isolation_threshold
         count = jnp.sum(suspects)
@@ -273,7 +266,8 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
             pick(suspects, d.suspects), pick(fi, d.isolation_functions), pick(norms, d.analytic_residuals),
             pick(need, d.filter_used), pick(healthy, d.filter_healthy))
         excluded = _excluded(decision, state.follow)
-        x_selected = config.estimators[excluded].astype(m.dtype) @ m
+        # a dead channel's column of its exclusion estimator is 0, and 0 * NaN must not reach the view
+        x_selected = config.estimators[excluded].astype(m.dtype) @ jnp.where(jnp.isfinite(m), m, 0.0)
         current = StepValues(statistic, alarm, fi, suspects, norms, need)
         return state._replace(current=current, decision=decision), view(y, x_selected)
 
@@ -289,7 +283,7 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
             Decision(c.statistic, decided, d.psa, nan),
             Decision(c.statistic, decided, d.hybrid, nan),
             _excluded(d, state.follow),
-            jnp.isfinite(c.statistic) & d.filter_healthy)
+            ~jnp.isnan(c.statistic) & d.filter_healthy)
         return state._replace(history=push(state.history, entry)), output
 
     return FDI(step, observe)

@@ -73,8 +73,8 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection.chi2 import Decision, Detector
-from jaxfdi.detection.glrt import check_steady_state, fault_directions, fault_signatures
+from jaxfdi.detection.chi2 import Decision, Detector, flag_dead
+from jaxfdi.detection.glrt import check_steady_state, fault_directions, fault_signatures, whiten_finite
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -127,7 +127,7 @@ def known_change_terms(signatures: Array, innovation_cov: Array, magnitudes: Arr
 
 
 def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Array, threshold,
-                      tail: bool = False, isolation: str = "max") -> Detector:
+                      tail: bool = False, isolation: str = "max", channel_labels: Array | None = None) -> Detector:
     """Online bank of known-change GLR (CUSUM) tests on a fault-blind filter's innovations.
 
     ``step(state, innovation (m,)) -> (state, Decision)`` (module docstring: statistic
@@ -136,7 +136,11 @@ def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Arra
     ``innovation_cov`` and ``magnitudes`` as ``known_change_terms``; ``threshold`` a
     positive scalar; ``tail``: also keep the onsets older than the window (CUSUM form);
     ``isolation``: ``"max"`` (each direction against no fault) or ``"pairwise"`` (against
-    no fault and every other direction, each at its own onset).
+    no fault and every other direction, each at its own onset); ``channel_labels`` (m,)
+    the fault label of each output channel, which a step with a non-finite innovation
+    component alarms with (``chi2.flag_dead``; ``None``: the bank's own label). That
+    component enters the statistics as 0, its fault-free mean, so they recover as soon as
+    the sensor does.
     """
     terms = known_change_terms(signatures, innovation_cov, magnitudes)
     _checks.check_positive("threshold", threshold, "a positive threshold on the log-likelihood ratio")
@@ -152,7 +156,8 @@ def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Arra
 
     def step(state: KnownChangeState, innovation: Array):
         _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
-        white = terms.whitener @ jnp.asarray(innovation, dtype)
+        innovation = jnp.asarray(innovation, dtype)
+        white = whiten_finite(terms.whitener, innovation)
         llr = jnp.einsum("lmd,m->ld", terms.gain, white) - terms.drift                    # (N, d), lag = offset
         older = jnp.concatenate([jnp.zeros((1, d), dtype), state.log_ratio[:-1]], axis=0)  # L(k-1, o-1)
         log_ratio = older + llr
@@ -172,6 +177,7 @@ def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Arra
         offset = jnp.where(in_window[direction] >= tail_ratio[direction], jnp.argmax(log_ratio[:, direction]), -1)
         decision = Decision(statistic, statistic > threshold, (1 + direction).astype(jnp.int32),
                             jnp.asarray(magnitudes, dtype)[direction])
+        decision = flag_dead(decision, ~jnp.isfinite(innovation), channel_labels)
         return KnownChangeState(log_ratio, tail_ratio, count, offset.astype(jnp.int32)), decision
 
     return Detector(init, step)
@@ -205,7 +211,8 @@ def known_change_detector(model: LinearGaussianModel, gain: Array, innovation_co
     _checks.check_covariance("innovation_cov", innovation_cov, m, definite=True)
     check_steady_state(model, gain=gain, innovation_cov=innovation_cov)
     signatures = fault_signatures(model, gain, fault_directions(model, actuator_feedthrough), window)
-    return known_change_bank(signatures, innovation_cov, magnitudes, threshold, tail, isolation)
+    sensor_labels = 1 + model.Gamma.shape[1] + jnp.arange(m, dtype=jnp.int32)
+    return known_change_bank(signatures, innovation_cov, magnitudes, threshold, tail, isolation, sensor_labels)
 
 
 def known_change_by_onset(innovations: Array, signatures: Array, innovation_cov: Array, magnitudes: Array) -> Array:

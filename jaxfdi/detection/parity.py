@@ -122,8 +122,29 @@ def parity_vector(space: ParitySpace, measurement: Array) -> Array:
 
 
 def fault_detection_statistic(parity: Array) -> Array:
-    """``FD = p^T p`` (eq. 8) over the last axis."""
-    return jnp.sum(jnp.square(parity), axis=-1)
+    """``FD = p^T p`` (eq. 8) over the last axis; ``+inf`` for a non-finite parity vector
+    (a dead channel: evidence, above every threshold)."""
+    parity = jnp.asarray(parity)
+    return jnp.where(jnp.all(jnp.isfinite(parity), axis=-1), jnp.sum(jnp.square(parity), axis=-1), jnp.inf)
+
+
+def dead_groups(space: ParitySpace, measurement: Array) -> Array:
+    """(..., G) bool: the groups with a non-finite channel in ``measurement`` (..., m)."""
+    return jnp.any(~jnp.isfinite(jnp.asarray(measurement)[..., space.groups]), axis=-1)
+
+
+def parity_tests(space: ParitySpace, measurement: Array) -> tuple[Array, Array]:
+    """``(FD, FI)`` (eqs. 8, 9) of ``measurement`` (..., m), a dead channel a fault of its
+    group: while one is non-finite, ``FD = +inf`` and ``FI`` is 1 for the groups holding a
+    dead channel and 0 for the others (the parity vector, which mixes every channel,
+    says nothing else then)."""
+    measurement = jnp.asarray(measurement)
+    dead = dead_groups(space, measurement)
+    parity = parity_vector(space, jnp.where(jnp.isfinite(measurement), measurement, 0.0))
+    any_dead = jnp.any(dead, axis=-1)
+    fd = jnp.where(any_dead, jnp.inf, fault_detection_statistic(parity))
+    fi = jnp.where(any_dead[..., None], dead.astype(parity.dtype), isolation_functions(space, parity))
+    return fd, fi
 
 
 def detection_threshold(space: ParitySpace, sigma, pfa) -> Array:
@@ -145,11 +166,13 @@ def out_of_subspace(space: ParitySpace, parity: Array) -> Array:
 
 def isolation_functions(space: ParitySpace, parity: Array) -> Array:
     """``FI_g = 1 - ||p - Q_g Q_g^T p|| / ||p||`` (eq. 9) for ``parity`` (..., q): (..., G).
-    ``FI_g = 0`` for ``p = 0`` (no fault evidence)."""
+    ``FI_g = 0`` for ``p = 0`` (no fault evidence); NaN for a non-finite ``p`` (which
+    group is unknown from ``p``: ``parity_tests`` isolates a dead channel)."""
     parity = jnp.asarray(parity)
     size = jnp.linalg.norm(parity, axis=-1)[..., None]
     positive = size > 0
-    return jnp.where(positive, 1.0 - out_of_subspace(space, parity) / jnp.where(positive, size, 1.0), 0.0)
+    fi = jnp.where(positive, 1.0 - out_of_subspace(space, parity) / jnp.where(positive, size, 1.0), 0.0)
+    return jnp.where(jnp.isfinite(size), fi, jnp.nan)
 
 
 def subspace_cosines(space: ParitySpace) -> Array:

@@ -149,11 +149,12 @@ def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: A
 
 def block_alarms(denoised: Array, threshold: Array, levels: int) -> Array:
     """Once-per-block decisions: at the last step of each block, ``True`` if any
-    reconstructed sample of the block reaches ``threshold``; ``False`` elsewhere.
-    Shape (T, ...) like ``denoised``."""
+    reconstructed sample of the block reaches ``threshold`` or is not finite (a dead
+    sensor's statistic, which the Haar transform spreads over its block, is evidence);
+    ``False`` elsewhere. Shape (T, ...) like ``denoised``."""
     x = _check(denoised, levels)
     size = 2**levels
     blocks = x.reshape((x.shape[0] // size, size) + x.shape[1:])
-    decision = jnp.any(blocks >= threshold, axis=1)
+    decision = jnp.any((blocks >= threshold) | ~jnp.isfinite(blocks), axis=1)
     out = jnp.zeros_like(blocks, dtype=bool).at[:, -1].set(decision)
     return out.reshape(x.shape)

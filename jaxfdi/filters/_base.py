@@ -4,6 +4,15 @@ A filter is a ``Filter(init, step)`` of pure functions (optax/blackjax style). T
 state carried between steps is the *prior* of the current step, ``x[k|k-1]``: ``step``
 conditions it on ``y[k]`` and then predicts ``x[k+1|k]`` with ``u[k]``. This matches
 ``x[k+1] = f(x[k], u[k])``, ``y[k] = h(x[k], u[k])`` with no off-by-one in the inputs.
+
+A dead sensor is evidence, never poison. A non-finite component of ``y`` (with
+``missing_measurements=True``, where NaN means 'not measured', an infinite one) does
+not reach the state: the update takes the prediction for it (a zero innovation), and
+the step reports a NaN innovation for that component and ``nis = +inf``, which every
+detector reads as an alarm on that channel. Without ``missing_measurements`` the
+covariance is updated as if the component had been measured, which keeps covariances
+independent of the data (one for all Monte Carlo runs) at the price of an optimistic
+covariance while the channel is dead; ``missing_measurements=True`` excludes it exactly.
 """
 from __future__ import annotations
 
@@ -32,12 +41,12 @@ class FilterInfo(NamedTuple):
     predicted_cov: Array    # (n, n) P[k|k-1]
     filtered_mean: Array    # (n,)   x[k|k]
     filtered_cov: Array     # (n, n) P[k|k]
-    innovation: Array       # (m,)   y[k] - y_hat[k|k-1]  (0 where y is missing)
+    innovation: Array       # (m,)   y[k] - y_hat[k|k-1]  (0 where y is missing, NaN where it is dead)
     innovation_cov: Array   # (m, m) S[k]  (unit variance where y is missing)
-    log_likelihood: Array   # ()     log N(innovation; 0, S) over the observed components
-    nis: Array              # ()     normalised innovation squared r^T S^-1 r
+    log_likelihood: Array   # ()     log N(innovation; 0, S) over the components the update used
+    nis: Array              # ()     normalised innovation squared r^T S^-1 r; +inf when a component is dead
     num_observed: Array     # ()     number of finite components of y[k]
-    healthy: Array          # ()     bool: S and P[k|k] positive definite and all finite
+    healthy: Array          # ()     bool: the filter's numerics: S and P[k|k] positive definite, state finite
 
 
 class ConditionedGaussian(NamedTuple):
@@ -107,7 +116,7 @@ def finish_step(prior: GaussianState, post: ConditionedGaussian, prediction: Gau
     """Assemble the next state and the step's ``FilterInfo``; checks ``P[k|k]`` is PD."""
     chol_P = _linalg.cholesky(post.cov, unroll)
     healthy = (post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
-               & jnp.isfinite(post.nis) & jnp.isfinite(post.log_likelihood))  # an overflowing outlier
+               & ~jnp.isnan(post.nis) & jnp.isfinite(post.log_likelihood))  # an overflowing outlier
     info = FilterInfo(
         predicted_mean=prior.mean,
         predicted_cov=prior.cov,
@@ -188,6 +197,26 @@ def observed_mask(y: Array) -> tuple[Array, Array, Array]:
     """``(mask, y with zeros where missing, number observed)``: NaN means 'not measured'."""
     mask = jnp.isfinite(y)
     return mask, jnp.where(mask, y, 0.0), jnp.sum(mask)
+
+
+def dead_components(y: Array, missing_measurements: bool) -> Array:
+    """Components of ``y`` that are evidence of a dead sensor: every non-finite one, or
+    with ``missing_measurements`` (NaN: 'not measured') the infinite ones."""
+    return jnp.isinf(y) if missing_measurements else ~jnp.isfinite(y)
+
+
+def used_innovation(y: Array, y_pred: Array) -> Array:
+    """``y - y_pred`` where ``y`` is finite and 0 (the prediction) where it is not: what a
+    filter's update may use, so that a dead sensor never reaches the state."""
+    finite = jnp.isfinite(y)
+    return jnp.where(finite, y, 0.0) - jnp.where(finite, y_pred, 0.0)
+
+
+def report_dead(innovation: Array, nis: Array, dead: Array, axis: int = 0) -> tuple[Array, Array]:
+    """What a step reports for dead components (``dead_components``): NaN in the
+    innovation, so a detector can tell which channel, and ``nis = +inf`` (data the model
+    gives zero likelihood), which exceeds every threshold. The state did not use them."""
+    return jnp.where(dead, jnp.nan, innovation), jnp.where(jnp.any(dead, axis=axis), jnp.inf, nis)
 
 
 def mask_innovation_cov(S: Array, mask: Array) -> Array:

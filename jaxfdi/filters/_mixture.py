@@ -43,6 +43,8 @@ class IMMInfo(NamedTuple):
     mode_log_likelihood: Array  # (M,)      log L_j(k) = log N(r_j; 0, S_j)
     log_likelihood: Array       # ()        log sum_j prior_j L_j, the mixture likelihood
     healthy: Array              # ()        bool: every mode update sound, all finite
+    dead: Array                 # (m,)      bool: components of y[k] that were not finite (a dead
+                                #           channel: reported here, not used by the modes' updates)
 
 
 def num_modes(mode_params: Any, expected: int | None = None) -> int:
@@ -187,6 +189,8 @@ def finish_mixture_step(
         & jnp.all(jnp.isfinite(mean))
         & jnp.all(jnp.isfinite(prediction.mean))
     )
-    info = IMMInfo(mode_prob, log_mode_prob, mean, cov, post.mean, post.cov, post.log_likelihood, log_likelihood, healthy)
+    dead = jnp.isnan(post.innovation[0])  # filters._base: a dead component's innovation is reported as NaN
+    info = IMMInfo(mode_prob, log_mode_prob, mean, cov, post.mean, post.cov, post.log_likelihood, log_likelihood, healthy,
+                   dead)
     next_state = IMMState(prediction.mean, prediction.cov, log_next_prob.astype(log_mode_prob.dtype))
     return next_state, info

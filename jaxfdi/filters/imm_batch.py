@@ -37,7 +37,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _linalg
-from jaxfdi.filters._base import BatchKernel, check_step_inputs
+from jaxfdi.filters._base import BatchKernel, check_step_inputs, used_innovation
 from jaxfdi.filters._mixture import IMMInfo, IMMState, bayes_mode_update, mixing
 from jaxfdi.models.linear import LinearGaussianModel
 
@@ -109,7 +109,7 @@ def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -
         x, P = state.mode_mean, state.mode_cov
         u = u[:, None]
         # 1. every mode's measurement update (standard form, see the module doc)
-        innovation = y[:, None] - mv(soa.C, x) - mv(soa.D, u)
+        innovation = used_innovation(y[:, None], mv(soa.C, x) + mv(soa.D, u))
         cross_cov = mm(P, tr(soa.C))                       # P C^T      (n, m, M, N)
         chol_S = _linalg.soa_cholesky(soa_symmetrize(mm(soa.C, cross_cov) + soa.R))
         G_t = _linalg.soa_solve_lower(chol_S, tr(cross_cov))  # G^T = L^-1 C P  (m, n, M, N)
@@ -145,7 +145,7 @@ def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -
             & jnp.all(jnp.isfinite(next_mean), axis=(0, 1))
         )
         info = IMMInfo(mode_prob, log_mu, mean[:, 0], cov[:, :, 0], post_mean, post_cov, mode_log_lik, log_lik,
-                       healthy)
+                       healthy, ~jnp.isfinite(y))
         return IMMState(next_mean, next_cov, log_cbar.astype(log_mu.dtype)), info
 
     def unpack_state(state: IMMState) -> IMMState:
@@ -165,6 +165,7 @@ def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -
             mode_log_likelihood=run_first(info.mode_log_likelihood),
             log_likelihood=run_first(info.log_likelihood),
             healthy=run_first(info.healthy),
+            dead=run_first(info.dead),
         )
 
     return BatchKernel(pack, step, unpack_state, unpack_info)

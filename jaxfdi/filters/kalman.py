@@ -4,7 +4,8 @@ Update (Joseph form, valid for any gain, keeps ``P`` symmetric positive definite
 ``r = y - C m - D u``, ``S = C P C^T + R``, ``K = P C^T S^-1``,
 ``m+ = m + K r``, ``P+ = (I - K C) P (I - K C)^T + K R K^T`` (Bucy & Joseph 1968).
 Predict: ``m' = Phi m+ + Gamma u``, ``P' = Phi P+ Phi^T + Q``.
-With ``missing_measurements=True``, NaN components of ``y`` are skipped component-wise.
+With ``missing_measurements=True``, NaN components of ``y`` are skipped component-wise;
+a dead (non-finite) component is reported, never used (``filters._base``).
 """
 from __future__ import annotations
 
@@ -18,8 +19,11 @@ from jaxfdi.filters._base import (
     GaussianState,
     check_step_inputs,
     gaussian_filter,
+    dead_components,
     mask_innovation_cov,
     observed_mask,
+    report_dead,
+    used_innovation,
 )
 from jaxfdi.filters.kalman_batch import kalman_batch_kernel, supports
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
@@ -35,8 +39,9 @@ def joseph_update(
     rows of ``H`` are zeroed and their innovation set to 0, so they neither update the
     state nor enter the likelihood. Without it the covariance recursion does not look at
     the data, so under ``vmap`` over runs that share the model and ``P0`` XLA carries a
-    single covariance instead of one per run (11x faster for 100 engine runs); a NaN in
-    ``y`` then makes the step unhealthy.
+    single covariance instead of one per run (11x faster for 100 engine runs); a
+    non-finite component of ``y`` then updates the mean with a zero innovation and is
+    reported as a dead channel (``_base`` module doc).
     """
     if missing_measurements:
         mask, y_obs, num_observed = observed_mask(y)
@@ -44,8 +49,8 @@ def joseph_update(
         innovation = jnp.where(mask, y_obs - y_pred, 0.0)
         R = jnp.where(mask[:, None] & mask[None, :], R, 0.0)
     else:
-        num_observed = jnp.asarray(y.shape[0], jnp.int32)
-        innovation = y - y_pred
+        num_observed = jnp.sum(jnp.isfinite(y)).astype(jnp.int32)
+        innovation = used_innovation(y, y_pred)
     mm = _linalg.matmul
     cross_cov = mm(cov, H.T)
     S = _linalg.symmetrize(mm(H, cross_cov) + R)
@@ -56,9 +61,10 @@ def joseph_update(
     whitened = _linalg.whiten(chol_S, innovation, unroll)
     new_cov = _linalg.joseph_cov(cov, gain, H, R)
     new_mean = mean + mm(gain, innovation)
-    log_lik = _linalg.gaussian_log_likelihood(whitened, chol_S, num_observed)
+    log_lik = _linalg.gaussian_log_likelihood(whitened, chol_S, num_observed if missing_measurements else y.shape[0])
     healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(new_mean))
-    return ConditionedGaussian(new_mean, new_cov, innovation, S, log_lik, jnp.sum(whitened**2), num_observed, healthy)
+    innovation, nis = report_dead(innovation, jnp.sum(whitened**2), dead_components(y, missing_measurements))
+    return ConditionedGaussian(new_mean, new_cov, innovation, S, log_lik, nis, num_observed, healthy)
 
 
 def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False,

@@ -39,6 +39,8 @@ from jaxfdi.filters._base import (
     check_sequences,
     check_step_inputs,
     kernel_scan,
+    report_dead,
+    used_innovation,
 )
 from jaxfdi.models.linear import LinearGaussianModel
 
@@ -87,7 +89,7 @@ def kalman_step_soa(model: LinearGaussianModel, state: GaussianState, y: Array, 
     """
     x, P = state
     m = model.C.shape[0]
-    innovation = y - _matvec(model.C, x) - _matvec(model.D, u)
+    innovation = used_innovation(y, _matvec(model.C, x) + _matvec(model.D, u))
     CP = _left_product(model.C, P)                                        # C P = (P C^T)^T, (m, n, N)
     S = _linalg.soa_symmetrize(_left_product(model.C, tr(CP)) + model.R)
     chol_S = _linalg.soa_cholesky(S)
@@ -105,7 +107,8 @@ def kalman_step_soa(model: LinearGaussianModel, state: GaussianState, y: Array, 
                & jnp.all(jnp.isfinite(_linalg.soa_cholesky(post_cov)), axis=(0, 1))
                & jnp.all(jnp.isfinite(next_mean), axis=0)
                & jnp.isfinite(nis) & jnp.isfinite(log_likelihood))
-    num_observed = jnp.full(nis.shape, m, jnp.int32)
+    num_observed = jnp.sum(jnp.isfinite(y), axis=0).astype(jnp.int32)
+    innovation, nis = report_dead(innovation, nis, ~jnp.isfinite(y))
     info = FilterInfo(x, P, post_mean, post_cov, innovation, S, log_likelihood, nis, num_observed, healthy)
     return GaussianState(next_mean, next_cov), info
 
@@ -176,7 +179,8 @@ def run_kalman_batch(model: LinearGaussianModel, init_state: GaussianState, ys: 
         (e.g. ``model._replace(Q=Qs)`` with ``Qs`` (N, n, n)), the others are shared.
       init_state: ``GaussianState(mean, cov)``: mean (n,) or (N, n), cov (n, n) or
         (N, n, n).
-      ys: (N, T, m) measurements (no missing values: a NaN makes the step unhealthy).
+      ys: (N, T, m) measurements (a non-finite component is a dead channel, as in
+        ``kalman_filter``: reported, not used by the mean).
       us: (T, nu) shared, (N, T, nu) per run, or ``None``.
 
     Returns:

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, FilterInfo, check_gaussian, check_step_inputs
+from jaxfdi.filters._base import Filter, FilterInfo, check_gaussian, check_step_inputs, report_dead, used_innovation
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -54,7 +54,7 @@ def sqrt_update(mean: Array, chol: Array, y: Array, y_pred: Array, H: Array, cho
     """Condition ``N(mean, chol chol^T)`` on ``y = H x + v``, ``v ~ N(0, chol_R chol_R^T)``
     by one QR factorisation (module doc). Returns ``(mean+, chol+, innovation, chol_S,
     whitened innovation)``."""
-    return sqrt_update_linearised(mean, chol, y - y_pred, H @ chol, chol_R)
+    return sqrt_update_linearised(mean, chol, used_innovation(y, y_pred), H @ chol, chol_R)
 
 
 def sqrt_update_linearised(mean: Array, chol: Array, innovation: Array, H_chol: Array, chol_noise: Array):
@@ -93,16 +93,16 @@ def sqrt_kalman_filter(model: LinearGaussianModel) -> Filter:
         next_mean = mm(model.Phi, mean) + mm(model.Gamma, u)
         next_chol = tria(jnp.concatenate([mm(model.Phi, chol), chol_Q.astype(chol.dtype)], axis=1))
         return SqrtGaussianState(next_mean, next_chol), sqrt_info(state, mean, chol, innovation, chol_S, whitened,
-                                                                  next_mean)
+                                                                  next_mean, ~jnp.isfinite(y))
 
     return Filter(init, step)
 
 
 def sqrt_info(prior: SqrtGaussianState, mean: Array, chol: Array, innovation: Array, chol_S: Array,
-              whitened: Array, next_mean: Array) -> FilterInfo:
+              whitened: Array, next_mean: Array, dead: Array) -> FilterInfo:
     """The step's ``FilterInfo`` from the factors: covariances as Gram matrices; healthy
     when the factors of ``S`` and ``P[k|k]`` have non-zero finite diagonals and every
-    output is finite."""
+    output is finite; ``dead`` (m,) components reported as ``report_dead`` says."""
     m = innovation.shape[0]
     nis = jnp.sum(whitened**2)
     diag_S = jnp.diagonal(chol_S)
@@ -112,8 +112,9 @@ def sqrt_info(prior: SqrtGaussianState, mean: Array, chol: Array, innovation: Ar
                & jnp.all(jnp.isfinite(mean)) & jnp.all(jnp.isfinite(next_mean)) & jnp.isfinite(nis)
                & jnp.isfinite(log_likelihood))
     gram = lambda L: L @ L.T  # noqa: E731
+    innovation, nis = report_dead(innovation, nis, dead)
     return FilterInfo(prior.mean, gram(prior.chol), mean, gram(chol), innovation, gram(chol_S), log_likelihood, nis,
-                      jnp.asarray(m, jnp.int32), healthy)
+                      jnp.sum(~dead).astype(jnp.int32), healthy)
 
 
 def check_sqrt_state(state, n: int) -> None:

@@ -32,7 +32,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs
+from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, used_innovation
 from jaxfdi.filters.sqrt_kalman import (
     SqrtGaussianState,
     check_sqrt_state,
@@ -119,7 +119,7 @@ def sqrt_unscented_kalman_filter(
         linearised = (plus - minus).T / (2.0 * scale)                                # H L, (m, n)
         residuals = 0.5 * (plus + minus)                                             # e_i, (n, m)
         delta_y = w * jnp.sum(dy, axis=0)
-        innovation = y - (y0 + delta_y)
+        innovation = used_innovation(y, y0 + delta_y)
         chol_noise = tria(jnp.concatenate([(2.0 * w) ** 0.5 * residuals.T, root_cross * delta_y[:, None],
                                            chol_R.astype(dtype)], axis=1))
         mean, chol, innovation, chol_S, whitened = sqrt_update_linearised(state.mean, state.chol, innovation,
@@ -132,6 +132,6 @@ def sqrt_unscented_kalman_filter(
         next_mean = x0 + delta_x
         next_chol = tria(jnp.concatenate([root_w * dx.T, root_cross * delta_x[:, None], chol_Q.astype(dtype)], axis=1))
         return SqrtGaussianState(next_mean, next_chol), sqrt_info(state, mean, chol, innovation, chol_S, whitened,
-                                                                  next_mean)
+                                                                  next_mean, ~jnp.isfinite(y))
 
     return Filter(init, step)

@@ -57,9 +57,12 @@ from jaxfdi.filters._base import (
     Filter,
     GaussianState,
     check_step_inputs,
+    dead_components,
     gaussian_filter,
     mask_innovation_cov,
     observed_mask,
+    report_dead,
+    used_innovation,
 )
 
 
@@ -244,18 +247,20 @@ def unscented_kalman_filter(
             S = mask_innovation_cov(S, mask)
             Pxy = jnp.where(mask[None, :], Pxy, 0.0)
         else:
-            innovation, num_observed = y - y_pred, jnp.asarray(m, jnp.int32)
+            innovation, num_observed = used_innovation(y, y_pred), jnp.sum(jnp.isfinite(y)).astype(jnp.int32)
         chol_S = _linalg.cholesky(S)
         gain = _linalg.gain_from_cross_cov(Pxy, chol_S)
         whitened = _linalg.whiten(chol_S, innovation)
         mean = state.mean + gain @ innovation
+        reported, nis = report_dead(innovation, jnp.sum(whitened**2), dead_components(y, missing_measurements))
         return ConditionedGaussian(
             mean=mean,
             cov=joseph_like_cov(chol, points, dy, Pxy, gain, R, w, cross_w),
-            innovation=innovation,
+            innovation=reported,
             innovation_cov=S,
-            log_likelihood=_linalg.gaussian_log_likelihood(whitened, chol_S, num_observed),
-            nis=jnp.sum(whitened**2),
+            log_likelihood=_linalg.gaussian_log_likelihood(whitened, chol_S, num_observed if missing_measurements
+                                                           else m),
+            nis=nis,
             num_observed=num_observed,
             healthy=(_linalg.cholesky_is_finite(chol_S) & _linalg.cholesky_is_finite(chol)
                      & jnp.all(jnp.isfinite(mean))),

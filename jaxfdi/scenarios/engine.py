@@ -217,7 +217,14 @@ def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Met
 def run_monitor(method: Method, model, us, key, f, keep_history=False):
     """One run of ``method`` on the engine with fault ``f`` (``monitor``: plant, filter, detector)."""
     return monitor(linear_simulator(model, f), method.filter, method.detector, jnp.zeros(7), method.init_state,
-                   us, key, f.onset, keep_history, method.detector_input, method.estimate_delay)
+                   us, key, f.onset, keep_history, method.detector_input, method.estimate_delay,
+                   sensor_labels(model))
+
+
+def sensor_labels(model) -> jax.Array:
+    """(m,) the fault label of each sensor channel (0 none, then the actuators, then the
+    sensors): what a dead channel isolates to."""
+    return 1 + model.Gamma.shape[1] + jnp.arange(model.C.shape[0], dtype=jnp.int32)
 
 
 class ScenarioRuns(NamedTuple):
@@ -475,8 +482,9 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
             _, info = run_filter_batch(imm, imm.init(*prior, mu0), ys, us)
             detector = mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps)
             inputs = jax.vmap(jax.vmap(detector_input))(info)
-            records = jax.vmap(lambda x, onset, ok: replay_detector(detector, x, onset, delay, ok))(
-                inputs, faults.onset, info.healthy)
+            records = jax.vmap(lambda x, onset, ok, dead: replay_detector(detector, x, onset, delay, ok, dead,
+                                                                          sensor_labels(model)))(
+                inputs, faults.onset, info.healthy, info.dead)
             return records, info.mode_prob
         return run
 

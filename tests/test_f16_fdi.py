@@ -27,7 +27,7 @@ from jaxfdi.scenarios.f16_flight import dispersions, flight_setup, nominal_dispe
 
 ONSET = 300          # the paper's 3 s
 STEPS = 320          # closed-loop flights of 3.2 s
-PAPER, NEAR, FREE = 16, 64, 64
+PAPER, NEAR, FREE, DEAD = 16, 64, 64, 12
 BATCH = "flights"
 
 
@@ -68,6 +68,12 @@ def flights(env):
     disp = dispersions(jax.random.key(25), setup, n)
     disp = jax.tree_util.tree_map(lambda a, b: a.at[:1].set(b), disp, nominal_dispersion(setup))
     cases = _cases(setup.x0.dtype)
+    # then DEAD flights with a dead rate sensor (4 per sensor), on draws of their own
+    dead = sf.fault_case("dead", np.arange(DEAD) % 3, 0.0, 0.0, dtype=setup.x0.dtype)
+    keys = jnp.concatenate([keys, jax.random.split(jax.random.key(26), DEAD)])
+    disp = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), disp, dispersions(jax.random.key(27), setup, DEAD))
+    cases = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), cases, dead)
+    n += DEAD
     follows = jnp.full((n,), hp.FOLLOW["hybrid"], jnp.int32)
     decision, healthy = jax.tree_util.tree_map(np.asarray, FLY(short, fdi, keys, disp, cases, follows))
     # the same flights with T_D at P_fa = 1e-3 per step (a statistical check of the FD law in closed loop)
@@ -124,13 +130,28 @@ def test_hybrid_beats_psa_alone_near_singular_directions(flights):
     assert interval(hybrid).low > interval(psa).high, (psa, hybrid)
 
 
+def test_a_dead_rate_sensor_is_detected_isolated_and_excluded_at_its_onset(flights):
+    """Both axes of a rate sensor NaN from 3 s (4 flights per sensor): the parity test
+    alarms at the onset (``FD = +inf``) with that sensor the one suspect, PSA and the
+    hybrid isolate it at once, and every flight stays healthy: the controller flies on the
+    estimate without the dead sensor and never receives a non-finite rate (one NaN rate
+    would make the plant's state, and so the flight, non-finite)."""
+    decision, healthy, _, sensor = flights
+    dead = slice(PAPER + NEAR + FREE, None)
+    assert np.all(healthy[dead])
+    assert np.all(decision.detection_step[dead] == ONSET) and np.all(decision.decision_step[dead] == ONSET)
+    assert np.array_equal(decision.suspects[dead], np.eye(3, dtype=bool)[sensor[dead]])
+    assert np.all(decision.psa[dead] == sensor[dead] + 1) and np.all(decision.hybrid[dead] == sensor[dead] + 1)
+    assert not np.any(decision.filter_used[dead])
+
+
 def test_fault_free_flights_false_alarms_within_binomial_bounds(flights):
     """64 fault-free closed-loop flights of 320 steps: at P_fa = 1e-6 per step the
     flights with an FD alarm are within the 99.9 % binomial bound (expected 0.02); at
     1e-3 per step, the count (expected 17.5) lies in its 99.9 % binomial interval, so FD
     follows its chi-square law in the closed loop."""
     decision, healthy, loose, _ = flights
-    free = slice(PAPER + NEAR, None)
+    free = slice(PAPER + NEAR, PAPER + NEAR + FREE)
     assert np.all(healthy[free])
     for pfa, record in ((sf.PFA, decision), (1e-3, loose)):
         per_flight = 1.0 - (1.0 - pfa) ** STEPS

@@ -44,13 +44,13 @@ import numpy as np
 
 from jaxfdi.detection.glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_detector, glrt_threshold
 from jaxfdi.detection.mode_probability import mode_probability_detector
-from jaxfdi.faults import stack_faults
+from jaxfdi.faults import Fault, fault, fault_label, stack_faults
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.mm import multiple_model
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.metrics import DetectionRecord, fault_row, unhealthy_rows_warning
-from jaxfdi.models.engine import TS, engine_model
+from jaxfdi.models.engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.filters._base import run_filter_batch
 from jaxfdi.monitor import monitor, replay_detector
@@ -294,31 +294,52 @@ def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, 
                        len(faults) * runs, batch, chunk_size=chunk_size, progress=progress)
 
 
-@functools.lru_cache(maxsize=2)
-def _fault_magnitudes(x64: bool) -> tuple[tuple[str, ...], tuple[float, ...]]:
-    """The faults' names and magnitudes (NaN for 'none'), once per precision: the threshold
-    search summarises thousands of replays, and building the faults cost 8 ms each time."""
-    names, faults = engine_faults(0)
-    return tuple(names), tuple(float(f.magnitude) if n != "none" else float("nan") for n, f in zip(names, faults))
+#: the study's sensor-health cases beside the paper's six faults (issue 37): the P2 sensor
+#: dead (NaN from the onset) and frozen (its value at the onset held); both isolate to P2
+HEALTH_CASES = ("P2 dead", "P2 frozen")
+
+
+def study_faults(onset_step: int) -> tuple[list[str], list[Fault]]:
+    """The study's cases: ``engine_faults`` (the paper's six and 'none') with
+    ``HEALTH_CASES`` before 'none'."""
+    names, faults = engine_faults(onset_step)
+    p2 = OUTPUT_NAMES.index("P2")
+    health = [fault("dead", "sensor", p2, onset_step), fault("stuck", "sensor", p2, onset_step)]
+    return [*names[:-1], *HEALTH_CASES, names[-1]], [*faults[:-1], *health, faults[-1]]
+
+
+@functools.lru_cache(maxsize=4)
+def _fault_cases(x64: bool, health: bool) -> tuple[tuple[str, ...], tuple[float, ...], tuple[int, ...]]:
+    """The cases' names, magnitudes (NaN for 'none' and the sensor-health cases) and fault
+    labels, once per precision and case set: the threshold search summarises thousands of
+    replays, and building the faults cost 8 ms each time."""
+    names, faults = study_faults(0) if health else engine_faults(0)
+    sized = [n not in ("none", *HEALTH_CASES) for n in names]
+    return (tuple(names), tuple(float(f.magnitude) if s else float("nan") for s, f in zip(sized, faults)),
+            tuple(int(fault_label(f, 1)) for f in faults))
 
 
 def summarize_method(name: str, paper: str | None, records: DetectionRecord, runs: int, steps: int) -> list[dict]:
-    """One row per fault: ``metrics.fault_row``'s columns (rates; delays in s over the runs
+    """One row per case: ``metrics.fault_row``'s columns (rates; delays in s over the runs
     with no pre-onset alarm), the paper's mean delay (``PAPER_DELAY[paper]``), the
-    estimate's error."""
-    names, magnitudes = _fault_magnitudes(bool(jax.config.jax_enable_x64))
+    estimate's error. ``records`` hold ``runs`` runs of each case, of ``engine_faults``
+    (seven cases) or of ``study_faults`` (nine, with the sensor-health cases)."""
+    x64, cases = bool(jax.config.jax_enable_x64), np.shape(records.onset)[0] // runs
+    names, magnitudes, labels = _fault_cases(x64, cases == len(_fault_cases(x64, True)[0]))
+    if cases != len(names) or cases * runs != np.shape(records.onset)[0]:
+        raise ValueError(f"records: expected {runs} runs of each of 7 or 9 cases, got {np.shape(records.onset)[0]}")
     records = jax.tree_util.tree_map(np.asarray, records)  # one transfer, not one per fault
     rows = []
-    for i, (fault_name, magnitude) in enumerate(zip(names, magnitudes)):
+    for i, (fault_name, magnitude, label) in enumerate(zip(names, magnitudes, labels)):
         part = jax.tree_util.tree_map(lambda x: x[i * runs:(i + 1) * runs], records)
         faulty = fault_name != "none"
-        columns = fault_row(part, steps, TS, label=i + 1 if faulty else None)
+        columns = fault_row(part, steps, TS, label=label if faulty else None)
         healthy = part.first_unhealthy < 0  # unhealthy runs: counted apart, in no rate
-        correct = part.isolated[healthy] == i + 1
-        estimates = part.estimate[healthy][correct] if faulty else np.zeros(0)
+        correct = part.isolated[healthy] == label
+        estimates = part.estimate[healthy][correct] if faulty and magnitude == magnitude else np.zeros(0)
         estimates = estimates[np.isfinite(estimates)]
         estimate = float(np.median(estimates)) if estimates.size else float("nan")
-        paper_delay = PAPER_DELAY[paper][i] if (faulty and paper) else float("nan")
+        paper_delay = PAPER_DELAY[paper][i] if (faulty and paper and i < len(PAPER_DELAY[paper])) else float("nan")
         rows.append({
             "method": name, "fault": fault_name, "magnitude": magnitude, "runs": columns["runs"],
             "detection_rate": columns["detection_rate"],
@@ -341,7 +362,7 @@ class EngineStudy(NamedTuple):
     """The engine study: configuration, table rows, per-method records and the arrays behind the figures."""
     config: dict[str, Any]
     rows: list[dict[str, Any]]             # one per (method, fault)
-    records: dict[str, DetectionRecord]    # per method, (7 * runs,) fault-major
+    records: dict[str, DetectionRecord]    # per method, (9 * runs,) case-major (``study_faults``)
     figures: dict[str, Any]                # arrays behind the figures
 
     def overview(self) -> str:
@@ -511,7 +532,7 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
 def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] | None = None,
                 duration: float = 4.0, onset_time: float = 2.0, unrolled: bool = False,
                 kernel: bool = True) -> Study:
-    """The engine study as data (``jaxfdi.study``): the seven cases and every method of
+    """The engine study as data (``jaxfdi.study``): the nine cases (``study_faults``) and every method of
     ``engine_method_names`` (or ``methods``) in five structures, one compiled program
     each: the MMs and IMMs of each mode design, and the GLRTs. Within a structure the
     methods are cells of a (filter x decision rule) grid: the IMMs that share a
@@ -556,7 +577,7 @@ def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] 
         if cells:
             structures.append(Structure(name, runs[name], axes, cells, averaged=name.startswith(("IMM", "GLRT")),
                                         batched=kernel and name.startswith("IMM")))
-    fault_names, faults = engine_faults(onset)
+    fault_names, faults = study_faults(onset)
     return Study("engine", stack_faults(faults), tuple(fault_names), tuple(structures))
 
 
@@ -588,6 +609,7 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
     bonferroni = _bonferroni_threshold(settings)
     config = {
         "scenario": "engine", "runs_per_fault": runs, "seed": seed, "Ts": TS, "steps": steps,
+        "cases": list(spec.case_names),
         "onset_step": int(round(onset_time / TS)), "fuel_step": FUEL_STEP, "methods": chosen,
         "settings": settings._asdict(), "paper_transition": PAPER_TRANSITION.tolist(),
         "hand_transition": sticky_transition(len(MODE_NAMES), settings.to_fault, settings.stay).tolist(),

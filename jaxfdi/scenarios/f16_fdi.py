@@ -76,7 +76,8 @@ PAPER_SENSOR = 0
 PAPER_FNR = 10.0
 PAPER_ANGLE_DEG = 45.0
 #: the fault kinds a case may have
-KINDS = {"bias": FaultKind.BIAS, "drift": FaultKind.RAMP, "stuck": FaultKind.STUCK, "scale": FaultKind.SCALE}
+KINDS = {"bias": FaultKind.BIAS, "drift": FaultKind.RAMP, "stuck": FaultKind.STUCK, "scale": FaultKind.SCALE,
+         "dead": FaultKind.DEAD}
 #: the rate sensors as parity groups: sensor i owns channels 2i, 2i + 1
 SENSOR_GROUPS = ((0, 1), (2, 3), (4, 5))
 
@@ -93,9 +94,10 @@ class FDISetup(NamedTuple):
 class FaultCase(NamedTuple):
     """One flight's rate-sensor fault (stack them to vmap). ``size``: FNR for a bias, the
     FNR reached one second after the onset for a drift, the relative scale error for a
-    scale fault, unused for a stuck sensor (it holds both axes' values at the onset)."""
+    scale fault, unused for a stuck sensor (it holds both axes' values at the onset) and a
+    dead one (NaN on both axes)."""
 
-    kind: Array    # () int FaultKind (BIAS, RAMP, STUCK, SCALE; NONE: fault-free)
+    kind: Array    # () int FaultKind (BIAS, RAMP, STUCK, SCALE, DEAD; NONE: fault-free)
     sensor: Array  # () int 0, 1, 2
     size: Array    # ()
     angle: Array   # () rad, direction in the sensor's axes
@@ -347,6 +349,18 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     per_run = (dispersions(keys[7], setup, n), _cases(full_cases, dtype), follows, jnp.zeros((n,), jnp.int32))
     out = _fly(setup, fdi, keys[8], per_run, None, chunk_size, progress, "full flights")
     rows += _full_flight_rows(out, labels, np.asarray(per_run[1].sensor), onset, setup)
+
+    # a dead rate sensor (NaN on both axes from the onset): flights of their own, with keys
+    # folded from the full flights', so that every draw above is what it was before them
+    draws = [int(rng.integers(3)) for _ in range(int(runs))]
+    dead_cases = [("dead", s, 0.0, 0.0) for _ in FOLLOWS for s in draws]
+    dead_labels = [("dead", 0.0, follow) for follow in FOLLOWS for _ in draws]
+    n = len(dead_cases)
+    follows = jnp.asarray([FOLLOW[f] for _, _, f in dead_labels], jnp.int32)
+    per_run = (dispersions(jax.random.fold_in(keys[7], 1), setup, n), _cases(dead_cases, dtype), follows,
+               jnp.zeros((n,), jnp.int32))
+    out = _fly(setup, fdi, jax.random.fold_in(keys[8], 1), per_run, None, chunk_size, progress, "dead-sensor flights")
+    rows += _full_flight_rows(out, dead_labels, np.asarray(per_run[1].sensor), onset, setup)
     steps = int(setup.reference.state.shape[0])
     config = {
         "runs": int(runs), "seed": int(seed), "dt_s": DT, "duration_s": steps * DT, "gust_sigma_ft_s": float(gust_sigma),
@@ -653,7 +667,7 @@ def study_table(study: F16FDIStudy) -> str:
                  f"{'in envelope':>11} {'max alt ft':>10} {'max bank':>8} {'max beta':>8}")
     for r in by("full_flights"):
         name = "fault-free" if r["kind"] == "none" else (
-            f"{r['kind']} {r['size']:g}" if r["kind"] != "stuck" else "stuck")
+            f"{r['kind']} {r['size']:g}" if r["kind"] not in ("stuck", "dead") else r["kind"])
         if r["kind"] == "none":
             mid = f"{'-':>8} {'-':>7} {'-':>9}"
         else:
@@ -781,7 +795,8 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
             values.append(match[0]["within_envelope"] / match[0]["flights"] if match else np.nan)
         ax.bar(np.arange(len(groups)) + (j - 1) * width, values, width, label=f"view: {follow}")
     ax.set_xticks(np.arange(len(groups)))
-    ax.set_xticklabels(["fault-free" if k == "none" else (k if k == "stuck" else f"{k} {s:g}") for k, s in groups])
+    ax.set_xticklabels(["fault-free" if k == "none" else (k if k in ("stuck", "dead") else f"{k} {s:g}")
+                        for k, s in groups])
     ax.set(ylabel="flights within the envelope", ylim=(0, 1.05), title="Safe envelope with and without FDI")
     ax.legend(fontsize=8)
     save(fig, "f16-fdi-envelope.png")

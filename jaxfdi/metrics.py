@@ -176,9 +176,16 @@ class DetectionSummary(NamedTuple):
 
 def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) -> DetectionSummary:
     """Summarise stacked records (leading run axis) of runs ``horizon`` steps long; an
-    unhealthy run (``first_unhealthy >= 0``) counts in ``runs`` and ``unhealthy_runs`` only."""
+    unhealthy run (``first_unhealthy >= 0``) counts in ``runs`` and ``unhealthy_runs`` only.
+    A record with a step at or after ``horizon`` (an alarm there, or more steps before its
+    onset) says the runs are longer: a ``ValueError``, since faults with an onset past a
+    too-short horizon would be scored as fault-free runs."""
     _checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
     _checks.check_positive("Ts", Ts, "a positive sample period")
+    seen = np.maximum(np.asarray(record.pre_onset_steps), np.asarray(record.first_alarm) + 1)
+    if np.any(seen > horizon):
+        raise ValueError(f"horizon: expected the runs' length, got {horizon}, but {int(np.sum(seen > horizon))} "
+                         f"record(s) saw {int(np.max(seen))} steps")
     onset = np.asarray(record.onset)
     healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
     detection = np.asarray(record.detection_step)

@@ -422,7 +422,38 @@ CASES = {
     "vtol_study unknown method": (lambda: vtol_study(runs=2, methods=["kalman"]), V, "methods"),
     "wheel_study estimator": (lambda: wheel_study(runs=2, estimator="pf"), V, "estimator"),
     "wheel_study calibration_runs zero": (lambda: wheel_study(runs=2, calibration_runs=0), V, "calibration_runs"),
+    # --- physical boundaries (issue 37 item 4) ------------------------------------------
+    "f16_params mass negative": (lambda: _f16().dynamics.f16_params(mass=-600.0), V, "mass"),
+    "f16_params xcg outside the chord": (lambda: _f16().dynamics.f16_params(xcg=1.4), V, "xcg"),
+    "f16_params aileron limit negative": (lambda: _f16().dynamics.f16_params(aileron_limit=-21.5), V, "aileron_limit"),
+    "level_flight airspeed negative": (lambda: _f16().trim.level_flight(-502.0), V, "airspeed"),
+    "level_flight altitude below sea level": (lambda: _f16().trim.level_flight(502.0, -100.0), V, "altitude"),
+    "level_flight altitude beyond the tables": (lambda: _f16().trim.level_flight(502.0, 6e4), V, "altitude"),
+    "flight_controller dt negative": (lambda: _flight_controller(dt=-0.01), V, "dt"),
+    "flight_controller inverted limits": (lambda: _flight_controller(lower=jnp.ones(4), upper=-jnp.ones(4)), V,
+                                         "lower"),
+    "raim_fdi dt zero": (lambda: _raim_fdi(dt=0.0), V, "dt"),
 }
+
+
+def _f16():
+    import types
+
+    from jaxfdi.models.f16 import dynamics, trim
+    return types.SimpleNamespace(dynamics=dynamics, trim=trim)
+
+
+def _flight_controller(dt=0.01, lower=-jnp.ones(4), upper=jnp.ones(4)):
+    from jaxfdi.control.flight import FlightGains, flight_controller
+    gains = FlightGains(*(jnp.zeros((2, 8)) for _ in FlightGains._fields))
+    return flight_controller(gains, dt, lower, upper)
+
+
+def _raim_fdi(dt=1.0):
+    from jaxfdi.data import data_path
+    from jaxfdi.gnss import ephemeris_table, raim_fdi, raim_tables, read_rinex_nav
+    table = ephemeris_table(read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
+    return raim_fdi(table, 0.0, dt, raim_tables(32))
 
 
 def test_at_least_100_cases():

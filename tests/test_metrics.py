@@ -214,6 +214,17 @@ def test_a_nan_statistic_is_unhealthy_and_never_clean():
     assert np.isnan(s.false_alarm_rate) and np.isnan(s.delay_median)
 
 
+def test_a_horizon_shorter_than_the_runs_is_refused():
+    """Runs of 40 steps with onsets at 10 and 30: summarised over a horizon of 20, the
+    onset 30 would be scored as a fault-free run; the records say they saw more steps."""
+    alarms = np.zeros((2, 40), bool)
+    alarms[:, 35] = True
+    records = jax.vmap(record_from_alarms)(jnp.asarray(alarms), jnp.asarray([10, 30]))
+    assert summarize_detection(records, 40).detection_rate == 1.0
+    with pytest.raises(ValueError, match="horizon: expected the runs' length, got 20, but 2 record"):
+        summarize_detection(records, 20)
+
+
 def test_confusion_matrix_and_isolation_accuracy_equal_counting():
     rng = np.random.default_rng(1)
     true = rng.integers(0, 4, 500)

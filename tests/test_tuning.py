@@ -275,6 +275,30 @@ def test_save_and_load_round_trip_with_the_parameterisation(tmp_path, suffix):
         tuning.save_params(tmp_path / "x.txt", raw, parameterization)
 
 
+def test_a_corrupted_parameter_file_names_the_file_and_the_problem(tmp_path):
+    """Truncated, not a zip, a field missing, and a good file renamed to the other format:
+    each a ValueError naming the file (never a bare zip, JSON or pickle error)."""
+    parameterization = {"h": tuning.positive(floor=1.0)}
+    raw = tuning.unconstrain(parameterization, {"h": np.array(4.0)})
+    good = tuning.save_params(tmp_path / "good.npz", raw, parameterization)
+    cases = {
+        "truncated.npz": good.read_bytes()[: len(good.read_bytes()) // 2],
+        "text.npz": b"not a zip file",
+        "missing.json": b'{"params": {}, "meta": {}}',
+        "cut.json": b'{"params": {"h": [1.0',
+        "swapped.json": good.read_bytes(),
+    }
+    for name, content in cases.items():
+        path = tmp_path / name
+        path.write_bytes(content)
+        with pytest.raises(ValueError, match=f"{name}: not a parameter file written by save_params"):
+            tuning.load_params(path)
+    with pytest.raises(ValueError, match="missing field 'parameterization'"):
+        tuning.load_params(tmp_path / "missing.json")
+    with pytest.raises(FileNotFoundError):
+        tuning.load_params(tmp_path / "absent.npz")
+
+
 def test_fixed_batches_visit_every_run_once_per_epoch():
     data = {"y": jnp.arange(12.0)}
     batch = tuning.fixed_batches(data, 4, jax.random.key(0))

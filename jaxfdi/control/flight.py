@@ -44,6 +44,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
@@ -145,6 +146,7 @@ def default_weights(dtype=None) -> FlightWeights:
 def design_flight_control(linear: LinearF16, dt: float, weights: FlightWeights) -> FlightDesign:
     """LQR-PI gains of both axes at the trim of ``linear`` (module doc); differentiable in
     ``weights`` (forward mode through the Riccati solver)."""
+    _checks.check_positive("dt", dt, "a positive sample period (s)")
     _checks.check_shape("weights.longitudinal", weights.longitudinal, (8,),
                         "VT, alpha, theta, Q, h, pow, int VT, int h")
     _checks.check_shape("weights.longitudinal_input", weights.longitudinal_input, (2,), "thtl, el")
@@ -245,6 +247,8 @@ def flight_reference(params: F16Params, plan: FlightPlan, trims: TrimResult, dt:
     rates (``Q += cos(phi) theta_ref'``, ``P += phi_ref'``), and the level-off's normal
     load ``dn = h_cmd'' / (g cos(gamma))`` to alpha (and theta, ``theta = gamma + alpha``)
     and to the controls at the pull-up trim's rate per g."""
+    _checks.check_positive("dt", dt, "a positive sample period (s)")
+    _checks.check_int("steps", steps, minimum=1, meaning="a positive number of steps")
     dtype = trims.state.dtype
     t = jnp.arange(int(steps), dtype=dtype) * dt
     prof = commanded_profile(plan, t)
@@ -277,6 +281,12 @@ def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array)
     input of step ``k`` is ``(x_ref[k], u_ref[k])`` (a ``FlightReference`` row).
     ``lower``/``upper`` (4,): control limits (the aircraft's)."""
     from jaxfdi.loop import Controller
+
+    _checks.check_positive("dt", dt, "a positive sample period (s)")
+    low, high = _checks.concrete(lower), _checks.concrete(upper)
+    if low is not None and high is not None and np.any(np.asarray(low) > np.asarray(high)):
+        raise ValueError(f"lower: expected control limits below upper (thtl, el, ail, rdr), got lower "
+                         f"{_checks.received(low)} and upper {_checks.received(high)}")
 
     lon_idx = jnp.asarray(LONGITUDINAL_DESIGN_STATES)
     lat_idx = jnp.asarray(LATERAL_STATES)

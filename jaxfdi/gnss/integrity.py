@@ -19,7 +19,8 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi.detection.chi2 import Decision
+from jaxfdi import _checks
+from jaxfdi.detection.chi2 import Decision, flag_dead
 from jaxfdi.gnss.frames import elevation_azimuth, line_of_sight_ned
 from jaxfdi.gnss.least_squares import masked_qr
 from jaxfdi.gnss.orbits import OrbitTable, satellite_position, select_orbits
@@ -41,6 +42,8 @@ class EpochIntegrity(NamedTuple):
     fix_excluded: PositionFix  # the fix without it (the full fix when none)
     check_excluded: ParityCheck
     protection_excluded: ProtectionLevels
+    dead: Array                # (S,) bool: a slot with an orbit whose pseudorange is infinite (a dead
+                               # channel: the fix leaves it out and ``raim_output`` alarms on it)
 
 
 def assess(fix: PositionFix, tables: RaimTables, operation="npa") -> tuple[ParityCheck, ProtectionLevels]:
@@ -57,7 +60,8 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
 
     Args:
       orbit: (S,) slot elements at this epoch; available: (S,) slots with a usable orbit.
-      t_receive: () time tag; pseudoranges: (S,) [m], NaN where not measured.
+      t_receive: () time tag; pseudoranges: (S,) [m], NaN where not measured; an infinite
+        one is a dead channel (``EpochIntegrity.dead``).
       tables: ``raim.raim_tables``; sigma: as for ``positioning.solve_position``.
       operation: alert limits (``protection.ALERT_LIMITS`` key or (HAL, VAL)).
       exclude: re-solve without the isolated satellite after an alarm.
@@ -67,9 +71,10 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
     transmit = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
     fix = solve_position(orbit, t_receive, pseudoranges, available, sigma, transmit=transmit)
     check, protection = assess(fix, tables, operation)
+    dead = jnp.asarray(available, bool) & jnp.isinf(jnp.asarray(pseudoranges))
     if not exclude:
         none = jnp.asarray(-1, jnp.int32)
-        return EpochIntegrity(fix, check, protection, none, fix, check, protection)
+        return EpochIntegrity(fix, check, protection, none, fix, check, protection, dead)
     excluded = jnp.where(check.alarm & (check.isolated >= 0), check.isolated, -1).astype(jnp.int32)
     keep = available & (jnp.arange(available.shape[0]) != excluded)
     initial = jnp.concatenate([fix.position, fix.clock_bias[None]])
@@ -79,7 +84,7 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
     check_x, protection_x = assess(refit, tables, operation)
     pick = lambda a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(excluded >= 0, u, v), a, b)  # noqa: E731
     return EpochIntegrity(fix, check, protection, excluded, pick(refit, fix), pick(check_x, check),
-                          pick(protection_x, protection))
+                          pick(protection_x, protection), dead)
 
 
 def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables: RaimTables,
@@ -106,7 +111,8 @@ def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables:
 class RaimOutput(NamedTuple):
     """What ``raim_fdi`` reports each step (a lean summary of ``EpochIntegrity``)."""
 
-    decision: Decision          # statistic, alarm, label 1 + isolated slot (0: none), estimate = max |TS_j|
+    decision: Decision          # statistic, alarm, label 1 + isolated slot (0: none), estimate = max |TS_j|;
+                                # a dead slot (infinite pseudorange): alarm, label 1 + slot (chi2.flag_dead)
     threshold: Array            # ()
     dof: Array                  # () int
     num_used: Array             # () int
@@ -128,6 +134,7 @@ def raim_output(result: EpochIntegrity) -> RaimOutput:
     check = result.check
     label = jnp.where(check.alarm & (check.isolated >= 0), 1 + check.isolated, jnp.where(check.alarm, -1, 0))
     decision = Decision(check.statistic, check.alarm, label.astype(jnp.int32), jnp.max(jnp.abs(check.isolation)))
+    decision = flag_dead(decision, result.dead, 1 + jnp.arange(result.dead.shape[0], dtype=jnp.int32))
     return RaimOutput(decision, check.threshold, check.dof, result.fix.num_used, result.fix.dops,
                       result.protection.hpl, result.protection.vpl, result.protection.available,
                       result.fix.position, result.fix.clock_bias, result.excluded, result.fix_excluded.position,
@@ -139,6 +146,7 @@ def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=
              exclude: bool = True) -> FDI:
     """``monitor_epoch`` as a stateless ``loop.FDI``: step ``k`` takes the (S,)
     pseudoranges time-tagged ``t0 + k dt`` and returns a ``RaimOutput``."""
+    _checks.check_positive("dt", dt, "a positive epoch interval (s)")
 
     def step(state, k, y, u):
         t = t0 + k * dt

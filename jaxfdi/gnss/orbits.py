@@ -80,9 +80,23 @@ class OrbitTable(NamedTuple):
     """Every record of S slots, padded to R records a slot (leaves (S, R))."""
 
     orbit: Orbit       # leaves (S, R)
-    valid: Array       # (S, R) bool: a real, healthy record
+    valid: Array       # (S, R) bool: a real, healthy, physically possible record
     validity: Array    # (S, R) s, the record serves epochs with |t - toe| <= validity
     prn: Array         # (S,) int, PRN of each slot
+    problem: Array     # (S, R) int: why a present record was refused (``ORBIT_PROBLEMS``; 0: none)
+
+
+#: why a broadcast record is impossible (``orbit_problem``'s codes)
+ORBIT_PROBLEMS = ("none", "a non-finite element", "an eccentricity outside [0, 1)", "a semi-major axis <= 0")
+
+
+def orbit_problem(orbit: Orbit) -> Array:
+    """Per record, the first reason its elements describe no orbit (an index into
+    ``ORBIT_PROBLEMS``; 0: none). Such a record is excluded alone: Kepler's equation has
+    no solution for it and would turn the whole fix NaN."""
+    finite = jnp.all(jnp.stack([jnp.isfinite(jnp.asarray(leaf)) for leaf in orbit]), axis=0)
+    e = jnp.asarray(orbit.eccentricity)
+    return jnp.where(~finite, 1, jnp.where((e < 0) | (e >= 1), 2, jnp.where(jnp.asarray(orbit.sqrt_a) <= 0, 3, 0)))
 
 
 def _wrap_half_week(dt: Array) -> Array:
@@ -218,6 +232,10 @@ def transmission_geometry(orbit: Orbit, t_receive: Array, receiver_ecef: Array,
 def _table(prns: np.ndarray, slot_prns: np.ndarray, columns: dict, valid: np.ndarray, validity: np.ndarray,
            dtype) -> OrbitTable:
     slot_prns = np.asarray(slot_prns, int)
+    repeated = sorted({int(p) for p in slot_prns if np.sum(slot_prns == p) > 1})
+    if repeated:
+        raise ValueError(f"slot_prns: expected each satellite once, got PRN {repeated} more than once "
+                         f"(it would be counted twice in every fix)")
     counts = [int(np.sum(prns == p)) for p in slot_prns]
     width = max(max(counts), 1)
     index = np.zeros((slot_prns.size, width), int)
@@ -228,9 +246,11 @@ def _table(prns: np.ndarray, slot_prns: np.ndarray, columns: dict, valid: np.nda
         present[s, : rows.size] = True
     take = lambda values: jnp.asarray(np.where(present, np.asarray(values, float)[index], 0.0), dtype)  # noqa: E731
     orbit = Orbit(**{name: take(columns[name]) for name in Orbit._fields})
-    return OrbitTable(orbit, jnp.asarray(present & np.asarray(valid)[index]),
+    raw = Orbit(**{name: np.asarray(columns[name], float)[index] for name in Orbit._fields})
+    problem = np.where(present, np.asarray(orbit_problem(raw)), 0)
+    return OrbitTable(orbit, jnp.asarray(present & np.asarray(valid)[index] & (problem == 0)),
                       jnp.asarray(np.where(present, np.asarray(validity, float)[index], 0.0), dtype),
-                      jnp.asarray(slot_prns, jnp.int32))
+                      jnp.asarray(slot_prns, jnp.int32), jnp.asarray(problem, jnp.int32))
 
 
 def ephemeris_table(ephemerides: Ephemerides, reference_week: int, slot_prns=None,
@@ -291,11 +311,12 @@ def select_orbits(table: OrbitTable, t: Array) -> tuple[Orbit, Array]:
     """Each slot's record for epoch ``t``: ``(orbit with (S,) leaves, (S,) bool available)``.
 
     The record with the smallest ``|t - toe|`` among the valid ones within their
-    validity (RTKLIB's ``seleph`` rule); a slot with none is unavailable (its orbit is
-    then a valid record's elements or zeros, never to be used).
+    validity (RTKLIB's ``seleph`` rule), never one that describes no orbit
+    (``orbit_problem``); a slot with none is unavailable (its orbit is then a valid
+    record's elements or zeros, never to be used).
     """
     age = jnp.abs(_wrap_half_week(t - table.orbit.toe))
-    usable = table.valid & (age <= table.validity)
+    usable = table.valid & (age <= table.validity) & (orbit_problem(table.orbit) == 0)
     index = jnp.argmin(jnp.where(usable, age, jnp.inf), axis=1)
     orbit = jax.tree_util.tree_map(lambda leaf: jnp.take_along_axis(leaf, index[:, None], axis=1)[:, 0], table.orbit)
     return orbit, jnp.any(usable, axis=1)

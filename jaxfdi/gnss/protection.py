@@ -34,7 +34,7 @@ from jax import Array
 
 from jaxfdi.gnss.least_squares import MaskedQR, masked_qr, solve_upper, thin_q
 from jaxfdi.gnss.positioning import PositionFix
-from jaxfdi.gnss.raim import RaimTables, whitened
+from jaxfdi.gnss.raim import RaimTables, check_tables, whitened
 
 #: (horizontal, vertical) alert limits [m]; inf: no vertical requirement
 ALERT_LIMITS = {
@@ -73,6 +73,7 @@ def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tup
         hal, val = ALERT_LIMITS[operation]
     else:
         hal, val = operation
+    check_tables(tables, fix)
     h, _ = whitened(fix)
     qr = masked_qr(h, fix.used) if qr is None else qr
     q1 = thin_q(qr)

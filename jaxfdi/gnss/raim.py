@@ -100,6 +100,17 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
     return RaimTables(jnp.concatenate([inf, threshold]), jnp.concatenate([jnp.full((1,), jnp.nan, dtype), lam]))
 
 
+def check_tables(tables: RaimTables, fix: PositionFix) -> None:
+    """Trace time: ``tables`` cover every degree of freedom the fix can have (``raim_tables``
+    of at least its S slots). A smaller table would clamp ``n - 4`` to its last entry: a
+    threshold and a protection level smaller than the true ones, with nothing to say so."""
+    slots = _checks.shape_of(fix.used)[0]
+    size = _checks.shape_of(tables.threshold)[0]
+    if size < slots - 3:
+        raise ValueError(f"tables: built for {size + 3} satellite slots (raim_tables({size + 3})), but the fix has "
+                         f"{slots}: up to {slots - 4} degrees of freedom need raim_tables({slots}) or more")
+
+
 def whitened(fix: PositionFix) -> tuple[Array, Array]:
     """``(H_w, y_w)``: geometry and residuals divided by sigma, zero at unused slots."""
     h = jnp.where(fix.used[:, None], fix.geometry / fix.sigma[:, None], 0.0)
@@ -115,6 +126,7 @@ def parity_matrix(fix: PositionFix) -> tuple[Array, Array]:
 
 def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = None) -> ParityCheck:
     """Detection statistic, threshold and isolation statistics of one fix (module doc)."""
+    check_tables(tables, fix)
     h, y = whitened(fix)
     qr = masked_qr(h, fix.used) if qr is None else qr
     q1 = thin_q(qr)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import time
+import zipfile
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
@@ -181,18 +182,26 @@ def save_params(path: str | Path, raw: dict, parameterization: dict[str, Transfo
 
 
 def load_params(path: str | Path) -> tuple[dict, dict[str, Transform], dict]:
-    """``(raw, parameterization, meta)`` from a file written by ``save_params``."""
+    """``(raw, parameterization, meta)`` from a file written by ``save_params``; a file that
+    is not one (truncated, another format, a field missing) raises a ``ValueError`` naming
+    the file and what is wrong."""
     path = Path(path)
-    if path.suffix == ".json":
-        data = json.loads(path.read_text())
-        params, record, meta = data["params"], data["parameterization"], data["meta"]
-    elif path.suffix == ".npz":
-        with np.load(path) as data:
-            extra = json.loads(str(data["__record__"]))
-            params = {k[len("param/"):]: data[k] for k in data.files if k.startswith("param/")}
-        record, meta = extra["parameterization"], extra["meta"]
-    else:
+    if path.suffix not in (".json", ".npz"):
         raise ValueError(f"path: expected a .json or .npz file name, got {path.name!r}")
-    parameterization = {k: from_record(v["transform"], v["options"]) for k, v in record.items()}
-    params = {k: jnp.asarray(v) for k, v in params.items()}
+    try:
+        if path.suffix == ".json":
+            data = json.loads(path.read_text())
+            params, record, meta = data["params"], data["parameterization"], data["meta"]
+        else:
+            with np.load(path) as data:
+                extra = json.loads(str(data["__record__"]))
+                params = {k[len("param/"):]: data[k] for k in data.files if k.startswith("param/")}
+            record, meta = extra["parameterization"], extra["meta"]
+        parameterization = {k: from_record(v["transform"], v["options"]) for k, v in record.items()}
+        params = {k: jnp.asarray(v) for k, v in params.items()}
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile) as error:
+        what = f"missing field {error}" if isinstance(error, KeyError) else f"{type(error).__name__}: {error}"
+        raise ValueError(f"{path}: not a parameter file written by save_params ({what})") from None
     return unconstrain(parameterization, params), parameterization, meta

@@ -96,6 +96,14 @@ def f16_params(aero: str = "tables", profile: str = "stevens_lewis_2nd_ed", xcg:
     """
     if aero not in ("tables", "morelli"):
         raise ValueError(f"aero: expected 'tables' or 'morelli', got {aero!r}")
+    if mass is not None:
+        _checks.check_positive("mass", mass, "a positive mass [slug]")
+    _checks.check_scalar("xcg", xcg, 0.0, 1.0, meaning="a centre of gravity in [0, 1] of the mean chord")
+    if aileron_limit is not None:
+        _checks.check_scalar("aileron_limit", aileron_limit, 0.0, 90.0, low_open=True,
+                             meaning="an aileron deflection limit in (0, 90] degrees")
+    if jxz is not None:
+        _checks.check_scalar("jxz", jxz, meaning="a finite product of inertia [slug ft^2]")
     dtype = dtype or jnp.result_type(float)
     data = stevens_lewis_data()
     mg, lim = data["mass_geometry"], data["limits"]

@@ -34,6 +34,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
@@ -69,8 +70,20 @@ class TrimResult(NamedTuple):
 
 def trim_condition(airspeed, altitude=0.0, climb_angle=0.0, turn_rate=0.0, pull_up_rate=0.0,
                    dtype=None) -> TrimCondition:
-    """A ``TrimCondition``; arrays of equal shape give a stack (vmap over axis 0)."""
+    """A ``TrimCondition``; arrays of equal shape give a stack (vmap over axis 0). Checked
+    when concrete: a positive finite ``airspeed`` [ft/s], an ``altitude`` [ft] within the
+    data's validity (0 to 50 000 ft, the thrust tables' range), finite angles and rates."""
     dtype = dtype or jnp.result_type(float)
+    for name, value, valid, expected in (
+            ("airspeed", airspeed, lambda v: v > 0.0, "a positive finite airspeed [ft/s]"),
+            ("altitude", altitude, lambda v: (v >= 0.0) & (v <= 50000.0), "an altitude in [0, 50000] ft")):
+        _checks.check_real(name, value)
+        concrete = _checks.concrete(value)
+        if concrete is not None and not np.all(np.isfinite(concrete) & valid(concrete)):
+            raise ValueError(f"{name}: expected {expected}, got {_checks.received(concrete)}")
+    for name, value in (("climb_angle", climb_angle), ("turn_rate", turn_rate), ("pull_up_rate", pull_up_rate)):
+        _checks.check_real(name, value)
+        _checks.check_finite(name, value)
     values = [jnp.asarray(v, dtype) for v in (airspeed, altitude, climb_angle, turn_rate, pull_up_rate)]
     shape = jnp.broadcast_shapes(*(v.shape for v in values))
     return TrimCondition(*(jnp.broadcast_to(v, shape) for v in values))

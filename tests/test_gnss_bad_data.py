@@ -1,0 +1,102 @@
+"""GNSS integrity from the data at hand (issue 37): tables too small for the fix are
+refused, a satellite listed twice is refused, a broadcast record that describes no orbit
+is excluded alone with its reason, and a dead (infinite) pseudorange alarms on its
+satellite. References: the same computation on clean data (the record or satellite left
+out, the pseudorange not measured), and tables large enough, which must agree exactly."""
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxfdi.data import data_path
+from jaxfdi.gnss import (elevation_sigma, ephemeris_table, geodetic_to_ecef, geometry_fix, monitor_epoch,
+                         parity_check, protection_levels, raim_tables, read_rinex_nav, select_orbits,
+                         transmission_geometry)
+from jaxfdi.gnss.integrity import raim_output
+from jaxfdi.gnss.orbits import ORBIT_PROBLEMS, SPEED_OF_LIGHT
+
+SITE = geodetic_to_ecef(math.radians(37.5419), math.radians(127.0782), 60.0)
+T = 259200.0 + 2700.0
+CLOCK = 1234.5
+
+
+@pytest.fixture(scope="module")
+def ephemerides():
+    return read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n"))
+
+
+def _epoch(table):
+    """Noise-free pseudoranges of the satellites above 5 deg at T (NaN elsewhere), from
+    ``table``'s orbits, and the one compiled monitor for any table of 32 slots."""
+    orbit, ok = select_orbits(table, T)
+    _, ranges, _, clock = transmission_geometry(orbit, T - CLOCK / SPEED_OF_LIGHT, SITE)
+    fix = geometry_fix(table, T, SITE, math.radians(5.0), elevation_sigma)
+    return jnp.where(fix.used & ok, ranges + CLOCK - SPEED_OF_LIGHT * clock, jnp.nan)
+
+
+MONITOR = jax.jit(lambda table, rho, tables: monitor_epoch(*select_orbits(table, T), T, rho, tables, elevation_sigma))
+
+
+def test_tables_smaller_than_the_fix_are_refused_and_larger_ones_agree(ephemerides):
+    table = ephemeris_table(ephemerides, 2086)
+    rho = _epoch(table)
+    exact = MONITOR(table, rho, raim_tables(32))
+    assert int(exact.check.dof) >= 2
+    with pytest.raises(ValueError, match=r"tables: built for 8 satellite slots .* raim_tables\(32\)"):
+        parity_check(exact.fix, raim_tables(8))
+    with pytest.raises(ValueError, match="tables: built for 8"):
+        protection_levels(exact.fix, raim_tables(8))
+    larger = MONITOR(table, rho, raim_tables(40))
+    assert float(larger.check.threshold) == float(exact.check.threshold)
+    assert float(larger.protection.hpl) == float(exact.protection.hpl)
+
+
+def test_a_satellite_listed_twice_is_refused(ephemerides):
+    with pytest.raises(ValueError, match=r"slot_prns: .* PRN \[2\] more than once"):
+        ephemeris_table(ephemerides, 2086, slot_prns=[1, 2, 2, 3, 4, 5])
+
+
+def test_an_impossible_orbit_is_excluded_alone_with_its_reason(ephemerides):
+    """Three visible satellites get impossible records (eccentricity 1.5, sqrt(a) = 0, a
+    NaN element): the table refuses exactly those records and says why; the fix, the
+    parity test and the protection levels equal those of the clean table with the three
+    satellites not measured (to 1e-9 relative), and stay finite."""
+    clean = ephemeris_table(ephemerides, 2086)
+    rho = _epoch(clean)
+    visible = np.flatnonzero(np.isfinite(np.asarray(rho)))
+    prns = [int(clean.prn[s]) for s in visible[:3]]
+    eph = ephemerides
+    ecc, sqrt_a, crs = (np.array(a, float) for a in (eph.eccentricity, eph.sqrt_a, eph.crs))
+    ecc[eph.prn == prns[0]] = 1.5
+    sqrt_a[eph.prn == prns[1]] = 0.0
+    crs[eph.prn == prns[2]] = np.nan
+    broken = ephemeris_table(eph._replace(eccentricity=ecc, sqrt_a=sqrt_a, crs=crs), 2086)
+    problem = np.asarray(broken.problem)
+    for prn, code in zip(prns, (2, 3, 1)):
+        slot = int(np.flatnonzero(np.asarray(broken.prn) == prn)[0])
+        present = np.flatnonzero(np.asarray(clean.valid[slot]))
+        assert np.all(problem[slot, present] == code), ORBIT_PROBLEMS[code]
+        assert not np.any(np.asarray(broken.valid[slot]))
+    assert np.sum(problem > 0) == sum(int(np.sum(eph.prn == p)) for p in prns)
+    got = MONITOR(broken, rho, raim_tables(32))
+    want = MONITOR(clean, rho.at[visible[:3]].set(jnp.nan), raim_tables(32))
+    assert bool(got.fix.healthy) and np.all(np.isfinite(np.asarray(got.fix.position)))
+    for a, b in ((got.fix.position, want.fix.position), (got.check.statistic, want.check.statistic),
+                 (got.protection.hpl, want.protection.hpl)):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-6)
+    assert int(got.fix.num_used) == len(visible) - 3
+
+
+def test_a_dead_pseudorange_alarms_on_its_satellite_and_the_fix_leaves_it_out(ephemerides):
+    table = ephemeris_table(ephemerides, 2086)
+    rho = _epoch(table)
+    slot = int(np.flatnonzero(np.isfinite(np.asarray(rho)))[2])
+    dead = MONITOR(table, rho.at[slot].set(jnp.inf), raim_tables(32))
+    missing = MONITOR(table, rho.at[slot].set(jnp.nan), raim_tables(32))
+    np.testing.assert_allclose(dead.fix.position, missing.fix.position, rtol=1e-12)
+    decision = raim_output(dead).decision
+    assert bool(decision.alarm) and float(decision.statistic) == np.inf and int(decision.label) == 1 + slot
+    quiet = raim_output(missing).decision                      # NaN: not measured, no evidence
+    assert not bool(quiet.alarm) and int(quiet.label) == 0

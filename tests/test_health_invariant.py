@@ -241,7 +241,7 @@ FILTERS = {
 
 #: filters whose update keeps a dead channel (non-finite y) out of the state and reports it
 DEAD_CHANNEL_FILTERS = ("kalman unrolled", "kalman lapack", "kalman unrolled missing", "kalman lapack missing",
-                        "ekf", "ukf", "imm", "imm batch kernel", "mm", "time varying")
+                        "ekf", "ukf", "imm", "imm batch kernel", "mm", "time varying", "tskf")
 
 #: fields where -inf is a value (log of a zero probability), not a failure
 LOG_PROBABILITIES = ("log_mode_prob",)
@@ -249,17 +249,18 @@ LOG_PROBABILITIES = ("log_mode_prob",)
 
 def _nonfinite_steps(info, dead: np.ndarray) -> dict[str, np.ndarray]:
     """(cases, T) bool per floating field: the step's value of that field is not finite,
-    other than a dead channel's evidence (``filters._base``): NaN in the innovation
-    exactly where ``y`` was not finite (``dead`` (cases, T, m)), ``nis = +inf`` there."""
+    other than a dead channel's evidence (``filters._base``): NaN in the innovation (the
+    TSKF's residual) exactly where ``y`` was not finite (``dead`` (cases, T, m)), ``nis``
+    (the TSKF's statistic) ``+inf`` there."""
     bad = {}
     for name, value in info._asdict().items():
         value = np.asarray(value)
         if name == "healthy" or value.dtype.kind != "f":
             continue
         value = np.where(np.isneginf(value), 0.0, value) if name in LOG_PROBABILITIES else value
-        if name == "innovation" and value.shape == dead.shape:
+        if name in ("innovation", "residual") and value.shape == dead.shape:
             value = np.where(dead & np.isnan(value), 0.0, value)
-        if name == "nis":
+        if name in ("nis", "statistic"):
             value = np.where(dead.any(axis=-1) & np.isposinf(value), 0.0, value)
         bad[name] = ~np.all(np.isfinite(value.reshape(value.shape[:2] + (-1,))), axis=-1)
     return bad
@@ -285,7 +286,9 @@ def test_non_finite_output_implies_unhealthy(name):
             # a dead sensor is evidence, not ill health: reported, and the state stays sound
             assert healthy[i].all(), f"{name}: {case_name}: a dead channel made the filter unhealthy"
             step = np.flatnonzero(~np.isfinite(CASES.ys[i]).all(axis=-1))[0]
-            evidence = (np.asarray(info.nis)[i, step] == np.inf if hasattr(info, "nis")
-                        else np.asarray(info.dead)[i, step].any())
+            if hasattr(info, "dead"):
+                evidence = np.asarray(info.dead)[i, step].any()
+            else:
+                evidence = np.asarray(info.nis if hasattr(info, "nis") else info.statistic)[i, step] == np.inf
             if not (name.endswith("missing") and case_name.startswith("y NaN")):  # there NaN is 'not measured'
                 assert evidence, f"{name}: {case_name}: the dead channel at step {step} is not reported"

@@ -56,7 +56,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, run_filter
+from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, report_dead, run_filter
 from jaxfdi.filters.unknown_input import check_decoupling, diffuse_log_likelihood, unbiased_minimum_variance_gain
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
@@ -140,9 +140,10 @@ class TSKFInfo(NamedTuple):
     filtered_cov: Array    # (n, n) P[k|k] = P_bar + V Pb V^T
     bias_mean: Array       # (p,)   b[k|k], the fault estimate
     bias_cov: Array        # (p, p) Pb[k|k]
-    residual: Array        # (m,)   r = y - C x[k|k] - D u - Fs b[k|k]  (eqs. 13, 15)
+    residual: Array        # (m,)   r = y - C x[k|k] - D u - Fs b[k|k]  (eqs. 13, 15); NaN where y is dead
     residual_cov: Array    # (m, m) W, its exact covariance (rank m - q)
-    statistic: Array       # ()     lambda = r^T W^+ r ~ chi2(m - q) under the filter's hypothesis
+    statistic: Array       # ()     lambda = r^T W^+ r ~ chi2(m - q) under the filter's hypothesis; +inf
+                           #        with a dead (non-finite) component of y, which the update did not use
     log_likelihood: Array  # ()     log-density of the decoupled innovation
     healthy: Array         # ()     bool: S_bar, S_b, P[k|k] positive definite, all finite
 
@@ -206,6 +207,9 @@ def two_stage_kalman_filter(
         prior_mean = x_bar + mm(V, b)
         Fs = sensor_matrix(direction, model, prior_mean, u)
         H_b = mm(model.C, V) + Fs                                          # (m, p)
+        # a dead (non-finite) component takes its prediction: a zero innovation (filters._base)
+        dead = ~jnp.isfinite(y)
+        y = jnp.where(dead, mm(model.C, prior_mean) + mm(model.D, u) + mm(Fs, b), y)
 
         # bias-free filter
         r_bar = y - mm(model.C, x_bar) - mm(model.D, u)
@@ -258,6 +262,7 @@ def two_stage_kalman_filter(
             & jnp.all(jnp.isfinite(x_bar_next)) & jnp.all(jnp.isfinite(b_post))
             & jnp.isfinite(statistic) & jnp.isfinite(log_lik)
         )
+        residual, statistic = report_dead(residual, statistic, dead)
         info = TSKFInfo(mean_post, cov_post, b_post, Pb_post, residual, residual_cov, statistic, log_lik, healthy)
         return TSKFState(x_bar_next, P_bar_next, b_post, Pb_next, V_next), info
 

@@ -1,0 +1,176 @@
+"""Property-based checks of the public API on malformed inputs (issue 37 item 5).
+
+Random inputs drawn by hypothesis (derandomised: the same examples on every run, so CI
+is reproducible). The property everywhere: a clear error naming the argument, or a
+flagged output (an alarm, ``nis = +inf``, a NaN innovation on the dead channel), never
+a finite wrong answer and never a silent NaN.
+
+===========================  ==============================================================
+module                       classes of input tried
+===========================  ==============================================================
+``filters.kalman_filter``    measurements with NaN, +inf, -inf and finite values in any
+``filters.unscented_...``    component (with and without ``missing_measurements``)
+``detection.chi2``           NIS streams with NaN/inf anywhere; ``chi2_threshold`` with
+                             dof and pfa anywhere on the real line, NaN and inf
+``detection.glrt``           innovations with NaN/inf in any components of any steps
+``detection.parity``         redundant measurements with NaN/inf in any channels
+``detection.frozen``         sigma with zeros, negatives, NaN, inf, wrong shapes; data with
+                             dead samples anywhere
+``faults.fault``             kinds, targets, negative or float components and onsets,
+                             non-finite magnitudes, effectiveness outside [0, 1]
+===========================  ==============================================================
+"""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.stats
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+import jaxfdi
+from jaxfdi.detection import chi2_detector, chi2_threshold, frozen_channel_detector, glrt_detector
+from jaxfdi.detection import parity as ps
+from jaxfdi.faults import fault
+from jaxfdi.filters import kalman_filter, unscented_kalman_filter
+from jaxfdi.models import engine_model
+from jaxfdi.models.linear import LinearGaussianModel
+from jaxfdi.riccati import steady_state_kalman
+
+SETTINGS = settings(max_examples=60, deadline=None, derandomize=True, database=None,
+                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+#: any float, the bad ones often
+ANY = st.one_of(st.floats(-1e3, 1e3), st.sampled_from([np.nan, np.inf, -np.inf]))
+
+MODEL = LinearGaussianModel(Phi=jnp.array([[1.0, 0.1], [0.0, 0.95]]), Gamma=jnp.zeros((2, 0)),
+                            C=jnp.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]), D=jnp.zeros((3, 0)),
+                            Q=0.01 * jnp.eye(2), R=0.1 * jnp.eye(3))
+
+
+def _filters():
+    """One jitted step of each filter from the same prior: ``y -> info``."""
+    filters = {
+        "kf": kalman_filter(MODEL),
+        "kf missing": kalman_filter(MODEL, missing_measurements=True),
+        "ukf": unscented_kalman_filter(lambda x, u, p: MODEL.Phi @ x, lambda x, u, p: MODEL.C @ x, MODEL.Q, MODEL.R),
+    }
+
+    def stepper(f):
+        prior = f.init(jnp.array([0.3, -0.2]), jnp.eye(2))
+        return jax.jit(lambda y: f.step(prior, y, jnp.zeros(0))[1])
+
+    return {name: stepper(f) for name, f in filters.items()}
+
+
+STEPS = _filters()
+
+
+@SETTINGS
+@given(y=hnp.arrays(np.float64, (3,), elements=ANY), name=st.sampled_from(sorted(STEPS)))
+def test_a_filter_step_reports_every_dead_component_and_keeps_its_state(y, name):
+    info = STEPS[name](jnp.asarray(y))
+    dead = np.isinf(y) if name == "kf missing" else ~np.isfinite(y)
+    assert bool(info.healthy)
+    assert np.all(np.isfinite(np.asarray(info.filtered_mean))) and np.all(np.isfinite(np.asarray(info.filtered_cov)))
+    np.testing.assert_array_equal(np.isnan(np.asarray(info.innovation)), dead)
+    assert (float(info.nis) == np.inf) == bool(dead.any())
+    assert not np.isnan(float(info.nis)) and np.isfinite(float(info.log_likelihood))
+
+
+@SETTINGS
+@given(nis=hnp.arrays(np.float64, (12,), elements=st.one_of(st.floats(0.0, 50.0),
+                                                             st.sampled_from([np.nan, np.inf]))),
+       window=st.integers(1, 5))
+def test_a_chi2_window_alarms_while_it_holds_a_bad_value_and_is_the_sum_otherwise(nis, window):
+    detector = chi2_detector(1e9, window)
+    _, (statistic, alarm) = jax.lax.scan(detector.step, detector.init(), jnp.asarray(nis))
+    for k in range(nis.size):
+        held = nis[max(0, k - window + 1):k + 1]
+        if np.all(np.isfinite(held)):
+            assert not bool(alarm[k]) and float(statistic[k]) == pytest.approx(held.sum(), rel=1e-12, abs=1e-12)
+        else:
+            assert bool(alarm[k]) and float(statistic[k]) == np.inf
+
+
+@SETTINGS
+@given(dof=st.one_of(st.floats(-5.0, 200.0), st.sampled_from([np.nan, np.inf, 0.0])),
+       pfa=st.one_of(st.floats(-0.5, 1.5), st.sampled_from([np.nan, np.inf, 1e-300, 0.0, 1.0])))
+def test_chi2_threshold_is_scipys_or_names_the_bad_argument(dof, pfa):
+    try:
+        value = float(chi2_threshold(dof, pfa))
+    except ValueError as error:
+        assert str(error).startswith(("dof:", "pfa:")), error
+        return
+    assert 0 < dof < np.inf and 0 < pfa < 1
+    np.testing.assert_allclose(value, scipy.stats.chi2.isf(pfa, dof), rtol=1e-8)
+
+
+ENGINE = engine_model()
+STEADY = steady_state_kalman(ENGINE)
+GLRT = glrt_detector(ENGINE, STEADY.gain, STEADY.innovation_cov, 4, 30.0)
+GLRT_RUN = jax.jit(lambda e: jax.lax.scan(GLRT.step, GLRT.init(), e)[1])
+
+
+@SETTINGS
+@given(innovations=hnp.arrays(np.float64, (8, 5), elements=st.one_of(st.floats(-1.0, 1.0),
+                                                                     st.sampled_from([np.nan, np.inf, -np.inf]))))
+def test_the_glrt_alarms_on_every_step_with_a_dead_channel_and_names_the_first(innovations):
+    decision = GLRT_RUN(jnp.asarray(innovations))
+    for k, row in enumerate(innovations):
+        dead = ~np.isfinite(row)
+        if dead.any():
+            assert bool(decision.alarm[k]) and float(decision.statistic[k]) == np.inf
+            assert int(decision.label[k]) == 1 + 1 + int(np.argmax(dead))    # nu = 1, then the sensors
+        else:
+            assert np.isfinite(float(decision.statistic[k]))
+
+
+SPACE = ps.parity_space(jnp.asarray(np.random.default_rng(4).normal(size=(6, 3))), jnp.asarray([[0, 1], [2, 3], [4, 5]]))
+PARITY = jax.jit(lambda m: ps.parity_tests(SPACE, m))
+
+
+@SETTINGS
+@given(measurement=hnp.arrays(np.float64, (6,), elements=ANY))
+def test_parity_tests_name_exactly_the_dead_groups(measurement):
+    fd, fi = (np.asarray(a) for a in PARITY(jnp.asarray(measurement)))
+    dead_groups = ~np.isfinite(measurement).reshape(3, 2).all(axis=1)
+    if dead_groups.any():
+        assert float(fd) == np.inf and np.array_equal(fi, dead_groups.astype(float))
+    else:
+        assert np.isfinite(float(fd)) and np.all((fi >= -1e-12) & (fi <= 1 + 1e-12))
+
+
+@SETTINGS
+@given(sigma=st.one_of(hnp.arrays(np.float64, (2,), elements=ANY), hnp.arrays(np.float64, st.sampled_from([(), (2, 1)]),
+                                                                                   elements=st.floats(0.1, 2.0))),
+       data=hnp.arrays(np.float64, (10, 2), elements=st.one_of(st.floats(-5.0, 5.0), st.sampled_from([np.nan]))))
+def test_the_frozen_test_refuses_a_bad_sigma_and_never_reports_nan(sigma, data):
+    try:
+        detector = frozen_channel_detector(sigma, 4, 0.01, jnp.array([1, 2]))
+    except ValueError as error:
+        assert str(error).startswith("sigma:"), error
+        assert sigma.shape != (2,) or not np.all(np.isfinite(sigma) & (sigma > 0))
+        return
+    assert sigma.shape == (2,) and np.all(np.isfinite(sigma) & (sigma > 0))
+    _, decision = jax.lax.scan(detector.step, detector.init(), jnp.asarray(data))
+    assert not np.any(np.isnan(np.asarray(decision.statistic)))
+    dead_steps = ~np.isfinite(data).all(axis=1)
+    assert np.all(np.asarray(decision.alarm)[dead_steps])
+
+
+@SETTINGS
+@given(kind=st.sampled_from(["bias", "ramp", "stuck", "dead", "effectiveness", "scale"]),
+       target=st.sampled_from(["actuator", "sensor"]),
+       component=st.one_of(st.integers(-2, 4), st.floats(0.0, 3.0)),
+       onset=st.one_of(st.integers(-5, 50), st.just(2.5)),
+       magnitude=st.one_of(st.floats(-2.0, 2.0), st.sampled_from([np.nan, np.inf])))
+def test_a_fault_is_built_or_refused_by_name(kind, target, component, onset, magnitude):
+    try:
+        f = fault(kind, target, component, onset, magnitude)
+    except (ValueError, TypeError) as error:
+        assert str(error).split(":")[0] in ("kind", "component", "onset", "magnitude"), error
+        return
+    assert int(f.component) >= 0 and int(f.onset) >= 0 and np.isfinite(float(f.magnitude))
+    assert not (kind == "dead" and target == "actuator")
+    assert not (kind == "effectiveness" and not 0.0 <= magnitude <= 1.0)

@@ -241,7 +241,7 @@ FILTERS = {
 
 #: filters whose update keeps a dead channel (non-finite y) out of the state and reports it
 DEAD_CHANNEL_FILTERS = ("kalman unrolled", "kalman lapack", "kalman unrolled missing", "kalman lapack missing",
-                        "ekf", "ukf", "imm", "imm batch kernel", "mm", "time varying", "tskf")
+                        "ekf", "ukf", "imm", "imm batch kernel", "mm", "time varying", "tskf", "unknown input")
 
 #: fields where -inf is a value (log of a zero probability), not a failure
 LOG_PROBABILITIES = ("log_mode_prob",)

@@ -26,7 +26,15 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import ConditionedGaussian, Filter, GaussianState, check_step_inputs, gaussian_filter
+from jaxfdi.filters._base import (
+    ConditionedGaussian,
+    Filter,
+    GaussianState,
+    check_step_inputs,
+    gaussian_filter,
+    report_dead,
+    used_innovation,
+)
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -103,7 +111,8 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array) -> Fi
     Returns:
       a Gaussian ``Filter`` (``init``, ``step``, ``update``, ``predict``) whose
       ``FilterInfo.nis`` is the decoupled statistic, chi-square with ``m - q`` degrees of
-      freedom; ``innovation`` and ``innovation_cov`` are the full ``r`` and ``S``.
+      freedom; ``innovation`` and ``innovation_cov`` are the full ``r`` and ``S``. A dead
+      (non-finite) component of ``y`` is reported and not used (``filters._base``).
     """
     n, nu, m = validate_linear_model(model)
     q = check_decoupling(model, unknown_input)
@@ -112,7 +121,7 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array) -> Fi
 
     def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
         check_step_inputs(y, u, m, nu)
-        innovation = y - mm(model.C, state.mean) - mm(model.D, u)
+        innovation = used_innovation(y, mm(model.C, state.mean) + mm(model.D, u))  # a dead component: 0
         cross_cov = mm(state.cov, model.C.T)
         S = _linalg.symmetrize(mm(model.C, cross_cov) + model.R)
         chol_S = _linalg.cholesky(S)
@@ -123,6 +132,7 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array) -> Fi
         cov = _linalg.joseph_cov(state.cov, gain, model.C, model.R)
         healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(mean))
         log_lik = diffuse_log_likelihood(statistic, chol_S, model.C, E, m - q)
+        innovation, statistic = report_dead(innovation, statistic, ~jnp.isfinite(y))
         return ConditionedGaussian(mean, cov, innovation, S, log_lik, statistic, jnp.asarray(m - q, jnp.int32), healthy)
 
     def predict(post: GaussianState, u: Array) -> GaussianState:

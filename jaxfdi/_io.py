@@ -260,9 +260,22 @@ def study_output(out: str | Path) -> Iterator[Path]:
 
 
 def _remove(tmp: Path | None, created: list[Path]) -> None:
-    """The temporary folder, and the folders ``study_output`` created if still empty."""
-    if tmp is not None:
-        shutil.rmtree(tmp, ignore_errors=True)
-    for folder in created:  # innermost first
-        with contextlib.suppress(OSError):
-            folder.rmdir()
+    """The temporary folder, and the folders ``study_output`` created if still empty.
+
+    ``_signals_held`` blocks signals at the OS level, but not a Python-level interrupt
+    already on its way (``cli._signals_raise`` delivers a dropped one again 10 ms later):
+    one that lands mid-removal is held until the removal is done, then raised, so the
+    folder never stays behind (a CI run once left it, 2026-11-27)."""
+    interrupted = None
+    for _ in range(3):
+        try:
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
+            for folder in created:  # innermost first
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
+            break
+        except BaseException as error:  # re-raised below, once the folders are gone
+            interrupted = error
+    if interrupted is not None:
+        raise interrupted

@@ -203,6 +203,12 @@ def is_active(f: Fault, k: Array) -> Array:
     return jnp.where(f.kind == FaultKind.IMPULSE, live & (k == f.onset), live)
 
 
+def sensor_labels(num_inputs: int, num_sensors: int) -> Array:
+    """(num_sensors,) int: ``fault_label`` of a fault on each sensor, ``1 + num_inputs + j``
+    (what a dead channel ``j`` isolates to: ``detection.flag_dead``)."""
+    return 1 + int(num_inputs) + jnp.arange(int(num_sensors), dtype=jnp.int32)
+
+
 def fault_label(f: Fault, num_inputs: int) -> Array:
     """Integer mode label: 0 no fault, ``1 + i`` actuator i, ``1 + num_inputs + j`` sensor j.
 

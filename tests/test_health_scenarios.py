@@ -90,7 +90,8 @@ def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     from jaxfdi.metrics import fault_row
     from jaxfdi.models.fault_modes import noise_inflation_modes
     from jaxfdi.monitor import replay_detector
-    from jaxfdi.scenarios.engine import PAPER_TRANSITION, sensor_labels
+    from jaxfdi.faults import sensor_labels
+    from jaxfdi.scenarios.engine import PAPER_TRANSITION
 
     model, steps = engine_model(), 80
     us = jnp.full((steps, 1), 0.01)
@@ -102,7 +103,8 @@ def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     _, info = run_filter_batch(imm, imm.init(jnp.zeros(7), model.Q, jnp.asarray(PAPER_TRANSITION[0])), ys, us)
     assert np.asarray(info.healthy).all()
     detector = mode_probability_detector(0.5)
-    records = jax.vmap(lambda mu, ok, dead: replay_detector(detector, mu, NEVER, 0, ok, dead, sensor_labels(model)))(
+    labels = sensor_labels(*model.dims[1:])
+    records = jax.vmap(lambda mu, ok, dead: replay_detector(detector, mu, NEVER, 0, ok, dead, labels))(
         info.mode_prob, info.healthy, info.dead)
     blind = jax.vmap(lambda mu, ok: replay_detector(detector, mu, NEVER, 0, ok))(info.mode_prob, info.healthy)
     first_bad = [int(np.argmax(~np.isfinite(y).all(axis=1))) if not np.isfinite(y).all() else -1 for y in ys]

@@ -165,7 +165,7 @@ def nan_run():
     from jaxfdi.faults import fault
     from jaxfdi.models import engine_model
     from jaxfdi.monitor import monitor
-    from jaxfdi.scenarios.engine import sensor_labels
+    from jaxfdi.faults import sensor_labels
 
     model = engine_model()
     kf = jaxfdi.kalman_filter(model)
@@ -173,7 +173,7 @@ def nan_run():
     f = fault("bias", "sensor", 2, 20, 0.0, end=21)._replace(magnitude=jnp.asarray(jnp.nan))
     run = jax.jit(lambda key: monitor(jaxfdi.linear_simulator(model, f), kf, chi2_detector(30.0, 2), jnp.zeros(7),
                                       kf.init(jnp.zeros(7), model.Q), jnp.full((40, 1), 0.01), key, 20, True,
-                                      channel_labels=sensor_labels(model)))
+                                      channel_labels=sensor_labels(*model.dims[1:])))
     return run(jax.random.key(0))
 
 

@@ -62,6 +62,7 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi.detection.chi2 import Decision, Detector, _check_representable, chi2_threshold, flag_dead
+from jaxfdi.faults import sensor_labels
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 from jaxfdi.riccati import steady_state_kalman
 
@@ -259,14 +260,14 @@ def engine_detector(setup: DetectorSetup, whitener: Array, engine: GLREngine) ->
     (label ``1 + nu + j``, ``chi2.flag_dead``)."""
     m, dtype = setup.innovation_cov.shape[0], setup.innovation_cov.dtype
 
-    sensor_labels = 1 + setup.num_inputs + jnp.arange(m, dtype=jnp.int32)
+    channel_labels = sensor_labels(setup.num_inputs, m)
 
     def step(state, innovation: Array):
         _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
         innovation = jnp.asarray(innovation, dtype)
         state, result = engine.update(state, whiten_finite(whitener, innovation))
         decision, onset_offset = decide(setup, result)
-        return state._replace(onset_offset=onset_offset), flag_dead(decision, ~jnp.isfinite(innovation), sensor_labels)
+        return state._replace(onset_offset=onset_offset), flag_dead(decision, ~jnp.isfinite(innovation), channel_labels)
 
     return Detector(engine.init, step)
 

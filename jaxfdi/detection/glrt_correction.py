@@ -41,6 +41,7 @@ from jaxfdi.detection.glrt import (
     windowed_engine,
 )
 from jaxfdi.detection.glrt_recursive import recursive_engine
+from jaxfdi.faults import sensor_labels
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 from jaxfdi.riccati import steady_state_kalman
 
@@ -137,7 +138,7 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
         innovation = jnp.where(dead, 0.0, y - C @ state.mean - D @ u - h @ state.fault)  # a dead sensor: the prediction
         detector, result = engine.update(state.detector, whitener @ innovation)
         decision, offset = decide(setup, result)
-        dead_decision = flag_dead(decision, dead, 1 + nu + jnp.arange(m, dtype=jnp.int32))
+        dead_decision = flag_dead(decision, dead, sensor_labels(nu, m))
         direction = decision.label - 1
         alarm_run = jnp.where(decision.alarm, state.alarm_run + 1, 0)
         confirmed = alarm_run == confirm

@@ -49,6 +49,7 @@ from jaxfdi.detection.glrt import (
     glr_from_correlation,
     whiten_finite,
 )
+from jaxfdi.faults import sensor_labels
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -167,7 +168,7 @@ def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window
         decision, onset_offset = decide(setup, result)
         closed = Phi @ (jnp.eye(n, dtype=dtype) - gain @ C)
         errors_next = jnp.einsum("ab,obd->oad", closed, errors) + (g - Phi @ (gain @ h))
-        decision = flag_dead(decision, ~jnp.isfinite(innovation), 1 + nu + jnp.arange(m, dtype=jnp.int32))
+        decision = flag_dead(decision, ~jnp.isfinite(innovation), sensor_labels(nu, m))
         return TransientGLRTState(P_next, errors_next, buffer, table, correlation, information, count,
                                   onset_offset), decision
 

@@ -75,6 +75,7 @@ from jax import Array
 from jaxfdi import _checks, _linalg
 from jaxfdi.detection.chi2 import Decision, Detector, flag_dead
 from jaxfdi.detection.glrt import check_steady_state, fault_directions, fault_signatures, whiten_finite
+from jaxfdi.faults import sensor_labels
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -211,8 +212,8 @@ def known_change_detector(model: LinearGaussianModel, gain: Array, innovation_co
     _checks.check_covariance("innovation_cov", innovation_cov, m, definite=True)
     check_steady_state(model, gain=gain, innovation_cov=innovation_cov)
     signatures = fault_signatures(model, gain, fault_directions(model, actuator_feedthrough), window)
-    sensor_labels = 1 + model.Gamma.shape[1] + jnp.arange(m, dtype=jnp.int32)
-    return known_change_bank(signatures, innovation_cov, magnitudes, threshold, tail, isolation, sensor_labels)
+    return known_change_bank(signatures, innovation_cov, magnitudes, threshold, tail, isolation,
+                             sensor_labels(model.Gamma.shape[1], m))
 
 
 def known_change_by_onset(innovations: Array, signatures: Array, innovation_cov: Array, magnitudes: Array) -> Array:

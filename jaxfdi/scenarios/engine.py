@@ -44,7 +44,7 @@ import numpy as np
 
 from jaxfdi.detection.glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_detector, glrt_threshold
 from jaxfdi.detection.mode_probability import mode_probability_detector
-from jaxfdi.faults import Fault, fault, fault_label, stack_faults
+from jaxfdi.faults import Fault, fault, fault_label, sensor_labels, stack_faults
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.mm import multiple_model
@@ -218,13 +218,7 @@ def run_monitor(method: Method, model, us, key, f, keep_history=False):
     """One run of ``method`` on the engine with fault ``f`` (``monitor``: plant, filter, detector)."""
     return monitor(linear_simulator(model, f), method.filter, method.detector, jnp.zeros(7), method.init_state,
                    us, key, f.onset, keep_history, method.detector_input, method.estimate_delay,
-                   sensor_labels(model))
-
-
-def sensor_labels(model) -> jax.Array:
-    """(m,) the fault label of each sensor channel (0 none, then the actuators, then the
-    sensors): what a dead channel isolates to."""
-    return 1 + model.Gamma.shape[1] + jnp.arange(model.C.shape[0], dtype=jnp.int32)
+                   sensor_labels(*model.dims[1:]))
 
 
 class ScenarioRuns(NamedTuple):
@@ -504,7 +498,7 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
             detector = mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps)
             inputs = jax.vmap(jax.vmap(detector_input))(info)
             records = jax.vmap(lambda x, onset, ok, dead: replay_detector(detector, x, onset, delay, ok, dead,
-                                                                          sensor_labels(model)))(
+                                                                          sensor_labels(*model.dims[1:])))(
                 inputs, faults.onset, info.healthy, info.dead)
             return records, info.mode_prob
         return run

@@ -63,6 +63,8 @@ def main() -> None:
     baseline = history.statistic[-1].mean(axis=0)                       # (T, F) fault-free mean per step
     rows = []
     for c, (name, f) in enumerate(cases[:-1]):
+        if name in sv.HEALTH_CASES:   # a dead or frozen sensor has no additive/multiplicative kind
+            continue
         onset = int(f.onset)
         location = int(f.component) + (0 if int(f.target) == int(jaxfdi.faults.Target.ACTUATOR) else 2)
         mult = bool(is_multiplicative(f))

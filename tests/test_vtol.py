@@ -16,6 +16,7 @@ from jaxfdi.filters import run_filter, unknown_input_filter
 from jaxfdi.models import vtol
 from jaxfdi.models.linear import LinearGaussianModel
 from jaxfdi.scenarios.vtol import (
+    HEALTH_CASES,
     LOCATIONS,
     METHODS,
     calibrate_thresholds,
@@ -33,10 +34,14 @@ CALIBRATION_RUNS = 40
 # --- the unbiased minimum-variance (Kitanidis) filter --------------------------------
 
 def _kitanidis_reference(Phi, C, Q, R, E, x0, P0, ys):
-    """Independent NumPy UMV filter with explicit inverses (Kitanidis 1987, eq. 13)."""
+    """Independent NumPy UMV filter with explicit inverses (Kitanidis 1987, eq. 13); a
+    non-finite component of ``y`` is left out of that step (its rows of C and R dropped)."""
     x, P, means, stats_ = x0.copy(), P0.copy(), [], []
     n = len(x0)
+    C_all, R_all = C, R
     for y in ys:
+        seen = np.isfinite(y)
+        C, R, y = C_all[seen], R_all[np.ix_(seen, seen)], y[seen]
         S = C @ P @ C.T + R
         Si = np.linalg.inv(S)
         K0 = P @ C.T @ Si
@@ -88,6 +93,31 @@ def test_unknown_input_filter_matches_kitanidis_reference(umv_problem):
                                                 np.asarray(model.R), E, vtol.X0, np.eye(4), ys)
     np.testing.assert_allclose(np.asarray(info.filtered_mean), ref_means, rtol=0, atol=1e-9)
     np.testing.assert_allclose(np.asarray(info.nis), ref_stats, rtol=1e-8, atol=1e-10)
+
+
+def test_unknown_input_filter_leaves_missing_sensors_out_exactly(umv_problem):
+    """``missing_measurements=True``: NaN components (one sensor for 100 steps, another
+    for two) are dropped from that step's update and statistic, as the reference that
+    removes their rows of C and R; an infinite one is dropped too and reported dead."""
+    model, E, simulate, _ = umv_problem
+    _, ys = simulate(1.0)
+    ys = ys.copy()
+    ys[100:200, 2] = np.nan
+    ys[50:52, 0] = np.nan
+    ys[300, 1] = np.inf
+    autonomous = LinearGaussianModel(model.Phi, jnp.zeros((4, 1)), model.C, jnp.zeros((4, 1)), model.Q, model.R)
+    filt = unknown_input_filter(autonomous, E, missing_measurements=True)
+    info = jax.jit(lambda ys: run_filter(filt, filt.init(jnp.asarray(vtol.X0), jnp.eye(4)), ys,
+                                         jnp.zeros((ys.shape[0], 1)))[1])(jnp.asarray(ys))
+    ref_means, ref_stats = _kitanidis_reference(np.asarray(model.Phi), np.asarray(model.C), np.asarray(model.Q),
+                                                np.asarray(model.R), E, vtol.X0, np.eye(4), ys)
+    np.testing.assert_allclose(np.asarray(info.filtered_mean), ref_means, rtol=0, atol=1e-9)
+    nis = np.asarray(info.nis)
+    assert nis[300] == np.inf and np.isnan(np.asarray(info.innovation)[300, 1])
+    keep = np.arange(len(ys)) != 300
+    # 1e-7: the reference's explicit inverse of F^T S^-1 F (C E entries down to 1.7e-5)
+    np.testing.assert_allclose(nis[keep], ref_stats[keep], rtol=1e-7, atol=1e-10)
+    np.testing.assert_array_equal(np.asarray(info.num_observed)[[0, 50, 150, 300]], [3, 2, 2, 2])
 
 
 def test_unknown_input_filter_error_does_not_depend_on_d(umv_problem):
@@ -202,6 +232,7 @@ def test_online_decisions_equal_the_offline_mdwt_st(study, histories):
         for r in range(5):
             alarms = method_alarms(h.statistic[c, r], study.design, thresholds)[3]
             labels = np.asarray(isolate(location_symptoms(alarms, study.design.location, 6)))
+            labels = np.where(h.health_label[c, r] > 0, h.health_label[c, r], labels)   # ahead of the bank
             latched = np.asarray(h.isolated[c, r])
             offline_first = int(np.argmax(labels > 0)) if (labels > 0).any() else -1
             online_first = int(np.argmax(latched > 0)) if (latched > 0).any() else -1
@@ -220,6 +251,8 @@ def test_matched_location_has_the_smallest_statistic(histories, study):
     raw_threshold = np.array(list(study.config["thresholds"]["raw"].values()))
     rates = {}
     for c, (name, f) in enumerate(cases[:-1]):
+        if name in HEALTH_CASES:   # every statistic reads the dead or frozen sensor: the health test isolates
+            continue
         start = int(f.onset) + 30
         mean_stat = np.asarray(h.statistic[c, :, start:]).mean(axis=1)                  # (runs, 12)
         relative = mean_stat / fault_free
@@ -280,13 +313,65 @@ def test_s3_step_detected_by_mdwt_st_within_eight_steps_without_false_alarm(stud
     # calibration puts each method's thresholds just above the largest of the calibration
     # runs, so a new fault-free run (here: the 120 steps before the onset) raises a symptom
     # with probability <= 1 / (CALIBRATION_RUNS + 1) (exchangeability); the count in RUNS
-    # runs is then at most Binomial(RUNS, 1/41); 1 - 1e-3 quantile
+    # runs is then at most Binomial(RUNS, p), p = 1/41 plus the channel-health test's
+    # union bound (4 sensors, 120 - 9 windows, pfa each); 1 - 1e-3 quantile
     false_alarm_runs = row["methods"]["MDWT-ST|ours"]["false_alarm_rate"] * RUNS
-    assert false_alarm_runs <= stats.binom.ppf(0.999, RUNS, 1 / (CALIBRATION_RUNS + 1)), false_alarm_runs
+    window, pfa = study.config["channel_health_test"]["window"], study.config["channel_health_test"]["pfa_per_window"]
+    p = 1 / (CALIBRATION_RUNS + 1) + 4 * (120 - window + 1) * pfa
+    assert false_alarm_runs <= stats.binom.ppf(0.999, RUNS, p), false_alarm_runs
     # per decision alone (Pfa 0.005, 30 decisions before the onset) 30 % of runs had one
     # no false isolation: the closed loop never latches a wrong or early fault
     assert row["online_false_isolation_rate"] == 0.0
     assert row["online_isolation_rate"] >= 0.9
+
+
+def test_dead_and_frozen_sensor_isolated_with_closed_form_delays(study):
+    """Sensor s3 dead (NaN from k = 100) and frozen (its k = 100 value held): every
+    method, with either threshold set, and the closed loop isolate s3 in every run, the
+    dead one at the onset and the frozen one when the health test's window holds only
+    frozen samples, ``window - 1`` steps after the onset (the onset sample is a live one,
+    ``detection.frozen``); no run is unhealthy (a dead sensor's +inf statistic is
+    evidence), nothing fires before the onset."""
+    window = study.config["channel_health_test"]["window"]
+    for name, delay in zip(HEALTH_CASES, (0, window - 1)):
+        row = _row(study, name)
+        assert row["unhealthy_runs"] == {"no_ftc": 0, "ftc": 0} and row["runs"] == RUNS, name
+        for key, m in row["methods"].items():
+            assert m["isolation_rate"] == 1.0, (name, key, m)
+            if key.endswith("|ours"):   # the paper's thresholds alarm before the onset: no clean run to time
+                assert m["isolation_delay_median"] == delay, (name, key, m)
+        assert row["online_isolation_rate"] == 1.0 and row["online_delay_median"] == delay, name
+        assert row["online_false_isolation_rate"] == 0.0, name
+        c = [r["fault"] for r in study.rows].index(name)
+        isolated = np.asarray(study.records.isolation_step[c])                      # (ftc, runs, thresholds, methods)
+        # every method: at the health test's step at the latest (the bank may name s3 first)
+        assert np.all((isolated >= 100) & (isolated <= 100 + delay)), (name, isolated)
+
+
+def test_the_controller_never_gets_a_non_finite_estimate(histories):
+    """A dead sensor (NaN) never reaches the feedback: the estimator takes its prediction
+    for the dead component (``filters._base``) in every run of every case."""
+    cases, h = histories
+    assert np.all(np.isfinite(np.asarray(h.estimate))), [name for c, (name, _) in enumerate(cases)
+                                                         if not np.isfinite(np.asarray(h.estimate[c])).all()]
+    assert np.all(np.isfinite(np.asarray(h.control)))
+
+
+def test_the_health_test_is_silent_on_fault_free_runs(histories, study):
+    """The stuck-at test's false alarms are at most 4 sensors x (windows) x pfa (union
+    bound, ``detection.frozen``): over the fault-free steps of these histories (every
+    case before its onset, RUNS runs each) about 1200 windows per run set, so any alarm
+    at all has probability < 0.1 (the moving plant makes the true rate far smaller:
+    the bound holds for a constant signal); it fires nowhere."""
+    cases, h = histories
+    labels = np.asarray(h.health_label)
+    window = study.config["channel_health_test"]["window"]
+    windows = 0
+    for c, (name, f) in enumerate(cases):
+        before = min(int(f.onset), labels.shape[-1])
+        assert not labels[c, :, :before].any(), name
+        windows += before - window + 1
+    assert study.config["channel_health_test"]["pfa_per_window"] * 4 * windows * RUNS < 0.1
 
 
 def test_a2_effectiveness_estimate_within_005_after_30_steps(study):
@@ -350,7 +435,7 @@ def test_calibrate_rejects_nothing_silently(design):
 
 
 def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table(design):
-    """Run 0 gets a NaN sensor bias at step 100 (every filter goes NaN), run 1 a finite
+    """Run 0 gets a sensor bias of 1e250 at step 100 (finite, but the filters overflow), run 1 a finite
     one: run 0 is reported unhealthy at step 100 with FTC off and on, left out of the
     row's rates (they equal those of run 1 alone), and the table says so."""
     from jaxfdi import fault
@@ -359,7 +444,9 @@ def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table(design):
     steps = 160
     thresholds = jnp.asarray(np.stack([scenario.paper_thresholds(12)] * 2))
     f = fault("bias", "sensor", 2, 100, 0.7)
-    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), fault("bias", "sensor", 2, 100, 0.0)._replace(magnitude=jnp.asarray(jnp.nan)), f,
+    # a NaN sensor is a dead sensor, evidence (the next test); a finite value that
+    # overflows the filters' arithmetic (1e250^2) is what makes a run numerically bad
+    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), fault("bias", "sensor", 2, 100, 1e250), f,
                                     no_fault(), no_fault())       # runs 2, 3: the fault-free twins of 0, 1
     keys = jnp.concatenate([jax.random.split(jax.random.PRNGKey(0), 2)] * 2)
     run = jax.jit(jax.vmap(jax.vmap(lambda f, key, ftc: vtol_run(design, thresholds, key, f, ftc, steps),

@@ -20,7 +20,15 @@ controller). Step ``k``:
 5. the TSKF bank steps on ``(y, u)``; its statistics fill a ``2^M`` block; at each
    block's end the blockwise Haar denoiser (soft thresholding) decides, the symptoms
    are matched against the signature matrix and the first isolated fault is latched
-   (with FTC on, the controller switches at that step).
+   (with FTC on, the controller switches at that step);
+6. beside the bank, a channel-health test on the raw ``y`` (``detection.frozen``: a
+   stuck-at test per sensor, and ``chi2.flag_dead`` for a non-finite one) decides every
+   step; a dead or frozen sensor is latched as that sensor's location, ahead of the
+   bank, and with FTC on the estimator leaves the channel out of its update
+   (``unknown_input_filter(..., missing_measurements=True)``, which a NaN sensor gets
+   from its first sample) instead of compensating a bias. The bank's statistics read
+   every sensor, so a dead one makes all of them ``+inf``; only the health test can
+   say which.
 
 The bank may hold several filters per fault location (e.g. a multiplicative and an
 additive hypothesis): ``location`` maps filter -> location, the location's symptom is
@@ -40,6 +48,7 @@ from jax import Array
 
 from jaxfdi import _linalg
 from jaxfdi.control.eigenstructure import GainSchedule, scheduled_gain
+from jaxfdi.detection.frozen import FrozenState, frozen_channel_detector
 from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.detection.wavelet import haar_denoise
 from jaxfdi.faults import Fault, FaultKind
@@ -77,6 +86,8 @@ class LoopDesign(NamedTuple):
     c_mult: float
     levels: int
     Ts: float
+    frozen_window: int = 10      # samples of the channel-health (stuck-at) test
+    frozen_pfa: float = 1e-6     # its false-alarm probability per window and sensor (an upper bound)
 
 
 class LoopStep(NamedTuple):
@@ -90,6 +101,7 @@ class LoopStep(NamedTuple):
     isolated: Array     # () int: latched location + 1 (0: none yet)
     isolated_kind: Array  # () bool: latched fault is multiplicative
     healthy: Array      # () bool: every filter healthy
+    health_label: Array  # () int: location + 1 of a sensor the health test finds dead or frozen now, 0 none
 
 
 class Reconfiguration(NamedTuple):
@@ -112,6 +124,8 @@ class BankState(NamedTuple):
     kind: Array         # () bool: latched fault is multiplicative
     posterior: GaussianState
     reconfiguration: Reconfiguration
+    health: FrozenState  # the channel-health test's window
+    excluded: Array      # (m,) bool: sensors latched dead or frozen (not used by the estimator under FTC)
 
 
 class BankOutput(NamedTuple):
@@ -121,14 +135,31 @@ class BankOutput(NamedTuple):
     isolated: Array       # () int
     isolated_kind: Array  # () bool
     healthy: Array        # () bool
+    health_label: Array   # () int
 
 
 def _estimator(design: LoopDesign):
-    return unknown_input_filter(design.model, design.unknown_input)
+    # NaN: a sensor not used (dead, or excluded once found dead or frozen), left out exactly
+    return unknown_input_filter(design.model, design.unknown_input, missing_measurements=True)
 
 
 def _bank_filter(design: LoopDesign, direction: FaultDirection):
     return two_stage_kalman_filter(design.model, direction, design.bias_walk, design.unknown_input)
+
+
+def sensor_locations(design: LoopDesign) -> Array:
+    """(m,) int: the fault label (location + 1) of each sensor, 0 for a sensor with no
+    location in the design."""
+    m = design.model.C.shape[0]
+    match = (~design.location_is_actuator)[None, :] & (design.location_component[None, :] == jnp.arange(m)[:, None])
+    return jnp.where(jnp.any(match, axis=1), jnp.argmax(match, axis=1) + 1, 0).astype(jnp.int32)
+
+
+def channel_health_test(design: LoopDesign):
+    """The stuck-at test of step 6 on the raw measurements: noise bound ``sqrt(diag R)``
+    of the nominal model, labels ``sensor_locations`` (a dead sample: ``flag_dead``)."""
+    sigma = jnp.sqrt(jnp.diagonal(design.model.R))
+    return frozen_channel_detector(sigma, design.frozen_window, design.frozen_pfa, sensor_locations(design))
 
 
 def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
@@ -140,6 +171,8 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
     block = 2**design.levels
     dtype = model.Phi.dtype
     estimator = _estimator(design)
+    health_test = channel_health_test(design)
+    channels = sensor_locations(design)
 
     def observe(state: BankState, k: Array, y: Array):
         isolated, kind, est = state.isolated, state.kind, state.estimator
@@ -152,7 +185,9 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
         # sensor compensation y_c = y - Fs b (eq. 31)
         direction = jax.tree_util.tree_map(lambda leaf: leaf[matched], design.directions)
         Fs = sensor_matrix(direction, model, est.mean, jnp.zeros((nu,), dtype))[:, 0]
-        y_used = jnp.where(on & ~is_actuator, y - Fs * b_hat, y)
+        excluded = on & state.excluded
+        y_used = jnp.where(on & ~is_actuator & ~jnp.any(excluded), y - Fs * b_hat, y)
+        y_used = jnp.where(excluded, jnp.nan, y_used)   # a dead or frozen sensor: not used
         post = estimator.update(est, y_used, jnp.zeros((nu,), dtype))
         loss = jnp.where(on & is_actuator & kind, jnp.clip(b_hat, 0.0, 1.0), 0.0)
         additive = jnp.where(on & is_actuator & ~kind, b_hat, 0.0) * jax.nn.one_hot(component, nu, dtype=dtype)
@@ -166,18 +201,23 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
         u_believed = u * (1.0 - view.loss * one_hot) - view.additive
         est_next = estimator.predict(state.posterior, u_believed)
         bank_next, info = jax.vmap(lambda d, s: _bank_filter(design, d).step(s, y, u))(design.directions, state.bank)
+        health, verdict = health_test.step(state.health, y)
+        health_label = jnp.where(verdict.alarm, verdict.label, 0)
         buffer = state.buffer.at[k % block].set(info.statistic)
         denoised = haar_denoise(buffer, design.levels, "soft", design.detail_sigma, design.c_mult)
         alarms = jnp.any(denoised >= design.threshold, axis=0)                       # (F,)
         label = isolate(location_symptoms(alarms, design.location, L))
         decide = (k % block == block - 1) & (state.isolated == 0) & (label > 0)
+        decide_health = (state.isolated == 0) & (health_label > 0)   # every step, ahead of the bank
         of_location = design.location == (label - 1)
         best = jnp.argmin(jnp.where(of_location, jnp.mean(buffer, axis=0), jnp.inf))
-        isolated = jnp.where(decide, label, state.isolated).astype(jnp.int32)
-        kind = jnp.where(decide, design.multiplicative[best], state.kind)
+        isolated = jnp.where(decide_health, health_label, jnp.where(decide, label, state.isolated)).astype(jnp.int32)
+        kind = jnp.where(decide_health, False, jnp.where(decide, design.multiplicative[best], state.kind))
+        excluded = state.excluded | (decide_health & (channels == health_label))
         output = BankOutput(state.posterior.mean, info.statistic, info.bias_mean[:, 0], isolated, kind,
-                            jnp.all(info.healthy))
-        return state._replace(estimator=est_next, bank=bank_next, buffer=buffer, isolated=isolated, kind=kind), output
+                            jnp.all(info.healthy), health_label.astype(jnp.int32))
+        return state._replace(estimator=est_next, bank=bank_next, buffer=buffer, isolated=isolated, kind=kind,
+                              health=health, excluded=excluded), output
 
     return FDI(step, observe)
 
@@ -185,7 +225,7 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
 def tskf_bank_init(design: LoopDesign) -> BankState:
     """The FDI's initial state: estimator and bank started at the plant's ``x0``."""
     model = design.model
-    n, nu = model.Phi.shape[0], model.Gamma.shape[1]
+    n, nu, m = model.Phi.shape[0], model.Gamma.shape[1], model.C.shape[0]
     dtype = model.Phi.dtype
     x0 = design.plant_x0[:n]
 
@@ -196,7 +236,8 @@ def tskf_bank_init(design: LoopDesign) -> BankState:
     idle = Reconfiguration(x0, jnp.zeros((), dtype), jnp.zeros((), jnp.int32), jnp.zeros((nu,), dtype))
     return BankState(prior, jax.vmap(bank_init)(design.directions),
                      jnp.zeros((2**design.levels, design.location.shape[0]), dtype),
-                     jnp.zeros((), jnp.int32), jnp.zeros((), bool), GaussianState(prior.mean, prior.cov), idle)
+                     jnp.zeros((), jnp.int32), jnp.zeros((), bool), GaussianState(prior.mean, prior.cov), idle,
+                     channel_health_test(design).init(), jnp.zeros((m,), bool))
 
 
 def reconfigurable_pi(design: LoopDesign) -> Controller:
@@ -239,7 +280,7 @@ def run_closed_loop(design: LoopDesign, key: Array, fault: Fault, ftc: Array, st
     trace = result.history
     (_, estimator_healthy), out = trace.view, trace.output
     return LoopStep(trace.sensed.state[:, :n], out.estimate, trace.control, out.statistic, out.bias, out.isolated,
-                    out.isolated_kind, out.healthy & estimator_healthy)
+                    out.isolated_kind, out.healthy & estimator_healthy, out.health_label)
 
 
 def is_multiplicative(fault: Fault) -> Array:

@@ -31,7 +31,9 @@ from jaxfdi.filters._base import (
     Filter,
     GaussianState,
     check_step_inputs,
+    dead_components,
     gaussian_filter,
+    mask_innovation_cov,
     report_dead,
     used_innovation,
 )
@@ -100,19 +102,25 @@ def diffuse_log_likelihood(statistic: Array, chol_S: Array, C: Array, unknown_in
     return -0.5 * (statistic + log_det + dof * math.log(2.0 * math.pi))
 
 
-def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array) -> Filter:
+def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array, missing_measurements: bool = False) -> Filter:
     """Kitanidis's unbiased minimum-variance filter, decoupling ``E d``.
 
     Args:
       model: the nominal ``LinearGaussianModel``.
       unknown_input: (n, q) distribution ``E`` of the unknown input (concrete), with
         ``rank(C E) = rank(E) = q <= m``.
+      missing_measurements: NaN components of ``y`` are not measured: their rows of ``C``
+        are left out of the update, the decoupling and the statistic (``chi2(m_obs - q)``),
+        as in ``kalman.joseph_update``. Decoupling then needs ``rank(C_obs E) = q``; where
+        the remaining sensors lose it the step is unhealthy.
 
     Returns:
       a Gaussian ``Filter`` (``init``, ``step``, ``update``, ``predict``) whose
       ``FilterInfo.nis`` is the decoupled statistic, chi-square with ``m - q`` degrees of
-      freedom; ``innovation`` and ``innovation_cov`` are the full ``r`` and ``S``. A dead
-      (non-finite) component of ``y`` is reported and not used (``filters._base``).
+      freedom (``num_observed`` holds them: ``m_obs - q`` with missing measurements);
+      ``innovation`` and ``innovation_cov`` are the full ``r`` and ``S``. A dead component
+      of ``y`` (non-finite; with ``missing_measurements`` infinite) is reported and not
+      used (``filters._base``).
     """
     n, nu, m = validate_linear_model(model)
     q = check_decoupling(model, unknown_input)
@@ -122,18 +130,26 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array) -> Fi
     def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
         check_step_inputs(y, u, m, nu)
         innovation = used_innovation(y, mm(model.C, state.mean) + mm(model.D, u))  # a dead component: 0
-        cross_cov = mm(state.cov, model.C.T)
-        S = _linalg.symmetrize(mm(model.C, cross_cov) + model.R)
+        C, R, dof = model.C, model.R, jnp.asarray(m - q, jnp.int32)
+        if missing_measurements:
+            mask = jnp.isfinite(y)
+            C = jnp.where(mask[:, None], C, 0.0)
+            R = jnp.where(mask[:, None] & mask[None, :], R, 0.0)
+            dof = (jnp.sum(mask) - q).astype(jnp.int32)
+        cross_cov = mm(state.cov, C.T)
+        S = _linalg.symmetrize(mm(C, cross_cov) + R)
+        if missing_measurements:   # a missing component: unit variance, uncorrelated, innovation 0
+            S = mask_innovation_cov(S, mask)
         chol_S = _linalg.cholesky(S)
-        gain, basis = unbiased_minimum_variance_gain(cross_cov, chol_S, model.C, E)
+        gain, basis = unbiased_minimum_variance_gain(cross_cov, chol_S, C, E)
         decoupled = mm(basis.T, _linalg.whiten(chol_S, innovation))
         statistic = jnp.sum(decoupled**2)
         mean = state.mean + mm(gain, innovation)
-        cov = _linalg.joseph_cov(state.cov, gain, model.C, model.R)
+        cov = _linalg.joseph_cov(state.cov, gain, C, R)
         healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(mean))
-        log_lik = diffuse_log_likelihood(statistic, chol_S, model.C, E, m - q)
-        innovation, statistic = report_dead(innovation, statistic, ~jnp.isfinite(y))
-        return ConditionedGaussian(mean, cov, innovation, S, log_lik, statistic, jnp.asarray(m - q, jnp.int32), healthy)
+        log_lik = diffuse_log_likelihood(statistic, chol_S, C, E, dof)
+        innovation, statistic = report_dead(innovation, statistic, dead_components(y, missing_measurements))
+        return ConditionedGaussian(mean, cov, innovation, S, log_lik, statistic, dof, healthy)
 
     def predict(post: GaussianState, u: Array) -> GaussianState:
         mean = mm(model.Phi, post.mean) + mm(model.Gamma, u)

@@ -53,11 +53,12 @@ from jaxfdi.control.eigenstructure import effectiveness_gain_schedule, nominal_e
 from jaxfdi.control.lqr import lqr_pi
 from jaxfdi.detection.calibration import empirical_threshold, scale_to_run_false_alarm
 from jaxfdi.detection.chi2 import chi2_threshold, moving_window_sum
+from jaxfdi.detection.frozen import frozen_threshold
 from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.detection.wavelet import block_alarms, causal_detail_sigma, chi2_detail_sigma, haar_denoise
 from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
-from jaxfdi.metrics import delay_statistics, record_from_alarms, unhealthy_warning
+from jaxfdi.metrics import delay_statistics, record_from_alarms, step_health, unhealthy_warning
 from jaxfdi.models import vtol
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.study import Structure, Study, run_study
@@ -136,8 +137,19 @@ def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
         ("s2 scaling 0.05", fault("scale", "sensor", 1, onset, 0.05)),
         ("s3 step 0.7", fault("bias", "sensor", 2, 120, 0.7)),
         ("s4 ramp 0.5/s", fault("ramp", "sensor", 3, onset, 0.0, slope=0.5 * Ts)),
+        *health_faults(onset),
         ("none", no_fault()),
     ]
+
+
+#: beyond the paper (issue 37): sensor s3 dead (NaN from the onset) and frozen (its value
+#: at the onset held), found by the loop's channel-health test (``closed_loop``, step 6)
+HEALTH_CASES = ("s3 dead", "s3 frozen")
+
+
+def health_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
+    """The ``HEALTH_CASES``: sensor s3 dead and frozen from ``onset``."""
+    return list(zip(HEALTH_CASES, (fault("dead", "sensor", 2, onset), fault("stuck", "sensor", 2, onset))))
 
 
 def true_bias(f: Fault, k) -> jnp.ndarray:
@@ -285,6 +297,8 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
     def evaluate(thresholds):
         alarms = method_alarms(history.statistic, design, thresholds)             # (5, T, F)
         labels = isolate(location_symptoms(alarms, design.location, L))           # (5, T)
+        # the channel-health test (a dead or frozen sensor) decides ahead of every method
+        labels = jnp.where(history.health_label > 0, history.health_label, labels)
         fired = labels != 0   # some location inconsistent: the symptoms leave the no-fault column
         detected = jax.vmap(record_from_alarms, in_axes=(0, None))(fired, f.onset)
         isolated = jax.vmap(record_from_alarms, in_axes=(0, None))(labels == label_true, f.onset)
@@ -313,8 +327,9 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
 
 
 def step_health_series(history: LoopStep) -> jnp.ndarray:
-    """(T,) bool: the loop's filters healthy and every bank statistic finite."""
-    return history.healthy & jnp.all(jnp.isfinite(history.statistic), axis=-1)
+    """(T,) bool: the loop's filters healthy and no bank statistic NaN (``+inf``, a dead
+    sensor's, is evidence: ``metrics.step_health``)."""
+    return jax.vmap(step_health)(history.healthy, history.statistic)
 
 
 #: why the closed loop's "kind right" is 0 on the additive faults (issue 27, item 7;
@@ -404,6 +419,8 @@ def _summarise(name: str, f: Fault, records: RunRecord, twin_states: np.ndarray,
         return np.sqrt(np.mean(d**2, axis=-1))
 
     right = on.online_isolated == label
+    # a dead or frozen sensor has no additive/multiplicative kind and no bias to estimate
+    health = int(f.kind) in (FaultKind.DEAD, FaultKind.STUCK)
     row = {
         "fault": name, "onset": onset if faulty else None, "methods": methods,
         "online_isolation_rate": float(np.mean(right)) if faulty else float("nan"),
@@ -411,7 +428,9 @@ def _summarise(name: str, f: Fault, records: RunRecord, twin_states: np.ndarray,
         if faulty else float(np.mean(on.online_step >= 0)),
         "online_delay_median": _median(on.online_step[right & (on.online_step >= onset)] - onset)
         if faulty else float("nan"),
-        "online_kind_rate": float(np.mean(on.online_kind_right[right])) if faulty and right.any() else float("nan"),
+        "online_kind_rate": float(np.mean(on.online_kind_right[right])) if faulty and right.any() and not health
+        else float("nan"),
+        "sensor_health": health,
         "bias_true": [float(v) for v in np.median(off.bias_true, axis=0)],
         "bias_estimate_median": [float(v) for v in np.median(off.bias_estimate, axis=0)],
         "bias_error_median": [float(v) for v in np.median(np.abs(off.bias_estimate - off.bias_true), axis=0)],
@@ -524,6 +543,8 @@ def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopD
         "thresholds": {method: dict(zip(FILTER_NAMES, map(float, row))) for method, row in zip(METHODS, calibrated)},
         "paper_threshold": PAPER_THRESHOLD, "paper_window_threshold": PAPER_WINDOW_THRESHOLD,
         "unknown_inputs_decoupled": int(design.unknown_input.shape[1]),
+        "channel_health_test": {"window": int(design.frozen_window), "pfa_per_window": float(design.frozen_pfa),
+                                "threshold": float(frozen_threshold(design.frozen_window, design.frozen_pfa))},
     }
     return VTOLStudy(config, rows, records, design)
 
@@ -548,9 +569,10 @@ def _case_table(row: dict[str, Any]) -> str:
         lines.append(f"  closed loop (MDWT-ST, latched): isolated {row['online_isolation_rate']:.2f} "
                      f"(kind right {_fmt(row['online_kind_rate'], '.2f', 4)}), median delay "
                      f"{_fmt(row['online_delay_median'], '.0f', 3)} steps, wrong/early {row['online_false_isolation_rate']:.2f}")
-        lines.append(f"  fault estimate (matched filter), median: {row['bias_estimate_median'][0]:.3f} at onset+"
-                     f"{ESTIMATE_AFTER} (true {row['bias_true'][0]:.3f}, |error| {row['bias_error_median'][0]:.3f}); "
-                     f"{row['bias_estimate_median'][1]:.3f} at the end (true {row['bias_true'][1]:.3f})")
+        if not row.get("sensor_health"):
+            lines.append(f"  fault estimate (matched filter), median: {row['bias_estimate_median'][0]:.3f} at onset+"
+                         f"{ESTIMATE_AFTER} (true {row['bias_true'][0]:.3f}, |error| {row['bias_error_median'][0]:.3f}); "
+                         f"{row['bias_estimate_median'][1]:.3f} at the end (true {row['bias_true'][1]:.3f})")
     else:
         lines.append(f"  closed loop (MDWT-ST, latched): false isolations {row['online_false_isolation_rate']:.2f}")
     lines.append(f"  tracking error |r - H x| RMS after onset: no FTC {row['tracking_error_no_ftc']:.3f}, "

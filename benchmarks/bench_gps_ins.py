@@ -43,11 +43,10 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxfdi import _io  # noqa: E402
-from jaxfdi.detection.chi2 import chi2_detector  # noqa: E402
 from jaxfdi.gnss import integrity as gnss_integrity  # noqa: E402
 from jaxfdi.gnss import measurements  # noqa: E402
 from jaxfdi.ins import error_state, imu, integrity, plant, scst, trajectory  # noqa: E402
-from jaxfdi.ins.loosely_coupled import GpsFix, loosely_coupled_filter  # noqa: E402
+from jaxfdi.ins.loosely_coupled import GpsFix  # noqa: E402
 from jaxfdi.ins.mechanization import NavState  # noqa: E402
 from jaxfdi.loop import Plant, combine_scorers, detection_scorer, feedforward, run_loop  # noqa: E402
 from jaxfdi.scenarios import gps_ins  # noqa: E402
@@ -85,16 +84,15 @@ def make_fixes(key, flight, position_cov):
 
 
 def design():
-    chi2_limit, scst_limit = gps_ins.thresholds()
-    return (loosely_coupled_filter(imu.noise_model(MODEL), 1.0 / gps_ins.IMU_RATE),
-            chi2_detector(chi2_limit, gps_ins.CHI2_WINDOW), scst.state_chi2_test(gps_ins.SCST_PERIOD, scst_limit))
+    """The study's filter and tests (the IMU health test too: the NumPy peer has none)."""
+    return gps_ins.design(MODEL, 1.0 / gps_ins.IMU_RATE)
 
 
 def initial(flight):
-    ins_filter, chi2, test = design()
+    ins_filter, chi2, test, health = design()
     nav0 = NavState(flight.position[0], flight.velocity[0], flight.attitude[0])
     cov0 = gps_ins.initial_covariance(MODEL)
-    return integrity.GpsInsFdiState(ins_filter.init(nav0, cov0), chi2.init(), test.init(15)), cov0
+    return integrity.GpsInsFdiState(ins_filter.init(nav0, cov0), chi2.init(), test.init(15), health.init()), cov0
 
 
 # --- jaxfdi ---------------------------------------------------------------------------------
@@ -118,8 +116,7 @@ def imu_fix_plant(flight, position_cov, fix_position, fix_velocity, replay=None)
 
 def jax_flights(flight, position_cov, keys):
     """All flights: scores of both tests (and the final INS position, to keep it live)."""
-    ins_filter, chi2, test = design()
-    fdi = integrity.ins_fdi(ins_filter, chi2, test)
+    fdi = integrity.ins_fdi(*design())
     T = position_cov.shape[0]
 
     def one(key):
@@ -347,10 +344,9 @@ def check_agreement(flight, position_cov, epochs: int) -> dict:
     errors = imu.draw_errors(jax.random.fold_in(key, 1), MODEL)
     samples = jax.vmap(lambda k, s: imu.measure(s, errors, jax.random.fold_in(key, k), MODEL, 0.01))(
         jnp.arange(epochs), flight.imu)
-    ins_filter, chi2, test = design()
     state0, _ = initial(flight)
     result = run_loop(imu_fix_plant(flight, position_cov, position, velocity, replay=samples),
-                      integrity.ins_fdi(ins_filter, chi2, test), feedforward(), errors, state0, key, epochs,
+                      integrity.ins_fdi(*design()), feedforward(), errors, state0, key, epochs,
                       exogenous=jnp.zeros((epochs, 0)), keep_history=True)
     out = result.history.output
     stats_np, final_np = numpy_flight(flight, position_cov, position, velocity, None, np.asarray(samples))

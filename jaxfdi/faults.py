@@ -274,7 +274,6 @@ def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> 
       ``(faulty signal, new held value)``.
     """
     on_this = (f.target == target) & is_active(f, k)
-    one_hot = jax.nn.one_hot(f.component, signal.shape[0], dtype=signal.dtype)
     s = signal[jnp.clip(f.component, 0, signal.shape[0] - 1)]
     held = jnp.where((k == f.onset) & (f.target == target), s, held)
     elapsed = (k - f.onset).astype(signal.dtype)
@@ -287,6 +286,7 @@ def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> 
             f.kind == FaultKind.EFFECTIVENESS,
             f.kind == FaultKind.STUCK,
             f.kind == FaultKind.STOP,
+            f.kind == FaultKind.DEAD,
         ],
         [
             s + f.magnitude,
@@ -296,13 +296,13 @@ def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> 
             (1 - f.magnitude) * s,
             held,
             jnp.zeros_like(s),
+            jnp.full_like(s, jnp.nan),
         ],
         s,
     ).astype(signal.dtype)
-    faulty_signal = jnp.where(on_this, signal + one_hot * (faulty - s), signal)
-    # a dead component is NaN alone (one_hot * NaN would spread it over every component)
-    dead = on_this & (f.kind == FaultKind.DEAD) & (jnp.arange(signal.shape[0]) == f.component)
-    return jnp.where(dead, jnp.nan, faulty_signal).astype(signal.dtype), held
+    # the component takes the faulty value itself (a held value is held to the last bit)
+    here = on_this & (jnp.arange(signal.shape[0]) == f.component)
+    return jnp.where(here, faulty, signal).astype(signal.dtype), held
 
 
 def apply_faults(faults: Fault, k: Array, signal: Array, target: int, held: Array) -> tuple[Array, Array]:

@@ -146,12 +146,74 @@ def test_bad_arguments_are_refused_by_name():
     with pytest.raises(ValueError, match="cov"):
         filt.init(_nav(), -jnp.eye(15))
     flight = plant.flight_tables(trajectory.stationary(PARK, 3.0), 2)
-    stuck = jaxfdi.fault("stuck", "sensor", 3, 1)
-    with pytest.raises(ValueError, match="imu_fault"):
-        plant.gps_ins_plant(None, 0.0, flight, jnp.ones((2, 5), bool), jnp.ones((2, 5)), imu.hg1900(),
-                            imu_fault=stuck)
     with pytest.raises(ValueError, match="imu_fault"):
         plant.gps_ins_plant(None, 0.0, flight, jnp.ones((2, 5), bool), jnp.ones((2, 5)), imu.hg1900(),
                             imu_fault=jaxfdi.fault("bias", "sensor", 7, 1, 1e-4))
     with pytest.raises(ValueError, match="trajectory: expected"):
         plant.flight_tables(trajectory.stationary(PARK, 3.0), 5)
+
+
+def test_hold_last_finite_against_a_loop():
+    """A dead IMU sample is replaced by its channel's latest finite one (the previous
+    epoch's ``last`` before the first): brute force over a random NaN/inf pattern."""
+    rng = np.random.default_rng(4)
+    samples = rng.normal(size=(40, 6))
+    samples[rng.random((40, 6)) < 0.3] = np.nan
+    samples[:5, 2] = np.inf                     # dead from the epoch's start: ``last`` fills it
+    samples[:, 4] = np.nan                      # dead the whole epoch
+    last = rng.normal(size=6)
+    expected, held = samples.copy(), last.copy()
+    for i in range(40):
+        for j in range(6):
+            if np.isfinite(samples[i, j]):
+                held[j] = samples[i, j]
+            expected[i, j] = held[j]
+    filled, new_last = jax.jit(loosely_coupled.hold_last_finite)(jnp.asarray(samples), jnp.asarray(last))
+    np.testing.assert_array_equal(np.asarray(filled), expected)
+    np.testing.assert_array_equal(np.asarray(new_last), expected[-1])
+
+
+def test_a_dead_imu_channel_keeps_the_ins_finite():
+    """One epoch with the roll gyro NaN from its 30th sample equals the epoch with those
+    samples replaced by the 29th (the filter coasts on the last finite sample)."""
+    filt = loosely_coupled.loosely_coupled_filter(imu.noise_model(imu.hg1900()), 0.01)
+    state = filt.init(_nav(), jnp.eye(15) * 1e-2)
+    fix = GpsFix(_nav().position, _nav().velocity, jnp.eye(3), jnp.eye(3), jnp.asarray(False))
+    samples = np.tile([0.1, -0.2, -9.8, 0.01, 0.0, 0.002], (100, 1)) + np.random.default_rng(5).normal(size=(100, 6)) * 1e-3
+    dead = samples.copy()
+    dead[30:, 3] = np.nan
+    held = samples.copy()
+    held[30:, 3] = samples[29, 3]
+    step = jax.jit(filt.step)
+    (next_dead, info_dead), (next_held, _) = step(state, fix, jnp.asarray(dead)), step(state, fix, jnp.asarray(held))
+    assert bool(info_dead.healthy)
+    for a, b in zip(jax.tree_util.tree_leaves(next_dead), jax.tree_util.tree_leaves(next_held)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_a_stuck_imu_channel_holds_its_onset_sample_and_a_dead_one_is_nan():
+    """The plant's IMU faults act per sample: STUCK on the roll gyro from epoch 1 holds
+    epoch 1's first sample on every later sample; DEAD on the yaw gyro from epoch 2 is
+    NaN on that channel alone."""
+    from jaxfdi.data import data_path
+    from jaxfdi.gnss import orbits, rinex
+
+    table = orbits.ephemeris_table(rinex.read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
+    slots = table.prn.shape[0]
+    model = imu.hg1900()
+    flight = plant.flight_tables(trajectory.stationary(PARK, 4.0, rate=10.0), 3)
+    faults = jaxfdi.concat_faults(jaxfdi.fault("stuck", "sensor", 3, 1), jaxfdi.fault("dead", "sensor", 5, 2))
+    gps_ins = plant.gps_ins_plant(table, 262_000.0, flight, jnp.zeros((3, slots), bool), jnp.ones((3, slots)), model,
+                                  imu_fault=faults)
+    key = jax.random.PRNGKey(0)
+    state = gps_ins.init((jnp.zeros(2), imu.draw_errors(key, model)))
+    epochs = []
+    for k in range(3):
+        state, sensed = gps_ins.measure(state, jnp.asarray(k), jnp.zeros(0), jax.random.fold_in(key, k))
+        state, _ = gps_ins.advance(state, jnp.asarray(k), jnp.zeros(0), jax.random.fold_in(key, k))
+        epochs.append(np.asarray(sensed.measurement.imu))
+    first, second, third = epochs
+    assert np.unique(first[:, 3]).size == 10                     # live before the onset
+    np.testing.assert_array_equal(second[:, 3], second[0, 3])    # held from the onset epoch's first sample
+    np.testing.assert_array_equal(third[:, 3], second[0, 3])
+    assert np.isnan(third[:, 5]).all() and np.isfinite(third[:, :5]).all() and np.isfinite(second).all()

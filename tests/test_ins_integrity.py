@@ -15,7 +15,9 @@ Claims decided statistically, with a fixed seed:
 - both tests detect the 60 deg/h roll-gyro bias in every flight, and the mean and the
   median detection time decrease from 30 to 60 to 90 deg/h for both;
 - RAIM detects the impulse in every flight and an epoch RAIM rejects is not used; the
-  singular SCST matrix B at the propagators' first reset is reported, never used."""
+  singular SCST matrix B at the propagators' first reset is reported, never used;
+- the IMU health test isolates a dead and a frozen roll gyro in the onset epoch
+  (4 flights each) and is silent on the fault-free flights."""
 import json
 
 import numpy as np
@@ -80,6 +82,26 @@ def test_raim_decisions_and_the_reported_singular_B(study):
     assert np.all(condition[~valid] > study.config["scst"]["max_condition"])   # invalid only when B is bad
     assert np.all(np.asarray(free.scst)[~valid] == 0.0)                  # ... and then no decision
     assert valid.mean() > 0.9 and row["scst_invalid_epochs"] >= RUNS
+
+
+def test_dead_and_frozen_roll_gyro_isolated_in_the_onset_epoch(study):
+    """The IMU health test (stuck-at over 20 samples, a NaN sample dead) names the roll gyro
+    (label 1 + 3) in every flight, in the onset epoch: a dead channel at its first NaN
+    sample, a frozen one at the 20th sample of the onset epoch (all 20 equal: the held
+    value is the onset epoch's first sample), which at 20 Hz is still that epoch. The INS
+    coasts on the last finite sample, so no flight goes numerically bad. Fault-free, no
+    flight has an IMU health alarm: the union bound is 6 channels x 12 000 windows x 1e-9
+    per flight, 1.2e-3 for the 16 flights."""
+    rows = {r["fault"]: r for r in study.rows if r["case"] == "imu-health"}
+    assert sorted(rows) == ["dead", "frozen"]
+    for name, row in rows.items():
+        assert row["health_detected"] == 1.0 and row["health_isolated"] == 1.0, (name, row)
+        assert row["health_median_s"] == 0.0 and row["health_max_s"] == 0.0, (name, row)
+        assert row["health_false_alarm_runs"] == 0 and row["chi2_unhealthy_runs"] == 0, (name, row)
+        assert np.isfinite(np.asarray(study.results[f"imu roll gyro {name}"].series.position_error)).all()
+    free = study.results["fault-free"].health
+    assert np.all(np.asarray(free.first_alarm) < 0)
+    assert "IMU health test" in study.table() and "fault-free flights with an IMU health alarm: 0/16" in study.table()
 
 
 def test_table_json_and_figures(study, tmp_path):

@@ -94,11 +94,16 @@ def walk_biases(errors: ImuErrors, key: Array, model: ImuModel, interval: float)
                            gyro_bias=errors.gyro_bias + model.gyro_bias_walk * root * z[1])
 
 
+def sample_sigma(model: ImuModel, dt: float, dtype=None) -> Array:
+    """(6,) the white noise of one sample ``dt`` [s] long: ``[VRW] * 3 + [ARW] * 3`` over
+    ``sqrt(dt)`` (module doc)."""
+    dtype = dtype or jnp.result_type(float)
+    return jnp.asarray([model.velocity_random_walk] * 3 + [model.angle_random_walk] * 3, dtype) / math.sqrt(dt)
+
+
 def measure(true_samples: Array, errors: ImuErrors, key: Array, model: ImuModel, dt: float) -> Array:
     """(n, 6) measured samples of (n, 6) error-free ones (module doc)."""
     noise = jax.random.normal(key, true_samples.shape, true_samples.dtype)
     scale = jnp.concatenate([1.0 + errors.accel_scale, 1.0 + errors.gyro_scale])
     bias = jnp.concatenate([errors.accel_bias, errors.gyro_bias])
-    density = jnp.concatenate([jnp.full((3,), model.velocity_random_walk, true_samples.dtype),
-                               jnp.full((3,), model.angle_random_walk, true_samples.dtype)]) / math.sqrt(dt)
-    return true_samples * scale + bias + density * noise
+    return true_samples * scale + bias + sample_sigma(model, dt, true_samples.dtype) * noise

@@ -14,6 +14,12 @@ Each GPS epoch:
    91.95 at 0.005). A coasted epoch leaves the window as it was and decides nothing.
 4. **SCST** (``scst.state_chi2_test``) on the filter's corrections and covariances,
    every epoch.
+5. **IMU health** (``imu_health_test``, beyond the paper): the stuck-at test of
+   ``detection.frozen`` on every raw IMU sample, each channel against its white noise
+   (``imu.sample_sigma``); a non-finite sample is a dead channel (``chi2.flag_dead``).
+   Label ``1 + channel`` of ``[f_x, f_y, f_z, w_x, w_y, w_z]``. The EKF coasts on a dead
+   channel's last finite sample (``loosely_coupled.hold_last_finite``); no IMU channel
+   can be excluded (each axis has one sensor), so the alarm is the whole answer.
 
 GPS and INS are never fused before the check: the chi-square test sees GPS minus INS,
 so a simultaneous GPS and INS fault cannot cancel in it (the paper's argument).
@@ -22,28 +28,38 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _linalg
 from jaxfdi.detection.chi2 import Decision, Detector, WindowState
+from jaxfdi.detection.frozen import FrozenState, frozen_channel_detector
 from jaxfdi.filters._base import Filter
 from jaxfdi.gnss import frames
-from jaxfdi.gnss.integrity import monitor_epoch
+from jaxfdi.gnss.integrity import monitor_epoch, raim_output
 from jaxfdi.gnss.measurements import elevation_sigma
 from jaxfdi.gnss.orbits import OrbitTable, select_orbits
 from jaxfdi.gnss.positioning import PositionFix
 from jaxfdi.gnss.raim import RaimTables
+from jaxfdi.ins import imu
 from jaxfdi.ins.loosely_coupled import GpsFix, InsState
 from jaxfdi.ins.mechanization import NavState
 from jaxfdi.ins.scst import ScstState, StateChi2Test
 from jaxfdi.loop import FDI
 
 
+#: the IMU health test: samples per window, false-alarm probability per window and channel
+#: (union bound per 1200 s flight at 100 Hz: 6 x 1.2e5 windows x 1e-9 < 1e-3)
+IMU_HEALTH_WINDOW = 20
+IMU_HEALTH_PFA = 1e-9
+
+
 class GpsInsFdiState(NamedTuple):
     ins: InsState
     chi2: WindowState
     scst: ScstState
+    health: FrozenState
 
 
 class InsTestOutput(NamedTuple):
@@ -55,6 +71,7 @@ class InsTestOutput(NamedTuple):
     scst_valid: Array       # () bool
     scst_condition: Array   # ()
     scst_age: Array         # () int
+    imu_health: Decision    # the epoch's IMU health decision: alarm if a sample alarmed, label 1 + channel
     nis: Array              # ()
     nav: NavState           # the estimate at t_k (after the feedback)
     accel_bias: Array       # (3,)
@@ -91,10 +108,26 @@ def fix_covariance(fix: PositionFix) -> Array:
     return _linalg.symmetrize(inverse[:3, :3])
 
 
-def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, state: GpsInsFdiState, fix: GpsFix,
-                     samples: Array) -> tuple[GpsInsFdiState, InsTestOutput]:
-    """Steps 2-4 of the module doc for one epoch: the EKF with ``fix`` and the epoch's IMU
-    ``samples`` (n, 6), then both tests."""
+def imu_health_test(model: imu.ImuModel, dt: float, window: int = IMU_HEALTH_WINDOW,
+                    pfa: float = IMU_HEALTH_PFA) -> Detector:
+    """Step 5 of the module doc: ``detection.frozen_channel_detector`` on one IMU sample
+    (6,) ``dt`` [s] long, noise ``imu.sample_sigma``, labels ``1 + channel``."""
+    return frozen_channel_detector(imu.sample_sigma(model, dt), window, pfa, 1 + jnp.arange(6, dtype=jnp.int32))
+
+
+def _epoch_decision(decisions: Decision) -> Decision:
+    """One decision of a detector stepped over an epoch's samples (leaves (n,)): the first
+    alarmed sample's, or the last sample's when none alarmed."""
+    alarm = jnp.any(decisions.alarm)
+    index = jnp.where(alarm, jnp.argmax(decisions.alarm), decisions.alarm.shape[0] - 1)
+    return Decision(decisions.statistic[index], alarm, decisions.label[index], decisions.estimate[index])
+
+
+def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector,
+                     state: GpsInsFdiState, fix: GpsFix, samples: Array) -> tuple[GpsInsFdiState, InsTestOutput]:
+    """Steps 2-5 of the module doc for one epoch: the EKF with ``fix`` and the epoch's IMU
+    ``samples`` (n, 6), then the three tests."""
+    health_state, verdicts = jax.lax.scan(health.step, state.health, samples)
     ins, info = ins_filter.step(state.ins, fix, samples)
     window, (statistic, alarm) = chi2.step(state.chi2, info.nis)
     window = WindowState(jnp.where(info.used, window.buffer, state.chi2.buffer),
@@ -107,27 +140,29 @@ def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, st
                                      info.process_cov)
     healthy = info.healthy & jnp.isfinite(chi2_decision.statistic) & jnp.isfinite(scst_out.decision.statistic)
     out = InsTestOutput(info.used, chi2_decision, scst_out.decision, scst_out.valid, scst_out.condition, scst_out.age,
-                        info.nis, info.filtered_nav, info.accel_bias, info.gyro_bias, info.filtered_cov, healthy)
-    return GpsInsFdiState(ins, window, scst_state), out
+                        _epoch_decision(verdicts), info.nis, info.filtered_nav, info.accel_bias, info.gyro_bias,
+                        info.filtered_cov, healthy)
+    return GpsInsFdiState(ins, window, scst_state, health_state), out
 
 
-def ins_fdi(ins_filter: Filter, chi2: Detector, scst: StateChi2Test) -> FDI:
+def ins_fdi(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector) -> FDI:
     """The INS tests alone as a ``loop.FDI``: step ``k`` takes ``(GpsFix, samples (n, 6))``
     (a receiver's validated solution, e.g. read from a log) and returns an
     ``InsTestOutput``."""
 
     def step(state: GpsInsFdiState, k, y, u):
         fix, samples = y
-        return ins_monitor_step(ins_filter, chi2, scst, state, fix, samples)
+        return ins_monitor_step(ins_filter, chi2, scst, health, state, fix, samples)
 
     return FDI(step)
 
 
 def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Filter, chi2: Detector,
-                scst: StateChi2Test, velocity_sigma: float, operation="npa") -> FDI:
+                scst: StateChi2Test, health: Detector, velocity_sigma: float, operation="npa") -> FDI:
     """The monitor of the module doc as a ``loop.FDI``; step ``k`` takes a
     ``plant.GpsInsMeasurement`` time-tagged ``t0 + k`` s and returns a ``GpsInsOutput``.
-    Its state is ``GpsInsFdiState(ins_filter.init(...), chi2.init(), scst.init(15))``."""
+    Its state is ``GpsInsFdiState(ins_filter.init(...), chi2.init(), scst.init(15),
+    health.init())``; ``health``: ``imu_health_test``."""
 
     def step(state: GpsInsFdiState, k, y, u):
         t = t0 + k
@@ -138,9 +173,8 @@ def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Fi
         lat, lon, height = frames.ecef_to_geodetic(fix.position)
         gps = GpsFix(jnp.stack([lat, lon, height]), y.velocity, fix_covariance(fix),
                      velocity_sigma**2 * jnp.eye(3, dtype=state.ins.cov.dtype), passes)
-        state, ins = ins_monitor_step(ins_filter, chi2, scst, state, gps, y.imu)
-        label = jnp.where(check.alarm & (check.isolated >= 0), 1 + check.isolated, jnp.where(check.alarm, -1, 0))
-        raim = Decision(check.statistic, check.alarm, label.astype(jnp.int32), jnp.max(jnp.abs(check.isolation)))
+        state, ins = ins_monitor_step(ins_filter, chi2, scst, health, state, gps, y.imu)
+        raim = raim_output(epoch).decision   # label 1 + slot; a dead slot alarms (chi2.flag_dead)
         return state, GpsInsOutput(raim, check.threshold, protection.hpl, fix.dops.hdop, fix.num_used, ins,
                                    ins.healthy)
 

@@ -20,7 +20,10 @@ estimates) and the error covariance ``P[k|k-1]``; one ``step`` is one GPS epoch:
 
 ``info`` carries what the state chi-square test needs (the correction, ``P[k|k]``,
 ``Phi``, ``Q_d``) besides the innovation and NIS, and ``healthy`` (``S`` and
-``P[k|k]`` positive definite, everything finite). One IMU step per strapdown update and
+``P[k|k]`` positive definite, everything finite). A non-finite IMU sample (a dead
+channel) is replaced by that channel's last finite sample (``hold_last_finite``): the INS
+coasts on it instead of turning NaN, and the monitor's IMU health test
+(``ins.integrity.imu_health_test``) raises the alarm. One IMU step per strapdown update and
 one covariance step per GPS epoch: the 15 x 15 algebra runs at 1 Hz, the 100 Hz work is
 the mechanisation alone (and ``chunks`` Jacobians).
 """
@@ -49,6 +52,7 @@ class InsState(NamedTuple):
     accel_bias: Array   # (3,) estimate b_hat_a [m/s^2]
     gyro_bias: Array    # (3,) estimate b_hat_g [rad/s]
     cov: Array          # (15, 15)
+    last_sample: Array  # (6,) each channel's last finite IMU sample (0 before the first)
 
 
 class GpsFix(NamedTuple):
@@ -77,6 +81,16 @@ class InsInfo(NamedTuple):
     healthy: Array          # () bool
 
 
+def hold_last_finite(samples: Array, last: Array) -> tuple[Array, Array]:
+    """``samples`` (n, 6) with each non-finite value replaced by its channel's latest
+    finite one (``last`` (6,) before the first), and the new ``last``."""
+    finite = jnp.isfinite(samples)
+    latest = jax.lax.cummax(jnp.where(finite, jnp.arange(samples.shape[0])[:, None], -1), axis=0)
+    filled = jnp.take_along_axis(samples, jnp.maximum(latest, 0), axis=0)
+    filled = jnp.where(latest >= 0, filled, last)
+    return filled, filled[-1]
+
+
 def measurement_matrix(dtype) -> Array:
     return jnp.eye(MEASUREMENT_SIZE, STATE_SIZE, dtype=dtype)
 
@@ -102,7 +116,8 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
         zero = jnp.zeros((3,), dtype)
         return InsState(jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), nav),
                         zero if accel_bias is None else jnp.asarray(accel_bias, dtype),
-                        zero if gyro_bias is None else jnp.asarray(gyro_bias, dtype), jnp.asarray(cov, dtype))
+                        zero if gyro_bias is None else jnp.asarray(gyro_bias, dtype), jnp.asarray(cov, dtype),
+                        jnp.zeros((6,), dtype))
 
     def update(state: InsState, fix: GpsFix):
         dtype = state.cov.dtype
@@ -141,6 +156,7 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
         if samples.ndim != 2 or samples.shape[1] != 6 or samples.shape[0] % chunks or samples.shape[0] < 2 * chunks:
             raise ValueError(f"u: expected (n, 6) IMU samples with n a multiple of chunks = {chunks} and at least "
                              f"{2 * chunks}, got shape {tuple(samples.shape)}")
+        samples, last_sample = hold_last_finite(samples, state.last_sample)
         post, used, correction, cov = update(state, fix)
         nav = error_state.correct(state.nav, correction)
         accel_bias = state.accel_bias + correction[error_state.ACCEL_BIAS]
@@ -153,6 +169,6 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
                    & jnp.all(jnp.isfinite(next_nav.position)))
         info = InsInfo(jnp.where(used, post.innovation, 0.0), post.innovation_cov, jnp.where(used, post.nis, 0.0), used,
                        correction, state.cov, cov, nav, accel_bias, gyro_bias, transition, process, healthy)
-        return InsState(next_nav, accel_bias, gyro_bias, predicted), info
+        return InsState(next_nav, accel_bias, gyro_bias, predicted, last_sample), info
 
     return Filter(init, step)

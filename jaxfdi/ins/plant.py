@@ -18,7 +18,8 @@ component, onset, magnitude, ...)``) on the 6-component sample
 ``[f_x, f_y, f_z (m/s^2), w_x, w_y, w_z (rad/s)]``: a roll-gyro bias of 30 deg/h from
 800 s is ``fault("bias", "sensor", 3, 800, radians(30) / 3600)``; onset, end and a
 ramp's slope count GPS epochs (seconds), and a fault acts on every sample of an epoch
-it is active in. STUCK is refused (it has no single value to hold over an epoch).
+it is active in. A STUCK channel holds its first sample of the onset epoch (a live one)
+from the second sample on; DEAD makes the channel NaN from the onset epoch's first sample.
 The truth of each epoch (``GpsInsTruth``) comes back in ``Sensed.state``.
 """
 from __future__ import annotations
@@ -62,7 +63,7 @@ class GpsInsTruth(NamedTuple):
 class GpsInsPlantState(NamedTuple):
     receiver: SimState
     imu: ImuErrors
-    held: Array           # (F_imu,) unused (no STUCK on the IMU), kept for apply_faults
+    held: Array           # (F_imu,) the value a STUCK IMU fault holds (apply_faults)
 
 
 class GpsInsSensed(NamedTuple):
@@ -117,9 +118,6 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
     imu_faults = as_stack(no_fault() if imu_fault is None else imu_fault)
     kinds, targets, components = (_checks.concrete(leaf) for leaf in (imu_faults.kind, imu_faults.target,
                                                                        imu_faults.component))
-    if kinds is not None and np.any(kinds == FaultKind.STUCK):
-        raise ValueError("imu_fault: expected bias, ramp, impulse, scale, effectiveness or stop kinds (STUCK holds "
-                         "no single value over an epoch), got a STUCK fault")
     if kinds is not None and targets is not None and components is not None and np.any(
             (kinds != FaultKind.NONE) & ((targets != Target.SENSOR) | (components >= IMU_CHANNELS))):
         raise ValueError(f"imu_fault: expected sensor faults on components 0..5 of [f_x, f_y, f_z, w_x, w_y, w_z], "
@@ -137,16 +135,22 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
         return GpsInsPlantState(state, errors, jnp.zeros((num_imu_faults,), state.state.dtype))
 
     def faulty_samples(samples, k, held):
-        def one(sample):
-            return apply_faults(imu_faults, k, sample, Target.SENSOR, held)[0]
-
-        return jax.vmap(one)(samples)
+        """The epoch's samples with the IMU faults, and the held values: a STUCK fault
+        takes its value from the onset epoch's first sample and holds it on every later
+        sample (``apply_faults`` alone would hold per epoch)."""
+        first, held = apply_faults(imu_faults, k, samples[0], Target.SENSOR, held)
+        rest = jax.vmap(lambda sample: apply_faults(imu_faults, k, sample, Target.SENSOR, held)[0])(samples[1:])
+        stuck = (imu_faults.kind == FaultKind.STUCK) & jax.vmap(is_active, in_axes=(0, None))(imu_faults, k)
+        on_channel = stuck[:, None] & (imu_faults.component[:, None] == jnp.arange(IMU_CHANNELS))    # (F, 6)
+        value = held[jnp.argmax(on_channel, axis=0)]                                                # (6,)
+        rest = jnp.where(jnp.any(on_channel, axis=0), value, rest)
+        return jnp.concatenate([first[None], rest]), held
 
     def measure(state: GpsInsPlantState, k: Array, u: Array, step_key: Array):
         receiver_state, sensed = receiver.measure(state.receiver, k, u, step_key)
         key_imu, key_velocity = jax.random.fold_in(step_key, 7), jax.random.fold_in(step_key, 8)
         samples = imu.measure(true_samples[k], state.imu, key_imu, model, dt)
-        samples = faulty_samples(samples, k, state.held)
+        samples, held = faulty_samples(samples, k, state.held)
         velocity = velocities[k] + velocity_sigma * jax.random.normal(key_velocity, (3,), velocities.dtype)
         imu_active = jax.vmap(is_active, in_axes=(0, None))(imu_faults, k)
         imu_mode = active_label(imu_faults, k, 0)
@@ -154,7 +158,7 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
         truth = GpsInsTruth(NavState(positions[k], velocities[k], attitudes[k]), state.imu.accel_bias,
                             state.imu.gyro_bias, receiver_state.state)
         measurement = GpsInsMeasurement(sensed.measurement, velocity, samples)
-        return (state._replace(receiver=receiver_state),
+        return (state._replace(receiver=receiver_state, held=held),
                 GpsInsSensed(truth, measurement, jnp.concatenate([sensed.fault_active, imu_active]), mode))
 
     def advance(state: GpsInsPlantState, k: Array, u: Array, step_key: Array):

@@ -27,6 +27,11 @@ case of both flights.
   20 deg/s with 42 deg of bank, pull-ups and dives; ``ins.trajectory.manoeuvre_legs``)
   fault-free and with the roll-gyro biases: where SCST degrades, measured.
 
+- **Beyond the paper (issue 37)**: the roll gyro dead (NaN) and frozen from the onset
+  (``IMU_HEALTH_CASES``), found by the monitor's IMU health test
+  (``ins.integrity.imu_health_test``), with the chi-square test's and SCST's own
+  detection times beside it; the fault-free flights' health alarms.
+
 ``StudySize`` shortens the flights, moves the onset and lowers the IMU rate for tests
 and the notebook (the satellite faults that would end after the onset are then left out);
 ``PAPER_SIZE`` (1200 s, 800 s, 100 Hz) is the CLI's.
@@ -56,7 +61,9 @@ from jaxfdi.ins.mechanization import NavState
 from jaxfdi.loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
 from jaxfdi.metrics import binomial_interval, summarize_detection, summarize_episodes
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, PARK_FAULTS, START_TOW, WEEK
+# Table 2's three episodes only (the GPS half's dead and frozen channels are not flown here)
+from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, WEEK
+from jaxfdi.scenarios.gnss_campus import TABLE2_FAULTS as PARK_FAULTS
 from jaxfdi.study import Structure, Study, case_slices, run_study
 
 FLIGHT_S = 1200
@@ -75,6 +82,8 @@ VELOCITY_SIGMA = 0.1       # m/s, receiver velocity solution per axis
 INITIAL_SIGMA = (3.0, 0.1, 0.05, 0.5)
 BEYOND_GYRO_DEG_H = (15.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0)
 BEYOND_ACCEL_MG = (2.0, 5.0, 10.0, 20.0, 50.0)
+#: beyond the paper (issue 37): the roll gyro dead (NaN) or frozen from the onset, name -> fault kind
+IMU_HEALTH_CASES = {"dead": "dead", "frozen": "stuck"}
 MANOEUVRE_HEIGHT = 200.0   # m above the park site
 
 
@@ -130,6 +139,7 @@ class RunOutput(NamedTuple):
     chi2: object                 # DetectionRecord
     scst: object                 # DetectionRecord
     raim: object                 # EpisodeRecord
+    health: object               # DetectionRecord of the IMU health test
     series: Series
 
 
@@ -151,10 +161,10 @@ def thresholds() -> tuple[float, float]:
 
 
 def design(model: imu.ImuModel, dt: float):
-    """The filter and both tests of the study: ``(filter, chi2 detector, SCST)``."""
+    """The filter and the tests of the study: ``(filter, chi2 detector, SCST, IMU health)``."""
     chi2_limit, scst_limit = thresholds()
     return (loosely_coupled_filter(imu.noise_model(model), dt), chi2_detector(chi2_limit, CHI2_WINDOW),
-            scst.state_chi2_test(SCST_PERIOD, scst_limit))
+            scst.state_chi2_test(SCST_PERIOD, scst_limit), integrity.imu_health_test(model, dt))
 
 
 def initial_covariance(model: imu.ImuModel):
@@ -167,8 +177,8 @@ def _run(world: World, case: RunCase, key: jax.Array) -> RunOutput:
     """One flight: the loop of plant and FDI, its scores and its traces."""
     model = imu.hg1900()
     epochs, per_epoch = world.flight.imu.shape[:2]
-    ins_filter, chi2, test = design(model, 1.0 / per_epoch)
-    monitor = integrity.gps_ins_fdi(world.table, START_TOW, world.tables, ins_filter, chi2, test,
+    ins_filter, chi2, test, health = design(model, 1.0 / per_epoch)
+    monitor = integrity.gps_ins_fdi(world.table, START_TOW, world.tables, ins_filter, chi2, test, health,
                                     VELOCITY_SIGMA)
     gps_ins = plant.gps_ins_plant(world.table, START_TOW, world.flight, world.visible, world.sigma, model,
                                   VELOCITY_SIGMA, satellite_fault=case.satellite_fault, imu_fault=case.imu_fault)
@@ -178,11 +188,12 @@ def _run(world: World, case: RunCase, key: jax.Array) -> RunOutput:
     nav_error = jnp.linalg.cholesky(cov0[:9, :9]) @ jax.random.normal(key_init, (9,), cov0.dtype)
     truth0 = NavState(world.flight.position[0], world.flight.velocity[0], world.flight.attitude[0])
     ins0 = ins_filter.init(error_state.correct(truth0, -nav_error), cov0)   # INS = truth + error; biases unknown
-    fdi0 = integrity.GpsInsFdiState(ins0, chi2.init(), test.init(error_state.STATE_SIZE))
+    fdi0 = integrity.GpsInsFdiState(ins0, chi2.init(), test.init(error_state.STATE_SIZE), health.init())
     clock = measurements.ClockModel()
     scorer = combine_scorers(
         chi2=detection_scorer(case.onset, lambda o: o.chi2, single=True),
         scst=detection_scorer(case.onset, lambda o: o.scst, single=True),
+        health=detection_scorer(case.onset, lambda o: o.ins.imu_health, single=True),
         raim=episode_scorer(flt.episodes(case.satellite_fault, 0), lambda o: o.raim, single=True))
     result = run_loop(gps_ins, monitor, feedforward(), (jnp.asarray([clock.bias, clock.drift]), errors), fdi0,
                       key_loop, epochs, exogenous=jnp.zeros((epochs, 0)), scorer=scorer, keep_history=True)
@@ -198,7 +209,7 @@ def _run(world: World, case: RunCase, key: jax.Array) -> RunOutput:
                     out.raim.statistic.astype(f32), out.raim_threshold.astype(f32), out.hpl.astype(f32),
                     out.hdop.astype(f32), errors9[:, :3].astype(f32), jnp.degrees(errors9[:, 6:9]).astype(f32),
                     jnp.concatenate([sigma[:, :3], jnp.degrees(sigma[:, 6:9])], axis=1).astype(f32), nees.astype(f32))
-    return RunOutput(result.score["chi2"], result.score["scst"], result.score["raim"], series)
+    return RunOutput(result.score["chi2"], result.score["scst"], result.score["raim"], result.score["health"], series)
 
 
 def _flight(key: jax.Array, case: RunCase, world: World) -> RunOutput:
@@ -284,19 +295,21 @@ def satellite_faults(slot: int | None, before: int | None = None) -> flt.Fault:
     return flt.concat_faults(*episodes)
 
 
-def imu_fault(channel: int | None, magnitude: float, onset_s: int = ONSET_S) -> flt.Fault:
-    """A bias on one IMU channel from ``onset_s`` (none when ``channel`` is ``None``)."""
+def imu_fault(channel: int | None, magnitude: float, onset_s: int = ONSET_S, kind: str = "bias") -> flt.Fault:
+    """A fault of ``kind`` (a bias of ``magnitude``; ``"dead"``, ``"stuck"``: the channel NaN
+    or frozen) on one IMU channel from ``onset_s`` (none when ``channel`` is ``None``)."""
     if channel is None:
         return flt.as_stack(flt.no_fault())
-    return flt.as_stack(plant.imu_bias_fault(channel, onset_s, magnitude))
+    return flt.as_stack(flt.fault(kind, "sensor", channel, onset_s, magnitude))
 
 
 def cases_of(specs, onset_s: int = ONSET_S) -> RunCase:
-    """Stack ``(satellite slot or None, IMU channel or None, magnitude)`` specs as cases;
-    the satellite faults are Table 2's that end before ``onset_s``."""
-    built = [RunCase(satellite_faults(slot, onset_s), imu_fault(channel, size, onset_s),
+    """Stack ``(satellite slot or None, IMU channel or None, magnitude[, kind])`` specs as
+    cases (kind ``"bias"`` by default); the satellite faults are Table 2's that end before
+    ``onset_s``."""
+    built = [RunCase(satellite_faults(slot, onset_s), imu_fault(channel, size, onset_s, *kind),
                      jnp.asarray(flt.NEVER if channel is None else onset_s, jnp.int32))
-             for slot, channel, size in specs]
+             for slot, channel, size, *kind in specs]
     return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *built)
 
 
@@ -326,6 +339,7 @@ def gps_ins_study(runs: int = 100, seed: int = 0, progress: bool = False, beyond
     small = max(int(runs) // 4, 2) if beyond_runs is None else int(beyond_runs)
     groups = [("fault-free", None, None, 0.0, runs)]
     groups += [(f"table3 {b:g} deg/h", slot, ROLL_GYRO, gyro_rad_s(b), runs) for b in TABLE3_DEG_H]
+    groups += [(f"imu roll gyro {name}", None, ROLL_GYRO, 0.0, small, kind) for name, kind in IMU_HEALTH_CASES.items()]
     if beyond:
         groups += [(f"park gyro {b:g} deg/h", None, ROLL_GYRO, gyro_rad_s(b), small) for b in BEYOND_GYRO_DEG_H]
         groups += [(f"park accel {a:g} mg", None, X_ACCEL, accel_m_s2(a), small) for a in BEYOND_ACCEL_MG]
@@ -340,8 +354,8 @@ def gps_ins_study(runs: int = 100, seed: int = 0, progress: bool = False, beyond
     key = jax.random.key(seed)
     for flight, world in worlds.items():
         mine = [g for f, g in plan if f == flight]
-        groups = [(name, cases_of([(s, c, m)] * n, size.onset_s)) for name, s, c, m, n in mine]
-        counts = tuple(n for *_, n in mine)
+        groups = [(name, cases_of([(s, c, m, *kind)] * n, size.onset_s)) for name, s, c, m, n, *kind in mine]
+        counts = tuple(n for _, _, _, _, n, *_ in mine)
         spec = flights_spec(world, groups, f"gps-ins {flight}")
         if progress:
             status(f"gps-ins: {sum(counts)} {flight} flights of {size.flight_s} s at {size.imu_rate} Hz")
@@ -383,6 +397,8 @@ def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE
         "table3_gyro_deg_h": list(TABLE3_DEG_H), "paper_table3_s": {f"{k:g}": list(v) for k, v in PAPER_TABLE3.items()},
         "beyond_gyro_deg_h": list(BEYOND_GYRO_DEG_H) if beyond else [],
         "beyond_accel_mg": list(BEYOND_ACCEL_MG) if beyond else [],
+        "imu_health": {"window_samples": integrity.IMU_HEALTH_WINDOW, "pfa_per_window": integrity.IMU_HEALTH_PFA,
+                       "cases": list(IMU_HEALTH_CASES), "runs": int(small)},
     }
 
 
@@ -439,7 +455,12 @@ def _rows(results: dict, size: StudySize = PAPER_SIZE) -> list:
     for name, out in results.items():
         base = {"runs": int(np.shape(out.chi2.onset)[0]),
                 "scst_invalid_epochs": int(np.sum(~np.asarray(out.series.scst_valid)))}
-        if name.startswith("table3"):
+        if name.startswith("imu roll gyro"):
+            right = (np.asarray(out.health.detection_step) >= 0) & (np.asarray(out.health.isolated) == 1 + ROLL_GYRO)
+            rows.append({"case": "imu-health", "fault": name.split()[-1], **base, **_delays(out.health, "health", size),
+                         "health_isolated": float(np.mean(right)),
+                         **_delays(out.chi2, "chi2", size), **_delays(out.scst, "scst", size)})
+        elif name.startswith("table3"):
             bias = float(name.split()[1])
             row = {"case": "table3", "gyro_deg_h": bias, **base, **_delays(out.chi2, "chi2", size),
                    **_delays(out.scst, "scst", size), "paper_chi2_s": PAPER_TABLE3[bias][0],
@@ -535,6 +556,20 @@ def gps_ins_table(study: GpsInsStudy) -> str:
     alarms = "; ".join(f"{k}: chi2 {v['chi2']}, SCST {v['scst']}" for k, v in first["ins_alarm_runs_during_gps_faults"].items())
     lines.append(f"  runs of those {first['runs']} ({first['gyro_deg_h']:g} deg/h) with an INS-test alarm during a satellite "
                  f"fault or the minute after: {alarms}")
+    health = [r for r in study.rows if r["case"] == "imu-health"]
+    if health:
+        free = study.results.get("fault-free") if study.results else None
+        quiet = "" if free is None else (f"; fault-free flights with an IMU health alarm: "
+                                         f"{int(np.sum(np.asarray(free.health.first_alarm) >= 0))}/"
+                                         f"{np.shape(free.health.first_alarm)[0]}")
+        lines.append(f"IMU health test (beyond the paper: stuck-at test over {integrity.IMU_HEALTH_WINDOW} samples, "
+                     f"P_fa {integrity.IMU_HEALTH_PFA:g} per window and channel; a NaN sample is a dead channel), roll "
+                     f"gyro from {onset} s, {health[0]['runs']} flights each{quiet}:")
+        for row in health:
+            lines.append(f"  {row['fault']:<6}: detected {row['health_detected']:.2f}, isolated (roll gyro) "
+                         f"{row['health_isolated']:.2f}, median delay {_fmt(row['health_median_s'])} s; chi2 alone "
+                         f"detected {row['chi2_detected']:.2f} (median {_fmt(row['chi2_median_s'])} s), SCST "
+                         f"{row['scst_detected']:.2f} (median {_fmt(row['scst_median_s'])} s)")
     lines.append("Fault-free park flights (independent decisions: chi2 every 10th epoch, SCST one propagator window in "
                  "two; 99 % binomial interval of the alarm count at P_fa 0.005):")
     for row in (r for r in study.rows if r["case"] == "false-alarm"):

@@ -43,6 +43,41 @@ def test_parallel_equals_dense_conditioning(T=13):
     np.testing.assert_allclose(np.sum(info.log_likelihood), log_density, rtol=1e-10)
 
 
+def test_a_dead_sensor_is_left_out_exactly_and_reported(T=13):
+    """Non-finite components (one sensor dead over steps 4-8, the other at step 10, NaN and
+    inf): x[k|k], P[k|k] and the summed log-likelihood are the dense conditioning on the
+    finite measurements alone; those steps report NaN in the dead innovation and nis = +inf
+    (the other filters' rule), and the filter stays healthy."""
+    import scipy
+
+    model = small_model()
+    rng = np.random.default_rng(5)
+    us, ys = rng.normal(size=(T, 1)), rng.normal(size=(T, 2)) * 2.0
+    ys[4:9, 1] = np.nan
+    ys[10, 0] = np.inf
+    m0, P0 = np.array([0.3, -0.1, 0.2]), np.diag([0.5, 0.4, 0.3])
+    _, info = parallel_kalman_filter(model, GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
+    joint = joint_gaussian(model, m0, P0, us, T)
+    flat = ys.ravel()
+    for k in range(T):
+        rows = np.flatnonzero(np.isfinite(flat[:2 * (k + 1)]))
+        Syy = joint.cov_y[np.ix_(rows, rows)]
+        cross = joint.cross[:, rows]
+        solved = scipy.linalg.solve(Syy, np.concatenate([(flat[rows] - joint.mean_y[rows])[:, None], cross.T], 1),
+                                    assume_a="pos")
+        mean, cov = joint.mean_x + cross @ solved[:, 0], joint.cov_x - cross @ solved[:, 1:]
+        np.testing.assert_allclose(info.filtered_mean[k], mean[3 * k:3 * k + 3], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(info.filtered_cov[k], cov[3 * k:3 * k + 3, 3 * k:3 * k + 3], rtol=1e-9, atol=1e-12)
+    rows = np.flatnonzero(np.isfinite(flat))
+    log_density = scipy.stats.multivariate_normal(joint.mean_y[rows], joint.cov_y[np.ix_(rows, rows)]).logpdf(flat[rows])
+    np.testing.assert_allclose(np.sum(info.log_likelihood), log_density, rtol=1e-10)
+    dead = ~np.isfinite(ys)
+    np.testing.assert_array_equal(np.isnan(np.asarray(info.innovation)), dead)
+    np.testing.assert_array_equal(np.isinf(np.asarray(info.nis)), dead.any(axis=1))
+    np.testing.assert_array_equal(np.asarray(info.num_observed), 2 - dead.sum(axis=1))
+    assert np.all(np.asarray(info.healthy))
+
+
 def test_bad_input():
     model = small_model()
     ys, us = np.zeros((13, 2)), np.zeros((13, 1))

@@ -30,6 +30,14 @@ in each combination, ``2T`` combinations), in ``2 log2 T`` rounds; so it pays wh
 round is cheap relative to a step of the sequential scan, i.e. on a GPU for long
 sequences, and loses on a CPU (``benchmarks/RESULTS.md``).
 
+A non-finite component of ``y_k`` is a dead sensor: it is left out of that step exactly
+(its row of ``C_y`` and of ``R`` dropped: ``kalman_filter(model, missing_measurements=True)``'s
+moments) and reported as the other filters report it (innovation NaN there, ``nis = +inf``,
+``filters._base.report_dead``). The sequential filter's default instead takes the
+prediction for the component and updates the covariance as if it were measured; that
+pseudo-measurement depends on the predicted mean, which no element can hold before the
+scan.
+
 The combination's solves and the Cholesky factors are ``_linalg``'s loop and written-out
 forms, not LAPACK: with batched LAPACK calls in every level, XLA:CPU (jaxlib 0.10.2) never
 returned from programs of T >= 2048-4096 steps (``tests/test_parallel_kalman.py``).
@@ -46,7 +54,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import FilterInfo, GaussianState, check_gaussian, check_sequences
+from jaxfdi.filters._base import FilterInfo, GaussianState, check_gaussian, check_sequences, report_dead
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -77,25 +85,38 @@ def _psd_solve(S: Array, rhs: Array) -> Array:
     return _linalg.stack_cho_solve(_linalg.stack_cholesky(_sym(S)), rhs)
 
 
+def _observed(model: LinearGaussianModel, ys: Array) -> tuple[Array, Array, Array, Array]:
+    """``(mask, C_k, R_k, ys with 0)``: per step, the rows of ``C`` and ``R`` of the finite
+    components of ``ys`` (T, m); a dead one's row is 0 and its ``R`` entry 1 (unit variance,
+    uncorrelated, innovation 0: it moves nothing)."""
+    mask = jnp.isfinite(ys)
+    C = jnp.where(mask[:, :, None], model.C, 0.0)                               # (T, m, n)
+    both = mask[:, :, None] & mask[:, None, :]
+    R = jnp.where(both, model.R, jnp.eye(model.R.shape[0], dtype=model.R.dtype))  # (T, m, m)
+    return mask, C, R, jnp.where(mask, ys, 0.0)
+
+
 def filtering_elements(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array, us: Array) -> FilteringElement:
-    """The T elements of ``ys`` (T, m) with inputs ``us`` (T, nu) (module doc)."""
-    Phi, Gamma, C, D, Q, R = model
+    """The T elements of ``ys`` (T, m) with inputs ``us`` (T, nu) (module doc; a
+    non-finite component is left out of its step)."""
+    Phi, Gamma, _, D, Q, _ = model
+    mask, C, R, ys = _observed(model, ys)
     n = Phi.shape[0]
     eye = jnp.eye(n, dtype=m0.dtype)
     bias = jnp.concatenate([jnp.zeros((1, n), m0.dtype), us[:-1] @ Gamma.T])     # Gamma u_{k-1}, (T, n)
     prior_mean = jnp.concatenate([m0[None], bias[1:]])                          # mean of x_k given x_{k-1} = 0
     prior_cov = jnp.concatenate([P0[None], jnp.broadcast_to(Q, (ys.shape[0] - 1, n, n))])
-    residual = ys - us @ D.T - prior_mean @ C.T                                # e, (T, m)
-    S = _sym(C @ prior_cov @ C.T + R)
+    residual = jnp.where(mask, ys - us @ D.T - _mv(C, prior_mean), 0.0)        # e, (T, m)
+    S = _sym(C @ prior_cov @ _mT(C) + R)
     gain = _mT(_psd_solve(S, C @ prior_cov))                                   # (T, n, m)
     contraction = eye - gain @ C
     cov = _sym(contraction @ prior_cov @ _mT(contraction) + gain @ R @ _mT(gain))
     A = jnp.concatenate([jnp.zeros((1, n, n), m0.dtype), contraction[1:] @ Phi])
-    CPhi = C @ Phi                                                             # (m, n)
-    S_inv_C_Phi = _psd_solve(S[1:], jnp.broadcast_to(CPhi, (ys.shape[0] - 1,) + CPhi.shape))
+    CPhi = C[1:] @ Phi                                                         # (T - 1, m, n)
+    S_inv_C_Phi = _psd_solve(S[1:], CPhi)
     S_inv_residual = _psd_solve(S[1:], residual[1:, :, None])[..., 0]          # (T - 1, m)
-    eta = jnp.concatenate([jnp.zeros((1, n), m0.dtype), S_inv_residual @ CPhi])
-    J = jnp.concatenate([jnp.zeros((1, n, n), m0.dtype), _sym(jnp.einsum("mi,tmj->tij", CPhi, S_inv_C_Phi))])
+    eta = jnp.concatenate([jnp.zeros((1, n), m0.dtype), jnp.einsum("tm,tmn->tn", S_inv_residual, CPhi)])
+    J = jnp.concatenate([jnp.zeros((1, n, n), m0.dtype), _sym(jnp.einsum("tmi,tmj->tij", CPhi, S_inv_C_Phi))])
     return FilteringElement(A, prior_mean + _mv(gain, residual), cov, eta, J)
 
 
@@ -122,7 +143,7 @@ def parallel_kalman_filter(model: LinearGaussianModel, init_state: GaussianState
     Args:
       model: a ``LinearGaussianModel``.
       init_state: ``GaussianState(m0, P0)``, the prior of ``x_0`` (``kalman_filter(model).init``).
-      ys: (T, m) measurements (no missing values), T >= 1.
+      ys: (T, m) measurements, T >= 1; a non-finite component is a dead sensor (module doc).
       us: (T, nu) inputs, or ``None``.
 
     Returns:
@@ -149,7 +170,8 @@ def parallel_kalman_filter(model: LinearGaussianModel, init_state: GaussianState
 
 @jax.jit
 def _parallel_filter(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array, us: Array):
-    Phi, Gamma, C, D, Q, R = model
+    Phi, Gamma, _, D, Q, _ = model
+    dead = ~jnp.isfinite(ys)
     elements = filtering_elements(model, m0, P0, ys, us)
     filtered = jax.lax.associative_scan(combine_filtering, elements)
     mean, cov = filtered.b, filtered.C
@@ -157,18 +179,19 @@ def _parallel_filter(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array
     next_cov = _sym(Phi @ cov @ Phi.T + Q)
     predicted_mean = jnp.concatenate([m0[None], next_mean[:-1]])
     predicted_cov = jnp.concatenate([P0[None], next_cov[:-1]])
-    innovation = ys - predicted_mean @ C.T - us @ D.T
-    S = _sym(C @ predicted_cov @ C.T + R)
+    mask, C, R, ys = _observed(model, ys)
+    innovation = jnp.where(mask, ys - _mv(C, predicted_mean) - us @ D.T, 0.0)
+    S = _sym(C @ predicted_cov @ _mT(C) + R)
     chol_S = _linalg.stack_cholesky(S)
     whitened = _linalg.stack_solve_lower(chol_S, innovation[..., None])[..., 0]
     nis = jnp.sum(whitened**2, axis=-1)
-    m = C.shape[0]
+    num_observed = jnp.sum(mask, axis=-1).astype(jnp.int32)
     log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol_S, axis1=-2, axis2=-1)), axis=-1)
-    log_likelihood = -0.5 * (nis + log_det + m * math.log(2.0 * math.pi))
+    log_likelihood = -0.5 * (nis + log_det + num_observed * math.log(2.0 * math.pi))
     healthy = (jnp.all(jnp.isfinite(chol_S), axis=(-2, -1)) & jnp.all(jnp.isfinite(mean), axis=-1)
                & jnp.all(jnp.isfinite(_linalg.stack_cholesky(cov)), axis=(-2, -1))
                & jnp.all(jnp.isfinite(next_mean), axis=-1) & jnp.isfinite(nis) & jnp.isfinite(log_likelihood))
-    num_observed = jnp.full(nis.shape, m, jnp.int32)
+    innovation, nis = report_dead(innovation, nis, dead, axis=-1)
     info = FilterInfo(predicted_mean, predicted_cov, mean, cov, innovation, S, log_likelihood, nis, num_observed,
                       healthy)
     return GaussianState(next_mean[-1], next_cov[-1]), info

@@ -8,8 +8,9 @@ a finite wrong answer and never a silent NaN.
 ===========================  ==============================================================
 module                       classes of input tried
 ===========================  ==============================================================
-``filters.kalman_filter``    measurements with NaN, +inf, -inf and finite values in any
-``filters.unscented_...``    component (with and without ``missing_measurements``)
+``filters``: KF, EKF, UKF,   measurements with NaN, +inf, -inf and finite values in any
+square-root KF and UKF,      component (with and without ``missing_measurements``)
+unknown-input filter
 ``detection.chi2``           NIS streams with NaN/inf anywhere; ``chi2_threshold`` with
                              dof and pfa anywhere on the real line, NaN and inf
 ``detection.glrt``           innovations with NaN/inf in any components of any steps
@@ -33,7 +34,14 @@ import jaxfdi
 from jaxfdi.detection import chi2_detector, chi2_threshold, frozen_channel_detector, glrt_detector
 from jaxfdi.detection import parity as ps
 from jaxfdi.faults import fault
-from jaxfdi.filters import kalman_filter, unscented_kalman_filter
+from jaxfdi.filters import (
+    extended_kalman_filter,
+    kalman_filter,
+    sqrt_kalman_filter,
+    sqrt_unscented_kalman_filter,
+    unknown_input_filter,
+    unscented_kalman_filter,
+)
 from jaxfdi.models import engine_model
 from jaxfdi.models.linear import LinearGaussianModel
 from jaxfdi.riccati import steady_state_kalman
@@ -48,12 +56,22 @@ MODEL = LinearGaussianModel(Phi=jnp.array([[1.0, 0.1], [0.0, 0.95]]), Gamma=jnp.
                             Q=0.01 * jnp.eye(2), R=0.1 * jnp.eye(3))
 
 
+#: reaches sensors 0 and 2 only: with both missing, nothing left is free of d
+UNKNOWN_INPUT = jnp.array([[1.0], [0.0]])
+
+
 def _filters():
     """One jitted step of each filter from the same prior: ``y -> info``."""
+    f, h = (lambda x, u, p: MODEL.Phi @ x), (lambda x, u, p: MODEL.C @ x)
     filters = {
         "kf": kalman_filter(MODEL),
         "kf missing": kalman_filter(MODEL, missing_measurements=True),
-        "ukf": unscented_kalman_filter(lambda x, u, p: MODEL.Phi @ x, lambda x, u, p: MODEL.C @ x, MODEL.Q, MODEL.R),
+        "ekf": extended_kalman_filter(f, h, MODEL.Q, MODEL.R),
+        "ukf": unscented_kalman_filter(f, h, MODEL.Q, MODEL.R),
+        "sqrt kf": sqrt_kalman_filter(MODEL),
+        "sqrt ukf": sqrt_unscented_kalman_filter(f, h, MODEL.Q, MODEL.R),
+        "unknown input": unknown_input_filter(MODEL, UNKNOWN_INPUT),
+        "unknown input missing": unknown_input_filter(MODEL, UNKNOWN_INPUT, missing_measurements=True),
     }
 
     def stepper(f):
@@ -70,12 +88,29 @@ STEPS = _filters()
 @given(y=hnp.arrays(np.float64, (3,), elements=ANY), name=st.sampled_from(sorted(STEPS)))
 def test_a_filter_step_reports_every_dead_component_and_keeps_its_state(y, name):
     info = STEPS[name](jnp.asarray(y))
-    dead = np.isinf(y) if name == "kf missing" else ~np.isfinite(y)
+    dead = np.isinf(y) if name.endswith("missing") else ~np.isfinite(y)
     assert bool(info.healthy)
     assert np.all(np.isfinite(np.asarray(info.filtered_mean))) and np.all(np.isfinite(np.asarray(info.filtered_cov)))
     np.testing.assert_array_equal(np.isnan(np.asarray(info.innovation)), dead)
     assert (float(info.nis) == np.inf) == bool(dead.any())
     assert not np.isnan(float(info.nis)) and np.isfinite(float(info.log_likelihood))
+
+
+def test_an_unknown_input_filter_that_loses_decoupling_keeps_its_prediction():
+    """Sensors 0 and 2 (the only ones the unknown input reaches) missing or dead: the
+    update keeps the prior exactly, statistic 0 at 0 degrees of freedom, healthy; with
+    one of them back, it updates again (the Kitanidis gain on the sensors left)."""
+    filt = unknown_input_filter(MODEL, UNKNOWN_INPUT, missing_measurements=True)
+    prior = filt.init(jnp.array([0.3, -0.2]), jnp.eye(2))
+    for y in ([np.nan, 1.0, np.nan], [np.inf, 1.0, np.nan]):
+        post = filt.update(prior, jnp.asarray(y), jnp.zeros(0))
+        np.testing.assert_array_equal(np.asarray(post.mean), np.asarray(prior.mean))
+        np.testing.assert_array_equal(np.asarray(post.cov), np.asarray(prior.cov))
+        assert bool(post.healthy) and int(post.num_observed) == 0
+        assert float(post.nis) == (np.inf if np.isinf(y[0]) else 0.0)
+    post = filt.update(prior, jnp.asarray([np.nan, 1.0, 0.4]), jnp.zeros(0))
+    assert bool(post.healthy) and not np.allclose(np.asarray(post.mean), np.asarray(prior.mean))
+    assert int(post.num_observed) == 1
 
 
 @SETTINGS

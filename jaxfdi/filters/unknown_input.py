@@ -91,6 +91,18 @@ def unbiased_minimum_variance_gain(
     return gain + _linalg.solve_lower_transposed(chol_S, correction.T).T, Q_full[:, q:]
 
 
+def decouplable(chol_S: Array, C_observed: Array, C: Array, unknown_input: Array) -> Array:
+    """() bool: ``rank(C_obs E) = q``, i.e. the whitened ``L^-1 C_obs E`` has ``q`` pivots
+    (the diagonal of its Gram matrix's Cholesky factor, ``|diag R1|``) above round-off of
+    the scale of ``L^-1 C E`` with every sensor."""
+    mm = _linalg.matmul
+    E = jnp.asarray(unknown_input, chol_S.dtype)
+    white = _linalg.solve_lower(chol_S, mm(C_observed, E))
+    scale = jnp.max(jnp.abs(_linalg.solve_lower(chol_S, mm(C, E))))
+    pivots = jnp.diagonal(_linalg.cholesky(_linalg.symmetrize(mm(white.T, white))))
+    return jnp.all(pivots > 1e3 * jnp.finfo(chol_S.dtype).eps * scale)
+
+
 def diffuse_log_likelihood(statistic: Array, chol_S: Array, C: Array, unknown_input: Array | None, dof: int) -> Array:
     """``-0.5 (lambda + log det S + log det(F^T S^-1 F) + dof log 2 pi)``, ``F = C E``: the
     Kalman log-likelihood, and with an unknown input de Jong's (1991) diffuse one, which
@@ -112,7 +124,8 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array, missi
       missing_measurements: NaN components of ``y`` are not measured: their rows of ``C``
         are left out of the update, the decoupling and the statistic (``chi2(m_obs - q)``),
         as in ``kalman.joseph_update``. Decoupling then needs ``rank(C_obs E) = q``; where
-        the remaining sensors lose it the step is unhealthy.
+        the remaining sensors lose it, the step keeps the prediction (no update, statistic 0
+        with 0 degrees of freedom): nothing the sensors left say is free of ``d``.
 
     Returns:
       a Gaussian ``Filter`` (``init``, ``step``, ``update``, ``predict``) whose
@@ -146,8 +159,13 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array, missi
         statistic = jnp.sum(decoupled**2)
         mean = state.mean + mm(gain, innovation)
         cov = _linalg.joseph_cov(state.cov, gain, C, R)
-        healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(mean))
         log_lik = diffuse_log_likelihood(statistic, chol_S, C, E, dof)
+        if missing_measurements:   # the sensors left cannot decouple d: keep the prediction
+            blind = ~decouplable(chol_S, C, model.C, E)
+            mean, cov = jnp.where(blind, state.mean, mean), jnp.where(blind, state.cov, cov)
+            statistic, log_lik = jnp.where(blind, 0.0, statistic), jnp.where(blind, 0.0, log_lik)
+            dof = jnp.where(blind, 0, dof).astype(jnp.int32)
+        healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(mean))
         innovation, statistic = report_dead(innovation, statistic, dead_components(y, missing_measurements))
         return ConditionedGaussian(mean, cov, innovation, S, log_lik, statistic, dof, healthy)
 

@@ -147,7 +147,7 @@ def _bank_filter(design: LoopDesign, direction: FaultDirection):
     return two_stage_kalman_filter(design.model, direction, design.bias_walk, design.unknown_input)
 
 
-def sensor_locations(design: LoopDesign) -> Array:
+def _sensor_locations(design: LoopDesign) -> Array:
     """(m,) int: the fault label (location + 1) of each sensor, 0 for a sensor with no
     location in the design."""
     m = design.model.C.shape[0]
@@ -155,11 +155,11 @@ def sensor_locations(design: LoopDesign) -> Array:
     return jnp.where(jnp.any(match, axis=1), jnp.argmax(match, axis=1) + 1, 0).astype(jnp.int32)
 
 
-def channel_health_test(design: LoopDesign):
+def _channel_health_test(design: LoopDesign):
     """The stuck-at test of step 6 on the raw measurements: noise bound ``sqrt(diag R)``
-    of the nominal model, labels ``sensor_locations`` (a dead sample: ``flag_dead``)."""
+    of the nominal model, labels ``_sensor_locations`` (a dead sample: ``flag_dead``)."""
     sigma = jnp.sqrt(jnp.diagonal(design.model.R))
-    return frozen_channel_detector(sigma, design.frozen_window, design.frozen_pfa, sensor_locations(design))
+    return frozen_channel_detector(sigma, design.frozen_window, design.frozen_pfa, _sensor_locations(design))
 
 
 def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
@@ -171,8 +171,8 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
     block = 2**design.levels
     dtype = model.Phi.dtype
     estimator = _estimator(design)
-    health_test = channel_health_test(design)
-    channels = sensor_locations(design)
+    health_test = _channel_health_test(design)
+    channels = _sensor_locations(design)
 
     def observe(state: BankState, k: Array, y: Array):
         isolated, kind, est = state.isolated, state.kind, state.estimator
@@ -237,7 +237,7 @@ def tskf_bank_init(design: LoopDesign) -> BankState:
     return BankState(prior, jax.vmap(bank_init)(design.directions),
                      jnp.zeros((2**design.levels, design.location.shape[0]), dtype),
                      jnp.zeros((), jnp.int32), jnp.zeros((), bool), GaussianState(prior.mean, prior.cov), idle,
-                     channel_health_test(design).init(), jnp.zeros((m,), bool))
+                     _channel_health_test(design).init(), jnp.zeros((m,), bool))
 
 
 def reconfigurable_pi(design: LoopDesign) -> Controller:

@@ -50,7 +50,7 @@ class PositionFix(NamedTuple):
     position: Array      # (3,) ECEF [m]
     clock_bias: Array    # () m
     residuals: Array     # (S,) measured minus predicted pseudorange at the solution [m]
-    geometry: Array      # (S, 4) [-u_ned^T, 1] at the solution
+    geometry: Array      # (S, 4) [-u_ned^T, 1] at the solution ((S, 3 + c) with c clocks: raim.unknowns)
     sigma: Array         # (S,) pseudorange standard deviations used as weights [m]
     used: Array          # (S,) bool
     num_used: Array      # () int
@@ -69,10 +69,11 @@ def transmit_states(orbit: Orbit, t_receive: Array, pseudoranges: Array) -> tupl
 
 
 def dops(geometry: Array, used: Array) -> Dops:
-    """DOPs of an (S, 4) NED + clock geometry over the ``used`` rows (unit weights)."""
+    """DOPs of an (S, 3 + clocks) NED + clock geometry over the ``used`` rows (unit
+    weights); TDOP is the first clock's."""
     h = jnp.where(used[:, None], geometry, 0.0)
     normal = h.T @ h
-    cov = _linalg.cho_solve(_linalg.cholesky(normal), jnp.eye(4, dtype=h.dtype))
+    cov = _linalg.cho_solve(_linalg.cholesky(normal), jnp.eye(h.shape[1], dtype=h.dtype))
     var = jnp.diagonal(cov)
     return Dops(jnp.sqrt(jnp.sum(var)), jnp.sqrt(var[0] + var[1] + var[2]), jnp.sqrt(var[0] + var[1]),
                 jnp.sqrt(var[2]), jnp.sqrt(var[3]))

@@ -11,14 +11,15 @@ position error per unit ``sqrt(noncentrality)``, is
 (eq. 10 times ``sigma``: with equal sigmas ``SLOPE(i) sigma``), the vertical one uses
 ``|A_D,i|``. The bias the test misses with probability ``P_md`` has noncentrality
 ``lambda`` (``noncentral_chi2.noncentrality_for_missed_detection`` at the detection
-threshold, ``n - 4`` degrees of freedom), so the protection levels are
+threshold, ``n - u`` degrees of freedom, ``u`` the fix's unknowns: ``raim.unknowns``), so
+the protection levels are
 
 ``HPL = max_i SLOPE_H(i) sqrt(lambda)``, ``VPL = max_i SLOPE_V(i) sqrt(lambda)``
 
 (eq. 11: ``SLOPE_max sqrt(mu) sigma_pr``), and the minimum detectable bias of satellite
 ``i`` is ``MDB_i = sigma_i sqrt(lambda / S_ii)``. GPS is available for an operation when
-``HPL <= HAL`` (and ``VPL <= VAL`` where a vertical limit applies); with 4 satellites
-or fewer there is no test and the levels are infinite.
+``HPL <= HAL`` (and ``VPL <= VAL`` where a vertical limit applies); with ``u``
+satellites or fewer there is no test and the levels are infinite.
 
 Alert limits (``ALERT_LIMITS``, RTCA DO-229 / ICAO Annex 10): non-precision approach
 HAL 556 m (the paper's Table 1, accuracy 220 m), terminal 1852 m, en route 3704 m,
@@ -34,7 +35,7 @@ from jax import Array
 
 from jaxfdi.gnss.least_squares import MaskedQR, masked_qr, solve_upper, thin_q
 from jaxfdi.gnss.positioning import PositionFix
-from jaxfdi.gnss.raim import RaimTables, check_tables, whitened
+from jaxfdi.gnss.raim import RaimTables, check_tables, unknowns, whitened
 
 #: (horizontal, vertical) alert limits [m]; inf: no vertical requirement
 ALERT_LIMITS = {
@@ -77,13 +78,13 @@ def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tup
     h, _ = whitened(fix)
     qr = masked_qr(h, fix.used) if qr is None else qr
     q1 = thin_q(qr)
-    gain = solve_upper(qr.r, q1.T)                         # (4, S) = (H_w^T H_w)^-1 H_w^T
+    gain = solve_upper(qr.r, q1.T)                         # (u, S) = (H_w^T H_w)^-1 H_w^T
     diag = jnp.where(fix.used, 1.0 - jnp.sum(q1**2, axis=1), 0.0)
     observable = fix.used & (diag > 1e-9)
     root = jnp.sqrt(jnp.where(observable, diag, 1.0))
     slope_h = jnp.where(observable, jnp.hypot(gain[0], gain[1]) / root, 0.0)
     slope_v = jnp.where(observable, jnp.abs(gain[2]) / root, 0.0)
-    dof = jnp.maximum(qr.num_used - 4, 0)
+    dof = jnp.maximum(qr.num_used - unknowns(fix), 0)
     lam = tables.noncentrality[jnp.minimum(dof, tables.noncentrality.shape[0] - 1)]
     scale = jnp.where(dof > 0, jnp.sqrt(lam), jnp.inf)
     hpl = jnp.where(dof > 0, jnp.max(slope_h) * scale, jnp.inf)

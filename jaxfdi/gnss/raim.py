@@ -1,12 +1,15 @@
 """Parity-space RAIM: detection, isolation (Brown & Chin 1992; seed 002 eqs. 5-9).
 
-Linearised at the least-squares fix, ``y = H x + eps`` (``H`` n x 4). With the QR
+Linearised at the least-squares fix, ``y = H x + eps`` (``H`` n x u: position and
+``u - 3`` receiver clocks, one per constellation; ``u = 4`` for GPS alone). With the QR
 decomposition of the *whitened* geometry ``W^(1/2) H = Q R`` (``W = diag(1/sigma_i^2)``),
-the last ``n - 4`` columns of ``Q`` give the parity matrix ``P`` ((n - 4) x n):
+the last ``n - u`` columns of ``Q`` give the parity matrix ``P`` ((n - u) x n):
 ``P H_w = 0``, ``P P^T = I``, and the parity vector ``p = P y_w = P eps_w``. Fault-free,
 ``p ~ N(0, I)``, so the detection statistic ``TS_D = p^T p`` is chi-square with
-``n - 4`` degrees of freedom (the weighted sum of squared residuals, Walter & Enge
-1995); equal sigmas give the paper's ``||p||^2 / sigma^2``.
+``n - u`` degrees of freedom (the weighted sum of squared residuals, Walter & Enge
+1995); equal sigmas give the paper's ``||p||^2 / sigma^2``. ``u`` is the fix's number of
+geometry columns, so a second clock costs a degree of freedom (and raises the threshold
+and the protection level) wherever the fix carries one.
 
 - **Threshold** ``chi2_threshold(n - 4, P_fa)`` (``rule="chi2"``). ``rule="paper"`` uses
   seed 002 eq. 8, ``sqrt(2 ln(1/r) sigma^2 / (n - 4))``, read as a bound on the RMS parity
@@ -17,8 +20,8 @@ the last ``n - 4`` columns of ``Q`` give the parity matrix ``P`` ((n - 4) x n):
 - **Isolation** (eq. 9): ``TS_j = p . P[:, j] / ||P[:, j]||``; the satellite with the largest
   ``|TS_j|`` is the faulty one. ``P^T p = S y_w`` with ``S = P^T P = I - Q1 Q1^T``, so the
   statistics come from the thin factor ``Q1`` without forming ``P`` (``parity_matrix``
-  forms it, for the paper's equations and the tests). Isolation needs ``n >= 6``: with 5
-  satellites every column of ``P`` is parallel to ``p``.
+  forms it, for the paper's equations and the tests). Isolation needs ``n >= u + 2``: with
+  ``u + 1`` satellites every column of ``P`` is parallel to ``p``.
 - **Exclusion**: re-solve without the isolated satellite (``integrity.monitor_epoch``).
 
 Arrays have one entry per satellite slot (S); unused slots are masked, never dropped,
@@ -56,8 +59,8 @@ class RaimTables(NamedTuple):
 class ParityCheck(NamedTuple):
     """Detection and isolation of one epoch."""
 
-    statistic: Array   # () TS_D = p^T p (whitened), 0 with fewer than 5 satellites
-    dof: Array         # () int, n - 4 (0: no test)
+    statistic: Array   # () TS_D = p^T p (whitened), 0 with fewer than u + 1 satellites
+    dof: Array         # () int, n - u (0: no test)
     threshold: Array   # () on TS_D (inf when dof == 0)
     alarm: Array       # () bool
     isolation: Array   # (S,) TS_j (0 at unused slots)
@@ -100,15 +103,25 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
     return RaimTables(jnp.concatenate([inf, threshold]), jnp.concatenate([jnp.full((1,), jnp.nan, dtype), lam]))
 
 
+def unknowns(fix: PositionFix) -> int:
+    """``u``: the fix's unknowns, 3 position coordinates and one clock per geometry column
+    after them (trace time; at least 4)."""
+    shape = _checks.shape_of(fix.geometry)
+    if len(shape) != 2 or shape[1] < 4:
+        raise ValueError(f"fix.geometry: expected (S, 3 + clocks) with at least one clock column, got shape {shape}")
+    return shape[1]
+
+
 def check_tables(tables: RaimTables, fix: PositionFix) -> None:
     """Trace time: ``tables`` cover every degree of freedom the fix can have (``raim_tables``
-    of at least its S slots). A smaller table would clamp ``n - 4`` to its last entry: a
+    of at least its S slots). A smaller table would clamp ``n - u`` to its last entry: a
     threshold and a protection level smaller than the true ones, with nothing to say so."""
     slots = _checks.shape_of(fix.used)[0]
     size = _checks.shape_of(tables.threshold)[0]
-    if size < slots - 3:
+    most = slots - unknowns(fix)
+    if size < most + 1:
         raise ValueError(f"tables: built for {size + 3} satellite slots (raim_tables({size + 3})), but the fix has "
-                         f"{slots}: up to {slots - 4} degrees of freedom need raim_tables({slots}) or more")
+                         f"{slots}: up to {most} degrees of freedom need raim_tables({most + 4}) or more")
 
 
 def whitened(fix: PositionFix) -> tuple[Array, Array]:
@@ -118,8 +131,8 @@ def whitened(fix: PositionFix) -> tuple[Array, Array]:
 
 
 def parity_matrix(fix: PositionFix) -> tuple[Array, Array]:
-    """``(P, valid)``: the explicit parity matrix ((S - 4), S) of the whitened geometry from
-    its QR decomposition (rows ``valid`` hold the ``n - 4`` parity rows)."""
+    """``(P, valid)``: the explicit parity matrix ((S - u), S) of the whitened geometry from
+    its QR decomposition (rows ``valid`` hold the ``n - u`` parity rows)."""
     h, _ = whitened(fix)
     return parity_rows(masked_qr(h, fix.used))
 
@@ -127,18 +140,19 @@ def parity_matrix(fix: PositionFix) -> tuple[Array, Array]:
 def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = None) -> ParityCheck:
     """Detection statistic, threshold and isolation statistics of one fix (module doc)."""
     check_tables(tables, fix)
+    u = unknowns(fix)
     h, y = whitened(fix)
     qr = masked_qr(h, fix.used) if qr is None else qr
     q1 = thin_q(qr)
     rotated = apply_qt(qr, y)                            # parity vector at used non-pivot slots
     num = qr.num_used
-    dof = jnp.maximum(num - 4, 0)
-    statistic = jnp.where(dof > 0, jnp.sum(jnp.where(qr.rank >= 4, rotated**2, 0.0)), 0.0)
+    dof = jnp.maximum(num - u, 0)
+    statistic = jnp.where(dof > 0, jnp.sum(jnp.where(qr.rank >= u, rotated**2, 0.0)), 0.0)
     projected = y - q1 @ (q1.T @ y)                       # S y_w = P^T p
     diag = jnp.where(fix.used, 1.0 - jnp.sum(q1**2, axis=1), 0.0)  # S_jj = ||P[:, j]||^2
     observable = fix.used & (diag > 1e-9)
     isolation = jnp.where(observable, projected / jnp.sqrt(jnp.where(observable, diag, 1.0)), 0.0)
     threshold = tables.threshold[jnp.minimum(dof, tables.threshold.shape[0] - 1)]
-    isolated = jnp.where(num >= 6, jnp.argmax(jnp.abs(isolation)), -1).astype(jnp.int32)
+    isolated = jnp.where(num >= u + 2, jnp.argmax(jnp.abs(isolation)), -1).astype(jnp.int32)
     return ParityCheck(statistic, dof.astype(jnp.int32), threshold, statistic > threshold, isolation, isolated,
                        jnp.isfinite(statistic))

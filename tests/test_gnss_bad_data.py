@@ -1,8 +1,10 @@
 """GNSS integrity from the data at hand (issue 37): tables too small for the fix are
 refused, a satellite listed twice is refused, a broadcast record that describes no orbit
 is excluded alone with its reason, and a dead (infinite) pseudorange alarms on its
-satellite. References: the same computation on clean data (the record or satellite left
-out, the pseudorange not measured), and tables large enough, which must agree exactly."""
+satellite; the receiver plant reports a DEAD fault on a tracked satellite as that dead
+channel (+inf) and keeps NaN for a satellite it does not track. References: the same
+computation on clean data (the record or satellite left out, the pseudorange not
+measured), and tables large enough, which must agree exactly."""
 import math
 
 import jax
@@ -11,9 +13,10 @@ import numpy as np
 import pytest
 
 from jaxfdi.data import data_path
+from jaxfdi.faults import concat_faults, fault
 from jaxfdi.gnss import (elevation_sigma, ephemeris_table, geodetic_to_ecef, geometry_fix, monitor_epoch,
-                         parity_check, protection_levels, raim_tables, read_rinex_nav, select_orbits,
-                         transmission_geometry)
+                         parity_check, protection_levels, raim_tables, read_rinex_nav, receiver_plant,
+                         select_orbits, transmission_geometry)
 from jaxfdi.gnss.integrity import raim_output
 from jaxfdi.gnss.orbits import ORBIT_PROBLEMS, SPEED_OF_LIGHT
 
@@ -98,5 +101,29 @@ def test_a_dead_pseudorange_alarms_on_its_satellite_and_the_fix_leaves_it_out(ep
     np.testing.assert_allclose(dead.fix.position, missing.fix.position, rtol=1e-12)
     decision = raim_output(dead).decision
     assert bool(decision.alarm) and float(decision.statistic) == np.inf and int(decision.label) == 1 + slot
+    assert int(dead.excluded) == slot                          # left out of the fix: reported as excluded
+    np.testing.assert_array_equal(dead.fix_excluded.position, dead.fix.position)
     quiet = raim_output(missing).decision                      # NaN: not measured, no evidence
-    assert not bool(quiet.alarm) and int(quiet.label) == 0
+    assert not bool(quiet.alarm) and int(quiet.label) == 0 and int(missing.excluded) == -1
+
+
+def test_the_receiver_reports_a_dead_tracked_channel_as_inf_and_an_untracked_one_as_nan(ephemerides):
+    """DEAD faults on a tracked slot and on a slot with an orbit below the mask: the plant
+    gives +inf on the first (RAIM: alarm, its label, excluded) and NaN on the second (not
+    measured: no evidence), every other tracked slot its finite pseudorange."""
+    table = ephemeris_table(ephemerides, 2086)
+    rho = _epoch(table)
+    _, has_orbit = select_orbits(table, T)
+    tracked = np.isfinite(np.asarray(rho))
+    slot = int(np.flatnonzero(tracked)[2])
+    hidden = int(np.flatnonzero(np.asarray(has_orbit) & ~tracked)[0])
+    plant = receiver_plant(table, T, 1.0, SITE[None], jnp.asarray(tracked)[None], jnp.full((1, 32), 3.0),
+                           fault=concat_faults(fault("dead", "sensor", slot, 0), fault("dead", "sensor", hidden, 0)))
+    _, sensed = plant.measure(plant.init(jnp.asarray([CLOCK, 0.0])), 0, jnp.zeros(0), jax.random.key(3))
+    y = np.asarray(sensed.measurement)
+    assert y[slot] == np.inf and np.isnan(y[hidden])
+    assert np.all(np.isfinite(np.delete(y, slot)[np.delete(tracked, slot)])) and np.all(np.isnan(y[~tracked]))
+    result = MONITOR(table, jnp.asarray(y), raim_tables(32))
+    decision = raim_output(result).decision
+    assert bool(decision.alarm) and int(decision.label) == 1 + slot and int(result.excluded) == slot
+    assert int(result.fix.num_used) == int(tracked.sum()) - 1 and bool(result.fix.healthy)

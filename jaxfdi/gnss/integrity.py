@@ -3,8 +3,10 @@
 ``monitor_epoch`` chains the pieces of seed 002's GPS half (Fig. 3): the least-squares
 fix (``positioning``), the parity test and isolation (``raim``), the protection levels
 and availability (``protection``), and, when the test alarms and a satellite is
-isolated, the exclusion: the fix, test and protection levels again without it. It is a
-snapshot method, so epochs and Monte Carlo runs are ``vmap``s of it (``monitor_epochs``);
+isolated, the exclusion: the fix, test and protection levels again without it (a dead
+channel, an infinite pseudorange, is left out of every fix, alarmed on and reported as
+the excluded slot when the parity test excludes none). It is a snapshot method, so
+epochs and Monte Carlo runs are ``vmap``s of it (``monitor_epochs``);
 ``raim_fdi`` wraps it as ``loop.FDI`` for ``loop.run_loop``, whose per-step output
 carries a ``Decision`` (alarm, isolated label ``1 + slot``: the label the foundation's
 faults give a sensor fault on that slot in a plant without inputs). ``geometry_fix`` and
@@ -38,8 +40,9 @@ class EpochIntegrity(NamedTuple):
     fix: PositionFix
     check: ParityCheck
     protection: ProtectionLevels
-    excluded: Array            # () int, the excluded slot (-1: none)
-    fix_excluded: PositionFix  # the fix without it (the full fix when none)
+    excluded: Array            # () int, the excluded slot (-1: none): the one isolated after a parity alarm,
+                               # else the first dead slot (every fix leaves it out); -1 without ``exclude``
+    fix_excluded: PositionFix  # the fix without it (the full fix when none or a dead slot: it lacks it)
     check_excluded: ParityCheck
     protection_excluded: ProtectionLevels
     dead: Array                # (S,) bool: a slot with an orbit whose pseudorange is infinite (a dead
@@ -75,14 +78,17 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
     if not exclude:
         none = jnp.asarray(-1, jnp.int32)
         return EpochIntegrity(fix, check, protection, none, fix, check, protection, dead)
-    excluded = jnp.where(check.alarm & (check.isolated >= 0), check.isolated, -1).astype(jnp.int32)
-    keep = available & (jnp.arange(available.shape[0]) != excluded)
+    isolated = jnp.where(check.alarm & (check.isolated >= 0), check.isolated, -1).astype(jnp.int32)
+    keep = available & (jnp.arange(available.shape[0]) != isolated)
     initial = jnp.concatenate([fix.position, fix.clock_bias[None]])
     refit = solve_position(orbit, t_receive, pseudoranges, keep, sigma if not callable(sigma) else fix.sigma,
                            initial=initial, iterations=EXCLUSION_ITERATIONS, unweighted_iterations=0,
                            transmit=transmit)
     check_x, protection_x = assess(refit, tables, operation)
-    pick = lambda a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(excluded >= 0, u, v), a, b)  # noqa: E731
+    pick = lambda a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(isolated >= 0, u, v), a, b)  # noqa: E731
+    # a dead slot is excluded too (the fix already leaves it out): reported when the parity
+    # test isolated nothing, so that a dead channel reads as detected, isolated and excluded
+    excluded = jnp.where(isolated >= 0, isolated, jnp.where(jnp.any(dead), jnp.argmax(dead), -1)).astype(jnp.int32)
     return EpochIntegrity(fix, check, protection, excluded, pick(refit, fix), pick(check_x, check),
                           pick(protection_x, protection), dead)
 
@@ -122,7 +128,7 @@ class RaimOutput(NamedTuple):
     available: Array            # () bool (HPL, VPL within the alert limits)
     position: Array             # (3,) ECEF, all satellites
     clock_bias: Array           # ()
-    excluded: Array             # () int slot (-1: none)
+    excluded: Array             # () int slot (-1: none): the parity test's isolated one, else a dead one
     position_excluded: Array    # (3,) after exclusion (= position when none)
     statistic_excluded: Array   # ()
     threshold_excluded: Array   # ()

@@ -18,8 +18,13 @@ satellite faults, as a plant for the foundation's loop.
   (``orbits.transmission_geometry``). Ionosphere and troposphere residuals are not
   modelled apart: they are part of the elevation-dependent noise.
 - **Faults**: the foundation's sensor faults (``jaxfdi.faults``), component = satellite
-  slot: an impulse, bias or ramp (drift) on one satellite's pseudorange, several episodes
-  in one run (``concat_faults``).
+  slot: an impulse, bias or ramp (drift) on one satellite's pseudorange, a frozen channel
+  (STUCK: the range held at its onset value), several episodes in one run
+  (``concat_faults``).
+- **Dead and missing**: NaN means "not measured" (a satellite not visible: not tracked, a
+  RINEX blank) and is no evidence; a DEAD fault (or any non-finite value) on a visible,
+  tracked slot is reported as ``+inf``, the dead channel that ``integrity`` alarms on,
+  isolates and leaves out (``EpochIntegrity.dead``), never as a silent NaN.
 
 ``receiver_plant`` returns a ``simulate.Simulator`` (``init``, ``step``, ``measure``,
 ``advance``), so ``simulate.simulate`` and ``loop.run_loop`` drive it.
@@ -128,7 +133,8 @@ def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, vi
       table: orbits of the S slots (``orbits.ephemeris_table`` / ``almanac_table``).
       t0, dt: time tag of step 0 [s from the table's reference week] and the step [s].
       path_ecef: (T, 3) receiver antenna positions at the T time tags.
-      visible: (T, S) bool: slots measured at each step (``visibility``); others are NaN.
+      visible: (T, S) bool: slots tracked at each step (``visibility``); others are NaN (not
+        measured). A tracked slot whose value a fault makes non-finite (DEAD) is ``+inf``.
       sigma: (T, S) pseudorange noise standard deviations [m] (``elevation_sigma``).
       clock: the oscillator (``ClockModel``); ``init`` takes ``[bias, drift]`` anyway.
       fault: sensor ``Fault``(s) on satellite slots (scalar leaves or a stack), or None.
@@ -157,7 +163,8 @@ def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, vi
         _, key_v = jax.random.split(step_key)
         noisy = clean + sigma[k] * jax.random.normal(key_v, clean.shape, clean.dtype)
         faulty, held = apply_faults(faults, k, noisy, Target.SENSOR, sim.held)
-        measured = jnp.where(visible[k], faulty, jnp.nan)
+        # NaN: not tracked; a tracked channel gone non-finite (DEAD) is a dead channel, +inf
+        measured = jnp.where(visible[k], jnp.where(jnp.isfinite(faulty), faulty, jnp.inf), jnp.nan)
         active = jax.vmap(is_active, in_axes=(0, None))(faults, k)
         return SimState(sim.state, held), Sensed(sim.state, measured, faulty - noisy, active,
                                                  active_label(faults, k, u.shape[0]))

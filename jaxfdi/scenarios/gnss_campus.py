@@ -18,9 +18,13 @@ are a ``vmap`` over keys.
   alert limit, while the parity statistic stays quiet (it cannot see geometry).
 - **Park** (Haneul Park, 37.5684 N 126.8851 E, open sky): Table 2's pseudorange faults on
   one satellite — impulse 100 m at 100 s, bias 100 m over 300-400 s, drift 1 m/s over
-  500-600 s — as one run's three episodes (``faults.concat_faults``), on each satellite
-  in view for the whole run in turn; the headline row is the highest satellite at the
-  start (the paper does not say which it used).
+  500-600 s — and, beyond the paper, a dead channel over 700-800 s (tracked, no value:
+  ``+inf``, which RAIM alarms on, isolates and leaves out at once) and a frozen one over
+  850-860 s (the pseudorange held at its onset value while the range moves at the
+  satellite's range rate: a ramp of tens to hundreds of m/s), as one run's five episodes
+  (``faults.concat_faults``), on each satellite in view for the whole run in turn; the
+  headline row is the highest satellite at the start (the paper does not say which it
+  used).
 
 Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection
 Algorithm for UAV using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781
@@ -61,9 +65,18 @@ PARK_PATH = (600.0, 200.0, 12.0, 60.0, 0.0)
 #: the building beside the campus circuit's east leg (NED about CAMPUS)
 CAMPUS_WALL = measurements.Wall(jnp.asarray([-30.0, 6.0]), jnp.asarray([30.0, 6.0]), jnp.asarray(50.0))
 #: seed 002 Table 2 (steps at 1 Hz): (name, kind, onset, end, magnitude, slope per step)
-PARK_FAULTS = (("impulse 100 m at 100 s", "impulse", 100, 101, 100.0, 0.0),
-               ("bias 100 m, 300-400 s", "bias", 300, 400, 100.0, 0.0),
-               ("drift 1 m/s, 500-600 s", "ramp", 500, 600, 0.0, 1.0))
+TABLE2_FAULTS = (("impulse 100 m at 100 s", "impulse", 100, 101, 100.0, 0.0),
+                 ("bias 100 m, 300-400 s", "bias", 300, 400, 100.0, 0.0),
+                 ("drift 1 m/s, 500-600 s", "ramp", 500, 600, 0.0, 1.0))
+#: beyond the paper (issue 37): a dead channel (tracked, no value: +inf, ``measurements``)
+#: and a frozen one (the pseudorange held at its onset value), each recovering at its end;
+#: the frozen one lasts 10 s: its error grows at the range rate (up to ~660 m/s here), and
+#: past ~9 km the full fix's fixed Gauss-Newton steps miss their convergence test
+#: (``positioning.ITERATIONS``), which would count the run unhealthy
+DEAD_FROZEN_FAULTS = (("dead 700-800 s", "dead", 700, 800, 0.0, 0.0),
+                      ("frozen 850-860 s", "stuck", 850, 860, 0.0, 0.0))
+#: the park run's episodes, in order: Table 2's, then ours
+PARK_FAULTS = TABLE2_FAULTS + DEAD_FROZEN_FAULTS
 #: beyond the paper: MDB over the day (open sky at the campus) and availability maps
 MDB_STEP_S = 300.0
 MAP_LAT = (-75.0, 75.0, 15.0)       # first, last, step [deg]
@@ -289,14 +302,15 @@ def _park_summary(result, case: Case, slots, candidates, headline, table):
             right = hit & (ex == slot) & (stat_x[pick][runs_idx, at] <= thr_x[pick][runs_idx, at])
             rows.append({
                 "case": "park", "prn": int(table.prn[slot]), "headline": bool(slot == headline), "fault": name,
-                "runs": int(summary.runs), "detected": float(summary.detection_rate[e]),
+                "runs": int(summary.runs), "unhealthy_runs": int(summary.unhealthy_runs),
+                "detected": float(summary.detection_rate[e]),
                 "isolated": float(summary.isolation_rate[e]), "excluded": float(right.mean()),
                 "delay_median_s": float(summary.delay_median[e]), "delay_p90_s": float(summary.delay_p90[e]),
                 "horizontal_error_after_exclusion_p95_m": float(np.percentile(
                     error_x[pick][runs_idx[right], at[right]], 95)) if right.any() else None,
                 "false_alarm_runs": int(summary.false_alarm_runs),
                 "false_alarm_rate_per_epoch": float(summary.false_alarm_rate_per_step),
-                "paper": "detected",
+                "paper": "detected" if e < len(TABLE2_FAULTS) else "beyond the paper",
             })
     first = int(np.flatnonzero(slots == headline)[0])
     series = {"hdop": np.asarray(out.dops.hdop[first]), "hpl": np.asarray(out.hpl[first]),
@@ -318,8 +332,8 @@ def gnss_table(study: GnssCampusStudy) -> str:
              f"there {_fmt(campus['horizontal_error_p95_where_hpl_over_m'], '.1f')} m, elsewhere "
              f"{_fmt(campus['horizontal_error_p95_elsewhere_m'], '.1f')} m",
              f"  paper: {PAPER['campus']}", "",
-             "Park (Table 2 faults on one satellite; rates over runs; 'excluded' = isolated satellite removed and "
-             "the re-solved test passes):",
+             "Park (Table 2 faults, then a dead and a frozen channel, on one satellite; rates over runs; 'excluded' "
+             "= isolated satellite removed and the re-solved test passes):",
              f"  {'PRN':>4} {'fault':<24} {'detected':>8} {'isolated':>8} {'excluded':>8} {'delay med/p90 s':>16} "
              f"{'FA runs':>7}  paper"]
     for row in (r for r in study.rows if r["case"] == "park"):
@@ -411,15 +425,21 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
                                                                           f"{study.park['headline_prn']:02d}"))):
         ax = fig.add_subplot(2, 1, i + 1)
         t = np.arange(series["statistic"].size) * DT
-        ax.semilogy(t, np.maximum(series["statistic"], 1e-3), label="TS_D = p^T p")
+        statistic = series["statistic"]
+        dead = np.isinf(statistic)
+        ax.semilogy(t, np.maximum(np.where(dead, np.nan, statistic), 1e-3), label="TS_D = p^T p")
         ax.semilogy(t, series["threshold"], color="C3", label="threshold chi2(n-4), P_fa 1/15000")
+        if dead.any():   # a dead channel's statistic is +inf: marked above the finite ones
+            top = 2.0 * max(np.max(statistic[~dead], initial=1.0), np.max(series["threshold"][np.isfinite(
+                series["threshold"])], initial=1.0))
+            ax.semilogy(t[dead], np.full(int(dead.sum()), top), "|", color="k", ms=4, label="dead channel: TS_D = +inf")
         if "statistic_excluded" in series:
             ax.semilogy(t, np.where(series["excluded"] >= 0, np.maximum(series["statistic_excluded"], 1e-3), np.nan),
                         ".", ms=3, color="C2", label="after exclusion")
             for _, _, onset, end, _, _ in PARK_FAULTS:
                 ax.axvspan(onset, max(end, onset + 3), color="gray", alpha=0.2)
         ax.set_title(f"{name}: parity statistic vs threshold (seed 002 Figs. 7 and 9)")
-        ax.legend(loc="upper right", fontsize=8)
+        ax.legend(loc="lower right" if "statistic_excluded" in series else "upper right", fontsize=8)
     ax.set_xlabel("time [s]")
     save(fig, "gnss-campus-statistic.png")
 

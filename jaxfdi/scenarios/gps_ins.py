@@ -61,9 +61,8 @@ from jaxfdi.ins.mechanization import NavState
 from jaxfdi.loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
 from jaxfdi.metrics import binomial_interval, summarize_detection, summarize_episodes
 from jaxfdi.scenarios._common import check_study, require_x64
-# Table 2's three episodes only (the GPS half's dead and frozen channels are not flown here)
-from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, WEEK
-from jaxfdi.scenarios.gnss_campus import TABLE2_FAULTS as PARK_FAULTS
+# Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
+from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK
 from jaxfdi.study import Structure, Study, case_slices, run_study
 
 FLIGHT_S = 1200
@@ -291,7 +290,7 @@ def satellite_faults(slot: int | None, before: int | None = None) -> flt.Fault:
     end before epoch ``before`` when given, the others replaced by no fault)."""
     episodes = [flt.no_fault() if slot is None or (before is not None and end >= before)
                 else flt.fault(kind, "sensor", slot, onset, magnitude, slope, end)
-                for _, kind, onset, end, magnitude, slope in PARK_FAULTS]
+                for _, kind, onset, end, magnitude, slope in TABLE2_FAULTS]
     return flt.concat_faults(*episodes)
 
 
@@ -393,7 +392,7 @@ def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE
         "scst": {"dof": error_state.STATE_SIZE, "pfa": PFA, "threshold": scst_limit, "period_s": SCST_PERIOD,
                  "max_condition": scst.DEFAULT_MAX_CONDITION},
         "raim": {"pfa": raim.DEFAULT_PFA, "pmd": raim.DEFAULT_PMD, "mask_deg": MASK_DEG, "operation": "npa"},
-        "satellite_faults_prn": int(table.prn[slot]), "satellite_faults": [name for name, *_ in PARK_FAULTS],
+        "satellite_faults_prn": int(table.prn[slot]), "satellite_faults": [name for name, *_ in TABLE2_FAULTS],
         "table3_gyro_deg_h": list(TABLE3_DEG_H), "paper_table3_s": {f"{k:g}": list(v) for k, v in PAPER_TABLE3.items()},
         "beyond_gyro_deg_h": list(BEYOND_GYRO_DEG_H) if beyond else [],
         "beyond_accel_mg": list(BEYOND_ACCEL_MG) if beyond else [],
@@ -469,7 +468,7 @@ def _rows(results: dict, size: StudySize = PAPER_SIZE) -> list:
             row["raim"] = [{"fault": fault[0], "detected": float(summary.detection_rate[e]),
                             "isolated": float(summary.isolation_rate[e]),
                             "delay_median_s": float(summary.delay_median[e])}
-                           for e, fault in enumerate(PARK_FAULTS) if fault[3] < size.onset_s]
+                           for e, fault in enumerate(TABLE2_FAULTS) if fault[3] < size.onset_s]
             row["raim_false_alarm_runs"] = int(summary.false_alarm_runs)
             row["ins_alarm_runs_during_gps_faults"] = _alarms_in_gps_windows(out.series, size.onset_s)
             rows.append(row)
@@ -500,7 +499,7 @@ def _false_alarms(series: Series, chi2_limit: float, scst_limit: float) -> dict:
 def _alarms_in_gps_windows(series: Series, onset_s: int = ONSET_S) -> dict:
     chi2_limit, scst_limit = thresholds()
     found = {}
-    for fault in PARK_FAULTS:
+    for fault in TABLE2_FAULTS:
         name, _, onset, end = fault[:4]
         if end >= onset_s:                                # not flown (a short study)
             continue
@@ -654,7 +653,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     ax.semilogy(t, np.maximum(s.raim, 1e-3), label="TS_D")
     ax.semilogy(t, s.raim_threshold, color="C3", label="threshold")
     ax.plot(t, np.where(s.gps_used, np.nan, 1e-2), "k|", label="epoch not used by the EKF")
-    for _, _, onset, end, _, _ in PARK_FAULTS:
+    for _, _, onset, end, _, _ in TABLE2_FAULTS:
         ax.axvspan(onset, max(end, onset + 3), color="gray", alpha=0.2)
     ax.set_title(f"RAIM statistic, satellite faults on PRN {study.config['satellite_faults_prn']:02d} (seed 002 Fig. 9)")
     ax.legend(fontsize=8)

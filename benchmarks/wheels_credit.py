@@ -66,7 +66,7 @@ def run_once(design, f, key, noise_scale, steps, restart, history=False):
     the engagement step, the bank's ``F_x`` at ``LAGS`` after it (and the history)."""
     params = design.params
     N = params.wheel_axes.shape[0]
-    fdi, fdi0 = rw.wheel_fdi(design, restart_prediction=restart)
+    fdi, fdi0 = rw.wheel_fdi(design, restart_prediction=restart, gyro_health=False)  # the credit bank alone
     plant = wheel_plant(params, f, noise_scale * design.gyro_sigma, noise_scale * design.disturbance_sigma,
                         noise_scale * design.wheel_noise_sigma)
     controller = wheel_attitude_controller(params, design.gains, design.profile, design.initial_speeds)

@@ -349,9 +349,12 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
           f"{cfg['calibration_runs']} fault-free runs, another seed); NIS over {cfg['nis_window']} steps "
           f"{cfg['nis_threshold']:.2f} (chi2, Pfa 1e-5); relative credit {cfg['credit_threshold']}; "
           f"mu_T {cfg['mode_threshold']}; isolators confirm over {cfg['confirm_steps']} steps")
-    print("rate = detected (F, NIS) or isolated to the right wheel (credit, MM); <=2s = the same within 2 s of "
-          "the onset, in the runs with no decision before it; delays over those runs (mean, median, p90); FA = share "
-          "of runs with a decision before the onset, clean = the others\n")
+    print("det = decided at or after the onset; isol = its first decision names the faulty wheel or gyro (- : "
+          "the method never names one: F and NIS for a wheel); <=2s = detected (F, NIS) or isolated (credit, MM, gyro "
+          "health test) within 2 s of the onset, in the runs with no decision before it; delays over those runs "
+          "(mean, median, p90); FA = share of runs with a decision before the onset, clean = the others; gyro cases "
+          f"(issue 37): the x gyro dead (NaN) or frozen, gyro health test = stuck-at test over {cfg['health_window']} "
+          f"samples, P_fa {cfg['health_pfa_per_window']:g} per window and gyro\n")
     print(study.table())
     print()
     print(study.headline())

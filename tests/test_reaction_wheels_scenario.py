@@ -1,12 +1,15 @@
 """Seed 004 scenario at reduced size: wheel fault semantics against hand-written
 formulas, and the issue's claims on a closed-loop Monte Carlo batch.
 
-One batch of 160 runs (the study's one closed-loop program, ``wheel_spec``, with the
+One batch of 172 runs (the study's one closed-loop program, ``wheel_spec``, with the
 batch's faults as its cases): 80 fault-free calibration runs, 40 fault-free test runs,
-and a stop of each wheel (spinning near its 2000 rpm bias speed) in 10 runs each, onsets
-uniform in 15-25 s. The banks engage on the NIS test, so the isolators do
-not depend on ``F_T``; ``F_T`` is calibrated on the calibration runs and checked on the
-test runs. Rates are checked with one-sided binomial bounds at the stated sizes.
+a stop of each wheel (spinning near its 2000 rpm bias speed) in 10 runs each, then each
+gyro dead and frozen (issue 37) in 2 runs each, onsets uniform in 15-25 s. The banks
+engage on the NIS test, so the isolators do not depend on ``F_T``; ``F_T`` is calibrated
+on the calibration runs and checked on the test runs. Rates are checked with one-sided
+binomial bounds at the stated sizes. One more program, the closed loop with its history
+(``histories``: a stop, a dead and a frozen gyro from step 200, 260 steps), serves the
+UKF comparison and the controller's view.
 """
 import jax
 import jax.numpy as jnp
@@ -20,7 +23,11 @@ from jaxfdi.metrics import binomial_lower_bound
 from jaxfdi.scenarios import reaction_wheels as rw
 from jaxfdi.study import run_study
 
-CALIBRATION, FREE, PER_WHEEL = 80, 40, 10
+CALIBRATION, FREE, PER_WHEEL, PER_GYRO = 80, 40, 10, 2
+STOPS = slice(CALIBRATION + FREE, CALIBRATION + FREE + 4 * PER_WHEEL)
+GYRO_CASES = [(kind, axis) for kind in ("dead", "frozen") for axis in range(3)]
+GYROS = slice(STOPS.stop, STOPS.stop + len(GYRO_CASES) * PER_GYRO)
+ONSET, HISTORY_STEPS = 200, 260
 
 
 @pytest.fixture(scope="module")
@@ -29,9 +36,26 @@ def batch():
     cases = [("none", -1)] + [("stop", w) for w in range(4)]
     free = rw.case_faults([("none", -1)], CALIBRATION + FREE, jax.random.key(11))
     stops = rw.case_faults(cases[1:], PER_WHEEL, jax.random.key(12))
-    faults = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), free, stops)
-    spec = rw.wheel_spec(design, cases)._replace(cases=faults, case_names=tuple(map(str, range(160))))
+    gyros = rw.case_faults(GYRO_CASES, PER_GYRO, jax.random.key(13))
+    faults = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a), free, stops, gyros)
+    total = GYROS.stop
+    spec = rw.wheel_spec(design, cases)._replace(cases=faults, case_names=tuple(map(str, range(total))))
     return design, run_study(spec, runs=1, seed=5).outputs["closed loop"]
+
+
+@pytest.fixture(scope="module")
+def histories():
+    """EKF closed loops with history, seed 3, 260 steps: a stop of wheel 2, the x gyro dead
+    and the y gyro frozen, each from step 200."""
+    design = rw.wheel_design()
+    faults = [rw.wheel_fault("stop", 1, ONSET), rw.gyro_fault("dead", 0, ONSET), rw.gyro_fault("frozen", 1, ONSET)]
+    run = jax.jit(jax.vmap(lambda f: rw.run_wheels(design, jax.random.key(3), f, steps=HISTORY_STEPS, history=True)))
+    out, hist = run(jax.tree_util.tree_map(lambda *x: jnp.stack(x), *faults))
+    return design, jax.tree_util.tree_map(np.asarray, out), jax.tree_util.tree_map(np.asarray, hist)
+
+
+def _at(tree, i):
+    return jax.tree_util.tree_map(lambda leaf: leaf[i], tree)
 
 
 def test_delivered_torque_follows_each_fault_kind():
@@ -103,7 +127,7 @@ def test_each_wheel_stop_is_detected_at_once_and_isolated_within_two_seconds(bat
     4 and 1 with 3)."""
     design, out = batch
     dt = float(design.params.dt)
-    stops = slice(CALIBRATION + FREE, None)
+    stops = STOPS
     onset = out.nis.onset[stops]
     wheel = np.repeat(np.arange(4), PER_WHEEL)
     detected = out.nis.detection_step[stops]
@@ -118,6 +142,137 @@ def test_each_wheel_stop_is_detected_at_once_and_isolated_within_two_seconds(bat
     assert min(rates["likelihood"]) >= 0.9, rates
 
 
+def _gyro_part(out, kind):
+    """The batch's runs of ``kind`` on each gyro: (records, gyro axis per run)."""
+    first = GYROS.start + GYRO_CASES.index((kind, 0)) * PER_GYRO
+    part = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[first:first + 3 * PER_GYRO], out)
+    return part, np.repeat(np.arange(3), PER_GYRO)
+
+
+def test_a_dead_gyro_is_detected_and_isolated_by_every_method_at_its_onset(batch):
+    """Issue 37: a gyro NaN from its onset (each gyro, 2 runs each). The wheels' speeds are
+    not measured, so the dead sensor is a gyro, label ``1 + N + j`` = 5, 6, 7 beside the
+    wheels' 1-4. Every method (F, NIS, both isolators through ``flag_dead`` on their
+    filters' dead report, and the gyro health test) alarms at the onset itself (delay 0)
+    naming that gyro, none before it (F's placeholder threshold aside), and the runs stay
+    healthy (the +inf statistics are evidence, not ill health)."""
+    _, out = batch
+    part, axis = _gyro_part(out, "dead")
+    np.testing.assert_array_equal(np.asarray(rw.gyro_labels(rw.wheel_design().params)), [5, 6, 7])
+    assert rw.run_is_healthy(part).all()
+    for method in rw.METHODS:
+        record = getattr(part, method)
+        np.testing.assert_array_equal(record.detection_step, record.onset, err_msg=method)
+        np.testing.assert_array_equal(record.isolated, 5 + axis, err_msg=method)
+        if method != "fdp":
+            assert np.all(record.false_alarms == 0), method
+
+
+def test_a_frozen_gyro_is_isolated_by_the_health_test_within_its_window(batch):
+    """A gyro holding its onset reading (each gyro, 2 runs each): ``HEALTH_WINDOW - 1``
+    steps after the onset the test's window holds only the held value (the onset's reading
+    is a live one), statistic 0, so the test has isolated that gyro by then at the latest,
+    with no alarm before the onset. (It may be a step or two earlier: with one live sample
+    left in the window the statistic is 0.9 d^2 / sigma^2, d ~ N(0, 2 sigma^2) (the rate's
+    change over a step aside), under the
+    threshold chi2.ppf(1e-7, 9) = 0.136 with probability 0.22; with two, 0.04.) The banks
+    cannot name a gyro without a NaN (their hypotheses are wheel stops): whatever they
+    decide is a wheel or nothing."""
+    _, out = batch
+    part, axis = _gyro_part(out, "frozen")
+    assert rw.run_is_healthy(part).all()
+    health = part.health
+    delay = health.detection_step - health.onset
+    assert np.all((delay >= 0) & (delay <= rw.HEALTH_WINDOW - 1)), delay
+    np.testing.assert_array_equal(health.isolated, 5 + axis)
+    assert np.all(health.false_alarms == 0)
+    for method in ("credit", "likelihood"):
+        assert set(getattr(part, method).isolated.tolist()) <= {-1, 1, 2, 3, 4}, method
+
+
+def test_the_gyro_health_test_stays_quiet_without_a_gyro_fault(batch):
+    """The stuck-at test's false-alarm probability is at most ``HEALTH_PFA`` per window and
+    gyro whatever the plant does (``detection.frozen``), so a 600-step run alarms with
+    probability <= 3 x 600 x 1e-7 = 1.8e-4 (union bound) and any alarm in the batch's 160
+    runs without a gyro fault (120 fault-free, 40 wheel stops) has probability <= 2.9 %."""
+    _, out = batch
+    per_run = 3 * 600 * rw.HEALTH_PFA
+    assert per_run <= 1.8e-4 and 1.0 - (1.0 - per_run) ** 160 < 0.03
+    assert np.all(np.asarray(out.health.first_alarm[:STOPS.stop]) < 0)
+
+
+def test_the_controller_never_flies_on_a_dead_or_frozen_gyro(histories):
+    """The controller's rates (``WheelHistory.controller_rate``): always finite; the raw
+    reading, to the bit, wherever the gyro is in service and finite (so a run without a
+    gyro fault, the stop here, flies exactly as before issue 37); for the dead x gyro from
+    step 200 and for the frozen y gyro once the health test has found it (within its
+    window: by step 209), the view EKF's posterior, within 3 gyro sigmas of the true rate
+    (measured 1.3e-4 rad/s), where the held reading drifts away. Until the test has found
+    it (at most 9 steps, 200-208) the held value reaches the controller: it is
+    indistinguishable from a live reading before."""
+    design, outs, hists = histories
+    sigma = float(design.gyro_sigma)
+    found = int(outs.health.detection_step[2])
+    assert ONSET <= found <= ONSET + rw.HEALTH_WINDOW - 1
+    stop, dead, frozen = (_at(hists, i) for i in range(3))
+    assert np.isfinite(hists.controller_rate).all()
+    np.testing.assert_array_equal(stop.controller_rate, stop.measurement)
+    # dead x gyro: NaN from the onset, the other two flown raw
+    assert np.isnan(dead.measurement[ONSET:, 0]).all() and np.isfinite(dead.measurement[:ONSET]).all()
+    np.testing.assert_array_equal(dead.controller_rate[:ONSET], dead.measurement[:ONSET])
+    np.testing.assert_array_equal(dead.controller_rate[:, 1:], dead.measurement[:, 1:])
+    assert np.max(np.abs(dead.controller_rate[ONSET:, 0] - dead.rate[ONSET:, 0])) < 3 * sigma
+    # frozen y gyro: held to the bit from the onset, out of service from `found`
+    held = frozen.measurement[ONSET, 1]
+    assert np.all(frozen.measurement[ONSET:, 1] == held)
+    np.testing.assert_array_equal(frozen.controller_rate[:found], frozen.measurement[:found])
+    np.testing.assert_array_equal(frozen.controller_rate[:, [0, 2]], frozen.measurement[:, [0, 2]])
+    assert np.all(frozen.controller_rate[found:, 1] != held)
+    assert np.max(np.abs(frozen.controller_rate[found:, 1] - frozen.rate[found:, 1])) < 3 * sigma
+    assert np.max(np.abs(held - frozen.rate[found:, 1])) > 3 * sigma
+    # the same runs' records: the health test names the gyro at the onset (dead) and at `found` (frozen)
+    assert outs.healthy.all()
+    assert outs.health.detection_step.tolist()[:2] == [-1, ONSET] and outs.health.isolated.tolist() == [-1, 5, 6]
+
+
+def test_the_study_table_has_the_gyro_rows(batch):
+    """``study_cases`` ends with the x gyro dead and frozen, named ``dead g1`` and ``frozen
+    g1``; their table rows (from the batch's x-gyro runs, beside 40 fault-free runs and the
+    stops of wheel 1) give every method's detection (``det``) and isolation (``isol``) rate:
+    dead, 1 and 1 for all five methods, with delay 0 (F's delays aside: the batch runs with
+    the placeholder ``F_T``, which alarms before the onset); frozen, 1 and 1 with delays at
+    most (W - 1) dt = 0.9 s for the gyro health test and isolation 0 for the others (none
+    names the gyro).
+    F and NIS never name a wheel: '-' in a wheel row's ``isol``."""
+    design, out = batch
+    dt = float(design.params.dt)
+    assert rw.study_cases()[-2:] == [("dead", 0), ("frozen", 0)]
+    assert rw.wheel_spec(design, rw.study_cases()).case_names[-2:] == ("dead g1", "frozen g1")
+    take = lambda start, n: jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[start:start + n], out)  # noqa: E731
+    rows = [rw.summarize_case(take(CALIBRATION, FREE), "none", -1, dt),
+            rw.summarize_case(take(STOPS.start, PER_WHEEL), "stop", 0, dt)]
+    for kind in ("dead", "frozen"):
+        first = GYROS.start + GYRO_CASES.index((kind, 0)) * PER_GYRO
+        rows.append(rw.summarize_case(take(first, PER_GYRO), kind, 0, dt))
+    assert rows[2]["gyro"] == 0 and rows[2]["wheel"] == -1
+    table = rw.WheelStudy({}, rows, out).table()
+    cells = {}
+    for line in table.splitlines()[2:]:
+        cells[(line[:10].strip(), line[11:35].strip())] = line[36:].split()
+    names = rw.METHOD_NAMES
+    for method in rw.METHODS:  # det isol <=2s FA clean mean med p90 (F: the batch's placeholder F_T alarms early)
+        want = ["1.00", "1.00", "1.00", "0.00", "2", "0.00", "0.00", "0.00"]
+        got = cells[("dead g1", names[method])]
+        assert (got[:2] == want[:2]) if method == "fdp" else (got == want), (method, got)
+    frozen = cells[("frozen g1", names["health"])]
+    assert frozen[:5] == ["1.00", "1.00", "1.00", "0.00", "2"] and all(float(v) <= 0.9 for v in frozen[5:]), frozen
+    for method in ("fdp", "nis", "credit", "likelihood"):
+        assert cells[("frozen g1", names[method])][1] == "0.00", method
+    assert cells[("none", names["health"])] == ["0.00"]  # FA only
+    assert cells[("stop w1", names["fdp"])][1] == "-" and cells[("stop w1", names["nis"])][1] == "-"
+    assert ("stop w1", names["health"]) not in cells
+
+
 def test_run_wheels_rejects_unknown_options():
     design = rw.wheel_design()
     with pytest.raises(ValueError, match="engage_on"):
@@ -126,17 +281,16 @@ def test_run_wheels_rejects_unknown_options():
         rw.run_wheels(design, jax.random.key(0), no_fault(), steps=3, estimator="pf")
 
 
-def test_ukf_estimator_agrees_with_the_ekf_on_the_closed_loop():
+def test_ukf_estimator_agrees_with_the_ekf_on_the_closed_loop(histories):
     """The UKF option, checked against the EKF on the same closed-loop run (a stop of
     wheel 2 at step 200): over 0.1 s the rate model is nearly linear, so the two filters'
     F and mode probabilities agree closely (measured 4e-10 relative in F, 2e-8 in mu),
     and both banks reach the same decisions."""
-    design = rw.wheel_design()
-    f = rw.wheel_fault("stop", 1, 200)
-    runs = {kind: jax.jit(lambda kind=kind: rw.run_wheels(design, jax.random.key(3), f, steps=260, estimator=kind,
-                                                          history=True))()
-            for kind in ("ekf", "ukf")}
-    (out_e, hist_e), (out_u, hist_u) = runs["ekf"], runs["ukf"]
+    design, outs, hists = histories
+    f = rw.wheel_fault("stop", 1, ONSET)
+    out_u, hist_u = jax.jit(lambda: rw.run_wheels(design, jax.random.key(3), f, steps=HISTORY_STEPS, estimator="ukf",
+                                                  history=True))()
+    out_e, hist_e = _at(outs, 0), _at(hists, 0)
     F_e = np.asarray(hist_e.detection_parameter)
     assert np.max(np.abs(np.asarray(hist_u.detection_parameter) - F_e)) < 1e-6 * np.max(F_e)
     assert np.max(np.abs(np.asarray(hist_u.mode_prob) - np.asarray(hist_e.mode_prob))) < 1e-5

@@ -19,6 +19,10 @@ isolators stay idle; from the step after the alarm they run on their own and dec
 With ``restart_prediction`` each hypothesis's prediction filter starts, at the
 engaging step, from its own estimation filter's posterior ``f(m_x, u; p_x)`` rather than
 from the nominal prediction, which carries the nominal filter's lag for good.
+
+A non-finite measurement component is a dead sensor: every filter takes its prediction
+there and reports it, and each of the four decisions alarms at that step with the
+channel's label (``chi2.flag_dead`` on the dead report of the decision's own filters).
 """
 from __future__ import annotations
 
@@ -28,7 +32,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi.detection.chi2 import Decision, chi2_detector
+from jaxfdi.detection.chi2 import Decision, chi2_detector, flag_dead
 from jaxfdi.detection.credits import credit_isolator
 from jaxfdi.detection.dual_filter import DualFilterState, dual_filter
 from jaxfdi.detection.mode_probability import mode_probability_detector
@@ -59,7 +63,7 @@ class TwoStage(NamedTuple):
 def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], transition: Callable, field: Callable,
                         params: Any, hypotheses: Any, modes: Any, *, detection_threshold, nis_threshold,
                         nis_window: int, credit_threshold, mode_threshold, mm_floor, engage_cov, confirm_steps: int = 1,
-                        engage_on: str = "nis", restart_prediction: bool = True) -> TwoStage:
+                        engage_on: str = "nis", restart_prediction: bool = True, channel_labels=None) -> TwoStage:
     """The two stages (module doc) on ``x[k+1] = transition(x, u, p)``, ``x' = field(x, u, p)``.
 
     ``nominal``: the dual filter's estimation filter on ``params``; ``bank_filter(p)``: the
@@ -67,6 +71,9 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
     ``hypotheses`` (M, ...) and ``modes`` (M + 1, ..., nominal first): stacked parameter
     pytrees. The credit isolator's labels are the hypotheses' indices + 1 (``confirm_steps``
     for both isolators); ``engage_cov`` (n, n) is added to the banks' restart covariance.
+    ``channel_labels`` (m,) int: the fault label of each measurement channel, what a
+    dead channel isolates to (``chi2.flag_dead``); ``None``: a dead channel alarms with
+    label -1.
     """
     if engage_on not in ("nis", "fdp"):
         raise ValueError(f"engage_on: expected 'nis' or 'fdp', got {engage_on!r}")
@@ -121,11 +128,15 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         mode_state, mode_out = mode_decision.step(c["mode"], mm_info.mode_prob)
         idle = lambda new, fresh: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged_before, a, b), new, fresh)  # noqa: E731
         credit_state, mode_state = idle(credit_state, credits.init()), idle(mode_state, mode_decision.init())
+        labels = jnp.full(y.shape, -1, jnp.int32) if channel_labels is None else channel_labels
+        dead = jnp.isnan  # the filters' dead report: NaN innovation on a dead component
         decisions = (
-            Decision(fdp, fdp_alarm, no_label, nan),
-            Decision(nis_stat, nis_alarm, no_label, nan),
-            Decision(credit_out.statistic, engaged_before & credit_out.alarm, credit_out.label, nan),
-            Decision(mode_out.statistic, engaged_before & mode_out.alarm, mode_out.label, nan),
+            flag_dead(Decision(fdp, fdp_alarm, no_label, nan), dead(dual_info.estimator.innovation), labels),
+            flag_dead(Decision(nis_stat, nis_alarm, no_label, nan), dead(nis_info.innovation), labels),
+            flag_dead(Decision(credit_out.statistic, engaged_before & credit_out.alarm, credit_out.label, nan),
+                      jnp.any(dead(bank_info.estimator.innovation), axis=0), labels),
+            flag_dead(Decision(mode_out.statistic, engaged_before & mode_out.alarm, mode_out.label, nan),
+                      mm_info.dead, labels),
         )
         healthy = dual_info.healthy & nis_info.healthy & jnp.all(bank_info.healthy) & mm_info.healthy
         new = dict(dual=dual, nis_filter=nis_filter_state, nis=nis_state, bank=bank, mm=mm_state, engaged=engaged,

@@ -26,8 +26,29 @@ the controller ``control.attitude.wheel_attitude_controller``. Step ``k``, ``t =
    stuck, torque bias, gain loss) and torque noise, and the truth
    (attitude quaternion, rates, wheel speeds) moves one RK4 step with a disturbance torque.
 
+The wheels' speeds are not measured (the filters take the commanded speeds as input):
+the only sensors are the three gyros, so a dead or frozen sensor is a gyro (``gyro_fault``,
+issue 37: the x gyro NaN, or holding its onset reading, from the onset; labels
+``faults.sensor_labels(N, 3)``, "gyro j" = ``1 + N + j`` beside the wheels' ``1 + i``).
+Beside step 1, before the controller (``loop.FDI.observe``), the **gyro health test**
+(``detection.frozen_channel_detector`` on the raw rates, ``sigma`` the gyro noise,
+``HEALTH_WINDOW`` = 10 samples, ``HEALTH_PFA`` = 1e-7 per window and gyro, an upper bound
+whatever the plant does, so a fault-free run of the study's 600 steps alarms with
+probability at most 3 x 600 x 1e-7 = 1.8e-4 (union bound); a NaN sample alarms at once
+through ``chi2.flag_dead``) names a frozen or dead gyro; the controller flies on the
+reading of the gyros in service and, for a dead sample or a gyro the test has found
+frozen (out of service for the rest of the run), on the posterior rate of a nominal
+filter (the NIS test's design: EKF, or UKF with ``estimator="ukf"``) that leaves those
+out (``missing_measurements``). A frozen
+gyro's held value still reaches the controller for the (at most ``HEALTH_WINDOW - 1``)
+steps the test needs to see it (it is indistinguishable from a live reading before). The two
+stages see the raw readings (each method's row is its own): a dead gyro makes each of
+their decisions alarm with the gyro's label (``two_stage_isolation(channel_labels=...)``,
+``chi2.flag_dead`` on its filters' dead report); a frozen gyro is only what their
+statistics make of it.
+
 Every run records, for the detector and each isolator, the first decision at or after
-the onset, false alarms before it and the isolated wheel (``metrics.DetectionRecord``).
+the onset, false alarms before it and the isolated wheel or gyro (``metrics.DetectionRecord``).
 
 Choices the paper leaves open (documented, tested): 10 Hz gyros with 3e-4 rad/s noise
 (0.017 deg/s, a small satellite's MEMS/FOG class); wheel bias speeds 2000 rpm, all the
@@ -59,10 +80,12 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.control.attitude import AttitudeGains, Slew, pd_gains, slew, slew_reference, wheel_attitude_controller
-from jaxfdi.detection.chi2 import chi2_threshold
+from jaxfdi.detection.chi2 import Decision, chi2_threshold
 from jaxfdi.detection.credits import hypothesis_credits
+from jaxfdi.detection.frozen import frozen_channel_detector
 from jaxfdi.detection.two_stage import two_stage_isolation
-from jaxfdi.faults import Fault, FaultKind, Target, fault, no_fault
+from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, no_fault, sensor_labels
+from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
@@ -91,6 +114,18 @@ SLEW_DEG = 10.0
 CONFIRM_STEPS = 3
 #: the isolation deadline (seconds after the onset) of the rates reported
 ISOLATION_DEADLINE_S = 2.0
+#: samples in the gyro health test's window: a frozen gyro is found at most HEALTH_WINDOW - 1
+#: steps after its onset (then the window holds only the held value; the onset's reading
+#: is a live one), sometimes a step or two earlier (a live sample close to the held value)
+HEALTH_WINDOW = 10
+#: the gyro health test's false-alarm probability per window and gyro, an upper bound
+#: whatever the plant does (``detection.frozen``); a fault-free run of T steps has at most
+#: ``3 T HEALTH_PFA`` (union bound): 1.8e-4 for the study's 600 steps
+HEALTH_PFA = 1e-7
+#: the gyro fault kinds of the study (issue 37) and the fault kind each is
+GYRO_KINDS = {"dead": FaultKind.DEAD, "frozen": FaultKind.STUCK}
+#: the gyro of the study's dead and frozen cases (0: x)
+GYRO_AXIS = 0
 
 
 class WheelDesign(NamedTuple):
@@ -162,13 +197,28 @@ def wheel_fault(kind: str, wheel: int, onset: int, magnitude: float = 0.0) -> Fa
     return fault(kinds[kind], Target.ACTUATOR, wheel, onset, magnitude)
 
 
-def estimation_filter(params: SpacecraftParams, q_sigma: Array, gyro_sigma: Array, kind: str = "ekf"):
+def gyro_fault(kind: str, axis: int, onset: int) -> Fault:
+    """A gyro fault (sensor ``axis``: 0, 1, 2 for x, y, z) from ``onset``: ``dead`` (NaN,
+    ``FaultKind.DEAD``) or ``frozen`` (the onset's reading held, ``FaultKind.STUCK``)."""
+    if kind not in GYRO_KINDS:
+        raise ValueError(f"kind: expected one of {sorted(GYRO_KINDS)}, got {kind!r}")
+    return fault(GYRO_KINDS[kind], Target.SENSOR, axis, onset)
+
+
+def gyro_labels(params: SpacecraftParams) -> Array:
+    """(3,) int: the fault label of each gyro, ``1 + N + j`` (``faults.sensor_labels``)."""
+    return sensor_labels(params.wheel_axes.shape[0], 3)
+
+
+def estimation_filter(params: SpacecraftParams, q_sigma: Array, gyro_sigma: Array, kind: str = "ekf",
+                      missing_measurements: bool = False):
     """The estimation filter on the rate model: EKF (seed 004) or UKF."""
     eye = jnp.eye(3, dtype=params.inertia.dtype)
     Q, R = q_sigma**2 * eye, gyro_sigma**2 * eye
     if kind == "ukf":
-        return unscented_kalman_filter(wheel_rate_transition, gyro_observation, Q, R, params, alpha=0.5)
-    return extended_kalman_filter(wheel_rate_transition, gyro_observation, Q, R, params)
+        return unscented_kalman_filter(wheel_rate_transition, gyro_observation, Q, R, params, alpha=0.5,
+                                       missing_measurements=missing_measurements)
+    return extended_kalman_filter(wheel_rate_transition, gyro_observation, Q, R, params, missing_measurements)
 
 
 class RunOutput(NamedTuple):
@@ -176,6 +226,7 @@ class RunOutput(NamedTuple):
     nis: DetectionRecord         # chi-square on the nominal EKF's windowed NIS
     credit: DetectionRecord      # credit isolator, banks engaged on the chosen detector
     likelihood: DetectionRecord  # MM mode probabilities, same engagement
+    health: DetectionRecord      # gyro health test (frozen / dead gyro), labels gyro_labels
     max_fault_free_fdp: Array    # () max F before the onset
     max_fault_free_nis: Array    # () max windowed NIS before the onset
     max_early_fdp: Array         # () max F within ISOLATION_DEADLINE_S after the onset
@@ -197,9 +248,11 @@ class WheelHistory(NamedTuple):
     credit: Array            # (T, M) C_x
     mode_prob: Array         # (T, M + 1) MM, normal mode first
     engaged: Array           # (T,) bool: the banks run on their own
+    controller_rate: Array   # (T, 3) the rates the controller flew on (``wheel_fdi``'s view)
 
 
-def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis", restart_prediction: bool = True):
+def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis", restart_prediction: bool = True,
+              gyro_health: bool = True):
     """Seed 004's two-stage FDI (``detection.two_stage``: the dual filter's ``F``, the
     windowed NIS test of a nominal EKF, and the credit and likelihood banks over the stop
     hypotheses, slaved to the nominal filter until the engaging alarm) as a ``loop.FDI``
@@ -212,6 +265,21 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
     lag for good: every ``F_x`` is then the same lag projected on ``grad det A_x``, and
     the credits rank the hypotheses by that geometry, whichever wheel stopped
     (``benchmarks/wheels_credit.py``). ``False`` keeps the former start (for comparison).
+
+    Gyro health (module doc): ``observe`` runs the gyro health test on the raw rates
+    (``frozen_channel_detector(gyro_sigma, HEALTH_WINDOW, HEALTH_PFA, gyro_labels)``) and
+    gives the controller an ``AttitudeReading`` whose rate is the reading where the gyro is
+    in service and finite, and elsewhere (a NaN sample, or a gyro the test has found
+    frozen: out of service from then on) the posterior of a nominal filter of the
+    ``estimator``'s kind with the banks' process noise that leaves those gyros out. The step's output is the two stages'
+    ``TwoStageOutput`` with the health test's decision appended to ``decisions`` (fifth),
+    ``healthy`` also covering that EKF. A fault-free run's controller sees the raw reading
+    at every step unless the health test alarms falsely (``HEALTH_PFA``).
+    ``gyro_health=False`` leaves the health test and the view out (the fifth decision never
+    alarms; the controller flies on the raw readings, a NaN included): for a plant whose
+    gyro noise is below ``gyro_sigma`` (the noise-free runs of ``tests/test_wheels_credit.py``
+    and ``benchmarks/wheels_credit.py``), where the stuck-at test rightly finds every gyro
+    frozen.
     """
     if estimator not in ("ekf", "ukf"):
         raise ValueError(f"estimator: expected 'ekf' or 'ukf', got {estimator!r}")
@@ -219,6 +287,7 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
     dtype = params.inertia.dtype
     N = params.wheel_axes.shape[0]
     eye = jnp.eye(3, dtype=dtype)
+    labels = gyro_labels(params)
     stages = two_stage_isolation(
         estimation_filter(params, design.estimator_q, design.gyro_sigma, estimator),
         lambda p: estimation_filter(p, design.bank_q, design.gyro_sigma, estimator),  # tighter: the NIS test's and banks'
@@ -226,14 +295,36 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
         stop_hypotheses(params, include_nominal=True), detection_threshold=design.detection_threshold,
         nis_threshold=design.nis_threshold, nis_window=NIS_WINDOW, credit_threshold=design.credit_threshold,
         mode_threshold=design.mode_threshold, mm_floor=design.mm_floor, engage_cov=design.engage_sigma**2 * eye,
-        confirm_steps=CONFIRM_STEPS, engage_on=engage_on, restart_prediction=restart_prediction)
-    state0 = stages.init(jnp.zeros(3, dtype), design.initial_sigma**2 * eye,
-                         jnp.concatenate([design.initial_speeds, jnp.zeros(N, dtype)]))
+        confirm_steps=CONFIRM_STEPS, engage_on=engage_on, restart_prediction=restart_prediction,
+        channel_labels=labels)
+    health_test = frozen_channel_detector(jnp.full((3,), design.gyro_sigma, dtype), HEALTH_WINDOW, HEALTH_PFA, labels)
+    view_filter = estimation_filter(params, design.bank_q, design.gyro_sigma, estimator, missing_measurements=True)
+    u0 = jnp.concatenate([design.initial_speeds, jnp.zeros(N, dtype)])
+    mean0, cov0 = jnp.zeros(3, dtype), design.initial_sigma**2 * eye
+    state0 = dict(stages=stages.init(mean0, cov0, u0), health=health_test.init(),
+                  verdict=Decision(jnp.zeros((), dtype), jnp.zeros((), bool), jnp.asarray(-1, jnp.int32),
+                                   jnp.full((), jnp.nan, dtype)),
+                  out=jnp.zeros((3,), bool), view=GaussianState(mean0, cov0), view_healthy=jnp.ones((), bool), u=u0)
+
+    def observe(c, k, reading):
+        health, verdict = health_test.step(c["health"], reading.rate)
+        frozen = verdict.alarm & jnp.isfinite(verdict.statistic)  # +inf: a dead sample, not a frozen gyro
+        out = c["out"] | (frozen & (labels == verdict.label))
+        post = view_filter.update(c["view"], jnp.where(out, jnp.nan, reading.rate), c["u"])
+        rate = jnp.where(out | ~jnp.isfinite(reading.rate), post.mean, reading.rate)
+        c = dict(c, health=health, verdict=verdict, out=out, view=GaussianState(post.mean, post.cov),
+                 view_healthy=post.healthy)
+        return c, reading._replace(rate=rate)
 
     def step(c, k, reading, command):
-        return stages.step(c, reading.rate, filter_input(command, params))
+        u = filter_input(command, params)
+        stages_state, output = stages.step(c["stages"], reading.rate, u)
+        view = view_filter.predict(c["view"], u) if gyro_health else c["view"]  # observe left step k's posterior
+        output = output._replace(decisions=output.decisions + (c["verdict"],),
+                                 healthy=output.healthy & c["view_healthy"])
+        return dict(c, stages=stages_state, view=view, u=u), output
 
-    return FDI(step), state0
+    return FDI(step, observe if gyro_health else None), state0
 
 
 def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, estimator: str = "ekf",
@@ -255,7 +346,7 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
         return (k >= f.onset) & ((k - f.onset) * params.dt < ISOLATION_DEADLINE_S)
 
     scorer = combine_scorers(
-        records=detection_scorer(f.onset, lambda out: out.decisions, dtype=dtype),
+        records=detection_scorer(f.onset, lambda out: out.decisions, dtype=dtype),  # METHODS' order
         peaks=peak_scorer(lambda out: jnp.concatenate([out.peaks, out.peaks[:1]]),
                           lambda k: jnp.stack([k < f.onset, k < f.onset, early(k)]), dtype),
         healthy=health_scorer(),
@@ -273,7 +364,8 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
     reference = jax.vmap(lambda s: slew_reference(s, design.profile)[1])(t)
     return out, WheelHistory(truth[:, :4], truth[:, 4:7], reference, reading.rate, truth[:, 7:], trace.control.speeds,
                              o.peaks[:, 0], o.peaks[:, 1], o.hypothesis_parameter,
-                             jax.vmap(hypothesis_credits)(o.hypothesis_parameter), o.mode_prob, o.engaged)
+                             jax.vmap(hypothesis_credits)(o.hypothesis_parameter), o.mode_prob, o.engaged,
+                             trace.view.rate)
 
 
 # --- the Monte Carlo study -------------------------------------------------------
@@ -282,24 +374,39 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
 KINDS = {"stop": 0.0, "stuck": 0.0, "bias": 2e-3, "gain": 0.5}
 #: fault onsets are drawn uniformly from these steps (15 s to 25 s at 10 Hz)
 ONSET_RANGE = (150, 250)
-METHODS = ("fdp", "nis", "credit", "likelihood")
+METHODS = ("fdp", "nis", "credit", "likelihood", "health")
 METHOD_NAMES = {"fdp": "dual filter F (paper)", "nis": "NIS chi-square", "credit": "credit isolator (paper)",
-                "likelihood": "MM likelihood"}
+                "likelihood": "MM likelihood", "health": "gyro health test"}
+#: the methods that name a wheel (the others never do: F and NIS detect only, the gyro
+#: health test names gyros)
+WHEEL_ISOLATORS = ("credit", "likelihood")
 
 
 def study_cases() -> list[tuple[str, int]]:
-    """``('none', -1)`` then every kind on every wheel (wheel index 0..3)."""
-    return [("none", -1)] + [(kind, wheel) for kind in KINDS for wheel in range(4)]
+    """``('none', -1)``, every kind of ``KINDS`` on every wheel (wheel index 0..3), then
+    the gyro cases (issue 37): every kind of ``GYRO_KINDS`` on gyro ``GYRO_AXIS``."""
+    return ([("none", -1)] + [(kind, wheel) for kind in KINDS for wheel in range(4)]
+            + [(kind, GYRO_AXIS) for kind in GYRO_KINDS])
+
+
+def case_name(kind: str, component: int) -> str:
+    """``none``, ``<kind> w<i>`` (wheel ``i``, from 1) or ``<kind> g<j>`` (gyro ``j``, from 1: x, y, z)."""
+    if kind == "none":
+        return "none"
+    return f"{kind} {'g' if kind in GYRO_KINDS else 'w'}{component + 1}"
 
 
 def case_faults(cases: list[tuple[str, int]], runs: int, key: Array) -> Fault:
     """A stacked batch of ``len(cases) * runs`` faults, case-major, random onsets (a
-    fault-free run's onset is ``faults.NEVER``: all of it counts for false alarms)."""
+    fault-free run's onset is ``faults.NEVER``: all of it counts for false alarms); a case
+    is ``(kind, wheel)`` for a kind of ``KINDS`` and ``(kind, gyro axis)`` for one of
+    ``GYRO_KINDS``."""
     onsets = np.asarray(jax.random.randint(key, (len(cases), runs), ONSET_RANGE[0], ONSET_RANGE[1] + 1))
     faults = []
-    for (kind, wheel), onset_row in zip(cases, onsets):
+    for (kind, component), onset_row in zip(cases, onsets):
         for onset in onset_row:
-            faults.append(no_fault() if kind == "none" else wheel_fault(kind, wheel, int(onset), KINDS[kind]))
+            faults.append(no_fault() if kind == "none" else gyro_fault(kind, component, int(onset))
+                          if kind in GYRO_KINDS else wheel_fault(kind, component, int(onset), KINDS[kind]))
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *faults)
 
 
@@ -323,7 +430,7 @@ def wheel_spec(design: WheelDesign, cases: Sequence[tuple[str, int]], steps: int
     in ``ONSET_RANGE``. Every method of ``METHODS`` comes out of the same run
     (``outputs["closed loop"]``, a ``RunOutput``)."""
     cases = tuple(cases)
-    names = tuple("none" if kind == "none" else f"{kind} w{wheel + 1}" for kind, wheel in cases)
+    names = tuple(case_name(kind, component) for kind, component in cases)
     loop = Structure("closed loop", _closed_loop(steps, estimator, engage_on), (), {"closed loop": ()}, shared=design)
     return Study(name, lambda runs, seed: case_faults(cases, runs, jax.random.key(seed + 2)), names, (loop,))
 
@@ -346,19 +453,25 @@ def calibrate_fdp_threshold(design: WheelDesign, runs: int, seed: int, margin: f
 
 
 def run_is_healthy(out: RunOutput) -> np.ndarray:
-    """(runs,) bool: every filter healthy at every step and every method's statistic finite."""
-    records = (out.fdp, out.nis, out.credit, out.likelihood)
+    """(runs,) bool: every filter healthy at every step and no method's statistic NaN (a
+    dead gyro's +inf is evidence, ``metrics.step_health``)."""
+    records = (out.fdp, out.nis, out.credit, out.likelihood, out.health)
     return np.asarray(out.healthy) & np.all([np.asarray(r.first_unhealthy) < 0 for r in records], axis=0)
 
 
-def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: bool) -> dict:
+def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: bool, label: int | None = None,
+                     names_it: bool = True) -> dict:
     """Rates and delays of one method over the runs of one case.
 
-    ``rate``: runs detected (detectors) or isolated to the faulty wheel (isolators) at or
-    after the onset; ``pre_onset_alarm_rate``: runs with a decision before the onset
-    (issue 27: false-alarm runs, whose delays are not scored); ``clean_runs``: the others;
-    the delays (mean, median, p90) and ``rate_within_deadline`` (right and within
-    ``ISOLATION_DEADLINE_S``, over all runs) count only clean runs."""
+    ``rate``: runs detected (detectors) or isolated to the fault's ``label`` (isolators;
+    default ``wheel + 1``) at or after the onset; ``decided_rate``: runs with a decision at
+    or after the onset (the detection rate); ``isolation_rate``: runs whose first such
+    decision names ``label`` (``None`` when the method never names this kind of fault,
+    ``names_it=False``: F and NIS for a wheel); ``pre_onset_alarm_rate``: runs with a
+    decision before the onset (issue 27: false-alarm runs, whose delays are not scored);
+    ``clean_runs``: the others; the delays (mean, median, p90) and
+    ``rate_within_deadline`` (right and within ``ISOLATION_DEADLINE_S``, over all runs)
+    count only clean runs. ``wheel < 0``: a fault-free case (false alarms only)."""
     onset = np.asarray(record.onset)
     detection = np.asarray(record.detection_step)
     detected = detection >= 0
@@ -368,7 +481,9 @@ def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: 
     row = {"false_alarm_rate": false_alarm}
     if wheel < 0:
         return row
-    correct = detected & (np.asarray(record.isolated) == wheel + 1) if isolating else detected
+    label = wheel + 1 if label is None else label
+    named = detected & (np.asarray(record.isolated) == label)
+    correct = named if isolating else detected
     scored = correct & ~pre_alarm
     in_time = scored & (delay <= ISOLATION_DEADLINE_S + 1e-9)
     nan = float("nan")
@@ -379,6 +494,7 @@ def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: 
         "delay_median_s": float(np.median(delay[scored])) if scored.any() else nan,
         "delay_p90_s": float(np.percentile(delay[scored], 90)) if scored.any() else nan,
         "decided_rate": float(np.mean(detected)),
+        "isolation_rate": float(np.mean(named)) if names_it else None,
         "pre_onset_alarm_rate": false_alarm,
         "clean_runs": int(np.sum(~pre_alarm)),
         "delay_runs": int(np.sum(scored)),
@@ -388,14 +504,25 @@ def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: 
 
 def summarize_case(part: RunOutput, kind: str, wheel: int, dt: float, methods=METHODS) -> dict:
     """The table row of one case from its runs' outputs; unhealthy runs are counted in
-    ``unhealthy_runs`` and left out of every rate."""
+    ``unhealthy_runs`` and left out of every rate. ``wheel``: the wheel, or for a kind of
+    ``GYRO_KINDS`` the gyro axis (the row then has ``wheel = -1`` and ``gyro``); the right
+    label is ``wheel + 1``, or ``gyro_labels``' for a gyro. Isolating methods: the credit
+    and MM isolators and the gyro health test."""
     healthy = run_is_healthy(part)
     clean = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[healthy], part)
-    row = {"case": "none" if kind == "none" else f"{kind} w{wheel + 1}", "kind": kind, "wheel": wheel,
+    gyro = kind in GYRO_KINDS
+    row = {"case": case_name(kind, wheel), "kind": kind, "wheel": -1 if gyro else wheel,
            "magnitude": KINDS.get(kind, 0.0)}
+    if gyro:
+        row["gyro"] = wheel
+    # the fault's label: fault_label as the simulator derives it (N = 4 wheels before the gyros)
+    label = None if kind == "none" else int(fault_label(
+        gyro_fault(kind, wheel, 0) if gyro else wheel_fault(kind, wheel, 0, KINDS[kind]), 4))
     for method in methods:
-        row[method] = summarize_method(getattr(clean, method), wheel, dt, method in ("credit", "likelihood"))
-    if wheel >= 0:
+        names_it = gyro or method in WHEEL_ISOLATORS
+        row[method] = summarize_method(getattr(clean, method), wheel, dt, method in (*WHEEL_ISOLATORS, "health"),
+                                       label, names_it)
+    if kind != "none" and not gyro:
         row["fdp_ratio_median"] = float(np.median(clean.max_early_fdp / clean.max_fault_free_fdp))
     row["healthy_rate"] = float(np.mean(part.healthy))
     row["runs"], row["unhealthy_runs"] = int(healthy.size), int(np.sum(~healthy))
@@ -408,17 +535,25 @@ class WheelStudy(NamedTuple):
     outputs: RunOutput  # (cases * runs,) per-run records, case-major
 
     def table(self) -> str:
-        """Per case and method: ``rate`` (detected, or isolated to the right wheel), ``<=2s``
-        (that within 2 s, clean runs only), ``FA`` (runs with a decision before the onset:
-        false-alarm runs), ``clean`` (the others) and the delays over the clean runs."""
-        head = (f"{'case':<10} {'method':<24} {'rate':>6} {'<=2s':>6} {'FA':>6} {'clean':>5} {'mean [s]':>8} "
-                f"{'med [s]':>8} {'p90 [s]':>8}")
+        """Per case and method: ``det`` (runs with a decision at or after the onset),
+        ``isol`` (runs whose first such decision names the faulty wheel or gyro; ``-``: the
+        method never names that kind of fault), ``<=2s`` (right within 2 s, clean runs only:
+        isolated for the isolators and the gyro health test, detected for F and NIS),
+        ``FA`` (runs with a decision before the onset: false-alarm runs), ``clean`` (the
+        others) and the delays over the clean runs (of the right decision, as ``<=2s``).
+        The gyro health test's line is printed for the fault-free and gyro cases (in the
+        wheel cases it names no wheel by construction; its rows hold its figures)."""
+        head = (f"{'case':<10} {'method':<24} {'det':>6} {'isol':>6} {'<=2s':>6} {'FA':>6} {'clean':>5} "
+                f"{'mean [s]':>8} {'med [s]':>8} {'p90 [s]':>8}")
         lines = [head, "-" * len(head)]
         for row in self.rows:
-            for method in (m for m in METHODS if m in row):
+            shown = [m for m in METHODS if m in row and (m != "health" or row["kind"] in ("none", *GYRO_KINDS))]
+            for method in shown:
                 r = row[method]
-                lines.append(f"{row['case']:<10} {METHOD_NAMES[method]:<24} {_fmt(r.get('rate'))} "
-                             f"{_fmt(r.get('rate_within_deadline'))} {_fmt(r['false_alarm_rate'])} "
+                isolation = None if "rate" not in r else r.get("isolation_rate")
+                isolation = float("nan") if "rate" in r and isolation is None else isolation  # '-': names none
+                lines.append(f"{row['case']:<10} {METHOD_NAMES[method]:<24} {_fmt(r.get('decided_rate'))} "
+                             f"{_fmt(isolation)} {_fmt(r.get('rate_within_deadline'))} {_fmt(r['false_alarm_rate'])} "
                              f"{r.get('clean_runs', ''):>5} {_fmt(r.get('delay_mean_s'), 8, 2)} "
                              f"{_fmt(r.get('delay_median_s'), 8, 2)} {_fmt(r.get('delay_p90_s'), 8, 2)}")
         bad = [row for row in self.rows if row.get("unhealthy_runs")]
@@ -481,7 +616,8 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
                 engage_on: str = "nis", steps: int = 600, chunk_size: int | None = None, progress: bool = False,
                 methods: Sequence[str] | None = None, momentum: str = "net",
                 zero_momentum_row: bool = True) -> WheelStudy:
-    """Every case of ``study_cases`` with ``runs`` Monte Carlo runs (noise and onset);
+    """Every case of ``study_cases`` (the wheel faults, then the x gyro dead and frozen)
+    with ``runs`` Monte Carlo runs (noise and onset);
     ``F_T`` calibrated first on ``calibration_runs`` fault-free runs of seed ``seed + 1``.
     ``methods``: the subset of ``METHODS`` to report (all by default; every method runs
     anyway: the banks are engaged by the detectors). ``momentum``: the wheels' bias
@@ -516,6 +652,9 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
         "fdp_threshold": threshold, "nis_threshold": float(design.nis_threshold), "nis_window": NIS_WINDOW,
         "credit_threshold": float(design.credit_threshold), "mode_threshold": float(design.mode_threshold),
         "confirm_steps": CONFIRM_STEPS, "fdp_margin": FDP_MARGIN, "kinds": KINDS, "slew_deg": SLEW_DEG,
+        "gyro_kinds": list(GYRO_KINDS), "gyro_axis": GYRO_AXIS,
+        "gyro_labels": [int(v) for v in np.asarray(gyro_labels(design.params))],
+        "health_window": HEALTH_WINDOW, "health_pfa_per_window": HEALTH_PFA,
         "bias_rpm": float(design.initial_speeds[0] / RPM), "momentum": momentum,
         "wheel_bias_speeds_rpm": [float(v) for v in np.asarray(design.initial_speeds) / RPM],
         "net_wheel_momentum_Nms": [float(v) for v in np.asarray(wheel_momentum(design.initial_speeds, design.params))],

@@ -50,6 +50,7 @@ from jaxfdi.metrics import (
     record_update,
     step_health,
 )
+from jaxfdi.montecarlo import _is_key
 
 
 class Plant(NamedTuple):
@@ -169,6 +170,12 @@ def run_loop(
         if not all(callable(getattr(part, field, None)) for field in needed):
             raise TypeError(f"{name}: expected an object with callable {', '.join(needed)} (a "
                             f"{name.capitalize() if name != 'fdi' else 'FDI'}), got {_checks.received(part)}")
+    if not _is_key(key) or (jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) and key.shape != ()):
+        raise TypeError(f"key: expected one PRNG key (jax.random.key(seed)), got {_checks.received(key)}")
+    for leaf in jax.tree_util.tree_leaves(exogenous):
+        if jnp.ndim(leaf) == 0:
+            raise ValueError(f"exogenous: expected (T, ...) leaves with a leading axis of steps, got a scalar leaf "
+                             f"{_checks.received(leaf)}")
     lengths = {leaf.shape[0] for leaf in jax.tree_util.tree_leaves(exogenous)}
     if len(lengths) > 1:
         raise ValueError(f"exogenous: every leaf needs the same leading number of steps T, got {sorted(lengths)}")
@@ -325,6 +332,8 @@ def episode_scorer(
 def peak_scorer(values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None) -> Scorer:
     """Running maxima: ``score[i] = max over the steps k with active(k)[i] of values(output)[i]``
     (0 before any such step), e.g. the largest statistic before the onset."""
+    _checks.check_callable("values", values, "a function output -> (n,) values")
+    _checks.check_callable("active", active, "a function k -> (n,) bool")
     dtype = dtype or jnp.result_type(float)
 
     def init(example):

@@ -87,6 +87,9 @@ def step_health(healthy: Array, *values) -> Array:
 
 
 def record_init(onset: Array, dtype=None) -> DetectionRecord:
+    """An empty record of a run whose fault starts at step ``onset`` (an int >= 0;
+    ``faults.NEVER`` for a fault-free run)."""
+    _checks.check_int_array("onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)")
     minus_one = jnp.asarray(-1, jnp.int32)
     zero = jnp.asarray(0, jnp.int32)
     nan = jnp.asarray(jnp.nan, dtype or jnp.result_type(float))
@@ -134,6 +137,12 @@ def _first_unhealthy(first: Array, k: Array, healthy: Array) -> Array:
 def record_from_alarms(alarms: Array, onset: Array, healthy: Array | None = None) -> DetectionRecord:
     """The same record computed from a whole (T,) alarm history (and optional (T,) bool
     ``healthy``) at once."""
+    if _checks._kind(alarms) not in "biu":
+        raise TypeError(f"alarms: expected a (T,) bool alarm history, got {_checks.received(alarms)}")
+    _checks.check_shape("alarms", alarms, (None,), "a (T,) alarm history")
+    _checks.check_int_array("onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)")
+    if healthy is not None:
+        _checks.check_shape("healthy", healthy, _checks.shape_of(alarms), "one flag per step of alarms")
     k = jnp.arange(alarms.shape[0])
     before = k < onset
     after = alarms & ~before
@@ -314,6 +323,9 @@ def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: i
 
 def isolation_accuracy(confusion: Array) -> Array:
     """Per true class, the fraction of runs isolated as that class."""
+    shape = _checks.shape_of(confusion)
+    if len(shape) != 2 or shape[1] < shape[0]:
+        raise ValueError(f"confusion: expected a (C, C + 1) confusion matrix (confusion_matrix), got shape {shape}")
     confusion = jnp.asarray(confusion)
     diagonal = jnp.diagonal(confusion[:, : confusion.shape[0]])
     return diagonal / jnp.maximum(confusion.sum(axis=1), 1)
@@ -345,6 +357,7 @@ def episode_record_init(onsets: Array, ends: Array, labels: Array, grace: int = 
     Window of episode ``e``: ``[onset_e, min(end_e + grace, min{onset_j > onset_e}))``.
     """
     _checks.check_int_array("grace", grace, 0, meaning="a number of steps >= 0")
+    _checks.check_int_array("onsets", onsets, 0, meaning="episode onset steps >= 0 (faults.NEVER: no episode)")
     onsets, ends, labels = (jnp.asarray(a, jnp.int32) for a in (onsets, ends, labels))
     if onsets.ndim != 1 or ends.shape != onsets.shape or labels.shape != onsets.shape:
         raise ValueError(f"onsets, ends, labels: expected three (E,) arrays, got shapes "
@@ -442,6 +455,9 @@ def binomial_interval(trials: int, p: float, level: float = 0.99) -> tuple[int, 
     counts a detector with design false-alarm probability ``p`` should give."""
     from scipy import stats
 
+    trials = _checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
+    _checks.check_probability("p", p, open_interval=False)
+    _checks.check_probability("level", level)
     tail = (1.0 - level) / 2.0
     return int(stats.binom.ppf(tail, trials, p)), int(stats.binom.ppf(1.0 - tail, trials, p))
 

@@ -102,6 +102,8 @@ def _counts(xp, record: DetectionRecord, valid, labels, horizon: int, bin_width:
     detection = xp.broadcast_to(xp.asarray(record.detection_step), onset.shape).astype(integer)
     false_alarms = xp.broadcast_to(xp.asarray(record.false_alarms), onset.shape).astype(integer)
     pre_steps = xp.broadcast_to(xp.asarray(record.pre_onset_steps), onset.shape).astype(integer)
+    first_alarm = xp.broadcast_to(xp.asarray(record.first_alarm), onset.shape).astype(integer)
+    longer = valid & (xp.maximum(pre_steps, first_alarm + 1) > horizon)   # the runs are longer than horizon
     faulty = (onset < horizon) & healthy
     detected = faulty & (detection >= 0)
     pre_alarm = faulty & (false_alarms > 0)
@@ -130,13 +132,18 @@ def _counts(xp, record: DetectionRecord, valid, labels, horizon: int, bin_width:
         detected_runs=count(detected), labelled_runs=labelled, isolated_runs=isolated,
         false_alarm_runs=count(healthy & (false_alarms > 0)), false_alarm_steps=total(false_alarms, healthy),
         pre_onset_steps=total(pre_steps, healthy), delay_sum=total(delay, inside), delay_histogram=histogram,
-        pre_alarm_runs=count(pre_alarm), delay_runs=count(scored), delays_outside=count(scored & ~inside))
+        pre_alarm_runs=count(pre_alarm), delay_runs=count(scored), delays_outside=count(scored & ~inside),
+        runs_longer=count(longer))
 
 
 def _finish(totals: dict, empty: DetectionCounts) -> DetectionCounts:
     """``DetectionCounts`` of ``_counts``' totals (host int64); a delay outside the
     horizon is an error (the runs are not ``horizon`` steps long)."""
     host = {name: np.asarray(value, np.int64) for name, value in totals.items()}
+    longer = int(host.pop("runs_longer"))
+    if longer:   # as metrics.summarize_detection: an onset past a short horizon would count as fault-free
+        raise ValueError(f"horizon: expected the runs' length, got {int(empty.horizon)}, but {longer} record(s) saw "
+                         f"more steps (an alarm or steps before the onset at or after step {int(empty.horizon)})")
     outside = int(host.pop("delays_outside"))
     if outside:
         raise ValueError(f"record: {outside} detection delays outside [0, horizon = {int(empty.horizon)}); is "
@@ -148,6 +155,10 @@ def merge_counts(*parts: DetectionCounts) -> DetectionCounts:
     """The counts of the union of the runs of ``parts`` (same horizon and bin width)."""
     if not parts:
         raise ValueError("parts: expected at least one DetectionCounts")
+    for part in parts:
+        if not isinstance(part, DetectionCounts):
+            raise TypeError(f"parts: expected DetectionCounts (streaming.detection_counts), got "
+                            f"{_checks.received(part)}")
     first = parts[0]
     for part in parts[1:]:
         if int(part.horizon) != int(first.horizon) or int(part.bin_width) != int(first.bin_width):

@@ -126,7 +126,14 @@ def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
 def case_slices(runs, num_cases: int) -> list[slice]:
     """The run ranges of each case in a case-major study output (``runs``: per case, or
     one count for every case)."""
-    counts = np.broadcast_to(np.asarray(runs, int), (num_cases,))
+    num_cases = _checks.check_int("num_cases", num_cases, 0, meaning="a number of cases >= 0")
+    try:
+        counts = np.broadcast_to(np.asarray(runs, int), (num_cases,))
+    except ValueError:
+        raise ValueError(f"runs: expected one count or {num_cases} counts (one per case), got "
+                         f"{_checks.received(runs)}") from None
+    if np.any(counts < 0):
+        raise ValueError(f"runs: expected counts >= 0, got {_checks.received(runs)}")
     starts = np.concatenate([[0], np.cumsum(counts)])
     return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:])]
 

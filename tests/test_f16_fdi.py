@@ -312,7 +312,7 @@ def test_fault_cases_from_arrays_are_the_cases_one_by_one():
     assert cases.kind.dtype == jnp.int32 and cases.angle.dtype == jnp.float64
     one = sf.fault_case("drift", 2, 4.0, 30.0, 1.5)
     assert [np.shape(f) for f in one] == [()] * 5 and int(one.onset) == 150 and int(one.kind) == int(sf.KINDS["drift"])
-    with pytest.raises(KeyError):
+    with pytest.raises(ValueError, match=r"^kind: expected one of .*'melt'"):
         sf.fault_case(np.array(["bias", "melt"]), 0, 1.0, 0.0)
 
 

@@ -96,12 +96,12 @@ def fault(**kw):
     return jaxfdi.fault(**args)
 
 
-def loop_run(steps=T, plant=None):
+def loop_run(steps=T, plant=None, exogenous=None, key=KEY):
     sim = plant or jaxfdi.linear_simulator(SMALL)
     kf = jaxfdi.kalman_filter(SMALL)
     fdi = filter_detector(kf, detection.chi2_detector(10.0))
-    return loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(2), kf.init(jnp.zeros(2), jnp.eye(2)), KEY, steps,
-                         exogenous=jnp.zeros((4, 1)))
+    return loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(2), kf.init(jnp.zeros(2), jnp.eye(2)), key, steps,
+                         exogenous=jnp.zeros((4, 1)) if exogenous is None else exogenous)
 
 
 def monte(num_runs=2, chunk_size=8192, run_one=lambda key, x: 0.0, key=KEY, progress=False):
@@ -433,6 +433,176 @@ CASES = {
     "flight_controller inverted limits": (lambda: _flight_controller(lower=jnp.ones(4), upper=-jnp.ones(4)), V,
                                          "lower"),
     "raim_fdi dt zero": (lambda: _raim_fdi(dt=0.0), V, "dt"),
+    # --- second audit of issue 37 item 4: shapes, ranges and boundaries that were silent or cryptic -------
+    # F-16 model
+    "f16_params jxz beyond sqrt(Jxx Jzz)": (lambda: _f16().dynamics.f16_params(jxz=1e5), V, "jxz"),
+    "f16_dynamics x complex": (lambda: _f16().dynamics.f16_dynamics(jnp.zeros(13, complex), jnp.zeros(4), _f16p()), T_,
+                               "x"),
+    "f16_dynamics gust (3,)": (lambda: _f16().dynamics.f16_dynamics(jnp.zeros(13), jnp.zeros(4), _f16p(),
+                                                                    jnp.zeros(3)), V, "gust"),
+    "saturate u (3,)": (lambda: _f16().dynamics.saturate(jnp.zeros(3), _f16p()), V, "u"),
+    "trim_condition shapes that do not broadcast": (lambda: _f16().trim.trim_condition([500.0, 600.0], [0.0] * 3), V,
+                                                    "altitude"),
+    "climb angle beyond vertical": (lambda: _f16().trim.climb(502.0, 2.0), V, "climb_angle"),
+    "trim_batch xcg length": (lambda: _f16().trim.trim_batch(_f16p(), _f16().trim.level_flight([500.0, 600.0]),
+                                                             jnp.full(3, 0.35)), V, "xcg"),
+    "longitudinal_modes NaN": (lambda: _f16lin().longitudinal_modes(jnp.eye(4).at[0, 0].set(jnp.nan)), V, "A_lon"),
+    "lateral_modes complex": (lambda: _f16lin().lateral_modes(jnp.eye(4) * (1 + 1j)), T_, "A_lat"),
+    "f16_sensors negative sigma": (lambda: _f16plant().f16_sensors(rate_sigma=-0.01), V, "rate_sigma"),
+    "f16_sensors NaN sigma": (lambda: _f16plant().f16_sensors(altitude_sigma=float("nan")), V, "altitude_sigma"),
+    "f16_plant dt zero": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(), dt=0.0), V, "dt"),
+    "f16_plant substeps float": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(), substeps=2.5), T_,
+                                 "substeps"),
+    "f16_plant gust_sigma negative": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(),
+                                                                    gust_sigma=-3.0), V, "gust_sigma"),
+    "f16_plant gust_length negative": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(),
+                                                                     gust_length=-1750.0), V, "gust_length"),
+    "f16_plant fault on y[20]": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(),
+                                                               fault=fault(component=20, onset=0)), V, "fault"),
+    "rate_model_input y (5,)": (lambda: _f16rates().rate_model_input(jnp.zeros(5), jnp.zeros(4)), V, "y"),
+    "rate_model_input u (3,)": (lambda: _f16rates().rate_model_input(jnp.zeros(14), jnp.zeros(3)), V, "u"),
+    "rate_passthrough_fdi axes (6, 2)": (lambda: _f16plant().rate_passthrough_fdi(jnp.eye(6)[:, :2]), V, "rate_axes"),
+    "lookup1 table shorter than its grid": (lambda: _f16tables().lookup1(3.5, jnp.arange(5.0), jnp.arange(3.0)), V,
+                                            "values"),
+    "lookup2 table rows != row grid": (lambda: _f16tables().lookup2(1.0, jnp.arange(5.0), 1.0, jnp.arange(5.0),
+                                                                    jnp.ones((4, 5))), V, "values"),
+    # flight control
+    "flight_controller gains shape": (lambda: _flight_ctrl().flight_controller(
+        _flight_ctrl().FlightGains(jnp.zeros((2, 7)), jnp.zeros((2, 5))), 0.01, -jnp.ones(4), jnp.ones(4)), V,
+                                      "gains.longitudinal"),
+    "flight_controller limits (3,)": (lambda: _flight_ctrl().flight_controller(
+        _flight_ctrl().FlightGains(jnp.zeros((2, 8)), jnp.zeros((2, 5))), 0.01, -jnp.ones(3), jnp.ones(3)), V, "lower"),
+    "measured_state rates (2,)": (lambda: _flight_ctrl().measured_state(_flight_view(rates=jnp.zeros(2))), V,
+                                  "view.rates"),
+    "flight_plan climb_time NaN": (lambda: _flight_ctrl().flight_plan(climb_time=float("nan")), V, "climb_time"),
+    "flight_plan bank_start inf": (lambda: _flight_ctrl().flight_plan(bank_start=float("inf")), V, "bank_start"),
+    "design_flight_control negative weights": (lambda: _flight_ctrl().design_flight_control(
+        None, 0.01, _flight_ctrl().default_weights()._replace(longitudinal=-jnp.ones(8))), V, "weights.longitudinal"),
+    "flight_reference three trims": (lambda: _flight_ctrl().flight_reference(
+        None, None, _trims(3), 0.01, 10), V, "trims.state"),
+    "initial_condition one trim": (lambda: _flight_ctrl().initial_condition(None, _trims(1)), V, "trims.state"),
+    # F-16 scenarios
+    "flight_setup gust_sigma negative": (lambda: _f16flight().flight_setup(gust_sigma=-3.0), V, "gust_sigma"),
+    "f16_flight_study chunk_size zero": (lambda: _f16flight().f16_flight_study(flights=2, chunk_size=0), V,
+                                         "chunk_size"),
+    "f16_fdi_study gust_sigma negative": (lambda: _f16fdi().f16_fdi_study(runs=1, gust_sigma=-3.0), V, "gust_sigma"),
+    "f16_fdi_study chunk_size zero": (lambda: _f16fdi().f16_fdi_study(runs=1, chunk_size=0), V, "chunk_size"),
+    "run_flight xcg outside the chord": (lambda: _f16flight().run_flight(None, KEY, _f16flight().Dispersion(
+        jnp.asarray(1.5), jnp.zeros(13))), V, "dispersion.xcg"),
+    "run_flight initial (12,)": (lambda: _f16flight().run_flight(None, KEY, _f16flight().Dispersion(
+        jnp.asarray(0.35), jnp.zeros(12))), V, "dispersion.initial"),
+    "dispersions xcg_range reversed": (lambda: _f16flight().dispersions(KEY, None, 5, xcg_range=(0.37, 0.33)), V,
+                                       "xcg_range"),
+    "dispersions xcg_range beyond the chord": (lambda: _f16flight().dispersions(KEY, None, 5, xcg_range=(0.2, 1.4)),
+                                               V, "xcg_range"),
+    "fdi_setup samples float": (lambda: _f16fdi().fdi_setup(_ns(sensors=None, x0=jnp.zeros(13)), samples=2000.5), T_,
+                                "samples"),
+    "fault_case unknown kind": (lambda: _f16fdi().fault_case(kind="drift2"), V, "kind"),
+    "fault_case sensor 3": (lambda: _f16fdi().fault_case(sensor=3), V, "sensor"),
+    "fault_case sensor -1": (lambda: _f16fdi().fault_case(sensor=-1), V, "sensor"),
+    "fault_case onset negative": (lambda: _f16fdi().fault_case(onset_s=-1.0), V, "onset_s"),
+    "analytic_residual_trace restart -1": (lambda: _f16fdi().analytic_residual_trace(
+        None, jnp.zeros((20, 14)), jnp.zeros((20, 4)), -1, jnp.ones(6, bool), 3), V, "restart"),
+    "analytic_residual_trace restart past the record": (lambda: _f16fdi().analytic_residual_trace(
+        None, jnp.zeros((20, 14)), jnp.zeros((20, 4)), 30, jnp.ones(6, bool), 3), V, "restart"),
+    "analytic_residual_trace trusted (5,)": (lambda: _f16fdi().analytic_residual_trace(
+        _ns(hybrid=_ns(space=_ns(H=jnp.zeros((6, 3))))), jnp.zeros((20, 14)), jnp.zeros((20, 4)), 2,
+        jnp.ones(5, bool), 3), V, "trusted"),
+    # GNSS
+    "parse_yuma rollovers float": (lambda: _gnss().parse_yuma("", rollovers=1.5), T_, "rollovers"),
+    "gps_week_seconds hour 30": (lambda: _gnss().gps_week_seconds(2020, 1, 4, hour=30), V, "hour"),
+    "gps_week_seconds minute negative": (lambda: _gnss().gps_week_seconds(2020, 1, 1, minute=-5), V, "minute"),
+    "transmission_geometry receiver (2,)": (lambda: _gnss().transmission_geometry(None, 0.0, jnp.ones(2)), V,
+                                            "receiver_ecef"),
+    "ecef_to_geodetic point (2,)": (lambda: _gnss().ecef_to_geodetic(jnp.ones(2) * 7e6), V, "ecef"),
+    "ecef_to_ned origin (2,)": (lambda: _gnss().ecef_to_ned(jnp.ones(3) * 7e6, jnp.ones(2) * 7e6), V, "origin_ecef"),
+    "geodetic_to_ecef shapes that do not broadcast": (lambda: _gnss().geodetic_to_ecef(jnp.zeros(2), jnp.zeros(3), 0.0),
+                                                      V, "lat"),
+    "solve_position pseudoranges (31,) for 32 slots": (lambda: _gnss().solve_position(
+        _ns(toe=jnp.zeros(32)), 0.0, jnp.zeros(31), jnp.ones(32, bool)), V, "pseudoranges"),
+    "solve_position sigma negative": (lambda: _gnss().solve_position(
+        _ns(toe=jnp.zeros(32)), 0.0, jnp.zeros(32), jnp.ones(32, bool), -jnp.ones(32)), V, "sigma"),
+    "dops used (31,)": (lambda: _gnss().dops(jnp.ones((32, 4)), jnp.ones(31, bool)), V, "used"),
+    "protection_levels operation (556,)": (lambda: _gnss().protection_levels(None, None, (556.0,)), V, "operation"),
+    "protection_levels negative HAL": (lambda: _gnss().protection_levels(None, None, (-1.0, 50.0)), V, "operation"),
+    "monitor_epochs pseudoranges (4, 32) for 5 epochs": (lambda: _gnss().monitor_epochs(
+        _ns(prn=jnp.zeros(32)), jnp.zeros(5), jnp.zeros((4, 32)), None), V, "pseudoranges"),
+    "monitor_epochs batch_size zero": (lambda: _gnss().monitor_epochs(
+        _ns(prn=jnp.zeros(32)), jnp.zeros(5), jnp.zeros((5, 32)), None, batch_size=0), V, "batch_size"),
+    "geometry_fix receiver (2,)": (lambda: _gnss().geometry_fix(None, 0.0, jnp.ones(2), 0.1, None), V,
+                                   "receiver_ecef"),
+    "availability_grid receivers (3,)": (lambda: _gnss().availability_grid(None, jnp.zeros(2), jnp.ones(3), None, 0.1,
+                                                                           None), V, "receivers_ecef"),
+    "raim_tables num_slots float": (lambda: _gnss().raim_tables(32.7), T_, "num_slots"),
+    "paper_threshold sigma negative": (lambda: _gnss().paper_threshold(6, 0.01, -3.0), V, "sigma"),
+    "visibility mask in degrees": (lambda: _gnss().visibility(None, 0.0, jnp.ones(3), 5.0), V, "mask_angle"),
+    "elevation_sigma zenith negative": (lambda: _gnss().elevation_sigma(jnp.asarray(0.5), zenith=-3.0), V, "zenith"),
+    "elevation_sigma min_elevation zero": (lambda: _gnss().elevation_sigma(jnp.asarray(0.0), min_elevation=0.0), V,
+                                           "min_elevation"),
+    "receiver_plant dt zero": (lambda: _receiver(dt=0.0), V, "dt"),
+    "receiver_plant sigma negative": (lambda: _receiver(sigma=-jnp.ones((3, 32))), V, "sigma"),
+    "receiver_plant fault on slot 40": (lambda: _receiver(fault=fault(component=40, onset=0)), V, "fault"),
+    "racetrack_ned speed NaN": (lambda: _gnss().racetrack_ned(jnp.zeros(3), 600.0, 200.0, float("nan"), 30.0), V,
+                                "speed"),
+    # INS
+    "imu sample_sigma dt negative": (lambda: _ins().imu.sample_sigma(_ins().imu.hg1900(), -0.01), V, "dt"),
+    "imu walk_biases interval negative": (lambda: _ins().imu.walk_biases(None, KEY, _ins().imu.hg1900(), -1.0), V,
+                                          "interval"),
+    "imu measure samples (10, 5)": (lambda: _ins().imu.measure(jnp.zeros((10, 5)), None, KEY, _ins().imu.hg1900(),
+                                                               0.01), V, "true_samples"),
+    "loosely_coupled_filter negative random walk": (lambda: _ins().loosely_coupled.loosely_coupled_filter(
+        _ins().imu.noise_model(_ins().imu.hg1900())._replace(velocity_random_walk=-1e-3), 0.1), V,
+                                                    "noise.velocity_random_walk"),
+    "ins init attitude not unit": (lambda: _ins_init(attitude=2.0 * jnp.array([1.0, 0.0, 0.0, 0.0])), V,
+                                   "nav.attitude"),
+    "ins init accel_bias (2,)": (lambda: _ins_init(accel_bias=jnp.zeros(2)), V, "accel_bias"),
+    "scst step correction (14,)": (lambda: _scst_step(jnp.zeros(14)), V, "correction"),
+    "ins initial_covariance sigma negative": (lambda: _ins().integrity.initial_covariance(-3.0, 0.1, 0.01, 0.05, 1e-2,
+                                                                                          1e-5), V, "position_sigma"),
+    "gps_ins_fdi velocity_sigma negative": (lambda: _ins().integrity.gps_ins_fdi(
+        None, 0.0, None, None, None, None, None, -0.1), V, "velocity_sigma"),
+    "fly blend negative": (lambda: _ins().trajectory.fly([(2.0, 0.0, 0.0, 0.0)], (37.5, 126.9, 100.0), 12.0,
+                                                         blend=-5.0), V, "blend"),
+    "fly latitude 95 deg": (lambda: _ins().trajectory.fly([(2.0, 0.0, 0.0, 0.0)], (95.0, 0.0, 100.0), 12.0), V,
+                            "start"),
+    "stationary duration negative": (lambda: _ins().trajectory.stationary((37.5, 126.9, 100.0), -5.0), V, "duration"),
+    "park_legs duration NaN": (lambda: _ins().trajectory.park_legs(float("nan")), V, "duration"),
+    "quaternion_to_euler q (3,)": (lambda: _ins().rotations.quaternion_to_euler(jnp.array([1.0, 0.0, 0.0])), V, "q"),
+    "strapdown step specific force (2,)": (lambda: _ins().mechanization.step(None, jnp.zeros(2), jnp.zeros(3), 0.01),
+                                           V, "specific_force"),
+    "discretize F (14, 14)": (lambda: _ins().error_state.discretize(jnp.zeros((14, 14)), None, 1.0), V, "jacobian"),
+    # streaming, tuning, metrics, loop, study
+    "detection_counts horizon shorter than the runs": (lambda: _streaming().detection_counts(_late_records(), 20), V,
+                                                       "horizon"),
+    "detection_summary horizon shorter than the runs": (lambda: (lambda s: s.counts(s.summary(
+        _late_records(), jnp.ones(2))[1]))(_streaming().detection_summary(20)), V, "horizon"),
+    "merge_counts not counts": (lambda: _streaming().merge_counts(_streaming().empty_counts(10), None), T_, "parts"),
+    "sticky_log_prior target shape": (lambda: tuning.sticky_log_prior(jnp.full((2, 2), 0.5), jnp.eye(3), 1.0), V,
+                                      "target"),
+    "fit loss not scalar": (lambda: tuning.fit(lambda raw, b: raw["a"] ** 2, {"a": jnp.ones(2)}, optax.adam(1e-2),
+                                               lambda i: None, None, steps=1), V, "loss"),
+    "mode_cross_entropy float labels": (lambda: tuning.mode_cross_entropy(jnp.zeros((3, 2)), jnp.full(3, 0.7)), T_,
+                                        "true_mode"),
+    "mode_cross_entropy label out of range": (lambda: tuning.mode_cross_entropy(jnp.zeros((3, 2)), jnp.full(3, 5)), V,
+                                              "true_mode"),
+    "soft_detection_loss onset negative": (lambda: tuning.soft_detection_loss(jnp.ones(5), 2.0, -3), V, "onset"),
+    "record_init onset negative": (lambda: metrics.record_init(-5), V, "onset"),
+    "record_init onset float": (lambda: metrics.record_init(2.5), T_, "onset"),
+    "record_from_alarms healthy longer": (lambda: metrics.record_from_alarms(jnp.zeros(5, bool), 2, jnp.ones(6, bool)),
+                                          V, "healthy"),
+    "record_from_alarms float alarms": (lambda: metrics.record_from_alarms(jnp.array([0.1, 5.0, 0.2]), 1), T_,
+                                        "alarms"),
+    "episode_record_init onset negative": (lambda: metrics.episode_record_init(jnp.array([-4]), jnp.array([3]),
+                                                                               jnp.array([1])), V, "onsets"),
+    "binomial_interval p above 1": (lambda: metrics.binomial_interval(10, 1.5), V, "p"),
+    "binomial_interval trials negative": (lambda: metrics.binomial_interval(-5, 0.1), V, "trials"),
+    "isolation_accuracy 1-D": (lambda: metrics.isolation_accuracy(jnp.array([1, 2, 3])), V, "confusion"),
+    "run_loop exogenous scalar leaf": (lambda: loop_run(exogenous=jnp.zeros(())), V, "exogenous"),
+    "run_loop a batch of keys": (lambda: loop_run(key=jax.random.split(KEY, 3)), T_, "key"),
+    "run_loop key int": (lambda: loop_run(key=0), T_, "key"),
+    "peak_scorer values not callable": (lambda: loop.peak_scorer(3.0, lambda k: True), T_, "values"),
+    "case_slices counts for 2 of 3 cases": (lambda: _case_slices([1, 2], 3), V, "runs"),
+    "case_slices negative runs": (lambda: _case_slices(-2, 2), V, "runs"),
 }
 
 
@@ -445,7 +615,7 @@ def _f16():
 
 def _flight_controller(dt=0.01, lower=-jnp.ones(4), upper=jnp.ones(4)):
     from jaxfdi.control.flight import FlightGains, flight_controller
-    gains = FlightGains(*(jnp.zeros((2, 8)) for _ in FlightGains._fields))
+    gains = FlightGains(jnp.zeros((2, 8)), jnp.zeros((2, 5)))
     return flight_controller(gains, dt, lower, upper)
 
 
@@ -454,6 +624,106 @@ def _raim_fdi(dt=1.0):
     from jaxfdi.gnss import ephemeris_table, raim_fdi, raim_tables, read_rinex_nav
     table = ephemeris_table(read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
     return raim_fdi(table, 0.0, dt, raim_tables(32))
+
+
+def _ns(**fields):
+    """A stand-in with only the fields a check reads before it refuses the call."""
+    import types
+    return types.SimpleNamespace(**fields)
+
+
+def _f16p():
+    return _f16().dynamics.f16_params()
+
+
+def _f16lin():
+    from jaxfdi.models.f16 import linearize
+    return linearize
+
+
+def _f16plant():
+    from jaxfdi.models.f16 import plant
+    return plant
+
+
+def _f16rates():
+    from jaxfdi.models.f16 import rates
+    return rates
+
+
+def _f16tables():
+    from jaxfdi.models.f16 import tables
+    return tables
+
+
+def _flight_ctrl():
+    from jaxfdi.control import flight
+    return flight
+
+
+def _flight_view(rates=jnp.zeros(3)):
+    from jaxfdi.models.f16.plant import FlightView
+    return FlightView(jnp.zeros(3), jnp.zeros(3), jnp.zeros(()), jnp.zeros(()), rates)
+
+
+def _trims(n):
+    return _ns(state=jnp.zeros((n, 13)), control=jnp.zeros((n, 4)))
+
+
+def _f16flight():
+    from jaxfdi.scenarios import f16_flight
+    return f16_flight
+
+
+def _f16fdi():
+    from jaxfdi.scenarios import f16_fdi
+    return f16_fdi
+
+
+def _gnss():
+    from jaxfdi import gnss
+    return gnss
+
+
+def _receiver(dt=1.0, sigma=jnp.ones((3, 32)), fault=None):
+    return _gnss().receiver_plant(_ns(prn=jnp.zeros(32)), 0.0, dt, jnp.ones((3, 3)) * 7e6, jnp.ones((3, 32), bool),
+                                  sigma, fault=fault)
+
+
+def _ins():
+    import types
+
+    from jaxfdi.ins import error_state, imu, integrity, loosely_coupled, mechanization, rotations, scst, trajectory
+    return types.SimpleNamespace(error_state=error_state, imu=imu, integrity=integrity, loosely_coupled=loosely_coupled,
+                                 mechanization=mechanization, rotations=rotations, scst=scst, trajectory=trajectory)
+
+
+def _ins_init(attitude=jnp.array([1.0, 0.0, 0.0, 0.0]), accel_bias=None):
+    from jaxfdi.ins.mechanization import NavState
+    filt = _ins().loosely_coupled.loosely_coupled_filter(_ins().imu.noise_model(_ins().imu.hg1900()), 0.1)
+    nav = NavState(jnp.array([0.6, 2.2, 100.0]), jnp.zeros(3), attitude)
+    return filt.init(nav, jnp.eye(15), accel_bias=accel_bias)
+
+
+def _scst_step(correction):
+    test = _ins().scst.state_chi2_test(10, 32.8)
+    return test.step(test.init(15), correction, jnp.eye(15), jnp.eye(15), jnp.eye(15))
+
+
+def _streaming():
+    from jaxfdi import streaming
+    return streaming
+
+
+def _late_records():
+    """Records of runs 100 steps long: one with its onset at 150 (fault-free within them)."""
+    a = lambda v: jnp.asarray(v, jnp.int32)  # noqa: E731
+    return metrics.DetectionRecord(a([150, 5]), a([-1, 7]), a([-1, 7]), a([0, 0]), a([100, 5]))
+
+
+def _case_slices(runs, num_cases):
+    from jaxfdi.study import case_slices
+    return case_slices(runs, num_cases)
 
 
 def test_at_least_100_cases():
@@ -487,3 +757,22 @@ def test_valid_neighbours_pass():
     assert int(metrics.confusion_matrix(jnp.array([0, 2]), jnp.array([-1, 2]), 3).sum()) == 2
     assert jaxfdi.monte_carlo(lambda key, x: x, KEY, 2, jnp.arange(2), chunk_size=1).shape == (2,)
     assert float(detection.chi2_threshold(np.int64(4), 0.005)) == pytest.approx(14.86, abs=5e-3)
+
+
+def test_second_audit_valid_neighbours_pass():
+    """The checks of the second audit are not over-eager: batched and edge values still pass."""
+    params = _f16p()
+    assert _f16().dynamics.saturate(jnp.zeros((5, 4)), params).shape == (5, 4)          # a (T, 4) batch of controls
+    assert _f16tables().lookup1(1.5, jnp.arange(5.0), jnp.ones((2, 5))).shape == (2,)  # m tables on one grid
+    assert _f16().trim.trim_condition([500.0, 600.0], 0.0, climb_angle=1.5).airspeed.shape == (2,)
+    points = jnp.ones((4, 3)) * 4e6
+    assert _gnss().ecef_to_ned(points, points + 10.0).shape == (4, 3)                  # one origin per point
+    assert _gnss().raim_tables(np.int64(32)).threshold.shape == (29,)
+    assert _gnss().gps_week_seconds(2020, 1, 4, 23, 59, 59.5) == (2086, 604799.5)
+    assert np.isfinite(float(_gnss().elevation_sigma(jnp.asarray(0.0))))
+    quaternion = _ins().rotations.euler_to_quaternion(0.1, -0.05, 2.0).astype(jnp.float32)
+    assert _ins_init(attitude=quaternion).nav.attitude.shape == (4,)                     # float32 round-off passes
+    assert int(metrics.record_init(jaxfdi.faults.NEVER).onset) == jaxfdi.faults.NEVER
+    assert int(metrics.record_from_alarms(jnp.array([0, 1, 1]), 1).detection_step) == 1   # 0/1 integer alarms
+    assert _case_slices([0, 2], 2) == [slice(0, 0), slice(0, 2)]
+    assert _f16fdi().fault_case(["bias", "none"], [0, 2], 10.0, 45.0).kind.shape == (2,)

@@ -112,6 +112,10 @@ def flight_plan(airspeed: float = 502.0, altitude: float = 0.0, climb_rate: floa
                 level_off: float = 4.0, bank_angle_deg: float = 30.0, bank_start: float = 5.0, roll_in: float = 2.0,
                 duration: float = 15.0) -> FlightPlan:
     """Seed 000's flight at the book's 502 ft/s sea-level trim (module doc)."""
+    for name, value in (("airspeed", airspeed), ("altitude", altitude), ("climb_rate", climb_rate),
+                        ("climb_time", climb_time), ("level_off", level_off), ("bank_angle_deg", bank_angle_deg),
+                        ("bank_start", bank_start), ("roll_in", roll_in), ("duration", duration)):
+        _checks.check_scalar(name, value, meaning="a real number")
     if not (airspeed > 0 and duration > 0 and level_off > 0 and roll_in > 0):
         raise ValueError("airspeed, duration, level_off, roll_in: expected positive values, got "
                          f"{airspeed}, {duration}, {level_off}, {roll_in}")
@@ -152,6 +156,12 @@ def design_flight_control(linear: LinearF16, dt: float, weights: FlightWeights) 
     _checks.check_shape("weights.longitudinal_input", weights.longitudinal_input, (2,), "thtl, el")
     _checks.check_shape("weights.lateral", weights.lateral, (5,), "beta, phi, P, R, int phi")
     _checks.check_shape("weights.lateral_input", weights.lateral_input, (2,), "ail, rdr")
+    for name, low_open in (("longitudinal", False), ("longitudinal_input", True), ("lateral", False),
+                           ("lateral_input", True)):
+        value = _checks.concrete(getattr(weights, name))   # traced when differentiated: unchecked
+        if value is not None and not (np.all(np.isfinite(value)) and np.all(value > 0 if low_open else value >= 0)):
+            raise ValueError(f"weights.{name}: expected finite LQR weights {'> 0' if low_open else '>= 0'}, got "
+                             f"{_checks.received(value)}")
     dtype = weights.longitudinal.dtype
     designs = []
     for states, inputs, tracked, q, r in (
@@ -190,8 +200,16 @@ def plan_trims(params: F16Params, plan: FlightPlan) -> TrimResult:
     return trim_batch(params, stacked, jnp.full((len(conditions),), params.xcg, dtype))
 
 
+def _check_trims(trims: TrimResult) -> None:
+    """``trims`` is ``plan_trims``' stack of 4 (level, climb, turn, pull-up) at trace time:
+    fewer rows would be read out of bounds, silently clamped to the last one."""
+    _checks.check_shape("trims.state", trims.state, (4, 13), "plan_trims' level, climb, turn and pull-up trims")
+    _checks.check_shape("trims.control", trims.control, (4, 4), "plan_trims' level, climb, turn and pull-up trims")
+
+
 def initial_condition(plan: FlightPlan, trims: TrimResult) -> tuple[Array, Array]:
     """``(x0 (13,), u0 (4,))``: the climb trim at the plan's initial altitude."""
+    _check_trims(trims)
     return trims.state[1].at[H].set(plan.altitude), trims.control[1]
 
 
@@ -249,6 +267,7 @@ def flight_reference(params: F16Params, plan: FlightPlan, trims: TrimResult, dt:
     and to the controls at the pull-up trim's rate per g."""
     _checks.check_positive("dt", dt, "a positive sample period (s)")
     _checks.check_int("steps", steps, minimum=1, meaning="a positive number of steps")
+    _check_trims(trims)
     dtype = trims.state.dtype
     t = jnp.arange(int(steps), dtype=dtype) * dt
     prof = commanded_profile(plan, t)
@@ -270,6 +289,8 @@ def flight_reference(params: F16Params, plan: FlightPlan, trims: TrimResult, dt:
 
 def measured_state(view: FlightView) -> tuple[Array, Array]:
     """``(x_lon (6,), x_lat (4,))`` as the controller reads them from the view."""
+    for name in ("air_data", "attitude", "rates"):
+        _checks.check_shape(f"view.{name}", getattr(view, name), (3,), "a FlightView field")
     vt, alpha, beta = view.air_data[0], view.air_data[1], view.air_data[2]
     phi, theta = view.attitude[0], view.attitude[1]
     p, q, r = view.rates[0], view.rates[1], view.rates[2]
@@ -283,6 +304,10 @@ def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array)
     from jaxfdi.loop import Controller
 
     _checks.check_positive("dt", dt, "a positive sample period (s)")
+    _checks.check_shape("gains.longitudinal", gains.longitudinal, (2, 8), "u_lon = -K [dx_lon (6); z_lon (2)]")
+    _checks.check_shape("gains.lateral", gains.lateral, (2, 5), "u_lat = -K [dx_lat (4); z_lat (1)]")
+    _checks.check_shape("lower", lower, (4,), "control limits thtl, el, ail, rdr")
+    _checks.check_shape("upper", upper, (4,), "control limits thtl, el, ail, rdr")
     low, high = _checks.concrete(lower), _checks.concrete(upper)
     if low is not None and high is not None and np.any(np.asarray(low) > np.asarray(high)):
         raise ValueError(f"lower: expected control limits below upper (thtl, el, ail, rdr), got lower "

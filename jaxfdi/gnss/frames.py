@@ -15,6 +15,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi import _checks
+
 #: WGS-84 semi-major axis [m] and flattening
 WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563
@@ -25,6 +27,11 @@ WGS84_B = WGS84_A * (1.0 - WGS84_F)
 def geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
     """(..., 3) ECEF [m] of geodetic latitude, longitude [rad] and ellipsoidal height [m]."""
     lat, lon, height = jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(height)
+    try:
+        jnp.broadcast_shapes(lat.shape, lon.shape, height.shape)
+    except ValueError:
+        raise ValueError(f"lat, lon, height: expected arrays that broadcast together, got shapes {lat.shape}, "
+                         f"{lon.shape}, {height.shape}") from None
     sin_lat = jnp.sin(lat)
     radius = WGS84_A / jnp.sqrt(1.0 - WGS84_E2 * sin_lat**2)
     return jnp.stack([(radius + height) * jnp.cos(lat) * jnp.cos(lon),
@@ -38,6 +45,7 @@ def ecef_to_geodetic(ecef: Array, iterations: int = 5) -> tuple[Array, Array, Ar
     Valid away from the Earth's centre (``|r| > 100 km``); the height is computed from
     the latitude in the form that is well conditioned at every latitude.
     """
+    _check_points("ecef", ecef)
     ecef = jnp.asarray(ecef)
     x, y, z = ecef[..., 0], ecef[..., 1], ecef[..., 2]
     p = jnp.hypot(x, y)
@@ -54,6 +62,14 @@ def ecef_to_geodetic(ecef: Array, iterations: int = 5) -> tuple[Array, Array, Ar
     return lat, lon, height
 
 
+def _check_points(name: str, points) -> None:
+    """(..., 3) coordinates (trace time): a last axis of another length would be read out of
+    bounds (an index past the end is clamped), silently."""
+    shape = _checks.shape_of(points)
+    if not shape or shape[-1] != 3:
+        raise ValueError(f"{name}: expected points of shape (..., 3) [m], got {shape}")
+
+
 def ned_rotation(lat: Array, lon: Array) -> Array:
     """(..., 3, 3) ``C_e^n``: rows are the North, East and Down unit vectors in ECEF."""
     lat, lon = jnp.asarray(lat), jnp.asarray(lon)
@@ -67,6 +83,8 @@ def ned_rotation(lat: Array, lon: Array) -> Array:
 
 def ecef_to_ned(ecef: Array, origin_ecef: Array) -> Array:
     """(..., 3) NED [m] of ECEF points relative to ``origin_ecef`` (NED axes at the origin)."""
+    _check_points("ecef", ecef)
+    _check_points("origin_ecef", origin_ecef)
     lat, lon, _ = ecef_to_geodetic(origin_ecef)
     delta = jnp.asarray(ecef) - jnp.asarray(origin_ecef)
     return jnp.einsum("...ij,...j->...i", ned_rotation(lat, lon), delta)
@@ -74,12 +92,16 @@ def ecef_to_ned(ecef: Array, origin_ecef: Array) -> Array:
 
 def ned_to_ecef(ned: Array, origin_ecef: Array) -> Array:
     """(..., 3) ECEF of NED offsets [m] from ``origin_ecef`` (inverse of ``ecef_to_ned``)."""
+    _check_points("ned", ned)
+    _check_points("origin_ecef", origin_ecef)
     lat, lon, _ = ecef_to_geodetic(origin_ecef)
     return jnp.asarray(origin_ecef) + jnp.einsum("...ji,...j->...i", ned_rotation(lat, lon), jnp.asarray(ned))
 
 
 def line_of_sight_ned(receiver_ecef: Array, satellite_ecef: Array) -> Array:
     """(..., 3) unit vector from the receiver to the satellite in the receiver's NED axes."""
+    _check_points("receiver_ecef", receiver_ecef)
+    _check_points("satellite_ecef", satellite_ecef)
     lat, lon, _ = ecef_to_geodetic(receiver_ecef)
     delta = jnp.asarray(satellite_ecef) - jnp.asarray(receiver_ecef)
     ned = jnp.einsum("...ij,...j->...i", ned_rotation(lat, lon), delta)

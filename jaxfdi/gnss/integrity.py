@@ -101,6 +101,14 @@ def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables:
     ``batch_size``: vmap over chunks of that many epochs, one chunk after another
     (``lax.map``), so the intermediates stay in cache: ~1.7x faster for 10^4-10^5 epochs on
     CPU at 128 (``benchmarks/bench_gnss_raim.py``); ``None`` vmaps all epochs at once."""
+    _checks.check_shape("times", times, (None,), "one time tag per epoch")
+    epochs = _checks.shape_of(times)[0]
+    _checks.check_shape("pseudoranges", pseudoranges, (epochs, _checks.shape_of(table.prn)[0]),
+                        "T epochs (times') x S slots (table's)")
+    if sigma is not None and not callable(sigma):
+        _checks.check_shape("sigma", sigma, _checks.shape_of(pseudoranges), "one standard deviation per pseudorange")
+    if batch_size is not None:
+        batch_size = _checks.check_int("batch_size", batch_size, 1, meaning="a positive number of epochs per chunk")
 
     def one(t, rho, sig):
         orbit, available = select_orbits(table, t)
@@ -170,6 +178,7 @@ def geometry_fix(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: 
     pseudoranges: its true position, zero residuals, the geometry of the satellites
     above ``mask_angle`` [rad] and ``sigma(elevation)`` weights. DOPs, protection levels
     and minimum detectable biases depend on nothing else."""
+    _checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
     orbit, has_orbit = select_orbits(table, t)
     sat = satellite_position(orbit, t)
     receiver_ecef = jnp.asarray(receiver_ecef)
@@ -199,6 +208,9 @@ def availability_grid(table: OrbitTable, times: Array, receivers_ecef: Array, ta
     """Protection levels and availability for every receiver (P, 3) at every epoch (T,):
     ``geometry_fix`` then ``protection_levels``, vmapped over epochs and mapped over the
     receivers ``batch_size`` at a time (bounded memory for large grids)."""
+    _checks.check_shape("receivers_ecef", receivers_ecef, (None, 3), "P receivers' ECEF positions [m]")
+    _checks.check_shape("times", times, (None,), "T epochs")
+    batch_size = _checks.check_int("batch_size", batch_size, 1, meaning="a positive number of receivers per chunk")
     times = jnp.asarray(times)
 
     def at(receiver, t):

@@ -36,13 +36,14 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
 from jaxfdi.gnss.frames import ecef_to_ned, elevation_azimuth, line_of_sight_ned
 from jaxfdi.gnss.orbits import SPEED_OF_LIGHT, OrbitTable, satellite_position, select_orbits, transmission_geometry
-from jaxfdi.simulate import Actuated, Sensed, SimState, SimStep, Simulator
+from jaxfdi.simulate import Actuated, Sensed, SimState, SimStep, Simulator, check_fault_components
 
 
 class Wall(NamedTuple):
@@ -68,6 +69,10 @@ def elevation_sigma(elevation: Array, zenith: float = 3.0, slant: float = 3.0,
                     min_elevation: float = math.radians(2.0)) -> Array:
     """``sqrt(a^2 + b^2 / sin^2 el)`` [m]: ``a = zenith``, ``b = slant``; elevations below
     ``min_elevation`` are taken at it (the satellite is masked anyway)."""
+    _checks.check_scalar("zenith", zenith, 0.0, meaning="a standard deviation >= 0 [m]")
+    _checks.check_scalar("slant", slant, 0.0, meaning="a standard deviation >= 0 [m]")
+    _checks.check_scalar("min_elevation", min_elevation, 0.0, 0.5 * math.pi, low_open=True,
+                         meaning="an elevation in (0, pi/2] rad")
     sin_el = jnp.sin(jnp.maximum(elevation, min_elevation))
     return jnp.sqrt(zenith**2 + (slant / sin_el) ** 2)
 
@@ -106,6 +111,8 @@ def visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: fl
     """``(visible, elevation, azimuth)`` over the S slots: valid healthy ephemeris, above
     ``mask_angle`` [rad] and not behind any of ``walls`` (whose NED frame is at
     ``origin_ecef``)."""
+    _checks.check_scalar("mask_angle", mask_angle, -0.5 * math.pi, 0.5 * math.pi,
+                         meaning="an elevation mask in [-pi/2, pi/2] rad")
     elevation, azimuth, los, has_orbit = sky_geometry(table, t, receiver_ecef)
     visible = has_orbit & (elevation > mask_angle)
     if walls:
@@ -139,12 +146,17 @@ def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, vi
       clock: the oscillator (``ClockModel``); ``init`` takes ``[bias, drift]`` anyway.
       fault: sensor ``Fault``(s) on satellite slots (scalar leaves or a stack), or None.
     """
+    _checks.check_positive("dt", dt, "a positive epoch interval (s)")
+    value = _checks.concrete(sigma)
+    if value is not None and np.any(value < 0):
+        raise ValueError(f"sigma: expected pseudorange standard deviations >= 0 [m], got {_checks.received(value)}")
     path_ecef, visible, sigma = jnp.asarray(path_ecef), jnp.asarray(visible, bool), jnp.asarray(sigma)
     _checks.check_shape("path_ecef", path_ecef, (None, 3), "T ECEF receiver positions")
     steps, slots = visible.shape if visible.ndim == 2 else (None, None)
     _checks.check_shape("visible", visible, (path_ecef.shape[0], table.prn.shape[0]), "T steps x S slots")
     _checks.check_shape("sigma", sigma, (steps, slots), "T steps x S slots")
     faults = as_stack(no_fault() if fault is None else fault)
+    check_fault_components(faults, Target.SENSOR, table.prn.shape[0])
     num_faults = faults.kind.shape[0]
     noise_sqrt = jnp.linalg.cholesky(clock_process_noise(clock, dt, path_ecef.dtype))
     transition = jnp.asarray([[1.0, dt], [0.0, 1.0]], path_ecef.dtype)

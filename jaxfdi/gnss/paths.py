@@ -9,6 +9,7 @@ receiver's time tags; ``phase`` [m] shifts the start along the circuit.
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi.gnss.frames import ned_to_ecef
@@ -17,8 +18,10 @@ from jaxfdi.gnss.frames import ned_to_ecef
 def racetrack_ned(times: Array, straight: float, radius: float, speed: float, height: float,
                   phase: float = 0.0) -> Array:
     """(T, 3) NED positions [m] at ``times`` [s from the start]; ``height`` above the origin."""
-    if straight < 0 or radius <= 0 or speed <= 0:
-        raise ValueError(f"straight, radius, speed: expected >= 0, > 0, > 0, got {straight}, {radius}, {speed}")
+    finite = all(bool(np.all(np.isfinite(np.asarray(v)))) for v in (straight, radius, speed, height, phase))
+    if not (finite and straight >= 0 and radius > 0 and speed > 0):
+        raise ValueError(f"straight, radius, speed, height, phase: expected finite values, straight >= 0, radius > 0, "
+                         f"speed > 0, got {straight}, {radius}, {speed}, {height}, {phase}")
     times = jnp.asarray(times)
     lap = 2.0 * straight + 2.0 * jnp.pi * radius
     s = jnp.mod(phase + speed * times, lap)

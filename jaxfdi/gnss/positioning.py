@@ -21,9 +21,10 @@ from typing import Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg
+from jaxfdi import _checks, _linalg
 from jaxfdi.gnss.frames import ecef_to_geodetic, elevation_azimuth, ned_rotation
 from jaxfdi.gnss.least_squares import apply_qt, leading, masked_qr, solve_upper
 from jaxfdi.gnss.orbits import SPEED_OF_LIGHT, Orbit, earth_rotation, satellite_clock, satellite_state
@@ -71,6 +72,7 @@ def transmit_states(orbit: Orbit, t_receive: Array, pseudoranges: Array) -> tupl
 def dops(geometry: Array, used: Array) -> Dops:
     """DOPs of an (S, 3 + clocks) NED + clock geometry over the ``used`` rows (unit
     weights); TDOP is the first clock's."""
+    _checks.check_shape("used", used, _checks.shape_of(geometry)[:1], "one flag per geometry row")
     h = jnp.where(used[:, None], geometry, 0.0)
     normal = h.T @ h
     cov = _linalg.cho_solve(_linalg.cholesky(normal), jnp.eye(h.shape[1], dtype=h.dtype))
@@ -120,6 +122,14 @@ def solve_position(
     """
     if solver not in ("normal", "qr"):
         raise ValueError(f"solver: expected 'normal' or 'qr', got {solver!r}")
+    slots = _checks.shape_of(orbit.toe) if hasattr(orbit, "toe") else _checks.shape_of(available)
+    _checks.check_shape("pseudoranges", pseudoranges, slots, "one pseudorange per satellite slot")
+    _checks.check_shape("available", available, slots, "one flag per satellite slot")
+    if sigma is not None and not callable(sigma):
+        _checks.check_shape("sigma", sigma, slots, "one standard deviation per satellite slot [m]")
+        value = _checks.concrete(sigma)
+        if value is not None and not np.all(value > 0):
+            raise ValueError(f"sigma: expected standard deviations > 0 [m], got {_checks.received(value)}")
     pseudoranges = jnp.asarray(pseudoranges)
     dtype = pseudoranges.dtype
     used = jnp.asarray(available, bool) & jnp.isfinite(pseudoranges)

@@ -31,8 +31,10 @@ import math
 from typing import NamedTuple
 
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
+from jaxfdi import _checks
 from jaxfdi.gnss.least_squares import MaskedQR, masked_qr, solve_upper, thin_q
 from jaxfdi.gnss.positioning import PositionFix
 from jaxfdi.gnss.raim import RaimTables, check_tables, unknowns, whitened
@@ -73,6 +75,10 @@ def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tup
             raise ValueError(f"operation: expected one of {sorted(ALERT_LIMITS)} or (HAL, VAL), got {operation!r}")
         hal, val = ALERT_LIMITS[operation]
     else:
+        limits = _checks.concrete(operation)
+        if limits is None or limits.shape != (2,) or limits.dtype.kind not in "fiu" or not np.all(limits > 0):
+            raise ValueError(f"operation: expected one of {sorted(ALERT_LIMITS)} or (HAL, VAL), two alert limits > 0 "
+                             f"[m] (inf: none), got {operation!r}")
         hal, val = operation
     check_tables(tables, fix)
     h, _ = whitened(fix)

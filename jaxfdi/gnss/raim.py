@@ -72,6 +72,10 @@ def paper_threshold(num_visible, pfa, sigma) -> Array:
     """Seed 002 eq. 8: ``sqrt(2 ln(1/pfa) sigma^2 / (n - 4))`` [m], a bound on the RMS
     parity ``sqrt(p^T p / (n - 4))`` (NaN for ``n <= 4``)."""
     _checks.check_probability("pfa", pfa)
+    _checks.check_real("sigma", sigma, "a pseudorange standard deviation [m]")
+    value = _checks.concrete(sigma)
+    if value is not None and not np.all(value > 0):
+        raise ValueError(f"sigma: expected a standard deviation > 0 [m], got {_checks.received(value)}")
     dof = jnp.asarray(num_visible) - 4.0
     return jnp.where(dof > 0, jnp.sqrt(2.0 * jnp.log(1.0 / jnp.asarray(pfa)) * jnp.asarray(sigma) ** 2
                                        / jnp.where(dof > 0, dof, 1.0)), jnp.nan)
@@ -88,8 +92,7 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
     """
     if rule not in RULES:
         raise ValueError(f"rule: expected one of {list(RULES)}, got {rule!r}")
-    if int(num_slots) < 5:
-        raise ValueError(f"num_slots: expected at least 5 satellite slots, got {num_slots}")
+    num_slots = _checks.check_int("num_slots", num_slots, 5, meaning="a number of satellite slots (at least 5)")
     _checks.check_probability("pfa", pfa)
     _checks.check_probability("pmd", pmd)
     dtype = dtype or jnp.result_type(float)

@@ -87,6 +87,9 @@ class Ephemerides(NamedTuple):
 def gps_week_seconds(year: int, month: int, day: int, hour: int = 0, minute: int = 0,
                      second: float = 0.0) -> tuple[int, float]:
     """``(week, seconds of week)`` of a GPS-time calendar date (no leap seconds: GPS time)."""
+    for name, value, high in (("hour", hour, 24.0), ("minute", minute, 60.0), ("second", second, 60.0)):
+        if not (isinstance(value, (int, float, np.integer, np.floating)) and 0 <= value < high):
+            raise ValueError(f"{name}: expected a number in [0, {high:g}), got {value!r}")
     days = (_dt.date(int(year), int(month), int(day)) - GPS_EPOCH).days
     if days < 0:
         raise ValueError(f"date: expected a date on or after {GPS_EPOCH} (GPS week 0), got {year}-{month}-{day}")

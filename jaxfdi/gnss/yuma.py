@@ -19,6 +19,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from jaxfdi import _checks
+
 
 class Almanac(NamedTuple):
     """Almanac of N satellites; every field is an (N,) NumPy array."""
@@ -76,8 +78,7 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
     Raises:
       ValueError: naming ``name`` and the line of a malformed record.
     """
-    if int(rollovers) < 0:
-        raise ValueError(f"rollovers: expected an integer >= 0, got {rollovers}")
+    rollovers = _checks.check_int("rollovers", rollovers, 0, meaning="a number of 1024-week rollovers >= 0")
     records: list[dict] = []
     current: dict | None = None
     header_line = 0

@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi import _checks
 from jaxfdi.ins import mechanization
 from jaxfdi.ins.earth import radii_of_curvature
 from jaxfdi.ins.mechanization import NavState
@@ -104,6 +105,7 @@ def continuous_noise(jacobian: Array, noise: ImuNoise) -> Array:
 
 def discretize(jacobian: Array, noise: ImuNoise, interval: Array) -> tuple[Array, Array]:
     """``(Phi, Q_d)`` over ``interval`` [s] for the interval's mean ``F`` (module doc)."""
+    _checks.check_shape("jacobian", jacobian, (STATE_SIZE, STATE_SIZE), "the error state's F")
     eye = jnp.eye(STATE_SIZE, dtype=jacobian.dtype)
     a = jacobian * interval
     a2 = a @ a

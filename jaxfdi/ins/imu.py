@@ -88,6 +88,7 @@ def draw_errors(key: Array, model: ImuModel, dtype=None) -> ImuErrors:
 
 def walk_biases(errors: ImuErrors, key: Array, model: ImuModel, interval: float) -> ImuErrors:
     """The biases after ``interval`` [s] of random walk."""
+    _checks.check_scalar("interval", interval, 0.0, meaning="a duration >= 0 (s)")
     z = jax.random.normal(key, (2, 3), errors.accel_bias.dtype)
     root = math.sqrt(interval)
     return errors._replace(accel_bias=errors.accel_bias + model.accel_bias_walk * root * z[0],
@@ -97,12 +98,14 @@ def walk_biases(errors: ImuErrors, key: Array, model: ImuModel, interval: float)
 def sample_sigma(model: ImuModel, dt: float, dtype=None) -> Array:
     """(6,) the white noise of one sample ``dt`` [s] long: ``[VRW] * 3 + [ARW] * 3`` over
     ``sqrt(dt)`` (module doc)."""
+    _checks.check_positive("dt", dt, "a positive sample interval (s)")
     dtype = dtype or jnp.result_type(float)
     return jnp.asarray([model.velocity_random_walk] * 3 + [model.angle_random_walk] * 3, dtype) / math.sqrt(dt)
 
 
 def measure(true_samples: Array, errors: ImuErrors, key: Array, model: ImuModel, dt: float) -> Array:
     """(n, 6) measured samples of (n, 6) error-free ones (module doc)."""
+    _checks.check_shape("true_samples", true_samples, (None, 6), "n samples of [f^b (3), w_ib^b (3)]")
     noise = jax.random.normal(key, true_samples.shape, true_samples.dtype)
     scale = jnp.concatenate([1.0 + errors.accel_scale, 1.0 + errors.gyro_scale])
     bias = jnp.concatenate([errors.accel_bias, errors.gyro_bias])

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg
+from jaxfdi import _checks, _linalg
 from jaxfdi.detection.chi2 import Decision, Detector, WindowState
 from jaxfdi.detection.frozen import FrozenState, frozen_channel_detector
 from jaxfdi.filters._base import Filter
@@ -163,6 +163,7 @@ def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Fi
     ``plant.GpsInsMeasurement`` time-tagged ``t0 + k`` s and returns a ``GpsInsOutput``.
     Its state is ``GpsInsFdiState(ins_filter.init(...), chi2.init(), scst.init(15),
     health.init())``; ``health``: ``imu_health_test``."""
+    _checks.check_positive("velocity_sigma", velocity_sigma, "a velocity standard deviation (m/s)")
 
     def step(state: GpsInsFdiState, k, y, u):
         t = t0 + k
@@ -184,6 +185,10 @@ def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Fi
 def initial_covariance(position_sigma: float, velocity_sigma: float, tilt_sigma: float, heading_sigma: float,
                        accel_bias_sigma: float, gyro_bias_sigma: float, dtype=None) -> Array:
     """(15, 15) diagonal ``P0`` from 1-sigma errors [m, m/s, rad, rad, m/s^2, rad/s]."""
+    for name, value in (("position_sigma", position_sigma), ("velocity_sigma", velocity_sigma),
+                        ("tilt_sigma", tilt_sigma), ("heading_sigma", heading_sigma),
+                        ("accel_bias_sigma", accel_bias_sigma), ("gyro_bias_sigma", gyro_bias_sigma)):
+        _checks.check_scalar(name, value, 0.0, meaning="a standard deviation >= 0")
     dtype = dtype or jnp.result_type(float)
     sigmas = jnp.asarray([position_sigma] * 3 + [velocity_sigma] * 3 + [tilt_sigma] * 2 + [heading_sigma]
                          + [accel_bias_sigma] * 3 + [gyro_bias_sigma] * 3, dtype)

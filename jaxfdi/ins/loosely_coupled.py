@@ -33,6 +33,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
@@ -106,12 +107,23 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
     """
     _checks.check_positive("dt", dt, "the IMU sample interval in seconds")
     chunks = _checks.check_int("chunks", chunks, 1, meaning="a positive number of Jacobians per epoch")
+    for name in ImuNoise._fields:
+        _checks.check_scalar(f"noise.{name}", getattr(noise, name), 0.0, meaning="a noise density >= 0")
 
     def init(nav: NavState, cov: Array, accel_bias: Array | None = None, gyro_bias: Array | None = None) -> InsState:
         _checks.check_shape("nav.position", nav.position, (3,), "lat, lon [rad], h [m]")
         _checks.check_shape("nav.velocity", nav.velocity, (3,), "NED velocity")
         _checks.check_shape("nav.attitude", nav.attitude, (4,), "a unit quaternion")
         _checks.check_covariance("cov", cov, STATE_SIZE)
+        quaternion = _checks.concrete(nav.attitude)
+        if quaternion is not None and quaternion.dtype.kind == "f":
+            tolerance = float(np.sqrt(np.finfo(quaternion.dtype).eps))
+            if not abs(float(np.linalg.norm(quaternion)) - 1.0) <= tolerance:
+                raise ValueError(f"nav.attitude: expected a unit quaternion (| |q| - 1 | <= {tolerance:.2g}), got "
+                                 f"{_checks.received(quaternion)} of norm {float(np.linalg.norm(quaternion)):.6g}")
+        for name, bias in (("accel_bias", accel_bias), ("gyro_bias", gyro_bias)):
+            if bias is not None:
+                _checks.check_shape(name, bias, (3,), "an IMU bias estimate per axis")
         dtype = _checks.float_dtype(nav.position, cov)
         zero = jnp.zeros((3,), dtype)
         return InsState(jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), nav),

@@ -28,6 +28,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi import _checks
 from jaxfdi.ins.earth import LocalEarth, local_earth, radii_of_curvature, transport_rate
 from jaxfdi.ins.rotations import (
     cross,
@@ -82,6 +83,10 @@ def integrate_position(position: Array, velocity: Array, new_velocity: Array, dt
 def step(nav: NavState, specific_force: Array, angular_rate: Array, dt: Array) -> NavState:
     """One strapdown update (module doc) with the interval's mean ``f^b`` [m/s^2] and
     ``w_ib^b`` [rad/s], both already corrected for the estimated IMU errors."""
+    for name, value in (("specific_force", specific_force), ("angular_rate", angular_rate)):
+        shape = _checks.shape_of(value)
+        if not shape or shape[0] != 3:
+            raise ValueError(f"{name}: expected a body-axis vector of shape (3,), got {shape}")
     earth = local_earth(nav.position)
     earth_rate, transport = navigation_rates(nav, earth)
     body_turn = small_rotation_quaternion(angular_rate * dt)

@@ -13,8 +13,18 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi import _checks
+
 #: below this squared angle [rad^2] the series forms are used (their error is ~1e-20)
 _SMALL = 1e-10
+
+
+def _check_leading(name: str, value: Array, size: int, meaning: str) -> None:
+    """The components run along axis 0 (trace time): a shorter axis would be read out of
+    bounds, silently clamped."""
+    shape = _checks.shape_of(value)
+    if not shape or shape[0] != size:
+        raise ValueError(f"{name}: expected {meaning}, shape ({size}, ...), got {shape}")
 
 
 def quaternion_multiply(p: Array, q: Array) -> Array:
@@ -45,6 +55,7 @@ def cross(a: Array, b: Array) -> Array:
 
 def quaternion_to_dcm(q: Array) -> Array:
     """(3, 3) ``C(q)`` (body to NED for the attitude quaternion)."""
+    _check_leading("q", q, 4, "a quaternion [q0, q1, q2, q3]")
     q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
     return jnp.stack([
         jnp.stack([q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)]),

@@ -108,6 +108,10 @@ def state_chi2_test(period: int, threshold, max_condition: float = DEFAULT_MAX_C
                          jnp.zeros((), jnp.int32))
 
     def step(state: ScstState, correction: Array, filtered_cov: Array, transition: Array, process_cov: Array):
+        n = _checks.shape_of(state.difference)[-1]
+        _checks.check_shape("correction", correction, (n,), "the filter's correction dx[k|k]")
+        for name, value in (("filtered_cov", filtered_cov), ("transition", transition), ("process_cov", process_cov)):
+            _checks.check_shape(name, value, (n, n), f"the filter's {n} x {n} matrix")
         started = state.age >= 0
         difference = jnp.where(started[:, None], state.difference + correction, 0.0)
         cov = jnp.where(started[:, None, None], state.cov, filtered_cov)

@@ -64,6 +64,15 @@ def command_profiles(legs, times: Array, blend: float) -> Array:
     return value
 
 
+def _check_start(start) -> None:
+    """``(lat deg, lon deg, h m)``, finite, latitude strictly inside (-90, 90) (the
+    navigation equations divide by cos(lat))."""
+    value = np.asarray(start, float) if np.ndim(start) == 1 and len(start) == 3 else None
+    if value is None or not np.all(np.isfinite(value)) or not abs(value[0]) < 90.0:
+        raise ValueError(f"start: expected (latitude deg in (-90, 90), longitude deg, height m), finite, got "
+                         f"{_checks.received(start)}")
+
+
 def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: float = 0.0, rate: float = 100.0,
         blend: float = 5.0, dtype=None) -> Trajectory:
     """The flight of ``legs`` (module doc) from ``start`` = (lat deg, lon deg, h m) at
@@ -74,6 +83,9 @@ def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: floa
                          f"{_checks.received(legs)}")
     _checks.check_positive("speed", speed, "a positive airspeed in m/s")
     _checks.check_positive("rate", rate, "a positive IMU rate in Hz")
+    _checks.check_positive("blend", blend, "a positive blending time in s")
+    _checks.check_scalar("heading_deg", heading_deg, meaning="a heading in degrees")
+    _check_start(start)
     dtype = dtype or jnp.result_type(float)
     dt = 1.0 / float(rate)
     steps = int(round(float(legs[:, 0].sum()) * rate))
@@ -123,6 +135,9 @@ def _from_samples(position0, velocity, attitude, dt) -> Trajectory:
 def stationary(start: tuple[float, float, float], duration: float, rate: float = 100.0,
                attitude_deg: tuple[float, float, float] = (0.0, 0.0, 0.0), dtype=None) -> Trajectory:
     """A vehicle at rest at ``start`` for ``duration`` [s] with a fixed roll, pitch, yaw."""
+    _checks.check_scalar("duration", duration, 0.0, meaning="a duration >= 0 in s")
+    _checks.check_positive("rate", rate, "a positive IMU rate in Hz")
+    _check_start(start)
     dtype = dtype or jnp.result_type(float)
     steps = int(round(duration * rate))
     q = euler_to_quaternion(*(jnp.asarray(math.radians(a), dtype) for a in attitude_deg))
@@ -137,6 +152,7 @@ _PARK_TURN = (math.pi * 200.0 / 12.0, math.degrees(12.0 / 200.0))
 def park_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float]]:
     """Climb 60 m, then racetrack laps (50 s legs, 180 deg turns at 3.4 deg/s), one lap
     climbing 30 m and one descending, until ``duration`` [s]."""
+    _checks.check_positive("duration", duration, "a positive flight duration in s")
     legs = [(60.0, 0.0, 1.0, 0.0)]
     lap = 0
     while sum(leg[0] for leg in legs) < duration:
@@ -157,6 +173,7 @@ def park_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float
 def manoeuvre_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float]]:
     """S-turns at +-20 deg/s (9 s each), pull-ups and dives at +-8 m/s, +-2 m/s^2 speed
     changes, until ``duration`` [s]; starts at 25 m/s."""
+    _checks.check_positive("duration", duration, "a positive flight duration in s")
     pattern = [(9.0, 20.0, 0.0, 0.0), (9.0, -20.0, 0.0, 0.0), (6.0, 0.0, 8.0, 2.0), (6.0, 0.0, -8.0, -2.0),
                (9.0, -20.0, 4.0, 0.0), (9.0, 20.0, -4.0, 0.0), (5.0, 0.0, 0.0, 1.0), (5.0, 0.0, 0.0, -1.0)]
     legs = [(20.0, 0.0, 0.0, 0.0)]

@@ -116,6 +116,7 @@ def fdi_setup(setup: FlightSetup, pfa: float = PFA, missed_isolation: float = MI
     _checks.check_probability("missed_isolation", missed_isolation)
     _checks.check_positive("design_fnr", design_fnr, "a fault-to-noise ratio")
     _checks.check_positive("process_std", process_std, "a standard deviation (rad/s)")
+    samples = _checks.check_int("samples", samples, 2, meaning="a number of Monte Carlo samples")
     parity_space(sensors.rate_axes, jnp.asarray(SENSOR_GROUPS))  # checks the layout eagerly
     key = jax.random.key(20040) if key is None else key
     hybrid, calibration = _thresholds(sensors.rate_axes, sensors.rate_sigma, jnp.asarray(pfa, dtype),
@@ -154,6 +155,16 @@ def fault_case(kind="bias", sensor=PAPER_SENSOR, size=PAPER_FNR, angle_deg=PAPER
     arrays broadcast together, a stack of them with a leading flight axis: built on the
     host, one transfer per field (a Python list of 10^5 single cases, each field a device
     array copied back to be stacked, kept a GPU busy for minutes before the flights)."""
+    from jaxfdi import _checks
+
+    names = ["none", *KINDS]
+    unknown = sorted({str(k) for k in np.ravel(kind)} - set(names))
+    if unknown:
+        raise ValueError(f"kind: expected one of {names}, got {unknown}")
+    _checks.check_int_array("sensor", np.asarray(sensor), 0, len(SENSOR_GROUPS) - 1, "rate sensor indices")
+    onset = np.asarray(onset_s, float)
+    if not np.all(np.isfinite(onset) & (onset >= 0)):
+        raise ValueError(f"onset_s: expected fault onsets >= 0 s, finite, got {_checks.received(onset)}")
     dtype = dtype or jnp.result_type(float)
     code = np.vectorize(lambda k: int(FaultKind.NONE if k == "none" else KINDS[k]), otypes=[np.int32])(kind)
     fields = np.broadcast_arrays(code, np.asarray(sensor), np.asarray(size, float),
@@ -292,6 +303,9 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     for v in sweep_fnr:
         _checks.check_positive("sweep_fnr", v, "positive fault-to-noise ratios")
     gust_sigma = GUST_SIGMA if gust_sigma is None else gust_sigma
+    _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
+    if chunk_size is not None:
+        _checks.check_int("chunk_size", chunk_size, 1, meaning="a positive number of flights per call")
     setup, _ = flight_setup(gust_sigma=gust_sigma)
     dtype = setup.x0.dtype
     keys = jax.random.split(jax.random.key(seed), 9)
@@ -396,8 +410,14 @@ def analytic_residual_trace(fdi: FDISetup, measurement: Array, control: Array, r
     with the ``trusted`` (6,) channels only: ``(norms (steps, 3), filtered rates (steps,
     3))``, ``norms[j]`` the per-sensor ``||m_i - H_i x_hat||`` at step ``restart + 1 + j``
     (eq. 30; at the decision step it is what the FDI computed by its bounded replay)."""
+    from jaxfdi import _checks
     from jaxfdi.filters import init_from_posterior, run_filter
 
+    length = _checks.shape_of(measurement)[0]
+    steps = _checks.check_int("steps", steps, 1, meaning="a positive number of steps")
+    restart = _checks.check_int("restart", restart, 0, length - 1 - steps,
+                                f"a step of the record (T = {length}) with {steps} steps after it")
+    _checks.check_shape("trusted", trusted, (_checks.shape_of(fdi.hybrid.space.H)[0],), "one flag per rate channel")
     ukf = f16_rate_ukf(fdi)
     channels = measurement[:, RATE_OFFSET:]
     inputs = jax.vmap(rate_model_input)(measurement, control)

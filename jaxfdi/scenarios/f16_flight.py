@@ -137,6 +137,9 @@ _reference = jax.jit(flight_reference, static_argnums=(1, 3, 4))
 def flight_setup(plan: FlightPlan | None = None, weights: FlightWeights | None = None, params: F16Params | None = None,
                  sensors: F16Sensors | None = None, gust_sigma: float = 0.0, dtype=None) -> tuple[FlightSetup, Design]:
     """Trims, linearisation, LQR design and reference of the flight (module doc)."""
+    from jaxfdi import _checks
+
+    _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
     dtype = dtype or jnp.result_type(float)
     plan = plan or flight_plan()
     params = params or f16_params(dtype=dtype)
@@ -173,6 +176,11 @@ def run_flight(setup: FlightSetup, key: Array, dispersion: Dispersion, keep_hist
     ``FlightView``) and its initial state; default the rate pass-through (every rate
     channel trusted). ``fault``: sensor or actuator faults of the plant (``f16_plant``),
     e.g. a ``faults.fault_group`` on both axes of one rate sensor."""
+    from jaxfdi import _checks
+
+    _checks.check_shape("dispersion.initial", dispersion.initial, (13,), "an offset of the 13-state initial state")
+    _checks.check_scalar("dispersion.xcg", dispersion.xcg, 0.0, 1.0,
+                         meaning="a centre of gravity in [0, 1] of the mean chord")
     dtype = setup.x0.dtype
     params = setup.params._replace(xcg=dispersion.xcg)
     plant = f16_plant(params, setup.sensors, DT, gust_sigma=setup.gust_sigma, fault=fault)
@@ -221,6 +229,10 @@ def nominal_dispersion(setup: FlightSetup, flights: int = 1) -> Dispersion:
 def dispersions(key: Array, setup: FlightSetup, flights: int, xcg_range=XCG_RANGE, spread=None) -> Dispersion:
     """``flights`` dispersions: c.g. uniform in ``xcg_range`` and initial offsets uniform
     within ``spread`` (``INITIAL_SPREAD``); flight 0 is nominal."""
+    low, high = (float(v) for v in xcg_range)
+    if not (np.isfinite(low) and np.isfinite(high) and 0.0 <= low <= high <= 1.0):
+        raise ValueError(f"xcg_range: expected (low, high) with 0 <= low <= high <= 1 (fractions of the mean chord), "
+                         f"got {tuple(xcg_range)}")
     dtype = setup.x0.dtype
     spread = INITIAL_SPREAD if spread is None else spread
     half = jnp.zeros(13, dtype).at[jnp.asarray(list(spread))].set(jnp.asarray(list(spread.values()), dtype))
@@ -306,6 +318,8 @@ def f16_flight_study(flights: int = 100, seed: int = 0, progress: bool = False, 
     require_x64("f16_flight_study")
     check_study(flights, seed, runs_name="flights", sample_flights=sample_flights)
     _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
+    if chunk_size is not None:
+        _checks.check_int("chunk_size", chunk_size, 1, meaning="a positive number of flights per call")
     setup, design = flight_setup(gust_sigma=gust_sigma)
     params = setup.params
     cases = book.book_cases()

@@ -23,6 +23,7 @@ import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
@@ -41,6 +42,7 @@ def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e
     _checks.check_shape("log_mode_prob", log_mode_prob, (None, None), "(T, M) log mode probabilities")
     T = log_mode_prob.shape[0]
     _checks.check_shape("true_mode", true_mode, (T,), "one int mode label per step")
+    _checks.check_int_array("true_mode", true_mode, 0, _checks.shape_of(log_mode_prob)[1] - 1, "mode labels")
     picked = jnp.take_along_axis(log_mode_prob, jnp.asarray(true_mode)[:, None].astype(jnp.int32), axis=1)[:, 0]
     return -jnp.mean(jnp.logaddexp(picked, math.log(floor)))
 
@@ -82,6 +84,10 @@ def soft_detection_loss(
         _checks.check_scalar(name, weight, 0.0, meaning="a loss weight >= 0")
     _checks.check_shape("statistic", statistic, (None,), "(T,) test statistic")
     T = statistic.shape[0]
+    value = _checks.concrete(onset)
+    if value is not None and np.any(value < 0):
+        raise ValueError(f"onset: expected a fault onset step >= 0 (faults.NEVER: fault-free), got "
+                         f"{_checks.received(value)}")
     k = jnp.arange(T)
     onset = jnp.minimum(jnp.asarray(onset), T)
     log_a, log_not = soft_alarm_log_prob(statistic, threshold, temperature)

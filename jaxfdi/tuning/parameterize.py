@@ -172,6 +172,7 @@ def sticky_log_prior(pi: Array, target: Array, concentration: float) -> Array:
     ``target``), summed over rows; entries where ``target`` is 0 do not count. Added to
     a tuning loss (negated) it keeps a learned transition matrix near a sticky design."""
     _checks.check_scalar("concentration", concentration, 0.0, meaning="a concentration >= 0")
+    _checks.check_shape("target", target, _checks.shape_of(pi), "the shape of pi")
     target = jnp.asarray(target, jnp.result_type(pi))
     weight = concentration * target
     return jnp.sum(jnp.where(weight > 0, weight * jnp.log(jnp.where(pi > 0, pi, 1.0)), 0.0))

@@ -129,7 +129,10 @@ def fit(
 
     val_loss_fn = jax.jit(full_loss)
     opt_state = optimizer.init(params)
-    best, best_val, best_step, bad = params, float(val_loss_fn(params, val_batch)), 0, 0
+    first = val_loss_fn(params, val_batch)
+    if jnp.shape(first) != ():
+        raise ValueError(f"loss: expected a scalar loss (raw params, batch) -> (), got shape {jnp.shape(first)}")
+    best, best_val, best_step, bad = params, float(first), 0, 0
     log = {"step": [0], "train": [float("nan")], "val": [best_val]}
     start, stopped = time.perf_counter(), False
     bar = progress_bar("tuning", "steps") if progress else None  # tqdm.auto, or log lines

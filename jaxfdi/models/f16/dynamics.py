@@ -107,6 +107,11 @@ def f16_params(aero: str = "tables", profile: str = "stevens_lewis_2nd_ed", xcg:
     dtype = dtype or jnp.result_type(float)
     data = stevens_lewis_data()
     mg, lim = data["mass_geometry"], data["limits"]
+    if jxz is not None and _checks.concrete(jxz) is not None:   # positive definite: Jxx Jzz - Jxz^2 > 0
+        bound = (mg["Jxx_slug_ft2"] * mg["Jzz_slug_ft2"]) ** 0.5
+        if not abs(float(_checks.concrete(jxz))) < bound:
+            raise ValueError(f"jxz: expected |Jxz| < sqrt(Jxx Jzz) = {bound:.6g} slug ft^2 (a positive definite "
+                             f"inertia tensor), got {_checks.received(jxz)}")
     a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
     model = aero_tables(profile, dtype) if aero == "tables" else morelli_coefficients_data(dtype)
     ail = lim["aileron_deg"][1] if aileron_limit is None else aileron_limit
@@ -166,8 +171,12 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
 
     ``gust``: optional (2,) angle-of-attack and sideslip increments (rad) of a wind gust,
     added to the angles the aerodynamic model sees (the kinematics keep ``x``'s)."""
+    _checks.check_real("x", x, "a real state")
+    _checks.check_real("u", u, "real controls")
     _checks.check_shape("x", x, (13,), "[VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]")
     _checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
+    if gust is not None:
+        _checks.check_shape("gust", gust, (2,), "angle-of-attack and sideslip increments, rad")
     vt, alpha, beta, phi, theta, psi, p, q, r = (x[i] for i in range(9))
     altitude, power = x[H], x[POW]
     air = air_data(vt, altitude, params.atmosphere)
@@ -209,4 +218,8 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
 
 def saturate(u: Array, params: F16Params) -> Array:
     """``u`` clipped to the control limits (throttle 0..1, el +-25, ail +-21.5, rdr +-30 deg)."""
+    shape = _checks.shape_of(u)
+    if not shape or shape[-1] != 4:
+        raise ValueError(f"u: expected controls [thtl, el, ail, rdr] along the last axis, shape (..., 4), got "
+                         f"{shape}")
     return jnp.clip(u, params.control_lower, params.control_upper)

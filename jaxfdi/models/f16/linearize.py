@@ -166,7 +166,7 @@ def longitudinal_modes(A_lon: Array, airspeed: float = 1.0) -> list[Mode]:
     pairs, the faster is the short period; one pair and two real roots, the pair is the
     phugoid unless it is faster than both real roots (then the short period); four real
     roots, the two of largest modulus are the short period."""
-    _checks.check_shape("A_lon", A_lon, (4, 4), "[VT, alpha, theta, Q] block")
+    _checks.check_matrix("A_lon", A_lon, (4, 4), "[VT, alpha, theta, Q] block")
     roots = _canonical(np.linalg.eigvals(np.asarray(A_lon, np.float64)))
     is_complex = np.abs(roots.imag) > 0
     real = roots[~is_complex]
@@ -188,7 +188,7 @@ def longitudinal_modes(A_lon: Array, airspeed: float = 1.0) -> list[Mode]:
 
 def lateral_modes(A_lat: Array) -> list[Mode]:
     """Roll subsidence, spiral and Dutch roll of the (4, 4) ``[beta, phi, P, R]`` block."""
-    _checks.check_shape("A_lat", A_lat, (4, 4), "[beta, phi, P, R] block")
+    _checks.check_matrix("A_lat", A_lat, (4, 4), "[beta, phi, P, R] block")
     roots = _canonical(np.linalg.eigvals(np.asarray(A_lat, np.float64)))
     is_complex = np.abs(roots.imag) > 0
     if np.count_nonzero(is_complex) == 2:

@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
@@ -93,11 +94,24 @@ def f16_sensors(rate_axes: Array | None = None, rate_sigma: float = 0.01, air_da
     dtype = dtype or jnp.result_type(float)
     axes = seed000_rate_axes(dtype) if rate_axes is None else jnp.asarray(rate_axes, dtype)
     _checks.check_shape("rate_axes", axes, (None, 3), "one body-axis direction per rate-sensor channel")
+    for name, value in (("rate_sigma", rate_sigma), ("air_data_sigma", air_data_sigma),
+                        ("attitude_sigma", attitude_sigma), ("altitude_sigma", altitude_sigma),
+                        ("power_sigma", power_sigma)):
+        _check_sigma(name, value)
     a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
     sensors = F16Sensors(axes, a(rate_sigma), a(air_data_sigma), a(attitude_sigma), a(altitude_sigma), a(power_sigma))
     _checks.check_shape("air_data_sigma", sensors.air_data_sigma, (3,), "VT, alpha, beta")
     _checks.check_shape("attitude_sigma", sensors.attitude_sigma, (3,), "phi, theta, psi")
     return sensors
+
+
+def _check_sigma(name: str, value) -> None:
+    """Real, finite and >= 0 (when concrete): a standard deviation."""
+    _checks.check_real(name, value, "standard deviations")
+    _checks.check_finite(name, value, "standard deviations")
+    concrete = _checks.concrete(value)
+    if concrete is not None and np.any(concrete < 0):
+        raise ValueError(f"{name}: expected standard deviations >= 0, got {_checks.received(concrete)}")
 
 
 def measurement_cov(sensors: F16Sensors) -> Array:
@@ -169,10 +183,13 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
     """
     from jaxfdi.faults import Target, active_label, apply_faults, as_stack, is_active
     from jaxfdi.loop import Plant
-    from jaxfdi.simulate import Actuated, Sensed, SimState
+    from jaxfdi.simulate import Actuated, Sensed, SimState, check_fault_components
 
-    if int(substeps) < 1:
-        raise ValueError(f"substeps: expected a positive number of RK4 steps per sample, got {substeps}")
+    substeps = _checks.check_int("substeps", substeps, 1, meaning="a positive number of RK4 steps per sample")
+    _checks.check_positive("dt", dt, "a positive sample period (s)")
+    _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
+    _checks.check_positive("gust_length", gust_length, "a positive gust correlation length (ft)")
+    _checks.check_positive("reference_speed", reference_speed, "a positive reference airspeed (ft/s)")
     dtype = aircraft.mass.dtype
     dt_arr = jnp.asarray(dt, dtype)
     decay = jnp.exp(-jnp.asarray(reference_speed, dtype) * dt_arr / jnp.asarray(gust_length, dtype))
@@ -182,6 +199,9 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
     m = noise_std.shape[0]
     transition = sampled_transition(int(substeps))
     faults = None if fault is None else as_stack(fault)
+    if faults is not None:
+        check_fault_components(faults, Target.SENSOR, m)
+        check_fault_components(faults, Target.ACTUATOR, 4)
     num_faults = 0 if faults is None else faults.kind.shape[0]
     noise_dtype = jnp.float32 if dtype == jnp.float64 else dtype
 
@@ -216,6 +236,7 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
 
 def rate_estimator(rate_axes: Array) -> Array:
     """``(H^T H)^-1 H^T`` (3, m_r): the least-squares body rates from every rate channel."""
+    _checks.check_matrix("rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel")
     return jnp.linalg.solve(rate_axes.T @ rate_axes, rate_axes.T)
 
 

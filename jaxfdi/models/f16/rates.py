@@ -53,6 +53,11 @@ def rate_model(aircraft: F16Params, rate_axes: Array, dt: float = 0.01, coeffici
 def rate_model_input(y: Array, u: Array) -> Array:
     """(8,) the rate model's input from the F-16's measurement ``y`` (``plant``'s layout:
     ``[VT, alpha, beta, phi, theta, psi, h, pow, rate channels]``) and the controls ``u`` (4,)."""
+    shape = _checks.shape_of(y)
+    if len(shape) != 1 or shape[0] < 8:
+        raise ValueError(f"y: expected the F-16's measurement [VT, alpha, beta, phi, theta, psi, h, pow, rate "
+                         f"channels], shape (8 + m_r,), got {shape}")
+    _checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
     return jnp.concatenate([y[0:3], y[6:7], jnp.asarray(u, y.dtype)])
 
 

@@ -72,20 +72,27 @@ def trim_condition(airspeed, altitude=0.0, climb_angle=0.0, turn_rate=0.0, pull_
                    dtype=None) -> TrimCondition:
     """A ``TrimCondition``; arrays of equal shape give a stack (vmap over axis 0). Checked
     when concrete: a positive finite ``airspeed`` [ft/s], an ``altitude`` [ft] within the
-    data's validity (0 to 50 000 ft, the thrust tables' range), finite angles and rates."""
+    data's validity (0 to 50 000 ft, the thrust tables' range), a climb angle in (-pi/2, pi/2)
+    rad, finite angles and rates."""
     dtype = dtype or jnp.result_type(float)
     for name, value, valid, expected in (
             ("airspeed", airspeed, lambda v: v > 0.0, "a positive finite airspeed [ft/s]"),
-            ("altitude", altitude, lambda v: (v >= 0.0) & (v <= 50000.0), "an altitude in [0, 50000] ft")):
+            ("altitude", altitude, lambda v: (v >= 0.0) & (v <= 50000.0), "an altitude in [0, 50000] ft"),
+            ("climb_angle", climb_angle, lambda v: np.abs(v) < 0.5 * np.pi,
+             "a flight-path angle in (-pi/2, pi/2) rad")):
         _checks.check_real(name, value)
         concrete = _checks.concrete(value)
         if concrete is not None and not np.all(np.isfinite(concrete) & valid(concrete)):
             raise ValueError(f"{name}: expected {expected}, got {_checks.received(concrete)}")
-    for name, value in (("climb_angle", climb_angle), ("turn_rate", turn_rate), ("pull_up_rate", pull_up_rate)):
+    for name, value in (("turn_rate", turn_rate), ("pull_up_rate", pull_up_rate)):
         _checks.check_real(name, value)
         _checks.check_finite(name, value)
     values = [jnp.asarray(v, dtype) for v in (airspeed, altitude, climb_angle, turn_rate, pull_up_rate)]
-    shape = jnp.broadcast_shapes(*(v.shape for v in values))
+    try:
+        shape = jnp.broadcast_shapes(*(v.shape for v in values))
+    except ValueError:
+        raise ValueError("airspeed, altitude, climb_angle, turn_rate, pull_up_rate: expected arrays that broadcast "
+                         f"together, got shapes {[v.shape for v in values]}") from None
     return TrimCondition(*(jnp.broadcast_to(v, shape) for v in values))
 
 
@@ -198,4 +205,5 @@ def trim(params: F16Params, condition: TrimCondition, guess: Array | None = None
 def trim_batch(params: F16Params, conditions: TrimCondition, xcg: Array) -> TrimResult:
     """``trim`` of a stack of conditions (leaves (N,)) at the c.g. positions ``xcg`` (N,),
     the other parameters shared: one compiled, vmapped solve (a new compilation per N)."""
+    _checks.check_shape("xcg", xcg, _checks.shape_of(conditions.airspeed)[:1], "one c.g. per condition")
     return jax.vmap(lambda c, x: trim(params._replace(xcg=x), c))(conditions, xcg)

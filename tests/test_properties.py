@@ -9,8 +9,8 @@ a finite wrong answer and never a silent NaN.
 module                       classes of input tried
 ===========================  ==============================================================
 ``filters``: KF, EKF, UKF,   measurements with NaN, +inf, -inf and finite values in any
-square-root KF and UKF,      component (with and without ``missing_measurements``)
-unknown-input filter
+square-root KF and UKF,      component (with and without ``missing_measurements``); of
+unknown-input filter         the wrong shape, empty, scalar or complex
 ``detection.chi2``           NIS streams with NaN/inf anywhere; ``chi2_threshold`` with
                              dof and pfa anywhere on the real line, NaN and inf
 ``detection.glrt``           innovations with NaN/inf in any components of any steps
@@ -94,6 +94,25 @@ def test_a_filter_step_reports_every_dead_component_and_keeps_its_state(y, name)
     np.testing.assert_array_equal(np.isnan(np.asarray(info.innovation)), dead)
     assert (float(info.nis) == np.inf) == bool(dead.any())
     assert not np.isnan(float(info.nis)) and np.isfinite(float(info.log_likelihood))
+
+
+#: measurements of the wrong shape (empty included) or dtype: refused at trace time, naming ``y``
+WRONG_Y = st.one_of(
+    hnp.arrays(np.float64, st.sampled_from([(0,), (2,), (4,), (3, 1), (1, 3), ()]), elements=st.floats(-1.0, 1.0)),
+    hnp.arrays(np.complex128, (3,), elements=st.complex_numbers(max_magnitude=1.0)),
+)   # (bool is real 0/1 for the library's checks: _checks.check_real)
+FILTERS = {"kf": kalman_filter(MODEL), "kf missing": kalman_filter(MODEL, missing_measurements=True),
+           "sqrt kf": sqrt_kalman_filter(MODEL), "unknown input": unknown_input_filter(MODEL, UNKNOWN_INPUT),
+           "ukf": unscented_kalman_filter(lambda x, u, p: MODEL.Phi @ x, lambda x, u, p: MODEL.C @ x, MODEL.Q, MODEL.R)}
+
+
+@SETTINGS
+@given(y=WRONG_Y, name=st.sampled_from(sorted(FILTERS)))
+def test_a_filter_step_refuses_a_measurement_of_the_wrong_shape_or_dtype_by_name(y, name):
+    filt = FILTERS[name]
+    prior = filt.init(jnp.array([0.3, -0.2]), jnp.eye(2))
+    with pytest.raises((ValueError, TypeError), match=r"^y\b"):
+        filt.step(prior, jnp.asarray(y), jnp.zeros(0))
 
 
 def test_an_unknown_input_filter_that_loses_decoupling_keeps_its_prediction():

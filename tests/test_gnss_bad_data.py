@@ -127,3 +127,21 @@ def test_the_receiver_reports_a_dead_tracked_channel_as_inf_and_an_untracked_one
     decision = raim_output(result).decision
     assert bool(decision.alarm) and int(decision.label) == 1 + slot and int(result.excluded) == slot
     assert int(result.fix.num_used) == int(tracked.sum()) - 1 and bool(result.fix.healthy)
+
+
+def test_an_epoch_is_as_healthy_as_the_fix_it_delivers(ephemerides):
+    """A 50 km fault on one satellite: the fix with it does not converge in its fixed
+    Gauss-Newton steps (measured: the 6th step still moves > 1 cm), RAIM isolates and
+    excludes it, and the fix without it converges to the noise-free position; the epoch
+    is healthy (the delivered fix), and without exclusion it is not."""
+    table = ephemeris_table(ephemerides, 2086)
+    rho = _epoch(table)
+    slot = int(np.flatnonzero(np.isfinite(np.asarray(rho)))[2])
+    result = MONITOR(table, rho.at[slot].add(5e4), raim_tables(32))
+    assert not bool(result.fix.healthy) and int(result.excluded) == slot
+    assert bool(result.fix_excluded.healthy)
+    np.testing.assert_allclose(np.asarray(result.fix_excluded.position), np.asarray(SITE), atol=1e-3)
+    assert bool(raim_output(result).healthy)
+    kept = jax.jit(lambda rho: monitor_epoch(*select_orbits(table, T), T, rho, raim_tables(32), elevation_sigma,
+                                             exclude=False))(rho.at[slot].add(5e4))
+    assert not bool(raim_output(kept).healthy)

@@ -141,7 +141,8 @@ class RaimOutput(NamedTuple):
     statistic_excluded: Array   # ()
     threshold_excluded: Array   # ()
     hpl_excluded: Array         # ()
-    healthy: Array              # () bool: a finite, converged fix and statistic
+    healthy: Array              # () bool: the solution delivered (after exclusion, when there is one) is
+                                # a finite, converged fix with a finite statistic
 
 
 def raim_output(result: EpochIntegrity) -> RaimOutput:
@@ -153,7 +154,17 @@ def raim_output(result: EpochIntegrity) -> RaimOutput:
                       result.protection.hpl, result.protection.vpl, result.protection.available,
                       result.fix.position, result.fix.clock_bias, result.excluded, result.fix_excluded.position,
                       result.check_excluded.statistic, result.check_excluded.threshold,
-                      result.protection_excluded.hpl, result.fix.healthy & check.healthy)
+                      result.protection_excluded.hpl, delivered_healthy(result))
+
+
+def delivered_healthy(result: EpochIntegrity) -> Array:
+    """() bool: the numerics of the solution the monitor delivers: after an exclusion the
+    fix without the satellite (a fault of tens of km can keep the fix with it from
+    converging in its fixed Gauss-Newton steps; that fix is evidence, not the answer),
+    else the fix with every satellite."""
+    excluded = result.excluded >= 0
+    return jnp.where(excluded, result.fix_excluded.healthy & result.check_excluded.healthy,
+                     result.fix.healthy & result.check.healthy)
 
 
 def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=None, operation="npa",

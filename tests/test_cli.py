@@ -98,8 +98,12 @@ def test_vtol_prints_tables_and_writes_figures(tmp_path):
         assert name in proc.stdout
     assert "MDWT-ST  paper" in proc.stdout and "Headline cases beside seed 001" in proc.stdout
     data = json.loads((tmp_path / "out" / "vtol.json").read_text())
-    assert data["config"]["runs_per_case"] == 2 and len(data["rows"]) == 9
-    assert_same_as_before("vtol", data)
+    from jaxfdi.scenarios.vtol import HEALTH_CASES, vtol_faults
+
+    assert data["config"]["runs_per_case"] == 2 and len(data["rows"]) == len(vtol_faults()) == 11
+    # the file predates the dead and frozen sensor cases (issue 37); the other cases' runs keep
+    # their keys (common random numbers per run index), so they are compared without them
+    assert_same_as_before("vtol", {**data, "rows": [r for r in data["rows"] if r["fault"] not in HEALTH_CASES]})
     assert "WARNING" not in proc.stdout and all(sum(row["unhealthy_runs"].values()) == 0 for row in data["rows"])
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
         "vtol-fig3-s3-statistics.png", "vtol-fig4-a2-estimate.png", "vtol-fig5-a2-ftc.png", "vtol.json"]

@@ -219,6 +219,12 @@ def report_dead(innovation: Array, nis: Array, dead: Array, axis: int = 0) -> tu
     return jnp.where(dead, jnp.nan, innovation), jnp.where(jnp.any(dead, axis=axis), jnp.inf, nis)
 
 
+def observed_rows(mask: Array, C: Array, R: Array) -> tuple[Array, Array]:
+    """``(C, R)`` with the rows (and columns of ``R``) of missing components zeroed: they
+    neither update the state nor enter ``S`` (then ``mask_innovation_cov``)."""
+    return jnp.where(mask[:, None], C, 0.0), jnp.where(mask[:, None] & mask[None, :], R, 0.0)
+
+
 def mask_innovation_cov(S: Array, mask: Array) -> Array:
     """Decouple missing components: their rows/columns become those of the identity."""
     both = mask[:, None] & mask[None, :]

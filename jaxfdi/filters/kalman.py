@@ -22,6 +22,7 @@ from jaxfdi.filters._base import (
     dead_components,
     mask_innovation_cov,
     observed_mask,
+    observed_rows,
     report_dead,
     used_innovation,
 )
@@ -45,9 +46,8 @@ def joseph_update(
     """
     if missing_measurements:
         mask, y_obs, num_observed = observed_mask(y)
-        H = jnp.where(mask[:, None], H, 0.0)
+        H, R = observed_rows(mask, H, R)
         innovation = jnp.where(mask, y_obs - y_pred, 0.0)
-        R = jnp.where(mask[:, None] & mask[None, :], R, 0.0)
     else:
         num_observed = jnp.sum(jnp.isfinite(y)).astype(jnp.int32)
         innovation = used_innovation(y, y_pred)

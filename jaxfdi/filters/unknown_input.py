@@ -34,6 +34,7 @@ from jaxfdi.filters._base import (
     dead_components,
     gaussian_filter,
     mask_innovation_cov,
+    observed_rows,
     report_dead,
     used_innovation,
 )
@@ -146,8 +147,7 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array, missi
         C, R, dof = model.C, model.R, jnp.asarray(m - q, jnp.int32)
         if missing_measurements:
             mask = jnp.isfinite(y)
-            C = jnp.where(mask[:, None], C, 0.0)
-            R = jnp.where(mask[:, None] & mask[None, :], R, 0.0)
+            C, R = observed_rows(mask, C, R)
             dof = (jnp.sum(mask) - q).astype(jnp.int32)
         cross_cov = mm(state.cov, C.T)
         S = _linalg.symmetrize(mm(C, cross_cov) + R)

@@ -32,8 +32,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.faults import (NEVER, Fault, FaultKind, Target, active_label, apply_faults, as_stack, fault, is_active,
-                           no_fault)
+from jaxfdi.faults import Fault, FaultKind, Target, active_label, apply_faults, as_stack, is_active, no_fault
 from jaxfdi.gnss import frames
 from jaxfdi.gnss.measurements import ClockModel, receiver_plant
 from jaxfdi.gnss.orbits import OrbitTable
@@ -167,9 +166,3 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
         return GpsInsPlantState(receiver_state, errors, state.held), moved
 
     return Plant(init, measure, advance)
-
-
-def imu_bias_fault(channel: int, onset: int, magnitude, end=None, label: int = -1) -> Fault:
-    """A bias of ``magnitude`` (m/s^2 on channels 0-2, rad/s on 3-5) on one IMU channel
-    from epoch ``onset`` (to ``end``): ``jaxfdi.fault("bias", "sensor", channel, ...)``."""
-    return fault("bias", "sensor", channel, onset, magnitude, 0.0, NEVER if end is None else end, label)

@@ -85,6 +85,34 @@ def test_paper_pi_design_keeps_an_eigenvalue_at_one(model):
     assert abs(float(design.spectral_radius) - 1.0) < 1e-9
 
 
+def test_the_papers_pitch_rate_command_has_no_steady_state(model):
+    """Why the paper's loop cannot track ``r = [-50, -5]`` (issue 38): a PI loop that
+    tracks ``r`` settles at an equilibrium ``(x, u)`` with ``x = Phi x + Gamma u`` and
+    ``H x = r``. That linear system ``[[Phi - I, Gamma], [H, 0]] [x; u] = [0; r]`` has a
+    solution only if ``w . [0; r] = 0`` for its left null vector ``w``; for ``H = (v_h, q)``
+    that vector's command part is the q axis (theta integrates q: a constant pitch rate
+    needs a ramping pitch angle), so every ``r_q != 0`` is out of reach and only
+    ``r_q = 0`` can be held. Tracking theta instead reaches every command. Reference:
+    SciPy's SVD and least squares on the same matrices."""
+    Phi, Gamma = np.asarray(model.Phi), np.asarray(model.Gamma)
+    for H, reachable in ((H_PAPER, False), (H_ANGLE, True)):
+        M = np.block([[Phi - np.eye(4), Gamma], [H, np.zeros((2, 2))]])
+        U, s, _ = sl.svd(M)
+        for r in (np.array([-50.0, -5.0]), np.array([-50.0, 0.0])):
+            rhs = np.r_[np.zeros(4), r]
+            solution, *_ = sl.lstsq(M, rhs)
+            residual = np.linalg.norm(M @ solution - rhs)
+            if reachable or r[1] == 0.0:
+                assert residual < 1e-9 * np.linalg.norm(r), (H, r, residual)
+            else:
+                # the residual is exactly the command's component along w
+                w = U[:, -1]
+                assert s[-1] < 1e-15 * s[0]
+                assert abs(w[4]) < 1e-12 and abs(w[5]) > 0.09   # w's command part: q only
+                np.testing.assert_allclose(residual, abs(w @ rhs), rtol=1e-6)
+                assert residual > 0.45                           # 5 * |w_q|: no equilibrium
+
+
 LOSSES = {"none": [0.0, 0.0], "a1 0.5": [0.5, 0.0], "a2 0.5": [0.0, 0.5], "both": [0.2, 0.3],
           "a1 dead": [1.0, 0.0], "a2 dead": [0.0, 1.0]}
 

@@ -380,6 +380,18 @@ def test_a2_effectiveness_estimate_within_005_after_30_steps(study):
     assert np.mean(np.abs(estimate - 0.5) < 0.05) >= 0.9, estimate
 
 
+def test_the_loop_holds_v_h_and_leaves_the_unreachable_q_command(histories, study):
+    # the paper's r_q = -5 has no equilibrium (test_control: the steady-state equations'
+    # left null vector is the q axis): every fault-free run holds v_h within 1 and leaves
+    # the q error at the size of the command itself (RMS over k >= 100, within 10 %)
+    cases, h = histories
+    none = [name for name, _ in cases].index("none")
+    error = np.asarray(study.design.command)[None, None] - np.asarray(h.state[none]) @ np.asarray(study.design.H).T
+    rms = np.sqrt(np.mean(error[:, 100:] ** 2, axis=1))                   # (runs, 2)
+    assert np.all(rms[:, 0] < 1.0), rms[:, 0]
+    np.testing.assert_allclose(rms[:, 1], 5.0, rtol=0.1)
+
+
 def test_ftc_keeps_tracking_error_within_twice_fault_free(study):
     names = [r["fault"] for r in study.rows]
     c, none = names.index("a2 effectiveness 0.5"), names.index("none")

@@ -462,6 +462,21 @@ def binomial_interval(trials: int, p: float, level: float = 0.99) -> tuple[int, 
     return int(stats.binom.ppf(tail, trials, p)), int(stats.binom.ppf(1.0 - tail, trials, p))
 
 
+def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[float, float]:
+    """Two-sided Clopper-Pearson ``level`` interval of a rate from ``successes`` of
+    ``trials`` (``scipy.stats.binomtest(...).proportion_ci(level, "exact")``); NaN
+    without trials."""
+    from scipy import stats
+
+    trials = _checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
+    successes = _checks.check_int("successes", successes, 0, trials, meaning=f"a count in [0, trials = {trials}]")
+    _checks.check_probability("level", level)
+    if trials == 0:
+        return float("nan"), float("nan")
+    ci = stats.binomtest(successes, trials).proportion_ci(level, method="exact")
+    return float(ci.low), float(ci.high)
+
+
 def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
     """One-sided Clopper-Pearson lower bound of a rate from ``successes`` of ``trials``,
     ``Beta.ppf(1 - confidence; successes, trials - successes + 1)`` (0 when none

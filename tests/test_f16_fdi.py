@@ -338,3 +338,56 @@ def test_exclusion_estimators_and_bad_input(env):
         hp.hybrid_psa_fdi(fdi.hybrid, None, lambda y: y, lambda y, u: u, lambda y, x: x)
     with pytest.raises(ValueError, match="coefficient_error"):
         rate_model(env[0].params, H, coefficient_error=(0.1, 0.1))
+
+
+def test_verification_statistic_is_the_least_squares_residual_of_the_channels_left(env):
+    """``FD_-g`` (hybrid_psa step 5) is NumPy's least-squares residual of the four channels
+    left without sensor g, +inf when a channel left is not finite; ``T_V`` is
+    ``sigma^2 chi2.isf(P_V, 6 - 2 - 3)`` (SciPy)."""
+    setup, fdi, _ = env
+    H = np.asarray(fdi.hybrid.space.H)
+    m = np.random.default_rng(1).standard_normal(6)
+    fd = np.asarray(hp.subset_statistics(fdi.hybrid, jnp.asarray(m)))
+    for g in range(3):
+        keep = [c for c in range(6) if c // 2 != g]
+        x = np.linalg.lstsq(H[keep], m[keep], rcond=None)[0]
+        np.testing.assert_allclose(fd[g], np.sum((m[keep] - H[keep] @ x) ** 2), rtol=1e-10)
+    dead = np.asarray(hp.subset_statistics(fdi.hybrid, jnp.asarray(m).at[4].set(jnp.nan)))
+    assert np.isfinite(dead[2]) and np.all(np.isinf(dead[:2]))
+    np.testing.assert_allclose(dead[2], fd[2], rtol=1e-12)
+    sigma = float(setup.sensors.rate_sigma)
+    np.testing.assert_allclose(float(fdi.hybrid.verification_threshold),
+                               sigma**2 * scipy.stats.chi2.isf(sf.VERIFICATION_PFA, 1), rtol=1e-9)
+    assert np.isinf(float(hp.hybrid_psa_config(fdi.hybrid.space, 0.01, 1.0, 0.5).verification_threshold))
+
+
+KIND_RUNS = 40
+
+
+@pytest.fixture(scope="module")
+def kinds():
+    """Every fault kind at the paper's size, 40 full flights (15 s) each, flown without FDI,
+    under the paper's hybrid rule and under the verified rule (the same draws)."""
+    study = sf.fault_kind_study(runs=KIND_RUNS, seed=38)
+    return {(r["kind"], r["follow"]): r for r in study.rows}
+
+
+def test_with_verified_fdi_no_fault_kind_leaves_the_envelope_more_often_than_without(kinds):
+    """Issue 38: for every fault kind, envelope exits under the verified FDI are not more
+    frequent than without FDI (one-sided Fisher exact test, p > 0.01), and where FDI is
+    needed (a drift: about half the flights leave without it) fewer, with non-overlapping
+    99 % Clopper-Pearson intervals. The paper's rule (no verification) flies a stuck sensor
+    out of the envelope (it excludes a healthy sensor), and the verified rule misisolates
+    fewer stuck sensors than it, again with non-overlapping 99 % intervals."""
+    for kind in sf.KIND_SIZES:
+        none, verified = kinds[(kind, "none")], kinds[(kind, "verified")]
+        assert verified["healthy"] == verified["flights"] == KIND_RUNS, kind
+        table = [[verified["envelope_exits"], KIND_RUNS - verified["envelope_exits"]],
+                 [none["envelope_exits"], KIND_RUNS - none["envelope_exits"]]]
+        assert scipy.stats.fisher_exact(table, alternative="greater").pvalue > 0.01, (kind, table)
+    drift_none, drift = kinds[("drift", "none")], kinds[("drift", "verified")]
+    assert drift["envelope_exit_interval_99"][1] < drift_none["envelope_exit_interval_99"][0], (drift, drift_none)
+    stuck_hybrid, stuck = kinds[("stuck", "hybrid")], kinds[("stuck", "verified")]
+    assert stuck_hybrid["envelope_exits"] > stuck["envelope_exits"]
+    assert stuck["misisolated_interval_99"][1] < stuck_hybrid["misisolated_interval_99"][0], (stuck, stuck_hybrid)
+    assert kinds[("none", "verified")]["envelope_exits"] == 0

@@ -360,3 +360,22 @@ def test_binomial_interval_equals_the_brute_force_cdf(trials, p):
     low = next(k for k, c in enumerate(cdf) if c >= Fraction(5, 1000))
     high = next(k for k, c in enumerate(cdf) if c >= Fraction(995, 1000))
     assert binomial_interval(trials, p, 0.99) == (low, high)
+
+
+def test_rate_interval_is_the_clopper_pearson_beta_quantiles():
+    """Two-sided Clopper-Pearson: ``[Beta.ppf(a/2; k, n-k+1), Beta.ppf(1-a/2; k+1, n-k)]``,
+    0 and 1 at the ends (SciPy's beta distribution)."""
+    from scipy import stats
+
+    from jaxfdi.metrics import rate_interval
+
+    for k, n, level in ((0, 10, 0.99), (3, 10, 0.95), (10, 10, 0.99), (454, 10000, 0.99), (1, 1, 0.5)):
+        low, high = rate_interval(k, n, level)
+        a = 1.0 - level
+        np.testing.assert_allclose(low, 0.0 if k == 0 else stats.beta.ppf(a / 2, k, n - k + 1), atol=1e-12)
+        np.testing.assert_allclose(high, 1.0 if k == n else stats.beta.ppf(1 - a / 2, k + 1, n - k), atol=1e-12)
+    assert all(np.isnan(rate_interval(0, 0)))
+    with pytest.raises(ValueError, match="successes"):
+        rate_interval(11, 10)
+    with pytest.raises(ValueError, match="level"):
+        rate_interval(1, 10, 1.5)

@@ -15,11 +15,24 @@ At every step ``k`` (``observe``, before the controller):
 4. the suspect with the larger ``||r_g||`` is isolated.
 
 The decision is made once, at the first alarm with at least one suspect, and latched.
+
+5. **Verification** (beyond the paper; the exclusion step of RAIM FDE, Parkinson & Axelrad
+   1988): from the step after the decision, the channels the exclusion left are tested
+   at every step, ``FD_-g = ||D_g (m - H x_-g)||^2`` (``x_-g`` the least-squares state
+   without group ``g``, ``D_g`` keeps the other channels) against
+   ``T_V = sigma^2 chi2_isf(m - d - n, P_V)``; when it alarms, the exclusion moves to the
+   group whose removal leaves the smallest ``FD_-h``. A fault that grows from zero
+   (stuck, drift) is often decided while its parity still lies near a singular
+   direction, where the UKF, restarted from a state the fault already corrupts, cannot
+   tell the two suspects apart; the wrong exclusion then leaves the faulty channels in
+   the view, and their own redundancy (1 dof for three 2-DOF sensors) shows it.
+
 The controller's view then uses the least-squares state from the channels left
 (``exclusion_estimators``; before any decision, from all of them). ``follow`` says which
-decision the selection obeys (``"hybrid"``, ``"psa"``: PSA alone, the suspect with the
-largest ``FI``, or ``"none"``: never exclude); it is an array in the state, so one
-compiled flight serves all three, and both decisions are always reported.
+decision the selection obeys (``"verified"``: the hybrid's, verified; ``"hybrid"``;
+``"psa"``: PSA alone, the suspect with the largest ``FI``; or ``"none"``: never exclude);
+it is an array in the state, so one compiled flight serves every mode, and every
+decision is always reported.
 
 The history the filter replays is a ``loop.RingBuffer`` of the last ``L`` steps
 (channels, filter inputs, the least-squares estimate) in the FDI's own state, and the
@@ -45,11 +58,11 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import Decision
+from jaxfdi.detection.chi2 import Decision, chi2_threshold
 from jaxfdi.detection.parity import ParitySpace, parity_tests
 
 #: ``follow`` names and their codes
-FOLLOW = {"none": 0, "psa": 1, "hybrid": 2}
+FOLLOW = {"none": 0, "psa": 1, "hybrid": 2, "verified": 3}
 
 
 class HybridPSAConfig(NamedTuple):
@@ -61,6 +74,7 @@ class HybridPSAConfig(NamedTuple):
     estimators: Array           # (G + 1, n, m) least-squares state: [0] all channels, [g + 1] without group g
     restart_cov: Array          # (n, n) sigma^2 (H^T H)^-1, the restart state's covariance
     channel_group: Array        # (m,) int: the group of each channel (-1: none)
+    verification_threshold: Array  # () T_V on FD_-g (inf: no verification)
 
 
 class HistoryEntry(NamedTuple):
@@ -94,6 +108,8 @@ class HybridDecision(NamedTuple):
     analytic_residuals: Array   # (G,) ||r_g|| at the decision (NaN: the filter was not needed)
     filter_used: Array          # () bool: two or more suspects, the filter decided
     filter_healthy: Array       # () bool: the replayed filter stayed healthy
+    verified: Array             # () int: the exclusion after verification (group + 1; 0: none)
+    revisions: Array            # () int: how often verification moved it
 
 
 class HybridPSAState(NamedTuple):
@@ -116,6 +132,7 @@ class HybridPSAOutput(NamedTuple):
     detection: Decision         # FD alarm of this step (label -1)
     psa: Decision               # latched: isolated by PSA alone (label group + 1)
     hybrid: Decision            # latched: isolated by the hybrid (label group + 1)
+    verified: Decision          # the hybrid's exclusion after verification (label group + 1)
     excluded: Array             # () int group + 1 whose channels the view leaves out (0: none)
     healthy: Array              # () bool
 
@@ -131,9 +148,12 @@ def exclusion_estimators(space: ParitySpace) -> Array:
     return jnp.linalg.solve(jnp.swapaxes(Hk, 1, 2) @ Hk, jnp.swapaxes(Hk, 1, 2))
 
 
-def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_threshold) -> HybridPSAConfig:
+def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_threshold,
+                      verification_pfa=None) -> HybridPSAConfig:
     """The arrays of the hybrid FDI for ``space``, channel noise ``sigma`` and the two
-    thresholds (``parity.detection_threshold``, ``parity.isolation_threshold``)."""
+    thresholds (``parity.detection_threshold``, ``parity.isolation_threshold``);
+    ``verification_pfa``: the per-step false-alarm probability ``P_V`` of the verification
+    (module doc, step 5; ``None``, or no redundancy left without a group: never revised)."""
     _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
     _checks.check_scalar("detection_threshold", detection_threshold, 0.0, low_open=True, meaning="T_D > 0")
     _checks.check_scalar("isolation_threshold", isolation_threshold, 0.0, 1.0, meaning="T_I in [0, 1]")
@@ -143,8 +163,27 @@ def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_
     G, d = space.groups.shape
     channel_group = jnp.full((m,), -1, jnp.int32).at[space.groups.ravel()].set(jnp.repeat(jnp.arange(G, dtype=jnp.int32), d))
     restart_cov = jnp.square(jnp.asarray(sigma, dtype)) * jnp.linalg.inv(H.T @ H)
+    dof = m - d - H.shape[1]  # the redundancy left without one group
+    if verification_pfa is None or dof < 1:
+        verification = jnp.asarray(jnp.inf, dtype)
+    else:
+        _checks.check_probability("verification_pfa", verification_pfa)
+        verification = jnp.square(jnp.asarray(sigma, dtype)) * chi2_threshold(dof, jnp.asarray(verification_pfa, dtype))
     return HybridPSAConfig(space, jnp.asarray(detection_threshold, dtype), jnp.asarray(isolation_threshold, dtype),
-                           exclusion_estimators(space), 0.5 * (restart_cov + restart_cov.T), channel_group)
+                           exclusion_estimators(space), 0.5 * (restart_cov + restart_cov.T), channel_group, verification)
+
+
+def subset_statistics(config: HybridPSAConfig, channels: Array) -> Array:
+    """(G,) ``FD_-g``: the squared least-squares residual of the channels left without
+    group ``g`` (module doc, step 5); ``+inf`` when a channel left is not finite."""
+    H = config.space.H
+    G = config.space.groups.shape[0]
+    finite = jnp.isfinite(channels)
+    m0 = jnp.where(finite, channels, 0.0)
+    residual = m0[None, :] - (config.estimators[1:].astype(m0.dtype) @ m0) @ H.T.astype(m0.dtype)   # (G, m)
+    keep = config.channel_group[None, :] != jnp.arange(G)[:, None]
+    residual = jnp.where(keep, jnp.where(finite[None, :], residual, jnp.inf), 0.0)
+    return jnp.sum(jnp.square(residual), axis=-1)
 
 
 def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: int = 3,
@@ -160,7 +199,7 @@ def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: 
         _checks.check_choice("follow", follow, list(FOLLOW))
         follow = FOLLOW[follow]
     else:
-        _checks.check_int_array("follow", follow, 0, 2, "a FOLLOW code (0 none, 1 psa, 2 hybrid)")
+        _checks.check_int_array("follow", follow, 0, 3, "a FOLLOW code (0 none, 1 psa, 2 hybrid, 3 verified)")
     dtype = config.space.H.dtype
     m, n = config.space.H.shape
     G = config.space.groups.shape[0]
@@ -172,7 +211,7 @@ def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: 
     current = StepValues(jnp.zeros((), dtype), jnp.zeros((), bool), jnp.zeros((G,), dtype), false_g, nan_g,
                          jnp.zeros((), bool))
     decision = HybridDecision(minus_one, minus_one, zero, zero, false_g, nan_g, nan_g, jnp.zeros((), bool),
-                              jnp.ones((), bool))
+                              jnp.ones((), bool), zero, zero)
     return HybridPSAState(ring_buffer(restart_lag, example), current, decision, jnp.asarray(follow, jnp.int32))
 
 
@@ -260,11 +299,16 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
         by_residual = jnp.argmax(jnp.where(suspects, jnp.nan_to_num(norms, nan=-jnp.inf), -jnp.inf)).astype(jnp.int32) + 1
         hybrid = jnp.where(need & healthy, by_residual, psa)
         pick = lambda new, old: jnp.where(decide, new, old)  # noqa: E731
+        # verification of the exclusion made at an earlier step (step 5)
+        subset = subset_statistics(config, m)
+        revise = (d.decision_step >= 0) & (subset[jnp.clip(d.verified - 1, 0, G - 1)] > config.verification_threshold)
+        moved = jnp.where(revise, jnp.argmin(subset).astype(jnp.int32) + 1, d.verified)
         decision = HybridDecision(
             jnp.where((d.detection_step < 0) & alarm, jnp.asarray(k, jnp.int32), d.detection_step),
             pick(jnp.asarray(k, jnp.int32), d.decision_step), pick(psa, d.psa), pick(hybrid, d.hybrid),
             pick(suspects, d.suspects), pick(fi, d.isolation_functions), pick(norms, d.analytic_residuals),
-            pick(need, d.filter_used), pick(healthy, d.filter_healthy))
+            pick(need, d.filter_used), pick(healthy, d.filter_healthy), pick(hybrid, moved),
+            d.revisions + (moved != d.verified).astype(jnp.int32))
         excluded = _excluded(decision, state.follow)
         # a dead channel's column of its exclusion estimator is 0, and 0 * NaN must not reach the view
         x_selected = config.estimators[excluded].astype(m.dtype) @ jnp.where(jnp.isfinite(m), m, 0.0)
@@ -282,6 +326,7 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
             Decision(c.statistic, c.alarm, jnp.asarray(-1, jnp.int32), nan),
             Decision(c.statistic, decided, d.psa, nan),
             Decision(c.statistic, decided, d.hybrid, nan),
+            Decision(c.statistic, decided, d.verified, nan),
             _excluded(d, state.follow),
             ~jnp.isnan(c.statistic) & d.filter_healthy)
         return state._replace(history=push(state.history, entry)), output
@@ -291,10 +336,10 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
 
 def _excluded(decision: HybridDecision, follow: Array) -> Array:
     """The group + 1 the view leaves out under ``follow`` (0: none)."""
-    return jnp.where(follow == FOLLOW["hybrid"], decision.hybrid,
-                     jnp.where(follow == FOLLOW["psa"], decision.psa, 0)).astype(jnp.int32)
+    return jnp.select([follow == FOLLOW["verified"], follow == FOLLOW["hybrid"], follow == FOLLOW["psa"]],
+                      [decision.verified, decision.hybrid, decision.psa], 0).astype(jnp.int32)
 
 
 __all__ = ["FOLLOW", "HybridPSAConfig", "HistoryEntry", "StepValues", "HybridDecision", "HybridPSAState",
-           "HybridPSAOutput", "exclusion_estimators", "hybrid_psa_config", "hybrid_psa_init", "analytic_residuals",
+           "HybridPSAOutput", "exclusion_estimators", "hybrid_psa_config", "subset_statistics", "hybrid_psa_init", "analytic_residuals",
            "hybrid_psa_fdi"]

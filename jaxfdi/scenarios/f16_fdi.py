@@ -54,7 +54,7 @@ from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.models.f16.plant import RATE_OFFSET, flight_view
 from jaxfdi.models.f16.rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
     rate_transition
-from jaxfdi.scenarios.f16_flight import DT, Dispersion, FlightSetup, run_flight
+from jaxfdi.scenarios.f16_flight import DT, Dispersion, FlightSetup, dispersions, run_flight
 from jaxfdi.study import Structure, Study, run_study
 
 #: per-step false-alarm probability of the FD test (a 15 s flight, 1500 steps: 1.5e-3 per flight)
@@ -134,7 +134,7 @@ def _thresholds(axes, sigma, pfa, missed_isolation, design_fnr, key, samples):
     space = parity_space(axes, jnp.asarray(SENSOR_GROUPS))
     t_d = detection_threshold(space, sigma, pfa)
     calibration = isolation_threshold(space, sigma, design_fnr, missed_isolation, t_d, key, samples)
-    return hybrid_psa_config(space, sigma, t_d, calibration.threshold), calibration
+    return hybrid_psa_config(space, sigma, t_d, calibration.threshold, VERIFICATION_PFA), calibration
 
 
 def f16_hybrid_fdi(fdi: FDISetup, batch_axis: str | None = None):
@@ -206,8 +206,8 @@ SWEEP_DIRECTIONS = 24
 SWEEP_AFTER_ONSET_S = 0.5
 #: a direction within this angle of a singular direction is "near singular"
 NEAR_SINGULAR_DEG = 15.0
-#: the fault kinds of the full flights and their sizes (FNR; scale: relative error)
-KIND_SIZES = {"bias": 10.0, "drift": 10.0, "stuck": 0.0, "scale": 0.5}
+#: every fault kind of the full flights at the paper's size (FNR 10; scale: relative error 0.5)
+KIND_SIZES = {"bias": 10.0, "drift": 10.0, "scale": 0.5, "stuck": 0.0, "dead": 0.0}
 #: larger biases for the envelope question (the paper's FNR 10 barely moves the aircraft)
 ENVELOPE_BIAS_FNR = (30.0, 100.0)
 #: the safe envelope: largest |h - h_cmd| (ft), |phi - phi_cmd| once rolled in (deg), |beta| (deg)
@@ -217,7 +217,11 @@ FAULT_FREE_PER_RUN = 10
 #: the vmap axis name the hybrid's replay condition reduces over
 BATCH_AXIS = "flights"
 #: the view modes compared (``FOLLOW`` codes)
-FOLLOWS = ("none", "psa", "hybrid")
+FOLLOWS = ("none", "psa", "hybrid", "verified")
+#: the views of the fault-kind study (``fault_kind_study``): no FDI, the paper's rule, verified
+KIND_FOLLOWS = ("none", "hybrid", "verified")
+#: per-step false-alarm probability of the exclusion's verification (``hybrid_psa``, step 5)
+VERIFICATION_PFA = 1e-6
 #: what the paper reports for its case (seed 000, Figs. 5-8)
 PAPER_REPORTS = {
     "detection": "FD crosses its threshold at the fault (t = 3 s)",
@@ -295,7 +299,7 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     from jaxfdi import _checks
     from jaxfdi.detection import sensor_configuration as sc
     from jaxfdi.scenarios._common import check_study, require_x64
-    from jaxfdi.scenarios.f16_flight import GUST_SIGMA, dispersions, flight_setup
+    from jaxfdi.scenarios.f16_flight import GUST_SIGMA, flight_setup
 
     require_x64("f16_fdi_study")
     check_study(runs, seed, runs_name="runs", directions=directions, optimizer_steps=optimizer_steps)
@@ -347,34 +351,10 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     rows += _sweep_rows(decision, sensor, grid, int(runs), onset, n_sweep)
     rows += _configuration_rows(space, optimisation, separation, decision, sensor, n_sweep, int(runs), sigma, keys[6])
 
-    # full flights: fault kinds x view modes, larger biases, and fault-free flights
-    full_cases, labels = [], []
+    # full flights: every fault kind and the larger biases x view modes, and fault-free flights
     kinds = list(KIND_SIZES.items()) + [("bias", v) for v in ENVELOPE_BIAS_FNR]
-    for kind, size in kinds:
-        draws = [(int(rng.integers(3)), float(rng.uniform(0.0, 360.0))) for _ in range(int(runs))]
-        for follow in FOLLOWS:
-            full_cases += [(kind, s, size, a) for s, a in draws]
-            labels += [(kind, size, follow)] * int(runs)
-    free = FAULT_FREE_PER_RUN * int(runs)
-    full_cases += [("none", 0, 0.0, 0.0)] * free
-    labels += [("none", 0.0, "hybrid")] * free
-    n = len(full_cases)
-    follows = jnp.asarray([FOLLOW[f] for _, _, f in labels], jnp.int32)
-    per_run = (dispersions(keys[7], setup, n), _cases(full_cases, dtype), follows, jnp.zeros((n,), jnp.int32))
-    out = _fly(setup, fdi, keys[8], per_run, None, chunk_size, progress, "full flights")
-    rows += _full_flight_rows(out, labels, np.asarray(per_run[1].sensor), onset, setup)
-
-    # a dead rate sensor (NaN on both axes from the onset): flights of their own, with keys
-    # folded from the full flights', so that every draw above is what it was before them
-    draws = [int(rng.integers(3)) for _ in range(int(runs))]
-    dead_cases = [("dead", s, 0.0, 0.0) for _ in FOLLOWS for s in draws]
-    dead_labels = [("dead", 0.0, follow) for follow in FOLLOWS for _ in draws]
-    n = len(dead_cases)
-    follows = jnp.asarray([FOLLOW[f] for _, _, f in dead_labels], jnp.int32)
-    per_run = (dispersions(jax.random.fold_in(keys[7], 1), setup, n), _cases(dead_cases, dtype), follows,
-               jnp.zeros((n,), jnp.int32))
-    out = _fly(setup, fdi, jax.random.fold_in(keys[8], 1), per_run, None, chunk_size, progress, "dead-sensor flights")
-    rows += _full_flight_rows(out, dead_labels, np.asarray(per_run[1].sensor), onset, setup)
+    rows += _kind_flights(setup, fdi, kinds, FOLLOWS, int(runs), FAULT_FREE_PER_RUN * int(runs), rng, keys[7],
+                          chunk_size, progress)
     steps = int(setup.reference.state.shape[0])
     config = {
         "runs": int(runs), "seed": int(seed), "dt_s": DT, "duration_s": steps * DT, "gust_sigma_ft_s": float(gust_sigma),
@@ -391,7 +371,8 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
         "sweep": {"fnr": list(sweep_fnr), "directions_deg": angles.tolist(), "flights_per_cell": int(runs),
                   "duration_s": FAULT_ONSET_S + SWEEP_AFTER_ONSET_S, "near_singular_deg": NEAR_SINGULAR_DEG},
         "kind_sizes": KIND_SIZES, "envelope_bias_fnr": list(ENVELOPE_BIAS_FNR), "envelope": ENVELOPE,
-        "fault_free_flights": free, "paper_reports": PAPER_REPORTS,
+        "fault_free_flights": FAULT_FREE_PER_RUN * int(runs), "verification_pfa": VERIFICATION_PFA,
+        "paper_reports": PAPER_REPORTS,
     }
     return F16FDIStudy(config, rows, history)
 
@@ -432,8 +413,8 @@ def analytic_residual_trace(fdi: FDISetup, measurement: Array, control: Array, r
 
 
 def _paper_case(setup: FlightSetup, fdi: FDISetup, key: Array) -> tuple[dict, dict]:
-    """The paper's case flown three times (same noise and gusts): the view never
-    excluding (``none``), following PSA alone, following the hybrid."""
+    """The paper's case flown once per view (same noise and gusts): never excluding
+    (``none``), following PSA alone, the hybrid, the verified hybrid."""
     from jaxfdi.scenarios.f16_flight import nominal_dispersion
 
     case = fault_case(dtype=setup.x0.dtype)
@@ -442,7 +423,7 @@ def _paper_case(setup: FlightSetup, fdi: FDISetup, key: Array) -> tuple[dict, di
     @jax.jit
     def fly(s, f, k):
         return jax.vmap(lambda follow: run_fdi_flight(s, f, k, disp, case, follow, keep_history=True))(
-            jnp.arange(3, dtype=jnp.int32))
+            jnp.arange(len(FOLLOW), dtype=jnp.int32))
 
     outs, hists = fly(setup, fdi, key)
     outs, hists = jax.tree_util.tree_map(np.asarray, (outs, hists))
@@ -586,7 +567,32 @@ def _configuration_rows(space, optimisation, separation, decision, sensor, n_swe
     return rows
 
 
+def _kind_flights(setup: FlightSetup, fdi: FDISetup, kinds, follows, runs: int, free: int, rng, key: Array,
+                  chunk_size, progress) -> list[dict]:
+    """Full flights: each ``(kind, size)`` of ``kinds`` on ``runs`` random sensors and
+    directions, the same draws flown under every view of ``follows``, and ``free``
+    fault-free flights (view: verified); their rows (``_full_flight_rows``)."""
+    cases, labels = [], []
+    for kind, size in kinds:
+        draws = [(int(rng.integers(3)), float(rng.uniform(0.0, 360.0))) for _ in range(runs)]
+        for follow in follows:
+            cases += [(kind, s, size, a) for s, a in draws]
+            labels += [(kind, size, follow)] * runs
+    cases += [("none", 0, 0.0, 0.0)] * free
+    labels += [("none", 0.0, "verified")] * free
+    n = len(cases)
+    k_disp, k_fly = jax.random.split(key)
+    per_run = (dispersions(k_disp, setup, n), _cases(cases, setup.x0.dtype),
+               jnp.asarray([FOLLOW[f] for _, _, f in labels], jnp.int32), jnp.zeros((n,), jnp.int32))
+    out = _fly(setup, fdi, k_fly, per_run, None, chunk_size, progress, "full flights")
+    return _full_flight_rows(out, labels, np.asarray(per_run[1].sensor), int(round(FAULT_ONSET_S / DT)), setup)
+
+
 def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> list[dict]:
+    """One row per (kind, size, view): decisions, the isolation by the decision the view
+    follows (none: the verified one, not flown), misisolations and envelope exits with
+    their 99 % Clopper-Pearson intervals (``metrics.rate_interval``)."""
+    from jaxfdi.metrics import rate_interval
     from jaxfdi.scenarios.f16_flight import ERRORS
 
     index = {name: i for i, name in enumerate(ERRORS)}
@@ -597,12 +603,17 @@ def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> li
         within &= np.nan_to_num(peak[:, index[name]], nan=np.inf) <= limit
     d = out.fdi
     step, det = np.asarray(d.decision_step), np.asarray(d.detection_step)
+    chosen = {"none": np.asarray(d.verified), "psa": np.asarray(d.psa), "hybrid": np.asarray(d.hybrid),
+              "verified": np.asarray(d.verified)}
     rows = []
     for group in dict.fromkeys(labels):
         sel = np.asarray([lab == group for lab in labels])
         kind, size, follow = group
-        row = {"section": "full_flights", "kind": kind, "size": size, "follow": follow, "flights": int(sel.sum()),
-               "healthy": int(healthy[sel].sum()), "within_envelope": int(within[sel].sum())}
+        flights = int(sel.sum())
+        exits = flights - int(within[sel].sum())
+        row = {"section": "full_flights", "kind": kind, "size": size, "follow": follow, "flights": flights,
+               "healthy": int(healthy[sel].sum()), "within_envelope": flights - exits, "envelope_exits": exits,
+               "envelope_exit_interval_99": list(rate_interval(exits, flights, 0.99))}
         for name in ENVELOPE:
             values = peak[sel & healthy, index[name]]
             row[f"{name}_median"] = float(np.median(values)) if values.size else float("nan")
@@ -610,18 +621,87 @@ def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> li
         if kind == "none":
             steps = int(setup.reference.state.shape[0])
             per_flight = 1.0 - (1.0 - PFA) ** steps
-            low, high = binomial_interval(int(sel.sum()), per_flight, 0.99)
+            low, high = binomial_interval(flights, per_flight, 0.99)
             row.update(fd_false_alarm_flights=int(np.sum(det[sel] >= 0)), decisions=int(np.sum(step[sel] >= 0)),
                        expected_per_flight=per_flight, binomial_99_interval=[low, high])
         else:
             decided = step[sel] >= onset
+            right = decided & (chosen[follow][sel] == sensor[sel] + 1)
+            wrong = int(decided.sum() - right.sum())
             row.update(decided=int(decided.sum()), early_decisions=int(np.sum((step[sel] >= 0) & (step[sel] < onset))),
                        psa_isolated=int(np.sum(decided & (np.asarray(d.psa)[sel] == sensor[sel] + 1))),
                        hybrid_isolated=int(np.sum(decided & (np.asarray(d.hybrid)[sel] == sensor[sel] + 1))),
+                       verified_isolated=int(np.sum(decided & (np.asarray(d.verified)[sel] == sensor[sel] + 1))),
+                       isolated=int(right.sum()), misisolated=wrong,
+                       misisolated_interval_99=list(rate_interval(wrong, flights, 0.99)),
+                       revised_flights=int(np.sum(decided & (np.asarray(d.revisions)[sel] > 0))),
                        filter_used=int(np.sum(decided & np.asarray(d.filter_used)[sel])),
                        median_delay_s=float(np.median(step[sel][decided] - onset) * DT) if decided.any() else float("nan"))
         rows.append(row)
     return rows
+
+
+class F16KindStudy(NamedTuple):
+    """Every fault kind at the paper's size under the views of ``KIND_FOLLOWS``."""
+
+    config: dict
+    rows: list[dict]
+
+    def table(self) -> str:
+        return kind_table(self.rows, self.config)
+
+
+def fault_kind_study(runs: int = 1000, seed: int = 0, progress: bool = False, chunk_size: int | None = 1024,
+                     follows=KIND_FOLLOWS) -> F16KindStudy:
+    """Issue 38's F-16 question: ``runs`` full flights of every fault kind (``KIND_SIZES``:
+    bias and drift at FNR 10, scale 0.5, stuck, dead) on a random sensor and direction,
+    flown under each view of ``follows`` (the same draws), and ``runs`` fault-free flights:
+    misisolations and envelope exits with their 99 % intervals."""
+    from jaxfdi import _checks
+    from jaxfdi.scenarios._common import check_study, require_x64
+    from jaxfdi.scenarios.f16_flight import flight_setup
+
+    require_x64("fault_kind_study")
+    check_study(runs, seed, runs_name="runs")
+    follows = tuple(follows)
+    for f in follows:
+        _checks.check_choice("follows", f, list(FOLLOW))
+    setup, _ = flight_setup()
+    keys = jax.random.split(jax.random.key(seed), 2)
+    fdi, _ = fdi_setup(setup, key=keys[0])
+    rows = _kind_flights(setup, fdi, list(KIND_SIZES.items()), follows, int(runs), int(runs),
+                         np.random.default_rng(seed), keys[1], chunk_size, progress)
+    config = {"runs": int(runs), "seed": int(seed), "kind_sizes": KIND_SIZES, "follows": list(follows),
+              "envelope": ENVELOPE, "pfa_per_step": PFA, "verification_pfa": VERIFICATION_PFA,
+              "duration_s": int(setup.reference.state.shape[0]) * DT, "fault_onset_s": FAULT_ONSET_S}
+    return F16KindStudy(config, rows)
+
+
+def _interval(bounds) -> str:
+    return f"[{bounds[0]:.3f}, {bounds[1]:.3f}]"
+
+
+def kind_table(rows: list[dict], config: dict) -> str:
+    """Misisolations and envelope exits per fault kind and view, with 99 % intervals."""
+    lines = [f"Fault kinds, {config['runs']} flights each of {config['duration_s']:.0f} s, fault at "
+             f"{config['fault_onset_s']:g} s on a random sensor and direction; misisolated: decided with the wrong "
+             "sensor by the decision the view follows (view none: the verified decision, not flown); 99 % "
+             "Clopper-Pearson intervals",
+             f"  {'fault':<12} {'view':<9} {'flights':>7} {'decided':>8} {'misisolated':>11} {'interval':>16} "
+             f"{'revised':>7} {'exits':>6} {'interval':>16}"]
+    for r in rows:
+        if r["section"] != "full_flights":
+            continue
+        name = "fault-free" if r["kind"] == "none" else (
+            r["kind"] if r["kind"] in ("stuck", "dead") else f"{r['kind']} {r['size']:g}")
+        if r["kind"] == "none":
+            mid = f"{r['decisions']:>8} {'-':>11} {'':>16} {'-':>7}"
+        else:
+            mid = (f"{r['decided']:>8} {r['misisolated']:>11} {_interval(r['misisolated_interval_99']):>16} "
+                   f"{r['revised_flights']:>7}")
+        lines.append(f"  {name:<12} {r['follow']:<9} {r['flights']:>7} {mid} {r['envelope_exits']:>6} "
+                     f"{_interval(r['envelope_exit_interval_99']):>16}")
+    return "\n".join(lines)
 
 
 def _pct(part: int, whole: int) -> str:
@@ -680,25 +760,26 @@ def study_table(study: F16FDIStudy) -> str:
                      f"{_pct(r['hybrid_isolated'], r['flights'])} (UKF used in {_pct(r['filter_used'], r['flights'])})")
     lines.append("")
     lines.append(f"Full flights ({cfg['duration_s']:.0f} s), fault at {cfg['fault_onset_s']:g} s on a random sensor and "
-                 f"direction; view: never excluding / PSA alone / hybrid. Envelope: |h - h_cmd| <= "
+                 f"direction; view: never excluding / PSA alone / hybrid / verified hybrid. Envelope: |h - h_cmd| <= "
                  f"{ENVELOPE['altitude_ft']:g} ft, |phi - phi_cmd| <= {ENVELOPE['bank_hold_deg']:g} deg once rolled in, "
-                 f"|beta| <= {ENVELOPE['sideslip_deg']:g} deg, finite")
-    lines.append(f"  {'fault':<16} {'view':<7} {'flights':>7} {'decided':>8} {'PSA ok':>7} {'hybrid ok':>9} "
-                 f"{'in envelope':>11} {'max alt ft':>10} {'max bank':>8} {'max beta':>8}")
+                 f"|beta| <= {ENVELOPE['sideslip_deg']:g} deg, finite. Wrong: decided with the wrong sensor by the "
+                 "decision the view follows (none: the verified one, not flown); 99 % Clopper-Pearson intervals")
+    lines.append(f"  {'fault':<14} {'view':<8} {'flights':>7} {'decided':>8} {'PSA ok':>7} {'hybrid ok':>9} "
+                 f"{'wrong':>6} {'exits':>6} {'exit rate 99 %':>15} {'max alt ft':>10} {'max bank':>8} {'max beta':>8}")
     for r in by("full_flights"):
         name = "fault-free" if r["kind"] == "none" else (
             f"{r['kind']} {r['size']:g}" if r["kind"] not in ("stuck", "dead") else r["kind"])
         if r["kind"] == "none":
-            mid = f"{'-':>8} {'-':>7} {'-':>9}"
+            mid = f"{'-':>8} {'-':>7} {'-':>9} {'-':>6}"
         else:
             mid = f"{_pct(r['decided'], r['flights']):>8} {_pct(r['psa_isolated'], r['flights']):>7} " \
-                  f"{_pct(r['hybrid_isolated'], r['flights']):>9}"
-        lines.append(f"  {name:<16} {r['follow']:<7} {r['flights']:>7} {mid} "
-                     f"{_pct(r['within_envelope'], r['flights']):>11} {r['altitude_ft_max']:>10.1f} "
+                  f"{_pct(r['hybrid_isolated'], r['flights']):>9} {r['misisolated']:>6}"
+        lines.append(f"  {name:<14} {r['follow']:<8} {r['flights']:>7} {mid} {r['envelope_exits']:>6} "
+                     f"{_interval(r['envelope_exit_interval_99']):>15} {r['altitude_ft_max']:>10.1f} "
                      f"{r['bank_hold_deg_max']:>8.2f} {r['sideslip_deg_max']:>8.2f}")
         if r["kind"] == "none":
             lo, hi = r["binomial_99_interval"]
-            lines.append(f"  {'':<16} fault-free: {r['fd_false_alarm_flights']} flights with an FD alarm, "
+            lines.append(f"  {'':<14} fault-free: {r['fd_false_alarm_flights']} flights with an FD alarm, "
                          f"{r['decisions']} isolation decisions (expected {r['expected_per_flight'] * r['flights']:.2f}; "
                          f"99 % binomial interval [{lo}, {hi}])")
     lines.append("")
@@ -807,13 +888,13 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     fig = Figure(figsize=(12, 4.5))
     ax = fig.add_subplot(1, 1, 1)
     groups = list(dict.fromkeys((r["kind"], r["size"]) for r in full))
-    width = 0.27
+    width = 0.8 / len(FOLLOWS)
     for j, follow in enumerate(FOLLOWS):
         values = []
         for kind, size in groups:
             match = [r for r in full if (r["kind"], r["size"]) == (kind, size) and r["follow"] == follow]
             values.append(match[0]["within_envelope"] / match[0]["flights"] if match else np.nan)
-        ax.bar(np.arange(len(groups)) + (j - 1) * width, values, width, label=f"view: {follow}")
+        ax.bar(np.arange(len(groups)) + (j - (len(FOLLOWS) - 1) / 2) * width, values, width, label=f"view: {follow}")
     ax.set_xticks(np.arange(len(groups)))
     ax.set_xticklabels(["fault-free" if k == "none" else (k if k in ("stuck", "dead") else f"{k} {s:g}")
                         for k, s in groups])
@@ -837,7 +918,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     return paths
 
 
-__all__ = ["PFA", "MISSED_ISOLATION", "DESIGN_FNR", "RESTART_LAG", "COEFFICIENT_ERROR", "FOLLOW", "FOLLOWS",
+__all__ = ["PFA", "MISSED_ISOLATION", "DESIGN_FNR", "RESTART_LAG", "COEFFICIENT_ERROR", "FOLLOW", "FOLLOWS", "KIND_FOLLOWS",
            "FDISetup", "FaultCase", "F16FDIStudy", "TABLE_1", "fdi_setup", "f16_hybrid_fdi", "f16_rate_ukf",
            "fdi_state0", "fault_case", "sensor_fault", "run_fdi_flight", "analytic_residual_trace",
-           "f16_fdi_study", "study_table", "plot_f16_fdi"]
+           "f16_fdi_study", "study_table", "plot_f16_fdi", "F16KindStudy", "fault_kind_study", "kind_table"]

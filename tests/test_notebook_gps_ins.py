@@ -23,4 +23,4 @@ def test_gps_ins_integrity_notebook(python3_kernel, monkeypatch, tmp_path):
         assert f"({chi2:>3d})" in line and f"({scst:>3d})" in line, line
     assert "Beyond the paper: detection time" in text
     figures = images(outputs)
-    assert len(figures) == 6, f"expected the GPS half's 2 figures and the INS half's 4, got {len(figures)}"
+    assert len(figures) == 7, f"expected the GPS half's 2 figures and the INS half's 5, got {len(figures)}"

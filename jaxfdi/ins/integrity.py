@@ -23,6 +23,11 @@ Each GPS epoch:
 
 GPS and INS are never fused before the check: the chi-square test sees GPS minus INS,
 so a simultaneous GPS and INS fault cannot cancel in it (the paper's argument).
+
+The INS tests also see a satellite fault that RAIM has not yet flagged (a 1 m/s
+pseudorange drift reaches the filter 10-25 s before RAIM's test crosses its threshold)
+and the filter settling after RAIM's exclusion. ``attribute_ins_alarms`` separates the
+two: an INS-test alarm with a RAIM alarm close to it in time is the GPS's.
 """
 from __future__ import annotations
 
@@ -193,3 +198,24 @@ def initial_covariance(position_sigma: float, velocity_sigma: float, tilt_sigma:
     sigmas = jnp.asarray([position_sigma] * 3 + [velocity_sigma] * 3 + [tilt_sigma] * 2 + [heading_sigma]
                          + [accel_bias_sigma] * 3 + [gyro_bias_sigma] * 3, dtype)
     return jnp.diag(sigmas**2)
+
+
+def attribute_ins_alarms(ins_alarms: Array, gps_alarms: Array, lookahead: int, holdoff: int) -> Array:
+    """Which INS-test alarms are the INS's (issue 38): the alarm at epoch ``k`` is the
+    GPS's when RAIM alarmed at some epoch of ``[k - holdoff, k + lookahead]``, else the
+    INS's. A causal monitor issues the INS decision at ``k + lookahead`` (it waits that long
+    for RAIM); ``holdoff`` covers the filter and the SCST propagators settling after an
+    exclusion. ``(..., T)`` bool arrays; returns the INS's alarms, ``(..., T)``.
+
+    Windowed sums by cumulative counts: ``any(gps[k - holdoff : k + lookahead + 1])``."""
+    lookahead = _checks.check_int("lookahead", lookahead, 0, meaning="a number of epochs >= 0")
+    holdoff = _checks.check_int("holdoff", holdoff, 0, meaning="a number of epochs >= 0")
+    ins_alarms, gps_alarms = jnp.asarray(ins_alarms, bool), jnp.asarray(gps_alarms, bool)
+    if ins_alarms.shape != gps_alarms.shape:
+        raise ValueError(f"gps_alarms: expected the shape of ins_alarms {ins_alarms.shape}, got {gps_alarms.shape}")
+    T = ins_alarms.shape[-1]
+    counts = jnp.concatenate([jnp.zeros(gps_alarms.shape[:-1] + (1,), jnp.int32),
+                              jnp.cumsum(gps_alarms.astype(jnp.int32), axis=-1)], axis=-1)   # counts[j] = sum gps[:j]
+    k = jnp.arange(T)
+    near = counts[..., jnp.minimum(k + lookahead + 1, T)] - counts[..., jnp.maximum(k - holdoff, 0)] > 0
+    return ins_alarms & ~near

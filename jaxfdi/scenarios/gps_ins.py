@@ -83,6 +83,18 @@ BEYOND_GYRO_DEG_H = (15.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0)
 BEYOND_ACCEL_MG = (2.0, 5.0, 10.0, 20.0, 50.0)
 #: beyond the paper (issue 37): the roll gyro dead (NaN) or frozen from the onset, name -> fault kind
 IMU_HEALTH_CASES = {"dead": "dead", "frozen": "stuck"}
+#: per-epoch false-alarm probabilities of the operating curve (issue 38): each test's
+#: Table 3 detection times at the threshold ``chi2_isf(dof, P_fa)`` of each
+OPERATING_PFA = (5e-3, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12, 1e-15)
+#: GPS/INS separation (``integrity.attribute_ins_alarms``): an INS-test alarm is the GPS's
+#: when RAIM alarmed from HOLDOFF s before it to LOOKAHEAD s after it (a 1 m/s drift
+#: reaches the filter 10-25 s before RAIM flags it; the SCST propagators hold an exclusion's
+#: transient up to two periods); the INS decision is issued LOOKAHEAD s late
+ATTRIBUTION_LOOKAHEAD = 30
+ATTRIBUTION_HOLDOFF = 2 * SCST_PERIOD
+#: the per-epoch P_fa at which the separation is scored: the design's, and one with about
+#: one fault-free flight in a hundred alarming (the operating curve)
+SEPARATION_PFA = (PFA, 1e-5)
 MANOEUVRE_HEIGHT = 200.0   # m above the park site
 
 
@@ -402,14 +414,16 @@ def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE
 
 
 def _delays(record, name, size: StudySize = PAPER_SIZE) -> dict:
-    """Detection time = first alarm at or after the onset minus the onset, over the healthy
-    runs that detected: mean and standard deviation (the paper's delays are means), median,
-    10-90 % and range."""
+    """Detection time = first alarm at or after the onset minus the onset, over the clean
+    runs (healthy, no alarm before the onset: issue 27's rule; a run whose alarm already
+    stands at the onset is a false-alarm run, counted apart) that detected: mean and
+    standard deviation (the paper's delays are means), median, 10-90 % and range."""
     summary = summarize_detection(record, size.flight_s)
     delays = np.where(np.asarray(record.detection_step) >= 0, np.asarray(record.detection_step) - size.onset_s,
                       np.nan)
     healthy = np.asarray(record.first_unhealthy) < 0
-    found = delays[healthy & np.isfinite(delays)]
+    clean = healthy & (np.asarray(record.false_alarms) == 0)
+    found = delays[clean & np.isfinite(delays)]
     pct = (lambda q: float(np.percentile(found, q)) if found.size else None)
     return {f"{name}_detected": summary.detection_rate, f"{name}_mean_s": float(found.mean()) if found.size else None,
             f"{name}_std_s": float(found.std(ddof=1)) if found.size > 1 else None,
@@ -417,7 +431,138 @@ def _delays(record, name, size: StudySize = PAPER_SIZE) -> dict:
             f"{name}_p90_s": pct(90), f"{name}_min_s": float(found.min()) if found.size else None,
             f"{name}_max_s": float(found.max()) if found.size else None,
             f"{name}_false_alarm_runs": int(np.sum(np.asarray(record.false_alarms)[healthy] > 0)),
-            f"{name}_unhealthy_runs": summary.unhealthy_runs}
+            f"{name}_clean_runs": int(clean.sum()), f"{name}_unhealthy_runs": summary.unhealthy_runs}
+
+
+def alarms_at(series: Series, test: str, threshold: float) -> np.ndarray:
+    """(runs, T) the alarms of ``test`` (``"chi2"`` or ``"scst"``) at ``threshold`` from the
+    stored statistics: the monitor's own rule (chi2: an epoch the EKF used; SCST: a valid
+    epoch; statistic above the threshold), so the design threshold gives its records."""
+    valid = np.asarray(series.gps_used if test == "chi2" else series.scst_valid)
+    return valid & (np.asarray(getattr(series, test), np.float64) > threshold)
+
+
+def _separated_record(out: RunOutput, test: str, size: StudySize):
+    """The ``DetectionRecord`` of ``test``'s INS decisions at its design threshold
+    (``ins_decisions``), with the monitor's own health."""
+    from jaxfdi.metrics import record_from_alarms
+
+    limit = dict(zip(("chi2", "scst"), thresholds()))[test]
+    decisions = jnp.asarray(ins_decisions(out.series, test, limit))
+    record = jax.vmap(record_from_alarms, in_axes=(0, None))(decisions, size.onset_s)
+    return jax.tree_util.tree_map(np.asarray, record._replace(first_unhealthy=getattr(out, test).first_unhealthy))
+
+
+def raim_alarms(series: Series) -> np.ndarray:
+    """(runs, T) RAIM's alarms (statistic above its threshold; a dead slot's is +inf)."""
+    return np.asarray(series.raim) > np.asarray(series.raim_threshold)
+
+
+def ins_decisions(series: Series, test: str, threshold: float) -> np.ndarray:
+    """(runs, T) the INS's alarms of ``test`` at ``threshold`` after the GPS/INS separation
+    (``integrity.attribute_ins_alarms``), at the epoch of the alarm (issued
+    ``ATTRIBUTION_LOOKAHEAD`` s later)."""
+    return np.asarray(integrity.attribute_ins_alarms(alarms_at(series, test, threshold), raim_alarms(series),
+                                                     ATTRIBUTION_LOOKAHEAD, ATTRIBUTION_HOLDOFF))
+
+
+def _first_alarms(alarms: np.ndarray, onset: int) -> tuple[np.ndarray, np.ndarray]:
+    after = alarms & (np.arange(alarms.shape[1]) >= onset)
+    return (np.where(alarms.any(axis=1), alarms.argmax(axis=1), -1),
+            np.where(after.any(axis=1), after.argmax(axis=1), -1))
+
+
+def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_PFA) -> list[dict]:
+    """Issue 38: each test at the threshold of each per-epoch false-alarm probability of
+    ``pfas`` (``chi2_isf(dof, P_fa)``), from the stored statistics: the fault-free flights'
+    alarm rate per epoch and the flights with an alarm (99 % interval), and Table 3's
+    detection time over the clean runs at each bias (``metrics.delay_statistics``), with the
+    INS's alarms after the GPS/INS separation (``ins_decisions``: the time of the alarm; the
+    decision is issued ``ATTRIBUTION_LOOKAHEAD`` s later)."""
+    from jaxfdi.metrics import delay_statistics, rate_interval
+
+    free = results["fault-free"].series
+    rows = []
+    for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE)):
+        valid = np.asarray(free.gps_used if test == "chi2" else free.scst_valid)
+        for pfa in pfas:
+            threshold = float(_scipy_stats.chi2.isf(pfa, dof))
+            alarms = alarms_at(free, test, threshold)
+            flights = int(alarms.shape[0])
+            with_alarm = int(np.sum(alarms.any(axis=1)))
+            row = {"case": "operating-curve", "test": test, "pfa_per_epoch": pfa, "threshold": threshold,
+                   "fault_free_alarm_rate_per_epoch": float(alarms.sum() / max(valid.sum(), 1)),
+                   "fault_free_flights": flights, "fault_free_flights_with_an_alarm": with_alarm,
+                   "flight_alarm_interval_99": list(rate_interval(with_alarm, flights, 0.99)), "table3": {}}
+            for bias in TABLE3_DEG_H:
+                decisions = ins_decisions(results[f"table3 {bias:g} deg/h"].series, test, threshold)
+                first, detection = _first_alarms(decisions, size.onset_s)
+                runs = decisions.shape[0]
+                row["table3"][f"{bias:g}"] = delay_statistics(np.full(runs, size.onset_s), first, detection)
+            rows.append(row)
+    return rows
+
+
+def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) -> dict:
+    """Issue 38: GPS and INS faults over the Table 3 flights (Table 2's satellite faults
+    before the IMU onset, then the gyro bias) at per-epoch ``pfa``. Each fault is decided
+    "GPS" (RAIM alarmed during it), "INS" (an INS decision of either test from its onset to
+    ``ATTRIBUTION_HOLDOFF`` s after its end; for the gyro bias, from its onset to the end of
+    the flight), both or neither; a flight is separated when each of its satellite faults is
+    GPS only and its gyro bias INS only. Returns the confusion counts and the separated
+    flights with their one-sided 95 % lower bound."""
+    from jaxfdi.metrics import binomial_lower_bound
+
+    limits = {test: float(_scipy_stats.chi2.isf(pfa, dof))
+              for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE))}
+    confusion: dict[str, dict[str, int]] = {}
+    separated = flights = 0
+    for bias in TABLE3_DEG_H:
+        series = results[f"table3 {bias:g} deg/h"].series
+        ins = ins_decisions(series, "chi2", limits["chi2"]) | ins_decisions(series, "scst", limits["scst"])
+        gps = raim_alarms(series)
+        steps = gps.shape[1]
+        ok = np.ones(gps.shape[0], bool)
+        episodes = [(name, onset, end) for name, _, onset, end, *_ in TABLE2_FAULTS if end < size.onset_s]
+        episodes.append((f"gyro bias {bias:g} deg/h", size.onset_s, steps))
+        for name, onset, end in episodes:
+            is_gps = not name.startswith("gyro")
+            said_gps = gps[:, onset:max(end, onset + 1)].any(axis=1)
+            said_ins = ins[:, onset:min(end + ATTRIBUTION_HOLDOFF, steps) if is_gps else steps].any(axis=1)
+            cell = confusion.setdefault(name.split(",")[0] if is_gps else "gyro bias", dict.fromkeys(
+                ("GPS only", "INS only", "both", "neither"), 0))
+            for key, sel in (("GPS only", said_gps & ~said_ins), ("INS only", ~said_gps & said_ins),
+                             ("both", said_gps & said_ins), ("neither", ~said_gps & ~said_ins)):
+                cell[key] += int(sel.sum())
+            ok &= (said_gps & ~said_ins) if is_gps else (said_ins & ~said_gps)
+        separated += int(ok.sum())
+        flights += int(ok.size)
+    return {"case": "separation", "pfa_per_epoch": pfa, "lookahead_s": ATTRIBUTION_LOOKAHEAD,
+            "holdoff_s": ATTRIBUTION_HOLDOFF, "confusion": confusion, "flights": flights,
+            "separated_flights": separated, "separated_rate": separated / flights if flights else float("nan"),
+            "lower_bound_95": binomial_lower_bound(separated, flights, 0.95)}
+
+
+def paper_reading(curve: list[dict]) -> list[dict]:
+    """For each test, the operating point whose mean detection times (clean runs) are
+    closest to the paper's Table 3 (least squares of the log ratios over the three biases,
+    points with a mean at every bias only)."""
+    rows = []
+    for test, column in (("chi2", 0), ("scst", 1)):
+        best = None
+        for row in (r for r in curve if r["test"] == test):
+            means = [row["table3"][f"{b:g}"]["delay_mean"] for b in TABLE3_DEG_H]
+            if not all(np.isfinite(means)):
+                continue
+            misfit = float(np.sum(np.log(np.asarray(means) / [PAPER_TABLE3[b][column] for b in TABLE3_DEG_H]) ** 2))
+            if best is None or misfit < best["log_misfit"]:
+                best = {"case": "paper-reading", "test": test, "pfa_per_epoch": row["pfa_per_epoch"],
+                        "threshold": row["threshold"], "mean_s": means, "log_misfit": misfit,
+                        "paper_s": [PAPER_TABLE3[b][column] for b in TABLE3_DEG_H],
+                        "clean_runs": [row["table3"][f"{b:g}"]["clean_runs"] for b in TABLE3_DEG_H]}
+        if best is not None:
+            rows.append(best)
+    return rows
 
 
 def independent_decisions(series: Series) -> tuple[np.ndarray, np.ndarray]:
@@ -448,9 +593,15 @@ def _rows(results: dict, size: StudySize = PAPER_SIZE) -> list:
                      "binomial_99_interval": [low, high], "design_pfa": PFA,
                      "mean_statistic": float(finite.mean()), "dof": dof,
                      "ks_pvalue_vs_chi2": float(_scipy_stats.kstest(finite, "chi2", args=(dof,)).pvalue),
+                     "alarms_per_flight": alarms / all_epochs.shape[0],
+                     "design_alarms_per_flight": finite.size / all_epochs.shape[0] * PFA,
                      "alarm_rate_all_epochs": float(np.mean(all_epochs[valid] > limit)),
                      "runs_with_an_alarm": int(np.sum(np.any((all_epochs > limit) & valid, axis=1)))})
     rows.append(_error_row("fault-free", free.series))
+    if any(name.startswith("table3") for name in results):
+        curve = operating_curve(results, size)
+        rows += curve + paper_reading(curve)
+        rows += [separation(results, size, pfa) for pfa in SEPARATION_PFA]
     for name, out in results.items():
         base = {"runs": int(np.shape(out.chi2.onset)[0]),
                 "scst_invalid_epochs": int(np.sum(~np.asarray(out.series.scst_valid)))}
@@ -461,8 +612,8 @@ def _rows(results: dict, size: StudySize = PAPER_SIZE) -> list:
                          **_delays(out.chi2, "chi2", size), **_delays(out.scst, "scst", size)})
         elif name.startswith("table3"):
             bias = float(name.split()[1])
-            row = {"case": "table3", "gyro_deg_h": bias, **base, **_delays(out.chi2, "chi2", size),
-                   **_delays(out.scst, "scst", size), "paper_chi2_s": PAPER_TABLE3[bias][0],
+            row = {"case": "table3", "gyro_deg_h": bias, **base, **_delays(_separated_record(out, "chi2", size), "chi2", size),
+                   **_delays(_separated_record(out, "scst", size), "scst", size), "paper_chi2_s": PAPER_TABLE3[bias][0],
                    "paper_scst_s": PAPER_TABLE3[bias][1]}
             summary = summarize_episodes(out.raim, 1.0)
             row["raim"] = [{"fault": fault[0], "detected": float(summary.detection_rate[e]),
@@ -533,11 +684,13 @@ def gps_ins_table(study: GpsInsStudy) -> str:
     onset = cfg["fault_onset_s"]
     size_note = "" if cfg.get("paper_size", True) else (f" [reduced size: {cfg['flight_s']} s flights, IMU "
                                                         f"{cfg['imu_rate_hz']} Hz]")
-    lines = [f"Table 3: roll-gyro bias from {onset} s; detection time [s] = first alarm at or after the onset "
-             f"minus {onset} over {cfg['runs']} flights: mean +- sd (the paper's figure is a mean), median "
-             f"[10-90 %]; paper beside{size_note}",
-             f"  {'bias':>9}  {'chi-square mean':>15} {'paper':>6} {'median [10-90]':>16}   {'SCST mean':>15} "
-             f"{'paper':>6} {'median [10-90]':>16}   detected chi2/SCST"]
+    lines = [f"Table 3: roll-gyro bias from {onset} s, {cfg['runs']} flights per bias; detection time [s] = first "
+             f"INS alarm at or after the onset minus {onset} (INS alarms: those RAIM does not explain, see the "
+             f"operating curve), over the clean flights only (no INS alarm before the onset; the others are "
+             f"false-alarm flights): mean +- sd (the paper's figure is a mean), median [10-90 %], clean flights; "
+             f"paper beside{size_note}",
+             f"  {'bias':>9}  {'chi-square mean':>15} {'paper':>6} {'median [10-90]':>16} {'clean':>5}   "
+             f"{'SCST mean':>15} {'paper':>6} {'median [10-90]':>16} {'clean':>5}   detected chi2/SCST"]
     for row in (r for r in study.rows if r["case"] == "table3"):
         def mean(t):
             return f"{_fmt(row[t + '_mean_s'], '.1f')} +- {_fmt(row[t + '_std_s'], '.1f')}"
@@ -545,9 +698,34 @@ def gps_ins_table(study: GpsInsStudy) -> str:
         def spread(t):
             return f"{_fmt(row[t + '_median_s'])} [{_fmt(row[t + '_p10_s'])}-{_fmt(row[t + '_p90_s'])}]"
 
-        lines.append(f"  {row['gyro_deg_h']:>5g} d/h  {mean('chi2'):>15} {row['paper_chi2_s']:>6g} {spread('chi2'):>16}   "
-                     f"{mean('scst'):>15} {row['paper_scst_s']:>6g} {spread('scst'):>16}   "
-                     f"{row['chi2_detected']:.2f}/{row['scst_detected']:.2f}")
+        lines.append(f"  {row['gyro_deg_h']:>5g} d/h  {mean('chi2'):>15} {row['paper_chi2_s']:>6g} {spread('chi2'):>16} "
+                     f"{row['chi2_clean_runs']:>5}   {mean('scst'):>15} {row['paper_scst_s']:>6g} {spread('scst'):>16} "
+                     f"{row['scst_clean_runs']:>5}   {row['chi2_detected']:.2f}/{row['scst_detected']:.2f}")
+    curve = [r for r in study.rows if r["case"] == "operating-curve"]
+    if curve:
+        lines.append("Operating curve (issue 38): each test at the threshold of a per-epoch P_fa, from the same flights' "
+                     "statistics: fault-free alarm rate per epoch, fault-free flights with an alarm [99 % interval], "
+                     "and Table 3's mean detection time over the clean flights (clean flights), the INS's alarms only: "
+                     f"an alarm with a RAIM alarm from {ATTRIBUTION_HOLDOFF} s before to {ATTRIBUTION_LOOKAHEAD} s after "
+                     f"it is the GPS's, and the INS decision is issued {ATTRIBUTION_LOOKAHEAD} s after the alarm")
+        for row in curve:
+            cells = "  ".join(f"{b}: {_fmt(v['delay_mean'], '.1f')} ({v['clean_runs']})" for b, v in row["table3"].items())
+            lo, hi = row["flight_alarm_interval_99"]
+            lines.append(f"  {row['test']:<5} P_fa {row['pfa_per_epoch']:<7g} threshold {row['threshold']:7.2f}: "
+                         f"{row['fault_free_alarm_rate_per_epoch']:.2e}/epoch, flights {row['fault_free_flights_with_an_alarm']}/"
+                         f"{row['fault_free_flights']} [{lo:.2f}, {hi:.2f}];  deg/h: {cells}")
+        for row in (r for r in study.rows if r["case"] == "paper-reading"):
+            paper = "/".join(f"{v:g}" for v in row["paper_s"])
+            ours = "/".join(_fmt(v, ".0f") for v in row["mean_s"])
+            lines.append(f"  the paper's {row['test']} times {paper} s are closest at P_fa {row['pfa_per_epoch']:g} per "
+                         f"epoch (threshold {row['threshold']:.2f}): ours {ours} s over "
+                         f"{'/'.join(str(c) for c in row['clean_runs'])} clean flights; the design P_fa is {PFA:g}")
+    for row in (r for r in study.rows if r["case"] == "separation"):
+        cells = "; ".join(f"{name}: " + ", ".join(f"{k} {v}" for k, v in counts.items() if v)
+                          for name, counts in row["confusion"].items())
+        lines.append(f"GPS/INS separation at P_fa {row['pfa_per_epoch']:g} per epoch (issue 38): "
+                     f"{row['separated_flights']}/{row['flights']} flights separated (>= {row['lower_bound_95']:.3f} "
+                     f"at 95 %); decided per fault: {cells}")
     first = next(r for r in study.rows if r["case"] == "table3")
     lines.append(f"RAIM on Table 2's satellite faults (PRN {cfg['satellite_faults_prn']:02d}), same flights: " + ("; ".join(
         f"{r['fault']} detected {r['detected']:.2f}, median {_fmt(r['delay_median_s'])} s" for r in first["raim"])
@@ -572,7 +750,8 @@ def gps_ins_table(study: GpsInsStudy) -> str:
     lines.append("Fault-free park flights (independent decisions: chi2 every 10th epoch, SCST one propagator window in "
                  "two; 99 % binomial interval of the alarm count at P_fa 0.005):")
     for row in (r for r in study.rows if r["case"] == "false-alarm"):
-        lines.append(f"  {row['test']:<5} {row['alarms']:>3} alarms in {row['independent_decisions']} decisions "
+        lines.append(f"  {row['test']:<5} {row['alarms_per_flight']:.2f} alarms per flight (design "
+                     f"{row['design_alarms_per_flight']:.2f}); {row['alarms']:>3} alarms in {row['independent_decisions']} decisions "
                      f"(interval {row['binomial_99_interval'][0]}-{row['binomial_99_interval'][1]}), mean statistic "
                      f"{row['mean_statistic']:.1f} (dof {row['dof']}), KS p {row['ks_pvalue_vs_chi2']:.2f}; all epochs "
                      f"{row['alarm_rate_all_epochs']:.4f}, runs with an alarm {row['runs_with_an_alarm']}/{row['runs']}")
@@ -608,7 +787,8 @@ def gps_ins_table(study: GpsInsStudy) -> str:
 
 def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     """Statistics vs thresholds (seed 002 Figs. 10-11), RAIM (Figs. 8-9), navigation errors,
-    and detection time vs bias size, as PNG files in ``out_dir``; returns their paths."""
+    detection time vs bias size, and Table 3 along the threshold (the operating curve), as
+    PNG files in ``out_dir``; returns their paths."""
     from pathlib import Path
 
     from matplotlib.figure import Figure
@@ -711,4 +891,31 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     else:
         ax.text(0.5, 0.5, "not computed (beyond=False)", ha="center", transform=ax.transAxes)
     save(fig, "gps-ins-detection-times.png")
+
+    curve = [r for r in study.rows if r["case"] == "operating-curve"]
+    fig = Figure(figsize=(11, 4.5))
+    ax, right = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    for test, style in (("chi2", "-"), ("scst", "--")):
+        points = [r for r in curve if r["test"] == test]
+        pfa = [r["pfa_per_epoch"] for r in points]
+        for j, b in enumerate(TABLE3_DEG_H):
+            ax.semilogx(pfa, [r["table3"][f"{b:g}"]["delay_mean"] for r in points], style, marker=".", color=f"C{j}",
+                        label=f"{test} {b:g} deg/h")
+            ax.axhline(PAPER_TABLE3[b][0 if test == "chi2" else 1], color=f"C{j}", ls=":", lw=0.8)
+        right.semilogx(pfa, [r["fault_free_flights_with_an_alarm"] / r["fault_free_flights"] for r in points], style,
+                       marker=".", color="k", label=test)
+    for a in (ax, right):
+        a.axvline(PFA, color="gray", lw=0.8)
+        a.invert_xaxis()
+        a.set_xlabel("per-epoch false-alarm probability of the threshold (design 0.005: grey)")
+    ax.set_ylabel("mean detection time over clean flights [s]")
+    reading = {r["test"]: r for r in study.rows if r["case"] == "paper-reading"}
+    note = "; ".join(f"{t} closest at P_fa {r['pfa_per_epoch']:g}: {'/'.join(_fmt(v) for v in r['mean_s'])} s"
+                     for t, r in reading.items())
+    ax.set_title(f"Table 3 along the threshold; dotted: the paper's times\n{note}", fontsize=8)
+    ax.legend(fontsize=7, ncol=2)
+    right.set(ylabel="fault-free flights with an alarm", ylim=(-0.02, 1.02),
+              title=f"false alarms over {study.config['runs']} fault-free flights")
+    right.legend(fontsize=8)
+    save(fig, "gps-ins-operating-curve.png")
     return written

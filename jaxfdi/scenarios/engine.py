@@ -684,3 +684,137 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
         fig.tight_layout()
         save(fig, "engine-estimates.png")
     return paths
+
+
+# --- the fault-size study (issue 38) -------------------------------------------------
+
+#: each sensor fault at these multiples of its noise standard deviation (fault-to-noise
+#: ratio), the actuator's, at the same grid index, at these multiples of the paper's 5 % of
+#: the fuel step; the spec's reading of "0.5 %" (of each output's operating point) is flown
+#: beside (FNR 5.4, 3.4, 11.1, 4.1, 5.1 for RPM, P2, T2, P4, T4)
+SIZE_FNR = (3.0, 5.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 14.0, 17.0, 20.0)
+SIZE_ACTUATOR = (0.5, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0)
+#: the methods of the study: one per Table 3 column (the paper's threshold and matrix)
+SIZE_METHODS = ("MM", "IMM", "GLRT l_T=200")
+
+
+class FaultSizeStudy(NamedTuple):
+    """Delays against fault size (``fault_size_study``)."""
+
+    config: dict[str, Any]
+    rows: list[dict[str, Any]]
+
+    def table(self) -> str:
+        return fault_size_table(self)
+
+
+def _matched_size(sizes, delays, paper: float) -> float:
+    """The size at which the delay curve (decreasing in size) crosses ``paper``: linear
+    interpolation between the grid points that bracket it (NaN if none does)."""
+    for (s0, d0), (s1, d1) in zip(zip(sizes, delays), zip(sizes[1:], delays[1:])):
+        if np.isfinite(d0) and np.isfinite(d1) and d0 >= paper >= d1:
+            return float(s0 if d0 == d1 else s0 + (d0 - paper) / (d0 - d1) * (s1 - s0))
+    return float("nan")
+
+
+def fault_size_study(runs: int = 100, seed: int = 0, fnr=SIZE_FNR, actuator=SIZE_ACTUATOR, methods=SIZE_METHODS,
+                     progress: bool = False) -> FaultSizeStudy:
+    """Issue 38: each method's mean delay (clean runs) against the fault's size, sensor
+    faults on a grid of fault-to-noise ratios ``fnr`` (``k sigma_j``, ``sigma_j`` the
+    output's noise standard deviation), the actuator's on ``actuator`` (multiples of the
+    paper's 0.0005 kg/s), and the spec's reading of "0.5 %" beside; for each method and
+    fault, the size at which our delay equals the paper's Table 3 (``_matched_size``), and
+    the reading the GLRT settles on: the grid FNR nearest the median of the sensors'
+    matched FNRs. One study of the engine's structures (``engine_spec``) with these cases."""
+    require_x64("fault_size_study (the engine model is stiff)")
+    check_study(runs, seed)
+    fnr, actuator = tuple(float(v) for v in fnr), tuple(float(v) for v in actuator)
+    if len(fnr) != len(actuator) or len(fnr) < 2:
+        raise ValueError(f"fnr, actuator: expected two grids of the same length >= 2, got {len(fnr)} and {len(actuator)}")
+    model = engine_model()
+    sigma = np.sqrt(np.diag(np.asarray(model.R)))
+    onset = 200
+    names, paper_faults = engine_faults(onset)
+    points = [("actuator", "grid", a * float(paper_faults[0].magnitude), float("nan")) for a in actuator]
+    points += [(out, "grid", k * sigma[j], k) for j, out in enumerate(OUTPUT_NAMES) for k in fnr]
+    points += [(name, "0.5 % of the operating point", float(f.magnitude),
+                float(f.magnitude) / sigma[j - 1] if j else float("nan"))
+               for j, (name, f) in enumerate(zip(names[:-1], paper_faults[:-1]))]
+    points.append(("none", "fault-free", 0.0, float("nan")))
+    by_name = dict(zip(names, paper_faults))
+    faults = [by_name[name]._replace(magnitude=jnp.asarray(size, by_name[name].magnitude.dtype))
+              for name, _, size, _ in points]
+    spec = engine_spec(methods=list(methods))
+    spec = spec._replace(cases=stack_faults(faults), case_names=tuple(f"{n} {size:.6g}" for n, _, size, _ in points))
+    result = run_study(spec, runs, seed, progress=progress)
+    steps = int(round(4.0 / TS))
+    rows = []
+    for method in methods:
+        records = jax.tree_util.tree_map(np.asarray, result.outputs[method])
+        for c, (name, point, size, k) in enumerate(points):
+            part = jax.tree_util.tree_map(lambda x: x[c * runs:(c + 1) * runs], records)
+            label = int(fault_label(faults[c], 1)) if name != "none" else None
+            columns = fault_row(part, steps, TS, label=label)
+            index = names.index(name)
+            paper = PAPER_DELAY[method_paper(method)][index] if name != "none" else float("nan")
+            rows.append({"case": "point", "method": method, "fault": name, "point": point, "size": size, "fnr": k,
+                         "paper_delay_s": paper, **columns})
+    for method in methods:
+        for name in names[:-1]:
+            curve = [r for r in rows if r["method"] == method and r["fault"] == name and r["point"] == "grid"]
+            axis = [r["fnr"] if name != "actuator" else a for r, a in zip(curve, actuator)]
+            rows.append({"case": "matched", "method": method, "fault": name, "paper_delay_s": curve[0]["paper_delay_s"],
+                         "unit": "multiple of 0.0005 kg/s" if name == "actuator" else "FNR",
+                         "matched": _matched_size(axis, [r["delay_mean_s"] for r in curve], curve[0]["paper_delay_s"])})
+    glrt = next((m for m in methods if m.startswith("GLRT")), None)
+    if glrt is not None:
+        matched = {r["fault"]: r["matched"] for r in rows
+                   if r["case"] == "matched" and r["method"] == glrt and r["fault"] != "actuator"}
+        finite = [v for v in matched.values() if np.isfinite(v)]
+        settled = float(fnr[int(np.argmin(np.abs(np.asarray(fnr) - np.median(finite))))]) if finite else float("nan")
+        rows.append({"case": "reading", "method": glrt, "matched_fnr": matched,
+                     "median_matched_fnr": float(np.median(finite)) if finite else float("nan"), "settled_fnr": settled,
+                     "spec_reading_fnr": {out: float(paper_faults[j + 1].magnitude) / sigma[j]
+                                          for j, out in enumerate(OUTPUT_NAMES)}})
+    config = {"runs": int(runs), "seed": int(seed), "fnr": list(fnr), "actuator_multiples": list(actuator),
+              "sensor_sigma": dict(zip(OUTPUT_NAMES, sigma.tolist())), "methods": list(methods), "onset_step": onset,
+              "paper_delay_s": PAPER_DELAY}
+    return FaultSizeStudy(config, rows)
+
+
+def fault_size_table(study: FaultSizeStudy) -> str:
+    """The delay curves, the matched sizes, and Table 3 at the spec's reading and at the
+    settled one, beside the paper."""
+    cfg, rows = study.config, study.rows
+    lines = [f"Delay against fault size, {cfg['runs']} runs per point (mean over the clean runs, s; '-': none detected); "
+             f"sensor faults at k sigma (FNR k), the actuator's at multiples of 0.0005 kg/s"]
+    for method in cfg["methods"]:
+        lines.append(f"  {method}: FNR " + " ".join(f"{k:>6g}" for k in cfg["fnr"]) + "   paper")
+        for name in ("actuator", *OUTPUT_NAMES):
+            curve = [r for r in rows if r["case"] == "point" and r["method"] == method and r["fault"] == name
+                     and r["point"] == "grid"]
+            lines.append(f"    {name:<9}" + " ".join(_fmt(r["delay_mean_s"], 6) for r in curve)
+                         + f"  {curve[0]['paper_delay_s']:.3f}")
+        lines.append("    matched size (our delay = the paper's): " + ", ".join(
+            f"{r['fault']} {_fmt(r['matched'], 4, 2).strip()}" for r in rows
+            if r["case"] == "matched" and r["method"] == method))
+    for r in (r for r in rows if r["case"] == "reading"):
+        spec = ", ".join(f"{k} {v:.1f}" for k, v in r["spec_reading_fnr"].items())
+        lines.append(f"Reading: the spec's \"0.5 % of the operating point\" puts the sensor faults at FNR {spec}; the "
+                     f"paper's {r['method']} delays are met at FNR " + ", ".join(
+                         f"{k} {_fmt(v, 4, 1).strip()}" for k, v in r["matched_fnr"].items())
+                     + f" (median {r['median_matched_fnr']:.1f}): every sensor fault about {r['settled_fnr']:g} sigma")
+        settled = r["settled_fnr"]
+        lines.append(f"Table 3 at both readings (mean delay, s): spec's 0.5 % | FNR {settled:g} | paper")
+        for method in cfg["methods"]:
+            cells = []
+            for name in ("actuator", *OUTPUT_NAMES):
+                spec_row = next(x for x in rows if x["case"] == "point" and x["method"] == method and x["fault"] == name
+                                and x["point"] != "grid")
+                grid = [x for x in rows if x["case"] == "point" and x["method"] == method and x["fault"] == name
+                        and x["point"] == "grid"]
+                at = grid[cfg["fnr"].index(settled)] if name != "actuator" else spec_row
+                cells.append(f"{name} {_fmt(spec_row['delay_mean_s'], 5).strip()} | "
+                             f"{_fmt(at['delay_mean_s'], 5).strip()} | {spec_row['paper_delay_s']:.3f}")
+            lines.append(f"  {method}: " + "; ".join(cells))
+    return "\n".join(lines)

@@ -16,6 +16,7 @@ from jaxfdi.filters import run_filter, unknown_input_filter
 from jaxfdi.models import vtol
 from jaxfdi.models.linear import LinearGaussianModel
 from jaxfdi.scenarios.vtol import (
+    FILTER_NAMES,
     HEALTH_CASES,
     LOCATIONS,
     METHODS,
@@ -390,6 +391,68 @@ def test_the_loop_holds_v_h_and_leaves_the_unreachable_q_command(histories, stud
     rms = np.sqrt(np.mean(error[:, 100:] ** 2, axis=1))                   # (runs, 2)
     assert np.all(rms[:, 0] < 1.0), rms[:, 0]
     np.testing.assert_allclose(rms[:, 1], 5.0, rtol=0.1)
+
+
+@pytest.fixture(scope="module")
+def calm(design):
+    """The s3 step and fault-free runs of ``histories`` (same keys) on the true plant
+    without the disturbance ``3 sin 10t`` (its oscillator started at rest)."""
+    from jaxfdi.faults import stack_faults
+
+    calm_design = design._replace(plant_x0=design.plant_x0.at[4:].set(0.0))
+    cases = dict(vtol_faults())
+    faults = stack_faults([cases["s3 step 0.7"], cases["none"]])
+    keys = jax.random.split(jax.random.PRNGKey(0), RUNS)
+    one = lambda f, key: run_closed_loop(calm_design, key, f, jnp.asarray(False), 300)  # noqa: E731
+    return jax.jit(jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None)))(faults, keys)
+
+
+S3_ADD = 10   # the s3 additive filter (FILTER_NAMES: the six multiplicative, then the six additive)
+
+
+def test_s3_step_estimate_swings_with_the_undecoupled_disturbance_and_averages_to_the_truth(histories, calm):
+    """Issue 38: the s3 step's estimate "drifting" from 0.86 (k = 150) to 0.50 (k = 299) is
+    the undecoupled disturbance 3 sin 10t seen by the s3 filter: over k = 150-299 its
+    spectrum peaks at 1 rad per step (10 rad/s x 0.1 s) and its time average is the true
+    0.7; without the disturbance the peak goes and the swing shrinks."""
+    cases, h = histories
+    s3 = [name for name, _ in cases].index("s3 step 0.7")
+
+    def summary(bias):
+        tail = np.asarray(bias)[:, 150:300]
+        spectrum = np.abs(np.fft.rfft(tail - tail.mean(axis=1, keepdims=True), axis=1)).mean(axis=0)
+        peak = np.fft.rfftfreq(tail.shape[1])[np.argmax(spectrum)] * 2 * np.pi
+        return np.median(tail.mean(axis=1)), np.median(tail.std(axis=1)), peak
+
+    mean, swing, peak = summary(h.bias[s3, :, :, S3_ADD])
+    assert abs(mean - 0.7) < 0.05 and abs(peak - 1.0) < 0.05, (mean, peak)
+    calm_mean, calm_swing, calm_peak = summary(calm.bias[0, :, :, S3_ADD])
+    assert abs(calm_mean - 0.7) < 0.05 and abs(calm_peak - 1.0) > 0.3, (calm_mean, calm_peak)
+    assert calm_swing < 0.75 * swing, (calm_swing, swing)
+
+
+def test_s3_isolation_waits_because_the_disturbance_raises_the_thresholds(histories, calm, study):
+    """Issue 38: the paper isolates step faults in 4-8 steps, we the s3 step in 15-65
+    (the others in 3-7). Isolation needs every other filter above its threshold. The
+    disturbance leaks into several filters (their fault-free 99.5 % quantile above 1.5x
+    chi2(3)'s, 12.84), so the calibrated thresholds are high, and under the s3 step at
+    least four mismatched filters' mean statistic (k = 121-159) is below 0.8 of theirs:
+    they cross only on noise peaks. Without the disturbance, every filter's fault-free
+    quantile is within 1.1x of 12.84 and every mismatched filter's mean statistic is
+    above 1.3x 12.84."""
+    chi2 = study.config["chi2_threshold"]
+    cases, h = histories
+    names = [name for name, _ in cases]
+    raw = np.asarray([study.config["thresholds"]["raw"][name] for name in FILTER_NAMES])
+    mismatched = [i for i, name in enumerate(FILTER_NAMES) if not name.startswith("s3")]
+    quantile = np.quantile(np.asarray(h.statistic[names.index("none")])[:, 20:], 0.995, axis=(0, 1))
+    assert np.sum(quantile > 1.5 * chi2) >= 4, quantile
+    under = np.median(np.asarray(h.statistic[names.index("s3 step 0.7")])[:, 121:160].mean(axis=1), axis=0)
+    assert np.sum(under[mismatched] < 0.8 * raw[mismatched]) >= 4, under / raw
+    calm_quantile = np.quantile(np.asarray(calm.statistic[1])[:, 20:], 0.995, axis=(0, 1))
+    assert np.all(calm_quantile < 1.1 * chi2), calm_quantile
+    calm_under = np.median(np.asarray(calm.statistic[0])[:, 121:160].mean(axis=1), axis=0)
+    assert np.all(calm_under[mismatched] > 1.3 * chi2), calm_under
 
 
 def test_ftc_keeps_tracking_error_within_twice_fault_free(study):

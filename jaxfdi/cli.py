@@ -128,7 +128,7 @@ def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
           f"window {result.config['window']}, Pfa {result.config['pfa']}, threshold {result.config['threshold']:.2f}")
     print(result.table())
     _io.write_json(folder / "engine-chi2.json", {"config": result.config, "rows": result.rows, "seconds": elapsed})
-    _io.atomic_write(folder / "engine-chi2.png", lambda tmp: plot_engine_chi2(result, tmp))
+    plot_engine_chi2(result, folder / "engine-chi2.png")
     return f"wrote {out / 'engine-chi2.json'} and {out / 'engine-chi2.png'} ({elapsed:.1f} s)"
 
 

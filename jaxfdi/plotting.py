@@ -21,6 +21,7 @@ __all__ = [
     "plot_loss_history",
     "plot_mode_probabilities",
     "plot_statistic",
+    "save_figure",
 ]
 
 
@@ -228,3 +229,26 @@ def plot_loss_history(step, train=None, validation=None, *, best_step: int | Non
     ax.set(xlabel="optimiser step", ylabel="loss")
     ax.legend(loc="best", fontsize="small")
     return fig
+
+
+def save_figure(fig, path, caption: str, dpi: int = 110):
+    """Write ``fig`` as a PNG at ``path`` (atomically: ``_io.atomic_write``) with ``caption``
+    under it: what the figure shows, and where it differs from the paper's figure. The
+    caption is wrapped to the figure's width and the layout (tight or constrained) makes
+    room for it. Returns the path written."""
+    import textwrap
+
+    from jaxfdi import _io
+
+    if not isinstance(caption, str) or not caption.strip():
+        raise ValueError(f"caption: expected a sentence saying what the figure shows, got {caption!r}")
+    width, height = fig.get_size_inches()
+    lines = textwrap.wrap(" ".join(caption.split()), width=max(int(width * 17), 40))
+    bottom = min((len(lines) * 0.17 + 0.1) / height, 0.4)
+    fig.text(0.01, 0.01, "\n".join(lines), ha="left", va="bottom", fontsize=8, wrap=False)
+    engine = fig.get_layout_engine()
+    if engine is not None and type(engine).__name__ == "ConstrainedLayoutEngine":
+        engine.set(rect=(0.0, bottom, 1.0, 1.0 - bottom))
+    else:
+        fig.tight_layout(rect=(0.0, bottom, 1.0, 1.0))
+    return _io.atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))

@@ -367,7 +367,7 @@ def test_rate_interval_is_the_clopper_pearson_beta_quantiles():
     0 and 1 at the ends (SciPy's beta distribution)."""
     from scipy import stats
 
-    from jaxfdi.metrics import rate_interval
+    from jaxfdi.metrics import rate_interval, rate_text
 
     for k, n, level in ((0, 10, 0.99), (3, 10, 0.95), (10, 10, 0.99), (454, 10000, 0.99), (1, 1, 0.5)):
         low, high = rate_interval(k, n, level)
@@ -375,6 +375,8 @@ def test_rate_interval_is_the_clopper_pearson_beta_quantiles():
         np.testing.assert_allclose(low, 0.0 if k == 0 else stats.beta.ppf(a / 2, k, n - k + 1), atol=1e-12)
         np.testing.assert_allclose(high, 1.0 if k == n else stats.beta.ppf(1 - a / 2, k + 1, n - k), atol=1e-12)
     assert all(np.isnan(rate_interval(0, 0)))
+    low, high = rate_interval(97, 100, 0.95)
+    assert rate_text(97, 100) == f"0.97 [{low:.2f},{high:.2f}]" and rate_text(0, 0) == "-"
     with pytest.raises(ValueError, match="successes"):
         rate_interval(11, 10)
     with pytest.raises(ValueError, match="level"):

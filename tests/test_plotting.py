@@ -111,3 +111,25 @@ def test_cli_selects_agg_unless_a_backend_is_named(non_agg_backend, monkeypatch)
     monkeypatch.delenv("MPLBACKEND")
     cli._select_agg_backend()
     assert matplotlib.get_backend().lower() == "agg"
+
+
+@pytest.mark.parametrize("layout", [None, "constrained"])
+def test_save_figure_writes_the_caption_under_the_axes(tmp_path, layout):
+    """The caption is a text of the figure, wrapped, below every axes (tight and
+    constrained layouts); the PNG is written; a figure without a caption is refused."""
+    fig = Figure(figsize=(6, 3), layout=layout)
+    ax = fig.add_subplot()
+    ax.plot([0, 1], [0, 1])
+    ax.set_xlabel("x")
+    caption = "What the figure shows and where it differs from the paper's. " * 4
+    path = plotting.save_figure(fig, tmp_path / "f.png", caption)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (text,) = [t for t in fig.texts if "What the figure shows" in t.get_text()]
+    assert " ".join(text.get_text().split()) == " ".join(caption.split()) and "\n" in text.get_text()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    top_of_caption = text.get_window_extent(renderer).y1
+    assert ax.get_tightbbox(renderer).y0 > top_of_caption
+    with pytest.raises(ValueError, match="caption"):
+        plotting.save_figure(Figure(), tmp_path / "g.png", " ")

@@ -409,16 +409,15 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
 
     from matplotlib.figure import Figure
 
-    from jaxfdi import _io
+    from jaxfdi.plotting import save_figure
 
     out = Path(out_dir)
     h = study.history
     t, state, control = h["t"], h["state"], h["control"]
     paths = []
 
-    def save(fig, name):
-        fig.tight_layout()
-        paths.append(str(_io.atomic_write(out / name, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))))
+    def save(fig, name, caption):
+        paths.append(str(save_figure(fig, out / name, caption)))
 
     fig = Figure(figsize=(11, 5))
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
@@ -430,7 +429,10 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     ax3.set(xlabel="east [ft]", ylabel="north [ft]", zlabel="altitude [ft]", title="trajectory (nominal in blue)")
     ax.set(xlabel="east [ft]", ylabel="north [ft]", title="ground track")
     ax.set_aspect("equal", adjustable="datalim")
-    save(fig, "f16-flight-trajectory.png")
+    save(fig, "f16-flight-trajectory.png",
+         "Sample flights of the study (dispersed c.g., initial offsets and gusts; the nominal one in blue) flying "
+         "the paper's manoeuvre: climb, level-off, 30 deg bank turn. Seed 000 describes the manoeuvre but shows no "
+         "trajectory.")
 
     fig = Figure(figsize=(12, 10))
     axes = fig.subplots(4, 2, sharex=True)
@@ -464,5 +466,7 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     axes[3, 1].set(ylabel="controls [deg]", xlabel="time [s]")
     axes[3, 1].legend(fontsize=7)
     fig.suptitle("Seed 000's flight: climb 120 ft/s 0-5 s, then altitude hold and 30 deg bank turn (nominal in blue)")
-    save(fig, "f16-flight-time-histories.png")
+    save(fig, "f16-flight-time-histories.png",
+         "Time histories of the same flights against the commanded profile (altitude, bank, airspeed, angles, body "
+         "rates, controls). Beyond the paper, which flies its aircraft only to feed the rate sensors.")
     return paths

@@ -58,14 +58,25 @@ class EngineChi2Result(NamedTuple):
     def table(self) -> str:
         """Per fault: ``FA rate`` is the share of runs with an alarm before the onset (for
         ``none``: any alarm); delays (mean, median, p90) over the ``clean`` runs, those
-        without one (``metrics.fault_row``)."""
-        head = (f"{'fault':<9} {'magnitude':>10} {'det. rate':>9} {'FA rate':>8} {'FA/step':>8} {'clean':>5} "
-                f"{'delay mean [s]':>14} {'delay med [s]':>13} {'delay p90 [s]':>13}")
+        without one (``metrics.fault_row``). Each rate is followed by its 95 %
+        Clopper-Pearson interval over the ``n`` healthy runs (``metrics.rate_interval``)."""
+        from jaxfdi.metrics import rate_interval
+
+        def rate(value, n, width):
+            if value is None or value != value or not n:
+                return f"{'-':>{width}} {'':>11}"
+            low, high = rate_interval(round(value * n), n, 0.95)
+            return f"{value:>{width}.3f} [{low:.2f},{high:.2f}]"
+
+        head = (f"{'fault':<9} {'magnitude':>10} {'n':>4} {'det. rate [95 %]':>21} {'FA rate [95 %]':>20} "
+                f"{'FA/step':>8} {'clean':>5} {'delay mean [s]':>14} {'delay med [s]':>13} {'delay p90 [s]':>13}")
         lines = [head, "-" * len(head)]
         for r in self.rows:
             clean = "-" if r["fault"] == "none" else str(r.get("clean_runs", "-"))
+            n = r["runs"] - r.get("unhealthy_runs", 0)
             lines.append(
-                f"{r['fault']:<9} {r['magnitude']:>10.4g} {_fmt(r['detection_rate'])} {_fmt(r['false_alarm_rate'], 8, 3)} "
+                f"{r['fault']:<9} {r['magnitude']:>10.4g} {n:>4} {rate(r['detection_rate'], n, 9)} "
+                f"{rate(r['false_alarm_rate'], n, 8)} "
                 f"{_fmt(r['false_alarm_rate_per_step'], 8, 4)} {clean:>5} {_fmt(r.get('delay_mean_s', float('nan')), 14)} "
                 f"{_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 13)}"
             )

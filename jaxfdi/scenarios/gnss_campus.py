@@ -322,6 +322,8 @@ def _park_summary(result, case: Case, slots, candidates, headline, table):
 
 def gnss_table(study: GnssCampusStudy) -> str:
     """The console table: campus availability and the park faults beside the paper."""
+    from jaxfdi.metrics import rate_text
+
     campus = study.rows[0]
     lines = ["Campus (no fault; the east sky hidden beside a building at each lap's pass):",
              f"  HDOP > 4 at epochs {_spans(campus['hdop_over_4_epochs'])} (max {campus['max_hdop']:.1f}); "
@@ -332,14 +334,17 @@ def gnss_table(study: GnssCampusStudy) -> str:
              f"there {_fmt(campus['horizontal_error_p95_where_hpl_over_m'], '.1f')} m, elsewhere "
              f"{_fmt(campus['horizontal_error_p95_elsewhere_m'], '.1f')} m",
              f"  paper: {PAPER['campus']}", "",
-             "Park (Table 2 faults, then a dead and a frozen channel, on one satellite; rates over runs; 'excluded' "
-             "= isolated satellite removed and the re-solved test passes):",
-             f"  {'PRN':>4} {'fault':<24} {'detected':>8} {'isolated':>8} {'excluded':>8} {'delay med/p90 s':>16} "
-             f"{'FA runs':>7}  paper"]
+             "Park (Table 2 faults, then a dead and a frozen channel, on one satellite; rates over the n healthy "
+             "runs with their 95 % Clopper-Pearson intervals; 'excluded' = isolated satellite removed and the "
+             "re-solved test passes):",
+             f"  {'PRN':>4} {'fault':<24} {'n':>4} {'detected':>16} {'isolated':>16} {'excluded':>16} "
+             f"{'delay med/p90 s':>16} {'FA runs':>7}  paper"]
     for row in (r for r in study.rows if r["case"] == "park"):
         mark = "*" if row["headline"] else " "
-        lines.append(f" {mark}{row['prn']:>3} {row['fault']:<24} {row['detected']:>8.2f} {row['isolated']:>8.2f} "
-                     f"{row['excluded']:>8.2f} {_fmt(row['delay_median_s'], '.0f'):>7} / "
+        n = row["runs"] - row["unhealthy_runs"]
+        rates = " ".join(f"{rate_text(round(row[k] * n), n):>16}" for k in ("detected", "isolated", "excluded"))
+        lines.append(f" {mark}{row['prn']:>3} {row['fault']:<24} {n:>4} {rates} "
+                     f"{_fmt(row['delay_median_s'], '.0f'):>7} / "
                      f"{_fmt(row['delay_p90_s'], '.0f'):<6} {row['false_alarm_runs']:>7}  {row['paper']}")
     lines.append(f"  * the headline satellite (highest at the start); paper: {PAPER['park']}")
     mdb = [r for r in study.rows if r["case"] == "mdb"]

@@ -704,6 +704,16 @@ def kind_table(rows: list[dict], config: dict) -> str:
     return "\n".join(lines)
 
 
+def _pct_ci(part: int, whole: int) -> str:
+    """``"97.0% [93,99]"``: the share and its 99 % Clopper-Pearson interval in %."""
+    from jaxfdi.metrics import rate_interval
+
+    if not whole:
+        return "-"
+    low, high = rate_interval(part, whole, 0.99)
+    return f"{100.0 * part / whole:5.1f}% [{100 * low:.0f},{100 * high:.0f}]"
+
+
 def _pct(part: int, whole: int) -> str:
     return f"{100.0 * part / whole:5.1f}%" if whole else "   - "
 
@@ -764,17 +774,18 @@ def study_table(study: F16FDIStudy) -> str:
                  f"{ENVELOPE['altitude_ft']:g} ft, |phi - phi_cmd| <= {ENVELOPE['bank_hold_deg']:g} deg once rolled in, "
                  f"|beta| <= {ENVELOPE['sideslip_deg']:g} deg, finite. Wrong: decided with the wrong sensor by the "
                  "decision the view follows (none: the verified one, not flown); 99 % Clopper-Pearson intervals")
-    lines.append(f"  {'fault':<14} {'view':<8} {'flights':>7} {'decided':>8} {'PSA ok':>7} {'hybrid ok':>9} "
+    lines.append(f"  {'fault':<14} {'view':<8} {'flights':>7} {'decided [99 %]':>19} {'PSA ok [99 %]':>19} "
+                 f"{'hybrid ok [99 %]':>19} "
                  f"{'wrong':>6} {'wrong 99 %':>15} {'exits':>6} {'exit rate 99 %':>15} {'max alt ft':>10} {'max bank':>8} "
                  f"{'max beta':>8}")
     for r in by("full_flights"):
         name = "fault-free" if r["kind"] == "none" else (
             f"{r['kind']} {r['size']:g}" if r["kind"] not in ("stuck", "dead") else r["kind"])
         if r["kind"] == "none":
-            mid = f"{'-':>8} {'-':>7} {'-':>9} {'-':>6} {'':>15}"
+            mid = f"{'-':>19} {'-':>19} {'-':>19} {'-':>6} {'':>15}"
         else:
-            mid = f"{_pct(r['decided'], r['flights']):>8} {_pct(r['psa_isolated'], r['flights']):>7} " \
-                  f"{_pct(r['hybrid_isolated'], r['flights']):>9} {r['misisolated']:>6} " \
+            mid = f"{_pct_ci(r['decided'], r['flights']):>19} {_pct_ci(r['psa_isolated'], r['flights']):>19} " \
+                  f"{_pct_ci(r['hybrid_isolated'], r['flights']):>19} {r['misisolated']:>6} " \
                   f"{_interval(r['misisolated_interval_99']):>15}"
         lines.append(f"  {name:<14} {r['follow']:<8} {r['flights']:>7} {mid} {r['envelope_exits']:>6} "
                      f"{_interval(r['envelope_exit_interval_99']):>15} {r['altitude_ft_max']:>10.1f} "

@@ -33,13 +33,16 @@ def test_engine_chi2_table_reports_unhealthy_runs(broken_chi2_study):
     for r in broken.rows:  # never a clean run: no rate, no delay
         assert all(np.isnan(r[k]) for k in ("detection_rate", "false_alarm_rate", "delay_median_s"))
     lines = broken.table().splitlines()
-    assert len(lines) == 2 + 7 + 1 and lines[0].startswith("fault      magnitude det. rate")
+    assert len(lines) == 2 + 7 + 1 and lines[0].split()[:4] == ["fault", "magnitude", "n", "det."]
+    assert all(line.split()[2] == "0" for line in lines[2:-1])   # no healthy run behind any rate
     assert lines[-1].startswith("WARNING: 7 of 7 runs went numerically bad (filter unhealthy or non-finite "
                                 "statistic: actuator 1, RPM 1, P2 1")
     assert "excluded from the rates above" in lines[-1]
-    # the same rows with every run healthy: the same table without the line
-    clean = broken._replace(rows=[dict(r, unhealthy_runs=0) for r in broken.rows]).table()
-    assert "WARNING" not in clean and clean.splitlines() == lines[:-1]
+    # the same rows with every run healthy: no warning line, and the run count is the runs'
+    clean = broken._replace(rows=[dict(r, unhealthy_runs=0) for r in broken.rows]).table().splitlines()
+    assert not any("WARNING" in line for line in clean) and len(clean) == len(lines) - 1
+    assert all(line.split()[2] == "1" for line in clean[2:])
+    assert [line.split()[:2] for line in clean] == [line.split()[:2] for line in lines[:-1]]
 
 
 def test_engine_rows_and_table_leave_unhealthy_runs_out():
@@ -67,8 +70,13 @@ def test_engine_rows_and_table_leave_unhealthy_runs_out():
     table = EngineStudy({}, rows, {"M": records}, {}).table()
     assert table.splitlines()[-1].startswith("WARNING: M: 2 of 14 runs went numerically bad")
     assert "statistic: actuator 1, none 1); they are excluded" in table
-    clean = EngineStudy({}, [dict(r, unhealthy_runs=0) for r in rows], {"M": records}, {}).table()
-    assert "WARNING" not in clean and clean.splitlines() == table.splitlines()[:-1]
+    # the same rows with every run healthy: no warning line; the rates' run counts are the runs'
+    clean = EngineStudy({}, [dict(r, unhealthy_runs=0) for r in rows], {"M": records}, {}).table().splitlines()
+    lines = table.splitlines()
+    assert not any("WARNING" in line for line in clean) and len(clean) == len(lines) - 1
+    n = {line.split()[0]: line.split()[1] for line in lines[3:-1]}
+    assert n["actuator"] == n["none"] == "1" and n["RPM"] == "2"
+    assert all(line.split()[1] == "2" for line in clean[3:])
 
 
 def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():

@@ -488,12 +488,9 @@ def rate_text(successes: int, trials: int, level: float = 0.95) -> str:
 
 def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
     """One-sided Clopper-Pearson lower bound of a rate from ``successes`` of ``trials``,
-    ``Beta.ppf(1 - confidence; successes, trials - successes + 1)`` (0 when none
-    succeeded; NaN without trials)."""
-    from scipy import stats
-
-    if trials <= 0:
-        return float("nan")
-    if successes <= 0:
-        return 0.0
-    return float(stats.beta.ppf(1.0 - confidence, successes, trials - successes + 1))
+    ``Beta.ppf(1 - confidence; successes, trials - successes + 1)``: the lower end of the
+    two-sided interval at level ``2 confidence - 1`` (``rate_interval``); 0 when none
+    succeeded, NaN without trials."""
+    _checks.check_scalar("confidence", confidence, 0.5, 1.0, low_open=True, high_open=True,
+                         meaning="a one-sided confidence in (0.5, 1)")
+    return rate_interval(successes, trials, 2.0 * confidence - 1.0)[0]

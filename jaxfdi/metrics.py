@@ -477,13 +477,14 @@ def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[flo
     return float(ci.low), float(ci.high)
 
 
-def rate_text(successes: int, trials: int, level: float = 0.95) -> str:
-    """``"0.97 [0.93,0.99]"``: the rate and its two-sided Clopper-Pearson ``level``
-    interval (``rate_interval``), for tables; ``"-"`` without trials."""
+def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2) -> str:
+    """``"0.97 [0.93,0.99]"``: the rate (``digits`` decimals) and its two-sided
+    Clopper-Pearson ``level`` interval (``rate_interval``), for tables; ``"-"`` without
+    trials."""
     if trials == 0:
         return "-"
     low, high = rate_interval(successes, trials, level)
-    return f"{successes / trials:.2f} [{low:.2f},{high:.2f}]"
+    return f"{successes / trials:.{digits}f} [{low:.2f},{high:.2f}]"
 
 
 def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection.chi2 import Decision, Detector, WindowState
+from jaxfdi.detection.chi2 import Decision, Detector, WindowState, moving_window_sum
 from jaxfdi.detection.frozen import FrozenState, frozen_channel_detector
 from jaxfdi.filters._base import Filter
 from jaxfdi.gnss import frames
@@ -201,21 +201,21 @@ def initial_covariance(position_sigma: float, velocity_sigma: float, tilt_sigma:
 
 
 def attribute_ins_alarms(ins_alarms: Array, gps_alarms: Array, lookahead: int, holdoff: int) -> Array:
-    """Which INS-test alarms are the INS's (issue 38): the alarm at epoch ``k`` is the
+    """Which INS-test alarms are the INS's: the alarm at epoch ``k`` is the
     GPS's when RAIM alarmed at some epoch of ``[k - holdoff, k + lookahead]``, else the
     INS's. A causal monitor issues the INS decision at ``k + lookahead`` (it waits that long
     for RAIM); ``holdoff`` covers the filter and the SCST propagators settling after an
     exclusion. ``(..., T)`` bool arrays; returns the INS's alarms, ``(..., T)``.
 
-    Windowed sums by cumulative counts: ``any(gps[k - holdoff : k + lookahead + 1])``."""
+    ``any(gps[k - holdoff : k + lookahead + 1])``: ``detection.chi2.moving_window_sum`` of
+    ``holdoff + lookahead + 1`` epochs ending at ``k + lookahead`` (the history padded
+    with ``lookahead`` alarm-free epochs)."""
     lookahead = _checks.check_int("lookahead", lookahead, 0, meaning="a number of epochs >= 0")
     holdoff = _checks.check_int("holdoff", holdoff, 0, meaning="a number of epochs >= 0")
     ins_alarms, gps_alarms = jnp.asarray(ins_alarms, bool), jnp.asarray(gps_alarms, bool)
     if ins_alarms.shape != gps_alarms.shape:
         raise ValueError(f"gps_alarms: expected the shape of ins_alarms {ins_alarms.shape}, got {gps_alarms.shape}")
-    T = ins_alarms.shape[-1]
-    counts = jnp.concatenate([jnp.zeros(gps_alarms.shape[:-1] + (1,), jnp.int32),
-                              jnp.cumsum(gps_alarms.astype(jnp.int32), axis=-1)], axis=-1)   # counts[j] = sum gps[:j]
-    k = jnp.arange(T)
-    near = counts[..., jnp.minimum(k + lookahead + 1, T)] - counts[..., jnp.maximum(k - holdoff, 0)] > 0
-    return ins_alarms & ~near
+    counts = jnp.moveaxis(gps_alarms, -1, 0).astype(jnp.float32)
+    padded = jnp.concatenate([counts, jnp.zeros((lookahead,) + counts.shape[1:], counts.dtype)])
+    near = moving_window_sum(padded, holdoff + lookahead + 1)[lookahead:] > 0
+    return ins_alarms & ~jnp.moveaxis(near, 0, -1)

@@ -60,13 +60,12 @@ class EngineChi2Result(NamedTuple):
         ``none``: any alarm); delays (mean, median, p90) over the ``clean`` runs, those
         without one (``metrics.fault_row``). Each rate is followed by its 95 %
         Clopper-Pearson interval over the ``n`` healthy runs (``metrics.rate_interval``)."""
-        from jaxfdi.metrics import rate_interval
+        from jaxfdi.metrics import rate_text
 
         def rate(value, n, width):
             if value is None or value != value or not n:
                 return f"{'-':>{width}} {'':>11}"
-            low, high = rate_interval(round(value * n), n, 0.95)
-            return f"{value:>{width}.3f} [{low:.2f},{high:.2f}]"
+            return f"{rate_text(round(value * n), n, digits=3):>{width + 12}}"
 
         head = (f"{'fault':<9} {'magnitude':>10} {'n':>4} {'det. rate [95 %]':>21} {'FA rate [95 %]':>20} "
                 f"{'FA/step':>8} {'clean':>5} {'delay mean [s]':>14} {'delay med [s]':>13} {'delay p90 [s]':>13}")

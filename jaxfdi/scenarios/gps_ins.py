@@ -442,12 +442,12 @@ def alarms_at(series: Series, test: str, threshold: float) -> np.ndarray:
     return valid & (np.asarray(getattr(series, test), np.float64) > threshold)
 
 
-def _separated_record(out: RunOutput, test: str, size: StudySize):
-    """The ``DetectionRecord`` of ``test``'s INS decisions at its design threshold
-    (``ins_decisions``), with the monitor's own health."""
+def _separated_record(out: RunOutput, test: str, size: StudySize, threshold: float | None = None):
+    """The ``DetectionRecord`` of ``test``'s INS decisions (``ins_decisions``) at
+    ``threshold`` (default: the design's), with the monitor's own health."""
     from jaxfdi.metrics import record_from_alarms
 
-    limit = dict(zip(("chi2", "scst"), thresholds()))[test]
+    limit = dict(zip(("chi2", "scst"), thresholds()))[test] if threshold is None else threshold
     decisions = jnp.asarray(ins_decisions(out.series, test, limit))
     record = jax.vmap(record_from_alarms, in_axes=(0, None))(decisions, size.onset_s)
     return jax.tree_util.tree_map(np.asarray, record._replace(first_unhealthy=getattr(out, test).first_unhealthy))
@@ -464,12 +464,6 @@ def ins_decisions(series: Series, test: str, threshold: float) -> np.ndarray:
     ``ATTRIBUTION_LOOKAHEAD`` s later)."""
     return np.asarray(integrity.attribute_ins_alarms(alarms_at(series, test, threshold), raim_alarms(series),
                                                      ATTRIBUTION_LOOKAHEAD, ATTRIBUTION_HOLDOFF))
-
-
-def _first_alarms(alarms: np.ndarray, onset: int) -> tuple[np.ndarray, np.ndarray]:
-    after = alarms & (np.arange(alarms.shape[1]) >= onset)
-    return (np.where(alarms.any(axis=1), alarms.argmax(axis=1), -1),
-            np.where(after.any(axis=1), after.argmax(axis=1), -1))
 
 
 def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_PFA) -> list[dict]:
@@ -495,10 +489,8 @@ def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_
                    "fault_free_flights": flights, "fault_free_flights_with_an_alarm": with_alarm,
                    "flight_alarm_interval_99": list(rate_interval(with_alarm, flights, 0.99)), "table3": {}}
             for bias in TABLE3_DEG_H:
-                decisions = ins_decisions(results[f"table3 {bias:g} deg/h"].series, test, threshold)
-                first, detection = _first_alarms(decisions, size.onset_s)
-                runs = decisions.shape[0]
-                row["table3"][f"{bias:g}"] = delay_statistics(np.full(runs, size.onset_s), first, detection)
+                record = _separated_record(results[f"table3 {bias:g} deg/h"], test, size, threshold)
+                row["table3"][f"{bias:g}"] = delay_statistics(record.onset, record.first_alarm, record.detection_step)
             rows.append(row)
     return rows
 

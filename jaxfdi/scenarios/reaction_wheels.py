@@ -545,15 +545,14 @@ class WheelStudy(NamedTuple):
         wheel cases it names no wheel by construction; its rows hold its figures). Every
         rate is followed by its 95 % Clopper-Pearson interval (``metrics.rate_interval``)
         over the ``n`` healthy runs (``<=2s``: over the clean runs)."""
-        from jaxfdi.metrics import rate_interval
+        from jaxfdi.metrics import rate_text
 
         def rate(value, n):
             if value is None:
                 return f"{'':>19}"
             if value != value or not n:
                 return f"{'-':>6}{'':>13}"
-            low, high = rate_interval(round(value * n), n, 0.95)
-            return f"{value:>6.2f} [{low:.2f},{high:.2f}]"
+            return f"{rate_text(round(value * n), n):>19}"
 
         head = (f"{'case':<10} {'method':<24} {'det [95 %]':>19} {'isol [95 %]':>19} {'<=2s [95 %]':>19} "
                 f"{'FA [95 %]':>19} {'n':>4} {'clean':>5} {'mean [s]':>8} {'med [s]':>8} {'p90 [s]':>8}")

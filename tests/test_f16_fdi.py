@@ -391,3 +391,26 @@ def test_with_verified_fdi_no_fault_kind_leaves_the_envelope_more_often_than_wit
     assert stuck_hybrid["envelope_exits"] > stuck["envelope_exits"]
     assert stuck["misisolated_interval_99"][1] < stuck_hybrid["misisolated_interval_99"][0], (stuck, stuck_hybrid)
     assert kinds[("none", "verified")]["envelope_exits"] == 0
+
+
+def test_a_flight_gone_bad_is_an_exit_and_never_a_decision():
+    """``_full_flight_rows`` on four hand-made flights of one kind: the two that went
+    numerically bad are exits whatever their tracking errors, and are neither right nor
+    wrong decisions even when their FDI named the faulty sensor."""
+    from types import SimpleNamespace
+
+    from jaxfdi.scenarios.f16_flight import ERRORS
+
+    setup, _ = flight_setup()
+    onset = 300
+    n = 4
+    decision = SimpleNamespace(decision_step=np.full(n, onset + 10), detection_step=np.full(n, onset + 5),
+                               psa=np.array([1, 2, 1, 1]), hybrid=np.array([1, 2, 1, 1]),
+                               verified=np.array([1, 2, 1, 1]), revisions=np.zeros(n, int),
+                               filter_used=np.zeros(n, bool))
+    out = SimpleNamespace(tracking=SimpleNamespace(max_abs=np.zeros((n, len(ERRORS)))),
+                          healthy=np.array([True, True, False, False]), fdi=decision)
+    labels = [("bias", 10.0, "verified")] * n
+    (row,) = sf._full_flight_rows(out, labels, np.zeros(n, int), onset, setup)
+    assert row["envelope_exits"] == 2 and row["healthy"] == 2
+    assert row["decided"] == 2 and row["isolated"] == 1 and row["misisolated"] == 1

@@ -114,6 +114,34 @@ def test_the_operating_curve_is_the_monitor_at_other_thresholds(study):
     assert sorted(readings) == ["chi2", "scst"]
 
 
+def test_a_flight_gone_bad_is_counted_apart_in_the_curve_and_the_separation(study):
+    """A Table 3 flight and a fault-free flight marked numerically bad leave every rate of
+    the operating curve and of the separation and are counted apart: never a clean or a
+    separated flight."""
+    from jaxfdi.scenarios.gps_ins import operating_curve, separation
+
+    results = dict(study.results)
+
+    def spoil(out):
+        bad = lambda record: record._replace(first_unhealthy=np.asarray(record.first_unhealthy).copy())  # noqa: E731
+        out = out._replace(chi2=bad(out.chi2))
+        out.chi2.first_unhealthy[0] = 5
+        return out
+
+    results["table3 60 deg/h"] = spoil(results["table3 60 deg/h"])
+    results["fault-free"] = spoil(results["fault-free"])
+    before = {(r["test"], r["pfa_per_epoch"]): r for r in operating_curve(study.results, SIZE)}
+    after = {(r["test"], r["pfa_per_epoch"]): r for r in operating_curve(results, SIZE)}
+    point = ("chi2", 0.005)
+    assert after[point]["fault_free_flights"] == before[point]["fault_free_flights"] - 1 == RUNS - 1
+    assert after[point]["fault_free_unhealthy_flights"] == 1
+    assert after[point]["table3"]["60"]["unhealthy_runs"] == 1
+    assert after[point]["table3"]["60"]["clean_runs"] <= before[point]["table3"]["60"]["clean_runs"]
+    assert after[("scst", 0.005)]["fault_free_flights"] == RUNS   # only the chi-square record went bad
+    split = separation(results, SIZE)
+    assert split["flights"] == 3 * RUNS - 1 and split["unhealthy_flights"] == 1
+
+
 def test_attribution_against_brute_force():
     """``attribute_ins_alarms``: an INS alarm at k is the GPS's iff RAIM alarmed in
     [k - holdoff, k + lookahead] (a loop over k), on random alarm histories."""

@@ -591,7 +591,8 @@ def _kind_flights(setup: FlightSetup, fdi: FDISetup, kinds, follows, runs: int, 
 def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> list[dict]:
     """One row per (kind, size, view): decisions, the isolation by the decision the view
     follows (none: the verified one, not flown), misisolations and envelope exits with
-    their 99 % Clopper-Pearson intervals (``metrics.rate_interval``)."""
+    their 99 % Clopper-Pearson intervals (``metrics.rate_interval``). A flight that went
+    numerically bad is an exit and never a decision."""
     from jaxfdi.metrics import rate_interval
     from jaxfdi.scenarios.f16_flight import ERRORS
 
@@ -625,7 +626,7 @@ def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> li
             row.update(fd_false_alarm_flights=int(np.sum(det[sel] >= 0)), decisions=int(np.sum(step[sel] >= 0)),
                        expected_per_flight=per_flight, binomial_99_interval=[low, high])
         else:
-            decided = step[sel] >= onset
+            decided = (step[sel] >= onset) & healthy[sel]   # a flight gone bad is never a right decision
             right = decided & (chosen[follow][sel] == sensor[sel] + 1)
             wrong = int(decided.sum() - right.sum())
             row.update(decided=int(decided.sum()), early_decisions=int(np.sum((step[sel] >= 0) & (step[sel] < onset))),

@@ -475,9 +475,12 @@ def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_
     decision is issued ``ATTRIBUTION_LOOKAHEAD`` s later)."""
     from jaxfdi.metrics import delay_statistics, rate_interval
 
-    free = results["fault-free"].series
+    free_out = results["fault-free"]
     rows = []
     for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE)):
+        # a flight that went numerically bad is counted apart, never as a clean one
+        keep = np.asarray(getattr(free_out, test).first_unhealthy) < 0
+        free = jax.tree_util.tree_map(lambda a: np.asarray(a)[keep], free_out.series)
         valid = np.asarray(free.gps_used if test == "chi2" else free.scst_valid)
         for pfa in pfas:
             threshold = float(_scipy_stats.chi2.isf(pfa, dof))
@@ -487,10 +490,15 @@ def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_
             row = {"case": "operating-curve", "test": test, "pfa_per_epoch": pfa, "threshold": threshold,
                    "fault_free_alarm_rate_per_epoch": float(alarms.sum() / max(valid.sum(), 1)),
                    "fault_free_flights": flights, "fault_free_flights_with_an_alarm": with_alarm,
-                   "flight_alarm_interval_99": list(rate_interval(with_alarm, flights, 0.99)), "table3": {}}
+                   "flight_alarm_interval_99": list(rate_interval(with_alarm, flights, 0.99)),
+                   "fault_free_unhealthy_flights": int(np.sum(~keep)), "table3": {}}
             for bias in TABLE3_DEG_H:
                 record = _separated_record(results[f"table3 {bias:g} deg/h"], test, size, threshold)
-                row["table3"][f"{bias:g}"] = delay_statistics(record.onset, record.first_alarm, record.detection_step)
+                healthy = record.first_unhealthy < 0
+                row["table3"][f"{bias:g}"] = {
+                    **delay_statistics(record.onset[healthy], record.first_alarm[healthy],
+                                       record.detection_step[healthy]),
+                    "unhealthy_runs": int(np.sum(~healthy))}
             rows.append(row)
     return rows
 
@@ -501,16 +509,21 @@ def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) ->
     "GPS" (RAIM alarmed during it), "INS" (an INS decision of either test from its onset to
     ``ATTRIBUTION_HOLDOFF`` s after its end; for the gyro bias, from its onset to the end of
     the flight), both or neither; a flight is separated when each of its satellite faults is
-    GPS only and its gyro bias INS only. Returns the confusion counts and the separated
-    flights with their one-sided 95 % lower bound."""
+    GPS only and its gyro bias INS only; flights that went numerically bad are counted
+    apart. Returns the confusion counts and the separated flights with their one-sided
+    95 % lower bound."""
     from jaxfdi.metrics import binomial_lower_bound
 
     limits = {test: float(_scipy_stats.chi2.isf(pfa, dof))
               for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE))}
     confusion: dict[str, dict[str, int]] = {}
-    separated = flights = 0
+    separated = flights = unhealthy = 0
     for bias in TABLE3_DEG_H:
-        series = results[f"table3 {bias:g} deg/h"].series
+        out = results[f"table3 {bias:g} deg/h"]
+        # a flight that went numerically bad is counted apart, never as a separated one
+        healthy = (np.asarray(out.chi2.first_unhealthy) < 0) & (np.asarray(out.scst.first_unhealthy) < 0)
+        unhealthy += int(np.sum(~healthy))
+        series = jax.tree_util.tree_map(lambda a: np.asarray(a)[healthy], out.series)
         ins = ins_decisions(series, "chi2", limits["chi2"]) | ins_decisions(series, "scst", limits["scst"])
         gps = raim_alarms(series)
         steps = gps.shape[1]
@@ -530,7 +543,7 @@ def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) ->
         separated += int(ok.sum())
         flights += int(ok.size)
     return {"case": "separation", "pfa_per_epoch": pfa, "lookahead_s": ATTRIBUTION_LOOKAHEAD,
-            "holdoff_s": ATTRIBUTION_HOLDOFF, "confusion": confusion, "flights": flights,
+            "holdoff_s": ATTRIBUTION_HOLDOFF, "confusion": confusion, "flights": flights, "unhealthy_flights": unhealthy,
             "separated_flights": separated, "separated_rate": separated / flights if flights else float("nan"),
             "lower_bound_95": binomial_lower_bound(separated, flights, 0.95)}
 

@@ -133,19 +133,19 @@ def jaxfdi_ukf_full_info(Q, R, params, m0, P0, ys, us):
 
 
 def jaxfdi_kf_batch(model, m0, P0, ys, us):
-    """``run_filter_batch``: N sequences at once; the shared covariances come back once."""
+    """``run_filter``: N sequences at once; the shared covariances come back once."""
     kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys, us)
+    _, info = jaxfdi.run_filter(kf, kf.init(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
 
 
 def jaxfdi_kf_kernel(model, m0, P0, ys, us):
     """Runs with their own prior (P0 (N, n, n)) or model (Q (N, n, n)): the structure-of-
-    arrays batch kernel (``run_filter_batch`` with a per-run prior, ``run_kalman_batch``
+    arrays batch kernel (``run_filter`` with a per-run prior, ``run_kalman_batch``
     with a per-run model)."""
     if P0.ndim == 3:
         kf = jaxfdi.kalman_filter(model)
-        _, info = jaxfdi.run_filter_batch(kf, jaxfdi.GaussianState(m0, P0), ys, us)
+        _, info = jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, P0), ys, us)
     else:
         _, info = jaxfdi.filters.run_kalman_batch(model, jaxfdi.GaussianState(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
@@ -155,7 +155,7 @@ def jaxfdi_ukf_batch(Q, R, params, m0, P0, ys, us):
     ukf = jaxfdi.unscented_kalman_filter(
         rigid_body_transition, rigid_body_observation, Q, R, params, ALPHA, BETA, KAPPA
     )
-    _, info = jaxfdi.run_filter_batch(ukf, ukf.init(m0, P0), ys, us)
+    _, info = jaxfdi.run_filter(ukf, ukf.init(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
 
 
@@ -475,8 +475,8 @@ def bench_filter(kind: str, prob: dict, args, log) -> dict:
             mean, cov, loglik = out
             outs["jaxfdi_batch"] = (mean, jnp.broadcast_to(cov, mean.shape[:1] + cov.shape[-3:]), loglik)
             result["rows"].append({"case": label, "impl": "jaxfdi_batch", "sequences_timed": N, **timing,
-                                   "note": "run_filter_batch; shared covariances returned once" if cov.ndim == 3 else
-                                           "run_filter_batch; covariances per run (they depend on the data)"})
+                                   "note": "run_filter; shared covariances returned once" if cov.ndim == 3 else
+                                           "run_filter; covariances per run (they depend on the data)"})
             log(f"  {kind} {label:>13} {'jaxfdi_batch':<17} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms")
         # filterpy: a Python loop, on fewer sequences for the batch (scaled linearly)
         n_fp = min(args.filterpy_sequences, N) if batch else 1
@@ -546,7 +546,7 @@ def bench_filter(kind: str, prob: dict, args, log) -> dict:
             timing, out = time_jax(jaxfdi_kf_kernel, call_args, None, reps, budget)
             outs["jaxfdi_batch"] = out
             result["rows"].append({"case": label, "impl": "jaxfdi_batch", "sequences_timed": N, **timing,
-                                   "note": "structure-of-arrays kernel (run_filter_batch / run_kalman_batch)"})
+                                   "note": "structure-of-arrays kernel (run_filter / run_kalman_batch)"})
             log(f"  {kind} {label:>20} {'jaxfdi_batch':<10} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms")
         result["rows"].append({**fp_row, "case": label, "note": "same filterpy timing as the 100-sequence case"})
         result["agreement"] += [dict(case=label, **row) for row in agreement(
@@ -558,7 +558,7 @@ def bench_driver_compile(prob: dict, log) -> list[dict]:
     """Compile time (trace + lower + XLA compile) of each KF driver on the engine, the
     plain scan beside them: eager ``run_filter`` (what a one-shot script calls; traced
     with library calls, ``_linalg.library_calls``), ``jit(run_filter)`` (the inlined,
-    written-out path of ``vmap``), ``run_filter_batch`` shared and per-run P0, and
+    written-out path of ``vmap``), ``run_filter`` shared and per-run P0, and
     ``run_kalman_batch`` per-run Q; every ``FilterInfo`` field returned."""
     from jaxfdi import _linalg
     from jaxfdi.filters._base import _scan_filter
@@ -571,10 +571,10 @@ def bench_driver_compile(prob: dict, log) -> list[dict]:
         "plain scan, 1 sequence (means, covs, loglik)": lambda: jax.jit(plain_kf).lower(model, m0, P0, ys[0], us),
         "run_filter eager, 1 sequence (full info)": lambda: _scan_filter.lower(kf, kf.init(m0, P0), ys[0], us),
         "jit(run_filter), 1 sequence (full info)": lambda: jax.jit(jaxfdi_kf_full_info).lower(model, m0, P0, ys[0], us),
-        f"run_filter_batch shared, {N} seq (full info)": lambda: jax.jit(
-            lambda y: jaxfdi.run_filter_batch(kf, kf.init(m0, P0), y, us)).lower(ys),
-        f"run_filter_batch P0 per run, {N} runs (full info)": lambda: jax.jit(
-            lambda p: jaxfdi.run_filter_batch(kf, jaxfdi.GaussianState(m0, p), ys, us)).lower(P0s),
+        f"run_filter shared, {N} seq (full info)": lambda: jax.jit(
+            lambda y: jaxfdi.run_filter(kf, kf.init(m0, P0), y, us)).lower(ys),
+        f"run_filter P0 per run, {N} runs (full info)": lambda: jax.jit(
+            lambda p: jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, p), ys, us)).lower(P0s),
         f"run_kalman_batch Q per run, {N} runs (full info)": lambda: jax.jit(
             lambda q: jaxfdi.filters.run_kalman_batch(model._replace(Q=q), jaxfdi.GaussianState(m0, P0), ys, us)
         ).lower(P0s),
@@ -765,7 +765,7 @@ def format_targets(results: dict) -> tuple[str, list[dict]]:
             lines.append(f"  {kind.upper():<4} {mine:<13} vs {other:<9} {case:<22} target >= {target:6.1f}x   "
                          f"measured {speedup:9.2f}x   {'MET' if ok else 'MISSED'}")
     lines.append("  (the target is stated for '%d sequences': vmap(run_filter) returning N copies of every field, and "
-                 "run_filter_batch returning shared covariances once; means+loglik is a third reading)" % res["N"])
+                 "run_filter returning shared covariances once; means+loglik is a third reading)" % res["N"])
     res = results["kf"]
     for case in (f"{res['N']} runs, P0 per run", f"{res['N']} runs, Q per run"):
         rows = {r["impl"]: r for r in res["rows"] if r["case"] == case}

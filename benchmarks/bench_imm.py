@@ -74,12 +74,12 @@ def jaxfdi_imm(modes, m0, P0):
 
 
 def jaxfdi_imm_batch(modes, m0, P0):
-    """``run_filter_batch``: the whole batch in one call (ys (N, T, m), shared us)."""
+    """``run_filter``: the whole batch in one call (ys (N, T, m), shared us)."""
     imm = jaxfdi.interacting_multiple_model(jaxfdi.kalman_filter, modes, PAPER_TRANSITION)
     mu0 = jnp.asarray(PAPER_TRANSITION[0] @ PAPER_TRANSITION)
 
     def run(ys, us):
-        _, info = jaxfdi.run_filter_batch(imm, imm.init(m0, P0, mu0), ys, us)
+        _, info = jaxfdi.run_filter(imm, imm.init(m0, P0, mu0), ys, us)
         return info.mode_prob, info.mean
 
     return run, imm.batch is not None
@@ -146,7 +146,7 @@ def bench_imm(args, log) -> list[dict]:
             f"{filterpy_per_seq * 1e3:.0f} ms -> {row['speedup_1']:.0f}x; {args.sequences} seq jaxfdi "
             f"{many['run_s'] * 1e3:.0f} ms (compile {many['compile_s']:.2f} s), filterpy "
             f"{row['filterpy_N_s']:.1f} s (extrapolated from {S}) -> {row['speedup_N']:.0f}x; "
-            f"run_filter_batch ({'structure-of-arrays kernel' if has_kernel else 'vmap, no kernel'}) "
+            f"run_filter ({'structure-of-arrays kernel' if has_kernel else 'vmap, no kernel'}) "
             f"{batch['run_s'] * 1e3:.0f} ms (compile {batch['compile_s']:.2f} s) -> {row['speedup_batch_N']:.0f}x; "
             f"agreement {max(err_mu, err_x):.1e}")
         rows.append(row)
@@ -157,7 +157,7 @@ def bench_glrt(args, log) -> list[dict]:
     model, ys, us = engine_data(args.sequences, seed=1)
     steady = jaxfdi.steady_state_kalman(model)
     kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter_batch(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, us)
+    _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, us)
     innovations = jnp.asarray(info.innovation)
     rows = []
     for N in (10, 20, 40):

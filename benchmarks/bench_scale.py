@@ -44,9 +44,10 @@ import jaxfdi  # noqa: E402
 from jaxfdi.detection import glrt_detector, recursive_glrt_detector  # noqa: E402
 from jaxfdi.filters import (  # noqa: E402
     GaussianState,
-    parallel_kalman_filter,
+    kalman_filter,
     parallel_rts_smoother,
     rts_smoother,
+    run_filter,
 )
 from jaxfdi.models import engine_model  # noqa: E402
 from jaxfdi.riccati import steady_state_kalman  # noqa: E402
@@ -89,7 +90,7 @@ def bench_parallel(cases, repeats, budget, log, eager=True, on_case=None) -> lis
             return info.filtered_mean, info.filtered_cov, info.log_likelihood, smooth.mean, smooth.cov
 
         def parallel(ys):
-            info = jax.vmap(lambda y: parallel_kalman_filter(model, prior, y, us)[1])(ys)
+            info = jax.vmap(lambda y: run_filter(kalman_filter(model, missing_measurements=True), prior, y, us, parallel=True)[1])(ys)
             smooth = jax.vmap(lambda i: parallel_rts_smoother(model, i))(info)
             return info.filtered_mean, info.filtered_cov, info.log_likelihood, smooth.mean, smooth.cov
 
@@ -98,7 +99,7 @@ def bench_parallel(cases, repeats, budget, log, eager=True, on_case=None) -> lis
             return info.filtered_mean, info.filtered_cov, info.log_likelihood
 
         def parallel_filter(ys):
-            info = jax.vmap(lambda y: parallel_kalman_filter(model, prior, y, us)[1])(ys)
+            info = jax.vmap(lambda y: run_filter(kalman_filter(model, missing_measurements=True), prior, y, us, parallel=True)[1])(ys)
             return info.filtered_mean, info.filtered_cov, info.log_likelihood
 
         results = {}
@@ -295,8 +296,8 @@ def bench_startup(repeats: int, log) -> dict:
     P0s = jnp.broadcast_to(P0, (2,) + P0.shape) * 1.5
     drivers = {
         "run_filter eager (one sequence, full info)": lambda: _scan_filter.lower(kf, kf.init(m0, P0), ys[0], us),
-        "run_filter_batch P0 per run (batch kernel)": lambda: jax.jit(
-            lambda p: jaxfdi.run_filter_batch(kf, jaxfdi.GaussianState(m0, p), ys, us)).lower(P0s),
+        "run_filter P0 per run (batch kernel)": lambda: jax.jit(
+            lambda p: jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, p), ys, us)).lower(P0s),
         "run_kalman_batch Q per run (batch kernel)": lambda: jax.jit(
             lambda q: jaxfdi.filters.run_kalman_batch(model._replace(Q=q), jaxfdi.GaussianState(m0, P0), ys, us)
         ).lower(P0s),

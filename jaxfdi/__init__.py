@@ -8,7 +8,6 @@ from jaxfdi.filters import (
     kalman_filter,
     multiple_model,
     run_filter,
-    run_filter_batch,
     two_stage_kalman_filter,
     unscented_kalman_filter,
 )
@@ -111,7 +110,7 @@ __all__ = [
     # filters and models
     "Filter", "FilterInfo", "GaussianState", "LinearGaussianModel", "c2d", "extended_kalman_filter",
     "init_from_posterior", "interacting_multiple_model", "kalman_filter", "linear_gaussian_model",
-    "multiple_model", "run_filter", "run_filter_batch", "two_stage_kalman_filter", "unscented_kalman_filter",
+    "multiple_model", "run_filter", "two_stage_kalman_filter", "unscented_kalman_filter",
     "solve_discrete_are", "steady_state_kalman",
     # faults and simulation
     "Fault", "FaultKind", "Target", "active_label", "concat_faults", "episodes", "fault", "fault_group",

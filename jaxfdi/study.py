@@ -56,7 +56,7 @@ class Structure(NamedTuple):
     case on the device instead of kept; a trace that does not depend on an axis is
     computed once for it. ``batched``: ``run(keys (B,), cases (B, ...), *params)`` runs a
     whole chunk and returns a leading run axis (B, ...), e.g. to drive a filter's batch
-    kernel (``run_filter_batch``) instead of ``vmap``. ``shared``: data that every run of
+    kernel (``run_filter``) instead of ``vmap``. ``shared``: data that every run of
     every cell reads as it is (a design, an ephemeris, a flight's tables: not vmapped),
     passed to ``run`` after the parameters, ``run(key, case, *params, shared)``; as data,
     not a closure, so that other values compile nothing new."""

@@ -9,7 +9,7 @@ from filterpy.kalman import KalmanFilter
 
 import jaxfdi
 from _linear_gaussian_cases import small_model
-from jaxfdi.filters import GaussianState, kalman_filter, run_filter, run_filter_batch, run_kalman_batch
+from jaxfdi.filters import GaussianState, kalman_filter, run_filter, run_kalman_batch
 from jaxfdi.models import LinearGaussianModel
 
 N, T = 5, 30
@@ -51,12 +51,12 @@ def data():
 
 
 def test_per_run_prior_equals_vmap_and_filterpy(data):
-    """run_filter_batch with a GaussianState per run takes the kernel; per-run inputs."""
+    """run_filter with a GaussianState per run takes the kernel; per-run inputs."""
     ys, us, means, covs = data
     model = small_model()
     kf = kalman_filter(model)
     assert kf.batch is not None and kf.batch.per_run_only
-    got = run_filter_batch(kf, GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us)
+    got = run_filter(kf, GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us)
     _assert_same(got, _vmapped(model, None, means, covs, ys, us))
     Phi, Gamma, C, D, Q, R = (np.asarray(a) for a in model)
     for run in (0, 3):   # filterpy (Joseph form; no feed-through, so D u is taken off y)
@@ -69,7 +69,7 @@ def test_per_run_prior_equals_vmap_and_filterpy(data):
             np.testing.assert_allclose(got[1].filtered_cov[run, k], ref.P, rtol=1e-9, atol=1e-12)
             ref.predict(u=us[run, k])
     # a shared prior keeps the vmap path: its covariances come back once
-    _, shared = run_filter_batch(kf, kf.init(means[0], covs[0]), ys, us)
+    _, shared = run_filter(kf, kf.init(means[0], covs[0]), ys, us)
     assert shared.filtered_cov.shape == (T, 3, 3)
 
 
@@ -108,14 +108,14 @@ def test_health_float32_and_gradient(data):
     model = small_model()
     bad = ys.copy()
     bad[1, 10, 0] = np.nan
-    _, info = run_filter_batch(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
+    _, info = run_filter(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
     _, ref = _vmapped(model, None, means, covs, bad, us)
     np.testing.assert_array_equal(info.healthy, ref.healthy)   # a dead channel: evidence, the same as vmap's
     for name in ("filtered_mean", "filtered_cov", "innovation", "nis", "num_observed"):
         np.testing.assert_allclose(getattr(info, name), getattr(ref, name), rtol=1e-9, atol=1e-12, err_msg=name)
     assert bool(info.healthy.all()) and float(info.nis[1, 10]) == np.inf and np.isnan(info.innovation[1, 10, 0])
     bad[0, 3, 1] = 1e250                                       # an overflowing outlier is ill health
-    _, info = run_filter_batch(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
+    _, info = run_filter(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
     assert not bool(info.healthy[0, 3]) and bool(info.healthy[0, :3].all()) and bool(info.healthy[1].all())
     model32 = LinearGaussianModel(*(jnp.asarray(a, jnp.float32) for a in model))
     _, info32 = run_kalman_batch(model32, GaussianState(jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32)),
@@ -167,7 +167,7 @@ def test_bad_input(data):
     with pytest.raises(ValueError, match="model.Q"):
         run_kalman_batch(model._replace(Q=np.stack([model.Q] * (N + 1))), GaussianState(jnp.zeros(3), jnp.eye(3)), ys, us)
     with pytest.raises(ValueError, match="init_state.cov"):
-        run_filter_batch(kalman_filter(model), GaussianState(jnp.zeros(3), jnp.asarray(covs[:2])), ys, us)
+        run_filter(kalman_filter(model), GaussianState(jnp.zeros(3), jnp.asarray(covs[:2])), ys, us)
     with pytest.raises(ValueError, match="states"):
         big = LinearGaussianModel(np.eye(17), np.zeros((17, 1)), np.ones((2, 17)), np.zeros((2, 1)), np.eye(17),
                                   np.eye(2))
@@ -175,7 +175,7 @@ def test_bad_input(data):
     with pytest.raises(ValueError, match="ys"):
         run_kalman_batch(model, GaussianState(jnp.zeros(3), jnp.eye(3)), ys[..., :1], us)
     with pytest.raises(ValueError, match="shared_covariance"):
-        run_filter_batch(kalman_filter(model), GaussianState(jnp.zeros(3), jnp.asarray(covs)), ys, us,
+        run_filter(kalman_filter(model), GaussianState(jnp.zeros(3), jnp.asarray(covs)), ys, us,
                          shared_covariance=True)
 
 
@@ -195,7 +195,7 @@ def test_imm_kernel_for_ten_states_equals_vmap():
     assert imm.batch is not None
     init = imm.init(np.zeros(n), np.eye(n), np.ones(3) / 3)
     ys, us = rng.normal(size=(3, 15, m)), rng.normal(size=(15, 1))
-    final, info = run_filter_batch(imm, init, ys, us)
+    final, info = run_filter(imm, init, ys, us)
     ref_final, ref_info = jax.jit(jax.vmap(lambda y: run_filter(imm, init, y, us)))(ys)
     for name, got, want in zip(info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)):
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, err_msg=name)

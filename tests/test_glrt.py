@@ -75,7 +75,7 @@ def test_signatures_equal_noise_free_filter_response(engine):
     cases = [(i, onset) for onset in onsets for i in range(6)] + [(None, 0)]
     ys = np.stack([_noise_free_measurements(model, i, onset, T) for i, onset in cases])
     kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter_batch(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, np.full((T, 1), 0.01))
+    _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, np.full((T, 1), 0.01))
     innov = np.asarray(info.innovation)
     G = np.asarray(signatures)
     for (i, onset), response in zip(cases, innov[:-1] - innov[-1]):

@@ -197,7 +197,7 @@ def _imm(case):
 def _imm_batch_kernel(case):
     filt = jaxfdi.interacting_multiple_model(jaxfdi.kalman_filter, _modes(_model(case)), TRANSITION)
     assert filt.batch is not None
-    info = jaxfdi.run_filter_batch(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys[None],
+    info = jaxfdi.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys[None],
                                    case.us)[1]
     return jax.tree_util.tree_map(lambda a: a[0], info)
 

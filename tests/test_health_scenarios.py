@@ -92,7 +92,7 @@ def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     from jaxfdi import linear_simulator, simulate
     from jaxfdi.detection.mode_probability import mode_probability_detector
     from jaxfdi.faults import fault
-    from jaxfdi.filters._base import run_filter_batch
+    from jaxfdi.filters._base import run_filter
     from jaxfdi.filters.imm import interacting_multiple_model
     from jaxfdi.filters.kalman import kalman_filter
     from jaxfdi.metrics import fault_row
@@ -108,7 +108,7 @@ def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     ys = np.array(ys)
     ys[[1, 3], 30:, 2] = np.nan
     imm = interacting_multiple_model(kalman_filter, noise_inflation_modes(model, 1e4, 0.008), PAPER_TRANSITION)
-    _, info = run_filter_batch(imm, imm.init(jnp.zeros(7), model.Q, jnp.asarray(PAPER_TRANSITION[0])), ys, us)
+    _, info = run_filter(imm, imm.init(jnp.zeros(7), model.Q, jnp.asarray(PAPER_TRANSITION[0])), ys, us)
     assert np.asarray(info.healthy).all()
     detector = mode_probability_detector(0.5)
     labels = sensor_labels(*model.dims[1:])

@@ -11,7 +11,6 @@ from jaxfdi.filters import (
     kalman_filter,
     multiple_model,
     run_filter,
-    run_filter_batch,
     unscented_kalman_filter,
 )
 from jaxfdi.models import LinearGaussianModel
@@ -194,7 +193,7 @@ def test_traces_once_vmap_equals_loop_and_float32(problem):
     batch = np.stack([ys, ys[::-1], ys * 0.5])
     for y in batch:
         run(y)
-    _, info = run_filter_batch(imm, imm.init(m0, P0, mu0), batch, us)
+    _, info = run_filter(imm, imm.init(m0, P0, mu0), batch, us)
     loop = np.stack([run(y) for y in batch])
     np.testing.assert_allclose(info.mode_prob, loop, rtol=1e-12, atol=1e-15)
 
@@ -240,12 +239,12 @@ def batch_problem(problem):
 
 
 def test_batch_kernel_equals_vmap_and_filterpy(problem, batch_problem):
-    """run_filter_batch runs the structure-of-arrays kernel (standard-form covariance
+    """run_filter runs the structure-of-arrays kernel (standard-form covariance
     update); every output equals vmap(run_filter) (Joseph form) and filterpy's IMM."""
     modes, _, _, m0, P0 = problem
     imm, init, ys, us = batch_problem
     assert imm.batch is not None
-    final, info = run_filter_batch(imm, init, ys, us)
+    final, info = run_filter(imm, init, ys, us)
     ref_final, ref_info = jax.vmap(lambda y, u: run_filter(imm, init, y, u))(ys, us)
     for name, got, want in zip(info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)):
         assert got.shape == want.shape, name
@@ -265,32 +264,32 @@ def test_batch_kernel_equals_vmap_and_filterpy(problem, batch_problem):
 def test_batch_kernel_shared_inputs_gradient_and_health(problem, batch_problem):
     modes, _, us_shared, m0, P0 = problem
     imm, init, ys, _ = batch_problem
-    _, info = run_filter_batch(imm, init, ys, us_shared)               # (T, nu) shared by the runs
+    _, info = run_filter(imm, init, ys, us_shared)               # (T, nu) shared by the runs
     _, ref = jax.vmap(lambda y: run_filter(imm, init, y, us_shared))(ys)
     np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)
 
     bad = ys.copy()
     bad[1, 25, 0] = np.nan                                              # a dead channel in run 1
-    _, info = run_filter_batch(imm, init, bad, us_shared)
+    _, info = run_filter(imm, init, bad, us_shared)
     _, ref = jax.vmap(lambda y: run_filter(imm, init, y, us_shared))(bad)
     np.testing.assert_array_equal(info.healthy, ref.healthy)
     np.testing.assert_array_equal(info.dead, ref.dead)
     np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)
     assert bool(info.healthy.all()) and np.array_equal(np.argwhere(np.asarray(info.dead)), [[1, 25, 0]])
     bad[0, 5, 1] = 1e250                                                # an overflowing outlier is ill health
-    _, info = run_filter_batch(imm, init, bad, us_shared)
+    _, info = run_filter(imm, init, bad, us_shared)
     assert not bool(info.healthy[0, 5]) and bool(info.healthy[0, :5].all()) and bool(info.healthy[1].all())
 
     @jax.jit  # compiled once for every evaluation chex makes (same shapes)
     def mean_log_likelihood(logits):
         filt = interacting_multiple_model(kalman_filter, modes, jax.nn.softmax(logits, axis=1))
-        return jnp.mean(run_filter_batch(filt, init, ys, us_shared)[1].log_likelihood)
+        return jnp.mean(run_filter(filt, init, ys, us_shared)[1].log_likelihood)
 
     chex.assert_numerical_grads(mean_log_likelihood, (jnp.log(TRANSITION + 0.02),), order=1, atol=1e-6, rtol=1e-5)
 
     def remat_mean_log_likelihood(logits):   # the kernel's step rematerialised: same gradient
         filt = checkpointed(interacting_multiple_model(kalman_filter, modes, jax.nn.softmax(logits, axis=1)))
-        return jnp.mean(run_filter_batch(filt, init, ys, us_shared)[1].log_likelihood)
+        return jnp.mean(run_filter(filt, init, ys, us_shared)[1].log_likelihood)
 
     logits = jnp.log(TRANSITION + 0.02)
     np.testing.assert_allclose(jax.grad(remat_mean_log_likelihood)(logits), jax.grad(mean_log_likelihood)(logits),
@@ -310,6 +309,6 @@ def test_batch_kernel_only_for_small_kalman_modes(problem):
 def test_batch_kernel_rejects_bad_shapes(batch_problem):
     imm, init, ys, us = batch_problem
     with pytest.raises(ValueError, match=r"y: expected shape \(2,\)"):
-        run_filter_batch(imm, init, ys[..., :1], us)
+        run_filter(imm, init, ys[..., :1], us)
     with pytest.raises(ValueError, match=r"u: expected shape \(1,\)"):
-        run_filter_batch(imm, init, ys, np.concatenate([us, us], axis=-1))
+        run_filter(imm, init, ys, np.concatenate([us, us], axis=-1))

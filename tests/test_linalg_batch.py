@@ -1,5 +1,5 @@
 """The element-wise small-matrix linear algebra against NumPy/SciPy, and the batch driver
-``run_filter_batch`` against the loop over ``run_filter``."""
+``run_filter`` against the loop over ``run_filter``."""
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -109,7 +109,7 @@ def engine_batch():
 def test_batch_driver_equals_loop_and_shares_the_covariance(engine_batch):
     model, ys_b, us, m0, P0 = engine_batch
     kf = jaxfdi.kalman_filter(model)
-    final, info = jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys_b, us)
+    final, info = jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b, us)
     assert info.filtered_cov.shape == (60, 7, 7) and final.cov.shape == (7, 7)  # once, no run axis
     assert info.filtered_mean.shape == (3, 60, 7)
     for i in range(3):
@@ -120,7 +120,7 @@ def test_batch_driver_equals_loop_and_shares_the_covariance(engine_batch):
             np.testing.assert_allclose(getattr(info, name), getattr(ref, name), rtol=1e-12)
         np.testing.assert_allclose(final.mean[i], final_i.mean, rtol=1e-12)
     # per-run inputs, and covariances kept per run on request
-    _, per_run = jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys_b, np.stack([us] * 3), shared_covariance=False)
+    _, per_run = jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b, np.stack([us] * 3), shared_covariance=False)
     assert per_run.filtered_cov.shape == (3, 60, 7, 7)
     np.testing.assert_allclose(per_run.filtered_cov[1], info.filtered_cov, rtol=1e-12)
 
@@ -128,20 +128,20 @@ def test_batch_driver_equals_loop_and_shares_the_covariance(engine_batch):
 def test_batch_driver_keeps_data_dependent_covariances_per_run(engine_batch):
     model, ys_b, us, m0, P0 = engine_batch
     kf = jaxfdi.kalman_filter(model, missing_measurements=True)
-    _, info = jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys_b, us)  # "auto"
+    _, info = jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b, us)  # "auto"
     assert info.filtered_cov.shape == (3, 60, 7, 7)
     with pytest.raises(ValueError, match="shared_covariance"):
-        jaxfdi.run_filter_batch(kf, kf.init(m0, P0), ys_b, us, shared_covariance=True)
+        jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b, us, shared_covariance=True)
     params, Q, R, ys, us_rb, m0_rb, P0_rb = rigid_body_data(T=30)
     ukf = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
-    _, info = jaxfdi.run_filter_batch(ukf, ukf.init(m0_rb, P0_rb), np.stack([ys, ys]), us_rb)
+    _, info = jaxfdi.run_filter(ukf, ukf.init(m0_rb, P0_rb), np.stack([ys, ys]), us_rb)
     _, ref = jaxfdi.run_filter(ukf, ukf.init(m0_rb, P0_rb), ys, us_rb)
     assert info.filtered_cov.shape == (2, 30, 3, 3)
     np.testing.assert_allclose(info.filtered_mean[1], ref.filtered_mean, rtol=1e-9)
 
 
 @pytest.mark.parametrize("bad, match", [
-    (dict(ys=np.zeros((60, 5))), r"ys: expected shape \(N, T, m\)"),
+    (dict(ys=np.zeros((2, 3, 60, 5))), r"ys: expected shape \(T, m\) for one run or \(N, T, m\) for N runs"),
     (dict(us=np.zeros((2, 60, 1))), r"us: expected 3 runs"),
     (dict(us=np.zeros(60)), r"us: expected shape \(T, nu\)"),
     (dict(shared_covariance="yes"), "shared_covariance"),
@@ -151,7 +151,7 @@ def test_batch_driver_bad_input(engine_batch, bad, match):
     kf = jaxfdi.kalman_filter(model)
     kwargs = dict(ys=ys_b, us=us) | bad
     with pytest.raises(ValueError, match=match):
-        jaxfdi.run_filter_batch(kf, kf.init(m0, P0), **kwargs)
+        jaxfdi.run_filter(kf, kf.init(m0, P0), **kwargs)
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4])

@@ -151,10 +151,12 @@ CASES = {
     "run_filter ys strings": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None,
                                                         np.array([["a"] * M] * T), US), T_, "ys"),
     "run_filter filt not a Filter": (lambda: jaxfdi.run_filter(lambda s, y, u: (s, y), None, YS, US), T_, "filt"),
-    "run_filter_batch ys 2-D": (lambda: jaxfdi.run_filter_batch(jaxfdi.kalman_filter(MODEL), None, YS, US), V, "ys"),
-    "run_filter_batch shared_covariance": (lambda: jaxfdi.run_filter_batch(
+    "run_filter ys 4-D": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None, YS[None, None], US), V, "ys"),
+    "run_filter parallel without an associative scan": (lambda: jaxfdi.run_filter(
+        jaxfdi.kalman_filter(MODEL), None, YS, US, parallel=True), V, "parallel"),
+    "run_filter shared_covariance": (lambda: jaxfdi.run_filter(
         jaxfdi.kalman_filter(MODEL), None, YS[None], US, shared_covariance="yes"), V, "shared_covariance"),
-    "run_filter_batch ys complex": (lambda: jaxfdi.run_filter_batch(jaxfdi.kalman_filter(MODEL), None,
+    "run_filter ys complex": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None,
                                                                     jnp.zeros((2, T, M), complex), US), T_, "ys"),
     "kalman_filter model not a model": (lambda: jaxfdi.kalman_filter((MODEL.Phi, MODEL.C)), T_, "model"),
     # --- EKF / UKF -----------------------------------------------------------------
@@ -567,7 +569,7 @@ CASES = {
                             "start"),
     "stationary duration negative": (lambda: _ins().trajectory.stationary((37.5, 126.9, 100.0), -5.0), V, "duration"),
     "park_legs duration NaN": (lambda: _ins().trajectory.park_legs(float("nan")), V, "duration"),
-    "quaternion_to_euler q (3,)": (lambda: _ins().rotations.quaternion_to_euler(jnp.array([1.0, 0.0, 0.0])), V, "q"),
+    "quaternion_to_euler q (3,)": (lambda: _ins().rotation.quaternion_to_euler(jnp.array([1.0, 0.0, 0.0])), V, "q"),
     "strapdown step specific force (2,)": (lambda: _ins().mechanization.step(None, jnp.zeros(2), jnp.zeros(3), 0.01),
                                            V, "specific_force"),
     "discretize F (14, 14)": (lambda: _ins().error_state.discretize(jnp.zeros((14, 14)), None, 1.0), V, "jacobian"),
@@ -696,9 +698,10 @@ def _receiver(dt=1.0, sigma=jnp.ones((3, 32)), fault=None):
 def _ins():
     import types
 
-    from jaxfdi.ins import error_state, imu, integrity, loosely_coupled, mechanization, rotations, scst, trajectory
+    from jaxfdi.ins import error_state, imu, integrity, loosely_coupled, mechanization, scst, trajectory
+    from jaxfdi.models import rotation
     return types.SimpleNamespace(error_state=error_state, imu=imu, integrity=integrity, loosely_coupled=loosely_coupled,
-                                 mechanization=mechanization, rotations=rotations, scst=scst, trajectory=trajectory)
+                                 mechanization=mechanization, rotation=rotation, scst=scst, trajectory=trajectory)
 
 
 def _ins_init(attitude=jnp.array([1.0, 0.0, 0.0, 0.0]), accel_bias=None):
@@ -773,7 +776,7 @@ def test_second_audit_valid_neighbours_pass():
     assert _gnss().raim_tables(np.int64(32)).threshold.shape == (29,)
     assert _gnss().gps_week_seconds(2020, 1, 4, 23, 59, 59.5) == (2086, 604799.5)
     assert np.isfinite(float(_gnss().elevation_sigma(jnp.asarray(0.0))))
-    quaternion = _ins().rotations.euler_to_quaternion(0.1, -0.05, 2.0).astype(jnp.float32)
+    quaternion = _ins().rotation.euler_to_quaternion(0.1, -0.05, 2.0).astype(jnp.float32)
     assert _ins_init(attitude=quaternion).nav.attitude.shape == (4,)                     # float32 round-off passes
     assert int(metrics.record_init(jaxfdi.faults.NEVER).onset) == jaxfdi.faults.NEVER
     assert int(metrics.record_from_alarms(jnp.array([0, 1, 1]), 1).detection_step) == 1   # 0/1 integer alarms

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from _linear_gaussian_cases import condition, engine_filtered, joint_gaussian, small_model
-from jaxfdi.filters import GaussianState, parallel_kalman_filter
+from jaxfdi.filters import GaussianState, kalman_filter, run_filter
 from jaxfdi.models import LinearGaussianModel
 
 
@@ -18,7 +18,7 @@ def test_parallel_equals_sequential_on_the_engine():
     """Every FilterInfo field and the final prediction within 1e-9 (relative to the
     field's largest value) of run_filter(kalman_filter), float64."""
     model, ys, us, m0, P0, (final, info) = engine_filtered()
-    got_final, got = parallel_kalman_filter(model, GaussianState(m0, P0), ys, us)
+    got_final, got = run_filter(kalman_filter(model, missing_measurements=True), GaussianState(m0, P0), ys, us, parallel=True)
     for name in ("predicted_mean", "predicted_cov", "filtered_mean", "filtered_cov", "innovation", "innovation_cov",
                  "log_likelihood", "nis"):
         assert _rel(getattr(got, name), getattr(info, name)) < 1e-9, name
@@ -34,7 +34,7 @@ def test_parallel_equals_dense_conditioning(T=13):
     rng = np.random.default_rng(4)
     us, ys = rng.normal(size=(T, 1)), rng.normal(size=(T, 2)) * 2.0
     m0, P0 = np.array([0.3, -0.1, 0.2]), np.diag([0.5, 0.4, 0.3])
-    _, info = parallel_kalman_filter(model, GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
+    _, info = run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us, parallel=True)
     joint = joint_gaussian(model, m0, P0, us, T)
     for k in range(T):
         mean, cov, log_density = condition(joint, ys, k + 1)
@@ -56,7 +56,7 @@ def test_a_dead_sensor_is_left_out_exactly_and_reported(T=13):
     ys[4:9, 1] = np.nan
     ys[10, 0] = np.inf
     m0, P0 = np.array([0.3, -0.1, 0.2]), np.diag([0.5, 0.4, 0.3])
-    _, info = parallel_kalman_filter(model, GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
+    _, info = run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us, parallel=True)
     joint = joint_gaussian(model, m0, P0, us, T)
     flat = ys.ravel()
     for k in range(T):
@@ -83,13 +83,13 @@ def test_bad_input():
     ys, us = np.zeros((13, 2)), np.zeros((13, 1))
     prior = GaussianState(jnp.zeros(3), jnp.eye(3))
     with pytest.raises(ValueError, match="ys"):
-        parallel_kalman_filter(model, prior, ys[:, :1], us)
+        run_filter(kalman_filter(model, missing_measurements=True), prior, ys[:, :1], us, parallel=True)
     with pytest.raises(ValueError, match="us"):
-        parallel_kalman_filter(model, prior, ys, us[:5])
+        run_filter(kalman_filter(model, missing_measurements=True), prior, ys, us[:5], parallel=True)
     with pytest.raises(TypeError, match="init_state"):
-        parallel_kalman_filter(model, (jnp.zeros(3), jnp.eye(3)), ys, us)
+        run_filter(kalman_filter(model, missing_measurements=True), (jnp.zeros(3), jnp.eye(3)), ys, us, parallel=True)
     with pytest.raises(ValueError, match="init_state.cov"):
-        parallel_kalman_filter(model, GaussianState(jnp.zeros(3), -jnp.eye(3)), ys, us)
+        run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.zeros(3), -jnp.eye(3)), ys, us, parallel=True)
 
 
 _LONG_SEQUENCE = r"""
@@ -99,7 +99,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp
 import numpy as np
 import jaxfdi
-from jaxfdi.filters import GaussianState, parallel_kalman_filter, parallel_rts_smoother, rts_smoother
+from jaxfdi.filters import GaussianState, kalman_filter, parallel_rts_smoother, rts_smoother, run_filter
 from jaxfdi.models import engine_model
 
 model, T = engine_model(), int(sys.argv[1])
@@ -108,7 +108,7 @@ ys = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.zeros(7), us, jax.rando
 prior = GaussianState(jnp.zeros(7), 10.0 * model.Q)
 kf = jaxfdi.kalman_filter(model, unroll_factorizations=False)
 parallel = jax.jit(lambda y: (lambda info: (info, parallel_rts_smoother(model, info)))(
-    parallel_kalman_filter(model, prior, y, us)[1]))
+    run_filter(kalman_filter(model, missing_measurements=True), prior, y, us, parallel=True)[1]))
 for _ in range(3):  # with LAPACK inside, the 2nd or 1st call never returned
     info, smooth = jax.block_until_ready(parallel(ys))
 ref = jaxfdi.run_filter(kf, prior, ys, us)[1]

@@ -8,7 +8,6 @@ from _linear_gaussian_cases import condition, engine_filtered, joint_gaussian, s
 from jaxfdi.filters import (
     GaussianState,
     kalman_filter,
-    parallel_kalman_filter,
     parallel_rts_smoother,
     rts_smoother,
     run_filter,
@@ -41,7 +40,7 @@ def test_smoother_equals_dense_conditioning(smoother):
     mean, cov, _ = condition(joint_gaussian(model, m0, P0, us, T), ys)
     kf = kalman_filter(model)
     infos = (run_filter(kf, kf.init(m0, P0), ys, us)[1],
-             parallel_kalman_filter(model, GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us)[1])
+             run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us, parallel=True)[1])
     for info in infos:
         result = smoother(model, info)
         np.testing.assert_allclose(result.mean, mean.reshape(T, 3), rtol=1e-9, atol=1e-12)
@@ -51,7 +50,7 @@ def test_smoother_equals_dense_conditioning(smoother):
 
 def test_bad_input():
     model, T = small_model(), 13
-    _, info = parallel_kalman_filter(model, GaussianState(jnp.zeros(3), jnp.eye(3)), np.zeros((T, 2)), np.zeros((T, 1)))
+    _, info = run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.zeros(3), jnp.eye(3)), np.zeros((T, 2)), np.zeros((T, 1)), parallel=True)
     with pytest.raises(TypeError, match="info"):
         rts_smoother(model, (info.filtered_mean, info.filtered_cov))
     with pytest.raises(ValueError, match="info.filtered_cov"):

@@ -4,14 +4,13 @@ Gaussian filters (KF, EKF, UKF), the multiple-model filters built on them (IMM, 
 the two-stage (bias) Kalman filter, optimal or robust to an unknown input, and the
 unbiased minimum-variance filter that decouples an unknown input.
 """
-from jaxfdi.filters._base import ConditionedGaussian, Filter, FilterInfo, GaussianState, gaussian_filter, run_filter, run_filter_batch
+from jaxfdi.filters._base import ConditionedGaussian, Filter, FilterInfo, GaussianState, gaussian_filter, run_filter
 from jaxfdi.filters._mixture import IMMInfo, IMMState
 from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.kalman_batch import run_kalman_batch
 from jaxfdi.filters.mm import multiple_model
-from jaxfdi.filters.parallel import parallel_kalman_filter
 from jaxfdi.filters.posterior import init_from_posterior
 from jaxfdi.filters.tskf import (
     FaultDirection,
@@ -37,10 +36,8 @@ __all__ = [
     "FilterInfo",
     "GaussianState",
     "run_filter",
-    "run_filter_batch",
     "kalman_filter",
     "run_kalman_batch",
-    "parallel_kalman_filter",
     "rts_smoother",
     "parallel_rts_smoother",
     "SmootherResult",

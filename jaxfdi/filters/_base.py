@@ -64,7 +64,7 @@ class ConditionedGaussian(NamedTuple):
 
 class BatchKernel(NamedTuple):
     """A filter's step for a whole batch of runs in a layout of its own (e.g. structure of
-    arrays), which ``run_filter_batch`` uses instead of ``vmap`` when a filter has one.
+    arrays), which ``run_filter`` uses for N runs instead of ``vmap`` when a filter has one.
 
     ``pack(state, N)`` lays out the prior shared by the N runs; ``step(carry, y, u)``
     takes ``y`` (m, N) and ``u`` (nu, N) or (nu, 1); ``unpack_state(carry)`` and
@@ -102,7 +102,9 @@ class Filter(NamedTuple):
     ``predict(update(...))`` plus the ``FilterInfo``.
 
     ``batch``, when present, is the same step for a batch of runs (``BatchKernel``),
-    what ``run_filter_batch`` runs.
+    what ``run_filter`` runs for N runs; ``parallel``, when present, is the whole
+    sequence as an associative scan, ``parallel(init_state, ys, us) -> (final, info)``,
+    what ``run_filter(..., parallel=True)`` runs.
     """
 
     init: Callable[..., Any]
@@ -110,6 +112,7 @@ class Filter(NamedTuple):
     update: Callable[[Any, Array, Array], ConditionedGaussian] | None = None
     predict: Callable[[GaussianState, Array], GaussianState] | None = None
     batch: BatchKernel | None = None
+    parallel: Callable[[Any, Array, Array | None], tuple[Any, Any]] | None = None
 
 
 def finish_step(prior: GaussianState, post: ConditionedGaussian, prediction: GaussianState, unroll: bool = True):
@@ -236,25 +239,55 @@ def run_filter(
     init_state: Any,
     ys: Array,
     us: Array | None = None,
+    *,
+    parallel: bool = False,
+    shared_covariance: bool | str = "auto",
 ) -> tuple[Any, Any]:
-    """Run a filter over a whole sequence with one ``lax.scan``.
+    """Run a filter over one sequence, or over a batch of sequences (Monte Carlo runs).
+
+    The one driver of every ``Filter``. One sequence ``ys`` (T, m) is one ``lax.scan`` of
+    ``filt.step``; with ``parallel=True`` it is the filter's associative scan instead
+    (O(log T) depth; the linear Kalman filter built with ``missing_measurements=True``),
+    the same outputs to round-off. A batch ``ys`` (N, T, m) runs all N sequences at once:
+    a filter with a structure-of-arrays kernel (the IMM over ``kalman_filter`` modes; the
+    linear KF when the runs have their own prior) runs it, any other filter is
+    vmapped. When every run shares the model and the initial covariance, a linear Kalman
+    filter's covariances, gains and innovation covariances do not depend on the data:
+    they are computed once for the batch and returned once, without the run axis.
 
     Args:
       filt: a ``Filter``.
-      init_state: ``filt.init(mean, cov)``, the prior of the first step.
-      ys: (T, m) measurements (NaN = missing for filters built with
-        ``missing_measurements=True``).
-      us: (T, nu) inputs, or ``None`` for a model without inputs.
+      init_state: ``filt.init(mean, cov)``, the prior of the first step; for a batch of a
+        Gaussian filter also one per run, ``GaussianState(mean (N, n), cov (N, n, n))``
+        (either of the two may be shared).
+      ys: (T, m) measurements of one run, or (N, T, m) of N runs (NaN = not measured
+        for filters built with ``missing_measurements=True``; any other non-finite value
+        is a dead sensor, reported and kept out of the state).
+      us: (T, nu) inputs (shared by the runs of a batch), (N, T, nu) per run, or ``None``
+        for a model without inputs.
+      parallel: run the associative scan (``ValueError`` for a filter without one).
+      shared_covariance: for a batch: ``True``: return ``predicted_cov``,
+        ``filtered_cov``, ``innovation_cov`` and the final covariance without the run axis
+        (a ``ValueError`` if they depend on the run: a nonlinear filter, or
+        ``missing_measurements=True``); ``False``: with the run axis, always; ``"auto"``:
+        shared when they are.
 
     Returns:
       ``(final_state, info)``: the prior for step T and the per-step outputs stacked
-      along a leading time axis (e.g. ``info.filtered_mean`` is (T, n)).
+      along a leading time axis (``info.filtered_mean`` is (T, n)), after a leading run
+      axis N for a batch.
     """
     check_filter(filt)
-    check_sequences(ys, us, "(T, m)", "(T, nu)")
+    check_sequences(ys, us, "(T, m) for one run or (N, T, m) for N runs", "(T, nu) or (N, T, nu)")
     ys = jnp.asarray(ys)
+    if ys.ndim == 3:
+        return _run_batch(filt, init_state, ys, us, parallel, shared_covariance)
     if ys.ndim != 2:
-        raise ValueError(f"ys: expected shape (T, m), got {tuple(ys.shape)}")
+        raise ValueError(f"ys: expected shape (T, m) for one run or (N, T, m) for N runs, got {tuple(ys.shape)}")
+    if shared_covariance not in (True, False, "auto"):
+        raise ValueError(f"shared_covariance: expected True, False or 'auto', got {shared_covariance!r}")
+    if parallel:
+        return _check_parallel(filt)(init_state, ys, us)
     if us is None:
         us = jnp.zeros((ys.shape[0], 0), ys.dtype)
     us = jnp.asarray(us)
@@ -267,49 +300,19 @@ def run_filter(
         return _scan_filter(filt, init_state, ys, us)
 
 
+def _check_parallel(filt: Filter) -> Callable[[Any, Array, Array | None], tuple[Any, Any]]:
+    if filt.parallel is None:
+        raise ValueError("parallel: this filter has no parallel-in-time form; the associative scan is the linear "
+                         "Kalman filter's, kalman_filter(model, missing_measurements=True)")
+    return filt.parallel
+
+
 _COVARIANCE_FIELDS = ("predicted_cov", "filtered_cov", "innovation_cov")
 
 
-def run_filter_batch(
-    filt: Filter,
-    init_state: Any,
-    ys: Array,
-    us: Array | None = None,
-    shared_covariance: bool | str = "auto",
-) -> tuple[Any, Any]:
-    """Run a filter over a batch of sequences (Monte Carlo runs) with ``vmap``.
-
-    A filter with a ``batch`` kernel (the IMM over ``kalman_filter`` modes; the linear KF
-    when the runs have their own prior) runs it: one step for all runs in its own
-    layout, with the same results as ``vmap`` (to round-off).
-
-    When every run shares the model and the initial covariance, a linear Kalman filter's
-    covariances, gains and innovation covariances do not depend on the data: XLA then
-    computes them once for the whole batch, and this driver returns them once (no run
-    axis) instead of ``N`` identical copies — for 100 engine runs of 1000 steps the
-    copies alone are 39 MB and half the run time.
-
-    Args:
-      filt: a ``Filter``.
-      init_state: the prior of the first step, shared by all runs; for a Gaussian filter
-        also one per run, ``GaussianState(mean (N, n), cov (N, n, n))`` (either of the two
-        may be shared). Runs with their own model: ``filters.run_kalman_batch``.
-      ys: (N, T, m) measurements of N runs.
-      us: (T, nu) inputs shared by the runs, (N, T, nu) per run, or ``None``.
-      shared_covariance: ``True``: return ``predicted_cov``, ``filtered_cov``,
-        ``innovation_cov`` and the final covariance without the run axis (a
-        ``ValueError`` if they depend on the run: a nonlinear filter, or
-        ``missing_measurements=True``); ``False``: with the run axis, always;
-        ``"auto"``: shared when they are, else with the run axis.
-
-    Returns:
-      ``(final_state, info)`` with a leading run axis N on every per-run field.
-    """
-    check_filter(filt)
-    check_sequences(ys, us, "(N, T, m)", "(T, nu) or (N, T, nu)")
-    ys = jnp.asarray(ys)
-    if ys.ndim != 3:
-        raise ValueError(f"ys: expected shape (N, T, m) for N runs, got {tuple(ys.shape)}")
+def _run_batch(filt: Filter, init_state: Any, ys: Array, us: Array | None, parallel: bool,
+               shared_covariance: bool | str) -> tuple[Any, Any]:
+    """``run_filter`` over N runs, ``ys`` (N, T, m)."""
     if us is None:
         us = jnp.zeros(ys.shape[1:2] + (0,), ys.dtype)
     us = jnp.asarray(us)
@@ -320,6 +323,8 @@ def run_filter_batch(
     if shared_covariance not in (True, False, "auto"):
         raise ValueError(f"shared_covariance: expected True, False or 'auto', got {shared_covariance!r}")
     us_axis = 0 if us.ndim == 3 else None
+    if parallel:
+        return jax.vmap(_check_parallel(filt), in_axes=(None, 0, us_axis))(init_state, ys, us)
     gaussian = isinstance(init_state, GaussianState)
     if shared_covariance is True and not gaussian:
         raise ValueError(

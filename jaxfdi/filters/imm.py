@@ -72,7 +72,7 @@ def interacting_multiple_model(
       posterior ``mu0``, ``u`` the input before ``y[0]``, ``None`` without inputs): mixing
       and mode-matched prediction, as ``init_from_posterior(imm, mean, cov, u, mode_prob)``;
       ``step(state, y, u) -> (IMMState, IMMInfo)``. Over ``kalman_filter`` modes of up
-      to 16 states (``imm_batch.supports``), ``run_filter_batch`` runs the
+      to 16 states (``imm_batch.supports``), ``run_filter`` runs the
       structure-of-arrays step of ``imm_batch.py`` (2.5x faster than ``vmap`` on 100
       engine runs), with the same results.
     """
@@ -86,7 +86,7 @@ def interacting_multiple_model(
     log_transition = safe_log(transition)
     batch = None
     if mode_filter is kalman_filter and isinstance(mode_params, LinearGaussianModel) and supports(mode_params):
-        batch = kalman_imm_batch_kernel(mode_params, log_transition)  # run_filter_batch's path
+        batch = kalman_imm_batch_kernel(mode_params, log_transition)  # run_filter's path
 
     def init(mean: Array, cov: Array, mode_prob: Array, *, posterior: bool = False, u: Array | None = None) -> IMMState:
         state = bank_init(mode_filter, mode_params, M, mean, cov, mode_prob)

@@ -1,5 +1,5 @@
 """The IMM over linear Kalman modes, one step for a whole batch of runs, in a
-structure-of-arrays layout: what ``run_filter_batch`` runs for
+structure-of-arrays layout: what ``run_filter`` runs for
 ``interacting_multiple_model(kalman_filter, LinearGaussianModel modes, pi)``.
 
 Same recursion as ``imm.py`` (seed 003 eqs. 6-12, Blom & Bar-Shalom 1988), same

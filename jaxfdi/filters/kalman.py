@@ -9,6 +9,8 @@ a dead (non-finite) component is reported, never used (``filters._base``).
 """
 from __future__ import annotations
 
+from functools import partial
+
 import jax.numpy as jnp
 from jax import Array
 
@@ -27,6 +29,7 @@ from jaxfdi.filters._base import (
     used_innovation,
 )
 from jaxfdi.filters.kalman_batch import kalman_batch_kernel, supports
+from jaxfdi.filters.parallel import parallel_scan
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
@@ -88,8 +91,10 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
         its cost from 42 to 30 ms and its compile time from 4.4 to 2.0 s
         (``benchmarks/bench_tuning.py``).
 
-    ``run_filter_batch`` over runs with their own prior runs the structure-of-arrays
-    step of ``kalman_batch.py``; runs with their own model: ``run_kalman_batch``.
+    ``run_filter`` over runs with their own prior runs the structure-of-arrays step of
+    ``kalman_batch.py``; runs with their own model: ``run_kalman_batch``. With
+    ``missing_measurements=True`` the filter also runs as an associative scan,
+    ``run_filter(..., parallel=True)`` (Särkkä and García-Fernández 2021; ``parallel.py``).
     """
     n, nu, m = validate_linear_model(model)
 
@@ -105,6 +110,8 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
         return GaussianState(next_mean, _linalg.symmetrize(mm(mm(model.Phi, post.cov), model.Phi.T) + model.Q))
 
     filt = gaussian_filter(n, update, predict, unroll_factorizations)
-    if missing_measurements or not supports(model):
+    if missing_measurements:  # dead components left out exactly, as the associative scan does
+        return filt._replace(parallel=partial(parallel_scan, model))
+    if not supports(model):
         return filt
-    return filt._replace(batch=kalman_batch_kernel(model))  # run_filter_batch, runs with their own prior
+    return filt._replace(batch=kalman_batch_kernel(model))  # run_filter over runs with their own prior

@@ -1,5 +1,5 @@
 """The linear Kalman filter for a whole batch of runs in one step, structure-of-arrays
-layout: what ``run_filter_batch`` runs when the runs carry their own prior, and what
+layout: what ``run_filter`` runs when the runs carry their own prior, and what
 ``run_kalman_batch`` runs when they carry their own model (a different ``Q``, ``R`` or
 ``Phi`` per run).
 

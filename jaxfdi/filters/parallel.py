@@ -23,7 +23,7 @@ and step 0 conditions the prior ``N(m0, P0)`` on ``y_0`` (``A = 0``, ``eta = 0``
 and the prefix combination up to ``k`` is ``N(x_k | y_0..y_k) = N(b, C)``. The
 predictions, innovations, likelihoods and health flags of ``FilterInfo`` follow from the
 filtered moments for all steps at once, so the outputs are those of
-``run_filter(kalman_filter(model), ...)`` (to round-off).
+``run_filter(kalman_filter(model, missing_measurements=True), ...)`` (to round-off).
 
 Where it wins: it does about 4x the arithmetic of the sequential filter (n x n solves
 in each combination, ``2T`` combinations), in ``2 log2 T`` rounds; so it pays where a
@@ -136,9 +136,10 @@ def combine_filtering(earlier: FilteringElement, later: FilteringElement) -> Fil
     )
 
 
-def parallel_kalman_filter(model: LinearGaussianModel, init_state: GaussianState, ys: Array,
-                           us: Array | None = None) -> tuple[GaussianState, FilterInfo]:
-    """Kalman filter over a whole sequence by an associative scan (module doc).
+def parallel_scan(model: LinearGaussianModel, init_state: GaussianState, ys: Array,
+                  us: Array | None = None) -> tuple[GaussianState, FilterInfo]:
+    """Kalman filter over a whole sequence by an associative scan (module doc): what
+    ``run_filter(kalman_filter(model, missing_measurements=True), ..., parallel=True)`` runs.
 
     Args:
       model: a ``LinearGaussianModel``.
@@ -147,7 +148,7 @@ def parallel_kalman_filter(model: LinearGaussianModel, init_state: GaussianState
       us: (T, nu) inputs, or ``None``.
 
     Returns:
-      ``(final_state, info)`` as ``run_filter(kalman_filter(model), init_state, ys, us)``:
+      ``(final_state, info)`` as ``run_filter(kalman_filter(model, True), init_state, ys, us)``:
       the prediction for step T and the per-step ``FilterInfo`` (leading axis T).
     """
     n, nu, m = validate_linear_model(model)

@@ -54,8 +54,8 @@ def rts_smoother(model: LinearGaussianModel, info: FilterInfo) -> SmootherResult
 
     Args:
       model: the ``LinearGaussianModel`` the filter ran with (``Phi`` is used).
-      info: ``FilterInfo`` of ``run_filter(kalman_filter(model), ...)`` (or of
-        ``parallel_kalman_filter``), leading axis T.
+      info: ``FilterInfo`` of ``run_filter(kalman_filter(model), ...)`` (also with
+        ``parallel=True``), leading axis T.
     """
     Phi, info = _check(model, info)
     return _sequential(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)

@@ -52,7 +52,7 @@ from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.metrics import DetectionRecord, fault_row, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
-from jaxfdi.filters._base import run_filter_batch
+from jaxfdi.filters import run_filter
 from jaxfdi.monitor import monitor, replay_detector
 from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.progress import logger
@@ -495,7 +495,7 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
 
     def imm_chunk(design: str):
         """The IMM structures over a whole chunk: the plant simulated per run, the IMM
-        bank through its structure-of-arrays kernel (``run_filter_batch``), then each
+        bank through its structure-of-arrays kernel (``run_filter``), then each
         decision rule replayed on the stored mode probabilities with the filter's health:
         the records ``monitor`` gives (to round-off: the kernel's covariance update is the
         standard form)."""
@@ -503,7 +503,7 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
             modes, prior, detector_input, delay = mode_bank(design, filt)
             imm = interacting_multiple_model(kalman_filter, modes, filt.mixing)
             ys = jax.vmap(lambda k, f: simulate(linear_simulator(model, f), x0, us, k)[1].measurement)(keys, faults)
-            _, info = run_filter_batch(imm, imm.init(*prior, mu0), ys, us)
+            _, info = run_filter(imm, imm.init(*prior, mu0), ys, us)
             detector = mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps)
             inputs = jax.vmap(jax.vmap(detector_input))(info)
             records = jax.vmap(lambda x, onset, ok, dead: replay_detector(detector, x, onset, delay, ok, dead,

@@ -69,16 +69,27 @@ class Target(enum.IntEnum):
 
 
 class Fault(NamedTuple):
-    """One fault (scalar leaves) or a batch of faults (leaves with leading axes)."""
+    """One fault (scalar leaves) or a batch of faults (leaves with leading axes).
 
-    kind: Array       # int, a FaultKind
-    target: Array     # int, a Target
-    component: Array  # int, index into u (actuator) or y (sensor)
-    onset: Array      # int, first faulty step
-    magnitude: Array  # float
-    slope: Array      # float, per step (RAMP)
-    end: Array        # int, first step after the fault (NEVER = permanent)
-    label: Array = -1  # int, mode label; -1: derived from target and component (``fault_label``)
+    Attributes:
+      kind: int, a FaultKind
+      target: int, a Target
+      component: int, index into u (actuator) or y (sensor)
+      onset: int, first faulty step
+      magnitude: float, the fault's size (its use per kind: the table above)
+      slope: float, per step (RAMP)
+      end: int, first step after the fault (NEVER = permanent)
+      label: int, mode label; -1: derived from target and component (``fault_label``)
+    """
+
+    kind: Array
+    target: Array
+    component: Array
+    onset: Array
+    magnitude: Array
+    slope: Array
+    end: Array
+    label: Array = -1
 
 
 def _enum_value(name: str, value, enum_type):
@@ -212,7 +223,7 @@ def sensor_labels(num_inputs: int, num_sensors: int) -> Array:
 def fault_label(f: Fault, num_inputs: int) -> Array:
     """Integer mode label: 0 no fault, ``1 + i`` actuator i, ``1 + num_inputs + j`` sensor j.
 
-    For the engine (one input) this is the seed-003 order: normal, actuator, RPM, P2, T2,
+    For the engine (one input) this is the mode order of Han et al. (2022): normal, actuator, RPM, P2, T2,
     P4, T4. An explicit ``f.label`` (>= 0) takes precedence (a ``fault_group``'s label).
     """
     derived = jnp.where(f.target == Target.ACTUATOR, 1 + f.component, 1 + num_inputs + f.component)

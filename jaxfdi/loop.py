@@ -27,7 +27,7 @@ Step ``k`` (``Ts`` apart):
 
 ``monitor`` (open loop: precomputed inputs, one filter, one detector) is this scan with
 ``feedforward()`` as the controller. A component that must re-run a filter over its last
-``L`` steps (seed 000's UKF restarts 2-3 steps before the detection) keeps a fixed-size
+``L`` steps (the UKF of Park et al. 2004 restarts 2-3 steps before the detection) keeps a fixed-size
 ``RingBuffer`` in its own state and replays it with ``replay_filter``: bounded, and
 ``jit``/``vmap`` friendly.
 """
@@ -93,20 +93,35 @@ class Scorer(NamedTuple):
 
 
 class LoopTrace(NamedTuple):
-    """One step of a run (stacked over time with ``keep_history=True``)."""
+    """One step of a run (stacked over time with ``keep_history=True``).
 
-    sensed: Any    # what ``measure`` returned (e.g. ``simulate.Sensed``)
-    view: Any      # what the controller saw
-    control: Array  # u[k]
-    output: Any    # what ``fdi.step`` returned
-    moved: Any     # what ``advance`` returned (e.g. ``simulate.Actuated``)
+    Attributes:
+      sensed: what ``measure`` returned (e.g. ``simulate.Sensed``)
+      view: what the controller saw
+      control: u[k]
+      output: what ``fdi.step`` returned
+      moved: what ``advance`` returned (e.g. ``simulate.Actuated``)
+    """
+
+    sensed: Any
+    view: Any
+    control: Array
+    output: Any
+    moved: Any
 
 
 class LoopResult(NamedTuple):
-    """What ``run_loop`` returns: the scorer's final value, the history (optional) and the final states."""
-    score: Any                 # ``scorer``'s final value (``None`` without a scorer)
-    history: LoopTrace | None  # (T, ...) with ``keep_history=True``
-    final: Any = None          # (plant, fdi, controller) states after the last step
+    """What ``run_loop`` returns: the scorer's final value, the history (optional) and the final states.
+
+    Attributes:
+      score: ``scorer``'s final value (``None`` without a scorer)
+      history: (T, ...) with ``keep_history=True``
+      final: (plant, fdi, controller) states after the last step
+    """
+
+    score: Any
+    history: LoopTrace | None
+    final: Any = None
 
 
 def feedforward() -> Controller:
@@ -366,10 +381,15 @@ def combine_scorers(**scorers: Scorer) -> Scorer:
 # --- history ------------------------------------------------------------------------
 
 class RingBuffer(NamedTuple):
-    """The last ``L`` entries of a stream, fixed-size (a pytree: lives in a scan carry)."""
+    """The last ``L`` entries of a stream, fixed-size (a pytree: lives in a scan carry).
 
-    data: Any      # pytree, leaves (L, ...)
-    count: Array   # () int, entries pushed so far
+    Attributes:
+      data: pytree, leaves (L, ...)
+      count: () int, entries pushed so far
+    """
+
+    data: Any
+    count: Array
 
     @property
     def length(self) -> int:

@@ -23,13 +23,23 @@ from jaxfdi.simulate import SimStep, Simulator
 
 
 class MonitorHistory(NamedTuple):
-    """Per-step history of a monitored run: labelled truth, filter outputs, statistic, alarm and label."""
-    truth: SimStep       # (T, ...) labelled truth
-    info: FilterInfo     # (T, ...) filter outputs
-    statistic: Array     # (T,) test statistic
-    alarm: Array         # (T,) bool decision
-    label: Array         # (T,) int isolated label (-1: the detector does not isolate)
-    estimate: Array      # (T,) the detector's fault estimate (NaN: none)
+    """Per-step history of a monitored run: labelled truth, filter outputs, statistic, alarm and label.
+
+    Attributes:
+      truth: (T, ...) labelled truth
+      info: (T, ...) filter outputs
+      statistic: (T,) test statistic
+      alarm: (T,) bool decision
+      label: (T,) int isolated label (-1: the detector does not isolate)
+      estimate: (T,) the detector's fault estimate (NaN: none)
+    """
+
+    truth: SimStep
+    info: FilterInfo
+    statistic: Array
+    alarm: Array
+    label: Array
+    estimate: Array
 
 
 class MonitorResult(NamedTuple):

@@ -63,22 +63,41 @@ from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
 class DareSolution(NamedTuple):
-    solution: Array         # (n, n) X, the stabilising solution when ``converged``
-    converged: Array        # () bool: X finite, residual <= sqrt(eps), closed loop stable
-    iterations: Array       # () int: doubling steps taken (X is the 2^iterations-step iterate)
-    residual: Array         # () relative DARE residual of X (inf when X is not finite)
-    spectral_radius: Array  # () max |eig(A - B K)|, K = (R + B^T X B)^-1 B^T X A (inf when not finite)
+    """A discrete algebraic Riccati equation's solution with its checks.
+
+    Attributes:
+      solution: (n, n) X, the stabilising solution when ``converged``
+      converged: () bool: X finite, residual <= sqrt(eps), closed loop stable
+      iterations: () int: doubling steps taken (X is the 2^iterations-step iterate)
+      residual: () relative DARE residual of X (inf when X is not finite)
+      spectral_radius: () max |eig(A - B K)|, K = (R + B^T X B)^-1 B^T X A (inf when not finite)
+    """
+
+    solution: Array
+    converged: Array
+    iterations: Array
+    residual: Array
+    spectral_radius: Array
 
 
 class SteadyStateKalman(NamedTuple):
-    """Steady-state Kalman filter of a ``LinearGaussianModel``."""
+    """Steady-state Kalman filter of a ``LinearGaussianModel``.
 
-    predicted_cov: Array    # (n, n) P = lim P[k|k-1]
-    innovation_cov: Array   # (m, m) S = C P C^T + R
-    gain: Array             # (n, m) K = P C^T S^-1, the measurement-update gain
-    converged: Array        # () bool, from the Riccati solver (a stabilising solution was found)
-    residual: Array         # () relative residual of the filter Riccati equation
-    spectral_radius: Array  # () max |eig(Phi (I - K C))|, the predictor's error dynamics (< 1)
+    Attributes:
+      predicted_cov: (n, n) P = lim P[k|k-1]
+      innovation_cov: (m, m) S = C P C^T + R
+      gain: (n, m) K = P C^T S^-1, the measurement-update gain
+      converged: () bool, from the Riccati solver (a stabilising solution was found)
+      residual: () relative residual of the filter Riccati equation
+      spectral_radius: () max |eig(Phi (I - K C))|, the predictor's error dynamics (< 1)
+    """
+
+    predicted_cov: Array
+    innovation_cov: Array
+    gain: Array
+    converged: Array
+    residual: Array
+    spectral_radius: Array
 
 
 #: the message of every "no stabilising solution" error

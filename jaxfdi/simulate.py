@@ -4,7 +4,7 @@
 then sensor faults act on ``y[k]``; ``u_f`` is the commanded ``u`` after actuator
 faults, ``w_u ~ N(0, Q_u)`` optional input noise (IMU noise driving an INS, motor torque
 noise), ``G`` an optional process-noise gain (default identity). The feed-through in ``h``
-sees the input given to ``measure`` (seed 003 eq. (4), ``y = C x + D u + v + nu_y``).
+sees the input given to ``measure`` (eq. (4) of Han et al. 2022, ``y = C x + D u + v + nu_y``).
 
 Time enters in three ways, each optional:
 
@@ -38,37 +38,67 @@ from jaxfdi.models.linear import LinearGaussianModel, linear_observation, linear
 
 
 class SimState(NamedTuple):
-    state: Array  # (n,) true state x[k]
-    held: Array   # (F,) values held by STUCK faults
+    """The simulator's carry: the true state and the values stuck faults hold.
+
+    Attributes:
+      state: (n,) true state x[k]
+      held: (F,) values held by STUCK faults
+    """
+
+    state: Array
+    held: Array
 
 
 class Sensed(NamedTuple):
-    """What ``measure`` returns besides the state: the sensor half of a ``SimStep``."""
+    """What ``measure`` returns besides the state: the sensor half of a ``SimStep``.
 
-    state: Array           # (n,)  true x[k]
-    measurement: Array     # (m,)  y[k], noisy and faulty (NaN where not available)
-    sensor_fault: Array    # (m,)  fault added to y[k]
-    fault_active: Array    # (F,)  bool per fault
-    mode: Array            # ()    int label of the first active fault, 0 if none
+    Attributes:
+      state: (n,) true x[k]
+      measurement: (m,) y[k], noisy and faulty (NaN where not available)
+      sensor_fault: (m,) fault added to y[k]
+      fault_active: (F,) bool per fault
+      mode: () int label of the first active fault, 0 if none
+    """
+
+    state: Array
+    measurement: Array
+    sensor_fault: Array
+    fault_active: Array
+    mode: Array
 
 
 class Actuated(NamedTuple):
-    """What ``advance`` returns besides the state: the actuator half of a ``SimStep``."""
+    """What ``advance`` returns besides the state: the actuator half of a ``SimStep``.
 
-    applied_input: Array   # (nu,) u after actuator faults (and input noise)
-    actuator_fault: Array  # (nu,) applied - commanded input
+    Attributes:
+      applied_input: (nu,) u after actuator faults (and input noise)
+      actuator_fault: (nu,) applied - commanded input
+    """
+
+    applied_input: Array
+    actuator_fault: Array
 
 
 class SimStep(NamedTuple):
-    """Labelled truth of one step (stacked over time by ``simulate``)."""
+    """Labelled truth of one step (stacked over time by ``simulate``).
 
-    state: Array           # (n,)  true x[k]
-    measurement: Array     # (m,)  y[k], noisy and faulty
-    applied_input: Array   # (nu,) u after actuator faults
-    actuator_fault: Array  # (nu,) applied - commanded input
-    sensor_fault: Array    # (m,)  fault added to y[k]
-    fault_active: Array    # (F,)  bool per fault
-    mode: Array            # ()    int label of the first active fault, 0 if none
+    Attributes:
+      state: (n,) true x[k]
+      measurement: (m,) y[k], noisy and faulty
+      applied_input: (nu,) u after actuator faults
+      actuator_fault: (nu,) applied - commanded input
+      sensor_fault: (m,) fault added to y[k]
+      fault_active: (F,) bool per fault
+      mode: () int label of the first active fault, 0 if none
+    """
+
+    state: Array
+    measurement: Array
+    applied_input: Array
+    actuator_fault: Array
+    sensor_fault: Array
+    fault_active: Array
+    mode: Array
 
 
 class Simulator(NamedTuple):

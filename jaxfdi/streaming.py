@@ -37,23 +37,41 @@ from jaxfdi.metrics import DetectionRecord, DetectionSummary
 
 
 class DetectionCounts(NamedTuple):
-    """Exact counts over runs (host-side NumPy int64); merge with ``merge_counts``."""
+    """Exact counts over runs (host-side NumPy int64); merge with ``merge_counts``.
 
-    runs: np.ndarray               # () all runs
-    unhealthy_runs: np.ndarray     # () runs with a step that was not healthy
-    faulty_runs: np.ndarray        # () healthy runs with an onset within the horizon
-    detected_runs: np.ndarray      # () of those, with an alarm at or after the onset
-    labelled_runs: np.ndarray      # () faulty runs whose true label was given
-    isolated_runs: np.ndarray      # () of those, detected and isolated as their label
-    false_alarm_runs: np.ndarray   # () healthy runs with an alarm before the onset
-    false_alarm_steps: np.ndarray  # () alarm steps before the onset (healthy runs)
-    pre_onset_steps: np.ndarray    # () steps before the onset (healthy runs)
-    delay_sum: np.ndarray          # () sum of the detection delays of clean detected runs, in steps
-    delay_histogram: np.ndarray    # (B,) clean detected runs with delay in [b w, (b + 1) w) steps
-    pre_alarm_runs: np.ndarray     # () faulty runs with an alarm before the onset (not clean)
-    delay_runs: np.ndarray         # () clean detected runs (the delays' sample size)
-    horizon: np.ndarray            # () steps per run
-    bin_width: np.ndarray          # () w, steps per bin
+    Attributes:
+      runs: () all runs
+      unhealthy_runs: () runs with a step that was not healthy
+      faulty_runs: () healthy runs with an onset within the horizon
+      detected_runs: () of those, with an alarm at or after the onset
+      labelled_runs: () faulty runs whose true label was given
+      isolated_runs: () of those, detected and isolated as their label
+      false_alarm_runs: () healthy runs with an alarm before the onset
+      false_alarm_steps: () alarm steps before the onset (healthy runs)
+      pre_onset_steps: () steps before the onset (healthy runs)
+      delay_sum: () sum of the detection delays of clean detected runs, in steps
+      delay_histogram: (B,) clean detected runs with delay in [b w, (b + 1) w) steps
+      pre_alarm_runs: () faulty runs with an alarm before the onset (not clean)
+      delay_runs: () clean detected runs (the delays' sample size)
+      horizon: () steps per run
+      bin_width: () w, steps per bin
+    """
+
+    runs: np.ndarray
+    unhealthy_runs: np.ndarray
+    faulty_runs: np.ndarray
+    detected_runs: np.ndarray
+    labelled_runs: np.ndarray
+    isolated_runs: np.ndarray
+    false_alarm_runs: np.ndarray
+    false_alarm_steps: np.ndarray
+    pre_onset_steps: np.ndarray
+    delay_sum: np.ndarray
+    delay_histogram: np.ndarray
+    pre_alarm_runs: np.ndarray
+    delay_runs: np.ndarray
+    horizon: np.ndarray
+    bin_width: np.ndarray
 
 
 class Reducer(NamedTuple):

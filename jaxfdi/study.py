@@ -91,10 +91,21 @@ class StudyResult(NamedTuple):
     the sum of the per-case runs), case-major (``case_slices``). ``means[method]``:
     (C, ...) per-case mean of the traces of an ``averaged`` structure.
     ``seconds[structure]``: wall time of its Monte Carlo, compilation included
-    (``compile_seconds``: the compilation alone, 0.0 when the program came from a cache)."""
+    (``compile_seconds``: the compilation alone, 0.0 when the program came from a cache).
+
+    Attributes:
+      name: the study's name
+      runs: int, or a tuple of one count per case
+      seed: the PRNG seed of the runs
+      case_names: the name of each case
+      outputs: method -> its output of every run (see above)
+      means: method -> (C, ...) per-case means (see above)
+      seconds: structure -> wall time of its Monte Carlo [s] (see above)
+      compile_seconds: structure -> compilation time [s] (see above)
+    """
 
     name: str
-    runs: Any        # int, or a tuple of one count per case
+    runs: Any
     seed: int
     case_names: tuple
     outputs: dict

@@ -18,9 +18,17 @@ from jax import Array
 
 
 class TrackingScore(NamedTuple):
-    sum_sq: Array   # (d,) sum of error^2 over the scored steps
-    max_abs: Array  # (d,) largest |error|
-    count: Array    # (d,) int, steps scored
+    """A scorer's carry: tracking errors accumulated over the scored steps.
+
+    Attributes:
+      sum_sq: (d,) sum of error^2 over the scored steps
+      max_abs: (d,) largest |error|
+      count: (d,) int, steps scored
+    """
+
+    sum_sq: Array
+    max_abs: Array
+    count: Array
 
     def rms(self) -> Array:
         """(d,) root mean square error (NaN where no step was scored)."""

@@ -1,7 +1,7 @@
 """Control: discrete LQR with integral action, eigenstructure assignment of a
 reconfigured gain for a faulty actuator, and the closed loop that switches to it when
-the FDD isolates a fault (seed 001, Section IV); reaction-wheel attitude control (seed 004);
-F-16 stability augmentation with altitude and bank-angle hold (seed 000)."""
+the FDD isolates a fault (Lee & Lyou, Section IV); reaction-wheel attitude control (Choi & Park 2009);
+F-16 stability augmentation with altitude and bank-angle hold (Park et al. 2004)."""
 from jaxfdi.control.attitude import (
     AttitudeGains,
     Slew,

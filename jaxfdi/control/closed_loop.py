@@ -1,4 +1,4 @@
-"""Closed-loop fault detection, isolation and fault-tolerant control (seed 001, Fig. 2).
+"""Closed-loop fault detection, isolation and fault-tolerant control (Lee & Lyou, Fig. 2).
 
 Three ``jaxfdi.loop`` parts, composed by ``run_closed_loop`` into one ``run_loop``:
 ``true_plant`` (a ``Simulator``), ``tskf_bank_fdi`` (estimator, TSKF bank, MDWT
@@ -61,81 +61,153 @@ from jaxfdi.simulate import Simulator, simulator
 
 
 class LoopDesign(NamedTuple):
-    """Everything the closed loop needs; build once (concrete arrays)."""
+    """Everything the closed loop needs; build once (concrete arrays).
 
-    model: LinearGaussianModel   # nominal model of the estimator and the bank
-    unknown_input: Array         # (n, q) E, decoupled by the estimator and the bank
-    plant_Phi: Array             # (nt, nt) true plant (first n states are the model's)
-    plant_Gamma: Array           # (nt, nu)
-    plant_C: Array               # (m, nt)
-    plant_x0: Array              # (nt,)
-    H: Array                     # (g, n) tracked outputs
-    command: Array               # (g,) r
-    gain: Array                  # (nu, n + g) nominal K
-    schedule: GainSchedule       # eigenstructure-assignment gains over each input's loss
-    directions: FaultDirection   # bank, leaves (F, ..., 1)
-    location: Array              # (F,) int: fault location of each filter (0 .. L-1)
-    multiplicative: Array        # (F,) bool: effectiveness/scaling filter (else additive)
-    location_is_actuator: Array  # (L,) bool
-    location_component: Array    # (L,) int: input or output index
-    bias_walk: Array             # (1, 1) Qb
-    init_cov: Array              # (n, n) prior covariance of x[0]
-    init_bias_cov: Array         # (1, 1)
-    threshold: Array             # (F,) per-filter threshold of the denoised statistic
-    detail_sigma: Array          # (M,) detail standard deviations for soft thresholding
+    Attributes:
+      model: nominal model of the estimator and the bank
+      unknown_input: (n, q) E, decoupled by the estimator and the bank
+      plant_Phi: (nt, nt) true plant (first n states are the model's)
+      plant_Gamma: (nt, nu) true plant's input matrix
+      plant_C: (m, nt) true plant's output matrix
+      plant_x0: (nt,) true plant's initial state
+      H: (g, n) tracked outputs
+      command: (g,) r, the command of the tracked outputs
+      gain: (nu, n + g) nominal K
+      schedule: eigenstructure-assignment gains over each input's loss
+      directions: bank, leaves (F, ..., 1)
+      location: (F,) int: fault location of each filter (0 .. L-1)
+      multiplicative: (F,) bool: effectiveness/scaling filter (else additive)
+      location_is_actuator: (L,) bool: the location is an actuator (else a sensor)
+      location_component: (L,) int: input or output index
+      bias_walk: (1, 1) Qb
+      init_cov: (n, n) prior covariance of x[0]
+      init_bias_cov: (1, 1) prior covariance of each filter's bias
+      threshold: (F,) per-filter threshold of the denoised statistic
+      detail_sigma: (M,) detail standard deviations for soft thresholding
+      c_mult: multiple of each detail's sigma used as the soft threshold
+      levels: number of Haar scales of the denoising (blocks of 2^levels steps)
+      Ts: sample period [s]
+      frozen_window: samples of the channel-health (stuck-at) test
+      frozen_pfa: its false-alarm probability per window and sensor (an upper bound)
+    """
+
+    model: LinearGaussianModel
+    unknown_input: Array
+    plant_Phi: Array
+    plant_Gamma: Array
+    plant_C: Array
+    plant_x0: Array
+    H: Array
+    command: Array
+    gain: Array
+    schedule: GainSchedule
+    directions: FaultDirection
+    location: Array
+    multiplicative: Array
+    location_is_actuator: Array
+    location_component: Array
+    bias_walk: Array
+    init_cov: Array
+    init_bias_cov: Array
+    threshold: Array
+    detail_sigma: Array
     c_mult: float
     levels: int
     Ts: float
-    frozen_window: int = 10      # samples of the channel-health (stuck-at) test
-    frozen_pfa: float = 1e-6     # its false-alarm probability per window and sensor (an upper bound)
+    frozen_window: int = 10
+    frozen_pfa: float = 1e-6
 
 
 class LoopStep(NamedTuple):
-    """Per-step record of one closed-loop run."""
+    """Per-step record of one closed-loop run.
 
-    state: Array        # (n,) true model states
-    estimate: Array     # (n,) x_hat[k|k] of the feedback estimator
-    control: Array      # (nu,) commanded u
-    statistic: Array    # (F,) bank statistics lambda
-    bias: Array         # (F,) bank fault estimates b[k|k]
-    isolated: Array     # () int: latched location + 1 (0: none yet)
-    isolated_kind: Array  # () bool: latched fault is multiplicative
-    healthy: Array      # () bool: every filter healthy
-    health_label: Array  # () int: location + 1 of a sensor the health test finds dead or frozen now, 0 none
+    Attributes:
+      state: (n,) true model states
+      estimate: (n,) x_hat[k|k] of the feedback estimator
+      control: (nu,) commanded u
+      statistic: (F,) bank statistics lambda
+      bias: (F,) bank fault estimates b[k|k]
+      isolated: () int: latched location + 1 (0: none yet)
+      isolated_kind: () bool: latched fault is multiplicative
+      healthy: () bool: every filter healthy
+      health_label: () int: location + 1 of a sensor the health test finds dead or frozen now, 0
+          none
+    """
+
+    state: Array
+    estimate: Array
+    control: Array
+    statistic: Array
+    bias: Array
+    isolated: Array
+    isolated_kind: Array
+    healthy: Array
+    health_label: Array
 
 
 class Reconfiguration(NamedTuple):
-    """What the seed-001 FDI gives the controller at step ``k`` (``tskf_bank_fdi.observe``)."""
+    """What the TSKF-bank FDI of Lee and Lyou gives the controller at step ``k`` (``tskf_bank_fdi.observe``).
 
-    estimate: Array   # (n,) x_hat[k|k] from the (compensated) measurement
-    loss: Array       # () isolated effectiveness loss of ``component`` (0: none / FTC off)
-    component: Array  # () int, the isolated input (meaningful when ``loss > 0`` or ``additive != 0``)
-    additive: Array   # (nu,) estimate of an isolated additive actuator fault, to add to u
+    Attributes:
+      estimate: (n,) x_hat[k|k] from the (compensated) measurement
+      loss: () isolated effectiveness loss of ``component`` (0: none / FTC off)
+      component: () int, the isolated input (meaningful when ``loss > 0`` or ``additive != 0``)
+      additive: (nu,) estimate of an isolated additive actuator fault, to add to u
+    """
+
+    estimate: Array
+    loss: Array
+    component: Array
+    additive: Array
 
 
 class BankState(NamedTuple):
     """The FDI's carry: estimator prior, bank, block buffer, latched decision and the
-    step's reconfiguration (set by ``observe``, used by ``step``)."""
+    step's reconfiguration (set by ``observe``, used by ``step``).
+
+    Attributes:
+      estimator: prior of the feedback estimator
+      bank: the bank's filter states (leaves (F, ...))
+      buffer: (2^levels, F) statistics of the current block
+      isolated: () int: latched location + 1 (0: none yet)
+      kind: () bool: latched fault is multiplicative
+      posterior: posterior of the feedback estimator at this step
+      reconfiguration: what ``step`` applies (set by ``observe``)
+      health: the channel-health test's window
+      excluded: (m,) bool: sensors latched dead or frozen (not used by the estimator under FTC)
+    """
 
     estimator: GaussianState
     bank: Any
-    buffer: Array       # (2^levels, F) statistics of the current block
-    isolated: Array     # () int: latched location + 1 (0: none yet)
-    kind: Array         # () bool: latched fault is multiplicative
+    buffer: Array
+    isolated: Array
+    kind: Array
     posterior: GaussianState
     reconfiguration: Reconfiguration
-    health: FrozenState  # the channel-health test's window
-    excluded: Array      # (m,) bool: sensors latched dead or frozen (not used by the estimator under FTC)
+    health: FrozenState
+    excluded: Array
 
 
 class BankOutput(NamedTuple):
-    estimate: Array       # (n,) x_hat[k|k]
-    statistic: Array      # (F,)
-    bias: Array           # (F,)
-    isolated: Array       # () int
-    isolated_kind: Array  # () bool
-    healthy: Array        # () bool
-    health_label: Array   # () int
+    """What the TSKF-bank FDI reports each step.
+
+    Attributes:
+      estimate: (n,) x_hat[k|k]
+      statistic: (F,) bank statistics lambda
+      bias: (F,) bank fault estimates b[k|k]
+      isolated: () int: latched location + 1 (0: none yet)
+      isolated_kind: () bool: latched fault is multiplicative
+      healthy: () bool: every filter healthy
+      health_label: () int: location + 1 of a sensor found dead or frozen, 0 none
+    """
+
+    estimate: Array
+    statistic: Array
+    bias: Array
+    isolated: Array
+    isolated_kind: Array
+    healthy: Array
+    health_label: Array
 
 
 def _estimator(design: LoopDesign):
@@ -163,7 +235,7 @@ def _channel_health_test(design: LoopDesign):
 
 
 def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
-    """Seed 001's FDD + reconfiguration as a ``loop.FDI`` (module doc, steps 2 and 5);
+    """Lee and Lyou's FDD + reconfiguration as a ``loop.FDI`` (module doc, steps 2 and 5);
     ``ftc`` (bool, traced) turns the reconfiguration on."""
     model = design.model
     nu = model.Gamma.shape[1]

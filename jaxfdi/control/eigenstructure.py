@@ -1,5 +1,5 @@
 """Eigenstructure assignment of a reconfigured state-feedback gain for a faulty actuator
-(seed 001, eqs. 23-29; Zhang & Jiang 1999, 2000).
+(Lee & Lyou, eqs. 23-29; Zhang & Jiang 1999, 2000).
 
 Sign convention: ``u = -K x`` as in ``lqr_gain`` (SciPy, MATLAB), so closed loops are
 ``A_bar - B K``; the paper's ``u = K x`` gains are the negatives of these.
@@ -46,12 +46,23 @@ NULL_RTOL = 1e-10
 
 
 class EigenstructureResult(NamedTuple):
-    """Eigenstructure assignment's gain with its diagnostics (eigenvectors, imaginary part, conditioning, residual)."""
-    gain: Array                    # (p, N) real K_f: u = -K_f x, closed loop A_bar - B_f K_f
-    eigenvectors: Array            # (N, N) complex V^f, columns v_i^f (eq. 26)
-    gain_imaginary: Array          # () max |Im K_f| before taking the real part
-    eigenvector_matrix_cond: Array  # () condition number of V^f (huge: not every eigenvalue is assignable)
-    assignment_residual: Array      # (N,) |(A_bar - B_f K_f) v_i^f - lambda_i v_i^f| / |v_i^f|: ~0 where assigned
+    """Eigenstructure assignment's gain with its diagnostics (eigenvectors, imaginary part, conditioning, residual).
+
+    Attributes:
+      gain: (p, N) real K_f: u = -K_f x, closed loop A_bar - B_f K_f
+      eigenvectors: (N, N) complex V^f, columns v_i^f (eq. 26)
+      gain_imaginary: () max |Im K_f| before taking the real part
+      eigenvector_matrix_cond: () condition number of V^f
+          (huge: not every eigenvalue is assignable)
+      assignment_residual: (N,) |(A_bar - B_f K_f) v_i^f - lambda_i v_i^f| / |v_i^f|: ~0 where
+          assigned
+    """
+
+    gain: Array
+    eigenvectors: Array
+    gain_imaginary: Array
+    eigenvector_matrix_cond: Array
+    assignment_residual: Array
 
 
 def effectiveness_input(B: Array, loss: Array) -> Array:
@@ -121,11 +132,18 @@ def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eig
 
 
 class GainSchedule(NamedTuple):
-    """Reconfigured gains tabulated over one actuator's effectiveness loss at a time."""
+    """Reconfigured gains tabulated over one actuator's effectiveness loss at a time.
 
-    losses: Array  # (G,) grid of losses in [0, 1], increasing
-    gains: Array   # (p, G, p, N): gains[i, g] = K_f (u = -K_f x) for input i with loss losses[g]
-    max_residual: Array  # (p, G) largest assignment residual of each entry (~0 where every eigenvalue is kept)
+    Attributes:
+      losses: (G,) grid of losses in [0, 1], increasing
+      gains: (p, G, p, N): gains[i, g] = K_f (u = -K_f x) for input i with loss losses[g]
+      max_residual: (p, G) largest assignment residual of each entry
+          (~0 where every eigenvalue is kept)
+    """
+
+    losses: Array
+    gains: Array
+    max_residual: Array
 
 
 def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, eigenvectors: Array,

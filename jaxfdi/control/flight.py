@@ -1,4 +1,4 @@
-"""F-16 flight control for seed 000's flight: LQR stability augmentation with altitude
+"""F-16 flight control for the flight of Park et al. (2004): LQR stability augmentation with altitude
 hold and bank-angle hold, designed on the linearised model (Park, Kim, Park & Roh 2004,
 Sec. III; Stevens & Lewis 2003, ch. 4 and 5).
 
@@ -12,7 +12,7 @@ Design (``design_flight_control``): the linear model about a wings-level trim
   ``phi`` (bank-angle hold);
 
 and each is an LQR-PI design (``control.lqr_pi``: ``u = -K [dx; z]``,
-``z[k+1] = z[k] + dt (r - H x)``, seed 001 eqs. 21-22) with diagonal weights
+``z[k+1] = z[k] + dt (r - H x)``, Lee & Lyou eqs. 21-22) with diagonal weights
 (``FlightWeights``). The state feedback on ``(alpha, Q)`` and ``(beta, P, R)`` is the
 stability augmentation; the feedback on ``h``, ``phi`` and their integrals is the altitude
 and bank-angle hold. One design per axis keeps the two SAS separate, as the paper has them.
@@ -25,7 +25,7 @@ of attack and elevator per g): ``u = clip(u_ref - K (x_meas - x_ref) - K_I z)``
 the ``FlightView`` — the body rates ``P, Q, R`` from ``view.rates``, the rate the FDI
 stage selected, so that a rate-sensor fault the FDI misses reaches the aircraft.
 
-The flight (``FlightPlan``, seed 000): climb at 120 ft/s for 0-5 s, then hold altitude and
+The flight (``FlightPlan``, Park et al. 2004): climb at 120 ft/s for 0-5 s, then hold altitude and
 bank-turn 5-15 s, at 502 ft/s from sea level, xcg = 0.35 (the book's trim). It starts
 trimmed in the 120 ft/s climb; the level-off and the roll-in are shaped by the smoothstep
 ``S(s) = 3 s^2 - 2 s^3``: the climb rate falls from 120 to 0 ft/s over ``level_off``
@@ -61,57 +61,101 @@ LATERAL_TRACKED = (1,)         # phi
 
 
 class FlightWeights(NamedTuple):
-    """Diagonal LQR weights (a pytree: differentiate the flight with respect to it)."""
+    """Diagonal LQR weights (a pytree: differentiate the flight with respect to it).
 
-    longitudinal: Array        # (8,) VT, alpha, theta, Q, h, pow, int VT, int h
-    longitudinal_input: Array  # (2,) thtl, el
-    lateral: Array             # (5,) beta, phi, P, R, int phi
-    lateral_input: Array       # (2,) ail, rdr
+    Attributes:
+      longitudinal: (8,) VT, alpha, theta, Q, h, pow, int VT, int h
+      longitudinal_input: (2,) thtl, el
+      lateral: (5,) beta, phi, P, R, int phi
+      lateral_input: (2,) ail, rdr
+    """
+
+    longitudinal: Array
+    longitudinal_input: Array
+    lateral: Array
+    lateral_input: Array
 
 
 class FlightGains(NamedTuple):
-    """The F-16 SAS gains: longitudinal and lateral LQR gains with integral states."""
-    longitudinal: Array  # (2, 8) u_lon = -K [dx_lon (6); z_lon (2)]
-    lateral: Array       # (2, 5) u_lat = -K [dx_lat (4); z_lat (1)]
+    """The F-16 SAS gains: longitudinal and lateral LQR gains with integral states.
+
+    Attributes:
+      longitudinal: (2, 8) u_lon = -K [dx_lon (6); z_lon (2)]
+      lateral: (2, 5) u_lat = -K [dx_lat (4); z_lat (1)]
+    """
+
+    longitudinal: Array
+    lateral: Array
 
 
 class FlightDesign(NamedTuple):
-    """An F-16 flight-control design: gains, closed-loop spectral radii and Riccati convergence flags."""
+    """An F-16 flight-control design: gains, closed-loop spectral radii and Riccati convergence flags.
+
+    Attributes:
+      gains: the longitudinal and lateral LQR gains
+      spectral_radius: (2,) max |eig| of the discrete closed loops (lon, lat): < 1 is stable
+      converged: (2,) Riccati solver flags
+    """
+
     gains: FlightGains
-    spectral_radius: Array  # (2,) max |eig| of the discrete closed loops (lon, lat): < 1 is stable
-    converged: Array        # (2,) Riccati solver flags
+    spectral_radius: Array
+    converged: Array
 
 
 class FlightPlan(NamedTuple):
-    """Seed 000's flight (defaults of ``flight_plan``)."""
+    """The flight of Park et al. (2004) (defaults of ``flight_plan``).
 
-    airspeed: float     # ft/s
-    altitude: float     # ft, initial
-    climb_rate: float   # ft/s
-    climb_time: float   # s, end of the climb (middle of the level-off)
-    level_off: float    # s, duration of the level-off (climb rate 120 -> 0 ft/s)
-    bank_angle: float   # rad
-    bank_start: float   # s
-    roll_in: float      # s
-    duration: float     # s
+    Attributes:
+      airspeed: ft/s, trim airspeed
+      altitude: ft, initial
+      climb_rate: ft/s, rate of the initial climb
+      climb_time: s, end of the climb (middle of the level-off)
+      level_off: s, duration of the level-off (climb rate 120 -> 0 ft/s)
+      bank_angle: rad, bank angle of the turn
+      bank_start: s, start of the roll-in
+      roll_in: s, duration of the roll-in
+      duration: s, length of the flight
+    """
+
+    airspeed: float
+    altitude: float
+    climb_rate: float
+    climb_time: float
+    level_off: float
+    bank_angle: float
+    bank_start: float
+    roll_in: float
+    duration: float
 
 
 class FlightReference(NamedTuple):
-    """Per-step reference (T rows): the state and controls the flight should have."""
+    """Per-step reference (T rows): the state and controls the flight should have.
 
-    state: Array    # (T, 13)
-    control: Array  # (T, 4)
+    Attributes:
+      state: (T, 13) reference state
+      control: (T, 4) reference controls
+    """
+
+    state: Array
+    control: Array
 
 
 class FlightControllerState(NamedTuple):
-    longitudinal_integral: Array  # (2,) int (VT_ref - VT), int (h_ref - h) dt
-    lateral_integral: Array       # (1,) int (phi_ref - phi) dt
+    """The SAS controller's carry: its integrator states.
+
+    Attributes:
+      longitudinal_integral: (2,) int (VT_ref - VT), int (h_ref - h) dt
+      lateral_integral: (1,) int (phi_ref - phi) dt
+    """
+
+    longitudinal_integral: Array
+    lateral_integral: Array
 
 
 def flight_plan(airspeed: float = 502.0, altitude: float = 0.0, climb_rate: float = 120.0, climb_time: float = 5.0,
                 level_off: float = 4.0, bank_angle_deg: float = 30.0, bank_start: float = 5.0, roll_in: float = 2.0,
                 duration: float = 15.0) -> FlightPlan:
-    """Seed 000's flight at the book's 502 ft/s sea-level trim (module doc)."""
+    """The flight of Park et al. (2004) at the book's 502 ft/s sea-level trim (module doc)."""
     for name, value in (("airspeed", airspeed), ("altitude", altitude), ("climb_rate", climb_rate),
                         ("climb_time", climb_time), ("level_off", level_off), ("bank_angle_deg", bank_angle_deg),
                         ("bank_start", bank_start), ("roll_in", roll_in), ("duration", duration)):
@@ -138,8 +182,8 @@ def bryson_weights(longitudinal, longitudinal_input, lateral, lateral_input, dty
 def default_weights(dtype=None) -> FlightWeights:
     """``bryson_weights`` of: VT 10 ft/s, alpha 2 deg, theta 5 deg, Q 20 deg/s, h 20 ft,
     pow 30 %, int VT 20 ft, int h 20 ft s; thtl 0.3, el 5 deg; beta 2 deg, phi 5 deg,
-    P 45 deg/s, R 20 deg/s, int phi 5 deg s; ail 15 deg, rdr 20 deg. Chosen on seed 000's
-    flight (64 dispersed flights with noise and gusts) for altitude errors under 10 ft and
+    P 45 deg/s, R 20 deg/s, int phi 5 deg s; ail 15 deg, rdr 20 deg. Chosen on the flight of
+    Park et al. (2004), 64 dispersed flights with noise and gusts, for altitude errors under 10 ft and
     bank errors under 1 deg once rolled in, with the controls' noise (the sensors') near
     1 deg per sample."""
     deg = math.pi / 180.0
@@ -231,14 +275,23 @@ def _smoothstep_integral(t: Array, width: float) -> Array:
 
 
 class Profile(NamedTuple):
-    """The commanded flight at times ``t`` (``commanded_profile``)."""
+    """The commanded flight at times ``t`` (``commanded_profile``).
 
-    climb_weight: Array  # share of the climb segment (1 -> 0 over the level-off)
-    bank_weight: Array   # share of the turn segment (0 -> 1 over the roll-in)
-    climb_rate: Array    # d climb_weight / dt
-    bank_rate: Array     # d bank_weight / dt
-    altitude: Array      # commanded h
-    bank: Array          # commanded phi
+    Attributes:
+      climb_weight: share of the climb segment (1 -> 0 over the level-off)
+      bank_weight: share of the turn segment (0 -> 1 over the roll-in)
+      climb_rate: d climb_weight / dt
+      bank_rate: d bank_weight / dt
+      altitude: commanded h
+      bank: commanded phi
+    """
+
+    climb_weight: Array
+    bank_weight: Array
+    climb_rate: Array
+    bank_rate: Array
+    altitude: Array
+    bank: Array
 
 
 def commanded_profile(plan: FlightPlan, t: Array) -> Profile:

@@ -1,4 +1,4 @@
-"""Discrete LQR and proportional-integral state feedback (seed 001, eqs. 21-22).
+"""Discrete LQR and proportional-integral state feedback (Lee & Lyou, eqs. 21-22).
 
 Integral action: the tracking error ``e = r - H x`` is integrated, ``z[k+1] = z[k] + Ts e``,
 and the augmented system ``x_a = [x; z]``::
@@ -11,8 +11,8 @@ is stabilised by ``u = -K x_a = -[K_p K_I] x_a``, ``K`` the discrete LQR gain
 algebraic Riccati equation (``jaxfdi.riccati``, structure-preserving doubling).
 
 Sign convention: ``u = -K x`` and the closed loop ``A - B K``, as SciPy
-(``scipy.signal.place_poles``), MATLAB (``dlqr``) and python-control (``dlqr``). Seed 001
-writes ``u = K x``; its ``K`` is the negative of ours.
+(``scipy.signal.place_poles``), MATLAB (``dlqr``) and python-control (``dlqr``). Lee and Lyou
+write ``u = K x``; its ``K`` is the negative of ours.
 
 A stabilising gain needs ``(A_bar, B_bar)`` stabilisable, i.e. no transmission zero of
 ``(A, B, H)`` at ``z = 1``. The paper's VTOL choice (track ``v_h`` and the pitch rate
@@ -46,15 +46,25 @@ _PI_NOT_STABILISABLE = ("(A_bar, B_bar) is not stabilisable ((A, B) is not, or (
 
 
 class PIDesign(NamedTuple):
-    """A proportional-integral LQR design on the integrator-augmented system."""
+    """A proportional-integral LQR design on the integrator-augmented system.
 
-    A_bar: Array      # (n + g, n + g)
-    B_bar: Array      # (n + g, p)
-    G: Array          # (n + g, g) command input of the integrator
-    gain: Array       # (p, n + g) K = [K_p K_I]; the control is u = -K [x; z] (closed loop A_bar - B_bar K)
-    riccati: Array    # (n + g, n + g) X
-    converged: Array  # () bool: a verified stabilising Riccati solution (False for a marginal design)
-    spectral_radius: Array  # () max |eig(A_bar - B_bar K)|: >= 1 means no stabilising gain exists
+    Attributes:
+      A_bar: (n + g, n + g) state matrix of the integrator-augmented system
+      B_bar: (n + g, p) input matrix of the integrator-augmented system
+      G: (n + g, g) command input of the integrator
+      gain: (p, n + g) K = [K_p K_I]; the control is u = -K [x; z] (closed loop A_bar - B_bar K)
+      riccati: (n + g, n + g) X, the DARE solution
+      converged: () bool: a verified stabilising Riccati solution (False for a marginal design)
+      spectral_radius: () max |eig(A_bar - B_bar K)|: >= 1 means no stabilising gain exists
+    """
+
+    A_bar: Array
+    B_bar: Array
+    G: Array
+    gain: Array
+    riccati: Array
+    converged: Array
+    spectral_radius: Array
 
 
 def lqr_gain(A: Array, B: Array, Q: Array, R: Array, allow_marginal: bool = False) -> tuple[Array, Array, Array]:

@@ -89,7 +89,7 @@ from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
 
 _unshadow(__name__, "dual_filter")
 
-# seed 000: parity space of redundant sensor groups, the hybrid PSA + on-demand filter FDI,
+# Park et al. (2004): parity space of redundant sensor groups, the hybrid PSA + on-demand filter FDI,
 # and the sensor arrangement by gradient
 from jaxfdi.detection.hybrid_psa import (  # noqa: E402
     HybridDecision,
@@ -121,7 +121,7 @@ __all__ += [
     "subspace_angles", "isolability", "optimize_configuration",
 ]
 
-# issue 27 item 6: the GLRT's steady-state check and the Willsky-Jones correction
+# the GLRT's steady-state check and the Willsky-Jones correction
 from jaxfdi.detection.glrt import check_steady_state, steady_state_tolerance  # noqa: E402
 from jaxfdi.detection.glrt_correction import (  # noqa: E402
     CorrectedGLRT,
@@ -138,7 +138,7 @@ from jaxfdi.detection.glrt_transient import (  # noqa: E402
 __all__ += ["CorrectedGLRT", "CorrectedGLRTInfo", "CorrectedGLRTState", "check_steady_state", "corrected_glrt",
             "steady_state_tolerance", "TransientGLRTState", "time_varying_signatures", "transient_glrt_detector"]
 
-# issue 27 item 2: the known-change GLR / CUSUM bank (signature and size known), the limit's detector
+# the known-change GLR / CUSUM bank (signature and size known), the limit's detector
 from jaxfdi.detection.known_change import (  # noqa: E402
     KnownChangeState,
     KnownChangeTerms,

@@ -12,7 +12,7 @@ that. Two calibrations close the gap:
   ``rate(s T) <= alpha`` on the calibration runs, found by bisection on the monotone
   ``rate`` (``scale_to_run_false_alarm``).
 
-Used by the VTOL study (Park et al. 2004, seed 001), whose bank of two-stage filters
+Used by the VTOL study (Lee & Lyou), whose bank of two-stage filters
 sees the ``3 sin 10 t`` disturbance leak into some statistics.
 """
 from __future__ import annotations

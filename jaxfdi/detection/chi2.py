@@ -183,8 +183,15 @@ def first_crossing(statistic: Array, threshold: Array, start: Array | int = 0) -
 
 
 class WindowState(NamedTuple):
-    buffer: Array  # (window,) last statistics, ring buffer
-    index: Array   # () next slot
+    """The moving-window sum's carry: a ring buffer of the last statistics.
+
+    Attributes:
+      buffer: (window,) last statistics, ring buffer
+      index: () next slot
+    """
+
+    buffer: Array
+    index: Array
 
 
 class Decision(NamedTuple):
@@ -194,12 +201,18 @@ class Decision(NamedTuple):
     actuators, then sensors; -1 for a detector that does not isolate) and ``estimate``
     the detector's estimate of the fault (e.g. a magnitude; NaN if it has none).
     Detectors that only detect may return the plain pair ``(statistic, alarm)``.
+
+    Attributes:
+      statistic: () the detector's test statistic
+      alarm: () bool, the statistic crossed its threshold
+      label: () int, the isolated fault label (see above)
+      estimate: () the detector's fault estimate (see above)
     """
 
-    statistic: Array  # ()
-    alarm: Array      # () bool
-    label: Array      # () int
-    estimate: Array   # ()
+    statistic: Array
+    alarm: Array
+    label: Array
+    estimate: Array
 
 
 def flag_dead(decision: Decision, dead: Array, labels: Array | None = None) -> Decision:

@@ -1,4 +1,4 @@
-"""Multi-hypothesis isolation by credits (seed 004, Section III, eq. 10).
+"""Multi-hypothesis isolation by credits (Choi & Park 2009, Section III, eq. 10).
 
 A bank of dual filters, one per fault hypothesis (for the reaction wheels: wheel ``x``
 stopped), gives one fault detection parameter ``F_x`` per hypothesis. The hypothesis
@@ -12,7 +12,7 @@ large enough. ``F`` scales with the operating point (rates, wheel momentum, faul
 so besides the paper's absolute threshold the isolator offers a scale-free one on the
 relative credit ``C_x / F_mean`` in ``[0, 1]``: 1 when ``F_x = 0``.
 
-Limit (issue 27 item 8; ``benchmarks/wheels_credit.py``): a dual filter's ``F`` is a
+Limit (``benchmarks/wheels_credit.py``): a dual filter's ``F`` is a
 scalar, ``F_x ~ |g_x . (x_PF - x_EKF)|`` with ``g_x = grad det A_x``, so it sees a
 hypothesis's state discrepancy only along ``g_x``. A wrong hypothesis whose prediction
 drifts nearly orthogonally to its ``g_x`` keeps an ``F`` as small as the right one's (in

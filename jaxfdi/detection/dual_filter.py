@@ -1,4 +1,4 @@
-"""Dual filter fault detection parameter (seed 004, Section II.3, eqs. 7-8).
+"""Dual filter fault detection parameter (Choi & Park 2009, Section II.3, eqs. 7-8).
 
 Two filters share one model: the *prediction filter* propagates it with the commanded
 inputs alone, ``x_PF[k+1] = f(x_PF[k], u[k])`` (the "theoretical" state), and the
@@ -35,23 +35,39 @@ from jaxfdi.filters._base import Filter
 
 
 class DualFilterState(NamedTuple):
-    """The dual filter's state: the estimation filter's state and the prediction filter's state."""
-    estimator: Any     # the estimation filter's state (its prior of step k)
-    prediction: Array  # (n,) the prediction filter's x_PF[k]
+    """The dual filter's state: the estimation filter's state and the prediction filter's state.
+
+    Attributes:
+      estimator: the estimation filter's state (its prior of step k)
+      prediction: (n,) the prediction filter's x_PF[k]
+    """
+
+    estimator: Any
+    prediction: Array
 
 
 class DualFilterInfo(NamedTuple):
-    """Per-step output of the dual filter: estimator info, prediction, both Jacobian determinants and F."""
-    estimator: Any           # the estimation filter's info of step k (e.g. FilterInfo)
-    prediction: Array        # (n,) x_PF[k]
-    det_prediction: Array    # () det A(x_PF[k], u[k])
-    det_estimation: Array    # () det A(x_EKF[k|k], u[k])
-    detection_parameter: Array  # () F[k] = |det_prediction - det_estimation|
-    healthy: Array           # () bool: the estimator healthy, F and x_PF finite
+    """Per-step output of the dual filter: estimator info, prediction, both Jacobian determinants and F.
+
+    Attributes:
+      estimator: the estimation filter's info of step k (e.g. FilterInfo)
+      prediction: (n,) x_PF[k]
+      det_prediction: () det A(x_PF[k], u[k])
+      det_estimation: () det A(x_EKF[k|k], u[k])
+      detection_parameter: () F[k] = |det_prediction - det_estimation|
+      healthy: () bool: the estimator healthy, F and x_PF finite
+    """
+
+    estimator: Any
+    prediction: Array
+    det_prediction: Array
+    det_estimation: Array
+    detection_parameter: Array
+    healthy: Array
 
 
 def system_matrix_det(field: Callable[[Array, Array, Any], Array], x: Array, u: Array, params: Any) -> Array:
-    """``det(dg/dx)`` of the continuous model at ``(x, u)`` (seed 004 eq. 8)."""
+    """``det(dg/dx)`` of the continuous model at ``(x, u)`` (eq. 8 of Choi & Park 2009)."""
     return _linalg.det(jax.jacfwd(field)(x, u, params))
 
 

@@ -31,9 +31,17 @@ from jaxfdi.detection.chi2 import Decision, Detector, chi2_threshold, flag_dead
 
 
 class FrozenState(NamedTuple):
-    buffer: Array  # (L, m) last L samples, ring buffer
-    index: Array   # () next slot
-    count: Array   # () samples seen (saturates at L)
+    """The stuck-at test's carry: a ring buffer of the last ``L`` samples.
+
+    Attributes:
+      buffer: (L, m) last L samples, ring buffer
+      index: () next slot
+      count: () samples seen (saturates at L)
+    """
+
+    buffer: Array
+    index: Array
+    count: Array
 
 
 def frozen_threshold(window: int, pfa, dtype=None) -> Array:

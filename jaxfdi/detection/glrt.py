@@ -4,7 +4,7 @@ A step fault of unknown size ``nu`` in direction ``i`` with onset ``theta`` adds
 signature to the innovations of a fault-blind steady-state Kalman filter:
 ``eps_k = eps0_k + G_i[k - theta] nu`` (``G[l] = 0`` for ``l < 0``), ``eps0_k ~ N(0, S)``
 white. Over the last ``N`` steps, for every direction ``i`` and candidate onset ``theta``
-(Willsky & Jones 1976, eqs. 3.10-3.14; seed 003 eqs. 14-23)::
+(Willsky & Jones 1976, eqs. 3.10-3.14; Han et al. 2022, eqs. 14-23)::
 
     d_i(theta) = sum_j G_i[j - theta]^T S^-1 eps_j
     R_i(theta) = sum_j G_i[j - theta]^T S^-1 G_i[j - theta]
@@ -12,9 +12,9 @@ white. Over the last ``N`` steps, for every direction ``i`` and candidate onset 
 
 and the GLR of direction ``i`` is ``max_theta l_i(theta)``.
 
-Signatures (derived here; seed 003's printed eqs. 18-19 are garbled). The plant is
+Signatures (derived here; eqs. 18-19 as printed in Han et al. (2022) are garbled). The plant is
 ``x[k+1] = Phi x[k] + Gamma (u[k] + f_u[k]) + w``, ``y[k] = C x[k] + D u[k] + f_y[k] + v``
-(seed 003 eq. 4, ``jaxfdi.simulate``: the feed-through sees the *commanded* input). A unit
+(eq. 4 of Han et al. 2022, ``jaxfdi.simulate``: the feed-through sees the *commanded* input). A unit
 step in direction ``i`` from step ``theta`` is ``f[k] = 1 (k >= theta)`` and enters the
 state update as ``g_i`` and the output as ``h_i`` (``FaultDirections``). The filter of
 ``jaxfdi.filters.kalman`` conditions on ``y[k]`` then predicts with ``u[k]``:
@@ -66,7 +66,7 @@ from jaxfdi.faults import sensor_labels
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 from jaxfdi.riccati import steady_state_kalman
 
-#: the threshold seed 003 uses (set by simulation to suppress T4 false alarms, sec. 3.3).
+#: the threshold Han et al. (2022) use (set by simulation to suppress T4 false alarms, sec. 3.3).
 PAPER_USED_THRESHOLD = 200.0
 
 
@@ -75,37 +75,60 @@ class FaultDirections(NamedTuple):
 
     Columns are ordered actuators then sensors, so direction ``i`` has the simulator's
     fault label ``1 + i``.
+
+    Attributes:
+      state: (n, d) added to x[k+1] = Phi x + Gamma u + ...
+      output: (m, d) added to y[k] = C x + D u + ...
     """
 
-    state: Array   # (n, d) added to x[k+1] = Phi x + Gamma u + ...
-    output: Array  # (m, d) added to y[k] = C x + D u + ...
+    state: Array
+    output: Array
 
 
 class GLRResult(NamedTuple):
-    """GLR of each direction, maximised over the onsets in the window."""
+    """GLR of each direction, maximised over the onsets in the window.
 
-    statistic: Array     # (d,) max_theta l_i(theta)
-    onset_offset: Array  # (d,) int, o with theta_hat = k - o (k: last step of the window)
-    magnitude: Array     # (d,) nu_hat at theta_hat
+    Attributes:
+      statistic: (d,) max_theta l_i(theta)
+      onset_offset: (d,) int, o with theta_hat = k - o (k: last step of the window)
+      magnitude: (d,) nu_hat at theta_hat
+    """
+
+    statistic: Array
+    onset_offset: Array
+    magnitude: Array
 
 
 class OnsetGLR(NamedTuple):
-    """GLR for every candidate onset offset ``o`` (rows) and direction (columns)."""
+    """GLR for every candidate onset offset ``o`` (rows) and direction (columns).
 
-    statistic: Array  # (N, d) l_i(k - o); -inf for onsets before the data
-    magnitude: Array  # (N, d) nu_hat_i(k - o); 0 where the window holds no information
+    Attributes:
+      statistic: (N, d) l_i(k - o); -inf for onsets before the data
+      magnitude: (N, d) nu_hat_i(k - o); 0 where the window holds no information
+    """
+
+    statistic: Array
+    magnitude: Array
 
 
 class GLRTState(NamedTuple):
-    window: Array        # (N, m) last N whitened innovations L^-1 eps, oldest first
-    count: Array         # () int32, steps seen (saturates at N)
-    onset_offset: Array  # () int32, onset offset of the last decision's isolated direction
+    """The windowed GLRT's carry: the last ``N`` whitened innovations.
+
+    Attributes:
+      window: (N, m) last N whitened innovations L^-1 eps, oldest first
+      count: () int32, steps seen (saturates at N)
+      onset_offset: () int32, onset offset of the last decision's isolated direction
+    """
+
+    window: Array
+    count: Array
+    onset_offset: Array
 
 
 def fault_directions(model: LinearGaussianModel, actuator_feedthrough: bool = False) -> FaultDirections:
     """Unit step-fault directions ``(g, h)``: actuators ``1..nu``, then sensors ``1..m``.
 
-    Actuator ``i``: ``g = Gamma[:, i]`` and ``h = 0``, because seed 003 eq. (4) and
+    Actuator ``i``: ``g = Gamma[:, i]`` and ``h = 0``, because eq. (4) of Han et al. (2022) and
     ``jaxfdi.simulate`` feed the commanded input through ``D`` (``y = C x + D u``); with
     ``actuator_feedthrough=True``, ``h = D[:, i]`` (a plant whose faulty input also
     passes through ``D``). Sensor ``j``: ``g = 0``, ``h = e_j``.
@@ -191,7 +214,7 @@ def glr_statistic(innovations: Array, signatures: Array, innovation_cov: Array |
 def glrt_threshold(pfa, num_directions: int, window: int, method: str = "paper") -> Array:
     """A threshold for the GLR statistic at false-alarm probability ``pfa`` per step.
 
-    ``"paper"``: ``chi2_threshold(num_directions * window, pfa)``, seed 003's theoretical
+    ``"paper"``: ``chi2_threshold(num_directions * window, pfa)``, Han et al.'s (2022) theoretical
     value (6 directions x N = 10, pfa = 0.005 -> 91.95); the paper then uses
     ``PAPER_USED_THRESHOLD = 200``, set by simulation. ``"bonferroni"``: each
     ``l_i(theta)`` is ``chi2(1)`` under no fault, so
@@ -225,7 +248,7 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
 
     Isolation:
       ``"max"``: the direction with the largest GLR.
-      ``"paper"``: seed 003 eq. (24), read as: actuator when the largest actuator GLR and
+      ``"paper"``: eq. (24) of Han et al. (2022), read as: actuator when the largest actuator GLR and
         the ``overlap_sensor`` GLR (T4, the last sensor) both exceed the threshold;
         otherwise the sensor with the largest GLR if some sensor exceeds it; otherwise an
         actuator if one alone exceeds it; with no alarm, the largest GLR as for ``"max"``.
@@ -273,14 +296,23 @@ def engine_detector(setup: DetectorSetup, whitener: Array, engine: GLREngine) ->
 
 
 class DetectorSetup(NamedTuple):
-    """What a GLRT detector is built from (checked by ``detector_setup``)."""
+    """What a GLRT detector is built from (checked by ``detector_setup``).
 
-    signatures: Array       # (N, m, d) fault_signatures, in the detector's dtype
-    innovation_cov: Array   # (m, m)
+    Attributes:
+      signatures: (N, m, d) fault_signatures, in the detector's dtype
+      innovation_cov: (m, m) steady-state innovation covariance S
+      threshold: () alarm threshold on the largest GLR
+      isolation: "max", "paper" or a () bool array (True: "paper")
+      num_inputs: nu: directions 0..nu-1 are actuators
+      sensor_t4: direction index of eq. (24)'s T4
+    """
+
+    signatures: Array
+    innovation_cov: Array
     threshold: Any
-    isolation: Any          # "max", "paper" or a () bool array (True: "paper")
-    num_inputs: int         # nu: directions 0..nu-1 are actuators
-    sensor_t4: int          # direction index of eq. (24)'s T4
+    isolation: Any
+    num_inputs: int
+    sensor_t4: int
 
 
 def detector_setup(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
@@ -414,7 +446,7 @@ def glr_sequence(setup: DetectorSetup, innovations: Array) -> GLRResult:
 
 
 def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallback: Array) -> Array:
-    """Seed 003 eq. (24): index of the isolated direction (see ``glrt_detector``)."""
+    """Eq. (24) of Han et al. (2022): index of the isolated direction (see ``glrt_detector``)."""
     actuator = jnp.argmax(statistic[:nu])
     sensor = nu + jnp.argmax(statistic[nu:])
     actuator_over = statistic[actuator] > threshold

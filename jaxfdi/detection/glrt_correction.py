@@ -47,26 +47,45 @@ from jaxfdi.riccati import steady_state_kalman
 
 
 class CorrectedGLRTState(NamedTuple):
-    """Steady-state KF + GLRT with Willsky-Jones correction."""
+    """Steady-state KF + GLRT with Willsky-Jones correction.
 
-    mean: Array       # (n,) predicted mean m[k|k-1], corrected, accommodated faults included
-    fault: Array      # (d,) accumulated fault-size estimates b, accommodated by the filter
-    detector: Any     # GLRTState or RecursiveGLRTState: the window, detected signatures removed
-    step: Array       # () int32, k (steps seen)
-    alarm_run: Array  # () int32, consecutive alarm steps (since the last correction)
+    Attributes:
+      mean: (n,) predicted mean m[k|k-1], corrected, accommodated faults included
+      fault: (d,) accumulated fault-size estimates b, accommodated by the filter
+      detector: GLRTState or RecursiveGLRTState: the window, detected signatures removed
+      step: () int32, k (steps seen)
+      alarm_run: () int32, consecutive alarm steps (since the last correction)
+    """
+
+    mean: Array
+    fault: Array
+    detector: Any
+    step: Array
+    alarm_run: Array
 
 
 class CorrectedGLRTInfo(NamedTuple):
-    """One step's output of ``corrected_glrt``."""
+    """One step's output of ``corrected_glrt``.
 
-    decision: Decision     # the GLRT's decision at step k (before the correction)
-    onset: Array           # () int32, theta_hat = k - onset offset of the isolated direction
-    information: Array     # () R_i(theta_hat) of the isolated direction: sd(nu_hat) = R^-1/2
-    confirmed: Array       # () bool: a detection was confirmed at step k (and corrected if ``correct``)
-    innovation: Array      # (m,) y - C m - D u - H b
-    predicted_mean: Array  # (n,) m[k+1|k] after the correction
-    fault: Array           # (d,) accumulated fault estimates after step k
-    healthy: Array         # () bool: the mean stayed finite
+    Attributes:
+      decision: the GLRT's decision at step k (before the correction)
+      onset: () int32, theta_hat = k - onset offset of the isolated direction
+      information: () R_i(theta_hat) of the isolated direction: sd(nu_hat) = R^-1/2
+      confirmed: () bool: a detection was confirmed at step k (and corrected if ``correct``)
+      innovation: (m,) y - C m - D u - H b
+      predicted_mean: (n,) m[k+1|k] after the correction
+      fault: (d,) accumulated fault estimates after step k
+      healthy: () bool: the mean stayed finite
+    """
+
+    decision: Decision
+    onset: Array
+    information: Array
+    confirmed: Array
+    innovation: Array
+    predicted_mean: Array
+    fault: Array
+    healthy: Array
 
 
 class CorrectedGLRT(NamedTuple):
@@ -95,8 +114,8 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
     and the detector re-arms (a second fault is tested against the corrected filter).
     ``correct=False`` runs the plain fault-blind filter and GLRT, marking the same
     confirmation events (alarm held ``confirm`` steps) without correcting: the contrast.
-    A larger ``confirm`` estimates ``nu_hat`` (and isolates) from more data: on seed-003
-    engine runs (N = 10, Bonferroni 1e-4) with an actuator step then a P4 step, 40 runs,
+    A larger ``confirm`` estimates ``nu_hat`` (and isolates) from more data: on the turbojet
+    runs of Han et al. (2022) (N = 10, Bonferroni 1e-4) with an actuator step then a P4 step, 40 runs,
     ``confirm=1`` confirmed 2.9 detections a run (premature corrections are re-detected and
     refined), ``confirm=5`` exactly 2.0 (``tests/test_glrt_correction.py``).
     Jit- and vmap-able (``lax.scan`` over steps, ``vmap`` over Monte Carlo runs).

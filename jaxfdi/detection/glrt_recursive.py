@@ -51,10 +51,17 @@ from jaxfdi.models.linear import LinearGaussianModel
 
 
 class RecursiveGLRTState(NamedTuple):
-    """The recursive windowed GLRT's state: correlations per onset offset, steps seen, last onset offset."""
-    correlation: Array   # (N, d) d_i(k - o) for onset offsets o = 0..N-1
-    count: Array         # () int32, steps seen (saturates at N)
-    onset_offset: Array  # () int32, onset offset of the last decision's isolated direction
+    """The recursive windowed GLRT's state: correlations per onset offset, steps seen, last onset offset.
+
+    Attributes:
+      correlation: (N, d) d_i(k - o) for onset offsets o = 0..N-1
+      count: () int32, steps seen (saturates at N)
+      onset_offset: () int32, onset offset of the last decision's isolated direction
+    """
+
+    correlation: Array
+    count: Array
+    onset_offset: Array
 
 
 def recursive_glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,

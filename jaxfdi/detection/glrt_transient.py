@@ -54,16 +54,28 @@ from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
 class TransientGLRTState(NamedTuple):
-    """``transient_glrt_detector``'s state (the fields of the other form are empty)."""
+    """``transient_glrt_detector``'s state (the fields of the other form are empty).
 
-    cov: Array          # (n, n) the filter's predicted covariance P[k+1|k] (data-independent)
-    errors: Array       # (N, n, d) E of onset k - o, advanced to step k + 1 (o: offsets of step k)
-    window: Array       # (N, m) whitened innovations L_j^-1 eps_j, oldest first; (0, m) in the recursive form
-    signatures: Array   # (N, N, m, d) T[o, p], onset k - o at window position p; (0, 0, m, d) recursive
-    correlation: Array  # (N, d) d_i(k - o)
-    information: Array  # (N, d) R_i(k - o)
-    count: Array        # () int32, steps seen (saturates at N)
-    onset_offset: Array  # () int32, onset offset of the last decision's isolated direction
+    Attributes:
+      cov: (n, n) the filter's predicted covariance P[k+1|k] (data-independent)
+      errors: (N, n, d) E of onset k - o, advanced to step k + 1 (o: offsets of step k)
+      window: (N, m) whitened innovations L_j^-1 eps_j, oldest first; (0, m) in the recursive
+          form
+      signatures: (N, N, m, d) T[o, p], onset k - o at window position p; (0, 0, m, d) recursive
+      correlation: (N, d) d_i(k - o)
+      information: (N, d) R_i(k - o)
+      count: () int32, steps seen (saturates at N)
+      onset_offset: () int32, onset offset of the last decision's isolated direction
+    """
+
+    cov: Array
+    errors: Array
+    window: Array
+    signatures: Array
+    correlation: Array
+    information: Array
+    count: Array
+    onset_offset: Array
 
 
 def time_varying_signatures(model: LinearGaussianModel, prior_cov: Array, directions: FaultDirections, onset: int,

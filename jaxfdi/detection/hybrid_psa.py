@@ -1,5 +1,5 @@
 """Hybrid FDI: the parity space, and analytic redundancy from a filter restarted on demand
-(seed 000: Park, Kim, Park & Roh 2004, Sec. 2.2), as a ``loop.FDI`` stage.
+(Park, Kim, Park & Roh 2004, Sec. 2.2), as a ``loop.FDI`` stage.
 
 At every step ``k`` (``observe``, before the controller):
 
@@ -66,75 +66,135 @@ FOLLOW = {"none": 0, "psa": 1, "hybrid": 2, "verified": 3}
 
 
 class HybridPSAConfig(NamedTuple):
-    """Arrays of the hybrid FDI (a pytree: pass it into ``jit``)."""
+    """Arrays of the hybrid FDI (a pytree: pass it into ``jit``).
+
+    Attributes:
+      space: the parity space of the sensor groups
+      detection_threshold: () T_D on FD = p^T p
+      isolation_threshold: () T_I on FI
+      estimators: (G + 1, n, m) least-squares state: [0] all channels, [g + 1] without group g
+      restart_cov: (n, n) sigma^2 (H^T H)^-1, the restart state's covariance
+      channel_group: (m,) int: the group of each channel (-1: none)
+      verification_threshold: () T_V on FD_-g (inf: no verification)
+    """
 
     space: ParitySpace
-    detection_threshold: Array  # () T_D on FD = p^T p
-    isolation_threshold: Array  # () T_I on FI
-    estimators: Array           # (G + 1, n, m) least-squares state: [0] all channels, [g + 1] without group g
-    restart_cov: Array          # (n, n) sigma^2 (H^T H)^-1, the restart state's covariance
-    channel_group: Array        # (m,) int: the group of each channel (-1: none)
-    verification_threshold: Array  # () T_V on FD_-g (inf: no verification)
+    detection_threshold: Array
+    isolation_threshold: Array
+    estimators: Array
+    restart_cov: Array
+    channel_group: Array
+    verification_threshold: Array
 
 
 class HistoryEntry(NamedTuple):
-    """One step kept for the replay."""
+    """One step kept for the replay.
 
-    channels: Array  # (m,)
-    inputs: Array    # (nu,) the filter's input of that step
-    estimate: Array  # (n,) least-squares state from every channel (a restart point)
+    Attributes:
+      channels: (m,) the measured channels of that step
+      inputs: (nu,) the filter's input of that step
+      estimate: (n,) least-squares state from every channel (a restart point)
+    """
+
+    channels: Array
+    inputs: Array
+    estimate: Array
 
 
 class StepValues(NamedTuple):
-    """What ``observe`` found at the current step (reported by ``step``)."""
+    """What ``observe`` found at the current step (reported by ``step``).
 
-    statistic: Array            # () FD
-    alarm: Array                # () bool FD > T_D
-    isolation_functions: Array  # (G,)
-    suspects: Array             # (G,) bool FI > T_I
-    analytic_residuals: Array   # (G,) ||r_g|| if the filter ran at this step, else NaN
-    filter_ran: Array           # () bool
+    Attributes:
+      statistic: () FD
+      alarm: () bool FD > T_D
+      isolation_functions: (G,) FI of each group
+      suspects: (G,) bool FI > T_I
+      analytic_residuals: (G,) ||r_g|| if the filter ran at this step, else NaN
+      filter_ran: () bool: the filter was replayed at this step
+    """
+
+    statistic: Array
+    alarm: Array
+    isolation_functions: Array
+    suspects: Array
+    analytic_residuals: Array
+    filter_ran: Array
 
 
 class HybridDecision(NamedTuple):
-    """The latched decision of a run (its FDI summary)."""
+    """The latched decision of a run (its FDI summary).
 
-    detection_step: Array       # () int first step with FD > T_D (-1: none)
-    decision_step: Array        # () int step of the isolation decision (-1: none)
-    psa: Array                  # () int PSA alone: isolated group + 1 (0: none)
-    hybrid: Array               # () int hybrid: isolated group + 1 (0: none)
-    suspects: Array             # (G,) bool at the decision
-    isolation_functions: Array  # (G,) FI at the decision
-    analytic_residuals: Array   # (G,) ||r_g|| at the decision (NaN: the filter was not needed)
-    filter_used: Array          # () bool: two or more suspects, the filter decided
-    filter_healthy: Array       # () bool: the replayed filter stayed healthy
-    verified: Array             # () int: the exclusion after verification (group + 1; 0: none)
-    revisions: Array            # () int: how often verification moved it
+    Attributes:
+      detection_step: () int first step with FD > T_D (-1: none)
+      decision_step: () int step of the isolation decision (-1: none)
+      psa: () int PSA alone: isolated group + 1 (0: none)
+      hybrid: () int hybrid: isolated group + 1 (0: none)
+      suspects: (G,) bool at the decision
+      isolation_functions: (G,) FI at the decision
+      analytic_residuals: (G,) ||r_g|| at the decision (NaN: the filter was not needed)
+      filter_used: () bool: two or more suspects, the filter decided
+      filter_healthy: () bool: the replayed filter stayed healthy
+      verified: () int: the exclusion after verification (group + 1; 0: none)
+      revisions: () int: how often verification moved it
+    """
+
+    detection_step: Array
+    decision_step: Array
+    psa: Array
+    hybrid: Array
+    suspects: Array
+    isolation_functions: Array
+    analytic_residuals: Array
+    filter_used: Array
+    filter_healthy: Array
+    verified: Array
+    revisions: Array
 
 
 class HybridPSAState(NamedTuple):
-    """The FDI's state in the scan carry (``hybrid_psa_init``)."""
+    """The FDI's state in the scan carry (``hybrid_psa_init``).
 
-    history: Any               # loop.RingBuffer of HistoryEntry, the last L steps
+    Attributes:
+      history: loop.RingBuffer of HistoryEntry, the last L steps
+      current: what ``observe`` found at the current step
+      decision: the latched decision of the run
+      follow: () int, FOLLOW code
+    """
+
+    history: Any
     current: StepValues
     decision: HybridDecision
-    follow: Array              # () int, FOLLOW code
+    follow: Array
 
 
 class HybridPSAOutput(NamedTuple):
-    """One step's output (``fdi.step``)."""
+    """One step's output (``fdi.step``).
 
-    statistic: Array            # () FD
-    alarm: Array                # () bool
-    isolation_functions: Array  # (G,)
-    suspects: Array             # (G,) bool
-    analytic_residuals: Array   # (G,) NaN unless the filter ran at this step
-    detection: Decision         # FD alarm of this step (label -1)
-    psa: Decision               # latched: isolated by PSA alone (label group + 1)
-    hybrid: Decision            # latched: isolated by the hybrid (label group + 1)
-    verified: Decision          # the hybrid's exclusion after verification (label group + 1)
-    excluded: Array             # () int group + 1 whose channels the view leaves out (0: none)
-    healthy: Array              # () bool
+    Attributes:
+      statistic: () FD
+      alarm: () bool FD > T_D
+      isolation_functions: (G,) FI of each group
+      suspects: (G,) bool FI > T_I
+      analytic_residuals: (G,) NaN unless the filter ran at this step
+      detection: FD alarm of this step (label -1)
+      psa: latched: isolated by PSA alone (label group + 1)
+      hybrid: latched: isolated by the hybrid (label group + 1)
+      verified: the hybrid's exclusion after verification (label group + 1)
+      excluded: () int group + 1 whose channels the view leaves out (0: none)
+      healthy: () bool: FD is a number and the replayed filter stayed healthy
+    """
+
+    statistic: Array
+    alarm: Array
+    isolation_functions: Array
+    suspects: Array
+    analytic_residuals: Array
+    detection: Decision
+    psa: Decision
+    hybrid: Decision
+    verified: Decision
+    excluded: Array
+    healthy: Array
 
 
 def exclusion_estimators(space: ParitySpace) -> Array:
@@ -189,7 +249,7 @@ def subset_statistics(config: HybridPSAConfig, channels: Array) -> Array:
 def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: int = 3,
                     follow: str | Array = "hybrid") -> HybridPSAState:
     """The FDI's initial state: an empty history of ``restart_lag`` steps (the filter
-    restarts that many steps before the decision; seed 000: 2-3), no decision.
+    restarts that many steps before the decision; Park et al. 2004: 2-3), no decision.
     ``input_example``: an array shaped like the filter's input (nu,). ``follow``: a name
     of ``FOLLOW`` or its code (an array, for one compiled flight of every mode)."""
     from jaxfdi.loop import ring_buffer
@@ -218,7 +278,7 @@ def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: 
 def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, valid: Array, channels: Array,
                        trusted: Array) -> tuple[Array, Array, Array, Array]:
     """Restart ``filt`` from the oldest stored step and run it to the current one with
-    the ``trusted`` channels only (seed 000 eq. 30).
+    the ``trusted`` channels only (Park et al. 2004, eq. 30).
 
     Args:
       filt: a Gaussian ``Filter`` (state x (n,), measurement all m channels, NaN = not used).

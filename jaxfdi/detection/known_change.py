@@ -80,20 +80,35 @@ from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
 class KnownChangeState(NamedTuple):
-    """The known-change bank's state after step ``k``."""
+    """The known-change bank's state after step ``k``.
 
-    log_ratio: Array     # (N, d) Lambda_i(k, k - o) for onset offsets o = 0..N-1 (-inf: onset before the data)
-    tail: Array          # (d,) max over onsets older than the window (-inf without ``tail`` or before N steps)
-    count: Array         # () int32, steps seen (saturates at N)
-    onset_offset: Array  # () int32, onset offset of the isolated direction (-1: an older onset, ``tail``)
+    Attributes:
+      log_ratio: (N, d) Lambda_i(k, k - o) for onset offsets o = 0..N-1
+          (-inf: onset before the data)
+      tail: (d,) max over onsets older than the window (-inf without ``tail`` or before N steps)
+      count: () int32, steps seen (saturates at N)
+      onset_offset: () int32, onset offset of the isolated direction
+          (-1: an older onset, ``tail``)
+    """
+
+    log_ratio: Array
+    tail: Array
+    count: Array
+    onset_offset: Array
 
 
 class KnownChangeTerms(NamedTuple):
-    """Whitened per-lag terms: ``llr_i(j, l) = gain[l, :, i] . w_j - drift[l, i]``."""
+    """Whitened per-lag terms: ``llr_i(j, l) = gain[l, :, i] . w_j - drift[l, i]``.
 
-    whitener: Array  # (m, m) L^-1 with S = L L^T
-    gain: Array      # (N, m, d) nu_i L^-1 G_i[l]
-    drift: Array     # (N, d) nu_i^2 / 2 ||L^-1 G_i[l]||^2
+    Attributes:
+      whitener: (m, m) L^-1 with S = L L^T
+      gain: (N, m, d) nu_i L^-1 G_i[l]
+      drift: (N, d) nu_i^2 / 2 ||L^-1 G_i[l]||^2
+    """
+
+    whitener: Array
+    gain: Array
+    drift: Array
 
 
 def known_change_terms(signatures: Array, innovation_cov: Array, magnitudes: Array) -> KnownChangeTerms:

@@ -1,4 +1,4 @@
-"""Decision on mode probabilities of a multiple-model filter (seed 003, eq. 13).
+"""Decision on mode probabilities of a multiple-model filter (Han et al. 2022, eq. 13).
 
 A fault is declared when the most probable fault mode reaches ``mu_T``:
 ``max_{j != normal} mu_j(k) >= mu_T``; that mode is the isolated one. With mode labels
@@ -57,7 +57,7 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
     ``estimate`` is that of the isolated mode.
 
     Args:
-      threshold: ``mu_T`` in (0, 1] (seed 003 uses 0.5), or (M,) one per mode: the top
+      threshold: ``mu_T`` in (0, 1] (Han et al. 2022 use 0.5), or (M,) one per mode: the top
         fault mode j alarms when ``mu_j >= threshold[j]`` (the normal mode's entry is
         not used).
       normal_mode: index of the fault-free mode.

@@ -42,21 +42,36 @@ from jaxfdi import _checks
 
 
 class Isolability(NamedTuple):
-    """Geometry of a sensor set's fault subspaces (``isolability``)."""
+    """Geometry of a sensor set's fault subspaces (``isolability``).
 
-    dihedral: Array       # (S, S) largest principal angle between the fault subspaces, rad (0 on the diagonal)
-    min_dihedral: Array   # () smallest off-diagonal dihedral angle, rad
-    detectability: Array  # (S,) lambda_min(V_i^T V_i)
-    isotropy: Array       # () ||H^T H / trace(H^T H) * 3 - I||_F (0: isotropic rate estimate)
+    Attributes:
+      dihedral: (S, S) largest principal angle between the fault subspaces, rad
+          (0 on the diagonal)
+      min_dihedral: () smallest off-diagonal dihedral angle, rad
+      detectability: (S,) lambda_min(V_i^T V_i)
+      isotropy: () ||H^T H / trace(H^T H) * 3 - I||_F (0: isotropic rate estimate)
+    """
+
+    dihedral: Array
+    min_dihedral: Array
+    detectability: Array
+    isotropy: Array
 
 
 class ConfigurationResult(NamedTuple):
-    """``optimize_configuration``'s result (leading axis: the starts)."""
+    """``optimize_configuration``'s result (leading axis: the starts).
 
-    quaternions: Array  # (starts, S, 4) final parameters (not normalised)
-    axes: Array         # (starts, 2S, 3) H of each start
-    objective: Array    # (starts, steps) objective value per step (to maximise)
-    best: Array         # () int, the start with the largest final objective
+    Attributes:
+      quaternions: (starts, S, 4) final parameters (not normalised)
+      axes: (starts, 2S, 3) H of each start
+      objective: (starts, steps) objective value per step (to maximise)
+      best: () int, the start with the largest final objective
+    """
+
+    quaternions: Array
+    axes: Array
+    objective: Array
+    best: Array
 
 
 def quaternion_axes(quaternion: Array) -> Array:

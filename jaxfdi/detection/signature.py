@@ -1,4 +1,4 @@
-"""Fault signature matrix and isolation by matching the symptom vector (seed 001,
+"""Fault signature matrix and isolation by matching the symptom vector (Lee & Lyou,
 eq. 20, Table 2).
 
 A bank has one filter per fault hypothesis. Filter i estimates fault i correctly, so

@@ -43,14 +43,23 @@ __all__ = ["TwoStageOutput", "two_stage_isolation"]
 
 
 class TwoStageOutput(NamedTuple):
-    """What the two stages give at one step."""
+    """What the two stages give at one step.
 
-    decisions: tuple             # (F, NIS, credit, likelihood) ``Decision``s
-    peaks: Array                 # (2,) F and the windowed NIS
-    healthy: Array               # () bool: every filter healthy
-    hypothesis_parameter: Array  # (M,) F_x of the credit bank
-    mode_prob: Array             # (M + 1,) likelihood bank, nominal mode first
-    engaged: Array               # () bool: the banks ran on their own at this step
+    Attributes:
+      decisions: (F, NIS, credit, likelihood) ``Decision``s
+      peaks: (2,) F and the windowed NIS
+      healthy: () bool: every filter healthy
+      hypothesis_parameter: (M,) F_x of the credit bank
+      mode_prob: (M + 1,) likelihood bank, nominal mode first
+      engaged: () bool: the banks ran on their own at this step
+    """
+
+    decisions: tuple
+    peaks: Array
+    healthy: Array
+    hypothesis_parameter: Array
+    mode_prob: Array
+    engaged: Array
 
 
 class TwoStage(NamedTuple):

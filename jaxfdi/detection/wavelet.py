@@ -1,4 +1,4 @@
-"""Haar multi-scale DWT denoising of a test statistic, block by block (seed 001, Table 1;
+"""Haar multi-scale DWT denoising of a test statistic, block by block (Lee & Lyou, Table 1;
 Rao & Bopardikar 1998).
 
 The statistic ``lambda_k`` is cut into blocks of ``2^M`` samples. Each block is
@@ -14,7 +14,7 @@ Denoising thresholds the details and reconstructs:
   the block mean;
 * ``"soft"`` (ST): each detail shrunk toward 0 by ``c_mult * sigma_j``
   (``sign(d) max(|d| - t, 0)``), ``sigma_j`` the detail's standard deviation at scale j:
-  ``chi2_detail_sigma`` for a chi-square statistic, or, as seed 001 does, the sample
+  ``chi2_detail_sigma`` for a chi-square statistic, or, as Lee and Lyou do, the sample
   standard deviation of the details themselves (``sample_detail_sigma``: from a
   fault-free calibration window at the start of the run, used from the first block after
   it, so the denoiser stays causal; ``causal_detail_sigma`` gives the per-block sigma).
@@ -81,7 +81,7 @@ def chi2_detail_sigma(dof: int, levels: int) -> np.ndarray:
 def sample_detail_sigma(statistic: Array, levels: int, window: int) -> Array:
     """(M, ...) sample standard deviation (``ddof = 1``, about the sample mean) of each
     scale's details over the blocks inside the first ``window`` steps of ``statistic``
-    (T, ...): seed 001's sigma, estimated on a fault-free calibration window."""
+    (T, ...): Lee and Lyou's sigma, estimated on a fault-free calibration window."""
     x = _check(statistic, levels)
     window = _checks.check_int("window", window, 2**levels, x.shape[0],
                                meaning=f"a number of steps in [2^levels = {2**levels}, T = {x.shape[0]}]")

@@ -1,4 +1,4 @@
-"""GNSS integrity (seed 002, GPS half): almanac and RINEX readers, broadcast orbits,
+"""GNSS integrity (Yoo et al. 2010, GPS half): almanac and RINEX readers, broadcast orbits,
 WGS-84 frames, simulated pseudoranges with masks and faults, snapshot least squares,
 parity RAIM with isolation and exclusion, protection levels and availability.
 

@@ -1,6 +1,6 @@
 """One epoch of GPS integrity monitoring, and the same as an FDI stage of the loop.
 
-``monitor_epoch`` chains the pieces of seed 002's GPS half (Fig. 3): the least-squares
+``monitor_epoch`` chains the pieces of the GPS half of Yoo et al. (2010, Fig. 3): the least-squares
 fix (``positioning``), the parity test and isolation (``raim``), the protection levels
 and availability (``protection``), and, when the test alarms and a satellite is
 isolated, the exclusion: the fix, test and protection levels again without it (a dead
@@ -36,17 +36,29 @@ EXCLUSION_ITERATIONS = 3
 
 
 class EpochIntegrity(NamedTuple):
-    """One epoch's integrity: the fix, the parity check, protection levels and the exclusion."""
+    """One epoch's integrity: the fix, the parity check, protection levels and the exclusion.
+
+    Attributes:
+      fix: the least-squares fix from every usable satellite
+      check: the parity test of ``fix``
+      protection: the protection levels and availability of ``fix``
+      excluded: () int, the excluded slot (-1: none): the one isolated after a parity alarm,
+          else the first dead slot (every fix leaves it out); -1 without ``exclude``
+      fix_excluded: the fix without it (the full fix when none or a dead slot: it lacks it)
+      check_excluded: the parity test of ``fix_excluded``
+      protection_excluded: the protection levels of ``fix_excluded``
+      dead: (S,) bool: a slot with an orbit whose pseudorange is infinite
+          (a dead channel: the fix leaves it out and ``raim_output`` alarms on it)
+    """
+
     fix: PositionFix
     check: ParityCheck
     protection: ProtectionLevels
-    excluded: Array            # () int, the excluded slot (-1: none): the one isolated after a parity alarm,
-                               # else the first dead slot (every fix leaves it out); -1 without ``exclude``
-    fix_excluded: PositionFix  # the fix without it (the full fix when none or a dead slot: it lacks it)
+    excluded: Array
+    fix_excluded: PositionFix
     check_excluded: ParityCheck
     protection_excluded: ProtectionLevels
-    dead: Array                # (S,) bool: a slot with an orbit whose pseudorange is infinite (a dead
-                               # channel: the fix leaves it out and ``raim_output`` alarms on it)
+    dead: Array
 
 
 def assess(fix: PositionFix, tables: RaimTables, operation="npa") -> tuple[ParityCheck, ProtectionLevels]:
@@ -123,26 +135,45 @@ def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables:
 
 
 class RaimOutput(NamedTuple):
-    """What ``raim_fdi`` reports each step (a lean summary of ``EpochIntegrity``)."""
+    """What ``raim_fdi`` reports each step (a lean summary of ``EpochIntegrity``).
 
-    decision: Decision          # statistic, alarm, label 1 + isolated slot (0: none), estimate = max |TS_j|;
-                                # a dead slot (infinite pseudorange): alarm, label 1 + slot (chi2.flag_dead)
-    threshold: Array            # ()
-    dof: Array                  # () int
-    num_used: Array             # () int
+    Attributes:
+      decision: statistic, alarm, label 1 + isolated slot (0: none), estimate = max |TS_j|; a
+          dead slot (infinite pseudorange): alarm, label 1 + slot (chi2.flag_dead)
+      threshold: () threshold on the parity statistic
+      dof: () int, degrees of freedom of the test
+      num_used: () int, satellites in the fix
+      dops: the fix's dilutions of precision
+      hpl: () m, horizontal protection level
+      vpl: () m, vertical protection level
+      available: () bool (HPL, VPL within the alert limits)
+      position: (3,) ECEF, all satellites
+      clock_bias: () m, receiver clock bias
+      excluded: () int slot (-1: none): the parity test's isolated one, else a dead one
+      position_excluded: (3,) after exclusion (= position when none)
+      statistic_excluded: () parity statistic after exclusion
+      threshold_excluded: () its threshold
+      hpl_excluded: () m, HPL after exclusion
+      healthy: () bool: the solution delivered (after exclusion, when there is one) is a finite,
+          converged fix with a finite statistic
+    """
+
+    decision: Decision
+    threshold: Array
+    dof: Array
+    num_used: Array
     dops: Dops
     hpl: Array
     vpl: Array
-    available: Array            # () bool (HPL, VPL within the alert limits)
-    position: Array             # (3,) ECEF, all satellites
-    clock_bias: Array           # ()
-    excluded: Array             # () int slot (-1: none): the parity test's isolated one, else a dead one
-    position_excluded: Array    # (3,) after exclusion (= position when none)
-    statistic_excluded: Array   # ()
-    threshold_excluded: Array   # ()
-    hpl_excluded: Array         # ()
-    healthy: Array              # () bool: the solution delivered (after exclusion, when there is one) is
-                                # a finite, converged fix with a finite statistic
+    available: Array
+    position: Array
+    clock_bias: Array
+    excluded: Array
+    position_excluded: Array
+    statistic_excluded: Array
+    threshold_excluded: Array
+    hpl_excluded: Array
+    healthy: Array
 
 
 def raim_output(result: EpochIntegrity) -> RaimOutput:
@@ -203,14 +234,23 @@ def geometry_fix(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: 
 
 
 class GridAvailability(NamedTuple):
-    """Geometry-only integrity over P receivers x T epochs (leaves (P, T), MDB (P, T, S))."""
+    """Geometry-only integrity over P receivers x T epochs (leaves (P, T), MDB (P, T, S)).
+
+    Attributes:
+      num_visible: (P, T) int, satellites above the mask
+      hdop: (P, T) horizontal dilution of precision
+      hpl: (P, T) m, horizontal protection level
+      vpl: (P, T) m, vertical protection level
+      available: (P, T) bool: HPL and VPL within the alert limits
+      minimum_detectable_bias: (P, T, S) m (inf where not visible)
+    """
 
     num_visible: Array
     hdop: Array
     hpl: Array
     vpl: Array
     available: Array
-    minimum_detectable_bias: Array   # (P, T, S) m (inf where not visible)
+    minimum_detectable_bias: Array
 
 
 def availability_grid(table: OrbitTable, times: Array, receivers_ecef: Array, tables: RaimTables,

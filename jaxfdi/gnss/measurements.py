@@ -4,7 +4,7 @@ satellite faults, as a plant for the foundation's loop.
 - **Visibility**: a satellite is used when its ephemeris is valid and healthy, it is
   above the elevation mask, and its line of sight does not cross a ``Wall`` — a
   vertical rectangle standing on the local level (the paper's campus case: an antenna
-  beside a rooftop structure loses the satellites on that side, seed 002 sec. 3.2).
+  beside a rooftop structure loses the satellites on that side, Yoo et al. 2010, sec. 3.2).
 - **Noise**: ``sigma(el) = sqrt(a^2 + b^2 / sin^2 el)`` [m] (the elevation model of
   RTKLIB's ``varerr``; Takasu 2013), white between epochs and satellites.
 - **Receiver clock**: bias ``b`` [m] and drift ``d`` [m/s] as the two-state random walk

@@ -49,10 +49,36 @@ KEPLER_ITERATIONS = 6
 
 
 class Orbit(NamedTuple):
-    """Broadcast elements of S satellite slots (leaves (S,), or (S, R) in a table)."""
+    """Broadcast elements of S satellite slots (leaves (S,), or (S, R) in a table).
 
-    toe: Array          # s, reference time of the ephemeris, from the reference week's start
-    week_start: Array   # s, start of the week of toe, from the reference week's start
+    Attributes:
+      toe: s, reference time of the ephemeris, from the reference week's start
+      week_start: s, start of the week of toe, from the reference week's start
+      sqrt_a: m^0.5, square root of the semi-major axis
+      eccentricity: orbital eccentricity (dimensionless)
+      i0: rad, inclination at toe
+      omega0: rad, longitude of the ascending node at the weekly epoch
+      argument_of_perigee: rad, argument of perigee
+      m0: rad, mean anomaly at toe
+      delta_n: rad/s, mean motion correction
+      omega_dot: rad/s, rate of right ascension
+      idot: rad/s, rate of inclination
+      cuc: rad, cosine harmonic correction to the argument of latitude
+      cus: rad, sine harmonic correction to the argument of latitude
+      crc: m, cosine harmonic correction to the orbit radius
+      crs: m, sine harmonic correction to the orbit radius
+      cic: rad, cosine harmonic correction to the inclination
+      cis: rad, sine harmonic correction to the inclination
+      toc: s, clock reference time, from the reference week's start
+      af0: s, clock bias at toc
+      af1: s/s, clock drift
+      af2: s/s^2, clock drift rate
+      tgd: s, group delay differential
+      relativity: 1: the clock includes the relativistic term (ephemeris); 0: almanac
+    """
+
+    toe: Array
+    week_start: Array
     sqrt_a: Array
     eccentricity: Array
     i0: Array
@@ -68,22 +94,30 @@ class Orbit(NamedTuple):
     crs: Array
     cic: Array
     cis: Array
-    toc: Array          # s, clock reference time, from the reference week's start
+    toc: Array
     af0: Array
     af1: Array
     af2: Array
     tgd: Array
-    relativity: Array   # 1: the clock includes the relativistic term (ephemeris); 0: almanac
+    relativity: Array
 
 
 class OrbitTable(NamedTuple):
-    """Every record of S slots, padded to R records a slot (leaves (S, R))."""
+    """Every record of S slots, padded to R records a slot (leaves (S, R)).
 
-    orbit: Orbit       # leaves (S, R)
-    valid: Array       # (S, R) bool: a real, healthy, physically possible record
-    validity: Array    # (S, R) s, the record serves epochs with |t - toe| <= validity
-    prn: Array         # (S,) int, PRN of each slot
-    problem: Array     # (S, R) int: why a present record was refused (``ORBIT_PROBLEMS``; 0: none)
+    Attributes:
+      orbit: the records' elements, leaves (S, R)
+      valid: (S, R) bool: a real, healthy, physically possible record
+      validity: (S, R) s, the record serves epochs with |t - toe| <= validity
+      prn: (S,) int, PRN of each slot
+      problem: (S, R) int: why a present record was refused (``ORBIT_PROBLEMS``; 0: none)
+    """
+
+    orbit: Orbit
+    valid: Array
+    validity: Array
+    prn: Array
+    problem: Array
 
 
 #: why a broadcast record is impossible (``orbit_problem``'s codes)

@@ -1,4 +1,4 @@
-"""Parity-space RAIM: detection, isolation (Brown & Chin 1992; seed 002 eqs. 5-9).
+"""Parity-space RAIM: detection, isolation (Brown & Chin 1992; Yoo et al. 2010, eqs. 5-9).
 
 Linearised at the least-squares fix, ``y = H x + eps`` (``H`` n x u: position and
 ``u - 3`` receiver clocks, one per constellation; ``u = 4`` for GPS alone). With the QR
@@ -12,7 +12,7 @@ geometry columns, so a second clock costs a degree of freedom (and raises the th
 and the protection level) wherever the fix carries one.
 
 - **Threshold** ``chi2_threshold(n - 4, P_fa)`` (``rule="chi2"``). ``rule="paper"`` uses
-  seed 002 eq. 8, ``sqrt(2 ln(1/r) sigma^2 / (n - 4))``, read as a bound on the RMS parity
+  eq. 8 of Yoo et al. (2010), ``sqrt(2 ln(1/r) sigma^2 / (n - 4))``, read as a bound on the RMS parity
   ``sqrt(p^T p / (n - 4))`` (the reading whose units agree): on ``TS_D`` it is
   ``2 ln(1/P_fa)`` whatever ``n``, the exact chi-square quantile for 2 degrees of freedom
   only; with 1 it is conservative, from 3 on its false-alarm rate exceeds ``P_fa``
@@ -50,26 +50,41 @@ RULES = ("chi2", "paper")
 
 class RaimTables(NamedTuple):
     """Per degrees of freedom ``k = 0..S-4``: the threshold on ``TS_D`` and the
-    noncentrality ``lambda`` missed with probability ``P_md`` (entry 0: no test)."""
+    noncentrality ``lambda`` missed with probability ``P_md`` (entry 0: no test).
 
-    threshold: Array       # (S - 3,)
-    noncentrality: Array   # (S - 3,)
+    Attributes:
+      threshold: (S - 3,) threshold on TS_D per degrees of freedom
+      noncentrality: (S - 3,) noncentrality missed with probability P_md, per degrees of freedom
+    """
+
+    threshold: Array
+    noncentrality: Array
 
 
 class ParityCheck(NamedTuple):
-    """Detection and isolation of one epoch."""
+    """Detection and isolation of one epoch.
 
-    statistic: Array   # () TS_D = p^T p (whitened), 0 with fewer than u + 1 satellites
-    dof: Array         # () int, n - u (0: no test)
-    threshold: Array   # () on TS_D (inf when dof == 0)
-    alarm: Array       # () bool
-    isolation: Array   # (S,) TS_j (0 at unused slots)
-    isolated: Array    # () int, slot with the largest |TS_j| (-1: none; needs n >= 6)
-    healthy: Array     # () bool: finite statistic
+    Attributes:
+      statistic: () TS_D = p^T p (whitened), 0 with fewer than u + 1 satellites
+      dof: () int, n - u (0: no test)
+      threshold: () on TS_D (inf when dof == 0)
+      alarm: () bool, TS_D above the threshold
+      isolation: (S,) TS_j (0 at unused slots)
+      isolated: () int, slot with the largest |TS_j| (-1: none; needs n >= 6)
+      healthy: () bool: finite statistic
+    """
+
+    statistic: Array
+    dof: Array
+    threshold: Array
+    alarm: Array
+    isolation: Array
+    isolated: Array
+    healthy: Array
 
 
 def paper_threshold(num_visible, pfa, sigma) -> Array:
-    """Seed 002 eq. 8: ``sqrt(2 ln(1/pfa) sigma^2 / (n - 4))`` [m], a bound on the RMS
+    """Eq. 8 of Yoo et al. (2010): ``sqrt(2 ln(1/pfa) sigma^2 / (n - 4))`` [m], a bound on the RMS
     parity ``sqrt(p^T p / (n - 4))`` (NaN for ``n <= 4``)."""
     _checks.check_probability("pfa", pfa)
     _checks.check_real("sigma", sigma, "a pseudorange standard deviation [m]")

@@ -46,42 +46,79 @@ _REQUIRED = (4, 4, 4, 4, 4, 4, 1)
 
 class Ephemerides(NamedTuple):
     """N broadcast ephemeris records; every per-record field is an (N,) NumPy array.
-    Angles in radians, times in seconds, as in IS-GPS-200 (RINEX 2 stores them so)."""
+    Angles in radians, times in seconds, as in IS-GPS-200 (RINEX 2 stores them so).
+
+    Attributes:
+      prn: int, PRN number
+      toc_week: int, GPS week of the clock epoch
+      toc: s of toc_week
+      af0: s, clock bias at toc
+      af1: s/s, clock drift
+      af2: s/s^2, clock drift rate
+      iode: int, issue of data, ephemeris
+      crs: m, sine harmonic correction to the orbit radius
+      delta_n: rad/s, mean motion correction
+      m0: rad, mean anomaly at toe
+      cuc: rad, cosine harmonic correction to the argument of latitude
+      eccentricity: orbital eccentricity (dimensionless)
+      cus: rad, sine harmonic correction to the argument of latitude
+      sqrt_a: m^0.5, square root of the semi-major axis
+      toe: s of week, ephemeris reference time
+      cic: rad, cosine harmonic correction to the inclination
+      omega0: rad, longitude of the ascending node at the weekly epoch
+      cis: rad, sine harmonic correction to the inclination
+      i0: rad, inclination at toe
+      crc: m, cosine harmonic correction to the orbit radius
+      argument_of_perigee: rad, argument of perigee
+      omega_dot: rad/s, rate of right ascension
+      idot: rad/s, rate of inclination
+      l2_codes: codes on L2
+      week: int, GPS week of toe (continuous, not mod 1024)
+      l2p_flag: L2 P data flag
+      accuracy: m (URA)
+      health: int, 0 = healthy
+      tgd: s, group delay differential
+      iodc: int, issue of data, clock
+      transmit_time: s of week, transmission time of the message
+      fit_interval: h (0: 4 hours, per RINEX 2.11)
+      ion_alpha: (4,) Klobuchar alpha from the header, NaN if absent
+      ion_beta: (4,) Klobuchar beta, NaN if absent
+    """
 
     prn: np.ndarray
-    toc_week: np.ndarray       # int, GPS week of the clock epoch
-    toc: np.ndarray            # s of toc_week
-    af0: np.ndarray            # s
-    af1: np.ndarray            # s/s
-    af2: np.ndarray            # s/s^2
+    toc_week: np.ndarray
+    toc: np.ndarray
+    af0: np.ndarray
+    af1: np.ndarray
+    af2: np.ndarray
     iode: np.ndarray
-    crs: np.ndarray            # m
-    delta_n: np.ndarray        # rad/s
-    m0: np.ndarray             # rad
-    cuc: np.ndarray            # rad
+    crs: np.ndarray
+    delta_n: np.ndarray
+    m0: np.ndarray
+    cuc: np.ndarray
     eccentricity: np.ndarray
-    cus: np.ndarray            # rad
-    sqrt_a: np.ndarray         # m^0.5
-    toe: np.ndarray            # s of week
-    cic: np.ndarray            # rad
-    omega0: np.ndarray         # rad
-    cis: np.ndarray            # rad
-    i0: np.ndarray             # rad
-    crc: np.ndarray            # m
-    argument_of_perigee: np.ndarray  # rad
-    omega_dot: np.ndarray      # rad/s
-    idot: np.ndarray           # rad/s
+    cus: np.ndarray
+    sqrt_a: np.ndarray
+    toe: np.ndarray
+    cic: np.ndarray
+    omega0: np.ndarray
+    cis: np.ndarray
+    i0: np.ndarray
+    crc: np.ndarray
+    argument_of_perigee: np.ndarray
+    omega_dot: np.ndarray
+    idot: np.ndarray
     l2_codes: np.ndarray
-    week: np.ndarray           # int, GPS week of toe (continuous, not mod 1024)
+    week: np.ndarray
     l2p_flag: np.ndarray
-    accuracy: np.ndarray       # m (URA)
-    health: np.ndarray         # int, 0 = healthy
-    tgd: np.ndarray            # s
+    accuracy: np.ndarray
+    health: np.ndarray
+    tgd: np.ndarray
     iodc: np.ndarray
-    transmit_time: np.ndarray  # s of week
-    fit_interval: np.ndarray   # h (0: 4 hours, per RINEX 2.11)
-    ion_alpha: np.ndarray      # (4,) Klobuchar alpha from the header, NaN if absent
-    ion_beta: np.ndarray       # (4,) Klobuchar beta, NaN if absent
+    transmit_time: np.ndarray
+    fit_interval: np.ndarray
+    ion_alpha: np.ndarray
+    ion_beta: np.ndarray
 
 
 def gps_week_seconds(year: int, month: int, day: int, hour: int = 0, minute: int = 0,

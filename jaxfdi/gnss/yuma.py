@@ -23,21 +23,37 @@ from jaxfdi import _checks
 
 
 class Almanac(NamedTuple):
-    """Almanac of N satellites; every field is an (N,) NumPy array."""
+    """Almanac of N satellites; every field is an (N,) NumPy array.
 
-    prn: np.ndarray            # int, PRN number
-    health: np.ndarray         # int, 0 = healthy
+    Attributes:
+      prn: int, PRN number
+      health: int, 0 = healthy
+      eccentricity: orbital eccentricity (dimensionless)
+      toa: s, time of applicability (seconds of ``week``)
+      inclination: rad, orbital inclination
+      omega_dot: rad/s, rate of right ascension
+      sqrt_a: m^0.5, square root of the semi-major axis
+      omega0: rad, longitude of the ascending node at the weekly epoch
+      argument_of_perigee: rad, argument of perigee
+      mean_anomaly: rad, at toa
+      af0: s, clock bias
+      af1: s/s, clock drift
+      week: int, full GPS week (file week + 1024 * rollovers)
+    """
+
+    prn: np.ndarray
+    health: np.ndarray
     eccentricity: np.ndarray
-    toa: np.ndarray            # s, time of applicability (seconds of ``week``)
-    inclination: np.ndarray    # rad
-    omega_dot: np.ndarray      # rad/s, rate of right ascension
-    sqrt_a: np.ndarray         # m^0.5
-    omega0: np.ndarray         # rad, longitude of the ascending node at the weekly epoch
-    argument_of_perigee: np.ndarray  # rad
-    mean_anomaly: np.ndarray   # rad, at toa
-    af0: np.ndarray            # s
-    af1: np.ndarray            # s/s
-    week: np.ndarray           # int, full GPS week (file week + 1024 * rollovers)
+    toa: np.ndarray
+    inclination: np.ndarray
+    omega_dot: np.ndarray
+    sqrt_a: np.ndarray
+    omega0: np.ndarray
+    argument_of_perigee: np.ndarray
+    mean_anomaly: np.ndarray
+    af0: np.ndarray
+    af1: np.ndarray
+    week: np.ndarray
 
 
 #: (key prefix as written in YUMA files, lower case; field; parser)

@@ -40,14 +40,23 @@ SOMIGLIANA_K = 0.00193185265241
 
 
 class LocalEarth(NamedTuple):
-    """What the navigation equations need at one point (``local_earth``)."""
+    """What the navigation equations need at one point (``local_earth``).
+
+    Attributes:
+      sin_lat: sine of the latitude
+      cos_lat: cosine of the latitude
+      meridian_radius: R_N [m]
+      transverse_radius: R_E [m]
+      gravity: (3,) g^n [m/s^2], NED
+      earth_rate: (3,) w_ie^n [rad/s]
+    """
 
     sin_lat: Array
     cos_lat: Array
-    meridian_radius: Array    # R_N [m]
-    transverse_radius: Array  # R_E [m]
-    gravity: Array            # (3,) g^n [m/s^2], NED
-    earth_rate: Array         # (3,) w_ie^n [rad/s]
+    meridian_radius: Array
+    transverse_radius: Array
+    gravity: Array
+    earth_rate: Array
 
 
 def _inverse_w(sin_lat: Array) -> Array:

@@ -36,25 +36,43 @@ FEET = 0.3048
 
 
 class ImuModel(NamedTuple):
-    """1-sigma error parameters (SI units; see ``hg1900``)."""
+    """1-sigma error parameters (SI units; see ``hg1900``).
 
-    accel_bias: float            # m/s^2, turn-on
-    gyro_bias: float             # rad/s, turn-on
-    velocity_random_walk: float  # m/s/sqrt(s)
-    angle_random_walk: float     # rad/sqrt(s)
-    accel_bias_walk: float       # m/s^2/sqrt(s)
-    gyro_bias_walk: float        # rad/s/sqrt(s)
-    accel_scale: float = 0.0     # dimensionless (ppm * 1e-6)
+    Attributes:
+      accel_bias: m/s^2, turn-on
+      gyro_bias: rad/s, turn-on
+      velocity_random_walk: m/s/sqrt(s)
+      angle_random_walk: rad/sqrt(s)
+      accel_bias_walk: m/s^2/sqrt(s)
+      gyro_bias_walk: rad/s/sqrt(s)
+      accel_scale: dimensionless (ppm * 1e-6)
+      gyro_scale: dimensionless (ppm * 1e-6)
+    """
+
+    accel_bias: float
+    gyro_bias: float
+    velocity_random_walk: float
+    angle_random_walk: float
+    accel_bias_walk: float
+    gyro_bias_walk: float
+    accel_scale: float = 0.0
     gyro_scale: float = 0.0
 
 
 class ImuErrors(NamedTuple):
-    """One IMU's current systematic errors (a run's draw; leaves may be batched)."""
+    """One IMU's current systematic errors (a run's draw; leaves may be batched).
 
-    accel_bias: Array   # (3,) m/s^2
-    gyro_bias: Array    # (3,) rad/s
-    accel_scale: Array  # (3,)
-    gyro_scale: Array   # (3,)
+    Attributes:
+      accel_bias: (3,) accelerometer bias [m/s^2]
+      gyro_bias: (3,) gyro bias [rad/s]
+      accel_scale: (3,) accelerometer scale-factor errors
+      gyro_scale: (3,) gyro scale-factor errors
+    """
+
+    accel_bias: Array
+    gyro_bias: Array
+    accel_scale: Array
+    gyro_scale: Array
 
 
 def hg1900(accel_scale_ppm: float = 0.0, gyro_scale_ppm: float = 0.0) -> ImuModel:

@@ -1,4 +1,4 @@
-"""Seed 002's GPS/INS integrity monitor (Fig. 3) as an FDI stage of the foundation's loop.
+"""The GPS/INS integrity monitor of Yoo et al. (2010, Fig. 3) as an FDI stage of the foundation's loop.
 
 Each GPS epoch:
 
@@ -9,7 +9,7 @@ Each GPS epoch:
 2. **EKF** (``loosely_coupled_filter``): update with the fix (position covariance from
    the weighted least-squares geometry, ``(G^T W G)^-1`` in NED; velocity covariance
    ``velocity_sigma^2 I``), feedback, then the INS through the epoch's IMU samples.
-3. **Windowed chi-square test** (seed 002 eq. 1; ``detection.chi2_detector``): the NIS
+3. **Windowed chi-square test** (Yoo et al. 2010, eq. 1; ``detection.chi2_detector``): the NIS
    of the epochs that were updated, summed over the last ``window`` of them (10: 60 dof,
    91.95 at 0.005). A coasted epoch leaves the window as it was and decides nothing.
 4. **SCST** (``scst.state_chi2_test``) on the filter's corrections and covariances,
@@ -68,33 +68,59 @@ class GpsInsFdiState(NamedTuple):
 
 
 class InsTestOutput(NamedTuple):
-    """One epoch of the INS tests (``ins_monitor_step``)."""
+    """One epoch of the INS tests (``ins_monitor_step``).
 
-    gps_used: Array         # () bool: the EKF was updated
-    chi2: Decision          # windowed NIS (statistic held, alarm False on coasted epochs)
+    Attributes:
+      gps_used: () bool: the EKF was updated
+      chi2: windowed NIS (statistic held, alarm False on coasted epochs)
+      scst: the state chi-square test's decision
+      scst_valid: () bool: the SCST's B passed its checks
+      scst_condition: () condition estimate of the SCST's scaled B
+      scst_age: () int, age of the tested propagator [epochs]
+      imu_health: the epoch's IMU health decision: alarm if a sample alarmed, label 1 + channel
+      nis: () normalised innovation squared of the epoch
+      nav: the estimate at t_k (after the feedback)
+      accel_bias: (3,) accelerometer bias estimate [m/s^2]
+      gyro_bias: (3,) gyro bias estimate [rad/s]
+      cov: (15, 15) P[k|k]
+      healthy: () bool: the filter healthy and both statistics finite
+    """
+
+    gps_used: Array
+    chi2: Decision
     scst: Decision
-    scst_valid: Array       # () bool
-    scst_condition: Array   # ()
-    scst_age: Array         # () int
-    imu_health: Decision    # the epoch's IMU health decision: alarm if a sample alarmed, label 1 + channel
-    nis: Array              # ()
-    nav: NavState           # the estimate at t_k (after the feedback)
-    accel_bias: Array       # (3,)
-    gyro_bias: Array        # (3,)
-    cov: Array              # (15, 15) P[k|k]
-    healthy: Array          # () bool
+    scst_valid: Array
+    scst_condition: Array
+    scst_age: Array
+    imu_health: Decision
+    nis: Array
+    nav: NavState
+    accel_bias: Array
+    gyro_bias: Array
+    cov: Array
+    healthy: Array
 
 
 class GpsInsOutput(NamedTuple):
-    """One epoch of the GPS/INS monitor (stacked over time with ``keep_history``)."""
+    """One epoch of the GPS/INS monitor (stacked over time with ``keep_history``).
 
-    raim: Decision          # parity statistic, alarm, label 1 + isolated slot
-    raim_threshold: Array   # ()
-    hpl: Array              # () m
-    hdop: Array             # ()
-    num_used: Array         # () satellites in the fix
+    Attributes:
+      raim: parity statistic, alarm, label 1 + isolated slot
+      raim_threshold: () threshold of the parity test
+      hpl: () m, horizontal protection level
+      hdop: () horizontal dilution of precision
+      num_used: () satellites in the fix
+      ins: the INS tests of the epoch
+      healthy: () bool: the INS tests' ``healthy``
+    """
+
+    raim: Decision
+    raim_threshold: Array
+    hpl: Array
+    hdop: Array
+    num_used: Array
     ins: InsTestOutput
-    healthy: Array          # () bool
+    healthy: Array
 
     # the INS fields at the top level, for scorers and plots
     gps_used = property(lambda self: self.ins.gps_used)

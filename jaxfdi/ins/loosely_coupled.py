@@ -1,4 +1,4 @@
-"""The 15-state loosely coupled INS/GPS error-state EKF with feedback (seed 002, Appendix).
+"""The 15-state loosely coupled INS/GPS error-state EKF with feedback (Yoo et al. 2010, Appendix).
 
 A ``Filter(init, step)`` whose state is the INS itself (navigation state, IMU bias
 estimates) and the error covariance ``P[k|k-1]``; one ``step`` is one GPS epoch:
@@ -47,39 +47,73 @@ MEASUREMENT_SIZE = 6
 
 
 class InsState(NamedTuple):
-    """The filter's state at ``t_k`` before the update: the INS and ``P[k|k-1]``."""
+    """The filter's state at ``t_k`` before the update: the INS and ``P[k|k-1]``.
+
+    Attributes:
+      nav: the INS's navigation state at t_k
+      accel_bias: (3,) estimate b_hat_a [m/s^2]
+      gyro_bias: (3,) estimate b_hat_g [rad/s]
+      cov: (15, 15) P[k|k-1]
+      last_sample: (6,) each channel's last finite IMU sample (0 before the first)
+    """
 
     nav: NavState
-    accel_bias: Array   # (3,) estimate b_hat_a [m/s^2]
-    gyro_bias: Array    # (3,) estimate b_hat_g [rad/s]
-    cov: Array          # (15, 15)
-    last_sample: Array  # (6,) each channel's last finite IMU sample (0 before the first)
+    accel_bias: Array
+    gyro_bias: Array
+    cov: Array
+    last_sample: Array
 
 
 class GpsFix(NamedTuple):
-    """One epoch's GPS solution as the filter uses it."""
+    """One epoch's GPS solution as the filter uses it.
 
-    position: Array        # (3,) lat, lon [rad], h [m]
-    velocity: Array        # (3,) NED [m/s]
-    position_cov: Array    # (3, 3) NED [m^2]
-    velocity_cov: Array    # (3, 3) [m^2/s^2]
-    valid: Array           # () bool: use it (RAIM passed)
+    Attributes:
+      position: (3,) lat, lon [rad], h [m]
+      velocity: (3,) NED [m/s]
+      position_cov: (3, 3) NED [m^2]
+      velocity_cov: (3, 3) [m^2/s^2]
+      valid: () bool: use it (RAIM passed)
+    """
+
+    position: Array
+    velocity: Array
+    position_cov: Array
+    velocity_cov: Array
+    valid: Array
 
 
 class InsInfo(NamedTuple):
-    innovation: Array       # (6,) z (0 when not used)
-    innovation_cov: Array   # (6, 6) S
-    nis: Array              # () z^T S^-1 z (0 when not used)
-    used: Array             # () bool
-    correction: Array       # (15,) dx_hat[k|k] fed back (0 when not used)
-    predicted_cov: Array    # (15, 15) P[k|k-1]
-    filtered_cov: Array     # (15, 15) P[k|k]
-    filtered_nav: NavState  # the INS after the feedback (the estimate at t_k)
-    accel_bias: Array       # (3,) estimate after the feedback
-    gyro_bias: Array        # (3,)
-    transition: Array       # (15, 15) Phi from t_k to t_k+1
-    process_cov: Array      # (15, 15) Q_d
-    healthy: Array          # () bool
+    """What one step of the loosely coupled EKF reports.
+
+    Attributes:
+      innovation: (6,) z (0 when not used)
+      innovation_cov: (6, 6) S
+      nis: () z^T S^-1 z (0 when not used)
+      used: () bool: the GPS fix was used
+      correction: (15,) dx_hat[k|k] fed back (0 when not used)
+      predicted_cov: (15, 15) P[k|k-1]
+      filtered_cov: (15, 15) P[k|k]
+      filtered_nav: the INS after the feedback (the estimate at t_k)
+      accel_bias: (3,) estimate after the feedback
+      gyro_bias: (3,) estimate after the feedback
+      transition: (15, 15) Phi from t_k to t_k+1
+      process_cov: (15, 15) Q_d
+      healthy: () bool: S and P[k|k] positive definite, everything finite
+    """
+
+    innovation: Array
+    innovation_cov: Array
+    nis: Array
+    used: Array
+    correction: Array
+    predicted_cov: Array
+    filtered_cov: Array
+    filtered_nav: NavState
+    accel_bias: Array
+    gyro_bias: Array
+    transition: Array
+    process_cov: Array
+    healthy: Array
 
 
 def hold_last_finite(samples: Array, last: Array) -> tuple[Array, Array]:

@@ -47,38 +47,79 @@ IMU_CHANNELS = 6
 
 
 class GpsInsMeasurement(NamedTuple):
-    pseudoranges: Array   # (S,) m, NaN where not measured
-    velocity: Array       # (3,) receiver velocity solution, NED [m/s]
-    imu: Array            # (n, 6) samples of [t_k, t_k+1)
+    """What the GPS/INS plant measures at one epoch.
+
+    Attributes:
+      pseudoranges: (S,) m, NaN where not measured
+      velocity: (3,) receiver velocity solution, NED [m/s]
+      imu: (n, 6) samples of [t_k, t_k+1)
+    """
+
+    pseudoranges: Array
+    velocity: Array
+    imu: Array
 
 
 class GpsInsTruth(NamedTuple):
-    nav: NavState         # at t_k
-    accel_bias: Array     # (3,) m/s^2
-    gyro_bias: Array      # (3,) rad/s
-    clock: Array          # (2,) receiver clock bias [m], drift [m/s]
+    """The true state of the GPS/INS plant at one epoch.
+
+    Attributes:
+      nav: the true navigation state at t_k
+      accel_bias: (3,) accelerometer bias [m/s^2]
+      gyro_bias: (3,) gyro bias [rad/s]
+      clock: (2,) receiver clock bias [m], drift [m/s]
+    """
+
+    nav: NavState
+    accel_bias: Array
+    gyro_bias: Array
+    clock: Array
 
 
 class GpsInsPlantState(NamedTuple):
+    """The GPS/INS plant's carry.
+
+    Attributes:
+      receiver: the receiver's simulator state (clock)
+      imu: the IMU's current systematic errors
+      held: (F_imu,) the value a STUCK IMU fault holds (apply_faults)
+    """
+
     receiver: SimState
     imu: ImuErrors
-    held: Array           # (F_imu,) the value a STUCK IMU fault holds (apply_faults)
+    held: Array
 
 
 class GpsInsSensed(NamedTuple):
+    """One epoch of the GPS/INS plant: the truth, the measurement and the active faults.
+
+    Attributes:
+      state: the truth at t_k
+      measurement: what the receiver and the IMU measure
+      fault_active: (F_sat + F_imu,) bool, the faults active at this epoch
+      mode: () int, label of the first active fault (satellite faults first)
+    """
+
     state: GpsInsTruth
     measurement: GpsInsMeasurement
-    fault_active: Array   # (F_sat + F_imu,) bool
-    mode: Array           # () int, label of the first active fault (satellite faults first)
+    fault_active: Array
+    mode: Array
 
 
 class FlightTables(NamedTuple):
-    """A flight as the plant reads it, per GPS epoch (T epochs, n IMU samples each)."""
+    """A flight as the plant reads it, per GPS epoch (T epochs, n IMU samples each).
 
-    position: Array       # (T, 3) lat, lon [rad], h [m] at t_k
-    velocity: Array       # (T, 3) NED [m/s]
-    attitude: Array       # (T, 4) body-to-NED quaternion
-    imu: Array            # (T, n, 6) error-free samples of [t_k, t_k+1)
+    Attributes:
+      position: (T, 3) lat, lon [rad], h [m] at t_k
+      velocity: (T, 3) NED [m/s]
+      attitude: (T, 4) body-to-NED quaternion
+      imu: (T, n, 6) error-free samples of [t_k, t_k+1)
+    """
+
+    position: Array
+    velocity: Array
+    attitude: Array
+    imu: Array
 
 
 def flight_tables(trajectory: Trajectory, epochs: int) -> FlightTables:

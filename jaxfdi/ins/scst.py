@@ -5,9 +5,9 @@ Da (1994) compares the Kalman filter's estimate ``x_f`` with that of a *propagat
 Fault-free, ``beta = x_m - x_f`` is zero-mean with covariance ``B = P_m - P_f`` (the
 filter's estimate is orthogonal to its error), so
 
-    l(k) = beta^T B^-1 beta ~ chi2(15)       (seed 002 eqs. 2-4; threshold 32.80 at 0.005)
+    l(k) = beta^T B^-1 beta ~ chi2(15)       (Yoo et al. 2010, eqs. 2-4; threshold 32.80 at 0.005)
 
-In the error-state form of seed 002's Fig. 3 the propagator lives in the filter's error
+In the error-state form of Fig. 3 of Yoo et al. (2010) the propagator lives in the filter's error
 coordinates. With feedback, the filter's estimate jumps by its correction ``dx[k|k]``
 each epoch while the propagator's does not, and both drift alike between epochs:
 
@@ -46,19 +46,39 @@ DEFAULT_MAX_CONDITION = 1e10
 
 
 class ScstState(NamedTuple):
-    difference: Array   # (2, n) beta[k|k-1] of propagators a and b
-    cov: Array          # (2, n, n) P_m[k|k-1]
-    age: Array          # (2,) int, epochs since each propagator's reset (-1: not started)
-    epoch: Array        # () int, epochs seen
+    """The state chi-square test's carry: two staggered propagators.
+
+    Attributes:
+      difference: (2, n) beta[k|k-1] of propagators a and b
+      cov: (2, n, n) P_m[k|k-1]
+      age: (2,) int, epochs since each propagator's reset (-1: not started)
+      epoch: () int, epochs seen
+    """
+
+    difference: Array
+    cov: Array
+    age: Array
+    epoch: Array
 
 
 class ScstOutput(NamedTuple):
-    decision: Decision  # statistic l (0 when invalid), alarm, label -1, estimate NaN
-    valid: Array        # () bool: B passed the checks
-    condition: Array    # () float: condition estimate of the scaled B (inf when not PD)
-    used: Array         # () int: the propagator tested (0 = a, 1 = b)
-    age: Array          # () int: its age [epochs]
-    reset: Array        # (2,) bool: propagators reset at this epoch
+    """One epoch of the state chi-square test.
+
+    Attributes:
+      decision: statistic l (0 when invalid), alarm, label -1, estimate NaN
+      valid: () bool: B passed the checks
+      condition: () float: condition estimate of the scaled B (inf when not PD)
+      used: () int: the propagator tested (0 = a, 1 = b)
+      age: () int: its age [epochs]
+      reset: (2,) bool: propagators reset at this epoch
+    """
+
+    decision: Decision
+    valid: Array
+    condition: Array
+    used: Array
+    age: Array
+    reset: Array
 
 
 class StateChi2Test(NamedTuple):

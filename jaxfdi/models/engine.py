@@ -1,4 +1,4 @@
-"""UAV turbojet engine, linearised about an operating point (seed 003, Table 1).
+"""UAV turbojet engine, linearised about an operating point (Han et al. 2022, Table 1).
 
 States ``[RPM, P2, T2, P3, T3, P4, T4]``, input fuel flow (kg/s), outputs
 ``[RPM, P2, T2, P4, T4]``. The continuous model is stiff (eigenvalues -36,360 ... -1.43);

@@ -10,8 +10,8 @@ state, so that IMM mixing is defined. The stack is a pytree: a filter bank is
   (its variance times ``sensor_inflation[j]``); an actuator-i mode adds process noise
   along the input direction, ``Q + s_i^2 Gamma e_i e_i^T Gamma^T``. The fault shows up as
   a change of likelihood; the state estimate stays that of a fault-free plant, and the
-  fault size is not estimated (the behaviour seed 003 reports for its IMM).
-* ``bias_modes`` (the IMM-GLR idea of seed 003's ref. [4]): the state is augmented with
+  fault size is not estimated (the behaviour Han et al. (2022) report for their IMM).
+* ``bias_modes`` (the IMM-GLR idea of ref. [4] of Han et al. 2022): the state is augmented with
   one bias per actuator and sensor, ``z = [x; b]``. In mode j only bias j acts (on the
   plant through ``Gamma`` and ``D`` for an actuator, on its output for a sensor) and
   follows a random walk of variance ``bias_walk[j]``; the other biases are reset to

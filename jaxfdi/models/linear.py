@@ -17,14 +17,23 @@ from jaxfdi import _checks
 
 
 class LinearGaussianModel(NamedTuple):
-    """Discrete linear Gaussian model; a pytree, so it can be vmapped over or tuned."""
+    """Discrete linear Gaussian model; a pytree, so it can be vmapped over or tuned.
 
-    Phi: Array    # (n, n) state transition
-    Gamma: Array  # (n, nu) input matrix
-    C: Array      # (m, n) output matrix
-    D: Array      # (m, nu) feed-through
-    Q: Array      # (n, n) process-noise covariance
-    R: Array      # (m, m) measurement-noise covariance
+    Attributes:
+      Phi: (n, n) state transition
+      Gamma: (n, nu) input matrix
+      C: (m, n) output matrix
+      D: (m, nu) feed-through
+      Q: (n, n) process-noise covariance
+      R: (m, m) measurement-noise covariance
+    """
+
+    Phi: Array
+    Gamma: Array
+    C: Array
+    D: Array
+    Q: Array
+    R: Array
 
     @property
     def dims(self) -> tuple[int, int, int]:

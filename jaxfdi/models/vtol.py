@@ -1,4 +1,4 @@
-"""VTOL aircraft in the vertical plane (Saif & Guan 1993; seed 001, Section V).
+"""VTOL aircraft in the vertical plane (Saif & Guan 1993; Lee & Lyou, Section V).
 
 States ``[v_h, v_v, q, theta]``, inputs ``[collective, longitudinal cyclic]``. Open loop
 unstable (eigenvalues 0.276 +/- 0.258j). Discretised at ``Ts = 0.1 s``.
@@ -17,7 +17,7 @@ B = np.array([[0.422, 0.1761], [3.5466, -7.5922], [-5.52, 4.49], [0.0, 0.0]])
 C = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 1.0, 1.0, 1.0]])
 TS = 0.1
 
-#: model uncertainty of seed 001, eq. 33: ``E_c d_c(t)`` with ``d_c = [0, 0.5, 0, 1] x``,
+#: model uncertainty of Lee and Lyou, eq. 33: ``E_c d_c(t)`` with ``d_c = [0, 0.5, 0, 1] x``,
 #: i.e. ``Delta a32 = 0.5`` and ``Delta a34 = 1.0`` (the pitch-rate row).
 UNCERTAINTY_INPUT = np.array([[0.0], [0.0], [1.0], [0.0]])
 UNCERTAINTY_GAIN = np.array([[0.0, 0.5, 0.0, 1.0]])
@@ -33,7 +33,7 @@ X0 = np.array([50.0, 1.0, 5.0, 1.0])
 
 def vtol_model(Ts: float = TS, dtype=None):
     """The nominal discrete VTOL model: ``Phi, Gamma`` by zero-order hold, ``C``, ``D = 0``,
-    ``Q = 0.01^2 I``, ``R = 0.1^2 I`` (seed 001, Section V)."""
+    ``Q = 0.01^2 I``, ``R = 0.1^2 I`` (Lee & Lyou, Section V)."""
     import jax.numpy as jnp
 
     from jaxfdi.models.linear import LinearGaussianModel, c2d

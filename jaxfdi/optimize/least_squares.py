@@ -37,25 +37,52 @@ from jaxfdi import _linalg
 
 
 class LeastSquaresResult(NamedTuple):
-    """Levenberg-Marquardt's result: solution, residual, cost, gradient, iterations and flags."""
-    x: Array          # (n,) the solution
-    residual: Array   # (m,) r(x)
-    cost: Array       # () 1/2 ||r(x)||^2
-    gradient: Array   # (n,) J^T r at x
-    steps: Array      # () int, iterations taken
-    converged: Array  # () bool, a tolerance was met before max_steps (module doc)
+    """Levenberg-Marquardt's result: solution, residual, cost, gradient, iterations and flags.
+
+    Attributes:
+      x: (n,) the solution
+      residual: (m,) r(x)
+      cost: () 1/2 ||r(x)||^2
+      gradient: (n,) J^T r at x
+      steps: () int, iterations taken
+      converged: () bool, a tolerance was met before max_steps (module doc)
+    """
+
+    x: Array
+    residual: Array
+    cost: Array
+    gradient: Array
+    steps: Array
+    converged: Array
 
 
 class _State(NamedTuple):
-    x: Array          # (n,) the accepted point
-    residual: Array   # (m,) r(x)
-    jacobian: Array   # (m, n) J(x)
-    cost: Array       # () F(x) (inf before the first evaluation)
-    scale: Array      # (n,) running max of diag(J^T J)
+    """Levenberg-Marquardt's loop carry.
+
+    Attributes:
+      x: (n,) the accepted point
+      residual: (m,) r(x)
+      jacobian: (m, n) J(x)
+      cost: () F(x) (inf before the first evaluation)
+      scale: (n,) running max of diag(J^T J)
+      damping: () mu, the damping of the next step
+      nu: () Nielsen's factor for mu after a rejected step
+      step: (n,) the step to the candidate x + step, evaluated next
+      predicted: () L(0) - L(step)
+      steps: () int, iterations taken
+      done: () bool, the loop ends
+      converged: () bool, a tolerance was met
+    """
+
+    x: Array
+    residual: Array
+    jacobian: Array
+    cost: Array
+    scale: Array
     damping: Array
     nu: Array
-    step: Array       # (n,) the step to the candidate x + step, evaluated next
-    predicted: Array  # () L(0) - L(step)
+    step: Array
+    predicted: Array
     steps: Array
     done: Array
     converged: Array

@@ -1,13 +1,13 @@
-"""Seed 003 engine fault diagnosis: MM, IMM (two mode designs) and GLRT on the same runs.
+"""Engine fault diagnosis of Han et al. (2022): MM, IMM (two mode designs) and GLRT on the same runs.
 
-Scenario (seed-003 note): steady state, a 0.01 kg/s fuel step at t = 0, one step fault
+Scenario (Han et al. 2022, as restated in the spec): steady state, a 0.01 kg/s fuel step at t = 0, one step fault
 at t = 2 s (actuator 0.0005 kg/s; sensors 0.5 % of their operating point), 4 s at
 100 Hz, and a fault-free case. Every method sees the same simulated runs (the noise of
 a run depends only on its key) and is scored by the same record: detection = first
 alarm at or after the onset, isolation = the label at that step, false alarm = an alarm
 before the onset. Delays are scored only in the runs with no alarm before the onset
-(``metrics.fault_row``; issue 27): each row also gives the share of runs with a
-pre-onset alarm and the number of clean runs behind the delays. Seed 003's Table 3
+(``metrics.fault_row``): each row also gives the share of runs with a
+pre-onset alarm and the number of clean runs behind the delays. The paper's Table 3
 delays (0.002, 0.006, 0.027 s, ...) are not multiples of half a sample, so they are means
 of its 100 runs, not medians: the table prints them beside our mean.
 
@@ -31,7 +31,7 @@ Methods (each a filter + an online detector fused with the plant in one scan):
   within 0.05 s); the lengths were chosen by hand on runs of seed 2, not the study's.
 
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
-Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
+Generalized Likelihood Ratio Test" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -64,7 +64,7 @@ from jaxfdi.tuning.train import fixed_batches
 
 MODE_NAMES = ("normal", "actuator", "RPM", "P2", "T2", "P4", "T4")
 
-#: seed 003's transition matrix, rows = from-mode (normal, actuator, RPM, P2, T2, P4, T4).
+#: the transition matrix of Han et al. (2022), rows = from-mode (normal, actuator, RPM, P2, T2, P4, T4).
 PAPER_TRANSITION = np.array([
     [0.940, 0.010, 0.010, 0.010, 0.010, 0.010, 0.010],
     [0.001, 0.989, 0.000, 0.000, 0.000, 0.000, 0.010],
@@ -75,7 +75,7 @@ PAPER_TRANSITION = np.array([
     [0.001, 0.001, 0.000, 0.000, 0.000, 0.000, 0.998],
 ])
 
-#: Table 3 of seed 003: detection delay [s] at mu_T = 0.5 / l_T = 200 (actuator, RPM, P2, T2, P4, T4).
+#: Table 3 of Han et al. (2022): detection delay [s] at mu_T = 0.5 / l_T = 200 (actuator, RPM, P2, T2, P4, T4).
 PAPER_DELAY = {
     "MM": [0.190, 0.000, 0.000, 0.002, 0.000, 0.002],
     "IMM": [0.020, 0.000, 0.000, 0.000, 0.000, 0.006],
@@ -99,34 +99,62 @@ def sticky_transition(num_modes: int, to_fault, stay) -> np.ndarray:
 
 
 class EngineSettings(NamedTuple):
-    """Hand-set parameters of the methods (issue 4 tunes them by gradient)."""
+    """Hand-set parameters of the methods (``engine_tuning`` tunes them by gradient).
 
-    mu_threshold: float = 0.5              # mu_T (paper)
-    confirm_steps: int = 3                 # the confirmed variant (the paper's rule is 1)
-    mode_confirm_steps: tuple = (1, 3, 3, 2, 3, 3, 3)  # per mode (normal, actuator, RPM, P2, T2, P4, T4)
-    sensor_inflation: float = 1e4          # Zhang & Li: R_jj factor in the sensor-j mode
-    actuator_noise: float = 0.008          # Zhang & Li: extra input noise std in the actuator mode [kg/s]
-    mm_floor: float = 1e-4                 # MM probability floor
-    bias_walk: tuple = (1e-12, 1e-6, 1e-8, 1e-10, 1e-8, 1e-8)  # per-step variance of the active bias
-    bias_prior: tuple = (1e-6, 1e4, 400.0, 4.0, 100.0, 36.0)   # variance of a bias when its mode is entered
-    to_fault: float = 5e-5                 # hand-set pi: P(normal -> each fault mode) per step
-    stay: float = 0.999                    # hand-set pi: P(fault mode stays)
-    glr_window: int = 10                   # N (paper)
-    glr_threshold: float = PAPER_USED_THRESHOLD  # l_T (paper; theory: chi2.isf(0.005, 60) = 91.95)
-    glr_pfa: float = 1e-4                  # per-step false-alarm probability of the Bonferroni threshold
-    glr_estimate_delay: int = 5            # GLRT magnitude read this many steps after the alarm (< N)
-    bias_estimate_delay: int = 50          # bias IMM's estimate read 0.5 s after the alarm
+    Attributes:
+      mu_threshold: mu_T (paper)
+      confirm_steps: the confirmed variant (the paper's rule is 1)
+      mode_confirm_steps: per mode (normal, actuator, RPM, P2, T2, P4, T4)
+      sensor_inflation: Zhang & Li: R_jj factor in the sensor-j mode
+      actuator_noise: Zhang & Li: extra input noise std in the actuator mode [kg/s]
+      mm_floor: MM probability floor
+      bias_walk: per-step variance of the active bias
+      bias_prior: variance of a bias when its mode is entered
+      to_fault: hand-set pi: P(normal -> each fault mode) per step
+      stay: hand-set pi: P(fault mode stays)
+      glr_window: N (paper)
+      glr_threshold: l_T (paper; theory: chi2.isf(0.005, 60) = 91.95)
+      glr_pfa: per-step false-alarm probability of the Bonferroni threshold
+      glr_estimate_delay: GLRT magnitude read this many steps after the alarm (< N)
+      bias_estimate_delay: bias IMM's estimate read 0.5 s after the alarm
+    """
+
+    mu_threshold: float = 0.5
+    confirm_steps: int = 3
+    mode_confirm_steps: tuple = (1, 3, 3, 2, 3, 3, 3)
+    sensor_inflation: float = 1e4
+    actuator_noise: float = 0.008
+    mm_floor: float = 1e-4
+    bias_walk: tuple = (1e-12, 1e-6, 1e-8, 1e-10, 1e-8, 1e-8)
+    bias_prior: tuple = (1e-6, 1e4, 400.0, 4.0, 100.0, 36.0)
+    to_fault: float = 5e-5
+    stay: float = 0.999
+    glr_window: int = 10
+    glr_threshold: float = PAPER_USED_THRESHOLD
+    glr_pfa: float = 1e-4
+    glr_estimate_delay: int = 5
+    bias_estimate_delay: int = 50
 
 
 class Method(NamedTuple):
-    """A filter + detector pair run on the plant by ``monitor``."""
+    """A filter + detector pair run on the plant by ``monitor``.
+
+    Attributes:
+      filter: the filter (``Filter``)
+      init_state: its initial state
+      detector: the detector (``Detector``)
+      detector_input: ``info -> detector input`` (``monitor``)
+      estimate_delay: steps after the detection within which the fault estimate is read
+          (``monitor``)
+      paper: the paper's column this method reproduces (Table 3)
+    """
 
     filter: Any
     init_state: Any
     detector: Any
     detector_input: Callable[[Any], Any]
     estimate_delay: int = 0
-    paper: str | None = None  # the paper's column this method reproduces (Table 3)
+    paper: str | None = None
 
 
 def _bias_estimates(info):
@@ -222,11 +250,21 @@ def run_monitor(method: Method, model, us, key, f, keep_history=False):
 
 
 class ScenarioRuns(NamedTuple):
-    model: Any          # the engine's LinearGaussianModel
-    us: jax.Array       # (T, 1) commanded fuel flow
-    faults: list        # the seven cases, ``engine_faults`` order
-    batch: Any          # stacked Fault, ``runs`` of each case, fault-major
-    keys: jax.Array     # (7 * runs,) PRNG keys split from ``seed``
+    """The study's runs: the model, the inputs, the cases, their stacked faults and keys.
+
+    Attributes:
+      model: the engine's LinearGaussianModel
+      us: (T, 1) commanded fuel flow
+      faults: the seven cases, ``engine_faults`` order
+      batch: stacked Fault, ``runs`` of each case, fault-major
+      keys: (7 * runs,) PRNG keys split from ``seed``
+    """
+
+    model: Any
+    us: jax.Array
+    faults: list
+    batch: Any
+    keys: jax.Array
 
 
 def scenario_runs(runs: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> ScenarioRuns:
@@ -243,10 +281,19 @@ def scenario_runs(runs: int, seed: int, duration: float = 4.0, onset_time: float
 
 
 class LabelledRuns(NamedTuple):
-    ys: jax.Array      # (R, T, 5) measurements
-    modes: jax.Array   # (R, T) true mode per step (0 normal, 1 actuator, 2.. sensors)
-    onsets: jax.Array  # (R,) fault onset step (NEVER for fault-free)
-    fault: jax.Array   # (R,) index into engine_faults (6 = fault-free)
+    """Simulated runs with their labels, for tuning and evaluation.
+
+    Attributes:
+      ys: (R, T, 5) measurements
+      modes: (R, T) true mode per step (0 normal, 1 actuator, 2.. sensors)
+      onsets: (R,) fault onset step (NEVER for fault-free)
+      fault: (R,) index into engine_faults (6 = fault-free)
+    """
+
+    ys: jax.Array
+    modes: jax.Array
+    onsets: jax.Array
+    fault: jax.Array
 
 
 def labelled_runs(runs_per_fault: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> LabelledRuns:
@@ -288,7 +335,7 @@ def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, 
                        len(faults) * runs, batch, chunk_size=chunk_size, progress=progress)
 
 
-#: the study's sensor-health cases beside the paper's six faults (issue 37): the P2 sensor
+#: the study's sensor-health cases beside the paper's six faults: the P2 sensor
 #: dead (NaN from the onset) and frozen (its value at the onset held); both isolate to P2
 HEALTH_CASES = ("P2 dead", "P2 frozen")
 
@@ -353,14 +400,23 @@ def summarize_method(name: str, paper: str | None, records: DetectionRecord, run
 
 
 class EngineStudy(NamedTuple):
-    """The engine study: configuration, table rows, per-method records and the arrays behind the figures."""
+    """The engine study: configuration, table rows, per-method records and the arrays behind the figures.
+
+    Attributes:
+      config: the study's settings
+      rows: one per (method, fault)
+      records: per method, (9 * runs,) case-major (``study_faults``)
+      figures: arrays behind the figures
+    """
+
     config: dict[str, Any]
-    rows: list[dict[str, Any]]             # one per (method, fault)
-    records: dict[str, DetectionRecord]    # per method, (9 * runs,) case-major (``study_faults``)
-    figures: dict[str, Any]                # arrays behind the figures
+    rows: list[dict[str, Any]]
+    records: dict[str, DetectionRecord]
+    figures: dict[str, Any]
 
     def overview(self) -> str:
-        """One line per method: the issue's acceptance quantities over the six faults."""
+        """One line per method, over the six faults: the worst detection and isolation rates,
+        the false-alarm rates, the largest median delay and the worst-isolated fault."""
         width = max(26, *(len(name) for name in self.records))
         head = (f"{'method':<{width}} {'min det':>7} {'min iso':>7} {'FA (no fault)':>13} {'FA (all)':>8} "
                 f"{'max med delay [s]':>17}  worst-isolated")
@@ -378,7 +434,7 @@ class EngineStudy(NamedTuple):
         return "\n".join(lines)
 
     def table(self) -> str:
-        """Per method and fault, beside seed 003's Table 3 (a mean: printed beside our mean).
+        """Per method and fault, beside Table 3 of Han et al. (2022) (a mean: printed beside our mean).
 
         ``pre-FA``: share of runs with an alarm before the onset (for ``none``: every alarm);
         ``clean``: runs without one, the only runs whose delays count (mean, median, p90).
@@ -423,29 +479,55 @@ def _fmt(x: float | None, width: int, digits: int = 3, kind: str = "f") -> str:
 
 
 class ModeRule(NamedTuple):
-    """The mode-probability decision (eq. 13, with confirmation) as data: one per method."""
-    threshold: Any       # (M,) mu_T per mode
-    confirm_steps: Any   # (M,) int consecutive steps per mode
+    """The mode-probability decision (eq. 13, with confirmation) as data: one per method.
+
+    Attributes:
+      threshold: (M,) mu_T per mode
+      confirm_steps: (M,) int consecutive steps per mode
+    """
+
+    threshold: Any
+    confirm_steps: Any
 
 
 class GLRTRule(NamedTuple):
-    """The GLRT decision as data: threshold l_T and eq. (24) isolation (else the largest GLR)."""
-    threshold: Any         # ()
-    paper_isolation: Any   # () bool
+    """The GLRT decision as data: threshold l_T and eq. (24) isolation (else the largest GLR).
+
+    Attributes:
+      threshold: () l_T, the threshold on the largest GLR
+      paper_isolation: () bool: isolate by eq. (24) (else the largest GLR)
+    """
+
+    threshold: Any
+    paper_isolation: Any
 
 
 class ZhangLiFilter(NamedTuple):
-    """Numbers of a Zhang & Li noise-inflation bank: MM floor or IMM transition."""
-    mixing: Any            # () MM probability floor, or (M, M) IMM transition
-    sensor_inflation: Any  # ()
-    actuator_noise: Any    # ()
+    """Numbers of a Zhang & Li noise-inflation bank: MM floor or IMM transition.
+
+    Attributes:
+      mixing: () MM probability floor, or (M, M) IMM transition
+      sensor_inflation: () R_jj factor in the sensor-j mode
+      actuator_noise: () extra input noise std in the actuator mode [kg/s]
+    """
+
+    mixing: Any
+    sensor_inflation: Any
+    actuator_noise: Any
 
 
 class BiasFilter(NamedTuple):
-    """Numbers of a fault-bias bank: MM floor or IMM transition, and the bias statistics."""
-    mixing: Any      # () MM probability floor, or (M, M) IMM transition
-    bias_walk: Any   # (6,)
-    bias_prior: Any  # (6,)
+    """Numbers of a fault-bias bank: MM floor or IMM transition, and the bias statistics.
+
+    Attributes:
+      mixing: () MM probability floor, or (M, M) IMM transition
+      bias_walk: (6,) per-step variance of each bias
+      bias_prior: (6,) variance of a bias when its mode is entered
+    """
+
+    mixing: Any
+    bias_walk: Any
+    bias_prior: Any
 
 
 def _mode_rule(settings: EngineSettings, confirm) -> ModeRule:
@@ -630,7 +712,7 @@ def method_paper(name: str) -> str | None:
 
 
 def plot_engine(study: EngineStudy, out_dir) -> list[str]:
-    """Figures like seed 003's Figs. 3-1/3-2 (mode probabilities), 4 (GLR statistics) and
+    """Figures like Figs. 3-1/3-2 of Han et al. (2022) (mode probabilities), 4 (GLR statistics) and
     the magnitude estimates against truth; written atomically; returns the paths."""
     import matplotlib.pyplot as plt
 
@@ -703,7 +785,7 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
     return paths
 
 
-# --- the fault-size study (issue 38) -------------------------------------------------
+# --- the fault-size study ----------------------------------------------------------
 
 #: each sensor fault at these multiples of its noise standard deviation (fault-to-noise
 #: ratio), the actuator's, at the same grid index, at these multiples of the paper's 5 % of
@@ -736,7 +818,7 @@ def _matched_size(sizes, delays, paper: float) -> float:
 
 def fault_size_study(runs: int = 100, seed: int = 0, fnr=SIZE_FNR, actuator=SIZE_ACTUATOR, methods=SIZE_METHODS,
                      progress: bool = False) -> FaultSizeStudy:
-    """Issue 38: each method's mean delay (clean runs) against the fault's size, sensor
+    """Each method's mean delay (clean runs) against the fault's size, sensor
     faults on a grid of fault-to-noise ratios ``fnr`` (``k sigma_j``, ``sigma_j`` the
     output's noise standard deviation), the actuator's on ``actuator`` (multiples of the
     paper's 0.0005 kg/s), and the spec's reading of "0.5 %" beside; for each method and

@@ -1,6 +1,6 @@
-"""Seed 003 engine: Monte Carlo study of the Kalman-filter chi-square detector.
+"""The engine of Han et al. (2022): Monte Carlo study of the Kalman-filter chi-square detector.
 
-Scenario (seed-003 note): steady state, a 0.01 kg/s fuel step at t = 0, one abrupt
+Scenario (Han et al. 2022, as restated in the spec): steady state, a 0.01 kg/s fuel step at t = 0, one abrupt
 (step) fault at t = 2 s, 4 s simulated at 100 Hz, 100 runs per fault. Fault sizes:
 actuator bias 5 % of the command (0.0005 kg/s); sensor biases 0.5 % of the operating
 point of that output (RPM 135, P2 16.99, T2 2.21 K, P4 8.285, T4 5.125 K). Plus a
@@ -9,7 +9,7 @@ fault-free case for the false-alarm rate. The fault-blind KF starts at the true
 ``chi2_threshold(window * 5, pfa)``.
 
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
-Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
+Generalized Likelihood Ratio Test" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ SENSOR_BIAS_FRACTION = 0.005
 
 
 def engine_faults(onset_step: int) -> tuple[list[str], list[Fault]]:
-    """The seed-003 faults in mode order (actuator, RPM, P2, T2, P4, T4) plus 'none'."""
+    """The faults of Han et al. (2022) in mode order (actuator, RPM, P2, T2, P4, T4) plus 'none'."""
     names = ["actuator", *OUTPUT_NAMES, "none"]
     faults = [fault("bias", "actuator", 0, onset_step, ACTUATOR_BIAS)]
     faults += [
@@ -49,11 +49,19 @@ def engine_faults(onset_step: int) -> tuple[list[str], list[Fault]]:
 
 
 class EngineChi2Result(NamedTuple):
-    """The engine chi-square study: configuration, table rows, per-run records and one example run per fault."""
+    """The engine chi-square study: configuration, table rows, per-run records and one example run per fault.
+
+    Attributes:
+      config: the study's settings
+      rows: one per fault: the summary in seconds
+      records: (faults * runs,) per-run records
+      examples: (faults, T, ...) one run of each fault
+    """
+
     config: dict[str, Any]
-    rows: list[dict[str, Any]]          # one per fault: the summary in seconds
-    records: DetectionRecord            # (faults * runs,) per-run records
-    examples: MonitorHistory            # (faults, T, ...) one run of each fault
+    rows: list[dict[str, Any]]
+    records: DetectionRecord
+    examples: MonitorHistory
 
     def table(self) -> str:
         """Per fault: ``FA rate`` is the share of runs with an alarm before the onset (for

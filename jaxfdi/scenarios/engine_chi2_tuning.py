@@ -1,4 +1,4 @@
-"""Seed 003 engine: the Kalman-filter chi-square detector tuned by gradient.
+"""The engine of Han et al. (2022): the Kalman-filter chi-square detector tuned by gradient.
 
 Hand-set detector (``engine_chi2_study``): the KF with the plant's ``Q`` and ``R``, the
 windowed NIS sum over ``L = 4`` steps, threshold ``chi2.isf(0.005, 5 L)``. Tuned here on
@@ -14,7 +14,7 @@ continuous parameters trained for each. The test alone does not isolate; its tab
 detection, false-alarm and delay columns.
 
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
-Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
+Generalized Likelihood Ratio Test" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -43,10 +43,19 @@ HAND_WINDOW, HAND_PFA = 4, 0.005
 
 
 class Chi2Weights(NamedTuple):
-    false_alarm: float = 5.0    # P(alarm before the onset)
-    miss: float = 5.0           # P(no alarm after it)
-    delay: float = 1.0          # expected delay / remaining horizon
-    temperature: float = 0.05   # of the sigmoid alarm, on log(statistic)
+    """Weights of the chi-square detector's tuning loss.
+
+    Attributes:
+      false_alarm: weight of P(alarm before the onset)
+      miss: weight of P(no alarm after it)
+      delay: weight of the expected delay / remaining horizon
+      temperature: temperature of the sigmoid alarm, on log(statistic)
+    """
+
+    false_alarm: float = 5.0
+    miss: float = 5.0
+    delay: float = 1.0
+    temperature: float = 0.05
 
 
 def hand_params(window: int = HAND_WINDOW) -> dict[str, Any]:
@@ -74,9 +83,17 @@ def chi2_loss(params: dict[str, Any], data: LabelledRuns, window: int,
 
 
 class Chi2Tuning(NamedTuple):
-    window: int                      # chosen by the validation loss
-    result: TrainResult              # of that window
-    val_loss: dict[int, float]       # best validation loss per window tried
+    """The tuned chi-square detector: the chosen window and its training.
+
+    Attributes:
+      window: chosen by the validation loss
+      result: the training result of that window
+      val_loss: best validation loss per window tried
+    """
+
+    window: int
+    result: TrainResult
+    val_loss: dict[int, float]
 
 
 def tune_engine_chi2(windows: tuple[int, ...] = (1, 2, 4, 8), steps: int = 150, train_runs: int = 16,

@@ -1,4 +1,4 @@
-"""Seed 003 engine: the IMMs tuned by gradient against labelled runs.
+"""The engine of Han et al. (2022): the IMMs tuned by gradient against labelled runs.
 
 The paper sets its IMM by hand (transition matrix "adjusted experimentally", mu_T = 0.5).
 Here each engine IMM design is trained with optax on labelled Monte Carlo runs of the
@@ -12,7 +12,7 @@ row, as ``jaxfdi run engine`` sets them):
 * ``bias`` (``bias_modes``, 13 states): the transition matrix, the six bias random-walk
   and six bias-prior variances, mu_T; hand-set: the paper's matrix (``IMM-bias`` of
   ``jaxfdi run engine``). With it this design raises an alarm before the onset in most
-  runs; those are false-alarm runs, and since issue 27 their "delays" (the alarm still
+  runs; those are false-alarm runs, and their "delays" (the alarm still
   standing at the onset) are not scored: the reference's delays are over its few clean
   runs (``metrics.fault_row``). Tried against jaxfdi's hand-set sticky matrix instead
   (``IMM-bias hand-pi``), tuning lowered the held-out cross-entropy by only 25-29 %:
@@ -33,7 +33,7 @@ surrogate, the fault-mode probabilities' minimum over the last c steps
 summaries as ``jaxfdi run engine``.
 
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
-Generalized Likelihood Ratio Test" (seed 003; CITATION.cff).
+Generalized Likelihood Ratio Test" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -87,15 +87,28 @@ NUM_FAULTS = len(PAPER_TRANSITION) - 1
 
 
 class ImmDesign(NamedTuple):
-    """One engine IMM design: what is tuned, its hand-set values, how to build it."""
+    """One engine IMM design: what is tuned, its hand-set values, how to build it.
+
+    Attributes:
+      name: the design's name (``imm_design``)
+      method: its column in ``jaxfdi run engine``
+      transition_mask: (M, M) allowed transitions
+      parameterization: parameter name -> its constraining transform
+      hand: the paper's / hand-set parameters
+      modes: params -> stacked mode models
+      initial: params -> (mean, cov) of the state at step 0
+      detector_input: ``info -> detector input`` (``monitor``)
+      estimate_delay: steps after the detection within which the fault estimate is read
+          (``monitor``)
+    """
 
     name: str
-    method: str                                  # its column in ``jaxfdi run engine``
-    transition_mask: np.ndarray                  # (M, M) allowed transitions
+    method: str
+    transition_mask: np.ndarray
     parameterization: dict[str, Transform]
-    hand: Callable[[], dict[str, Any]]           # the paper's / hand-set parameters
-    modes: Callable[[dict[str, Any]], Any]       # params -> stacked mode models
-    initial: Callable[[dict[str, Any]], tuple]   # params -> (mean, cov) of the state at step 0
+    hand: Callable[[], dict[str, Any]]
+    modes: Callable[[dict[str, Any]], Any]
+    initial: Callable[[dict[str, Any]], tuple]
     detector_input: Callable[[Any], Any]
     estimate_delay: int
 
@@ -165,12 +178,23 @@ def mode_log_probs(design: ImmDesign, params: dict[str, Any], ys: jax.Array, rem
 
 
 class LossWeights(NamedTuple):
-    detection: float = 1.0      # the soft detection loss against the cross-entropy
-    false_alarm: float = 5.0    # within it: P(alarm before the onset)
-    miss: float = 1.0           # P(no alarm after the onset)
-    delay: float = 1.0          # expected delay / steps after the onset
-    isolation: float = 5.0      # P(the first alarm names the wrong fault)
-    temperature: float = 0.05   # of the sigmoid alarm, in units of mu
+    """Weights of the IMM tuning loss.
+
+    Attributes:
+      detection: weight of the soft detection loss against the cross-entropy
+      false_alarm: within it: weight of P(alarm before the onset)
+      miss: weight of P(no alarm after the onset)
+      delay: weight of the expected delay / steps after the onset
+      isolation: weight of P(the first alarm names the wrong fault)
+      temperature: temperature of the sigmoid alarm, in units of mu
+    """
+
+    detection: float = 1.0
+    false_alarm: float = 5.0
+    miss: float = 1.0
+    delay: float = 1.0
+    isolation: float = 5.0
+    temperature: float = 0.05
 
 
 def confirmed_probabilities(fault_mu: jax.Array, confirm_steps) -> jax.Array:
@@ -276,7 +300,7 @@ def detector_records(mode_prob: jax.Array, onsets: jax.Array, threshold, confirm
     return jax.vmap(lambda mu, onset: replay_detector(detector, mu, onset))(mode_prob, onsets)
 
 
-#: the reported row metrics and which way is better (issue 27: delays over the runs with no
+#: the reported row metrics and which way is better (delays over the runs with no
 #: pre-onset alarm, whose share ``false_alarm_rate`` is for a fault's runs; a delay the
 #: hand-set design cannot score, no clean run, is not compared)
 _BETTER = {"detection_rate": 1, "isolation_rate": 1, "false_alarm_rate": -1, "delay_mean_s": -1,

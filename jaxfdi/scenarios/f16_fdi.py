@@ -1,6 +1,6 @@
-"""Seed 000 end to end: three 2-DOF rate sensors on the closed-loop F-16, the parity space,
+"""Park et al. (2004) end to end: three 2-DOF rate sensors on the closed-loop F-16, the parity space,
 the UKF's analytic redundancy on demand, and the controller flying on the FDI-selected
-rates (Park, Kim, Park & Roh 2004; issue 24).
+rates (Park, Kim, Park & Roh 2004).
 
 A flight (``run_fdi_flight``) is ``scenarios.f16_flight.run_flight`` (the F-16, its
 sensors with noise and gusts, the LQR SAS with altitude and bank hold, the paper's climb
@@ -27,7 +27,7 @@ axes: ``f = FNR sigma sqrt(2) (cos angle, sin angle)``; Table 1's singular direc
 at 45, 135, 225 and 315 deg for every sensor.
 
 Reference: Park, Kim, Park & Roh (2004), "Hybrid Fault Detection and Isolation Method for Inertial
-Sensors Using Unscented Kalman Filter" (seed 000; CITATION.cff).
+Sensors Using Unscented Kalman Filter" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -83,25 +83,40 @@ SENSOR_GROUPS = ((0, 1), (2, 3), (4, 5))
 
 
 class FDISetup(NamedTuple):
-    """The arrays of seed 000's FDI (a pytree: pass it into ``jit``)."""
+    """The arrays of the hybrid FDI of Park et al. 2004 (a pytree: pass it into ``jit``).
+
+    Attributes:
+      hybrid: the parity space and thresholds of the hybrid FDI
+      rates: the UKF's rate model
+      process_cov: (3, 3) UKF Q
+      noise_cov: (6, 6) UKF R
+    """
 
     hybrid: HybridPSAConfig
     rates: RateModel
-    process_cov: Array  # (3, 3) UKF Q
-    noise_cov: Array    # (6, 6) UKF R
+    process_cov: Array
+    noise_cov: Array
 
 
 class FaultCase(NamedTuple):
     """One flight's rate-sensor fault (stack them to vmap). ``size``: FNR for a bias, the
     FNR reached one second after the onset for a drift, the relative scale error for a
     scale fault, unused for a stuck sensor (it holds both axes' values at the onset) and a
-    dead one (NaN on both axes)."""
+    dead one (NaN on both axes).
 
-    kind: Array    # () int FaultKind (BIAS, RAMP, STUCK, SCALE, DEAD; NONE: fault-free)
-    sensor: Array  # () int 0, 1, 2
-    size: Array    # ()
-    angle: Array   # () rad, direction in the sensor's axes
-    onset: Array   # () int step
+    Attributes:
+      kind: () int FaultKind (BIAS, RAMP, STUCK, SCALE, DEAD; NONE: fault-free)
+      sensor: () int 0, 1, 2
+      size: () the fault's size (see above)
+      angle: () rad, direction in the sensor's axes
+      onset: () int step
+    """
+
+    kind: Array
+    sensor: Array
+    size: Array
+    angle: Array
+    onset: Array
 
 
 def fdi_setup(setup: FlightSetup, pfa: float = PFA, missed_isolation: float = MISSED_ISOLATION,
@@ -222,7 +237,7 @@ FOLLOWS = ("none", "psa", "hybrid", "verified")
 KIND_FOLLOWS = ("none", "hybrid", "verified")
 #: per-step false-alarm probability of the exclusion's verification (``hybrid_psa``, step 5)
 VERIFICATION_PFA = 1e-6
-#: what the paper reports for its case (seed 000, Figs. 5-8)
+#: what the paper reports for its case (Park et al. 2004, Figs. 5-8)
 PAPER_REPORTS = {
     "detection": "FD crosses its threshold at the fault (t = 3 s)",
     "psa_suspects": [1, 3],
@@ -234,9 +249,17 @@ PAPER_REPORTS = {
 
 
 class F16FDIStudy(NamedTuple):
+    """The F-16 FDI study: its settings, table rows and the flights behind the figures.
+
+    Attributes:
+      config: the study's settings
+      rows: the table's rows, one dict each
+      history: the paper case's flights (NumPy), for the figures
+    """
+
     config: dict
     rows: list[dict]
-    history: dict  # the paper case's flights (NumPy), for the figures
+    history: dict
 
     def table(self) -> str:
         return study_table(self)
@@ -291,7 +314,7 @@ def _angle_from_singular(angle_deg: np.ndarray) -> np.ndarray:
 def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_sigma: float | None = None,
                   directions: int = SWEEP_DIRECTIONS, sweep_fnr=SWEEP_FNR, optimizer_steps: int = 400,
                   chunk_size: int | None = 1024) -> F16FDIStudy:
-    """Seed 000 end to end (module doc): the paper's case beside the paper, the parity
+    """Park et al. (2004) end to end (module doc): the paper's case beside the paper, the parity
     geometry and Table 1, the direction x magnitude sweep (``runs`` flights per sensor,
     FNR and direction; PSA alone vs the hybrid), fault kinds and the safe envelope with
     and without FDI (``runs`` flights per kind and mode), ``FAULT_FREE_PER_RUN * runs``
@@ -468,7 +491,7 @@ def _paper_case(setup: FlightSetup, fdi: FDISetup, key: Array) -> tuple[dict, di
     return history, row
 
 
-#: seed 000 Table 1: (type, the two sensors, sensor i's fault, sensor k's fault, the rate affected)
+#: Table 1 of Park et al. (2004): (type, the two sensors, sensor i's fault, sensor k's fault, the rate affected)
 TABLE_1 = ((1, (0, 1), (1.0, -1.0), (-1.0, 1.0), "p"), (2, (0, 2), (1.0, 1.0), (-1.0, 1.0), "q"),
            (3, (1, 2), (1.0, 1.0), (1.0, 1.0), "r"))
 
@@ -654,7 +677,7 @@ class F16KindStudy(NamedTuple):
 
 def fault_kind_study(runs: int = 1000, seed: int = 0, progress: bool = False, chunk_size: int | None = 1024,
                      follows=KIND_FOLLOWS) -> F16KindStudy:
-    """Issue 38's F-16 question: ``runs`` full flights of every fault kind (``KIND_SIZES``:
+    """The F-16 fault-kind study: ``runs`` full flights of every fault kind (``KIND_SIZES``:
     bias and drift at FNR 10, scale 0.5, stuck, dead) on a random sensor and direction,
     flown under each view of ``follows`` (the same draws), and ``runs`` fault-free flights:
     misisolations and envelope exits with their 99 % intervals."""

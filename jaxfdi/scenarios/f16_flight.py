@@ -1,14 +1,14 @@
-"""Seed 000's aircraft: the Stevens & Lewis F-16 in closed loop, fault-free (issue 23).
+"""The aircraft of Park et al. (2004): the Stevens & Lewis F-16 in closed loop, fault-free.
 
 A flight (``run_flight``) is ``loop.run_loop`` of three parts:
 
 - the plant ``models.f16.f16_plant``: the 13-state F-16 (book tables, xcg per flight),
-  RK4 at ``DT`` = 0.01 s, sensors with noise (seed 000's three 2-DOF rate sensors,
+  RK4 at ``DT`` = 0.01 s, sensors with noise (the three 2-DOF rate sensors of Park et al. 2004,
   sigma = 0.01 rad/s; air data, attitude, altitude, engine power), optional gusts, wrapped
   by ``tracking.tracked_plant`` so that the run keeps its tracking errors;
 - the FDI stage ``models.f16.rate_passthrough_fdi``: no fault detection yet, the
-  controller flies on the least-squares body rates of the six rate channels (seed 000's
-  parity-space FDI will take this place and hand over its selected rate);
+  controller flies on the least-squares body rates of the six rate channels (the
+  parity-space FDI of Park et al. 2004 will take this place and hand over its selected rate);
 - the controller ``control.flight.flight_controller``: LQR stability augmentation with
   altitude and bank-angle hold, designed on the ``jax.jacfwd`` linearisation about the
   level trim at 502 ft/s, sea level, xcg = 0.35 (Stevens & Lewis Table 3.6-3's first case).
@@ -24,7 +24,7 @@ over the flights.
 
 References: Stevens & Lewis (2003) *Aircraft Control and Simulation*, 2nd ed.; Morelli
 (1998) "Global nonlinear parametric modeling with application to F-16 aerodynamics";
-Park, Kim, Park & Roh (2004), seed 000.
+Park, Kim, Park & Roh (2004).
 """
 from __future__ import annotations
 
@@ -83,49 +83,90 @@ ERROR_MEANING = {
 
 
 class FlightSetup(NamedTuple):
-    """Everything a flight needs besides its key and dispersion (a pytree of arrays)."""
+    """Everything a flight needs besides its key and dispersion (a pytree of arrays).
+
+    Attributes:
+      params: the aircraft's parameters
+      sensors: the sensor layout and noise
+      gains: the SAS gains
+      reference: (T, ...) the per-step reference
+      x0: (13,) initial state (the climb trim)
+      u0: (4,) its controls
+      gust_sigma: () ft/s, gust intensity
+      phases: (3,) s: end of the climb, start of the altitude hold, start of the bank hold
+    """
 
     params: F16Params
     sensors: F16Sensors
     gains: FlightGains
-    reference: FlightReference  # (T, ...)
-    x0: Array                   # (13,) initial state (the climb trim)
-    u0: Array                   # (4,) its controls
-    gust_sigma: Array           # () ft/s
-    phases: Array               # (3,) s: end of the climb, start of the altitude hold, start of the bank hold
+    reference: FlightReference
+    x0: Array
+    u0: Array
+    gust_sigma: Array
+    phases: Array
 
 
 class Dispersion(NamedTuple):
-    """One flight's departures from the nominal one (stack them to vmap)."""
+    """One flight's departures from the nominal one (stack them to vmap).
 
-    xcg: Array      # () c.g. of this flight
-    initial: Array  # (13,) added to the initial state
+    Attributes:
+      xcg: () c.g. of this flight
+      initial: (13,) added to the initial state
+    """
+
+    xcg: Array
+    initial: Array
 
 
 class FlightHistory(NamedTuple):
-    """Per-step signals of a flight (``keep_history``)."""
+    """Per-step signals of a flight (``keep_history``).
 
-    state: Array           # (T, 15) true [x (13), w_g, v_g]
-    control: Array         # (T, 4)
-    measured_rates: Array  # (T, 3) the rates the controller flew on
-    measurement: Any = None  # (T, 8 + m_r) y
-    fdi: Any = None          # the FDI stage's per-step outputs (None for the rate pass-through)
+    Attributes:
+      state: (T, 15) true [x (13), w_g, v_g]
+      control: (T, 4) controls [thtl, el, ail, rdr]
+      measured_rates: (T, 3) the rates the controller flew on
+      measurement: (T, 8 + m_r) y
+      fdi: the FDI stage's per-step outputs (None for the rate pass-through)
+    """
+
+    state: Array
+    control: Array
+    measured_rates: Array
+    measurement: Any = None
+    fdi: Any = None
 
 
 class Outcome(NamedTuple):
-    tracking: TrackingScore  # (len(ERRORS),) components
-    final_state: Array       # (15,)
-    healthy: Array           # () bool: the flight stayed finite
-    fdi: Any = None          # the FDI stage's final state (None for the rate pass-through)
+    """What a flight leaves for scoring: tracking errors, final state and health.
+
+    Attributes:
+      tracking: the tracking errors, one component per ``ERRORS`` entry
+      final_state: (15,) true [x (13), w_g, v_g] at the end
+      healthy: () bool: the flight stayed finite
+      fdi: the FDI stage's final state (None for the rate pass-through)
+    """
+
+    tracking: TrackingScore
+    final_state: Array
+    healthy: Array
+    fdi: Any = None
 
 
 class Design(NamedTuple):
-    """What the setup was built from (concrete, for reports)."""
+    """What the setup was built from (concrete, for reports).
+
+    Attributes:
+      plan: the flight
+      trims: TrimResult (4,): level, climb, turn, pull-up
+      linear: LinearF16 at the level trim
+      design: FlightDesign, the gains and their checks
+      weights: the LQR weights
+    """
 
     plan: FlightPlan
-    trims: object        # TrimResult (4,): level, climb, turn, pull-up
-    linear: object       # LinearF16 at the level trim
-    design: object       # FlightDesign
+    trims: object
+    linear: object
+    design: object
     weights: FlightWeights
 
 
@@ -245,9 +286,17 @@ def dispersions(key: Array, setup: FlightSetup, flights: int, xcg_range=XCG_RANG
 # --- the study ---------------------------------------------------------------------
 
 class F16FlightStudy(NamedTuple):
+    """The fault-free F-16 flight study: its settings, table rows and sample flights.
+
+    Attributes:
+      config: the study's settings
+      rows: the table's rows, one dict each
+      history: the sample flights' histories (NumPy), for the figures
+    """
+
     config: dict
     rows: list[dict]
-    history: dict  # the sample flights' histories (NumPy), for the figures
+    history: dict
 
     def table(self) -> str:
         return study_table(self)

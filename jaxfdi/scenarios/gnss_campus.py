@@ -1,4 +1,4 @@
-"""Seed 002, GPS half: RAIM availability on a campus with a blocked sky, and the park
+"""Yoo et al. (2010), GPS half: RAIM availability on a campus with a blocked sky, and the park
 case's satellite faults detected, isolated and excluded.
 
 Both cases fly a UAV on a racetrack from 2020-01-01 00:45:00 GPS time (week 2086, the day
@@ -28,7 +28,7 @@ are a ``vmap`` over keys.
 
 Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection
 Algorithm for UAV using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781
-(seed 002; CITATION.cff).
+(CITATION.cff).
 """
 from __future__ import annotations
 
@@ -64,11 +64,11 @@ CAMPUS_PATH = (800.0, 140.0, 8.0, 20.0, 400.0 - 8.0 * 170.0)
 PARK_PATH = (600.0, 200.0, 12.0, 60.0, 0.0)
 #: the building beside the campus circuit's east leg (NED about CAMPUS)
 CAMPUS_WALL = measurements.Wall(jnp.asarray([-30.0, 6.0]), jnp.asarray([30.0, 6.0]), jnp.asarray(50.0))
-#: seed 002 Table 2 (steps at 1 Hz): (name, kind, onset, end, magnitude, slope per step)
+#: Table 2 of Yoo et al. (2010) (steps at 1 Hz): (name, kind, onset, end, magnitude, slope per step)
 TABLE2_FAULTS = (("impulse 100 m at 100 s", "impulse", 100, 101, 100.0, 0.0),
                  ("bias 100 m, 300-400 s", "bias", 300, 400, 100.0, 0.0),
                  ("drift 1 m/s, 500-600 s", "ramp", 500, 600, 0.0, 1.0))
-#: beyond the paper (issue 37): a dead channel (tracked, no value: +inf, ``measurements``)
+#: beyond the paper: a dead channel (tracked, no value: +inf, ``measurements``)
 #: and a frozen one (the pseudorange held at its onset value), each recovering at its end;
 #: the frozen one's error grows at the range rate (up to ~660 m/s here: tens of km by its
 #: end, where the fix with it no longer converges in its fixed Gauss-Newton steps; the
@@ -92,20 +92,39 @@ PAPER = {"campus": "HDOP > 4 at epochs 480 and 790 (east sky hidden by a rooftop
 
 
 class Case(NamedTuple):
-    """Everything a case's runs share."""
+    """Everything a case's runs share.
 
-    origin: jax.Array     # (3,) ECEF
-    path: jax.Array       # (T, 3) ECEF
-    visible: jax.Array    # (T, S) bool
-    sigma: jax.Array      # (T, S) m
-    elevation: jax.Array  # (T, S) rad
-    azimuth: jax.Array    # (T, S) rad
+    Attributes:
+      origin: (3,) ECEF origin of the site
+      path: (T, 3) ECEF receiver path
+      visible: (T, S) bool, satellites in view
+      sigma: (T, S) m, pseudorange noise std
+      elevation: (T, S) rad, elevation of each satellite
+      azimuth: (T, S) rad, azimuth of each satellite
+    """
+
+    origin: jax.Array
+    path: jax.Array
+    visible: jax.Array
+    sigma: jax.Array
+    elevation: jax.Array
+    azimuth: jax.Array
 
 
 class GnssCampusStudy(NamedTuple):
+    """The GPS RAIM study: its settings, table rows and the series behind the figures.
+
+    Attributes:
+      config: the study's settings
+      rows: the table's rows, one dict each
+      campus: per-epoch series (NumPy) for the figures
+      park: the park case's per-epoch series (NumPy) for the figures
+      beyond: the studies beyond the paper (empty without ``beyond``)
+    """
+
     config: dict
     rows: list
-    campus: dict          # per-epoch series (NumPy) for the figures
+    campus: dict
     park: dict
     beyond: dict
 

@@ -1,4 +1,4 @@
-"""Seed 002, INS half: the park flight's GPS/INS integrity monitor and Table 3.
+"""Yoo et al. (2010), INS half: the park flight's GPS/INS integrity monitor and Table 3.
 
 A UAV flies the park case (Haneul Park, from 2020-01-01 00:45:00 GPST, the GPS half's site,
 orbits and receiver: ``scenarios.gnss_campus``) for 1200 s: a 60 m climb, then the GPS
@@ -27,7 +27,7 @@ case of both flights.
   20 deg/s with 42 deg of bank, pull-ups and dives; ``ins.trajectory.manoeuvre_legs``)
   fault-free and with the roll-gyro biases: where SCST degrades, measured.
 
-- **Beyond the paper (issue 37)**: the roll gyro dead (NaN) and frozen from the onset
+- **Beyond the paper**: the roll gyro dead (NaN) and frozen from the onset
   (``IMU_HEALTH_CASES``), found by the monitor's IMU health test
   (``ins.integrity.imu_health_test``), with the chi-square test's and SCST's own
   detection times beside it; the fault-free flights' health alarms.
@@ -38,7 +38,7 @@ and the notebook (the satellite faults that would end after the onset are then l
 
 Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection
 Algorithm for UAV using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781
-(seed 002; CITATION.cff).
+(CITATION.cff).
 """
 from __future__ import annotations
 
@@ -71,7 +71,7 @@ ONSET_S = 800
 ROLL_GYRO = 3              # IMU channel: [f_x, f_y, f_z, w_x, w_y, w_z]
 X_ACCEL = 0
 TABLE3_DEG_H = (30.0, 60.0, 90.0)
-#: seed 002 Table 3: detection time [s] (chi-square, SCST)
+#: Table 3 of Yoo et al. (2010): detection time [s] (chi-square, SCST)
 PAPER_TABLE3 = {30.0: (159.0, 149.0), 60.0: (59.0, 49.0), 90.0: (44.0, 39.0)}
 CHI2_WINDOW = 10
 PFA = 0.005
@@ -81,9 +81,9 @@ VELOCITY_SIGMA = 0.1       # m/s, receiver velocity solution per axis
 INITIAL_SIGMA = (3.0, 0.1, 0.05, 0.5)
 BEYOND_GYRO_DEG_H = (15.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0)
 BEYOND_ACCEL_MG = (2.0, 5.0, 10.0, 20.0, 50.0)
-#: beyond the paper (issue 37): the roll gyro dead (NaN) or frozen from the onset, name -> fault kind
+#: beyond the paper: the roll gyro dead (NaN) or frozen from the onset, name -> fault kind
 IMU_HEALTH_CASES = {"dead": "dead", "frozen": "stuck"}
-#: per-epoch false-alarm probabilities of the operating curve (issue 38): each test's
+#: per-epoch false-alarm probabilities of the operating curve: each test's
 #: Table 3 detection times at the threshold ``chi2_isf(dof, P_fa)`` of each
 OPERATING_PFA = (5e-3, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12, 1e-15)
 #: GPS/INS separation (``integrity.attribute_ins_alarms``): an INS-test alarm is the GPS's
@@ -113,53 +113,105 @@ PAPER_SIZE = StudySize()
 
 
 class World(NamedTuple):
-    """What every run of one flight shares (arguments of the compiled program)."""
+    """What every run of one flight shares (arguments of the compiled program).
+
+    Attributes:
+      table: the broadcast orbits
+      tables: thresholds and noncentralities per degrees of freedom
+      flight: the flight as the plant reads it
+      visible: (T, S) bool, satellites in view
+      sigma: (T, S) m, pseudorange noise std
+    """
 
     table: orbits.OrbitTable
-    tables: raim.RaimTables  # thresholds and noncentralities per degrees of freedom
+    tables: raim.RaimTables
     flight: plant.FlightTables
-    visible: jax.Array    # (T, S)
-    sigma: jax.Array      # (T, S)
+    visible: jax.Array
+    sigma: jax.Array
 
 
 class RunCase(NamedTuple):
-    satellite_fault: flt.Fault   # stack of 3 (Table 2's episodes, or none)
-    imu_fault: flt.Fault         # stack of 1
-    onset: jax.Array             # () int, the IMU fault's onset (faults.NEVER when none)
+    """One run's faults: the satellite episodes and the IMU fault.
+
+    Attributes:
+      satellite_fault: stack of 3 (Table 2's episodes, or none)
+      imu_fault: stack of 1
+      onset: () int, the IMU fault's onset (faults.NEVER when none)
+    """
+
+    satellite_fault: flt.Fault
+    imu_fault: flt.Fault
+    onset: jax.Array
 
 
 class Series(NamedTuple):
-    """Per-epoch traces of a run (float32: figures and independent samples)."""
+    """Per-epoch traces of a run (float32: figures and independent samples).
+
+    Attributes:
+      chi2: (T,) windowed chi-square statistic
+      scst: (T,) SCST statistic
+      scst_valid: (T,) bool, the SCST's B passed its checks
+      scst_condition: (T,) condition estimate of the scaled B (inf when not PD)
+      gps_used: (T,) bool, the EKF was updated
+      raim: (T,) RAIM parity statistic
+      raim_threshold: (T,) its threshold
+      hpl: (T,) m, horizontal protection level
+      hdop: (T,) horizontal dilution of precision
+      position_error: (T, 3) NED m
+      attitude_error: (T, 3) psi NED deg
+      sigma: (T, 6) filter 1-sigma: position m (3), attitude deg (3)
+      nees: (T,) normalised estimation error squared of the 15 states
+    """
 
     chi2: jax.Array
     scst: jax.Array
     scst_valid: jax.Array
-    scst_condition: jax.Array    # condition estimate of the scaled B (inf when not PD)
+    scst_condition: jax.Array
     gps_used: jax.Array
     raim: jax.Array
     raim_threshold: jax.Array
     hpl: jax.Array
     hdop: jax.Array
-    position_error: jax.Array    # (T, 3) NED m
-    attitude_error: jax.Array    # (T, 3) psi NED deg
-    sigma: jax.Array             # (T, 6) filter 1-sigma: position m (3), attitude deg (3)
-    nees: jax.Array              # (T,) normalised estimation error squared of the 15 states
+    position_error: jax.Array
+    attitude_error: jax.Array
+    sigma: jax.Array
+    nees: jax.Array
 
 
 class RunOutput(NamedTuple):
-    chi2: object                 # DetectionRecord
-    scst: object                 # DetectionRecord
-    raim: object                 # EpisodeRecord
-    health: object               # DetectionRecord of the IMU health test
+    """What a GPS/INS run leaves: the tests' records and its per-epoch series.
+
+    Attributes:
+      chi2: DetectionRecord of the windowed chi-square test
+      scst: DetectionRecord of the SCST
+      raim: EpisodeRecord of RAIM over the satellite episodes
+      health: DetectionRecord of the IMU health test
+      series: the run's per-epoch traces
+    """
+
+    chi2: object
+    scst: object
+    raim: object
+    health: object
     series: Series
 
 
 class GpsInsStudy(NamedTuple):
+    """The GPS/INS integrity study: its settings, table rows, series, curves and records.
+
+    Attributes:
+      config: the study's settings
+      rows: the table's rows, one dict each
+      series: case name -> Series of its first run (NumPy), for the figures
+      curves: (flight, sensor) -> rows of the detection-time curves
+      results: case name -> RunOutput of all its runs (NumPy)
+    """
+
     config: dict
     rows: list
-    series: dict                 # case name -> Series of its first run (NumPy), for the figures
-    curves: dict                 # (flight, sensor) -> rows of the detection-time curves
-    results: dict                # case name -> RunOutput of all its runs (NumPy)
+    series: dict
+    curves: dict
+    results: dict
 
     def table(self) -> str:
         return gps_ins_table(self)
@@ -415,7 +467,7 @@ def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE
 
 def _delays(record, name, size: StudySize = PAPER_SIZE) -> dict:
     """Detection time = first alarm at or after the onset minus the onset, over the clean
-    runs (healthy, no alarm before the onset: issue 27's rule; a run whose alarm already
+    runs (healthy, no alarm before the onset, as ``metrics`` scores delays; a run whose alarm already
     stands at the onset is a false-alarm run, counted apart) that detected: mean and
     standard deviation (the paper's delays are means), median, 10-90 % and range."""
     summary = summarize_detection(record, size.flight_s)
@@ -467,7 +519,7 @@ def ins_decisions(series: Series, test: str, threshold: float) -> np.ndarray:
 
 
 def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_PFA) -> list[dict]:
-    """Issue 38: each test at the threshold of each per-epoch false-alarm probability of
+    """Each test at the threshold of each per-epoch false-alarm probability of
     ``pfas`` (``chi2_isf(dof, P_fa)``), from the stored statistics: the fault-free flights'
     alarm rate per epoch and the flights with an alarm (99 % interval), and Table 3's
     detection time over the clean runs at each bias (``metrics.delay_statistics``), with the
@@ -504,7 +556,7 @@ def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_
 
 
 def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) -> dict:
-    """Issue 38: GPS and INS faults over the Table 3 flights (Table 2's satellite faults
+    """GPS and INS faults over the Table 3 flights (Table 2's satellite faults
     before the IMU onset, then the gyro bias) at per-epoch ``pfa``. Each fault is decided
     "GPS" (RAIM alarmed during it), "INS" (an INS decision of either test from its onset to
     ``ATTRIBUTION_HOLDOFF`` s after its end; for the gyro bias, from its onset to the end of
@@ -795,7 +847,7 @@ def gps_ins_table(study: GpsInsStudy) -> str:
 
 
 def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
-    """Statistics vs thresholds (seed 002 Figs. 10-11), RAIM (Figs. 8-9), navigation errors,
+    """Statistics vs thresholds (Yoo et al. 2010, Figs. 10-11), RAIM (Figs. 8-9), navigation errors,
     detection time vs bias size, and Table 3 along the threshold (the operating curve), as
     PNG files in ``out_dir``; returns their paths."""
     from pathlib import Path

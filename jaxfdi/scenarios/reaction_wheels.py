@@ -1,4 +1,4 @@
-"""Seed 004: satellite reaction-wheel fault isolation with a dual filter and a bank of
+"""Choi and Park (2009): satellite reaction-wheel fault isolation with a dual filter and a bank of
 multi-hypothesis EKFs, in closed loop, Monte Carlo.
 
 A run (``run_wheels``) is the library's closed loop, ``loop.run_loop`` of three parts:
@@ -14,7 +14,7 @@ the controller ``control.attitude.wheel_attitude_controller``. Step ``k``, ``t =
    when ``F > F_T``; beside it, a nominal EKF with the banks' process noise gives the
    windowed NIS test (``chi2(3 L)``, ``L = NIS_WINDOW``), which is what engages the banks
    by default (``engage_on``: the paper's ``F`` is blind to some stops, notebook 05);
-4. two banks over the stop hypotheses (wheel ``i`` stopped, seed 004 eq. 9) run slaved
+4. two banks over the stop hypotheses (wheel ``i`` stopped, Choi & Park 2009, eq. 9) run slaved
    to the nominal filter (re-initialised from its posterior every step) until the
    detection, then on their own (each hypothesis's prediction filter starting from its
    EKF's posterior: ``wheel_fdi``, ``restart_prediction``) — the paper's two-stage
@@ -27,8 +27,8 @@ the controller ``control.attitude.wheel_attitude_controller``. Step ``k``, ``t =
    (attitude quaternion, rates, wheel speeds) moves one RK4 step with a disturbance torque.
 
 The wheels' speeds are not measured (the filters take the commanded speeds as input):
-the only sensors are the three gyros, so a dead or frozen sensor is a gyro (``gyro_fault``,
-issue 37: the x gyro NaN, or holding its onset reading, from the onset; labels
+the only sensors are the three gyros, so a dead or frozen sensor is a gyro (``gyro_fault``:
+the x gyro NaN, or holding its onset reading, from the onset; labels
 ``faults.sensor_labels(N, 3)``, "gyro j" = ``1 + N + j`` beside the wheels' ``1 + i``).
 Beside step 1, before the controller (``loop.FDI.observe``), the **gyro health test**
 (``detection.frozen_channel_detector`` on the raw rates, ``sigma`` the gyro noise,
@@ -52,8 +52,8 @@ the onset, false alarms before it and the isolated wheel or gyro (``metrics.Dete
 
 Choices the paper leaves open (documented, tested): 10 Hz gyros with 3e-4 rad/s noise
 (0.017 deg/s, a small satellite's MEMS/FOG class); wheel bias speeds 2000 rpm, all the
-same way by default (``momentum="net"``, issue 27: the body carries a net wheel momentum
-``I_w H^T Omega``, so ``det A`` is not structurally zero and seed 004's result, F rising
+same way by default (``momentum="net"``: the body carries a net wheel momentum
+``I_w H^T Omega``, so ``det A`` is not structurally zero and the result of Choi and Park, F rising
 by orders of magnitude at a stop, can be checked), or +/-2000 rpm in the null space of
 ``H^T`` (``momentum="zero"``: zero net momentum, ``det A = 0`` on the true trajectory,
 reported as the headline's second row); a 10 deg slew keeps every wheel within about
@@ -65,7 +65,7 @@ their prior widened by 2e-3 rad/s (the nominal filter lags a stop's rate jump); 
 confirm over ``CONFIRM_STEPS``; a fault's onset uniform in 15-25 s.
 
 Reference: Choi & Park (2009), "Design of Fault Isolator of Satellite Reaction Wheel System Using Dual
-Filter and Multi-hypothesis Extended Kalman Filter" (seed 004; CITATION.cff).
+Filter and Multi-hypothesis Extended Kalman Filter" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -122,36 +122,55 @@ HEALTH_WINDOW = 10
 #: whatever the plant does (``detection.frozen``); a fault-free run of T steps has at most
 #: ``3 T HEALTH_PFA`` (union bound): 1.8e-4 for the study's 600 steps
 HEALTH_PFA = 1e-7
-#: the gyro fault kinds of the study (issue 37) and the fault kind each is
+#: the gyro fault kinds of the study and the fault kind each is
 GYRO_KINDS = {"dead": FaultKind.DEAD, "frozen": FaultKind.STUCK}
 #: the gyro of the study's dead and frozen cases (0: x)
 GYRO_AXIS = 0
 
 
 class WheelDesign(NamedTuple):
-    """Everything a run needs besides its key and its fault (a pytree of arrays)."""
+    """Everything a run needs besides its key and its fault (a pytree of arrays).
 
-    params: SpacecraftParams      # nominal model (wheel_mask all ones)
+    Attributes:
+      params: nominal model (wheel_mask all ones)
+      gains: the attitude controller's gains
+      profile: the slew to fly
+      initial_speeds: (N,) rad/s
+      gyro_sigma: () rad/s
+      disturbance_sigma: () N m, external torque per axis
+      wheel_noise_sigma: () N m, motor torque noise per wheel
+      estimator_q: () rad/s per step, the dual filter's EKF process noise
+      bank_q: () rad/s per step, the banks' EKF process noise
+      initial_sigma: () rad/s, prior std of the rates
+      engage_sigma: () rad/s, added to the banks' prior std at engagement
+      detection_threshold: () F_T
+      nis_threshold: () on the windowed NIS of the nominal EKF
+      credit_threshold: () on the relative credit C_x / F_mean
+      mode_threshold: () mu_T
+      mm_floor: () MM probability floor
+    """
+
+    params: SpacecraftParams
     gains: AttitudeGains
     profile: Slew
-    initial_speeds: Array         # (N,) rad/s
-    gyro_sigma: Array             # () rad/s
-    disturbance_sigma: Array      # () N m, external torque per axis
-    wheel_noise_sigma: Array      # () N m, motor torque noise per wheel
-    estimator_q: Array            # () rad/s per step, the dual filter's EKF process noise
-    bank_q: Array                 # () rad/s per step, the banks' EKF process noise
-    initial_sigma: Array          # () rad/s, prior std of the rates
-    engage_sigma: Array           # () rad/s, added to the banks' prior std at engagement
-    detection_threshold: Array    # () F_T
-    nis_threshold: Array          # () on the windowed NIS of the nominal EKF
-    credit_threshold: Array       # () on the relative credit C_x / F_mean
-    mode_threshold: Array         # () mu_T
-    mm_floor: Array               # () MM probability floor
+    initial_speeds: Array
+    gyro_sigma: Array
+    disturbance_sigma: Array
+    wheel_noise_sigma: Array
+    estimator_q: Array
+    bank_q: Array
+    initial_sigma: Array
+    engage_sigma: Array
+    detection_threshold: Array
+    nis_threshold: Array
+    credit_threshold: Array
+    mode_threshold: Array
+    mm_floor: Array
 
 
 #: wheel bias-speed patterns (signs per wheel): ``net`` all the same way, so the body carries
 #: a net wheel momentum ``I_w H^T Omega`` (along +z for the pyramid) and ``det A`` is not
-#: structurally zero (issue 27, the default); ``zero`` in the null space of ``H^T``, zero
+#: structurally zero (the default); ``zero`` in the null space of ``H^T``, zero
 #: net momentum, ``det A = 0`` on the true trajectory (notebook 05)
 MOMENTUM_PATTERNS = {"net": (1.0, 1.0, 1.0, 1.0), "zero": (1.0, -1.0, 1.0, -1.0)}
 
@@ -212,7 +231,7 @@ def gyro_labels(params: SpacecraftParams) -> Array:
 
 def estimation_filter(params: SpacecraftParams, q_sigma: Array, gyro_sigma: Array, kind: str = "ekf",
                       missing_measurements: bool = False):
-    """The estimation filter on the rate model: EKF (seed 004) or UKF."""
+    """The estimation filter on the rate model: EKF (Choi & Park 2009) or UKF."""
     eye = jnp.eye(3, dtype=params.inertia.dtype)
     Q, R = q_sigma**2 * eye, gyro_sigma**2 * eye
     if kind == "ukf":
@@ -222,43 +241,73 @@ def estimation_filter(params: SpacecraftParams, q_sigma: Array, gyro_sigma: Arra
 
 
 class RunOutput(NamedTuple):
-    fdp: DetectionRecord         # dual filter: F > F_T (seed 004)
-    nis: DetectionRecord         # chi-square on the nominal EKF's windowed NIS
-    credit: DetectionRecord      # credit isolator, banks engaged on the chosen detector
-    likelihood: DetectionRecord  # MM mode probabilities, same engagement
-    health: DetectionRecord      # gyro health test (frozen / dead gyro), labels gyro_labels
-    max_fault_free_fdp: Array    # () max F before the onset
-    max_fault_free_nis: Array    # () max windowed NIS before the onset
-    max_early_fdp: Array         # () max F within ISOLATION_DEADLINE_S after the onset
-    healthy: Array               # () bool: every filter healthy at every step
+    """What a reaction-wheel run leaves: each method's record and the run's peaks.
+
+    Attributes:
+      fdp: dual filter: F > F_T (Choi & Park 2009)
+      nis: chi-square on the nominal EKF's windowed NIS
+      credit: credit isolator, banks engaged on the chosen detector
+      likelihood: MM mode probabilities, same engagement
+      health: gyro health test (frozen / dead gyro), labels gyro_labels
+      max_fault_free_fdp: () max F before the onset
+      max_fault_free_nis: () max windowed NIS before the onset
+      max_early_fdp: () max F within ISOLATION_DEADLINE_S after the onset
+      healthy: () bool: every filter healthy at every step
+    """
+
+    fdp: DetectionRecord
+    nis: DetectionRecord
+    credit: DetectionRecord
+    likelihood: DetectionRecord
+    health: DetectionRecord
+    max_fault_free_fdp: Array
+    max_fault_free_nis: Array
+    max_early_fdp: Array
+    healthy: Array
 
 
 class WheelHistory(NamedTuple):
-    """Per-step signals of one run (for the figures)."""
+    """Per-step signals of one run (for the figures).
 
-    attitude: Array          # (T, 4) true quaternion
-    rate: Array              # (T, 3) true body rates
-    reference_rate: Array    # (T, 3)
-    measurement: Array       # (T, 3)
-    wheel_speed: Array       # (T, N) true
-    commanded_speed: Array   # (T, N)
-    detection_parameter: Array  # (T,) F of the nominal dual filter
-    windowed_nis: Array      # (T,) nominal EKF
-    hypothesis_parameter: Array  # (T, M) F_x of the credit bank
-    credit: Array            # (T, M) C_x
-    mode_prob: Array         # (T, M + 1) MM, normal mode first
-    engaged: Array           # (T,) bool: the banks run on their own
-    controller_rate: Array   # (T, 3) the rates the controller flew on (``wheel_fdi``'s view)
+    Attributes:
+      attitude: (T, 4) true quaternion
+      rate: (T, 3) true body rates
+      reference_rate: (T, 3) the slew's reference body rates
+      measurement: (T, 3) gyro readings
+      wheel_speed: (T, N) true
+      commanded_speed: (T, N) commanded wheel speeds
+      detection_parameter: (T,) F of the nominal dual filter
+      windowed_nis: (T,) windowed NIS of the nominal EKF
+      hypothesis_parameter: (T, M) F_x of the credit bank
+      credit: (T, M) C_x
+      mode_prob: (T, M + 1) MM, normal mode first
+      engaged: (T,) bool: the banks run on their own
+      controller_rate: (T, 3) the rates the controller flew on (``wheel_fdi``'s view)
+    """
+
+    attitude: Array
+    rate: Array
+    reference_rate: Array
+    measurement: Array
+    wheel_speed: Array
+    commanded_speed: Array
+    detection_parameter: Array
+    windowed_nis: Array
+    hypothesis_parameter: Array
+    credit: Array
+    mode_prob: Array
+    engaged: Array
+    controller_rate: Array
 
 
 def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis", restart_prediction: bool = True,
               gyro_health: bool = True):
-    """Seed 004's two-stage FDI (``detection.two_stage``: the dual filter's ``F``, the
+    """The two-stage FDI of Choi and Park (2009) (``detection.two_stage``: the dual filter's ``F``, the
     windowed NIS test of a nominal EKF, and the credit and likelihood banks over the stop
     hypotheses, slaved to the nominal filter until the engaging alarm) as a ``loop.FDI``
     on the gyro readings and the wheel commands, and its initial state.
 
-    ``restart_prediction`` (default, issue 27 item 8): at the engaging step each
+    ``restart_prediction`` (default): at the engaging step each
     hypothesis's prediction filter starts from its own EKF's posterior of that step, not
     from the nominal filter's predicted mean. The nominal filter lags a stop's rate jump
     (``I^-1 I_w Omega_i a_i``, ~0.017 rad/s), and a prediction started there carries the
@@ -384,7 +433,7 @@ WHEEL_ISOLATORS = ("credit", "likelihood")
 
 def study_cases() -> list[tuple[str, int]]:
     """``('none', -1)``, every kind of ``KINDS`` on every wheel (wheel index 0..3), then
-    the gyro cases (issue 37): every kind of ``GYRO_KINDS`` on gyro ``GYRO_AXIS``."""
+    the gyro cases: every kind of ``GYRO_KINDS`` on gyro ``GYRO_AXIS``."""
     return ([("none", -1)] + [(kind, wheel) for kind in KINDS for wheel in range(4)]
             + [(kind, GYRO_AXIS) for kind in GYRO_KINDS])
 
@@ -468,7 +517,7 @@ def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: 
     or after the onset (the detection rate); ``isolation_rate``: runs whose first such
     decision names ``label`` (``None`` when the method never names this kind of fault,
     ``names_it=False``: F and NIS for a wheel); ``pre_onset_alarm_rate``: runs with a
-    decision before the onset (issue 27: false-alarm runs, whose delays are not scored);
+    decision before the onset (false-alarm runs, whose delays are not scored);
     ``clean_runs``: the others; the delays (mean, median, p90) and
     ``rate_within_deadline`` (right and within ``ISOLATION_DEADLINE_S``, over all runs)
     count only clean runs. ``wheel < 0``: a fault-free case (false alarms only)."""
@@ -530,9 +579,17 @@ def summarize_case(part: RunOutput, kind: str, wheel: int, dt: float, methods=ME
 
 
 class WheelStudy(NamedTuple):
+    """The reaction-wheel study: its settings, table rows and per-run records.
+
+    Attributes:
+      config: the study's settings
+      rows: the table's rows, one dict each
+      outputs: (cases * runs,) per-run records, case-major
+    """
+
     config: dict
     rows: list[dict]
-    outputs: RunOutput  # (cases * runs,) per-run records, case-major
+    outputs: RunOutput
 
     def table(self) -> str:
         """Per case and method: ``det`` (runs with a decision at or after the onset),
@@ -689,7 +746,7 @@ def wheel_examples(design: WheelDesign, seed: int = 0, wheel: int = 0, onset: in
 
 
 def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel: int = 0, onset: int = 200) -> list[str]:
-    """Figures like seed 004's Figs. 3-9 (attitude, F, the bank's F_x, credits) and the
+    """Figures like Figs. 3-9 of Choi and Park (2009) (attitude, F, the bank's F_x, credits) and the
     MM's mode probabilities; returns the paths written (each atomically)."""
     import matplotlib.pyplot as plt
 

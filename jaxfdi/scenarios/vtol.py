@@ -1,7 +1,7 @@
-"""Seed 001 VTOL scenario: robust TSKF bank, wavelet-denoised chi-square tests, signature
+"""The VTOL scenario of Lee and Lyou: robust TSKF bank, wavelet-denoised chi-square tests, signature
 isolation and fault-tolerant control, Monte Carlo over every fault kind.
 
-Setup (seed-001 note, Section V): the VTOL model at ``Ts = 0.1 s``; the true plant has
+Setup (Lee & Lyou, Section V, as restated in the spec): the VTOL model at ``Ts = 0.1 s``; the true plant has
 the airspeed uncertainty (``Delta a32 = 0.5``, ``Delta a34 = 1``) and the disturbance
 ``3 sin 10t`` on ``v_v``; ``Q = 0.01^2 I``, ``R = 0.1^2 I``, ``x0 = [50, 1, 5, 1]``,
 ``P0 = 10 I``, ``P_b0 = 10``, bias random walk ``0.2^2``; LQR-PI tracking ``H_r = (v_h,
@@ -12,17 +12,17 @@ multiplicative filter (effectiveness ``Fa = -B diag(u)``, scaling ``Fs = diag(C 
 and an additive one (``-B e_i``, ``e_j``: the step and ramp faults), 12 TSKFs in one
 vmap. Each run is one closed loop (``jaxfdi.control.closed_loop``); the bank's
 statistics are then evaluated five ways (raw, 4-step window, MDWT hard and soft, and
-MDWT soft with seed 001's own sigma: ``MDWT-ST-SV`` takes each detail scale's sigma from
+MDWT soft with the paper's own sigma: ``MDWT-ST-SV`` takes each detail scale's sigma from
 the sample variance of the run's fault-free first ``SIGMA_WINDOW`` steps,
 ``wavelet.causal_detail_sigma``, where ``MDWT-ST`` uses the chi-square value; the
 fault-free statistics are not chi2(3), see below).
 
-Beyond the paper (issue 37): sensor s3 dead (NaN) and frozen (``HEALTH_CASES``). The
+Beyond the paper: sensor s3 dead (NaN) and frozen (``HEALTH_CASES``). The
 bank cannot name them (every filter reads every sensor); the loop's channel-health test
 does (``control.closed_loop``, step 6), ahead of each method's decision, and with FTC the
 estimator leaves the sensor out.
 
-Departures and findings (see also the closing notes of issue 5):
+Departures and findings:
 
 * the filters decouple the uncertainty input only (q = 1, chi2(3) statistics, so the
   paper's 14.86 = chi2(4) is not this statistic's threshold). Decoupling the disturbance
@@ -41,7 +41,7 @@ Departures and findings (see also the closing notes of issue 5):
   it, in the transient after the onset (MDWT-ST 1.00 over 100 runs, median 7 steps).
 
 Reference: Lee & Lyou, "Fault Tolerant Controller Design for Linear Stochastic Systems with
-Uncertainties" (seed 001; CITATION.cff).
+Uncertainties" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -90,7 +90,7 @@ SIGMA_WINDOW = 96
 
 def vtol_design(tracked: str = "paper", decouple_disturbance: bool = False, levels: int = 2,
                 c_mult: float = 2.0, pfa: float = PFA, dtype=None) -> LoopDesign:
-    """The closed-loop design of seed 001's example (see the module docstring)."""
+    """The closed-loop design of Lee and Lyou's example (see the module docstring)."""
     dtype = dtype or jnp.result_type(float)
     model = vtol.vtol_model(dtype=dtype)
     E = vtol.vtol_unknown_input(include_disturbance=decouple_disturbance, dtype=dtype)
@@ -129,7 +129,7 @@ ESTIMATE_AFTER = 30  # steps after the onset at which the fault estimate is scor
 
 def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
     """Faults of every kind in the spec, one at a time, and the fault-free case. The two
-    headline cases are seed 001's: s3 step 0.7 from k = 120 and a2 effectiveness 0.5
+    headline cases are the paper's: s3 step 0.7 from k = 120 and a2 effectiveness 0.5
     from k = 100. The paper's actuator step/ramp is ``u_i - delta`` / ``u_i - rho k Ts``
     (negative magnitudes here); ramp slopes are per second (``Ts`` per step)."""
     Ts = vtol.TS
@@ -147,7 +147,7 @@ def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
     ]
 
 
-#: beyond the paper (issue 37): sensor s3 dead (NaN from the onset) and frozen (its value
+#: beyond the paper: sensor s3 dead (NaN from the onset) and frozen (its value
 #: at the onset held), found by the loop's channel-health test (``closed_loop``, step 6)
 HEALTH_CASES = ("s3 dead", "s3 frozen")
 
@@ -210,7 +210,7 @@ def chi2_thresholds(dof: int, num_filters: int, pfa: float = PFA) -> np.ndarray:
 
 
 def paper_thresholds(num_filters: int) -> np.ndarray:
-    """(5, F) seed 001's thresholds: 14.86 (chi2(4), Pfa 0.005) and 34.27 for the window."""
+    """(5, F) the thresholds of Lee and Lyou: 14.86 (chi2(4), Pfa 0.005) and 34.27 for the window."""
     values = [PAPER_THRESHOLD, PAPER_WINDOW_THRESHOLD, PAPER_THRESHOLD, PAPER_THRESHOLD, PAPER_THRESHOLD]
     return np.repeat(np.array(values)[:, None], num_filters, axis=1)
 
@@ -272,23 +272,40 @@ def runs_with_symptoms(values, design: LoopDesign, thresholds) -> jnp.ndarray:
 
 
 class RunRecord(NamedTuple):
-    """Small per-run summary of one closed-loop run."""
+    """Small per-run summary of one closed-loop run.
 
-    first_alarm: Any          # (2, 5) per threshold set (ours, paper's) and method: first step with a
-                              #        symptom (some location inconsistent), -1 none
-    detection_step: Any       # (2, 5) the first such step at/after the onset
-    isolation_step: Any       # (2, 5) first step at/after the onset whose signature names the true location
-    false_decisions: Any      # (2, 5) decisions with a symptom before the onset (raw, window: every step;
-                              #        MDWT: once per block)
-    online_isolated: Any      # () latched location + 1 of the closed loop (0 none)
-    online_step: Any          # () step at which it latched (-1 none)
-    online_kind_right: Any    # () bool: latched kind (multiplicative/additive) is the fault's
-    bias_estimate: Any        # (2,) matched filter's estimate at onset + ESTIMATE_AFTER and at the end
-    bias_true: Any            # (2,) the true values there
-    tracking_error: Any       # () RMS of |r - H x| (eq. 21's e_k) over k >= the scoring start
-    vh_error: Any             # () the same for v_h alone (the channel the nominal loop tracks well)
-    states: Any               # (T, n) float32 true states (for the deviation from the fault-free twin)
-    first_unhealthy: Any = -1  # () first step with a filter unhealthy or a statistic not finite, -1 none
+    Attributes:
+      first_alarm: (2, 5) per threshold set (ours, paper's) and method: first step with a
+          symptom (some location inconsistent), -1 none
+      detection_step: (2, 5) the first such step at/after the onset
+      isolation_step: (2, 5) first step at/after the onset whose signature names the true
+          location
+      false_decisions: (2, 5) decisions with a symptom before the onset
+          (raw, window: every step; MDWT: once per block)
+      online_isolated: () latched location + 1 of the closed loop (0 none)
+      online_step: () step at which it latched (-1 none)
+      online_kind_right: () bool: latched kind (multiplicative/additive) is the fault's
+      bias_estimate: (2,) matched filter's estimate at onset + ESTIMATE_AFTER and at the end
+      bias_true: (2,) the true values there
+      tracking_error: () RMS of |r - H x| (eq. 21's e_k) over k >= the scoring start
+      vh_error: () the same for v_h alone (the channel the nominal loop tracks well)
+      states: (T, n) float32 true states (for the deviation from the fault-free twin)
+      first_unhealthy: () first step with a filter unhealthy or a statistic not finite, -1 none
+    """
+
+    first_alarm: Any
+    detection_step: Any
+    isolation_step: Any
+    false_decisions: Any
+    online_isolated: Any
+    online_step: Any
+    online_kind_right: Any
+    bias_estimate: Any
+    bias_true: Any
+    tracking_error: Any
+    vh_error: Any
+    states: Any
+    first_unhealthy: Any = -1
 
 
 def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = STEPS) -> RunRecord:
@@ -337,8 +354,8 @@ def step_health_series(history: LoopStep) -> jnp.ndarray:
     return jax.vmap(step_health)(history.healthy, history.statistic)
 
 
-#: why the closed loop's "kind right" is 0 on the additive faults (issue 27, item 7;
-#: ``python benchmarks/vtol_fault_kind.py``, 20 runs per case, FTC off)
+#: why the closed loop's "kind right" is 0 on the additive faults
+#: (``python benchmarks/vtol_fault_kind.py``, 20 runs per case, FTC off)
 KIND_NOTE = (
     "kind (additive vs multiplicative): not identifiable for the additive faults under the paper's inputs. At a\n"
     "location the two filters' fault directions differ only by the scaling signal (u_i for an actuator, (C x)_j for\n"
@@ -351,7 +368,7 @@ KIND_NOTE = (
     "the same tracking error with and without FTC). Computation: python benchmarks/vtol_fault_kind.py")
 
 
-PAPER_HEADLINE = {  # seed 001, Section V: first detection step of the s3 step (onset 120)
+PAPER_HEADLINE = {  # Lee & Lyou, Section V: first detection step of the s3 step (onset 120)
     # the paper's soft threshold takes sigma from the details' sample variance: its 124 is the
     # reference of both soft rows (ours with the chi-square sigma, and MDWT-ST-SV with the paper's)
     "s3 step 0.7": {"raw": 123, "window": 123, "MDWT-HT": 128, "MDWT-ST": 124, "MDWT-ST-SV": 124},
@@ -359,10 +376,19 @@ PAPER_HEADLINE = {  # seed 001, Section V: first detection step of the s3 step (
 
 
 class VTOLStudy(NamedTuple):
+    """The VTOL study: its settings, table rows, per-run records and the design.
+
+    Attributes:
+      config: the study's settings
+      rows: one per fault case
+      records: leaves (cases, 2 [FTC off, on], runs, ...)
+      design: with the calibrated MDWT-ST thresholds the closed loop used
+    """
+
     config: dict[str, Any]
-    rows: list[dict[str, Any]]   # one per fault case
-    records: RunRecord           # leaves (cases, 2 [FTC off, on], runs, ...)
-    design: LoopDesign           # with the calibrated MDWT-ST thresholds the closed loop used
+    rows: list[dict[str, Any]]
+    records: RunRecord
+    design: LoopDesign
 
     def table(self) -> str:
         bad = [row for row in self.rows if sum(row.get("unhealthy_runs", {}).values())]
@@ -399,7 +425,7 @@ def _summarise(name: str, f: Fault, records: RunRecord, twin_states: np.ndarray,
             first, det, iso = off.first_alarm[:, s, m], off.detection_step[:, s, m], off.isolation_step[:, s, m]
             false_alarm = (first >= 0) & ((first < onset) if faulty else True)
             decisions = min(onset, steps) // (1 if m < 2 else 2**levels)   # decisions before the onset
-            # issue 27: delays only in the runs with no symptom before the onset (metrics.delay_statistics)
+            # delays only in the runs with no symptom before the onset (metrics.delay_statistics)
             delays = delay_statistics(np.full(first.shape, onset), first, det) if faulty else {}
             clean = ~false_alarm
             nan = float("nan")
@@ -638,7 +664,7 @@ def vtol_examples(design: LoopDesign, seed: int = 0, steps: int = STEPS) -> dict
 
 
 def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesign, out) -> list[str]:
-    """Figures like seed 001's Figs. 3-5; returns the paths written (each atomically)."""
+    """Figures like Figs. 3-5 of Lee and Lyou; returns the paths written (each atomically)."""
     import matplotlib.pyplot as plt
 
     from pathlib import Path

@@ -33,17 +33,33 @@ from jaxfdi.tuning.parameterize import Transform, constrain, from_record, merge,
 
 
 class TrainHistory(NamedTuple):
-    """Training history: evaluated steps, training and validation losses, best step, early stop."""
-    step: np.ndarray        # (E,) training step of each evaluation
-    train_loss: np.ndarray  # (E,) training mini-batch loss at that step
-    val_loss: np.ndarray    # (E,) validation loss at that step
-    best_step: int          # the step whose parameters are returned
+    """Training history: evaluated steps, training and validation losses, best step, early stop.
+
+    Attributes:
+      step: (E,) training step of each evaluation
+      train_loss: (E,) training mini-batch loss at that step
+      val_loss: (E,) validation loss at that step
+      best_step: the step whose parameters are returned
+      stopped_early: training stopped before ``steps``: no improvement for ``patience``
+          evaluations, or a non-finite loss or gradient
+    """
+
+    step: np.ndarray
+    train_loss: np.ndarray
+    val_loss: np.ndarray
+    best_step: int
     stopped_early: bool
 
 
 class TrainResult(NamedTuple):
-    """What ``fit`` returns: the best unconstrained parameters and the training history."""
-    raw: dict               # best unconstrained parameters (trainable and frozen)
+    """What ``fit`` returns: the best unconstrained parameters and the training history.
+
+    Attributes:
+      raw: best unconstrained parameters (trainable and frozen)
+      history: the losses over training
+    """
+
+    raw: dict
     history: TrainHistory
 
 

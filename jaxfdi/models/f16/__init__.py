@@ -1,10 +1,10 @@
-"""The Stevens & Lewis F-16 (seed 000's aircraft) as a JAX model: the book's tables and
+"""The Stevens & Lewis F-16 (the aircraft of Park et al. 2004) as a JAX model: the book's tables and
 Morelli's polynomial, engine and atmosphere, the 13-state dynamics, trim, linearisation
 and modes, and the sampled plant with its sensors for ``jaxfdi.loop.run_loop``.
 
 References: Stevens & Lewis (2003) *Aircraft Control and Simulation*, 2nd ed. (App. A);
 Morelli (1998) "Global nonlinear parametric modeling with application to F-16
-aerodynamics"; Park, Kim, Park & Roh (2004), seed 000.
+aerodynamics"; Park, Kim, Park & Roh (2004).
 """
 from jaxfdi.models.f16.aero import AeroCoefficients, table_coefficients
 from jaxfdi.models.f16.atmosphere import AirData, air_data
@@ -84,7 +84,7 @@ from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
 
 _unshadow(__name__, "linearize", "trim")
 
-# seed 000's UKF process model: the body rates alone (moment equations 34-36)
+# the UKF process model of Park et al. (2004): the body rates alone (moment equations 34-36)
 from jaxfdi.models.f16.dynamics import moment_equations  # noqa: E402
 from jaxfdi.models.f16.rates import (  # noqa: E402
     RATE_INPUT_NAMES,

@@ -18,11 +18,19 @@ from jaxfdi.models.f16.tables import AtmosphereData
 
 
 class AirData(NamedTuple):
-    """Air data: Mach number, dynamic pressure, density and temperature."""
-    mach: Array            # ()
-    dynamic_pressure: Array  # () lbf/ft^2
-    density: Array         # () slug/ft^3
-    temperature: Array     # () deg R
+    """Air data: Mach number, dynamic pressure, density and temperature.
+
+    Attributes:
+      mach: () Mach number
+      dynamic_pressure: () lbf/ft^2
+      density: () slug/ft^3
+      temperature: () deg R
+    """
+
+    mach: Array
+    dynamic_pressure: Array
+    density: Array
+    temperature: Array
 
 
 def air_data(vt: Array, altitude: Array, atm: AtmosphereData) -> AirData:

@@ -33,13 +33,23 @@ SYMMETRIC_ZEROS = ("ail_deg", "rdr_deg", "beta_rad")
 
 
 class BookCase(NamedTuple):
-    """One row of Stevens & Lewis Tables 3.6-2/3.6-3: the flight condition and the book's trim."""
-    table: str          # "3.6-2" or "3.6-3"
+    """One row of Stevens & Lewis Tables 3.6-2/3.6-3: the flight condition and the book's trim.
+
+    Attributes:
+      table: "3.6-2" or "3.6-3"
+      label: the row's case, as the book names it
+      airspeed: ft/s
+      turn_rate: rad/s
+      xcg: c.g. position, fraction of cbar
+      printed: quantity -> the book's value
+    """
+
+    table: str
     label: str
-    airspeed: float     # ft/s
-    turn_rate: float    # rad/s
+    airspeed: float
+    turn_rate: float
     xcg: float
-    printed: dict       # quantity -> the book's value
+    printed: dict
 
 
 def book_cases() -> list[BookCase]:

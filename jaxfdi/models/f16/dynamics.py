@@ -1,6 +1,6 @@
 """The 13-state nonlinear F-16 of Stevens & Lewis (2003, *Aircraft Control and Simulation*,
 2nd ed., sec. 2.5 and ``SUBROUTINE F`` of App. A): rigid body, flat non-rotating earth,
-constant mass; the aircraft of seed 000 (Park, Kim, Park & Roh 2004, eqs. 31-42).
+constant mass; the aircraft of Park, Kim, Park & Roh (2004, eqs. 31-42).
 
 State ``x = [VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]`` (ft/s, rad,
 rad/s, ft, engine power %), controls ``u = [thtl, el, ail, rdr]`` (throttle 0..1, surface
@@ -59,22 +59,39 @@ RAD_TO_DEG = 180.0 / jnp.pi
 
 
 class F16Params(NamedTuple):
-    """Everything ``f16_dynamics`` needs (a pytree: vmap over any leaf, e.g. ``xcg``)."""
+    """Everything ``f16_dynamics`` needs (a pytree: vmap over any leaf, e.g. ``xcg``).
 
-    aero: AeroTables | MorelliCoefficients  # the aerodynamic model (its type selects it)
+    Attributes:
+      aero: the aerodynamic model (its type selects it)
+      engine: the F100 thrust tables and power lag
+      atmosphere: the air data computer's constants
+      mass: () slug, aircraft mass
+      inertia: (4,) Jxx, Jyy, Jzz, Jxz, slug ft^2
+      area: () S, ft^2
+      span: () b, ft
+      chord: () cbar, ft
+      xcg_ref: () reference c.g. position, fraction of cbar
+      xcg: () c.g. position, fraction of cbar
+      engine_momentum: () hx, slug ft^2/s
+      gravity: () acceleration of gravity, ft/s^2
+      control_lower: (4,) lower control limits: thtl, el, ail, rdr
+      control_upper: (4,) upper control limits: thtl, el, ail, rdr
+    """
+
+    aero: AeroTables | MorelliCoefficients
     engine: EngineData
     atmosphere: AtmosphereData
-    mass: Array           # () slug
-    inertia: Array        # (4,) Jxx, Jyy, Jzz, Jxz, slug ft^2
-    area: Array           # () S, ft^2
-    span: Array           # () b, ft
-    chord: Array          # () cbar, ft
-    xcg_ref: Array        # () fraction of cbar
-    xcg: Array            # () fraction of cbar
-    engine_momentum: Array  # () hx, slug ft^2/s
-    gravity: Array        # () ft/s^2
-    control_lower: Array  # (4,) thtl, el, ail, rdr
-    control_upper: Array  # (4,)
+    mass: Array
+    inertia: Array
+    area: Array
+    span: Array
+    chord: Array
+    xcg_ref: Array
+    xcg: Array
+    engine_momentum: Array
+    gravity: Array
+    control_lower: Array
+    control_upper: Array
 
 
 def f16_params(aero: str = "tables", profile: str = "stevens_lewis_2nd_ed", xcg: float = 0.35,
@@ -153,7 +170,7 @@ def aero_coefficients(params: F16Params, x: Array, u: Array, gust: Array | None 
 
 def moment_equations(p: Array, q: Array, r: Array, c: AeroCoefficients, qs: Array,
                      params: F16Params) -> tuple[Array, Array, Array]:
-    """``(P', Q', R')`` of the body rates (seed 000 eqs. 34-36; Stevens & Lewis eq. 2.5-16
+    """``(P', Q', R')`` of the body rates (Park et al. 2004, eqs. 34-36; Stevens & Lewis eq. 2.5-16
     with the engine's angular momentum ``hx``) from the coefficients ``c`` and
     ``qs = qbar S``: the part of ``f16_dynamics`` that ``models.f16.rates`` (the UKF's
     model) also uses."""

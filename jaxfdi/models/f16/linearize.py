@@ -64,24 +64,42 @@ LONGITUDINAL_DESIGN_STATES = (VT, ALPHA, THETA, Q, H, POW)
 
 
 class LinearF16(NamedTuple):
-    """``x' = A dx + B du`` about ``(x, u)``."""
+    """``x' = A dx + B du`` about ``(x, u)``.
 
-    A: Array  # (13, 13)
-    B: Array  # (13, 4)
-    x: Array  # (13,) the trim state
-    u: Array  # (4,) the trim controls
+    Attributes:
+      A: (13, 13) state Jacobian
+      B: (13, 4) control Jacobian
+      x: (13,) the trim state
+      u: (4,) the trim controls
+    """
+
+    A: Array
+    B: Array
+    x: Array
+    u: Array
 
 
 class Mode(NamedTuple):
-    """A flight mode: name, roots, natural frequency, damping ratio and time constant."""
+    """A flight mode: name, roots, natural frequency, damping ratio and time constant.
+
+    Attributes:
+      name: the mode's name (e.g. short period, phugoid)
+      roots: its eigenvalues (one real root, or a pair)
+      natural_frequency: rad/s, |lambda| (of the first root for two real roots)
+      damping_ratio: -Re/|lambda| (nan for two real roots)
+      time_constant: s, -1/lambda of the slowest real root (nan for a complex pair)
+      stable: every root has a negative real part
+      shapes: per root: |eigenvector| over the block's states, max 1
+          (VT divided by the trim airspeed)
+    """
+
     name: str
     roots: tuple[complex, ...]
-    natural_frequency: float    # rad/s, |lambda| (of the first root for two real roots)
-    damping_ratio: float        # -Re/|lambda| (nan for two real roots)
-    time_constant: float        # s, -1/lambda of the slowest real root (nan for a complex pair)
+    natural_frequency: float
+    damping_ratio: float
+    time_constant: float
     stable: bool
-    shapes: tuple[tuple[float, ...], ...] = ()  # per root: |eigenvector| over the block's states, max 1
-                                                # (VT divided by the trim airspeed)
+    shapes: tuple[tuple[float, ...], ...] = ()
 
     def describe(self, names: tuple[str, ...] | None = None) -> str:
         """One line: roots, frequency and damping (or time constant), and with ``names``

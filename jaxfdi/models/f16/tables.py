@@ -45,62 +45,115 @@ AERO_TABLES = ("CX", "CZ", "CM", "CL", "CN", "DLDA", "DLDR", "DNDA", "DNDR", "DA
 class AeroTables(NamedTuple):
     """Stevens & Lewis aerodynamic tables (rows x alpha columns) and the CY/CZ formula
     constants (``CY = cy_beta beta + cy_ail ail/ail_norm + cy_rdr rdr/rdr_norm``,
-    ``CZ = CZ(alpha) (1 - (beta/cz_beta_factor)^2) + cz_el el/el_norm``; angles in deg)."""
+    ``CZ = CZ(alpha) (1 - (beta/cz_beta_factor)^2) + cz_el el/el_norm``; angles in deg).
 
-    alpha_deg: Array     # (12,) breakpoints -10..45
-    elevator_deg: Array  # (5,)  -24..24
-    beta_abs_deg: Array  # (7,)  0..30 (CL, CN)
-    beta_deg: Array      # (7,)  -30..30 (DLDA, DLDR, DNDA, DNDR)
-    CX: Array            # (5, 12) elevator x alpha
-    CZ: Array            # (12,)
-    CM: Array            # (5, 12) elevator x alpha
-    CL: Array            # (7, 12) |beta| x alpha
-    CN: Array            # (7, 12) |beta| x alpha
-    DLDA: Array          # (7, 12) beta x alpha, per unit ail/20
-    DLDR: Array          # (7, 12) beta x alpha, per unit rdr/30
-    DNDA: Array          # (7, 12)
-    DNDR: Array          # (7, 12)
-    DAMP: Array          # (9, 12) CXq CYr CYp CZq Clr Clp Cmq Cnr Cnp
-    cy_beta: Array       # () per deg
-    cy_ail: Array        # ()
-    cy_rdr: Array        # ()
-    cz_beta_factor: Array  # () deg (57.3)
-    cz_el: Array         # ()
-    ail_norm: Array      # () deg (20)
-    rdr_norm: Array      # () deg (30)
-    el_norm: Array       # () deg (25)
+    Attributes:
+      alpha_deg: (12,) breakpoints -10..45
+      elevator_deg: (5,) elevator breakpoints -24..24
+      beta_abs_deg: (7,) |beta| breakpoints 0..30 (CL, CN)
+      beta_deg: (7,) beta breakpoints -30..30 (DLDA, DLDR, DNDA, DNDR)
+      CX: (5, 12) elevator x alpha
+      CZ: (12,) over alpha
+      CM: (5, 12) elevator x alpha
+      CL: (7, 12) |beta| x alpha
+      CN: (7, 12) |beta| x alpha
+      DLDA: (7, 12) beta x alpha, per unit ail/20
+      DLDR: (7, 12) beta x alpha, per unit rdr/30
+      DNDA: (7, 12) beta x alpha, per unit ail/20
+      DNDR: (7, 12) beta x alpha, per unit rdr/30
+      DAMP: (9, 12) CXq CYr CYp CZq Clr Clp Cmq Cnr Cnp
+      cy_beta: () per deg
+      cy_ail: () CY per unit ail/ail_norm
+      cy_rdr: () CY per unit rdr/rdr_norm
+      cz_beta_factor: () deg (57.3)
+      cz_el: () CZ per unit el/el_norm
+      ail_norm: () deg (20)
+      rdr_norm: () deg (30)
+      el_norm: () deg (25)
+    """
+
+    alpha_deg: Array
+    elevator_deg: Array
+    beta_abs_deg: Array
+    beta_deg: Array
+    CX: Array
+    CZ: Array
+    CM: Array
+    CL: Array
+    CN: Array
+    DLDA: Array
+    DLDR: Array
+    DNDA: Array
+    DNDR: Array
+    DAMP: Array
+    cy_beta: Array
+    cy_ail: Array
+    cy_rdr: Array
+    cz_beta_factor: Array
+    cz_el: Array
+    ail_norm: Array
+    rdr_norm: Array
+    el_norm: Array
 
 
 class EngineData(NamedTuple):
-    """F100 thrust tables (Mach rows x altitude columns), throttle gearing and power lag."""
+    """F100 thrust tables (Mach rows x altitude columns), throttle gearing and power lag.
 
-    mach: Array          # (6,) 0..1
-    altitude_ft: Array   # (6,) 0..50000
-    idle: Array          # (6, 6) lbf
-    military: Array      # (6, 6)
-    maximum: Array       # (6, 6)
-    gear_break: Array    # () throttle 0.77
-    gear_low: Array      # () 64.94 % per unit throttle
-    gear_high: Array     # () 217.38
-    gear_offset: Array   # () -117.38
-    afterburner: Array   # () 50 %
-    fast_rate: Array     # () 5 1/s
-    lit_target: Array    # () 60 %
-    unlit_target: Array  # () 40 %
-    rtau: Array          # (6,) dp_low, rtau_low, dp_high, rtau_high, intercept, slope
+    Attributes:
+      mach: (6,) Mach breakpoints 0..1
+      altitude_ft: (6,) altitude breakpoints 0..50000 ft
+      idle: (6, 6) lbf, idle thrust
+      military: (6, 6) lbf, military thrust
+      maximum: (6, 6) lbf, maximum (afterburner) thrust
+      gear_break: () throttle 0.77
+      gear_low: () 64.94 % per unit throttle
+      gear_high: () 217.38
+      gear_offset: () -117.38
+      afterburner: () 50 %
+      fast_rate: () 5 1/s
+      lit_target: () 60 %
+      unlit_target: () 40 %
+      rtau: (6,) dp_low, rtau_low, dp_high, rtau_high, intercept, slope
+    """
+
+    mach: Array
+    altitude_ft: Array
+    idle: Array
+    military: Array
+    maximum: Array
+    gear_break: Array
+    gear_low: Array
+    gear_high: Array
+    gear_offset: Array
+    afterburner: Array
+    fast_rate: Array
+    lit_target: Array
+    unlit_target: Array
+    rtau: Array
 
 
 class AtmosphereData(NamedTuple):
-    """Stevens & Lewis air data computer constants (``atmosphere.py``)."""
+    """Stevens & Lewis air data computer constants (``atmosphere.py``).
 
-    rho0: Array          # () slug/ft^3
-    tfac_slope: Array    # () 1/ft
-    T0: Array            # () deg R
-    T_strat: Array       # () deg R
-    strat_alt: Array     # () ft
-    exponent: Array      # () 4.14
-    gamma: Array         # () 1.4
-    gas_constant: Array  # () ft lbf / (slug deg R)
+    Attributes:
+      rho0: () slug/ft^3
+      tfac_slope: () 1/ft
+      T0: () deg R
+      T_strat: () deg R
+      strat_alt: () ft, altitude of the stratosphere's base
+      exponent: () 4.14, exponent of tfac in the density rho0 tfac^exponent
+      gamma: () ratio of specific heats, 1.4
+      gas_constant: () ft lbf / (slug deg R)
+    """
+
+    rho0: Array
+    tfac_slope: Array
+    T0: Array
+    T_strat: Array
+    strat_alt: Array
+    exponent: Array
+    gamma: Array
+    gas_constant: Array
 
 
 @functools.lru_cache(maxsize=None)

@@ -49,23 +49,41 @@ TRIM_RESIDUALS = ("VT", "alpha", "beta", "P", "Q", "R")
 
 
 class TrimCondition(NamedTuple):
-    """A steady flight condition (a pytree of scalars; stack them to vmap)."""
+    """A steady flight condition (a pytree of scalars; stack them to vmap).
 
-    airspeed: Array      # () VT, ft/s
-    altitude: Array      # () h, ft
-    climb_angle: Array   # () gamma, rad
-    turn_rate: Array     # () psi', rad/s
-    pull_up_rate: Array  # () theta', rad/s (wings level)
+    Attributes:
+      airspeed: () VT, ft/s
+      altitude: () h, ft
+      climb_angle: () gamma, rad
+      turn_rate: () psi', rad/s
+      pull_up_rate: () theta', rad/s (wings level)
+    """
+
+    airspeed: Array
+    altitude: Array
+    climb_angle: Array
+    turn_rate: Array
+    pull_up_rate: Array
 
 
 class TrimResult(NamedTuple):
-    """A trim: state, controls, residual, convergence and whether the controls are within limits."""
-    state: Array          # (13,) trimmed state
-    control: Array        # (4,) [thtl, el, ail, rdr]
-    residual: Array       # (6,) [VT', alpha', beta', P', Q', R'] at the trim
-    converged: Array      # () bool: the solver stopped with max |residual| <= tolerance
-    within_limits: Array  # () bool: controls inside params' limits
-    steps: Array          # () int, Levenberg-Marquardt iterations
+    """A trim: state, controls, residual, convergence and whether the controls are within limits.
+
+    Attributes:
+      state: (13,) trimmed state
+      control: (4,) [thtl, el, ail, rdr]
+      residual: (6,) [VT', alpha', beta', P', Q', R'] at the trim
+      converged: () bool: the solver stopped with max |residual| <= tolerance
+      within_limits: () bool: controls inside params' limits
+      steps: () int, Levenberg-Marquardt iterations
+    """
+
+    state: Array
+    control: Array
+    residual: Array
+    converged: Array
+    within_limits: Array
+    steps: Array
 
 
 def trim_condition(airspeed, altitude=0.0, climb_angle=0.0, turn_rate=0.0, pull_up_rate=0.0,

@@ -154,9 +154,9 @@ CASES = {
     "run_filter ys 4-D": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None, YS[None, None], US), V, "ys"),
     "run_filter parallel without an associative scan": (lambda: jaxfdi.run_filter(
         jaxfdi.kalman_filter(MODEL), None, YS, US, parallel=True), V, "parallel"),
-    "run_filter shared_covariance": (lambda: jaxfdi.run_filter(
+    "run_filter N runs shared_covariance": (lambda: jaxfdi.run_filter(
         jaxfdi.kalman_filter(MODEL), None, YS[None], US, shared_covariance="yes"), V, "shared_covariance"),
-    "run_filter ys complex": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None,
+    "run_filter N runs ys complex": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None,
                                                                     jnp.zeros((2, T, M), complex), US), T_, "ys"),
     "kalman_filter model not a model": (lambda: jaxfdi.kalman_filter((MODEL.Phi, MODEL.C)), T_, "model"),
     # --- EKF / UKF -----------------------------------------------------------------

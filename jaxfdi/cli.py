@@ -124,7 +124,7 @@ def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
     )
     elapsed = time.perf_counter() - start
     out = Path(args.out)
-    print(f"engine-chi2: KF chi-square test on the seed-003 turbojet, {args.runs} runs per fault, "
+    print(f"engine-chi2: KF chi-square test on the turbojet of Han et al. (2022), {args.runs} runs per fault, "
           f"window {result.config['window']}, Pfa {result.config['pfa']}, threshold {result.config['threshold']:.2f}")
     print(result.table())
     _io.write_json(folder / "engine-chi2.json", {"config": result.config, "rows": result.rows, "seconds": elapsed})
@@ -180,12 +180,12 @@ def _run_engine(args: argparse.Namespace, folder: Path) -> str:
     study = engine_study(runs=args.runs, seed=args.seed, progress=not args.quiet,
                          **_methods_option(args))
     elapsed = time.perf_counter() - start
-    print(f"engine: seed-003 turbojet, MM / IMM (two mode designs) / GLRT on the same {args.runs} runs per fault, "
+    print(f"engine: the turbojet of Han et al. (2022), MM / IMM (two mode designs) / GLRT on the same {args.runs} runs per fault, "
           f"mu_T = {study.config['settings']['mu_threshold']}")
     print(study.overview())
     print()
     print("Per method and fault; pre-FA = share of runs with an alarm before the onset (false-alarm runs); delays "
-          "[s] over the 'clean' runs only, those without one; 'paper' = seed 003 Table 3, a mean delay (beside our "
+          "[s] over the 'clean' runs only, those without one; 'paper' = Table 3 of Han et al. (2022), a mean delay (beside our "
           "mean); estimate = median over correctly isolated runs")
     print(study.table())
     return _write_study(study, args, folder, "engine.json", lambda where: plot_engine(study, where), elapsed)
@@ -312,7 +312,7 @@ def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
     examples = vtol_examples(study.design, seed=args.seed)
     elapsed = time.perf_counter() - start
     cfg = study.config
-    print(f"vtol: seed-001 VTOL, bank of 12 robust TSKFs (multiplicative + additive per location), "
+    print(f"vtol: the VTOL of Lee & Lyou, bank of 12 robust TSKFs (multiplicative + additive per location), "
           f"{args.runs} closed-loop runs per fault with FTC off and on; statistic chi2({cfg['dof']}): "
           f"chi2 thresholds {cfg['chi2_threshold']:.2f} / window {cfg['chi2_window_threshold']:.2f}, paper's "
           f"{cfg['paper_threshold']} / {cfg['paper_window_threshold']}; MDWT M = {cfg['levels']}, c = {cfg['c_mult']}")
@@ -342,7 +342,7 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
     examples = wheel_examples(design, seed=args.seed, estimator=args.estimator, engage_on=args.engage_on)
     elapsed = time.perf_counter() - start
     cfg = study.config
-    print(f"reaction-wheels: seed-004 KITSAT-3 with a 4-wheel pyramid, {cfg['slew_deg']:.0f} deg slew in 40 s, "
+    print(f"reaction-wheels: KITSAT-3 (Choi & Park 2009) with a 4-wheel pyramid, {cfg['slew_deg']:.0f} deg slew in 40 s, "
           f"60 s at 10 Hz, {args.runs} runs per case (noise and onset uniform in 15-25 s); estimation filter "
           f"{args.estimator.upper()}, banks engaged on the {'NIS test' if args.engage_on == 'nis' else 'dual filter F'}")
     print(f"thresholds: F_T = {cfg['fdp_threshold']:.3e} ({cfg['fdp_margin']} x the largest F of "
@@ -353,7 +353,7 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
           "the method never names one: F and NIS for a wheel); <=2s = detected (F, NIS) or isolated (credit, MM, gyro "
           "health test) within 2 s of the onset, in the runs with no decision before it; delays over those runs "
           "(mean, median, p90); FA = share of runs with a decision before the onset, clean = the others; gyro cases "
-          f"(issue 37): the x gyro dead (NaN) or frozen, gyro health test = stuck-at test over {cfg['health_window']} "
+          f"the x gyro dead (NaN) or frozen, gyro health test = stuck-at test over {cfg['health_window']} "
           f"samples, P_fa {cfg['health_pfa_per_window']:g} per window and gyro\n")
     print(study.table())
     print()
@@ -369,7 +369,7 @@ def _run_f16_flight(args: argparse.Namespace, folder: Path) -> str:
     study = f16_flight_study(flights=args.runs, seed=args.seed, progress=not args.quiet)
     elapsed = time.perf_counter() - start
     cfg, trim = study.config, study.config["design_trim"]
-    print(f"f16-flight: seed-000 F-16 (Stevens & Lewis 2nd-ed. tables), climb {cfg['plan']['climb_rate_ft_s']:.0f} "
+    print(f"f16-flight: F-16 of Park et al. (2004) (Stevens & Lewis 2nd-ed. tables), climb {cfg['plan']['climb_rate_ft_s']:.0f} "
           f"ft/s for 0-5 s, then altitude hold and a {cfg['plan']['bank_angle_deg']:.0f} deg bank turn to "
           f"{cfg['duration_s']:.0f} s; design trim {trim['airspeed_ft_s']:.0f} ft/s, sea level, xcg {trim['xcg']}; "
           f"{cfg['flights']} flights, RK4 at {cfg['dt_s']} s")
@@ -384,7 +384,7 @@ def _run_f16(args: argparse.Namespace, folder: Path) -> str:
     study = f16_fdi_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
     elapsed = time.perf_counter() - start
     cfg = study.config
-    print(f"f16: seed-000 hybrid FDI, three 2-DOF rate sensors (sigma {cfg['rate_sigma_rad_s']:g} rad/s) on the "
+    print(f"f16: hybrid FDI of Park et al. (2004), three 2-DOF rate sensors (sigma {cfg['rate_sigma_rad_s']:g} rad/s) on the "
           f"closed-loop F-16, parity space + UKF on demand (restart {cfg['restart_lag_steps']} steps back, Cl/Cm/Cn "
           f"errors {cfg['coefficient_error_Cl_Cm_Cn']}); {args.runs} runs per case")
     print(study.table())
@@ -398,7 +398,7 @@ def _run_gnss_campus(args: argparse.Namespace, folder: Path) -> str:
     study = gnss_campus_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
     elapsed = time.perf_counter() - start
     cfg = study.config
-    print(f"gnss-campus: seed-002 GPS RAIM from {cfg['start']} (broadcast ephemerides {cfg['ephemeris']}), 1 Hz, "
+    print(f"gnss-campus: GPS RAIM of Yoo et al. (2010) from {cfg['start']} (broadcast ephemerides {cfg['ephemeris']}), 1 Hz, "
           f"{cfg['mask_deg']:.0f} deg mask, P_fa {cfg['pfa']:.2e}, P_md {cfg['pmd']:g}, NPA HAL 556 m; "
           f"{args.runs} runs per case")
     print(study.table())
@@ -413,7 +413,7 @@ def _run_gps_ins(args: argparse.Namespace, folder: Path) -> str:
     study = gps_ins_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
     elapsed = time.perf_counter() - start
     cfg = study.config
-    print(f"gps-ins: seed-002 INS/GPS integrity, park flight {cfg['flight_s']} s from {cfg['start']}, HG1900-class "
+    print(f"gps-ins: INS/GPS integrity of Yoo et al. (2010), park flight {cfg['flight_s']} s from {cfg['start']}, HG1900-class "
           f"IMU {cfg['imu_rate_hz']} Hz, GPS 1 Hz (RAIM-passed fixes only), 15-state error-state EKF; chi-square "
           f"{cfg['chi2']['threshold']:.2f} (60 dof), SCST {cfg['scst']['threshold']:.2f} (15 dof, propagators reset "
           f"every {cfg['scst']['period_s']} s); {args.runs} runs per case")
@@ -422,21 +422,21 @@ def _run_gps_ins(args: argparse.Namespace, folder: Path) -> str:
 
 
 RUNNERS = {
-    "engine": Runner(_run_engine, "seed-003 turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
+    "engine": Runner(_run_engine, "Han et al. (2022) turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
                                   "the paper's Table 3", methods=_engine_method_names),
-    "engine-chi2": Runner(_run_engine_chi2, "seed-003 turbojet: the Kalman-filter chi-square test (--window, --pfa)",
+    "engine-chi2": Runner(_run_engine_chi2, "Han et al. (2022) turbojet: the Kalman-filter chi-square test (--window, --pfa)",
                           options=("window", "pfa")),
-    "reaction-wheels": Runner(_run_reaction_wheels, "seed-004 satellite, 4-wheel pyramid: dual filter F, NIS, "
+    "reaction-wheels": Runner(_run_reaction_wheels, "Choi & Park (2009) satellite, 4-wheel pyramid: dual filter F, NIS, "
                               "credits, MM isolator (--estimator, --engage-on)", options=("estimator", "engage_on"),
                               methods=_wheel_method_names),
-    "f16": Runner(_run_f16, "seed-000 F-16 rate sensors: parity space with the UKF's analytic redundancy on "
+    "f16": Runner(_run_f16, "Park et al. (2004) F-16 rate sensors: parity space with the UKF's analytic redundancy on "
                             "demand, the paper's case, direction x magnitude sweep, envelope, sensor layout"),
-    "f16-flight": Runner(_run_f16_flight, "seed-000 F-16: book trim tables beside ours, modes, LQR SAS with "
+    "f16-flight": Runner(_run_f16_flight, "Park et al. (2004) F-16: book trim tables beside ours, modes, LQR SAS with "
                                           "altitude and bank hold flying the paper's climb and bank turn"),
-    "gps-ins": Runner(_run_gps_ins, "seed-002 INS/GPS: 15-state EKF, windowed chi-square and SCST, Table 3 (gyro bias)"),
-    "gnss-campus": Runner(_run_gnss_campus, "seed-002 GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
+    "gps-ins": Runner(_run_gps_ins, "Yoo et al. (2010) INS/GPS: 15-state EKF, windowed chi-square and SCST, Table 3 (gyro bias)"),
+    "gnss-campus": Runner(_run_gnss_campus, "Yoo et al. (2010) GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
                                             "park satellite faults detected, isolated and excluded"),
-    "vtol": Runner(_run_vtol, "seed-001 VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
+    "vtol": Runner(_run_vtol, "Lee & Lyou VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
                               "fault-tolerant control", methods=_vtol_method_names),
 }
 TUNERS = {

@@ -53,11 +53,9 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from scipy import stats  # noqa: E402
-
 from jaxfdi import _io, kalman_filter, run_filter  # noqa: E402
 from jaxfdi.detection import fault_directions, fault_signatures, glr_statistic, known_change_bank  # noqa: E402
-from jaxfdi.metrics import DetectionRecord  # noqa: E402
+from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, binomial_upper_bound  # noqa: E402
 from jaxfdi.models import engine_model  # noqa: E402
 from jaxfdi.riccati import steady_state_kalman  # noqa: E402
 from jaxfdi.scenarios import engine_tuning as et  # noqa: E402
@@ -268,18 +266,10 @@ def choose(design: Design, points: list[dict]) -> dict:
     return best
 
 
-def clopper_pearson(k: int, n: int, side: str, level: float = 0.95) -> float:
-    """One-sided Clopper-Pearson bound of a binomial rate (``scipy.stats.beta``)."""
-    alpha = 1.0 - level
-    if side == "upper":
-        return 1.0 if k >= n else float(stats.beta.ppf(level, k + 1, n - k))
-    return 0.0 if k <= 0 else float(stats.beta.ppf(alpha, k, n - k + 1))
-
-
 def verdict(point: dict) -> dict:
     n_free = point["runs"]  # fault-free runs (healthy: unhealthy runs are reported apart)
-    fa_upper = clopper_pearson(point["false_alarm_runs"], n_free, "upper")
-    iso_lower = {f: clopper_pearson(point["isolated_runs"][f], point["runs"], "lower") for f in FAULTS}
+    fa_upper = binomial_upper_bound(point["false_alarm_runs"], n_free)
+    iso_lower = {f: binomial_lower_bound(point["isolated_runs"][f], point["runs"]) for f in FAULTS}
     delays = point["delay_median_s"]
     met = (fa_upper <= TARGET["false_alarm"] and min(iso_lower.values()) >= TARGET["isolation"]
            and all(delays[f] == delays[f] and delays[f] <= TARGET["delay_median_s"] + 1e-12 for f in FAULTS)

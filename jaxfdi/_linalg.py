@@ -241,6 +241,12 @@ def solve_lower_transposed(chol: Array, rhs: Array, unroll: bool = True) -> Arra
     return soa_solve_lower_transposed(chol, rhs)
 
 
+def solve_upper(upper: Array, rhs: Array, unroll: bool = True) -> Array:
+    """``R^{-1} b`` for upper-triangular ``R`` (n, n) and ``b`` (n,) or (n, p): back
+    substitution, ``R = (R^T)^T`` with ``R^T`` lower (``solve_lower_transposed``)."""
+    return solve_lower_transposed(upper.T, rhs, unroll)
+
+
 def cho_solve(chol: Array, rhs: Array, unroll: bool = True) -> Array:
     """``A^{-1} b`` from the lower Cholesky factor ``L`` of ``A = L L^T``."""
     return solve_lower_transposed(chol, solve_lower(chol, rhs, unroll), unroll)

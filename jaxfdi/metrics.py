@@ -1,6 +1,6 @@
 """Detection and isolation metrics, accumulated inside the scan or summarised over runs.
 
-Definitions (``../shared/spec/README.md``; issue 27 for the delay): the detection delay is
+Definitions (``../shared/spec/README.md``): the detection delay is
 the first step at or after the fault onset whose decision is "fault", minus the onset; a
 false alarm is a "fault" decision before the onset (or anywhere in a fault-free run,
 whose onset is ``faults.NEVER``); a run with no alarm at or after the onset is a missed
@@ -64,16 +64,30 @@ from jaxfdi.faults import NEVER
 
 
 class DetectionRecord(NamedTuple):
-    """One run's detection outcome: onset, first alarm, detection step, false alarms, isolation and health."""
-    onset: Array            # () int, fault onset step (NEVER when fault-free)
-    first_alarm: Array      # () int, first alarm anywhere, -1 if none
-    detection_step: Array   # () int, first alarm at/after onset, -1 if none
-    false_alarms: Array     # () int, number of alarm steps before the onset
-    pre_onset_steps: Array  # () int, number of steps seen before the onset
-    isolated: Array = -1    # () int, label at the detection step (-1: none / not isolating)
-    first_label: Array = -1  # () int, label at the first alarm (a false alarm's label)
-    estimate: Array = float("nan")  # () float, estimate of the isolated fault, latest within estimate_delay steps after detection
-    first_unhealthy: Array = -1  # () int, first step that was not healthy, -1 if the run stayed healthy
+    """One run's detection outcome: onset, first alarm, detection step, false alarms, isolation and health.
+
+    Attributes:
+      onset: () int, fault onset step (NEVER when fault-free)
+      first_alarm: () int, first alarm anywhere, -1 if none
+      detection_step: () int, first alarm at/after onset, -1 if none
+      false_alarms: () int, number of alarm steps before the onset
+      pre_onset_steps: () int, number of steps seen before the onset
+      isolated: () int, label at the detection step (-1: none / not isolating)
+      first_label: () int, label at the first alarm (a false alarm's label)
+      estimate: () float, estimate of the isolated fault, latest within estimate_delay steps
+          after detection
+      first_unhealthy: () int, first step that was not healthy, -1 if the run stayed healthy
+    """
+
+    onset: Array
+    first_alarm: Array
+    detection_step: Array
+    false_alarms: Array
+    pre_onset_steps: Array
+    isolated: Array = -1
+    first_label: Array = -1
+    estimate: Array = float("nan")
+    first_unhealthy: Array = -1
 
 
 def step_health(healthy: Array, *values) -> Array:
@@ -166,21 +180,37 @@ def record_from_alarms(alarms: Array, onset: Array, healthy: Array | None = None
 
 class DetectionSummary(NamedTuple):
     """Summary over runs (host-side NumPy). Delays in the unit of ``Ts``. Every rate and
-    delay is over the healthy runs only; ``runs`` counts all of them."""
+    delay is over the healthy runs only; ``runs`` counts all of them.
 
-    runs: int                      # all runs, healthy or not
-    faulty_runs: int               # healthy runs with an onset within the horizon
-    detection_rate: float          # detected / faulty runs
-    missed_detection_rate: float   # 1 - detection_rate
-    false_alarm_rate: float        # healthy runs with >= 1 alarm before onset / healthy runs
-    false_alarm_rate_per_step: float  # alarm steps before onset / steps before onset (healthy runs)
-    delay_mean: float              # over the clean detected runs (no alarm before the onset)
+    Attributes:
+      runs: all runs, healthy or not
+      faulty_runs: healthy runs with an onset within the horizon
+      detection_rate: detected / faulty runs
+      missed_detection_rate: 1 - detection_rate
+      false_alarm_rate: healthy runs with >= 1 alarm before onset / healthy runs
+      false_alarm_rate_per_step: alarm steps before onset / steps before onset (healthy runs)
+      delay_mean: over the clean detected runs (no alarm before the onset)
+      delay_median: median over the same runs
+      delay_p90: 90th percentile over the same runs
+      unhealthy_runs: runs with a step that was not healthy (left out of the rates)
+      pre_onset_alarm_rate: faulty runs with an alarm before the onset / faulty runs
+      clean_runs: faulty runs with no alarm before the onset
+      delay_runs: clean runs that were detected: the delays' sample size
+    """
+
+    runs: int
+    faulty_runs: int
+    detection_rate: float
+    missed_detection_rate: float
+    false_alarm_rate: float
+    false_alarm_rate_per_step: float
+    delay_mean: float
     delay_median: float
     delay_p90: float
-    unhealthy_runs: int = 0        # runs with a step that was not healthy (left out of the rates)
-    pre_onset_alarm_rate: float = float("nan")  # faulty runs with an alarm before the onset / faulty runs
-    clean_runs: int = 0            # faulty runs with no alarm before the onset
-    delay_runs: int = 0            # clean runs that were detected: the delays' sample size
+    unhealthy_runs: int = 0
+    pre_onset_alarm_rate: float = float("nan")
+    clean_runs: int = 0
+    delay_runs: int = 0
 
 
 def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) -> DetectionSummary:
@@ -332,18 +362,31 @@ def isolation_accuracy(confusion: Array) -> Array:
 
 
 class EpisodeRecord(NamedTuple):
-    """Per-run record of several fault episodes (E of them; see the module docstring)."""
+    """Per-run record of several fault episodes (E of them; see the module docstring).
 
-    onset: Array             # (E,) int, episode onsets (NEVER: no episode)
-    close: Array             # (E,) int, first step after each episode's detection window
-    label: Array             # (E,) int, true label of each episode
-    detection_step: Array    # (E,) int, first alarm in [onset, close), -1 if none
-    isolated: Array          # (E,) int, label at the detection step, -1 if none
-    false_alarms: Array      # () int, alarm steps outside every window
-    first_false_alarm: Array  # () int, first such step, -1 if none
-    outside_steps: Array     # () int, steps seen outside every window
-    steps: Array             # () int, steps seen
-    first_unhealthy: Array   # () int, first step that was not healthy, -1 if none
+    Attributes:
+      onset: (E,) int, episode onsets (NEVER: no episode)
+      close: (E,) int, first step after each episode's detection window
+      label: (E,) int, true label of each episode
+      detection_step: (E,) int, first alarm in [onset, close), -1 if none
+      isolated: (E,) int, label at the detection step, -1 if none
+      false_alarms: () int, alarm steps outside every window
+      first_false_alarm: () int, first such step, -1 if none
+      outside_steps: () int, steps seen outside every window
+      steps: () int, steps seen
+      first_unhealthy: () int, first step that was not healthy, -1 if none
+    """
+
+    onset: Array
+    close: Array
+    label: Array
+    detection_step: Array
+    isolated: Array
+    false_alarms: Array
+    first_false_alarm: Array
+    outside_steps: Array
+    steps: Array
+    first_unhealthy: Array
 
     @property
     def delay(self) -> Array:
@@ -396,19 +439,33 @@ def episode_record_update(record: EpisodeRecord, k: Array, alarm: Array, label: 
 class EpisodeSummary(NamedTuple):
     """Summary of stacked ``EpisodeRecord``s (host-side NumPy), per episode index ``e``
     ((E,) arrays) over the healthy runs in which episode ``e`` began; delays in the unit
-    of ``Ts``. Unhealthy runs count in ``runs`` and ``unhealthy_runs`` only."""
+    of ``Ts``. Unhealthy runs count in ``runs`` and ``unhealthy_runs`` only.
 
-    runs: int                       # all runs
+    Attributes:
+      runs: all runs
+      unhealthy_runs: runs with a step that was not healthy (left out of the rates)
+      episodes: (E,) healthy runs in which episode e began (onset < steps)
+      detection_rate: (E,) detected / episodes
+      isolation_rate: (E,) isolated as its label / episodes
+      delay_mean: (E,) over detected episodes
+      delay_median: (E,) median over detected episodes
+      delay_p90: (E,) 90th percentile over detected episodes
+      false_alarm_runs: healthy runs with >= 1 alarm outside every window
+      false_alarm_rate: false_alarm_runs / healthy runs
+      false_alarm_rate_per_step: false-alarm steps / steps outside every window (healthy runs)
+    """
+
+    runs: int
     unhealthy_runs: int
-    episodes: np.ndarray            # (E,) healthy runs in which episode e began (onset < steps)
-    detection_rate: np.ndarray      # (E,) detected / episodes
-    isolation_rate: np.ndarray      # (E,) isolated as its label / episodes
-    delay_mean: np.ndarray          # (E,) over detected episodes
-    delay_median: np.ndarray        # (E,)
-    delay_p90: np.ndarray           # (E,)
-    false_alarm_runs: int           # healthy runs with >= 1 alarm outside every window
-    false_alarm_rate: float         # false_alarm_runs / healthy runs
-    false_alarm_rate_per_step: float  # false-alarm steps / steps outside every window (healthy runs)
+    episodes: np.ndarray
+    detection_rate: np.ndarray
+    isolation_rate: np.ndarray
+    delay_mean: np.ndarray
+    delay_median: np.ndarray
+    delay_p90: np.ndarray
+    false_alarm_runs: int
+    false_alarm_rate: float
+    false_alarm_rate_per_step: float
 
 
 def summarize_episodes(records: EpisodeRecord, Ts: float = 1.0) -> EpisodeSummary:
@@ -463,9 +520,10 @@ def binomial_interval(trials: int, p: float, level: float = 0.99) -> tuple[int, 
 
 
 def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[float, float]:
-    """Two-sided Clopper-Pearson ``level`` interval of a rate from ``successes`` of
-    ``trials`` (``scipy.stats.binomtest(...).proportion_ci(level, "exact")``); NaN
-    without trials."""
+    """Two-sided Clopper-Pearson (1934) ``level`` interval of a rate from ``k = successes``
+    of ``n = trials``: ``[B^-1(a/2; k, n-k+1), B^-1(1-a/2; k+1, n-k)]``, ``a = 1 - level``,
+    ``B^-1`` the beta quantile (``scipy.stats.beta.ppf``); 0 when ``k = 0``, 1 when
+    ``k = n``, NaN without trials. Every binomial bound of the library is this one."""
     from scipy import stats
 
     trials = _checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
@@ -473,8 +531,10 @@ def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[flo
     _checks.check_probability("level", level)
     if trials == 0:
         return float("nan"), float("nan")
-    ci = stats.binomtest(successes, trials).proportion_ci(level, method="exact")
-    return float(ci.low), float(ci.high)
+    tail = (1.0 - level) / 2.0
+    low = 0.0 if successes == 0 else float(stats.beta.ppf(tail, successes, trials - successes + 1))
+    high = 1.0 if successes == trials else float(stats.beta.ppf(1.0 - tail, successes + 1, trials - successes))
+    return low, high
 
 
 def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2) -> str:
@@ -489,9 +549,19 @@ def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2)
 
 def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
     """One-sided Clopper-Pearson lower bound of a rate from ``successes`` of ``trials``,
-    ``Beta.ppf(1 - confidence; successes, trials - successes + 1)``: the lower end of the
-    two-sided interval at level ``2 confidence - 1`` (``rate_interval``); 0 when none
-    succeeded, NaN without trials."""
+    ``B^-1(1 - confidence; k, n-k+1)``: the lower end of the two-sided interval at level
+    ``2 confidence - 1`` (``rate_interval``); 0 when none succeeded, NaN without trials."""
+    return _one_sided_interval(successes, trials, confidence)[0]
+
+
+def binomial_upper_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
+    """One-sided Clopper-Pearson upper bound, ``B^-1(confidence; k+1, n-k)``: the upper end
+    of ``rate_interval`` at level ``2 confidence - 1``; 1 when all succeeded, NaN without
+    trials."""
+    return _one_sided_interval(successes, trials, confidence)[1]
+
+
+def _one_sided_interval(successes: int, trials: int, confidence: float) -> tuple[float, float]:
     _checks.check_scalar("confidence", confidence, 0.5, 1.0, low_open=True, high_open=True,
                          meaning="a one-sided confidence in (0.5, 1)")
-    return rate_interval(successes, trials, 2.0 * confidence - 1.0)[0]
+    return rate_interval(successes, trials, 2.0 * confidence - 1.0)

@@ -298,3 +298,23 @@ def test_plant_and_solver_agree_and_faults_hit_their_slot(table):
         sol = solve_position(orbit, T0 + k, clean.measurement[k], ok)
         assert np.max(np.abs(np.asarray(sol.position - SITE))) < 1e-3
         assert float(sol.clock_bias) == pytest.approx(float(clean.state[k, 0]), abs=1e-3)
+
+
+def test_raim_statistic_is_the_sensor_parity_statistic():
+    """``TS_D`` (QR on the used slots) is ``detection.parity``'s ``p^T p`` of the explicit
+    parity vector ``P y_w``, and ``P`` spans the same left null space as the sensors' SVD
+    basis of the used rows (``V^T V = P^T P``)."""
+    from jaxfdi.detection import parity as ps
+
+    rng = np.random.default_rng(11)
+    tables = raim_tables(32)
+    for n in (5, 8, 13):
+        h, used = random_geometry(rng, n)
+        fix = synthetic_fix(jnp.asarray(h), jnp.asarray(used), jnp.asarray(rng.normal(size=32)))
+        P, valid = parity_matrix(fix)
+        parity = P @ fix.residuals
+        assert float(parity_check(fix, tables).statistic) == pytest.approx(float(ps.parity_statistic(parity, valid)),
+                                                                          rel=1e-12)
+        V = np.asarray(ps.parity_space(h[used]).V)
+        Pv = np.asarray(P)[np.asarray(valid)][:, used]
+        np.testing.assert_allclose(Pv.T @ Pv, V.T @ V, atol=1e-12)

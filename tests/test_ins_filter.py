@@ -13,7 +13,8 @@ import pytest
 from scipy import stats
 
 import jaxfdi
-from jaxfdi.ins import error_state, imu, loosely_coupled, plant, rotations, scst, trajectory
+from jaxfdi.ins import error_state, imu, loosely_coupled, plant, scst, trajectory
+from jaxfdi.models import rotation
 from jaxfdi.ins.loosely_coupled import GpsFix
 from jaxfdi.ins.mechanization import NavState
 
@@ -22,7 +23,7 @@ PARK = (37.5684, 126.8851, 70.0)
 
 def _nav():
     return NavState(jnp.asarray([math.radians(PARK[0]), math.radians(PARK[1]), 130.0]),
-                    jnp.asarray([11.0, -3.0, 0.4]), rotations.euler_to_quaternion(0.1, -0.05, 2.0))
+                    jnp.asarray([11.0, -3.0, 0.4]), rotation.euler_to_quaternion(0.1, -0.05, 2.0))
 
 
 def test_feedback_is_the_exact_inverse_of_the_error():

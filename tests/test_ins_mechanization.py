@@ -13,7 +13,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from jaxfdi.gnss import frames
-from jaxfdi.ins import earth, error_state, mechanization, rotations, trajectory
+from jaxfdi.ins import earth, error_state, mechanization, trajectory
+from jaxfdi.models import rotation
 
 PARK = (37.5684, 126.8851, 70.0)
 
@@ -60,17 +61,17 @@ def test_attitude_algebra_matches_scipy():
     rng = np.random.default_rng(0)
     for _ in range(5):
         roll, pitch, yaw = rng.uniform(-1.2, 1.2, 3)
-        q = rotations.euler_to_quaternion(roll, pitch, yaw)
+        q = rotation.euler_to_quaternion(roll, pitch, yaw)
         reference = Rotation.from_euler("ZYX", [yaw, pitch, roll])
-        np.testing.assert_allclose(rotations.quaternion_to_dcm(q), reference.as_matrix(), atol=1e-14)
-        np.testing.assert_allclose(rotations.quaternion_to_euler(q), [roll, pitch, yaw], atol=1e-13)
+        np.testing.assert_allclose(rotation.quaternion_to_dcm(q), reference.as_matrix(), atol=1e-14)
+        np.testing.assert_allclose(rotation.quaternion_to_euler(q), [roll, pitch, yaw], atol=1e-13)
         v = rng.normal(size=3)
-        np.testing.assert_allclose(rotations.rotate(q, v), reference.apply(v), atol=1e-14)
+        np.testing.assert_allclose(rotation.rotate(q, v), reference.apply(v), atol=1e-14)
         r = rng.normal(size=3)
-        np.testing.assert_allclose(rotations.rotation_vector(rotations.rotation_quaternion(r)),
+        np.testing.assert_allclose(rotation.rotation_vector(rotation.rotation_quaternion(r)),
                                    Rotation.from_rotvec(r).as_rotvec(), atol=1e-13)
         small = r / np.linalg.norm(r) * 0.1       # the strapdown step's series, at its stated limit
-        np.testing.assert_allclose(rotations.small_rotation_quaternion(small), rotations.rotation_quaternion(small),
+        np.testing.assert_allclose(rotation.small_rotation_quaternion(small), rotation.rotation_quaternion(small),
                                    atol=1e-15)
 
 
@@ -193,16 +194,16 @@ def test_F_has_the_textbook_blocks(park_flight):
     index = 11000                                      # in a turn: f^n has a horizontal part
     nav, sample = park_flight.state(index), park_flight.imu[index]
     F = np.asarray(jax.jit(error_state.error_jacobian)(nav, sample[:3], sample[3:]))
-    C = np.asarray(rotations.quaternion_to_dcm(nav.attitude))
+    C = np.asarray(rotation.quaternion_to_dcm(nav.attitude))
     f_n = C @ np.asarray(sample[:3])
     local = earth.local_earth(nav.position)
     w_in = np.asarray(local.earth_rate + earth.transport_rate(nav.velocity, nav.position[2], local))
-    skew = np.asarray(rotations.skew(jnp.asarray(f_n)))
+    skew = np.asarray(rotation.skew(jnp.asarray(f_n)))
     np.testing.assert_allclose(F[0:3, 3:6], np.eye(3), atol=2e-6)
     np.testing.assert_allclose(F[3:6, 6:9], -skew, atol=1e-9 * np.abs(f_n).max())
     np.testing.assert_allclose(F[3:6, 9:12], C, atol=1e-12)
     np.testing.assert_allclose(F[6:9, 12:15], C, atol=1e-12)
-    np.testing.assert_allclose(F[6:9, 6:9], -np.asarray(rotations.skew(jnp.asarray(w_in))), atol=1e-12)
+    np.testing.assert_allclose(F[6:9, 6:9], -np.asarray(rotation.skew(jnp.asarray(w_in))), atol=1e-12)
     assert np.all(F[9:] == 0.0)
 
 

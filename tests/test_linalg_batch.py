@@ -29,6 +29,9 @@ def test_cholesky_and_solves_equal_scipy(n):
     np.testing.assert_allclose(_linalg.solve_lower(L_ref, B), scipy.linalg.solve_triangular(L_ref, B, lower=True), rtol=1e-12)
     np.testing.assert_allclose(_linalg.solve_lower_transposed(L_ref, B),
                                scipy.linalg.solve_triangular(L_ref, B, lower=True, trans="T"), rtol=1e-12)
+    R = np.ascontiguousarray(L_ref.T)
+    np.testing.assert_allclose(_linalg.solve_upper(R, b), scipy.linalg.solve_triangular(R, b, lower=False), rtol=1e-12)
+    np.testing.assert_allclose(_linalg.solve_upper(R, B), scipy.linalg.solve_triangular(R, B, lower=False), rtol=1e-12)
     np.testing.assert_allclose(_linalg.cho_solve(L_ref, B), np.linalg.solve(A, B), rtol=1e-11)
     np.testing.assert_allclose(_linalg.psd_solve(A, b), np.linalg.solve(A, b), rtol=1e-11)
 

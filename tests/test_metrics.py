@@ -381,3 +381,18 @@ def test_rate_interval_is_the_clopper_pearson_beta_quantiles():
         rate_interval(11, 10)
     with pytest.raises(ValueError, match="level"):
         rate_interval(1, 10, 1.5)
+
+
+def test_one_sided_bounds_are_the_beta_quantiles():
+    """Lower ``Beta.ppf(1-c; k, n-k+1)``, upper ``Beta.ppf(c; k+1, n-k)``, 0 and 1 at the ends."""
+    from scipy import stats
+
+    from jaxfdi.metrics import binomial_lower_bound, binomial_upper_bound
+
+    for k, n, c in ((0, 10, 0.95), (3, 10, 0.95), (10, 10, 0.99), (7, 1000, 0.95)):
+        low, high = binomial_lower_bound(k, n, c), binomial_upper_bound(k, n, c)
+        np.testing.assert_allclose(low, 0.0 if k == 0 else stats.beta.ppf(1 - c, k, n - k + 1), atol=1e-12)
+        np.testing.assert_allclose(high, 1.0 if k == n else stats.beta.ppf(c, k + 1, n - k), atol=1e-12)
+    assert np.isnan(binomial_upper_bound(0, 0))
+    with pytest.raises(ValueError, match="confidence"):
+        binomial_upper_bound(1, 3, 0.4)

@@ -1,5 +1,5 @@
 """Attitude control with reaction wheels: a rest-to-rest slew, quaternion PD with
-feed-forward, and minimum-norm wheel torque allocation (seed 004 leaves the law open).
+feed-forward, and minimum-norm wheel torque allocation (Choi & Park 2009 leave the law open).
 
 Reference: a slew by ``angle`` about a fixed body axis ``e`` with the versine profile
 ``theta(s) = angle (s - sin(2 pi s) / (2 pi))``, ``s = (t - start) / duration`` in
@@ -26,22 +26,37 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.models.reaction_wheels import quaternion_conjugate, quaternion_multiply, rotate_to_inertial
+from jaxfdi.models.rotation import quaternion_conjugate, quaternion_multiply, rotate
 
 
 class Slew(NamedTuple):
-    """An eigen-axis slew manoeuvre: rotation axis, angle, start time and duration."""
-    axis: Array      # (3,) unit rotation axis in the body (= initial inertial) frame
-    angle: Array     # () rad
-    start: Array     # () s
-    duration: Array  # () s
+    """An eigen-axis slew manoeuvre: rotation axis, angle, start time and duration.
+
+    Attributes:
+      axis: (3,) unit rotation axis in the body (= initial inertial) frame
+      angle: () rad, slew angle
+      start: () s, start time
+      duration: () s, duration of the slew
+    """
+
+    axis: Array
+    angle: Array
+    start: Array
+    duration: Array
 
 
 class AttitudeGains(NamedTuple):
-    """Quaternion PD attitude gains and the wheel torque limit."""
-    kp: Array                # (3, 3)
-    kd: Array                # (3, 3)
-    max_wheel_torque: Array  # () N m
+    """Quaternion PD attitude gains and the wheel torque limit.
+
+    Attributes:
+      kp: (3, 3) proportional gain on the attitude error
+      kd: (3, 3) derivative gain on the rate error
+      max_wheel_torque: () N m, torque limit of each wheel
+    """
+
+    kp: Array
+    kd: Array
+    max_wheel_torque: Array
 
 
 def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, duration: float = 40.0, dtype=None) -> Slew:
@@ -89,7 +104,7 @@ def control_torque(q: Array, w: Array, wheel_momentum: Array, t: Array, profile:
     q_ref, w_ref, alpha_ref = slew_reference(t, profile)
     dq = quaternion_multiply(quaternion_conjugate(q_ref), q)
     dq = jnp.where(dq[0] < 0, -dq, dq)
-    w_ref_body = rotate_to_inertial(quaternion_conjugate(dq), w_ref)
+    w_ref_body = rotate(quaternion_conjugate(dq), w_ref)
     return (inertia @ alpha_ref + jnp.cross(w, inertia @ w + wheel_momentum)
             - 2.0 * gains.kp @ dq[1:] - gains.kd @ (w - w_ref_body))
 

@@ -1,5 +1,5 @@
 """Parity space of a redundant sensor set, with faults that act on groups of channels
-(Potter & Deckert 1973; for two-degree-of-freedom sensors, seed 000: Park, Kim, Park &
+(Potter & Deckert 1973; for two-degree-of-freedom sensors, Park, Kim, Park &
 Roh 2004, Sec. 2.1).
 
 Measurements ``m = H x + eps + f`` (``H`` (m, n) of full column rank, ``m > n``,
@@ -12,11 +12,11 @@ channels, in any direction of them.
   singular vectors). Parity vector ``p = V m = V eps + V f`` (eq. 4).
 - Detection (eq. 8): ``FD = p^T p``; fault-free, ``FD / sigma^2 ~ chi2(q)``, threshold
   ``T_D = sigma^2 chi2_isf(q, P_fa)``.
-- Fault subspace of group ``g``: ``FS_g = span(V[:, group_g])`` (seed 000's fault plane
-  ``FP_i = span(v_ci1, v_ci2)``), with an orthonormal basis ``Q_g`` (``fault_bases``).
+- Fault subspace of group ``g``: ``FS_g = span(V[:, group_g])`` (the fault plane
+  ``FP_i = span(v_ci1, v_ci2)`` of Park et al. 2004), with an orthonormal basis ``Q_g`` (``fault_bases``).
 - Isolation (eq. 9, with the bars and the norm the print lost):
   ``FI_g = 1 - ||p - Q_g Q_g^T p|| / ||p||``. For a 2-D plane in a 3-D parity space
-  ``||p - Q Q^T p|| = |p . u_g|`` with ``u_g`` the plane's unit normal, seed 000's
+  ``||p - Q Q^T p|| = |p . u_g|`` with ``u_g`` the plane's unit normal, Park et al.'s
   ``FI_k = 1 - |p . u_k| / ||p||``. ``FI_g = 1`` when ``p`` lies in ``FS_g``; a group is a
   *suspect* when ``FI_g > T_I``.
 - Singular directions: where two fault subspaces meet. Their principal angles
@@ -43,28 +43,50 @@ from jaxfdi.detection.chi2 import chi2_threshold
 
 
 class ParitySpace(NamedTuple):
-    """The parity space of a sensor set (a pytree: vmap over sensor sets)."""
+    """The parity space of a sensor set (a pytree: vmap over sensor sets).
 
-    H: Array            # (m, n) measurement matrix, one row per channel
-    V: Array            # (q, m) parity matrix: V H = 0, V V^T = I
-    groups: Array       # (G, d) int: the channels of each sensor
-    fault_bases: Array  # (G, q, d) orthonormal basis (columns) of each fault subspace span(V[:, group])
+    Attributes:
+      H: (m, n) measurement matrix, one row per channel
+      V: (q, m) parity matrix: V H = 0, V V^T = I
+      groups: (G, d) int: the channels of each sensor
+      fault_bases: (G, q, d) orthonormal basis (columns) of each fault subspace
+          span(V[:, group])
+    """
+
+    H: Array
+    V: Array
+    groups: Array
+    fault_bases: Array
 
 
 class SingularDirections(NamedTuple):
-    """Where two fault subspaces come closest (``singular_directions``)."""
+    """Where two fault subspaces come closest (``singular_directions``).
 
-    direction: Array  # (G, G, q) unit parity direction of group i closest to subspace k (0 on the diagonal)
-    cosine: Array     # (G, G) cosine of the smallest principal angle (1: the subspaces share that direction)
+    Attributes:
+      direction: (G, G, q) unit parity direction of group i closest to subspace k
+          (0 on the diagonal)
+      cosine: (G, G) cosine of the smallest principal angle
+          (1: the subspaces share that direction)
+    """
+
+    direction: Array
+    cosine: Array
 
 
 class IsolationCalibration(NamedTuple):
-    """``isolation_threshold``'s result."""
+    """``isolation_threshold``'s result.
 
-    threshold: Array         # () T_I
-    missed_isolation: Array  # () fraction of the detected samples with FI of the faulty group <= T_I
-    detected: Array          # () int, samples detected (FD > T_D) and used
-    samples: Array           # () int, samples drawn
+    Attributes:
+      threshold: () T_I
+      missed_isolation: () fraction of the detected samples with FI of the faulty group <= T_I
+      detected: () int, samples detected (FD > T_D) and used
+      samples: () int, samples drawn
+    """
+
+    threshold: Array
+    missed_isolation: Array
+    detected: Array
+    samples: Array
 
 
 def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
@@ -121,11 +143,19 @@ def parity_vector(space: ParitySpace, measurement: Array) -> Array:
     return jnp.asarray(measurement) @ space.V.T
 
 
+def parity_statistic(parity: Array, valid: Array | None = None) -> Array:
+    """``p^T p`` over the last axis, the entries outside ``valid`` (a mask, e.g. RAIM's
+    unused satellite slots) left out; fault-free and whitened, ``chi2`` with as many
+    degrees of freedom as valid entries (Potter & Deckert 1973; Brown & Chin 1992)."""
+    squares = jnp.square(jnp.asarray(parity))
+    return jnp.sum(squares if valid is None else jnp.where(valid, squares, 0.0), axis=-1)
+
+
 def fault_detection_statistic(parity: Array) -> Array:
-    """``FD = p^T p`` (eq. 8) over the last axis; ``+inf`` for a non-finite parity vector
-    (a dead channel: evidence, above every threshold)."""
+    """``FD = p^T p`` (eq. 8, ``parity_statistic``) over the last axis; ``+inf`` for a
+    non-finite parity vector (a dead channel: evidence, above every threshold)."""
     parity = jnp.asarray(parity)
-    return jnp.where(jnp.all(jnp.isfinite(parity), axis=-1), jnp.sum(jnp.square(parity), axis=-1), jnp.inf)
+    return jnp.where(jnp.all(jnp.isfinite(parity), axis=-1), parity_statistic(parity), jnp.inf)
 
 
 def dead_groups(space: ParitySpace, measurement: Array) -> Array:
@@ -199,7 +229,7 @@ def singular_directions(space: ParitySpace) -> SingularDirections:
     """For each ordered pair ``(i, k)``, the unit direction of ``FS_i`` closest to ``FS_k``
     (``Q_i a``, ``a`` the top left singular vector of ``Q_i^T Q_k``) and the cosine of the
     angle between them: 1 when the subspaces intersect along it (a singular direction;
-    seed 000's plane intersections). The diagonal is 0 (direction) and 1 (cosine)."""
+    the plane intersections of Park et al. 2004). The diagonal is 0 (direction) and 1 (cosine)."""
     products = jnp.einsum("iqd,kqe->ikde", space.fault_bases, space.fault_bases)
     left, values, _ = jnp.linalg.svd(products)
     direction = jnp.einsum("iqd,ikd->ikq", space.fault_bases, left[..., :, 0])
@@ -232,7 +262,7 @@ def group_fault(space: ParitySpace, group: Array, fault: Array) -> Array:
 
 def isolation_threshold(space: ParitySpace, sigma, fault_to_noise, missed_isolation, detection_threshold: Array,
                         key: Array, samples: int = 100_000) -> IsolationCalibration:
-    """``T_I`` chosen by Monte Carlo from a missed-isolation probability (seed 000, Sec. 2.1).
+    """``T_I`` chosen by Monte Carlo from a missed-isolation probability (Park et al. 2004, Sec. 2.1).
 
     Each sample: a group ``g`` uniform over the groups, a fault direction uniform on the
     unit sphere of its ``d`` channels, of RMS size per channel ``fault_to_noise * sigma``
@@ -279,7 +309,7 @@ def isolation_threshold(space: ParitySpace, sigma, fault_to_noise, missed_isolat
 
 __all__ = [
     "ParitySpace", "SingularDirections", "IsolationCalibration", "parity_space", "parity_vector",
-    "fault_detection_statistic", "detection_threshold", "out_of_subspace", "isolation_functions",
+    "parity_statistic", "fault_detection_statistic", "detection_threshold", "out_of_subspace", "isolation_functions",
     "subspace_cosines", "subspace_angles", "singular_directions", "singular_faults", "group_fault",
     "isolation_threshold",
 ]

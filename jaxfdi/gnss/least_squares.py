@@ -25,12 +25,19 @@ from jax import Array
 
 
 class MaskedQR(NamedTuple):
-    """Householder factorisation of the used rows of an (S, m) matrix."""
+    """Householder factorisation of the used rows of an (S, m) matrix.
 
-    reflectors: Array  # (m, S) unit Householder vectors (zero at unused slots)
-    r: Array           # (m, m) upper triangular factor
-    rank: Array        # (S,) int: position of each used slot among the used ones (-1: unused)
-    num_used: Array    # () int
+    Attributes:
+      reflectors: (m, S) unit Householder vectors (zero at unused slots)
+      r: (m, m) upper triangular factor
+      rank: (S,) int: position of each used slot among the used ones (-1: unused)
+      num_used: () int, number of used rows
+    """
+
+    reflectors: Array
+    r: Array
+    rank: Array
+    num_used: Array
 
 
 def masked_qr(matrix: Array, used: Array) -> MaskedQR:
@@ -104,14 +111,11 @@ def parity_rows(qr: MaskedQR) -> tuple[Array, Array]:
     return jnp.where(valid[:, None], complement, 0.0), valid
 
 
-def solve_upper(r: Array, rhs: Array) -> Array:
-    """``R^{-1} b`` for upper-triangular ``R`` (m, m), ``b`` (m,) or (m, k), written out
-    (back substitution; m is 4 here)."""
-    m = r.shape[0]
-    rows = [None] * m
-    for i in reversed(range(m)):
-        acc = rhs[i]
-        for k in range(i + 1, m):
-            acc = acc - r[i, k] * rows[k]
-        rows[i] = acc / r[i, i]
-    return jnp.stack(rows)
+def parity_column_norms(q1: Array, used: Array) -> tuple[Array, Array]:
+    """``(norm, observable)``: ``||P[:, j]|| = sqrt(S_jj)``, ``S = P^T P = I - Q1 Q1^T``, from
+    the thin factor (``thin_q``) without forming ``P``. ``observable``: used slots with
+    ``S_jj > 1e-9`` (a satellite alone on its clock has ``S_jj = 0``); ``norm`` is 1 at
+    the others, so it divides safely."""
+    diag = jnp.where(used, 1.0 - jnp.sum(q1**2, axis=1), 0.0)
+    observable = used & (diag > 1e-9)
+    return jnp.sqrt(jnp.where(observable, diag, 1.0)), observable

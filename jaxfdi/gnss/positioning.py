@@ -26,7 +26,7 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi.gnss.frames import ecef_to_geodetic, elevation_azimuth, ned_rotation
-from jaxfdi.gnss.least_squares import apply_qt, leading, masked_qr, solve_upper
+from jaxfdi.gnss.least_squares import apply_qt, leading, masked_qr
 from jaxfdi.gnss.orbits import SPEED_OF_LIGHT, Orbit, earth_rotation, satellite_clock, satellite_state
 
 #: Gauss-Newton iterations from the Earth's centre (converged to 1e-8 m after 5 on
@@ -46,19 +46,33 @@ class Dops(NamedTuple):
 
 
 class PositionFix(NamedTuple):
-    """One epoch's least-squares solution (slot arrays (S,), zero/False at unused slots)."""
+    """One epoch's least-squares solution (slot arrays (S,), zero/False at unused slots).
 
-    position: Array      # (3,) ECEF [m]
-    clock_bias: Array    # () m
-    residuals: Array     # (S,) measured minus predicted pseudorange at the solution [m]
-    geometry: Array      # (S, 4) [-u_ned^T, 1] at the solution ((S, 3 + c) with c clocks: raim.unknowns)
-    sigma: Array         # (S,) pseudorange standard deviations used as weights [m]
-    used: Array          # (S,) bool
-    num_used: Array      # () int
-    elevation: Array     # (S,) rad, seen from the solution
-    azimuth: Array       # (S,) rad
+    Attributes:
+      position: (3,) ECEF [m]
+      clock_bias: () m, receiver clock bias
+      residuals: (S,) measured minus predicted pseudorange at the solution [m]
+      geometry: (S, 4) [-u_ned^T, 1] at the solution ((S, 3 + c) with c clocks: raim.unknowns)
+      sigma: (S,) pseudorange standard deviations used as weights [m]
+      used: (S,) bool, the slots in the solution
+      num_used: () int, number of used slots
+      elevation: (S,) rad, seen from the solution
+      azimuth: (S,) rad, seen from the solution
+      dops: dilutions of precision of the used geometry
+      healthy: () bool: >= 4 satellites, finite, converged
+    """
+
+    position: Array
+    clock_bias: Array
+    residuals: Array
+    geometry: Array
+    sigma: Array
+    used: Array
+    num_used: Array
+    elevation: Array
+    azimuth: Array
     dops: Dops
-    healthy: Array       # () bool: >= 4 satellites, finite, converged
+    healthy: Array
 
 
 def transmit_states(orbit: Orbit, t_receive: Array, pseudoranges: Array) -> tuple[Array, Array]:
@@ -154,7 +168,7 @@ def solve_position(
         y = jnp.where(used, (rho - predicted) / std, 0.0)
         if solver == "qr":
             qr = masked_qr(h, used)
-            step = solve_upper(qr.r, leading(qr, apply_qt(qr, y)))
+            step = _linalg.solve_upper(qr.r, leading(qr, apply_qt(qr, y)))
         else:   # normal equations, 4 x 4 Cholesky written out (element-wise over a batch)
             normal = jnp.einsum("si,sj->ij", h, h)
             step = _linalg.cho_solve(_linalg.cholesky(normal), jnp.einsum("si,s->i", h, y))

@@ -1,5 +1,5 @@
 """Protection levels by the slope method and availability against alert limits
-(Brown & Chin 1992; seed 002 eqs. 10-11, Table 1).
+(Brown & Chin 1992; Yoo et al. 2010, eqs. 10-11, Table 1).
 
 A bias ``b`` on satellite ``i`` moves the position by ``A[:, i] b`` with
 ``A = (H^T W H)^{-1} H^T W`` and the test statistic's noncentrality by
@@ -34,8 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
-from jaxfdi.gnss.least_squares import MaskedQR, masked_qr, solve_upper, thin_q
+from jaxfdi import _checks, _linalg
+from jaxfdi.gnss.least_squares import MaskedQR, masked_qr, parity_column_norms, thin_q
 from jaxfdi.gnss.positioning import PositionFix
 from jaxfdi.gnss.raim import RaimTables, check_tables, unknowns, whitened
 
@@ -51,13 +51,23 @@ ALERT_LIMITS = {
 
 
 class ProtectionLevels(NamedTuple):
-    """Slope-method protection levels: slopes per satellite, HPL, VPL and minimum detectable biases."""
-    slope_horizontal: Array   # (S,) m per sqrt(noncentrality), 0 at unused slots
-    slope_vertical: Array     # (S,)
-    hpl: Array                # () m (inf without a test)
-    vpl: Array                # () m
-    minimum_detectable_bias: Array  # (S,) m (inf at unused or unobservable slots)
-    available: Array          # () bool: HPL <= HAL and VPL <= VAL
+    """Slope-method protection levels: slopes per satellite, HPL, VPL and minimum detectable biases.
+
+    Attributes:
+      slope_horizontal: (S,) m per sqrt(noncentrality), 0 at unused slots
+      slope_vertical: (S,) vertical slope, m per sqrt(noncentrality)
+      hpl: () m (inf without a test)
+      vpl: () m (inf without a test)
+      minimum_detectable_bias: (S,) m (inf at unused or unobservable slots)
+      available: () bool: HPL <= HAL and VPL <= VAL
+    """
+
+    slope_horizontal: Array
+    slope_vertical: Array
+    hpl: Array
+    vpl: Array
+    minimum_detectable_bias: Array
+    available: Array
 
 
 def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tuple[float, float] = "npa",
@@ -84,10 +94,8 @@ def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tup
     h, _ = whitened(fix)
     qr = masked_qr(h, fix.used) if qr is None else qr
     q1 = thin_q(qr)
-    gain = solve_upper(qr.r, q1.T)                         # (u, S) = (H_w^T H_w)^-1 H_w^T
-    diag = jnp.where(fix.used, 1.0 - jnp.sum(q1**2, axis=1), 0.0)
-    observable = fix.used & (diag > 1e-9)
-    root = jnp.sqrt(jnp.where(observable, diag, 1.0))
+    gain = _linalg.solve_upper(qr.r, q1.T)  # (u, S) = (H_w^T H_w)^-1 H_w^T
+    root, observable = parity_column_norms(q1, fix.used)  # sqrt(S_ii)
     slope_h = jnp.where(observable, jnp.hypot(gain[0], gain[1]) / root, 0.0)
     slope_v = jnp.where(observable, jnp.abs(gain[2]) / root, 0.0)
     dof = jnp.maximum(qr.num_used - unknowns(fix), 0)

@@ -7,7 +7,9 @@ the last ``n - u`` columns of ``Q`` give the parity matrix ``P`` ((n - u) x n):
 ``P H_w = 0``, ``P P^T = I``, and the parity vector ``p = P y_w = P eps_w``. Fault-free,
 ``p ~ N(0, I)``, so the detection statistic ``TS_D = p^T p`` is chi-square with
 ``n - u`` degrees of freedom (the weighted sum of squared residuals, Walter & Enge
-1995); equal sigmas give the paper's ``||p||^2 / sigma^2``. ``u`` is the fix's number of
+1995); equal sigmas give the paper's ``||p||^2 / sigma^2``. The parity space is the
+sensors' one (``detection.parity``: ``P`` a basis of the left null space of ``H_w``,
+``TS_D`` its ``parity_statistic``), formed by QR on the used slots. ``u`` is the fix's number of
 geometry columns, so a second clock costs a degree of freedom (and raises the threshold
 and the protection level) wherever the fix carries one.
 
@@ -38,7 +40,8 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.detection.chi2 import chi2_threshold
 from jaxfdi.detection.noncentral_chi2 import noncentrality_for_missed_detection
-from jaxfdi.gnss.least_squares import MaskedQR, apply_qt, masked_qr, parity_rows, thin_q
+from jaxfdi.detection.parity import parity_statistic
+from jaxfdi.gnss.least_squares import MaskedQR, apply_qt, masked_qr, parity_column_norms, parity_rows, thin_q
 from jaxfdi.gnss.positioning import PositionFix
 
 #: Brown & Chin (1992), RTCA DO-208 for non-precision approach: P_fa = 1/15000 per test
@@ -165,11 +168,10 @@ def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = Non
     rotated = apply_qt(qr, y)                            # parity vector at used non-pivot slots
     num = qr.num_used
     dof = jnp.maximum(num - u, 0)
-    statistic = jnp.where(dof > 0, jnp.sum(jnp.where(qr.rank >= u, rotated**2, 0.0)), 0.0)
+    statistic = jnp.where(dof > 0, parity_statistic(rotated, qr.rank >= u), 0.0)
     projected = y - q1 @ (q1.T @ y)                       # S y_w = P^T p
-    diag = jnp.where(fix.used, 1.0 - jnp.sum(q1**2, axis=1), 0.0)  # S_jj = ||P[:, j]||^2
-    observable = fix.used & (diag > 1e-9)
-    isolation = jnp.where(observable, projected / jnp.sqrt(jnp.where(observable, diag, 1.0)), 0.0)
+    norm, observable = parity_column_norms(q1, fix.used)  # ||P[:, j]||
+    isolation = jnp.where(observable, projected / norm, 0.0)
     threshold = tables.threshold[jnp.minimum(dof, tables.threshold.shape[0] - 1)]
     isolated = jnp.where(num >= u + 2, jnp.argmax(jnp.abs(isolation)), -1).astype(jnp.int32)
     return ParityCheck(statistic, dof.astype(jnp.int32), threshold, statistic > threshold, isolation, isolated,

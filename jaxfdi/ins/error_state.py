@@ -1,11 +1,11 @@
 """The INS error state and its dynamics, by automatic differentiation of the strapdown
-equations (no hand-typed blocks: seed 002's printed F11..F35 carry typos).
+equations (no hand-typed blocks: F11..F35 as printed in Yoo et al. (2010) carry typos).
 
 Error state (15): ``[dp (3), dv (3), psi (3), db_a (3), db_g (3)]``, INS minus truth:
 
 - ``dp``: position error in NED metres, ``[(R_N + h)(L_ins - L), (R_E + h) cos L_ins
-  (lon_ins - lon), -(h_ins - h)]`` with the radii at the INS point (seed 002's
-  ``dLlh`` scaled to metres, which keeps the covariance well conditioned);
+  (lon_ins - lon), -(h_ins - h)]`` with the radii at the INS point (the
+  ``dLlh`` of Yoo et al. 2010 scaled to metres, which keeps the covariance well conditioned);
 - ``dv = v_ins - v``; ``psi`` the attitude error, ``C(q_ins) = exp([psi x]) C(q)``
   (Groves 2013, eq. 5.111's small-angle ``I + [psi x]`` made exact);
 - ``db = b - b_hat``: the IMU bias the INS has not yet removed (``f_ins = f + db_a``).
@@ -37,7 +37,7 @@ from jaxfdi import _checks
 from jaxfdi.ins import mechanization
 from jaxfdi.ins.earth import radii_of_curvature
 from jaxfdi.ins.mechanization import NavState
-from jaxfdi.ins.rotations import quaternion_conjugate, quaternion_multiply, rotation_quaternion, rotation_vector
+from jaxfdi.models.rotation import quaternion_conjugate, quaternion_multiply, rotation_quaternion, rotation_vector
 
 #: sizes and slices of the error state
 STATE_SIZE = 15
@@ -48,12 +48,19 @@ STATE_NAMES = ("dp_N", "dp_E", "dp_D", "dv_N", "dv_E", "dv_D", "psi_N", "psi_E",
 
 
 class ImuNoise(NamedTuple):
-    """White-noise and bias random-walk densities of an IMU (1-sigma, per axis)."""
+    """White-noise and bias random-walk densities of an IMU (1-sigma, per axis).
 
-    velocity_random_walk: Array   # () m/s/sqrt(s)
-    angle_random_walk: Array      # () rad/sqrt(s)
-    accel_bias_walk: Array        # () m/s^2/sqrt(s)
-    gyro_bias_walk: Array         # () rad/s/sqrt(s)
+    Attributes:
+      velocity_random_walk: () m/s/sqrt(s)
+      angle_random_walk: () rad/sqrt(s)
+      accel_bias_walk: () m/s^2/sqrt(s)
+      gyro_bias_walk: () rad/s/sqrt(s)
+    """
+
+    velocity_random_walk: Array
+    angle_random_walk: Array
+    accel_bias_walk: Array
+    gyro_bias_walk: Array
 
 
 def navigation_error(ins: NavState, truth: NavState) -> Array:

@@ -30,7 +30,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.ins.earth import LocalEarth, local_earth, radii_of_curvature, transport_rate
-from jaxfdi.ins.rotations import (
+from jaxfdi.models.rotation import (
     cross,
     quaternion_conjugate,
     quaternion_multiply,
@@ -43,11 +43,17 @@ from jaxfdi.ins.rotations import (
 
 
 class NavState(NamedTuple):
-    """An INS's (or the truth's) navigation state; leaves may carry leading batch axes."""
+    """An INS's (or the truth's) navigation state; leaves may carry leading batch axes.
 
-    position: Array   # (3,) latitude [rad], longitude [rad], ellipsoidal height [m]
-    velocity: Array   # (3,) NED [m/s]
-    attitude: Array   # (4,) body-to-NED unit quaternion, scalar first
+    Attributes:
+      position: (3,) latitude [rad], longitude [rad], ellipsoidal height [m]
+      velocity: (3,) NED [m/s]
+      attitude: (4,) body-to-NED unit quaternion, scalar first
+    """
+
+    position: Array
+    velocity: Array
+    attitude: Array
 
 
 def navigation_rates(nav: NavState, earth: LocalEarth) -> tuple[Array, Array]:

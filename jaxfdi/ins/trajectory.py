@@ -10,7 +10,7 @@ Velocities and attitudes are sampled at the IMU rate; positions are integrated f
 velocities with the INS's own trapezoidal rule (``mechanization.integrate_position``),
 and the IMU samples are the exact inverse of the INS step between consecutive states
 (``mechanization.inverse_step``): an error-free IMU makes the INS reproduce the truth to
-round-off. ``park_flight`` is seed 002's park case flown as the GPS half's racetrack
+round-off. ``park_flight`` is the park case of Yoo et al. (2010) flown as the GPS half's racetrack
 (600 m legs, 200 m turns at 12 m/s) after a climb, with a climb and a descent on the way;
 ``manoeuvre_flight`` is the strong-manoeuvre case of the paper's caveat (25 m/s, S-turns
 at 20 deg/s, 42 deg of bank, pull-ups and dives, 2 m/s^2 speed changes).
@@ -28,20 +28,28 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.ins import mechanization
 from jaxfdi.ins.mechanization import NavState
-from jaxfdi.ins.rotations import euler_to_quaternion
+from jaxfdi.models.rotation import euler_to_quaternion
 
 #: standard gravity used for the coordinated-turn bank angle [m/s^2]
 G0 = 9.80665
 
 
 class Trajectory(NamedTuple):
-    """A flight sampled at the IMU rate: N + 1 states and N IMU samples."""
+    """A flight sampled at the IMU rate: N + 1 states and N IMU samples.
 
-    dt: float                # s
-    position: Array          # (N + 1, 3) lat, lon [rad], h [m]
-    velocity: Array          # (N + 1, 3) NED [m/s]
-    attitude: Array          # (N + 1, 4) body-to-NED quaternion
-    imu: Array               # (N, 6) error-free [f^b (m/s^2), w_ib^b (rad/s)] over each interval
+    Attributes:
+      dt: s, IMU sample period
+      position: (N + 1, 3) lat, lon [rad], h [m]
+      velocity: (N + 1, 3) NED [m/s]
+      attitude: (N + 1, 4) body-to-NED quaternion
+      imu: (N, 6) error-free [f^b (m/s^2), w_ib^b (rad/s)] over each interval
+    """
+
+    dt: float
+    position: Array
+    velocity: Array
+    attitude: Array
+    imu: Array
 
     def state(self, index) -> NavState:
         return NavState(self.position[index], self.velocity[index], self.attitude[index])

@@ -1,22 +1,22 @@
-"""Spacecraft with a cluster of reaction wheels (seed 004, eqs. 1-6).
+"""Spacecraft with a cluster of reaction wheels (Choi & Park 2009, eqs. 1-6).
 
-Euler's equations with wheel momentum (Wie 2008, sec. 7.3; seed 004 eq. 1):
+Euler's equations with wheel momentum (Wie 2008, sec. 7.3; Choi & Park 2009, eq. 1):
 
     I w' + w x (I w + h_w) + h_w' = T_ext,    h_w = I_w sum_i Omega_i a_i = I_w H^T Omega,
 
 with ``w`` the body rates (rad/s), ``Omega`` the wheels' spin rates (rad/s), ``a_i`` the
-spin axes (the rows of ``H``, seed 004 eq. 4) and ``I_w Omega_i' = tau_i`` the motor
+spin axes (the rows of ``H``, Choi & Park 2009, eq. 4) and ``I_w Omega_i' = tau_i`` the motor
 torque on wheel ``i``. Total momentum ``I w + h_w`` is conserved in the inertial frame
 when ``T_ext = 0``; in the body frame ``(I w + h_w)' = -w x (I w + h_w)``, so its norm
 is conserved.
 
 Two views of the same physics:
 
-* the filters' model (seed 004's EKF): state ``w`` (3,), input
+* the filters' model (the EKF of Choi & Park 2009): state ``w`` (3,), input
   ``u = [Omega (N), Omega' (N)]`` (commanded wheel speeds and accelerations), one RK4
   step per sample with ``Omega(t) = Omega + t Omega'`` inside the step
   (``wheel_rate_transition``); ``params.wheel_mask`` (N,) switches wheels off, which is
-  how a stop hypothesis ``Omega_i = 0`` (seed 004 eq. 9) is written;
+  how a stop hypothesis ``Omega_i = 0`` (Choi & Park 2009, eq. 9) is written;
 * the truth (``spacecraft_step``): state ``[q (4), w (3), Omega (N)]`` with the attitude
   quaternion (scalar first), driven by the wheel torques actually delivered and an
   external torque, so wheel faults change the wheels' speeds physically.
@@ -28,7 +28,7 @@ it — the paper's printed eqs. 3, 5 and 9 have wrong indices and signs.
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -36,20 +36,30 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi.models.integrate import rk4
+from jaxfdi.models.rotation import quaternion_multiply, rotate, skew
 
 
 class SpacecraftParams(NamedTuple):
-    """Rigid body and wheel cluster (a pytree: vmap over ``wheel_mask`` for a bank)."""
+    """Rigid body and wheel cluster (a pytree: vmap over ``wheel_mask`` for a bank).
 
-    inertia: Array        # (3, 3) body inertia, kg m^2
-    wheel_inertia: Array  # ()     spin-axis inertia of one wheel I_w, kg m^2
-    wheel_axes: Array     # (N, 3) spin axes a_i (rows), the H of seed 004 eq. 4
-    wheel_mask: Array     # (N,)   1: the wheel acts as commanded; 0: stopped (a hypothesis)
-    dt: Array             # ()     sample period, s
+    Attributes:
+      inertia: (3, 3) body inertia, kg m^2
+      wheel_inertia: () spin-axis inertia of one wheel I_w, kg m^2
+      wheel_axes: (N, 3) spin axes a_i (rows), the H of Choi & Park 2009, eq. 4
+      wheel_mask: (N,) 1: the wheel acts as commanded; 0: stopped (a hypothesis)
+      dt: () sample period, s
+    """
+
+    inertia: Array
+    wheel_inertia: Array
+    wheel_axes: Array
+    wheel_mask: Array
+    dt: Array
 
 
 def pyramid_axes(beta_deg: float = 45.0, sigma_deg: float = 45.0, dtype=None) -> Array:
-    """Seed 004 eq. 4: four wheels on a cone of half-angle ``beta`` about body z, at
+    """Eq. 4 of Choi & Park (2009): four wheels on a cone of half-angle ``beta`` about body z, at
     azimuths ``+/-sigma``, ``180 -/+ sigma``; rows are the spin axes."""
     _checks.check_scalar("beta_deg", beta_deg, meaning="a cone half-angle in degrees")
     _checks.check_scalar("sigma_deg", sigma_deg, meaning="an azimuth in degrees")
@@ -63,7 +73,7 @@ def pyramid_axes(beta_deg: float = 45.0, sigma_deg: float = 45.0, dtype=None) ->
 
 def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.055), wheel_inertia: float = 0.000239,
                    dtype=None) -> SpacecraftParams:
-    """KITSAT-3 (seed 004 Table 1): ``I = diag(3.118, 3.050, 4.055)`` kg m^2,
+    """KITSAT-3 (Choi & Park 2009, Table 1): ``I = diag(3.118, 3.050, 4.055)`` kg m^2,
     ``I_w = 0.000239`` kg m^2, the 45/45 deg pyramid unless ``wheel_axes`` (N, 3) is given
     (any geometry: the rows are normalised)."""
     _checks.check_positive("dt", dt, "a positive sample period in seconds")
@@ -86,7 +96,7 @@ def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.05
 
 
 def stop_hypotheses(params: SpacecraftParams, include_nominal: bool = False) -> SpacecraftParams:
-    """The bank's models: hypothesis ``i`` has wheel ``i`` stopped (seed 004 eq. 9).
+    """The bank's models: hypothesis ``i`` has wheel ``i`` stopped (Choi & Park 2009, eq. 9).
 
     Returns ``params`` with a leading hypothesis axis on every leaf: (N, ...) or, with
     ``include_nominal``, (N + 1, ...) with the fault-free model first (mode 0 = normal,
@@ -107,7 +117,7 @@ def wheel_momentum(speeds: Array, params: SpacecraftParams) -> Array:
 
 def rate_derivative(w: Array, speeds: Array, accelerations: Array, params: SpacecraftParams,
                     external_torque: Array | float = 0.0) -> Array:
-    """``w' = I^-1 (T_ext - w x (I w + h_w) - h_w')`` (seed 004 eq. 1, any wheel geometry)."""
+    """``w' = I^-1 (T_ext - w x (I w + h_w) - h_w')`` (Choi & Park 2009, eq. 1, any wheel geometry)."""
     momentum = params.inertia @ w + wheel_momentum(speeds, params)
     wheel_torque_on_body = wheel_momentum(accelerations, params)  # h_w'
     return jnp.linalg.solve(params.inertia, external_torque - jnp.cross(w, momentum) - wheel_torque_on_body)
@@ -122,24 +132,9 @@ def split_input(u: Array, params: SpacecraftParams) -> tuple[Array, Array]:
 
 def body_rate_field(w: Array, u: Array, params: SpacecraftParams) -> Array:
     """The filters' continuous model ``w' = g(w, u)`` at the start of a step; its
-    Jacobian ``dg/dw`` is seed 004's system matrix ``A`` (eq. 8)."""
+    Jacobian ``dg/dw`` is the system matrix ``A`` of Choi & Park (2009, eq. 8)."""
     speeds, accelerations = split_input(u, params)
     return rate_derivative(w, speeds, accelerations, params)
-
-
-def rk4(field: Callable[[Array, Array], Array], x: Array, dt: Array, substeps: int = 1) -> Array:
-    """``substeps`` classical RK4 steps of ``x' = field(x, t)`` over ``[0, dt]``."""
-    h = dt / substeps
-
-    def one(i, x):
-        t = i * h
-        k1 = field(x, t)
-        k2 = field(x + 0.5 * h * k1, t + 0.5 * h)
-        k3 = field(x + 0.5 * h * k2, t + 0.5 * h)
-        k4 = field(x + h * k3, t + h)
-        return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-    return jax.lax.fori_loop(0, substeps, one, x) if substeps > 1 else one(0, x)
 
 
 def wheel_rate_transition(w: Array, u: Array, params: SpacecraftParams) -> Array:
@@ -150,13 +145,8 @@ def wheel_rate_transition(w: Array, u: Array, params: SpacecraftParams) -> Array
 
 
 def gyro_observation(w: Array, u: Array, params: SpacecraftParams) -> Array:
-    """Three rate gyros on the body axes, ``z = w`` (seed 004 eq. 6)."""
+    """Three rate gyros on the body axes, ``z = w`` (Choi & Park 2009, eq. 6)."""
     return w
-
-
-def skew(v: Array) -> Array:
-    """``[v]x`` with ``[v]x a = v x a``."""
-    return jnp.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]], dtype=v.dtype)
 
 
 def rate_jacobian(w: Array, speeds: Array, params: SpacecraftParams) -> Array:
@@ -166,23 +156,6 @@ def rate_jacobian(w: Array, speeds: Array, params: SpacecraftParams) -> Array:
 
 
 # --- the truth: attitude, rates and wheel speeds -------------------------------------
-
-def quaternion_multiply(p: Array, q: Array) -> Array:
-    """Hamilton product, scalar first."""
-    p0, pv = p[0], p[1:]
-    q0, qv = q[0], q[1:]
-    return jnp.concatenate([jnp.array([p0 * q0 - pv @ qv]), p0 * qv + q0 * pv + jnp.cross(pv, qv)])
-
-
-def quaternion_conjugate(q: Array) -> Array:
-    return q * jnp.array([1.0, -1.0, -1.0, -1.0], q.dtype)
-
-
-def rotate_to_inertial(q: Array, v: Array) -> Array:
-    """``R(q) v``: a body-frame vector in the inertial frame (``q`` body -> inertial)."""
-    qv = jnp.concatenate([jnp.zeros(1, v.dtype), v])
-    return quaternion_multiply(quaternion_multiply(q, qv), quaternion_conjugate(q))[1:]
-
 
 def spacecraft_field(state: Array, wheel_torque: Array, external_torque: Array, params: SpacecraftParams) -> Array:
     """``[q', w', Omega']`` of the truth state ``[q (4), w (3), Omega (N)]``."""
@@ -203,30 +176,47 @@ def spacecraft_step(state: Array, wheel_torque: Array, external_torque: Array, p
 def total_momentum(state: Array, params: SpacecraftParams) -> Array:
     """Inertial-frame angular momentum ``R(q) (I w + h_w)`` (3,): constant without ``T_ext``."""
     q, w, speeds = state[:4], state[4:7], state[7:]
-    return rotate_to_inertial(q, params.inertia @ w + wheel_momentum(speeds, params))
+    return rotate(q, params.inertia @ w + wheel_momentum(speeds, params))
 
 
 # --- the truth as a closed-loop plant (jaxfdi.loop) ----------------------------------
 
 class AttitudeReading(NamedTuple):
     """What the attitude sensors give at step ``k``: the attitude (taken as exact) and the
-    gyros' body rates."""
+    gyros' body rates.
 
-    quaternion: Array  # (4,) true attitude, scalar first
-    rate: Array        # (3,) gyro reading w + v, rad/s
+    Attributes:
+      quaternion: (4,) true attitude, scalar first
+      rate: (3,) gyro reading w + v, rad/s
+    """
+
+    quaternion: Array
+    rate: Array
 
 
 class WheelSensed(NamedTuple):
-    state: Array                   # (7 + N,) true [q, w, Omega] at step k
+    """The spacecraft plant's output at step ``k``: the truth and the sensors' reading.
+
+    Attributes:
+      state: (7 + N,) true [q, w, Omega] at step k
+      measurement: the attitude and the gyros' rates
+    """
+
+    state: Array
     measurement: AttitudeReading
 
 
 class WheelCommand(NamedTuple):
     """The flight software's command at step ``k``: the commanded wheel speeds (its
-    integral of the torques) and the motor torques."""
+    integral of the torques) and the motor torques.
 
-    speeds: Array  # (N,) rad/s
-    torque: Array  # (N,) N m
+    Attributes:
+      speeds: (N,) rad/s
+      torque: (N,) N m
+    """
+
+    speeds: Array
+    torque: Array
 
 
 def filter_input(command: WheelCommand, params: SpacecraftParams) -> Array:

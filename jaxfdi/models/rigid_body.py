@@ -15,12 +15,19 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi.models.integrate import rk4
 
 
 class RigidBodyParams(NamedTuple):
-    """Rigid-body parameters: principal moments of inertia and the sample period."""
-    inertia: Array  # (3,) principal moments of inertia
-    dt: Array       # () sample period
+    """Rigid-body parameters: principal moments of inertia and the sample period.
+
+    Attributes:
+      inertia: (3,) principal moments of inertia
+      dt: () sample period
+    """
+
+    inertia: Array
+    dt: Array
 
 
 def rigid_body_params(dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dtype=None) -> RigidBodyParams:
@@ -39,12 +46,7 @@ def _rate_derivative(w: Array, tau: Array, inertia: Array) -> Array:
 
 def rigid_body_transition(w: Array, tau: Array, params: RigidBodyParams) -> Array:
     """One RK4 step of Euler's rotation equations."""
-    dt = params.dt
-    k1 = _rate_derivative(w, tau, params.inertia)
-    k2 = _rate_derivative(w + 0.5 * dt * k1, tau, params.inertia)
-    k3 = _rate_derivative(w + 0.5 * dt * k2, tau, params.inertia)
-    k4 = _rate_derivative(w + dt * k3, tau, params.inertia)
-    return w + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return rk4(lambda x, t: _rate_derivative(x, tau, params.inertia), w, params.dt)
 
 
 def rigid_body_observation(w: Array, tau: Array, params: RigidBodyParams) -> Array:

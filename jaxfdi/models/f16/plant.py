@@ -1,6 +1,6 @@
 """The F-16 as a sampled plant for ``jaxfdi.loop.run_loop``: RK4 integration, sensors with
 noise, sensor and actuator faults (``jaxfdi.faults``), optional gusts; and the view the
-flight controller reads, whose body rates are a *selected* rate (seed 000: Park, Kim,
+flight controller reads, whose body rates are a *selected* rate (Park, Kim,
 Park & Roh 2004).
 
 State of the sampled plant ``x_s = [x (13), w_g, v_g]``: the aircraft and a vertical and
@@ -14,13 +14,13 @@ limits) and the gust held. Faults act on ``y`` and ``u`` as in
 Measurement ``y`` (``MEASUREMENT_NAMES``): air data ``[VT, alpha, beta]``, attitude
 ``[phi, theta, psi]``, altitude, engine power, and the rate sensors
 ``m = H [P, Q, R]`` (``rate_axes`` ``H``, one row per input axis), each with white
-Gaussian noise. Seed 000 flies three two-degree-of-freedom rate sensors, ``H`` 6x3
+Gaussian noise. Park et al. (2004) fly three two-degree-of-freedom rate sensors, ``H`` 6x3
 (``seed000_rate_axes``), sigma = 0.01 rad/s on every axis; the paper leaves the other
 sensors' noise at "an appropriate level" (defaults in ``f16_sensors``).
 
 The controller does not read ``m``: ``rate_passthrough_fdi`` forms its ``FlightView``
 with the least-squares rate ``(H^T H)^-1 H^T m`` (all sensors trusted). An FDI stage that
-isolates a faulty sensor (seed 000's parity space + UKF) returns the same view with its
+isolates a faulty sensor (the parity space + UKF of Park et al. 2004) returns the same view with its
 own selected rate instead.
 """
 from __future__ import annotations
@@ -35,6 +35,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.models.f16.dynamics import ALPHA, BETA, H, P, PHI, POW, PSI, R, THETA, VT, F16Params, f16_dynamics, saturate
+from jaxfdi.models.integrate import rk4
 
 # ``jaxfdi.simulate``, ``jaxfdi.faults`` and ``jaxfdi.loop`` sit above ``models`` in the
 # dependency order: they are imported where used (as ``models.reaction_wheels.wheel_plant`` does).
@@ -48,37 +49,61 @@ RATE_OFFSET = len(MEASUREMENT_NAMES)
 
 
 class F16Sensors(NamedTuple):
-    """Sensor layout and noise (standard deviations)."""
+    """Sensor layout and noise (standard deviations).
 
-    rate_axes: Array       # (m_r, 3) H: the input axis of each rate-sensor channel (rows, unit vectors)
-    rate_sigma: Array      # () rad/s per channel
-    air_data_sigma: Array  # (3,) VT ft/s, alpha rad, beta rad
-    attitude_sigma: Array  # (3,) phi, theta, psi rad
-    altitude_sigma: Array  # () ft
-    power_sigma: Array     # () %
+    Attributes:
+      rate_axes: (m_r, 3) H: the input axis of each rate-sensor channel (rows, unit vectors)
+      rate_sigma: () rad/s per channel
+      air_data_sigma: (3,) VT ft/s, alpha rad, beta rad
+      attitude_sigma: (3,) phi, theta, psi rad
+      altitude_sigma: () ft, altimeter noise
+      power_sigma: () %
+    """
+
+    rate_axes: Array
+    rate_sigma: Array
+    air_data_sigma: Array
+    attitude_sigma: Array
+    altitude_sigma: Array
+    power_sigma: Array
 
 
 class SampledF16(NamedTuple):
-    """Parameters of the sampled plant (a pytree: vmap over the aircraft's leaves)."""
+    """Parameters of the sampled plant (a pytree: vmap over the aircraft's leaves).
+
+    Attributes:
+      aircraft: the aircraft's parameters
+      rate_axes: (m_r, 3) H of the rate sensors
+      dt: () s, sample period
+      gust_decay: () a = exp(-V0 dt / L)
+    """
 
     aircraft: F16Params
-    rate_axes: Array   # (m_r, 3)
-    dt: Array          # () s
-    gust_decay: Array  # () a = exp(-V0 dt / L)
+    rate_axes: Array
+    dt: Array
+    gust_decay: Array
 
 
 class FlightView(NamedTuple):
-    """What the flight controller reads at step ``k``."""
+    """What the flight controller reads at step ``k``.
 
-    air_data: Array  # (3,) VT, alpha, beta
-    attitude: Array  # (3,) phi, theta, psi
-    altitude: Array  # ()
-    power: Array     # ()
-    rates: Array     # (3,) the selected body rates P, Q, R
+    Attributes:
+      air_data: (3,) VT, alpha, beta
+      attitude: (3,) phi, theta, psi
+      altitude: () h, ft
+      power: () engine power, %
+      rates: (3,) the selected body rates P, Q, R
+    """
+
+    air_data: Array
+    attitude: Array
+    altitude: Array
+    power: Array
+    rates: Array
 
 
 def seed000_rate_axes(dtype=None) -> Array:
-    """Seed 000's three 2-DOF rate sensors (spec, isotropic ``H^T H = 2 I``): sensor 1 in
+    """The three 2-DOF rate sensors of Park et al. (2004) (spec, isotropic ``H^T H = 2 I``): sensor 1 in
     the x-y plane at +-45 deg, sensor 2 in x-z, sensor 3 in y-z; rows are the six axes."""
     dtype = dtype or jnp.result_type(float)
     s = 1.0 / math.sqrt(2.0)
@@ -88,7 +113,7 @@ def seed000_rate_axes(dtype=None) -> Array:
 def f16_sensors(rate_axes: Array | None = None, rate_sigma: float = 0.01, air_data_sigma=(0.5, 1e-3, 1e-3),
                 attitude_sigma=(1e-3, 1e-3, 1e-3), altitude_sigma: float = 2.0, power_sigma: float = 0.1,
                 dtype=None) -> F16Sensors:
-    """Sensors of the flight: seed 000's rate sensors (0.01 rad/s) by default; air data
+    """Sensors of the flight: the rate sensors of Park et al. 2004 (0.01 rad/s) by default; air data
     0.5 ft/s and 1 mrad (0.06 deg), attitude 1 mrad, altitude 2 ft, engine power 0.1 %
     (choices: the paper gives only the rate sensors' noise)."""
     dtype = dtype or jnp.result_type(float)
@@ -122,20 +147,6 @@ def measurement_cov(sensors: F16Sensors) -> Array:
     return jnp.diag(sigma * sigma)
 
 
-def rk4_sample(x: Array, u: Array, gust: Array, params: F16Params, dt: Array, substeps: int) -> Array:
-    """``substeps`` classical RK4 steps of ``f16_dynamics`` over ``dt``, ``u`` and ``gust`` held."""
-    h = dt / substeps
-
-    def one(_, x):
-        k1 = f16_dynamics(x, u, params, gust)
-        k2 = f16_dynamics(x + 0.5 * h * k1, u, params, gust)
-        k3 = f16_dynamics(x + 0.5 * h * k2, u, params, gust)
-        k4 = f16_dynamics(x + h * k3, u, params, gust)
-        return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-    return one(0, x) if substeps == 1 else jax.lax.fori_loop(0, substeps, one, x)
-
-
 def sampled_transition(substeps: int = 1):
     """``f(x_s, u, plant) -> x_s[k+1]`` of the sampled plant (module doc), without noise.
 
@@ -146,8 +157,8 @@ def sampled_transition(substeps: int = 1):
     @jax.checkpoint
     def transition(xs: Array, u: Array, plant: SampledF16) -> Array:
         x, gust = xs[:13], xs[13:]
-        angles = gust / x[VT]
-        x_next = rk4_sample(x, saturate(u, plant.aircraft), angles, plant.aircraft, plant.dt, substeps)
+        angles, u_sat = gust / x[VT], saturate(u, plant.aircraft)
+        x_next = rk4(lambda x, t: f16_dynamics(x, u_sat, plant.aircraft, angles), x, plant.dt, substeps)
         return jnp.concatenate([x_next, plant.gust_decay * gust])
 
     return transition

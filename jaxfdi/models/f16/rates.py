@@ -1,4 +1,4 @@
-"""The F-16's body rates alone: seed 000's UKF process model (Park, Kim, Park & Roh 2004,
+"""The F-16's body rates alone: the UKF process model of Park, Kim, Park & Roh (2004,
 Sec. III: "the UKF's system model is the moment equations (34)-(36) only").
 
 State ``w = [P, Q, R]`` (rad/s); input ``v = [VT, alpha, beta, h, thtl, el, ail, rdr]``
@@ -24,18 +24,26 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.models.f16.atmosphere import air_data
 from jaxfdi.models.f16.dynamics import H, VT, F16Params, aero_coefficients, moment_equations
+from jaxfdi.models.integrate import rk4
 
 #: the rate model's input, in order
 RATE_INPUT_NAMES = ("VT", "alpha", "beta", "h", "thtl", "el", "ail", "rdr")
 
 
 class RateModel(NamedTuple):
-    """Parameters of the rate model (a pytree)."""
+    """Parameters of the rate model (a pytree).
+
+    Attributes:
+      aircraft: the aircraft's parameters
+      coefficient_scale: (3,) multipliers of Cl, Cm, Cn: 1 + the coefficient errors
+      rate_axes: (m_r, 3) H of the rate sensors
+      dt: () s, sample period
+    """
 
     aircraft: F16Params
-    coefficient_scale: Array  # (3,) multipliers of Cl, Cm, Cn: 1 + the coefficient errors
-    rate_axes: Array          # (m_r, 3) H of the rate sensors
-    dt: Array                 # () s
+    coefficient_scale: Array
+    rate_axes: Array
+    dt: Array
 
 
 def rate_model(aircraft: F16Params, rate_axes: Array, dt: float = 0.01, coefficient_error=(0.0, 0.0, 0.0)) -> RateModel:
@@ -62,7 +70,7 @@ def rate_model_input(y: Array, u: Array) -> Array:
 
 
 def rate_derivative(rates: Array, inputs: Array, model: RateModel) -> Array:
-    """``[P', Q', R']`` (seed 000 eqs. 34-36) with the model's coefficient errors."""
+    """``[P', Q', R']`` (Park et al. 2004, eqs. 34-36) with the model's coefficient errors."""
     aircraft = model.aircraft
     vt, alpha, beta, altitude = inputs[0], inputs[1], inputs[2], inputs[3]
     zero = jnp.zeros((), rates.dtype)
@@ -76,12 +84,7 @@ def rate_derivative(rates: Array, inputs: Array, model: RateModel) -> Array:
 
 def rate_transition(rates: Array, inputs: Array, model: RateModel) -> Array:
     """``w[k+1]``: one classical RK4 step of ``rate_derivative`` over ``model.dt``."""
-    h = model.dt
-    k1 = rate_derivative(rates, inputs, model)
-    k2 = rate_derivative(rates + 0.5 * h * k1, inputs, model)
-    k3 = rate_derivative(rates + 0.5 * h * k2, inputs, model)
-    k4 = rate_derivative(rates + h * k3, inputs, model)
-    return rates + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return rk4(lambda x, t: rate_derivative(x, inputs, model), rates, model.dt)
 
 
 def rate_observation(rates: Array, inputs: Array, model: RateModel) -> Array:

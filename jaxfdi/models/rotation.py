@@ -1,10 +1,12 @@
-"""Attitude algebra of the strapdown equations: unit quaternions (Hamilton, scalar first),
-direction cosine matrices, rotation vectors and Euler angles.
+"""Attitude algebra (the strapdown INS, the spacecraft's truth and attitude control): unit
+quaternions (Hamilton, scalar first), direction cosine matrices, rotation vectors, Euler
+angles and the cross-product matrix.
 
-``q`` is the body-to-NED attitude: ``v^n = C(q) v^b``. A rotation vector ``r`` (angle
-``|r|`` about ``r / |r|``) has ``exp(r) = [cos(|r|/2), sin(|r|/2) r / |r|]``; ``log`` is
-its inverse on the hemisphere ``q_0 >= 0`` (Groves 2013, App. E.6; Titterton & Weston
-2004, sec. 3.6). Small angles take series expansions, so the functions and their first
+``q`` is the body-to-reference attitude (NED for the INS, inertial for the spacecraft):
+``v^n = C(q) v^b = (q (x) [0, v^b] (x) q*)_v``. A rotation vector ``r`` (angle ``|r|``
+about ``r / |r|``) has ``exp(r) = [cos(|r|/2), sin(|r|/2) r / |r|]``; ``log`` is its
+inverse on the hemisphere ``q_0 >= 0`` (Groves 2013, App. E.6; Titterton & Weston 2004,
+sec. 3.6). Small angles take series expansions, so the functions and their first
 two derivatives are finite at the identity (the EKF differentiates through them).
 Euler angles are roll, pitch, yaw (z-y-x order, ``C = R_z(yaw) R_y(pitch) R_x(roll)``).
 """

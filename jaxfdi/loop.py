@@ -40,7 +40,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import Decision, as_decision
+from jaxfdi.detection.chi2 import Decision
 from jaxfdi.metrics import (
     DetectionRecord,
     EpisodeRecord,
@@ -251,16 +251,14 @@ def run_loop(
 # --- scoring ----------------------------------------------------------------------
 
 def _decisions(value: Any) -> Any:
-    """A ``Decision``, a ``(statistic, alarm)`` pair, or a tuple / named tuple / dict of
-    them, with every decision as a ``Decision``."""
-    if isinstance(value, Decision):
-        return value
-    if isinstance(value, dict):
-        return {name: _decisions(v) for name, v in value.items()}
-    if isinstance(value, (tuple, list)) and all(isinstance(v, (tuple, list, dict)) for v in value):
-        items = [_decisions(v) for v in value]
-        return type(value)(*items) if hasattr(value, "_fields") else type(value)(items)
-    return as_decision(value)
+    """``value``, a ``Decision`` or a tuple / named tuple / dict of them, checked: a
+    ``TypeError`` names anything else."""
+    leaves = jax.tree_util.tree_leaves(value, is_leaf=lambda x: isinstance(x, Decision))
+    for leaf in leaves:
+        if not isinstance(leaf, Decision):
+            raise TypeError(f"decisions: expected the output's Decision, or a tuple / dict of Decisions, got "
+                            f"{_checks.received(leaf)} in a {type(value).__name__}")
+    return value
 
 
 def _per_decision_scorer(decisions: Callable[[Any], Any], healthy: Callable[[Any], Array] | None,
@@ -303,8 +301,8 @@ def detection_scorer(
 
     Args:
       onset: () fault onset step (``faults.NEVER`` for a fault-free run).
-      decisions: ``output -> Decision`` (or a ``(statistic, alarm)`` pair), or a tuple /
-        dict of them: the score is the same structure of records.
+      decisions: ``output -> Decision``, or a tuple / dict of them: the score is the
+        same structure of records.
       healthy: ``output -> () bool``: the step's numerics were sound (default: the
         output's ``healthy`` field when it has one); with the decision's statistic
         not NaN, it decides the record's ``first_unhealthy``.

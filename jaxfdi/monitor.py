@@ -15,7 +15,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import Detector, as_decision, flag_dead
+from jaxfdi.detection.chi2 import Detector, flag_dead
 from jaxfdi.filters._base import Filter, FilterInfo
 from jaxfdi.loop import FDI, detection_scorer, feedforward, run_loop
 from jaxfdi.metrics import DetectionRecord, record_init, record_update, step_health
@@ -69,7 +69,6 @@ def filter_detector(filt: Filter, detector: Detector, detector_input: Callable[[
         filt_state, det_state = state
         filt_state, info = filt.step(filt_state, y, u)
         det_state, decision = detector.step(det_state, detector_input(info))
-        decision = as_decision(decision)
         dead = dead_channels(info)
         if dead is not None:
             decision = flag_dead(decision, dead, channel_labels)
@@ -154,7 +153,7 @@ def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_dela
         det_state, record = carry
         k, x, ok, dead_k = k_input
         det_state, decision = detector.step(det_state, x)
-        decision = flag_dead(as_decision(decision), dead_k, channel_labels)
+        decision = flag_dead(decision, dead_k, channel_labels)
         ok = step_health(ok, decision.statistic)
         return (det_state, record_update(record, k, decision.alarm, decision.label, decision.estimate,
                                          estimate_delay, healthy=ok)), None

@@ -71,7 +71,7 @@ CASES = {
         linear_transition, linear_observation, _asymmetric(7), MODEL.R, MODEL), r"Q: .*must be symmetric"),
     "initial mean shape": (lambda: _kf_run(mean=jnp.zeros(6)), r"mean: expected shape \(7,\)"),
     "initial cov shape": (lambda: _kf_run(cov=jnp.eye(6)), r"cov: expected a square matrix of shape \(7, 7\)"),
-    "ys not 2-D": (lambda: _kf_run(ys=jnp.zeros(T)), r"ys: expected shape \(T, m\), got \(6,\)"),
+    "ys not 2-D": (lambda: _kf_run(ys=jnp.zeros(T)), r"ys: expected shape \(T, m\) for one run or \(N, T, m\) for N runs, got \(6,\)"),
     "ys wrong width": (lambda: _kf_run(ys=jnp.zeros((T, 4))), r"y: expected shape \(5,\)"),
     "us wrong width": (lambda: _kf_run(us=jnp.zeros((T, 2))), r"u: expected shape \(1,\)"),
     "ys/us lengths differ": (lambda: _kf_run(us=jnp.zeros((T + 1, 1))),

@@ -58,10 +58,10 @@ def test_online_window_detector_equals_offline_window_sum():
     rng = np.random.default_rng(1)
     nis = rng.chisquare(5, size=40)
     det = jaxfdi.chi2_detector(20.0, window=4)
-    _, (stat, alarm) = jax.lax.scan(det.step, det.init(), jnp.asarray(nis))
+    _, decision = jax.lax.scan(det.step, det.init(), jnp.asarray(nis))
     brute = np.array([nis[max(0, k - 3):k + 1].sum() for k in range(40)])
-    np.testing.assert_allclose(stat, brute, rtol=1e-12)
-    np.testing.assert_array_equal(alarm, brute > 20.0)
+    np.testing.assert_allclose(decision.statistic, brute, rtol=1e-12)
+    np.testing.assert_array_equal(decision.alarm, brute > 20.0)
 
 
 def test_nis_equals_explicit_inverse():

@@ -1,6 +1,14 @@
-"""Contract tests over a registry of every filter: jit == no-jit, the driver traces
-once, vmap over a bank / over runs equals the Python loop, float32 in gives float32
-out and stays finite, and log-likelihood gradients in Q and R equal finite differences."""
+"""Contract tests over every filter and every detector of the library.
+
+Filters (``REGISTRY``: KF, EKF and UKF on a linear and a nonlinear model): jit == no-jit,
+the driver traces once, vmap over a bank / over runs equals the Python loop, float32 in
+gives float32 out and stays finite, and log-likelihood gradients in Q and R equal finite
+differences. Every ``Filter`` factory (``FILTERS``): finite outputs of the documented
+shapes and dtypes, jit == eager, ``run_filter`` on (N, T, m) == the loop over runs, vmap
+over a parameter bank, float32 kept, and the likelihood's gradient == a finite difference.
+Every ``Detector`` factory (``DETECTORS``): a step gives a ``Decision`` of scalars, jit and
+vmap over streams under ``lax.scan`` work, a non-finite input alarms, a quiet stream does not."""
+import functools
 from typing import NamedTuple
 
 import chex
@@ -155,3 +163,457 @@ def test_log_likelihood_gradients_in_Q_and_R_match_finite_differences(case):
 def _symmetric(rng, n):
     a = rng.normal(size=(n, n))
     return jnp.asarray(0.5 * (a + a.T))
+
+
+# ------------------------------------------------------------------ every Filter of the library
+# One small problem per filter (float64; the conftest enables x64): ``build(theta, dtype)``
+# gives the filter and its initial state for a scalar model parameter ``theta`` (a scale
+# of the measurement noise, or of the prior for the INS) in ``dtype``. Each case lists
+# every leaf of its step's info with its documented per-step shape and kind ('f' float of
+# the filter's dtype, 'b' bool, 'i' int32).
+T_STEPS, N_RUNS = 12, 3
+F = "f"
+FILTER_INFO = {"predicted_mean": ((3,), F), "predicted_cov": ((3, 3), F), "filtered_mean": ((3,), F),
+               "filtered_cov": ((3, 3), F), "innovation": ((2,), F), "innovation_cov": ((2, 2), F),
+               "log_likelihood": ((), F), "nis": ((), F), "num_observed": ((), "i"), "healthy": ((), "b")}
+IMM_INFO = {"mode_prob": ((2,), F), "log_mode_prob": ((2,), F), "mean": ((3,), F), "cov": ((3, 3), F),
+            "mode_mean": ((2, 3), F), "mode_cov": ((2, 3, 3), F), "mode_log_likelihood": ((2,), F),
+            "log_likelihood": ((), F), "healthy": ((), "b"), "dead": ((2,), "b")}
+TSKF_INFO = {"filtered_mean": ((3,), F), "filtered_cov": ((3, 3), F), "bias_mean": ((1,), F), "bias_cov": ((1, 1), F),
+             "residual": ((2,), F), "residual_cov": ((2, 2), F), "statistic": ((), F), "log_likelihood": ((), F),
+             "healthy": ((), "b")}
+DUAL_INFO = {**{f"estimator.{name}": spec for name, spec in FILTER_INFO.items()}, "prediction": ((3,), F),
+             "det_prediction": ((), F), "det_estimation": ((), F), "detection_parameter": ((), F), "healthy": ((), "b")}
+CORRECTED_INFO = {"decision.statistic": ((), F), "decision.alarm": ((), "b"), "decision.label": ((), "i"),
+                  "decision.estimate": ((), F), "onset": ((), "i"), "information": ((), F), "confirmed": ((), "b"),
+                  "innovation": ((2,), F), "predicted_mean": ((3,), F), "fault": ((3,), F), "healthy": ((), "b")}
+INS_INFO = {"innovation": ((6,), F), "innovation_cov": ((6, 6), F), "nis": ((), F), "used": ((), "b"),
+            "correction": ((15,), F), "predicted_cov": ((15, 15), F), "filtered_cov": ((15, 15), F),
+            "filtered_nav.position": ((3,), F), "filtered_nav.velocity": ((3,), F), "filtered_nav.attitude": ((4,), F),
+            "accel_bias": ((3,), F), "gyro_bias": ((3,), F), "transition": ((15, 15), F), "process_cov": ((15, 15), F),
+            "healthy": ((), "b")}
+
+
+class FilterCase(NamedTuple):
+    build: object              # (theta, dtype) -> (Filter, initial state)
+    info: dict                 # leaf path -> (per-step shape, kind)
+    ys: object = None          # (T, m), or a pytree for ``scan_only``
+    us: object = None          # (T, nu), or a pytree for ``scan_only``
+    log_likelihood: object = None  # info -> (T,) log-likelihoods; None: no gradient check (reason at the case)
+    scan_only: bool = False    # measurements are a pytree: driven by lax.scan, not run_filter (reason at the case)
+    rtol: float = 1e-9         # batch / vmap against the loop over runs
+    jit_rtol: float = 1e-10    # jit against eager
+
+
+def _cast(tree, dtype):
+    """Float leaves in ``dtype``; concrete ones stay concrete (NumPy) inside a trace, as
+    filters that check a matrix at build time (the unknown-input filter's ``C E``) need."""
+    def cast(a):
+        if not jnp.issubdtype(jnp.result_type(a), jnp.floating):
+            return a
+        return jnp.asarray(a, dtype) if isinstance(a, jax.core.Tracer) else np.asarray(a, dtype)
+    return jax.tree_util.tree_map(cast, tree)
+
+
+@functools.lru_cache(maxsize=None)
+def _linear_problem():
+    from _linear_gaussian_cases import small_model
+
+    model = small_model()
+    us = np.sin(0.3 * np.arange(T_STEPS))[:, None]
+    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.array([0.5, -0.2, 0.1]), jnp.asarray(us),
+                               jax.random.key(3))
+    return model, np.asarray(truth.measurement), us
+
+
+def _gaussian(make, m0=np.zeros(3), P0=np.eye(3)):
+    """``build`` of a filter with ``init(mean, cov)`` from ``make(model with R scaled by theta)``."""
+    model, _, _ = _linear_problem()
+
+    def build(theta, dtype):
+        scaled = _cast(model, dtype)
+        filt = make(scaled._replace(R=scaled.R * theta))
+        return filt, filt.init(jnp.asarray(m0, dtype), jnp.asarray(P0, dtype))
+
+    return build
+
+
+def _modes(model):
+    """Two kalman_filter modes: nominal, and the measurement noise x 4."""
+    stacked = jax.tree_util.tree_map(lambda a: jnp.stack([a, a]), model)
+    return stacked._replace(R=stacked.R * jnp.asarray([1.0, 4.0], model.R.dtype)[:, None, None])
+
+
+def _bank_build(make):
+    model, _, _ = _linear_problem()
+
+    def build(theta, dtype):
+        scaled = _cast(model, dtype)
+        filt = make(_modes(scaled._replace(R=scaled.R * theta)))
+        return filt, filt.init(jnp.zeros(3, dtype), jnp.eye(3, dtype=dtype), jnp.asarray([0.9, 0.1], dtype))
+
+    return build
+
+
+def _time_varying_build(theta, dtype):
+    from jaxfdi.filters import model_at, time_varying
+
+    model, _, _ = _linear_problem()
+    scaled = _cast(model, dtype)
+    wobble = 1.0 + 0.5 * jnp.sin(jnp.arange(T_STEPS, dtype=dtype))
+    at = model_at(scaled, R=scaled.R[None] * theta * wobble[:, None, None])
+    filt = time_varying(lambda k: jaxfdi.kalman_filter(at(k)))
+    return filt, filt.init(jnp.zeros(3, dtype), jnp.eye(3, dtype=dtype))
+
+
+def _dual_field(x, u, model):
+    """A continuous-time field with a state-dependent Jacobian (its determinant varies)."""
+    return model.Phi @ x - x + 0.1 * jnp.sin(x) + model.Gamma @ u
+
+
+def _dual_build(theta, dtype):
+    from jaxfdi.detection.dual_filter import dual_filter
+
+    model, _, _ = _linear_problem()
+    scaled = _cast(model, dtype)
+    ekf = jaxfdi.extended_kalman_filter(linear_transition, linear_observation, scaled.Q, scaled.R * theta, scaled)
+    filt = dual_filter(ekf, linear_transition, _dual_field, scaled)
+    return filt, filt.init(jnp.zeros(3, dtype), jnp.eye(3, dtype=dtype))
+
+
+def _corrected_glrt_build(theta, dtype):
+    from jaxfdi.detection import corrected_glrt
+
+    model, _, _ = _linear_problem()
+    scaled = _cast(model, dtype)
+    filt = corrected_glrt(scaled._replace(R=scaled.R * theta), 4, 30.0)
+    return filt, filt.init(jnp.zeros(3, dtype))
+
+
+@functools.lru_cache(maxsize=None)
+def _ins_problem():
+    """Four GPS epochs of a level INS moving north-east, four IMU samples 0.01 s apart each."""
+    from jaxfdi.ins.loosely_coupled import GpsFix
+    from jaxfdi.ins.mechanization import NavState
+
+    epochs, per_epoch = 4, 4
+    nav = NavState(jnp.asarray([0.6547, 2.2146, 130.0]), jnp.asarray([11.0, -3.0, 0.4]),
+                   jnp.asarray([1.0, 0.0, 0.0, 0.0]))
+    rng = np.random.default_rng(8)
+    k = np.arange(1, epochs + 1)[:, None] * per_epoch * 0.01
+    position = np.asarray(nav.position) + np.concatenate([11.0 * k / 6.37e6, -3.0 * k / 5.1e6, -0.4 * k], 1)
+    fixes = GpsFix(jnp.asarray(position + rng.normal(size=(epochs, 3)) * [1e-7, 1e-7, 1.0]),
+                   jnp.asarray(np.asarray(nav.velocity) + 0.05 * rng.normal(size=(epochs, 3))),
+                   jnp.tile(4.0 * jnp.eye(3), (epochs, 1, 1)), jnp.tile(0.01 * jnp.eye(3), (epochs, 1, 1)),
+                   jnp.ones(epochs, bool))
+    samples = np.tile([0.0, 0.0, -9.8, 0.0, 0.0, 0.0], (epochs, per_epoch, 1)) + 1e-3 * rng.normal(
+        size=(epochs, per_epoch, 6))
+    return nav, fixes, jnp.asarray(samples)
+
+
+def _ins_build(theta, dtype):
+    from jaxfdi.ins import imu
+    from jaxfdi.ins.loosely_coupled import loosely_coupled_filter
+
+    nav, _, _ = _ins_problem()
+    filt = loosely_coupled_filter(imu.noise_model(imu.hg1900()), 0.01)
+    prior = jnp.diag(jnp.asarray([4, 4, 9, .01, .01, .01, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4, 1e-4, 1e-11, 1e-11, 1e-11]))
+    return filt, filt.init(_cast(nav, dtype), jnp.asarray(theta * prior, dtype))
+
+
+def _filter_registry():
+    from jaxfdi.filters import (
+        interacting_multiple_model,
+        multiple_model,
+        sensor_direction,
+        sqrt_kalman_filter,
+        sqrt_unscented_kalman_filter,
+        two_stage_kalman_filter,
+        unknown_input_filter,
+    )
+    from jaxfdi.tuning.train import checkpointed
+
+    _, ys, us = _linear_problem()
+    linear = dict(ys=ys, us=us)
+    own = lambda info: info.log_likelihood  # noqa: E731
+
+    def nonlinear(kind):  # an EKF / UKF on the linear model
+        return lambda model: kind(linear_transition, linear_observation, model.Q, model.R, model)
+
+    def tskf(model):
+        walk = 1e-4 * np.eye(1, dtype=model.R.dtype)
+        return two_stage_kalman_filter(model, sensor_direction(model, 0, "additive"), walk)
+
+    _, fixes, samples = _ins_problem()
+    return {
+        "kalman_filter": FilterCase(_gaussian(jaxfdi.kalman_filter), FILTER_INFO, log_likelihood=own, **linear),
+        "extended_kalman_filter": FilterCase(_gaussian(nonlinear(jaxfdi.extended_kalman_filter)), FILTER_INFO,
+                                             log_likelihood=own, **linear),
+        # the UKFs' alpha = 1e-3 weights (1/alpha^2 ~ 1e6): jit's reassociated sums differ by ~3e-10 (Case above)
+        "unscented_kalman_filter": FilterCase(_gaussian(nonlinear(jaxfdi.unscented_kalman_filter)), FILTER_INFO,
+                                              log_likelihood=own, jit_rtol=1e-9, **linear),
+        "sqrt_kalman_filter": FilterCase(_gaussian(sqrt_kalman_filter), FILTER_INFO, log_likelihood=own, **linear),
+        "sqrt_unscented_kalman_filter": FilterCase(_gaussian(nonlinear(sqrt_unscented_kalman_filter)), FILTER_INFO,
+                                                   log_likelihood=own, jit_rtol=1e-9, **linear),
+        "interacting_multiple_model": FilterCase(
+            _bank_build(lambda modes: interacting_multiple_model(jaxfdi.kalman_filter, modes,
+                                                                 jnp.asarray([[0.95, 0.05], [0.05, 0.95]]))),
+            IMM_INFO, log_likelihood=own, **linear),
+        "multiple_model": FilterCase(_bank_build(lambda modes: multiple_model(jaxfdi.kalman_filter, modes, 1e-3)),
+                                     IMM_INFO, log_likelihood=own, **linear),
+        # tuning.train.checkpointed: any filter with its step (and batch kernel) rematerialised
+        "checkpointed": FilterCase(
+            _bank_build(lambda modes: checkpointed(interacting_multiple_model(
+                jaxfdi.kalman_filter, modes, jnp.asarray([[0.95, 0.05], [0.05, 0.95]])))),
+            IMM_INFO, log_likelihood=own, **linear),
+        "two_stage_kalman_filter": FilterCase(_gaussian(tskf), TSKF_INFO, log_likelihood=own, **linear),
+        "unknown_input_filter": FilterCase(
+            _gaussian(lambda model: unknown_input_filter(model, np.asarray([[0.0], [1.0], [0.0]], model.R.dtype))),
+            FILTER_INFO, log_likelihood=own, **linear),
+        "time_varying": FilterCase(_time_varying_build, FILTER_INFO, log_likelihood=own, **linear),
+        "dual_filter": FilterCase(_dual_build, DUAL_INFO, log_likelihood=lambda info: info.estimator.log_likelihood,
+                                  **linear),
+        # no gradient check: the corrected GLRT reports no likelihood, and its corrections are
+        # discrete decisions (a confirmed alarm), not a smooth function of the model
+        "corrected_glrt": FilterCase(_corrected_glrt_build, CORRECTED_INFO, **linear),
+        # the INS's measurement is a GpsFix pytree and its input (n, 6) IMU samples an epoch:
+        # run_filter takes (T, m) arrays, so it is driven by lax.scan and has no (N, T, m) form;
+        # no gradient check: it reports no likelihood (its outputs are the NIS and the correction)
+        "loosely_coupled_filter": FilterCase(_ins_build, INS_INFO, fixes, samples, scan_only=True),
+    }
+
+
+FILTERS = _filter_registry()
+
+
+def drive(case, filt, state, ys, us):
+    """``run_filter`` (one run or a batch), or a ``lax.scan`` of ``step`` for ``scan_only``."""
+    if case.scan_only:
+        return jax.lax.scan(lambda s, yu: filt.step(s, *yu), state, (ys, us))
+    return jaxfdi.run_filter(filt, state, ys, us)
+
+
+def _run_case(case, theta, ys, dtype=jnp.float64):
+    filt, state = case.build(theta, dtype)
+    return drive(case, filt, state, _cast(ys, dtype), _cast(case.us, dtype))
+
+
+def _leaves(info):
+    return {jax.tree_util.keystr(path)[1:]: leaf for path, leaf in jax.tree_util.tree_flatten_with_path(info)[0]}
+
+
+def _perturbed(case, rng):
+    """Another run: ``case.ys`` plus noise (5 % of each channel's spread; for the INS's
+    fixes, about a metre and 5 cm/s)."""
+    if case.scan_only:
+        fixes = case.ys
+        position = fixes.position + rng.normal(size=fixes.position.shape) * np.array([1e-7, 1e-7, 1.0])
+        return fixes._replace(position=position, velocity=fixes.velocity + 0.05 * rng.normal(size=fixes.velocity.shape))
+    return jnp.asarray(case.ys + 0.05 * rng.normal(size=case.ys.shape) * np.std(case.ys, axis=0))
+
+
+def _steps(case):
+    return jax.tree_util.tree_leaves(case.ys)[0].shape[0]
+
+
+@pytest.fixture(scope="module", params=sorted(FILTERS))
+def filter_case(request):
+    return FILTERS[request.param]
+
+
+def test_every_filter_is_finite_with_its_documented_shapes_and_jit_equals_eager(filter_case):
+    case = filter_case
+    eager_final, eager = _run_case(case, 1.0, case.ys)
+    leaves = _leaves(eager)
+    assert set(leaves) == set(case.info), "the info's leaves are not the documented ones"
+    for name, (shape, kind) in case.info.items():
+        leaf = leaves[name]
+        assert leaf.shape == (_steps(case),) + shape, name
+        assert leaf.dtype == {"f": jnp.float64, "b": jnp.bool_, "i": jnp.int32}[kind], name
+    chex.assert_tree_all_finite((eager_final, eager))
+    assert bool(jnp.all(leaves["healthy"]))
+    jitted_final, jitted = jax.jit(lambda theta, ys: _run_case(case, theta, ys))(1.0, case.ys)
+    chex.assert_trees_all_close((jitted_final, jitted), (eager_final, eager), rtol=case.jit_rtol,
+                                atol=case.jit_rtol * _scale((eager_final, eager)))
+
+
+def test_every_filter_keeps_float32(filter_case):
+    case = filter_case
+    final, info = _run_case(case, 1.0, case.ys, jnp.float32)
+    for name, leaf in _leaves((final, info)).items():
+        if jnp.issubdtype(leaf.dtype, jnp.floating):
+            assert leaf.dtype == jnp.float32, name
+    chex.assert_tree_all_finite((final, info))
+    assert bool(jnp.all(_leaves(info)["healthy"]))
+
+
+@pytest.mark.parametrize("name", sorted(n for n, c in FILTERS.items() if not c.scan_only))  # INS: see its case
+def test_every_filter_run_on_a_batch_equals_the_loop_over_runs(name):
+    """``run_filter`` on (N, T, m) (a batch kernel, a vmap, covariances shared when the
+    filter shares them) equals one run at a time."""
+    case = FILTERS[name]
+    ys_batch = jnp.stack([_perturbed(case, np.random.default_rng(i)) for i in range(N_RUNS)])
+    filt, state = case.build(1.0, jnp.float64)
+    batch = jaxfdi.run_filter(filt, state, ys_batch, case.us)
+    for i in range(N_RUNS):
+        single = jaxfdi.run_filter(filt, state, ys_batch[i], case.us)
+        run_i = jax.tree_util.tree_map(lambda b, s: b[i] if b.shape != s.shape else b, batch, single)
+        chex.assert_trees_all_close(run_i, single, rtol=case.rtol, atol=case.rtol * _scale(single))
+
+
+def test_every_filter_vmaps_over_a_parameter_bank_and_runs(filter_case):
+    case = filter_case
+    thetas = jnp.asarray([0.5, 1.0, 2.0])
+    ys_batch = jax.tree_util.tree_map(lambda *a: jnp.stack(a),
+                                      *[_perturbed(case, np.random.default_rng(10 + i)) for i in range(3)])
+    batched = jax.jit(jax.vmap(lambda theta, ys: _run_case(case, theta, ys)))(thetas, ys_batch)
+    one = jax.jit(lambda theta, ys: _run_case(case, theta, ys))
+    for i in range(3):
+        single = one(thetas[i], jax.tree_util.tree_map(lambda a: a[i], ys_batch))
+        chex.assert_trees_all_close(jax.tree_util.tree_map(lambda a: a[i], batched), single, rtol=case.rtol,
+                                    atol=case.rtol * _scale(single))
+
+
+@pytest.mark.parametrize("name", sorted(n for n, c in FILTERS.items() if c.log_likelihood is not None))
+def test_every_likelihood_filter_has_the_finite_difference_gradient(name):
+    """d/dtheta of the summed log-likelihood (theta: the measurement noise scale) by
+    reverse mode equals a fourth-order central difference (rtol 1e-4)."""
+    case = FILTERS[name]
+    loss = jax.jit(lambda theta: jnp.sum(case.log_likelihood(_run_case(case, theta, case.ys)[1])))
+    theta, eps = 1.0, 1e-3
+    gradient = jax.grad(loss)(theta)
+    along = [loss(theta + step * eps) for step in (2, 1, -1, -2)]
+    difference = (-along[0] + 8 * along[1] - 8 * along[2] + along[3]) / (12 * eps)
+    assert np.isfinite(float(gradient))
+    np.testing.assert_allclose(float(gradient), float(difference), rtol=1e-4)
+
+
+# ------------------------------------------------------------------ every Detector of the library
+# One case per factory of ``jaxfdi.detection`` that returns a ``Detector``: ``make()``, a
+# random stream of its inputs ``stream(rng, (B, T))``, a quiet stream (T, ...) far from its
+# threshold, and ``dead(value, bad)``: one input with a component replaced by ``bad``.
+class DetectorCase(NamedTuple):
+    make: object
+    stream: object
+    quiet: object
+    dead: object = lambda value, bad: value.at[0].set(bad)  # noqa: E731
+
+
+@functools.lru_cache(maxsize=None)
+def _glrt_setup():
+    from _linear_gaussian_cases import small_model
+    from jaxfdi.riccati import steady_state_kalman
+
+    model = small_model()
+    steady = steady_state_kalman(model)
+    return model, steady.gain, steady.innovation_cov
+
+
+def _innovations(rng, shape):
+    _, _, S = _glrt_setup()
+    return jnp.asarray(rng.normal(size=shape + (2,)) @ np.linalg.cholesky(np.asarray(S)).T)
+
+
+def _detector_registry():
+    from jaxfdi.detection import (
+        chi2_detector,
+        credit_isolator,
+        fault_directions,
+        fault_signatures,
+        frozen_channel_detector,
+        glrt_detector,
+        known_change_bank,
+        known_change_detector,
+        mode_probability_detector,
+        recursive_glrt_detector,
+        transient_glrt_detector,
+    )
+
+    model, gain, S = _glrt_setup()
+    window, zeros = 4, jnp.zeros((T_STEPS, 2))
+    signatures = fault_signatures(model, gain, fault_directions(model), window)
+    sizes = jnp.asarray([0.5, 2.0, -2.0])
+    alternating = jnp.asarray((-1.0) ** np.arange(T_STEPS))[:, None] * jnp.asarray([1.0, 2.0])
+    return {
+        "chi2_detector": DetectorCase(lambda: chi2_detector(20.0, 3),
+                                      lambda rng, shape: jnp.asarray(rng.chisquare(2, size=shape)),
+                                      jnp.full((T_STEPS,), 0.1), lambda value, bad: jnp.asarray(bad)),
+        # a lower-tail test: the quiet stream is a channel far from frozen (it alternates)
+        "frozen_channel_detector": DetectorCase(
+            lambda: frozen_channel_detector(jnp.asarray([0.1, 0.1]), window, 1e-3, jnp.asarray([3, 4])),
+            lambda rng, shape: jnp.asarray(rng.normal(size=shape + (2,))), alternating),
+        "glrt_detector": DetectorCase(lambda: glrt_detector(model, gain, S, window, 30.0), _innovations, zeros),
+        "recursive_glrt_detector": DetectorCase(lambda: recursive_glrt_detector(model, gain, S, window, 30.0),
+                                                _innovations, zeros),
+        "transient_glrt_detector": DetectorCase(lambda: transient_glrt_detector(model, 4.0 * model.Q, window, 30.0),
+                                                _innovations, zeros),
+        "known_change_bank": DetectorCase(lambda: known_change_bank(signatures, S, sizes, 10.0, tail=True),
+                                          _innovations, zeros),
+        "known_change_detector": DetectorCase(lambda: known_change_detector(model, gain, S, sizes, window, 10.0),
+                                              _innovations, zeros),
+        "mode_probability_detector": DetectorCase(
+            lambda: mode_probability_detector(0.9, confirm_steps=2),
+            lambda rng, shape: jnp.asarray(rng.dirichlet([4.0, 1.0, 1.0], size=shape)),
+            jnp.tile(jnp.asarray([0.98, 0.01, 0.01]), (T_STEPS, 1))),
+        "credit_isolator": DetectorCase(lambda: credit_isolator(0.5, label_offset=1),
+                                        lambda rng, shape: jnp.asarray(np.abs(rng.normal(size=shape + (3,)))),
+                                        jnp.ones((T_STEPS, 3))),
+    }
+
+
+DETECTORS = _detector_registry()
+
+
+@pytest.fixture(scope="module", params=sorted(DETECTORS))
+def detector_case(request):
+    return DETECTORS[request.param]
+
+
+def test_every_detector_steps_to_a_decision_of_scalars(detector_case):
+    from jaxfdi.detection.chi2 import Decision
+
+    detector = detector_case.make()
+    value = detector_case.stream(np.random.default_rng(0), (1,))[0]
+    _, decision = detector.step(detector.init(), value)
+    assert type(decision) is Decision
+    assert all(jnp.shape(field) == () for field in decision)
+    assert decision.statistic.dtype == decision.estimate.dtype == jnp.float64
+    assert decision.alarm.dtype == jnp.bool_ and decision.label.dtype == jnp.int32
+
+
+def test_every_detector_jits_and_vmaps_over_streams_under_scan(detector_case):
+    """jit(vmap over B streams of scan(step)) equals the scans one stream at a time."""
+    detector = detector_case.make()
+    streams = detector_case.stream(np.random.default_rng(1), (3, T_STEPS))
+
+    def scan(values):
+        return jax.lax.scan(detector.step, detector.init(), values)
+
+    batched = jax.jit(jax.vmap(scan))(streams)
+    for b in range(3):
+        chex.assert_trees_all_close(jax.tree_util.tree_map(lambda a: a[b], batched), scan(streams[b]),
+                                    rtol=1e-12, atol=1e-12)
+
+
+# the mode-probability detector reads a filter's posterior probabilities, not a sensor: a
+# dead sensor reaches it as the filter's dead report (monitor.filter_detector applies
+# chi2.flag_dead), and a NaN probability is broken numerics, which the records count as
+# unhealthy (metrics.step_health), not as an alarm
+@pytest.mark.parametrize("bad", [np.inf, np.nan], ids=["inf", "nan"])
+@pytest.mark.parametrize("name", sorted(set(DETECTORS) - {"mode_probability_detector"}))
+def test_every_detector_alarms_on_a_dead_input(name, bad):
+    """A non-finite input mid-stream alarms at that step: a dead sensor is never silent."""
+    case = DETECTORS[name]
+    detector = case.make()
+    values = case.quiet.at[6].set(case.dead(case.quiet[6], bad))
+    _, decisions = jax.lax.scan(detector.step, detector.init(), values)
+    assert bool(decisions.alarm[6])
+
+
+@pytest.mark.parametrize("name", sorted(DETECTORS))
+def test_every_detector_is_silent_far_below_its_threshold(name):
+    case = DETECTORS[name]
+    detector = case.make()
+    _, decisions = jax.lax.scan(detector.step, detector.init(), case.quiet)
+    assert not bool(jnp.any(decisions.alarm))
+    assert bool(jnp.all(jnp.isfinite(decisions.statistic)))

@@ -110,10 +110,11 @@ def test_a_nan_burst_alarms_on_its_channel_and_a_later_fault_is_detected_as_with
 def test_chi2_window_alarms_while_a_dead_nis_is_in_it_and_recovers():
     nis = np.array([1.0, 2.0, np.inf, 3.0, 1.0, 0.5, np.nan, 2.0, 1.0, 1.0])
     detector = chi2_detector(100.0, window=3)
-    _, (statistic, alarm) = jax.lax.scan(detector.step, detector.init(), jnp.asarray(nis))
+    _, decision = jax.lax.scan(detector.step, detector.init(), jnp.asarray(nis))
     bad = np.array([False, False, True, True, True, False, True, True, True, False])  # a bad value in the window
-    np.testing.assert_array_equal(np.asarray(alarm), bad)
-    assert np.all(np.asarray(statistic)[bad] == np.inf) and np.all(np.isfinite(np.asarray(statistic)[~bad]))
+    np.testing.assert_array_equal(np.asarray(decision.alarm), bad)
+    statistic = np.asarray(decision.statistic)
+    assert np.all(statistic[bad] == np.inf) and np.all(np.isfinite(statistic[~bad]))
     # moving_window_sum against brute force: +inf where the window holds a non-finite value
     windows = [nis[max(0, k - 2):k + 1] for k in range(len(nis))]
     brute = [np.inf if not np.all(np.isfinite(w)) else w.sum() for w in windows]

@@ -253,9 +253,9 @@ def test_window_sum_first_crossing_and_online_detector_equal_references():
         def body(state, value):
             return detector.step(state, value)
 
-        _, (statistic, alarm) = jax.lax.scan(body, detector.init(), jnp.asarray(x[:, 0]))
-        np.testing.assert_allclose(statistic, expected[:, 0], rtol=1e-12)
-        np.testing.assert_array_equal(alarm, expected[:, 0] > threshold)
+        _, decision = jax.lax.scan(body, detector.init(), jnp.asarray(x[:, 0]))
+        np.testing.assert_allclose(decision.statistic, expected[:, 0], rtol=1e-12)
+        np.testing.assert_array_equal(decision.alarm, expected[:, 0] > threshold)
 
 
 def test_nis_equals_explicit_inverse():

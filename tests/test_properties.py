@@ -138,13 +138,14 @@ def test_an_unknown_input_filter_that_loses_decoupling_keeps_its_prediction():
        window=st.integers(1, 5))
 def test_a_chi2_window_alarms_while_it_holds_a_bad_value_and_is_the_sum_otherwise(nis, window):
     detector = chi2_detector(1e9, window)
-    _, (statistic, alarm) = jax.lax.scan(detector.step, detector.init(), jnp.asarray(nis))
+    _, decision = jax.lax.scan(detector.step, detector.init(), jnp.asarray(nis))
     for k in range(nis.size):
         held = nis[max(0, k - window + 1):k + 1]
         if np.all(np.isfinite(held)):
-            assert not bool(alarm[k]) and float(statistic[k]) == pytest.approx(held.sum(), rel=1e-12, abs=1e-12)
+            assert not bool(decision.alarm[k])
+            assert float(decision.statistic[k]) == pytest.approx(held.sum(), rel=1e-12, abs=1e-12)
         else:
-            assert bool(alarm[k]) and float(statistic[k]) == np.inf
+            assert bool(decision.alarm[k]) and float(decision.statistic[k]) == np.inf
 
 
 @SETTINGS

@@ -124,7 +124,6 @@ __all__ += [
 # the GLRT's steady-state check and the Willsky-Jones correction
 from jaxfdi.detection.glrt import check_steady_state, steady_state_tolerance  # noqa: E402
 from jaxfdi.detection.glrt_correction import (  # noqa: E402
-    CorrectedGLRT,
     CorrectedGLRTInfo,
     CorrectedGLRTState,
     corrected_glrt,
@@ -135,7 +134,7 @@ from jaxfdi.detection.glrt_transient import (  # noqa: E402
     transient_glrt_detector,
 )
 
-__all__ += ["CorrectedGLRT", "CorrectedGLRTInfo", "CorrectedGLRTState", "check_steady_state", "corrected_glrt",
+__all__ += ["CorrectedGLRTInfo", "CorrectedGLRTState", "check_steady_state", "corrected_glrt",
             "steady_state_tolerance", "TransientGLRTState", "time_varying_signatures", "transient_glrt_detector"]
 
 # the known-change GLR / CUSUM bank (signature and size known), the limit's detector

@@ -8,7 +8,7 @@ statistic exceeds ``chi2_threshold(dof, pfa)``.
 """
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -197,10 +197,10 @@ class WindowState(NamedTuple):
 class Decision(NamedTuple):
     """One step's output of an online detector.
 
-    ``label`` is the isolated fault label (the simulator's mode label: 0 none, then
-    actuators, then sensors; -1 for a detector that does not isolate) and ``estimate``
-    the detector's estimate of the fault (e.g. a magnitude; NaN if it has none).
-    Detectors that only detect may return the plain pair ``(statistic, alarm)``.
+    Every ``Detector`` step returns one. ``label`` is the isolated fault label (the
+    simulator's mode label: 0 none, then actuators, then sensors; -1 for a detector that
+    does not isolate) and ``estimate`` the detector's estimate of the fault (e.g. a
+    magnitude; NaN if it has none).
 
     Attributes:
       statistic: () the detector's test statistic
@@ -232,27 +232,21 @@ def flag_dead(decision: Decision, dead: Array, labels: Array | None = None) -> D
                     jnp.where(any_dead, jnp.nan, decision.estimate).astype(statistic.dtype))
 
 
-def as_decision(output) -> Decision:
-    """A detector step's output as a ``Decision`` (a plain ``(statistic, alarm)`` pair gets
-    ``label = -1`` and ``estimate = NaN``)."""
-    if isinstance(output, Decision):
-        return output
-    statistic, alarm = output
-    return Decision(statistic, alarm, jnp.asarray(-1, jnp.int32), jnp.full((), jnp.nan, jnp.result_type(statistic)))
-
-
 class Detector(NamedTuple):
-    """Online detector: ``step(state, value) -> (state, Decision or (statistic, alarm))``."""
+    """Online detector: ``init() -> state``; ``step(state, value) -> (state, Decision)``,
+    one value (a NIS, an innovation, mode probabilities, ...) in, one ``Decision`` out
+    (a detector that does not isolate gives ``label = -1`` and ``estimate = NaN``)."""
 
-    init: Callable[[], WindowState]
-    step: Callable[[WindowState, Array], tuple[WindowState, tuple[Array, Array]]]
+    init: Callable[[], Any]
+    step: Callable[[Any, Any], tuple[Any, Decision]]
 
 
 def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
     """Windowed chi-square test on a stream of NIS values.
 
     ``statistic[k] = sum_{j=k-L+1..k} nis[j]`` (fewer terms during the first ``L - 1``
-    steps); alarm when ``statistic[k] > threshold``. Use
+    steps); alarm when ``statistic[k] > threshold``; ``step(state, nis) -> (state,
+    Decision)`` with label -1 and estimate NaN (the test does not isolate). Use
     ``chi2_threshold(window * m, pfa)`` for a design false-alarm rate ``pfa``. A
     non-finite NIS (a dead sensor: ``+inf`` from the filters) enters as ``+inf``: the
     alarm holds while it is in the window, and the test recovers when it leaves.
@@ -269,6 +263,8 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
         nis = jnp.asarray(nis)
         buffer = state.buffer.at[state.index].set(jnp.where(jnp.isnan(nis), jnp.inf, nis))
         statistic = jnp.sum(buffer)
-        return WindowState(buffer, (state.index + 1) % window), (statistic, statistic > threshold)
+        decision = Decision(statistic, statistic > threshold, jnp.asarray(-1, jnp.int32),
+                            jnp.full((), jnp.nan, statistic.dtype))
+        return WindowState(buffer, (state.index + 1) % window), decision
 
     return Detector(init, step)

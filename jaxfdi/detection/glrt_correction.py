@@ -23,7 +23,7 @@ innovations it would have produced. The steady-state assumption is ``glrt``'s.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -42,6 +42,7 @@ from jaxfdi.detection.glrt import (
 )
 from jaxfdi.detection.glrt_recursive import recursive_engine
 from jaxfdi.faults import sensor_labels
+from jaxfdi.filters._base import Filter
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 from jaxfdi.riccati import steady_state_kalman
 
@@ -88,17 +89,14 @@ class CorrectedGLRTInfo(NamedTuple):
     healthy: Array
 
 
-class CorrectedGLRT(NamedTuple):
-    """``init(mean, cov=None) -> state``; ``step(state, y, u) -> (state, CorrectedGLRTInfo)``."""
-
-    init: Callable[..., CorrectedGLRTState]
-    step: Callable[[CorrectedGLRTState, Array, Array], tuple[CorrectedGLRTState, CorrectedGLRTInfo]]
-
-
 def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation: str = "max",
                    actuator_feedthrough: bool = False, overlap_sensor: int = -1, confirm: int = 1,
-                   correct: bool = True, recursive: bool = False) -> CorrectedGLRT:
-    """Steady-state Kalman filter + windowed GLRT with the Willsky-Jones correction.
+                   correct: bool = True, recursive: bool = False) -> Filter:
+    """Steady-state Kalman filter + windowed GLRT with the Willsky-Jones correction, as a
+    ``Filter``: ``init(mean, cov=None) -> CorrectedGLRTState``; ``step(state, y, u) ->
+    (state, CorrectedGLRTInfo)``, the GLRT's ``Decision`` in ``info.decision``; so
+    ``run_filter`` drives it (one run or a batch), and in a ``loop.FDI`` its step is
+    ``lambda s, k, y, u: filt.step(s, y, u)`` (the state counts its own steps).
 
     The filter is ``kalman_filter(model)`` at its steady state (gain ``K``, ``P = P_ss``)
     with the faults found so far accommodated: ``eps_k = y_k - C m_k - D u_k - H b``,
@@ -172,4 +170,4 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
                                  jnp.where(dead, jnp.nan, innovation), mean, fault, jnp.all(jnp.isfinite(mean)))
         return CorrectedGLRTState(mean, fault, detector, state.step + 1, alarm_run), info
 
-    return CorrectedGLRT(init, step)
+    return Filter(init, step)

@@ -52,9 +52,10 @@ def check_confirm_steps(confirm_steps) -> None:
 def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) -> Detector:
     """Online detector on mode probabilities ``mu`` (M,).
 
-    ``step(state, mu)`` or ``step(state, (mu, estimates))`` with ``estimates`` (M,) a
-    per-mode fault estimate (e.g. the bias each mode estimates); the decision's
-    ``estimate`` is that of the isolated mode.
+    ``step(state, mu)`` or ``step(state, (mu, estimates))`` ``-> (state, Decision)``, with
+    ``estimates`` (M,) a per-mode fault estimate (e.g. the bias each mode estimates); the
+    decision's label is the top fault mode and its ``estimate`` that mode's (NaN without
+    ``estimates``).
 
     Args:
       threshold: ``mu_T`` in (0, 1] (Han et al. 2022 use 0.5), or (M,) one per mode: the top

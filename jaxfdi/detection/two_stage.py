@@ -119,13 +119,13 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         fdp = dual_info.detection_parameter
         fdp_alarm = fdp > detection_threshold
         nis_filter_state, nis_info = nis_filter.step(c["nis_filter"], y, u)
-        nis_state, (nis_stat, nis_alarm) = nis_test.step(c["nis"], nis_info.nis)
+        nis_state, nis_decision = nis_test.step(c["nis"], nis_info.nis)
 
         # stage 2: the banks, slaved to the nominal filter until the engaging alarm
         bank, bank_info = jax.vmap(lambda p, s: bank_dual(p).step(s, y, u))(hypotheses, c["bank"])
         mm_state, mm_info = mm.step(c["mm"], y, u)
         engaged_before = c["engaged"]
-        engaged = engaged_before | (nis_alarm if engage_on == "nis" else fdp_alarm)
+        engaged = engaged_before | (nis_decision.alarm if engage_on == "nis" else fdp_alarm)
         post = GaussianState(dual_info.estimator.filtered_mean, dual_info.estimator.filtered_cov)
         reset_bank, reset_mm = slaved(post, u)
         keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged, a, b), new, old)  # noqa: E731
@@ -141,7 +141,7 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         dead = jnp.isnan  # the filters' dead report: NaN innovation on a dead component
         decisions = (
             flag_dead(Decision(fdp, fdp_alarm, no_label, nan), dead(dual_info.estimator.innovation), labels),
-            flag_dead(Decision(nis_stat, nis_alarm, no_label, nan), dead(nis_info.innovation), labels),
+            flag_dead(nis_decision._replace(estimate=nan), dead(nis_info.innovation), labels),
             flag_dead(Decision(credit_out.statistic, engaged_before & credit_out.alarm, credit_out.label, nan),
                       jnp.any(dead(bank_info.estimator.innovation), axis=0), labels),
             flag_dead(Decision(mode_out.statistic, engaged_before & mode_out.alarm, mode_out.label, nan),
@@ -150,7 +150,7 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         healthy = dual_info.healthy & nis_info.healthy & jnp.all(bank_info.healthy) & mm_info.healthy
         new = dict(dual=dual, nis_filter=nis_filter_state, nis=nis_state, bank=bank, mm=mm_state, engaged=engaged,
                    credit=credit_state, mode=mode_state)
-        return new, TwoStageOutput(decisions, jnp.stack([fdp, nis_stat]), healthy, bank_info.detection_parameter,
-                                   mm_info.mode_prob, engaged_before)
+        return new, TwoStageOutput(decisions, jnp.stack([fdp, nis_decision.statistic]), healthy,
+                                   bank_info.detection_parameter, mm_info.mode_prob, engaged_before)
 
     return TwoStage(init, step)

@@ -160,13 +160,13 @@ def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, he
     ``samples`` (n, 6), then the three tests."""
     health_state, verdicts = jax.lax.scan(health.step, state.health, samples)
     ins, info = ins_filter.step(state.ins, fix, samples)
-    window, (statistic, alarm) = chi2.step(state.chi2, info.nis)
+    window, decision = chi2.step(state.chi2, info.nis)
     window = WindowState(jnp.where(info.used, window.buffer, state.chi2.buffer),
                          jnp.where(info.used, window.index, state.chi2.index))
     held = jnp.sum(state.chi2.buffer)
     dtype = state.ins.cov.dtype
-    chi2_decision = Decision(jnp.where(info.used, statistic, held), info.used & alarm, jnp.asarray(-1, jnp.int32),
-                             jnp.full((), jnp.nan, dtype))
+    chi2_decision = Decision(jnp.where(info.used, decision.statistic, held), info.used & decision.alarm,
+                             jnp.asarray(-1, jnp.int32), jnp.full((), jnp.nan, dtype))
     scst_state, scst_out = scst.step(state.scst, info.correction, info.filtered_cov, info.transition,
                                      info.process_cov)
     healthy = info.healthy & jnp.isfinite(chi2_decision.statistic) & jnp.isfinite(scst_out.decision.statistic)

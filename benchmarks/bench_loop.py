@@ -67,8 +67,8 @@ def worker(workload: str, runs: int, repeats: int, out: str) -> None:
         def one(key):
             return run_monitor(method, model, us, key, f).record
     else:
-        from jaxfdi.control.closed_loop import run_closed_loop
         from jaxfdi.scenarios.vtol import vtol_design
+        from jaxfdi.scenarios.vtol_loop import run_closed_loop
 
         design = vtol_design()
         f = jaxfdi.fault("effectiveness", "actuator", 1, 100, 0.5)

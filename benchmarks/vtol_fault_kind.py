@@ -37,9 +37,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxfdi
-from jaxfdi.control.closed_loop import is_multiplicative, run_closed_loop
 from jaxfdi.faults import stack_faults
 from jaxfdi.scenarios import vtol as sv
+from jaxfdi.scenarios.vtol_loop import is_multiplicative, run_closed_loop
 
 WINDOWS = (4, 20, 60)
 

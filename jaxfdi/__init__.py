@@ -14,7 +14,9 @@ from jaxfdi.filters import (
 from jaxfdi.filters import init_from_posterior
 from jaxfdi.models import LinearGaussianModel, c2d, linear_gaussian_model
 
-__version__ = "0.1.0"
+from jaxfdi import _version
+
+__version__ = _version.__version__
 
 
 def enable_x64(enable: bool = True) -> None:

@@ -44,6 +44,8 @@ import threading
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
+from jaxfdi._version import __version__
+
 #: prefix of a study's temporary folder inside its output folder
 TEMP_PREFIX = ".jaxfdi-tmp-"
 #: signals held back while files are published or a temporary folder is removed
@@ -125,12 +127,10 @@ def provenance(seed: int | None = None) -> dict:
     import jaxlib
     import numpy
 
-    import jaxfdi
-
     active = _RECORDING or {"argv": list(sys.argv), "seed": None}
     devices = jax.local_devices()
     return {
-        "jaxfdi": jaxfdi.__version__,
+        "jaxfdi": __version__,
         "jax": jax.__version__,
         "jaxlib": getattr(jaxlib, "__version__", None) or jaxlib.version.__version__,
         "numpy": numpy.__version__,

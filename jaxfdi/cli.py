@@ -28,8 +28,22 @@ from typing import Callable, Iterator, NamedTuple, Sequence
 
 import numpy as np
 
-from jaxfdi import _io
+import jaxfdi
+from jaxfdi import _io, distributed, progress
 from jaxfdi._checks import MAX_SEED  # seeds: see its comment
+from jaxfdi.scenarios import engine_chi2_tuning as ct
+from jaxfdi.scenarios import engine_tuning as et
+from jaxfdi.scenarios.engine import engine_method_names, engine_study, plot_engine
+from jaxfdi.scenarios.engine_chi2 import engine_chi2_study, plot_engine_chi2
+from jaxfdi.scenarios.f16_fdi import f16_fdi_study, plot_f16_fdi
+from jaxfdi.scenarios.f16_flight import f16_flight_study, plot_f16_flight
+from jaxfdi.scenarios.gnss_campus import gnss_campus_study, plot_gnss_campus
+from jaxfdi.scenarios.gps_ins import gps_ins_study, plot_gps_ins
+from jaxfdi.scenarios.reaction_wheels import METHODS as WHEEL_METHODS
+from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_examples, wheel_study
+from jaxfdi.scenarios.vtol import METHODS as VTOL_METHODS
+from jaxfdi.scenarios.vtol import plot_vtol, vtol_design, vtol_examples, vtol_study
+from jaxfdi.tuning import constrain, save_params, unconstrain
 
 #: the CLI's messages (jaxfdi.progress.configure_logging sends them to stderr; --quiet drops INFO)
 logger = logging.getLogger("jaxfdi")
@@ -60,7 +74,7 @@ class Runner(NamedTuple):
     line that names them under ``--out`` (printed once they are in place). ``options``:
     the scenario-specific options it reads (dest names of ``RUN_SPECIFIC`` or
     ``TUNE_SPECIFIC``; the others are refused). ``methods``: the valid ``--methods``
-    names (imported lazily; ``None``: one method, no ``--methods``). ``check(args)``:
+    names (``None``: one method, no ``--methods``). ``check(args)``:
     further checks that need the scenario's module, raising ``UsageError`` (``expected``)."""
     run: Callable[[argparse.Namespace, Path], str]
     help: str
@@ -116,8 +130,6 @@ def _write_study(study, args: argparse.Namespace, folder: Path, name: str, plot:
 
 
 def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios.engine_chi2 import engine_chi2_study, plot_engine_chi2
-
     start = time.perf_counter()
     result = engine_chi2_study(
         runs=args.runs, seed=args.seed, window=args.window, pfa=args.pfa, progress=not args.quiet,
@@ -156,26 +168,18 @@ def _methods_option(args: argparse.Namespace) -> dict:
 
 
 def _engine_method_names() -> list[str]:
-    from jaxfdi.scenarios.engine import engine_method_names
-
     return engine_method_names()
 
 
 def _vtol_method_names() -> list[str]:
-    from jaxfdi.scenarios.vtol import METHODS
-
-    return list(METHODS)
+    return list(VTOL_METHODS)
 
 
 def _wheel_method_names() -> list[str]:
-    from jaxfdi.scenarios.reaction_wheels import METHODS
-
-    return list(METHODS)
+    return list(WHEEL_METHODS)
 
 
 def _run_engine(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios.engine import engine_study, plot_engine
-
     start = time.perf_counter()
     study = engine_study(runs=args.runs, seed=args.seed, progress=not args.quiet,
                          **_methods_option(args))
@@ -192,15 +196,11 @@ def _run_engine(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _engine_imm_designs(args: argparse.Namespace) -> list[str]:
-    from jaxfdi.scenarios import engine_tuning as et
-
     return sorted(et.DESIGNS) if args.design == "all" else [args.design]
 
 
 def _check_engine_imm(args: argparse.Namespace) -> None:
     """``--freeze``: parameter names of every chosen design, leaving one to train."""
-    from jaxfdi.scenarios import engine_tuning as et
-
     frozen = tuple(name.strip() for name in args.freeze.split(",") if name.strip())
     for name in _engine_imm_designs(args):
         params = sorted(et.imm_design(name).parameterization)
@@ -214,9 +214,6 @@ def _check_engine_imm(args: argparse.Namespace) -> None:
 
 
 def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios import engine_tuning as et
-    from jaxfdi.tuning import constrain, save_params, unconstrain
-
     test_seed = args.seed + 1000
     frozen = args.freeze
     report, paths = {}, []
@@ -271,9 +268,6 @@ def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _tune_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios import engine_chi2_tuning as ct
-    from jaxfdi.tuning import constrain, save_params
-
     start = time.perf_counter()
     windows = args.windows
     weights = ct.Chi2Weights(false_alarm=args.false_alarm_weight, delay=args.delay_weight)
@@ -304,8 +298,6 @@ def _tune_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios.vtol import plot_vtol, vtol_design, vtol_examples, vtol_study
-
     start = time.perf_counter()
     design = vtol_design()
     study = vtol_study(runs=args.runs, seed=args.seed, design=design, progress=not args.quiet, **_methods_option(args))
@@ -332,8 +324,6 @@ def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_examples, wheel_study
-
     start = time.perf_counter()
     study = wheel_study(runs=args.runs, seed=args.seed, calibration_runs=max(20, 2 * args.runs),
                         estimator=args.estimator, engage_on=args.engage_on, progress=not args.quiet,
@@ -363,8 +353,6 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _run_f16_flight(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios.f16_flight import f16_flight_study, plot_f16_flight
-
     start = time.perf_counter()
     study = f16_flight_study(flights=args.runs, seed=args.seed, progress=not args.quiet)
     elapsed = time.perf_counter() - start
@@ -378,8 +366,6 @@ def _run_f16_flight(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _run_f16(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios.f16_fdi import f16_fdi_study, plot_f16_fdi
-
     start = time.perf_counter()
     study = f16_fdi_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
     elapsed = time.perf_counter() - start
@@ -392,8 +378,6 @@ def _run_f16(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _run_gnss_campus(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios.gnss_campus import gnss_campus_study, plot_gnss_campus
-
     start = time.perf_counter()
     study = gnss_campus_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
     elapsed = time.perf_counter() - start
@@ -407,8 +391,6 @@ def _run_gnss_campus(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _run_gps_ins(args: argparse.Namespace, folder: Path) -> str:
-    from jaxfdi.scenarios.gps_ins import gps_ins_study, plot_gps_ins
-
     start = time.perf_counter()
     study = gps_ins_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
     elapsed = time.perf_counter() - start
@@ -732,13 +714,10 @@ def main(argv: list[str] | None = None) -> int:
         processes = _process_options(args) if kind == "run" else None
     except UsageError as e:
         return _fail(str(e), 2)
-    import jaxfdi
-    from jaxfdi import progress as _progress
-
     jaxfdi.enable_x64()
     jaxfdi.enable_compilation_cache()
     _select_agg_backend()
-    _progress.configure_logging(quiet=args.quiet)
+    progress.configure_logging(quiet=args.quiet)
     scratch = _join_processes(args, processes)
     try:
         with _signals_raise(), _io.recording(argv, args.seed):
@@ -776,8 +755,6 @@ def main(argv: list[str] | None = None) -> int:
 def _process_options(args: argparse.Namespace) -> tuple:
     """``--num-processes/--process-id/--coordinator`` (or the environment), checked
     (pure Python); ``(None, None, None)`` for one process."""
-    from jaxfdi import distributed
-
     try:
         return distributed.resolve_options(args.num_processes, args.process_id, args.coordinator)
     except ValueError as e:
@@ -790,8 +767,6 @@ def _join_processes(args: argparse.Namespace, processes) -> str | None:
     ``--out``: every process has the whole gathered study). Returns that folder."""
     if processes is None or processes[0] is None or processes[0] <= 1:
         return None
-    from jaxfdi import distributed
-
     distributed.initialize(*processes)
     if processes[1] == 0:
         return None

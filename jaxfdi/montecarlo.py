@@ -43,6 +43,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from jaxfdi import _checks
+from jaxfdi.distributed import allgather
 from jaxfdi.progress import progress_bar, status
 
 ProgressFn = Callable[[int, int, float], None]
@@ -251,8 +252,6 @@ def monte_carlo(
         total = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf.addressable_data(0)), total)
     if reduce is not None:
         if multiprocess:
-            from jaxfdi.distributed import allgather
-
             state = reduce.merge(allgather(state))
         return state
     if multiprocess:
@@ -388,8 +387,6 @@ def _to_host(array: jax.Array) -> np.ndarray:
 
 def _gather_runs(outputs: list, num_runs: int) -> Any:
     """One all-gather of every process's rows of every chunk, put back in run order."""
-    from jaxfdi.distributed import allgather
-
     local = jax.tree_util.tree_map(lambda *parts: np.stack(parts), *outputs)   # (chunks, local rows, ...)
     everyone = allgather(local)                                                 # [process](chunks, rows, ...)
 

@@ -9,9 +9,12 @@ the Agg backend itself before its scenarios draw their figures.
 """
 from __future__ import annotations
 
+import textwrap
 from typing import Mapping, Sequence
 
 import numpy as np
+
+from jaxfdi import _io
 
 __all__ = [
     "new_axes",
@@ -236,10 +239,6 @@ def save_figure(fig, path, caption: str, dpi: int = 110):
     under it: what the figure shows, and where it differs from the paper's figure. The
     caption is wrapped to the figure's width and the layout (tight or constrained) makes
     room for it. Returns the path written."""
-    import textwrap
-
-    from jaxfdi import _io
-
     if not isinstance(caption, str) or not caption.strip():
         raise ValueError(f"caption: expected a sentence saying what the figure shows, got {caption!r}")
     width, height = fig.get_size_inches()

@@ -16,6 +16,8 @@ from typing import Any, Callable, NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi.loop import Plant
+
 
 class TrackingScore(NamedTuple):
     """A scorer's carry: tracking errors accumulated over the scored steps.
@@ -49,7 +51,7 @@ def tracking_update(score: TrackingScore, error: Array, active: Array) -> Tracki
 
 
 def tracked_plant(plant, error: Callable[[Array, Any], Array], size: int,
-                  active: Callable[[Array], Array] | None = None, dtype=None):
+                  active: Callable[[Array], Array] | None = None, dtype=None) -> Plant:
     """``plant`` (a ``loop.Plant``) whose state is ``(state, TrackingScore)``.
 
     Args:
@@ -59,8 +61,6 @@ def tracked_plant(plant, error: Callable[[Array, Any], Array], size: int,
       active: ``k -> (size,) bool`` steps scored per component (default: all).
       dtype: dtype of the score (default JAX's default float).
     """
-    from jaxfdi.loop import Plant
-
     if int(size) < 1:
         raise ValueError(f"size: expected a positive number of error components, got {size}")
 

@@ -144,7 +144,8 @@ def test_plant_noise_and_faults(flight):
     rate sensor 1 (seed 000's fault) appears in ``y`` from its onset on, and a stuck
     elevator takes the value commanded at its onset (``faults`` holds it afterwards)."""
     from jaxfdi.faults import concat_faults, fault, fault_group
-    from jaxfdi.models.f16.plant import RATE_OFFSET, f16_plant, measurement_cov
+    from jaxfdi.control.f16_loop import f16_plant
+    from jaxfdi.models.f16.plant import RATE_OFFSET, measurement_cov
 
     setup = flight[0]
     bias = fault_group("bias", "sensor", (RATE_OFFSET, RATE_OFFSET + 1), 300, (0.1, 0.1))

@@ -452,18 +452,18 @@ CASES = {
     "lateral_modes complex": (lambda: _f16lin().lateral_modes(jnp.eye(4) * (1 + 1j)), T_, "A_lat"),
     "f16_sensors negative sigma": (lambda: _f16plant().f16_sensors(rate_sigma=-0.01), V, "rate_sigma"),
     "f16_sensors NaN sigma": (lambda: _f16plant().f16_sensors(altitude_sigma=float("nan")), V, "altitude_sigma"),
-    "f16_plant dt zero": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(), dt=0.0), V, "dt"),
-    "f16_plant substeps float": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(), substeps=2.5), T_,
+    "f16_plant dt zero": (lambda: _f16loop().f16_plant(_f16p(), _f16plant().f16_sensors(), dt=0.0), V, "dt"),
+    "f16_plant substeps float": (lambda: _f16loop().f16_plant(_f16p(), _f16plant().f16_sensors(), substeps=2.5), T_,
                                  "substeps"),
-    "f16_plant gust_sigma negative": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(),
+    "f16_plant gust_sigma negative": (lambda: _f16loop().f16_plant(_f16p(), _f16plant().f16_sensors(),
                                                                     gust_sigma=-3.0), V, "gust_sigma"),
-    "f16_plant gust_length negative": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(),
+    "f16_plant gust_length negative": (lambda: _f16loop().f16_plant(_f16p(), _f16plant().f16_sensors(),
                                                                      gust_length=-1750.0), V, "gust_length"),
-    "f16_plant fault on y[20]": (lambda: _f16plant().f16_plant(_f16p(), _f16plant().f16_sensors(),
+    "f16_plant fault on y[20]": (lambda: _f16loop().f16_plant(_f16p(), _f16plant().f16_sensors(),
                                                                fault=fault(component=20, onset=0)), V, "fault"),
     "rate_model_input y (5,)": (lambda: _f16rates().rate_model_input(jnp.zeros(5), jnp.zeros(4)), V, "y"),
     "rate_model_input u (3,)": (lambda: _f16rates().rate_model_input(jnp.zeros(14), jnp.zeros(3)), V, "u"),
-    "rate_passthrough_fdi axes (6, 2)": (lambda: _f16plant().rate_passthrough_fdi(jnp.eye(6)[:, :2]), V, "rate_axes"),
+    "rate_passthrough_fdi axes (6, 2)": (lambda: _f16loop().rate_passthrough_fdi(jnp.eye(6)[:, :2]), V, "rate_axes"),
     "lookup1 table shorter than its grid": (lambda: _f16tables().lookup1(3.5, jnp.arange(5.0), jnp.arange(3.0)), V,
                                             "values"),
     "lookup2 table rows != row grid": (lambda: _f16tables().lookup2(1.0, jnp.arange(5.0), 1.0, jnp.arange(5.0),
@@ -649,6 +649,11 @@ def _f16lin():
 def _f16plant():
     from jaxfdi.models.f16 import plant
     return plant
+
+
+def _f16loop():
+    from jaxfdi.control import f16_loop
+    return f16_loop
 
 
 def _f16rates():

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi.control.closed_loop import run_closed_loop
 from jaxfdi.control.eigenstructure import assign_eigenstructure, scheduled_gain
 from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.faults import fault_label, no_fault
@@ -27,6 +26,7 @@ from jaxfdi.scenarios.vtol import (
     vtol_run,
     vtol_study,
 )
+from jaxfdi.scenarios.vtol_loop import run_closed_loop
 
 RUNS = 20
 CALIBRATION_RUNS = 40

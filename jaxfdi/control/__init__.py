@@ -1,7 +1,8 @@
 """Control: discrete LQR with integral action, eigenstructure assignment of a
-reconfigured gain for a faulty actuator, and the closed loop that switches to it when
-the FDD isolates a fault (Lee & Lyou, Section IV); reaction-wheel attitude control (Choi & Park 2009);
-F-16 stability augmentation with altitude and bank-angle hold (Park et al. 2004)."""
+reconfigured gain for a faulty actuator, and the PI controller that switches to it when
+the FDD isolates a fault (Lee & Lyou, Section IV); reaction-wheel attitude control and
+the spacecraft as a loop plant (Choi & Park 2009); F-16 stability augmentation with
+altitude and bank-angle hold, and the sampled F-16 as loop stages (Park et al. 2004)."""
 from jaxfdi.control.attitude import (
     AttitudeGains,
     Slew,
@@ -11,7 +12,7 @@ from jaxfdi.control.attitude import (
     slew,
     slew_reference,
 )
-from jaxfdi.control.closed_loop import LoopDesign, LoopStep, run_closed_loop
+from jaxfdi.control.closed_loop import Reconfiguration, reconfigurable_pi
 from jaxfdi.control.eigenstructure import (
     EigenstructureResult,
     GainSchedule,
@@ -20,6 +21,7 @@ from jaxfdi.control.eigenstructure import (
     effectiveness_input,
     scheduled_gain,
 )
+from jaxfdi.control.f16_loop import f16_plant, rate_passthrough_fdi
 from jaxfdi.control.flight import (
     FlightDesign,
     FlightGains,
@@ -48,8 +50,7 @@ __all__ = [
     "slew_reference",
     "EigenstructureResult",
     "GainSchedule",
-    "LoopDesign",
-    "LoopStep",
+    "Reconfiguration",
     "PIDesign",
     "assign_eigenstructure",
     "effectiveness_gain_schedule",
@@ -57,7 +58,7 @@ __all__ = [
     "integral_augmentation",
     "lqr_gain",
     "lqr_pi",
-    "run_closed_loop",
+    "reconfigurable_pi",
     "scheduled_gain",
     "FlightDesign",
     "FlightGains",
@@ -73,4 +74,6 @@ __all__ = [
     "flight_reference",
     "initial_condition",
     "plan_trims",
+    "f16_plant",
+    "rate_passthrough_fdi",
 ]

@@ -16,16 +16,32 @@ the rate error ``dw = w - R(dq)^T w_ref``,
 (``tau`` the motor torques), so ``tau = -H (H^T H)^-1 T_c``, the minimum-norm
 allocation (pseudo-inverse of ``H^T``), scaled down as a whole if any wheel would exceed
 ``max_wheel_torque`` (the direction of the torque is kept).
+
+The loop's parts (``jaxfdi.loop``): ``wheel_attitude_controller`` (the law above) and
+``wheel_plant``, the truth of ``models.reaction_wheels`` with gyro noise, wheel torque
+noise, an external disturbance torque and a wheel or gyro fault.
 """
 from __future__ import annotations
 
 import math
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi.faults import Target, apply_fault
+from jaxfdi.loop import Controller, Plant
+from jaxfdi.models.reaction_wheels import (
+    AttitudeReading,
+    SpacecraftParams,
+    WheelCommand,
+    delivered_torque,
+    spacecraft_step,
+    stop_transfer,
+    wheel_momentum,
+)
 from jaxfdi.models.rotation import quaternion_conjugate, quaternion_multiply, rotate
 
 
@@ -121,14 +137,13 @@ def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: A
     return tau * jnp.minimum(1.0, max_wheel_torque / jnp.maximum(peak, 1e-30))
 
 
-def wheel_attitude_controller(params, gains: AttitudeGains, profile: Slew, initial_speeds: Array):
+def wheel_attitude_controller(params: SpacecraftParams, gains: AttitudeGains, profile: Slew,
+                              initial_speeds: Array) -> Controller:
     """The attitude loop as a ``loop.Controller``: quaternion PD with gyroscopic
     feed-forward on the sensed ``AttitudeReading`` (``control_torque``), minimum-norm
     allocation to the wheels (``allocate_wheel_torques``); its state is the commanded
     wheel speeds, which the flight software integrates from the torques it commands,
     ``Omega_cmd[k+1] = Omega_cmd[k] + dt tau[k] / I_w``. Returns a ``WheelCommand``."""
-    from jaxfdi.loop import Controller
-    from jaxfdi.models.reaction_wheels import WheelCommand, wheel_momentum
 
     def step(commanded: Array, k: Array, reading, exogenous):
         t = k * params.dt
@@ -138,3 +153,60 @@ def wheel_attitude_controller(params, gains: AttitudeGains, profile: Slew, initi
         return commanded + params.dt * tau / params.wheel_inertia, WheelCommand(commanded, tau)
 
     return Controller(lambda: jnp.asarray(initial_speeds), step)
+
+
+# --- the truth as a closed-loop plant ----------------------------------------------
+
+class WheelSensed(NamedTuple):
+    """The spacecraft plant's output at step ``k``: the truth and the sensors' reading.
+
+    Attributes:
+      state: (7 + N,) true [q, w, Omega] at step k
+      measurement: the attitude and the gyros' rates
+    """
+
+    state: Array
+    measurement: AttitudeReading
+
+
+def wheel_plant(params: SpacecraftParams, fault, gyro_sigma: Array, disturbance_sigma: Array,
+                wheel_noise_sigma: Array) -> Plant:
+    """The spacecraft truth as a ``loop.Plant`` under a ``fault`` (scalar leaves): a wheel
+    fault (``Target.ACTUATOR``, component = wheel) or a gyro fault (``Target.SENSOR``,
+    component = body axis: ``faults.apply_fault`` on the reading, e.g. DEAD = NaN, STUCK =
+    the onset's reading held to the last bit).
+
+    ``measure``: ``AttitudeReading(q, w + v)``, ``v ~ N(0, gyro_sigma^2 I)``, then the gyro
+    fault; ``advance`` with a ``WheelCommand``: the wheels deliver ``delivered_torque`` plus
+    white torque noise (``wheel_noise_sigma``), a stop moves its wheel's momentum to the
+    body (``stop_transfer``), and the truth moves one RK4 step with a white external
+    torque (``disturbance_sigma``). Step ``k``'s draws come from its key ``fold_in(key, k)``.
+    The plant's state is ``(x, held)``: the truth ``[q, w, Omega]`` and the value a STUCK
+    gyro holds.
+    """
+    dtype = params.inertia.dtype
+    N = params.wheel_axes.shape[0]
+
+    def keys(step_key):
+        return jax.random.split(step_key, 3)  # gyro, disturbance, wheel torque
+
+    def init(x0: Array):
+        _checks.check_shape("x0", x0, (7 + N,), "[q (4), w (3), Omega (N)]")
+        return jnp.asarray(x0), jnp.zeros((), dtype)
+
+    def measure(plant, k: Array, command: WheelCommand, step_key: Array):
+        state, held = plant
+        k_gyro, _, _ = keys(step_key)
+        rate = state[4:7] + gyro_sigma * jax.random.normal(k_gyro, (3,), dtype)
+        rate, held = apply_fault(fault, k, rate, Target.SENSOR, held)
+        return (state, held), WheelSensed(state, AttitudeReading(state[:4], rate))
+
+    def advance(plant, k: Array, command: WheelCommand, step_key: Array):
+        state, held = plant
+        _, k_dist, k_wheel = keys(step_key)
+        delivered = delivered_torque(fault, k, command.torque) + wheel_noise_sigma * jax.random.normal(k_wheel, (N,), dtype)
+        disturbance = disturbance_sigma * jax.random.normal(k_dist, (3,), dtype)
+        state = spacecraft_step(stop_transfer(state, fault, k, params), delivered, disturbance, params)
+        return (state, held), delivered
+
+    return Plant(init, measure, advance)

@@ -49,6 +49,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.control.lqr import lqr_pi
+from jaxfdi.loop import Controller
 from jaxfdi.models.f16.dynamics import AIL, ALPHA, EL, H, P, PHI, Q, RDR, THETA, THTL, F16Params
 from jaxfdi.models.f16.linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, LinearF16, submodel
 from jaxfdi.models.f16.plant import FlightView
@@ -350,12 +351,10 @@ def measured_state(view: FlightView) -> tuple[Array, Array]:
     return jnp.stack([vt, alpha, theta, q, view.altitude, view.power]), jnp.stack([beta, phi, p, r])
 
 
-def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array):
+def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array) -> Controller:
     """The SAS and autopilot as a ``loop.Controller`` on a ``FlightView``; the exogenous
     input of step ``k`` is ``(x_ref[k], u_ref[k])`` (a ``FlightReference`` row).
     ``lower``/``upper`` (4,): control limits (the aircraft's)."""
-    from jaxfdi.loop import Controller
-
     _checks.check_positive("dt", dt, "a positive sample period (s)")
     _checks.check_shape("gains.longitudinal", gains.longitudinal, (2, 8), "u_lon = -K [dx_lon (6); z_lon (2)]")
     _checks.check_shape("gains.lateral", gains.lateral, (2, 5), "u_lat = -K [dx_lat (4); z_lat (1)]")

@@ -42,7 +42,7 @@ from jaxfdi.filters._base import (
     report_dead,
     used_innovation,
 )
-from jaxfdi.models.linear import LinearGaussianModel
+from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 tr = _linalg.soa_transpose
 
@@ -243,7 +243,6 @@ def _check_batched_model(model: Any, num_runs: int) -> tuple[LinearGaussianModel
                              f"got shape {shape}")
     first = LinearGaussianModel(*(jnp.asarray(leaf)[0] if batched else jnp.asarray(leaf)
                                   for leaf, batched in zip(model, per_run)))
-    from jaxfdi.models.linear import validate_linear_model
     validate_linear_model(first)
     for name, leaf, batched, ref in zip(model._fields, model, per_run, first):
         if batched and _checks.shape_of(leaf)[1:] != _checks.shape_of(ref):

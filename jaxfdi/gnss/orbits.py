@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from jaxfdi import _checks
 from jaxfdi.gnss.rinex import SECONDS_PER_WEEK, Ephemerides
 from jaxfdi.gnss.yuma import Almanac
 
@@ -251,8 +252,6 @@ def transmission_geometry(orbit: Orbit, t_receive: Array, receiver_ecef: Array,
     contracting by ~1e-5 a step: picometres after 3) and (S,) satellite clocks [s] at
     transmission (``satellite_clock``, L1).
     """
-    from jaxfdi import _checks
-
     _checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
     receiver_ecef = jnp.asarray(receiver_ecef)
     tau = jnp.full(orbit.toe.shape, 0.075, jnp.result_type(receiver_ecef, orbit.toe))

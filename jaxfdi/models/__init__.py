@@ -2,7 +2,7 @@
 ``f(x, u, params)`` / ``h(x, u, params)`` with a params pytree."""
 from jaxfdi.models import f16
 from jaxfdi.models.engine import engine_model
-from jaxfdi.models.f16 import F16Params, f16_dynamics, f16_params, f16_plant, f16_sensors
+from jaxfdi.models.f16 import F16Params, f16_dynamics, f16_params, f16_sensors
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.models.linear import (
     LinearGaussianModel,
@@ -43,7 +43,6 @@ __all__ = [
     "F16Params",
     "f16_dynamics",
     "f16_params",
-    "f16_plant",
     "f16_sensors",
     "noise_inflation_modes",
     "bias_modes",

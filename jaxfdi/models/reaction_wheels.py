@@ -36,6 +36,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi.faults import FaultKind, Target, apply_fault, is_active
 from jaxfdi.models.integrate import rk4
 from jaxfdi.models.rotation import quaternion_multiply, rotate, skew
 
@@ -179,7 +180,7 @@ def total_momentum(state: Array, params: SpacecraftParams) -> Array:
     return rotate(q, params.inertia @ w + wheel_momentum(speeds, params))
 
 
-# --- the truth as a closed-loop plant (jaxfdi.loop) ----------------------------------
+# --- sensors, commands and faults of the truth (its loop.Plant: control.attitude.wheel_plant) ---
 
 class AttitudeReading(NamedTuple):
     """What the attitude sensors give at step ``k``: the attitude (taken as exact) and the
@@ -192,18 +193,6 @@ class AttitudeReading(NamedTuple):
 
     quaternion: Array
     rate: Array
-
-
-class WheelSensed(NamedTuple):
-    """The spacecraft plant's output at step ``k``: the truth and the sensors' reading.
-
-    Attributes:
-      state: (7 + N,) true [q, w, Omega] at step k
-      measurement: the attitude and the gyros' rates
-    """
-
-    state: Array
-    measurement: AttitudeReading
 
 
 class WheelCommand(NamedTuple):
@@ -228,8 +217,6 @@ def delivered_torque(f, k: Array, command: Array) -> Array:
     """The motor torques the wheels deliver under fault ``f`` (scalar leaves): the
     fault acts on the command (bias, gain loss), and a STOP or STUCK wheel delivers none
     (a sensor fault, e.g. a stuck gyro, leaves the wheels alone)."""
-    from jaxfdi.faults import FaultKind, Target, apply_fault, is_active
-
     faulty, _ = apply_fault(f, k, command, Target.ACTUATOR, jnp.zeros((), command.dtype))
     no_torque = (is_active(f, k) & (f.target == Target.ACTUATOR)
                  & ((f.kind == FaultKind.STOP) | (f.kind == FaultKind.STUCK)))
@@ -239,57 +226,9 @@ def delivered_torque(f, k: Array, command: Array) -> Array:
 
 def stop_transfer(state: Array, f, k: Array, params: SpacecraftParams) -> Array:
     """At a stop's onset: the wheel's speed -> 0 and its momentum to the body rates."""
-    from jaxfdi.faults import FaultKind, Target
-
     speeds = state[7:]
     stopped = (f.kind == FaultKind.STOP) & (f.target == Target.ACTUATOR) & (k == f.onset)
     new_speeds = jnp.where(stopped & jax.nn.one_hot(f.component, speeds.shape[0], dtype=bool), 0.0, speeds)
     body_momentum = params.inertia @ state[4:7] + wheel_momentum(speeds, params)
     w = jnp.linalg.solve(params.inertia, body_momentum - wheel_momentum(new_speeds, params))
     return jnp.where(stopped, jnp.concatenate([state[:4], w, new_speeds]), state)
-
-
-def wheel_plant(params: SpacecraftParams, fault, gyro_sigma: Array, disturbance_sigma: Array,
-                wheel_noise_sigma: Array):
-    """The spacecraft truth as a ``loop.Plant`` under a ``fault`` (scalar leaves): a wheel
-    fault (``Target.ACTUATOR``, component = wheel) or a gyro fault (``Target.SENSOR``,
-    component = body axis: ``faults.apply_fault`` on the reading, e.g. DEAD = NaN, STUCK =
-    the onset's reading held to the last bit).
-
-    ``measure``: ``AttitudeReading(q, w + v)``, ``v ~ N(0, gyro_sigma^2 I)``, then the gyro
-    fault; ``advance`` with a ``WheelCommand``: the wheels deliver ``delivered_torque`` plus
-    white torque noise (``wheel_noise_sigma``), a stop moves its wheel's momentum to the
-    body (``stop_transfer``), and the truth moves one RK4 step with a white external
-    torque (``disturbance_sigma``). Step ``k``'s draws come from its key ``fold_in(key, k)``.
-    The plant's state is ``(x, held)``: the truth ``[q, w, Omega]`` and the value a STUCK
-    gyro holds.
-    """
-    from jaxfdi.faults import Target, apply_fault
-    from jaxfdi.loop import Plant
-
-    dtype = params.inertia.dtype
-    N = params.wheel_axes.shape[0]
-
-    def keys(step_key):
-        return jax.random.split(step_key, 3)  # gyro, disturbance, wheel torque
-
-    def init(x0: Array):
-        _checks.check_shape("x0", x0, (7 + N,), "[q (4), w (3), Omega (N)]")
-        return jnp.asarray(x0), jnp.zeros((), dtype)
-
-    def measure(plant, k: Array, command: WheelCommand, step_key: Array):
-        state, held = plant
-        k_gyro, _, _ = keys(step_key)
-        rate = state[4:7] + gyro_sigma * jax.random.normal(k_gyro, (3,), dtype)
-        rate, held = apply_fault(fault, k, rate, Target.SENSOR, held)
-        return (state, held), WheelSensed(state, AttitudeReading(state[:4], rate))
-
-    def advance(plant, k: Array, command: WheelCommand, step_key: Array):
-        state, held = plant
-        _, k_dist, k_wheel = keys(step_key)
-        delivered = delivered_torque(fault, k, command.torque) + wheel_noise_sigma * jax.random.normal(k_wheel, (N,), dtype)
-        disturbance = disturbance_sigma * jax.random.normal(k_dist, (3,), dtype)
-        state = spacecraft_step(stop_transfer(state, fault, k, params), delivered, disturbance, params)
-        return (state, held), delivered
-
-    return Plant(init, measure, advance)

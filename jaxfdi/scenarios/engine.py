@@ -49,12 +49,13 @@ from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.filters.mm import multiple_model
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.metrics import DetectionRecord, fault_row, unhealthy_rows_warning
+from jaxfdi.metrics import DetectionRecord, fault_row, rate_text, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.filters import run_filter
 from jaxfdi.monitor import monitor, replay_detector
 from jaxfdi.montecarlo import monte_carlo
+from jaxfdi.plotting import save_figure
 from jaxfdi.progress import logger
 from jaxfdi.riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
@@ -440,8 +441,6 @@ class EngineStudy(NamedTuple):
         ``clean``: runs without one, the only runs whose delays count (mean, median, p90).
         Every rate with its 95 % Clopper-Pearson interval (``metrics.rate_text``) over the
         healthy runs (``n``)."""
-        from jaxfdi.metrics import rate_text
-
         head = (f"{'fault':<9} {'n':>5} {'det [95 %]':>16} {'iso [95 %]':>16} {'pre-FA [95 %]':>16} {'clean':>5} "
                 f"{'delay mean':>10} {'paper':>6} {'med':>6} {'p90':>6} {'estimate':>10} {'true':>9} {'err %':>6}")
 
@@ -715,8 +714,6 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
     """Figures like Figs. 3-1/3-2 of Han et al. (2022) (mode probabilities), 4 (GLR statistics) and
     the magnitude estimates against truth; written atomically; returns the paths."""
     import matplotlib.pyplot as plt
-
-    from jaxfdi.plotting import save_figure
 
     cfg, paths = study.config, []
     t = np.arange(cfg["steps"]) * cfg["Ts"]

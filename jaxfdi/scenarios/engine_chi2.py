@@ -25,9 +25,10 @@ from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
 from jaxfdi.faults import Fault, fault, no_fault, stack_faults
 from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.metrics import DetectionRecord, fault_row, summarize_detection, unhealthy_rows_warning
+from jaxfdi.metrics import DetectionRecord, fault_row, rate_text, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi.monitor import MonitorHistory, monitor
+from jaxfdi.plotting import save_figure
 from jaxfdi.simulate import linear_simulator
 from jaxfdi.study import Structure, Study, run_study
 
@@ -68,8 +69,6 @@ class EngineChi2Result(NamedTuple):
         ``none``: any alarm); delays (mean, median, p90) over the ``clean`` runs, those
         without one (``metrics.fault_row``). Each rate is followed by its 95 %
         Clopper-Pearson interval over the ``n`` healthy runs (``metrics.rate_interval``)."""
-        from jaxfdi.metrics import rate_text
-
         def rate(value, n, width):
             if value is None or value != value or not n:
                 return f"{'-':>{width}} {'':>11}"
@@ -192,8 +191,6 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
     """Two panels: one run's windowed statistic per fault, and the delay distributions
     (written atomically at ``path`` with its caption)."""
     import matplotlib.pyplot as plt
-
-    from jaxfdi.plotting import save_figure
 
     cfg = result.config
     t = np.arange(cfg["steps"]) * cfg["Ts"]

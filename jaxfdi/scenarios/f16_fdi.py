@@ -40,6 +40,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from jaxfdi import _checks
+from jaxfdi.detection import parity as ps
+from jaxfdi.detection import sensor_configuration as sc
 from jaxfdi.detection.hybrid_psa import (
     FOLLOW,
     HybridPSAConfig,
@@ -49,12 +52,25 @@ from jaxfdi.detection.hybrid_psa import (
 )
 from jaxfdi.detection.parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
 from jaxfdi.faults import Fault, FaultKind, Target
-from jaxfdi.metrics import binomial_interval
+from jaxfdi.filters import init_from_posterior, run_filter
+from jaxfdi.metrics import binomial_interval, rate_interval
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.models.f16.plant import RATE_OFFSET, flight_view
 from jaxfdi.models.f16.rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
     rate_transition
-from jaxfdi.scenarios.f16_flight import DT, Dispersion, FlightSetup, dispersions, run_flight
+from jaxfdi.plotting import save_figure
+from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.scenarios.f16_flight import (
+    DT,
+    ERRORS,
+    GUST_SIGMA,
+    Dispersion,
+    FlightSetup,
+    dispersions,
+    flight_setup,
+    nominal_dispersion,
+    run_flight,
+)
 from jaxfdi.study import Structure, Study, run_study
 
 #: per-step false-alarm probability of the FD test (a 15 s flight, 1500 steps: 1.5e-3 per flight)
@@ -123,8 +139,6 @@ def fdi_setup(setup: FlightSetup, pfa: float = PFA, missed_isolation: float = MI
               design_fnr: float = DESIGN_FNR, coefficient_error=COEFFICIENT_ERROR, process_std: float = PROCESS_STD,
               key: Array | None = None, samples: int = 200_000) -> tuple[FDISetup, IsolationCalibration]:
     """Thresholds (``T_I`` by ``samples`` Monte Carlo draws), the UKF's model and noise."""
-    from jaxfdi import _checks
-
     sensors = setup.sensors
     dtype = setup.x0.dtype
     _checks.check_probability("pfa", pfa)
@@ -170,8 +184,6 @@ def fault_case(kind="bias", sensor=PAPER_SENSOR, size=PAPER_FNR, angle_deg=PAPER
     arrays broadcast together, a stack of them with a leading flight axis: built on the
     host, one transfer per field (a Python list of 10^5 single cases, each field a device
     array copied back to be stacked, kept a GPU busy for minutes before the flights)."""
-    from jaxfdi import _checks
-
     names = ["none", *KINDS]
     unknown = sorted({str(k) for k in np.ravel(kind)} - set(names))
     if unknown:
@@ -319,11 +331,6 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
     FNR and direction; PSA alone vs the hybrid), fault kinds and the safe envelope with
     and without FDI (``runs`` flights per kind and mode), ``FAULT_FREE_PER_RUN * runs``
     fault-free flights, and the sensor arrangement optimised by gradient. Needs float64."""
-    from jaxfdi import _checks
-    from jaxfdi.detection import sensor_configuration as sc
-    from jaxfdi.scenarios._common import check_study, require_x64
-    from jaxfdi.scenarios.f16_flight import GUST_SIGMA, flight_setup
-
     require_x64("f16_fdi_study")
     check_study(runs, seed, runs_name="runs", directions=directions, optimizer_steps=optimizer_steps)
     sweep_fnr = tuple(float(v) for v in np.atleast_1d(sweep_fnr))
@@ -414,9 +421,6 @@ def analytic_residual_trace(fdi: FDISetup, measurement: Array, control: Array, r
     with the ``trusted`` (6,) channels only: ``(norms (steps, 3), filtered rates (steps,
     3))``, ``norms[j]`` the per-sensor ``||m_i - H_i x_hat||`` at step ``restart + 1 + j``
     (eq. 30; at the decision step it is what the FDI computed by its bounded replay)."""
-    from jaxfdi import _checks
-    from jaxfdi.filters import init_from_posterior, run_filter
-
     length = _checks.shape_of(measurement)[0]
     steps = _checks.check_int("steps", steps, 1, meaning="a positive number of steps")
     restart = _checks.check_int("restart", restart, 0, length - 1 - steps,
@@ -438,8 +442,6 @@ def analytic_residual_trace(fdi: FDISetup, measurement: Array, control: Array, r
 def _paper_case(setup: FlightSetup, fdi: FDISetup, key: Array) -> tuple[dict, dict]:
     """The paper's case flown once per view (same noise and gusts): never excluding
     (``none``), following PSA alone, the hybrid, the verified hybrid."""
-    from jaxfdi.scenarios.f16_flight import nominal_dispersion
-
     case = fault_case(dtype=setup.x0.dtype)
     disp = jax.tree_util.tree_map(lambda a: a[0], nominal_dispersion(setup))
 
@@ -497,8 +499,6 @@ TABLE_1 = ((1, (0, 1), (1.0, -1.0), (-1.0, 1.0), "p"), (2, (0, 2), (1.0, 1.0), (
 
 
 def _geometry_rows(space, fdi: FDISetup, calibration) -> list[dict]:
-    from jaxfdi.detection import parity as ps
-
     angles = np.degrees(np.asarray(ps.subspace_angles(space)))
     faults = np.asarray(ps.singular_faults(space))
     H = np.asarray(space.H)
@@ -559,8 +559,6 @@ def _sweep_rows(decision, sensor, grid, runs: int, onset: int, n_sweep: int) -> 
 
 def _configuration_rows(space, optimisation, separation, decision, sensor, n_sweep: int, runs: int, sigma: float,
                         key: Array) -> list[dict]:
-    from jaxfdi.detection import sensor_configuration as sc
-
     groups = space.groups
     layouts = {"spec": space.H, "optimised (isolation rate)": optimisation.axes[optimisation.best],
                "optimised (fault-plane separation)": separation.axes[separation.best]}
@@ -616,9 +614,6 @@ def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> li
     follows (none: the verified one, not flown), misisolations and envelope exits with
     their 99 % Clopper-Pearson intervals (``metrics.rate_interval``). A flight that went
     numerically bad is an exit and never a decision."""
-    from jaxfdi.metrics import rate_interval
-    from jaxfdi.scenarios.f16_flight import ERRORS
-
     index = {name: i for i, name in enumerate(ERRORS)}
     peak = np.asarray(out.tracking.max_abs)
     healthy = np.asarray(out.healthy)
@@ -681,10 +676,6 @@ def fault_kind_study(runs: int = 1000, seed: int = 0, progress: bool = False, ch
     bias and drift at FNR 10, scale 0.5, stuck, dead) on a random sensor and direction,
     flown under each view of ``follows`` (the same draws), and ``runs`` fault-free flights:
     misisolations and envelope exits with their 99 % intervals."""
-    from jaxfdi import _checks
-    from jaxfdi.scenarios._common import check_study, require_x64
-    from jaxfdi.scenarios.f16_flight import flight_setup
-
     require_x64("fault_kind_study")
     check_study(runs, seed, runs_name="runs")
     follows = tuple(follows)
@@ -730,8 +721,6 @@ def kind_table(rows: list[dict], config: dict) -> str:
 
 def _pct_ci(part: int, whole: int) -> str:
     """``"97.0% [93,99]"``: the share and its 99 % Clopper-Pearson interval in %."""
-    from jaxfdi.metrics import rate_interval
-
     if not whole:
         return "-"
     low, high = rate_interval(part, whole, 0.99)
@@ -838,8 +827,6 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     from pathlib import Path
 
     from matplotlib.figure import Figure
-
-    from jaxfdi.plotting import save_figure
 
     out = Path(out_dir)
     h, cfg, rows = study.history, study.config, study.rows

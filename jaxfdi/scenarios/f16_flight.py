@@ -2,11 +2,11 @@
 
 A flight (``run_flight``) is ``loop.run_loop`` of three parts:
 
-- the plant ``models.f16.f16_plant``: the 13-state F-16 (book tables, xcg per flight),
+- the plant ``control.f16_loop.f16_plant``: the 13-state F-16 (book tables, xcg per flight),
   RK4 at ``DT`` = 0.01 s, sensors with noise (the three 2-DOF rate sensors of Park et al. 2004,
   sigma = 0.01 rad/s; air data, attitude, altitude, engine power), optional gusts, wrapped
   by ``tracking.tracked_plant`` so that the run keeps its tracking errors;
-- the FDI stage ``models.f16.rate_passthrough_fdi``: no fault detection yet, the
+- the FDI stage ``control.f16_loop.rate_passthrough_fdi``: no fault detection yet, the
   controller flies on the least-squares body rates of the six rate channels (the
   parity-space FDI of Park et al. 2004 will take this place and hand over its selected rate);
 - the controller ``control.flight.flight_controller``: LQR stability augmentation with
@@ -36,7 +36,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from jaxfdi import _checks
+from jaxfdi.control.f16_loop import f16_plant, rate_passthrough_fdi
 from jaxfdi.control.flight import (
+    LATERAL_TRACKED,
+    LONGITUDINAL_TRACKED,
     FlightGains,
     FlightPlan,
     FlightReference,
@@ -50,13 +54,18 @@ from jaxfdi.control.flight import (
     initial_condition,
     plan_trims,
 )
+from jaxfdi.control.lqr import integral_augmentation
 from jaxfdi.loop import run_loop
 from jaxfdi.models.f16 import book
 from jaxfdi.models.f16.dynamics import (
     ALPHA, BETA, CONTROL_NAMES, H, P, PHI, Q, R, STATE_NAMES, THETA, VT, F16Params, f16_params,
 )
-from jaxfdi.models.f16.linearize import flight_modes, linearize
-from jaxfdi.models.f16.plant import F16Sensors, f16_plant, f16_sensors, rate_passthrough_fdi
+from jaxfdi.models.f16.linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, flight_modes, linearize, submodel
+from jaxfdi.models.f16.plant import F16Sensors, f16_sensors
+from jaxfdi.models.linear import c2d
+from jaxfdi.plotting import save_figure
+from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.study import Structure, Study, run_study
 from jaxfdi.tracking import TrackingScore, tracked_plant
 
 #: control period and RK4 step, s
@@ -178,8 +187,6 @@ _reference = jax.jit(flight_reference, static_argnums=(1, 3, 4))
 def flight_setup(plan: FlightPlan | None = None, weights: FlightWeights | None = None, params: F16Params | None = None,
                  sensors: F16Sensors | None = None, gust_sigma: float = 0.0, dtype=None) -> tuple[FlightSetup, Design]:
     """Trims, linearisation, LQR design and reference of the flight (module doc)."""
-    from jaxfdi import _checks
-
     _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
     dtype = dtype or jnp.result_type(float)
     plan = plan or flight_plan()
@@ -217,8 +224,6 @@ def run_flight(setup: FlightSetup, key: Array, dispersion: Dispersion, keep_hist
     ``FlightView``) and its initial state; default the rate pass-through (every rate
     channel trusted). ``fault``: sensor or actuator faults of the plant (``f16_plant``),
     e.g. a ``faults.fault_group`` on both axes of one rate sensor."""
-    from jaxfdi import _checks
-
     _checks.check_shape("dispersion.initial", dispersion.initial, (13,), "an offset of the 13-state initial state")
     _checks.check_scalar("dispersion.xcg", dispersion.xcg, 0.0, 1.0,
                          meaning="a centre of gravity in [0, 1] of the mean chord")
@@ -313,11 +318,6 @@ def _mode_row(mode, where: str) -> dict:
 
 def _closed_loop_rows(design: Design) -> list[dict]:
     """Continuous-equivalent poles ``log(z) / DT`` of the two discrete LQR-PI loops."""
-    from jaxfdi.control.flight import LATERAL_TRACKED, LONGITUDINAL_TRACKED
-    from jaxfdi.control.lqr import integral_augmentation
-    from jaxfdi.models.f16.linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, submodel
-    from jaxfdi.models.linear import c2d
-
     rows = []
     gains = design.design.gains
     for axis, states, inputs, tracked, gain in (
@@ -360,10 +360,6 @@ def f16_flight_study(flights: int = 100, seed: int = 0, progress: bool = False, 
                      sample_flights: int = 8, chunk_size: int | None = None) -> F16FlightStudy:
     """Trim table beside the book's, modes, the LQR design and ``flights`` closed-loop
     flights (module doc). Needs float64 (``jaxfdi.enable_x64()``)."""
-    from jaxfdi import _checks
-    from jaxfdi.scenarios._common import check_study, require_x64
-    from jaxfdi.study import Structure, Study, run_study
-
     require_x64("f16_flight_study")
     check_study(flights, seed, runs_name="flights", sample_flights=sample_flights)
     _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
@@ -457,8 +453,6 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     from pathlib import Path
 
     from matplotlib.figure import Figure
-
-    from jaxfdi.plotting import save_figure
 
     out = Path(out_dir)
     h = study.history

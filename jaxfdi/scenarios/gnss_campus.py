@@ -44,7 +44,8 @@ from jaxfdi.data import data_path
 from jaxfdi.gnss import frames, integrity, measurements, orbits, paths, raim, rinex, yuma
 from jaxfdi.gnss.protection import ALERT_LIMITS
 from jaxfdi.loop import episode_scorer, feedforward, run_loop
-from jaxfdi.metrics import summarize_episodes
+from jaxfdi.metrics import rate_text, summarize_episodes
+from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.progress import status
 from jaxfdi.study import Structure, Study, run_study
@@ -341,8 +342,6 @@ def _park_summary(result, case: Case, slots, candidates, headline, table):
 
 def gnss_table(study: GnssCampusStudy) -> str:
     """The console table: campus availability and the park faults beside the paper."""
-    from jaxfdi.metrics import rate_text
-
     campus = study.rows[0]
     lines = ["Campus (no fault; the east sky hidden beside a building at each lap's pass):",
              f"  HDOP > 4 at epochs {_spans(campus['hdop_over_4_epochs'])} (max {campus['max_hdop']:.1f}); "
@@ -399,8 +398,6 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
     from pathlib import Path
 
     from matplotlib.figure import Figure
-
-    from jaxfdi.plotting import save_figure
 
     out_dir = Path(out_dir)
     paths_out = []

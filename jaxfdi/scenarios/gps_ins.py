@@ -59,7 +59,17 @@ from jaxfdi.ins import error_state, imu, integrity, plant, scst, trajectory
 from jaxfdi.ins.loosely_coupled import loosely_coupled_filter
 from jaxfdi.ins.mechanization import NavState
 from jaxfdi.loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
-from jaxfdi.metrics import binomial_interval, summarize_detection, summarize_episodes
+from jaxfdi.metrics import (
+    binomial_interval,
+    binomial_lower_bound,
+    delay_statistics,
+    rate_interval,
+    rate_text,
+    record_from_alarms,
+    summarize_detection,
+    summarize_episodes,
+)
+from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 # Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
 from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK
@@ -497,8 +507,6 @@ def alarms_at(series: Series, test: str, threshold: float) -> np.ndarray:
 def _separated_record(out: RunOutput, test: str, size: StudySize, threshold: float | None = None):
     """The ``DetectionRecord`` of ``test``'s INS decisions (``ins_decisions``) at
     ``threshold`` (default: the design's), with the monitor's own health."""
-    from jaxfdi.metrics import record_from_alarms
-
     limit = dict(zip(("chi2", "scst"), thresholds()))[test] if threshold is None else threshold
     decisions = jnp.asarray(ins_decisions(out.series, test, limit))
     record = jax.vmap(record_from_alarms, in_axes=(0, None))(decisions, size.onset_s)
@@ -525,8 +533,6 @@ def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_
     detection time over the clean runs at each bias (``metrics.delay_statistics``), with the
     INS's alarms after the GPS/INS separation (``ins_decisions``: the time of the alarm; the
     decision is issued ``ATTRIBUTION_LOOKAHEAD`` s later)."""
-    from jaxfdi.metrics import delay_statistics, rate_interval
-
     free_out = results["fault-free"]
     rows = []
     for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE)):
@@ -564,8 +570,6 @@ def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) ->
     GPS only and its gyro bias INS only; flights that went numerically bad are counted
     apart. Returns the confusion counts and the separated flights with their one-sided
     95 % lower bound."""
-    from jaxfdi.metrics import binomial_lower_bound
-
     limits = {test: float(_scipy_stats.chi2.isf(pfa, dof))
               for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE))}
     confusion: dict[str, dict[str, int]] = {}
@@ -737,8 +741,6 @@ def _fmt(value, spec=".0f") -> str:
 
 def gps_ins_table(study: GpsInsStudy) -> str:
     """Table 3 beside the paper's, RAIM's decisions, false alarms, the curves."""
-    from jaxfdi.metrics import rate_text
-
     cfg = study.config
     onset = cfg["fault_onset_s"]
     size_note = "" if cfg.get("paper_size", True) else (f" [reduced size: {cfg['flight_s']} s flights, IMU "
@@ -853,8 +855,6 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     from pathlib import Path
 
     from matplotlib.figure import Figure
-
-    from jaxfdi.plotting import save_figure
 
     out_dir = Path(out_dir)
     written = []

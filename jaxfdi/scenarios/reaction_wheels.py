@@ -2,7 +2,7 @@
 multi-hypothesis EKFs, in closed loop, Monte Carlo.
 
 A run (``run_wheels``) is the library's closed loop, ``loop.run_loop`` of three parts:
-the truth ``models.reaction_wheels.wheel_plant``, the FDI ``wheel_fdi`` (steps 3-4) and
+the truth ``control.attitude.wheel_plant``, the FDI ``wheel_fdi`` (steps 3-4) and
 the controller ``control.attitude.wheel_attitude_controller``. Step ``k``, ``t = k dt``:
 
 1. gyros measure the true body rates, ``y = w + v``;
@@ -79,7 +79,15 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.control.attitude import AttitudeGains, Slew, pd_gains, slew, slew_reference, wheel_attitude_controller
+from jaxfdi.control.attitude import (
+    AttitudeGains,
+    Slew,
+    pd_gains,
+    slew,
+    slew_reference,
+    wheel_attitude_controller,
+    wheel_plant,
+)
 from jaxfdi.detection.chi2 import Decision, chi2_threshold
 from jaxfdi.detection.credits import hypothesis_credits
 from jaxfdi.detection.frozen import frozen_channel_detector
@@ -89,7 +97,7 @@ from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
-from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, unhealthy_warning
+from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, rate_text, unhealthy_warning
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.study import Structure, Study, run_study
 from jaxfdi.models.reaction_wheels import (
@@ -101,9 +109,9 @@ from jaxfdi.models.reaction_wheels import (
     kitsat3_params,
     stop_hypotheses,
     wheel_momentum,
-    wheel_plant,
     wheel_rate_transition,
 )
+from jaxfdi.plotting import save_figure
 
 RPM = 2.0 * math.pi / 60.0
 #: steps in the NIS window of the chi-square detector
@@ -602,8 +610,6 @@ class WheelStudy(NamedTuple):
         wheel cases it names no wheel by construction; its rows hold its figures). Every
         rate is followed by its 95 % Clopper-Pearson interval (``metrics.rate_interval``)
         over the ``n`` healthy runs (``<=2s``: over the clean runs)."""
-        from jaxfdi.metrics import rate_text
-
         def rate(value, n):
             if value is None:
                 return f"{'':>19}"
@@ -751,8 +757,6 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
     import matplotlib.pyplot as plt
 
     from pathlib import Path
-
-    from jaxfdi.plotting import save_figure
 
     out = Path(out)
     cfg = study.config

@@ -10,7 +10,7 @@ q)`` with ``Q = diag(1, 1, 1, 1, 10, 10)``, ``R = I``, command ``r = [-50, -5]``
 The bank has, for each of the 6 fault locations (a1, a2, s1..s4), the paper's
 multiplicative filter (effectiveness ``Fa = -B diag(u)``, scaling ``Fs = diag(C x)``)
 and an additive one (``-B e_i``, ``e_j``: the step and ramp faults), 12 TSKFs in one
-vmap. Each run is one closed loop (``jaxfdi.control.closed_loop``); the bank's
+vmap. Each run is one closed loop (``jaxfdi.scenarios.vtol_loop``); the bank's
 statistics are then evaluated five ways (raw, 4-step window, MDWT hard and soft, and
 MDWT soft with the paper's own sigma: ``MDWT-ST-SV`` takes each detail scale's sigma from
 the sample variance of the run's fault-free first ``SIGMA_WINDOW`` steps,
@@ -19,7 +19,7 @@ fault-free statistics are not chi2(3), see below).
 
 Beyond the paper: sensor s3 dead (NaN) and frozen (``HEALTH_CASES``). The
 bank cannot name them (every filter reads every sensor); the loop's channel-health test
-does (``control.closed_loop``, step 6), ahead of each method's decision, and with FTC the
+does (``scenarios.vtol_loop``, step 6), ahead of each method's decision, and with FTC the
 estimator leaves the sensor out.
 
 Departures and findings:
@@ -53,7 +53,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import _checks
-from jaxfdi.control.closed_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
 from jaxfdi.control.eigenstructure import effectiveness_gain_schedule, nominal_eigenstructure
 from jaxfdi.control.lqr import lqr_pi
 from jaxfdi.detection.calibration import empirical_threshold, scale_to_run_false_alarm
@@ -63,9 +62,11 @@ from jaxfdi.detection.signature import isolate, location_symptoms
 from jaxfdi.detection.wavelet import block_alarms, causal_detail_sigma, chi2_detail_sigma, haar_denoise
 from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
-from jaxfdi.metrics import delay_statistics, record_from_alarms, step_health, unhealthy_warning
+from jaxfdi.metrics import delay_statistics, rate_text, record_from_alarms, step_health, unhealthy_warning
 from jaxfdi.models import vtol
+from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
+from jaxfdi.scenarios.vtol_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
 from jaxfdi.study import Structure, Study, run_study
 
 LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
@@ -148,7 +149,7 @@ def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
 
 
 #: beyond the paper: sensor s3 dead (NaN from the onset) and frozen (its value
-#: at the onset held), found by the loop's channel-health test (``closed_loop``, step 6)
+#: at the onset held), found by the loop's channel-health test (``vtol_loop``, step 6)
 HEALTH_CASES = ("s3 dead", "s3 frozen")
 
 
@@ -587,8 +588,6 @@ def _fmt(x: float, spec: str = ".2f", width: int = 7) -> str:
 def _case_table(row: dict[str, Any]) -> str:
     """One case's block: every rate with its 95 % Clopper-Pearson interval over the ``n``
     healthy runs (FTC off)."""
-    from jaxfdi.metrics import rate_text
-
     onset = row["onset"]
     n = row["runs"] - row.get("unhealthy_runs", {}).get("no_ftc", 0)
 
@@ -668,8 +667,6 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
     import matplotlib.pyplot as plt
 
     from pathlib import Path
-
-    from jaxfdi.plotting import save_figure
 
     out = Path(out)
     cfg = study.config

@@ -1,6 +1,7 @@
 """The Stevens & Lewis F-16 (the aircraft of Park et al. 2004) as a JAX model: the book's tables and
 Morelli's polynomial, engine and atmosphere, the 13-state dynamics, trim, linearisation
-and modes, and the sampled plant with its sensors for ``jaxfdi.loop.run_loop``.
+and modes, and the sampled plant with its sensors (its ``jaxfdi.loop`` stages:
+``jaxfdi.control.f16_loop``).
 
 References: Stevens & Lewis (2003) *Aircraft Control and Simulation*, 2nd ed. (App. A);
 Morelli (1998) "Global nonlinear parametric modeling with application to F-16
@@ -35,11 +36,9 @@ from jaxfdi.models.f16.plant import (
     MEASUREMENT_NAMES,
     F16Sensors,
     FlightView,
-    f16_plant,
     f16_sensors,
     flight_view,
     rate_estimator,
-    rate_passthrough_fdi,
     seed000_rate_axes,
 )
 from jaxfdi.models.f16.tables import (
@@ -72,7 +71,7 @@ __all__ = [
     "inertia_constants", "saturate", "power_rate", "throttle_gearing", "thrust", "LinearF16", "Mode", "flight_modes",
     "lateral", "lateral_modes", "linearize", "longitudinal", "longitudinal_modes", "MorelliCoefficients",
     "morelli_coefficients_data", "polynomial_coefficients", "MEASUREMENT_NAMES", "F16Sensors", "FlightView",
-    "f16_plant", "f16_sensors", "flight_view", "rate_estimator", "rate_passthrough_fdi", "seed000_rate_axes",
+    "f16_sensors", "flight_view", "rate_estimator", "seed000_rate_axes",
     "PROFILES", "AeroTables", "AtmosphereData", "EngineData", "aero_tables", "atmosphere_data", "engine_data",
     "lookup1", "lookup2", "table_arrays", "TrimCondition", "TrimResult", "climb", "coordinated_turn", "level_flight",
     "pull_up", "trim", "trim_batch", "trim_condition",

@@ -29,6 +29,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi.data import data_path
 from jaxfdi.models.f16.aero import AeroCoefficients
 
 #: the polynomial's variables, in the order of a term's exponent tuple
@@ -78,8 +79,6 @@ def _parse_term(term: str) -> tuple[tuple[int, ...], bool]:
 
 @functools.lru_cache(maxsize=None)
 def _data() -> tuple[dict, dict]:
-    from jaxfdi.data import data_path
-
     with open(data_path("f16_morelli.json")) as fh:
         data = json.load(fh)
     coefficients = data["coefficients"]

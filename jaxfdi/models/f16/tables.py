@@ -34,6 +34,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi.data import data_path
 
 #: cell-override profiles of ``f16_stevens_lewis.json`` (``"stevens_lewis_2nd_ed"`` = the book)
 PROFILES = ("stevens_lewis_2nd_ed", "nasa_morelli_tm2003_212145", "aerobench_python")
@@ -158,8 +159,6 @@ class AtmosphereData(NamedTuple):
 
 @functools.lru_cache(maxsize=None)
 def _raw(name: str = "f16_stevens_lewis.json") -> dict:
-    from jaxfdi.data import data_path
-
     with open(data_path(name)) as fh:
         return json.load(fh)
 

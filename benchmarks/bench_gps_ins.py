@@ -48,7 +48,8 @@ from jaxfdi.gnss import measurements  # noqa: E402
 from jaxfdi.ins import error_state, imu, integrity, plant, scst, trajectory  # noqa: E402
 from jaxfdi.ins.loosely_coupled import GpsFix  # noqa: E402
 from jaxfdi.ins.mechanization import NavState  # noqa: E402
-from jaxfdi.loop import Plant, combine_scorers, detection_scorer, feedforward, run_loop  # noqa: E402
+from jaxfdi.loop import combine_scorers, detection_scorer, feedforward, run_loop
+from jaxfdi.stages import Plant  # noqa: E402
 from jaxfdi.scenarios import gps_ins  # noqa: E402
 
 VELOCITY_SIGMA = 0.1

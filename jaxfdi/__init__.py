@@ -55,19 +55,8 @@ from jaxfdi.faults import (  # noqa: E402
     no_fault,
     stack_faults,
 )
-from jaxfdi.loop import (  # noqa: E402
-    FDI,
-    Controller,
-    LoopResult,
-    LoopTrace,
-    Plant,
-    Scorer,
-    detection_scorer,
-    episode_scorer,
-    feedforward,
-    run_loop,
-    state_feedback,
-)
+from jaxfdi.loop import LoopResult, LoopTrace, detection_scorer, episode_scorer, feedforward, run_loop, state_feedback
+from jaxfdi.stages import Controller, FDI, Plant, Scorer
 from jaxfdi.metrics import (  # noqa: E402
     DetectionRecord,
     DetectionSummary,

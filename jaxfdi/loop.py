@@ -28,8 +28,9 @@ Step ``k`` (``Ts`` apart):
 ``monitor`` (open loop: precomputed inputs, one filter, one detector) is this scan with
 ``feedforward()`` as the controller. A component that must re-run a filter over its last
 ``L`` steps (the UKF of Park et al. 2004 restarts 2-3 steps before the detection) keeps a fixed-size
-``RingBuffer`` in its own state and replays it with ``replay_filter``: bounded, and
-``jit``/``vmap`` friendly.
+``filters.history.RingBuffer`` in its own state and replays it with
+``filters.history.replay_filter``: bounded, and ``jit``/``vmap`` friendly. The shapes of
+the three parts and of a scorer are ``jaxfdi.stages``.
 """
 from __future__ import annotations
 
@@ -51,45 +52,7 @@ from jaxfdi.metrics import (
     step_health,
 )
 from jaxfdi.montecarlo import _is_key
-
-
-class Plant(NamedTuple):
-    """``init(x0) -> state``; ``measure(state, k, u, step_key) -> (state, sensed)``;
-    ``advance(state, k, u, step_key) -> (state, moved)``, with ``step_key = fold_in(key, k)``
-    (the loop folds the run's key once per step). ``Simulator`` has these fields."""
-
-    init: Callable[[Array], Any]
-    measure: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
-    advance: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
-
-
-class FDI(NamedTuple):
-    """``step(state, k, y, u) -> (state, output)``; optional ``observe(state, k, y) ->
-    (state, view)`` runs before the controller (``None``: the controller sees ``y``)."""
-
-    step: Callable[[Any, Array, Any, Array], tuple[Any, Any]]
-    observe: Callable[[Any, Array, Any], tuple[Any, Any]] | None = None
-
-
-class Controller(NamedTuple):
-    """``init() -> state``; ``step(state, k, view, exogenous) -> (state, u)``.
-
-    ``feedforward=True``: ``u`` does not depend on ``view`` (it is called with ``None``
-    before the sensors read), so the sensors' feed-through sees this step's ``u``."""
-
-    init: Callable[[], Any]
-    step: Callable[[Any, Array, Any, Any], tuple[Any, Array]]
-    feedforward: bool = False
-
-
-class Scorer(NamedTuple):
-    """Metrics folded over a run: ``init(example) -> score``, where ``example()`` gives the
-    FDI output's structure (``jax.ShapeDtypeStruct`` leaves; it traces one step, so call
-    it only when the score's shape depends on the output); ``update(score, k, output)
-    -> score``."""
-
-    init: Callable[[Any], Any]
-    update: Callable[[Any, Array, Any], Any]
+from jaxfdi.stages import FDI, Controller, Plant, Scorer
 
 
 class LoopTrace(NamedTuple):
@@ -374,63 +337,3 @@ def combine_scorers(**scorers: Scorer) -> Scorer:
         return {name: scorer.update(score[name], k, output) for name, scorer in scorers.items()}
 
     return Scorer(init, update)
-
-
-# --- history ------------------------------------------------------------------------
-
-class RingBuffer(NamedTuple):
-    """The last ``L`` entries of a stream, fixed-size (a pytree: lives in a scan carry).
-
-    Attributes:
-      data: pytree, leaves (L, ...)
-      count: () int, entries pushed so far
-    """
-
-    data: Any
-    count: Array
-
-    @property
-    def length(self) -> int:
-        return jax.tree_util.tree_leaves(self.data)[0].shape[0]
-
-
-def ring_buffer(length: int, example: Any) -> RingBuffer:
-    """An empty buffer of ``length`` entries shaped like ``example``."""
-    length = _checks.check_int("length", length, 1, meaning="a positive number of entries")
-    data = jax.tree_util.tree_map(lambda leaf: jnp.zeros((int(length),) + jnp.shape(leaf), jnp.result_type(leaf)),
-                                  example)
-    return RingBuffer(data, jnp.zeros((), jnp.int32))
-
-
-def push(buffer: RingBuffer, entry: Any) -> RingBuffer:
-    """Append ``entry``, overwriting the oldest once full."""
-    slot = buffer.count % buffer.length
-    data = jax.tree_util.tree_map(lambda store, leaf: store.at[slot].set(leaf), buffer.data, entry)
-    return RingBuffer(data, buffer.count + 1)
-
-
-def ordered(buffer: RingBuffer) -> tuple[Any, Array]:
-    """``(entries, valid)``: the stored entries oldest first, (L, ...), and which of the L
-    slots hold an entry ((L,) bool; fewer than L before the buffer first fills)."""
-    L = buffer.length
-    start = jnp.where(buffer.count >= L, buffer.count % L, 0)
-    index = (start + jnp.arange(L)) % L
-    entries = jax.tree_util.tree_map(lambda store: store[index], buffer.data)
-    return entries, jnp.arange(L) < jnp.minimum(buffer.count, L)
-
-
-def replay_filter(filt, state: Any, ys: Array, us: Array, valid: Array | None = None) -> tuple[Any, Any]:
-    """Re-run ``filt`` from ``state`` (the prior of the first entry) over (L, ...) stored
-    ``ys``, ``us``; steps with ``valid == False`` leave the state unchanged. Returns the
-    final state and the (L, ...) infos (a fixed-length scan: jit/vmap friendly)."""
-    ys, us = jnp.asarray(ys), jnp.asarray(us)
-    _checks.check_same_length(("ys", "us"), ys, us)
-    valid = jnp.ones((ys.shape[0],), bool) if valid is None else jnp.asarray(valid, bool)
-    _checks.check_shape("valid", valid, (ys.shape[0],), "one flag per stored step")
-
-    def body(s, entry):
-        y, u, ok = entry
-        new, info = filt.step(s, y, u)
-        return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, s), info
-
-    return jax.lax.scan(body, state, (ys, us, valid))

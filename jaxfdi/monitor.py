@@ -17,7 +17,8 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.detection.chi2 import Detector, flag_dead
 from jaxfdi.filters._base import Filter, FilterInfo
-from jaxfdi.loop import FDI, detection_scorer, feedforward, run_loop
+from jaxfdi.loop import detection_scorer, feedforward, run_loop
+from jaxfdi.stages import FDI
 from jaxfdi.metrics import DetectionRecord, record_init, record_update, step_health
 from jaxfdi.simulate import SimStep, Simulator
 

@@ -16,7 +16,7 @@ from typing import Any, Callable, NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi.loop import Plant
+from jaxfdi.stages import Plant
 
 
 class TrackingScore(NamedTuple):

@@ -16,7 +16,7 @@ import pytest
 import scipy.stats
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from jaxfdi import loop
+from jaxfdi import loop, stages
 from jaxfdi.detection import hybrid_psa as hp
 from jaxfdi.faults import Target, active_label, apply_faults
 from jaxfdi.models.f16.dynamics import f16_dynamics
@@ -179,7 +179,7 @@ def recorded(env):
 def _replayed(fdi, ys, us, batch_axis=None):
     """The hybrid FDI stage driven by ``run_loop`` over the recorded ``ys`` with the
     recorded controls (a plant that plays them back, a feed-forward controller)."""
-    player = loop.Plant(lambda x0: None, lambda s, k, u, key: (s, ys[k]), lambda s, k, u, key: (s, None))
+    player = stages.Plant(lambda x0: None, lambda s, k, u, key: (s, ys[k]), lambda s, k, u, key: (s, None))
     result = loop.run_loop(player, sf.f16_hybrid_fdi(fdi, batch_axis), loop.feedforward(), jnp.zeros(1),
                            sf.fdi_state0(fdi), jax.random.key(0), exogenous=us, keep_history=True)
     return result.final[1].decision, result.history.output

@@ -12,6 +12,7 @@ from scipy import stats
 
 import jaxfdi
 from jaxfdi import loop
+from jaxfdi.filters import history
 from jaxfdi.filters import model_at, time_varying
 from jaxfdi.models import engine_model
 from jaxfdi.models.linear import LinearGaussianModel
@@ -94,7 +95,7 @@ def test_closed_loop_lqr_with_a_perfect_sensor_is_the_closed_form_response():
     K = _lqr(Phi, Gamma, np.eye(n), np.eye(nu))
     model = LinearGaussianModel(jnp.asarray(Phi), jnp.asarray(Gamma), jnp.eye(n), jnp.zeros((n, nu)),
                                 jnp.zeros((n, n)), jnp.zeros((n, n)))
-    passthrough = loop.FDI(lambda state, k, y, u: (state, None))
+    passthrough = jaxfdi.FDI(lambda state, k, y, u: (state, None))
     x0 = jnp.asarray(rng.normal(size=n))
     result = loop.run_loop(jaxfdi.linear_simulator(model), passthrough, loop.state_feedback(K), x0, None,
                            jax.random.key(0), 40, u0=jnp.zeros(nu), keep_history=True)
@@ -111,8 +112,8 @@ def test_closed_loop_feedthrough_sees_the_held_input():
     term of y[k] carries u[k-1] (zero-order hold), u0 at step 0."""
     model = LinearGaussianModel(jnp.eye(1) * 0.5, jnp.eye(1), jnp.eye(1), jnp.eye(1) * 2.0,
                                 jnp.zeros((1, 1)), jnp.zeros((1, 1)))
-    counter = loop.Controller(lambda: jnp.zeros(1), lambda s, k, view, exo: (s + 1.0, s + 1.0))
-    result = loop.run_loop(jaxfdi.linear_simulator(model), loop.FDI(lambda s, k, y, u: (s, None)), counter,
+    counter = jaxfdi.Controller(lambda: jnp.zeros(1), lambda s, k, view, exo: (s + 1.0, s + 1.0))
+    result = loop.run_loop(jaxfdi.linear_simulator(model), jaxfdi.FDI(lambda s, k, y, u: (s, None)), counter,
                            jnp.zeros(1), None, jax.random.key(0), 5, u0=jnp.full(1, 7.0), keep_history=True)
     u = np.asarray(result.history.control)[:, 0]
     x = np.asarray(result.history.sensed.state)[:, 0]
@@ -134,41 +135,41 @@ def test_replay_over_the_ring_buffer_equals_the_original_estimates():
 
     def step(state, k, y, u):
         prior, buffer = state
-        buffer = loop.push(buffer, (y, u, prior))
+        buffer = history.push(buffer, (y, u, prior))
         post, info = kf.step(prior, y, u)
-        (ys, us, priors), valid = loop.ordered(buffer)
+        (ys, us, priors), valid = history.ordered(buffer)
         start = jax.tree_util.tree_map(lambda leaf: leaf[0], priors)
-        _, replayed = loop.replay_filter(kf, start, ys, us, valid)
+        _, replayed = history.replay_filter(kf, start, ys, us, valid)
         last = jnp.sum(valid) - 1
         return (post, buffer), (info.filtered_mean, replayed.filtered_mean[last], buffer.count)
 
-    fdi = loop.FDI(step)
+    fdi = jaxfdi.FDI(step)
     us = jnp.asarray(rng.normal(size=(25, 1)))
     result = loop.run_loop(jaxfdi.linear_simulator(model), fdi, loop.feedforward(), jnp.zeros(n),
-                           (prior0, loop.ring_buffer(L, example)), jax.random.key(3), exogenous=us, keep_history=True)
+                           (prior0, history.ring_buffer(L, example)), jax.random.key(3), exogenous=us, keep_history=True)
     original, replayed, count = result.history.output
     np.testing.assert_allclose(replayed, original, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(count, np.arange(1, 26))
     # and the buffer really holds the last L steps, oldest first
     _, buffer = result.final[1]
-    (ys, _, _), valid = loop.ordered(buffer)
+    (ys, _, _), valid = history.ordered(buffer)
     np.testing.assert_array_equal(ys, result.history.sensed.measurement[-L:])
     assert bool(jnp.all(valid))
 
 
 def test_ring_buffer_before_it_fills():
-    buffer = loop.ring_buffer(4, jnp.zeros(()))
+    buffer = history.ring_buffer(4, jnp.zeros(()))
     for value in (1.0, 2.0):
-        buffer = loop.push(buffer, jnp.asarray(value))
-    entries, valid = loop.ordered(buffer)
+        buffer = history.push(buffer, jnp.asarray(value))
+    entries, valid = history.ordered(buffer)
     np.testing.assert_array_equal(valid, [True, True, False, False])
     np.testing.assert_array_equal(entries[:2], [1.0, 2.0])
     for value in (3.0, 4.0, 5.0, 6.0, 7.0):
-        buffer = loop.push(buffer, jnp.asarray(value))
-    entries, valid = loop.ordered(buffer)
+        buffer = history.push(buffer, jnp.asarray(value))
+    entries, valid = history.ordered(buffer)
     np.testing.assert_array_equal(entries, [4.0, 5.0, 6.0, 7.0])
     with pytest.raises(ValueError, match="length"):
-        loop.ring_buffer(0, jnp.zeros(()))
+        history.ring_buffer(0, jnp.zeros(()))
 
 
 def test_time_varying_kalman_filter_matches_filterpy_matrix_by_matrix():
@@ -285,7 +286,7 @@ def test_a_dead_sensor_mid_run_is_an_alarm_not_ill_health(engine):
 def test_loop_input_errors():
     model = engine_model()
     sim = jaxfdi.linear_simulator(model)
-    fdi = loop.FDI(lambda s, k, y, u: (s, None))
+    fdi = jaxfdi.FDI(lambda s, k, y, u: (s, None))
     with pytest.raises(ValueError, match="u0"):
         loop.run_loop(sim, fdi, loop.state_feedback(jnp.zeros((1, 7))), jnp.zeros(7), None, jax.random.key(0), 5)
     with pytest.raises(ValueError, match="steps"):

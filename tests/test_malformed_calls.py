@@ -24,6 +24,7 @@ import pytest
 
 import jaxfdi
 from jaxfdi import control, detection, loop, metrics, models, tuning
+from jaxfdi.filters import history
 from jaxfdi.filters import tskf
 from jaxfdi.models.vtol import vtol_model, vtol_true_plant
 from jaxfdi.monitor import filter_detector
@@ -340,8 +341,8 @@ CASES = {
     "run_loop steps zero": (lambda: loop_run(steps=0), V, "steps"),
     "run_loop steps float": (lambda: loop_run(steps=2.5), T_, "steps"),
     "run_loop plant not a plant": (lambda: loop_run(plant=lambda x: x), T_, "plant"),
-    "ring_buffer length zero": (lambda: loop.ring_buffer(0, jnp.zeros(2)), V, "length"),
-    "ring_buffer length float": (lambda: loop.ring_buffer(3.0, jnp.zeros(2)), T_, "length"),
+    "ring_buffer length zero": (lambda: history.ring_buffer(0, jnp.zeros(2)), V, "length"),
+    "ring_buffer length float": (lambda: history.ring_buffer(3.0, jnp.zeros(2)), T_, "length"),
     "state_feedback gain NaN": (lambda: loop.state_feedback(jnp.full((1, 2), jnp.nan)), V, "gain"),
     "detection_scorer estimate_delay negative": (lambda: loop.detection_scorer(5, lambda o: o, estimate_delay=-1), V,
                                                  "estimate_delay"),

@@ -32,7 +32,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.faults import Target, apply_fault
-from jaxfdi.loop import Controller, Plant
+from jaxfdi.stages import Controller, Plant
 from jaxfdi.models.reaction_wheels import (
     AttitudeReading,
     SpacecraftParams,

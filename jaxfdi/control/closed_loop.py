@@ -15,7 +15,7 @@ from jax import Array
 
 from jaxfdi import _linalg
 from jaxfdi.control.eigenstructure import GainSchedule, scheduled_gain
-from jaxfdi.loop import Controller
+from jaxfdi.stages import Controller
 
 
 class Reconfiguration(NamedTuple):

@@ -18,7 +18,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.faults import Target, active_label, apply_faults, as_stack, is_active
-from jaxfdi.loop import FDI, Plant
+from jaxfdi.stages import FDI, Plant
 from jaxfdi.models.f16.dynamics import F16Params
 from jaxfdi.models.f16.plant import (
     RATE_OFFSET,

@@ -49,7 +49,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.control.lqr import lqr_pi
-from jaxfdi.loop import Controller
+from jaxfdi.stages import Controller
 from jaxfdi.models.f16.dynamics import AIL, ALPHA, EL, H, P, PHI, Q, RDR, THETA, THTL, F16Params
 from jaxfdi.models.f16.linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, LinearF16, submodel
 from jaxfdi.models.f16.plant import FlightView

@@ -1,5 +1,5 @@
 """Hybrid FDI: the parity space, and analytic redundancy from a filter restarted on demand
-(Park, Kim, Park & Roh 2004, Sec. 2.2), as a ``loop.FDI`` stage.
+(Park, Kim, Park & Roh 2004, Sec. 2.2), as an ``FDI`` stage of the loop (``jaxfdi.stages``).
 
 At every step ``k`` (``observe``, before the controller):
 
@@ -34,9 +34,9 @@ decision the selection obeys (``"verified"``: the hybrid's, verified; ``"hybrid"
 it is an array in the state, so one compiled flight serves every mode, and every
 decision is always reported.
 
-The history the filter replays is a ``loop.RingBuffer`` of the last ``L`` steps
+The history the filter replays is a ``filters.history.RingBuffer`` of the last ``L`` steps
 (channels, filter inputs, the least-squares estimate) in the FDI's own state, and the
-replay is ``loop.replay_filter``: bounded, inside the scan, so the whole hybrid runs
+replay is ``filters.history.replay_filter``: bounded, inside the scan, so the whole hybrid runs
 vmapped over Monte Carlo flights. Under ``vmap`` a ``lax.cond`` on a per-flight
 predicate computes both branches; with ``batch_axis`` (the name of the ``vmap`` axis:
 ``jax.vmap(..., axis_name=...)``, e.g. inside ``monte_carlo(..., batched=True)``) the
@@ -60,6 +60,8 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.detection.chi2 import Decision, chi2_threshold
 from jaxfdi.detection.parity import ParitySpace, parity_tests
+from jaxfdi.filters.history import ordered, push, replay_filter, ring_buffer
+from jaxfdi.stages import FDI
 
 #: ``follow`` names and their codes
 FOLLOW = {"none": 0, "psa": 1, "hybrid": 2, "verified": 3}
@@ -155,7 +157,7 @@ class HybridPSAState(NamedTuple):
     """The FDI's state in the scan carry (``hybrid_psa_init``).
 
     Attributes:
-      history: loop.RingBuffer of HistoryEntry, the last L steps
+      history: filters.history.RingBuffer of HistoryEntry, the last L steps
       current: what ``observe`` found at the current step
       decision: the latched decision of the run
       follow: () int, FOLLOW code
@@ -252,8 +254,6 @@ def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: 
     restarts that many steps before the decision; Park et al. 2004: 2-3), no decision.
     ``input_example``: an array shaped like the filter's input (nu,). ``follow``: a name
     of ``FOLLOW`` or its code (an array, for one compiled flight of every mode)."""
-    from jaxfdi.loop import ring_buffer
-
     restart_lag = _checks.check_int("restart_lag", restart_lag, 1, meaning="a number of steps >= 1")
     if isinstance(follow, str):
         _checks.check_choice("follow", follow, list(FOLLOW))
@@ -284,7 +284,7 @@ def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, val
       filt: a Gaussian ``Filter`` (state x (n,), measurement all m channels, NaN = not used).
       config: ``hybrid_psa_config(...)``.
       entries, valid: the history oldest first, (L, ...), and which entries are stored
-        (``loop.ordered``): the restart point is ``entries[0]``, the least-squares
+        (``filters.history.ordered``): the restart point is ``entries[0]``, the least-squares
         estimate of that step with covariance ``config.restart_cov``.
       channels: (m,) the current step's channels.
       trusted: (m,) bool, the channels the filter may use.
@@ -293,8 +293,6 @@ def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, val
       ``(norms (G,), residual (m,), mean (n,), healthy ())``: ``||r_g||`` per group,
       ``r = m - H x_hat[k|k]``, the filtered state and whether every step stayed healthy.
     """
-    from jaxfdi.loop import replay_filter
-
     # the restart point is the prior of its own step with nothing measured (every channel
     # NaN: the update leaves it as it is), so one scan does every prediction
     restart = filt.init(entries.estimate[0], config.restart_cov)
@@ -310,7 +308,7 @@ def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, val
 def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[[Array], Array],
                    filter_input: Callable[[Array, Array], Array], view: Callable[[Array, Array], Any],
                    batch_axis: str | None = None):
-    """The hybrid FDI as a ``loop.FDI(step, observe)`` (module doc); its state is
+    """The hybrid FDI as an ``FDI(step, observe)`` (module doc); its state is
     ``hybrid_psa_init(config, ...)``.
 
     Args:
@@ -324,8 +322,6 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
         least-squares state of the channels the decision left.
       batch_axis: name of the ``vmap`` axis of a batch of runs, or ``None`` (module doc).
     """
-    from jaxfdi.loop import FDI, ordered, push
-
     for name, fn in (("channels", channels), ("filter_input", filter_input), ("view", view)):
         _checks.check_callable(name, fn)
     if not all(callable(getattr(analytic_filter, f, None)) for f in ("init", "update", "predict")):

@@ -39,6 +39,7 @@ import optax
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi.detection.chi2 import chi2_threshold
 
 
 class Isolability(NamedTuple):
@@ -172,8 +173,6 @@ def isolation_surrogate(H: Array, groups: Array, sigma: float, fault_to_noise: f
     """Smooth Monte Carlo rate of "detected, and PSA alone picks the faulty sensor" (module
     doc): common random numbers from ``key``, faults of RMS ``fault_to_noise * sigma`` per
     axis, detection ``FD > sigma^2 chi2_isf(q, pfa)`` smoothed over one unit of ``FD / sigma^2``."""
-    from jaxfdi.detection.chi2 import chi2_threshold
-
     S = groups.shape[0]
     _, sensor, statistic, fi = _draws(H, groups, sigma, fault_to_noise, key, samples)
     q = H.shape[0] - H.shape[1]
@@ -199,8 +198,6 @@ def isolation_rate(H: Array, groups: Array, sigma: float, fault_to_noise: float,
                    samples: int = 100_000, pfa: float = 1e-6) -> Array:
     """The hard Monte Carlo rate of the same kind of draws: detected (``FD > T_D``) and
     ``argmax FI`` is the faulty sensor."""
-    from jaxfdi.detection.chi2 import chi2_threshold
-
     _, sensor, statistic, fi = _draws(H, groups, sigma, fault_to_noise, key, samples)
     q = H.shape[0] - H.shape[1]
     detected = statistic > chi2_threshold(q, jnp.asarray(pfa, H.dtype))

@@ -29,7 +29,7 @@ from jaxfdi.gnss.orbits import OrbitTable, satellite_position, select_orbits
 from jaxfdi.gnss.positioning import Dops, PositionFix, dops, solve_position, transmit_states
 from jaxfdi.gnss.protection import ProtectionLevels, protection_levels
 from jaxfdi.gnss.raim import ParityCheck, RaimTables, parity_check, whitened
-from jaxfdi.loop import FDI
+from jaxfdi.stages import FDI
 
 #: Gauss-Newton steps of the re-solve without the excluded satellite (from the full fix)
 EXCLUSION_ITERATIONS = 3

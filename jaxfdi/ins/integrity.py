@@ -51,7 +51,7 @@ from jaxfdi.ins import imu
 from jaxfdi.ins.loosely_coupled import GpsFix, InsState
 from jaxfdi.ins.mechanization import NavState
 from jaxfdi.ins.scst import ScstState, StateChi2Test
-from jaxfdi.loop import FDI
+from jaxfdi.stages import FDI
 
 
 #: the IMU health test: samples per window, false-alarm probability per window and channel

@@ -40,7 +40,7 @@ from jaxfdi.ins import imu
 from jaxfdi.ins.imu import ImuErrors, ImuModel
 from jaxfdi.ins.mechanization import NavState
 from jaxfdi.ins.trajectory import Trajectory
-from jaxfdi.loop import Plant
+from jaxfdi.stages import Plant
 from jaxfdi.simulate import SimState
 
 IMU_CHANNELS = 6

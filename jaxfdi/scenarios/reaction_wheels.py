@@ -96,7 +96,8 @@ from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, no_fault
 from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.ukf import unscented_kalman_filter
-from jaxfdi.loop import FDI, combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
+from jaxfdi.loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
+from jaxfdi.stages import FDI
 from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, rate_text, unhealthy_warning
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.study import Structure, Study, run_study

@@ -57,7 +57,8 @@ from jaxfdi.faults import Fault, FaultKind
 from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters.tskf import FaultDirection, sensor_matrix, two_stage_kalman_filter
 from jaxfdi.filters.unknown_input import unknown_input_filter
-from jaxfdi.loop import FDI, run_loop
+from jaxfdi.loop import run_loop
+from jaxfdi.stages import FDI
 from jaxfdi.models.linear import LinearGaussianModel
 from jaxfdi.simulate import Simulator, simulator
 

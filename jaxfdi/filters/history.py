@@ -1,0 +1,72 @@
+"""A bounded history of a filter's inputs and its replay: a fixed-size ring buffer of the
+last ``L`` steps that lives in a scan carry, and a fixed-length scan that re-runs a filter
+over it (a detector that restarts its estimator a few steps before a detection, e.g. the
+hybrid parity-space FDI of Park et al. 2004). Bounded, so ``jit``/``vmap`` friendly.
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+
+
+class RingBuffer(NamedTuple):
+    """The last ``L`` entries of a stream, fixed-size (a pytree: lives in a scan carry).
+
+    Attributes:
+      data: pytree, leaves (L, ...)
+      count: () int, entries pushed so far
+    """
+
+    data: Any
+    count: Array
+
+    @property
+    def length(self) -> int:
+        return jax.tree_util.tree_leaves(self.data)[0].shape[0]
+
+
+def ring_buffer(length: int, example: Any) -> RingBuffer:
+    """An empty buffer of ``length`` entries shaped like ``example``."""
+    length = _checks.check_int("length", length, 1, meaning="a positive number of entries")
+    data = jax.tree_util.tree_map(lambda leaf: jnp.zeros((int(length),) + jnp.shape(leaf), jnp.result_type(leaf)),
+                                  example)
+    return RingBuffer(data, jnp.zeros((), jnp.int32))
+
+
+def push(buffer: RingBuffer, entry: Any) -> RingBuffer:
+    """Append ``entry``, overwriting the oldest once full."""
+    slot = buffer.count % buffer.length
+    data = jax.tree_util.tree_map(lambda store, leaf: store.at[slot].set(leaf), buffer.data, entry)
+    return RingBuffer(data, buffer.count + 1)
+
+
+def ordered(buffer: RingBuffer) -> tuple[Any, Array]:
+    """``(entries, valid)``: the stored entries oldest first, (L, ...), and which of the L
+    slots hold an entry ((L,) bool; fewer than L before the buffer first fills)."""
+    L = buffer.length
+    start = jnp.where(buffer.count >= L, buffer.count % L, 0)
+    index = (start + jnp.arange(L)) % L
+    entries = jax.tree_util.tree_map(lambda store: store[index], buffer.data)
+    return entries, jnp.arange(L) < jnp.minimum(buffer.count, L)
+
+
+def replay_filter(filt, state: Any, ys: Array, us: Array, valid: Array | None = None) -> tuple[Any, Any]:
+    """Re-run ``filt`` from ``state`` (the prior of the first entry) over (L, ...) stored
+    ``ys``, ``us``; steps with ``valid == False`` leave the state unchanged. Returns the
+    final state and the (L, ...) infos (a fixed-length scan: jit/vmap friendly)."""
+    ys, us = jnp.asarray(ys), jnp.asarray(us)
+    _checks.check_same_length(("ys", "us"), ys, us)
+    valid = jnp.ones((ys.shape[0],), bool) if valid is None else jnp.asarray(valid, bool)
+    _checks.check_shape("valid", valid, (ys.shape[0],), "one flag per stored step")
+
+    def body(s, entry):
+        y, u, ok = entry
+        new, info = filt.step(s, y, u)
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, s), info
+
+    return jax.lax.scan(body, state, (ys, us, valid))

@@ -1,0 +1,48 @@
+"""The shapes of the closed loop's stages (``loop.run_loop``): a plant, an FDI stage, a
+controller, and a scorer that folds metrics over a run. Types only, at the bottom of the
+package, so that every layer can build a stage without importing the loop.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+from jax import Array
+
+
+class Plant(NamedTuple):
+    """``init(x0) -> state``; ``measure(state, k, u, step_key) -> (state, sensed)``;
+    ``advance(state, k, u, step_key) -> (state, moved)``, with ``step_key = fold_in(key, k)``
+    (the loop folds the run's key once per step). ``Simulator`` has these fields."""
+
+    init: Callable[[Array], Any]
+    measure: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
+    advance: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
+
+
+class FDI(NamedTuple):
+    """``step(state, k, y, u) -> (state, output)``; optional ``observe(state, k, y) ->
+    (state, view)`` runs before the controller (``None``: the controller sees ``y``)."""
+
+    step: Callable[[Any, Array, Any, Array], tuple[Any, Any]]
+    observe: Callable[[Any, Array, Any], tuple[Any, Any]] | None = None
+
+
+class Controller(NamedTuple):
+    """``init() -> state``; ``step(state, k, view, exogenous) -> (state, u)``.
+
+    ``feedforward=True``: ``u`` does not depend on ``view`` (it is called with ``None``
+    before the sensors read), so the sensors' feed-through sees this step's ``u``."""
+
+    init: Callable[[], Any]
+    step: Callable[[Any, Array, Any, Any], tuple[Any, Array]]
+    feedforward: bool = False
+
+
+class Scorer(NamedTuple):
+    """Metrics folded over a run: ``init(example) -> score``, where ``example()`` gives the
+    FDI output's structure (``jax.ShapeDtypeStruct`` leaves; it traces one step, so call
+    it only when the score's shape depends on the output); ``update(score, k, output)
+    -> score``."""
+
+    init: Callable[[Any], Any]
+    update: Callable[[Any, Array, Any], Any]

@@ -61,7 +61,7 @@ from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomi
 
 from jaxfdi import _linalg  # noqa: E402
 from jaxfdi.detection.credits import hypothesis_credits  # noqa: E402
-from jaxfdi.detection.dual_filter import dual_filter  # noqa: E402
+from jaxfdi.detection._dual_filter import dual_filter  # noqa: E402
 from jaxfdi.filters._base import Filter, run_filter  # noqa: E402
 from jaxfdi.filters.mm import multiple_model  # noqa: E402
 from jaxfdi.models.reaction_wheels import (  # noqa: E402

@@ -163,7 +163,7 @@ def _mc_study(T: int):
         sim = jaxfdi.linear_simulator(model, jaxfdi.fault("bias", "sensor", 3, onset, size))
         kf = jaxfdi.kalman_filter(model)
         detector = jaxfdi.chi2_detector(threshold, 4)
-        return jaxfdi.monitor.monitor(sim, kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q * 10.0), us, key,
+        return jaxfdi.monitor(sim, kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q * 10.0), us, key,
                                       onset).record
 
     return run_one

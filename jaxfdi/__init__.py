@@ -69,8 +69,8 @@ from jaxfdi.metrics import (  # noqa: E402
 )
 from jaxfdi.montecarlo import monte_carlo  # noqa: E402
 from jaxfdi.riccati import solve_discrete_are, steady_state_kalman  # noqa: E402
-from jaxfdi.monitor import MonitorHistory, MonitorResult, monitor, replay_detector  # noqa: E402
-from jaxfdi.simulate import SimStep, Simulator, linear_simulator, simulate, simulator  # noqa: E402
+from jaxfdi._monitor import MonitorHistory, MonitorResult, monitor, replay_detector  # noqa: E402
+from jaxfdi._simulate import SimStep, Simulator, linear_simulator, simulate, simulator  # noqa: E402
 
 
 _LAZY_SUBMODULES = ("control", "tuning", "streaming", "distributed", "plotting")
@@ -89,13 +89,6 @@ def __getattr__(name: str):
 def __dir__():
     return sorted(set(globals()) | set(_LAZY_SUBMODULES))
 
-
-# ``jaxfdi.monitor`` and ``jaxfdi.simulate`` are the modules (``import jaxfdi.monitor as m``);
-# the functions are ``jaxfdi.monitor.monitor`` and ``jaxfdi.simulate.simulate``. Calling the
-# module, the old ``jaxfdi.monitor(...)``, still works with a DeprecationWarning (_shadow).
-from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
-
-_unshadow(__name__, "monitor", "simulate")
 
 __all__ = [
     # filters and models

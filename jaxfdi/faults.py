@@ -176,8 +176,9 @@ def fault_group(kind, target, components, onset, magnitudes, slopes=0.0, end=NEV
         raise ValueError(f"components: expected shape (G,) with G >= 1, got {tuple(components.shape)}")
     size = components.shape[0]
     for name, value in (("magnitudes", magnitudes), ("slopes", slopes)):
-        if jnp.ndim(value) not in (0, 1) or (jnp.ndim(value) == 1 and jnp.shape(value)[0] != size):
-            raise ValueError(f"{name}: expected a scalar or shape ({size},) like components, got {jnp.shape(value)}")
+        shape = _checks.shape_of(value)
+        if len(shape) not in (0, 1) or (len(shape) == 1 and shape[0] != size):
+            raise ValueError(f"{name}: expected a scalar or shape ({size},) like components, got {shape}")
     entries = [
         fault(kind, target, components[g], onset, jnp.broadcast_to(jnp.asarray(magnitudes), (size,))[g],
               jnp.broadcast_to(jnp.asarray(slopes), (size,))[g], end, label)

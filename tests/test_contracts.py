@@ -272,7 +272,7 @@ def _dual_field(x, u, model):
 
 
 def _dual_build(theta, dtype):
-    from jaxfdi.detection.dual_filter import dual_filter
+    from jaxfdi.detection._dual_filter import dual_filter
 
     model, _, _ = _linear_problem()
     scaled = _cast(model, dtype)

@@ -30,7 +30,7 @@ from jaxfdi.detection.known_change import known_change_detector
 from jaxfdi.faults import fault
 from jaxfdi.models import engine_model
 from jaxfdi.riccati import steady_state_kalman
-from jaxfdi.simulate import simulate
+from jaxfdi import simulate
 
 T, ONSET, WINDOW, BURST = 120, 60, 10, slice(20, 25)
 

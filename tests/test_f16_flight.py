@@ -14,7 +14,7 @@ import scipy.linalg
 from jaxfdi.control.flight import LATERAL_TRACKED, LONGITUDINAL_TRACKED, flight_plan
 from jaxfdi.control.lqr import integral_augmentation
 from jaxfdi.models.f16.dynamics import ALPHA, BETA, H, PHI, Q, THETA, VT
-from jaxfdi.models.f16.linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, longitudinal, submodel
+from jaxfdi.models.f16._linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, longitudinal, submodel
 from jaxfdi.models.f16.plant import f16_sensors
 from jaxfdi.scenarios.f16_flight import ERRORS, cast_setup, dispersions, flight_setup, nominal_dispersion, run_flights
 

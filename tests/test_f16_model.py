@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from jaxfdi.models.f16.aero import table_coefficients
 from jaxfdi.models.f16.dynamics import aero_coefficients, f16_dynamics, f16_params, saturate
-from jaxfdi.models.f16.linearize import flight_modes, linearize, longitudinal
+from jaxfdi.models.f16._linearize import flight_modes, linearize, longitudinal
 from jaxfdi.models.f16.engine import power_rate, throttle_gearing, thrust
 from jaxfdi.models.f16.morelli import polynomial_coefficients
 from jaxfdi.models.f16.tables import lookup1, lookup2, stevens_lewis_data, table_arrays
@@ -305,7 +305,7 @@ def test_modes_at_the_books_trims():
     period is an oscillation; at 0.35 the two fastest roots are real, -1.91 and +0.098
     1/s, the unstable one mostly pitch attitude and airspeed; at 0.38 the divergence is
     faster (+0.66 1/s); the lateral modes are alike at all three."""
-    from jaxfdi.models.f16.trim import level_flight, trim_batch
+    from jaxfdi.models.f16._trim import level_flight, trim_batch
 
     p = f16_params()
     xcgs = jnp.array([0.30, 0.35, 0.38, 0.33])  # four, as the flight's trims: one compiled solve for both

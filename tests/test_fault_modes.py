@@ -8,7 +8,7 @@ import pytest
 from jaxfdi.faults import FaultKind, Target, fault
 from jaxfdi.filters import kalman_filter, run_filter
 from jaxfdi.models import bias_mode_initial_state, bias_modes, engine_model, noise_inflation_modes
-from jaxfdi.simulate import linear_simulator, simulate
+from jaxfdi import linear_simulator, simulate
 
 
 @pytest.fixture(scope="module")

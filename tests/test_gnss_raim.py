@@ -19,7 +19,7 @@ from jaxfdi.gnss import (ecef_to_ned, elevation_sigma, ephemeris_table, geodetic
                          transmission_geometry)
 from jaxfdi.gnss.orbits import SPEED_OF_LIGHT
 from jaxfdi.gnss.positioning import PositionFix, dops
-from jaxfdi.simulate import simulate
+from jaxfdi import simulate
 from jaxfdi import faults
 
 N = 2048                      # epochs per batched call (one compiled program for every test)

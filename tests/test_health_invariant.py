@@ -29,7 +29,7 @@ import pytest
 
 import jaxfdi
 from jaxfdi.filters import tskf
-from jaxfdi.filters.time_varying import model_at, time_varying
+from jaxfdi.filters._time_varying import model_at, time_varying
 from jaxfdi.filters.unknown_input import unknown_input_filter
 
 N, M, NU, T = 3, 2, 1, 10

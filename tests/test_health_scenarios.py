@@ -97,7 +97,7 @@ def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     from jaxfdi.filters.kalman import kalman_filter
     from jaxfdi.metrics import fault_row
     from jaxfdi.models.fault_modes import noise_inflation_modes
-    from jaxfdi.monitor import replay_detector
+    from jaxfdi._monitor import replay_detector
     from jaxfdi.faults import sensor_labels
     from jaxfdi.scenarios.engine import PAPER_TRANSITION
 

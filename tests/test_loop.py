@@ -16,7 +16,7 @@ from jaxfdi.filters import history
 from jaxfdi.filters import model_at, time_varying
 from jaxfdi.models import engine_model
 from jaxfdi.models.linear import LinearGaussianModel
-from jaxfdi.monitor import filter_detector
+from jaxfdi._monitor import filter_detector
 
 T = 60
 ONSET = 30

@@ -27,7 +27,7 @@ from jaxfdi import control, detection, loop, metrics, models, tuning
 from jaxfdi.filters import history
 from jaxfdi.filters import tskf
 from jaxfdi.models.vtol import vtol_model, vtol_true_plant
-from jaxfdi.monitor import filter_detector
+from jaxfdi._monitor import filter_detector
 from jaxfdi.scenarios.engine import engine_study
 from jaxfdi.scenarios.engine_chi2 import engine_chi2_study
 from jaxfdi.scenarios.engine_chi2_tuning import tune_engine_chi2
@@ -615,7 +615,7 @@ CASES = {
 def _f16():
     import types
 
-    from jaxfdi.models.f16 import dynamics, trim
+    from jaxfdi.models.f16 import dynamics, _trim as trim
     return types.SimpleNamespace(dynamics=dynamics, trim=trim)
 
 
@@ -643,7 +643,7 @@ def _f16p():
 
 
 def _f16lin():
-    from jaxfdi.models.f16 import linearize
+    from jaxfdi.models.f16 import _linearize as linearize
     return linearize
 
 

@@ -164,7 +164,7 @@ def nan_run():
     NaN measurement on sensor 2 at step 20 (a one-step dead sensor), with its history."""
     from jaxfdi.faults import fault
     from jaxfdi.models import engine_model
-    from jaxfdi.monitor import monitor
+    from jaxfdi import monitor
     from jaxfdi.faults import sensor_labels
 
     model = engine_model()

@@ -11,7 +11,6 @@ import subprocess
 import sys
 import textwrap
 import types
-import warnings
 
 import jax
 import jaxlib
@@ -107,42 +106,33 @@ def test_version_option():
     assert proc.returncode == 0 and proc.stdout.strip() == f"jaxfdi {jaxfdi.__version__}"
 
 
-# --- module names that no function shadows -------------------------------------------------
+# --- a function and its module never share a name ------------------------------------------
 
-SHADOWED = [("jaxfdi", "monitor"), ("jaxfdi", "simulate"), ("jaxfdi.filters", "time_varying"),
-            ("jaxfdi.detection", "dual_filter"), ("jaxfdi.models.f16", "linearize"), ("jaxfdi.models.f16", "trim")]
+FUNCTIONS = [("jaxfdi", "monitor"), ("jaxfdi", "simulate"), ("jaxfdi.filters", "time_varying"),
+             ("jaxfdi.detection", "dual_filter"), ("jaxfdi.models.f16", "linearize"), ("jaxfdi.models.f16", "trim")]
 
 
-@pytest.mark.parametrize("package,name", SHADOWED)
-def test_module_attribute_is_the_module_and_the_function_keeps_its_path(package, name):
+@pytest.mark.parametrize("package,name", FUNCTIONS)
+def test_the_package_attribute_is_the_function_and_its_module_is_private(package, name):
+    """``jaxfdi.monitor`` is the function; its module is ``jaxfdi._monitor``, so no module
+    is shadowed by a function of its name and nothing needs a callable module."""
     import importlib
 
-    module = importlib.import_module(f"{package}.{name}")
-    assert isinstance(module, types.ModuleType) and module.__name__ == f"{package}.{name}"
-    assert getattr(importlib.import_module(package), name) is module
-    function = getattr(module, name)
-    assert inspect.isfunction(function) and function.__module__ == module.__name__
+    function = getattr(importlib.import_module(package), name)
+    assert inspect.isfunction(function) and function.__module__ == f"{package}._{name}"
+    module = importlib.import_module(f"{package}._{name}")
+    assert type(module) is types.ModuleType and getattr(module, name) is function
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module(f"{package}.{name}")
 
 
-def test_import_as_gives_the_module_and_calling_it_is_deprecated():
-    import jax.numpy as jnp
+def test_no_module_of_the_package_is_callable():
+    import importlib
+    import pkgutil
 
-    import jaxfdi.monitor as m
-    import jaxfdi.simulate as s
-    from jaxfdi.monitor import monitor
-    from jaxfdi.simulate import simulate
-
-    assert isinstance(m, types.ModuleType) and isinstance(s, types.ModuleType)
-    assert m.monitor is monitor and s.simulate is simulate
-    model = jaxfdi.linear_gaussian_model(jnp.eye(1) * 0.9, jnp.eye(1), 0.01 * jnp.eye(1), 0.01 * jnp.eye(1))
-    args = (jaxfdi.linear_simulator(model), jnp.ones(1), jnp.zeros((4, 0)), jax.random.key(0))
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        old = jaxfdi.simulate(*args)
-    assert [w.category for w in caught] == [DeprecationWarning]
-    assert "jaxfdi.simulate.simulate" in str(caught[0].message)
-    new = simulate(*args)
-    np.testing.assert_array_equal(old[1].measurement, new[1].measurement)
+    modules = [importlib.import_module(info.name) for info in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi.")
+               if not info.name.endswith("__main__")]
+    assert [m.__name__ for m in modules if type(m) is not types.ModuleType or callable(m)] == []
 
 
 def test_no_module_is_shadowed_by_a_name_of_its_package():

@@ -24,7 +24,7 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 import jaxfdi
 from jaxfdi.control.attitude import allocate_wheel_torques, slew, slew_reference
 from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
-from jaxfdi.detection.dual_filter import dual_filter, system_matrix_det
+from jaxfdi.detection._dual_filter import dual_filter, system_matrix_det
 from jaxfdi.faults import no_fault
 from jaxfdi.models.reaction_wheels import (
     body_rate_field,

@@ -5,7 +5,7 @@ gusts and faults, and the fault-free FDI stage that gives the flight controller 
 ``f16_plant`` moves the state ``[x (13), w_g, v_g]`` of ``models.f16.plant`` one sample
 ``dt`` at a time (``sampled_transition``) and measures ``y`` (``sampled_observation``) with
 white Gaussian noise (``measurement_cov``); faults act on ``y`` and ``u`` as in
-``jaxfdi.simulate.simulator``. ``rate_passthrough_fdi`` flies the controller on the
+``jaxfdi._simulate.simulator``. ``rate_passthrough_fdi`` flies the controller on the
 least-squares rate ``(H^T H)^-1 H^T m`` of all rate channels; an FDI stage that isolates a
 faulty sensor (the parity space + UKF of Park et al. 2004) returns the same view with its
 own selected rate instead.
@@ -30,7 +30,7 @@ from jaxfdi.models.f16.plant import (
     sampled_observation,
     sampled_transition,
 )
-from jaxfdi.simulate import Actuated, Sensed, SimState, check_fault_components
+from jaxfdi._simulate import Actuated, Sensed, SimState, check_fault_components
 
 
 def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, substeps: int = 1, gust_sigma: float = 0.0,

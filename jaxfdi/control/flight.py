@@ -51,9 +51,9 @@ from jaxfdi import _checks
 from jaxfdi.control.lqr import lqr_pi
 from jaxfdi.stages import Controller
 from jaxfdi.models.f16.dynamics import AIL, ALPHA, EL, H, P, PHI, Q, RDR, THETA, THTL, F16Params
-from jaxfdi.models.f16.linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, LinearF16, submodel
+from jaxfdi.models.f16._linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, LinearF16, submodel
 from jaxfdi.models.f16.plant import FlightView
-from jaxfdi.models.f16.trim import TrimResult, climb, coordinated_turn, level_flight, pull_up, trim_batch
+from jaxfdi.models.f16._trim import TrimResult, climb, coordinated_turn, level_flight, pull_up, trim_batch
 from jaxfdi.models.linear import c2d
 
 #: tracked outputs of each axis (indices into its design states)

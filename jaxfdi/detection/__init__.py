@@ -10,7 +10,7 @@ from jaxfdi.detection.chi2 import (
     normalized_innovation_squared,
 )
 from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
-from jaxfdi.detection.dual_filter import DualFilterInfo, DualFilterState, dual_filter, system_matrix_det
+from jaxfdi.detection._dual_filter import DualFilterInfo, DualFilterState, dual_filter, system_matrix_det
 from jaxfdi.detection.frozen import frozen_channel_detector, frozen_threshold
 from jaxfdi.detection.glrt import (
     PAPER_USED_THRESHOLD,
@@ -83,11 +83,6 @@ __all__ = [
     "scale_to_run_false_alarm",
 ]
 
-# ``jaxfdi.detection.dual_filter`` is the module; its function is
-# ``jaxfdi.detection.dual_filter.dual_filter`` (calling the module still works, deprecated)
-from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
-
-_unshadow(__name__, "dual_filter")
 
 # Park et al. (2004): parity space of redundant sensor groups, the hybrid PSA + on-demand filter FDI,
 # and the sensor arrangement by gradient

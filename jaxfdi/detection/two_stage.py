@@ -34,7 +34,7 @@ from jax import Array
 
 from jaxfdi.detection.chi2 import Decision, chi2_detector, flag_dead
 from jaxfdi.detection.credits import credit_isolator
-from jaxfdi.detection.dual_filter import DualFilterState, dual_filter
+from jaxfdi.detection._dual_filter import DualFilterState, dual_filter
 from jaxfdi.detection.mode_probability import mode_probability_detector
 from jaxfdi.filters._base import Filter, GaussianState
 from jaxfdi.filters.mm import multiple_model

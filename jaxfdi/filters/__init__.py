@@ -25,7 +25,7 @@ from jaxfdi.filters.tskf import (
 from jaxfdi.filters.sqrt_kalman import SqrtGaussianState, sqrt_kalman_filter
 from jaxfdi.filters.sqrt_ukf import sqrt_unscented_kalman_filter
 from jaxfdi.filters.smoother import SmootherResult, parallel_rts_smoother, rts_smoother
-from jaxfdi.filters.time_varying import TimedState, model_at, time_varying
+from jaxfdi.filters._time_varying import TimedState, model_at, time_varying
 from jaxfdi.filters.ukf import unscented_kalman_filter
 from jaxfdi.filters.unknown_input import unknown_input_filter
 
@@ -64,9 +64,3 @@ __all__ = [
     "model_at",
     "TimedState",
 ]
-
-# ``jaxfdi.filters.time_varying`` is the module; its function is
-# ``jaxfdi.filters.time_varying.time_varying`` (calling the module still works, deprecated)
-from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
-
-_unshadow(__name__, "time_varying")

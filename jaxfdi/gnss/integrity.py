@@ -127,7 +127,7 @@ def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables:
         return monitor_epoch(orbit, available, t, rho, tables, sig if sigma is not None and not callable(sigma)
                              else sigma, operation, exclude)
 
-    sig = jnp.zeros(jnp.shape(pseudoranges)) if sigma is None or callable(sigma) else jnp.asarray(sigma)
+    sig = jnp.zeros(_checks.shape_of(pseudoranges)) if sigma is None or callable(sigma) else jnp.asarray(sigma)
     args = (jnp.asarray(times), jnp.asarray(pseudoranges), sig)
     if batch_size is None:
         return jax.vmap(one)(*args)

@@ -43,7 +43,7 @@ from jaxfdi import _checks
 from jaxfdi.faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
 from jaxfdi.gnss.frames import ecef_to_ned, elevation_azimuth, line_of_sight_ned
 from jaxfdi.gnss.orbits import SPEED_OF_LIGHT, OrbitTable, satellite_position, select_orbits, transmission_geometry
-from jaxfdi.simulate import Actuated, Sensed, SimState, SimStep, Simulator, check_fault_components
+from jaxfdi._simulate import Actuated, Sensed, SimState, SimStep, Simulator, check_fault_components
 
 
 class Wall(NamedTuple):

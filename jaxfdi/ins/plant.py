@@ -41,7 +41,7 @@ from jaxfdi.ins.imu import ImuErrors, ImuModel
 from jaxfdi.ins.mechanization import NavState
 from jaxfdi.ins.trajectory import Trajectory
 from jaxfdi.stages import Plant
-from jaxfdi.simulate import SimState
+from jaxfdi._simulate import SimState
 
 IMU_CHANNELS = 6
 

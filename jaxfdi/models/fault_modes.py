@@ -39,7 +39,7 @@ def _per_component(name: str, value, size: int, dtype, positive: bool = False) -
         bound = "> 0" if positive else ">= 0"
         raise ValueError(f"{name}: expected values {bound} (a variance factor or a standard deviation), got "
                          f"{_checks.received(concrete)}")
-    value = jnp.broadcast_to(jnp.asarray(value, dtype), (size,)) if jnp.ndim(value) == 0 else jnp.asarray(value, dtype)
+    value = jnp.broadcast_to(jnp.asarray(value, dtype), (size,)) if np.ndim(value) == 0 else jnp.asarray(value, dtype)
     _checks.check_shape(name, value, (size,), "one value per component, or a scalar")
     return value
 

@@ -53,13 +53,13 @@ from jaxfdi.metrics import DetectionRecord, fault_row, rate_text, unhealthy_rows
 from jaxfdi.models.engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.filters import run_filter
-from jaxfdi.monitor import monitor, replay_detector
+from jaxfdi._monitor import monitor, replay_detector
 from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.plotting import save_figure
 from jaxfdi.progress import logger
 from jaxfdi.riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
-from jaxfdi.simulate import linear_simulator, simulate
+from jaxfdi._simulate import linear_simulator, simulate
 from jaxfdi.study import Structure, Study, run_study
 from jaxfdi.tuning.train import fixed_batches
 

@@ -27,9 +27,9 @@ from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.metrics import DetectionRecord, fault_row, rate_text, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models.engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
-from jaxfdi.monitor import MonitorHistory, monitor
+from jaxfdi._monitor import MonitorHistory, monitor
 from jaxfdi.plotting import save_figure
-from jaxfdi.simulate import linear_simulator
+from jaxfdi._simulate import linear_simulator
 from jaxfdi.study import Structure, Study, run_study
 
 FUEL_STEP = 0.01  # kg/s

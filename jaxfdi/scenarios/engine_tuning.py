@@ -52,7 +52,7 @@ from jaxfdi.filters.kalman import kalman_filter
 from jaxfdi.models.engine import engine_model
 from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.metrics import DetectionRecord, unhealthy_rows_warning
-from jaxfdi.monitor import replay_detector
+from jaxfdi._monitor import replay_detector
 from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.scenarios._common import check_study
 from jaxfdi.scenarios.engine import (

@@ -60,7 +60,13 @@ from jaxfdi.models.f16 import book
 from jaxfdi.models.f16.dynamics import (
     ALPHA, BETA, CONTROL_NAMES, H, P, PHI, Q, R, STATE_NAMES, THETA, VT, F16Params, f16_params,
 )
-from jaxfdi.models.f16.linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, flight_modes, linearize, submodel
+from jaxfdi.models.f16._linearize import (
+    LATERAL_STATES,
+    LONGITUDINAL_DESIGN_STATES,
+    flight_modes,
+    linearize,
+    submodel,
+)
 from jaxfdi.models.f16.plant import F16Sensors, f16_sensors
 from jaxfdi.models.linear import c2d
 from jaxfdi.plotting import save_figure

@@ -60,7 +60,7 @@ from jaxfdi.filters.unknown_input import unknown_input_filter
 from jaxfdi.loop import run_loop
 from jaxfdi.stages import FDI
 from jaxfdi.models.linear import LinearGaussianModel
-from jaxfdi.simulate import Simulator, simulator
+from jaxfdi._simulate import Simulator, simulator
 
 
 class LoopDesign(NamedTuple):

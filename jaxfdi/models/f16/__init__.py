@@ -21,7 +21,7 @@ from jaxfdi.models.f16.dynamics import (
     saturate,
 )
 from jaxfdi.models.f16.engine import power_rate, throttle_gearing, thrust
-from jaxfdi.models.f16.linearize import (
+from jaxfdi.models.f16._linearize import (
     LinearF16,
     Mode,
     flight_modes,
@@ -53,7 +53,7 @@ from jaxfdi.models.f16.tables import (
     lookup2,
     table_arrays,
 )
-from jaxfdi.models.f16.trim import (
+from jaxfdi.models.f16._trim import (
     TrimCondition,
     TrimResult,
     climb,
@@ -77,11 +77,6 @@ __all__ = [
     "pull_up", "trim", "trim_batch", "trim_condition",
 ]
 
-# ``linearize`` and ``trim`` name the modules; their functions are ``linearize.linearize``
-# and ``trim.trim`` (calling the module still works, deprecated)
-from jaxfdi._shadow import unshadow as _unshadow  # noqa: E402
-
-_unshadow(__name__, "linearize", "trim")
 
 # the UKF process model of Park et al. (2004): the body rates alone (moment equations 34-36)
 from jaxfdi.models.f16.dynamics import moment_equations  # noqa: E402

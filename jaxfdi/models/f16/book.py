@@ -18,7 +18,7 @@ import numpy as np
 
 from jaxfdi.models.f16.dynamics import F16Params
 from jaxfdi.models.f16.tables import stevens_lewis_data
-from jaxfdi.models.f16.trim import TrimResult, trim_batch, trim_condition
+from jaxfdi.models.f16._trim import TrimResult, trim_batch, trim_condition
 
 #: where each printed quantity is found: (``"state"`` or ``"control"``, index, to degrees)
 QUANTITIES = {

@@ -20,7 +20,7 @@ from jaxfdi.filters._base import Filter, FilterInfo
 from jaxfdi.loop import detection_scorer, feedforward, run_loop
 from jaxfdi.stages import FDI
 from jaxfdi.metrics import DetectionRecord, record_init, record_update, step_health
-from jaxfdi.simulate import SimStep, Simulator
+from jaxfdi._simulate import SimStep, Simulator
 
 
 class MonitorHistory(NamedTuple):

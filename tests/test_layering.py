@@ -1,0 +1,86 @@
+"""The package's layering, read from the source: every import of a jaxfdi module points down
+the layers (or stays within its own layer), and none hides inside a function.
+
+Layers, lowest first: numerics and I/O <- faults and the stage shapes <- models <- Riccati and simulation <-
+filters <- metrics and Monte Carlo <- studies and streaming <- detection <- the loop <-
+monitor, tracking, tuning <- GNSS, control <- INS <- plotting <- scenarios <- CLI and the
+package's front door.
+"""
+import ast
+import pathlib
+
+import pytest
+
+import jaxfdi
+
+PACKAGE = pathlib.Path(jaxfdi.__file__).parent
+
+#: unit (a package or a top-level module of jaxfdi) -> layer; lower layers never import higher ones
+LAYERS = {
+    "_checks": 0, "_linalg": 0, "_io": 0, "_version": 0, "progress": 0, "data": 0, "distributed": 0,
+    "faults": 1, "optimize": 1, "stages": 1,
+    "models": 2,
+    "riccati": 3, "_simulate": 3,
+    "filters": 4,
+    "metrics": 5, "montecarlo": 5,
+    "study": 6, "streaming": 6,
+    "detection": 7,
+    "loop": 8,
+    "_monitor": 9, "tracking": 9, "tuning": 9,
+    "gnss": 10, "control": 10,
+    "ins": 11,
+    "plotting": 12,
+    "scenarios": 13,
+    "cli": 14, "__init__": 14, "__main__": 14,
+}
+
+
+def _unit(dotted: str) -> str:
+    """``jaxfdi.filters.kalman`` -> ``filters``; ``jaxfdi.loop`` -> ``loop``; ``jaxfdi`` -> ``__init__``."""
+    parts = dotted.split(".")
+    if len(parts) == 1 or not ((PACKAGE / parts[1]).is_dir() or (PACKAGE / f"{parts[1]}.py").exists()):
+        return "__init__"  # the package itself, or a name its __init__ exports
+    return parts[1]
+
+
+def _modules():
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE.parent).with_suffix("")
+        parts = list(rel.parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        yield ".".join(parts), path
+
+
+def _imports(path: pathlib.Path):
+    """(line, imported module, inside a function) for every import of a jaxfdi module."""
+    tree = ast.parse(path.read_text())
+    functions = [node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    inside = {id(n) for f in functions for n in ast.walk(f) if n is not f}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module and node.module.split(".")[0] == "jaxfdi":
+            targets = [node.module] if node.module != "jaxfdi" else [f"jaxfdi.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            targets = [a.name for a in node.names if a.name.split(".")[0] == "jaxfdi"]
+        else:
+            continue
+        for target in targets:
+            yield node.lineno, target, id(node) in inside
+
+
+def test_every_unit_has_a_layer():
+    units = {_unit(name) for name, _ in _modules()}
+    assert units - set(LAYERS) == set(), "give these modules a layer in LAYERS"
+
+
+@pytest.mark.parametrize("name,path", list(_modules()), ids=[name for name, _ in _modules()])
+def test_imports_point_down_the_layers(name, path):
+    source = _unit(name)
+    bad = []
+    for line, target, in_function in _imports(path):
+        unit = _unit(target)
+        if in_function:
+            bad.append(f"line {line}: {target} imported inside a function")
+        elif LAYERS[unit] > LAYERS[source]:
+            bad.append(f"line {line}: {target} (layer {LAYERS[unit]}) from layer {LAYERS[source]}")
+    assert bad == []

@@ -352,55 +352,54 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
                         lambda where: plot_wheels(study, examples, where), elapsed)
 
 
-def _run_f16_flight(args: argparse.Namespace, folder: Path) -> str:
-    start = time.perf_counter()
-    study = f16_flight_study(flights=args.runs, seed=args.seed, progress=not args.quiet)
-    elapsed = time.perf_counter() - start
-    cfg, trim = study.config, study.config["design_trim"]
-    print(f"f16-flight: F-16 of Park et al. (2004) (Stevens & Lewis 2nd-ed. tables), climb {cfg['plan']['climb_rate_ft_s']:.0f} "
-          f"ft/s for 0-5 s, then altitude hold and a {cfg['plan']['bank_angle_deg']:.0f} deg bank turn to "
-          f"{cfg['duration_s']:.0f} s; design trim {trim['airspeed_ft_s']:.0f} ft/s, sea level, xcg {trim['xcg']}; "
-          f"{cfg['flights']} flights, RK4 at {cfg['dt_s']} s")
-    print(study.table())
-    return _write_study(study, args, folder, "f16-flight.json", lambda where: plot_f16_flight(study, where), elapsed)
+def _study_runner(study: Callable, name: str, plot: Callable, header: Callable[[dict, argparse.Namespace], str],
+                  runs: str = "runs") -> Callable[[argparse.Namespace, Path], str]:
+    """A runner for a study with a one-line header: ``study(<runs>=--runs, seed, progress)``,
+    its header and table printed, its JSON and figures (``plot(study, folder)``) written."""
+
+    def run(args: argparse.Namespace, folder: Path) -> str:
+        start = time.perf_counter()
+        result = study(**{runs: args.runs}, seed=args.seed, progress=not args.quiet)
+        elapsed = time.perf_counter() - start
+        print(header(result.config, args))
+        print(result.table())
+        return _write_study(result, args, folder, name, lambda where: plot(result, where), elapsed)
+
+    return run
 
 
-def _run_f16(args: argparse.Namespace, folder: Path) -> str:
-    start = time.perf_counter()
-    study = f16_fdi_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
-    elapsed = time.perf_counter() - start
-    cfg = study.config
-    print(f"f16: hybrid FDI of Park et al. (2004), three 2-DOF rate sensors (sigma {cfg['rate_sigma_rad_s']:g} rad/s) on the "
-          f"closed-loop F-16, parity space + UKF on demand (restart {cfg['restart_lag_steps']} steps back, Cl/Cm/Cn "
-          f"errors {cfg['coefficient_error_Cl_Cm_Cn']}); {args.runs} runs per case")
-    print(study.table())
-    return _write_study(study, args, folder, "f16.json", lambda where: plot_f16_fdi(study, where), elapsed)
+def _f16_flight_header(cfg: dict, args: argparse.Namespace) -> str:
+    trim = cfg["design_trim"]
+    return (f"f16-flight: F-16 of Park et al. (2004) (Stevens & Lewis 2nd-ed. tables), climb "
+            f"{cfg['plan']['climb_rate_ft_s']:.0f} ft/s for 0-5 s, then altitude hold and a "
+            f"{cfg['plan']['bank_angle_deg']:.0f} deg bank turn to {cfg['duration_s']:.0f} s; design trim "
+            f"{trim['airspeed_ft_s']:.0f} ft/s, sea level, xcg {trim['xcg']}; {cfg['flights']} flights, RK4 at "
+            f"{cfg['dt_s']} s")
 
 
-def _run_gnss_campus(args: argparse.Namespace, folder: Path) -> str:
-    start = time.perf_counter()
-    study = gnss_campus_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
-    elapsed = time.perf_counter() - start
-    cfg = study.config
-    print(f"gnss-campus: GPS RAIM of Yoo et al. (2010) from {cfg['start']} (broadcast ephemerides {cfg['ephemeris']}), 1 Hz, "
-          f"{cfg['mask_deg']:.0f} deg mask, P_fa {cfg['pfa']:.2e}, P_md {cfg['pmd']:g}, NPA HAL 556 m; "
-          f"{args.runs} runs per case")
-    print(study.table())
-    return _write_study(study, args, folder, "gnss-campus.json", lambda where: plot_gnss_campus(study, where),
-                        elapsed)
+def _f16_header(cfg: dict, args: argparse.Namespace) -> str:
+    return (f"f16: hybrid FDI of Park et al. (2004), three 2-DOF rate sensors (sigma {cfg['rate_sigma_rad_s']:g} "
+            f"rad/s) on the closed-loop F-16, parity space + UKF on demand (restart {cfg['restart_lag_steps']} steps "
+            f"back, Cl/Cm/Cn errors {cfg['coefficient_error_Cl_Cm_Cn']}); {args.runs} runs per case")
 
 
-def _run_gps_ins(args: argparse.Namespace, folder: Path) -> str:
-    start = time.perf_counter()
-    study = gps_ins_study(runs=args.runs, seed=args.seed, progress=not args.quiet)
-    elapsed = time.perf_counter() - start
-    cfg = study.config
-    print(f"gps-ins: INS/GPS integrity of Yoo et al. (2010), park flight {cfg['flight_s']} s from {cfg['start']}, HG1900-class "
-          f"IMU {cfg['imu_rate_hz']} Hz, GPS 1 Hz (RAIM-passed fixes only), 15-state error-state EKF; chi-square "
-          f"{cfg['chi2']['threshold']:.2f} (60 dof), SCST {cfg['scst']['threshold']:.2f} (15 dof, propagators reset "
-          f"every {cfg['scst']['period_s']} s); {args.runs} runs per case")
-    print(study.table())
-    return _write_study(study, args, folder, "gps-ins.json", lambda where: plot_gps_ins(study, where), elapsed)
+def _gnss_campus_header(cfg: dict, args: argparse.Namespace) -> str:
+    return (f"gnss-campus: GPS RAIM of Yoo et al. (2010) from {cfg['start']} (broadcast ephemerides "
+            f"{cfg['ephemeris']}), 1 Hz, {cfg['mask_deg']:.0f} deg mask, P_fa {cfg['pfa']:.2e}, P_md {cfg['pmd']:g}, "
+            f"NPA HAL 556 m; {args.runs} runs per case")
+
+
+def _gps_ins_header(cfg: dict, args: argparse.Namespace) -> str:
+    return (f"gps-ins: INS/GPS integrity of Yoo et al. (2010), park flight {cfg['flight_s']} s from {cfg['start']}, "
+            f"HG1900-class IMU {cfg['imu_rate_hz']} Hz, GPS 1 Hz (RAIM-passed fixes only), 15-state error-state EKF; "
+            f"chi-square {cfg['chi2']['threshold']:.2f} (60 dof), SCST {cfg['scst']['threshold']:.2f} (15 dof, "
+            f"propagators reset every {cfg['scst']['period_s']} s); {args.runs} runs per case")
+
+
+_run_f16_flight = _study_runner(f16_flight_study, "f16-flight.json", plot_f16_flight, _f16_flight_header, "flights")
+_run_f16 = _study_runner(f16_fdi_study, "f16.json", plot_f16_fdi, _f16_header)
+_run_gnss_campus = _study_runner(gnss_campus_study, "gnss-campus.json", plot_gnss_campus, _gnss_campus_header)
+_run_gps_ins = _study_runner(gps_ins_study, "gps-ins.json", plot_gps_ins, _gps_ins_header)
 
 
 RUNNERS = {

@@ -30,7 +30,6 @@ see ``benchmarks/RESULTS.md``.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -44,20 +43,10 @@ from jaxfdi.models.linear import LinearGaussianModel
 mm, mv, tr = _linalg.soa_matmul, _linalg.soa_matvec, _linalg.soa_transpose
 
 
-class SoAModes(NamedTuple):
-    """Mode models with the mode axis moved behind the matrix axes: (rows, cols, M, 1)."""
-
-    Phi: Array
-    Gamma: Array
-    C: Array
-    D: Array
-    Q: Array
-    R: Array
-
-
-def soa_modes(modes: LinearGaussianModel) -> SoAModes:
-    """(M, rows, cols) leaves -> (rows, cols, M, 1): broadcast over the runs."""
-    return SoAModes(*(jnp.moveaxis(jnp.asarray(leaf), 0, -1)[..., None] for leaf in modes))
+def soa_modes(modes: LinearGaussianModel) -> LinearGaussianModel:
+    """The mode models with the mode axis moved behind the matrix axes: (M, rows, cols)
+    leaves -> (rows, cols, M, 1), broadcast over the runs."""
+    return LinearGaussianModel(*(jnp.moveaxis(jnp.asarray(leaf), 0, -1)[..., None] for leaf in modes))
 
 
 def soa_symmetrize(a: Array) -> Array:

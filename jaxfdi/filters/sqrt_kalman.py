@@ -68,6 +68,17 @@ def sqrt_update_linearised(mean: Array, chol: Array, innovation: Array, H_chol: 
     return mean + gain_bar @ whitened, chol_post, innovation, chol_S, whitened
 
 
+def sqrt_init(n: int):
+    """An ``init(mean, cov) -> SqrtGaussianState`` that validates the prior against the
+    state size ``n`` and stores the Cholesky factor of ``cov``."""
+
+    def init(mean: Array, cov: Array) -> SqrtGaussianState:
+        mean, cov = check_gaussian(mean, cov, n)
+        return SqrtGaussianState(mean, factor(cov))
+
+    return init
+
+
 def sqrt_kalman_filter(model: LinearGaussianModel) -> Filter:
     """Square-root linear Kalman filter for a ``LinearGaussianModel`` (module doc).
 
@@ -79,9 +90,7 @@ def sqrt_kalman_filter(model: LinearGaussianModel) -> Filter:
     n, nu, m = validate_linear_model(model)
     chol_Q, chol_R = factor(model.Q), factor(model.R)
 
-    def init(mean: Array, cov: Array) -> SqrtGaussianState:
-        mean, cov = check_gaussian(mean, cov, n)
-        return SqrtGaussianState(mean, factor(cov))
+    init = sqrt_init(n)
 
     def step(state: SqrtGaussianState, y: Array, u: Array):
         check_sqrt_state(state, n)

@@ -31,13 +31,14 @@ from typing import Any, Callable
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, used_innovation
+from jaxfdi import _checks
+from jaxfdi.filters._base import Filter, check_step_inputs, used_innovation
 from jaxfdi.filters.sqrt_kalman import (
     SqrtGaussianState,
     check_sqrt_state,
     factor,
     sqrt_info,
+    sqrt_init,
     sqrt_update_linearised,
     tria,
 )
@@ -102,9 +103,7 @@ def sqrt_unscented_kalman_filter(
             return sigma_differences == "taylor"
         return bool(jnp.finfo(mean.dtype).eps > 1e-10 and alpha <= 1e-2)
 
-    def init(mean: Array, cov: Array) -> SqrtGaussianState:
-        mean, cov = check_gaussian(mean, cov, n)
-        return SqrtGaussianState(mean, factor(cov))
+    init = sqrt_init(n)
 
     def step(state: SqrtGaussianState, y: Array, u: Array):
         check_sqrt_state(state, n)

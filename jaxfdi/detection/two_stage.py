@@ -62,18 +62,13 @@ class TwoStageOutput(NamedTuple):
     engaged: Array
 
 
-class TwoStage(NamedTuple):
-    """``init(mean, cov, u0) -> state``; ``step(state, y, u) -> (state, TwoStageOutput)``."""
-
-    init: Callable[..., Any]
-    step: Callable[..., tuple[Any, TwoStageOutput]]
-
-
 def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], transition: Callable, field: Callable,
                         params: Any, hypotheses: Any, modes: Any, *, detection_threshold, nis_threshold,
                         nis_window: int, credit_threshold, mode_threshold, mm_floor, engage_cov, confirm_steps: int = 1,
-                        engage_on: str = "nis", restart_prediction: bool = True, channel_labels=None) -> TwoStage:
-    """The two stages (module doc) on ``x[k+1] = transition(x, u, p)``, ``x' = field(x, u, p)``.
+                        engage_on: str = "nis", restart_prediction: bool = True, channel_labels=None) -> Filter:
+    """The two stages (module doc) on ``x[k+1] = transition(x, u, p)``, ``x' = field(x, u, p)``,
+    as a ``Filter``: ``init(mean, cov, u0) -> state``; ``step(state, y, u) -> (state,
+    TwoStageOutput)`` (its decisions in ``output.decisions``), so ``run_filter`` drives it.
 
     ``nominal``: the dual filter's estimation filter on ``params``; ``bank_filter(p)``: the
     filter of the NIS test (on ``params``) and of the banks (on each hypothesis);
@@ -153,4 +148,4 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         return new, TwoStageOutput(decisions, jnp.stack([fdp, nis_decision.statistic]), healthy,
                                    bank_info.detection_parameter, mm_info.mode_prob, engaged_before)
 
-    return TwoStage(init, step)
+    return Filter(init, step)

@@ -24,7 +24,7 @@ a quiet 2-core VM) and checks its ``engine-imm-tuning.json``:
 
 This was ``tests/test_engine_tuning_full.py``; it moved here because at full size it is a
 benchmark-sized Monte Carlo (the project's rule: small sizes in tests, big ones in
-``benchmarks/``). ``tests/test_engine_tuning.py`` keeps the reduced-size checks in CI.
+``benchmarks/``). ``tests/scenarios/test_engine_tuning.py`` keeps the reduced-size checks in CI.
 
     python benchmarks/engine_tuning_acceptance.py            # runs the command (temporary --out)
     python benchmarks/engine_tuning_acceptance.py --report R/engine-imm-tuning.json

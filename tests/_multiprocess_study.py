@@ -1,4 +1,4 @@
-"""A small engine Monte Carlo study run by ``tests/test_multiprocess.py`` in one process
+"""A small engine Monte Carlo study run by ``tests/core/test_multiprocess.py`` in one process
 and, as a script, in several processes (``python -m jaxfdi.distributed``)."""
 from __future__ import annotations
 

@@ -8,7 +8,12 @@ notebook, one to ten tests each) to the end of the run, where one of them keeps 
 busy while the other idles. Here the reordering is off and the files below start first,
 the longest first (a longest-processing-time-first schedule); every other file follows
 in its usual order. The list is a scheduling hint only: a file missing from it still
-runs, a name that no longer exists is ignored.
+runs, a name that no longer exists is ignored. Its entries are file names, matched in any
+folder of ``tests/`` (the folders mirror ``jaxfdi/``; a test file's name is unique across
+them, as pytest's default import mode needs without ``__init__.py`` files).
+
+Imports: the shared helpers (``_problems.py``, ``_notebooks.py``, ...) stay in ``tests/``,
+which ``pythonpath = ["tests"]`` (pyproject.toml) puts on ``sys.path`` for every folder.
 
 Compilation (most of the suite's time): one persistent XLA compilation cache serves the
 whole run, every worker and every process a test starts (CLI runs, notebook kernels:
@@ -37,7 +42,8 @@ _CACHE_MIN_COMPILE_S = 0.2
 #: the most expensive test files, longest first (seconds on 2 cores; see .ci/run)
 HEAVY_FIRST = (
     "test_engine_scenario.py",
-    "test_contracts.py",
+    "test_filter_contracts.py",
+    "test_detector_contracts.py",
     "test_linalg_batch.py",
     "test_engine_tuning.py",
     "test_f16_fdi.py",

@@ -736,10 +736,10 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
             row[0].set_ylabel(f"{key.split('/', 1)[1]}\nmean mode probability ({cfg['figure_runs']} runs)")
         axes[0, -1].legend(fontsize=7)
         save(fig, "engine-mode-probabilities.png",
-             f"Mean mode probabilities over {cfg['figure_runs']} runs per fault (seed 003 Figs. 3-1 and 3-2 show one "
-             "run), the fault at 2 s, mu_T dashed. Sensor faults are 0.5 % of the operating point (the spec's "
-             "reading); at that size P2's fault is 3.4 noise sigmas and its mode rises slowly, where the paper's "
-             "Table 3 has it at once: the paper's faults are about 9-12 sigmas (docs/papers/engine.md).")
+             f"Mean mode probabilities over {cfg['figure_runs']} runs per fault (Han et al. 2022, Figs. 3-1 "
+             "and 3-2, show one run), the fault at 2 s, mu_T dashed. Sensor faults are 0.5 % of the operating point "
+             "(the spec's reading); at that size P2's fault is 3.4 noise sigmas and its mode rises slowly, "
+             "where the paper's Table 3 has it at once: the paper's faults are about 9-12 sigmas (docs/papers/engine.md).")
 
     if "glr" in study.figures:
         fig, axes = plt.subplots(2, 3, figsize=(15, 7), sharex=True)
@@ -753,10 +753,10 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
             ax.set(title=f"{fault_names[i]} fault", xlabel="time [s]", ylabel="mean GLR l_i")
         axes[0, 0].legend(fontsize=7, ncol=2)
         save(fig, "engine-glrt.png",
-             f"Mean GLR per fault direction over {cfg['figure_runs']} runs per fault (seed 003 Fig. 4 shows one run), "
-             "with the paper's l_T = 200, the theoretical 91.95 and our Bonferroni threshold. At the spec's 0.5 % "
-             "the P2 and P4 GLRs level off near 50 and 90, below 200, where the paper detects them in 0.06 and "
-             "0.04 s: its faults are about 9-12 noise sigmas (docs/papers/engine.md).")
+             f"Mean GLR per fault direction over {cfg['figure_runs']} runs per fault (Han et al. 2022, Fig. 4, "
+             "shows one run), with the paper's l_T = 200, the theoretical 91.95 and our Bonferroni threshold. At the "
+             "spec's 0.5 % the P2 and P4 GLRs level off near 50 and 90, below 200, where the paper detects them "
+             "in 0.06 and 0.04 s: its faults are about 9-12 noise sigmas (docs/papers/engine.md).")
 
     with_estimates = [m for m in study.records if any(
         r["method"] == m and r["estimate_median"] == r["estimate_median"] for r in study.rows)]

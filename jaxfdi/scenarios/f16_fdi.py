@@ -9,7 +9,7 @@ and bank turn) with two changes: a fault on both axes of one rate sensor
 labelled by sensor), and the FDI stage ``detection.hybrid_psa_fdi`` in place of the rate
 pass-through:
 
-- parity space of the spec's ``H`` (6x3, ``models.f16.seed000_rate_axes``), the three
+- parity space of the spec's ``H`` (6x3, ``models.f16.skewed_rate_axes``), the three
   sensors as groups (``detection.parity``); ``T_D`` from a per-step false-alarm
   probability (``PFA``), ``T_I`` by Monte Carlo from a missed-isolation probability
   (``MISSED_ISOLATION`` at the design fault-to-noise ratio ``DESIGN_FNR``);
@@ -871,9 +871,9 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     ax.axvline(t[step], color="grey", ls=":", lw=1)
     ax.set(xlabel="time [s]", ylabel="deg/s", title="Fig. 8: true and FDI-selected body rates (hybrid)")
     ax.legend(fontsize=7, ncol=3)
-    fig.suptitle("Seed 000's case: bias on both axes of sensor 1 from t = 3 s, FNR 10")
+    fig.suptitle("The case of Park et al. (2004): bias on both axes of sensor 1 from t = 3 s, FNR 10")
     save(fig, "f16-fdi-paper-case.png",
-         "The paper's case (bias of 0.1 rad/s on both axes of sensor 1 from 3 s), one flight, as seed 000 "
+         "The paper's case (bias of 0.1 rad/s on both axes of sensor 1 from 3 s), one flight, as Park et al. (2004), "
          "Figs. 5-8: FD, the isolation functions around the decision, the UKF's analytic residuals and the selected "
          "rates. As in the paper, PSA flags sensors 1 and 3 and the UKF's residual picks sensor 1.")
 

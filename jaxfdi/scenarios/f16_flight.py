@@ -480,8 +480,8 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     ax.set_aspect("equal", adjustable="datalim")
     save(fig, "f16-flight-trajectory.png",
          "Sample flights of the study (dispersed c.g., initial offsets and gusts; the nominal one in blue) flying "
-         "the paper's manoeuvre: climb, level-off, 30 deg bank turn. Seed 000 describes the manoeuvre but shows no "
-         "trajectory.")
+         "the paper's manoeuvre: climb, level-off, 30 deg bank turn. Park et al. (2004) describe the "
+         "manoeuvre but show no trajectory.")
 
     fig = Figure(figsize=(12, 10))
     axes = fig.subplots(4, 2, sharex=True)
@@ -514,7 +514,8 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
         axes[3, 1].plot(t, control[0, :, j] * (10.0 if j == 0 else 1.0), lw=0.7, label=name)
     axes[3, 1].set(ylabel="controls [deg]", xlabel="time [s]")
     axes[3, 1].legend(fontsize=7)
-    fig.suptitle("Seed 000's flight: climb 120 ft/s 0-5 s, then altitude hold and 30 deg bank turn (nominal in blue)")
+    fig.suptitle("The flight of Park et al. (2004): climb 120 ft/s 0-5 s, then altitude hold and 30 deg bank turn "
+                 "(nominal in blue)")
     save(fig, "f16-flight-time-histories.png",
          "Time histories of the same flights against the commanded profile (altitude, bank, airspeed, angles, body "
          "rates, controls). Beyond the paper, which flies its aircraft only to feed the rate sensors.")

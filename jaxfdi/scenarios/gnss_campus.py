@@ -437,11 +437,11 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
         twin.semilogy(t, np.where(np.isfinite(series["hpl"]), series["hpl"], np.nan), color="C1", label="HPL")
         twin.axhline(556.0, color="C3", lw=1.5, label="NPA HAL 556 m")
         twin.set_ylabel("HPL [m]")
-        ax.set_title(f"{name}: HDOP and HPL (seed 002 Figs. 6 and 8)")
+        ax.set_title(f"{name}: HDOP and HPL (Yoo et al. 2010, Figs. 6 and 8)")
         twin.legend(loc="upper right", fontsize=8)
     ax.set_xlabel("time [s]")
     save(fig, "gnss-campus-dop-hpl.png",
-         "HDOP and HPL over the run, campus and park (seed 002 Figs. 6 and 8): behind the wall HDOP rises above 4 "
+         "HDOP and HPL over the run, campus and park (Yoo et al. 2010, Figs. 6 and 8): behind the wall HDOP rises above 4 "
          "and HPL above the 556 m NPA alert limit, as in the paper, while the parity statistic stays quiet.")
 
     fig = Figure(figsize=(10, 7))
@@ -462,11 +462,11 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
                         ".", ms=3, color="C2", label="after exclusion")
             for _, _, onset, end, _, _ in PARK_FAULTS:
                 ax.axvspan(onset, max(end, onset + 3), color="gray", alpha=0.2)
-        ax.set_title(f"{name}: parity statistic vs threshold (seed 002 Figs. 7 and 9)")
+        ax.set_title(f"{name}: parity statistic vs threshold (Yoo et al. 2010, Figs. 7 and 9)")
         ax.legend(loc="lower right" if "statistic_excluded" in series else "upper right", fontsize=8)
     ax.set_xlabel("time [s]")
     save(fig, "gnss-campus-statistic.png",
-         "The parity test statistic against its threshold, campus and park with Table 2's faults (seed 002 Figs. 7 "
+         "The parity test statistic against its threshold, campus and park with Table 2's faults (Yoo et al. 2010, Figs. 7 "
          "and 9; the paper's were recorded, these are simulated). The impulse and the bias cross at once, the "
          "1 m/s drift only after tens of seconds (the paper: 'RAIM detects' all three, without times); beyond it, "
          "a dead and a frozen channel.")

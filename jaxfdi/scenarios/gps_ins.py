@@ -766,7 +766,7 @@ def gps_ins_table(study: GpsInsStudy) -> str:
                      f"{rate_text(round(row['scst_detected'] * healthy), healthy)}")
     curve = [r for r in study.rows if r["case"] == "operating-curve"]
     if curve:
-        lines.append("Operating curve (issue 38): each test at the threshold of a per-epoch P_fa, from the same flights' "
+        lines.append("Operating curve: each test at the threshold of a per-epoch P_fa, from the same flights' "
                      "statistics: fault-free alarm rate per epoch, fault-free flights with an alarm [99 % interval], "
                      "and Table 3's mean detection time over the clean flights (clean flights), the INS's alarms only: "
                      f"an alarm with a RAIM alarm from {ATTRIBUTION_HOLDOFF} s before to {ATTRIBUTION_LOOKAHEAD} s after "
@@ -786,7 +786,7 @@ def gps_ins_table(study: GpsInsStudy) -> str:
     for row in (r for r in study.rows if r["case"] == "separation"):
         cells = "; ".join(f"{name}: " + ", ".join(f"{k} {v}" for k, v in counts.items() if v)
                           for name, counts in row["confusion"].items())
-        lines.append(f"GPS/INS separation at P_fa {row['pfa_per_epoch']:g} per epoch (issue 38): "
+        lines.append(f"GPS/INS separation at P_fa {row['pfa_per_epoch']:g} per epoch: "
                      f"{row['separated_flights']}/{row['flights']} flights separated (>= {row['lower_bound_95']:.3f} "
                      f"at 95 %); decided per fault: {cells}")
     first = next(r for r in study.rows if r["case"] == "table3")
@@ -874,12 +874,12 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
             ax.semilogy(t, np.maximum(getattr(s, field), 1e-2), lw=0.8, label=f"{b:g} deg/h roll gyro from {onset} s")
         ax.axhline(limit, color="k", lw=1.2, label=f"threshold {limit:.2f}")
         ax.axvline(onset, color="gray", ls=":")
-        ax.set_title(f"{title} vs threshold (seed 002 Fig. {10 + i})")
+        ax.set_title(f"{title} vs threshold (Yoo et al. 2010, Fig. {10 + i})")
         ax.legend(fontsize=8, loc="upper left")
     ax.set_xlabel("time [s]")
     save(fig, "gps-ins-statistics.png",
-         "One flight per roll-gyro bias: the windowed chi-square and SCST statistics against their thresholds (seed "
-         "002 Figs. 10-11, recorded data there, simulated here). Both also rise during Table 2's satellite drift "
+         "One flight per roll-gyro bias: the windowed chi-square and SCST statistics against their thresholds (Yoo "
+         "et al. 2010, Figs. 10-11, recorded data there, simulated here). Both also rise during Table 2's satellite drift "
          "(500-600 s) and after its exclusion: those alarms are the GPS's (the separation), not the INS's.")
 
     s = study.series[f"table3 {TABLE3_DEG_H[0]:g} deg/h"]
@@ -890,18 +890,19 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     twin.semilogy(t, s.hpl, color="C1", label="HPL")
     twin.axhline(556.0, color="C3", label="NPA HAL 556 m")
     twin.legend(fontsize=8)
-    ax.set_title("park flight: HDOP and HPL (seed 002 Fig. 8)")
+    ax.set_title("park flight: HDOP and HPL (Yoo et al. 2010, Fig. 8)")
     ax = fig.add_subplot(2, 1, 2)
     ax.semilogy(t, np.maximum(s.raim, 1e-3), label="TS_D")
     ax.semilogy(t, s.raim_threshold, color="C3", label="threshold")
     ax.plot(t, np.where(s.gps_used, np.nan, 1e-2), "k|", label="epoch not used by the EKF")
     for _, _, onset, end, _, _ in TABLE2_FAULTS:
         ax.axvspan(onset, max(end, onset + 3), color="gray", alpha=0.2)
-    ax.set_title(f"RAIM statistic, satellite faults on PRN {study.config['satellite_faults_prn']:02d} (seed 002 Fig. 9)")
+    ax.set_title(f"RAIM statistic, satellite faults on PRN {study.config['satellite_faults_prn']:02d} "
+                 "(Yoo et al. 2010, Fig. 9)")
     ax.legend(fontsize=8)
     ax.set_xlabel("time [s]")
     save(fig, "gps-ins-raim.png",
-         "The same flight: HDOP and HPL (seed 002 Fig. 8) and RAIM's statistic with the epochs the EKF did not "
+         "The same flight: HDOP and HPL (Yoo et al. 2010, Fig. 8) and RAIM's statistic with the epochs the EKF did not "
          "use (Fig. 9); Table 2's faults shaded. " + "; ".join(
              f"{r['fault'].split(',')[0]}: RAIM's median delay {_fmt(r['delay_median_s'])} s"
              for r in next((row["raim"] for row in study.rows if row["case"] == "table3"), []))

@@ -335,7 +335,7 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
     at every step unless the health test alarms falsely (``HEALTH_PFA``).
     ``gyro_health=False`` leaves the health test and the view out (the fifth decision never
     alarms; the controller flies on the raw readings, a NaN included): for a plant whose
-    gyro noise is below ``gyro_sigma`` (the noise-free runs of ``tests/test_wheels_credit.py``
+    gyro noise is below ``gyro_sigma`` (the noise-free runs of ``tests/scenarios/test_wheels_credit.py``
     and ``benchmarks/wheels_credit.py``), where the stuck-at test rightly finds every gyro
     frozen.
     """
@@ -644,7 +644,7 @@ class WheelStudy(NamedTuple):
         in the default momentum-biased configuration and, second, with zero net momentum;
         the credit isolator's rate per wheel with its one-sided 95 % lower bound
         (Clopper-Pearson)."""
-        lines = ["Wheel stops (seed 004 reports one run: F jumps by orders of magnitude at the stop of wheel 1, and",
+        lines = ["Wheel stops (Choi & Park 2009 report one run: F jumps by orders of magnitude at the stop of wheel 1, and",
                  "credit 1 separates from the others immediately):"]
         blocks = [(self.config.get("momentum", "net"), self.rows)]
         zero = self.config.get("zero_momentum")
@@ -786,7 +786,7 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
                 ax.axvline(fault_time, color="grey", ls=":", lw=1)
     save(fig, "reaction-wheels-fig3-5-attitude.png",
          f"One run each: attitude (rotation from the start) and body rates, fault-free and with wheel {wheel + 1} "
-         f"stopping at {fault_time:.0f} s, as seed 004's Figs. 3 and 5 (a single run there too).")
+         f"stopping at {fault_time:.0f} s, as Choi & Park (2009), Figs. 3 and 5 (a single run there too).")
 
     # Figs. 4 and 6: the fault detection parameter, and the NIS test beside it
     fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
@@ -802,7 +802,7 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
         ax.axvline(fault_time, color="grey", ls=":", lw=1)
         ax.legend(fontsize=7)
     save(fig, "reaction-wheels-fig4-6-detection.png",
-         "The same two runs: the dual filter's fault detection parameter F (seed 004 Figs. 4 and 6) and, beside the "
+         "The same two runs: the dual filter's fault detection parameter F (Choi & Park 2009, Figs. 4 and 6) and, beside the "
          "paper, the windowed NIS test that engages the isolators. F jumps by orders of magnitude at the stop, as in "
          "the paper.")
 

@@ -624,7 +624,7 @@ def _case_table(row: dict[str, Any]) -> str:
 
 def _headline(study: VTOLStudy) -> str:
     rows = {row["fault"]: row for row in study.rows}
-    out = ["Headline cases beside seed 001 (paper's numbers from one run; ours: run 0 and the median over runs)"]
+    out = ["Headline cases beside Lee & Lyou (paper's numbers from one run; ours: run 0 and the median over runs)"]
     s3 = rows.get("s3 step 0.7")
     if s3:
         out.append("  s3 step 0.7 from k = 120, first detection step: method  paper | ours (T_D 14.86/34.27): run 0, "
@@ -636,7 +636,7 @@ def _headline(study: VTOLStudy) -> str:
                        f"{o['first_detection_run0']:>5}, {_fmt(120 + o['delay_median'], '.1f', 6)}, "
                        f"FA {o['false_alarm_rate']:.2f}")
         if "MDWT-ST-SV|paper" in s3["methods"]:
-            out.append(f"    (MDWT-ST: sigma of each detail scale from the chi-square law; MDWT-ST-SV: seed 001's sample "
+            out.append(f"    (MDWT-ST: sigma of each detail scale from the chi-square law; MDWT-ST-SV: Lee & Lyou's sample "
                        f"sigma of the run's first {SIGMA_WINDOW} steps, fault-free)")
     a2 = rows.get("a2 effectiveness 0.5")
     if a2:
@@ -695,7 +695,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
     axes[0].set_title("Fig. 3: s3 step 0.7 from k = 120, statistic of filter s1 (run 0)")
     axes[-1].set(xlabel="step k")
     save(fig, "vtol-fig3-s3-statistics.png",
-         "One run: the s1 filter's chi-square statistic under the s3 step, raw and Haar-denoised, as seed 001's Fig. "
+         "One run: the s1 filter's chi-square statistic under the s3 step, raw and Haar-denoised, as Lee & Lyou's Fig. "
          "3. Unlike the paper's, the fault-free part crosses the paper's 14.86 often: the undecoupled disturbance "
          "3 sin 10t leaks into this filter (its fault-free statistic is not chi2(3)), so the red line is the "
          "threshold calibrated on fault-free runs of another seed.")
@@ -726,7 +726,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
     axes[1, 1].set(xlabel="step k")
     fig.suptitle("Fig. 5: a2 effectiveness 0.5 from k = 100, states (run 0)")
     save(fig, "vtol-fig5-a2-ftc.png",
-         "One run each: the states fault-free, and after the a2 loss with and without FTC (seed 001 Fig. 5). With FTC "
+         "One run each: the states fault-free, and after the a2 loss with and without FTC (Lee & Lyou, Fig. 5). With FTC "
          "the states stay near the fault-free run, without it they leave, as in the paper. In all three q stays "
          "near 0 and v_v and theta drift: the paper's q = -5 command has no equilibrium (theta integrates q; "
          "docs/papers/vtol.md), so no PI loop tracks it, the fault-free one included.")

@@ -15,7 +15,7 @@ from scipy import stats
 import jaxfdi
 from _problems import engine_false_alarm_study
 
-HERE = Path(__file__).parent
+TESTS = Path(__file__).resolve().parents[1]  # the shared helpers (_problems)
 
 
 def test_monte_carlo_equals_python_loop_for_any_chunk_size():
@@ -54,7 +54,7 @@ def test_sharded_over_two_devices_equals_one_device(single_device_study, tmp_pat
     script = textwrap.dedent(f"""
         import sys, numpy as np, jax
         jax.config.update("jax_enable_x64", True)
-        sys.path.insert(0, {str(HERE)!r})
+        sys.path.insert(0, {str(TESTS)!r})
         from _problems import engine_false_alarm_study
         assert len(jax.local_devices()) == 2, jax.local_devices()
         record, last = engine_false_alarm_study(num_runs=24, T=30, window=2, pfa=0.05, chunk_size=10)

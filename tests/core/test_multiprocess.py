@@ -12,7 +12,7 @@ import _multiprocess_study as study_module
 from jaxfdi import distributed
 from jaxfdi.montecarlo import run_keys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
+TESTS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the shared helpers
 
 
 def _same_bits(a, b) -> bool:
@@ -25,8 +25,8 @@ def test_two_processes_equal_one_process(tmp_path):
     with chunks of 4 (4 on its one device): every record field and every streaming count
     identical, on both processes (each returns the whole study)."""
     prefix = str(tmp_path / "out_")
-    command = [sys.executable, os.path.join(HERE, "_multiprocess_study.py"), prefix, "8"]
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([HERE, os.environ.get("PYTHONPATH", "")]))
+    command = [sys.executable, os.path.join(TESTS, "_multiprocess_study.py"), prefix, "8"]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([TESTS, os.environ.get("PYTHONPATH", "")]))
     try:
         distributed.launch_local(command, 2, timeout_s=240, env=env)
     except RuntimeError:  # e.g. the free port was taken meanwhile: once more on another one

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import numpy as np
 
-README = (Path(__file__).parents[1] / "README.md").read_text()
-CI = (Path(__file__).parents[1] / ".ci" / "run").read_text()
+README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+CI = (Path(__file__).resolve().parents[2] / ".ci" / "run").read_text()
 
 
 def test_quick_start_is_two_commands_and_ci_runs_the_test_command():

@@ -22,7 +22,8 @@ from jaxfdi.faults import fault, no_fault, stack_faults
 from jaxfdi.models.linear import LinearGaussianModel
 from _compiles import counting_compiles
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).resolve().parent
+TESTS = HERE.parent  # the shared helpers (_compiles)
 T = 60
 MODEL = LinearGaussianModel(Phi=np.array([[1.0, 0.1], [0.0, 1.0]]), Gamma=np.array([[0.005], [0.1]]),
                             C=np.eye(2), D=np.zeros((2, 1)), Q=1e-4 * np.eye(2), R=1e-2 * np.eye(2))
@@ -206,7 +207,7 @@ def test_two_devices_give_the_same_decisions(tmp_path):
     script = textwrap.dedent(f"""
         import sys, numpy as np, jax
         jax.config.update("jax_enable_x64", True)
-        sys.path.insert(0, {str(HERE)!r})
+        sys.path[:0] = [{str(HERE)!r}, {str(TESTS)!r}]
         from test_study import toy_study
         from jaxfdi import study
         assert len(jax.local_devices()) == 2, jax.local_devices()

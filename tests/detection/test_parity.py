@@ -2,8 +2,8 @@
 gradient (detection.sensor_configuration).
 
 References: SciPy's null space and subspace angles, the cross products of plane normals
-for 2-D fault planes in a 3-D parity space, seed 000's Table 1 as printed in the spec,
-the chi-square law of the fault-free statistic (binomial interval of its false-alarm
+for 2-D fault planes in a 3-D parity space, Table 1 of Park et al. (2004) as printed in the
+spec, the chi-square law of the fault-free statistic (binomial interval of its false-alarm
 count), an independent NumPy Monte Carlo of the missed-isolation probability.
 """
 import jax
@@ -15,7 +15,7 @@ import scipy.stats
 
 from jaxfdi.detection import parity as ps
 from jaxfdi.detection import sensor_configuration as sc
-from jaxfdi.models.f16.plant import seed000_rate_axes
+from jaxfdi.models.f16.plant import skewed_rate_axes
 
 GROUPS = np.arange(6).reshape(3, 2)
 SIGMA = 0.01
@@ -26,7 +26,7 @@ CALIBRATE = jax.jit(ps.isolation_threshold, static_argnums=6)
 
 @pytest.fixture(scope="module")
 def spec():
-    return ps.parity_space(seed000_rate_axes(), GROUPS)
+    return ps.parity_space(skewed_rate_axes(), GROUPS)
 
 
 def _random_sets():
@@ -54,7 +54,7 @@ def test_v_is_an_orthonormal_left_null_space(spec, case):
 
 
 def test_isolation_functions_equal_the_plane_normal_formula(spec):
-    """Seed 000's FI_k = 1 - |p . u_k| / ||p|| with u_k the unit normal of FP_k (the cross
+    """FI_k = 1 - |p . u_k| / ||p|| (Park et al. 2004) with u_k the unit normal of FP_k (the cross
     product of V's two columns of sensor k); the singular direction of two planes is the
     cross product of their normals; the principal angles equal SciPy's."""
     V = np.asarray(spec.V)
@@ -158,20 +158,20 @@ def test_isolation_threshold_meets_its_missed_isolation_probability(spec):
 def test_transformations_and_bad_input(spec):
     p = jax.random.normal(jax.random.key(2), (5, 3))
     np.testing.assert_allclose(jax.jit(ps.isolation_functions)(spec, p), ps.isolation_functions(spec, p), atol=1e-15)
-    spaces = jax.vmap(lambda H: ps.parity_space(H, GROUPS))(jnp.stack([seed000_rate_axes(), -seed000_rate_axes()]))
+    spaces = jax.vmap(lambda H: ps.parity_space(H, GROUPS))(jnp.stack([skewed_rate_axes(), -skewed_rate_axes()]))
     np.testing.assert_allclose(jnp.einsum("sqm,smn->sqn", spaces.V, spaces.H), 0.0, atol=1e-12)
     with pytest.raises(ValueError, match="H: expected more channels"):
         ps.parity_space(np.eye(3))
     with pytest.raises(ValueError, match="H: expected full column rank"):
         ps.parity_space(np.ones((5, 2)))
     with pytest.raises(ValueError, match="groups: expected every channel in at most one group"):
-        ps.parity_space(seed000_rate_axes(), [[0, 1], [1, 2]])
+        ps.parity_space(skewed_rate_axes(), [[0, 1], [1, 2]])
     with pytest.raises(ValueError, match="groups: expected at most q = m - n = 1 channels"):
         ps.parity_space(np.vstack([np.eye(3), [[1.0, 1.0, 1.0]]]), [[0, 1], [2, 3]])  # q = 1 < d = 2
     with pytest.raises(ValueError, match="groups: the fault subspace of group 0"):
         ps.parity_space(np.vstack([np.eye(3), np.eye(3)[:2]]), [[2], [0]])  # channel 2 alone measures z
     with pytest.raises(ValueError, match="groups: expected"):
-        ps.parity_space(seed000_rate_axes(), [[0, 9]])
+        ps.parity_space(skewed_rate_axes(), [[0, 9]])
     with pytest.raises(ValueError, match="missed_isolation"):
         ps.isolation_threshold(spec, SIGMA, 10.0, 1.5, 1.0, jax.random.key(0), 10)
 

@@ -52,7 +52,7 @@ def test_bad_options_exit_with_usage_error(args):
     assert proc.returncode == 2 and proc.stderr.startswith(f"jaxfdi: {args[0]}: expected ")
 
 
-DATA = pathlib.Path(__file__).parent / "data"
+DATA = pathlib.Path(__file__).resolve().parents[1] / "data"
 
 
 def assert_same_as_before(name: str, data: dict) -> None:
@@ -96,7 +96,7 @@ def test_vtol_prints_tables_and_writes_figures(tmp_path):
     assert proc.returncode == 0, proc.stderr
     for name in ("a1 effectiveness 0.3 from k = 100", "s3 step 0.7 from k = 120", "none (fault-free)"):
         assert name in proc.stdout
-    assert "MDWT-ST  paper" in proc.stdout and "Headline cases beside seed 001" in proc.stdout
+    assert "MDWT-ST  paper" in proc.stdout and "Headline cases beside Lee & Lyou" in proc.stdout
     data = json.loads((tmp_path / "out" / "vtol.json").read_text())
     from jaxfdi.scenarios.vtol import HEALTH_CASES, vtol_faults
 
@@ -109,7 +109,7 @@ def test_vtol_prints_tables_and_writes_figures(tmp_path):
         "vtol-fig3-s3-statistics.png", "vtol-fig4-a2-estimate.png", "vtol-fig5-a2-ftc.png", "vtol.json"]
 
 
-# `jaxfdi run reaction-wheels`: tests/test_reaction_wheels_end_to_end.py (with notebook 05, which
+# `jaxfdi run reaction-wheels`: tests/scenarios/test_reaction_wheels_end_to_end.py (with notebook 05, which
 # computes the same study at the same size)
 
 
@@ -129,7 +129,7 @@ def test_help_lists_every_scenario_and_tuning_target():
             assert len(line.split()) > 3, f"no description: {line!r}"  # one line each, with what it runs
 
 
-# `--methods` running only the named methods: tests/test_engine_scenario.py (on the full
+# `--methods` running only the named methods: tests/scenarios/test_engine_scenario.py (on the full
 # engine run's compiled programs)
 
 

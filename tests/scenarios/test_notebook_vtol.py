@@ -1,4 +1,4 @@
-"""Notebook 04 (seed 001's VTOL: robust TSKF bank, wavelet-denoised tests, FTC) end to end
+"""Notebook 04 (Lee & Lyou's VTOL: robust TSKF bank, wavelet-denoised tests, FTC) end to end
 in a fresh kernel, 5 runs per fault, and its printed results checked."""
 from _notebooks import images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
 
@@ -11,6 +11,6 @@ def test_vtol_notebook(python3_kernel, monkeypatch, tmp_path):
     assert "statistic dof: 3" in text
     for name in ("a2 effectiveness 0.5 from k = 100", "s3 step 0.7 from k = 120", "none (fault-free)"):
         assert name in text
-    assert "Headline cases beside seed 001" in text
+    assert "Headline cases beside Lee & Lyou" in text
     assert "online isolation of the a2 fault (location + 1): 2" in text
     assert len(images(outputs)) == 2, f"expected Fig. 3 and Figs. 4-5, got {len(images(outputs))}"

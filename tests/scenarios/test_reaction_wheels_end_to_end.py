@@ -1,5 +1,6 @@
-"""Seed 004 end to end: `jaxfdi run reaction-wheels --runs 2` (table, JSON equal to the
-one written before the scenario moved onto `jaxfdi.loop`, figures) and notebook 05.
+"""Reaction wheels (Choi & Park 2009) end to end: `jaxfdi run reaction-wheels --runs 2`
+(table, JSON equal to the one written before the scenario moved onto `jaxfdi.loop`,
+figures) and notebook 05.
 
 At 2 runs per case the notebook's study and examples are the CLI's (``wheel_study(runs=2,
 seed=0, calibration_runs=20)``, ``wheel_examples(..., seed=0)``): both run on the run's
@@ -36,7 +37,7 @@ def test_reaction_wheels_prints_every_case_and_writes_figures(shared):
             assert f"\n{case:<10} {method}" in proc.stdout
     for case in ("none", "dead g1", "frozen g1"):
         assert f"\n{case:<10} gyro health test" in proc.stdout
-    assert "Wheel stops (seed 004 reports" in proc.stdout
+    assert "Wheel stops (Choi & Park 2009 report" in proc.stdout
     assert data["config"]["runs"] == RUNS and data["config"]["calibration_runs"] == 20
     assert data["config"]["fdp_threshold"] > 0
     assert sorted(p.name for p in (shared / "out").iterdir()) == [
@@ -55,5 +56,5 @@ def test_reaction_wheels_notebook(shared, python3_kernel, monkeypatch):
     assert abs(zero_total_det) < 1e-6 * abs(bias_det)
     for case in CASES:
         assert f"\n{case:<10} MM likelihood" in text
-    assert "Wheel stops (seed 004 reports" in text
+    assert "Wheel stops (Choi & Park 2009 report" in text
     assert len(images(outputs)) == 3, f"expected Figs. 3/5, 4/6 and 8/9, got {len(images(outputs))}"

@@ -39,7 +39,7 @@ from jaxfdi.models.f16.plant import (
     f16_sensors,
     flight_view,
     rate_estimator,
-    seed000_rate_axes,
+    skewed_rate_axes,
 )
 from jaxfdi.models.f16.tables import (
     PROFILES,
@@ -71,7 +71,7 @@ __all__ = [
     "inertia_constants", "saturate", "power_rate", "throttle_gearing", "thrust", "LinearF16", "Mode", "flight_modes",
     "lateral", "lateral_modes", "linearize", "longitudinal", "longitudinal_modes", "MorelliCoefficients",
     "morelli_coefficients_data", "polynomial_coefficients", "MEASUREMENT_NAMES", "F16Sensors", "FlightView",
-    "f16_sensors", "flight_view", "rate_estimator", "seed000_rate_axes",
+    "f16_sensors", "flight_view", "rate_estimator", "skewed_rate_axes",
     "PROFILES", "AeroTables", "AtmosphereData", "EngineData", "aero_tables", "atmosphere_data", "engine_data",
     "lookup1", "lookup2", "table_arrays", "TrimCondition", "TrimResult", "climb", "coordinated_turn", "level_flight",
     "pull_up", "trim", "trim_batch", "trim_condition",

@@ -14,7 +14,7 @@ Measurement ``y`` (``MEASUREMENT_NAMES``): air data ``[VT, alpha, beta]``, attit
 ``[phi, theta, psi]``, altitude, engine power, and the rate sensors
 ``m = H [P, Q, R]`` (``rate_axes`` ``H``, one row per input axis), each with white
 Gaussian noise (``measurement_cov``). Park et al. (2004) fly three two-degree-of-freedom rate sensors, ``H`` 6x3
-(``seed000_rate_axes``), sigma = 0.01 rad/s on every axis; the paper leaves the other
+(``skewed_rate_axes``), sigma = 0.01 rad/s on every axis; the paper leaves the other
 sensors' noise at "an appropriate level" (defaults in ``f16_sensors``).
 
 The controller does not read ``m`` but a ``FlightView`` (``flight_view``) whose rates an
@@ -96,7 +96,7 @@ class FlightView(NamedTuple):
     rates: Array
 
 
-def seed000_rate_axes(dtype=None) -> Array:
+def skewed_rate_axes(dtype=None) -> Array:
     """The three 2-DOF rate sensors of Park et al. (2004) (spec, isotropic ``H^T H = 2 I``): sensor 1 in
     the x-y plane at +-45 deg, sensor 2 in x-z, sensor 3 in y-z; rows are the six axes."""
     dtype = dtype or jnp.result_type(float)
@@ -111,7 +111,7 @@ def f16_sensors(rate_axes: Array | None = None, rate_sigma: float = 0.01, air_da
     0.5 ft/s and 1 mrad (0.06 deg), attitude 1 mrad, altitude 2 ft, engine power 0.1 %
     (choices: the paper gives only the rate sensors' noise)."""
     dtype = dtype or jnp.result_type(float)
-    axes = seed000_rate_axes(dtype) if rate_axes is None else jnp.asarray(rate_axes, dtype)
+    axes = skewed_rate_axes(dtype) if rate_axes is None else jnp.asarray(rate_axes, dtype)
     _checks.check_shape("rate_axes", axes, (None, 3), "one body-axis direction per rate-sensor channel")
     for name, value in (("rate_sigma", rate_sigma), ("air_data_sigma", air_data_sigma),
                         ("attitude_sigma", attitude_sigma), ("altitude_sigma", altitude_sigma),

@@ -298,7 +298,7 @@ def solve_pivoted(matrix: Array, rhs: Array) -> Array:
     For the associative scan of ``filters.parallel``: on XLA:CPU (jaxlib 0.10.2) a
     program holding the scan's 2 log2 T levels of batched ``getrf`` calls
     (``jnp.linalg.solve``) never completes from T = 2048-4096 steps on (every worker
-    thread idle, the result never ready; ``tests/test_parallel_kalman.py``); this form
+    thread idle, the result never ready; ``tests/filters/test_parallel_kalman.py``); this form
     has no custom call to wedge. A singular ``A`` gives inf/NaN, as LU would.
     """
     n = matrix.shape[-1]

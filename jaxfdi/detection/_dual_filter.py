@@ -12,7 +12,7 @@ the two filters' system matrices ``A = dg/dx`` of the continuous model ``x' = g(
 with ``A`` by ``jax.jacfwd`` (never the paper's printed Jacobians). A fault is declared
 when ``F`` exceeds a threshold (calibrated on fault-free runs).
 
-Why it is weak (notebook 05; ``tests/test_reaction_wheels_model.py``): for the
+Why it is weak (notebook 05; ``tests/models/test_reaction_wheels_model.py``): for the
 spacecraft ``A = -I^-1 ([w]x I - [L]x)`` with ``L = I w + h_w`` the total body momentum,
 and a cross-product matrix is singular, so ``det A = 0`` whenever ``L = 0`` (and whenever
 ``w = 0``, or for a spherical body). A wheel cluster with zero net momentum keeps

@@ -28,7 +28,7 @@ def chi2_threshold(dof, pfa) -> Array:
     on ``log Q(dof/2, x/2) = log pfa`` with ``log Q`` evaluated in log space
     (``log_upper_gamma``), so that every ``pfa`` down to ``finfo(dtype).tiny``
     (``2.2e-308`` in float64, ``1.2e-38`` in float32) has a finite threshold. Agrees with
-    ``scipy.stats.chi2.isf`` to ~1e-12 relative in float64 (``tests/test_chi2_tail.py``).
+    ``scipy.stats.chi2.isf`` to ~1e-12 relative in float64 (``tests/detection/test_chi2_tail.py``).
 
     Differentiable in ``pfa`` and ``dof`` (the Newton iterations are not differentiated;
     one last Newton step is, which gives the implicit derivative

@@ -115,7 +115,7 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
     A larger ``confirm`` estimates ``nu_hat`` (and isolates) from more data: on the turbojet
     runs of Han et al. (2022) (N = 10, Bonferroni 1e-4) with an actuator step then a P4 step, 40 runs,
     ``confirm=1`` confirmed 2.9 detections a run (premature corrections are re-detected and
-    refined), ``confirm=5`` exactly 2.0 (``tests/test_glrt_correction.py``).
+    refined), ``confirm=5`` exactly 2.0 (``tests/detection/test_glrt_correction.py``).
     Jit- and vmap-able (``lax.scan`` over steps, ``vmap`` over Monte Carlo runs).
 
     ``init(mean, cov=None)``: ``cov``, if given, must be ``P_ss`` (``check_steady_state``);

@@ -27,39 +27,68 @@ from jaxfdi import _checks, _linalg
 
 
 class GaussianState(NamedTuple):
-    """Gaussian belief carried by the scan: the prior ``N(mean, cov)`` of the next step."""
+    """Gaussian belief carried by the scan: the prior ``N(mean, cov)`` of the next step.
 
-    mean: Array  # (n,)
-    cov: Array   # (n, n)
+    Attributes:
+      mean: (n,) the mean x[k|k-1]
+      cov: (n, n) the covariance P[k|k-1]
+    """
+
+    mean: Array
+    cov: Array
 
 
 class FilterInfo(NamedTuple):
     """Per-step outputs shared by all Gaussian filters (KF, EKF, UKF), so that detectors,
-    metrics and the contract tests treat them alike."""
+    metrics and the contract tests treat them alike.
 
-    predicted_mean: Array   # (n,)   x[k|k-1]
-    predicted_cov: Array    # (n, n) P[k|k-1]
-    filtered_mean: Array    # (n,)   x[k|k]
-    filtered_cov: Array     # (n, n) P[k|k]
-    innovation: Array       # (m,)   y[k] - y_hat[k|k-1]  (0 where y is missing, NaN where it is dead)
-    innovation_cov: Array   # (m, m) S[k]  (unit variance where y is missing)
-    log_likelihood: Array   # ()     log N(innovation; 0, S) over the components the update used
-    nis: Array              # ()     normalised innovation squared r^T S^-1 r; +inf when a component is dead
-    num_observed: Array     # ()     number of finite components of y[k]
-    healthy: Array          # ()     bool: the filter's numerics: S and P[k|k] positive definite, state finite
+    Attributes:
+      predicted_mean: (n,) x[k|k-1]
+      predicted_cov: (n, n) P[k|k-1]
+      filtered_mean: (n,) x[k|k]
+      filtered_cov: (n, n) P[k|k]
+      innovation: (m,) y[k] - y_hat[k|k-1] (0 where y is missing, NaN where it is dead)
+      innovation_cov: (m, m) S[k] (unit variance where y is missing)
+      log_likelihood: () log N(innovation; 0, S) over the components the update used
+      nis: () normalised innovation squared r^T S^-1 r; +inf when a component is dead
+      num_observed: () number of finite components of y[k]
+      healthy: () bool: the filter's numerics: S and P[k|k] positive definite, state finite
+    """
+
+    predicted_mean: Array
+    predicted_cov: Array
+    filtered_mean: Array
+    filtered_cov: Array
+    innovation: Array
+    innovation_cov: Array
+    log_likelihood: Array
+    nis: Array
+    num_observed: Array
+    healthy: Array
 
 
 class ConditionedGaussian(NamedTuple):
-    """Result of one measurement update: the posterior and what the update saw."""
+    """Result of one measurement update: the posterior and what the update saw.
 
-    mean: Array            # (n,)   x[k|k]
-    cov: Array             # (n, n) P[k|k]
-    innovation: Array      # (m,)
-    innovation_cov: Array  # (m, m)
-    log_likelihood: Array  # ()
-    nis: Array             # ()
-    num_observed: Array    # ()
-    healthy: Array         # () bool
+    Attributes:
+      mean: (n,) x[k|k]
+      cov: (n, n) P[k|k]
+      innovation: (m,)
+      innovation_cov: (m, m)
+      log_likelihood: ()
+      nis: ()
+      num_observed: ()
+      healthy: () bool
+    """
+
+    mean: Array
+    cov: Array
+    innovation: Array
+    innovation_cov: Array
+    log_likelihood: Array
+    nis: Array
+    num_observed: Array
+    healthy: Array
 
 
 class BatchKernel(NamedTuple):

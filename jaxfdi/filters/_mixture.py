@@ -24,27 +24,46 @@ from jaxfdi.filters._base import ConditionedGaussian, Filter, GaussianState
 class IMMState(NamedTuple):
     """State carried between steps by the IMM and the static MM filter: the per-mode
     priors of step k and the log prior mode probabilities (IMM: the predicted
-    ``log cbar_j(k)``; MM: the posterior of step k-1)."""
+    ``log cbar_j(k)``; MM: the posterior of step k-1).
 
-    mode_mean: Array      # (M, n)    x_j[k|k-1]
-    mode_cov: Array       # (M, n, n) P_j[k|k-1]
-    log_mode_prob: Array  # (M,)      log P(mode j at k | y[:k-1])
+    Attributes:
+      mode_mean: (M, n) x_j[k|k-1]
+      mode_cov: (M, n, n) P_j[k|k-1]
+      log_mode_prob: (M,) log P(mode j at k | y[:k-1])
+    """
+
+    mode_mean: Array
+    mode_cov: Array
+    log_mode_prob: Array
 
 
 class IMMInfo(NamedTuple):
-    """Per-step outputs of the IMM and the static MM filter (posteriors at step k)."""
+    """Per-step outputs of the IMM and the static MM filter (posteriors at step k).
 
-    mode_prob: Array            # (M,)      mu_j(k) = P(mode j | y[:k])
-    log_mode_prob: Array        # (M,)      log mu_j(k)
-    mean: Array                 # (n,)      combined x[k|k] (moment matched)
-    cov: Array                  # (n, n)    combined P[k|k]
-    mode_mean: Array            # (M, n)    mode-matched x_j[k|k]
-    mode_cov: Array             # (M, n, n) mode-matched P_j[k|k]
-    mode_log_likelihood: Array  # (M,)      log L_j(k) = log N(r_j; 0, S_j)
-    log_likelihood: Array       # ()        log sum_j prior_j L_j, the mixture likelihood
-    healthy: Array              # ()        bool: every mode update sound, all finite
-    dead: Array                 # (m,)      bool: components of y[k] that were not finite (a dead
-                                #           channel: reported here, not used by the modes' updates)
+    Attributes:
+      mode_prob: (M,) mu_j(k) = P(mode j | y[:k])
+      log_mode_prob: (M,) log mu_j(k)
+      mean: (n,) combined x[k|k] (moment matched)
+      cov: (n, n) combined P[k|k]
+      mode_mean: (M, n) mode-matched x_j[k|k]
+      mode_cov: (M, n, n) mode-matched P_j[k|k]
+      mode_log_likelihood: (M,) log L_j(k) = log N(r_j; 0, S_j)
+      log_likelihood: () log sum_j prior_j L_j, the mixture likelihood
+      healthy: () bool: every mode update sound, all finite
+      dead: (m,) bool: components of y[k] that were not finite (a dead channel: reported
+          here, not used by the modes' updates)
+    """
+
+    mode_prob: Array
+    log_mode_prob: Array
+    mean: Array
+    cov: Array
+    mode_mean: Array
+    mode_cov: Array
+    mode_log_likelihood: Array
+    log_likelihood: Array
+    healthy: Array
+    dead: Array
 
 
 def num_modes(mode_params: Any, expected: int | None = None) -> int:

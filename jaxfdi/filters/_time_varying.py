@@ -24,9 +24,14 @@ from jaxfdi.models.linear import LinearGaussianModel
 
 
 class TimedState(NamedTuple):
-    """A time-varying filter's state: the step index and the wrapped filter's state."""
-    step: Array  # () int, the step the inner state is the prior of
-    inner: Any   # the wrapped filter's state
+    """A time-varying filter's state: the step index and the wrapped filter's state.
+
+    Attributes:
+      step: () int, the step the inner state is the prior of
+      inner: the wrapped filter's state
+    """
+    step: Array
+    inner: Any
 
 
 def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter:

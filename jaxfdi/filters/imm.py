@@ -1,14 +1,14 @@
 """Interacting multiple model filter (Blom & Bar-Shalom 1988), any Gaussian mode filter.
 
 One cycle, with ``pi[i, j] = P(mode j at k+1 | mode i at k)`` row-stochastic
-(Bar-Shalom, Li & Kirubarajan 2001, sec. 11.6.6; seed 003 eqs. 6-12):
+(Bar-Shalom, Li & Kirubarajan 2001, sec. 11.6.6; Han et al. 2022, eqs. 6-12):
 
 1. mode-matched update of every mode's prior with ``y[k]``: posteriors ``x_j, P_j`` and
    likelihoods ``L_j = N(r_j; 0, S_j)``;
 2. mode probabilities ``mu_j(k) ∝ L_j cbar_j(k)`` (log space, log-sum-exp);
 3. mixing: ``cbar_j(k+1) = sum_i pi_ij mu_i``, ``mu_{i|j} = pi_ij mu_i / cbar_j``,
    ``x0_j = sum_i mu_{i|j} x_i``, ``P0_j = sum_i mu_{i|j} [P_i + (x_i - x0_j)(x_i - x0_j)^T]``
-   (seed 003 prints eq. 11 with the wrong terms; this is the standard form);
+   (Han et al. 2022 print eq. 11 with the wrong terms; this is the standard form);
 4. every mode's time update from its mixed ``(x0_j, P0_j)`` with ``u[k]``.
 
 The combined estimate ``x = sum_j mu_j x_j`` (moment matched) is an output, never fed

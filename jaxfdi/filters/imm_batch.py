@@ -2,7 +2,7 @@
 structure-of-arrays layout: what ``run_filter`` runs for
 ``interacting_multiple_model(kalman_filter, LinearGaussianModel modes, pi)``.
 
-Same recursion as ``imm.py`` (seed 003 eqs. 6-12, Blom & Bar-Shalom 1988), same
+Same recursion as ``imm.py`` (Han et al. 2022, eqs. 6-12; Blom & Bar-Shalom 1988), same
 outputs. Two things differ, both for speed on CPU, where 100 runs x 7 modes are 700
 small covariance recursions a step:
 

@@ -1,7 +1,7 @@
 """Static multiple-model filter (Magill 1965; MMAE), with a probability floor.
 
 Every mode's filter runs on its own, never mixed; only the mode probabilities are
-updated, ``mu_j(k) ∝ L_j(k) mu_j(k-1)`` (seed 003 eq. 6), in log space. Without a
+updated, ``mu_j(k) ∝ L_j(k) mu_j(k-1)`` (Han et al. 2022, eq. 6), in log space. Without a
 floor a mode whose probability underflows to 0 can never come back, so a fault
 that starts after a long fault-free stretch is never recognised; ``floor`` keeps
 every ``mu_j >= floor`` by mixing in the uniform distribution,

@@ -40,7 +40,7 @@ scan.
 
 The combination's solves and the Cholesky factors are ``_linalg``'s loop and written-out
 forms, not LAPACK: with batched LAPACK calls in every level, XLA:CPU (jaxlib 0.10.2) never
-returned from programs of T >= 2048-4096 steps (``tests/test_parallel_kalman.py``).
+returned from programs of T >= 2048-4096 steps (``tests/filters/test_parallel_kalman.py``).
 Above ``_linalg.UNROLL_MAX`` (8) states the Cholesky factors are LAPACK calls again;
 long sequences of such models have not been tested on CPU.
 """
@@ -59,13 +59,21 @@ from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
 class FilteringElement(NamedTuple):
-    """One associative-scan element (leading time axis when stacked)."""
+    """One associative-scan element (leading time axis when stacked).
 
-    A: Array    # (n, n)
-    b: Array    # (n,)
-    C: Array    # (n, n)
-    eta: Array  # (n,)
-    J: Array    # (n, n)
+    Attributes:
+      A: (n, n)
+      b: (n,)
+      C: (n, n)
+      eta: (n,)
+      J: (n, n)
+    """
+
+    A: Array
+    b: Array
+    C: Array
+    eta: Array
+    J: Array
 
 
 def _mT(a: Array) -> Array:

@@ -29,11 +29,17 @@ from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
 class SmootherResult(NamedTuple):
-    """Smoothed moments ``N(x_k | y_0..y_{T-1})`` and the smoother gains."""
+    """Smoothed moments ``N(x_k | y_0..y_{T-1})`` and the smoother gains.
 
-    mean: Array  # (T, n)
-    cov: Array   # (T, n, n)
-    gain: Array  # (T, n, n) G_k (zero at the last step)
+    Attributes:
+      mean: (T, n)
+      cov: (T, n, n)
+      gain: (T, n, n) G_k (zero at the last step)
+    """
+
+    mean: Array
+    cov: Array
+    gain: Array
 
 
 class SmoothingElement(NamedTuple):

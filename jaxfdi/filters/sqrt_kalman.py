@@ -29,10 +29,15 @@ from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
 class SqrtGaussianState(NamedTuple):
-    """Gaussian prior ``N(mean, chol chol^T)`` of the next step, by its factor."""
+    """Gaussian prior ``N(mean, chol chol^T)`` of the next step, by its factor.
 
-    mean: Array  # (n,)
-    chol: Array  # (n, n) lower triangular, non-negative diagonal
+    Attributes:
+      mean: (n,)
+      chol: (n, n) lower triangular, non-negative diagonal
+    """
+
+    mean: Array
+    chol: Array
 
 
 def tria(a: Array) -> Array:

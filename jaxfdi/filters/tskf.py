@@ -1,6 +1,6 @@
 """Two-stage Kalman filter (TSKF) for a random-walk fault bias, optimal or robust to an
 unknown input (Keller & Darouach 1997; Hsieh & Chen 1999; Keller, Darouach & Caramelle
-1998; seed 001, Section III).
+1998; Lee & Lyou, Section III).
 
 Plant, with ``b`` the fault bias (``p`` components) and ``d`` an unknown input::
 
@@ -31,7 +31,7 @@ The unknown input is treated as having an infinite (diffuse) variance: that limi
 the augmented Kalman filter is Kitanidis's unbiased minimum-variance filter, and it
 factors into the two stages exactly as above, the bias filter seeing only the part of
 ``y`` that ``C E d`` cannot reach. Decoupling needs ``rank(C E) = rank(E) = q <= m``
-(seed 001, eq. 5), checked when the filter is built.
+(Lee & Lyou, eq. 5), checked when the filter is built.
 
 Test statistic: ``lambda = e^T S_b^-1 e``, chi-square with ``m - q`` degrees of freedom
 when the filter's fault hypothesis holds. It equals ``r^T W^+ r`` for the paper's
@@ -68,12 +68,18 @@ class FaultDirection(NamedTuple):
     ``Fs[k] = output + (C x_hat + D u)[:, None] * output_scaled``.
 
     A pytree of arrays: a bank of filters is a vmap over stacked directions.
+
+    Attributes:
+      state: (n, p) constant actuator distribution
+      input_scaled: (nu, p) Fa gains proportional to u (effectiveness: -e_i)
+      output: (m, p) constant sensor distribution
+      output_scaled: (m, p) Fs gains proportional to the predicted output (scaling: e_j)
     """
 
-    state: Array          # (n, p) constant actuator distribution
-    input_scaled: Array   # (nu, p) Fa gains proportional to u (effectiveness: -e_i)
-    output: Array         # (m, p) constant sensor distribution
-    output_scaled: Array  # (m, p) Fs gains proportional to the predicted output (scaling: e_j)
+    state: Array
+    input_scaled: Array
+    output: Array
+    output_scaled: Array
 
 
 def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "effectiveness") -> FaultDirection:
@@ -124,28 +130,48 @@ def sensor_matrix(direction: FaultDirection, model: LinearGaussianModel, x_hat: 
 
 
 class TSKFState(NamedTuple):
-    """Prior of step k in two-stage form: ``x = x_bar + coupling b``."""
+    """Prior of step k in two-stage form: ``x = x_bar + coupling b``.
 
-    bias_free_mean: Array  # (n,)   x_bar[k|k-1]
-    bias_free_cov: Array   # (n, n) P_bar[k|k-1]
-    bias_mean: Array       # (p,)   b[k|k-1]
-    bias_cov: Array        # (p, p) Pb[k|k-1]
-    coupling: Array        # (n, p) V[k|k-1]
+    Attributes:
+      bias_free_mean: (n,) x_bar[k|k-1]
+      bias_free_cov: (n, n) P_bar[k|k-1]
+      bias_mean: (p,) b[k|k-1]
+      bias_cov: (p, p) Pb[k|k-1]
+      coupling: (n, p) V[k|k-1]
+    """
+
+    bias_free_mean: Array
+    bias_free_cov: Array
+    bias_mean: Array
+    bias_cov: Array
+    coupling: Array
 
 
 class TSKFInfo(NamedTuple):
-    """Per-step outputs of the two-stage filter."""
+    """Per-step outputs of the two-stage filter.
 
-    filtered_mean: Array   # (n,)   x[k|k] = x_bar + V b
-    filtered_cov: Array    # (n, n) P[k|k] = P_bar + V Pb V^T
-    bias_mean: Array       # (p,)   b[k|k], the fault estimate
-    bias_cov: Array        # (p, p) Pb[k|k]
-    residual: Array        # (m,)   r = y - C x[k|k] - D u - Fs b[k|k]  (eqs. 13, 15); NaN where y is dead
-    residual_cov: Array    # (m, m) W, its exact covariance (rank m - q)
-    statistic: Array       # ()     lambda = r^T W^+ r ~ chi2(m - q) under the filter's hypothesis; +inf
-                           #        with a dead (non-finite) component of y, which the update did not use
-    log_likelihood: Array  # ()     log-density of the decoupled innovation
-    healthy: Array         # ()     bool: S_bar, S_b, P[k|k] positive definite, all finite
+    Attributes:
+      filtered_mean: (n,) x[k|k] = x_bar + V b
+      filtered_cov: (n, n) P[k|k] = P_bar + V Pb V^T
+      bias_mean: (p,) b[k|k], the fault estimate
+      bias_cov: (p, p) Pb[k|k]
+      residual: (m,) r = y - C x[k|k] - D u - Fs b[k|k] (eqs. 13, 15); NaN where y is dead
+      residual_cov: (m, m) W, its exact covariance (rank m - q)
+      statistic: () lambda = r^T W^+ r ~ chi2(m - q) under the filter's hypothesis; +inf
+          with a dead (non-finite) component of y, which the update did not use
+      log_likelihood: () log-density of the decoupled innovation
+      healthy: () bool: S_bar, S_b, P[k|k] positive definite, all finite
+    """
+
+    filtered_mean: Array
+    filtered_cov: Array
+    bias_mean: Array
+    bias_cov: Array
+    residual: Array
+    residual_cov: Array
+    statistic: Array
+    log_likelihood: Array
+    healthy: Array
 
 
 def tskf_statistic_dof(model: LinearGaussianModel, unknown_input: Array | None = None) -> int:
@@ -283,7 +309,7 @@ def run_tskf_bank(
     """Run a bank of TSKFs, one per stacked fault direction, on the same data.
 
     The bank is one filter vmapped over ``directions`` (leaves with a leading axis F,
-    from ``stack_directions``): seed 001's ``l + r`` actuator and sensor filters.
+    from ``stack_directions``): Lee & Lyou's ``l + r`` actuator and sensor filters.
 
     Args:
       model, bias_walk, unknown_input: as in ``two_stage_kalman_filter`` (shared).

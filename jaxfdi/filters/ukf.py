@@ -4,7 +4,7 @@ Wan & van der Merwe 2000), additive noise, Cholesky sigma points.
 Sigma points ``X0 = m``, ``X(+/-)i = m +/- sqrt(L + lambda) col_i(chol P)``,
 ``lambda = alpha^2 (L + kappa) - L``, weights ``Wm0 = lambda / (L + lambda)``,
 ``Wc0 = Wm0 + 1 - alpha^2 + beta``, ``Wi = 1 / (2 (L + lambda))``.
-Measurement update ``K = Pxy S^-1``, ``P+ = P - K S K^T`` (seed 000, eq. 29 corrected),
+Measurement update ``K = Pxy S^-1``, ``P+ = P - K S K^T`` (Park et al. 2004, eq. 29 corrected),
 computed in a Joseph-like form (below).
 
 Centred form (the float32 fix). With small ``alpha`` the centre weights are huge and
@@ -67,10 +67,15 @@ from jaxfdi.filters._base import (
 
 
 class SigmaPoints(NamedTuple):
-    """Sigma points in centred form: the centre and the 2L offsets from it."""
+    """Sigma points in centred form: the centre and the 2L offsets from it.
 
-    centre: Array   # (n,)
-    offsets: Array  # (2n, n): +s_1..+s_n, -s_1..-s_n
+    Attributes:
+      centre: (n,)
+      offsets: (2n, n): +s_1..+s_n, -s_1..-s_n
+    """
+
+    centre: Array
+    offsets: Array
 
 
 def unscented_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, float, float]:

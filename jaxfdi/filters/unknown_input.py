@@ -1,5 +1,5 @@
 """Kalman filter robust to an unknown input: the unbiased minimum-variance (UMV) filter
-of Kitanidis (1987), the state estimator of seed 001's feedback loop.
+of Kitanidis (1987), the state estimator of Lee & Lyou's feedback loop.
 
 Plant ``x[k+1] = Phi x + Gamma u + E d + w``, ``y = C x + D u + v`` with ``d`` unknown
 (arbitrary, e.g. the model uncertainty ``Delta A x``). Update with the gain
@@ -12,7 +12,7 @@ In whitened coordinates (``S = L L^T``, ``L^-1 F = [Q1 Q2] [R1; 0]`` by QR) the
 correction is ``(I - K0 C) E R1^-1 Q1^T L^-1``, and the innovation's ``d``-free part is
 ``Q2^T L^-1 r`` (``m - q`` components): its squared norm is the chi-square(m - q) test
 statistic (``nis``) and the log-likelihood is de Jong's (1991) diffuse one.
-Decoupling needs ``rank(C E) = rank(E) = q <= m`` (seed 001, eq. 5), checked when the
+Decoupling needs ``rank(C E) = rank(E) = q <= m`` (Lee & Lyou, eq. 5), checked when the
 filter is built (``check_decoupling``). Predict as the Kalman filter, with ``E d``
 left out: its effect has already been removed from the estimate by the gain.
 """
@@ -42,7 +42,7 @@ from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
 
 def check_decoupling(model: LinearGaussianModel, unknown_input: Array) -> int:
-    """Check ``rank(C E) = rank(E) = q <= m`` (seed 001, eq. 5) and return ``q``.
+    """Check ``rank(C E) = rank(E) = q <= m`` (Lee & Lyou, eq. 5) and return ``q``.
 
     Raises a ``ValueError`` naming the failed condition; ``E`` must be concrete.
     """

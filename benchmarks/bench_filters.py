@@ -141,13 +141,13 @@ def jaxfdi_kf_batch(model, m0, P0, ys, us):
 
 def jaxfdi_kf_kernel(model, m0, P0, ys, us):
     """Runs with their own prior (P0 (N, n, n)) or model (Q (N, n, n)): the structure-of-
-    arrays batch kernel (``run_filter`` with a per-run prior, ``run_kalman_batch``
+    arrays batch kernel (``run_filter`` with a per-run prior or a model per run
     with a per-run model)."""
     if P0.ndim == 3:
         kf = jaxfdi.kalman_filter(model)
         _, info = jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, P0), ys, us)
     else:
-        _, info = jaxfdi.filters.run_kalman_batch(model, jaxfdi.GaussianState(m0, P0), ys, us)
+        _, info = jaxfdi.run_filter(jaxfdi.kalman_filter(model), jaxfdi.GaussianState(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
 
 
@@ -546,7 +546,7 @@ def bench_filter(kind: str, prob: dict, args, log) -> dict:
             timing, out = time_jax(jaxfdi_kf_kernel, call_args, None, reps, budget)
             outs["jaxfdi_batch"] = out
             result["rows"].append({"case": label, "impl": "jaxfdi_batch", "sequences_timed": N, **timing,
-                                   "note": "structure-of-arrays kernel (run_filter / run_kalman_batch)"})
+                                   "note": "structure-of-arrays kernel (run_filter, a prior or a model per run)"})
             log(f"  {kind} {label:>20} {'jaxfdi_batch':<10} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms")
         result["rows"].append({**fp_row, "case": label, "note": "same filterpy timing as the 100-sequence case"})
         result["agreement"] += [dict(case=label, **row) for row in agreement(
@@ -559,7 +559,7 @@ def bench_driver_compile(prob: dict, log) -> list[dict]:
     plain scan beside them: eager ``run_filter`` (what a one-shot script calls; traced
     with library calls, ``_linalg.library_calls``), ``jit(run_filter)`` (the inlined,
     written-out path of ``vmap``), ``run_filter`` shared and per-run P0, and
-    ``run_kalman_batch`` per-run Q; every ``FilterInfo`` field returned."""
+    ``run_filter`` with a per-run Q; every ``FilterInfo`` field returned."""
     from jaxfdi import _linalg
     from jaxfdi.filters._base import _scan_filter
 
@@ -575,8 +575,8 @@ def bench_driver_compile(prob: dict, log) -> list[dict]:
             lambda y: jaxfdi.run_filter(kf, kf.init(m0, P0), y, us)).lower(ys),
         f"run_filter P0 per run, {N} runs (full info)": lambda: jax.jit(
             lambda p: jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, p), ys, us)).lower(P0s),
-        f"run_kalman_batch Q per run, {N} runs (full info)": lambda: jax.jit(
-            lambda q: jaxfdi.filters.run_kalman_batch(model._replace(Q=q), jaxfdi.GaussianState(m0, P0), ys, us)
+        f"run_filter Q per run, {N} runs (full info)": lambda: jax.jit(
+            lambda q: jaxfdi.run_filter(jaxfdi.kalman_filter(model._replace(Q=q)), jaxfdi.GaussianState(m0, P0), ys, us)
         ).lower(P0s),
     }
     rows = []

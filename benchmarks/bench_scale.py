@@ -298,8 +298,8 @@ def bench_startup(repeats: int, log) -> dict:
         "run_filter eager (one sequence, full info)": lambda: _scan_filter.lower(kf, kf.init(m0, P0), ys[0], us),
         "run_filter P0 per run (batch kernel)": lambda: jax.jit(
             lambda p: jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, p), ys, us)).lower(P0s),
-        "run_kalman_batch Q per run (batch kernel)": lambda: jax.jit(
-            lambda q: jaxfdi.filters.run_kalman_batch(model._replace(Q=q), jaxfdi.GaussianState(m0, P0), ys, us)
+        "run_filter, Q per run (batch kernel)": lambda: jax.jit(
+            lambda q: jaxfdi.run_filter(jaxfdi.kalman_filter(model._replace(Q=q)), jaxfdi.GaussianState(m0, P0), ys, us)
         ).lower(P0s),
         "jit(vmap(run_filter)) (written-out algebra)": lambda: jax.jit(jax.vmap(
             lambda y: jaxfdi.run_filter(kf, kf.init(m0, P0), y, us))).lower(ys),

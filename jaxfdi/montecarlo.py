@@ -150,8 +150,8 @@ def monte_carlo(
         processes after ``jaxfdi.distributed.initialize``, else the local ones).
       progress: ``True`` for a line on stderr, or a callable ``(done, total, seconds)``.
       batched: ``run_one`` takes a whole chunk, ``(keys (B,), per_run (B, ...)) ->
-        outputs (B, ...)`` (e.g. to run a batch kernel such as ``run_kalman_batch``
-        over runs that differ in their model), instead of one run under ``vmap``.
+        outputs (B, ...)`` (e.g. ``run_filter`` of a ``kalman_filter`` with a model per
+        run, the batch kernel), instead of one run under ``vmap``.
       reduce: a ``streaming.Reducer``: fold each chunk's outputs into its state on the
         host and return the state (merged across processes) instead of the stacked
         outputs.

@@ -9,7 +9,6 @@ from jaxfdi.filters._mixture import IMMInfo, IMMState
 from jaxfdi.filters.ekf import extended_kalman_filter
 from jaxfdi.filters.imm import interacting_multiple_model
 from jaxfdi.filters.kalman import kalman_filter
-from jaxfdi.filters.kalman_batch import run_kalman_batch
 from jaxfdi.filters.mm import multiple_model
 from jaxfdi.filters.posterior import init_from_posterior
 from jaxfdi.filters.tskf import (
@@ -37,7 +36,6 @@ __all__ = [
     "GaussianState",
     "run_filter",
     "kalman_filter",
-    "run_kalman_batch",
     "rts_smoother",
     "parallel_rts_smoother",
     "SmootherResult",

@@ -14,7 +14,7 @@ from functools import partial
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg
+from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import (
     ConditionedGaussian,
     Filter,
@@ -28,7 +28,7 @@ from jaxfdi.filters._base import (
     report_dead,
     used_innovation,
 )
-from jaxfdi.filters.kalman_batch import kalman_batch_kernel, supports
+from jaxfdi.filters.kalman_batch import check_per_run_model, kalman_batch_kernel, per_run_leaves, supports
 from jaxfdi.filters.parallel import parallel_scan
 from jaxfdi.models.linear import LinearGaussianModel, validate_linear_model
 
@@ -78,7 +78,11 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
     ``step(state, y, u)`` updates with ``y[k]`` (m,) and predicts with ``u[k]`` (nu,).
 
     Args:
-      model: the ``LinearGaussianModel``.
+      model: the ``LinearGaussianModel``; leaves with a leading run axis N (e.g.
+        ``model._replace(Q=Qs)``, ``Qs`` (N, n, n)) give one model per run: the filter
+        then runs only over N runs at once (``run_filter`` with ``ys`` (N, T, m)), by the
+        structure-of-arrays kernel (up to 16 states and 8 outputs), with the standard-form
+        covariance update (equal to Joseph's for the optimal gain).
       missing_measurements: treat NaN components of ``y`` as not measured (static).
         Off by default: then the covariances do not depend on the data, which is what
         makes a vmapped Monte Carlo study fast (see ``joseph_update``).
@@ -91,11 +95,13 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
         its cost from 42 to 30 ms and its compile time from 4.4 to 2.0 s
         (``benchmarks/bench_tuning.py``).
 
-    ``run_filter`` over runs with their own prior runs the structure-of-arrays step of
-    ``kalman_batch.py``; runs with their own model: ``run_kalman_batch``. With
+    ``run_filter`` over runs with their own prior or their own model runs the
+    structure-of-arrays step of ``kalman_batch.py``. With
     ``missing_measurements=True`` the filter also runs as an associative scan,
     ``run_filter(..., parallel=True)`` (Särkkä and García-Fernández 2021; ``parallel.py``).
     """
+    if isinstance(model, LinearGaussianModel) and any(per_run_leaves(model)):
+        return _per_run_kalman_filter(model, missing_measurements)
     n, nu, m = validate_linear_model(model)
 
     def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
@@ -115,3 +121,30 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
     if not supports(model):
         return filt
     return filt._replace(batch=kalman_batch_kernel(model))  # run_filter over runs with their own prior
+
+
+def _per_run_kalman_filter(model: LinearGaussianModel, missing_measurements: bool) -> Filter:
+    """``kalman_filter`` of a model with a run axis on some leaves: ``init`` takes a shared
+    or per-run prior, ``step`` refuses a single sequence, ``batch`` is the kernel."""
+    if missing_measurements:
+        raise ValueError("missing_measurements: a model per run runs the batch kernel, which reports a non-finite "
+                         "component and keeps it out of the mean but not out of the covariance; use jax.vmap over "
+                         "kalman_filter(model_of_one_run, missing_measurements=True)")
+    model, per_run, num_runs = check_per_run_model(model)
+    n = _checks.shape_of(model.Phi)[-1]
+
+    def init(mean: Array, cov: Array) -> GaussianState:
+        for name, value, shapes in (("mean", mean, ((n,), (num_runs, n))), ("cov", cov, ((n, n), (num_runs, n, n)))):
+            _checks.check_real(name, value, "a real prior")
+            _checks.check_finite(name, value, "prior")
+            if _checks.shape_of(value) not in shapes:
+                raise ValueError(f"{name}: expected shape {shapes[0]} shared or {shapes[1]} per run, got "
+                                 f"{_checks.shape_of(value)}")
+        dtype = jnp.result_type(model.Phi, mean, cov)
+        return GaussianState(jnp.asarray(mean, dtype), jnp.asarray(cov, dtype))
+
+    def step(state: GaussianState, y: Array, u: Array):
+        raise ValueError(f"model: a model with a run axis ({num_runs} runs) runs over its runs at once: pass ys of "
+                         f"shape ({num_runs}, T, m) to run_filter")
+
+    return Filter(init, step, batch=kalman_batch_kernel(model, per_run))

@@ -1,7 +1,7 @@
 """The linear Kalman filter for a whole batch of runs in one step, structure-of-arrays
-layout: what ``run_filter`` runs when the runs carry their own prior, and what
-``run_kalman_batch`` runs when they carry their own model (a different ``Q``, ``R`` or
-``Phi`` per run).
+layout: what ``run_filter`` runs over N runs of ``kalman_filter(model)`` when the runs
+carry their own prior, or their own model (``kalman_filter`` of a model whose leaves have
+a leading run axis: a different ``Q``, ``R`` or ``Phi`` per run).
 
 Same recursion and outputs as ``kalman.py`` (Kalman 1960); two things differ, as in the
 IMM's kernel (``imm_batch.py``), both for speed on CPU:
@@ -24,10 +24,7 @@ info is written run-first into (N, T, ...) buffers (``BatchKernel.info_runs_firs
 from __future__ import annotations
 
 import math
-from functools import partial
-from typing import Any
 
-import jax
 import jax.numpy as jnp
 from jax import Array
 
@@ -36,9 +33,7 @@ from jaxfdi.filters._base import (
     BatchKernel,
     FilterInfo,
     GaussianState,
-    check_sequences,
     check_step_inputs,
-    kernel_scan,
     report_dead,
     used_innovation,
 )
@@ -122,6 +117,10 @@ def kalman_batch_kernel(model: LinearGaussianModel, per_run: LinearGaussianModel
     n, nu, m = model.Phi.shape[-1], model.Gamma.shape[-1], model.C.shape[-2]
 
     def pack(state: GaussianState, num_runs: int) -> GaussianState:
+        for name, leaf, batched in zip(model._fields, model, per_run):
+            if batched and leaf.shape[0] != num_runs:
+                raise ValueError(f"model.{name}: a per-run leaf needs a leading axis of {num_runs} runs (as ys), "
+                                 f"got shape {tuple(leaf.shape)}")
         return pack_prior(state, n, num_runs)
 
     def step(state: GaussianState, y: Array, u: Array):
@@ -134,7 +133,7 @@ def kalman_batch_kernel(model: LinearGaussianModel, per_run: LinearGaussianModel
         """(T, N, ...) -> (N, T, ...): not used by the driver (``info_runs_first``)."""
         return FilterInfo(*(jnp.swapaxes(leaf, 0, 1) for leaf in info))
 
-    return BatchKernel(pack, step, unpack_state, unpack_info, per_run_only=True, info_runs_first=True)
+    return BatchKernel(pack, step, unpack_state, unpack_info, per_run_only=not any(per_run), info_runs_first=True)
 
 
 def pack_prior(state: GaussianState, n: int, num_runs: int) -> GaussianState:
@@ -151,14 +150,6 @@ def unpack_state(state: GaussianState) -> GaussianState:
     return GaussianState(jnp.moveaxis(state.mean, -1, 0), jnp.moveaxis(state.cov, -1, 0))
 
 
-@partial(jax.jit, static_argnums=1)
-def _run_kernel(model: LinearGaussianModel, per_run: LinearGaussianModel, init_state: GaussianState, ys: Array,
-                us: Array):
-    """The model is an argument, not a constant of the program: one executable serves
-    every call with the same shapes."""
-    return kernel_scan(kalman_batch_kernel(model, per_run), init_state, ys, us)
-
-
 def supports(model: LinearGaussianModel) -> bool:
     """True when the kernel takes ``model``: at most ``KERNEL_MAX_STATES`` states and
     ``UNROLL_MAX`` outputs (static shapes)."""
@@ -166,81 +157,25 @@ def supports(model: LinearGaussianModel) -> bool:
     return n <= KERNEL_MAX_STATES and m <= _linalg.UNROLL_MAX
 
 
-def run_kalman_batch(model: LinearGaussianModel, init_state: GaussianState, ys: Array, us: Array | None = None
-                     ) -> tuple[GaussianState, FilterInfo]:
-    """Kalman filter over ``N`` runs, each with its own model and prior if wanted.
-
-    The same results as ``jax.vmap(lambda p, s, y, u: run_filter(kalman_filter(p), s, y,
-    u))`` over the per-run leaves (to round-off: the covariance update is in the
-    standard form here, Joseph's there), 3-6x faster on CPU (``benchmarks/RESULTS.md``).
-
-    Args:
-      model: a ``LinearGaussianModel``; any leaf may carry a leading run axis ``N``
-        (e.g. ``model._replace(Q=Qs)`` with ``Qs`` (N, n, n)), the others are shared.
-      init_state: ``GaussianState(mean, cov)``: mean (n,) or (N, n), cov (n, n) or
-        (N, n, n).
-      ys: (N, T, m) measurements (a non-finite component is a dead channel, as in
-        ``kalman_filter``: reported, not used by the mean).
-      us: (T, nu) shared, (N, T, nu) per run, or ``None``.
-
-    Returns:
-      ``(final_state, info)`` with a leading run axis on every field, as ``vmap``.
-    """
-    check_sequences(ys, us, "(N, T, m)", "(T, nu) or (N, T, nu)")
-    ys = jnp.asarray(ys)
-    if ys.ndim != 3:
-        raise ValueError(f"ys: expected shape (N, T, m) for N runs, got {tuple(ys.shape)}")
-    num_runs = ys.shape[0]
-    model, per_run = _check_batched_model(model, num_runs)
-    n, nu, m = model.Phi.shape[-1], model.Gamma.shape[-1], model.C.shape[-2]
-    if not supports(model):
-        raise ValueError(f"model: the batch kernel takes up to {KERNEL_MAX_STATES} states and "
-                         f"{_linalg.UNROLL_MAX} outputs, got {n} states and {m} outputs; use "
-                         "jax.vmap(run_filter) instead")
-    if not isinstance(init_state, GaussianState):
-        raise TypeError(f"init_state: expected a GaussianState(mean, cov), got {_checks.received(init_state)}")
-    check_batched_prior(init_state, n, num_runs)
-    if us is None:
-        us = jnp.zeros((ys.shape[1], nu), ys.dtype)
-    us = jnp.asarray(us)
-    if us.ndim not in (2, 3) or (us.ndim == 3 and us.shape[0] != num_runs):
-        raise ValueError(f"us: expected shape (T, nu) shared or ({num_runs}, T, nu) per run, got {tuple(us.shape)}")
-    _checks.check_same_length(("ys", "us"), ys[0], us if us.ndim == 2 else us[0])
-    if _checks.shape_of(ys)[-1] != m:
-        raise ValueError(f"ys: expected {m} outputs per step (model.C has {m} rows), got shape {tuple(ys.shape)}")
-    dtype = jnp.result_type(ys, *model, init_state.mean, init_state.cov)
-    return _run_kernel(model, per_run, GaussianState(*(jnp.asarray(a, dtype) for a in init_state)), ys, us)
+def per_run_leaves(model: LinearGaussianModel) -> LinearGaussianModel:
+    """Which leaves of ``model`` carry a leading run axis (3-D instead of a matrix)."""
+    return LinearGaussianModel(*(len(_checks.shape_of(leaf)) == 3 for leaf in model))
 
 
-def check_batched_prior(init_state: GaussianState, n: int, num_runs: int) -> None:
-    """``mean`` (n,) or (N, n), ``cov`` (n, n) or (N, n, n), real and finite."""
-    mean_shape, cov_shape = _checks.shape_of(init_state.mean), _checks.shape_of(init_state.cov)
-    if mean_shape not in ((n,), (num_runs, n)):
-        raise ValueError(f"init_state.mean: expected shape ({n},) shared or ({num_runs}, {n}) per run, got {mean_shape}")
-    if cov_shape not in ((n, n), (num_runs, n, n)):
-        raise ValueError(f"init_state.cov: expected shape ({n}, {n}) shared or ({num_runs}, {n}, {n}) per run, "
-                         f"got {cov_shape}")
-    _checks.check_real("init_state.mean", init_state.mean, "a real initial mean")
-    _checks.check_finite("init_state.mean", init_state.mean, "initial state mean")
-    _checks.check_real("init_state.cov", init_state.cov, "a real initial covariance")
-    _checks.check_finite("init_state.cov", init_state.cov, "initial covariance")
-
-
-def _check_batched_model(model: Any, num_runs: int) -> tuple[LinearGaussianModel, LinearGaussianModel]:
-    """Split ``model`` into its leaves and which of them carry a leading run axis; check
-    every leaf, per run or shared, against the shared shapes."""
-    if not isinstance(model, LinearGaussianModel):
-        raise TypeError(f"model: expected a LinearGaussianModel, got {_checks.received(model)}")
-    expected_ndim = 2
-    per_run = LinearGaussianModel(*(len(_checks.shape_of(leaf)) == expected_ndim + 1 for leaf in model))
-    for name, leaf, batched in zip(model._fields, model, per_run):
+def check_per_run_model(model: LinearGaussianModel) -> tuple[LinearGaussianModel, LinearGaussianModel, int]:
+    """A model with a run axis on some leaves: ``(model in one float dtype, per_run, N)``;
+    every leaf, per run or shared, checked against the shared shapes and one ``N``."""
+    per_run = per_run_leaves(model)
+    sizes = {_checks.shape_of(leaf)[0] for leaf, batched in zip(model, per_run) if batched}
+    num_runs = max(sizes)
+    for name, leaf in zip(model._fields, model):
         shape = _checks.shape_of(leaf)
         if len(shape) not in (2, 3):
             raise ValueError(f"model.{name}: expected a matrix, or one per run with a leading axis of "
                              f"{num_runs}, got shape {shape}")
-        if batched and shape[0] != num_runs:
-            raise ValueError(f"model.{name}: a per-run leaf needs a leading axis of {num_runs} runs (as ys), "
-                             f"got shape {shape}")
+        if len(shape) == 3 and shape[0] != num_runs:
+            raise ValueError(f"model.{name}: every per-run leaf needs the same leading axis of runs "
+                             f"({sorted(sizes)} given), got shape {shape}")
     first = LinearGaussianModel(*(jnp.asarray(leaf)[0] if batched else jnp.asarray(leaf)
                                   for leaf, batched in zip(model, per_run)))
     validate_linear_model(first)
@@ -248,5 +183,10 @@ def _check_batched_model(model: Any, num_runs: int) -> tuple[LinearGaussianModel
         if batched and _checks.shape_of(leaf)[1:] != _checks.shape_of(ref):
             raise ValueError(f"model.{name}: expected shape ({num_runs}, *{_checks.shape_of(ref)}), got "
                              f"{_checks.shape_of(leaf)}")
+    if not supports(first):
+        n, m = _checks.shape_of(first.Phi)[-1], _checks.shape_of(first.C)[0]
+        raise ValueError(f"model: a model per run runs the batch kernel, which takes up to {KERNEL_MAX_STATES} "
+                         f"states and {_linalg.UNROLL_MAX} outputs, got {n} states and {m} outputs; use "
+                         "jax.vmap over kalman_filter of each run's model")
     dtype = _checks.float_dtype(*model)
-    return LinearGaussianModel(*(jnp.asarray(leaf, dtype) for leaf in model)), per_run
+    return LinearGaussianModel(*(jnp.asarray(leaf, dtype) for leaf in model)), per_run, num_runs

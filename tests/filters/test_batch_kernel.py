@@ -9,7 +9,7 @@ from filterpy.kalman import KalmanFilter
 
 import jaxfdi
 from _linear_gaussian_cases import small_model
-from jaxfdi.filters import GaussianState, kalman_filter, run_filter, run_kalman_batch
+from jaxfdi.filters import GaussianState, kalman_filter, run_filter
 from jaxfdi.models import LinearGaussianModel
 
 N, T = 5, 30
@@ -74,7 +74,7 @@ def test_per_run_prior_equals_vmap_and_filterpy(data):
 
 
 def test_per_run_model_equals_vmap(data):
-    """run_kalman_batch with Phi, Q and R per run and shared inputs; then Q alone per run,
+    """run_filter of kalman_filter with Phi, Q and R per run and shared inputs; then Q alone per run,
     a per-run mean with a shared covariance."""
     ys, us, means, covs = data
     model = small_model()
@@ -82,10 +82,10 @@ def test_per_run_model_equals_vmap(data):
     every = model._replace(Phi=np.asarray(model.Phi)[None] * (1 - 0.1 * scale), Q=np.asarray(model.Q)[None] * scale,
                            R=np.asarray(model.R)[None] / scale)
     axes = LinearGaussianModel(0, None, None, None, 0, 0)
-    got = run_kalman_batch(every, GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us[0])
+    got = run_filter(kalman_filter(every), GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us[0])
     _assert_same(got, _vmapped(every, axes, means, covs, ys, us[0]))
     only_q = model._replace(Q=np.asarray(model.Q)[None] * scale)
-    got = run_kalman_batch(only_q, GaussianState(jnp.asarray(means), jnp.asarray(covs[0])), ys, us)
+    got = run_filter(kalman_filter(only_q), GaussianState(jnp.asarray(means), jnp.asarray(covs[0])), ys, us)
     _assert_same(got, _vmapped(only_q, LinearGaussianModel(None, None, None, None, 0, None), means, covs[0], ys, us))
 
 
@@ -98,7 +98,7 @@ def test_fifteen_states_equal_vmap():
     model = LinearGaussianModel(Phi, np.zeros((n, 1)), C, np.zeros((m, 1)), np.eye(n) * 0.01, np.eye(m) * 0.1)
     per_run = model._replace(Q=np.eye(n)[None] * np.linspace(0.005, 0.05, 3)[:, None, None])
     ys = rng.normal(size=(3, 12, m))
-    got = run_kalman_batch(per_run, GaussianState(jnp.zeros(n), jnp.eye(n)), ys)
+    got = run_filter(kalman_filter(per_run), GaussianState(jnp.zeros(n), jnp.eye(n)), ys, np.zeros((12, 1)))
     _assert_same(got, _vmapped(per_run, LinearGaussianModel(None, None, None, None, 0, None), np.zeros(n), np.eye(n),
                                ys, np.zeros((12, 1))))
 
@@ -118,14 +118,14 @@ def test_health_float32_and_gradient(data):
     _, info = run_filter(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
     assert not bool(info.healthy[0, 3]) and bool(info.healthy[0, :3].all()) and bool(info.healthy[1].all())
     model32 = LinearGaussianModel(*(jnp.asarray(a, jnp.float32) for a in model))
-    _, info32 = run_kalman_batch(model32, GaussianState(jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32)),
+    _, info32 = run_filter(kalman_filter(model32), GaussianState(jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32)),
                                  jnp.asarray(ys, jnp.float32), jnp.asarray(us, jnp.float32))
     assert info32.filtered_cov.dtype == jnp.float32 and bool(info32.healthy.all())
 
     def loss(scale, batched):
         mdl = model._replace(Q=jnp.asarray(model.Q)[None] * scale[:, None, None])
         if batched:
-            info = run_kalman_batch(mdl, GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us)[1]
+            info = run_filter(kalman_filter(mdl), GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us)[1]
         else:
             info = _vmapped(mdl, LinearGaussianModel(None, None, None, None, 0, None), means, covs, ys, us)[1]
         return jnp.mean(info.log_likelihood)
@@ -153,7 +153,7 @@ def test_monte_carlo_batched_runs_the_kernel():
     def batch(keys, q_scales):
         models, ys = jax.vmap(data_of)(keys, q_scales)
         per_run = model._replace(Q=models.Q)
-        return jnp.sum(run_kalman_batch(per_run, GaussianState(jnp.zeros(3), jnp.eye(3)), ys, us)[1].log_likelihood, -1)
+        return jnp.sum(run_filter(kalman_filter(per_run), GaussianState(jnp.zeros(3), jnp.eye(3)), ys, us)[1].log_likelihood, -1)
 
     scales = np.linspace(0.5, 2.0, 11)
     want = jaxfdi.monte_carlo(one, jax.random.key(4), 11, scales, chunk_size=4)
@@ -165,15 +165,21 @@ def test_bad_input(data):
     ys, us, means, covs = data
     model = small_model()
     with pytest.raises(ValueError, match="model.Q"):
-        run_kalman_batch(model._replace(Q=np.stack([model.Q] * (N + 1))), GaussianState(jnp.zeros(3), jnp.eye(3)), ys, us)
+        run_filter(kalman_filter(model._replace(Q=np.stack([model.Q] * (N + 1)))), GaussianState(jnp.zeros(3), jnp.eye(3)),
+                   ys, us)
     with pytest.raises(ValueError, match="init_state.cov"):
         run_filter(kalman_filter(model), GaussianState(jnp.zeros(3), jnp.asarray(covs[:2])), ys, us)
-    with pytest.raises(ValueError, match="states"):
-        big = LinearGaussianModel(np.eye(17), np.zeros((17, 1)), np.ones((2, 17)), np.zeros((2, 1)), np.eye(17),
-                                  np.eye(2))
-        run_kalman_batch(big, GaussianState(jnp.zeros(17), jnp.eye(17)), ys, us)
-    with pytest.raises(ValueError, match="ys"):
-        run_kalman_batch(model, GaussianState(jnp.zeros(3), jnp.eye(3)), ys[..., :1], us)
+    with pytest.raises(ValueError, match="states"):  # a model per run takes the kernel, up to 16 states
+        big = LinearGaussianModel(np.eye(17), np.zeros((17, 1)), np.ones((2, 17)), np.zeros((2, 1)),
+                                  np.stack([np.eye(17)] * N), np.eye(2))
+        kalman_filter(big)
+    per_run = model._replace(Q=np.stack([model.Q] * N))
+    with pytest.raises(ValueError, match=r"y: expected shape \(2,\)"):
+        run_filter(kalman_filter(per_run), GaussianState(jnp.zeros(3), jnp.eye(3)), ys[..., :1], us)
+    with pytest.raises(ValueError, match=r"pass ys of shape \(%d, T, m\)" % N):
+        run_filter(kalman_filter(per_run), GaussianState(jnp.zeros(3), jnp.eye(3)), ys[0], us[0])
+    with pytest.raises(ValueError, match="missing_measurements"):
+        kalman_filter(per_run, missing_measurements=True)
     with pytest.raises(ValueError, match="shared_covariance"):
         run_filter(kalman_filter(model), GaussianState(jnp.zeros(3), jnp.asarray(covs)), ys, us,
                          shared_covariance=True)

@@ -15,10 +15,13 @@ them, as pytest's default import mode needs without ``__init__.py`` files).
 Imports: the shared helpers (``_problems.py``, ``_notebooks.py``, ...) stay in ``tests/``,
 which ``pythonpath = ["tests"]`` (pyproject.toml) puts on ``sys.path`` for every folder.
 
-Compilation (most of the suite's time): one persistent XLA compilation cache serves the
-whole run, every worker and every process a test starts (CLI runs, notebook kernels:
-``JAXFDI_CACHE_DIR``), so that a program compiled anywhere in the run, e.g. a scenario's
-Monte Carlo that a CLI test and its notebook both run at the same size, is compiled once.
+Compilation (most of the suite's time): a persistent XLA compilation cache per xdist
+worker serves that worker and every process its tests start (CLI runs, notebook kernels:
+``JAXFDI_CACHE_DIR``), so that a program compiled in a worker, e.g. a scenario's Monte
+Carlo that a CLI test and its notebook both run at the same size, is compiled once there.
+One folder for all workers let two workers write and read the same entry at once (jax
+0.10.2 writes an entry in place): three CI runs lost a worker to a segfault or abort in
+XLA's compile and cache code once the scenario tests, now in one folder, ran side by side.
 The cache starts empty in a temporary folder made by the controller and is deleted at
 the end: nothing is carried between runs, so a CI run still compiles everything it uses
 once. (Compiling at LLVM optimisation level 0, ``--xla_backend_optimization_level=0``,
@@ -68,6 +71,9 @@ def pytest_configure(config):
     if not hasattr(config, "workerinput") and _CACHE_ENV not in os.environ:  # the controller
         config._jaxfdi_xla_cache = os.environ[_CACHE_ENV] = tempfile.mkdtemp(prefix="jaxfdi-test-xla-")
     cache = os.environ.get(_CACHE_ENV)
+    if cache and hasattr(config, "workerinput"):  # a folder per worker (module doc)
+        cache = os.path.join(cache, config.workerinput["workerid"])
+        os.makedirs(cache, exist_ok=True)
     if cache:
         import jaxfdi
 

@@ -15,24 +15,32 @@ them, as pytest's default import mode needs without ``__init__.py`` files).
 Imports: the shared helpers (``_problems.py``, ``_notebooks.py``, ...) stay in ``tests/``,
 which ``pythonpath = ["tests"]`` (pyproject.toml) puts on ``sys.path`` for every folder.
 
-Compilation (most of the suite's time): a persistent XLA compilation cache per xdist
-worker serves that worker and every process its tests start (CLI runs, notebook kernels:
-``JAXFDI_CACHE_DIR``), so that a program compiled in a worker, e.g. a scenario's Monte
-Carlo that a CLI test and its notebook both run at the same size, is compiled once there.
-One folder for all workers let two workers write and read the same entry at once (jax
-0.10.2 writes an entry in place): three CI runs lost a worker to a segfault or abort in
-XLA's compile and cache code once the scenario tests, now in one folder, ran side by side.
-The cache starts empty in a temporary folder made by the controller and is deleted at
-the end: nothing is carried between runs, so a CI run still compiles everything it uses
-once. (Compiling at LLVM optimisation level 0, ``--xla_backend_optimization_level=0``,
+Compilation (most of the suite's time): one persistent XLA compilation cache serves the
+whole run, every worker and every process a test starts (CLI runs, notebook kernels:
+``JAXFDI_CACHE_DIR``), so that a program compiled anywhere in the run, e.g. a scenario's
+Monte Carlo that a CLI test and its notebook both run at the same size, is compiled once.
+
+Memory maps: a compiled program stays loaded, about 3 memory maps of the process, while
+JAX's caches hold it. A worker that runs half the suite loads some 20 thousand programs
+and passes Linux's ``vm.max_map_count`` (65530), and its next compile, cache write or
+cache read dies inside XLA with a segfault or an abort: four CI runs lost a worker that
+way at 76-96 % (the 125 first tests of ``tests/filters`` alone reach 24.6k maps). So each
+test module ends with ``jax.clear_caches()``, which unloads its programs
+(``_release_programs``).
+
+The persistent cache starts empty in a temporary folder made by the controller and is
+deleted at the end: nothing is carried between runs, so a CI run still compiles
+everything it uses once. (Compiling at LLVM optimisation level 0, ``--xla_backend_optimization_level=0``,
 was tried and made the suite slower: 1727 s and 54.7 CPU-minutes for a fresh-clone run,
 the programs' runs being slower by more than their compilation got cheaper, and a float32
 square-root UKF test moved by 4 %.)"""
+import gc
 import os
 import shutil
 import tempfile
 
 import jax
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 
@@ -71,9 +79,6 @@ def pytest_configure(config):
     if not hasattr(config, "workerinput") and _CACHE_ENV not in os.environ:  # the controller
         config._jaxfdi_xla_cache = os.environ[_CACHE_ENV] = tempfile.mkdtemp(prefix="jaxfdi-test-xla-")
     cache = os.environ.get(_CACHE_ENV)
-    if cache and hasattr(config, "workerinput"):  # a folder per worker (module doc)
-        cache = os.path.join(cache, config.workerinput["workerid"])
-        os.makedirs(cache, exist_ok=True)
     if cache:
         import jaxfdi
 
@@ -92,3 +97,12 @@ def pytest_collection_modifyitems(session, config, items):
     rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
     # a stable sort: tests keep their order within a file, other files theirs
     items.sort(key=lambda item: rank.get(item.path.name, len(HEAVY_FIRST)))
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_programs():
+    """After each test module, drop JAX's caches so that its compiled programs are
+    unloaded (module doc: a worker otherwise runs out of memory maps)."""
+    yield
+    jax.clear_caches()
+    gc.collect()

@@ -55,12 +55,8 @@ from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints, UnscentedKalma
 from jax.scipy.linalg import cho_solve, cholesky  # noqa: E402
 
 import jaxfdi  # noqa: E402
-from jaxfdi.models import (  # noqa: E402
-    engine_model,
-    rigid_body_observation,
-    rigid_body_params,
-    rigid_body_transition,
-)
+from jaxfdi.models import engine_model, rigid_body_params
+from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
 
 ALPHA, BETA, KAPPA = 1e-3, 2.0, 0.0
 T_KF, T_UKF = 1000, 600
@@ -107,35 +103,35 @@ def rigid_body_problem(num_sequences: int, seed: int = 1) -> dict:
 
 # --------------------------------------------------------------------- jaxfdi (library)
 def jaxfdi_kf(model, m0, P0, ys, us):
-    kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter(kf, kf.init(m0, P0), ys, us)
+    kf = jaxfdi.filters.kalman_filter(model)
+    _, info = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood)
 
 
 def jaxfdi_kf_full_info(model, m0, P0, ys, us):
-    kf = jaxfdi.kalman_filter(model)
-    return jaxfdi.run_filter(kf, kf.init(m0, P0), ys, us)[1]
+    kf = jaxfdi.filters.kalman_filter(model)
+    return jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys, us)[1]
 
 
 def jaxfdi_ukf(Q, R, params, m0, P0, ys, us):
-    ukf = jaxfdi.unscented_kalman_filter(
+    ukf = jaxfdi.filters.unscented_kalman_filter(
         rigid_body_transition, rigid_body_observation, Q, R, params, ALPHA, BETA, KAPPA
     )
-    _, info = jaxfdi.run_filter(ukf, ukf.init(m0, P0), ys, us)
+    _, info = jaxfdi.filters.run_filter(ukf, ukf.init(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood)
 
 
 def jaxfdi_ukf_full_info(Q, R, params, m0, P0, ys, us):
-    ukf = jaxfdi.unscented_kalman_filter(
+    ukf = jaxfdi.filters.unscented_kalman_filter(
         rigid_body_transition, rigid_body_observation, Q, R, params, ALPHA, BETA, KAPPA
     )
-    return jaxfdi.run_filter(ukf, ukf.init(m0, P0), ys, us)[1]
+    return jaxfdi.filters.run_filter(ukf, ukf.init(m0, P0), ys, us)[1]
 
 
 def jaxfdi_kf_batch(model, m0, P0, ys, us):
     """``run_filter``: N sequences at once; the shared covariances come back once."""
-    kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter(kf, kf.init(m0, P0), ys, us)
+    kf = jaxfdi.filters.kalman_filter(model)
+    _, info = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
 
 
@@ -144,18 +140,19 @@ def jaxfdi_kf_kernel(model, m0, P0, ys, us):
     arrays batch kernel (``run_filter`` with a per-run prior or a model per run
     with a per-run model)."""
     if P0.ndim == 3:
-        kf = jaxfdi.kalman_filter(model)
-        _, info = jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, P0), ys, us)
+        kf = jaxfdi.filters.kalman_filter(model)
+        _, info = jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m0, P0), ys, us)
     else:
-        _, info = jaxfdi.run_filter(jaxfdi.kalman_filter(model), jaxfdi.GaussianState(m0, P0), ys, us)
+        _, info = jaxfdi.filters.run_filter(
+            jaxfdi.filters.kalman_filter(model), jaxfdi.filters.GaussianState(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
 
 
 def jaxfdi_ukf_batch(Q, R, params, m0, P0, ys, us):
-    ukf = jaxfdi.unscented_kalman_filter(
+    ukf = jaxfdi.filters.unscented_kalman_filter(
         rigid_body_transition, rigid_body_observation, Q, R, params, ALPHA, BETA, KAPPA
     )
-    _, info = jaxfdi.run_filter(ukf, ukf.init(m0, P0), ys, us)
+    _, info = jaxfdi.filters.run_filter(ukf, ukf.init(m0, P0), ys, us)
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
 
 
@@ -565,18 +562,18 @@ def bench_driver_compile(prob: dict, log) -> list[dict]:
 
     model, m0, P0, ys, us = prob["model"], prob["m0"], prob["P0"], prob["ys"], prob["us"]
     N = ys.shape[0]
-    kf = jaxfdi.kalman_filter(model)
+    kf = jaxfdi.filters.kalman_filter(model)
     P0s = jnp.broadcast_to(P0, (N,) + P0.shape) * 1.5
     cases = {
         "plain scan, 1 sequence (means, covs, loglik)": lambda: jax.jit(plain_kf).lower(model, m0, P0, ys[0], us),
         "run_filter eager, 1 sequence (full info)": lambda: _scan_filter.lower(kf, kf.init(m0, P0), ys[0], us),
         "jit(run_filter), 1 sequence (full info)": lambda: jax.jit(jaxfdi_kf_full_info).lower(model, m0, P0, ys[0], us),
         f"run_filter shared, {N} seq (full info)": lambda: jax.jit(
-            lambda y: jaxfdi.run_filter(kf, kf.init(m0, P0), y, us)).lower(ys),
+            lambda y: jaxfdi.filters.run_filter(kf, kf.init(m0, P0), y, us)).lower(ys),
         f"run_filter P0 per run, {N} runs (full info)": lambda: jax.jit(
-            lambda p: jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, p), ys, us)).lower(P0s),
+            lambda p: jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m0, p), ys, us)).lower(P0s),
         f"run_filter Q per run, {N} runs (full info)": lambda: jax.jit(
-            lambda q: jaxfdi.run_filter(jaxfdi.kalman_filter(model._replace(Q=q)), jaxfdi.GaussianState(m0, P0), ys, us)
+            lambda q: jaxfdi.filters.run_filter(jaxfdi.filters.kalman_filter(model._replace(Q=q)), jaxfdi.filters.GaussianState(m0, P0), ys, us)
         ).lower(P0s),
     }
     rows = []
@@ -623,8 +620,8 @@ t1 = time.perf_counter()
 d = np.load(sys.argv[1])
 model = jax.block_until_ready(engine_model())
 t_model = time.perf_counter()
-kf = jaxfdi.kalman_filter(model)
-_, info = jaxfdi.run_filter(kf, kf.init(d['m0'], d['P0']), d['ys'], d['us'])
+kf = jaxfdi.filters.kalman_filter(model)
+_, info = jaxfdi.filters.run_filter(kf, kf.init(d['m0'], d['P0']), d['ys'], d['us'])
 means = np.asarray(info.filtered_mean)
 t2 = time.perf_counter()
 print(json.dumps({'import_s': t1 - t0, 'build_and_run_s': t2 - t1, 'model_s': t_model - t1, 'filter_s': t2 - t_model,

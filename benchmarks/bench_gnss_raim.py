@@ -45,8 +45,9 @@ import numpy as np  # noqa: E402
 
 from jaxfdi import _io  # noqa: E402
 from jaxfdi.data import data_path  # noqa: E402
-from jaxfdi.gnss import (ephemeris_table, geodetic_to_ecef, integrity, raim_tables, read_rinex_nav,  # noqa: E402
-                         select_orbits, transmission_geometry)
+from jaxfdi.gnss import geodetic_to_ecef, integrity, read_rinex_nav
+from jaxfdi.gnss.orbits import ephemeris_table, select_orbits, transmission_geometry
+from jaxfdi.gnss.raim import raim_tables
 from jaxfdi.gnss.frames import elevation_azimuth  # noqa: E402
 from jaxfdi.gnss.orbits import OMEGA_E, SPEED_OF_LIGHT  # noqa: E402
 from jaxfdi.gnss.positioning import transmit_states  # noqa: E402

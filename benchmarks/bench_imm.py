@@ -37,7 +37,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_filters import cpu_model, rel_diff, time_jax, write_json_atomic  # noqa: E402
 
 import jaxfdi  # noqa: E402
-from jaxfdi.models import bias_mode_initial_state, bias_modes, engine_model, noise_inflation_modes  # noqa: E402
+from jaxfdi.models import engine_model
+from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes  # noqa: E402
 from jaxfdi.scenarios.engine import PAPER_TRANSITION, EngineSettings  # noqa: E402
 
 T = 1000
@@ -63,11 +64,11 @@ def designs(model):
 
 
 def jaxfdi_imm(modes, m0, P0):
-    imm = jaxfdi.interacting_multiple_model(jaxfdi.kalman_filter, modes, PAPER_TRANSITION)
+    imm = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, modes, PAPER_TRANSITION)
     mu0 = jnp.asarray(PAPER_TRANSITION[0] @ PAPER_TRANSITION)  # filterpy's first prior: mu0 @ pi
 
     def run(ys, us):
-        _, info = jaxfdi.run_filter(imm, imm.init(m0, P0, mu0), ys, us)
+        _, info = jaxfdi.filters.run_filter(imm, imm.init(m0, P0, mu0), ys, us)
         return info.mode_prob, info.mean
 
     return run
@@ -75,11 +76,11 @@ def jaxfdi_imm(modes, m0, P0):
 
 def jaxfdi_imm_batch(modes, m0, P0):
     """``run_filter``: the whole batch in one call (ys (N, T, m), shared us)."""
-    imm = jaxfdi.interacting_multiple_model(jaxfdi.kalman_filter, modes, PAPER_TRANSITION)
+    imm = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, modes, PAPER_TRANSITION)
     mu0 = jnp.asarray(PAPER_TRANSITION[0] @ PAPER_TRANSITION)
 
     def run(ys, us):
-        _, info = jaxfdi.run_filter(imm, imm.init(m0, P0, mu0), ys, us)
+        _, info = jaxfdi.filters.run_filter(imm, imm.init(m0, P0, mu0), ys, us)
         return info.mode_prob, info.mean
 
     return run, imm.batch is not None
@@ -155,13 +156,13 @@ def bench_imm(args, log) -> list[dict]:
 
 def bench_glrt(args, log) -> list[dict]:
     model, ys, us = engine_data(args.sequences, seed=1)
-    steady = jaxfdi.steady_state_kalman(model)
-    kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, us)
+    steady = jaxfdi.filters.steady_state_kalman(model)
+    kf = jaxfdi.filters.kalman_filter(model)
+    _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, us)
     innovations = jnp.asarray(info.innovation)
     rows = []
     for N in (10, 20, 40):
-        det = jaxfdi.glrt_detector(model, steady.gain, steady.innovation_cov, N, 200.0)
+        det = jaxfdi.detection.glrt_detector(model, steady.gain, steady.innovation_cov, N, 200.0)
 
         def run(e, det=det):
             return jax.lax.scan(det.step, det.init(), e)[1].statistic

@@ -47,8 +47,8 @@ def worker(workload: str, runs: int, repeats: int, out: str) -> None:
         from jaxfdi.models import engine_model
 
         model = engine_model()
-        kf = jaxfdi.kalman_filter(model)
-        detector = jaxfdi.chi2_detector(jaxfdi.chi2_threshold(4 * 5, 0.005), 4)
+        kf = jaxfdi.filters.kalman_filter(model)
+        detector = jaxfdi.detection.chi2_detector(jaxfdi.detection.chi2_threshold(4 * 5, 0.005), 4)
         f = jaxfdi.fault("bias", "sensor", 1, 200, 16.99)
         us = jnp.full((400, 1), 0.01)
 

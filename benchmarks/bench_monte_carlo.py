@@ -39,7 +39,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import bench_filters as bf  # noqa: E402  (reference implementations: plain scan, dynamax)
 
 import jaxfdi  # noqa: E402
-from jaxfdi.models import engine_model, rigid_body_observation, rigid_body_params, rigid_body_transition  # noqa: E402
+from jaxfdi.models import engine_model, rigid_body_params
+from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition  # noqa: E402
 
 
 def kf_runners(T: int):
@@ -53,8 +54,8 @@ def kf_runners(T: int):
         return jaxfdi.simulate(sim, jnp.zeros(7), us, key)[1].measurement
 
     def jaxfdi_run(key):
-        kf = jaxfdi.kalman_filter(model)
-        _, info = jaxfdi.run_filter(kf, kf.init(m0, P0), data(key), us)
+        kf = jaxfdi.filters.kalman_filter(model)
+        _, info = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), data(key), us)
         return jnp.sum(info.log_likelihood)
 
     impls = {
@@ -80,9 +81,9 @@ def ukf_runners(T: int):
         return jaxfdi.simulate(sim, x0, us, key_noise)[1].measurement
 
     def jaxfdi_run(key):
-        ukf = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params,
+        ukf = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params,
                                              bf.ALPHA, bf.BETA, bf.KAPPA)
-        _, info = jaxfdi.run_filter(ukf, ukf.init(m0, P0), data(key), us)
+        _, info = jaxfdi.filters.run_filter(ukf, ukf.init(m0, P0), data(key), us)
         return jnp.sum(info.log_likelihood)
 
     impls = {
@@ -97,12 +98,12 @@ def ukf_runners(T: int):
 def monitor_runners(T: int):
     model = engine_model()
     us = jnp.full((T, 1), 0.01)
-    threshold = jaxfdi.chi2_threshold(4 * 5, 0.005)
+    threshold = jaxfdi.detection.chi2_threshold(4 * 5, 0.005)
     p2_bias = jaxfdi.fault("bias", "sensor", component=1, onset=T // 2, magnitude=16.99)
 
     def run(key):
-        kf = jaxfdi.kalman_filter(model)
-        result = jaxfdi.monitor(jaxfdi.linear_simulator(model, p2_bias), kf, jaxfdi.chi2_detector(threshold, 4),
+        kf = jaxfdi.filters.kalman_filter(model)
+        result = jaxfdi.monitor(jaxfdi.linear_simulator(model, p2_bias), kf, jaxfdi.detection.chi2_detector(threshold, 4),
                                 jnp.zeros(7), kf.init(jnp.zeros(7), model.Q), us, key, p2_bias.onset)
         return result.record.detection_step.astype(jnp.float64)
 

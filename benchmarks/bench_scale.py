@@ -82,10 +82,10 @@ def bench_parallel(cases, repeats, budget, log, eager=True, on_case=None) -> lis
     for batch, T in cases:
         model, ys, us = engine_sequences(batch, T)
         prior = GaussianState(jnp.zeros(7), 10.0 * model.Q)
-        kf = jaxfdi.kalman_filter(model)
+        kf = jaxfdi.filters.kalman_filter(model)
 
         def sequential(ys):
-            info = jax.vmap(lambda y: jaxfdi.run_filter(kf, prior, y, us)[1])(ys)
+            info = jax.vmap(lambda y: jaxfdi.filters.run_filter(kf, prior, y, us)[1])(ys)
             smooth = jax.vmap(lambda i: rts_smoother(model, i))(info)
             return info.filtered_mean, info.filtered_cov, info.log_likelihood, smooth.mean, smooth.cov
 
@@ -95,7 +95,7 @@ def bench_parallel(cases, repeats, budget, log, eager=True, on_case=None) -> lis
             return info.filtered_mean, info.filtered_cov, info.log_likelihood, smooth.mean, smooth.cov
 
         def sequential_filter(ys):
-            info = jax.vmap(lambda y: jaxfdi.run_filter(kf, prior, y, us)[1])(ys)
+            info = jax.vmap(lambda y: jaxfdi.filters.run_filter(kf, prior, y, us)[1])(ys)
             return info.filtered_mean, info.filtered_cov, info.log_likelihood
 
         def parallel_filter(ys):
@@ -114,7 +114,7 @@ def bench_parallel(cases, repeats, budget, log, eager=True, on_case=None) -> lis
         rows[-1]["agreement"] = max(agree_filter, agree_smooth)
         log(f"  batch {batch:4d} T {T:7d} agreement (max rel diff, filter and smoother): {agree_filter:.1e} {agree_smooth:.1e}")
         if batch == 1 and eager:  # one sequence eagerly: the library-call driver, as a one-shot script runs it
-            timing = repeat_timing(lambda: block(jaxfdi.run_filter(kf, prior, ys[0], us)), repeats, budget)
+            timing = repeat_timing(lambda: block(jaxfdi.filters.run_filter(kf, prior, ys[0], us)), repeats, budget)
             rows.append({"batch": 1, "T": T, "impl": "sequential KF eager run_filter", **timing, "compile_s": float("nan")})
             log(f"  batch    1 T {T:7d} {'eager run_filter':<18} run {timing['run_s'] * 1e3:10.1f} ms")
         if on_case is not None:
@@ -156,13 +156,13 @@ def _mc_study(T: int):
     model = make_engine()
     us = jnp.full((T, 1), 0.01)
     onset_step = T // 2
-    threshold = jaxfdi.chi2_threshold(4 * 5, 1e-3)
+    threshold = jaxfdi.detection.chi2_threshold(4 * 5, 1e-3)
 
     def run_one(key, size):
         onset = jnp.where(size > 0, onset_step, jaxfdi.faults.NEVER)
         sim = jaxfdi.linear_simulator(model, jaxfdi.fault("bias", "sensor", 3, onset, size))
-        kf = jaxfdi.kalman_filter(model)
-        detector = jaxfdi.chi2_detector(threshold, 4)
+        kf = jaxfdi.filters.kalman_filter(model)
+        detector = jaxfdi.detection.chi2_detector(threshold, 4)
         return jaxfdi.monitor(sim, kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q * 10.0), us, key,
                                       onset).record
 
@@ -292,17 +292,17 @@ def bench_startup(repeats: int, log) -> dict:
     from jaxfdi.filters._base import _scan_filter
 
     model, m0, P0, ys, us = prob["model"], prob["m0"], prob["P0"], prob["ys"], prob["us"]
-    kf = jaxfdi.kalman_filter(model)
+    kf = jaxfdi.filters.kalman_filter(model)
     P0s = jnp.broadcast_to(P0, (2,) + P0.shape) * 1.5
     drivers = {
         "run_filter eager (one sequence, full info)": lambda: _scan_filter.lower(kf, kf.init(m0, P0), ys[0], us),
         "run_filter P0 per run (batch kernel)": lambda: jax.jit(
-            lambda p: jaxfdi.run_filter(kf, jaxfdi.GaussianState(m0, p), ys, us)).lower(P0s),
+            lambda p: jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m0, p), ys, us)).lower(P0s),
         "run_filter, Q per run (batch kernel)": lambda: jax.jit(
-            lambda q: jaxfdi.run_filter(jaxfdi.kalman_filter(model._replace(Q=q)), jaxfdi.GaussianState(m0, P0), ys, us)
+            lambda q: jaxfdi.filters.run_filter(jaxfdi.filters.kalman_filter(model._replace(Q=q)), jaxfdi.filters.GaussianState(m0, P0), ys, us)
         ).lower(P0s),
         "jit(vmap(run_filter)) (written-out algebra)": lambda: jax.jit(jax.vmap(
-            lambda y: jaxfdi.run_filter(kf, kf.init(m0, P0), y, us))).lower(ys),
+            lambda y: jaxfdi.filters.run_filter(kf, kf.init(m0, P0), y, us))).lower(ys),
     }
     out["driver_compile_cpu_s"] = {}
     for name, lower in drivers.items():

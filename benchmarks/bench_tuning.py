@@ -39,9 +39,9 @@ def kf_rows(args, log):
         return model._replace(Q=jnp.diag(jnp.exp(t[0])), R=jnp.diag(jnp.exp(t[1])))
 
     def jaxfdi_total(t, remat=False, unroll=True):
-        kf = jaxfdi.kalman_filter(with_noise(t), unroll_factorizations=unroll)
-        kf = tuning.checkpointed(kf) if remat else kf
-        return jnp.sum(jax.vmap(lambda y: jaxfdi.run_filter(kf, kf.init(m0, P0), y, us)[1].log_likelihood.sum())(ys))
+        kf = jaxfdi.filters.kalman_filter(with_noise(t), unroll_factorizations=unroll)
+        kf = jaxfdi.tuning.train.checkpointed(kf) if remat else kf
+        return jnp.sum(jax.vmap(lambda y: jaxfdi.filters.run_filter(kf, kf.init(m0, P0), y, us)[1].log_likelihood.sum())(ys))
 
     def dynamax_total(t):
         return jnp.sum(jax.vmap(lambda y: dynamax_kf(with_noise(t), m0, P0, y, us)[2])(ys))
@@ -72,7 +72,7 @@ def imm_rows(args, log):
     runs = max(1, args.imm_sequences // 7)
     data = et.labelled_runs(runs, seed=0)
     design = et.imm_design("zhang-li")
-    raw = tuning.unconstrain(design.parameterization, design.hand())
+    raw = jaxfdi.tuning.parameterize.unconstrain(design.parameterization, design.hand())
     rows = []
     for remat in (False, True):
         def loss(r, remat=remat):

@@ -1,26 +1,31 @@
-"""jaxfdi: model-based fault detection and isolation in JAX."""
-from jaxfdi.filters import (
-    Filter,
-    FilterInfo,
-    GaussianState,
-    extended_kalman_filter,
-    interacting_multiple_model,
-    kalman_filter,
-    multiple_model,
-    run_filter,
-    two_stage_kalman_filter,
-    unscented_kalman_filter,
-)
-from jaxfdi.filters import init_from_posterior
-from jaxfdi.models import LinearGaussianModel, c2d, linear_gaussian_model
+"""jaxfdi: model-based fault detection and isolation in JAX.
 
-from jaxfdi import _version
+The top level holds what every study uses: faults as data, the simulator, the closed
+loop's stages and its scan, the fused monitor, the Monte Carlo driver, the study engine
+and detection summaries. Estimators are in ``filters``, residual tests and isolation in
+``detection``, plants in ``models``, then ``control``, ``tuning``, ``gnss``, ``ins``, the
+papers' studies in ``scenarios``, and ``plotting``, ``streaming``, ``distributed``. The
+public API is these packages' ``__all__``, listed on one page of the documentation.
+"""
+from jaxfdi import _version, detection, filters, models
+from jaxfdi._monitor import MonitorResult, monitor
+from jaxfdi._simulate import linear_simulator, simulate, simulator
+from jaxfdi.faults import Fault, FaultKind, fault, no_fault, stack_faults
+from jaxfdi.loop import LoopResult, run_loop, state_feedback
+from jaxfdi.metrics import DetectionSummary, rate_interval, summarize_detection
+from jaxfdi.montecarlo import monte_carlo
+from jaxfdi.stages import FDI, Controller, Plant, Scorer
+from jaxfdi.study import Structure, Study, run_study
 
 __version__ = _version.__version__
 
 
 def enable_x64(enable: bool = True) -> None:
-    """Switch JAX to float64 (library code never does this by itself)."""
+    """Switch JAX to float64 (library code never does this by itself).
+
+    Returns:
+      None; it sets ``jax_enable_x64`` to ``enable`` (``False`` switches back to float32).
+    """
     import jax
 
     jax.config.update("jax_enable_x64", enable)
@@ -29,7 +34,11 @@ def enable_x64(enable: bool = True) -> None:
 def enable_compilation_cache(path: str | None = None) -> str:
     """Keep compiled XLA programs on disk so that a repeated run (a CLI call, a notebook
     re-run) skips most compilation. ``path`` defaults to ``$JAXFDI_CACHE_DIR`` or
-    ``~/.cache/jaxfdi/xla``; returns the folder used."""
+    ``~/.cache/jaxfdi/xla``.
+
+    Returns:
+      str, the folder used for the cache.
+    """
     import os
     from pathlib import Path
 
@@ -41,44 +50,13 @@ def enable_compilation_cache(path: str | None = None) -> str:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
     return cache
 
-from jaxfdi import detection, faults, loop, metrics, models  # noqa: E402
-from jaxfdi.detection import chi2_detector, chi2_threshold, glrt_detector, mode_probability_detector  # noqa: E402
-from jaxfdi.faults import (  # noqa: E402
-    Fault,
-    FaultKind,
-    Target,
-    active_label,
-    concat_faults,
-    episodes,
-    fault,
-    fault_group,
-    no_fault,
-    stack_faults,
-)
-from jaxfdi.loop import LoopResult, LoopTrace, detection_scorer, episode_scorer, feedforward, run_loop, state_feedback
-from jaxfdi.stages import Controller, FDI, Plant, Scorer
-from jaxfdi.metrics import (  # noqa: E402
-    DetectionRecord,
-    DetectionSummary,
-    EpisodeRecord,
-    EpisodeSummary,
-    confusion_matrix,
-    step_health,
-    summarize_detection,
-    summarize_episodes,
-)
-from jaxfdi.montecarlo import monte_carlo  # noqa: E402
-from jaxfdi.riccati import solve_discrete_are, steady_state_kalman  # noqa: E402
-from jaxfdi._monitor import MonitorHistory, MonitorResult, monitor, replay_detector  # noqa: E402
-from jaxfdi._simulate import SimStep, Simulator, linear_simulator, simulate, simulator  # noqa: E402
 
-
-_LAZY_SUBMODULES = ("control", "tuning", "streaming", "distributed", "plotting")
+_LAZY_SUBMODULES = ("control", "tuning", "gnss", "ins", "scenarios", "plotting", "streaming", "distributed")
 
 
 def __getattr__(name: str):
-    """``jaxfdi.control`` and ``jaxfdi.tuning`` (which import optax, ~0.1 s) and the
-    multi-host helpers are imported on first use, not by ``import jaxfdi``."""
+    """The subpackages beyond the core (``control`` and ``tuning`` import optax, ~0.1 s)
+    are imported on first use, not by ``import jaxfdi``."""
     if name in _LAZY_SUBMODULES:
         import importlib
 
@@ -91,23 +69,15 @@ def __dir__():
 
 
 __all__ = [
-    # filters and models
-    "Filter", "FilterInfo", "GaussianState", "LinearGaussianModel", "c2d", "extended_kalman_filter",
-    "init_from_posterior", "interacting_multiple_model", "kalman_filter", "linear_gaussian_model",
-    "multiple_model", "run_filter", "two_stage_kalman_filter", "unscented_kalman_filter",
-    "solve_discrete_are", "steady_state_kalman",
     # faults and simulation
-    "Fault", "FaultKind", "Target", "active_label", "concat_faults", "episodes", "fault", "fault_group",
-    "no_fault", "stack_faults", "SimStep", "Simulator", "linear_simulator", "simulator",
-    # detection, loop, Monte Carlo, metrics
-    "chi2_detector", "chi2_threshold", "glrt_detector", "mode_probability_detector",
-    "FDI", "Controller", "LoopResult", "LoopTrace", "Plant", "Scorer", "detection_scorer", "episode_scorer",
-    "feedforward", "run_loop", "state_feedback", "MonitorHistory", "MonitorResult", "replay_detector",
-    "monte_carlo", "DetectionRecord", "DetectionSummary", "EpisodeRecord", "EpisodeSummary",
-    "confusion_matrix", "step_health", "summarize_detection", "summarize_episodes",
+    "Fault", "FaultKind", "fault", "no_fault", "stack_faults", "simulator", "linear_simulator", "simulate",
+    # the closed loop, the monitor, Monte Carlo, studies, summaries
+    "Plant", "FDI", "Controller", "Scorer", "run_loop", "state_feedback", "LoopResult", "monitor",
+    "MonitorResult", "monte_carlo", "Study", "Structure", "run_study", "summarize_detection",
+    "DetectionSummary", "rate_interval",
     # set-up
     "enable_x64", "enable_compilation_cache",
-    # subpackages and modules
-    "control", "detection", "faults", "filters", "loop", "metrics", "models", "monitor", "montecarlo",
-    "plotting", "progress", "riccati", "simulate", "streaming", "tuning", "distributed",
+    # subpackages
+    "filters", "detection", "models", "control", "tuning", "gnss", "ins", "scenarios", "plotting",
+    "streaming", "distributed",
 ]

@@ -44,7 +44,13 @@ class MonitorHistory(NamedTuple):
 
 
 class MonitorResult(NamedTuple):
-    """What ``monitor`` returns: the run's detection record and, optionally, its history."""
+    """What ``monitor`` returns: the run's detection record and, optionally, its history.
+
+    Attributes:
+      record: the run's ``DetectionRecord`` (scalar fields: first alarm, detection step, ...)
+      history: the ``MonitorHistory`` of (T, ...) per-step arrays with ``keep_history=True``,
+        else ``None``
+    """
     record: DetectionRecord
     history: MonitorHistory | None
 
@@ -112,6 +118,11 @@ def monitor(
         ``first_unhealthy`` (an infinite statistic, a dead sensor, is an alarm).
       channel_labels: (m,) the fault label of each measurement channel, which a step with
         a dead channel isolates (``filter_detector``).
+
+    Returns:
+      ``MonitorResult(record, history)``: the run's ``DetectionRecord`` and, with
+      ``keep_history=True``, its ``MonitorHistory`` (truth ``SimStep``, filter info,
+      statistic, alarm, label and estimate, each with a leading time axis T), else ``None``.
     """
     _checks.check_real("us", us, "real inputs of shape (T, nu)")
     _checks.check_finite("us", us, "inputs")

@@ -182,6 +182,13 @@ def simulator(
         as ``Q``), or ``None``.
       available: (T, m) bool array or callable ``(k, x) -> (m,) bool``: components that
         are measured at step ``k`` (the others are NaN), or ``None`` (all, always).
+
+    Returns:
+      ``Simulator(init, step, measure, advance)``: ``init(x0)`` takes the (n,) true initial
+      state and gives a ``SimState`` (F held values, zero); ``step(state, k, u, key) ->
+      (state, SimStep)`` with the run's key; ``measure(state, k, u, step_key) -> (state,
+      Sensed)`` and ``advance(state, k, u, step_key) -> (state, Actuated)`` with the step's
+      key ``fold_in(key, k)``.
     """
     _checks.check_callable("f", f, "a plant function f(x, u, params) -> next state")
     _checks.check_callable("h", h, "a sensor function h(x, u, params) -> measurement")
@@ -274,13 +281,24 @@ def check_fault_components(faults: Fault, target: int, size: int) -> None:
 
 def linear_simulator(model: LinearGaussianModel, fault: Fault | None = None, **options) -> Simulator:
     """``simulator`` for a ``LinearGaussianModel`` (its own ``Q`` and ``R``); ``options``
-    as for ``simulator`` (``input_noise``, ``available``, ...)."""
+    as for ``simulator`` (``input_noise``, ``available``, ...).
+
+    Returns:
+      ``Simulator`` of ``x[k+1] = Phi x[k] + Gamma u[k] + w[k]``, ``y[k] = C x[k] + D u[k] + v[k]``
+      (as ``simulator`` returns).
+    """
     validate_linear_model(model)
     return simulator(linear_transition, linear_observation, model.Q, model.R, model, fault, **options)
 
 
 def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState, SimStep]:
-    """Run a simulator over ``us`` (T, nu); returns the final state and the (T, ...) truth."""
+    """Run a simulator over ``us`` (T, nu).
+
+    Returns:
+      ``(final, truth)``: the final ``SimState`` (true state ``x[T]``, after the last step) and the
+      ``SimStep`` of every step stacked along a leading time axis (``truth.state`` (T, n),
+      ``truth.measurement`` (T, m), ``truth.mode`` (T,), ...).
+    """
     _checks.check_real("us", us, "real inputs of shape (T, nu)")
     _checks.check_finite("us", us, "inputs")
     us = jnp.asarray(us)

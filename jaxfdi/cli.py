@@ -43,7 +43,8 @@ from jaxfdi.scenarios.reaction_wheels import METHODS as WHEEL_METHODS
 from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_examples, wheel_study
 from jaxfdi.scenarios.vtol import METHODS as VTOL_METHODS
 from jaxfdi.scenarios.vtol import plot_vtol, vtol_design, vtol_examples, vtol_study
-from jaxfdi.tuning import constrain, save_params, unconstrain
+from jaxfdi.tuning import constrain, save_params
+from jaxfdi.tuning.parameterize import unconstrain
 
 #: the CLI's messages (jaxfdi.progress.configure_logging sends them to stderr; --quiet drops INFO)
 logger = logging.getLogger("jaxfdi")

@@ -34,6 +34,8 @@ from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 
+__all__ = ["initialize"]
+
 ENV_NUM_PROCESSES = "JAXFDI_NUM_PROCESSES"
 ENV_PROCESS_ID = "JAXFDI_PROCESS_ID"
 ENV_COORDINATOR = "JAX_COORDINATOR_ADDRESS"
@@ -99,7 +101,12 @@ def initialize(num_processes: int | None = None, process_id: int | None = None, 
     Call before any other JAX work. Values not given come from the environment
     (``JAXFDI_NUM_PROCESSES``, ``JAXFDI_PROCESS_ID``, ``JAX_COORDINATOR_ADDRESS``); with
     none at all, one process (nothing to do). On a CPU-only host the cross-process
-    collectives go through gloo. Returns the process's place and the device counts.
+    collectives go through gloo.
+
+    Returns:
+      ``ProcessInfo(process_id, num_processes, local_devices, global_devices)``: the
+      process's place (``jax.process_index()``, ``jax.process_count()``) and the device
+      counts (this process's, every process's); ``(0, 1, n, n)`` for one process.
     """
     import jax
 

@@ -50,7 +50,19 @@ NEVER = 2**30
 
 class FaultKind(enum.IntEnum):
     """How a fault acts (module doc): none, a bias (step), a ramp, an impulse, a scale or
-    effectiveness change, stuck, stopped, or dead (NaN)."""
+    effectiveness change, stuck, stopped, or dead (NaN).
+
+    Attributes:
+      NONE: 0, no fault: the component is nominal (a fault-free run)
+      BIAS: 1, ``s + magnitude`` (a step)
+      RAMP: 2, ``s + magnitude + slope (k - onset)`` (a drift)
+      IMPULSE: 3, ``s + magnitude`` at ``k == onset`` only (a single-sample spike)
+      SCALE: 4, ``(1 + magnitude) s`` (sensor scaling)
+      EFFECTIVENESS: 5, ``(1 - magnitude) s``, an actuator effectiveness loss in [0, 1]
+      STUCK: 6, ``s(onset)``: stuck at the value at onset
+      STOP: 7, ``0``: the component stops
+      DEAD: 8, ``NaN``: a dead or disconnected sensor (sensors only)
+    """
     NONE = 0
     BIAS = 1
     RAMP = 2
@@ -120,6 +132,11 @@ def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, l
 
     ``label`` >= 0 sets the fault's mode label explicitly (e.g. a sensor group's);
     -1 (default) lets ``fault_label`` derive it from target and component.
+
+    Returns:
+      ``Fault`` with int32 ``kind``, ``target``, ``component``, ``onset``, ``end``, ``label``
+      and float ``magnitude``, ``slope`` (the default float dtype), each of the shape of the
+      argument (scalars for one fault, arrays for a batch).
     """
     kind = _enum_value("kind", kind, FaultKind)
     target = _enum_value("target", target, Target)
@@ -188,12 +205,22 @@ def fault_group(kind, target, components, onset, magnitudes, slopes=0.0, end=NEV
 
 
 def no_fault() -> Fault:
-    """The fault-free label (never active)."""
+    """The fault-free label (never active).
+
+    Returns:
+      ``Fault`` with scalar leaves: kind NONE on sensor 0, ``onset = NEVER``; its
+      ``fault_label`` is 0.
+    """
     return fault(FaultKind.NONE, Target.SENSOR, 0, NEVER)
 
 
 def stack_faults(faults: list[Fault]) -> Fault:
-    """Stack faults along a new leading axis (a batch for vmap, or simultaneous faults)."""
+    """Stack faults along a new leading axis (a batch for vmap, or simultaneous faults).
+
+    Returns:
+      ``Fault`` whose leaves have a new leading axis of ``len(faults)`` (scalar leaves
+      become (F,)).
+    """
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *faults)
 
 

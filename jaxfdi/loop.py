@@ -94,7 +94,13 @@ def feedforward() -> Controller:
 
 def state_feedback(gain: Array, reference: Callable[[Array], Array] | None = None) -> Controller:
     """``u[k] = -K (x_hat[k] - x_ref[k])`` on the view (an estimate; ``u = -K x`` as SciPy's
-    LQR), with ``x_ref`` from ``reference(exogenous)`` or zero."""
+    LQR), with ``x_ref`` from ``reference(exogenous)`` or zero.
+
+    Returns:
+      ``Controller(init, step)`` (not feed-forward) with no state (``init() -> None``):
+      ``step(None, k, view, exogenous) -> (None, u)``, ``u`` (nu,) for a ``gain`` (nu, n)
+      and a view (n,).
+    """
     _checks.check_matrix("gain", gain, (None, None), "K: nu inputs x n states, u = -K x")
     gain = jnp.asarray(gain)
 
@@ -141,6 +147,12 @@ def run_loop(
         loop); required unless the controller is feed-forward.
       scorer: ``Scorer`` of the FDI outputs (e.g. ``detection_scorer``), or ``None``.
       keep_history: also return the stacked ``LoopTrace`` (memory grows with T).
+
+    Returns:
+      ``LoopResult(score, history, final)``: the scorer's final value (``None`` without a
+      scorer); with ``keep_history=True`` the ``LoopTrace`` of every step stacked along a
+      leading time axis T (else ``None``); and the ``(plant, fdi, controller)`` states
+      after the last step.
     """
     for name, part, needed in (("plant", plant, ("init", "measure", "advance")), ("fdi", fdi, ("step",)),
                                ("controller", controller, ("init", "step")),

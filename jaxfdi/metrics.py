@@ -218,7 +218,13 @@ def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) 
     unhealthy run (``first_unhealthy >= 0``) counts in ``runs`` and ``unhealthy_runs`` only.
     A record with a step at or after ``horizon`` (an alarm there, or more steps before its
     onset) says the runs are longer: a ``ValueError``, since faults with an onset past a
-    too-short horizon would be scored as fault-free runs."""
+    too-short horizon would be scored as fault-free runs.
+
+    Returns:
+      ``DetectionSummary`` of Python ints and floats: run counts, detection, missed
+      detection and false-alarm rates, and delays (mean, median, 90th percentile) in the
+      unit of ``Ts`` over the clean detected runs; NaN where a rate or delay has no runs.
+    """
     _checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
     _checks.check_positive("Ts", Ts, "a positive sample period")
     seen = np.maximum(np.asarray(record.pre_onset_steps), np.asarray(record.first_alarm) + 1)
@@ -523,7 +529,12 @@ def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[flo
     """Two-sided Clopper-Pearson (1934) ``level`` interval of a rate from ``k = successes``
     of ``n = trials``: ``[B^-1(a/2; k, n-k+1), B^-1(1-a/2; k+1, n-k)]``, ``a = 1 - level``,
     ``B^-1`` the beta quantile (``scipy.stats.beta.ppf``); 0 when ``k = 0``, 1 when
-    ``k = n``, NaN without trials. Every binomial bound of the library is this one."""
+    ``k = n``, NaN without trials. Every binomial bound of the library is this one.
+
+    Returns:
+      ``(low, high)``: two floats in [0, 1], the interval's bounds on the rate ``k / n``
+      (both NaN without trials).
+    """
     from scipy import stats
 
     trials = _checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")

@@ -165,6 +165,12 @@ def monte_carlo(
         arguments of the compiled program, not constants in it, so that studies that
         differ only in these numbers (thresholds, transition matrices) share one program.
       label: what the progress display and the compilation message call this study.
+
+    Returns:
+      ``run_one``'s output pytree with NumPy leaves stacked along a leading run axis
+      ``(num_runs, ...)``, in run order; with ``summary``, ``(kept, totals)``: ``kept``
+      stacked over runs the same way and ``totals`` summed over the runs (NumPy); with
+      ``reduce``, the reducer's final state (merged across processes) instead.
     """
     _checks.check_callable("run_one", run_one, "a function (key, per_run_slice) -> outputs")
     num_runs = _checks.check_int("num_runs", num_runs, 1, meaning="a positive number of runs")

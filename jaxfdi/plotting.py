@@ -16,16 +16,7 @@ import numpy as np
 
 from jaxfdi import _io
 
-__all__ = [
-    "new_axes",
-    "plot_confusion",
-    "plot_delays",
-    "plot_estimate",
-    "plot_loss_history",
-    "plot_mode_probabilities",
-    "plot_statistic",
-    "save_figure",
-]
+__all__ = ["plot_statistic", "plot_mode_probabilities", "plot_estimate", "plot_delays", "plot_confusion"]
 
 
 def new_axes(ax=None, figsize: tuple[float, float] = (7.0, 3.5)):
@@ -176,7 +167,7 @@ def plot_confusion(matrix, labels: Sequence[str], *, normalize: bool = True, ax=
     """A confusion matrix (rows: true fault, columns: decided) as an annotated image.
 
     Args:
-      matrix: ``(K, K)`` counts, e.g. ``jaxfdi.confusion_matrix``.
+      matrix: ``(K, K)`` counts, e.g. ``jaxfdi.metrics.confusion_matrix``.
       labels: K class names.
       normalize: show each row as shares of its runs.
       ax: axes to draw on (default: a new figure).

@@ -159,6 +159,9 @@ def solve_discrete_are(A: Array, B: Array, Q: Array, R: Array, tol=None, max_ite
 
     Raises ``ValueError`` when the arguments are concrete and no stabilising solution was
     found; under ``jit``/``vmap`` use ``solve_discrete_are_info`` and its ``converged``.
+
+    Returns:
+      (n, n) ``X``, the stabilising solution, in the dtype of ``A`` promoted with the others.
     """
     result = solve_discrete_are_info(A, B, Q, R, tol, max_iter)
     require_stabilising(result, (A, B, Q, R), "A, B, Q, R",
@@ -305,7 +308,7 @@ def _smith_doubling(closed_loop: Array, forcing: Array, max_iter: int = 64) -> A
 
 
 def steady_state_kalman(model: LinearGaussianModel, tol=None, max_iter: int = 64) -> SteadyStateKalman:
-    """Steady-state Kalman filter of ``model``, as ``jaxfdi.kalman_filter`` converges to.
+    """Steady-state Kalman filter of ``model``, as ``jaxfdi.filters.kalman_filter`` converges to.
 
     ``P = Phi (P - P C^T S^-1 C P) Phi^T + Q`` is the DARE with ``A = Phi^T``,
     ``B = C^T`` (Anderson & Moore 1979, ch. 4); ``S = C P C^T + R``, ``K = P C^T S^-1``.
@@ -315,6 +318,11 @@ def steady_state_kalman(model: LinearGaussianModel, tol=None, max_iter: int = 64
     Raises ``ValueError`` when the model is concrete and has no stabilising solution
     (``(C, Phi)`` not detectable, or ``(Phi, Q)`` with an uncontrollable mode on the unit
     circle); under ``jit``/``vmap`` check ``converged``.
+
+    Returns:
+      ``SteadyStateKalman``: ``P`` (n, n) the steady prior covariance ``P[k|k-1]``, ``S``
+      (m, m), the gain ``K`` (n, m), and the solver's ``converged`` flag, relative
+      ``residual`` and the spectral radius of ``Phi (I - K C)``.
     """
     validate_linear_model(model)
     _check_dare(jnp.asarray(model.Phi).T, jnp.asarray(model.C).T, model.Q, model.R,

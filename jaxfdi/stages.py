@@ -12,7 +12,15 @@ from jax import Array
 class Plant(NamedTuple):
     """``init(x0) -> state``; ``measure(state, k, u, step_key) -> (state, sensed)``;
     ``advance(state, k, u, step_key) -> (state, moved)``, with ``step_key = fold_in(key, k)``
-    (the loop folds the run's key once per step). ``Simulator`` has these fields."""
+    (the loop folds the run's key once per step). ``Simulator`` has these fields.
+
+    Attributes:
+      init: ``init(x0) -> state``, the plant's initial state from the true initial state
+      measure: ``measure(state, k, u, step_key) -> (state, sensed)``: the sensors read
+        ``x[k]``; ``sensed`` is ``y[k]`` or has it as its ``measurement`` field (e.g. ``Sensed``)
+      advance: ``advance(state, k, u, step_key) -> (state, moved)``: actuator faults and
+        dynamics with ``u[k]``; ``moved`` is kept in the loop's trace (e.g. ``Actuated``)
+    """
 
     init: Callable[[Array], Any]
     measure: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
@@ -21,7 +29,14 @@ class Plant(NamedTuple):
 
 class FDI(NamedTuple):
     """``step(state, k, y, u) -> (state, output)``; optional ``observe(state, k, y) ->
-    (state, view)`` runs before the controller (``None``: the controller sees ``y``)."""
+    (state, view)`` runs before the controller (``None``: the controller sees ``y``).
+
+    Attributes:
+      step: ``step(state, k, y, u) -> (state, output)``: the FDI's step after the controller
+        (time update, detectors, decisions); ``output`` is what a ``Scorer`` folds
+      observe: ``observe(state, k, y) -> (state, view)``, the part the controller waits for,
+        or ``None``
+    """
 
     step: Callable[[Any, Array, Any, Array], tuple[Any, Any]]
     observe: Callable[[Any, Array, Any], tuple[Any, Any]] | None = None
@@ -31,7 +46,14 @@ class Controller(NamedTuple):
     """``init() -> state``; ``step(state, k, view, exogenous) -> (state, u)``.
 
     ``feedforward=True``: ``u`` does not depend on ``view`` (it is called with ``None``
-    before the sensors read), so the sensors' feed-through sees this step's ``u``."""
+    before the sensors read), so the sensors' feed-through sees this step's ``u``.
+
+    Attributes:
+      init: ``init() -> state``, the controller's initial state
+      step: ``step(state, k, view, exogenous) -> (state, u)``: ``u`` (nu,) is ``u[k]``;
+        ``exogenous`` is step ``k``'s slice of the loop's per-step data
+      feedforward: bool, ``u`` does not depend on ``view`` (default False)
+    """
 
     init: Callable[[], Any]
     step: Callable[[Any, Array, Any, Any], tuple[Any, Array]]
@@ -42,7 +64,12 @@ class Scorer(NamedTuple):
     """Metrics folded over a run: ``init(example) -> score``, where ``example()`` gives the
     FDI output's structure (``jax.ShapeDtypeStruct`` leaves; it traces one step, so call
     it only when the score's shape depends on the output); ``update(score, k, output)
-    -> score``."""
+    -> score``.
+
+    Attributes:
+      init: ``init(example) -> score``, the score before the first step
+      update: ``update(score, k, output) -> score``, folds step ``k``'s FDI output in
+    """
 
     init: Callable[[Any], Any]
     update: Callable[[Any, Array, Any], Any]

@@ -35,6 +35,7 @@ import numpy as np
 from jaxfdi import _checks
 from jaxfdi.metrics import DetectionRecord, DetectionSummary
 
+__all__ = ["detection_reducer"]
 
 class DetectionCounts(NamedTuple):
     """Exact counts over runs (host-side NumPy int64); merge with ``merge_counts``.
@@ -251,7 +252,15 @@ def detection_reducer(horizon: int, bin_width: int = 1, record: Callable[[Any], 
                       label: Callable[[Any], Any] | None = None) -> Reducer:
     """A ``Reducer`` of ``DetectionCounts`` for ``monte_carlo(..., reduce=...)``:
     ``record(outputs)`` picks the records from ``run_one``'s outputs (default: the
-    outputs are the record), ``label(outputs)`` the true labels (optional)."""
+    outputs are the record), ``label(outputs)`` the true labels (optional).
+
+    Returns:
+      ``Reducer(init, update, merge)``: ``init()`` gives the empty ``DetectionCounts``
+      (``ceil(horizon / bin_width)`` delay bins); ``update(counts, outputs)`` adds the
+      ``detection_counts`` of a chunk's records; ``merge(states)`` sums the counts of
+      several hosts (``merge_counts``). ``summarize_counts`` turns the final counts into a
+      ``DetectionSummary``.
+    """
     empty_counts(horizon, bin_width)  # checks the arguments now
     pick = record or (lambda outputs: outputs)
 

@@ -59,7 +59,18 @@ class Structure(NamedTuple):
     kernel (``run_filter``) instead of ``vmap``. ``shared``: data that every run of
     every cell reads as it is (a design, an ephemeris, a flight's tables: not vmapped),
     passed to ``run`` after the parameters, ``run(key, case, *params, shared)``; as data,
-    not a closure, so that other values compile nothing new."""
+    not a closure, so that other values compile nothing new.
+
+    Attributes:
+      name: str, the structure's name (progress messages, ``StudyResult.seconds``)
+      run: ``run(key, case, *params[, shared]) -> output`` (or ``(output, trace)``), one run
+        of one method
+      axes: tuple of parameter pytrees, each with a leading axis (the grid's axes, outer first)
+      methods: dict, method name -> its cell of the grid (a tuple of one index per axis)
+      averaged: bool, ``run`` returns ``(output, trace)`` and the traces are averaged per case
+      batched: bool, ``run`` takes and returns a whole chunk of runs (leading axis B)
+      shared: pytree every run of every cell reads whole, or ``None``
+    """
 
     name: str
     run: Callable[..., Any]
@@ -76,7 +87,14 @@ class Study(NamedTuple):
     every run of case ``c`` gets slice ``c``), or, where a case's runs differ beyond
     their noise (a random onset, a dispersion), ``draw(runs, seed)`` returning a pytree
     with a leading axis of the total number of runs (``C * runs``, or the sum of the
-    per-case ``runs``), case-major (run ``i`` gets slice ``i``)."""
+    per-case ``runs``), case-major (run ``i`` gets slice ``i``).
+
+    Attributes:
+      name: str, the study's name (progress messages, ``StudyResult.name``)
+      cases: pytree with a leading case axis C, or a callable ``draw(runs, seed)`` (above)
+      case_names: tuple of C names, one per case
+      structures: tuple of ``Structure``, the methods grouped by compiled program
+    """
 
     name: str
     cases: Any
@@ -210,6 +228,13 @@ def run_study(study: Study, runs, seed: int, *, progress: bool = False, chunk_si
       structures: run only these structures (by name; default all).
       key: the PRNG key to split instead of ``jax.random.key(seed)`` (a study whose runs
         come from a key derived from its seed).
+
+    Returns:
+      ``StudyResult``: per method of the chosen structures, ``outputs[method]`` (NumPy
+      leaves with a leading case-major run axis ``C * runs``, or the sum of the per-case
+      counts, then the run's output shape) and, for an ``averaged`` structure,
+      ``means[method]`` (C, ...) per-case trace means; ``seconds`` and ``compile_seconds``
+      per structure; and the study's name, ``runs``, ``seed`` and case names.
     """
     num_cases = _check_study(study)
     counts = _run_counts(runs, num_cases)

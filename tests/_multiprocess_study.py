@@ -17,12 +17,12 @@ NUM_RUNS, T, ONSET, WINDOW = 22, 50, 25, 3
 def run_one(key, size):
     """Constant-velocity target, position and velocity sensors, KF + 3-step chi-square
     test; a sensor-0 bias of ``size`` from step ONSET (fault-free when 0)."""
-    model = jaxfdi.linear_gaussian_model(jnp.array([[1.0, 0.1], [0.0, 1.0]]), jnp.eye(2),
+    model = jaxfdi.models.linear_gaussian_model(jnp.array([[1.0, 0.1], [0.0, 1.0]]), jnp.eye(2),
                                          jnp.diag(jnp.array([1e-3, 1e-2])), jnp.diag(jnp.array([0.05, 0.02])))
     onset = jnp.where(size > 0, ONSET, jaxfdi.faults.NEVER)
     sim = jaxfdi.linear_simulator(model, jaxfdi.fault("bias", "sensor", 0, onset, size))
-    kf = jaxfdi.kalman_filter(model, unroll_factorizations=False)  # LAPACK calls: compiles faster
-    detector = jaxfdi.chi2_detector(jaxfdi.chi2_threshold(WINDOW * 2, 1e-3), WINDOW)
+    kf = jaxfdi.filters.kalman_filter(model, unroll_factorizations=False)  # LAPACK calls: compiles faster
+    detector = jaxfdi.detection.chi2_detector(jaxfdi.detection.chi2_threshold(WINDOW * 2, 1e-3), WINDOW)
     return jaxfdi.monitor(sim, kf, detector, jnp.zeros(2), kf.init(jnp.zeros(2), jnp.eye(2)), jnp.zeros((T, 0)), key,
                           onset).record
 

@@ -6,14 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxfdi
-from jaxfdi.models import (
-    engine_model,
-    linear_observation,
-    linear_transition,
-    rigid_body_observation,
-    rigid_body_params,
-    rigid_body_transition,
-)
+from jaxfdi.models import engine_model, rigid_body_params
+from jaxfdi.models.linear import linear_observation, linear_transition
+from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
 
 
 def engine_data(T: int = 120, seed: int = 0):
@@ -50,14 +45,14 @@ def engine_false_alarm_study(num_runs: int, T: int, window: int, pfa: float, see
     """
     model = engine_model()
     P0 = 10.0 * np.asarray(model.Q)
-    threshold = jaxfdi.chi2_threshold(window * 5, pfa)
+    threshold = jaxfdi.detection.chi2_threshold(window * 5, pfa)
     us = jnp.full((T, 1), 0.01)
     key_x0, key_mc = jax.random.split(jax.random.key(seed))
     x0s = jax.random.multivariate_normal(key_x0, jnp.zeros(7), jnp.asarray(P0), (num_runs,))
 
     def run_one(key, x0):
-        kf = jaxfdi.kalman_filter(model)
-        result = jaxfdi.monitor(jaxfdi.linear_simulator(model), kf, jaxfdi.chi2_detector(threshold, window),
+        kf = jaxfdi.filters.kalman_filter(model)
+        result = jaxfdi.monitor(jaxfdi.linear_simulator(model), kf, jaxfdi.detection.chi2_detector(threshold, window),
                                 x0, kf.init(jnp.zeros(7), jnp.asarray(P0)), us, key, jaxfdi.faults.NEVER,
                                 keep_history=True)
         return result.record, result.history.statistic[-1]

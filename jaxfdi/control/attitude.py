@@ -76,7 +76,12 @@ class AttitudeGains(NamedTuple):
 
 
 def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, duration: float = 40.0, dtype=None) -> Slew:
-    """An eigen-axis slew of ``angle_deg`` degrees about ``axis`` from ``start`` over ``duration`` seconds."""
+    """An eigen-axis slew of ``angle_deg`` degrees about ``axis`` from ``start`` over ``duration`` seconds.
+
+    Returns:
+      ``Slew`` in ``dtype`` (default float): the unit ``axis`` (3,), the ``angle`` () in rad,
+      ``start`` () and ``duration`` () in s.
+    """
     dtype = dtype or jnp.result_type(float)
     _checks.check_matrix("axis", axis, (3,), "rotation axis")
     axis = jnp.asarray(axis, dtype)
@@ -115,8 +120,13 @@ def slew_reference(t: Array, profile: Slew) -> tuple[Array, Array, Array]:
 
 def control_torque(q: Array, w: Array, wheel_momentum: Array, t: Array, profile: Slew, gains: AttitudeGains,
                    inertia: Array) -> Array:
-    """Commanded body torque ``T_c`` (3,) from the attitude ``q``, the rate ``w`` (gyros)
-    and the wheels' momentum ``h_w`` as the flight software believes it."""
+    """Commanded body torque from the attitude ``q``, the rate ``w`` (gyros)
+    and the wheels' momentum ``h_w`` as the flight software believes it.
+
+    Returns:
+      (3,) ``T_c = I alpha_ref + w x (I w + h_w) - 2 K_p dq_vec - K_d dw`` in the body frame
+      [N m], for the slew reference at time ``t`` (module doc).
+    """
     q_ref, w_ref, alpha_ref = slew_reference(t, profile)
     dq = quaternion_multiply(quaternion_conjugate(q_ref), q)
     dq = jnp.where(dq[0] < 0, -dq, dq)

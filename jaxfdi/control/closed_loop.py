@@ -42,7 +42,13 @@ def reconfigurable_pi(gain: Array, schedule: GainSchedule, H: Array, command: Ar
     of ``schedule`` while an effectiveness loss is isolated; integrator
     ``z[k+1] = z[k] + Ts (command - H x_hat[k|k])`` on the tracked outputs ``H`` (g, n).
     It reads the FDI's view as a pair ``(Reconfiguration, anything)``; its state is ``z``
-    (g,), of ``dtype`` (default: the gain's)."""
+    (g,), of ``dtype`` (default: the gain's).
+
+    Returns:
+      ``Controller(init, step)`` (not feed-forward): ``init()`` gives ``z = 0`` (g,);
+      ``step(z, k, view, exogenous) -> (z[k+1], u[k])`` with ``u`` (nu,) and
+      ``exogenous`` unused.
+    """
     g = H.shape[0]
     dtype = dtype or gain.dtype
     mm = _linalg.matmul

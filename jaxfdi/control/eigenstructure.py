@@ -91,6 +91,11 @@ def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eig
 
     Traceable (``jit``/``vmap`` over ``B_faulty``), so a closed loop can reconfigure
     from an online fault estimate.
+
+    Returns:
+      ``EigenstructureResult``: the real gain ``K_f`` (p, N), the assigned eigenvectors
+      ``V^f`` (N, N) complex, the largest ``|Im K_f|`` dropped (), the condition number of
+      ``V^f`` () and each eigenvalue's assignment residual (N,) (~0 where it is kept).
     """
     N = _checks.check_square("A_bar", A_bar, None, "augmented state matrix")
     _checks.check_shape("B_faulty", B_faulty, (N, None), "N states x p inputs")
@@ -169,7 +174,12 @@ def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, 
 
 def scheduled_gain(schedule: GainSchedule, component: Array, loss: Array) -> Array:
     """The gain ``K_f`` (``u = -K_f x``) for input ``component`` with effectiveness ``loss``
-    (clipped to [0, 1]), linearly interpolated in ``schedule``. Traceable."""
+    (clipped to [0, 1]), linearly interpolated in ``schedule``. Traceable.
+
+    Returns:
+      (p, N) the interpolated gain ``K_f``, between the two tabulated gains of
+      ``schedule.gains[component]`` that bracket ``loss``.
+    """
     losses = schedule.losses
     position = jnp.clip(loss, 0.0, 1.0) * (losses.shape[0] - 1)
     lower = jnp.clip(jnp.floor(position).astype(jnp.int32), 0, losses.shape[0] - 2)

@@ -55,6 +55,12 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
       reference_speed: ``V0`` of the gust's correlation time ``L / V0``, ft/s.
       fault: sensor faults on ``y`` (components: ``MEASUREMENT_NAMES`` then the rate
         channels) and actuator faults on ``u`` (``jaxfdi.fault``), or ``None``.
+
+    Returns:
+      ``Plant(init, measure, advance)``: ``init(x0)`` takes ``[x (13), w_g, v_g]`` (15,) and
+      gives a ``SimState`` (F held values, zero); ``measure(state, k, u, step_key) ->
+      (state, Sensed)`` with ``y`` (m,); ``advance(state, k, u, step_key) -> (state,
+      Actuated)`` with ``u`` (4,) ``[thtl, el, ail, rdr]``.
     """
     substeps = _checks.check_int("substeps", substeps, 1, meaning="a positive number of RK4 steps per sample")
     _checks.check_positive("dt", dt, "a positive sample period (s)")

@@ -194,7 +194,13 @@ def default_weights(dtype=None) -> FlightWeights:
 
 def design_flight_control(linear: LinearF16, dt: float, weights: FlightWeights) -> FlightDesign:
     """LQR-PI gains of both axes at the trim of ``linear`` (module doc); differentiable in
-    ``weights`` (forward mode through the Riccati solver)."""
+    ``weights`` (forward mode through the Riccati solver).
+
+    Returns:
+      ``FlightDesign``: the ``FlightGains`` (longitudinal (2, 8), lateral (2, 5)), the
+      spectral radius of each discrete closed loop (2,) (lon, lat; < 1 is stable) and the
+      Riccati solver's ``converged`` flags (2,).
+    """
     _checks.check_positive("dt", dt, "a positive sample period (s)")
     _checks.check_shape("weights.longitudinal", weights.longitudinal, (8,),
                         "VT, alpha, theta, Q, h, pow, int VT, int h")
@@ -354,7 +360,14 @@ def measured_state(view: FlightView) -> tuple[Array, Array]:
 def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array) -> Controller:
     """The SAS and autopilot as a ``loop.Controller`` on a ``FlightView``; the exogenous
     input of step ``k`` is ``(x_ref[k], u_ref[k])`` (a ``FlightReference`` row).
-    ``lower``/``upper`` (4,): control limits (the aircraft's)."""
+    ``lower``/``upper`` (4,): control limits (the aircraft's).
+
+    Returns:
+      ``Controller(init, step)`` (not feed-forward): ``init()`` gives a zero
+      ``FlightControllerState`` (integrals (2,) and (1,)); ``step(state, k, view,
+      (x_ref, u_ref)) -> (state, u)`` with ``u`` (4,) ``[thtl, el, ail, rdr]`` clipped to
+      ``[lower, upper]``.
+    """
     _checks.check_positive("dt", dt, "a positive sample period (s)")
     _checks.check_shape("gains.longitudinal", gains.longitudinal, (2, 8), "u_lon = -K [dx_lon (6); z_lon (2)]")
     _checks.check_shape("gains.lateral", gains.lateral, (2, 5), "u_lat = -K [dx_lat (4); z_lat (1)]")

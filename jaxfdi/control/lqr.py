@@ -106,7 +106,13 @@ def _lqr(A: Array, B: Array, Q: Array, R: Array) -> tuple[DareSolution, Array]:
 
 
 def integral_augmentation(A: Array, B: Array, H: Array, Ts: float) -> tuple[Array, Array, Array]:
-    """``(A_bar, B_bar, G)`` of eq. 21 for tracking ``r = H x`` with integral action."""
+    """``(A_bar, B_bar, G)`` of eq. 21 for tracking ``r = H x`` with integral action.
+
+    Returns:
+      ``(A_bar, B_bar, G)`` in ``A``'s dtype: ``A_bar = [[A, 0], [-Ts H, I]]`` (n + g, n + g),
+      ``B_bar = [B; 0]`` (n + g, p) and ``G = [0; Ts I]`` (n + g, g), the reference's input
+      to the integrator, with ``g`` the number of tracked outputs (rows of ``H``).
+    """
     n = _checks.check_square("A", A, None, "discrete state matrix")
     _checks.check_shape("B", B, (n, None), "n states x p inputs")
     _checks.check_shape("H", H, (None, n), "g tracked outputs x n states")
@@ -131,6 +137,11 @@ def lqr_pi(A: Array, B: Array, H: Array, Q: Array, R: Array, Ts: float, allow_ma
     at ``z = 1``) is returned with ``converged = False`` and ``spectral_radius = 1``; a
     design with no closed loop of spectral radius <= 1 raises ``ValueError`` (concrete
     arguments; under ``jit`` check ``converged`` and ``spectral_radius``).
+
+    Returns:
+      ``PIDesign``: the augmented ``A_bar`` (n + g, n + g), ``B_bar`` (n + g, p), ``G``
+      (n + g, g), the gain ``K = [K_p K_I]`` (p, n + g), the Riccati solution ``X``
+      (n + g, n + g), the ``converged`` flag and the closed loop's ``spectral_radius``.
     """
     A_bar, B_bar, G = integral_augmentation(A, B, H, Ts)
     _checks.check_covariance("Q", Q, A_bar.shape[0])

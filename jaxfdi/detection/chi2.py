@@ -39,6 +39,10 @@ def chi2_threshold(dof, pfa) -> Array:
       dof: degrees of freedom (> 0, finite), scalar or array.
       pfa: false-alarm probability in ``[finfo(dtype).tiny, 1)``, scalar or array.
 
+    Returns:
+      the threshold ``x``, the broadcast shape of ``dof`` and ``pfa``, in their float dtype
+      (NaN for an out-of-range value under ``jit``/``vmap``).
+
     Raises:
       ValueError: naming ``dof`` or ``pfa`` when a concrete value is out of range, in
         particular a ``pfa`` below the smallest normal number of the dtype. Under
@@ -161,7 +165,12 @@ def normalized_innovation_squared(innovation: Array, innovation_cov: Array) -> A
 def moving_window_sum(x: Array, window: int) -> Array:
     """Sum of the last ``window`` values along axis 0 (fewer at the start); ``+inf`` for
     a window that holds a non-finite value (a dead sensor's statistic is evidence), and
-    finite again once it has left the window."""
+    finite again once it has left the window.
+
+    Returns:
+      array of ``x``'s shape (T, ...): entry ``k`` is ``sum x[max(0, k-window+1)..k]``
+      (``+inf`` as above).
+    """
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
     _checks.check_real("x", x, "real statistics")
     x = jnp.asarray(x)
@@ -176,7 +185,12 @@ def moving_window_sum(x: Array, window: int) -> Array:
 
 
 def first_crossing(statistic: Array, threshold: Array, start: Array | int = 0) -> Array:
-    """First index ``k >= start`` with ``statistic[k] > threshold`` along axis 0, else -1."""
+    """First index ``k >= start`` with ``statistic[k] > threshold`` along axis 0, else -1.
+
+    Returns:
+      int array of shape ``statistic.shape[1:]`` (a scalar for a (T,) statistic): the first
+      crossing step of each column, -1 where there is none.
+    """
     k = jnp.arange(statistic.shape[0]).reshape((-1,) + (1,) * (statistic.ndim - 1))
     hit = (statistic > threshold) & (k >= start)
     return jnp.where(jnp.any(hit, axis=0), jnp.argmax(hit, axis=0), -1)
@@ -235,7 +249,13 @@ def flag_dead(decision: Decision, dead: Array, labels: Array | None = None) -> D
 class Detector(NamedTuple):
     """Online detector: ``init() -> state``; ``step(state, value) -> (state, Decision)``,
     one value (a NIS, an innovation, mode probabilities, ...) in, one ``Decision`` out
-    (a detector that does not isolate gives ``label = -1`` and ``estimate = NaN``)."""
+    (a detector that does not isolate gives ``label = -1`` and ``estimate = NaN``).
+
+    Attributes:
+      init: ``init() -> state``, the detector's initial state
+      step: ``step(state, value) -> (state, Decision)``: one value in, the step's
+        ``Decision`` (statistic, alarm, label, estimate; each ()) out
+    """
 
     init: Callable[[], Any]
     step: Callable[[Any, Any], tuple[Any, Decision]]
@@ -250,6 +270,11 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
     ``chi2_threshold(window * m, pfa)`` for a design false-alarm rate ``pfa``. A
     non-finite NIS (a dead sensor: ``+inf`` from the filters) enters as ``+inf``: the
     alarm holds while it is in the window, and the test recovers when it leaves.
+
+    Returns:
+      ``Detector(init, step)``: ``init()`` gives a ``WindowState`` (a zero (window,)
+      buffer of ``dtype``); ``step(state, nis)`` takes a () NIS and returns ``(state,
+      Decision)``.
     """
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
     _checks.check_real("threshold", threshold, "a real threshold")

@@ -77,6 +77,11 @@ def frozen_channel_detector(sigma, window: int, pfa, channel_labels: Array | Non
       window: L >= 2 samples.
       pfa: false-alarm probability per window and channel (module doc: an upper bound).
       channel_labels: (m,) int, the fault label of each channel.
+
+    Returns:
+      ``Detector(init, step)``: ``init()`` gives an empty ``FrozenState`` (a zero (L, m)
+      buffer in ``sigma``'s float dtype); ``step(state, y)`` takes ``y`` (m,) and returns
+      ``(state, Decision)`` as above.
     """
     _checks.check_real("sigma", sigma, "noise standard deviations")
     _checks.check_shape("sigma", sigma, (None,), "one noise standard deviation per channel (m,)")

@@ -132,6 +132,10 @@ def fault_directions(model: LinearGaussianModel, actuator_feedthrough: bool = Fa
     ``jaxfdi.simulate`` feed the commanded input through ``D`` (``y = C x + D u``); with
     ``actuator_feedthrough=True``, ``h = D[:, i]`` (a plant whose faulty input also
     passes through ``D``). Sensor ``j``: ``g = 0``, ``h = e_j``.
+
+    Returns:
+      ``FaultDirections(state, output)`` in ``Gamma``'s dtype with ``d = nu + m`` columns:
+      ``state`` (n, d) the ``g`` and ``output`` (m, d) the ``h`` of each direction.
     """
     validate_linear_model(model)
     return _directions(model.Gamma, model.D, bool(actuator_feedthrough))
@@ -152,6 +156,10 @@ def fault_signatures(model: LinearGaussianModel, gain: Array, directions: FaultD
     ``G[0] = h``, ``E[1] = g - Phi K h``, ``G[l] = C E[l] + h``,
     ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h`` (derived in the module docstring from the
     filter of ``jaxfdi.filters.kalman`` with its steady-state gain ``K``, (n, m)).
+
+    Returns:
+      (window, m, d) array in ``gain``'s dtype: ``G[l]`` for lags ``l = 0..window-1``, one
+      column per direction of ``directions``.
     """
     n, _, m = validate_linear_model(model)
     window = _check_window(window)
@@ -220,6 +228,10 @@ def glrt_threshold(pfa, num_directions: int, window: int, method: str = "paper")
     ``l_i(theta)`` is ``chi2(1)`` under no fault, so
     ``chi2_threshold(1, pfa / (num_directions * window))`` bounds the per-step false-alarm
     probability of the maximum by ``pfa``.
+
+    Returns:
+      the threshold on the GLR statistic, of ``pfa``'s shape (() for a scalar) and float
+      dtype.
     """
     _checks.check_choice("method", method, ("paper", "bonferroni"))
     _checks.check_probability("pfa", pfa)
@@ -263,6 +275,11 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
         that detectors with either rule share one compiled program.
       actuator_feedthrough: see ``fault_directions``.
       overlap_sensor: sensor index (into the outputs) of eq. (24)'s T4.
+
+    Returns:
+      ``Detector(init, step)``: ``init()`` gives an empty ``GLRTState`` (a zero (N, m)
+      window); ``step(state, innovation)`` takes the filter's (m,) innovation and returns
+      ``(state, Decision)`` as above (a non-finite component alarms and isolates its sensor).
     """
     setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
                            overlap_sensor)

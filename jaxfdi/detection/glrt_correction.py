@@ -120,6 +120,12 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
 
     ``init(mean, cov=None)``: ``cov``, if given, must be ``P_ss`` (``check_steady_state``);
     other arguments as ``glrt_detector``.
+
+    Returns:
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov=None) ->
+      CorrectedGLRTState``; ``step(state, y (m,), u (nu,)) -> (state, CorrectedGLRTInfo)``
+      with the decision, the onset estimate, the confirmation, the innovation (m,), the
+      corrected ``m[k+1|k]`` (n,) and the accumulated fault estimates (d,), ``d = nu + m``.
     """
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)

@@ -69,7 +69,13 @@ def recursive_glrt_detector(model: LinearGaussianModel, gain: Array, innovation_
                             overlap_sensor: int = -1) -> Detector:
     """``glrt_detector`` with running sums: the same ``Decision`` each step (to
     round-off) at O(N m d) a step instead of O(N^2 m d). Same arguments and state
-    meaning (``onset_offset``: ``theta_hat = k - onset_offset``)."""
+    meaning (``onset_offset``: ``theta_hat = k - onset_offset``).
+
+    Returns:
+      ``Detector(init, step)``: ``init()`` gives a zero ``RecursiveGLRTState`` (correlations
+      (N, d), ``d = nu + m``); ``step(state, innovation)`` takes the filter's (m,) innovation
+      and returns ``(state, Decision)`` as ``glrt_detector``'s step does.
+    """
     setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
                            overlap_sensor)
     whitener, engine = recursive_engine(setup)

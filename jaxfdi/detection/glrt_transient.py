@@ -138,6 +138,11 @@ def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window
     (O(N^2 m d) a step) or, ``recursive=True``, the running sums ``d``, ``R`` (O(N m d)
     a step; same decisions to round-off). Each step also costs one Riccati step. With
     ``prior_cov = P_ss`` it equals ``glrt_detector``. Step inputs as ``glrt_detector``.
+
+    Returns:
+      ``Detector(init, step)``: ``init()`` gives a ``TransientGLRTState`` with ``P_0 =
+      prior_cov`` and empty window and sums; ``step(state, innovation)`` takes the filter's
+      (m,) innovation and returns ``(state, Decision)`` as ``glrt_detector``'s step does.
     """
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)

@@ -215,7 +215,14 @@ def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_
     """The arrays of the hybrid FDI for ``space``, channel noise ``sigma`` and the two
     thresholds (``parity.detection_threshold``, ``parity.isolation_threshold``);
     ``verification_pfa``: the per-step false-alarm probability ``P_V`` of the verification
-    (module doc, step 5; ``None``, or no redundancy left without a group: never revised)."""
+    (module doc, step 5; ``None``, or no redundancy left without a group: never revised).
+
+    Returns:
+      ``HybridPSAConfig`` in ``space.H``'s dtype: ``space``, the thresholds ``T_D`` () and
+      ``T_I`` (), the exclusion estimators (G + 1, n, m), the restart covariance
+      ``sigma^2 (H^T H)^-1`` (n, n), each channel's group (m,) int32 and ``T_V`` ()
+      (``inf`` without verification).
+    """
     _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
     _checks.check_scalar("detection_threshold", detection_threshold, 0.0, low_open=True, meaning="T_D > 0")
     _checks.check_scalar("isolation_threshold", isolation_threshold, 0.0, 1.0, meaning="T_I in [0, 1]")
@@ -321,6 +328,12 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
       view: ``(y, x_selected) -> view``, what the controller reads, from the
         least-squares state of the channels the decision left.
       batch_axis: name of the ``vmap`` axis of a batch of runs, or ``None`` (module doc).
+
+    Returns:
+      ``FDI(step, observe)`` on a ``HybridPSAState``: ``observe(state, k, y) -> (state,
+      view)`` runs the tests, latches the decision and gives ``view(y, x_selected)``;
+      ``step(state, k, y, u) -> (state, HybridPSAOutput)`` reports the step's statistics and
+      ``Decision``s and stores the step in the replay history.
     """
     for name, fn in (("channels", channels), ("filter_input", filter_input), ("view", view)):
         _checks.check_callable(name, fn)

@@ -220,6 +220,12 @@ def known_change_detector(model: LinearGaussianModel, gain: Array, innovation_co
       window: N >= 1 onsets (and signature lags).
       threshold: > 0, on the log-likelihood ratio.
       tail, isolation, actuator_feedthrough: see ``known_change_bank`` and ``fault_directions``.
+
+    Returns:
+      ``Detector(init, step)`` (``known_change_bank``'s): ``init()`` gives a
+      ``KnownChangeState`` with every log-ratio ``-inf``; ``step(state, innovation)`` takes
+      the filter's (m,) innovation and returns ``(state, Decision)``, estimate the known size
+      of the isolated direction; a non-finite component alarms and isolates its sensor.
     """
     n, _, m = validate_linear_model(model)
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps N")

@@ -67,6 +67,12 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
         mode (the normal mode's entry is not used). A traced (M,) integer array is
         accepted (its values are then checked by whoever made it), so that detectors with
         different lengths can share one compiled program.
+
+    Returns:
+      ``Detector(init, step)``: ``init()`` gives the confirmation state ``(candidate label
+      -1, steps held 0)``; ``step(state, mu)`` or ``step(state, (mu, estimates))`` returns
+      ``(state, Decision)`` with statistic the top fault mode's probability and label its
+      index.
     """
     _checks.check_real("threshold", threshold, "a probability mu_T in (0, 1], or one per mode (M,)")
     value = _checks.concrete(threshold)

@@ -98,6 +98,11 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
       groups: (G, d) channel indices of each sensor (every channel at most once); default
         ``[[0], [1], ..., [m - 1]]`` (one channel per sensor).
 
+    Returns:
+      ``ParitySpace`` in ``H``'s float dtype: ``H`` (m, n), the parity matrix ``V`` (q, m),
+      ``q = m - n`` (the last ``q`` left singular vectors of ``H``), ``groups`` (G, d) int32
+      and each group's orthonormal fault-subspace basis ``fault_bases`` (G, q, d).
+
     Raises:
       ValueError: for a concrete ``H`` without full column rank, a channel index out of
         range or used twice, or a group whose fault subspace has fewer than ``d``

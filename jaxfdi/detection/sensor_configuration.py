@@ -217,6 +217,12 @@ def optimize_configuration(key: Array, sensors: int = 3, starts: int = 16, steps
       objective: ``"separation"`` (``separation_objective``) or ``"isolation"``
         (``isolation_surrogate`` at ``sigma``, ``fault_to_noise``, ``samples`` draws,
         detection at ``pfa``).
+
+    Returns:
+      ``ConfigurationResult`` in ``dtype``: the final quaternions (starts, S, 4) (not
+      normalised), their axes ``H`` (starts, 2S, 3), the objective before each Adam step
+      (starts, steps) (to maximise) and ``best`` () int32, the start with the largest
+      objective after the last step.
     """
     sensors = _checks.check_int("sensors", sensors, 3, meaning="a number of 2-DOF sensors >= 3")
     starts = _checks.check_int("starts", starts, 1, meaning="a number of random starts")

@@ -30,8 +30,9 @@ def signature_matrix(num_filters: int) -> np.ndarray:
 def isolate(symptoms: Array, matrix: Array | None = None) -> Array:
     """Match the symptom vector(s) ``symptoms`` (..., F) bool against ``matrix`` (F, K).
 
-    Returns the index (...) of the matching column: 0 no fault, ``i + 1`` fault of filter
-    i for the default matrix, ``UNMATCHED`` (-1) when no column matches.
+    Returns:
+      int array (...): the index of the (first) matching column: 0 no fault, ``i + 1`` fault
+      of filter i for the default matrix, ``UNMATCHED`` (-1) when no column matches.
     """
     symptoms = jnp.asarray(symptoms, bool)
     F = symptoms.shape[-1]

@@ -78,6 +78,14 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
     ``channel_labels`` (m,) int: the fault label of each measurement channel, what a
     dead channel isolates to (``chi2.flag_dead``); ``None``: a dead channel alarms with
     label -1.
+
+    Returns:
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n),
+      u0) -> state``, a dict of the dual filter, the NIS filter and test, both banks
+      (slaved to the prior), the engaged flag and the isolators' states; ``step(state, y
+      (m,), u) -> (state, TwoStageOutput)`` with the four ``Decision``s (F, NIS, credit,
+      likelihood), the peaks (2,), health, the credit bank's ``F_x`` (M,) and the mode
+      probabilities (M + 1,).
     """
     if engage_on not in ("nis", "fdp"):
         raise ValueError(f"engage_on: expected 'nis' or 'fdp', got {engage_on!r}")

@@ -125,6 +125,10 @@ def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: A
       sigma: (M,) or (M, channels) detail standard deviations for ``"soft"``, or
         (B, M) / (B, M, channels) one set per block (``causal_detail_sigma``).
       c_mult: the sigma multiple (paper: 2).
+
+    Returns:
+      the denoised statistic, of ``statistic``'s shape (T, ...): every sample of a block is
+      its block mean plus the (thresholded) details (``"hard"``: the block mean alone).
     """
     _checks.check_choice("mode", mode, MODES)
     _checks.check_positive("c_mult", c_mult, "a positive multiple of the detail sigma")

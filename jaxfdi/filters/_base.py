@@ -134,6 +134,17 @@ class Filter(NamedTuple):
     what ``run_filter`` runs for N runs; ``parallel``, when present, is the whole
     sequence as an associative scan, ``parallel(init_state, ys, us) -> (final, info)``,
     what ``run_filter(..., parallel=True)`` runs.
+
+    Attributes:
+      init: ``init(mean, cov) -> state``, the prior of the first step (some filters take
+        more arguments)
+      step: ``step(state, y, u) -> (state, info)``: ``y`` (m,), ``u`` (nu,); the next prior
+        and the step's outputs (``FilterInfo`` for the Gaussian filters)
+      update: ``update(state, y, u) -> ConditionedGaussian``, or ``None``
+      predict: ``predict(posterior: GaussianState, u) -> GaussianState``, or ``None``
+      batch: ``BatchKernel`` for N runs at once, or ``None``
+      parallel: ``parallel(init_state, ys, us) -> (final, info)``, the associative scan
+        over (T, m) measurements, or ``None``
     """
 
     init: Callable[..., Any]

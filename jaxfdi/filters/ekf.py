@@ -31,6 +31,12 @@ def extended_kalman_filter(
       Q: (n, n) process-noise covariance; R: (m, m) measurement-noise covariance.
       params: any pytree passed to ``f`` and ``h`` (tunable, vmappable).
       missing_measurements: treat NaN components of ``y`` as not measured (static).
+
+    Returns:
+      ``Filter(init, step, update, predict)``: ``init(mean (n,), cov (n, n)) ->
+      GaussianState``; ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``, the
+      Joseph update with the Jacobian of ``h`` at the prior mean, then the prediction
+      with the Jacobian of ``f`` at the posterior mean.
     """
     _checks.check_callable("f", f, "a function f(x, u, params) -> next state")
     _checks.check_callable("h", h, "a function h(x, u, params) -> measurement")

@@ -74,9 +74,6 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
                   unroll_factorizations: bool = True) -> Filter:
     """Linear Kalman filter for a ``LinearGaussianModel``.
 
-    Returns ``Filter(init, step)``; ``init(mean, cov)`` is the prior of ``x[0]``,
-    ``step(state, y, u)`` updates with ``y[k]`` (m,) and predicts with ``u[k]`` (nu,).
-
     Args:
       model: the ``LinearGaussianModel``; leaves with a leading run axis N (e.g.
         ``model._replace(Q=Qs)``, ``Qs`` (N, n, n)) give one model per run: the filter
@@ -99,6 +96,14 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
     structure-of-arrays step of ``kalman_batch.py``. With
     ``missing_measurements=True`` the filter also runs as an associative scan,
     ``run_filter(..., parallel=True)`` (Särkkä and García-Fernández 2021; ``parallel.py``).
+
+    Returns:
+      ``Filter(init, step)``; ``init(mean, cov)`` is the prior of ``x[0]``,
+      ``step(state, y, u)`` updates with ``y[k]`` (m,) and predicts with ``u[k]`` (nu,),
+      returning ``(GaussianState, FilterInfo)``; with ``update`` and ``predict``, and
+      ``parallel`` with ``missing_measurements=True`` or else ``batch`` where the kernel
+      supports the model. For a model per run: ``init`` and ``batch`` only (``step``
+      raises ``ValueError``; ``run_filter`` over (N, T, m) runs the kernel).
     """
     if isinstance(model, LinearGaussianModel) and any(per_run_leaves(model)):
         return _per_run_kalman_filter(model, missing_measurements)

@@ -62,13 +62,23 @@ def rts_smoother(model: LinearGaussianModel, info: FilterInfo) -> SmootherResult
       model: the ``LinearGaussianModel`` the filter ran with (``Phi`` is used).
       info: ``FilterInfo`` of ``run_filter(kalman_filter(model), ...)`` (also with
         ``parallel=True``), leading axis T.
+
+    Returns:
+      ``SmootherResult``: the smoothed means ``ms_k`` (T, n) and covariances ``Ps_k``
+      (T, n, n) of ``x_k`` given ``y_0..y_{T-1}``, and the gains ``G_k`` (T, n, n), zero at
+      the last step.
     """
     Phi, info = _check(model, info)
     return _sequential(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)
 
 
 def parallel_rts_smoother(model: LinearGaussianModel, info: FilterInfo) -> SmootherResult:
-    """The same smoother by a reverse associative scan (module doc): O(log T) depth."""
+    """The same smoother by a reverse associative scan (module doc): O(log T) depth.
+
+    Returns:
+      ``SmootherResult`` as ``rts_smoother`` (equal to round-off): means (T, n),
+      covariances (T, n, n) and gains (T, n, n), zero at the last step.
+    """
     Phi, info = _check(model, info)
     return _parallel(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)
 

@@ -91,6 +91,12 @@ def sqrt_kalman_filter(model: LinearGaussianModel) -> Filter:
     allowed); ``step(state, y, u) -> (state, FilterInfo)`` with the outputs of
     ``kalman_filter`` (equal in exact arithmetic; in float64 to round-off). ``Q`` and
     ``R`` are factored once, when the filter is built.
+
+    Returns:
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n)) ->
+      SqrtGaussianState`` (mean and lower-triangular factor of ``P[0|-1]``);
+      ``step(state, y (m,), u (nu,)) -> (SqrtGaussianState, FilterInfo)``, covariances in
+      the info as Gram matrices of the factors.
     """
     n, nu, m = validate_linear_model(model)
     chol_Q, chol_R = factor(model.Q), factor(model.R)

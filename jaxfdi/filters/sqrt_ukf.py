@@ -74,6 +74,11 @@ def sqrt_unscented_kalman_filter(
     Same arguments and outputs (``FilterInfo``) as ``unscented_kalman_filter`` (equal in
     float64 to round-off); the state is a ``SqrtGaussianState(mean, chol)``. Needs
     ``beta >= alpha^2`` (non-negative weights, see the module doc).
+
+    Returns:
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n)) ->
+      SqrtGaussianState``; ``step(state, y (m,), u) -> (SqrtGaussianState, FilterInfo)``,
+      covariances in the info as Gram matrices of the factors.
     """
     _checks.check_callable("f", f, "a transition function f(x, u, params)")
     _checks.check_callable("h", h, "a measurement function h(x, u, params)")

@@ -85,7 +85,13 @@ class FaultDirection(NamedTuple):
 def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "effectiveness") -> FaultDirection:
     """One actuator's fault direction: ``"effectiveness"`` (``Fa = -Gamma[:, i] u_i``, the
     bias is the lost fraction) or ``"additive"`` (``Fa = -Gamma[:, i]``, the bias is the
-    amount subtracted from ``u_i``)."""
+    amount subtracted from ``u_i``).
+
+    Returns:
+      ``FaultDirection`` of one bias (p = 1) in ``Phi``'s dtype: ``input_scaled = -e_i``
+      (nu, 1) for ``"effectiveness"``, ``state = -Gamma[:, i]`` (n, 1) for ``"additive"``;
+      the other fields zero.
+    """
     n, nu, m = validate_linear_model(model)
     _checks.check_choice("kind", kind, ["effectiveness", "additive"])
     component = _checks.check_int("component", component, 0, nu - 1, "an input index")
@@ -99,8 +105,14 @@ def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "
 
 
 def sensor_direction(model: LinearGaussianModel, component: int, kind: str = "scaling") -> FaultDirection:
-    """One sensor's fault direction: ``"scaling"`` (``Fs = e_j (C x_hat)_j``, the bias is the
-    relative gain error) or ``"additive"`` (``Fs = e_j``, the bias is added to ``y_j``)."""
+    """One sensor's fault direction: ``"scaling"`` (``Fs = e_j (C x_hat + D u)_j``, the bias is the
+    relative gain error) or ``"additive"`` (``Fs = e_j``, the bias is added to ``y_j``).
+
+    Returns:
+      ``FaultDirection`` of one bias (p = 1) in ``Phi``'s dtype: ``output_scaled = e_j``
+      (m, 1) for ``"scaling"``, ``output = e_j`` (m, 1) for ``"additive"``; the other fields
+      zero.
+    """
     n, nu, m = validate_linear_model(model)
     _checks.check_choice("kind", kind, ["scaling", "additive"])
     component = _checks.check_int("component", component, 0, m - 1, "an output index")

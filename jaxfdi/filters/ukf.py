@@ -211,6 +211,11 @@ def unscented_kalman_filter(
         ``"taylor"`` for float32 and narrower states with ``alpha <= 1e-2``, else
         ``"direct"``.
       missing_measurements: treat NaN components of ``y`` as not measured (static).
+
+    Returns:
+      ``Filter(init, step, update, predict)``: ``init(mean (n,), cov (n, n)) ->
+      GaussianState``; ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``, the
+      unscented update then the unscented prediction through ``f``.
     """
     _checks.check_callable("f", f, "a transition function f(x, u, params)")
     _checks.check_callable("h", h, "a measurement function h(x, u, params)")

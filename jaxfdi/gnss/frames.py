@@ -25,7 +25,12 @@ WGS84_B = WGS84_A * (1.0 - WGS84_F)
 
 
 def geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
-    """(..., 3) ECEF [m] of geodetic latitude, longitude [rad] and ellipsoidal height [m]."""
+    """ECEF coordinates of geodetic latitude, longitude [rad] and ellipsoidal height [m]
+    (WGS-84, closed form); the three broadcast together.
+
+    Returns:
+      (..., 3) ECEF ``[x, y, z]`` [m], ``...`` the broadcast shape of the inputs.
+    """
     lat, lon, height = jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(height)
     try:
         jnp.broadcast_shapes(lat.shape, lon.shape, height.shape)
@@ -40,10 +45,15 @@ def geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
 
 
 def ecef_to_geodetic(ecef: Array, iterations: int = 5) -> tuple[Array, Array, Array]:
-    """``(lat, lon, height)`` [rad, rad, m] of (..., 3) ECEF points (Bowring's iteration).
+    """Geodetic coordinates of (..., 3) ECEF points [m] (Bowring's iteration, ``iterations``
+    latitude updates).
 
     Valid away from the Earth's centre (``|r| > 100 km``); the height is computed from
     the latitude in the form that is well conditioned at every latitude.
+
+    Returns:
+      ``(lat, lon, height)`` [rad, rad, m], each of shape (...): geodetic latitude,
+      longitude in [-pi, pi] and height above the WGS-84 ellipsoid.
     """
     _check_points("ecef", ecef)
     ecef = jnp.asarray(ecef)

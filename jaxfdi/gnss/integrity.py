@@ -112,7 +112,14 @@ def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables:
 
     ``batch_size``: vmap over chunks of that many epochs, one chunk after another
     (``lax.map``), so the intermediates stay in cache: ~1.7x faster for 10^4-10^5 epochs on
-    CPU at 128 (``benchmarks/bench_gnss_raim.py``); ``None`` vmaps all epochs at once."""
+    CPU at 128 (``benchmarks/bench_gnss_raim.py``); ``None`` vmaps all epochs at once.
+
+    Returns:
+      ``EpochIntegrity`` of the T epochs (each epoch's slot records chosen by
+      ``select_orbits``): every leaf of ``monitor_epoch``'s with a leading T axis, e.g.
+      ``fix.position`` (T, 3), ``check.alarm`` (T,), ``protection.hpl`` (T,), ``excluded``
+      (T,) int (-1: none), ``dead`` (T, S).
+    """
     _checks.check_shape("times", times, (None,), "one time tag per epoch")
     epochs = _checks.shape_of(times)[0]
     _checks.check_shape("pseudoranges", pseudoranges, (epochs, _checks.shape_of(table.prn)[0]),
@@ -201,7 +208,15 @@ def delivered_healthy(result: EpochIntegrity) -> Array:
 def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=None, operation="npa",
              exclude: bool = True) -> FDI:
     """``monitor_epoch`` as a stateless ``loop.FDI``: step ``k`` takes the (S,)
-    pseudoranges time-tagged ``t0 + k dt`` and returns a ``RaimOutput``."""
+    pseudoranges time-tagged ``t0 + k dt`` and returns a ``RaimOutput``.
+
+    Returns:
+      ``FDI`` with ``step(state, k, y, u) -> (state, RaimOutput)`` and no ``observe``:
+      ``state`` is passed through unchanged, ``y`` is the (S,) pseudoranges [m] (NaN: not
+      measured, inf: dead channel), ``u`` is unused; the ``RaimOutput`` holds the
+      ``Decision`` (label ``1 + slot``), threshold, DOPs, HPL/VPL, positions and the
+      exclusion of that epoch.
+    """
     _checks.check_positive("dt", dt, "a positive epoch interval (s)")
 
     def step(state, k, y, u):

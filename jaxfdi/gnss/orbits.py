@@ -204,9 +204,14 @@ def _clock(orbit: Orbit, t: Array, sin_e: Array, l1_group_delay: bool) -> Array:
 
 
 def satellite_position(orbit: Orbit, t: Array) -> Array:
-    """(S, 3) ECEF positions [m] at GPS time ``t`` (IS-GPS-200 Table 20-IV), in the
-    Earth-fixed frame of the same instant. The harmonic corrections and ``IDOT t_k`` are
-    applied to the sines and cosines by angle addition (they are below 1e-4 rad)."""
+    """Positions of the S slots at GPS time ``t`` (IS-GPS-200 Table 20-IV). The harmonic
+    corrections and ``IDOT t_k`` are applied to the sines and cosines by angle addition
+    (they are below 1e-4 rad).
+
+    Returns:
+      (S, 3) ECEF positions [m] at GPS time ``t``, in the Earth-fixed frame of the same
+      instant (no light-time or Sagnac correction: ``transmission_geometry``).
+    """
     tk, sin_e, cos_e, a = _anomaly(orbit, t)
     return _position(orbit, tk, sin_e, cos_e, a)
 

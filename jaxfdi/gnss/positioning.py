@@ -85,7 +85,14 @@ def transmit_states(orbit: Orbit, t_receive: Array, pseudoranges: Array) -> tupl
 
 def dops(geometry: Array, used: Array) -> Dops:
     """DOPs of an (S, 3 + clocks) NED + clock geometry over the ``used`` rows (unit
-    weights); TDOP is the first clock's."""
+    weights); TDOP is the first clock's.
+
+    Returns:
+      ``Dops(gdop, pdop, hdop, vdop, tdop)``, each a () dimensionless array from the
+      diagonal ``q`` of ``(H^T H)^{-1}``: ``sqrt(trace)``, ``sqrt(q_NN + q_EE + q_DD)``,
+      ``sqrt(q_NN + q_EE)``, ``sqrt(q_DD)`` and ``sqrt(q_tt)`` of the first clock column
+      (NaN when the used rows do not determine the unknowns: a singular ``H^T H``).
+    """
     _checks.check_shape("used", used, _checks.shape_of(geometry)[:1], "one flag per geometry row")
     h = jnp.where(used[:, None], geometry, 0.0)
     normal = h.T @ h
@@ -133,6 +140,14 @@ def solve_position(
       solver: "normal" (the steps by the normal equations, a written-out 4 x 4 Cholesky:
         cheapest under ``vmap``) or "qr" (the masked Householder QR); the fix agrees to
         well below a millimetre (the RAIM statistics always use the QR).
+
+    Returns:
+      ``PositionFix``: the (3,) ECEF position [m] and () clock bias [m] after ``iterations``
+      steps; per slot (S,) the residuals (measured minus predicted) [m], the weights'
+      standard deviations (1 at unused slots), the ``used`` flags (available and finite),
+      elevation and azimuth seen from the solution [rad]; the (S, 4) NED + clock geometry
+      ``[-u_ned^T, 1]`` (zero rows at unused slots), its ``dops``, ``num_used`` and
+      ``healthy`` (>= 4 used, finite and the last step below 1 cm).
     """
     if solver not in ("normal", "qr"):
         raise ValueError(f"solver: expected 'normal' or 'qr', got {solver!r}")

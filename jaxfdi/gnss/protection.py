@@ -79,6 +79,13 @@ def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tup
       tables: ``raim.raim_tables`` (threshold and noncentrality per degrees of freedom).
       operation: a key of ``ALERT_LIMITS`` or ``(HAL, VAL)`` in metres.
       qr: the whitened geometry's ``masked_qr`` when already computed.
+
+    Returns:
+      ``ProtectionLevels``: the (S,) horizontal and vertical slopes [m per
+      ``sqrt(noncentrality)``] (0 at unused or unobservable slots), the () ``hpl`` and
+      ``vpl`` [m] (inf with ``n - u <= 0`` degrees of freedom), the (S,)
+      ``minimum_detectable_bias`` [m] (inf at unused or unobservable slots or without a
+      test) and the () bool ``available`` (``HPL <= HAL`` and ``VPL <= VAL``).
     """
     if isinstance(operation, str):
         if operation not in ALERT_LIMITS:

@@ -159,7 +159,16 @@ def parity_matrix(fix: PositionFix) -> tuple[Array, Array]:
 
 
 def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = None) -> ParityCheck:
-    """Detection statistic, threshold and isolation statistics of one fix (module doc)."""
+    """Detection statistic, threshold and isolation statistics of one fix (module doc).
+
+    Returns:
+      ``ParityCheck``: the () statistic ``TS_D = p^T p`` (0 when ``n <= u``), its () int
+      degrees of freedom ``n - u`` (clipped at 0), the () threshold ``tables.threshold[dof]``
+      (inf when ``dof == 0``), the () bool ``alarm`` ``TS_D > threshold``, the (S,)
+      isolation statistics ``TS_j`` (0 at unused slots), the () int32 ``isolated`` slot of
+      the largest ``|TS_j|`` (-1 when ``n < u + 2``) and the () bool ``healthy`` (finite
+      ``TS_D``).
+    """
     check_tables(tables, fix)
     u = unknowns(fix)
     h, y = whitened(fix)

@@ -229,7 +229,13 @@ def parse_rinex_nav(text: str, name: str = "<string>") -> Ephemerides:
 
 
 def read_rinex_nav(path: str | Path) -> Ephemerides:
-    """Read a RINEX 2 GPS navigation file (``parse_rinex_nav`` on its ASCII text)."""
+    """Read a RINEX 2 GPS navigation file (``parse_rinex_nav`` on its ASCII text).
+
+    Returns:
+      ``Ephemerides``: one (N,) NumPy array per field for the file's N records, in file
+      order (int PRN, weeks and health; float the rest), plus the header's (4,) Klobuchar
+      ``ion_alpha`` / ``ion_beta`` (NaN if absent).
+    """
     path = Path(path)
     data = path.read_bytes()
     try:

@@ -153,7 +153,13 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
 
 
 def read_yuma(path: str | Path, rollovers: int = 0) -> Almanac:
-    """Read a YUMA almanac file (``parse_yuma`` on its ASCII text)."""
+    """Read a YUMA almanac file (``parse_yuma`` on its ASCII text).
+
+    Returns:
+      ``Almanac``: one (N,) NumPy array per field for the file's N satellites, in file
+      order (int PRN, health and full GPS week ``file week + 1024 * rollovers``; float the
+      rest).
+    """
     path = Path(path)
     try:
         text = path.read_bytes().decode("ascii")

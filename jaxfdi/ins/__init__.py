@@ -8,7 +8,20 @@ flights and their perfect IMU), ``plant`` (GPS receiver + IMU as a loop plant),
 chi-square test with two propagators), ``integrity`` (RAIM -> EKF -> chi-square and SCST as
 the loop's FDI stage). The quaternion algebra is ``jaxfdi.models.rotation``.
 """
+from jaxfdi.ins.imu import hg1900
+from jaxfdi.ins.integrity import gps_ins_fdi
+from jaxfdi.ins.loosely_coupled import loosely_coupled_filter
+from jaxfdi.ins.mechanization import NavState
+from jaxfdi.ins.plant import gps_ins_plant
+from jaxfdi.ins.scst import state_chi2_test
+from jaxfdi.ins.trajectory import fly
 
-#: the subpackage's modules (imported on ``from jaxfdi.ins import *``)
-__all__ = ["earth", "error_state", "imu", "integrity", "loosely_coupled", "mechanization", "plant", "scst",
-           "trajectory"]
+__all__ = [
+    "NavState",
+    "hg1900",
+    "fly",
+    "loosely_coupled_filter",
+    "state_chi2_test",
+    "gps_ins_plant",
+    "gps_ins_fdi",
+]

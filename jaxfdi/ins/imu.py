@@ -76,7 +76,14 @@ class ImuErrors(NamedTuple):
 
 
 def hg1900(accel_scale_ppm: float = 0.0, gyro_scale_ppm: float = 0.0) -> ImuModel:
-    """An HG1900-class tactical IMU (module doc for the numbers and their source)."""
+    """An HG1900-class tactical IMU (module doc for the numbers and their source).
+
+    Returns:
+      ``ImuModel`` of 1-sigma SI floats: turn-on biases 1 mg [m/s^2] and 1 deg/h [rad/s],
+      random walks VRW 0.065 ft/s/sqrt(h) [m/s/sqrt(s)] and ARW 0.125 deg/sqrt(h)
+      [rad/sqrt(s)], bias walks 0.1 mg and 1 deg/h per sqrt(h) [per sqrt(s)], and scale
+      factors ``accel_scale_ppm * 1e-6``, ``gyro_scale_ppm * 1e-6`` (dimensionless).
+    """
     for name, value in (("accel_scale_ppm", accel_scale_ppm), ("gyro_scale_ppm", gyro_scale_ppm)):
         _checks.check_scalar(name, value, 0.0, meaning="a scale-factor sigma >= 0 in ppm")
     return ImuModel(

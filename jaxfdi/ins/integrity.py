@@ -190,10 +190,15 @@ def ins_fdi(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Det
 
 def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Filter, chi2: Detector,
                 scst: StateChi2Test, health: Detector, velocity_sigma: float, operation="npa") -> FDI:
-    """The monitor of the module doc as a ``loop.FDI``; step ``k`` takes a
-    ``plant.GpsInsMeasurement`` time-tagged ``t0 + k`` s and returns a ``GpsInsOutput``.
-    Its state is ``GpsInsFdiState(ins_filter.init(...), chi2.init(), scst.init(15),
-    health.init())``; ``health``: ``imu_health_test``."""
+    """The monitor of the module doc as a ``loop.FDI``; ``health``: ``imu_health_test``.
+
+    Returns:
+      ``FDI`` with ``step(state, k, y, u) -> (state, GpsInsOutput)`` and no ``observe``:
+      step ``k`` takes a ``plant.GpsInsMeasurement`` time-tagged ``t0 + k`` s (``u`` unused)
+      and returns a ``GpsInsOutput`` (RAIM decision and threshold, HPL, HDOP, satellites
+      used, the epoch's ``InsTestOutput``, ``healthy``). Its state is
+      ``GpsInsFdiState(ins_filter.init(...), chi2.init(), scst.init(15), health.init())``.
+    """
     _checks.check_positive("velocity_sigma", velocity_sigma, "a velocity standard deviation (m/s)")
 
     def step(state: GpsInsFdiState, k, y, u):

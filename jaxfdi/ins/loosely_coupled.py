@@ -138,6 +138,14 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
       dt: IMU sample interval [s]; an epoch is ``u.shape[0]`` samples.
       chunks: Jacobian evaluations per epoch (it must divide the samples per epoch; each
         at the midpoint sample of its chunk).
+
+    Returns:
+      ``Filter(init, step)``: ``init(nav, cov, accel_bias=None, gyro_bias=None) -> InsState``
+      from the ``NavState`` at the first epoch, its (15, 15) error covariance and (3,) bias
+      estimates (default 0); ``step(state, fix, u) -> (state, InsInfo)`` takes the epoch's
+      ``GpsFix`` and its (n, 6) IMU samples ``u`` and returns the ``InsState`` at the next
+      epoch (INS, bias estimates, ``P[k+1|k]``) and an ``InsInfo`` (innovation, NIS,
+      feedback correction, ``P[k|k-1]``, ``P[k|k]``, ``Phi``, ``Q_d``, ``healthy``).
     """
     _checks.check_positive("dt", dt, "the IMU sample interval in seconds")
     chunks = _checks.check_int("chunks", chunks, 1, meaning="a positive number of Jacobians per epoch")

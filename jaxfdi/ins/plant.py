@@ -150,7 +150,16 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
       clock: the receiver oscillator.
       satellite_fault: sensor faults on satellite slots (``receiver_plant``).
       imu_fault: sensor faults on the IMU's 6 channels (module doc).
-    ``init`` takes ``(clock0 (2,), ImuErrors)`` (``imu.draw_errors``).
+
+    Returns:
+      ``Plant(init, measure, advance)``, one step per GPS epoch. ``init`` takes
+      ``(clock0 (2,), ImuErrors)`` (``imu.draw_errors``) and returns a ``GpsInsPlantState``;
+      ``measure(state, k, u, step_key) -> (state, GpsInsSensed)``: the epoch's truth
+      (``GpsInsTruth``), the ``GpsInsMeasurement`` (pseudoranges (S,) [m], velocity (3,)
+      NED [m/s], IMU samples (n, 6)), the (F_sat + F_imu,) active faults and the mode
+      label; ``advance(state, k, u, step_key) -> (state, Actuated)`` moves the receiver
+      clock and walks the IMU biases over one epoch (``u`` passed through, no actuator
+      fault).
     """
     _checks.check_shape("flight.imu", flight.imu, (None, None, IMU_CHANNELS), "T epochs x n samples x 6")
     per_epoch = flight.imu.shape[1]

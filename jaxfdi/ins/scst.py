@@ -112,6 +112,15 @@ def state_chi2_test(period: int, threshold, max_condition: float = DEFAULT_MAX_C
       period: epochs between resets of one propagator (even, >= 2).
       threshold: alarm when ``l > threshold`` (``chi2_threshold(15, pfa)``: 32.80 at 0.005).
       max_condition: largest accepted condition estimate of the scaled ``B``.
+
+    Returns:
+      ``StateChi2Test(init, step)``: ``init(n, dtype=None) -> ScstState`` (two propagators of
+      n error states, not yet started); ``step(state, correction, filtered_cov, transition,
+      process_cov) -> (state, ScstOutput)`` takes the filter's (n,) ``dx[k|k]`` and (n, n)
+      ``P[k|k]``, ``Phi_k``, ``Q_k`` and returns the propagators at ``k + 1`` and the epoch's
+      ``ScstOutput``: a ``Decision`` (statistic ``l``, 0 when invalid; alarm; label -1;
+      estimate NaN), ``valid``, ``condition``, the propagator tested and its age, and the
+      (2,) reset flags.
     """
     period = _checks.check_int("period", period, 2, meaning="an even number of epochs >= 2")
     if period % 2:

@@ -84,7 +84,18 @@ def _check_start(start) -> None:
 def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: float = 0.0, rate: float = 100.0,
         blend: float = 5.0, dtype=None) -> Trajectory:
     """The flight of ``legs`` (module doc) from ``start`` = (lat deg, lon deg, h m) at
-    ``speed`` [m/s] and ``heading_deg``, sampled at ``rate`` [Hz]."""
+    ``speed`` [m/s] and ``heading_deg``, sampled at ``rate`` [Hz].
+
+    Returns:
+      ``Trajectory`` with ``dt = 1 / rate`` and ``N = round(sum of durations * rate)``
+      samples: ``position`` (N + 1, 3) lat, lon [rad], h [m]; ``velocity`` (N + 1, 3)
+      NED [m/s]; ``attitude`` (N + 1, 4) body-to-NED quaternions; ``imu`` (N, 6) the
+      error-free ``[f^b, w_ib^b]`` of each interval, all in ``dtype``.
+
+    Raises:
+      ValueError: malformed ``legs`` or ``start``, or a flight that stalls or climbs
+        faster than it flies.
+    """
     legs = np.asarray(legs, float)
     if legs.ndim != 2 or legs.shape[1] != 4 or np.any(legs[:, 0] <= 0):
         raise ValueError(f"legs: expected rows (duration > 0, turn deg/s, climb m/s, accel m/s^2), got "

@@ -40,6 +40,12 @@ def engine_model(Ts: float = TS, dtype=None) -> LinearGaussianModel:
     span five orders of magnitude), else float32, unless ``dtype`` is given. ``Phi`` and
     ``Gamma`` are computed in float64 either way (``c2d``) and then cast, so the float32
     model is the float64 one rounded (the float32 exponential of this stiff block is NaN).
+
+    Returns:
+      ``LinearGaussianModel`` with n = 7 states, nu = 1 input and m = 5 outputs: ``Phi``
+      (7, 7) and ``Gamma`` (7, 1) the zero-order hold of ``(A, B)`` over ``Ts``; ``C``
+      (5, 7) selecting ``[RPM, P2, T2, P4, T4]``; ``D`` (5, 1); the diagonal ``Q`` (7, 7) and
+      ``R`` (5, 5) of the module's tables (the same for every ``Ts``); all in ``dtype``.
     """
     dtype = dtype or jnp.result_type(float)
     Phi, Gamma = c2d(A, B, Ts, dtype=dtype)

@@ -51,6 +51,11 @@ def linear_gaussian_model(Phi: Array, C: Array, Q: Array, R: Array, Gamma: Array
     (m, nu). Every block takes ``Phi``'s dtype; shapes are checked
     (``validate_linear_model``).
 
+    Returns:
+      ``LinearGaussianModel(Phi (n, n), Gamma (n, nu), C (m, n), D (m, nu), Q (n, n),
+      R (m, m))``, every block a JAX array of ``Phi``'s float dtype (``nu = 0`` without
+      ``Gamma``).
+
     Example::
 
         model = linear_gaussian_model(Phi, C, Q, R)   # no inputs

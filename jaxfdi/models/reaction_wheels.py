@@ -76,7 +76,14 @@ def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.05
                    dtype=None) -> SpacecraftParams:
     """KITSAT-3 (Choi & Park 2009, Table 1): ``I = diag(3.118, 3.050, 4.055)`` kg m^2,
     ``I_w = 0.000239`` kg m^2, the 45/45 deg pyramid unless ``wheel_axes`` (N, 3) is given
-    (any geometry: the rows are normalised)."""
+    (any geometry: the rows are normalised).
+
+    Returns:
+      ``SpacecraftParams`` in ``dtype``: ``inertia`` (3, 3) [kg m^2] (a (3,) ``inertia`` is
+      its diagonal), ``wheel_inertia`` () [kg m^2], ``wheel_axes`` (N, 3) unit spin axes
+      (N = 4 for the pyramid), ``wheel_mask`` (N,) ones (every wheel healthy) and ``dt``
+      () [s].
+    """
     _checks.check_positive("dt", dt, "a positive sample period in seconds")
     _checks.check_positive("wheel_inertia", wheel_inertia, "a positive wheel inertia in kg m^2")
     dtype = dtype or jnp.result_type(float)

@@ -31,7 +31,12 @@ class RigidBodyParams(NamedTuple):
 
 
 def rigid_body_params(dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dtype=None) -> RigidBodyParams:
-    """Principal moments of inertia ``inertia`` (3,) > 0 and the step ``dt`` > 0 (s)."""
+    """Principal moments of inertia ``inertia`` (3,) > 0 and the step ``dt`` > 0 (s).
+
+    Returns:
+      ``RigidBodyParams(inertia (3,) [kg m^2], dt () [s])`` as arrays of ``dtype`` (default:
+      JAX's default float).
+    """
     _checks.check_positive("dt", dt, "a positive step in seconds")
     _checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
     if np.any(np.asarray(inertia) <= 0):

@@ -56,7 +56,6 @@ from jaxfdi.filters import run_filter
 from jaxfdi._monitor import monitor, replay_detector
 from jaxfdi.montecarlo import monte_carlo
 from jaxfdi.plotting import save_figure
-from jaxfdi.progress import logger
 from jaxfdi.riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi._simulate import linear_simulator, simulate
@@ -625,7 +624,20 @@ def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] 
     ``kernel``: the IMM structures run the IMM batch kernel over each chunk (default;
     2.8x faster on CPU) instead of ``vmap(monitor)``; ``unrolled``: the other filters use
     written-out factorisations instead of library calls. Both change speed only
-    (``benchmarks/bench_studies.py --linalg`` measures the second)."""
+    (``benchmarks/bench_studies.py --linalg`` measures the second).
+
+    Returns:
+      ``Study("engine", cases, case_names, structures)``: the nine ``study_faults`` stacked
+      (the paper's six, ``HEALTH_CASES``, ``none``; onset at ``onset_time``) and their
+      names, and the ``Structure`` of each of the five programs that holds a chosen
+      method: its run function, its parameter grids (filter numbers, decision rules) and
+      each method's cell in them; the IMM and GLRT structures also average their traces
+      (mode probabilities, GLR statistics) per case.
+
+    Raises:
+      ValueError: a name in ``methods`` that ``engine_method_names(settings)`` lacks, or
+        an empty ``methods``.
+    """
     names = engine_method_names(settings)
     chosen = names if methods is None else list(methods)
     unknown = [m for m in chosen if m not in names]
@@ -673,7 +685,16 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
     (``engine_spec`` through ``study.run_study``: five programs).
 
     Needs float64 (``jaxfdi.enable_x64()``): the engine is stiff. The figures' mean mode
-    probabilities and GLR statistics are averaged over the same runs, on the device."""
+    probabilities and GLR statistics are averaged over the same runs, on the device.
+
+    Returns:
+      ``EngineStudy``: ``config`` (the settings, cases, methods, thresholds and timings),
+      ``rows`` (``summarize_method``'s, one per method and case), ``records`` (per method a
+      ``DetectionRecord`` of 9 * ``runs`` runs, case-major, ``study_faults`` order) and
+      ``figures``: ``"mode_prob/<method>"`` (9, T, 7) mean mode probabilities of ``IMM`` and
+      the confirmed IMM, ``"glr"`` (9, T, 6) mean GLR per fault direction of the first GLRT
+      (each only when its method ran; T = ``duration / TS`` steps).
+    """
     require_x64("engine_study (the engine model is stiff)")
     check_study(runs, seed)
     spec = engine_spec(settings, methods, duration, onset_time, unrolled, kernel)

@@ -110,7 +110,16 @@ def engine_chi2_study(
 
     ``threshold`` (default ``chi2_threshold(window * 5, pfa)``) and ``filter_noise = (Q,
     R)`` (default the plant's) set the detector a tuner changed; the plant is always
-    simulated with its own noise."""
+    simulated with its own noise.
+
+    Returns:
+      ``EngineChi2Result`` over the seven ``engine_faults`` cases (actuator, RPM, P2, T2,
+      P4, T4, none): ``config`` (runs, seed, window, pfa, dof, threshold, Ts, steps, onset
+      step, fuel step), ``rows`` (one per case: magnitude, detection, missed-detection and
+      false-alarm rates, delays in s, unhealthy, pre-onset-alarm and clean runs),
+      ``records`` (a ``DetectionRecord`` of 7 * ``runs`` runs, case-major) and ``examples``
+      (a ``MonitorHistory`` of one extra run per case, leaves (7, T, ...)).
+    """
     require_x64("engine_chi2_study (the engine model is stiff)")
     check_study(runs, seed, window=window, **({} if chunk_size is None else {"chunk_size": chunk_size}))
     _checks.check_probability("pfa", pfa)
@@ -124,7 +133,6 @@ def engine_chi2_study(
     onset = int(round(onset_time / TS))
     if window > steps:
         raise ValueError(f"window: expected at most the {steps} steps of a run, got {window}")
-    us = jnp.full((steps, 1), FUEL_STEP)
     dof = window * model.C.shape[0]
     threshold = chi2_threshold(dof, pfa) if threshold is None else jnp.asarray(threshold)
     filter_model = model if filter_noise is None else model._replace(Q=jnp.asarray(filter_noise[0]),

@@ -37,6 +37,10 @@ def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e
       true_mode: (T,) int true mode per step (``SimStep.mode``).
       floor: probability floor, so that a structurally impossible mode costs
         ``-log(floor)`` (finite, with a finite gradient) rather than infinity.
+
+    Returns:
+      () the mean over the T steps of ``-log(mu_true + floor)`` [nats], in ``(0,
+      -log(floor)]``, differentiable in ``log_mode_prob``.
     """
     _checks.check_scalar("floor", floor, 0.0, 1.0, low_open=True, meaning="a probability floor in (0, 1]")
     _checks.check_shape("log_mode_prob", log_mode_prob, (None, None), "(T, M) log mode probabilities")
@@ -114,6 +118,10 @@ def soft_detection_loss(
 
 
 def innovation_nll(log_likelihood: Array) -> Array:
-    """``-(1/T) sum_k log N(r_k; 0, S_k)`` from the (T,) per-step ``FilterInfo.log_likelihood``."""
+    """``-(1/T) sum_k log N(r_k; 0, S_k)`` from the (T,) per-step ``FilterInfo.log_likelihood``.
+
+    Returns:
+      () the mean negative log-likelihood per step [nats], ``-mean(log_likelihood)``.
+    """
     _checks.check_shape("log_likelihood", log_likelihood, (None,), "(T,) per-step log-likelihoods")
     return -jnp.mean(log_likelihood)

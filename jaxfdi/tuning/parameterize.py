@@ -50,7 +50,13 @@ def identity() -> Transform:
 
 def positive(floor: float = 0.0) -> Transform:
     """``p = floor + softplus(x)``; inverse ``x = log(expm1(p - floor))`` written stably.
-    ``floor`` >= 0, finite."""
+    ``floor`` >= 0, finite.
+
+    Returns:
+      ``Transform`` named ``"positive"`` with options ``{"floor": floor}``: ``forward`` maps
+      an array of any shape elementwise to values above ``floor``, ``inverse`` maps values
+      above ``floor`` back to raw reals of the same shape.
+    """
     _checks.check_scalar("floor", floor, 0.0, meaning="a lower bound >= 0")
 
     def forward(x):
@@ -88,7 +94,13 @@ def _log_probability(p: Array) -> Array:
 
 def simplex() -> Transform:
     """Probability vector ``p = softmax(x)`` (e.g. an IMM's initial mode probabilities);
-    ``inverse`` returns ``log p`` (log-sum-exp 0), ``log(tiny)`` at a zero."""
+    ``inverse`` returns ``log p`` (log-sum-exp 0), ``log(tiny)`` at a zero.
+
+    Returns:
+      ``Transform`` named ``"simplex"`` (no options): ``forward`` maps (M,) logits to an
+      (M,) probability vector (positive, summing to 1), ``inverse`` an (M,) probability
+      vector to (M,) logits.
+    """
 
     def forward(logits):
         logits = jnp.asarray(logits)
@@ -151,7 +163,14 @@ def log_diagonal() -> Transform:
 def cholesky_factor() -> Transform:
     """Full covariance ``L L^T`` from an (n, n) array: its strict lower triangle is the
     off-diagonal of ``L``, its diagonal the log of ``L``'s diagonal (upper triangle
-    ignored). Symmetric positive definite for every finite input."""
+    ignored). Symmetric positive definite for every finite input.
+
+    Returns:
+      ``Transform`` named ``"cholesky_factor"`` (no options): ``forward`` maps (n, n) raw
+      parameters to the (n, n) covariance ``L L^T``, ``inverse`` maps a symmetric positive
+      definite (n, n) covariance to its (n, n) log-Cholesky parameters (zero above the
+      diagonal).
+    """
 
     def forward(raw):
         raw = jnp.asarray(raw)
@@ -198,7 +217,15 @@ def from_record(name: str, options: dict) -> Transform:
 
 
 def constrain(parameterization: dict[str, Transform], raw: dict[str, Array]) -> dict[str, Array]:
-    """Unconstrained -> constrained, entry by entry."""
+    """Unconstrained -> constrained, entry by entry.
+
+    Returns:
+      dict with the keys of ``raw``: ``parameterization[name].forward(raw[name])`` for each
+      (entries of ``parameterization`` without a raw value are left out).
+
+    Raises:
+      ValueError: a key of ``raw`` without a transform.
+    """
     _check_keys(parameterization, raw, "raw")
     return {k: parameterization[k].forward(v) for k, v in raw.items()}
 

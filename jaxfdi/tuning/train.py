@@ -123,6 +123,13 @@ def fit(
     computed; the parameters with the lowest one are returned, and training stops after
     ``patience`` evaluations without improvement. Non-finite losses or gradients stop
     training (the best parameters so far are kept) rather than poisoning the state.
+
+    Returns:
+      ``TrainResult(raw, history)``: ``raw``, a dict with the keys of ``raw0``: the
+      trainable entries at the evaluation with the lowest validation loss and the frozen
+      ones unchanged; ``history``, a ``TrainHistory`` of the E evaluations (step 0 first):
+      (E,) ``step``, ``train_loss`` (NaN at step 0) and ``val_loss``, the ``best_step`` and
+      ``stopped_early``.
     """
     _checks.check_callable("loss", loss, "a function (raw params, batch) -> scalar loss")
     _checks.check_callable("train_batch", train_batch, "a function step -> batch")
@@ -181,7 +188,11 @@ def fit(
 
 def save_params(path: str | Path, raw: dict, parameterization: dict[str, Transform], meta: dict | None = None) -> Path:
     """Write the constrained parameters, the parameterisation (transform names and
-    options) and ``meta`` to ``.npz`` or ``.json``, completely or not at all."""
+    options) and ``meta`` to ``.npz`` or ``.json``, completely or not at all.
+
+    Returns:
+      the ``Path`` of the file written (``path``; its folder is created if missing).
+    """
     path = Path(path)
     params = {k: np.asarray(v).tolist() if path.suffix == ".json" else np.asarray(v)
               for k, v in constrain(parameterization, raw).items()}
@@ -201,9 +212,14 @@ def save_params(path: str | Path, raw: dict, parameterization: dict[str, Transfo
 
 
 def load_params(path: str | Path) -> tuple[dict, dict[str, Transform], dict]:
-    """``(raw, parameterization, meta)`` from a file written by ``save_params``; a file that
-    is not one (truncated, another format, a field missing) raises a ``ValueError`` naming
-    the file and what is wrong."""
+    """Read a file written by ``save_params``; a file that is not one (truncated, another
+    format, a field missing) raises a ``ValueError`` naming the file and what is wrong.
+
+    Returns:
+      ``(raw, parameterization, meta)``: the unconstrained parameters (a dict of JAX arrays,
+      ``unconstrain`` of the saved constrained values), the dict ``name -> Transform``
+      rebuilt from the recorded transform names and options, and the saved ``meta`` dict.
+    """
     path = Path(path)
     if path.suffix not in (".json", ".npz"):
         raise ValueError(f"path: expected a .json or .npz file name, got {path.name!r}")

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from jaxfdi.control import assign_eigenstructure, effectiveness_input, integral_augmentation, lqr_gain, lqr_pi
+from jaxfdi.control import assign_eigenstructure, integral_augmentation, lqr_gain, lqr_pi
+from jaxfdi.control.eigenstructure import effectiveness_input
 from jaxfdi.control.eigenstructure import nominal_eigenstructure
 from jaxfdi.models import vtol
 

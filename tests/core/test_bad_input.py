@@ -12,7 +12,8 @@ import pytest
 
 import jaxfdi
 from jaxfdi.detection import chi2_detector, chi2_threshold, moving_window_sum
-from jaxfdi.models import c2d, engine_model, linear_observation, linear_transition
+from jaxfdi.models import c2d, engine_model
+from jaxfdi.models.linear import linear_observation, linear_transition
 
 MODEL = engine_model()          # n = 7, nu = 1, m = 5
 T = 6
@@ -22,20 +23,20 @@ US = jnp.zeros((T, 1))
 
 def _kf_run(model=MODEL, mean=jnp.zeros(7), cov=jnp.eye(7), ys=YS, us=US):
     def go(ys, us):
-        filt = jaxfdi.kalman_filter(model)
-        return jaxfdi.run_filter(filt, filt.init(mean, cov), ys, us)[1]
+        filt = jaxfdi.filters.kalman_filter(model)
+        return jaxfdi.filters.run_filter(filt, filt.init(mean, cov), ys, us)[1]
     return jax.eval_shape(go, ys, us)
 
 
 def _ekf_run(Q=MODEL.Q, R=MODEL.R, ys=YS, us=US):
     def go(ys, us):
-        filt = jaxfdi.extended_kalman_filter(linear_transition, linear_observation, Q, R, MODEL)
-        return jaxfdi.run_filter(filt, filt.init(jnp.zeros(7), jnp.eye(7)), ys, us)[1]
+        filt = jaxfdi.filters.extended_kalman_filter(linear_transition, linear_observation, Q, R, MODEL)
+        return jaxfdi.filters.run_filter(filt, filt.init(jnp.zeros(7), jnp.eye(7)), ys, us)[1]
     return jax.eval_shape(go, ys, us)
 
 
 def _ukf(**kw):
-    return jaxfdi.unscented_kalman_filter(linear_transition, linear_observation, MODEL.Q, MODEL.R, MODEL, **kw)
+    return jaxfdi.filters.unscented_kalman_filter(linear_transition, linear_observation, MODEL.Q, MODEL.R, MODEL, **kw)
 
 
 def _asymmetric(n):
@@ -67,7 +68,7 @@ CASES = {
     "R not square (EKF)": (lambda: _ekf_run(R=jnp.zeros((5, 4))),
                            r"R: expected a square matrix of shape \(n, n\).*got \(5, 4\)"),
     "Q not symmetric (EKF)": (lambda: _ekf_run(Q=_asymmetric(7)), r"Q: covariance of shape \(7, 7\) must be symmetric"),
-    "Q not symmetric (UKF)": (lambda: jaxfdi.unscented_kalman_filter(
+    "Q not symmetric (UKF)": (lambda: jaxfdi.filters.unscented_kalman_filter(
         linear_transition, linear_observation, _asymmetric(7), MODEL.R, MODEL), r"Q: .*must be symmetric"),
     "initial mean shape": (lambda: _kf_run(mean=jnp.zeros(6)), r"mean: expected shape \(7,\)"),
     "initial cov shape": (lambda: _kf_run(cov=jnp.eye(6)), r"cov: expected a square matrix of shape \(7, 7\)"),

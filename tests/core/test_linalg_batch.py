@@ -9,7 +9,7 @@ import scipy.linalg
 import jaxfdi
 from _problems import engine_data, rigid_body_data
 from jaxfdi import _linalg
-from jaxfdi.models import rigid_body_observation, rigid_body_transition
+from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
 
 
 def random_spd(rng, n):
@@ -111,34 +111,34 @@ def engine_batch():
 
 def test_batch_driver_equals_loop_and_shares_the_covariance(engine_batch):
     model, ys_b, us, m0, P0 = engine_batch
-    kf = jaxfdi.kalman_filter(model)
-    final, info = jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b, us)
+    kf = jaxfdi.filters.kalman_filter(model)
+    final, info = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys_b, us)
     assert info.filtered_cov.shape == (60, 7, 7) and final.cov.shape == (7, 7)  # once, no run axis
     assert info.filtered_mean.shape == (3, 60, 7)
     for i in range(3):
-        final_i, ref = jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b[i], us)
+        final_i, ref = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys_b[i], us)
         for name in ("filtered_mean", "innovation", "log_likelihood", "nis"):
             np.testing.assert_allclose(getattr(info, name)[i], getattr(ref, name), rtol=1e-12, atol=1e-9)
         for name in ("filtered_cov", "predicted_cov", "innovation_cov"):
             np.testing.assert_allclose(getattr(info, name), getattr(ref, name), rtol=1e-12)
         np.testing.assert_allclose(final.mean[i], final_i.mean, rtol=1e-12)
     # per-run inputs, and covariances kept per run on request
-    _, per_run = jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b, np.stack([us] * 3), shared_covariance=False)
+    _, per_run = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys_b, np.stack([us] * 3), shared_covariance=False)
     assert per_run.filtered_cov.shape == (3, 60, 7, 7)
     np.testing.assert_allclose(per_run.filtered_cov[1], info.filtered_cov, rtol=1e-12)
 
 
 def test_batch_driver_keeps_data_dependent_covariances_per_run(engine_batch):
     model, ys_b, us, m0, P0 = engine_batch
-    kf = jaxfdi.kalman_filter(model, missing_measurements=True)
-    _, info = jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b, us)  # "auto"
+    kf = jaxfdi.filters.kalman_filter(model, missing_measurements=True)
+    _, info = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys_b, us)  # "auto"
     assert info.filtered_cov.shape == (3, 60, 7, 7)
     with pytest.raises(ValueError, match="shared_covariance"):
-        jaxfdi.run_filter(kf, kf.init(m0, P0), ys_b, us, shared_covariance=True)
+        jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys_b, us, shared_covariance=True)
     params, Q, R, ys, us_rb, m0_rb, P0_rb = rigid_body_data(T=30)
-    ukf = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
-    _, info = jaxfdi.run_filter(ukf, ukf.init(m0_rb, P0_rb), np.stack([ys, ys]), us_rb)
-    _, ref = jaxfdi.run_filter(ukf, ukf.init(m0_rb, P0_rb), ys, us_rb)
+    ukf = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
+    _, info = jaxfdi.filters.run_filter(ukf, ukf.init(m0_rb, P0_rb), np.stack([ys, ys]), us_rb)
+    _, ref = jaxfdi.filters.run_filter(ukf, ukf.init(m0_rb, P0_rb), ys, us_rb)
     assert info.filtered_cov.shape == (2, 30, 3, 3)
     np.testing.assert_allclose(info.filtered_mean[1], ref.filtered_mean, rtol=1e-9)
 
@@ -151,10 +151,10 @@ def test_batch_driver_keeps_data_dependent_covariances_per_run(engine_batch):
 ])
 def test_batch_driver_bad_input(engine_batch, bad, match):
     model, ys_b, us, m0, P0 = engine_batch
-    kf = jaxfdi.kalman_filter(model)
+    kf = jaxfdi.filters.kalman_filter(model)
     kwargs = dict(ys=ys_b, us=us) | bad
     with pytest.raises(ValueError, match=match):
-        jaxfdi.run_filter(kf, kf.init(m0, P0), **kwargs)
+        jaxfdi.filters.run_filter(kf, kf.init(m0, P0), **kwargs)
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4])

@@ -13,7 +13,7 @@ from scipy import stats
 import jaxfdi
 from jaxfdi import loop
 from jaxfdi.filters import history
-from jaxfdi.filters import model_at, time_varying
+from jaxfdi.filters._time_varying import model_at, time_varying
 from jaxfdi.models import engine_model
 from jaxfdi.models.linear import LinearGaussianModel
 from jaxfdi._monitor import filter_detector
@@ -25,9 +25,9 @@ ONSET = 30
 @pytest.fixture(scope="module")
 def engine():
     model = engine_model()
-    kf = jaxfdi.kalman_filter(model)
-    threshold = jaxfdi.chi2_threshold(2 * 5, 0.01)
-    detector = jaxfdi.chi2_detector(threshold, 2)
+    kf = jaxfdi.filters.kalman_filter(model)
+    threshold = jaxfdi.detection.chi2_threshold(2 * 5, 0.01)
+    detector = jaxfdi.detection.chi2_detector(threshold, 2)
     return model, kf, detector, threshold
 
 
@@ -52,7 +52,7 @@ def test_feedforward_loop_equals_the_open_loop_pipeline(engine):
     for run in range(2):
         result = jax.tree_util.tree_map(lambda leaf: leaf[run], results)
         truth = jax.tree_util.tree_map(lambda leaf: leaf[run], truths)
-        _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), model.Q), truth.measurement, us)
+        _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), model.Q), truth.measurement, us)
         nis = np.asarray(info.nis)
         statistic = np.array([nis[max(0, k - 1): k + 1].sum() for k in range(T)])
         alarms = statistic > float(threshold)
@@ -129,7 +129,7 @@ def test_replay_over_the_ring_buffer_equals_the_original_estimates():
     n, m = 3, 2
     model = LinearGaussianModel(jnp.asarray(np.eye(n) * 0.9 + 0.05 * rng.normal(size=(n, n))), jnp.ones((n, 1)),
                                 jnp.asarray(rng.normal(size=(m, n))), jnp.zeros((m, 1)), 0.01 * jnp.eye(n), 0.1 * jnp.eye(m))
-    kf = jaxfdi.kalman_filter(model)
+    kf = jaxfdi.filters.kalman_filter(model)
     prior0 = kf.init(jnp.zeros(n), jnp.eye(n))
     example = (jnp.zeros(m), jnp.zeros(1), prior0)
 
@@ -183,8 +183,8 @@ def test_time_varying_kalman_filter_matches_filterpy_matrix_by_matrix():
     ys = rng.normal(size=(steps, m))
     us = rng.normal(size=(steps, nu))
     at = model_at(model, C=Cs, Q=Qs, R=Rs)
-    filt = time_varying(lambda k: jaxfdi.kalman_filter(at(k)))
-    _, info = jaxfdi.run_filter(filt, filt.init(jnp.zeros(n), jnp.eye(n)), jnp.asarray(ys), jnp.asarray(us))
+    filt = time_varying(lambda k: jaxfdi.filters.kalman_filter(at(k)))
+    _, info = jaxfdi.filters.run_filter(filt, filt.init(jnp.zeros(n), jnp.eye(n)), jnp.asarray(ys), jnp.asarray(us))
 
     kf = KalmanFilter(dim_x=n, dim_z=m, dim_u=nu)
     kf.F, kf.B = np.asarray(model.Phi), np.asarray(model.Gamma)
@@ -301,10 +301,10 @@ def test_episode_scorer_over_a_flight_with_three_fault_episodes(engine):
     Python from the stored alarm sequence."""
     model, kf, detector, _ = engine
     steps, grace = 150, 3
-    group = jaxfdi.fault_group("bias", "sensor", [1, 3], 20, [25.0, 4.0], end=45, label=9)
-    flight = jaxfdi.concat_faults(group, jaxfdi.fault("bias", "actuator", 0, 70, 2e-3, end=95),
+    group = jaxfdi.faults.fault_group("bias", "sensor", [1, 3], 20, [25.0, 4.0], end=45, label=9)
+    flight = jaxfdi.faults.concat_faults(group, jaxfdi.fault("bias", "actuator", 0, 70, 2e-3, end=95),
                                   jaxfdi.fault("ramp", "sensor", 2, 110, 0.0, slope=0.5))
-    onsets, ends, labels = jaxfdi.episodes(flight, 1)
+    onsets, ends, labels = jaxfdi.faults.episodes(flight, 1)
     us = jnp.full((steps, 1), 0.01)
     result = loop.run_loop(jaxfdi.linear_simulator(model, flight), filter_detector(kf, detector), loop.feedforward(),
                            jnp.zeros(7), (kf.init(jnp.zeros(7), model.Q), detector.init()), jax.random.key(7),

@@ -24,7 +24,7 @@ import pytest
 
 import jaxfdi
 from jaxfdi import control, detection, loop, metrics, models, tuning
-from jaxfdi.filters import history
+from jaxfdi.filters import _time_varying, history
 from jaxfdi.filters import tskf
 from jaxfdi.models.vtol import vtol_model, vtol_true_plant
 from jaxfdi._monitor import filter_detector
@@ -35,7 +35,8 @@ from jaxfdi.scenarios.engine_tuning import imm_design, tune_engine_imm
 from jaxfdi.scenarios.reaction_wheels import wheel_study
 from jaxfdi.scenarios.vtol import vtol_study
 from jaxfdi.tuning.parameterize import from_record
-from jaxfdi.models import engine_model, linear_observation, linear_transition
+from jaxfdi.models import engine_model
+from jaxfdi.models.linear import linear_observation, linear_transition
 
 MODEL = engine_model()                       # n = 7, nu = 1, m = 5
 N, NU, M = 7, 1, 5
@@ -44,7 +45,7 @@ YS, US = jnp.zeros((T, M)), jnp.zeros((T, NU))
 NAN_7 = jnp.eye(N).at[2, 3].set(jnp.nan)
 INDEFINITE_2 = jnp.array([[1.0, 2.0], [2.0, 1.0]])    # symmetric, eigenvalues -1 and 3
 KEY = jax.random.key(0)
-SMALL = jaxfdi.linear_gaussian_model(jnp.array([[0.9, 0.1], [0.0, 0.8]]), jnp.eye(2), 0.01 * jnp.eye(2),
+SMALL = jaxfdi.models.linear_gaussian_model(jnp.array([[0.9, 0.1], [0.0, 0.8]]), jnp.eye(2), 0.01 * jnp.eye(2),
                                      0.1 * jnp.eye(2), Gamma=jnp.array([[0.0], [1.0]]))
 
 
@@ -57,29 +58,29 @@ def indefinite(n: int) -> jnp.ndarray:
 
 def kf_run(model=MODEL, mean=jnp.zeros(N), cov=jnp.eye(N), ys=YS, us=US, filt=None):
     def go(ys, us):
-        f = filt or jaxfdi.kalman_filter(model)
-        return jaxfdi.run_filter(f, f.init(mean, cov), ys, us)[1]
+        f = filt or jaxfdi.filters.kalman_filter(model)
+        return jaxfdi.filters.run_filter(f, f.init(mean, cov), ys, us)[1]
     return jax.eval_shape(go, ys, us)
 
 
 def ekf(**kw):
     args = dict(f=linear_transition, h=linear_observation, Q=MODEL.Q, R=MODEL.R, params=MODEL)
     args.update(kw)
-    return jaxfdi.extended_kalman_filter(**args)
+    return jaxfdi.filters.extended_kalman_filter(**args)
 
 
 def ukf(**kw):
     args = dict(f=linear_transition, h=linear_observation, Q=MODEL.Q, R=MODEL.R, params=MODEL)
     args.update(kw)
-    return jaxfdi.unscented_kalman_filter(**args)
+    return jaxfdi.filters.unscented_kalman_filter(**args)
 
 
 def two_modes():
     return jax.tree.map(lambda a: jnp.stack([a, a]), SMALL)
 
 
-def imm(transition=jnp.array([[0.9, 0.1], [0.2, 0.8]]), mode_filter=jaxfdi.kalman_filter):
-    return jaxfdi.interacting_multiple_model(mode_filter, two_modes(), transition)
+def imm(transition=jnp.array([[0.9, 0.1], [0.2, 0.8]]), mode_filter=jaxfdi.filters.kalman_filter):
+    return jaxfdi.filters.interacting_multiple_model(mode_filter, two_modes(), transition)
 
 
 def sim_run(sim=None, x0=jnp.zeros(N), us=US):
@@ -99,7 +100,7 @@ def fault(**kw):
 
 def loop_run(steps=T, plant=None, exogenous=None, key=KEY):
     sim = plant or jaxfdi.linear_simulator(SMALL)
-    kf = jaxfdi.kalman_filter(SMALL)
+    kf = jaxfdi.filters.kalman_filter(SMALL)
     fdi = filter_detector(kf, detection.chi2_detector(10.0))
     return loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(2), kf.init(jnp.zeros(2), jnp.eye(2)), key, steps,
                          exogenous=jnp.zeros((4, 1)) if exogenous is None else exogenous)
@@ -115,33 +116,33 @@ V, T_ = ValueError, TypeError
 # id: (thunk, exception type, the argument the message must name)
 CASES = {
     # --- models.linear -------------------------------------------------------------
-    "model Phi NaN": (lambda: jaxfdi.linear_gaussian_model(NAN_7, MODEL.C, MODEL.Q, MODEL.R, MODEL.Gamma), V, "Phi"),
-    "model Phi inf": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(N).at[0, 0].set(jnp.inf), MODEL.C, MODEL.Q,
+    "model Phi NaN": (lambda: jaxfdi.models.linear_gaussian_model(NAN_7, MODEL.C, MODEL.Q, MODEL.R, MODEL.Gamma), V, "Phi"),
+    "model Phi inf": (lambda: jaxfdi.models.linear_gaussian_model(jnp.eye(N).at[0, 0].set(jnp.inf), MODEL.C, MODEL.Q,
                                                            MODEL.R, MODEL.Gamma), V, "Phi"),
-    "model Gamma NaN": (lambda: jaxfdi.linear_gaussian_model(MODEL.Phi, MODEL.C, MODEL.Q, MODEL.R,
+    "model Gamma NaN": (lambda: jaxfdi.models.linear_gaussian_model(MODEL.Phi, MODEL.C, MODEL.Q, MODEL.R,
                                                              MODEL.Gamma.at[0, 0].set(jnp.nan)), V, "Gamma"),
-    "model C NaN": (lambda: jaxfdi.linear_gaussian_model(MODEL.Phi, MODEL.C.at[1, 1].set(jnp.nan), MODEL.Q, MODEL.R),
+    "model C NaN": (lambda: jaxfdi.models.linear_gaussian_model(MODEL.Phi, MODEL.C.at[1, 1].set(jnp.nan), MODEL.Q, MODEL.R),
                     V, "C"),
-    "model D inf": (lambda: jaxfdi.linear_gaussian_model(MODEL.Phi, MODEL.C, MODEL.Q, MODEL.R, MODEL.Gamma,
+    "model D inf": (lambda: jaxfdi.models.linear_gaussian_model(MODEL.Phi, MODEL.C, MODEL.Q, MODEL.R, MODEL.Gamma,
                                                          jnp.full((M, NU), jnp.inf)), V, "D"),
-    "model Q indefinite": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(2), jnp.eye(2), INDEFINITE_2, jnp.eye(2)),
+    "model Q indefinite": (lambda: jaxfdi.models.linear_gaussian_model(jnp.eye(2), jnp.eye(2), INDEFINITE_2, jnp.eye(2)),
                            V, "Q"),
-    "model R indefinite": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.eye(2), INDEFINITE_2),
+    "model R indefinite": (lambda: jaxfdi.models.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.eye(2), INDEFINITE_2),
                            V, "R"),
-    "model Q complex": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.eye(2) * (1 + 1j),
+    "model Q complex": (lambda: jaxfdi.models.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.eye(2) * (1 + 1j),
                                                              jnp.eye(2)), T_, "Q"),
-    "model Phi complex": (lambda: jaxfdi.linear_gaussian_model(jnp.eye(2) * 1j, jnp.eye(2), jnp.eye(2), jnp.eye(2)),
+    "model Phi complex": (lambda: jaxfdi.models.linear_gaussian_model(jnp.eye(2) * 1j, jnp.eye(2), jnp.eye(2), jnp.eye(2)),
                           T_, "Phi"),
-    "model Phi strings": (lambda: jaxfdi.linear_gaussian_model(np.array([["a", "b"], ["c", "d"]]), jnp.eye(2),
+    "model Phi strings": (lambda: jaxfdi.models.linear_gaussian_model(np.array([["a", "b"], ["c", "d"]]), jnp.eye(2),
                                                                jnp.eye(2), jnp.eye(2)), T_, "Phi"),
     "model R NaN (replace)": (lambda: kf_run(MODEL._replace(R=MODEL.R.at[0, 0].set(jnp.nan))), V, "model.R"),
     "model Q indefinite (replace)": (lambda: kf_run(MODEL._replace(Q=indefinite(N))), V, "model.Q"),
     "model Phi NaN (replace)": (lambda: kf_run(MODEL._replace(Phi=NAN_7)), V, "model.Phi"),
-    "c2d Ts NaN": (lambda: jaxfdi.c2d(jnp.zeros((2, 2)), jnp.zeros((2, 1)), float("nan")), V, "Ts"),
-    "c2d Ts inf": (lambda: jaxfdi.c2d(jnp.zeros((2, 2)), jnp.zeros((2, 1)), float("inf")), V, "Ts"),
-    "c2d A NaN": (lambda: jaxfdi.c2d(jnp.full((2, 2), jnp.nan), jnp.zeros((2, 1)), 0.1), V, "A"),
-    "c2d A complex": (lambda: jaxfdi.c2d(1j * jnp.eye(2), jnp.zeros((2, 1)), 0.1), T_, "A"),
-    "c2d B inf": (lambda: jaxfdi.c2d(jnp.eye(2), jnp.full((2, 1), jnp.inf), 0.1), V, "B"),
+    "c2d Ts NaN": (lambda: jaxfdi.models.c2d(jnp.zeros((2, 2)), jnp.zeros((2, 1)), float("nan")), V, "Ts"),
+    "c2d Ts inf": (lambda: jaxfdi.models.c2d(jnp.zeros((2, 2)), jnp.zeros((2, 1)), float("inf")), V, "Ts"),
+    "c2d A NaN": (lambda: jaxfdi.models.c2d(jnp.full((2, 2), jnp.nan), jnp.zeros((2, 1)), 0.1), V, "A"),
+    "c2d A complex": (lambda: jaxfdi.models.c2d(1j * jnp.eye(2), jnp.zeros((2, 1)), 0.1), T_, "A"),
+    "c2d B inf": (lambda: jaxfdi.models.c2d(jnp.eye(2), jnp.full((2, 1), jnp.inf), 0.1), V, "B"),
     # --- Kalman filter and the drivers --------------------------------------------
     "kf init mean NaN": (lambda: kf_run(mean=jnp.zeros(N).at[0].set(jnp.nan)), V, "mean"),
     "kf init mean complex": (lambda: kf_run(mean=jnp.zeros(N, complex)), T_, "mean"),
@@ -149,17 +150,17 @@ CASES = {
     "kf init cov NaN": (lambda: kf_run(cov=NAN_7), V, "cov"),
     "run_filter ys complex": (lambda: kf_run(ys=jnp.zeros((T, M), complex)), T_, "ys"),
     "run_filter us complex": (lambda: kf_run(us=jnp.zeros((T, NU), complex)), T_, "us"),
-    "run_filter ys strings": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None,
+    "run_filter ys strings": (lambda: jaxfdi.filters.run_filter(jaxfdi.filters.kalman_filter(MODEL), None,
                                                         np.array([["a"] * M] * T), US), T_, "ys"),
-    "run_filter filt not a Filter": (lambda: jaxfdi.run_filter(lambda s, y, u: (s, y), None, YS, US), T_, "filt"),
-    "run_filter ys 4-D": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None, YS[None, None], US), V, "ys"),
-    "run_filter parallel without an associative scan": (lambda: jaxfdi.run_filter(
-        jaxfdi.kalman_filter(MODEL), None, YS, US, parallel=True), V, "parallel"),
-    "run_filter N runs shared_covariance": (lambda: jaxfdi.run_filter(
-        jaxfdi.kalman_filter(MODEL), None, YS[None], US, shared_covariance="yes"), V, "shared_covariance"),
-    "run_filter N runs ys complex": (lambda: jaxfdi.run_filter(jaxfdi.kalman_filter(MODEL), None,
+    "run_filter filt not a Filter": (lambda: jaxfdi.filters.run_filter(lambda s, y, u: (s, y), None, YS, US), T_, "filt"),
+    "run_filter ys 4-D": (lambda: jaxfdi.filters.run_filter(jaxfdi.filters.kalman_filter(MODEL), None, YS[None, None], US), V, "ys"),
+    "run_filter parallel without an associative scan": (lambda: jaxfdi.filters.run_filter(
+        jaxfdi.filters.kalman_filter(MODEL), None, YS, US, parallel=True), V, "parallel"),
+    "run_filter N runs shared_covariance": (lambda: jaxfdi.filters.run_filter(
+        jaxfdi.filters.kalman_filter(MODEL), None, YS[None], US, shared_covariance="yes"), V, "shared_covariance"),
+    "run_filter N runs ys complex": (lambda: jaxfdi.filters.run_filter(jaxfdi.filters.kalman_filter(MODEL), None,
                                                                     jnp.zeros((2, T, M), complex), US), T_, "ys"),
-    "kalman_filter model not a model": (lambda: jaxfdi.kalman_filter((MODEL.Phi, MODEL.C)), T_, "model"),
+    "kalman_filter model not a model": (lambda: jaxfdi.filters.kalman_filter((MODEL.Phi, MODEL.C)), T_, "model"),
     # --- EKF / UKF -----------------------------------------------------------------
     "ekf f not callable": (lambda: ekf(f=MODEL.Phi), T_, "f"),
     "ekf h not callable": (lambda: ekf(h=None), T_, "h"),
@@ -178,22 +179,22 @@ CASES = {
     "imm negative transition": (lambda: imm(jnp.array([[1.1, -0.1], [0.2, 0.8]])), V, "transition"),
     "imm NaN transition": (lambda: imm(jnp.array([[jnp.nan, 0.1], [0.2, 0.8]])), V, "transition"),
     "imm complex transition": (lambda: imm(jnp.eye(2, dtype=complex)), T_, "transition"),
-    "imm mode_filter not callable": (lambda: imm(mode_filter=jaxfdi.kalman_filter(SMALL)), T_, "mode_filter"),
+    "imm mode_filter not callable": (lambda: imm(mode_filter=jaxfdi.filters.kalman_filter(SMALL)), T_, "mode_filter"),
     "imm init mode_prob sum": (lambda: imm().init(jnp.zeros(2), jnp.eye(2), jnp.array([0.7, 0.7])), V, "mode_prob"),
     "imm init mode_prob negative": (lambda: imm().init(jnp.zeros(2), jnp.eye(2), jnp.array([1.5, -0.5])), V,
                                     "mode_prob"),
     "imm init cov indefinite": (lambda: imm().init(jnp.zeros(2), INDEFINITE_2, jnp.array([0.5, 0.5])), V, "cov"),
-    "mm floor above 1/M": (lambda: jaxfdi.multiple_model(jaxfdi.kalman_filter, two_modes(), 0.6), V, "floor"),
-    "mm floor NaN": (lambda: jaxfdi.multiple_model(jaxfdi.kalman_filter, two_modes(), float("nan")), V, "floor"),
-    "mm init mode_prob NaN": (lambda: jaxfdi.multiple_model(jaxfdi.kalman_filter, two_modes()).init(
+    "mm floor above 1/M": (lambda: jaxfdi.filters.multiple_model(jaxfdi.filters.kalman_filter, two_modes(), 0.6), V, "floor"),
+    "mm floor NaN": (lambda: jaxfdi.filters.multiple_model(jaxfdi.filters.kalman_filter, two_modes(), float("nan")), V, "floor"),
+    "mm init mode_prob NaN": (lambda: jaxfdi.filters.multiple_model(jaxfdi.filters.kalman_filter, two_modes()).init(
         jnp.zeros(2), jnp.eye(2), jnp.array([jnp.nan, 0.5])), V, "mode_prob"),
     # --- two-stage / unknown-input / time-varying / posterior -----------------------
-    "tskf bias_walk indefinite": (lambda: jaxfdi.two_stage_kalman_filter(
+    "tskf bias_walk indefinite": (lambda: jaxfdi.filters.two_stage_kalman_filter(
         MODEL, tskf.stack_directions([DIRECTION, DIRECTION])._replace(
             state=jnp.concatenate([DIRECTION.state] * 2, 1), input_scaled=jnp.concatenate([DIRECTION.input_scaled] * 2, 1),
             output=jnp.concatenate([DIRECTION.output] * 2, 1),
             output_scaled=jnp.concatenate([DIRECTION.output_scaled] * 2, 1)), INDEFINITE_2), V, "bias_walk"),
-    "tskf bias_walk NaN": (lambda: jaxfdi.two_stage_kalman_filter(MODEL, DIRECTION, jnp.full((1, 1), jnp.nan)), V,
+    "tskf bias_walk NaN": (lambda: jaxfdi.filters.two_stage_kalman_filter(MODEL, DIRECTION, jnp.full((1, 1), jnp.nan)), V,
                            "bias_walk"),
     "actuator_direction component": (lambda: tskf.actuator_direction(MODEL, 5), V, "component"),
     "actuator_direction component float": (lambda: tskf.actuator_direction(MODEL, 0.0), T_, "component"),
@@ -203,28 +204,28 @@ CASES = {
                            "unknown_input"),
     "unknown_input NaN": (lambda: jaxfdi.filters.unknown_input_filter(MODEL, jnp.full((N, 1), jnp.nan)), V,
                           "unknown_input"),
-    "time_varying not callable": (lambda: jaxfdi.filters.time_varying(jaxfdi.kalman_filter(MODEL)), T_,
+    "time_varying not callable": (lambda: _time_varying.time_varying(jaxfdi.filters.kalman_filter(MODEL)), T_,
                                   "filter_at"),
-    "time_varying start negative": (lambda: jaxfdi.filters.time_varying(lambda k: jaxfdi.kalman_filter(MODEL), -1), V,
+    "time_varying start negative": (lambda: _time_varying.time_varying(lambda k: jaxfdi.filters.kalman_filter(MODEL), -1), V,
                                     "start"),
-    "model_at unknown field": (lambda: jaxfdi.filters.model_at(MODEL, S=jnp.zeros((T, M, M))), V, "S"),
-    "model_at table NaN": (lambda: jaxfdi.filters.model_at(MODEL, R=jnp.full((T, M, M), jnp.nan)), V, "R"),
-    "model_at table indefinite": (lambda: jaxfdi.filters.model_at(
+    "model_at unknown field": (lambda: _time_varying.model_at(MODEL, S=jnp.zeros((T, M, M))), V, "S"),
+    "model_at table NaN": (lambda: _time_varying.model_at(MODEL, R=jnp.full((T, M, M), jnp.nan)), V, "R"),
+    "model_at table indefinite": (lambda: _time_varying.model_at(
         SMALL, Q=jnp.stack([jnp.eye(2), INDEFINITE_2])), V, "Q"),
-    "init_from_posterior not Gaussian": (lambda: jaxfdi.init_from_posterior(
+    "init_from_posterior not Gaussian": (lambda: jaxfdi.filters.init_from_posterior(
         jaxfdi.filters.Filter(lambda m, c: (m, c), lambda s, y, u: (s, y)), jnp.zeros(N), jnp.eye(N)), V, "filt"),
-    "init_from_posterior cov indefinite": (lambda: jaxfdi.init_from_posterior(
-        jaxfdi.kalman_filter(SMALL), jnp.zeros(2), INDEFINITE_2, jnp.zeros(1)), V, "cov"),
+    "init_from_posterior cov indefinite": (lambda: jaxfdi.filters.init_from_posterior(
+        jaxfdi.filters.kalman_filter(SMALL), jnp.zeros(2), INDEFINITE_2, jnp.zeros(1)), V, "cov"),
     # --- fault-mode designs ----------------------------------------------------------
-    "noise_inflation negative": (lambda: models.noise_inflation_modes(MODEL, -5.0, 1.0), V, "sensor_inflation"),
-    "noise_inflation zero": (lambda: models.noise_inflation_modes(MODEL, 0.0, 1.0), V, "sensor_inflation"),
-    "noise_inflation NaN": (lambda: models.noise_inflation_modes(MODEL, float("nan"), 1.0), V, "sensor_inflation"),
-    "noise_inflation actuator negative": (lambda: models.noise_inflation_modes(MODEL, 10.0, -1.0), V,
+    "noise_inflation negative": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, -5.0, 1.0), V, "sensor_inflation"),
+    "noise_inflation zero": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, 0.0, 1.0), V, "sensor_inflation"),
+    "noise_inflation NaN": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, float("nan"), 1.0), V, "sensor_inflation"),
+    "noise_inflation actuator negative": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, 10.0, -1.0), V,
                                           "actuator_noise"),
-    "noise_inflation wrong length": (lambda: models.noise_inflation_modes(MODEL, jnp.ones(3) * 10, 1.0), V,
+    "noise_inflation wrong length": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, jnp.ones(3) * 10, 1.0), V,
                                      "sensor_inflation"),
-    "bias_modes walk negative": (lambda: models.bias_modes(MODEL, -1.0, 1.0), V, "bias_walk"),
-    "bias_modes prior NaN": (lambda: models.bias_modes(MODEL, 1.0, float("nan")), V, "bias_prior"),
+    "bias_modes walk negative": (lambda: jaxfdi.models.fault_modes.bias_modes(MODEL, -1.0, 1.0), V, "bias_walk"),
+    "bias_modes prior NaN": (lambda: jaxfdi.models.fault_modes.bias_modes(MODEL, 1.0, float("nan")), V, "bias_prior"),
     # --- faults ---------------------------------------------------------------------
     "fault unknown kind name": (lambda: fault(kind="drift"), V, "kind"),
     "fault unknown kind int": (lambda: fault(kind=9), V, "kind"),
@@ -243,13 +244,13 @@ CASES = {
                                      "magnitude"),
     "fault end before onset": (lambda: fault(onset=10, end=5), V, "end"),
     "fault label below -1": (lambda: fault(label=-2), V, "label"),
-    "fault_group no components": (lambda: jaxfdi.fault_group("bias", "sensor", [], 10, 1.0), V, "components"),
-    "fault_group magnitudes length": (lambda: jaxfdi.fault_group("bias", "sensor", [0, 1], 10, [1.0, 2.0, 3.0]), V,
+    "fault_group no components": (lambda: jaxfdi.faults.fault_group("bias", "sensor", [], 10, 1.0), V, "components"),
+    "fault_group magnitudes length": (lambda: jaxfdi.faults.fault_group("bias", "sensor", [0, 1], 10, [1.0, 2.0, 3.0]), V,
                                       "magnitudes"),
-    "fault_group components float": (lambda: jaxfdi.fault_group("bias", "sensor", [0.5, 1.0], 10, 1.0), T_,
+    "fault_group components float": (lambda: jaxfdi.faults.fault_group("bias", "sensor", [0.5, 1.0], 10, 1.0), T_,
                                      "components"),
-    "concat_faults none": (lambda: jaxfdi.concat_faults(), V, "faults"),
-    "concat_faults not a Fault": (lambda: jaxfdi.concat_faults(fault(), (1, 2)), T_, "faults"),
+    "concat_faults none": (lambda: jaxfdi.faults.concat_faults(), V, "faults"),
+    "concat_faults not a Fault": (lambda: jaxfdi.faults.concat_faults(fault(), (1, 2)), T_, "faults"),
     # --- simulator ------------------------------------------------------------------
     "sim sensor fault component out of range": (lambda: sim_with(fault(component=10)), V, "fault"),
     "sim actuator fault component out of range": (lambda: sim_with(fault(target="actuator", component=3)), V, "fault"),
@@ -303,14 +304,14 @@ CASES = {
                                              "confirm_steps"),
     "mode_probability normal_mode negative": (lambda: detection.mode_probability_detector(0.9, normal_mode=-1), V,
                                               "normal_mode"),
-    "credit_isolator confirm_steps zero": (lambda: detection.credit_isolator(0.5, confirm_steps=0), V,
+    "credit_isolator confirm_steps zero": (lambda: jaxfdi.detection.credits.credit_isolator(0.5, confirm_steps=0), V,
                                            "confirm_steps"),
-    "credit_isolator threshold NaN": (lambda: detection.credit_isolator(float("nan")), V, "threshold"),
+    "credit_isolator threshold NaN": (lambda: jaxfdi.detection.credits.credit_isolator(float("nan")), V, "threshold"),
     "haar_denoise levels zero": (lambda: detection.haar_denoise(jnp.ones(16), levels=0), V, "levels"),
     "haar_denoise levels float": (lambda: detection.haar_denoise(jnp.ones(16), levels=2.0), T_, "levels"),
     "haar_denoise mode": (lambda: detection.haar_denoise(jnp.ones(16), mode="hard2"), V, "mode"),
     "haar_denoise c_mult NaN": (lambda: detection.haar_denoise(jnp.ones(16), c_mult=float("nan")), V, "c_mult"),
-    "signature_matrix zero filters": (lambda: detection.signature_matrix(0), V, "num_filters"),
+    "signature_matrix zero filters": (lambda: jaxfdi.detection.signature.signature_matrix(0), V, "num_filters"),
     "location_symptoms num_locations zero": (lambda: detection.signature.location_symptoms(jnp.ones(4, bool), jnp.zeros(4, int),
                                                                                  0), V, "num_locations"),
     # --- metrics ------------------------------------------------------------------------
@@ -349,32 +350,32 @@ CASES = {
     "episode_scorer grace negative": (lambda: loop.episode_scorer(
         (jnp.array([1]), jnp.array([3]), jnp.array([1])), lambda o: o, grace=-1), V, "grace"),
     "monitor estimate_delay negative": (lambda: jaxfdi.monitor(
-        jaxfdi.linear_simulator(SMALL), jaxfdi.kalman_filter(SMALL), detection.chi2_detector(10.0), jnp.zeros(2),
-        jaxfdi.kalman_filter(SMALL).init(jnp.zeros(2), jnp.eye(2)), jnp.zeros((T, 1)), KEY, 2, estimate_delay=-2), V,
+        jaxfdi.linear_simulator(SMALL), jaxfdi.filters.kalman_filter(SMALL), detection.chi2_detector(10.0), jnp.zeros(2),
+        jaxfdi.filters.kalman_filter(SMALL).init(jnp.zeros(2), jnp.eye(2)), jnp.zeros((T, 1)), KEY, 2, estimate_delay=-2), V,
                                         "estimate_delay"),
     "monitor us complex": (lambda: jaxfdi.monitor(
-        jaxfdi.linear_simulator(SMALL), jaxfdi.kalman_filter(SMALL), detection.chi2_detector(10.0), jnp.zeros(2),
-        jaxfdi.kalman_filter(SMALL).init(jnp.zeros(2), jnp.eye(2)), jnp.zeros((T, 1), complex), KEY, 2), T_, "us"),
+        jaxfdi.linear_simulator(SMALL), jaxfdi.filters.kalman_filter(SMALL), detection.chi2_detector(10.0), jnp.zeros(2),
+        jaxfdi.filters.kalman_filter(SMALL).init(jnp.zeros(2), jnp.eye(2)), jnp.zeros((T, 1), complex), KEY, 2), T_, "us"),
     # --- Riccati and control --------------------------------------------------------
-    "dare A NaN": (lambda: jaxfdi.solve_discrete_are(jnp.full((2, 2), jnp.nan), jnp.eye(2), jnp.eye(2), jnp.eye(2)), V,
+    "dare A NaN": (lambda: jaxfdi.filters.solve_discrete_are(jnp.full((2, 2), jnp.nan), jnp.eye(2), jnp.eye(2), jnp.eye(2)), V,
                    "A"),
-    "dare R singular": (lambda: jaxfdi.solve_discrete_are(jnp.eye(2), jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2))), V,
+    "dare R singular": (lambda: jaxfdi.filters.solve_discrete_are(jnp.eye(2), jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2))), V,
                         "R"),
-    "dare Q indefinite": (lambda: jaxfdi.solve_discrete_are(jnp.eye(2), jnp.eye(2), INDEFINITE_2, jnp.eye(2)), V, "Q"),
+    "dare Q indefinite": (lambda: jaxfdi.filters.solve_discrete_are(jnp.eye(2), jnp.eye(2), INDEFINITE_2, jnp.eye(2)), V, "Q"),
     "lqr not stabilisable": (lambda: control.lqr_gain(jnp.diag(jnp.array([1.5, 0.5])), jnp.array([[0.0], [1.0]]),
                                                       jnp.eye(2), jnp.eye(1)), V, "A"),
-    "steady_state_kalman undetectable": (lambda: jaxfdi.steady_state_kalman(jaxfdi.linear_gaussian_model(
+    "steady_state_kalman undetectable": (lambda: jaxfdi.filters.steady_state_kalman(jaxfdi.models.linear_gaussian_model(
         jnp.diag(jnp.array([1.5, 0.5])), jnp.zeros((1, 2)), jnp.eye(2), jnp.eye(1))), V, "model"),
-    "effectiveness_gain_schedule num_losses": (lambda: control.effectiveness_gain_schedule(
+    "effectiveness_gain_schedule num_losses": (lambda: jaxfdi.control.eigenstructure.effectiveness_gain_schedule(
         jnp.eye(2), jnp.eye(2), jnp.array([0.5, 0.4]), jnp.eye(2), num_losses=1), V, "num_losses"),
-    "pd_gains natural_frequency negative": (lambda: control.pd_gains(jnp.eye(3), natural_frequency=-0.1), V,
+    "pd_gains natural_frequency negative": (lambda: jaxfdi.control.attitude.pd_gains(jnp.eye(3), natural_frequency=-0.1), V,
                                             "natural_frequency"),
-    "pd_gains damping NaN": (lambda: control.pd_gains(jnp.eye(3), damping=float("nan")), V, "damping"),
-    "pd_gains inertia indefinite": (lambda: control.pd_gains(-jnp.eye(3)), V, "inertia"),
+    "pd_gains damping NaN": (lambda: jaxfdi.control.attitude.pd_gains(jnp.eye(3), damping=float("nan")), V, "damping"),
+    "pd_gains inertia indefinite": (lambda: jaxfdi.control.attitude.pd_gains(-jnp.eye(3)), V, "inertia"),
     "slew angle NaN": (lambda: control.slew(angle_deg=float("nan")), V, "angle_deg"),
     "slew duration zero": (lambda: control.slew(duration=0.0), V, "duration"),
     "slew axis zero": (lambda: control.slew(axis=(0.0, 0.0, 0.0)), V, "axis"),
-    "allocate wheel_axes shape": (lambda: control.allocate_wheel_torques(jnp.zeros(3), jnp.zeros((4, 2)), 0.1), V,
+    "allocate wheel_axes shape": (lambda: jaxfdi.control.attitude.allocate_wheel_torques(jnp.zeros(3), jnp.zeros((4, 2)), 0.1), V,
                                   "wheel_axes"),
     # --- model constructors ---------------------------------------------------------
     "engine_model Ts negative": (lambda: engine_model(Ts=-0.01), V, "Ts"),
@@ -386,20 +387,20 @@ CASES = {
     "kitsat3_params inertia negative": (lambda: models.kitsat3_params(inertia=(3.0, -1.0, 4.0)), V, "inertia"),
     "kitsat3_params wheel_inertia NaN": (lambda: models.kitsat3_params(wheel_inertia=float("nan")), V,
                                          "wheel_inertia"),
-    "pyramid_axes beta NaN": (lambda: models.pyramid_axes(beta_deg=float("nan")), V, "beta_deg"),
+    "pyramid_axes beta NaN": (lambda: jaxfdi.models.reaction_wheels.pyramid_axes(beta_deg=float("nan")), V, "beta_deg"),
     "rigid_body_params dt negative": (lambda: models.rigid_body_params(dt=-0.02), V, "dt"),
     "rigid_body_params inertia zero": (lambda: models.rigid_body_params(inertia=(0.0, 1.0, 1.0)), V, "inertia"),
     # --- tuning --------------------------------------------------------------------------
     "positive floor negative": (lambda: tuning.positive(floor=-1.0), V, "floor"),
-    "stochastic_rows empty row": (lambda: tuning.stochastic_rows(jnp.array([[True, False], [False, False]])), V,
+    "stochastic_rows empty row": (lambda: jaxfdi.tuning.parameterize.stochastic_rows(jnp.array([[True, False], [False, False]])), V,
                                   "mask"),
-    "sticky_log_prior concentration negative": (lambda: tuning.sticky_log_prior(
+    "sticky_log_prior concentration negative": (lambda: jaxfdi.tuning.parameterize.sticky_log_prior(
         jnp.eye(2), jnp.eye(2), -1.0), V, "concentration"),
     "fit steps negative": (lambda: tuning.fit(lambda raw, b: 0.0, {"a": jnp.zeros(1)}, optax.adam(1e-2),
                                               lambda i: None, None, steps=-1), V, "steps"),
     "fit eval_every zero": (lambda: tuning.fit(lambda raw, b: 0.0, {"a": jnp.zeros(1)}, optax.adam(1e-2),
                                                lambda i: None, None, steps=3, eval_every=0), V, "eval_every"),
-    "fixed_batches batch_size zero": (lambda: tuning.fixed_batches(jnp.zeros((4, 2)), 0, KEY), V, "batch_size"),
+    "fixed_batches batch_size zero": (lambda: jaxfdi.tuning.train.fixed_batches(jnp.zeros((4, 2)), 0, KEY), V, "batch_size"),
     "mode_cross_entropy floor zero": (lambda: tuning.mode_cross_entropy(jnp.zeros((3, 2)), jnp.zeros(3, int), 0.0), V,
                                       "floor"),
     "soft_detection temperature zero": (lambda: tuning.soft_detection_loss(jnp.ones(5), 2.0, 3, temperature=0.0), V,
@@ -407,7 +408,7 @@ CASES = {
     "soft_detection weight NaN": (lambda: tuning.soft_detection_loss(jnp.ones(5), 2.0, 3,
                                                                      false_alarm_weight=float("nan")), V,
                                   "false_alarm_weight"),
-    "constrain missing key": (lambda: tuning.constrain({"a": tuning.identity()}, {"b": jnp.zeros(1)}), V, "raw"),
+    "constrain missing key": (lambda: tuning.constrain({"a": jaxfdi.tuning.parameterize.identity()}, {"b": jnp.zeros(1)}), V, "raw"),
     "from_record unknown transform": (lambda: from_record("exp_map", {}), V, "name"),
     # --- scenario studies (refused before any computation) ---------------------
     "engine_study runs zero": (lambda: engine_study(runs=0), V, "runs"),
@@ -580,7 +581,7 @@ CASES = {
     "detection_summary horizon shorter than the runs": (lambda: (lambda s: s.counts(s.summary(
         _late_records(), jnp.ones(2))[1]))(_streaming().detection_summary(20)), V, "horizon"),
     "merge_counts not counts": (lambda: _streaming().merge_counts(_streaming().empty_counts(10), None), T_, "parts"),
-    "sticky_log_prior target shape": (lambda: tuning.sticky_log_prior(jnp.full((2, 2), 0.5), jnp.eye(3), 1.0), V,
+    "sticky_log_prior target shape": (lambda: jaxfdi.tuning.parameterize.sticky_log_prior(jnp.full((2, 2), 0.5), jnp.eye(3), 1.0), V,
                                       "target"),
     "fit loss not scalar": (lambda: tuning.fit(lambda raw, b: raw["a"] ** 2, {"a": jnp.ones(2)}, optax.adam(1e-2),
                                                lambda i: None, None, steps=1), V, "loss"),
@@ -627,7 +628,9 @@ def _flight_controller(dt=0.01, lower=-jnp.ones(4), upper=jnp.ones(4)):
 
 def _raim_fdi(dt=1.0):
     from jaxfdi.data import data_path
-    from jaxfdi.gnss import ephemeris_table, raim_fdi, raim_tables, read_rinex_nav
+    from jaxfdi.gnss import raim_fdi, read_rinex_nav
+    from jaxfdi.gnss.orbits import ephemeris_table
+    from jaxfdi.gnss.raim import raim_tables
     table = ephemeris_table(read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
     return raim_fdi(table, 0.0, dt, raim_tables(32))
 
@@ -692,8 +695,13 @@ def _f16fdi():
 
 
 def _gnss():
-    from jaxfdi import gnss
-    return gnss
+    """Every function and class of ``jaxfdi.gnss``'s modules by name, public or not."""
+    import types
+
+    from jaxfdi.gnss import frames, integrity, measurements, orbits, paths, positioning, protection, raim, rinex, yuma
+    modules = (frames, integrity, measurements, orbits, paths, positioning, protection, raim, rinex, yuma)
+    return types.SimpleNamespace(**{name: obj for module in modules for name, obj in vars(module).items()
+                                    if getattr(obj, "__module__", None) == module.__name__})
 
 
 def _receiver(dt=1.0, sigma=jnp.ones((3, 32)), fault=None):
@@ -756,13 +764,13 @@ def test_malformed_call_is_refused(name):
 
 def test_valid_neighbours_pass():
     """The checks are not over-eager: valid values at the edge of each family trace."""
-    tiny = jaxfdi.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2)), 1e-24 * jnp.eye(2))
+    tiny = jaxfdi.models.linear_gaussian_model(jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2)), 1e-24 * jnp.eye(2))
     assert kf_run(tiny, jnp.zeros(2), jnp.eye(2), jnp.zeros((T, 2)), jnp.zeros((T, 0))).nis.shape == (T,)
     info = kf_run(mean=jnp.zeros(N, int))                     # an integer mean is promoted, not the cov demoted
     assert info.filtered_cov.dtype == jnp.result_type(float)
-    skipping = jaxfdi.kalman_filter(MODEL, missing_measurements=True)
+    skipping = jaxfdi.filters.kalman_filter(MODEL, missing_measurements=True)
     assert kf_run(ys=YS.at[1, 2].set(jnp.nan), filt=skipping).nis.shape == (T,)   # NaN = missing is valid there
-    assert models.noise_inflation_modes(MODEL, 1.0, 0.0).Q.shape == (1 + NU + M, N, N)
+    assert jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, 1.0, 0.0).Q.shape == (1 + NU + M, N, N)
     assert jaxfdi.fault("stuck", "sensor", 4, 0).onset == 0
     assert jaxfdi.fault("effectiveness", "actuator", 0, 3, 1.0).magnitude == 1.0
     assert sim_with(fault(component=M - 1))[1].measurement.shape == (T, M)

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum, normalized_innovation_squared
+from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum
+from jaxfdi.detection.chi2 import normalized_innovation_squared
 from jaxfdi.faults import NEVER
 from jaxfdi.metrics import (
     DetectionRecord,
@@ -168,7 +169,7 @@ def nan_run():
     from jaxfdi.faults import sensor_labels
 
     model = engine_model()
-    kf = jaxfdi.kalman_filter(model)
+    kf = jaxfdi.filters.kalman_filter(model)
     # fault() refuses a NaN magnitude; the corrupted sensor is built by hand on purpose
     f = fault("bias", "sensor", 2, 20, 0.0, end=21)._replace(magnitude=jnp.asarray(jnp.nan))
     run = jax.jit(lambda key: monitor(jaxfdi.linear_simulator(model, f), kf, chi2_detector(30.0, 2), jnp.zeros(7),

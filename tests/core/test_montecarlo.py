@@ -88,7 +88,7 @@ def test_false_alarm_rate_is_the_design_pfa():
 
     runs_w, pfa_w = 2000, 0.05
     _, last = engine_false_alarm_study(runs_w, 20, window=4, pfa=pfa_w, seed=2)
-    threshold = float(jaxfdi.chi2_threshold(20, pfa_w))
+    threshold = float(jaxfdi.detection.chi2_threshold(20, pfa_w))
     ok, detail = _inside_binomial_99(int((last > threshold).sum()), runs_w, pfa_w)
     assert ok, detail
     # and the statistic itself is chi2(20): Kolmogorov-Smirnov at the 1 % level

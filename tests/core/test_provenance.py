@@ -115,13 +115,16 @@ FUNCTIONS = [("jaxfdi", "monitor"), ("jaxfdi", "simulate"), ("jaxfdi.filters", "
 @pytest.mark.parametrize("package,name", FUNCTIONS)
 def test_the_package_attribute_is_the_function_and_its_module_is_private(package, name):
     """``jaxfdi.monitor`` is the function; its module is ``jaxfdi._monitor``, so no module
-    is shadowed by a function of its name and nothing needs a callable module."""
+    is shadowed by a function of its name and nothing needs a callable module (a function
+    that is not public, ``time_varying``, is its private module's only)."""
     import importlib
 
-    function = getattr(importlib.import_module(package), name)
-    assert inspect.isfunction(function) and function.__module__ == f"{package}._{name}"
     module = importlib.import_module(f"{package}._{name}")
-    assert type(module) is types.ModuleType and getattr(module, name) is function
+    function = getattr(module, name)
+    assert inspect.isfunction(function) and function.__module__ == f"{package}._{name}"
+    assert type(module) is types.ModuleType
+    public = importlib.import_module(package)
+    assert getattr(public, name, function) is function and (name in public.__all__) == hasattr(public, name)
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module(f"{package}.{name}")
 

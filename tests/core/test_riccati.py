@@ -90,8 +90,8 @@ def test_kalman_from_steady_state_prior_stays_there(engine):
     T = 40  # the covariance recursion does not look at the data: any ys will do
     ys = np.random.default_rng(0).normal(size=(T, 5)) * np.sqrt(np.diag(np.asarray(model.R)))
     us = np.full((T, 1), 0.01)
-    kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, us)
+    kf = jaxfdi.filters.kalman_filter(model)
+    _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, us)
     P = np.asarray(steady.predicted_cov)
     assert max(_rel(Pk, P) for Pk in np.asarray(info.predicted_cov)) < RTOL
     assert max(_rel(Sk, steady.innovation_cov) for Sk in np.asarray(info.innovation_cov)) < RTOL

@@ -33,7 +33,7 @@ from test_riccati import PROBLEMS
 #: an unstable mode (1.5) that the input cannot reach
 NOT_STABILISABLE = (np.diag([1.5, 0.5]), np.array([[0.0], [1.0]]), np.eye(2), np.eye(1))
 #: an unstable plant (eigenvalue 1.1) measured by nothing: (C, Phi) not detectable
-BLIND = jaxfdi.linear_gaussian_model(np.array([[1.1, 0.1], [0.0, 0.9]]), np.zeros((1, 2)), np.eye(2), np.eye(1))
+BLIND = jaxfdi.models.linear_gaussian_model(np.array([[1.1, 0.1], [0.0, 0.9]]), np.zeros((1, 2)), np.eye(2), np.eye(1))
 
 
 def test_non_stabilisable_is_detected():
@@ -142,7 +142,7 @@ def _scipy_kalman_gain(Phi, C, Q, R):
 
 
 def _kalman_gain(Phi, C, Q, R):
-    model = jaxfdi.LinearGaussianModel(Phi, jnp.zeros((Phi.shape[0], 1)), C, jnp.zeros((C.shape[0], 1)), Q, R)
+    model = jaxfdi.models.LinearGaussianModel(Phi, jnp.zeros((Phi.shape[0], 1)), C, jnp.zeros((C.shape[0], 1)), Q, R)
     return steady_state_kalman(model).gain
 
 

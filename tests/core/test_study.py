@@ -35,8 +35,8 @@ def toy_run(key, f, r_scale, threshold):
     """One run: the plant with fault ``f``, a KF with R scaled, a chi-square detector."""
     us = jnp.ones((T, 1))
     model = MODEL._replace(R=MODEL.R * r_scale)
-    kf = jaxfdi.kalman_filter(model, unroll_factorizations=False)
-    result = jaxfdi.monitor(jaxfdi.linear_simulator(MODEL, f), kf, jaxfdi.chi2_detector(threshold, 2), jnp.zeros(2),
+    kf = jaxfdi.filters.kalman_filter(model, unroll_factorizations=False)
+    result = jaxfdi.monitor(jaxfdi.linear_simulator(MODEL, f), kf, jaxfdi.detection.chi2_detector(threshold, 2), jnp.zeros(2),
                             kf.init(jnp.zeros(2), MODEL.Q), us, key, f.onset, keep_history=True)
     return result.record, result.history.statistic
 
@@ -127,8 +127,8 @@ def test_drawn_cases_give_each_run_its_own_case():
 
 def _shared_model_run(key, f, threshold, model):
     us = jnp.ones((T, 1))
-    kf = jaxfdi.kalman_filter(model, unroll_factorizations=False)
-    return jaxfdi.monitor(jaxfdi.linear_simulator(model, f), kf, jaxfdi.chi2_detector(threshold, 2), jnp.zeros(2),
+    kf = jaxfdi.filters.kalman_filter(model, unroll_factorizations=False)
+    return jaxfdi.monitor(jaxfdi.linear_simulator(model, f), kf, jaxfdi.detection.chi2_detector(threshold, 2), jnp.zeros(2),
                           kf.init(jnp.zeros(2), model.Q), us, key, f.onset).record
 
 

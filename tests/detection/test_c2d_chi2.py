@@ -8,7 +8,8 @@ from scipy.signal import cont2discrete
 from scipy.stats import chi2
 
 import jaxfdi
-from jaxfdi.detection import first_crossing, moving_window_sum, normalized_innovation_squared
+from jaxfdi.detection import first_crossing, moving_window_sum
+from jaxfdi.detection.chi2 import normalized_innovation_squared
 from jaxfdi.models import c2d, engine, vtol
 
 
@@ -27,18 +28,18 @@ def test_engine_discrete_spectral_radius_is_the_papers():
 
 def test_chi2_threshold_reproduces_the_papers_values():
     dofs = np.array([4, 16, 60, 3, 15])
-    np.testing.assert_allclose(jaxfdi.chi2_threshold(dofs, 0.005), [14.86, 34.27, 91.95, 12.84, 32.80], atol=5e-3)
+    np.testing.assert_allclose(jaxfdi.detection.chi2_threshold(dofs, 0.005), [14.86, 34.27, 91.95, 12.84, 32.80], atol=5e-3)
 
 
 @pytest.mark.parametrize("pfa", [1e-8, 1e-4, 0.005, 0.05, 0.5, 0.95])
 def test_chi2_threshold_equals_scipy(pfa):
     dofs = np.array([1, 2, 3, 5, 7, 20, 60, 250, 1000])
-    np.testing.assert_allclose(jaxfdi.chi2_threshold(dofs, pfa), chi2.isf(pfa, dofs), rtol=1e-6)
+    np.testing.assert_allclose(jaxfdi.detection.chi2_threshold(dofs, pfa), chi2.isf(pfa, dofs), rtol=1e-6)
 
 
 def test_chi2_threshold_gradient_in_pfa_equals_closed_form():
     """d x / d pfa = -1 / pdf(x) (inverse function rule)."""
-    grad = jax.grad(lambda p: jaxfdi.chi2_threshold(5, p))(0.01)
+    grad = jax.grad(lambda p: jaxfdi.detection.chi2_threshold(5, p))(0.01)
     np.testing.assert_allclose(grad, -1.0 / chi2.pdf(chi2.isf(0.01, 5), 5), rtol=1e-6)
 
 
@@ -57,7 +58,7 @@ def test_moving_window_sum_and_first_crossing_equal_brute_force():
 def test_online_window_detector_equals_offline_window_sum():
     rng = np.random.default_rng(1)
     nis = rng.chisquare(5, size=40)
-    det = jaxfdi.chi2_detector(20.0, window=4)
+    det = jaxfdi.detection.chi2_detector(20.0, window=4)
     _, decision = jax.lax.scan(det.step, det.init(), jnp.asarray(nis))
     brute = np.array([nis[max(0, k - 3):k + 1].sum() for k in range(40)])
     np.testing.assert_allclose(decision.statistic, brute, rtol=1e-12)

@@ -100,4 +100,4 @@ def test_bad_degrees_of_freedom_are_named():
     for dof, error in ((np.inf, ValueError), (np.nan, ValueError), (-1.0, ValueError), ("3", TypeError)):
         with pytest.raises(error, match="^dof: "):
             chi2_threshold(dof, 0.01)
-    assert jaxfdi.chi2_threshold(np.int64(4), 0.005).dtype == jnp.float64
+    assert jaxfdi.detection.chi2_threshold(np.int64(4), 0.005).dtype == jnp.float64

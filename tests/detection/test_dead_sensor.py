@@ -15,14 +15,14 @@ import scipy.stats
 
 import jaxfdi
 from jaxfdi.detection import (
-    block_alarms,
     chi2_detector,
-    credit_isolator,
     glrt_detector,
     glrt_threshold,
     moving_window_sum,
     recursive_glrt_detector,
 )
+from jaxfdi.detection.credits import credit_isolator
+from jaxfdi.detection.wavelet import block_alarms
 from jaxfdi.detection import parity as ps
 from jaxfdi.detection.frozen import frozen_channel_detector, frozen_threshold
 from jaxfdi.detection.glrt_correction import corrected_glrt
@@ -83,7 +83,7 @@ def test_a_nan_burst_alarms_on_its_channel_and_a_later_fault_is_detected_as_with
     the burst, within one window."""
     model, steady, us, sigma, ys, burst, dead_label, _ = engine
     detector = _detectors(model, steady, sigma)[name]
-    kf = jaxfdi.kalman_filter(model)
+    kf = jaxfdi.filters.kalman_filter(model)
     kf0 = kf.init(jnp.zeros(7), steady.predicted_cov)
 
     def decisions(y):
@@ -93,7 +93,7 @@ def test_a_nan_burst_alarms_on_its_channel_and_a_later_fault_is_detected_as_with
                                    (jnp.asarray(y), us))
             assert bool(info.healthy.all())
             return info.decision
-        _, info = jaxfdi.run_filter(kf, kf0, y, us)
+        _, info = jaxfdi.filters.run_filter(kf, kf0, y, us)
         assert bool(info.healthy.all())
         return jax.lax.scan(detector.step, detector.init(), info.innovation)[1]
 

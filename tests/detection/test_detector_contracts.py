@@ -45,17 +45,17 @@ def _innovations(rng, shape):
 def _detector_registry():
     from jaxfdi.detection import (
         chi2_detector,
-        credit_isolator,
         fault_directions,
         fault_signatures,
         frozen_channel_detector,
         glrt_detector,
-        known_change_bank,
         known_change_detector,
         mode_probability_detector,
         recursive_glrt_detector,
         transient_glrt_detector,
     )
+    from jaxfdi.detection.credits import credit_isolator
+    from jaxfdi.detection.known_change import known_change_bank
 
     model, gain, S = _glrt_setup()
     window, zeros = 4, jnp.zeros((T_STEPS, 2))

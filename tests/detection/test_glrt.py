@@ -74,8 +74,8 @@ def test_signatures_equal_noise_free_filter_response(engine):
     onsets, T = (0, 3, 11), 11 + WINDOW
     cases = [(i, onset) for onset in onsets for i in range(6)] + [(None, 0)]
     ys = np.stack([_noise_free_measurements(model, i, onset, T) for i, onset in cases])
-    kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, np.full((T, 1), 0.01))
+    kf = jaxfdi.filters.kalman_filter(model)
+    _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, np.full((T, 1), 0.01))
     innov = np.asarray(info.innovation)
     G = np.asarray(signatures)
     for (i, onset), response in zip(cases, innov[:-1] - innov[-1]):
@@ -129,8 +129,8 @@ def monte_carlo(engine):
 
     def one(fault, key, x0):
         _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model, fault), x0, us, key)
-        kf = jaxfdi.kalman_filter(model)
-        _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us)
+        kf = jaxfdi.filters.kalman_filter(model)
+        _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us)
         return info.innovation
 
     rng = np.random.default_rng(11)

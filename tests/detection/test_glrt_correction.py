@@ -20,9 +20,9 @@ from jaxfdi.detection import (
     glrt_detector,
     glrt_threshold,
     recursive_glrt_detector,
-    time_varying_signatures,
     transient_glrt_detector,
 )
+from jaxfdi.detection.glrt_transient import time_varying_signatures
 from jaxfdi.models import engine_model
 from jaxfdi.riccati import steady_state_kalman
 
@@ -174,8 +174,8 @@ def test_time_varying_signatures_equal_two_filter_runs(engine):
     cases = [(i, onset) for onset in onsets for i in range(6)]
     ys = np.stack([_simulate(engine, [(i, onset, 1.0)], 1, seed=5)[0, :T_short] for i, onset in cases]
                   + [_simulate(engine, [], 1, seed=5)[0, :T_short]])
-    kf = jaxfdi.kalman_filter(engine)
-    run = jax.jit(lambda y: jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), P0), y, jnp.full((T_short, 1), U))[1])
+    kf = jaxfdi.filters.kalman_filter(engine)
+    run = jax.jit(lambda y: jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), P0), y, jnp.full((T_short, 1), U))[1])
     innovations = np.stack([np.asarray(run(y).innovation) for y in ys])
     directions = fault_directions(engine)
     steady_G = np.asarray(fault_signatures(engine, steady.gain, directions, length))

@@ -30,8 +30,8 @@ def innovations(engine):
 
     def one(fault, key):
         _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model, fault), jnp.zeros(7), us, key)
-        kf = jaxfdi.kalman_filter(model)
-        return jaxfdi.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us)[1].innovation
+        kf = jaxfdi.filters.kalman_filter(model)
+        return jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us)[1].innovation
 
     faults = jaxfdi.stack_faults([jaxfdi.no_fault(), jaxfdi.fault("bias", "sensor", 3, ONSET, SIZES[4]),
                                   jaxfdi.fault("bias", "actuator", 0, ONSET, SIZES[0])])

@@ -16,7 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.detection import credit_isolator, dual_filter
+from jaxfdi.detection import dual_filter
+from jaxfdi.detection.credits import credit_isolator
 from jaxfdi.detection.two_stage import two_stage_isolation
 from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters.ekf import extended_kalman_filter

@@ -197,7 +197,7 @@ def test_imm_kernel_for_ten_states_equals_vmap():
     modes = modes._replace(R=modes.R * np.array([1.0, 30.0, 1.0])[:, None, None],
                            Q=modes.Q * np.array([1.0, 1.0, 20.0])[:, None, None])
     transition = np.array([[0.9, 0.05, 0.05], [0.1, 0.85, 0.05], [0.1, 0.05, 0.85]])
-    imm = jaxfdi.interacting_multiple_model(kalman_filter, modes, transition)
+    imm = jaxfdi.filters.interacting_multiple_model(kalman_filter, modes, transition)
     assert imm.batch is not None
     init = imm.init(np.zeros(n), np.eye(n), np.ones(3) / 3)
     ys, us = rng.normal(size=(3, 15, m)), rng.normal(size=(15, 1))

@@ -18,7 +18,9 @@ import pytest
 
 import jaxfdi
 from _problems import rigid_body_data
-from jaxfdi.models import c2d, linear_observation, linear_transition, rigid_body_observation, rigid_body_transition, vtol
+from jaxfdi.models import c2d, vtol
+from jaxfdi.models.linear import linear_observation, linear_transition
+from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
 
 
 class Case(NamedTuple):
@@ -42,7 +44,7 @@ class Case(NamedTuple):
 def _vtol_case():
     Phi, Gamma = c2d(vtol.A, vtol.B, vtol.TS)
     Q, R = 1e-2 * np.eye(4), 1e-1 * np.eye(4)
-    model = jaxfdi.LinearGaussianModel(Phi, Gamma, jnp.asarray(vtol.C), jnp.zeros((4, 2)), Q, R)
+    model = jaxfdi.models.LinearGaussianModel(Phi, Gamma, jnp.asarray(vtol.C), jnp.zeros((4, 2)), Q, R)
     T = 40
     us = np.stack([np.sin(0.2 * np.arange(T)), np.cos(0.1 * np.arange(T))], 1)
     _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.array([1.0, 0.5, 0.1, 0.0]), us, jax.random.key(4))
@@ -55,12 +57,12 @@ def _registry():
     params, Qr, Rr, ysr, usr, m0r, P0r = rigid_body_data(T=40)
     rb = dict(Q=Qr, R=Rr, params=params, ys=ysr, us=usr, m0=m0r, P0=P0r)
     return {
-        "kf": Case(lambda Q, R, p: jaxfdi.kalman_filter(p._replace(Q=Q, R=R)), **lin),
-        "ekf-linear": Case(lambda Q, R, p: jaxfdi.extended_kalman_filter(linear_transition, linear_observation, Q, R, p), **lin),
-        "ukf-linear": Case(lambda Q, R, p: jaxfdi.unscented_kalman_filter(linear_transition, linear_observation, Q, R, p), **lin,
+        "kf": Case(lambda Q, R, p: jaxfdi.filters.kalman_filter(p._replace(Q=Q, R=R)), **lin),
+        "ekf-linear": Case(lambda Q, R, p: jaxfdi.filters.extended_kalman_filter(linear_transition, linear_observation, Q, R, p), **lin),
+        "ukf-linear": Case(lambda Q, R, p: jaxfdi.filters.unscented_kalman_filter(linear_transition, linear_observation, Q, R, p), **lin,
                            rtol=1e-8, fd_rtol=1e-5),
-        "ekf-rigid-body": Case(lambda Q, R, p: jaxfdi.extended_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, p), **rb),
-        "ukf-rigid-body": Case(lambda Q, R, p: jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, p),
+        "ekf-rigid-body": Case(lambda Q, R, p: jaxfdi.filters.extended_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, p), **rb),
+        "ukf-rigid-body": Case(lambda Q, R, p: jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, p),
                                **rb, rtol=1e-8, fd_rtol=1e-5),
     }
 
@@ -70,7 +72,7 @@ REGISTRY = _registry()
 
 def total_log_likelihood(case, Q, R, ys):
     filt = case.make(Q, R, case.params)
-    _, info = jaxfdi.run_filter(filt, filt.init(jnp.asarray(case.m0), jnp.asarray(case.P0)), ys, jnp.asarray(case.us))
+    _, info = jaxfdi.filters.run_filter(filt, filt.init(jnp.asarray(case.m0), jnp.asarray(case.P0)), ys, jnp.asarray(case.us))
     return jnp.sum(info.log_likelihood)
 
 
@@ -81,7 +83,7 @@ def case(request):
 
 def run(case, Q, R, ys, us, m0, P0):
     filt = case.make(Q, R, case.params)
-    return jaxfdi.run_filter(filt, filt.init(m0, P0), ys, us)[1]
+    return jaxfdi.filters.run_filter(filt, filt.init(m0, P0), ys, us)[1]
 
 
 def test_jit_equals_no_jit_and_is_finite(case):
@@ -128,7 +130,7 @@ def test_float32_in_float32_out_and_finite(case):
     f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
     params32 = jax.tree_util.tree_map(lambda a: f32(a) if jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating) else a, case.params)
     filt = case.make(f32(case.Q), f32(case.R), params32)
-    _, info = jaxfdi.run_filter(filt, filt.init(f32(case.m0), f32(case.P0)), f32(case.ys), f32(case.us))
+    _, info = jaxfdi.filters.run_filter(filt, filt.init(f32(case.m0), f32(case.P0)), f32(case.ys), f32(case.us))
     for name, leaf in info._asdict().items():
         if jnp.issubdtype(leaf.dtype, jnp.floating):
             assert leaf.dtype == jnp.float32, name
@@ -255,13 +257,13 @@ def _bank_build(make):
 
 
 def _time_varying_build(theta, dtype):
-    from jaxfdi.filters import model_at, time_varying
+    from jaxfdi.filters._time_varying import model_at, time_varying
 
     model, _, _ = _linear_problem()
     scaled = _cast(model, dtype)
     wobble = 1.0 + 0.5 * jnp.sin(jnp.arange(T_STEPS, dtype=dtype))
     at = model_at(scaled, R=scaled.R[None] * theta * wobble[:, None, None])
-    filt = time_varying(lambda k: jaxfdi.kalman_filter(at(k)))
+    filt = time_varying(lambda k: jaxfdi.filters.kalman_filter(at(k)))
     return filt, filt.init(jnp.zeros(3, dtype), jnp.eye(3, dtype=dtype))
 
 
@@ -275,7 +277,7 @@ def _dual_build(theta, dtype):
 
     model, _, _ = _linear_problem()
     scaled = _cast(model, dtype)
-    ekf = jaxfdi.extended_kalman_filter(linear_transition, linear_observation, scaled.Q, scaled.R * theta, scaled)
+    ekf = jaxfdi.filters.extended_kalman_filter(linear_transition, linear_observation, scaled.Q, scaled.R * theta, scaled)
     filt = dual_filter(ekf, linear_transition, _dual_field, scaled)
     return filt, filt.init(jnp.zeros(3, dtype), jnp.eye(3, dtype=dtype))
 
@@ -345,25 +347,25 @@ def _filter_registry():
 
     _, fixes, samples = _ins_problem()
     return {
-        "kalman_filter": FilterCase(_gaussian(jaxfdi.kalman_filter), FILTER_INFO, log_likelihood=own, **linear),
-        "extended_kalman_filter": FilterCase(_gaussian(nonlinear(jaxfdi.extended_kalman_filter)), FILTER_INFO,
+        "kalman_filter": FilterCase(_gaussian(jaxfdi.filters.kalman_filter), FILTER_INFO, log_likelihood=own, **linear),
+        "extended_kalman_filter": FilterCase(_gaussian(nonlinear(jaxfdi.filters.extended_kalman_filter)), FILTER_INFO,
                                              log_likelihood=own, **linear),
         # the UKFs' alpha = 1e-3 weights (1/alpha^2 ~ 1e6): jit's reassociated sums differ by ~3e-10 (Case above)
-        "unscented_kalman_filter": FilterCase(_gaussian(nonlinear(jaxfdi.unscented_kalman_filter)), FILTER_INFO,
+        "unscented_kalman_filter": FilterCase(_gaussian(nonlinear(jaxfdi.filters.unscented_kalman_filter)), FILTER_INFO,
                                               log_likelihood=own, jit_rtol=1e-9, **linear),
         "sqrt_kalman_filter": FilterCase(_gaussian(sqrt_kalman_filter), FILTER_INFO, log_likelihood=own, **linear),
         "sqrt_unscented_kalman_filter": FilterCase(_gaussian(nonlinear(sqrt_unscented_kalman_filter)), FILTER_INFO,
                                                    log_likelihood=own, jit_rtol=1e-9, **linear),
         "interacting_multiple_model": FilterCase(
-            _bank_build(lambda modes: interacting_multiple_model(jaxfdi.kalman_filter, modes,
+            _bank_build(lambda modes: interacting_multiple_model(jaxfdi.filters.kalman_filter, modes,
                                                                  jnp.asarray([[0.95, 0.05], [0.05, 0.95]]))),
             IMM_INFO, log_likelihood=own, **linear),
-        "multiple_model": FilterCase(_bank_build(lambda modes: multiple_model(jaxfdi.kalman_filter, modes, 1e-3)),
+        "multiple_model": FilterCase(_bank_build(lambda modes: multiple_model(jaxfdi.filters.kalman_filter, modes, 1e-3)),
                                      IMM_INFO, log_likelihood=own, **linear),
         # tuning.train.checkpointed: any filter with its step (and batch kernel) rematerialised
         "checkpointed": FilterCase(
             _bank_build(lambda modes: checkpointed(interacting_multiple_model(
-                jaxfdi.kalman_filter, modes, jnp.asarray([[0.95, 0.05], [0.05, 0.95]])))),
+                jaxfdi.filters.kalman_filter, modes, jnp.asarray([[0.95, 0.05], [0.05, 0.95]])))),
             IMM_INFO, log_likelihood=own, **linear),
         "two_stage_kalman_filter": FilterCase(_gaussian(tskf), TSKF_INFO, log_likelihood=own, **linear),
         "unknown_input_filter": FilterCase(
@@ -389,7 +391,7 @@ def drive(case, filt, state, ys, us):
     """``run_filter`` (one run or a batch), or a ``lax.scan`` of ``step`` for ``scan_only``."""
     if case.scan_only:
         return jax.lax.scan(lambda s, yu: filt.step(s, *yu), state, (ys, us))
-    return jaxfdi.run_filter(filt, state, ys, us)
+    return jaxfdi.filters.run_filter(filt, state, ys, us)
 
 
 def _run_case(case, theta, ys, dtype=jnp.float64):
@@ -453,9 +455,9 @@ def test_every_filter_run_on_a_batch_equals_the_loop_over_runs(name):
     case = FILTERS[name]
     ys_batch = jnp.stack([_perturbed(case, np.random.default_rng(i)) for i in range(N_RUNS)])
     filt, state = case.build(1.0, jnp.float64)
-    batch = jaxfdi.run_filter(filt, state, ys_batch, case.us)
+    batch = jaxfdi.filters.run_filter(filt, state, ys_batch, case.us)
     for i in range(N_RUNS):
-        single = jaxfdi.run_filter(filt, state, ys_batch[i], case.us)
+        single = jaxfdi.filters.run_filter(filt, state, ys_batch[i], case.us)
         run_i = jax.tree_util.tree_map(lambda b, s: b[i] if b.shape != s.shape else b, batch, single)
         chex.assert_trees_all_close(run_i, single, rtol=case.rtol, atol=case.rtol * _scale(single))
 

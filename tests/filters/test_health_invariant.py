@@ -148,12 +148,12 @@ C_FIXED = np.array([[1.0, 0.0, 0.5], [0.0, 1.0, -0.3]])
 E = np.array([[1.0], [0.0], [0.0]])
 
 
-def _model(case: Case, C=None) -> jaxfdi.LinearGaussianModel:
+def _model(case: Case, C=None) -> jaxfdi.models.LinearGaussianModel:
     C = case.C if C is None else C
-    return jaxfdi.LinearGaussianModel(case.Phi, case.Gamma, C, jnp.zeros((M, NU)), case.Q, case.R)
+    return jaxfdi.models.LinearGaussianModel(case.Phi, case.Gamma, C, jnp.zeros((M, NU)), case.Q, case.R)
 
 
-def _modes(model: jaxfdi.LinearGaussianModel) -> jaxfdi.LinearGaussianModel:
+def _modes(model: jaxfdi.models.LinearGaussianModel) -> jaxfdi.models.LinearGaussianModel:
     stacked = jax.tree_util.tree_map(lambda a: jnp.stack([a, a]), model)
     return stacked._replace(Q=jnp.stack([model.Q, 10.0 * model.Q]))
 
@@ -169,59 +169,59 @@ def _h(x, u, model):
 
 def _kalman(unroll: bool, missing: bool):
     def run(case):
-        filt = jaxfdi.kalman_filter(_model(case), missing_measurements=missing, unroll_factorizations=unroll)
-        return jaxfdi.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
+        filt = jaxfdi.filters.kalman_filter(_model(case), missing_measurements=missing, unroll_factorizations=unroll)
+        return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
     return run
 
 
 def _ekf(case):
     model = _model(case)
-    filt = jaxfdi.extended_kalman_filter(_f, _h, model.Q, model.R, model)
-    return jaxfdi.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
+    filt = jaxfdi.filters.extended_kalman_filter(_f, _h, model.Q, model.R, model)
+    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
 
 
 def _ukf(case):
     model = _model(case)
-    filt = jaxfdi.unscented_kalman_filter(_f, _h, model.Q, model.R, model)
-    return jaxfdi.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
+    filt = jaxfdi.filters.unscented_kalman_filter(_f, _h, model.Q, model.R, model)
+    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
 
 
 TRANSITION = np.array([[0.95, 0.05], [0.05, 0.95]])
 
 
 def _imm(case):
-    filt = jaxfdi.interacting_multiple_model(jaxfdi.kalman_filter, _modes(_model(case)), TRANSITION)
-    return jaxfdi.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys, case.us)[1]
+    filt = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, _modes(_model(case)), TRANSITION)
+    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys, case.us)[1]
 
 
 def _imm_batch_kernel(case):
-    filt = jaxfdi.interacting_multiple_model(jaxfdi.kalman_filter, _modes(_model(case)), TRANSITION)
+    filt = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, _modes(_model(case)), TRANSITION)
     assert filt.batch is not None
-    info = jaxfdi.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys[None],
+    info = jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys[None],
                                    case.us)[1]
     return jax.tree_util.tree_map(lambda a: a[0], info)
 
 
 def _mm(case):
-    filt = jaxfdi.multiple_model(jaxfdi.kalman_filter, _modes(_model(case)), floor=0.01)
-    return jaxfdi.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys, case.us)[1]
+    filt = jaxfdi.filters.multiple_model(jaxfdi.filters.kalman_filter, _modes(_model(case)), floor=0.01)
+    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys, case.us)[1]
 
 
 def _tskf(case):
     model = _model(case)
     filt = tskf.two_stage_kalman_filter(model, tskf.sensor_direction(model, 0, "additive"), 1e-4 * jnp.eye(1))
-    return jaxfdi.run_filter(filt, filt.init(case.m0, case.P0, jnp.zeros(1), 0.1 * jnp.eye(1)), case.ys, case.us)[1]
+    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0, jnp.zeros(1), 0.1 * jnp.eye(1)), case.ys, case.us)[1]
 
 
 def _unknown_input(case):
     filt = unknown_input_filter(_model(case, C_FIXED), E)
-    return jaxfdi.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
+    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
 
 
 def _time_varying(case):
     at = model_at(_model(case), Q=case.Q_scale[:, None, None] * case.Q[None])
-    filt = time_varying(lambda k: jaxfdi.kalman_filter(at(k)))
-    return jaxfdi.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
+    filt = time_varying(lambda k: jaxfdi.filters.kalman_filter(at(k)))
+    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
 
 
 FILTERS = {

@@ -14,7 +14,7 @@ from jaxfdi.filters import (
     unscented_kalman_filter,
 )
 from jaxfdi.models import LinearGaussianModel
-from jaxfdi.tuning import checkpointed
+from jaxfdi.tuning.train import checkpointed
 from jaxfdi.models.fault_modes import noise_inflation_modes
 
 T = 40

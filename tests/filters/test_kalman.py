@@ -51,9 +51,9 @@ def engine():
 
 def _runner(missing_measurements, unroll_factorizations=True):
     def run(model, m0, P0, ys, us):
-        kf = jaxfdi.kalman_filter(model, missing_measurements=missing_measurements,
+        kf = jaxfdi.filters.kalman_filter(model, missing_measurements=missing_measurements,
                                   unroll_factorizations=unroll_factorizations)
-        return jaxfdi.run_filter(kf, kf.init(m0, P0), ys, us)
+        return jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys, us)
 
     return jax.jit(run)
 
@@ -134,11 +134,11 @@ def test_partially_missing_equals_filter_on_observed_rows(engine):
     k_missing, j_missing = 7, 2
     ys_nan = ys.copy()
     ys_nan[k_missing, j_missing] = np.nan
-    kf = jaxfdi.kalman_filter(model, missing_measurements=True)
+    kf = jaxfdi.filters.kalman_filter(model, missing_measurements=True)
     state = kf.init(m0, P0)
     keep = np.array([j for j in range(5) if j != j_missing])
     reduced = model._replace(C=model.C[keep], D=model.D[keep], R=model.R[np.ix_(keep, keep)])
-    kf_reduced = jaxfdi.kalman_filter(reduced)
+    kf_reduced = jaxfdi.filters.kalman_filter(reduced)
     for k in range(k_missing + 1):
         if k < k_missing:
             state, info = kf.step(state, ys_nan[k], us[k])
@@ -161,11 +161,11 @@ def test_log_likelihood_equals_exact_joint_gaussian():
     C = np.array([[1.0, 0.5]])
     Q = np.array([[0.2, 0.05], [0.05, 0.1]])
     R = np.array([[0.3]])
-    model = jaxfdi.LinearGaussianModel(Phi, np.zeros((n, 0)), C, np.zeros((m, 0)), Q, R)
+    model = jaxfdi.models.LinearGaussianModel(Phi, np.zeros((n, 0)), C, np.zeros((m, 0)), Q, R)
     m0, P0 = np.array([0.3, -0.2]), np.eye(n)
     ys = rng.normal(size=(T, m))
-    kf = jaxfdi.kalman_filter(model)
-    _, info = jaxfdi.run_filter(kf, kf.init(m0, P0), ys)
+    kf = jaxfdi.filters.kalman_filter(model)
+    _, info = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys)
     # joint moments of x_0..x_{T-1}
     means, covs = [m0], [P0]
     for _ in range(T - 1):

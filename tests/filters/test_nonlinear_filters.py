@@ -10,7 +10,7 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 
 import jaxfdi
 from _problems import engine_data, linear_as_nonlinear, rigid_body_data
-from jaxfdi.models import rigid_body_observation, rigid_body_transition
+from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
 
 FIELDS = ("filtered_mean", "filtered_cov", "predicted_mean", "predicted_cov", "innovation", "log_likelihood")
 
@@ -33,14 +33,14 @@ def rigid():
 @pytest.fixture(scope="module")
 def kf_info(engine):
     model, ys, us, m0, P0 = engine
-    kf = jaxfdi.kalman_filter(model)
-    return jaxfdi.run_filter(kf, kf.init(m0, P0), ys, us)[1]
+    kf = jaxfdi.filters.kalman_filter(model)
+    return jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys, us)[1]
 
 
 def test_ekf_on_linear_model_equals_kf(engine, kf_info):
     model, ys, us, m0, P0 = engine
-    ekf = jaxfdi.extended_kalman_filter(*linear_as_nonlinear(model))
-    _, info = jaxfdi.run_filter(ekf, ekf.init(m0, P0), ys, us)
+    ekf = jaxfdi.filters.extended_kalman_filter(*linear_as_nonlinear(model))
+    _, info = jaxfdi.filters.run_filter(ekf, ekf.init(m0, P0), ys, us)
     for name in FIELDS:
         assert rel_err(getattr(info, name), getattr(kf_info, name)) < 1e-10, name
 
@@ -50,8 +50,8 @@ def test_ukf_on_linear_model_equals_kf(engine, kf_info, alpha, tol):
     """The UT is exact for linear maps; alpha = 1e-3 costs digits to the 1e6 weights
     even in float64 on this stiff, badly scaled model (states span 1e-1..1e4)."""
     model, ys, us, m0, P0 = engine
-    ukf = jaxfdi.unscented_kalman_filter(*linear_as_nonlinear(model), alpha=alpha)
-    _, info = jaxfdi.run_filter(ukf, ukf.init(m0, P0), ys, us)
+    ukf = jaxfdi.filters.unscented_kalman_filter(*linear_as_nonlinear(model), alpha=alpha)
+    _, info = jaxfdi.filters.run_filter(ukf, ukf.init(m0, P0), ys, us)
     for name in FIELDS:
         assert rel_err(getattr(info, name), getattr(kf_info, name)) < tol, name
 
@@ -78,8 +78,8 @@ def test_ukf_equals_filterpy(rigid, alpha, tol):
     ~1e6 * eps in float64 (weights -1e6), so the reference itself is good to ~1e-8
     only: we check 1e-7 there."""
     params, Q, R, ys, us, m0, P0 = rigid
-    ukf = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params, alpha, 2.0, 0.0)
-    _, info = jaxfdi.run_filter(ukf, ukf.init(m0, P0), ys, us)
+    ukf = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params, alpha, 2.0, 0.0)
+    _, info = jaxfdi.filters.run_filter(ukf, ukf.init(m0, P0), ys, us)
     ref = filterpy_ukf(params, Q, R, ys, us, m0, P0, alpha, 2.0, 0.0)
     for name, value in ref.items():
         assert rel_err(getattr(info, name), value) < tol, name
@@ -102,8 +102,8 @@ def test_ekf_equals_filterpy_with_numerical_jacobians(rigid):
         ref.F = fd_jacobian(ref.x.ravel(), us[k])
         ref.x = np.asarray(f(ref.x.ravel(), us[k])).reshape(3, 1)
         ref.P = ref.F @ ref.P @ ref.F.T + ref.Q
-    ekf = jaxfdi.extended_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
-    _, info = jaxfdi.run_filter(ekf, ekf.init(m0, P0), ys, us)
+    ekf = jaxfdi.filters.extended_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
+    _, info = jaxfdi.filters.run_filter(ekf, ekf.init(m0, P0), ys, us)
     assert rel_err(info.filtered_mean, np.array(means)) < 1e-7
     assert rel_err(info.filtered_cov, np.array(covs)) < 1e-6  # central differences: O(eps^2) + round-off
 
@@ -111,13 +111,13 @@ def test_ekf_equals_filterpy_with_numerical_jacobians(rigid):
 def test_ukf_float32_alpha_1e3_stays_finite_and_matches_float64(rigid):
     """Acceptance test of the centred/Taylor form: float32, alpha = 1e-3 (Wc0 ~ -1e6)."""
     params, Q, R, ys, us, m0, P0 = rigid
-    ukf64 = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
-    _, ref = jaxfdi.run_filter(ukf64, ukf64.init(m0, P0), ys, us)
+    ukf64 = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
+    _, ref = jaxfdi.filters.run_filter(ukf64, ukf64.init(m0, P0), ys, us)
 
     f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
     params32 = jax.tree_util.tree_map(f32, params)
-    ukf32 = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, f32(Q), f32(R), params32)
-    _, info = jaxfdi.run_filter(ukf32, ukf32.init(f32(m0), f32(P0)), f32(ys), f32(us))
+    ukf32 = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, f32(Q), f32(R), params32)
+    _, info = jaxfdi.filters.run_filter(ukf32, ukf32.init(f32(m0), f32(P0)), f32(ys), f32(us))
     assert info.filtered_mean.dtype == jnp.float32
     assert info.filtered_cov.dtype == jnp.float32
     assert bool(jnp.all(jnp.isfinite(info.filtered_mean))) and bool(jnp.all(jnp.isfinite(info.filtered_cov)))
@@ -131,11 +131,11 @@ def test_textbook_differences_in_float32_are_what_the_taylor_form_fixes(rigid):
     """The same float32 run with direct sigma-point differences is far off (> 1e-3),
     which is why ``sigma_differences='auto'`` picks the Taylor form there."""
     params, Q, R, ys, us, m0, P0 = rigid
-    ukf64 = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
-    _, ref = jaxfdi.run_filter(ukf64, ukf64.init(m0, P0), ys, us)
+    ukf64 = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
+    _, ref = jaxfdi.filters.run_filter(ukf64, ukf64.init(m0, P0), ys, us)
     f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
-    ukf = jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, f32(Q), f32(R),
+    ukf = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, f32(Q), f32(R),
                                          jax.tree_util.tree_map(f32, params), sigma_differences="direct")
-    _, info = jaxfdi.run_filter(ukf, ukf.init(f32(m0), f32(P0)), f32(ys), f32(us))
+    _, info = jaxfdi.filters.run_filter(ukf, ukf.init(f32(m0), f32(P0)), f32(ys), f32(us))
     finite = bool(jnp.all(jnp.isfinite(info.filtered_mean)))
     assert (not finite) or rel_err(info.filtered_mean, ref.filtered_mean) > 1e-3

@@ -6,7 +6,6 @@ import pytest
 
 from _linear_gaussian_cases import condition, engine_filtered, joint_gaussian, small_model
 from jaxfdi.filters import GaussianState, kalman_filter, run_filter
-from jaxfdi.models import LinearGaussianModel
 
 
 def _rel(a, b):
@@ -106,12 +105,12 @@ model, T = engine_model(), int(sys.argv[1])
 us = jnp.full((T, 1), 0.01)
 ys = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.zeros(7), us, jax.random.key(0))[1].measurement
 prior = GaussianState(jnp.zeros(7), 10.0 * model.Q)
-kf = jaxfdi.kalman_filter(model, unroll_factorizations=False)
+kf = jaxfdi.filters.kalman_filter(model, unroll_factorizations=False)
 parallel = jax.jit(lambda y: (lambda info: (info, parallel_rts_smoother(model, info)))(
     run_filter(kalman_filter(model, missing_measurements=True), prior, y, us, parallel=True)[1]))
 for _ in range(3):  # with LAPACK inside, the 2nd or 1st call never returned
     info, smooth = jax.block_until_ready(parallel(ys))
-ref = jaxfdi.run_filter(kf, prior, ys, us)[1]
+ref = jaxfdi.filters.run_filter(kf, prior, ys, us)[1]
 ref_smooth = rts_smoother(model, ref)
 rel = lambda a, b: float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / np.max(np.abs(np.asarray(b))))
 print(max(rel(info.filtered_mean, ref.filtered_mean), rel(info.filtered_cov, ref.filtered_cov),

@@ -10,20 +10,16 @@ import pytest
 from _linear_gaussian_cases import engine_filtered
 from _problems import rigid_body_data
 from jaxfdi.filters import (
-    SqrtGaussianState,
     kalman_filter,
     run_filter,
     sqrt_kalman_filter,
     sqrt_unscented_kalman_filter,
     unscented_kalman_filter,
 )
-from jaxfdi.models import (
-    LinearGaussianModel,
-    linear_observation,
-    linear_transition,
-    rigid_body_observation,
-    rigid_body_transition,
-)
+from jaxfdi.filters.sqrt_kalman import SqrtGaussianState
+from jaxfdi.models import LinearGaussianModel
+from jaxfdi.models.linear import linear_observation, linear_transition
+from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
 
 FIELDS = ("predicted_mean", "predicted_cov", "filtered_mean", "filtered_cov", "innovation", "innovation_cov",
           "log_likelihood", "nis")

@@ -82,7 +82,7 @@ def _run_tskf(model, direction, ys, us, E=None):
     filt = tskf.two_stage_kalman_filter(model, direction, QB * jnp.eye(direction.state.shape[1]), E)
     p = direction.state.shape[1]
     init = filt.init(jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4), jnp.zeros(p), PB0 * jnp.eye(p))
-    return filt, jaxfdi.run_filter(filt, init, jnp.asarray(ys), jnp.asarray(us))[1]
+    return filt, jaxfdi.filters.run_filter(filt, init, jnp.asarray(ys), jnp.asarray(us))[1]
 
 
 def _effectiveness_loss(k, signal, x, u, target):
@@ -128,9 +128,9 @@ def test_tskf_is_a_filter_and_its_bias_prior_defaults_to_a_known_zero(model):
     bias at 0 with zero covariance: the augmented KF (filterpy) with that prior."""
     direction = tskf.actuator_direction(model, 0, "additive")
     filt = tskf.two_stage_kalman_filter(model, direction, QB * jnp.eye(1))
-    assert type(filt) is jaxfdi.Filter and tskf.tskf_statistic_dof(model) == 4
+    assert type(filt) is jaxfdi.filters.Filter and tskf.tskf_statistic_dof(model) == 4
     ys, us = _data(model, seed=4, bias_fn=_actuator_step)
-    _, info = jaxfdi.run_filter(filt, filt.init(jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4)), ys, us)
+    _, info = jaxfdi.filters.run_filter(filt, filt.init(jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4)), ys, us)
     ref = _filterpy_augmented(model, direction, ys, us, pb0=0.0)
     for name, ours in (("mean", info.filtered_mean), ("bias", info.bias_mean), ("nis", info.statistic)):
         err = _rel_err(ours, ref[name])
@@ -195,7 +195,7 @@ def test_robust_tskf_equals_augmented_umv_filter(model, case, q):
     E = vtol.vtol_unknown_input(include_disturbance=(q == 2))
     ys, us = _data(model, seed=3, bias_fn=fault, d_scale=5.0, E=np.asarray(E))
     filt, info = _run_tskf(model, direction, ys, us, E)
-    assert isinstance(filt, jaxfdi.Filter) and tskf.tskf_statistic_dof(model, E) == 4 - q
+    assert isinstance(filt, jaxfdi.filters.Filter) and tskf.tskf_statistic_dof(model, E) == 4 - q
     ref = _umv_augmented(model, direction, E, ys, us)
     for name, ours in (("mean", info.filtered_mean), ("cov", info.filtered_cov), ("bias", info.bias_mean),
                        ("residual", info.residual), ("W", info.residual_cov), ("stat", info.statistic)):
@@ -253,7 +253,7 @@ def unknown_input_runs(model):
 
     def run(filt, ys):
         init = filt.init(jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4), jnp.zeros(1), PB0 * jnp.eye(1))
-        return jaxfdi.run_filter(filt, init, ys, us)[1].statistic
+        return jaxfdi.filters.run_filter(filt, init, ys, us)[1].statistic
 
     scales = (0.0, 1.0, 100.0)
 

@@ -20,7 +20,7 @@ import pytest
 
 import jaxfdi
 from _problems import rigid_body_data
-from jaxfdi.models import rigid_body_observation, rigid_body_transition
+from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
 
 T = 12
 PARAMS, Q, R, YS, US, M0, P0 = rigid_body_data(T=T)
@@ -59,16 +59,16 @@ def _run_batch(make):
 
     def one(R_case, P0_case):
         filt = make(R_case)
-        return jaxfdi.run_filter(filt, filt.init(jnp.asarray(M0), P0_case), YS, US)[1]
+        return jaxfdi.filters.run_filter(filt, filt.init(jnp.asarray(M0), P0_case), YS, US)[1]
 
     return jax.jit(jax.vmap(one))(Rs, P0s)
 
 
 @pytest.fixture(scope="module")
 def failing_runs():
-    ukf = _run_batch(lambda R_case: jaxfdi.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q,
+    ukf = _run_batch(lambda R_case: jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q,
                                                                    R_case, PARAMS))
-    ekf = _run_batch(lambda R_case: jaxfdi.extended_kalman_filter(rigid_body_transition, rigid_body_observation, Q,
+    ekf = _run_batch(lambda R_case: jaxfdi.filters.extended_kalman_filter(rigid_body_transition, rigid_body_observation, Q,
                                                                   R_case, PARAMS))
     return ukf, ekf
 
@@ -116,8 +116,8 @@ def test_ukf_stays_positive_definite_where_the_ekf_does(failing_runs, index, nam
 def test_equals_the_textbook_update_where_it_is_sound(h, alpha):
     rng = np.random.default_rng(0)
     ys = np.stack([np.asarray(h(jnp.asarray(y), None, None)) for y in YS]) + 1e-2 * rng.normal(size=YS.shape)
-    filt = jaxfdi.unscented_kalman_filter(rigid_body_transition, h, Q, R, PARAMS, alpha=alpha)
-    _, info = jaxfdi.run_filter(filt, filt.init(jnp.asarray(M0), jnp.asarray(P0)), ys, US)
+    filt = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, h, Q, R, PARAMS, alpha=alpha)
+    _, info = jaxfdi.filters.run_filter(filt, filt.init(jnp.asarray(M0), jnp.asarray(P0)), ys, US)
     assert bool(np.all(info.healthy))
     for k in range(T):
         mean, cov = textbook_update(np.asarray(info.predicted_mean[k]), np.asarray(info.predicted_cov[k]), ys[k], h,
@@ -131,7 +131,7 @@ def test_equals_the_textbook_update_where_it_is_sound(h, alpha):
 def test_missing_component_is_skipped_by_the_joseph_like_update():
     """A NaN component neither updates the state nor the covariance: the update equals the
     textbook update on the observed components alone."""
-    filt = jaxfdi.unscented_kalman_filter(rigid_body_transition, nonlinear_gyros, Q, R, PARAMS,
+    filt = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, nonlinear_gyros, Q, R, PARAMS,
                                           missing_measurements=True)
     y = np.asarray(nonlinear_gyros(jnp.asarray(YS[0]), None, None)) + 0.01
     y_missing = y.copy()

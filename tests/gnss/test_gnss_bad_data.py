@@ -14,9 +14,11 @@ import pytest
 
 from jaxfdi.data import data_path
 from jaxfdi.faults import concat_faults, fault
-from jaxfdi.gnss import (elevation_sigma, ephemeris_table, geodetic_to_ecef, geometry_fix, monitor_epoch,
-                         parity_check, protection_levels, raim_tables, read_rinex_nav, receiver_plant,
-                         select_orbits, transmission_geometry)
+from jaxfdi.gnss import geodetic_to_ecef, parity_check, protection_levels, read_rinex_nav
+from jaxfdi.gnss.integrity import geometry_fix, monitor_epoch
+from jaxfdi.gnss.measurements import elevation_sigma, receiver_plant
+from jaxfdi.gnss.orbits import ephemeris_table, select_orbits, transmission_geometry
+from jaxfdi.gnss.raim import raim_tables
 from jaxfdi.gnss.integrity import raim_output
 from jaxfdi.gnss.orbits import ORBIT_PROBLEMS, SPEED_OF_LIGHT
 

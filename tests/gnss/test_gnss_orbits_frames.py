@@ -10,9 +10,16 @@ import pyrtklib as rtk
 import pytest
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss import (almanac_table, ecef_to_geodetic, ecef_to_ned, elevation_azimuth, ephemeris_table,
-                         geodetic_to_ecef, ned_to_ecef, read_rinex_nav, read_yuma, satellite_clock,
-                         satellite_position, satellite_velocity, select_orbits, transmission_geometry)
+from jaxfdi.gnss import ecef_to_geodetic, geodetic_to_ecef, read_rinex_nav, read_yuma, satellite_position
+from jaxfdi.gnss.frames import ecef_to_ned, elevation_azimuth, ned_to_ecef
+from jaxfdi.gnss.orbits import (
+    almanac_table,
+    ephemeris_table,
+    satellite_clock,
+    satellite_velocity,
+    select_orbits,
+    transmission_geometry,
+)
 from jaxfdi.gnss.orbits import OMEGA_E, SPEED_OF_LIGHT, Orbit
 from jaxfdi.gnss.positioning import dops
 

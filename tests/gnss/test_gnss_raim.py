@@ -13,10 +13,19 @@ import pytest
 from scipy import optimize, stats
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss import (ecef_to_ned, elevation_sigma, ephemeris_table, geodetic_to_ecef, geometry_fix,
-                         monitor_epochs, paper_threshold, parity_check, parity_matrix, protection_levels,
-                         raim_tables, read_rinex_nav, receiver_plant, select_orbits, solve_position,
-                         transmission_geometry)
+from jaxfdi.gnss import (
+    geodetic_to_ecef,
+    monitor_epochs,
+    parity_check,
+    protection_levels,
+    read_rinex_nav,
+    solve_position,
+)
+from jaxfdi.gnss.frames import ecef_to_ned
+from jaxfdi.gnss.integrity import geometry_fix
+from jaxfdi.gnss.measurements import elevation_sigma, receiver_plant
+from jaxfdi.gnss.orbits import ephemeris_table, select_orbits, transmission_geometry
+from jaxfdi.gnss.raim import paper_threshold, parity_matrix, raim_tables
 from jaxfdi.gnss.orbits import SPEED_OF_LIGHT
 from jaxfdi.gnss.positioning import PositionFix, dops
 from jaxfdi import simulate

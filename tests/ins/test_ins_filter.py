@@ -101,8 +101,8 @@ def linear_scst_samples():
     dt = 1.0
     Phi = jnp.asarray([[1.0, dt, 0.5 * dt**2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
     Q = jnp.diag(jnp.asarray([1e-4, 1e-3, 1e-4]))
-    model = jaxfdi.linear_gaussian_model(Phi, jnp.asarray([[1.0, 0.0, 0.0]]), Q, jnp.asarray([[0.25]]))
-    kf = jaxfdi.kalman_filter(model)
+    model = jaxfdi.models.linear_gaussian_model(Phi, jnp.asarray([[1.0, 0.0, 0.0]]), Q, jnp.asarray([[0.25]]))
+    kf = jaxfdi.filters.kalman_filter(model)
     test = scst.state_chi2_test(20, 1e9)
     steps = 120
 
@@ -110,7 +110,7 @@ def linear_scst_samples():
         key_x0, key_run = jax.random.split(key)
         x0 = jax.random.normal(key_x0, (3,))                     # drawn from the filter's prior N(0, I)
         _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), x0, jnp.zeros((steps, 0)), key_run)
-        _, info = jaxfdi.run_filter(kf, kf.init(jnp.zeros(3), jnp.eye(3)), truth.measurement)
+        _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(3), jnp.eye(3)), truth.measurement)
 
         def body(state, step):
             correction, cov = step
@@ -203,7 +203,7 @@ def test_a_stuck_imu_channel_holds_its_onset_sample_and_a_dead_one_is_nan():
     slots = table.prn.shape[0]
     model = imu.hg1900()
     flight = plant.flight_tables(trajectory.stationary(PARK, 4.0, rate=10.0), 3)
-    faults = jaxfdi.concat_faults(jaxfdi.fault("stuck", "sensor", 3, 1), jaxfdi.fault("dead", "sensor", 5, 2))
+    faults = jaxfdi.faults.concat_faults(jaxfdi.fault("stuck", "sensor", 3, 1), jaxfdi.fault("dead", "sensor", 5, 2))
     gps_ins = plant.gps_ins_plant(table, 262_000.0, flight, jnp.zeros((3, slots), bool), jnp.ones((3, slots)), model,
                                   imu_fault=faults)
     key = jax.random.PRNGKey(0)

@@ -20,7 +20,8 @@ _CHILD = r"""
 import json, sys
 import jax, numpy as np
 assert not jax.config.jax_enable_x64
-from jaxfdi.models import bias_modes, engine_model, kitsat3_params, noise_inflation_modes, rigid_body_params, vtol
+from jaxfdi.models import engine_model, kitsat3_params, rigid_body_params, vtol
+from jaxfdi.models.fault_modes import bias_modes, noise_inflation_modes
 out = {}
 def put(name, tree):
     for i, leaf in enumerate(jax.tree.leaves(tree)):
@@ -56,7 +57,8 @@ def float32_run():
 
 
 def _float64_models():
-    from jaxfdi.models import bias_modes, kitsat3_params, noise_inflation_modes, rigid_body_params
+    from jaxfdi.models import kitsat3_params, rigid_body_params
+    from jaxfdi.models.fault_modes import bias_modes, noise_inflation_modes
 
     engine = engine_model(dtype=jnp.float64)
     return {

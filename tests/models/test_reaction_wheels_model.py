@@ -328,7 +328,7 @@ def test_ekf_equals_filterpy(params, gyro_data, ekf_reference):
     max|reference|, every field. Measured <= 3.4e-16."""
     ys, us, m0, P0 = gyro_data
     ekf = estimation_filter(params, jnp.asarray(Q_SIGMA), jnp.asarray(GYRO_SIGMA), "ekf")
-    _, info = jaxfdi.run_filter(ekf, ekf.init(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
+    _, info = jaxfdi.filters.run_filter(ekf, ekf.init(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
     for name, value in ekf_reference.items():
         err = rel_err(getattr(info, name), value)
         print(f"ekf {name}: {err:.1e}")
@@ -341,7 +341,7 @@ def test_ukf_equals_filterpy(params, transition, gyro_data):
     covariances and log-likelihoods per step. Measured <= 1.6e-14."""
     ys, us, m0, P0 = gyro_data
     ukf = estimation_filter(params, jnp.asarray(Q_SIGMA), jnp.asarray(GYRO_SIGMA), "ukf")
-    _, info = jaxfdi.run_filter(ukf, ukf.init(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
+    _, info = jaxfdi.filters.run_filter(ukf, ukf.init(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
     ref = filterpy_ukf(transition, ys, us, m0, P0, float(params.dt))
     for name, value in ref.items():
         err = rel_err(getattr(info, name), value)
@@ -360,7 +360,7 @@ def test_dual_filter_parameter_equals_numpy(params, transition, gyro_data, ekf_r
     f, _ = transition
     estimator = estimation_filter(params, jnp.asarray(Q_SIGMA), jnp.asarray(GYRO_SIGMA), "ekf")
     dual = dual_filter(estimator, wheel_rate_transition, body_rate_field, params)
-    _, info = jaxfdi.run_filter(dual, dual.init(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
+    _, info = jaxfdi.filters.run_filter(dual, dual.init(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
 
     inertia, axes = np.diag([3.118, 3.050, 4.055]), pyramid_axes()
     det = lambda x, u: np.linalg.det(np_rate_jacobian(x, u[:4], inertia, 0.000239, axes, np.ones(4)))  # noqa: E731

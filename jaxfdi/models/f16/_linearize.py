@@ -128,7 +128,12 @@ def _fmt_root(r: complex) -> str:
 
 
 def linearize(params: F16Params, x: Array, u: Array) -> LinearF16:
-    """Jacobians of ``f16_dynamics`` at ``(x, u)`` (``jax.jacfwd``)."""
+    """Jacobians of ``f16_dynamics`` at ``(x, u)`` (``jax.jacfwd``).
+
+    Returns:
+      ``LinearF16(A, B, x, u)``: ``A = df/dx`` (13, 13) and ``B = df/du`` (13, 4) at the
+      point, and the (13,) state and (4,) controls it was taken at (``dx' = A dx + B du``).
+    """
     _checks.check_shape("x", x, (13,), "trim state")
     _checks.check_shape("u", u, (4,), "trim controls")
     A, B = jax.jacfwd(f16_dynamics, argnums=(0, 1))(x, u, params)

@@ -203,6 +203,13 @@ def trim(params: F16Params, condition: TrimCondition, guess: Array | None = None
       max_steps: most Levenberg-Marquardt iterations.
       tolerance: ``converged`` requires ``max |residual| <=`` this (default
         ``1000 eps g``: 7e-12 in float64, 4e-3 in float32).
+
+    Returns:
+      ``TrimResult``: the (13,) trimmed ``state`` (``psi = pn = pe = 0``, power at its
+      commanded value), the (4,) ``control`` ``[thtl, el, ail, rdr]``, the (6,) ``residual``
+      ``[VT', alpha', beta', P', Q', R']`` there, () bool ``converged`` (finite and
+      ``max |residual| <= tolerance``) and ``within_limits`` (controls inside ``params``'
+      limits), and the () int Levenberg-Marquardt ``steps``.
     """
     for name, leaf in zip(TrimCondition._fields, condition):
         _checks.check_shape(f"condition.{name}", leaf, (), "a scalar (vmap over a stack of conditions)")

@@ -110,6 +110,14 @@ def f16_params(aero: str = "tables", profile: str = "stevens_lewis_2nd_ed", xcg:
       jxz: product of inertia ``Jxz`` (default 982 slug ft^2).
       aileron_limit: degrees (default the book's 21.5; Morelli clips at 20).
       dtype: float dtype of every leaf (default: JAX's default float).
+
+    Returns:
+      ``F16Params``: the aerodynamic model (``AeroTables`` or ``MorelliCoefficients``, per
+      ``aero``), the engine and atmosphere data, () ``mass`` [slug], (4,) ``inertia``
+      ``[Jxx, Jyy, Jzz, Jxz]`` [slug ft^2], () ``area``, ``span``, ``chord``, ``xcg_ref``,
+      ``xcg``, ``engine_momentum`` and ``gravity``, and the (4,) control limits
+      ``control_lower``, ``control_upper`` of ``[thtl, el, ail, rdr]`` (aileron
+      ``+-aileron_limit`` deg); every leaf in ``dtype``.
     """
     if aero not in ("tables", "morelli"):
         raise ValueError(f"aero: expected 'tables' or 'morelli', got {aero!r}")
@@ -187,7 +195,14 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
     """``x'`` (13,) of the state ``x`` (13,) under the controls ``u`` (4,) (module doc).
 
     ``gust``: optional (2,) angle-of-attack and sideslip increments (rad) of a wind gust,
-    added to the angles the aerodynamic model sees (the kinematics keep ``x``'s)."""
+    added to the angles the aerodynamic model sees (the kinematics keep ``x``'s).
+
+    Returns:
+      (13,) time derivative of ``x``, in its order: ``VT'`` [ft/s^2], ``alpha'``, ``beta'``,
+      ``phi'``, ``theta'``, ``psi'`` [rad/s], ``P'``, ``Q'``, ``R'`` [rad/s^2], the north,
+      east and up velocities ``pn'``, ``pe'``, ``h'`` [ft/s] and ``pow'`` [%/s]; controls are
+      not clipped (``saturate``).
+    """
     _checks.check_real("x", x, "a real state")
     _checks.check_real("u", u, "real controls")
     _checks.check_shape("x", x, (13,), "[VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]")

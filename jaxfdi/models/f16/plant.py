@@ -109,7 +109,13 @@ def f16_sensors(rate_axes: Array | None = None, rate_sigma: float = 0.01, air_da
                 dtype=None) -> F16Sensors:
     """Sensors of the flight: the rate sensors of Park et al. 2004 (0.01 rad/s) by default; air data
     0.5 ft/s and 1 mrad (0.06 deg), attitude 1 mrad, altitude 2 ft, engine power 0.1 %
-    (choices: the paper gives only the rate sensors' noise)."""
+    (choices: the paper gives only the rate sensors' noise).
+
+    Returns:
+      ``F16Sensors`` in ``dtype``: ``rate_axes`` (m_r, 3) (default ``skewed_rate_axes``,
+      m_r = 6), () ``rate_sigma`` [rad/s], (3,) ``air_data_sigma`` [ft/s, rad, rad], (3,)
+      ``attitude_sigma`` [rad], () ``altitude_sigma`` [ft] and () ``power_sigma`` [%].
+    """
     dtype = dtype or jnp.result_type(float)
     axes = skewed_rate_axes(dtype) if rate_axes is None else jnp.asarray(rate_axes, dtype)
     _checks.check_shape("rate_axes", axes, (None, 3), "one body-axis direction per rate-sensor channel")

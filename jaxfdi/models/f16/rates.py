@@ -49,7 +49,13 @@ class RateModel(NamedTuple):
 def rate_model(aircraft: F16Params, rate_axes: Array, dt: float = 0.01, coefficient_error=(0.0, 0.0, 0.0)) -> RateModel:
     """The rate model of ``aircraft`` with relative errors ``coefficient_error`` (3,) on
     ``Cl, Cm, Cn`` (e.g. ``(0.1, -0.1, 0.1)``: rolling and yawing moments 10 % too large,
-    pitching moment 10 % too small)."""
+    pitching moment 10 % too small).
+
+    Returns:
+      ``RateModel``: ``aircraft`` itself, the (3,) ``coefficient_scale``
+      ``1 + coefficient_error``, the (m_r, 3) ``rate_axes`` and the () ``dt`` [s], in the
+      dtype of ``aircraft.mass``; the params of ``rate_transition`` and ``rate_observation``.
+    """
     dtype = aircraft.mass.dtype
     _checks.check_matrix("rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel")
     _checks.check_matrix("coefficient_error", coefficient_error, (3,), "relative errors of Cl, Cm, Cn")

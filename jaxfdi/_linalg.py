@@ -22,11 +22,12 @@ chains of unrolled products into consumers that recompute them (the 13-state IMM
 rather than the transpose of ``k`` sliced products (``_written_out_matmul``): the engine
 IMM tuning gradient went from 6.0x to 4.9x its forward pass.
 
-All of this pays for batches. A single sequence run eagerly (``run_filter`` outside any
-transformation, what a one-shot script does) has no batch to vectorise over, and the
-written-out algebra only makes its program large: the engine KF's scan was 13.6k HLO
-lines and compiled in 1.4-2.6 s. ``library_calls()`` makes every helper here use
-``dot`` and LAPACK while such a trace is made (2.5k lines; see ``benchmarks/RESULTS.md``).
+All of this pays for batches. A single sequence (``run_filter`` called eagerly or under
+``jit`` alone, what a one-shot script does) has no batch to vectorise over, and the
+written-out algebra only makes its program large: the engine KF's scan under ``jit`` was
+13.7k HLO lines and compiled in 1.9 s. ``library_calls()`` makes every helper here use
+``dot`` and LAPACK while such a trace is made (1.0k lines, 0.7 s; see
+``benchmarks/RESULTS.md``). Under ``vmap`` or ``grad`` the algebra stays written out.
 """
 from __future__ import annotations
 

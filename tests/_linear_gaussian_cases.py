@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
@@ -76,3 +77,10 @@ def condition(joint: JointGaussian, ys, steps: int | None = None):
     mean = joint.mean_x + cross @ solved[:, 0]
     cov = joint.cov_x - cross @ solved[:, 1:]
     return mean, cov, scipy.stats.multivariate_normal(joint.mean_y[:rows], Syy).logpdf(ys[:rows])
+
+
+def scan_steps(filt, init_state, ys, us):
+    """The reference recursion of any ``Filter``: a plain ``lax.scan`` of ``filt.step``
+    over one sequence (``run_filter`` dispatches a ``vmap`` of itself to the batch kernel,
+    so a kernel is checked against a vmap of this instead)."""
+    return jax.lax.scan(lambda state, yu: filt.step(state, *yu), init_state, (ys, us))

@@ -22,6 +22,8 @@ from typing import Any, Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 from jax import Array
+from jax.custom_batching import custom_vmap
+from jax.interpreters.partial_eval import DynamicJaxprTracer
 
 from jaxfdi import _checks, _linalg
 
@@ -294,6 +296,8 @@ def run_filter(
     vmapped. When every run shares the model and the initial covariance, a linear Kalman
     filter's covariances, gains and innovation covariances do not depend on the data:
     they are computed once for the batch and returned once, without the run axis.
+    ``jax.vmap(run_filter)`` over runs (prior, ``ys``, ``us``) reaches the same batch
+    kernel; its derivative is the scan's.
 
     Args:
       filt: a ``Filter``.
@@ -334,10 +338,55 @@ def run_filter(
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
     _checks.check_same_length(("ys", "us"), ys, us)
-    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((init_state, ys, us))):
-        return _scan_filter.__wrapped__(filt, init_state, ys, us)  # inside jit/vmap: inline the scan
-    with _linalg.library_calls():  # one sequence, no batch: dot and LAPACK (_linalg's module doc)
-        return _scan_filter(filt, init_state, ys, us)
+    if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((init_state, ys, us))):
+        with _linalg.library_calls():  # one sequence, no batch: dot and LAPACK (_linalg's module doc)
+            return _scan_filter(filt, init_state, ys, us)
+    closed_over = jax.make_jaxpr(filt.step)(init_state, ys[0], us[0]).consts
+    if _only_staged(closed_over) and _only_staged(jax.tree_util.tree_leaves((init_state, ys, us))):
+        with _linalg.library_calls():  # under jit alone: still one sequence
+            return _scan_filter.__wrapped__(filt, init_state, ys, us)
+    if filt.batch is not None and _only_staged(closed_over):  # a jax.vmap over runs reaches the kernel
+        return _batchable_scan(filt)(init_state, ys, us)
+    return _scan_filter.__wrapped__(filt, init_state, ys, us)  # inline, written out (_linalg)
+
+
+def _only_staged(values) -> bool:
+    """Whether every tracer among ``values`` is ``jit``'s, none an outer ``vmap``'s or
+    ``grad``'s (which want the written-out algebra of ``_linalg``)."""
+    return all(isinstance(v, DynamicJaxprTracer) or not isinstance(v, jax.core.Tracer) for v in values)
+
+
+def _batchable_scan(filt: Filter) -> Callable[[Any, Array, Array], tuple[Any, Any]]:
+    """The scan of one sequence, whose batching rule (``jax.vmap`` over runs) is
+    ``run_filter`` on the batch, i.e. the filter's batch kernel; its derivative is the
+    plain scan's (``custom_vmap`` has no transpose rule, so ``custom_jvp`` keeps reverse
+    mode on the scan)."""
+
+    def scan(init_state, ys, us):
+        return _scan_filter.__wrapped__(filt, init_state, ys, us)
+
+    @custom_vmap
+    def batchable(init_state, ys, us):
+        return scan(init_state, ys, us)
+
+    @batchable.def_vmap
+    def _over_runs(axis_size, in_batched, init_state, ys, us):
+        state_batched, ys_batched, us_batched = in_batched
+        if not isinstance(init_state, GaussianState) and any(jax.tree_util.tree_leaves(state_batched)):
+            axes = jax.tree_util.tree_map(lambda batched: 0 if batched else None, state_batched)
+            out = jax.vmap(scan, in_axes=(axes, 0 if ys_batched else None, 0 if us_batched else None))(
+                init_state, ys, us)  # a kernel takes one prior for all runs (or a Gaussian one per run)
+        else:
+            ys = ys if ys_batched else jnp.broadcast_to(ys, (axis_size,) + ys.shape)
+            out = _run_batch(filt, init_state, ys, us, False, False)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    @jax.custom_jvp
+    def differentiable(init_state, ys, us):
+        return batchable(init_state, ys, us)
+
+    differentiable.defjvp(lambda primals, tangents: jax.jvp(scan, primals, tangents))
+    return differentiable
 
 
 def _check_parallel(filt: Filter) -> Callable[[Any, Array, Array | None], tuple[Any, Any]]:

@@ -8,7 +8,7 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 import jaxfdi
-from _linear_gaussian_cases import small_model
+from _linear_gaussian_cases import scan_steps, small_model
 from jaxfdi.filters import GaussianState, kalman_filter, run_filter
 from jaxfdi.models import LinearGaussianModel
 
@@ -16,12 +16,13 @@ N, T = 5, 30
 
 
 def _vmapped(model, model_axes, mean, cov, ys, us):
-    """The reference: vmap(run_filter(kalman_filter(model_i), ...)) with the given axes."""
+    """The reference: vmap of a plain ``lax.scan`` of ``kalman_filter(model_i).step`` with
+    the given axes (not ``run_filter``, whose ``vmap`` over runs is the kernel itself)."""
     us_axis = 0 if np.ndim(us) == 3 else None
 
     def one(mdl, m0, P0, y, u):
         kf = kalman_filter(mdl)
-        return run_filter(kf, kf.init(m0, P0), y, u)
+        return scan_steps(kf, kf.init(m0, P0), y, u)
 
     axes = (model_axes, 0 if np.ndim(mean) == 2 else None, 0 if np.ndim(cov) == 3 else None, 0, us_axis)
     return jax.jit(jax.vmap(one, in_axes=axes))(model, mean, cov, ys, us)
@@ -101,6 +102,32 @@ def test_fifteen_states_equal_vmap():
     got = run_filter(kalman_filter(per_run), GaussianState(jnp.zeros(n), jnp.eye(n)), ys, np.zeros((12, 1)))
     _assert_same(got, _vmapped(per_run, LinearGaussianModel(None, None, None, None, 0, None), np.zeros(n), np.eye(n),
                                ys, np.zeros((12, 1))))
+
+
+def test_vmap_of_run_filter_is_the_kernel_and_differentiates_as_the_scan(data, monkeypatch):
+    """``jax.vmap(run_filter)`` over runs with their own prior, the path a user writes,
+    runs the kernel (once, not per run) and equals a vmapped plain scan; its reverse-mode
+    gradient (the scan's) equals the gradient of the loop over runs."""
+    from jaxfdi.filters import _base
+
+    ys, us, means, covs = data
+    model = small_model()
+    kf = kalman_filter(model)
+    calls = []
+    kernel = _base.kernel_scan
+    monkeypatch.setattr(_base, "kernel_scan", lambda *a: (calls.append(1), kernel(*a))[1])
+    run = jax.vmap(lambda m0, P0, y, u: run_filter(kf, GaussianState(m0, P0), y, u))
+    got = run(jnp.asarray(means), jnp.asarray(covs), ys, us)
+    assert len(calls) == 1
+    _assert_same(got, _vmapped(model, None, means, covs, ys, us))
+
+    def loss(scale, vmapped):
+        one = lambda m0, P0, y, u: run_filter(kf, GaussianState(m0, P0 * scale), y, u)[1].log_likelihood.sum()
+        if vmapped:
+            return jnp.sum(jax.vmap(one)(jnp.asarray(means), jnp.asarray(covs), ys, us))
+        return sum(one(means[i], covs[i], ys[i], us[i]) for i in range(N))
+
+    np.testing.assert_allclose(jax.grad(loss)(1.3, True), jax.grad(loss)(1.3, False), rtol=1e-10)
 
 
 def test_health_float32_and_gradient(data):
@@ -202,6 +229,6 @@ def test_imm_kernel_for_ten_states_equals_vmap():
     init = imm.init(np.zeros(n), np.eye(n), np.ones(3) / 3)
     ys, us = rng.normal(size=(3, 15, m)), rng.normal(size=(15, 1))
     final, info = run_filter(imm, init, ys, us)
-    ref_final, ref_info = jax.jit(jax.vmap(lambda y: run_filter(imm, init, y, us)))(ys)
+    ref_final, ref_info = jax.jit(jax.vmap(lambda y: scan_steps(imm, init, y, us)))(ys)
     for name, got, want in zip(info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)):
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, err_msg=name)

@@ -13,6 +13,7 @@ from jaxfdi.filters import (
     run_filter,
     unscented_kalman_filter,
 )
+from _linear_gaussian_cases import scan_steps
 from jaxfdi.models import LinearGaussianModel
 from jaxfdi.tuning.train import checkpointed
 from jaxfdi.models.fault_modes import noise_inflation_modes
@@ -240,12 +241,13 @@ def batch_problem(problem):
 
 def test_batch_kernel_equals_vmap_and_filterpy(problem, batch_problem):
     """run_filter runs the structure-of-arrays kernel (standard-form covariance
-    update); every output equals vmap(run_filter) (Joseph form) and filterpy's IMM."""
+    update); every output equals a vmapped plain scan of imm.step (Joseph form) and
+    filterpy's IMM."""
     modes, _, _, m0, P0 = problem
     imm, init, ys, us = batch_problem
     assert imm.batch is not None
     final, info = run_filter(imm, init, ys, us)
-    ref_final, ref_info = jax.vmap(lambda y, u: run_filter(imm, init, y, u))(ys, us)
+    ref_final, ref_info = jax.vmap(lambda y, u: scan_steps(imm, init, y, u))(ys, us)
     for name, got, want in zip(info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)):
         assert got.shape == want.shape, name
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, err_msg=name)
@@ -265,13 +267,13 @@ def test_batch_kernel_shared_inputs_gradient_and_health(problem, batch_problem):
     modes, _, us_shared, m0, P0 = problem
     imm, init, ys, _ = batch_problem
     _, info = run_filter(imm, init, ys, us_shared)               # (T, nu) shared by the runs
-    _, ref = jax.vmap(lambda y: run_filter(imm, init, y, us_shared))(ys)
+    _, ref = jax.vmap(lambda y: scan_steps(imm, init, y, us_shared))(ys)
     np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)
 
     bad = ys.copy()
     bad[1, 25, 0] = np.nan                                              # a dead channel in run 1
     _, info = run_filter(imm, init, bad, us_shared)
-    _, ref = jax.vmap(lambda y: run_filter(imm, init, y, us_shared))(bad)
+    _, ref = jax.vmap(lambda y: scan_steps(imm, init, y, us_shared))(bad)
     np.testing.assert_array_equal(info.healthy, ref.healthy)
     np.testing.assert_array_equal(info.dead, ref.dead)
     np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)

@@ -19,6 +19,7 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 from jaxfdi import loop, stages
 from jaxfdi.detection import hybrid_psa as hp
 from jaxfdi.faults import Target, active_label, apply_faults
+from jaxfdi.filters import run_filter
 from jaxfdi.models.f16.dynamics import f16_dynamics
 from jaxfdi.models.f16.plant import MEASURED_STATES, RATE_OFFSET
 from jaxfdi.models.f16.rates import rate_derivative, rate_model, rate_model_input, rate_transition
@@ -225,8 +226,8 @@ def test_ukf_on_the_moment_equations_equals_filterpy(env, recorded):
     m0 = np.linalg.lstsq(H, channels[0], rcond=None)[0]
     P0 = np.asarray(fdi.hybrid.restart_cov)
     T = 40
-    _, info = jax.jit(lambda: jax.tree_util.tree_map(lambda a: a, __import__("jaxfdi").run_filter(
-        ukf, ukf.init(jnp.asarray(m0), jnp.asarray(P0)), jnp.where(trusted, channels[:T], jnp.nan), inputs[:T])))()
+    _, info = jax.jit(lambda: run_filter(ukf, ukf.init(jnp.asarray(m0), jnp.asarray(P0)),
+                                         jnp.where(trusted, channels[:T], jnp.nan), inputs[:T]))()
     f = jax.jit(lambda x, v: rate_transition(x, v, fdi.rates))
     points = MerweScaledSigmaPoints(3, sf.UKF_ALPHA, sf.UKF_BETA, sf.UKF_KAPPA)
     ref = UnscentedKalmanFilter(3, 2, 0.01, hx=lambda x: H[trusted] @ x, fx=None, points=points)

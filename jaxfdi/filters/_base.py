@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 from jax.custom_batching import custom_vmap
+from jax.extend.core import Jaxpr, Literal
 from jax.interpreters.partial_eval import DynamicJaxprTracer
 
 from jaxfdi import _checks, _linalg
@@ -428,19 +429,51 @@ def _run_batch(filt: Filter, init_state: Any, ys: Array, us: Array | None, paral
     if filt.batch is not None and (per_run_prior or not filt.batch.per_run_only):
         return _kernel_scan(filt.batch, init_state, ys, us)
     init_axes = init_axes if per_run_prior else None
-    if shared_covariance is False or not gaussian or (per_run_prior and init_axes.cov is not None):
-        return _batch_scan(filt, init_state, ys, us, us_axis, False, init_axes)
-    try:
-        return _batch_scan(filt, init_state, ys, us, us_axis, True, init_axes)
-    except ValueError as error:  # vmap: "mapped output but out_axes is None"
-        if "out_axes" not in str(error):
-            raise
-        if shared_covariance is True:
-            raise ValueError(
-                "shared_covariance: the covariances depend on the run (nonlinear filter, "
-                "missing_measurements=True or per-run model); use shared_covariance=False"
-            ) from None
-    return _batch_scan(filt, init_state, ys, us, us_axis, False, init_axes)
+    per_run_cov = per_run_prior and init_axes.cov is not None
+    u = us[0, 0] if us_axis == 0 else us[0]
+    shared = (shared_covariance is not False and gaussian and not per_run_cov
+              and not _covariance_sees_data(filt, init_state, ys[0, 0], u, us_axis == 0))
+    if shared_covariance is True and not shared:
+        raise ValueError("shared_covariance: the covariances depend on the run (nonlinear filter, "
+                         "missing_measurements=True or per-run model); use shared_covariance=False")
+    return _batch_scan(filt, init_state, ys, us, us_axis, shared, init_axes)
+
+
+def _covariance_sees_data(filt: Filter, prior: GaussianState, y: Array, u: Array, per_run_inputs: bool) -> bool:
+    """Whether a Gaussian filter's covariances depend on the data of a run: read from the
+    step's jaxpr, forward from the mean, ``y`` and per-run inputs to the next covariance
+    and the ``FilterInfo`` covariances. If none is reached, the covariance of every step
+    is the same for all runs sharing ``P0`` (the linear KF without missing measurements)."""
+    mean, cov = (jnp.asarray(leaf) for leaf in prior)
+    step = lambda mean, cov, y, u: filt.step(GaussianState(mean, cov), y, u)  # noqa: E731
+    closed, out_shape = jax.make_jaxpr(step, return_shape=True)(mean[0] if mean.ndim == 2 else mean, cov, y, u)
+    reached = _reached_outputs(closed.jaxpr, [True, False, True, per_run_inputs])
+    state, info = jax.tree.unflatten(jax.tree.structure(out_shape), reached)
+    return bool(state.cov or any(getattr(info, name) for name in _COVARIANCE_FIELDS))
+
+
+_CALLS = {"jit": "jaxpr", "pjit": "jaxpr", "closed_call": "call_jaxpr", "custom_jvp_call": "call_jaxpr",
+          "custom_vjp_call": "call_jaxpr"}
+
+
+def _reached_outputs(jaxpr: Jaxpr, reached_inputs: list[bool]) -> list[bool]:
+    """Which outputs of ``jaxpr`` the flagged inputs reach by data flow (what ``vmap``
+    would batch); calls are followed inside, other higher-order primitives (``scan``,
+    ``cond``) count as reached by any flagged operand."""
+    reached = {var for var, flag in zip(jaxpr.invars, reached_inputs) if flag}
+
+    def flagged(var) -> bool:
+        return not isinstance(var, Literal) and var in reached
+
+    for eqn in jaxpr.eqns:
+        inputs = [flagged(var) for var in eqn.invars]
+        if not any(inputs):
+            continue
+        inner = eqn.params.get(_CALLS.get(eqn.primitive.name, ""))
+        outputs = (_reached_outputs(getattr(inner, "jaxpr", inner), inputs) if inner is not None
+                   else [True] * len(eqn.outvars))
+        reached.update(var for var, flag in zip(eqn.outvars, outputs) if flag)
+    return [flagged(var) for var in jaxpr.outvars]
 
 
 def _prior_axes(init_state: GaussianState, num_runs: int) -> GaussianState:

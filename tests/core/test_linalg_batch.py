@@ -9,6 +9,7 @@ import scipy.linalg
 import jaxfdi
 from _problems import engine_data, rigid_body_data
 from jaxfdi import _linalg
+from jaxfdi.filters._base import _covariance_sees_data
 from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
 
 
@@ -141,6 +142,47 @@ def test_batch_driver_keeps_data_dependent_covariances_per_run(engine_batch):
     _, ref = jaxfdi.filters.run_filter(ukf, ukf.init(m0_rb, P0_rb), ys, us_rb)
     assert info.filtered_cov.shape == (2, 30, 3, 3)
     np.testing.assert_allclose(info.filtered_mean[1], ref.filtered_mean, rtol=1e-9)
+
+
+def _vmap_batches_covariances(filt, state, y, u, per_run_u):
+    """The reference: does ``vmap`` over runs (their mean, ``y`` and maybe ``u``) accept
+    the step's covariances as unbatched (``out_axes=None``)?"""
+    shared = jaxfdi.filters.FilterInfo(*(None if "cov" in name else 0 for name in jaxfdi.filters.FilterInfo._fields))
+    step = lambda mean, y, u: filt.step(jaxfdi.filters.GaussianState(mean, state.cov), y, u)  # noqa: E731
+    try:
+        jax.vmap(step, in_axes=(0, 0, 0 if per_run_u else None),
+                 out_axes=(jaxfdi.filters.GaussianState(0, None), shared))(
+            jnp.stack([state.mean] * 2), jnp.stack([y] * 2), jnp.stack([u] * 2) if per_run_u else u)
+    except ValueError:
+        return True
+    return False
+
+
+def _engine_ekf(model, **kwargs):
+    return jaxfdi.filters.extended_kalman_filter(lambda x, u, p: model.Phi @ x + model.Gamma @ u,
+                                                 lambda x, u, p: model.C @ x + model.D @ u, model.Q, model.R, **kwargs)
+
+
+@pytest.mark.parametrize("name, build, per_run_u", [
+    ("KF", lambda model: jaxfdi.filters.kalman_filter(model), False),
+    ("KF, inputs per run", lambda model: jaxfdi.filters.kalman_filter(model), True),
+    ("KF with missing measurements", lambda model: jaxfdi.filters.kalman_filter(model, missing_measurements=True), False),
+    ("EKF of a linear model", _engine_ekf, True),  # constant Jacobians: the covariances are shared
+    ("EKF with missing measurements", lambda model: _engine_ekf(model, missing_measurements=True), False),
+    ("UKF", lambda model: jaxfdi.filters.unscented_kalman_filter(
+        lambda x, u, p: model.Phi @ x + model.Gamma @ u, lambda x, u, p: model.C @ x + model.D @ u, model.Q, model.R),
+     False),
+])
+def test_shared_covariance_is_read_from_the_step_as_vmap_batches_it(engine_batch, name, build, per_run_u):
+    """``run_filter``'s "auto" reads from the step's jaxpr whether the covariances see the
+    data; the reference is ``vmap`` itself, asked to leave them unbatched."""
+    model, ys_b, us, m0, P0 = engine_batch
+    filt = build(model)
+    state = filt.init(m0, P0)
+    expected = _vmap_batches_covariances(filt, state, jnp.asarray(ys_b[0, 0]), jnp.asarray(us[0]), per_run_u)
+    assert _covariance_sees_data(filt, state, jnp.asarray(ys_b[0, 0]), jnp.asarray(us[0]), per_run_u) == expected
+    _, info = jaxfdi.filters.run_filter(filt, state, ys_b, np.stack([us] * 3) if per_run_u else us)
+    assert info.filtered_cov.ndim == (4 if expected else 3)
 
 
 @pytest.mark.parametrize("bad, match", [

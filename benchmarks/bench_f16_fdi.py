@@ -50,7 +50,7 @@ from bench_f16_flight import numpy_design  # noqa: E402
 
 from jaxfdi import _io  # noqa: E402
 from jaxfdi.data import data_path  # noqa: E402
-from jaxfdi.detection.hybrid_psa import FOLLOW  # noqa: E402
+from jaxfdi.detection._hybrid_psa import FOLLOW  # noqa: E402
 from jaxfdi.scenarios import f16_fdi as sf  # noqa: E402
 from jaxfdi.scenarios.f16_flight import DT, GUST_SIGMA, dispersions, flight_setup, run_flight, run_flights  # noqa: E402
 

@@ -66,9 +66,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import f16_numpy_baseline as baseline  # noqa: E402
 
 from jaxfdi import _io  # noqa: E402
-from jaxfdi.control.flight import FlightWeights, design_flight_control  # noqa: E402
+from jaxfdi.control._flight import FlightWeights, design_flight_control  # noqa: E402
 from jaxfdi.data import data_path  # noqa: E402
-from jaxfdi.models.f16.plant import measurement_cov  # noqa: E402
+from jaxfdi.models.f16._plant import measurement_cov  # noqa: E402
 from jaxfdi.scenarios.f16_flight import (  # noqa: E402
     DT, ERRORS, GUST_SIGMA, cast_setup, dispersions, flight_setup, nominal_dispersion, run_flight, run_flights,
 )

@@ -45,12 +45,12 @@ import numpy as np  # noqa: E402
 
 from jaxfdi import _io  # noqa: E402
 from jaxfdi.data import data_path  # noqa: E402
-from jaxfdi.gnss import geodetic_to_ecef, integrity, read_rinex_nav
-from jaxfdi.gnss.orbits import ephemeris_table, select_orbits, transmission_geometry
-from jaxfdi.gnss.raim import raim_tables
-from jaxfdi.gnss.frames import elevation_azimuth  # noqa: E402
-from jaxfdi.gnss.orbits import OMEGA_E, SPEED_OF_LIGHT  # noqa: E402
-from jaxfdi.gnss.positioning import transmit_states  # noqa: E402
+from jaxfdi.gnss import geodetic_to_ecef, _integrity as integrity, read_rinex_nav
+from jaxfdi.gnss._orbits import ephemeris_table, select_orbits, transmission_geometry
+from jaxfdi.gnss._raim import raim_tables
+from jaxfdi.gnss._frames import elevation_azimuth  # noqa: E402
+from jaxfdi.gnss._orbits import OMEGA_E, SPEED_OF_LIGHT  # noqa: E402
+from jaxfdi.gnss._positioning import transmit_states  # noqa: E402
 
 SIGMA = 5.0
 MASK = math.radians(5.0)
@@ -102,7 +102,7 @@ def make_data(table, epochs: int, seed: int = 0):
         sat_tx, clk = transmit_states(orbit, t, rho)
         return sat_tx, clk, rho, jnp.where(faulty, slot, -1)
 
-    from jaxfdi.gnss.orbits import satellite_position as orbit_positions  # noqa: E402
+    from jaxfdi.gnss._orbits import satellite_position as orbit_positions  # noqa: E402
     keys = jax.random.split(jax.random.key(seed), epochs)
     out = jax.jit(jax.vmap(one))(jnp.asarray(times), sites[site_of], keys, jnp.asarray(fault_on))
     return (times,) + tuple(np.asarray(o) for o in out)

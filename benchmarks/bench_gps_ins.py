@@ -43,13 +43,13 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxfdi import _io  # noqa: E402
-from jaxfdi.gnss import integrity as gnss_integrity  # noqa: E402
-from jaxfdi.gnss import measurements  # noqa: E402
-from jaxfdi.ins import error_state, imu, integrity, plant, scst, trajectory  # noqa: E402
-from jaxfdi.ins.loosely_coupled import GpsFix  # noqa: E402
-from jaxfdi.ins.mechanization import NavState  # noqa: E402
-from jaxfdi.loop import combine_scorers, detection_scorer, feedforward, run_loop
-from jaxfdi.stages import Plant  # noqa: E402
+from jaxfdi.gnss import _integrity as gnss_integrity  # noqa: E402
+from jaxfdi.gnss import _measurements as measurements  # noqa: E402
+from jaxfdi.ins import _error_state as error_state, _imu as imu, _integrity as integrity, _plant as plant, _scst as scst, _trajectory as trajectory  # noqa: E402
+from jaxfdi.ins._loosely_coupled import GpsFix  # noqa: E402
+from jaxfdi.ins._mechanization import NavState  # noqa: E402
+from jaxfdi._loop import combine_scorers, detection_scorer, feedforward, run_loop
+from jaxfdi._stages import Plant  # noqa: E402
 from jaxfdi.scenarios import gps_ins  # noqa: E402
 
 VELOCITY_SIGMA = 0.1
@@ -63,7 +63,7 @@ def setup(seconds: int):
     table = gps_ins._ephemeris()
     traj = trajectory.fly(trajectory.park_legs(float(seconds)), gps_ins.PARK, 12.0)
     flight = plant.flight_tables(traj, seconds)
-    from jaxfdi.gnss import frames
+    from jaxfdi.gnss import _frames as frames
 
     path = frames.geodetic_to_ecef(flight.position[:, 0], flight.position[:, 1], flight.position[:, 2])
     times = gps_ins.START_TOW + jnp.arange(seconds, dtype=float)

@@ -38,7 +38,7 @@ from bench_filters import cpu_model, rel_diff, time_jax, write_json_atomic  # no
 
 import jaxfdi  # noqa: E402
 from jaxfdi.models import engine_model
-from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes  # noqa: E402
+from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes  # noqa: E402
 from jaxfdi.scenarios.engine import PAPER_TRANSITION, EngineSettings  # noqa: E402
 
 T = 1000

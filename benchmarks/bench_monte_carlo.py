@@ -40,7 +40,7 @@ import bench_filters as bf  # noqa: E402  (reference implementations: plain scan
 
 import jaxfdi  # noqa: E402
 from jaxfdi.models import engine_model, rigid_body_params
-from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition  # noqa: E402
+from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition  # noqa: E402
 
 
 def kf_runners(T: int):

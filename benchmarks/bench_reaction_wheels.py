@@ -60,11 +60,11 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic  # noqa: E402
 
 from jaxfdi import _linalg  # noqa: E402
-from jaxfdi.detection.credits import hypothesis_credits  # noqa: E402
+from jaxfdi.detection._credits import hypothesis_credits  # noqa: E402
 from jaxfdi.detection._dual_filter import dual_filter  # noqa: E402
 from jaxfdi.filters._base import Filter, run_filter  # noqa: E402
-from jaxfdi.filters.mm import multiple_model  # noqa: E402
-from jaxfdi.models.reaction_wheels import (  # noqa: E402
+from jaxfdi.filters._mm import multiple_model  # noqa: E402
+from jaxfdi.models._reaction_wheels import (  # noqa: E402
     body_rate_field,
     stop_hypotheses,
     wheel_rate_transition,

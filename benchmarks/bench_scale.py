@@ -50,7 +50,7 @@ from jaxfdi.filters import (  # noqa: E402
     run_filter,
 )
 from jaxfdi.models import engine_model  # noqa: E402
-from jaxfdi.riccati import steady_state_kalman  # noqa: E402
+from jaxfdi._riccati import steady_state_kalman  # noqa: E402
 
 
 def block(tree):
@@ -159,7 +159,7 @@ def _mc_study(T: int):
     threshold = jaxfdi.detection.chi2_threshold(4 * 5, 1e-3)
 
     def run_one(key, size):
-        onset = jnp.where(size > 0, onset_step, jaxfdi.faults.NEVER)
+        onset = jnp.where(size > 0, onset_step, jaxfdi._faults.NEVER)
         sim = jaxfdi.linear_simulator(model, jaxfdi.fault("bias", "sensor", 3, onset, size))
         kf = jaxfdi.filters.kalman_filter(model)
         detector = jaxfdi.detection.chi2_detector(threshold, 4)
@@ -172,7 +172,7 @@ def _mc_study(T: int):
 def mc_worker(out: str, runs: int, T: int, per_device: int) -> None:
     """One process of ``--mc``: join the others, time the study (first call with
     compilation, then warm), the gather of its records alone, and its streaming summary."""
-    from jaxfdi import distributed, montecarlo, streaming
+    from jaxfdi import distributed, _montecarlo as montecarlo, streaming
 
     info = distributed.ProcessInfo(jax.process_index(), jax.process_count(), jax.local_device_count(),
                                    jax.device_count())  # joined at import (top of this file)

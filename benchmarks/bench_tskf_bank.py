@@ -41,9 +41,9 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, os.path.dirname(__file__))
 from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic  # noqa: E402
 
-from jaxfdi.filters.tskf import actuator_direction, run_tskf_bank, sensor_direction, stack_directions  # noqa: E402
-from jaxfdi.control.lqr import lqr_pi  # noqa: E402
-from jaxfdi.models import vtol  # noqa: E402
+from jaxfdi.filters._tskf import actuator_direction, run_tskf_bank, sensor_direction, stack_directions  # noqa: E402
+from jaxfdi.control._lqr import lqr_pi  # noqa: E402
+from jaxfdi.models import _vtol as vtol  # noqa: E402
 from jaxfdi.scenarios.vtol import BIAS_WALK, COMMAND, INIT_BIAS_COV, INIT_COV, LQR_Q, LQR_R, TRACKED  # noqa: E402
 
 T = 300
@@ -121,7 +121,7 @@ def augmented_bank(model, directions):
 
 
 def numpy_tskf(model, direction, E, ys, us):
-    """The robust TSKF of ``jaxfdi.filters.tskf`` in plain NumPy, one run: (T,) statistics
+    """The robust TSKF of ``jaxfdi.filters._tskf`` in plain NumPy, one run: (T,) statistics
     and bias estimates."""
     Phi, Gamma, C, Q, R = (np.asarray(a) for a in (model.Phi, model.Gamma, model.C, model.Q, model.R))
     st, iu, out, os_ = (np.asarray(a)[:, 0] for a in direction)

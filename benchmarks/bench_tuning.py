@@ -40,7 +40,7 @@ def kf_rows(args, log):
 
     def jaxfdi_total(t, remat=False, unroll=True):
         kf = jaxfdi.filters.kalman_filter(with_noise(t), unroll_factorizations=unroll)
-        kf = jaxfdi.tuning.train.checkpointed(kf) if remat else kf
+        kf = jaxfdi.tuning._train.checkpointed(kf) if remat else kf
         return jnp.sum(jax.vmap(lambda y: jaxfdi.filters.run_filter(kf, kf.init(m0, P0), y, us)[1].log_likelihood.sum())(ys))
 
     def dynamax_total(t):
@@ -72,7 +72,7 @@ def imm_rows(args, log):
     runs = max(1, args.imm_sequences // 7)
     data = et.labelled_runs(runs, seed=0)
     design = et.imm_design("zhang-li")
-    raw = jaxfdi.tuning.parameterize.unconstrain(design.parameterization, design.hand())
+    raw = jaxfdi.tuning._parameterize.unconstrain(design.parameterization, design.hand())
     rows = []
     for remat in (False, True):
         def loss(r, remat=remat):

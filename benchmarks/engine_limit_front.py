@@ -2,7 +2,7 @@
 
 **The limit (item 2).** For each of the engine's six faults the detector that knows the
 fault's signature *and size* and only not its onset: a bank of known-change GLR / CUSUM
-tests (``jaxfdi.detection.known_change.known_change_bank``, Lorden-optimal for one known change) on the
+tests (``jaxfdi.detection._known_change.known_change_bank``, Lorden-optimal for one known change) on the
 innovations of the fault-blind steady-state Kalman filter. Window ``--window`` onsets plus
 every older onset with the signature held at its last lag (``tail``: the CUSUM form). Two
 isolation rules: ``limit``, alarm when the largest of the six log-likelihood ratios
@@ -55,13 +55,13 @@ jax.config.update("jax_enable_x64", True)
 
 from jaxfdi import _io
 from jaxfdi.filters._base import run_filter
-from jaxfdi.filters.kalman import kalman_filter  # noqa: E402
+from jaxfdi.filters._kalman import kalman_filter  # noqa: E402
 from jaxfdi.detection import fault_directions, fault_signatures
-from jaxfdi.detection.glrt import glr_statistic
-from jaxfdi.detection.known_change import known_change_bank  # noqa: E402
-from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, binomial_upper_bound  # noqa: E402
+from jaxfdi.detection._glrt import glr_statistic
+from jaxfdi.detection._known_change import known_change_bank  # noqa: E402
+from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, binomial_upper_bound  # noqa: E402
 from jaxfdi.models import engine_model  # noqa: E402
-from jaxfdi.riccati import steady_state_kalman  # noqa: E402
+from jaxfdi._riccati import steady_state_kalman  # noqa: E402
 from jaxfdi.scenarios import engine_tuning as et  # noqa: E402
 from jaxfdi.scenarios.engine import (  # noqa: E402
     EngineSettings,

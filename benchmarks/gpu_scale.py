@@ -26,8 +26,8 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_f16_fdi import fdi_flights, random_cases  # noqa: E402
 
-from jaxfdi.detection.hybrid_psa import FOLLOW  # noqa: E402
-from jaxfdi.montecarlo import default_chunk_size  # noqa: E402
+from jaxfdi.detection._hybrid_psa import FOLLOW  # noqa: E402
+from jaxfdi._montecarlo import default_chunk_size  # noqa: E402
 from jaxfdi.scenarios import f16_fdi as sf  # noqa: E402
 from jaxfdi.scenarios.f16_flight import GUST_SIGMA, dispersions, flight_setup  # noqa: E402
 

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxfdi
-from jaxfdi.faults import stack_faults
+from jaxfdi._faults import stack_faults
 from jaxfdi.scenarios import vtol as sv
 from jaxfdi.scenarios.vtol_loop import is_multiplicative, run_closed_loop
 
@@ -66,7 +66,7 @@ def main() -> None:
         if name in sv.HEALTH_CASES:   # a dead or frozen sensor has no additive/multiplicative kind
             continue
         onset = int(f.onset)
-        location = int(f.component) + (0 if int(f.target) == int(jaxfdi.faults.Target.ACTUATOR) else 2)
+        location = int(f.component) + (0 if int(f.target) == int(jaxfdi._faults.Target.ACTUATOR) else 2)
         mult = bool(is_multiplicative(f))
         own = location + (0 if mult else 6)
         other = location + (6 if mult else 0)

@@ -45,11 +45,11 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 
 from jaxfdi import _io  # noqa: E402
-from jaxfdi.control.attitude import wheel_attitude_controller, wheel_plant  # noqa: E402
-from jaxfdi.loop import detection_scorer, run_loop  # noqa: E402
-from jaxfdi.metrics import binomial_lower_bound  # noqa: E402
-from jaxfdi.models.reaction_wheels import WheelCommand, filter_input  # noqa: E402
-from jaxfdi.montecarlo import monte_carlo  # noqa: E402
+from jaxfdi.control._attitude import wheel_attitude_controller, wheel_plant  # noqa: E402
+from jaxfdi._loop import detection_scorer, run_loop  # noqa: E402
+from jaxfdi._metrics import binomial_lower_bound  # noqa: E402
+from jaxfdi.models._reaction_wheels import WheelCommand, filter_input  # noqa: E402
+from jaxfdi._montecarlo import monte_carlo  # noqa: E402
 from jaxfdi.scenarios import reaction_wheels as rw  # noqa: E402
 
 #: steps after the engagement at which the credits are examined (0.3 s: the decision

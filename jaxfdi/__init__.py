@@ -10,12 +10,13 @@ public API is these packages' ``__all__``, listed on one page of the documentati
 from jaxfdi import _version, detection, filters, models
 from jaxfdi._monitor import MonitorResult, monitor
 from jaxfdi._simulate import linear_simulator, simulate, simulator
-from jaxfdi.faults import Fault, FaultKind, fault, no_fault, stack_faults
-from jaxfdi.loop import LoopResult, run_loop, state_feedback
-from jaxfdi.metrics import DetectionSummary, rate_interval, summarize_detection
-from jaxfdi.montecarlo import monte_carlo
-from jaxfdi.stages import FDI, Controller, Plant, Scorer
-from jaxfdi.study import Structure, Study, run_study
+from jaxfdi._faults import Fault, FaultKind, concat_faults, fault, fault_group, no_fault, stack_faults
+from jaxfdi._loop import LoopResult, run_loop, state_feedback
+from jaxfdi._metrics import DetectionSummary, rate_interval, summarize_detection
+from jaxfdi._montecarlo import monte_carlo
+from jaxfdi._progress import progress_bar
+from jaxfdi._stages import FDI, Controller, Plant, Scorer
+from jaxfdi._study import Structure, Study, run_study
 
 __version__ = _version.__version__
 
@@ -70,11 +71,11 @@ def __dir__():
 
 __all__ = [
     # faults and simulation
-    "Fault", "FaultKind", "fault", "no_fault", "stack_faults", "simulator", "linear_simulator", "simulate",
+    "Fault", "FaultKind", "fault", "fault_group", "no_fault", "stack_faults", "concat_faults", "simulator", "linear_simulator", "simulate",
     # the closed loop, the monitor, Monte Carlo, studies, summaries
     "Plant", "FDI", "Controller", "Scorer", "run_loop", "state_feedback", "LoopResult", "monitor",
     "MonitorResult", "monte_carlo", "Study", "Structure", "run_study", "summarize_detection",
-    "DetectionSummary", "rate_interval",
+    "DetectionSummary", "rate_interval", "progress_bar",
     # set-up
     "enable_x64", "enable_compilation_cache",
     # subpackages

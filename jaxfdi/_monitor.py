@@ -15,11 +15,11 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import Detector, flag_dead
+from jaxfdi.detection._chi2 import Detector, flag_dead
 from jaxfdi.filters._base import Filter, FilterInfo
-from jaxfdi.loop import detection_scorer, feedforward, run_loop
-from jaxfdi.stages import FDI
-from jaxfdi.metrics import DetectionRecord, record_init, record_update, step_health
+from jaxfdi._loop import detection_scorer, feedforward, run_loop
+from jaxfdi._stages import FDI
+from jaxfdi._metrics import DetectionRecord, record_init, record_update, step_health
 from jaxfdi._simulate import SimStep, Simulator
 
 

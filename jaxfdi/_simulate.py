@@ -20,7 +20,7 @@ and independent of chunking or sharding.
 
 The simulator is a ``Simulator(init, step, measure, advance)``: ``measure`` reads the
 sensors at step ``k`` and ``advance`` moves the plant with the input applied at ``k``,
-which is what a closed loop needs (``jaxfdi.loop``: the controller acts between the two);
+which is what a closed loop needs (``jaxfdi._loop``: the controller acts between the two);
 ``step`` is the two together, for open-loop runs (``simulate``).
 """
 from __future__ import annotations
@@ -33,8 +33,8 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
-from jaxfdi.models.linear import LinearGaussianModel, linear_observation, linear_transition, validate_linear_model
+from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
+from jaxfdi.models._linear import LinearGaussianModel, linear_observation, linear_transition, validate_linear_model
 
 
 class SimState(NamedTuple):

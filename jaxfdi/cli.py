@@ -29,7 +29,7 @@ from typing import Callable, Iterator, NamedTuple, Sequence
 import numpy as np
 
 import jaxfdi
-from jaxfdi import _io, distributed, progress
+from jaxfdi import _io, distributed, _progress as progress
 from jaxfdi._checks import MAX_SEED  # seeds: see its comment
 from jaxfdi.scenarios import engine_chi2_tuning as ct
 from jaxfdi.scenarios import engine_tuning as et
@@ -44,9 +44,9 @@ from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_ex
 from jaxfdi.scenarios.vtol import METHODS as VTOL_METHODS
 from jaxfdi.scenarios.vtol import plot_vtol, vtol_design, vtol_examples, vtol_study
 from jaxfdi.tuning import constrain, save_params
-from jaxfdi.tuning.parameterize import unconstrain
+from jaxfdi.tuning._parameterize import unconstrain
 
-#: the CLI's messages (jaxfdi.progress.configure_logging sends them to stderr; --quiet drops INFO)
+#: the CLI's messages (jaxfdi._progress.configure_logging sends them to stderr; --quiet drops INFO)
 logger = logging.getLogger("jaxfdi")
 
 #: the largest count an option takes (runs, steps, windows: JAX indexes them in int32)

@@ -167,7 +167,7 @@ def plot_confusion(matrix, labels: Sequence[str], *, normalize: bool = True, ax=
     """A confusion matrix (rows: true fault, columns: decided) as an annotated image.
 
     Args:
-      matrix: ``(K, K)`` counts, e.g. ``jaxfdi.metrics.confusion_matrix``.
+      matrix: ``(K, K)`` counts, e.g. ``jaxfdi._metrics.confusion_matrix``.
       labels: K class names.
       normalize: show each row as shares of its runs.
       ax: axes to draw on (default: a new figure).

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import _checks
-from jaxfdi.metrics import DetectionRecord, DetectionSummary
+from jaxfdi._metrics import DetectionRecord, DetectionSummary
 
 __all__ = ["detection_reducer"]
 

@@ -19,7 +19,7 @@ def run_one(key, size):
     test; a sensor-0 bias of ``size`` from step ONSET (fault-free when 0)."""
     model = jaxfdi.models.linear_gaussian_model(jnp.array([[1.0, 0.1], [0.0, 1.0]]), jnp.eye(2),
                                          jnp.diag(jnp.array([1e-3, 1e-2])), jnp.diag(jnp.array([0.05, 0.02])))
-    onset = jnp.where(size > 0, ONSET, jaxfdi.faults.NEVER)
+    onset = jnp.where(size > 0, ONSET, jaxfdi._faults.NEVER)
     sim = jaxfdi.linear_simulator(model, jaxfdi.fault("bias", "sensor", 0, onset, size))
     kf = jaxfdi.filters.kalman_filter(model, unroll_factorizations=False)  # LAPACK calls: compiles faster
     detector = jaxfdi.detection.chi2_detector(jaxfdi.detection.chi2_threshold(WINDOW * 2, 1e-3), WINDOW)

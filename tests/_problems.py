@@ -7,8 +7,8 @@ import numpy as np
 
 import jaxfdi
 from jaxfdi.models import engine_model, rigid_body_params
-from jaxfdi.models.linear import linear_observation, linear_transition
-from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
+from jaxfdi.models._linear import linear_observation, linear_transition
+from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 
 def engine_data(T: int = 120, seed: int = 0):
@@ -53,7 +53,7 @@ def engine_false_alarm_study(num_runs: int, T: int, window: int, pfa: float, see
     def run_one(key, x0):
         kf = jaxfdi.filters.kalman_filter(model)
         result = jaxfdi.monitor(jaxfdi.linear_simulator(model), kf, jaxfdi.detection.chi2_detector(threshold, window),
-                                x0, kf.init(jnp.zeros(7), jnp.asarray(P0)), us, key, jaxfdi.faults.NEVER,
+                                x0, kf.init(jnp.zeros(7), jnp.asarray(P0)), us, key, jaxfdi._faults.NEVER,
                                 keep_history=True)
         return result.record, result.history.statistic[-1]
 

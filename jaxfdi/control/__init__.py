@@ -3,12 +3,12 @@ reconfigured gain for a faulty actuator, and the PI controller that switches to 
 the FDD isolates a fault (Lee & Lyou, Section IV); reaction-wheel attitude control and
 the spacecraft as a loop plant (Choi & Park 2009); F-16 stability augmentation with
 altitude and bank-angle hold, and the sampled F-16 as loop stages (Park et al. 2004)."""
-from jaxfdi.control.attitude import control_torque, slew
-from jaxfdi.control.closed_loop import reconfigurable_pi
-from jaxfdi.control.eigenstructure import assign_eigenstructure
-from jaxfdi.control.f16_loop import f16_plant
-from jaxfdi.control.flight import design_flight_control, flight_controller
-from jaxfdi.control.lqr import PIDesign, integral_augmentation, lqr_gain, lqr_pi
+from jaxfdi.control._attitude import control_torque, slew
+from jaxfdi.control._closed_loop import reconfigurable_pi
+from jaxfdi.control._eigenstructure import assign_eigenstructure
+from jaxfdi.control._f16_loop import f16_plant
+from jaxfdi.control._flight import design_flight_control, flight_controller
+from jaxfdi.control._lqr import PIDesign, integral_augmentation, lqr_gain, lqr_pi
 
 __all__ = [
     "lqr_gain",

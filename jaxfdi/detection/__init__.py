@@ -1,6 +1,6 @@
 """Residual evaluation: tests that turn filter outputs into fault decisions."""
 from jaxfdi.detection._dual_filter import dual_filter
-from jaxfdi.detection.chi2 import (
+from jaxfdi.detection._chi2 import (
     Decision,
     Detector,
     chi2_detector,
@@ -8,18 +8,18 @@ from jaxfdi.detection.chi2 import (
     first_crossing,
     moving_window_sum,
 )
-from jaxfdi.detection.frozen import frozen_channel_detector
-from jaxfdi.detection.glrt import fault_directions, fault_signatures, glrt_detector, glrt_threshold
-from jaxfdi.detection.glrt_correction import corrected_glrt
-from jaxfdi.detection.glrt_recursive import recursive_glrt_detector
-from jaxfdi.detection.glrt_transient import transient_glrt_detector
-from jaxfdi.detection.hybrid_psa import hybrid_psa_config, hybrid_psa_fdi
-from jaxfdi.detection.known_change import known_change_detector
-from jaxfdi.detection.mode_probability import mode_probability_detector
-from jaxfdi.detection.parity import parity_space
-from jaxfdi.detection.signature import isolate
-from jaxfdi.detection.two_stage import two_stage_isolation
-from jaxfdi.detection.wavelet import haar_denoise
+from jaxfdi.detection._frozen import frozen_channel_detector
+from jaxfdi.detection._glrt import fault_directions, fault_signatures, glrt_detector, glrt_threshold
+from jaxfdi.detection._glrt_correction import corrected_glrt
+from jaxfdi.detection._glrt_recursive import recursive_glrt_detector
+from jaxfdi.detection._glrt_transient import transient_glrt_detector
+from jaxfdi.detection._hybrid_psa import hybrid_psa_config, hybrid_psa_fdi
+from jaxfdi.detection._known_change import known_change_detector
+from jaxfdi.detection._mode_probability import mode_probability_detector
+from jaxfdi.detection._parity import parity_space
+from jaxfdi.detection._signature import isolate
+from jaxfdi.detection._two_stage import two_stage_isolation
+from jaxfdi.detection._wavelet import haar_denoise
 
 __all__ = [
     "Decision",

@@ -5,18 +5,19 @@ the two-stage (bias) Kalman filter, optimal or robust to an unknown input, and t
 unbiased minimum-variance filter that decouples an unknown input.
 """
 from jaxfdi.filters._base import Filter, FilterInfo, GaussianState, run_filter
-from jaxfdi.filters.ekf import extended_kalman_filter
-from jaxfdi.filters.imm import interacting_multiple_model
-from jaxfdi.filters.kalman import kalman_filter
-from jaxfdi.filters.mm import multiple_model
-from jaxfdi.filters.posterior import init_from_posterior
-from jaxfdi.filters.smoother import parallel_rts_smoother, rts_smoother
-from jaxfdi.filters.sqrt_kalman import sqrt_kalman_filter
-from jaxfdi.filters.sqrt_ukf import sqrt_unscented_kalman_filter
-from jaxfdi.filters.tskf import actuator_direction, sensor_direction, two_stage_kalman_filter
-from jaxfdi.filters.ukf import unscented_kalman_filter
-from jaxfdi.filters.unknown_input import unknown_input_filter
-from jaxfdi.riccati import solve_discrete_are, steady_state_kalman
+from jaxfdi.filters._ekf import extended_kalman_filter
+from jaxfdi.filters._imm import interacting_multiple_model
+from jaxfdi.filters._kalman import kalman_filter
+from jaxfdi.filters._time_varying import time_varying
+from jaxfdi.filters._mm import multiple_model
+from jaxfdi.filters._posterior import init_from_posterior
+from jaxfdi.filters._smoother import parallel_rts_smoother, rts_smoother
+from jaxfdi.filters._sqrt_kalman import sqrt_kalman_filter
+from jaxfdi.filters._sqrt_ukf import sqrt_unscented_kalman_filter
+from jaxfdi.filters._tskf import actuator_direction, sensor_direction, two_stage_kalman_filter
+from jaxfdi.filters._ukf import unscented_kalman_filter
+from jaxfdi.filters._unknown_input import unknown_input_filter
+from jaxfdi._riccati import solve_discrete_are, steady_state_kalman
 
 __all__ = [
     "Filter",
@@ -34,6 +35,7 @@ __all__ = [
     "interacting_multiple_model",
     "multiple_model",
     "unknown_input_filter",
+    "time_varying",
     "rts_smoother",
     "parallel_rts_smoother",
     "init_from_posterior",

@@ -20,7 +20,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.filters._base import Filter
-from jaxfdi.models.linear import LinearGaussianModel
+from jaxfdi.models._linear import LinearGaussianModel
 
 
 class TimedState(NamedTuple):
@@ -41,6 +41,10 @@ def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter
     u)`` is the step-``k`` filter's ``step``. The halves ``update``/``predict`` are not
     exposed (a multiple-model filter over time-varying modes is built from modes that
     read the step themselves).
+
+    Returns:
+      ``Filter(init, step)`` whose state is ``TimedState(step, inner)`` and whose ``step``
+      returns the step-``k`` filter's info.
     """
     _checks.check_callable("filter_at", filter_at, "a function k -> Filter (e.g. lambda k: kalman_filter(at(k)))")
     start = _checks.check_int("start", start, 0, meaning="the first step's index")

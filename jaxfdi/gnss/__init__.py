@@ -8,14 +8,14 @@ plant), ``least_squares`` (masked Householder QR), ``positioning`` (WLS, DOPs),
 ``raim`` (parity test, isolation), ``protection`` (slopes, HPL/VPL, availability),
 ``integrity`` (one epoch end to end, the loop's FDI stage, availability over grids).
 """
-from jaxfdi.gnss.frames import ecef_to_geodetic, geodetic_to_ecef
-from jaxfdi.gnss.integrity import monitor_epochs, raim_fdi
-from jaxfdi.gnss.orbits import satellite_position
-from jaxfdi.gnss.positioning import PositionFix, dops, solve_position
-from jaxfdi.gnss.protection import ProtectionLevels, protection_levels
-from jaxfdi.gnss.raim import parity_check
-from jaxfdi.gnss.rinex import read_rinex_nav
-from jaxfdi.gnss.yuma import read_yuma
+from jaxfdi.gnss._frames import ecef_to_geodetic, geodetic_to_ecef
+from jaxfdi.gnss._integrity import monitor_epochs, raim_fdi
+from jaxfdi.gnss._orbits import satellite_position
+from jaxfdi.gnss._positioning import PositionFix, dops, solve_position
+from jaxfdi.gnss._protection import ProtectionLevels, protection_levels
+from jaxfdi.gnss._raim import parity_check
+from jaxfdi.gnss._rinex import read_rinex_nav
+from jaxfdi.gnss._yuma import read_yuma
 
 __all__ = [
     "read_rinex_nav",

@@ -1,20 +1,21 @@
 """Strapdown INS and INS/GPS integrity (Yoo et al. 2010, INS half).
 
-Modules: ``earth`` (WGS-84 radii, gravity, Earth and transport rates), ``mechanization``
-(NED strapdown step, its inverse, the continuous equations), ``error_state`` (the 15 error states, feedback, ``F`` by
-``jax.jacfwd``, discretisation), ``imu`` (HG1900-class error model), ``trajectory`` (UAV
-flights and their perfect IMU), ``plant`` (GPS receiver + IMU as a loop plant),
-``loosely_coupled`` (the 15-state error-state EKF as a ``Filter``), ``scst`` (Da's state
-chi-square test with two propagators), ``integrity`` (RAIM -> EKF -> chi-square and SCST as
-the loop's FDI stage). The quaternion algebra is ``jaxfdi.models.rotation``.
+Inside: WGS-84 radii, gravity, Earth and transport rates; the NED strapdown step
+(``NavState``), its inverse and the continuous equations; the 15 error states, their
+feedback, ``F`` by ``jax.jacfwd`` and its discretisation; an HG1900-class IMU error model
+(``hg1900``); UAV flights and their perfect IMU (``fly``); the GPS receiver and IMU as a
+loop plant (``gps_ins_plant``); the 15-state error-state EKF as a ``Filter``
+(``loosely_coupled_filter``); Da's state chi-square test with two propagators
+(``state_chi2_test``); RAIM -> EKF -> chi-square and SCST as the loop's FDI stage
+(``gps_ins_fdi``). The quaternion algebra is that of the reaction-wheel model.
 """
-from jaxfdi.ins.imu import hg1900
-from jaxfdi.ins.integrity import gps_ins_fdi
-from jaxfdi.ins.loosely_coupled import loosely_coupled_filter
-from jaxfdi.ins.mechanization import NavState
-from jaxfdi.ins.plant import gps_ins_plant
-from jaxfdi.ins.scst import state_chi2_test
-from jaxfdi.ins.trajectory import fly
+from jaxfdi.ins._imu import hg1900
+from jaxfdi.ins._integrity import gps_ins_fdi
+from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
+from jaxfdi.ins._mechanization import NavState
+from jaxfdi.ins._plant import gps_ins_plant
+from jaxfdi.ins._scst import state_chi2_test
+from jaxfdi.ins._trajectory import fly
 
 __all__ = [
     "NavState",

@@ -1,5 +1,5 @@
 """Numerical optimisation in JAX: nonlinear least squares (Levenberg-Marquardt)."""
-from jaxfdi.optimize.least_squares import levenberg_marquardt
+from jaxfdi.optimize._least_squares import levenberg_marquardt
 
 __all__ = [
     "levenberg_marquardt",

@@ -42,25 +42,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi.detection.glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_detector, glrt_threshold
-from jaxfdi.detection.mode_probability import mode_probability_detector
-from jaxfdi.faults import Fault, fault, fault_label, sensor_labels, stack_faults
-from jaxfdi.filters.imm import interacting_multiple_model
-from jaxfdi.filters.kalman import kalman_filter
-from jaxfdi.filters.mm import multiple_model
+from jaxfdi.detection._glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_detector, glrt_threshold
+from jaxfdi.detection._mode_probability import mode_probability_detector
+from jaxfdi._faults import Fault, fault, fault_label, sensor_labels, stack_faults
+from jaxfdi.filters._imm import interacting_multiple_model
+from jaxfdi.filters._kalman import kalman_filter
+from jaxfdi.filters._mm import multiple_model
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.metrics import DetectionRecord, fault_row, rate_text, unhealthy_rows_warning
-from jaxfdi.models.engine import OUTPUT_NAMES, TS, engine_model
-from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, unhealthy_rows_warning
+from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
+from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.filters import run_filter
 from jaxfdi._monitor import monitor, replay_detector
-from jaxfdi.montecarlo import monte_carlo
+from jaxfdi._montecarlo import monte_carlo
 from jaxfdi.plotting import save_figure
-from jaxfdi.riccati import steady_state_kalman
+from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi._simulate import linear_simulator, simulate
-from jaxfdi.study import Structure, Study, run_study
-from jaxfdi.tuning.train import fixed_batches
+from jaxfdi._study import Structure, Study, run_study
+from jaxfdi.tuning._train import fixed_batches
 
 MODE_NAMES = ("normal", "actuator", "RPM", "P2", "T2", "P4", "T4")
 
@@ -615,7 +615,7 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
 def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] | None = None,
                 duration: float = 4.0, onset_time: float = 2.0, unrolled: bool = False,
                 kernel: bool = True) -> Study:
-    """The engine study as data (``jaxfdi.study``): the nine cases (``study_faults``) and every method of
+    """The engine study as data (``jaxfdi._study``): the nine cases (``study_faults``) and every method of
     ``engine_method_names`` (or ``methods``) in five structures, one compiled program
     each: the MMs and IMMs of each mode design, and the GLRTs. Within a structure the
     methods are cells of a (filter x decision rule) grid: the IMMs that share a

@@ -21,16 +21,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
-from jaxfdi.faults import Fault, fault, no_fault, stack_faults
-from jaxfdi.filters.kalman import kalman_filter
+from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
+from jaxfdi._faults import Fault, fault, no_fault, stack_faults
+from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.metrics import DetectionRecord, fault_row, rate_text, summarize_detection, unhealthy_rows_warning
-from jaxfdi.models.engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
+from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, summarize_detection, unhealthy_rows_warning
+from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi._monitor import MonitorHistory, monitor
 from jaxfdi.plotting import save_figure
 from jaxfdi._simulate import linear_simulator
-from jaxfdi.study import Structure, Study, run_study
+from jaxfdi._study import Structure, Study, run_study
 
 FUEL_STEP = 0.01  # kg/s
 ACTUATOR_BIAS = 0.05 * FUEL_STEP

@@ -26,17 +26,17 @@ import numpy as np
 import optax
 
 from jaxfdi import _checks
-from jaxfdi.detection.chi2 import chi2_threshold, moving_window_sum
+from jaxfdi.detection._chi2 import chi2_threshold, moving_window_sum
 from jaxfdi.filters._base import run_filter
-from jaxfdi.filters.kalman import kalman_filter
-from jaxfdi.metrics import unhealthy_rows_warning
-from jaxfdi.models.engine import TS, engine_model
+from jaxfdi.filters._kalman import kalman_filter
+from jaxfdi._metrics import unhealthy_rows_warning
+from jaxfdi.models._engine import TS, engine_model
 from jaxfdi.scenarios._common import check_study
 from jaxfdi.scenarios.engine import LabelledRuns, _fmt, balanced_batches, labelled_runs
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_chi2_study
-from jaxfdi.tuning import losses
-from jaxfdi.tuning.parameterize import constrain, log_diagonal, log_scale, unconstrain
-from jaxfdi.tuning.train import TrainResult, fit
+from jaxfdi.tuning import _losses as losses
+from jaxfdi.tuning._parameterize import constrain, log_diagonal, log_scale, unconstrain
+from jaxfdi.tuning._train import TrainResult, fit
 
 PARAMETERIZATION = {"Q": log_diagonal(), "R": log_diagonal(), "threshold": log_scale()}
 HAND_WINDOW, HAND_PFA = 4, 0.005

@@ -45,15 +45,15 @@ import numpy as np
 import optax
 
 from jaxfdi import _checks
-from jaxfdi.detection.mode_probability import mode_probability_detector
+from jaxfdi.detection._mode_probability import mode_probability_detector
 from jaxfdi.filters._base import run_filter
-from jaxfdi.filters.imm import interacting_multiple_model
-from jaxfdi.filters.kalman import kalman_filter
-from jaxfdi.models.engine import engine_model
-from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
-from jaxfdi.metrics import DetectionRecord, unhealthy_rows_warning
+from jaxfdi.filters._imm import interacting_multiple_model
+from jaxfdi.filters._kalman import kalman_filter
+from jaxfdi.models._engine import engine_model
+from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi._metrics import DetectionRecord, unhealthy_rows_warning
 from jaxfdi._monitor import replay_detector
-from jaxfdi.montecarlo import monte_carlo
+from jaxfdi._montecarlo import monte_carlo
 from jaxfdi.scenarios._common import check_study
 from jaxfdi.scenarios.engine import (
     PAPER_TRANSITION,
@@ -70,8 +70,8 @@ from jaxfdi.scenarios.engine import (
     summarize_method,
 )
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP
-from jaxfdi.tuning import losses
-from jaxfdi.tuning.parameterize import (
+from jaxfdi.tuning import _losses as losses
+from jaxfdi.tuning._parameterize import (
     Transform,
     constrain,
     log_scale,
@@ -80,7 +80,7 @@ from jaxfdi.tuning.parameterize import (
     unconstrain,
     unit_interval,
 )
-from jaxfdi.tuning.train import TrainResult, checkpointed, fit, strongly_typed
+from jaxfdi.tuning._train import TrainResult, checkpointed, fit, strongly_typed
 
 TRANSITION_MASK = (PAPER_TRANSITION > 0) | np.eye(len(PAPER_TRANSITION), dtype=bool)
 NUM_FAULTS = len(PAPER_TRANSITION) - 1

@@ -41,22 +41,22 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection import parity as ps
-from jaxfdi.detection import sensor_configuration as sc
-from jaxfdi.detection.hybrid_psa import (
+from jaxfdi.detection import _parity as ps
+from jaxfdi.detection import _sensor_configuration as sc
+from jaxfdi.detection._hybrid_psa import (
     FOLLOW,
     HybridPSAConfig,
     hybrid_psa_config,
     hybrid_psa_fdi,
     hybrid_psa_init,
 )
-from jaxfdi.detection.parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
-from jaxfdi.faults import Fault, FaultKind, Target
+from jaxfdi.detection._parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
+from jaxfdi._faults import Fault, FaultKind, Target
 from jaxfdi.filters import init_from_posterior, run_filter
-from jaxfdi.metrics import binomial_interval, rate_interval
-from jaxfdi.filters.ukf import unscented_kalman_filter
-from jaxfdi.models.f16.plant import RATE_OFFSET, flight_view
-from jaxfdi.models.f16.rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
+from jaxfdi._metrics import binomial_interval, rate_interval
+from jaxfdi.filters._ukf import unscented_kalman_filter
+from jaxfdi.models.f16._plant import RATE_OFFSET, flight_view
+from jaxfdi.models.f16._rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
     rate_transition
 from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
@@ -71,7 +71,7 @@ from jaxfdi.scenarios.f16_flight import (
     nominal_dispersion,
     run_flight,
 )
-from jaxfdi.study import Structure, Study, run_study
+from jaxfdi._study import Structure, Study, run_study
 
 #: per-step false-alarm probability of the FD test (a 15 s flight, 1500 steps: 1.5e-3 per flight)
 PFA = 1e-6

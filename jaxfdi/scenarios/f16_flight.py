@@ -37,8 +37,8 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.control.f16_loop import f16_plant, rate_passthrough_fdi
-from jaxfdi.control.flight import (
+from jaxfdi.control._f16_loop import f16_plant, rate_passthrough_fdi
+from jaxfdi.control._flight import (
     LATERAL_TRACKED,
     LONGITUDINAL_TRACKED,
     FlightGains,
@@ -54,10 +54,10 @@ from jaxfdi.control.flight import (
     initial_condition,
     plan_trims,
 )
-from jaxfdi.control.lqr import integral_augmentation
-from jaxfdi.loop import run_loop
-from jaxfdi.models.f16 import book
-from jaxfdi.models.f16.dynamics import (
+from jaxfdi.control._lqr import integral_augmentation
+from jaxfdi._loop import run_loop
+from jaxfdi.models.f16 import _book as book
+from jaxfdi.models.f16._dynamics import (
     ALPHA, BETA, CONTROL_NAMES, H, P, PHI, Q, R, STATE_NAMES, THETA, VT, F16Params, f16_params,
 )
 from jaxfdi.models.f16._linearize import (
@@ -67,12 +67,12 @@ from jaxfdi.models.f16._linearize import (
     linearize,
     submodel,
 )
-from jaxfdi.models.f16.plant import F16Sensors, f16_sensors
-from jaxfdi.models.linear import c2d
+from jaxfdi.models.f16._plant import F16Sensors, f16_sensors
+from jaxfdi.models._linear import c2d
 from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.study import Structure, Study, run_study
-from jaxfdi.tracking import TrackingScore, tracked_plant
+from jaxfdi._study import Structure, Study, run_study
+from jaxfdi._tracking import TrackingScore, tracked_plant
 
 #: control period and RK4 step, s
 DT = 0.01

@@ -39,16 +39,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import faults as flt
+from jaxfdi import _faults as flt
 from jaxfdi.data import data_path
-from jaxfdi.gnss import frames, integrity, measurements, orbits, paths, raim, rinex, yuma
-from jaxfdi.gnss.protection import ALERT_LIMITS
-from jaxfdi.loop import episode_scorer, feedforward, run_loop
-from jaxfdi.metrics import rate_text, summarize_episodes
+from jaxfdi.gnss import _frames as frames, _integrity as integrity, _measurements as measurements, _orbits as orbits, _paths as paths, _raim as raim, _rinex as rinex, _yuma as yuma
+from jaxfdi.gnss._protection import ALERT_LIMITS
+from jaxfdi._loop import episode_scorer, feedforward, run_loop
+from jaxfdi._metrics import rate_text, summarize_episodes
 from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.progress import status
-from jaxfdi.study import Structure, Study, run_study
+from jaxfdi._progress import status
+from jaxfdi._study import Structure, Study, run_study
 
 WEEK = 2086
 START_TOW = 259200.0 + 2700.0        # 2020-01-01 00:45:00 GPST

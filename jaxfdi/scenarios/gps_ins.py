@@ -50,16 +50,16 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats as _scipy_stats
 
-from jaxfdi.progress import status
-from jaxfdi import faults as flt
+from jaxfdi._progress import status
+from jaxfdi import _faults as flt
 from jaxfdi.data import data_path
-from jaxfdi.detection.chi2 import chi2_detector, chi2_threshold
-from jaxfdi.gnss import frames, measurements, orbits, raim, rinex
-from jaxfdi.ins import error_state, imu, integrity, plant, scst, trajectory
-from jaxfdi.ins.loosely_coupled import loosely_coupled_filter
-from jaxfdi.ins.mechanization import NavState
-from jaxfdi.loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
-from jaxfdi.metrics import (
+from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
+from jaxfdi.gnss import _frames as frames, _measurements as measurements, _orbits as orbits, _raim as raim, _rinex as rinex
+from jaxfdi.ins import _error_state as error_state, _imu as imu, _integrity as integrity, _plant as plant, _scst as scst, _trajectory as trajectory
+from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
+from jaxfdi.ins._mechanization import NavState
+from jaxfdi._loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
+from jaxfdi._metrics import (
     binomial_interval,
     binomial_lower_bound,
     delay_statistics,
@@ -73,7 +73,7 @@ from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 # Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
 from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK
-from jaxfdi.study import Structure, Study, case_slices, run_study
+from jaxfdi._study import Structure, Study, case_slices, run_study
 
 FLIGHT_S = 1200
 IMU_RATE = 100

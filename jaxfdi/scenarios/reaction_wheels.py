@@ -79,7 +79,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.control.attitude import (
+from jaxfdi.control._attitude import (
     AttitudeGains,
     Slew,
     pd_gains,
@@ -88,20 +88,20 @@ from jaxfdi.control.attitude import (
     wheel_attitude_controller,
     wheel_plant,
 )
-from jaxfdi.detection.chi2 import Decision, chi2_threshold
-from jaxfdi.detection.credits import hypothesis_credits
-from jaxfdi.detection.frozen import frozen_channel_detector
-from jaxfdi.detection.two_stage import two_stage_isolation
-from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, no_fault, sensor_labels
+from jaxfdi.detection._chi2 import Decision, chi2_threshold
+from jaxfdi.detection._credits import hypothesis_credits
+from jaxfdi.detection._frozen import frozen_channel_detector
+from jaxfdi.detection._two_stage import two_stage_isolation
+from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, no_fault, sensor_labels
 from jaxfdi.filters._base import GaussianState
-from jaxfdi.filters.ekf import extended_kalman_filter
-from jaxfdi.filters.ukf import unscented_kalman_filter
-from jaxfdi.loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
-from jaxfdi.stages import FDI
-from jaxfdi.metrics import DetectionRecord, binomial_lower_bound, rate_text, unhealthy_warning
+from jaxfdi.filters._ekf import extended_kalman_filter
+from jaxfdi.filters._ukf import unscented_kalman_filter
+from jaxfdi._loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
+from jaxfdi._stages import FDI
+from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, rate_text, unhealthy_warning
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
-from jaxfdi.study import Structure, Study, run_study
-from jaxfdi.models.reaction_wheels import (
+from jaxfdi._study import Structure, Study, run_study
+from jaxfdi.models._reaction_wheels import (
     SpacecraftParams,
     WheelCommand,
     body_rate_field,

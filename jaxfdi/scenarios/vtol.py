@@ -53,21 +53,21 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import _checks
-from jaxfdi.control.eigenstructure import effectiveness_gain_schedule, nominal_eigenstructure
-from jaxfdi.control.lqr import lqr_pi
-from jaxfdi.detection.calibration import empirical_threshold, scale_to_run_false_alarm
-from jaxfdi.detection.chi2 import chi2_threshold, moving_window_sum
-from jaxfdi.detection.frozen import frozen_threshold
-from jaxfdi.detection.signature import isolate, location_symptoms
-from jaxfdi.detection.wavelet import block_alarms, causal_detail_sigma, chi2_detail_sigma, haar_denoise
-from jaxfdi.faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
-from jaxfdi.filters.tskf import actuator_direction, sensor_direction, stack_directions
-from jaxfdi.metrics import delay_statistics, rate_text, record_from_alarms, step_health, unhealthy_warning
-from jaxfdi.models import vtol
+from jaxfdi.control._eigenstructure import effectiveness_gain_schedule, nominal_eigenstructure
+from jaxfdi.control._lqr import lqr_pi
+from jaxfdi.detection._calibration import empirical_threshold, scale_to_run_false_alarm
+from jaxfdi.detection._chi2 import chi2_threshold, moving_window_sum
+from jaxfdi.detection._frozen import frozen_threshold
+from jaxfdi.detection._signature import isolate, location_symptoms
+from jaxfdi.detection._wavelet import block_alarms, causal_detail_sigma, chi2_detail_sigma, haar_denoise
+from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
+from jaxfdi.filters._tskf import actuator_direction, sensor_direction, stack_directions
+from jaxfdi._metrics import delay_statistics, rate_text, record_from_alarms, step_health, unhealthy_warning
+from jaxfdi.models import _vtol as vtol
 from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.scenarios.vtol_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
-from jaxfdi.study import Structure, Study, run_study
+from jaxfdi._study import Structure, Study, run_study
 
 LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
 FILTER_NAMES = tuple(f"{loc}-{kind}" for kind in ("mult", "add") for loc in LOCATIONS)

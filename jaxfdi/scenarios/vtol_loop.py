@@ -1,7 +1,7 @@
 """The closed loop of Lee and Lyou's VTOL example: fault detection, isolation and
 fault-tolerant control (Lee & Lyou, Fig. 2).
 
-Three ``jaxfdi.loop`` parts, composed by ``run_closed_loop`` into one ``run_loop``:
+Three ``jaxfdi._loop`` parts, composed by ``run_closed_loop`` into one ``run_loop``:
 ``true_plant`` (a ``Simulator``), ``tskf_bank_fdi`` (estimator, TSKF bank, MDWT
 decision, signature isolation, reconfiguration) and ``control.reconfigurable_pi`` (the
 controller). Step ``k``:
@@ -48,18 +48,18 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _linalg
-from jaxfdi.control.closed_loop import Reconfiguration, reconfigurable_pi
-from jaxfdi.control.eigenstructure import GainSchedule
-from jaxfdi.detection.frozen import FrozenState, frozen_channel_detector
-from jaxfdi.detection.signature import isolate, location_symptoms
-from jaxfdi.detection.wavelet import haar_denoise
-from jaxfdi.faults import Fault, FaultKind
+from jaxfdi.control._closed_loop import Reconfiguration, reconfigurable_pi
+from jaxfdi.control._eigenstructure import GainSchedule
+from jaxfdi.detection._frozen import FrozenState, frozen_channel_detector
+from jaxfdi.detection._signature import isolate, location_symptoms
+from jaxfdi.detection._wavelet import haar_denoise
+from jaxfdi._faults import Fault, FaultKind
 from jaxfdi.filters._base import GaussianState
-from jaxfdi.filters.tskf import FaultDirection, sensor_matrix, two_stage_kalman_filter
-from jaxfdi.filters.unknown_input import unknown_input_filter
-from jaxfdi.loop import run_loop
-from jaxfdi.stages import FDI
-from jaxfdi.models.linear import LinearGaussianModel
+from jaxfdi.filters._tskf import FaultDirection, sensor_matrix, two_stage_kalman_filter
+from jaxfdi.filters._unknown_input import unknown_input_filter
+from jaxfdi._loop import run_loop
+from jaxfdi._stages import FDI
+from jaxfdi.models._linear import LinearGaussianModel
 from jaxfdi._simulate import Simulator, simulator
 
 

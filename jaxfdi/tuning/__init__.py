@@ -1,7 +1,7 @@
 """Gradient-based tuning: parameterisations, differentiable losses, the optax loop."""
-from jaxfdi.tuning.losses import innovation_nll, mode_cross_entropy, soft_detection_loss
-from jaxfdi.tuning.parameterize import cholesky_factor, constrain, positive, simplex
-from jaxfdi.tuning.train import TrainResult, fit, load_params, save_params
+from jaxfdi.tuning._losses import innovation_nll, mode_cross_entropy, soft_detection_loss
+from jaxfdi.tuning._parameterize import cholesky_factor, constrain, positive, simplex
+from jaxfdi.tuning._train import TrainResult, fit, load_params, save_params
 
 __all__ = [
     "fit",

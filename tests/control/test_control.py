@@ -11,9 +11,9 @@ import pytest
 import scipy.linalg as sl
 
 from jaxfdi.control import assign_eigenstructure, integral_augmentation, lqr_gain, lqr_pi
-from jaxfdi.control.eigenstructure import effectiveness_input
-from jaxfdi.control.eigenstructure import nominal_eigenstructure
-from jaxfdi.models import vtol
+from jaxfdi.control._eigenstructure import effectiveness_input
+from jaxfdi.control._eigenstructure import nominal_eigenstructure
+from jaxfdi.models import _vtol as vtol
 
 H_PAPER = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0]])   # v_h and q (seed 001, eq. 35)
 H_ANGLE = np.array([[1.0, 0, 0, 0], [0, 0, 0, 1]])   # v_h and theta: stabilisable

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi.faults import (
+from jaxfdi._faults import (
     NEVER,
     FaultKind,
     active_label,
@@ -19,7 +19,7 @@ from jaxfdi.faults import (
     no_fault,
     stack_faults,
 )
-from jaxfdi.metrics import episode_record_init, episode_record_update, summarize_episodes
+from jaxfdi._metrics import episode_record_init, episode_record_update, summarize_episodes
 from jaxfdi.models import engine_model
 
 KINDS = ["bias", "ramp", "impulse", "scale", "stuck", "none"]

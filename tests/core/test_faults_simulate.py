@@ -6,7 +6,7 @@ import pytest
 from scipy import stats
 
 import jaxfdi
-from jaxfdi.faults import FaultKind, Target, apply_fault, fault, fault_label, is_active, stack_faults
+from jaxfdi._faults import FaultKind, Target, apply_fault, fault, fault_label, is_active, stack_faults
 from jaxfdi.models import engine_model
 
 STEPS = np.arange(12)

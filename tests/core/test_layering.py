@@ -17,16 +17,16 @@ PACKAGE = pathlib.Path(jaxfdi.__file__).parent
 
 #: unit (a package or a top-level module of jaxfdi) -> layer; lower layers never import higher ones
 LAYERS = {
-    "_checks": 0, "_linalg": 0, "_io": 0, "_version": 0, "progress": 0, "data": 0, "distributed": 0,
-    "faults": 1, "optimize": 1, "stages": 1,
+    "_checks": 0, "_linalg": 0, "_io": 0, "_version": 0, "_progress": 0, "data": 0, "distributed": 0,
+    "_faults": 1, "optimize": 1, "_stages": 1,
     "models": 2,
-    "riccati": 3, "_simulate": 3,
+    "_riccati": 3, "_simulate": 3,
     "filters": 4,
-    "metrics": 5, "montecarlo": 5,
-    "study": 6, "streaming": 6,
+    "_metrics": 5, "_montecarlo": 5,
+    "_study": 6, "streaming": 6,
     "detection": 7,
-    "loop": 8,
-    "_monitor": 9, "tracking": 9, "tuning": 9,
+    "_loop": 8,
+    "_monitor": 9, "_tracking": 9, "tuning": 9,
     "gnss": 10, "control": 10,
     "ins": 11,
     "plotting": 12,
@@ -36,7 +36,7 @@ LAYERS = {
 
 
 def _unit(dotted: str) -> str:
-    """``jaxfdi.filters.kalman`` -> ``filters``; ``jaxfdi.loop`` -> ``loop``; ``jaxfdi`` -> ``__init__``."""
+    """``jaxfdi.filters._kalman`` -> ``filters``; ``jaxfdi._loop`` -> ``loop``; ``jaxfdi`` -> ``__init__``."""
     parts = dotted.split(".")
     if len(parts) == 1 or not ((PACKAGE / parts[1]).is_dir() or (PACKAGE / f"{parts[1]}.py").exists()):
         return "__init__"  # the package itself, or a name its __init__ exports

@@ -10,7 +10,7 @@ import jaxfdi
 from _problems import engine_data, rigid_body_data
 from jaxfdi import _linalg
 from jaxfdi.filters._base import _covariance_sees_data
-from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
+from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 
 def random_spd(rng, n):

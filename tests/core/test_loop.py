@@ -1,4 +1,4 @@
-"""The closed-loop scan (``jaxfdi.loop``) and the time-varying simulator and filter,
+"""The closed-loop scan (``jaxfdi._loop``) and the time-varying simulator and filter,
 against independent references: the open-loop pipeline written step by step in Python,
 the closed-form closed-loop response, the original filter run, filterpy driven matrix by
 matrix, and sample statistics."""
@@ -11,11 +11,11 @@ from filterpy.kalman import KalmanFilter
 from scipy import stats
 
 import jaxfdi
-from jaxfdi import loop
-from jaxfdi.filters import history
+from jaxfdi import _loop as loop
+from jaxfdi.filters import _history as history
 from jaxfdi.filters._time_varying import model_at, time_varying
 from jaxfdi.models import engine_model
-from jaxfdi.models.linear import LinearGaussianModel
+from jaxfdi.models._linear import LinearGaussianModel
 from jaxfdi._monitor import filter_detector
 
 T = 60
@@ -271,7 +271,7 @@ def test_a_dead_sensor_mid_run_is_an_alarm_not_ill_health(engine):
     sim = jaxfdi.linear_simulator(model, available=lambda k, x: jnp.full((5,), k != 40))
     labels = 10 + jnp.arange(5)
     records = []
-    for onset in (ONSET, jaxfdi.faults.NEVER):
+    for onset in (ONSET, jaxfdi._faults.NEVER):
         result = jaxfdi.monitor(sim, kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q), us,
                                 jax.random.key(0), onset, keep_history=True, channel_labels=labels)
         assert int(result.record.first_unhealthy) == -1
@@ -301,10 +301,10 @@ def test_episode_scorer_over_a_flight_with_three_fault_episodes(engine):
     Python from the stored alarm sequence."""
     model, kf, detector, _ = engine
     steps, grace = 150, 3
-    group = jaxfdi.faults.fault_group("bias", "sensor", [1, 3], 20, [25.0, 4.0], end=45, label=9)
-    flight = jaxfdi.faults.concat_faults(group, jaxfdi.fault("bias", "actuator", 0, 70, 2e-3, end=95),
+    group = jaxfdi._faults.fault_group("bias", "sensor", [1, 3], 20, [25.0, 4.0], end=45, label=9)
+    flight = jaxfdi._faults.concat_faults(group, jaxfdi.fault("bias", "actuator", 0, 70, 2e-3, end=95),
                                   jaxfdi.fault("ramp", "sensor", 2, 110, 0.0, slope=0.5))
-    onsets, ends, labels = jaxfdi.faults.episodes(flight, 1)
+    onsets, ends, labels = jaxfdi._faults.episodes(flight, 1)
     us = jnp.full((steps, 1), 0.01)
     result = loop.run_loop(jaxfdi.linear_simulator(model, flight), filter_detector(kf, detector), loop.feedforward(),
                            jnp.zeros(7), (kf.init(jnp.zeros(7), model.Q), detector.init()), jax.random.key(7),

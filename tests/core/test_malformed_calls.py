@@ -23,10 +23,10 @@ import optax
 import pytest
 
 import jaxfdi
-from jaxfdi import control, detection, loop, metrics, models, tuning
-from jaxfdi.filters import _time_varying, history
-from jaxfdi.filters import tskf
-from jaxfdi.models.vtol import vtol_model, vtol_true_plant
+from jaxfdi import control, detection, _loop as loop, _metrics as metrics, models, tuning
+from jaxfdi.filters import _time_varying, _history as history
+from jaxfdi.filters import _tskf as tskf
+from jaxfdi.models._vtol import vtol_model, vtol_true_plant
 from jaxfdi._monitor import filter_detector
 from jaxfdi.scenarios.engine import engine_study
 from jaxfdi.scenarios.engine_chi2 import engine_chi2_study
@@ -34,9 +34,9 @@ from jaxfdi.scenarios.engine_chi2_tuning import tune_engine_chi2
 from jaxfdi.scenarios.engine_tuning import imm_design, tune_engine_imm
 from jaxfdi.scenarios.reaction_wheels import wheel_study
 from jaxfdi.scenarios.vtol import vtol_study
-from jaxfdi.tuning.parameterize import from_record
+from jaxfdi.tuning._parameterize import from_record
 from jaxfdi.models import engine_model
-from jaxfdi.models.linear import linear_observation, linear_transition
+from jaxfdi.models._linear import linear_observation, linear_transition
 
 MODEL = engine_model()                       # n = 7, nu = 1, m = 5
 N, NU, M = 7, 1, 5
@@ -217,15 +217,15 @@ CASES = {
     "init_from_posterior cov indefinite": (lambda: jaxfdi.filters.init_from_posterior(
         jaxfdi.filters.kalman_filter(SMALL), jnp.zeros(2), INDEFINITE_2, jnp.zeros(1)), V, "cov"),
     # --- fault-mode designs ----------------------------------------------------------
-    "noise_inflation negative": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, -5.0, 1.0), V, "sensor_inflation"),
-    "noise_inflation zero": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, 0.0, 1.0), V, "sensor_inflation"),
-    "noise_inflation NaN": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, float("nan"), 1.0), V, "sensor_inflation"),
-    "noise_inflation actuator negative": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, 10.0, -1.0), V,
+    "noise_inflation negative": (lambda: jaxfdi.models._fault_modes.noise_inflation_modes(MODEL, -5.0, 1.0), V, "sensor_inflation"),
+    "noise_inflation zero": (lambda: jaxfdi.models._fault_modes.noise_inflation_modes(MODEL, 0.0, 1.0), V, "sensor_inflation"),
+    "noise_inflation NaN": (lambda: jaxfdi.models._fault_modes.noise_inflation_modes(MODEL, float("nan"), 1.0), V, "sensor_inflation"),
+    "noise_inflation actuator negative": (lambda: jaxfdi.models._fault_modes.noise_inflation_modes(MODEL, 10.0, -1.0), V,
                                           "actuator_noise"),
-    "noise_inflation wrong length": (lambda: jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, jnp.ones(3) * 10, 1.0), V,
+    "noise_inflation wrong length": (lambda: jaxfdi.models._fault_modes.noise_inflation_modes(MODEL, jnp.ones(3) * 10, 1.0), V,
                                      "sensor_inflation"),
-    "bias_modes walk negative": (lambda: jaxfdi.models.fault_modes.bias_modes(MODEL, -1.0, 1.0), V, "bias_walk"),
-    "bias_modes prior NaN": (lambda: jaxfdi.models.fault_modes.bias_modes(MODEL, 1.0, float("nan")), V, "bias_prior"),
+    "bias_modes walk negative": (lambda: jaxfdi.models._fault_modes.bias_modes(MODEL, -1.0, 1.0), V, "bias_walk"),
+    "bias_modes prior NaN": (lambda: jaxfdi.models._fault_modes.bias_modes(MODEL, 1.0, float("nan")), V, "bias_prior"),
     # --- faults ---------------------------------------------------------------------
     "fault unknown kind name": (lambda: fault(kind="drift"), V, "kind"),
     "fault unknown kind int": (lambda: fault(kind=9), V, "kind"),
@@ -244,13 +244,13 @@ CASES = {
                                      "magnitude"),
     "fault end before onset": (lambda: fault(onset=10, end=5), V, "end"),
     "fault label below -1": (lambda: fault(label=-2), V, "label"),
-    "fault_group no components": (lambda: jaxfdi.faults.fault_group("bias", "sensor", [], 10, 1.0), V, "components"),
-    "fault_group magnitudes length": (lambda: jaxfdi.faults.fault_group("bias", "sensor", [0, 1], 10, [1.0, 2.0, 3.0]), V,
+    "fault_group no components": (lambda: jaxfdi._faults.fault_group("bias", "sensor", [], 10, 1.0), V, "components"),
+    "fault_group magnitudes length": (lambda: jaxfdi._faults.fault_group("bias", "sensor", [0, 1], 10, [1.0, 2.0, 3.0]), V,
                                       "magnitudes"),
-    "fault_group components float": (lambda: jaxfdi.faults.fault_group("bias", "sensor", [0.5, 1.0], 10, 1.0), T_,
+    "fault_group components float": (lambda: jaxfdi._faults.fault_group("bias", "sensor", [0.5, 1.0], 10, 1.0), T_,
                                      "components"),
-    "concat_faults none": (lambda: jaxfdi.faults.concat_faults(), V, "faults"),
-    "concat_faults not a Fault": (lambda: jaxfdi.faults.concat_faults(fault(), (1, 2)), T_, "faults"),
+    "concat_faults none": (lambda: jaxfdi._faults.concat_faults(), V, "faults"),
+    "concat_faults not a Fault": (lambda: jaxfdi._faults.concat_faults(fault(), (1, 2)), T_, "faults"),
     # --- simulator ------------------------------------------------------------------
     "sim sensor fault component out of range": (lambda: sim_with(fault(component=10)), V, "fault"),
     "sim actuator fault component out of range": (lambda: sim_with(fault(target="actuator", component=3)), V, "fault"),
@@ -304,14 +304,14 @@ CASES = {
                                              "confirm_steps"),
     "mode_probability normal_mode negative": (lambda: detection.mode_probability_detector(0.9, normal_mode=-1), V,
                                               "normal_mode"),
-    "credit_isolator confirm_steps zero": (lambda: jaxfdi.detection.credits.credit_isolator(0.5, confirm_steps=0), V,
+    "credit_isolator confirm_steps zero": (lambda: jaxfdi.detection._credits.credit_isolator(0.5, confirm_steps=0), V,
                                            "confirm_steps"),
-    "credit_isolator threshold NaN": (lambda: jaxfdi.detection.credits.credit_isolator(float("nan")), V, "threshold"),
+    "credit_isolator threshold NaN": (lambda: jaxfdi.detection._credits.credit_isolator(float("nan")), V, "threshold"),
     "haar_denoise levels zero": (lambda: detection.haar_denoise(jnp.ones(16), levels=0), V, "levels"),
     "haar_denoise levels float": (lambda: detection.haar_denoise(jnp.ones(16), levels=2.0), T_, "levels"),
     "haar_denoise mode": (lambda: detection.haar_denoise(jnp.ones(16), mode="hard2"), V, "mode"),
     "haar_denoise c_mult NaN": (lambda: detection.haar_denoise(jnp.ones(16), c_mult=float("nan")), V, "c_mult"),
-    "signature_matrix zero filters": (lambda: jaxfdi.detection.signature.signature_matrix(0), V, "num_filters"),
+    "signature_matrix zero filters": (lambda: jaxfdi.detection._signature.signature_matrix(0), V, "num_filters"),
     "location_symptoms num_locations zero": (lambda: detection.signature.location_symptoms(jnp.ones(4, bool), jnp.zeros(4, int),
                                                                                  0), V, "num_locations"),
     # --- metrics ------------------------------------------------------------------------
@@ -366,16 +366,16 @@ CASES = {
                                                       jnp.eye(2), jnp.eye(1)), V, "A"),
     "steady_state_kalman undetectable": (lambda: jaxfdi.filters.steady_state_kalman(jaxfdi.models.linear_gaussian_model(
         jnp.diag(jnp.array([1.5, 0.5])), jnp.zeros((1, 2)), jnp.eye(2), jnp.eye(1))), V, "model"),
-    "effectiveness_gain_schedule num_losses": (lambda: jaxfdi.control.eigenstructure.effectiveness_gain_schedule(
+    "effectiveness_gain_schedule num_losses": (lambda: jaxfdi.control._eigenstructure.effectiveness_gain_schedule(
         jnp.eye(2), jnp.eye(2), jnp.array([0.5, 0.4]), jnp.eye(2), num_losses=1), V, "num_losses"),
-    "pd_gains natural_frequency negative": (lambda: jaxfdi.control.attitude.pd_gains(jnp.eye(3), natural_frequency=-0.1), V,
+    "pd_gains natural_frequency negative": (lambda: jaxfdi.control._attitude.pd_gains(jnp.eye(3), natural_frequency=-0.1), V,
                                             "natural_frequency"),
-    "pd_gains damping NaN": (lambda: jaxfdi.control.attitude.pd_gains(jnp.eye(3), damping=float("nan")), V, "damping"),
-    "pd_gains inertia indefinite": (lambda: jaxfdi.control.attitude.pd_gains(-jnp.eye(3)), V, "inertia"),
+    "pd_gains damping NaN": (lambda: jaxfdi.control._attitude.pd_gains(jnp.eye(3), damping=float("nan")), V, "damping"),
+    "pd_gains inertia indefinite": (lambda: jaxfdi.control._attitude.pd_gains(-jnp.eye(3)), V, "inertia"),
     "slew angle NaN": (lambda: control.slew(angle_deg=float("nan")), V, "angle_deg"),
     "slew duration zero": (lambda: control.slew(duration=0.0), V, "duration"),
     "slew axis zero": (lambda: control.slew(axis=(0.0, 0.0, 0.0)), V, "axis"),
-    "allocate wheel_axes shape": (lambda: jaxfdi.control.attitude.allocate_wheel_torques(jnp.zeros(3), jnp.zeros((4, 2)), 0.1), V,
+    "allocate wheel_axes shape": (lambda: jaxfdi.control._attitude.allocate_wheel_torques(jnp.zeros(3), jnp.zeros((4, 2)), 0.1), V,
                                   "wheel_axes"),
     # --- model constructors ---------------------------------------------------------
     "engine_model Ts negative": (lambda: engine_model(Ts=-0.01), V, "Ts"),
@@ -387,20 +387,20 @@ CASES = {
     "kitsat3_params inertia negative": (lambda: models.kitsat3_params(inertia=(3.0, -1.0, 4.0)), V, "inertia"),
     "kitsat3_params wheel_inertia NaN": (lambda: models.kitsat3_params(wheel_inertia=float("nan")), V,
                                          "wheel_inertia"),
-    "pyramid_axes beta NaN": (lambda: jaxfdi.models.reaction_wheels.pyramid_axes(beta_deg=float("nan")), V, "beta_deg"),
+    "pyramid_axes beta NaN": (lambda: jaxfdi.models._reaction_wheels.pyramid_axes(beta_deg=float("nan")), V, "beta_deg"),
     "rigid_body_params dt negative": (lambda: models.rigid_body_params(dt=-0.02), V, "dt"),
     "rigid_body_params inertia zero": (lambda: models.rigid_body_params(inertia=(0.0, 1.0, 1.0)), V, "inertia"),
     # --- tuning --------------------------------------------------------------------------
     "positive floor negative": (lambda: tuning.positive(floor=-1.0), V, "floor"),
-    "stochastic_rows empty row": (lambda: jaxfdi.tuning.parameterize.stochastic_rows(jnp.array([[True, False], [False, False]])), V,
+    "stochastic_rows empty row": (lambda: jaxfdi.tuning._parameterize.stochastic_rows(jnp.array([[True, False], [False, False]])), V,
                                   "mask"),
-    "sticky_log_prior concentration negative": (lambda: jaxfdi.tuning.parameterize.sticky_log_prior(
+    "sticky_log_prior concentration negative": (lambda: jaxfdi.tuning._parameterize.sticky_log_prior(
         jnp.eye(2), jnp.eye(2), -1.0), V, "concentration"),
     "fit steps negative": (lambda: tuning.fit(lambda raw, b: 0.0, {"a": jnp.zeros(1)}, optax.adam(1e-2),
                                               lambda i: None, None, steps=-1), V, "steps"),
     "fit eval_every zero": (lambda: tuning.fit(lambda raw, b: 0.0, {"a": jnp.zeros(1)}, optax.adam(1e-2),
                                                lambda i: None, None, steps=3, eval_every=0), V, "eval_every"),
-    "fixed_batches batch_size zero": (lambda: jaxfdi.tuning.train.fixed_batches(jnp.zeros((4, 2)), 0, KEY), V, "batch_size"),
+    "fixed_batches batch_size zero": (lambda: jaxfdi.tuning._train.fixed_batches(jnp.zeros((4, 2)), 0, KEY), V, "batch_size"),
     "mode_cross_entropy floor zero": (lambda: tuning.mode_cross_entropy(jnp.zeros((3, 2)), jnp.zeros(3, int), 0.0), V,
                                       "floor"),
     "soft_detection temperature zero": (lambda: tuning.soft_detection_loss(jnp.ones(5), 2.0, 3, temperature=0.0), V,
@@ -408,7 +408,7 @@ CASES = {
     "soft_detection weight NaN": (lambda: tuning.soft_detection_loss(jnp.ones(5), 2.0, 3,
                                                                      false_alarm_weight=float("nan")), V,
                                   "false_alarm_weight"),
-    "constrain missing key": (lambda: tuning.constrain({"a": jaxfdi.tuning.parameterize.identity()}, {"b": jnp.zeros(1)}), V, "raw"),
+    "constrain missing key": (lambda: tuning.constrain({"a": jaxfdi.tuning._parameterize.identity()}, {"b": jnp.zeros(1)}), V, "raw"),
     "from_record unknown transform": (lambda: from_record("exp_map", {}), V, "name"),
     # --- scenario studies (refused before any computation) ---------------------
     "engine_study runs zero": (lambda: engine_study(runs=0), V, "runs"),
@@ -581,7 +581,7 @@ CASES = {
     "detection_summary horizon shorter than the runs": (lambda: (lambda s: s.counts(s.summary(
         _late_records(), jnp.ones(2))[1]))(_streaming().detection_summary(20)), V, "horizon"),
     "merge_counts not counts": (lambda: _streaming().merge_counts(_streaming().empty_counts(10), None), T_, "parts"),
-    "sticky_log_prior target shape": (lambda: jaxfdi.tuning.parameterize.sticky_log_prior(jnp.full((2, 2), 0.5), jnp.eye(3), 1.0), V,
+    "sticky_log_prior target shape": (lambda: jaxfdi.tuning._parameterize.sticky_log_prior(jnp.full((2, 2), 0.5), jnp.eye(3), 1.0), V,
                                       "target"),
     "fit loss not scalar": (lambda: tuning.fit(lambda raw, b: raw["a"] ** 2, {"a": jnp.ones(2)}, optax.adam(1e-2),
                                                lambda i: None, None, steps=1), V, "loss"),
@@ -616,12 +616,12 @@ CASES = {
 def _f16():
     import types
 
-    from jaxfdi.models.f16 import dynamics, _trim as trim
+    from jaxfdi.models.f16 import _dynamics as dynamics, _trim as trim
     return types.SimpleNamespace(dynamics=dynamics, trim=trim)
 
 
 def _flight_controller(dt=0.01, lower=-jnp.ones(4), upper=jnp.ones(4)):
-    from jaxfdi.control.flight import FlightGains, flight_controller
+    from jaxfdi.control._flight import FlightGains, flight_controller
     gains = FlightGains(jnp.zeros((2, 8)), jnp.zeros((2, 5)))
     return flight_controller(gains, dt, lower, upper)
 
@@ -629,8 +629,8 @@ def _flight_controller(dt=0.01, lower=-jnp.ones(4), upper=jnp.ones(4)):
 def _raim_fdi(dt=1.0):
     from jaxfdi.data import data_path
     from jaxfdi.gnss import raim_fdi, read_rinex_nav
-    from jaxfdi.gnss.orbits import ephemeris_table
-    from jaxfdi.gnss.raim import raim_tables
+    from jaxfdi.gnss._orbits import ephemeris_table
+    from jaxfdi.gnss._raim import raim_tables
     table = ephemeris_table(read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
     return raim_fdi(table, 0.0, dt, raim_tables(32))
 
@@ -651,32 +651,32 @@ def _f16lin():
 
 
 def _f16plant():
-    from jaxfdi.models.f16 import plant
+    from jaxfdi.models.f16 import _plant as plant
     return plant
 
 
 def _f16loop():
-    from jaxfdi.control import f16_loop
+    from jaxfdi.control import _f16_loop as f16_loop
     return f16_loop
 
 
 def _f16rates():
-    from jaxfdi.models.f16 import rates
+    from jaxfdi.models.f16 import _rates as rates
     return rates
 
 
 def _f16tables():
-    from jaxfdi.models.f16 import tables
+    from jaxfdi.models.f16 import _tables as tables
     return tables
 
 
 def _flight_ctrl():
-    from jaxfdi.control import flight
+    from jaxfdi.control import _flight as flight
     return flight
 
 
 def _flight_view(rates=jnp.zeros(3)):
-    from jaxfdi.models.f16.plant import FlightView
+    from jaxfdi.models.f16._plant import FlightView
     return FlightView(jnp.zeros(3), jnp.zeros(3), jnp.zeros(()), jnp.zeros(()), rates)
 
 
@@ -698,7 +698,7 @@ def _gnss():
     """Every function and class of ``jaxfdi.gnss``'s modules by name, public or not."""
     import types
 
-    from jaxfdi.gnss import frames, integrity, measurements, orbits, paths, positioning, protection, raim, rinex, yuma
+    from jaxfdi.gnss import _frames as frames, _integrity as integrity, _measurements as measurements, _orbits as orbits, _paths as paths, _positioning as positioning, _protection as protection, _raim as raim, _rinex as rinex, _yuma as yuma
     modules = (frames, integrity, measurements, orbits, paths, positioning, protection, raim, rinex, yuma)
     return types.SimpleNamespace(**{name: obj for module in modules for name, obj in vars(module).items()
                                     if getattr(obj, "__module__", None) == module.__name__})
@@ -712,14 +712,14 @@ def _receiver(dt=1.0, sigma=jnp.ones((3, 32)), fault=None):
 def _ins():
     import types
 
-    from jaxfdi.ins import error_state, imu, integrity, loosely_coupled, mechanization, scst, trajectory
-    from jaxfdi.models import rotation
+    from jaxfdi.ins import _error_state as error_state, _imu as imu, _integrity as integrity, _loosely_coupled as loosely_coupled, _mechanization as mechanization, _scst as scst, _trajectory as trajectory
+    from jaxfdi.models import _rotation as rotation
     return types.SimpleNamespace(error_state=error_state, imu=imu, integrity=integrity, loosely_coupled=loosely_coupled,
                                  mechanization=mechanization, rotation=rotation, scst=scst, trajectory=trajectory)
 
 
 def _ins_init(attitude=jnp.array([1.0, 0.0, 0.0, 0.0]), accel_bias=None):
-    from jaxfdi.ins.mechanization import NavState
+    from jaxfdi.ins._mechanization import NavState
     filt = _ins().loosely_coupled.loosely_coupled_filter(_ins().imu.noise_model(_ins().imu.hg1900()), 0.1)
     nav = NavState(jnp.array([0.6, 2.2, 100.0]), jnp.zeros(3), attitude)
     return filt.init(nav, jnp.eye(15), accel_bias=accel_bias)
@@ -742,7 +742,7 @@ def _late_records():
 
 
 def _case_slices(runs, num_cases):
-    from jaxfdi.study import case_slices
+    from jaxfdi._study import case_slices
     return case_slices(runs, num_cases)
 
 
@@ -770,7 +770,7 @@ def test_valid_neighbours_pass():
     assert info.filtered_cov.dtype == jnp.result_type(float)
     skipping = jaxfdi.filters.kalman_filter(MODEL, missing_measurements=True)
     assert kf_run(ys=YS.at[1, 2].set(jnp.nan), filt=skipping).nis.shape == (T,)   # NaN = missing is valid there
-    assert jaxfdi.models.fault_modes.noise_inflation_modes(MODEL, 1.0, 0.0).Q.shape == (1 + NU + M, N, N)
+    assert jaxfdi.models._fault_modes.noise_inflation_modes(MODEL, 1.0, 0.0).Q.shape == (1 + NU + M, N, N)
     assert jaxfdi.fault("stuck", "sensor", 4, 0).onset == 0
     assert jaxfdi.fault("effectiveness", "actuator", 0, 3, 1.0).magnitude == 1.0
     assert sim_with(fault(component=M - 1))[1].measurement.shape == (T, M)
@@ -792,7 +792,7 @@ def test_second_audit_valid_neighbours_pass():
     assert np.isfinite(float(_gnss().elevation_sigma(jnp.asarray(0.0))))
     quaternion = _ins().rotation.euler_to_quaternion(0.1, -0.05, 2.0).astype(jnp.float32)
     assert _ins_init(attitude=quaternion).nav.attitude.shape == (4,)                     # float32 round-off passes
-    assert int(metrics.record_init(jaxfdi.faults.NEVER).onset) == jaxfdi.faults.NEVER
+    assert int(metrics.record_init(jaxfdi._faults.NEVER).onset) == jaxfdi._faults.NEVER
     assert int(metrics.record_from_alarms(jnp.array([0, 1, 1]), 1).detection_step) == 1   # 0/1 integer alarms
     assert _case_slices([0, 2], 2) == [slice(0, 0), slice(0, 2)]
     assert _f16fdi().fault_case(["bias", "none"], [0, 2], 10.0, 45.0).kind.shape == (2,)

@@ -6,9 +6,9 @@ import pytest
 
 import jaxfdi
 from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum
-from jaxfdi.detection.chi2 import normalized_innovation_squared
-from jaxfdi.faults import NEVER
-from jaxfdi.metrics import (
+from jaxfdi.detection._chi2 import normalized_innovation_squared
+from jaxfdi._faults import NEVER
+from jaxfdi._metrics import (
     DetectionRecord,
     confusion_matrix,
     isolation_accuracy,
@@ -163,10 +163,10 @@ def test_unhealthy_runs_are_counted_apart_and_never_scored_clean():
 def nan_run():
     """A KF (no missing_measurements) chi-square monitor (window 2) on the engine fed one
     NaN measurement on sensor 2 at step 20 (a one-step dead sensor), with its history."""
-    from jaxfdi.faults import fault
+    from jaxfdi._faults import fault
     from jaxfdi.models import engine_model
     from jaxfdi import monitor
-    from jaxfdi.faults import sensor_labels
+    from jaxfdi._faults import sensor_labels
 
     model = engine_model()
     kf = jaxfdi.filters.kalman_filter(model)
@@ -351,7 +351,7 @@ def test_binomial_interval_equals_the_brute_force_cdf(trials, p):
     import math
     from fractions import Fraction
 
-    from jaxfdi.metrics import binomial_interval
+    from jaxfdi._metrics import binomial_interval
 
     q = Fraction(p).limit_denominator(10**6)
     cdf, acc = [], Fraction(0)
@@ -368,7 +368,7 @@ def test_rate_interval_is_the_clopper_pearson_beta_quantiles():
     0 and 1 at the ends (SciPy's beta distribution)."""
     from scipy import stats
 
-    from jaxfdi.metrics import rate_interval, rate_text
+    from jaxfdi._metrics import rate_interval, rate_text
 
     for k, n, level in ((0, 10, 0.99), (3, 10, 0.95), (10, 10, 0.99), (454, 10000, 0.99), (1, 1, 0.5)):
         low, high = rate_interval(k, n, level)
@@ -388,7 +388,7 @@ def test_one_sided_bounds_are_the_beta_quantiles():
     """Lower ``Beta.ppf(1-c; k, n-k+1)``, upper ``Beta.ppf(c; k+1, n-k)``, 0 and 1 at the ends."""
     from scipy import stats
 
-    from jaxfdi.metrics import binomial_lower_bound, binomial_upper_bound
+    from jaxfdi._metrics import binomial_lower_bound, binomial_upper_bound
 
     for k, n, c in ((0, 10, 0.95), (3, 10, 0.95), (10, 10, 0.99), (7, 1000, 0.95)):
         low, high = binomial_lower_bound(k, n, c), binomial_upper_bound(k, n, c)

@@ -10,7 +10,7 @@ import pytest
 
 import _multiprocess_study as study_module
 from jaxfdi import distributed
-from jaxfdi.montecarlo import run_keys
+from jaxfdi._montecarlo import run_keys
 
 TESTS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the shared helpers
 

@@ -32,8 +32,8 @@ from hypothesis.extra import numpy as hnp
 
 import jaxfdi
 from jaxfdi.detection import chi2_detector, chi2_threshold, frozen_channel_detector, glrt_detector
-from jaxfdi.detection import parity as ps
-from jaxfdi.faults import fault
+from jaxfdi.detection import _parity as ps
+from jaxfdi._faults import fault
 from jaxfdi.filters import (
     extended_kalman_filter,
     kalman_filter,
@@ -43,8 +43,8 @@ from jaxfdi.filters import (
     unscented_kalman_filter,
 )
 from jaxfdi.models import engine_model
-from jaxfdi.models.linear import LinearGaussianModel
-from jaxfdi.riccati import steady_state_kalman
+from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi._riccati import steady_state_kalman
 
 SETTINGS = settings(max_examples=60, deadline=None, derandomize=True, database=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])

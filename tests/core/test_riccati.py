@@ -8,7 +8,7 @@ import scipy.linalg
 
 import jaxfdi
 from jaxfdi.models import engine_model
-from jaxfdi.riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
+from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
 
 RTOL = 1e-9
 

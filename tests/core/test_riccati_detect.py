@@ -26,8 +26,8 @@ import scipy.linalg
 
 import jaxfdi
 from jaxfdi.control import integral_augmentation, lqr_gain, lqr_pi
-from jaxfdi.models import vtol
-from jaxfdi.riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
+from jaxfdi.models import _vtol as vtol
+from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
 from test_riccati import PROBLEMS
 
 #: an unstable mode (1.5) that the input cannot reach

@@ -9,8 +9,8 @@ from scipy.stats import chi2
 
 import jaxfdi
 from jaxfdi.detection import first_crossing, moving_window_sum
-from jaxfdi.detection.chi2 import normalized_innovation_squared
-from jaxfdi.models import c2d, engine, vtol
+from jaxfdi.detection._chi2 import normalized_innovation_squared
+from jaxfdi.models import c2d, _engine as engine, _vtol as vtol
 
 
 @pytest.mark.parametrize("A,B,Ts", [(engine.A, engine.B, engine.TS), (vtol.A, vtol.B, vtol.TS)], ids=["engine", "vtol"])

@@ -1,4 +1,4 @@
-"""Thresholds calibrated on fault-free runs (``jaxfdi.detection.calibration``): the
+"""Thresholds calibrated on fault-free runs (``jaxfdi.detection._calibration``): the
 empirical quantile against the chi-square law it estimates (scipy) and against its
 defining counts, and the per-run scaling against the closed form of the smallest factor
 (an order statistic of the runs' maxima)."""
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi.detection.calibration import empirical_threshold, scale_to_run_false_alarm
+from jaxfdi.detection._calibration import empirical_threshold, scale_to_run_false_alarm
 
 
 def test_empirical_threshold_estimates_the_laws_quantile_and_keeps_the_floor():

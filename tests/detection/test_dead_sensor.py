@@ -21,15 +21,15 @@ from jaxfdi.detection import (
     moving_window_sum,
     recursive_glrt_detector,
 )
-from jaxfdi.detection.credits import credit_isolator
-from jaxfdi.detection.wavelet import block_alarms
-from jaxfdi.detection import parity as ps
-from jaxfdi.detection.frozen import frozen_channel_detector, frozen_threshold
-from jaxfdi.detection.glrt_correction import corrected_glrt
-from jaxfdi.detection.known_change import known_change_detector
-from jaxfdi.faults import fault
+from jaxfdi.detection._credits import credit_isolator
+from jaxfdi.detection._wavelet import block_alarms
+from jaxfdi.detection import _parity as ps
+from jaxfdi.detection._frozen import frozen_channel_detector, frozen_threshold
+from jaxfdi.detection._glrt_correction import corrected_glrt
+from jaxfdi.detection._known_change import known_change_detector
+from jaxfdi._faults import fault
 from jaxfdi.models import engine_model
-from jaxfdi.riccati import steady_state_kalman
+from jaxfdi._riccati import steady_state_kalman
 from jaxfdi import simulate
 
 T, ONSET, WINDOW, BURST = 120, 60, 10, slice(20, 25)

@@ -30,7 +30,7 @@ class DetectorCase(NamedTuple):
 @functools.lru_cache(maxsize=None)
 def _glrt_setup():
     from _linear_gaussian_cases import small_model
-    from jaxfdi.riccati import steady_state_kalman
+    from jaxfdi._riccati import steady_state_kalman
 
     model = small_model()
     steady = steady_state_kalman(model)
@@ -54,8 +54,8 @@ def _detector_registry():
         recursive_glrt_detector,
         transient_glrt_detector,
     )
-    from jaxfdi.detection.credits import credit_isolator
-    from jaxfdi.detection.known_change import known_change_bank
+    from jaxfdi.detection._credits import credit_isolator
+    from jaxfdi.detection._known_change import known_change_bank
 
     model, gain, S = _glrt_setup()
     window, zeros = 4, jnp.zeros((T_STEPS, 2))
@@ -98,7 +98,7 @@ def detector_case(request):
 
 
 def test_every_detector_steps_to_a_decision_of_scalars(detector_case):
-    from jaxfdi.detection.chi2 import Decision
+    from jaxfdi.detection._chi2 import Decision
 
     detector = detector_case.make()
     value = detector_case.stream(np.random.default_rng(0), (1,))[0]

@@ -8,7 +8,7 @@ import pytest
 import scipy.stats
 
 import jaxfdi
-from jaxfdi.detection.glrt import (
+from jaxfdi.detection._glrt import (
     detector_setup,
     fault_directions,
     fault_signatures,
@@ -19,7 +19,7 @@ from jaxfdi.detection.glrt import (
     glrt_threshold,
 )
 from jaxfdi.models import engine_model
-from jaxfdi.riccati import steady_state_kalman
+from jaxfdi._riccati import steady_state_kalman
 
 WINDOW = 10
 NUM_INPUTS = 1
@@ -246,7 +246,7 @@ def test_paper_threshold_values():
 
 def test_paper_isolation_logic():
     """Eq. (24): actuator only when the actuator and T4 GLRs both exceed the threshold."""
-    from jaxfdi.detection.glrt import _paper_isolation
+    from jaxfdi.detection._glrt import _paper_isolation
 
     cases = [([20, 1, 1, 1, 1, 20], 0), ([20, 1, 1, 1, 15, 5], 4), ([5, 1, 12, 1, 1, 3], 2),
              ([20, 1, 1, 1, 1, 5], 0), ([3, 1, 1, 1, 1, 5], 5)]

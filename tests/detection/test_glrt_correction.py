@@ -22,9 +22,9 @@ from jaxfdi.detection import (
     recursive_glrt_detector,
     transient_glrt_detector,
 )
-from jaxfdi.detection.glrt_transient import time_varying_signatures
+from jaxfdi.detection._glrt_transient import time_varying_signatures
 from jaxfdi.models import engine_model
-from jaxfdi.riccati import steady_state_kalman
+from jaxfdi._riccati import steady_state_kalman
 
 WINDOW, T, U = 10, 130, 0.01
 # (direction, onset, size): the seed-003 actuator bias (0.0005 kg/s, direction 0), then the

@@ -7,9 +7,9 @@ import pytest
 
 import jaxfdi
 from jaxfdi.detection import glrt_detector, glrt_threshold, recursive_glrt_detector
-from jaxfdi.detection.glrt import fault_directions, fault_signatures
+from jaxfdi.detection._glrt import fault_directions, fault_signatures
 from jaxfdi.models import engine_model
-from jaxfdi.riccati import steady_state_kalman
+from jaxfdi._riccati import steady_state_kalman
 
 T, ONSET = 90, 40
 SIZES = [0.0005, 135.0, 16.99, 2.21, 8.285, 5.125]  # seed 003: actuator, then sensors 1..5

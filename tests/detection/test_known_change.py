@@ -8,9 +8,9 @@ import pytest
 from scipy import stats
 
 from jaxfdi.detection import fault_directions, fault_signatures, known_change_detector
-from jaxfdi.detection.known_change import known_change_bank, known_change_by_onset
+from jaxfdi.detection._known_change import known_change_bank, known_change_by_onset
 from jaxfdi.models import engine_model
-from jaxfdi.riccati import steady_state_kalman
+from jaxfdi._riccati import steady_state_kalman
 
 T, N, M, D = 24, 5, 3, 2
 

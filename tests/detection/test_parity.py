@@ -13,9 +13,9 @@ import pytest
 import scipy.linalg
 import scipy.stats
 
-from jaxfdi.detection import parity as ps
-from jaxfdi.detection import sensor_configuration as sc
-from jaxfdi.models.f16.plant import skewed_rate_axes
+from jaxfdi.detection import _parity as ps
+from jaxfdi.detection import _sensor_configuration as sc
+from jaxfdi.models.f16._plant import skewed_rate_axes
 
 GROUPS = np.arange(6).reshape(3, 2)
 SIGMA = 0.01

@@ -4,7 +4,7 @@ per-block sigma, and ``haar_denoise`` with per-block sigma equal to the constant
 import numpy as np
 import pytest
 
-from jaxfdi.detection.wavelet import causal_detail_sigma, chi2_detail_sigma, haar_denoise, sample_detail_sigma
+from jaxfdi.detection._wavelet import causal_detail_sigma, chi2_detail_sigma, haar_denoise, sample_detail_sigma
 
 
 def numpy_details(x, levels):

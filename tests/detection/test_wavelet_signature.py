@@ -8,7 +8,7 @@ import pytest
 import pywt
 from scipy import stats
 
-from jaxfdi.detection import signature, wavelet
+from jaxfdi.detection import _signature as signature, _wavelet as wavelet
 
 M = 3
 

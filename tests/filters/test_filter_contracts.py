@@ -18,9 +18,9 @@ import pytest
 
 import jaxfdi
 from _problems import rigid_body_data
-from jaxfdi.models import c2d, vtol
-from jaxfdi.models.linear import linear_observation, linear_transition
-from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
+from jaxfdi.models import c2d, _vtol as vtol
+from jaxfdi.models._linear import linear_observation, linear_transition
+from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 
 class Case(NamedTuple):
@@ -294,8 +294,8 @@ def _corrected_glrt_build(theta, dtype):
 @functools.lru_cache(maxsize=None)
 def _ins_problem():
     """Four GPS epochs of a level INS moving north-east, four IMU samples 0.01 s apart each."""
-    from jaxfdi.ins.loosely_coupled import GpsFix
-    from jaxfdi.ins.mechanization import NavState
+    from jaxfdi.ins._loosely_coupled import GpsFix
+    from jaxfdi.ins._mechanization import NavState
 
     epochs, per_epoch = 4, 4
     nav = NavState(jnp.asarray([0.6547, 2.2146, 130.0]), jnp.asarray([11.0, -3.0, 0.4]),
@@ -313,8 +313,8 @@ def _ins_problem():
 
 
 def _ins_build(theta, dtype):
-    from jaxfdi.ins import imu
-    from jaxfdi.ins.loosely_coupled import loosely_coupled_filter
+    from jaxfdi.ins import _imu as imu
+    from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
 
     nav, _, _ = _ins_problem()
     filt = loosely_coupled_filter(imu.noise_model(imu.hg1900()), 0.01)
@@ -332,7 +332,7 @@ def _filter_registry():
         two_stage_kalman_filter,
         unknown_input_filter,
     )
-    from jaxfdi.tuning.train import checkpointed
+    from jaxfdi.tuning._train import checkpointed
 
     _, ys, us = _linear_problem()
     linear = dict(ys=ys, us=us)

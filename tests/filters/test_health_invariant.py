@@ -28,9 +28,9 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi.filters import tskf
+from jaxfdi.filters import _tskf as tskf
 from jaxfdi.filters._time_varying import model_at, time_varying
-from jaxfdi.filters.unknown_input import unknown_input_filter
+from jaxfdi.filters._unknown_input import unknown_input_filter
 
 N, M, NU, T = 3, 2, 1, 10
 

@@ -15,8 +15,8 @@ from jaxfdi.filters import (
 )
 from _linear_gaussian_cases import scan_steps
 from jaxfdi.models import LinearGaussianModel
-from jaxfdi.tuning.train import checkpointed
-from jaxfdi.models.fault_modes import noise_inflation_modes
+from jaxfdi.tuning._train import checkpointed
+from jaxfdi.models._fault_modes import noise_inflation_modes
 
 T = 40
 TRANSITION = np.array([[0.90, 0.05, 0.05], [0.10, 0.88, 0.02], [0.05, 0.0, 0.95]])

@@ -10,7 +10,7 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 
 import jaxfdi
 from _problems import engine_data, linear_as_nonlinear, rigid_body_data
-from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
+from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 FIELDS = ("filtered_mean", "filtered_cov", "predicted_mean", "predicted_cov", "innovation", "log_likelihood")
 

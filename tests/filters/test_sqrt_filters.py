@@ -16,10 +16,10 @@ from jaxfdi.filters import (
     sqrt_unscented_kalman_filter,
     unscented_kalman_filter,
 )
-from jaxfdi.filters.sqrt_kalman import SqrtGaussianState
+from jaxfdi.filters._sqrt_kalman import SqrtGaussianState
 from jaxfdi.models import LinearGaussianModel
-from jaxfdi.models.linear import linear_observation, linear_transition
-from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
+from jaxfdi.models._linear import linear_observation, linear_transition
+from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 FIELDS = ("predicted_mean", "predicted_cov", "filtered_mean", "filtered_cov", "innovation", "innovation_cov",
           "log_likelihood", "nis")

@@ -12,8 +12,8 @@ from filterpy.kalman import KalmanFilter
 from scipy import stats
 
 import jaxfdi
-from jaxfdi.filters import tskf
-from jaxfdi.models import vtol
+from jaxfdi.filters import _tskf as tskf
+from jaxfdi.models import _vtol as vtol
 
 T = 60
 P0, PB0, QB = 10.0, 10.0, 0.2**2

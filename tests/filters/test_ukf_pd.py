@@ -20,7 +20,7 @@ import pytest
 
 import jaxfdi
 from _problems import rigid_body_data
-from jaxfdi.models.rigid_body import rigid_body_observation, rigid_body_transition
+from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 T = 12
 PARAMS, Q, R, YS, US, M0, P0 = rigid_body_data(T=T)

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 
 from jaxfdi.data import data_path
-from jaxfdi.faults import concat_faults, fault
+from jaxfdi._faults import concat_faults, fault
 from jaxfdi.gnss import geodetic_to_ecef, parity_check, protection_levels, read_rinex_nav
-from jaxfdi.gnss.integrity import geometry_fix, monitor_epoch
-from jaxfdi.gnss.measurements import elevation_sigma, receiver_plant
-from jaxfdi.gnss.orbits import ephemeris_table, select_orbits, transmission_geometry
-from jaxfdi.gnss.raim import raim_tables
-from jaxfdi.gnss.integrity import raim_output
-from jaxfdi.gnss.orbits import ORBIT_PROBLEMS, SPEED_OF_LIGHT
+from jaxfdi.gnss._integrity import geometry_fix, monitor_epoch
+from jaxfdi.gnss._measurements import elevation_sigma, receiver_plant
+from jaxfdi.gnss._orbits import ephemeris_table, select_orbits, transmission_geometry
+from jaxfdi.gnss._raim import raim_tables
+from jaxfdi.gnss._integrity import raim_output
+from jaxfdi.gnss._orbits import ORBIT_PROBLEMS, SPEED_OF_LIGHT
 
 SITE = geodetic_to_ecef(math.radians(37.5419), math.radians(127.0782), 60.0)
 T = 259200.0 + 2700.0

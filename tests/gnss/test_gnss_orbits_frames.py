@@ -11,8 +11,8 @@ import pytest
 
 from jaxfdi.data import data_path
 from jaxfdi.gnss import ecef_to_geodetic, geodetic_to_ecef, read_rinex_nav, read_yuma, satellite_position
-from jaxfdi.gnss.frames import ecef_to_ned, elevation_azimuth, ned_to_ecef
-from jaxfdi.gnss.orbits import (
+from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, ned_to_ecef
+from jaxfdi.gnss._orbits import (
     almanac_table,
     ephemeris_table,
     satellite_clock,
@@ -20,8 +20,8 @@ from jaxfdi.gnss.orbits import (
     select_orbits,
     transmission_geometry,
 )
-from jaxfdi.gnss.orbits import OMEGA_E, SPEED_OF_LIGHT, Orbit
-from jaxfdi.gnss.positioning import dops
+from jaxfdi.gnss._orbits import OMEGA_E, SPEED_OF_LIGHT, Orbit
+from jaxfdi.gnss._positioning import dops
 
 C = 299792458.0
 OFFSETS = np.array([-5400.0, -1800.5, 0.0, 1234.5, 3600.0, 7199.0])  # s from each record's toe

@@ -21,15 +21,15 @@ from jaxfdi.gnss import (
     read_rinex_nav,
     solve_position,
 )
-from jaxfdi.gnss.frames import ecef_to_ned
-from jaxfdi.gnss.integrity import geometry_fix
-from jaxfdi.gnss.measurements import elevation_sigma, receiver_plant
-from jaxfdi.gnss.orbits import ephemeris_table, select_orbits, transmission_geometry
-from jaxfdi.gnss.raim import paper_threshold, parity_matrix, raim_tables
-from jaxfdi.gnss.orbits import SPEED_OF_LIGHT
-from jaxfdi.gnss.positioning import PositionFix, dops
+from jaxfdi.gnss._frames import ecef_to_ned
+from jaxfdi.gnss._integrity import geometry_fix
+from jaxfdi.gnss._measurements import elevation_sigma, receiver_plant
+from jaxfdi.gnss._orbits import ephemeris_table, select_orbits, transmission_geometry
+from jaxfdi.gnss._raim import paper_threshold, parity_matrix, raim_tables
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT
+from jaxfdi.gnss._positioning import PositionFix, dops
 from jaxfdi import simulate
-from jaxfdi import faults
+from jaxfdi import _faults as faults
 
 N = 2048                      # epochs per batched call (one compiled program for every test)
 SITE = geodetic_to_ecef(math.radians(37.5419), math.radians(127.0782), 60.0)
@@ -313,7 +313,7 @@ def test_raim_statistic_is_the_sensor_parity_statistic():
     """``TS_D`` (QR on the used slots) is ``detection.parity``'s ``p^T p`` of the explicit
     parity vector ``P y_w``, and ``P`` spans the same left null space as the sensors' SVD
     basis of the used rows (``V^T V = P^T P``)."""
-    from jaxfdi.detection import parity as ps
+    from jaxfdi.detection import _parity as ps
 
     rng = np.random.default_rng(11)
     tables = raim_tables(32)

@@ -9,8 +9,8 @@ import pytest
 
 from jaxfdi.data import data_path
 from jaxfdi.gnss import read_rinex_nav, read_yuma
-from jaxfdi.gnss.rinex import gps_week_seconds, parse_rinex_nav
-from jaxfdi.gnss.yuma import parse_yuma
+from jaxfdi.gnss._rinex import gps_week_seconds, parse_rinex_nav
+from jaxfdi.gnss._yuma import parse_yuma
 
 RINEX = data_path("gps_nav_rinex2_sugl0010.20n")
 YUMA = data_path("gps_almanac_2086.yuma.txt")

@@ -13,10 +13,10 @@ import pytest
 from scipy import stats
 
 import jaxfdi
-from jaxfdi.ins import error_state, imu, loosely_coupled, plant, scst, trajectory
-from jaxfdi.models import rotation
-from jaxfdi.ins.loosely_coupled import GpsFix
-from jaxfdi.ins.mechanization import NavState
+from jaxfdi.ins import _error_state as error_state, _imu as imu, _loosely_coupled as loosely_coupled, _plant as plant, _scst as scst, _trajectory as trajectory
+from jaxfdi.models import _rotation as rotation
+from jaxfdi.ins._loosely_coupled import GpsFix
+from jaxfdi.ins._mechanization import NavState
 
 PARK = (37.5684, 126.8851, 70.0)
 
@@ -197,13 +197,13 @@ def test_a_stuck_imu_channel_holds_its_onset_sample_and_a_dead_one_is_nan():
     epoch 1's first sample on every later sample; DEAD on the yaw gyro from epoch 2 is
     NaN on that channel alone."""
     from jaxfdi.data import data_path
-    from jaxfdi.gnss import orbits, rinex
+    from jaxfdi.gnss import _orbits as orbits, _rinex as rinex
 
     table = orbits.ephemeris_table(rinex.read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
     slots = table.prn.shape[0]
     model = imu.hg1900()
     flight = plant.flight_tables(trajectory.stationary(PARK, 4.0, rate=10.0), 3)
-    faults = jaxfdi.faults.concat_faults(jaxfdi.fault("stuck", "sensor", 3, 1), jaxfdi.fault("dead", "sensor", 5, 2))
+    faults = jaxfdi._faults.concat_faults(jaxfdi.fault("stuck", "sensor", 3, 1), jaxfdi.fault("dead", "sensor", 5, 2))
     gps_ins = plant.gps_ins_plant(table, 262_000.0, flight, jnp.zeros((3, slots), bool), jnp.ones((3, slots)), model,
                                   imu_fault=faults)
     key = jax.random.PRNGKey(0)

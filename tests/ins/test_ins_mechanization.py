@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from jaxfdi.gnss import frames
-from jaxfdi.ins import earth, error_state, mechanization, trajectory
-from jaxfdi.models import rotation
+from jaxfdi.gnss import _frames as frames
+from jaxfdi.ins import _earth as earth, _error_state as error_state, _mechanization as mechanization, _trajectory as trajectory
+from jaxfdi.models import _rotation as rotation
 
 PARK = (37.5684, 126.8851, 70.0)
 

@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from jaxfdi.models.f16.aero import table_coefficients
-from jaxfdi.models.f16.dynamics import aero_coefficients, f16_dynamics, f16_params, saturate
+from jaxfdi.models.f16._aero import table_coefficients
+from jaxfdi.models.f16._dynamics import aero_coefficients, f16_dynamics, f16_params, saturate
 from jaxfdi.models.f16._linearize import flight_modes, linearize, longitudinal
-from jaxfdi.models.f16.engine import power_rate, throttle_gearing, thrust
-from jaxfdi.models.f16.morelli import polynomial_coefficients
-from jaxfdi.models.f16.tables import lookup1, lookup2, stevens_lewis_data, table_arrays
+from jaxfdi.models.f16._engine import power_rate, throttle_gearing, thrust
+from jaxfdi.models.f16._morelli import polynomial_coefficients
+from jaxfdi.models.f16._tables import lookup1, lookup2, stevens_lewis_data, table_arrays
 
 RNG = np.random.default_rng(20231123)
 N = 400

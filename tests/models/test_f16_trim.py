@@ -13,9 +13,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.models.f16 import book
-from jaxfdi.models.f16.dynamics import f16_dynamics, f16_params
-from jaxfdi.models.f16.tables import stevens_lewis_data
+from jaxfdi.models.f16 import _book as book
+from jaxfdi.models.f16._dynamics import f16_dynamics, f16_params
+from jaxfdi.models.f16._tables import stevens_lewis_data
 from jaxfdi.models.f16._trim import TRIM_RESIDUALS, trim_batch, trim_condition, trim_residual
 
 #: cells that are not within half a unit: (case, quantity) -> (bound on |ours - book|, why)

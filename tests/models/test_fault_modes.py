@@ -5,10 +5,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.faults import FaultKind, Target, fault
+from jaxfdi._faults import FaultKind, Target, fault
 from jaxfdi.filters import kalman_filter, run_filter
 from jaxfdi.models import engine_model
-from jaxfdi.models.fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi import linear_simulator, simulate
 
 

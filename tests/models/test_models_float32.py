@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 from jaxfdi.models import c2d, engine_model
-from jaxfdi.models import vtol
+from jaxfdi.models import _vtol as vtol
 
 _CHILD = r"""
 import json, sys
 import jax, numpy as np
 assert not jax.config.jax_enable_x64
-from jaxfdi.models import engine_model, kitsat3_params, rigid_body_params, vtol
-from jaxfdi.models.fault_modes import bias_modes, noise_inflation_modes
+from jaxfdi.models import engine_model, kitsat3_params, rigid_body_params, _vtol as vtol
+from jaxfdi.models._fault_modes import bias_modes, noise_inflation_modes
 out = {}
 def put(name, tree):
     for i, leaf in enumerate(jax.tree.leaves(tree)):
@@ -58,7 +58,7 @@ def float32_run():
 
 def _float64_models():
     from jaxfdi.models import kitsat3_params, rigid_body_params
-    from jaxfdi.models.fault_modes import bias_modes, noise_inflation_modes
+    from jaxfdi.models._fault_modes import bias_modes, noise_inflation_modes
 
     engine = engine_model(dtype=jnp.float64)
     return {

@@ -22,11 +22,11 @@ import pytest
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 import jaxfdi
-from jaxfdi.control.attitude import allocate_wheel_torques, slew, slew_reference
-from jaxfdi.detection.credits import credit_isolator, hypothesis_credits
+from jaxfdi.control._attitude import allocate_wheel_torques, slew, slew_reference
+from jaxfdi.detection._credits import credit_isolator, hypothesis_credits
 from jaxfdi.detection._dual_filter import dual_filter, system_matrix_det
-from jaxfdi.faults import no_fault
-from jaxfdi.models.reaction_wheels import (
+from jaxfdi._faults import no_fault
+from jaxfdi.models._reaction_wheels import (
     body_rate_field,
     kitsat3_params,
     pyramid_axes,
@@ -36,7 +36,7 @@ from jaxfdi.models.reaction_wheels import (
     total_momentum,
     wheel_rate_transition,
 )
-from jaxfdi.models.reaction_wheels import delivered_torque, stop_transfer
+from jaxfdi.models._reaction_wheels import delivered_torque, stop_transfer
 from jaxfdi.scenarios.reaction_wheels import estimation_filter, wheel_fault
 
 jax.config.update("jax_enable_x64", True)

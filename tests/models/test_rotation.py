@@ -1,9 +1,9 @@
-"""``jaxfdi.models.rotation``: the one quaternion algebra of the INS and the spacecraft
+"""``jaxfdi.models._rotation``: the one quaternion algebra of the INS and the spacecraft
 (Hamilton product, scalar first)."""
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi.models import rotation
+from jaxfdi.models import _rotation as rotation
 
 
 def _unit(v):

@@ -7,12 +7,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.faults import stack_faults
-from jaxfdi.models.engine import OUTPUT_NAMES, TS, engine_model
+from jaxfdi._faults import stack_faults
+from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.scenarios.engine import PAPER_DELAY, engine_spec, fault_size_study
 from jaxfdi.scenarios.engine_chi2 import engine_faults
-from jaxfdi.study import case_slices, run_study
-from jaxfdi.metrics import fault_row
+from jaxfdi._study import case_slices, run_study
+from jaxfdi._metrics import fault_row
 
 GLRT = "GLRT l_T=200"
 

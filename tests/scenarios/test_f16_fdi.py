@@ -16,13 +16,13 @@ import pytest
 import scipy.stats
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from jaxfdi import loop, stages
-from jaxfdi.detection import hybrid_psa as hp
-from jaxfdi.faults import Target, active_label, apply_faults
+from jaxfdi import _loop as loop, _stages as stages
+from jaxfdi.detection import _hybrid_psa as hp
+from jaxfdi._faults import Target, active_label, apply_faults
 from jaxfdi.filters import run_filter
-from jaxfdi.models.f16.dynamics import f16_dynamics
-from jaxfdi.models.f16.plant import MEASURED_STATES, RATE_OFFSET
-from jaxfdi.models.f16.rates import rate_derivative, rate_model, rate_model_input, rate_transition
+from jaxfdi.models.f16._dynamics import f16_dynamics
+from jaxfdi.models.f16._plant import MEASURED_STATES, RATE_OFFSET
+from jaxfdi.models.f16._rates import rate_derivative, rate_model, rate_model_input, rate_transition
 from jaxfdi.scenarios import f16_fdi as sf
 from jaxfdi.scenarios.f16_flight import dispersions, flight_setup, nominal_dispersion
 

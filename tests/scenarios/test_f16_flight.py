@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from jaxfdi.control.flight import LATERAL_TRACKED, LONGITUDINAL_TRACKED, flight_plan
-from jaxfdi.control.lqr import integral_augmentation
-from jaxfdi.models.f16.dynamics import ALPHA, BETA, H, PHI, Q, THETA, VT
+from jaxfdi.control._flight import LATERAL_TRACKED, LONGITUDINAL_TRACKED, flight_plan
+from jaxfdi.control._lqr import integral_augmentation
+from jaxfdi.models.f16._dynamics import ALPHA, BETA, H, PHI, Q, THETA, VT
 from jaxfdi.models.f16._linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, longitudinal, submodel
-from jaxfdi.models.f16.plant import f16_sensors
+from jaxfdi.models.f16._plant import f16_sensors
 from jaxfdi.scenarios.f16_flight import ERRORS, cast_setup, dispersions, flight_setup, nominal_dispersion, run_flights
 
 FLIGHTS = 4
@@ -143,9 +143,9 @@ def test_plant_noise_and_faults(flight):
     sample std within 5 %: its standard error is 1.1 %), a sensor bias on both axes of
     rate sensor 1 (seed 000's fault) appears in ``y`` from its onset on, and a stuck
     elevator takes the value commanded at its onset (``faults`` holds it afterwards)."""
-    from jaxfdi.faults import concat_faults, fault, fault_group
-    from jaxfdi.control.f16_loop import f16_plant
-    from jaxfdi.models.f16.plant import RATE_OFFSET, measurement_cov
+    from jaxfdi._faults import concat_faults, fault, fault_group
+    from jaxfdi.control._f16_loop import f16_plant
+    from jaxfdi.models.f16._plant import RATE_OFFSET, measurement_cov
 
     setup = flight[0]
     bias = fault_group("bias", "sensor", (RATE_OFFSET, RATE_OFFSET + 1), 300, (0.1, 0.1))

@@ -16,10 +16,10 @@ from scipy import stats
 
 from jaxfdi.data import data_path
 from jaxfdi.gnss import geodetic_to_ecef, read_rinex_nav, satellite_position
-from jaxfdi.gnss.measurements import ClockModel, visibility
-from jaxfdi.gnss.orbits import ephemeris_table, satellite_clock, select_orbits
-from jaxfdi.gnss.paths import racetrack_ecef
-from jaxfdi.gnss.orbits import SPEED_OF_LIGHT
+from jaxfdi.gnss._measurements import ClockModel, visibility
+from jaxfdi.gnss._orbits import ephemeris_table, satellite_clock, select_orbits
+from jaxfdi.gnss._paths import racetrack_ecef
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT
 from jaxfdi.scenarios.gnss_campus import (DT, MASK_DEG, PARK, PARK_FAULTS, PARK_PATH, START_TOW, TABLE2_FAULTS, WEEK,
                                           gnss_campus_study, plot_gnss_campus)
 

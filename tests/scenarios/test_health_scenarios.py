@@ -4,8 +4,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.faults import NEVER
-from jaxfdi.metrics import DetectionRecord
+from jaxfdi._faults import NEVER
+from jaxfdi._metrics import DetectionRecord
 from jaxfdi.models import engine_model
 from jaxfdi.scenarios.engine import EngineStudy, summarize_method
 from jaxfdi.scenarios.engine_chi2 import engine_chi2_study
@@ -90,15 +90,15 @@ def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     import jax
 
     from jaxfdi import linear_simulator, simulate
-    from jaxfdi.detection.mode_probability import mode_probability_detector
-    from jaxfdi.faults import fault
+    from jaxfdi.detection._mode_probability import mode_probability_detector
+    from jaxfdi._faults import fault
     from jaxfdi.filters._base import run_filter
-    from jaxfdi.filters.imm import interacting_multiple_model
-    from jaxfdi.filters.kalman import kalman_filter
-    from jaxfdi.metrics import fault_row
-    from jaxfdi.models.fault_modes import noise_inflation_modes
+    from jaxfdi.filters._imm import interacting_multiple_model
+    from jaxfdi.filters._kalman import kalman_filter
+    from jaxfdi._metrics import fault_row
+    from jaxfdi.models._fault_modes import noise_inflation_modes
     from jaxfdi._monitor import replay_detector
-    from jaxfdi.faults import sensor_labels
+    from jaxfdi._faults import sensor_labels
     from jaxfdi.scenarios.engine import PAPER_TRANSITION
 
     model, steps = engine_model(), 80

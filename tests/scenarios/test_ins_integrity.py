@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi.ins.integrity import attribute_ins_alarms
+from jaxfdi.ins._integrity import attribute_ins_alarms
 from jaxfdi.scenarios.gps_ins import (PAPER_TABLE3, StudySize, alarms_at, gps_ins_study, ins_decisions, plot_gps_ins,
                                       thresholds)
 

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi.faults import FaultKind, no_fault
-from jaxfdi.models.reaction_wheels import delivered_torque, kitsat3_params, stop_hypotheses, stop_transfer, wheel_momentum
-from jaxfdi.metrics import binomial_lower_bound
+from jaxfdi._faults import FaultKind, no_fault
+from jaxfdi.models._reaction_wheels import delivered_torque, kitsat3_params, stop_hypotheses, stop_transfer, wheel_momentum
+from jaxfdi._metrics import binomial_lower_bound
 from jaxfdi.scenarios import reaction_wheels as rw
-from jaxfdi.study import run_study
+from jaxfdi._study import run_study
 
 CALIBRATION, FREE, PER_WHEEL, PER_GYRO = 80, 40, 10, 2
 STOPS = slice(CALIBRATION + FREE, CALIBRATION + FREE + 4 * PER_WHEEL)

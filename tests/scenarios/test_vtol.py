@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi.control.eigenstructure import assign_eigenstructure, scheduled_gain
-from jaxfdi.detection.signature import isolate, location_symptoms
-from jaxfdi.faults import fault_label, no_fault
+from jaxfdi.control._eigenstructure import assign_eigenstructure, scheduled_gain
+from jaxfdi.detection._signature import isolate, location_symptoms
+from jaxfdi._faults import fault_label, no_fault
 from jaxfdi.filters import run_filter, unknown_input_filter
-from jaxfdi.models import vtol
-from jaxfdi.models.linear import LinearGaussianModel
+from jaxfdi.models import _vtol as vtol
+from jaxfdi.models._linear import LinearGaussianModel
 from jaxfdi.scenarios.vtol import (
     FILTER_NAMES,
     HEALTH_CASES,
@@ -167,7 +167,7 @@ def test_gain_schedule_is_the_eigenstructure_assignment(design):
     # exact at the grid points; between them the interpolated gain keeps every nominal
     # eigenvalue of the faulty loop within 1e-3
     schedule = design.schedule
-    from jaxfdi.control.lqr import integral_augmentation
+    from jaxfdi.control._lqr import integral_augmentation
 
     A_bar, B_bar, _ = integral_augmentation(design.model.Phi, design.model.Gamma, design.H, vtol.TS)
     lam = np.linalg.eigvals(np.asarray(A_bar) - np.asarray(B_bar) @ np.asarray(design.gain))
@@ -195,8 +195,8 @@ def test_other_thresholds_seeds_and_runs_compile_no_new_closed_loop(study):
     thresholds, and a fresh design of the same value with another seed and run count,
     compile nothing new; the paper-threshold decisions equal the study's own evaluation
     of the same runs against the paper's thresholds."""
-    from jaxfdi import montecarlo
-    from jaxfdi import study as engine
+    from jaxfdi import _montecarlo as montecarlo
+    from jaxfdi import _study as engine
     from jaxfdi.scenarios.vtol import paper_thresholds, vtol_spec
 
     filters = study.design.location.shape[0]
@@ -213,7 +213,7 @@ def test_other_thresholds_seeds_and_runs_compile_no_new_closed_loop(study):
 @pytest.fixture(scope="module")
 def histories(study):
     """Full closed-loop histories (FTC off) of every fault case, 20 runs each (same keys as the study)."""
-    from jaxfdi.faults import stack_faults
+    from jaxfdi._faults import stack_faults
 
     cases = vtol_faults()
     faults = stack_faults([f for _, f in cases])
@@ -397,7 +397,7 @@ def test_the_loop_holds_v_h_and_leaves_the_unreachable_q_command(histories, stud
 def calm(design):
     """The s3 step and fault-free runs of ``histories`` (same keys) on the true plant
     without the disturbance ``3 sin 10t`` (its oscillator started at rest)."""
-    from jaxfdi.faults import stack_faults
+    from jaxfdi._faults import stack_faults
 
     calm_design = design._replace(plant_x0=design.plant_x0.at[4:].set(0.0))
     cases = dict(vtol_faults())
@@ -484,7 +484,7 @@ def test_study_rows_and_calibration(study):
 def test_per_run_calibration_is_the_smallest_scaling_meeting_the_rate(design):
     """Brute force on the calibration runs themselves: the scaled thresholds leave at most
     ``run_false_alarm`` of them with a symptom, and any smaller scaling does not."""
-    from jaxfdi.montecarlo import monte_carlo
+    from jaxfdi._montecarlo import monte_carlo
     from jaxfdi.scenarios.vtol import decision_values, runs_with_symptoms
 
     runs, seed, steps = 12, 5, 120

@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi.control.attitude import wheel_attitude_controller, wheel_plant
-from jaxfdi.loop import detection_scorer, run_loop
-from jaxfdi.models.reaction_wheels import WheelCommand, filter_input
-from jaxfdi.metrics import binomial_lower_bound
+from jaxfdi.control._attitude import wheel_attitude_controller, wheel_plant
+from jaxfdi._loop import detection_scorer, run_loop
+from jaxfdi.models._reaction_wheels import WheelCommand, filter_input
+from jaxfdi._metrics import binomial_lower_bound
 from jaxfdi.scenarios import reaction_wheels as rw
 
 RUNS, STEPS, ONSET = 20, 300, 200

@@ -33,7 +33,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.models.f16.dynamics import (
+from jaxfdi.models.f16._dynamics import (
     AIL,
     ALPHA,
     BETA,

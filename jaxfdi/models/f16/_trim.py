@@ -38,9 +38,9 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.models.f16.dynamics import ALPHA, BETA, P, Q, R, VT, F16Params, f16_dynamics
-from jaxfdi.models.f16.engine import throttle_gearing
-from jaxfdi.optimize.least_squares import levenberg_marquardt
+from jaxfdi.models.f16._dynamics import ALPHA, BETA, P, Q, R, VT, F16Params, f16_dynamics
+from jaxfdi.models.f16._engine import throttle_gearing
+from jaxfdi.optimize._least_squares import levenberg_marquardt
 
 #: the trim unknowns, in order
 TRIM_VARIABLES = ("thtl", "el", "ail", "rdr", "alpha", "beta")

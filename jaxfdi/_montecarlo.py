@@ -1,0 +1,404 @@
+"""Monte Carlo driver: vmap over runs, chunked to bound memory, sharded over devices and
+processes.
+
+``monte_carlo(run_one, key, num_runs, per_run)`` calls ``run_one(key_i, per_run_i)``
+for every run, where ``key_i`` is the i-th of ``jax.random.split(key, num_runs)`` and
+``per_run_i`` the i-th slice of any pytree of per-run data (faults, magnitudes, initial
+states, models). Runs are evaluated ``chunk_size`` at a time by one compiled
+``jit(vmap(run_one))``; each chunk's run axis is sharded over the devices with
+``jax.sharding`` (``NamedSharding(Mesh(devices, ("runs",)), P("runs"))``). Each run's
+randomness depends only on its own key, which depends only on its index (``run_keys``),
+so results do not depend on the number of devices, processes or the chunk size (up to
+floating-point rounding: XLA may vectorise a batch of different width differently;
+with the same number of runs per device they are bit for bit the same). Outputs come
+back as NumPy.
+
+Several processes (``jaxfdi.distributed.initialize``; every process calls
+``monte_carlo`` with the same arguments): the mesh spans every device of every process,
+each process computes the runs its devices hold, and the outputs are gathered once at
+the end, so every process returns the whole result. With ``reduce`` (e.g.
+``streaming.detection_reducer``), each chunk's outputs are folded into a summary
+instead of kept, and the processes' summaries are merged at the end.
+
+The device never waits for the host: chunk ``c + 1`` is dispatched before chunk ``c``'s
+outputs are looked at, outputs stay on the device until one transfer at the end, and
+``summary`` (counts, sums, histograms: anything additive) is computed inside the chunk's
+program and added up on the device. Progress counts finished chunks. With the default
+``chunk_size=None`` the chunk is sized for the backend (``default_chunk_size``); a
+smaller study gets a power of two, never below ``MIN_CHUNK`` runs per device, so few
+programs serve every number of runs (on a CPU one: a compilation costs more than the
+padded runs); the first chunk's compilation is reported.
+"""
+from __future__ import annotations
+
+import functools
+import sys
+import threading
+import time
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from jaxfdi import _checks
+from jaxfdi.distributed import allgather
+from jaxfdi._progress import progress_bar, status
+
+ProgressFn = Callable[[int, int, float], None]
+
+
+def print_progress(done: int, total: int, elapsed: float) -> None:
+    """Default progress display: one updating line on stderr."""
+    rate = done / elapsed if elapsed > 0 else float("nan")
+    end = "\n" if done >= total else ""
+    print(f"\rmonte carlo: {done}/{total} runs, {elapsed:.1f} s, {rate:.0f} runs/s", end=end, file=sys.stderr, flush=True)
+
+
+def _num_runs_of(per_run: Any) -> set[int]:
+    return {np.shape(leaf)[0] if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(per_run)}
+
+
+def _is_key(key: Any) -> bool:
+    return isinstance(key, jax.Array) and (jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+                                           or (key.dtype == jnp.uint32 and key.shape == (2,)))
+
+
+def _split_is_foldlike(key: jax.Array) -> bool:
+    """True when ``split(key, n)[i]`` is the threefry hash of the 64-bit index ``i``
+    alone (JAX's partitionable threefry, the default), so any run's key can be computed
+    without the others."""
+    typed = jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+    impl = str(jax.random.key_impl(key)) if typed else str(jax.config.jax_default_prng_impl)
+    return bool(jax.config.jax_threefry_partitionable) and "threefry" in impl
+
+
+@jax.jit
+def _threefry_index_keys(key_data: jax.Array, high: jax.Array, low: jax.Array) -> jax.Array:
+    from jax.extend.random import threefry2x32_p
+
+    bits = threefry2x32_p.bind(key_data[0], key_data[1], high, low)
+    return jnp.stack(bits, axis=-1)
+
+
+def run_keys(key: jax.Array, index: np.ndarray, num_runs: int) -> jax.Array:
+    """The keys of runs ``index`` of ``num_runs``: ``jax.random.split(key, num_runs)[index]``.
+
+    With JAX's partitionable threefry (the default) key ``i`` depends on ``i`` alone and
+    is computed directly (a 10^8-run study never holds 10^8 keys); otherwise the whole
+    split is formed.
+    """
+    index = np.asarray(index)
+    if not _split_is_foldlike(key):
+        return jax.random.split(key, num_runs)[jnp.asarray(index)]
+    typed = jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+    wide = index.astype(np.uint64)
+    bits = _threefry_index_keys(jax.random.key_data(key) if typed else key,
+                                jnp.asarray((wide >> np.uint64(32)).astype(np.uint32)),
+                                jnp.asarray((wide & np.uint64(0xFFFFFFFF)).astype(np.uint32)))
+    return jax.random.wrap_key_data(bits, impl=jax.random.key_impl(key)) if typed else bits
+
+
+#: runs per chunk by backend (``default_chunk_size``). CPU: 64, where a study's state stays
+#: in cache (the engine's bias IMMs: 19 s at 16-64 runs per chunk, 26 s at 128-256); a
+#: chunk costs about 0.5 ms of dispatch, so very cheap runs want a larger ``chunk_size``
+#: (10^5 three-draw runs: 1.3 s at 64, 0.5 s at 8192). An accelerator wants wide batches
+#: (its memory bounds them: a chunk's outputs and scratch are per run).
+CHUNK_BY_PLATFORM = {"cpu": 64, "gpu": 16384, "cuda": 16384, "rocm": 16384, "tpu": 16384}
+#: the smallest default chunk per device: a study of fewer runs is padded up to it, so
+#: that its calibration, its main runs and a test's few runs share one program (the
+#: reaction-wheel study's closed loop: 16 s to compile, 25-46 ms a padded run on a CPU)
+MIN_CHUNK = 64
+
+
+def default_chunk_size(devices: list | None = None) -> int:
+    """Runs per chunk for the devices' backend (``CHUNK_BY_PLATFORM``), times their count."""
+    devices = devices or jax.local_devices()
+    return CHUNK_BY_PLATFORM.get(devices[0].platform, 1024) * len(devices)
+
+
+def monte_carlo(
+    run_one: Callable[[jax.Array, Any], Any],
+    key: jax.Array,
+    num_runs: int,
+    per_run: Any = None,
+    *,
+    chunk_size: int | None = None,
+    devices: list | None = None,
+    progress: bool | ProgressFn = False,
+    batched: bool = False,
+    reduce: Any = None,
+    summary: Callable[[Any, jax.Array], Any] | None = None,
+    shared: Any = None,
+    label: str = "monte carlo",
+) -> Any:
+    """Evaluate ``run_one`` over ``num_runs`` runs; return outputs stacked over runs.
+
+    Args:
+      run_one: pure function ``(key, per_run_slice) -> pytree``; keep its output small
+        (metrics, not histories) for large ``num_runs``.
+      key: PRNG key; run i gets ``jax.random.split(key, num_runs)[i]``.
+      num_runs: number of runs.
+      per_run: pytree whose leaves have leading axis ``num_runs`` (or ``None``); with
+        several processes, the same on every process.
+      chunk_size: runs per compiled call (memory bound); rounded up to a multiple of the
+        number of devices. ``None``: ``default_chunk_size(devices)``, and a smaller study
+        the next power of two, at least ``MIN_CHUNK`` per device (a few program shapes,
+        whatever ``num_runs``; on a CPU one).
+      devices: devices to shard the run axis over (default: all devices of all
+        processes after ``jaxfdi.distributed.initialize``, else the local ones).
+      progress: ``True`` for a line on stderr, or a callable ``(done, total, seconds)``.
+      batched: ``run_one`` takes a whole chunk, ``(keys (B,), per_run (B, ...)) ->
+        outputs (B, ...)`` (e.g. ``run_filter`` of a ``kalman_filter`` with a model per
+        run, the batch kernel), instead of one run under ``vmap``.
+      reduce: a ``streaming.Reducer``: fold each chunk's outputs into its state on the
+        host and return the state (merged across processes) instead of the stacked
+        outputs.
+      summary: ``(outputs (B, ...), weight (B,)) -> (kept, totals)``: ``kept`` the
+        outputs to return per run (e.g. ``outputs`` less the histories it summed),
+        ``totals`` additive over runs (sums, counts, histograms; ``weight`` is 1 for a
+        run and 0 for the padding of the last chunk). Computed on the device inside the
+        chunk's program and summed over chunks (and processes); the call returns
+        ``(kept, totals)``.
+      shared: a pytree every run reads whole (``run_one(key, per_run_slice, shared)``):
+        arguments of the compiled program, not constants in it, so that studies that
+        differ only in these numbers (thresholds, transition matrices) share one program.
+      label: what the progress display and the compilation message call this study.
+
+    Returns:
+      ``run_one``'s output pytree with NumPy leaves stacked along a leading run axis
+      ``(num_runs, ...)``, in run order; with ``summary``, ``(kept, totals)``: ``kept``
+      stacked over runs the same way and ``totals`` summed over the runs (NumPy); with
+      ``reduce``, the reducer's final state (merged across processes) instead.
+    """
+    _checks.check_callable("run_one", run_one, "a function (key, per_run_slice) -> outputs")
+    num_runs = _checks.check_int("num_runs", num_runs, 1, meaning="a positive number of runs")
+    if chunk_size is not None:
+        chunk_size = _checks.check_int("chunk_size", chunk_size, 1, meaning="a positive number of runs per call")
+    if not _is_key(key):
+        raise TypeError(f"key: expected a PRNG key (jax.random.key(seed)), got {_checks.received(key)}")
+    if not (progress is None or isinstance(progress, bool) or callable(progress)):
+        raise TypeError(f"progress: expected True/False or a callable (done, total, seconds), got "
+                        f"{_checks.received(progress)}")
+    if reduce is not None and not all(callable(getattr(reduce, name, None)) for name in ("init", "update", "merge")):
+        raise TypeError(f"reduce: expected a Reducer(init, update, merge) such as streaming.detection_reducer(...), "
+                        f"got {_checks.received(reduce)}")
+    if summary is not None:
+        _checks.check_callable("summary", summary, "a function (outputs, weight) -> additive pytree")
+        if reduce is not None:
+            raise ValueError("summary: expected None with reduce (one way to fold the outputs)")
+    sizes = _num_runs_of(per_run)
+    if sizes and sizes != {num_runs}:
+        raise ValueError(f"per_run: every leaf needs leading axis num_runs = {num_runs}, got leading sizes {sorted(sizes)}")
+    devices, multiprocess, chunk, sharding, compiled, shared = _plan(run_one, num_runs, chunk_size, devices, batched,
+                                                                      summary, shared)
+    report = progress_bar(label, "runs") if progress is True else (progress or None)  # tqdm.auto or log lines
+    rows = _local_rows(devices, chunk) if multiprocess else slice(0, chunk)
+
+    state = reduce.init() if reduce is not None else None
+    outputs, total, pending = [], None, None
+    start_time = time.perf_counter()
+    done = [0]  # runs reported finished
+    running = None  # after the first dispatch: a long chunk is reported while it runs
+
+    def finish(chunk_result):
+        """Wait for a dispatched chunk, fold it in, report it (the pipeline's tail)."""
+        nonlocal state, total
+        result, part, valid, stop = chunk_result
+        if reduce is not None:
+            host = jax.tree_util.tree_map(_to_host if multiprocess else np.asarray, result)
+            state = reduce.update(state, jax.tree_util.tree_map(lambda leaf: leaf[valid], host))
+        else:
+            jax.block_until_ready(result)
+            outputs.append(result)
+        if part is not None:
+            total = part if total is None else jax.tree_util.tree_map(jnp.add, total, part)
+        if report:
+            report(stop, num_runs, time.perf_counter() - start_time)
+            done[0] = stop
+            if running is not None:
+                running.touch()
+
+    try:
+        for start in range(0, num_runs, chunk):
+            stop = min(start + chunk, num_runs)
+            index = np.minimum(np.arange(start, start + chunk), num_runs - 1)  # pad by repeating the last run
+            valid = np.arange(start, start + chunk)[rows] < stop
+            weight = np.arange(start, start + chunk) < stop
+            first = start == 0
+            heartbeat = None
+            if first and progress:
+                programs = _cache_size(compiled)
+                if programs == 0:
+                    status(f"{label}: compiling")
+                    heartbeat = _Heartbeat(f"{label}: still compiling", start_time)
+            try:
+                if multiprocess:
+                    result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk,
+                                                 valid, shared)
+                else:  # dispatched: the device works on
+                    result = compiled(*_chunk_args(key, index, num_runs, per_run, weight, sharding), *shared)
+            finally:
+                if heartbeat is not None:
+                    heartbeat.stop()
+            if first and progress and _cache_size(compiled) > programs:
+                status(f"{label}: compiled in {time.perf_counter() - start_time:.1f} s")
+            if first and report:
+                running = _Heartbeat(lambda: f"{label}: running, {done[0]}/{num_runs} runs done", start_time)
+            result, part = result if summary is not None else (result, None)
+            if pending is not None:
+                finish(pending)  # the previous chunk, while this one runs
+            pending = (result, part, valid, stop)
+        finish(pending)
+    finally:
+        if running is not None:
+            running.stop()
+    if total is not None:  # the program summed over the global chunk: replicated on every process
+        total = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf.addressable_data(0)), total)
+    if reduce is not None:
+        if multiprocess:
+            state = reduce.merge(allgather(state))
+        return state
+    if multiprocess:
+        stacked = _gather_runs([jax.tree_util.tree_map(_to_host, o) for o in outputs], num_runs)
+    elif len(outputs) == 1:
+        stacked = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[:num_runs], outputs[0])
+    else:  # one transfer of every chunk, joined on the host (no program per number of chunks)
+        stacked = jax.tree_util.tree_map(lambda *parts: np.concatenate(parts, axis=0)[:num_runs],
+                                         *jax.device_get(outputs))
+    return (stacked, total) if summary is not None else stacked
+
+
+class _Heartbeat:
+    """Logs ``message`` (a string, or a callable giving one) with the seconds since
+    ``start`` from a daemon thread whenever ``interval`` seconds pass with neither a beat
+    nor a ``touch()`` (the progress display's own report), until ``stop()``: a long
+    compilation, or a long chunk, is never silent."""
+
+    def __init__(self, message, start: float, interval: float = 5.0) -> None:
+        self._done = threading.Event()
+        self._last = time.perf_counter()
+        self._thread = threading.Thread(target=self._beat, args=(message, start, interval), daemon=True)
+        self._thread.start()
+
+    def _beat(self, message, start: float, interval: float) -> None:
+        while not self._done.wait(min(1.0, interval)):
+            now = time.perf_counter()
+            if now - self._last >= interval:
+                self._last = now
+                status(f"{message() if callable(message) else message} ({now - start:.0f} s)")
+
+    def touch(self) -> None:
+        self._last = time.perf_counter()
+
+    def stop(self) -> None:
+        self._done.set()
+
+
+def _plan(run_one, num_runs, chunk_size, devices, batched, summary, shared):
+    """The devices (and whether they span processes), the chunk, its sharding, the
+    compiled chunk program and the ``shared`` arguments of a ``monte_carlo`` call."""
+    devices = list(devices or (jax.devices() if jax.process_count() > 1 else jax.local_devices()))
+    multiprocess = len({d.process_index for d in devices}) > 1
+    if multiprocess:
+        devices = sorted(devices, key=lambda d: (d.process_index, d.id))
+        per_process = {p: sum(d.process_index == p for d in devices) for p in {d.process_index for d in devices}}
+        if len(set(per_process.values())) != 1:
+            raise ValueError(f"devices: every process needs the same number of devices, got {per_process}")
+    n_dev = len(devices)
+    if chunk_size is None:
+        smallest = max(MIN_CHUNK * n_dev, 1 << max(int(num_runs) - 1, 0).bit_length())
+        chunk = min(default_chunk_size(devices), smallest)
+    else:
+        chunk = min(int(chunk_size), int(num_runs))
+    chunk = -(-chunk // n_dev) * n_dev
+    sharding = NamedSharding(Mesh(np.array(devices), ("runs",)), PartitionSpec("runs"))
+    try:
+        compiled = _compiled(run_one, bool(batched), summary, shared is not None)
+    except TypeError:  # an unhashable callable object
+        compiled = _chunk_program(run_one, bool(batched), summary, shared is not None)
+    shared = () if shared is None else (jax.tree_util.tree_map(jnp.asarray, shared),)
+    return devices, multiprocess, chunk, sharding, compiled, shared
+
+
+def _chunk_args(key, index: np.ndarray, num_runs: int, per_run: Any, weight: np.ndarray, sharding) -> tuple:
+    """A chunk's keys, per-run data and weights, on the devices (one process)."""
+    chunk_keys = run_keys(key, index, num_runs)
+    chunk_data = jax.tree_util.tree_map(lambda leaf: _take(leaf, index), per_run)
+    return jax.device_put((chunk_keys, chunk_data, weight), sharding)
+
+
+def _take(leaf: Any, index: np.ndarray) -> Any:
+    """Rows ``index`` of a per-run leaf: NumPy data stays on the host (no program per
+    shape), device data is gathered where it is."""
+    return leaf[index] if isinstance(leaf, jax.Array) else np.asarray(leaf)[index]
+
+
+def _cache_size(compiled) -> int:
+    """How many programs a ``jax.jit`` function holds (0 when it cannot tell)."""
+    try:
+        return int(compiled._cache_size())
+    except (AttributeError, TypeError):
+        return 0
+
+
+def _chunk_program(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
+    """``jit`` of one chunk: ``(keys, per_run, weight[, shared]) -> outputs`` or, with
+    ``summary``, ``summary(outputs, weight) = (kept, totals)``."""
+    runs = run_one if batched else jax.vmap(run_one, in_axes=(0, 0, None) if with_shared else (0, 0))
+
+    def chunk(keys, data, weight, *shared):
+        out = runs(keys, data, *shared)
+        return out if summary is None else summary(out, weight)
+
+    return jax.jit(chunk)
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
+    """``_chunk_program``, one per ``run_one``: a second study with the same function
+    (e.g. its streaming summary after its records) reuses the compiled executables."""
+    return _chunk_program(run_one, batched, summary, with_shared)
+
+
+def _local_rows(devices: list, chunk: int) -> slice:
+    """The rows of a chunk held by this process's devices (contiguous: the mesh lists
+    the devices process by process)."""
+    per_device = chunk // len(devices)
+    mine = [i for i, d in enumerate(devices) if d.process_index == jax.process_index()]
+    if not mine or mine != list(range(mine[0], mine[-1] + 1)):
+        raise ValueError("devices: every process needs at least one device in the list")
+    return slice(mine[0] * per_device, (mine[-1] + 1) * per_device)
+
+
+def _chunk_multiprocess(compiled, sharding, key, local_index, num_runs, per_run, chunk, local_valid, shared):
+    """One chunk over the global mesh: this process builds its rows only, every process
+    runs the same program (dispatched; ``_to_host`` takes this process's rows)."""
+    local_keys = run_keys(key, local_index, num_runs)
+    local_data = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[local_index], per_run)
+
+    def global_array(local):
+        return jax.make_array_from_process_local_data(sharding, local, (chunk,) + tuple(np.shape(local)[1:]))
+
+    return compiled(global_array(local_keys), jax.tree_util.tree_map(global_array, local_data),
+                    global_array(np.asarray(local_valid)), *shared)
+
+
+def _to_host(array: jax.Array) -> np.ndarray:
+    """This process's rows of a global array, as NumPy."""
+    shards = sorted(array.addressable_shards, key=lambda shard: shard.index[0].start or 0)
+    return np.concatenate([np.asarray(shard.data) for shard in shards], axis=0)
+
+
+def _gather_runs(outputs: list, num_runs: int) -> Any:
+    """One all-gather of every process's rows of every chunk, put back in run order."""
+    local = jax.tree_util.tree_map(lambda *parts: np.stack(parts), *outputs)   # (chunks, local rows, ...)
+    everyone = allgather(local)                                                 # [process](chunks, rows, ...)
+
+    def order(*per_process):
+        stacked = np.stack(per_process, axis=1)                                 # (chunks, processes, rows, ...)
+        return stacked.reshape((-1,) + stacked.shape[3:])[:num_runs]
+
+    return jax.tree_util.tree_map(order, *everyone)
+

@@ -1,0 +1,344 @@
+"""The study engine: a Monte Carlo study is data, and one function runs it.
+
+A study names its cases (what each run simulates: a fault, a magnitude), the number of
+runs of each, and its methods, grouped by **structure**: methods that differ only in
+numbers (a transition matrix, a threshold, a confirmation length) are one compiled
+program with those numbers as arrays. A structure's ``run(key, case, *params)`` is one
+run of one method; its ``axes`` are parameter pytrees with a leading axis each, and the
+engine ``vmap`` s ``run`` over them in turn, outer axis first, so one program runs the
+whole grid ``axes[0] x axes[1] x ...`` on the same simulated run. What does not depend
+on an axis is computed once for it: with ``axes = (filter_params (F,), detector_params
+(D,))`` the plant is simulated once per run and each of the F filters runs once, feeding
+its D detectors. A method is a cell of the grid (``methods``: name -> index tuple).
+
+``run_study(study, runs, seed)`` runs every structure through ``monte_carlo`` on the same
+keys (run ``i`` of the study gets ``split(key(seed), cases * runs)[i]`` in every
+structure, so every method sees the same noise), case-major, and returns a
+``StudyResult``: per method the runs' outputs (host NumPy, one transfer per structure)
+and, where a structure is ``averaged``, the per-case mean of its runs' traces, summed
+on the device (``monte_carlo``'s ``summary``): what a figure of mean
+histories needs without keeping any history. A study compiles one program per
+structure, whatever ``runs`` and ``seed`` (``monte_carlo``'s chunk sizing); progress
+says which structure compiles (k of n) and how fast the runs go.
+
+Example (two thresholds of one chi-square detector on one Kalman filter, one program)::
+
+    structure = Structure("kf-chi2", run, axes=(jnp.array([9.2, 11.3]),),
+                          methods={"chi2 1%": (0,), "chi2 0.1%": (1,)})
+    study = Study("toy", cases=stack_faults(faults), case_names=names, structures=(structure,))
+    result = run_study(study, runs=100, seed=0)
+    result.outputs["chi2 1%"]          # (cases * runs, ...) case-major
+"""
+from __future__ import annotations
+
+import functools
+import time
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxfdi import _checks
+from jaxfdi._montecarlo import _num_runs_of, monte_carlo
+from jaxfdi._progress import status
+
+__all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_slices"]
+
+
+class Structure(NamedTuple):
+    """Methods that share one compiled program.
+
+    ``run(key, case, *params) -> output`` is one run of one method, ``params`` one slice
+    of each of ``axes``; ``methods`` maps each method's name to its cell of the grid (one
+    index per axis). ``averaged``: ``run`` returns ``(output, trace)`` and ``trace`` (e.g.
+    the run's mode-probability history, for a figure) is averaged over the runs of each
+    case on the device instead of kept; a trace that does not depend on an axis is
+    computed once for it. ``batched``: ``run(keys (B,), cases (B, ...), *params)`` runs a
+    whole chunk and returns a leading run axis (B, ...), e.g. to drive a filter's batch
+    kernel (``run_filter``) instead of ``vmap``. ``shared``: data that every run of
+    every cell reads as it is (a design, an ephemeris, a flight's tables: not vmapped),
+    passed to ``run`` after the parameters, ``run(key, case, *params, shared)``; as data,
+    not a closure, so that other values compile nothing new.
+
+    Attributes:
+      name: str, the structure's name (progress messages, ``StudyResult.seconds``)
+      run: ``run(key, case, *params[, shared]) -> output`` (or ``(output, trace)``), one run
+        of one method
+      axes: tuple of parameter pytrees, each with a leading axis (the grid's axes, outer first)
+      methods: dict, method name -> its cell of the grid (a tuple of one index per axis)
+      averaged: bool, ``run`` returns ``(output, trace)`` and the traces are averaged per case
+      batched: bool, ``run`` takes and returns a whole chunk of runs (leading axis B)
+      shared: pytree every run of every cell reads whole, or ``None``
+    """
+
+    name: str
+    run: Callable[..., Any]
+    axes: tuple
+    methods: dict
+    averaged: bool = False
+    batched: bool = False
+    shared: Any = None
+
+
+class Study(NamedTuple):
+    """A study's specification: its cases, their names, and the structures that run the
+    methods. ``cases``: a pytree with a leading case axis C (e.g. a stacked ``Fault``;
+    every run of case ``c`` gets slice ``c``), or, where a case's runs differ beyond
+    their noise (a random onset, a dispersion), ``draw(runs, seed)`` returning a pytree
+    with a leading axis of the total number of runs (``C * runs``, or the sum of the
+    per-case ``runs``), case-major (run ``i`` gets slice ``i``).
+
+    Attributes:
+      name: str, the study's name (progress messages, ``StudyResult.name``)
+      cases: pytree with a leading case axis C, or a callable ``draw(runs, seed)`` (above)
+      case_names: tuple of C names, one per case
+      structures: tuple of ``Structure``, the methods grouped by compiled program
+    """
+
+    name: str
+    cases: Any
+    case_names: tuple
+    structures: tuple
+
+
+class StudyResult(NamedTuple):
+    """What ``run_study`` returns.
+
+    ``outputs[method]``: the method's output of every run, leading axis ``C * runs`` (or
+    the sum of the per-case runs), case-major (``case_slices``). ``means[method]``:
+    (C, ...) per-case mean of the traces of an ``averaged`` structure.
+    ``seconds[structure]``: wall time of its Monte Carlo, compilation included
+    (``compile_seconds``: the compilation alone, 0.0 when the program came from a cache).
+
+    Attributes:
+      name: the study's name
+      runs: int, or a tuple of one count per case
+      seed: the PRNG seed of the runs
+      case_names: the name of each case
+      outputs: method -> its output of every run (see above)
+      means: method -> (C, ...) per-case means (see above)
+      seconds: structure -> wall time of its Monte Carlo [s] (see above)
+      compile_seconds: structure -> compilation time [s] (see above)
+    """
+
+    name: str
+    runs: Any
+    seed: int
+    case_names: tuple
+    outputs: dict
+    means: dict
+    seconds: dict
+    compile_seconds: dict
+
+
+def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
+    """``(key, case) -> output`` with a leading axis per ``structure.axes`` (outer first):
+    ``structure.run`` vmapped over each axis in turn, key and case shared. A ``batched``
+    structure's ``(keys, cases)`` give ``(B, *grid, ...)``: the run axis stays first."""
+    count = len(structure.axes)
+    extra = () if structure.shared is None else (structure.shared,)
+
+    def run(key, case):
+        fn = structure.run
+        for axis in reversed(range(count)):
+            fn = jax.vmap(fn, in_axes=(None, None, *(0 if j == axis else None for j in range(count)),
+                                       *(None for _ in extra)))
+        out = fn(key, case, *structure.axes, *extra)
+        if structure.batched:
+            out = jax.tree_util.tree_map(lambda leaf: jnp.moveaxis(leaf, count, 0), out)
+        return out
+
+    return run
+
+
+def case_slices(runs, num_cases: int) -> list[slice]:
+    """The run ranges of each case in a case-major study output (``runs``: per case, or
+    one count for every case)."""
+    num_cases = _checks.check_int("num_cases", num_cases, 0, meaning="a number of cases >= 0")
+    try:
+        counts = np.broadcast_to(np.asarray(runs, int), (num_cases,))
+    except ValueError:
+        raise ValueError(f"runs: expected one count or {num_cases} counts (one per case), got "
+                         f"{_checks.received(runs)}") from None
+    if np.any(counts < 0):
+        raise ValueError(f"runs: expected counts >= 0, got {_checks.received(runs)}")
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:])]
+
+
+def _run_counts(runs, num_cases: int) -> tuple[int, ...]:
+    """``runs`` (one count, or one per case) as a count per case, each checked positive."""
+    if np.ndim(runs) == 0:
+        return (_checks.check_int("runs", runs, 1, meaning="a positive number of runs per case"),) * num_cases
+    counts = tuple(runs)
+    if len(counts) != num_cases:
+        raise ValueError(f"runs: expected one count or {num_cases} counts (one per case), got {len(counts)}")
+    return tuple(_checks.check_int(f"runs[{i}]", n, 1, meaning="a positive number of runs") for i, n in enumerate(counts))
+
+
+def _check_study(study: Study) -> int:
+    if not isinstance(study, Study):
+        raise TypeError(f"study: expected a jaxfdi.Study, got {_checks.received(study)}")
+    if callable(study.cases):
+        num_cases = len(study.case_names)
+    else:
+        sizes = _num_runs_of(study.cases)
+        if len(sizes) != 1 or -1 in sizes:
+            raise ValueError(f"study.cases: expected leaves with one leading case axis, got leading sizes {sorted(sizes)}")
+        num_cases = sizes.pop()
+    if not num_cases:
+        raise ValueError("study.case_names: expected at least one case")
+    if len(study.case_names) != num_cases:
+        raise ValueError(f"study.case_names: expected {num_cases} names (one per case), got {len(study.case_names)}")
+    if not study.structures:
+        raise ValueError("study.structures: expected at least one Structure")
+    seen = set()
+    for s in study.structures:
+        if not isinstance(s, Structure):
+            raise TypeError(f"study.structures: expected Structure entries, got {_checks.received(s)}")
+        lengths = []
+        for a, axis in enumerate(s.axes):
+            leading = _num_runs_of(axis)
+            if len(leading) != 1 or -1 in leading:
+                raise ValueError(f"{s.name}.axes[{a}]: expected leaves with one leading axis, got {sorted(leading)}")
+            lengths.append(leading.pop())
+        for method, cell in s.methods.items():
+            if method in seen:
+                raise ValueError(f"{s.name}.methods: method {method!r} named twice in the study")
+            seen.add(method)
+            if len(cell) != len(lengths) or not all(0 <= i < n for i, n in zip(cell, lengths)):
+                raise ValueError(f"{s.name}.methods[{method!r}]: expected one index per axis within {lengths}, "
+                                 f"got {cell}")
+    return num_cases
+
+
+def run_study(study: Study, runs, seed: int, *, progress: bool = False, chunk_size: int | None = None,
+              structures: list[str] | None = None, key: jax.Array | None = None) -> StudyResult:
+    """Run ``runs`` runs of every case of ``study`` through each structure.
+
+    Args:
+      study: the ``Study``.
+      runs: runs per case: one count for every case, or a sequence of one per case.
+      seed: PRNG seed; run ``i`` (case-major) gets ``split(key(seed), total)[i]`` in every
+        structure (``total``: ``C * runs``, or the sum of the per-case counts).
+      progress: log which structure compiles and show the runs' progress.
+      chunk_size: runs per compiled call (default: ``monte_carlo``'s, sized for the
+        backend; it does not change any result).
+      structures: run only these structures (by name; default all).
+      key: the PRNG key to split instead of ``jax.random.key(seed)`` (a study whose runs
+        come from a key derived from its seed).
+
+    Returns:
+      ``StudyResult``: per method of the chosen structures, ``outputs[method]`` (NumPy
+      leaves with a leading case-major run axis ``C * runs``, or the sum of the per-case
+      counts, then the run's output shape) and, for an ``averaged`` structure,
+      ``means[method]`` (C, ...) per-case trace means; ``seconds`` and ``compile_seconds``
+      per structure; and the study's name, ``runs``, ``seed`` and case names.
+    """
+    num_cases = _check_study(study)
+    counts = _run_counts(runs, num_cases)
+    runs = counts[0] if np.ndim(runs) == 0 else counts
+    seed = _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
+    names = [s.name for s in study.structures]
+    if structures is not None and (not structures or set(structures) - set(names)):
+        raise ValueError(f"structures: expected names among {names}, got {list(structures)}")
+    chosen = [s for s in study.structures if structures is None or s.name in structures]
+    total = sum(counts)
+    key = jax.random.key(seed) if key is None else key
+    per_run = (_per_run_cases(study, runs, counts, seed), np.repeat(np.arange(num_cases, dtype=np.int32), counts))
+    outputs, means, seconds, compile_seconds = {}, {}, {}, {}
+    for k, structure in enumerate(chosen, start=1):
+        label = f"{study.name}: {structure.name} ({k} of {len(chosen)})"
+        program = _program(structure)
+        summary = _case_mean_summary(num_cases) if structure.averaged else None
+        compile_before = _compile_time_probe()
+        start = time.perf_counter()
+        result = monte_carlo(program, key, total, per_run, chunk_size=chunk_size, progress=progress, summary=summary,
+                             shared=(structure.axes, structure.shared), label=label, batched=structure.batched)
+        seconds[structure.name] = time.perf_counter() - start
+        compile_seconds[structure.name] = _compile_time_probe() - compile_before
+        out, sums = result if summary is not None else (result, None)
+        for method, cell in structure.methods.items():
+            outputs[method] = jax.tree_util.tree_map(lambda leaf, c=cell: leaf[(slice(None), *c)], out)
+            if sums is not None:
+                totals, counts = sums
+                means[method] = jax.tree_util.tree_map(lambda leaf, c=cell: _per_case_mean(leaf, c, counts), totals)
+        if progress:
+            status(f"{label}: {total} runs in {seconds[structure.name]:.1f} s")
+    return StudyResult(study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds)
+
+
+def _per_run_cases(study: Study, runs, counts: tuple[int, ...], seed: int):
+    """Every run's case: the study's cases repeated ``counts`` times each, or its ``draw``."""
+    if not callable(study.cases):
+        return jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), counts, axis=0), study.cases)
+    drawn = study.cases(runs, seed)
+    sizes = _num_runs_of(drawn)
+    if sizes != {sum(counts)}:
+        raise ValueError(f"study.cases: the draw(runs={runs}, seed={seed}) must give leaves with a leading axis of "
+                         f"{sum(counts)} (the runs of every case), got leading sizes {sorted(sizes)}")
+    return drawn
+
+
+def _per_case_mean(total, cell: tuple, counts):
+    """(C, ...) mean of one grid cell from its per-case ``total`` (C, *grid, ...) and the runs per case."""
+    part = total[(slice(None), *cell)]
+    return part / counts.reshape((-1,) + (1,) * (part.ndim - 1))
+
+
+_PROGRAMS: dict = {}
+
+
+def _program(structure: Structure) -> Callable:
+    """``(key, (case, case_index), (axes, shared)) -> output`` of a structure (``grid_run``;
+    an ``averaged`` one's ``(output, trace, case_index)``). One function object per
+    ``(run, averaged, batched)``, so that a second study of the same structure, with other
+    runs, seed, parameter values or shared data, reuses ``monte_carlo``'s compiled chunk."""
+    signature = (structure.run, structure.averaged, structure.batched)
+    if signature not in _PROGRAMS:
+        run, averaged, batched = signature
+
+        def one(key, data, arguments):
+            case, case_index = data
+            axes, shared = arguments
+            out = grid_run(Structure("", run, axes, {}, averaged, batched, shared))(key, case)
+            return (*out, case_index) if averaged else out
+
+        _PROGRAMS[signature] = one
+    return _PROGRAMS[signature]
+
+
+@functools.lru_cache(maxsize=64)
+def _case_mean_summary(num_cases: int):
+    """``summary`` for ``monte_carlo``: keep the runs' outputs; total the runs' traces
+    per case and count the runs."""
+
+    def summary(outputs, weight):
+        out, values, case_index = outputs
+        w = weight.astype(jnp.result_type(float))
+
+        def per_case(leaf):
+            weighted = leaf * w.reshape((-1,) + (1,) * (leaf.ndim - 1))
+            return jax.ops.segment_sum(weighted, case_index, num_segments=num_cases)
+
+        totals = jax.tree_util.tree_map(per_case, values), jax.ops.segment_sum(w, case_index, num_segments=num_cases)
+        return out, totals
+
+    return summary
+
+
+def _compile_time_probe() -> float:
+    """Seconds XLA has spent compiling in this process so far (``jax.monitoring``)."""
+    return _COMPILE_SECONDS[0]
+
+
+_COMPILE_SECONDS = [0.0]
+
+
+def _record_duration(event: str, duration: float, **_: Any) -> None:
+    if event == "/jax/core/compile/backend_compile_duration":
+        _COMPILE_SECONDS[0] += duration
+
+
+jax.monitoring.register_event_duration_secs_listener(_record_duration)

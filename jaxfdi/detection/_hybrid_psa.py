@@ -1,0 +1,414 @@
+"""Hybrid FDI: the parity space, and analytic redundancy from a filter restarted on demand
+(Park, Kim, Park & Roh 2004, Sec. 2.2), as an ``FDI`` stage of the loop (``jaxfdi._stages``).
+
+At every step ``k`` (``observe``, before the controller):
+
+1. **Detection** (PSA): ``p = V m``, ``FD = p^T p``, alarm when ``FD > T_D``.
+2. **Isolation** (PSA): the suspects are the groups with ``FI_g > T_I`` (``parity``). One
+   suspect: it is isolated. Two or more (the parity lies near a singular direction):
+3. **Analytic redundancy**: the filter restarts from the state ``L`` steps before ``k``
+   (``restart_lag``; "2-3 steps before the detection, so that the estimate is not yet
+   corrupted"), the least-squares estimate from every channel with its covariance
+   ``sigma^2 (H^T H)^-1``, and runs to ``k`` updating only with the channels of the
+   groups PSA judged healthy (the suspects' channels are NaN: ``missing_measurements``);
+   the residuals ``r_g = m_g - H_g x_hat[k|k]`` (eq. 30) of the suspects are compared:
+4. the suspect with the larger ``||r_g||`` is isolated.
+
+The decision is made once, at the first alarm with at least one suspect, and latched.
+
+5. **Verification** (beyond the paper; the exclusion step of RAIM FDE, Parkinson & Axelrad
+   1988): from the step after the decision, the channels the exclusion left are tested
+   at every step, ``FD_-g = ||D_g (m - H x_-g)||^2`` (``x_-g`` the least-squares state
+   without group ``g``, ``D_g`` keeps the other channels) against
+   ``T_V = sigma^2 chi2_isf(m - d - n, P_V)``; when it alarms, the exclusion moves to the
+   group whose removal leaves the smallest ``FD_-h``. A fault that grows from zero
+   (stuck, drift) is often decided while its parity still lies near a singular
+   direction, where the UKF, restarted from a state the fault already corrupts, cannot
+   tell the two suspects apart; the wrong exclusion then leaves the faulty channels in
+   the view, and their own redundancy (1 dof for three 2-DOF sensors) shows it.
+
+The controller's view then uses the least-squares state from the channels left
+(``exclusion_estimators``; before any decision, from all of them). ``follow`` says which
+decision the selection obeys (``"verified"``: the hybrid's, verified; ``"hybrid"``;
+``"psa"``: PSA alone, the suspect with the largest ``FI``; or ``"none"``: never exclude);
+it is an array in the state, so one compiled flight serves every mode, and every
+decision is always reported.
+
+The history the filter replays is a ``filters.history.RingBuffer`` of the last ``L`` steps
+(channels, filter inputs, the least-squares estimate) in the FDI's own state, and the
+replay is ``filters.history.replay_filter``: bounded, inside the scan, so the whole hybrid runs
+vmapped over Monte Carlo flights. Under ``vmap`` a ``lax.cond`` on a per-flight
+predicate computes both branches; with ``batch_axis`` (the name of the ``vmap`` axis:
+``jax.vmap(..., axis_name=...)``, e.g. inside ``monte_carlo(..., batched=True)``) the
+replay runs only at the steps where some flight of the batch needs it (``psum`` of the
+predicate), and each flight keeps its own result: the same numbers, the filter's cost
+paid a few steps per batch instead of every step.
+
+The filter is any Gaussian ``Filter`` with ``init``, ``update`` and ``predict`` whose
+state is the rate-like state ``x`` (n,) and whose measurement is every channel ``H x``
+(m,), built with ``missing_measurements=True``; this module does not import
+``jaxfdi.filters`` (they meet here as a function argument).
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.detection._chi2 import Decision, chi2_threshold
+from jaxfdi.detection._parity import ParitySpace, parity_tests
+from jaxfdi.filters._history import ordered, push, replay_filter, ring_buffer
+from jaxfdi._stages import FDI
+
+#: ``follow`` names and their codes
+FOLLOW = {"none": 0, "psa": 1, "hybrid": 2, "verified": 3}
+
+
+class HybridPSAConfig(NamedTuple):
+    """Arrays of the hybrid FDI (a pytree: pass it into ``jit``).
+
+    Attributes:
+      space: the parity space of the sensor groups
+      detection_threshold: () T_D on FD = p^T p
+      isolation_threshold: () T_I on FI
+      estimators: (G + 1, n, m) least-squares state: [0] all channels, [g + 1] without group g
+      restart_cov: (n, n) sigma^2 (H^T H)^-1, the restart state's covariance
+      channel_group: (m,) int: the group of each channel (-1: none)
+      verification_threshold: () T_V on FD_-g (inf: no verification)
+    """
+
+    space: ParitySpace
+    detection_threshold: Array
+    isolation_threshold: Array
+    estimators: Array
+    restart_cov: Array
+    channel_group: Array
+    verification_threshold: Array
+
+
+class HistoryEntry(NamedTuple):
+    """One step kept for the replay.
+
+    Attributes:
+      channels: (m,) the measured channels of that step
+      inputs: (nu,) the filter's input of that step
+      estimate: (n,) least-squares state from every channel (a restart point)
+    """
+
+    channels: Array
+    inputs: Array
+    estimate: Array
+
+
+class StepValues(NamedTuple):
+    """What ``observe`` found at the current step (reported by ``step``).
+
+    Attributes:
+      statistic: () FD
+      alarm: () bool FD > T_D
+      isolation_functions: (G,) FI of each group
+      suspects: (G,) bool FI > T_I
+      analytic_residuals: (G,) ||r_g|| if the filter ran at this step, else NaN
+      filter_ran: () bool: the filter was replayed at this step
+    """
+
+    statistic: Array
+    alarm: Array
+    isolation_functions: Array
+    suspects: Array
+    analytic_residuals: Array
+    filter_ran: Array
+
+
+class HybridDecision(NamedTuple):
+    """The latched decision of a run (its FDI summary).
+
+    Attributes:
+      detection_step: () int first step with FD > T_D (-1: none)
+      decision_step: () int step of the isolation decision (-1: none)
+      psa: () int PSA alone: isolated group + 1 (0: none)
+      hybrid: () int hybrid: isolated group + 1 (0: none)
+      suspects: (G,) bool at the decision
+      isolation_functions: (G,) FI at the decision
+      analytic_residuals: (G,) ||r_g|| at the decision (NaN: the filter was not needed)
+      filter_used: () bool: two or more suspects, the filter decided
+      filter_healthy: () bool: the replayed filter stayed healthy
+      verified: () int: the exclusion after verification (group + 1; 0: none)
+      revisions: () int: how often verification moved it
+    """
+
+    detection_step: Array
+    decision_step: Array
+    psa: Array
+    hybrid: Array
+    suspects: Array
+    isolation_functions: Array
+    analytic_residuals: Array
+    filter_used: Array
+    filter_healthy: Array
+    verified: Array
+    revisions: Array
+
+
+class HybridPSAState(NamedTuple):
+    """The FDI's state in the scan carry (``hybrid_psa_init``).
+
+    Attributes:
+      history: filters.history.RingBuffer of HistoryEntry, the last L steps
+      current: what ``observe`` found at the current step
+      decision: the latched decision of the run
+      follow: () int, FOLLOW code
+    """
+
+    history: Any
+    current: StepValues
+    decision: HybridDecision
+    follow: Array
+
+
+class HybridPSAOutput(NamedTuple):
+    """One step's output (``fdi.step``).
+
+    Attributes:
+      statistic: () FD
+      alarm: () bool FD > T_D
+      isolation_functions: (G,) FI of each group
+      suspects: (G,) bool FI > T_I
+      analytic_residuals: (G,) NaN unless the filter ran at this step
+      detection: FD alarm of this step (label -1)
+      psa: latched: isolated by PSA alone (label group + 1)
+      hybrid: latched: isolated by the hybrid (label group + 1)
+      verified: the hybrid's exclusion after verification (label group + 1)
+      excluded: () int group + 1 whose channels the view leaves out (0: none)
+      healthy: () bool: FD is a number and the replayed filter stayed healthy
+    """
+
+    statistic: Array
+    alarm: Array
+    isolation_functions: Array
+    suspects: Array
+    analytic_residuals: Array
+    detection: Decision
+    psa: Decision
+    hybrid: Decision
+    verified: Decision
+    excluded: Array
+    healthy: Array
+
+
+def exclusion_estimators(space: ParitySpace) -> Array:
+    """(G + 1, n, m): ``(H^T H)^-1 H^T`` from every channel ([0]) and from the channels
+    left when group ``g`` is excluded ([g + 1]; zero columns for the excluded ones)."""
+    H = space.H
+    m = H.shape[0]
+    G = space.groups.shape[0]
+    keep = jnp.ones((G + 1, m), H.dtype).at[jnp.arange(1, G + 1)[:, None], space.groups].set(0.0)
+    Hk = keep[:, :, None] * H[None]
+    return jnp.linalg.solve(jnp.swapaxes(Hk, 1, 2) @ Hk, jnp.swapaxes(Hk, 1, 2))
+
+
+def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_threshold,
+                      verification_pfa=None) -> HybridPSAConfig:
+    """The arrays of the hybrid FDI for ``space``, channel noise ``sigma`` and the two
+    thresholds (``parity.detection_threshold``, ``parity.isolation_threshold``);
+    ``verification_pfa``: the per-step false-alarm probability ``P_V`` of the verification
+    (module doc, step 5; ``None``, or no redundancy left without a group: never revised).
+
+    Returns:
+      ``HybridPSAConfig`` in ``space.H``'s dtype: ``space``, the thresholds ``T_D`` () and
+      ``T_I`` (), the exclusion estimators (G + 1, n, m), the restart covariance
+      ``sigma^2 (H^T H)^-1`` (n, n), each channel's group (m,) int32 and ``T_V`` ()
+      (``inf`` without verification).
+    """
+    _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
+    _checks.check_scalar("detection_threshold", detection_threshold, 0.0, low_open=True, meaning="T_D > 0")
+    _checks.check_scalar("isolation_threshold", isolation_threshold, 0.0, 1.0, meaning="T_I in [0, 1]")
+    H = space.H
+    dtype = H.dtype
+    m = H.shape[0]
+    G, d = space.groups.shape
+    channel_group = jnp.full((m,), -1, jnp.int32).at[space.groups.ravel()].set(jnp.repeat(jnp.arange(G, dtype=jnp.int32), d))
+    restart_cov = jnp.square(jnp.asarray(sigma, dtype)) * jnp.linalg.inv(H.T @ H)
+    dof = m - d - H.shape[1]  # the redundancy left without one group
+    if verification_pfa is None or dof < 1:
+        verification = jnp.asarray(jnp.inf, dtype)
+    else:
+        _checks.check_probability("verification_pfa", verification_pfa)
+        verification = jnp.square(jnp.asarray(sigma, dtype)) * chi2_threshold(dof, jnp.asarray(verification_pfa, dtype))
+    return HybridPSAConfig(space, jnp.asarray(detection_threshold, dtype), jnp.asarray(isolation_threshold, dtype),
+                           exclusion_estimators(space), 0.5 * (restart_cov + restart_cov.T), channel_group, verification)
+
+
+def subset_statistics(config: HybridPSAConfig, channels: Array) -> Array:
+    """(G,) ``FD_-g``: the squared least-squares residual of the channels left without
+    group ``g`` (module doc, step 5); ``+inf`` when a channel left is not finite."""
+    H = config.space.H
+    G = config.space.groups.shape[0]
+    finite = jnp.isfinite(channels)
+    m0 = jnp.where(finite, channels, 0.0)
+    residual = m0[None, :] - (config.estimators[1:].astype(m0.dtype) @ m0) @ H.T.astype(m0.dtype)   # (G, m)
+    keep = config.channel_group[None, :] != jnp.arange(G)[:, None]
+    residual = jnp.where(keep, jnp.where(finite[None, :], residual, jnp.inf), 0.0)
+    return jnp.sum(jnp.square(residual), axis=-1)
+
+
+def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: int = 3,
+                    follow: str | Array = "hybrid") -> HybridPSAState:
+    """The FDI's initial state: an empty history of ``restart_lag`` steps (the filter
+    restarts that many steps before the decision; Park et al. 2004: 2-3), no decision.
+    ``input_example``: an array shaped like the filter's input (nu,). ``follow``: a name
+    of ``FOLLOW`` or its code (an array, for one compiled flight of every mode)."""
+    restart_lag = _checks.check_int("restart_lag", restart_lag, 1, meaning="a number of steps >= 1")
+    if isinstance(follow, str):
+        _checks.check_choice("follow", follow, list(FOLLOW))
+        follow = FOLLOW[follow]
+    else:
+        _checks.check_int_array("follow", follow, 0, 3, "a FOLLOW code (0 none, 1 psa, 2 hybrid, 3 verified)")
+    dtype = config.space.H.dtype
+    m, n = config.space.H.shape
+    G = config.space.groups.shape[0]
+    example = HistoryEntry(jnp.zeros((m,), dtype), jnp.zeros(jnp.shape(input_example), dtype), jnp.zeros((n,), dtype))
+    nan_g = jnp.full((G,), jnp.nan, dtype)
+    false_g = jnp.zeros((G,), bool)
+    minus_one = jnp.asarray(-1, jnp.int32)
+    zero = jnp.asarray(0, jnp.int32)
+    current = StepValues(jnp.zeros((), dtype), jnp.zeros((), bool), jnp.zeros((G,), dtype), false_g, nan_g,
+                         jnp.zeros((), bool))
+    decision = HybridDecision(minus_one, minus_one, zero, zero, false_g, nan_g, nan_g, jnp.zeros((), bool),
+                              jnp.ones((), bool), zero, zero)
+    return HybridPSAState(ring_buffer(restart_lag, example), current, decision, jnp.asarray(follow, jnp.int32))
+
+
+def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, valid: Array, channels: Array,
+                       trusted: Array) -> tuple[Array, Array, Array, Array]:
+    """Restart ``filt`` from the oldest stored step and run it to the current one with
+    the ``trusted`` channels only (Park et al. 2004, eq. 30).
+
+    Args:
+      filt: a Gaussian ``Filter`` (state x (n,), measurement all m channels, NaN = not used).
+      config: ``hybrid_psa_config(...)``.
+      entries, valid: the history oldest first, (L, ...), and which entries are stored
+        (``filters.history.ordered``): the restart point is ``entries[0]``, the least-squares
+        estimate of that step with covariance ``config.restart_cov``.
+      channels: (m,) the current step's channels.
+      trusted: (m,) bool, the channels the filter may use.
+
+    Returns:
+      ``(norms (G,), residual (m,), mean (n,), healthy ())``: ``||r_g||`` per group,
+      ``r = m - H x_hat[k|k]``, the filtered state and whether every step stayed healthy.
+    """
+    # the restart point is the prior of its own step with nothing measured (every channel
+    # NaN: the update leaves it as it is), so one scan does every prediction
+    restart = filt.init(entries.estimate[0], config.restart_cov)
+    masked = jnp.where(trusted[None, :] & (jnp.arange(valid.shape[0]) > 0)[:, None], entries.channels, jnp.nan)
+    state, infos = replay_filter(filt, restart, masked, entries.inputs, valid)
+    post = filt.update(state, jnp.where(trusted, channels, jnp.nan), entries.inputs[-1])
+    residual = channels - config.space.H @ post.mean
+    norms = jnp.linalg.norm(residual[config.space.groups], axis=-1)
+    healthy = post.healthy & jnp.all(infos.healthy | ~valid) & jnp.all(jnp.isfinite(norms))
+    return norms, residual, post.mean, healthy
+
+
+def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[[Array], Array],
+                   filter_input: Callable[[Array, Array], Array], view: Callable[[Array, Array], Any],
+                   batch_axis: str | None = None):
+    """The hybrid FDI as an ``FDI(step, observe)`` (module doc); its state is
+    ``hybrid_psa_init(config, ...)``.
+
+    Args:
+      config: ``hybrid_psa_config(...)``.
+      analytic_filter: the Gaussian filter of the analytic redundancy (e.g. a UKF on the
+        F-16's moment equations, ``missing_measurements=True``).
+      channels: ``y -> m`` (m,), the redundant channels in the plant's measurement.
+      filter_input: ``(y, u) -> v`` (nu,), the filter's input of a step (``u``: the
+        control the controller sent at that step).
+      view: ``(y, x_selected) -> view``, what the controller reads, from the
+        least-squares state of the channels the decision left.
+      batch_axis: name of the ``vmap`` axis of a batch of runs, or ``None`` (module doc).
+
+    Returns:
+      ``FDI(step, observe)`` on a ``HybridPSAState``: ``observe(state, k, y) -> (state,
+      view)`` runs the tests, latches the decision and gives ``view(y, x_selected)``;
+      ``step(state, k, y, u) -> (state, HybridPSAOutput)`` reports the step's statistics and
+      ``Decision``s and stores the step in the replay history.
+    """
+    for name, fn in (("channels", channels), ("filter_input", filter_input), ("view", view)):
+        _checks.check_callable(name, fn)
+    if not all(callable(getattr(analytic_filter, f, None)) for f in ("init", "update", "predict")):
+        raise TypeError(f"analytic_filter: expected a Gaussian Filter with init, update and predict (e.g. "
+                        f"unscented_kalman_filter(...)), got {_checks.received(analytic_filter)}")
+    space = config.space
+    G = space.groups.shape[0]
+
+    def observe(state: HybridPSAState, k, y):
+        m = channels(y)
+        statistic, fi = parity_tests(space, m)  # a dead channel: FD = +inf, its group the one suspect
+        alarm = statistic > config.detection_threshold
+        suspects = fi > config.isolation_threshold
+        count = jnp.sum(suspects)
+        d = state.decision
+        decide = (d.decision_step < 0) & alarm & (count >= 1)
+        need = decide & (count >= 2)
+        run = need if batch_axis is None else jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
+        trusted = (config.channel_group < 0) | ~suspects[jnp.clip(config.channel_group, 0, G - 1)]
+        entries, valid = ordered(state.history)
+        nan_g = jnp.full((G,), jnp.nan, m.dtype)
+
+        def replay(_):
+            norms, _, _, healthy = analytic_residuals(analytic_filter, config, entries, valid, m, trusted)
+            return norms, healthy
+
+        norms, healthy = jax.lax.cond(run, replay, lambda _: (nan_g, jnp.ones((), bool)), None)
+        norms = jnp.where(need, norms, nan_g)
+        healthy = jnp.where(need, healthy, True)
+        psa = jnp.argmax(jnp.where(suspects, fi, -jnp.inf)).astype(jnp.int32) + 1
+        by_residual = jnp.argmax(jnp.where(suspects, jnp.nan_to_num(norms, nan=-jnp.inf), -jnp.inf)).astype(jnp.int32) + 1
+        hybrid = jnp.where(need & healthy, by_residual, psa)
+        pick = lambda new, old: jnp.where(decide, new, old)  # noqa: E731
+        # verification of the exclusion made at an earlier step (step 5)
+        subset = subset_statistics(config, m)
+        revise = (d.decision_step >= 0) & (subset[jnp.clip(d.verified - 1, 0, G - 1)] > config.verification_threshold)
+        moved = jnp.where(revise, jnp.argmin(subset).astype(jnp.int32) + 1, d.verified)
+        decision = HybridDecision(
+            jnp.where((d.detection_step < 0) & alarm, jnp.asarray(k, jnp.int32), d.detection_step),
+            pick(jnp.asarray(k, jnp.int32), d.decision_step), pick(psa, d.psa), pick(hybrid, d.hybrid),
+            pick(suspects, d.suspects), pick(fi, d.isolation_functions), pick(norms, d.analytic_residuals),
+            pick(need, d.filter_used), pick(healthy, d.filter_healthy), pick(hybrid, moved),
+            d.revisions + (moved != d.verified).astype(jnp.int32))
+        excluded = _excluded(decision, state.follow)
+        # a dead channel's column of its exclusion estimator is 0, and 0 * NaN must not reach the view
+        x_selected = config.estimators[excluded].astype(m.dtype) @ jnp.where(jnp.isfinite(m), m, 0.0)
+        current = StepValues(statistic, alarm, fi, suspects, norms, need)
+        return state._replace(current=current, decision=decision), view(y, x_selected)
+
+    def step(state: HybridPSAState, k, y, u):
+        m = channels(y)
+        entry = HistoryEntry(m, filter_input(y, u), config.estimators[0].astype(m.dtype) @ m)
+        c, d = state.current, state.decision
+        decided = d.decision_step >= 0
+        nan = jnp.full((), jnp.nan, m.dtype)
+        output = HybridPSAOutput(
+            c.statistic, c.alarm, c.isolation_functions, c.suspects, c.analytic_residuals,
+            Decision(c.statistic, c.alarm, jnp.asarray(-1, jnp.int32), nan),
+            Decision(c.statistic, decided, d.psa, nan),
+            Decision(c.statistic, decided, d.hybrid, nan),
+            Decision(c.statistic, decided, d.verified, nan),
+            _excluded(d, state.follow),
+            ~jnp.isnan(c.statistic) & d.filter_healthy)
+        return state._replace(history=push(state.history, entry)), output
+
+    return FDI(step, observe)
+
+
+def _excluded(decision: HybridDecision, follow: Array) -> Array:
+    """The group + 1 the view leaves out under ``follow`` (0: none)."""
+    return jnp.select([follow == FOLLOW["verified"], follow == FOLLOW["hybrid"], follow == FOLLOW["psa"]],
+                      [decision.verified, decision.hybrid, decision.psa], 0).astype(jnp.int32)
+
+
+__all__ = ["FOLLOW", "HybridPSAConfig", "HistoryEntry", "StepValues", "HybridDecision", "HybridPSAState",
+           "HybridPSAOutput", "exclusion_estimators", "hybrid_psa_config", "subset_statistics", "hybrid_psa_init", "analytic_residuals",
+           "hybrid_psa_fdi"]

@@ -1,0 +1,141 @@
+"""Square-root unscented Kalman filter: the UKF of ``ukf.py`` (scaled unscented
+transform, centred form) with the covariance carried as a lower triangular factor
+``L`` and every update an orthogonal transformation (van der Merwe & Wan 2001; the array
+form of the square-root KF, ``sqrt_kalman.py``), for float32 at scale.
+
+Sigma points ``m +/- s_i``, ``s_i = scale * col_i(L)``, and their centred images
+``dY_{+/-i} = g(m +/- s_i) - g(m)``. The statistical linearisation ``H = Pxy^T P^-1``
+(Lefebvre et al. 2002) needs no solve in this basis: ``L^-1 s_i = scale e_i``, so
+
+    H L = (dY_+ - dY_-) / (2 scale),     e_i = dY_{+/-i} - H (+/- s_i) = (dY_+i + dY_-i) / 2,
+
+and the predicted-measurement covariance is ``H P H^T + Lambda`` with
+``Lambda = 2 W sum_i e_i e_i^T + (beta - alpha^2) delta delta^T`` (``ukf.py``; ``W`` the
+sigma-point weight, ``delta = W sum dY``). The update conditions ``N(m, L L^T)`` on
+``y = H x + e + v``, ``Cov(e + v) = Lambda + R``, by the pre-array of the square-root KF::
+
+    [[L_noise, H L], [0, L]]  --QR-->  [[L_S, 0], [Kbar, L+]],
+    L_noise = tria([sqrt(2 W) e_1..e_n, sqrt(beta - alpha^2) delta, L_R]),
+
+``m+ = m + Kbar L_S^-1 r``: no gain ``Pxy S^-1`` is formed, whose solve with an
+ill-conditioned ``S`` is what breaks a float32 filter. In exact arithmetic ``L+ L+^T`` is
+``ukf.py``'s Joseph-like posterior and ``L_S L_S^T`` its ``S``. The time update is
+``L' = tria([sqrt(W) dX_1..dX_2n, sqrt(beta - alpha^2) delta_x, L_Q])``: Gram matrices
+with non-negative weights (``beta >= alpha^2``), no Cholesky downdate by the negative
+centre weight of van der Merwe & Wan's form.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.filters._base import Filter, check_step_inputs, used_innovation
+from jaxfdi.filters._sqrt_kalman import (
+    SqrtGaussianState,
+    check_sqrt_state,
+    factor,
+    sqrt_info,
+    sqrt_init,
+    sqrt_update_linearised,
+    tria,
+)
+from jaxfdi.filters._ukf import SigmaPoints, _propagate, unscented_weights
+
+
+def factor_sigma_points(mean: Array, chol: Array, scale: float, taylor: bool) -> SigmaPoints:
+    """Centred sigma points ``m +/- s_i``, ``s_i = scale * col_i(L)``, from the factor ``L``.
+
+    For direct differences the offsets are rounded symmetrically, ``s = (m + s) - m``,
+    as in ``ukf.sigma_points`` (the points are evaluated). The Taylor differences never
+    form ``m + s``: the offsets stay exact, which matters in float32, where an offset of
+    a well-measured direction (1e-7 of ``m``) is below the rounding of ``m + s``."""
+    s = scale * chol.T
+    if not taylor:
+        s = (mean[None, :] + s) - mean[None, :]
+    return SigmaPoints(mean, jnp.concatenate([s, -s], axis=0))
+
+
+def sqrt_unscented_kalman_filter(
+    f: Callable[[Array, Array, Any], Array],
+    h: Callable[[Array, Array, Any], Array],
+    Q: Array,
+    R: Array,
+    params: Any = None,
+    alpha: float = 1e-3,
+    beta: float = 2.0,
+    kappa: float = 0.0,
+    sigma_differences: str = "auto",
+) -> Filter:
+    """Square-root UKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
+
+    Same arguments and outputs (``FilterInfo``) as ``unscented_kalman_filter`` (equal in
+    float64 to round-off); the state is a ``SqrtGaussianState(mean, chol)``. Needs
+    ``beta >= alpha^2`` (non-negative weights, see the module doc).
+
+    Returns:
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n)) ->
+      SqrtGaussianState``; ``step(state, y (m,), u) -> (SqrtGaussianState, FilterInfo)``,
+      covariances in the info as Gram matrices of the factors.
+    """
+    _checks.check_callable("f", f, "a transition function f(x, u, params)")
+    _checks.check_callable("h", h, "a measurement function h(x, u, params)")
+    n = _checks.check_covariance("Q", Q)
+    m = _checks.check_covariance("R", R)
+    for name, value in (("alpha", alpha), ("beta", beta), ("kappa", kappa)):
+        _checks.check_real(name, value, "a real scalar (static)")
+        if _checks.concrete(value) is None:
+            raise TypeError(f"{name}: expected a Python float (a static scaled-UT parameter), "
+                            f"got {_checks.received(value)}")
+    _checks.check_positive("alpha", alpha, "a positive scalar")
+    alpha, beta, kappa = float(alpha), float(beta), float(kappa)
+    if alpha**2 * (n + kappa) <= 0:
+        raise ValueError(f"kappa: expected alpha^2 (n + kappa) > 0 for n = {n}, got kappa = {kappa}")
+    if beta < alpha**2:
+        raise ValueError(f"beta: the square-root form needs beta >= alpha^2 = {alpha**2:g} (non-negative weights), "
+                         f"got {beta}")
+    if sigma_differences not in ("auto", "direct", "taylor"):
+        raise ValueError(f"sigma_differences: expected 'auto', 'direct' or 'taylor', got {sigma_differences!r}")
+    w, _, _ = unscented_weights(n, alpha, beta, kappa)
+    scale = (alpha**2 * (n + kappa)) ** 0.5
+    root_w, root_cross = w**0.5, (beta - alpha**2) ** 0.5
+    chol_Q, chol_R = factor(jnp.asarray(Q)), factor(jnp.asarray(R))
+
+    def use_taylor(mean: Array) -> bool:
+        if sigma_differences != "auto":
+            return sigma_differences == "taylor"
+        return bool(jnp.finfo(mean.dtype).eps > 1e-10 and alpha <= 1e-2)
+
+    init = sqrt_init(n)
+
+    def step(state: SqrtGaussianState, y: Array, u: Array):
+        check_sqrt_state(state, n)
+        check_step_inputs(y, u, m, None)
+        dtype = state.mean.dtype
+        taylor = use_taylor(state.mean)
+        # measurement update, in the sigma-point basis (module doc)
+        points = factor_sigma_points(state.mean, state.chol, scale, taylor)
+        y0, dy = _propagate(points, lambda x: h(x, u, params), taylor)
+        _checks.check_shape("h(x, u, params)", y0, (m,), "one predicted measurement")
+        plus, minus = dy[:n], dy[n:]
+        linearised = (plus - minus).T / (2.0 * scale)                                # H L, (m, n)
+        residuals = 0.5 * (plus + minus)                                             # e_i, (n, m)
+        delta_y = w * jnp.sum(dy, axis=0)
+        innovation = used_innovation(y, y0 + delta_y)
+        chol_noise = tria(jnp.concatenate([(2.0 * w) ** 0.5 * residuals.T, root_cross * delta_y[:, None],
+                                           chol_R.astype(dtype)], axis=1))
+        mean, chol, innovation, chol_S, whitened = sqrt_update_linearised(state.mean, state.chol, innovation,
+                                                                          linearised, chol_noise)
+        # time update
+        points = factor_sigma_points(mean, chol, scale, taylor)
+        x0, dx = _propagate(points, lambda x: f(x, u, params), taylor)
+        _checks.check_shape("f(x, u, params)", x0, (n,), "the next state")
+        delta_x = w * jnp.sum(dx, axis=0)
+        next_mean = x0 + delta_x
+        next_chol = tria(jnp.concatenate([root_w * dx.T, root_cross * delta_x[:, None], chol_Q.astype(dtype)], axis=1))
+        return SqrtGaussianState(next_mean, next_chol), sqrt_info(state, mean, chol, innovation, chol_S, whitened,
+                                                                  next_mean, ~jnp.isfinite(y))
+
+    return Filter(init, step)

@@ -1,0 +1,196 @@
+"""Simulated GPS pseudoranges: visibility masks, elevation-dependent noise, receiver clock,
+satellite faults, as a plant for the foundation's loop.
+
+- **Visibility**: a satellite is used when its ephemeris is valid and healthy, it is
+  above the elevation mask, and its line of sight does not cross a ``Wall`` — a
+  vertical rectangle standing on the local level (the paper's campus case: an antenna
+  beside a rooftop structure loses the satellites on that side, Yoo et al. 2010, sec. 3.2).
+- **Noise**: ``sigma(el) = sqrt(a^2 + b^2 / sin^2 el)`` [m] (the elevation model of
+  RTKLIB's ``varerr``; Takasu 2013), white between epochs and satellites.
+- **Receiver clock**: bias ``b`` [m] and drift ``d`` [m/s] as the two-state random walk
+  driven by the oscillator's Allan-variance coefficients ``h0`` (white frequency) and
+  ``h_-2`` (random-walk frequency) (Brown & Hwang 2012, sec. 9.3):
+  ``Q = c^2 [[h0/2 dt + 2 pi^2 h_-2 dt^3/3, pi^2 h_-2 dt^2], [pi^2 h_-2 dt^2, 2 pi^2 h_-2 dt]]``.
+- **Pseudorange**: the receiver samples at its own clock's time tags ``t_k = t0 + k dt``
+  (true GPS time ``t_k - b/c``), so
+  ``rho_i = |R(tau) r_i(t_k - b/c - tau) - x| + b - c dt_i + sigma_i n_i``,
+  the light time ``tau`` and Earth rotation ``R(tau)`` solved per satellite
+  (``orbits.transmission_geometry``). Ionosphere and troposphere residuals are not
+  modelled apart: they are part of the elevation-dependent noise.
+- **Faults**: the foundation's sensor faults (``jaxfdi._faults``), component = satellite
+  slot: an impulse, bias or ramp (drift) on one satellite's pseudorange, a frozen channel
+  (STUCK: the range held at its onset value), several episodes in one run
+  (``concat_faults``).
+- **Dead and missing**: NaN means "not measured" (a satellite not visible: not tracked, a
+  RINEX blank) and is no evidence; a DEAD fault (or any non-finite value) on a visible,
+  tracked slot is reported as ``+inf``, the dead channel that ``integrity`` alarms on,
+  isolates and leaves out (``EpochIntegrity.dead``), never as a silent NaN.
+
+``receiver_plant`` returns a ``simulate.Simulator`` (``init``, ``step``, ``measure``,
+``advance``), so ``simulate.simulate`` and ``loop.run_loop`` drive it.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
+from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, line_of_sight_ned
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, OrbitTable, satellite_position, select_orbits, transmission_geometry
+from jaxfdi._simulate import Actuated, Sensed, SimState, SimStep, Simulator, check_fault_components
+
+
+class Wall(NamedTuple):
+    """A vertical rectangle: base from ``start`` to ``end`` ((2,) north, east [m] in a local
+    NED frame), from the ground up to ``height`` [m above the frame's origin]."""
+
+    start: Array
+    end: Array
+    height: Array
+
+
+class ClockModel(NamedTuple):
+    """Receiver oscillator: Allan-variance coefficients (TCXO defaults, Brown & Hwang 2012
+    Table 9.1) and the initial bias [m] and drift [m/s]."""
+
+    h0: float = 2e-19
+    h_minus2: float = 2e-20
+    bias: float = 3000.0
+    drift: float = 0.5
+
+
+def elevation_sigma(elevation: Array, zenith: float = 3.0, slant: float = 3.0,
+                    min_elevation: float = math.radians(2.0)) -> Array:
+    """``sqrt(a^2 + b^2 / sin^2 el)`` [m]: ``a = zenith``, ``b = slant``; elevations below
+    ``min_elevation`` are taken at it (the satellite is masked anyway)."""
+    _checks.check_scalar("zenith", zenith, 0.0, meaning="a standard deviation >= 0 [m]")
+    _checks.check_scalar("slant", slant, 0.0, meaning="a standard deviation >= 0 [m]")
+    _checks.check_scalar("min_elevation", min_elevation, 0.0, 0.5 * math.pi, low_open=True,
+                         meaning="an elevation in (0, pi/2] rad")
+    sin_el = jnp.sin(jnp.maximum(elevation, min_elevation))
+    return jnp.sqrt(zenith**2 + (slant / sin_el) ** 2)
+
+
+def wall_blocks(receiver_ned: Array, line_of_sight: Array, wall: Wall) -> Array:
+    """(S,) bool: the ray from ``receiver_ned`` (3,) along unit ``line_of_sight`` (S, 3)
+    (both NED) crosses ``wall`` below its top."""
+    start, end = jnp.asarray(wall.start), jnp.asarray(wall.end)
+    edge = end - start
+    offset = start - receiver_ned[:2]
+    d = line_of_sight[:, :2]
+
+    def cross(a, b):
+        return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+    denom = cross(d, edge)
+    safe = jnp.where(jnp.abs(denom) > 1e-12, denom, 1.0)
+    s = cross(offset, edge) / safe            # along the ray (unit 3-D direction)
+    t = cross(offset, d) / safe               # along the wall's base, 0..1
+    up_at_wall = -(receiver_ned[2] + s * line_of_sight[:, 2])
+    return (jnp.abs(denom) > 1e-12) & (s > 0) & (t >= 0) & (t <= 1) & (up_at_wall <= wall.height)
+
+
+def sky_geometry(table: OrbitTable, t: Array, receiver_ecef: Array) -> tuple[Array, Array, Array, Array]:
+    """``(elevation, azimuth, line_of_sight_ned, has_orbit)``, each over the S slots, of the
+    satellites seen from ``receiver_ecef`` (3,) at time ``t`` (positions at ``t``; the light
+    time changes an elevation by < 1e-4 rad)."""
+    orbit, has_orbit = select_orbits(table, t)
+    sat = satellite_position(orbit, t)
+    elevation, azimuth = elevation_azimuth(receiver_ecef, sat)
+    return elevation, azimuth, line_of_sight_ned(receiver_ecef, sat), has_orbit
+
+
+def visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: float,
+               origin_ecef: Array | None = None, walls: tuple[Wall, ...] = ()) -> tuple[Array, Array, Array]:
+    """``(visible, elevation, azimuth)`` over the S slots: valid healthy ephemeris, above
+    ``mask_angle`` [rad] and not behind any of ``walls`` (whose NED frame is at
+    ``origin_ecef``)."""
+    _checks.check_scalar("mask_angle", mask_angle, -0.5 * math.pi, 0.5 * math.pi,
+                         meaning="an elevation mask in [-pi/2, pi/2] rad")
+    elevation, azimuth, los, has_orbit = sky_geometry(table, t, receiver_ecef)
+    visible = has_orbit & (elevation > mask_angle)
+    if walls:
+        if origin_ecef is None:
+            raise ValueError("origin_ecef: expected the (3,) ECEF origin of the walls' NED frame, got None")
+        receiver_ned = ecef_to_ned(receiver_ecef, origin_ecef)
+        for wall in walls:
+            visible = visible & ~wall_blocks(receiver_ned, los, wall)
+    return visible, elevation, azimuth
+
+
+def clock_process_noise(clock: ClockModel, dt: float, dtype=None) -> Array:
+    """(2, 2) process-noise covariance of ``[bias, drift]`` over ``dt`` seconds [m, m/s]."""
+    dtype = dtype or jnp.result_type(float)
+    c2 = SPEED_OF_LIGHT**2
+    qb, qd = 0.5 * clock.h0 * c2, 2.0 * math.pi**2 * clock.h_minus2 * c2
+    return jnp.asarray([[qb * dt + qd * dt**3 / 3.0, qd * dt**2 / 2.0], [qd * dt**2 / 2.0, qd * dt]], dtype)
+
+
+def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, visible: Array, sigma: Array,
+                   clock: ClockModel = ClockModel(), fault: Fault | None = None) -> Simulator:
+    """A GPS receiver on a known path, as a ``Simulator`` over the state ``[b, d]``.
+
+    Args:
+      table: orbits of the S slots (``orbits.ephemeris_table`` / ``almanac_table``).
+      t0, dt: time tag of step 0 [s from the table's reference week] and the step [s].
+      path_ecef: (T, 3) receiver antenna positions at the T time tags.
+      visible: (T, S) bool: slots tracked at each step (``visibility``); others are NaN (not
+        measured). A tracked slot whose value a fault makes non-finite (DEAD) is ``+inf``.
+      sigma: (T, S) pseudorange noise standard deviations [m] (``elevation_sigma``).
+      clock: the oscillator (``ClockModel``); ``init`` takes ``[bias, drift]`` anyway.
+      fault: sensor ``Fault``(s) on satellite slots (scalar leaves or a stack), or None.
+    """
+    _checks.check_positive("dt", dt, "a positive epoch interval (s)")
+    value = _checks.concrete(sigma)
+    if value is not None and np.any(value < 0):
+        raise ValueError(f"sigma: expected pseudorange standard deviations >= 0 [m], got {_checks.received(value)}")
+    path_ecef, visible, sigma = jnp.asarray(path_ecef), jnp.asarray(visible, bool), jnp.asarray(sigma)
+    _checks.check_shape("path_ecef", path_ecef, (None, 3), "T ECEF receiver positions")
+    steps, slots = visible.shape if visible.ndim == 2 else (None, None)
+    _checks.check_shape("visible", visible, (path_ecef.shape[0], table.prn.shape[0]), "T steps x S slots")
+    _checks.check_shape("sigma", sigma, (steps, slots), "T steps x S slots")
+    faults = as_stack(no_fault() if fault is None else fault)
+    check_fault_components(faults, Target.SENSOR, table.prn.shape[0])
+    num_faults = faults.kind.shape[0]
+    noise_sqrt = jnp.linalg.cholesky(clock_process_noise(clock, dt, path_ecef.dtype))
+    transition = jnp.asarray([[1.0, dt], [0.0, 1.0]], path_ecef.dtype)
+
+    def init(x0: Array) -> SimState:
+        _checks.check_shape("x0", x0, (2,), "receiver clock [bias m, drift m/s]")
+        x0 = jnp.asarray(x0, path_ecef.dtype)
+        return SimState(x0, jnp.zeros((num_faults,), x0.dtype))
+
+    def measure(sim: SimState, k: Array, u: Array, step_key: Array):
+        bias = sim.state[0]
+        t_tag = t0 + k * dt
+        orbit, _ = select_orbits(table, t_tag)
+        _, ranges, _, sat_clock = transmission_geometry(orbit, t_tag - bias / SPEED_OF_LIGHT, path_ecef[k])
+        clean = ranges + bias - SPEED_OF_LIGHT * sat_clock
+        _, key_v = jax.random.split(step_key)
+        noisy = clean + sigma[k] * jax.random.normal(key_v, clean.shape, clean.dtype)
+        faulty, held = apply_faults(faults, k, noisy, Target.SENSOR, sim.held)
+        # NaN: not tracked; a tracked channel gone non-finite (DEAD) is a dead channel, +inf
+        measured = jnp.where(visible[k], jnp.where(jnp.isfinite(faulty), faulty, jnp.inf), jnp.nan)
+        active = jax.vmap(is_active, in_axes=(0, None))(faults, k)
+        return SimState(sim.state, held), Sensed(sim.state, measured, faulty - noisy, active,
+                                                 active_label(faults, k, u.shape[0]))
+
+    def advance(sim: SimState, k: Array, u: Array, step_key: Array):
+        key_w, _ = jax.random.split(step_key)
+        w = noise_sqrt @ jax.random.normal(key_w, (2,), sim.state.dtype)
+        return SimState(transition @ sim.state + w, sim.held), Actuated(u, jnp.zeros_like(u))
+
+    def step(sim: SimState, k: Array, u: Array, key: Array):
+        step_key = jax.random.fold_in(key, k)
+        sim, sensed = measure(sim, k, u, step_key)
+        sim, moved = advance(sim, k, u, step_key)
+        return sim, SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
+                            sensed.sensor_fault, sensed.fault_active, sensed.mode)
+
+    return Simulator(init, step, measure, advance)

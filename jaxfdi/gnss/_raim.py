@@ -1,0 +1,187 @@
+"""Parity-space RAIM: detection, isolation (Brown & Chin 1992; Yoo et al. 2010, eqs. 5-9).
+
+Linearised at the least-squares fix, ``y = H x + eps`` (``H`` n x u: position and
+``u - 3`` receiver clocks, one per constellation; ``u = 4`` for GPS alone). With the QR
+decomposition of the *whitened* geometry ``W^(1/2) H = Q R`` (``W = diag(1/sigma_i^2)``),
+the last ``n - u`` columns of ``Q`` give the parity matrix ``P`` ((n - u) x n):
+``P H_w = 0``, ``P P^T = I``, and the parity vector ``p = P y_w = P eps_w``. Fault-free,
+``p ~ N(0, I)``, so the detection statistic ``TS_D = p^T p`` is chi-square with
+``n - u`` degrees of freedom (the weighted sum of squared residuals, Walter & Enge
+1995); equal sigmas give the paper's ``||p||^2 / sigma^2``. The parity space is the
+sensors' one (``detection.parity``: ``P`` a basis of the left null space of ``H_w``,
+``TS_D`` its ``parity_statistic``), formed by QR on the used slots. ``u`` is the fix's number of
+geometry columns, so a second clock costs a degree of freedom (and raises the threshold
+and the protection level) wherever the fix carries one.
+
+- **Threshold** ``chi2_threshold(n - 4, P_fa)`` (``rule="chi2"``). ``rule="paper"`` uses
+  eq. 8 of Yoo et al. (2010), ``sqrt(2 ln(1/r) sigma^2 / (n - 4))``, read as a bound on the RMS parity
+  ``sqrt(p^T p / (n - 4))`` (the reading whose units agree): on ``TS_D`` it is
+  ``2 ln(1/P_fa)`` whatever ``n``, the exact chi-square quantile for 2 degrees of freedom
+  only; with 1 it is conservative, from 3 on its false-alarm rate exceeds ``P_fa``
+  (``paper_threshold``; tested).
+- **Isolation** (eq. 9): ``TS_j = p . P[:, j] / ||P[:, j]||``; the satellite with the largest
+  ``|TS_j|`` is the faulty one. ``P^T p = S y_w`` with ``S = P^T P = I - Q1 Q1^T``, so the
+  statistics come from the thin factor ``Q1`` without forming ``P`` (``parity_matrix``
+  forms it, for the paper's equations and the tests). Isolation needs ``n >= u + 2``: with
+  ``u + 1`` satellites every column of ``P`` is parallel to ``p``.
+- **Exclusion**: re-solve without the isolated satellite (``integrity.monitor_epoch``).
+
+Arrays have one entry per satellite slot (S); unused slots are masked, never dropped,
+so one compiled function serves every number of visible satellites.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.detection._chi2 import chi2_threshold
+from jaxfdi.detection._noncentral_chi2 import noncentrality_for_missed_detection
+from jaxfdi.detection._parity import parity_statistic
+from jaxfdi.gnss._least_squares import MaskedQR, apply_qt, masked_qr, parity_column_norms, parity_rows, thin_q
+from jaxfdi.gnss._positioning import PositionFix
+
+#: Brown & Chin (1992), RTCA DO-208 for non-precision approach: P_fa = 1/15000 per test
+DEFAULT_PFA = 1.0 / 15000.0
+#: missed-detection probability of the protection level (Brown & Chin 1992)
+DEFAULT_PMD = 1e-3
+RULES = ("chi2", "paper")
+
+
+class RaimTables(NamedTuple):
+    """Per degrees of freedom ``k = 0..S-4``: the threshold on ``TS_D`` and the
+    noncentrality ``lambda`` missed with probability ``P_md`` (entry 0: no test).
+
+    Attributes:
+      threshold: (S - 3,) threshold on TS_D per degrees of freedom
+      noncentrality: (S - 3,) noncentrality missed with probability P_md, per degrees of freedom
+    """
+
+    threshold: Array
+    noncentrality: Array
+
+
+class ParityCheck(NamedTuple):
+    """Detection and isolation of one epoch.
+
+    Attributes:
+      statistic: () TS_D = p^T p (whitened), 0 with fewer than u + 1 satellites
+      dof: () int, n - u (0: no test)
+      threshold: () on TS_D (inf when dof == 0)
+      alarm: () bool, TS_D above the threshold
+      isolation: (S,) TS_j (0 at unused slots)
+      isolated: () int, slot with the largest |TS_j| (-1: none; needs n >= 6)
+      healthy: () bool: finite statistic
+    """
+
+    statistic: Array
+    dof: Array
+    threshold: Array
+    alarm: Array
+    isolation: Array
+    isolated: Array
+    healthy: Array
+
+
+def paper_threshold(num_visible, pfa, sigma) -> Array:
+    """Eq. 8 of Yoo et al. (2010): ``sqrt(2 ln(1/pfa) sigma^2 / (n - 4))`` [m], a bound on the RMS
+    parity ``sqrt(p^T p / (n - 4))`` (NaN for ``n <= 4``)."""
+    _checks.check_probability("pfa", pfa)
+    _checks.check_real("sigma", sigma, "a pseudorange standard deviation [m]")
+    value = _checks.concrete(sigma)
+    if value is not None and not np.all(value > 0):
+        raise ValueError(f"sigma: expected a standard deviation > 0 [m], got {_checks.received(value)}")
+    dof = jnp.asarray(num_visible) - 4.0
+    return jnp.where(dof > 0, jnp.sqrt(2.0 * jnp.log(1.0 / jnp.asarray(pfa)) * jnp.asarray(sigma) ** 2
+                                       / jnp.where(dof > 0, dof, 1.0)), jnp.nan)
+
+
+def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_PMD, rule: str = "chi2",
+                dtype=None) -> RaimTables:
+    """Thresholds on ``TS_D`` and protection-level noncentralities for ``k = 0..S-4``.
+
+    Args:
+      num_slots: S, the number of satellite slots.
+      pfa: false-alarm probability per test; pmd: missed-detection probability.
+      rule: "chi2" (``chi2_threshold(k, pfa)``) or "paper" (eq. 8: ``2 ln(1/pfa)``).
+    """
+    if rule not in RULES:
+        raise ValueError(f"rule: expected one of {list(RULES)}, got {rule!r}")
+    num_slots = _checks.check_int("num_slots", num_slots, 5, meaning="a number of satellite slots (at least 5)")
+    _checks.check_probability("pfa", pfa)
+    _checks.check_probability("pmd", pmd)
+    dtype = dtype or jnp.result_type(float)
+    dof = jnp.arange(1, int(num_slots) - 3, dtype=dtype)
+    if rule == "chi2":
+        threshold = chi2_threshold(dof, jnp.asarray(pfa, dtype))
+    else:
+        threshold = jnp.full(dof.shape, 2.0 * np.log(1.0 / pfa), dtype)
+    lam = noncentrality_for_missed_detection(threshold, dof, jnp.asarray(pmd, dtype))
+    inf = jnp.full((1,), jnp.inf, dtype)
+    return RaimTables(jnp.concatenate([inf, threshold]), jnp.concatenate([jnp.full((1,), jnp.nan, dtype), lam]))
+
+
+def unknowns(fix: PositionFix) -> int:
+    """``u``: the fix's unknowns, 3 position coordinates and one clock per geometry column
+    after them (trace time; at least 4)."""
+    shape = _checks.shape_of(fix.geometry)
+    if len(shape) != 2 or shape[1] < 4:
+        raise ValueError(f"fix.geometry: expected (S, 3 + clocks) with at least one clock column, got shape {shape}")
+    return shape[1]
+
+
+def check_tables(tables: RaimTables, fix: PositionFix) -> None:
+    """Trace time: ``tables`` cover every degree of freedom the fix can have (``raim_tables``
+    of at least its S slots). A smaller table would clamp ``n - u`` to its last entry: a
+    threshold and a protection level smaller than the true ones, with nothing to say so."""
+    slots = _checks.shape_of(fix.used)[0]
+    size = _checks.shape_of(tables.threshold)[0]
+    most = slots - unknowns(fix)
+    if size < most + 1:
+        raise ValueError(f"tables: built for {size + 3} satellite slots (raim_tables({size + 3})), but the fix has "
+                         f"{slots}: up to {most} degrees of freedom need raim_tables({most + 4}) or more")
+
+
+def whitened(fix: PositionFix) -> tuple[Array, Array]:
+    """``(H_w, y_w)``: geometry and residuals divided by sigma, zero at unused slots."""
+    h = jnp.where(fix.used[:, None], fix.geometry / fix.sigma[:, None], 0.0)
+    return h, jnp.where(fix.used, fix.residuals / fix.sigma, 0.0)
+
+
+def parity_matrix(fix: PositionFix) -> tuple[Array, Array]:
+    """``(P, valid)``: the explicit parity matrix ((S - u), S) of the whitened geometry from
+    its QR decomposition (rows ``valid`` hold the ``n - u`` parity rows)."""
+    h, _ = whitened(fix)
+    return parity_rows(masked_qr(h, fix.used))
+
+
+def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = None) -> ParityCheck:
+    """Detection statistic, threshold and isolation statistics of one fix (module doc).
+
+    Returns:
+      ``ParityCheck``: the () statistic ``TS_D = p^T p`` (0 when ``n <= u``), its () int
+      degrees of freedom ``n - u`` (clipped at 0), the () threshold ``tables.threshold[dof]``
+      (inf when ``dof == 0``), the () bool ``alarm`` ``TS_D > threshold``, the (S,)
+      isolation statistics ``TS_j`` (0 at unused slots), the () int32 ``isolated`` slot of
+      the largest ``|TS_j|`` (-1 when ``n < u + 2``) and the () bool ``healthy`` (finite
+      ``TS_D``).
+    """
+    check_tables(tables, fix)
+    u = unknowns(fix)
+    h, y = whitened(fix)
+    qr = masked_qr(h, fix.used) if qr is None else qr
+    q1 = thin_q(qr)
+    rotated = apply_qt(qr, y)                            # parity vector at used non-pivot slots
+    num = qr.num_used
+    dof = jnp.maximum(num - u, 0)
+    statistic = jnp.where(dof > 0, parity_statistic(rotated, qr.rank >= u), 0.0)
+    projected = y - q1 @ (q1.T @ y)                       # S y_w = P^T p
+    norm, observable = parity_column_norms(q1, fix.used)  # ||P[:, j]||
+    isolation = jnp.where(observable, projected / norm, 0.0)
+    threshold = tables.threshold[jnp.minimum(dof, tables.threshold.shape[0] - 1)]
+    isolated = jnp.where(num >= u + 2, jnp.argmax(jnp.abs(isolation)), -1).astype(jnp.int32)
+    return ParityCheck(statistic, dof.astype(jnp.int32), threshold, statistic > threshold, isolation, isolated,
+                       jnp.isfinite(statistic))

@@ -1,0 +1,59 @@
+"""Rigid-body angular rates (Euler's equations), a small nonlinear model.
+
+``I w' = tau - w x (I w)`` with principal inertias ``I = diag(Ixx, Iyy, Izz)``, state
+``w = [p, q, r]`` (rad/s), input torque ``tau`` (N m), integrated by one classical RK4
+step per sample. Measurement: the rates themselves (rate gyros). The gyroscopic term is
+quadratic in ``w``, so the UKF and the EKF differ from each other and from a KF.
+Default inertias are the F-16's (Stevens & Lewis), in kg m^2.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.models._integrate import rk4
+
+
+class RigidBodyParams(NamedTuple):
+    """Rigid-body parameters: principal moments of inertia and the sample period.
+
+    Attributes:
+      inertia: (3,) principal moments of inertia
+      dt: () sample period
+    """
+
+    inertia: Array
+    dt: Array
+
+
+def rigid_body_params(dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dtype=None) -> RigidBodyParams:
+    """Principal moments of inertia ``inertia`` (3,) > 0 and the step ``dt`` > 0 (s).
+
+    Returns:
+      ``RigidBodyParams(inertia (3,) [kg m^2], dt () [s])`` as arrays of ``dtype`` (default:
+      JAX's default float).
+    """
+    _checks.check_positive("dt", dt, "a positive step in seconds")
+    _checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
+    if np.any(np.asarray(inertia) <= 0):
+        raise ValueError(f"inertia: expected positive principal moments, got {_checks.received(inertia)}")
+    dtype = dtype or jnp.result_type(float)
+    return RigidBodyParams(jnp.asarray(inertia, dtype), jnp.asarray(dt, dtype))
+
+
+def _rate_derivative(w: Array, tau: Array, inertia: Array) -> Array:
+    return (tau - jnp.cross(w, inertia * w)) / inertia
+
+
+def rigid_body_transition(w: Array, tau: Array, params: RigidBodyParams) -> Array:
+    """One RK4 step of Euler's rotation equations."""
+    return rk4(lambda x, t: _rate_derivative(x, tau, params.inertia), w, params.dt)
+
+
+def rigid_body_observation(w: Array, tau: Array, params: RigidBodyParams) -> Array:
+    """Rate gyros: ``y = w``."""
+    return w

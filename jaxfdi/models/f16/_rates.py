@@ -1,0 +1,102 @@
+"""The F-16's body rates alone: the UKF process model of Park, Kim, Park & Roh (2004,
+Sec. III: "the UKF's system model is the moment equations (34)-(36) only").
+
+State ``w = [P, Q, R]`` (rad/s); input ``v = [VT, alpha, beta, h, thtl, el, ail, rdr]``
+(``RATE_INPUT_NAMES``): the measured air data and altitude, which the moment equations
+take as known, and the controls the flight controller commanded. The derivative is the
+moment part of ``dynamics.f16_dynamics`` (``moment_equations``: Stevens & Lewis eq.
+2.5-16 with the engine's angular momentum) with the aerodynamic moment coefficients
+scaled, ``Cl (1 + e_l)``, ``Cm (1 + e_m)``, ``Cn (1 + e_n)``: the paper runs its UKF on a
+model with aerodynamic-coefficient errors to show the method does not need an exact
+model. The model's c.g. is its own (the design's), not the flight's.
+
+``rate_transition`` is one classical RK4 step over ``dt`` with the input held (the
+plant's integrator); ``rate_observation`` is the rate sensors' ``H w`` (``H`` the
+``rate_axes``, one row per input axis).
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax import Array
+
+from jaxfdi import _checks
+from jaxfdi.models.f16._atmosphere import air_data
+from jaxfdi.models.f16._dynamics import H, VT, F16Params, aero_coefficients, moment_equations
+from jaxfdi.models._integrate import rk4
+
+#: the rate model's input, in order
+RATE_INPUT_NAMES = ("VT", "alpha", "beta", "h", "thtl", "el", "ail", "rdr")
+
+
+class RateModel(NamedTuple):
+    """Parameters of the rate model (a pytree).
+
+    Attributes:
+      aircraft: the aircraft's parameters
+      coefficient_scale: (3,) multipliers of Cl, Cm, Cn: 1 + the coefficient errors
+      rate_axes: (m_r, 3) H of the rate sensors
+      dt: () s, sample period
+    """
+
+    aircraft: F16Params
+    coefficient_scale: Array
+    rate_axes: Array
+    dt: Array
+
+
+def rate_model(aircraft: F16Params, rate_axes: Array, dt: float = 0.01, coefficient_error=(0.0, 0.0, 0.0)) -> RateModel:
+    """The rate model of ``aircraft`` with relative errors ``coefficient_error`` (3,) on
+    ``Cl, Cm, Cn`` (e.g. ``(0.1, -0.1, 0.1)``: rolling and yawing moments 10 % too large,
+    pitching moment 10 % too small).
+
+    Returns:
+      ``RateModel``: ``aircraft`` itself, the (3,) ``coefficient_scale``
+      ``1 + coefficient_error``, the (m_r, 3) ``rate_axes`` and the () ``dt`` [s], in the
+      dtype of ``aircraft.mass``; the params of ``rate_transition`` and ``rate_observation``.
+    """
+    dtype = aircraft.mass.dtype
+    _checks.check_matrix("rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel")
+    _checks.check_matrix("coefficient_error", coefficient_error, (3,), "relative errors of Cl, Cm, Cn")
+    _checks.check_positive("dt", dt, "a positive sample period (s)")
+    scale = 1.0 + jnp.asarray(coefficient_error, dtype)
+    return RateModel(aircraft, scale, jnp.asarray(rate_axes, dtype), jnp.asarray(dt, dtype))
+
+
+def rate_model_input(y: Array, u: Array) -> Array:
+    """(8,) the rate model's input from the F-16's measurement ``y`` (``plant``'s layout:
+    ``[VT, alpha, beta, phi, theta, psi, h, pow, rate channels]``) and the controls ``u`` (4,)."""
+    shape = _checks.shape_of(y)
+    if len(shape) != 1 or shape[0] < 8:
+        raise ValueError(f"y: expected the F-16's measurement [VT, alpha, beta, phi, theta, psi, h, pow, rate "
+                         f"channels], shape (8 + m_r,), got {shape}")
+    _checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
+    return jnp.concatenate([y[0:3], y[6:7], jnp.asarray(u, y.dtype)])
+
+
+def rate_derivative(rates: Array, inputs: Array, model: RateModel) -> Array:
+    """``[P', Q', R']`` (Park et al. 2004, eqs. 34-36) with the model's coefficient errors."""
+    aircraft = model.aircraft
+    vt, alpha, beta, altitude = inputs[0], inputs[1], inputs[2], inputs[3]
+    zero = jnp.zeros((), rates.dtype)
+    x = jnp.stack([vt, alpha, beta, zero, zero, zero, rates[0], rates[1], rates[2], zero, zero, altitude, zero])
+    c = aero_coefficients(aircraft, x, inputs[4:8])
+    scale = model.coefficient_scale
+    c = c._replace(Cl=c.Cl * scale[0], Cm=c.Cm * scale[1], Cn=c.Cn * scale[2])
+    qs = air_data(x[VT], x[H], aircraft.atmosphere).dynamic_pressure * aircraft.area
+    return jnp.stack(moment_equations(rates[0], rates[1], rates[2], c, qs, aircraft))
+
+
+def rate_transition(rates: Array, inputs: Array, model: RateModel) -> Array:
+    """``w[k+1]``: one classical RK4 step of ``rate_derivative`` over ``model.dt``."""
+    return rk4(lambda x, t: rate_derivative(x, inputs, model), rates, model.dt)
+
+
+def rate_observation(rates: Array, inputs: Array, model: RateModel) -> Array:
+    """``H w`` (m_r,): what the rate channels read without noise."""
+    return model.rate_axes @ rates
+
+
+__all__ = ["RATE_INPUT_NAMES", "RateModel", "rate_model", "rate_model_input", "rate_derivative", "rate_transition",
+           "rate_observation"]

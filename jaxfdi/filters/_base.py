@@ -16,6 +16,7 @@ covariance while the channel is dead; ``missing_measurements=True`` excludes it 
 """
 from __future__ import annotations
 
+import contextlib
 from functools import partial
 from typing import Any, Callable, NamedTuple
 
@@ -339,12 +340,16 @@ def run_filter(
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
     _checks.check_same_length(("ys", "us"), ys, us)
+    # One sequence, no batch: on CPU dot and LAPACK (_linalg's module doc); on a GPU the
+    # written-out algebra (a cuSOLVER call per 7x7 factorisation made the engine KF 2.8x
+    # slower than it on an H200, benchmarks/RESULTS.md).
+    library = _linalg.library_calls if jax.default_backend() == "cpu" else contextlib.nullcontext
     if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((init_state, ys, us))):
-        with _linalg.library_calls():  # one sequence, no batch: dot and LAPACK (_linalg's module doc)
+        with library():
             return _scan_filter(filt, init_state, ys, us)
     closed_over = jax.make_jaxpr(filt.step)(init_state, ys[0], us[0]).consts
     if _only_staged(closed_over) and _only_staged(jax.tree_util.tree_leaves((init_state, ys, us))):
-        with _linalg.library_calls():  # under jit alone: still one sequence
+        with library():  # under jit alone: still one sequence
             return _scan_filter.__wrapped__(filt, init_state, ys, us)
     if filt.batch is not None and _only_staged(closed_over):  # a jax.vmap over runs reaches the kernel
         return _batchable_scan(filt)(init_state, ys, us)

@@ -130,6 +130,32 @@ def test_vmap_of_run_filter_is_the_kernel_and_differentiates_as_the_scan(data, m
     np.testing.assert_allclose(jax.grad(loss)(1.3, True), jax.grad(loss)(1.3, False), rtol=1e-10)
 
 
+def _primitives(jaxpr) -> set:
+    """Every primitive's name in a jaxpr and in the jaxprs it calls."""
+    names = set()
+    for eqn in jaxpr.eqns:
+        names.add(eqn.primitive.name)
+        for value in eqn.params.values():
+            inner = getattr(value, "jaxpr", value)
+            if hasattr(inner, "eqns"):
+                names |= _primitives(inner)
+    return names
+
+
+@pytest.mark.parametrize("backend, library", [("cpu", True), ("gpu", False)])
+def test_one_sequence_under_jit_uses_lapack_on_cpu_only(data, monkeypatch, backend, library):
+    """One sequence under ``jit`` alone: LAPACK factorisations on CPU, the written-out
+    algebra on a GPU (where a cuSOLVER call per small matrix is slower); the same numbers
+    as a plain scan either way."""
+    ys, us, means, covs = data
+    kf = kalman_filter(small_model())
+    state = kf.init(means[0], covs[0])
+    monkeypatch.setattr(jax, "default_backend", lambda: backend)
+    run = lambda y: run_filter(kf, state, y, us[0])  # noqa: E731
+    assert ("cholesky" in _primitives(jax.make_jaxpr(run)(ys[0]).jaxpr)) == library
+    _assert_same(jax.jit(run)(ys[0]), jax.jit(lambda y: scan_steps(kf, state, y, us[0]))(ys[0]))
+
+
 def test_health_float32_and_gradient(data):
     ys, us, means, covs = data
     model = small_model()

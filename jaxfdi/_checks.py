@@ -127,14 +127,6 @@ def float_dtype(*arrays: Any):
     return jnp.result_type(*floats)
 
 
-def as_real_array(name: str, x: Any, dtype=None, meaning: str = "real numbers", finite: bool = True):
-    """``x`` as a JAX float array (integers become floats): real, and finite when concrete."""
-    check_real(name, x, meaning)
-    if finite:
-        check_finite(name, x, meaning if meaning != "real numbers" else "")
-    return jnp.asarray(x, dtype=dtype or float_dtype(x))
-
-
 def check_shape(name: str, x: Any, expected: tuple, meaning: str = "") -> None:
     """Raise if ``x`` does not have shape ``expected`` (``None`` entries match anything)."""
     shape = shape_of(x)

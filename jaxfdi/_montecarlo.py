@@ -32,7 +32,6 @@ padded runs); the first chunk's compilation is reported.
 from __future__ import annotations
 
 import functools
-import sys
 import threading
 import time
 from typing import Any, Callable
@@ -47,13 +46,6 @@ from jaxfdi.distributed import allgather
 from jaxfdi._progress import progress_bar, status
 
 ProgressFn = Callable[[int, int, float], None]
-
-
-def print_progress(done: int, total: int, elapsed: float) -> None:
-    """Default progress display: one updating line on stderr."""
-    rate = done / elapsed if elapsed > 0 else float("nan")
-    end = "\n" if done >= total else ""
-    print(f"\rmonte carlo: {done}/{total} runs, {elapsed:.1f} s, {rate:.0f} runs/s", end=end, file=sys.stderr, flush=True)
 
 
 def _num_runs_of(per_run: Any) -> set[int]:

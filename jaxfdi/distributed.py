@@ -128,11 +128,6 @@ def _checks_timeout(timeout_s) -> None:
         raise ValueError(f"timeout_s: expected a positive integer (seconds), got {timeout_s!r}")
 
 
-def is_multiprocess(devices: Sequence) -> bool:
-    """True when ``devices`` belong to more than one process."""
-    return len({d.process_index for d in devices}) > 1
-
-
 def allgather(tree: Any) -> list:
     """Every process's ``tree`` (NumPy leaves of the same shapes on every process), as a
     list over processes; integer leaves travel as two 32-bit words, so int64 counts

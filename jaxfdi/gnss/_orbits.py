@@ -162,11 +162,6 @@ def kepler(mean_anomaly: Array, eccentricity: Array, iterations: int = KEPLER_IT
     return E, sin_e, cos_e
 
 
-def eccentric_anomaly(mean_anomaly: Array, eccentricity: Array, iterations: int = KEPLER_ITERATIONS) -> Array:
-    """``E`` with ``M = E - e sin E`` (``kepler``)."""
-    return kepler(mean_anomaly, eccentricity, iterations)[0]
-
-
 def _anomaly(orbit: Orbit, t: Array) -> tuple[Array, Array, Array, Array]:
     """``(t_k, sin E, cos E, A)`` of every slot at time ``t``."""
     a = orbit.sqrt_a**2

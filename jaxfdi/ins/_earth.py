@@ -108,11 +108,3 @@ def local_earth(position: Array) -> LocalEarth:
     return LocalEarth(sin_lat, cos_lat, meridian, transverse, gravity_ned(sin_lat, cos_lat, position[2], inverse_w),
                       earth_rate_ned(sin_lat, cos_lat))
 
-
-def schuler_period(latitude: float, height: float = 0.0) -> float:
-    """``2 pi sqrt((R_N + h) / g)`` [s], the textbook period of the north channel's
-    undamped oscillation (Titterton & Weston 2004, sec. 12.2)."""
-    sin_lat = jnp.sin(jnp.asarray(latitude))
-    meridian, _ = radii_of_curvature(sin_lat)
-    g = gravity_ned(sin_lat, jnp.cos(jnp.asarray(latitude)), jnp.asarray(height))[2]
-    return float(2.0 * jnp.pi * jnp.sqrt((meridian + height) / g))

@@ -3,9 +3,9 @@ set, early stopping, progress, and parameters saved with their parameterisation.
 
 The loss is any ``loss(raw, batch) -> scalar`` of the *unconstrained* parameters
 ``raw`` (a dict; map them with ``parameterize.constrain`` inside the loss). Batches come
-from ``train_batch(step)``: freshly simulated labelled runs (``fresh_batches``: run keys
-folded from a training seed, so validation and test data, drawn from other seeds, are
-never trained on) or slices of a fixed dataset (``fixed_batches``). Only the names in
+from ``train_batch(step)``: freshly simulated labelled runs (run keys folded from a
+training seed, ``jax.random.fold_in(key, step)``, so validation and test data, drawn from
+other seeds, are never trained on) or slices of a fixed dataset (``fixed_batches``). Only the names in
 ``trainable`` move; the others are passed to the loss unchanged.
 
 Long runs: ``checkpointed(filter)`` wraps a filter's step in ``jax.checkpoint``, so the
@@ -69,11 +69,6 @@ def checkpointed(filt: Filter) -> Filter:
     if getattr(filt, "batch", None) is not None:
         filt = filt._replace(batch=filt.batch._replace(step=jax.checkpoint(filt.batch.step)))
     return filt._replace(step=jax.checkpoint(filt.step))
-
-
-def fresh_batches(make_batch: Callable[[jax.Array], Any], key: jax.Array) -> Callable[[int], Any]:
-    """``step -> make_batch(fold_in(key, step))``: a new simulated mini-batch per step."""
-    return lambda step: make_batch(jax.random.fold_in(key, step))
 
 
 def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[int], Any]:

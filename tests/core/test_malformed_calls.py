@@ -312,7 +312,7 @@ CASES = {
     "haar_denoise mode": (lambda: detection.haar_denoise(jnp.ones(16), mode="hard2"), V, "mode"),
     "haar_denoise c_mult NaN": (lambda: detection.haar_denoise(jnp.ones(16), c_mult=float("nan")), V, "c_mult"),
     "signature_matrix zero filters": (lambda: jaxfdi.detection._signature.signature_matrix(0), V, "num_filters"),
-    "location_symptoms num_locations zero": (lambda: detection.signature.location_symptoms(jnp.ones(4, bool), jnp.zeros(4, int),
+    "location_symptoms num_locations zero": (lambda: jaxfdi.detection._signature.location_symptoms(jnp.ones(4, bool), jnp.zeros(4, int),
                                                                                  0), V, "num_locations"),
     # --- metrics ------------------------------------------------------------------------
     "confusion_matrix true label out of range": (lambda: metrics.confusion_matrix(jnp.array([0, 3]),

@@ -71,7 +71,8 @@ def __dir__():
 
 __all__ = [
     # faults and simulation
-    "Fault", "FaultKind", "fault", "fault_group", "no_fault", "stack_faults", "concat_faults", "simulator", "linear_simulator", "simulate",
+    "Fault", "FaultKind", "fault", "fault_group", "no_fault", "stack_faults", "concat_faults", "simulator",
+    "linear_simulator", "simulate",
     # the closed loop, the monitor, Monte Carlo, studies, summaries
     "Plant", "FDI", "Controller", "Scorer", "run_loop", "state_feedback", "LoopResult", "monitor",
     "MonitorResult", "monte_carlo", "Study", "Structure", "run_study", "summarize_detection",

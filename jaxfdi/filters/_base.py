@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 from jax.custom_batching import custom_vmap
-from jax.extend.core import Jaxpr, Literal
+from jax.interpreters import partial_eval as pe
 from jax.interpreters.partial_eval import DynamicJaxprTracer
 
 from jaxfdi import _checks, _linalg
@@ -445,40 +445,19 @@ def _run_batch(filt: Filter, init_state: Any, ys: Array, us: Array | None, paral
 
 
 def _covariance_sees_data(filt: Filter, prior: GaussianState, y: Array, u: Array, per_run_inputs: bool) -> bool:
-    """Whether a Gaussian filter's covariances depend on the data of a run: read from the
-    step's jaxpr, forward from the mean, ``y`` and per-run inputs to the next covariance
-    and the ``FilterInfo`` covariances. If none is reached, the covariance of every step
-    is the same for all runs sharing ``P0`` (the linear KF without missing measurements)."""
+    """Whether a Gaussian filter's covariances depend on the data of a run: JAX's dead-code
+    analysis of the step's jaxpr (``dce_jaxpr``) says which inputs the next covariance and
+    the ``FilterInfo`` covariances need; if neither the mean, ``y`` nor per-run inputs,
+    the covariance of every step is the same for all runs sharing ``P0`` (the linear KF
+    without missing measurements)."""
     mean, cov = (jnp.asarray(leaf) for leaf in prior)
     step = lambda mean, cov, y, u: filt.step(GaussianState(mean, cov), y, u)  # noqa: E731
     closed, out_shape = jax.make_jaxpr(step, return_shape=True)(mean[0] if mean.ndim == 2 else mean, cov, y, u)
-    reached = _reached_outputs(closed.jaxpr, [True, False, True, per_run_inputs])
-    state, info = jax.tree.unflatten(jax.tree.structure(out_shape), reached)
-    return bool(state.cov or any(getattr(info, name) for name in _COVARIANCE_FIELDS))
-
-
-_CALLS = {"jit": "jaxpr", "pjit": "jaxpr", "closed_call": "call_jaxpr", "custom_jvp_call": "call_jaxpr",
-          "custom_vjp_call": "call_jaxpr"}
-
-
-def _reached_outputs(jaxpr: Jaxpr, reached_inputs: list[bool]) -> list[bool]:
-    """Which outputs of ``jaxpr`` the flagged inputs reach by data flow (what ``vmap``
-    would batch); calls are followed inside, other higher-order primitives (``scan``,
-    ``cond``) count as reached by any flagged operand."""
-    reached = {var for var, flag in zip(jaxpr.invars, reached_inputs) if flag}
-
-    def flagged(var) -> bool:
-        return not isinstance(var, Literal) and var in reached
-
-    for eqn in jaxpr.eqns:
-        inputs = [flagged(var) for var in eqn.invars]
-        if not any(inputs):
-            continue
-        inner = eqn.params.get(_CALLS.get(eqn.primitive.name, ""))
-        outputs = (_reached_outputs(getattr(inner, "jaxpr", inner), inputs) if inner is not None
-                   else [True] * len(eqn.outvars))
-        reached.update(var for var, flag in zip(eqn.outvars, outputs) if flag)
-    return [flagged(var) for var in jaxpr.outvars]
+    structure = jax.tree.structure(out_shape)
+    state, info = jax.tree.unflatten(structure, range(structure.num_leaves))
+    covariances = {state.cov, *(getattr(info, name) for name in _COVARIANCE_FIELDS)}
+    _, needed = pe.dce_jaxpr(closed.jaxpr, [i in covariances for i in range(structure.num_leaves)])
+    return bool(needed[0] or needed[2] or (per_run_inputs and needed[3]))
 
 
 def _prior_axes(init_state: GaussianState, num_runs: int) -> GaussianState:

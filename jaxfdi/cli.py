@@ -123,11 +123,14 @@ def _named(args: argparse.Namespace, folder: Path, path) -> Path:
 
 def _write_study(study, args: argparse.Namespace, folder: Path, name: str, plot: Callable[[Path], list[str]],
                  elapsed: float) -> str:
-    """A scenario study's JSON (config, rows, seconds) and figures, and the line that
-    names them."""
+    """A scenario study's JSON (config, rows, seconds), its table as CSV beside it
+    (``study.to_frame()``: the same rows, one per method and case, with the rates'
+    intervals) and its figures, and the line that names them."""
     _io.write_json(folder / name, {"config": study.config, "rows": study.rows, "seconds": elapsed})
+    csv = Path(name).with_suffix(".csv")
+    _io.atomic_write(folder / csv, lambda tmp: study.to_frame().to_csv(tmp, index=False))
     paths = [str(_named(args, folder, p)) for p in plot(folder)]
-    return f"wrote {Path(args.out) / name} and {', '.join(paths)} ({elapsed:.1f} s)"
+    return f"wrote {Path(args.out) / name}, {Path(args.out) / csv} and {', '.join(paths)} ({elapsed:.1f} s)"
 
 
 def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
@@ -136,13 +139,15 @@ def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
         runs=args.runs, seed=args.seed, window=args.window, pfa=args.pfa, progress=not args.quiet,
     )
     elapsed = time.perf_counter() - start
-    out = Path(args.out)
     print(f"engine-chi2: KF chi-square test on the turbojet of Han et al. (2022), {args.runs} runs per fault, "
           f"window {result.config['window']}, Pfa {result.config['pfa']}, threshold {result.config['threshold']:.2f}")
     print(result.table())
-    _io.write_json(folder / "engine-chi2.json", {"config": result.config, "rows": result.rows, "seconds": elapsed})
-    plot_engine_chi2(result, folder / "engine-chi2.png")
-    return f"wrote {out / 'engine-chi2.json'} and {out / 'engine-chi2.png'} ({elapsed:.1f} s)"
+
+    def plot(where: Path) -> list[Path]:
+        plot_engine_chi2(result, where / "engine-chi2.png")
+        return [where / "engine-chi2.png"]
+
+    return _write_study(result, args, folder, "engine-chi2.json", plot, elapsed)
 
 
 def split_methods(text: str, valid: list[str]) -> tuple[list[str], list[str]]:

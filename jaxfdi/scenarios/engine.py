@@ -49,6 +49,7 @@ from jaxfdi.filters._imm import interacting_multiple_model
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.filters._mm import multiple_model
 from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi._frame import study_frame, study_html
 from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, unhealthy_rows_warning
 from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
@@ -432,6 +433,9 @@ class EngineStudy(NamedTuple):
                 f"{_fmt(_nanmax([r['delay_median_s'] for r in faulty]), 17)}  {worst['fault']}"
             )
         return "\n".join(lines)
+
+    to_frame = study_frame
+    _repr_html_ = study_html
 
     def table(self) -> str:
         """Per method and fault, beside Table 3 of Han et al. (2022) (a mean: printed beside our mean).
@@ -820,6 +824,9 @@ class FaultSizeStudy(NamedTuple):
 
     config: dict[str, Any]
     rows: list[dict[str, Any]]
+
+    to_frame = study_frame
+    _repr_html_ = study_html
 
     def table(self) -> str:
         return fault_size_table(self)

@@ -53,6 +53,7 @@ from jaxfdi.detection._hybrid_psa import (
 from jaxfdi.detection._parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
 from jaxfdi._faults import Fault, FaultKind, Target
 from jaxfdi.filters import init_from_posterior, run_filter
+from jaxfdi._frame import study_frame, study_html
 from jaxfdi._metrics import binomial_interval, rate_interval
 from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.models.f16._plant import RATE_OFFSET, flight_view
@@ -272,6 +273,9 @@ class F16FDIStudy(NamedTuple):
     config: dict
     rows: list[dict]
     history: dict
+
+    to_frame = study_frame
+    _repr_html_ = study_html
 
     def table(self) -> str:
         return study_table(self)
@@ -665,6 +669,9 @@ class F16KindStudy(NamedTuple):
 
     config: dict
     rows: list[dict]
+
+    to_frame = study_frame
+    _repr_html_ = study_html
 
     def table(self) -> str:
         return kind_table(self.rows, self.config)

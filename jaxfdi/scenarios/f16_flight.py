@@ -37,6 +37,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi._frame import study_frame, study_html
 from jaxfdi.control._f16_loop import f16_plant, rate_passthrough_fdi
 from jaxfdi.control._flight import (
     LATERAL_TRACKED,
@@ -308,6 +309,9 @@ class F16FlightStudy(NamedTuple):
     config: dict
     rows: list[dict]
     history: dict
+
+    to_frame = study_frame
+    _repr_html_ = study_html
 
     def table(self) -> str:
         return study_table(self)

@@ -44,6 +44,7 @@ from jaxfdi.data import data_path
 from jaxfdi.gnss import _frames as frames, _integrity as integrity, _measurements as measurements, _orbits as orbits, _paths as paths, _raim as raim, _rinex as rinex, _yuma as yuma
 from jaxfdi.gnss._protection import ALERT_LIMITS
 from jaxfdi._loop import episode_scorer, feedforward, run_loop
+from jaxfdi._frame import study_frame, study_html
 from jaxfdi._metrics import rate_text, summarize_episodes
 from jaxfdi.plotting import save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
@@ -128,6 +129,9 @@ class GnssCampusStudy(NamedTuple):
     campus: dict
     park: dict
     beyond: dict
+
+    to_frame = study_frame
+    _repr_html_ = study_html
 
     def table(self) -> str:
         return gnss_table(self)

@@ -59,6 +59,7 @@ from jaxfdi.ins import _error_state as error_state, _imu as imu, _integrity as i
 from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
 from jaxfdi.ins._mechanization import NavState
 from jaxfdi._loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
+from jaxfdi._frame import study_frame, study_html
 from jaxfdi._metrics import (
     binomial_interval,
     binomial_lower_bound,
@@ -222,6 +223,9 @@ class GpsInsStudy(NamedTuple):
     series: dict
     curves: dict
     results: dict
+
+    to_frame = study_frame
+    _repr_html_ = study_html
 
     def table(self) -> str:
         return gps_ins_table(self)

@@ -62,6 +62,7 @@ from jaxfdi.detection._signature import isolate, location_symptoms
 from jaxfdi.detection._wavelet import block_alarms, causal_detail_sigma, chi2_detail_sigma, haar_denoise
 from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters._tskf import actuator_direction, sensor_direction, stack_directions
+from jaxfdi._frame import results_frame, study_html
 from jaxfdi._metrics import delay_statistics, rate_text, record_from_alarms, step_health, unhealthy_warning
 from jaxfdi.models import _vtol as vtol
 from jaxfdi.plotting import save_figure
@@ -390,6 +391,14 @@ class VTOLStudy(NamedTuple):
     rows: list[dict[str, Any]]
     records: RunRecord
     design: LoopDesign
+
+    _repr_html_ = study_html
+
+    def to_frame(self, level: float = 0.95):
+        """The table as a pandas DataFrame (``results_frame``): one row per fault and
+        ``method|thresholds``, each detection rate beside its ``level`` Clopper-Pearson
+        interval over the healthy runs without FTC (those the methods are scored on)."""
+        return results_frame(self.rows, level, unhealthy="unhealthy_runs.no_ftc")
 
     def table(self) -> str:
         bad = [row for row in self.rows if sum(row.get("unhealthy_runs", {}).values())]

@@ -70,3 +70,16 @@ def test_all_is_what_star_import_gives():
     namespace = {}
     exec("from jaxfdi import *", namespace)
     assert set(jaxfdi.__all__) <= set(namespace)
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_every_field_of_a_public_named_tuple_is_a_documented_attribute(package):
+    """The API reference shows a result's fields: each ``_fields`` entry has its own line
+    (``name:`` or ``name (type):``) in the class's ``Attributes:`` section."""
+    missing = []
+    for name, obj in public(package).items():
+        if inspect.isclass(obj) and hasattr(obj, "_fields"):
+            section = own_docstring(obj).partition("\nAttributes:\n")[2]
+            documented = set(re.findall(r"^ {2,4}(\w+)(?: \(.*?\))?:", section, flags=re.M))
+            missing += [f"{name}.{field}" for field in obj._fields if field not in documented]
+    assert missing == [], f"{package}: fields without an attribute line: {missing}"

@@ -22,7 +22,7 @@ LAYERS = {
     "models": 2,
     "_riccati": 3, "_simulate": 3,
     "filters": 4,
-    "_metrics": 5, "_montecarlo": 5,
+    "_metrics": 5, "_montecarlo": 5, "_frame": 5,
     "_study": 6, "streaming": 6,
     "detection": 7,
     "_loop": 8,

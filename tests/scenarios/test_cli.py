@@ -5,8 +5,11 @@ import pathlib
 import subprocess
 import sys
 
+import pandas as pd
 import pytest
 from scipy import stats
+
+from _frames import assert_table_is_the_json
 
 FAULTS = ["actuator", "RPM", "P2", "T2", "P4", "T4", "none"]
 
@@ -16,6 +19,12 @@ def run_cli(tmp, *args):
     conftest); the output folder is ``tmp / "out"``."""
     return subprocess.run([sys.executable, "-m", "jaxfdi", "run", *args, "--out", str(tmp / "out")],
                           capture_output=True, text=True, timeout=600)
+
+
+def assert_csv_is_the_json(path, rows, methods=()):
+    """The CSV the CLI writes beside a study's JSON holds the same rows and numbers (read
+    back exactly: ``float_precision="round_trip"``)."""
+    assert_table_is_the_json(pd.read_csv(path, float_precision="round_trip"), rows, methods)
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +50,8 @@ def test_engine_chi2_writes_table_json_and_png(cli_run):
     assert data["rows"][-1]["detection_rate"] is None  # strict JSON: no fault to detect -> null, not NaN
     png = (tmp / "out" / "engine-chi2.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
-    assert sorted(p.name for p in (tmp / "out").iterdir()) == ["engine-chi2.json", "engine-chi2.png"]
+    assert sorted(p.name for p in (tmp / "out").iterdir()) == ["engine-chi2.csv", "engine-chi2.json", "engine-chi2.png"]
+    assert_csv_is_the_json(tmp / "out" / "engine-chi2.csv", data["rows"])
     assert any(pathlib.Path(os.environ["JAXFDI_CACHE_DIR"]).iterdir()), "persistent compilation cache not written"
 
 
@@ -106,7 +116,8 @@ def test_vtol_prints_tables_and_writes_figures(tmp_path):
     assert_same_as_before("vtol", {**data, "rows": [r for r in data["rows"] if r["fault"] not in HEALTH_CASES]})
     assert "WARNING" not in proc.stdout and all(sum(row["unhealthy_runs"].values()) == 0 for row in data["rows"])
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
-        "vtol-fig3-s3-statistics.png", "vtol-fig4-a2-estimate.png", "vtol-fig5-a2-ftc.png", "vtol.json"]
+        "vtol-fig3-s3-statistics.png", "vtol-fig4-a2-estimate.png", "vtol-fig5-a2-ftc.png", "vtol.csv", "vtol.json"]
+    assert_csv_is_the_json(tmp_path / "out" / "vtol.csv", data["rows"])
 
 
 # `jaxfdi run reaction-wheels`: tests/scenarios/test_reaction_wheels_end_to_end.py (with notebook 05, which

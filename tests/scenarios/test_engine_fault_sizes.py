@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from _frames import assert_table_is_the_json
 from jaxfdi._faults import stack_faults
 from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.scenarios.engine import PAPER_DELAY, engine_spec, fault_size_study
@@ -57,3 +58,10 @@ def test_the_papers_delays_sit_at_about_ten_sigma_for_every_sensor(study):
         paper = PAPER_DELAY["GLRT"][j + 1]
         assert row["detection_rate"] == 1.0, (name, row)
         assert abs(row["delay_mean_s"] - paper) <= 0.01, (name, row["delay_mean_s"], paper)
+
+
+def test_the_table_as_a_data_frame_is_the_rows(study):
+    """``to_frame()`` holds every row's numbers (the JSON the CLI writes), one row per
+    method and case; ``_repr_html_`` renders it for a notebook."""
+    assert_table_is_the_json(study.to_frame(), study.rows)
+    assert "<table" in study._repr_html_()

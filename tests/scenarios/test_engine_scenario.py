@@ -172,11 +172,13 @@ def test_methods_as_data_equal_the_methods_run_one_by_one():
     ``run_method`` runs the paper's seven cases, the study nine (the sensor-health cases
     before 'none'): run ``i`` has key ``i`` in both, so the six faults' runs compare."""
     from _compiles import counting_compiles
+    from _frames import assert_table_is_the_json
     from jaxfdi.scenarios.engine import engine_methods, engine_study, run_method
 
     runs, seed = 10, 11  # 90 runs: the CLI run's chunk of 64, so the grid programs come from the run's cache
     faults = slice(0, 6 * runs)
     study = engine_study(runs=runs, seed=seed, methods=SHARED_CELLS)
+    assert_table_is_the_json(study.to_frame(), study.rows)  # the table as a DataFrame: the same numbers
     every = engine_methods()
     for name in SHARED_CELLS:
         alone = run_method(every[name], runs, seed)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from _frames import assert_table_is_the_json
 from jaxfdi.data import data_path
 from jaxfdi.gnss import geodetic_to_ecef, read_rinex_nav, satellite_position
 from jaxfdi.gnss._measurements import ClockModel, visibility
@@ -134,3 +135,10 @@ def test_dead_and_frozen_channels_detected_isolated_excluded(study):
 def test_figures(study, tmp_path):
     paths = plot_gnss_campus(study, tmp_path)
     assert len(paths) == 3 and all((tmp_path / p.split("/")[-1]).stat().st_size > 10_000 for p in paths)
+
+
+def test_the_table_as_a_data_frame_is_the_rows(study):
+    """``to_frame()`` holds every row's numbers (the JSON the CLI writes), one row per
+    method and case; ``_repr_html_`` renders it for a notebook."""
+    assert_table_is_the_json(study.to_frame(), study.rows)
+    assert "<table" in study._repr_html_()

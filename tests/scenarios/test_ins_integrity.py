@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from _frames import assert_table_is_the_json
 from jaxfdi.ins._integrity import attribute_ins_alarms
 from jaxfdi.scenarios.gps_ins import (PAPER_TABLE3, StudySize, alarms_at, gps_ins_study, ins_decisions, plot_gps_ins,
                                       thresholds)
@@ -224,3 +225,10 @@ def test_table_json_and_figures(study, tmp_path):
     paths = plot_gps_ins(study, tmp_path)
     assert "Operating curve" in text and "closest at P_fa" in text
     assert len(paths) == 5 and all((tmp_path / p.split("/")[-1]).stat().st_size > 10_000 for p in paths)
+
+
+def test_the_table_as_a_data_frame_is_the_rows(study):
+    """``to_frame()`` holds every row's numbers (the JSON the CLI writes), one row per
+    method and case; ``_repr_html_`` renders it for a notebook."""
+    assert_table_is_the_json(study.to_frame(), study.rows)
+    assert "<table" in study._repr_html_()

@@ -10,7 +10,8 @@ import json
 import pytest
 
 from _notebooks import images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
-from test_cli import assert_same_as_before, run_cli
+from jaxfdi.scenarios.reaction_wheels import METHODS
+from test_cli import assert_csv_is_the_json, assert_same_as_before, run_cli
 
 RUNS = 2
 WHEEL_CASES = ["none"] + [f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain") for w in range(1, 5)]
@@ -42,7 +43,8 @@ def test_reaction_wheels_prints_every_case_and_writes_figures(shared):
     assert data["config"]["fdp_threshold"] > 0
     assert sorted(p.name for p in (shared / "out").iterdir()) == [
         "reaction-wheels-fig3-5-attitude.png", "reaction-wheels-fig4-6-detection.png",
-        "reaction-wheels-fig8-9-isolation.png", "reaction-wheels.json"]
+        "reaction-wheels-fig8-9-isolation.png", "reaction-wheels.csv", "reaction-wheels.json"]
+    assert_csv_is_the_json(shared / "out" / "reaction-wheels.csv", data["rows"], METHODS)
 
 
 def test_reaction_wheels_notebook(shared, python3_kernel, monkeypatch):

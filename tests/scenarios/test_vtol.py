@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from _frames import assert_table_is_the_json
 from jaxfdi.control._eigenstructure import assign_eigenstructure, scheduled_gain
 from jaxfdi.detection._signature import isolate, location_symptoms
 from jaxfdi._faults import fault_label, no_fault
@@ -570,3 +571,10 @@ def test_sample_sigma_soft_threshold_row_is_the_papers_causal_estimate():
     np.testing.assert_allclose(values[4, SIGMA_WINDOW:], want, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(values[4, :SIGMA_WINDOW], values[3, :SIGMA_WINDOW])
     assert np.any(np.abs(values[4, SIGMA_WINDOW:] - values[3, SIGMA_WINDOW:]) > 1e-6)
+
+
+def test_the_table_as_a_data_frame_is_the_rows(study):
+    """``to_frame()`` holds every row's numbers (the JSON the CLI writes), one row per
+    method and case; ``_repr_html_`` renders it for a notebook."""
+    assert_table_is_the_json(study.to_frame(), study.rows)
+    assert "<table" in study._repr_html_()

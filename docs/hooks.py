@@ -1,6 +1,7 @@
-"""mkdocs hook: say which executed example copies (docs/examples) are older than their
-source notebook (notebooks/), by the SHA-256 the copy records. Re-run
-``python docs/execute_notebooks.py <prefix>`` to refresh one."""
+"""mkdocs hook: a warning (an error under ``mkdocs build --strict``, as CI builds) for each
+executed example copy (docs/examples) older than its source notebook (notebooks/), by the
+SHA-256 the copy records. Re-run ``python docs/execute_notebooks.py <prefix>`` to refresh
+one."""
 from __future__ import annotations
 
 import hashlib
@@ -17,7 +18,7 @@ def on_pre_build(config, **kwargs):
         source = ROOT / "notebooks" / copy.name
         meta = json.loads(copy.read_text()).get("metadata", {}).get("jaxfdi_docs", {})
         if not source.exists():
-            log.info("examples: %s has no source notebook", copy.name)
+            log.warning("examples: %s has no source notebook", copy.name)
         elif meta.get("source_sha256") != hashlib.sha256(source.read_bytes()).hexdigest():
-            log.info("examples: %s was executed from an older notebooks/%s: python docs/execute_notebooks.py "
+            log.warning("examples: %s was executed from an older notebooks/%s: python docs/execute_notebooks.py "
                      "[--text] %s", copy.name, copy.name, copy.name[:2])

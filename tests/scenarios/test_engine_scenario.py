@@ -7,7 +7,7 @@ Power of those tests at 30 runs (they reject only a clearly lower rate): a claim
 is rejected at <= 24 of 30 (probability 0.07 if the true rate is 90 %, 0.57 at 80 %,
 0.92 at 70 %); 90 % at <= 22 (0.24 at 80 %, 0.72 at 70 %); 97 % at <= 25 (0.18 at
 90 %, 0.75 at 80 %); fault-free alarms <= 5 % at >= 6 of 30 (0.57 at 20 %), <= 1 % at
->= 3 of 30 (0.59 at 10 %, 0.96 at 20 %). The 100-run claims are the README's (CLI
+>= 3 of 30 (0.59 at 10 %, 0.96 at 20 %). The 100-run claims are the engine docs page's (CLI
 default size).
 
 The same file runs `--methods` and notebook 02 on the programs the full run compiled

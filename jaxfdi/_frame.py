@@ -101,16 +101,11 @@ def results_frame(rows: list[dict], level: float = 0.95, methods: tuple[str, ...
     return frame
 
 
-def results_html(frame, config: dict | None = None) -> str:
-    """The HTML a notebook renders for a study's frame: one table per ``section`` or
-    ``case`` where those hold rows of different columns (only the columns each uses),
-    numbers to four significant digits, ``-`` for none."""
-
-    def columns(part):
-        return tuple(part.dropna(axis=1, how="all").columns)
-
-    group = next((c for c in ("section", "case") if c in frame
-                  and len({columns(p) for _, p in frame.groupby(c, sort=False, dropna=False)}) > 1), None)
+def results_html(frame, config: dict | None = None, group: str = "section") -> str:
+    """The HTML a notebook renders for a study's frame: one table per value of the
+    ``group`` column where the frame has one (only the columns each uses), numbers to
+    four significant digits, ``-`` for none."""
+    group = group if group in frame else None
     parts = []
     if config:
         runs = config.get("runs", config.get("runs_per_fault", config.get("runs_per_case")))
@@ -118,7 +113,8 @@ def results_html(frame, config: dict | None = None) -> str:
         if runs is not None:
             parts.append(f"<p>{html.escape(str(runs))} runs per case, seed {html.escape(str(seed))}; "
                          "rates with their 95 % Clopper-Pearson intervals (<code>_low</code>, <code>_high</code>)</p>")
-    groups = [(None, frame)] if group is None else [(name, part) for name, part in frame.groupby(group, sort=False, dropna=False)]
+    groups = ([(None, frame)] if group is None
+              else [(name, part) for name, part in frame.groupby(group, sort=False, dropna=False)])
     for name, part in groups:
         if name is not None:
             parts.append(f"<h4>{html.escape(str(name))}</h4>")
@@ -133,6 +129,13 @@ def study_frame(self, level: float = 0.95):
     return results_frame(self.rows, level)
 
 
+def study_repr(self) -> str:
+    """A study's text form: its size and where its table is (the fields hold arrays of
+    every run, too long to print)."""
+    return f"{type(self).__name__}({len(self.rows)} rows; .to_frame() for the table, .table() for text)"
+
+
 def study_html(self) -> str:
-    """Jupyter's rich display of a study: its ``to_frame()`` as HTML tables."""
-    return results_html(self.to_frame(), getattr(self, "config", None))
+    """Jupyter's rich display of a study: its ``to_frame()`` as HTML tables, one per
+    section (the column a study names in ``_html_group``, default ``section``)."""
+    return results_html(self.to_frame(), getattr(self, "config", None), getattr(self, "_html_group", "section"))

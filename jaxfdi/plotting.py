@@ -6,9 +6,15 @@ so no function selects or changes the matplotlib backend, opens a window or keep
 figure alive in pyplot's registry: in Jupyter a returned figure shows as the cell's
 value (or with ``display(fig)``); in a script, ``fig.savefig(path)``. The CLI selects
 the Agg backend itself before its scenarios draw their figures.
+
+The studies' figures keep a house style (``save_figure``): one text column wide at the
+resolution the docs show them, text readable at that width, every panel's axes labelled
+with units, every labelled curve in a legend, one colour per hypothesis across panels and
+figures (``hypothesis_colors``), and a caption that says how many runs the figure shows.
 """
 from __future__ import annotations
 
+import re
 import textwrap
 from typing import Mapping, Sequence
 
@@ -225,17 +231,101 @@ def plot_loss_history(step, train=None, validation=None, *, best_step: int | Non
     return fig
 
 
-def save_figure(fig, path, caption: str, dpi: int = 110):
-    """Write ``fig`` as a PNG at ``path`` (atomically: ``_io.atomic_write``) with ``caption``
-    under it: what the figure shows, and where it differs from the paper's figure. The
-    caption is wrapped to the figure's width and the layout (tight or constrained) makes
-    room for it. Returns the path written."""
+#: The house style of the figures the studies write: one text column wide
+#: (``COLUMN_WIDTH_IN``), saved at ``DPI`` so that the PNG is about the 800 px a notebook or
+#: the documentation shows it at, its text in ``FONT_PT`` (titles, axis labels) and
+#: ``SMALL_FONT_PT`` (ticks, legends, the caption) points, readable at that width.
+COLUMN_WIDTH_IN = 7.5
+DPI = 110
+FONT_PT = 9.0
+SMALL_FONT_PT = 8.0
+#: the colour of a hypothesis (mode, fault, method) that is no fault
+NO_FAULT_COLOR = "0.25"
+_NO_FAULT = {"none", "normal", "fault-free", "no fault", "nominal"}
+_RUN_COUNT = re.compile(r"\b(\d[\d,]*|one|two|three|four|five|ten)\s+(\w+\s+){0,2}"
+                        r"(runs?|flights?|epochs?|trials?|realisations?|realizations?)\b", re.IGNORECASE)
+
+
+def hypothesis_colors(names: Sequence[str]) -> dict[str, str]:
+    """One colour per hypothesis, the same in every panel and figure of a study: the
+    fault-free one (``none``, ``normal``, ...) dark grey, the others matplotlib's ``tab10``
+    colours in the order given (pass the study's full list of names, not a panel's).
+
+    Returns:
+      ``{name: colour}`` for every name.
+    """
+    from matplotlib import colormaps
+
+    palette = colormaps["tab10"].colors
+    colors, k = {}, 0
+    for name in names:
+        if str(name).lower() in _NO_FAULT:
+            colors[name] = NO_FAULT_COLOR
+        else:
+            colors[name] = palette[k % len(palette)]
+            k += 1
+    return colors
+
+
+def _check_figure(fig, caption: str) -> None:
+    """The house rules a saved figure keeps: every panel's axes are labelled (a panel may
+    share the label of its row's or column's neighbour), every labelled curve is in a
+    legend, and the caption says how many runs (flights, epochs) the figure shows."""
+    if not _RUN_COUNT.search(caption):
+        raise ValueError(f"caption: expected the number of runs (flights, epochs) the figure shows, got {caption!r}")
+    # a polar panel's angle and radius are named by its title
+    panels = [ax for ax in fig.axes
+              if ax.get_label() != "<colorbar>" and ax.get_subplotspec() is not None and ax.name != "polar"]
+    for axis in ("x", "y"):
+        groups: dict = {}
+        for ax in panels:
+            spec = ax.get_subplotspec()
+            key = tuple(spec.colspan) if axis == "x" else tuple(spec.rowspan)
+            label = ax.get_xlabel() if axis == "x" else ax.get_ylabel()
+            groups.setdefault(key, []).append(bool(label.strip()) or not ax.axison)
+        if not all(any(labelled) for labelled in groups.values()):
+            raise ValueError(f"fig: a panel without an {axis} label (what it shows, with its unit)")
+    legends = [legend for legend in [*(ax.get_legend() for ax in panels), *fig.legends] if legend is not None]
+    shown = {text.get_text() for legend in legends for text in legend.get_texts()}
+    labels = {label for ax in panels for label in ax.get_legend_handles_labels()[1]}
+    if legends and labels - shown:
+        raise ValueError(f"fig: curves {sorted(labels - shown)} are labelled but in no legend")
+
+
+def _house_style(fig) -> None:
+    """The figure one column wide (its aspect kept) and its text at the house sizes."""
+    width, height = fig.get_size_inches()
+    fig.set_size_inches(COLUMN_WIDTH_IN, height * COLUMN_WIDTH_IN / width)
+    for ax in fig.axes:
+        ax.title.set_fontsize(FONT_PT)
+        ax.xaxis.label.set_fontsize(FONT_PT)
+        ax.yaxis.label.set_fontsize(FONT_PT)
+        ax.tick_params(labelsize=SMALL_FONT_PT)
+        legend = ax.get_legend()
+        if legend is not None:
+            for text in legend.get_texts():
+                text.set_fontsize(SMALL_FONT_PT)
+    for legend in fig.legends:
+        for text in legend.get_texts():
+            text.set_fontsize(SMALL_FONT_PT)
+
+
+def save_figure(fig, path, caption: str, dpi: int = DPI):
+    """Write ``fig`` as a PNG at ``path`` (atomically: ``_io.atomic_write``) in the house
+    style (``COLUMN_WIDTH_IN`` wide at ``dpi``, text at ``FONT_PT``/``SMALL_FONT_PT``),
+    with ``caption`` under it: what the figure shows, over how many runs, and where it
+    differs from the paper's figure. A panel without axis labels, a labelled curve in no
+    legend or a caption without the run count is a ``ValueError``. The caption is wrapped
+    to the figure's width and the layout (tight or constrained) makes room for it.
+    Returns the path written."""
     if not isinstance(caption, str) or not caption.strip():
         raise ValueError(f"caption: expected a sentence saying what the figure shows, got {caption!r}")
+    _check_figure(fig, caption)
+    _house_style(fig)
     width, height = fig.get_size_inches()
-    lines = textwrap.wrap(" ".join(caption.split()), width=max(int(width * 17), 40))
-    bottom = min((len(lines) * 0.17 + 0.1) / height, 0.4)
-    fig.text(0.01, 0.01, "\n".join(lines), ha="left", va="bottom", fontsize=8, wrap=False)
+    lines = textwrap.wrap(" ".join(caption.split()), width=max(int(width * 72 / (0.55 * SMALL_FONT_PT)), 40))
+    bottom = min((len(lines) * SMALL_FONT_PT * 1.25 / 72 + 0.1) / height, 0.4)
+    fig.text(0.01, 0.01, "\n".join(lines), ha="left", va="bottom", fontsize=SMALL_FONT_PT, wrap=False)
     engine = fig.get_layout_engine()
     if engine is not None and type(engine).__name__ == "ConstrainedLayoutEngine":
         engine.set(rect=(0.0, bottom, 1.0, 1.0 - bottom))

@@ -25,14 +25,12 @@ def _same(table_value, json_value, where):
         assert str(table_value) == str(json_value), where
 
 
-def _cells(row: dict, prefix: str = "") -> dict:
-    cells = {}
-    for key, value in row.items():
-        if isinstance(value, dict):
-            cells.update(_cells(value, f"{prefix}{key}."))
-        else:
-            cells[f"{prefix}{key}"] = value
-    return cells
+def _cells(row: dict) -> dict:
+    """``{"a": {"b": 1}}`` -> ``{"a.b": 1}``, by pandas' own flattening (not the library's)."""
+    import pandas as pd
+
+    flat = pd.json_normalize(row, sep=".").iloc[0].items() if row else []
+    return {key: value.item() if isinstance(value, np.generic) else value for key, value in flat}
 
 
 def assert_table_is_the_json(frame, rows: list[dict], methods: tuple[str, ...] = ()) -> None:

@@ -36,6 +36,7 @@ Generalized Likelihood Ratio Test" (CITATION.cff).
 from __future__ import annotations
 
 import functools
+import textwrap
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -49,14 +50,14 @@ from jaxfdi.filters._imm import interacting_multiple_model
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.filters._mm import multiple_model
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi._frame import study_frame, study_html
+from jaxfdi._frame import study_frame, study_html, study_repr
 from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, unhealthy_rows_warning
 from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.filters import run_filter
 from jaxfdi._monitor import monitor, replay_detector
 from jaxfdi._montecarlo import monte_carlo
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import COLUMN_WIDTH_IN, hypothesis_colors, save_figure
 from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi._simulate import linear_simulator, simulate
@@ -436,6 +437,7 @@ class EngineStudy(NamedTuple):
 
     to_frame = study_frame
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def table(self) -> str:
         """Per method and fault, beside Table 3 of Han et al. (2022) (a mean: printed beside our mean).
@@ -749,34 +751,49 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
         plt.close(fig)
         paths.append(str(path))
 
+    colors = hypothesis_colors(MODE_NAMES)  # one colour per mode (fault direction) in every figure
     prob_keys = [k for k in study.figures if k.startswith("mode_prob/")]
     if prob_keys:
-        fig, axes = plt.subplots(len(prob_keys), 6, figsize=(18, 3.2 * len(prob_keys)), sharey=True, squeeze=False)
-        for row, key in zip(axes, prob_keys):
-            for i, ax in enumerate(row):
+        # per mode design: the six faults as a 2 x 3 block of panels, the designs one under the other
+        fig, axes = plt.subplots(2 * len(prob_keys), 3, figsize=(COLUMN_WIDTH_IN, 3.3 * len(prob_keys) + 0.6),
+                                 sharex=True, sharey=True, squeeze=False, layout="constrained")
+        for d, key in enumerate(prob_keys):
+            block = axes[2 * d:2 * d + 2].flat
+            for i, ax in enumerate(block):
                 for j, mode in enumerate(MODE_NAMES):
-                    ax.plot(t, study.figures[key][i, :, j], lw=1.2 if j in (0, i + 1) else 0.7, label=mode)
-                ax.axhline(cfg["settings"]["mu_threshold"], color="k", ls="--", lw=0.8)
-                ax.set(title=f"{fault_names[i]} fault", xlabel="time [s]")
-            row[0].set_ylabel(f"{key.split('/', 1)[1]}\nmean mode probability ({cfg['figure_runs']} runs)")
-        axes[0, -1].legend(fontsize=7)
+                    ax.plot(t, study.figures[key][i, :, j], color=colors[mode], lw=1.4 if j in (0, i + 1) else 0.6,
+                            label=mode)
+                ax.axhline(cfg["settings"]["mu_threshold"], color="k", ls="--", lw=0.8, label="mu_T")
+                ax.set_title(f"{fault_names[i]} fault")
+            for ax in axes[2 * d:2 * d + 2, 0]:
+                ax.set_ylabel("\n".join(textwrap.wrap(key.split("/", 1)[1], 18)) + "\nmode probability", fontsize=8)
+        for ax in axes[-1]:
+            ax.set_xlabel("time [s]")
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="outside upper center", ncol=len(labels))
         save(fig, "engine-mode-probabilities.png",
              f"Mean mode probabilities over {cfg['figure_runs']} runs per fault (Han et al. 2022, Figs. 3-1 "
-             "and 3-2, show one run), the fault at 2 s, mu_T dashed. Sensor faults are 0.5 % of the operating point "
+             "and 3-2, show one run), the fault at 2 s, mu_T dashed; the true fault's mode and the normal mode drawn "
+             "thick. Sensor faults are 0.5 % of the operating point "
              "(the spec's reading); at that size P2's fault is 3.4 noise sigmas and its mode rises slowly, "
              "where the paper's Table 3 has it at once: the paper's faults are about 9-12 sigmas (docs/papers/engine.md).")
 
     if "glr" in study.figures:
-        fig, axes = plt.subplots(2, 3, figsize=(15, 7), sharex=True)
+        fig, axes = plt.subplots(3, 2, figsize=(COLUMN_WIDTH_IN, 6.6), sharex=True, sharey=True, layout="constrained")
         for i, ax in enumerate(axes.flat):
             for j, direction in enumerate(MODE_NAMES[1:]):
-                ax.semilogy(t, np.maximum(study.figures["glr"][i, :, j], 1e-2), lw=1.2 if j == i else 0.7,
-                            label=direction)
+                ax.semilogy(t, np.maximum(study.figures["glr"][i, :, j], 1e-2), color=colors[direction],
+                            lw=1.4 if j == i else 0.6, label=direction)
             for value, style in ((cfg["settings"]["glr_threshold"], "--"), (cfg["glr_threshold_theory"], ":"),
                                  (cfg["glr_threshold_bonferroni"], "-.")):
                 ax.axhline(value, color="k", ls=style, lw=0.8, label=f"l_T = {value:.1f}")
-            ax.set(title=f"{fault_names[i]} fault", xlabel="time [s]", ylabel="mean GLR l_i")
-        axes[0, 0].legend(fontsize=7, ncol=2)
+            ax.set_title(f"{fault_names[i]} fault")
+        for ax in axes[:, 0]:
+            ax.set_ylabel("mean GLR l_i")
+        for ax in axes[-1]:
+            ax.set_xlabel("time [s]")
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="outside upper center", ncol=5)
         save(fig, "engine-glrt.png",
              f"Mean GLR per fault direction over {cfg['figure_runs']} runs per fault (Han et al. 2022, Fig. 4, "
              "shows one run), with the paper's l_T = 200, the theoretical 91.95 and our Bonferroni threshold. At the "
@@ -787,8 +804,9 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
         r["method"] == m and r["estimate_median"] == r["estimate_median"] for r in study.rows)]
     if with_estimates:
         runs = cfg["runs_per_fault"]
-        fig, axes = plt.subplots(1, 6, figsize=(18, 0.45 * len(with_estimates) + 1.6), sharey=True)
-        for i, ax in enumerate(axes):
+        fig, axes = plt.subplots(2, 3, figsize=(COLUMN_WIDTH_IN, 0.5 * len(with_estimates) + 2.6), sharex=True,
+                                 sharey=True, layout="constrained")
+        for i, ax in enumerate(axes.flat):
             true = engine_faults(0)[1][i].magnitude
             data = []
             for m in with_estimates:
@@ -798,10 +816,15 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
                 data.append(np.asarray(rec.estimate)[part][ok] / float(true))
             ax.boxplot(data, orientation="horizontal", tick_labels=with_estimates)
             ax.axvline(1.0, color="k", lw=0.8)
-            ax.set(title=f"{fault_names[i]}: estimate / true", xlim=(0.0, 2.0))
-        axes[0].invert_yaxis()
+            ax.set(title=f"{fault_names[i]} fault", xlim=(0.0, 2.0))
+        axes[0, 0].invert_yaxis()
+        for ax in axes[-1]:
+            ax.set_xlabel("estimate / true size")
+        for ax in axes[:, 0]:
+            ax.set_ylabel("method")
         save(fig, "engine-estimates.png",
-             "Fault-size estimates over the correctly isolated runs, divided by the true size (1 = right), for the "
+             f"Fault-size estimates over the correctly isolated runs of {runs} runs per fault, divided by the true size "
+             "(1 = right), for the "
              "methods that estimate one. The paper reports the GLRT's estimates without numbers and says the IMM "
              "cannot estimate a size; the bias-mode IMMs here do.")
     return paths
@@ -826,7 +849,9 @@ class FaultSizeStudy(NamedTuple):
     rows: list[dict[str, Any]]
 
     to_frame = study_frame
+    _html_group = "case"  # the rows' case is a section of the table
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def table(self) -> str:
         return fault_size_table(self)

@@ -25,11 +25,11 @@ from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
 from jaxfdi._faults import Fault, fault, no_fault, stack_faults
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi._frame import study_frame, study_html
+from jaxfdi._frame import study_frame, study_html, study_repr
 from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi._monitor import MonitorHistory, monitor
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import COLUMN_WIDTH_IN, hypothesis_colors, save_figure
 from jaxfdi._simulate import linear_simulator
 from jaxfdi._study import Structure, Study, run_study
 
@@ -67,6 +67,7 @@ class EngineChi2Result(NamedTuple):
 
     to_frame = study_frame
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def table(self) -> str:
         """Per fault: ``FA rate`` is the share of runs with an alarm before the onset (for
@@ -206,10 +207,11 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
 
     cfg = result.config
     t = np.arange(cfg["steps"]) * cfg["Ts"]
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12, 4.5))
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
     stats = np.asarray(result.examples.statistic)
+    colors = hypothesis_colors([row["fault"] for row in result.rows])  # the engine figures' colours
     for row, stat in zip(result.rows, stats):
-        ax0.semilogy(t, np.maximum(stat, 1e-3), lw=0.8, label=row["fault"])
+        ax0.semilogy(t, np.maximum(stat, 1e-3), lw=0.8, color=colors[row["fault"]], label=row["fault"])
     ax0.axhline(cfg["threshold"], color="k", ls="--", lw=1, label=f"threshold {cfg['threshold']:.2f}")
     ax0.axvline(cfg["onset_step"] * cfg["Ts"], color="grey", ls=":", lw=1)
     ax0.set(xlabel="time [s]", ylabel=f"windowed NIS (L = {cfg['window']})", title="one run per fault")
@@ -225,8 +227,8 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
         delays.append((det[sl][ok] - onset[sl][ok]) * cfg["Ts"])
         labels.append(row["fault"])
     ax1.boxplot(delays, tick_labels=labels)
-    ax1.set(ylabel="detection delay [s]", title=f"{runs} runs per fault, Pfa = {cfg['pfa']}")
+    ax1.set(xlabel="fault", ylabel="detection delay [s]", title=f"{runs} runs per fault, Pfa = {cfg['pfa']}")
     save_figure(fig, path, "Left: one run per fault of the Kalman filter's windowed NIS and its threshold. Right: the "
                            f"detection delays of the detected runs, {runs} per fault. The paper's Table 3 has no "
-                           "chi-square test; this is the baseline its MM, IMM and GLRT improve on.", dpi=120)
+                           "chi-square test; this is the baseline its MM, IMM and GLRT improve on.")
     plt.close(fig)

@@ -53,13 +53,13 @@ from jaxfdi.detection._hybrid_psa import (
 from jaxfdi.detection._parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
 from jaxfdi._faults import Fault, FaultKind, Target
 from jaxfdi.filters import init_from_posterior, run_filter
-from jaxfdi._frame import study_frame, study_html
+from jaxfdi._frame import study_frame, study_html, study_repr
 from jaxfdi._metrics import binomial_interval, rate_interval
 from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.models.f16._plant import RATE_OFFSET, flight_view
 from jaxfdi.models.f16._rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
     rate_transition
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.scenarios.f16_flight import (
     DT,
@@ -276,6 +276,7 @@ class F16FDIStudy(NamedTuple):
 
     to_frame = study_frame
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def table(self) -> str:
         return study_table(self)
@@ -672,6 +673,7 @@ class F16KindStudy(NamedTuple):
 
     to_frame = study_frame
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def table(self) -> str:
         return kind_table(self.rows, self.config)
@@ -844,7 +846,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
         paths.append(str(save_figure(fig, out / name, caption)))
 
     t, step = h["t"], h["decision_step"]
-    fig = Figure(figsize=(12, 8))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 6.4), layout="constrained")
     axes = fig.subplots(2, 2)
     ax = axes[0, 0]
     ax.semilogy(t, np.maximum(h["fd"], 1e-12), lw=0.7)
@@ -858,8 +860,8 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
         ax.plot(t[window], h["fi"][window, i], lw=1, label=f"FI_{i + 1}")
     ax.axhline(h["ti"], color="k", ls="--", lw=1, label="T_I")
     ax.axvline(t[step], color="grey", ls=":", lw=1)
-    ax.set(xlabel="time [s]", ylabel="FI_k", title=f"Fig. 6: isolation functions (suspects at the decision: "
-                                                     f"{[int(i) + 1 for i in np.nonzero(h['suspects'])[0]]})")
+    ax.set(xlabel="time [s]", ylabel="FI_k", title=f"Fig. 6: isolation functions, suspects "
+                                                     f"{[int(i) + 1 for i in np.nonzero(h['suspects'])[0]]}")
     ax.legend(fontsize=8)
     ax = axes[1, 0]
     for i in range(3):
@@ -867,8 +869,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
         ax.plot(h["residual_t"], h["residuals"][:, i], style, lw=1, label=f"||r_{i + 1}||" + (
             "" if h["suspects"][i] else " (healthy: updates the UKF)"))
     ax.axvline(t[step], color="grey", ls=":", lw=1)
-    ax.set(xlabel="time [s]", ylabel="rad/s", title=f"Fig. 7: UKF analytic residuals (restart {RESTART_LAG} steps "
-                                                      "before the decision)")
+    ax.set(xlabel="time [s]", ylabel="residual norm [rad/s]", title="Fig. 7: UKF analytic residuals")
     ax.legend(fontsize=8)
     ax = axes[1, 1]
     hybrid = FOLLOW["hybrid"]
@@ -876,15 +877,15 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
         ax.plot(t, h["rates"][hybrid, :, j] * deg, color=f"C{j}", lw=0.4, alpha=0.6, label=f"{name} selected")
         ax.plot(t, h["state"][hybrid, :, 6 + j] * deg, color=f"C{j}", lw=1.3, label=f"{name} true")
     ax.axvline(t[step], color="grey", ls=":", lw=1)
-    ax.set(xlabel="time [s]", ylabel="deg/s", title="Fig. 8: true and FDI-selected body rates (hybrid)")
+    ax.set(xlabel="time [s]", ylabel="body rate [deg/s]", title="Fig. 8: true and selected rates")
     ax.legend(fontsize=7, ncol=3)
     fig.suptitle("The case of Park et al. (2004): bias on both axes of sensor 1 from t = 3 s, FNR 10")
     save(fig, "f16-fdi-paper-case.png",
          "The paper's case (bias of 0.1 rad/s on both axes of sensor 1 from 3 s), one flight, as Park et al. (2004), "
-         "Figs. 5-8: FD, the isolation functions around the decision, the UKF's analytic residuals and the selected "
-         "rates. As in the paper, PSA flags sensors 1 and 3 and the UKF's residual picks sensor 1.")
+         f"Figs. 5-8: FD, the isolation functions around the decision, the UKF's analytic residuals (restarted "
+         f"{RESTART_LAG} steps before the decision) and the rates the hybrid FDI selects. As in the paper, PSA flags sensors 1 and 3 and the UKF's residual picks sensor 1.")
 
-    fig = Figure(figsize=(12, 5))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.6), layout="constrained")
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     ax = fig.add_subplot(1, 2, 2)
     for name, i in FOLLOW.items():
@@ -896,12 +897,12 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     ax.set(xlabel="time [s]", ylabel="deg", title="bank-angle error of the paper's case")
     ax.legend(fontsize=8)
     save(fig, "f16-fdi-trajectory.png",
-         "The paper's case flown once per view (same noise): the trajectory and the bank-angle error. The "
+         f"The paper's case, one flight per view ({', '.join(FOLLOW)}; the same noise): the trajectory and the bank-angle error. The "
          "paper shows no trajectory; its bias barely moves the aircraft, whatever the view.")
 
     sweep = [r for r in rows if r["section"] == "sweep"]
     fnrs = cfg["sweep"]["fnr"]
-    fig = Figure(figsize=(14, 5))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
     for s in range(3):
         ax = fig.add_subplot(1, 3, s + 1, projection="polar")
         for c, v in enumerate(fnrs):
@@ -914,16 +915,21 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
         for a in (45, 135, 225, 315):
             ax.plot([math.radians(a)] * 2, [0, 1], color="grey", lw=0.6, ls=":")
         ax.set_ylim(0, 1.02)
-        ax.set_title(f"sensor {s + 1}: isolation rate vs fault direction")
+        ax.set_rlabel_position(100)
+        ax.set_title(f"sensor {s + 1}", pad=16)
         if s == 2:
-            ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.85, -0.1))
+            handles, labels = ax.get_legend_handles_labels()
+            fig.legend(handles, labels, loc="outside upper center", ncol=3)
     save(fig, "f16-fdi-sweep-polar.png",
-         f"Isolation rate against the fault's direction in each sensor's plane, {cfg['sweep']['flights_per_cell']} "
+         f"Isolation rate (radius) against the fault's direction (angle) in each sensor's plane, "
+         f"{cfg['sweep']['flights_per_cell']} "
          "flights per cell, PSA alone and hybrid (beyond the paper, which shows one direction). The dips of PSA "
          "alone sit at Table 1's singular directions (45 + 90 j deg), where the UKF decides.")
 
     full = [r for r in rows if r["section"] == "full_flights"]
-    fig = Figure(figsize=(12, 4.5))
+    counts = sorted({r["flights"] for r in full})
+    counts = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]} to {counts[-1]}"
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
     ax = fig.add_subplot(1, 1, 1)
     groups = list(dict.fromkeys((r["kind"], r["size"]) for r in full))
     width = 0.8 / len(FOLLOWS)
@@ -936,15 +942,17 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     ax.set_xticks(np.arange(len(groups)))
     ax.set_xticklabels(["fault-free" if k == "none" else (k if k in ("stuck", "dead") else f"{k} {s:g}")
                         for k, s in groups])
-    ax.set(ylabel="flights within the envelope", ylim=(0, 1.05), title="Safe envelope with and without FDI")
+    ax.set(xlabel="fault kind and size", ylabel="share of flights within the envelope", ylim=(0, 1.05),
+           title="Safe envelope with and without FDI")
     ax.legend(fontsize=8)
     save(fig, "f16-fdi-envelope.png",
-         "Share of full flights within the safe envelope per fault kind and view (beyond the paper). Under the "
+         f"Share of full flights within the safe envelope per fault kind and view, {counts} flights per bar "
+         "(beyond the paper). Under the "
          "paper's rule (hybrid) a stuck sensor leaves the envelope in about 3 flights of 10 (the wrong sensor "
          "excluded); the verified rule keeps every kind at least as safe as never excluding (measured at 10^3 "
          "and 10^4 flights per kind: docs/papers/f16.md).")
 
-    fig = Figure(figsize=(12, 4.5))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
     axes = fig.subplots(1, 2)
     for r in (r for r in rows if r["section"] == "optimisation"):
         axes[0].plot(r["curve"], label=f"objective: {r['objective']}")
@@ -958,7 +966,8 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     axes[1].legend(fontsize=8)
     save(fig, "f16-fdi-sensor-configuration.png",
          "Beyond the paper: the three sensors' axes chosen by gradient (Adam) for isolation rate or fault-plane "
-         "separation, and their Monte Carlo isolation rate by PSA alone against the paper's arrangement.")
+         "separation, and their Monte Carlo isolation rate by PSA alone against the paper's arrangement (100,000 "
+         "Monte Carlo trials per point, each a random fault seen in one parity step, no flight).")
     return paths
 
 

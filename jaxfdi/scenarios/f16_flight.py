@@ -37,7 +37,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi._frame import study_frame, study_html
+from jaxfdi._frame import study_frame, study_html, study_repr
 from jaxfdi.control._f16_loop import f16_plant, rate_passthrough_fdi
 from jaxfdi.control._flight import (
     LATERAL_TRACKED,
@@ -70,7 +70,7 @@ from jaxfdi.models.f16._linearize import (
 )
 from jaxfdi.models.f16._plant import F16Sensors, f16_sensors
 from jaxfdi.models._linear import c2d
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._study import Structure, Study, run_study
 from jaxfdi._tracking import TrackingScore, tracked_plant
@@ -312,6 +312,7 @@ class F16FlightStudy(NamedTuple):
 
     to_frame = study_frame
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def table(self) -> str:
         return study_table(self)
@@ -472,7 +473,7 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     def save(fig, name, caption):
         paths.append(str(save_figure(fig, out / name, caption)))
 
-    fig = Figure(figsize=(11, 5))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.6), layout="constrained")
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     ax = fig.add_subplot(1, 2, 2)
     for i in range(state.shape[0]):
@@ -483,11 +484,11 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     ax.set(xlabel="east [ft]", ylabel="north [ft]", title="ground track")
     ax.set_aspect("equal", adjustable="datalim")
     save(fig, "f16-flight-trajectory.png",
-         "Sample flights of the study (dispersed c.g., initial offsets and gusts; the nominal one in blue) flying "
+         f"{state.shape[0]} sample flights of the study (dispersed c.g., initial offsets and gusts; the nominal one in blue) flying "
          "the paper's manoeuvre: climb, level-off, 30 deg bank turn. Park et al. (2004) describe the "
          "manoeuvre but show no trajectory.")
 
-    fig = Figure(figsize=(12, 10))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 8.5), layout="constrained")
     axes = fig.subplots(4, 2, sharex=True)
     deg = 180.0 / math.pi
     ref = h["reference_state"]
@@ -510,17 +511,17 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     nominal = state[0]
     for j, name in enumerate("PQR"):
         axes[3, 0].plot(t, h["measured_rates"][0, :, j] * deg, color=f"C{j}", lw=0.4, alpha=0.5,
-                        label=f"{name} flown on (least squares of the 6 channels)")
+                        label=f"{name} flown on")
         axes[3, 0].plot(t, nominal[:, P + j] * deg, color=f"C{j}", lw=1.2, label=f"{name} true")
     axes[3, 0].set(ylabel="body rates [deg/s]", xlabel="time [s]")
-    axes[3, 0].legend(fontsize=6, ncol=2)
+    axes[3, 0].legend(fontsize=6, ncol=3)
     for j, name in enumerate(["throttle x 10", "elevator", "aileron", "rudder"]):
         axes[3, 1].plot(t, control[0, :, j] * (10.0 if j == 0 else 1.0), lw=0.7, label=name)
     axes[3, 1].set(ylabel="controls [deg]", xlabel="time [s]")
     axes[3, 1].legend(fontsize=7)
-    fig.suptitle("The flight of Park et al. (2004): climb 120 ft/s 0-5 s, then altitude hold and 30 deg bank turn "
-                 "(nominal in blue)")
+    fig.suptitle("Park et al. (2004): climb 0-5 s, altitude hold, 30 deg bank turn")
     save(fig, "f16-flight-time-histories.png",
-         "Time histories of the same flights against the commanded profile (altitude, bank, airspeed, angles, body "
-         "rates, controls). Beyond the paper, which flies its aircraft only to feed the rate sensors.")
+         f"Time histories of the same {state.shape[0]} flights (the nominal one in blue, the others grey) against "
+         "the commanded profile (altitude, bank, airspeed, angles, body rates, controls); 'flown on' is the rate the "
+         "controller flies on, the least-squares fit of the six sensor channels. Beyond the paper, which flies its aircraft only to feed the rate sensors.")
     return paths

@@ -44,9 +44,9 @@ from jaxfdi.data import data_path
 from jaxfdi.gnss import _frames as frames, _integrity as integrity, _measurements as measurements, _orbits as orbits, _paths as paths, _raim as raim, _rinex as rinex, _yuma as yuma
 from jaxfdi.gnss._protection import ALERT_LIMITS
 from jaxfdi._loop import episode_scorer, feedforward, run_loop
-from jaxfdi._frame import study_frame, study_html
+from jaxfdi._frame import study_frame, study_html, study_repr
 from jaxfdi._metrics import rate_text, summarize_episodes
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._progress import status
 from jaxfdi._study import Structure, Study, run_study
@@ -131,7 +131,9 @@ class GnssCampusStudy(NamedTuple):
     beyond: dict
 
     to_frame = study_frame
+    _html_group = "case"  # the rows' case is a section of the table
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def table(self) -> str:
         return gnss_table(self)
@@ -412,7 +414,7 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
     campus = study.campus
     over = np.flatnonzero(campus["hpl"] > 556.0)
     blocked = int(over[0]) if over.size else int(np.argmax(campus["hdop"]))
-    fig = Figure(figsize=(10, 5))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.8), layout="constrained")
     for i, (k, title) in enumerate(((0, "campus, t = 0 s (open)"), (blocked, f"campus, t = {blocked} s (beside the wall)"))):
         ax = fig.add_subplot(1, 2, i + 1, projection="polar")
         ax.set_theta_zero_location("N")
@@ -426,11 +428,11 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
         ax.set_title(title)
         ax.legend(loc="lower left", fontsize=8)
     save(fig, "gnss-campus-sky.png",
-         "Sky plots of the campus case at the start and beside the wall, where the building hides the eastern sky "
+         "Sky plots of the campus run at two epochs, the start and beside the wall, where the building hides the eastern sky "
          "(o: used, x: above the mask but hidden). The paper's campus data were recorded; the wall here is "
          "ours, modelled from its description (one side of the sky shadowed).")
 
-    fig = Figure(figsize=(10, 7))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 5.4), layout="constrained")
     for i, (series, name) in enumerate(((campus, "campus"), (study.park, "park"))):
         ax = fig.add_subplot(2, 1, i + 1)
         t = np.arange(series["hdop"].size) * DT
@@ -442,13 +444,16 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
         twin.axhline(556.0, color="C3", lw=1.5, label="NPA HAL 556 m")
         twin.set_ylabel("HPL [m]")
         ax.set_title(f"{name}: HDOP and HPL (Yoo et al. 2010, Figs. 6 and 8)")
-        twin.legend(loc="upper right", fontsize=8)
+        # one legend for both y axes: HDOP (left) and HPL with its alert limit (right)
+        handles, labels = [sum(pair, []) for pair in zip(ax.get_legend_handles_labels(), twin.get_legend_handles_labels())]
+        twin.legend(handles, labels, loc="upper right", fontsize=8)
     ax.set_xlabel("time [s]")
     save(fig, "gnss-campus-dop-hpl.png",
-         "HDOP and HPL over the run, campus and park (Yoo et al. 2010, Figs. 6 and 8): behind the wall HDOP rises above 4 "
+         f"HDOP and HPL over one run each, campus and park ({campus['hdop'].size} epochs at {DT:g} s; Yoo et al. "
+         "2010, Figs. 6 and 8): behind the wall HDOP rises above 4 "
          "and HPL above the 556 m NPA alert limit, as in the paper, while the parity statistic stays quiet.")
 
-    fig = Figure(figsize=(10, 7))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 5.4), layout="constrained")
     for i, (series, name) in enumerate(((campus, "campus (no fault)"), (study.park, f"park, faults on PRN "
                                                                           f"{study.park['headline_prn']:02d}"))):
         ax = fig.add_subplot(2, 1, i + 1)
@@ -467,18 +472,19 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
             for _, _, onset, end, _, _ in PARK_FAULTS:
                 ax.axvspan(onset, max(end, onset + 3), color="gray", alpha=0.2)
         ax.set_title(f"{name}: parity statistic vs threshold (Yoo et al. 2010, Figs. 7 and 9)")
+        ax.set_ylabel("TS_D = p^T p (chi-square)")
         ax.legend(loc="lower right" if "statistic_excluded" in series else "upper right", fontsize=8)
     ax.set_xlabel("time [s]")
     save(fig, "gnss-campus-statistic.png",
-         "The parity test statistic against its threshold, campus and park with Table 2's faults (Yoo et al. 2010, Figs. 7 "
-         "and 9; the paper's were recorded, these are simulated). The impulse and the bias cross at once, the "
+         f"The parity test statistic against its threshold over one run each ({campus['statistic'].size} epochs), campus "
+         "and park with Table 2's faults (Yoo et al. 2010, Figs. 7 and 9; the paper's were recorded, these are simulated). The impulse and the bias cross at once, the "
          "1 m/s drift only after tens of seconds (the paper: 'RAIM detects' all three, without times); beyond it, "
          "a dead and a frozen channel.")
 
     beyond = study.beyond
     if "mdb" not in beyond:
         return paths_out
-    fig = Figure(figsize=(10, 5))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.8), layout="constrained")
     ax = fig.add_subplot(1, 1, 1)
     for slot, prn in enumerate(beyond["prn"]):
         if np.isfinite(beyond["mdb"][:, slot]).any():
@@ -488,18 +494,18 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
     ax.set_ylabel("minimum detectable bias [m]")
     ax.set_title("MDB of every satellite at the campus, open sky (one line per PRN)")
     save(fig, "gnss-campus-mdb.png",
-         "Minimal detectable bias of every satellite at the campus with open sky, one line per PRN (beyond the "
-         "paper).")
+         f"Minimal detectable bias of every satellite at the campus with open sky, one line per PRN, over "
+         f"{len(beyond['mdb_hours'])} epochs of the day: the geometry alone, no noise (beyond the paper).")
 
-    fig = Figure(figsize=(11, 3.2 * len(MAP_OPERATIONS)))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 2.4 * len(MAP_OPERATIONS) + 0.4), layout="constrained")
     keys = list(beyond["maps"])
     for i, key in enumerate(keys):
         ax = fig.add_subplot(len(MAP_OPERATIONS), len(CONSTELLATIONS), 1 + (i % len(MAP_OPERATIONS)) *
                              len(CONSTELLATIONS) + i // len(MAP_OPERATIONS))
         image = ax.imshow(beyond["maps"][key], origin="lower", vmin=0.0, vmax=1.0, aspect="auto",
                           extent=(beyond["lons"][0], beyond["lons"][-1], beyond["lats"][0], beyond["lats"][-1]))
-        ax.set_title(f"{key[0]}: {key[1]}", fontsize=9)
-        fig.colorbar(image, ax=ax, fraction=0.04)
+        ax.set(title=f"{key[0]}: {key[1]}", xlabel="longitude [deg]", ylabel="latitude [deg]")
+        fig.colorbar(image, ax=ax, fraction=0.04, label="availability")
     save(fig, "gnss-campus-availability.png",
          "RAIM availability (HPL within the alert limit) over the day for the masks and modes shown (beyond the "
          "paper, which reports one run).")

@@ -59,7 +59,7 @@ from jaxfdi.ins import _error_state as error_state, _imu as imu, _integrity as i
 from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
 from jaxfdi.ins._mechanization import NavState
 from jaxfdi._loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
-from jaxfdi._frame import study_frame, study_html
+from jaxfdi._frame import study_frame, study_html, study_repr
 from jaxfdi._metrics import (
     binomial_interval,
     binomial_lower_bound,
@@ -70,7 +70,7 @@ from jaxfdi._metrics import (
     summarize_detection,
     summarize_episodes,
 )
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 # Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
 from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK
@@ -225,7 +225,9 @@ class GpsInsStudy(NamedTuple):
     results: dict
 
     to_frame = study_frame
+    _html_group = "case"  # the rows' case is a section of the table
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def table(self) -> str:
         return gps_ins_table(self)
@@ -869,7 +871,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
 
     t = np.arange(study.config["flight_s"])
     onset = study.config["fault_onset_s"]
-    fig = Figure(figsize=(10, 7))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 5.4), layout="constrained")
     for i, (field, limit, title) in enumerate((("chi2", chi2_limit, "windowed chi-square (10 epochs, 60 dof)"),
                                                ("scst", scst_limit, "SCST (15 dof)"))):
         ax = fig.add_subplot(2, 1, i + 1)
@@ -879,6 +881,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
         ax.axhline(limit, color="k", lw=1.2, label=f"threshold {limit:.2f}")
         ax.axvline(onset, color="gray", ls=":")
         ax.set_title(f"{title} vs threshold (Yoo et al. 2010, Fig. {10 + i})")
+        ax.set_ylabel(f"{field} statistic")
         ax.legend(fontsize=8, loc="upper left")
     ax.set_xlabel("time [s]")
     save(fig, "gps-ins-statistics.png",
@@ -887,16 +890,21 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
          "(500-600 s) and after its exclusion: those alarms are the GPS's (the separation), not the INS's.")
 
     s = study.series[f"table3 {TABLE3_DEG_H[0]:g} deg/h"]
-    fig = Figure(figsize=(10, 7))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 5.4), layout="constrained")
     ax = fig.add_subplot(2, 1, 1)
     ax.plot(t, s.hdop, label="HDOP")
     twin = ax.twinx()
     twin.semilogy(t, s.hpl, color="C1", label="HPL")
     twin.axhline(556.0, color="C3", label="NPA HAL 556 m")
-    twin.legend(fontsize=8)
+    ax.set_ylabel("HDOP")
+    twin.set_ylabel("HPL [m]")
+    # one legend for both y axes: HDOP (left) and HPL with its alert limit (right)
+    handles, labels = [sum(pair, []) for pair in zip(ax.get_legend_handles_labels(), twin.get_legend_handles_labels())]
+    twin.legend(handles, labels, fontsize=8)
     ax.set_title("park flight: HDOP and HPL (Yoo et al. 2010, Fig. 8)")
     ax = fig.add_subplot(2, 1, 2)
     ax.semilogy(t, np.maximum(s.raim, 1e-3), label="TS_D")
+    ax.set_ylabel("TS_D = p^T p (chi-square)")
     ax.semilogy(t, s.raim_threshold, color="C3", label="threshold")
     ax.plot(t, np.where(s.gps_used, np.nan, 1e-2), "k|", label="epoch not used by the EKF")
     for _, _, onset, end, _, _ in TABLE2_FAULTS:
@@ -906,40 +914,42 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     ax.legend(fontsize=8)
     ax.set_xlabel("time [s]")
     save(fig, "gps-ins-raim.png",
-         "The same flight: HDOP and HPL (Yoo et al. 2010, Fig. 8) and RAIM's statistic with the epochs the EKF did not "
+         "One flight (the 30 deg/h one above): HDOP and HPL (Yoo et al. 2010, Fig. 8) and RAIM's statistic with the epochs the EKF did not "
          "use (Fig. 9); Table 2's faults shaded. " + "; ".join(
              f"{r['fault'].split(',')[0]}: RAIM's median delay {_fmt(r['delay_median_s'])} s"
              for r in next((row["raim"] for row in study.rows if row["case"] == "table3"), []))
          + f" ({study.config['runs']} flights). A slow fault reaches the filter before RAIM flags it.")
 
-    fig = Figure(figsize=(10, 8))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 6.0), layout="constrained")
     for i, (name, label) in enumerate((("fault-free", "fault-free"), ("table3 60 deg/h", "60 deg/h roll gyro"))):
         s = study.series[name]
         ax = fig.add_subplot(2, 2, 1 + i)
         ax.plot(t, np.hypot(s.position_error[:, 0], s.position_error[:, 1]), lw=0.8, label="horizontal error")
         ax.plot(t, np.hypot(s.sigma[:, 0], s.sigma[:, 1]), "k--", lw=0.8, label="filter sigma")
-        ax.set_ylabel("m")
+        ax.set_ylabel("horizontal position error [m]")
         ax.set_title(f"position, {label}")
         ax.legend(fontsize=8)
         ax = fig.add_subplot(2, 2, 3 + i)
         for j, axis in enumerate("NED"):
             ax.plot(t, s.attitude_error[:, j], lw=0.8, label=f"psi_{axis}")
         ax.plot(t, s.sigma[:, 3], "k--", lw=0.8, label="sigma psi_N")
-        ax.set_ylabel("deg")
+        ax.set_ylabel("attitude error [deg]")
         ax.set_xlabel("time [s]")
         ax.set_title(f"attitude error, {label}")
         ax.legend(fontsize=8)
     save(fig, "gps-ins-errors.png",
-         "Position and attitude errors with the filter's 1-sigma, fault-free and with the 60 deg/h gyro bias (beyond "
+         "Position and attitude errors with the filter's 1-sigma over one flight each, fault-free and with the 60 "
+         "deg/h gyro bias (beyond "
          "the paper, which shows no navigation errors).")
 
-    fig = Figure(figsize=(11, 4.5))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
     ax = fig.add_subplot(1, 2, 1)
     sizes = list(TABLE3_DEG_H)
     rows = [r for r in study.rows if r["case"] == "table3"]
-    for test, marker in (("chi2", "o"), ("scst", "s")):
-        ax.plot(sizes, [r[f"{test}_mean_s"] or np.nan for r in rows], marker + "-", label=f"{test} (mean)")
-        ax.plot(sizes, [r[f"paper_{test}_s"] for r in rows], marker + "--", mfc="none", label=f"{test} paper")
+    for test, marker, color in (("chi2", "o", "C0"), ("scst", "s", "C1")):
+        ax.plot(sizes, [r[f"{test}_mean_s"] or np.nan for r in rows], marker + "-", color=color, label=f"{test} (mean)")
+        ax.plot(sizes, [r[f"paper_{test}_s"] for r in rows], marker + "--", mfc="none", color=color,
+                label=f"{test} paper")
     for (flight, sensor), curve in study.curves.items():
         if sensor == "gyro":
             for test in ("chi2", "scst"):
@@ -959,19 +969,19 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     ax.set_xticks(BEYOND_ACCEL_MG, [f"{a:g}" for a in BEYOND_ACCEL_MG])
     ax.minorticks_off()
     ax.set_xlabel("x-accelerometer bias [mg]")
-    ax.set_title("detection time vs accelerometer bias (beyond the paper)")
+    ax.set_title("accelerometer bias (beyond the paper)")
     if study.curves:
         ax.legend(fontsize=8)
     else:
         ax.text(0.5, 0.5, "not computed (beyond=False)", ha="center", transform=ax.transAxes)
     save(fig, "gps-ins-detection-times.png",
-         "Mean detection time (clean flights) against the gyro bias beside the paper's Table 3, and, beyond it, the "
-         "median against gyro and accelerometer bias sizes. The paper's chi-square times are " + ", ".join(
+         f"Mean detection time over the clean flights of {study.config['runs']} flights per bias against the gyro bias "
+         "beside the paper's Table 3, and, beyond it, the median against gyro and accelerometer bias sizes. The paper's chi-square times are " + ", ".join(
              f"{r['paper_chi2_s'] / r['chi2_mean_s']:.1f}x" for r in rows if r["chi2_mean_s"])
          + " ours; its data were recorded, ours simulated (the operating curve; docs/papers/gnss-ins.md).")
 
     curve = [r for r in study.rows if r["case"] == "operating-curve"]
-    fig = Figure(figsize=(11, 4.5))
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
     ax, right = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
     for test, style in (("chi2", "-"), ("scst", "--")):
         points = [r for r in curve if r["test"] == test]

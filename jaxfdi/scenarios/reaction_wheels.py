@@ -98,7 +98,7 @@ from jaxfdi.filters._ekf import extended_kalman_filter
 from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi._loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
 from jaxfdi._stages import FDI
-from jaxfdi._frame import results_frame, study_html
+from jaxfdi._frame import results_frame, study_html, study_repr
 from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, rate_text, unhealthy_warning
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi._study import Structure, Study, run_study
@@ -113,7 +113,7 @@ from jaxfdi.models._reaction_wheels import (
     wheel_momentum,
     wheel_rate_transition,
 )
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import COLUMN_WIDTH_IN, hypothesis_colors, save_figure
 
 RPM = 2.0 * math.pi / 60.0
 #: steps in the NIS window of the chi-square detector
@@ -602,6 +602,7 @@ class WheelStudy(NamedTuple):
     outputs: RunOutput
 
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def to_frame(self, level: float = 0.95):
         """The table as a pandas DataFrame (``results_frame``): one row per case and method
@@ -779,7 +780,7 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
         paths.append(str(path))
 
     # Figs. 3 and 5: attitude and rates, fault-free and with the stop
-    fig, axes = plt.subplots(2, 2, figsize=(11, 6), sharex=True)
+    fig, axes = plt.subplots(2, 2, figsize=(COLUMN_WIDTH_IN, 5.0), sharex=True, layout="constrained")
     for col, (name, title) in enumerate([("none", "Fig. 3: fault-free"), ("stop", f"Fig. 5: wheel {wheel + 1} stops at {fault_time:.0f} s")]):
         h = examples[name]
         angle = np.degrees(2.0 * np.arccos(np.clip(np.abs(h.attitude[:, 0]), 0.0, 1.0)))
@@ -797,7 +798,7 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
          f"stopping at {fault_time:.0f} s, as Choi & Park (2009), Figs. 3 and 5 (a single run there too).")
 
     # Figs. 4 and 6: the fault detection parameter, and the NIS test beside it
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(COLUMN_WIDTH_IN, 5.0), sharex=True, layout="constrained")
     for name, label in [("none", "fault-free"), ("stop", f"wheel {wheel + 1} stop")]:
         axes[0].semilogy(t, np.maximum(examples[name].detection_parameter, 1e-16), lw=0.8, label=label)
         axes[1].plot(t, examples[name].windowed_nis, lw=0.8, label=label)
@@ -817,14 +818,16 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
     # Figs. 8 and 9: the hypothesis bank's F_x and credits; the MM's mode probabilities
     h = examples["stop"]
     zoom = (t >= fault_time - 2.0) & (t <= fault_time + 8.0)
-    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    fig, axes = plt.subplots(3, 1, figsize=(COLUMN_WIDTH_IN, 7.0), sharex=True, layout="constrained")
     names = [f"H{i + 1}: wheel {i + 1} stopped" for i in range(h.credit.shape[1])]
     engaged = h.engaged[zoom]
+    colors = hypothesis_colors(["nominal"] + names)  # a hypothesis keeps its colour in the three panels
     for i, label in enumerate(names):
-        axes[0].semilogy(t[zoom], np.where(engaged, np.maximum(h.hypothesis_parameter[zoom, i], 1e-16), np.nan), lw=1, label=label)
-        axes[1].plot(t[zoom], np.where(engaged, h.credit[zoom, i], np.nan), lw=1, label=label)
+        axes[0].semilogy(t[zoom], np.where(engaged, np.maximum(h.hypothesis_parameter[zoom, i], 1e-16), np.nan), lw=1,
+                         color=colors[label], label=label)
+        axes[1].plot(t[zoom], np.where(engaged, h.credit[zoom, i], np.nan), lw=1, color=colors[label], label=label)
     for i, label in enumerate(["nominal"] + names):
-        axes[2].plot(t[zoom], h.mode_prob[zoom, i], lw=1, label=label)
+        axes[2].plot(t[zoom], h.mode_prob[zoom, i], lw=1, color=colors[label], label=label)
     axes[0].set(ylabel="F_x", title=f"Fig. 8: the bank's F_x after wheel {wheel + 1} stops (engaged on detection)")
     axes[1].set(ylabel="credit C_x", title="Fig. 9: credits C_x = max(F_mean - F_x, 0)")
     axes[2].set(ylabel="mode probability", xlabel="time [s]", title="MM over the same hypotheses (likelihood-based)")
@@ -844,7 +847,7 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
         agrees = f"as in {paper}"
     leader = leader if end.size else 0
     save(fig, "reaction-wheels-fig8-9-isolation.png",
-         f"The stop run: the hypothesis bank's F_x, the credits and the MM's mode probabilities. In this run "
+         f"One run, the stop of wheel {wheel + 1}: the hypothesis bank's F_x, the credits and the MM's mode probabilities. In this run "
          f"hypothesis {leader} holds the largest credit 8 s after the stop of wheel {wheel + 1}, {agrees}. The "
          "scalar det A behind F_x discards the direction of the discrepancy (benchmarks/RESULTS.md: the credits "
          "isolate a wheel-1 stop in 66 % of runs 4 s after engagement); the MM, on the innovation vectors, isolates "

@@ -62,10 +62,10 @@ from jaxfdi.detection._signature import isolate, location_symptoms
 from jaxfdi.detection._wavelet import block_alarms, causal_detail_sigma, chi2_detail_sigma, haar_denoise
 from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters._tskf import actuator_direction, sensor_direction, stack_directions
-from jaxfdi._frame import results_frame, study_html
+from jaxfdi._frame import results_frame, study_html, study_repr
 from jaxfdi._metrics import delay_statistics, rate_text, record_from_alarms, step_health, unhealthy_warning
 from jaxfdi.models import _vtol as vtol
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.scenarios.vtol_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
 from jaxfdi._study import Structure, Study, run_study
@@ -393,6 +393,7 @@ class VTOLStudy(NamedTuple):
     design: LoopDesign
 
     _repr_html_ = study_html
+    __repr__ = study_repr
 
     def to_frame(self, level: float = 0.95):
         """The table as a pandas DataFrame (``results_frame``): one row per fault and
@@ -691,7 +692,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
 
     # Fig. 3: one filter's statistic under the s3 step, raw and denoised
     stat = examples["s3 step"].statistic[:, shown]
-    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    fig, axes = plt.subplots(3, 1, figsize=(COLUMN_WIDTH_IN, 6.0), sharex=True, layout="constrained")
     series = [("raw", stat), ("MDWT-HT (block mean)", np.asarray(haar_denoise(stat, design.levels, "hard"))),
               ("MDWT-ST", np.asarray(haar_denoise(stat, design.levels, "soft", design.detail_sigma, design.c_mult)))]
     for ax, (label, values) in zip(axes, series):
@@ -710,7 +711,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
          "threshold calibrated on fault-free runs of another seed.")
 
     # Fig. 4: the a2 effectiveness estimate of the matched filter
-    fig, ax = plt.subplots(figsize=(9, 3.5))
+    fig, ax = plt.subplots(figsize=(COLUMN_WIDTH_IN, 3.0), layout="constrained")
     ax.plot(t, examples["a2 no FTC"].bias[:, 1], lw=1, label="a2 filter estimate, no FTC")
     ax.plot(t, examples["a2 FTC"].bias[:, 1], lw=1, label="a2 filter estimate, FTC")
     ax.plot(t, np.where(t >= 100, 0.5, 0.0), "k--", lw=1, label="true loss")
@@ -723,7 +724,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
          "over the runs.")
 
     # Fig. 5: states with and without FTC against the fault-free run
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(2, 2, figsize=(COLUMN_WIDTH_IN, 5.0), sharex=True, layout="constrained")
     for i, (ax, label) in enumerate(zip(axes.ravel(), ["v_h", "v_v", "q", "theta"])):
         ax.plot(t, examples["none"].state[:, i], "k", lw=1, label="fault-free")
         ax.plot(t, examples["a2 no FTC"].state[:, i], lw=1, label="a2 fault, no FTC")

@@ -120,8 +120,8 @@ def test_save_figure_writes_the_caption_under_the_axes(tmp_path, layout):
     fig = Figure(figsize=(6, 3), layout=layout)
     ax = fig.add_subplot()
     ax.plot([0, 1], [0, 1])
-    ax.set_xlabel("x")
-    caption = "What the figure shows and where it differs from the paper's. " * 4
+    ax.set(xlabel="x [m]", ylabel="y [m]")
+    caption = "What the figure shows over 10 runs and where it differs from the paper's. " * 4
     path = plotting.save_figure(fig, tmp_path / "f.png", caption)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     (text,) = [t for t in fig.texts if "What the figure shows" in t.get_text()]
@@ -133,3 +133,56 @@ def test_save_figure_writes_the_caption_under_the_axes(tmp_path, layout):
     assert ax.get_tightbbox(renderer).y0 > top_of_caption
     with pytest.raises(ValueError, match="caption"):
         plotting.save_figure(Figure(), tmp_path / "g.png", " ")
+
+
+def _two_panels(**legend):
+    fig = Figure(figsize=(18, 4), layout="constrained")
+    left, right = fig.subplots(1, 2)
+    left.plot(t, statistic, label="statistic")
+    left.plot(t, statistic / 2, label="half")
+    right.plot(t, statistic)
+    left.set(xlabel="time [s]", ylabel="statistic")
+    right.set(xlabel="time [s]")
+    if legend.get("legend", True):
+        left.legend()
+    return fig
+
+
+def test_saved_figures_are_a_column_wide_with_the_house_fonts(tmp_path):
+    """The house style: whatever size a study draws at, the PNG is COLUMN_WIDTH_IN at DPI
+    (about the 800 px the docs show) and its text at the house sizes."""
+    from PIL import Image
+
+    fig = _two_panels()
+    path = plotting.save_figure(fig, tmp_path / "f.png", "One run of the statistic, 2 runs in all.")
+    width, _ = Image.open(path).size
+    assert width == round(plotting.COLUMN_WIDTH_IN * plotting.DPI)
+    left = fig.axes[0]
+    assert left.xaxis.label.get_fontsize() == plotting.FONT_PT
+    assert {text.get_fontsize() for text in left.get_legend().get_texts()} == {plotting.SMALL_FONT_PT}
+
+
+@pytest.mark.parametrize("case,match", [
+    ("caption without a run count", "number of runs"),
+    ("panel without labels", "y label"),
+    ("curve in no legend", "in no legend"),
+])
+def test_save_figure_refuses_a_figure_a_reader_cannot_read(tmp_path, case, match):
+    fig, caption = _two_panels(), "One run of the statistic."
+    if case == "caption without a run count":
+        caption = "The statistic against time."
+    elif case == "panel without labels":
+        fig.axes[0].set_ylabel("")
+    else:
+        fig.axes[1].plot(t, statistic, label="unlisted")
+    with pytest.raises(ValueError, match=match):
+        plotting.save_figure(fig, tmp_path / "f.png", caption)
+    assert not (tmp_path / "f.png").exists()
+
+
+def test_a_hypothesis_keeps_its_colour():
+    names = ["normal", "actuator", "RPM", "P2"]
+    colors = plotting.hypothesis_colors(names)
+    assert colors["normal"] == plotting.NO_FAULT_COLOR
+    assert len({colors[n] for n in names[1:]}) == 3
+    assert plotting.hypothesis_colors(["none", *names[1:]])["P2"] == colors["P2"]  # the same order, the same colour

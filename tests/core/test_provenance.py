@@ -36,7 +36,9 @@ def check_provenance(record, argv, seed):
 
 def fake_study(args, folder):
     """A study written the way the scenario runners write theirs."""
-    study = types.SimpleNamespace(config={"runs": args.runs, "seed": args.seed}, rows=[{"rate": 1.0}])
+    rows = [{"rate": 1.0}]
+    study = types.SimpleNamespace(config={"runs": args.runs, "seed": args.seed}, rows=rows,
+                                  to_frame=lambda: __import__("pandas").DataFrame(rows))
     return cli._write_study(study, args, folder, "fake.json", lambda where: [], 0.5)
 
 
@@ -46,6 +48,7 @@ def test_study_json_written_by_the_cli_carries_provenance(monkeypatch, tmp_path)
     assert cli.main(argv) == 0
     data = json.loads((tmp_path / "out" / "fake.json").read_text())
     assert data["config"] == {"runs": 3, "seed": 17} and data["rows"] == [{"rate": 1.0}]
+    assert (tmp_path / "out" / "fake.csv").read_text().splitlines() == ["rate", "1.0"]  # the table beside it
     check_provenance(data["provenance"], argv, 17)
 
 

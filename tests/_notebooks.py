@@ -121,6 +121,18 @@ def run_clean(name: str, kernel: str, monkeypatch, env: dict[str, str]):
     return outputs, "\n".join(_text(o) for o in outputs)
 
 
+def tables(outputs) -> str:
+    """The HTML of the notebook's DataFrame tables (a study result or a DataFrame as a
+    cell's value renders as ``<table class="dataframe">``), joined."""
+    return "\n".join(o["data"]["text/html"] for o in outputs
+                     if 'class="dataframe"' in o.get("data", {}).get("text/html", ""))
+
+
+def cells_of_column(html: str, value: str) -> int:
+    """How many table cells hold exactly ``value``."""
+    return html.count(f"<td>{value}</td>")
+
+
 def images(outputs) -> list:
     """The PNG outputs (figures) of a notebook's cells."""
     return [o for o in outputs if "image/png" in o.get("data", {})]

@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from _notebooks import FAULT_NAMES, images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
+from _notebooks import FAULT_NAMES, images, python3_kernel, run_clean, tables  # noqa: F401 (python3_kernel: a fixture)
+from test_cli import assert_csv_is_the_json
 
 RUNS = 30
 FAULTS = ["actuator", "RPM", "P2", "T2", "P4", "T4"]
@@ -65,7 +66,8 @@ def test_prints_every_method_and_writes_json_and_figures(engine_run):
     # the paper's Table 3 beside ours
     assert rows[("IMM", "actuator")]["paper_delay_s"] == 0.020 and rows[("GLRT l_T=200", "P2")]["paper_delay_s"] == 0.058
     assert sorted(p.name for p in out.iterdir()) == [
-        "engine-estimates.png", "engine-glrt.png", "engine-mode-probabilities.png", "engine.json"]
+        "engine-estimates.png", "engine-glrt.png", "engine-mode-probabilities.png", "engine.csv", "engine.json"]
+    assert_csv_is_the_json(out / "engine.csv", data["rows"])
     for png in out.glob("*.png"):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
 
@@ -155,8 +157,12 @@ def test_engine_imm_glrt_notebook(engine_run, python3_kernel, monkeypatch):
     overview = text[text.index("method  "):].splitlines()
     methods = [line.split("  ")[0] for line in overview[2:13]]
     assert methods[:3] == ["MM", "IMM", "IMM hand-pi"] and methods[-1].startswith("GLRT")
+    html = tables(outputs)
+    assert html.count("<table") == 2  # the study, and Table 3 as a pivot of study.to_frame()
     for fault in FAULT_NAMES:
-        assert f"\n{fault} " in text
+        assert f"<td>{fault}</td>" in html
+    table3 = html.split("<table")[2]
+    assert "paper_delay_s" in table3 and "delay_mean_s" in table3 and "GLRT l_T=200" in table3
     assert len(images(outputs)) == 3, f"expected the three study figures, got {len(images(outputs))}"
 
 

@@ -1,6 +1,6 @@
 """Notebook 04 (Lee & Lyou's VTOL: robust TSKF bank, wavelet-denoised tests, FTC) end to end
 in a fresh kernel, 5 runs per fault, and its printed results checked."""
-from _notebooks import images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
+from _notebooks import images, python3_kernel, run_clean, tables  # noqa: F401 (python3_kernel: a fixture)
 
 
 def test_vtol_notebook(python3_kernel, monkeypatch, tmp_path):
@@ -9,8 +9,10 @@ def test_vtol_notebook(python3_kernel, monkeypatch, tmp_path):
     assert "runs per fault: 5" in text
     assert "nominal closed-loop spectral radius: 1.000000" in text   # the paper's q tracking: eigenvalue 1
     assert "statistic dof: 3" in text
-    for name in ("a2 effectiveness 0.5 from k = 100", "s3 step 0.7 from k = 120", "none (fault-free)"):
-        assert name in text
+    html = tables(outputs)  # the study as a DataFrame: a row per fault and method|thresholds
+    assert html.count("<table") == 1 and "detection_rate_low" in html
+    for name in ("a2 effectiveness 0.5", "s3 step 0.7", "none"):
+        assert html.count(f"<td>{name}</td>") == 10, name  # 5 methods x 2 threshold sets
     assert "Headline cases beside Lee & Lyou" in text
     assert "online isolation of the a2 fault (location + 1): 2" in text
     assert len(images(outputs)) == 2, f"expected Fig. 3 and Figs. 4-5, got {len(images(outputs))}"

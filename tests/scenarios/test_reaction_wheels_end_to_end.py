@@ -9,7 +9,7 @@ import json
 
 import pytest
 
-from _notebooks import images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
+from _notebooks import images, python3_kernel, run_clean, tables  # noqa: F401 (python3_kernel: a fixture)
 from jaxfdi.scenarios.reaction_wheels import METHODS
 from test_cli import assert_csv_is_the_json, assert_same_as_before, run_cli
 
@@ -56,7 +56,10 @@ def test_reaction_wheels_notebook(shared, python3_kernel, monkeypatch):
     zero_total_det = float(text.split("zero total momentum")[1].split("det A = ")[1].split()[0])
     bias_det = float(text.split("wheels at bias speed:")[1].split("det A = ")[1].split()[0])
     assert abs(zero_total_det) < 1e-6 * abs(bias_det)
+    html = tables(outputs)  # the study as a DataFrame: a row per case and method
+    assert html.count("<table") == 1
+    assert html.count("<tr>") == len(CASES) * len(METHODS)  # the body's rows (the header's <tr> has a style)
     for case in CASES:
-        assert f"\n{case:<10} MM likelihood" in text
+        assert html.count(f"<td>{case}</td>") >= len(METHODS), case  # "none" is also the fault-free row's kind
     assert "Wheel stops (Choi & Park 2009 report" in text
     assert len(images(outputs)) == 3, f"expected Figs. 3/5, 4/6 and 8/9, got {len(images(outputs))}"

@@ -123,19 +123,31 @@ def results_html(frame, config: dict | None = None, group: str = "section") -> s
     return "\n".join(parts)
 
 
-def study_frame(self, level: float = 0.95):
-    """The study's table as a pandas DataFrame (``results_frame`` of its rows): one row per
-    method and case, every rate beside its ``level`` Clopper-Pearson interval."""
-    return results_frame(self.rows, level)
+def study_result(cls=None, *, group: str = "section", methods: tuple[str, ...] = (),
+                 unhealthy: str = "unhealthy_runs"):
+    """Class decorator for a study's result (a NamedTuple with ``config`` and ``rows``):
+    ``to_frame(level=0.95)``, its table as a pandas DataFrame (``results_frame`` with the
+    study's ``methods`` fields and ``unhealthy`` column); ``_repr_html_``, Jupyter's display
+    of it as HTML tables, one per value of the ``group`` column; and a one-line ``repr``
+    (the result's arrays of every run are too long to print).
 
+    Returns:
+      The class, with the three methods attached.
+    """
 
-def study_repr(self) -> str:
-    """A study's text form: its size and where its table is (the fields hold arrays of
-    every run, too long to print)."""
-    return f"{type(self).__name__}({len(self.rows)} rows; .to_frame() for the table, .table() for text)"
+    def attach(cls):
+        def to_frame(self, level: float = 0.95):
+            """The study's table as a pandas DataFrame: one row per method and case, every
+            run rate beside its ``level`` Clopper-Pearson interval (``_low``, ``_high``)."""
+            return results_frame(self.rows, level, methods, unhealthy)
 
+        def _repr_html_(self) -> str:
+            return results_html(self.to_frame(), self.config, group)
 
-def study_html(self) -> str:
-    """Jupyter's rich display of a study: its ``to_frame()`` as HTML tables, one per
-    section (the column a study names in ``_html_group``, default ``section``)."""
-    return results_html(self.to_frame(), getattr(self, "config", None), getattr(self, "_html_group", "section"))
+        def __repr__(self) -> str:
+            return f"{type(self).__name__}({len(self.rows)} rows; .to_frame() for the table, .table() for text)"
+
+        cls.to_frame, cls._repr_html_, cls.__repr__ = to_frame, _repr_html_, __repr__
+        return cls
+
+    return attach if cls is None else attach(cls)

@@ -50,7 +50,7 @@ from jaxfdi.filters._imm import interacting_multiple_model
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.filters._mm import multiple_model
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi._frame import study_frame, study_html, study_repr
+from jaxfdi._frame import study_result
 from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, unhealthy_rows_warning
 from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
@@ -401,6 +401,7 @@ def summarize_method(name: str, paper: str | None, records: DetectionRecord, run
     return rows
 
 
+@study_result
 class EngineStudy(NamedTuple):
     """The engine study: configuration, table rows, per-method records and the arrays behind the figures.
 
@@ -434,10 +435,6 @@ class EngineStudy(NamedTuple):
                 f"{_fmt(_nanmax([r['delay_median_s'] for r in faulty]), 17)}  {worst['fault']}"
             )
         return "\n".join(lines)
-
-    to_frame = study_frame
-    _repr_html_ = study_html
-    __repr__ = study_repr
 
     def table(self) -> str:
         """Per method and fault, beside Table 3 of Han et al. (2022) (a mean: printed beside our mean).
@@ -842,16 +839,12 @@ SIZE_ACTUATOR = (0.5, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0)
 SIZE_METHODS = ("MM", "IMM", "GLRT l_T=200")
 
 
+@study_result(group="case")
 class FaultSizeStudy(NamedTuple):
     """Delays against fault size (``fault_size_study``)."""
 
     config: dict[str, Any]
     rows: list[dict[str, Any]]
-
-    to_frame = study_frame
-    _html_group = "case"  # the rows' case is a section of the table
-    _repr_html_ = study_html
-    __repr__ = study_repr
 
     def table(self) -> str:
         return fault_size_table(self)

@@ -25,7 +25,7 @@ from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
 from jaxfdi._faults import Fault, fault, no_fault, stack_faults
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi._frame import study_frame, study_html, study_repr
+from jaxfdi._frame import study_result
 from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, summarize_detection, unhealthy_rows_warning
 from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi._monitor import MonitorHistory, monitor
@@ -50,6 +50,7 @@ def engine_faults(onset_step: int) -> tuple[list[str], list[Fault]]:
     return names, faults
 
 
+@study_result
 class EngineChi2Result(NamedTuple):
     """The engine chi-square study: configuration, table rows, per-run records and one example run per fault.
 
@@ -64,10 +65,6 @@ class EngineChi2Result(NamedTuple):
     rows: list[dict[str, Any]]
     records: DetectionRecord
     examples: MonitorHistory
-
-    to_frame = study_frame
-    _repr_html_ = study_html
-    __repr__ = study_repr
 
     def table(self) -> str:
         """Per fault: ``FA rate`` is the share of runs with an alarm before the onset (for

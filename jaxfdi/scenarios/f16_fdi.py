@@ -53,7 +53,7 @@ from jaxfdi.detection._hybrid_psa import (
 from jaxfdi.detection._parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
 from jaxfdi._faults import Fault, FaultKind, Target
 from jaxfdi.filters import init_from_posterior, run_filter
-from jaxfdi._frame import study_frame, study_html, study_repr
+from jaxfdi._frame import study_result
 from jaxfdi._metrics import binomial_interval, rate_interval
 from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.models.f16._plant import RATE_OFFSET, flight_view
@@ -261,6 +261,7 @@ PAPER_REPORTS = {
 }
 
 
+@study_result
 class F16FDIStudy(NamedTuple):
     """The F-16 FDI study: its settings, table rows and the flights behind the figures.
 
@@ -273,10 +274,6 @@ class F16FDIStudy(NamedTuple):
     config: dict
     rows: list[dict]
     history: dict
-
-    to_frame = study_frame
-    _repr_html_ = study_html
-    __repr__ = study_repr
 
     def table(self) -> str:
         return study_table(self)
@@ -665,15 +662,12 @@ def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> li
     return rows
 
 
+@study_result
 class F16KindStudy(NamedTuple):
     """Every fault kind at the paper's size under the views of ``KIND_FOLLOWS``."""
 
     config: dict
     rows: list[dict]
-
-    to_frame = study_frame
-    _repr_html_ = study_html
-    __repr__ = study_repr
 
     def table(self) -> str:
         return kind_table(self.rows, self.config)

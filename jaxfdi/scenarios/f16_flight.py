@@ -37,7 +37,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi._frame import study_frame, study_html, study_repr
+from jaxfdi._frame import study_result
 from jaxfdi.control._f16_loop import f16_plant, rate_passthrough_fdi
 from jaxfdi.control._flight import (
     LATERAL_TRACKED,
@@ -297,6 +297,7 @@ def dispersions(key: Array, setup: FlightSetup, flights: int, xcg_range=XCG_RANG
 
 # --- the study ---------------------------------------------------------------------
 
+@study_result
 class F16FlightStudy(NamedTuple):
     """The fault-free F-16 flight study: its settings, table rows and sample flights.
 
@@ -309,10 +310,6 @@ class F16FlightStudy(NamedTuple):
     config: dict
     rows: list[dict]
     history: dict
-
-    to_frame = study_frame
-    _repr_html_ = study_html
-    __repr__ = study_repr
 
     def table(self) -> str:
         return study_table(self)

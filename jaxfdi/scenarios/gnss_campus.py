@@ -44,7 +44,7 @@ from jaxfdi.data import data_path
 from jaxfdi.gnss import _frames as frames, _integrity as integrity, _measurements as measurements, _orbits as orbits, _paths as paths, _raim as raim, _rinex as rinex, _yuma as yuma
 from jaxfdi.gnss._protection import ALERT_LIMITS
 from jaxfdi._loop import episode_scorer, feedforward, run_loop
-from jaxfdi._frame import study_frame, study_html, study_repr
+from jaxfdi._frame import study_result
 from jaxfdi._metrics import rate_text, summarize_episodes
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
@@ -113,6 +113,7 @@ class Case(NamedTuple):
     azimuth: jax.Array
 
 
+@study_result(group="case")
 class GnssCampusStudy(NamedTuple):
     """The GPS RAIM study: its settings, table rows and the series behind the figures.
 
@@ -129,11 +130,6 @@ class GnssCampusStudy(NamedTuple):
     campus: dict
     park: dict
     beyond: dict
-
-    to_frame = study_frame
-    _html_group = "case"  # the rows' case is a section of the table
-    _repr_html_ = study_html
-    __repr__ = study_repr
 
     def table(self) -> str:
         return gnss_table(self)

@@ -59,7 +59,7 @@ from jaxfdi.ins import _error_state as error_state, _imu as imu, _integrity as i
 from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
 from jaxfdi.ins._mechanization import NavState
 from jaxfdi._loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
-from jaxfdi._frame import study_frame, study_html, study_repr
+from jaxfdi._frame import study_result
 from jaxfdi._metrics import (
     binomial_interval,
     binomial_lower_bound,
@@ -207,6 +207,7 @@ class RunOutput(NamedTuple):
     series: Series
 
 
+@study_result(group="case")
 class GpsInsStudy(NamedTuple):
     """The GPS/INS integrity study: its settings, table rows, series, curves and records.
 
@@ -223,11 +224,6 @@ class GpsInsStudy(NamedTuple):
     series: dict
     curves: dict
     results: dict
-
-    to_frame = study_frame
-    _html_group = "case"  # the rows' case is a section of the table
-    _repr_html_ = study_html
-    __repr__ = study_repr
 
     def table(self) -> str:
         return gps_ins_table(self)

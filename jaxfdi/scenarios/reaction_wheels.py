@@ -98,7 +98,7 @@ from jaxfdi.filters._ekf import extended_kalman_filter
 from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi._loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
 from jaxfdi._stages import FDI
-from jaxfdi._frame import results_frame, study_html, study_repr
+from jaxfdi._frame import study_result
 from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, rate_text, unhealthy_warning
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi._study import Structure, Study, run_study
@@ -588,6 +588,7 @@ def summarize_case(part: RunOutput, kind: str, wheel: int, dt: float, methods=ME
     return row
 
 
+@study_result(methods=METHODS)
 class WheelStudy(NamedTuple):
     """The reaction-wheel study: its settings, table rows and per-run records.
 
@@ -601,13 +602,6 @@ class WheelStudy(NamedTuple):
     rows: list[dict]
     outputs: RunOutput
 
-    _repr_html_ = study_html
-    __repr__ = study_repr
-
-    def to_frame(self, level: float = 0.95):
-        """The table as a pandas DataFrame (``results_frame``): one row per case and method
-        (``METHODS``), every run rate beside its ``level`` Clopper-Pearson interval."""
-        return results_frame(self.rows, level, methods=METHODS)
 
     def table(self) -> str:
         """Per case and method: ``det`` (runs with a decision at or after the onset),

@@ -62,7 +62,7 @@ from jaxfdi.detection._signature import isolate, location_symptoms
 from jaxfdi.detection._wavelet import block_alarms, causal_detail_sigma, chi2_detail_sigma, haar_denoise
 from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters._tskf import actuator_direction, sensor_direction, stack_directions
-from jaxfdi._frame import results_frame, study_html, study_repr
+from jaxfdi._frame import study_result
 from jaxfdi._metrics import delay_statistics, rate_text, record_from_alarms, step_health, unhealthy_warning
 from jaxfdi.models import _vtol as vtol
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
@@ -377,6 +377,7 @@ PAPER_HEADLINE = {  # Lee & Lyou, Section V: first detection step of the s3 step
 }
 
 
+@study_result(unhealthy="unhealthy_runs.no_ftc")
 class VTOLStudy(NamedTuple):
     """The VTOL study: its settings, table rows, per-run records and the design.
 
@@ -392,14 +393,6 @@ class VTOLStudy(NamedTuple):
     records: RunRecord
     design: LoopDesign
 
-    _repr_html_ = study_html
-    __repr__ = study_repr
-
-    def to_frame(self, level: float = 0.95):
-        """The table as a pandas DataFrame (``results_frame``): one row per fault and
-        ``method|thresholds``, each detection rate beside its ``level`` Clopper-Pearson
-        interval over the healthy runs without FTC (those the methods are scored on)."""
-        return results_frame(self.rows, level, unhealthy="unhealthy_runs.no_ftc")
 
     def table(self) -> str:
         bad = [row for row in self.rows if sum(row.get("unhealthy_runs", {}).values())]

@@ -35,6 +35,7 @@ import datetime
 import json
 import math
 import os
+import secrets
 import shlex
 import shutil
 import signal
@@ -244,7 +245,12 @@ def study_output(out: str | Path) -> Iterator[Path]:
     try:
         with _signals_held():
             out.mkdir(parents=True, exist_ok=True)
-            tmp = Path(tempfile.mkdtemp(prefix=TEMP_PREFIX, dir=out))
+            # named before it exists: the OS mask holds a signal back in this thread only, and
+            # one delivered to another of the process's threads (XLA's) still raises here at
+            # the next bytecode, which could fall between a mkdtemp's mkdir and the assignment
+            # and leave the folder behind, unknown to the clean-up (CI, 2026-11-28)
+            tmp = out / f"{TEMP_PREFIX}{secrets.token_hex(8)}"
+            tmp.mkdir(mode=0o700)
         yield tmp
     except BaseException:
         with _signals_held():

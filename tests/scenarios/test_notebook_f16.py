@@ -2,16 +2,18 @@
 kernel, one run per case (the programs of ``jaxfdi run f16 --runs 1``: 24 directions per
 sensor plane, 400 optimiser steps; compilation dominates, so fewer would not be cheaper);
 its Table 1 check, printed paper comparison and figures checked."""
-from _notebooks import images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
+from _notebooks import images, python3_kernel, run_clean, tables  # noqa: F401 (python3_kernel: a fixture)
 
 
 def test_f16_hybrid_notebook(python3_kernel, monkeypatch, tmp_path):
     outputs, text = run_clean("06_f16_hybrid_psa_ukf.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": "1"})
+                              {"JAXFDI_NB_RUNS": "1", "JAXFDI_NB_OPT_STEPS": "400"})  # the CLI's 400 steps
     assert "runs per case: 1, directions per sensor plane: 24, optimiser steps: 400" in text
     for kind in (1, 2, 3):
         assert f"type {kind}: sensors" in text
     assert "Headline case beside seed 000" in text
     assert "PSA suspects: ours [1, 3] | paper: [1, 3]" in text
     assert "isolated sensor: ours 1 | paper: 1" in text
+    html = tables(outputs)  # the study as DataFrames, a table per section
+    assert html.count("<table") == 9 and "<h4>table1</h4>" in html and "<h4>paper_case</h4>" in html
     assert len(images(outputs)) == 5, f"expected 5 figures, got {len(images(outputs))}"

@@ -79,8 +79,10 @@ def python3_kernel(tmp_path_factory, monkeypatch) -> str:
     return KERNEL
 
 
-def _execute(name: str, kernel: str) -> nbformat.NotebookNode:
+def _execute(name: str, kernel: str, epilogue: str = "") -> nbformat.NotebookNode:
     nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    if epilogue:
+        nb.cells.append(nbformat.v4.new_code_cell(epilogue))
     client = NotebookClient(
         nb,
         timeout=CELL_TIMEOUT_S,
@@ -103,16 +105,16 @@ def _text(output) -> str:
     return output.get("data", {}).get("text/plain", "")
 
 
-def run_clean(name: str, kernel: str, monkeypatch, env: dict[str, str]):
+def run_clean(name: str, kernel: str, monkeypatch, env: dict[str, str], epilogue: str = ""):
     """Execute a stored notebook (kept without outputs) with ``env`` in the kernel's
-    environment; check it wrote nothing into the repo and raised no error. Returns
-    ``(outputs, text)``."""
+    environment, and then the code ``epilogue`` (a test's look at the notebook's variables);
+    check it wrote nothing into the repo and raised no error. Returns ``(outputs, text)``."""
     stored = nbformat.read(NOTEBOOKS / name, as_version=4)
     assert all(not c.get("outputs") for c in stored.cells if c.cell_type == "code")
     for var, value in env.items():
         monkeypatch.setenv(var, value)  # inherited by the kernel process
     before = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
-    nb = _execute(name, kernel)
+    nb = _execute(name, kernel, epilogue)
     after = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
     assert after == before, f"the notebook wrote files into the repo: {sorted(set(after) - set(before))}"
     outputs = list(_outputs(nb))

@@ -51,6 +51,7 @@ from jaxfdi.filters._imm import interacting_multiple_model
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.models._engine import engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi._frame import results_frame
 from jaxfdi._metrics import DetectionRecord, unhealthy_rows_warning
 from jaxfdi._monitor import replay_detector
 from jaxfdi._montecarlo import monte_carlo
@@ -378,6 +379,19 @@ def worse_metrics(hand_rows: list[dict], tuned_rows: list[dict], hand_ce: float,
             if hand == hand and not sign * tuned >= sign * hand:  # a NaN tuned value counts as worse
                 worse.append(f"{h['fault']} {key}")
     return worse
+
+
+def comparison_frame(hand_rows: list[dict], tuned_rows: list[dict], level: float = 0.95):
+    """Hand-set (``paper``) beside tuned, per fault, as a pandas DataFrame: the rows of
+    ``evaluate_engine_imm`` with a ``settings`` column, every run rate beside its ``level``
+    Clopper-Pearson interval (``results_frame``).
+
+    Returns:
+      ``pandas.DataFrame``, fault by fault, the paper's row before the tuned one.
+    """
+    rows = [{"fault": row["fault"], "settings": label, **row}
+            for pair in zip(hand_rows, tuned_rows) for label, row in zip(("paper", "tuned"), pair)]
+    return results_frame(rows, level)
 
 
 def comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce) -> str:

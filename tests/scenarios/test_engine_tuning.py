@@ -13,7 +13,7 @@ import sys
 import numpy as np
 import pytest
 
-from _notebooks import FAULT_NAMES, images, python3_kernel, run_clean  # noqa: F401 (python3_kernel: a fixture)
+from _notebooks import FAULT_NAMES, cells_of_column, images, python3_kernel, run_clean, tables  # noqa: F401 (python3_kernel: a fixture)
 from jaxfdi.cli import main
 from jaxfdi.scenarios import engine_tuning as et
 from jaxfdi.tuning import constrain, load_params
@@ -215,9 +215,12 @@ def test_tuning_notebook(imm_tuned, python3_kernel, monkeypatch):
     outputs, text = run_clean("03_tuning.ipynb", python3_kernel, monkeypatch, env)
     assert "Adam steps: 20, training runs per fault: 2, held-out runs per fault: 10" in text
     assert "rows sum to one: True | structural zeros kept: True" in text
-    table = text[text.index("fault     "):].splitlines()
-    assert [line.split()[:2] for line in table[2:16]] == [[f, label] for f in FAULT_NAMES for label in ("paper", "tuned")]
-    ce_line = next(line for line in table if line.startswith("mean per-step mode cross-entropy"))
+    html = tables(outputs)  # hand-set beside tuned, then beside per-mode mu_T: DataFrames, a row per fault and setting
+    assert html.count("<table") == 2 and html.count("<tr>") == 2 * 2 * len(FAULT_NAMES)
+    assert cells_of_column(html, "paper") == cells_of_column(html, "tuned") == 2 * len(FAULT_NAMES)
+    assert all(cells_of_column(html, f) == 4 for f in FAULT_NAMES)
+    assert html.count("<th>detection_rate_low</th>") == 2
+    ce_line = next(line for line in text.splitlines() if line.startswith("mean per-step mode cross-entropy"))
     paper_ce, tuned_ce = (float(part.split()[-1].rstrip(",")) for part in ce_line.split(":")[1].split("(")[0].split(","))
     assert tuned_ce < paper_ce, ce_line
     # the per-mode thresholds: seven values in (0, 1), chosen to shrink the shortfall on the selection runs

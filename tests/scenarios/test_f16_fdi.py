@@ -16,6 +16,8 @@ import pytest
 import scipy.stats
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
+from _frames import assert_table_is_the_json
+
 from jaxfdi import _loop as loop, _stages as stages
 from jaxfdi.detection import _hybrid_psa as hp
 from jaxfdi._faults import Target, active_label, apply_faults
@@ -370,6 +372,7 @@ def kinds():
     """Every fault kind at the paper's size, 40 full flights (15 s) each, flown without FDI,
     under the paper's hybrid rule and under the verified rule (the same draws)."""
     study = sf.fault_kind_study(runs=KIND_RUNS, seed=38)
+    assert_table_is_the_json(study.to_frame(), study.rows)  # the table as a DataFrame: the same numbers
     return {(r["kind"], r["follow"]): r for r in study.rows}
 
 

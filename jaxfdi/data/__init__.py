@@ -19,6 +19,6 @@ def data_path(name: str) -> Path:
     """
     path = DATA_DIR / name
     if not path.is_file():
-        available = sorted(p.name for p in DATA_DIR.iterdir() if p.suffix in (".json", ".txt", ".20n"))
+        available = sorted(p.name for p in DATA_DIR.iterdir() if p.suffix in (".json", ".txt", ".20n", ".05o", ".05n"))
         raise ValueError(f"name: expected one of {available}, got {name!r}")
     return path

@@ -17,6 +17,7 @@ use: ``(H^T H)^{-1}`` gives ``HDOP = sqrt(q_NN + q_EE)``, ``VDOP = sqrt(q_DD)``,
 """
 from __future__ import annotations
 
+import math
 from typing import Callable, NamedTuple
 
 import jax
@@ -25,7 +26,8 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.gnss._frames import ecef_to_geodetic, elevation_azimuth, ned_rotation
+from jaxfdi.gnss._atmosphere import Atmosphere, atmosphere_corrections
+from jaxfdi.gnss._frames import ecef_to_geodetic, ned_rotation
 from jaxfdi.gnss._least_squares import apply_qt, leading, masked_qr
 from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, Orbit, earth_rotation, satellite_clock, satellite_state
 
@@ -123,6 +125,8 @@ def solve_position(
     unweighted_iterations: int = UNWEIGHTED_ITERATIONS,
     transmit: tuple[Array, Array] | None = None,
     solver: str = "normal",
+    atmosphere: Atmosphere | None = None,
+    mask_angle: float | None = None,
 ) -> PositionFix:
     """Iterated weighted least-squares fix of one epoch.
 
@@ -140,14 +144,19 @@ def solve_position(
       solver: "normal" (the steps by the normal equations, a written-out 4 x 4 Cholesky:
         cheapest under ``vmap``) or "qr" (the masked Householder QR); the fix agrees to
         well below a millimetre (the RAIM statistics always use the QR).
+      atmosphere: the broadcast ionosphere (``broadcast_atmosphere``); then the predicted pseudoranges carry
+        the Klobuchar and Saastamoinen delays seen from the current estimate, and the
+        weights their error variances (``atmosphere_corrections``): ``sigma^2 + var``.
+      mask_angle: elevation mask [rad]: from the second step on, a slot below it as seen
+        from the current estimate is not used (``None``: no mask).
 
     Returns:
       ``PositionFix``: the (3,) ECEF position [m] and () clock bias [m] after ``iterations``
       steps; per slot (S,) the residuals (measured minus predicted) [m], the weights'
-      standard deviations (1 at unused slots), the ``used`` flags (available and finite),
-      elevation and azimuth seen from the solution [rad]; the (S, 4) NED + clock geometry
-      ``[-u_ned^T, 1]`` (zero rows at unused slots), its ``dops``, ``num_used`` and
-      ``healthy`` (>= 4 used, finite and the last step below 1 cm).
+      standard deviations (1 at unused slots), the ``used`` flags (available, finite and
+      above the mask), elevation and azimuth seen from the solution [rad]; the (S, 4) NED
+      + clock geometry ``[-u_ned^T, 1]`` (zero rows at unused slots), its ``dops``,
+      ``num_used`` and ``healthy`` (>= 4 used, finite and the last step below 1 cm).
     """
     if solver not in ("normal", "qr"):
         raise ValueError(f"solver: expected 'normal' or 'qr', got {solver!r}")
@@ -159,26 +168,37 @@ def solve_position(
         value = _checks.concrete(sigma)
         if value is not None and not np.all(value > 0):
             raise ValueError(f"sigma: expected standard deviations > 0 [m], got {_checks.received(value)}")
+    if mask_angle is not None and not (isinstance(mask_angle, (int, float))
+                                       and -math.pi / 2 <= mask_angle < math.pi / 2):
+        raise ValueError(f"mask_angle: expected an elevation in [-pi/2, pi/2) rad, got {mask_angle!r}")
     pseudoranges = jnp.asarray(pseudoranges)
     dtype = pseudoranges.dtype
-    used = jnp.asarray(available, bool) & jnp.isfinite(pseudoranges)
-    rho = jnp.where(used, pseudoranges, 0.0)
+    measured = jnp.asarray(available, bool) & jnp.isfinite(pseudoranges)
+    rho = jnp.where(measured, pseudoranges, 0.0)
     sat_tx, sat_clock = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
     state0 = jnp.zeros(4, dtype) if initial is None else jnp.asarray(initial, dtype)
     ones = jnp.ones_like(rho)
+    local = callable(sigma) or atmosphere is not None or mask_angle is not None  # angles needed every step
 
-    def weights_at(state, k):
-        if sigma is None:
-            return ones
-        if not callable(sigma):
-            return jnp.asarray(sigma, dtype)
-        elevation, _ = elevation_azimuth(state[:3], sat_tx)
-        return jnp.where(k < unweighted_iterations, ones, sigma(elevation))
+    def linearize(state, k):
+        """Predicted pseudoranges, ECEF lines of sight, elevations and azimuths, standard
+        deviations and the used slots at ``state`` in step ``k``."""
+        predicted, los, _ = _predict(sat_tx, sat_clock, state)
+        elevation = azimuth = None
+        if local:
+            elevation, azimuth = _look_angles(state, los)
+        std = ones if sigma is None else jnp.asarray(sigma, dtype) if not callable(sigma) else \
+            jnp.where(k < unweighted_iterations, ones, sigma(elevation))
+        used = measured if mask_angle is None else measured & ((k < 1) | (elevation >= mask_angle))
+        if atmosphere is not None:
+            delay, variance = atmosphere_corrections(atmosphere, t_receive, state[:3], elevation, azimuth)
+            predicted = predicted + delay
+            std = jnp.where(k < unweighted_iterations, std, jnp.sqrt(std**2 + variance))
+        return predicted, los, elevation, azimuth, std, used
 
     def gauss_newton(k, carry):
         state, _ = carry
-        predicted, los, _ = _predict(sat_tx, sat_clock, state)
-        std = weights_at(state, k)
+        predicted, los, _, _, std, used = linearize(state, k)
         h = jnp.where(used[:, None], jnp.concatenate([-los, ones[:, None]], axis=1) / std[:, None], 0.0)
         y = jnp.where(used, (rho - predicted) / std, 0.0)
         if solver == "qr":
@@ -190,13 +210,11 @@ def solve_position(
         return state + step, step
 
     state, step = jax.lax.fori_loop(0, int(iterations), gauss_newton, (state0, jnp.zeros(4, dtype)))
-    predicted, los, sat = _predict(sat_tx, sat_clock, state)
-    std = weights_at(state, int(iterations))
-    lat, lon, _ = ecef_to_geodetic(state[:3])
-    los_ned = los @ ned_rotation(lat, lon).T
+    predicted, los, elevation, azimuth, std, used = linearize(state, int(iterations))
+    los_ned = los @ _ned_at(state).T
+    if not local:
+        elevation, azimuth = _look_angles(state, los)
     geometry = jnp.where(used[:, None], jnp.concatenate([-los_ned, ones[:, None]], axis=1), 0.0)
-    elevation = jnp.arcsin(jnp.clip(-los_ned[:, 2], -1.0, 1.0))
-    azimuth = jnp.mod(jnp.arctan2(los_ned[:, 1], los_ned[:, 0]), 2.0 * jnp.pi)
     num_used = jnp.sum(used)
     healthy = (num_used >= 4) & jnp.all(jnp.isfinite(state)) & (jnp.linalg.norm(step[:3]) < 1e-2)
     return PositionFix(
@@ -204,3 +222,15 @@ def solve_position(
         geometry=geometry, sigma=jnp.where(used, std, 1.0), used=used, num_used=num_used,
         elevation=jnp.where(used, elevation, 0.0), azimuth=jnp.where(used, azimuth, 0.0),
         dops=dops(geometry, used), healthy=healthy)
+
+
+def _ned_at(state: Array) -> Array:
+    lat, lon, _ = ecef_to_geodetic(state[:3])
+    return ned_rotation(lat, lon)
+
+
+def _look_angles(state: Array, los: Array) -> tuple[Array, Array]:
+    """(S,) elevations and azimuths [rad] of the ECEF unit lines of sight ``los`` seen from ``state``."""
+    los_ned = los @ _ned_at(state).T
+    elevation = jnp.arcsin(jnp.clip(-los_ned[:, 2], -1.0, 1.0))
+    return elevation, jnp.mod(jnp.arctan2(los_ned[:, 1], los_ned[:, 0]), 2.0 * jnp.pi)

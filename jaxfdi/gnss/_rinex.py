@@ -236,11 +236,18 @@ def read_rinex_nav(path: str | Path) -> Ephemerides:
       order (int PRN, weeks and health; float the rest), plus the header's (4,) Klobuchar
       ``ion_alpha`` / ``ion_beta`` (NaN if absent).
     """
-    path = Path(path)
-    data = path.read_bytes()
+    return parse_rinex_nav(read_ascii(path), str(path))
+
+
+def read_ascii(path: str | Path) -> str:
+    """The text of an ASCII file (LF or CRLF lines).
+
+    Returns:
+      ``str``; a byte outside ASCII is a ``ValueError`` naming the file and its line.
+    """
+    data = Path(path).read_bytes()
     try:
-        text = data.decode("ascii")
+        return data.decode("ascii")
     except UnicodeDecodeError as err:
         line = data[: err.start].count(b"\n") + 1
         raise ValueError(f"{path}:{line}: expected ASCII text, got byte {data[err.start]:#04x}") from None
-    return parse_rinex_nav(text, str(path))

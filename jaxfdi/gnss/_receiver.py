@@ -1,0 +1,140 @@
+"""A real receiver's observation file through the snapshot integrity chain.
+
+``receiver_epochs`` aligns an observation file (``read_rinex_obs``) with a navigation
+file (``read_rinex_nav``): one slot per GPS satellite observed, the epochs' time tags
+from the start of the first epoch's week, the broadcast ionosphere of the navigation
+header and each satellite's user range accuracy. ``monitor_receiver`` runs
+``monitor_epochs`` on them with single-point positioning's measurement model, the one
+RTKLIB's ``pntpos`` uses (Takasu 2013, RTKLIB manual, E.6), so that its fixes can be
+compared with RTKLIB's on the same epochs: broadcast orbits and clocks (``T_GD`` for an
+L1 C/A user), Klobuchar and Saastamoinen delays, a 15 deg elevation mask, and weights
+
+``sigma_i^2 = URA_i^2 + 0.3^2 + 0.3^2 (1 + 1 / sin max(E_i, 5 deg)) + var_iono + var_tropo``
+
+(URA of the ephemeris, code bias 0.3 m, RTKLIB's default code error
+``100 x (3 mm + 3 mm / sqrt(sin E))`` in variance form, the atmosphere's model errors:
+``atmosphere_corrections``).
+"""
+from __future__ import annotations
+
+import functools
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from jaxfdi.gnss._atmosphere import Atmosphere, broadcast_atmosphere
+from jaxfdi.gnss._integrity import EpochIntegrity, monitor_epochs
+from jaxfdi.gnss._orbits import OrbitTable, ephemeris_table
+from jaxfdi.gnss._raim import RaimTables, raim_tables
+from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides
+from jaxfdi.gnss._rinex_obs import Observations
+
+#: IS-GPS-200 (20.3.3.3.1.3) URA values [m] of the indices 0-14 (index 15: no accuracy prediction)
+URA_VALUES = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0)
+#: RTKLIB's single-point model: code bias error, code error at the zenith [m], lowest elevation of the weights
+CODE_BIAS_ERROR = 0.3
+CODE_ERROR = 0.3
+WEIGHT_MIN_ELEVATION = math.radians(5.0)
+#: the elevation mask of single-point positioning [rad]
+MASK_ANGLE = math.radians(15.0)
+
+
+class ReceiverEpochs(NamedTuple):
+    """A receiver's GPS pseudoranges aligned with broadcast orbits.
+
+    Attributes:
+      table: the navigation file's records, one slot per satellite in ``satellite``
+      times: (E,) s, the epochs' time tags from the start of ``reference_week``
+      pseudoranges: (E, S) m, NaN where not observed
+      ura: (S,) m, user range accuracy of each slot (the largest of its records')
+      atmosphere: the broadcast ionosphere of the navigation header
+      satellite: (S,) str, the slots' satellites (``G05``)
+      reference_week: int, GPS week of ``times == 0``
+    """
+
+    table: OrbitTable
+    times: Array
+    pseudoranges: Array
+    ura: Array
+    atmosphere: Atmosphere
+    satellite: np.ndarray
+    reference_week: int
+
+
+def user_range_accuracy(accuracy) -> np.ndarray:
+    """The URA value [m] that RINEX's ``SV accuracy`` [m] stands for: the smallest of
+    ``URA_VALUES`` not below it (6144 m beyond the table, and for NaN).
+
+    Returns:
+      float array, the shape of ``accuracy``.
+    """
+    accuracy = np.asarray(accuracy, float)
+    index = np.searchsorted(np.asarray(URA_VALUES), np.nan_to_num(accuracy, nan=np.inf), side="left")
+    return np.asarray(URA_VALUES + (URA_VALUES[-1],))[np.minimum(index, len(URA_VALUES))]
+
+
+def receiver_epochs(observations: Observations, ephemerides: Ephemerides, dtype=None) -> ReceiverEpochs:
+    """The GPS satellites of ``observations`` as slots of ``ephemerides``' orbits (a
+    satellite of another system, or with no record, is left out).
+
+    Returns:
+      ``ReceiverEpochs`` with the (E,) times from the first epoch's week and the (E, S)
+      pseudoranges of the S GPS satellites the navigation file has records of.
+    """
+    gps = [k for k, sat in enumerate(observations.satellite) if sat[0] == "G"
+           and int(sat[1:]) in set(np.asarray(ephemerides.prn).tolist())]
+    if not gps:
+        raise ValueError("observations: expected GPS satellites that the navigation file has records of, got "
+                         f"{list(observations.satellite)}")
+    prns = np.array([int(observations.satellite[k][1:]) for k in gps])
+    week = int(observations.week[0])
+    dtype = dtype or jnp.result_type(float)
+    ura = np.array([user_range_accuracy(ephemerides.accuracy[ephemerides.prn == p]).max() for p in prns])
+    times = (observations.week - week) * SECONDS_PER_WEEK + observations.time_of_week
+    return ReceiverEpochs(
+        table=ephemeris_table(ephemerides, week, slot_prns=prns, dtype=dtype),
+        times=jnp.asarray(times, dtype), pseudoranges=jnp.asarray(observations.pseudorange[:, gps], dtype),
+        ura=jnp.asarray(ura, dtype), atmosphere=broadcast_atmosphere(ephemerides.ion_alpha, ephemerides.ion_beta),
+        satellite=observations.satellite[gps], reference_week=week)
+
+
+def code_sigma(ura: Array):
+    """RTKLIB's pseudorange standard deviation without the atmosphere's share (module docstring).
+
+    Returns:
+      A function of the (S,) elevations [rad] giving the (S,) standard deviations [m].
+    """
+    def sigma(elevation: Array) -> Array:
+        sin_e = jnp.sin(jnp.maximum(elevation, WEIGHT_MIN_ELEVATION))
+        return jnp.sqrt(ura**2 + CODE_BIAS_ERROR**2 + CODE_ERROR**2 * (1.0 + 1.0 / sin_e))
+    return sigma
+
+
+def monitor_receiver(epochs: ReceiverEpochs, tables: RaimTables | None = None, mask_angle: float = MASK_ANGLE,
+                     operation="npa", exclude: bool = True) -> EpochIntegrity:
+    """Fix, RAIM, protection levels and exclusion of every epoch of a receiver, with the
+    single-point measurement model (module docstring).
+
+    Args:
+      epochs: ``receiver_epochs``.
+      tables: ``raim_tables`` (default: of the slots, ``P_fa = 1e-3``, ``P_md = 1e-3``).
+      mask_angle: elevation mask [rad].
+      operation, exclude: as for ``monitor_epochs``.
+
+    Returns:
+      ``EpochIntegrity`` with a leading (E,) axis on every leaf.
+    """
+    slots = int(epochs.pseudoranges.shape[1])
+    tables = raim_tables(max(slots, 5), pfa=1e-3, pmd=1e-3) if tables is None else tables
+    return _monitor(epochs.table, epochs.times, epochs.pseudoranges, epochs.ura, epochs.atmosphere, tables,
+                    float(mask_angle), operation if isinstance(operation, str) else tuple(operation), bool(exclude))
+
+
+@functools.partial(jax.jit, static_argnames=("mask_angle", "operation", "exclude"))
+def _monitor(table, times, pseudoranges, ura, atmosphere, tables, mask_angle, operation, exclude):
+    return monitor_epochs(table, times, pseudoranges, tables, sigma=code_sigma(ura), operation=operation,
+                          exclude=exclude, atmosphere=atmosphere, mask_angle=mask_angle)

@@ -38,6 +38,7 @@ from jaxfdi.scenarios.engine_chi2 import engine_chi2_study, plot_engine_chi2
 from jaxfdi.scenarios.f16_fdi import f16_fdi_study, plot_f16_fdi
 from jaxfdi.scenarios.f16_flight import f16_flight_study, plot_f16_flight
 from jaxfdi.scenarios.gnss_campus import gnss_campus_study, plot_gnss_campus
+from jaxfdi.scenarios.gnss_real import gnss_real_study, plot_gnss_real
 from jaxfdi.scenarios.gps_ins import gps_ins_study, plot_gps_ins
 from jaxfdi.scenarios.reaction_wheels import METHODS as WHEEL_METHODS
 from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_examples, wheel_study
@@ -395,6 +396,13 @@ def _gnss_campus_header(cfg: dict, args: argparse.Namespace) -> str:
             f"NPA HAL 556 m; {args.runs} runs per case")
 
 
+def _gnss_real_header(cfg: dict, args: argparse.Namespace) -> str:
+    return (f"gnss-real: GPS integrity on real receivers, GEONET stations {' and '.join(cfg['stations'])} "
+            f"({cfg['data']}, 30 s), RTKLIB's single-point model, {cfg['mask_deg']:.0f} deg mask, parity test "
+            f"P_fa {cfg['pfa']:g}, slope PLs P_md {cfg['pmd']:g}, solution-separation PLs (ARAIM LPV-200); faults "
+            f"injected into station {cfg['fault_station']}, {args.runs} trials per size and rate")
+
+
 def _gps_ins_header(cfg: dict, args: argparse.Namespace) -> str:
     return (f"gps-ins: INS/GPS integrity of Yoo et al. (2010), park flight {cfg['flight_s']} s from {cfg['start']}, "
             f"HG1900-class IMU {cfg['imu_rate_hz']} Hz, GPS 1 Hz (RAIM-passed fixes only), 15-state error-state EKF; "
@@ -406,6 +414,7 @@ _run_f16_flight = _study_runner(f16_flight_study, "f16-flight.json", plot_f16_fl
 _run_f16 = _study_runner(f16_fdi_study, "f16.json", plot_f16_fdi, _f16_header)
 _run_gnss_campus = _study_runner(gnss_campus_study, "gnss-campus.json", plot_gnss_campus, _gnss_campus_header)
 _run_gps_ins = _study_runner(gps_ins_study, "gps-ins.json", plot_gps_ins, _gps_ins_header)
+_run_gnss_real = _study_runner(gnss_real_study, "gnss-real.json", plot_gnss_real, _gnss_real_header)
 
 
 RUNNERS = {
@@ -423,6 +432,8 @@ RUNNERS = {
     "gps-ins": Runner(_run_gps_ins, "Yoo et al. (2010) INS/GPS: 15-state EKF, windowed chi-square and SCST, Table 3 (gyro bias)"),
     "gnss-campus": Runner(_run_gnss_campus, "Yoo et al. (2010) GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
                                             "park satellite faults detected, isolated and excluded"),
+    "gnss-real": Runner(_run_gnss_real, "GEONET stations (real GPS, one hour): positions beside RTKLIB's, slope and "
+                                        "solution-separation PLs (Stanford diagrams), injected step and ramp faults"),
     "vtol": Runner(_run_vtol, "Lee & Lyou VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
                               "fault-tolerant control", methods=_vtol_method_names),
 }

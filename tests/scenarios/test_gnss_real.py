@@ -1,0 +1,62 @@
+"""The real-receiver study (``jaxfdi run gnss-real``) at a reduced size: its CSV table is
+its JSON rows, no epoch of either GEONET hour is misleading for either protection level, its
+fixes are RTKLIB's, and the injected steps at or above the minimum detectable bias are
+detected as often as the slope protection level promises (a binomial test)."""
+import json
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+from scipy import stats
+
+from _frames import assert_table_is_the_json
+from jaxfdi.scenarios.gnss_real import STEP_SIZES
+
+RUNS = 60
+P_MD = 1e-3
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    """``jaxfdi run gnss-real --runs 60 --seed 5``: its stdout, rows and output folder."""
+    out = tmp_path_factory.mktemp("gnss-real") / "out"
+    proc = subprocess.run([sys.executable, "-m", "jaxfdi", "run", "gnss-real", "--runs", str(RUNS), "--seed", "5",
+                           "--quiet", "--out", str(out)], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout, json.loads((out / "gnss-real.json").read_text()), out
+
+
+def test_cli_writes_the_table_its_csv_and_the_stanford_diagrams(study):
+    stdout, data, out = study
+    assert "gnss-real: GPS integrity on real receivers" in stdout and "positions station GEONET 0759" in stdout
+    assert data["config"]["runs"] == RUNS and data["config"]["seed"] == 5
+    rows = data["rows"]
+    assert [r["section"] for r in rows] == ["positions"] * 2 + ["step"] * len(STEP_SIZES) + ["ramp"] * 4
+    exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+    assert_table_is_the_json(pd.read_csv(out / "gnss-real.csv", **exact), rows)  # the CSV is to_frame()
+    assert (out / "gnss-real-stanford.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sorted(p.name for p in out.iterdir()) == ["gnss-real-stanford.png", "gnss-real.csv", "gnss-real.json"]
+
+
+def test_both_hours_have_no_misleading_epoch_and_rtklibs_fixes(study):
+    for row in study[1]["rows"][:2]:
+        assert row["scored_epochs"] == 115 and row["parity_alarms"] == 0 and row["ss_alarms"] == 0
+        assert row["misleading_slope"] == 0 and row["misleading_ss"] == 0
+        assert row["rtklib_max_difference_m"] < 1e-3
+        assert row["horizontal_error_median_m"] < 1.0 < row["hpl_median_m"] < row["ss_hpl_median_m"]
+
+
+def test_steps_at_or_above_the_minimum_detectable_bias_are_detected(study):
+    """Pooled over sizes: the misses among trials whose bias is at least that satellite's
+    MDB at that epoch are not more than P_md = 1e-3 allows (one-sided binomial test,
+    p > 0.01); and the detection rate grows with the bias."""
+    steps = [r for r in study[1]["rows"] if r["section"] == "step"]
+    trials = sum(r["runs_at_or_above_mdb"] for r in steps)
+    misses = sum(round(r["runs_at_or_above_mdb"] * (1.0 - r["detection_rate_at_or_above_mdb"]))
+                 for r in steps if r["runs_at_or_above_mdb"])
+    assert trials >= RUNS
+    assert stats.binomtest(misses, trials, P_MD, alternative="greater").pvalue > 0.01, (misses, trials)
+    rates = [r["detection_rate"] for r in steps]
+    assert rates == sorted(rates) and rates[0] < 0.5 and rates[-1] > 0.9  # a 100 m step can hide in a weak geometry
+    assert all(r["ss_detection_rate"] <= r["detection_rate"] + 0.1 for r in steps)  # SS's budgets are stricter

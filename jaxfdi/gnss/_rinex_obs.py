@@ -166,85 +166,87 @@ def _values(text: str, types: list[str], name: str, line_no: int, satellite: str
     return out
 
 
-def _records_v2(lines, start, types, name):
-    """Yield ``(week, tow, {satellite: {type: value}})`` of each observation epoch."""
+def _records(read_record, lines: list[str], start: int, types: dict, name: str):
+    """Yield each observation epoch's ``(week, tow, {satellite: {type: value}})``:
+    ``read_record(lines, position, types, name)`` reads the record starting at
+    ``position`` and returns where the next begins and the epoch (``None`` for an event);
+    blank lines between records are skipped."""
+    position = start
+    while position < len(lines):
+        if not lines[position].strip():
+            position += 1
+            continue
+        position, record = read_record(lines, position, types, name)
+        if record is not None:
+            yield record
+
+
+def _record_v2(lines, position, types, name):
+    """A RINEX 2 record: an epoch line, its satellite list continued every 12, and each
+    satellite's fields, five to a line."""
     kinds = types["*"]
     per_line = 5
-    position = start
-    while position < len(lines):
-        line_no, line = position + 1, lines[position]
-        if not line.strip():
-            position += 1
-            continue
-        flag, count = _flag_count(line, 28, name, line_no)
-        if flag > 1:  # an event: `count` special records (header lines) follow, or cycle slips (6)
-            skip = count if flag != 6 else count * -(-len(kinds) // per_line)
-            position += 1 + skip
-            continue
-        week, tow = _epoch_time(line[:26], name, line_no, True)
-        satellites, at = [], position
-        while len(satellites) < count:
-            if at >= len(lines):
-                _fail(name, at, f"the epoch of line {line_no} lists {count} satellites, the file ends after "
-                                f"{len(satellites)}")
-            names = lines[at][32:68]
-            if at != position and lines[at][:32].strip():
-                _fail(name, at + 1, f"expected the satellite list of the epoch of line {line_no} continued in "
-                                    f"columns 33-68, got {lines[at]!r}")
-            for k in range(0, min(36, 3 * (count - len(satellites))), 3):
-                sat = names[k:k + 3]
-                system = sat[0] if sat[0] != " " else "G"
-                try:
-                    satellites.append(f"{system}{int(sat[1:]):02d}")
-                except ValueError:
-                    _fail(name, at + 1, f"expected a satellite (A1, I2) in columns {33 + k}-{35 + k}, got {sat!r}")
-            at += 1
-        rows = -(-len(kinds) // per_line)
-        record = {}
-        for sat in satellites:
-            if at + rows > len(lines):
-                _fail(name, len(lines), f"the epoch of line {line_no}: {sat}'s {rows} observation lines are "
-                                        f"missing (the file ends)")
-            text = "".join(lines[at + r][:FIELD * per_line].ljust(FIELD * per_line) for r in range(rows))
-            record[sat] = _values(text, kinds, name, at + 1, sat)
-            at += rows
-        position = at
-        yield week, tow, record
-
-
-def _records_v3(lines, start, types, name):
-    position = start
-    while position < len(lines):
-        line_no, line = position + 1, lines[position]
-        if not line.strip():
-            position += 1
-            continue
-        if line[0] != ">":
-            _fail(name, line_no, f"expected an epoch line starting with '>', got {line!r}")
-        flag, count = _flag_count(line, 31, name, line_no)
-        if flag > 1:
-            position += 1 + count
-            continue
-        week, tow = _epoch_time(line[1:29], name, line_no, False)
-        if position + count >= len(lines):
-            _fail(name, len(lines), f"the epoch of line {line_no} lists {count} satellites, the file ends "
-                                    f"after {len(lines) - 1 - position}")
-        record = {}
-        for at in range(position + 1, position + 1 + count):
-            text = lines[at]
-            if text.startswith(">"):
-                _fail(name, at + 1, f"the epoch of line {line_no} lists {count} satellites, found "
-                                    f"{at - position - 1} before the next epoch")
-            system = text[0]
+    line_no, line = position + 1, lines[position]
+    flag, count = _flag_count(line, 28, name, line_no)
+    if flag > 1:  # an event: `count` special records (header lines) follow, or cycle slips (6)
+        return position + 1 + (count if flag != 6 else count * -(-len(kinds) // per_line)), None
+    week, tow = _epoch_time(line[:26], name, line_no, True)
+    satellites, at = [], position
+    while len(satellites) < count:
+        if at >= len(lines):
+            _fail(name, at, f"the epoch of line {line_no} lists {count} satellites, the file ends after "
+                            f"{len(satellites)}")
+        names = lines[at][32:68]
+        if at != position and lines[at][:32].strip():
+            _fail(name, at + 1, f"expected the satellite list of the epoch of line {line_no} continued in "
+                                f"columns 33-68, got {lines[at]!r}")
+        for k in range(0, min(36, 3 * (count - len(satellites))), 3):
+            sat = names[k:k + 3]
+            system = sat[0] if sat[0] != " " else "G"
             try:
-                sat = f"{system}{int(text[1:3]):02d}"
+                satellites.append(f"{system}{int(sat[1:]):02d}")
             except ValueError:
-                _fail(name, at + 1, f"expected a satellite identifier (A1, I2) in columns 1-3, got {text[:3]!r}")
-            if system not in types:
-                _fail(name, at + 1, f"satellite {sat}: its system {system!r} has no 'SYS / # / OBS TYPES' line")
-            record[sat] = _values(text[3:], types[system], name, at + 1, sat)
-        position += 1 + count
-        yield week, tow, record
+                _fail(name, at + 1, f"expected a satellite (A1, I2) in columns {33 + k}-{35 + k}, got {sat!r}")
+        at += 1
+    rows = -(-len(kinds) // per_line)
+    record = {}
+    for sat in satellites:
+        if at + rows > len(lines):
+            _fail(name, len(lines), f"the epoch of line {line_no}: {sat}'s {rows} observation lines are "
+                                    f"missing (the file ends)")
+        text = "".join(lines[at + r][:FIELD * per_line].ljust(FIELD * per_line) for r in range(rows))
+        record[sat] = _values(text, kinds, name, at + 1, sat)
+        at += rows
+    return at, (week, tow, record)
+
+
+def _record_v3(lines, position, types, name):
+    """A RINEX 3 record: an epoch line ``>`` and one line per satellite."""
+    line_no, line = position + 1, lines[position]
+    if line[0] != ">":
+        _fail(name, line_no, f"expected an epoch line starting with '>', got {line!r}")
+    flag, count = _flag_count(line, 31, name, line_no)
+    if flag > 1:
+        return position + 1 + count, None
+    week, tow = _epoch_time(line[1:29], name, line_no, False)
+    if position + count >= len(lines):
+        _fail(name, len(lines), f"the epoch of line {line_no} lists {count} satellites, the file ends "
+                                f"after {len(lines) - 1 - position}")
+    record = {}
+    for at in range(position + 1, position + 1 + count):
+        text = lines[at]
+        if text.startswith(">"):
+            _fail(name, at + 1, f"the epoch of line {line_no} lists {count} satellites, found "
+                                f"{at - position - 1} before the next epoch")
+        system = text[0]
+        try:
+            sat = f"{system}{int(text[1:3]):02d}"
+        except ValueError:
+            _fail(name, at + 1, f"expected a satellite identifier (A1, I2) in columns 1-3, got {text[:3]!r}")
+        if system not in types:
+            _fail(name, at + 1, f"satellite {sat}: its system {system!r} has no 'SYS / # / OBS TYPES' line")
+        record[sat] = _values(text[3:], types[system], name, at + 1, sat)
+    return position + 1 + count, (week, tow, record)
 
 
 def parse_rinex_obs(text: str, name: str = "<string>") -> Observations:
@@ -258,7 +260,7 @@ def parse_rinex_obs(text: str, name: str = "<string>") -> Observations:
     """
     lines = text.splitlines()
     version, start, types, approx = _header(lines, name)
-    records = list((_records_v2 if version < 3 else _records_v3)(lines, start, types, name))
+    records = list(_records(_record_v2 if version < 3 else _record_v3, lines, start, types, name))
     if not records:
         _fail(name, len(lines), "no observation epoch after the header")
     satellites = sorted({sat for _, _, record in records for sat in record})

@@ -37,7 +37,7 @@ import numpy as np
 from jaxfdi._frame import study_result
 from jaxfdi._metrics import rate_interval
 from jaxfdi.data import data_path
-from jaxfdi.gnss._frames import ned_rotation
+from jaxfdi.gnss._frames import ecef_to_ned
 from jaxfdi.gnss._receiver import ReceiverEpochs, monitor_receiver, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._rinex_obs import read_rinex_obs
@@ -82,9 +82,7 @@ def _fmt(value) -> str:
 def local_errors(position: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Horizontal and vertical (absolute) errors [m] of (E, 3) ECEF fixes from ``truth``, in
     the north-east-down axes at ``truth``."""
-    lat = math.atan2(truth[2], math.hypot(truth[0], truth[1]) * (1.0 - 6.69437999014e-3))
-    lon = math.atan2(truth[1], truth[0])
-    ned = (position - truth) @ np.asarray(ned_rotation(lat, lon)).T
+    ned = np.asarray(ecef_to_ned(position, truth))
     return np.hypot(ned[:, 0], ned[:, 1]), np.abs(ned[:, 2])
 
 
@@ -191,8 +189,8 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
     loaded = {}
     for station in STATIONS:
         epochs, truth = _load(station)
-        loaded[station] = epochs
         result = jax.tree_util.tree_map(np.asarray, monitor_receiver(epochs))
+        loaded[station] = epochs, result
         separation = jax.tree_util.tree_map(np.asarray, separate(result.fix))
         row, arrays = _position_row(station, result, separation, truth, np.asarray(epochs.times))
         rows.append(row)
@@ -200,8 +198,7 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
         if progress:
             print(f"gnss-real: station {station}: {row['scored_epochs']} epochs scored", flush=True)
 
-    epochs = loaded[FAULT_STATION]
-    clean = jax.tree_util.tree_map(np.asarray, monitor_receiver(epochs))
+    epochs, clean = loaded[FAULT_STATION]
     rho = np.asarray(epochs.pseudoranges)
     times = np.asarray(epochs.times)
     mdb_all = np.asarray(clean.protection.minimum_detectable_bias)

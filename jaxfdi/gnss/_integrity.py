@@ -72,7 +72,8 @@ def assess(fix: PositionFix, tables: RaimTables, operation="npa") -> tuple[Parit
 def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array, tables: RaimTables,
                   sigma: Array | Callable[[Array], Array] | None = None, operation="npa",
                   exclude: bool = True, transmit: tuple[Array, Array] | None = None,
-                  atmosphere: Atmosphere | None = None, mask_angle: float | None = None) -> EpochIntegrity:
+                  atmosphere: Atmosphere | None = None, mask_angle: float | None = None,
+                  clocks: Array | None = None) -> EpochIntegrity:
     """Fix, RAIM, protection levels and exclusion of one epoch (module doc).
 
     Args:
@@ -84,11 +85,12 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
       exclude: re-solve without the isolated satellite after an alarm.
       transmit: satellite positions and clocks at transmission
         (``positioning.transmit_states``) when already known (``orbit`` is then unused).
-      atmosphere, mask_angle: as for ``positioning.solve_position`` (broadcast delays, elevation mask).
+      atmosphere, mask_angle, clocks: as for ``positioning.solve_position`` (broadcast
+        delays, elevation mask, a receiver clock per constellation).
     """
     transmit = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
     fix = solve_position(orbit, t_receive, pseudoranges, available, sigma, transmit=transmit, atmosphere=atmosphere,
-                         mask_angle=mask_angle)
+                         mask_angle=mask_angle, clocks=clocks)
     check, protection = assess(fix, tables, operation)
     dead = jnp.asarray(available, bool) & jnp.isinf(jnp.asarray(pseudoranges))
     if not exclude:
@@ -96,10 +98,10 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
         return EpochIntegrity(fix, check, protection, none, fix, check, protection, dead)
     isolated = jnp.where(check.alarm & (check.isolated >= 0), check.isolated, -1).astype(jnp.int32)
     keep = available & (jnp.arange(available.shape[0]) != isolated)
-    initial = jnp.concatenate([fix.position, fix.clock_bias[None]])
+    initial = jnp.concatenate([fix.position, jnp.atleast_1d(fix.clock_bias)])
     refit = solve_position(orbit, t_receive, pseudoranges, keep, sigma, initial=initial,
                            iterations=EXCLUSION_ITERATIONS, unweighted_iterations=0, transmit=transmit,
-                           atmosphere=atmosphere, mask_angle=mask_angle)
+                           atmosphere=atmosphere, mask_angle=mask_angle, clocks=clocks)
     check_x, protection_x = assess(refit, tables, operation)
     pick = lambda a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(isolated >= 0, u, v), a, b)  # noqa: E731
     # a dead slot is excluded too (the fix already leaves it out): reported when the parity

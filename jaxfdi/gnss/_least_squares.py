@@ -10,8 +10,14 @@ identity on the unused ones. Hence, for every ``n >= m``, with the same shapes:
 - the thin factor ``Q1`` (S, m) has zero rows at unused slots and ``R`` (m, m) is the
   triangular factor of the used rows: ``H = Q1 R``;
 - the columns ``m..n-1`` of the full ``Q`` span the parity space of the used rows
-  (Brown & Chin 1992): ``P`` ((S - m), S) with its first ``n - m`` rows valid, so that
-  ``P H = 0`` and ``P P^T = I`` on them, and zero columns at unused slots.
+  (Brown & Chin 1992): ``P`` (S, S) with ``n - m`` valid rows, so that ``P H = 0`` and
+  ``P P^T = I`` on them, and zero columns at unused slots.
+
+A column that is zero on every used row (a receiver clock whose constellation has no
+satellite in view this epoch) is an unknown the rows do not carry: it takes no pivot,
+its row of ``R`` is the unit row (so the solution's entry is 0) and its column of
+``Q1`` is zero; ``num_pivots`` counts the columns that remain, and the parity space has
+``n - num_pivots`` dimensions.
 
 Everything is element-wise code over the S rows (no LAPACK call per epoch), which XLA
 vectorises when the functions are vmapped over epochs and Monte Carlo runs.
@@ -32,12 +38,16 @@ class MaskedQR(NamedTuple):
       r: (m, m) upper triangular factor
       rank: (S,) int: position of each used slot among the used ones (-1: unused)
       num_used: () int, number of used rows
+      pivot: (m,) int: the rank of each column's pivot row (-1: a column zero on the used rows)
+      num_pivots: () int, columns with a pivot (the unknowns the used rows carry)
     """
 
     reflectors: Array
     r: Array
     rank: Array
     num_used: Array
+    pivot: Array
+    num_pivots: Array
 
 
 def masked_qr(matrix: Array, used: Array) -> MaskedQR:
@@ -46,18 +56,21 @@ def masked_qr(matrix: Array, used: Array) -> MaskedQR:
     Reflection ``j`` pivots on the ``j``-th used slot and acts on the used slots from it
     on, which is the textbook algorithm on the used rows moved to the top in slot order,
     written with masks instead of a permutation. A column that is zero below its pivot
-    gives an identity reflection; with fewer than ``m`` used rows ``R`` is singular
-    (callers check ``num_used``).
+    gives an identity reflection; with fewer than ``num_pivots`` used rows ``R`` is
+    singular (callers check ``num_used``). A column zero on every used row takes no
+    pivot (module doc).
     """
     matrix = jnp.asarray(matrix)
     used = jnp.asarray(used, bool)
     num_cols = matrix.shape[1]
     rank = jnp.where(used, jnp.cumsum(used) - 1, -1)
     work = jnp.where(used[:, None], matrix, 0.0)
+    carried = jnp.any(work != 0.0, axis=0)       # (m,) exact: reflections keep a zero column zero
+    pivot_of = jnp.cumsum(carried) - 1
     reflectors, rows = [], []
     for j in range(num_cols):
-        pivot = rank == j
-        x = jnp.where(rank >= j, work[:, j], 0.0)
+        pivot = carried[j] & (rank == pivot_of[j])
+        x = jnp.where(carried[j] & (rank >= pivot_of[j]), work[:, j], 0.0)
         x_pivot = jnp.sum(jnp.where(pivot, x, 0.0))
         alpha = -jnp.where(x_pivot >= 0, 1.0, -1.0) * jnp.linalg.norm(x)
         v = x - jnp.where(pivot, alpha, 0.0)
@@ -65,9 +78,11 @@ def masked_qr(matrix: Array, used: Array) -> MaskedQR:
         v = jnp.where(v_norm > 0, v / jnp.where(v_norm > 0, v_norm, 1.0), 0.0)
         work = work - 2.0 * v[:, None] * (v @ work)[None, :]
         reflectors.append(v)
-        rows.append(jnp.sum(jnp.where(pivot[:, None], work, 0.0), axis=0))
+        unit = (jnp.arange(num_cols) == j).astype(work.dtype)
+        rows.append(jnp.where(carried[j], jnp.sum(jnp.where(pivot[:, None], work, 0.0), axis=0), unit))
     r = jnp.triu(jnp.stack(rows))
-    return MaskedQR(jnp.stack(reflectors), r, rank, jnp.sum(used))
+    pivots = jnp.where(carried, pivot_of, -1)
+    return MaskedQR(jnp.stack(reflectors), r, rank, jnp.sum(used), pivots, jnp.sum(carried))
 
 
 def _apply_q(qr: MaskedQR, columns: Array) -> Array:
@@ -88,26 +103,29 @@ def apply_qt(qr: MaskedQR, vector: Array) -> Array:
 
 
 def leading(qr: MaskedQR, rotated: Array) -> Array:
-    """(m,) the pivot slots' entries of ``apply_qt``'s result (``Q1^T y``), in pivot order."""
-    num_cols = qr.reflectors.shape[0]
-    return jnp.stack([jnp.sum(jnp.where(qr.rank == j, rotated, 0.0)) for j in range(num_cols)])
+    """(m,) the pivot slots' entries of ``apply_qt``'s result (``Q1^T y``), in column order
+    (0 for a column without a pivot)."""
+    return jnp.sum(jnp.where(_pivot_units(qr), rotated[:, None], 0.0), axis=0)
+
+
+def _pivot_units(qr: MaskedQR) -> Array:
+    """(S, m) bool: slot ``s`` is column ``j``'s pivot."""
+    return (qr.rank[:, None] == qr.pivot[None, :]) & (qr.pivot[None, :] >= 0)
 
 
 def thin_q(qr: MaskedQR) -> Array:
-    """(S, m) ``Q1`` (zero rows at unused slots): ``Q`` applied to the pivots' unit vectors."""
-    num_cols = qr.reflectors.shape[0]
-    pivots = (qr.rank[:, None] == jnp.arange(num_cols)[None, :]).astype(qr.r.dtype)
-    return _apply_q(qr, pivots)
+    """(S, m) ``Q1`` (zero rows at unused slots, a zero column for a column without a
+    pivot): ``Q`` applied to the pivots' unit vectors."""
+    return _apply_q(qr, _pivot_units(qr).astype(qr.r.dtype))
 
 
 def parity_rows(qr: MaskedQR) -> tuple[Array, Array]:
-    """``(P, valid)``: P ((S - m), S), the orthonormal parity matrix of the used rows in its
-    first ``n - m`` rows (``valid``, (S - m,) bool); the other rows are zero."""
-    num_rows, num_cols = qr.reflectors.shape[1], qr.reflectors.shape[0]
-    index = jnp.arange(num_cols, num_rows)
-    units = (qr.rank[:, None] == index[None, :]).astype(qr.r.dtype)      # (S, S - m)
+    """``(P, valid)``: P (S, S), the orthonormal parity matrix of the used rows in its
+    ``n - num_pivots`` rows ``valid`` ((S,) bool); the other rows are zero."""
+    index = jnp.arange(qr.reflectors.shape[1])
+    units = (qr.rank[:, None] == index[None, :]).astype(qr.r.dtype)      # (S, S)
     complement = _apply_q(qr, units).T
-    valid = index < qr.num_used
+    valid = (index >= qr.num_pivots) & (index < qr.num_used)
     return jnp.where(valid[:, None], complement, 0.0), valid
 
 

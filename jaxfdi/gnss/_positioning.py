@@ -10,8 +10,13 @@ positions do not depend on the position estimate. Gauss-Newton from the Earth's 
 least-squares problem by the masked Householder QR of ``least_squares``; rows of unused
 slots are zero, so the shapes never depend on how many satellites are in view.
 
+Several constellations: one receiver clock per constellation (``clocks``, a slot's
+membership of each clock column), ``rho_i = |r_i - x| + b_c(i) - c dt_i + eps_i`` and
+``H = [-u_i^T, e_c(i)^T]``; a clock whose constellation has no used satellite stays at
+its start value and takes no degree of freedom (``least_squares``).
+
 The returned geometry is expressed in local North-East-Down axes at the solution and
-the clock column (``H_ned = [-u_ned^T, 1]``), which is what RAIM's slopes and the DOPs
+the clock columns (``H_ned = [-u_ned^T, e_c^T]``), which is what RAIM's slopes and the DOPs
 use: ``(H^T H)^{-1}`` gives ``HDOP = sqrt(q_NN + q_EE)``, ``VDOP = sqrt(q_DD)``,
 ``PDOP``, ``TDOP``, ``GDOP`` (Misra & Enge 2011, sec. 6.1.3).
 """
@@ -52,9 +57,9 @@ class PositionFix(NamedTuple):
 
     Attributes:
       position: (3,) ECEF [m]
-      clock_bias: () m, receiver clock bias
+      clock_bias: () m, receiver clock bias ((C,) with ``clocks``: one per constellation)
       residuals: (S,) measured minus predicted pseudorange at the solution [m]
-      geometry: (S, 4) [-u_ned^T, 1] at the solution ((S, 3 + c) with c clocks: raim.unknowns)
+      geometry: (S, 3 + C) [-u_ned^T, e_c^T] at the solution (C = 1: [-u_ned^T, 1])
       sigma: (S,) pseudorange standard deviations used as weights [m]
       used: (S,) bool, the slots in the solution
       num_used: () int, number of used slots
@@ -87,7 +92,7 @@ def transmit_states(orbit: Orbit, t_receive: Array, pseudoranges: Array) -> tupl
 
 def dops(geometry: Array, used: Array) -> Dops:
     """DOPs of an (S, 3 + clocks) NED + clock geometry over the ``used`` rows (unit
-    weights); TDOP is the first clock's.
+    weights); TDOP is the first clock's; a clock column without used rows is left out.
 
     Returns:
       ``Dops(gdop, pdop, hdop, vdop, tdop)``, each a () dimensionless array from the
@@ -97,21 +102,27 @@ def dops(geometry: Array, used: Array) -> Dops:
     """
     _checks.check_shape("used", used, _checks.shape_of(geometry)[:1], "one flag per geometry row")
     h = jnp.where(used[:, None], geometry, 0.0)
-    normal = h.T @ h
+    absent = _absent_columns(h)
+    normal = h.T @ h + jnp.diag(absent.astype(h.dtype))
     cov = _linalg.cho_solve(_linalg.cholesky(normal), jnp.eye(h.shape[1], dtype=h.dtype))
-    var = jnp.diagonal(cov)
+    var = jnp.where(absent, 0.0, jnp.diagonal(cov))
     return Dops(jnp.sqrt(jnp.sum(var)), jnp.sqrt(var[0] + var[1] + var[2]), jnp.sqrt(var[0] + var[1]),
                 jnp.sqrt(var[2]), jnp.sqrt(var[3]))
 
 
-def _predict(sat_tx: Array, sat_clock: Array, state: Array) -> tuple[Array, Array, Array]:
+def _absent_columns(h: Array) -> Array:
+    """(u,) bool: clock columns zero on every row (a constellation without used satellites)."""
+    return (jnp.arange(h.shape[1]) >= 3) & ~jnp.any(h != 0.0, axis=0)
+
+
+def _predict(sat_tx: Array, sat_clock: Array, state: Array, membership: Array) -> tuple[Array, Array, Array]:
     """Predicted pseudoranges, ECEF unit lines of sight and satellite positions (reception
-    frame) for ``state = [x, y, z, b]``."""
+    frame) for ``state = [x, y, z, b_1..b_C]`` and the (S, C) clock ``membership``."""
     travel = jnp.linalg.norm(sat_tx - state[:3], axis=-1) / SPEED_OF_LIGHT
     sat = earth_rotation(sat_tx, travel)
     delta = sat - state[:3]
     distance = jnp.linalg.norm(delta, axis=-1)
-    return distance + state[3] - SPEED_OF_LIGHT * sat_clock, delta / distance[:, None], sat
+    return distance + membership @ state[3:] - SPEED_OF_LIGHT * sat_clock, delta / distance[:, None], sat
 
 
 def solve_position(
@@ -127,6 +138,7 @@ def solve_position(
     solver: str = "normal",
     atmosphere: Atmosphere | None = None,
     mask_angle: float | None = None,
+    clocks: Array | None = None,
 ) -> PositionFix:
     """Iterated weighted least-squares fix of one epoch.
 
@@ -138,7 +150,7 @@ def solve_position(
       sigma: (S,) standard deviations [m], or a function of the (S,) elevations [rad]
         seen from the current estimate (applied after ``unweighted_iterations``), or
         ``None`` (unit weights).
-      initial: (4,) ``[x, y, z, b]`` start (default the Earth's centre, clock 0).
+      initial: (3 + C,) ``[x, y, z, b_1..b_C]`` start (default the Earth's centre, clocks 0).
       iterations: Gauss-Newton steps (fixed count, so it jits and vmaps).
       transmit: ``transmit_states(orbit, t_receive, pseudoranges)`` if already computed.
       solver: "normal" (the steps by the normal equations, a written-out 4 x 4 Cholesky:
@@ -149,14 +161,17 @@ def solve_position(
         weights their error variances (``atmosphere_corrections``): ``sigma^2 + var``.
       mask_angle: elevation mask [rad]: from the second step on, a slot below it as seen
         from the current estimate is not used (``None``: no mask).
+      clocks: (S, C) bool, slot ``s`` on receiver clock ``c`` (one True per row: its
+        constellation); ``None``: one clock for every slot. The clock bias is then (C,).
 
     Returns:
       ``PositionFix``: the (3,) ECEF position [m] and () clock bias [m] after ``iterations``
       steps; per slot (S,) the residuals (measured minus predicted) [m], the weights'
       standard deviations (1 at unused slots), the ``used`` flags (available, finite and
       above the mask), elevation and azimuth seen from the solution [rad]; the (S, 4) NED
-      + clock geometry ``[-u_ned^T, 1]`` (zero rows at unused slots), its ``dops``,
-      ``num_used`` and ``healthy`` (>= 4 used, finite and the last step below 1 cm).
+      + clock geometry ``[-u_ned^T, e_c^T]`` (zero rows at unused slots), its ``dops``,
+      ``num_used`` and ``healthy`` (at least 3 + the clocks in use, finite and the last
+      step below 1 cm).
     """
     if solver not in ("normal", "qr"):
         raise ValueError(f"solver: expected 'normal' or 'qr', got {solver!r}")
@@ -171,19 +186,25 @@ def solve_position(
     if mask_angle is not None and not (isinstance(mask_angle, (int, float))
                                        and -math.pi / 2 <= mask_angle < math.pi / 2):
         raise ValueError(f"mask_angle: expected an elevation in [-pi/2, pi/2) rad, got {mask_angle!r}")
+    if clocks is not None:
+        _checks.check_shape("clocks", clocks, (slots[0], None), "(S, C) bool: each slot's receiver clock")
     pseudoranges = jnp.asarray(pseudoranges)
     dtype = pseudoranges.dtype
+    membership = jnp.ones(slots + (1,), dtype) if clocks is None else jnp.asarray(clocks, bool).astype(dtype)
+    unknown = 3 + membership.shape[1]
+    if initial is not None:
+        _checks.check_shape("initial", initial, (unknown,), f"[x, y, z] and {unknown - 3} clock(s) [m]")
     measured = jnp.asarray(available, bool) & jnp.isfinite(pseudoranges)
     rho = jnp.where(measured, pseudoranges, 0.0)
     sat_tx, sat_clock = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
-    state0 = jnp.zeros(4, dtype) if initial is None else jnp.asarray(initial, dtype)
+    state0 = jnp.zeros(unknown, dtype) if initial is None else jnp.asarray(initial, dtype)
     ones = jnp.ones_like(rho)
     local = callable(sigma) or atmosphere is not None or mask_angle is not None  # angles needed every step
 
     def linearize(state, k):
         """Predicted pseudoranges, ECEF lines of sight, elevations and azimuths, standard
         deviations and the used slots at ``state`` in step ``k``."""
-        predicted, los, _ = _predict(sat_tx, sat_clock, state)
+        predicted, los, _ = _predict(sat_tx, sat_clock, state, membership)
         elevation = azimuth = None
         if local:
             elevation, azimuth = _look_angles(state, los)
@@ -199,26 +220,28 @@ def solve_position(
     def gauss_newton(k, carry):
         state, _ = carry
         predicted, los, _, _, std, used = linearize(state, k)
-        h = jnp.where(used[:, None], jnp.concatenate([-los, ones[:, None]], axis=1) / std[:, None], 0.0)
+        h = jnp.where(used[:, None], jnp.concatenate([-los, membership], axis=1) / std[:, None], 0.0)
         y = jnp.where(used, (rho - predicted) / std, 0.0)
         if solver == "qr":
             qr = masked_qr(h, used)
             step = _linalg.solve_upper(qr.r, leading(qr, apply_qt(qr, y)))
-        else:   # normal equations, 4 x 4 Cholesky written out (element-wise over a batch)
-            normal = jnp.einsum("si,sj->ij", h, h)
+        else:   # normal equations, Cholesky written out (element-wise over a batch)
+            normal = jnp.einsum("si,sj->ij", h, h) + jnp.diag(_absent_columns(h).astype(dtype))
             step = _linalg.cho_solve(_linalg.cholesky(normal), jnp.einsum("si,s->i", h, y))
         return state + step, step
 
-    state, step = jax.lax.fori_loop(0, int(iterations), gauss_newton, (state0, jnp.zeros(4, dtype)))
+    state, step = jax.lax.fori_loop(0, int(iterations), gauss_newton, (state0, jnp.zeros(unknown, dtype)))
     predicted, los, elevation, azimuth, std, used = linearize(state, int(iterations))
     los_ned = los @ _ned_at(state).T
     if not local:
         elevation, azimuth = _look_angles(state, los)
-    geometry = jnp.where(used[:, None], jnp.concatenate([-los_ned, ones[:, None]], axis=1), 0.0)
+    geometry = jnp.where(used[:, None], jnp.concatenate([-los_ned, membership], axis=1), 0.0)
     num_used = jnp.sum(used)
-    healthy = (num_used >= 4) & jnp.all(jnp.isfinite(state)) & (jnp.linalg.norm(step[:3]) < 1e-2)
+    clocks_in_use = jnp.sum(jnp.any(used[:, None] & (membership > 0), axis=0))
+    healthy = (num_used >= 3 + clocks_in_use) & jnp.all(jnp.isfinite(state)) & (jnp.linalg.norm(step[:3]) < 1e-2)
     return PositionFix(
-        position=state[:3], clock_bias=state[3], residuals=jnp.where(used, rho - predicted, 0.0),
+        position=state[:3], clock_bias=state[3] if clocks is None else state[3:],
+        residuals=jnp.where(used, rho - predicted, 0.0),
         geometry=geometry, sigma=jnp.where(used, std, 1.0), used=used, num_used=num_used,
         elevation=jnp.where(used, elevation, 0.0), azimuth=jnp.where(used, azimuth, 0.0),
         dops=dops(geometry, used), healthy=healthy)

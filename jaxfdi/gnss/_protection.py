@@ -11,7 +11,8 @@ position error per unit ``sqrt(noncentrality)``, is
 (eq. 10 times ``sigma``: with equal sigmas ``SLOPE(i) sigma``), the vertical one uses
 ``|A_D,i|``. The bias the test misses with probability ``P_md`` has noncentrality
 ``lambda`` (``noncentral_chi2.noncentrality_for_missed_detection`` at the detection
-threshold, ``n - u`` degrees of freedom, ``u`` the fix's unknowns: ``raim.unknowns``), so
+threshold, ``n - u`` degrees of freedom, ``u`` the unknowns the used satellites carry:
+3 and a clock per constellation in view), so
 the protection levels are
 
 ``HPL = max_i SLOPE_H(i) sqrt(lambda)``, ``VPL = max_i SLOPE_V(i) sqrt(lambda)``
@@ -37,7 +38,7 @@ from jax import Array
 from jaxfdi import _checks, _linalg
 from jaxfdi.gnss._least_squares import MaskedQR, masked_qr, parity_column_norms, thin_q
 from jaxfdi.gnss._positioning import PositionFix
-from jaxfdi.gnss._raim import RaimTables, check_tables, unknowns, whitened
+from jaxfdi.gnss._raim import RaimTables, check_tables, whitened
 
 #: (horizontal, vertical) alert limits [m]; inf: no vertical requirement
 ALERT_LIMITS = {
@@ -105,7 +106,7 @@ def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tup
     root, observable = parity_column_norms(q1, fix.used)  # sqrt(S_ii)
     slope_h = jnp.where(observable, jnp.hypot(gain[0], gain[1]) / root, 0.0)
     slope_v = jnp.where(observable, jnp.abs(gain[2]) / root, 0.0)
-    dof = jnp.maximum(qr.num_used - unknowns(fix), 0)
+    dof = jnp.maximum(qr.num_used - qr.num_pivots, 0)
     lam = tables.noncentrality[jnp.minimum(dof, tables.noncentrality.shape[0] - 1)]
     scale = jnp.where(dof > 0, jnp.sqrt(lam), jnp.inf)
     hpl = jnp.where(dof > 0, jnp.max(slope_h) * scale, jnp.inf)

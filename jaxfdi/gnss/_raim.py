@@ -3,15 +3,15 @@
 Linearised at the least-squares fix, ``y = H x + eps`` (``H`` n x u: position and
 ``u - 3`` receiver clocks, one per constellation; ``u = 4`` for GPS alone). With the QR
 decomposition of the *whitened* geometry ``W^(1/2) H = Q R`` (``W = diag(1/sigma_i^2)``),
-the last ``n - u`` columns of ``Q`` give the parity matrix ``P`` ((n - u) x n):
+the last ``n - u`` columns of ``Q`` give the parity matrix ``P`` ((n - u) x n; ``u``
+counts the clocks of the constellations with a used satellite):
 ``P H_w = 0``, ``P P^T = I``, and the parity vector ``p = P y_w = P eps_w``. Fault-free,
 ``p ~ N(0, I)``, so the detection statistic ``TS_D = p^T p`` is chi-square with
 ``n - u`` degrees of freedom (the weighted sum of squared residuals, Walter & Enge
 1995); equal sigmas give the paper's ``||p||^2 / sigma^2``. The parity space is the
 sensors' one (``detection.parity``: ``P`` a basis of the left null space of ``H_w``,
-``TS_D`` its ``parity_statistic``), formed by QR on the used slots. ``u`` is the fix's number of
-geometry columns, so a second clock costs a degree of freedom (and raises the threshold
-and the protection level) wherever the fix carries one.
+``TS_D`` its ``parity_statistic``), formed by QR on the used slots. A second clock costs a degree of freedom (and raises
+the threshold and the protection level) wherever it has a satellite.
 
 - **Threshold** ``chi2_threshold(n - 4, P_fa)`` (``rule="chi2"``). ``rule="paper"`` uses
   eq. 8 of Yoo et al. (2010), ``sqrt(2 ln(1/r) sigma^2 / (n - 4))``, read as a bound on the RMS parity
@@ -125,8 +125,10 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
 
 
 def unknowns(fix: PositionFix) -> int:
-    """``u``: the fix's unknowns, 3 position coordinates and one clock per geometry column
-    after them (trace time; at least 4)."""
+    """The fix's geometry columns: 3 position coordinates and one clock per column after
+    them (trace time; at least 4). ``u`` of an epoch counts only the clocks with a used
+    satellite (``MaskedQR.num_pivots``): a constellation out of view costs no degree of
+    freedom."""
     shape = _checks.shape_of(fix.geometry)
     if len(shape) != 2 or shape[1] < 4:
         raise ValueError(f"fix.geometry: expected (S, 3 + clocks) with at least one clock column, got shape {shape}")
@@ -139,7 +141,8 @@ def check_tables(tables: RaimTables, fix: PositionFix) -> None:
     threshold and a protection level smaller than the true ones, with nothing to say so."""
     slots = _checks.shape_of(fix.used)[0]
     size = _checks.shape_of(tables.threshold)[0]
-    most = slots - unknowns(fix)
+    unknowns(fix)
+    most = slots - 4          # every used satellite on one clock
     if size < most + 1:
         raise ValueError(f"tables: built for {size + 3} satellite slots (raim_tables({size + 3})), but the fix has "
                          f"{slots}: up to {most} degrees of freedom need raim_tables({most + 4}) or more")
@@ -170,12 +173,11 @@ def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = Non
       ``TS_D``).
     """
     check_tables(tables, fix)
-    u = unknowns(fix)
     h, y = whitened(fix)
     qr = masked_qr(h, fix.used) if qr is None else qr
     q1 = thin_q(qr)
     rotated = apply_qt(qr, y)                            # parity vector at used non-pivot slots
-    num = qr.num_used
+    num, u = qr.num_used, qr.num_pivots
     dof = jnp.maximum(num - u, 0)
     statistic = jnp.where(dof > 0, parity_statistic(rotated, qr.rank >= u), 0.0)
     projected = y - q1 @ (q1.T @ y)                       # S y_w = P^T p

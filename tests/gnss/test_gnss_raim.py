@@ -104,20 +104,26 @@ def random_geometry(rng, n, slots=32):
 def test_parity_matrix_and_statistics_match_numpy(clocks):
     """Against a NumPy complete QR of the visible rows; ``clocks = 2``: a second receiver
     clock (a second constellation: half the slots), u = 5 unknowns, so n - 5 degrees of
-    freedom and the threshold and protection level of n - 5."""
+    freedom and the threshold and protection level of n - 5; where one constellation has
+    no satellite in view its clock is no unknown (the reference drops the column: u = 4)."""
     rng = np.random.default_rng(3)
     tables = raim_tables(32)
     explicit = jax.jit(lambda h, used, y: parity_matrix(synthetic_fix(h, used, y)))
     check = jax.jit(lambda h, used, y: parity_check(synthetic_fix(h, used, y), tables))
     levels = jax.jit(lambda h, used, y: protection_levels(synthetic_fix(h, used, y), tables))
-    u = 3 + clocks
-    for n in (u + 1, u + 2, 9, 13, 32):
-        h, used = random_geometry(rng, n)
+    cases = [(n, None) for n in (3 + clocks + 1, 3 + clocks + 2, 9, 13, 32)]
+    if clocks == 2:
+        cases += [(n, 2) for n in (5, 6, 9)]      # every used satellite on the first clock
+    for n, only in cases:
+        h, used = random_geometry(rng, n, slots=32 if only is None else 16)
+        u = 3 + clocks
         if clocks == 2:   # slots 16-31 on the second clock
+            if only is not None:
+                h, used = np.concatenate([h, h]), np.concatenate([used, np.zeros(16, bool)])
             second = np.arange(32) >= 16
             h = np.concatenate([h[:, :3], (~second)[:, None] * 1.0, second[:, None] * 1.0], axis=1)
             if not (used & second).any() or not (used & ~second).any():
-                continue
+                u = 4
         y = rng.normal(size=32) * 3.0
         P, valid = map(np.asarray, explicit(h, used, y))
         Pv = P[valid]
@@ -127,6 +133,7 @@ def test_parity_matrix_and_statistics_match_numpy(clocks):
         assert np.all(Pv[:, ~used] == 0.0) and np.all(P[~valid] == 0.0)
         # NumPy reference on the visible rows only (complete QR, the paper's construction)
         hv, yv = h[used], y[used]
+        hv = hv[:, np.any(hv != 0.0, axis=0)]                # a clock out of view is no unknown
         q, _ = np.linalg.qr(hv, mode="complete")
         p_ref = q[:, u:].T @ yv
         result = check(h, used, y)

@@ -400,7 +400,9 @@ def _gnss_real_header(cfg: dict, args: argparse.Namespace) -> str:
     return (f"gnss-real: GPS integrity on real receivers, GEONET stations {' and '.join(cfg['stations'])} "
             f"({cfg['data']}, 30 s), RTKLIB's single-point model, {cfg['mask_deg']:.0f} deg mask, parity test "
             f"P_fa {cfg['pfa']:g}, slope PLs P_md {cfg['pmd']:g}, solution-separation PLs (ARAIM LPV-200); faults "
-            f"injected into station {cfg['fault_station']}, {args.runs} trials per size and rate")
+            f"injected into station {cfg['fault_station']}, {args.runs} trials per size and rate; "
+            f"{len(cfg['phones'])} smartphone traces (GSDC 2021-2023), every constellation, a clock per "
+            "constellation, beside Google's fixes and gnss_lib_py's FDE")
 
 
 def _gps_ins_header(cfg: dict, args: argparse.Namespace) -> str:
@@ -433,7 +435,8 @@ RUNNERS = {
     "gnss-campus": Runner(_run_gnss_campus, "Yoo et al. (2010) GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
                                             "park satellite faults detected, isolated and excluded"),
     "gnss-real": Runner(_run_gnss_real, "GEONET stations (real GPS, one hour): positions beside RTKLIB's, slope and "
-                                        "solution-separation PLs (Stanford diagrams), injected step and ramp faults"),
+                                        "solution-separation PLs (Stanford diagrams), injected step and ramp faults; "
+                                        "smartphones (every constellation) beside Google and gnss_lib_py"),
     "vtol": Runner(_run_vtol, "Lee & Lyou VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
                               "fault-tolerant control", methods=_vtol_method_names),
 }

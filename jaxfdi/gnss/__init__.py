@@ -1,20 +1,24 @@
 """GNSS integrity (Yoo et al. 2010, GPS half): almanac and RINEX readers, broadcast orbits,
 WGS-84 frames, simulated pseudoranges with masks and faults, snapshot least squares,
 broadcast atmospheric corrections, parity RAIM with isolation and exclusion, protection
-levels and availability, and real receivers' observation files through the same chain.
+levels and availability, and real receivers' observation files and smartphone traces
+through the same chain, one receiver clock per constellation.
 
-Modules: ``yuma``, ``rinex`` and ``rinex_obs`` (readers), ``orbits`` (IS-GPS-200),
+Modules: ``yuma``, ``rinex``, ``rinex_obs`` and ``android`` (readers), ``orbits`` (IS-GPS-200),
 ``frames`` (WGS-84), ``atmosphere`` (Klobuchar, Saastamoinen), ``paths`` (UAV circuits),
 ``measurements`` (visibility, noise, receiver plant), ``least_squares`` (masked
 Householder QR), ``positioning`` (WLS, DOPs), ``raim`` (parity test, isolation),
-``protection`` (slopes, HPL/VPL, availability), ``integrity`` (one epoch end to end, the
-loop's FDI stage, availability over grids), ``receiver`` (an observation file's epochs).
+``protection`` (slopes, HPL/VPL, availability), ``solution_separation`` (ARAIM's
+levels), ``integrity`` (one epoch end to end, the loop's FDI stage, availability over
+grids), ``receiver`` (a real receiver's epochs: observation files and phones).
 """
+from jaxfdi.gnss._android import read_android
 from jaxfdi.gnss._frames import ecef_to_geodetic, geodetic_to_ecef
 from jaxfdi.gnss._integrity import monitor_epochs, raim_fdi
 from jaxfdi.gnss._orbits import satellite_position
-from jaxfdi.gnss._positioning import PositionFix, solve_position
-from jaxfdi.gnss._protection import ProtectionLevels, protection_levels
+from jaxfdi.gnss._positioning import solve_position
+from jaxfdi.gnss._protection import protection_levels
+from jaxfdi.gnss._receiver import monitor_receiver
 from jaxfdi.gnss._raim import parity_check
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._rinex_obs import read_rinex_obs
@@ -23,15 +27,15 @@ from jaxfdi.gnss._yuma import read_yuma
 __all__ = [
     "read_rinex_nav",
     "read_rinex_obs",
+    "read_android",
     "read_yuma",
     "satellite_position",
     "ecef_to_geodetic",
     "geodetic_to_ecef",
     "solve_position",
-    "PositionFix",
     "parity_check",
     "raim_fdi",
     "protection_levels",
-    "ProtectionLevels",
     "monitor_epochs",
+    "monitor_receiver",
 ]

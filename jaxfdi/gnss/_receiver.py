@@ -14,6 +14,11 @@ L1 C/A user), Klobuchar and Saastamoinen delays, a 15 deg elevation mask, and we
 (URA of the ephemeris, code bias 0.3 m, RTKLIB's default code error
 ``100 x (3 mm + 3 mm / sqrt(sin E))`` in variance form, the atmosphere's model errors:
 ``atmosphere_corrections``).
+
+``monitor_phone`` runs the same chain on a smartphone trace (``read_android``), whose
+files carry the satellite positions and corrected pseudoranges: no orbits, no
+atmosphere; one receiver clock per constellation and the phone's own pseudorange
+uncertainty as the weights' standard deviations.
 """
 from __future__ import annotations
 
@@ -26,8 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from jaxfdi.gnss._android import PhoneEpochs
 from jaxfdi.gnss._atmosphere import Atmosphere, broadcast_atmosphere
-from jaxfdi.gnss._integrity import EpochIntegrity, monitor_epochs
+from jaxfdi.gnss._integrity import EpochIntegrity, monitor_epoch, monitor_epochs
 from jaxfdi.gnss._orbits import OrbitTable, ephemeris_table
 from jaxfdi.gnss._raim import RaimTables, raim_tables
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides
@@ -114,20 +120,40 @@ def code_sigma(ura: Array):
     return sigma
 
 
-def monitor_receiver(epochs: ReceiverEpochs, tables: RaimTables | None = None, mask_angle: float = MASK_ANGLE,
+def monitor_receiver(measurements: Observations | ReceiverEpochs | PhoneEpochs, ephemerides: Ephemerides | None = None,
+                     tables: RaimTables | None = None, mask_angle: float | None = None, clocks: str = "constellation",
                      operation="npa", exclude: bool = True) -> EpochIntegrity:
-    """Fix, RAIM, protection levels and exclusion of every epoch of a receiver, with the
-    single-point measurement model (module docstring).
+    """Fix, RAIM, protection levels and exclusion of every epoch of a real receiver
+    (module docstring).
 
     Args:
-      epochs: ``receiver_epochs``.
+      measurements: an observation file (``read_rinex_obs``, with its ``ephemerides``
+        from ``read_rinex_nav``: GPS, RTKLIB's single-point model), the same aligned
+        (``receiver_epochs``), or a phone trace (``read_android``: every constellation).
       tables: ``raim_tables`` (default: of the slots, ``P_fa = 1e-3``, ``P_md = 1e-3``).
-      mask_angle: elevation mask [rad].
+      mask_angle: elevation mask [rad]; ``None``: 15 deg for an observation file
+        (RTKLIB's), none for a phone (as Google's and gnss_lib_py's solutions).
+      clocks: a phone's receiver clocks: "constellation" (one per constellation,
+        ``n - 3 - C`` degrees of freedom with C in view) or "one" (the files'
+        inter-signal biases taken as exact); an observation file is GPS alone.
       operation, exclude: as for ``monitor_epochs``.
 
     Returns:
-      ``EpochIntegrity`` with a leading (E,) axis on every leaf.
+      ``EpochIntegrity`` with a leading epoch axis on every leaf (a phone's
+      ``fix.clock_bias`` (T, C), in ``PhoneEpochs.clocks`` order, with per-constellation clocks).
     """
+    if isinstance(measurements, PhoneEpochs):
+        return _monitor_trace(measurements, tables, clocks, mask_angle, operation, exclude)
+    if isinstance(measurements, Observations):
+        if not isinstance(ephemerides, Ephemerides):
+            raise ValueError("ephemerides: expected the navigation file's records (read_rinex_nav) for an observation "
+                             f"file, got {type(ephemerides).__name__}")
+        measurements = receiver_epochs(measurements, ephemerides)
+    if not isinstance(measurements, ReceiverEpochs):
+        raise TypeError("measurements: expected read_rinex_obs's Observations, receiver_epochs' ReceiverEpochs or "
+                        f"read_android's PhoneEpochs, got {type(measurements).__name__}")
+    epochs = measurements
+    mask_angle = MASK_ANGLE if mask_angle is None else mask_angle
     slots = int(epochs.pseudoranges.shape[1])
     tables = raim_tables(max(slots, 5), pfa=1e-3, pmd=1e-3) if tables is None else tables
     return _monitor(epochs.table, epochs.times, epochs.pseudoranges, epochs.ura, epochs.atmosphere, tables,
@@ -138,3 +164,31 @@ def monitor_receiver(epochs: ReceiverEpochs, tables: RaimTables | None = None, m
 def _monitor(table, times, pseudoranges, ura, atmosphere, tables, mask_angle, operation, exclude):
     return monitor_epochs(table, times, pseudoranges, tables, sigma=code_sigma(ura), operation=operation,
                           exclude=exclude, atmosphere=atmosphere, mask_angle=mask_angle)
+
+
+def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, exclude) -> EpochIntegrity:
+    """``monitor_epoch`` vmapped over a phone's epochs with the files' satellite positions at
+    transmission and corrected pseudoranges, weights from the phone's uncertainty."""
+    if clocks not in ("constellation", "one"):
+        raise ValueError(f"clocks: expected 'constellation' or 'one', got {clocks!r}")
+    slots = len(phone.signal)
+    tables = raim_tables(max(slots, 5), pfa=1e-3, pmd=1e-3) if tables is None else tables
+    dtype = jnp.result_type(float)
+    membership = jnp.asarray(phone.clocks()) if clocks == "constellation" else None
+    return _monitor_phone(jnp.asarray(phone.satellite, dtype), jnp.asarray(phone.pseudorange, dtype),
+                          jnp.asarray(phone.sigma, dtype), membership, tables,
+                          None if mask_angle is None else float(mask_angle),
+                          operation if isinstance(operation, str) else tuple(operation), bool(exclude))
+
+
+@functools.partial(jax.jit, static_argnames=("mask_angle", "operation", "exclude"))
+def _monitor_phone(satellite, pseudoranges, uncertainty, membership, tables, mask_angle, operation, exclude):
+    def one(sat, rho, sig):
+        # a slot without a satellite position or an uncertainty cannot be used: not measured
+        rho = jnp.where(jnp.all(jnp.isfinite(sat), axis=1) & (sig > 0), rho, jnp.nan)
+        sat = jnp.where(jnp.isfinite(sat), sat, 0.0)
+        sig = jnp.where(jnp.isfinite(rho), sig, 1.0)
+        available = jnp.isfinite(rho)
+        return monitor_epoch(None, available, 0.0, rho, tables, sig, operation, exclude,
+                             transmit=(sat, jnp.zeros_like(rho)), mask_angle=mask_angle, clocks=membership)
+    return jax.vmap(one)(satellite, pseudoranges, uncertainty)

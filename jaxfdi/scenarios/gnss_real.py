@@ -1,4 +1,5 @@
-"""Real receivers: GPS integrity on an hour of two GEONET stations, beside RTKLIB.
+"""Real receivers: GPS integrity on an hour of two GEONET stations, beside RTKLIB, and
+every constellation on four smartphone traces, beside Google and gnss_lib_py.
 
 Data: GEONET stations 0759 and 3040 (GSI, Japan; 3.3 km apart), 2005-04-02
 00:00-00:59:30 GPST, 30 s, Trimble 5700, RINEX 2.10 with the broadcast ephemerides
@@ -24,6 +25,21 @@ levels (``solution_separation``: ARAIM's LPV-200 budgets, ``P_sat = 1e-5``).
   slope protection level assumes (``1 - P_md`` is promised there); the ramp rows the
   detection within the hour, the delay and the bias at detection beside that epoch's
   minimum detectable bias.
+- **phones**: four traces of Google's Smartphone Decimeter Challenge (2021-2023, GPS,
+  GLONASS, Galileo, BeiDou, QZSS; shipped in ``jaxfdi/data``) through
+  ``gnss.monitor_receiver``: one receiver clock per constellation, the phone's own
+  pseudorange uncertainty as sigma, no mask, the same tests and levels. Per trace: the
+  alarms and the median ``TS_D / dof`` (1 when the phone's uncertainties are right),
+  the delivered fix (after exclusion) against Google's weighted-least-squares one and
+  against the ground truth, both protection levels and misleading epochs where there
+  is truth.
+- **phone-peers** (when gnss_lib_py is installed): the same epochs through gnss_lib_py
+  1.1's ``solve_wls`` (unit weights, one clock) against ours in that configuration, and
+  its residual fault detection and exclusion (Blanch, Walter & Enge 2015, greedy, one
+  fault) against our parity test and exclusion at the same threshold on the same
+  unweighted statistic: the agreement table. gnss_lib_py's exclusion statistic divides
+  by ``1 - h_ii`` of the geometry without its clock column; ``explained`` counts the
+  differing exclusions that its own formula with the clock column would have made ours.
 """
 from __future__ import annotations
 
@@ -36,8 +52,11 @@ import numpy as np
 
 from jaxfdi._frame import study_result
 from jaxfdi._metrics import rate_interval
+from jaxfdi._progress import status
 from jaxfdi.data import data_path
 from jaxfdi.gnss._frames import ecef_to_ned
+from jaxfdi.gnss._android import PhoneEpochs, read_android
+from jaxfdi.gnss._raim import raim_tables
 from jaxfdi.gnss._receiver import ReceiverEpochs, monitor_receiver, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._rinex_obs import read_rinex_obs
@@ -53,6 +72,15 @@ STEP_SIZES = (10.0, 20.0, 30.0, 50.0, 100.0)          # m
 RAMP_RATES = (0.05, 0.1, 0.2, 0.5)                    # m/s
 #: RTKLIB's largest GDOP for a solution (pos1-maxgdop): epochs beyond it are not scored
 MAX_GDOP = 30.0
+#: the phone traces: label -> (measurement file, ground-truth file or None) in jaxfdi/data
+PHONES = {
+    "GSDC 2021 Pixel 4 XL": ("gsdc2021_Pixel4XL_derived.csv", None),
+    "GSDC 2021 Pixel 4": ("gsdc2021_Pixel4_derived.csv", "gsdc2021_Pixel4_ground_truth.csv"),
+    "GSDC 2022": ("gsdc2022_device_gnss.csv", "gsdc2022_ground_truth.csv"),
+    "GSDC 2023 Pixel 7 Pro": ("gsdc2023_device_gnss.csv", "gsdc2023_ground_truth.csv"),
+}
+#: gnss_lib_py's default residual threshold [m^2] (``fde_greedy_residual``), used by both sides of the agreement table
+PEER_THRESHOLD = 3000.0
 
 
 @study_result(group="section")
@@ -158,6 +186,108 @@ def _position_row(station: str, result, separation, truth: np.ndarray, times: np
     return row, arrays
 
 
+def load_phone(label: str) -> PhoneEpochs:
+    """The phone trace ``label`` of ``PHONES`` (with its ground truth where there is one)."""
+    measurements, truth = PHONES[label]
+    return read_android(data_path(measurements), None if truth is None else data_path(truth))
+
+
+def _phone_row(label: str, phone: PhoneEpochs, result, separation) -> tuple[dict, dict]:
+    """The ``phones`` row of a trace and its per-epoch arrays (module docstring)."""
+    excluded = result.excluded >= 0
+    delivered = np.where(excluded[:, None], result.fix_excluded.position, result.fix.position)
+    alarm, dof = result.check.alarm, result.check.dof
+    low, high = rate_interval(int(alarm.sum()), int(alarm.size), 0.95)
+    hpl, vpl = result.protection.hpl, result.protection.vpl
+    row = {"section": "phones", "trace": label, "epochs": int(alarm.size),
+           "measurements": int(result.fix.num_used.sum()), "constellations": "".join(np.unique(phone.constellation)),
+           "dof_median": float(np.median(dof)), "parity_alarms": int(alarm.sum()), "alarm_rate_low": low,
+           "alarm_rate_high": high, "exclusions": int(excluded.sum()), "ss_alarms": int(separation.alarm.sum()),
+           "statistic_per_dof_median": float(np.median(result.check.statistic / np.maximum(dof, 1))),
+           "hpl_median_m": float(np.median(hpl)), "ss_hpl_median_m": float(np.median(separation.hpl))}
+    google = np.all(np.isfinite(phone.wls_position), axis=1)
+    row["google_difference_median_m"] = (float(np.median(np.linalg.norm(delivered - phone.wls_position, axis=1)[google]))
+                                         if google.any() else float("nan"))
+    truth = np.all(np.isfinite(phone.truth), axis=1)
+    arrays = {"alarm": alarm, "hpl": hpl, "vpl": vpl, "ss_hpl": separation.hpl, "ss_vpl": separation.vpl,
+              "truth": truth}
+    row["truth_epochs"] = int(truth.sum())
+    if truth.any():
+        horizontal, vertical = local_errors(delivered[truth], phone.truth[truth])
+        fix_h, fix_v = local_errors(result.fix.position[truth], phone.truth[truth])
+        row.update({"horizontal_error_median_m": float(np.median(horizontal)),
+                    "horizontal_error_max_m": float(horizontal.max()),
+                    "vertical_error_median_m": float(np.median(vertical)), "vertical_error_max_m": float(vertical.max())})
+        if google[truth].all():
+            g_h, g_v = local_errors(phone.wls_position[truth], phone.truth[truth])
+            row.update({"google_horizontal_error_median_m": float(np.median(g_h)),
+                        "google_vertical_error_median_m": float(np.median(g_v))})
+        quiet = ~alarm[truth]
+        row["misleading_slope"] = int(np.sum(quiet & ((fix_h > hpl[truth]) | (fix_v > vpl[truth]))))
+        row["misleading_ss"] = int(np.sum(quiet & ((fix_h > separation.hpl[truth]) | (fix_v > separation.vpl[truth]))))
+        arrays.update({"horizontal_error": fix_h, "vertical_error": fix_v})
+    return row, arrays
+
+
+def _peer_navdata(phone: PhoneEpochs):
+    """gnss_lib_py's NavData of the trace's usable measurements, with their (epoch, slot)."""
+    from gnss_lib_py.navdata.navdata import NavData
+
+    at, slot = np.nonzero(np.isfinite(phone.pseudorange) & np.all(np.isfinite(phone.satellite), axis=2)
+                          & (phone.sigma > 0))
+    nav = NavData()
+    nav["gps_millis"] = phone.gps_millis[at].astype(float)
+    nav["corr_pr_m"] = phone.pseudorange[at, slot]
+    for i, axis in enumerate("xyz"):
+        nav[f"{axis}_sv_m"] = phone.satellite[at, slot, i]
+    nav["b_sv_m"] = np.zeros(at.size)
+    return nav, at, slot
+
+
+def _peer_row(label: str, phone: PhoneEpochs) -> dict | None:
+    """The ``phone-peers`` row of a trace (module docstring); ``None`` without gnss_lib_py."""
+    try:
+        from gnss_lib_py.algorithms.fde import solve_fde
+        from gnss_lib_py.algorithms.snapshot import solve_wls
+    except ImportError:
+        return None
+    import warnings
+
+    nav, at, slot = _peer_navdata(phone)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        state = solve_wls(nav)
+        faults = np.asarray(solve_fde(nav, method="residual", threshold=PEER_THRESHOLD, max_faults=1)["fault_residual"])
+    theirs_position = np.stack([np.asarray(state[f"{axis}_rx_wls_m"]) for axis in "xyz"], axis=1)
+    epochs = phone.gps_millis.size
+    unit = phone._replace(sigma=np.where(np.isfinite(phone.sigma), 1.0, np.nan))
+    slots = len(phone.signal)
+    tables = raim_tables(max(slots, 5))
+    tables = tables._replace(threshold=jnp.where(jnp.arange(tables.threshold.shape[0]) > 0, PEER_THRESHOLD, jnp.inf))
+    ours = jax.tree_util.tree_map(np.asarray, monitor_receiver(unit, tables=tables, clocks="one"))
+    theirs_excluded = np.full(epochs, -1)
+    theirs_excluded[at[faults == 1]] = slot[faults == 1]
+    theirs_alarm = theirs_excluded >= 0
+    ours_alarm, ours_excluded = ours.check.alarm, ours.excluded
+    both = ours_alarm & theirs_alarm
+    differ = both & (ours_excluded != theirs_excluded)
+    explained = 0
+    for k in np.flatnonzero(differ):   # gnss_lib_py's normalised residual with and without the clock column
+        used = ours.fix.used[k]
+        r, h = ours.fix.residuals[k][used], ours.fix.geometry[k][used]
+        lever = lambda g: np.einsum("ij,jk,ik->i", g, np.linalg.inv(g.T @ g), g)  # noqa: E731
+        slots_k = np.flatnonzero(used)
+        without_clock = slots_k[np.argmax(r**2 / (1.0 - lever(h[:, :3])))]
+        with_clock = slots_k[np.argmax(r**2 / (1.0 - lever(h)))]
+        explained += int(without_clock == theirs_excluded[k] and with_clock == ours_excluded[k])
+    return {"section": "phone-peers", "trace": label, "epochs": epochs,
+            "wls_max_difference_m": float(np.max(np.linalg.norm(ours.fix.position - theirs_position, axis=1))),
+            "threshold_m2": PEER_THRESHOLD, "both_alarm": int(both.sum()),
+            "jaxfdi_only": int((ours_alarm & ~theirs_alarm).sum()), "gnss_lib_py_only": int((~ours_alarm & theirs_alarm).sum()),
+            "neither": int((~ours_alarm & ~theirs_alarm).sum()), "same_exclusion": int((both & ~differ).sum()),
+            "different_exclusion": int(differ.sum()), "explained": explained}
+
+
 def _trials(result, runs: int, seed: int, last: int) -> tuple[np.ndarray, np.ndarray]:
     """``runs`` (epoch, slot) pairs drawn among the scored epochs before ``last`` and the
     slots each fix uses."""
@@ -196,7 +326,7 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
         rows.append(row)
         epochs_out[station] = arrays
         if progress:
-            print(f"gnss-real: station {station}: {row['scored_epochs']} epochs scored", flush=True)
+            status(f"gnss-real: station {station}: {row['scored_epochs']} epochs scored")
 
     epochs, clean = loaded[FAULT_STATION]
     rho = np.asarray(epochs.pseudoranges)
@@ -221,7 +351,7 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
                      "detection_rate_at_or_above_mdb": float(detected[above].mean()) if above.any() else float("nan"),
                      "detection_rate_at_or_above_mdb_low": low, "detection_rate_at_or_above_mdb_high": high})
         if progress:
-            print(f"gnss-real: step {size:g} m: detection {detected.mean():.3f}", flush=True)
+            status(f"gnss-real: step {size:g} m: detection {detected.mean():.3f}")
 
     last = rho.shape[0] - 10   # a ramp has ten epochs (5 min) or more to grow
     at, slot = _trials(clean, runs, seed + 1, last=last)
@@ -245,10 +375,24 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
                      "bias_at_detection_min_m": float(bias.min()) if bias.size else float("nan"),
                      "mdb_at_detection_median_m": float(np.median(mdb)) if mdb.size else float("nan")})
         if progress:
-            print(f"gnss-real: ramp {rate:g} m/s: detection {detected.mean():.3f}", flush=True)
+            status(f"gnss-real: ramp {rate:g} m/s: detection {detected.mean():.3f}")
+
+    for label in PHONES:
+        phone = load_phone(label)
+        result = jax.tree_util.tree_map(np.asarray, monitor_receiver(phone))
+        separation = jax.tree_util.tree_map(np.asarray, separate(result.fix))
+        row, arrays = _phone_row(label, phone, result, separation)
+        rows.append(row)
+        epochs_out[label] = arrays
+        peers = _peer_row(label, phone)
+        if peers is not None:
+            rows.append(peers)
+        if progress:
+            status(f"gnss-real: {label}: {row['epochs']} epochs, {row['parity_alarms']} alarms")
     config = {"stations": list(STATIONS), "fault_station": FAULT_STATION, "runs": runs, "seed": seed,
               "mask_deg": 15.0, "pfa": 1e-3, "pmd": 1e-3, "max_gdop": MAX_GDOP,
-              "data": "GEONET 2005-04-02 00:00-01:00 GPST"}
+              "data": "GEONET 2005-04-02 00:00-01:00 GPST; GSDC 2021-2023 phone traces", "phones": list(PHONES),
+              "phone_clocks": "one per constellation", "phone_mask_deg": None}
     return GnssRealStudy(config, rows, epochs_out)
 
 
@@ -260,25 +404,36 @@ def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
 
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 6.0), layout="constrained")
+    fig = Figure(figsize=(COLUMN_WIDTH_IN, 6.5), layout="constrained")
     axes = fig.subplots(2, 2)
-    count = sum(int((arrays["gdop"] <= MAX_GDOP).sum()) for arrays in study.epochs.values())
+    count = sum(int((study.epochs[station]["gdop"] <= MAX_GDOP).sum()) for station in STATIONS)
+    phones = {label: arrays for label, arrays in study.epochs.items() if label in PHONES and arrays["truth"].any()}
+    count_phones = sum(int(arrays["truth"].sum()) for arrays in phones.values())
     for row, (method, prefix) in enumerate((("slope", ""), ("solution separation", "ss_"))):
         for col, (axis, error) in enumerate((("horizontal", "horizontal_error"), ("vertical", "vertical_error"))):
             ax = axes[row, col]
             level = prefix + ("hpl" if axis == "horizontal" else "vpl")
-            for station, arrays in study.epochs.items():
+            for station in STATIONS:
+                arrays = study.epochs[station]
                 scored = arrays["gdop"] <= MAX_GDOP
                 ax.loglog(arrays[error][scored], arrays[level][scored], ".", ms=3, label=f"station {station}")
-            ax.plot((10.0, 1e3), (10.0, 1e3), "k-", lw=0.8, label="error = PL")
-            ax.fill_between((10.0, 1e3), (10.0, 10.0), (10.0, 1e3), color="r", alpha=0.1,
+            for label, arrays in phones.items():
+                truth = arrays["truth"]
+                alarm = arrays["alarm"][truth]
+                ax.loglog(arrays[error], arrays[level][truth], "x", ms=4, label=label)
+                ax.loglog(arrays[error][alarm], arrays[level][truth][alarm], "o", ms=6, mfc="none", mec="k",
+                          lw=0.5, label="_alarm" if label != next(iter(phones)) else "parity alarm (phones)")
+            ax.plot((1.0, 1e3), (1.0, 1e3), "k-", lw=0.8, label="error = PL")
+            ax.fill_between((1.0, 1e3), (1.0, 1.0), (1.0, 1e3), color="r", alpha=0.1,
                             label="misleading (error > PL)")
-            ax.set(xlim=(0.05, 1e3), ylim=(10.0, 1e5), xlabel=f"{axis} error [m]",
+            ax.set(xlim=(0.05, 1e3), ylim=(1.0, 1e5), xlabel=f"{axis} error [m]",
                    ylabel=f"{level.replace('ss_', '').upper()} [m]", title=f"{axis}, {method}")
-            ax.legend(fontsize=6, loc="upper left")
+    axes[0, 0].legend(fontsize=6, loc="upper left", ncol=2)
     path = save_figure(fig, Path(out_dir) / "gnss-real-stanford.png",
                        f"Stanford diagrams of {count} epochs of GEONET stations 0759 and 3040 (one hour at 30 s, "
-                       "2005-04-02, GDOP <= 30): error from the surveyed position against the slope protection levels "
-                       "(P_fa = P_md = 1e-3, top) and the solution-separation ones (ARAIM LPV-200 budgets, bottom); no "
-                       "epoch falls in the misleading region.")
+                       "2005-04-02, GDOP <= 30), error from the surveyed position, and of the "
+                       f"{count_phones} smartphone epochs with ground truth (GSDC 2021-2023, crosses; circled: a "
+                       "parity alarm), against the slope protection levels (P_fa = P_md = 1e-3, top) and the "
+                       "solution-separation ones (ARAIM LPV-200 budgets, bottom). A point in the red region "
+                       "without an alarm is misleading information: the table counts them.")
     return [str(path)]

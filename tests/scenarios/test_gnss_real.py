@@ -1,7 +1,9 @@
 """The real-receiver study (``jaxfdi run gnss-real``) at a reduced size: its CSV table is
 its JSON rows, no epoch of either GEONET hour is misleading for either protection level, its
-fixes are RTKLIB's, and the injected steps at or above the minimum detectable bias are
-detected as often as the slope protection level promises (a binomial test)."""
+fixes are RTKLIB's, the injected steps at or above the minimum detectable bias are
+detected as often as the slope protection level promises (a binomial test), and on the
+phone traces gnss_lib_py's fault detection takes the same decisions and Google's own fix
+of the Pixel 7 Pro (whose uncertainties are right: ``TS_D / dof`` near 1) is ours."""
 import json
 import subprocess
 import sys
@@ -11,7 +13,7 @@ import pytest
 from scipy import stats
 
 from _frames import assert_table_is_the_json
-from jaxfdi.scenarios.gnss_real import STEP_SIZES
+from jaxfdi.scenarios.gnss_real import PHONES, STEP_SIZES
 
 RUNS = 60
 P_MD = 1e-3
@@ -30,9 +32,11 @@ def study(tmp_path_factory):
 def test_cli_writes_the_table_its_csv_and_the_stanford_diagrams(study):
     stdout, data, out = study
     assert "gnss-real: GPS integrity on real receivers" in stdout and "positions station GEONET 0759" in stdout
+    assert "phones    trace GSDC 2023 Pixel 7 Pro" in stdout
     assert data["config"]["runs"] == RUNS and data["config"]["seed"] == 5
     rows = data["rows"]
-    assert [r["section"] for r in rows] == ["positions"] * 2 + ["step"] * len(STEP_SIZES) + ["ramp"] * 4
+    assert [r["section"] for r in rows] == (["positions"] * 2 + ["step"] * len(STEP_SIZES) + ["ramp"] * 4
+                                            + ["phones", "phone-peers"] * len(PHONES))
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
     assert_table_is_the_json(pd.read_csv(out / "gnss-real.csv", **exact), rows)  # the CSV is to_frame()
     assert (out / "gnss-real-stanford.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -60,3 +64,16 @@ def test_steps_at_or_above_the_minimum_detectable_bias_are_detected(study):
     rates = [r["detection_rate"] for r in steps]
     assert rates == sorted(rates) and rates[0] < 0.5 and rates[-1] > 0.9  # a 100 m step can hide in a weak geometry
     assert all(r["ss_detection_rate"] <= r["detection_rate"] + 0.1 for r in steps)  # SS's budgets are stricter
+
+
+def test_phone_rows_agree_with_gnss_lib_py_and_google(study):
+    rows = study[1]["rows"]
+    phones = {r["trace"]: r for r in rows if r["section"] == "phones"}
+    peers = [r for r in rows if r["section"] == "phone-peers"]
+    assert sorted(phones) == sorted(PHONES) and len(peers) == len(PHONES)
+    for row in peers:
+        assert row["wls_max_difference_m"] < 1e-3 and row["jaxfdi_only"] == 0 and row["gnss_lib_py_only"] == 0
+        assert row["explained"] == row["different_exclusion"]
+    calibrated = phones["GSDC 2023 Pixel 7 Pro"]
+    assert 0.5 < calibrated["statistic_per_dof_median"] < 2.0 and calibrated["google_difference_median_m"] < 0.5
+    assert phones["GSDC 2021 Pixel 4"]["truth_epochs"] == 7 and phones["GSDC 2021 Pixel 4 XL"]["truth_epochs"] == 0

@@ -1,0 +1,226 @@
+"""Smartphone traces (Google Smartphone Decimeter Challenge 2021-2023, every constellation)
+against gnss_lib_py 1.1 (Stanford NavLab), NumPy/SciPy and the files' own fields.
+
+- Reader: the 2022/2023 files against gnss_lib_py's parsers, value for value (corrected
+  pseudorange, satellite position, Google's fix; the same measurements kept); the 2021
+  files against pandas with the data notes' formula and the one-epoch time shift, which
+  must put every kept signal's flight time where a satellite's can be; ground truth
+  against gnss_lib_py's parsers (ECEF within 1 mm: two closed forms of the same
+  conversion). Damaged copies name the file and line.
+- Positions: unit weights and one clock against gnss_lib_py's ``solve_wls`` within 1 mm
+  (both iterate Gauss-Newton to convergence on the same equations; its Sagnac rotation
+  uses the measured instead of the geometric flight time, 33 ns apart for 10 m of
+  residual: 0.06 mm at the satellite).
+- Fault detection and exclusion at gnss_lib_py's threshold (3000 m^2 on the unweighted
+  residual sum of squares, one exclusion) against its greedy residual FDE: the same
+  alarm at every epoch, and every exclusion that differs is the one its normalised
+  residual without the clock column picks (``1 - h_ii`` of the line-of-sight columns
+  alone), ours being the one with it.
+- One clock per constellation: the slope protection level, minimum detectable biases
+  and the parity statistic with its ``n - 3 - C`` degrees of freedom against a NumPy /
+  SciPy computation on every epoch of the four traces (rel 1e-8).
+"""
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import optimize, stats
+
+from jaxfdi.data import data_path
+from jaxfdi.gnss import geodetic_to_ecef, monitor_receiver, read_android
+from jaxfdi.gnss._android import read_android_ground_truth
+from jaxfdi.gnss._raim import raim_tables
+from jaxfdi.scenarios.gnss_real import PHONES, PEER_THRESHOLD, _peer_navdata, _peer_row, load_phone
+
+gnss_lib_py = pytest.importorskip("gnss_lib_py")
+from gnss_lib_py.algorithms.snapshot import solve_wls  # noqa: E402
+from gnss_lib_py.parsers import google_decimeter as glp  # noqa: E402
+
+LETTER = {"gps": "G", "glonass": "R", "qzss": "J", "beidou": "C", "galileo": "E"}
+
+
+@pytest.mark.parametrize("name, parser", [("gsdc2022_device_gnss.csv", glp.AndroidDerived2022),
+                                          ("gsdc2023_device_gnss.csv", glp.AndroidDerived2023)])
+def test_device_gnss_files_read_as_gnss_lib_py_reads_them(name, parser):
+    ours = read_android(data_path(name))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        nav = parser(str(data_path(name)))
+    raw = pd.read_csv(data_path(name))
+    signal = raw["SignalType"].fillna("").to_numpy() != ""       # rows without a signal type are skipped
+    nav = nav.copy(cols=np.flatnonzero(signal))
+    at = np.searchsorted(ours.gps_millis, np.asarray(nav["gps_millis"]).astype(np.int64))
+    assert np.array_equal(ours.gps_millis[at], np.asarray(nav["gps_millis"]).astype(np.int64))
+    names = [f"{LETTER[c]}{s:02d} {t}" for c, s, t in zip(nav["gnss_id"], raw["Svid"][signal], raw["SignalType"][signal])]
+    slot = np.array([ours.signal.index(n) for n in names])
+    assert len(set(zip(at, slot))) == at.size == np.isfinite(ours.satellite[..., 0]).sum()
+    np.testing.assert_array_equal(ours.pseudorange[at, slot], np.asarray(nav["corr_pr_m"]))
+    np.testing.assert_array_equal(ours.satellite[at, slot], np.asarray(nav[["x_sv_m", "y_sv_m", "z_sv_m"]]).T)
+    np.testing.assert_array_equal(ours.wls_position[at], np.asarray(nav[["x_rx_m", "y_rx_m", "z_rx_m"]]).T)
+    np.testing.assert_array_equal(ours.sigma[at, slot], np.asarray(nav["raw_pr_sigma_m"]))
+    np.testing.assert_array_equal(ours.cn0[at, slot], np.asarray(nav["cn0_dbhz"]))
+
+
+@pytest.mark.parametrize("name", ["gsdc2021_Pixel4XL_derived.csv", "gsdc2021_Pixel4_derived.csv"])
+def test_derived_2021_files_shift_one_epoch_and_drop_timing_outliers(name):
+    """The data notes' corrections: the reception time is the stamp less one 1 Hz epoch;
+    the kept rows' median flight time is then a signal's from 20 000 km (64-95 ms; the
+    stamp itself gives 1077 ms and the previous row of the Pixel 4 XL file, 5 s before,
+    a negative one)."""
+    ours = read_android(data_path(name))
+    raw = pd.read_csv(data_path(name))
+    received = raw["millisSinceGpsEpoch"].to_numpy() - 1000
+    flight = received - raw["receivedSvTimeInGpsNanos"].to_numpy() / 1e6
+    kept = (flight > 0) & (flight < 300)
+    assert 64.0 < np.median(flight[kept]) < 95.0
+    corrected = (raw["rawPrM"] + raw["satClkBiasM"] - raw["isrbM"] - raw["ionoDelayM"] - raw["tropoDelayM"]).to_numpy()
+    letters = raw["constellationType"].map({1: "G", 3: "R", 4: "J", 5: "C", 6: "E"})
+    names = [f"{c}{s:02d} {t}" for c, s, t in zip(letters, raw["svid"], raw["signalType"])]
+    at = np.searchsorted(ours.gps_millis, received[kept])
+    slot = np.array([ours.signal.index(n) for n, k in zip(names, kept) if k])
+    np.testing.assert_array_equal(ours.gps_millis[at], received[kept])
+    np.testing.assert_array_equal(ours.pseudorange[at, slot], corrected[kept])
+    assert np.isfinite(ours.pseudorange).sum() == kept.sum()
+    if name == "gsdc2021_Pixel4_derived.csv":
+        # gnss_lib_py maps each stamp to the file's previous one: the same times at 1 Hz
+        # (it drops the first epoch, which has no previous one)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            nav = glp.AndroidDerived2021(str(data_path(name)))
+        assert np.array_equal(np.unique(np.asarray(nav["gps_millis"])).astype(np.int64), ours.gps_millis[1:])
+
+
+@pytest.mark.parametrize("name, parser", [("gsdc2021_Pixel4_ground_truth.csv", glp.AndroidGroundTruth2021),
+                                          ("gsdc2022_ground_truth.csv", glp.AndroidGroundTruth2022),
+                                          ("gsdc2023_ground_truth.csv", glp.AndroidGroundTruth2023)])
+def test_ground_truth_reads_as_gnss_lib_py_reads_it(name, parser):
+    times, lat_lon_height = read_android_ground_truth(data_path(name))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        nav = parser(str(data_path(name)))
+    order = np.argsort(np.asarray(nav["gps_millis"]), kind="stable")
+    np.testing.assert_array_equal(times, np.asarray(nav["gps_millis"])[order].astype(np.int64))
+    np.testing.assert_array_equal(lat_lon_height[:, 0], np.asarray(nav["lat_rx_gt_deg"])[order])
+    height = np.asarray(nav["alt_rx_gt_m"])[order]
+    ecef = np.asarray(nav[["x_rx_gt_m", "y_rx_gt_m", "z_rx_gt_m"]]).T[order]
+    if name.startswith("gsdc2021"):
+        # the hosts' 61 m correction, which gnss_lib_py 1.1.0 applies twice (its heights are
+        # the file's less 122 m): compare with its heights put back by one correction
+        file_height = pd.read_csv(data_path(name)).sort_values("millisSinceGpsEpoch", kind="stable")
+        np.testing.assert_allclose(height, file_height["heightAboveWgs84EllipsoidM"].to_numpy() - 122.0, atol=1e-9)
+        height = height + 61.0
+        ecef = np.asarray(geodetic_to_ecef(np.radians(lat_lon_height[:, 0]), np.radians(lat_lon_height[:, 1]), height))
+    np.testing.assert_allclose(lat_lon_height[:, 2], height, atol=1e-9)
+    measurements = {"gsdc2021": "gsdc2021_Pixel4_derived.csv", "gsdc2022": "gsdc2022_device_gnss.csv",
+                    "gsdc2023": "gsdc2023_device_gnss.csv"}[name[:8]]
+    phone = read_android(data_path(measurements), data_path(name))
+    at = np.searchsorted(times, phone.gps_millis)
+    assert np.all(times[at] == phone.gps_millis)
+    np.testing.assert_allclose(phone.truth, ecef[at], atol=1e-3, rtol=0)
+
+
+@pytest.mark.parametrize("line, edit, message", [
+    (5, lambda row: row.rsplit(",", 3)[0], "gsdc2022_device_gnss.csv:5: list index out of range"),
+    (8, lambda row: row.replace(",1,C,", ",1x,C,", 1), "gsdc2022_device_gnss.csv:8: invalid literal"),
+    (1, lambda row: "a,b,c", "gsdc2022_device_gnss.csv:1: expected a GSDC measurement CSV header"),
+    (9, lambda row: row.replace(",1,C,", ",2,C,", 1), "gsdc2022_device_gnss.csv:9: constellation type 2"),
+])
+def test_damaged_phone_file_names_the_line(line, edit, message, tmp_path):
+    rows = data_path("gsdc2022_device_gnss.csv").read_text().splitlines()
+    assert ",1,C," in rows[line - 1] or line in (1, 5)
+    rows[line - 1] = edit(rows[line - 1])
+    damaged = tmp_path / "gsdc2022_device_gnss.csv"
+    damaged.write_text("\n".join(rows) + "\n")
+    with pytest.raises(ValueError, match=message):
+        read_android(damaged)
+
+
+def test_monitor_receiver_names_what_it_needs():
+    from jaxfdi.gnss import read_rinex_obs
+    with pytest.raises(ValueError, match="ephemerides: expected the navigation file's records"):
+        monitor_receiver(read_rinex_obs(data_path("07590920.05o")))
+    with pytest.raises(TypeError, match="measurements: expected read_rinex_obs's Observations"):
+        monitor_receiver(np.zeros((3, 4)))
+    with pytest.raises(ValueError, match="clocks: expected 'constellation' or 'one'"):
+        monitor_receiver(load_phone("GSDC 2023 Pixel 7 Pro"), clocks="two")
+
+
+@pytest.fixture(scope="module", params=list(PHONES))
+def phone(request):
+    return request.param, load_phone(request.param)
+
+
+def test_unit_weight_fixes_match_gnss_lib_py(phone):
+    _, trace = phone
+    nav, _, _ = _peer_navdata(trace)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        state = solve_wls(nav)
+    theirs = np.stack([np.asarray(state[f"{a}_rx_wls_m"]) for a in "xyz"], axis=1)
+    assert np.array_equal(np.asarray(state["gps_millis"]).astype(np.int64), trace.gps_millis)
+    unit = trace._replace(sigma=np.where(np.isfinite(trace.sigma), 1.0, np.nan))
+    ours = np.asarray(monitor_receiver(unit, clocks="one", exclude=False).fix.position)
+    assert np.max(np.linalg.norm(ours - theirs, axis=1)) < 1e-3
+
+
+def test_fault_detection_and_exclusion_agree_with_gnss_lib_py(phone):
+    label, trace = phone
+    row = _peer_row(label, trace)
+    assert row["threshold_m2"] == PEER_THRESHOLD
+    assert row["jaxfdi_only"] == 0 and row["gnss_lib_py_only"] == 0
+    assert row["both_alarm"] + row["neither"] == trace.gps_millis.size
+    assert row["explained"] == row["different_exclusion"]
+    assert row["same_exclusion"] + row["different_exclusion"] == row["both_alarm"]
+
+
+def test_per_constellation_clocks_slope_levels_match_numpy(phone):
+    """Every epoch: whitened geometry of the used slots with one clock column per
+    constellation in view; ``A = (H^T H)^-1 H^T``, ``S = I - H A``, slopes
+    ``|A_q,i| / sqrt(S_ii)``, ``lambda`` by SciPy's noncentral chi-square at the
+    chi-square threshold of ``n - 3 - C`` degrees of freedom (Brown & Chin 1992)."""
+    _, trace = phone
+    tables = raim_tables(max(len(trace.signal), 5), pfa=1e-3, pmd=1e-3)
+    result = jax.tree_util.tree_map(np.asarray, monitor_receiver(trace, tables=tables, exclude=False))
+    membership = trace.clocks()
+    assert result.fix.geometry.shape[-1] == 3 + membership.shape[1]
+    lam_of = {}
+    for k in range(trace.gps_millis.size):
+        used = result.fix.used[k]
+        h = (result.fix.geometry[k] / result.fix.sigma[k][:, None])[used]
+        h = np.concatenate([h[:, :3], h[:, 3:][:, np.any(membership[used], axis=0)]], axis=1)
+        n, u = h.shape
+        dof = n - u
+        assert u == 3 + len(set(trace.constellation[used])) and result.check.dof[k] == dof
+        y = (result.fix.residuals[k] / result.fix.sigma[k])[used]
+        A = np.linalg.solve(h.T @ h, h.T)
+        S = np.eye(n) - h @ A
+        assert result.check.statistic[k] == pytest.approx(y @ S @ y, rel=1e-8)
+        if dof not in lam_of:
+            threshold = stats.chi2.isf(1e-3, dof)
+            lam_of[dof] = optimize.brentq(lambda v: stats.ncx2.cdf(threshold, dof, v) - 1e-3, 1e-6, 1e3, xtol=1e-12)
+        lam = lam_of[dof]
+        seen = np.diag(S) > 1e-9
+        root = np.sqrt(np.where(seen, np.diag(S), 1.0))
+        hpl = np.max(np.where(seen, np.hypot(A[0], A[1]) / root, 0.0)) * np.sqrt(lam)
+        vpl = np.max(np.where(seen, np.abs(A[2]) / root, 0.0)) * np.sqrt(lam)
+        assert result.protection.hpl[k] == pytest.approx(hpl, rel=1e-8)
+        assert result.protection.vpl[k] == pytest.approx(vpl, rel=1e-8)
+        sigma = result.fix.sigma[k][used]
+        np.testing.assert_allclose(result.protection.minimum_detectable_bias[k][used],
+                                   np.where(seen, sigma * np.sqrt(lam) / root, np.inf), rtol=1e-8)
+
+
+def test_a_clock_per_constellation_costs_its_degrees_of_freedom(phone):
+    _, trace = phone
+    each = monitor_receiver(trace, exclude=False)
+    one = monitor_receiver(trace, clocks="one", exclude=False)
+    in_view = np.array([len(set(trace.constellation[u])) for u in np.asarray(each.fix.used)])
+    np.testing.assert_array_equal(np.asarray(one.check.dof) - np.asarray(each.check.dof), in_view - 1)
+    assert np.asarray(each.fix.clock_bias).shape == (trace.gps_millis.size, trace.clocks().shape[1])
+    # a constellation without a used satellite keeps its clock at the start value
+    in_use = np.asarray([np.any(trace.clocks()[u], axis=0) for u in np.asarray(each.fix.used)])
+    assert np.all(np.asarray(each.fix.clock_bias)[~in_use] == 0.0)
+    assert jnp.all(each.fix.healthy)

@@ -153,6 +153,49 @@ def _rtklib_difference(station: str, position: np.ndarray, times: np.ndarray) ->
     return worst
 
 
+def _rtklib_fde(station: str):
+    """RTKLIB's own RAIM fault detection and exclusion (``pntpos`` with ``posopt[4]``, the
+    ``pos1-raimfde`` option: after a failed chi-square test it re-solves without each
+    satellite in turn and keeps the passing solution of the smallest residual RMS) on the
+    station's epochs, as ``decide(epoch, prn, bias) -> (decision, position)`` with a bias
+    added to that satellite's C1; ``decision`` is "none", "x<prn>" (excluded) or "no fix".
+    ``None`` without pyrtklib."""
+    try:
+        import pyrtklib as rtk
+    except ImportError:
+        return None
+    obs, nav, sta = rtk.obs_t(), rtk.nav_t(), rtk.sta_t()
+    for kind, suffix in ((1, "o"), (2, "n")):
+        rtk.readrnx(str(data_path(STATIONS[station] + suffix)), kind, "", obs, nav, sta)
+    rtk.sortobs(obs)
+    rtk.resetsysopts()
+    popt, sopt, fopt = rtk.prcopt_t(), rtk.solopt_t(), rtk.filopt_t()
+    rtk.getsysopts(popt, sopt, fopt)
+    popt.mode, popt.navsys, popt.elmin = rtk.PMODE_SINGLE, rtk.SYS_GPS, math.radians(15.0)
+    popt.ionoopt, popt.tropopt = rtk.IONOOPT_BRDC, rtk.TROPOPT_SAAS
+    popt.posopt[4] = 1
+    starts = [0] + [i for i in range(1, obs.n) if rtk.timediff(obs.data[i].time, obs.data[i - 1].time) != 0] + [obs.n]
+
+    def decide(epoch: int, prn: int, bias: float):
+        first, end = starts[epoch], starts[epoch + 1]
+        record = next(obs.data[i] for i in range(first, end) if obs.data[i].sat == prn)
+        clean = record.P[0]
+        solution, status, message = rtk.sol_t(), rtk.Arr1Dssat_t(rtk.MAXSAT), rtk.Arr1Dchar(256)
+        record.P[0] = clean + bias
+        before = [obs.data[i].sat for i in range(first, end)]
+        ok = rtk.pntpos(obs.data[first], end - first, nav, popt, solution, rtk.Arr1Ddouble(2 * (end - first)),
+                        status[0], message)
+        record.P[0] = clean
+        position = np.array([solution.rr[i] for i in range(3)])
+        if not ok:
+            return "no fix", position
+        # a satellite RTKLIB checked (azimuth/elevation set) but left out of the solution
+        gone = [sat for sat in before if status[sat - 1].azel[1] >= math.radians(15.0) and not status[sat - 1].vs]
+        return ("x" + ",".join(map(str, gone)) if gone else "none"), position
+
+    return decide
+
+
 def _position_row(station: str, result, separation, truth: np.ndarray, times: np.ndarray) -> tuple[dict, dict]:
     fix = result.fix
     position = np.asarray(fix.position)
@@ -333,11 +376,26 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
     times = np.asarray(epochs.times)
     mdb_all = np.asarray(clean.protection.minimum_detectable_bias)
     at, slot = _trials(clean, runs, seed, last=rho.shape[0])
+    rtklib = _rtklib_fde(FAULT_STATION)
+    prns = np.asarray(epochs.table.prn)
     for size in step_sizes:
         faulty = rho[at].copy()
         faulty[np.arange(runs), slot] += size
         trial = epochs._replace(times=jnp.asarray(times[at]), pseudoranges=jnp.asarray(faulty))
         out = jax.tree_util.tree_map(np.asarray, monitor_receiver(trial))
+        same, worst = None, None
+        if rtklib is not None:
+            # ours in RTKLIB's terms: no alarm; excluded (the fix without it passes); no fix
+            passed = ~out.check_excluded.alarm
+            ours = np.where(~out.check.alarm, "none", np.where(passed, np.char.add("x", prns[np.maximum(out.excluded, 0)]
+                                                                                   .astype(str)), "no fix"))
+            delivered = np.where(out.check.alarm[:, None], out.fix_excluded.position, out.fix.position)
+            same, worst = 0, 0.0
+            for r in range(runs):
+                decision, position = rtklib(int(at[r]), int(prns[slot[r]]), float(size))
+                same += int(decision == ours[r])
+                if decision == ours[r] and decision != "no fix":
+                    worst = max(worst, float(np.linalg.norm(position - delivered[r])))
         ss = jax.tree_util.tree_map(np.asarray, separate(out.fix))
         detected, ss_detected = out.check.alarm, ss.alarm
         excluded = out.excluded == slot
@@ -349,7 +407,8 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
                      "exclusion_rate": float(excluded.mean()), "mdb_median_m": float(np.median(mdb)),
                      "runs_at_or_above_mdb": int(above.sum()),
                      "detection_rate_at_or_above_mdb": float(detected[above].mean()) if above.any() else float("nan"),
-                     "detection_rate_at_or_above_mdb_low": low, "detection_rate_at_or_above_mdb_high": high})
+                     "detection_rate_at_or_above_mdb_low": low, "detection_rate_at_or_above_mdb_high": high,
+                     "rtklib_same_decision": same, "rtklib_max_difference_m": worst})
         if progress:
             status(f"gnss-real: step {size:g} m: detection {detected.mean():.3f}")
 

@@ -10,7 +10,8 @@ the other satellites (whitened geometry ``h``, residuals ``y``; ``D_k`` its 0/1 
 whose own ``N_0^-1 h^T y`` is zero at convergence),
 ``sigma_k,q^2 = (N_k^-1)_qq``, ``sigma_ss,k,q^2 = (N_k^-1 - N_0^-1)_qq``
 
-(q = north, east, down; a clock column left without satellites is dropped). A mode is
+(q = north, east, down; a clock column left without satellites is dropped; a satellite
+alone on its clock gives ``sigma_ss = 0`` and no test). A mode is
 monitored when its solution exists (at least ``3 + clocks left`` satellites); the priors
 of the others, and of two or more simultaneous satellite faults (``(n P_sat)^2 / 2``), are
 ``P_nm``. The test thresholds are ``T_k,q = K_fa,q sigma_ss,k,q`` with
@@ -157,7 +158,10 @@ def solution_separation(fix: PositionFix, p_satellite: float = P_SATELLITE, p_co
     count = jnp.maximum(jnp.sum(monitored), 1)
     k_fa = _q_inverse(jnp.array([fa_h / 4.0, fa_h / 4.0, fa_v / 2.0], dtype) / count)
     threshold = jnp.where(monitored[:, None], k_fa * sigma_ss, jnp.inf)
-    ratio = jnp.where(monitored[:, None], jnp.abs(separation) / threshold, 0.0)
+    # a mode that cannot move the solution (a satellite alone on its clock: sigma_ss = 0) has
+    # nothing to test; its threshold 0 stays in the levels, where it is exact
+    testable = monitored[:, None] & (sigma_ss > 1e-9 * sigma0)
+    ratio = jnp.where(testable, jnp.abs(separation) / jnp.where(testable, threshold, 1.0), 0.0)
     alarm = jnp.any(ratio > 1.0)
     isolated = jnp.where(alarm, jnp.argmax(jnp.max(ratio, axis=1)), -1).astype(jnp.int32)
     scale = jnp.maximum(1.0 - unmonitored / (hmi_h + hmi_v), 0.0)

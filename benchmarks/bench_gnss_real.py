@@ -1,5 +1,5 @@
 """Real receivers: epochs per second for positioning + RAIM + both protection levels on the
-GEONET hour, jaxfdi beside RTKLIB.
+GEONET hour, jaxfdi beside RTKLIB, and on a smartphone trace, jaxfdi beside gnss_lib_py.
 
 * jaxfdi: ``monitor_receiver`` (single-point fix with RTKLIB's model, parity test,
   slope HPL/VPL, exclusion by a 3-step re-solve) and ``solution_separation`` (ARAIM
@@ -11,18 +11,25 @@ GEONET hour, jaxfdi beside RTKLIB.
   its time includes reading the RINEX files and writing the solution file (it has no
   call without them), so it is a per-epoch cost of the whole program, not of the fix alone.
 
-gnss-lib-py is not timed here: its FDE needs the satellite positions and clocks per
-measurement in its NavData, which RINEX 2 files do not carry (the phone files do); its
-timing on simulated epochs is in ``bench_gnss_raim.py``.
+* Phones: the GSDC 2021 Pixel 4 XL trace (281 epochs, 48 signal slots, 5
+  constellations). jaxfdi: ``monitor_receiver`` (a clock per constellation, parity test,
+  slope levels, exclusion) and ``solution_separation``, the trace tiled ``--copies``
+  times. gnss_lib_py 1.1: ``solve_wls`` and ``solve_fde(method="residual",
+  max_faults=1)`` (its greedy residual FDE, which re-solves its WLS) on the trace's
+  NavData; no protection level (it has none), so the ratio flatters gnss_lib_py.
 
-Run:  python benchmarks/bench_gnss_real.py        (~1 minute on 2 cores)
+Run:  python benchmarks/bench_gnss_real.py        (~2 minutes on 2 cores; writes benchmarks/gnss_real.json)
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
+import platform
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import jax
@@ -37,6 +44,55 @@ from jaxfdi.gnss._receiver import monitor_receiver, receiver_epochs  # noqa: E40
 from jaxfdi.gnss._rinex import read_rinex_nav  # noqa: E402
 from jaxfdi.gnss._rinex_obs import read_rinex_obs  # noqa: E402
 from jaxfdi.gnss._solution_separation import solution_separation  # noqa: E402
+from jaxfdi.scenarios.gnss_real import _peer_navdata, load_phone  # noqa: E402
+
+PHONE = "GSDC 2021 Pixel 4 XL"
+
+
+def _timed(run, repeats: int) -> tuple[float, float]:
+    """(first call [s], median of ``repeats`` later calls [s]) of ``run``, blocked until ready."""
+    start = time.perf_counter()
+    jax.block_until_ready(run())
+    first = time.perf_counter() - start
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(run())
+        times.append(time.perf_counter() - start)
+    return first, float(np.median(times))
+
+
+def phone_timing(copies: int, repeats: int) -> dict:
+    phone = load_phone(PHONE)
+    tiled = phone._replace(**{f: np.tile(getattr(phone, f), (copies,) + (1,) * (getattr(phone, f).ndim - 1))
+                              for f in ("pseudorange", "sigma", "satellite")})
+    separate = jax.jit(jax.vmap(solution_separation))
+
+    def run():
+        result = monitor_receiver(tiled)
+        return result, separate(result.fix)
+
+    first, median = _timed(run, repeats)
+    count = copies * phone.gps_millis.size
+    return {"epochs": count, "first_call_s": first, "run_s": median, "epochs_per_s": count / median}
+
+
+def gnss_lib_py_timing(repeats: int) -> dict:
+    from gnss_lib_py.algorithms.fde import solve_fde
+    from gnss_lib_py.algorithms.snapshot import solve_wls
+
+    phone = load_phone(PHONE)
+    times = []
+    for _ in range(repeats):
+        nav, _, _ = _peer_navdata(phone)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            start = time.perf_counter()
+            solve_wls(nav)
+            solve_fde(nav, method="residual", threshold=3000.0, max_faults=1)
+            times.append(time.perf_counter() - start)
+    count = phone.gps_millis.size
+    return {"epochs": count, "run_s": float(np.median(times)), "epochs_per_s": count / float(np.median(times))}
 
 
 def jaxfdi_timing(copies: int, repeats: int) -> dict:
@@ -48,17 +104,9 @@ def jaxfdi_timing(copies: int, repeats: int) -> dict:
         result = monitor_receiver(tiled)
         return result, separate(result.fix)
 
-    start = time.perf_counter()
-    jax.block_until_ready(run())
-    first = time.perf_counter() - start
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        jax.block_until_ready(run())
-        times.append(time.perf_counter() - start)
+    first, median = _timed(run, repeats)
     count = int(tiled.times.shape[0])
-    return {"epochs": count, "first_call_s": first, "run_s": float(np.median(times)),
-            "epochs_per_s": count / float(np.median(times))}
+    return {"epochs": count, "first_call_s": first, "run_s": median, "epochs_per_s": count / median}
 
 
 def rtklib_timing(raim: bool, repeats: int) -> dict:
@@ -91,16 +139,35 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--copies", type=int, default=10, help="tiles of the 120-epoch hour for jaxfdi (default 10)")
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--out", default="benchmarks/gnss_real.json", help="JSON results (written atomically)")
     args = parser.parse_args()
+    results = {"machine": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+                           "jax": jax.__version__, "device": str(jax.devices()[0])}, "copies": args.copies}
     ours = jaxfdi_timing(args.copies, args.repeats)
+    results["geonet"] = {"jaxfdi": ours}
     print(f"jaxfdi: {ours['epochs']} epochs, first call {ours['first_call_s']:.1f} s (compile), then "
           f"{ours['run_s'] * 1e3:.1f} ms: {ours['epochs_per_s']:.0f} epochs/s (fix, parity test, slope and "
           f"solution-separation PLs, exclusion)")
     for raim in (False, True):
         peer = rtklib_timing(raim, args.repeats)
+        results["geonet"]["rtklib_raim_fde" if raim else "rtklib"] = peer
         print(f"RTKLIB postpos{' with RAIM FDE' if raim else ''}: {peer['solved']} of 120 epochs solved in "
               f"{peer['run_s'] * 1e3:.1f} ms (reading and writing files included): {peer['epochs_per_s']:.0f} epochs/s; "
               f"jaxfdi/RTKLIB = {ours['epochs_per_s'] / peer['epochs_per_s']:.1f}x")
+    phone = phone_timing(args.copies, args.repeats)
+    print(f"jaxfdi, {PHONE}: {phone['epochs']} epochs, first call {phone['first_call_s']:.1f} s (compile), then "
+          f"{phone['run_s'] * 1e3:.1f} ms: {phone['epochs_per_s']:.0f} epochs/s (a clock per constellation, parity "
+          "test, slope and solution-separation PLs, exclusion)")
+    peer = gnss_lib_py_timing(args.repeats)
+    print(f"gnss_lib_py solve_wls + residual FDE, {PHONE}: {peer['epochs']} epochs in {peer['run_s'] * 1e3:.0f} ms: "
+          f"{peer['epochs_per_s']:.0f} epochs/s (no protection levels); jaxfdi/gnss_lib_py = "
+          f"{phone['epochs_per_s'] / peer['epochs_per_s']:.0f}x")
+    results["phone"] = {"trace": PHONE, "jaxfdi": phone, "gnss_lib_py": peer}
+    tmp = f"{args.out}.tmp"
+    with open(tmp, "w") as handle:
+        json.dump(results, handle, indent=1)
+    os.replace(tmp, args.out)
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ SIZES = {
     "05": {"JAXFDI_NB_RUNS": "10"},
     "06": {"JAXFDI_NB_RUNS": "4"},
     "07": {"JAXFDI_NB_RUNS": "4"},
+    "08": {"JAXFDI_NB_RUNS": "20"},
 }
 
 

@@ -146,10 +146,12 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
         kind = header.index("MessageType") if "MessageType" in header else None
         rows = []
         for line, row in enumerate(reader, start=2):
-            if not row or (kind is not None and row[kind] != "Raw") or not row[column[layout["signal"]]].strip():
-                continue     # not a measurement, or one Google's pipeline left without a signal type
+            if not row or (kind is not None and row[kind] != "Raw"):
+                continue     # not a measurement
             try:
                 value = {n: row[column[n]] for n in names}
+                if not value[layout["signal"]].strip():
+                    continue     # a measurement Google's pipeline left without a signal type
                 code = int(value[layout["constellation"]])
                 if code not in CONSTELLATIONS:
                     raise ValueError(f"constellation type {code} (expected one of {sorted(CONSTELLATIONS)})")
@@ -174,6 +176,11 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
     epochs, epoch_of = np.unique(times, return_inverse=True)
     signal = tuple(sorted({r[1] for r in rows}))
     slot_of = {s: i for i, s in enumerate(signal)}
+    seen = set()
+    for k, (_, slot, _) in zip(epoch_of, rows):
+        if (k, slot) in seen:
+            raise ValueError(f"{path}: two rows of {slot} at {int(epochs[k])} ms (GPS): expected one per signal and epoch")
+        seen.add((k, slot))
     shape = (epochs.size, len(signal))
     pseudorange, sigma, cn0 = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
     satellite = np.full(shape + (3,), np.nan)

@@ -138,6 +138,18 @@ def test_damaged_phone_file_names_the_line(line, edit, message, tmp_path):
         read_android(damaged)
 
 
+def test_truncated_and_repeated_rows_are_named(tmp_path):
+    rows = data_path("gsdc2022_device_gnss.csv").read_text().splitlines()
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join(rows[:3] + [rows[3][:40]] + rows[4:]) + "\n")
+    with pytest.raises(ValueError, match="short.csv:4: list index out of range"):
+        read_android(short)
+    twice = tmp_path / "twice.csv"
+    twice.write_text("\n".join(rows[:2] + [rows[1]] + rows[2:]) + "\n")
+    with pytest.raises(ValueError, match="twice.csv: two rows of G02 GPS_L1 at"):
+        read_android(twice)
+
+
 def test_monitor_receiver_names_what_it_needs():
     from jaxfdi.gnss import read_rinex_obs
     with pytest.raises(ValueError, match="ephemerides: expected the navigation file's records"):

@@ -142,6 +142,8 @@ def monitor_receiver(measurements: Observations | ReceiverEpochs | PhoneEpochs, 
       ``EpochIntegrity`` with a leading epoch axis on every leaf (a phone's
       ``fix.clock_bias`` (T, C), in ``PhoneEpochs.clocks`` order, with per-constellation clocks).
     """
+    if clocks not in ("constellation", "one"):
+        raise ValueError(f"clocks: expected 'constellation' or 'one', got {clocks!r}")
     if isinstance(measurements, PhoneEpochs):
         return _monitor_trace(measurements, tables, clocks, mask_angle, operation, exclude)
     if isinstance(measurements, Observations):
@@ -169,8 +171,6 @@ def _monitor(table, times, pseudoranges, ura, atmosphere, tables, mask_angle, op
 def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, exclude) -> EpochIntegrity:
     """``monitor_epoch`` vmapped over a phone's epochs with the files' satellite positions at
     transmission and corrected pseudoranges, weights from the phone's uncertainty."""
-    if clocks not in ("constellation", "one"):
-        raise ValueError(f"clocks: expected 'constellation' or 'one', got {clocks!r}")
     slots = len(phone.signal)
     tables = raim_tables(max(slots, 5), pfa=1e-3, pmd=1e-3) if tables is None else tables
     dtype = jnp.result_type(float)

@@ -307,6 +307,8 @@ def _peer_row(label: str, phone: PhoneEpochs) -> dict | None:
         faults = np.asarray(solve_fde(nav, method="residual", threshold=PEER_THRESHOLD, max_faults=1)["fault_residual"])
     theirs_position = np.stack([np.asarray(state[f"{axis}_rx_wls_m"]) for axis in "xyz"], axis=1)
     epochs = phone.gps_millis.size
+    if not np.array_equal(np.asarray(state["gps_millis"]).astype(np.int64), phone.gps_millis):
+        raise RuntimeError(f"{label}: gnss_lib_py's solve_wls returned other epochs than the trace's")
     unit = phone._replace(sigma=np.where(np.isfinite(phone.sigma), 1.0, np.nan))
     slots = len(phone.signal)
     tables = raim_tables(max(slots, 5))

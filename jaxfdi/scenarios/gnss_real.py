@@ -29,6 +29,11 @@ levels (``solution_separation``: ARAIM's LPV-200 budgets, ``P_sat = 1e-5``).
   slope protection level assumes (``1 - P_md`` is promised there); the ramp rows the
   detection within the hour, the delay and the bias at detection beside that epoch's
   minimum detectable bias.
+- **channel**: on the ramps' trials, the satellite's channel stops at that epoch: frozen
+  at its last pseudorange (the true range keeps moving, up to hundreds of metres per 30 s
+  epoch) or dead (an infinite pseudorange, which the fix leaves out and flags). Rows:
+  detection (a parity alarm or the dead flag), exclusion of that satellite, the delay,
+  and how far the range had moved from the frozen value when a frozen channel was caught.
 - **phones**: four traces of Google's Smartphone Decimeter Challenge (2021-2023, GPS,
   GLONASS, Galileo, BeiDou, QZSS; shipped in ``jaxfdi/data``) through
   ``gnss.monitor_receiver``: one receiver clock per constellation, the phone's own
@@ -442,6 +447,29 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
                      "mdb_at_detection_median_m": float(np.median(mdb)) if mdb.size else float("nan")})
         if progress:
             status(f"gnss-real: ramp {rate:g} m/s: detection {detected.mean():.3f}")
+
+    # a channel that stops: frozen at its last value, or dead (an infinite pseudorange)
+    tracked = np.isfinite(rho)
+    for kind in ("frozen", "dead"):
+        faulty = np.repeat(rho[None], runs, axis=0)
+        after = (steps[None, :] >= at[:, None]) & tracked[:, slot].T                     # (runs, E)
+        held = rho[at, slot][:, None] if kind == "frozen" else np.inf
+        faulty[np.arange(runs)[:, None], steps[None, :], slot[:, None]] = np.where(after, held, rho[:, slot].T)
+        run_one = lambda r: monitor_receiver(epochs._replace(pseudoranges=r))  # noqa: E731
+        out = jax.tree_util.tree_map(np.asarray, jax.lax.map(run_one, jnp.asarray(faulty)))
+        flagged = out.check.alarm | out.dead.any(axis=2)
+        alarm = flagged & after
+        detected = alarm.any(axis=1)
+        first = np.argmax(alarm, axis=1)
+        isolated = out.excluded[np.arange(runs), first] == slot
+        moved = np.abs(rho[first, slot] - rho[at, slot])[detected]
+        rows.append({"section": "channel", "kind": kind, "runs": runs, "detection_rate": float(detected.mean()),
+                     "exclusion_rate": float((detected & isolated).mean()),
+                     "delay_median_s": float(np.median((first - at)[detected] * 30.0)) if detected.any() else float("nan"),
+                     "range_change_at_detection_median_m": float(np.median(moved)) if kind == "frozen" and moved.size
+                     else float("nan")})
+        if progress:
+            status(f"gnss-real: {kind} channel: detection {detected.mean():.3f}")
 
     for label in PHONES:
         phone = load_phone(label)

@@ -36,7 +36,7 @@ def test_cli_writes_the_table_its_csv_and_the_stanford_diagrams(study):
     assert data["config"]["runs"] == RUNS and data["config"]["seed"] == 5
     rows = data["rows"]
     assert [r["section"] for r in rows] == (["positions"] * 2 + ["step"] * len(STEP_SIZES) + ["ramp"] * 4
-                                            + ["phones", "phone-peers"] * len(PHONES))
+                                            + ["channel"] * 2 + ["phones", "phone-peers"] * len(PHONES))
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
     assert_table_is_the_json(pd.read_csv(out / "gnss-real.csv", **exact), rows)  # the CSV is to_frame()
     assert (out / "gnss-real-stanford.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -88,3 +88,13 @@ def test_phone_rows_agree_with_gnss_lib_py_and_google(study):
     calibrated = phones["GSDC 2023 Pixel 7 Pro"]
     assert 0.5 < calibrated["statistic_per_dof_median"] < 2.0 and calibrated["google_difference_median_m"] < 0.5
     assert phones["GSDC 2021 Pixel 4"]["truth_epochs"] == 7 and phones["GSDC 2021 Pixel 4 XL"]["truth_epochs"] == 0
+
+
+def test_a_stopped_channel_is_caught_and_its_satellite_excluded(study):
+    """A dead channel (infinite pseudorange) is flagged at once and excluded in every trial;
+    a frozen one is caught at the next epoch in every trial (30 s of range change: far above
+    any minimum detectable bias)."""
+    channel = {r["kind"]: r for r in study[1]["rows"] if r["section"] == "channel"}
+    assert channel["dead"]["detection_rate"] == 1.0 and channel["dead"]["exclusion_rate"] == 1.0
+    assert channel["dead"]["delay_median_s"] == 0.0
+    assert channel["frozen"]["detection_rate"] == 1.0 and channel["frozen"]["delay_median_s"] == 30.0

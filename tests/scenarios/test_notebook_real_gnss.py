@@ -14,6 +14,6 @@ def test_real_receivers_notebook(python3_kernel, monkeypatch):
     assert "station 0759: 115 epochs of GDOP <= 30, 0 alarms; every error below its level: True" in text
     html = tables(outputs)
     assert "ours - Google&#x27;s [m]" in html or "ours - Google's [m]" in html
-    for heading in ("positions", "step", "ramp", "phones", "phone-peers"):
+    for heading in ("positions", "step", "ramp", "channel", "phones", "phone-peers"):
         assert f"<h4>{heading}</h4>" in html, heading
     assert len(images(outputs)) == 1

@@ -66,7 +66,7 @@ from jaxfdi.data import data_path
 from jaxfdi.gnss._frames import ecef_to_ned
 from jaxfdi.gnss._android import PhoneEpochs, read_android
 from jaxfdi.gnss._raim import raim_tables
-from jaxfdi.gnss._receiver import ReceiverEpochs, monitor_receiver, receiver_epochs
+from jaxfdi.gnss._receiver import MASK_ANGLE, ReceiverEpochs, monitor_receiver, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._rinex_obs import read_rinex_obs
 from jaxfdi.gnss._solution_separation import solution_separation
@@ -138,11 +138,7 @@ def _rtklib_difference(station: str, position: np.ndarray, times: np.ndarray) ->
     import tempfile
     from pathlib import Path
 
-    rtk.resetsysopts()
-    popt, sopt, fopt = rtk.prcopt_t(), rtk.solopt_t(), rtk.filopt_t()
-    rtk.getsysopts(popt, sopt, fopt)
-    popt.mode, popt.navsys, popt.elmin = rtk.PMODE_SINGLE, rtk.SYS_GPS, math.radians(15.0)
-    popt.ionoopt, popt.tropopt, sopt.posf = rtk.IONOOPT_BRDC, rtk.TROPOPT_SAAS, rtk.SOLF_XYZ
+    popt, sopt, fopt = _rtklib_options(rtk)
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "rtklib.pos"
         name = rtk.Arr1Dchar(1024)
@@ -162,6 +158,17 @@ def _rtklib_difference(station: str, position: np.ndarray, times: np.ndarray) ->
     return worst
 
 
+def _rtklib_options(rtk):
+    """RTKLIB's default options with the study's model: single point, GPS, the 15 deg mask,
+    broadcast ionosphere, Saastamoinen troposphere, ECEF output."""
+    rtk.resetsysopts()
+    popt, sopt, fopt = rtk.prcopt_t(), rtk.solopt_t(), rtk.filopt_t()
+    rtk.getsysopts(popt, sopt, fopt)
+    popt.mode, popt.navsys, popt.elmin = rtk.PMODE_SINGLE, rtk.SYS_GPS, MASK_ANGLE
+    popt.ionoopt, popt.tropopt, sopt.posf = rtk.IONOOPT_BRDC, rtk.TROPOPT_SAAS, rtk.SOLF_XYZ
+    return popt, sopt, fopt
+
+
 def _rtklib_fde(station: str):
     """RTKLIB's own RAIM fault detection and exclusion (``pntpos`` with ``posopt[4]``, the
     ``pos1-raimfde`` option: after a failed chi-square test it re-solves without each
@@ -177,11 +184,7 @@ def _rtklib_fde(station: str):
     for kind, suffix in ((1, "o"), (2, "n")):
         rtk.readrnx(str(data_path(STATIONS[station] + suffix)), kind, "", obs, nav, sta)
     rtk.sortobs(obs)
-    rtk.resetsysopts()
-    popt, sopt, fopt = rtk.prcopt_t(), rtk.solopt_t(), rtk.filopt_t()
-    rtk.getsysopts(popt, sopt, fopt)
-    popt.mode, popt.navsys, popt.elmin = rtk.PMODE_SINGLE, rtk.SYS_GPS, math.radians(15.0)
-    popt.ionoopt, popt.tropopt = rtk.IONOOPT_BRDC, rtk.TROPOPT_SAAS
+    popt, _, _ = _rtklib_options(rtk)
     popt.posopt[4] = 1
     starts = [0] + [i for i in range(1, obs.n) if rtk.timediff(obs.data[i].time, obs.data[i - 1].time) != 0] + [obs.n]
 
@@ -199,7 +202,7 @@ def _rtklib_fde(station: str):
         if not ok:
             return "no fix", position
         # a satellite RTKLIB checked (azimuth/elevation set) but left out of the solution
-        gone = [sat for sat in before if status[sat - 1].azel[1] >= math.radians(15.0) and not status[sat - 1].vs]
+        gone = [sat for sat in before if status[sat - 1].azel[1] >= MASK_ANGLE and not status[sat - 1].vs]
         return ("x" + ",".join(map(str, gone)) if gone else "none"), position
 
     return decide

@@ -141,7 +141,7 @@ def solution_separation(fix: PositionFix, p_satellite: float = P_SATELLITE, p_co
         dropped = jnp.concatenate([jnp.zeros(3, bool), ~kept_clocks])
         normal = normal + jnp.diag(jnp.where(dropped, 1.0, 0.0))       # a clock without satellites: unknown removed
         solvable = jnp.sum(mask) >= 3 + jnp.sum(kept_clocks)
-        inverse = _linalg.cho_solve(_linalg.cholesky(normal), jnp.eye(unknowns, dtype=dtype))
+        inverse = _linalg.psd_solve(normal, jnp.eye(unknowns, dtype=dtype))
         return inverse, weights, solvable
 
     inverse0, _, solvable0 = normal_inverse(used)
@@ -185,7 +185,7 @@ def fault_free_levels(fix: PositionFix, p_hmi: tuple[float, float] = (P_HMI_HORI
       ``(hpl, vpl)`` [m].
     """
     h, _ = whitened(fix)
-    inverse0 = _linalg.cho_solve(_linalg.cholesky(h.T @ h), jnp.eye(h.shape[1], dtype=h.dtype))
+    inverse0 = _linalg.psd_solve(h.T @ h, jnp.eye(h.shape[1], dtype=h.dtype))
     sigma0 = jnp.sqrt(jnp.diagonal(inverse0)[:3])
     hmi_h, hmi_v = p_hmi
     return (jnp.hypot(sigma0[0], sigma0[1]) * _q_inverse(hmi_h / 4.0), sigma0[2] * _q_inverse(hmi_v / 2.0))

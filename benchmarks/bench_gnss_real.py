@@ -42,7 +42,7 @@ import numpy as np  # noqa: E402
 from jaxfdi.data import data_path  # noqa: E402
 from jaxfdi.gnss._receiver import monitor_receiver, receiver_epochs  # noqa: E402
 from jaxfdi.gnss._rinex import read_rinex_nav  # noqa: E402
-from jaxfdi.gnss._rinex_obs import read_rinex_obs  # noqa: E402
+from jaxfdi.gnss import read_observations  # noqa: E402
 from jaxfdi.gnss._solution_separation import solution_separation  # noqa: E402
 from jaxfdi.scenarios.gnss_real import _peer_navdata, load_phone  # noqa: E402
 
@@ -96,7 +96,7 @@ def gnss_lib_py_timing(repeats: int) -> dict:
 
 
 def jaxfdi_timing(copies: int, repeats: int) -> dict:
-    epochs = receiver_epochs(read_rinex_obs(data_path("07590920.05o")), read_rinex_nav(data_path("07590920.05n")))
+    epochs = receiver_epochs(read_observations(data_path("07590920.05o")), read_rinex_nav(data_path("07590920.05n")))
     tiled = epochs._replace(times=jnp.tile(epochs.times, copies), pseudoranges=jnp.tile(epochs.pseudoranges, (copies, 1)))
     separate = jax.jit(jax.vmap(solution_separation))
 

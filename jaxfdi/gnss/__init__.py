@@ -4,13 +4,13 @@ broadcast atmospheric corrections, parity RAIM with isolation and exclusion, pro
 levels and availability, and real receivers' observation files and smartphone traces
 through the same chain, one receiver clock per constellation.
 
-Modules: ``yuma``, ``rinex``, ``rinex_obs`` and ``android`` (readers), ``orbits`` (IS-GPS-200),
+Modules: ``yuma``, ``rinex``, ``rinex_obs``, ``gnss_log`` and ``android`` (readers), ``orbits`` (IS-GPS-200),
 ``frames`` (WGS-84), ``atmosphere`` (Klobuchar, Saastamoinen), ``paths`` (UAV circuits),
 ``measurements`` (visibility, noise, receiver plant), ``least_squares`` (masked
 Householder QR), ``positioning`` (WLS, DOPs), ``raim`` (parity test, isolation),
 ``protection`` (slopes, HPL/VPL, availability), ``solution_separation`` (ARAIM's
 levels), ``integrity`` (one epoch end to end, the loop's FDI stage, availability over
-grids), ``receiver`` (a real receiver's epochs: observation files and phones).
+grids), ``receiver`` (a real receiver's epochs: observation files, logs and phones).
 """
 from jaxfdi.gnss._android import read_android
 from jaxfdi.gnss._frames import ecef_to_geodetic, geodetic_to_ecef
@@ -18,15 +18,14 @@ from jaxfdi.gnss._integrity import monitor_epochs, raim_fdi
 from jaxfdi.gnss._orbits import satellite_position
 from jaxfdi.gnss._positioning import solve_position
 from jaxfdi.gnss._protection import protection_levels
-from jaxfdi.gnss._receiver import monitor_receiver
+from jaxfdi.gnss._receiver import monitor_receiver, read_observations
 from jaxfdi.gnss._raim import parity_check
 from jaxfdi.gnss._rinex import read_rinex_nav
-from jaxfdi.gnss._rinex_obs import read_rinex_obs
 from jaxfdi.gnss._yuma import read_yuma
 
 __all__ = [
     "read_rinex_nav",
-    "read_rinex_obs",
+    "read_observations",
     "read_android",
     "read_yuma",
     "satellite_position",

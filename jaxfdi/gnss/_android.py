@@ -36,6 +36,7 @@ from __future__ import annotations
 import csv
 from typing import NamedTuple
 
+import jax
 import numpy as np
 
 from jaxfdi.gnss._frames import geodetic_to_ecef
@@ -105,6 +106,14 @@ def unix_to_gps_millis(unix_ms: np.ndarray) -> np.ndarray:
         raise ValueError("utcTimeMillis: expected times from 2017-01-01 on (GPS - UTC = 18 s), got "
                          f"{int(unix_ms.min())} ms")
     return unix_ms - GPS_EPOCH_UNIX_MS + LEAP_SECONDS_MS
+
+
+def geodetic_ecef64(lat_deg, lon_deg, height) -> np.ndarray:
+    """(..., 3) float64 ECEF [m] of latitude, longitude [deg] and ellipsoidal height [m],
+    whatever the x64 flag (``geodetic_to_ecef`` in a scoped float64 context: float32
+    would round a ground truth to 0.5 m)."""
+    with jax.enable_x64(True):
+        return np.asarray(geodetic_to_ecef(np.radians(lat_deg), np.radians(lon_deg), np.asarray(height, float)))
 
 
 def _float(text: str) -> float:
@@ -202,8 +211,7 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
         found = (at < times.size) & (times[np.minimum(at, times.size - 1)] == epochs)
         if not found.any():
             raise ValueError(f"ground_truth: {ground_truth} has no row at the epochs of {path}")
-        lat, lon, height = lat_lon_height[at[found]].T
-        truth[found] = np.asarray(geodetic_to_ecef(np.radians(lat), np.radians(lon), height))
+        truth[found] = geodetic_ecef64(*lat_lon_height[at[found]].T)
     return PhoneEpochs(epochs, signal, np.array([s[0] for s in signal]), pseudorange, sigma, cn0, satellite, wls,
                        truth)
 

@@ -1,6 +1,7 @@
 """A real receiver's observation file through the snapshot integrity chain.
 
-``receiver_epochs`` aligns an observation file (``read_rinex_obs``) with a navigation
+``read_observations`` reads a receiver's observations: a RINEX 2 or 3 observation file or
+an Android GnssLogger log. ``receiver_epochs`` aligns them with a navigation
 file (``read_rinex_nav``): one slot per GPS satellite observed, the epochs' time tags
 from the start of the first epoch's week, the broadcast ionosphere of the navigation
 header and each satellite's user range accuracy. ``monitor_receiver`` runs
@@ -37,7 +38,9 @@ from jaxfdi.gnss._integrity import EpochIntegrity, monitor_epoch, monitor_epochs
 from jaxfdi.gnss._orbits import OrbitTable, ephemeris_table
 from jaxfdi.gnss._raim import RaimTables, raim_tables
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides
-from jaxfdi.gnss._rinex_obs import Observations
+from jaxfdi.gnss._gnss_log import parse_gnss_log
+from jaxfdi.gnss._rinex import read_ascii
+from jaxfdi.gnss._rinex_obs import Observations, parse_rinex_obs
 
 #: IS-GPS-200 (20.3.3.3.1.3) URA values [m] of the indices 0-14 (index 15: no accuracy prediction)
 URA_VALUES = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0)
@@ -69,6 +72,25 @@ class ReceiverEpochs(NamedTuple):
     atmosphere: Atmosphere
     satellite: np.ndarray
     reference_week: int
+
+
+def read_observations(path) -> Observations:
+    """Read a receiver's observation file: RINEX 2 or 3 (Gurtner & Estey 2007; IGS 2018),
+    or an Android GnssLogger log (``# Raw,`` records, pseudoranges generated from the
+    receiver and satellite times: EUSPA 2017), told apart by their first line.
+
+    Returns:
+      ``Observations``: (E,) epochs' GPS week and time of week, (S,) satellites and the
+      code read for each, (E, S) pseudoranges [m] and C/N0 [dB-Hz] (NaN where not
+      measured), the approximate (header or first fix) ECEF position.
+
+    Raises:
+      ValueError: naming the file and the line of the first malformed header or record.
+    """
+    text = read_ascii(path)
+    if text.lstrip().startswith("#"):
+        return parse_gnss_log(text, str(path))
+    return parse_rinex_obs(text, str(path))
 
 
 def user_range_accuracy(accuracy) -> np.ndarray:
@@ -127,7 +149,7 @@ def monitor_receiver(measurements: Observations | ReceiverEpochs | PhoneEpochs, 
     (module docstring).
 
     Args:
-      measurements: an observation file (``read_rinex_obs``, with its ``ephemerides``
+      measurements: an observation file (``read_observations``, with its ``ephemerides``
         from ``read_rinex_nav``: GPS, RTKLIB's single-point model), the same aligned
         (``receiver_epochs``), or a phone trace (``read_android``: every constellation).
       tables: ``raim_tables`` (default: of the slots, ``P_fa = 1e-3``, ``P_md = 1e-3``).
@@ -152,7 +174,7 @@ def monitor_receiver(measurements: Observations | ReceiverEpochs | PhoneEpochs, 
                              f"file, got {type(ephemerides).__name__}")
         measurements = receiver_epochs(measurements, ephemerides)
     if not isinstance(measurements, ReceiverEpochs):
-        raise TypeError("measurements: expected read_rinex_obs's Observations, receiver_epochs' ReceiverEpochs or "
+        raise TypeError("measurements: expected read_observations's Observations, receiver_epochs' ReceiverEpochs or "
                         f"read_android's PhoneEpochs, got {type(measurements).__name__}")
     epochs = measurements
     mask_angle = MASK_ANGLE if mask_angle is None else mask_angle

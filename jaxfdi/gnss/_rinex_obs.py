@@ -17,12 +17,11 @@ skipped. A malformed header or record raises a ``ValueError`` naming the file an
 """
 from __future__ import annotations
 
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
-from jaxfdi.gnss._rinex import gps_week_seconds, read_ascii
+from jaxfdi.gnss._rinex import gps_week_seconds
 
 #: per system, the codes read as its pseudorange, best first (RINEX 2 names, then RINEX 3)
 CODE_PRIORITY = {
@@ -285,12 +284,3 @@ def parse_rinex_obs(text: str, name: str = "<string>") -> Observations:
         week=np.array([r[0] for r in records], int), time_of_week=np.array([r[1] for r in records]),
         satellite=np.array(satellites, dtype="<U3"), code=np.array([codes[s[0]] for s in satellites], dtype="<U3"),
         pseudorange=pseudorange, cn0=cn0, approx_position=approx)
-
-
-def read_rinex_obs(path: str | Path) -> Observations:
-    """Read a RINEX 2 or 3 observation file (``parse_rinex_obs`` on its ASCII text).
-
-    Returns:
-      ``Observations`` of the file's epochs (see ``parse_rinex_obs``).
-    """
-    return parse_rinex_obs(read_ascii(path), str(path))

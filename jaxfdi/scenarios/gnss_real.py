@@ -66,9 +66,8 @@ from jaxfdi.data import data_path
 from jaxfdi.gnss._frames import ecef_to_ned
 from jaxfdi.gnss._android import PhoneEpochs, read_android
 from jaxfdi.gnss._raim import raim_tables
-from jaxfdi.gnss._receiver import MASK_ANGLE, ReceiverEpochs, monitor_receiver, receiver_epochs
+from jaxfdi.gnss._receiver import MASK_ANGLE, ReceiverEpochs, monitor_receiver, read_observations, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
-from jaxfdi.gnss._rinex_obs import read_rinex_obs
 from jaxfdi.gnss._solution_separation import solution_separation
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
@@ -124,7 +123,7 @@ def local_errors(position: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, n
 
 
 def _load(station: str) -> tuple[ReceiverEpochs, np.ndarray]:
-    obs = read_rinex_obs(data_path(STATIONS[station] + "o"))
+    obs = read_observations(data_path(STATIONS[station] + "o"))
     return receiver_epochs(obs, read_rinex_nav(data_path(STATIONS[station] + "n"))), obs.approx_position
 
 

@@ -151,10 +151,10 @@ def test_truncated_and_repeated_rows_are_named(tmp_path):
 
 
 def test_monitor_receiver_names_what_it_needs():
-    from jaxfdi.gnss import read_rinex_obs
+    from jaxfdi.gnss import read_observations
     with pytest.raises(ValueError, match="ephemerides: expected the navigation file's records"):
-        monitor_receiver(read_rinex_obs(data_path("07590920.05o")))
-    with pytest.raises(TypeError, match="measurements: expected read_rinex_obs's Observations"):
+        monitor_receiver(read_observations(data_path("07590920.05o")))
+    with pytest.raises(TypeError, match="measurements: expected read_observations's Observations"):
         monitor_receiver(np.zeros((3, 4)))
     with pytest.raises(ValueError, match="clocks: expected 'constellation' or 'one'"):
         monitor_receiver(load_phone("GSDC 2023 Pixel 7 Pro"), clocks="two")

@@ -25,9 +25,9 @@ import pyrtklib as rtk
 import pytest
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss._receiver import code_sigma, monitor_receiver, receiver_epochs, user_range_accuracy
+from jaxfdi.gnss._receiver import code_sigma, monitor_receiver, read_observations, receiver_epochs, user_range_accuracy
 from jaxfdi.gnss._rinex import read_rinex_nav
-from jaxfdi.gnss._rinex_obs import parse_rinex_obs, read_rinex_obs
+from jaxfdi.gnss._rinex_obs import parse_rinex_obs
 
 STATIONS = {"0759": (-3976219.5082, 3382372.5671, 3652512.9849), "3040": (-3978242.4348, 3382841.1715, 3649902.7667)}
 SATELLITES = {"0759": 11, "3040": 12}  # GPS satellites seen in the hour
@@ -73,14 +73,14 @@ def rtklib_positions(station, tmp_path) -> dict[float, np.ndarray]:
 
 @pytest.fixture(scope="module", params=list(STATIONS))
 def station(request):
-    obs = read_rinex_obs(observation(request.param))
+    obs = read_observations(observation(request.param))
     result = monitor_receiver(receiver_epochs(obs, read_rinex_nav(navigation(request.param))))
     return request.param, obs, jax.tree_util.tree_map(np.asarray, result)
 
 
 @pytest.mark.parametrize("name", list(STATIONS))
 def test_every_real_file_is_read(name):
-    obs = read_rinex_obs(observation(name))
+    obs = read_observations(observation(name))
     eph = read_rinex_nav(navigation(name))
     assert obs.pseudorange.shape == (120, SATELLITES[name]) and obs.week.tolist() == [1316] * 120
     assert obs.time_of_week[0] == 518400.0 and abs(obs.time_of_week[-1] - 521970.0) < 0.01
@@ -108,7 +108,7 @@ def test_rtklib_rinex3_copy_reads_the_same(name, tmp_path):
     copy = tmp_path / "copy.obs"
     assert rtk.convrnx(rtk.STRFMT_RINEX, options, str(observation(name)), [str(copy)] + [""] * 8) == 1
     assert copy.read_text().startswith("     3.03           OBSERVATION DATA")
-    two, three = read_rinex_obs(observation(name)), read_rinex_obs(copy)
+    two, three = read_observations(observation(name)), read_observations(copy)
     assert three.satellite.tolist() == two.satellite.tolist() and set(three.code) == {"C1C"}
     np.testing.assert_array_equal(three.week, two.week)
     np.testing.assert_array_equal(three.time_of_week, two.time_of_week)
@@ -181,7 +181,7 @@ def test_damaged_observation_file_names_the_line(line_no, new, message, tmp_path
     path = tmp_path / "damaged.05o"
     path.write_text(damaged("0759", line_no, new))
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")) as info:
-        read_rinex_obs(path)
+        read_observations(path)
     assert str(path) in str(info.value)
 
 
@@ -205,4 +205,4 @@ def test_damaged_rinex3_and_bytes_name_the_line(tmp_path):
     path = tmp_path / "bytes.obs"
     path.write_bytes(good.encode().replace(b"G03  247", b"G03  2\xe97"))
     with pytest.raises(ValueError, match=r"bytes.obs:5: expected ASCII text, got byte 0xe9"):
-        read_rinex_obs(path)
+        read_observations(path)

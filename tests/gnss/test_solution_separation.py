@@ -15,7 +15,7 @@ from jaxfdi.data import data_path
 from jaxfdi.gnss._positioning import PositionFix, dops
 from jaxfdi.gnss._receiver import monitor_receiver, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
-from jaxfdi.gnss._rinex_obs import read_rinex_obs
+from jaxfdi.gnss import read_observations
 from jaxfdi.gnss._solution_separation import (P_CONSTELLATION, P_FA_HORIZONTAL, P_FA_VERTICAL, P_HMI_HORIZONTAL,
                                               P_HMI_VERTICAL, P_SATELLITE, fault_free_levels, solution_separation)
 
@@ -70,7 +70,7 @@ def reference(geometry, sigma, residuals, used, p_const):
 
 @pytest.fixture(scope="module")
 def geonet():
-    obs = read_rinex_obs(data_path("07590920.05o"))
+    obs = read_observations(data_path("07590920.05o"))
     result = monitor_receiver(receiver_epochs(obs, read_rinex_nav(data_path("07590920.05n"))), exclude=False)
     return jax.tree_util.tree_map(np.asarray, result.fix)
 
@@ -168,7 +168,7 @@ def test_the_isolated_mode_is_the_fix_without_the_faulty_satellite():
     at its own position, up to 80 m away: 10 cm on 82 m measured)."""
     from jaxfdi.gnss._frames import ecef_to_ned
 
-    obs = read_rinex_obs(data_path("07590920.05o"))
+    obs = read_observations(data_path("07590920.05o"))
     epochs = receiver_epochs(obs, read_rinex_nav(data_path("07590920.05n")))
     e, checked = 30, 0
     rho = np.asarray(epochs.pseudoranges)

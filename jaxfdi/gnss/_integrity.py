@@ -19,6 +19,7 @@ from typing import Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
@@ -43,13 +44,15 @@ class EpochIntegrity(NamedTuple):
       fix: the least-squares fix from every usable satellite
       check: the parity test of ``fix``
       protection: the protection levels and availability of ``fix``
-      excluded: () int, the excluded slot (-1: none): the one isolated after a parity alarm,
-          else the first dead slot (every fix leaves it out); -1 without ``exclude``
-      fix_excluded: the fix without it (the full fix when none or a dead slot: it lacks it)
+      excluded: () int, the first excluded slot (-1: none): the one isolated after a parity
+          alarm, else the first dead slot (every fix leaves it out); -1 without ``exclude``
+      fix_excluded: the fix after exclusion (the full fix when none or a dead slot: it lacks it)
       check_excluded: the parity test of ``fix_excluded``
       protection_excluded: the protection levels of ``fix_excluded``
       dead: (S,) bool: a slot with an orbit whose pseudorange is infinite
           (a dead channel: the fix leaves it out and ``raim_output`` alarms on it)
+      exclusions: (S,) bool, every slot ``fix_excluded`` leaves out by exclusion, one per
+          round, and the dead ones
     """
 
     fix: PositionFix
@@ -60,6 +63,14 @@ class EpochIntegrity(NamedTuple):
     check_excluded: ParityCheck
     protection_excluded: ProtectionLevels
     dead: Array
+    exclusions: Array
+
+
+def exclusion_rounds(exclude: bool | int) -> int:
+    """The number of exclusion rounds ``exclude`` asks for (``True``: 1, ``False``: 0)."""
+    if isinstance(exclude, (bool, np.bool_)):
+        return int(exclude)
+    return _checks.check_int("exclude", exclude, 0, meaning="the most satellites to exclude (or a bool: 1 or none)")
 
 
 def assess(fix: PositionFix, tables: RaimTables, operation="npa") -> tuple[ParityCheck, ProtectionLevels]:
@@ -71,7 +82,7 @@ def assess(fix: PositionFix, tables: RaimTables, operation="npa") -> tuple[Parit
 
 def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array, tables: RaimTables,
                   sigma: Array | Callable[[Array], Array] | None = None, operation="npa",
-                  exclude: bool = True, transmit: tuple[Array, Array] | None = None,
+                  exclude: bool | int = True, transmit: tuple[Array, Array] | None = None,
                   atmosphere: Atmosphere | None = None, mask_angle: float | None = None,
                   clocks: Array | None = None) -> EpochIntegrity:
     """Fix, RAIM, protection levels and exclusion of one epoch (module doc).
@@ -82,7 +93,9 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
         one is a dead channel (``EpochIntegrity.dead``).
       tables: ``raim.raim_tables``; sigma: as for ``positioning.solve_position``.
       operation: alert limits (``protection.ALERT_LIMITS`` key or (HAL, VAL)).
-      exclude: re-solve without the isolated satellite after an alarm.
+      exclude: the most satellites excluded, one after another (greedy, as Brown & Chin
+        1992's FDE iterated: each round re-solves without the satellite the current fix's
+        parity test isolates, while it alarms and can isolate); ``True``: 1, ``False``: none.
       transmit: satellite positions and clocks at transmission
         (``positioning.transmit_states``) when already known (``orbit`` is then unused).
       atmosphere, mask_angle, clocks: as for ``positioning.solve_position`` (broadcast
@@ -93,26 +106,37 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
                          mask_angle=mask_angle, clocks=clocks)
     check, protection = assess(fix, tables, operation)
     dead = jnp.asarray(available, bool) & jnp.isinf(jnp.asarray(pseudoranges))
-    if not exclude:
-        none = jnp.asarray(-1, jnp.int32)
-        return EpochIntegrity(fix, check, protection, none, fix, check, protection, dead)
-    isolated = jnp.where(check.alarm & (check.isolated >= 0), check.isolated, -1).astype(jnp.int32)
-    keep = available & (jnp.arange(available.shape[0]) != isolated)
-    initial = jnp.concatenate([fix.position, jnp.atleast_1d(fix.clock_bias)])
-    refit = solve_position(orbit, t_receive, pseudoranges, keep, sigma, initial=initial,
-                           iterations=EXCLUSION_ITERATIONS, unweighted_iterations=0, transmit=transmit,
-                           atmosphere=atmosphere, mask_angle=mask_angle, clocks=clocks)
-    check_x, protection_x = assess(refit, tables, operation)
-    pick = lambda a, b: jax.tree_util.tree_map(lambda u, v: jnp.where(isolated >= 0, u, v), a, b)  # noqa: E731
-    # a dead slot is excluded too (the fix already leaves it out): reported when the parity
+    rounds = exclusion_rounds(exclude)
+    none = jnp.asarray(-1, jnp.int32)
+    if rounds == 0:
+        return EpochIntegrity(fix, check, protection, none, fix, check, protection, dead, dead)
+
+    def exclude_one(carry, _):
+        """Leave out the slot the current fix's parity test isolates, if it alarms."""
+        keep, first, current = carry
+        now_fix, now_check = current[0], current[1]
+        drop = jnp.where(now_check.alarm & (now_check.isolated >= 0), now_check.isolated, -1).astype(jnp.int32)
+        keep = keep & (jnp.arange(keep.shape[0]) != drop)
+        initial = jnp.concatenate([now_fix.position, jnp.atleast_1d(now_fix.clock_bias)])
+        refit = solve_position(orbit, t_receive, pseudoranges, keep, sigma, initial=initial,
+                               iterations=EXCLUSION_ITERATIONS, unweighted_iterations=0, transmit=transmit,
+                               atmosphere=atmosphere, mask_angle=mask_angle, clocks=clocks)
+        refit = (refit,) + assess(refit, tables, operation)
+        current = jax.tree_util.tree_map(lambda u, v: jnp.where(drop >= 0, u, v), refit, current)
+        return (keep, jnp.where(first >= 0, first, drop), current), None
+
+    keep = jnp.asarray(available, bool)
+    (keep, first, (fix_x, check_x, protection_x)), _ = jax.lax.scan(
+        exclude_one, (keep, none, (fix, check, protection)), None, length=rounds)
+    # a dead slot is excluded too (every fix already leaves it out): reported when the parity
     # test isolated nothing, so that a dead channel reads as detected, isolated and excluded
-    excluded = jnp.where(isolated >= 0, isolated, jnp.where(jnp.any(dead), jnp.argmax(dead), -1)).astype(jnp.int32)
-    return EpochIntegrity(fix, check, protection, excluded, pick(refit, fix), pick(check_x, check),
-                          pick(protection_x, protection), dead)
+    excluded = jnp.where(first >= 0, first, jnp.where(jnp.any(dead), jnp.argmax(dead), -1)).astype(jnp.int32)
+    return EpochIntegrity(fix, check, protection, excluded, fix_x, check_x, protection_x, dead,
+                          (jnp.asarray(available, bool) & ~keep) | dead)
 
 
 def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables: RaimTables,
-                   sigma=None, operation="npa", exclude: bool = True, batch_size: int | None = None,
+                   sigma=None, operation="npa", exclude: bool | int = True, batch_size: int | None = None,
                    atmosphere: Atmosphere | None = None, mask_angle: float | None = None) -> EpochIntegrity:
     """``monitor_epoch`` vmapped over epochs: ``times`` (T,), ``pseudoranges`` (T, S) (NaN:
     not measured; a fixed sigma array is (T, S)). Leaves gain a leading T axis. With
@@ -214,7 +238,7 @@ def delivered_healthy(result: EpochIntegrity) -> Array:
 
 
 def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=None, operation="npa",
-             exclude: bool = True) -> FDI:
+             exclude: bool | int = True) -> FDI:
     """``monitor_epoch`` as a stateless ``loop.FDI``: step ``k`` takes the (S,)
     pseudoranges time-tagged ``t0 + k dt`` and returns a ``RaimOutput``.
 

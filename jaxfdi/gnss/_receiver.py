@@ -34,7 +34,7 @@ from jax import Array
 
 from jaxfdi.gnss._android import PhoneEpochs
 from jaxfdi.gnss._atmosphere import Atmosphere, broadcast_atmosphere
-from jaxfdi.gnss._integrity import EpochIntegrity, monitor_epoch, monitor_epochs
+from jaxfdi.gnss._integrity import EpochIntegrity, exclusion_rounds, monitor_epoch, monitor_epochs
 from jaxfdi.gnss._orbits import OrbitTable, ephemeris_table
 from jaxfdi.gnss._raim import RaimTables, raim_tables
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides
@@ -144,7 +144,7 @@ def code_sigma(ura: Array):
 
 def monitor_receiver(measurements: Observations | ReceiverEpochs | PhoneEpochs, ephemerides: Ephemerides | None = None,
                      tables: RaimTables | None = None, mask_angle: float | None = None, clocks: str = "constellation",
-                     operation="npa", exclude: bool = True) -> EpochIntegrity:
+                     operation="npa", exclude: bool | int = True) -> EpochIntegrity:
     """Fix, RAIM, protection levels and exclusion of every epoch of a real receiver
     (module docstring).
 
@@ -181,7 +181,8 @@ def monitor_receiver(measurements: Observations | ReceiverEpochs | PhoneEpochs, 
     slots = int(epochs.pseudoranges.shape[1])
     tables = raim_tables(max(slots, 5), pfa=1e-3, pmd=1e-3) if tables is None else tables
     return _monitor(epochs.table, epochs.times, epochs.pseudoranges, epochs.ura, epochs.atmosphere, tables,
-                    float(mask_angle), operation if isinstance(operation, str) else tuple(operation), bool(exclude))
+                    float(mask_angle), operation if isinstance(operation, str) else tuple(operation),
+                    exclusion_rounds(exclude))
 
 
 @functools.partial(jax.jit, static_argnames=("mask_angle", "operation", "exclude"))
@@ -200,7 +201,8 @@ def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, ex
     return _monitor_phone(jnp.asarray(phone.satellite, dtype), jnp.asarray(phone.pseudorange, dtype),
                           jnp.asarray(phone.sigma, dtype), membership, tables,
                           None if mask_angle is None else float(mask_angle),
-                          operation if isinstance(operation, str) else tuple(operation), bool(exclude))
+                          operation if isinstance(operation, str) else tuple(operation),
+                          exclusion_rounds(exclude))
 
 
 @functools.partial(jax.jit, static_argnames=("mask_angle", "operation", "exclude"))

@@ -37,18 +37,22 @@ levels (``solution_separation``: ARAIM's LPV-200 budgets, ``P_sat = 1e-5``).
 - **phones**: four traces of Google's Smartphone Decimeter Challenge (2021-2023, GPS,
   GLONASS, Galileo, BeiDou, QZSS; shipped in ``jaxfdi/data``) through
   ``gnss.monitor_receiver``: one receiver clock per constellation, the phone's own
-  pseudorange uncertainty as sigma, no mask, the same tests and levels. Per trace: the
-  alarms and the median ``TS_D / dof`` (1 when the phone's uncertainties are right),
+  pseudorange uncertainty as sigma, no mask, the same tests and levels, and up to
+  ``PHONE_EXCLUSIONS`` satellites excluded one after another. Per trace: the alarms, the
+  epochs with an exclusion, the signals excluded and the epochs still alarming after
+  them, the median ``TS_D / dof`` (1 when the phone's uncertainties are right),
   the delivered fix (after exclusion) against Google's weighted-least-squares one and
   against the ground truth, both protection levels and misleading epochs where there
   is truth.
 - **phone-peers** (when gnss_lib_py is installed): the same epochs through gnss_lib_py
   1.1's ``solve_wls`` (unit weights, one clock) against ours in that configuration, and
-  its residual fault detection and exclusion (Blanch, Walter & Enge 2015, greedy, one
-  fault) against our parity test and exclusion at the same threshold on the same
-  unweighted statistic: the agreement table. gnss_lib_py's exclusion statistic divides
-  by ``1 - h_ii`` of the geometry without its clock column; ``explained`` counts the
-  differing exclusions that its own formula with the clock column would have made ours.
+  its residual fault detection and exclusion (Blanch, Walter & Enge 2015, greedy) against
+  our parity test and exclusion at the same threshold on the same unweighted statistic:
+  the agreement table. First exclusion (one fault each): gnss_lib_py's exclusion
+  statistic divides by ``1 - h_ii`` of the geometry without its clock column;
+  ``explained`` counts the differing exclusions that its own formula with the clock
+  column would have made ours. ``same_exclusion_set``: epochs where up to
+  ``PHONE_EXCLUSIONS`` greedy exclusions on both sides leave out the same signals.
 """
 from __future__ import annotations
 
@@ -89,6 +93,8 @@ PHONES = {
 }
 #: gnss_lib_py's default residual threshold [m^2] (``fde_greedy_residual``), used by both sides of the agreement table
 PEER_THRESHOLD = 3000.0
+#: the most satellites excluded from a phone's epoch, one after another (``monitor_receiver(exclude=)``)
+PHONE_EXCLUSIONS = 3
 
 
 @study_result(group="section")
@@ -248,15 +254,18 @@ def load_phone(label: str) -> PhoneEpochs:
 
 def _phone_row(label: str, phone: PhoneEpochs, result, separation) -> tuple[dict, dict]:
     """The ``phones`` row of a trace and its per-epoch arrays (module docstring)."""
-    excluded = result.excluded >= 0
-    delivered = np.where(excluded[:, None], result.fix_excluded.position, result.fix.position)
+    excluded = np.any(result.exclusions & ~result.dead, axis=1)
+    delivered = result.fix_excluded.position
     alarm, dof = result.check.alarm, result.check.dof
     low, high = rate_interval(int(alarm.sum()), int(alarm.size), 0.95)
     hpl, vpl = result.protection.hpl, result.protection.vpl
     row = {"section": "phones", "trace": label, "epochs": int(alarm.size),
            "measurements": int(result.fix.num_used.sum()), "constellations": "".join(np.unique(phone.constellation)),
            "dof_median": float(np.median(dof)), "parity_alarms": int(alarm.sum()), "alarm_rate_low": low,
-           "alarm_rate_high": high, "exclusions": int(excluded.sum()), "ss_alarms": int(separation.alarm.sum()),
+           "alarm_rate_high": high, "exclusions": int(excluded.sum()),
+           "excluded_signals": int(np.sum(result.exclusions & ~result.dead)),
+           "alarm_after_exclusion": int(np.sum(alarm & result.check_excluded.alarm)),
+           "ss_alarms": int(separation.alarm.sum()),
            "statistic_per_dof_median": float(np.median(result.check.statistic / np.maximum(dof, 1))),
            "hpl_median_m": float(np.median(hpl)), "ss_hpl_median_m": float(np.median(separation.hpl))}
     google = np.all(np.isfinite(phone.wls_position), axis=1)
@@ -311,7 +320,8 @@ def _peer_row(label: str, phone: PhoneEpochs) -> dict | None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         state = solve_wls(nav)
-        faults = np.asarray(solve_fde(nav, method="residual", threshold=PEER_THRESHOLD, max_faults=1)["fault_residual"])
+        faults, greedy = (np.asarray(solve_fde(nav.copy(), method="residual", threshold=PEER_THRESHOLD,
+                                               max_faults=k)["fault_residual"]) for k in (1, PHONE_EXCLUSIONS))
     theirs_position = np.stack([np.asarray(state[f"{axis}_rx_wls_m"]) for axis in "xyz"], axis=1)
     epochs = phone.gps_millis.size
     if not np.array_equal(np.asarray(state["gps_millis"]).astype(np.int64), phone.gps_millis):
@@ -320,10 +330,13 @@ def _peer_row(label: str, phone: PhoneEpochs) -> dict | None:
     slots = len(phone.signal)
     tables = raim_tables(max(slots, 5))
     tables = tables._replace(threshold=jnp.where(jnp.arange(tables.threshold.shape[0]) > 0, PEER_THRESHOLD, jnp.inf))
-    ours = jax.tree_util.tree_map(np.asarray, monitor_receiver(unit, tables=tables, clocks="one"))
+    ours = jax.tree_util.tree_map(np.asarray, monitor_receiver(unit, tables=tables, clocks="one",
+                                                               exclude=PHONE_EXCLUSIONS))
     theirs_excluded = np.full(epochs, -1)
     theirs_excluded[at[faults == 1]] = slot[faults == 1]
     theirs_alarm = theirs_excluded >= 0
+    theirs_set = np.zeros(ours.exclusions.shape, bool)
+    theirs_set[at[greedy == 1], slot[greedy == 1]] = True
     ours_alarm, ours_excluded = ours.check.alarm, ours.excluded
     both = ours_alarm & theirs_alarm
     differ = both & (ours_excluded != theirs_excluded)
@@ -341,7 +354,8 @@ def _peer_row(label: str, phone: PhoneEpochs) -> dict | None:
             "threshold_m2": PEER_THRESHOLD, "both_alarm": int(both.sum()),
             "jaxfdi_only": int((ours_alarm & ~theirs_alarm).sum()), "gnss_lib_py_only": int((~ours_alarm & theirs_alarm).sum()),
             "neither": int((~ours_alarm & ~theirs_alarm).sum()), "same_exclusion": int((both & ~differ).sum()),
-            "different_exclusion": int(differ.sum()), "explained": explained}
+            "different_exclusion": int(differ.sum()), "explained": explained, "greedy_rounds": PHONE_EXCLUSIONS,
+            "same_exclusion_set": int(np.all((ours.exclusions & ~ours.dead) == theirs_set, axis=1).sum())}
 
 
 def _trials(result, runs: int, seed: int, last: int) -> tuple[np.ndarray, np.ndarray]:
@@ -475,7 +489,7 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
 
     for label in PHONES:
         phone = load_phone(label)
-        result = jax.tree_util.tree_map(np.asarray, monitor_receiver(phone))
+        result = jax.tree_util.tree_map(np.asarray, monitor_receiver(phone, exclude=PHONE_EXCLUSIONS))
         separation = jax.tree_util.tree_map(np.asarray, separate(result.fix))
         row, arrays = _phone_row(label, phone, result, separation)
         rows.append(row)

@@ -130,7 +130,8 @@ def test_first_gps_fix_is_the_approximate_position_in_float64():
     lat, lon, h = np.radians(37.4235845), np.radians(-122.0941221), -32.830566      # the first GPS Fix record
     a, e2 = 6378137.0, 6.69437999014e-3
     n = a / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-    expected = [(n + h) * np.cos(lat) * np.cos(lon), (n + h) * np.cos(lat) * np.sin(lon), (n * (1 - e2) + h) * np.sin(lat)]
+    expected = [(n + h) * np.cos(lat) * np.cos(lon), (n + h) * np.cos(lat) * np.sin(lon),
+                (n * (1 - e2) + h) * np.sin(lat)]
     np.testing.assert_allclose(obs.approx_position, expected, atol=1e-6, rtol=0)
     assert np.all(np.isnan(read_observations(data_path("gsdc2023_gnss_log.txt")).approx_position))
 

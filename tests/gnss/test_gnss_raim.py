@@ -19,6 +19,7 @@ from jaxfdi.gnss import (
     parity_check,
     protection_levels,
     read_rinex_nav,
+    read_yuma,
     solve_position,
 )
 from jaxfdi.gnss._frames import ecef_to_ned
@@ -163,6 +164,81 @@ def test_parity_matrix_and_statistics_match_numpy(clocks):
         assert float(pl.vpl) == pytest.approx(np.max(np.where(seen, np.abs(A[2]) / root, 0.0)) * np.sqrt(lam), rel=rel)
         np.testing.assert_allclose(np.asarray(pl.minimum_detectable_bias)[used],
                                    np.where(seen, np.sqrt(lam) / root, np.inf), rtol=rel)
+
+
+#: Galileo's nominal constellation as the ARAIM studies use it: Walker 24/3/1, a = 29 600.318
+#: km, i = 56 deg (EU-U.S. Working Group C, ARAIM Technical Subgroup, Milestone 3 Report, 2016)
+GALILEO_WALKER = dict(a=29_600_318.0, inclination=np.radians(56.0), planes=3, per_plane=8, phasing=1)
+GM = 3.986004418e14
+
+
+def circular_positions(a, inclination, raan, argument_of_latitude):
+    """(S, 3) inertial positions of circular orbits."""
+    cu, su, co, so, ci, si = (np.cos(argument_of_latitude), np.sin(argument_of_latitude), np.cos(raan), np.sin(raan),
+                              np.cos(inclination), np.sin(inclination))
+    return np.stack([a * (cu * co - su * ci * so), a * (cu * so + su * ci * co), a * su * si], axis=1)
+
+
+def gps_and_galileo_nominal(t):
+    """(48, 3) positions of the RTCA MOPS (DO-229) 24-satellite GPS almanac and Galileo's
+    Walker 24/3/1 at ``t`` s after the almanac's reference time, both as circular orbits in
+    one inertial snapshot, and the (48,) constellation index (0 GPS, 1 Galileo)."""
+    alm = read_yuma(data_path("gps_almanac_0703_rtca_mops24.yuma.txt"))
+    assert np.all(np.asarray(alm.eccentricity) == 0.0)
+    a = np.asarray(alm.sqrt_a) ** 2
+    gps = circular_positions(a, np.asarray(alm.inclination), np.asarray(alm.omega0),
+                             np.asarray(alm.argument_of_perigee) + np.asarray(alm.mean_anomaly) + np.sqrt(GM / a**3) * t)
+    w = GALILEO_WALKER
+    plane, slot = np.divmod(np.arange(w["planes"] * w["per_plane"]), w["per_plane"])
+    total = w["planes"] * w["per_plane"]
+    galileo = circular_positions(w["a"], w["inclination"], 2 * np.pi * plane / w["planes"],
+                                 2 * np.pi * (slot / w["per_plane"] + w["phasing"] * plane / total)
+                                 + np.sqrt(GM / w["a"] ** 3) * t)
+    return np.concatenate([gps, galileo]), np.repeat([0, 1], [len(gps), total])
+
+
+def test_two_clock_slope_levels_on_the_nominal_gps_and_galileo_constellations():
+    """The published dual-constellation geometry of ARAIM availability studies (GPS's
+    DO-229 24 satellites, Galileo's Walker 24/3/1), seen from 12 users over 6 hours with a
+    5 deg mask: ``H = [-u_NED^T, e_GPS, e_GAL]`` in NumPy, the parity statistic with
+    ``n - 5`` degrees of freedom, slope HPL/VPL and minimum detectable biases (Brown & Chin
+    1992) against SciPy's chi-square and noncentral chi-square, rel 1e-8."""
+    tables = raim_tables(48, pfa=1e-3, pmd=1e-3)
+    run = jax.jit(lambda h, used, y: (parity_check(synthetic_fix(h, used, y), tables),
+                                      protection_levels(synthetic_fix(h, used, y), tables)))
+    rng = np.random.default_rng(11)
+    lam_of, checked = {}, 0
+    for lat, lon in zip(np.radians([-60, -30, 0, 20, 37.4, 52, 70, 80, 10, -45, 45, 65]), np.radians(
+            [0, 30, 60, 90, -122.1, 150, 180, -150, -90, -60, -30, 5])):
+        user = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)]) * 6_371_000.0
+        ned = np.array([[-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)],
+                        [-np.sin(lon), np.cos(lon), 0.0], user / -np.linalg.norm(user)])
+        for t in np.arange(0.0, 6 * 3600.0, 3600.0):
+            sats, system = gps_and_galileo_nominal(t)
+            los = (sats - user) @ ned.T
+            los /= np.linalg.norm(los, axis=1, keepdims=True)
+            used = -los[:, 2] > np.sin(np.radians(5.0))
+            h = np.concatenate([-los, (system == 0)[:, None] * 1.0, (system == 1)[:, None] * 1.0], axis=1)
+            y = rng.normal(size=48)
+            check, levels = run(h, used, y)
+            hv, yv = h[used], y[used]
+            n = hv.shape[0]
+            dof = n - 5
+            assert (system[used] == 0).sum() >= 4 and (system[used] == 1).sum() >= 4 and int(check.dof) == dof
+            A = np.linalg.solve(hv.T @ hv, hv.T)
+            S = np.eye(n) - hv @ A
+            assert float(check.statistic) == pytest.approx(yv @ S @ yv, rel=1e-8)
+            if dof not in lam_of:
+                threshold = stats.chi2.isf(1e-3, dof)
+                lam_of[dof] = optimize.brentq(lambda v: stats.ncx2.cdf(threshold, dof, v) - 1e-3, 1e-6, 1e3,
+                                              xtol=1e-13)
+            root = np.sqrt(np.diag(S))
+            scale = np.sqrt(lam_of[dof])
+            assert float(levels.hpl) == pytest.approx(np.max(np.hypot(A[0], A[1]) / root) * scale, rel=1e-8)
+            assert float(levels.vpl) == pytest.approx(np.max(np.abs(A[2]) / root) * scale, rel=1e-8)
+            np.testing.assert_allclose(np.asarray(levels.minimum_detectable_bias)[used], scale / root, rtol=1e-8)
+            checked += 1
+    assert checked == 72
 
 
 def test_one_program_for_every_satellite_count():

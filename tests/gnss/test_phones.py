@@ -30,7 +30,7 @@ import pytest
 from scipy import optimize, stats
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss import geodetic_to_ecef, monitor_receiver, read_android
+from jaxfdi.gnss import ecef_to_geodetic, geodetic_to_ecef, monitor_receiver, read_android
 from jaxfdi.gnss._android import read_android_ground_truth
 from jaxfdi.gnss._raim import raim_tables
 from jaxfdi.scenarios.gnss_real import PHONES, PEER_THRESHOLD, _peer_navdata, _peer_row, load_phone
@@ -236,3 +236,59 @@ def test_a_clock_per_constellation_costs_its_degrees_of_freedom(phone):
     in_use = np.asarray([np.any(trace.clocks()[u], axis=0) for u in np.asarray(each.fix.used)])
     assert np.all(np.asarray(each.fix.clock_bias)[~in_use] == 0.0)
     assert jnp.all(each.fix.healthy)
+
+
+def test_greedy_exclusion_matches_numpy_rounds(phone):
+    """Up to three exclusions against NumPy rounds of the same rule (Brown & Chin 1992's
+    test iterated): each round solves the whitened least squares on the slots left (one
+    clock column per constellation in view), alarms when ``y^T S y`` exceeds SciPy's
+    chi-square quantile at ``n - 3 - C`` degrees of freedom, and leaves out the largest
+    normalised residual ``|(S y)_j| / sqrt(S_jj)`` (``S_jj > 0``) while ``n >= u + 2``. The rounds are
+    linearised at the full fix in its NED frame (our re-solve iterates the ranges:
+    positions within 5 cm, statistics within 1 % on the 2021 phones' tens-of-metres
+    outliers)."""
+    _, trace = phone
+    rounds = 3
+    full = jax.tree_util.tree_map(np.asarray, monitor_receiver(trace, exclude=False))
+    out = jax.tree_util.tree_map(np.asarray, monitor_receiver(trace, exclude=rounds))
+    np.testing.assert_array_equal(out.fix.position, full.fix.position)
+    membership = trace.clocks()
+    for k in range(trace.gps_millis.size):
+        keep = full.fix.used[k].copy()
+        h_all = full.fix.geometry[k] / full.fix.sigma[k][:, None]
+        y_all = full.fix.residuals[k] / full.fix.sigma[k]
+        dropped, statistic, step = [], None, np.zeros(3)
+        for _ in range(rounds + 1):
+            clocks = np.any(membership[keep], axis=0)
+            h = np.concatenate([h_all[keep, :3], h_all[keep, 3:][:, clocks]], axis=1)
+            n, u = h.shape
+            delta = np.linalg.lstsq(h, y_all[keep], rcond=None)[0]
+            residual = y_all[keep] - h @ delta
+            statistic, step = residual @ residual, delta[:3]
+            dof = n - u
+            alarm = dof > 0 and statistic > stats.chi2.isf(1e-3, dof)
+            if not alarm or n < u + 2 or len(dropped) == rounds:
+                break
+            s = np.diag(np.eye(n) - h @ np.linalg.solve(h.T @ h, h.T))
+            seen = s > 1e-9            # a satellite alone on its clock has no residual to test
+            worst = np.flatnonzero(keep)[np.argmax(np.where(seen, np.abs(residual) / np.sqrt(np.where(seen, s, 1)), 0))]
+            dropped.append(worst)
+            keep[worst] = False
+        assert sorted(np.flatnonzero(out.exclusions[k] & ~out.dead[k])) == sorted(dropped), k
+        assert out.excluded[k] == (dropped[0] if dropped else -1)
+        assert out.check_excluded.statistic[k] == pytest.approx(statistic, rel=1e-2, abs=1e-6)
+        lat, lon, _ = (float(v) for v in ecef_to_geodetic(full.fix.position[k]))
+        sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+        ecef_to_ned = np.array([[-sl * co, -sl * so, cl], [-so, co, 0.0], [-cl * co, -cl * so, -sl]])
+        np.testing.assert_allclose(ecef_to_ned @ (out.fix_excluded.position[k] - full.fix.position[k]), step,
+                                   atol=0.05)
+
+
+def test_exclude_counts_rounds():
+    trace = load_phone("GSDC 2021 Pixel 4")
+    one, true = (monitor_receiver(trace, exclude=e) for e in (1, True))
+    jax.tree_util.tree_map(np.testing.assert_array_equal, one, true)
+    with pytest.raises(ValueError, match=r"exclude: expected the most satellites to exclude .* in \[0, inf\], got -1"):
+        monitor_receiver(trace, exclude=-1)
+    with pytest.raises(TypeError, match="exclude: expected the most satellites to exclude"):
+        monitor_receiver(trace, exclude=1.5)

@@ -13,7 +13,7 @@ import pytest
 from scipy import stats
 
 from _frames import assert_table_is_the_json
-from jaxfdi.scenarios.gnss_real import PHONES, STEP_SIZES
+from jaxfdi.scenarios.gnss_real import PHONE_EXCLUSIONS, PHONES, STEP_SIZES
 
 RUNS = 60
 P_MD = 1e-3
@@ -85,6 +85,12 @@ def test_phone_rows_agree_with_gnss_lib_py_and_google(study):
     for row in peers:
         assert row["wls_max_difference_m"] < 1e-3 and row["jaxfdi_only"] == 0 and row["gnss_lib_py_only"] == 0
         assert row["explained"] == row["different_exclusion"]
+        # greedy rounds: the same excluded signals but where the first round differs, and on
+        # at most 2 % of the epochs more (measured 277 of 281 on the Pixel 4 XL)
+        assert row["epochs"] - row["same_exclusion_set"] <= row["different_exclusion"] + 0.02 * row["epochs"]
+    for row in phones.values():
+        assert row["excluded_signals"] <= PHONE_EXCLUSIONS * row["exclusions"]
+        assert row["exclusions"] <= row["parity_alarms"] and row["alarm_after_exclusion"] <= row["parity_alarms"]
     calibrated = phones["GSDC 2023 Pixel 7 Pro"]
     assert 0.5 < calibrated["statistic_per_dof_median"] < 2.0 and calibrated["google_difference_median_m"] < 0.5
     assert phones["GSDC 2021 Pixel 4"]["truth_epochs"] == 7 and phones["GSDC 2021 Pixel 4 XL"]["truth_epochs"] == 0

@@ -10,6 +10,10 @@ GEONET hour, jaxfdi beside RTKLIB, and on a smartphone trace, jaxfdi beside gnss
   single-point positioning with the same models, with and without its RAIM FDE option;
   its time includes reading the RINEX files and writing the solution file (it has no
   call without them), so it is a per-epoch cost of the whole program, not of the fix alone.
+* gnss_lib_py 1.1 on the same hour: ``solve_wls`` and ``solve_fde(method="residual",
+  max_faults=1)`` on the satellites our fixes use, with our satellite positions at
+  transmission and clock-corrected pseudoranges given (it computes no orbits there, no
+  atmosphere and no protection level, so the ratio flatters it).
 
 * Phones: the GSDC 2021 Pixel 4 XL trace (281 epochs, 48 signal slots, 5
   constellations). jaxfdi: ``monitor_receiver`` (a clock per constellation, parity test,
@@ -40,9 +44,10 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxfdi.data import data_path  # noqa: E402
-from jaxfdi.gnss._receiver import monitor_receiver, receiver_epochs  # noqa: E402
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, select_orbits  # noqa: E402
+from jaxfdi.gnss._positioning import transmit_states  # noqa: E402
+from jaxfdi.gnss._receiver import monitor_receiver, read_observations, receiver_epochs  # noqa: E402
 from jaxfdi.gnss._rinex import read_rinex_nav  # noqa: E402
-from jaxfdi.gnss import read_observations  # noqa: E402
 from jaxfdi.gnss._solution_separation import solution_separation  # noqa: E402
 from jaxfdi.scenarios.gnss_real import _peer_navdata, load_phone  # noqa: E402
 
@@ -92,6 +97,39 @@ def gnss_lib_py_timing(repeats: int) -> dict:
             solve_fde(nav, method="residual", threshold=3000.0, max_faults=1)
             times.append(time.perf_counter() - start)
     count = phone.gps_millis.size
+    return {"epochs": count, "run_s": float(np.median(times)), "epochs_per_s": count / float(np.median(times))}
+
+
+def gnss_lib_py_geonet_timing(repeats: int) -> dict:
+    """gnss_lib_py's WLS + residual FDE on station 0759's hour (module doc)."""
+    from gnss_lib_py.algorithms.fde import solve_fde
+    from gnss_lib_py.algorithms.snapshot import solve_wls
+    from gnss_lib_py.navdata.navdata import NavData
+
+    epochs = receiver_epochs(read_observations(data_path("07590920.05o")), read_rinex_nav(data_path("07590920.05n")))
+    used = np.asarray(monitor_receiver(epochs).fix.used)
+
+    def states(t, rho):
+        orbit, _ = select_orbits(epochs.table, t)
+        return transmit_states(orbit, t, rho)
+
+    position, clock = (np.asarray(a) for a in jax.vmap(states)(epochs.times, epochs.pseudoranges))
+    at, slot = np.nonzero(used)
+    times = []
+    for _ in range(repeats):
+        nav = NavData()
+        nav["gps_millis"] = np.asarray(epochs.times)[at] * 1e3
+        nav["corr_pr_m"] = np.asarray(epochs.pseudoranges)[at, slot] + SPEED_OF_LIGHT * clock[at, slot]
+        for i, axis in enumerate("xyz"):
+            nav[f"{axis}_sv_m"] = position[at, slot, i]
+        nav["b_sv_m"] = np.zeros(at.size)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            start = time.perf_counter()
+            solve_wls(nav)
+            solve_fde(nav, method="residual", threshold=3000.0, max_faults=1)
+            times.append(time.perf_counter() - start)
+    count = int(np.any(used, axis=1).sum())
     return {"epochs": count, "run_s": float(np.median(times)), "epochs_per_s": count / float(np.median(times))}
 
 
@@ -154,6 +192,11 @@ def main() -> None:
         print(f"RTKLIB postpos{' with RAIM FDE' if raim else ''}: {peer['solved']} of 120 epochs solved in "
               f"{peer['run_s'] * 1e3:.1f} ms (reading and writing files included): {peer['epochs_per_s']:.0f} epochs/s; "
               f"jaxfdi/RTKLIB = {ours['epochs_per_s'] / peer['epochs_per_s']:.1f}x")
+    peer = gnss_lib_py_geonet_timing(args.repeats)
+    results["geonet"]["gnss_lib_py"] = peer
+    print(f"gnss_lib_py solve_wls + residual FDE on the same hour: {peer['epochs']} epochs in "
+          f"{peer['run_s'] * 1e3:.0f} ms: {peer['epochs_per_s']:.0f} epochs/s (satellite states given, no protection "
+          f"levels); jaxfdi/gnss_lib_py = {ours['epochs_per_s'] / peer['epochs_per_s']:.0f}x")
     phone = phone_timing(args.copies, args.repeats)
     print(f"jaxfdi, {PHONE}: {phone['epochs']} epochs, first call {phone['first_call_s']:.1f} s (compile), then "
           f"{phone['run_s'] * 1e3:.1f} ms: {phone['epochs_per_s']:.0f} epochs/s (a clock per constellation, parity "

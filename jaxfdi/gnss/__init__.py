@@ -4,10 +4,10 @@ broadcast atmospheric corrections, parity RAIM with isolation and exclusion, pro
 levels and availability, and real receivers' observation files and smartphone traces
 through the same chain, one receiver clock per constellation.
 
-Modules: ``yuma``, ``rinex``, ``rinex_obs``, ``gnss_log`` and ``android`` (readers), ``orbits`` (IS-GPS-200),
-``frames`` (WGS-84), ``atmosphere`` (Klobuchar, Saastamoinen), ``paths`` (UAV circuits),
-``measurements`` (visibility, noise, receiver plant), ``least_squares`` (masked
-Householder QR), ``positioning`` (WLS, DOPs), ``raim`` (parity test, isolation),
+Modules: ``yuma``, ``rinex``, ``rinex_obs``, ``gnss_log`` and ``android`` (readers),
+``orbits`` (IS-GPS-200), ``frames`` (WGS-84), ``atmosphere`` (Klobuchar, Saastamoinen),
+``paths`` (UAV circuits), ``measurements`` (visibility, noise, receiver plant),
+``least_squares`` (masked Householder QR), ``positioning`` (WLS, DOPs), ``raim`` (parity test, isolation),
 ``protection`` (slopes, HPL/VPL, availability), ``solution_separation`` (ARAIM's
 levels), ``integrity`` (one epoch end to end, the loop's FDI stage, availability over
 grids), ``receiver`` (a real receiver's epochs: observation files, logs and phones).

@@ -18,9 +18,10 @@ than 500 ns (the filter of Google's gps-measurement-tools and gnss_lib_py); othe
 Its code is the RINEX 3 one (band from ``CarrierFrequencyHz``, attribute from
 ``CodeType``, or C/A and BeiDou B1I where an older log has none), and per system the first
 code of ``CODE_PRIORITY`` the log has is kept: one single-frequency pseudorange per
-satellite, as from a RINEX file. SBAS, IRNSS and GLONASS rows without a slot number are
-skipped. ``approx_position`` is the log's first ``Fix`` of the GPS provider (the phone's
-own GNSS position), NaN without one. A malformed record raises a ``ValueError`` naming the file and line.
+satellite, as from a RINEX file. QZSS PRNs 193-202 read as J01-J10 (RINEX 3); SBAS,
+IRNSS and GLONASS rows without a slot number are skipped. ``approx_position`` is the
+log's first ``Fix`` of the GPS provider (the phone's own GNSS position), NaN without one.
+A malformed record raises a ``ValueError`` naming the file and line.
 """
 from __future__ import annotations
 
@@ -129,9 +130,9 @@ def parse_gnss_log(text: str, name: str = "<string>") -> Observations:
         if key in records:
             _fail(name, line_no, f"a second record of {satellite} {rinex} at TimeNanos {time_nanos}")
         offset, period = _frame(system)
-        ambiguous = state & (GLO_TOD_DECODED | GLO_TOD_KNOWN if system == "R" else TOW_DECODED | TOW_KNOWN)
+        time_known = state & (GLO_TOD_DECODED | GLO_TOD_KNOWN if system == "R" else TOW_DECODED | TOW_KNOWN)
         flight = ((gps_ns + offset - sent + period // 2) % period) - period // 2
-        valid = bool(ambiguous) and uncertainty < MAX_TIME_UNCERTAINTY_NS
+        valid = bool(time_known) and uncertainty < MAX_TIME_UNCERTAINTY_NS
         records[key] = ((flight + sub_ns) * C * 1e-9 if valid else np.nan, cn0)
     if not records:
         _fail(name, len(text.splitlines()), "no Raw record of GPS, GLONASS, QZSS, BeiDou or Galileo")

@@ -34,12 +34,11 @@ from jax import Array
 
 from jaxfdi.gnss._android import PhoneEpochs
 from jaxfdi.gnss._atmosphere import Atmosphere, broadcast_atmosphere
+from jaxfdi.gnss._gnss_log import parse_gnss_log
 from jaxfdi.gnss._integrity import EpochIntegrity, exclusion_rounds, monitor_epoch, monitor_epochs
 from jaxfdi.gnss._orbits import OrbitTable, ephemeris_table
 from jaxfdi.gnss._raim import RaimTables, raim_tables
-from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides
-from jaxfdi.gnss._gnss_log import parse_gnss_log
-from jaxfdi.gnss._rinex import read_ascii
+from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides, read_ascii
 from jaxfdi.gnss._rinex_obs import Observations, parse_rinex_obs
 
 #: IS-GPS-200 (20.3.3.3.1.3) URA values [m] of the indices 0-14 (index 15: no accuracy prediction)

@@ -243,10 +243,10 @@ def test_greedy_exclusion_matches_numpy_rounds(phone):
     test iterated): each round solves the whitened least squares on the slots left (one
     clock column per constellation in view), alarms when ``y^T S y`` exceeds SciPy's
     chi-square quantile at ``n - 3 - C`` degrees of freedom, and leaves out the largest
-    normalised residual ``|(S y)_j| / sqrt(S_jj)`` (``S_jj > 0``) while ``n >= u + 2``. The rounds are
-    linearised at the full fix in its NED frame (our re-solve iterates the ranges:
-    positions within 5 cm, statistics within 1 % on the 2021 phones' tens-of-metres
-    outliers)."""
+    normalised residual ``|(S y)_j| / sqrt(S_jj)`` (``S_jj > 0``) while ``n >= u + 2``.
+    The rounds are linearised at the full fix in its NED frame (our re-solve iterates the
+    ranges: positions within 5 cm, statistics within 1 % on the 2021 phones'
+    tens-of-metres outliers)."""
     _, trace = phone
     rounds = 3
     full = jax.tree_util.tree_map(np.asarray, monitor_receiver(trace, exclude=False))
@@ -271,7 +271,8 @@ def test_greedy_exclusion_matches_numpy_rounds(phone):
                 break
             s = np.diag(np.eye(n) - h @ np.linalg.solve(h.T @ h, h.T))
             seen = s > 1e-9            # a satellite alone on its clock has no residual to test
-            worst = np.flatnonzero(keep)[np.argmax(np.where(seen, np.abs(residual) / np.sqrt(np.where(seen, s, 1)), 0))]
+            normalised = np.where(seen, np.abs(residual) / np.sqrt(np.where(seen, s, 1.0)), 0.0)
+            worst = np.flatnonzero(keep)[np.argmax(normalised)]
             dropped.append(worst)
             keep[worst] = False
         assert sorted(np.flatnonzero(out.exclusions[k] & ~out.dead[k])) == sorted(dropped), k

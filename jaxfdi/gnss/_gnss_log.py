@@ -22,6 +22,11 @@ satellite, as from a RINEX file. QZSS PRNs 193-202 read as J01-J10 (RINEX 3); SB
 IRNSS and GLONASS rows without a slot number are skipped. ``approx_position`` is the
 log's first ``Fix`` of the GPS provider (the phone's own GNSS position), NaN without one.
 A malformed record raises a ``ValueError`` naming the file and line.
+
+Our own reader rather than gnss_lib_py's ``AndroidRawGnss`` (the maintained one): it
+stops with a ``KeyError`` on logs without a ``CodeType`` column (the 2021 Pixel 4 log
+here), and it forms the times in float64 seconds, which rounds the satellite time to
+about 1 cm of range; here the nanoseconds stay integers.
 """
 from __future__ import annotations
 

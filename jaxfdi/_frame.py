@@ -11,7 +11,8 @@ by two rules that keep it tidy:
   row per entry, its key in a column named by the field's singular (``methods`` -> ``method``);
   so do the fields a study names as ``methods`` (one dict per method, each a field of the
   row), the field's name in the ``method`` column;
-* any other dict flattens into ``field.key`` columns; a list stays one cell.
+* any other dict flattens into ``field.key`` columns; a list stays one cell, its NumPy
+  scalars as Python numbers (so that a CSV cell reads ``[1.5, 0.0]``, as in the JSON).
 
 Each run rate (``RUN_RATES``) of a row that counts its runs gets its two-sided 95 %
 Clopper-Pearson interval (``rate_interval``) in ``<rate>_low`` and ``<rate>_high``, over the
@@ -25,10 +26,19 @@ import html
 import math
 from typing import Any
 
+import numpy as np
+
 from jaxfdi._metrics import rate_interval
 
 #: the per-run rates of ``fault_row`` whose intervals the frame adds
 RUN_RATES = ("detection_rate", "missed_detection_rate", "isolation_rate", "false_alarm_rate", "pre_onset_alarm_rate")
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with NumPy scalars as Python numbers, inside lists and tuples too."""
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def _flat(row: dict, prefix: str = "") -> dict:
@@ -37,7 +47,7 @@ def _flat(row: dict, prefix: str = "") -> dict:
         if isinstance(value, dict):
             out.update(_flat(value, f"{prefix}{key}."))
         else:
-            out[f"{prefix}{key}"] = value
+            out[f"{prefix}{key}"] = _plain(value)
     return out
 
 

@@ -122,6 +122,17 @@ def test_vtol_prints_tables_and_writes_figures(tmp_path):
     assert_csv_is_the_json(tmp_path / "out" / "vtol.csv", data["rows"])
 
 
+def test_f16_flight_writes_a_csv_that_is_its_json(tmp_path):
+    """The F-16 flight study at two flights: every section, and its CSV (``to_frame()``)
+    holds the JSON's numbers, lists of poles and roots included."""
+    proc = run_cli(tmp_path, "f16-flight", "--runs", "2", "--seed", "1", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((tmp_path / "out" / "f16-flight.json").read_text())
+    assert data["config"]["flights"] == 2
+    assert {r["section"] for r in data["rows"]} == {"trim", "mode", "closed_loop", "tracking"}
+    assert_csv_is_the_json(tmp_path / "out" / "f16-flight.csv", data["rows"])
+
+
 # `jaxfdi run reaction-wheels`: tests/scenarios/test_reaction_wheels_end_to_end.py (with notebook 05, which
 # computes the same study at the same size)
 

@@ -82,28 +82,31 @@ def phone_timing(copies: int, repeats: int) -> dict:
     return {"epochs": count, "first_call_s": first, "run_s": median, "epochs_per_s": count / median}
 
 
-def gnss_lib_py_timing(repeats: int) -> dict:
+def _gnss_lib_py_rate(make_nav, count: int, repeats: int) -> dict:
+    """gnss_lib_py's ``solve_wls`` + ``solve_fde(method="residual", max_faults=1)`` on a fresh
+    ``make_nav()`` each repeat (both write rows into it); ``count`` epochs."""
     from gnss_lib_py.algorithms.fde import solve_fde
     from gnss_lib_py.algorithms.snapshot import solve_wls
 
-    phone = load_phone(PHONE)
     times = []
     for _ in range(repeats):
-        nav, _, _ = _peer_navdata(phone)
+        nav = make_nav()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             start = time.perf_counter()
             solve_wls(nav)
             solve_fde(nav, method="residual", threshold=3000.0, max_faults=1)
             times.append(time.perf_counter() - start)
-    count = phone.gps_millis.size
     return {"epochs": count, "run_s": float(np.median(times)), "epochs_per_s": count / float(np.median(times))}
+
+
+def gnss_lib_py_timing(repeats: int) -> dict:
+    phone = load_phone(PHONE)
+    return _gnss_lib_py_rate(lambda: _peer_navdata(phone)[0], phone.gps_millis.size, repeats)
 
 
 def gnss_lib_py_geonet_timing(repeats: int) -> dict:
     """gnss_lib_py's WLS + residual FDE on station 0759's hour (module doc)."""
-    from gnss_lib_py.algorithms.fde import solve_fde
-    from gnss_lib_py.algorithms.snapshot import solve_wls
     from gnss_lib_py.navdata.navdata import NavData
 
     epochs = receiver_epochs(read_observations(data_path("07590920.05o")), read_rinex_nav(data_path("07590920.05n")))
@@ -115,22 +118,17 @@ def gnss_lib_py_geonet_timing(repeats: int) -> dict:
 
     position, clock = (np.asarray(a) for a in jax.vmap(states)(epochs.times, epochs.pseudoranges))
     at, slot = np.nonzero(used)
-    times = []
-    for _ in range(repeats):
+
+    def make_nav():
         nav = NavData()
         nav["gps_millis"] = np.asarray(epochs.times)[at] * 1e3
         nav["corr_pr_m"] = np.asarray(epochs.pseudoranges)[at, slot] + SPEED_OF_LIGHT * clock[at, slot]
         for i, axis in enumerate("xyz"):
             nav[f"{axis}_sv_m"] = position[at, slot, i]
         nav["b_sv_m"] = np.zeros(at.size)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            start = time.perf_counter()
-            solve_wls(nav)
-            solve_fde(nav, method="residual", threshold=3000.0, max_faults=1)
-            times.append(time.perf_counter() - start)
-    count = int(np.any(used, axis=1).sum())
-    return {"epochs": count, "run_s": float(np.median(times)), "epochs_per_s": count / float(np.median(times))}
+        return nav
+
+    return _gnss_lib_py_rate(make_nav, int(np.any(used, axis=1).sum()), repeats)
 
 
 def jaxfdi_timing(copies: int, repeats: int) -> dict:

@@ -34,10 +34,11 @@ import numpy as np
 
 from jaxfdi.gnss._android import (CONSTELLATIONS, GPS_EPOCH_UNIX_MS, LEAP_SECONDS_MS, LEAP_VALID_FROM_UNIX_MS,
                                   geodetic_ecef64)
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT
+from jaxfdi.gnss._rinex import SECONDS_PER_WEEK
 from jaxfdi.gnss._rinex_obs import CODE_PRIORITY, Observations, _fail
 
-C = 299_792_458.0
-WEEK_NS = 604_800 * 10**9
+WEEK_NS = int(SECONDS_PER_WEEK) * 10**9
 DAY_NS = 86_400 * 10**9
 #: Android GnssMeasurement state bits: time of week (or GLONASS time of day) decoded or known
 TOW_DECODED, TOW_KNOWN, GLO_TOD_DECODED, GLO_TOD_KNOWN = 0x8, 0x4000, 0x80, 0x8000
@@ -138,7 +139,7 @@ def parse_gnss_log(text: str, name: str = "<string>") -> Observations:
         time_known = state & (GLO_TOD_DECODED | GLO_TOD_KNOWN if system == "R" else TOW_DECODED | TOW_KNOWN)
         flight = ((gps_ns + offset - sent + period // 2) % period) - period // 2
         valid = bool(time_known) and uncertainty < MAX_TIME_UNCERTAINTY_NS
-        records[key] = ((flight + sub_ns) * C * 1e-9 if valid else np.nan, cn0)
+        records[key] = ((flight + sub_ns) * SPEED_OF_LIGHT * 1e-9 if valid else np.nan, cn0)
     if not records:
         _fail(name, len(text.splitlines()), "no Raw record of GPS, GLONASS, QZSS, BeiDou or Galileo")
     times = sorted(epochs)

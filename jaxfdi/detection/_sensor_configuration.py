@@ -123,8 +123,12 @@ def _pair_geometry(H: Array, groups: Array) -> tuple[Array, Array, Array]:
 def isolability(H: Array, groups: Array) -> Isolability:
     """Fault-subspace geometry of ``H`` ((m, 3)) with sensor ``groups`` ((S, d)) (module doc)."""
     _checks.check_matrix("H", H, (None, 3), "one input axis per row")
-    groups = jnp.asarray(groups, jnp.int32)
-    H = jnp.asarray(H, _checks.float_dtype(H))
+    return _isolability(jnp.asarray(H, _checks.float_dtype(H)), jnp.asarray(groups, jnp.int32))
+
+
+@jax.jit
+def _isolability(H: Array, groups: Array) -> Isolability:
+    """``isolability`` once ``H`` is checked, as one program."""
     _, gram, cross = _pair_geometry(H, groups)
     cos2 = _smallest_eigenvalue(jnp.einsum("ikba,ikbc->ikac", cross, cross))  # smallest squared cosine
     sin2 = jnp.clip(1.0 - cos2, 0.0, 1.0)
@@ -194,6 +198,7 @@ def _isolation_functions_from_projector(P: Array, groups: Array, residual: Array
     return 1.0 - jnp.linalg.norm(away, axis=-1) / size
 
 
+@partial(jax.jit, static_argnames=("samples",))
 def isolation_rate(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Array,
                    samples: int = 100_000, pfa: float = 1e-6) -> Array:
     """The hard Monte Carlo rate of the same kind of draws: detected (``FD > T_D``) and

@@ -113,11 +113,19 @@ def visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: fl
     ``origin_ecef``)."""
     _checks.check_scalar("mask_angle", mask_angle, -0.5 * math.pi, 0.5 * math.pi,
                          meaning="an elevation mask in [-pi/2, pi/2] rad")
+    if walls and origin_ecef is None:
+        raise ValueError("origin_ecef: expected the (3,) ECEF origin of the walls' NED frame, got None")
+    return _visibility(table, t, receiver_ecef, mask_angle, origin_ecef, tuple(walls))
+
+
+@jax.jit
+def _visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: Array, origin_ecef: Array | None,
+                walls: tuple[Wall, ...]) -> tuple[Array, Array, Array]:
+    """``visibility`` once checked, as one program: a vmapped call outside ``jit`` (a sky
+    over a path) compiles once instead of once per operation."""
     elevation, azimuth, los, has_orbit = sky_geometry(table, t, receiver_ecef)
     visible = has_orbit & (elevation > mask_angle)
     if walls:
-        if origin_ecef is None:
-            raise ValueError("origin_ecef: expected the (3,) ECEF origin of the walls' NED frame, got None")
         receiver_ned = ecef_to_ned(receiver_ecef, origin_ecef)
         for wall in walls:
             visible = visible & ~wall_blocks(receiver_ned, los, wall)

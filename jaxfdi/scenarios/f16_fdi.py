@@ -428,15 +428,22 @@ def analytic_residual_trace(fdi: FDISetup, measurement: Array, control: Array, r
     restart = _checks.check_int("restart", restart, 0, length - 1 - steps,
                                 f"a step of the record (T = {length}) with {steps} steps after it")
     _checks.check_shape("trusted", trusted, (_checks.shape_of(fdi.hybrid.space.H)[0],), "one flag per rate channel")
+    return _residual_trace(fdi, jnp.asarray(measurement), jnp.asarray(control), restart, jnp.asarray(trusted), steps)
+
+
+@partial(jax.jit, static_argnames=("steps",))
+def _residual_trace(fdi: FDISetup, measurement: Array, control: Array, restart: Array, trusted: Array,
+                    steps: int) -> tuple[Array, Array]:
+    """``analytic_residual_trace`` once its arguments are checked, as one program."""
     ukf = f16_rate_ukf(fdi)
     channels = measurement[:, RATE_OFFSET:]
     inputs = jax.vmap(rate_model_input)(measurement, control)
     estimate = fdi.hybrid.estimators[0] @ channels[restart]
     prior = init_from_posterior(ukf, estimate, fdi.hybrid.restart_cov, inputs[restart])
-    window = slice(restart + 1, restart + 1 + int(steps))
-    ys = jnp.where(trusted[None, :], channels[window], jnp.nan)
-    _, info = run_filter(ukf, prior, ys, inputs[window])
-    residual = channels[window] - info.filtered_mean @ fdi.hybrid.space.H.T
+    window = lambda a: jax.lax.dynamic_slice_in_dim(a, restart + 1, steps)  # noqa: E731
+    ys = jnp.where(trusted[None, :], window(channels), jnp.nan)
+    _, info = run_filter(ukf, prior, ys, window(inputs))
+    residual = window(channels) - info.filtered_mean @ fdi.hybrid.space.H.T
     groups = fdi.hybrid.space.groups
     return jnp.linalg.norm(residual[:, groups], axis=-1), info.filtered_mean
 

@@ -114,14 +114,18 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
     _checks.check_probability("pfa", pfa)
     _checks.check_probability("pmd", pmd)
     dtype = dtype or jnp.result_type(float)
-    dof = jnp.arange(1, int(num_slots) - 3, dtype=dtype)
+    # computed for a multiple of 32 slots and cut: every receiver of up to 32 (64, ...) slots
+    # shares one compiled program of the special functions (entries are elementwise)
+    dof = jnp.arange(1, -(-int(num_slots) // 32) * 32 - 3, dtype=dtype)
     if rule == "chi2":
         threshold = chi2_threshold(dof, jnp.asarray(pfa, dtype))
     else:
         threshold = jnp.full(dof.shape, 2.0 * np.log(1.0 / pfa), dtype)
     lam = noncentrality_for_missed_detection(threshold, dof, jnp.asarray(pmd, dtype))
     inf = jnp.full((1,), jnp.inf, dtype)
-    return RaimTables(jnp.concatenate([inf, threshold]), jnp.concatenate([jnp.full((1,), jnp.nan, dtype), lam]))
+    keep = int(num_slots) - 4
+    return RaimTables(jnp.concatenate([inf, threshold[:keep]]),
+                      jnp.concatenate([jnp.full((1,), jnp.nan, dtype), lam[:keep]]))
 
 
 def unknowns(fix: PositionFix) -> int:

@@ -6,6 +6,10 @@ warm-up run that fills the compilation cache.
 
     python benchmarks/before_after.py 0091114 --study engine --runs 100 --repeats 3
     python benchmarks/before_after.py 0091114 --study f16 --runs 1 --repeats 2
+    python benchmarks/before_after.py 8ee2533 --study f16 --runs 2 --repeats 1 --compile
+
+With ``--compile`` it measures the compilation instead: each run is cold (an empty
+compilation cache) and counts the programs XLA compiles and their seconds.
 
 The revision is checked out with ``git worktree`` into a temporary folder and imported
 through ``PYTHONPATH``; the JSON of the two must agree (same seed, same tables) to 1e-9
@@ -25,13 +29,38 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run(study: str, runs: int, out: Path, pythonpath: str | None) -> dict:
+#: ``python -c`` body of a ``--compile`` run: the CLI with a listener counting XLA compilations
+_COUNTED = """import json, sys
+from jax import monitoring
+seen = {"programs": 0, "compile_s": 0.0}
+def listen(event, duration, **kw):
+    if event == "/jax/core/compile/backend_compile_duration":
+        seen["programs"] += 1
+        seen["compile_s"] += duration
+monitoring.register_event_duration_secs_listener(listen)
+from jaxfdi.cli import main
+main(sys.argv[2:])
+open(sys.argv[1], "w").write(json.dumps(seen))
+"""
+
+
+def run(study: str, runs: int, out: Path, pythonpath: str | None, compile_counts: bool = False) -> dict:
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
-    subprocess.run([sys.executable, "-m", "jaxfdi", "run", study, "--runs", str(runs), "--quiet", "--out", str(out)],
-                   check=True, env=env, cwd=tempfile.gettempdir(), stdout=subprocess.DEVNULL)
+    cli = ["run", study, "--runs", str(runs), "--quiet", "--out", str(out)]
+    if compile_counts:
+        with tempfile.TemporaryDirectory() as cache:
+            env["JAXFDI_CACHE_DIR"] = cache
+            counts = out.with_suffix(".compile.json")
+            subprocess.run([sys.executable, "-c", _COUNTED, str(counts), *cli], check=True, env=env,
+                           cwd=tempfile.gettempdir(), stdout=subprocess.DEVNULL)
+        report = json.loads(next(out.glob("*.json")).read_text())
+        report["compilation"] = json.loads(counts.read_text())
+        return report
+    subprocess.run([sys.executable, "-m", "jaxfdi", *cli], check=True, env=env, cwd=tempfile.gettempdir(),
+                   stdout=subprocess.DEVNULL)
     return json.loads(next(out.glob("*.json")).read_text())
 
 
@@ -44,7 +73,7 @@ def run_seconds(report: dict) -> float:
 
 
 def differences(a, b, path="") -> list[str]:
-    skip = ("seconds", "provenance")
+    skip = ("seconds", "provenance", "compilation")
     if isinstance(a, dict):
         return [d for k in a if k not in skip for d in differences(a[k], b.get(k), f"{path}/{k}")]
     if isinstance(a, list):
@@ -63,7 +92,10 @@ def main() -> None:
     parser.add_argument("--study", default="engine")
     parser.add_argument("--runs", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--compile", action="store_true", help="cold runs: count compiled programs and seconds")
     args = parser.parse_args()
+    if args.compile:
+        return compile_cost(args)
     with tempfile.TemporaryDirectory() as tmp:
         old = Path(tmp) / "old"
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-f", "-q", str(old), args.revision], check=True)
@@ -82,6 +114,24 @@ def main() -> None:
     before, after = (sorted(times[k])[len(times[k]) // 2] for k in ("before", "after"))
     print(f"{args.study} --runs {args.runs}: run (compile excluded), median of {args.repeats}: before "
           f"{args.revision} {before:.2f} s, after {after:.2f} s, ratio {after / before:.3f}")
+    diff = differences(reports["before"], reports["after"])
+    print("same tables (1e-9 relative)" if not diff else "DIFFERENT: " + "; ".join(diff[:10]))
+
+
+def compile_cost(args) -> None:
+    """``--compile``: cold runs, before and after alternating, each in a fresh process."""
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "old"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-f", "-q", str(old), args.revision], check=True)
+        try:
+            reports = {}
+            for i in range(args.repeats):
+                for which, path in (("before", str(old)), ("after", None)):
+                    reports[which] = run(args.study, args.runs, Path(tmp) / f"{which}{i}", path, compile_counts=True)
+                    c = reports[which]["compilation"]
+                    print(f"{which}: {c['programs']} programs compiled in {c['compile_s']:.1f} s", flush=True)
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=True)
     diff = differences(reports["before"], reports["after"])
     print("same tables (1e-9 relative)" if not diff else "DIFFERENT: " + "; ".join(diff[:10]))
 

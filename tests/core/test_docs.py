@@ -66,3 +66,53 @@ def test_concept_pages_code_runs():
     assert float(truth.sensor_fault[20, 1]) == 0.5 and float(truth.sensor_fault[20, 0]) == 0.0
     assert abs(float(namespace["threshold"]) - 39.9968) < 1e-3          # scipy.stats.chi2.isf(0.005, 20)
     assert bool(namespace["converged"])
+
+
+def _hooks():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("docs_hooks", DOCS / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    return hooks
+
+
+def test_the_build_finds_stale_copies_and_regenerates_them(tmp_path, monkeypatch, caplog):
+    """mkdocs' hook on a copy of the tree: a changed notebook text makes its copy stale (a
+    warning, an error under --strict), ``JAXFDI_EXECUTE_NOTEBOOKS=1`` brings it up to date
+    with its outputs kept; a notebook without a copy is stale too. (A changed code cell is
+    executed again: ``execute_notebooks.execute``, what the notebook tests run.)"""
+    import shutil
+
+    (tmp_path / "notebooks").mkdir()
+    (tmp_path / "docs" / "examples").mkdir(parents=True)
+    shutil.copy(DOCS / "execute_notebooks.py", tmp_path / "docs")
+    name = "01_kalman_monte_carlo.ipynb"
+    shutil.copy(ROOT / "notebooks" / name, tmp_path / "notebooks")
+    shutil.copy(DOCS / "examples" / name, tmp_path / "docs" / "examples")
+    hooks = _hooks()
+    monkeypatch.setattr(hooks, "ROOT", tmp_path)
+    assert hooks.stale_copies(tmp_path) == []
+
+    source = json.loads((tmp_path / "notebooks" / name).read_text())
+    first_text = next(c for c in source["cells"] if c["cell_type"] == "markdown")
+    first_text["source"] = ["# A new title\n"] + first_text["source"][1:]
+    (tmp_path / "notebooks" / name).write_text(json.dumps(source))
+    monkeypatch.delenv(hooks.REGENERATE, raising=False)
+    with caplog.at_level("WARNING", logger="mkdocs.hooks.examples"):
+        hooks.on_pre_build(config=None)
+    assert [r.getMessage().split(" is missing")[0] for r in caplog.records] == [f"examples: docs/examples/{name}"]
+
+    caplog.clear()
+    monkeypatch.setenv(hooks.REGENERATE, "1")
+    with caplog.at_level("WARNING", logger="mkdocs.hooks.examples"):
+        hooks.on_pre_build(config=None)
+    assert caplog.records == [] and hooks.stale_copies(tmp_path) == []
+    copy = json.loads((tmp_path / "docs" / "examples" / name).read_text())
+    assert "".join(next(c for c in copy["cells"] if c["cell_type"] == "markdown")["source"]).startswith("# A new title")
+    executed = json.loads((DOCS / "examples" / name).read_text())
+    assert ([c["outputs"] for c in copy["cells"] if c["cell_type"] == "code"]
+            == [c["outputs"] for c in executed["cells"] if c["cell_type"] == "code"])
+
+    shutil.copy(ROOT / "notebooks" / "02_engine_imm_glrt.ipynb", tmp_path / "notebooks")
+    assert hooks.stale_copies(tmp_path) == ["02_engine_imm_glrt.ipynb"]

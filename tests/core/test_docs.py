@@ -116,3 +116,19 @@ def test_the_build_finds_stale_copies_and_regenerates_them(tmp_path, monkeypatch
 
     shutil.copy(ROOT / "notebooks" / "02_engine_imm_glrt.ipynb", tmp_path / "notebooks")
     assert hooks.stale_copies(tmp_path) == ["02_engine_imm_glrt.ipynb"]
+
+
+def test_ci_tries_the_wheel_on_every_python_the_package_claims():
+    """The classifiers name the Pythons the wheel is known to install and run on: the floor
+    (``requires-python``, CI's own interpreter, which runs the suite) and each newer one that
+    ``.ci/run`` installs the wheel into and runs the README's example with."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    version = lambda v: tuple(map(int, v.split(".")))  # noqa: E731
+    claimed = sorted((c.rsplit(":: ", 1)[1] for c in project["classifiers"]
+                      if re.fullmatch(r"Programming Language :: Python :: 3\.\d+", c)), key=version)
+    floor = project["requires-python"].removeprefix(">=")
+    ci = (ROOT / ".ci" / "run").read_text()
+    newer = re.search(r"^for minor in ([\d. ]+); do$", ci, re.M).group(1).split()
+    assert claimed == sorted([floor, *newer], key=version)

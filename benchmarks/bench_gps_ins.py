@@ -181,7 +181,7 @@ def np_log(q):
 
 
 def np_step(pos, vel, q, f, w, dt):
-    """``mechanization.step`` in NumPy."""
+    """``mechanization.strapdown_step`` in NumPy."""
     lat, lon, h = pos
     s, c = math.sin(lat), math.cos(lat)
     rn, re, iw = np_radii(s)

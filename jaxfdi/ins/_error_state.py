@@ -94,7 +94,12 @@ def error_rate(error: Array, ins: NavState, specific_force: Array, angular_rate:
 
 
 def error_jacobian(ins: NavState, specific_force: Array, angular_rate: Array) -> Array:
-    """(15, 15) ``F`` at the INS state: ``jax.jacfwd`` of ``error_rate`` at ``dx = 0``."""
+    """The error-state system matrix at the INS state (module doc).
+
+    Returns:
+      (15, 15) ``F = d(error rate)/d(dx)`` at ``dx = 0`` (``jax.jacfwd`` of ``error_rate``),
+      for the state ``[dp, dv, psi, db_a, db_g]`` and the IMU sample ``(f^b, w_ib^b)``.
+    """
     zero = jnp.zeros((STATE_SIZE,), ins.velocity.dtype)
     return jax.jacfwd(error_rate)(zero, ins, specific_force, angular_rate)
 

@@ -12,7 +12,7 @@ estimates) and the error covariance ``P[k|k-1]``; one ``step`` is one GPS epoch:
    ``error_state.correct(INS, dx_hat)``, the bias estimates ``b_hat + db_hat``, and the
    error estimate returns to zero (``P`` is kept: a first-order reset);
 3. **predict** over the epoch's ``n`` IMU samples (``u``: (n, 6), e.g. 100 at 100 Hz):
-   ``n`` strapdown steps (``mechanization.step``) with the bias-corrected samples, in
+   ``n`` strapdown steps (``mechanization.strapdown_step``) with the bias-corrected samples, in
    ``chunks`` equal chunks; ``F`` by ``jax.jacfwd`` of the mechanisation's error rate
    (``error_state.error_jacobian``) at each chunk's midpoint state and mean sample, their
    mean discretised to ``(Phi, Q_d)`` (``error_state.discretize``),
@@ -193,7 +193,7 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
         first = per_chunk // 2
 
         def strapdown(nav, sample):
-            return mechanization.step(nav, sample[:3], sample[3:], dt), None
+            return mechanization.strapdown_step(nav, sample[:3], sample[3:], dt), None
 
         def chunk(nav, part):
             nav, _ = jax.lax.scan(strapdown, nav, part[:first])

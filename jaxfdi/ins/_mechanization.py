@@ -17,7 +17,7 @@ first-order precision form of Groves (2013), sec. 5.4 (Titterton & Weston 2004, 
 ``inverse_step`` solves 1-2 for ``(f^b, w_ib^b)`` given the states at both ends (the
 attitude by a quaternion logarithm, the specific force by a 3 x 3 solve), so an IMU
 built from a trajectory whose positions were integrated by ``integrate_position`` makes
-``step`` reproduce that trajectory to round-off (``trajectory``). ``rates`` are the
+``strapdown_step`` reproduce that trajectory to round-off (``trajectory``). ``rates`` are the
 continuous-time equations (Groves 2013, eqs. 5.46, 5.53, 2.111), which the EKF
 linearises by automatic differentiation (``error_state``).
 """
@@ -86,9 +86,19 @@ def integrate_position(position: Array, velocity: Array, new_velocity: Array, dt
     return jnp.stack([new_lat, new_lon, new_height])
 
 
-def step(nav: NavState, specific_force: Array, angular_rate: Array, dt: Array) -> NavState:
-    """One strapdown update (module doc) with the interval's mean ``f^b`` [m/s^2] and
-    ``w_ib^b`` [rad/s], both already corrected for the estimated IMU errors."""
+def strapdown_step(nav: NavState, specific_force: Array, angular_rate: Array, dt: Array) -> NavState:
+    """One strapdown update in NED (module doc) with the interval's mean ``f^b`` [m/s^2]
+    and ``w_ib^b`` [rad/s], both already corrected for the estimated IMU errors.
+
+    Returns:
+      ``NavState`` after ``dt`` [s] (Groves 2013, sec. 5.4):
+      ``q+ = exp(-w_in^n dt) (x) q (x) exp(w_ib^b dt)``,
+      ``v+ = v + (C_avg f^b + g^n - (2 w_ie^n + w_en^n) x v) dt``, the position by the
+      trapezoidal rule.
+
+    Raises:
+      ValueError: ``specific_force`` or ``angular_rate`` not of shape (3,).
+    """
     for name, value in (("specific_force", specific_force), ("angular_rate", angular_rate)):
         shape = _checks.shape_of(value)
         if not shape or shape[0] != 3:
@@ -106,7 +116,7 @@ def step(nav: NavState, specific_force: Array, angular_rate: Array, dt: Array) -
 
 
 def inverse_step(nav: NavState, new_velocity: Array, new_attitude: Array, dt: Array) -> tuple[Array, Array]:
-    """``(f^b, w_ib^b)`` that take ``step`` from ``nav`` to ``new_velocity`` and
+    """``(f^b, w_ib^b)`` that take ``strapdown_step`` from ``nav`` to ``new_velocity`` and
     ``new_attitude`` in ``dt`` (the position then follows from ``integrate_position``)."""
     earth = local_earth(nav.position)
     earth_rate, transport = navigation_rates(nav, earth)

@@ -5,8 +5,8 @@ orbits and receiver: ``scenarios.gnss_campus``) for 1200 s: a 60 m climb, then t
 half's racetrack (600 m legs, 200 m turns, 12 m/s) with a climb and a descent on the way
 (``ins.trajectory.park_flight``). Its HG1900-class IMU (``ins.imu.hg1900``) runs at 100 Hz,
 its receiver at 1 Hz. One run is the foundation's loop (``loop.run_loop``) of the plant
-``ins.plant.gps_ins_plant`` (pseudoranges with Table 2's satellite faults, the velocity
-solution, IMU samples with the IMU fault) and the FDI ``ins.integrity.gps_ins_fdi``
+``ins._plant.gps_ins_plant`` (pseudoranges with Table 2's satellite faults, the velocity
+solution, IMU samples with the IMU fault) and the FDI ``ins._integrity.gps_ins_fdi``
 (RAIM -> 15-state error-state EKF -> windowed chi-square test over 10 epochs at 60 dof,
 91.95, and Da's SCST at 15 dof, 32.80, with two propagators reset every ``SCST_PERIOD``
 s); Monte Carlo runs are a ``vmap`` over keys and faults, one compiled program for every

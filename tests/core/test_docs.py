@@ -132,3 +132,29 @@ def test_ci_tries_the_wheel_on_every_python_the_package_claims():
     ci = (ROOT / ".ci" / "run").read_text()
     newer = re.search(r"^for minor in ([\d. ]+); do$", ci, re.M).group(1).split()
     assert claimed == sorted([floor, *newer], key=version)
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb")))
+def test_notebooks_use_only_the_public_api(name):
+    """A notebook is what users copy: it imports jaxfdi's public namespaces and the studies
+    (``jaxfdi.scenarios.<study>``), never an implementation module (``jaxfdi.<...>._name``)."""
+    import ast
+
+    cells = json.loads((ROOT / "notebooks" / name).read_text())["cells"]
+    code = "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "code")
+    code = re.sub(r"^\s*[%!].*$", "", code, flags=re.M)  # IPython magics and shell lines
+    private = []
+    for node in ast.walk(ast.parse(code)):
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("jaxfdi"):
+            private += [f"{node.module}.{a.name}" for a in node.names
+                        if any(part.startswith("_") for part in [*node.module.split("."), a.name])]
+        elif isinstance(node, ast.Import):
+            private += [a.name for a in node.names
+                        if a.name.startswith("jaxfdi") and any(p.startswith("_") for p in a.name.split("."))]
+        elif isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
+            root = node.value
+            while isinstance(root, ast.Attribute):
+                root = root.value
+            if isinstance(root, ast.Name) and root.id == "jaxfdi":
+                private.append(ast.unparse(node))
+    assert private == [], f"{name} reaches into {private}"

@@ -572,7 +572,7 @@ CASES = {
     "stationary duration negative": (lambda: _ins().trajectory.stationary((37.5, 126.9, 100.0), -5.0), V, "duration"),
     "park_legs duration NaN": (lambda: _ins().trajectory.park_legs(float("nan")), V, "duration"),
     "quaternion_to_euler q (3,)": (lambda: _ins().rotation.quaternion_to_euler(jnp.array([1.0, 0.0, 0.0])), V, "q"),
-    "strapdown step specific force (2,)": (lambda: _ins().mechanization.step(None, jnp.zeros(2), jnp.zeros(3), 0.01),
+    "strapdown step specific force (2,)": (lambda: _ins().mechanization.strapdown_step(None, jnp.zeros(2), jnp.zeros(3), 0.01),
                                            V, "specific_force"),
     "discretize F (14, 14)": (lambda: _ins().error_state.discretize(jnp.zeros((14, 14)), None, 1.0), V, "jacobian"),
     # streaming, tuning, metrics, loop, study

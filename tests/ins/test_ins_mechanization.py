@@ -30,7 +30,7 @@ def run_ins():
     @jax.jit
     def run(nav0, samples, bias, dt):
         def body(nav, sample):
-            return mechanization.step(nav, sample[:3] - bias[:3], sample[3:] - bias[3:], dt), nav.velocity
+            return mechanization.strapdown_step(nav, sample[:3] - bias[:3], sample[3:] - bias[3:], dt), nav.velocity
 
         return jax.lax.scan(body, nav0, samples)
 
@@ -134,7 +134,7 @@ def _transition_by_differences(nav, samples, dt):
     column i is d(error after) / d(error before) for a perturbation of state i."""
     def fly(start, bias):
         def body(n, s):
-            return mechanization.step(n, s[:3] - bias[:3], s[3:] - bias[3:], dt), None
+            return mechanization.strapdown_step(n, s[:3] - bias[:3], s[3:] - bias[3:], dt), None
 
         return jax.lax.scan(body, start, samples)[0]
 

@@ -10,9 +10,9 @@ Velocities and attitudes are sampled at the IMU rate; positions are integrated f
 velocities with the INS's own trapezoidal rule (``mechanization.integrate_position``),
 and the IMU samples are the exact inverse of the INS step between consecutive states
 (``mechanization.inverse_step``): an error-free IMU makes the INS reproduce the truth to
-round-off. ``park_flight`` is the park case of Yoo et al. (2010) flown as the GPS half's racetrack
+round-off. ``park_legs`` are the park case of Yoo et al. (2010) flown as the GPS half's racetrack
 (600 m legs, 200 m turns at 12 m/s) after a climb, with a climb and a descent on the way;
-``manoeuvre_flight`` is the strong-manoeuvre case of the paper's caveat (25 m/s, S-turns
+``manoeuvre_legs`` the strong-manoeuvre case of the paper's caveat (25 m/s, S-turns
 at 20 deg/s, 42 deg of bank, pull-ups and dives, 2 m/s^2 speed changes).
 """
 from __future__ import annotations

@@ -3,8 +3,8 @@
 A UAV flies the park case (Haneul Park, from 2020-01-01 00:45:00 GPST, the GPS half's site,
 orbits and receiver: ``scenarios.gnss_campus``) for 1200 s: a 60 m climb, then the GPS
 half's racetrack (600 m legs, 200 m turns, 12 m/s) with a climb and a descent on the way
-(``ins.trajectory.park_flight``). Its HG1900-class IMU (``ins.imu.hg1900``) runs at 100 Hz,
-its receiver at 1 Hz. One run is the foundation's loop (``loop.run_loop``) of the plant
+(``ins._trajectory.park_legs``). Its HG1900-class IMU (``ins.hg1900``) runs at 100 Hz,
+its receiver at 1 Hz. One run is the closed loop (``jaxfdi.run_loop``) of the plant
 ``ins._plant.gps_ins_plant`` (pseudoranges with Table 2's satellite faults, the velocity
 solution, IMU samples with the IMU fault) and the FDI ``ins._integrity.gps_ins_fdi``
 (RAIM -> 15-state error-state EKF -> windowed chi-square test over 10 epochs at 60 dof,

@@ -89,8 +89,9 @@ def rate_derivative(rates: Array, inputs: Array, model: RateModel) -> Array:
 
 
 def rate_transition(rates: Array, inputs: Array, model: RateModel) -> Array:
-    """``w[k+1]``: one classical RK4 step of ``rate_derivative`` over ``model.dt``."""
-    return rk4(lambda x, t: rate_derivative(x, inputs, model), rates, model.dt)
+    """``w[k+1]``: one classical RK4 step of ``rate_derivative`` over ``model.dt`` (its
+    stages a loop: the aerodynamic tables compile once)."""
+    return rk4(lambda x, t: rate_derivative(x, inputs, model), rates, model.dt, loop_stages=True)
 
 
 def rate_observation(rates: Array, inputs: Array, model: RateModel) -> Array:

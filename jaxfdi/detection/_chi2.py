@@ -8,6 +8,7 @@ statistic exceeds ``chi2_threshold(dof, pfa)``.
 """
 from __future__ import annotations
 
+from functools import partial
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -173,7 +174,12 @@ def moving_window_sum(x: Array, window: int) -> Array:
     """
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
     _checks.check_real("x", x, "real statistics")
-    x = jnp.asarray(x)
+    return _moving_window_sum(jnp.asarray(x), window)
+
+
+@partial(jax.jit, static_argnums=1)
+def _moving_window_sum(x: Array, window: int) -> Array:
+    """``moving_window_sum`` once checked, as one program."""
     bad = ~jnp.isfinite(x)
 
     def windowed(values):

@@ -172,6 +172,13 @@ def _draws(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Ar
     return P, sensor, statistic, _isolation_functions_from_projector(P, groups, residual)
 
 
+def _threshold(H: Array, pfa) -> Array:
+    """``chi2_isf(q, pfa)``, ``q = m - 3``: a number at trace time when ``pfa`` is one (not
+    a Newton solve inside every optimiser step)."""
+    with jax.ensure_compile_time_eval():
+        return chi2_threshold(H.shape[0] - H.shape[1], jnp.asarray(pfa, H.dtype))
+
+
 def isolation_surrogate(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Array,
                         samples: int = 4096, pfa: float = 1e-6, temperature: float = 0.02) -> Array:
     """Smooth Monte Carlo rate of "detected, and PSA alone picks the faulty sensor" (module
@@ -179,8 +186,7 @@ def isolation_surrogate(H: Array, groups: Array, sigma: float, fault_to_noise: f
     axis, detection ``FD > sigma^2 chi2_isf(q, pfa)`` smoothed over one unit of ``FD / sigma^2``."""
     S = groups.shape[0]
     _, sensor, statistic, fi = _draws(H, groups, sigma, fault_to_noise, key, samples)
-    q = H.shape[0] - H.shape[1]
-    detected = jax.nn.sigmoid(statistic - chi2_threshold(q, jnp.asarray(pfa, H.dtype)))
+    detected = jax.nn.sigmoid(statistic - _threshold(H, pfa))
     true = jnp.take_along_axis(fi, sensor[:, None], axis=1)[:, 0]
     other = jnp.max(jnp.where(jax.nn.one_hot(sensor, S, dtype=bool), -jnp.inf, fi), axis=1)
     return jnp.mean(detected * jax.nn.sigmoid((true - other) / temperature))
@@ -204,8 +210,7 @@ def isolation_rate(H: Array, groups: Array, sigma: float, fault_to_noise: float,
     """The hard Monte Carlo rate of the same kind of draws: detected (``FD > T_D``) and
     ``argmax FI`` is the faulty sensor."""
     _, sensor, statistic, fi = _draws(H, groups, sigma, fault_to_noise, key, samples)
-    q = H.shape[0] - H.shape[1]
-    detected = statistic > chi2_threshold(q, jnp.asarray(pfa, H.dtype))
+    detected = statistic > _threshold(H, pfa)
     return jnp.mean(detected & (jnp.argmax(fi, axis=1) == sensor))
 
 

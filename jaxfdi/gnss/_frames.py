@@ -12,6 +12,9 @@ Angles are radians; every function takes leading batch axes (``...``).
 """
 from __future__ import annotations
 
+from functools import partial
+
+import jax
 import jax.numpy as jnp
 from jax import Array
 
@@ -37,6 +40,13 @@ def geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
     except ValueError:
         raise ValueError(f"lat, lon, height: expected arrays that broadcast together, got shapes {lat.shape}, "
                          f"{lon.shape}, {height.shape}") from None
+    return _geodetic_to_ecef(lat, lon, height)
+
+
+@jax.jit
+def _geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
+    """``geodetic_to_ecef`` once checked, as one program (a call from the host compiles
+    once per shape, not once per operation; likewise the other ``_`` programs here)."""
     sin_lat = jnp.sin(lat)
     radius = WGS84_A / jnp.sqrt(1.0 - WGS84_E2 * sin_lat**2)
     return jnp.stack([(radius + height) * jnp.cos(lat) * jnp.cos(lon),
@@ -56,14 +66,18 @@ def ecef_to_geodetic(ecef: Array, iterations: int = 5) -> tuple[Array, Array, Ar
       longitude in [-pi, pi] and height above the WGS-84 ellipsoid.
     """
     _check_points("ecef", ecef)
-    ecef = jnp.asarray(ecef)
+    return _ecef_to_geodetic(jnp.asarray(ecef), int(iterations))
+
+
+@partial(jax.jit, static_argnums=1)
+def _ecef_to_geodetic(ecef: Array, iterations: int) -> tuple[Array, Array, Array]:
     x, y, z = ecef[..., 0], ecef[..., 1], ecef[..., 2]
     p = jnp.hypot(x, y)
     lon = jnp.arctan2(y, x)
     ep2 = WGS84_E2 / (1.0 - WGS84_E2)
     beta = jnp.arctan2(z, (1.0 - WGS84_F) * p)  # parametric latitude, first guess
     lat = beta
-    for _ in range(int(iterations)):
+    for _ in range(iterations):
         lat = jnp.arctan2(z + ep2 * WGS84_B * jnp.sin(beta) ** 3, p - WGS84_E2 * WGS84_A * jnp.cos(beta) ** 3)
         beta = jnp.arctan2((1.0 - WGS84_F) * jnp.sin(lat), jnp.cos(lat))
     sin_lat, cos_lat = jnp.sin(lat), jnp.cos(lat)
@@ -95,17 +109,26 @@ def ecef_to_ned(ecef: Array, origin_ecef: Array) -> Array:
     """(..., 3) NED [m] of ECEF points relative to ``origin_ecef`` (NED axes at the origin)."""
     _check_points("ecef", ecef)
     _check_points("origin_ecef", origin_ecef)
+    return _ecef_to_ned(jnp.asarray(ecef), jnp.asarray(origin_ecef))
+
+
+@jax.jit
+def _ecef_to_ned(ecef: Array, origin_ecef: Array) -> Array:
     lat, lon, _ = ecef_to_geodetic(origin_ecef)
-    delta = jnp.asarray(ecef) - jnp.asarray(origin_ecef)
-    return jnp.einsum("...ij,...j->...i", ned_rotation(lat, lon), delta)
+    return jnp.einsum("...ij,...j->...i", ned_rotation(lat, lon), ecef - origin_ecef)
 
 
 def ned_to_ecef(ned: Array, origin_ecef: Array) -> Array:
     """(..., 3) ECEF of NED offsets [m] from ``origin_ecef`` (inverse of ``ecef_to_ned``)."""
     _check_points("ned", ned)
     _check_points("origin_ecef", origin_ecef)
+    return _ned_to_ecef(jnp.asarray(ned), jnp.asarray(origin_ecef))
+
+
+@jax.jit
+def _ned_to_ecef(ned: Array, origin_ecef: Array) -> Array:
     lat, lon, _ = ecef_to_geodetic(origin_ecef)
-    return jnp.asarray(origin_ecef) + jnp.einsum("...ji,...j->...i", ned_rotation(lat, lon), jnp.asarray(ned))
+    return origin_ecef + jnp.einsum("...ji,...j->...i", ned_rotation(lat, lon), ned)
 
 
 def line_of_sight_ned(receiver_ecef: Array, satellite_ecef: Array) -> Array:

@@ -55,20 +55,20 @@ class Trajectory(NamedTuple):
         return NavState(self.position[index], self.velocity[index], self.attitude[index])
 
 
-def _smoothstep(s: Array) -> Array:
-    s = jnp.clip(s, 0.0, 1.0)
+def _smoothstep(s: np.ndarray) -> np.ndarray:
+    s = np.clip(s, 0.0, 1.0)
     return s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
 
 
-def command_profiles(legs, times: Array, blend: float) -> Array:
-    """(T, 3) turn rate [rad/s], climb rate [m/s], acceleration [m/s^2] at ``times``."""
+def command_profiles(legs, times, blend: float) -> np.ndarray:
+    """(T, 3) turn rate [rad/s], climb rate [m/s], acceleration [m/s^2] at ``times`` (NumPy)."""
     legs = np.asarray(legs, float)
+    times = np.asarray(times, float)
     starts = np.concatenate([[0.0], np.cumsum(legs[:, 0])[:-1]])
     commands = np.stack([np.radians(legs[:, 1]), legs[:, 2], legs[:, 3]], axis=1)
-    value = jnp.broadcast_to(jnp.asarray(commands[0]), (times.shape[0], 3))
+    value = np.broadcast_to(commands[0], (times.shape[0], 3)).copy()
     for i in range(1, len(legs)):   # each change blends in from the leg's start
-        weight = _smoothstep((times - starts[i]) / blend)[:, None]
-        value = value + weight * jnp.asarray(commands[i] - commands[i - 1])
+        value += _smoothstep((times - starts[i]) / blend)[:, None] * (commands[i] - commands[i - 1])
     return value
 
 
@@ -108,23 +108,30 @@ def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: floa
     dtype = dtype or jnp.result_type(float)
     dt = 1.0 / float(rate)
     steps = int(round(float(legs[:, 0].sum()) * rate))
-    times = jnp.arange(steps + 1, dtype=dtype) * dt
-    commands = command_profiles(legs, times, blend).astype(dtype)
+    commands = jnp.asarray(command_profiles(legs, np.arange(steps + 1) * dt, blend), dtype)
+    position0 = jnp.asarray([math.radians(start[0]), math.radians(start[1]), start[2]], dtype)
+    trajectory, slowest, steepest = _fly(commands, position0, jnp.asarray(speed, dtype),
+                                         jnp.asarray(math.radians(heading_deg), dtype), jnp.asarray(dt, dtype))
+    if float(slowest) <= 0.0 or float(steepest) >= 1.0:
+        raise ValueError("legs: the flight stalls (speed <= 0) or climbs faster than it flies")
+    return trajectory._replace(dt=dt)
 
+
+@jax.jit
+def _fly(commands, position0, speed, heading0, dt):
+    """``fly`` once its legs are sampled, as one program: the trajectory, the lowest
+    airspeed and the steepest climb (``|climb| / airspeed``)."""
     def integral(values):   # trapezoidal cumulative integral on the sample grid
-        return jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(0.5 * (values[1:] + values[:-1]) * dt)])
+        return jnp.concatenate([jnp.zeros((1,), values.dtype), jnp.cumsum(0.5 * (values[1:] + values[:-1]) * dt)])
 
     turn, climb, accel = commands[:, 0], commands[:, 1], commands[:, 2]
     airspeed = speed + integral(accel)
-    if float(jnp.min(airspeed)) <= 0.0 or float(jnp.max(jnp.abs(climb) / airspeed)) >= 1.0:
-        raise ValueError("legs: the flight stalls (speed <= 0) or climbs faster than it flies")
-    heading = math.radians(heading_deg) + integral(turn)
+    heading = heading0 + integral(turn)
     gamma = jnp.arcsin(climb / airspeed)
     velocity = jnp.stack([airspeed * jnp.cos(gamma) * jnp.cos(heading), airspeed * jnp.cos(gamma) * jnp.sin(heading),
                           -climb], axis=1)
     attitude = jax.vmap(euler_to_quaternion)(jnp.arctan(airspeed * turn / G0), gamma, heading)
-    position0 = jnp.asarray([math.radians(start[0]), math.radians(start[1]), start[2]], dtype)
-    return _from_samples(position0, velocity, attitude, dt)
+    return _from_samples(position0, velocity, attitude, dt), jnp.min(airspeed), jnp.max(jnp.abs(climb) / airspeed)
 
 
 @jax.jit

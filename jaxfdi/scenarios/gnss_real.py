@@ -441,14 +441,17 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
             status(f"gnss-real: step {size:g} m: detection {detected.mean():.3f}")
 
     last = rho.shape[0] - 10   # a ramp has ten epochs (5 min) or more to grow
+    # every run's (E, S) pseudoranges of the station, one run after another: one program
+    # for every ramp rate and channel kind
+    monitor_runs = jax.jit(lambda runs: jax.lax.map(lambda r: monitor_receiver(epochs._replace(pseudoranges=r)),
+                                                    runs))
     at, slot = _trials(clean, runs, seed + 1, last=last)
     steps = np.arange(rho.shape[0])
     for rate in ramp_rates:
         grow = np.clip(steps[None, :] - at[:, None], 0, None) * 30.0 * rate          # (runs, E)
         faulty = np.repeat(rho[None], runs, axis=0)                                     # (runs, E, S)
         faulty[np.arange(runs), :, slot] += grow
-        run_one = lambda r: monitor_receiver(epochs._replace(pseudoranges=r))  # noqa: E731
-        out = jax.tree_util.tree_map(np.asarray, jax.lax.map(run_one, jnp.asarray(faulty)))
+        out = jax.tree_util.tree_map(np.asarray, monitor_runs(jnp.asarray(faulty)))
         alarm = out.check.alarm & (steps[None, :] >= at[:, None])
         detected = alarm.any(axis=1)
         first = np.argmax(alarm, axis=1)
@@ -471,8 +474,7 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
         after = (steps[None, :] >= at[:, None]) & tracked[:, slot].T                     # (runs, E)
         held = rho[at, slot][:, None] if kind == "frozen" else np.inf
         faulty[np.arange(runs)[:, None], steps[None, :], slot[:, None]] = np.where(after, held, rho[:, slot].T)
-        run_one = lambda r: monitor_receiver(epochs._replace(pseudoranges=r))  # noqa: E731
-        out = jax.tree_util.tree_map(np.asarray, jax.lax.map(run_one, jnp.asarray(faulty)))
+        out = jax.tree_util.tree_map(np.asarray, monitor_runs(jnp.asarray(faulty)))
         flagged = out.check.alarm | out.dead.any(axis=2)
         alarm = flagged & after
         detected = alarm.any(axis=1)

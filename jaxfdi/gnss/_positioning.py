@@ -41,6 +41,12 @@ from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, Orbit, earth_rotation, satellite
 ITERATIONS = 6
 #: of which the first ones use unit weights (elevations are meaningless until then)
 UNWEIGHTED_ITERATIONS = 3
+#: epochs of a recorded trace are solved EPOCH_CHUNK at a time with the slots padded to a
+#: multiple of it, and several receiver clocks padded to the seven constellations Android
+#: reports (GPS, SBAS, GLONASS, QZSS, BeiDou, Galileo, NavIC): every trace of up to 64
+#: signals shares one compiled program (a padded slot is unused, a padded clock has no satellite)
+EPOCH_CHUNK = 64
+CONSTELLATIONS = 7
 
 
 class Dops(NamedTuple):
@@ -80,6 +86,22 @@ class PositionFix(NamedTuple):
     azimuth: Array
     dops: Dops
     healthy: Array
+
+
+def padded_to(array, shape: tuple, fill) -> np.ndarray:
+    """``array`` (NumPy) in the leading corner of a ``shape`` array of ``fill``: padding at
+    the end of every axis, cut back with ``array[:n]``-style slices."""
+    out = np.full(shape, fill, dtype=np.asarray(array).dtype)
+    out[tuple(slice(0, n) for n in np.shape(array))] = array
+    return out
+
+
+def padded_sizes(epochs: int, slots: int, clocks: int) -> tuple[int, int, int]:
+    """The padded (epochs, slots, clocks) of ``EPOCH_CHUNK`` and ``CONSTELLATIONS``; one
+    clock stays one."""
+    def up(n):
+        return -(-n // EPOCH_CHUNK) * EPOCH_CHUNK
+    return up(epochs), up(max(slots, 5)), max(clocks, CONSTELLATIONS) if clocks > 1 else clocks
 
 
 def transmit_states(orbit: Orbit, t_receive: Array, pseudoranges: Array) -> tuple[Array, Array]:

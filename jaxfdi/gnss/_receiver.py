@@ -16,10 +16,11 @@ L1 C/A user), Klobuchar and Saastamoinen delays, a 15 deg elevation mask, and we
 ``100 x (3 mm + 3 mm / sqrt(sin E))`` in variance form, the atmosphere's model errors:
 ``atmosphere_corrections``).
 
-``monitor_phone`` runs the same chain on a smartphone trace (``read_android``), whose
-files carry the satellite positions and corrected pseudoranges: no orbits, no
-atmosphere; one receiver clock per constellation and the phone's own pseudorange
-uncertainty as the weights' standard deviations.
+On a smartphone trace (``read_android``), whose files carry the satellite positions and
+corrected pseudoranges, ``monitor_receiver`` runs the same chain without orbits or
+atmosphere: one receiver clock per constellation and the phone's own pseudorange
+uncertainty as the weights' standard deviations, the trace padded and chunked
+(``positioning.EPOCH_CHUNK``) so that every trace of up to 64 signals shares one program.
 """
 from __future__ import annotations
 
@@ -37,6 +38,7 @@ from jaxfdi.gnss._atmosphere import Atmosphere, broadcast_atmosphere
 from jaxfdi.gnss._gnss_log import parse_gnss_log
 from jaxfdi.gnss._integrity import EpochIntegrity, exclusion_rounds, monitor_epoch, monitor_epochs
 from jaxfdi.gnss._orbits import OrbitTable, ephemeris_table
+from jaxfdi.gnss._positioning import EPOCH_CHUNK, padded_sizes, padded_to
 from jaxfdi.gnss._raim import RaimTables, raim_tables
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides, read_ascii
 from jaxfdi.gnss._rinex_obs import Observations, parse_rinex_obs
@@ -192,16 +194,33 @@ def _monitor(table, times, pseudoranges, ura, atmosphere, tables, mask_angle, op
 
 def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, exclude) -> EpochIntegrity:
     """``monitor_epoch`` vmapped over a phone's epochs with the files' satellite positions at
-    transmission and corrected pseudoranges, weights from the phone's uncertainty."""
-    slots = len(phone.signal)
-    tables = raim_tables(max(slots, 5), pfa=1e-3, pmd=1e-3) if tables is None else tables
+    transmission and corrected pseudoranges, weights from the phone's uncertainty; padded
+    and chunked (``positioning.EPOCH_CHUNK``), the padding cut from the result."""
+    epochs, slots = phone.pseudorange.shape
+    own = phone.clocks().shape[1] if clocks == "constellation" else 1
+    rows, width, wide = padded_sizes(epochs, slots, own)
     dtype = jnp.result_type(float)
-    membership = jnp.asarray(phone.clocks()) if clocks == "constellation" else None
-    return _monitor_phone(jnp.asarray(phone.satellite, dtype), jnp.asarray(phone.pseudorange, dtype),
-                          jnp.asarray(phone.sigma, dtype), membership, tables,
-                          None if mask_angle is None else float(mask_angle),
-                          operation if isinstance(operation, str) else tuple(operation),
-                          exclusion_rounds(exclude))
+    if tables is None:
+        tables = raim_tables(width, pfa=1e-3, pmd=1e-3)
+    elif tables.threshold.shape[0] < width - 3:   # entries past S - 4 dof are never read
+        tables = RaimTables(padded_to(np.asarray(tables.threshold), (width - 3,), np.inf),
+                            padded_to(np.asarray(tables.noncentrality), (width - 3,), np.nan))
+    membership = jnp.asarray(padded_to(phone.clocks(), (width, wide), False)) if clocks == "constellation" else None
+    satellite = padded_to(np.asarray(phone.satellite, dtype), (rows, width, 3), np.nan)
+    pseudoranges = padded_to(np.asarray(phone.pseudorange, dtype), (rows, width), np.nan)
+    uncertainty = padded_to(np.asarray(phone.sigma, dtype), (rows, width), np.nan)
+    options = (None if mask_angle is None else float(mask_angle), operation if isinstance(operation, str)
+               else tuple(operation), exclusion_rounds(exclude))
+    chunks = [jax.tree_util.tree_map(np.asarray, _monitor_phone(satellite[k:k + EPOCH_CHUNK],
+                                                                pseudoranges[k:k + EPOCH_CHUNK],
+                                                                uncertainty[k:k + EPOCH_CHUNK], membership, tables,
+                                                                *options))
+              for k in range(0, rows, EPOCH_CHUNK)]
+    # padding sits at the end of every axis: epochs, slots (width >= 64), clocks, geometry columns
+    cut = {width: slots, wide: own, 3 + wide: 3 + own}
+    return jax.tree_util.tree_map(
+        lambda *leaf: jnp.asarray(np.concatenate(leaf)[(slice(0, epochs),) + tuple(slice(0, cut.get(n, n))
+                                                                                   for n in leaf[0].shape[1:])]), *chunks)
 
 
 @functools.partial(jax.jit, static_argnames=("mask_angle", "operation", "exclude"))

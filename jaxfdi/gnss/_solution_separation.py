@@ -1,6 +1,7 @@
 """Protection levels by multiple-hypothesis solution separation (the ARAIM user algorithm,
 Blanch et al. 2015, "Baseline advanced RAIM user algorithm and possible improvements",
-IEEE TAES 51(1); EU-U.S. ARAIM ADD v3), for one fix, vmappable over epochs.
+IEEE TAES 51(1); EU-U.S. ARAIM ADD v3), for one fix, vmappable over epochs
+(``separate_epochs``: a recorded trace's epochs, padded as ``monitor_receiver`` pads a phone's).
 
 Fault modes ``k``: each used satellite alone (prior ``P_sat``) and each constellation as a
 whole (prior ``P_const`` of its clock column). Mode ``k``'s fault-tolerant solution keeps
@@ -33,11 +34,12 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import Array
 from jax.scipy.special import ndtr, ndtri
 
 from jaxfdi import _linalg
-from jaxfdi.gnss._positioning import PositionFix
+from jaxfdi.gnss._positioning import EPOCH_CHUNK, PositionFix, padded_sizes, padded_to
 from jaxfdi.gnss._raim import whitened
 
 #: integrity and continuity budgets of the ARAIM ADD (LPV-200): P_HMI and P_FA, vertical / horizontal
@@ -167,14 +169,52 @@ def solution_separation(fix: PositionFix, p_satellite: float = P_SATELLITE, p_co
     isolated = jnp.where(alarm, jnp.argmax(jnp.max(ratio, axis=1)), -1).astype(jnp.int32)
     scale = jnp.maximum(1.0 - unmonitored / (hmi_h + hmi_v), 0.0)
     prior_monitored = jnp.where(monitored, prior, 0.0)
-    levels = [_solve_level(sigma0[q], threshold[:, q], jnp.where(monitored, sigma[:, q], 1.0), prior_monitored,
-                           budget * scale)
-              for q, budget in ((0, hmi_h / 2.0), (1, hmi_h / 2.0), (2, hmi_v))]
+    budgets = jnp.array([hmi_h / 2.0, hmi_h / 2.0, hmi_v], dtype) * scale           # north, east, down
+    levels = jax.vmap(_solve_level, in_axes=(0, 1, 1, None, 0))(
+        sigma0, threshold, jnp.where(monitored[:, None], sigma, 1.0), prior_monitored, budgets)
     available = solvable0 & (scale > 0.0)
     hpl = jnp.where(available, jnp.hypot(levels[0], levels[1]), jnp.inf)
     vpl = jnp.where(available, levels[2], jnp.inf)
     return SolutionSeparation(hpl, vpl, jnp.where(monitored[:, None], separation, 0.0), threshold, sigma, monitored,
                               unmonitored, alarm, isolated)
+
+
+_separations = jax.jit(jax.vmap(solution_separation, in_axes=(0, None, None, None, None)))
+
+
+def separate_epochs(fix: PositionFix, p_satellite: float = P_SATELLITE, p_constellation=P_CONSTELLATION,
+                    p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL),
+                    p_fa: tuple[float, float] = (P_FA_HORIZONTAL, P_FA_VERTICAL)) -> SolutionSeparation:
+    """``solution_separation`` of every epoch of a fix with a leading epoch axis (T, ...),
+    ``positioning.EPOCH_CHUNK`` epochs at a time with its slots and clock columns padded as
+    a phone trace's (unused slots, clocks without satellites, a zero prior): every fix of up
+    to 64 slots shares one compiled program. Same arguments as ``solution_separation``.
+
+    Returns:
+      ``SolutionSeparation`` with a leading T axis on every leaf; modes K = S + C as there.
+    """
+    fix = jax.tree_util.tree_map(np.asarray, fix)
+    epochs, slots, columns = fix.geometry.shape
+    rows, width, wide = padded_sizes(epochs, slots, columns - 3)
+
+    def pad(leaf, *shape, fill=0):
+        return padded_to(leaf, (rows,) + shape, fill)
+
+    clock_shape = (wide,) if fix.clock_bias.ndim == 2 else ()
+    padded = PositionFix(pad(fix.position, 3), pad(fix.clock_bias, *clock_shape), pad(fix.residuals, width),
+                         pad(fix.geometry, width, 3 + wide), pad(fix.sigma, width, fill=1.0),
+                         pad(fix.used, width, fill=False), pad(fix.num_used), pad(fix.elevation, width),
+                         pad(fix.azimuth, width), jax.tree_util.tree_map(pad, fix.dops), pad(fix.healthy, fill=False))
+    prior = padded_to(np.broadcast_to(np.asarray(p_constellation, fix.residuals.dtype), (columns - 3,)), (wide,), 0.0)
+    chunks = [jax.tree_util.tree_map(np.asarray, _separations(
+        jax.tree_util.tree_map(lambda leaf: leaf[k:k + EPOCH_CHUNK], padded), p_satellite, prior, p_hmi, p_fa))
+        for k in range(0, rows, EPOCH_CHUNK)]
+    out = jax.tree_util.tree_map(lambda *leaf: np.concatenate(leaf)[:epochs], *chunks)
+    modes = np.r_[0:slots, width:width + columns - 3]          # the satellites', then the constellations'
+    isolated = np.where(out.isolated >= width, out.isolated - width + slots, out.isolated)
+    return jax.tree_util.tree_map(jnp.asarray, out._replace(
+        separation=out.separation[:, modes], threshold=out.threshold[:, modes], sigma=out.sigma[:, modes],
+        monitored=out.monitored[:, modes], isolated=isolated.astype(out.isolated.dtype)))
 
 
 def fault_free_levels(fix: PositionFix, p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL)):

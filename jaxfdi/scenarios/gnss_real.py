@@ -72,7 +72,7 @@ from jaxfdi.gnss._android import PhoneEpochs, read_android
 from jaxfdi.gnss._raim import raim_tables
 from jaxfdi.gnss._receiver import MASK_ANGLE, ReceiverEpochs, monitor_receiver, read_observations, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
-from jaxfdi.gnss._solution_separation import solution_separation
+from jaxfdi.gnss._solution_separation import separate_epochs
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 
@@ -385,13 +385,12 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
     check_study(runs=runs, seed=seed)
     require_x64("gnss_real_study")
     rows, epochs_out = [], {}
-    separate = jax.jit(jax.vmap(solution_separation))
     loaded = {}
     for station in STATIONS:
         epochs, truth = _load(station)
         result = jax.tree_util.tree_map(np.asarray, monitor_receiver(epochs))
         loaded[station] = epochs, result
-        separation = jax.tree_util.tree_map(np.asarray, separate(result.fix))
+        separation = jax.tree_util.tree_map(np.asarray, separate_epochs(result.fix))
         row, arrays = _position_row(station, result, separation, truth, np.asarray(epochs.times))
         rows.append(row)
         epochs_out[station] = arrays
@@ -423,7 +422,7 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
                 same += int(decision == ours[r])
                 if decision == ours[r] and decision != "no fix":
                     worst = max(worst, float(np.linalg.norm(position - delivered[r])))
-        ss = jax.tree_util.tree_map(np.asarray, separate(out.fix))
+        ss = jax.tree_util.tree_map(np.asarray, separate_epochs(out.fix))
         detected, ss_detected = out.check.alarm, ss.alarm
         excluded = out.excluded == slot
         mdb = mdb_all[at, slot]
@@ -492,7 +491,7 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
     for label in PHONES:
         phone = load_phone(label)
         result = jax.tree_util.tree_map(np.asarray, monitor_receiver(phone, exclude=PHONE_EXCLUSIONS))
-        separation = jax.tree_util.tree_map(np.asarray, separate(result.fix))
+        separation = jax.tree_util.tree_map(np.asarray, separate_epochs(result.fix))
         row, arrays = _phone_row(label, phone, result, separation)
         rows.append(row)
         epochs_out[label] = arrays

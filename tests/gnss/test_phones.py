@@ -19,6 +19,8 @@ against gnss_lib_py 1.1 (Stanford NavLab), NumPy/SciPy and the files' own fields
 - One clock per constellation: the slope protection level, minimum detectable biases
   and the parity statistic with its ``n - 3 - C`` degrees of freedom against a NumPy /
   SciPy computation on every epoch of the four traces (rel 1e-8).
+- Padding: the traces share one compiled program, and the padded result cut back equals
+  each trace solved at its own shape (positions within 1 um).
 """
 import warnings
 
@@ -293,3 +295,30 @@ def test_exclude_counts_rounds():
         monitor_receiver(trace, exclude=-1)
     with pytest.raises(TypeError, match="exclude: expected the most satellites to exclude"):
         monitor_receiver(trace, exclude=1.5)
+
+
+def test_traces_share_one_program_and_padding_changes_nothing():
+    """The four traces (5-281 epochs, 26-48 signals, 3-5 constellations) run in one compiled
+    program per option set: epochs in chunks of 64, slots padded to 64, clock columns to
+    Android's seven. Cut back, the result is the trace solved at its own shape: the same
+    decisions and degrees of freedom, positions within 1 um (round-off of longer sums)."""
+    from jaxfdi.gnss import _receiver
+
+    traces = [load_phone(label) for label in PHONES]
+    assert len({(t.pseudorange.shape, t.clocks().shape[1]) for t in traces}) == len(traces)
+    _receiver._monitor_phone.clear_cache()
+    padded = [jax.tree_util.tree_map(np.asarray, monitor_receiver(t, exclude=2)) for t in traces]
+    assert _receiver._monitor_phone._cache_size() == 1
+    for trace, out in zip(traces, padded):
+        slots = len(trace.signal)
+        own = jax.tree_util.tree_map(np.asarray, _receiver._monitor_phone(
+            jnp.asarray(trace.satellite), jnp.asarray(trace.pseudorange), jnp.asarray(trace.sigma),
+            jnp.asarray(trace.clocks()), raim_tables(slots, pfa=1e-3, pmd=1e-3), None, "npa", 2))
+        jax.tree_util.tree_map(lambda a, b: np.testing.assert_equal(a.shape, b.shape), out, own)
+        for a, b in ((out.excluded, own.excluded), (out.exclusions, own.exclusions), (out.check.alarm, own.check.alarm),
+                     (out.check.dof, own.check.dof), (out.fix.used, own.fix.used)):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_allclose(out.fix.position, own.fix.position, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(out.fix_excluded.position, own.fix_excluded.position, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(out.fix.clock_bias, own.fix.clock_bias, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(out.protection.hpl, own.protection.hpl, rtol=1e-9)

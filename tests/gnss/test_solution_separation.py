@@ -17,7 +17,8 @@ from jaxfdi.gnss._receiver import monitor_receiver, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss import read_observations
 from jaxfdi.gnss._solution_separation import (P_CONSTELLATION, P_FA_HORIZONTAL, P_FA_VERTICAL, P_HMI_HORIZONTAL,
-                                              P_HMI_VERTICAL, P_SATELLITE, fault_free_levels, solution_separation)
+                                              P_HMI_VERTICAL, P_SATELLITE, fault_free_levels, separate_epochs,
+                                              solution_separation)
 
 
 def reference(geometry, sigma, residuals, used, p_const):
@@ -141,16 +142,21 @@ def test_levels_never_fall_below_the_fault_free_ones(geonet):
 @pytest.mark.parametrize("label", ["GSDC 2021 Pixel 4 XL", "GSDC 2022", "GSDC 2023 Pixel 7 Pro"])
 def test_levels_match_the_long_way_on_phone_epochs(label):
     """Real multi-constellation epochs (a clock per constellation, its constellation-wide
-    fault mode monitored with ``P_const``), every 20th epoch of the trace."""
+    fault mode monitored with ``P_const``), every 20th epoch of the trace, through
+    ``separate_epochs`` (the trace padded to 64 slots and seven clocks, cut back) and
+    ``solution_separation`` of the epoch alone (the same decisions)."""
     from jaxfdi.scenarios.gnss_real import load_phone
 
     phone = load_phone(label)
     fixes = jax.tree_util.tree_map(np.asarray, monitor_receiver(phone, exclude=False).fix)
     clocks = fixes.geometry.shape[-1] - 3
     assert clocks == phone.clocks().shape[1] >= 3
+    batch = jax.tree_util.tree_map(np.asarray, separate_epochs(fixes))
     for e in range(0, phone.gps_millis.size, 20):
         fix = one(fixes, e)
-        ours = solution_separation(fix)
+        ours, alone = one(batch, e), solution_separation(fix)
+        for field in ("monitored", "alarm", "isolated"):
+            np.testing.assert_array_equal(getattr(ours, field), getattr(alone, field))
         hpl, vpl, thresholds, separations = reference(fix.geometry, fix.sigma, fix.residuals, fix.used,
                                                       [P_CONSTELLATION] * clocks)
         monitored = np.asarray(ours.monitored)
@@ -190,3 +196,19 @@ def test_the_isolated_mode_is_the_fix_without_the_faulty_satellite():
         np.testing.assert_allclose(np.asarray(ss.separation)[slot], moved, rtol=2e-3, atol=1e-2)
         checked += 1
     assert checked >= 3
+
+
+def test_fixes_of_every_shape_share_two_programs(geonet):
+    """``separate_epochs`` pads epochs, slots and several clocks: the GEONET hour (one clock)
+    and its first 20 epochs compile one program, the four phone traces (3-5 clocks) one more."""
+    from jaxfdi.gnss._solution_separation import _separations
+    from jaxfdi.scenarios.gnss_real import PHONES, load_phone
+
+    _separations.clear_cache()
+    whole = separate_epochs(geonet)
+    first = separate_epochs(one(geonet, slice(0, 20)))
+    np.testing.assert_array_equal(np.asarray(first.hpl), np.asarray(whole.hpl)[:20])
+    assert _separations._cache_size() == 1
+    for label in PHONES:
+        separate_epochs(monitor_receiver(load_phone(label), exclude=False).fix)
+    assert _separations._cache_size() == 2

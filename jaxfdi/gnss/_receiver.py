@@ -218,9 +218,11 @@ def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, ex
               for k in range(0, rows, EPOCH_CHUNK)]
     # padding sits at the end of every axis: epochs, slots (width >= 64), clocks, geometry columns
     cut = {width: slots, wide: own, 3 + wide: 3 + own}
-    return jax.tree_util.tree_map(
-        lambda *leaf: jnp.asarray(np.concatenate(leaf)[(slice(0, epochs),) + tuple(slice(0, cut.get(n, n))
-                                                                                   for n in leaf[0].shape[1:])]), *chunks)
+
+    def joined(*leaf):
+        whole = np.concatenate(leaf)
+        return jnp.asarray(whole[(slice(0, epochs),) + tuple(slice(0, cut.get(n, n)) for n in whole.shape[1:])])
+    return jax.tree_util.tree_map(joined, *chunks)
 
 
 @functools.partial(jax.jit, static_argnames=("mask_angle", "operation", "exclude"))

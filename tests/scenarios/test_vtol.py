@@ -94,7 +94,10 @@ def test_unknown_input_filter_matches_kitanidis_reference(umv_problem):
     ref_means, ref_stats = _kitanidis_reference(np.asarray(model.Phi), np.asarray(model.C), np.asarray(model.Q),
                                                 np.asarray(model.R), E, vtol.X0, np.eye(4), ys)
     np.testing.assert_allclose(np.asarray(info.filtered_mean), ref_means, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(np.asarray(info.nis), ref_stats, rtol=1e-8, atol=1e-10)
+    # the open-loop state grows to 3e6, so each innovation y - C x carries eps |C x| <= 7e-10 of
+    # round-off, and the statistic r^T Pi r (Pi: S^-1 projected off F) |2 Pi r| <= 17 times
+    # that: 3.5e-8 at most per implementation (both: 1.8e-8 seen)
+    np.testing.assert_allclose(np.asarray(info.nis), ref_stats, rtol=1e-8, atol=1e-7)
 
 
 def test_unknown_input_filter_leaves_missing_sensors_out_exactly(umv_problem):

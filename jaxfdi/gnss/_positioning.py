@@ -89,11 +89,9 @@ class PositionFix(NamedTuple):
 
 
 def padded_to(array, shape: tuple, fill) -> np.ndarray:
-    """``array`` (NumPy) in the leading corner of a ``shape`` array of ``fill``: padding at
-    the end of every axis, cut back with ``array[:n]``-style slices."""
-    out = np.full(shape, fill, dtype=np.asarray(array).dtype)
-    out[tuple(slice(0, n) for n in np.shape(array))] = array
-    return out
+    """``array`` (NumPy) padded with ``fill`` at the end of every axis to ``shape``."""
+    array = np.asarray(array)
+    return np.pad(array, [(0, n - m) for n, m in zip(shape, array.shape)], constant_values=fill)
 
 
 def padded_sizes(epochs: int, slots: int, clocks: int) -> tuple[int, int, int]:
@@ -102,6 +100,16 @@ def padded_sizes(epochs: int, slots: int, clocks: int) -> tuple[int, int, int]:
     def up(n):
         return -(-n // EPOCH_CHUNK) * EPOCH_CHUNK
     return up(epochs), up(max(slots, 5)), max(clocks, CONSTELLATIONS) if clocks > 1 else clocks
+
+
+def in_chunks(solve: Callable, epochs: int, *arrays):
+    """``solve(*chunk)`` on ``EPOCH_CHUNK`` epochs at a time of ``arrays`` (pytrees whose
+    leading axis is padded to a multiple of it), the results joined on the host and cut
+    back to ``epochs``: every padded trace reuses the one program of a chunk."""
+    rows = jax.tree_util.tree_leaves(arrays)[0].shape[0]
+    chunks = [jax.tree_util.tree_map(np.asarray, solve(*jax.tree_util.tree_map(lambda a: a[k:k + EPOCH_CHUNK], arrays)))
+              for k in range(0, rows, EPOCH_CHUNK)]
+    return jax.tree_util.tree_map(lambda *chunk: np.concatenate(chunk)[:epochs], *chunks)
 
 
 def transmit_states(orbit: Orbit, t_receive: Array, pseudoranges: Array) -> tuple[Array, Array]:

@@ -38,7 +38,7 @@ from jaxfdi.gnss._atmosphere import Atmosphere, broadcast_atmosphere
 from jaxfdi.gnss._gnss_log import parse_gnss_log
 from jaxfdi.gnss._integrity import EpochIntegrity, exclusion_rounds, monitor_epoch, monitor_epochs
 from jaxfdi.gnss._orbits import OrbitTable, ephemeris_table
-from jaxfdi.gnss._positioning import EPOCH_CHUNK, padded_sizes, padded_to
+from jaxfdi.gnss._positioning import in_chunks, padded_sizes, padded_to
 from jaxfdi.gnss._raim import RaimTables, raim_tables
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides, read_ascii
 from jaxfdi.gnss._rinex_obs import Observations, parse_rinex_obs
@@ -211,18 +211,24 @@ def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, ex
     uncertainty = padded_to(np.asarray(phone.sigma, dtype), (rows, width), np.nan)
     options = (None if mask_angle is None else float(mask_angle), operation if isinstance(operation, str)
                else tuple(operation), exclusion_rounds(exclude))
-    chunks = [jax.tree_util.tree_map(np.asarray, _monitor_phone(satellite[k:k + EPOCH_CHUNK],
-                                                                pseudoranges[k:k + EPOCH_CHUNK],
-                                                                uncertainty[k:k + EPOCH_CHUNK], membership, tables,
-                                                                *options))
-              for k in range(0, rows, EPOCH_CHUNK)]
-    # padding sits at the end of every axis: epochs, slots (width >= 64), clocks, geometry columns
-    cut = {width: slots, wide: own, 3 + wide: 3 + own}
+    out = in_chunks(lambda *chunk: _monitor_phone(*chunk, membership, tables, *options), epochs,
+                    satellite, pseudoranges, uncertainty)
 
-    def joined(*leaf):
-        whole = np.concatenate(leaf)
-        return jnp.asarray(whole[(slice(0, epochs),) + tuple(slice(0, cut.get(n, n)) for n in whole.shape[1:])])
-    return jax.tree_util.tree_map(joined, *chunks)
+    def cut(path, leaf):
+        """The trace's own slots and clocks: the padding sits at the end of those axes."""
+        name = path[-1].name
+        index = (slice(None),) + ((slice(0, slots),) if name in _SLOT_FIELDS else ())
+        if name == "geometry":
+            index += (slice(0, 3 + own),)
+        elif name == "clock_bias" and leaf.ndim == 2:
+            index += (slice(0, own),)
+        return jnp.asarray(leaf[index])
+    return jax.tree_util.tree_map_with_path(cut, out)
+
+
+#: the ``EpochIntegrity`` leaves with a slot axis (after the epoch axis)
+_SLOT_FIELDS = frozenset({"residuals", "geometry", "sigma", "used", "elevation", "azimuth", "isolation",
+                          "slope_horizontal", "slope_vertical", "minimum_detectable_bias", "dead", "exclusions"})
 
 
 @functools.partial(jax.jit, static_argnames=("mask_angle", "operation", "exclude"))
@@ -232,7 +238,7 @@ def _monitor_phone(satellite, pseudoranges, uncertainty, membership, tables, mas
         rho = jnp.where(jnp.all(jnp.isfinite(sat), axis=1) & (sig > 0), rho, jnp.nan)
         sat = jnp.where(jnp.isfinite(sat), sat, 0.0)
         sig = jnp.where(jnp.isfinite(rho), sig, 1.0)
-        available = jnp.isfinite(rho)
+        available = ~jnp.isnan(rho)       # an infinite pseudorange is a dead channel (never used)
         return monitor_epoch(None, available, 0.0, rho, tables, sig, operation, exclude,
                              transmit=(sat, jnp.zeros_like(rho)), mask_angle=mask_angle, clocks=membership)
     return jax.vmap(one)(satellite, pseudoranges, uncertainty)

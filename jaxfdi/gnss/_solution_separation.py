@@ -39,7 +39,7 @@ from jax import Array
 from jax.scipy.special import ndtr, ndtri
 
 from jaxfdi import _linalg
-from jaxfdi.gnss._positioning import EPOCH_CHUNK, PositionFix, padded_sizes, padded_to
+from jaxfdi.gnss._positioning import PositionFix, in_chunks, padded_sizes, padded_to
 from jaxfdi.gnss._raim import whitened
 
 #: integrity and continuity budgets of the ARAIM ADD (LPV-200): P_HMI and P_FA, vertical / horizontal
@@ -206,10 +206,7 @@ def separate_epochs(fix: PositionFix, p_satellite: float = P_SATELLITE, p_conste
                          pad(fix.used, width, fill=False), pad(fix.num_used), pad(fix.elevation, width),
                          pad(fix.azimuth, width), jax.tree_util.tree_map(pad, fix.dops), pad(fix.healthy, fill=False))
     prior = padded_to(np.broadcast_to(np.asarray(p_constellation, fix.residuals.dtype), (columns - 3,)), (wide,), 0.0)
-    chunks = [jax.tree_util.tree_map(np.asarray, _separations(
-        jax.tree_util.tree_map(lambda leaf: leaf[k:k + EPOCH_CHUNK], padded), p_satellite, prior, p_hmi, p_fa))
-        for k in range(0, rows, EPOCH_CHUNK)]
-    out = jax.tree_util.tree_map(lambda *leaf: np.concatenate(leaf)[:epochs], *chunks)
+    out = in_chunks(lambda chunk: _separations(chunk, p_satellite, prior, p_hmi, p_fa), epochs, padded)
     modes = np.r_[0:slots, width:width + columns - 3]          # the satellites', then the constellations'
     isolated = np.where(out.isolated >= width, out.isolated - width + slots, out.isolated)
     return jax.tree_util.tree_map(jnp.asarray, out._replace(

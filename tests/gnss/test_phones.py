@@ -34,6 +34,7 @@ from scipy import optimize, stats
 from jaxfdi.data import data_path
 from jaxfdi.gnss import ecef_to_geodetic, geodetic_to_ecef, monitor_receiver, read_android
 from jaxfdi.gnss._android import read_android_ground_truth
+from jaxfdi.gnss._integrity import raim_output
 from jaxfdi.gnss._raim import raim_tables
 from jaxfdi.scenarios.gnss_real import PEER_THRESHOLD, PHONE_EXCLUSIONS, PHONES, _peer_navdata, _peer_row, load_phone
 
@@ -324,3 +325,47 @@ def test_traces_share_one_program_and_padding_changes_nothing():
         np.testing.assert_allclose(out.fix_excluded.position, own.fix_excluded.position, rtol=0, atol=1e-6)
         np.testing.assert_allclose(out.fix.clock_bias, own.fix.clock_bias, rtol=0, atol=1e-6)
         np.testing.assert_allclose(out.protection.hpl, own.protection.hpl, rtol=1e-9)
+
+
+def test_bad_channels_in_a_padded_trace_are_evidence():
+    """A dead, missing or frozen channel inside a padded phone trace (the Pixel 7 Pro's, 34
+    signals padded to 64), on its fastest-moving signal (range rate ~700 m/s):
+    - NaN from epoch 1 on is not measured: the fixes equal the trace without the slot
+      (within 1 um), nothing flagged;
+    - infinite is a dead channel: flagged, excluded and alarmed at exactly those epochs
+      (``raim_output`` labels the slot), its fix equal to the NaN one (never used);
+    - frozen at its epoch-1 value, it is 700 m off one second later: the parity test alarms
+      and excludes that slot at every later epoch."""
+    trace = load_phone("GSDC 2023 Pixel 7 Pro")
+    rho = trace.pseudorange
+    measured = np.isfinite(rho).all(0)
+    slot = int(np.argmax(np.where(measured, np.abs(np.diff(rho, axis=0)).min(0), 0.0)))
+    assert np.abs(np.diff(rho[:, slot])).min() > 500.0
+
+    def run(pseudorange):
+        return jax.tree_util.tree_map(np.asarray, monitor_receiver(trace._replace(pseudorange=pseudorange),
+                                                                   exclude=PHONE_EXCLUSIONS))
+
+    def edited(value):
+        out = rho.copy()
+        out[1:, slot] = value
+        return out
+
+    keep = np.arange(rho.shape[1]) != slot
+    without = jax.tree_util.tree_map(np.asarray, monitor_receiver(trace._replace(
+        signal=tuple(np.asarray(trace.signal)[keep]), constellation=trace.constellation[keep],
+        pseudorange=rho[:, keep], sigma=trace.sigma[:, keep], cn0=trace.cn0[:, keep],
+        satellite=trace.satellite[:, keep]), exclude=PHONE_EXCLUSIONS))
+    missing, dead = run(edited(np.nan)), run(edited(np.inf))
+    for out in (missing, dead):
+        np.testing.assert_allclose(out.fix.position[1:], without.fix.position[1:], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(out.fix_excluded.position[1:], without.fix_excluded.position[1:], rtol=0, atol=1e-6)
+        assert not out.fix.used[1:, slot].any() and out.fix.used[0, slot]
+    assert not missing.dead.any() and not missing.exclusions[:, slot].any()
+    np.testing.assert_array_equal(dead.dead, np.arange(rho.shape[0])[:, None] >= np.where(keep, rho.shape[0], 1))
+    assert dead.exclusions[1:, slot].all()
+    decisions = jax.vmap(raim_output)(jax.tree_util.tree_map(jnp.asarray, dead)).decision
+    assert decisions.alarm[1:].all() and (decisions.label[1:] == 1 + slot).all()
+    frozen = run(edited(rho[1, slot]))
+    assert frozen.check.alarm[2:].all() and (frozen.check.isolated[2:] == slot).all()
+    assert frozen.exclusions[2:, slot].all() and not frozen.exclusions[:2, slot].any()

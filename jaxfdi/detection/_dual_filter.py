@@ -24,14 +24,14 @@ axis is nearest the slew axis leaves ``F`` unchanged for seconds).
 """
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter
+from jaxfdi.filters._base import Filter, ModelFunction
 
 
 class DualFilterState(NamedTuple):
@@ -66,17 +66,12 @@ class DualFilterInfo(NamedTuple):
     healthy: Array
 
 
-def system_matrix_det(field: Callable[[Array, Array, Any], Array], x: Array, u: Array, params: Any) -> Array:
+def system_matrix_det(field: ModelFunction, x: Array, u: Array, params: Any) -> Array:
     """``det(dg/dx)`` of the continuous model at ``(x, u)`` (eq. 8 of Choi & Park 2009)."""
     return _linalg.det(jax.jacfwd(field)(x, u, params))
 
 
-def dual_filter(
-    estimator: Filter,
-    transition: Callable[[Array, Array, Any], Array],
-    field: Callable[[Array, Array, Any], Array],
-    params: Any = None,
-) -> Filter:
+def dual_filter(estimator: Filter, transition: ModelFunction, field: ModelFunction, params: Any = None) -> Filter:
     """Prediction filter + estimation filter with the fault detection parameter ``F``.
 
     Args:

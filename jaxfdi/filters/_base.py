@@ -122,6 +122,10 @@ class BatchKernel(NamedTuple):
     info_runs_first: bool = False
 
 
+#: a nonlinear model, ``x[k+1] = f(x, u, params)`` or ``y = h(x, u, params)``: (n,), (nu,), pytree -> array
+ModelFunction = Callable[[Array, Array, Any], Array]
+
+
 class Filter(NamedTuple):
     """A filter as pure functions.
 

@@ -6,24 +6,18 @@ Jacobians are never hand-typed (printed Jacobians in papers carry typos).
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any
 
 import jax
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, GaussianState, check_step_inputs, gaussian_filter
+from jaxfdi.filters._base import Filter, GaussianState, ModelFunction, check_step_inputs, gaussian_filter
 from jaxfdi.filters._kalman import joseph_update
 
 
-def extended_kalman_filter(
-    f: Callable[[Array, Array, Any], Array],
-    h: Callable[[Array, Array, Any], Array],
-    Q: Array,
-    R: Array,
-    params: Any = None,
-    missing_measurements: bool = False,
-) -> Filter:
+def extended_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Array, params: Any = None,
+                           missing_measurements: bool = False) -> Filter:
     """EKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
     Args:

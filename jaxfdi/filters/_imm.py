@@ -27,21 +27,9 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.filters._base import Filter
-from jaxfdi.filters._mixture import (
-    IMMInfo,
-    IMMState,
-    bank_init,
-    bank_predict,
-    bank_update,
-    bayes_mode_update,
-    check_distribution,
-    check_mode_filter,
-    finish_mixture_step,
-    mixing,
-    moment_match,
-    num_modes,
-    safe_log,
-)
+from jaxfdi.filters._mixture import (IMMInfo, IMMState, bank_init, bank_predict, bank_update, bayes_mode_update,
+                                     check_distribution, check_mode_filter, finish_mixture_step, mixing, moment_match,
+                                     num_modes, safe_log)
 from jaxfdi.filters._imm_batch import kalman_imm_batch_kernel, supports
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.filters._posterior import posterior_input

@@ -15,19 +15,9 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (
-    ConditionedGaussian,
-    Filter,
-    GaussianState,
-    check_step_inputs,
-    gaussian_filter,
-    dead_components,
-    mask_innovation_cov,
-    observed_mask,
-    observed_rows,
-    report_dead,
-    used_innovation,
-)
+from jaxfdi.filters._base import (ConditionedGaussian, Filter, GaussianState, check_step_inputs, gaussian_filter,
+                                  dead_components, mask_innovation_cov, observed_mask, observed_rows, report_dead,
+                                  used_innovation)
 from jaxfdi.filters._kalman_batch import check_per_run_model, kalman_batch_kernel, per_run_leaves, supports
 from jaxfdi.filters._parallel import parallel_scan
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model

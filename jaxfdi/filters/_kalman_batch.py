@@ -29,14 +29,8 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (
-    BatchKernel,
-    FilterInfo,
-    GaussianState,
-    check_step_inputs,
-    report_dead,
-    used_innovation,
-)
+from jaxfdi.filters._base import (BatchKernel, FilterInfo, GaussianState, check_step_inputs, report_dead,
+                                  used_innovation)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 tr = _linalg.soa_transpose

@@ -16,17 +16,8 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.filters._base import Filter
-from jaxfdi.filters._mixture import (
-    IMMInfo,
-    IMMState,
-    bank_init,
-    bank_predict,
-    bank_update,
-    bayes_mode_update,
-    check_mode_filter,
-    finish_mixture_step,
-    num_modes,
-)
+from jaxfdi.filters._mixture import (IMMInfo, IMMState, bank_init, bank_predict, bank_update, bayes_mode_update,
+                                     check_mode_filter, finish_mixture_step, num_modes)
 
 
 def apply_floor(log_mode_prob: Array, floor: Array) -> Array:

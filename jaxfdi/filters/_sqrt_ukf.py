@@ -26,23 +26,16 @@ centre weight of van der Merwe & Wan's form.
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any
 
 import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.filters._base import Filter, check_step_inputs, used_innovation
-from jaxfdi.filters._sqrt_kalman import (
-    SqrtGaussianState,
-    check_sqrt_state,
-    factor,
-    sqrt_info,
-    sqrt_init,
-    sqrt_update_linearised,
-    tria,
-)
-from jaxfdi.filters._ukf import SigmaPoints, _propagate, unscented_weights
+from jaxfdi.filters._base import Filter, ModelFunction, check_step_inputs, used_innovation
+from jaxfdi.filters._sqrt_kalman import (SqrtGaussianState, check_sqrt_state, factor, sqrt_info, sqrt_init,
+                                         sqrt_update_linearised, tria)
+from jaxfdi.filters._ukf import SigmaPoints, _propagate, scaled_transform
 
 
 def factor_sigma_points(mean: Array, chol: Array, scale: float, taylor: bool) -> SigmaPoints:
@@ -58,17 +51,9 @@ def factor_sigma_points(mean: Array, chol: Array, scale: float, taylor: bool) ->
     return SigmaPoints(mean, jnp.concatenate([s, -s], axis=0))
 
 
-def sqrt_unscented_kalman_filter(
-    f: Callable[[Array, Array, Any], Array],
-    h: Callable[[Array, Array, Any], Array],
-    Q: Array,
-    R: Array,
-    params: Any = None,
-    alpha: float = 1e-3,
-    beta: float = 2.0,
-    kappa: float = 0.0,
-    sigma_differences: str = "auto",
-) -> Filter:
+def sqrt_unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Array, params: Any = None,
+                                 alpha: float = 1e-3, beta: float = 2.0, kappa: float = 0.0,
+                                 sigma_differences: str = "auto") -> Filter:
     """Square-root UKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
     Same arguments and outputs (``FilterInfo``) as ``unscented_kalman_filter`` (equal in
@@ -80,33 +65,12 @@ def sqrt_unscented_kalman_filter(
       SqrtGaussianState``; ``step(state, y (m,), u) -> (SqrtGaussianState, FilterInfo)``,
       covariances in the info as Gram matrices of the factors.
     """
-    _checks.check_callable("f", f, "a transition function f(x, u, params)")
-    _checks.check_callable("h", h, "a measurement function h(x, u, params)")
-    n = _checks.check_covariance("Q", Q)
-    m = _checks.check_covariance("R", R)
-    for name, value in (("alpha", alpha), ("beta", beta), ("kappa", kappa)):
-        _checks.check_real(name, value, "a real scalar (static)")
-        if _checks.concrete(value) is None:
-            raise TypeError(f"{name}: expected a Python float (a static scaled-UT parameter), "
-                            f"got {_checks.received(value)}")
-    _checks.check_positive("alpha", alpha, "a positive scalar")
-    alpha, beta, kappa = float(alpha), float(beta), float(kappa)
-    if alpha**2 * (n + kappa) <= 0:
-        raise ValueError(f"kappa: expected alpha^2 (n + kappa) > 0 for n = {n}, got kappa = {kappa}")
+    n, m, alpha, beta, w, scale, use_taylor = scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences)
     if beta < alpha**2:
         raise ValueError(f"beta: the square-root form needs beta >= alpha^2 = {alpha**2:g} (non-negative weights), "
                          f"got {beta}")
-    if sigma_differences not in ("auto", "direct", "taylor"):
-        raise ValueError(f"sigma_differences: expected 'auto', 'direct' or 'taylor', got {sigma_differences!r}")
-    w, _, _ = unscented_weights(n, alpha, beta, kappa)
-    scale = (alpha**2 * (n + kappa)) ** 0.5
     root_w, root_cross = w**0.5, (beta - alpha**2) ** 0.5
     chol_Q, chol_R = factor(jnp.asarray(Q)), factor(jnp.asarray(R))
-
-    def use_taylor(mean: Array) -> bool:
-        if sigma_differences != "auto":
-            return sigma_differences == "taylor"
-        return bool(jnp.finfo(mean.dtype).eps > 1e-10 and alpha <= 1e-2)
 
     init = sqrt_init(n)
 

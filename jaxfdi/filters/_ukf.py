@@ -52,18 +52,9 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (
-    ConditionedGaussian,
-    Filter,
-    GaussianState,
-    check_step_inputs,
-    dead_components,
-    gaussian_filter,
-    mask_innovation_cov,
-    observed_mask,
-    report_dead,
-    used_innovation,
-)
+from jaxfdi.filters._base import (ConditionedGaussian, Filter, GaussianState, ModelFunction, check_step_inputs,
+                                  dead_components, gaussian_filter, mask_innovation_cov, observed_mask, report_dead,
+                                  used_innovation)
 
 
 class SigmaPoints(NamedTuple):
@@ -180,18 +171,41 @@ def joseph_like_cov(chol: Array, points: SigmaPoints, dy: Array, cross_cov: Arra
     return _linalg.symmetrize(cov)
 
 
-def unscented_kalman_filter(
-    f: Callable[[Array, Array, Any], Array],
-    h: Callable[[Array, Array, Any], Array],
-    Q: Array,
-    R: Array,
-    params: Any = None,
-    alpha: float = 1e-3,
-    beta: float = 2.0,
-    kappa: float = 0.0,
-    sigma_differences: str = "auto",
-    missing_measurements: bool = False,
-) -> Filter:
+def scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences: str):
+    """Check a UKF's arguments when it is built and return ``(n, m, alpha, beta, w,
+    scale, use_taylor)``: the sizes, the static scaled-UT parameters as floats, the mean
+    weights (``unscented_weights``), ``sqrt(alpha^2 (n + kappa))`` and whether a mean of a
+    given dtype takes Taylor-form centred differences (``sigma_differences``)."""
+    _checks.check_callable("f", f, "a transition function f(x, u, params)")
+    _checks.check_callable("h", h, "a measurement function h(x, u, params)")
+    n = _checks.check_covariance("Q", Q)
+    m = _checks.check_covariance("R", R)
+    for name, value in (("alpha", alpha), ("beta", beta), ("kappa", kappa)):
+        _checks.check_real(name, value, "a real scalar (static)")
+        if _checks.concrete(value) is None:
+            raise TypeError(f"{name}: expected a Python float (a static scaled-UT parameter), "
+                            f"got {_checks.received(value)}")
+    _checks.check_positive("alpha", alpha, "a positive scalar")
+    _checks.check_scalar("beta", beta, meaning="a real scalar")
+    _checks.check_scalar("kappa", kappa, meaning="a real scalar")
+    alpha, beta, kappa = float(alpha), float(beta), float(kappa)
+    if alpha**2 * (n + kappa) <= 0:
+        raise ValueError(f"kappa: expected alpha^2 (n + kappa) > 0 for n = {n}, got kappa = {kappa}")
+    if sigma_differences not in ("auto", "direct", "taylor"):
+        raise ValueError(f"sigma_differences: expected 'auto', 'direct' or 'taylor', got {sigma_differences!r}")
+    w, _, _ = unscented_weights(n, alpha, beta, kappa)
+
+    def use_taylor(mean: Array) -> bool:
+        if sigma_differences != "auto":
+            return sigma_differences == "taylor"
+        return bool(jnp.finfo(mean.dtype).eps > 1e-10 and alpha <= 1e-2)
+
+    return n, m, alpha, beta, w, (alpha**2 * (n + kappa)) ** 0.5, use_taylor
+
+
+def unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Array, params: Any = None,
+                            alpha: float = 1e-3, beta: float = 2.0, kappa: float = 0.0,
+                            sigma_differences: str = "auto", missing_measurements: bool = False) -> Filter:
     """UKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
     Sigma points are redrawn from ``N(m, P)`` before each measurement update (so the
@@ -217,31 +231,8 @@ def unscented_kalman_filter(
       GaussianState``; ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``, the
       unscented update then the unscented prediction through ``f``.
     """
-    _checks.check_callable("f", f, "a transition function f(x, u, params)")
-    _checks.check_callable("h", h, "a measurement function h(x, u, params)")
-    n = _checks.check_covariance("Q", Q)
-    m = _checks.check_covariance("R", R)
-    for name, value in (("alpha", alpha), ("beta", beta), ("kappa", kappa)):
-        _checks.check_real(name, value, "a real scalar (static)")
-        if _checks.concrete(value) is None:
-            raise TypeError(f"{name}: expected a Python float (a static scaled-UT parameter), "
-                            f"got {_checks.received(value)}")
-    _checks.check_positive("alpha", alpha, "a positive scalar")
-    _checks.check_scalar("beta", beta, meaning="a real scalar")
-    _checks.check_scalar("kappa", kappa, meaning="a real scalar")
-    alpha, beta, kappa = float(alpha), float(beta), float(kappa)
-    if alpha**2 * (n + kappa) <= 0:
-        raise ValueError(f"kappa: expected alpha^2 (n + kappa) > 0 for n = {n}, got kappa = {kappa}")
-    w, _, _ = unscented_weights(n, alpha, beta, kappa)
-    scale = (alpha**2 * (n + kappa)) ** 0.5
+    n, m, alpha, beta, w, scale, use_taylor = scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences)
     cross_w = beta - alpha**2
-    if sigma_differences not in ("auto", "direct", "taylor"):
-        raise ValueError(f"sigma_differences: expected 'auto', 'direct' or 'taylor', got {sigma_differences!r}")
-
-    def use_taylor(mean: Array) -> bool:
-        if sigma_differences != "auto":
-            return sigma_differences == "taylor"
-        return bool(jnp.finfo(mean.dtype).eps > 1e-10 and alpha <= 1e-2)
 
     def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
         check_step_inputs(y, u, m, None)

@@ -26,18 +26,8 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (
-    ConditionedGaussian,
-    Filter,
-    GaussianState,
-    check_step_inputs,
-    dead_components,
-    gaussian_filter,
-    mask_innovation_cov,
-    observed_rows,
-    report_dead,
-    used_innovation,
-)
+from jaxfdi.filters._base import (ConditionedGaussian, Filter, GaussianState, check_step_inputs, dead_components,
+                                  gaussian_filter, mask_innovation_cov, observed_rows, report_dead, used_innovation)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 

@@ -1,7 +1,8 @@
 """Figures of FDI results, for notebooks and scripts.
 
 Every function draws on ``ax`` when one is given (and returns ``ax.figure``), otherwise
-on a new ``matplotlib.figure.Figure`` that it returns. Figures are made without pyplot,
+on a new ``matplotlib.figure.Figure`` that it returns; ``t`` is the (T,) times of the
+samples (default: step indices). Figures are made without pyplot,
 so no function selects or changes the matplotlib backend, opens a window or keeps a
 figure alive in pyplot's registry: in Jupyter a returned figure shows as the cell's
 value (or with ``display(fig)``); in a script, ``fig.savefig(path)``. The CLI selects
@@ -47,14 +48,9 @@ def plot_statistic(statistic, threshold=None, *, t=None, onset=None, label: str 
     Args:
       statistic: ``(T,)`` one run, or ``(R, T)`` several runs (drawn thin).
       threshold: scalar or ``(T,)`` alarm threshold (dashed), or ``None``.
-      t: ``(T,)`` times (default: step indices).
       onset: time of the fault onset (dotted vertical line), or ``None``.
       label: the statistic's name (legend and y label).
       log: logarithmic y axis.
-      ax: axes to draw on (default: a new figure).
-
-    Returns:
-      The ``matplotlib.figure.Figure``.
     """
     values = np.asarray(statistic, dtype=float)
     if values.ndim not in (1, 2):
@@ -84,13 +80,8 @@ def plot_mode_probabilities(mode_prob, names: Sequence[str] | None = None, *, t=
     Args:
       mode_prob: ``(T, M)`` probabilities of M modes.
       names: M mode names (default ``mode 0`` ...).
-      t: ``(T,)`` times (default: step indices).
       onset: fault onset (dotted vertical line), or ``None``.
       threshold: the decision threshold ``mu_T`` (dashed), or ``None``.
-      ax: axes to draw on (default: a new figure).
-
-    Returns:
-      The ``matplotlib.figure.Figure``.
     """
     prob = np.asarray(mode_prob, dtype=float)
     if prob.ndim != 2:
@@ -118,12 +109,7 @@ def plot_estimate(estimate, truth=None, std=None, *, t=None, label: str = "estim
       estimate: ``(T,)`` estimates.
       truth: ``(T,)`` true values, or ``None``.
       std: ``(T,)`` standard deviations (e.g. ``sqrt(cov[:, i, i])``), or ``None``.
-      t: ``(T,)`` times (default: step indices).
       label: the quantity's name.
-      ax: axes to draw on (default: a new figure).
-
-    Returns:
-      The ``matplotlib.figure.Figure``.
     """
     est = np.asarray(estimate, dtype=float)
     if est.ndim != 1:
@@ -148,10 +134,6 @@ def plot_delays(delays: Mapping[str, Sequence[float]], *, unit: str = "s", ax=No
     Args:
       delays: name -> delays of the runs (NaN for a run never detected).
       unit: the delays' unit (axis label).
-      ax: axes to draw on (default: a new figure).
-
-    Returns:
-      The ``matplotlib.figure.Figure``.
     """
     if not delays:
         raise ValueError("delays: expected at least one name -> delays entry, got none")
@@ -176,10 +158,6 @@ def plot_confusion(matrix, labels: Sequence[str], *, normalize: bool = True, ax=
       matrix: ``(K, K)`` counts, e.g. ``jaxfdi._metrics.confusion_matrix``.
       labels: K class names.
       normalize: show each row as shares of its runs.
-      ax: axes to draw on (default: a new figure).
-
-    Returns:
-      The ``matplotlib.figure.Figure``.
     """
     m = np.asarray(matrix, dtype=float)
     if m.ndim != 2 or m.shape[0] != m.shape[1]:
@@ -211,10 +189,6 @@ def plot_loss_history(step, train=None, validation=None, *, best_step: int | Non
       validation: ``(N,)`` validation losses, or ``None``.
       best_step: the step kept (dotted vertical line), or ``None``.
       log: logarithmic y axis.
-      ax: axes to draw on (default: a new figure).
-
-    Returns:
-      The ``matplotlib.figure.Figure``.
     """
     steps = np.asarray(step)
     fig, ax = new_axes(ax)

@@ -106,29 +106,29 @@ def ned_rotation(lat: Array, lon: Array) -> Array:
 
 
 def ecef_to_ned(ecef: Array, origin_ecef: Array) -> Array:
-    """(..., 3) NED [m] of ECEF points relative to ``origin_ecef`` (NED axes at the origin)."""
-    _check_points("ecef", ecef)
-    _check_points("origin_ecef", origin_ecef)
-    return _ecef_to_ned(jnp.asarray(ecef), jnp.asarray(origin_ecef))
-
-
-@jax.jit
-def _ecef_to_ned(ecef: Array, origin_ecef: Array) -> Array:
-    lat, lon, _ = ecef_to_geodetic(origin_ecef)
-    return jnp.einsum("...ij,...j->...i", ned_rotation(lat, lon), ecef - origin_ecef)
+    """(..., 3) NED [m] of ECEF points relative to ``origin_ecef``: ``R (x - x0)`` with
+    ``R = ned_rotation`` at the origin."""
+    return _local_frame("ecef", ecef, origin_ecef)
 
 
 def ned_to_ecef(ned: Array, origin_ecef: Array) -> Array:
-    """(..., 3) ECEF of NED offsets [m] from ``origin_ecef`` (inverse of ``ecef_to_ned``)."""
-    _check_points("ned", ned)
+    """(..., 3) ECEF of NED offsets [m] from ``origin_ecef``: ``x0 + R^T n`` (inverse of
+    ``ecef_to_ned``)."""
+    return _local_frame("ned", ned, origin_ecef)
+
+
+def _local_frame(given: str, points: Array, origin_ecef: Array) -> Array:
+    _check_points(given, points)
     _check_points("origin_ecef", origin_ecef)
-    return _ned_to_ecef(jnp.asarray(ned), jnp.asarray(origin_ecef))
+    return _rotate(given, jnp.asarray(points), jnp.asarray(origin_ecef))
 
 
-@jax.jit
-def _ned_to_ecef(ned: Array, origin_ecef: Array) -> Array:
-    lat, lon, _ = ecef_to_geodetic(origin_ecef)
-    return origin_ecef + jnp.einsum("...ji,...j->...i", ned_rotation(lat, lon), ned)
+@partial(jax.jit, static_argnums=0)
+def _rotate(given: str, points: Array, origin_ecef: Array) -> Array:
+    rotation = ned_rotation(*ecef_to_geodetic(origin_ecef)[:2])
+    if given == "ecef":
+        return jnp.einsum("...ij,...j->...i", rotation, points - origin_ecef)
+    return origin_ecef + jnp.einsum("...ji,...j->...i", rotation, points)
 
 
 def line_of_sight_ned(receiver_ecef: Array, satellite_ecef: Array) -> Array:

@@ -42,15 +42,8 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.detection._chi2 import Decision
-from jaxfdi._metrics import (
-    DetectionRecord,
-    EpisodeRecord,
-    episode_record_init,
-    episode_record_update,
-    record_init,
-    record_update,
-    step_health,
-)
+from jaxfdi._metrics import (DetectionRecord, EpisodeRecord, episode_record_init, episode_record_update, record_init,
+                             record_update, step_health)
 from jaxfdi._montecarlo import _is_key
 from jaxfdi._stages import FDI, Controller, Plant, Scorer
 

@@ -558,6 +558,21 @@ def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2)
     return f"{successes / trials:.{digits}f} [{low:.2f},{high:.2f}]"
 
 
+def rate_cell(rate, trials: int, width: int = 16, digits: int = 2) -> str:
+    """A table's rate over ``trials`` runs as ``rate_text`` (with its 95 % interval),
+    right-aligned in ``width``; ``-`` for a missing rate (``None``, NaN) or no runs."""
+    if rate is None or rate != rate or not trials:
+        return f"{'-':>{width}}"
+    return f"{rate_text(round(rate * trials), trials, digits=digits):>{width}}"
+
+
+def cell(value, spec: str = ".3f", width: int = 0, missing: str = "-") -> str:
+    """A table cell: ``format(value, spec)`` right-aligned in ``width``; ``missing`` for
+    ``None`` or a number that is not finite (no value to show)."""
+    absent = value is None or (isinstance(value, (int, float, np.number)) and not np.isfinite(value))
+    return f"{missing if absent else format(value, spec):>{width}}"
+
+
 def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
     """One-sided Clopper-Pearson lower bound of a rate from ``successes`` of ``trials``,
     ``B^-1(1 - confidence; k, n-k+1)``: the lower end of the two-sided interval at level

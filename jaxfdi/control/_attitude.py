@@ -33,15 +33,8 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi._faults import Target, apply_fault
 from jaxfdi._stages import Controller, Plant
-from jaxfdi.models._reaction_wheels import (
-    AttitudeReading,
-    SpacecraftParams,
-    WheelCommand,
-    delivered_torque,
-    spacecraft_step,
-    stop_transfer,
-    wheel_momentum,
-)
+from jaxfdi.models._reaction_wheels import (AttitudeReading, SpacecraftParams, WheelCommand, delivered_torque,
+                                            spacecraft_step, stop_transfer, wheel_momentum)
 from jaxfdi.models._rotation import quaternion_conjugate, quaternion_multiply, rotate
 
 

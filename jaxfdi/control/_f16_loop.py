@@ -20,16 +20,8 @@ from jaxfdi import _checks
 from jaxfdi._faults import Target, active_label, apply_faults, as_stack, is_active
 from jaxfdi._stages import FDI, Plant
 from jaxfdi.models.f16._dynamics import F16Params
-from jaxfdi.models.f16._plant import (
-    RATE_OFFSET,
-    F16Sensors,
-    SampledF16,
-    flight_view,
-    measurement_cov,
-    rate_estimator,
-    sampled_observation,
-    sampled_transition,
-)
+from jaxfdi.models.f16._plant import (RATE_OFFSET, F16Sensors, SampledF16, flight_view, measurement_cov, rate_estimator,
+                                      sampled_observation, sampled_transition)
 from jaxfdi._simulate import Actuated, Sensed, SimState, check_fault_components
 
 

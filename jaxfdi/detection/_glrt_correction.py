@@ -31,15 +31,8 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.detection._chi2 import Decision, flag_dead
-from jaxfdi.detection._glrt import (
-    _check_window,
-    check_steady_state,
-    decide,
-    detector_setup,
-    fault_directions,
-    step_response,
-    windowed_engine,
-)
+from jaxfdi.detection._glrt import (_check_window, check_steady_state, decide, detector_setup, fault_directions,
+                                    step_response, windowed_engine)
 from jaxfdi.detection._glrt_recursive import recursive_engine
 from jaxfdi._faults import sensor_labels
 from jaxfdi.filters._base import Filter

@@ -36,17 +36,8 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi.detection._chi2 import Detector
-from jaxfdi.detection._glrt import (
-    DetectorSetup,
-    GLREngine,
-    GLRResult,
-    _maximise,
-    _onset_tensors,
-    _whitener,
-    detector_setup,
-    engine_detector,
-    glr_from_correlation,
-)
+from jaxfdi.detection._glrt import (DetectorSetup, GLREngine, GLRResult, _maximise, _onset_tensors, _whitener,
+                                    detector_setup, engine_detector, glr_from_correlation)
 from jaxfdi.models._linear import LinearGaussianModel
 
 

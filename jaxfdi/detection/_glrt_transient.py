@@ -37,18 +37,9 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi.detection._chi2 import Detector, flag_dead
-from jaxfdi.detection._glrt import (
-    DetectorSetup,
-    FaultDirections,
-    _check_decision_args,
-    _check_directions,
-    _check_window,
-    _maximise,
-    decide,
-    fault_directions,
-    glr_from_correlation,
-    whiten_finite,
-)
+from jaxfdi.detection._glrt import (DetectorSetup, FaultDirections, _check_decision_args, _check_directions,
+                                    _check_window, _maximise, decide, fault_directions, glr_from_correlation,
+                                    whiten_finite)
 from jaxfdi._faults import sensor_labels
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 

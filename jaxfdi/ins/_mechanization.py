@@ -30,16 +30,8 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.ins._earth import LocalEarth, local_earth, radii_of_curvature, transport_rate
-from jaxfdi.models._rotation import (
-    cross,
-    quaternion_conjugate,
-    quaternion_multiply,
-    quaternion_to_dcm,
-    rotate,
-    rotation_quaternion,
-    rotation_vector,
-    small_rotation_quaternion,
-)
+from jaxfdi.models._rotation import (cross, quaternion_conjugate, quaternion_multiply, quaternion_to_dcm, rotate,
+                                     rotation_quaternion, rotation_vector, small_rotation_quaternion)
 
 
 class NavState(NamedTuple):

@@ -51,7 +51,7 @@ from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.filters._mm import multiple_model
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._frame import study_result
-from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, unhealthy_rows_warning
+from jaxfdi._metrics import DetectionRecord, cell, fault_row, rate_cell, unhealthy_rows_warning
 from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi.filters import run_filter
@@ -96,8 +96,6 @@ def sticky_transition(num_modes: int, to_fault, stay) -> np.ndarray:
     pi[1:, 0] = 1.0 - stay
     pi[np.arange(1, num_modes), np.arange(1, num_modes)] = stay
     return pi
-
-
 
 
 class EngineSettings(NamedTuple):
@@ -432,7 +430,7 @@ class EngineStudy(NamedTuple):
             lines.append(
                 f"{name:<{width}} {min(r['detection_rate'] for r in faulty):>7.2f} {worst['isolation_rate']:>7.2f} "
                 f"{rows[-1]['false_alarm_rate']:>13.2f} {fa_all:>8.3f} "
-                f"{_fmt(_nanmax([r['delay_median_s'] for r in faulty]), 17)}  {worst['fault']}"
+                f"{cell(_nanmax([r['delay_median_s'] for r in faulty]), '.3f', 17)}  {worst['fault']}"
             )
         return "\n".join(lines)
 
@@ -441,13 +439,10 @@ class EngineStudy(NamedTuple):
 
         ``pre-FA``: share of runs with an alarm before the onset (for ``none``: every alarm);
         ``clean``: runs without one, the only runs whose delays count (mean, median, p90).
-        Every rate with its 95 % Clopper-Pearson interval (``metrics.rate_text``) over the
+        Every rate with its 95 % Clopper-Pearson interval (``metrics.rate_cell``) over the
         healthy runs (``n``)."""
         head = (f"{'fault':<9} {'n':>5} {'det [95 %]':>16} {'iso [95 %]':>16} {'pre-FA [95 %]':>16} {'clean':>5} "
                 f"{'delay mean':>10} {'paper':>6} {'med':>6} {'p90':>6} {'estimate':>10} {'true':>9} {'err %':>6}")
-
-        def rate(value, n):
-            return f"{'-':>16}" if value != value or n == 0 else f"{rate_text(round(value * n), n):>16}"
 
         blocks = []
         for name in self.records:
@@ -458,12 +453,12 @@ class EngineStudy(NamedTuple):
                 clean = r.get("clean_runs")
                 n = r["runs"] - r.get("unhealthy_runs", 0)
                 lines.append(
-                    f"{r['fault']:<9} {n:>5} {rate(r['detection_rate'], n)} {rate(r['isolation_rate'], n)} "
-                    f"{rate(pre, n)} {'-' if clean is None or r['fault'] == 'none' else clean:>5} "
-                    f"{_fmt(r.get('delay_mean_s', float('nan')), 10)} {_fmt(r['paper_delay_s'], 6)} "
-                    f"{_fmt(r['delay_median_s'], 6)} {_fmt(r['delay_p90_s'], 6)} "
-                    f"{_fmt(r['estimate_median'], 10, 4, 'g')} "
-                    f"{_fmt(r['magnitude'], 9, 4, 'g')} {_fmt(100 * r['estimate_error'], 6, 1)}"
+                    f"{r['fault']:<9} {n:>5} {rate_cell(r['detection_rate'], n)} {rate_cell(r['isolation_rate'], n)} "
+                    f"{rate_cell(pre, n)} {'-' if clean is None or r['fault'] == 'none' else clean:>5} "
+                    f"{cell(r.get('delay_mean_s', float('nan')), '.3f', 10)} {cell(r['paper_delay_s'], '.3f', 6)} "
+                    f"{cell(r['delay_median_s'], '.3f', 6)} {cell(r['delay_p90_s'], '.3f', 6)} "
+                    f"{cell(r['estimate_median'], '.4g', 10)} "
+                    f"{cell(r['magnitude'], '.4g', 9)} {cell(100 * r['estimate_error'], '.1f', 6)}"
                 )
             warning = unhealthy_rows_warning([r for r in self.rows if r["method"] == name], name)
             blocks.append("\n".join(lines + ([warning] if warning else [])))
@@ -473,10 +468,6 @@ class EngineStudy(NamedTuple):
 def _nanmax(values: list[float]) -> float:
     finite = [v for v in values if v == v]
     return max(finite) if finite else float("nan")
-
-
-def _fmt(x: float | None, width: int, digits: int = 3, kind: str = "f") -> str:
-    return f"{'-':>{width}}" if x is None or x != x else f"{x:>{width}.{digits}{kind}}"
 
 
 class ModeRule(NamedTuple):
@@ -935,16 +926,16 @@ def fault_size_table(study: FaultSizeStudy) -> str:
         for name in ("actuator", *OUTPUT_NAMES):
             curve = [r for r in rows if r["case"] == "point" and r["method"] == method and r["fault"] == name
                      and r["point"] == "grid"]
-            lines.append(f"    {name:<9}" + " ".join(_fmt(r["delay_mean_s"], 6) for r in curve)
+            lines.append(f"    {name:<9}" + " ".join(cell(r["delay_mean_s"], '.3f', 6) for r in curve)
                          + f"  {curve[0]['paper_delay_s']:.3f}")
         lines.append("    matched size (our delay = the paper's): " + ", ".join(
-            f"{r['fault']} {_fmt(r['matched'], 4, 2).strip()}" for r in rows
+            f"{r['fault']} {cell(r['matched'], '.2f', 4).strip()}" for r in rows
             if r["case"] == "matched" and r["method"] == method))
     for r in (r for r in rows if r["case"] == "reading"):
         spec = ", ".join(f"{k} {v:.1f}" for k, v in r["spec_reading_fnr"].items())
         lines.append(f"Reading: the spec's \"0.5 % of the operating point\" puts the sensor faults at FNR {spec}; the "
                      f"paper's {r['method']} delays are met at FNR " + ", ".join(
-                         f"{k} {_fmt(v, 4, 1).strip()}" for k, v in r["matched_fnr"].items())
+                         f"{k} {cell(v, '.1f', 4).strip()}" for k, v in r["matched_fnr"].items())
                      + f" (median {r['median_matched_fnr']:.1f}): every sensor fault about {r['settled_fnr']:g} sigma")
         settled = r["settled_fnr"]
         lines.append(f"Table 3 at both readings (mean delay, s): spec's 0.5 % | FNR {settled:g} | paper")
@@ -956,7 +947,7 @@ def fault_size_table(study: FaultSizeStudy) -> str:
                 grid = [x for x in rows if x["case"] == "point" and x["method"] == method and x["fault"] == name
                         and x["point"] == "grid"]
                 at = grid[cfg["fnr"].index(settled)] if name != "actuator" else spec_row
-                cells.append(f"{name} {_fmt(spec_row['delay_mean_s'], 5).strip()} | "
-                             f"{_fmt(at['delay_mean_s'], 5).strip()} | {spec_row['paper_delay_s']:.3f}")
+                cells.append(f"{name} {cell(spec_row['delay_mean_s'], '.3f', 5).strip()} | "
+                             f"{cell(at['delay_mean_s'], '.3f', 5).strip()} | {spec_row['paper_delay_s']:.3f}")
             lines.append(f"  {method}: " + "; ".join(cells))
     return "\n".join(lines)

@@ -26,7 +26,8 @@ from jaxfdi._faults import Fault, fault, no_fault, stack_faults
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._frame import study_result
-from jaxfdi._metrics import DetectionRecord, fault_row, rate_text, summarize_detection, unhealthy_rows_warning
+from jaxfdi._metrics import (DetectionRecord, cell, fault_row, rate_cell, summarize_detection,
+                             unhealthy_rows_warning)
 from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi._monitor import MonitorHistory, monitor
 from jaxfdi.plotting import COLUMN_WIDTH_IN, hypothesis_colors, save_figure
@@ -71,11 +72,6 @@ class EngineChi2Result(NamedTuple):
         ``none``: any alarm); delays (mean, median, p90) over the ``clean`` runs, those
         without one (``metrics.fault_row``). Each rate is followed by its 95 %
         Clopper-Pearson interval over the ``n`` healthy runs (``metrics.rate_interval``)."""
-        def rate(value, n, width):
-            if value is None or value != value or not n:
-                return f"{'-':>{width}} {'':>11}"
-            return f"{rate_text(round(value * n), n, digits=3):>{width + 12}}"
-
         head = (f"{'fault':<9} {'magnitude':>10} {'n':>4} {'det. rate [95 %]':>21} {'FA rate [95 %]':>20} "
                 f"{'FA/step':>8} {'clean':>5} {'delay mean [s]':>14} {'delay med [s]':>13} {'delay p90 [s]':>13}")
         lines = [head, "-" * len(head)]
@@ -83,17 +79,13 @@ class EngineChi2Result(NamedTuple):
             clean = "-" if r["fault"] == "none" else str(r.get("clean_runs", "-"))
             n = r["runs"] - r.get("unhealthy_runs", 0)
             lines.append(
-                f"{r['fault']:<9} {r['magnitude']:>10.4g} {n:>4} {rate(r['detection_rate'], n, 9)} "
-                f"{rate(r['false_alarm_rate'], n, 8)} "
-                f"{_fmt(r['false_alarm_rate_per_step'], 8, 4)} {clean:>5} {_fmt(r.get('delay_mean_s', float('nan')), 14)} "
-                f"{_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 13)}"
+                f"{r['fault']:<9} {r['magnitude']:>10.4g} {n:>4} {rate_cell(r['detection_rate'], n, 21, digits=3)} "
+                f"{rate_cell(r['false_alarm_rate'], n, 20, digits=3)} "
+                f"{cell(r['false_alarm_rate_per_step'], '.4f', 8)} {clean:>5} {cell(r.get('delay_mean_s', float('nan')), '.3f', 14)} "
+                f"{cell(r['delay_median_s'], '.3f', 13)} {cell(r['delay_p90_s'], '.3f', 13)}"
             )
         warning = unhealthy_rows_warning(self.rows)
         return "\n".join(lines + ([warning] if warning else []))
-
-
-def _fmt(x: float, width: int = 9, digits: int = 3) -> str:
-    return f"{'-':>{width}}" if x is None or x != x else f"{x:>{width}.{digits}f}"
 
 
 def engine_chi2_study(

@@ -29,10 +29,10 @@ from jaxfdi import _checks
 from jaxfdi.detection._chi2 import chi2_threshold, moving_window_sum
 from jaxfdi.filters._base import run_filter
 from jaxfdi.filters._kalman import kalman_filter
-from jaxfdi._metrics import unhealthy_rows_warning
+from jaxfdi._metrics import cell, unhealthy_rows_warning
 from jaxfdi.models._engine import TS, engine_model
 from jaxfdi.scenarios._common import check_study
-from jaxfdi.scenarios.engine import LabelledRuns, _fmt, balanced_batches, labelled_runs
+from jaxfdi.scenarios.engine import LabelledRuns, balanced_batches, labelled_runs
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_chi2_study
 from jaxfdi.tuning import _losses as losses
 from jaxfdi.tuning._parameterize import constrain, log_diagonal, log_scale, unconstrain
@@ -146,9 +146,9 @@ def comparison_table(hand_rows: list[dict], tuned_rows: list[dict], hand_window:
     for h, t in zip(hand_rows, tuned_rows):
         for label, r in ((f"hand L={hand_window}", h), (f"tuned L={tuned_window}", t)):
             clean = "-" if r["fault"] == "none" else r.get("clean_runs", "-")
-            lines.append(f"{r['fault']:<9} {label:<16} {_fmt(r['detection_rate'], 5, 2)} "
-                         f"{_fmt(r['false_alarm_rate'], 5, 2)} {clean:>5} {_fmt(r.get('delay_mean_s'), 8)} "
-                         f"{_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 8)}")
+            lines.append(f"{r['fault']:<9} {label:<16} {cell(r['detection_rate'], '.2f', 5)} "
+                         f"{cell(r['false_alarm_rate'], '.2f', 5)} {clean:>5} {cell(r.get('delay_mean_s'), '.3f', 8)} "
+                         f"{cell(r['delay_median_s'], '.3f', 13)} {cell(r['delay_p90_s'], '.3f', 8)}")
     lines.append(f"held-out tuning loss: hand {hand_loss:.4f}, tuned {tuned_loss:.4f}")
     lines += [w for w in (unhealthy_rows_warning(hand_rows, "hand"), unhealthy_rows_warning(tuned_rows, "tuned")) if w]
     return "\n".join(lines)

@@ -52,35 +52,17 @@ from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.models._engine import engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi._frame import results_frame
-from jaxfdi._metrics import DetectionRecord, unhealthy_rows_warning
+from jaxfdi._metrics import DetectionRecord, cell, unhealthy_rows_warning
 from jaxfdi._monitor import replay_detector
 from jaxfdi._montecarlo import monte_carlo
 from jaxfdi.scenarios._common import check_study
-from jaxfdi.scenarios.engine import (
-    PAPER_TRANSITION,
-    EngineSettings,
-    LabelledRuns,
-    Method,
-    _bias_estimates,
-    _fmt,
-    _mode_prob,
-    balanced_batches,
-    labelled_runs,
-    run_monitor,
-    scenario_runs,
-    summarize_method,
-)
+from jaxfdi.scenarios.engine import (PAPER_TRANSITION, EngineSettings, LabelledRuns, Method, _bias_estimates,
+                                     _mode_prob, balanced_batches, labelled_runs, run_monitor, scenario_runs,
+                                     summarize_method)
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP
 from jaxfdi.tuning import _losses as losses
-from jaxfdi.tuning._parameterize import (
-    Transform,
-    constrain,
-    log_scale,
-    simplex,
-    stochastic_rows,
-    unconstrain,
-    unit_interval,
-)
+from jaxfdi.tuning._parameterize import (Transform, constrain, log_scale, simplex, stochastic_rows, unconstrain,
+                                         unit_interval)
 from jaxfdi.tuning._train import TrainResult, checkpointed, fit, strongly_typed
 
 TRANSITION_MASK = (PAPER_TRANSITION > 0) | np.eye(len(PAPER_TRANSITION), dtype=bool)
@@ -404,9 +386,9 @@ def comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce) -> str:
         for label, r in (("paper", h), ("tuned", t)):
             clean = "-" if r["fault"] == "none" else r.get("clean_runs", "-")
             lines.append(
-                f"{r['fault']:<9} {label:<6} {_fmt(r['detection_rate'], 5, 2)} {_fmt(r['isolation_rate'], 5, 2)} "
-                f"{_fmt(r['false_alarm_rate'], 5, 2)} {clean:>5} {_fmt(r.get('delay_mean_s'), 8)} "
-                f"{_fmt(r['delay_median_s'], 13)} {_fmt(r['delay_p90_s'], 8)}")
+                f"{r['fault']:<9} {label:<6} {cell(r['detection_rate'], '.2f', 5)} {cell(r['isolation_rate'], '.2f', 5)} "
+                f"{cell(r['false_alarm_rate'], '.2f', 5)} {clean:>5} {cell(r.get('delay_mean_s'), '.3f', 8)} "
+                f"{cell(r['delay_median_s'], '.3f', 13)} {cell(r['delay_p90_s'], '.3f', 8)}")
     lines.append(f"mean per-step mode cross-entropy: paper {hand_ce:.4f}, tuned {tuned_ce:.4f} "
                  f"({100 * (1 - tuned_ce / hand_ce):.0f} % lower)")
     lines += [w for w in (unhealthy_rows_warning(hand_rows, "paper"), unhealthy_rows_warning(tuned_rows, "tuned")) if w]

@@ -43,13 +43,7 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.detection import _parity as ps
 from jaxfdi.detection import _sensor_configuration as sc
-from jaxfdi.detection._hybrid_psa import (
-    FOLLOW,
-    HybridPSAConfig,
-    hybrid_psa_config,
-    hybrid_psa_fdi,
-    hybrid_psa_init,
-)
+from jaxfdi.detection._hybrid_psa import (FOLLOW, HybridPSAConfig, hybrid_psa_config, hybrid_psa_fdi, hybrid_psa_init)
 from jaxfdi.detection._parity import IsolationCalibration, detection_threshold, isolation_threshold, parity_space
 from jaxfdi._faults import Fault, FaultKind, Target
 from jaxfdi.filters import init_from_posterior, run_filter
@@ -61,17 +55,8 @@ from jaxfdi.models.f16._rates import RATE_INPUT_NAMES, RateModel, rate_model, ra
     rate_transition
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
-from jaxfdi.scenarios.f16_flight import (
-    DT,
-    ERRORS,
-    GUST_SIGMA,
-    Dispersion,
-    FlightSetup,
-    dispersions,
-    flight_setup,
-    nominal_dispersion,
-    run_flight,
-)
+from jaxfdi.scenarios.f16_flight import (DT, ERRORS, GUST_SIGMA, Dispersion, FlightSetup, dispersions, flight_setup,
+                                         nominal_dispersion, run_flight)
 from jaxfdi._study import Structure, Study, run_study
 
 #: per-step false-alarm probability of the FD test (a 15 s flight, 1500 steps: 1.5e-3 per flight)

@@ -39,35 +39,16 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi._frame import study_result
 from jaxfdi.control._f16_loop import f16_plant, rate_passthrough_fdi
-from jaxfdi.control._flight import (
-    LATERAL_TRACKED,
-    LONGITUDINAL_TRACKED,
-    FlightGains,
-    FlightPlan,
-    FlightReference,
-    FlightWeights,
-    commanded_profile,
-    default_weights,
-    design_flight_control,
-    flight_controller,
-    flight_plan,
-    flight_reference,
-    initial_condition,
-    plan_trims,
-)
+from jaxfdi.control._flight import (LATERAL_TRACKED, LONGITUDINAL_TRACKED, FlightGains, FlightPlan, FlightReference,
+                                    FlightWeights, commanded_profile, default_weights, design_flight_control,
+                                    flight_controller, flight_plan, flight_reference, initial_condition, plan_trims)
 from jaxfdi.control._lqr import integral_augmentation
 from jaxfdi._loop import run_loop
 from jaxfdi.models.f16 import _book as book
 from jaxfdi.models.f16._dynamics import (
     ALPHA, BETA, CONTROL_NAMES, H, P, PHI, Q, R, STATE_NAMES, THETA, VT, F16Params, f16_params,
 )
-from jaxfdi.models.f16._linearize import (
-    LATERAL_STATES,
-    LONGITUDINAL_DESIGN_STATES,
-    flight_modes,
-    linearize,
-    submodel,
-)
+from jaxfdi.models.f16._linearize import (LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, flight_modes, linearize, submodel)
 from jaxfdi.models.f16._plant import F16Sensors, f16_sensors
 from jaxfdi.models._linear import c2d
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure

@@ -32,6 +32,7 @@ Algorithm for UAV using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKS
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -45,12 +46,14 @@ from jaxfdi.gnss import _frames as frames, _integrity as integrity, _measurement
 from jaxfdi.gnss._protection import ALERT_LIMITS
 from jaxfdi._loop import episode_scorer, feedforward, run_loop
 from jaxfdi._frame import study_result
-from jaxfdi._metrics import rate_text, summarize_episodes
+from jaxfdi._metrics import cell, rate_cell, summarize_episodes
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._progress import status
 from jaxfdi._study import Structure, Study, run_study
 
+#: the GNSS studies' table cells say "n/a" where there is no number (they print them in sentences)
+_cell = functools.partial(cell, missing="n/a")
 WEEK = 2086
 START_TOW = 259200.0 + 2700.0        # 2020-01-01 00:45:00 GPST
 DT = 1.0
@@ -349,10 +352,10 @@ def gnss_table(study: GnssCampusStudy) -> str:
              f"  HDOP > 4 at epochs {_spans(campus['hdop_over_4_epochs'])} (max {campus['max_hdop']:.1f}); "
              f"HPL > 556 m at {_spans(campus['hpl_over_556_epochs'])} (max {campus['max_hpl_m']:.0f} m); "
              f"NPA availability {campus['availability_npa']:.1%}",
-             f"  parity test alarm rate there {_fmt(campus['alarm_rate_where_hpl_over'])}, elsewhere "
-             f"{_fmt(campus['alarm_rate_elsewhere'])} (design P_fa {study.config['pfa']:.1e}); horizontal error p95 "
-             f"there {_fmt(campus['horizontal_error_p95_where_hpl_over_m'], '.1f')} m, elsewhere "
-             f"{_fmt(campus['horizontal_error_p95_elsewhere_m'], '.1f')} m",
+             f"  parity test alarm rate there {_cell(campus['alarm_rate_where_hpl_over'], '.3f')}, elsewhere "
+             f"{_cell(campus['alarm_rate_elsewhere'], '.3f')} (design P_fa {study.config['pfa']:.1e}); horizontal error p95 "
+             f"there {_cell(campus['horizontal_error_p95_where_hpl_over_m'], '.1f')} m, elsewhere "
+             f"{_cell(campus['horizontal_error_p95_elsewhere_m'], '.1f')} m",
              f"  paper: {PAPER['campus']}", "",
              "Park (Table 2 faults, then a dead and a frozen channel, on one satellite; rates over the n healthy "
              "runs with their 95 % Clopper-Pearson intervals; 'excluded' = isolated satellite removed and the "
@@ -362,10 +365,10 @@ def gnss_table(study: GnssCampusStudy) -> str:
     for row in (r for r in study.rows if r["case"] == "park"):
         mark = "*" if row["headline"] else " "
         n = row["runs"] - row["unhealthy_runs"]
-        rates = " ".join(f"{rate_text(round(row[k] * n), n):>16}" for k in ("detected", "isolated", "excluded"))
+        rates = " ".join(rate_cell(row[k], n) for k in ("detected", "isolated", "excluded"))
         lines.append(f" {mark}{row['prn']:>3} {row['fault']:<24} {n:>4} {rates} "
-                     f"{_fmt(row['delay_median_s'], '.0f'):>7} / "
-                     f"{_fmt(row['delay_p90_s'], '.0f'):<6} {row['false_alarm_runs']:>7}  {row['paper']}")
+                     f"{_cell(row['delay_median_s'], '.0f'):>7} / "
+                     f"{_cell(row['delay_p90_s'], '.0f'):<6} {row['false_alarm_runs']:>7}  {row['paper']}")
     lines.append(f"  * the headline satellite (highest at the start); paper: {PAPER['park']}")
     mdb = [r for r in study.rows if r["case"] == "mdb"]
     if mdb:
@@ -377,10 +380,6 @@ def gnss_table(study: GnssCampusStudy) -> str:
         lines.append("Availability over a day on a world grid (geometry only, 5 deg mask): mean / worst point")
         lines += [f"  {r['constellation']:<26} {r['operation']:<10} {r['mean']:.4f} / {r['min']:.3f}" for r in maps]
     return "\n".join(lines)
-
-
-def _fmt(value, spec=".3f") -> str:
-    return "n/a" if value is None or (isinstance(value, float) and not np.isfinite(value)) else format(value, spec)
 
 
 def _spans(indices) -> str:

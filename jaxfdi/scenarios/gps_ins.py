@@ -60,20 +60,12 @@ from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
 from jaxfdi.ins._mechanization import NavState
 from jaxfdi._loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
 from jaxfdi._frame import study_result
-from jaxfdi._metrics import (
-    binomial_interval,
-    binomial_lower_bound,
-    delay_statistics,
-    rate_interval,
-    rate_text,
-    record_from_alarms,
-    summarize_detection,
-    summarize_episodes,
-)
+from jaxfdi._metrics import (binomial_interval, binomial_lower_bound, delay_statistics, rate_cell, rate_interval,
+                             record_from_alarms, summarize_detection, summarize_episodes)
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 # Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
-from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK
+from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK, _cell
 from jaxfdi._study import Structure, Study, case_slices, run_study
 
 FLIGHT_S = 1200
@@ -592,11 +584,11 @@ def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) ->
             is_gps = not name.startswith("gyro")
             said_gps = gps[:, onset:max(end, onset + 1)].any(axis=1)
             said_ins = ins[:, onset:min(end + ATTRIBUTION_HOLDOFF, steps) if is_gps else steps].any(axis=1)
-            cell = confusion.setdefault(name.split(",")[0] if is_gps else "gyro bias", dict.fromkeys(
+            counts = confusion.setdefault(name.split(",")[0] if is_gps else "gyro bias", dict.fromkeys(
                 ("GPS only", "INS only", "both", "neither"), 0))
             for key, sel in (("GPS only", said_gps & ~said_ins), ("INS only", ~said_gps & said_ins),
                              ("both", said_gps & said_ins), ("neither", ~said_gps & ~said_ins)):
-                cell[key] += int(sel.sum())
+                counts[key] += int(sel.sum())
             ok &= (said_gps & ~said_ins) if is_gps else (said_ins & ~said_gps)
         separated += int(ok.sum())
         flights += int(ok.size)
@@ -737,10 +729,6 @@ def _error_row(name: str, series: Series) -> dict:
             "nees_mean": float(np.mean(np.asarray(series.nees)[:, settled])), "nees_dof": error_state.STATE_SIZE}
 
 
-def _fmt(value, spec=".0f") -> str:
-    return "n/a" if value is None or (isinstance(value, float) and not np.isfinite(value)) else format(value, spec)
-
-
 def gps_ins_table(study: GpsInsStudy) -> str:
     """Table 3 beside the paper's, RAIM's decisions, false alarms, the curves."""
     cfg = study.config
@@ -756,16 +744,17 @@ def gps_ins_table(study: GpsInsStudy) -> str:
              f"{'SCST mean':>15} {'paper':>6} {'median [10-90]':>16} {'clean':>5}   detected chi2/SCST [95 %]"]
     for row in (r for r in study.rows if r["case"] == "table3"):
         def mean(t):
-            return f"{_fmt(row[t + '_mean_s'], '.1f')} +- {_fmt(row[t + '_std_s'], '.1f')}"
+            return f"{_cell(row[t + '_mean_s'], '.1f')} +- {_cell(row[t + '_std_s'], '.1f')}"
 
         def spread(t):
-            return f"{_fmt(row[t + '_median_s'])} [{_fmt(row[t + '_p10_s'])}-{_fmt(row[t + '_p90_s'])}]"
+            low, high = _cell(row[t + '_p10_s'], '.0f'), _cell(row[t + '_p90_s'], '.0f')
+            return f"{_cell(row[t + '_median_s'], '.0f')} [{low}-{high}]"
 
         healthy = row["runs"] - row["chi2_unhealthy_runs"]
         lines.append(f"  {row['gyro_deg_h']:>5g} d/h  {mean('chi2'):>15} {row['paper_chi2_s']:>6g} {spread('chi2'):>16} "
                      f"{row['chi2_clean_runs']:>5}   {mean('scst'):>15} {row['paper_scst_s']:>6g} {spread('scst'):>16} "
-                     f"{row['scst_clean_runs']:>5}   {rate_text(round(row['chi2_detected'] * healthy), healthy)}/"
-                     f"{rate_text(round(row['scst_detected'] * healthy), healthy)}")
+                     f"{row['scst_clean_runs']:>5}   {rate_cell(row['chi2_detected'], healthy, 0)}/"
+                     f"{rate_cell(row['scst_detected'], healthy, 0)}")
     curve = [r for r in study.rows if r["case"] == "operating-curve"]
     if curve:
         lines.append("Operating curve: each test at the threshold of a per-epoch P_fa, from the same flights' "
@@ -774,14 +763,14 @@ def gps_ins_table(study: GpsInsStudy) -> str:
                      f"an alarm with a RAIM alarm from {ATTRIBUTION_HOLDOFF} s before to {ATTRIBUTION_LOOKAHEAD} s after "
                      f"it is the GPS's, and the INS decision is issued {ATTRIBUTION_LOOKAHEAD} s after the alarm")
         for row in curve:
-            cells = "  ".join(f"{b}: {_fmt(v['delay_mean'], '.1f')} ({v['clean_runs']})" for b, v in row["table3"].items())
+            cells = "  ".join(f"{b}: {_cell(v['delay_mean'], '.1f')} ({v['clean_runs']})" for b, v in row["table3"].items())
             lo, hi = row["flight_alarm_interval_99"]
             lines.append(f"  {row['test']:<5} P_fa {row['pfa_per_epoch']:<7g} threshold {row['threshold']:7.2f}: "
                          f"{row['fault_free_alarm_rate_per_epoch']:.2e}/epoch, flights {row['fault_free_flights_with_an_alarm']}/"
                          f"{row['fault_free_flights']} [{lo:.2f}, {hi:.2f}];  deg/h: {cells}")
         for row in (r for r in study.rows if r["case"] == "paper-reading"):
             paper = "/".join(f"{v:g}" for v in row["paper_s"])
-            ours = "/".join(_fmt(v, ".0f") for v in row["mean_s"])
+            ours = "/".join(_cell(v, ".0f") for v in row["mean_s"])
             lines.append(f"  the paper's {row['test']} times {paper} s are closest at P_fa {row['pfa_per_epoch']:g} per "
                          f"epoch (threshold {row['threshold']:.2f}): ours {ours} s over "
                          f"{'/'.join(str(c) for c in row['clean_runs'])} clean flights; the design P_fa is {PFA:g}")
@@ -793,7 +782,7 @@ def gps_ins_table(study: GpsInsStudy) -> str:
                      f"at 95 %); decided per fault: {cells}")
     first = next(r for r in study.rows if r["case"] == "table3")
     lines.append(f"RAIM on Table 2's satellite faults (PRN {cfg['satellite_faults_prn']:02d}), same flights: " + ("; ".join(
-        f"{r['fault']} detected {r['detected']:.2f}, median {_fmt(r['delay_median_s'])} s" for r in first["raim"])
+        f"{r['fault']} detected {r['detected']:.2f}, median {_cell(r['delay_median_s'], '.0f')} s" for r in first["raim"])
         or "none flown before the onset"))
     alarms = "; ".join(f"{k}: chi2 {v['chi2']}, SCST {v['scst']}" for k, v in first["ins_alarm_runs_during_gps_faults"].items())
     lines.append(f"  runs of those {first['runs']} ({first['gyro_deg_h']:g} deg/h) with an INS-test alarm during a satellite "
@@ -809,9 +798,9 @@ def gps_ins_table(study: GpsInsStudy) -> str:
                      f"gyro from {onset} s, {health[0]['runs']} flights each{quiet}:")
         for row in health:
             lines.append(f"  {row['fault']:<6}: detected {row['health_detected']:.2f}, isolated (roll gyro) "
-                         f"{row['health_isolated']:.2f}, median delay {_fmt(row['health_median_s'])} s; chi2 alone "
-                         f"detected {row['chi2_detected']:.2f} (median {_fmt(row['chi2_median_s'])} s), SCST "
-                         f"{row['scst_detected']:.2f} (median {_fmt(row['scst_median_s'])} s)")
+                         f"{row['health_isolated']:.2f}, median delay {_cell(row['health_median_s'], '.0f')} s; chi2 alone "
+                         f"detected {row['chi2_detected']:.2f} (median {_cell(row['chi2_median_s'], '.0f')} s), SCST "
+                         f"{row['scst_detected']:.2f} (median {_cell(row['scst_median_s'], '.0f')} s)")
     lines.append("Fault-free park flights (independent decisions: chi2 every 10th epoch, SCST one propagator window in "
                  "two; 99 % binomial interval of the alarm count at P_fa 0.005):")
     for row in (r for r in study.rows if r["case"] == "false-alarm"):
@@ -836,8 +825,8 @@ def gps_ins_table(study: GpsInsStudy) -> str:
         lines.append(f"Beyond the paper: detection time [s] vs bias size, median over {cfg['beyond_runs']} flights "
                      f"(detected fraction), chi-square / SCST")
         for (flight, sensor), rows in study.curves.items():
-            cells = ", ".join(f"{r['size']:g}: {_fmt(r['chi2_median_s'])} ({r['chi2_detected']:.2f}) / "
-                              f"{_fmt(r['scst_median_s'])} ({r['scst_detected']:.2f})" for r in rows)
+            cells = ", ".join(f"{r['size']:g}: {_cell(r['chi2_median_s'], '.0f')} ({r['chi2_detected']:.2f}) / "
+                              f"{_cell(r['scst_median_s'], '.0f')} ({r['scst_detected']:.2f})" for r in rows)
             lines.append(f"  {flight} {sensor} [{rows[0]['unit']}]: {cells}")
         for row in (r for r in study.rows if r["case"] == "manoeuvre-false-alarm"):
             lines.append(f"  manoeuvre flight, fault-free: chi2 false-alarm rate {row['chi2_independent_rate']:.4f} "
@@ -912,7 +901,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     save(fig, "gps-ins-raim.png",
          "One flight (the 30 deg/h one above): HDOP and HPL (Yoo et al. 2010, Fig. 8) and RAIM's statistic with the epochs the EKF did not "
          "use (Fig. 9); Table 2's faults shaded. " + "; ".join(
-             f"{r['fault'].split(',')[0]}: RAIM's median delay {_fmt(r['delay_median_s'])} s"
+             f"{r['fault'].split(',')[0]}: RAIM's median delay {_cell(r['delay_median_s'], '.0f')} s"
              for r in next((row["raim"] for row in study.rows if row["case"] == "table3"), []))
          + f" ({study.config['runs']} flights). A slow fault reaches the filter before RAIM flags it.")
 
@@ -994,7 +983,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
         a.set_xlabel("per-epoch false-alarm probability of the threshold (design 0.005: grey)")
     ax.set_ylabel("mean detection time over clean flights [s]")
     reading = {r["test"]: r for r in study.rows if r["case"] == "paper-reading"}
-    note = "; ".join(f"{t} closest at P_fa {r['pfa_per_epoch']:g}: {'/'.join(_fmt(v) for v in r['mean_s'])} s"
+    note = "; ".join(f"{t} closest at P_fa {r['pfa_per_epoch']:g}: {'/'.join(_cell(v, '.0f') for v in r['mean_s'])} s"
                      for t, r in reading.items())
     ax.set_title(f"Table 3 along the threshold; dotted: the paper's times\n{note}", fontsize=8)
     ax.legend(fontsize=7, ncol=2)
@@ -1004,8 +993,8 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     save(fig, "gps-ins-operating-curve.png",
          f"Table 3 recomputed at thresholds from P_fa {OPERATING_PFA[0]:g} down to {OPERATING_PFA[-1]:g} per epoch "
          "(left, the paper's times dotted) and the fault-free flights with an alarm at each (right). The longest "
-         "mean time at 30 deg/h on the curve is " + _fmt(max((r["table3"]["30"]["delay_mean"] for r in curve
+         "mean time at 30 deg/h on the curve is " + _cell(max((r["table3"]["30"]["delay_mean"] for r in curve
                                                             if r["test"] == "chi2" and np.isfinite(
-                                                                r["table3"]["30"]["delay_mean"])), default=None))
+                                                                r["table3"]["30"]["delay_mean"])), default=None), '.0f')
          + f" s (chi-square), against the paper's {PAPER_TABLE3[30.0][0]:g} s.")
     return written

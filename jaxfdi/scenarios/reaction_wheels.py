@@ -79,15 +79,8 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.control._attitude import (
-    AttitudeGains,
-    Slew,
-    pd_gains,
-    slew,
-    slew_reference,
-    wheel_attitude_controller,
-    wheel_plant,
-)
+from jaxfdi.control._attitude import (AttitudeGains, Slew, pd_gains, slew, slew_reference, wheel_attitude_controller,
+                                      wheel_plant)
 from jaxfdi.detection._chi2 import Decision, chi2_threshold
 from jaxfdi.detection._credits import hypothesis_credits
 from jaxfdi.detection._frozen import frozen_channel_detector
@@ -99,20 +92,12 @@ from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi._loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
 from jaxfdi._stages import FDI
 from jaxfdi._frame import study_result
-from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, rate_text, unhealthy_warning
+from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, cell, rate_cell, unhealthy_warning
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi._study import Structure, Study, run_study
-from jaxfdi.models._reaction_wheels import (
-    SpacecraftParams,
-    WheelCommand,
-    body_rate_field,
-    filter_input,
-    gyro_observation,
-    kitsat3_params,
-    stop_hypotheses,
-    wheel_momentum,
-    wheel_rate_transition,
-)
+from jaxfdi.models._reaction_wheels import (SpacecraftParams, WheelCommand, body_rate_field, filter_input,
+                                            gyro_observation, kitsat3_params, stop_hypotheses, wheel_momentum,
+                                            wheel_rate_transition)
 from jaxfdi.plotting import COLUMN_WIDTH_IN, hypothesis_colors, save_figure
 
 RPM = 2.0 * math.pi / 60.0
@@ -614,13 +599,6 @@ class WheelStudy(NamedTuple):
         wheel cases it names no wheel by construction; its rows hold its figures). Every
         rate is followed by its 95 % Clopper-Pearson interval (``metrics.rate_interval``)
         over the ``n`` healthy runs (``<=2s``: over the clean runs)."""
-        def rate(value, n):
-            if value is None:
-                return f"{'':>19}"
-            if value != value or not n:
-                return f"{'-':>6}{'':>13}"
-            return f"{rate_text(round(value * n), n):>19}"
-
         head = (f"{'case':<10} {'method':<24} {'det [95 %]':>19} {'isol [95 %]':>19} {'<=2s [95 %]':>19} "
                 f"{'FA [95 %]':>19} {'n':>4} {'clean':>5} {'mean [s]':>8} {'med [s]':>8} {'p90 [s]':>8}")
         lines = [head, "-" * len(head)]
@@ -629,14 +607,12 @@ class WheelStudy(NamedTuple):
             n = row["runs"] - row.get("unhealthy_runs", 0)
             for method in shown:
                 r = row[method]
-                isolation = None if "rate" not in r else r.get("isolation_rate")
-                isolation = float("nan") if "rate" in r and isolation is None else isolation  # '-': names none
                 clean = r.get("clean_runs")
-                lines.append(f"{row['case']:<10} {METHOD_NAMES[method]:<24} {rate(r.get('decided_rate'), n)} "
-                             f"{rate(isolation, n)} {rate(r.get('rate_within_deadline'), clean)} "
-                             f"{rate(r['false_alarm_rate'], n)} {n:>4} "
-                             f"{'' if clean is None else clean:>5} {_fmt(r.get('delay_mean_s'), 8, 2)} "
-                             f"{_fmt(r.get('delay_median_s'), 8, 2)} {_fmt(r.get('delay_p90_s'), 8, 2)}")
+                lines.append(f"{row['case']:<10} {METHOD_NAMES[method]:<24} {rate_cell(r.get('decided_rate'), n, 19)} "
+                             f"{rate_cell(r.get('isolation_rate'), n, 19)} {rate_cell(r.get('rate_within_deadline'), clean, 19)} "
+                             f"{rate_cell(r['false_alarm_rate'], n, 19)} {n:>4} "
+                             f"{'' if clean is None else clean:>5} {cell(r.get('delay_mean_s'), '.2f', 8)} "
+                             f"{cell(r.get('delay_median_s'), '.2f', 8)} {cell(r.get('delay_p90_s'), '.2f', 8)}")
         bad = [row for row in self.rows if row.get("unhealthy_runs")]
         warning = unhealthy_warning(sum(row["unhealthy_runs"] for row in bad), sum(row["runs"] for row in self.rows),
                                     ", ".join(f"{row['case']} {row['unhealthy_runs']}" for row in bad))
@@ -665,18 +641,12 @@ class WheelStudy(NamedTuple):
                 right = round(credit["rate"] * (row["runs"] - row.get("unhealthy_runs", 0)))
                 lines.append(
                     f"    wheel {row['wheel'] + 1}: F detects {row['fdp']['rate']:.2f} (median "
-                    f"{_fmt(row['fdp']['delay_median_s'], 4, 1).strip()} s, F after/before "
+                    f"{cell(row['fdp']['delay_median_s'], '.1f', 4).strip()} s, F after/before "
                     f"{row['fdp_ratio_median']:.1f}x), credits isolate {credit['rate']:.2f} (>= "
                     f"{binomial_lower_bound(right, row['runs'] - row.get('unhealthy_runs', 0)):.2f} at 95 %), "
                     f"{credit['rate_within_deadline']:.2f} within 2 s; MM {row['likelihood']['rate_within_deadline']:.2f}"
                     f" within 2 s")
         return "\n".join(lines)
-
-
-def _fmt(x, width: int = 6, digits: int = 2) -> str:
-    if x is None:
-        return f"{'':>{width}}"
-    return f"{'-':>{width}}" if x != x else f"{x:>{width}.{digits}f}"
 
 
 def _cases_study(design: WheelDesign, cases, runs: int, seed: int, calibration_runs: int, selected, options):

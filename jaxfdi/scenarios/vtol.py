@@ -63,7 +63,8 @@ from jaxfdi.detection._wavelet import block_alarms, causal_detail_sigma, chi2_de
 from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, is_active, no_fault, stack_faults
 from jaxfdi.filters._tskf import actuator_direction, sensor_direction, stack_directions
 from jaxfdi._frame import study_result
-from jaxfdi._metrics import delay_statistics, rate_text, record_from_alarms, step_health, unhealthy_warning
+from jaxfdi._metrics import (cell, delay_statistics, rate_cell, record_from_alarms, step_health,
+                             unhealthy_warning)
 from jaxfdi.models import _vtol as vtol
 from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
@@ -584,18 +585,11 @@ def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopD
     return VTOLStudy(config, rows, records, design)
 
 
-def _fmt(x: float, spec: str = ".2f", width: int = 7) -> str:
-    return f"{'-':>{width}}" if x is None or x != x else f"{x:>{width}{spec}}"
-
-
 def _case_table(row: dict[str, Any]) -> str:
     """One case's block: every rate with its 95 % Clopper-Pearson interval over the ``n``
     healthy runs (FTC off)."""
     onset = row["onset"]
     n = row["runs"] - row.get("unhealthy_runs", {}).get("no_ftc", 0)
-
-    def rate(value):
-        return f"{'-':>16}" if value is None or value != value else f"{rate_text(round(value * n), n):>16}"
 
     head = (f"{row['fault']}" + (f" from k = {onset}" if onset is not None else " (fault-free)") + f", n = {n} runs"
             + f"\n  method   thresholds {'FA rate [95 %]':>16}  FA/dec.  clean {'det rate [95 %]':>16}  det delay "
@@ -604,14 +598,14 @@ def _case_table(row: dict[str, Any]) -> str:
     for key, m in row["methods"].items():
         method, which = key.split("|")
         clean = m.get("clean_runs", "-") if onset is not None else "-"
-        lines.append(f"  {method:<8} {which:<10} {rate(m['false_alarm_rate'])}  {_fmt(m['false_alarm_per_decision'], '.4f')}"
-                     f"  {clean:>5} {rate(m['detection_rate'])}  "
-                     f"{_fmt(m['delay_median'], '.1f', 9)} {rate(m['isolation_rate'])}  "
-                     f"{_fmt(m['isolation_delay_median'], '.1f', 9)}")
+        lines.append(f"  {method:<8} {which:<10} {rate_cell(m['false_alarm_rate'], n)}  {cell(m['false_alarm_per_decision'], '.4f', 7)}"
+                     f"  {clean:>5} {rate_cell(m['detection_rate'], n)}  "
+                     f"{cell(m['delay_median'], '.1f', 9)} {rate_cell(m['isolation_rate'], n)}  "
+                     f"{cell(m['isolation_delay_median'], '.1f', 9)}")
     if onset is not None:
-        lines.append(f"  closed loop (MDWT-ST, latched): isolated {rate(row['online_isolation_rate']).strip()} "
-                     f"(kind right {_fmt(row['online_kind_rate'], '.2f', 4)}), median delay "
-                     f"{_fmt(row['online_delay_median'], '.0f', 3)} steps, wrong/early {row['online_false_isolation_rate']:.2f}")
+        lines.append(f"  closed loop (MDWT-ST, latched): isolated {rate_cell(row['online_isolation_rate'], n).strip()} "
+                     f"(kind right {cell(row['online_kind_rate'], '.2f', 4)}), median delay "
+                     f"{cell(row['online_delay_median'], '.0f', 3)} steps, wrong/early {row['online_false_isolation_rate']:.2f}")
         if not row.get("sensor_health"):
             lines.append(f"  fault estimate (matched filter), median: {row['bias_estimate_median'][0]:.3f} at onset+"
                          f"{ESTIMATE_AFTER} (true {row['bias_true'][0]:.3f}, |error| {row['bias_error_median'][0]:.3f}); "
@@ -635,8 +629,8 @@ def _headline(study: VTOLStudy) -> str:
         for method in (m for m in METHODS if f"{m}|paper" in s3["methods"]):
             p, o = s3["methods"][f"{method}|paper"], s3["methods"][f"{method}|ours"]
             out.append(f"    {method:<10} {PAPER_HEADLINE['s3 step 0.7'][method]:>5} | {p['first_detection_run0']:>5}, "
-                       f"{_fmt(120 + p['delay_median'], '.1f', 6)}, FA {p['false_alarm_rate']:.2f} | "
-                       f"{o['first_detection_run0']:>5}, {_fmt(120 + o['delay_median'], '.1f', 6)}, "
+                       f"{cell(120 + p['delay_median'], '.1f', 6)}, FA {p['false_alarm_rate']:.2f} | "
+                       f"{o['first_detection_run0']:>5}, {cell(120 + o['delay_median'], '.1f', 6)}, "
                        f"FA {o['false_alarm_rate']:.2f}")
         if "MDWT-ST-SV|paper" in s3["methods"]:
             out.append(f"    (MDWT-ST: sigma of each detail scale from the chi-square law; MDWT-ST-SV: Lee & Lyou's sample "

@@ -38,15 +38,8 @@ from jaxfdi.models.f16._aero import AeroCoefficients, table_coefficients
 from jaxfdi.models.f16._atmosphere import air_data
 from jaxfdi.models.f16._engine import power_rate, throttle_gearing, thrust
 from jaxfdi.models.f16._morelli import MorelliCoefficients, morelli_coefficients_data, polynomial_coefficients
-from jaxfdi.models.f16._tables import (
-    AeroTables,
-    AtmosphereData,
-    EngineData,
-    aero_tables,
-    atmosphere_data,
-    engine_data,
-    stevens_lewis_data,
-)
+from jaxfdi.models.f16._tables import (AeroTables, AtmosphereData, EngineData, aero_tables, atmosphere_data,
+                                       engine_data, stevens_lewis_data)
 
 #: the 13 states, in order: airspeed, angles of attack and sideslip, Euler angles, body rates,
 #: north and east position, altitude, engine power

@@ -33,26 +33,8 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.models.f16._dynamics import (
-    AIL,
-    ALPHA,
-    BETA,
-    EL,
-    H,
-    PHI,
-    POW,
-    RDR,
-    THETA,
-    THTL,
-    VT,
-    F16Params,
-    P,
-    Q,
-    R,
-    STATE_NAMES,
-    CONTROL_NAMES,
-    f16_dynamics,
-)
+from jaxfdi.models.f16._dynamics import (AIL, ALPHA, BETA, EL, H, PHI, POW, RDR, THETA, THTL, VT, F16Params, P, Q, R,
+                                         STATE_NAMES, CONTROL_NAMES, f16_dynamics)
 
 #: the longitudinal and lateral state and input indices (the 4-state blocks of the modes)
 LONGITUDINAL_STATES = (VT, ALPHA, THETA, Q)

@@ -560,8 +560,11 @@ def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2)
 
 def rate_cell(rate, trials: int, width: int = 16, digits: int = 2) -> str:
     """A table's rate over ``trials`` runs as ``rate_text`` (with its 95 % interval),
-    right-aligned in ``width``; ``-`` for a missing rate (``None``, NaN) or no runs."""
-    if rate is None or rate != rate or not trials:
+    right-aligned in ``width``; ``-`` where there is no rate (NaN, no runs), blank where
+    none applies (``None``: a method that does not decide that)."""
+    if rate is None:
+        return " " * width
+    if rate != rate or not trials:
         return f"{'-':>{width}}"
     return f"{rate_text(round(rate * trials), trials, digits=digits):>{width}}"
 

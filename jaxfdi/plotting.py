@@ -51,6 +51,9 @@ def plot_statistic(statistic, threshold=None, *, t=None, onset=None, label: str 
       onset: time of the fault onset (dotted vertical line), or ``None``.
       label: the statistic's name (legend and y label).
       log: logarithmic y axis.
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
     """
     values = np.asarray(statistic, dtype=float)
     if values.ndim not in (1, 2):
@@ -82,6 +85,9 @@ def plot_mode_probabilities(mode_prob, names: Sequence[str] | None = None, *, t=
       names: M mode names (default ``mode 0`` ...).
       onset: fault onset (dotted vertical line), or ``None``.
       threshold: the decision threshold ``mu_T`` (dashed), or ``None``.
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
     """
     prob = np.asarray(mode_prob, dtype=float)
     if prob.ndim != 2:
@@ -110,6 +116,9 @@ def plot_estimate(estimate, truth=None, std=None, *, t=None, label: str = "estim
       truth: ``(T,)`` true values, or ``None``.
       std: ``(T,)`` standard deviations (e.g. ``sqrt(cov[:, i, i])``), or ``None``.
       label: the quantity's name.
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
     """
     est = np.asarray(estimate, dtype=float)
     if est.ndim != 1:
@@ -134,6 +143,9 @@ def plot_delays(delays: Mapping[str, Sequence[float]], *, unit: str = "s", ax=No
     Args:
       delays: name -> delays of the runs (NaN for a run never detected).
       unit: the delays' unit (axis label).
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
     """
     if not delays:
         raise ValueError("delays: expected at least one name -> delays entry, got none")
@@ -158,6 +170,9 @@ def plot_confusion(matrix, labels: Sequence[str], *, normalize: bool = True, ax=
       matrix: ``(K, K)`` counts, e.g. ``jaxfdi._metrics.confusion_matrix``.
       labels: K class names.
       normalize: show each row as shares of its runs.
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
     """
     m = np.asarray(matrix, dtype=float)
     if m.ndim != 2 or m.shape[0] != m.shape[1]:
@@ -189,6 +204,9 @@ def plot_loss_history(step, train=None, validation=None, *, best_step: int | Non
       validation: ``(N,)`` validation losses, or ``None``.
       best_step: the step kept (dotted vertical line), or ``None``.
       log: logarithmic y axis.
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
     """
     steps = np.asarray(step)
     fig, ax = new_axes(ax)

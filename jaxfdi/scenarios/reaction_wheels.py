@@ -608,11 +608,14 @@ class WheelStudy(NamedTuple):
             for method in shown:
                 r = row[method]
                 clean = r.get("clean_runs")
+                isolation = None if "rate" not in r else r.get("isolation_rate")  # None: never isolates (blank)
+                isolation = float("nan") if "rate" in r and isolation is None else isolation  # '-': names none
+                delays = " ".join(" " * 8 if r.get(k) is None else cell(r[k], ".2f", 8)
+                                  for k in ("delay_mean_s", "delay_median_s", "delay_p90_s"))
                 lines.append(f"{row['case']:<10} {METHOD_NAMES[method]:<24} {rate_cell(r.get('decided_rate'), n, 19)} "
-                             f"{rate_cell(r.get('isolation_rate'), n, 19)} {rate_cell(r.get('rate_within_deadline'), clean, 19)} "
-                             f"{rate_cell(r['false_alarm_rate'], n, 19)} {n:>4} "
-                             f"{'' if clean is None else clean:>5} {cell(r.get('delay_mean_s'), '.2f', 8)} "
-                             f"{cell(r.get('delay_median_s'), '.2f', 8)} {cell(r.get('delay_p90_s'), '.2f', 8)}")
+                             f"{rate_cell(isolation, n, 19)} {rate_cell(r.get('rate_within_deadline'), clean, 19)} "
+                             f"{rate_cell(r['false_alarm_rate'], n, 19)} {n:>4} {'' if clean is None else clean:>5} "
+                             f"{delays}")
         bad = [row for row in self.rows if row.get("unhealthy_runs")]
         warning = unhealthy_warning(sum(row["unhealthy_runs"] for row in bad), sum(row["runs"] for row in self.rows),
                                     ", ".join(f"{row['case']} {row['unhealthy_runs']}" for row in bad))

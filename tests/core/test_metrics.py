@@ -387,7 +387,7 @@ def test_rate_interval_is_the_clopper_pearson_beta_quantiles():
 def test_table_cells_show_a_dash_where_there_is_no_number():
     """``cell``: ``format`` right-aligned, the ``missing`` text for None, NaN and +-inf;
     ``rate_cell``: ``rate_text`` of ``round(rate n)`` of ``n`` right-aligned, ``-`` for a
-    missing rate or no runs."""
+    NaN rate or no runs, blank for ``None`` (no such rate)."""
     from jaxfdi._metrics import cell, rate_cell, rate_text
 
     assert cell(1.23456, ".2f", 7) == "   1.23" and cell(7, ".4g") == "7" and cell(np.float32(0.5), ".1f") == "0.5"
@@ -395,8 +395,9 @@ def test_table_cells_show_a_dash_where_there_is_no_number():
         assert cell(missing, ".2f", 4) == "   -" and cell(missing, ".0f", missing="n/a") == "n/a"
     assert rate_cell(0.97, 100) == f"{rate_text(97, 100):>16}" and len(rate_cell(0.97, 100)) == 16
     assert rate_cell(0.3333, 3, 0, digits=3) == rate_text(1, 3, digits=3)
-    for rate, n in ((None, 10), (float("nan"), 10), (0.5, 0)):
+    for rate, n in ((float("nan"), 10), (0.5, 0)):
         assert rate_cell(rate, n, 19) == " " * 18 + "-"
+    assert rate_cell(None, 10, 19) == " " * 19
 
 
 def test_one_sided_bounds_are_the_beta_quantiles():

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxfdi import _checks
 from jaxfdi.detection._glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_detector, glrt_threshold
 from jaxfdi.detection._mode_probability import mode_probability_detector
 from jaxfdi._faults import Fault, fault, fault_label, sensor_labels, stack_faults
@@ -323,6 +324,37 @@ def balanced_batches(data: LabelledRuns, runs_per_fault: int, batch_runs: int, k
         return jax.tree.map(lambda leaf: leaf[take], data)
 
     return batch
+
+
+def training_data(train_runs: int, val_runs: int, batch_runs: int, seed: int, steps: int, learning_rate: float):
+    """``(batches, val)`` for ``tuning.fit`` after checking the sizes: labelled runs of
+    ``seed`` served as ``balanced_batches``, validation runs of ``seed + 1``."""
+    check_study(train_runs, seed, steps=steps, val_runs=val_runs, batch_runs=batch_runs, runs_name="train_runs")
+    _checks.check_positive("learning_rate", learning_rate, "a positive learning rate")
+    train = labelled_runs(train_runs, seed)
+    return balanced_batches(train, train_runs, batch_runs, jax.random.key(seed)), labelled_runs(val_runs, seed + 1)
+
+
+def hand_tuned_table(hand_rows: list[dict], tuned_rows: list[dict], labels: tuple[str, str], names: tuple[str, str],
+                     footer: str, isolation: bool = True) -> str:
+    """Hand-set beside tuned rows (``metrics.fault_row``), fault by fault: detection
+    (isolation) and ``FA`` rates (``FA``: share of runs with an alarm before the onset),
+    delays over the ``clean`` runs only; ``footer`` below, then ``unhealthy_rows_warning``
+    of each side under its ``names``."""
+    width = max(6, *map(len, labels))
+    head = (f"{'fault':<9} {'':<{width}} {'det':>5} " + (f"{'iso':>5} " if isolation else "")
+            + f"{'FA':>5} {'clean':>5} {'mean [s]':>8} {'delay med [s]':>13} {'p90 [s]':>8}")
+    lines = [head, "-" * len(head)]
+    rates = ("detection_rate", "isolation_rate", "false_alarm_rate") if isolation else ("detection_rate",
+                                                                                          "false_alarm_rate")
+    for pair in zip(hand_rows, tuned_rows):
+        for label, r in zip(labels, pair):
+            clean = "-" if r["fault"] == "none" else r.get("clean_runs", "-")
+            lines.append(f"{r['fault']:<9} {label:<{width}} {' '.join(cell(r[k], '.2f', 5) for k in rates)} "
+                         f"{clean:>5} {cell(r.get('delay_mean_s'), '.3f', 8)} {cell(r['delay_median_s'], '.3f', 13)} "
+                         f"{cell(r['delay_p90_s'], '.3f', 8)}")
+    warnings = [unhealthy_rows_warning(rows, name) for rows, name in zip((hand_rows, tuned_rows), names)]
+    return "\n".join(lines + [footer] + [w for w in warnings if w])
 
 
 def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, onset_time: float = 2.0,

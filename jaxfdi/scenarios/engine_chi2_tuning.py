@@ -29,10 +29,8 @@ from jaxfdi import _checks
 from jaxfdi.detection._chi2 import chi2_threshold, moving_window_sum
 from jaxfdi.filters._base import run_filter
 from jaxfdi.filters._kalman import kalman_filter
-from jaxfdi._metrics import cell, unhealthy_rows_warning
 from jaxfdi.models._engine import TS, engine_model
-from jaxfdi.scenarios._common import check_study
-from jaxfdi.scenarios.engine import LabelledRuns, balanced_batches, labelled_runs
+from jaxfdi.scenarios.engine import LabelledRuns, hand_tuned_table, labelled_runs, training_data
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_chi2_study
 from jaxfdi.tuning import _losses as losses
 from jaxfdi.tuning._parameterize import constrain, log_diagonal, log_scale, unconstrain
@@ -106,11 +104,7 @@ def tune_engine_chi2(windows: tuple[int, ...] = (1, 2, 4, 8), steps: int = 150, 
     steps_per_run = int(round(4.0 / TS))  # labelled_runs' default duration
     for w in windows:
         _checks.check_int("windows", w, 1, steps_per_run, "window lengths in steps, within a run")
-    check_study(train_runs, seed, steps=steps, val_runs=val_runs, batch_runs=batch_runs, runs_name="train_runs")
-    _checks.check_positive("learning_rate", learning_rate, "a positive learning rate")
-    train = labelled_runs(train_runs, seed)
-    val = labelled_runs(val_runs, seed + 1)
-    train_batch = balanced_batches(train, train_runs, batch_runs, jax.random.key(seed))
+    train_batch, val = training_data(train_runs, val_runs, batch_runs, seed, steps, learning_rate)
     results, val_loss = {}, {}
     for window in windows:
         def loss(raw, data, window=window):
@@ -138,17 +132,7 @@ def evaluate_engine_chi2(params: dict[str, Any], window: int, runs: int, seed: i
 
 def comparison_table(hand_rows: list[dict], tuned_rows: list[dict], hand_window: int, tuned_window: int,
                      hand_loss: float, tuned_loss: float) -> str:
-    """Hand-set beside tuned, per fault: ``FA`` = share of runs with an alarm before the
-    onset; delays over the ``clean`` runs only (``metrics.fault_row``)."""
-    head = (f"{'fault':<9} {'':<16} {'det':>5} {'FA':>5} {'clean':>5} {'mean [s]':>8} {'delay med [s]':>13} "
-            f"{'p90 [s]':>8}")
-    lines = [head, "-" * len(head)]
-    for h, t in zip(hand_rows, tuned_rows):
-        for label, r in ((f"hand L={hand_window}", h), (f"tuned L={tuned_window}", t)):
-            clean = "-" if r["fault"] == "none" else r.get("clean_runs", "-")
-            lines.append(f"{r['fault']:<9} {label:<16} {cell(r['detection_rate'], '.2f', 5)} "
-                         f"{cell(r['false_alarm_rate'], '.2f', 5)} {clean:>5} {cell(r.get('delay_mean_s'), '.3f', 8)} "
-                         f"{cell(r['delay_median_s'], '.3f', 13)} {cell(r['delay_p90_s'], '.3f', 8)}")
-    lines.append(f"held-out tuning loss: hand {hand_loss:.4f}, tuned {tuned_loss:.4f}")
-    lines += [w for w in (unhealthy_rows_warning(hand_rows, "hand"), unhealthy_rows_warning(tuned_rows, "tuned")) if w]
-    return "\n".join(lines)
+    """Hand-set beside tuned, per fault (``engine.hand_tuned_table``), and the held-out loss."""
+    return hand_tuned_table(hand_rows, tuned_rows, (f"hand L={hand_window}", f"tuned L={tuned_window}"),
+                            ("hand", "tuned"), f"held-out tuning loss: hand {hand_loss:.4f}, tuned {tuned_loss:.4f}",
+                            isolation=False)

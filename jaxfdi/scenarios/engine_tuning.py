@@ -44,7 +44,6 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxfdi import _checks
 from jaxfdi.detection._mode_probability import mode_probability_detector
 from jaxfdi.filters._base import run_filter
 from jaxfdi.filters._imm import interacting_multiple_model
@@ -52,13 +51,12 @@ from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.models._engine import engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
 from jaxfdi._frame import results_frame
-from jaxfdi._metrics import DetectionRecord, cell, unhealthy_rows_warning
+from jaxfdi._metrics import DetectionRecord
 from jaxfdi._monitor import replay_detector
 from jaxfdi._montecarlo import monte_carlo
-from jaxfdi.scenarios._common import check_study
 from jaxfdi.scenarios.engine import (PAPER_TRANSITION, EngineSettings, LabelledRuns, Method, _bias_estimates,
-                                     _mode_prob, balanced_batches, labelled_runs, run_monitor, scenario_runs,
-                                     summarize_method)
+                                     _mode_prob, hand_tuned_table, labelled_runs, run_monitor, scenario_runs,
+                                     summarize_method, training_data)
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP
 from jaxfdi.tuning import _losses as losses
 from jaxfdi.tuning._parameterize import (Transform, constrain, log_scale, simplex, stochastic_rows, unconstrain,
@@ -230,11 +228,7 @@ def tune_engine_imm(design: ImmDesign, steps: int = 150, train_runs: int = 16, v
     if unknown:
         raise ValueError(f"frozen: unknown parameters {sorted(unknown)}; design {design.name!r} has "
                          f"{sorted(design.parameterization)}")
-    check_study(train_runs, seed, steps=steps, val_runs=val_runs, batch_runs=batch_runs, runs_name="train_runs")
-    _checks.check_positive("learning_rate", learning_rate, "a positive learning rate")
-    train = labelled_runs(train_runs, seed)
-    val = labelled_runs(val_runs, seed + 1)
-    train_batch = balanced_batches(train, train_runs, batch_runs, jax.random.key(seed))
+    train_batch, val = training_data(train_runs, val_runs, batch_runs, seed, steps, learning_rate)
 
     def loss(raw, data):
         return imm_loss(design, constrain(design.parameterization, raw), data, weights, confirm_steps=confirm_steps)[0]
@@ -377,19 +371,8 @@ def comparison_frame(hand_rows: list[dict], tuned_rows: list[dict], level: float
 
 
 def comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce) -> str:
-    """Hand-set (``paper``) beside tuned, per fault: ``FA`` = share of runs with an alarm
-    before the onset; delays over the ``clean`` runs only (``metrics.fault_row``)."""
-    head = (f"{'fault':<9} {'':<6} {'det':>5} {'iso':>5} {'FA':>5} {'clean':>5} {'mean [s]':>8} "
-            f"{'delay med [s]':>13} {'p90 [s]':>8}")
-    lines = [head, "-" * len(head)]
-    for h, t in zip(hand_rows, tuned_rows):
-        for label, r in (("paper", h), ("tuned", t)):
-            clean = "-" if r["fault"] == "none" else r.get("clean_runs", "-")
-            lines.append(
-                f"{r['fault']:<9} {label:<6} {cell(r['detection_rate'], '.2f', 5)} {cell(r['isolation_rate'], '.2f', 5)} "
-                f"{cell(r['false_alarm_rate'], '.2f', 5)} {clean:>5} {cell(r.get('delay_mean_s'), '.3f', 8)} "
-                f"{cell(r['delay_median_s'], '.3f', 13)} {cell(r['delay_p90_s'], '.3f', 8)}")
-    lines.append(f"mean per-step mode cross-entropy: paper {hand_ce:.4f}, tuned {tuned_ce:.4f} "
-                 f"({100 * (1 - tuned_ce / hand_ce):.0f} % lower)")
-    lines += [w for w in (unhealthy_rows_warning(hand_rows, "paper"), unhealthy_rows_warning(tuned_rows, "tuned")) if w]
-    return "\n".join(lines)
+    """Hand-set (``paper``) beside tuned, per fault (``engine.hand_tuned_table``), and the
+    mean mode cross-entropy of each."""
+    return hand_tuned_table(hand_rows, tuned_rows, ("paper", "tuned"), ("paper", "tuned"),
+                            f"mean per-step mode cross-entropy: paper {hand_ce:.4f}, tuned {tuned_ce:.4f} "
+                            f"({100 * (1 - tuned_ce / hand_ce):.0f} % lower)")

@@ -117,6 +117,16 @@ def check_finite(name: str, x: Any, meaning: str = "") -> None:
         raise ValueError(f"{name}: expected finite values{extra}, got {received(value)} (non-finite{at})")
 
 
+def check_inputs(us: Any) -> jax.Array:
+    """``us`` as a (T, nu) array of real inputs, finite when concrete (trace time)."""
+    check_real("us", us, "real inputs of shape (T, nu)")
+    check_finite("us", us, "inputs")
+    us = jnp.asarray(us)
+    if us.ndim != 2:
+        raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
+    return us
+
+
 def float_dtype(*arrays: Any):
     """The float dtype a result takes: the promoted dtype of the float arguments, or JAX's
     default float when every argument is an integer (an integer initial mean must not turn

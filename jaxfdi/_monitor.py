@@ -124,11 +124,7 @@ def monitor(
       ``keep_history=True``, its ``MonitorHistory`` (truth ``SimStep``, filter info,
       statistic, alarm, label and estimate, each with a leading time axis T), else ``None``.
     """
-    _checks.check_real("us", us, "real inputs of shape (T, nu)")
-    _checks.check_finite("us", us, "inputs")
-    us = jnp.asarray(us)
-    if us.ndim != 2:
-        raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
+    us = _checks.check_inputs(us)
     scorer = detection_scorer(onset, lambda out: out[1], lambda out: out[0].healthy, estimate_delay,
                               jnp.asarray(x0).dtype, single=True)
     result = run_loop(sim, filter_detector(filt, detector, detector_input, channel_labels), feedforward(), x0,

@@ -18,7 +18,7 @@ Time enters in three ways, each optional:
 Noise for step ``k`` comes from ``fold_in(key, k)``, so a run is reproducible step by step
 and independent of chunking or sharding.
 
-The simulator is a ``Simulator(init, step, measure, advance)``: ``measure`` reads the
+The simulator is a ``Simulator(init, measure, advance)``: ``measure`` reads the
 sensors at step ``k`` and ``advance`` moves the plant with the input applied at ``k``,
 which is what a closed loop needs (``jaxfdi._loop``: the controller acts between the two);
 ``step`` is the two together, for open-loop runs (``simulate``).
@@ -102,16 +102,27 @@ class SimStep(NamedTuple):
 
 
 class Simulator(NamedTuple):
-    """``init(x0)``; ``step(state, k, u, key) -> (state, SimStep)`` with the run's key;
-    and its halves ``measure(state, k, u, step_key) -> (state, Sensed)`` (``u``: the
-    input the feed-through sees) and ``advance(state, k, u, step_key) -> (state,
-    Actuated)``, which take the step's key ``fold_in(key, k)`` (a closed loop folds it
-    once for both)."""
+    """A plant with its sensors, in two halves a closed loop can put its controller between.
+
+    Attributes:
+      init: ``init(x0) -> SimState``
+      measure: ``measure(state, k, u, step_key) -> (state, Sensed)`` (``u``: the input the
+        feed-through sees), with the step's key ``fold_in(key, k)``
+      advance: ``advance(state, k, u, step_key) -> (state, Actuated)``, the same key
+    """
 
     init: Callable[[Array], SimState]
-    step: Callable[[SimState, Array, Array, Array], tuple[SimState, SimStep]]
-    measure: Callable[[SimState, Array, Array, Array], tuple[SimState, Sensed]] | None = None
-    advance: Callable[[SimState, Array, Array, Array], tuple[SimState, Actuated]] | None = None
+    measure: Callable[[SimState, Array, Array, Array], tuple[SimState, Sensed]]
+    advance: Callable[[SimState, Array, Array, Array], tuple[SimState, Actuated]]
+
+    def step(self, sim: SimState, k: Array, u: Array, key: Array) -> tuple[SimState, SimStep]:
+        """One open-loop step with the run's ``key``: ``measure`` then ``advance`` on
+        ``fold_in(key, k)``, their records joined in a ``SimStep``."""
+        step_key = jax.random.fold_in(key, k)
+        sim, sensed = self.measure(sim, k, u, step_key)
+        sim, moved = self.advance(sim, k, u, step_key)
+        return sim, SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
+                            sensed.sensor_fault, sensed.fault_active, sensed.mode)
 
 
 def per_step(name: str, value: Any, size: int) -> Callable[[Array], Array]:
@@ -184,11 +195,11 @@ def simulator(
         are measured at step ``k`` (the others are NaN), or ``None`` (all, always).
 
     Returns:
-      ``Simulator(init, step, measure, advance)``: ``init(x0)`` takes the (n,) true initial
-      state and gives a ``SimState`` (F held values, zero); ``step(state, k, u, key) ->
-      (state, SimStep)`` with the run's key; ``measure(state, k, u, step_key) -> (state,
-      Sensed)`` and ``advance(state, k, u, step_key) -> (state, Actuated)`` with the step's
-      key ``fold_in(key, k)``.
+      ``Simulator(init, measure, advance)``: ``init(x0)`` takes the (n,) true initial
+      state and gives a ``SimState`` (F held values, zero); ``measure(state, k, u,
+      step_key) -> (state, Sensed)`` and ``advance(state, k, u, step_key) -> (state,
+      Actuated)`` with the step's key ``fold_in(key, k)``; ``Simulator.step(state, k, u,
+      key)`` is the two with the run's key.
     """
     _checks.check_callable("f", f, "a plant function f(x, u, params) -> next state")
     _checks.check_callable("h", h, "a sensor function h(x, u, params) -> measurement")
@@ -253,15 +264,7 @@ def simulator(
         x_next = plant_f(x, u_applied, k, params) + (w if G is None else G @ w)
         return SimState(x_next, held), Actuated(u_applied, u_applied - u)
 
-    def step(sim: SimState, k: Array, u: Array, key: Array):
-        step_key = jax.random.fold_in(key, k)
-        sim, sensed = measure(sim, k, u, step_key)
-        sim, moved = advance(sim, k, u, step_key)
-        out = SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
-                      sensed.sensor_fault, sensed.fault_active, sensed.mode)
-        return sim, out
-
-    return Simulator(init, step, measure, advance)
+    return Simulator(init, measure, advance)
 
 
 def check_fault_components(faults: Fault, target: int, size: int) -> None:
@@ -299,11 +302,7 @@ def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState
       ``SimStep`` of every step stacked along a leading time axis (``truth.state`` (T, n),
       ``truth.measurement`` (T, m), ``truth.mode`` (T,), ...).
     """
-    _checks.check_real("us", us, "real inputs of shape (T, nu)")
-    _checks.check_finite("us", us, "inputs")
-    us = jnp.asarray(us)
-    if us.ndim != 2:
-        raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
+    us = _checks.check_inputs(us)
     steps = jnp.arange(us.shape[0])
 
     def body(state, ku):

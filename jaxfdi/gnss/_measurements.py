@@ -43,7 +43,7 @@ from jaxfdi import _checks
 from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
 from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, line_of_sight_ned
 from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, OrbitTable, satellite_position, select_orbits, transmission_geometry
-from jaxfdi._simulate import Actuated, Sensed, SimState, SimStep, Simulator, check_fault_components
+from jaxfdi._simulate import Actuated, Sensed, SimState, Simulator, check_fault_components
 
 
 class Wall(NamedTuple):
@@ -194,11 +194,4 @@ def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, vi
         w = noise_sqrt @ jax.random.normal(key_w, (2,), sim.state.dtype)
         return SimState(transition @ sim.state + w, sim.held), Actuated(u, jnp.zeros_like(u))
 
-    def step(sim: SimState, k: Array, u: Array, key: Array):
-        step_key = jax.random.fold_in(key, k)
-        sim, sensed = measure(sim, k, u, step_key)
-        sim, moved = advance(sim, k, u, step_key)
-        return sim, SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
-                            sensed.sensor_fault, sensed.fault_active, sensed.mode)
-
-    return Simulator(init, step, measure, advance)
+    return Simulator(init, measure, advance)

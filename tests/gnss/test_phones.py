@@ -21,6 +21,8 @@ against gnss_lib_py 1.1 (Stanford NavLab), NumPy/SciPy and the files' own fields
   SciPy computation on every epoch of the four traces (rel 1e-8).
 - Padding: the traces share one compiled program, and the padded result cut back equals
   each trace solved at its own shape (positions within 1 um).
+- Bad channels in a padded trace: a NaN channel equals the trace without it, an infinite
+  one is a dead channel (flagged, excluded, alarmed), a frozen one is isolated and excluded.
 """
 import warnings
 

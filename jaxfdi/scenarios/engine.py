@@ -345,8 +345,7 @@ def hand_tuned_table(hand_rows: list[dict], tuned_rows: list[dict], labels: tupl
     head = (f"{'fault':<9} {'':<{width}} {'det':>5} " + (f"{'iso':>5} " if isolation else "")
             + f"{'FA':>5} {'clean':>5} {'mean [s]':>8} {'delay med [s]':>13} {'p90 [s]':>8}")
     lines = [head, "-" * len(head)]
-    rates = ("detection_rate", "isolation_rate", "false_alarm_rate") if isolation else ("detection_rate",
-                                                                                          "false_alarm_rate")
+    rates = ("detection_rate",) + (("isolation_rate",) if isolation else ()) + ("false_alarm_rate",)
     for pair in zip(hand_rows, tuned_rows):
         for label, r in zip(labels, pair):
             clean = "-" if r["fault"] == "none" else r.get("clean_runs", "-")

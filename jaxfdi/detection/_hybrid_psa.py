@@ -173,11 +173,7 @@ class HybridPSAOutput(NamedTuple):
     """One step's output (``fdi.step``).
 
     Attributes:
-      statistic: () FD
-      alarm: () bool FD > T_D
-      isolation_functions: (G,) FI of each group
-      suspects: (G,) bool FI > T_I
-      analytic_residuals: (G,) NaN unless the filter ran at this step
+      values: what ``observe`` found at this step (FD, its alarm, FI, suspects, ``||r_g||``)
       detection: FD alarm of this step (label -1)
       psa: latched: isolated by PSA alone (label group + 1)
       hybrid: latched: isolated by the hybrid (label group + 1)
@@ -186,11 +182,7 @@ class HybridPSAOutput(NamedTuple):
       healthy: () bool: FD is a number and the replayed filter stayed healthy
     """
 
-    statistic: Array
-    alarm: Array
-    isolation_functions: Array
-    suspects: Array
-    analytic_residuals: Array
+    values: StepValues
     detection: Decision
     psa: Decision
     hybrid: Decision
@@ -391,7 +383,7 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
         decided = d.decision_step >= 0
         nan = jnp.full((), jnp.nan, m.dtype)
         output = HybridPSAOutput(
-            c.statistic, c.alarm, c.isolation_functions, c.suspects, c.analytic_residuals,
+            c,
             Decision(c.statistic, c.alarm, jnp.asarray(-1, jnp.int32), nan),
             Decision(c.statistic, decided, d.psa, nan),
             Decision(c.statistic, decided, d.hybrid, nan),

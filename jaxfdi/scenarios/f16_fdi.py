@@ -465,7 +465,7 @@ def _paper_case(setup: FlightSetup, fdi: FDISetup, key: Array) -> tuple[dict, di
         "section": "paper_case", "fault": "bias on both axes of sensor 1, FNR 10 (0.1 rad/s per axis), from t = 3 s",
         "onset_step": onset, "detection_step": int(d.detection_step), "decision_step": step,
         "detection_time_s": int(d.detection_step) * DT,
-        "fd_over_sigma2_at_decision": float(out.statistic[hybrid, step]) / sigma2,
+        "fd_over_sigma2_at_decision": float(out.values.statistic[hybrid, step]) / sigma2,
         "td_over_sigma2": float(fdi.hybrid.detection_threshold) / sigma2,
         "isolation_functions": d.isolation_functions.tolist(), "isolation_threshold": float(fdi.hybrid.isolation_threshold),
         "psa_suspects": [int(i) + 1 for i in np.nonzero(d.suspects)[0]], "psa_alone_isolates": int(d.psa),
@@ -479,8 +479,8 @@ def _paper_case(setup: FlightSetup, fdi: FDISetup, key: Array) -> tuple[dict, di
         "paper": PAPER_REPORTS,
     }
     t = np.arange(hists.state.shape[1]) * DT
-    history = {"t": t, "state": hists.state, "rates": hists.measured_rates, "fd": out.statistic[hybrid],
-               "fi": out.isolation_functions[hybrid], "td": float(fdi.hybrid.detection_threshold),
+    history = {"t": t, "state": hists.state, "rates": hists.measured_rates, "fd": out.values.statistic[hybrid],
+               "fi": out.values.isolation_functions[hybrid], "td": float(fdi.hybrid.detection_threshold),
                "ti": float(fdi.hybrid.isolation_threshold), "decision_step": step, "onset_step": onset,
                "suspects": d.suspects, "residual_t": t[step - RESTART_LAG + 1: step - RESTART_LAG + 1 + window],
                "residuals": norms, "reference_state": np.asarray(setup.reference.state), "follows": list(FOLLOW)}

@@ -203,7 +203,7 @@ def test_replayed_ukf_equals_a_fresh_ukf_from_the_buffered_state(env, recorded):
     trusted = jnp.repeat(~decision.suspects, 2)
     norms, _ = sf.analytic_residual_trace(fdi, ys, us, step - sf.RESTART_LAG, trusted, sf.RESTART_LAG)
     np.testing.assert_allclose(decision.analytic_residuals, norms[-1], rtol=1e-12, atol=1e-15)
-    assert np.all(np.isnan(np.asarray(out.analytic_residuals)[np.arange(len(ys)) != step]))
+    assert np.all(np.isnan(np.asarray(out.values.analytic_residuals)[np.arange(len(ys)) != step]))
     # a batch: per-run noise, with the psum condition and without
     noise = 0.01 * jax.random.normal(jax.random.key(1), (4,) + ys[:, RATE_OFFSET:].shape)
     batch = jnp.broadcast_to(ys, (4,) + ys.shape).at[:, :, RATE_OFFSET:].add(noise)

@@ -102,6 +102,30 @@ def padded_sizes(epochs: int, slots: int, clocks: int) -> tuple[int, int, int]:
     return up(epochs), up(max(slots, 5)), max(clocks, CONSTELLATIONS) if clocks > 1 else clocks
 
 
+#: the leaves of a ``PositionFix`` and of the results built on it with a slot axis (after
+#: the epoch axis); ``geometry`` also has 3 + C clock columns, a per-constellation
+#: ``clock_bias`` C clocks
+SLOT_FIELDS = frozenset({"residuals", "geometry", "sigma", "used", "elevation", "azimuth", "isolation",
+                         "slope_horizontal", "slope_vertical", "minimum_detectable_bias", "dead", "exclusions"})
+
+
+def resized(tree, epochs: int, slots: int, clocks: int, fills: dict | None = None):
+    """A fix or a result built on it (NumPy leaves, leading epoch axis) cut or padded to
+    ``epochs``, ``slots`` and ``clocks`` (``SLOT_FIELDS``); padding takes the leaf's
+    ``fills`` entry by field name (default 0 / False)."""
+    def one(path, leaf):
+        name = path[-1].name
+        shape = [epochs, *leaf.shape[1:]]
+        if name in SLOT_FIELDS:
+            shape[1] = slots
+        if name == "geometry":
+            shape[2] = 3 + clocks
+        elif name == "clock_bias" and leaf.ndim == 2:
+            shape[1] = clocks
+        return padded_to(leaf[tuple(slice(0, n) for n in shape)], shape, (fills or {}).get(name, 0))
+    return jax.tree_util.tree_map_with_path(one, tree)
+
+
 def in_chunks(solve: Callable, epochs: int, *arrays):
     """``solve(*chunk)`` on ``EPOCH_CHUNK`` epochs at a time of ``arrays`` (pytrees whose
     leading axis is padded to a multiple of it), the results joined on the host and cut

@@ -38,7 +38,7 @@ from jaxfdi.gnss._atmosphere import Atmosphere, broadcast_atmosphere
 from jaxfdi.gnss._gnss_log import parse_gnss_log
 from jaxfdi.gnss._integrity import EpochIntegrity, exclusion_rounds, monitor_epoch, monitor_epochs
 from jaxfdi.gnss._orbits import OrbitTable, ephemeris_table
-from jaxfdi.gnss._positioning import in_chunks, padded_sizes, padded_to
+from jaxfdi.gnss._positioning import in_chunks, padded_sizes, padded_to, resized
 from jaxfdi.gnss._raim import RaimTables, raim_tables
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides, read_ascii
 from jaxfdi.gnss._rinex_obs import Observations, parse_rinex_obs
@@ -203,8 +203,8 @@ def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, ex
     if tables is None:
         tables = raim_tables(width, pfa=1e-3, pmd=1e-3)
     elif tables.threshold.shape[0] < width - 3:   # entries past S - 4 dof are never read
-        tables = RaimTables(padded_to(np.asarray(tables.threshold), (width - 3,), np.inf),
-                            padded_to(np.asarray(tables.noncentrality), (width - 3,), np.nan))
+        tables = RaimTables(padded_to(tables.threshold, (width - 3,), np.inf),
+                            padded_to(tables.noncentrality, (width - 3,), np.nan))
     membership = jnp.asarray(padded_to(phone.clocks(), (width, wide), False)) if clocks == "constellation" else None
     satellite = padded_to(np.asarray(phone.satellite, dtype), (rows, width, 3), np.nan)
     pseudoranges = padded_to(np.asarray(phone.pseudorange, dtype), (rows, width), np.nan)
@@ -213,22 +213,7 @@ def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, ex
                else tuple(operation), exclusion_rounds(exclude))
     out = in_chunks(lambda *chunk: _monitor_phone(*chunk, membership, tables, *options), epochs,
                     satellite, pseudoranges, uncertainty)
-
-    def cut(path, leaf):
-        """The trace's own slots and clocks: the padding sits at the end of those axes."""
-        name = path[-1].name
-        index = (slice(None),) + ((slice(0, slots),) if name in _SLOT_FIELDS else ())
-        if name == "geometry":
-            index += (slice(0, 3 + own),)
-        elif name == "clock_bias" and leaf.ndim == 2:
-            index += (slice(0, own),)
-        return jnp.asarray(leaf[index])
-    return jax.tree_util.tree_map_with_path(cut, out)
-
-
-#: the ``EpochIntegrity`` leaves with a slot axis (after the epoch axis)
-_SLOT_FIELDS = frozenset({"residuals", "geometry", "sigma", "used", "elevation", "azimuth", "isolation",
-                          "slope_horizontal", "slope_vertical", "minimum_detectable_bias", "dead", "exclusions"})
+    return jax.tree_util.tree_map(jnp.asarray, resized(out, epochs, slots, own))   # the trace's own slots, clocks
 
 
 @functools.partial(jax.jit, static_argnames=("mask_angle", "operation", "exclude"))

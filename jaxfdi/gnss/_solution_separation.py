@@ -39,7 +39,7 @@ from jax import Array
 from jax.scipy.special import ndtr, ndtri
 
 from jaxfdi import _linalg
-from jaxfdi.gnss._positioning import PositionFix, in_chunks, padded_sizes, padded_to
+from jaxfdi.gnss._positioning import PositionFix, in_chunks, padded_sizes, padded_to, resized
 from jaxfdi.gnss._raim import whitened
 
 #: integrity and continuity budgets of the ARAIM ADD (LPV-200): P_HMI and P_FA, vertical / horizontal
@@ -196,15 +196,7 @@ def separate_epochs(fix: PositionFix, p_satellite: float = P_SATELLITE, p_conste
     fix = jax.tree_util.tree_map(np.asarray, fix)
     epochs, slots, columns = fix.geometry.shape
     rows, width, wide = padded_sizes(epochs, slots, columns - 3)
-
-    def pad(leaf, *shape, fill=0):
-        return padded_to(leaf, (rows,) + shape, fill)
-
-    clock_shape = (wide,) if fix.clock_bias.ndim == 2 else ()
-    padded = PositionFix(pad(fix.position, 3), pad(fix.clock_bias, *clock_shape), pad(fix.residuals, width),
-                         pad(fix.geometry, width, 3 + wide), pad(fix.sigma, width, fill=1.0),
-                         pad(fix.used, width, fill=False), pad(fix.num_used), pad(fix.elevation, width),
-                         pad(fix.azimuth, width), jax.tree_util.tree_map(pad, fix.dops), pad(fix.healthy, fill=False))
+    padded = resized(fix, rows, width, wide, fills={"sigma": 1.0})      # unused slots, clocks without satellites
     prior = padded_to(np.broadcast_to(np.asarray(p_constellation, fix.residuals.dtype), (columns - 3,)), (wide,), 0.0)
     out = in_chunks(lambda chunk: _separations(chunk, p_satellite, prior, p_hmi, p_fa), epochs, padded)
     modes = np.r_[0:slots, width:width + columns - 3]          # the satellites', then the constellations'

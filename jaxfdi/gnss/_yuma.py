@@ -56,30 +56,18 @@ class Almanac(NamedTuple):
     week: np.ndarray
 
 
-#: (key prefix as written in YUMA files, lower case; field; parser)
-_FIELDS = (
-    ("id", "prn", int),
-    ("health", "health", int),
-    ("eccentricity", "eccentricity", float),
-    ("time of applicability", "toa", float),
-    ("orbital inclination", "inclination", float),
-    ("rate of right ascen", "omega_dot", float),
-    ("sqrt(a)", "sqrt_a", float),
-    ("right ascen at", "omega0", float),
-    ("argument of perigee", "argument_of_perigee", float),
-    ("mean anom", "mean_anomaly", float),
-    ("af0", "af0", float),
-    ("af1", "af1", float),
-    ("week", "week", int),
-)
+#: key prefix as written in YUMA files (lower case) -> field
+_FIELDS = {"id": "prn", "health": "health", "eccentricity": "eccentricity", "time of applicability": "toa",
+           "orbital inclination": "inclination", "rate of right ascen": "omega_dot", "sqrt(a)": "sqrt_a",
+           "right ascen at": "omega0", "argument of perigee": "argument_of_perigee", "mean anom": "mean_anomaly",
+           "af0": "af0", "af1": "af1", "week": "week"}
+#: the fields that are whole numbers
+_INTEGER_FIELDS = ("prn", "health", "week")
 
 
-def _field_of(key: str):
+def _field_of(key: str) -> str | None:
     key = key.strip().lower()
-    for prefix, name, parse in _FIELDS:
-        if key.startswith(prefix):
-            return name, parse
-    return None, None
+    return next((name for prefix, name in _FIELDS.items() if key.startswith(prefix)), None)
 
 
 def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac:
@@ -100,7 +88,7 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
     header_line = 0
 
     def close(record, line_no):
-        missing = [n for _, n, _ in _FIELDS if n not in record]
+        missing = [n for n in _FIELDS.values() if n not in record]
         if missing:
             raise ValueError(f"{name}:{line_no}: almanac record starting on this line lacks {missing}")
 
@@ -118,24 +106,25 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
             raise ValueError(f"{name}:{line_no}: expected a '******** ... almanac for PRN-nn ********' header "
                              f"before the fields, got {line!r}")
         key, sep, value = line.partition(":")
-        field, parse = _field_of(key)
+        field = _field_of(key)
         if not sep or field is None:
             raise ValueError(f"{name}:{line_no}: expected 'Key: value' with a YUMA key "
-                             f"({', '.join(p for p, _, _ in _FIELDS)}), got {line!r}")
+                             f"({', '.join(_FIELDS)}), got {line!r}")
         if field in current:
             raise ValueError(f"{name}:{line_no}: field {key.strip()!r} repeated in the record starting on line "
                              f"{header_line}")
         try:
             number = float(value.strip().replace("D", "E").replace("d", "e"))
-            if parse is int:
+            if field in _INTEGER_FIELDS:
                 if number != int(number):
                     raise ValueError
                 number = int(number)
             elif not np.isfinite(number):
                 raise ValueError
         except ValueError:
-            raise ValueError(f"{name}:{line_no}: field {key.strip()!r}: expected a "
-                             f"{'whole number' if parse is int else 'finite number'}, got {value.strip()!r}") from None
+            wanted = "whole number" if field in _INTEGER_FIELDS else "finite number"
+            raise ValueError(f"{name}:{line_no}: field {key.strip()!r}: expected a {wanted}, "
+                             f"got {value.strip()!r}") from None
         current[field] = number
     if current is not None:
         close(current, header_line)
@@ -146,8 +135,8 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
     repeated = sorted({p for p in prns if prns.count(p) > 1})
     if repeated:
         raise ValueError(f"{name}: PRN(s) {repeated} appear in more than one record")
-    columns = {field: np.asarray([r[field] for r in records], dtype=int if parse is int else float)
-               for _, field, parse in _FIELDS}
+    columns = {field: np.asarray([r[field] for r in records], dtype=int if field in _INTEGER_FIELDS else float)
+               for field in _FIELDS.values()}
     columns["week"] = columns["week"] + 1024 * int(rollovers)
     return Almanac(**columns)
 

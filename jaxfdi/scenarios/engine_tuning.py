@@ -94,32 +94,33 @@ class ImmDesign(NamedTuple):
     estimate_delay: int
 
 
+def _imm_design(name: str, method: str, tuned: dict[str, Transform], hand: Callable[[], dict[str, Any]],
+                modes, initial, detector_input, estimate_delay: int) -> ImmDesign:
+    """A design that also tunes the transition matrix, the initial mode probabilities and mu_T
+    (hand-set: the paper's matrix, its normal row and the engine study's mu_T)."""
+    common = {"transition": stochastic_rows(TRANSITION_MASK), "initial_mode": simplex()}
+    hand_common = lambda: {"transition": jnp.asarray(PAPER_TRANSITION),  # noqa: E731
+                           "initial_mode": jnp.asarray(PAPER_TRANSITION[0]), **hand(),
+                           "mu_threshold": jnp.asarray(EngineSettings().mu_threshold)}
+    return ImmDesign(name, method, TRANSITION_MASK, {**common, **tuned, "mu_threshold": unit_interval()},
+                     hand_common, modes, initial, detector_input, estimate_delay)
+
+
 def _zhang_li() -> ImmDesign:
-    settings = EngineSettings()
-    model = engine_model()
-    return ImmDesign(
-        "zhang-li", "IMM", TRANSITION_MASK,
-        {"transition": stochastic_rows(TRANSITION_MASK), "initial_mode": simplex(), "sensor_inflation": log_scale(),
-         "actuator_noise": log_scale(), "mu_threshold": unit_interval()},
-        lambda: {"transition": jnp.asarray(PAPER_TRANSITION), "initial_mode": jnp.asarray(PAPER_TRANSITION[0]),
-                 "sensor_inflation": jnp.full(5, settings.sensor_inflation),
-                 "actuator_noise": jnp.full(1, settings.actuator_noise),
-                 "mu_threshold": jnp.asarray(settings.mu_threshold)},
+    settings, model = EngineSettings(), engine_model()
+    return _imm_design(
+        "zhang-li", "IMM", {"sensor_inflation": log_scale(), "actuator_noise": log_scale()},
+        lambda: {"sensor_inflation": jnp.full(5, settings.sensor_inflation),
+                 "actuator_noise": jnp.full(1, settings.actuator_noise)},
         lambda p: noise_inflation_modes(model, p["sensor_inflation"], p["actuator_noise"]),
-        lambda p: (jnp.zeros(7), model.Q),
-        _mode_prob, 0)
+        lambda p: (jnp.zeros(7), model.Q), _mode_prob, 0)
 
 
 def _bias() -> ImmDesign:
-    settings = EngineSettings()
-    model = engine_model()
-    return ImmDesign(
-        "bias", "IMM-bias", TRANSITION_MASK,
-        {"transition": stochastic_rows(TRANSITION_MASK), "initial_mode": simplex(), "bias_walk": log_scale(),
-         "bias_prior": log_scale(), "mu_threshold": unit_interval()},
-        lambda: {"transition": jnp.asarray(PAPER_TRANSITION), "initial_mode": jnp.asarray(PAPER_TRANSITION[0]),
-                 "bias_walk": jnp.asarray(settings.bias_walk),
-                 "bias_prior": jnp.asarray(settings.bias_prior), "mu_threshold": jnp.asarray(settings.mu_threshold)},
+    settings, model = EngineSettings(), engine_model()
+    return _imm_design(
+        "bias", "IMM-bias", {"bias_walk": log_scale(), "bias_prior": log_scale()},
+        lambda: {"bias_walk": jnp.asarray(settings.bias_walk), "bias_prior": jnp.asarray(settings.bias_prior)},
         lambda p: bias_modes(model, p["bias_walk"], p["bias_prior"]),
         lambda p: bias_mode_initial_state(model, jnp.zeros(7), model.Q, p["bias_prior"]),
         _bias_estimates, settings.bias_estimate_delay)

@@ -1,27 +1,21 @@
-"""The one validation layer: clear errors that name the argument, what was expected and
-what was received, raised at trace time.
+"""The one validation layer: trace-time errors that name the argument, what was expected and what was received.
 
-Every public constructor and function of jaxfdi checks its arguments with these helpers.
-They run in Python while JAX traces, so a wrong argument is reported once, before any
-compilation, with the name the caller used:
+Every public constructor and function checks its arguments with these helpers, in Python while JAX traces, so a
+wrong argument is reported once, before compilation, under the caller's name:
 
-- ``TypeError`` when the *kind* of value is wrong: a float where a count is meant, a
-  complex or string array where real numbers are, a non-callable where a function is;
-- ``ValueError`` when the kind is right but the value is not: a shape, a non-finite
-  entry, an indefinite covariance, a probability outside (0, 1), an index out of range,
-  an unknown name.
+- ``TypeError`` for the wrong *kind* of value: a float for a count, a complex or string array for real numbers, a
+  non-callable for a function;
+- ``ValueError`` for a wrong value of the right kind: shape, non-finite entry, indefinite covariance, probability
+  outside (0, 1), index out of range, unknown name.
 
-Shape and dtype checks always run. Value checks (finiteness, symmetry, definiteness,
-ranges) run on concrete arrays only: under ``jit``/``vmap`` values are unknown at trace
-time, and the filters report numerical trouble through their ``healthy`` flag instead.
+Shape and dtype checks always run; value checks (finiteness, symmetry, definiteness, ranges) only on concrete arrays
+(under ``jit``/``vmap`` filters report numerical trouble through ``healthy``).
 
-Tolerances (stated once, used everywhere):
+Tolerances (``eps`` of the array's float dtype), relative so that a covariance of 1e-24 is as valid as one of 1e24:
 
-- symmetry: ``max |X - X^T| <= 1e3 eps max |X|`` (``eps`` of the array's float dtype);
-- positive semi-definite: ``lambda_min >= -100 n eps lambda_max`` (eigenvalues of the
-  symmetric part, in float64); positive definite: ``lambda_min > 100 n eps lambda_max``
-  and ``lambda_max > 0``. A relative test, so that a covariance of 1e-24 is as valid as
-  one of 1e24.
+- symmetry: ``max |X - X^T| <= 1e3 eps max |X|``;
+- PSD: ``lambda_min >= -100 n eps lambda_max`` (eigenvalues of the symmetric part, in float64); positive definite:
+  ``lambda_min > 100 n eps lambda_max`` and ``lambda_max > 0``.
 """
 from __future__ import annotations
 
@@ -34,10 +28,9 @@ import numpy as np
 
 #: how many entries of a received value an error message prints
 _SHOWN = 6
-#: the largest seed a study or the CLI takes. ``jax.random.key`` takes any int64 and, with
-#: float64 enabled, gives distinct keys for 0 .. 2**63 - 1; without it, seeds are taken
-#: modulo 2**32. 0 .. 2**32 - 1 gives the same key either way and leaves room for the
-#: seeds studies derive (seed + 1, + 2, + 1000, + 1_000_003).
+#: the largest seed a study or the CLI takes: ``jax.random.key`` gives distinct keys for 0 .. 2**63 - 1 with float64
+#: enabled, else takes seeds modulo 2**32; 0 .. 2**32 - 1 is the same key either way and leaves room for derived
+#: seeds (seed + 1, + 2, + 1000, + 1_000_003).
 MAX_SEED = 2**32 - 1
 
 
@@ -128,9 +121,8 @@ def check_inputs(us: Any) -> jax.Array:
 
 
 def float_dtype(*arrays: Any):
-    """The float dtype a result takes: the promoted dtype of the float arguments, or JAX's
-    default float when every argument is an integer (an integer initial mean must not turn
-    the covariance into integers)."""
+    """The float dtype of a result: the promoted dtype of the float arguments, or JAX's default float when all are
+    integers (an integer initial mean must not make the covariance integer)."""
     floats = [a for a in arrays if _kind(a) == "f"]
     if not floats:
         return jnp.result_type(float)
@@ -173,9 +165,8 @@ def _eps(value: np.ndarray) -> float:
 
 
 def check_covariance(name: str, x: Any, size: int | None = None, definite: bool = False) -> int:
-    """A covariance: real, square, finite, symmetric and positive semi-definite (``definite``:
-    positive definite), by the eigenvalue test with the tolerances of the module doc.
-    Returns its size."""
+    """A covariance: real, square, finite, symmetric, PSD (``definite``: positive definite) by the eigenvalue test
+    with the module doc's tolerances. Returns its size."""
     n = check_square(name, x, size, "a covariance")
     value = concrete(x)
     if value is None or n == 0:
@@ -214,8 +205,8 @@ def check_probability(name: str, p: Any, open_interval: bool = True) -> None:
 
 def check_int(name: str, value: Any, minimum: int | None = None, maximum: int | None = None,
               meaning: str = "an integer") -> int:
-    """A concrete integer count or index (Python or NumPy integer, or a 0-d integer array;
-    not a bool, not a float even if integral) in ``[minimum, maximum]``; returned as int."""
+    """A concrete integer count or index (Python/NumPy integer or 0-d integer array; not a bool, not an integral
+    float) in ``[minimum, maximum]``; returned as int."""
     kind = _kind(value)
     if isinstance(value, jax.core.Tracer):
         raise TypeError(f"{name}: expected {meaning} known at trace time (a Python int), got {received(value)}")
@@ -231,8 +222,8 @@ def check_int(name: str, value: Any, minimum: int | None = None, maximum: int | 
 
 def check_int_array(name: str, value: Any, minimum: int | None = None, maximum: int | None = None,
                     meaning: str = "integers") -> None:
-    """Integer entries (any shape; floats are refused), within ``[minimum, maximum]`` when
-    concrete (traced integer arrays pass: checked by whoever made them)."""
+    """Integer entries (any shape; floats refused), within ``[minimum, maximum]`` when concrete (traced integer
+    arrays pass: checked by whoever made them)."""
     kind = _kind(value)
     if kind not in "iu":
         raise TypeError(f"{name}: expected {meaning}, got {received(value)}")
@@ -247,8 +238,7 @@ def check_int_array(name: str, value: Any, minimum: int | None = None, maximum: 
 
 def check_scalar(name: str, value: Any, low: float | None = None, high: float | None = None, *,
                  low_open: bool = False, high_open: bool = False, meaning: str = "a real scalar") -> None:
-    """A real scalar, finite, in the interval ``low .. high`` (open or closed ends), when
-    concrete; a traced scalar passes (its value is unknown at trace time)."""
+    """A real finite scalar in ``low .. high`` (open or closed ends) when concrete; a traced scalar passes."""
     check_real(name, value, meaning)
     if np.ndim(value) != 0:
         raise ValueError(f"{name}: expected {meaning} (shape ()), got shape {_fmt(shape_of(value))}")

@@ -1,36 +1,17 @@
 """Faults as data: a ``Fault`` pytree and the pure function that applies it.
 
-A fault acts on one component of the actuator signal ``u`` or of the sensor signal
-``y`` while ``onset <= k < end`` (steps). Every leaf is an array, so batches of faults
-(different kinds, components, onsets, magnitudes) vmap like any other data, and each
-Monte Carlo run carries its own label.
+A fault acts on one component of the actuator signal ``u`` or sensor signal ``y`` while ``onset <= k < end``
+(steps), as its ``FaultKind`` says. Every leaf is an array, so batches of faults (kinds, components, onsets,
+magnitudes) vmap like data and each Monte Carlo run carries its own label.
 
-Kinds (``s`` is the nominal component, ``k`` the step):
+A fault on a *group* of components (both axes of a 2-DOF rate sensor, one satellite's pseudorange) is a stack of
+single-component faults sharing one explicit ``label`` (``fault_group``; ``label = -1``, the default: derived by
+``fault_label`` from target and component). Faults with different ``onset``/``end`` in one stack
+(``concat_faults``) are episodes of one run (``episodes``); a step's mode is the label of the stack's first active
+fault (``active_label``).
 
-============  ==================================  =====================================
-kind          faulty component                    parameters
-============  ==================================  =====================================
-NONE          ``s``                               (a fault-free run)
-BIAS          ``s + magnitude``                   step/bias
-RAMP          ``s + magnitude + slope (k - onset)``  drift, ``slope`` per step
-IMPULSE       ``s + magnitude`` at ``k == onset`` only  a single-sample spike
-SCALE         ``(1 + magnitude) s``               multiplicative (sensor scaling)
-EFFECTIVENESS ``(1 - magnitude) s``               actuator effectiveness loss, 0..1
-STUCK         ``s(onset)``                        stuck at the value at onset
-STOP          ``0``                               the component stops (no output)
-DEAD          ``NaN``                             a dead or disconnected sensor
-============  ==================================  =====================================
-
-A fault on a *group* of components (both axes of a 2-DOF rate sensor, the pseudorange of
-one satellite) is a stack of single-component faults that share one explicit ``label``
-(``fault_group``); ``label = -1`` (the default) means "the label ``fault_label`` derives
-from target and component". Several faults with different ``onset``/``end`` in one
-stack (``concat_faults``) are several episodes of one run (``episodes``); the mode of a
-step is the label of the first active fault of the stack (``active_label``).
-
-A plant model may give a kind more physics than the signal change: the reaction-wheel
-scenario reads STOP as "the wheel's speed goes to 0 and its momentum to the body" and
-STUCK as "the wheel's speed freezes" (``scenarios.reaction_wheels.wheel_fault``).
+A plant may give a kind more physics: the reaction-wheel scenario reads STOP as "speed to 0, momentum to the body"
+and STUCK as "speed freezes" (``scenarios.reaction_wheels.wheel_fault``).
 """
 from __future__ import annotations
 
@@ -49,18 +30,17 @@ NEVER = 2**30
 
 
 class FaultKind(enum.IntEnum):
-    """How a fault acts (module doc): none, a bias (step), a ramp, an impulse, a scale or
-    effectiveness change, stuck, stopped, or dead (NaN).
+    """How a fault acts on the nominal component ``s`` at step ``k``.
 
     Attributes:
       NONE: 0, no fault: the component is nominal (a fault-free run)
       BIAS: 1, ``s + magnitude`` (a step)
-      RAMP: 2, ``s + magnitude + slope (k - onset)`` (a drift)
+      RAMP: 2, ``s + magnitude + slope (k - onset)`` (a drift, ``slope`` per step)
       IMPULSE: 3, ``s + magnitude`` at ``k == onset`` only (a single-sample spike)
       SCALE: 4, ``(1 + magnitude) s`` (sensor scaling)
       EFFECTIVENESS: 5, ``(1 - magnitude) s``, an actuator effectiveness loss in [0, 1]
       STUCK: 6, ``s(onset)``: stuck at the value at onset
-      STOP: 7, ``0``: the component stops
+      STOP: 7, ``0``: the component stops (no output)
       DEAD: 8, ``NaN``: a dead or disconnected sensor (sensors only)
     """
     NONE = 0
@@ -88,7 +68,7 @@ class Fault(NamedTuple):
       target: int, a Target
       component: int, index into u (actuator) or y (sensor)
       onset: int, first faulty step
-      magnitude: float, the fault's size (its use per kind: the table above)
+      magnitude: float, the fault's size (its use per kind: FaultKind)
       slope: float, per step (RAMP)
       end: int, first step after the fault (NEVER = permanent)
       label: int, mode label; -1: derived from target and component (``fault_label``)
@@ -122,21 +102,16 @@ def _enum_value(name: str, value, enum_type):
 
 
 def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, label=-1) -> Fault:
-    """Build a ``Fault``; ``kind`` and ``target`` take the enums or their names.
+    """Build a ``Fault``; ``kind`` and ``target`` take the enums or their names; arguments may be arrays (a batch).
 
-    Arguments may be arrays (a batch of faults). Checked at trace time: integer
-    ``component >= 0``, ``onset >= 0``, ``end > onset`` and ``label >= -1``; finite real
-    ``magnitude`` and ``slope``; an EFFECTIVENESS loss ``magnitude`` in [0, 1] (a loss
-    above 1 would reverse the input's sign). Whether ``component`` exists in the signal
-    is checked by the simulator, which knows its size.
-
-    ``label`` >= 0 sets the fault's mode label explicitly (e.g. a sensor group's);
-    -1 (default) lets ``fault_label`` derive it from target and component.
+    Checked at trace time: integer ``component >= 0``, ``onset >= 0``, ``end > onset``, ``label >= -1``; finite
+    real ``magnitude`` and ``slope``; EFFECTIVENESS ``magnitude`` in [0, 1] (above 1 reverses the input's sign).
+    The simulator checks ``component`` against the signal size. ``label`` >= 0 sets the mode label explicitly
+    (e.g. a sensor group's); -1 (default): ``fault_label``.
 
     Returns:
-      ``Fault`` with int32 ``kind``, ``target``, ``component``, ``onset``, ``end``, ``label``
-      and float ``magnitude``, ``slope`` (the default float dtype), each of the shape of the
-      argument (scalars for one fault, arrays for a batch).
+      ``Fault`` with int32 ``kind``, ``target``, ``component``, ``onset``, ``end``, ``label`` and float
+      ``magnitude``, ``slope`` (default float dtype), each of its argument's shape (scalars for one fault).
     """
     kind = _enum_value("kind", kind, FaultKind)
     target = _enum_value("target", target, Target)
@@ -175,19 +150,17 @@ def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, l
 def fault_group(kind, target, components, onset, magnitudes, slopes=0.0, end=NEVER, label=-1) -> Fault:
     """One fault on a group of components, labelled as one: a stack (leading axis G).
 
-    Entry ``g`` acts on ``components[g]`` with ``magnitudes[g]`` and ``slopes[g]``
-    (scalars broadcast), all with the same kind, target, onset, end and ``label``; a
-    fault "in any direction of the sensor's plane" is ``magnitudes = size * direction``.
+    Entry ``g`` acts on ``components[g]`` with ``magnitudes[g]``, ``slopes[g]`` (scalars broadcast), sharing kind,
+    target, onset, end and ``label``; a fault "in any direction of the sensor's plane" is
+    ``magnitudes = size * direction``.
 
     Args:
       components: (G,) component indices, G >= 1.
       magnitudes, slopes: (G,) or scalar.
-      label: the group's mode label (>= 0), shared by every entry; -1 keeps the derived
-        per-component labels (each entry then isolates as its own component).
+      label: the group's mode label (>= 0), shared by every entry; -1 keeps the derived per-component labels.
 
     Returns:
-      ``Fault`` with leaves of a leading axis G (a stack ``concat_faults`` and the
-      simulator take).
+      ``Fault`` with leaves of a leading axis G (for ``concat_faults`` and the simulator).
     """
     if np.size(components) == 0:
         raise ValueError(f"components: expected shape (G,) with G >= 1, got {_checks.received(components)}")
@@ -212,8 +185,7 @@ def no_fault() -> Fault:
     """The fault-free label (never active).
 
     Returns:
-      ``Fault`` with scalar leaves: kind NONE on sensor 0, ``onset = NEVER``; its
-      ``fault_label`` is 0.
+      ``Fault`` with scalar leaves: kind NONE on sensor 0, ``onset = NEVER``; its ``fault_label`` is 0.
     """
     return fault(FaultKind.NONE, Target.SENSOR, 0, NEVER)
 
@@ -222,15 +194,13 @@ def stack_faults(faults: list[Fault]) -> Fault:
     """Stack faults along a new leading axis (a batch for vmap, or simultaneous faults).
 
     Returns:
-      ``Fault`` whose leaves have a new leading axis of ``len(faults)`` (scalar leaves
-      become (F,)).
+      ``Fault`` whose leaves have a new leading axis of ``len(faults)`` (scalar leaves become (F,)).
     """
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *faults)
 
 
 def concat_faults(*faults: Fault) -> Fault:
-    """One stack (leading axis F) of single faults and stacks, in order: the faults of one
-    run (e.g. a ``fault_group`` and later episodes).
+    """One stack (leading axis F) of single faults and stacks, in order: one run's faults (group, later episodes).
 
     Returns:
       ``Fault`` whose leaves are the arguments' stacks concatenated along axis 0.
@@ -251,16 +221,14 @@ def is_active(f: Fault, k: Array) -> Array:
 
 
 def sensor_labels(num_inputs: int, num_sensors: int) -> Array:
-    """(num_sensors,) int: ``fault_label`` of a fault on each sensor, ``1 + num_inputs + j``
-    (what a dead channel ``j`` isolates to: ``detection.flag_dead``)."""
+    """(num_sensors,) int: sensor ``j``'s ``fault_label`` ``1 + num_inputs + j``, what a dead ``j`` isolates to."""
     return 1 + int(num_inputs) + jnp.arange(int(num_sensors), dtype=jnp.int32)
 
 
 def fault_label(f: Fault, num_inputs: int) -> Array:
-    """Integer mode label: 0 no fault, ``1 + i`` actuator i, ``1 + num_inputs + j`` sensor j.
-
-    For the engine (one input) this is the mode order of Han et al. (2022): normal, actuator, RPM, P2, T2,
-    P4, T4. An explicit ``f.label`` (>= 0) takes precedence (a ``fault_group``'s label).
+    """Integer mode label: 0 no fault, ``1 + i`` actuator i, ``1 + num_inputs + j`` sensor j; an explicit
+    ``f.label`` (>= 0, e.g. a ``fault_group``'s) takes precedence. For the engine (one input) this is the mode order
+    of Han et al. (2022): normal, actuator, RPM, P2, T2, P4, T4.
     """
     derived = jnp.where(f.target == Target.ACTUATOR, 1 + f.component, 1 + num_inputs + f.component)
     label = jnp.where(jnp.asarray(f.label) >= 0, f.label, derived)
@@ -268,8 +236,7 @@ def fault_label(f: Fault, num_inputs: int) -> Array:
 
 
 def active_label(faults: Fault, k: Array, num_inputs: int) -> Array:
-    """() int: the label (``fault_label``) of the first fault of the stack ``faults``
-    (leaves (F,), or scalar leaves) active at step ``k``; 0 when none is."""
+    """() int: ``fault_label`` of the first fault of the stack (leaves (F,) or scalar) active at ``k``, else 0."""
     faults = as_stack(faults)
     active = jax.vmap(is_active, in_axes=(0, None))(faults, k)
     labels = jax.vmap(fault_label, in_axes=(0, None))(faults, num_inputs)
@@ -279,11 +246,9 @@ def active_label(faults: Fault, k: Array, num_inputs: int) -> Array:
 def episodes(faults: Fault, num_inputs: int) -> tuple[Array, Array, Array]:
     """The fault episodes of one run: ``(onsets, ends, labels)``, each (F,) int.
 
-    Entry ``i`` is fault ``i`` of the stack: its onset, its end (``onset + 1`` for an
-    IMPULSE) and its ``fault_label``. Entries that are not an episode of their own carry
-    ``onset = end = NEVER`` and label 0: NONE faults, and repeats of an earlier entry's
-    (onset, end, label), i.e. the further components of a ``fault_group``. Fixed shapes,
-    so it jits and vmaps over runs; ``metrics.episode_record_init`` takes the result.
+    Entry ``i``: fault ``i``'s onset, end (``onset + 1`` for an IMPULSE) and ``fault_label``. NONE faults and
+    repeats of an earlier entry's (onset, end, label) (further components of a ``fault_group``) carry
+    ``onset = end = NEVER``, label 0. Fixed shapes (jits, vmaps over runs); feeds ``metrics.episode_record_init``.
     """
     faults = as_stack(faults)
     ends = jnp.where(faults.kind == FaultKind.IMPULSE, jnp.minimum(faults.end, faults.onset + 1), faults.end)
@@ -299,8 +264,7 @@ def episodes(faults: Fault, num_inputs: int) -> tuple[Array, Array, Array]:
 
 
 def as_stack(f: Fault) -> Fault:
-    """Leaves (F,): scalar faults become a stack of one; a scalar leaf of a stack (a
-    ``Fault`` built by hand without ``label``) is broadcast to the stack."""
+    """Leaves (F,): scalar faults become a stack of one; a stack's scalar leaf (hand-built, no ``label``) broadcast."""
     shape = jnp.shape(f.kind) if jnp.ndim(f.kind) else (1,)
     return jax.tree_util.tree_map(
         lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), shape) if jnp.ndim(leaf) == 0 else leaf, f)
@@ -313,8 +277,7 @@ def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> 
       f: the fault.
       k: current step.
       signal: (d,) nominal actuator or sensor vector.
-      target: which signal this is (``Target.ACTUATOR`` or ``Target.SENSOR``); a fault on
-        the other target leaves it unchanged.
+      target: ``Target.ACTUATOR`` or ``Target.SENSOR``, which signal this is; a fault on the other leaves it as is.
       held: () the value held by a STUCK fault (carried by the simulator).
 
     Returns:

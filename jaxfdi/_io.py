@@ -2,31 +2,23 @@
 
 Guarantees (POSIX, one file system):
 
-- ``atomic_write`` / ``write_json``: a file is written to a temporary name in its own
-  folder, then renamed onto its name (``os.replace``, atomic): a reader sees the old
-  file or the new one, never a part. The temporary file is removed on any exception,
-  ``KeyboardInterrupt`` included. The file gets the permissions of a newly created file,
-  ``0o666 & ~umask`` (``mkstemp`` alone would leave 0600).
-- ``study_output(out)``: a study writes into a temporary folder ``out/.jaxfdi-tmp-*``;
-  when it returns, every file is moved into ``out`` (same relative path) by
-  ``os.replace``, JSON files last, with SIGINT/SIGTERM/SIGHUP held back during the moves;
-  when it raises (an error, Ctrl-C, or SIGTERM turned into an exception by the caller),
-  the temporary folder and any folder it created are removed, so ``out`` is left as it
-  was.
+- ``atomic_write`` / ``write_json``: written to a temporary name in the same folder, then ``os.replace``d onto the
+  name (atomic): readers see the old or the new file, never a part. The temporary file is removed on any exception,
+  ``KeyboardInterrupt`` included. Permissions of a new file, ``0o666 & ~umask`` (``mkstemp`` alone: 0600).
+- ``study_output(out)``: a study writes into ``out/.jaxfdi-tmp-*``; on return every file is ``os.replace``d into
+  ``out`` (same relative path), JSON last, SIGINT/SIGTERM/SIGHUP held back during the moves; on raise (error,
+  Ctrl-C, SIGTERM turned into an exception by the caller) the temporary folder and any folder it created are
+  removed: ``out`` is left as it was.
 
-What remains non-atomic: several files cannot be replaced in one step on POSIX (only a
-folder rename can, and the output layout is ``out/engine.json``, ``out/engine-*.png``):
-the moves take microseconds, but a process killed by SIGKILL during them leaves some new
-files beside old ones (never a partial file; the JSON, moved last, is new only if every
-other file is). A signal that arrives during the moves is acted on after them (the study
-is then complete in ``out``). SIGKILL during the study itself leaves its
-``.jaxfdi-tmp-*`` folder behind (nothing can run then), never a file under a result name.
-Nothing is fsynced: durability across a power cut is not promised.
+Not atomic: several files cannot be replaced in one step on POSIX (only a folder rename can; the layout is
+``out/engine.json``, ``out/engine-*.png``). The moves take microseconds, but SIGKILL during them leaves some new
+files beside old ones (never a partial file; the JSON, moved last, is new only if every other file is). A signal
+during the moves acts after them (the study is then complete in ``out``). SIGKILL during the study leaves its
+``.jaxfdi-tmp-*`` folder behind, never a file under a result name. Nothing is fsynced: no durability across a
+power cut.
 
-Provenance: every JSON object written by ``write_json`` gets a ``"provenance"`` entry
-(``provenance()``: jaxfdi, jax, jaxlib, numpy and Python versions, backend, device kind
-and count, x64 on/off, command line, seed, UTC time); the CLI names the command line and
-seed with ``recording(argv, seed)``, and its ``.npz`` files carry the same record.
+Provenance: every JSON object from ``write_json`` gets a ``"provenance"`` entry (``provenance()``); the CLI names
+command line and seed with ``recording(argv, seed)``, and its ``.npz`` files carry the same record.
 """
 from __future__ import annotations
 
@@ -54,8 +46,7 @@ _HELD = tuple(s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM"
 
 
 def current_umask() -> int:
-    """The process umask (from ``/proc/self/status`` where there is one, so that it is
-    read without being changed)."""
+    """The process umask (from ``/proc/self/status`` where there is one: read without changing it)."""
     try:
         with open("/proc/self/status") as fh:
             for line in fh:
@@ -107,8 +98,8 @@ _RECORDING: dict | None = None
 
 @contextlib.contextmanager
 def recording(argv: list[str] | None, seed: int | None) -> Iterator[None]:
-    """Within this block, ``provenance()`` names the command line ``jaxfdi <argv...>``
-    (``argv`` None: ``sys.argv[1:]``) and ``seed``; the CLI wraps each command in it."""
+    """Within this block ``provenance()`` names the command line ``jaxfdi <argv...>`` (``argv`` None:
+    ``sys.argv[1:]``) and ``seed``; the CLI wraps each command in it."""
     global _RECORDING
     previous = _RECORDING
     _RECORDING = {"argv": ["jaxfdi", *(sys.argv[1:] if argv is None else argv)], "seed": seed}
@@ -119,11 +110,10 @@ def recording(argv: list[str] | None, seed: int | None) -> Iterator[None]:
 
 
 def provenance(seed: int | None = None) -> dict:
-    """How a result was made: a JSON-ready dict with ``jaxfdi``, ``jax``, ``jaxlib``,
-    ``numpy`` and ``python`` versions, ``backend`` (``jax.default_backend()``),
-    ``device_kind`` and ``device_count`` (local devices), ``x64`` (``jax_enable_x64``),
-    ``command`` (the command line, shell-quoted), ``seed`` (the argument, else the one
-    named by ``recording``, else None) and ``created`` (UTC, ISO 8601)."""
+    """How a result was made: a JSON-ready dict with ``jaxfdi``, ``jax``, ``jaxlib``, ``numpy`` and ``python``
+    versions, ``backend`` (``jax.default_backend()``), ``device_kind`` and ``device_count`` (local), ``x64``
+    (``jax_enable_x64``), ``command`` (shell-quoted), ``seed`` (the argument, else ``recording``'s, else None) and
+    ``created`` (UTC, ISO 8601)."""
     import jax
     import jaxlib
     import numpy
@@ -147,16 +137,15 @@ def provenance(seed: int | None = None) -> dict:
 
 
 def with_provenance(data: Any) -> Any:
-    """``data`` (a dict) with a ``"provenance"`` entry added (kept if it has one);
-    anything else unchanged."""
+    """``data`` (a dict) with a ``"provenance"`` entry added (kept if present); anything else unchanged."""
     if isinstance(data, dict) and "provenance" not in data:
         return {**data, "provenance": provenance()}
     return data
 
 
 def write_json(path: str | Path, data: Any) -> Path:
-    """Write ``data`` as strict JSON (undefined numbers such as a NaN rate become null);
-    a dict gets its ``"provenance"`` entry (``with_provenance``)."""
+    """Write ``data`` as strict JSON (NaN and other undefined numbers become null); a dict gets its
+    ``"provenance"`` entry (``with_provenance``)."""
     data = with_provenance(data)
 
     def write(tmp: str) -> None:
@@ -168,11 +157,9 @@ def write_json(path: str | Path, data: Any) -> Path:
 
 
 def check_output_dir(out: str | Path, name: str = "out") -> None:
-    """Raise ``ValueError`` (``"<name>: expected ..., got ..."``) unless ``out`` can be a
-    study's output folder: a writable folder, or a path that does not exist yet below a
-    writable folder (``study_output`` creates it). Writability is tested by creating and
-    removing a probe file (``os.access`` says yes to root, whatever the permissions);
-    nothing else is created."""
+    """Raise ``ValueError`` (``"<name>: expected ..., got ..."``) unless ``out`` can be a study's output folder: a
+    writable folder, or a missing path below one (``study_output`` creates it). Writability is tested with a probe
+    file (``os.access`` says yes to root whatever the permissions); nothing else is created."""
     out = Path(out)
     base = out
     while not base.exists():
@@ -196,8 +183,7 @@ def check_output_dir(out: str | Path, name: str = "out") -> None:
 
 @contextlib.contextmanager
 def _signals_held() -> Iterator[None]:
-    """Hold SIGINT/SIGTERM/SIGHUP back (delivered on exit) in the main thread, so that a
-    publication or a clean-up is not cut in half; elsewhere a no-op."""
+    """Hold SIGINT/SIGTERM/SIGHUP (delivered on exit) in the main thread, so nothing is cut in half; else a no-op."""
     if not _HELD or threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -209,8 +195,7 @@ def _signals_held() -> Iterator[None]:
 
 
 def _publish(tmp: Path, out: Path) -> list[Path]:
-    """Move every file under ``tmp`` to the same place under ``out``, JSON last; checks
-    first that no target is a folder, so that a clash fails before any move."""
+    """Move every file under ``tmp`` to its place under ``out``, JSON last; a folder target fails before any move."""
     files = sorted((p for p in tmp.rglob("*") if not p.is_dir()), key=lambda p: (p.suffix == ".json", str(p)))
     targets = [out / p.relative_to(tmp) for p in files]
     clash = [str(t) for t in targets if t.is_dir() and not t.is_symlink()]
@@ -226,14 +211,11 @@ def _publish(tmp: Path, out: Path) -> list[Path]:
 
 @contextlib.contextmanager
 def study_output(out: str | Path) -> Iterator[Path]:
-    """A temporary folder inside ``out`` for a study's files, published together.
+    """A temporary folder inside ``out`` for a study's files, published together (module docstring).
 
-    ``with study_output("results") as folder:`` write the study's files into
-    ``folder``; on a normal exit they are moved into ``results`` (created if needed;
-    JSON files last, signals held back during the moves); on an exception (``KeyboardInterrupt``
-    included) nothing is moved, and the temporary folder and the folders this call
-    created are removed: ``out`` is as it was. See the module docstring for what is
-    atomic and what is not.
+    ``with study_output("results") as folder:`` write into ``folder``; on normal exit the files move into
+    ``results`` (created if needed; JSON last, signals held back); on an exception (``KeyboardInterrupt`` included)
+    nothing moves and the temporary folder and folders this call created are removed: ``out`` is as it was.
     """
     out = Path(out)
     created = []
@@ -245,10 +227,9 @@ def study_output(out: str | Path) -> Iterator[Path]:
     try:
         with _signals_held():
             out.mkdir(parents=True, exist_ok=True)
-            # named before it exists: the OS mask holds a signal back in this thread only, and
-            # one delivered to another of the process's threads (XLA's) still raises here at
-            # the next bytecode, which could fall between a mkdtemp's mkdir and the assignment
-            # and leave the folder behind, unknown to the clean-up (CI, 2026-11-28)
+            # named before it exists: the OS mask holds signals back in this thread only; one delivered to another
+            # thread (XLA's) still raises at the next bytecode, which could fall between mkdtemp's mkdir and the
+            # assignment and leave the folder unknown to the clean-up
             tmp = out / f"{TEMP_PREFIX}{secrets.token_hex(8)}"
             tmp.mkdir(mode=0o700)
         yield tmp
@@ -266,12 +247,9 @@ def study_output(out: str | Path) -> Iterator[Path]:
 
 
 def _remove(tmp: Path | None, created: list[Path]) -> None:
-    """The temporary folder, and the folders ``study_output`` created if still empty.
-
-    ``_signals_held`` blocks signals at the OS level, but not a Python-level interrupt
-    already on its way (``cli._signals_raise`` delivers a dropped one again 10 ms later):
-    one that lands mid-removal is held until the removal is done, then raised, so the
-    folder never stays behind (a CI run once left it, 2026-11-27)."""
+    """The temporary folder, and the folders ``study_output`` created if still empty. A Python-level interrupt on
+    its way (``cli._signals_raise`` re-delivers a dropped one 10 ms later; ``_signals_held`` blocks only OS
+    signals) landing mid-removal is held until the removal is done, then raised: the folder never stays behind."""
     interrupted = None
     for _ in range(3):
         try:

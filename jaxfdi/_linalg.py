@@ -1,35 +1,26 @@
 """Small dense linear-algebra helpers shared by every filter.
 
-Solve, don't invert: every use of an innovation covariance goes through its Cholesky
-factor, so a loss of positive-definiteness shows up as NaN in the factor, which the
-filters turn into a ``healthy = False`` flag instead of a silent wrong answer.
+Solve, don't invert: every innovation covariance goes through its Cholesky factor, so a loss of
+positive-definiteness shows as NaN in the factor, which filters turn into ``healthy = False``, not a silent wrong
+answer.
 
-Small matrices are factorised element by element. The filters of this library work
-with states and outputs of a handful of components, vmapped over banks and Monte
-Carlo runs. On CPU, ``jax.scipy.linalg.cholesky``/``solve_triangular`` lower to LAPACK
-calls that loop over a vmapped batch one 5x5 matrix at a time; written out for a static
-size ``n <= UNROLL_MAX`` the same algorithms are element-wise array operations that XLA
-fuses and vectorises across the batch (measured: the UKF over 100 runs 2x faster, see
-``benchmarks/RESULTS.md``). Larger matrices use LAPACK/cuSOLVER.
+Small matrices (static ``n <= UNROLL_MAX``) are factorised element by element: the filters' states and outputs
+have a handful of components, vmapped over banks and runs, and on CPU ``jax.scipy.linalg`` lowers to LAPACK calls
+that loop over the batch one 5x5 matrix at a time, while written-out algorithms are element-wise operations XLA
+fuses and vectorises (UKF over 100 runs 2x faster, ``benchmarks/RESULTS.md``). Larger matrices use LAPACK/cuSOLVER.
 
-Matrix products go the same way (``matmul``): XLA:CPU runs every small ``dot`` as its
-own library call, 0.5-0.8 us for one 7x7 product whether alone or in a vmapped batch,
-while the same product as a sum of ``k`` outer products is fused element-wise code: 4x
-faster for one 7x7 product, 8x for a batch of 700 (the IMM bank over 100 runs). Only
-matrices with every dimension ``<= UNROLL_MAX`` are unrolled: past that, XLA fuses
-chains of unrolled products into consumers that recompute them (the 13-state IMM got
-2.5x slower; benchmarks/RESULTS.md). Their derivative is one broadcast multiply-and-reduce
-rather than the transpose of ``k`` sliced products (``_written_out_matmul``): the engine
-IMM tuning gradient went from 6.0x to 4.9x its forward pass.
+Products likewise (``matmul``): XLA:CPU runs each small ``dot`` as a library call (0.5-0.8 us for a 7x7, alone or
+batched); as a sum of ``k`` outer products it is fused code, 4x faster for one 7x7, 8x for a batch of 700 (IMM bank,
+100 runs). Only matrices with every dimension ``<= UNROLL_MAX`` are unrolled: beyond, XLA fuses chains of unrolled
+products into consumers that recompute them (13-state IMM 2.5x slower). Their derivative is one broadcast
+multiply-and-reduce, not the transpose of ``k`` sliced products (``_written_out_matmul``): engine IMM tuning
+gradient 6.0x -> 4.9x its forward pass.
 
-All of this pays for batches. A single sequence (``run_filter`` called eagerly or under
-``jit`` alone, what a one-shot script does) has no batch to vectorise over, and the
-written-out algebra only makes its program large: the engine KF's scan under ``jit`` was
-13.7k HLO lines and compiled in 1.9 s. ``library_calls()`` makes every helper here use
-``dot`` and LAPACK while such a trace is made on CPU (1.0k lines, 0.7 s; see
-``benchmarks/RESULTS.md``). Under ``vmap`` or ``grad`` the algebra stays written out, and
-on a GPU too, where a cuSOLVER call per small factorisation costs more than the written-out
-algebra (the engine KF 2.8x slower on an H200).
+This pays only for batches. A single sequence (``run_filter`` eager or under ``jit`` alone) has nothing to
+vectorise and the written-out algebra only bloats it (engine KF scan: 13.7k HLO lines, 1.9 s to compile);
+``library_calls()`` makes every helper use ``dot`` and LAPACK while such a trace is made on CPU (1.0k lines, 0.7 s).
+Under ``vmap`` or ``grad``, and on GPU (a cuSOLVER call per small factorisation costs more: engine KF 2.8x slower on
+an H200), the algebra stays written out.
 """
 from __future__ import annotations
 
@@ -51,8 +42,8 @@ _TRACE_STATE = threading.local()
 
 @contextlib.contextmanager
 def library_calls():
-    """While active (a trace of one unbatched sequence), ``matmul``, ``cholesky`` and the
-    triangular solves use ``dot`` and LAPACK whatever their size and ``unroll`` flag."""
+    """While active (a trace of one unbatched sequence), ``matmul``, ``cholesky`` and the triangular solves use
+    ``dot`` and LAPACK whatever their size and ``unroll`` flag."""
     previous = getattr(_TRACE_STATE, "library", False)
     _TRACE_STATE.library = True
     try:
@@ -76,8 +67,7 @@ def is_small(*arrays: Array) -> bool:
 
 
 def matmul(a: Array, b: Array) -> Array:
-    """``a @ b`` for 1-D or 2-D operands; small ones (``is_small``) are written out as
-    ``sum_j a[:, j] b[j, :]`` so that XLA fuses the product (see the module doc)."""
+    """``a @ b`` for 1-D/2-D operands; small ones (``is_small``) as ``sum_j a[:, j] b[j, :]``, fused by XLA."""
     a, b = jnp.asarray(a), jnp.asarray(b)
     if _library() or not is_small(a, b) or a.shape[-1] != b.shape[0]:
         return a @ b
@@ -93,13 +83,10 @@ def matmul(a: Array, b: Array) -> Array:
 def _written_out_matmul(a: Array, b: Array) -> Array:
     """``soa_matmul`` of two 2-D matrices, with a tangent rule whose transpose is cheap.
 
-    Differentiated as written, each term ``a[:, j] b[j, :]`` slices its operands, and the
-    reverse pass transposes every slice into a zero-padded full-size array (``k`` pads
-    per product). The tangent here is the same bilinear form as one broadcast
-    multiply-and-reduce, ``sum_j da[:, j, None] * b[None, j, :]``, whose transpose is
-    again a broadcast multiply-and-reduce: no pads. Forward mode (``jvp``, ``jacfwd``)
-    is kept, which a ``custom_vjp`` would lose. Measured on the engine IMM tuning
-    gradient in ``benchmarks/RESULTS.md``.
+    Differentiated as written, each term ``a[:, j] b[j, :]`` slices its operands and the reverse pass pads every
+    slice back to full size (``k`` pads per product). The tangent here, ``sum_j da[:, j, None] * b[None, j, :]``, is
+    one broadcast multiply-and-reduce whose transpose is another: no pads. Keeps forward mode (``jvp``, ``jacfwd``),
+    which a ``custom_vjp`` would lose (engine IMM tuning gradient, ``benchmarks/RESULTS.md``).
     """
     return soa_matmul(a, b)
 
@@ -125,14 +112,11 @@ _written_out_matmul.defjvp(_written_out_matmul_jvp, symbolic_zeros=True)
 def materialize(tree):
     """``tree``, computed once and stored (a structure-of-arrays kernel's intermediate).
 
-    XLA:CPU fuses cheap element-wise producers into every consumer; for a chain of
-    written-out products or factorisations that means the inner computation is redone
-    for every element of the outer one (13-state models: 4-10x slower), and
-    ``optimization_barrier`` does not stop it on CPU. A ``lax.cond`` is a fusion
-    boundary: its true branch returns ``tree``, its predicate (a bit of the first
-    element's bit pattern OR 1, never zero) is always true but not known to the
-    compiler; the false branch (zeros) is never taken. Were XLA to fold the predicate
-    it would inline the true branch: same values, only slower.
+    XLA:CPU fuses cheap element-wise producers into every consumer, so a chain of written-out products or
+    factorisations redoes the inner computation per outer element (13-state models: 4-10x slower);
+    ``optimization_barrier`` does not stop it on CPU. A ``lax.cond`` is a fusion boundary: the true branch returns
+    ``tree``, the predicate (a bit of the first element's bit pattern OR 1) is always true but unknown to the
+    compiler; the false branch (zeros) is never taken. If XLA folded the predicate: same values, only slower.
     """
     leaves = jax.tree.leaves(tree)
     first = jnp.ravel(leaves[0])[0]
@@ -141,11 +125,9 @@ def materialize(tree):
     return jax.lax.cond(always, lambda t: t, lambda t: jax.tree.map(jnp.zeros_like, t), tree)
 
 
-# Structure-of-arrays forms. A batch of matrices stored matrix-axes-first, (rows, cols,
-# *batch), makes every element A[i, j] one contiguous batch vector, so the written-out
-# algorithms below are element-wise operations over whole batch vectors, which XLA:CPU
-# vectorises (the vmapped layout, batch first, leaves it 5-element strided rows). The
-# 2-D case (no batch axes) is what ``matmul``, ``cholesky`` and the solves unroll.
+# Structure-of-arrays forms: a (rows, cols, *batch) stack makes each A[i, j] a contiguous batch vector, so the
+# written-out algorithms below are element-wise over whole batch vectors, which XLA:CPU vectorises (batch-first
+# leaves 5-element strided rows). The 2-D case (no batch axes) is what ``matmul``, ``cholesky`` and solves unroll.
 
 def soa_transpose(a: Array) -> Array:
     """Per-matrix transpose of a (rows, cols, *batch) stack."""
@@ -158,8 +140,7 @@ def soa_symmetrize(a: Array) -> Array:
 
 
 def soa_matmul(a: Array, b: Array) -> Array:
-    """``a @ b`` per batch element: (p, k, *batch) x (k, q, *batch) -> (p, q, *batch), as
-    ``sum_j a[:, j] b[j, :]`` (batch axes broadcast)."""
+    """``a @ b`` per batch element, (p, k, *batch) x (k, q, *batch) -> (p, q, *batch), batch axes broadcast."""
     total = a[:, 0, None] * b[None, 0]
     for j in range(1, b.shape[0]):
         total = total + a[:, j, None] * b[None, j]
@@ -175,9 +156,8 @@ def soa_matvec(a: Array, x: Array) -> Array:
 
 
 def soa_cholesky(matrix: Array) -> Array:
-    """Lower Cholesky factor of every matrix of a (n, n, *batch) stack, element by
-    element (Cholesky-Banachiewicz): a matrix that is not positive definite yields NaN
-    (square root of a negative pivot), which ``cholesky_is_finite`` reports."""
+    """Lower Cholesky factor of each matrix of a (n, n, *batch) stack, element by element
+    (Cholesky-Banachiewicz); not positive definite yields NaN (``cholesky_is_finite`` reports it)."""
     n = matrix.shape[0]
     L = [[None] * n for _ in range(n)]
     for j in range(n):
@@ -195,8 +175,7 @@ def soa_cholesky(matrix: Array) -> Array:
 
 
 def soa_solve_lower(chol: Array, rhs: Array) -> Array:
-    """``L^{-1} b`` per batch element: ``L`` (n, n, *batch), ``b`` (n, ...) with the
-    batch axes last (forward substitution)."""
+    """``L^{-1} b`` per batch element: ``L`` (n, n, *batch), ``b`` (n, ...) batch axes last (forward substitution)."""
     rows = []
     for i in range(chol.shape[0]):
         acc = rhs[i]
@@ -219,9 +198,8 @@ def soa_solve_lower_transposed(chol: Array, rhs: Array) -> Array:
 
 
 def cholesky(matrix: Array, unroll: bool = True) -> Array:
-    """Lower Cholesky factor ``L`` (``L L^T = A``) of one (n, n) matrix: written out
-    (``soa_cholesky``) for ``n <= UNROLL_MAX``, else LAPACK. Either way a matrix that is
-    not positive definite yields NaN, so ``cholesky_is_finite`` reports it."""
+    """Lower Cholesky factor ``L`` (``L L^T = A``) of one (n, n) matrix: written out (``soa_cholesky``) for
+    ``n <= UNROLL_MAX``, else LAPACK; not positive definite yields NaN (``cholesky_is_finite``)."""
     n = matrix.shape[-1]
     if matrix.ndim != 2 or n > UNROLL_MAX or not unroll or _library():
         return jsl.cholesky(matrix, lower=True)
@@ -245,8 +223,7 @@ def solve_lower_transposed(chol: Array, rhs: Array, unroll: bool = True) -> Arra
 
 
 def solve_upper(upper: Array, rhs: Array, unroll: bool = True) -> Array:
-    """``R^{-1} b`` for upper-triangular ``R`` (n, n) and ``b`` (n,) or (n, p): back
-    substitution, ``R = (R^T)^T`` with ``R^T`` lower (``solve_lower_transposed``)."""
+    """``R^{-1} b``, ``R`` (n, n) upper triangular, ``b`` (n,) or (n, p): ``solve_lower_transposed`` on ``R^T``."""
     return solve_lower_transposed(upper.T, rhs, unroll)
 
 
@@ -269,17 +246,16 @@ def _from_soa(a: Array) -> Array:
 
 
 def stack_cholesky(matrix: Array) -> Array:
-    """Lower Cholesky factors of a stack (..., n, n): written out (``soa_cholesky``) for
-    ``n <= UNROLL_MAX``, else LAPACK (see ``solve_pivoted`` for why the associative scan
-    avoids LAPACK on CPU)."""
+    """Lower Cholesky factors of a stack (..., n, n): written out for ``n <= UNROLL_MAX``, else LAPACK (why the
+    associative scan avoids LAPACK on CPU: ``solve_pivoted``)."""
     if matrix.shape[-1] > UNROLL_MAX:
         return jnp.linalg.cholesky(matrix)
     return _from_soa(soa_cholesky(_to_soa(matrix)))
 
 
 def stack_cho_solve(chol: Array, rhs: Array) -> Array:
-    """``A^{-1} B`` for stacks of lower factors ``L`` (..., n, n) of ``A`` and ``B``
-    (..., n, k): substitutions written out for ``n <= UNROLL_MAX``, else LAPACK."""
+    """``A^{-1} B`` for stacks of lower factors ``L`` (..., n, n) of ``A`` and ``B`` (..., n, k): written out for
+    ``n <= UNROLL_MAX``, else LAPACK."""
     if chol.shape[-1] > UNROLL_MAX:
         return jsl.cho_solve((chol, True), rhs)
     L = _to_soa(chol)
@@ -294,15 +270,12 @@ def stack_solve_lower(chol: Array, rhs: Array) -> Array:
 
 
 def solve_pivoted(matrix: Array, rhs: Array) -> Array:
-    """``A^{-1} B`` for stacks ``A`` (..., n, n) and ``B`` (..., n, k): Gauss-Jordan
-    elimination with partial pivoting (Golub & Van Loan, 4th ed., sec. 3.4) as a
-    ``fori_loop`` over the n columns, element-wise over the stack, with no LAPACK call.
+    """``A^{-1} B`` for stacks ``A`` (..., n, n), ``B`` (..., n, k): Gauss-Jordan with partial pivoting (Golub & Van
+    Loan, 4th ed., sec. 3.4), a ``fori_loop`` over the n columns, element-wise over the stack, no LAPACK call.
 
-    For the associative scan of ``filters.parallel``: on XLA:CPU (jaxlib 0.10.2) a
-    program holding the scan's 2 log2 T levels of batched ``getrf`` calls
-    (``jnp.linalg.solve``) never completes from T = 2048-4096 steps on (every worker
-    thread idle, the result never ready; ``tests/filters/test_parallel_kalman.py``); this form
-    has no custom call to wedge. A singular ``A`` gives inf/NaN, as LU would.
+    For ``filters.parallel``'s associative scan: on XLA:CPU (jaxlib 0.10.2) a program with the scan's 2 log2 T levels
+    of batched ``getrf`` (``jnp.linalg.solve``) never completes from T = 2048-4096 on (workers idle;
+    ``tests/filters/test_parallel_kalman.py``); this form has no custom call to wedge. Singular ``A``: inf/NaN, as LU.
     """
     n = matrix.shape[-1]
     augmented = jnp.concatenate([matrix, rhs.astype(matrix.dtype)], axis=-1)   # (..., n, n + k)
@@ -324,8 +297,7 @@ def solve_pivoted(matrix: Array, rhs: Array) -> Array:
 
 
 def det(matrix: Array) -> Array:
-    """Determinant; 1x1 to 3x3 written out (cofactor expansion), so a vmapped batch is
-    element-wise code rather than one LU call per matrix."""
+    """Determinant; 1x1 to 3x3 by cofactors: element-wise for a vmapped batch, not one LU call per matrix."""
     matrix = jnp.asarray(matrix)
     n = matrix.shape[-1]
     if n == 1:
@@ -346,12 +318,8 @@ def cholesky_is_finite(chol: Array) -> Array:
 
 
 def psd_sqrt(cov: Array) -> Array:
-    """Matrix square root ``L`` with ``L L^T = cov`` for a positive *semi*-definite ``cov``.
-
-    Uses the symmetric eigendecomposition (clipping round-off negative eigenvalues), so
-    singular noise covariances (a noise-free channel) are allowed. Meant for sampling,
-    outside the hot loop.
-    """
+    """Square root ``L``, ``L L^T = cov``, of a PSD ``cov`` (eigendecomposition, round-off negative eigenvalues
+    clipped): singular noise covariances (noise-free channel) allowed. For sampling, outside the hot loop."""
     eigval, eigvec = jnp.linalg.eigh(symmetrize(cov))
     return eigvec * jnp.sqrt(jnp.clip(eigval, 0.0, None))
 
@@ -362,19 +330,15 @@ def whiten(chol: Array, innovation: Array, unroll: bool = True) -> Array:
 
 
 def gaussian_log_likelihood(whitened: Array, chol: Array, num_observed: Array | int) -> Array:
-    """``log N(r; 0, S)`` from ``w = L^{-1} r`` and ``L`` (``S = L L^T``).
-
-    ``-0.5 (w^T w + log det S + k log 2 pi)`` with ``k`` the number of observed
-    components (missing components enter ``S`` as unit variance with zero residual and
-    so contribute nothing but are not counted in ``k``).
-    """
+    """``log N(r; 0, S) = -0.5 (w^T w + log det S + k log 2 pi)`` from ``w = L^{-1} r`` and ``L`` (``S = L L^T``),
+    ``k`` the number of observed components (missing ones enter ``S`` as unit variance with zero residual: they
+    add nothing and are not counted in ``k``)."""
     log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol)))
     return -0.5 * (jnp.sum(whitened**2) + log_det + num_observed * math.log(2.0 * math.pi))
 
 
 def joseph_cov(cov: Array, gain: Array, H: Array, noise_cov: Array) -> Array:
-    """Joseph-form posterior covariance ``(I - K H) P (I - K H)^T + K R K^T`` (Bucy &
-    Joseph 1968): symmetric positive semi-definite for any gain ``K``."""
+    """Joseph-form covariance ``(I - K H) P (I - K H)^T + K R K^T`` (Bucy & Joseph 1968): PSD for any gain ``K``."""
     I_KH = jnp.eye(cov.shape[0], dtype=cov.dtype) - matmul(gain, H)
     return symmetrize(matmul(matmul(I_KH, cov), I_KH.T) + matmul(matmul(gain, noise_cov), gain.T))
 

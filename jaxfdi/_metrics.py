@@ -1,54 +1,28 @@
 """Detection and isolation metrics, accumulated inside the scan or summarised over runs.
 
-Definitions (``../shared/spec/README.md``): the detection delay is
-the first step at or after the fault onset whose decision is "fault", minus the onset; a
-false alarm is a "fault" decision before the onset (or anywhere in a fault-free run,
-whose onset is ``faults.NEVER``); a run with no alarm at or after the onset is a missed
-detection. Isolation is correct when the isolated label equals the injected one.
+Definitions (``../shared/spec/README.md``): detection delay = first "fault" decision at or after the onset minus the
+onset; false alarm = a "fault" decision before the onset (anywhere in a fault-free run, onset ``faults.NEVER``);
+missed detection = no alarm at or after the onset; isolation correct = isolated label equals the injected one.
+**Delays are scored only in clean runs** (no alarm before the onset): an alarm standing at the onset is the false
+alarm, not a zero-delay detection. Table columns per fault: ``fault_row`` and ``DetectionSummary``.
 
-**Delays are scored only in clean runs**, runs with no alarm before the onset: in a run
-whose alarm already stands at the onset the "detection" at the onset is the false alarm
-still standing, not a zero-delay detection. Per fault every table reports (``fault_row``,
-the one place these are defined):
+``DetectionRecord`` is a small per-run carry (10^5 runs keep a few numbers each, not histories); for isolating
+detectors (IMM mode probabilities, GLRT, signature matching) it keeps the label at the detection step (the first
+mode that crosses) and the estimate (e.g. fault magnitude) ``estimate_delay`` steps later.
 
-* ``detection_rate``: faulty runs with an alarm at or after the onset / faulty runs;
-* ``isolation_rate``: faulty runs isolated as their label / faulty runs (when labelled);
-* ``pre_onset_alarm_rate``: faulty runs with an alarm before the onset / faulty runs;
-* ``delay_mean``, ``delay_median``, ``delay_p90``: over the *clean* detected runs;
-* ``clean_runs``: faulty runs without a pre-onset alarm; ``delay_runs``: of those, the
-  detected ones, whose delays the three statistics summarise.
+Health: a run whose filter lost positive-definiteness or whose statistic went NaN is *unhealthy* from that step
+(``first_unhealthy``; pass ``healthy = step_health(info.healthy, statistic)``); summaries count it in ``runs`` and
+``unhealthy_runs`` only (a NaN statistic never crosses: an all-NaN run is not a clean "no false alarm, missed
+detection" run). An *infinite* statistic is evidence: filters report a dead sensor as ``nis = +inf``
+(``filters._base``), detectors alarm on it, and it is scored like any fault (detected, isolated, delay).
 
-A fault-free run has no onset, so every alarm in it is a false alarm
-(``false_alarm_rate``).
-
-``DetectionRecord`` is a tiny per-run carry, so a Monte Carlo study of 10^5 runs keeps
-a handful of numbers a run instead of whole histories. A detector that also isolates
-(IMM mode probabilities, GLRT, signature matching) reports a label with each decision;
-the record keeps the label at the detection step (isolation = the first mode that
-crosses) and the detector's estimate (e.g. a fault magnitude) ``estimate_delay`` steps
-after it.
-
-Health: a run whose filter lost positive-definiteness or whose statistic went NaN is
-*unhealthy* from its first such step (``first_unhealthy``; callers pass ``healthy =
-step_health(info.healthy, statistic)``). Its alarms mean nothing (a NaN statistic never
-crosses a threshold), so the summaries count it in ``runs`` and in ``unhealthy_runs`` and
-leave it out of every rate and delay: an all-NaN run is never a clean "no false alarm,
-missed detection" run. An *infinite* statistic is not ill health but evidence: the
-filters report a dead sensor (a non-finite measurement) as ``nis = +inf``
-(``filters._base``) and detectors alarm on it, so a dead-sensor fault is scored like any
-other fault: detected, isolated, with its delay.
-
-Several episodes in one run (``EpisodeRecord``; a GPS/INS flight with four satellite
-faults): episode ``e`` (``faults.episodes``: onset, end, label) owns the detection window
-``[onset_e, close_e)`` with ``close_e = min(end_e + grace, next onset)``, the next onset
-being the earliest later onset of another episode. An alarm in the window detects the
-episode (first such step; delay = step - onset; isolated = the label then). ``grace``
-(steps, default 0) is the detector's memory: a windowed test keeps alarming for about a
-window after a transient fault clears, which is not a false alarm. A window never runs
-into the next episode, so a late alarm is credited to the episode that is active then.
-Every alarm step outside all windows is a false alarm (count and first step). Episodes
-with the same onset share their window (simultaneous faults); each is detected by the
-same alarm and isolated only if the label is its own.
+Several episodes per run (``EpisodeRecord``; e.g. a GPS/INS flight with four satellite faults): episode ``e``
+(``faults.episodes``: onset, end, label) owns ``[onset_e, close_e)``, ``close_e = min(end_e + grace, next onset)``
+(earliest later onset of another episode), so a late alarm is credited to the episode active then. Its first alarm
+there detects it (delay = step - onset; isolated = the label then). ``grace`` (steps, default 0): the detector's
+memory (a windowed test alarms about a window after a transient fault clears). Alarm steps outside all windows are
+false alarms (count, first step). Same-onset episodes share a window: detected by the same alarm, each isolated only
+by its own label.
 """
 from __future__ import annotations
 
@@ -91,9 +65,8 @@ class DetectionRecord(NamedTuple):
 
 
 def step_health(healthy: Array, *values) -> Array:
-    """() bool: ``healthy`` and no element of any leaf of ``values`` NaN (e.g.
-    ``step_health(info.healthy, statistic)``); an infinite value is evidence (a dead
-    sensor's statistic), not ill health."""
+    """() bool: ``healthy`` and no NaN in any leaf of ``values`` (e.g. ``step_health(info.healthy, statistic)``);
+    an infinite value (a dead sensor's statistic) is evidence, not ill health."""
     ok = jnp.asarray(healthy, bool)
     for leaf in jax.tree.leaves(values):
         ok = ok & ~jnp.any(jnp.isnan(jnp.asarray(leaf)))
@@ -101,8 +74,7 @@ def step_health(healthy: Array, *values) -> Array:
 
 
 def record_init(onset: Array, dtype=None) -> DetectionRecord:
-    """An empty record of a run whose fault starts at step ``onset`` (an int >= 0;
-    ``faults.NEVER`` for a fault-free run)."""
+    """An empty record of a run whose fault starts at step ``onset`` (int >= 0; ``faults.NEVER``: fault-free)."""
     _checks.check_int_array("onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)")
     minus_one = jnp.asarray(-1, jnp.int32)
     zero = jnp.asarray(0, jnp.int32)
@@ -115,8 +87,8 @@ def record_update(
     record: DetectionRecord, k: Array, alarm: Array, label: Array = -1, estimate: Array | None = None,
     estimate_delay: int = 0, healthy: Array = True,
 ) -> DetectionRecord:
-    """Fold the decision of step ``k`` (alarm, isolated label, estimate) into the record;
-    ``healthy`` False marks the run unhealthy from ``k`` on (``step_health``)."""
+    """Fold step ``k``'s decision (alarm, label, estimate) into the record; ``healthy`` False marks the run
+    unhealthy from ``k`` on (``step_health``)."""
     _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     k = jnp.asarray(k, jnp.int32)
     label = jnp.asarray(label, jnp.int32)
@@ -149,8 +121,7 @@ def _first_unhealthy(first: Array, k: Array, healthy: Array) -> Array:
 
 
 def record_from_alarms(alarms: Array, onset: Array, healthy: Array | None = None) -> DetectionRecord:
-    """The same record computed from a whole (T,) alarm history (and optional (T,) bool
-    ``healthy``) at once."""
+    """The same record from a whole (T,) alarm history (and optional (T,) bool ``healthy``) at once."""
     if _checks._kind(alarms) not in "biu":
         raise TypeError(f"alarms: expected a (T,) bool alarm history, got {_checks.received(alarms)}")
     _checks.check_shape("alarms", alarms, (None,), "a (T,) alarm history")
@@ -179,8 +150,7 @@ def record_from_alarms(alarms: Array, onset: Array, healthy: Array | None = None
 
 
 class DetectionSummary(NamedTuple):
-    """Summary over runs (host-side NumPy). Delays in the unit of ``Ts``. Every rate and
-    delay is over the healthy runs only; ``runs`` counts all of them.
+    """Summary over runs (host-side NumPy); delays in the unit of ``Ts``; rates and delays over healthy runs only.
 
     Attributes:
       runs: all runs, healthy or not
@@ -214,16 +184,14 @@ class DetectionSummary(NamedTuple):
 
 
 def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) -> DetectionSummary:
-    """Summarise stacked records (leading run axis) of runs ``horizon`` steps long; an
-    unhealthy run (``first_unhealthy >= 0``) counts in ``runs`` and ``unhealthy_runs`` only.
-    A record with a step at or after ``horizon`` (an alarm there, or more steps before its
-    onset) says the runs are longer: a ``ValueError``, since faults with an onset past a
-    too-short horizon would be scored as fault-free runs.
+    """Summarise stacked records (leading run axis) of runs ``horizon`` steps long.
+
+    Unhealthy runs (``first_unhealthy >= 0``) count in ``runs`` and ``unhealthy_runs`` only. Raises ``ValueError``
+    if a record saw a step at or after ``horizon`` (an alarm, or more pre-onset steps): the runs are longer, and
+    faults with an onset past a too-short horizon would be scored as fault-free.
 
     Returns:
-      ``DetectionSummary`` of Python ints and floats: run counts, detection, missed
-      detection and false-alarm rates, and delays (mean, median, 90th percentile) in the
-      unit of ``Ts`` over the clean detected runs; NaN where a rate or delay has no runs.
+      ``DetectionSummary`` of Python ints and floats; NaN where a rate or delay has no runs.
     """
     _checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
     _checks.check_positive("Ts", Ts, "a positive sample period")
@@ -263,13 +231,11 @@ def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) 
 
 
 def delay_statistics(onset, first_alarm, detection_step, Ts: float = 1.0) -> dict:
-    """The delay columns from per-run arrays (host-side, for studies that keep their own
-    records): ``onset`` (R,), ``first_alarm`` (R,) (first alarm anywhere, -1 none),
-    ``detection_step`` (R,) (first alarm at/after the onset, -1 none), all faulty runs.
+    """The delay columns from per-run (R,) arrays of faulty runs (host-side, for studies with their own records):
+    ``onset``, ``first_alarm`` (anywhere, -1 none), ``detection_step`` (at/after the onset, -1 none).
 
-    Returns ``pre_onset_alarm_rate``, ``clean_runs``, ``delay_runs`` and ``delay_mean``,
-    ``delay_median``, ``delay_p90`` (unit of ``Ts``) over the clean detected runs (module
-    docstring); NaN where there are none."""
+    Returns ``pre_onset_alarm_rate``, ``clean_runs``, ``delay_runs`` and ``delay_mean``, ``delay_median``,
+    ``delay_p90`` (unit of ``Ts``) over the clean detected runs; NaN where there are none."""
     _checks.check_positive("Ts", Ts, "a positive sample period")
     onset, first, detection = (np.asarray(a).astype(np.int64).ravel() for a in (onset, first_alarm, detection_step))
     if not onset.shape == first.shape == detection.shape:
@@ -290,13 +256,11 @@ def delay_statistics(onset, first_alarm, detection_step, Ts: float = 1.0) -> dic
 
 
 def fault_row(record: DetectionRecord, horizon: int, Ts: float = 1.0, label: int | None = None) -> dict:
-    """The per-fault columns every table reports (module docstring), from stacked records
-    of the runs of one fault (or of the fault-free case): ``runs``, ``unhealthy_runs``,
-    ``detection_rate``, ``isolation_rate`` (``record.isolated == label`` over the faulty
-    runs; NaN without ``label`` or for fault-free runs), ``false_alarm_rate`` (runs with
-    an alarm before the onset / healthy runs: for a fault's runs the same as
-    ``pre_onset_alarm_rate``), ``pre_onset_alarm_rate``, ``clean_runs``, ``delay_runs``,
-    ``delay_mean_s``, ``delay_median_s``, ``delay_p90_s`` (unit of ``Ts``)."""
+    """The per-fault table columns from stacked records of one fault's (or the fault-free) runs: ``runs``,
+    ``unhealthy_runs``, ``detection_rate``, ``isolation_rate`` (faulty runs detected with ``record.isolated ==
+    label`` / faulty runs; NaN without ``label`` or fault-free), ``false_alarm_rate`` (runs alarming before the onset
+    / healthy runs; for faulty runs = ``pre_onset_alarm_rate``), ``pre_onset_alarm_rate``, ``clean_runs``,
+    ``delay_runs``, ``delay_mean_s``, ``delay_median_s``, ``delay_p90_s`` (unit of ``Ts``; as ``DetectionSummary``)."""
     s = summarize_detection(record, horizon, Ts)
     onset = np.asarray(record.onset)
     healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
@@ -315,9 +279,8 @@ def fault_row(record: DetectionRecord, horizon: int, Ts: float = 1.0, label: int
 
 
 def unhealthy_warning(unhealthy: int, runs: int, detail: str = "", what: str = "") -> str:
-    """The console line a study prints when runs went numerically bad ("" when none did);
-    ``detail`` (e.g. the count per fault) goes in the brackets, ``what`` (e.g. the
-    method) before the count."""
+    """The console line a study prints when runs went numerically bad ("" if none); ``detail`` (e.g. the count
+    per fault) goes in the brackets, ``what`` (e.g. the method) before the count."""
     if not unhealthy:
         return ""
     detail = f": {detail}" if detail else ""
@@ -327,20 +290,17 @@ def unhealthy_warning(unhealthy: int, runs: int, detail: str = "", what: str = "
 
 
 def unhealthy_rows_warning(rows: list[dict], what: str = "") -> str:
-    """``unhealthy_warning`` for table rows (dicts with ``runs``, ``fault`` and, in newer
-    rows, ``unhealthy_runs``), with the count per fault."""
+    """``unhealthy_warning`` for table rows (dicts with ``runs``, ``fault``, maybe ``unhealthy_runs``), per fault."""
     bad = [r for r in rows if r.get("unhealthy_runs")]
     return unhealthy_warning(sum(r["unhealthy_runs"] for r in bad), sum(r["runs"] for r in rows),
                              ", ".join(f"{r['fault']} {r['unhealthy_runs']}" for r in bad), what)
 
 
 def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: int) -> Array:
-    """``M[i, j]`` = number of runs with true label ``i`` isolated as ``j``.
+    """``M[i, j]`` = number of runs with true label ``i`` isolated as ``j``, (num_classes, num_classes + 1).
 
-    Negative predictions (nothing isolated) are counted in an extra last column, so
-    ``M`` is (num_classes, num_classes + 1). A label outside ``[0, num_classes)`` (a
-    true label, or a prediction >= num_classes) is refused, not dropped: every run is
-    counted once.
+    The last column counts negative predictions (nothing isolated). A label outside ``[0, num_classes)`` (true, or
+    a prediction >= num_classes) is refused, not dropped: every run counts once.
     """
     num_classes = _checks.check_int("num_classes", num_classes, 1, meaning="a positive number of classes")
     _checks.check_int_array("true_labels", true_labels, 0, num_classes - 1, "class labels")
@@ -443,9 +403,8 @@ def episode_record_update(record: EpisodeRecord, k: Array, alarm: Array, label: 
 
 
 class EpisodeSummary(NamedTuple):
-    """Summary of stacked ``EpisodeRecord``s (host-side NumPy), per episode index ``e``
-    ((E,) arrays) over the healthy runs in which episode ``e`` began; delays in the unit
-    of ``Ts``. Unhealthy runs count in ``runs`` and ``unhealthy_runs`` only.
+    """Summary of stacked ``EpisodeRecord``s (host-side NumPy) per episode index ``e`` ((E,) arrays), over healthy
+    runs in which ``e`` began (unhealthy: ``runs``, ``unhealthy_runs`` only); delays in the unit of ``Ts``.
 
     Attributes:
       runs: all runs
@@ -512,10 +471,9 @@ def summarize_episodes(records: EpisodeRecord, Ts: float = 1.0) -> EpisodeSummar
 
 
 def binomial_interval(trials: int, p: float, level: float = 0.99) -> tuple[int, int]:
-    """Central ``level`` interval ``[low, high]`` of a Binomial(``trials``, ``p``) count:
-    ``low`` the smallest k with ``P(X <= k) >= (1 - level) / 2``, ``high`` the smallest k
-    with ``P(X <= k) >= 1 - (1 - level) / 2`` (``scipy.stats.binom``), e.g. the alarm
-    counts a detector with design false-alarm probability ``p`` should give."""
+    """Central ``level`` interval ``[low, high]`` of a Binomial(``trials``, ``p``) count (``scipy.stats.binom``),
+    e.g. the alarm counts of a detector with design false-alarm probability ``p``: ``low`` / ``high`` the smallest
+    k with ``P(X <= k) >= (1 - level) / 2`` / ``>= 1 - (1 - level) / 2``."""
     from scipy import stats
 
     trials = _checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
@@ -526,14 +484,13 @@ def binomial_interval(trials: int, p: float, level: float = 0.99) -> tuple[int, 
 
 
 def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[float, float]:
-    """Two-sided Clopper-Pearson (1934) ``level`` interval of a rate from ``k = successes``
-    of ``n = trials``: ``[B^-1(a/2; k, n-k+1), B^-1(1-a/2; k+1, n-k)]``, ``a = 1 - level``,
-    ``B^-1`` the beta quantile (``scipy.stats.beta.ppf``); 0 when ``k = 0``, 1 when
-    ``k = n``, NaN without trials. Every binomial bound of the library is this one.
+    """Two-sided Clopper-Pearson (1934) ``level`` interval of a rate, ``k = successes`` of ``n = trials``.
+
+    ``[B^-1(a/2; k, n-k+1), B^-1(1-a/2; k+1, n-k)]``, ``a = 1 - level``, ``B^-1`` the beta quantile
+    (``scipy.stats.beta.ppf``); 0 when ``k = 0``, 1 when ``k = n``. Every binomial bound of the library is this one.
 
     Returns:
-      ``(low, high)``: two floats in [0, 1], the interval's bounds on the rate ``k / n``
-      (both NaN without trials).
+      ``(low, high)``: floats in [0, 1] bounding the rate ``k / n``; both NaN without trials.
     """
     from scipy import stats
 
@@ -549,9 +506,8 @@ def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[flo
 
 
 def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2) -> str:
-    """``"0.97 [0.93,0.99]"``: the rate (``digits`` decimals) and its two-sided
-    Clopper-Pearson ``level`` interval (``rate_interval``), for tables; ``"-"`` without
-    trials."""
+    """``"0.97 [0.93,0.99]"``: the rate (``digits`` decimals) and its two-sided Clopper-Pearson ``level`` interval
+    (``rate_interval``); ``"-"`` without trials."""
     if trials == 0:
         return "-"
     low, high = rate_interval(successes, trials, level)
@@ -559,9 +515,8 @@ def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2)
 
 
 def rate_cell(rate, trials: int, width: int = 16, digits: int = 2) -> str:
-    """A table's rate over ``trials`` runs as ``rate_text`` (with its 95 % interval),
-    right-aligned in ``width``; ``-`` where there is no rate (NaN, no runs), blank where
-    none applies (``None``: a method that does not decide that)."""
+    """``rate_text`` (95 % interval) of ``rate`` over ``trials`` runs, right-aligned in ``width``; ``-`` with no
+    rate (NaN, no runs), blank for ``None`` (a method that does not decide that)."""
     if rate is None:
         return " " * width
     if rate != rate or not trials:
@@ -570,23 +525,20 @@ def rate_cell(rate, trials: int, width: int = 16, digits: int = 2) -> str:
 
 
 def cell(value, spec: str = ".3f", width: int = 0, missing: str = "-") -> str:
-    """A table cell: ``format(value, spec)`` right-aligned in ``width``; ``missing`` for
-    ``None`` or a number that is not finite (no value to show)."""
+    """``format(value, spec)`` right-aligned in ``width``; ``missing`` for ``None`` or a non-finite number."""
     absent = value is None or (isinstance(value, (int, float, np.number)) and not np.isfinite(value))
     return f"{missing if absent else format(value, spec):>{width}}"
 
 
 def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
-    """One-sided Clopper-Pearson lower bound of a rate from ``successes`` of ``trials``,
-    ``B^-1(1 - confidence; k, n-k+1)``: the lower end of the two-sided interval at level
-    ``2 confidence - 1`` (``rate_interval``); 0 when none succeeded, NaN without trials."""
+    """One-sided Clopper-Pearson lower bound ``B^-1(1 - confidence; k, n-k+1)`` (``rate_interval`` at level
+    ``2 confidence - 1``); 0 when none succeeded, NaN without trials."""
     return _one_sided_interval(successes, trials, confidence)[0]
 
 
 def binomial_upper_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
-    """One-sided Clopper-Pearson upper bound, ``B^-1(confidence; k+1, n-k)``: the upper end
-    of ``rate_interval`` at level ``2 confidence - 1``; 1 when all succeeded, NaN without
-    trials."""
+    """One-sided Clopper-Pearson upper bound ``B^-1(confidence; k+1, n-k)`` (``rate_interval`` at level
+    ``2 confidence - 1``); 1 when all succeeded, NaN without trials."""
     return _one_sided_interval(successes, trials, confidence)[1]
 
 

@@ -1,33 +1,20 @@
-"""Monte Carlo driver: vmap over runs, chunked to bound memory, sharded over devices and
-processes.
+"""Monte Carlo driver: vmap over runs, chunked to bound memory, sharded over devices and processes.
 
-``monte_carlo(run_one, key, num_runs, per_run)`` calls ``run_one(key_i, per_run_i)``
-for every run, where ``key_i`` is the i-th of ``jax.random.split(key, num_runs)`` and
-``per_run_i`` the i-th slice of any pytree of per-run data (faults, magnitudes, initial
-states, models). Runs are evaluated ``chunk_size`` at a time by one compiled
-``jit(vmap(run_one))``; each chunk's run axis is sharded over the devices with
-``jax.sharding`` (``NamedSharding(Mesh(devices, ("runs",)), P("runs"))``). Each run's
-randomness depends only on its own key, which depends only on its index (``run_keys``),
-so results do not depend on the number of devices, processes or the chunk size (up to
-floating-point rounding: XLA may vectorise a batch of different width differently;
-with the same number of runs per device they are bit for bit the same). Outputs come
-back as NumPy.
+``run_one(key_i, per_run_i)`` runs for every ``i``: ``key_i = jax.random.split(key, num_runs)[i]``, ``per_run_i``
+the i-th slice of any per-run pytree (faults, magnitudes, initial states, models), ``chunk_size`` runs at a time
+by one ``jit(vmap(run_one))`` with the run axis sharded over devices
+(``NamedSharding(Mesh(devices, ("runs",)), P("runs"))``). A run's randomness depends only on its index
+(``run_keys``), so results do not depend on devices, processes or chunk size (up to rounding: XLA may vectorise
+another batch width differently; same runs per device: bit for bit). Outputs come back as NumPy.
 
-Several processes (``jaxfdi.distributed.initialize``; every process calls
-``monte_carlo`` with the same arguments): the mesh spans every device of every process,
-each process computes the runs its devices hold, and the outputs are gathered once at
-the end, so every process returns the whole result. With ``reduce`` (e.g.
-``streaming.detection_reducer``), each chunk's outputs are folded into a summary
-instead of kept, and the processes' summaries are merged at the end.
+Several processes (``jaxfdi.distributed.initialize``; all call ``monte_carlo`` with the same arguments): the mesh
+spans every device of every process, each computes its devices' runs, outputs are gathered once at the end, and
+every process returns the whole result. With ``reduce`` (e.g. ``streaming.detection_reducer``) each chunk is folded
+into a summary instead of kept, and the processes' summaries are merged at the end.
 
-The device never waits for the host: chunk ``c + 1`` is dispatched before chunk ``c``'s
-outputs are looked at, outputs stay on the device until one transfer at the end, and
-``summary`` (counts, sums, histograms: anything additive) is computed inside the chunk's
-program and added up on the device. Progress counts finished chunks. With the default
-``chunk_size=None`` the chunk is sized for the backend (``default_chunk_size``); a
-smaller study gets a power of two, never below ``MIN_CHUNK`` runs per device, so few
-programs serve every number of runs (on a CPU one: a compilation costs more than the
-padded runs); the first chunk's compilation is reported.
+The device never waits for the host: chunk ``c + 1`` is dispatched before chunk ``c``'s outputs are read, outputs
+stay on the device until one final transfer, and ``summary`` (anything additive: counts, sums, histograms) is summed
+on the device in the chunk's program. Progress counts finished chunks; the first chunk's compilation is reported.
 """
 from __future__ import annotations
 
@@ -58,9 +45,8 @@ def _is_key(key: Any) -> bool:
 
 
 def _split_is_foldlike(key: jax.Array) -> bool:
-    """True when ``split(key, n)[i]`` is the threefry hash of the 64-bit index ``i``
-    alone (JAX's partitionable threefry, the default), so any run's key can be computed
-    without the others."""
+    """True when ``split(key, n)[i]`` is the threefry hash of the 64-bit index ``i`` alone (JAX's partitionable
+    threefry, the default), so any run's key can be computed without the others."""
     typed = jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
     impl = str(jax.random.key_impl(key)) if typed else str(jax.config.jax_default_prng_impl)
     return bool(jax.config.jax_threefry_partitionable) and "threefry" in impl
@@ -75,11 +61,8 @@ def _threefry_index_keys(key_data: jax.Array, high: jax.Array, low: jax.Array) -
 
 
 def run_keys(key: jax.Array, index: np.ndarray, num_runs: int) -> jax.Array:
-    """The keys of runs ``index`` of ``num_runs``: ``jax.random.split(key, num_runs)[index]``.
-
-    With JAX's partitionable threefry (the default) key ``i`` depends on ``i`` alone and
-    is computed directly (a 10^8-run study never holds 10^8 keys); otherwise the whole
-    split is formed.
+    """The keys of runs ``index`` of ``num_runs``: ``jax.random.split(key, num_runs)[index]``, computed directly
+    with partitionable threefry (the default; a 10^8-run study never holds 10^8 keys), else from the whole split.
     """
     index = np.asarray(index)
     if not _split_is_foldlike(key):
@@ -92,15 +75,13 @@ def run_keys(key: jax.Array, index: np.ndarray, num_runs: int) -> jax.Array:
     return jax.random.wrap_key_data(bits, impl=jax.random.key_impl(key)) if typed else bits
 
 
-#: runs per chunk by backend (``default_chunk_size``). CPU: 64, where a study's state stays
-#: in cache (the engine's bias IMMs: 19 s at 16-64 runs per chunk, 26 s at 128-256); a
-#: chunk costs about 0.5 ms of dispatch, so very cheap runs want a larger ``chunk_size``
-#: (10^5 three-draw runs: 1.3 s at 64, 0.5 s at 8192). An accelerator wants wide batches
-#: (its memory bounds them: a chunk's outputs and scratch are per run).
+#: runs per chunk by backend (``default_chunk_size``). CPU: 64, where a study's state stays in cache (engine bias
+#: IMMs: 19 s at 16-64 runs per chunk, 26 s at 128-256); a chunk costs ~0.5 ms of dispatch, so very cheap runs want
+#: a larger ``chunk_size`` (10^5 three-draw runs: 1.3 s at 64, 0.5 s at 8192). An accelerator wants wide batches
+#: (bounded by memory: outputs and scratch are per run).
 CHUNK_BY_PLATFORM = {"cpu": 64, "gpu": 16384, "cuda": 16384, "rocm": 16384, "tpu": 16384}
-#: the smallest default chunk per device: a study of fewer runs is padded up to it, so
-#: that its calibration, its main runs and a test's few runs share one program (the
-#: reaction-wheel study's closed loop: 16 s to compile, 25-46 ms a padded run on a CPU)
+#: the smallest default chunk per device: a smaller study is padded up to it, so its calibration, main runs and a
+#: test's few runs share one program (reaction-wheel closed loop: 16 s to compile, 25-46 ms a padded run on a CPU)
 MIN_CHUNK = 64
 
 
@@ -128,41 +109,31 @@ def monte_carlo(
     """Evaluate ``run_one`` over ``num_runs`` runs; return outputs stacked over runs.
 
     Args:
-      run_one: pure function ``(key, per_run_slice) -> pytree``; keep its output small
-        (metrics, not histories) for large ``num_runs``.
+      run_one: pure function ``(key, per_run_slice) -> pytree``; keep its output small (metrics, not histories).
       key: PRNG key; run i gets ``jax.random.split(key, num_runs)[i]``.
       num_runs: number of runs.
-      per_run: pytree whose leaves have leading axis ``num_runs`` (or ``None``); with
-        several processes, the same on every process.
-      chunk_size: runs per compiled call (memory bound); rounded up to a multiple of the
-        number of devices. ``None``: ``default_chunk_size(devices)``, and a smaller study
-        the next power of two, at least ``MIN_CHUNK`` per device (a few program shapes,
-        whatever ``num_runs``; on a CPU one).
-      devices: devices to shard the run axis over (default: all devices of all
-        processes after ``jaxfdi.distributed.initialize``, else the local ones).
+      per_run: pytree whose leaves have leading axis ``num_runs`` (or ``None``); the same on every process.
+      chunk_size: runs per compiled call (memory bound), rounded up to a multiple of the device count. ``None``:
+        ``default_chunk_size(devices)``, or for a smaller study the next power of two, at least ``MIN_CHUNK`` per
+        device (few program shapes whatever ``num_runs``; on a CPU one, compiling costs more than padded runs).
+      devices: devices to shard the run axis over (default: all devices of all processes after
+        ``jaxfdi.distributed.initialize``, else the local ones).
       progress: ``True`` for a line on stderr, or a callable ``(done, total, seconds)``.
-      batched: ``run_one`` takes a whole chunk, ``(keys (B,), per_run (B, ...)) ->
-        outputs (B, ...)`` (e.g. ``run_filter`` of a ``kalman_filter`` with a model per
-        run, the batch kernel), instead of one run under ``vmap``.
-      reduce: a ``streaming.Reducer``: fold each chunk's outputs into its state on the
-        host and return the state (merged across processes) instead of the stacked
-        outputs.
-      summary: ``(outputs (B, ...), weight (B,)) -> (kept, totals)``: ``kept`` the
-        outputs to return per run (e.g. ``outputs`` less the histories it summed),
-        ``totals`` additive over runs (sums, counts, histograms; ``weight`` is 1 for a
-        run and 0 for the padding of the last chunk). Computed on the device inside the
-        chunk's program and summed over chunks (and processes); the call returns
-        ``(kept, totals)``.
-      shared: a pytree every run reads whole (``run_one(key, per_run_slice, shared)``):
-        arguments of the compiled program, not constants in it, so that studies that
-        differ only in these numbers (thresholds, transition matrices) share one program.
+      batched: ``run_one`` takes a whole chunk, ``(keys (B,), per_run (B, ...)) -> outputs (B, ...)`` (e.g.
+        ``run_filter`` of a ``kalman_filter`` with a model per run, the batch kernel), instead of ``vmap``.
+      reduce: a ``streaming.Reducer``: fold each chunk's outputs into its state on the host and return the state
+        (merged across processes) instead of the stacked outputs.
+      summary: ``(outputs (B, ...), weight (B,)) -> (kept, totals)``: ``kept`` the per-run outputs to return (e.g.
+        less the histories summed), ``totals`` additive over runs (``weight`` 1 for a run, 0 for the last chunk's
+        padding); computed on the device in the chunk's program, summed over chunks (and processes).
+      shared: pytree every run reads whole (``run_one(key, per_run_slice, shared)``): program arguments, not
+        constants, so studies differing only in these numbers (thresholds, transition matrices) share one program.
       label: what the progress display and the compilation message call this study.
 
     Returns:
-      ``run_one``'s output pytree with NumPy leaves stacked along a leading run axis
-      ``(num_runs, ...)``, in run order; with ``summary``, ``(kept, totals)``: ``kept``
-      stacked over runs the same way and ``totals`` summed over the runs (NumPy); with
-      ``reduce``, the reducer's final state (merged across processes) instead.
+      ``run_one``'s output pytree with NumPy leaves stacked along a leading run axis ``(num_runs, ...)``, in run
+      order; with ``summary``, ``(kept, totals)`` (``kept`` stacked likewise, ``totals`` summed over runs, NumPy);
+      with ``reduce``, the reducer's final state (merged across processes) instead.
     """
     _checks.check_callable("run_one", run_one, "a function (key, per_run_slice) -> outputs")
     num_runs = _checks.check_int("num_runs", num_runs, 1, meaning="a positive number of runs")
@@ -263,10 +234,9 @@ def monte_carlo(
 
 
 class _Heartbeat:
-    """Logs ``message`` (a string, or a callable giving one) with the seconds since
-    ``start`` from a daemon thread whenever ``interval`` seconds pass with neither a beat
-    nor a ``touch()`` (the progress display's own report), until ``stop()``: a long
-    compilation, or a long chunk, is never silent."""
+    """Logs ``message`` (string or callable) with the seconds since ``start`` from a daemon thread whenever
+    ``interval`` s pass without a beat or ``touch()``, until ``stop()``: a long compilation or chunk is never
+    silent."""
 
     def __init__(self, message, start: float, interval: float = 5.0) -> None:
         self._done = threading.Event()
@@ -289,8 +259,7 @@ class _Heartbeat:
 
 
 def _plan(run_one, num_runs, chunk_size, devices, batched, summary, shared):
-    """The devices (and whether they span processes), the chunk, its sharding, the
-    compiled chunk program and the ``shared`` arguments of a ``monte_carlo`` call."""
+    """Devices (multi-process or not), chunk, sharding, compiled chunk program, ``shared`` args of ``monte_carlo``."""
     devices = list(devices or (jax.devices() if jax.process_count() > 1 else jax.local_devices()))
     multiprocess = len({d.process_index for d in devices}) > 1
     if multiprocess:
@@ -322,8 +291,7 @@ def _chunk_args(key, index: np.ndarray, num_runs: int, per_run: Any, weight: np.
 
 
 def _take(leaf: Any, index: np.ndarray) -> Any:
-    """Rows ``index`` of a per-run leaf: NumPy data stays on the host (no program per
-    shape), device data is gathered where it is."""
+    """Rows ``index`` of a per-run leaf: NumPy stays on host (no program per shape), device data gathered in place."""
     return leaf[index] if isinstance(leaf, jax.Array) else np.asarray(leaf)[index]
 
 
@@ -336,8 +304,8 @@ def _cache_size(compiled) -> int:
 
 
 def _chunk_program(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
-    """``jit`` of one chunk: ``(keys, per_run, weight[, shared]) -> outputs`` or, with
-    ``summary``, ``summary(outputs, weight) = (kept, totals)``."""
+    """``jit`` of one chunk: ``(keys, per_run, weight[, shared]) -> outputs``, or with ``summary``
+    ``summary(outputs, weight) = (kept, totals)``."""
     runs = run_one if batched else jax.vmap(run_one, in_axes=(0, 0, None) if with_shared else (0, 0))
 
     def chunk(keys, data, weight, *shared):
@@ -349,14 +317,13 @@ def _chunk_program(run_one: Callable, batched: bool, summary: Callable | None, w
 
 @functools.lru_cache(maxsize=64)
 def _compiled(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
-    """``_chunk_program``, one per ``run_one``: a second study with the same function
-    (e.g. its streaming summary after its records) reuses the compiled executables."""
+    """``_chunk_program``, one per ``run_one``: another study with the same function (e.g. its streaming summary
+    after its records) reuses the compiled executables."""
     return _chunk_program(run_one, batched, summary, with_shared)
 
 
 def _local_rows(devices: list, chunk: int) -> slice:
-    """The rows of a chunk held by this process's devices (contiguous: the mesh lists
-    the devices process by process)."""
+    """The chunk rows held by this process's devices (contiguous: the mesh lists devices process by process)."""
     per_device = chunk // len(devices)
     mine = [i for i, d in enumerate(devices) if d.process_index == jax.process_index()]
     if not mine or mine != list(range(mine[0], mine[-1] + 1)):
@@ -365,8 +332,8 @@ def _local_rows(devices: list, chunk: int) -> slice:
 
 
 def _chunk_multiprocess(compiled, sharding, key, local_index, num_runs, per_run, chunk, local_valid, shared):
-    """One chunk over the global mesh: this process builds its rows only, every process
-    runs the same program (dispatched; ``_to_host`` takes this process's rows)."""
+    """One chunk over the global mesh: this process builds only its rows, every process runs the same program
+    (dispatched; ``_to_host`` takes this process's rows)."""
     local_keys = run_keys(key, local_index, num_runs)
     local_data = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[local_index], per_run)
 

@@ -1,11 +1,9 @@
-"""Discrete algebraic Riccati equation by structure-preserving doubling, its verification
-and its derivative, and the steady-state Kalman filter.
+"""Discrete algebraic Riccati equation (DARE) by structure-preserving doubling, its verification and derivative,
+and the steady-state Kalman filter.
 
-``X = A^T X A - A^T X B (R + B^T X B)^-1 B^T X A + Q`` (the convention of
-``scipy.linalg.solve_discrete_are``). With ``G = B R^-1 B^T`` it reads
-``X = A^T X (I + G X)^-1 A + Q``, and the structure-preserving doubling algorithm
-(SDA; Chu, Fan & Lin 2005, "A structure-preserving doubling algorithm for discrete-time
-algebraic Riccati equations", Linear Algebra Appl. 396) iterates from
+``X = A^T X A - A^T X B (R + B^T X B)^-1 B^T X A + Q`` (``scipy.linalg.solve_discrete_are`` convention), i.e.
+``X = A^T X (I + G X)^-1 A + Q`` with ``G = B R^-1 B^T``. SDA (Chu, Fan & Lin 2005, "A structure-preserving doubling
+algorithm for discrete-time algebraic Riccati equations", Linear Algebra Appl. 396), from
 ``A_0 = A, G_0 = G, H_0 = Q``::
 
     W_k     = I + G_k H_k
@@ -13,39 +11,29 @@ algebraic Riccati equations", Linear Algebra Appl. 396) iterates from
     G_{k+1} = G_k + A_k W_k^-1 G_k A_k^T
     H_{k+1} = H_k + A_k^T H_k W_k^-1 A_k
 
-``H_k`` is the Riccati iterate after ``2^k`` steps and converges quadratically to the
-stabilising solution when ``(A, B)`` is stabilisable and ``(Q, A)`` has no unobservable
-mode on the unit circle. One iteration costs one LU factorisation and a few products, so
-the solver is a ``lax.while_loop`` that jit-compiles and vmaps. The loop stops at the
-first non-finite iterate (no stabilising solution makes ``H_k`` grow like
-``|lambda|^(2^k)`` and overflow within a few steps).
+``H_k`` is the ``2^k``-step Riccati iterate; it converges quadratically to the stabilising solution when ``(A, B)``
+is stabilisable and ``(Q, A)`` has no unobservable mode on the unit circle. One LU per iteration, in a
+``lax.while_loop`` (jits, vmaps); the loop stops at the first non-finite iterate (without a stabilising solution
+``H_k`` grows like ``|lambda|^(2^k)`` and overflows).
 
-Verification. A stopped loop is not a solution: ``converged`` is true only when ``X`` is
-finite, its relative residual
-``||X - A^T X A + A^T X B K - Q||_F / (||X||_F + ||A^T X A||_F + ||Q||_F)``, with
-``K = (R + B^T X B)^-1 B^T X A``, is at most ``sqrt(eps)``, and the closed loop
-``A - B K`` has spectral radius below ``1 - sqrt(eps)`` (a stabilising solution). The
-residual is computed on ``X / max |X|`` (the equation is homogeneous in ``(X, Q, R)``),
-so a large but valid solution does not overflow it.
+Verification: ``converged`` only when ``X`` is finite, the relative residual
+``||X - A^T X A + A^T X B K - Q||_F / (||X||_F + ||A^T X A||_F + ||Q||_F)``, ``K = (R + B^T X B)^-1 B^T X A``, is
+<= ``sqrt(eps)``, and ``rho(A - B K) < 1 - sqrt(eps)``. The residual is computed on ``X / max |X|`` (the equation is
+homogeneous in ``(X, Q, R)``), so a large valid solution does not overflow it.
 
-
-Derivative (implicit differentiation, a ``jax.custom_jvp``). At the solution the optimal
-gain is a stationary point of ``F(X, K) = Q + K^T R K + (A - B K)^T X (A - B K)``, so
-differentiating ``X = F(X, K)`` gives the Stein (discrete Lyapunov) equation
+Derivative (implicit, a ``jax.custom_jvp``): ``K`` is a stationary point of
+``F(X, K) = Q + K^T R K + (A - B K)^T X (A - B K)``, so differentiating ``X = F(X, K)`` gives the Stein equation
 
     dX - A_c^T dX A_c = dQ + K^T dR K + (dA - dB K)^T X A_c + A_c^T X (dA - dB K),
 
-``A_c = A - B K`` (e.g. Kao & Hennequin 2020, "Automatic differentiation of Sylvester,
-Lyapunov, and algebraic Riccati equations"). It is solved by Smith's doubling
-``Y_{j+1} = Y_j + P_j^T Y_j P_j``, ``P_{j+1} = P_j^2`` inside ``lax.custom_linear_solve``,
-whose transpose (``Z - A_c Z A_c^T = b``) is the same doubling on ``A_c^T``. A tangent
-rule that is linear in the tangents gives forward mode (``jvp``, ``jacfwd``) directly and
-reverse mode (``grad``, ``vjp``) by JAX's transposition; a ``custom_vjp`` would have
-lost forward mode. The solver's own loop is never differentiated.
+``A_c = A - B K`` (e.g. Kao & Hennequin 2020, "Automatic differentiation of Sylvester, Lyapunov, and algebraic
+Riccati equations"), solved by Smith's doubling ``Y_{j+1} = Y_j + P_j^T Y_j P_j``, ``P_{j+1} = P_j^2`` in
+``lax.custom_linear_solve`` (transpose ``Z - A_c Z A_c^T = b``: the same doubling on ``A_c^T``). Linear tangents give
+forward mode (``jvp``, ``jacfwd``) and, by transposition, reverse mode (``grad``, ``vjp``); a ``custom_vjp`` would
+lose forward mode. The solver's loop is never differentiated.
 
-The filter Riccati equation of ``jaxfdi.filters._kalman`` (``P' = Phi P+ Phi^T + Q``,
-``Q`` the per-step process-noise covariance, not ``Gamma Q Gamma^T``) is the DARE with
-``A = Phi^T``, ``B = C^T``; the LQR equation is the DARE with ``(Phi, Gamma, Q_x, R_u)``.
+The filter Riccati equation of ``jaxfdi.filters._kalman`` (``P' = Phi P+ Phi^T + Q``, ``Q`` the per-step process
+noise, not ``Gamma Q Gamma^T``) is the DARE with ``A = Phi^T``, ``B = C^T``; LQR's is ``(Phi, Gamma, Q_x, R_u)``.
 """
 from __future__ import annotations
 
@@ -126,26 +114,23 @@ def _settings(dtype, tol, max_iter) -> tuple[float, int]:
 
 
 def solve_discrete_are_info(A: Array, B: Array, Q: Array, R: Array, tol=None, max_iter: int = 64) -> DareSolution:
-    """Stabilising solution of ``X = A^T X A - A^T X B (R + B^T X B)^-1 B^T X A + Q`` by
-    structure-preserving doubling (Chu, Fan & Lin 2005), verified (module doc).
+    """Stabilising solution of ``X = A^T X A - A^T X B (R + B^T X B)^-1 B^T X A + Q`` by structure-preserving
+    doubling (Chu, Fan & Lin 2005), verified (module doc).
 
-    Never raises for a problem without a stabilising solution: it returns
-    ``converged = False`` (with ``residual`` and ``spectral_radius`` saying why), so it
-    can be used under ``jit``/``vmap``. Differentiable in ``A, B, Q, R`` in forward and
-    reverse mode (implicit differentiation, module doc).
+    Never raises without a stabilising solution: ``converged = False`` (``residual``, ``spectral_radius`` say why),
+    so it works under ``jit``/``vmap``. Differentiable in ``A, B, Q, R``, forward and reverse mode (module doc).
 
     Args:
       A: (n, n) state matrix.
       B: (n, p) input matrix.
       Q: (n, n) symmetric positive semi-definite state weight.
       R: (p, p) symmetric positive definite input weight.
-      tol: stop when ``||H_{k+1} - H_k||_F <= tol ||H_{k+1}||_F``; default ``100 eps`` of
-        the dtype (the increments shrink like ``rho(A_cl)^(2^k)`` so they reach round-off).
+      tol: stop when ``||H_{k+1} - H_k||_F <= tol ||H_{k+1}||_F``; default ``100 eps`` of the dtype (increments
+        shrink like ``rho(A_cl)^(2^k)``, so they reach round-off).
       max_iter: most doubling steps (static).
 
     Returns:
-      ``DareSolution(solution, converged, iterations, residual, spectral_radius)`` in the
-      dtype of ``A`` promoted with the others.
+      ``DareSolution`` in the dtype of ``A`` promoted with the others.
     """
     _check_dare(A, B, Q, R)
     dtype = _float_dtype(A, B, Q, R)
@@ -154,11 +139,10 @@ def solve_discrete_are_info(A: Array, B: Array, Q: Array, R: Array, tol=None, ma
 
 
 def solve_discrete_are(A: Array, B: Array, Q: Array, R: Array, tol=None, max_iter: int = 64) -> Array:
-    """(n, n) stabilising DARE solution ``X``, same convention as
-    ``scipy.linalg.solve_discrete_are(A, B, Q, R)``; see ``solve_discrete_are_info``.
+    """(n, n) stabilising DARE solution ``X`` (``scipy.linalg.solve_discrete_are(A, B, Q, R)`` convention).
 
-    Raises ``ValueError`` when the arguments are concrete and no stabilising solution was
-    found; under ``jit``/``vmap`` use ``solve_discrete_are_info`` and its ``converged``.
+    Raises ``ValueError`` when the arguments are concrete and no stabilising solution was found; under
+    ``jit``/``vmap`` use ``solve_discrete_are_info`` and its ``converged``.
 
     Returns:
       (n, n) ``X``, the stabilising solution, in the dtype of ``A`` promoted with the others.
@@ -170,13 +154,10 @@ def solve_discrete_are(A: Array, B: Array, Q: Array, R: Array, tol=None, max_ite
 
 
 def require_stabilising(result, arguments, names: str, why: str, allow_marginal: bool = False) -> None:
-    """Raise ``ValueError`` (naming ``names``) when every one of ``arguments`` is concrete
-    and ``result`` (a ``DareSolution`` or ``SteadyStateKalman``) is not a stabilising
-    solution; nothing under ``jit``/``vmap`` (the caller has the flag).
-
-    ``allow_marginal`` also accepts a finite solution whose closed loop keeps eigenvalues
-    on the unit circle (within ``sqrt(eps)``): an uncontrollable mode at ``|z| = 1`` that
-    no gain can move (``lqr_pi``'s paper design).
+    """Raise ``ValueError`` (naming ``names``) when all ``arguments`` are concrete and ``result`` (``DareSolution``
+    or ``SteadyStateKalman``) is not stabilising; nothing under ``jit``/``vmap`` (the caller has the flag).
+    ``allow_marginal`` also accepts a finite solution with closed-loop eigenvalues on the unit circle (within
+    ``sqrt(eps)``): an uncontrollable mode at ``|z| = 1`` no gain can move (``lqr_pi``'s paper design).
     """
     leaves = jax.tree_util.tree_leaves((arguments, result))
     if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
@@ -208,8 +189,7 @@ def _gain(A: Array, B: Array, R: Array, X: Array) -> Array:
 
 
 def _verify(A: Array, B: Array, Q: Array, R: Array, X: Array) -> tuple[Array, Array]:
-    """Relative residual and closed-loop spectral radius of a candidate ``X`` (module doc);
-    both ``inf`` when ``X`` is not finite."""
+    """Relative residual and closed-loop spectral radius of ``X`` (module doc); ``inf`` for a non-finite ``X``."""
     finite = jnp.all(jnp.isfinite(X))
     scale = jnp.max(jnp.abs(jnp.where(finite, X, 0.0)))  # not a norm: its squares could overflow
     scale = jnp.where(finite & (scale > 0), scale, 1.0)
@@ -274,8 +254,8 @@ def _solution_jvp(tol, max_iter, primals, tangents):
 
 
 def stein_solve(closed_loop: Array, forcing: Array) -> Array:
-    """``Y`` with ``Y - A_c^T Y A_c = M`` (``A_c`` = ``closed_loop`` stable, ``M`` = ``forcing``),
-    a linear function of ``M`` that JAX can transpose (``lax.custom_linear_solve``)."""
+    """``Y`` with ``Y - A_c^T Y A_c = M`` (``A_c`` = ``closed_loop`` stable, ``M`` = ``forcing``), linear in ``M``
+    and transposable by JAX (``lax.custom_linear_solve``)."""
 
     def stein(Y):
         return Y - closed_loop.T @ Y @ closed_loop
@@ -288,8 +268,8 @@ def stein_solve(closed_loop: Array, forcing: Array) -> Array:
 
 
 def _smith_doubling(closed_loop: Array, forcing: Array, max_iter: int = 64) -> Array:
-    """``sum_k (A^T)^k M A^k`` by doubling (Smith 1968): ``Y <- Y + P^T Y P``, ``P <- P^2``,
-    until the increment reaches round-off (quadratic once ``rho(A)^(2^j)`` is small)."""
+    """``sum_k (A^T)^k M A^k`` by doubling (Smith 1968): ``Y <- Y + P^T Y P``, ``P <- P^2``, until the increment
+    reaches round-off (quadratic once ``rho(A)^(2^j)`` is small)."""
     eps = jnp.finfo(forcing.dtype).eps
 
     def cond(carry):
@@ -310,19 +290,15 @@ def _smith_doubling(closed_loop: Array, forcing: Array, max_iter: int = 64) -> A
 def steady_state_kalman(model: LinearGaussianModel, tol=None, max_iter: int = 64) -> SteadyStateKalman:
     """Steady-state Kalman filter of ``model``, as ``jaxfdi.filters.kalman_filter`` converges to.
 
-    ``P = Phi (P - P C^T S^-1 C P) Phi^T + Q`` is the DARE with ``A = Phi^T``,
-    ``B = C^T`` (Anderson & Moore 1979, ch. 4); ``S = C P C^T + R``, ``K = P C^T S^-1``.
-    A ``kalman_filter(model)`` started from the prior ``(mean, P)`` keeps ``P[k|k-1] = P``
-    and the constant gain ``K``. Differentiable in the model (implicit differentiation).
+    ``P = Phi (P - P C^T S^-1 C P) Phi^T + Q`` is the DARE with ``A = Phi^T``, ``B = C^T`` (Anderson & Moore 1979,
+    ch. 4); ``S = C P C^T + R``, ``K = P C^T S^-1``. ``kalman_filter(model)`` started from ``(mean, P)`` keeps
+    ``P[k|k-1] = P`` and the constant gain ``K``. Differentiable in the model (implicit differentiation).
 
-    Raises ``ValueError`` when the model is concrete and has no stabilising solution
-    (``(C, Phi)`` not detectable, or ``(Phi, Q)`` with an uncontrollable mode on the unit
-    circle); under ``jit``/``vmap`` check ``converged``.
+    Raises ``ValueError`` when the model is concrete and has no stabilising solution (``(C, Phi)`` not detectable,
+    or ``(Phi, Q)`` with an uncontrollable mode on the unit circle); under ``jit``/``vmap`` check ``converged``.
 
     Returns:
-      ``SteadyStateKalman``: ``P`` (n, n) the steady prior covariance ``P[k|k-1]``, ``S``
-      (m, m), the gain ``K`` (n, m), and the solver's ``converged`` flag, relative
-      ``residual`` and the spectral radius of ``Phi (I - K C)``.
+      ``SteadyStateKalman``: ``P_ss``, ``S``, ``K`` and the solver's checks.
     """
     validate_linear_model(model)
     _check_dare(jnp.asarray(model.Phi).T, jnp.asarray(model.C).T, model.Q, model.R,
@@ -338,8 +314,8 @@ def steady_state_kalman(model: LinearGaussianModel, tol=None, max_iter: int = 64
 
 @partial(jax.jit, static_argnums=(4, 5))
 def _steady_state(Phi: Array, C: Array, Q: Array, R: Array, tol: float, max_iter: int) -> SteadyStateKalman:
-    """One compiled executable. A one-off computation: LAPACK factorisations compile
-    faster than ``_linalg``'s element-wise small-matrix versions (made for vmapped loops)."""
+    """One compiled executable; LAPACK factorisations compile faster here than ``_linalg``'s element-wise
+    small-matrix versions (made for vmapped loops)."""
     dare = _solve.__wrapped__(Phi.T, C.T, Q, R, tol, max_iter)
     P = _linalg.symmetrize(dare.solution)
     S = _linalg.symmetrize(C @ P @ C.T + R)

@@ -1,25 +1,18 @@
 """The study engine: a Monte Carlo study is data, and one function runs it.
 
-A study names its cases (what each run simulates: a fault, a magnitude), the number of
-runs of each, and its methods, grouped by **structure**: methods that differ only in
-numbers (a transition matrix, a threshold, a confirmation length) are one compiled
-program with those numbers as arrays. A structure's ``run(key, case, *params)`` is one
-run of one method; its ``axes`` are parameter pytrees with a leading axis each, and the
-engine ``vmap`` s ``run`` over them in turn, outer axis first, so one program runs the
-whole grid ``axes[0] x axes[1] x ...`` on the same simulated run. What does not depend
-on an axis is computed once for it: with ``axes = (filter_params (F,), detector_params
-(D,))`` the plant is simulated once per run and each of the F filters runs once, feeding
-its D detectors. A method is a cell of the grid (``methods``: name -> index tuple).
+A study names its cases (what each run simulates: a fault, a magnitude), the runs per case, and its methods grouped
+by **structure**: methods differing only in numbers (a transition matrix, a threshold, a confirmation length) are
+one compiled program with those numbers as arrays. ``run(key, case, *params)`` is one run of one method; the engine
+``vmap`` s it over each of ``axes`` (parameter pytrees with a leading axis), outer first, so one program runs the
+grid ``axes[0] x axes[1] x ...`` on the same simulated run, computing what does not depend on an axis once for it
+(``axes = (filter_params (F,), detector_params (D,))``: the plant once per run, each of F filters once, feeding its
+D detectors). A method is a grid cell (``methods``: name -> index tuple).
 
-``run_study(study, runs, seed)`` runs every structure through ``monte_carlo`` on the same
-keys (run ``i`` of the study gets ``split(key(seed), cases * runs)[i]`` in every
-structure, so every method sees the same noise), case-major, and returns a
-``StudyResult``: per method the runs' outputs (host NumPy, one transfer per structure)
-and, where a structure is ``averaged``, the per-case mean of its runs' traces, summed
-on the device (``monte_carlo``'s ``summary``): what a figure of mean
-histories needs without keeping any history. A study compiles one program per
-structure, whatever ``runs`` and ``seed`` (``monte_carlo``'s chunk sizing); progress
-says which structure compiles (k of n) and how fast the runs go.
+``run_study(study, runs, seed)`` runs every structure through ``monte_carlo`` on the same keys (every method sees
+the same noise), case-major, and returns a ``StudyResult``: per method the runs' outputs (host NumPy, one transfer
+per structure) and, for ``averaged`` structures, per-case means of the runs' traces summed on the device
+(``monte_carlo``'s ``summary``; mean-history figures without keeping histories). One compiled program per structure
+whatever ``runs`` and ``seed``; progress says which structure compiles (k of n) and how fast the runs go.
 
 Example (two thresholds of one chi-square detector on one Kalman filter, one program)::
 
@@ -49,27 +42,18 @@ __all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_s
 class Structure(NamedTuple):
     """Methods that share one compiled program.
 
-    ``run(key, case, *params) -> output`` is one run of one method, ``params`` one slice
-    of each of ``axes``; ``methods`` maps each method's name to its cell of the grid (one
-    index per axis). ``averaged``: ``run`` returns ``(output, trace)`` and ``trace`` (e.g.
-    the run's mode-probability history, for a figure) is averaged over the runs of each
-    case on the device instead of kept; a trace that does not depend on an axis is
-    computed once for it. ``batched``: ``run(keys (B,), cases (B, ...), *params)`` runs a
-    whole chunk and returns a leading run axis (B, ...), e.g. to drive a filter's batch
-    kernel (``run_filter``) instead of ``vmap``. ``shared``: data that every run of
-    every cell reads as it is (a design, an ephemeris, a flight's tables: not vmapped),
-    passed to ``run`` after the parameters, ``run(key, case, *params, shared)``; as data,
-    not a closure, so that other values compile nothing new.
-
     Attributes:
       name: str, the structure's name (progress messages, ``StudyResult.seconds``)
-      run: ``run(key, case, *params[, shared]) -> output`` (or ``(output, trace)``), one run
-        of one method
+      run: ``run(key, case, *params[, shared]) -> output`` (or ``(output, trace)``), one run of one method,
+        ``params`` one slice of each of ``axes``
       axes: tuple of parameter pytrees, each with a leading axis (the grid's axes, outer first)
       methods: dict, method name -> its cell of the grid (a tuple of one index per axis)
-      averaged: bool, ``run`` returns ``(output, trace)`` and the traces are averaged per case
-      batched: bool, ``run`` takes and returns a whole chunk of runs (leading axis B)
-      shared: pytree every run of every cell reads whole, or ``None``
+      averaged: bool, ``run`` returns ``(output, trace)`` and ``trace`` (e.g. a mode-probability history) is
+        averaged over each case's runs on the device instead of kept (once per axis it does not depend on)
+      batched: bool, ``run(keys (B,), cases (B, ...), *params)`` takes and returns a whole chunk of runs (leading
+        axis B), e.g. to drive a filter's batch kernel (``run_filter``) instead of ``vmap``
+      shared: pytree every run of every cell reads whole (a design, an ephemeris, a flight's tables: not vmapped),
+        passed after the parameters; data, not a closure, so other values compile nothing new; or ``None``
     """
 
     name: str
@@ -82,16 +66,13 @@ class Structure(NamedTuple):
 
 
 class Study(NamedTuple):
-    """A study's specification: its cases, their names, and the structures that run the
-    methods. ``cases``: a pytree with a leading case axis C (e.g. a stacked ``Fault``;
-    every run of case ``c`` gets slice ``c``), or, where a case's runs differ beyond
-    their noise (a random onset, a dispersion), ``draw(runs, seed)`` returning a pytree
-    with a leading axis of the total number of runs (``C * runs``, or the sum of the
-    per-case ``runs``), case-major (run ``i`` gets slice ``i``).
+    """A study's specification: its cases, their names, and the structures that run the methods.
 
     Attributes:
       name: str, the study's name (progress messages, ``StudyResult.name``)
-      cases: pytree with a leading case axis C, or a callable ``draw(runs, seed)`` (above)
+      cases: pytree with a leading case axis C (e.g. a stacked ``Fault``; case ``c``'s runs get slice ``c``), or,
+        where runs differ beyond their noise (random onset, dispersion), ``draw(runs, seed)`` returning a pytree with
+        a leading axis of all runs (``C * runs`` or the sum of per-case ``runs``), case-major (run ``i``: slice ``i``)
       case_names: tuple of C names, one per case
       structures: tuple of ``Structure``, the methods grouped by compiled program
     """
@@ -105,21 +86,16 @@ class Study(NamedTuple):
 class StudyResult(NamedTuple):
     """What ``run_study`` returns.
 
-    ``outputs[method]``: the method's output of every run, leading axis ``C * runs`` (or
-    the sum of the per-case runs), case-major (``case_slices``). ``means[method]``:
-    (C, ...) per-case mean of the traces of an ``averaged`` structure.
-    ``seconds[structure]``: wall time of its Monte Carlo, compilation included
-    (``compile_seconds``: the compilation alone, 0.0 when the program came from a cache).
-
     Attributes:
       name: the study's name
       runs: int, or a tuple of one count per case
       seed: the PRNG seed of the runs
       case_names: the name of each case
-      outputs: method -> its output of every run (see above)
-      means: method -> (C, ...) per-case means (see above)
-      seconds: structure -> wall time of its Monte Carlo [s] (see above)
-      compile_seconds: structure -> compilation time [s] (see above)
+      outputs: method -> its output of every run, leading axis ``C * runs`` (or the sum of per-case runs),
+        case-major (``case_slices``)
+      means: method -> (C, ...) per-case mean of the traces of an ``averaged`` structure
+      seconds: structure -> wall time of its Monte Carlo [s], compilation included
+      compile_seconds: structure -> compilation time alone [s] (0.0 when the program came from a cache)
     """
 
     name: str
@@ -133,9 +109,8 @@ class StudyResult(NamedTuple):
 
 
 def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
-    """``(key, case) -> output`` with a leading axis per ``structure.axes`` (outer first):
-    ``structure.run`` vmapped over each axis in turn, key and case shared. A ``batched``
-    structure's ``(keys, cases)`` give ``(B, *grid, ...)``: the run axis stays first."""
+    """``(key, case) -> output`` with a leading axis per ``structure.axes`` (outer first): ``structure.run``
+    vmapped over each axis in turn, key and case shared. A ``batched`` structure gives ``(B, *grid, ...)``."""
     count = len(structure.axes)
     extra = () if structure.shared is None else (structure.shared,)
 
@@ -153,8 +128,7 @@ def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
 
 
 def case_slices(runs, num_cases: int) -> list[slice]:
-    """The run ranges of each case in a case-major study output (``runs``: per case, or
-    one count for every case)."""
+    """The run ranges of each case in a case-major output (``runs``: per case, or one count for all)."""
     num_cases = _checks.check_int("num_cases", num_cases, 0, meaning="a number of cases >= 0")
     try:
         counts = np.broadcast_to(np.asarray(runs, int), (num_cases,))
@@ -220,21 +194,15 @@ def run_study(study: Study, runs, seed: int, *, progress: bool = False, chunk_si
     Args:
       study: the ``Study``.
       runs: runs per case: one count for every case, or a sequence of one per case.
-      seed: PRNG seed; run ``i`` (case-major) gets ``split(key(seed), total)[i]`` in every
-        structure (``total``: ``C * runs``, or the sum of the per-case counts).
+      seed: PRNG seed; run ``i`` (case-major) gets ``split(key(seed), total)[i]`` in every structure (``total``:
+        ``C * runs``, or the sum of the per-case counts).
       progress: log which structure compiles and show the runs' progress.
-      chunk_size: runs per compiled call (default: ``monte_carlo``'s, sized for the
-        backend; it does not change any result).
+      chunk_size: runs per compiled call (default: ``monte_carlo``'s, sized for the backend; no effect on results).
       structures: run only these structures (by name; default all).
-      key: the PRNG key to split instead of ``jax.random.key(seed)`` (a study whose runs
-        come from a key derived from its seed).
+      key: PRNG key to split instead of ``jax.random.key(seed)`` (runs from a key derived from the seed).
 
     Returns:
-      ``StudyResult``: per method of the chosen structures, ``outputs[method]`` (NumPy
-      leaves with a leading case-major run axis ``C * runs``, or the sum of the per-case
-      counts, then the run's output shape) and, for an ``averaged`` structure,
-      ``means[method]`` (C, ...) per-case trace means; ``seconds`` and ``compile_seconds``
-      per structure; and the study's name, ``runs``, ``seed`` and case names.
+      ``StudyResult`` of the chosen structures' methods: NumPy outputs, leading case-major run axis.
     """
     num_cases = _check_study(study)
     counts = _run_counts(runs, num_cases)
@@ -291,10 +259,9 @@ _PROGRAMS: dict = {}
 
 
 def _program(structure: Structure) -> Callable:
-    """``(key, (case, case_index), (axes, shared)) -> output`` of a structure (``grid_run``;
-    an ``averaged`` one's ``(output, trace, case_index)``). One function object per
-    ``(run, averaged, batched)``, so that a second study of the same structure, with other
-    runs, seed, parameter values or shared data, reuses ``monte_carlo``'s compiled chunk."""
+    """``(key, (case, case_index), (axes, shared)) -> output`` of a structure (``grid_run``; ``averaged``:
+    ``(output, trace, case_index)``). One function object per ``(run, averaged, batched)``, so another study of the
+    structure (other runs, seed, parameters, shared data) reuses ``monte_carlo``'s compiled chunk."""
     signature = (structure.run, structure.averaged, structure.batched)
     if signature not in _PROGRAMS:
         run, averaged, batched = signature
@@ -311,8 +278,7 @@ def _program(structure: Structure) -> Callable:
 
 @functools.lru_cache(maxsize=64)
 def _case_mean_summary(num_cases: int):
-    """``summary`` for ``monte_carlo``: keep the runs' outputs; total the runs' traces
-    per case and count the runs."""
+    """``summary`` for ``monte_carlo``: keep the outputs; total the traces per case and count the runs."""
 
     def summary(outputs, weight):
         out, values, case_index = outputs

@@ -1,26 +1,22 @@
 """Multi-host Monte Carlo on JAX's multi-controller runtime.
 
-Every process runs the same program (SPMD). ``initialize`` connects it to the others
-(``jax.distributed.initialize``; gloo collectives on CPU), after which ``jax.devices()``
-lists every device of every process and ``monte_carlo`` shards each chunk of runs over
-all of them (a 1-D mesh, processes in order), computes on each process only the runs
-its devices hold, and gathers the outputs (or the streaming summary) once at the end.
-Each run's key depends only on its global index (``run_keys``), so every process gets
-the same results as one process with the same runs per device, bit for bit.
+Every process runs the same program (SPMD). ``initialize`` connects it to the others (``jax.distributed.initialize``;
+gloo collectives on CPU); then ``jax.devices()`` lists every process's devices and ``monte_carlo`` shards each chunk
+of runs over all of them (1-D mesh, processes in order), computes on each process only its devices' runs, and
+gathers the outputs (or streaming summary) once at the end. Run keys depend only on the global index
+(``run_keys``): bit for bit the results of one process with the same runs per device.
 
-Launching. On a cluster, one process per host::
+Launching: on a cluster, one process per host::
 
     jaxfdi run STUDY ... --num-processes N --process-id I --coordinator HOST:PORT
 
-or the environment variables ``JAX_COORDINATOR_ADDRESS`` (JAX's own),
-``JAXFDI_NUM_PROCESSES`` and ``JAXFDI_PROCESS_ID`` (or a SLURM / Open MPI allocation,
-which ``jax.distributed`` detects by itself). On one machine, N local processes
-simulate a cluster::
+or the environment variables ``JAX_COORDINATOR_ADDRESS`` (JAX's own), ``JAXFDI_NUM_PROCESSES``,
+``JAXFDI_PROCESS_ID`` (or a SLURM / Open MPI allocation, which ``jax.distributed`` detects). On one machine, N
+local processes simulate a cluster::
 
     python -m jaxfdi.distributed --num-processes 2 -- python my_study.py
 
-starts N copies of the command with those variables set (a free port on 127.0.0.1)
-and stops them all if one fails.
+starts N copies of the command with those variables set (a free port on 127.0.0.1) and stops all if one fails.
 """
 from __future__ import annotations
 
@@ -49,10 +45,9 @@ class ProcessInfo(NamedTuple):
 
 
 def check_options(num_processes: Any = None, process_id: Any = None, coordinator: Any = None) -> tuple:
-    """Check the launcher options (``None``: not given); return them as
-    ``(num_processes, process_id, coordinator)`` with ints. Raises ``ValueError``
-    naming the option. ``num_processes > 1`` needs all three (from the options or the
-    environment, see the module doc), unless a cluster manager provides them."""
+    """Check the launcher options (``None``: not given); return ``(num_processes, process_id, coordinator)`` with
+    ints; ``ValueError`` naming the option. ``num_processes > 1`` needs all three (options or environment, module
+    doc) unless a cluster manager provides them."""
     def as_int(name, value, minimum):
         if value is None:
             return None
@@ -98,15 +93,12 @@ def initialize(num_processes: int | None = None, process_id: int | None = None, 
                timeout_s: int = 300) -> ProcessInfo:
     """Join the other processes of a multi-process study; a no-op for one process.
 
-    Call before any other JAX work. Values not given come from the environment
-    (``JAXFDI_NUM_PROCESSES``, ``JAXFDI_PROCESS_ID``, ``JAX_COORDINATOR_ADDRESS``); with
-    none at all, one process (nothing to do). On a CPU-only host the cross-process
-    collectives go through gloo.
+    Call before any other JAX work. Values not given come from the environment (``JAXFDI_NUM_PROCESSES``,
+    ``JAXFDI_PROCESS_ID``, ``JAX_COORDINATOR_ADDRESS``); with none, one process. CPU-only hosts use gloo.
 
     Returns:
-      ``ProcessInfo(process_id, num_processes, local_devices, global_devices)``: the
-      process's place (``jax.process_index()``, ``jax.process_count()``) and the device
-      counts (this process's, every process's); ``(0, 1, n, n)`` for one process.
+      ``ProcessInfo(process_id, num_processes, local_devices, global_devices)``: ``jax.process_index()``,
+      ``jax.process_count()`` and the device counts (this process's, all processes'); ``(0, 1, n, n)`` for one.
     """
     import jax
 
@@ -129,9 +121,8 @@ def _checks_timeout(timeout_s) -> None:
 
 
 def allgather(tree: Any) -> list:
-    """Every process's ``tree`` (NumPy leaves of the same shapes on every process), as a
-    list over processes; integer leaves travel as two 32-bit words, so int64 counts
-    survive without ``jax_enable_x64``."""
+    """Every process's ``tree`` (NumPy leaves, same shapes everywhere), as a list over processes; integer leaves
+    travel as two 32-bit words, so int64 counts survive without ``jax_enable_x64``."""
     import jax
     from jax.experimental import multihost_utils
 
@@ -164,10 +155,9 @@ _BARRIERS = [0]
 
 
 def barrier(name: str, timeout_s: int = 3600) -> None:
-    """Wait until every process gets here (the coordination service's barrier, up to
-    ``timeout_s``); a no-op for one process. Called before each cross-process gather: a
-    process still compiling (a loaded host) would otherwise make gloo's set-up, which
-    allows 30 s, fail on the others."""
+    """Wait until every process gets here (coordination-service barrier, up to ``timeout_s``); no-op for one
+    process. Called before each cross-process gather: a process still compiling (loaded host) would otherwise make
+    gloo's set-up (30 s allowed) fail on the others."""
     import jax
 
     if jax.process_count() == 1:
@@ -191,11 +181,10 @@ def free_port() -> int:
 
 def launch_local(command: Sequence[str], num_processes: int, timeout_s: float = 600.0, port: int | None = None,
                  env: dict | None = None) -> list[subprocess.CompletedProcess]:
-    """Run ``num_processes`` copies of ``command`` on this machine as one multi-process
-    study (a simulated cluster): each gets ``JAX_COORDINATOR_ADDRESS=127.0.0.1:PORT``,
-    ``JAXFDI_NUM_PROCESSES`` and its ``JAXFDI_PROCESS_ID``. Waits for all; if one fails
-    or ``timeout_s`` passes, the others are stopped. Returns their completed processes
-    (stdout and stderr captured); raises ``RuntimeError`` with the failing output."""
+    """Run ``num_processes`` copies of ``command`` here as one multi-process study (simulated cluster), each with
+    ``JAX_COORDINATOR_ADDRESS=127.0.0.1:PORT``, ``JAXFDI_NUM_PROCESSES`` and its ``JAXFDI_PROCESS_ID``. Waits for
+    all; if one fails or ``timeout_s`` passes the others are stopped. Returns the completed processes (output
+    captured); raises ``RuntimeError`` with the failing output."""
     num_processes, _, _ = check_options(num_processes, 0, "127.0.0.1:1")
     port = free_port() if port is None else port
     base = dict(os.environ if env is None else env)

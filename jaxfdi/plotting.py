@@ -1,17 +1,13 @@
 """Figures of FDI results, for notebooks and scripts.
 
-Every function draws on ``ax`` when one is given (and returns ``ax.figure``), otherwise
-on a new ``matplotlib.figure.Figure`` that it returns; ``t`` is the (T,) times of the
-samples (default: step indices). Figures are made without pyplot,
-so no function selects or changes the matplotlib backend, opens a window or keeps a
-figure alive in pyplot's registry: in Jupyter a returned figure shows as the cell's
-value (or with ``display(fig)``); in a script, ``fig.savefig(path)``. The CLI selects
-the Agg backend itself before its scenarios draw their figures.
+Each function draws on ``ax`` if given (returning ``ax.figure``), else on a new
+``matplotlib.figure.Figure`` it returns; ``t``: (T,) sample times (default: step indices). No pyplot:
+no backend change, no window, nothing kept in pyplot's registry (Jupyter shows a returned figure as the
+cell's value or with ``display(fig)``; scripts ``fig.savefig(path)``; the CLI selects Agg itself).
 
-The studies' figures keep a house style (``save_figure``): one text column wide at the
-resolution the docs show them, text readable at that width, every panel's axes labelled
-with units, every labelled curve in a legend, one colour per hypothesis across panels and
-figures (``hypothesis_colors``), and a caption that says how many runs the figure shows.
+Studies' figures keep a house style (``save_figure``): one text column wide at the docs' resolution,
+axes labelled with units, labelled curves in a legend, one colour per hypothesis across panels and
+figures (``hypothesis_colors``), a caption giving the number of runs.
 """
 from __future__ import annotations
 
@@ -27,8 +23,7 @@ __all__ = ["plot_statistic", "plot_mode_probabilities", "plot_estimate", "plot_d
 
 
 def new_axes(ax=None, figsize: tuple[float, float] = (7.0, 3.5)):
-    """``(figure, ax)``: ``ax`` and its figure when given, else a new ``Figure`` (not
-    registered with pyplot) with one axes of size ``figsize`` inches."""
+    """``(figure, ax)``: ``ax`` and its figure, else a new unregistered ``Figure`` of ``figsize`` inches."""
     if ax is not None:
         return ax.figure, ax
     from matplotlib.figure import Figure
@@ -137,8 +132,7 @@ def plot_estimate(estimate, truth=None, std=None, *, t=None, label: str = "estim
 
 
 def plot_delays(delays: Mapping[str, Sequence[float]], *, unit: str = "s", ax=None):
-    """Detection delays per fault (or per method) as box plots; NaN (not detected) left out
-    and counted in the label.
+    """Detection delays per fault (or per method) as box plots; NaN (not detected) left out and counted in the label.
 
     Args:
       delays: name -> delays of the runs (NaN for a run never detected).
@@ -223,10 +217,8 @@ def plot_loss_history(step, train=None, validation=None, *, best_step: int | Non
     return fig
 
 
-#: The house style of the figures the studies write: one text column wide
-#: (``COLUMN_WIDTH_IN``), saved at ``DPI`` so that the PNG is about the 800 px a notebook or
-#: the documentation shows it at, its text in ``FONT_PT`` (titles, axis labels) and
-#: ``SMALL_FONT_PT`` (ticks, legends, the caption) points, readable at that width.
+#: house style: ``COLUMN_WIDTH_IN`` wide at ``DPI`` (~800 px, as notebooks and docs show it); text in
+#: ``FONT_PT`` (titles, axis labels) and ``SMALL_FONT_PT`` (ticks, legends, caption)
 COLUMN_WIDTH_IN = 7.5
 DPI = 110
 FONT_PT = 9.0
@@ -239,9 +231,8 @@ _RUN_COUNT = re.compile(r"\b(\d[\d,]*|one|two|three|four|five|ten)\s+(\w+\s+){0,
 
 
 def hypothesis_colors(names: Sequence[str]) -> dict[str, str]:
-    """One colour per hypothesis, the same in every panel and figure of a study: the
-    fault-free one (``none``, ``normal``, ...) dark grey, the others matplotlib's ``tab10``
-    colours in the order given (pass the study's full list of names, not a panel's).
+    """One colour per hypothesis across a study's panels and figures: fault-free (``none``, ``normal``, ...)
+    dark grey, the others ``tab10`` in the order given (pass the study's full list, not a panel's).
 
     Returns:
       ``{name: colour}`` for every name.
@@ -260,9 +251,8 @@ def hypothesis_colors(names: Sequence[str]) -> dict[str, str]:
 
 
 def _check_figure(fig, caption: str) -> None:
-    """The house rules a saved figure keeps: every panel's axes are labelled (a panel may
-    share the label of its row's or column's neighbour), every labelled curve is in a
-    legend, and the caption says how many runs (flights, epochs) the figure shows."""
+    """House rules: every panel's axes labelled (or sharing a row/column neighbour's label), every labelled
+    curve in a legend, the caption giving the number of runs (flights, epochs)."""
     if not _RUN_COUNT.search(caption):
         raise ValueError(f"caption: expected the number of runs (flights, epochs) the figure shows, got {caption!r}")
     # a polar panel's angle and radius are named by its title
@@ -303,13 +293,9 @@ def _house_style(fig) -> None:
 
 
 def save_figure(fig, path, caption: str, dpi: int = DPI):
-    """Write ``fig`` as a PNG at ``path`` (atomically: ``_io.atomic_write``) in the house
-    style (``COLUMN_WIDTH_IN`` wide at ``dpi``, text at ``FONT_PT``/``SMALL_FONT_PT``),
-    with ``caption`` under it: what the figure shows, over how many runs, and where it
-    differs from the paper's figure. A panel without axis labels, a labelled curve in no
-    legend or a caption without the run count is a ``ValueError``. The caption is wrapped
-    to the figure's width and the layout (tight or constrained) makes room for it.
-    Returns the path written."""
+    """Write ``fig`` as a PNG at ``path`` (atomically, ``_io.atomic_write``) in the house style with
+    ``caption`` under it (what it shows, over how many runs, how it differs from the paper's), wrapped
+    to the figure's width; ``ValueError`` if the house rules (``_check_figure``) fail. Returns the path."""
     if not isinstance(caption, str) or not caption.strip():
         raise ValueError(f"caption: expected a sentence saying what the figure shows, got {caption!r}")
     _check_figure(fig, caption)

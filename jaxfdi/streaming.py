@@ -1,28 +1,20 @@
-"""Streaming detection summaries: exact counts and a delay histogram, merged across
-Monte Carlo chunks and hosts, for studies too large to keep every run's record.
+"""Streaming detection summaries: exact counts and a delay histogram, merged across Monte Carlo chunks and hosts,
+for studies too large to keep every run's record.
 
-``detection_counts`` folds a chunk of ``DetectionRecord`` s (leading run axis) into
-integer counts (runs, unhealthy runs, faulty runs, detections, correct isolations,
-false-alarm runs and steps, steps before the onset) and the histogram of the detection
-delays in steps, with bins ``[b w, (b + 1) w)`` of ``w = bin_width`` steps over
-``[0, horizon)`` (every delay of a run ``horizon`` steps long falls in one). Counts merge
-by addition (``merge_counts``), so the summary of a whole study is the same whatever its
-chunks and hosts were, and ``summarize_counts`` gives the ``DetectionSummary`` of
-``metrics.summarize_detection``: every count and rate exactly, the mean delay exactly
-(an integer sum), and the median and 90th percentile from the histogram; as there,
-delays are those of the clean detected runs (no alarm before the onset).
+``detection_counts`` folds a chunk of ``DetectionRecord`` s (leading run axis) into integer counts (runs, unhealthy,
+faulty, detections, correct isolations, false-alarm runs and steps, pre-onset steps) and a histogram of detection
+delays in steps, bins ``[b w, (b + 1) w)``, ``w = bin_width``, over ``[0, horizon)``. Counts merge by addition
+(``merge_counts``): the study's summary does not depend on chunks or hosts. ``summarize_counts`` gives
+``metrics.summarize_detection``'s ``DetectionSummary``: counts, rates and mean delay exact (integer sum), median and
+90th percentile from the histogram; delays of the clean detected runs (no alarm before the onset).
 
-Quantiles (NumPy's default "linear" definition on the sorted delays ``d_0 <= ... <=
-d_{n-1}``: ``d_j + (h - j)(d_{j+1} - d_j)``, ``h = (n - 1) q``, ``j = floor(h)``): the
-histogram tells exactly which bin holds each order statistic ``d_j``; it is taken as
-the middle of the integer delays of its bin, ``b w + (w - 1) / 2``. The result is within
-``(w - 1) / 2`` steps of NumPy's (``quantile_resolution``), and exact for ``w = 1``.
+Quantiles: NumPy's "linear" definition on sorted delays ``d_0 <= ... <= d_{n-1}``, ``d_j + (h - j)(d_{j+1} - d_j)``,
+``h = (n - 1) q``, ``j = floor(h)``. The histogram gives each ``d_j``'s bin; ``d_j`` is taken as the middle of its
+integer delays, ``b w + (w - 1) / 2``: within ``(w - 1) / 2`` steps of NumPy (``quantile_resolution``), exact at w=1.
 
-``detection_reducer`` packages this for ``monte_carlo(..., reduce=...)``, folding each
-chunk on the host; ``detection_summary`` computes the same counts on the device inside
-each chunk's program (``monte_carlo(..., summary=...)``), added up there and moved to
-the host once: no round-trip per chunk, and no per-run output kept (a GPU study of
-10^8 runs holds a histogram, not 10^8 records).
+``detection_reducer``: for ``monte_carlo(..., reduce=...)``, folding each chunk on the host. ``detection_summary``:
+the same counts on the device in each chunk's program (``monte_carlo(..., summary=...)``), moved to the host once:
+no round-trip per chunk, no per-run output kept (a GPU study of 10^8 runs holds a histogram, not 10^8 records).
 """
 from __future__ import annotations
 
@@ -76,9 +68,8 @@ class DetectionCounts(NamedTuple):
 
 
 class Reducer(NamedTuple):
-    """How ``monte_carlo`` folds outputs instead of stacking them: ``init() -> state``,
-    ``update(state, outputs) -> state`` for a chunk's outputs (NumPy, leading run axis),
-    ``merge(states) -> state`` for the states of several hosts (associative)."""
+    """How ``monte_carlo`` folds outputs instead of stacking them: ``init() -> state``, ``update(state, outputs) ->
+    state`` per chunk (NumPy, leading run axis), ``merge(states) -> state`` across hosts (associative)."""
 
     init: Callable[[], Any]
     update: Callable[[Any, Any], Any]
@@ -101,8 +92,8 @@ def detection_counts(record: DetectionRecord, horizon: int, bin_width: int = 1, 
       record: ``DetectionRecord`` with a leading run axis.
       horizon: steps per run (delays fall in ``[0, horizon)``).
       bin_width: steps per delay-histogram bin.
-      labels: optional (runs,) true fault labels; a detected faulty run counts in
-        ``isolated_runs`` when ``record.isolated`` equals its label.
+      labels: optional (runs,) true labels; ``isolated_runs`` counts detected faulty runs with ``record.isolated ==
+        label``.
     """
     empty = empty_counts(horizon, bin_width)
     onset = np.asarray(record.onset)
@@ -113,8 +104,8 @@ def detection_counts(record: DetectionRecord, horizon: int, bin_width: int = 1, 
 
 
 def _counts(xp, record: DetectionRecord, valid, labels, horizon: int, bin_width: int, integer) -> dict:
-    """The counts of ``DetectionCounts`` (and ``delays_outside``) of the ``valid`` runs of
-    ``record``, with ``xp`` NumPy (host, int64) or ``jax.numpy`` (inside a program)."""
+    """``DetectionCounts`` counts (and ``delays_outside``) of the ``valid`` runs of ``record``, ``xp`` NumPy (host,
+    int64) or ``jax.numpy`` (in a program)."""
     onset = xp.asarray(record.onset).astype(integer)
     valid = xp.asarray(valid, bool)
     healthy = valid & (xp.broadcast_to(xp.asarray(record.first_unhealthy), onset.shape) < 0)
@@ -156,8 +147,7 @@ def _counts(xp, record: DetectionRecord, valid, labels, horizon: int, bin_width:
 
 
 def _finish(totals: dict, empty: DetectionCounts) -> DetectionCounts:
-    """``DetectionCounts`` of ``_counts``' totals (host int64); a delay outside the
-    horizon is an error (the runs are not ``horizon`` steps long)."""
+    """``DetectionCounts`` of ``_counts``' totals (host int64); a delay outside the horizon raises (runs longer)."""
     host = {name: np.asarray(value, np.int64) for name, value in totals.items()}
     longer = int(host.pop("runs_longer"))
     if longer:   # as metrics.summarize_detection: an onset past a short horizon would count as fault-free
@@ -189,14 +179,12 @@ def merge_counts(*parts: DetectionCounts) -> DetectionCounts:
 
 
 def quantile_resolution(counts: DetectionCounts, Ts: float = 1.0) -> float:
-    """Largest difference between ``delay_quantile`` and NumPy's quantile of the same
-    delays: ``(bin_width - 1) / 2`` steps, in the unit of ``Ts``."""
+    """Largest gap between ``delay_quantile`` and NumPy's quantile: ``(bin_width - 1) / 2`` steps, unit of ``Ts``."""
     return (int(counts.bin_width) - 1) / 2 * Ts
 
 
 def delay_quantile(counts: DetectionCounts, q: float, Ts: float = 1.0) -> float:
-    """The ``q`` quantile of the detection delays from the histogram (module doc); NaN
-    when nothing was detected."""
+    """The ``q`` quantile of the detection delays from the histogram (module doc); NaN if nothing was detected."""
     _checks.check_scalar("q", q, 0.0, 1.0, meaning="a quantile level in [0, 1]")
     histogram = np.asarray(counts.delay_histogram, np.int64)
     total = int(histogram.sum())
@@ -217,8 +205,7 @@ def delay_quantile(counts: DetectionCounts, q: float, Ts: float = 1.0) -> float:
 
 
 def summarize_counts(counts: DetectionCounts, Ts: float = 1.0) -> DetectionSummary:
-    """``DetectionSummary`` of the counts: the same numbers as ``summarize_detection`` of
-    the records (median and p90 within ``quantile_resolution``)."""
+    """``DetectionSummary`` as ``summarize_detection`` of the records (median, p90 within ``quantile_resolution``)."""
     _checks.check_positive("Ts", Ts, "a positive sample period")
     nan = float("nan")
     faulty, detected, scored = int(counts.faulty_runs), int(counts.detected_runs), int(counts.delay_runs)
@@ -250,16 +237,13 @@ def isolation_rate(counts: DetectionCounts) -> float:
 
 def detection_reducer(horizon: int, bin_width: int = 1, record: Callable[[Any], DetectionRecord] | None = None,
                       label: Callable[[Any], Any] | None = None) -> Reducer:
-    """A ``Reducer`` of ``DetectionCounts`` for ``monte_carlo(..., reduce=...)``:
-    ``record(outputs)`` picks the records from ``run_one``'s outputs (default: the
-    outputs are the record), ``label(outputs)`` the true labels (optional).
+    """A ``Reducer`` of ``DetectionCounts`` for ``monte_carlo(..., reduce=...)``; ``record(outputs)`` picks the
+    records from ``run_one``'s outputs (default: the outputs), ``label(outputs)`` the true labels (optional).
 
     Returns:
-      ``Reducer(init, update, merge)``: ``init()`` gives the empty ``DetectionCounts``
-      (``ceil(horizon / bin_width)`` delay bins); ``update(counts, outputs)`` adds the
-      ``detection_counts`` of a chunk's records; ``merge(states)`` sums the counts of
-      several hosts (``merge_counts``). ``summarize_counts`` turns the final counts into a
-      ``DetectionSummary``.
+      ``Reducer(init, update, merge)``: ``init()`` gives empty ``DetectionCounts`` (``ceil(horizon / bin_width)``
+      delay bins); ``update(counts, outputs)`` adds a chunk's ``detection_counts``; ``merge(states)`` sums hosts'
+      counts (``merge_counts``). ``summarize_counts`` turns the final counts into a ``DetectionSummary``.
     """
     empty_counts(horizon, bin_width)  # checks the arguments now
     pick = record or (lambda outputs: outputs)
@@ -272,8 +256,8 @@ def detection_reducer(horizon: int, bin_width: int = 1, record: Callable[[Any], 
 
 
 class DeviceSummary(NamedTuple):
-    """``summary`` for ``monte_carlo(..., summary=summary)`` (counts summed on the device)
-    and ``counts(totals) -> DetectionCounts`` for what it returns."""
+    """``summary`` for ``monte_carlo(..., summary=summary)`` (counts summed on the device) and
+    ``counts(totals) -> DetectionCounts`` for its result."""
 
     summary: Callable[[Any, Any], Any]
     counts: Callable[[Any], DetectionCounts]
@@ -281,15 +265,12 @@ class DeviceSummary(NamedTuple):
 
 def detection_summary(horizon: int, bin_width: int = 1, record: Callable[[Any], DetectionRecord] | None = None,
                       label: Callable[[Any], Any] | None = None) -> DeviceSummary:
-    """``detection_counts`` computed on the device: ``monte_carlo(run_one, key, n,
-    summary=s.summary)`` returns ``(None, totals)`` and ``s.counts(totals)`` the
-    ``DetectionCounts`` of all ``n`` runs, equal to ``detection_counts`` of their records
-    (the padded runs of the last chunk weigh 0). ``record``/``label`` pick the records
-    and the true labels from the run's outputs, as in ``detection_reducer``. Counts are
-    in JAX's default integer (int64 with ``jaxfdi.enable_x64()``, else int32: exact up to
-    2^31 - 1 steps); a delay outside ``[0, horizon)`` cannot raise inside the program, so
-    it is counted apart and ``counts`` raises the ``ValueError`` ``detection_counts``
-    would."""
+    """``detection_counts`` on the device: ``monte_carlo(run_one, key, n, summary=s.summary)`` returns
+    ``(None, totals)``, ``s.counts(totals)`` the ``DetectionCounts`` of all ``n`` runs, equal to ``detection_counts``
+    of their records (last chunk's padding weighs 0). ``record``/``label`` as in ``detection_reducer``. Counts in
+    JAX's default integer (int64 with ``jaxfdi.enable_x64()``, else int32: exact up to 2^31 - 1 steps); a delay
+    outside ``[0, horizon)`` cannot raise in the program, so it is counted apart and ``counts`` raises
+    ``detection_counts``' ``ValueError``."""
     empty = empty_counts(horizon, bin_width)  # checks the arguments now
     pick = record or (lambda outputs: outputs)
 

@@ -1,8 +1,7 @@
-"""Control: discrete LQR with integral action, eigenstructure assignment of a
-reconfigured gain for a faulty actuator, and the PI controller that switches to it when
-the FDD isolates a fault (Lee & Lyou, Section IV); reaction-wheel attitude control and
-the spacecraft as a loop plant (Choi & Park 2009); F-16 stability augmentation with
-altitude and bank-angle hold, and the sampled F-16 as loop stages (Park et al. 2004)."""
+"""Control: discrete LQR with integral action, eigenstructure assignment of a reconfigured gain for a faulty actuator,
+and the PI controller that switches to it when the FDD isolates a fault (Lee & Lyou, Section IV); reaction-wheel
+attitude control and the spacecraft as a loop plant (Choi & Park 2009); F-16 stability augmentation with altitude and
+bank-angle hold, and the sampled F-16 as loop stages (Park et al. 2004)."""
 from jaxfdi.control._attitude import control_torque, slew
 from jaxfdi.control._closed_loop import reconfigurable_pi
 from jaxfdi.control._eigenstructure import assign_eigenstructure

@@ -1,25 +1,19 @@
 """Attitude control with reaction wheels: a rest-to-rest slew, quaternion PD with
 feed-forward, and minimum-norm wheel torque allocation (Choi & Park 2009 leave the law open).
 
-Reference: a slew by ``angle`` about a fixed body axis ``e`` with the versine profile
-``theta(s) = angle (s - sin(2 pi s) / (2 pi))``, ``s = (t - start) / duration`` in
-``[0, 1]`` (zero rate and acceleration at both ends; Wie 2008, sec. 7.3), so
-``q_ref = [cos(theta/2), sin(theta/2) e]``, ``w_ref = theta' e``, ``alpha_ref = theta'' e``.
+Reference: slew by ``angle`` about a fixed body axis ``e``, versine profile
+``theta(s) = angle (s - sin(2 pi s) / (2 pi))``, ``s = (t - start) / duration`` in ``[0, 1]`` (zero rate
+and acceleration at both ends; Wie 2008, sec. 7.3): ``q_ref = [cos(theta/2), sin(theta/2) e]``,
+``w_ref = theta' e``, ``alpha_ref = theta'' e``.
 
-Law (Wie, Weiss & Arapostathis 1989, with gyroscopic feed-forward): with the attitude
-error ``dq = q_ref^* (x) q`` (sign chosen so that ``dq_0 >= 0``, the short way round) and
-the rate error ``dw = w - R(dq)^T w_ref``,
+Law (Wie, Weiss & Arapostathis 1989, with gyroscopic feed-forward), ``dq = q_ref^* (x) q`` (``dq_0 >= 0``:
+the short way), ``dw = w - R(dq)^T w_ref``:
 
-    T_c = I alpha_ref + w x (I w + h_w) - 2 K_p dq_vec - K_d dw,
+    T_c = I alpha_ref + w x (I w + h_w) - 2 K_p dq_vec - K_d dw,   K_p = I w_n^2,  K_d = 2 zeta w_n I.
 
-``K_p = I w_n^2``, ``K_d = 2 zeta w_n I``. The wheels deliver ``-H^T tau`` to the body
-(``tau`` the motor torques), so ``tau = -H (H^T H)^-1 T_c``, the minimum-norm
-allocation (pseudo-inverse of ``H^T``), scaled down as a whole if any wheel would exceed
-``max_wheel_torque`` (the direction of the torque is kept).
-
-The loop's parts (``jaxfdi._loop``): ``wheel_attitude_controller`` (the law above) and
-``wheel_plant``, the truth of ``models.reaction_wheels`` with gyro noise, wheel torque
-noise, an external disturbance torque and a wheel or gyro fault.
+The wheels deliver ``-H^T tau``, so ``tau = -H (H^T H)^-1 T_c`` (minimum norm), scaled down as a whole
+(direction kept) if a wheel would exceed ``max_wheel_torque``. Loop parts (``jaxfdi._loop``):
+``wheel_attitude_controller`` and ``wheel_plant``.
 """
 from __future__ import annotations
 
@@ -72,8 +66,7 @@ def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, dura
     """An eigen-axis slew of ``angle_deg`` degrees about ``axis`` from ``start`` over ``duration`` seconds.
 
     Returns:
-      ``Slew`` in ``dtype`` (default float): the unit ``axis`` (3,), the ``angle`` () in rad,
-      ``start`` () and ``duration`` () in s.
+      ``Slew`` in ``dtype`` (default float), ``axis`` normalised, ``angle`` in rad.
     """
     dtype = dtype or jnp.result_type(float)
     _checks.check_matrix("axis", axis, (3,), "rotation axis")
@@ -113,12 +106,10 @@ def slew_reference(t: Array, profile: Slew) -> tuple[Array, Array, Array]:
 
 def control_torque(q: Array, w: Array, wheel_momentum: Array, t: Array, profile: Slew, gains: AttitudeGains,
                    inertia: Array) -> Array:
-    """Commanded body torque from the attitude ``q``, the rate ``w`` (gyros)
-    and the wheels' momentum ``h_w`` as the flight software believes it.
+    """Commanded body torque from attitude ``q``, gyro rate ``w`` and the believed wheel momentum ``h_w``.
 
     Returns:
-      (3,) ``T_c = I alpha_ref + w x (I w + h_w) - 2 K_p dq_vec - K_d dw`` in the body frame
-      [N m], for the slew reference at time ``t`` (module doc).
+      (3,) ``T_c`` (module doc) in the body frame [N m] for the slew reference at ``t``.
     """
     q_ref, w_ref, alpha_ref = slew_reference(t, profile)
     dq = quaternion_multiply(quaternion_conjugate(q_ref), q)
@@ -129,8 +120,7 @@ def control_torque(q: Array, w: Array, wheel_momentum: Array, t: Array, profile:
 
 
 def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: Array) -> Array:
-    """Motor torques ``tau`` (N,) with ``-H^T tau = T_c``, minimum norm, saturated by
-    uniform scaling."""
+    """Motor torques ``tau`` (N,) with ``-H^T tau = T_c``, minimum norm, saturated by uniform scaling."""
     _checks.check_shape("torque", torque, (None,), "the commanded body torque (3,)")
     size = _checks.shape_of(torque)[0]
     _checks.check_shape("wheel_axes", wheel_axes, (None, size), f"H: N wheels x {size} body axes")
@@ -142,11 +132,9 @@ def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: A
 
 def wheel_attitude_controller(params: SpacecraftParams, gains: AttitudeGains, profile: Slew,
                               initial_speeds: Array) -> Controller:
-    """The attitude loop as a ``loop.Controller``: quaternion PD with gyroscopic
-    feed-forward on the sensed ``AttitudeReading`` (``control_torque``), minimum-norm
-    allocation to the wheels (``allocate_wheel_torques``); its state is the commanded
-    wheel speeds, which the flight software integrates from the torques it commands,
-    ``Omega_cmd[k+1] = Omega_cmd[k] + dt tau[k] / I_w``. Returns a ``WheelCommand``."""
+    """The attitude loop as a ``loop.Controller`` on an ``AttitudeReading`` (``control_torque``,
+    ``allocate_wheel_torques``); state: commanded speeds ``Omega_cmd[k+1] = Omega_cmd[k] + dt tau[k] / I_w``.
+    Returns a ``WheelCommand``."""
 
     def step(commanded: Array, k: Array, reading, exogenous):
         t = k * params.dt
@@ -174,18 +162,14 @@ class WheelSensed(NamedTuple):
 
 def wheel_plant(params: SpacecraftParams, fault, gyro_sigma: Array, disturbance_sigma: Array,
                 wheel_noise_sigma: Array) -> Plant:
-    """The spacecraft truth as a ``loop.Plant`` under a ``fault`` (scalar leaves): a wheel
-    fault (``Target.ACTUATOR``, component = wheel) or a gyro fault (``Target.SENSOR``,
-    component = body axis: ``faults.apply_fault`` on the reading, e.g. DEAD = NaN, STUCK =
-    the onset's reading held to the last bit).
+    """The spacecraft truth as a ``loop.Plant`` under ``fault`` (scalar leaves): wheel (``Target.ACTUATOR``,
+    component = wheel) or gyro (``Target.SENSOR``, component = axis; ``faults.apply_fault`` on the reading:
+    DEAD = NaN, STUCK = onset reading held to the last bit).
 
-    ``measure``: ``AttitudeReading(q, w + v)``, ``v ~ N(0, gyro_sigma^2 I)``, then the gyro
-    fault; ``advance`` with a ``WheelCommand``: the wheels deliver ``delivered_torque`` plus
-    white torque noise (``wheel_noise_sigma``), a stop moves its wheel's momentum to the
-    body (``stop_transfer``), and the truth moves one RK4 step with a white external
-    torque (``disturbance_sigma``). Step ``k``'s draws come from its key ``fold_in(key, k)``.
-    The plant's state is ``(x, held)``: the truth ``[q, w, Omega]`` and the value a STUCK
-    gyro holds.
+    ``measure``: ``AttitudeReading(q, w + v)``, ``v ~ N(0, gyro_sigma^2 I)``, then the gyro fault;
+    ``advance(WheelCommand)``: ``delivered_torque`` + white noise ``wheel_noise_sigma``, a stop's momentum
+    to the body (``stop_transfer``), one RK4 step with white external torque ``disturbance_sigma``. Draws
+    from ``fold_in(key, k)``; state ``(x, held)``: truth ``[q, w, Omega]`` and a STUCK gyro's value.
     """
     dtype = params.inertia.dtype
     N = params.wheel_axes.shape[0]

@@ -1,10 +1,5 @@
-"""A reconfigurable PI controller for fault-tolerant control (Lee & Lyou, eqs. 22-29): the
-LQR-PI state feedback ``u = -K [x_hat; z]`` on an estimate, switched to the
-eigenstructure-assignment gain for ``B_f = B (I - diag(b))`` (a ``GainSchedule``
-tabulated once, ``control.eigenstructure``) while an actuator effectiveness loss ``b`` is
-isolated, with an isolated additive actuator fault compensated by adding its estimate to
-``u``. It reads a ``Reconfiguration`` from the FDI stage of a ``jaxfdi._loop`` closed loop;
-the VTOL loop of Lee & Lyou that feeds it is ``jaxfdi.scenarios.vtol_loop``.
+"""A reconfigurable PI controller for fault-tolerant control (Lee & Lyou, eqs. 22-29), fed a
+``Reconfiguration`` by a ``jaxfdi._loop`` FDI stage (the VTOL loop: ``jaxfdi.scenarios.vtol_loop``).
 """
 from __future__ import annotations
 
@@ -37,17 +32,15 @@ class Reconfiguration(NamedTuple):
 
 def reconfigurable_pi(gain: Array, schedule: GainSchedule, H: Array, command: Array, Ts: float,
                       dtype=None) -> Controller:
-    """The PI state feedback of eq. 22, ``u = -K [x_hat; z] (+ additive fix)``, with the
-    nominal ``gain`` K (nu, n + g), or the eigenstructure-assignment gain ``scheduled_gain``
-    of ``schedule`` while an effectiveness loss is isolated; integrator
-    ``z[k+1] = z[k] + Ts (command - H x_hat[k|k])`` on the tracked outputs ``H`` (g, n).
-    It reads the FDI's view as a pair ``(Reconfiguration, anything)``; its state is ``z``
-    (g,), of ``dtype`` (default: the gain's).
+    """PI state feedback of eq. 22, ``u = -K [x_hat; z]`` plus an isolated additive actuator fault's estimate;
+    ``K`` the nominal ``gain`` (nu, n + g), or while an effectiveness loss ``b`` is isolated the
+    eigenstructure gain for ``B_f = B (I - diag(b))`` (``scheduled_gain`` of the once-tabulated
+    ``schedule``); ``z[k+1] = z[k] + Ts (command - H x_hat[k|k])``, tracked outputs ``H`` (g, n). View: a pair
+    ``(Reconfiguration, anything)``; state ``z`` (g,) of ``dtype`` (default: the gain's).
 
     Returns:
       ``Controller(init, step)`` (not feed-forward): ``init()`` gives ``z = 0`` (g,);
-      ``step(z, k, view, exogenous) -> (z[k+1], u[k])`` with ``u`` (nu,) and
-      ``exogenous`` unused.
+      ``step(z, k, view, exogenous) -> (z[k+1], u[k])`` with ``u`` (nu,) and ``exogenous`` unused.
     """
     g = H.shape[0]
     dtype = dtype or gain.dtype

@@ -1,33 +1,21 @@
 """Eigenstructure assignment of a reconfigured state-feedback gain for a faulty actuator
 (Lee & Lyou, eqs. 23-29; Zhang & Jiang 1999, 2000).
 
-Sign convention: ``u = -K x`` as in ``lqr_gain`` (SciPy, MATLAB), so closed loops are
-``A_bar - B K``; the paper's ``u = K x`` gains are the negatives of these.
+Sign: ``u = -K x`` as ``lqr_gain`` (closed loop ``A_bar - B K``); the paper's ``u = K x`` gains are the negatives.
 
-Given the nominal closed loop ``A_bar - B_bar K_n`` with eigenvalues ``lambda_i`` and
-eigenvectors ``v_i``, and the faulty input matrix ``B_f``, find ``K_f`` such that
-``A_bar - B_f K_f`` keeps every ``lambda_i`` (eq. 23) with eigenvectors as close as
-possible to the nominal ones. An eigenvector of the faulty loop must lie in the span of
-``E_i = (lambda_i I - A_bar)^-1 B_f`` (eq. 24); the closest one (eq. 25, ``W_i = I``)
-is the projection ``v_i^f = E_i alpha_i``, ``alpha_i = E_i^+ v_i`` (eq. 26). The span
-is computed as the null space of ``[lambda_i I - A_bar, -B_f]`` by SVD — the "SVD-based"
-assignment of the paper, which stays defined when ``lambda_i`` is also an eigenvalue of
-``A_bar`` (the integrators put 1 in both). Then
-``(lambda_i I - A_bar) v_i^f = B_f alpha_i`` and ``K_f v_i^f = -alpha_i`` for all i, i.e.
-``K_f = -[alpha_1 ... alpha_N] (V^f)^-1``, which is minus the paper's eq. 29
-``B_f^+ (V^f Lambda - A_bar V^f) (V^f)^-1`` whenever ``B_f`` has full column rank
-(the SVDs of eq. 28 are the pseudo-inverses). Complex-conjugate eigenvalues give
-conjugate columns, so ``K_f`` is real up to round-off (its imaginary part is reported).
+Find ``K_f`` so ``A_bar - B_f K_f`` keeps the nominal ``lambda_i`` (eq. 23) with eigenvectors nearest the nominal
+``v_i``: ``v_i^f`` lies in the span of ``E_i = (lambda_i I - A_bar)^-1 B_f`` (eq. 24); nearest (eq. 25, ``W_i = I``):
+``v_i^f = E_i alpha_i``, ``alpha_i = E_i^+ v_i`` (eq. 26). The span is the null space of ``[lambda_i I - A_bar, -B_f]``
+by SVD (the paper's "SVD-based" assignment), defined also where ``lambda_i`` is an eigenvalue of ``A_bar`` (the
+integrators' 1). ``K_f v_i^f = -alpha_i``: ``K_f = -[alpha_1 ... alpha_N] (V^f)^-1``, minus eq. 29
+``B_f^+ (V^f Lambda - A_bar V^f) (V^f)^-1`` when ``B_f`` has full column rank (eq. 28's SVDs are the pseudo-inverses).
+Conjugate eigenvalues give conjugate columns: ``K_f`` is real up to round-off (imaginary part reported).
 
-A totally failed actuator (a zero column of ``B_f``) makes ``E_i`` rank-deficient: the
-pseudo-inverse gives the minimum-norm ``alpha_i``, whose component on the dead input is
-0, so that input's row of ``K_f`` is 0 and the remaining inputs assign the eigenvalues
-if ``(A_bar, B_f)`` can still move them. When it cannot (on the VTOL tracking
-``v_h`` and ``theta``, one actuator cannot hold two integrators: a mode at 1 becomes
-uncontrollable), ``V^f`` is singular, ``K_f`` is the least-squares (pseudo-inverse)
-solution of ``K_f V^f = -[alpha_i]``, and ``assignment_residual`` says which eigenvalues
-were kept. (The paper's design, tracking ``v_h`` and ``q``, has that mode at 1 already
-in the nominal loop, so there either actuator alone keeps every eigenvalue.)
+A dead actuator (zero column of ``B_f``): minimum-norm ``alpha_i`` has 0 on it, so its row of ``K_f`` is 0 and the
+others assign what ``(A_bar, B_f)`` can move. If not (VTOL tracking ``v_h`` and ``theta``: one actuator cannot hold two
+integrators, a mode at 1 becomes uncontrollable), ``V^f`` is singular, ``K_f`` is the least-squares solution of
+``K_f V^f = -[alpha_i]``, and ``assignment_residual`` shows which eigenvalues were kept. (The paper's design, tracking
+``v_h`` and ``q``, has that mode at 1 already, so either actuator alone keeps every eigenvalue.)
 """
 from __future__ import annotations
 
@@ -52,10 +40,8 @@ class EigenstructureResult(NamedTuple):
       gain: (p, N) real K_f: u = -K_f x, closed loop A_bar - B_f K_f
       eigenvectors: (N, N) complex V^f, columns v_i^f (eq. 26)
       gain_imaginary: () max |Im K_f| before taking the real part
-      eigenvector_matrix_cond: () condition number of V^f
-          (huge: not every eigenvalue is assignable)
-      assignment_residual: (N,) |(A_bar - B_f K_f) v_i^f - lambda_i v_i^f| / |v_i^f|: ~0 where
-          assigned
+      eigenvector_matrix_cond: () condition number of V^f (huge: not every eigenvalue is assignable)
+      assignment_residual: (N,) |(A_bar - B_f K_f) v_i^f - lambda_i v_i^f| / |v_i^f|: ~0 where assigned
     """
 
     gain: Array
@@ -78,24 +64,19 @@ def nominal_eigenstructure(A_bar, B_bar, K_nominal) -> tuple[np.ndarray, np.ndar
 
 
 def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eigenvectors: Array) -> EigenstructureResult:
-    """Reconfigured gain ``K_f`` (``u = -K_f x``) such that ``A_bar - B_f K_f`` keeps
-    ``eigenvalues``, with eigenvectors projected onto the faulty system's admissible
-    subspaces (eq. 26, ``W_i = I``).
+    """Reconfigured gain ``K_f`` (``u = -K_f x``): ``A_bar - B_f K_f`` keeps ``eigenvalues``, eigenvectors
+    projected onto the admissible subspaces (eq. 26, ``W_i = I``). Traceable (``jit``/``vmap`` over
+    ``B_faulty``: reconfigure from an online fault estimate).
 
     Args:
       A_bar: (N, N) open-loop (augmented) state matrix.
       B_faulty: (N, p) faulty input matrix ``B_f``.
       eigenvalues: (N,) complex nominal closed-loop eigenvalues (distinct).
-      eigenvectors: (N, N) complex nominal eigenvectors (columns), e.g. from
-        ``nominal_eigenstructure``.
-
-    Traceable (``jit``/``vmap`` over ``B_faulty``), so a closed loop can reconfigure
-    from an online fault estimate.
+      eigenvectors: (N, N) complex nominal eigenvectors (columns), e.g. ``nominal_eigenstructure``'s.
 
     Returns:
-      ``EigenstructureResult``: the real gain ``K_f`` (p, N), the assigned eigenvectors
-      ``V^f`` (N, N) complex, the largest ``|Im K_f|`` dropped (), the condition number of
-      ``V^f`` () and each eigenvalue's assignment residual (N,) (~0 where it is kept).
+      ``EigenstructureResult``: real ``K_f`` (p, N), ``V^f`` (N, N), dropped max ``|Im K_f|``, ``cond(V^f)``,
+      residual per eigenvalue (N,) (~0 where kept).
     """
     N = _checks.check_square("A_bar", A_bar, None, "augmented state matrix")
     _checks.check_shape("B_faulty", B_faulty, (N, None), "N states x p inputs")
@@ -142,8 +123,7 @@ class GainSchedule(NamedTuple):
     Attributes:
       losses: (G,) grid of losses in [0, 1], increasing
       gains: (p, G, p, N): gains[i, g] = K_f (u = -K_f x) for input i with loss losses[g]
-      max_residual: (p, G) largest assignment residual of each entry
-          (~0 where every eigenvalue is kept)
+      max_residual: (p, G) largest assignment residual of each entry (~0 where every eigenvalue is kept)
     """
 
     losses: Array
@@ -153,12 +133,9 @@ class GainSchedule(NamedTuple):
 
 def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, eigenvectors: Array,
                                 num_losses: int = 201) -> GainSchedule:
-    """``assign_eigenstructure`` for each input's loss on a uniform grid over [0, 1].
-
-    A closed loop that reconfigures from an online loss estimate looks the gain up
-    (``scheduled_gain``) instead of solving ``2 (N + 1)`` SVDs every step: exact at the
-    grid points, linear in between (the gain is smooth in the loss away from 1).
-    """
+    """``assign_eigenstructure`` for each input's loss on a uniform grid over [0, 1], so a loop looks the
+    gain up (``scheduled_gain``) instead of ``2 (N + 1)`` SVDs a step: exact at grid points, linear
+    between (smooth in the loss away from 1)."""
     num_losses = _checks.check_int("num_losses", num_losses, 2, meaning="a number of grid points >= 2 over [0, 1]")
     p = _checks.shape_of(B_bar)[1]
     losses = jnp.linspace(0.0, 1.0, num_losses, dtype=jnp.asarray(A_bar).dtype)
@@ -173,12 +150,11 @@ def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, 
 
 
 def scheduled_gain(schedule: GainSchedule, component: Array, loss: Array) -> Array:
-    """The gain ``K_f`` (``u = -K_f x``) for input ``component`` with effectiveness ``loss``
-    (clipped to [0, 1]), linearly interpolated in ``schedule``. Traceable.
+    """``K_f`` (``u = -K_f x``) for input ``component`` with ``loss`` (clipped to [0, 1]), linear in
+    ``schedule``. Traceable.
 
     Returns:
-      (p, N) the interpolated gain ``K_f``, between the two tabulated gains of
-      ``schedule.gains[component]`` that bracket ``loss``.
+      (p, N) ``K_f`` between the two gains of ``schedule.gains[component]`` bracketing ``loss``.
     """
     losses = schedule.losses
     position = jnp.clip(loss, 0.0, 1.0) * (losses.shape[0] - 1)

@@ -1,14 +1,8 @@
-"""The sampled F-16 (``models.f16.plant``) as ``jaxfdi._loop`` stages: the plant with noise,
-gusts and faults, and the fault-free FDI stage that gives the flight controller its
-``FlightView`` (Park, Kim, Park & Roh 2004).
+"""The sampled F-16 (``models.f16.plant``) as ``jaxfdi._loop`` stages: the plant with noise, gusts and faults, and the
+fault-free FDI stage that gives the flight controller its ``FlightView`` (Park, Kim, Park & Roh 2004).
 
-``f16_plant`` moves the state ``[x (13), w_g, v_g]`` of ``models.f16.plant`` one sample
-``dt`` at a time (``sampled_transition``) and measures ``y`` (``sampled_observation``) with
-white Gaussian noise (``measurement_cov``); faults act on ``y`` and ``u`` as in
-``jaxfdi._simulate.simulator``. ``rate_passthrough_fdi`` flies the controller on the
-least-squares rate ``(H^T H)^-1 H^T m`` of all rate channels; an FDI stage that isolates a
-faulty sensor (the parity space + UKF of Park et al. 2004) returns the same view with its
-own selected rate instead.
+``rate_passthrough_fdi`` flies the controller on the least-squares rate ``(H^T H)^-1 H^T m`` of all rate channels; an
+isolating FDI stage (Park et al.'s parity space + UKF) returns the same view with its own selected rate.
 """
 from __future__ import annotations
 
@@ -29,13 +23,10 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
               gust_length: float = 1750.0, reference_speed: float = 502.0, fault=None) -> Plant:
     """The sampled F-16 as a ``loop.Plant`` with state ``simulate.SimState([x (13), w_g, v_g], held)``.
 
-    ``measure`` returns a ``simulate.Sensed`` and ``advance`` a ``simulate.Actuated``, as
-    ``simulate.simulator`` does, with the same key use (``split(step_key)`` into process
-    and measurement keys) and the same fault handling (``faults.apply_faults`` on ``y``
-    and on ``u``; STUCK values in ``held``). It is not ``simulator`` itself because the
-    standard normal draws are made in float32 and cast: in float64 they cost a third of a
-    flight's step (1.1 of 3.6 us per flight and step, 10^3 vmapped flights); the noise's
-    law is the same.
+    One sample ``dt`` by ``sampled_transition``, ``y`` by ``sampled_observation`` + white noise
+    (``measurement_cov``). As ``simulate.simulator`` (``split(step_key)`` into process and measurement keys;
+    ``faults.apply_faults`` on ``y`` and ``u``, STUCK values in ``held``), but normal draws in float32, cast
+    (same law; in float64 they cost 1.1 of 3.6 us per flight and step, 10^3 vmapped flights).
 
     Args:
       aircraft: ``f16_params(...)``.
@@ -49,10 +40,9 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
         channels) and actuator faults on ``u`` (``jaxfdi.fault``), or ``None``.
 
     Returns:
-      ``Plant(init, measure, advance)``: ``init(x0)`` takes ``[x (13), w_g, v_g]`` (15,) and
-      gives a ``SimState`` (F held values, zero); ``measure(state, k, u, step_key) ->
-      (state, Sensed)`` with ``y`` (m,); ``advance(state, k, u, step_key) -> (state,
-      Actuated)`` with ``u`` (4,) ``[thtl, el, ail, rdr]``.
+      ``Plant(init, measure, advance)``: ``init(x0 (15,)) -> SimState`` (F held values, zero);
+      ``measure(state, k, u, step_key) -> (state, Sensed)``, ``y`` (m,); ``advance(state, k, u, step_key)
+      -> (state, Actuated)``, ``u`` (4,) ``[thtl, el, ail, rdr]``.
     """
     substeps = _checks.check_int("substeps", substeps, 1, meaning="a positive number of RK4 steps per sample")
     _checks.check_positive("dt", dt, "a positive sample period (s)")
@@ -104,8 +94,7 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
 
 
 def rate_passthrough_fdi(rate_axes: Array) -> FDI:
-    """The FDI stage of a fault-free flight: no detection, the controller flies on the
-    least-squares rates of all channels (state ``None``, output ``None``): a ``loop.FDI``."""
+    """Fault-free ``loop.FDI``: no detection, least-squares rates of all channels (state, output ``None``)."""
     estimator = rate_estimator(jnp.asarray(rate_axes))  # once: a solve inside the step costs 4x the flight (vmapped LU)
 
     def observe(state, k, y):

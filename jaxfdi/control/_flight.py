@@ -1,41 +1,26 @@
-"""F-16 flight control for the flight of Park et al. (2004): LQR stability augmentation with altitude
-hold and bank-angle hold, designed on the linearised model (Park, Kim, Park & Roh 2004,
-Sec. III; Stevens & Lewis 2003, ch. 4 and 5).
+"""F-16 flight control for the flight of Park et al. (2004): LQR stability augmentation with altitude and bank-angle
+hold on the linearised model (Park, Kim, Park & Roh 2004, Sec. III; Stevens & Lewis 2003, ch. 4 and 5).
 
 Design (``design_flight_control``): the linear model about a wings-level trim
-(``models.f16.linearize``) is discretised at the control period ``dt`` (zero-order hold,
-``models.c2d``) and split into
+(``models.f16.linearize``), zero-order hold at ``dt`` (``models.c2d``), one LQR-PI per axis
+(``control.lqr_pi``: ``u = -K [dx; z]``, ``z[k+1] = z[k] + dt (r - H x)``, Lee & Lyou eqs. 21-22;
+diagonal ``FlightWeights``), keeping the two SAS separate as the paper does:
 
-- longitudinal ``x_lon = [VT, alpha, theta, Q, h, pow]``, ``u_lon = [thtl, el]``, with
-  integral action on ``[VT, h]`` (airspeed and altitude hold);
-- lateral ``x_lat = [beta, phi, P, R]``, ``u_lat = [ail, rdr]``, with integral action on
-  ``phi`` (bank-angle hold);
+- longitudinal ``x_lon = [VT, alpha, theta, Q, h, pow]``, ``u_lon = [thtl, el]``, integral on ``[VT, h]``;
+- lateral ``x_lat = [beta, phi, P, R]``, ``u_lat = [ail, rdr]``, integral on ``phi``.
 
-and each is an LQR-PI design (``control.lqr_pi``: ``u = -K [dx; z]``,
-``z[k+1] = z[k] + dt (r - H x)``, Lee & Lyou eqs. 21-22) with diagonal weights
-(``FlightWeights``). The state feedback on ``(alpha, Q)`` and ``(beta, P, R)`` is the
-stability augmentation; the feedback on ``h``, ``phi`` and their integrals is the altitude
-and bank-angle hold. One design per axis keeps the two SAS separate, as the paper has them.
+Feedback on ``(alpha, Q)``, ``(beta, P, R)`` is the SAS; on ``h``, ``phi`` and integrals the holds.
 
-The law (``flight_controller``) flies on a reference ``(x_ref[k], u_ref[k])``
-(``flight_reference``: the trims of the flight's segments, level, climb and turn, blended
-along the commanded profile, and the level-off's normal load at a pull-up trim's angle
-of attack and elevator per g): ``u = clip(u_ref - K (x_meas - x_ref) - K_I z)``
-(controls in the book's units: throttle 0-1, surfaces in degrees), with ``x_meas`` read from
-the ``FlightView`` — the body rates ``P, Q, R`` from ``view.rates``, the rate the FDI
-stage selected, so that a rate-sensor fault the FDI misses reaches the aircraft.
+Law (``flight_controller``): ``u = clip(u_ref - K (x_meas - x_ref) - K_I z)`` (throttle 0-1, surfaces in deg) about
+``flight_reference``; ``x_meas`` from the ``FlightView``, ``P, Q, R`` from ``view.rates`` (the FDI stage's selected
+rate, so a missed rate-sensor fault reaches the aircraft). Integrators stop while their axis's controls are at a limit
+(conditional integration: no wind-up of a saturated throttle in the climb).
 
-The flight (``FlightPlan``, Park et al. 2004): climb at 120 ft/s for 0-5 s, then hold altitude and
-bank-turn 5-15 s, at 502 ft/s from sea level, xcg = 0.35 (the book's trim). It starts
-trimmed in the 120 ft/s climb; the level-off and the roll-in are shaped by the smoothstep
-``S(s) = 3 s^2 - 2 s^3``: the climb rate falls from 120 to 0 ft/s over ``level_off``
-seconds centred on t = 5 s (600 ft gained in all, as 120 ft/s x 5 s) and the bank angle
-rolls in to 30 deg over ``roll_in`` seconds from t = 5 s. (Levelling off a 120 ft/s climb
-in ``T`` seconds along ``S`` takes a peak normal-load change of ``1.5 x 120 / (g T)``,
-1.4 g for T = 4 s, whatever the airspeed: the paper's flight is brisk.)
-
-The integrators stop while the controls of their axis are at a limit (conditional
-integration, so a saturated throttle in the climb does not wind them up).
+Flight (``FlightPlan``): 502 ft/s from sea level, xcg = 0.35 (the book's trim), starting trimmed in a
+120 ft/s climb for 0-5 s, then altitude hold and a bank turn 5-15 s. Smoothstep ``S(s) = 3 s^2 - 2 s^3``
+shapes the level-off (120 -> 0 ft/s over ``level_off`` s centred on t = 5 s; 600 ft gained) and the
+roll-in (to 30 deg over ``roll_in`` s from t = 5 s). Peak normal-load change ``1.5 x 120 / (g T)``
+for a level-off in ``T`` s: 1.4 g for T = 4 s, whatever the airspeed (the paper's flight is brisk).
 """
 from __future__ import annotations
 
@@ -173,33 +158,29 @@ def flight_plan(airspeed: float = 502.0, altitude: float = 0.0, climb_rate: floa
 
 
 def bryson_weights(longitudinal, longitudinal_input, lateral, lateral_input, dtype=None) -> FlightWeights:
-    """Bryson's rule: each weight ``1 / (largest acceptable value)^2`` (same units as the
-    states and controls; angles in rad, surfaces in deg)."""
+    """Bryson's rule: weight ``1 / (largest acceptable value)^2`` (angles in rad, surfaces in deg)."""
     dtype = dtype or jnp.result_type(float)
     inv_sq = lambda v: 1.0 / jnp.asarray(v, dtype) ** 2  # noqa: E731
     return FlightWeights(inv_sq(longitudinal), inv_sq(longitudinal_input), inv_sq(lateral), inv_sq(lateral_input))
 
 
 def default_weights(dtype=None) -> FlightWeights:
-    """``bryson_weights`` of: VT 10 ft/s, alpha 2 deg, theta 5 deg, Q 20 deg/s, h 20 ft,
-    pow 30 %, int VT 20 ft, int h 20 ft s; thtl 0.3, el 5 deg; beta 2 deg, phi 5 deg,
-    P 45 deg/s, R 20 deg/s, int phi 5 deg s; ail 15 deg, rdr 20 deg. Chosen on the flight of
-    Park et al. (2004), 64 dispersed flights with noise and gusts, for altitude errors under 10 ft and
-    bank errors under 1 deg once rolled in, with the controls' noise (the sensors') near
-    1 deg per sample."""
+    """``bryson_weights`` of: VT 10 ft/s, alpha 2 deg, theta 5 deg, Q 20 deg/s, h 20 ft, pow 30 %, int VT 20 ft, int h
+    20 ft s; thtl 0.3, el 5 deg; beta 2 deg, phi 5 deg, P 45 deg/s, R 20 deg/s, int phi 5 deg s; ail 15 deg, rdr 20 deg.
+    Chosen on 64 dispersed flights (noise, gusts) for altitude errors < 10 ft, bank errors < 1 deg once rolled in,
+    control noise ~1 deg per sample."""
     deg = math.pi / 180.0
     return bryson_weights([10.0, 2 * deg, 5 * deg, 20 * deg, 20.0, 30.0, 20.0, 20.0], [0.3, 5.0],
                           [2 * deg, 5 * deg, 45 * deg, 20 * deg, 5 * deg], [15.0, 20.0], dtype)
 
 
 def design_flight_control(linear: LinearF16, dt: float, weights: FlightWeights) -> FlightDesign:
-    """LQR-PI gains of both axes at the trim of ``linear`` (module doc); differentiable in
-    ``weights`` (forward mode through the Riccati solver).
+    """LQR-PI gains of both axes at the trim of ``linear`` (module doc); differentiable in ``weights``
+    (forward mode through the Riccati solver).
 
     Returns:
-      ``FlightDesign``: the ``FlightGains`` (longitudinal (2, 8), lateral (2, 5)), the
-      spectral radius of each discrete closed loop (2,) (lon, lat; < 1 is stable) and the
-      Riccati solver's ``converged`` flags (2,).
+      ``FlightDesign``: ``FlightGains`` (lon (2, 8), lat (2, 5)), each closed loop's spectral radius (2,)
+      (< 1 is stable) and the Riccati ``converged`` flags (2,).
     """
     _checks.check_positive("dt", dt, "a positive sample period (s)")
     _checks.check_shape("weights.longitudinal", weights.longitudinal, (8,),
@@ -233,11 +214,9 @@ PULL_UP_LOAD = 2.0
 
 
 def plan_trims(params: F16Params, plan: FlightPlan) -> TrimResult:
-    """The trims the reference is made of, stacked (4,): level at the initial altitude,
-    the climb (``gamma = asin(climb_rate / VT)``) half-way up, the coordinated turn at the
-    final altitude with the turn rate ``g tan(phi) / VT`` of the commanded bank, and a
-    wings-level pull-up at ``PULL_UP_LOAD`` g (pitch rate ``g (n - 1) / VT``), whose
-    departure from level flight is the angle of attack and elevator per g."""
+    """The reference's trims, stacked (4,): level at the initial altitude; climb ``gamma =
+    asin(climb_rate / VT)`` half-way up; coordinated turn at the final altitude, rate ``g tan(phi) / VT``;
+    wings-level pull-up at ``PULL_UP_LOAD`` g (pitch rate ``g (n - 1) / VT``), giving alpha and elevator per g."""
     dtype = params.mass.dtype
     top = plan.altitude + plan.climb_rate * plan.climb_time
     gamma = math.asin(plan.climb_rate / plan.airspeed)
@@ -252,8 +231,7 @@ def plan_trims(params: F16Params, plan: FlightPlan) -> TrimResult:
 
 
 def _check_trims(trims: TrimResult) -> None:
-    """``trims`` is ``plan_trims``' stack of 4 (level, climb, turn, pull-up) at trace time:
-    fewer rows would be read out of bounds, silently clamped to the last one."""
+    """``trims`` must be ``plan_trims``' stack of 4 (fewer rows would be silently clamped to the last)."""
     _checks.check_shape("trims.state", trims.state, (4, 13), "plan_trims' level, climb, turn and pull-up trims")
     _checks.check_shape("trims.control", trims.control, (4, 4), "plan_trims' level, climb, turn and pull-up trims")
 
@@ -302,10 +280,8 @@ class Profile(NamedTuple):
 
 
 def commanded_profile(plan: FlightPlan, t: Array) -> Profile:
-    """The commanded climb and bank at times ``t``: climb rate ``plan.climb_rate`` until the
-    level-off, which runs over ``[climb_time - level_off/2, climb_time + level_off/2]``
-    (so the climb gains ``climb_rate x climb_time`` feet in all), and the bank angle
-    rolling in over ``[bank_start, bank_start + roll_in]``."""
+    """Commanded climb and bank at ``t``: level-off over ``climb_time -/+ level_off/2`` (gaining
+    ``climb_rate x climb_time`` ft in all), roll-in over ``[bank_start, bank_start + roll_in]``."""
     t = jnp.asarray(t)
     start = plan.climb_time - 0.5 * plan.level_off
     s_climb = (t - start) / plan.level_off
@@ -319,12 +295,10 @@ def commanded_profile(plan: FlightPlan, t: Array) -> Profile:
 
 
 def flight_reference(params: F16Params, plan: FlightPlan, trims: TrimResult, dt: float, steps: int) -> FlightReference:
-    """``x_ref``/``u_ref`` at ``t = k dt``: the level trim plus the climb and turn trims'
-    departures from it, weighted by ``commanded_profile``; ``h_ref`` and ``phi_ref`` are
-    the commanded altitude and bank, the transitions' own rates are added to the body
-    rates (``Q += cos(phi) theta_ref'``, ``P += phi_ref'``), and the level-off's normal
-    load ``dn = h_cmd'' / (g cos(gamma))`` to alpha (and theta, ``theta = gamma + alpha``)
-    and to the controls at the pull-up trim's rate per g."""
+    """``x_ref``/``u_ref`` at ``t = k dt``: level trim + climb and turn trims' departures weighted by
+    ``commanded_profile``; ``h_ref``, ``phi_ref`` commanded; ``Q += cos(phi) theta_ref'``,
+    ``P += phi_ref'``; the level-off's load ``dn = h_cmd'' / (g cos(gamma))`` added to alpha (and theta,
+    ``theta = gamma + alpha``) and to the controls at the pull-up trim's rate per g."""
     _checks.check_positive("dt", dt, "a positive sample period (s)")
     _checks.check_int("steps", steps, minimum=1, meaning="a positive number of steps")
     _check_trims(trims)
@@ -358,15 +332,12 @@ def measured_state(view: FlightView) -> tuple[Array, Array]:
 
 
 def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array) -> Controller:
-    """The SAS and autopilot as a ``loop.Controller`` on a ``FlightView``; the exogenous
-    input of step ``k`` is ``(x_ref[k], u_ref[k])`` (a ``FlightReference`` row).
-    ``lower``/``upper`` (4,): control limits (the aircraft's).
+    """The SAS and autopilot as a ``loop.Controller`` on a ``FlightView``; step ``k``'s exogenous input
+    is ``(x_ref[k], u_ref[k])`` (a ``FlightReference`` row); ``lower``/``upper`` (4,): control limits.
 
     Returns:
-      ``Controller(init, step)`` (not feed-forward): ``init()`` gives a zero
-      ``FlightControllerState`` (integrals (2,) and (1,)); ``step(state, k, view,
-      (x_ref, u_ref)) -> (state, u)`` with ``u`` (4,) ``[thtl, el, ail, rdr]`` clipped to
-      ``[lower, upper]``.
+      ``Controller(init, step)`` (not feed-forward): ``init()`` a zero ``FlightControllerState``;
+      ``step(state, k, view, (x_ref, u_ref)) -> (state, u)``, ``u`` (4,) ``[thtl, el, ail, rdr]`` in ``[lower, upper]``.
     """
     _checks.check_positive("dt", dt, "a positive sample period (s)")
     _checks.check_shape("gains.longitudinal", gains.longitudinal, (2, 8), "u_lon = -K [dx_lon (6); z_lon (2)]")

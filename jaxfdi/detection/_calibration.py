@@ -1,19 +1,14 @@
 """Thresholds calibrated on fault-free runs, where the statistic's law is only approximate.
 
-A chi-square threshold assumes white Gaussian innovations; a closed loop, an unmodelled
-disturbance or a wavelet denoiser leaves the fault-free statistic heavier-tailed than
-that. Two calibrations close the gap:
+A chi-square threshold assumes white Gaussian innovations; a closed loop, an unmodelled disturbance or a wavelet
+denoiser makes the fault-free statistic heavier-tailed. Two calibrations:
 
-* per decision, ``T = max(T_law, q_{1 - P_fa})``: the law's threshold, raised to the
-  empirical ``1 - P_fa`` quantile of the fault-free decision values where they leak above
-  it (``empirical_threshold``);
-* per run, a run of ``K`` decisions alarms with probability up to ``K P_fa``, so a
-  family-wise rate needs a larger threshold: the smallest common factor ``s >= 1`` with
-  ``rate(s T) <= alpha`` on the calibration runs, found by bisection on the monotone
-  ``rate`` (``scale_to_run_false_alarm``).
+* per decision, ``T = max(T_law, q_{1 - P_fa})``: the law's threshold raised to the empirical ``1 - P_fa`` quantile of
+  fault-free decisions (``empirical_threshold``);
+* per run: ``K`` decisions alarm with probability up to ``K P_fa``, so a family-wise rate needs the smallest common
+  factor ``s >= 1`` with ``rate(s T) <= alpha`` on calibration runs (bisection, ``scale_to_run_false_alarm``).
 
-Used by the VTOL study (Lee & Lyou), whose bank of two-stage filters
-sees the ``3 sin 10 t`` disturbance leak into some statistics.
+Used by the VTOL study (Lee & Lyou): its two-stage filter bank sees the ``3 sin 10 t`` disturbance leak in.
 """
 from __future__ import annotations
 
@@ -27,11 +22,9 @@ __all__ = ["empirical_threshold", "scale_to_run_false_alarm"]
 
 
 def empirical_threshold(values, pfa: float, floor=None) -> np.ndarray:
-    """``max(floor, q_{1 - pfa})``: the empirical upper ``pfa`` quantile of fault-free
-    decision ``values`` over their leading (sample) axis, raised to ``floor`` (the law's
-    threshold, broadcast against the quantile; ``None``: no floor). Quantiles by linear
-    interpolation (``numpy.quantile``'s default). Non-finite values (a calibration run
-    that went bad) are refused: a NaN threshold would never alarm."""
+    """``max(floor, q_{1 - pfa})``: empirical upper ``pfa`` quantile of fault-free decision ``values`` over their
+    leading (sample) axis (``numpy.quantile``'s linear interpolation), raised to ``floor`` (the law's threshold,
+    broadcast; ``None``: none). Non-finite values (a bad calibration run) are refused: a NaN threshold never alarms."""
     _checks.check_probability("pfa", pfa)
     values = np.asarray(values)
     if values.ndim == 0 or values.shape[0] < 1:
@@ -47,13 +40,11 @@ def scale_to_run_false_alarm(rate: Callable[[np.ndarray], np.ndarray], target: f
                              upper: float = 16.0, iterations: int = 40) -> np.ndarray:
     """(groups,) the smallest factors ``s >= 1`` with ``rate(s)[g] <= target``, by bisection.
 
-    ``rate(scales (groups,)) -> (groups,)`` is each group's share of fault-free runs with
-    any alarm when its thresholds are multiplied by ``scales[g]`` (non-increasing in the
-    scale). A group already within ``target`` at 1 keeps 1; otherwise the bracket
-    ``[1, upper]`` is halved ``iterations`` times and its upper end returned (within
-    ``(upper - 1) 2^-iterations`` of the smallest factor, on the rate's steps). A
-    ``ValueError`` when some group exceeds ``target`` even at ``upper``, or a rate is not
-    in [0, 1] (a NaN from a bad run is never read as meeting the target)."""
+    ``rate(scales (groups,)) -> (groups,)``: each group's share of fault-free runs with any alarm at thresholds times
+    ``scales[g]`` (non-increasing). A group within ``target`` at 1 keeps 1; otherwise ``[1, upper]`` is halved
+    ``iterations`` times and its upper end returned (within ``(upper - 1) 2^-iterations`` of the smallest factor, on
+    the rate's steps). ``ValueError`` when a group exceeds ``target`` even at ``upper``, or a rate is not in [0, 1] (a
+    NaN from a bad run never meets the target)."""
     if not 0.0 <= target < 1.0:
         raise ValueError(f"target: expected a rate in [0, 1), got {target}")
     if not upper > 1.0:

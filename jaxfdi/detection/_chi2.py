@@ -1,10 +1,8 @@
 """Chi-square residual tests: thresholds, normalised innovation squared, windows.
 
-Under the fault-free hypothesis the innovation of a correctly tuned Kalman filter is
-white, ``r ~ N(0, S)``, so the normalised innovation squared ``r^T S^-1 r`` is
-``chi2(m)`` and a sum over a window of ``L`` steps is ``chi2(L m)`` (Mehra & Peschon
-1971; Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4). A fault is declared when the
-statistic exceeds ``chi2_threshold(dof, pfa)``.
+Fault-free, a correctly tuned Kalman filter's innovation is white, ``r ~ N(0, S)``, so the NIS ``r^T S^-1 r`` is
+``chi2(m)`` and its sum over ``L`` steps ``chi2(L m)`` (Mehra & Peschon 1971; Bar-Shalom, Li & Kirubarajan 2001,
+sec. 5.4). A fault is declared when the statistic exceeds ``chi2_threshold(dof, pfa)``.
 """
 from __future__ import annotations
 
@@ -23,31 +21,23 @@ from jaxfdi import _checks
 def chi2_threshold(dof, pfa) -> Array:
     """Upper quantile ``x`` with ``P(chi2(dof) > x) = pfa``, computed in JAX.
 
-    ``P(chi2(dof) > x) = Q(dof/2, x/2)``, ``Q`` the regularised upper incomplete gamma
-    function. Start: Wilson-Hilferty with the upper normal quantile ``-ndtri(pfa)``
-    (``ndtri(1 - pfa)`` would round to ``inf`` below ``pfa ~ eps``); then Newton steps
-    on ``log Q(dof/2, x/2) = log pfa`` with ``log Q`` evaluated in log space
-    (``log_upper_gamma``), so that every ``pfa`` down to ``finfo(dtype).tiny``
-    (``2.2e-308`` in float64, ``1.2e-38`` in float32) has a finite threshold. Agrees with
-    ``scipy.stats.chi2.isf`` to ~1e-12 relative in float64 (``tests/detection/test_chi2_tail.py``).
-
-    Differentiable in ``pfa`` and ``dof`` (the Newton iterations are not differentiated;
-    one last Newton step is, which gives the implicit derivative
-    ``dx/dpfa = -1 / pdf(x)``), vmappable and jit-compatible. The result has the float
-    dtype of the arguments (JAX's default float for Python numbers).
+    ``P(chi2(dof) > x) = Q(dof/2, x/2)``, ``Q`` the regularised upper incomplete gamma function. Wilson-Hilferty
+    start from ``-ndtri(pfa)`` (``ndtri(1 - pfa)`` rounds to ``inf`` below ``pfa ~ eps``), then Newton on
+    ``log Q(dof/2, x/2) = log pfa`` in log space (``log_upper_gamma``): finite for every ``pfa`` down to
+    ``finfo(dtype).tiny`` (``2.2e-308`` float64, ``1.2e-38`` float32). Matches ``scipy.stats.chi2.isf`` to ~1e-12
+    relative in float64 (``tests/detection/test_chi2_tail.py``). Differentiable in ``pfa`` and ``dof`` (one last
+    differentiated Newton step gives the implicit ``dx/dpfa = -1 / pdf(x)``), vmappable, jit-compatible.
 
     Args:
       dof: degrees of freedom (> 0, finite), scalar or array.
       pfa: false-alarm probability in ``[finfo(dtype).tiny, 1)``, scalar or array.
 
     Returns:
-      the threshold ``x``, the broadcast shape of ``dof`` and ``pfa``, in their float dtype
-      (NaN for an out-of-range value under ``jit``/``vmap``).
+      the threshold ``x``, broadcast shape of ``dof`` and ``pfa``, in their float dtype (JAX's default float for
+      Python numbers); NaN for an out-of-range value under ``jit``/``vmap``.
 
     Raises:
-      ValueError: naming ``dof`` or ``pfa`` when a concrete value is out of range, in
-        particular a ``pfa`` below the smallest normal number of the dtype. Under
-        ``jit``/``vmap`` such a value gives NaN.
+      ValueError: naming ``dof`` or ``pfa`` for a concrete value out of range (e.g. ``pfa`` below ``tiny``).
     """
     _checks.check_real("dof", dof, "degrees of freedom")
     _checks.check_finite("dof", dof, "degrees of freedom")
@@ -61,8 +51,8 @@ def chi2_threshold(dof, pfa) -> Array:
 
 
 def _check_representable(pfa, dtype, what: str = "pfa") -> None:
-    """A concrete ``pfa`` must be a normal number of ``dtype`` below 1 once cast to it;
-    ``what`` says which probability (e.g. a per-test ``pfa / tests``) in the message."""
+    """A concrete ``pfa`` must be a normal number of ``dtype`` below 1 once cast; ``what`` names the probability
+    (e.g. a per-test ``pfa / tests``) in the message."""
     value = _checks.concrete(pfa)
     if value is None:
         return
@@ -85,11 +75,10 @@ _LENTZ_STEPS = 40
 def log_upper_gamma(a: Array, x: Array) -> Array:
     """``log Q(a, x)``, ``Q(a, x) = Gamma(a, x) / Gamma(a)``, accurate where ``Q`` underflows.
 
-    Where ``Q`` is a normal number of the dtype, ``log(gammaincc(a, x))``. Far in the
-    upper tail (``x > a + 1`` and ``x^a e^-x / Gamma(a) < tiny^(1/2)``), Legendre's
-    continued fraction ``Gamma(a, x) = e^-x x^a / (x + 1 - a - 1 (1 - a) / (x + 3 - a - ...))``
-    evaluated by the modified Lentz method (Press et al. 2007, *Numerical Recipes* 3rd
-    ed., sec. 6.2) in log space: ``log Q = a log x - x - lgamma(a) + log CF``.
+    ``log(gammaincc(a, x))`` where ``Q`` is normal. Far in the upper tail (``x > a + 1`` and
+    ``x^a e^-x / Gamma(a) < tiny^(1/2)``): Legendre's continued fraction
+    ``Gamma(a, x) = e^-x x^a / (x + 1 - a - 1 (1 - a) / (x + 3 - a - ...))`` by modified Lentz (Press et al. 2007,
+    *Numerical Recipes* 3rd ed., sec. 6.2), ``log Q = a log x - x - lgamma(a) + log CF``.
     """
     dtype = jnp.result_type(a, x)
     tiny = jnp.finfo(dtype).tiny
@@ -164,13 +153,11 @@ def normalized_innovation_squared(innovation: Array, innovation_cov: Array) -> A
 
 
 def moving_window_sum(x: Array, window: int) -> Array:
-    """Sum of the last ``window`` values along axis 0 (fewer at the start); ``+inf`` for
-    a window that holds a non-finite value (a dead sensor's statistic is evidence), and
-    finite again once it has left the window.
+    """Sum of the last ``window`` values along axis 0 (fewer at the start); ``+inf`` while the window holds a
+    non-finite value (a dead sensor's statistic is evidence), finite again once it has left.
 
     Returns:
-      array of ``x``'s shape (T, ...): entry ``k`` is ``sum x[max(0, k-window+1)..k]``
-      (``+inf`` as above).
+      array of ``x``'s shape (T, ...): entry ``k`` is ``sum x[max(0, k-window+1)..k]`` (``+inf`` as above).
     """
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
     _checks.check_real("x", x, "real statistics")
@@ -194,8 +181,7 @@ def first_crossing(statistic: Array, threshold: Array, start: Array | int = 0) -
     """First index ``k >= start`` with ``statistic[k] > threshold`` along axis 0, else -1.
 
     Returns:
-      int array of shape ``statistic.shape[1:]`` (a scalar for a (T,) statistic): the first
-      crossing step of each column, -1 where there is none.
+      int array of shape ``statistic.shape[1:]`` (scalar for (T,)): each column's first crossing, -1 if none.
     """
     k = jnp.arange(statistic.shape[0]).reshape((-1,) + (1,) * (statistic.ndim - 1))
     hit = (statistic > threshold) & (k >= start)
@@ -215,18 +201,14 @@ class WindowState(NamedTuple):
 
 
 class Decision(NamedTuple):
-    """One step's output of an online detector.
-
-    Every ``Detector`` step returns one. ``label`` is the isolated fault label (the
-    simulator's mode label: 0 none, then actuators, then sensors; -1 for a detector that
-    does not isolate) and ``estimate`` the detector's estimate of the fault (e.g. a
-    magnitude; NaN if it has none).
+    """One step's output of an online ``Detector``.
 
     Attributes:
       statistic: () the detector's test statistic
       alarm: () bool, the statistic crossed its threshold
-      label: () int, the isolated fault label (see above)
-      estimate: () the detector's fault estimate (see above)
+      label: () int, the isolated fault label (simulator's mode label: 0 none, then actuators, then sensors; -1: the
+        detector does not isolate)
+      estimate: () the detector's fault estimate (e.g. a magnitude; NaN if none)
     """
 
     statistic: Array
@@ -236,11 +218,10 @@ class Decision(NamedTuple):
 
 
 def flag_dead(decision: Decision, dead: Array, labels: Array | None = None) -> Decision:
-    """The one rule for a dead sensor: a step whose input has a non-finite component
-    (``dead`` (m,) bool, e.g. ``isnan(info.innovation)``, ``filters._base``) alarms with
-    ``statistic = +inf`` and the label ``labels[j]`` of the first dead channel ``j``
-    (``labels`` (m,) int, the simulator's fault label of each channel; ``None``: the
-    detector's own label), estimate NaN. Other steps keep ``decision``."""
+    """The one rule for a dead sensor: a step whose input has a non-finite component (``dead`` (m,) bool, e.g.
+    ``isnan(info.innovation)``, ``filters._base``) alarms with ``statistic = +inf``, label ``labels[j]`` of the
+    first dead channel ``j`` (``labels`` (m,) int, each channel's fault label; ``None``: the detector's own) and
+    estimate NaN. Other steps keep ``decision``."""
     dead = jnp.asarray(dead, bool)
     if dead.size == 0:
         return decision
@@ -253,14 +234,12 @@ def flag_dead(decision: Decision, dead: Array, labels: Array | None = None) -> D
 
 
 class Detector(NamedTuple):
-    """Online detector: ``init() -> state``; ``step(state, value) -> (state, Decision)``,
-    one value (a NIS, an innovation, mode probabilities, ...) in, one ``Decision`` out
-    (a detector that does not isolate gives ``label = -1`` and ``estimate = NaN``).
+    """Online detector: one value (a NIS, an innovation, mode probabilities, ...) in, one ``Decision`` out.
 
     Attributes:
       init: ``init() -> state``, the detector's initial state
-      step: ``step(state, value) -> (state, Decision)``: one value in, the step's
-        ``Decision`` (statistic, alarm, label, estimate; each ()) out
+      step: ``step(state, value) -> (state, Decision)`` (statistic, alarm, label, estimate; each ()); a
+        non-isolating detector gives ``label = -1``, ``estimate = NaN``
     """
 
     init: Callable[[], Any]
@@ -270,17 +249,13 @@ class Detector(NamedTuple):
 def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
     """Windowed chi-square test on a stream of NIS values.
 
-    ``statistic[k] = sum_{j=k-L+1..k} nis[j]`` (fewer terms during the first ``L - 1``
-    steps); alarm when ``statistic[k] > threshold``; ``step(state, nis) -> (state,
-    Decision)`` with label -1 and estimate NaN (the test does not isolate). Use
-    ``chi2_threshold(window * m, pfa)`` for a design false-alarm rate ``pfa``. A
-    non-finite NIS (a dead sensor: ``+inf`` from the filters) enters as ``+inf``: the
-    alarm holds while it is in the window, and the test recovers when it leaves.
+    ``statistic[k] = sum_{j=k-L+1..k} nis[j]`` (fewer terms in the first ``L - 1`` steps), alarm when it exceeds
+    ``threshold``, label -1, estimate NaN; ``chi2_threshold(window * m, pfa)`` gives a design false-alarm rate
+    ``pfa``. A non-finite NIS (dead sensor: ``+inf`` from the filters) is ``+inf`` while in the window.
 
     Returns:
-      ``Detector(init, step)``: ``init()`` gives a ``WindowState`` (a zero (window,)
-      buffer of ``dtype``); ``step(state, nis)`` takes a () NIS and returns ``(state,
-      Decision)``.
+      ``Detector(init, step)``: ``init()`` gives a ``WindowState`` (zero (window,) buffer of ``dtype``);
+      ``step(state, nis ()) -> (state, Decision)``.
     """
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
     _checks.check_real("threshold", threshold, "a real threshold")

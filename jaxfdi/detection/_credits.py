@@ -1,24 +1,17 @@
 """Multi-hypothesis isolation by credits (Choi & Park 2009, Section III, eq. 10).
 
-A bank of dual filters, one per fault hypothesis (for the reaction wheels: wheel ``x``
-stopped), gives one fault detection parameter ``F_x`` per hypothesis. The hypothesis
-that matches the plant predicts it well, so its ``F_x`` stays small while the others
-grow. The credit of hypothesis ``x`` is
+A bank of dual filters, one per fault hypothesis (reaction wheels: wheel ``x`` stopped), gives one ``F_x`` each;
+the hypothesis matching the plant keeps ``F_x`` small while the others grow. Credit
 
     C_x = max(F_mean - F_x, 0),    F_mean = (1/M) sum_x F_x,
 
-and the fault is isolated to the hypothesis with the largest credit once that credit is
-large enough. ``F`` scales with the operating point (rates, wheel momentum, fault size),
-so besides the paper's absolute threshold the isolator offers a scale-free one on the
-relative credit ``C_x / F_mean`` in ``[0, 1]``: 1 when ``F_x = 0``.
+isolated to the largest credit once large enough. ``F`` scales with the operating point (rates, wheel momentum, fault
+size), so a scale-free threshold on ``C_x / F_mean`` in ``[0, 1]`` (1: ``F_x = 0``) supplements the paper's one.
 
-Limit (``benchmarks/wheels_credit.py``): a dual filter's ``F`` is a
-scalar, ``F_x ~ |g_x . (x_PF - x_EKF)|`` with ``g_x = grad det A_x``, so it sees a
-hypothesis's state discrepancy only along ``g_x``. A wrong hypothesis whose prediction
-drifts nearly orthogonally to its ``g_x`` keeps an ``F`` as small as the right one's (in
-the reaction-wheel pyramid: a stop of wheel 1 against hypothesis 3, the opposite wheel),
-and noise decides between them; a likelihood bank on the innovation vectors does not
-have this blind direction.
+Limit (``benchmarks/wheels_credit.py``): ``F_x ~ |g_x . (x_PF - x_EKF)|``, ``g_x = grad det A_x``, sees a
+hypothesis's discrepancy only along ``g_x``; a wrong hypothesis drifting nearly orthogonally to it keeps ``F`` as
+small as the right one's (reaction-wheel pyramid: wheel 1 stopped vs hypothesis 3, the opposite wheel) and noise
+decides. A likelihood bank on the innovation vectors has no such blind direction.
 """
 from __future__ import annotations
 
@@ -38,21 +31,17 @@ def hypothesis_credits(detection_parameters: Array) -> Array:
 
 
 def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, confirm_steps: int = 1) -> Detector:
-    """Online isolator on the bank's ``F`` (M,): names ``argmax C_x`` once it is above
-    ``threshold``.
+    """Online isolator on the bank's ``F`` (M,): names ``argmax C_x`` once it is above ``threshold``.
 
     Args:
-      threshold: on ``C_x / F_mean`` (``relative=True``, default; in ``(0, 1]`` for a
-        meaningful test: 1 means ``F_x = 0``) or on ``C_x`` itself (the paper's form).
+      threshold: on ``C_x / F_mean`` (``relative=True``, default; in ``(0, 1]`` to be meaningful, 1 means
+        ``F_x = 0``) or on ``C_x`` (the paper's form).
       relative: which credit the threshold applies to.
-      label_offset: added to the hypothesis index to give the decision's label (1 when
-        hypothesis ``x`` is the simulator's label ``1 + x``).
+      label_offset: added to the hypothesis index for the label (1 when hypothesis ``x`` is label ``1 + x``).
       confirm_steps: consecutive steps the same hypothesis must lead above the threshold.
 
-    ``step(state, F) -> (state, Decision(statistic, alarm, label, estimate))`` with the
-    leading (relative) credit as statistic and ``F_mean`` as estimate. A non-finite
-    ``F_x`` is evidence, not a zero credit: the step alarms with ``statistic = +inf`` and
-    label -1 (the credits cannot say which hypothesis), ``chi2.flag_dead``.
+    ``step(state, F) -> (state, Decision)``: statistic the leading (relative) credit, estimate ``F_mean``. A
+    non-finite ``F_x`` is evidence: alarm, ``statistic = +inf``, label -1 (which hypothesis is unknown), ``flag_dead``.
     """
     _checks.check_positive("threshold", threshold, "a positive scalar credit threshold")
     _checks.check_int("confirm_steps", confirm_steps, 1, meaning="an integer number of steps >= 1")

@@ -1,26 +1,18 @@
 """Dual filter fault detection parameter (Choi & Park 2009, Section II.3, eqs. 7-8).
 
-Two filters share one model: the *prediction filter* propagates it with the commanded
-inputs alone, ``x_PF[k+1] = f(x_PF[k], u[k])`` (the "theoretical" state), and the
-*estimation filter* (an EKF, or a UKF) also uses the measurements. With a healthy plant
-both agree; after a fault the plant stops following the commands, the estimate follows
-the measurements and the prediction does not. The fault detection parameter compares
-the two filters' system matrices ``A = dg/dx`` of the continuous model ``x' = g(x, u)``:
+Two filters share one model: the *prediction filter* runs it on the commanded inputs alone,
+``x_PF[k+1] = f(x_PF[k], u[k])``; the *estimation filter* (EKF or UKF) also uses the measurements, so after a fault
+the estimate follows the plant and the prediction does not. With ``A = dg/dx`` of the continuous ``x' = g(x, u)``
+by ``jax.jacfwd`` (never the paper's printed Jacobians), fault when ``F`` exceeds a threshold calibrated fault-free:
 
-    F[k] = | det A(x_PF[k], u[k]) - det A(x_EKF[k|k], u[k]) |,
+    F[k] = | det A(x_PF[k], u[k]) - det A(x_EKF[k|k], u[k]) |.
 
-with ``A`` by ``jax.jacfwd`` (never the paper's printed Jacobians). A fault is declared
-when ``F`` exceeds a threshold (calibrated on fault-free runs).
-
-Why it is weak (notebook 05; ``tests/models/test_reaction_wheels_model.py``): for the
-spacecraft ``A = -I^-1 ([w]x I - [L]x)`` with ``L = I w + h_w`` the total body momentum,
-and a cross-product matrix is singular, so ``det A = 0`` whenever ``L = 0`` (and whenever
-``w = 0``, or for a spherical body). A wheel cluster with zero net momentum keeps
-``L = 0`` on the true trajectory whatever the fault (a stop conserves momentum), so ``F``
-sees a fault only through the *model's* momentum error combined with the rate
-discrepancy ``x_PF - x_EKF``: a scalar cubic projection of it that is blind along
-directions where ``grad det A`` is small (in the scenario, a stop of the wheel whose
-axis is nearest the slew axis leaves ``F`` unchanged for seconds).
+Weakness (notebook 05; ``tests/models/test_reaction_wheels_model.py``): for the spacecraft
+``A = -I^-1 ([w]x I - [L]x)``, ``L = I w + h_w`` the total body momentum, so ``det A = 0`` whenever ``L = 0`` (or
+``w = 0``, or a spherical body). A zero-net-momentum wheel cluster keeps ``L = 0`` whatever the fault (a stop
+conserves momentum): ``F`` sees a fault only through the *model's* momentum error with ``x_PF - x_EKF``, a scalar
+cubic projection blind where ``grad det A`` is small (stopping the wheel nearest the slew axis leaves ``F``
+unchanged for seconds).
 """
 from __future__ import annotations
 
@@ -75,9 +67,8 @@ def dual_filter(estimator: Filter, transition: ModelFunction, field: ModelFuncti
     """Prediction filter + estimation filter with the fault detection parameter ``F``.
 
     Args:
-      estimator: the estimation filter, a Gaussian ``Filter`` built on the same model
-        (``extended_kalman_filter(transition, h, Q, R, params)`` or a UKF); its
-        ``info.filtered_mean`` is ``x_EKF[k|k]``.
+      estimator: the estimation filter, a Gaussian ``Filter`` on the same model (``extended_kalman_filter(transition,
+        h, Q, R, params)`` or a UKF); its ``info.filtered_mean`` is ``x_EKF[k|k]``.
       transition: the discrete model ``f(x, u, params)`` the prediction filter runs.
       field: the continuous model ``g(x, u, params)`` whose Jacobian is ``A``.
       params: pytree passed to ``transition`` and ``field`` (vmap it for a hypothesis bank).

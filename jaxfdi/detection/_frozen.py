@@ -1,22 +1,17 @@
-"""Frozen (stuck-at) channel test: a sensor whose output stops changing while its noise
-says it must.
+"""Frozen (stuck-at) channel test: a sensor whose output stops changing while its noise says it must.
 
-A healthy channel ``y_i = s_i + e_i`` with white Gaussian noise of standard deviation at
-least ``sigma`` has, over a window of ``L`` samples, ``sum_i (y_i - ybar)^2 / sigma^2``
-distributed as a non-central ``chi2(L - 1, lambda)``, ``lambda = sum_i (s_i - sbar)^2 /
-sigma^2`` for any signal ``s`` (conditionally on it, if it is random and independent of
-the noise). The non-central law is stochastically increasing in ``lambda`` and in the
-noise variance, so
+A healthy channel ``y_i = s_i + e_i`` with white Gaussian noise of standard deviation >= ``sigma`` has, over ``L``
+samples, ``sum_i (y_i - ybar)^2 / sigma^2 ~`` non-central ``chi2(L - 1, lambda)``,
+``lambda = sum_i (s_i - sbar)^2 / sigma^2`` for any signal ``s`` (conditionally, if random and independent of the
+noise). The law is stochastically increasing in ``lambda`` and the noise variance, so
 
     P(statistic < chi2.ppf(pfa, L - 1)) <= pfa,
 
-with equality for a constant signal and noise exactly ``sigma``: the lower-tail test
-bounds the false-alarm probability per window whatever the plant does. A frozen channel
-(``FaultKind.STUCK``: the value at the onset held) has statistic 0 once the window holds
-only frozen samples, ``L - 1`` steps after the onset (the onset sample is still a live
-one). ``sigma`` must not exceed the true noise (a quantising sensor whose step is larger
-than its noise repeats values by itself: use the quantisation step's ``1/sqrt(12)``
-there, or a longer window).
+with equality for a constant signal and noise exactly ``sigma``: the lower-tail test bounds the false-alarm
+probability per window whatever the plant does. A frozen channel (``FaultKind.STUCK``) has statistic 0 once the
+window holds only frozen samples, ``L - 1`` steps after the onset (the onset sample is live). ``sigma`` must not
+exceed the true noise (a quantising sensor with step above its noise repeats values by itself: use the step's
+``1/sqrt(12)``, or a longer window).
 """
 from __future__ import annotations
 
@@ -62,26 +57,20 @@ def frozen_statistic(samples: Array, sigma: Array) -> Array:
 def frozen_channel_detector(sigma, window: int, pfa, channel_labels: Array | None = None) -> Detector:
     """Online stuck-at test on raw measurements ``y`` (m,).
 
-    ``step(state, y) -> (state, Decision)``: statistic ``min_j frozen_statistic_j`` over
-    the last ``window`` samples, alarm once ``window`` samples are in and the statistic is
-    below ``frozen_threshold(window, pfa)`` (a lower-tail test: small means frozen),
-    label ``channel_labels[j]`` of the most frozen channel (-1 without labels), estimate
-    that channel's held value. A non-finite sample is a dead channel (``chi2.flag_dead``).
-
-    A window that holds a non-finite sample of a channel does not test that channel
-    (its statistic is ``+inf``: not frozen), so the test recovers ``window`` steps after
-    a dead sample.
+    Statistic ``min_j frozen_statistic_j`` over the last ``window`` samples; alarm once ``window`` samples are in and
+    it is below ``frozen_threshold(window, pfa)`` (lower tail: small means frozen); label ``channel_labels[j]`` of
+    the most frozen channel (-1 without labels); estimate its held value. A non-finite sample is a dead channel
+    (``chi2.flag_dead``), untested (statistic ``+inf``) while in the window: recovery ``window`` steps later.
 
     Args:
       sigma: (m,) a lower bound of each channel's noise standard deviation.
       window: L >= 2 samples.
-      pfa: false-alarm probability per window and channel (module doc: an upper bound).
+      pfa: false-alarm probability per window and channel (an upper bound, module doc).
       channel_labels: (m,) int, the fault label of each channel.
 
     Returns:
-      ``Detector(init, step)``: ``init()`` gives an empty ``FrozenState`` (a zero (L, m)
-      buffer in ``sigma``'s float dtype); ``step(state, y)`` takes ``y`` (m,) and returns
-      ``(state, Decision)`` as above.
+      ``Detector(init, step)``: ``init()`` gives an empty ``FrozenState`` (zero (L, m) buffer in ``sigma``'s float
+      dtype); ``step(state, y (m,)) -> (state, Decision)``.
     """
     _checks.check_real("sigma", sigma, "noise standard deviations")
     _checks.check_shape("sigma", sigma, (None,), "one noise standard deviation per channel (m,)")

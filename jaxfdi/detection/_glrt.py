@@ -1,10 +1,9 @@
 """Windowed generalised likelihood ratio test for step faults (Willsky & Jones 1976).
 
-A step fault of unknown size ``nu`` in direction ``i`` with onset ``theta`` adds a known
-signature to the innovations of a fault-blind steady-state Kalman filter:
-``eps_k = eps0_k + G_i[k - theta] nu`` (``G[l] = 0`` for ``l < 0``), ``eps0_k ~ N(0, S)``
-white. Over the last ``N`` steps, for every direction ``i`` and candidate onset ``theta``
-(Willsky & Jones 1976, eqs. 3.10-3.14; Han et al. 2022, eqs. 14-23)::
+A step of unknown size ``nu`` in direction ``i`` from onset ``theta`` adds a signature to the innovations of a
+fault-blind steady-state Kalman filter: ``eps_k = eps0_k + G_i[k - theta] nu`` (``G[l] = 0`` for ``l < 0``),
+``eps0_k ~ N(0, S)`` white. Over the last ``N`` steps (Willsky & Jones 1976, eqs. 3.10-3.14; Han et al. 2022,
+eqs. 14-23)::
 
     d_i(theta) = sum_j G_i[j - theta]^T S^-1 eps_j
     R_i(theta) = sum_j G_i[j - theta]^T S^-1 G_i[j - theta]
@@ -12,42 +11,28 @@ white. Over the last ``N`` steps, for every direction ``i`` and candidate onset 
 
 and the GLR of direction ``i`` is ``max_theta l_i(theta)``.
 
-Signatures (derived here; eqs. 18-19 as printed in Han et al. (2022) are garbled). The plant is
-``x[k+1] = Phi x[k] + Gamma (u[k] + f_u[k]) + w``, ``y[k] = C x[k] + D u[k] + f_y[k] + v``
-(eq. 4 of Han et al. 2022, ``jaxfdi.simulate``: the feed-through sees the *commanded* input). A unit
-step in direction ``i`` from step ``theta`` is ``f[k] = 1 (k >= theta)`` and enters the
-state update as ``g_i`` and the output as ``h_i`` (``FaultDirections``). The filter of
-``jaxfdi.filters._kalman`` conditions on ``y[k]`` then predicts with ``u[k]``:
-``eps_k = y_k - C m_k - D u_k``, ``m_{k+1} = Phi (m_k + K eps_k) + Gamma u_k``. The
-fault's share of the prediction error ``e_k = dx_k - dm_k`` then obeys
-``e_{k+1} = Phi (I - K C) e_k + (g - Phi K h) f_k`` with ``e_theta = 0``, and its share
-of the innovation is ``G[l] = C e_{theta+l} + h`` for lag ``l = k - theta >= 0``::
+Signatures (derived here; Han et al. 2022 eqs. 18-19 are garbled as printed). Plant (their eq. 4,
+``jaxfdi.simulate``; ``D`` sees the *commanded* input): ``x[k+1] = Phi x[k] + Gamma (u[k] + f_u[k]) + w``,
+``y[k] = C x[k] + D u[k] + f_y[k] + v``. A unit step ``f[k] = 1 (k >= theta)`` in direction ``i`` enters the state
+as ``g_i`` and the output as ``h_i`` (``FaultDirections``). Filter (``jaxfdi.filters._kalman``):
+``eps_k = y_k - C m_k - D u_k``, ``m_{k+1} = Phi (m_k + K eps_k) + Gamma u_k``; the fault's share of the prediction
+error obeys ``e_{k+1} = Phi (I - K C) e_k + (g - Phi K h) f_k``, ``e_theta = 0``, so at lag ``l = k - theta >= 0``::
 
     G[0] = h,   E[1] = g - Phi K h
     G[l] = C E[l] + h,   E[l+1] = Phi (I - K C) E[l] + g - Phi K h
 
-So a sensor fault shows at its onset step (``G[0] = e_j``); an actuator fault shows one
-step later (``G[0] = 0``, ``G[1] = C Gamma_i``) unless it also passes through ``D``.
+A sensor fault shows at onset (``G[0] = e_j``), an actuator fault one step later (``G[0] = 0``,
+``G[1] = C Gamma_i``) unless it also passes through ``D``.
 
-Steady state (an assumption made explicit). The signatures above and the ``chi2(1)`` law
-need a *constant* gain ``K`` and innovation covariance ``S``: the filter must run in
-steady state, ``P[k|k-1] = P_ss`` (the DARE solution, ``steady_state_kalman``).
-``glrt_detector``, ``recursive_glrt_detector`` (``glrt_recursive``) and ``corrected_glrt``
-(``glrt_correction``) take the steady state only: they raise ``ValueError`` (naming
-``gain``, ``innovation_cov`` or ``cov`` and the expected ``steady_state_kalman(model)``
-field) when a concrete value differs from the model's steady state by more than
-``steady_state_tolerance(dtype)`` (relative, Frobenius norm: ``1e-6`` in float64,
-``sqrt(eps)`` in float32). Under ``jit``/``vmap`` of the construction the values are
-unknown and the check is skipped. A filter started from another prior is served by
-``transient_glrt_detector`` (``glrt_transient``: time-varying gains and signatures).
+Steady state required (constant ``K``, ``S``; ``P[k|k-1] = P_ss``, the DARE solution of ``steady_state_kalman``):
+``glrt_detector``, ``recursive_glrt_detector`` and ``corrected_glrt`` raise ``ValueError`` (naming ``gain``,
+``innovation_cov`` or ``cov`` and the expected ``steady_state_kalman(model)`` field) when a concrete value differs
+from it by more than ``steady_state_tolerance(dtype)``; the check is skipped under ``jit``/``vmap`` of the
+construction. Another prior: ``transient_glrt_detector`` (time-varying gains and signatures).
 
-The forms share the interface here: ``detector_setup`` (checked arguments and
-signatures), ``GLREngine`` (the window: ``windowed_engine`` here, ``recursive_engine`` in
-``glrt_recursive``), ``engine_detector`` and ``decide``.
-
-Timing. The window ends at the current step ``k``; an onset *offset* ``o`` in
-``0..N-1`` stands for ``theta = k - o`` (``o = 0``: the fault began at this step). The
-onset estimate of a decision at step ``k`` is therefore ``k - onset_offset``.
+Timing: the window ends at step ``k``; onset offset ``o`` in ``0..N-1`` means ``theta = k - o`` (onset estimate
+``k - onset_offset``). Shared by the forms: ``detector_setup``, ``GLREngine`` (``windowed_engine``;
+``glrt_recursive.recursive_engine``), ``engine_detector``, ``decide``.
 """
 from __future__ import annotations
 
@@ -71,10 +56,8 @@ PAPER_USED_THRESHOLD = 200.0
 
 
 class FaultDirections(NamedTuple):
-    """How a unit step fault enters the plant, one column per fault direction.
-
-    Columns are ordered actuators then sensors, so direction ``i`` has the simulator's
-    fault label ``1 + i``.
+    """How a unit step fault enters the plant, one column per direction: actuators then sensors
+    (direction ``i`` has the simulator's fault label ``1 + i``).
 
     Attributes:
       state: (n, d) added to x[k+1] = Phi x + Gamma u + ...
@@ -128,14 +111,11 @@ class GLRTState(NamedTuple):
 def fault_directions(model: LinearGaussianModel, actuator_feedthrough: bool = False) -> FaultDirections:
     """Unit step-fault directions ``(g, h)``: actuators ``1..nu``, then sensors ``1..m``.
 
-    Actuator ``i``: ``g = Gamma[:, i]`` and ``h = 0``, because eq. (4) of Han et al. (2022) and
-    ``jaxfdi.simulate`` feed the commanded input through ``D`` (``y = C x + D u``); with
-    ``actuator_feedthrough=True``, ``h = D[:, i]`` (a plant whose faulty input also
-    passes through ``D``). Sensor ``j``: ``g = 0``, ``h = e_j``.
+    Actuator ``i``: ``g = Gamma[:, i]``, ``h = 0`` (Han et al. 2022 eq. 4 and ``jaxfdi.simulate`` feed the commanded
+    input through ``D``), or ``h = D[:, i]`` if ``actuator_feedthrough``. Sensor ``j``: ``g = 0``, ``h = e_j``.
 
     Returns:
-      ``FaultDirections(state, output)`` in ``Gamma``'s dtype with ``d = nu + m`` columns:
-      ``state`` (n, d) the ``g`` and ``output`` (m, d) the ``h`` of each direction.
+      ``FaultDirections`` of the ``d = nu + m`` directions, in ``Gamma``'s dtype.
     """
     validate_linear_model(model)
     return _directions(model.Gamma, model.D, bool(actuator_feedthrough))
@@ -153,13 +133,11 @@ def _directions(Gamma: Array, D: Array, actuator_feedthrough: bool) -> FaultDire
 def fault_signatures(model: LinearGaussianModel, gain: Array, directions: FaultDirections, window: int) -> Array:
     """(window, m, d) innovation signatures ``G[l]`` of a unit step fault, lag ``l = k - theta``.
 
-    ``G[0] = h``, ``E[1] = g - Phi K h``, ``G[l] = C E[l] + h``,
-    ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h`` (derived in the module docstring from the
-    filter of ``jaxfdi.filters._kalman`` with its steady-state gain ``K``, (n, m)).
+    ``G[0] = h``, ``E[1] = g - Phi K h``, ``G[l] = C E[l] + h``, ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h``,
+    ``K`` (n, m) the steady-state gain (derivation: module docstring).
 
     Returns:
-      (window, m, d) array in ``gain``'s dtype: ``G[l]`` for lags ``l = 0..window-1``, one
-      column per direction of ``directions``.
+      (window, m, d) array in ``gain``'s dtype: ``G[l]``, ``l = 0..window-1``, one column per direction.
     """
     n, _, m = validate_linear_model(model)
     window = _check_window(window)
@@ -172,9 +150,9 @@ def fault_signatures(model: LinearGaussianModel, gain: Array, directions: FaultD
 
 @partial(jax.jit, static_argnums=5)
 def step_response(Phi: Array, C: Array, gain: Array, g: Array, h: Array, length: int) -> tuple[Array, Array]:
-    """A unit step's share of the steady-state filter's prediction error ``E[l]``,
-    (length, n, d), and of its innovation ``G[l] = C E[l] + h``, (length, m, d), at lags
-    ``l = 0..length-1``: ``E[0] = 0``, ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h``."""
+    """A unit step's share of the steady-state filter's prediction error ``E[l]`` (length, n, d) and innovation
+    ``G[l] = C E[l] + h`` (length, m, d), lags ``0..length-1``: ``E[0] = 0``,
+    ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h``."""
     closed_loop = Phi @ (jnp.eye(Phi.shape[0], dtype=Phi.dtype) - gain @ C)
     forcing = g - Phi @ (gain @ h)
 
@@ -191,10 +169,9 @@ def glr_by_onset(innovations: Array, signatures: Array, innovation_cov: Array | 
     Args:
       innovations: (N, m) innovations of the last N steps, oldest first (row N-1 is step k).
       signatures: (N, m, d) ``G[l]`` from ``fault_signatures``.
-      innovation_cov: (m, m) steady-state ``S``; ``None`` when ``innovations`` and
-        ``signatures`` are already whitened (``L^-1 eps``, ``L^-1 G`` with ``S = L L^T``).
-      num_valid: () number of most recent rows that are data (onsets older than that are
-        not considered); default N.
+      innovation_cov: (m, m) steady-state ``S``; ``None`` when ``innovations`` and ``signatures`` are already
+        whitened (``L^-1 eps``, ``L^-1 G`` with ``S = L L^T``).
+      num_valid: () number of most recent rows that are data (older onsets not considered); default N.
     """
     innovations, signatures, innovation_cov = _check_glr_inputs(innovations, signatures, innovation_cov)
     num_valid = innovations.shape[0] if num_valid is None else num_valid
@@ -213,8 +190,7 @@ def glr_statistic(innovations: Array, signatures: Array, innovation_cov: Array |
                   num_valid=None) -> GLRResult:
     """GLR of each direction maximised over the onsets of the window (Willsky & Jones 1976).
 
-    Same arguments as ``glr_by_onset``; returns ``GLRResult(statistic (d,),
-    onset_offset (d,), magnitude (d,))`` with ``theta_hat = k - onset_offset``.
+    Same arguments as ``glr_by_onset``; returns ``GLRResult`` ((d,) each), ``theta_hat = k - onset_offset``.
     """
     return _maximise(glr_by_onset(innovations, signatures, innovation_cov, num_valid))
 
@@ -222,16 +198,13 @@ def glr_statistic(innovations: Array, signatures: Array, innovation_cov: Array |
 def glrt_threshold(pfa, num_directions: int, window: int, method: str = "paper") -> Array:
     """A threshold for the GLR statistic at false-alarm probability ``pfa`` per step.
 
-    ``"paper"``: ``chi2_threshold(num_directions * window, pfa)``, Han et al.'s (2022) theoretical
-    value (6 directions x N = 10, pfa = 0.005 -> 91.95); the paper then uses
-    ``PAPER_USED_THRESHOLD = 200``, set by simulation. ``"bonferroni"``: each
-    ``l_i(theta)`` is ``chi2(1)`` under no fault, so
-    ``chi2_threshold(1, pfa / (num_directions * window))`` bounds the per-step false-alarm
-    probability of the maximum by ``pfa``.
+    ``"paper"``: ``chi2_threshold(num_directions * window, pfa)``, Han et al.'s (2022) theoretical value
+    (6 directions x N = 10, pfa = 0.005 -> 91.95; they then use ``PAPER_USED_THRESHOLD = 200``, set by simulation).
+    ``"bonferroni"``: ``chi2_threshold(1, pfa / (num_directions * window))``, since each ``l_i(theta)`` is
+    ``chi2(1)`` under no fault; bounds the per-step false-alarm probability of the maximum by ``pfa``.
 
     Returns:
-      the threshold on the GLR statistic, of ``pfa``'s shape (() for a scalar) and float
-      dtype.
+      the threshold, of ``pfa``'s shape (() for a scalar) and float dtype.
     """
     _checks.check_choice("method", method, ("paper", "bonferroni"))
     _checks.check_probability("pfa", pfa)
@@ -250,20 +223,15 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
                   isolation: str = "max", actuator_feedthrough: bool = False, overlap_sensor: int = -1) -> Detector:
     """Online windowed GLRT on the innovations of a fault-blind steady-state Kalman filter.
 
-    ``step(state, innovation (m,)) -> (state, Decision)`` at step ``k``: statistic =
-    ``max_i max_theta l_i(theta)`` over the onsets within the data seen, alarm =
-    statistic > threshold, label = ``1 + i`` for the isolated direction ``i`` (the
-    simulator's fault label; given at every step, alarm or not), estimate = its
-    ``nu_hat``. The state's ``onset_offset`` gives ``theta_hat = k - onset_offset``.
-    Each step correlates the whole window with every onset: O(N^2) per step;
-    ``recursive_glrt_detector`` gives the same decisions in O(N).
+    ``step`` at step ``k``: statistic = ``max_i max_theta l_i(theta)`` over the onsets in the data seen, alarm =
+    statistic > threshold, label = ``1 + i`` of the isolated direction (every step), estimate = its ``nu_hat``;
+    ``theta_hat = k - state.onset_offset``. O(N^2) per step (``recursive_glrt_detector``: same decisions, O(N)).
 
     Isolation:
       ``"max"``: the direction with the largest GLR.
-      ``"paper"``: eq. (24) of Han et al. (2022), read as: actuator when the largest actuator GLR and
-        the ``overlap_sensor`` GLR (T4, the last sensor) both exceed the threshold;
-        otherwise the sensor with the largest GLR if some sensor exceeds it; otherwise an
-        actuator if one alone exceeds it; with no alarm, the largest GLR as for ``"max"``.
+      ``"paper"``: Han et al. (2022) eq. (24), read as: actuator if the largest actuator GLR and the
+        ``overlap_sensor`` GLR (T4, the last sensor) both exceed the threshold; else the largest sensor if one
+        exceeds it; else an actuator if one alone exceeds it; with no alarm, as ``"max"``.
 
     Args:
       model: the plant the filter assumes (``Phi``, ``Gamma``, ``C``, ``D``).
@@ -271,15 +239,13 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
       innovation_cov: (m, m) steady-state ``S``.
       window: N >= 1 steps.
       threshold: > 0, e.g. ``PAPER_USED_THRESHOLD`` or ``glrt_threshold(...)``.
-      isolation: ``"max"`` or ``"paper"``, or a () bool array (``True``: ``"paper"``) so
-        that detectors with either rule share one compiled program.
+      isolation: ``"max"``, ``"paper"`` or a () bool array (``True``: ``"paper"``; both rules in one program).
       actuator_feedthrough: see ``fault_directions``.
       overlap_sensor: sensor index (into the outputs) of eq. (24)'s T4.
 
     Returns:
-      ``Detector(init, step)``: ``init()`` gives an empty ``GLRTState`` (a zero (N, m)
-      window); ``step(state, innovation)`` takes the filter's (m,) innovation and returns
-      ``(state, Decision)`` as above (a non-finite component alarms and isolates its sensor).
+      ``Detector(init, step)``: ``init()`` gives an empty ``GLRTState`` (zero (N, m) window);
+      ``step(state, innovation (m,)) -> (state, Decision)``; a non-finite component alarms and isolates its sensor.
     """
     setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
                            overlap_sensor)
@@ -288,16 +254,14 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
 
 
 def whiten_finite(whitener: Array, innovation: Array) -> Array:
-    """``L^-1 eps`` with a non-finite component of ``eps`` (a dead sensor) taken as 0, its
-    fault-free mean: the step enters the statistics as one without a fault, so they
+    """``L^-1 eps`` with a non-finite component (dead sensor) taken as 0, its fault-free mean, so the statistics
     recover as soon as the sensor does."""
     return whitener @ jnp.where(jnp.isfinite(innovation), innovation, 0.0)
 
 
 def engine_detector(setup: DetectorSetup, whitener: Array, engine: GLREngine) -> Detector:
-    """The online ``Detector`` of an engine (windowed or recursive): whiten, update, decide.
-    A step with a non-finite innovation component ``j`` alarms and isolates sensor ``j``
-    (label ``1 + nu + j``, ``chi2.flag_dead``)."""
+    """The online ``Detector`` of an engine (windowed or recursive): whiten, update, decide. A non-finite
+    innovation component ``j`` alarms and isolates sensor ``j`` (label ``1 + nu + j``, ``chi2.flag_dead``)."""
     m, dtype = setup.innovation_cov.shape[0], setup.innovation_cov.dtype
 
     channel_labels = sensor_labels(setup.num_inputs, m)
@@ -363,8 +327,7 @@ def _check_decision_args(threshold, isolation: str, overlap_sensor: int, m: int)
 
 
 def decide(setup: DetectorSetup, result: GLRResult) -> tuple[Decision, Array]:
-    """The step's decision from the GLR of every direction, and the isolated direction's
-    onset offset."""
+    """The step's decision from the GLR of every direction, and the isolated direction's onset offset."""
     statistic = jnp.max(result.statistic)
     alarm = statistic > setup.threshold
     direction = jnp.argmax(result.statistic)
@@ -378,18 +341,15 @@ def decide(setup: DetectorSetup, result: GLRResult) -> tuple[Decision, Array]:
 
 
 def steady_state_tolerance(dtype) -> float:
-    """Relative (Frobenius) tolerance of ``check_steady_state``: ``max(1e-6, sqrt(eps))``
-    (``1e-6`` in float64, ``3.5e-4`` in float32)."""
+    """Relative Frobenius tolerance of ``check_steady_state``: ``max(1e-6, sqrt(eps))`` (float32: ``3.5e-4``)."""
     return max(1e-6, float(np.sqrt(np.finfo(dtype).eps)))
 
 
 def check_steady_state(model: LinearGaussianModel, gain=None, innovation_cov=None, cov=None) -> None:
     """Raise ``ValueError`` unless the given filter quantities are the model's steady state.
 
-    ``gain`` (K), ``innovation_cov`` (S) and ``cov`` (the filter's prior ``P[0|-1]``) are
-    compared with ``steady_state_kalman(model)``: relative Frobenius difference at most
-    ``steady_state_tolerance(dtype)``. The GLR signatures assume a constant gain (module
-    docstring, "Steady state"). Skipped for values unknown at trace time.
+    ``gain`` (K), ``innovation_cov`` (S), ``cov`` (prior ``P[0|-1]``) vs ``steady_state_kalman(model)``: relative
+    Frobenius difference <= ``steady_state_tolerance(dtype)``. Skipped for values unknown at trace time.
     """
     given = {name: value for name, value in (("gain", gain), ("innovation_cov", innovation_cov), ("cov", cov))
              if value is not None}
@@ -419,10 +379,9 @@ def check_steady_state(model: LinearGaussianModel, gain=None, innovation_cov=Non
 
 
 class GLREngine(NamedTuple):
-    """The GLR's window of one detector form: ``update(state, white (m,)) -> (state,
-    GLRResult)``, ``remove(state, direction, offset, size) -> state`` takes the whitened
-    signature of a step of ``size`` in ``direction`` with onset offset ``offset`` out of
-    the window (the data seen), and ``information`` (N, d) is ``R_i(k - o)``."""
+    """One detector form's GLR window: ``update(state, white (m,)) -> (state, GLRResult)``;
+    ``remove(state, direction, offset, size) -> state`` takes a step of ``size`` in ``direction`` with onset
+    offset ``offset`` out of the window; ``information`` (N, d) is ``R_i(k - o)``."""
 
     init: Callable[[], Any]
     update: Callable[[Any, Array], tuple[Any, GLRResult]]
@@ -453,9 +412,8 @@ def windowed_engine(setup: DetectorSetup) -> tuple[Array, GLREngine]:
 
 
 def glr_sequence(setup: DetectorSetup, innovations: Array) -> GLRResult:
-    """Every direction's windowed GLR at every step of ``innovations`` (T, m): the
-    ``GLRResult`` (T, d) that ``glrt_detector`` maximises over directions at each step
-    (for figures of each direction's statistic)."""
+    """Every direction's windowed GLR at every step of ``innovations`` (T, m): the ``GLRResult`` (T, d) that
+    ``glrt_detector`` maximises over directions (for figures)."""
     whitener, engine = windowed_engine(setup)
     _, result = jax.lax.scan(lambda state, e: engine.update(state, whiten_finite(whitener, e)), engine.init(),
                              innovations)
@@ -510,8 +468,8 @@ def _detector_tensors(signatures: Array, innovation_cov: Array) -> tuple[Array, 
 
 
 def _onset_tensors(white_signatures: Array) -> tuple[Array, Array]:
-    """``T[o, p] = Gw[p - (N-1-o)]`` (0 for a negative lag), (N, N, m, d), and the
-    information ``I[o] = sum_{l<=o} ||Gw[l]||^2`` per column, (N, d)."""
+    """``T[o, p] = Gw[p - (N-1-o)]`` (0 for a negative lag), (N, N, m, d), and the information
+    ``I[o] = sum_{l<=o} ||Gw[l]||^2`` per column, (N, d)."""
     N = white_signatures.shape[0]
     offset = jnp.arange(N)[:, None]
     position = jnp.arange(N)[None, :]
@@ -528,8 +486,8 @@ def _glr_core(white_window: Array, onset_signatures: Array, information: Array, 
 
 
 def glr_from_correlation(correlation: Array, information: Array, num_valid) -> OnsetGLR:
-    """``nu_hat = d / I``, ``l = d^2 / I`` from the correlations ``d`` (N, d) and the
-    information ``I`` (N, d) of every onset offset; offsets ``>= num_valid`` are -inf."""
+    """``nu_hat = d / I``, ``l = d^2 / I`` from correlations ``d`` (N, d) and information ``I`` (N, d) of every
+    onset offset; offsets ``>= num_valid`` are -inf."""
     N = correlation.shape[0]
     informative = information > 0
     safe = jnp.where(informative, information, 1.0)

@@ -1,25 +1,19 @@
 """Willsky-Jones state correction after a confirmed GLRT detection (Willsky & Jones 1976).
 
-A steady-state Kalman filter (gain ``K``) feeds the windowed GLRT of ``glrt`` (or its
-running-sum form, ``glrt_recursive``). A unit step in direction ``i`` (``g``, ``h``:
-``fault_directions``) from step ``theta`` moves the true state by ``alpha[l]`` and the
-fault-blind filter's predicted mean by ``F[l]``, both at step ``theta + l``::
+A steady-state Kalman filter (gain ``K``) feeds the GLRT of ``glrt`` (or ``glrt_recursive``). A unit step in
+direction ``i`` (``g``, ``h``: ``fault_directions``) from ``theta`` moves the true state by ``alpha[l]`` and the
+fault-blind predicted mean by ``F[l]`` at step ``theta + l``::
 
     alpha[0] = 0,   alpha[l+1] = Phi alpha[l] + g,         F[l] = alpha[l] - E[l]
     E[0] = 0,       E[l+1] = Phi (I - K C) E[l] + g - Phi K h
 
-(``E``: the step's share of the prediction error, ``glrt`` module docstring). A filter
-that *knows* the fault (it subtracts ``h nu`` from ``y`` and adds ``g nu`` to its
-prediction from ``theta`` on) has mean ``m0 + alpha nu``: its error is the fault-free
-one. So after a confirmed decision at step ``k`` with onset ``theta_hat = k - o`` and
-size ``nu_hat``, the predicted mean is corrected by ``(alpha - F)[o + 1] nu_hat``::
-
-    m[k+1] += E_i[o + 1] nu_hat,   b_i += nu_hat,   window -= Gw_i[. - theta_hat] nu_hat
-
-the fault is accommodated from then on (``y - h nu_hat``, ``+ g nu_hat``) and its
-whitened signature is removed from the window (``d_i(theta_hat)`` becomes 0 and the test
-re-arms): the filter is then exactly the known-fault filter, and the window holds the
-innovations it would have produced. The steady-state assumption is ``glrt``'s.
+(``E``: the step's share of the prediction error, ``glrt`` module docstring). A filter that *knows* the fault
+(subtracts ``h nu`` from ``y``, adds ``g nu`` to its prediction from ``theta`` on) has mean ``m0 + alpha nu`` and the
+fault-free error. So a confirmed decision at step ``k`` (onset ``theta_hat = k - o``, size ``nu_hat``) adds
+``(alpha - F)[o + 1] nu_hat = E_i[o + 1] nu_hat`` to the predicted mean, accommodates the fault from then on
+(``y - h nu_hat``, ``+ g nu_hat``) and removes its whitened signature from the window (``d_i(theta_hat) = 0``, the
+test re-arms): exactly the known-fault filter and its innovations (``corrected_glrt``). Steady state as in ``glrt``.
+produced. Steady state assumed as in ``glrt``.
 """
 from __future__ import annotations
 
@@ -85,40 +79,30 @@ class CorrectedGLRTInfo(NamedTuple):
 def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation: str = "max",
                    actuator_feedthrough: bool = False, overlap_sensor: int = -1, confirm: int = 1,
                    correct: bool = True, recursive: bool = False) -> Filter:
-    """Steady-state Kalman filter + windowed GLRT with the Willsky-Jones correction, as a
-    ``Filter``: ``init(mean, cov=None) -> CorrectedGLRTState``; ``step(state, y, u) ->
-    (state, CorrectedGLRTInfo)``, the GLRT's ``Decision`` in ``info.decision``; so
-    ``run_filter`` drives it (one run or a batch), and in a ``loop.FDI`` its step is
+    """Steady-state Kalman filter + windowed GLRT with the Willsky-Jones correction (module docstring), as a
+    ``Filter``; ``run_filter`` drives it (one run or a batch); in a ``loop.FDI`` its step is
     ``lambda s, k, y, u: filt.step(s, y, u)`` (the state counts its own steps).
 
-    The filter is ``kalman_filter(model)`` at its steady state (gain ``K``, ``P = P_ss``)
-    with the faults found so far accommodated: ``eps_k = y_k - C m_k - D u_k - H b``,
-    ``m_{k+1} = Phi (m_k + K eps_k) + Gamma u_k + G b`` (``G, H`` = ``fault_directions``).
-    ``eps_k`` goes through the GLRT of ``glrt_detector`` (``recursive``: the running-sum
-    form of ``recursive_glrt_detector``; same decisions to round-off). A detection is
-    confirmed when the alarm has held ``confirm`` consecutive steps; then, with the
-    isolated direction ``i``, onset ``theta_hat = k - o`` and size ``nu_hat``
-    (module docstring)::
+    The filter is ``kalman_filter(model)`` at steady state (gain ``K``, ``P = P_ss``) with the faults found so far
+    accommodated: ``eps_k = y_k - C m_k - D u_k - H b``, ``m_{k+1} = Phi (m_k + K eps_k) + Gamma u_k + G b``
+    (``G, H`` = ``fault_directions``). ``eps_k`` feeds ``glrt_detector``'s GLRT (``recursive``:
+    ``recursive_glrt_detector``'s running sums, same decisions to round-off). A detection is confirmed when the
+    alarm has held ``confirm`` consecutive steps; then, for isolated direction ``i``, ``theta_hat = k - o``,
+    ``nu_hat``::
 
         m_{k+1} += E_i[o + 1] nu_hat,   b_i += nu_hat,   window -= Gw_i[. - theta_hat] nu_hat
 
-    and the detector re-arms (a second fault is tested against the corrected filter).
-    ``correct=False`` runs the plain fault-blind filter and GLRT, marking the same
-    confirmation events (alarm held ``confirm`` steps) without correcting: the contrast.
-    A larger ``confirm`` estimates ``nu_hat`` (and isolates) from more data: on the turbojet
-    runs of Han et al. (2022) (N = 10, Bonferroni 1e-4) with an actuator step then a P4 step, 40 runs,
-    ``confirm=1`` confirmed 2.9 detections a run (premature corrections are re-detected and
-    refined), ``confirm=5`` exactly 2.0 (``tests/detection/test_glrt_correction.py``).
-    Jit- and vmap-able (``lax.scan`` over steps, ``vmap`` over Monte Carlo runs).
-
-    ``init(mean, cov=None)``: ``cov``, if given, must be ``P_ss`` (``check_steady_state``);
-    other arguments as ``glrt_detector``.
+    and the detector re-arms (a second fault is tested against the corrected filter). ``correct=False``: plain
+    fault-blind filter and GLRT, marking the same confirmations without correcting (the contrast). A larger
+    ``confirm`` estimates ``nu_hat`` (and isolates) from more data: on Han et al.'s (2022) turbojet (N = 10,
+    Bonferroni 1e-4), actuator step then P4 step, 40 runs, ``confirm=1`` confirmed 2.9 detections a run (premature
+    corrections re-detected and refined), ``confirm=5`` exactly 2.0 (``tests/detection/test_glrt_correction.py``).
+    Jit- and vmap-able. ``init``'s ``cov``, if given, must be ``P_ss``; other arguments as ``glrt_detector``.
 
     Returns:
-      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov=None) ->
-      CorrectedGLRTState``; ``step(state, y (m,), u (nu,)) -> (state, CorrectedGLRTInfo)``
-      with the decision, the onset estimate, the confirmation, the innovation (m,), the
-      corrected ``m[k+1|k]`` (n,) and the accumulated fault estimates (d,), ``d = nu + m``.
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov=None) -> CorrectedGLRTState``;
+      ``step(state, y (m,), u (nu,)) -> (state, CorrectedGLRTInfo)``: ``Decision`` (``info.decision``), onset,
+      confirmation, innovation (m,), corrected ``m[k+1|k]`` (n,), accumulated fault estimates (d,), ``d = nu + m``.
     """
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)

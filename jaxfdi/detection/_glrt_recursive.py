@@ -1,31 +1,21 @@
-"""The windowed GLRT by running sums: O(N) per step instead of O(N^2) (Willsky & Jones
-1976, sec. 3).
+"""The windowed GLRT by running sums: O(N) per step instead of O(N^2) (Willsky & Jones 1976, sec. 3).
 
-The windowed test (``glrt.py``) recomputes, at every step ``k``, the correlation of
-the last ``N`` whitened innovations ``w_j`` with the whitened signature of every onset
-``theta = k - o`` in the window::
+``glrt.py`` recomputes at every step ``k`` the correlation of the last ``N`` whitened innovations ``w_j`` with the
+whitened signature of every onset ``theta = k - o`` in the window, an (N, N, m, d) contraction::
 
-    d_i(theta) = sum_{j=theta..k} Gw_i[j - theta]^T w_j,        o = k - theta = 0..N-1,
+    d_i(theta) = sum_{j=theta..k} Gw_i[j - theta]^T w_j,        o = k - theta = 0..N-1.
 
-an (N, N, m, d) contraction. Each of these sums gains exactly one term a step, the one
-at ``j = k``, whose lag ``k - theta`` is the onset offset ``o`` itself. So the
-correlations of the N onsets kept are carried and updated::
+Each sum gains one term a step (``j = k``, lag = offset ``o``), so the N correlations are carried as running sums
+(Willsky & Jones 1976, eq. 3.17), an (N, m, d) contraction a step, dropping the onset leaving the window::
 
-    d[o](k) = d[o-1](k-1) + Gw[o]^T w_k   (o >= 1),      d[0](k) = Gw[0]^T w_k,
+    d[o](k) = d[o-1](k-1) + Gw[o]^T w_k   (o >= 1),      d[0](k) = Gw[0]^T w_k.
 
-(Willsky & Jones 1976, eq. 3.17: the matched-filter outputs as running sums), an
-(N, m, d) contraction a step; the onset that leaves the window is dropped. The
-information ``R_i(theta) = sum_{l<=o} ||Gw_i[l]||^2`` depends only on the offset, as in
-the windowed form, and the statistic, estimate, isolation and alarms are the same
-functions of ``d`` (``glrt.glr_from_correlation``, ``glrt.decide``): the two detectors
-agree to round-off (the sums are added in another order).
-
-Removing a detected fault (the Willsky-Jones correction of ``glrt_correction``)
-subtracts ``nu_hat Gw_i[j - theta_hat]`` from the window's ``w_j``; in the running sums
-that is ``d_i'(k - o') -= nu_hat X[o', o_hat, i', i]`` with the cross-information
-``X[o', o, i', i] = sum_p T[o', p, :, i'] . T[o, p, :, i]`` of the onsets' whitened
-signatures ``T`` over the window positions ``p`` (``glrt._onset_tensors``), (N, N, d, d).
-The steady-state assumption is the windowed form's (``glrt`` module docstring).
+``R_i(theta) = sum_{l<=o} ||Gw_i[l]||^2`` depends only on the offset; statistic, estimate, isolation and alarms are
+the same functions of ``d`` (``glrt.glr_from_correlation``, ``glrt.decide``): the windowed form's, to round-off.
+Removing a detected fault (``glrt_correction``) subtracts ``nu_hat Gw_i[j - theta_hat]`` from the window's ``w_j``,
+here ``d_i'(k - o') -= nu_hat X[o', o_hat, i', i]``, cross-information
+``X[o', o, i', i] = sum_p T[o', p, :, i'] . T[o, p, :, i]`` (N, N, d, d) of the onsets' whitened signatures ``T``
+(``glrt._onset_tensors``). Steady state as in ``glrt``.
 """
 from __future__ import annotations
 
@@ -58,14 +48,12 @@ class RecursiveGLRTState(NamedTuple):
 def recursive_glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
                             isolation: str = "max", actuator_feedthrough: bool = False,
                             overlap_sensor: int = -1) -> Detector:
-    """``glrt_detector`` with running sums: the same ``Decision`` each step (to
-    round-off) at O(N m d) a step instead of O(N^2 m d). Same arguments and state
-    meaning (``onset_offset``: ``theta_hat = k - onset_offset``).
+    """``glrt_detector`` with running sums: the same ``Decision`` each step (to round-off) at O(N m d) a step
+    instead of O(N^2 m d); same arguments and state meaning (``theta_hat = k - onset_offset``).
 
     Returns:
-      ``Detector(init, step)``: ``init()`` gives a zero ``RecursiveGLRTState`` (correlations
-      (N, d), ``d = nu + m``); ``step(state, innovation)`` takes the filter's (m,) innovation
-      and returns ``(state, Decision)`` as ``glrt_detector``'s step does.
+      ``Detector(init, step)``: ``init()`` gives a zero ``RecursiveGLRTState`` (correlations (N, d),
+      ``d = nu + m``); ``step(state, innovation (m,)) -> (state, Decision)`` as ``glrt_detector``'s.
     """
     setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
                            overlap_sensor)
@@ -74,8 +62,8 @@ def recursive_glrt_detector(model: LinearGaussianModel, gain: Array, innovation_
 
 
 def recursive_engine(setup: DetectorSetup, removable: bool = False) -> tuple[Array, GLREngine]:
-    """The whitener ``L^-1`` and the running-sum engine; ``removable`` builds the
-    cross-information ``X`` (N, N, d, d) that ``remove`` needs (else ``remove`` raises)."""
+    """The whitener ``L^-1`` and the running-sum engine; ``removable`` builds the cross-information ``X``
+    (N, N, d, d) that ``remove`` needs (else ``remove`` raises)."""
     whitener, white_signatures, information = _recursive_tensors(setup.signatures, setup.innovation_cov)
     window, _, num_directions = white_signatures.shape
     dtype = setup.innovation_cov.dtype
@@ -109,8 +97,7 @@ def _cross_information(white_signatures: Array) -> Array:
 
 @jax.jit
 def _recursive_tensors(signatures: Array, innovation_cov: Array) -> tuple[Array, Array, Array]:
-    """``L^-1``, the whitened signatures ``Gw[l] = L^-1 G[l]`` (N, m, d) and the
-    information ``I[o] = sum_{l<=o} ||Gw[l]||^2`` (N, d)."""
+    """``L^-1``, whitened ``Gw[l] = L^-1 G[l]`` (N, m, d), information ``I[o] = sum_{l<=o} ||Gw[l]||^2`` (N, d)."""
     whitener = _whitener(innovation_cov)
     white = jnp.einsum("ab,lbd->lad", whitener, signatures)
     return whitener, white, jnp.cumsum(jnp.sum(white**2, axis=1), axis=0)

@@ -1,29 +1,22 @@
-"""The windowed GLRT for a Kalman filter started at any prior: time-varying signatures
-(Willsky & Jones 1976, sec. 3, with the filter's own gains).
+"""The windowed GLRT for a Kalman filter started at any prior: time-varying signatures (Willsky & Jones 1976,
+sec. 3, with the filter's own gains).
 
-The GLR of ``glrt`` needs a constant gain ``K`` and innovation covariance ``S`` (a filter
-in steady state, ``P[k|k-1] = P_ss``). ``kalman_filter(model)`` started at another prior
-covariance ``P[0]`` has gains ``K_k`` and innovation covariances ``S_k`` that vary until
-``P`` converges to ``P_ss`` (``P_{k+1} = Phi (I - K_k C) P_k (I - K_k C)^T Phi^T +
-Phi K_k R K_k^T Phi^T + Q``, data-independent). A unit step in direction ``i`` (``g``,
-``h``: ``fault_directions``) from step ``theta`` then adds to the innovation at step
-``k >= theta`` a signature that depends on the onset as well as the lag::
+``glrt``'s GLR needs constant ``K`` and ``S`` (steady state, ``P[k|k-1] = P_ss``). ``kalman_filter(model)`` started
+at another prior ``P[0]`` has gains ``K_k`` and covariances ``S_k`` varying until ``P`` converges (data-independent
+``P_{k+1} = Phi (I - K_k C) P_k (I - K_k C)^T Phi^T + Phi K_k R K_k^T Phi^T + Q``). A unit step in direction ``i``
+(``g``, ``h``: ``fault_directions``) from ``theta`` then adds at ``k >= theta`` a signature depending on onset and
+lag (``glrt``'s recursion with ``K_k``)::
 
     G[k, theta] = C E[k] + h,   E[theta] = 0,
     E[k+1] = Phi (I - K_k C) E[k] + g - Phi K_k h
 
-(the steady-state recursion of ``glrt`` with ``K`` replaced by ``K_k``), and the
-innovations are whitened by each step's ``S_k = L_k L_k^T``: ``w_j = L_j^-1 eps_j``,
-``Gw[j, theta] = L_j^-1 G[j, theta]``. Over the last ``N`` steps, for every onset
-``theta = k - o``::
+Whitening by each step's ``S_k = L_k L_k^T``: ``w_j = L_j^-1 eps_j``, ``Gw[j, theta] = L_j^-1 G[j, theta]``. Over the
+last ``N`` steps, for every onset ``theta = k - o``::
 
     d_i(theta) = sum_j Gw_i[j, theta]^T w_j,   R_i(theta) = sum_j ||Gw_i[j, theta]||^2,
     nu_hat = d / R,   l_i(theta) = d^2 / R   (chi2(1) under no fault)
 
-``transient_glrt_detector`` carries ``P_k`` and the error signature ``E`` of each onset
-in the window, and builds the onset-by-position table ``Gw[j, theta]`` as the window
-slides (or the running sums of ``glrt_recursive``, ``recursive=True``); with
-``P[0] = P_ss`` it equals ``glrt_detector``.
+With ``P[0] = P_ss``, ``transient_glrt_detector`` equals ``glrt_detector``.
 """
 from __future__ import annotations
 
@@ -50,8 +43,7 @@ class TransientGLRTState(NamedTuple):
     Attributes:
       cov: (n, n) the filter's predicted covariance P[k+1|k] (data-independent)
       errors: (N, n, d) E of onset k - o, advanced to step k + 1 (o: offsets of step k)
-      window: (N, m) whitened innovations L_j^-1 eps_j, oldest first; (0, m) in the recursive
-          form
+      window: (N, m) whitened innovations L_j^-1 eps_j, oldest first; (0, m) in the recursive form
       signatures: (N, N, m, d) T[o, p], onset k - o at window position p; (0, 0, m, d) recursive
       correlation: (N, d) d_i(k - o)
       information: (N, d) R_i(k - o)
@@ -71,15 +63,9 @@ class TransientGLRTState(NamedTuple):
 
 def time_varying_signatures(model: LinearGaussianModel, prior_cov: Array, directions: FaultDirections, onset: int,
                             length: int) -> Array:
-    """(length, m, d) innovation signatures ``G[theta + l, theta]`` of a unit step from
-    ``theta = onset`` for ``kalman_filter(model)`` started at the prior covariance
-    ``prior_cov`` (its gains ``K_k`` vary until ``P`` reaches ``P_ss``); ``onset`` may be
-    traced (vmap over onsets)::
-
-        G[k, theta] = C E[k] + h,   E[theta] = 0,
-        E[k+1] = Phi (I - K_k C) E[k] + g - Phi K_k h
-
-    (``glrt``'s recursion with the filter's own ``K_k``; module docstring)."""
+    """(length, m, d) innovation signatures ``G[theta + l, theta]`` of a unit step from ``theta = onset`` for
+    ``kalman_filter(model)`` started at ``prior_cov`` (module docstring's recursion); ``onset`` may be traced (vmap
+    over onsets)."""
     n, _, m = validate_linear_model(model)
     _checks.check_covariance("prior_cov", prior_cov, n)
     _checks.check_shape("onset", onset, (), "one step index theta")
@@ -106,8 +92,8 @@ def _time_varying_signatures(Phi, C, Q, R, P, g, h, onset, length: int) -> Array
 
 
 def _riccati_step(Phi, C, Q, R, P):
-    """The KF's gain ``K = P C^T S^-1``, whitener ``L^-1`` (``S = L L^T``) and next
-    predicted covariance (Joseph update, then ``Phi P+ Phi^T + Q``)."""
+    """The KF's gain ``K = P C^T S^-1``, whitener ``L^-1`` (``S = L L^T``) and next predicted covariance (Joseph
+    update, then ``Phi P+ Phi^T + Q``)."""
     S = _linalg.symmetrize(C @ P @ C.T + R)
     chol = jnp.linalg.cholesky(S)
     gain = jsl.cho_solve((chol, True), C @ P).T
@@ -120,20 +106,17 @@ def _riccati_step(Phi, C, Q, R, P):
 def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window: int, threshold,
                             isolation: str = "max", actuator_feedthrough: bool = False, overlap_sensor: int = -1,
                             recursive: bool = False) -> Detector:
-    """The windowed GLRT of ``glrt_detector`` for a ``kalman_filter(model)`` started at
-    any prior covariance ``prior_cov`` (``kf.init(mean, prior_cov)``): time-varying
-    signatures ``G[k, theta]`` (``time_varying_signatures``) and whitening by each step's
-    ``S_k``. The state carries the filter's covariance ``P_k`` (it does not depend on the
-    data), the error signature ``E`` of each onset in the window, and either the window
-    of whitened innovations with the onset-by-position signature table ``T[o, p]``
-    (O(N^2 m d) a step) or, ``recursive=True``, the running sums ``d``, ``R`` (O(N m d)
-    a step; same decisions to round-off). Each step also costs one Riccati step. With
-    ``prior_cov = P_ss`` it equals ``glrt_detector``. Step inputs as ``glrt_detector``.
+    """The windowed GLRT of ``glrt_detector`` for a ``kalman_filter(model)`` started at any ``prior_cov``
+    (``kf.init(mean, prior_cov)``): time-varying ``G[k, theta]`` (``time_varying_signatures``), ``S_k`` whitening.
+
+    The state carries ``P_k`` (data-independent), each window onset's error signature ``E``, and either the window
+    of whitened innovations with the onset-by-position table ``T[o, p]`` (O(N^2 m d) a step) or, ``recursive=True``,
+    the running sums ``d``, ``R`` (O(N m d); same decisions to round-off); plus one Riccati step per step. With
+    ``prior_cov = P_ss`` it equals ``glrt_detector``. Other arguments and step inputs as ``glrt_detector``.
 
     Returns:
-      ``Detector(init, step)``: ``init()`` gives a ``TransientGLRTState`` with ``P_0 =
-      prior_cov`` and empty window and sums; ``step(state, innovation)`` takes the filter's
-      (m,) innovation and returns ``(state, Decision)`` as ``glrt_detector``'s step does.
+      ``Detector(init, step)``: ``init()`` gives a ``TransientGLRTState`` with ``P_0 = prior_cov``, empty window and
+      sums; ``step(state, innovation (m,)) -> (state, Decision)`` as ``glrt_detector``'s.
     """
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)

@@ -1,53 +1,33 @@
-"""Hybrid FDI: the parity space, and analytic redundancy from a filter restarted on demand
-(Park, Kim, Park & Roh 2004, Sec. 2.2), as an ``FDI`` stage of the loop (``jaxfdi._stages``).
+"""Hybrid FDI: parity space plus analytic redundancy from a filter restarted on demand (Park, Kim, Park & Roh
+2004, Sec. 2.2), as an ``FDI`` stage of the loop (``jaxfdi._stages``).
 
 At every step ``k`` (``observe``, before the controller):
 
 1. **Detection** (PSA): ``p = V m``, ``FD = p^T p``, alarm when ``FD > T_D``.
-2. **Isolation** (PSA): the suspects are the groups with ``FI_g > T_I`` (``parity``). One
-   suspect: it is isolated. Two or more (the parity lies near a singular direction):
-3. **Analytic redundancy**: the filter restarts from the state ``L`` steps before ``k``
-   (``restart_lag``; "2-3 steps before the detection, so that the estimate is not yet
-   corrupted"), the least-squares estimate from every channel with its covariance
-   ``sigma^2 (H^T H)^-1``, and runs to ``k`` updating only with the channels of the
-   groups PSA judged healthy (the suspects' channels are NaN: ``missing_measurements``);
-   the residuals ``r_g = m_g - H_g x_hat[k|k]`` (eq. 30) of the suspects are compared:
-4. the suspect with the larger ``||r_g||`` is isolated.
+2. **Isolation** (PSA): suspects = groups with ``FI_g > T_I`` (``parity``); one suspect is isolated, two or more
+   (parity near a singular direction) go to 3.
+3. **Analytic redundancy**: the filter restarts ``L = restart_lag`` steps before ``k`` ("2-3 steps before the
+   detection, so that the estimate is not yet corrupted") from the all-channel least-squares estimate, covariance
+   ``sigma^2 (H^T H)^-1``, and runs to ``k`` on the channels of groups PSA judged healthy (suspects' channels NaN),
+   giving the suspects' ``r_g = m_g - H_g x_hat[k|k]`` (eq. 30);
+4. the suspect with the larger ``||r_g||`` is isolated. The decision is made once, at the first alarm with at
+   least one suspect, and latched.
+5. **Verification** (beyond the paper; RAIM FDE exclusion, Parkinson & Axelrad 1988): from the next step,
+   ``FD_-g = ||D_g (m - H x_-g)||^2`` (``x_-g`` least squares without group ``g``, ``D_g`` keeps the other channels)
+   vs ``T_V = sigma^2 chi2_isf(m - d - n, P_V)``; on alarm the exclusion moves to the group whose removal leaves the
+   smallest ``FD_-h``. A fault growing from zero (stuck, drift) is often decided near a singular direction, where
+   the UKF restarted from a corrupted state cannot tell the suspects apart; the faulty channels left in view show it
+   by their own redundancy (1 dof for three 2-DOF sensors).
 
-The decision is made once, at the first alarm with at least one suspect, and latched.
+The controller's view is the least-squares state of the channels left (``exclusion_estimators``; all before a
+decision). ``follow`` picks the decision obeyed (``"verified"``, ``"hybrid"``, ``"psa"``: largest ``FI``,
+``"none"``: never exclude), an array in the state (one compiled flight for every mode); every decision is reported.
 
-5. **Verification** (beyond the paper; the exclusion step of RAIM FDE, Parkinson & Axelrad
-   1988): from the step after the decision, the channels the exclusion left are tested
-   at every step, ``FD_-g = ||D_g (m - H x_-g)||^2`` (``x_-g`` the least-squares state
-   without group ``g``, ``D_g`` keeps the other channels) against
-   ``T_V = sigma^2 chi2_isf(m - d - n, P_V)``; when it alarms, the exclusion moves to the
-   group whose removal leaves the smallest ``FD_-h``. A fault that grows from zero
-   (stuck, drift) is often decided while its parity still lies near a singular
-   direction, where the UKF, restarted from a state the fault already corrupts, cannot
-   tell the two suspects apart; the wrong exclusion then leaves the faulty channels in
-   the view, and their own redundancy (1 dof for three 2-DOF sensors) shows it.
-
-The controller's view then uses the least-squares state from the channels left
-(``exclusion_estimators``; before any decision, from all of them). ``follow`` says which
-decision the selection obeys (``"verified"``: the hybrid's, verified; ``"hybrid"``;
-``"psa"``: PSA alone, the suspect with the largest ``FI``; or ``"none"``: never exclude);
-it is an array in the state, so one compiled flight serves every mode, and every
-decision is always reported.
-
-The history the filter replays is a ``filters.history.RingBuffer`` of the last ``L`` steps
-(channels, filter inputs, the least-squares estimate) in the FDI's own state, and the
-replay is ``filters.history.replay_filter``: bounded, inside the scan, so the whole hybrid runs
-vmapped over Monte Carlo flights. Under ``vmap`` a ``lax.cond`` on a per-flight
-predicate computes both branches; with ``batch_axis`` (the name of the ``vmap`` axis:
-``jax.vmap(..., axis_name=...)``, e.g. inside ``monte_carlo(..., batched=True)``) the
-replay runs only at the steps where some flight of the batch needs it (``psum`` of the
-predicate), and each flight keeps its own result: the same numbers, the filter's cost
-paid a few steps per batch instead of every step.
-
-The filter is any Gaussian ``Filter`` with ``init``, ``update`` and ``predict`` whose
-state is the rate-like state ``x`` (n,) and whose measurement is every channel ``H x``
-(m,), built with ``missing_measurements=True``; this module does not import
-``jaxfdi.filters`` (they meet here as a function argument).
+The replay (``filters.history.replay_filter`` over a ``RingBuffer`` of the last ``L`` steps' channels, filter inputs
+and least-squares estimates) is bounded and inside the scan: the hybrid vmaps over Monte Carlo flights. Under
+``vmap`` ``lax.cond`` computes both branches; with ``batch_axis`` (the ``vmap`` axis name, e.g. in
+``monte_carlo(..., batched=True)``) the replay runs only at steps where some flight needs it (``psum``): same
+numbers, filter cost paid a few steps per batch.
 """
 from __future__ import annotations
 
@@ -192,8 +172,7 @@ class HybridPSAOutput(NamedTuple):
 
 
 def exclusion_estimators(space: ParitySpace) -> Array:
-    """(G + 1, n, m): ``(H^T H)^-1 H^T`` from every channel ([0]) and from the channels
-    left when group ``g`` is excluded ([g + 1]; zero columns for the excluded ones)."""
+    """(G + 1, n, m) ``(H^T H)^-1 H^T``: all channels ([0]), without group ``g`` ([g + 1], its columns zero)."""
     H = space.H
     m = H.shape[0]
     G = space.groups.shape[0]
@@ -204,16 +183,13 @@ def exclusion_estimators(space: ParitySpace) -> Array:
 
 def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_threshold,
                       verification_pfa=None) -> HybridPSAConfig:
-    """The arrays of the hybrid FDI for ``space``, channel noise ``sigma`` and the two
-    thresholds (``parity.detection_threshold``, ``parity.isolation_threshold``);
-    ``verification_pfa``: the per-step false-alarm probability ``P_V`` of the verification
-    (module doc, step 5; ``None``, or no redundancy left without a group: never revised).
+    """The arrays of the hybrid FDI for ``space``, channel noise ``sigma`` and thresholds ``T_D``, ``T_I``
+    (``parity.detection_threshold``, ``parity.isolation_threshold``); ``verification_pfa``: per-step false-alarm
+    probability ``P_V`` of the verification (module doc, step 5; ``None`` or no redundancy left without a group:
+    never revised).
 
     Returns:
-      ``HybridPSAConfig`` in ``space.H``'s dtype: ``space``, the thresholds ``T_D`` () and
-      ``T_I`` (), the exclusion estimators (G + 1, n, m), the restart covariance
-      ``sigma^2 (H^T H)^-1`` (n, n), each channel's group (m,) int32 and ``T_V`` ()
-      (``inf`` without verification).
+      ``HybridPSAConfig`` in ``space.H``'s dtype (channel groups int32; ``T_V = inf`` without verification).
     """
     _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
     _checks.check_scalar("detection_threshold", detection_threshold, 0.0, low_open=True, meaning="T_D > 0")
@@ -235,8 +211,8 @@ def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_
 
 
 def subset_statistics(config: HybridPSAConfig, channels: Array) -> Array:
-    """(G,) ``FD_-g``: the squared least-squares residual of the channels left without
-    group ``g`` (module doc, step 5); ``+inf`` when a channel left is not finite."""
+    """(G,) ``FD_-g``: squared least-squares residual of the channels left without group ``g`` (module doc, step
+    5); ``+inf`` when a channel left is not finite."""
     H = config.space.H
     G = config.space.groups.shape[0]
     finite = jnp.isfinite(channels)
@@ -249,10 +225,9 @@ def subset_statistics(config: HybridPSAConfig, channels: Array) -> Array:
 
 def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: int = 3,
                     follow: str | Array = "hybrid") -> HybridPSAState:
-    """The FDI's initial state: an empty history of ``restart_lag`` steps (the filter
-    restarts that many steps before the decision; Park et al. 2004: 2-3), no decision.
-    ``input_example``: an array shaped like the filter's input (nu,). ``follow``: a name
-    of ``FOLLOW`` or its code (an array, for one compiled flight of every mode)."""
+    """The FDI's initial state: empty history of ``restart_lag`` steps (restart that many steps before the
+    decision; Park et al. 2004: 2-3), no decision. ``input_example``: shaped like the filter input (nu,).
+    ``follow``: a ``FOLLOW`` name or its code (an array: one compiled flight for every mode)."""
     restart_lag = _checks.check_int("restart_lag", restart_lag, 1, meaning="a number of steps >= 1")
     if isinstance(follow, str):
         _checks.check_choice("follow", follow, list(FOLLOW))
@@ -276,24 +251,22 @@ def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: 
 
 def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, valid: Array, channels: Array,
                        trusted: Array) -> tuple[Array, Array, Array, Array]:
-    """Restart ``filt`` from the oldest stored step and run it to the current one with
-    the ``trusted`` channels only (Park et al. 2004, eq. 30).
+    """Restart ``filt`` at the oldest stored step, run it to now on the ``trusted`` channels (Park et al., eq. 30).
 
     Args:
       filt: a Gaussian ``Filter`` (state x (n,), measurement all m channels, NaN = not used).
       config: ``hybrid_psa_config(...)``.
-      entries, valid: the history oldest first, (L, ...), and which entries are stored
-        (``filters.history.ordered``): the restart point is ``entries[0]``, the least-squares
-        estimate of that step with covariance ``config.restart_cov``.
+      entries, valid: the history, oldest first, (L, ...), and which entries are stored (``filters.history.ordered``);
+        restart point ``entries[0]``, its least-squares estimate with covariance ``config.restart_cov``.
       channels: (m,) the current step's channels.
       trusted: (m,) bool, the channels the filter may use.
 
     Returns:
-      ``(norms (G,), residual (m,), mean (n,), healthy ())``: ``||r_g||`` per group,
-      ``r = m - H x_hat[k|k]``, the filtered state and whether every step stayed healthy.
+      ``(norms (G,), residual (m,), mean (n,), healthy ())``: ``||r_g||`` per group, ``r = m - H x_hat[k|k]``, the
+      filtered state and whether every step stayed healthy.
     """
-    # the restart point is the prior of its own step with nothing measured (every channel
-    # NaN: the update leaves it as it is), so one scan does every prediction
+    # the restart point is its own step's prior with nothing measured (all NaN: update keeps it), so one scan
+    # does every prediction
     restart = filt.init(entries.estimate[0], config.restart_cov)
     masked = jnp.where(trusted[None, :] & (jnp.arange(valid.shape[0]) > 0)[:, None], entries.channels, jnp.nan)
     state, infos = replay_filter(filt, restart, masked, entries.inputs, valid)
@@ -307,25 +280,23 @@ def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, val
 def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[[Array], Array],
                    filter_input: Callable[[Array, Array], Array], view: Callable[[Array, Array], Any],
                    batch_axis: str | None = None):
-    """The hybrid FDI as an ``FDI(step, observe)`` (module doc); its state is
-    ``hybrid_psa_init(config, ...)``.
+    """The hybrid FDI (module doc) as an ``FDI(step, observe)``; state ``hybrid_psa_init(config, ...)``.
 
     Args:
       config: ``hybrid_psa_config(...)``.
-      analytic_filter: the Gaussian filter of the analytic redundancy (e.g. a UKF on the
-        F-16's moment equations, ``missing_measurements=True``).
+      analytic_filter: the analytic redundancy's Gaussian ``Filter`` (``init``, ``update``, ``predict``; state ``x``
+        (n,), measuring every channel ``H x`` (m,), ``missing_measurements=True``; e.g. a UKF on the F-16's moment
+        equations).
       channels: ``y -> m`` (m,), the redundant channels in the plant's measurement.
-      filter_input: ``(y, u) -> v`` (nu,), the filter's input of a step (``u``: the
-        control the controller sent at that step).
-      view: ``(y, x_selected) -> view``, what the controller reads, from the
-        least-squares state of the channels the decision left.
+      filter_input: ``(y, u) -> v`` (nu,), the filter's input of a step (``u``: the control sent at that step).
+      view: ``(y, x_selected) -> view``, what the controller reads, from the least-squares state of the channels
+        the decision left.
       batch_axis: name of the ``vmap`` axis of a batch of runs, or ``None`` (module doc).
 
     Returns:
-      ``FDI(step, observe)`` on a ``HybridPSAState``: ``observe(state, k, y) -> (state,
-      view)`` runs the tests, latches the decision and gives ``view(y, x_selected)``;
-      ``step(state, k, y, u) -> (state, HybridPSAOutput)`` reports the step's statistics and
-      ``Decision``s and stores the step in the replay history.
+      ``FDI(step, observe)`` on a ``HybridPSAState``: ``observe(state, k, y) -> (state, view)`` runs the tests,
+      latches the decision and gives ``view(y, x_selected)``; ``step(state, k, y, u) -> (state,
+      HybridPSAOutput)`` reports the step's statistics and ``Decision``s and stores the step for the replay.
     """
     for name, fn in (("channels", channels), ("filter_input", filter_input), ("view", view)):
         _checks.check_callable(name, fn)

@@ -1,67 +1,45 @@
 """Known-change GLR / CUSUM bank: the step fault's signature *and size* are known, only the onset is not.
 
-A step fault of known size ``nu_i`` in direction ``i`` with onset ``theta`` adds
-``nu_i G_i[j - theta]`` to the innovations ``eps_j ~ N(0, S)`` of a fault-blind
-steady-state Kalman filter (``G_i[l]``: ``fault_signatures``, zero for ``l < 0``). The
-log-likelihood ratio of "onset ``theta``" against "no fault" given the innovations up to
-step ``k`` is (Basseville & Nikiforov 1993, sec. 2.2 and 7.2; Willsky & Jones 1976, with
-``nu`` known instead of estimated)::
+A step of known size ``nu_i`` in direction ``i`` from onset ``theta`` adds ``nu_i G_i[j - theta]`` to the
+innovations ``eps_j ~ N(0, S)`` of a fault-blind steady-state Kalman filter (``G_i[l]``: ``fault_signatures``, 0 for
+``l < 0``). Log-likelihood ratio of "onset ``theta``" vs "no fault" up to step ``k`` (Basseville & Nikiforov 1993,
+sec. 2.2, 7.2; Willsky & Jones 1976 with ``nu`` known)::
 
     Lambda_i(k, theta) = sum_{j=theta..k} llr_i(j, j - theta),
     llr_i(j, l) = nu_i G_i[l]^T S^-1 eps_j - nu_i^2 / 2  G_i[l]^T S^-1 G_i[l]
 
-Statistic (exact windowed form): for a window of ``N`` onsets,
+Windowed statistic over ``N`` onsets the data allow (step 0 first)::
 
-    s_i(k) = max { Lambda_i(k, theta) : k - N + 1 <= theta <= k, theta >= 0 },
+    s_i(k) = max { Lambda_i(k, theta) : k - N + 1 <= theta <= k, theta >= 0 }
 
-the onsets the data seen so far allow (step 0 is the first step). Carried recursively:
-with ``o = k - theta`` the onset offset, ``L_i(k, o) = L_i(k-1, o-1) + llr_i(k, o)``
-(``L_i(k, 0) = llr_i(k, 0)``), O(N m d) a step; the onset leaving the window is dropped
-(as ``recursive_glrt_detector`` does for the unknown-size GLR).
+carried recursively with offset ``o = k - theta``: ``L_i(k, o) = L_i(k-1, o-1) + llr_i(k, o)``,
+``L_i(k, 0) = llr_i(k, 0)``, O(N m d) a step; the onset leaving the window is dropped.
 
-``tail=True`` keeps every older onset as well (the unwindowed GLR of Lorden 1971),
-holding the signature at its last computed lag (``G_i[l] = G_i[N - 1]`` for
-``l >= N - 1``, exact once the signature has converged: the steady-state filter's
-closed loop ``Phi (I - K C)`` is stable)::
+``tail=True`` also keeps every older onset (unwindowed GLR, Lorden 1971), holding the signature at its last lag
+(``G_i[l] = G_i[N - 1]`` for ``l >= N - 1``; exact once converged, ``Phi (I - K C)`` being stable)::
 
     M_i(k) = max(M_i(k-1), L_i(k-1, N-1)) + llr_i(k, N-1),   M_i = -inf until N steps,
     s_i(k) = max(max_o L_i(k, o), M_i(k)).
 
-For a constant signature (``G_i[l] = G_i``) this is ``max_{theta <= k} sum_{j>=theta}
-llr_i(j)``, whose positive part is Page's CUSUM (Page 1954)
-``g_k = max(0, g_{k-1} + llr_k)``: with a threshold ``h > 0`` the two alarm at the same
-steps. The CUSUM minimises Lorden's worst-case mean delay for a given mean time between
-false alarms when one known change is tested (Lorden 1971; Moustakides 1986).
+For a constant signature this is ``max_{theta <= k} sum_{j>=theta} llr_i(j)``, whose positive part is Page's
+(1954) CUSUM ``g_k = max(0, g_{k-1} + llr_k)`` (same alarms for ``h > 0``); the CUSUM minimises Lorden's worst-case
+mean delay for a given mean time between false alarms for one known change (Lorden 1971; Moustakides 1986).
 
-Decision (a bank of ``d`` such tests, one per direction): statistic ``max_i s_i(k)``,
-alarm when it exceeds the threshold, label ``1 + argmax_i s_i(k)`` (the simulator's
-fault label), estimate the known size of that direction; the state keeps the onset
-offset of the isolated direction (``-1``: an onset older than the window, ``tail``).
-Isolation by the largest statistic is the natural bank rule, not an isolation-optimal
-one: two directions whose signatures overlap in the first lags (on the engine, a
-fuel-flow fault and a P4 bias) both gain against "no fault", and the first to cross
-need not be the true one.
+Decision (bank of ``d`` tests): statistic ``max_i s_i(k)``, alarm above the threshold, label ``1 + argmax_i s_i(k)``,
+estimate that direction's known size; the state keeps its onset offset (``-1``: older than the window, ``tail``). Not
+isolation-optimal: directions overlapping in the first lags (engine: fuel-flow fault, P4 bias) both gain against
+"no fault", and the first to cross need not be the true one.
 
-``isolation="pairwise"`` tests each direction against every rival, not only against no
-fault: the GLR between hypotheses, each at its own most likely onset::
+``isolation="pairwise"``: each direction against every rival, each at its own most likely onset (Nikiforov 1995;
+Basseville & Nikiforov 1993 sec. 7.4), ``r_i(k) = s_i(k) - max(0, max_{j != i} s_j(k))``: ``i`` alarms once it beats
+no fault *and* every other direction by the threshold. Nikiforov's vector CUSUM, ``max_theta min_j (Lambda_i -
+Lambda_j)`` at a common onset, lets the wrong direction win at a shifted onset when the first lags differ; ``r_i`` is
+never larger: later alarms, safer isolation.
 
-    r_i(k) = s_i(k) - max(0, max_{j != i} s_j(k)),
-
-so direction ``i`` alarms once its likelihood beats no fault *and* every other direction
-by the threshold (the pairwise comparison of Nikiforov 1995, Basseville & Nikiforov 1993
-sec. 7.4, with the onset a nuisance under each hypothesis: Nikiforov's vector CUSUM
-compares two hypotheses at a common onset, ``max_theta min_j (Lambda_i - Lambda_j)``,
-which for signatures that differ in their first lags lets the wrong direction win at a
-shifted onset; ``r_i`` is never larger, so it alarms later and isolates more safely).
-
-References: E. S. Page (1954), Continuous inspection schemes, Biometrika 41; G. Lorden
-(1971), Procedures for reacting to a change in distribution, Ann. Math. Stat. 42;
-M. Basseville & I. V. Nikiforov (1993), Detection of Abrupt Changes, ch. 2 (CUSUM and
-GLR for a known change) and ch. 7 (additive changes in state-space models: the
-innovation signatures; detection and isolation); I. V. Nikiforov (1995), A generalized
-change detection problem, IEEE Trans. Inf. Theory 41; G. V. Moustakides (1986), Optimal
-stopping times for detecting changes in distributions, Ann. Stat. 14; A. S. Willsky & H. L. Jones
-(1976), IEEE TAC 21.
+References: Page (1954), Continuous inspection schemes, Biometrika 41; Lorden (1971), Procedures for reacting to a
+change in distribution, Ann. Math. Stat. 42; Basseville & Nikiforov (1993), Detection of Abrupt Changes, ch. 2, 7;
+Nikiforov (1995), A generalized change detection problem, IEEE Trans. Inf. Theory 41; Moustakides (1986), Optimal
+stopping times for detecting changes in distributions, Ann. Stat. 14; Willsky & Jones (1976), IEEE TAC 21.
 """
 from __future__ import annotations
 
@@ -83,12 +61,10 @@ class KnownChangeState(NamedTuple):
     """The known-change bank's state after step ``k``.
 
     Attributes:
-      log_ratio: (N, d) Lambda_i(k, k - o) for onset offsets o = 0..N-1
-          (-inf: onset before the data)
+      log_ratio: (N, d) Lambda_i(k, k - o) for onset offsets o = 0..N-1 (-inf: onset before the data)
       tail: (d,) max over onsets older than the window (-inf without ``tail`` or before N steps)
       count: () int32, steps seen (saturates at N)
-      onset_offset: () int32, onset offset of the isolated direction
-          (-1: an older onset, ``tail``)
+      onset_offset: () int32, onset offset of the isolated direction (-1: an older onset, ``tail``)
     """
 
     log_ratio: Array
@@ -144,19 +120,13 @@ def known_change_terms(signatures: Array, innovation_cov: Array, magnitudes: Arr
 
 def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Array, threshold,
                       tail: bool = False, isolation: str = "max", channel_labels: Array | None = None) -> Detector:
-    """Online bank of known-change GLR (CUSUM) tests on a fault-blind filter's innovations.
+    """Online bank of known-change GLR (CUSUM) tests (module docstring) on a fault-blind filter's innovations.
 
-    ``step(state, innovation (m,)) -> (state, Decision)`` (module docstring: statistic
-    ``max_i s_i(k)``, alarm ``> threshold``, label ``1 + argmax_i``, estimate the known
-    size). Jit- and vmap-able; a ``lax.scan`` over steps. ``signatures``,
-    ``innovation_cov`` and ``magnitudes`` as ``known_change_terms``; ``threshold`` a
-    positive scalar; ``tail``: also keep the onsets older than the window (CUSUM form);
-    ``isolation``: ``"max"`` (each direction against no fault) or ``"pairwise"`` (against
-    no fault and every other direction, each at its own onset); ``channel_labels`` (m,)
-    the fault label of each output channel, which a step with a non-finite innovation
-    component alarms with (``chi2.flag_dead``; ``None``: the bank's own label). That
-    component enters the statistics as 0, its fault-free mean, so they recover as soon as
-    the sensor does.
+    ``step(state, innovation (m,)) -> (state, Decision)``; jit- and vmap-able. ``signatures``, ``innovation_cov``,
+    ``magnitudes``: as ``known_change_terms``; ``threshold`` > 0; ``tail``: also keep onsets older than the window
+    (CUSUM form); ``isolation``: ``"max"`` (vs no fault) or ``"pairwise"`` (vs no fault and every other direction);
+    ``channel_labels`` (m,): label a step with a non-finite innovation component alarms with (``chi2.flag_dead``;
+    ``None``: the bank's own); that component enters as 0, its fault-free mean: recovery with the sensor.
     """
     terms = known_change_terms(signatures, innovation_cov, magnitudes)
     _checks.check_positive("threshold", threshold, "a positive threshold on the log-likelihood ratio")
@@ -209,9 +179,8 @@ def _against_rivals(statistic: Array) -> Array:
 def known_change_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, magnitudes: Array,
                           window: int, threshold, tail: bool = False, actuator_feedthrough: bool = False,
                           isolation: str = "max") -> Detector:
-    """``known_change_bank`` with the signatures of ``fault_directions(model)`` for the
-    steady-state filter ``(gain, innovation_cov)`` (``steady_state_kalman(model)``; checked
-    as ``glrt_detector`` checks it), over ``window`` onsets.
+    """``known_change_bank`` with ``fault_directions(model)``'s signatures for the steady-state filter
+    ``(gain, innovation_cov)`` (checked as ``glrt_detector`` does), over ``window`` onsets.
 
     Args:
       model: the plant the filter assumes.
@@ -222,10 +191,9 @@ def known_change_detector(model: LinearGaussianModel, gain: Array, innovation_co
       tail, isolation, actuator_feedthrough: see ``known_change_bank`` and ``fault_directions``.
 
     Returns:
-      ``Detector(init, step)`` (``known_change_bank``'s): ``init()`` gives a
-      ``KnownChangeState`` with every log-ratio ``-inf``; ``step(state, innovation)`` takes
-      the filter's (m,) innovation and returns ``(state, Decision)``, estimate the known size
-      of the isolated direction; a non-finite component alarms and isolates its sensor.
+      ``Detector(init, step)``: ``init()`` gives a ``KnownChangeState`` with every log-ratio ``-inf``;
+      ``step(state, innovation (m,)) -> (state, Decision)``, estimate the isolated direction's known size; a
+      non-finite component alarms and isolates its sensor.
     """
     n, _, m = validate_linear_model(model)
     window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps N")
@@ -238,9 +206,8 @@ def known_change_detector(model: LinearGaussianModel, gain: Array, innovation_co
 
 
 def known_change_by_onset(innovations: Array, signatures: Array, innovation_cov: Array, magnitudes: Array) -> Array:
-    """(N, d) ``Lambda_i(k, k - o)`` for every onset offset ``o`` of a window of innovations
-    (N, m), oldest first, row N-1 = step k (all N onsets allowed): the offline form of
-    the bank's statistic, ``max`` over axis 0."""
+    """(N, d) ``Lambda_i(k, k - o)`` for every onset offset of a window of innovations (N, m), oldest first, row
+    N-1 = step k (all N onsets allowed): the offline bank statistic (``max`` over axis 0)."""
     terms = known_change_terms(signatures, innovation_cov, magnitudes)
     N, m, d = terms.gain.shape
     _checks.check_shape("innovations", innovations, (N, m), "N steps x m outputs, oldest first")

@@ -1,18 +1,12 @@
 """Decision on mode probabilities of a multiple-model filter (Han et al. 2022, eq. 13).
 
-A fault is declared when the most probable fault mode reaches ``mu_T``:
-``max_{j != normal} mu_j(k) >= mu_T``; that mode is the isolated one. With mode labels
-ordered as the simulator's (0 normal, then actuators, then sensors), the isolated mode
-index is the fault label, so the monitor's record gives detection and isolation at once.
+Fault when the most probable fault mode reaches ``mu_T``: ``max_{j != normal} mu_j(k) >= mu_T``; that mode is
+isolated, its index (simulator order: 0 normal, actuators, sensors) being the fault label.
 
-``confirm_steps = c > 1`` (not in the paper) declares only when the same fault mode has
-been the most probable one at or above ``mu_T`` for ``c`` consecutive steps: an
-actuator fault of the engine first shows in P4 alone, so for a step or two a P4-bias
-mode explains it as well, and a first-crossing decision isolates it as P4 in ~10 % of
-runs; ``c`` steps of confirmation let the slower T4 and RPM responses decide.
-``confirm_steps`` may also be one length per mode, ``c_j``: mode j alarms once it has led
-for ``c_j`` steps, so a mode that no other hypothesis mimics (the engine's P2 bias) can be
-declared sooner than the actuator/P4 pair that needs the extra steps.
+``confirm_steps = c > 1`` (not in the paper): declare only once the same fault mode has led at or above ``mu_T``
+for ``c`` consecutive steps. An engine actuator fault first shows in P4 alone, so for a step or two a P4-bias mode
+explains it as well and first-crossing isolates it as P4 in ~10 % of runs; ``c`` steps let the slower T4 and RPM
+responses decide. Per-mode ``c_j``: a mode nothing mimics (engine P2 bias) is declared before the actuator/P4 pair.
 """
 from __future__ import annotations
 
@@ -30,9 +24,8 @@ def confirmation_init() -> tuple[Array, Array]:
 
 
 def confirm(state: tuple[Array, Array], label: Array, above: Array, confirm_steps):
-    """k-step confirmation of an isolating decision: alarm once the same ``label`` has led
-    above its threshold for ``confirm_steps`` consecutive steps (an int, or one per label:
-    ``confirm_steps[label]``); returns ``(state, alarm)``."""
+    """k-step confirmation of an isolating decision: alarm once the same ``label`` has led above its threshold for
+    ``confirm_steps`` consecutive steps (an int, or per label ``confirm_steps[label]``); returns ``(state, alarm)``."""
     candidate, held = state
     held = jnp.where(above, jnp.where(label == candidate, held + 1, 1), 0)
     required = confirm_steps if np.ndim(confirm_steps) == 0 else jnp.asarray(confirm_steps)[label]
@@ -40,8 +33,7 @@ def confirm(state: tuple[Array, Array], label: Array, above: Array, confirm_step
 
 
 def check_confirm_steps(confirm_steps) -> None:
-    """``TypeError`` unless ``confirm_steps`` holds integers, ``ValueError`` unless it is
-    one integer >= 1 or a 1-D sequence of them."""
+    """``TypeError`` unless integers, ``ValueError`` unless one integer >= 1 or a 1-D sequence of them."""
     if isinstance(confirm_steps, (list, tuple)):
         confirm_steps = np.asarray(confirm_steps)
     _checks.check_int_array("confirm_steps", confirm_steps, 1, meaning="an integer >= 1, or one per mode (M,)")
@@ -52,27 +44,20 @@ def check_confirm_steps(confirm_steps) -> None:
 def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) -> Detector:
     """Online detector on mode probabilities ``mu`` (M,).
 
-    ``step(state, mu)`` or ``step(state, (mu, estimates))`` ``-> (state, Decision)``, with
-    ``estimates`` (M,) a per-mode fault estimate (e.g. the bias each mode estimates); the
-    decision's label is the top fault mode and its ``estimate`` that mode's (NaN without
-    ``estimates``).
+    ``step(state, mu)`` or ``step(state, (mu, estimates)) -> (state, Decision)``, ``estimates`` (M,) a per-mode
+    fault estimate (e.g. each mode's bias); label = top fault mode, ``estimate`` its estimate (NaN without).
 
     Args:
-      threshold: ``mu_T`` in (0, 1] (Han et al. 2022 use 0.5), or (M,) one per mode: the top
-        fault mode j alarms when ``mu_j >= threshold[j]`` (the normal mode's entry is
-        not used).
+      threshold: ``mu_T`` in (0, 1] (Han et al. 2022: 0.5), or (M,) per mode: top fault mode j alarms when
+        ``mu_j >= threshold[j]`` (normal mode's entry unused).
       normal_mode: index of the fault-free mode.
-      confirm_steps: consecutive steps the same mode must stay the top fault mode at or
-        above ``mu_T`` before an alarm (1: the paper's memoryless rule), or (M,) one per
-        mode (the normal mode's entry is not used). A traced (M,) integer array is
-        accepted (its values are then checked by whoever made it), so that detectors with
-        different lengths can share one compiled program.
+      confirm_steps: consecutive steps the same mode must stay top fault mode at or above ``mu_T`` (1: the paper's
+        memoryless rule), or (M,) per mode (normal entry unused). A traced (M,) integer array is accepted (values
+        checked by its maker), so detectors with different lengths share one compiled program.
 
     Returns:
-      ``Detector(init, step)``: ``init()`` gives the confirmation state ``(candidate label
-      -1, steps held 0)``; ``step(state, mu)`` or ``step(state, (mu, estimates))`` returns
-      ``(state, Decision)`` with statistic the top fault mode's probability and label its
-      index.
+      ``Detector(init, step)``: ``init()`` gives the confirmation state ``(candidate label -1, steps held 0)``;
+      ``step`` returns ``(state, Decision)``, statistic the top fault mode's probability, label its index.
     """
     _checks.check_real("threshold", threshold, "a probability mu_T in (0, 1], or one per mode (M,)")
     value = _checks.concrete(threshold)

@@ -1,26 +1,20 @@
-"""Noncentral chi-square distribution in JAX: CDF, quantile and the noncentrality that
-gives a missed-detection probability.
+"""Noncentral chi-square in JAX: CDF, quantile and the noncentrality for a missed-detection probability.
 
-A fault of size ``b`` shifts a chi-square test statistic with ``k`` degrees of freedom
-to the noncentral chi-square with noncentrality ``lambda`` (the squared shift of the
-whitened residual). Its CDF is the Poisson mixture of central chi-square CDFs
-(Johnson, Kotz & Balakrishnan 1995, ch. 29):
+A fault shifts a chi-square statistic of ``k`` dof to the noncentral chi-square with noncentrality ``lambda`` (the
+squared shift of the whitened residual), a Poisson mixture of central CDFs (Johnson, Kotz & Balakrishnan 1995,
+ch. 29):
 
 ``F(x; k, lambda) = sum_j exp(-lambda/2) (lambda/2)^j / j! P(k/2 + j, x/2)``
 
-with ``P`` the regularised lower incomplete gamma, evaluated once at the top of the window
-and carried down by ``P(a, y) = P(a + 1, y) + y^a e^-y / Gamma(a + 1)`` (positive terms
-only: no cancellation). The sum runs over a fixed window of
-``NUM_TERMS`` terms centred on the Poisson mode, so it jits and vmaps; that window holds
-all but a negligible Poisson mass (over 9 standard deviations each side) for
-``lambda <= 400``, far beyond the protection-level range (``lambda`` < 200 for
-``P_fa, P_md >= 1e-9`` and up to 30 degrees of freedom).
+``P`` the regularised lower incomplete gamma, evaluated once at the window's top and carried down by
+``P(a, y) = P(a + 1, y) + y^a e^-y / Gamma(a + 1)`` (positive terms: no cancellation). A fixed window of
+``NUM_TERMS`` terms centred on the Poisson mode (jits, vmaps) holds all but a negligible mass (over 9 standard
+deviations each side) for ``lambda <= 400``, beyond the protection-level range (``lambda`` < 200 for
+``P_fa, P_md >= 1e-9``, up to 30 dof).
 
-RAIM's protection level (Brown & Chin 1992) needs the inverse in ``lambda``:
-``noncentrality_for_missed_detection(threshold, k, p_md)`` solves
-``F(threshold; k, lambda) = p_md`` (the bias that the test, at ``threshold``, misses
-with probability ``p_md``). ``ncx2_quantile`` inverts in ``x``. Both by bisection with a
-fixed iteration count (the CDF is monotone in each argument).
+RAIM's protection level (Brown & Chin 1992): ``noncentrality_for_missed_detection(threshold, k, p_md)`` solves
+``F(threshold; k, lambda) = p_md`` (the bias the test at ``threshold`` misses with probability ``p_md``);
+``ncx2_quantile`` inverts in ``x``. Both by fixed-count bisection (the CDF is monotone in each argument).
 """
 from __future__ import annotations
 
@@ -64,8 +58,8 @@ def _cdf(x, dof, lam):
     safe_half = jnp.where(half > 0, half, 1.0)[..., None]
     log_weight = jnp.where(j > 0, j * jnp.log(safe_half), 0.0) - half[..., None] - gammaln(j + 1.0)
     log_weight = jnp.where((half[..., None] == 0) & (j > 0), -jnp.inf, log_weight)
-    # P(a + j, y) for the window's j from one incomplete gamma at its top, adding the
-    # positive terms y^(a+i) e^-y / Gamma(a+i+1) downwards (stable, no cancellation)
+    # P(a + j, y) for the window's j from one incomplete gamma at its top, adding the positive terms
+    # y^(a+i) e^-y / Gamma(a+i+1) downwards (stable, no cancellation)
     a = 0.5 * dof[..., None] + j
     y = 0.5 * jnp.maximum(x, jnp.finfo(dtype).tiny)[..., None]
     top = gammainc(a[..., -1:], y)
@@ -105,12 +99,10 @@ def _quantile(p, dof, lam):
 
 
 def noncentrality_for_missed_detection(threshold, dof, p_md) -> Array:
-    """``lambda`` with ``P(ncx2(dof, lambda) <= threshold) = p_md``; 0 when even the
-    central distribution stays below ``threshold`` with probability less than ``p_md``.
-
-    With a test at ``threshold`` on a chi-square statistic of ``dof`` degrees of freedom,
-    a fault whose noncentrality is ``lambda`` or more is missed with probability at
-    most ``p_md`` (Brown & Chin 1992: ``p_bias = sigma sqrt(lambda)``).
+    """``lambda`` with ``P(ncx2(dof, lambda) <= threshold) = p_md``; 0 when even the central distribution stays
+    below ``threshold`` with probability less than ``p_md``. A test at ``threshold`` on a ``dof``-dof chi-square
+    misses a fault of noncentrality ``>= lambda`` with probability ``<= p_md`` (Brown & Chin 1992:
+    ``p_bias = sigma sqrt(lambda)``).
     """
     _checks.check_probability("p_md", p_md)
     dtype = _dtype(threshold, dof, p_md)

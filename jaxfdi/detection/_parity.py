@@ -1,33 +1,24 @@
-"""Parity space of a redundant sensor set, with faults that act on groups of channels
-(Potter & Deckert 1973; for two-degree-of-freedom sensors, Park, Kim, Park &
-Roh 2004, Sec. 2.1).
+"""Parity space of a redundant sensor set, with faults acting on groups of channels (Potter & Deckert 1973;
+2-DOF sensors: Park, Kim, Park & Roh 2004, Sec. 2.1).
 
-Measurements ``m = H x + eps + f`` (``H`` (m, n) of full column rank, ``m > n``,
-independent channels of equal noise ``sigma``). A *group* is the set of channels one
-sensor owns (the two input axes of a 2-DOF rate sensor); a fault acts on one group's
-channels, in any direction of them.
+Measurements ``m = H x + eps + f``: ``H`` (m, n) full column rank, ``m > n``, independent channels of equal noise
+``sigma``. A *group* is one sensor's channels (a 2-DOF rate sensor's two axes); a fault acts on them in any direction.
 
-- ``V`` ((q, m), ``q = m - n``): rows an orthonormal basis of the left null space of
-  ``H``, so ``V H = 0`` and ``V V^T = I_q`` (from the SVD of ``H``: the last ``q`` left
-  singular vectors). Parity vector ``p = V m = V eps + V f`` (eq. 4).
-- Detection (eq. 8): ``FD = p^T p``; fault-free, ``FD / sigma^2 ~ chi2(q)``, threshold
-  ``T_D = sigma^2 chi2_isf(q, P_fa)``.
-- Fault subspace of group ``g``: ``FS_g = span(V[:, group_g])`` (the fault plane
-  ``FP_i = span(v_ci1, v_ci2)`` of Park et al. 2004), with an orthonormal basis ``Q_g`` (``fault_bases``).
-- Isolation (eq. 9, with the bars and the norm the print lost):
-  ``FI_g = 1 - ||p - Q_g Q_g^T p|| / ||p||``. For a 2-D plane in a 3-D parity space
-  ``||p - Q Q^T p|| = |p . u_g|`` with ``u_g`` the plane's unit normal, Park et al.'s
-  ``FI_k = 1 - |p . u_k| / ||p||``. ``FI_g = 1`` when ``p`` lies in ``FS_g``; a group is a
-  *suspect* when ``FI_g > T_I``.
-- Singular directions: where two fault subspaces meet. Their principal angles
-  (Bjorck & Golub 1973) are the arc cosines of the singular values of ``Q_i^T Q_k``; a
-  singular value 1 is a shared direction (a fault along it cannot be told between the
-  two groups), and ``singular_faults`` gives the group's fault that lands on it.
-- ``T_I`` from a missed-isolation probability by Monte Carlo (``isolation_threshold``):
-  the ``P_MI`` quantile of the faulty group's ``FI`` over detected random faults.
+- ``V`` ((q, m), ``q = m - n``): orthonormal rows spanning the left null space of ``H`` (last ``q`` left singular
+  vectors), ``V H = 0``, ``V V^T = I_q``. Parity ``p = V m = V eps + V f`` (eq. 4).
+- Detection (eq. 8): ``FD = p^T p``; fault-free ``FD / sigma^2 ~ chi2(q)``, ``T_D = sigma^2 chi2_isf(q, P_fa)``.
+- Fault subspace ``FS_g = span(V[:, group_g])`` (Park et al.'s fault plane ``FP_i = span(v_ci1, v_ci2)``),
+  orthonormal basis ``Q_g`` (``fault_bases``).
+- Isolation (eq. 9, with the bars and norm the print lost): ``FI_g = 1 - ||p - Q_g Q_g^T p|| / ||p||``; for a 2-D
+  plane in a 3-D parity space this is Park et al.'s ``FI_k = 1 - |p . u_k| / ||p||``, ``u_k`` the unit normal.
+  ``FI_g = 1`` when ``p`` lies in ``FS_g``; group ``g`` is a *suspect* when ``FI_g > T_I``.
+- Singular directions, where two fault subspaces meet: principal angles (Bjorck & Golub 1973) are the arc cosines
+  of the singular values of ``Q_i^T Q_k``; a singular value 1 is a shared direction (a fault along it cannot be
+  told between the groups; ``singular_faults``).
+- ``T_I`` by Monte Carlo (``isolation_threshold``): the ``P_MI`` quantile of the faulty group's ``FI`` over
+  detected random faults.
 
-Everything is array arithmetic (no scan): vmap over sensor sets, jit, and
-differentiate the statistics in the measurements.
+Array arithmetic only (no scan): vmaps over sensor sets, jits, differentiable in the measurements.
 """
 from __future__ import annotations
 
@@ -93,20 +84,16 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
     """The parity space of ``H`` with the sensor ``groups``.
 
     Args:
-      H: (m, n), ``m > n``, full column rank: row ``j`` is channel ``j``'s measurement
-        direction (for rate sensors, the input axis).
-      groups: (G, d) channel indices of each sensor (every channel at most once); default
-        ``[[0], [1], ..., [m - 1]]`` (one channel per sensor).
+      H: (m, n), ``m > n``, full column rank: row ``j`` is channel ``j``'s measurement direction (rate sensors:
+        the input axis).
+      groups: (G, d) channel indices of each sensor, every channel at most once; default ``[[0], [1], ..., [m - 1]]``.
 
     Returns:
-      ``ParitySpace`` in ``H``'s float dtype: ``H`` (m, n), the parity matrix ``V`` (q, m),
-      ``q = m - n`` (the last ``q`` left singular vectors of ``H``), ``groups`` (G, d) int32
-      and each group's orthonormal fault-subspace basis ``fault_bases`` (G, q, d).
+      ``ParitySpace`` in ``H``'s float dtype, ``q = m - n``, ``groups`` int32.
 
     Raises:
-      ValueError: for a concrete ``H`` without full column rank, a channel index out of
-        range or used twice, or a group whose fault subspace has fewer than ``d``
-        dimensions (a fault of that sensor along some direction would leave no parity).
+      ValueError: for a concrete ``H`` without full column rank, a channel index out of range or used twice, or a
+        group whose fault subspace has fewer than ``d`` dimensions (a fault along some direction leaves no parity).
     """
     _checks.check_matrix("H", H, (None, None), "one measurement row per channel")
     H = jnp.asarray(H, _checks.float_dtype(H))
@@ -149,16 +136,14 @@ def parity_vector(space: ParitySpace, measurement: Array) -> Array:
 
 
 def parity_statistic(parity: Array, valid: Array | None = None) -> Array:
-    """``p^T p`` over the last axis, the entries outside ``valid`` (a mask, e.g. RAIM's
-    unused satellite slots) left out; fault-free and whitened, ``chi2`` with as many
-    degrees of freedom as valid entries (Potter & Deckert 1973; Brown & Chin 1992)."""
+    """``p^T p`` over the last axis, entries outside the mask ``valid`` (e.g. RAIM's unused satellite slots) left
+    out; fault-free and whitened, chi2 with as many dof as valid entries (Potter & Deckert 1973; Brown & Chin 1992)."""
     squares = jnp.square(jnp.asarray(parity))
     return jnp.sum(squares if valid is None else jnp.where(valid, squares, 0.0), axis=-1)
 
 
 def fault_detection_statistic(parity: Array) -> Array:
-    """``FD = p^T p`` (eq. 8, ``parity_statistic``) over the last axis; ``+inf`` for a
-    non-finite parity vector (a dead channel: evidence, above every threshold)."""
+    """``FD = p^T p`` (eq. 8) over the last axis; ``+inf`` for a non-finite parity (dead channel: evidence)."""
     parity = jnp.asarray(parity)
     return jnp.where(jnp.all(jnp.isfinite(parity), axis=-1), parity_statistic(parity), jnp.inf)
 
@@ -169,10 +154,9 @@ def dead_groups(space: ParitySpace, measurement: Array) -> Array:
 
 
 def parity_tests(space: ParitySpace, measurement: Array) -> tuple[Array, Array]:
-    """``(FD, FI)`` (eqs. 8, 9) of ``measurement`` (..., m), a dead channel a fault of its
-    group: while one is non-finite, ``FD = +inf`` and ``FI`` is 1 for the groups holding a
-    dead channel and 0 for the others (the parity vector, which mixes every channel,
-    says nothing else then)."""
+    """``(FD, FI)`` (eqs. 8, 9) of ``measurement`` (..., m), a dead channel being a fault of its group: while one is
+    non-finite, ``FD = +inf`` and ``FI`` is 1 for groups holding a dead channel, 0 for the others (the parity mixes
+    every channel, so it says nothing else then)."""
     measurement = jnp.asarray(measurement)
     dead = dead_groups(space, measurement)
     parity = parity_vector(space, jnp.where(jnp.isfinite(measurement), measurement, 0.0))
@@ -190,9 +174,8 @@ def detection_threshold(space: ParitySpace, sigma, pfa) -> Array:
 
 
 def out_of_subspace(space: ParitySpace, parity: Array) -> Array:
-    """``||p - Q_g Q_g^T p||`` (..., G): the parity's distance from each fault subspace,
-    formed as a difference vector (not ``sqrt(||p||^2 - ||Q^T p||^2)``, which loses half
-    the digits when ``p`` lies in the subspace)."""
+    """``||p - Q_g Q_g^T p||`` (..., G), distance from each fault subspace, as a difference vector (not
+    ``sqrt(||p||^2 - ||Q^T p||^2)``, which loses half the digits when ``p`` lies in the subspace)."""
     parity = jnp.asarray(parity)
     coords = jnp.einsum("gqd,...q->...gd", space.fault_bases, parity)
     projected = jnp.einsum("gqd,...gd->...gq", space.fault_bases, coords)
@@ -200,9 +183,8 @@ def out_of_subspace(space: ParitySpace, parity: Array) -> Array:
 
 
 def isolation_functions(space: ParitySpace, parity: Array) -> Array:
-    """``FI_g = 1 - ||p - Q_g Q_g^T p|| / ||p||`` (eq. 9) for ``parity`` (..., q): (..., G).
-    ``FI_g = 0`` for ``p = 0`` (no fault evidence); NaN for a non-finite ``p`` (which
-    group is unknown from ``p``: ``parity_tests`` isolates a dead channel)."""
+    """``FI_g = 1 - ||p - Q_g Q_g^T p|| / ||p||`` (eq. 9), ``parity`` (..., q) -> (..., G). 0 for ``p = 0`` (no
+    evidence); NaN for a non-finite ``p`` (``parity_tests`` isolates a dead channel)."""
     parity = jnp.asarray(parity)
     size = jnp.linalg.norm(parity, axis=-1)[..., None]
     positive = size > 0
@@ -211,18 +193,16 @@ def isolation_functions(space: ParitySpace, parity: Array) -> Array:
 
 
 def subspace_cosines(space: ParitySpace) -> Array:
-    """(G, G, d) cosines of the principal angles between every two fault subspaces
-    (singular values of ``Q_i^T Q_k``, largest first)."""
+    """(G, G, d) principal-angle cosines of every two fault subspaces (singular values of ``Q_i^T Q_k``, largest
+    first)."""
     products = jnp.einsum("iqd,kqe->ikde", space.fault_bases, space.fault_bases)
     return jnp.clip(jnp.linalg.svd(products, compute_uv=False), 0.0, 1.0)
 
 
 def subspace_angles(space: ParitySpace) -> Array:
-    """(G, G, d) principal angles (rad, smallest first) between every two fault
-    subspaces; for 2-D planes in a 3-D parity space ``[0, dihedral angle]``.
-
-    ``atan2(sin, cos)`` with the sines from the singular values of ``(I - Q_k Q_k^T) Q_i``
-    (Knyazev & Argentati 2002): ``arccos`` alone is good to only ``sqrt(eps)`` near 0."""
+    """(G, G, d) principal angles (rad, smallest first) between every two fault subspaces; 2-D planes in a 3-D
+    parity space: ``[0, dihedral angle]``. ``atan2(sin, cos)``, sines from the singular values of
+    ``(I - Q_k Q_k^T) Q_i`` (Knyazev & Argentati 2002): ``arccos`` alone is good to only ``sqrt(eps)`` near 0."""
     Q = space.fault_bases
     cosines = subspace_cosines(space)
     away = Q[:, None] - jnp.einsum("kqe,kre,ird->ikqd", Q, Q, Q)  # (I - Q_k Q_k^T) Q_i
@@ -231,10 +211,9 @@ def subspace_angles(space: ParitySpace) -> Array:
 
 
 def singular_directions(space: ParitySpace) -> SingularDirections:
-    """For each ordered pair ``(i, k)``, the unit direction of ``FS_i`` closest to ``FS_k``
-    (``Q_i a``, ``a`` the top left singular vector of ``Q_i^T Q_k``) and the cosine of the
-    angle between them: 1 when the subspaces intersect along it (a singular direction;
-    the plane intersections of Park et al. 2004). The diagonal is 0 (direction) and 1 (cosine)."""
+    """Per ordered pair ``(i, k)``: the unit direction of ``FS_i`` closest to ``FS_k`` (``Q_i a``, ``a`` the top
+    left singular vector of ``Q_i^T Q_k``) and its cosine to ``FS_k``, 1 for a singular direction (Park et al.
+    2004's plane intersections). Diagonal: direction 0, cosine 1."""
     products = jnp.einsum("iqd,kqe->ikde", space.fault_bases, space.fault_bases)
     left, values, _ = jnp.linalg.svd(products)
     direction = jnp.einsum("iqd,ikd->ikq", space.fault_bases, left[..., :, 0])
@@ -244,10 +223,9 @@ def singular_directions(space: ParitySpace) -> SingularDirections:
 
 
 def singular_faults(space: ParitySpace) -> Array:
-    """(G, G, d): the fault of group ``i`` (on its own ``d`` channels, unit norm) whose
-    parity lies along the singular direction it shares with group ``k`` (least squares
-    ``V_i^+ direction``); such a fault cannot be told between ``i`` and ``k``. The sign is
-    fixed so that the first nonzero entry is positive; the diagonal is 0."""
+    """(G, G, d): group ``i``'s unit fault (on its ``d`` channels) whose parity lies along the singular direction
+    shared with group ``k`` (least squares ``V_i^+ direction``): it cannot be told between ``i`` and ``k``. Sign:
+    first nonzero entry positive; diagonal 0."""
     columns = jnp.moveaxis(space.V[:, space.groups], 1, 0)  # (G, q, d)
     dirs = singular_directions(space).direction               # (G, G, q)
     faults = jnp.einsum("idq,ikq->ikd", jnp.linalg.pinv(columns), dirs)
@@ -267,16 +245,12 @@ def group_fault(space: ParitySpace, group: Array, fault: Array) -> Array:
 
 def isolation_threshold(space: ParitySpace, sigma, fault_to_noise, missed_isolation, detection_threshold: Array,
                         key: Array, samples: int = 100_000) -> IsolationCalibration:
-    """``T_I`` chosen by Monte Carlo from a missed-isolation probability (Park et al. 2004, Sec. 2.1).
+    """``T_I`` by Monte Carlo from a missed-isolation probability (Park et al. 2004, Sec. 2.1).
 
-    Each sample: a group ``g`` uniform over the groups, a fault direction uniform on the
-    unit sphere of its ``d`` channels, of RMS size per channel ``fault_to_noise * sigma``
-    (norm ``fault_to_noise * sigma * sqrt(d)``), channel noise ``N(0, sigma^2 I)``. Among
-    the samples detected (``FD > detection_threshold``), ``T_I`` is set so that the
-    faulty group's ``FI_g <= T_I`` (missed isolation: the faulty sensor is not among the
-    suspects) in a fraction ``missed_isolation`` of them: between the two order
-    statistics around the ``missed_isolation`` quantile, so the sample rate does not
-    exceed it.
+    Each sample: group ``g`` uniform, fault direction uniform on the unit sphere of its ``d`` channels, RMS size per
+    channel ``fault_to_noise * sigma`` (norm ``fault_to_noise * sigma * sqrt(d)``), noise ``N(0, sigma^2 I)``. Among
+    detected samples (``FD > detection_threshold``), ``T_I`` makes the faulty group's ``FI_g <= T_I`` (missed
+    isolation) in a fraction ``missed_isolation`` (midway between the order statistics around it: not exceeded).
 
     Args:
       space: ``parity_space(...)``.

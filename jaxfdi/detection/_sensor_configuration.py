@@ -1,31 +1,22 @@
 """Arranging redundant two-axis sensors for isolability, by gradient (optax).
 
-A sensor ``i`` has two orthogonal input axes, the first two columns of a rotation
-``R(q_i)`` of a unit quaternion ``q_i`` (Shuster 1993), so any ``q`` gives a valid sensor
-and the optimiser moves freely over unconstrained 4-vectors (normalised inside). The
-stacked axes are ``H`` ((2S, 3), rows ``a_i1, a_i2``).
+Sensor ``i``'s two orthogonal input axes are the first two columns of ``R(q_i)``, ``q_i`` a unit quaternion
+(Shuster 1993): any 4-vector (normalised inside) is a valid sensor. Stacked axes: ``H`` ((2S, 3), rows ``a_i1, a_i2``).
 
-Isolability is read from the projector ``P = I - H (H^T H)^-1 H^T = V^T V`` (no SVD of
-``H``, so it is differentiable): the fault subspace of sensor ``i`` is ``span(P E_i)``
-(``E_i`` its two channel columns), with Gram matrix ``G_i = E_i^T P E_i = V_i^T V_i``.
+Isolability from the projector ``P = I - H (H^T H)^-1 H^T = V^T V`` (no SVD of ``H``: differentiable): sensor
+``i``'s fault subspace is ``span(P E_i)`` (``E_i`` its channel columns), Gram ``G_i = E_i^T P E_i = V_i^T V_i``.
 
-- *Fault-plane separation*: the principal angles between the subspaces of ``i`` and
-  ``k`` have cosines the singular values of ``G_i^-1/2 E_i^T P E_k G_k^-1/2``. For three
-  2-DOF sensors (a 3-D parity space) two planes always share a line (cosine 1, the
-  singular direction); the other angle is their dihedral angle. Faults near the shared
-  line are ambiguous over a cone whose width falls as ``1 / sin(dihedral)``, so the
-  criterion is the smallest dihedral angle (``isolability``), at most 90 deg.
-- *Detectability*: ``lambda_min(G_i)``, the smallest parity energy of a unit fault of
-  sensor ``i`` (``||V_i f||^2 >= lambda_min ||f||^2``); ``sum_i trace G_i = trace P = q`` caps
-  the worst case at ``q / (d S)`` (0.5 for three 2-DOF sensors).
-- *Isolation rate* (a Monte Carlo surrogate): over faults of fixed size in random
-  directions of random sensors with noise, ``sigmoid(FD / sigma^2 - chi2_isf(q, P_fa))
-  sigmoid((FI_true - max_other FI) / tau)``, the smooth version of "detected, and PSA
-  alone picks the faulty sensor" (``parity``'s ``FD`` and ``FI``).
-
-``optimize_configuration`` runs Adam from random starts (vmapped) on a soft minimum of
-the dihedral angles' ``sin^2`` plus a soft minimum of the detectabilities, or on the
-isolation-rate surrogate.
+- *Fault-plane separation*: principal-angle cosines between subspaces ``i``, ``k`` are the singular values of
+  ``G_i^-1/2 E_i^T P E_k G_k^-1/2``. For three 2-DOF sensors (3-D parity space) two planes always share a line
+  (cosine 1, the singular direction); the other angle is the dihedral angle. Faults near the shared line are
+  ambiguous over a cone of width ~ ``1 / sin(dihedral)``, so the criterion is the smallest dihedral angle
+  (``isolability``), at most 90 deg.
+- *Detectability*: ``lambda_min(G_i)``, the smallest parity energy of a unit fault of sensor ``i``
+  (``||V_i f||^2 >= lambda_min ||f||^2``); ``sum_i trace G_i = trace P = q`` caps the worst case at ``q / (d S)``
+  (0.5 for three 2-DOF sensors).
+- *Isolation rate* (Monte Carlo surrogate): over fixed-size faults in random directions of random sensors with
+  noise, ``sigmoid(FD / sigma^2 - chi2_isf(q, P_fa)) sigmoid((FI_true - max_other FI) / tau)``, smooth "detected,
+  and PSA alone picks the faulty sensor" (``parity``'s ``FD``, ``FI``).
 """
 from __future__ import annotations
 
@@ -46,8 +37,7 @@ class Isolability(NamedTuple):
     """Geometry of a sensor set's fault subspaces (``isolability``).
 
     Attributes:
-      dihedral: (S, S) largest principal angle between the fault subspaces, rad
-          (0 on the diagonal)
+      dihedral: (S, S) largest principal angle between the fault subspaces, rad (0 on the diagonal)
       min_dihedral: () smallest off-diagonal dihedral angle, rad
       detectability: (S,) lambda_min(V_i^T V_i)
       isotropy: () ||H^T H / trace(H^T H) * 3 - I||_F (0: isotropic rate estimate)
@@ -76,8 +66,8 @@ class ConfigurationResult(NamedTuple):
 
 
 def quaternion_axes(quaternion: Array) -> Array:
-    """(2, 3): the first two columns of the rotation of ``quaternion`` (4,), scalar first,
-    normalised here: two orthogonal unit input axes."""
+    """(2, 3): two orthogonal unit input axes, the first two columns of the rotation of ``quaternion`` (4,), scalar
+    first, normalised here."""
     w, x, y, z = quaternion / jnp.linalg.norm(quaternion)
     first = jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
     second = jnp.stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)])
@@ -90,9 +80,8 @@ def sensor_axes(quaternions: Array) -> Array:
 
 
 def _inverse_sqrt(gram: Array) -> Array:
-    """``gram^-1/2`` of a symmetric positive definite matrix; for 2 x 2 in closed form,
-    ``adj(M + s I) / (s sqrt(tr M + 2 s))`` with ``s = sqrt(det M)`` (smooth where ``eigh``'s
-    derivative divides by the gap between equal eigenvalues, e.g. at the spec's ``I / 2``)."""
+    """``gram^-1/2`` of an SPD matrix; 2 x 2 in closed form, ``adj(M + s I) / (s sqrt(tr M + 2 s))``,
+    ``s = sqrt(det M)`` (smooth where ``eigh``'s derivative divides by the eigengap, e.g. at the spec's ``I / 2``)."""
     if gram.shape[-1] != 2:
         values, vectors = jnp.linalg.eigh(gram)
         return (vectors / jnp.sqrt(values)) @ vectors.T
@@ -103,8 +92,8 @@ def _inverse_sqrt(gram: Array) -> Array:
 
 
 def _smallest_eigenvalue(sym: Array) -> Array:
-    """Smallest eigenvalue of symmetric matrices (..., d, d); for 2 x 2 in closed form
-    (``(tr - sqrt((a - c)^2 + 4 b^2)) / 2``, the root kept away from 0 by 1e-30)."""
+    """Smallest eigenvalue of symmetric (..., d, d); 2 x 2 in closed form, ``(tr - sqrt((a - c)^2 + 4 b^2)) / 2``,
+    root kept away from 0 by 1e-30."""
     if sym.shape[-1] != 2:
         return jnp.linalg.eigvalsh(sym)[..., 0]
     a, b, c = sym[..., 0, 0], sym[..., 0, 1], sym[..., 1, 1]
@@ -146,8 +135,7 @@ def _soft_min(values: Array, temperature: float) -> Array:
 
 
 def separation_objective(H: Array, groups: Array, temperature: float = 0.02, detectability_weight: float = 1.0) -> Array:
-    """Soft minimum of the dihedral angles' ``sin^2`` plus ``detectability_weight`` times a
-    soft minimum of the detectabilities (to maximise)."""
+    """Soft min of dihedral angles' ``sin^2`` + ``detectability_weight`` x soft min of detectabilities (maximise)."""
     _, gram, cross = _pair_geometry(H, groups)
     cos2 = _smallest_eigenvalue(jnp.einsum("ikba,ikbc->ikac", cross, cross))
     S = groups.shape[0]
@@ -173,17 +161,16 @@ def _draws(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Ar
 
 
 def _threshold(H: Array, pfa) -> Array:
-    """``chi2_isf(q, pfa)``, ``q = m - 3``: a number at trace time when ``pfa`` is one (not
-    a Newton solve inside every optimiser step)."""
+    """``chi2_isf(q, pfa)``, ``q = m - 3``: a trace-time number for a concrete ``pfa`` (no Newton per step)."""
     with jax.ensure_compile_time_eval():
         return chi2_threshold(H.shape[0] - H.shape[1], jnp.asarray(pfa, H.dtype))
 
 
 def isolation_surrogate(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Array,
                         samples: int = 4096, pfa: float = 1e-6, temperature: float = 0.02) -> Array:
-    """Smooth Monte Carlo rate of "detected, and PSA alone picks the faulty sensor" (module
-    doc): common random numbers from ``key``, faults of RMS ``fault_to_noise * sigma`` per
-    axis, detection ``FD > sigma^2 chi2_isf(q, pfa)`` smoothed over one unit of ``FD / sigma^2``."""
+    """Smooth Monte Carlo rate of "detected, and PSA alone picks the faulty sensor" (module doc): common random
+    numbers from ``key``, faults of RMS ``fault_to_noise * sigma`` per axis, detection
+    ``FD > sigma^2 chi2_isf(q, pfa)`` smoothed over one unit of ``FD / sigma^2``."""
     S = groups.shape[0]
     _, sensor, statistic, fi = _draws(H, groups, sigma, fault_to_noise, key, samples)
     detected = jax.nn.sigmoid(statistic - _threshold(H, pfa))
@@ -193,8 +180,8 @@ def isolation_surrogate(H: Array, groups: Array, sigma: float, fault_to_noise: f
 
 
 def _isolation_functions_from_projector(P: Array, groups: Array, residual: Array) -> Array:
-    """``FI_i`` of parity vectors given as ``V^T p`` (rows of ``residual``, in ``range(P)``):
-    the subspace of sensor ``i`` is ``span(P E_i)``, orthonormalised by ``G_i^-1/2``."""
+    """``FI_i`` of parity vectors given as ``V^T p`` (rows of ``residual``, in ``range(P)``); sensor ``i``'s subspace
+    ``span(P E_i)`` orthonormalised by ``G_i^-1/2``."""
     cols = P[:, groups]                                   # (m, S, d)
     gram = jnp.einsum("msa,msb->sab", cols, cols)
     basis = jnp.einsum("msa,sab->smb", cols, jax.vmap(_inverse_sqrt)(gram))  # (S, m, d) orthonormal
@@ -207,8 +194,7 @@ def _isolation_functions_from_projector(P: Array, groups: Array, residual: Array
 @partial(jax.jit, static_argnames=("samples",))
 def isolation_rate(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Array,
                    samples: int = 100_000, pfa: float = 1e-6) -> Array:
-    """The hard Monte Carlo rate of the same kind of draws: detected (``FD > T_D``) and
-    ``argmax FI`` is the faulty sensor."""
+    """Hard Monte Carlo rate of the same draws: detected (``FD > T_D``) and ``argmax FI`` the faulty sensor."""
     _, sensor, statistic, fi = _draws(H, groups, sigma, fault_to_noise, key, samples)
     detected = statistic > _threshold(H, pfa)
     return jnp.mean(detected & (jnp.argmax(fi, axis=1) == sensor))
@@ -224,15 +210,11 @@ def optimize_configuration(key: Array, sensors: int = 3, starts: int = 16, steps
       key: PRNG key (starts, and the surrogate's common random numbers).
       sensors: number of 2-DOF sensors S (>= 3 for a parity space with isolation).
       starts, steps, learning_rate: the optimisation (static counts).
-      objective: ``"separation"`` (``separation_objective``) or ``"isolation"``
-        (``isolation_surrogate`` at ``sigma``, ``fault_to_noise``, ``samples`` draws,
-        detection at ``pfa``).
+      objective: ``"separation"`` (``separation_objective``) or ``"isolation"`` (``isolation_surrogate`` at
+        ``sigma``, ``fault_to_noise``, ``samples`` draws, detection at ``pfa``).
 
     Returns:
-      ``ConfigurationResult`` in ``dtype``: the final quaternions (starts, S, 4) (not
-      normalised), their axes ``H`` (starts, 2S, 3), the objective before each Adam step
-      (starts, steps) (to maximise) and ``best`` () int32, the start with the largest
-      objective after the last step.
+      ``ConfigurationResult`` in ``dtype``; ``best`` () int32 by the objective after the last step.
     """
     sensors = _checks.check_int("sensors", sensors, 3, meaning="a number of 2-DOF sensors >= 3")
     starts = _checks.check_int("starts", starts, 1, meaning="a number of random starts")

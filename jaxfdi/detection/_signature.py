@@ -1,11 +1,8 @@
-"""Fault signature matrix and isolation by matching the symptom vector (Lee & Lyou,
-eq. 20, Table 2).
+"""Fault signature matrix and isolation by matching the symptom vector (Lee & Lyou, eq. 20, Table 2).
 
-A bank has one filter per fault hypothesis. Filter i estimates fault i correctly, so
-under fault i its statistic stays low while every other filter's grows. The symptom
-vector ``S`` has one bit per filter (statistic over threshold). The signature matrix
-has a "no fault" column of zeros and, for fault i, a column of ones with a 0 in row i;
-isolation returns the column equal to ``S``.
+One filter per fault hypothesis: under fault i filter i's statistic stays low, every other grows. Symptom vector
+``S``: one bit per filter (statistic over threshold). Signature matrix: a "no fault" column of zeros and, for fault
+i, ones with a 0 in row i; isolation returns the column equal to ``S``.
 """
 from __future__ import annotations
 
@@ -44,10 +41,9 @@ def isolate(symptoms: Array, matrix: Array | None = None) -> Array:
 
 
 def location_symptoms(alarms: Array, location: Array, num_locations: int) -> Array:
-    """Symptoms per fault location (..., L) from per-filter alarms (..., F) when a bank has
-    several filters per location (e.g. multiplicative and additive hypotheses): a
-    location's symptom is set when every one of its filters alarms, so a fault there
-    leaves it clear as long as one of its hypotheses explains the data."""
+    """Per-location symptoms (..., L) from per-filter alarms (..., F) for banks with several filters per location
+    (e.g. multiplicative and additive hypotheses): set when every filter of the location alarms, so a fault there
+    leaves it clear while one of its hypotheses explains the data."""
     num_locations = _checks.check_int("num_locations", num_locations, 1, meaning="a positive number of locations")
     _checks.check_index("location", location, num_locations, "a location index per filter")
     alarms = jnp.asarray(alarms, bool)

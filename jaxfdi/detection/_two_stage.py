@@ -1,28 +1,21 @@
-"""Two-stage fault isolation with a dual filter and multi-hypothesis filter banks
-(Choi & Park 2009, Fig. 10).
+"""Two-stage fault isolation with a dual filter and multi-hypothesis filter banks (Choi & Park 2009, Fig. 10).
 
-Stage 1 detects on the nominal model: the dual filter's fault detection parameter ``F``
-(``dual_filter``, declared when ``F > F_T``) and, beside it, the windowed NIS of a
-nominal filter (``chi2_detector``). Stage 2 isolates with two banks over the fault
-hypotheses ``p_x`` (model parameters, e.g. wheel ``x`` stopped):
+Stage 1 detects on the nominal model: the dual filter's fault detection parameter ``F`` (``dual_filter``, fault
+when ``F > F_T``) and the windowed NIS of a nominal filter (``chi2_detector``). Stage 2 isolates with two banks over
+the fault hypotheses ``p_x`` (model parameters, e.g. wheel ``x`` stopped):
 
-- the credit bank: one dual filter per hypothesis, credits ``C_x`` from the ``F_x``
-  (``credit_isolator``, Choi & Park eq. 10);
-- the likelihood bank: the static multiple-model filter over the nominal model and the
-  hypotheses, mode probabilities from the innovations' likelihoods
-  (``mode_probability_detector``).
+- credit bank: one dual filter per hypothesis, credits ``C_x`` from the ``F_x`` (``credit_isolator``, eq. 10);
+- likelihood bank: the static multiple-model filter over the nominal model and the hypotheses, mode probabilities
+  from innovation likelihoods (``mode_probability_detector``).
 
-Until the engaging alarm (``engage_on``: the NIS test or ``F``) both banks are slaved to
-the nominal filter: each step they restart from its posterior ``N(m, P + S_e)``
-(``engage_cov = S_e`` widens the prior, since the nominal filter lags a fault) and their
-isolators stay idle; from the step after the alarm they run on their own and decide.
-With ``restart_prediction`` each hypothesis's prediction filter starts, at the
-engaging step, from its own estimation filter's posterior ``f(m_x, u; p_x)`` rather than
-from the nominal prediction, which carries the nominal filter's lag for good.
+Until the engaging alarm (``engage_on``: the NIS test or ``F``) both banks are slaved to the nominal filter,
+restarting each step from its posterior ``N(m, P + S_e)`` (``engage_cov = S_e`` widens the prior, the nominal filter
+lagging a fault), isolators idle; from the step after the alarm they run and decide on their own. With
+``restart_prediction`` each hypothesis's prediction filter starts at the engaging step from its own estimation
+filter's posterior ``f(m_x, u; p_x)``, not the nominal prediction (which keeps the nominal lag for good).
 
-A non-finite measurement component is a dead sensor: every filter takes its prediction
-there and reports it, and each of the four decisions alarms at that step with the
-channel's label (``chi2.flag_dead`` on the dead report of the decision's own filters).
+A non-finite measurement component is a dead sensor: every filter takes its prediction there and reports it; all
+four decisions alarm then with the channel's label (``chi2.flag_dead`` on their own filters' dead report).
 """
 from __future__ import annotations
 
@@ -66,26 +59,20 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
                         params: Any, hypotheses: Any, modes: Any, *, detection_threshold, nis_threshold,
                         nis_window: int, credit_threshold, mode_threshold, mm_floor, engage_cov, confirm_steps: int = 1,
                         engage_on: str = "nis", restart_prediction: bool = True, channel_labels=None) -> Filter:
-    """The two stages (module doc) on ``x[k+1] = transition(x, u, p)``, ``x' = field(x, u, p)``,
-    as a ``Filter``: ``init(mean, cov, u0) -> state``; ``step(state, y, u) -> (state,
-    TwoStageOutput)`` (its decisions in ``output.decisions``), so ``run_filter`` drives it.
+    """The two stages (module doc) on ``x[k+1] = transition(x, u, p)``, ``x' = field(x, u, p)``, as a ``Filter``
+    (``run_filter`` drives it; decisions in ``output.decisions``).
 
-    ``nominal``: the dual filter's estimation filter on ``params``; ``bank_filter(p)``: the
-    filter of the NIS test (on ``params``) and of the banks (on each hypothesis);
-    ``hypotheses`` (M, ...) and ``modes`` (M + 1, ..., nominal first): stacked parameter
-    pytrees. The credit isolator's labels are the hypotheses' indices + 1 (``confirm_steps``
-    for both isolators); ``engage_cov`` (n, n) is added to the banks' restart covariance.
-    ``channel_labels`` (m,) int: the fault label of each measurement channel, what a
-    dead channel isolates to (``chi2.flag_dead``); ``None``: a dead channel alarms with
-    label -1.
+    ``nominal``: the dual filter's estimation filter on ``params``; ``bank_filter(p)``: the filter of the NIS test
+    (on ``params``) and of the banks (each hypothesis); ``hypotheses`` (M, ...), ``modes`` (M + 1, ..., nominal
+    first): stacked parameter pytrees. Credit-isolator labels: hypothesis index + 1 (``confirm_steps`` for both
+    isolators); ``engage_cov`` (n, n) is added to the banks' restart covariance. ``channel_labels`` (m,) int: each
+    channel's fault label, what a dead channel isolates to (``chi2.flag_dead``); ``None``: label -1.
 
     Returns:
-      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n),
-      u0) -> state``, a dict of the dual filter, the NIS filter and test, both banks
-      (slaved to the prior), the engaged flag and the isolators' states; ``step(state, y
-      (m,), u) -> (state, TwoStageOutput)`` with the four ``Decision``s (F, NIS, credit,
-      likelihood), the peaks (2,), health, the credit bank's ``F_x`` (M,) and the mode
-      probabilities (M + 1,).
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n), u0) -> state``, a dict of the
+      dual filter, NIS filter and test, both banks (slaved to the prior), engaged flag and isolators' states;
+      ``step(state, y (m,), u) -> (state, TwoStageOutput)`` with the four ``Decision``s (F, NIS, credit,
+      likelihood), peaks (2,), health, the credit bank's ``F_x`` (M,) and mode probabilities (M + 1,).
     """
     if engage_on not in ("nis", "fdp"):
         raise ValueError(f"engage_on: expected 'nis' or 'fdp', got {engage_on!r}")

@@ -1,27 +1,19 @@
-"""Haar multi-scale DWT denoising of a test statistic, block by block (Lee & Lyou, Table 1;
-Rao & Bopardikar 1998).
+"""Haar multi-scale DWT denoising of a test statistic, block by block (Lee & Lyou, Table 1; Rao & Bopardikar 1998).
 
-The statistic ``lambda_k`` is cut into blocks of ``2^M`` samples. Each block is
-decomposed into its approximation ``c`` (the block mean, scale M) and detail
-coefficients ``d(j, l)`` at scales ``j = 1..M`` (``2^(M-j)`` of them at scale j): with
-the paper's averaging normalisation ``d = (mean of the first half - mean of the second
-half) / 2`` of each length-``2^j`` sub-block, so that every sample is
-``c + sum_j +-d(j, l)`` (perfect reconstruction). The orthonormal Haar transform
-(PyWavelets) has ``c = cA / 2^(M/2)``, ``d_j = cD_j / 2^(j/2)``.
+``lambda_k`` is cut into blocks of ``2^M`` samples, each decomposed into its approximation ``c`` (block mean,
+scale M) and details ``d(j, l)`` at scales ``j = 1..M`` (``2^(M-j)`` at scale j), with the paper's averaging
+normalisation ``d = (mean of first half - mean of second half) / 2`` of each length-``2^j`` sub-block: every sample
+is ``c + sum_j +-d(j, l)``. Orthonormal Haar (PyWavelets): ``c = cA / 2^(M/2)``, ``d_j = cD_j / 2^(j/2)``.
 
 Denoising thresholds the details and reconstructs:
-* ``"hard"`` (HT, as the paper uses the word): every detail dropped, each sample becomes
-  the block mean;
-* ``"soft"`` (ST): each detail shrunk toward 0 by ``c_mult * sigma_j``
-  (``sign(d) max(|d| - t, 0)``), ``sigma_j`` the detail's standard deviation at scale j:
-  ``chi2_detail_sigma`` for a chi-square statistic, or, as Lee and Lyou do, the sample
-  standard deviation of the details themselves (``sample_detail_sigma``: from a
-  fault-free calibration window at the start of the run, used from the first block after
-  it, so the denoiser stays causal; ``causal_detail_sigma`` gives the per-block sigma).
+* ``"hard"`` (HT, the paper's word): every detail dropped, each sample becomes the block mean;
+* ``"soft"`` (ST): ``sign(d) max(|d| - t, 0)``, ``t = c_mult * sigma_j``, ``sigma_j`` the scale-j detail standard
+  deviation: ``chi2_detail_sigma`` for a chi-square statistic, or, as Lee and Lyou, the details' sample standard
+  deviation (``sample_detail_sigma``, from a fault-free calibration window at the run's start, used from the next
+  block on, so causal; ``causal_detail_sigma`` gives the per-block sigma).
 
-A block is complete only at its last sample, so decisions are made once per block
-(``block_alarms``): detection lags the onset by at most ``2^M`` steps. A block uses
-its own samples only, so the denoiser is causal at block resolution.
+A block is complete only at its last sample, so decisions are once per block (``block_alarms``): detection lags the
+onset by at most ``2^M`` steps; a block uses only its own samples (causal at block resolution).
 """
 from __future__ import annotations
 
@@ -46,10 +38,9 @@ def _check(statistic: Array, levels: int) -> Array:
 
 
 def haar_decompose(statistic: Array, levels: int) -> tuple[Array, list[Array]]:
-    """Blockwise Haar analysis of ``statistic`` (T, ...) with T a multiple of ``2^M``.
+    """Blockwise Haar analysis of ``statistic`` (T, ...), T a multiple of ``2^M``.
 
-    Returns ``(approx, details)``: ``approx`` (B, ...) the block means of the B blocks,
-    ``details[j - 1]`` (B, 2^(M-j), ...) the scale-j detail coefficients in time order.
+    Returns ``(approx, details)``: ``approx`` (B, ...) block means, ``details[j - 1]`` (B, 2^(M-j), ...) in time order.
     """
     x = _check(statistic, levels)
     blocks = x.reshape((x.shape[0] // 2**levels, 2**levels) + x.shape[1:])
@@ -72,16 +63,15 @@ def haar_reconstruct(approx: Array, details: list[Array]) -> Array:
 
 
 def chi2_detail_sigma(dof: int, levels: int) -> np.ndarray:
-    """Standard deviation (M,) of the scale-j detail of i.i.d. chi2(dof) samples:
-    ``var(lambda) = 2 dof``, and a scale-j detail is a difference of two means of
-    ``2^(j-1)`` samples over 2, so ``sigma_j = sqrt(2 dof / 2^j)``."""
+    """(M,) standard deviation of the scale-j detail of i.i.d. chi2(dof) samples: ``var(lambda) = 2 dof``, a detail
+    is half a difference of two means of ``2^(j-1)`` samples, so ``sigma_j = sqrt(2 dof / 2^j)``."""
     return np.sqrt(2.0 * dof / 2.0 ** np.arange(1, levels + 1))
 
 
 def sample_detail_sigma(statistic: Array, levels: int, window: int) -> Array:
-    """(M, ...) sample standard deviation (``ddof = 1``, about the sample mean) of each
-    scale's details over the blocks inside the first ``window`` steps of ``statistic``
-    (T, ...): Lee and Lyou's sigma, estimated on a fault-free calibration window."""
+    """(M, ...) sample standard deviation (``ddof = 1``, about the sample mean) of each scale's details over the
+    blocks within the first ``window`` steps of ``statistic`` (T, ...): Lee and Lyou's sigma, from a fault-free
+    calibration window."""
     x = _check(statistic, levels)
     window = _checks.check_int("window", window, 2**levels, x.shape[0],
                                meaning=f"a number of steps in [2^levels = {2**levels}, T = {x.shape[0]}]")
@@ -93,10 +83,9 @@ def sample_detail_sigma(statistic: Array, levels: int, window: int) -> Array:
 
 
 def causal_detail_sigma(statistic: Array, levels: int, window: int, prior_sigma: Array) -> Array:
-    """(B, M, ...) per-block sigma: ``prior_sigma`` (M,) or (M, ...) (e.g. the chi-square
-    value) for the blocks that end inside the calibration window, the window's
-    ``sample_detail_sigma`` from the first block after it (a block never uses its own or
-    later samples to set its threshold)."""
+    """(B, M, ...) per-block sigma: ``prior_sigma`` (M,) or (M, ...) (e.g. the chi-square value) for blocks ending
+    inside the calibration window, the window's ``sample_detail_sigma`` from the first block after it (a block
+    never sets its threshold from its own or later samples)."""
     x = _check(statistic, levels)
     estimate = sample_detail_sigma(x, levels, window)
     size = 2**levels
@@ -115,20 +104,20 @@ def soft_threshold(x: Array, threshold: Array) -> Array:
 
 def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: Array | None = None,
                  c_mult: float = 2.0) -> Array:
-    """Denoise ``statistic`` (T, ...) block by block (blocks of ``2^levels``).
+    """Denoise ``statistic`` (T, ...) block by block (blocks of ``2^levels``; module docstring).
 
     Args:
       statistic: (T,) or (T, channels), T a multiple of ``2^levels``.
       levels: M, the number of scales.
-      mode: ``"hard"`` (block mean), ``"soft"`` (details shrunk by ``c_mult * sigma_j``)
-        or ``"none"`` (reconstruction without thresholding: the input).
-      sigma: (M,) or (M, channels) detail standard deviations for ``"soft"``, or
-        (B, M) / (B, M, channels) one set per block (``causal_detail_sigma``).
+      mode: ``"hard"`` (block mean), ``"soft"`` (details shrunk by ``c_mult * sigma_j``) or ``"none"``
+        (reconstruction without thresholding: the input).
+      sigma: (M,) or (M, channels) detail standard deviations for ``"soft"``, or (B, M) / (B, M, channels) one set
+        per block (``causal_detail_sigma``).
       c_mult: the sigma multiple (paper: 2).
 
     Returns:
-      the denoised statistic, of ``statistic``'s shape (T, ...): every sample of a block is
-      its block mean plus the (thresholded) details (``"hard"``: the block mean alone).
+      the denoised statistic, of ``statistic``'s shape (T, ...): each sample is its block mean plus the
+      (thresholded) details (``"hard"``: the block mean alone).
     """
     _checks.check_choice("mode", mode, MODES)
     _checks.check_positive("c_mult", c_mult, "a positive multiple of the detail sigma")
@@ -152,10 +141,9 @@ def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: A
 
 
 def block_alarms(denoised: Array, threshold: Array, levels: int) -> Array:
-    """Once-per-block decisions: at the last step of each block, ``True`` if any
-    reconstructed sample of the block reaches ``threshold`` or is not finite (a dead
-    sensor's statistic, which the Haar transform spreads over its block, is evidence);
-    ``False`` elsewhere. Shape (T, ...) like ``denoised``."""
+    """Once-per-block decisions, (T, ...) like ``denoised``: at each block's last step ``True`` if any reconstructed
+    sample of the block reaches ``threshold`` or is not finite (a dead sensor's statistic, spread over its block by
+    the transform, is evidence); ``False`` elsewhere."""
     x = _check(denoised, levels)
     size = 2**levels
     blocks = x.reshape((x.shape[0] // size, size) + x.shape[1:])

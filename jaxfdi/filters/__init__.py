@@ -1,8 +1,7 @@
 """Filters: each a factory returning ``Filter(init, step)``; ``run_filter`` scans it.
 
-Gaussian filters (KF, EKF, UKF), the multiple-model filters built on them (IMM, MM),
-the two-stage (bias) Kalman filter, optimal or robust to an unknown input, and the
-unbiased minimum-variance filter that decouples an unknown input.
+Gaussian filters (KF, EKF, UKF), the multiple-model filters built on them (IMM, MM), the two-stage (bias) Kalman
+filter, optimal or robust to an unknown input, and the unbiased minimum-variance filter decoupling an unknown input.
 """
 from jaxfdi.filters._base import Filter, FilterInfo, GaussianState, run_filter
 from jaxfdi.filters._ekf import extended_kalman_filter

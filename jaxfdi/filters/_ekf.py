@@ -1,8 +1,7 @@
-"""Extended Kalman filter: the KF on Jacobians of ``f`` and ``h`` taken by ``jax.jacfwd``.
+"""Extended Kalman filter (Jazwinski 1970): the KF on Jacobians of ``f`` and ``h`` by ``jax.jacfwd``.
 
-``H = dh/dx (m, u)``, ``r = y - h(m, u)``, Joseph update as in ``kalman``;
-``F = df/dx (m+, u)``, ``m' = f(m+, u)``, ``P' = F P+ F^T + Q`` (Jazwinski 1970).
-Jacobians are never hand-typed (printed Jacobians in papers carry typos).
+``H = dh/dx (m, u)``, ``r = y - h(m, u)``, Joseph update as ``kalman``; ``F = df/dx (m+, u)``, ``m' = f(m+, u)``,
+``P' = F P+ F^T + Q``. Jacobians are never hand-typed (printed ones carry typos).
 """
 from __future__ import annotations
 
@@ -27,10 +26,9 @@ def extended_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Arra
       missing_measurements: treat NaN components of ``y`` as not measured (static).
 
     Returns:
-      ``Filter(init, step, update, predict)``: ``init(mean (n,), cov (n, n)) ->
-      GaussianState``; ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``, the
-      Joseph update with the Jacobian of ``h`` at the prior mean, then the prediction
-      with the Jacobian of ``f`` at the posterior mean.
+      ``Filter(init, step, update, predict)``: ``init(mean (n,), cov (n, n)) -> GaussianState``;
+      ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``: Joseph update with ``h``'s Jacobian at the prior
+      mean, then prediction with ``f``'s Jacobian at the posterior mean.
     """
     _checks.check_callable("f", f, "a function f(x, u, params) -> next state")
     _checks.check_callable("h", h, "a function h(x, u, params) -> measurement")

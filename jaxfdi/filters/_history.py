@@ -1,7 +1,6 @@
-"""A bounded history of a filter's inputs and its replay: a fixed-size ring buffer of the
-last ``L`` steps that lives in a scan carry, and a fixed-length scan that re-runs a filter
-over it (a detector that restarts its estimator a few steps before a detection, e.g. the
-hybrid parity-space FDI of Park et al. 2004). Bounded, so ``jit``/``vmap`` friendly.
+"""A bounded history of a filter's inputs and its replay: a fixed-size ring buffer of the last ``L`` steps in a scan
+carry, and a fixed-length scan re-running a filter over it (for detectors restarting their estimator a few steps
+before a detection, e.g. Park et al. 2004's hybrid parity-space FDI). Bounded: ``jit``/``vmap`` friendly.
 """
 from __future__ import annotations
 
@@ -46,8 +45,8 @@ def push(buffer: RingBuffer, entry: Any) -> RingBuffer:
 
 
 def ordered(buffer: RingBuffer) -> tuple[Any, Array]:
-    """``(entries, valid)``: the stored entries oldest first, (L, ...), and which of the L
-    slots hold an entry ((L,) bool; fewer than L before the buffer first fills)."""
+    """``(entries, valid)``: stored entries oldest first (L, ...) and which slots hold one ((L,) bool; fewer than L
+    before the buffer first fills)."""
     L = buffer.length
     start = jnp.where(buffer.count >= L, buffer.count % L, 0)
     index = (start + jnp.arange(L)) % L
@@ -56,9 +55,8 @@ def ordered(buffer: RingBuffer) -> tuple[Any, Array]:
 
 
 def replay_filter(filt, state: Any, ys: Array, us: Array, valid: Array | None = None) -> tuple[Any, Any]:
-    """Re-run ``filt`` from ``state`` (the prior of the first entry) over (L, ...) stored
-    ``ys``, ``us``; steps with ``valid == False`` leave the state unchanged. Returns the
-    final state and the (L, ...) infos (a fixed-length scan: jit/vmap friendly)."""
+    """Re-run ``filt`` from ``state`` (prior of the first entry) over (L, ...) stored ``ys``, ``us``; ``valid ==
+    False`` steps keep the state. Returns the final state and the (L, ...) infos (fixed-length scan)."""
     ys, us = jnp.asarray(ys), jnp.asarray(us)
     _checks.check_same_length(("ys", "us"), ys, us)
     valid = jnp.ones((ys.shape[0],), bool) if valid is None else jnp.asarray(valid, bool)

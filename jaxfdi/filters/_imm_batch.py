@@ -1,31 +1,21 @@
-"""The IMM over linear Kalman modes, one step for a whole batch of runs, in a
-structure-of-arrays layout: what ``run_filter`` runs for
-``interacting_multiple_model(kalman_filter, LinearGaussianModel modes, pi)``.
+"""The IMM over linear Kalman modes, one step for a whole batch of runs, structure-of-arrays layout: what
+``run_filter`` runs for ``interacting_multiple_model(kalman_filter, LinearGaussianModel modes, pi)``.
 
-Same recursion as ``imm.py`` (Han et al. 2022, eqs. 6-12; Blom & Bar-Shalom 1988), same
-outputs. Two things differ, both for speed on CPU, where 100 runs x 7 modes are 700
-small covariance recursions a step:
+Same recursion and outputs as ``imm.py`` (Han et al. 2022, eqs. 6-12; Blom & Bar-Shalom 1988). Two differences, for
+CPU speed (100 runs x 7 modes = 700 small covariance recursions a step):
 
-- layout: every array carries its matrix axes first and the batch axes ``(M, N)``
-  (modes, runs) last, e.g. the covariances are ``(n, n, M, N)``; every element
-  ``P[i, j]`` is then one contiguous vector of ``M N`` values and the written-out
-  algebra of ``_linalg.soa_*`` is vectorised over it (under ``vmap`` the batch is the
-  leading axis and XLA works through 7-element strided rows);
-- covariance update ``P+ = P - G G^T`` with ``G = P C^T L^-T`` (``S = L L^T``) instead
-  of the Joseph form, which needs two batched ``n x n x n`` products per mode: equal for
-  the optimal gain (Bar-Shalom et al. 2001, eq. 5.2.3-15); the posterior is
-  symmetrised and factorised, and a covariance that lost positive definiteness makes
-  ``healthy`` false, as on the vmapped path. The mean update ``x + K r`` is ``x + G w``
-  with ``w = L^-1 r``, so the gain itself is never formed.
+- layout: matrix axes first, batch axes ``(M, N)`` (modes, runs) last (covariances ``(n, n, M, N)``), so each
+  ``P[i, j]`` is a contiguous vector of ``M N`` values for ``_linalg.soa_*`` (``vmap``: 7-element strided rows);
+- covariance update ``P+ = P - G G^T``, ``G = P C^T L^-T`` (``S = L L^T``), not Joseph (two batched ``n x n x n``
+  products per mode): equal for the optimal gain (Bar-Shalom et al. 2001, eq. 5.2.3-15); the posterior is
+  symmetrised and factorised, lost positive definiteness makes ``healthy`` false as on the vmapped path. Mean
+  ``x + K r = x + G w``, ``w = L^-1 r``: the gain is never formed.
 
-Models of more than ``_linalg.UNROLL_MAX`` states (the 13-state bias design, up to
-``KERNEL_MAX_STATES``): XLA:CPU fuses the chains of written-out products and solves
-into their consumers and recomputes them for every element (the kernel was 3.4x slower
-than ``vmap`` on 13 states); ``_linalg.materialize`` stores the gain factor, the mode
-posteriors, the mixed covariances and ``Phi P`` once each (2.8x faster than ``vmap``).
-
-Measured on the engine (7 modes, 100 runs x 1000 steps, ``benchmarks/bench_imm.py``):
-see ``benchmarks/RESULTS.md``.
+Above ``_linalg.UNROLL_MAX`` states (13-state bias design, up to ``KERNEL_MAX_STATES``) XLA:CPU fuses chains of
+written-out products and solves into consumers and recomputes them per element (kernel 3.4x slower than ``vmap`` on
+13 states); ``_linalg.materialize`` stores the gain factor, mode posteriors, mixed covariances and ``Phi P`` once
+each (2.8x faster than ``vmap``). Engine timings (7 modes, 100 runs x 1000 steps, ``benchmarks/bench_imm.py``):
+``benchmarks/RESULTS.md``.
 """
 from __future__ import annotations
 
@@ -44,8 +34,7 @@ mm, mv, tr = _linalg.soa_matmul, _linalg.soa_matvec, _linalg.soa_transpose
 
 
 def soa_modes(modes: LinearGaussianModel) -> LinearGaussianModel:
-    """The mode models with the mode axis moved behind the matrix axes: (M, rows, cols)
-    leaves -> (rows, cols, M, 1), broadcast over the runs."""
+    """Mode models (M, rows, cols) -> (rows, cols, M, 1): mode axis behind the matrix axes, broadcast over runs."""
     return LinearGaussianModel(*(jnp.moveaxis(jnp.asarray(leaf), 0, -1)[..., None] for leaf in modes))
 
 
@@ -54,9 +43,8 @@ def soa_symmetrize(a: Array) -> Array:
 
 
 def soa_moment_match(weights: Array, means: Array, covs: Array) -> tuple[Array, Array]:
-    """``x_j = sum_i w_ij x_i``, ``P_j = sum_i w_ij [P_i + (x_i - x_j)(x_i - x_j)^T]``
-    for weights ``(M, J, N)``, means ``(n, M, N)``, covariances ``(n, n, M, N)``;
-    returns ``(n, J, N)``, ``(n, n, J, N)``."""
+    """``x_j = sum_i w_ij x_i``, ``P_j = sum_i w_ij [P_i + (x_i - x_j)(x_i - x_j)^T]``; weights ``(M, J, N)``, means
+    ``(n, M, N)``, covariances ``(n, n, M, N)`` -> ``(n, J, N)``, ``(n, n, J, N)``."""
     M = weights.shape[0]
     mean = sum(weights[i] * means[:, i, None] for i in range(M))
     cov = 0.0
@@ -71,15 +59,14 @@ KERNEL_MAX_STATES = 16
 
 
 def supports(modes: LinearGaussianModel) -> bool:
-    """True when the kernel takes these stacked modes: every dimension at least 1, at
-    most ``KERNEL_MAX_STATES`` states and ``_linalg.UNROLL_MAX`` outputs and inputs."""
+    """True when the kernel takes these stacked modes: every dimension >= 1, at most ``KERNEL_MAX_STATES`` states and
+    ``_linalg.UNROLL_MAX`` outputs and inputs."""
     n, nu, m = modes.Phi.shape[-1], modes.Gamma.shape[-1], modes.C.shape[-2]
     return 1 <= n <= KERNEL_MAX_STATES and 1 <= nu <= _linalg.UNROLL_MAX and 1 <= m <= _linalg.UNROLL_MAX
 
 
 def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -> BatchKernel:
-    """``BatchKernel`` of the IMM over ``kalman_filter`` modes (``modes`` stacked on a
-    leading axis M, ``log_transition`` (M, M) = ``log pi``)."""
+    """``BatchKernel`` of the IMM over ``kalman_filter`` modes (axis M) with ``log_transition = log pi`` (M, M)."""
     soa = soa_modes(modes)
     n, nu, m = soa.Phi.shape[0], soa.Gamma.shape[1], soa.C.shape[0]
     large = n > _linalg.UNROLL_MAX  # materialise the chains XLA would recompute (module doc)

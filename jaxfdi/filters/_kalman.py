@@ -1,11 +1,9 @@
-"""Linear Kalman filter (Kalman 1960) with the Joseph-form covariance update.
+"""Linear Kalman filter (Kalman 1960) with the Joseph-form covariance update (Bucy & Joseph 1968).
 
-Update (Joseph form, valid for any gain, keeps ``P`` symmetric positive definite):
-``r = y - C m - D u``, ``S = C P C^T + R``, ``K = P C^T S^-1``,
-``m+ = m + K r``, ``P+ = (I - K C) P (I - K C)^T + K R K^T`` (Bucy & Joseph 1968).
-Predict: ``m' = Phi m+ + Gamma u``, ``P' = Phi P+ Phi^T + Q``.
-With ``missing_measurements=True``, NaN components of ``y`` are skipped component-wise;
-a dead (non-finite) component is reported, never used (``filters._base``).
+Update: ``r = y - C m - D u``, ``S = C P C^T + R``, ``K = P C^T S^-1``, ``m+ = m + K r``,
+``P+ = (I - K C) P (I - K C)^T + K R K^T`` (valid for any gain, keeps ``P`` SPD). Predict: ``m' = Phi m+ + Gamma u``,
+``P' = Phi P+ Phi^T + Q``. With ``missing_measurements=True`` NaN components of ``y`` are skipped component-wise; a
+dead (non-finite) component is reported, never used (``filters._base``).
 """
 from __future__ import annotations
 
@@ -29,13 +27,11 @@ def joseph_update(
 ) -> ConditionedGaussian:
     """Condition ``N(mean, cov)`` on ``y = H x + v``, ``v ~ N(0, R)``, predicted ``y_pred``.
 
-    With ``missing_measurements`` (static), NaN components of ``y`` are missing: their
-    rows of ``H`` are zeroed and their innovation set to 0, so they neither update the
-    state nor enter the likelihood. Without it the covariance recursion does not look at
-    the data, so under ``vmap`` over runs that share the model and ``P0`` XLA carries a
-    single covariance instead of one per run (11x faster for 100 engine runs); a
-    non-finite component of ``y`` then updates the mean with a zero innovation and is
-    reported as a dead channel (``_base`` module doc).
+    With ``missing_measurements`` (static) NaN components of ``y`` are missing: rows of ``H`` zeroed, innovation 0,
+    so they neither update the state nor enter the likelihood. Without it the covariance recursion ignores the data,
+    so under ``vmap`` over runs sharing the model and ``P0`` XLA carries one covariance, not one per run (11x faster
+    for 100 engine runs); a non-finite component then updates the mean with a zero innovation and is reported as a
+    dead channel (``_base`` module doc).
     """
     if missing_measurements:
         mask, y_obs, num_observed = observed_mask(y)
@@ -65,35 +61,28 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
     """Linear Kalman filter for a ``LinearGaussianModel``.
 
     Args:
-      model: the ``LinearGaussianModel``; leaves with a leading run axis N (e.g.
-        ``model._replace(Q=Qs)``, ``Qs`` (N, n, n)) give one model per run: the filter
-        then runs only over N runs at once (``run_filter`` with ``ys`` (N, T, m)), by the
-        structure-of-arrays kernel (up to 16 states and 8 outputs), with the standard-form
+      model: the ``LinearGaussianModel``; leaves with a leading run axis N (e.g. ``model._replace(Q=Qs)``, ``Qs``
+        (N, n, n)) give one model per run: the filter then runs only over N runs at once (``run_filter`` with
+        ``ys`` (N, T, m)) by the structure-of-arrays kernel (up to 16 states and 8 outputs), with the standard-form
         covariance update (equal to Joseph's for the optimal gain).
-      missing_measurements: treat NaN components of ``y`` as not measured (static).
-        Off by default: then the covariances do not depend on the data, which is what
-        makes a vmapped Monte Carlo study fast (see ``joseph_update``).
-      unroll_factorizations: Cholesky factorisations and triangular solves of small
-        matrices written out element by element (default; ``_linalg``), which is what
-        makes *batches* of covariances fast (an IMM's modes, per-run covariances). When
-        the covariance is one for the whole batch (a single sequence, or a Monte Carlo
-        study whose runs share the model), LAPACK calls are faster, and their gradients
-        much faster: ``False`` on the engine's log-likelihood gradient over 100 runs cut
-        its cost from 42 to 30 ms and its compile time from 4.4 to 2.0 s
-        (``benchmarks/bench_tuning.py``).
+      missing_measurements: treat NaN components of ``y`` as not measured (static). Off by default: covariances then
+        do not depend on the data, which makes vmapped Monte Carlo fast (``joseph_update``).
+      unroll_factorizations: small Cholesky factorisations and triangular solves written out element by element
+        (default; ``_linalg``), fast for *batches* of covariances (IMM modes, per-run covariances). With one
+        covariance for the whole batch (a single sequence, or runs sharing the model) LAPACK is faster, and its
+        gradients much faster: ``False`` on the engine's log-likelihood gradient over 100 runs cut 42 -> 30 ms and
+        compile 4.4 -> 2.0 s (``benchmarks/bench_tuning.py``).
 
-    ``run_filter`` over runs with their own prior or their own model runs the
-    structure-of-arrays step of ``kalman_batch.py``. With
-    ``missing_measurements=True`` the filter also runs as an associative scan,
-    ``run_filter(..., parallel=True)`` (Särkkä and García-Fernández 2021; ``parallel.py``).
+    ``run_filter`` over runs with their own prior or model runs ``kalman_batch.py``'s structure-of-arrays step; with
+    ``missing_measurements=True`` also the associative scan ``run_filter(..., parallel=True)`` (Särkkä and
+    García-Fernández 2021; ``parallel.py``).
 
     Returns:
-      ``Filter(init, step)``; ``init(mean, cov)`` is the prior of ``x[0]``,
-      ``step(state, y, u)`` updates with ``y[k]`` (m,) and predicts with ``u[k]`` (nu,),
-      returning ``(GaussianState, FilterInfo)``; with ``update`` and ``predict``, and
-      ``parallel`` with ``missing_measurements=True`` or else ``batch`` where the kernel
-      supports the model. For a model per run: ``init`` and ``batch`` only (``step``
-      raises ``ValueError``; ``run_filter`` over (N, T, m) runs the kernel).
+      ``Filter(init, step)``; ``init(mean, cov)``: prior of ``x[0]``; ``step(state, y, u)`` updates with ``y[k]``
+      (m,), predicts with ``u[k]`` (nu,), returns ``(GaussianState, FilterInfo)``; with ``update`` and ``predict``,
+      and ``parallel`` (``missing_measurements=True``) or else ``batch`` where the kernel supports the model. Model
+      per run: ``init`` and ``batch`` only (``step`` raises ``ValueError``; ``run_filter`` over (N, T, m) runs the
+      kernel).
     """
     if isinstance(model, LinearGaussianModel) and any(per_run_leaves(model)):
         return _per_run_kalman_filter(model, missing_measurements)
@@ -119,8 +108,8 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
 
 
 def _per_run_kalman_filter(model: LinearGaussianModel, missing_measurements: bool) -> Filter:
-    """``kalman_filter`` of a model with a run axis on some leaves: ``init`` takes a shared
-    or per-run prior, ``step`` refuses a single sequence, ``batch`` is the kernel."""
+    """``kalman_filter`` of a model with a run axis on some leaves: ``init`` takes a shared or per-run prior,
+    ``step`` refuses a single sequence, ``batch`` is the kernel."""
     if missing_measurements:
         raise ValueError("missing_measurements: a model per run runs the batch kernel, which reports a non-finite "
                          "component and keeps it out of the mean but not out of the covariance; use jax.vmap over "

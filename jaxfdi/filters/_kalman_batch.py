@@ -1,25 +1,17 @@
-"""The linear Kalman filter for a whole batch of runs in one step, structure-of-arrays
-layout: what ``run_filter`` runs over N runs of ``kalman_filter(model)`` when the runs
-carry their own prior, or their own model (``kalman_filter`` of a model whose leaves have
-a leading run axis: a different ``Q``, ``R`` or ``Phi`` per run).
+"""The linear Kalman filter for a whole batch of runs in one step, structure-of-arrays layout: what ``run_filter``
+runs for N runs of ``kalman_filter(model)`` with their own prior or model (leaves with a leading run axis).
 
-Same recursion and outputs as ``kalman.py`` (Kalman 1960); two things differ, as in the
-IMM's kernel (``imm_batch.py``), both for speed on CPU:
+Same recursion and outputs as ``kalman.py`` (Kalman 1960); two differences, as in ``imm_batch.py``, for CPU speed:
 
-- layout: every array carries its matrix axes first and the run axis ``N`` last, e.g.
-  the covariances are ``(n, n, N)``, so each element ``P[i, j]`` is one contiguous
-  vector of ``N`` values and the written-out algebra of ``_linalg.soa_*`` is vectorised
-  over it (``vmap`` puts the run axis first, and XLA then works through 7-element rows);
-- covariance update ``P+ = P - G^T G`` with ``G = L^-1 C P`` (``S = L L^T``) instead of
-  the Joseph form: equal for the optimal gain (Bar-Shalom et al. 2001, eq. 5.2.3-15),
-  and exactly symmetric as computed. ``P+`` is still factorised for ``healthy``, as on
-  the vmapped path. The mean update ``x + K r`` is ``x + G^T w`` with ``w = L^-1 r``.
+- layout: matrix axes first, run axis ``N`` last (covariances ``(n, n, N)``), so each ``P[i, j]`` is a contiguous
+  vector of ``N`` values over which ``_linalg.soa_*`` vectorises (``vmap`` puts runs first: 7-element rows);
+- covariance update ``P+ = P - G^T G``, ``G = L^-1 C P`` (``S = L L^T``), not Joseph: equal for the optimal gain
+  (Bar-Shalom et al. 2001, eq. 5.2.3-15) and exactly symmetric. ``P+`` is still factorised for ``healthy``. Mean:
+  ``x + K r = x + G^T w``, ``w = L^-1 r``.
 
-Products with a matrix shared by the runs (``C``, ``Phi``) are matrix products of the
-whole stack (``_left_product``), which XLA computes once; written-out chains of them
-would be fused into loops that recompute the inner product for every output element.
-For the same reason the gain factor ``G`` is stored once (``_linalg.materialize``). The
-info is written run-first into (N, T, ...) buffers (``BatchKernel.info_runs_first``).
+Products with a shared matrix (``C``, ``Phi``) are matrix products of the whole stack (``_left_product``), computed
+once (written-out chains would be fused into loops recomputing the inner product per element); ``G`` is stored once
+(``_linalg.materialize``). Info goes run-first into (N, T, ...) buffers (``BatchKernel.info_runs_first``).
 """
 from __future__ import annotations
 
@@ -40,14 +32,10 @@ KERNEL_MAX_STATES = 16
 
 
 def _left_product(a: Array, b: Array) -> Array:
-    """``a @ b`` per run for ``a`` (p, k, 1 or N) and ``b`` (k, q, N) -> (p, q, N).
-
-    A matrix shared by the runs multiplies the whole stack as one matrix product (a
-    GEMM of (p, k) by (k, q N)): XLA:CPU never fuses a ``dot`` into its consumer, so the
-    product is computed once. Written out, a chain like ``Phi P Phi^T`` is fused into
-    one loop that recomputes the inner product for every element of the outer one
-    (n^4 instead of 2 n^3 operations; ``optimization_barrier`` does not prevent it on
-    CPU)."""
+    """``a @ b`` per run, ``a`` (p, k, 1 or N), ``b`` (k, q, N) -> (p, q, N). A shared ``a`` multiplies the whole
+    stack as one GEMM ((p, k) by (k, q N)), which XLA:CPU never fuses into its consumer, so it is computed once;
+    written out, ``Phi P Phi^T`` fuses into one loop recomputing the inner product per outer element (n^4 instead of
+    2 n^3; ``optimization_barrier`` does not prevent it on CPU)."""
     if a.shape[-1] == 1:
         return jnp.tensordot(a[..., 0], b, axes=(1, 0))
     return _linalg.soa_matmul(a, b)
@@ -63,19 +51,15 @@ def _congruence(a: Array, sym: Array) -> Array:
 
 
 def soa_model(model: LinearGaussianModel, per_run: LinearGaussianModel) -> LinearGaussianModel:
-    """Leaves ``(rows, cols)`` -> ``(rows, cols, 1)``; per-run leaves ``(N, rows, cols)``
-    -> ``(rows, cols, N)`` (``per_run`` says which leaves carry the run axis)."""
+    """Leaves ``(rows, cols)`` -> ``(rows, cols, 1)``; ``per_run`` leaves ``(N, rows, cols)`` -> ``(rows, cols, N)``."""
     return LinearGaussianModel(*(jnp.moveaxis(leaf, 0, -1) if batched else leaf[..., None]
                                  for leaf, batched in zip(model, per_run)))
 
 
 def kalman_step_soa(model: LinearGaussianModel, state: GaussianState, y: Array, u: Array):
-    """One Kalman step (update with ``y[k]``, predict with ``u[k]``) for every run at once.
-
-    ``model``: ``soa_model`` leaves (rows, cols, N or 1); ``state``: mean (n, N), cov
-    (n, n, N); ``y`` (m, N); ``u`` (nu, N or 1). Returns ``(next_state, FilterInfo)`` with
-    the run axis last on every field.
-    """
+    """One Kalman step (update with ``y[k]``, predict with ``u[k]``) for every run at once: ``model`` with
+    ``soa_model`` leaves (rows, cols, N or 1), ``state`` mean (n, N), cov (n, n, N), ``y`` (m, N), ``u`` (nu, N or
+    1). Returns ``(next_state, FilterInfo)``, run axis last on every field."""
     x, P = state
     m = model.C.shape[0]
     innovation = used_innovation(y, _matvec(model.C, x) + _matvec(model.D, u))
@@ -103,10 +87,9 @@ def kalman_step_soa(model: LinearGaussianModel, state: GaussianState, y: Array, 
 
 
 def kalman_batch_kernel(model: LinearGaussianModel, per_run: LinearGaussianModel | None = None) -> BatchKernel:
-    """``BatchKernel`` of ``kalman_filter(model)`` for runs that carry their own prior
-    (``pack`` takes a shared or a per-run ``GaussianState``); ``per_run`` marks the
-    leaves of ``model`` with a leading run axis (default none). Building it does no
-    array work, so ``kalman_filter`` always attaches it."""
+    """``BatchKernel`` of ``kalman_filter(model)`` for runs with their own prior (``pack`` takes a shared or per-run
+    ``GaussianState``); ``per_run`` marks ``model``'s leaves with a leading run axis (default none). No array work
+    at build time, so ``kalman_filter`` always attaches it."""
     per_run = per_run or LinearGaussianModel(*(False,) * 6)
     n, nu, m = model.Phi.shape[-1], model.Gamma.shape[-1], model.C.shape[-2]
 
@@ -145,8 +128,7 @@ def unpack_state(state: GaussianState) -> GaussianState:
 
 
 def supports(model: LinearGaussianModel) -> bool:
-    """True when the kernel takes ``model``: at most ``KERNEL_MAX_STATES`` states and
-    ``UNROLL_MAX`` outputs (static shapes)."""
+    """True when the kernel takes ``model``: at most ``KERNEL_MAX_STATES`` states, ``UNROLL_MAX`` outputs (static)."""
     n, m = model.Phi.shape[-1], model.C.shape[-2]
     return n <= KERNEL_MAX_STATES and m <= _linalg.UNROLL_MAX
 
@@ -157,8 +139,8 @@ def per_run_leaves(model: LinearGaussianModel) -> LinearGaussianModel:
 
 
 def check_per_run_model(model: LinearGaussianModel) -> tuple[LinearGaussianModel, LinearGaussianModel, int]:
-    """A model with a run axis on some leaves: ``(model in one float dtype, per_run, N)``;
-    every leaf, per run or shared, checked against the shared shapes and one ``N``."""
+    """A model with a run axis on some leaves: ``(model in one float dtype, per_run, N)``; every leaf checked
+    against the shared shapes and one ``N``."""
     per_run = per_run_leaves(model)
     sizes = {_checks.shape_of(leaf)[0] for leaf, batched in zip(model, per_run) if batched}
     num_runs = max(sizes)

@@ -1,12 +1,9 @@
-"""What the multiple-model filters (IMM, static MM) share: state, info, the vmapped
-mode bank, the Bayes update of the mode probabilities in log space, moment matching.
+"""What the multiple-model filters (IMM, static MM) share: state, info, the vmapped mode bank, the Bayes update of
+the mode probabilities in log space, moment matching.
 
-A bank of M mode-matched filters is ONE Gaussian filter vmapped over a params pytree
-whose leaves carry a leading mode axis M (STYLE.md rule 3), never a Python list.
-
-Mode probabilities are kept as logarithms and normalised with log-sum-exp: the mode
-likelihoods ``L_j = N(r_j; 0, S_j)`` of a 5-output engine are routinely below 1e-300
-(and below 1e-38 in float32) for the wrong modes, so raw densities would underflow.
+A bank of M mode-matched filters is ONE Gaussian filter vmapped over a params pytree with a leading mode axis M
+(STYLE.md rule 3), never a Python list. Mode probabilities are logs normalised by log-sum-exp: the wrong modes'
+likelihoods ``L_j = N(r_j; 0, S_j)`` of a 5-output engine are routinely below 1e-300 (1e-38 in float32).
 """
 from __future__ import annotations
 
@@ -22,9 +19,8 @@ from jaxfdi.filters._base import ConditionedGaussian, Filter, GaussianState
 
 
 class IMMState(NamedTuple):
-    """State carried between steps by the IMM and the static MM filter: the per-mode
-    priors of step k and the log prior mode probabilities (IMM: the predicted
-    ``log cbar_j(k)``; MM: the posterior of step k-1).
+    """State carried between steps by the IMM and the static MM filter: per-mode priors of step k and log prior
+    mode probabilities (IMM: predicted ``log cbar_j(k)``; MM: the posterior of step k-1).
 
     Attributes:
       mode_mean: (M, n) x_j[k|k-1]
@@ -50,8 +46,7 @@ class IMMInfo(NamedTuple):
       mode_log_likelihood: (M,) log L_j(k) = log N(r_j; 0, S_j)
       log_likelihood: () log sum_j prior_j L_j, the mixture likelihood
       healthy: () bool: every mode update sound, all finite
-      dead: (m,) bool: components of y[k] that were not finite (a dead channel: reported
-          here, not used by the modes' updates)
+      dead: (m,) bool: components of y[k] that were not finite (dead channel: reported here, not used by the modes)
     """
 
     mode_prob: Array
@@ -99,8 +94,8 @@ def first_mode(mode_params: Any) -> Any:
 
 
 def bank_init(mode_filter, mode_params, M: int, mean: Array, cov: Array, mode_prob: Array) -> IMMState:
-    """Per-mode priors from a shared ``(n,), (n, n)`` or per-mode ``(M, n), (M, n, n)``
-    initial Gaussian, validated by the mode filter's own ``init``; ``log mode_prob``."""
+    """Per-mode priors from a shared ``(n,), (n, n)`` or per-mode ``(M, n), (M, n, n)`` initial Gaussian, validated
+    by the mode filter's own ``init``; ``log mode_prob``."""
     ndim = len(_checks.shape_of(mean))
     if ndim not in (1, 2) or (ndim == 2 and _checks.shape_of(mean)[0] != M):
         raise ValueError(f"mean: expected shape (n,) shared by the modes or ({M}, n) per mode, got {_checks.shape_of(mean)}")
@@ -115,8 +110,7 @@ def bank_init(mode_filter, mode_params, M: int, mean: Array, cov: Array, mode_pr
 
 
 def check_distribution(name: str, prob: Any, axis: int = -1) -> None:
-    """Real probabilities; when concrete: finite, no negative entries, and sums along
-    ``axis`` equal to 1 (to ``sqrt(eps)``)."""
+    """Real probabilities; when concrete: finite, non-negative, summing to 1 along ``axis`` (to ``sqrt(eps)``)."""
     _checks.check_real(name, prob, "real probabilities")
     value = _checks.concrete(prob)
     if value is None:
@@ -136,8 +130,7 @@ def safe_log(prob: Array) -> Array:
 
 
 def log_normalizer(logits: Array, axis: int = -1) -> Array:
-    """``log sum exp(logits)`` along ``axis``: ``-inf`` (not NaN) when every term is
-    ``-inf``, with finite gradients there."""
+    """``log sum exp(logits)`` along ``axis``: ``-inf`` (not NaN) when every term is ``-inf``, finite gradients."""
     top = jax.lax.stop_gradient(jnp.max(logits, axis=axis, keepdims=True))
     top = jnp.where(jnp.isfinite(top), top, 0.0)
     total = jnp.sum(jnp.exp(logits - top), axis=axis)
@@ -146,18 +139,17 @@ def log_normalizer(logits: Array, axis: int = -1) -> Array:
 
 
 def bayes_mode_update(log_prior: Array, log_likelihood: Array, axis: int = -1) -> tuple[Array, Array]:
-    """``log mu_j = log L_j + log prior_j - log sum_i L_i prior_i`` (modes along ``axis``);
-    also returns the mixture log-likelihood ``log sum_i L_i prior_i`` (Bar-Shalom et al.
-    2001, eq. 11.6.6-19)."""
+    """``log mu_j = log L_j + log prior_j - log sum_i L_i prior_i`` (modes along ``axis``) and the mixture
+    log-likelihood ``log sum_i L_i prior_i`` (Bar-Shalom et al. 2001, eq. 11.6.6-19)."""
     joint = log_likelihood + log_prior
     log_mix = log_normalizer(joint, axis=axis)
     return joint - jnp.expand_dims(log_mix, axis), log_mix
 
 
 def mixing(log_mode_prob: Array, log_transition: Array) -> tuple[Array, Array]:
-    """``(log cbar (M,), mixing weights mu_{i|j} (M, M))`` in log space: columns ``j``
-    of the weights sum to 1 (a column of ``-inf`` logits gives zeros, not NaN). Trailing
-    batch axes broadcast: ``(M, N)`` and ``(M, M, 1)`` give ``(M, N)``, ``(M, M, N)``."""
+    """``(log cbar (M,), mixing weights mu_{i|j} (M, M))`` in log space; weight columns ``j`` sum to 1 (a column of
+    ``-inf`` logits gives zeros, not NaN). Trailing batch axes broadcast: ``(M, N)``, ``(M, M, 1)`` ->
+    ``(M, N)``, ``(M, M, N)``."""
     joint = log_mode_prob[:, None] + log_transition  # log pi_ij mu_i
     log_cbar = log_normalizer(joint, axis=0)
     weights = jnp.exp(joint - jnp.where(jnp.isfinite(log_cbar), log_cbar, 0.0)[None, :])
@@ -165,8 +157,8 @@ def mixing(log_mode_prob: Array, log_transition: Array) -> tuple[Array, Array]:
 
 
 def moment_match(weights: Array, means: Array, covs: Array) -> tuple[Array, Array]:
-    """Gaussian with the moments of ``sum_i w_i N(x_i, P_i)`` (weights summing to 1):
-    ``x = sum_i w_i x_i``, ``P = sum_i w_i [P_i + (x_i - x)(x_i - x)^T]``."""
+    """Gaussian with the moments of ``sum_i w_i N(x_i, P_i)`` (weights sum to 1): ``x = sum_i w_i x_i``,
+    ``P = sum_i w_i [P_i + (x_i - x)(x_i - x)^T]``."""
     mean = _linalg.matmul(weights, means)
     deviation = means - mean
     cov = _linalg.matmul((weights[:, None] * deviation).T, deviation)
@@ -182,8 +174,8 @@ def bank_update(mode_filter, mode_params, state: IMMState, y: Array, u: Array) -
     """Every mode's measurement update with ``y[k]``: one filter vmapped over the params."""
     prior = GaussianState(state.mode_mean, state.mode_cov)
     post = jax.vmap(lambda p, s: mode_filter(p).update(s, y, u))(mode_params, prior)
-    # Materialise the posteriors: otherwise XLA fuses each mode's update into the mixing
-    # that reads it M times and recomputes it there (measured 10-20 % slower at 7 modes).
+    # Materialise the posteriors, else XLA fuses each mode's update into the mixing that reads it M times and
+    # recomputes it there (measured 10-20 % slower at 7 modes).
     mean, cov = jax.lax.optimization_barrier((post.mean, post.cov))
     return post._replace(mean=mean, cov=cov)
 

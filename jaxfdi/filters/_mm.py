@@ -1,11 +1,9 @@
 """Static multiple-model filter (Magill 1965; MMAE), with a probability floor.
 
-Every mode's filter runs on its own, never mixed; only the mode probabilities are
-updated, ``mu_j(k) ∝ L_j(k) mu_j(k-1)`` (Han et al. 2022, eq. 6), in log space. Without a
-floor a mode whose probability underflows to 0 can never come back, so a fault
-that starts after a long fault-free stretch is never recognised; ``floor`` keeps
-every ``mu_j >= floor`` by mixing in the uniform distribution,
-``mu <- floor + (1 - M floor) mu``, the usual fix (Maybeck 1999). ``floor = 0`` is the textbook MM, equal to an IMM with ``pi = I``.
+Modes run on their own, never mixed; only ``mu_j(k) ∝ L_j(k) mu_j(k-1)`` (Han et al. 2022, eq. 6) is updated, in
+log space. Without a floor an underflowed mode never comes back (a fault after a long fault-free stretch is never
+recognised); ``floor`` keeps ``mu_j >= floor`` by mixing in the uniform, ``mu <- floor + (1 - M floor) mu`` (Maybeck
+1999). ``floor = 0``: the textbook MM, equal to an IMM with ``pi = I``.
 """
 from __future__ import annotations
 
@@ -21,8 +19,7 @@ from jaxfdi.filters._mixture import (IMMInfo, IMMState, bank_init, bank_predict,
 
 
 def apply_floor(log_mode_prob: Array, floor: Array) -> Array:
-    """``log(floor + (1 - M floor) mu)``: every probability ``>= floor``, the sum still 1,
-    smooth in ``floor`` and ``mu``, and the identity for ``floor = 0``."""
+    """``log(floor + (1 - M floor) mu)``: each ``>= floor``, sum 1, smooth, the identity for ``floor = 0``."""
     M = log_mode_prob.shape[-1]
     floor = floor.astype(log_mode_prob.dtype)
     log_floor = jnp.where(floor > 0, jnp.log(jnp.where(floor > 0, floor, 1.0)), -jnp.inf)

@@ -1,48 +1,33 @@
-"""Parallel-in-time Kalman filter: the filtering recursion as an associative scan
-(Särkkä & García-Fernández 2021, "Temporal parallelization of Bayesian smoothers",
-IEEE TAC 66(1), sec. III-B), O(log T) sequential depth instead of O(T).
+"""Parallel-in-time Kalman filter: the filtering recursion as an associative scan (Särkkä & García-Fernández 2021,
+"Temporal parallelization of Bayesian smoothers", IEEE TAC 66(1), sec. III-B), O(log T) depth instead of O(T).
 
-Each step ``k`` is an element ``(A, b, C, eta, J)`` of the conditional
-``p(x_k | x_{k-1}, y_k) = N(A x_{k-1} + b, C)`` and the likelihood
-``p(y_k | x_{k-1}) ∝ N_I(x_{k-1}; eta, J)`` (information form). For
-``x_k = Phi x_{k-1} + Gamma u_{k-1} + w``, ``y_k = C_y x_k + D u_k + v`` and
-``c = Gamma u_{k-1}``, ``e = y_k - D u_k - C_y c``:
+Step ``k`` is an element ``(A, b, C, eta, J)`` of ``p(x_k | x_{k-1}, y_k) = N(A x_{k-1} + b, C)`` and
+``p(y_k | x_{k-1}) ∝ N_I(x_{k-1}; eta, J)`` (information form). For ``x_k = Phi x_{k-1} + Gamma u_{k-1} + w``,
+``y_k = C_y x_k + D u_k + v``, ``c = Gamma u_{k-1}``, ``e = y_k - D u_k - C_y c``:
 
     S = C_y Q C_y^T + R,   K = Q C_y^T S^-1,
     A = (I - K C_y) Phi,   b = c + K e,   C = (I - K C_y) Q (I - K C_y)^T + K R K^T,
     eta = Phi^T C_y^T S^-1 e,   J = Phi^T C_y^T S^-1 C_y Phi,
 
-and step 0 conditions the prior ``N(m0, P0)`` on ``y_0`` (``A = 0``, ``eta = 0``,
-``J = 0``). Two elements combine as (their eqs. 14-15; ``i`` before ``j``)
+step 0 conditioning ``N(m0, P0)`` on ``y_0`` (``A = 0``, ``eta = 0``, ``J = 0``). Combination (their eqs. 14-15;
+``i`` before ``j``):
 
     M = I + C_i J_j,
     A_ij = A_j M^-1 A_i,            b_ij = A_j M^-1 (b_i + C_i eta_j) + b_j,
     C_ij = A_j M^-1 C_i A_j^T + C_j,
     eta_ij = A_i^T M^-T (eta_j - J_j b_i) + eta_i,   J_ij = A_i^T M^-T J_j A_i + J_i,
 
-and the prefix combination up to ``k`` is ``N(x_k | y_0..y_k) = N(b, C)``. The
-predictions, innovations, likelihoods and health flags of ``FilterInfo`` follow from the
-filtered moments for all steps at once, so the outputs are those of
-``run_filter(kalman_filter(model, missing_measurements=True), ...)`` (to round-off).
+and the prefix up to ``k`` is ``N(x_k | y_0..y_k) = N(b, C)``; ``FilterInfo`` follows for all steps at once, equal to
+``run_filter(kalman_filter(model, missing_measurements=True), ...)`` to round-off. Cost: ~4x the sequential
+arithmetic (n x n solves per combination, ``2T`` combinations) in ``2 log2 T`` rounds: wins on a GPU for long
+sequences, loses on a CPU (``benchmarks/RESULTS.md``).
 
-Where it wins: it does about 4x the arithmetic of the sequential filter (n x n solves
-in each combination, ``2T`` combinations), in ``2 log2 T`` rounds; so it pays where a
-round is cheap relative to a step of the sequential scan, i.e. on a GPU for long
-sequences, and loses on a CPU (``benchmarks/RESULTS.md``).
-
-A non-finite component of ``y_k`` is a dead sensor: it is left out of that step exactly
-(its row of ``C_y`` and of ``R`` dropped: ``kalman_filter(model, missing_measurements=True)``'s
-moments) and reported as the other filters report it (innovation NaN there, ``nis = +inf``,
-``filters._base.report_dead``). The sequential filter's default instead takes the
-prediction for the component and updates the covariance as if it were measured; that
-pseudo-measurement depends on the predicted mean, which no element can hold before the
-scan.
-
-The combination's solves and the Cholesky factors are ``_linalg``'s loop and written-out
-forms, not LAPACK: with batched LAPACK calls in every level, XLA:CPU (jaxlib 0.10.2) never
-returned from programs of T >= 2048-4096 steps (``tests/filters/test_parallel_kalman.py``).
-Above ``_linalg.UNROLL_MAX`` (8) states the Cholesky factors are LAPACK calls again;
-long sequences of such models have not been tested on CPU.
+A dead (non-finite) component of ``y_k`` is left out of its step exactly (rows of ``C_y``, ``R`` dropped) and reported
+as elsewhere (innovation NaN, ``nis = +inf``, ``filters._base.report_dead``); the sequential default's
+pseudo-measurement (the prediction) depends on the predicted mean, unknown to an element before the scan. Solves and
+Cholesky use ``_linalg``'s written-out forms, not LAPACK (with batched LAPACK in every level XLA:CPU, jaxlib 0.10.2,
+never returned for T >= 2048-4096; ``tests/filters/test_parallel_kalman.py``); above ``_linalg.UNROLL_MAX`` (8)
+states Cholesky is LAPACK again (long sequences untested on CPU).
 """
 from __future__ import annotations
 
@@ -94,9 +79,8 @@ def _psd_solve(S: Array, rhs: Array) -> Array:
 
 
 def _observed(model: LinearGaussianModel, ys: Array) -> tuple[Array, Array, Array, Array]:
-    """``(mask, C_k, R_k, ys with 0)``: per step, the rows of ``C`` and ``R`` of the finite
-    components of ``ys`` (T, m); a dead one's row is 0 and its ``R`` entry 1 (unit variance,
-    uncorrelated, innovation 0: it moves nothing)."""
+    """``(mask, C_k, R_k, ys with 0)``: per step, rows of ``C`` and ``R`` for the finite components of ``ys`` (T, m);
+    a dead one's row is 0, its ``R`` entry 1 (unit variance, uncorrelated, innovation 0: it moves nothing)."""
     mask = jnp.isfinite(ys)
     C = jnp.where(mask[:, :, None], model.C, 0.0)                               # (T, m, n)
     both = mask[:, :, None] & mask[:, None, :]
@@ -105,8 +89,7 @@ def _observed(model: LinearGaussianModel, ys: Array) -> tuple[Array, Array, Arra
 
 
 def filtering_elements(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array, us: Array) -> FilteringElement:
-    """The T elements of ``ys`` (T, m) with inputs ``us`` (T, nu) (module doc; a
-    non-finite component is left out of its step)."""
+    """The T elements of ``ys`` (T, m), inputs ``us`` (T, nu) (module doc; non-finite components left out)."""
     Phi, Gamma, _, D, Q, _ = model
     mask, C, R, ys = _observed(model, ys)
     n = Phi.shape[0]
@@ -146,8 +129,8 @@ def combine_filtering(earlier: FilteringElement, later: FilteringElement) -> Fil
 
 def parallel_scan(model: LinearGaussianModel, init_state: GaussianState, ys: Array,
                   us: Array | None = None) -> tuple[GaussianState, FilterInfo]:
-    """Kalman filter over a whole sequence by an associative scan (module doc): what
-    ``run_filter(kalman_filter(model, missing_measurements=True), ..., parallel=True)`` runs.
+    """Kalman filter over a whole sequence by an associative scan (module doc), as run by
+    ``run_filter(kalman_filter(model, missing_measurements=True), ..., parallel=True)``.
 
     Args:
       model: a ``LinearGaussianModel``.
@@ -156,8 +139,8 @@ def parallel_scan(model: LinearGaussianModel, init_state: GaussianState, ys: Arr
       us: (T, nu) inputs, or ``None``.
 
     Returns:
-      ``(final_state, info)`` as ``run_filter(kalman_filter(model, True), init_state, ys, us)``:
-      the prediction for step T and the per-step ``FilterInfo`` (leading axis T).
+      ``(final_state, info)`` as ``run_filter(kalman_filter(model, True), init_state, ys, us)``: the prediction for
+      step T and the per-step ``FilterInfo`` (leading axis T).
     """
     n, nu, m = validate_linear_model(model)
     if not isinstance(init_state, GaussianState):

@@ -1,14 +1,10 @@
-"""Start a filter from a posterior: the predict-first convention of filterpy and most
-textbooks (``x0, P0`` describe ``x[-1]`` given no data; the first step predicts, then
-updates with ``y[0]``).
+"""Start a filter from a posterior: the predict-first convention of filterpy and most textbooks (``x0, P0`` describe
+``x[-1]`` given no data; the first step predicts, then updates with ``y[0]``).
 
-jaxfdi's filters carry the *prior* of the current step (``_base.py``), so a posterior
-``N(x0, P0)`` of step -1 becomes the prior of step 0 by one time update with the input
-``u[-1]`` applied in between: ``x[0|-1] = Phi x0 + Gamma u[-1]``, ``P[0|-1] = Phi P0
-Phi^T + Q`` for a Kalman filter. For an IMM the posterior is per mode with mode
-probabilities ``mu0``, and the first prior is the IMM's mixing and mode-matched
-predictions (Bar-Shalom, Li & Kirubarajan 2001, sec. 11.6.6, steps 1 and 4), which is
-what filterpy's ``IMMEstimator.predict`` does first.
+jaxfdi's filters carry the *prior* of the current step (``_base.py``), so a posterior ``N(x0, P0)`` of step -1 becomes
+the step-0 prior by one time update with ``u[-1]``: ``x[0|-1] = Phi x0 + Gamma u[-1]``, ``P[0|-1] = Phi P0 Phi^T +
+Q`` for a KF. For an IMM (per-mode posterior, mode probabilities ``mu0``): mixing and mode-matched predictions
+(Bar-Shalom, Li & Kirubarajan 2001, sec. 11.6.6, steps 1 and 4), as filterpy's ``IMMEstimator.predict`` first does.
 """
 from __future__ import annotations
 
@@ -26,13 +22,12 @@ def init_from_posterior(filt: Filter, mean: Array, cov: Array, u: Array | None =
     """The prior of step 0 from a posterior ``N(mean, cov)`` of step -1.
 
     Args:
-      filt: a Gaussian filter (``kalman_filter``, ``extended_kalman_filter``,
-        ``unscented_kalman_filter``, ``unknown_input_filter``: anything with ``predict``),
-        or an ``interacting_multiple_model`` (then ``mode_prob`` is required).
+      filt: a Gaussian filter (``kalman_filter``, ``extended_kalman_filter``, ``unscented_kalman_filter``,
+        ``unknown_input_filter``: anything with ``predict``), or an ``interacting_multiple_model`` (then
+        ``mode_prob`` is required).
       mean: (n,) posterior mean; for an IMM (n,) shared or (M, n) per mode.
       cov: (n, n) posterior covariance; for an IMM (n, n) or (M, n, n).
-      u: (nu,) input applied between the posterior and ``y[0]``; ``None`` for a model
-        without inputs.
+      u: (nu,) input applied between the posterior and ``y[0]``; ``None`` for a model without inputs.
       mode_prob: (M,) posterior mode probabilities ``mu0`` (IMM only).
 
     Returns:

@@ -1,18 +1,15 @@
-"""Rauch-Tung-Striebel smoother (Rauch, Tung & Striebel 1965), sequential and parallel
-in time (Särkkä & García-Fernández 2021, sec. IV), from a Kalman filter's outputs.
+"""Rauch-Tung-Striebel smoother (Rauch, Tung & Striebel 1965), sequential and parallel in time (Särkkä &
+García-Fernández 2021, sec. IV), from a Kalman filter's outputs.
 
-For ``x_{k+1} = Phi x_k + Gamma u_k + w``, the smoothed ``N(x_k | y_0..y_{T-1})`` from the
-filtered ``N(m_k, P_k)`` (``info.filtered_*``) and the predictions
-``N(m_{k+1}^-, P_{k+1}^-)`` (``info.predicted_*`` of step ``k + 1``):
+For ``x_{k+1} = Phi x_k + Gamma u_k + w``: from filtered ``N(m_k, P_k)`` (``info.filtered_*``) and predicted
+``N(m_{k+1}^-, P_{k+1}^-)`` (``info.predicted_*`` of step ``k + 1``), backwards from ``ms_{T-1} = m_{T-1}``:
 
     G_k = P_k Phi^T (P_{k+1}^-)^-1,
-    ms_k = m_k + G_k (ms_{k+1} - m_{k+1}^-),   Ps_k = P_k + G_k (Ps_{k+1} - P_{k+1}^-) G_k^T,
+    ms_k = m_k + G_k (ms_{k+1} - m_{k+1}^-),   Ps_k = P_k + G_k (Ps_{k+1} - P_{k+1}^-) G_k^T.
 
-backwards from ``ms_{T-1} = m_{T-1}``. The parallel form writes step ``k`` as the
-element ``(E, g, L) = (G_k, m_k - G_k m_{k+1}^-, P_k - G_k P_{k+1}^- G_k^T)`` (the last
-one ``(0, m_{T-1}, P_{T-1})``) of ``p(x_k | x_{k+1}, y_0..y_k) = N(E x_{k+1} + g, L)``;
-two of them combine as ``(E_i E_j, E_i g_j + g_i, E_i L_j E_i^T + L_i)`` (``i`` before
-``j``), and a reverse associative scan gives every ``N(ms_k, Ps_k) = N(g, L)``.
+Parallel form: element ``(E, g, L) = (G_k, m_k - G_k m_{k+1}^-, P_k - G_k P_{k+1}^- G_k^T)`` (last
+``(0, m_{T-1}, P_{T-1})``) of ``p(x_k | x_{k+1}, y_0..y_k) = N(E x_{k+1} + g, L)``; combination
+``(E_i E_j, E_i g_j + g_i, E_i L_j E_i^T + L_i)`` (``i`` before ``j``); reverse scan: ``N(ms_k, Ps_k) = N(g, L)``.
 """
 from __future__ import annotations
 
@@ -49,8 +46,8 @@ class SmoothingElement(NamedTuple):
 
 
 def smoother_gains(Phi: Array, filtered_cov: Array, next_predicted_cov: Array) -> Array:
-    """``G_k = P_k Phi^T (P_{k+1}^-)^-1`` for stacks (T - 1, n, n), by a Cholesky solve of
-    the symmetric ``P_{k+1}^-``: ``G^T = (P^-)^-1 Phi P_k``."""
+    """``G_k = P_k Phi^T (P_{k+1}^-)^-1`` for stacks (T - 1, n, n), by a Cholesky solve of the symmetric
+    ``P_{k+1}^-``: ``G^T = (P^-)^-1 Phi P_k``."""
     chol = _linalg.stack_cholesky(_sym(next_predicted_cov))    # no LAPACK for small n: _linalg.solve_pivoted
     return _mT(_linalg.stack_cho_solve(chol, Phi @ filtered_cov))
 
@@ -60,13 +57,11 @@ def rts_smoother(model: LinearGaussianModel, info: FilterInfo) -> SmootherResult
 
     Args:
       model: the ``LinearGaussianModel`` the filter ran with (``Phi`` is used).
-      info: ``FilterInfo`` of ``run_filter(kalman_filter(model), ...)`` (also with
-        ``parallel=True``), leading axis T.
+      info: ``FilterInfo`` of ``run_filter(kalman_filter(model), ...)`` (also ``parallel=True``), leading axis T.
 
     Returns:
-      ``SmootherResult``: the smoothed means ``ms_k`` (T, n) and covariances ``Ps_k``
-      (T, n, n) of ``x_k`` given ``y_0..y_{T-1}``, and the gains ``G_k`` (T, n, n), zero at
-      the last step.
+      ``SmootherResult``: smoothed means ``ms_k`` (T, n) and covariances ``Ps_k`` (T, n, n) of ``x_k`` given
+      ``y_0..y_{T-1}``, and gains ``G_k`` (T, n, n), zero at the last step.
     """
     Phi, info = _check(model, info)
     return _sequential(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)
@@ -76,8 +71,7 @@ def parallel_rts_smoother(model: LinearGaussianModel, info: FilterInfo) -> Smoot
     """The same smoother by a reverse associative scan (module doc): O(log T) depth.
 
     Returns:
-      ``SmootherResult`` as ``rts_smoother`` (equal to round-off): means (T, n),
-      covariances (T, n, n) and gains (T, n, n), zero at the last step.
+      ``SmootherResult`` as ``rts_smoother`` (equal to round-off), gains zero at the last step.
     """
     Phi, info = _check(model, info)
     return _parallel(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)
@@ -102,8 +96,7 @@ def _sequential(Phi, mean, cov, predicted_mean, predicted_cov) -> SmootherResult
 
 
 def combine_smoothing(later: SmoothingElement, earlier: SmoothingElement) -> SmoothingElement:
-    """``earlier ⊗ later`` as ``associative_scan(..., reverse=True)`` calls it (the
-    later element first)."""
+    """``earlier ⊗ later`` as ``associative_scan(..., reverse=True)`` calls it (later element first)."""
     return SmoothingElement(earlier.E @ later.E, _mv(earlier.E, later.g) + earlier.g,
                             _sym(earlier.E @ later.L @ _mT(earlier.E) + earlier.L))
 

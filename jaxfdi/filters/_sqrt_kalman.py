@@ -1,19 +1,15 @@
-"""Square-root (Cholesky-factor) Kalman filter: the covariance is carried as a lower
-triangular factor ``L`` (``P = L L^T``) and updated by orthogonal transformations of
-pre-arrays (Kaminski, Bryson & Schmidt 1971; the array form of Morf & Kailath 1975),
-so round-off can never make it indefinite: what a float32 filter at scale needs.
+"""Square-root (Cholesky-factor) Kalman filter: ``P = L L^T`` carried as the lower triangular ``L`` and updated by
+orthogonal transformations of pre-arrays (Kaminski, Bryson & Schmidt 1971; array form of Morf & Kailath 1975), so
+round-off never makes it indefinite (for float32 filters at scale).
 
-Measurement update: the QR factorisation of ``pre^T`` turns the pre-array into a lower
-triangular post-array with the same Gram matrix ``pre pre^T``::
+Measurement update: QR of ``pre^T`` gives a lower triangular post-array with the same Gram matrix ``pre pre^T``::
 
     pre = [[L_R, C L],      post = [[L_S,   0 ],     L_S L_S^T = S = C P C^T + R,
            [0,   L  ]]              [Kbar,  L+]]     Kbar = P C^T L_S^-T,  L+ L+^T = P - Kbar Kbar^T,
 
-so ``K = Kbar L_S^-1``, ``m+ = m + Kbar w`` with the whitened innovation
-``w = L_S^-1 r``, and ``log det S = 2 sum log diag L_S``. Time update: the triangular
-factor of ``[Phi L+, L_Q]`` (``tria``). ``S``, ``P[k|k]`` and ``P[k+1|k]`` are never
-formed from differences; the ``FilterInfo`` covariances are the Gram matrices of the
-factors (positive semi-definite by construction).
+so ``K = Kbar L_S^-1``, ``m+ = m + Kbar w``, ``w = L_S^-1 r``, ``log det S = 2 sum log diag L_S``. Time update: the
+triangular factor of ``[Phi L+, L_Q]`` (``tria``). ``S``, ``P[k|k]``, ``P[k+1|k]`` are never formed from
+differences; ``FilterInfo`` covariances are Gram matrices of the factors (PSD by construction).
 """
 from __future__ import annotations
 
@@ -41,30 +37,27 @@ class SqrtGaussianState(NamedTuple):
 
 
 def tria(a: Array) -> Array:
-    """A lower triangular ``L`` with ``L L^T = a a^T`` and a non-negative diagonal, for
-    ``a`` (n, k), ``k >= n``: ``R^T`` of the QR factorisation of ``a^T`` (only ``R`` is
-    formed), columns signed so that the diagonal is non-negative."""
+    """Lower triangular ``L``, ``L L^T = a a^T``, non-negative diagonal, for ``a`` (n, k), ``k >= n``: ``R^T`` of
+    the QR of ``a^T`` (only ``R`` formed), columns signed for a non-negative diagonal."""
     lower = jnp.linalg.qr(a.T, mode="r").T
     sign = jnp.where(jnp.diagonal(lower) < 0, -1.0, 1.0).astype(a.dtype)
     return lower * sign[None, :]
 
 
 def factor(cov: Array) -> Array:
-    """A lower triangular square root of a positive *semi*-definite ``cov``:
-    ``tria(psd_sqrt(cov))`` (no Cholesky, so a zero variance is allowed)."""
+    """Lower triangular square root of a PSD ``cov``: ``tria(psd_sqrt(cov))`` (no Cholesky: zero variance allowed)."""
     return tria(_linalg.psd_sqrt(cov))
 
 
 def sqrt_update(mean: Array, chol: Array, y: Array, y_pred: Array, H: Array, chol_R: Array):
-    """Condition ``N(mean, chol chol^T)`` on ``y = H x + v``, ``v ~ N(0, chol_R chol_R^T)``
-    by one QR factorisation (module doc). Returns ``(mean+, chol+, innovation, chol_S,
-    whitened innovation)``."""
+    """Condition ``N(mean, chol chol^T)`` on ``y = H x + v``, ``v ~ N(0, chol_R chol_R^T)`` by one QR (module doc).
+    Returns ``(mean+, chol+, innovation, chol_S, whitened innovation)``."""
     return sqrt_update_linearised(mean, chol, used_innovation(y, y_pred), H @ chol, chol_R)
 
 
 def sqrt_update_linearised(mean: Array, chol: Array, innovation: Array, H_chol: Array, chol_noise: Array):
-    """The array-form update from ``H L`` (m, n), the innovation and the factor of the
-    noise covariance (m, k): ``[[L_noise, H L], [0, L]]`` -> ``[[L_S, 0], [Kbar, L+]]``."""
+    """Array-form update from ``H L`` (m, n), the innovation and the noise factor (m, k):
+    ``[[L_noise, H L], [0, L]]`` -> ``[[L_S, 0], [Kbar, L+]]``."""
     n, m, k = mean.shape[0], innovation.shape[0], chol_noise.shape[1]
     pre = jnp.block([[chol_noise, H_chol], [jnp.zeros((n, k), mean.dtype), chol]])
     post = tria(pre)
@@ -74,8 +67,7 @@ def sqrt_update_linearised(mean: Array, chol: Array, innovation: Array, H_chol: 
 
 
 def sqrt_init(n: int):
-    """An ``init(mean, cov) -> SqrtGaussianState`` that validates the prior against the
-    state size ``n`` and stores the Cholesky factor of ``cov``."""
+    """``init(mean, cov) -> SqrtGaussianState``: validates the prior against ``n``, stores ``cov``'s Cholesky factor."""
 
     def init(mean: Array, cov: Array) -> SqrtGaussianState:
         mean, cov = check_gaussian(mean, cov, n)
@@ -87,16 +79,12 @@ def sqrt_init(n: int):
 def sqrt_kalman_filter(model: LinearGaussianModel) -> Filter:
     """Square-root linear Kalman filter for a ``LinearGaussianModel`` (module doc).
 
-    ``init(mean, cov) -> SqrtGaussianState`` factors the prior (positive semi-definite
-    allowed); ``step(state, y, u) -> (state, FilterInfo)`` with the outputs of
-    ``kalman_filter`` (equal in exact arithmetic; in float64 to round-off). ``Q`` and
-    ``R`` are factored once, when the filter is built.
+    Outputs of ``kalman_filter`` (equal in exact arithmetic, in float64 to round-off); ``Q``, ``R`` factored once.
 
     Returns:
-      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n)) ->
-      SqrtGaussianState`` (mean and lower-triangular factor of ``P[0|-1]``);
-      ``step(state, y (m,), u (nu,)) -> (SqrtGaussianState, FilterInfo)``, covariances in
-      the info as Gram matrices of the factors.
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n)) -> SqrtGaussianState``
+      (mean and lower-triangular factor of ``P[0|-1]``; PSD prior allowed); ``step(state, y (m,), u (nu,)) ->
+      (SqrtGaussianState, FilterInfo)``, info covariances as Gram matrices of the factors.
     """
     n, nu, m = validate_linear_model(model)
     chol_Q, chol_R = factor(model.Q), factor(model.R)
@@ -120,9 +108,8 @@ def sqrt_kalman_filter(model: LinearGaussianModel) -> Filter:
 
 def sqrt_info(prior: SqrtGaussianState, mean: Array, chol: Array, innovation: Array, chol_S: Array,
               whitened: Array, next_mean: Array, dead: Array) -> FilterInfo:
-    """The step's ``FilterInfo`` from the factors: covariances as Gram matrices; healthy
-    when the factors of ``S`` and ``P[k|k]`` have non-zero finite diagonals and every
-    output is finite; ``dead`` (m,) components reported as ``report_dead`` says."""
+    """The step's ``FilterInfo`` from the factors (covariances as Gram matrices); healthy when the factors of ``S``
+    and ``P[k|k]`` have non-zero finite diagonals and every output is finite; ``dead`` (m,) as ``report_dead``."""
     m = innovation.shape[0]
     nis = jnp.sum(whitened**2)
     diag_S = jnp.diagonal(chol_S)

@@ -1,28 +1,22 @@
-"""Square-root unscented Kalman filter: the UKF of ``ukf.py`` (scaled unscented
-transform, centred form) with the covariance carried as a lower triangular factor
-``L`` and every update an orthogonal transformation (van der Merwe & Wan 2001; the array
-form of the square-root KF, ``sqrt_kalman.py``), for float32 at scale.
+"""Square-root unscented Kalman filter for float32 at scale: ``ukf.py``'s UKF (scaled UT, centred form) with a lower
+triangular covariance factor ``L``, every update orthogonal (van der Merwe & Wan 2001; ``sqrt_kalman.py``'s arrays).
 
-Sigma points ``m +/- s_i``, ``s_i = scale * col_i(L)``, and their centred images
-``dY_{+/-i} = g(m +/- s_i) - g(m)``. The statistical linearisation ``H = Pxy^T P^-1``
-(Lefebvre et al. 2002) needs no solve in this basis: ``L^-1 s_i = scale e_i``, so
+Sigma points ``m +/- s_i``, ``s_i = scale * col_i(L)``, centred images ``dY_{+/-i} = g(m +/- s_i) - g(m)``. The
+statistical linearisation ``H = Pxy^T P^-1`` (Lefebvre et al. 2002) needs no solve here (``L^-1 s_i = scale e_i``):
 
     H L = (dY_+ - dY_-) / (2 scale),     e_i = dY_{+/-i} - H (+/- s_i) = (dY_+i + dY_-i) / 2,
 
-and the predicted-measurement covariance is ``H P H^T + Lambda`` with
-``Lambda = 2 W sum_i e_i e_i^T + (beta - alpha^2) delta delta^T`` (``ukf.py``; ``W`` the
-sigma-point weight, ``delta = W sum dY``). The update conditions ``N(m, L L^T)`` on
-``y = H x + e + v``, ``Cov(e + v) = Lambda + R``, by the pre-array of the square-root KF::
+predicted-measurement covariance ``H P H^T + Lambda``, ``Lambda = 2 W sum_i e_i e_i^T + (beta - alpha^2) delta
+delta^T`` (``ukf.py``; ``W`` the sigma-point weight, ``delta = W sum dY``). The update conditions ``N(m, L L^T)`` on
+``y = H x + e + v``, ``Cov(e + v) = Lambda + R``, by the square-root KF pre-array::
 
     [[L_noise, H L], [0, L]]  --QR-->  [[L_S, 0], [Kbar, L+]],
     L_noise = tria([sqrt(2 W) e_1..e_n, sqrt(beta - alpha^2) delta, L_R]),
 
-``m+ = m + Kbar L_S^-1 r``: no gain ``Pxy S^-1`` is formed, whose solve with an
-ill-conditioned ``S`` is what breaks a float32 filter. In exact arithmetic ``L+ L+^T`` is
-``ukf.py``'s Joseph-like posterior and ``L_S L_S^T`` its ``S``. The time update is
-``L' = tria([sqrt(W) dX_1..dX_2n, sqrt(beta - alpha^2) delta_x, L_Q])``: Gram matrices
-with non-negative weights (``beta >= alpha^2``), no Cholesky downdate by the negative
-centre weight of van der Merwe & Wan's form.
+``m+ = m + Kbar L_S^-1 r``: no gain ``Pxy S^-1`` (its solve with an ill-conditioned ``S`` breaks float32 filters).
+Exactly, ``L+ L+^T`` is ``ukf.py``'s Joseph-like posterior and ``L_S L_S^T`` its ``S``. Time update
+``L' = tria([sqrt(W) dX_1..dX_2n, sqrt(beta - alpha^2) delta_x, L_Q])``: non-negative weights (``beta >= alpha^2``),
+no Cholesky downdate by van der Merwe & Wan's negative centre weight.
 """
 from __future__ import annotations
 
@@ -39,12 +33,10 @@ from jaxfdi.filters._ukf import SigmaPoints, _propagate, scaled_transform
 
 
 def factor_sigma_points(mean: Array, chol: Array, scale: float, taylor: bool) -> SigmaPoints:
-    """Centred sigma points ``m +/- s_i``, ``s_i = scale * col_i(L)``, from the factor ``L``.
-
-    For direct differences the offsets are rounded symmetrically, ``s = (m + s) - m``,
-    as in ``ukf.sigma_points`` (the points are evaluated). The Taylor differences never
-    form ``m + s``: the offsets stay exact, which matters in float32, where an offset of
-    a well-measured direction (1e-7 of ``m``) is below the rounding of ``m + s``."""
+    """Centred sigma points ``m +/- s_i``, ``s_i = scale * col_i(L)``. Direct differences: offsets rounded
+    symmetrically, ``s = (m + s) - m``, as ``ukf.sigma_points``. Taylor differences never form ``m + s``: offsets stay
+    exact, which matters in float32 (a well-measured direction's offset, 1e-7 of ``m``, is below ``m + s``'s
+    rounding)."""
     s = scale * chol.T
     if not taylor:
         s = (mean[None, :] + s) - mean[None, :]
@@ -56,14 +48,12 @@ def sqrt_unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R
                                  sigma_differences: str = "auto") -> Filter:
     """Square-root UKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
-    Same arguments and outputs (``FilterInfo``) as ``unscented_kalman_filter`` (equal in
-    float64 to round-off); the state is a ``SqrtGaussianState(mean, chol)``. Needs
-    ``beta >= alpha^2`` (non-negative weights, see the module doc).
+    Arguments and ``FilterInfo`` as ``unscented_kalman_filter`` (equal in float64 to round-off); needs
+    ``beta >= alpha^2`` (non-negative weights, module doc).
 
     Returns:
-      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n)) ->
-      SqrtGaussianState``; ``step(state, y (m,), u) -> (SqrtGaussianState, FilterInfo)``,
-      covariances in the info as Gram matrices of the factors.
+      ``Filter(init, step)`` (no ``update``/``predict``): ``init(mean (n,), cov (n, n)) -> SqrtGaussianState``;
+      ``step(state, y (m,), u) -> (SqrtGaussianState, FilterInfo)``, info covariances as Gram matrices of factors.
     """
     n, m, alpha, beta, w, scale, use_taylor = scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences)
     if beta < alpha**2:

@@ -1,15 +1,12 @@
 """Time-varying filters: any filter whose model changes with the step.
 
-``time_varying(filter_at)`` turns a factory ``k -> Filter`` (``kalman_filter`` of the
-step's matrices, an EKF of ``f(x, u, k, params)``, ...) into one ``Filter`` whose state
-carries the step counter: ``step`` at step ``k`` conditions on ``y[k]`` with the step-``k``
-measurement model (``C_k``, ``R_k``, ``h(., ., k)``) and predicts ``x[k+1|k]`` with the
-step-``k`` transition (``Phi_k``, ``Gamma_k``, ``Q_k``): ``x[k+1] = Phi_k x[k] + Gamma_k u[k]
-+ w[k]``, ``w[k] ~ N(0, Q_k)``, ``y[k] = C_k x[k] + D_k u[k] + v[k]``, ``v[k] ~ N(0, R_k)``.
-
-The factory is called with a traced step inside the scan, so it must build its filter
-from arrays (index a (T, ...) table, or compute from ``k``); shapes are checked at trace
-time as for any filter. Per-step matrices of a linear model: ``model_at(model, Q=Qs, ...)``.
+``time_varying(filter_at)`` turns a factory ``k -> Filter`` (``kalman_filter`` of the step's matrices, an EKF of
+``f(x, u, k, params)``, ...) into one ``Filter`` whose state carries the step counter: at step ``k`` it conditions on
+``y[k]`` with the step-``k`` measurement model and predicts with the step-``k`` transition:
+``x[k+1] = Phi_k x[k] + Gamma_k u[k] + w[k]``, ``w[k] ~ N(0, Q_k)``, ``y[k] = C_k x[k] + D_k u[k] + v[k]``,
+``v[k] ~ N(0, R_k)``. The factory gets a traced step inside the scan, so it must build its filter from arrays (index
+a (T, ...) table, or compute from ``k``); shapes are checked at trace time. Linear per-step matrices:
+``model_at(model, Q=Qs, ...)``.
 """
 from __future__ import annotations
 
@@ -37,14 +34,11 @@ class TimedState(NamedTuple):
 def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter:
     """A ``Filter`` running ``filter_at(k)`` at step ``k`` (counted from ``start``).
 
-    ``init(*args)`` is ``filter_at(start).init(*args)`` with the counter; ``step(state, y,
-    u)`` is the step-``k`` filter's ``step``. The halves ``update``/``predict`` are not
-    exposed (a multiple-model filter over time-varying modes is built from modes that
-    read the step themselves).
+    ``init(*args)`` is ``filter_at(start).init(*args)`` plus the counter; ``update``/``predict`` are not exposed (a
+    multiple-model filter over time-varying modes uses modes that read the step themselves).
 
     Returns:
-      ``Filter(init, step)`` whose state is ``TimedState(step, inner)`` and whose ``step``
-      returns the step-``k`` filter's info.
+      ``Filter(init, step)``, state ``TimedState(step, inner)``; ``step`` is the step-``k`` filter's (its info).
     """
     _checks.check_callable("filter_at", filter_at, "a function k -> Filter (e.g. lambda k: kalman_filter(at(k)))")
     start = _checks.check_int("start", start, 0, meaning="the first step's index")
@@ -60,10 +54,8 @@ def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter
 
 
 def model_at(model: LinearGaussianModel, **per_step: Array) -> Callable[[Array], LinearGaussianModel]:
-    """``k -> model`` with the named fields (``Phi``, ``Gamma``, ``C``, ``D``, ``Q``, ``R``)
-    taken from (T, ...) per-step arrays; the other fields stay constant.
-
-    Example: ``time_varying(lambda k: kalman_filter(at(k)))`` with
+    """``k -> model`` with the named fields (``Phi``, ``Gamma``, ``C``, ``D``, ``Q``, ``R``) from (T, ...) per-step
+    arrays, the others constant; e.g. ``time_varying(lambda k: kalman_filter(at(k)))``,
     ``at = model_at(model, Q=Qs, R=Rs, C=Cs)``.
     """
     fields = LinearGaussianModel._fields

@@ -1,50 +1,33 @@
-"""Two-stage Kalman filter (TSKF) for a random-walk fault bias, optimal or robust to an
-unknown input (Keller & Darouach 1997; Hsieh & Chen 1999; Keller, Darouach & Caramelle
-1998; Lee & Lyou, Section III).
+"""Two-stage Kalman filter (TSKF) for a random-walk fault bias, optimal or robust to an unknown input (Keller &
+Darouach 1997; Hsieh & Chen 1999; Keller, Darouach & Caramelle 1998; Lee & Lyou, Section III).
 
-Plant, with ``b`` the fault bias (``p`` components) and ``d`` an unknown input::
+Plant, ``b`` the fault bias (``p`` components), ``d`` an unknown input::
 
     x[k+1] = Phi x[k] + Gamma u[k] + Fa[k] b[k] + E d[k] + w[k],   w ~ N(0, Q)
     b[k+1] = b[k] + wb[k],                                          wb ~ N(0, Qb)
     y[k]   = C x[k] + D u[k] + Fs[k] b[k] + v[k],                   v ~ N(0, R)
 
-The filter keeps the augmented prior of ``[x; b]`` factored as ``x = x_bar + V b`` with
-``x_bar`` independent of ``b`` — a *bias-free* filter ``(x_bar, P_bar)``, a *bias
-filter* ``(b, Pb)`` and the coupling ``V`` — which is exactly the Kalman filter on the
-augmented state (the test of this module), at the cost of an n-state and a p-state
-filter. One step, with ``H_b = C V + Fs`` the bias's effect on ``y`` through the
-coupling:
+The augmented prior of ``[x; b]`` is factored as ``x = x_bar + V b`` (``x_bar`` independent of ``b``): a
+bias-free filter ``(x_bar, P_bar)``, a bias filter ``(b, Pb)`` and the coupling ``V``; exactly the augmented-state
+KF (the module's test) at the cost of an n-state and a p-state filter. One step, ``H_b = C V + Fs``:
 
-* bias-free update: ``r_bar = y - C x_bar - D u``, ``S_bar = C P_bar C^T + R``, gain
-  ``K_bar`` (Kalman; with an unknown input the unbiased minimum-variance gain of
-  Kitanidis 1987, ``(I - K_bar C) E = 0``), ``x_bar += K_bar r_bar``, Joseph ``P_bar``,
-  ``V -= K_bar H_b``;
-* bias update, in whitened coordinates ``e = N^T L^-1 (r_bar - H_b b)``
-  (``S_bar = L L^T``; ``N`` an orthonormal basis of the complement of ``L^-1 C E``, the
-  identity without unknown input): ``G = N^T L^-1 H_b``, ``S_b = G Pb G^T + I``,
-  ``b += Pb G^T S_b^-1 e``;
-* predict (the optimal coupling of Hsieh & Chen): ``U = Phi V + Fa``,
-  ``Pb' = Pb + Qb``, ``V' = U Pb Pb'^-1``, ``x_bar' = Phi x_bar + Gamma u + (U - V') b``,
-  ``P_bar' = Phi P_bar Phi^T + Q + U Pb U^T - V' Pb' V'^T``.
+* bias-free update: ``r_bar = y - C x_bar - D u``, ``S_bar = C P_bar C^T + R``, gain ``K_bar`` (Kalman; with an
+  unknown input the unbiased minimum-variance gain of Kitanidis 1987, ``(I - K_bar C) E = 0``),
+  ``x_bar += K_bar r_bar``, Joseph ``P_bar``, ``V -= K_bar H_b``;
+* bias update in whitened coordinates ``e = N^T L^-1 (r_bar - H_b b)`` (``S_bar = L L^T``; ``N`` an orthonormal
+  basis of the complement of ``L^-1 C E``, identity without unknown input): ``G = N^T L^-1 H_b``,
+  ``S_b = G Pb G^T + I``, ``b += Pb G^T S_b^-1 e``;
+* predict (optimal coupling of Hsieh & Chen): ``U = Phi V + Fa``, ``Pb' = Pb + Qb``, ``V' = U Pb Pb'^-1``,
+  ``x_bar' = Phi x_bar + Gamma u + (U - V') b``, ``P_bar' = Phi P_bar Phi^T + Q + U Pb U^T - V' Pb' V'^T``.
 
-The unknown input is treated as having an infinite (diffuse) variance: that limit of
-the augmented Kalman filter is Kitanidis's unbiased minimum-variance filter, and it
-factors into the two stages exactly as above, the bias filter seeing only the part of
-``y`` that ``C E d`` cannot reach. Decoupling needs ``rank(C E) = rank(E) = q <= m``
-(Lee & Lyou, eq. 5), checked when the filter is built.
-
-Test statistic: ``lambda = e^T S_b^-1 e``, chi-square with ``m - q`` degrees of freedom
-when the filter's fault hypothesis holds. It equals ``r^T W^+ r`` for the paper's
-residual ``r = y - C x[k|k] - D u - Fs b[k|k]`` (eqs. 13, 15) with ``W`` its exact
-covariance (eq. 17 is misprinted; ``W = T S T^T``, ``T`` the linear map from the
-augmented innovation to ``r``), and, without unknown input, the augmented filter's
-normalised innovation squared.
-
-Time-varying fault distributions (``FaultDirection``): an actuator effectiveness loss
-``Gamma (I - diag(xi)) u`` has ``Fa[k] = -Gamma diag(u[k])`` (its columns are selected
-by ``input_scaled``), a sensor scaling ``(I + diag(xi)) C x`` has
-``Fs[k] = diag(C x_hat)`` (``output_scaled``), evaluated at the prior mean
-``x[k|k-1]`` — the paper writes ``x[k|k]``, which the update has not produced yet.
+The unknown input has infinite (diffuse) variance: that limit of the augmented KF is Kitanidis's filter, which
+factors as above, the bias filter seeing only the part of ``y`` that ``C E d`` cannot reach. Test statistic
+``lambda = e^T S_b^-1 e ~ chi2(m - q)`` under the filter's fault hypothesis; it equals ``r^T W^+ r`` for the paper's
+residual ``r = y - C x[k|k] - D u - Fs b[k|k]`` (eqs. 13, 15), ``W = T S T^T`` its exact covariance (eq. 17 is
+misprinted; ``T``: augmented innovation -> ``r``), and without unknown input the augmented filter's NIS.
+Time-varying directions (``FaultDirection``): effectiveness loss ``Gamma (I - diag(xi)) u`` has
+``Fa[k] = -Gamma diag(u[k])`` (``input_scaled``), sensor scaling ``(I + diag(xi)) C x`` has ``Fs[k] = diag(C x_hat)``
+(``output_scaled``) at the prior mean ``x[k|k-1]`` (the paper's ``x[k|k]`` does not exist yet).
 """
 from __future__ import annotations
 
@@ -62,12 +45,8 @@ from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
 class FaultDirection(NamedTuple):
-    """How a bias ``b`` (p,) enters the plant; ``Fa[k]`` (n, p) and ``Fs[k]`` (m, p) are
-
-    ``Fa[k] = state + Gamma (input_scaled * u[k][:, None])`` and
-    ``Fs[k] = output + (C x_hat + D u)[:, None] * output_scaled``.
-
-    A pytree of arrays: a bank of filters is a vmap over stacked directions.
+    """How a bias ``b`` (p,) enters: ``Fa[k] = state + Gamma (input_scaled * u[k][:, None])`` (n, p),
+    ``Fs[k] = output + (C x_hat + D u)[:, None] * output_scaled`` (m, p). A pytree: banks vmap over stacked ones.
 
     Attributes:
       state: (n, p) constant actuator distribution
@@ -83,14 +62,12 @@ class FaultDirection(NamedTuple):
 
 
 def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "effectiveness") -> FaultDirection:
-    """One actuator's fault direction: ``"effectiveness"`` (``Fa = -Gamma[:, i] u_i``, the
-    bias is the lost fraction) or ``"additive"`` (``Fa = -Gamma[:, i]``, the bias is the
-    amount subtracted from ``u_i``).
+    """One actuator's fault direction: ``"effectiveness"`` (``Fa = -Gamma[:, i] u_i``, bias = lost fraction) or
+    ``"additive"`` (``Fa = -Gamma[:, i]``, bias = amount subtracted from ``u_i``).
 
     Returns:
-      ``FaultDirection`` of one bias (p = 1) in ``Phi``'s dtype: ``input_scaled = -e_i``
-      (nu, 1) for ``"effectiveness"``, ``state = -Gamma[:, i]`` (n, 1) for ``"additive"``;
-      the other fields zero.
+      ``FaultDirection`` of one bias (p = 1) in ``Phi``'s dtype: ``input_scaled = -e_i`` (nu, 1) for
+      ``"effectiveness"``, ``state = -Gamma[:, i]`` (n, 1) for ``"additive"``; the other fields zero.
     """
     n, nu, m = validate_linear_model(model)
     _checks.check_choice("kind", kind, ["effectiveness", "additive"])
@@ -105,13 +82,12 @@ def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "
 
 
 def sensor_direction(model: LinearGaussianModel, component: int, kind: str = "scaling") -> FaultDirection:
-    """One sensor's fault direction: ``"scaling"`` (``Fs = e_j (C x_hat + D u)_j``, the bias is the
-    relative gain error) or ``"additive"`` (``Fs = e_j``, the bias is added to ``y_j``).
+    """One sensor's fault direction: ``"scaling"`` (``Fs = e_j (C x_hat + D u)_j``, bias = relative gain error) or
+    ``"additive"`` (``Fs = e_j``, bias added to ``y_j``).
 
     Returns:
-      ``FaultDirection`` of one bias (p = 1) in ``Phi``'s dtype: ``output_scaled = e_j``
-      (m, 1) for ``"scaling"``, ``output = e_j`` (m, 1) for ``"additive"``; the other fields
-      zero.
+      ``FaultDirection`` of one bias (p = 1) in ``Phi``'s dtype: ``output_scaled = e_j`` (m, 1) for ``"scaling"``,
+      ``output = e_j`` (m, 1) for ``"additive"``; the other fields zero.
     """
     n, nu, m = validate_linear_model(model)
     _checks.check_choice("kind", kind, ["scaling", "additive"])
@@ -187,11 +163,9 @@ class TSKFInfo(NamedTuple):
 
 
 def tskf_statistic_dof(model: LinearGaussianModel, unknown_input: Array | None = None) -> int:
-    """Degrees of freedom ``m - q`` of the TSKF statistic ``lambda`` (``TSKFInfo.statistic``):
-    chi-square with ``m - q`` degrees of freedom under the filter's hypothesis, ``m``
-    outputs and ``q = rank(E)`` decoupled unknown inputs (0 without ``unknown_input``);
-    e.g. ``chi2_threshold(tskf_statistic_dof(model, E), pfa)``. Checks the decoupling
-    conditions as ``two_stage_kalman_filter`` does."""
+    """Degrees of freedom ``m - q`` of the chi-square TSKF statistic ``lambda`` (``TSKFInfo.statistic``), ``m``
+    outputs, ``q = rank(E)`` decoupled unknown inputs (0 without ``unknown_input``); e.g.
+    ``chi2_threshold(tskf_statistic_dof(model, E), pfa)``. Checks decoupling as ``two_stage_kalman_filter`` does."""
     _, _, m = validate_linear_model(model)
     return m - (0 if unknown_input is None else check_decoupling(model, unknown_input))
 
@@ -208,16 +182,14 @@ def two_stage_kalman_filter(
       model: the nominal ``LinearGaussianModel`` (``Q``, ``R`` of ``w``, ``v``).
       direction: a ``FaultDirection`` (a bias of size p).
       bias_walk: (p, p) covariance ``Qb`` of the bias random walk.
-      unknown_input: (n, q) distribution ``E`` of an unknown input to decouple, or ``None``
-        (the optimal TSKF). Must satisfy ``rank(C E) = rank(E) = q <= m``.
+      unknown_input: (n, q) distribution ``E`` of an unknown input to decouple, ``rank(C E) = rank(E) = q <= m``
+        (Lee & Lyou, eq. 5; checked at build time); ``None``: the optimal TSKF.
 
     Returns:
-      ``Filter(init, step)``: ``init(mean, cov, bias_mean=None, bias_cov=None)`` (the
-      prior of the first step, ``x`` and ``b`` independent; the bias defaults to 0 with
-      zero covariance: fault-free at the start, the walk ``bias_walk`` opens it), and
-      ``step(state, y, u)`` returning ``(state, TSKFInfo)``; run it with ``run_filter``.
-      ``TSKFInfo.statistic`` is chi-square with ``tskf_statistic_dof(model,
-      unknown_input)`` (``m - q``) degrees of freedom under the filter's hypothesis.
+      ``Filter(init, step)``: ``init(mean, cov, bias_mean=None, bias_cov=None)`` (prior of the first step, ``x``
+      and ``b`` independent; bias default 0 with zero covariance: fault-free at the start, ``bias_walk`` opens
+      it); ``step(state, y, u) -> (state, TSKFInfo)``; run with ``run_filter``. ``TSKFInfo.statistic`` ~ chi2 with
+      ``tskf_statistic_dof(model, unknown_input)`` (``m - q``) dof under the filter's hypothesis.
     """
     n, nu, m = validate_linear_model(model)
     _checks.check_shape("direction.state", direction.state, (n, None), "n states x p biases")
@@ -318,16 +290,13 @@ def run_tskf_bank(
     us: Array,
     unknown_input: Array | None = None,
 ) -> TSKFInfo:
-    """Run a bank of TSKFs, one per stacked fault direction, on the same data.
-
-    The bank is one filter vmapped over ``directions`` (leaves with a leading axis F,
-    from ``stack_directions``): Lee & Lyou's ``l + r`` actuator and sensor filters.
+    """Run a bank of TSKFs (Lee & Lyou's ``l + r`` actuator and sensor filters) on the same data: one filter vmapped
+    over the stacked ``directions``.
 
     Args:
       model, bias_walk, unknown_input: as in ``two_stage_kalman_filter`` (shared).
-      directions: ``FaultDirection`` with leaves (F, ...).
-      init_mean (n,), init_cov (n, n): prior of ``x[0]``; init_bias_cov (p, p): prior of
-        ``b[0]`` (mean 0: no fault).
+      directions: ``FaultDirection`` with leaves (F, ...) (``stack_directions``).
+      init_mean (n,), init_cov (n, n): prior of ``x[0]``; init_bias_cov (p, p): prior of ``b[0]`` (mean 0).
       ys: (T, m) measurements; us: (T, nu) inputs.
 
     Returns:

@@ -1,47 +1,30 @@
-"""Unscented Kalman filter with the scaled unscented transform (Julier 2002;
-Wan & van der Merwe 2000), additive noise, Cholesky sigma points.
+"""Unscented Kalman filter: scaled UT (Julier 2002; Wan & van der Merwe 2000), additive noise, Cholesky sigma points.
 
-Sigma points ``X0 = m``, ``X(+/-)i = m +/- sqrt(L + lambda) col_i(chol P)``,
-``lambda = alpha^2 (L + kappa) - L``, weights ``Wm0 = lambda / (L + lambda)``,
-``Wc0 = Wm0 + 1 - alpha^2 + beta``, ``Wi = 1 / (2 (L + lambda))``.
-Measurement update ``K = Pxy S^-1``, ``P+ = P - K S K^T`` (Park et al. 2004, eq. 29 corrected),
-computed in a Joseph-like form (below).
+Sigma points ``X0 = m``, ``X(+/-)i = m +/- sqrt(L + lambda) col_i(chol P)``, ``lambda = alpha^2 (L + kappa) - L``,
+weights ``Wm0 = lambda / (L + lambda)``, ``Wc0 = Wm0 + 1 - alpha^2 + beta``, ``Wi = 1 / (2 (L + lambda))``. Update
+``K = Pxy S^-1``, ``P+ = P - K S K^T`` (Park et al. 2004, eq. 29 corrected), in a Joseph-like form (below).
 
-Centred form (the float32 fix). With small ``alpha`` the centre weights are huge and
-negative (``alpha = 1e-3`` gives ``Wc0 ~ -1e6``), and the textbook sums
-``sum_i Wc_i (Y_i - ybar)(Y_i - ybar)^T`` cancel catastrophically in float32: the
-"covariance" loses positive-definiteness and the filter returns NaN. Writing every
-point relative to the centre, ``d_i = Y_i - Y_0`` and ``delta = sum_{i>0} W_i d_i``, the
-same moments are, exactly in real arithmetic,
+Centred form (the float32 fix): with small ``alpha`` the centre weights are huge and negative (``alpha = 1e-3``:
+``Wc0 ~ -1e6``) and the textbook sums ``sum_i Wc_i (Y_i - ybar)(Y_i - ybar)^T`` cancel catastrophically in float32
+(indefinite covariance, NaN). With ``d_i = Y_i - Y_0``, ``delta = sum_{i>0} W_i d_i`` the same moments are exactly
+(using ``sum_i Wm_i = 1``, ``Wc_i = Wm_i`` for ``i > 0``)
 
     mean = Y_0 + delta,
     cov  = sum_{i>0} W_i d_i d_i^T + (beta - alpha^2) delta delta^T,
     Pxy  = sum_{i>0} W_i dx_i dy_i^T + (beta - alpha^2) delta_x delta_y^T,
 
-(using ``sum_i Wm_i = 1`` and ``Wc_i = Wm_i`` for ``i > 0``), which have only positive
-weights of moderate size: positive semi-definite by construction for ``beta >= alpha^2``.
-The +/- offsets are rounded symmetrically (``s = (m + s) - m``) so that the linear part
-of a map cancels exactly in ``delta``.
+with moderate positive weights: PSD by construction for ``beta >= alpha^2``. The +/- offsets are rounded
+symmetrically (``s = (m + s) - m``) so a map's linear part cancels exactly in ``delta``.
 
-Joseph-like update (positive semi-definite by construction). ``P - K S K^T`` subtracts
-nearly equal matrices when the measurement is much more precise than the prior (a
-measurement variance of 1e-24, or ``P0 = 1e12 I``): round-off of size ``eps ||P||`` then
-exceeds the true posterior variance and ``P+`` loses positive definiteness. The
-statistical linearisation of ``h`` over the sigma points, ``H = Pxy^T P^-1`` (Lefebvre,
-Bruyninckx & De Schutter 2002), and its residuals ``e_i = d_i - H dx_i`` split the
-predicted-measurement covariance exactly into ``Pyy = H P H^T + Lambda`` with
-
-    Lambda = sum_{i>0} W_i e_i e_i^T + (beta - alpha^2) delta delta^T   (PSD),
-
-so that, exactly in real arithmetic,
-
-    P+ = P - K S K^T = (I - K H) P (I - K H)^T + K (R + Lambda) K^T,
-
-the Joseph form of the EKF (Bucy & Joseph 1968) with ``R + Lambda`` as the noise. It is
-formed as ``F F^T + G G^T + (beta - alpha^2) (K delta)(K delta)^T + K R K^T``
-(``F = (I - K H) chol P``, ``G = K [sqrt(W_i) e_i]``): for ``beta >= alpha^2`` a sum of
-Gram matrices, which round-off cannot make indefinite beyond ``eps`` of its own size.
-For a linear ``h``, ``Lambda = 0`` and it is the EKF's/KF's Joseph update.
+Joseph-like update (PSD by construction): ``P - K S K^T`` subtracts nearly equal matrices when the measurement is
+much more precise than the prior (variance 1e-24, or ``P0 = 1e12 I``), and round-off ``eps ||P||`` exceeds the true
+posterior variance. The statistical linearisation ``H = Pxy^T P^-1`` (Lefebvre, Bruyninckx & De Schutter 2002) and
+residuals ``e_i = d_i - H dx_i`` split ``Pyy = H P H^T + Lambda`` exactly, with PSD
+``Lambda = sum_{i>0} W_i e_i e_i^T + (beta - alpha^2) delta delta^T``, so that exactly
+``P+ = P - K S K^T = (I - K H) P (I - K H)^T + K (R + Lambda) K^T``, the EKF's Joseph form (Bucy & Joseph 1968)
+with noise ``R + Lambda``, formed as ``F F^T + G G^T + (beta - alpha^2) (K delta)(K delta)^T + K R K^T``
+(``F = (I - K H) chol P``, ``G = K [sqrt(W_i) e_i]``): for ``beta >= alpha^2`` a sum of Gram matrices, indefinite by
+at most ``eps`` of its own size. For a linear ``h``, ``Lambda = 0``: the EKF's/KF's Joseph update.
 """
 from __future__ import annotations
 
@@ -70,11 +53,8 @@ class SigmaPoints(NamedTuple):
 
 
 def unscented_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, float, float]:
-    """``(Wi, Wm0, Wc0)`` of the scaled unscented transform for state size ``n``.
-
-    ``n + lambda = alpha^2 (n + kappa)`` is formed directly: computed as ``n + lambda``
-    it cancels (``alpha = 1e-3``: ``3 + (3e-6 - 3)``) and the weights lose ~1e-10.
-    """
+    """``(Wi, Wm0, Wc0)`` of the scaled unscented transform for state size ``n``; ``n + lambda = alpha^2 (n + kappa)``
+    is formed directly (as ``n + lambda`` it cancels, ``alpha = 1e-3``: ``3 + (3e-6 - 3)``, losing ~1e-10)."""
     spread = alpha**2 * (n + kappa)  # n + lambda
     w = 1.0 / (2.0 * spread)
     wm0 = 1.0 - n / spread           # lambda / (n + lambda)
@@ -97,12 +77,9 @@ def _centred_differences_direct(points: SigmaPoints, g: Callable[[Array], Array]
 
 
 def _centred_differences_taylor(points: SigmaPoints, g: Callable[[Array], Array]) -> tuple[Array, Array]:
-    """``d(+/-i) = +/- J s_i + (1/2) s_i^T H s_i`` by nested forward-mode AD.
-
-    The second-order Taylor expansion of ``g(c +/- s_i) - g(c)``: no subtraction of
-    nearly equal numbers, so it keeps full relative precision in float32. Its
-    truncation error is O(|s|^3) per point and O(alpha^2) relative in the moments, so
-    it converges to the exact scaled UT as ``alpha -> 0``.
+    """``d(+/-i) = +/- J s_i + (1/2) s_i^T H s_i`` by nested forward-mode AD: the second-order Taylor expansion of
+    ``g(c +/- s_i) - g(c)``, no subtraction of nearly equal numbers, so full relative precision in float32.
+    Truncation error O(|s|^3) per point, O(alpha^2) relative in the moments: exact scaled UT as ``alpha -> 0``.
     """
     c = points.centre
     n = c.shape[0]
@@ -121,10 +98,8 @@ def _centred_differences_taylor(points: SigmaPoints, g: Callable[[Array], Array]
 def unscented_moments(
     points: SigmaPoints, g: Callable[[Array], Array], w: float, cross_w: float, taylor: bool = False
 ):
-    """Propagate sigma points through ``g``; return mean, cov, cross-cov (centred form).
-
-    ``cross_w = beta - alpha^2`` weights the ``delta delta^T`` correction; ``taylor``
-    selects the AD differences (see ``_centred_differences_taylor``).
+    """Propagate sigma points through ``g``: mean, cov, cross-cov (centred form); ``cross_w = beta - alpha^2``
+    weights the ``delta delta^T`` term, ``taylor`` selects the AD differences (``_centred_differences_taylor``).
     """
     y0, dy = _propagate(points, g, taylor)
     return _moments(points, y0, dy, w, cross_w)
@@ -172,10 +147,9 @@ def joseph_like_cov(chol: Array, points: SigmaPoints, dy: Array, cross_cov: Arra
 
 
 def scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences: str):
-    """Check a UKF's arguments when it is built and return ``(n, m, alpha, beta, w,
-    scale, use_taylor)``: the sizes, the static scaled-UT parameters as floats, the mean
-    weights (``unscented_weights``), ``sqrt(alpha^2 (n + kappa))`` and whether a mean of a
-    given dtype takes Taylor-form centred differences (``sigma_differences``)."""
+    """Check a UKF's arguments at build time; return ``(n, m, alpha, beta, w, scale, use_taylor)``: sizes, static
+    scaled-UT parameters as floats, weights (``unscented_weights``), ``sqrt(alpha^2 (n + kappa))`` and whether a
+    mean of a given dtype takes Taylor-form differences (``sigma_differences``)."""
     _checks.check_callable("f", f, "a transition function f(x, u, params)")
     _checks.check_callable("h", h, "a measurement function h(x, u, params)")
     n = _checks.check_covariance("Q", Q)
@@ -208,28 +182,23 @@ def unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Arr
                             sigma_differences: str = "auto", missing_measurements: bool = False) -> Filter:
     """UKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
-    Sigma points are redrawn from ``N(m, P)`` before each measurement update (so the
-    additive ``Q`` is felt by the predicted measurement), as in filterpy >= 2.
+    Sigma points are redrawn from ``N(m, P)`` before each update (the additive ``Q`` reaches the predicted
+    measurement), as in filterpy >= 2.
 
     Args:
       f, h: pure functions of ``(x (n,), u (nu,), params)``.
       Q: (n, n), R: (m, m) additive noise covariances.
       params: pytree passed to ``f`` and ``h``.
-      alpha, beta, kappa: scaled-UT parameters (static). ``beta >= alpha^2`` keeps the
-        centred covariance positive semi-definite.
-      sigma_differences: how ``g(c + s_i) - g(c)`` is formed. ``"direct"`` evaluates
-        ``g`` at each sigma point (the textbook UT). ``"taylor"`` uses the second-order
-        expansion by nested ``jax.jvp`` (exact as alpha -> 0, error O(alpha^2)), which
-        stays accurate in float32 where direct differences of points only
-        ``alpha * sigma`` apart lose most of their digits. ``"auto"`` (default) picks
-        ``"taylor"`` for float32 and narrower states with ``alpha <= 1e-2``, else
-        ``"direct"``.
+      alpha, beta, kappa: scaled-UT parameters (static); ``beta >= alpha^2`` keeps the covariance PSD.
+      sigma_differences: how ``g(c + s_i) - g(c)`` is formed: ``"direct"`` evaluates ``g`` at each sigma point
+        (textbook UT); ``"taylor"``: second-order expansion by nested ``jax.jvp`` (error O(alpha^2)), accurate in
+        float32 where direct differences of points ``alpha * sigma`` apart lose most digits; ``"auto"`` (default):
+        ``"taylor"`` for float32 and narrower with ``alpha <= 1e-2``, else ``"direct"``.
       missing_measurements: treat NaN components of ``y`` as not measured (static).
 
     Returns:
-      ``Filter(init, step, update, predict)``: ``init(mean (n,), cov (n, n)) ->
-      GaussianState``; ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``, the
-      unscented update then the unscented prediction through ``f``.
+      ``Filter(init, step, update, predict)``: ``init(mean (n,), cov (n, n)) -> GaussianState``;
+      ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``, unscented update then prediction through ``f``.
     """
     n, m, alpha, beta, w, scale, use_taylor = scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences)
     cross_w = beta - alpha**2

@@ -1,20 +1,16 @@
-"""Kalman filter robust to an unknown input: the unbiased minimum-variance (UMV) filter
-of Kitanidis (1987), the state estimator of Lee & Lyou's feedback loop.
+"""Kalman filter robust to an unknown input: the unbiased minimum-variance (UMV) filter of Kitanidis (1987), the
+state estimator of Lee & Lyou's feedback loop.
 
-Plant ``x[k+1] = Phi x + Gamma u + E d + w``, ``y = C x + D u + v`` with ``d`` unknown
-(arbitrary, e.g. the model uncertainty ``Delta A x``). Update with the gain
+Plant ``x[k+1] = Phi x + Gamma u + E d + w``, ``y = C x + D u + v``, ``d`` unknown (arbitrary, e.g. model
+uncertainty ``Delta A x``). Gain
 
     K = K0 + (I - K0 C) E (F^T S^-1 F)^-1 F^T S^-1,   K0 = P C^T S^-1,  F = C E,
 
-the minimum-variance gain among those with ``(I - K C) E = 0``, so that the posterior
-error does not depend on ``d`` (it is the Kalman filter's limit for a diffuse ``d``).
-In whitened coordinates (``S = L L^T``, ``L^-1 F = [Q1 Q2] [R1; 0]`` by QR) the
-correction is ``(I - K0 C) E R1^-1 Q1^T L^-1``, and the innovation's ``d``-free part is
-``Q2^T L^-1 r`` (``m - q`` components): its squared norm is the chi-square(m - q) test
-statistic (``nis``) and the log-likelihood is de Jong's (1991) diffuse one.
-Decoupling needs ``rank(C E) = rank(E) = q <= m`` (Lee & Lyou, eq. 5), checked when the
-filter is built (``check_decoupling``). Predict as the Kalman filter, with ``E d``
-left out: its effect has already been removed from the estimate by the gain.
+minimum-variance among gains with ``(I - K C) E = 0`` (posterior error free of ``d``; the KF's limit for a diffuse
+``d``). Whitened (``S = L L^T``, QR ``L^-1 F = [Q1 Q2] [R1; 0]``) the correction is ``(I - K0 C) E R1^-1 Q1^T L^-1``,
+and the innovation's ``d``-free part ``Q2^T L^-1 r`` (``m - q`` components) gives the chi-square(m - q) statistic
+(``nis``) and de Jong's (1991) diffuse log-likelihood. Decoupling needs ``rank(C E) = rank(E) = q <= m`` (Lee &
+Lyou, eq. 5; ``check_decoupling`` at build time). Predict as the KF without ``E d`` (the gain removed its effect).
 """
 from __future__ import annotations
 
@@ -32,10 +28,8 @@ from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
 def check_decoupling(model: LinearGaussianModel, unknown_input: Array) -> int:
-    """Check ``rank(C E) = rank(E) = q <= m`` (Lee & Lyou, eq. 5) and return ``q``.
-
-    Raises a ``ValueError`` naming the failed condition; ``E`` must be concrete.
-    """
+    """Check ``rank(C E) = rank(E) = q <= m`` (Lee & Lyou, eq. 5) and return ``q``; raises a ``ValueError`` naming
+    the failed condition; ``E`` must be concrete."""
     n, _, m = validate_linear_model(model)
     _checks.check_matrix("unknown_input", unknown_input, (n, None), "E: n states x q unknown inputs")
     E = _checks.concrete(unknown_input)
@@ -60,13 +54,12 @@ def check_decoupling(model: LinearGaussianModel, unknown_input: Array) -> int:
 def unbiased_minimum_variance_gain(
     cross_cov: Array, chol_S: Array, C: Array, unknown_input: Array | None
 ) -> tuple[Array, Array]:
-    """``(K, N)``: the UMV gain (the Kalman gain without unknown input) and the
-    (m, m - q) orthonormal basis ``N`` of the whitened innovation's ``d``-free part
-    (the identity without unknown input).
+    """``(K, N)``: the UMV gain (Kalman gain without unknown input) and the (m, m - q) orthonormal basis ``N`` of
+    the whitened innovation's ``d``-free part (identity without unknown input).
 
     Args:
-      cross_cov: (n, m) ``P C^T``; chol_S: (m, m) Cholesky factor of ``S``;
-      C: (m, n); unknown_input: (n, q) ``E`` or ``None``.
+      cross_cov: (n, m) ``P C^T``; chol_S: (m, m) Cholesky factor of ``S``; C: (m, n); unknown_input: (n, q) ``E``
+        or ``None``.
     """
     gain = _linalg.gain_from_cross_cov(cross_cov, chol_S)  # K0 = P C^T S^-1
     m = chol_S.shape[0]
@@ -83,9 +76,8 @@ def unbiased_minimum_variance_gain(
 
 
 def decouplable(chol_S: Array, C_observed: Array, C: Array, unknown_input: Array) -> Array:
-    """() bool: ``rank(C_obs E) = q``, i.e. the whitened ``L^-1 C_obs E`` has ``q`` pivots
-    (the diagonal of its Gram matrix's Cholesky factor, ``|diag R1|``) above round-off of
-    the scale of ``L^-1 C E`` with every sensor."""
+    """() bool: ``rank(C_obs E) = q``: the whitened ``L^-1 C_obs E`` has ``q`` pivots (``|diag R1|``, from its Gram
+    matrix's Cholesky factor) above round-off of the scale of ``L^-1 C E`` with every sensor."""
     mm = _linalg.matmul
     E = jnp.asarray(unknown_input, chol_S.dtype)
     white = _linalg.solve_lower(chol_S, mm(C_observed, E))
@@ -95,9 +87,8 @@ def decouplable(chol_S: Array, C_observed: Array, C: Array, unknown_input: Array
 
 
 def diffuse_log_likelihood(statistic: Array, chol_S: Array, C: Array, unknown_input: Array | None, dof: int) -> Array:
-    """``-0.5 (lambda + log det S + log det(F^T S^-1 F) + dof log 2 pi)``, ``F = C E``: the
-    Kalman log-likelihood, and with an unknown input de Jong's (1991) diffuse one, which
-    does not depend on ``d``."""
+    """``-0.5 (lambda + log det S + log det(F^T S^-1 F) + dof log 2 pi)``, ``F = C E``: the Kalman log-likelihood, or
+    with an unknown input de Jong's (1991) diffuse one, independent of ``d``."""
     log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol_S)))
     if unknown_input is not None and unknown_input.shape[1]:
         F_white = _linalg.solve_lower(chol_S, _linalg.matmul(C, jnp.asarray(unknown_input, chol_S.dtype)))
@@ -110,21 +101,17 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array, missi
 
     Args:
       model: the nominal ``LinearGaussianModel``.
-      unknown_input: (n, q) distribution ``E`` of the unknown input (concrete), with
-        ``rank(C E) = rank(E) = q <= m``.
-      missing_measurements: NaN components of ``y`` are not measured: their rows of ``C``
-        are left out of the update, the decoupling and the statistic (``chi2(m_obs - q)``),
-        as in ``kalman.joseph_update``. Decoupling then needs ``rank(C_obs E) = q``; where
-        the remaining sensors lose it, the step keeps the prediction (no update, statistic 0
-        with 0 degrees of freedom): nothing the sensors left say is free of ``d``.
+      unknown_input: (n, q) distribution ``E`` of the unknown input (concrete), ``rank(C E) = rank(E) = q <= m``.
+      missing_measurements: NaN components of ``y`` are not measured: their rows of ``C`` are left out of update,
+        decoupling and statistic (``chi2(m_obs - q)``), as in ``kalman.joseph_update``. Decoupling then needs
+        ``rank(C_obs E) = q``; where the remaining sensors lose it, the step keeps the prediction (no update,
+        statistic 0 with 0 dof): nothing they say is free of ``d``.
 
     Returns:
-      a Gaussian ``Filter`` (``init``, ``step``, ``update``, ``predict``) whose
-      ``FilterInfo.nis`` is the decoupled statistic, chi-square with ``m - q`` degrees of
-      freedom (``num_observed`` holds them: ``m_obs - q`` with missing measurements);
-      ``innovation`` and ``innovation_cov`` are the full ``r`` and ``S``. A dead component
-      of ``y`` (non-finite; with ``missing_measurements`` infinite) is reported and not
-      used (``filters._base``).
+      a Gaussian ``Filter`` (``init``, ``step``, ``update``, ``predict``); ``FilterInfo.nis`` is the decoupled
+      statistic, chi-square with ``m - q`` dof (in ``num_observed``; ``m_obs - q`` with missing measurements);
+      ``innovation``, ``innovation_cov`` are the full ``r``, ``S``. A dead (non-finite; with
+      ``missing_measurements`` infinite) component of ``y`` is reported and not used (``filters._base``).
     """
     n, nu, m = validate_linear_model(model)
     q = check_decoupling(model, unknown_input)

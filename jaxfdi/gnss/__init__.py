@@ -1,16 +1,12 @@
-"""GNSS integrity (Yoo et al. 2010, GPS half): almanac and RINEX readers, broadcast orbits,
-WGS-84 frames, simulated pseudoranges with masks and faults, snapshot least squares,
-broadcast atmospheric corrections, parity RAIM with isolation and exclusion, protection
-levels and availability, and real receivers' observation files and smartphone traces
-through the same chain, one receiver clock per constellation.
+"""GNSS integrity (Yoo et al. 2010, GPS half), with real receivers' observation files and smartphone traces through the
+same chain (one receiver clock per constellation).
 
-Modules: ``yuma``, ``rinex``, ``rinex_obs``, ``gnss_log`` and ``android`` (readers),
-``orbits`` (IS-GPS-200), ``frames`` (WGS-84), ``atmosphere`` (Klobuchar, Saastamoinen),
-``paths`` (UAV circuits), ``measurements`` (visibility, noise, receiver plant),
-``least_squares`` (masked Householder QR), ``positioning`` (WLS, DOPs), ``raim`` (parity test, isolation),
-``protection`` (slopes, HPL/VPL, availability), ``solution_separation`` (ARAIM's
-levels), ``integrity`` (one epoch end to end, the loop's FDI stage, availability over
-grids), ``receiver`` (a real receiver's epochs: observation files, logs and phones).
+Modules: ``yuma``, ``rinex``, ``rinex_obs``, ``gnss_log``, ``android`` (readers), ``orbits`` (IS-GPS-200 broadcast
+orbits), ``frames`` (WGS-84), ``atmosphere`` (Klobuchar, Saastamoinen), ``paths`` (UAV circuits), ``measurements``
+(simulated pseudoranges: visibility masks, noise, faults, receiver plant), ``least_squares`` (masked Householder QR),
+``positioning`` (WLS, DOPs), ``raim`` (parity test, isolation), ``protection`` (slopes, HPL/VPL, availability),
+``solution_separation`` (ARAIM's levels), ``integrity`` (one epoch end to end with exclusion, the loop's FDI stage,
+availability over grids), ``receiver`` (a real receiver's epochs: observation files, logs and phones).
 """
 from jaxfdi.gnss._android import read_android
 from jaxfdi.gnss._frames import ecef_to_geodetic, geodetic_to_ecef

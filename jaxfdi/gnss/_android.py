@@ -1,35 +1,21 @@
-"""Smartphone measurements: the Google Smartphone Decimeter Challenge's CSV files
-(Fu, Khider & van Diggelen 2020, "Android raw GNSS measurement datasets for precise
-positioning", ION GNSS+), read into per-epoch slot arrays.
+"""Smartphone measurements: the Google Smartphone Decimeter Challenge's CSV files (Fu, Khider & van Diggelen 2020,
+"Android raw GNSS measurement datasets for precise positioning", ION GNSS+), read into per-epoch slot arrays.
 
-Two layouts: the 2021 "derived" files (``millisSinceGpsEpoch``, ``rawPrM``, ...) and the
-2022/2023 ``device_gnss`` files (``utcTimeMillis``, ``RawPseudorangeMeters``, ...,
-Google's own weighted-least-squares position ``WlsPosition*EcefMeters``). Both carry the
-satellite's ECEF position at transmission (in the frame of that instant) and the
-corrections, so the corrected pseudorange needs no ephemeris:
+Layouts: 2021 "derived" files (``millisSinceGpsEpoch``, ``rawPrM``, ...) and 2022/2023 ``device_gnss`` files
+(``utcTimeMillis``, ``RawPseudorangeMeters``, ..., Google's WLS position ``WlsPosition*EcefMeters``). Both carry the
+satellite's ECEF position at transmission (frame of that instant) and the corrections, so no ephemeris is needed:
+``rho_c = rho_raw + c dt_sv - ISRB - I - T`` (satellite clock, inter-signal range bias, iono, tropo; the files'
+definition). A slot is one signal of one satellite (``"G05 GPS_L1"``; dual-frequency: two per satellite). Rows without a
+signal type (2022/2023 rows Google's pipeline did not process) are skipped.
 
-``rho_c = rho_raw + c dt_sv - ISRB - I - T``
+2021 corrections (Kaggle, "Google Smartphone Decimeter Challenge", data page, 2021): a derived row's
+``millisSinceGpsEpoch`` is the *next* epoch's of the 1 Hz log, so reception = ``millisSinceGpsEpoch - 1000`` (not the
+previous kept time, 5 s in the one-in-five Pixel 4 XL file; with 1000 ms the median flight time is 77 ms, as it must
+be); rows whose signal left more than 300 ms before reception (or after it) are dropped as timing outliers.
 
-(satellite clock, inter-signal range bias, ionospheric and tropospheric delays; the
-files' own definition). A slot is one signal of one satellite (``"G05 GPS_L1"``): a
-dual-frequency phone has two slots per satellite. Rows without a signal type (the
-2022/2023 files' measurements that Google's pipeline did not process: no satellite
-position, no corrections) are skipped.
-
-The 2021 files need the two corrections of the challenge's data notes (Kaggle, "Google
-Smartphone Decimeter Challenge", data page, 2021): a derived row's
-``millisSinceGpsEpoch`` is the *next* epoch's of the 1 Hz log, so the reception time is
-``millisSinceGpsEpoch - 1000`` (the notes map each time to the one before it, which in a
-file that keeps one epoch in five, as the Pixel 4 XL one here, would be 5 s: with 1000 ms
-the signals' median flight time is 77 ms, as it must be), and rows whose signal left
-the satellite more than 300 ms before reception (or after it) are timing outliers and
-dropped.
-
-Constellations use Android's ``GnssStatus`` codes (1 GPS, 3 GLONASS, 4 QZSS, 5 BeiDou,
-6 Galileo) and are reported as RINEX letters. The reader is the standard library's
-``csv``: gnss_lib_py parses the same files (the tests check every column against it),
-but it would bring plotting and data-frame libraries into a core install for twenty
-columns of numbers.
+Constellations: Android ``GnssStatus`` codes (1 GPS, 3 GLONASS, 4 QZSS, 5 BeiDou, 6 Galileo), reported
+as RINEX letters. Parsed with the standard ``csv`` (tests check every column against gnss_lib_py, kept
+out of the core install: plotting and data-frame dependencies for twenty columns).
 """
 from __future__ import annotations
 
@@ -109,9 +95,8 @@ def unix_to_gps_millis(unix_ms: np.ndarray) -> np.ndarray:
 
 
 def geodetic_ecef64(lat_deg, lon_deg, height) -> np.ndarray:
-    """(..., 3) float64 ECEF [m] of latitude, longitude [deg] and ellipsoidal height [m],
-    whatever the x64 flag (``geodetic_to_ecef`` in a scoped float64 context: float32
-    would round a ground truth to 0.5 m)."""
+    """(..., 3) float64 ECEF [m] of lat, lon [deg], ellipsoidal height [m], whatever the x64 flag
+    (float32 would round a ground truth to 0.5 m)."""
     with jax.enable_x64(True):
         return np.asarray(geodetic_to_ecef(np.radians(lat_deg), np.radians(lon_deg), np.asarray(height, float)))
 
@@ -121,15 +106,11 @@ def _float(text: str) -> float:
 
 
 def read_android(path, ground_truth=None) -> PhoneEpochs:
-    """Read a Smartphone Decimeter Challenge measurement CSV (2021 ``*_derived.csv`` or
-    2022/2023 ``device_gnss.csv``) into ``PhoneEpochs`` (module doc), with the trace's
-    ground-truth CSV when given (``read_android_ground_truth``; matched by time).
+    """Read a Smartphone Decimeter Challenge CSV (2021 ``*_derived.csv`` or 2022/2023 ``device_gnss.csv``),
+    with the ground-truth CSV when given (``read_android_ground_truth``; matched by time).
 
     Returns:
-      ``PhoneEpochs``: the (T,) epochs' GPS times, the (S,) signal slots and their
-      constellations, the (T, S) corrected pseudoranges, uncertainties and C/N0, the
-      (T, S, 3) satellite positions, and the (T, 3) Google fix and ground truth (NaN where
-      the file or the truth has none).
+      ``PhoneEpochs`` (NaN where the file or the truth has none).
 
     Raises:
       ValueError: naming the file and line, for a header of neither layout, a missing
@@ -217,12 +198,10 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
 
 
 def read_android_ground_truth(path) -> tuple[np.ndarray, np.ndarray]:
-    """A GSDC ground-truth CSV: ``(gps_millis (T,) int64, lat_lon_height (T, 3))`` in degrees,
-    degrees and metres above the WGS-84 ellipsoid (2021: ``millisSinceGpsEpoch``, ``latDeg``,
-    ``lngDeg``, ``heightAboveWgs84EllipsoidM`` less 61 m, the competition hosts'
-    correction of the 2021 heights (Kaggle, "Tips & notes from the competition hosts",
-    2021); 2022/2023: ``UnixTimeMillis``, ``LatitudeDegrees``, ``LongitudeDegrees``,
-    ``AltitudeMeters``), sorted by time."""
+    """A GSDC ground-truth CSV: ``(gps_millis (T,) int64, lat_lon_height (T, 3))`` [deg, deg, m above WGS-84],
+    sorted by time. 2021: ``millisSinceGpsEpoch``, ``latDeg``, ``lngDeg``, ``heightAboveWgs84EllipsoidM`` less
+    61 m (the hosts' correction, Kaggle, "Tips & notes from the competition hosts", 2021); 2022/2023:
+    ``UnixTimeMillis``, ``LatitudeDegrees``, ``LongitudeDegrees``, ``AltitudeMeters``."""
     with open(path, newline="") as handle:
         reader = csv.DictReader(handle)
         header = reader.fieldnames or []

@@ -1,26 +1,21 @@
 """Broadcast atmospheric delays of a pseudorange (JAX): Klobuchar ionosphere and
 Saastamoinen troposphere, with the error variances single-point positioning weights by.
 
-Ionosphere (Klobuchar 1987; IS-GPS-200 20.3.3.5.2.5), angles in semicircles, ``E`` the
-elevation: Earth-central angle ``psi = 0.0137 / (E + 0.11) - 0.022``; pierce point
-``phi_i = phi_u + psi cos A`` (clipped to +/-0.416), ``lambda_i = lambda_u + psi sin A /
-cos(phi_i)``; geomagnetic latitude ``phi_m = phi_i + 0.064 cos(lambda_i - 1.617)``; local
-time ``t = 43200 lambda_i + t_GPS`` (mod 1 day); obliquity ``F = 1 + 16 (0.53 - E)^3``;
-``AMP = max(sum alpha_n phi_m^n, 0)``, ``PER = max(sum beta_n phi_m^n, 72000)``,
-``x = 2 pi (t - 50400) / PER``; the L1 delay is
-``c F (5e-9 + AMP (1 - x^2/2 + x^4/24))`` for ``|x| < 1.57``, else ``c F 5e-9``.
+Ionosphere (Klobuchar 1987; IS-GPS-200 20.3.3.5.2.5), semicircles, ``E`` elevation: Earth-central angle
+``psi = 0.0137 / (E + 0.11) - 0.022``; pierce point ``phi_i = phi_u + psi cos A`` (clipped to +/-0.416),
+``lambda_i = lambda_u + psi sin A / cos(phi_i)``; geomagnetic ``phi_m = phi_i + 0.064 cos(lambda_i - 1.617)``;
+local time ``t = 43200 lambda_i + t_GPS`` (mod 1 day); obliquity ``F = 1 + 16 (0.53 - E)^3``;
+``AMP = max(sum alpha_n phi_m^n, 0)``, ``PER = max(sum beta_n phi_m^n, 72000)``, ``x = 2 pi (t - 50400) / PER``;
+L1 delay ``c F (5e-9 + AMP (1 - x^2/2 + x^4/24))`` for ``|x| < 1.57``, else ``c F 5e-9``.
 
-Troposphere (Saastamoinen 1972, standard atmosphere at the ellipsoidal height ``h`` [m],
-relative humidity 0.7, as RTKLIB): ``p = 1013.25 (1 - 2.2557e-5 h)^5.2568`` hPa,
-``T = 288.16 - 6.5e-3 h`` K, ``e = 6.108 rh exp((17.15 T - 4684) / (T - 38.45))`` hPa;
-``z`` the zenith angle, the delay is
+Troposphere (Saastamoinen 1972, standard atmosphere at ellipsoidal height ``h`` [m], humidity 0.7, as
+RTKLIB): ``p = 1013.25 (1 - 2.2557e-5 h)^5.2568`` hPa, ``T = 288.16 - 6.5e-3 h`` K,
+``e = 6.108 rh exp((17.15 T - 4684) / (T - 38.45))`` hPa, zenith angle ``z``:
 ``0.0022768 p / ((1 - 0.00266 cos 2 phi - 0.00028 h / 1000) cos z) + 0.002277 (1255 / T + 0.05) e / cos z``.
 
-Error variances (RTKLIB manual, Takasu 2013, E.6): ``(0.5 I)^2`` of the broadcast
-ionosphere ``I`` and ``(0.3 / (sin E + 0.1))^2`` of the model troposphere. Both delays are
-zero below the horizon and for a receiver more than 1 km below the ellipsoid (the
-troposphere: outside -100 m to 10 km), so an iteration that starts at the Earth's centre
-sees none.
+Error variances (RTKLIB manual, Takasu 2013, E.6): ``(0.5 I)^2`` (ionosphere ``I``), ``(0.3 / (sin E + 0.1))^2``. Both
+delays are zero below the horizon and for a receiver > 1 km below the ellipsoid (troposphere: outside
+-100 m to 10 km), so an iteration from the Earth's centre sees none.
 """
 from __future__ import annotations
 
@@ -101,8 +96,7 @@ def saastamoinen_delay(latitude: Array, height: Array, elevation: Array, humidit
     """Tropospheric delay of the Saastamoinen model in the standard atmosphere (module docstring).
 
     Returns:
-      Delay [m], the broadcast shape of the inputs; 0 below the horizon or for a height
-      outside -100 m to 10 km.
+      Delay [m], the broadcast shape of the inputs; 0 below the horizon or for a height outside -100 m to 10 km.
     """
     h = jnp.maximum(height, 0.0)
     pressure = 1013.25 * (1.0 - 2.2557e-5 * h) ** 5.2568
@@ -117,13 +111,11 @@ def saastamoinen_delay(latitude: Array, height: Array, elevation: Array, humidit
 
 def atmosphere_corrections(atmosphere: Atmosphere, time: Array, receiver_ecef: Array, elevation: Array,
                            azimuth: Array) -> tuple[Array, Array]:
-    """The delays a pseudorange carries, and their model error variances, for the
-    satellites at ``elevation``/``azimuth`` (S,) [rad] seen from ``receiver_ecef`` (3,) at
-    GPS ``time`` [s; of the week, or from any week's start: the model reads it modulo a day].
+    """Delays and model error variances for satellites at ``elevation``/``azimuth`` (S,) [rad] from
+    ``receiver_ecef`` (3,) at GPS ``time`` [s from any week's start: read modulo a day].
 
     Returns:
-      ``(delay, variance)``, (S,) each: Klobuchar plus Saastamoinen [m] and
-      ``(0.5 I)^2 + (0.3 / (sin E + 0.1))^2`` [m^2] (module docstring).
+      ``(delay, variance)``, (S,) each: Klobuchar + Saastamoinen [m], their variances [m^2] (module doc).
     """
     lat, lon, height = ecef_to_geodetic(receiver_ecef)
     ionosphere = klobuchar_delay(atmosphere.ion_alpha, atmosphere.ion_beta, lat, lon, height, elevation, azimuth,

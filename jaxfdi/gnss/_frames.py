@@ -1,12 +1,9 @@
 """WGS-84 frames: ECEF <-> geodetic, local NED, elevation and azimuth (JAX).
 
-Earth model WGS-84 (NIMA TR8350.2, 2000): ``a = 6378137 m``, ``1/f = 298.257223563``.
-Geodetic -> ECEF is the closed form ``x = (N + h) cos(lat) cos(lon)``, ... with
-``N = a / sqrt(1 - e^2 sin^2 lat)``; ECEF -> geodetic iterates Bowring's (1976)
-latitude update a fixed number of times (sub-millimetre after 3 iterations anywhere
-near the Earth; 5 are used), so the function jits and vmaps. The local frame is
-North-East-Down at the geodetic point (Misra & Enge 2011, sec. 4.2); elevation and
-azimuth follow from the NED line-of-sight unit vector (azimuth clockwise from north).
+WGS-84 (NIMA TR8350.2, 2000): ``a = 6378137 m``, ``1/f = 298.257223563``. Geodetic -> ECEF:
+``x = (N + h) cos(lat) cos(lon)``, ..., ``N = a / sqrt(1 - e^2 sin^2 lat)``; ECEF -> geodetic: a fixed 5
+iterations of Bowring's (1976) latitude update (sub-mm after 3 near the Earth; jits and vmaps). Local
+frame NED at the geodetic point (Misra & Enge 2011, sec. 4.2); azimuth clockwise from north.
 
 Angles are radians; every function takes leading batch axes (``...``).
 """
@@ -45,8 +42,8 @@ def geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
 
 @jax.jit
 def _geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
-    """``geodetic_to_ecef`` once checked, as one program (a call from the host compiles
-    once per shape, not once per operation; likewise the other ``_`` programs here)."""
+    """``geodetic_to_ecef`` after the checks, one program (compiled once per shape; likewise the other
+    ``_`` programs here)."""
     sin_lat = jnp.sin(lat)
     radius = WGS84_A / jnp.sqrt(1.0 - WGS84_E2 * sin_lat**2)
     return jnp.stack([(radius + height) * jnp.cos(lat) * jnp.cos(lon),
@@ -55,11 +52,8 @@ def _geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
 
 
 def ecef_to_geodetic(ecef: Array, iterations: int = 5) -> tuple[Array, Array, Array]:
-    """Geodetic coordinates of (..., 3) ECEF points [m] (Bowring's iteration, ``iterations``
-    latitude updates).
-
-    Valid away from the Earth's centre (``|r| > 100 km``); the height is computed from
-    the latitude in the form that is well conditioned at every latitude.
+    """Geodetic coordinates of (..., 3) ECEF points [m] (``iterations`` Bowring updates); valid for
+    ``|r| > 100 km``; height in a form well conditioned at every latitude.
 
     Returns:
       ``(lat, lon, height)`` [rad, rad, m], each of shape (...): geodetic latitude,
@@ -87,8 +81,7 @@ def _ecef_to_geodetic(ecef: Array, iterations: int) -> tuple[Array, Array, Array
 
 
 def _check_points(name: str, points) -> None:
-    """(..., 3) coordinates (trace time): a last axis of another length would be read out of
-    bounds (an index past the end is clamped), silently."""
+    """(..., 3) coordinates (trace time): another last axis would be read out of bounds silently (clamped)."""
     shape = _checks.shape_of(points)
     if not shape or shape[-1] != 3:
         raise ValueError(f"{name}: expected points of shape (..., 3) [m], got {shape}")
@@ -112,8 +105,7 @@ def ecef_to_ned(ecef: Array, origin_ecef: Array) -> Array:
 
 
 def ned_to_ecef(ned: Array, origin_ecef: Array) -> Array:
-    """(..., 3) ECEF of NED offsets [m] from ``origin_ecef``: ``x0 + R^T n`` (inverse of
-    ``ecef_to_ned``)."""
+    """(..., 3) ECEF of NED offsets [m] from ``origin_ecef``: ``x0 + R^T n`` (inverse of ``ecef_to_ned``)."""
     return _local_frame("ned", ned, origin_ecef)
 
 

@@ -1,32 +1,23 @@
-"""Android GnssLogger logs (``Raw`` records; the format of the Smartphone Decimeter
-Challenge's ``*_GnssLog.txt`` files) into ``Observations``: pseudoranges generated from the
-receiver's clock and the satellite time it received (European GNSS Agency, "Using GNSS
-raw measurements on Android devices", white paper, 2017, sec. 2.4):
+"""Android GnssLogger logs (``Raw`` records; the format of the Smartphone Decimeter Challenge's ``*_GnssLog.txt`` files)
+into ``Observations``: pseudoranges generated from the receiver's clock and the satellite time it received (European
+GNSS Agency, "Using GNSS raw measurements on Android devices", white paper, 2017, sec. 2.4):
 
 ``t_Rx = TimeNanos + TimeOffsetNanos - (FullBiasNanos + BiasNanos)``  [ns, GPS time]
 
-``rho = c (t_Rx,sys - ReceivedSvTimeNanos)``, the difference wrapped into half the
-satellite time's period, with ``t_Rx,sys`` the reception time in the satellite's frame:
-GPS, Galileo and QZSS time of week; BeiDou time of week (BDT = GPST - 14 s); GLONASS time
-of day (UTC(SU) = GPST - leap seconds + 3 h). The epoch's own ``FullBiasNanos`` is used,
-so the time tag is GPS time (Google's tools hold the first epoch's bias over a log
-instead: a receiver-clock term common to every satellite of an epoch).
+``rho = c (t_Rx,sys - ReceivedSvTimeNanos)`` wrapped into half the satellite time's period, ``t_Rx,sys`` in
+the satellite's frame: GPS, Galileo, QZSS time of week; BeiDou time of week (BDT = GPST - 14 s);
+GLONASS time of day (UTC(SU) = GPST - leap seconds + 3 h). Each epoch's own ``FullBiasNanos``: the tag
+is GPS time (Google's tools hold the first epoch's bias: a receiver-clock term common to the epoch).
 
-A measurement has a pseudorange when its satellite time is unambiguous (``State`` has
-TOW_DECODED or TOW_KNOWN; GLONASS GLO_TOD_DECODED or GLO_TOD_KNOWN) and uncertain by less
-than 500 ns (the filter of Google's gps-measurement-tools and gnss_lib_py); otherwise NaN.
-Its code is the RINEX 3 one (band from ``CarrierFrequencyHz``, attribute from
-``CodeType``, or C/A and BeiDou B1I where an older log has none), and per system the first
-code of ``CODE_PRIORITY`` the log has is kept: one single-frequency pseudorange per
-satellite, as from a RINEX file. QZSS PRNs 193-202 read as J01-J10 (RINEX 3); SBAS,
-IRNSS and GLONASS rows without a slot number are skipped. ``approx_position`` is the
-log's first ``Fix`` of the GPS provider (the phone's own GNSS position), NaN without one.
-A malformed record raises a ``ValueError`` naming the file and line.
+A pseudorange needs an unambiguous satellite time (``State`` TOW_DECODED or TOW_KNOWN; GLONASS GLO_TOD_DECODED or
+GLO_TOD_KNOWN) uncertain by < 500 ns (as gps-measurement-tools and gnss_lib_py); otherwise NaN. Code: RINEX 3 (band from
+``CarrierFrequencyHz``, attribute from ``CodeType``, or C/A and BeiDou B1I in older logs); per system the first
+``CODE_PRIORITY`` code kept (one single-frequency pseudorange per satellite). QZSS PRNs 193-202 read as J01-J10; SBAS,
+IRNSS and GLONASS rows without a slot are skipped. ``approx_position``: the first GPS-provider ``Fix``, NaN without one.
+A malformed record raises ``ValueError`` naming the file and line.
 
-Our own reader rather than gnss_lib_py's ``AndroidRawGnss`` (the maintained one): it
-stops with a ``KeyError`` on logs without a ``CodeType`` column (the 2021 Pixel 4 log
-here), and it forms the times in float64 seconds, which rounds the satellite time to
-about 1 cm of range; here the nanoseconds stay integers.
+Not gnss_lib_py's ``AndroidRawGnss``: it raises ``KeyError`` without a ``CodeType`` column (the 2021 Pixel 4
+log here) and uses float64 seconds (~1 cm of range); here the nanoseconds stay integers.
 """
 from __future__ import annotations
 
@@ -77,9 +68,8 @@ def parse_gnss_log(text: str, name: str = "<string>") -> Observations:
       ``Observations``: one row per receiver epoch (``TimeNanos``), one column per satellite.
 
     Raises:
-      ValueError: naming ``name`` and the line of a missing ``# Raw`` header, a short
-        record, a value that is not a number, an unknown constellation or two records of
-        one signal in an epoch.
+      ValueError: naming ``name`` and the line of a missing ``# Raw`` header, a short record, a value that is not a
+        number, an unknown constellation or two records of one signal in an epoch.
     """
     header, fix_header, raw, fix = None, None, [], None
     for line_no, line in enumerate(text.splitlines(), start=1):

@@ -1,17 +1,12 @@
 """One epoch of GPS integrity monitoring, and the same as an FDI stage of the loop.
 
-``monitor_epoch`` chains the pieces of the GPS half of Yoo et al. (2010, Fig. 3): the least-squares
-fix (``positioning``), the parity test and isolation (``raim``), the protection levels
-and availability (``protection``), and, when the test alarms and a satellite is
-isolated, the exclusion: the fix, test and protection levels again without it (a dead
-channel, an infinite pseudorange, is left out of every fix, alarmed on and reported as
-the excluded slot when the parity test excludes none). It is a snapshot method, so
-epochs and Monte Carlo runs are ``vmap``s of it (``monitor_epochs``);
-``raim_fdi`` wraps it as ``loop.FDI`` for ``loop.run_loop``, whose per-step output
-carries a ``Decision`` (alarm, isolated label ``1 + slot``: the label the foundation's
-faults give a sensor fault on that slot in a plant without inputs). ``geometry_fix`` and
-``availability_grid`` give the same protection levels without measurements (they depend
-on geometry and noise model only), over grids of receivers and epochs.
+``monitor_epoch`` chains the GPS half of Yoo et al. (2010, Fig. 3): least-squares fix (``positioning``), parity test and
+isolation (``raim``), protection levels and availability (``protection``), and on an alarm with an isolated satellite,
+exclusion (all again without it). A dead channel (infinite pseudorange) is left out of every fix, alarmed on, and
+reported as the excluded slot when the parity test excludes none. Snapshot method: epochs and Monte Carlo runs are
+``vmap``s (``monitor_epochs``); ``raim_fdi`` is it as ``loop.FDI``, its ``Decision`` label ``1 + slot`` (the faults'
+sensor label in a plant without inputs). ``geometry_fix`` and ``availability_grid``: the same protection levels without
+measurements (geometry and noise model only), over receiver/epoch grids.
 """
 from __future__ import annotations
 
@@ -44,15 +39,13 @@ class EpochIntegrity(NamedTuple):
       fix: the least-squares fix from every usable satellite
       check: the parity test of ``fix``
       protection: the protection levels and availability of ``fix``
-      excluded: () int, the first excluded slot (-1: none): the one isolated after a parity
-          alarm, else the first dead slot (every fix leaves it out); -1 without ``exclude``
+      excluded: () int, first excluded slot (-1: none or no ``exclude``): isolated after an alarm, else the
+          first dead slot
       fix_excluded: the fix after exclusion (the full fix when none or a dead slot: it lacks it)
       check_excluded: the parity test of ``fix_excluded``
       protection_excluded: the protection levels of ``fix_excluded``
-      dead: (S,) bool: a slot with an orbit whose pseudorange is infinite
-          (a dead channel: the fix leaves it out and ``raim_output`` alarms on it)
-      exclusions: (S,) bool, every slot ``fix_excluded`` leaves out by exclusion, one per
-          round, and the dead ones
+      dead: (S,) bool: a slot with an orbit and an infinite pseudorange (left out; ``raim_output`` alarms)
+      exclusions: (S,) bool, every slot ``fix_excluded`` leaves out (one per round) and the dead ones
     """
 
     fix: PositionFix
@@ -93,13 +86,11 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
         one is a dead channel (``EpochIntegrity.dead``).
       tables: ``raim.raim_tables``; sigma: as for ``positioning.solve_position``.
       operation: alert limits (``protection.ALERT_LIMITS`` key or (HAL, VAL)).
-      exclude: the most satellites excluded, one after another (greedy, as Brown & Chin
-        1992's FDE iterated: each round re-solves without the satellite the current fix's
-        parity test isolates, while it alarms and can isolate); ``True``: 1, ``False``: none.
-      transmit: satellite positions and clocks at transmission
-        (``positioning.transmit_states``) when already known (``orbit`` is then unused).
-      atmosphere, mask_angle, clocks: as for ``positioning.solve_position`` (broadcast
-        delays, elevation mask, a receiver clock per constellation).
+      exclude: most satellites excluded, greedily (Brown & Chin 1992's FDE iterated: re-solve without the
+        isolated satellite while the test alarms and isolates); ``True``: 1, ``False``: none.
+      transmit: satellite positions and clocks at transmission (``positioning.transmit_states``), if
+        known (``orbit`` then unused).
+      atmosphere, mask_angle, clocks: as for ``positioning.solve_position``.
     """
     transmit = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
     fix = solve_position(orbit, t_receive, pseudoranges, available, sigma, transmit=transmit, atmosphere=atmosphere,
@@ -128,8 +119,7 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
     keep = jnp.asarray(available, bool)
     (keep, first, (fix_x, check_x, protection_x)), _ = jax.lax.scan(
         exclude_one, (keep, none, (fix, check, protection)), None, length=rounds)
-    # a dead slot is excluded too (every fix already leaves it out): reported when the parity
-    # test isolated nothing, so that a dead channel reads as detected, isolated and excluded
+    # a dead slot (already left out) is reported when the parity test isolated nothing: detected, isolated, excluded
     excluded = jnp.where(first >= 0, first, jnp.where(jnp.any(dead), jnp.argmax(dead), -1)).astype(jnp.int32)
     return EpochIntegrity(fix, check, protection, excluded, fix_x, check_x, protection_x, dead,
                           (jnp.asarray(available, bool) & ~keep) | dead)
@@ -138,19 +128,15 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
 def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables: RaimTables,
                    sigma=None, operation="npa", exclude: bool | int = True, batch_size: int | None = None,
                    atmosphere: Atmosphere | None = None, mask_angle: float | None = None) -> EpochIntegrity:
-    """``monitor_epoch`` vmapped over epochs: ``times`` (T,), ``pseudoranges`` (T, S) (NaN:
-    not measured; a fixed sigma array is (T, S)). Leaves gain a leading T axis. With
-    ``atmosphere`` (one for all epochs) and ``mask_angle``: as ``positioning.solve_position``.
-
-    ``batch_size``: vmap over chunks of that many epochs, one chunk after another
-    (``lax.map``), so the intermediates stay in cache: ~1.7x faster for 10^4-10^5 epochs on
-    CPU at 128 (``benchmarks/bench_gnss_raim.py``); ``None`` vmaps all epochs at once.
+    """``monitor_epoch`` vmapped over epochs: ``times`` (T,), ``pseudoranges`` (T, S) (NaN: not measured; a fixed sigma
+    array is (T, S)); ``atmosphere`` (one for all) and ``mask_angle`` as ``positioning.solve_position``. ``batch_size``:
+    chunks of epochs in sequence (``lax.map``), keeping intermediates in cache (~1.7x faster for 10^4-10^5 epochs on CPU
+    at 128, ``benchmarks/bench_gnss_raim.py``); ``None``: all at once.
 
     Returns:
-      ``EpochIntegrity`` of the T epochs (each epoch's slot records chosen by
-      ``select_orbits``): every leaf of ``monitor_epoch``'s with a leading T axis, e.g.
-      ``fix.position`` (T, 3), ``check.alarm`` (T,), ``protection.hpl`` (T,), ``excluded``
-      (T,) int (-1: none), ``dead`` (T, S).
+      ``EpochIntegrity`` of the T epochs (each epoch's slot records chosen by ``select_orbits``): every leaf of
+      ``monitor_epoch``'s with a leading T axis, e.g. ``fix.position`` (T, 3), ``check.alarm`` (T,), ``protection.hpl``
+      (T,), ``excluded`` (T,) int (-1: none), ``dead`` (T, S).
     """
     _checks.check_shape("times", times, (None,), "one time tag per epoch")
     epochs = _checks.shape_of(times)[0]
@@ -193,8 +179,7 @@ class RaimOutput(NamedTuple):
       statistic_excluded: () parity statistic after exclusion
       threshold_excluded: () its threshold
       hpl_excluded: () m, HPL after exclusion
-      healthy: () bool: the solution delivered (after exclusion, when there is one) is a finite,
-          converged fix with a finite statistic
+      healthy: () bool: the delivered solution (after exclusion, if any) is finite, converged, finite statistic
     """
 
     decision: Decision
@@ -228,10 +213,9 @@ def raim_output(result: EpochIntegrity) -> RaimOutput:
 
 
 def delivered_healthy(result: EpochIntegrity) -> Array:
-    """() bool: the numerics of the solution the monitor delivers: after an exclusion the
-    fix without the satellite (a fault of tens of km can keep the fix with it from
-    converging in its fixed Gauss-Newton steps; that fix is evidence, not the answer),
-    else the fix with every satellite."""
+    """() bool: the delivered solution's numerics: after an exclusion the fix without the satellite (a
+    fault of tens of km can stop the full fix converging in its fixed Gauss-Newton steps; that fix is
+    evidence, not the answer), else the full fix."""
     excluded = result.excluded >= 0
     return jnp.where(excluded, result.fix_excluded.healthy & result.check_excluded.healthy,
                      result.fix.healthy & result.check.healthy)
@@ -239,15 +223,11 @@ def delivered_healthy(result: EpochIntegrity) -> Array:
 
 def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=None, operation="npa",
              exclude: bool | int = True) -> FDI:
-    """``monitor_epoch`` as a stateless ``loop.FDI``: step ``k`` takes the (S,)
-    pseudoranges time-tagged ``t0 + k dt`` and returns a ``RaimOutput``.
+    """``monitor_epoch`` as a stateless ``loop.FDI``; step ``k``'s pseudoranges are tagged ``t0 + k dt``.
 
     Returns:
-      ``FDI`` with ``step(state, k, y, u) -> (state, RaimOutput)`` and no ``observe``:
-      ``state`` is passed through unchanged, ``y`` is the (S,) pseudoranges [m] (NaN: not
-      measured, inf: dead channel), ``u`` is unused; the ``RaimOutput`` holds the
-      ``Decision`` (label ``1 + slot``), threshold, DOPs, HPL/VPL, positions and the
-      exclusion of that epoch.
+      ``FDI`` with ``step(state, k, y, u) -> (state, RaimOutput)``, no ``observe``: ``state`` passed
+      through, ``y`` (S,) pseudoranges [m] (NaN: not measured, inf: dead channel), ``u`` unused.
     """
     _checks.check_positive("dt", dt, "a positive epoch interval (s)")
 
@@ -263,10 +243,8 @@ def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=
 
 def geometry_fix(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: float,
                  sigma: Callable[[Array], Array]) -> PositionFix:
-    """The fix a receiver at ``receiver_ecef`` (3,) would have at ``t`` with error-free
-    pseudoranges: its true position, zero residuals, the geometry of the satellites
-    above ``mask_angle`` [rad] and ``sigma(elevation)`` weights. DOPs, protection levels
-    and minimum detectable biases depend on nothing else."""
+    """The error-free fix of a receiver at ``receiver_ecef`` (3,) at ``t``: true position, zero residuals, satellites
+    above ``mask_angle`` [rad], ``sigma(elevation)`` weights (DOPs, protection levels and MDBs depend on these only)."""
     _checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
     orbit, has_orbit = select_orbits(table, t)
     sat = satellite_position(orbit, t)
@@ -303,9 +281,8 @@ class GridAvailability(NamedTuple):
 def availability_grid(table: OrbitTable, times: Array, receivers_ecef: Array, tables: RaimTables,
                       mask_angle: float, sigma: Callable[[Array], Array], operation="npa",
                       batch_size: int = 64) -> GridAvailability:
-    """Protection levels and availability for every receiver (P, 3) at every epoch (T,):
-    ``geometry_fix`` then ``protection_levels``, vmapped over epochs and mapped over the
-    receivers ``batch_size`` at a time (bounded memory for large grids)."""
+    """Protection levels and availability for receivers (P, 3) x epochs (T,): ``geometry_fix`` then
+    ``protection_levels``, vmapped over epochs, receivers ``batch_size`` at a time (bounded memory)."""
     _checks.check_shape("receivers_ecef", receivers_ecef, (None, 3), "P receivers' ECEF positions [m]")
     _checks.check_shape("times", times, (None,), "T epochs")
     batch_size = _checks.check_int("batch_size", batch_size, 1, meaning="a positive number of receivers per chunk")

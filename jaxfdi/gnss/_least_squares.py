@@ -1,26 +1,17 @@
 """Masked Householder QR of a tall geometry matrix, with a fixed number of rows.
 
-A snapshot GNSS solution has one row per satellite *slot* (S of them, e.g. 32 PRNs),
-of which only the ``n`` visible ones count. Rows of unused slots are zeroed and the
-``m`` Householder reflections (Golub & Van Loan 2013, alg. 5.1.1) pivot on the first
-``m`` used rows and act on used rows only — the textbook algorithm on the used rows
-moved to the top, written with masks instead of a permutation — so they are the
-identity on the unused ones. Hence, for every ``n >= m``, with the same shapes:
+One row per satellite *slot* (S, e.g. 32 PRNs), of which the ``n`` used count: unused rows are zeroed;
+the ``m`` Householder reflections (Golub & Van Loan 2013, alg. 5.1.1) pivot on the first ``m`` used rows
+and act on used rows only (the textbook algorithm on the used rows moved to the top, masks instead of a
+permutation). For every ``n >= m``, same shapes:
 
-- the thin factor ``Q1`` (S, m) has zero rows at unused slots and ``R`` (m, m) is the
-  triangular factor of the used rows: ``H = Q1 R``;
-- the columns ``m..n-1`` of the full ``Q`` span the parity space of the used rows
-  (Brown & Chin 1992): ``P`` (S, S) with ``n - m`` valid rows, so that ``P H = 0`` and
-  ``P P^T = I`` on them, and zero columns at unused slots.
+- ``Q1`` (S, m), zero rows at unused slots, ``R`` (m, m): ``H = Q1 R`` on the used rows;
+- columns ``m..n-1`` of ``Q`` span the parity space (Brown & Chin 1992): ``P`` (S, S), ``n - m`` valid rows,
+  ``P H = 0``, ``P P^T = I``, zero columns at unused slots.
 
-A column that is zero on every used row (a receiver clock whose constellation has no
-satellite in view this epoch) is an unknown the rows do not carry: it takes no pivot,
-its row of ``R`` is the unit row (so the solution's entry is 0) and its column of
-``Q1`` is zero; ``num_pivots`` counts the columns that remain, and the parity space has
-``n - num_pivots`` dimensions.
-
-Everything is element-wise code over the S rows (no LAPACK call per epoch), which XLA
-vectorises when the functions are vmapped over epochs and Monte Carlo runs.
+A column zero on every used row (a clock with no satellite in view) takes no pivot: unit row of ``R`` (solution entry
+0), zero column of ``Q1``; ``num_pivots`` counts the others, the parity space has ``n - num_pivots`` dimensions.
+Element-wise code over the S rows (no LAPACK call per epoch), vectorised by XLA under vmap.
 """
 from __future__ import annotations
 
@@ -53,12 +44,8 @@ class MaskedQR(NamedTuple):
 def masked_qr(matrix: Array, used: Array) -> MaskedQR:
     """Householder QR of the rows of ``matrix`` (S, m) where ``used`` (S,) is true.
 
-    Reflection ``j`` pivots on the ``j``-th used slot and acts on the used slots from it
-    on, which is the textbook algorithm on the used rows moved to the top in slot order,
-    written with masks instead of a permutation. A column that is zero below its pivot
-    gives an identity reflection; with fewer than ``num_pivots`` used rows ``R`` is
-    singular (callers check ``num_used``). A column zero on every used row takes no
-    pivot (module doc).
+    Reflection ``j`` pivots on the ``j``-th used slot (module doc). A column zero below its pivot gives an identity
+    reflection; with fewer than ``num_pivots`` used rows ``R`` is singular (callers check ``num_used``).
     """
     matrix = jnp.asarray(matrix)
     used = jnp.asarray(used, bool)
@@ -93,9 +80,8 @@ def _apply_q(qr: MaskedQR, columns: Array) -> Array:
 
 
 def apply_qt(qr: MaskedQR, vector: Array) -> Array:
-    """``Q^T y`` for a (S,) vector, in slot order: the entry of the ``i``-th used slot is
-    entry ``i`` of ``Q^T`` times the used rows — ``Q1^T y`` at the m pivot slots
-    (``leading``), the parity vector at the other used slots, zero at unused ones."""
+    """``Q^T y`` for (S,) ``y`` in slot order: ``Q1^T y`` at the m pivot slots (``leading``), the parity
+    vector at the other used slots, zero at unused ones."""
     work = jnp.where(qr.rank >= 0, jnp.asarray(vector), 0.0)
     for v in qr.reflectors:
         work = work - 2.0 * v * (v @ work)
@@ -130,10 +116,9 @@ def parity_rows(qr: MaskedQR) -> tuple[Array, Array]:
 
 
 def parity_column_norms(q1: Array, used: Array) -> tuple[Array, Array]:
-    """``(norm, observable)``: ``||P[:, j]|| = sqrt(S_jj)``, ``S = P^T P = I - Q1 Q1^T``, from
-    the thin factor (``thin_q``) without forming ``P``. ``observable``: used slots with
-    ``S_jj > 1e-9`` (a satellite alone on its clock has ``S_jj = 0``); ``norm`` is 1 at
-    the others, so it divides safely."""
+    """``(norm, observable)``: ``||P[:, j]|| = sqrt(S_jj)``, ``S = P^T P = I - Q1 Q1^T`` (from ``thin_q``);
+    ``observable``: used slots with ``S_jj > 1e-9`` (a satellite alone on its clock has 0); ``norm`` is 1
+    elsewhere (safe divisor)."""
     diag = jnp.where(used, 1.0 - jnp.sum(q1**2, axis=1), 0.0)
     observable = used & (diag > 1e-9)
     return jnp.sqrt(jnp.where(observable, diag, 1.0)), observable

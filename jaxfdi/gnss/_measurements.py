@@ -1,33 +1,22 @@
 """Simulated GPS pseudoranges: visibility masks, elevation-dependent noise, receiver clock,
 satellite faults, as a plant for the foundation's loop.
 
-- **Visibility**: a satellite is used when its ephemeris is valid and healthy, it is
-  above the elevation mask, and its line of sight does not cross a ``Wall`` — a
-  vertical rectangle standing on the local level (the paper's campus case: an antenna
-  beside a rooftop structure loses the satellites on that side, Yoo et al. 2010, sec. 3.2).
-- **Noise**: ``sigma(el) = sqrt(a^2 + b^2 / sin^2 el)`` [m] (the elevation model of
-  RTKLIB's ``varerr``; Takasu 2013), white between epochs and satellites.
-- **Receiver clock**: bias ``b`` [m] and drift ``d`` [m/s] as the two-state random walk
-  driven by the oscillator's Allan-variance coefficients ``h0`` (white frequency) and
-  ``h_-2`` (random-walk frequency) (Brown & Hwang 2012, sec. 9.3):
+- **Visibility**: valid healthy ephemeris, above the mask, line of sight not crossing a ``Wall`` (a vertical rectangle
+  on the local level: the paper's antenna beside a rooftop structure, Yoo et al. 2010, sec. 3.2).
+- **Noise**: ``sigma(el) = sqrt(a^2 + b^2 / sin^2 el)`` [m] (RTKLIB's ``varerr``; Takasu 2013), white;
+  iono and tropo residuals are part of it.
+- **Clock**: bias ``b`` [m], drift ``d`` [m/s], two-state random walk from Allan coefficients ``h0``
+  (white frequency), ``h_-2`` (random-walk frequency) (Brown & Hwang 2012, sec. 9.3):
   ``Q = c^2 [[h0/2 dt + 2 pi^2 h_-2 dt^3/3, pi^2 h_-2 dt^2], [pi^2 h_-2 dt^2, 2 pi^2 h_-2 dt]]``.
-- **Pseudorange**: the receiver samples at its own clock's time tags ``t_k = t0 + k dt``
-  (true GPS time ``t_k - b/c``), so
-  ``rho_i = |R(tau) r_i(t_k - b/c - tau) - x| + b - c dt_i + sigma_i n_i``,
-  the light time ``tau`` and Earth rotation ``R(tau)`` solved per satellite
-  (``orbits.transmission_geometry``). Ionosphere and troposphere residuals are not
-  modelled apart: they are part of the elevation-dependent noise.
-- **Faults**: the foundation's sensor faults (``jaxfdi._faults``), component = satellite
-  slot: an impulse, bias or ramp (drift) on one satellite's pseudorange, a frozen channel
-  (STUCK: the range held at its onset value), several episodes in one run
-  (``concat_faults``).
-- **Dead and missing**: NaN means "not measured" (a satellite not visible: not tracked, a
-  RINEX blank) and is no evidence; a DEAD fault (or any non-finite value) on a visible,
-  tracked slot is reported as ``+inf``, the dead channel that ``integrity`` alarms on,
-  isolates and leaves out (``EpochIntegrity.dead``), never as a silent NaN.
+- **Pseudorange** at the receiver's tags ``t_k = t0 + k dt`` (true time ``t_k - b/c``):
+  ``rho_i = |R(tau) r_i(t_k - b/c - tau) - x| + b - c dt_i + sigma_i n_i`` (``orbits.transmission_geometry``).
+- **Faults**: sensor faults (``jaxfdi._faults``), component = slot: impulse, bias, ramp, frozen
+  (STUCK: onset value held), several episodes per run (``concat_faults``).
+- **Dead and missing**: NaN = not measured (not visible/tracked, a RINEX blank), no evidence; a DEAD
+  fault (any non-finite value) on a tracked slot is ``+inf``, the dead channel ``integrity`` alarms on,
+  isolates and leaves out (``EpochIntegrity.dead``), never a silent NaN.
 
-``receiver_plant`` returns a ``simulate.Simulator`` (``init``, ``step``, ``measure``,
-``advance``), so ``simulate.simulate`` and ``loop.run_loop`` drive it.
+``receiver_plant`` is a ``simulate.Simulator`` for ``simulate.simulate`` and ``loop.run_loop``.
 """
 from __future__ import annotations
 
@@ -97,9 +86,8 @@ def wall_blocks(receiver_ned: Array, line_of_sight: Array, wall: Wall) -> Array:
 
 
 def sky_geometry(table: OrbitTable, t: Array, receiver_ecef: Array) -> tuple[Array, Array, Array, Array]:
-    """``(elevation, azimuth, line_of_sight_ned, has_orbit)``, each over the S slots, of the
-    satellites seen from ``receiver_ecef`` (3,) at time ``t`` (positions at ``t``; the light
-    time changes an elevation by < 1e-4 rad)."""
+    """``(elevation, azimuth, line_of_sight_ned, has_orbit)`` over S slots from ``receiver_ecef`` (3,) at
+    ``t`` (positions at ``t``; light time changes an elevation < 1e-4 rad)."""
     orbit, has_orbit = select_orbits(table, t)
     sat = satellite_position(orbit, t)
     elevation, azimuth = elevation_azimuth(receiver_ecef, sat)
@@ -108,9 +96,8 @@ def sky_geometry(table: OrbitTable, t: Array, receiver_ecef: Array) -> tuple[Arr
 
 def visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: float,
                origin_ecef: Array | None = None, walls: tuple[Wall, ...] = ()) -> tuple[Array, Array, Array]:
-    """``(visible, elevation, azimuth)`` over the S slots: valid healthy ephemeris, above
-    ``mask_angle`` [rad] and not behind any of ``walls`` (whose NED frame is at
-    ``origin_ecef``)."""
+    """``(visible, elevation, azimuth)`` over the S slots: valid healthy ephemeris, above ``mask_angle`` [rad] and not
+    behind any of ``walls`` (whose NED frame is at ``origin_ecef``)."""
     _checks.check_scalar("mask_angle", mask_angle, -0.5 * math.pi, 0.5 * math.pi,
                          meaning="an elevation mask in [-pi/2, pi/2] rad")
     if walls and origin_ecef is None:
@@ -121,8 +108,7 @@ def visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: fl
 @jax.jit
 def _visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: Array, origin_ecef: Array | None,
                 walls: tuple[Wall, ...]) -> tuple[Array, Array, Array]:
-    """``visibility`` once checked, as one program: a vmapped call outside ``jit`` (a sky
-    over a path) compiles once instead of once per operation."""
+    """``visibility`` after the checks, one program (a vmapped call outside ``jit`` compiles once)."""
     elevation, azimuth, los, has_orbit = sky_geometry(table, t, receiver_ecef)
     visible = has_orbit & (elevation > mask_angle)
     if walls:
@@ -148,8 +134,8 @@ def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, vi
       table: orbits of the S slots (``orbits.ephemeris_table`` / ``almanac_table``).
       t0, dt: time tag of step 0 [s from the table's reference week] and the step [s].
       path_ecef: (T, 3) receiver antenna positions at the T time tags.
-      visible: (T, S) bool: slots tracked at each step (``visibility``); others are NaN (not
-        measured). A tracked slot whose value a fault makes non-finite (DEAD) is ``+inf``.
+      visible: (T, S) bool: slots tracked (``visibility``); others NaN; a tracked slot made non-finite
+        (DEAD) is ``+inf``.
       sigma: (T, S) pseudorange noise standard deviations [m] (``elevation_sigma``).
       clock: the oscillator (``ClockModel``); ``init`` takes ``[bias, drift]`` anyway.
       fault: sensor ``Fault``(s) on satellite slots (scalar leaves or a stack), or None.

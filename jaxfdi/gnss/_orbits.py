@@ -1,28 +1,18 @@
 """GPS satellite positions and clocks from broadcast ephemerides and almanacs (JAX).
 
-Positions follow IS-GPS-200 (rev. N, 2022) Table 20-IV, user algorithm for ephemeris
-determination: mean motion ``n = sqrt(mu / A^3) + delta n``; mean anomaly
-``M = M0 + n t_k``; Kepler's equation ``M = E - e sin E`` by Newton iterations from
-``E = M`` (a fixed count, so it vmaps); true anomaly and argument of latitude
-``Phi = nu + omega``; second-harmonic corrections ``du, dr, di`` from ``2 Phi``
-(applied to the sines and cosines by angle addition: two ``sin``/``cos`` pairs and the
-node's per satellite, so a vmapped constellation is cheap);
-``Omega = Omega0 + (Omega_dot - Omega_e) t_k - Omega_e t_oe``; the rotation to ECEF. The
-almanac (Table 20-VI; YUMA gives the full inclination) is the same with no harmonic
-terms, ``delta n = IDOT = 0`` and ``t_oa`` for ``t_oe``.
+Positions: IS-GPS-200 (rev. N, 2022) Table 20-IV: ``n = sqrt(mu / A^3) + delta n``; ``M = M0 + n t_k``; Kepler
+``M = E - e sin E`` by a fixed count of Newton iterations from ``E = M`` (vmaps); ``Phi = nu + omega``; harmonic
+corrections ``du, dr, di`` from ``2 Phi``, applied by angle addition (two ``sin``/``cos`` pairs and the node's per
+satellite); ``Omega = Omega0 + (Omega_dot - Omega_e) t_k - Omega_e t_oe``; rotation to ECEF. Almanac (Table 20-VI; YUMA
+gives the full inclination): the same with no harmonics, ``delta n = IDOT = 0``, ``t_oa`` for ``t_oe``.
 
-The satellite clock (20.3.3.3.3.1 and 20.3.3.3.3.2) is
-``dt_sv = af0 + af1 (t - t_oc) + af2 (t - t_oc)^2 + F e sqrt(A) sin E``,
-``F = -2 sqrt(mu) / c^2``, less ``T_GD`` for an L1-only user; the almanac's is
-``af0 + af1 t_k`` (20.3.3.5.2.3, no relativistic term, as RTKLIB's ``alm2pos``). Time differences are wrapped
-into +/- half a week (20.3.3.3.3.1).
+Clock (20.3.3.3.3.1-2): ``dt_sv = af0 + af1 (t - t_oc) + af2 (t - t_oc)^2 + F e sqrt(A) sin E``,
+``F = -2 sqrt(mu) / c^2``, less ``T_GD`` for an L1-only user; almanac ``af0 + af1 t_k`` (20.3.3.5.2.3, no
+relativistic term, as RTKLIB's ``alm2pos``). Time differences wrapped into +/- half a week.
 
-Time ``t`` is GPS time in seconds from the start of a *reference week* chosen by the
-caller (``orbit_table``), so float64 keeps sub-microsecond resolution. An
-``Orbit`` holds one set of elements per satellite slot (leaves (S,)); an
-``OrbitTable`` holds every record of every slot (leaves (S, R), padded) and
-``select_orbits`` picks, for an epoch, each slot's record nearest in time within its
-validity (RTKLIB's rule), so one compiled function serves a whole day.
+``t``: GPS seconds from the start of a caller-chosen *reference week* (float64 keeps sub-microsecond resolution).
+``Orbit``: one element set per slot (leaves (S,)); ``OrbitTable``: every record (leaves (S, R), padded);
+``select_orbits`` picks each slot's nearest valid record (RTKLIB's rule), so one compiled function serves a whole day.
 """
 from __future__ import annotations
 
@@ -126,9 +116,8 @@ ORBIT_PROBLEMS = ("none", "a non-finite element", "an eccentricity outside [0, 1
 
 
 def orbit_problem(orbit: Orbit) -> Array:
-    """Per record, the first reason its elements describe no orbit (an index into
-    ``ORBIT_PROBLEMS``; 0: none). Such a record is excluded alone: Kepler's equation has
-    no solution for it and would turn the whole fix NaN."""
+    """Per record, the first reason it describes no orbit (index into ``ORBIT_PROBLEMS``; 0: none). Such
+    a record is excluded alone (Kepler has no solution; it would turn the whole fix NaN)."""
     finite = jnp.all(jnp.stack([jnp.isfinite(jnp.asarray(leaf)) for leaf in orbit]), axis=0)
     e = jnp.asarray(orbit.eccentricity)
     return jnp.where(~finite, 1, jnp.where((e < 0) | (e >= 1), 2, jnp.where(jnp.asarray(orbit.sqrt_a) <= 0, 3, 0)))
@@ -139,9 +128,8 @@ def _wrap_half_week(dt: Array) -> Array:
 
 
 def _sin_cos_step(sin_x: Array, cos_x: Array, step: Array) -> tuple[Array, Array]:
-    """``(sin(x + d), cos(x + d))`` from ``sin x``, ``cos x`` and a small ``d`` (|d| < 0.1):
-    angle addition with the Taylor series of ``sin d``, ``cos d`` to 7th/8th order
-    (truncation below 1e-16), so no transcendental call."""
+    """``(sin(x + d), cos(x + d))`` for |d| < 0.1 by angle addition, ``sin d``, ``cos d`` as Taylor series
+    to 7th/8th order (truncation < 1e-16): no transcendental call."""
     d2 = step * step
     sin_d = step * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0)))
     cos_d = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0 * (1.0 - d2 / 56.0)))
@@ -150,9 +138,8 @@ def _sin_cos_step(sin_x: Array, cos_x: Array, step: Array) -> tuple[Array, Array
 
 def kepler(mean_anomaly: Array, eccentricity: Array, iterations: int = KEPLER_ITERATIONS
            ) -> tuple[Array, Array, Array]:
-    """``(E, sin E, cos E)`` with ``M = E - e sin E``: Newton's method from ``E = M`` (fixed
-    count), carrying ``sin E`` and ``cos E`` by angle addition (``_sin_cos_step``: Newton
-    steps are at most ``e / (1 - e)``), so one ``sin``/``cos`` pair per solve."""
+    """``(E, sin E, cos E)`` with ``M = E - e sin E``: fixed-count Newton from ``E = M``, ``sin E``/``cos E``
+    carried by angle addition (steps <= ``e / (1 - e)``): one ``sin``/``cos`` pair per solve."""
     E = mean_anomaly
     sin_e, cos_e = jnp.sin(E), jnp.cos(E)
     for _ in range(int(iterations)):
@@ -199,9 +186,8 @@ def _clock(orbit: Orbit, t: Array, sin_e: Array, l1_group_delay: bool) -> Array:
 
 
 def satellite_position(orbit: Orbit, t: Array) -> Array:
-    """Positions of the S slots at GPS time ``t`` (IS-GPS-200 Table 20-IV). The harmonic
-    corrections and ``IDOT t_k`` are applied to the sines and cosines by angle addition
-    (they are below 1e-4 rad).
+    """Positions of the S slots at GPS time ``t`` (IS-GPS-200 Table 20-IV; harmonic corrections and
+    ``IDOT t_k``, below 1e-4 rad, by angle addition).
 
     Returns:
       (S, 3) ECEF positions [m] at GPS time ``t``, in the Earth-fixed frame of the same
@@ -218,23 +204,21 @@ def satellite_state(orbit: Orbit, t: Array, l1_group_delay: bool = True) -> tupl
 
 
 def satellite_velocity(orbit: Orbit, t: Array) -> Array:
-    """(S, 3) ECEF velocities [m/s] at ``t``: the time derivative of ``satellite_position``
-    by forward-mode AD (Earth-fixed frame, so it includes the frame's rotation)."""
+    """(S, 3) ECEF velocities [m/s] at ``t``: ``d/dt satellite_position`` by forward AD (Earth-fixed frame)."""
     t = jnp.asarray(t, jnp.result_type(orbit.toe))
     return jax.jvp(lambda s: satellite_position(orbit, s), (t,), (jnp.ones_like(t),))[1]
 
 
 def satellite_clock(orbit: Orbit, t: Array, l1_group_delay: bool = True) -> Array:
-    """(S,) satellite clock offset ``dt_sv`` [s] at GPS time ``t``: polynomial plus the
-    relativistic term, less ``T_GD`` when ``l1_group_delay`` (an L1 C/A user)."""
+    """(S,) clock offset ``dt_sv`` [s] at ``t``: polynomial + relativistic term, less ``T_GD`` when
+    ``l1_group_delay`` (L1 C/A user)."""
     _, sin_e, _, _ = _anomaly(orbit, t)
     return _clock(orbit, t, sin_e, l1_group_delay)
 
 
 def earth_rotation(position: Array, travel_time: Array) -> Array:
-    """(..., 3) positions rotated about the z axis by ``-Omega_e * travel_time``: a point
-    fixed in the ECEF frame of transmission, expressed in the ECEF frame of reception
-    (the Sagnac correction)."""
+    """(..., 3) positions rotated about z by ``-Omega_e * travel_time``: from the ECEF frame of transmission
+    to that of reception (Sagnac correction)."""
     angle = OMEGA_E * travel_time    # < 1e-6 rad: series to 4th order, exact in float64
     c, s = 1.0 - 0.5 * angle**2 * (1.0 - angle**2 / 12.0), angle * (1.0 - angle**2 / 6.0)
     x, y, z = position[..., 0], position[..., 1], position[..., 2]
@@ -243,14 +227,11 @@ def earth_rotation(position: Array, travel_time: Array) -> Array:
 
 def transmission_geometry(orbit: Orbit, t_receive: Array, receiver_ecef: Array,
                           iterations: int = 3) -> tuple[Array, Array, Array, Array]:
-    """Light-time solution for a receiver at ``receiver_ecef`` (3,) at true GPS time
-    ``t_receive``.
+    """Light-time solution for a receiver at ``receiver_ecef`` (3,) at true GPS time ``t_receive``:
+    ``tau = |R(tau) r_s(t - tau) - r_r| / c`` by fixed point (contracts ~1e-5 a step: pm after 3).
 
-    Returns ``(positions, ranges, t_transmit, clocks)``: (S, 3) satellite positions at
-    transmission in the ECEF frame of reception, (S,) geometric ranges [m], (S,)
-    transmission times (fixed-point iteration ``tau = |R(tau) r_s(t - tau) - r_r| / c``,
-    contracting by ~1e-5 a step: picometres after 3) and (S,) satellite clocks [s] at
-    transmission (``satellite_clock``, L1).
+    Returns ``(positions, ranges, t_transmit, clocks)``: (S, 3) positions at transmission in the ECEF
+    frame of reception, (S,) ranges [m], (S,) transmission times, (S,) clocks [s] (``satellite_clock``, L1).
     """
     _checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
     receiver_ecef = jnp.asarray(receiver_ecef)
@@ -320,11 +301,8 @@ def ephemeris_table(ephemerides: Ephemerides, reference_week: int, slot_prns=Non
 
 def almanac_table(almanac: Almanac, reference_week: int | None = None, slot_prns=None,
                   include_unhealthy: bool = False, dtype=None) -> OrbitTable:
-    """An almanac as an ``OrbitTable`` (one record a slot, valid at any time).
-
-    ``reference_week`` defaults to the almanac's week; slots default to its PRNs in
-    file order.
-    """
+    """An almanac as an ``OrbitTable`` (one record a slot, valid at any time); ``reference_week``
+    defaults to the almanac's, slots to its PRNs in file order."""
     dtype = dtype or jnp.result_type(float)
     alm = almanac
     reference_week = int(alm.week[0]) if reference_week is None else int(reference_week)
@@ -344,12 +322,9 @@ def almanac_table(almanac: Almanac, reference_week: int | None = None, slot_prns
 
 
 def select_orbits(table: OrbitTable, t: Array) -> tuple[Orbit, Array]:
-    """Each slot's record for epoch ``t``: ``(orbit with (S,) leaves, (S,) bool available)``.
-
-    The record with the smallest ``|t - toe|`` among the valid ones within their
-    validity (RTKLIB's ``seleph`` rule), never one that describes no orbit
-    (``orbit_problem``); a slot with none is unavailable (its orbit is then a valid
-    record's elements or zeros, never to be used).
+    """Each slot's record for epoch ``t``: ``(orbit with (S,) leaves, (S,) bool available)``: smallest
+    ``|t - toe|`` among valid records within their validity (RTKLIB's ``seleph``), never one with an
+    ``orbit_problem``; a slot with none is unavailable (its orbit then is filler, never to be used).
     """
     age = jnp.abs(_wrap_half_week(t - table.orbit.toe))
     usable = table.valid & (age <= table.validity) & (orbit_problem(table.orbit) == 0)

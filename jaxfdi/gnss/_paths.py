@@ -1,10 +1,8 @@
 """Receiver trajectories: a UAV flying a racetrack circuit at constant speed and height.
 
-The racetrack is two straight legs of length ``straight`` joined by half circles of
-radius ``radius``: the first leg heads north along ``east = 0``, the return leg heads south
-along ``east = -2 radius``, starting at ``(north, east) = (-straight / 2, 0)``. Positions are
-local NED about a geodetic origin, then ECEF (``frames.ned_to_ecef``), sampled at the
-receiver's time tags; ``phase`` [m] shifts the start along the circuit.
+Two legs of length ``straight`` joined by half circles of ``radius``: north along ``east = 0``, back south
+along ``east = -2 radius``, from ``(north, east) = (-straight / 2, 0)``; local NED about a geodetic origin,
+then ECEF (``frames.ned_to_ecef``) at the receiver's tags; ``phase`` [m] shifts the start along the circuit.
 """
 from __future__ import annotations
 

@@ -1,30 +1,21 @@
 """Protection levels by the slope method and availability against alert limits
 (Brown & Chin 1992; Yoo et al. 2010, eqs. 10-11, Table 1).
 
-A bias ``b`` on satellite ``i`` moves the position by ``A[:, i] b`` with
-``A = (H^T W H)^{-1} H^T W`` and the test statistic's noncentrality by
-``S_ii b^2 / sigma_i^2`` (``S = P^T P`` of the whitened geometry). The horizontal slope,
-position error per unit ``sqrt(noncentrality)``, is
+A bias ``b`` on satellite ``i`` moves the position by ``A[:, i] b``, ``A = (H^T W H)^{-1} H^T W``, and the
+noncentrality by ``S_ii b^2 / sigma_i^2`` (``S = P^T P``, whitened). Slopes (eq. 10 times ``sigma``):
 
-``SLOPE_H(i) = sqrt(A_N,i^2 + A_E,i^2) sigma_i / sqrt(S_ii)``
+``SLOPE_H(i) = sqrt(A_N,i^2 + A_E,i^2) sigma_i / sqrt(S_ii)``, ``SLOPE_V`` with ``|A_D,i|``.
 
-(eq. 10 times ``sigma``: with equal sigmas ``SLOPE(i) sigma``), the vertical one uses
-``|A_D,i|``. The bias the test misses with probability ``P_md`` has noncentrality
-``lambda`` (``noncentral_chi2.noncentrality_for_missed_detection`` at the detection
-threshold, ``n - u`` degrees of freedom, ``u`` the unknowns the used satellites carry:
-3 and a clock per constellation in view), so
-the protection levels are
+``lambda``: noncentrality missed with probability ``P_md`` at the threshold
+(``noncentral_chi2.noncentrality_for_missed_detection``, ``n - u`` dof, ``u`` = 3 + a clock per constellation in view):
 
-``HPL = max_i SLOPE_H(i) sqrt(lambda)``, ``VPL = max_i SLOPE_V(i) sqrt(lambda)``
+``HPL = max_i SLOPE_H(i) sqrt(lambda)``, ``VPL = max_i SLOPE_V(i) sqrt(lambda)`` (eq. 11:
+``SLOPE_max sqrt(mu) sigma_pr``), ``MDB_i = sigma_i sqrt(lambda / S_ii)``.
 
-(eq. 11: ``SLOPE_max sqrt(mu) sigma_pr``), and the minimum detectable bias of satellite
-``i`` is ``MDB_i = sigma_i sqrt(lambda / S_ii)``. GPS is available for an operation when
-``HPL <= HAL`` (and ``VPL <= VAL`` where a vertical limit applies); with ``u``
-satellites or fewer there is no test and the levels are infinite.
-
-Alert limits (``ALERT_LIMITS``, RTCA DO-229 / ICAO Annex 10): non-precision approach
-HAL 556 m (the paper's Table 1, accuracy 220 m), terminal 1852 m, en route 3704 m,
-oceanic 7408 m, LNAV/VNAV 556 m / 50 m, LPV 40 m / 50 m.
+Available when ``HPL <= HAL`` (and ``VPL <= VAL`` where a vertical limit applies); with ``u`` satellites
+or fewer there is no test and the levels are infinite. ``ALERT_LIMITS`` (RTCA DO-229 / ICAO Annex 10):
+non-precision approach HAL 556 m (the paper's Table 1, accuracy 220 m), terminal 1852 m, en route
+3704 m, oceanic 7408 m, LNAV/VNAV 556 m / 50 m, LPV 40 m / 50 m.
 """
 from __future__ import annotations
 
@@ -82,11 +73,8 @@ def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tup
       qr: the whitened geometry's ``masked_qr`` when already computed.
 
     Returns:
-      ``ProtectionLevels``: the (S,) horizontal and vertical slopes [m per
-      ``sqrt(noncentrality)``] (0 at unused or unobservable slots), the () ``hpl`` and
-      ``vpl`` [m] (inf with ``n - u <= 0`` degrees of freedom), the (S,)
-      ``minimum_detectable_bias`` [m] (inf at unused or unobservable slots or without a
-      test) and the () bool ``available`` (``HPL <= HAL`` and ``VPL <= VAL``).
+      ``ProtectionLevels``: slopes 0 at unused or unobservable slots; ``hpl``, ``vpl`` inf with
+      ``n - u <= 0`` dof; ``minimum_detectable_bias`` inf at unused or unobservable slots or without a test.
     """
     if isinstance(operation, str):
         if operation not in ALERT_LIMITS:

@@ -1,33 +1,22 @@
 """Parity-space RAIM: detection, isolation (Brown & Chin 1992; Yoo et al. 2010, eqs. 5-9).
 
-Linearised at the least-squares fix, ``y = H x + eps`` (``H`` n x u: position and
-``u - 3`` receiver clocks, one per constellation; ``u = 4`` for GPS alone). With the QR
-decomposition of the *whitened* geometry ``W^(1/2) H = Q R`` (``W = diag(1/sigma_i^2)``),
-the last ``n - u`` columns of ``Q`` give the parity matrix ``P`` ((n - u) x n; ``u``
-counts the clocks of the constellations with a used satellite):
-``P H_w = 0``, ``P P^T = I``, and the parity vector ``p = P y_w = P eps_w``. Fault-free,
-``p ~ N(0, I)``, so the detection statistic ``TS_D = p^T p`` is chi-square with
-``n - u`` degrees of freedom (the weighted sum of squared residuals, Walter & Enge
-1995); equal sigmas give the paper's ``||p||^2 / sigma^2``. The parity space is the
-sensors' one (``detection.parity``: ``P`` a basis of the left null space of ``H_w``,
-``TS_D`` its ``parity_statistic``), formed by QR on the used slots. A second clock costs a degree of freedom (and raises
-the threshold and the protection level) wherever it has a satellite.
+Linearised at the least-squares fix, ``y = H x + eps`` (``H`` n x u: position and ``u - 3`` clocks, one per
+constellation with a used satellite; ``u = 4`` for GPS). Whitened QR ``W^(1/2) H = Q R`` (``W = diag(1/sigma_i^2)``);
+the last ``n - u`` columns of ``Q`` give ``P`` ((n - u) x n): ``P H_w = 0``, ``P P^T = I``, ``p = P y_w = P eps_w``.
+Fault-free ``p ~ N(0, I)``: ``TS_D = p^T p`` is chi-square with ``n - u`` dof (weighted SSE, Walter & Enge 1995; equal
+sigmas: the paper's ``||p||^2 / sigma^2``); the sensors' parity space (``detection.parity``, ``parity_statistic``) on
+the used slots. A second clock costs a dof (higher threshold and protection level) wherever it has a satellite.
 
-- **Threshold** ``chi2_threshold(n - 4, P_fa)`` (``rule="chi2"``). ``rule="paper"`` uses
-  eq. 8 of Yoo et al. (2010), ``sqrt(2 ln(1/r) sigma^2 / (n - 4))``, read as a bound on the RMS parity
-  ``sqrt(p^T p / (n - 4))`` (the reading whose units agree): on ``TS_D`` it is
-  ``2 ln(1/P_fa)`` whatever ``n``, the exact chi-square quantile for 2 degrees of freedom
-  only; with 1 it is conservative, from 3 on its false-alarm rate exceeds ``P_fa``
-  (``paper_threshold``; tested).
-- **Isolation** (eq. 9): ``TS_j = p . P[:, j] / ||P[:, j]||``; the satellite with the largest
-  ``|TS_j|`` is the faulty one. ``P^T p = S y_w`` with ``S = P^T P = I - Q1 Q1^T``, so the
-  statistics come from the thin factor ``Q1`` without forming ``P`` (``parity_matrix``
-  forms it, for the paper's equations and the tests). Isolation needs ``n >= u + 2``: with
-  ``u + 1`` satellites every column of ``P`` is parallel to ``p``.
+- **Threshold** ``chi2_threshold(n - 4, P_fa)`` (``rule="chi2"``); ``rule="paper"``: eq. 8 of Yoo et al.
+  (2010), ``sqrt(2 ln(1/r) sigma^2 / (n - 4))``, a bound on the RMS parity ``sqrt(p^T p / (n - 4))`` (units
+  agree): on ``TS_D`` ``2 ln(1/P_fa)`` for any ``n``, exact for 2 dof only, conservative for 1, above
+  ``P_fa`` from 3 (``paper_threshold``; tested).
+- **Isolation** (eq. 9): ``TS_j = p . P[:, j] / ||P[:, j]||``, the largest ``|TS_j|`` faulty; ``P^T p = S y_w``,
+  ``S = P^T P = I - Q1 Q1^T``: from the thin ``Q1`` without ``P`` (``parity_matrix`` forms it for the paper's equations
+  and tests). Needs ``n >= u + 2`` (with ``u + 1`` every column of ``P`` is parallel to ``p``).
 - **Exclusion**: re-solve without the isolated satellite (``integrity.monitor_epoch``).
 
-Arrays have one entry per satellite slot (S); unused slots are masked, never dropped,
-so one compiled function serves every number of visible satellites.
+One entry per satellite slot (S); unused slots masked, never dropped: one program for any number visible.
 """
 from __future__ import annotations
 
@@ -129,10 +118,8 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
 
 
 def unknowns(fix: PositionFix) -> int:
-    """The fix's geometry columns: 3 position coordinates and one clock per column after
-    them (trace time; at least 4). ``u`` of an epoch counts only the clocks with a used
-    satellite (``MaskedQR.num_pivots``): a constellation out of view costs no degree of
-    freedom."""
+    """The fix's geometry columns: 3 position, then one per clock (trace time; >= 4). An epoch's ``u``
+    counts only clocks with a used satellite (``MaskedQR.num_pivots``)."""
     shape = _checks.shape_of(fix.geometry)
     if len(shape) != 2 or shape[1] < 4:
         raise ValueError(f"fix.geometry: expected (S, 3 + clocks) with at least one clock column, got shape {shape}")
@@ -140,9 +127,8 @@ def unknowns(fix: PositionFix) -> int:
 
 
 def check_tables(tables: RaimTables, fix: PositionFix) -> None:
-    """Trace time: ``tables`` cover every degree of freedom the fix can have (``raim_tables``
-    of at least its S slots). A smaller table would clamp ``n - u`` to its last entry: a
-    threshold and a protection level smaller than the true ones, with nothing to say so."""
+    """Trace time: ``tables`` must cover every dof (``raim_tables`` of >= S slots); a smaller one would
+    silently clamp ``n - u``, giving too small a threshold and protection level."""
     slots = _checks.shape_of(fix.used)[0]
     size = _checks.shape_of(tables.threshold)[0]
     unknowns(fix)
@@ -159,8 +145,7 @@ def whitened(fix: PositionFix) -> tuple[Array, Array]:
 
 
 def parity_matrix(fix: PositionFix) -> tuple[Array, Array]:
-    """``(P, valid)``: the explicit parity matrix ((S - u), S) of the whitened geometry from
-    its QR decomposition (rows ``valid`` hold the ``n - u`` parity rows)."""
+    """``(P, valid)``: explicit parity matrix ((S - u), S) from the whitened QR (``valid``: the ``n - u`` rows)."""
     h, _ = whitened(fix)
     return parity_rows(masked_qr(h, fix.used))
 
@@ -169,12 +154,8 @@ def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = Non
     """Detection statistic, threshold and isolation statistics of one fix (module doc).
 
     Returns:
-      ``ParityCheck``: the () statistic ``TS_D = p^T p`` (0 when ``n <= u``), its () int
-      degrees of freedom ``n - u`` (clipped at 0), the () threshold ``tables.threshold[dof]``
-      (inf when ``dof == 0``), the () bool ``alarm`` ``TS_D > threshold``, the (S,)
-      isolation statistics ``TS_j`` (0 at unused slots), the () int32 ``isolated`` slot of
-      the largest ``|TS_j|`` (-1 when ``n < u + 2``) and the () bool ``healthy`` (finite
-      ``TS_D``).
+      ``ParityCheck``: ``TS_D`` (0 when ``n <= u``), dof ``n - u`` (clipped at 0), threshold ``tables.threshold[dof]``,
+      ``alarm = TS_D > threshold``, (S,) ``TS_j``, int32 ``isolated`` (-1 when ``n < u + 2``), ``healthy``.
     """
     check_tables(tables, fix)
     h, y = whitened(fix)

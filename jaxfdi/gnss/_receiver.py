@@ -1,26 +1,18 @@
 """A real receiver's observation file through the snapshot integrity chain.
 
-``read_observations`` reads a receiver's observations: a RINEX 2 or 3 observation file or
-an Android GnssLogger log. ``receiver_epochs`` aligns them with a navigation
-file (``read_rinex_nav``): one slot per GPS satellite observed, the epochs' time tags
-from the start of the first epoch's week, the broadcast ionosphere of the navigation
-header and each satellite's user range accuracy. ``monitor_receiver`` runs
-``monitor_epochs`` on them with single-point positioning's measurement model, the one
-RTKLIB's ``pntpos`` uses (Takasu 2013, RTKLIB manual, E.6), so that its fixes can be
-compared with RTKLIB's on the same epochs: broadcast orbits and clocks (``T_GD`` for an
-L1 C/A user), Klobuchar and Saastamoinen delays, a 15 deg elevation mask, and weights
+``read_observations``: RINEX 2/3 observation file or Android GnssLogger log. ``receiver_epochs`` aligns them with a
+navigation file (``read_rinex_nav``): a slot per observed GPS satellite, times from the first epoch's week, the header's
+broadcast ionosphere, each satellite's URA. ``monitor_receiver`` runs ``monitor_epochs`` with RTKLIB ``pntpos``'s
+single-point model (Takasu 2013, RTKLIB manual, E.6), comparable with RTKLIB's fixes: broadcast orbits and clocks
+(``T_GD``, L1 C/A), Klobuchar and Saastamoinen, 15 deg mask, weights
 
 ``sigma_i^2 = URA_i^2 + 0.3^2 + 0.3^2 (1 + 1 / sin max(E_i, 5 deg)) + var_iono + var_tropo``
 
-(URA of the ephemeris, code bias 0.3 m, RTKLIB's default code error
-``100 x (3 mm + 3 mm / sqrt(sin E))`` in variance form, the atmosphere's model errors:
-``atmosphere_corrections``).
-
-On a smartphone trace (``read_android``), whose files carry the satellite positions and
-corrected pseudoranges, ``monitor_receiver`` runs the same chain without orbits or
-atmosphere: one receiver clock per constellation and the phone's own pseudorange
-uncertainty as the weights' standard deviations, the trace padded and chunked
-(``positioning.EPOCH_CHUNK``) so that every trace of up to 64 signals shares one program.
+(code bias 0.3 m; RTKLIB's default code error ``100 x (3 mm + 3 mm / sqrt(sin E))`` in variance form;
+atmosphere model errors: ``atmosphere_corrections``). A smartphone trace (``read_android``) carries
+satellite positions and corrected pseudoranges: the same chain without orbits or atmosphere, a clock
+per constellation, the phone's pseudorange uncertainty as sigma, padded and chunked
+(``positioning.EPOCH_CHUNK``) so every trace of up to 64 signals shares one program.
 """
 from __future__ import annotations
 
@@ -76,14 +68,12 @@ class ReceiverEpochs(NamedTuple):
 
 
 def read_observations(path) -> Observations:
-    """Read a receiver's observation file: RINEX 2 or 3 (Gurtner & Estey 2007; IGS 2018),
-    or an Android GnssLogger log (``# Raw,`` records, pseudoranges generated from the
-    receiver and satellite times: EUSPA 2017), told apart by their first line.
+    """Read a receiver's observation file: RINEX 2 or 3 (Gurtner & Estey 2007; IGS 2018) or an Android GnssLogger log
+    (``# Raw,`` records, pseudoranges from receiver and satellite times: EUSPA 2017), told apart by the first line.
 
     Returns:
-      ``Observations``: (E,) epochs' GPS week and time of week, (S,) satellites and the
-      code read for each, (E, S) pseudoranges [m] and C/N0 [dB-Hz] (NaN where not
-      measured), the approximate (header or first fix) ECEF position.
+      ``Observations``: (E,) GPS week and time of week, (S,) satellites and code read, (E, S)
+      pseudoranges [m] and C/N0 [dB-Hz] (NaN: not measured), approximate ECEF position (header or first fix).
 
     Raises:
       ValueError: naming the file and the line of the first malformed header or record.
@@ -95,8 +85,8 @@ def read_observations(path) -> Observations:
 
 
 def user_range_accuracy(accuracy) -> np.ndarray:
-    """The URA value [m] that RINEX's ``SV accuracy`` [m] stands for: the smallest of
-    ``URA_VALUES`` not below it (6144 m beyond the table, and for NaN).
+    """The URA [m] for RINEX's ``SV accuracy`` [m]: smallest ``URA_VALUES`` entry not below it (6144 m
+    beyond the table and for NaN).
 
     Returns:
       float array, the shape of ``accuracy``.
@@ -107,12 +97,11 @@ def user_range_accuracy(accuracy) -> np.ndarray:
 
 
 def receiver_epochs(observations: Observations, ephemerides: Ephemerides, dtype=None) -> ReceiverEpochs:
-    """The GPS satellites of ``observations`` as slots of ``ephemerides``' orbits (a
-    satellite of another system, or with no record, is left out).
+    """The GPS satellites of ``observations`` as slots of ``ephemerides``' orbits (other systems and
+    satellites without a record left out).
 
     Returns:
-      ``ReceiverEpochs`` with the (E,) times from the first epoch's week and the (E, S)
-      pseudoranges of the S GPS satellites the navigation file has records of.
+      ``ReceiverEpochs``: (E,) times from the first epoch's week, (E, S) pseudoranges.
     """
     gps = [k for k, sat in enumerate(observations.satellite) if sat[0] == "G"
            and int(sat[1:]) in set(np.asarray(ephemerides.prn).tolist())]
@@ -146,24 +135,20 @@ def code_sigma(ura: Array):
 def monitor_receiver(measurements: Observations | ReceiverEpochs | PhoneEpochs, ephemerides: Ephemerides | None = None,
                      tables: RaimTables | None = None, mask_angle: float | None = None, clocks: str = "constellation",
                      operation="npa", exclude: bool | int = True) -> EpochIntegrity:
-    """Fix, RAIM, protection levels and exclusion of every epoch of a real receiver
-    (module docstring).
+    """Fix, RAIM, protection levels and exclusion of every epoch of a real receiver (module doc).
 
     Args:
-      measurements: an observation file (``read_observations``, with its ``ephemerides``
-        from ``read_rinex_nav``: GPS, RTKLIB's single-point model), the same aligned
-        (``receiver_epochs``), or a phone trace (``read_android``: every constellation).
+      measurements: an observation file (``read_observations``, with ``ephemerides`` from ``read_rinex_nav``: GPS only),
+        the same aligned (``receiver_epochs``), or a phone trace (``read_android``: every constellation).
       tables: ``raim_tables`` (default: of the slots, ``P_fa = 1e-3``, ``P_md = 1e-3``).
-      mask_angle: elevation mask [rad]; ``None``: 15 deg for an observation file
-        (RTKLIB's), none for a phone (as Google's and gnss_lib_py's solutions).
-      clocks: a phone's receiver clocks: "constellation" (one per constellation,
-        ``n - 3 - C`` degrees of freedom with C in view) or "one" (the files'
-        inter-signal biases taken as exact); an observation file is GPS alone.
+      mask_angle: [rad]; ``None``: 15 deg for a file (RTKLIB's), none for a phone (as Google, gnss_lib_py).
+      clocks: a phone's: "constellation" (one each, ``n - 3 - C`` dof with C in view) or "one" (the files'
+        inter-signal biases taken as exact).
       operation, exclude: as for ``monitor_epochs``.
 
     Returns:
-      ``EpochIntegrity`` with a leading epoch axis on every leaf (a phone's
-      ``fix.clock_bias`` (T, C), in ``PhoneEpochs.clocks`` order, with per-constellation clocks).
+      ``EpochIntegrity``, a leading epoch axis on every leaf (a phone's per-constellation
+      ``fix.clock_bias`` (T, C), ``PhoneEpochs.clocks`` order).
     """
     if clocks not in ("constellation", "one"):
         raise ValueError(f"clocks: expected 'constellation' or 'one', got {clocks!r}")
@@ -193,9 +178,8 @@ def _monitor(table, times, pseudoranges, ura, atmosphere, tables, mask_angle, op
 
 
 def _monitor_trace(phone: PhoneEpochs, tables, clocks, mask_angle, operation, exclude) -> EpochIntegrity:
-    """``monitor_epoch`` vmapped over a phone's epochs with the files' satellite positions at
-    transmission and corrected pseudoranges, weights from the phone's uncertainty; padded
-    and chunked (``positioning.EPOCH_CHUNK``), the padding cut from the result."""
+    """``monitor_epoch`` vmapped over a phone's epochs (files' positions and corrected pseudoranges,
+    phone's uncertainty as weights), padded and chunked (``positioning.EPOCH_CHUNK``), padding cut."""
     epochs, slots = phone.pseudorange.shape
     own = phone.clocks().shape[1] if clocks == "constellation" else 1
     rows, width, wide = padded_sizes(epochs, slots, own)

@@ -1,19 +1,13 @@
 """RINEX 2 GPS navigation-message reader (NumPy): broadcast ephemerides as arrays.
 
-A RINEX 2.x ``N`` file (Gurtner & Estey, RINEX 2.11, 2007) is a header closed by
-``END OF HEADER`` and records of 8 lines: the PRN and clock epoch (``yy mm dd hh mm
-ss``, GPS time) with ``af0, af1, af2``, then 7 "broadcast orbit" lines of 4 numbers
-(the last may hold fewer): IODE, Crs, delta n, M0 / Cuc, e, Cus, sqrt(A) / toe, Cic,
-OMEGA0, Cis / i0, Crc, omega, OMEGA DOT / IDOT, L2 codes, GPS week, L2 P flag /
-accuracy, health, TGD, IODC / transmission time, fit interval.
+RINEX 2.x ``N`` file (Gurtner & Estey, RINEX 2.11, 2007): a header closed by ``END OF HEADER``, records of 8 lines: PRN
+and clock epoch (``yy mm dd hh mm ss``, GPS time) with ``af0, af1, af2``, then 7 lines of 4 numbers (the last may hold
+fewer): IODE, Crs, delta n, M0 / Cuc, e, Cus, sqrt(A) / toe, Cic, OMEGA0, Cis / i0, Crc, omega, OMEGA DOT / IDOT, L2
+codes, GPS week, L2 P flag / accuracy, health, TGD, IODC / transmission time, fit interval.
 
-The standard writes the numbers as ``D19.12`` in fixed columns; some producers (the
-shipped ``gps_nav_rinex2_sugl0010.20n``, made by Stanford's ephVote) write them 20
-characters wide. This reader therefore reads the numbers of a line as a sequence
-(Fortran ``D`` exponents accepted, adjacent numbers without a blank between them
-split correctly) and rejects a line holding anything else. LF and CRLF line endings
-are accepted; a malformed header or record raises a ``ValueError`` naming the file and
-the line.
+Numbers are read as a sequence, not fixed ``D19.12`` columns (the shipped ``gps_nav_rinex2_sugl0010.20n``, by Stanford's
+ephVote, writes 20 wide): Fortran ``D`` exponents accepted, adjacent numbers split, any other content rejected. LF and
+CRLF accepted; a malformed header or record raises ``ValueError`` naming the file and line.
 """
 from __future__ import annotations
 
@@ -45,8 +39,7 @@ _REQUIRED = (4, 4, 4, 4, 4, 4, 1)
 
 
 class Ephemerides(NamedTuple):
-    """N broadcast ephemeris records; every per-record field is an (N,) NumPy array.
-    Angles in radians, times in seconds, as in IS-GPS-200 (RINEX 2 stores them so).
+    """N broadcast ephemeris records, each field an (N,) NumPy array; radians and seconds (IS-GPS-200).
 
     Attributes:
       prn: int, PRN number
@@ -232,8 +225,7 @@ def read_rinex_nav(path: str | Path) -> Ephemerides:
     """Read a RINEX 2 GPS navigation file (``parse_rinex_nav`` on its ASCII text).
 
     Returns:
-      ``Ephemerides``: one (N,) NumPy array per field for the file's N records, in file
-      order (int PRN, weeks and health; float the rest), plus the header's (4,) Klobuchar
+      ``Ephemerides``: (N,) arrays in file order (int PRN, weeks, health; float the rest), header's (4,)
       ``ion_alpha`` / ``ion_beta`` (NaN if absent).
     """
     return parse_rinex_nav(read_ascii(path), str(path))

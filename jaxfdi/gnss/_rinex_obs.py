@@ -1,19 +1,15 @@
 """RINEX 2 and 3 observation-file reader (NumPy): code pseudoranges and C/N0 per epoch.
 
-A RINEX observation file (Gurtner & Estey, RINEX 2.11, 2007; IGS RINEX 3.04, 2018) is a
-header closed by ``END OF HEADER`` and epoch records. RINEX 2 lists the observation
-types once (``# / TYPES OF OBSERV``: ``C1``, ``P1``, ``L1``, ``S1``, ...); an epoch line
-``yy mm dd hh mm ss.sssssss  flag n`` names its ``n`` satellites (12 per line), and each
-satellite's observations follow, five 16-character fields (``F14.3`` value, loss-of-lock
-and signal-strength digits) per line. RINEX 3 lists the types per system
-(``SYS / # / OBS TYPES``: ``C1C``, ``C2I``, ...); an epoch line starts with ``>`` and each
-satellite's record is one line, its identifier (``G05``) then its fields.
+Format (Gurtner & Estey, RINEX 2.11, 2007; IGS RINEX 3.04, 2018): header closed by ``END OF HEADER``, then
+epoch records. RINEX 2: types listed once (``# / TYPES OF OBSERV``); epoch line ``yy mm dd hh mm
+ss.sssssss  flag n`` with ``n`` satellites (12 per line), then each satellite's fields, five of 16
+characters per line (``F14.3`` value, loss-of-lock and signal-strength digits). RINEX 3: types per
+system (``SYS / # / OBS TYPES``); epoch line ``>``, one line per satellite (``G05`` then fields).
 
-The reader keeps, per system, the first single-frequency code of ``CODE_PRIORITY`` that the
-header lists (GPS, QZSS and GLONASS ``C1``/``C1C``, Galileo E1, BeiDou B1I) and its signal
-strength (``S1``, ``S1C``, ... in dB-Hz) where recorded. Epochs flagged 0 (ok) or 1 (power
-failure) are observations; event records (flags 2-5) and cycle-slip records (6) are
-skipped. A malformed header or record raises a ``ValueError`` naming the file and line.
+Kept per system: the first single-frequency code of ``CODE_PRIORITY`` in the header (GPS, QZSS, GLONASS
+``C1``/``C1C``, Galileo E1, BeiDou B1I) and its signal strength (``S1``, ``S1C``, ... dB-Hz) if recorded.
+Flags 0 (ok) and 1 (power failure) are observations; events (2-5) and cycle slips (6) are skipped. A
+malformed header or record raises ``ValueError`` naming the file and line.
 """
 from __future__ import annotations
 
@@ -166,10 +162,8 @@ def _values(text: str, types: list[str], name: str, line_no: int, satellite: str
 
 
 def _records(read_record, lines: list[str], start: int, types: dict, name: str):
-    """Yield each observation epoch's ``(week, tow, {satellite: {type: value}})``:
-    ``read_record(lines, position, types, name)`` reads the record starting at
-    ``position`` and returns where the next begins and the epoch (``None`` for an event);
-    blank lines between records are skipped."""
+    """Yield each epoch's ``(week, tow, {satellite: {type: value}})``; ``read_record(lines, position, types,
+    name)`` returns the next record's position and the epoch (``None``: an event); blank lines skipped."""
     position = start
     while position < len(lines):
         if not lines[position].strip():

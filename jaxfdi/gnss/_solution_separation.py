@@ -1,32 +1,24 @@
-"""Protection levels by multiple-hypothesis solution separation (the ARAIM user algorithm,
-Blanch et al. 2015, "Baseline advanced RAIM user algorithm and possible improvements",
-IEEE TAES 51(1); EU-U.S. ARAIM ADD v3), for one fix, vmappable over epochs
-(``separate_epochs``: a recorded trace's epochs, padded as ``monitor_receiver`` pads a phone's).
+"""Protection levels by multiple-hypothesis solution separation (the ARAIM user algorithm, Blanch et al. 2015, "Baseline
+advanced RAIM user algorithm and possible improvements", IEEE TAES 51(1); EU-U.S. ARAIM ADD v3), for one fix, vmappable
+over epochs (``separate_epochs``: a recorded trace's epochs, padded as ``monitor_receiver`` pads a phone's).
 
-Fault modes ``k``: each used satellite alone (prior ``P_sat``) and each constellation as a
-whole (prior ``P_const`` of its clock column). Mode ``k``'s fault-tolerant solution keeps
-the other satellites (whitened geometry ``h``, residuals ``y``; ``D_k`` its 0/1 mask):
+Fault modes ``k``: each used satellite (prior ``P_sat``) and each constellation (prior ``P_const`` of its
+clock column). Mode ``k`` keeps the other satellites (whitened ``h``, residuals ``y``, 0/1 mask ``D_k``):
 
-``N_k = h^T D_k h``, ``dx_k = N_k^-1 h^T D_k y`` (the separation from the all-in-view fix,
-whose own ``N_0^-1 h^T y`` is zero at convergence),
+``N_k = h^T D_k h``, ``dx_k = N_k^-1 h^T D_k y`` (all-in-view ``N_0^-1 h^T y`` is zero at convergence),
 ``sigma_k,q^2 = (N_k^-1)_qq``, ``sigma_ss,k,q^2 = (N_k^-1 - N_0^-1)_qq``
 
-(q = north, east, down; a clock column left without satellites is dropped; a satellite
-alone on its clock gives ``sigma_ss = 0`` and no test). A mode is
-monitored when its solution exists (at least ``3 + clocks left`` satellites); the priors
-of the others, and of two or more simultaneous satellite faults (``(n P_sat)^2 / 2``), are
-``P_nm``. The test thresholds are ``T_k,q = K_fa,q sigma_ss,k,q`` with
-``K_fa,q = Q^-1(P_FA,q / (2 N_q))`` (``N_q`` monitored modes; horizontal ``P_FA_H`` shared
-by two axes); the test alarms when some ``|dx_k,q| > T_k,q``. Each protection level
-``PL_q`` solves
+(q = N, E, D; a clock column without satellites is dropped; a satellite alone on its clock:
+``sigma_ss = 0``, no test). Monitored: modes whose solution exists (>= ``3 + clocks left``
+satellites); the others' priors and multiple satellite faults (``(n P_sat)^2 / 2``) make ``P_nm``.
+Thresholds ``T_k,q = K_fa,q sigma_ss,k,q``, ``K_fa,q = Q^-1(P_FA,q / (2 N_q))`` (``N_q`` monitored
+modes; ``P_FA_H`` shared by two axes); alarm if some ``|dx_k,q| > T_k,q``. Each ``PL_q`` solves
 
 ``2 Q(PL_q / sigma_0,q) + sum_k P_k Q((PL_q - T_k,q) / sigma_k,q) = P_HMI,q (1 - P_nm / (P_HMI_V + P_HMI_H))``
 
-by bisection (``P_HMI,q``: ``P_HMI_H / 2`` on each horizontal axis, ``P_HMI_V`` down),
-and ``HPL = sqrt(PL_N^2 + PL_E^2)``, ``VPL = PL_D``. Since every term is positive,
-``PL_q >= sigma_0,q Q^-1(P_HMI,q' / 2)``: the levels never fall below the fault-free ones
-(``fault_free_levels``). With more unmonitored probability than the budget the levels are
-infinite.
+by bisection (``P_HMI,q``: ``P_HMI_H / 2`` per horizontal axis, ``P_HMI_V`` down); ``HPL = sqrt(PL_N^2 +
+PL_E^2)``, ``VPL = PL_D``; never below the fault-free levels ``sigma_0,q Q^-1(P_HMI,q' / 2)``
+(``fault_free_levels``); infinite when the unmonitored probability exceeds the budget.
 """
 from __future__ import annotations
 
@@ -52,8 +44,7 @@ BISECTIONS = 60
 
 
 class SolutionSeparation(NamedTuple):
-    """One epoch's solution-separation test and protection levels (K = S + C fault modes:
-    the S single-satellite modes, then the C constellation modes).
+    """One epoch's solution-separation test and levels (K = S + C modes: S satellites, then C constellations).
 
     Attributes:
       hpl: () m, horizontal protection level (inf when unavailable)
@@ -119,9 +110,7 @@ def solution_separation(fix: PositionFix, p_satellite: float = P_SATELLITE, p_co
       p_hmi, p_fa: (horizontal, vertical) integrity risk and false-alarm budgets.
 
     Returns:
-      ``SolutionSeparation``: ``hpl``, ``vpl`` [m], the (K, 3) separations, thresholds and
-      fault-tolerant sigmas of the K = S + C modes, which are monitored, ``P_nm``, the
-      test's ``alarm`` and the mode it points at.
+      ``SolutionSeparation`` of the K = S + C modes.
     """
     h, y = whitened(fix)
     slots, unknowns = h.shape
@@ -185,10 +174,9 @@ _separations = jax.jit(jax.vmap(solution_separation, in_axes=(0, None, None, Non
 def separate_epochs(fix: PositionFix, p_satellite: float = P_SATELLITE, p_constellation=P_CONSTELLATION,
                     p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL),
                     p_fa: tuple[float, float] = (P_FA_HORIZONTAL, P_FA_VERTICAL)) -> SolutionSeparation:
-    """``solution_separation`` of every epoch of a fix with a leading epoch axis (T, ...),
-    ``positioning.EPOCH_CHUNK`` epochs at a time with its slots and clock columns padded as
-    a phone trace's (unused slots, clocks without satellites, a zero prior): every fix of up
-    to 64 slots shares one compiled program. Same arguments as ``solution_separation``.
+    """``solution_separation`` per epoch of a fix with a leading axis (T, ...), ``positioning.EPOCH_CHUNK``
+    at a time, padded as a phone trace (unused slots, empty clocks, zero prior): fixes of up to 64 slots
+    share one program. Arguments as ``solution_separation``.
 
     Returns:
       ``SolutionSeparation`` with a leading T axis on every leaf; modes K = S + C as there.
@@ -207,8 +195,8 @@ def separate_epochs(fix: PositionFix, p_satellite: float = P_SATELLITE, p_conste
 
 
 def fault_free_levels(fix: PositionFix, p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL)):
-    """The protection levels of the all-in-view solution alone: ``sigma_0,q Q^-1(P_HMI,q / 2)``
-    per axis (``P_HMI_H / 2`` on north and east), the floor of the solution-separation levels.
+    """All-in-view levels ``sigma_0,q Q^-1(P_HMI,q / 2)`` per axis (``P_HMI_H / 2`` on N and E), the floor
+    of the solution-separation levels.
 
     Returns:
       ``(hpl, vpl)`` [m].

@@ -1,24 +1,17 @@
 """The Earth an INS navigates on: WGS-84 radii of curvature, normal gravity, Earth and
 transport rates in local North-East-Down axes.
 
-The ellipsoid constants are those of ``jaxfdi.gnss._frames`` (NIMA TR8350.2, 2000) and the
-Earth rate that of ``jaxfdi.gnss._orbits`` (IS-GPS-200); nothing here is a second geodesy.
+Ellipsoid constants from ``jaxfdi.gnss._frames`` (NIMA TR8350.2, 2000), Earth rate from ``jaxfdi.gnss._orbits``
+(IS-GPS-200). ``L``, longitude in rad, ``h`` ellipsoidal [m]; scalar functions (``vmap`` for batches).
 
-- Radii of curvature (Groves 2013, eqs. 2.105-2.106): meridian
-  ``R_N = a (1 - e^2) / (1 - e^2 sin^2 L)^(3/2)``, transverse
+- Radii (Groves 2013, eqs. 2.105-2.106): ``R_N = a (1 - e^2) / (1 - e^2 sin^2 L)^(3/2)``,
   ``R_E = a / sqrt(1 - e^2 sin^2 L)``.
-- Normal gravity on the ellipsoid (Somigliana; NIMA TR8350.2 eq. 4-1):
-  ``g0(L) = g_e (1 + k sin^2 L) / sqrt(1 - e^2 sin^2 L)`` with ``g_e = 9.7803253359``,
-  ``k = 0.00193185265241``; above it (Groves 2013, eq. 2.139):
-  ``g_D = g0(L) [1 - 2 (1 + f (1 - 2 sin^2 L) + w^2 a^2 b / mu) h / a + 3 h^2 / a^2]``,
-  ``g_N = -8.08e-9 h sin 2L`` [m/s^2], ``g_E = 0``. This is gravity (gravitation plus the
-  centrifugal term), what a strapdown velocity equation adds to the specific force.
-- Earth rate ``w_ie^n = W [cos L, 0, -sin L]``; transport rate
-  ``w_en^n = [v_E / (R_E + h), -v_N / (R_N + h), -v_E tan L / (R_E + h)]`` (Groves 2013,
-  eqs. 2.123, 5.44; Titterton & Weston 2004, sec. 3.5).
-
-Latitude ``L`` and longitude in radians, height ``h`` ellipsoidal [m]; functions take
-scalars (``vmap`` them for batches).
+- Normal gravity (Somigliana; NIMA TR8350.2 eq. 4-1): ``g0(L) = g_e (1 + k sin^2 L) / sqrt(1 - e^2 sin^2 L)``,
+  ``g_e = 9.7803253359``, ``k = 0.00193185265241``; above it (Groves 2013, eq. 2.139):
+  ``g_D = g0(L) [1 - 2 (1 + f (1 - 2 sin^2 L) + w^2 a^2 b / mu) h / a + 3 h^2 / a^2]``, ``g_N = -8.08e-9 h sin 2L``
+  [m/s^2], ``g_E = 0`` (gravitation + centrifugal: what the velocity equation adds to the specific force).
+- ``w_ie^n = W [cos L, 0, -sin L]``; ``w_en^n = [v_E / (R_E + h), -v_N / (R_N + h), -v_E tan L / (R_E + h)]``
+  (Groves 2013, eqs. 2.123, 5.44; Titterton & Weston 2004, sec. 3.5).
 """
 from __future__ import annotations
 

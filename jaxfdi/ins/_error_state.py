@@ -3,26 +3,19 @@ equations (no hand-typed blocks: F11..F35 as printed in Yoo et al. (2010) carry 
 
 Error state (15): ``[dp (3), dv (3), psi (3), db_a (3), db_g (3)]``, INS minus truth:
 
-- ``dp``: position error in NED metres, ``[(R_N + h)(L_ins - L), (R_E + h) cos L_ins
-  (lon_ins - lon), -(h_ins - h)]`` with the radii at the INS point (the
-  ``dLlh`` of Yoo et al. 2010 scaled to metres, which keeps the covariance well conditioned);
-- ``dv = v_ins - v``; ``psi`` the attitude error, ``C(q_ins) = exp([psi x]) C(q)``
-  (Groves 2013, eq. 5.111's small-angle ``I + [psi x]`` made exact);
-- ``db = b - b_hat``: the IMU bias the INS has not yet removed (``f_ins = f + db_a``).
+- ``dp`` (NED m): ``[(R_N + h)(L_ins - L), (R_E + h) cos L_ins (lon_ins - lon), -(h_ins - h)]``, radii at
+  the INS point (Yoo et al.'s ``dLlh`` in metres: a well-conditioned covariance);
+- ``dv = v_ins - v``; ``psi``: ``C(q_ins) = exp([psi x]) C(q)`` (Groves 2013, eq. 5.111's ``I + [psi x]`` made exact);
+- ``db = b - b_hat``: bias not yet removed (``f_ins = f + db_a``).
 
-``correct(ins, dx)`` is the exact inverse of ``navigation_error`` (the truth an error
-implies), which is the EKF's feedback: the INS is replaced by ``correct(ins, dx_hat)`` and
-the bias estimates by ``b_hat + db_hat``, after which the error estimate is zero again
-(the error-state reset).
+``correct(ins, dx)``, the exact inverse of ``navigation_error``, is the EKF's feedback: INS
+``correct(ins, dx_hat)``, biases ``b_hat + db_hat``, error estimate reset to zero.
 
-Dynamics: with the INS driven by ``f_hat = f_meas - b_hat`` and the truth by
-``f_hat - db - n`` (``n`` the IMU's white noise), the error rate is the derivative of
-``navigation_error`` along both trajectories (one ``jax.jvp``), and
-``F = d(error rate) / d(dx)`` at ``dx = 0`` by ``jax.jacfwd`` (``error_jacobian``). Noise
-enters like the bias, so ``G = F[:, 9:15]``; biases are random walks. Over an interval
-``T`` with the mean ``F`` of the interval (``discretize``):
-``Phi = I + A + A^2/2 + A^3/6`` (``A = F T``; exact to round-off for ``T = 1 s``: every
-term of ``A^4`` is a Schuler or Earth-rate product, < 1e-6) and
+Dynamics: INS driven by ``f_hat = f_meas - b_hat``, truth by ``f_hat - db - n`` (``n`` white noise); the error rate is
+``navigation_error``'s derivative along both (one ``jax.jvp``); ``F = d(error rate) / d(dx)`` at ``dx = 0`` by
+``jax.jacfwd`` (``error_jacobian``); noise enters like the bias, ``G = F[:, 9:15]``; biases are random walks. Over ``T``
+with the interval's mean ``F`` (``discretize``): ``Phi = I + A + A^2/2 + A^3/6`` (``A = F T``; exact to round-off for
+``T = 1 s``: ``A^4`` terms are Schuler or Earth-rate products < 1e-6),
 ``Q_d = Q T + (F Q + Q F^T) T^2 / 2 + F Q F^T T^3 / 3`` (Brown & Hwang 2012, sec. 3.9).
 """
 from __future__ import annotations
@@ -97,8 +90,8 @@ def error_jacobian(ins: NavState, specific_force: Array, angular_rate: Array) ->
     """The error-state system matrix at the INS state (module doc).
 
     Returns:
-      (15, 15) ``F = d(error rate)/d(dx)`` at ``dx = 0`` (``jax.jacfwd`` of ``error_rate``),
-      for the state ``[dp, dv, psi, db_a, db_g]`` and the IMU sample ``(f^b, w_ib^b)``.
+      (15, 15) ``F = d(error rate)/d(dx)`` at ``dx = 0`` for ``[dp, dv, psi, db_a, db_g]`` and the IMU
+      sample ``(f^b, w_ib^b)``.
     """
     zero = jnp.zeros((STATE_SIZE,), ins.velocity.dtype)
     return jax.jacfwd(error_rate)(zero, ins, specific_force, angular_rate)

@@ -1,22 +1,18 @@
 """A tactical-grade IMU: turn-on biases, bias random walks, white noise, scale factors.
 
-Each sample is the interval's mean ``[f^b (m/s^2), w_ib^b (rad/s)]`` (the IMU's velocity
-and angle increments divided by ``dt``). Over one sample (Groves 2013, sec. 4.4;
-Titterton & Weston 2004, ch. 8):
+A sample is the interval's mean ``[f^b (m/s^2), w_ib^b (rad/s)]`` (increments / ``dt``); over one sample
+(Groves 2013, sec. 4.4; Titterton & Weston 2004, ch. 8):
 
     f_meas = (1 + s_a) f + b_a + VRW / sqrt(dt) n_a,   w_meas = (1 + s_g) w + b_g + ARW / sqrt(dt) n_g,
 
-``n ~ N(0, I)`` white from sample to sample (so the increments are random walks of
-density VRW, ARW); ``b_a``, ``b_g`` drawn at turn-on from the bias sigmas and random walks
-in flight (``walk_biases``, density ``*_bias_walk``); ``s_a``, ``s_g`` per-axis scale
-factors (drawn from their sigmas; 0 by default, as the 15-state filter does not model them).
+``n ~ N(0, I)`` white (increments are random walks of density VRW, ARW); ``b_a``, ``b_g`` drawn at
+turn-on, random walks in flight (``walk_biases``, ``*_bias_walk``); ``s_a``, ``s_g`` per-axis scale
+factors (0 by default: the 15-state filter does not model them).
 
-``hg1900()`` gives an HG1900-class unit. The public source found for its numbers is the
-Honeywell tactical-grade brochure (HG1700, N61-1619-000-001) as quoted by NavToolkit's
-``hg1700_model`` (all 1 sigma): accelerometer bias 1 mg, VRW 0.065 ft/s/sqrt(h), gyro
-bias 1 deg/h, ARW 0.125 deg/sqrt(h); the HG1900 (MEMS) is sold in the same class. The
-brochure quotes no bias random walk; ``*_bias_walk`` (a 1-sigma drift of 1 deg/h and
-0.1 mg over an hour) is this library's assumption.
+``hg1900()``: numbers from Honeywell's tactical-grade brochure (HG1700, N61-1619-000-001) as quoted by NavToolkit's
+``hg1700_model`` (1 sigma): accelerometer bias 1 mg, VRW 0.065 ft/s/sqrt(h), gyro bias 1 deg/h, ARW 0.125 deg/sqrt(h)
+(HG1900, MEMS, is the same class). ``*_bias_walk`` (1 deg/h and 0.1 mg drift over an hour, 1 sigma) is this library's
+assumption (the brochure quotes none).
 """
 from __future__ import annotations
 
@@ -79,10 +75,8 @@ def hg1900(accel_scale_ppm: float = 0.0, gyro_scale_ppm: float = 0.0) -> ImuMode
     """An HG1900-class tactical IMU (module doc for the numbers and their source).
 
     Returns:
-      ``ImuModel`` of 1-sigma SI floats: turn-on biases 1 mg [m/s^2] and 1 deg/h [rad/s],
-      random walks VRW 0.065 ft/s/sqrt(h) [m/s/sqrt(s)] and ARW 0.125 deg/sqrt(h)
-      [rad/sqrt(s)], bias walks 0.1 mg and 1 deg/h per sqrt(h) [per sqrt(s)], and scale
-      factors ``accel_scale_ppm * 1e-6``, ``gyro_scale_ppm * 1e-6`` (dimensionless).
+      ``ImuModel`` of 1-sigma SI floats (module doc's numbers), scale factors ``accel_scale_ppm * 1e-6``,
+      ``gyro_scale_ppm * 1e-6``.
     """
     for name, value in (("accel_scale_ppm", accel_scale_ppm), ("gyro_scale_ppm", gyro_scale_ppm)):
         _checks.check_scalar(name, value, 0.0, meaning="a scale-factor sigma >= 0 in ppm")
@@ -121,8 +115,7 @@ def walk_biases(errors: ImuErrors, key: Array, model: ImuModel, interval: float)
 
 
 def sample_sigma(model: ImuModel, dt: float, dtype=None) -> Array:
-    """(6,) the white noise of one sample ``dt`` [s] long: ``[VRW] * 3 + [ARW] * 3`` over
-    ``sqrt(dt)`` (module doc)."""
+    """(6,) white noise of a sample ``dt`` [s] long: ``[VRW] * 3 + [ARW] * 3`` over ``sqrt(dt)``."""
     _checks.check_positive("dt", dt, "a positive sample interval (s)")
     dtype = dtype or jnp.result_type(float)
     return jnp.asarray([model.velocity_random_walk] * 3 + [model.angle_random_walk] * 3, dtype) / math.sqrt(dt)

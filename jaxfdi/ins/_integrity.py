@@ -2,32 +2,24 @@
 
 Each GPS epoch:
 
-1. **RAIM** on the pseudoranges (``gnss.integrity.monitor_epoch``: least-squares fix,
-   parity test, protection levels; no exclusion). The fix is the INS's reference only
-   when RAIM *passes*: a test was possible (``n >= 5``), it did not alarm, HPL and VPL are
-   within the alert limits and the fix converged. Otherwise the epoch is coasted.
-2. **EKF** (``loosely_coupled_filter``): update with the fix (position covariance from
-   the weighted least-squares geometry, ``(G^T W G)^-1`` in NED; velocity covariance
-   ``velocity_sigma^2 I``), feedback, then the INS through the epoch's IMU samples.
-3. **Windowed chi-square test** (Yoo et al. 2010, eq. 1; ``detection.chi2_detector``): the NIS
-   of the epochs that were updated, summed over the last ``window`` of them (10: 60 dof,
-   91.95 at 0.005). A coasted epoch leaves the window as it was and decides nothing.
-4. **SCST** (``scst.state_chi2_test``) on the filter's corrections and covariances,
-   every epoch.
-5. **IMU health** (``imu_health_test``, beyond the paper): the stuck-at test of
-   ``detection.frozen`` on every raw IMU sample, each channel against its white noise
-   (``imu.sample_sigma``); a non-finite sample is a dead channel (``chi2.flag_dead``).
-   Label ``1 + channel`` of ``[f_x, f_y, f_z, w_x, w_y, w_z]``. The EKF coasts on a dead
-   channel's last finite sample (``loosely_coupled.hold_last_finite``); no IMU channel
-   can be excluded (each axis has one sensor), so the alarm is the whole answer.
+1. **RAIM** (``gnss.integrity.monitor_epoch``: fix, parity test, protection levels; no exclusion).
+   The fix is used only when RAIM *passes*: ``n >= 5``, no alarm, HPL and VPL within the alert limits,
+   fix converged; otherwise the epoch is coasted.
+2. **EKF** (``loosely_coupled_filter``): update with the fix (position covariance ``(G^T W G)^-1`` in
+   NED, velocity ``velocity_sigma^2 I``), feedback, INS through the epoch's IMU samples.
+3. **Windowed chi-square** (Yoo et al. 2010, eq. 1; ``detection.chi2_detector``): NIS summed over the
+   last ``window`` updated epochs (10: 60 dof, 91.95 at 0.005); a coasted epoch changes nothing.
+4. **SCST** (``scst.state_chi2_test``) on the corrections and covariances, every epoch.
+5. **IMU health** (``imu_health_test``, beyond the paper): ``detection.frozen`` on every raw sample
+   against its white noise (``imu.sample_sigma``); non-finite = dead (``chi2.flag_dead``); label
+   ``1 + channel`` of ``[f_x, f_y, f_z, w_x, w_y, w_z]``. The EKF coasts on a dead channel's last
+   finite sample (``loosely_coupled.hold_last_finite``); no IMU channel can be excluded (one sensor
+   per axis): the alarm is the whole answer.
 
-GPS and INS are never fused before the check: the chi-square test sees GPS minus INS,
-so a simultaneous GPS and INS fault cannot cancel in it (the paper's argument).
-
-The INS tests also see a satellite fault that RAIM has not yet flagged (a 1 m/s
-pseudorange drift reaches the filter 10-25 s before RAIM's test crosses its threshold)
-and the filter settling after RAIM's exclusion. ``attribute_ins_alarms`` separates the
-two: an INS-test alarm with a RAIM alarm close to it in time is the GPS's.
+The chi-square test sees GPS minus INS, never fused before, so simultaneous GPS and INS faults cannot
+cancel (the paper's argument). The INS tests also see satellite faults RAIM has not yet flagged (a 1 m/s
+drift reaches the filter 10-25 s before RAIM crosses) and settling after RAIM's exclusion:
+``attribute_ins_alarms`` gives an INS alarm near a RAIM alarm to the GPS.
 """
 from __future__ import annotations
 
@@ -141,14 +133,13 @@ def fix_covariance(fix: PositionFix) -> Array:
 
 def imu_health_test(model: imu.ImuModel, dt: float, window: int = IMU_HEALTH_WINDOW,
                     pfa: float = IMU_HEALTH_PFA) -> Detector:
-    """Step 5 of the module doc: ``detection.frozen_channel_detector`` on one IMU sample
-    (6,) ``dt`` [s] long, noise ``imu.sample_sigma``, labels ``1 + channel``."""
+    """Step 5: ``detection.frozen_channel_detector`` on a (6,) sample ``dt`` [s] long, noise
+    ``imu.sample_sigma``, labels ``1 + channel``."""
     return frozen_channel_detector(imu.sample_sigma(model, dt), window, pfa, 1 + jnp.arange(6, dtype=jnp.int32))
 
 
 def _epoch_decision(decisions: Decision) -> Decision:
-    """One decision of a detector stepped over an epoch's samples (leaves (n,)): the first
-    alarmed sample's, or the last sample's when none alarmed."""
+    """An epoch's decision from per-sample ones (leaves (n,)): the first alarmed, else the last."""
     alarm = jnp.any(decisions.alarm)
     index = jnp.where(alarm, jnp.argmax(decisions.alarm), decisions.alarm.shape[0] - 1)
     return Decision(decisions.statistic[index], alarm, decisions.label[index], decisions.estimate[index])
@@ -156,8 +147,7 @@ def _epoch_decision(decisions: Decision) -> Decision:
 
 def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector,
                      state: GpsInsFdiState, fix: GpsFix, samples: Array) -> tuple[GpsInsFdiState, InsTestOutput]:
-    """Steps 2-5 of the module doc for one epoch: the EKF with ``fix`` and the epoch's IMU
-    ``samples`` (n, 6), then the three tests."""
+    """Steps 2-5 for one epoch: the EKF with ``fix`` and ``samples`` (n, 6), then the three tests."""
     health_state, verdicts = jax.lax.scan(health.step, state.health, samples)
     ins, info = ins_filter.step(state.ins, fix, samples)
     window, decision = chi2.step(state.chi2, info.nis)
@@ -177,9 +167,8 @@ def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, he
 
 
 def ins_fdi(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector) -> FDI:
-    """The INS tests alone as a ``loop.FDI``: step ``k`` takes ``(GpsFix, samples (n, 6))``
-    (a receiver's validated solution, e.g. read from a log) and returns an
-    ``InsTestOutput``."""
+    """The INS tests alone as a ``loop.FDI``: step ``k`` takes ``(GpsFix, samples (n, 6))`` (a receiver's
+    validated solution, e.g. from a log) and returns an ``InsTestOutput``."""
 
     def step(state: GpsInsFdiState, k, y, u):
         fix, samples = y
@@ -193,11 +182,9 @@ def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Fi
     """The monitor of the module doc as a ``loop.FDI``; ``health``: ``imu_health_test``.
 
     Returns:
-      ``FDI`` with ``step(state, k, y, u) -> (state, GpsInsOutput)`` and no ``observe``:
-      step ``k`` takes a ``plant.GpsInsMeasurement`` time-tagged ``t0 + k`` s (``u`` unused)
-      and returns a ``GpsInsOutput`` (RAIM decision and threshold, HPL, HDOP, satellites
-      used, the epoch's ``InsTestOutput``, ``healthy``). Its state is
-      ``GpsInsFdiState(ins_filter.init(...), chi2.init(), scst.init(15), health.init())``.
+      ``FDI`` with ``step(state, k, y, u) -> (state, GpsInsOutput)``, no ``observe``; ``y`` a
+      ``plant.GpsInsMeasurement`` tagged ``t0 + k`` s, ``u`` unused; state ``GpsInsFdiState(
+      ins_filter.init(...), chi2.init(), scst.init(15), health.init())``.
     """
     _checks.check_positive("velocity_sigma", velocity_sigma, "a velocity standard deviation (m/s)")
 
@@ -232,15 +219,10 @@ def initial_covariance(position_sigma: float, velocity_sigma: float, tilt_sigma:
 
 
 def attribute_ins_alarms(ins_alarms: Array, gps_alarms: Array, lookahead: int, holdoff: int) -> Array:
-    """Which INS-test alarms are the INS's: the alarm at epoch ``k`` is the
-    GPS's when RAIM alarmed at some epoch of ``[k - holdoff, k + lookahead]``, else the
-    INS's. A causal monitor issues the INS decision at ``k + lookahead`` (it waits that long
-    for RAIM); ``holdoff`` covers the filter and the SCST propagators settling after an
-    exclusion. ``(..., T)`` bool arrays; returns the INS's alarms, ``(..., T)``.
-
-    ``any(gps[k - holdoff : k + lookahead + 1])``: ``detection.chi2.moving_window_sum`` of
-    ``holdoff + lookahead + 1`` epochs ending at ``k + lookahead`` (the history padded
-    with ``lookahead`` alarm-free epochs)."""
+    """The INS's own alarms ``(..., T)`` of ``(..., T)`` bool arrays: an alarm at ``k`` is the GPS's when
+    ``any(gps[k - holdoff : k + lookahead + 1])`` (``detection.chi2.moving_window_sum``, history padded
+    with ``lookahead`` alarm-free epochs). A causal monitor decides at ``k + lookahead``; ``holdoff``
+    covers the filter and SCST propagators settling after an exclusion."""
     lookahead = _checks.check_int("lookahead", lookahead, 0, meaning="a number of epochs >= 0")
     holdoff = _checks.check_int("holdoff", holdoff, 0, meaning="a number of epochs >= 0")
     ins_alarms, gps_alarms = jnp.asarray(ins_alarms, bool), jnp.asarray(gps_alarms, bool)

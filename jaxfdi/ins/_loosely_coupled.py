@@ -1,31 +1,20 @@
 """The 15-state loosely coupled INS/GPS error-state EKF with feedback (Yoo et al. 2010, Appendix).
 
-A ``Filter(init, step)`` whose state is the INS itself (navigation state, IMU bias
-estimates) and the error covariance ``P[k|k-1]``; one ``step`` is one GPS epoch:
+State: the INS (navigation state, IMU bias estimates) and ``P[k|k-1]``; one ``step`` per GPS epoch:
 
-1. **update** with the GPS fix at ``t_k`` when it is valid (RAIM passed):
-   ``z = [p_INS - p_GPS; v_INS - v_GPS]`` (position as NED metres,
-   ``error_state.navigation_error`` against the fix), ``H = [I_6 0]``,
-   ``R = blkdiag(R_p, R_v)`` from the receiver's least-squares covariance; Joseph form
-   (``filters.kalman.joseph_update``), NIS ``z^T S^-1 z``;
-2. **feedback and reset** (Groves 2013, sec. 14.1.2): the INS becomes
-   ``error_state.correct(INS, dx_hat)``, the bias estimates ``b_hat + db_hat``, and the
-   error estimate returns to zero (``P`` is kept: a first-order reset);
-3. **predict** over the epoch's ``n`` IMU samples (``u``: (n, 6), e.g. 100 at 100 Hz):
-   ``n`` strapdown steps (``mechanization.strapdown_step``) with the bias-corrected samples, in
-   ``chunks`` equal chunks; ``F`` by ``jax.jacfwd`` of the mechanisation's error rate
-   (``error_state.error_jacobian``) at each chunk's midpoint state and mean sample, their
-   mean discretised to ``(Phi, Q_d)`` (``error_state.discretize``),
-   ``P[k+1|k] = Phi P[k|k] Phi^T + Q_d``.
+1. **update** with a valid fix (RAIM passed): ``z = [p_INS - p_GPS; v_INS - v_GPS]`` (NED metres,
+   ``error_state.navigation_error``), ``H = [I_6 0]``, ``R = blkdiag(R_p, R_v)`` from the receiver's
+   least-squares covariance; Joseph form (``filters.kalman.joseph_update``), NIS ``z^T S^-1 z``;
+2. **feedback and reset** (Groves 2013, sec. 14.1.2): INS ``error_state.correct(INS, dx_hat)``, biases
+   ``b_hat + db_hat``, error estimate to zero (``P`` kept: first-order reset);
+3. **predict** over the epoch's ``n`` samples (``u`` (n, 6), e.g. 100 at 100 Hz): ``n`` strapdown steps
+   (``mechanization.strapdown_step``) on bias-corrected samples in ``chunks`` equal chunks; ``F`` by
+   ``jax.jacfwd`` (``error_state.error_jacobian``) at each chunk's midpoint state and mean sample, their
+   mean discretised (``error_state.discretize``): ``P[k+1|k] = Phi P[k|k] Phi^T + Q_d``.
 
-``info`` carries what the state chi-square test needs (the correction, ``P[k|k]``,
-``Phi``, ``Q_d``) besides the innovation and NIS, and ``healthy`` (``S`` and
-``P[k|k]`` positive definite, everything finite). A non-finite IMU sample (a dead
-channel) is replaced by that channel's last finite sample (``hold_last_finite``): the INS
-coasts on it instead of turning NaN, and the monitor's IMU health test
-(``ins.integrity.imu_health_test``) raises the alarm. One IMU step per strapdown update and
-one covariance step per GPS epoch: the 15 x 15 algebra runs at 1 Hz, the 100 Hz work is
-the mechanisation alone (and ``chunks`` Jacobians).
+The 15 x 15 algebra runs at 1 Hz; at 100 Hz only the mechanisation (and ``chunks`` Jacobians). A
+non-finite sample (dead channel) is replaced by its channel's last finite one (``hold_last_finite``):
+the INS coasts instead of turning NaN; the IMU health test (``ins.integrity.imu_health_test``) alarms.
 """
 from __future__ import annotations
 
@@ -117,8 +106,8 @@ class InsInfo(NamedTuple):
 
 
 def hold_last_finite(samples: Array, last: Array) -> tuple[Array, Array]:
-    """``samples`` (n, 6) with each non-finite value replaced by its channel's latest
-    finite one (``last`` (6,) before the first), and the new ``last``."""
+    """``samples`` (n, 6), non-finite values replaced by the channel's latest finite one (``last`` (6,)
+    before the first), and the new ``last``."""
     finite = jnp.isfinite(samples)
     latest = jax.lax.cummax(jnp.where(finite, jnp.arange(samples.shape[0])[:, None], -1), axis=0)
     filled = jnp.take_along_axis(samples, jnp.maximum(latest, 0), axis=0)
@@ -136,16 +125,12 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
     Args:
       noise: the IMU's noise densities the filter assumes (``imu.noise_model``).
       dt: IMU sample interval [s]; an epoch is ``u.shape[0]`` samples.
-      chunks: Jacobian evaluations per epoch (it must divide the samples per epoch; each
-        at the midpoint sample of its chunk).
+      chunks: Jacobian evaluations per epoch (must divide the samples per epoch; each at its chunk's midpoint).
 
     Returns:
-      ``Filter(init, step)``: ``init(nav, cov, accel_bias=None, gyro_bias=None) -> InsState``
-      from the ``NavState`` at the first epoch, its (15, 15) error covariance and (3,) bias
-      estimates (default 0); ``step(state, fix, u) -> (state, InsInfo)`` takes the epoch's
-      ``GpsFix`` and its (n, 6) IMU samples ``u`` and returns the ``InsState`` at the next
-      epoch (INS, bias estimates, ``P[k+1|k]``) and an ``InsInfo`` (innovation, NIS,
-      feedback correction, ``P[k|k-1]``, ``P[k|k]``, ``Phi``, ``Q_d``, ``healthy``).
+      ``Filter(init, step)``: ``init(nav, cov, accel_bias=None, gyro_bias=None) -> InsState`` (first
+      epoch's ``NavState``, (15, 15) covariance, (3,) biases, default 0); ``step(state, fix, u) ->
+      (state, InsInfo)`` with the epoch's ``GpsFix`` and (n, 6) samples ``u``, state at the next epoch.
     """
     _checks.check_positive("dt", dt, "the IMU sample interval in seconds")
     chunks = _checks.check_int("chunks", chunks, 1, meaning="a positive number of Jacobians per epoch")

@@ -1,25 +1,18 @@
 """Strapdown inertial navigation in local North-East-Down axes: one step, its exact
 inverse, and the continuous-time equations.
 
-The navigation state is latitude, longitude, ellipsoidal height, the NED velocity and the
-body-to-NED attitude quaternion. One step of ``dt`` with the interval's mean specific
-force ``f^b`` and angular rate ``w_ib^b`` (the IMU's increments divided by ``dt``) is the
-first-order precision form of Groves (2013), sec. 5.4 (Titterton & Weston 2004, ch. 3):
+One step of ``dt`` with the interval's mean ``f^b`` and ``w_ib^b`` (increments / ``dt``), the first-order
+precision form of Groves (2013), sec. 5.4 (Titterton & Weston 2004, ch. 3):
 
-1. attitude: ``q+ = exp(-w_in^n dt) (x) q (x) exp(w_ib^b dt)``, ``w_in = w_ie + w_en``
-   (``exp`` by its series, exact in float64 for turns below 0.1 rad per step), then one
-   Newton step towards unit norm;
-2. velocity: ``v+ = v + (C_avg f^b + g^n - (2 w_ie^n + w_en^n) x v) dt`` with
-   ``C_avg = (C(q) + C(q+)) / 2`` (eq. 5.54);
+1. attitude: ``q+ = exp(-w_in^n dt) (x) q (x) exp(w_ib^b dt)``, ``w_in = w_ie + w_en`` (``exp`` by its series, exact in
+   float64 for turns below 0.1 rad per step), then one Newton step towards unit norm;
+2. velocity: ``v+ = v + (C_avg f^b + g^n - (2 w_ie^n + w_en^n) x v) dt`` with ``C_avg = (C(q) + C(q+)) / 2`` (eq. 5.54);
 3. position by the trapezoidal rule (eq. 5.56): ``h+ = h - dt (v_D + v_D+) / 2``, then
    latitude with ``R_N`` at the old latitude, longitude with both ends' ``R_E``.
 
-``inverse_step`` solves 1-2 for ``(f^b, w_ib^b)`` given the states at both ends (the
-attitude by a quaternion logarithm, the specific force by a 3 x 3 solve), so an IMU
-built from a trajectory whose positions were integrated by ``integrate_position`` makes
-``strapdown_step`` reproduce that trajectory to round-off (``trajectory``). ``rates`` are the
-continuous-time equations (Groves 2013, eqs. 5.46, 5.53, 2.111), which the EKF
-linearises by automatic differentiation (``error_state``).
+``inverse_step`` solves 1-2 for ``(f^b, w_ib^b)`` (quaternion logarithm, 3 x 3 solve), so an IMU built from a trajectory
+integrated by ``integrate_position`` reproduces it to round-off (``trajectory``). ``rates``: the continuous-time
+equations (Groves 2013, eqs. 5.46, 5.53, 2.111), linearised by AD for the EKF (``error_state``).
 """
 from __future__ import annotations
 
@@ -57,9 +50,8 @@ def integrate_position(position: Array, velocity: Array, new_velocity: Array, dt
                        earth: LocalEarth | None = None) -> Array:
     """Groves (2013) eq. 5.56: the position after ``dt`` from the velocities at both ends.
 
-    ``earth``: the ``LocalEarth`` at ``position`` if already computed. The new latitude's
-    sine and cosine come from the old ones by the angle-addition series to third order
-    (exact in float64 for a latitude step below 1e-4 rad, 600 m)."""
+    ``earth``: the ``LocalEarth`` at ``position`` if computed. New latitude's sin/cos by angle addition
+    to third order (exact in float64 for steps below 1e-4 rad, 600 m)."""
     lat, lon, height = position[0], position[1], position[2]
     if earth is None:
         sin_lat, cos_lat = jnp.sin(lat), jnp.cos(lat)
@@ -83,10 +75,7 @@ def strapdown_step(nav: NavState, specific_force: Array, angular_rate: Array, dt
     and ``w_ib^b`` [rad/s], both already corrected for the estimated IMU errors.
 
     Returns:
-      ``NavState`` after ``dt`` [s] (Groves 2013, sec. 5.4):
-      ``q+ = exp(-w_in^n dt) (x) q (x) exp(w_ib^b dt)``,
-      ``v+ = v + (C_avg f^b + g^n - (2 w_ie^n + w_en^n) x v) dt``, the position by the
-      trapezoidal rule.
+      ``NavState`` after ``dt`` [s] (module doc's steps 1-3).
 
     Raises:
       ValueError: ``specific_force`` or ``angular_rate`` not of shape (3,).

@@ -1,26 +1,19 @@
-"""A UAV's GPS receiver and IMU as one plant of the foundation's loop, one step per GPS
-epoch.
+"""A UAV's GPS receiver and IMU as one loop plant, one step per GPS epoch.
 
-Step ``k`` (time ``t_k = t0 + k`` s) measures:
+Step ``k`` (``t_k = t0 + k`` s) measures:
 
-- the pseudoranges of ``gnss.receiver_plant`` at ``t_k`` (light time, Earth rotation,
-  satellite and receiver clocks, elevation-dependent noise, satellite faults per slot);
-- the receiver's velocity solution: the true NED velocity plus white noise of
-  ``velocity_sigma`` per axis (the pseudorange simulation has no Doppler, so the
-  velocity is simulated in the solution domain; satellite faults do not reach it);
-- the ``n`` IMU samples of ``[t_k, t_k+1)`` (``imu.measure``: turn-on biases, white
-  noise, scale factors) with the IMU faults applied to each sample.
+- ``gnss.receiver_plant``'s pseudoranges at ``t_k`` (light time, Earth rotation, clocks,
+  elevation-dependent noise, satellite faults per slot);
+- the velocity solution: true NED velocity + white noise ``velocity_sigma`` per axis (simulated in the
+  solution domain, no Doppler: satellite faults do not reach it);
+- the ``n`` IMU samples of ``[t_k, t_k+1)`` (``imu.measure``: turn-on biases, white noise, scale
+  factors), IMU faults applied to each.
 
-``advance`` moves the receiver clock and lets the IMU biases walk for one epoch.
-
-IMU faults are the foundation's sensor faults (``jaxfdi.fault(kind, "sensor",
-component, onset, magnitude, ...)``) on the 6-component sample
-``[f_x, f_y, f_z (m/s^2), w_x, w_y, w_z (rad/s)]``: a roll-gyro bias of 30 deg/h from
-800 s is ``fault("bias", "sensor", 3, 800, radians(30) / 3600)``; onset, end and a
-ramp's slope count GPS epochs (seconds), and a fault acts on every sample of an epoch
-it is active in. A STUCK channel holds its first sample of the onset epoch (a live one)
-from the second sample on; DEAD makes the channel NaN from the onset epoch's first sample.
-The truth of each epoch (``GpsInsTruth``) comes back in ``Sensed.state``.
+IMU faults: ``jaxfdi.fault(kind, "sensor", component, onset, magnitude, ...)`` on the sample
+``[f_x, f_y, f_z (m/s^2), w_x, w_y, w_z (rad/s)]`` (roll-gyro bias 30 deg/h from 800 s:
+``fault("bias", "sensor", 3, 800, radians(30) / 3600)``); onset, end and ramp slope count epochs (s); a fault acts on
+every sample of an active epoch. STUCK holds the onset epoch's first (live) sample from the second on; DEAD is NaN from
+the onset epoch's first sample. Truth (``GpsInsTruth``) comes back in ``Sensed.state``.
 """
 from __future__ import annotations
 
@@ -152,14 +145,10 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
       imu_fault: sensor faults on the IMU's 6 channels (module doc).
 
     Returns:
-      ``Plant(init, measure, advance)``, one step per GPS epoch. ``init`` takes
-      ``(clock0 (2,), ImuErrors)`` (``imu.draw_errors``) and returns a ``GpsInsPlantState``;
-      ``measure(state, k, u, step_key) -> (state, GpsInsSensed)``: the epoch's truth
-      (``GpsInsTruth``), the ``GpsInsMeasurement`` (pseudoranges (S,) [m], velocity (3,)
-      NED [m/s], IMU samples (n, 6)), the (F_sat + F_imu,) active faults and the mode
-      label; ``advance(state, k, u, step_key) -> (state, Actuated)`` moves the receiver
-      clock and walks the IMU biases over one epoch (``u`` passed through, no actuator
-      fault).
+      ``Plant(init, measure, advance)``, one step per GPS epoch: ``init((clock0 (2,), ImuErrors))``
+      (``imu.draw_errors``) -> ``GpsInsPlantState``; ``measure(state, k, u, step_key) -> (state,
+      GpsInsSensed)``; ``advance(state, k, u, step_key) -> (state, Actuated)`` moves the receiver clock
+      and walks the IMU biases one epoch (``u`` passed through, no actuator fault).
     """
     _checks.check_shape("flight.imu", flight.imu, (None, None, IMU_CHANNELS), "T epochs x n samples x 6")
     per_epoch = flight.imu.shape[1]
@@ -184,9 +173,8 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
         return GpsInsPlantState(state, errors, jnp.zeros((num_imu_faults,), state.state.dtype))
 
     def faulty_samples(samples, k, held):
-        """The epoch's samples with the IMU faults, and the held values: a STUCK fault
-        takes its value from the onset epoch's first sample and holds it on every later
-        sample (``apply_faults`` alone would hold per epoch)."""
+        """The epoch's samples with IMU faults, and held values: STUCK holds the onset epoch's first sample
+        on every later sample (``apply_faults`` alone would hold per epoch)."""
         first, held = apply_faults(imu_faults, k, samples[0], Target.SENSOR, held)
         rest = jax.vmap(lambda sample: apply_faults(imu_faults, k, sample, Target.SENSOR, held)[0])(samples[1:])
         stuck = (imu_faults.kind == FaultKind.STUCK) & jax.vmap(is_active, in_axes=(0, None))(imu_faults, k)

@@ -1,32 +1,24 @@
 """The state chi-square test (SCST) with Da's two periodically reset propagators.
 
-Da (1994) compares the Kalman filter's estimate ``x_f`` with that of a *propagator*
-``x_m``: the same model run without measurements from a reset to the filter's estimate.
-Fault-free, ``beta = x_m - x_f`` is zero-mean with covariance ``B = P_m - P_f`` (the
-filter's estimate is orthogonal to its error), so
+Da (1994): the filter's ``x_f`` against a *propagator* ``x_m`` (the model run without measurements from
+a reset to ``x_f``). Fault-free ``beta = x_m - x_f`` is zero-mean, covariance ``B = P_m - P_f``, so
 
     l(k) = beta^T B^-1 beta ~ chi2(15)       (Yoo et al. 2010, eqs. 2-4; threshold 32.80 at 0.005)
 
-In the error-state form of Fig. 3 of Yoo et al. (2010) the propagator lives in the filter's error
-coordinates. With feedback, the filter's estimate jumps by its correction ``dx[k|k]``
-each epoch while the propagator's does not, and both drift alike between epochs:
+Error-state form (Yoo et al. 2010, Fig. 3), with feedback (the filter jumps by ``dx[k|k]``, the
+propagator does not; both drift alike between epochs):
 
     beta[k|k] = beta[k|k-1] + dx[k|k],     beta[k+1|k] = Phi_k beta[k|k],
     P_m[k+1] = Phi_k P_m[k] Phi_k^T + Q_k,  B(k) = P_m(k) - P_f[k|k].
 
-A propagator reset (``beta = 0``, ``P_m = P_f[k|k]``) leaves ``B = 0``: singular. Da's
-scheme runs two propagators reset alternately every ``period`` epochs, half a period
-apart, and tests with the one reset longer ago, so the test never uses a propagator
-younger than ``period / 2`` (both start at the first epoch, so the first ``period / 2``
-epochs use a young one). Resets follow the schedule whatever the test decides, so an
-alarm clears at most ``period`` epochs after its cause has (a propagator kept through an
-alarm would hold it for ever after a transient fault).
+A reset (``beta = 0``, ``P_m = P_f[k|k]``) makes ``B = 0`` singular, so two propagators are reset alternately every
+``period`` epochs, half a period apart, and the older one is tested (never younger than ``period / 2``, except in the
+first ``period / 2`` epochs). Resets ignore the decisions, so an alarm clears at most ``period`` epochs after its cause
+(a propagator kept through an alarm would hold it for ever after a transient fault).
 
-``B`` is checked, never trusted: it is scaled to unit diagonal (``D^-1/2 B D^-1/2``), the
-scaled matrix factored by Cholesky, and the test is *valid* only if every diagonal entry
-of ``B`` is positive, the factor is finite and ``(max pivot / min pivot)^2`` (a lower
-bound of the scaled condition number) is at most ``max_condition``. An invalid epoch
-makes no decision (alarm False, statistic 0) and says so in ``valid`` and ``condition``.
+``B`` is checked: scaled to unit diagonal (``D^-1/2 B D^-1/2``), Cholesky-factored; *valid* only if every diagonal entry
+is positive, the factor finite and ``(max pivot / min pivot)^2`` (a lower bound of the condition number)
+<= ``max_condition``. An invalid epoch decides nothing (alarm False, statistic 0; ``valid``, ``condition`` say so).
 """
 from __future__ import annotations
 
@@ -39,9 +31,8 @@ from jax import Array
 from jaxfdi import _checks, _linalg
 from jaxfdi.detection._chi2 import Decision
 
-#: largest accepted condition estimate of the scaled B: float64 solves keep ~6 significant
-#: digits of l. B nears it during straight legs, where the filter learns nothing about heading
-#: and the z gyro bias since the reset and their rows of B become nearly dependent.
+#: largest accepted condition estimate of the scaled B (float64 solves keep ~6 digits of l); B nears it on
+#: straight legs (nothing learnt on heading and z gyro bias since the reset: their rows nearly dependent)
 DEFAULT_MAX_CONDITION = 1e10
 
 
@@ -114,13 +105,9 @@ def state_chi2_test(period: int, threshold, max_condition: float = DEFAULT_MAX_C
       max_condition: largest accepted condition estimate of the scaled ``B``.
 
     Returns:
-      ``StateChi2Test(init, step)``: ``init(n, dtype=None) -> ScstState`` (two propagators of
-      n error states, not yet started); ``step(state, correction, filtered_cov, transition,
-      process_cov) -> (state, ScstOutput)`` takes the filter's (n,) ``dx[k|k]`` and (n, n)
-      ``P[k|k]``, ``Phi_k``, ``Q_k`` and returns the propagators at ``k + 1`` and the epoch's
-      ``ScstOutput``: a ``Decision`` (statistic ``l``, 0 when invalid; alarm; label -1;
-      estimate NaN), ``valid``, ``condition``, the propagator tested and its age, and the
-      (2,) reset flags.
+      ``StateChi2Test(init, step)``: ``init(n, dtype=None) -> ScstState`` (not yet started);
+      ``step(state, correction, filtered_cov, transition, process_cov) -> (state, ScstOutput)`` with (n,)
+      ``dx[k|k]``, (n, n) ``P[k|k]``, ``Phi_k``, ``Q_k``; the state at ``k + 1``.
     """
     period = _checks.check_int("period", period, 2, meaning="an even number of epochs >= 2")
     if period % 2:

@@ -1,19 +1,13 @@
 """UAV flights and the perfect IMU that flies them.
 
-A flight is a list of legs ``(duration [s], turn rate [deg/s], climb rate [m/s],
-acceleration [m/s^2])``; the commands pass from one leg to the next over ``blend``
-seconds along the quintic smoothstep ``10 s^3 - 15 s^4 + 6 s^5`` (continuous up to the
-second derivative, so bank and pitch rates are continuous too). Speed, heading and height
-are their integrals; the aircraft flies coordinated: yaw = heading, pitch = flight-path
-angle ``asin(climb / V)`` (zero angle of attack), roll ``atan(V turn_rate / g0)``.
-Velocities and attitudes are sampled at the IMU rate; positions are integrated from the
-velocities with the INS's own trapezoidal rule (``mechanization.integrate_position``),
-and the IMU samples are the exact inverse of the INS step between consecutive states
-(``mechanization.inverse_step``): an error-free IMU makes the INS reproduce the truth to
-round-off. ``park_legs`` are the park case of Yoo et al. (2010) flown as the GPS half's racetrack
-(600 m legs, 200 m turns at 12 m/s) after a climb, with a climb and a descent on the way;
-``manoeuvre_legs`` the strong-manoeuvre case of the paper's caveat (25 m/s, S-turns
-at 20 deg/s, 42 deg of bank, pull-ups and dives, 2 m/s^2 speed changes).
+Legs ``(duration [s], turn rate [deg/s], climb rate [m/s], acceleration [m/s^2])``, blended over ``blend``
+s by ``10 s^3 - 15 s^4 + 6 s^5`` (C2: bank and pitch rates continuous); speed, heading, height integrated;
+coordinated flight: yaw = heading, pitch ``asin(climb / V)`` (zero alpha), roll ``atan(V turn_rate / g0)``.
+Positions by the INS's trapezoidal rule (``mechanization.integrate_position``), IMU samples the exact
+inverse step (``mechanization.inverse_step``): an error-free IMU reproduces the truth to round-off.
+``park_legs``: Yoo et al.'s (2010) park case as the GPS half's racetrack (600 m legs, 200 m turns, 12 m/s)
+after a climb, with a climb and a descent on the way; ``manoeuvre_legs``: the paper's strong-manoeuvre
+caveat (25 m/s, S-turns at 20 deg/s, 42 deg bank, pull-ups and dives, 2 m/s^2 speed changes).
 """
 from __future__ import annotations
 
@@ -87,14 +81,10 @@ def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: floa
     ``speed`` [m/s] and ``heading_deg``, sampled at ``rate`` [Hz].
 
     Returns:
-      ``Trajectory`` with ``dt = 1 / rate`` and ``N = round(sum of durations * rate)``
-      samples: ``position`` (N + 1, 3) lat, lon [rad], h [m]; ``velocity`` (N + 1, 3)
-      NED [m/s]; ``attitude`` (N + 1, 4) body-to-NED quaternions; ``imu`` (N, 6) the
-      error-free ``[f^b, w_ib^b]`` of each interval, all in ``dtype``.
+      ``Trajectory`` in ``dtype``, ``dt = 1 / rate``, ``N = round(sum of durations * rate)``.
 
     Raises:
-      ValueError: malformed ``legs`` or ``start``, or a flight that stalls or climbs
-        faster than it flies.
+      ValueError: malformed ``legs`` or ``start``, or a flight that stalls or climbs faster than it flies.
     """
     legs = np.asarray(legs, float)
     if legs.ndim != 2 or legs.shape[1] != 4 or np.any(legs[:, 0] <= 0):

@@ -1,8 +1,7 @@
 """UAV turbojet engine, linearised about an operating point (Han et al. 2022, Table 1).
 
-States ``[RPM, P2, T2, P3, T3, P4, T4]``, input fuel flow (kg/s), outputs
-``[RPM, P2, T2, P4, T4]``. The continuous model is stiff (eigenvalues -36,360 ... -1.43);
-it is discretised by zero-order hold at ``Ts = 0.01 s``.
+States ``[RPM, P2, T2, P3, T3, P4, T4]``, input fuel flow (kg/s), outputs ``[RPM, P2, T2, P4, T4]``. The continuous
+model is stiff (eigenvalues -36,360 ... -1.43); it is discretised by zero-order hold at ``Ts = 0.01 s``.
 """
 from __future__ import annotations
 
@@ -36,16 +35,13 @@ TS = 0.01
 def engine_model(Ts: float = TS, dtype=None) -> LinearGaussianModel:
     """Discrete engine model ``(Phi, Gamma, C, D, Q, R)`` at sample period ``Ts``.
 
-    Uses float64 when x64 is enabled (recommended: the model is stiff and its states
-    span five orders of magnitude), else float32, unless ``dtype`` is given. ``Phi`` and
-    ``Gamma`` are computed in float64 either way (``c2d``) and then cast, so the float32
-    model is the float64 one rounded (the float32 exponential of this stiff block is NaN).
+    ``dtype`` default: float64 under x64 (recommended: stiff, states span five orders of magnitude), else float32;
+    ``Phi``, ``Gamma`` computed in float64 either way (``c2d``) and cast (float32's exponential of this block is NaN).
 
     Returns:
-      ``LinearGaussianModel`` with n = 7 states, nu = 1 input and m = 5 outputs: ``Phi``
-      (7, 7) and ``Gamma`` (7, 1) the zero-order hold of ``(A, B)`` over ``Ts``; ``C``
-      (5, 7) selecting ``[RPM, P2, T2, P4, T4]``; ``D`` (5, 1); the diagonal ``Q`` (7, 7) and
-      ``R`` (5, 5) of the module's tables (the same for every ``Ts``); all in ``dtype``.
+      ``LinearGaussianModel``, n = 7, nu = 1, m = 5: ZOH ``Phi``, ``Gamma`` over ``Ts``; ``C`` selects
+      ``[RPM, P2, T2, P4, T4]``; ``D`` (5, 1); diagonal ``Q``, ``R`` from the module's tables (same for every
+      ``Ts``); all in ``dtype``.
     """
     dtype = dtype or jnp.result_type(float)
     Phi, Gamma = c2d(A, B, Ts, dtype=dtype)

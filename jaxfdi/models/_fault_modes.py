@@ -1,22 +1,15 @@
 """Mode models for multiple-model fault diagnosis of a linear plant.
 
-Both designs turn one ``LinearGaussianModel`` with ``nu`` actuators and ``m`` sensors
-into ``M = 1 + nu + m`` mode models stacked along a leading axis (mode 0 normal, then
-one per actuator, then one per sensor: the simulator's fault labels), all with the same
-state, so that IMM mixing is defined. The stack is a pytree: a filter bank is
-``vmap(kalman_filter)`` over it, and its numbers can be tuned.
+A ``LinearGaussianModel`` with ``nu`` actuators and ``m`` sensors becomes ``M = 1 + nu + m`` mode models on
+a leading axis (0 normal, then actuators, then sensors: the simulator's labels), same state (IMM mixing
+defined); a pytree: a bank is ``vmap(kalman_filter)`` over it, tunable.
 
-* ``noise_inflation_modes`` (Zhang & Li 1998): a sensor-j fault mode distrusts sensor j
-  (its variance times ``sensor_inflation[j]``); an actuator-i mode adds process noise
-  along the input direction, ``Q + s_i^2 Gamma e_i e_i^T Gamma^T``. The fault shows up as
-  a change of likelihood; the state estimate stays that of a fault-free plant, and the
-  fault size is not estimated (the behaviour Han et al. (2022) report for their IMM).
-* ``bias_modes`` (the IMM-GLR idea of ref. [4] of Han et al. 2022): the state is augmented with
-  one bias per actuator and sensor, ``z = [x; b]``. In mode j only bias j acts (on the
-  plant through ``Gamma`` and ``D`` for an actuator, on its output for a sensor) and
-  follows a random walk of variance ``bias_walk[j]``; the other biases are reset to
-  ``N(0, bias_prior[i])`` at every step, which is the prior a bias gets when its mode is
-  entered. The matching mode therefore also estimates the fault's size.
+* ``noise_inflation_modes`` (Zhang & Li 1998): sensor-j mode ``R_jj`` times ``sensor_inflation[j]``;
+  actuator-i mode ``Q + s_i^2 Gamma e_i e_i^T Gamma^T``. A fault shows as a likelihood change; the
+  estimate stays fault-free and no size is estimated (as Han et al. 2022 report for their IMM).
+* ``bias_modes`` (IMM-GLR, ref. [4] of Han et al. 2022): ``z = [x; b]``, one bias per actuator and sensor;
+  in mode j only bias j acts and walks (variance ``bias_walk[j]``); the others are reset to
+  ``N(0, bias_prior[i])`` every step (the prior on entering their mode): the matching mode estimates size.
 """
 from __future__ import annotations
 
@@ -30,8 +23,7 @@ from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
 def _per_component(name: str, value, size: int, dtype, positive: bool = False) -> Array:
-    """() or (size,) real, finite values, ``>= 0`` (``> 0`` with ``positive``) when concrete,
-    as a (size,) array."""
+    """() or (size,) real, finite values, ``>= 0`` (``> 0`` with ``positive``) when concrete, as a (size,) array."""
     _checks.check_real(name, value, "real values")
     _checks.check_finite(name, value)
     concrete = _checks.concrete(value)
@@ -49,8 +41,7 @@ def noise_inflation_modes(model: LinearGaussianModel, sensor_inflation, actuator
 
     Args:
       model: the fault-free plant model.
-      sensor_inflation: () or (m,) factor on ``R[j, j]`` in the sensor-j mode (> 0; an
-        inflation is > 1).
+      sensor_inflation: () or (m,) factor on ``R[j, j]`` in the sensor-j mode (> 0; an inflation is > 1).
       actuator_noise: () or (nu,) standard deviation ``s_i`` of the extra input noise of
         the actuator-i mode (input units per step).
 
@@ -75,9 +66,8 @@ def noise_inflation_modes(model: LinearGaussianModel, sensor_inflation, actuator
 def bias_modes(model: LinearGaussianModel, bias_walk, bias_prior) -> LinearGaussianModel:
     """Augmented-state fault-bias mode models, ``z = [x (n); b (nu + m)]``.
 
-    Mode 0: no bias acts, every bias is reset to ``N(0, bias_prior)``. Mode ``1 + i``
-    (actuator i): ``x+ = Phi x + Gamma (u + b_i)``, ``y = C x + D (u + b_i)``, and
-    ``b_i+ = b_i + N(0, bias_walk[i])``. Mode ``1 + nu + j`` (sensor j):
+    Mode 0: no bias, all reset to ``N(0, bias_prior)``; mode ``1 + i``: ``x+ = Phi x + Gamma (u + b_i)``,
+    ``y = C x + D (u + b_i)``, ``b_i+ = b_i + N(0, bias_walk[i])``; mode ``1 + nu + j``:
     ``y_j = C_j x + D_j u + b_{nu+j}``.
 
     Args:

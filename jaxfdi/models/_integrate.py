@@ -16,12 +16,9 @@ def rk4(field: Callable[[Array, Array], Array], x: Array, dt: Array, substeps: i
     ``x+ = x + h/6 (k1 + 2 k2 + 2 k3 + k4)``, ``k1 = f(x, t)``, ``k2 = f(x + h/2 k1, t + h/2)``,
     ``k3 = f(x + h/2 k2, t + h/2)``, ``k4 = f(x + h k3, t + h)``.
 
-    ``t`` is the time since the start of the interval; inputs held over it are closed
-    over by ``field``. ``substeps`` is static (a ``fori_loop`` when > 1). With
-    ``loop_stages`` the four stages are a loop too, so ``field`` is compiled once rather
-    than four times: for a large model (the F-16's tables) that compiles about a third
-    faster and runs a batch of 100 flights as fast or faster, but a single flight about 2.7x
-    slower (the loop's overhead per step; ``benchmarks/RESULTS.md``)."""
+    ``t``: time since the interval's start; held inputs are closed over by ``field``. ``substeps`` static (``fori_loop``
+    when > 1). ``loop_stages``: the four stages a loop too, ``field`` compiled once (F-16: compiles ~1/3 faster, a batch
+    of 100 flights as fast or faster, a single flight ~2.7x slower; ``benchmarks/RESULTS.md``)."""
     h = dt / substeps
 
     def unrolled(x, t):

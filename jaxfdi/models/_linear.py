@@ -1,7 +1,6 @@
 """Linear Gaussian state-space models as data, and zero-order-hold discretisation.
 
-``x[k+1] = Phi x[k] + Gamma u[k] + w[k]``, ``y[k] = C x[k] + D u[k] + v[k]``,
-``w ~ N(0, Q)``, ``v ~ N(0, R)``.
+``x[k+1] = Phi x[k] + Gamma u[k] + w[k]``, ``y[k] = C x[k] + D u[k] + v[k]``, ``w ~ N(0, Q)``, ``v ~ N(0, R)``.
 """
 from __future__ import annotations
 
@@ -45,16 +44,11 @@ def linear_gaussian_model(Phi: Array, C: Array, Q: Array, R: Array, Gamma: Array
                           D: Array | None = None) -> LinearGaussianModel:
     """A ``LinearGaussianModel``, with ``Gamma``/``D`` optional for a model without inputs.
 
-    ``x[k+1] = Phi x[k] + Gamma u[k] + w[k]``, ``y[k] = C x[k] + D u[k] + v[k]``. A missing
-    ``Gamma`` is the zero-width (n, 0) input matrix (no inputs: run filters and
-    simulators with ``us=None`` or ``jnp.zeros((T, 0))``); a missing ``D`` is zeros
-    (m, nu). Every block takes ``Phi``'s dtype; shapes are checked
-    (``validate_linear_model``).
+    Missing ``Gamma``: zero-width (n, 0) (no inputs: run with ``us=None`` or ``jnp.zeros((T, 0))``);
+    missing ``D``: zeros (m, nu). Shapes checked (``validate_linear_model``).
 
     Returns:
-      ``LinearGaussianModel(Phi (n, n), Gamma (n, nu), C (m, n), D (m, nu), Q (n, n),
-      R (m, m))``, every block a JAX array of ``Phi``'s float dtype (``nu = 0`` without
-      ``Gamma``).
+      ``LinearGaussianModel``, every block a JAX array of ``Phi``'s float dtype (``nu = 0`` without ``Gamma``).
 
     Example::
 
@@ -110,16 +104,11 @@ def linear_observation(x: Array, u: Array, model: LinearGaussianModel) -> Array:
 def c2d(A: Array, B: Array, Ts: float, dtype=None) -> tuple[Array, Array]:
     """Zero-order-hold discretisation by one matrix exponential.
 
-    ``expm([[A, B], [0, 0]] Ts) = [[Phi, Gamma], [0, I]]`` (Van Loan 1978), the same
-    result as ``scipy.signal.cont2discrete(..., method="zoh")``.
-
-    With concrete inputs (NumPy or JAX arrays known at trace time: every model
-    constructor) the exponential is computed in float64 whether or not x64 is enabled,
-    and only the result is cast to ``dtype``: a stiff block (the engine's ``[A, B] Ts``
-    has a 1-norm near 7e5) overflows float32's scaling and squaring into NaN. Under
-    x64 with float64 inputs this is the same computation as before, bit for bit. A
-    non-finite result raises a ``ValueError``. With traced inputs (``jit``/``vmap``
-    over ``A``, ``B`` or ``Ts``) it runs in the inputs' dtype, traceable.
+    ``expm([[A, B], [0, 0]] Ts) = [[Phi, Gamma], [0, I]]`` (Van Loan 1978), as
+    ``scipy.signal.cont2discrete(..., method="zoh")``. Concrete inputs (every model constructor): computed
+    in float64 whatever the x64 flag, then cast to ``dtype`` (a stiff block, the engine's ``[A, B] Ts``
+    with 1-norm ~7e5, overflows float32 scaling and squaring into NaN); a non-finite result raises
+    ``ValueError``. Traced inputs (``jit``/``vmap`` over ``A``, ``B``, ``Ts``): the inputs' dtype.
 
     Args:
       A: (n, n) continuous state matrix.
@@ -153,11 +142,9 @@ def c2d(A: Array, B: Array, Ts: float, dtype=None) -> tuple[Array, Array]:
 
 
 def zoh_float64(A, B, Ts) -> tuple[np.ndarray, np.ndarray]:
-    """``(Phi, Gamma)`` of concrete ``A``, ``B``, ``Ts`` as float64 NumPy arrays, whatever
-    the x64 flag: JAX's own ``expm`` (Higham 2005 scaling and squaring, the one c2d has
-    always used and its tests compare with SciPy), run eagerly in a scoped
-    ``jax.enable_x64`` context, so that under x64 the numbers are those of ``c2d`` in
-    float64 exactly. (A NumPy Pade would differ from it in the last bits.)"""
+    """``(Phi, Gamma)`` of concrete ``A``, ``B``, ``Ts`` as float64 NumPy, whatever the x64 flag: JAX's
+    ``expm`` (Higham 2005 scaling and squaring) in a scoped ``jax.enable_x64`` context, so under x64 the
+    numbers equal ``c2d``'s in float64 exactly (a NumPy Pade would differ in the last bits)."""
     args = (np.asarray(A, np.float64), np.asarray(B, np.float64), np.asarray(Ts, np.float64))
     with jax.ensure_compile_time_eval(), _x64():
         Phi, Gamma = _zoh(*(jnp.asarray(a, jnp.float64) for a in args))

@@ -4,26 +4,18 @@ Euler's equations with wheel momentum (Wie 2008, sec. 7.3; Choi & Park 2009, eq.
 
     I w' + w x (I w + h_w) + h_w' = T_ext,    h_w = I_w sum_i Omega_i a_i = I_w H^T Omega,
 
-with ``w`` the body rates (rad/s), ``Omega`` the wheels' spin rates (rad/s), ``a_i`` the
-spin axes (the rows of ``H``, Choi & Park 2009, eq. 4) and ``I_w Omega_i' = tau_i`` the motor
-torque on wheel ``i``. Total momentum ``I w + h_w`` is conserved in the inertial frame
-when ``T_ext = 0``; in the body frame ``(I w + h_w)' = -w x (I w + h_w)``, so its norm
-is conserved.
+``w`` body rates, ``Omega`` wheel spin rates (rad/s), ``a_i`` spin axes (rows of ``H``, eq. 4),
+``I_w Omega_i' = tau_i`` motor torque. With ``T_ext = 0``, ``I w + h_w`` is conserved inertially; in the
+body frame ``(I w + h_w)' = -w x (I w + h_w)`` (norm conserved).
 
-Two views of the same physics:
+* filters' model (Choi & Park's EKF): state ``w`` (3,), input ``u = [Omega (N), Omega' (N)]`` (commanded speeds and
+  accelerations), one RK4 step per sample with ``Omega(t) = Omega + t Omega'`` (``wheel_rate_transition``);
+  ``params.wheel_mask`` (N,) switches wheels off: stop hypothesis ``Omega_i = 0`` (eq. 9);
+* truth (``spacecraft_step``): ``[q (4, scalar first), w (3), Omega (N)]``, driven by the delivered
+  wheel torques and an external torque (wheel faults change wheel speeds physically).
 
-* the filters' model (the EKF of Choi & Park 2009): state ``w`` (3,), input
-  ``u = [Omega (N), Omega' (N)]`` (commanded wheel speeds and accelerations), one RK4
-  step per sample with ``Omega(t) = Omega + t Omega'`` inside the step
-  (``wheel_rate_transition``); ``params.wheel_mask`` (N,) switches wheels off, which is
-  how a stop hypothesis ``Omega_i = 0`` (Choi & Park 2009, eq. 9) is written;
-* the truth (``spacecraft_step``): state ``[q (4), w (3), Omega (N)]`` with the attitude
-  quaternion (scalar first), driven by the wheel torques actually delivered and an
-  external torque, so wheel faults change the wheels' speeds physically.
-
-Jacobians are taken by ``jax.jacfwd``; the closed form
-``A = dw'/dw = -I^-1 ([w]x I - [I w + h_w]x)`` (``rate_jacobian``) is kept only to test
-it — the paper's printed eqs. 3, 5 and 9 have wrong indices and signs.
+Jacobians by ``jax.jacfwd``; the closed form ``A = dw'/dw = -I^-1 ([w]x I - [I w + h_w]x)``
+(``rate_jacobian``) is for tests only: the paper's eqs. 3, 5 and 9 have wrong indices and signs.
 """
 from __future__ import annotations
 
@@ -74,15 +66,11 @@ def pyramid_axes(beta_deg: float = 45.0, sigma_deg: float = 45.0, dtype=None) ->
 
 def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.055), wheel_inertia: float = 0.000239,
                    dtype=None) -> SpacecraftParams:
-    """KITSAT-3 (Choi & Park 2009, Table 1): ``I = diag(3.118, 3.050, 4.055)`` kg m^2,
-    ``I_w = 0.000239`` kg m^2, the 45/45 deg pyramid unless ``wheel_axes`` (N, 3) is given
-    (any geometry: the rows are normalised).
+    """KITSAT-3 (Choi & Park 2009, Table 1): ``I = diag(3.118, 3.050, 4.055)`` kg m^2, ``I_w = 0.000239`` kg m^2, the
+    45/45 deg pyramid unless ``wheel_axes`` (N, 3) is given (rows normalised); a (3,) ``inertia`` is its diagonal.
 
     Returns:
-      ``SpacecraftParams`` in ``dtype``: ``inertia`` (3, 3) [kg m^2] (a (3,) ``inertia`` is
-      its diagonal), ``wheel_inertia`` () [kg m^2], ``wheel_axes`` (N, 3) unit spin axes
-      (N = 4 for the pyramid), ``wheel_mask`` (N,) ones (every wheel healthy) and ``dt``
-      () [s].
+      ``SpacecraftParams`` in ``dtype``, unit ``wheel_axes`` (N = 4 for the pyramid), ``wheel_mask`` ones.
     """
     _checks.check_positive("dt", dt, "a positive sample period in seconds")
     _checks.check_positive("wheel_inertia", wheel_inertia, "a positive wheel inertia in kg m^2")
@@ -106,9 +94,8 @@ def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.05
 def stop_hypotheses(params: SpacecraftParams, include_nominal: bool = False) -> SpacecraftParams:
     """The bank's models: hypothesis ``i`` has wheel ``i`` stopped (Choi & Park 2009, eq. 9).
 
-    Returns ``params`` with a leading hypothesis axis on every leaf: (N, ...) or, with
-    ``include_nominal``, (N + 1, ...) with the fault-free model first (mode 0 = normal,
-    mode ``1 + i`` = wheel ``i`` stopped, the simulator's label order).
+    Returns ``params`` with a leading hypothesis axis (N, ...), or with ``include_nominal`` (N + 1, ...),
+    fault-free first (mode ``1 + i`` = wheel ``i`` stopped, the simulator's label order).
     """
     N = params.wheel_axes.shape[0]
     masks = 1.0 - jnp.eye(N, dtype=params.wheel_mask.dtype)
@@ -139,15 +126,13 @@ def split_input(u: Array, params: SpacecraftParams) -> tuple[Array, Array]:
 
 
 def body_rate_field(w: Array, u: Array, params: SpacecraftParams) -> Array:
-    """The filters' continuous model ``w' = g(w, u)`` at the start of a step; its
-    Jacobian ``dg/dw`` is the system matrix ``A`` of Choi & Park (2009, eq. 8)."""
+    """The filters' ``w' = g(w, u)`` at the start of a step; ``dg/dw`` is ``A`` of Choi & Park (2009, eq. 8)."""
     speeds, accelerations = split_input(u, params)
     return rate_derivative(w, speeds, accelerations, params)
 
 
 def wheel_rate_transition(w: Array, u: Array, params: SpacecraftParams) -> Array:
-    """The filters' ``f``: one RK4 step of the body rates with the commanded wheel
-    speeds ramping at the commanded accelerations, ``Omega(t) = Omega + t Omega'``."""
+    """The filters' ``f``: one RK4 step of the rates with ``Omega(t) = Omega + t Omega'``."""
     speeds, accelerations = split_input(u, params)
     return rk4(lambda x, t: rate_derivative(x, speeds + t * accelerations, accelerations, params), w, params.dt)
 
@@ -190,8 +175,7 @@ def total_momentum(state: Array, params: SpacecraftParams) -> Array:
 # --- sensors, commands and faults of the truth (its loop.Plant: control.attitude.wheel_plant) ---
 
 class AttitudeReading(NamedTuple):
-    """What the attitude sensors give at step ``k``: the attitude (taken as exact) and the
-    gyros' body rates.
+    """The attitude sensors at step ``k``: attitude (taken as exact) and gyro rates.
 
     Attributes:
       quaternion: (4,) true attitude, scalar first
@@ -203,8 +187,7 @@ class AttitudeReading(NamedTuple):
 
 
 class WheelCommand(NamedTuple):
-    """The flight software's command at step ``k``: the commanded wheel speeds (its
-    integral of the torques) and the motor torques.
+    """The flight software's command at step ``k``: wheel speeds (integral of the torques) and torques.
 
     Attributes:
       speeds: (N,) rad/s
@@ -221,9 +204,8 @@ def filter_input(command: WheelCommand, params: SpacecraftParams) -> Array:
 
 
 def delivered_torque(f, k: Array, command: Array) -> Array:
-    """The motor torques the wheels deliver under fault ``f`` (scalar leaves): the
-    fault acts on the command (bias, gain loss), and a STOP or STUCK wheel delivers none
-    (a sensor fault, e.g. a stuck gyro, leaves the wheels alone)."""
+    """Torques delivered under fault ``f`` (scalar leaves): bias and gain loss act on the command; STOP or
+    STUCK deliver none; sensor faults leave the wheels alone."""
     faulty, _ = apply_fault(f, k, command, Target.ACTUATOR, jnp.zeros((), command.dtype))
     no_torque = (is_active(f, k) & (f.target == Target.ACTUATOR)
                  & ((f.kind == FaultKind.STOP) | (f.kind == FaultKind.STUCK)))

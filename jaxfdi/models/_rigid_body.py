@@ -1,10 +1,8 @@
 """Rigid-body angular rates (Euler's equations), a small nonlinear model.
 
-``I w' = tau - w x (I w)`` with principal inertias ``I = diag(Ixx, Iyy, Izz)``, state
-``w = [p, q, r]`` (rad/s), input torque ``tau`` (N m), integrated by one classical RK4
-step per sample. Measurement: the rates themselves (rate gyros). The gyroscopic term is
-quadratic in ``w``, so the UKF and the EKF differ from each other and from a KF.
-Default inertias are the F-16's (Stevens & Lewis), in kg m^2.
+``I w' = tau - w x (I w)``, ``I = diag(Ixx, Iyy, Izz)`` (default the F-16's, Stevens & Lewis, kg m^2),
+``w = [p, q, r]`` (rad/s), torque ``tau`` (N m), one RK4 step per sample; measured ``y = w``. The
+gyroscopic term is quadratic in ``w``, so UKF, EKF and KF differ.
 """
 from __future__ import annotations
 
@@ -34,8 +32,7 @@ def rigid_body_params(dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dty
     """Principal moments of inertia ``inertia`` (3,) > 0 and the step ``dt`` > 0 (s).
 
     Returns:
-      ``RigidBodyParams(inertia (3,) [kg m^2], dt () [s])`` as arrays of ``dtype`` (default:
-      JAX's default float).
+      ``RigidBodyParams(inertia (3,) [kg m^2], dt () [s])`` in ``dtype`` (default: JAX's default float).
     """
     _checks.check_positive("dt", dt, "a positive step in seconds")
     _checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")

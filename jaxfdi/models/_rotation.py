@@ -1,14 +1,10 @@
-"""Attitude algebra (the strapdown INS, the spacecraft's truth and attitude control): unit
-quaternions (Hamilton, scalar first), direction cosine matrices, rotation vectors, Euler
-angles and the cross-product matrix.
+"""Attitude algebra (the strapdown INS, the spacecraft's truth and attitude control): unit quaternions (Hamilton, scalar
+first), direction cosine matrices, rotation vectors, Euler angles and the cross-product matrix.
 
-``q`` is the body-to-reference attitude (NED for the INS, inertial for the spacecraft):
-``v^n = C(q) v^b = (q (x) [0, v^b] (x) q*)_v``. A rotation vector ``r`` (angle ``|r|``
-about ``r / |r|``) has ``exp(r) = [cos(|r|/2), sin(|r|/2) r / |r|]``; ``log`` is its
-inverse on the hemisphere ``q_0 >= 0`` (Groves 2013, App. E.6; Titterton & Weston 2004,
-sec. 3.6). Small angles take series expansions, so the functions and their first
-two derivatives are finite at the identity (the EKF differentiates through them).
-Euler angles are roll, pitch, yaw (z-y-x order, ``C = R_z(yaw) R_y(pitch) R_x(roll)``).
+``q``: body-to-reference (NED for the INS, inertial for the spacecraft), ``v^n = C(q) v^b = (q (x) [0, v^b] (x) q*)_v``.
+Rotation vector ``r``: ``exp(r) = [cos(|r|/2), sin(|r|/2) r / |r|]``, ``log`` its inverse on ``q_0 >= 0`` (Groves 2013,
+App. E.6; Titterton & Weston 2004, sec. 3.6). Series near the identity keep values and two derivatives finite (the EKF
+differentiates through them). Euler: roll, pitch, yaw, ``C = R_z(yaw) R_y(pitch) R_x(roll)``.
 """
 from __future__ import annotations
 
@@ -22,8 +18,7 @@ _SMALL = 1e-10
 
 
 def _check_leading(name: str, value: Array, size: int, meaning: str) -> None:
-    """The components run along axis 0 (trace time): a shorter axis would be read out of
-    bounds, silently clamped."""
+    """The components run along axis 0 (trace time): a shorter axis would be read out of bounds, silently clamped."""
     shape = _checks.shape_of(value)
     if not shape or shape[0] != size:
         raise ValueError(f"{name}: expected {meaning}, shape ({size}, ...), got {shape}")
@@ -44,9 +39,8 @@ def quaternion_conjugate(q: Array) -> Array:
 
 
 def rotate(q: Array, v: Array) -> Array:
-    """``C(q) v`` without forming ``C``: ``v + q0 t + q_v x t``, ``t = 2 q_v x v`` (written out
-    element by element, which XLA fuses across a vmapped batch; a 3 x 3 ``dot`` per batch
-    element does not fuse and costs ~10x more on CPU)."""
+    """``C(q) v`` as ``v + q0 t + q_v x t``, ``t = 2 q_v x v``, element-wise (fuses under vmap; a 3 x 3 ``dot``
+    per element costs ~10x more on CPU)."""
     t = 2.0 * cross(q[1:], v)
     return v + q[0] * t + cross(q[1:], t)
 
@@ -77,9 +71,8 @@ def rotation_quaternion(rotation: Array) -> Array:
 
 
 def small_rotation_quaternion(rotation: Array) -> Array:
-    """``exp(r)`` by its series to the sixth order in ``|r|``: the error is below 1e-15 for
-    ``|r| <= 0.1`` rad, and no transcendental function is evaluated (the strapdown step's
-    turns are a few milliradians)."""
+    """``exp(r)`` by its series to sixth order (error < 1e-15 for ``|r| <= 0.1`` rad; no transcendental
+    call; strapdown turns are a few mrad)."""
     x2 = jnp.sum(rotation**2, axis=0)
     real = 1.0 - x2 / 8.0 + x2 * x2 / 384.0 - x2 * x2 * x2 / 46080.0
     scale = 0.5 - x2 / 48.0 + x2 * x2 / 3840.0 - x2 * x2 * x2 / 645120.0

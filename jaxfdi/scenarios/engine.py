@@ -1,34 +1,25 @@
 """Engine fault diagnosis of Han et al. (2022): MM, IMM (two mode designs) and GLRT on the same runs.
 
-Scenario (Han et al. 2022, as restated in the spec): steady state, a 0.01 kg/s fuel step at t = 0, one step fault
-at t = 2 s (actuator 0.0005 kg/s; sensors 0.5 % of their operating point), 4 s at
-100 Hz, and a fault-free case. Every method sees the same simulated runs (the noise of
-a run depends only on its key) and is scored by the same record: detection = first
-alarm at or after the onset, isolation = the label at that step, false alarm = an alarm
-before the onset. Delays are scored only in the runs with no alarm before the onset
-(``metrics.fault_row``): each row also gives the share of runs with a
-pre-onset alarm and the number of clean runs behind the delays. The paper's Table 3
-delays (0.002, 0.006, 0.027 s, ...) are not multiples of half a sample, so they are means
-of its 100 runs, not medians: the table prints them beside our mean.
+Scenario (Han et al. 2022, as restated in the spec): steady state, 0.01 kg/s fuel step at t = 0 s, one step fault at
+t = 2 s (actuator 0.0005 kg/s; sensors 0.5 % of their operating point), 4 s at 100 Hz, and a fault-free case. All
+methods see the same runs (noise depends only on the key) and one record: detection = first alarm at or after the onset,
+isolation = its label, false alarm = an alarm before the onset. Delays count only runs with no pre-onset alarm
+(``metrics.fault_row``; rows give that share and the clean-run count). Table 3's delays (0.002, 0.006, 0.027 s, ...) are
+not multiples of half a sample, so they are means of 100 runs: printed beside our mean.
 
-Methods (each a filter + an online detector fused with the plant in one scan):
+Methods (filter + online detector, fused with the plant in one scan):
 
-* ``MM`` / ``IMM`` on the Zhang & Li noise-inflation modes (``noise_inflation_modes``),
-  decision ``max_j mu_j >= mu_T`` (eq. 13), the mode that crosses first is isolated;
-* ``MM-bias`` / ``IMM-bias`` on the augmented fault-bias modes (``bias_modes``), which
-  also estimate the fault's size;
-* IMMs with the paper's transition matrix and with a hand-set one (``sticky_transition``);
-* ``GLRT``: the fault-blind steady-state KF's innovations tested by the windowed GLR
-  (Willsky & Jones), threshold ``l_T`` (the paper's 200, and a Bonferroni threshold
-  derived from a per-step false-alarm probability), isolation by the largest GLR or by
-  the paper's eq. (24) (actuator only when the actuator and T4 GLRs both cross);
-* a confirmed variant of the hand-set bias IMM: the same top fault mode must hold
-  ``mu_T`` for ``confirm_steps`` consecutive steps (not in the paper; see
-  ``mode_probability_detector`` for why the actuator fault needs it), and one with a
-  length per mode (``mode_confirm_steps``): P2, which no other mode mimics and which is
-  the slowest to cross, confirms over 2 steps, the others over 3. This one is the
-  library's answer to the paper's IMM claim (no false alarm, every fault isolated, delays
-  within 0.05 s); the lengths were chosen by hand on runs of seed 2, not the study's.
+* ``MM`` / ``IMM`` on Zhang & Li noise-inflation modes (``noise_inflation_modes``), decision
+  ``max_j mu_j >= mu_T`` (eq. 13), the first mode to cross isolated;
+* ``MM-bias`` / ``IMM-bias`` on augmented fault-bias modes (``bias_modes``), which also estimate size;
+* IMMs with the paper's transition matrix and a hand-set one (``sticky_transition``);
+* ``GLRT``: windowed GLR (Willsky & Jones) on the fault-blind steady-state KF's innovations,
+  ``l_T`` the paper's 200 or Bonferroni from a per-step false-alarm probability; isolation by the
+  largest GLR or eq. (24) (actuator only when the actuator and T4 GLRs both cross);
+* confirmed hand-set bias IMMs (not in the paper; ``mode_probability_detector`` says why the actuator fault needs it):
+  the top fault mode holds ``mu_T`` for ``confirm_steps``, or per mode (``mode_confirm_steps``: P2, mimicked by no mode
+  and slowest to cross, 2 steps, others 3). The latter answers the paper's IMM claim (no false alarm, all isolated,
+  delays within 0.05 s); lengths set by hand on seed 2, not the study's.
 
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
 Generalized Likelihood Ratio Test" (CITATION.cff).
@@ -87,8 +78,8 @@ PAPER_DELAY = {
 
 
 def sticky_transition(num_modes: int, to_fault, stay) -> np.ndarray:
-    """Row-stochastic matrix: normal -> fault j with ``to_fault[j-1]`` (a scalar: the same
-    for all); fault mode j stays with ``stay[j-1]`` and otherwise returns to normal."""
+    """Row-stochastic matrix: normal -> fault j with ``to_fault[j-1]`` (scalar: same for all); fault j
+    stays with ``stay[j-1]``, else returns to normal."""
     to_fault = np.broadcast_to(np.asarray(to_fault, float), (num_modes - 1,))
     stay = np.broadcast_to(np.asarray(stay, float), (num_modes - 1,))
     pi = np.zeros((num_modes, num_modes))
@@ -145,8 +136,7 @@ class Method(NamedTuple):
       init_state: its initial state
       detector: the detector (``Detector``)
       detector_input: ``info -> detector input`` (``monitor``)
-      estimate_delay: steps after the detection within which the fault estimate is read
-          (``monitor``)
+      estimate_delay: steps after the detection within which the fault estimate is read (``monitor``)
       paper: the paper's column this method reproduces (Table 3)
     """
 
@@ -189,8 +179,7 @@ def _bonferroni_threshold(settings: EngineSettings) -> float:
 
 
 def engine_method_names(settings: EngineSettings = EngineSettings()) -> list[str]:
-    """The names of ``engine_methods(settings)`` in table order, without building the
-    methods (what the CLI checks ``--methods`` against before computing)."""
+    """The names of ``engine_methods(settings)`` in table order, without building them (for the CLI's ``--methods``)."""
     bonferroni = _bonferroni_threshold(settings)
     return ["MM", "IMM", "IMM hand-pi", "MM-bias", "IMM-bias", "IMM-bias hand-pi", confirmed_name(settings),
             mode_confirmed_name(settings), f"GLRT l_T={settings.glr_threshold:g}", f"GLRT l_T={bonferroni:.1f}",
@@ -269,10 +258,8 @@ class ScenarioRuns(NamedTuple):
 
 
 def scenario_runs(runs: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> ScenarioRuns:
-    """The study's runs: ``runs`` of each engine case (fault-major) with inputs and keys.
-
-    Needs float64 (``jaxfdi.enable_x64()``; the CLI enables it): every engine study,
-    tuning and evaluation starts here."""
+    """``runs`` of each engine case (fault-major) with inputs and keys; every engine study, tuning and
+    evaluation starts here. Needs float64 (``jaxfdi.enable_x64()``; the CLI enables it)."""
     require_x64("engine scenarios (the engine model is stiff)")
     steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
     _, faults = engine_faults(onset)
@@ -312,8 +299,8 @@ def labelled_runs(runs_per_fault: int, seed: int, duration: float = 4.0, onset_t
 
 
 def balanced_batches(data: LabelledRuns, runs_per_fault: int, batch_runs: int, key: jax.Array):
-    """``step -> batch``: ``batch_runs`` runs of each of the seven cases of the fault-major
-    ``data``, reshuffled every epoch (``tuning.fixed_batches`` over run indices)."""
+    """``step -> batch``: ``batch_runs`` runs of each of the seven cases of fault-major ``data``,
+    reshuffled every epoch (``tuning.fixed_batches``)."""
     batch_runs = min(batch_runs, runs_per_fault)
     index_batches = fixed_batches(jnp.arange(runs_per_fault), batch_runs, key)
     per_fault = jnp.arange(data.ys.shape[0]) % runs_per_fault
@@ -337,10 +324,8 @@ def training_data(train_runs: int, val_runs: int, batch_runs: int, seed: int, st
 
 def hand_tuned_table(hand_rows: list[dict], tuned_rows: list[dict], labels: tuple[str, str], names: tuple[str, str],
                      footer: str, isolation: bool = True) -> str:
-    """Hand-set beside tuned rows (``metrics.fault_row``), fault by fault: detection
-    (isolation) and ``FA`` rates (``FA``: share of runs with an alarm before the onset),
-    delays over the ``clean`` runs only; ``footer`` below, then ``unhealthy_rows_warning``
-    of each side under its ``names``."""
+    """Hand-set beside tuned rows (``metrics.fault_row``) per fault: detection (isolation) and ``FA`` (pre-onset alarm)
+    rates, delays over ``clean`` runs; ``footer``, then each side's ``unhealthy_rows_warning`` under its ``names``."""
     width = max(6, *map(len, labels))
     head = (f"{'fault':<9} {'':<{width}} {'det':>5} " + (f"{'iso':>5} " if isolation else "")
             + f"{'FA':>5} {'clean':>5} {'mean [s]':>8} {'delay med [s]':>13} {'p90 [s]':>8}")
@@ -358,22 +343,20 @@ def hand_tuned_table(hand_rows: list[dict], tuned_rows: list[dict], labels: tupl
 
 def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, onset_time: float = 2.0,
                chunk_size: int = 1024, progress: bool = False) -> DetectionRecord:
-    """Records of ``runs`` runs of each engine fault (and fault-free), fault-major in
-    ``engine_faults`` order. Run ``i`` gets the same key, hence the same noise, for
-    every method."""
+    """Records of ``runs`` runs of each engine fault and fault-free, fault-major (``engine_faults``);
+    run ``i`` has the same key (noise) for every method."""
     model, us, faults, batch, _ = scenario_runs(runs, seed, duration, onset_time)
     return monte_carlo(lambda key, f: run_monitor(method, model, us, key, f).record, jax.random.key(seed),
                        len(faults) * runs, batch, chunk_size=chunk_size, progress=progress)
 
 
-#: the study's sensor-health cases beside the paper's six faults: the P2 sensor
-#: dead (NaN from the onset) and frozen (its value at the onset held); both isolate to P2
+#: sensor-health cases beside the paper's six: P2 dead (NaN from the onset) and frozen (onset value
+#: held); both isolate to P2
 HEALTH_CASES = ("P2 dead", "P2 frozen")
 
 
 def study_faults(onset_step: int) -> tuple[list[str], list[Fault]]:
-    """The study's cases: ``engine_faults`` (the paper's six and 'none') with
-    ``HEALTH_CASES`` before 'none'."""
+    """``engine_faults`` (the paper's six and 'none') with ``HEALTH_CASES`` before 'none'."""
     names, faults = engine_faults(onset_step)
     p2 = OUTPUT_NAMES.index("P2")
     health = [fault("dead", "sensor", p2, onset_step), fault("stuck", "sensor", p2, onset_step)]
@@ -382,9 +365,8 @@ def study_faults(onset_step: int) -> tuple[list[str], list[Fault]]:
 
 @functools.lru_cache(maxsize=4)
 def _fault_cases(x64: bool, health: bool) -> tuple[tuple[str, ...], tuple[float, ...], tuple[int, ...]]:
-    """The cases' names, magnitudes (NaN for 'none' and the sensor-health cases) and fault
-    labels, once per precision and case set: the threshold search summarises thousands of
-    replays, and building the faults cost 8 ms each time."""
+    """The cases' names, magnitudes (NaN for 'none' and sensor-health cases) and labels, cached per
+    precision and case set (the threshold search summarises thousands of replays; 8 ms a build)."""
     names, faults = study_faults(0) if health else engine_faults(0)
     sized = [n not in ("none", *HEALTH_CASES) for n in names]
     return (tuple(names), tuple(float(f.magnitude) if s else float("nan") for s, f in zip(sized, faults)),
@@ -392,10 +374,9 @@ def _fault_cases(x64: bool, health: bool) -> tuple[tuple[str, ...], tuple[float,
 
 
 def summarize_method(name: str, paper: str | None, records: DetectionRecord, runs: int, steps: int) -> list[dict]:
-    """One row per case: ``metrics.fault_row``'s columns (rates; delays in s over the runs
-    with no pre-onset alarm), the paper's mean delay (``PAPER_DELAY[paper]``), the
-    estimate's error. ``records`` hold ``runs`` runs of each case, of ``engine_faults``
-    (seven cases) or of ``study_faults`` (nine, with the sensor-health cases)."""
+    """One row per case: ``metrics.fault_row``'s columns (delays in s over runs with no pre-onset alarm),
+    the paper's mean delay (``PAPER_DELAY[paper]``), the estimate's error. ``records``: ``runs`` of each
+    case of ``engine_faults`` (seven) or ``study_faults`` (nine)."""
     x64, cases = bool(jax.config.jax_enable_x64), np.shape(records.onset)[0] // runs
     names, magnitudes, labels = _fault_cases(x64, cases == len(_fault_cases(x64, True)[0]))
     if cases != len(names) or cases * runs != np.shape(records.onset)[0]:
@@ -447,8 +428,8 @@ class EngineStudy(NamedTuple):
     figures: dict[str, Any]
 
     def overview(self) -> str:
-        """One line per method, over the six faults: the worst detection and isolation rates,
-        the false-alarm rates, the largest median delay and the worst-isolated fault."""
+        """Per method over the six faults: worst detection and isolation rates, false-alarm rates, largest
+        median delay, worst-isolated fault."""
         width = max(26, *(len(name) for name in self.records))
         head = (f"{'method':<{width}} {'min det':>7} {'min iso':>7} {'FA (no fault)':>13} {'FA (all)':>8} "
                 f"{'max med delay [s]':>17}  worst-isolated")
@@ -466,12 +447,11 @@ class EngineStudy(NamedTuple):
         return "\n".join(lines)
 
     def table(self) -> str:
-        """Per method and fault, beside Table 3 of Han et al. (2022) (a mean: printed beside our mean).
+        """Per method and fault, beside Table 3 of Han et al. (2022) (a mean: beside our mean).
 
-        ``pre-FA``: share of runs with an alarm before the onset (for ``none``: every alarm);
-        ``clean``: runs without one, the only runs whose delays count (mean, median, p90).
-        Every rate with its 95 % Clopper-Pearson interval (``metrics.rate_cell``) over the
-        healthy runs (``n``)."""
+        ``pre-FA``: runs alarming before the onset (``none``: every alarm); ``clean``: the others, whose
+        delays count (mean, median, p90). Rates with 95 % Clopper-Pearson intervals (``metrics.rate_cell``)
+        over the ``n`` healthy runs."""
         head = (f"{'fault':<9} {'n':>5} {'det [95 %]':>16} {'iso [95 %]':>16} {'pre-FA [95 %]':>16} {'clean':>5} "
                 f"{'delay mean':>10} {'paper':>6} {'med':>6} {'p90':>6} {'estimate':>10} {'true':>9} {'err %':>6}")
 
@@ -565,10 +545,9 @@ def _stack(items):
 @functools.lru_cache(maxsize=16)
 def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_estimate_delay: int,
                     unrolled: bool, kernel: bool) -> dict:
-    """The run functions of the engine study's structures (``study.Structure.run``), one
-    object per static setting so that every study of these sizes reuses their programs.
-    Each returns ``(DetectionRecord, trace)``: the trace is averaged over each fault's runs
-    for the figures (mode probabilities; per-direction GLR statistics)."""
+    """The structures' run functions (``study.Structure.run``), one object per static setting so studies
+    of these sizes reuse their programs. Each returns ``(DetectionRecord, trace)``; the trace (mode
+    probabilities; per-direction GLR) is averaged per fault for the figures."""
     model = engine_model()
     us = jnp.full((steps, 1), FUEL_STEP)
     x0, P0 = jnp.zeros(7), model.Q
@@ -599,11 +578,9 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
         return run
 
     def imm_chunk(design: str):
-        """The IMM structures over a whole chunk: the plant simulated per run, the IMM
-        bank through its structure-of-arrays kernel (``run_filter``), then each
-        decision rule replayed on the stored mode probabilities with the filter's health:
-        the records ``monitor`` gives (to round-off: the kernel's covariance update is the
-        standard form)."""
+        """The IMM structures over a chunk: plant per run, the bank through its structure-of-arrays kernel
+        (``run_filter``), each rule replayed on the stored mode probabilities and health: ``monitor``'s
+        records to round-off (the kernel's covariance update is the standard form)."""
         def run(keys, faults, filt: ZhangLiFilter | BiasFilter, rule: ModeRule):
             modes, prior, detector_input, delay = mode_bank(design, filt)
             imm = interacting_multiple_model(kalman_filter, modes, filt.mixing)
@@ -640,28 +617,21 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
 def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] | None = None,
                 duration: float = 4.0, onset_time: float = 2.0, unrolled: bool = False,
                 kernel: bool = True) -> Study:
-    """The engine study as data (``jaxfdi._study``): the nine cases (``study_faults``) and every method of
-    ``engine_method_names`` (or ``methods``) in five structures, one compiled program
-    each: the MMs and IMMs of each mode design, and the GLRTs. Within a structure the
-    methods are cells of a (filter x decision rule) grid: the IMMs that share a
-    transition matrix run one filter for their rules.
-
-    ``kernel``: the IMM structures run the IMM batch kernel over each chunk (default;
-    2.8x faster on CPU) instead of ``vmap(monitor)``; ``unrolled``: the other filters use
-    written-out factorisations instead of library calls. Both change speed only
-    (``benchmarks/bench_studies.py --linalg`` measures the second).
+    """The engine study as data (``jaxfdi._study``): the nine ``study_faults`` and every method of
+    ``engine_method_names`` (or ``methods``) in five structures, one compiled program each (MMs and
+    IMMs per mode design, GLRTs); methods are cells of a (filter x decision rule) grid, IMMs sharing a
+    transition matrix run one filter. Speed-only options: ``kernel`` (default) runs the IMM batch kernel
+    per chunk (2.8x faster on CPU) instead of ``vmap(monitor)``; ``unrolled``: written-out
+    factorisations in the other filters (``benchmarks/bench_studies.py --linalg``).
 
     Returns:
-      ``Study("engine", cases, case_names, structures)``: the nine ``study_faults`` stacked
-      (the paper's six, ``HEALTH_CASES``, ``none``; onset at ``onset_time``) and their
-      names, and the ``Structure`` of each of the five programs that holds a chosen
-      method: its run function, its parameter grids (filter numbers, decision rules) and
-      each method's cell in them; the IMM and GLRT structures also average their traces
-      (mode probabilities, GLR statistics) per case.
+      ``Study("engine", cases, case_names, structures)``: the nine cases stacked (the paper's six,
+      ``HEALTH_CASES``, ``none``; onset at ``onset_time``), their names, and each ``Structure`` holding a
+      chosen method (run function, parameter grids, method cells); the IMM and GLRT ones also average
+      their traces (mode probabilities, GLR statistics) per case.
 
     Raises:
-      ValueError: a name in ``methods`` that ``engine_method_names(settings)`` lacks, or
-        an empty ``methods``.
+      ValueError: a name in ``methods`` that ``engine_method_names(settings)`` lacks, or an empty ``methods``.
     """
     names = engine_method_names(settings)
     chosen = names if methods is None else list(methods)
@@ -706,19 +676,16 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
                  methods: list[str] | None = None, duration: float = 4.0, onset_time: float = 2.0,
                  progress: bool = False, chunk_size: int | None = None, unrolled: bool = False,
                  kernel: bool = True) -> EngineStudy:
-    """Run every method (or ``methods``) on the same ``runs`` runs per fault
-    (``engine_spec`` through ``study.run_study``: five programs).
-
-    Needs float64 (``jaxfdi.enable_x64()``): the engine is stiff. The figures' mean mode
-    probabilities and GLR statistics are averaged over the same runs, on the device.
+    """Run every method (or ``methods``) on the same ``runs`` runs per fault (``engine_spec`` through
+    ``study.run_study``: five programs; figure means averaged on the device). Needs float64
+    (``jaxfdi.enable_x64()``): the engine is stiff.
 
     Returns:
-      ``EngineStudy``: ``config`` (the settings, cases, methods, thresholds and timings),
-      ``rows`` (``summarize_method``'s, one per method and case), ``records`` (per method a
-      ``DetectionRecord`` of 9 * ``runs`` runs, case-major, ``study_faults`` order) and
-      ``figures``: ``"mode_prob/<method>"`` (9, T, 7) mean mode probabilities of ``IMM`` and
-      the confirmed IMM, ``"glr"`` (9, T, 6) mean GLR per fault direction of the first GLRT
-      (each only when its method ran; T = ``duration / TS`` steps).
+      ``EngineStudy``: ``config`` (settings, cases, methods, thresholds, timings), ``rows``
+      (``summarize_method``'s), ``records`` (per method a ``DetectionRecord`` of 9 * ``runs`` runs,
+      case-major, ``study_faults`` order), ``figures``: ``"mode_prob/<method>"`` (9, T, 7) mean mode
+      probabilities of ``IMM`` and the confirmed IMM, ``"glr"`` (9, T, 6) mean GLR per fault direction of
+      the first GLRT (each only if its method ran; T = ``duration / TS``).
     """
     require_x64("engine_study (the engine model is stiff)")
     check_study(runs, seed)
@@ -757,8 +724,8 @@ def method_paper(name: str) -> str | None:
 
 
 def plot_engine(study: EngineStudy, out_dir) -> list[str]:
-    """Figures like Figs. 3-1/3-2 of Han et al. (2022) (mode probabilities), 4 (GLR statistics) and
-    the magnitude estimates against truth; written atomically; returns the paths."""
+    """Figs. 3-1/3-2 (mode probabilities) and 4 (GLR) of Han et al. (2022) and the magnitude estimates
+    against truth, written atomically; returns the paths."""
     import matplotlib.pyplot as plt
 
     cfg, paths = study.config, []
@@ -851,10 +818,9 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
 
 # --- the fault-size study ----------------------------------------------------------
 
-#: each sensor fault at these multiples of its noise standard deviation (fault-to-noise
-#: ratio), the actuator's, at the same grid index, at these multiples of the paper's 5 % of
-#: the fuel step; the spec's reading of "0.5 %" (of each output's operating point) is flown
-#: beside (FNR 5.4, 3.4, 11.1, 4.1, 5.1 for RPM, P2, T2, P4, T4)
+#: sensor faults at these multiples of their noise std (fault-to-noise ratio); the actuator's, same
+#: index, at these multiples of the paper's 5 % of the fuel step; the spec's "0.5 %" of the operating
+#: point flown beside (FNR 5.4, 3.4, 11.1, 4.1, 5.1 for RPM, P2, T2, P4, T4)
 SIZE_FNR = (3.0, 5.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 14.0, 17.0, 20.0)
 SIZE_ACTUATOR = (0.5, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0)
 #: the methods of the study: one per Table 3 column (the paper's threshold and matrix)
@@ -873,8 +839,7 @@ class FaultSizeStudy(NamedTuple):
 
 
 def _matched_size(sizes, delays, paper: float) -> float:
-    """The size at which the delay curve (decreasing in size) crosses ``paper``: linear
-    interpolation between the grid points that bracket it (NaN if none does)."""
+    """Where the (decreasing) delay curve crosses ``paper``, interpolated linearly (NaN if never)."""
     for (s0, d0), (s1, d1) in zip(zip(sizes, delays), zip(sizes[1:], delays[1:])):
         if np.isfinite(d0) and np.isfinite(d1) and d0 >= paper >= d1:
             return float(s0 if d0 == d1 else s0 + (d0 - paper) / (d0 - d1) * (s1 - s0))
@@ -883,13 +848,10 @@ def _matched_size(sizes, delays, paper: float) -> float:
 
 def fault_size_study(runs: int = 100, seed: int = 0, fnr=SIZE_FNR, actuator=SIZE_ACTUATOR, methods=SIZE_METHODS,
                      progress: bool = False) -> FaultSizeStudy:
-    """Each method's mean delay (clean runs) against the fault's size, sensor
-    faults on a grid of fault-to-noise ratios ``fnr`` (``k sigma_j``, ``sigma_j`` the
-    output's noise standard deviation), the actuator's on ``actuator`` (multiples of the
-    paper's 0.0005 kg/s), and the spec's reading of "0.5 %" beside; for each method and
-    fault, the size at which our delay equals the paper's Table 3 (``_matched_size``), and
-    the reading the GLRT settles on: the grid FNR nearest the median of the sensors'
-    matched FNRs. One study of the engine's structures (``engine_spec``) with these cases."""
+    """Each method's mean delay (clean runs) against fault size: sensors on fault-to-noise ratios ``fnr``
+    (``k sigma_j``, the output's noise std), the actuator on ``actuator`` (multiples of 0.0005 kg/s), the spec's "0.5 %"
+    beside; per method and fault the size matching Table 3's delay (``_matched_size``), and the GLRT's settled reading:
+    the grid FNR nearest the median matched sensor FNR. One ``engine_spec`` study with these cases."""
     require_x64("fault_size_study (the engine model is stiff)")
     check_study(runs, seed)
     fnr, actuator = tuple(float(v) for v in fnr), tuple(float(v) for v in actuator)
@@ -947,8 +909,7 @@ def fault_size_study(runs: int = 100, seed: int = 0, fnr=SIZE_FNR, actuator=SIZE
 
 
 def fault_size_table(study: FaultSizeStudy) -> str:
-    """The delay curves, the matched sizes, and Table 3 at the spec's reading and at the
-    settled one, beside the paper."""
+    """The delay curves, matched sizes, and Table 3 at the spec's and the settled reading beside the paper."""
     cfg, rows = study.config, study.rows
     lines = [f"Delay against fault size, {cfg['runs']} runs per point (mean over the clean runs, s; '-': none detected); "
              f"sensor faults at k sigma (FNR k), the actuator's at multiples of 0.0005 kg/s"]

@@ -1,30 +1,21 @@
-"""Park et al. (2004) end to end: three 2-DOF rate sensors on the closed-loop F-16, the parity space,
-the UKF's analytic redundancy on demand, and the controller flying on the FDI-selected
-rates (Park, Kim, Park & Roh 2004).
+"""Park et al. (2004) end to end: three 2-DOF rate sensors on the closed-loop F-16, the parity space, the UKF's analytic
+redundancy on demand, and the controller flying on the FDI-selected rates (Park, Kim, Park & Roh 2004).
 
-A flight (``run_fdi_flight``) is ``scenarios.f16_flight.run_flight`` (the F-16, its
-sensors with noise and gusts, the LQR SAS with altitude and bank hold, the paper's climb
-and bank turn) with two changes: a fault on both axes of one rate sensor
-(``sensor_fault``: bias, drift, stuck or scale, in any direction of the sensor's plane,
-labelled by sensor), and the FDI stage ``detection.hybrid_psa_fdi`` in place of the rate
-pass-through:
+A flight (``run_fdi_flight``) is ``scenarios.f16_flight.run_flight`` (F-16, sensors with noise and
+gusts, LQR SAS with altitude and bank hold, climb and bank turn) with a fault on both axes of one rate
+sensor (``sensor_fault``: bias, drift, stuck or scale, any direction in the sensor's plane, labelled by
+sensor) and the FDI stage ``detection.hybrid_psa_fdi`` instead of the rate pass-through:
 
-- parity space of the spec's ``H`` (6x3, ``models.f16.skewed_rate_axes``), the three
-  sensors as groups (``detection.parity``); ``T_D`` from a per-step false-alarm
-  probability (``PFA``), ``T_I`` by Monte Carlo from a missed-isolation probability
-  (``MISSED_ISOLATION`` at the design fault-to-noise ratio ``DESIGN_FNR``);
-- when PSA leaves two suspects, a UKF on the moment equations 34-36 with
-  aerodynamic-coefficient errors (``models.f16.rates``, ``COEFFICIENT_ERROR``) restarts
-  ``RESTART_LAG`` steps before the decision from the least-squares rates, updates with
-  the healthy sensor only and isolates the suspect with the larger residual;
-- after the decision the controller flies on the least-squares rates of the four axes
-  left.
+- parity space of the spec's ``H`` (6x3, ``models.f16.skewed_rate_axes``), sensors as groups (``detection.parity``);
+  ``T_D`` from ``PFA`` per step, ``T_I`` by Monte Carlo from ``MISSED_ISOLATION`` at ``DESIGN_FNR``;
+- when PSA leaves two suspects, a UKF on moment eqs. 34-36 with coefficient errors (``models.f16.rates``,
+  ``COEFFICIENT_ERROR``) restarts ``RESTART_LAG`` steps before the decision from the least-squares rates, updates with
+  the healthy sensor only, and isolates the suspect with the larger residual;
+- after the decision the controller flies on the least-squares rates of the four axes left.
 
-Fault-to-noise ratio (FNR): the fault's RMS over the sensor's two axes divided by the
-per-axis noise sigma = 0.01 rad/s (the paper's case, a bias of 0.1 rad/s on both axes of
-sensor 1, is FNR 10). The fault's direction ``angle`` is measured in the sensor's own
-axes: ``f = FNR sigma sqrt(2) (cos angle, sin angle)``; Table 1's singular directions are
-at 45, 135, 225 and 315 deg for every sensor.
+FNR: the fault's RMS over the sensor's two axes / per-axis noise sigma = 0.01 rad/s (paper's case: 0.1 rad/s bias on
+both axes of sensor 1 = FNR 10). ``angle`` in the sensor's axes: ``f = FNR sigma sqrt(2) (cos angle, sin angle)``;
+singular directions (Table 1): 45, 135, 225, 315 deg.
 
 Reference: Park, Kim, Park & Roh (2004), "Hybrid Fault Detection and Isolation Method for Inertial
 Sensors Using Unscented Kalman Filter" (CITATION.cff).
@@ -101,10 +92,8 @@ class FDISetup(NamedTuple):
 
 
 class FaultCase(NamedTuple):
-    """One flight's rate-sensor fault (stack them to vmap). ``size``: FNR for a bias, the
-    FNR reached one second after the onset for a drift, the relative scale error for a
-    scale fault, unused for a stuck sensor (it holds both axes' values at the onset) and a
-    dead one (NaN on both axes).
+    """One flight's rate-sensor fault (stack to vmap). ``size``: FNR (bias), FNR reached 1 s after onset
+    (drift), relative scale error (scale); unused for stuck (both axes' onset values held) and dead (NaN).
 
     Attributes:
       kind: () int FaultKind (BIAS, RAMP, STUCK, SCALE, DEAD; NONE: fault-free)
@@ -166,10 +155,9 @@ def fdi_state0(fdi: FDISetup, follow="hybrid"):
 
 def fault_case(kind="bias", sensor=PAPER_SENSOR, size=PAPER_FNR, angle_deg=PAPER_ANGLE_DEG, onset_s=FAULT_ONSET_S,
                dtype=None) -> FaultCase:
-    """A ``FaultCase`` by name (``kind``: ``"none"`` or a key of ``KINDS``), or, from
-    arrays broadcast together, a stack of them with a leading flight axis: built on the
-    host, one transfer per field (a Python list of 10^5 single cases, each field a device
-    array copied back to be stacked, kept a GPU busy for minutes before the flights)."""
+    """A ``FaultCase`` by name (``kind``: ``"none"`` or a ``KINDS`` key), or from broadcast arrays a stack
+    with a leading flight axis, built on the host with one transfer per field (stacking 10^5 single
+    cases kept a GPU busy for minutes)."""
     names = ["none", *KINDS]
     unknown = sorted({str(k) for k in np.ravel(kind)} - set(names))
     if unknown:
@@ -186,8 +174,7 @@ def fault_case(kind="bias", sensor=PAPER_SENSOR, size=PAPER_FNR, angle_deg=PAPER
 
 
 def sensor_fault(case: FaultCase, sigma: Array) -> Fault:
-    """The ``Fault`` stack (2,) of ``case`` on both axes of its sensor, labelled sensor + 1
-    (``fault_group`` with traced values: the case may be a vmapped array)."""
+    """The ``Fault`` stack (2,) of ``case`` on both axes of its sensor, label sensor + 1 (traced values ok)."""
     dtype = case.size.dtype
     direction = jnp.stack([jnp.cos(case.angle), jnp.sin(case.angle)])
     amplitude = case.size * sigma * math.sqrt(2.0) * direction  # FNR: RMS over the two axes / sigma
@@ -202,8 +189,8 @@ def sensor_fault(case: FaultCase, sigma: Array) -> Fault:
 
 def run_fdi_flight(setup: FlightSetup, fdi: FDISetup, key: Array, dispersion: Dispersion, case: FaultCase,
                    follow: Array, keep_history: bool = False, batch_axis: str | None = None):
-    """One closed-loop flight with the rate-sensor fault ``case`` and the hybrid FDI, the
-    view following ``follow`` (a ``FOLLOW`` code: 0 none, 1 PSA alone, 2 hybrid)."""
+    """One closed-loop flight with fault ``case`` and the hybrid FDI; the view follows ``follow`` (``FOLLOW``
+    code: 0 none, 1 PSA alone, 2 hybrid)."""
     fault = sensor_fault(case, setup.sensors.rate_sigma)
     return run_flight(setup, key, dispersion, keep_history, fdi=f16_hybrid_fdi(fdi, batch_axis),
                       fdi_state0=fdi_state0(fdi, follow), fault=fault)
@@ -211,8 +198,7 @@ def run_fdi_flight(setup: FlightSetup, fdi: FDISetup, key: Array, dispersion: Di
 
 # --- the study ---------------------------------------------------------------------
 
-#: the sweep: fault-to-noise ratios, and directions every 360 / SWEEP_DIRECTIONS deg
-#: from 0 (so Table 1's singular directions, 45 + 90 j deg, are among them)
+#: the sweep: FNRs, and directions every 360 / SWEEP_DIRECTIONS deg from 0 (incl. Table 1's 45 + 90 j)
 SWEEP_FNR = (5.0, 10.0, 20.0)
 SWEEP_DIRECTIONS = 24
 #: the sweep's flights end this long after the onset (the decision comes within steps)
@@ -280,10 +266,8 @@ def _layout_fdi(setup: FlightSetup, fdi: FDISetup, layouts: FDISetup | None, ind
 
 
 def _flights(keys, per, shared):
-    """A chunk of flights of ``per = (dispersions, cases, follows, layout indices)`` on
-    ``shared = (setup, fdi, layouts)``: ``vmap`` with the run axis named ``BATCH_AXIS``, so
-    that the hybrid's replay condition spans the chunk; each keeps its outcome and the
-    FDI's decision."""
+    """Flights of ``per = (dispersions, cases, follows, layout indices)`` on ``shared = (setup, fdi, layouts)``, vmapped
+    over ``BATCH_AXIS`` (the hybrid's replay condition spans the chunk); each keeps its outcome and decision."""
     setup, fdi, layouts = shared
 
     def one(k, p):
@@ -296,10 +280,8 @@ def _flights(keys, per, shared):
 
 
 def _fly(setup, fdi, key, per_run, layouts=None, chunk_size=1024, progress=False, name="flights"):
-    """Flights of ``per_run`` (``_flights``) on the study engine: one batched structure with
-    the setup, the FDI and the layouts as shared data (one program per flight length).
-    Chunks of 1024 flights (the default study cold on the 2-core CPU: 129 s in chunks of
-    64, 116 s in chunks of 1024)."""
+    """``_flights`` on the study engine, setup, FDI and layouts shared (one program per flight length);
+    chunks of 1024 (default study cold on 2 CPU cores: 116 s, vs 129 s in chunks of 64)."""
     n = int(per_run[2].shape[0])
     structure = Structure(name, _flights, (), {name: ()}, batched=True, shared=(setup, fdi, layouts))
     spec = Study("f16", lambda runs, seed: per_run, (name,), (structure,))
@@ -313,11 +295,10 @@ def _angle_from_singular(angle_deg: np.ndarray) -> np.ndarray:
 def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_sigma: float | None = None,
                   directions: int = SWEEP_DIRECTIONS, sweep_fnr=SWEEP_FNR, optimizer_steps: int = 400,
                   chunk_size: int | None = 1024) -> F16FDIStudy:
-    """Park et al. (2004) end to end (module doc): the paper's case beside the paper, the parity
-    geometry and Table 1, the direction x magnitude sweep (``runs`` flights per sensor,
-    FNR and direction; PSA alone vs the hybrid), fault kinds and the safe envelope with
-    and without FDI (``runs`` flights per kind and mode), ``FAULT_FREE_PER_RUN * runs``
-    fault-free flights, and the sensor arrangement optimised by gradient. Needs float64."""
+    """Park et al. (2004) end to end: the paper's case, parity geometry and Table 1, the direction x FNR
+    sweep (``runs`` per sensor, FNR, direction; PSA vs hybrid), fault kinds and the safe envelope with and
+    without FDI (``runs`` per kind and mode), ``FAULT_FREE_PER_RUN * runs`` fault-free flights, the sensor
+    arrangement optimised by gradient. Needs float64."""
     require_x64("f16_fdi_study")
     check_study(runs, seed, runs_name="runs", directions=directions, optimizer_steps=optimizer_steps)
     sweep_fnr = tuple(float(v) for v in np.atleast_1d(sweep_fnr))
@@ -395,19 +376,17 @@ def f16_fdi_study(runs: int = 100, seed: int = 0, progress: bool = False, gust_s
 
 
 def f16_rate_ukf(fdi: FDISetup):
-    """The UKF of the analytic redundancy: moment equations 34-36 with the coefficient
-    errors (``models.f16.rates``), every rate channel measured, NaN = not used."""
+    """The analytic-redundancy UKF: moment eqs. 34-36 with coefficient errors, every channel (NaN: unused)."""
     return unscented_kalman_filter(rate_transition, rate_observation, fdi.process_cov, fdi.noise_cov, fdi.rates,
                                    UKF_ALPHA, UKF_BETA, UKF_KAPPA, missing_measurements=True)
 
 
 def analytic_residual_trace(fdi: FDISetup, measurement: Array, control: Array, restart: int, trusted: Array,
                             steps: int) -> tuple[Array, Array]:
-    """The UKF restarted at step ``restart`` of a recorded flight (least-squares rates of
-    every channel, covariance ``sigma^2 (H^T H)^-1``) and run ``steps`` steps on, updated
-    with the ``trusted`` (6,) channels only: ``(norms (steps, 3), filtered rates (steps,
-    3))``, ``norms[j]`` the per-sensor ``||m_i - H_i x_hat||`` at step ``restart + 1 + j``
-    (eq. 30; at the decision step it is what the FDI computed by its bounded replay)."""
+    """The UKF restarted at step ``restart`` of a recorded flight (least-squares rates, covariance
+    ``sigma^2 (H^T H)^-1``), run ``steps`` on with the ``trusted`` (6,) channels: ``(norms (steps, 3),
+    filtered rates (steps, 3))``, ``norms[j] = ||m_i - H_i x_hat||`` per sensor at ``restart + 1 + j``
+    (eq. 30; at the decision step, what the FDI's bounded replay computed)."""
     length = _checks.shape_of(measurement)[0]
     steps = _checks.check_int("steps", steps, 1, meaning="a positive number of steps")
     restart = _checks.check_int("restart", restart, 0, length - 1 - steps,
@@ -434,8 +413,7 @@ def _residual_trace(fdi: FDISetup, measurement: Array, control: Array, restart: 
 
 
 def _paper_case(setup: FlightSetup, fdi: FDISetup, key: Array) -> tuple[dict, dict]:
-    """The paper's case flown once per view (same noise and gusts): never excluding
-    (``none``), following PSA alone, the hybrid, the verified hybrid."""
+    """The paper's case once per view (same noise, gusts): ``none``, PSA alone, hybrid, verified hybrid."""
     case = fault_case(dtype=setup.x0.dtype)
     disp = jax.tree_util.tree_map(lambda a: a[0], nominal_dispersion(setup))
 
@@ -584,9 +562,8 @@ def _configuration_rows(space, optimisation, separation, decision, sensor, n_swe
 
 def _kind_flights(setup: FlightSetup, fdi: FDISetup, kinds, follows, runs: int, free: int, rng, key: Array,
                   chunk_size, progress) -> list[dict]:
-    """Full flights: each ``(kind, size)`` of ``kinds`` on ``runs`` random sensors and
-    directions, the same draws flown under every view of ``follows``, and ``free``
-    fault-free flights (view: verified); their rows (``_full_flight_rows``)."""
+    """Full flights of each ``(kind, size)`` on ``runs`` random sensors and directions, the same draws under
+    every view of ``follows``, and ``free`` fault-free flights (verified); their rows."""
     cases, labels = [], []
     for kind, size in kinds:
         draws = [(int(rng.integers(3)), float(rng.uniform(0.0, 360.0))) for _ in range(runs)]
@@ -604,10 +581,9 @@ def _kind_flights(setup: FlightSetup, fdi: FDISetup, kinds, follows, runs: int, 
 
 
 def _full_flight_rows(out, labels, sensor, onset: int, setup: FlightSetup) -> list[dict]:
-    """One row per (kind, size, view): decisions, the isolation by the decision the view
-    follows (none: the verified one, not flown), misisolations and envelope exits with
-    their 99 % Clopper-Pearson intervals (``metrics.rate_interval``). A flight that went
-    numerically bad is an exit and never a decision."""
+    """One row per (kind, size, view): decisions, isolation by the followed decision (none: the verified
+    one), misisolations and envelope exits with 99 % Clopper-Pearson intervals; a numerically bad
+    flight is an exit, never a decision."""
     index = {name: i for i, name in enumerate(ERRORS)}
     peak = np.asarray(out.tracking.max_abs)
     healthy = np.asarray(out.healthy)
@@ -667,10 +643,9 @@ class F16KindStudy(NamedTuple):
 
 def fault_kind_study(runs: int = 1000, seed: int = 0, progress: bool = False, chunk_size: int | None = 1024,
                      follows=KIND_FOLLOWS) -> F16KindStudy:
-    """The F-16 fault-kind study: ``runs`` full flights of every fault kind (``KIND_SIZES``:
-    bias and drift at FNR 10, scale 0.5, stuck, dead) on a random sensor and direction,
-    flown under each view of ``follows`` (the same draws), and ``runs`` fault-free flights:
-    misisolations and envelope exits with their 99 % intervals."""
+    """``runs`` full flights of every fault kind (``KIND_SIZES``: bias and drift at FNR 10, scale 0.5,
+    stuck, dead), random sensor and direction, under each view of ``follows``, and ``runs`` fault-free:
+    misisolations and envelope exits with 99 % intervals."""
     require_x64("fault_kind_study")
     check_study(runs, seed, runs_name="runs")
     follows = tuple(follows)
@@ -727,8 +702,7 @@ def _pct(part: int, whole: int) -> str:
 
 
 def study_table(study: F16FDIStudy) -> str:
-    """The text the CLI prints: the paper's case beside the paper, Table 1, the sweep,
-    the fault kinds and the envelope, false alarms, the sensor arrangement."""
+    """The CLI's text: paper's case, Table 1, sweep, fault kinds and envelope, false alarms, arrangement."""
     cfg, rows = study.config, study.rows
     by = lambda section: [r for r in rows if r["section"] == section]  # noqa: E731
     p = by("paper_case")[0]
@@ -817,8 +791,8 @@ def study_table(study: F16FDIStudy) -> str:
 
 
 def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
-    """The paper's Figs. 5-8 for its case, the trajectory, the sweep as polar plots, the
-    envelope and the sensor arrangement (PNG, written atomically); returns the paths."""
+    """Figs. 5-8 for the paper's case, trajectory, sweep (polar), envelope, sensor arrangement (PNG, written
+    atomically); returns the paths."""
     from pathlib import Path
 
     from matplotlib.figure import Figure

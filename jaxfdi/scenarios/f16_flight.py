@@ -1,30 +1,22 @@
 """The aircraft of Park et al. (2004): the Stevens & Lewis F-16 in closed loop, fault-free.
 
-A flight (``run_flight``) is ``loop.run_loop`` of three parts:
+A flight (``run_flight``) is ``loop.run_loop`` of:
 
-- the plant ``control.f16_loop.f16_plant``: the 13-state F-16 (book tables, xcg per flight),
-  RK4 at ``DT`` = 0.01 s, sensors with noise (the three 2-DOF rate sensors of Park et al. 2004,
-  sigma = 0.01 rad/s; air data, attitude, altitude, engine power), optional gusts, wrapped
-  by ``tracking.tracked_plant`` so that the run keeps its tracking errors;
-- the FDI stage ``control.f16_loop.rate_passthrough_fdi``: no fault detection yet, the
-  controller flies on the least-squares body rates of the six rate channels (the
-  parity-space FDI of Park et al. 2004 will take this place and hand over its selected rate);
-- the controller ``control.flight.flight_controller``: LQR stability augmentation with
-  altitude and bank-angle hold, designed on the ``jax.jacfwd`` linearisation about the
-  level trim at 502 ft/s, sea level, xcg = 0.35 (Stevens & Lewis Table 3.6-3's first case).
+- plant ``control.f16_loop.f16_plant``: 13-state F-16 (book tables, xcg per flight), RK4 at
+  ``DT`` = 0.01 s, noisy sensors (three 2-DOF rate sensors, sigma = 0.01 rad/s; air data, attitude, altitude,
+  engine power), optional gusts, wrapped by ``tracking.tracked_plant`` (keeps tracking errors);
+- FDI ``control.f16_loop.rate_passthrough_fdi``: no detection, least-squares body rates of the six
+  rate channels (``scenarios.f16_fdi`` puts the parity-space FDI here);
+- controller ``control.flight.flight_controller``: LQR SAS with altitude and bank-angle hold on the ``jax.jacfwd``
+  linearisation about the level trim at 502 ft/s, sea level, xcg = 0.35 (Stevens & Lewis Table 3.6-3's first case).
 
-The flight (Park, Kim, Park & Roh 2004, Sec. III): climb at 120 ft/s for 0-5 s, then hold
-altitude and bank-turn (30 deg) 5-15 s; it starts trimmed in the climb (the level-off and
-roll-in shapes are in ``control.flight``). A study flies ``flights`` of it vmapped in one
-compiled scan, each with its own sensor noise, gusts, c.g. (uniform in ``XCG_RANGE``) and
-initial-state offsets (``dispersions``); flight 0 is the nominal one (design c.g., no
-offsets). It reports the book's trim tables beside ours (one vmapped trim solve), the
-open-loop modes at the design trim and the closed-loop poles, and the tracking errors
-over the flights.
+Flight (Park, Kim, Park & Roh 2004, Sec. III; shapes in ``control.flight``): trimmed 120 ft/s climb 0-5 s, then altitude
+hold and 30 deg bank turn 5-15 s. A study flies ``flights`` vmapped in one scan, each with its own noise, gusts, c.g.
+(uniform in ``XCG_RANGE``) and initial offsets (``dispersions``; flight 0 nominal), and reports the book's trims beside
+ours (one vmapped solve), open-loop modes, closed-loop poles and tracking errors.
 
-References: Stevens & Lewis (2003) *Aircraft Control and Simulation*, 2nd ed.; Morelli
-(1998) "Global nonlinear parametric modeling with application to F-16 aerodynamics";
-Park, Kim, Park & Roh (2004).
+References: Stevens & Lewis (2003) *Aircraft Control and Simulation*, 2nd ed.; Morelli (1998) "Global nonlinear
+parametric modeling with application to F-16 aerodynamics"; Park, Kim, Park & Roh (2004).
 """
 from __future__ import annotations
 
@@ -60,8 +52,7 @@ from jaxfdi._tracking import TrackingScore, tracked_plant
 DT = 0.01
 #: c.g. range of the dispersed flights (fractions of cbar); the design is at 0.35
 XCG_RANGE = (0.33, 0.37)
-#: initial-state offsets of the dispersed flights: uniform within +- these (VT ft/s, alpha,
-#: beta, phi, theta rad, P, Q, R rad/s)
+#: initial offsets of dispersed flights, uniform within +-: VT ft/s, alpha, beta, phi, theta rad, P, Q, R rad/s
 INITIAL_SPREAD = {VT: 5.0, ALPHA: math.radians(0.5), BETA: math.radians(0.5), PHI: math.radians(2.0),
                   THETA: math.radians(0.5), P: math.radians(2.0), Q: math.radians(1.0), R: math.radians(1.0)}
 #: gust velocity standard deviation of the study, ft/s (light turbulence)
@@ -199,19 +190,15 @@ def flight_setup(plan: FlightPlan | None = None, weights: FlightWeights | None =
 
 
 def cast_setup(setup: FlightSetup, dtype) -> FlightSetup:
-    """The same setup with every float leaf in ``dtype`` (e.g. a float32 flight flown with
-    the float64 design)."""
+    """The setup with every float leaf in ``dtype`` (e.g. a float32 flight with the float64 design)."""
     return jax.tree_util.tree_map(lambda a: a.astype(dtype) if jnp.issubdtype(a.dtype, jnp.floating) else a, setup)
 
 
 def run_flight(setup: FlightSetup, key: Array, dispersion: Dispersion, keep_history: bool = False, fdi=None,
                fdi_state0: Any = None, fault=None):
-    """One closed-loop flight; returns an ``Outcome`` (and a ``FlightHistory``).
-
-    ``fdi``/``fdi_state0``: the FDI stage (a ``loop.FDI`` whose ``observe`` returns a
-    ``FlightView``) and its initial state; default the rate pass-through (every rate
-    channel trusted). ``fault``: sensor or actuator faults of the plant (``f16_plant``),
-    e.g. a ``faults.fault_group`` on both axes of one rate sensor."""
+    """One closed-loop flight; returns an ``Outcome`` (and a ``FlightHistory``). ``fdi``/``fdi_state0``: a
+    ``loop.FDI`` whose ``observe`` returns a ``FlightView``, and its state (default: rate pass-through);
+    ``fault``: plant faults (``f16_plant``), e.g. a ``faults.fault_group`` on both axes of a rate sensor."""
     _checks.check_shape("dispersion.initial", dispersion.initial, (13,), "an offset of the 13-state initial state")
     _checks.check_scalar("dispersion.xcg", dispersion.xcg, 0.0, 1.0,
                          meaning="a centre of gravity in [0, 1] of the mean chord")
@@ -261,8 +248,7 @@ def nominal_dispersion(setup: FlightSetup, flights: int = 1) -> Dispersion:
 
 
 def dispersions(key: Array, setup: FlightSetup, flights: int, xcg_range=XCG_RANGE, spread=None) -> Dispersion:
-    """``flights`` dispersions: c.g. uniform in ``xcg_range`` and initial offsets uniform
-    within ``spread`` (``INITIAL_SPREAD``); flight 0 is nominal."""
+    """``flights`` dispersions: c.g. uniform in ``xcg_range``, offsets within ``spread``; flight 0 nominal."""
     low, high = (float(v) for v in xcg_range)
     if not (np.isfinite(low) and np.isfinite(high) and 0.0 <= low <= high <= 1.0):
         raise ValueError(f"xcg_range: expected (low, high) with 0 <= low <= high <= 1 (fractions of the mean chord), "
@@ -347,8 +333,8 @@ def _dispersed_flight(key: Array, dispersion: Dispersion, setup: FlightSetup):
 
 def f16_flight_study(flights: int = 100, seed: int = 0, progress: bool = False, gust_sigma: float = GUST_SIGMA,
                      sample_flights: int = 8, chunk_size: int | None = None) -> F16FlightStudy:
-    """Trim table beside the book's, modes, the LQR design and ``flights`` closed-loop
-    flights (module doc). Needs float64 (``jaxfdi.enable_x64()``)."""
+    """Trims beside the book's, modes, LQR design, ``flights`` closed-loop flights; needs float64
+    (``jaxfdi.enable_x64()``)."""
     require_x64("f16_flight_study")
     check_study(flights, seed, runs_name="flights", sample_flights=sample_flights)
     _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
@@ -437,8 +423,7 @@ def study_table(study: F16FlightStudy) -> str:
 
 
 def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
-    """The trajectory and the time histories of the sample flights (PNG, written
-    atomically); returns the paths."""
+    """Trajectory and time histories of the sample flights (PNG, atomic); returns the paths."""
     from pathlib import Path
 
     from matplotlib.figure import Figure

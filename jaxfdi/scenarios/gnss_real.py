@@ -1,58 +1,37 @@
 """Real receivers: GPS integrity on an hour of two GEONET stations, beside RTKLIB, and
 every constellation on four smartphone traces, beside Google and gnss_lib_py.
 
-Data: GEONET stations 0759 and 3040 (GSI, Japan; 3.3 km apart), 2005-04-02
-00:00-00:59:30 GPST, 30 s, Trimble 5700, RINEX 2.10 with the broadcast ephemerides
-(RTKLIB's test data, shipped in ``jaxfdi/data``). The header's ``APPROX POSITION XYZ``
-is the surveyed position: the truth at every epoch.
+Data: GEONET stations 0759 and 3040 (GSI, Japan; 3.3 km apart), 2005-04-02 00:00-00:59:30 GPST, 30 s,
+Trimble 5700, RINEX 2.10 with broadcast ephemerides (RTKLIB's test data, in ``jaxfdi/data``); truth:
+the header's surveyed ``APPROX POSITION XYZ``.
 
-Each epoch is fixed by ``gnss.monitor_receiver``: C1 pseudoranges, RTKLIB's
-single-point model (broadcast orbits and clocks, Klobuchar, Saastamoinen, 15 deg mask,
-its weights), the parity test at ``P_fa = 1e-3`` (RTKLIB's chi-square level), slope
-protection levels at ``P_md = 1e-3``, exclusion; and solution-separation protection
-levels (``solution_separation``: ARAIM's LPV-200 budgets, ``P_sat = 1e-5``).
+Each epoch: ``gnss.monitor_receiver`` on C1 with RTKLIB's single-point model (broadcast orbits and
+clocks, Klobuchar, Saastamoinen, 15 deg mask, its weights), parity test at ``P_fa = 1e-3`` (RTKLIB's
+chi-square level), slope protection levels at ``P_md = 1e-3``, exclusion; solution-separation levels
+(``solution_separation``: ARAIM LPV-200 budgets, ``P_sat = 1e-5``).
 
-- **positions**: per station, the horizontal and vertical errors from the surveyed
-  position, the largest difference from RTKLIB's own fixes of the same epochs (when
-  pyrtklib is installed), alarms, and misleading information (an error beyond its
-  protection level without an alarm) for both protection levels: the Stanford diagrams.
-- **step** and **ramp**: faults injected into station 0759's real pseudoranges. A step of
-  ``b`` metres on one satellite at one epoch (a snapshot test sees one epoch at a time),
-  and a ramp of ``r`` m/s on one satellite from one epoch to the end of the hour, on
-  ``runs`` (satellite, epoch) pairs drawn with ``seed`` among those the fix uses. The
-  step rows give the detection rate of both tests, correct exclusion by each (the parity
-  test's isolated satellite; solution separation's mode of the largest separation
-  relative to its threshold), RTKLIB's RAIM FDE on the same trials (when pyrtklib is
-  installed: the trials where it takes our decision, and the largest difference of the
-  fixes), and the detection
-  rate among the trials whose bias is at least the minimum detectable bias that the
-  slope protection level assumes (``1 - P_md`` is promised there); the ramp rows the
-  detection within the hour, the delay and the bias at detection beside that epoch's
-  minimum detectable bias.
-- **channel**: on the ramps' trials, the satellite's channel stops at that epoch: frozen
-  at its last pseudorange (the true range keeps moving, up to hundreds of metres per 30 s
-  epoch) or dead (an infinite pseudorange, which the fix leaves out and flags). Rows:
-  detection (a parity alarm or the dead flag), exclusion of that satellite, the delay,
-  and how far the range had moved from the frozen value when a frozen channel was caught.
-- **phones**: four traces of Google's Smartphone Decimeter Challenge (2021-2023, GPS,
-  GLONASS, Galileo, BeiDou, QZSS; shipped in ``jaxfdi/data``) through
-  ``gnss.monitor_receiver``: one receiver clock per constellation, the phone's own
-  pseudorange uncertainty as sigma, no mask, the same tests and levels, and up to
-  ``PHONE_EXCLUSIONS`` satellites excluded one after another. Per trace: the alarms, the
-  epochs with an exclusion, the signals excluded and the epochs still alarming after
-  them, the median ``TS_D / dof`` (1 when the phone's uncertainties are right),
-  the delivered fix (after exclusion) against Google's weighted-least-squares one and
-  against the ground truth, both protection levels and misleading epochs where there
-  is truth.
-- **phone-peers** (when gnss_lib_py is installed): the same epochs through gnss_lib_py
-  1.1's ``solve_wls`` (unit weights, one clock) against ours in that configuration, and
-  its residual fault detection and exclusion (Blanch, Walter & Enge 2015, greedy) against
-  our parity test and exclusion at the same threshold on the same unweighted statistic:
-  the agreement table. First exclusion (one fault each): gnss_lib_py's exclusion
-  statistic divides by ``1 - h_ii`` of the geometry without its clock column;
-  ``explained`` counts the differing exclusions that its own formula with the clock
-  column would have made ours. ``same_exclusion_set``: epochs where up to
-  ``PHONE_EXCLUSIONS`` greedy exclusions on both sides leave out the same signals.
+- **positions**: per station, horizontal/vertical errors from the surveyed position, largest
+  difference from RTKLIB's fixes (with pyrtklib), alarms, misleading information (error beyond the
+  level without alarm) for both levels: the Stanford diagrams.
+- **step** / **ramp** on station 0759's real pseudoranges: ``b`` m on one satellite at one epoch (snapshot test), or
+  ``r`` m/s from one epoch to the end of the hour; ``runs`` (satellite, epoch) pairs drawn with ``seed`` among those the
+  fix uses. Step rows: detection by both tests, correct exclusion by each (parity's isolated satellite; solution
+  separation's largest separation relative to its threshold), RTKLIB's RAIM FDE on the same trials (with pyrtklib:
+  agreement, largest fix difference), detection among trials with bias >= the slope level's minimum detectable bias
+  (``1 - P_md`` promised there). Ramp rows: detection within the hour, delay, bias at detection beside that epoch's MDB.
+- **channel**: on the ramps' trials the channel stops at that epoch: frozen at its last pseudorange (the range moves up
+  to hundreds of m per 30 s) or dead (infinite, left out and flagged). Rows: detection (parity alarm or dead flag),
+  exclusion of that satellite, delay, range moved from the frozen value when caught.
+- **phones**: four Google Smartphone Decimeter Challenge traces (2021-2023; GPS, GLONASS, Galileo, BeiDou, QZSS; in
+  ``jaxfdi/data``) through ``gnss.monitor_receiver``: a clock per constellation, the phone's pseudorange uncertainty as
+  sigma, no mask, up to ``PHONE_EXCLUSIONS`` greedy exclusions. Per trace: alarms, epochs with an exclusion, signals
+  excluded, epochs still alarming, median ``TS_D / dof`` (1 when the uncertainties are right), delivered fix against
+  Google's WLS and the ground truth, both levels and misleading epochs where there is truth.
+- **phone-peers** (with gnss_lib_py): gnss_lib_py 1.1's ``solve_wls`` (unit weights, one clock) against ours so
+  configured, and its greedy residual FDE (Blanch, Walter & Enge 2015) against our parity test and exclusion at the same
+  threshold on the same unweighted statistic. Its first exclusion divides by ``1 - h_ii`` of the geometry without the
+  clock column; ``explained`` counts differing exclusions its formula with the clock column would have made ours;
+  ``same_exclusion_set``: epochs where up to ``PHONE_EXCLUSIONS`` exclusions agree on both sides.
 """
 from __future__ import annotations
 
@@ -99,9 +78,8 @@ PHONE_EXCLUSIONS = 3
 
 @study_result(group="section")
 class GnssRealStudy(NamedTuple):
-    """The study's rows (one per station, step size and ramp rate) and, for the figures,
-    the per-epoch arrays of each station (``epochs[station]``: ``horizontal_error``,
-    ``vertical_error``, ``hpl``, ``vpl``, ``ss_hpl``, ``ss_vpl``, ``alarm``, ``gdop``)."""
+    """Rows (per station, step size, ramp rate) and per-epoch arrays per station for the figures (``epochs[station]``:
+    ``horizontal_error``, ``vertical_error``, ``hpl``, ``vpl``, ``ss_hpl``, ``ss_vpl``, ``alarm``, ``gdop``)."""
     config: dict
     rows: list[dict]
     epochs: dict
@@ -122,8 +100,7 @@ def _fmt(value) -> str:
 
 
 def local_errors(position: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Horizontal and vertical (absolute) errors [m] of (E, 3) ECEF fixes from ``truth``, in
-    the north-east-down axes at ``truth``."""
+    """Absolute horizontal and vertical errors [m] of (E, 3) ECEF fixes, NED axes at ``truth``."""
     ned = np.asarray(ecef_to_ned(position, truth))
     return np.hypot(ned[:, 0], ned[:, 1]), np.abs(ned[:, 2])
 
@@ -175,12 +152,10 @@ def _rtklib_options(rtk):
 
 
 def _rtklib_fde(station: str):
-    """RTKLIB's own RAIM fault detection and exclusion (``pntpos`` with ``posopt[4]``, the
-    ``pos1-raimfde`` option: after a failed chi-square test it re-solves without each
-    satellite in turn and keeps the passing solution of the smallest residual RMS) on the
-    station's epochs, as ``decide(epoch, prn, bias) -> (decision, position)`` with a bias
-    added to that satellite's C1; ``decision`` is "none", "x<prn>" (excluded) or "no fix".
-    ``None`` without pyrtklib."""
+    """RTKLIB's RAIM FDE (``pntpos``, ``posopt[4]`` = ``pos1-raimfde``: after a failed chi-square test,
+    re-solve without each satellite, keep the passing solution of smallest residual RMS) as
+    ``decide(epoch, prn, bias) -> (decision, position)``, bias added to that C1; ``decision``: "none",
+    "x<prn>" (excluded) or "no fix". ``None`` without pyrtklib."""
     try:
         import pyrtklib as rtk
     except ImportError:
@@ -359,8 +334,7 @@ def _peer_row(label: str, phone: PhoneEpochs) -> dict | None:
 
 
 def _trials(result, runs: int, seed: int, last: int) -> tuple[np.ndarray, np.ndarray]:
-    """``runs`` (epoch, slot) pairs drawn among the scored epochs before ``last`` and the
-    slots each fix uses."""
+    """``runs`` (epoch, slot) pairs drawn among the scored epochs before ``last`` and the slots each fix uses."""
     used = np.asarray(result.fix.used) & (np.asarray(result.fix.dops.gdop) <= MAX_GDOP)[:, None]
     used[last:] = False
     epochs, slots = np.nonzero(used)
@@ -508,9 +482,8 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
 
 
 def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
-    """The Stanford diagrams (error against protection level, slope and solution
-    separation, horizontal and vertical) of both stations' epochs, as a PNG in ``out_dir``;
-    returns its path."""
+    """Stanford diagrams (error vs slope and solution-separation levels, H and V) of both stations, a PNG
+    in ``out_dir``; returns its path."""
     from pathlib import Path
 
     from matplotlib.figure import Figure

@@ -1,68 +1,44 @@
 """Choi and Park (2009): satellite reaction-wheel fault isolation with a dual filter and a bank of
 multi-hypothesis EKFs, in closed loop, Monte Carlo.
 
-A run (``run_wheels``) is the library's closed loop, ``loop.run_loop`` of three parts:
-the truth ``control.attitude.wheel_plant``, the FDI ``wheel_fdi`` (steps 3-4) and
-the controller ``control.attitude.wheel_attitude_controller``. Step ``k``, ``t = k dt``:
+A run (``run_wheels``) is ``loop.run_loop`` of the truth ``control.attitude.wheel_plant``, the FDI
+``wheel_fdi`` (steps 3-4) and ``control.attitude.wheel_attitude_controller``. Step ``k``, ``t = k dt``:
 
-1. gyros measure the true body rates, ``y = w + v``;
-2. the attitude controller (``control.attitude``: a 10 deg slew about (1, 1, 1) in 40 s,
-   quaternion PD with gyroscopic feed-forward, minimum-norm allocation to the four
-   wheels) commands wheel torques; the flight software integrates them into the
-   commanded wheel speeds, and the filters' input is ``u = [Omega_cmd, tau_cmd / I_w]``;
-3. the dual filter (nominal model) gives the fault detection parameter ``F``, declared
-   when ``F > F_T``; beside it, a nominal EKF with the banks' process noise gives the
-   windowed NIS test (``chi2(3 L)``, ``L = NIS_WINDOW``), which is what engages the banks
-   by default (``engage_on``: the paper's ``F`` is blind to some stops, notebook 05);
-4. two banks over the stop hypotheses (wheel ``i`` stopped, Choi & Park 2009, eq. 9) run slaved
-   to the nominal filter (re-initialised from its posterior every step) until the
-   detection, then on their own (each hypothesis's prediction filter starting from its
-   EKF's posterior: ``wheel_fdi``, ``restart_prediction``) — the paper's two-stage
-   architecture (Fig. 10): the credit bank (a dual filter per hypothesis, credits
-   ``C_x``, eq. 10) and the likelihood bank (the static MM filter over the nominal
-   model and the four stop hypotheses, mode probabilities from the innovations'
-   likelihoods);
-5. the wheels deliver the commanded torques, with the fault (``wheel_fault``: stop,
-   stuck, torque bias, gain loss) and torque noise, and the truth
-   (attitude quaternion, rates, wheel speeds) moves one RK4 step with a disturbance torque.
+1. gyros: ``y = w + v``;
+2. controller: 10 deg slew about (1, 1, 1) in 40 s, quaternion PD with gyroscopic feed-forward,
+   minimum-norm allocation to the four wheels; the commanded torques integrate into the commanded
+   speeds; filter input ``u = [Omega_cmd, tau_cmd / I_w]``;
+3. the dual filter (nominal model) alarms on ``F > F_T``; beside it a nominal EKF with the banks'
+   process noise gives the windowed NIS test (``chi2(3 L)``, ``L = NIS_WINDOW``), which engages the
+   banks by default (``engage_on``: ``F`` is blind to some stops, notebook 05);
+4. two banks over the stop hypotheses (eq. 9), slaved to the nominal filter (re-initialised from its
+   posterior every step) until detection, then on their own (paper Fig. 10): the credit bank (a dual
+   filter per hypothesis, credits ``C_x``, eq. 10) and the likelihood bank (static MM over the
+   nominal model and the four stops, probabilities from the innovations' likelihoods);
+5. the wheels deliver the commanded torques with the fault (``wheel_fault``) and torque noise; the
+   truth (quaternion, rates, wheel speeds) moves one RK4 step with a disturbance torque.
 
-The wheels' speeds are not measured (the filters take the commanded speeds as input):
-the only sensors are the three gyros, so a dead or frozen sensor is a gyro (``gyro_fault``:
-the x gyro NaN, or holding its onset reading, from the onset; labels
-``faults.sensor_labels(N, 3)``, "gyro j" = ``1 + N + j`` beside the wheels' ``1 + i``).
-Beside step 1, before the controller (``loop.FDI.observe``), the **gyro health test**
-(``detection.frozen_channel_detector`` on the raw rates, ``sigma`` the gyro noise,
-``HEALTH_WINDOW`` = 10 samples, ``HEALTH_PFA`` = 1e-7 per window and gyro, an upper bound
-whatever the plant does, so a fault-free run of the study's 600 steps alarms with
-probability at most 3 x 600 x 1e-7 = 1.8e-4 (union bound); a NaN sample alarms at once
-through ``chi2.flag_dead``) names a frozen or dead gyro; the controller flies on the
-reading of the gyros in service and, for a dead sample or a gyro the test has found
-frozen (out of service for the rest of the run), on the posterior rate of a nominal
-filter (the NIS test's design: EKF, or UKF with ``estimator="ukf"``) that leaves those
-out (``missing_measurements``). A frozen
-gyro's held value still reaches the controller for the (at most ``HEALTH_WINDOW - 1``)
-steps the test needs to see it (it is indistinguishable from a live reading before). The two
-stages see the raw readings (each method's row is its own): a dead gyro makes each of
-their decisions alarm with the gyro's label (``two_stage_isolation(channel_labels=...)``,
-``chi2.flag_dead`` on its filters' dead report); a frozen gyro is only what their
-statistics make of it.
+Wheel speeds are not measured; the only sensors are the three gyros (``gyro_fault``: x gyro NaN or holding its onset
+reading; gyro ``j`` has label ``1 + N + j``, wheel ``i`` ``1 + i``, ``faults.sensor_labels(N, 3)``). The gyro health
+test (``loop.FDI.observe``, before the controller) names a frozen or dead gyro; the controller then flies, for a dead
+sample or a gyro found frozen (out of service for the rest of the run), on the posterior rate of a nominal filter (EKF,
+or UKF with ``estimator="ukf"``) that leaves it out (``missing_measurements``). A frozen gyro's held value still reaches
+the controller for at most ``HEALTH_WINDOW - 1`` steps (indistinguishable from a live reading before). The two stages
+see the raw readings: a dead gyro makes each decision alarm with the gyro's label
+(``two_stage_isolation(channel_labels=...)``, ``chi2.flag_dead``); a frozen gyro is only what their statistics make of
+it. Each run records per method the first decision at or after the onset, false alarms before it and the isolated wheel
+or gyro (``metrics.DetectionRecord``).
 
-Every run records, for the detector and each isolator, the first decision at or after
-the onset, false alarms before it and the isolated wheel or gyro (``metrics.DetectionRecord``).
+Choices the paper leaves open (documented, tested):
 
-Choices the paper leaves open (documented, tested): 10 Hz gyros with 3e-4 rad/s noise
-(0.017 deg/s, a small satellite's MEMS/FOG class); wheel bias speeds 2000 rpm, all the
-same way by default (``momentum="net"``: the body carries a net wheel momentum
-``I_w H^T Omega``, so ``det A`` is not structurally zero and the result of Choi and Park, F rising
-by orders of magnitude at a stop, can be checked), or +/-2000 rpm in the null space of
-``H^T`` (``momentum="zero"``: zero net momentum, ``det A = 0`` on the true trajectory,
-reported as the headline's second row); a 10 deg slew keeps every wheel within about
-45 % of its bias, so stops happen at speed; disturbance torque 1e-5 N m and wheel torque
-noise 2e-5 N m (white, per sample); the estimation EKF's process noise 1e-4 rad/s per
-step (it must follow a fault for ``F`` to see it; a matched ``Q`` ~ 1e-6 leaves it as
-blind as the prediction); the banks' EKFs and the NIS test's use 1e-5; banks engaged with
-their prior widened by 2e-3 rad/s (the nominal filter lags a stop's rate jump); isolators
-confirm over ``CONFIRM_STEPS``; a fault's onset uniform in 15-25 s.
+- gyros 10 Hz, noise 3e-4 rad/s (0.017 deg/s, a small satellite's MEMS/FOG class);
+- wheel bias speeds 2000 rpm, pattern ``momentum`` (``MOMENTUM_PATTERNS``; ``"zero"`` is the
+  headline's second row); the 10 deg slew keeps every wheel within ~45 % of its bias (stops at speed);
+- disturbance torque 1e-5 N m, wheel torque noise 2e-5 N m (white, per sample);
+- estimation EKF process noise 1e-4 rad/s per step (``F`` sees a fault only if the EKF follows it;
+  a matched ``Q`` ~ 1e-6 is as blind as the prediction); the banks' EKFs and the NIS test's 1e-5;
+- banks engaged with their prior widened by 2e-3 rad/s (the nominal filter lags a stop's rate jump);
+- isolators confirm over ``CONFIRM_STEPS``; onset uniform in 15-25 s.
 
 Reference: Choi & Park (2009), "Design of Fault Isolator of Satellite Reaction Wheel System Using Dual
 Filter and Multi-hypothesis Extended Kalman Filter" (CITATION.cff).
@@ -110,12 +86,10 @@ CONFIRM_STEPS = 3
 #: the isolation deadline (seconds after the onset) of the rates reported
 ISOLATION_DEADLINE_S = 2.0
 #: samples in the gyro health test's window: a frozen gyro is found at most HEALTH_WINDOW - 1
-#: steps after its onset (then the window holds only the held value; the onset's reading
-#: is a live one), sometimes a step or two earlier (a live sample close to the held value)
+#: steps after its onset, sometimes earlier (a live sample close to the held value)
 HEALTH_WINDOW = 10
-#: the gyro health test's false-alarm probability per window and gyro, an upper bound
-#: whatever the plant does (``detection.frozen``); a fault-free run of T steps has at most
-#: ``3 T HEALTH_PFA`` (union bound): 1.8e-4 for the study's 600 steps
+#: gyro health test false-alarm probability per window and gyro, an upper bound whatever the plant
+#: (``detection.frozen``); a fault-free run of T steps: <= ``3 T HEALTH_PFA`` = 1.8e-4 for 600 (union bound)
 HEALTH_PFA = 1e-7
 #: the gyro fault kinds of the study and the fault kind each is
 GYRO_KINDS = {"dead": FaultKind.DEAD, "frozen": FaultKind.STUCK}
@@ -163,20 +137,17 @@ class WheelDesign(NamedTuple):
     mm_floor: Array
 
 
-#: wheel bias-speed patterns (signs per wheel): ``net`` all the same way, so the body carries
-#: a net wheel momentum ``I_w H^T Omega`` (along +z for the pyramid) and ``det A`` is not
-#: structurally zero (the default); ``zero`` in the null space of ``H^T``, zero
-#: net momentum, ``det A = 0`` on the true trajectory (notebook 05)
+#: wheel bias-speed signs: ``net`` (default) all the same way, net momentum ``I_w H^T Omega`` (+z for the
+#: pyramid), ``det A`` not structurally zero, so F's rise at a stop (Choi & Park) can be checked; ``zero`` in
+#: the null space of ``H^T``, zero net momentum, ``det A = 0`` on the true trajectory (notebook 05)
 MOMENTUM_PATTERNS = {"net": (1.0, 1.0, 1.0, 1.0), "zero": (1.0, -1.0, 1.0, -1.0)}
 
 
 def wheel_design(dt: float = 0.1, bias_rpm: float = 2000.0, detection_threshold: float = 6e-9,
                  nis_pfa: float = 1e-5, credit_threshold: float = 0.5,
                  mode_threshold: float = 0.9, momentum: str = "net", dtype=None) -> WheelDesign:
-    """The scenario's defaults (see the module doc for each choice). ``detection_threshold``
-    ``F_T`` is a placeholder: ``wheel_study`` calibrates it on fault-free runs.
-    ``momentum`` (``MOMENTUM_PATTERNS``): ``"net"`` (default) biases every wheel the same
-    way, ``"zero"`` puts the bias speeds in the null space of ``H^T``."""
+    """The scenario's defaults (module doc); ``detection_threshold`` ``F_T`` is a placeholder that
+    ``wheel_study`` calibrates on fault-free runs; ``momentum``: a key of ``MOMENTUM_PATTERNS``."""
     _checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
     dtype = dtype or jnp.result_type(float)
     params = kitsat3_params(dt=dt, dtype=dtype)
@@ -212,8 +183,8 @@ def wheel_fault(kind: str, wheel: int, onset: int, magnitude: float = 0.0) -> Fa
 
 
 def gyro_fault(kind: str, axis: int, onset: int) -> Fault:
-    """A gyro fault (sensor ``axis``: 0, 1, 2 for x, y, z) from ``onset``: ``dead`` (NaN,
-    ``FaultKind.DEAD``) or ``frozen`` (the onset's reading held, ``FaultKind.STUCK``)."""
+    """A gyro fault on ``axis`` (0, 1, 2: x, y, z) from ``onset``: ``dead`` (NaN, ``FaultKind.DEAD``) or
+    ``frozen`` (onset reading held, ``FaultKind.STUCK``)."""
     if kind not in GYRO_KINDS:
         raise ValueError(f"kind: expected one of {sorted(GYRO_KINDS)}, got {kind!r}")
     return fault(GYRO_KINDS[kind], Target.SENSOR, axis, onset)
@@ -297,33 +268,23 @@ class WheelHistory(NamedTuple):
 
 def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis", restart_prediction: bool = True,
               gyro_health: bool = True):
-    """The two-stage FDI of Choi and Park (2009) (``detection.two_stage``: the dual filter's ``F``, the
-    windowed NIS test of a nominal EKF, and the credit and likelihood banks over the stop
-    hypotheses, slaved to the nominal filter until the engaging alarm) as a ``loop.FDI``
-    on the gyro readings and the wheel commands, and its initial state.
+    """The two-stage FDI of Choi and Park (2009) (``detection.two_stage``: ``F``, the NIS test, the credit and
+    likelihood banks) as a ``loop.FDI`` on the gyro readings and wheel commands, and its initial state.
 
-    ``restart_prediction`` (default): at the engaging step each
-    hypothesis's prediction filter starts from its own EKF's posterior of that step, not
-    from the nominal filter's predicted mean. The nominal filter lags a stop's rate jump
-    (``I^-1 I_w Omega_i a_i``, ~0.017 rad/s), and a prediction started there carries the
-    lag for good: every ``F_x`` is then the same lag projected on ``grad det A_x``, and
-    the credits rank the hypotheses by that geometry, whichever wheel stopped
-    (``benchmarks/wheels_credit.py``). ``False`` keeps the former start (for comparison).
+    ``restart_prediction`` (default): at engagement each hypothesis's prediction filter starts from its own EKF's
+    posterior, not the nominal filter's predicted mean, which lags a stop's rate jump (``I^-1 I_w Omega_i a_i``, ~0.017
+    rad/s): started there, every ``F_x`` is that lag projected on ``grad det A_x`` and the credits rank by geometry,
+    whichever wheel stopped (``benchmarks/wheels_credit.py``). ``False``: from the nominal predicted mean (comparison).
 
-    Gyro health (module doc): ``observe`` runs the gyro health test on the raw rates
-    (``frozen_channel_detector(gyro_sigma, HEALTH_WINDOW, HEALTH_PFA, gyro_labels)``) and
-    gives the controller an ``AttitudeReading`` whose rate is the reading where the gyro is
-    in service and finite, and elsewhere (a NaN sample, or a gyro the test has found
-    frozen: out of service from then on) the posterior of a nominal filter of the
-    ``estimator``'s kind with the banks' process noise that leaves those gyros out. The step's output is the two stages'
-    ``TwoStageOutput`` with the health test's decision appended to ``decisions`` (fifth),
-    ``healthy`` also covering that EKF. A fault-free run's controller sees the raw reading
-    at every step unless the health test alarms falsely (``HEALTH_PFA``).
-    ``gyro_health=False`` leaves the health test and the view out (the fifth decision never
-    alarms; the controller flies on the raw readings, a NaN included): for a plant whose
-    gyro noise is below ``gyro_sigma`` (the noise-free runs of ``tests/scenarios/test_wheels_credit.py``
-    and ``benchmarks/wheels_credit.py``), where the stuck-at test rightly finds every gyro
-    frozen.
+    ``observe`` runs the gyro health test on the raw rates
+    (``frozen_channel_detector(gyro_sigma, HEALTH_WINDOW, HEALTH_PFA, gyro_labels)``; a NaN sample alarms at once) and
+    gives the controller an ``AttitudeReading``: the reading where the gyro is in service and finite, else (NaN, or
+    found frozen: out of service from then on) the posterior of a nominal ``estimator`` filter with the banks' process
+    noise that leaves those gyros out. Output: the two stages' ``TwoStageOutput``, the health decision appended fifth to
+    ``decisions``, ``healthy`` also covering that filter. ``gyro_health=False`` drops the test and the view (fifth
+    decision never alarms; the controller flies on raw readings, NaN included): for plants with gyro noise below
+    ``gyro_sigma`` (noise-free runs of ``tests/scenarios/test_wheels_credit.py``, ``benchmarks/wheels_credit.py``),
+    where the stuck-at test rightly finds every gyro frozen.
     """
     if estimator not in ("ekf", "ukf"):
         raise ValueError(f"estimator: expected 'ekf' or 'ukf', got {estimator!r}")
@@ -373,11 +334,9 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
 
 def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, estimator: str = "ekf",
                engage_on: str = "nis", history: bool = False):
-    """One closed-loop run; returns ``RunOutput`` (and ``WheelHistory`` if ``history``).
-
-    The composition ``run_loop(wheel_plant, wheel_fdi, wheel_attitude_controller)``.
-    ``engage_on``: the detector whose first alarm engages the hypothesis banks, ``"nis"``
-    (default) or ``"fdp"`` (the paper's ``F``); ``estimator``: ``"ekf"`` or ``"ukf"``.
+    """One closed-loop run ``run_loop(wheel_plant, wheel_fdi, wheel_attitude_controller)``; returns
+    ``RunOutput`` (and ``WheelHistory`` if ``history``). ``engage_on``: the detector whose first alarm
+    engages the banks, ``"nis"`` (default) or ``"fdp"`` (the paper's ``F``); ``estimator``: ``"ekf"``/``"ukf"``.
     """
     params = design.params
     dtype = params.inertia.dtype
@@ -421,14 +380,12 @@ ONSET_RANGE = (150, 250)
 METHODS = ("fdp", "nis", "credit", "likelihood", "health")
 METHOD_NAMES = {"fdp": "dual filter F (paper)", "nis": "NIS chi-square", "credit": "credit isolator (paper)",
                 "likelihood": "MM likelihood", "health": "gyro health test"}
-#: the methods that name a wheel (the others never do: F and NIS detect only, the gyro
-#: health test names gyros)
+#: the methods that name a wheel (F and NIS only detect, the health test names gyros)
 WHEEL_ISOLATORS = ("credit", "likelihood")
 
 
 def study_cases() -> list[tuple[str, int]]:
-    """``('none', -1)``, every kind of ``KINDS`` on every wheel (wheel index 0..3), then
-    the gyro cases: every kind of ``GYRO_KINDS`` on gyro ``GYRO_AXIS``."""
+    """``('none', -1)``, every ``KINDS`` on wheels 0..3, then every ``GYRO_KINDS`` on gyro ``GYRO_AXIS``."""
     return ([("none", -1)] + [(kind, wheel) for kind in KINDS for wheel in range(4)]
             + [(kind, GYRO_AXIS) for kind in GYRO_KINDS])
 
@@ -441,10 +398,8 @@ def case_name(kind: str, component: int) -> str:
 
 
 def case_faults(cases: list[tuple[str, int]], runs: int, key: Array) -> Fault:
-    """A stacked batch of ``len(cases) * runs`` faults, case-major, random onsets (a
-    fault-free run's onset is ``faults.NEVER``: all of it counts for false alarms); a case
-    is ``(kind, wheel)`` for a kind of ``KINDS`` and ``(kind, gyro axis)`` for one of
-    ``GYRO_KINDS``."""
+    """Stacked ``len(cases) * runs`` faults, case-major, random onsets (fault-free: ``faults.NEVER``, the whole run
+    counts for false alarms); a case is ``(kind, wheel)`` (``KINDS``) or ``(kind, gyro axis)`` (``GYRO_KINDS``)."""
     onsets = np.asarray(jax.random.randint(key, (len(cases), runs), ONSET_RANGE[0], ONSET_RANGE[1] + 1))
     faults = []
     for (kind, component), onset_row in zip(cases, onsets):
@@ -456,9 +411,8 @@ def case_faults(cases: list[tuple[str, int]], runs: int, key: Array) -> Fault:
 
 @functools.lru_cache(maxsize=None)
 def _closed_loop(steps: int, estimator: str, engage_on: str):
-    """``run(key, fault, design)``: ``run_wheels`` with the design as data. One function
-    per option set, so one compiled program serves every design (the calibration, the
-    study, the zero-momentum row) and every run count and seed."""
+    """``run(key, fault, design)``: ``run_wheels`` with the design as data; one function per option
+    set, so one compiled program serves every design, run count and seed."""
 
     def run(key, f, design):
         return run_wheels(design, key, f, steps, estimator, engage_on)
@@ -468,11 +422,9 @@ def _closed_loop(steps: int, estimator: str, engage_on: str):
 
 def wheel_spec(design: WheelDesign, cases: Sequence[tuple[str, int]], steps: int = 600, estimator: str = "ekf",
                engage_on: str = "nis", name: str = "reaction-wheels") -> Study:
-    """The study of ``cases`` ((kind, wheel) pairs, as ``study_cases``) on ``design``: one
-    structure, the closed loop (``run_wheels``) with the design as data; run ``i`` of a
-    case has the fault of ``case_faults(cases, runs, key(seed + 2))``, its onset uniform
-    in ``ONSET_RANGE``. Every method of ``METHODS`` comes out of the same run
-    (``outputs["closed loop"]``, a ``RunOutput``)."""
+    """The study of ``cases`` (as ``study_cases``) on ``design``: one structure, ``run_wheels`` with the
+    design as data; faults ``case_faults(cases, runs, key(seed + 2))``, onsets uniform in
+    ``ONSET_RANGE``; every method comes out of the same run (``outputs["closed loop"]``, a ``RunOutput``)."""
     cases = tuple(cases)
     names = tuple(case_name(kind, component) for kind, component in cases)
     loop = Structure("closed loop", _closed_loop(steps, estimator, engage_on), (), {"closed loop": ()}, shared=design)
@@ -485,11 +437,9 @@ FDP_MARGIN = 1.5
 
 def calibrate_fdp_threshold(design: WheelDesign, runs: int, seed: int, margin: float = FDP_MARGIN,
                             **options) -> float:
-    """``F_T = margin * max F`` over ``runs`` fault-free runs of ``seed`` (the paper sets its
-    threshold by eye; ``F`` has no known distribution, and the largest of ``n`` runs alone
-    is exceeded by a new run with probability ``1 / (n + 1)``). ``options``: ``steps``,
-    ``estimator``, ``engage_on`` (``wheel_spec``), ``chunk_size``, ``progress``
-    (``run_study``)."""
+    """``F_T = margin * max F`` over ``runs`` fault-free runs of ``seed`` (the paper sets it by eye; ``F``
+    has no known distribution; a new run exceeds the max of ``n`` with probability ``1 / (n + 1)``).
+    ``options``: ``steps``, ``estimator``, ``engage_on`` (``wheel_spec``), ``chunk_size``, ``progress``."""
     spec_options = {k: options.pop(k) for k in ("steps", "estimator", "engage_on") if k in options}
     spec = wheel_spec(design, [("none", -1)], name="reaction-wheels F_T calibration", **spec_options)
     out = run_study(spec, runs, seed, **options).outputs["closed loop"]
@@ -497,25 +447,22 @@ def calibrate_fdp_threshold(design: WheelDesign, runs: int, seed: int, margin: f
 
 
 def run_is_healthy(out: RunOutput) -> np.ndarray:
-    """(runs,) bool: every filter healthy at every step and no method's statistic NaN (a
-    dead gyro's +inf is evidence, ``metrics.step_health``)."""
+    """(runs,) bool: every filter healthy at every step, no statistic NaN (a dead gyro's +inf is
+    evidence, ``metrics.step_health``)."""
     records = (out.fdp, out.nis, out.credit, out.likelihood, out.health)
     return np.asarray(out.healthy) & np.all([np.asarray(r.first_unhealthy) < 0 for r in records], axis=0)
 
 
 def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: bool, label: int | None = None,
                      names_it: bool = True) -> dict:
-    """Rates and delays of one method over the runs of one case.
+    """Rates and delays of one method over one case's runs (``wheel < 0``: fault-free, false alarms only).
 
-    ``rate``: runs detected (detectors) or isolated to the fault's ``label`` (isolators;
-    default ``wheel + 1``) at or after the onset; ``decided_rate``: runs with a decision at
-    or after the onset (the detection rate); ``isolation_rate``: runs whose first such
-    decision names ``label`` (``None`` when the method never names this kind of fault,
-    ``names_it=False``: F and NIS for a wheel); ``pre_onset_alarm_rate``: runs with a
-    decision before the onset (false-alarm runs, whose delays are not scored);
-    ``clean_runs``: the others; the delays (mean, median, p90) and
-    ``rate_within_deadline`` (right and within ``ISOLATION_DEADLINE_S``, over all runs)
-    count only clean runs. ``wheel < 0``: a fault-free case (false alarms only)."""
+    - ``rate``: detected (detectors) or isolated to ``label`` (isolators; default ``wheel + 1``) at or after the onset;
+    - ``decided_rate``: a decision at or after the onset; ``isolation_rate``: the first one names ``label``
+      (``None`` if ``names_it=False``: F and NIS for a wheel);
+    - ``pre_onset_alarm_rate``: a decision before the onset (false-alarm runs); ``clean_runs``: the others;
+    - delays (mean, median, p90) and ``rate_within_deadline`` (right within ``ISOLATION_DEADLINE_S``, over
+      all runs) count clean runs only."""
     onset = np.asarray(record.onset)
     detection = np.asarray(record.detection_step)
     detected = detection >= 0
@@ -547,11 +494,9 @@ def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: 
 
 
 def summarize_case(part: RunOutput, kind: str, wheel: int, dt: float, methods=METHODS) -> dict:
-    """The table row of one case from its runs' outputs; unhealthy runs are counted in
-    ``unhealthy_runs`` and left out of every rate. ``wheel``: the wheel, or for a kind of
-    ``GYRO_KINDS`` the gyro axis (the row then has ``wheel = -1`` and ``gyro``); the right
-    label is ``wheel + 1``, or ``gyro_labels``' for a gyro. Isolating methods: the credit
-    and MM isolators and the gyro health test."""
+    """One case's table row; unhealthy runs are counted in ``unhealthy_runs`` and left out of every rate.
+    ``wheel``: the wheel, or for ``GYRO_KINDS`` the gyro axis (row: ``wheel = -1``, ``gyro``); right label
+    ``wheel + 1`` or ``gyro_labels``'. Isolating methods: credit, MM and the gyro health test."""
     healthy = run_is_healthy(part)
     clean = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[healthy], part)
     gyro = kind in GYRO_KINDS
@@ -589,16 +534,11 @@ class WheelStudy(NamedTuple):
 
 
     def table(self) -> str:
-        """Per case and method: ``det`` (runs with a decision at or after the onset),
-        ``isol`` (runs whose first such decision names the faulty wheel or gyro; ``-``: the
-        method never names that kind of fault), ``<=2s`` (right within 2 s, clean runs only:
-        isolated for the isolators and the gyro health test, detected for F and NIS),
-        ``FA`` (runs with a decision before the onset: false-alarm runs), ``clean`` (the
-        others) and the delays over the clean runs (of the right decision, as ``<=2s``).
-        The gyro health test's line is printed for the fault-free and gyro cases (in the
-        wheel cases it names no wheel by construction; its rows hold its figures). Every
-        rate is followed by its 95 % Clopper-Pearson interval (``metrics.rate_interval``)
-        over the ``n`` healthy runs (``<=2s``: over the clean runs)."""
+        """Per case and method (``summarize_method``): ``det``, ``isol`` (``-``: never names that kind of
+        fault), ``<=2s`` (clean runs: isolated for isolators and the health test, detected for F and NIS),
+        ``FA``, ``clean`` and the delays of the right decision over clean runs. The health test's line only
+        for fault-free and gyro cases (it names no wheel). Each rate with its 95 % Clopper-Pearson interval
+        (``metrics.rate_interval``) over the ``n`` healthy runs (``<=2s``: the clean runs)."""
         head = (f"{'case':<10} {'method':<24} {'det [95 %]':>19} {'isol [95 %]':>19} {'<=2s [95 %]':>19} "
                 f"{'FA [95 %]':>19} {'n':>4} {'clean':>5} {'mean [s]':>8} {'med [s]':>8} {'p90 [s]':>8}")
         lines = [head, "-" * len(head)]
@@ -622,10 +562,8 @@ class WheelStudy(NamedTuple):
         return "\n".join(lines + ([warning] if warning else []))
 
     def headline(self) -> str:
-        """The stop cases beside what the paper reports (qualitatively: it gives no numbers),
-        in the default momentum-biased configuration and, second, with zero net momentum;
-        the credit isolator's rate per wheel with its one-sided 95 % lower bound
-        (Clopper-Pearson)."""
+        """The stop cases beside the paper (qualitative: no numbers there), net momentum then zero; the
+        credit rate per wheel with its one-sided 95 % Clopper-Pearson lower bound."""
         lines = ["Wheel stops (Choi & Park 2009 report one run: F jumps by orders of magnitude at the stop of wheel 1, and",
                  "credit 1 separates from the others immediately):"]
         blocks = [(self.config.get("momentum", "net"), self.rows)]
@@ -670,20 +608,15 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
                 engage_on: str = "nis", steps: int = 600, chunk_size: int | None = None, progress: bool = False,
                 methods: Sequence[str] | None = None, momentum: str = "net",
                 zero_momentum_row: bool = True) -> WheelStudy:
-    """Every case of ``study_cases`` (the wheel faults, then the x gyro dead and frozen)
-    with ``runs`` Monte Carlo runs (noise and onset);
-    ``F_T`` calibrated first on ``calibration_runs`` fault-free runs of seed ``seed + 1``.
-    ``methods``: the subset of ``METHODS`` to report (all by default; every method runs
-    anyway: the banks are engaged by the detectors). ``momentum``: the wheels' bias
-    pattern (``MOMENTUM_PATTERNS``; default ``"net"``, the configuration in which seed
-    004's result can be checked). With ``zero_momentum_row`` (and ``momentum="net"``) the
-    four stop cases are also run with zero net momentum (its own ``F_T``), reported in
-    ``config["zero_momentum"]`` and in the headline as the second row: there ``det A`` is
-    structurally ~0 on the true trajectory. Every part runs on the study engine
-    (``wheel_spec``, ``run_study``; ``chunk_size`` its runs per compiled call, default
-    the backend's) and shares one compiled program. Needs float64
-    (``jaxfdi.enable_x64()``); unhealthy runs are left out of every rate and counted in
-    the row's ``unhealthy_runs``."""
+    """Every case of ``study_cases`` with ``runs`` Monte Carlo runs (noise and onset), ``F_T`` calibrated
+    first on ``calibration_runs`` fault-free runs of seed ``seed + 1``. Needs float64 (``jaxfdi.enable_x64()``).
+
+    - ``methods``: the subset of ``METHODS`` reported (all run anyway: the detectors engage the banks);
+    - ``momentum``: ``MOMENTUM_PATTERNS`` key (default ``"net"``, where Choi & Park's F rise at a stop can be checked);
+    - ``zero_momentum_row`` (with ``"net"``): the four stops also with zero net momentum (own ``F_T``,
+      ``det A`` ~0 on the true trajectory), in ``config["zero_momentum"]`` and the headline's second row;
+    - one compiled program on the study engine (``wheel_spec``, ``run_study``; ``chunk_size``: runs per
+      call, default the backend's); unhealthy runs are left out of every rate, counted in ``unhealthy_runs``."""
     selected = check_methods(methods, METHODS)
     require_x64("wheel_study")
     check_study(runs, seed, calibration_runs=calibration_runs, steps=steps)
@@ -729,8 +662,8 @@ def wheel_examples(design: WheelDesign, seed: int = 0, wheel: int = 0, onset: in
 
 
 def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel: int = 0, onset: int = 200) -> list[str]:
-    """Figures like Figs. 3-9 of Choi and Park (2009) (attitude, F, the bank's F_x, credits) and the
-    MM's mode probabilities; returns the paths written (each atomically)."""
+    """Figs. 3-9 of Choi and Park (2009) (attitude, F, F_x, credits) and the MM's mode probabilities;
+    returns the paths written (each atomically)."""
     import matplotlib.pyplot as plt
 
     from pathlib import Path

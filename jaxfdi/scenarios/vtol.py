@@ -1,44 +1,31 @@
 """The VTOL scenario of Lee and Lyou: robust TSKF bank, wavelet-denoised chi-square tests, signature
 isolation and fault-tolerant control, Monte Carlo over every fault kind.
 
-Setup (Lee & Lyou, Section V, as restated in the spec): the VTOL model at ``Ts = 0.1 s``; the true plant has
-the airspeed uncertainty (``Delta a32 = 0.5``, ``Delta a34 = 1``) and the disturbance
-``3 sin 10t`` on ``v_v``; ``Q = 0.01^2 I``, ``R = 0.1^2 I``, ``x0 = [50, 1, 5, 1]``,
-``P0 = 10 I``, ``P_b0 = 10``, bias random walk ``0.2^2``; LQR-PI tracking ``H_r = (v_h,
-q)`` with ``Q = diag(1, 1, 1, 1, 10, 10)``, ``R = I``, command ``r = [-50, -5]``.
+Setup (Lee & Lyou, Section V, as restated in the spec): VTOL model at ``Ts = 0.1 s``; true plant with
+airspeed uncertainty (``Delta a32 = 0.5``, ``Delta a34 = 1``) and disturbance ``3 sin 10t`` on ``v_v``;
+``Q = 0.01^2 I``, ``R = 0.1^2 I``, ``x0 = [50, 1, 5, 1]``, ``P0 = 10 I``, ``P_b0 = 10``, bias random walk
+``0.2^2``; LQR-PI tracking ``H_r = (v_h, q)``, ``Q = diag(1, 1, 1, 1, 10, 10)``, ``R = I``, ``r = [-50, -5]``.
 
-The bank has, for each of the 6 fault locations (a1, a2, s1..s4), the paper's
-multiplicative filter (effectiveness ``Fa = -B diag(u)``, scaling ``Fs = diag(C x)``)
-and an additive one (``-B e_i``, ``e_j``: the step and ramp faults), 12 TSKFs in one
-vmap. Each run is one closed loop (``jaxfdi.scenarios.vtol_loop``); the bank's
-statistics are then evaluated five ways (raw, 4-step window, MDWT hard and soft, and
-MDWT soft with the paper's own sigma: ``MDWT-ST-SV`` takes each detail scale's sigma from
-the sample variance of the run's fault-free first ``SIGMA_WINDOW`` steps,
-``wavelet.causal_detail_sigma``, where ``MDWT-ST`` uses the chi-square value; the
-fault-free statistics are not chi2(3), see below).
+Bank: per fault location (a1, a2, s1..s4) the paper's multiplicative filter (``Fa = -B diag(u)``, ``Fs = diag(C x)``)
+and an additive one (``-B e_i``, ``e_j``: step and ramp faults), 12 TSKFs in one vmap. Each run is one closed loop
+(``scenarios.vtol_loop``); statistics evaluated five ways (``METHODS``: raw, 4-step window, MDWT hard, soft, and soft
+with the paper's sigma, ``MDWT-ST-SV``: each detail scale's sigma from the sample variance of the fault-free first
+``SIGMA_WINDOW`` steps, ``wavelet.causal_detail_sigma``; ``MDWT-ST`` uses the chi-square value).
 
-Beyond the paper: sensor s3 dead (NaN) and frozen (``HEALTH_CASES``). The
-bank cannot name them (every filter reads every sensor); the loop's channel-health test
-does (``scenarios.vtol_loop``, step 6), ahead of each method's decision, and with FTC the
-estimator leaves the sensor out.
+Beyond the paper: s3 dead (NaN) and frozen (``HEALTH_CASES``), which the bank cannot name (every filter
+reads every sensor); the loop's channel-health test does (``vtol_loop``, step 6), ahead of each
+method, and with FTC the estimator leaves the sensor out.
 
 Departures and findings:
 
-* the filters decouple the uncertainty input only (q = 1, chi2(3) statistics, so the
-  paper's 14.86 = chi2(4) is not this statistic's threshold). Decoupling the disturbance
-  too (q = 2) leaves the actuator faults nearly invisible; undecoupled, ``3 sin 10t``
-  leaks into some filters (fault-free means up to 8.6 instead of 3), so "our"
-  thresholds are calibrated per filter on fault-free runs (``calibrate_thresholds``),
-  per decision and then per run (at most 1 % of fault-free runs with any symptom: per
-  decision alone, 30 % of runs raised one before step 120);
-* tracking ``q`` (the paper's ``H_r``) leaves a closed-loop eigenvalue at 1 (the pitch
-  angle ramps under the -5 command); tracking ``theta`` instead has a stabilising LQR
-  gain for the nominal model but the true plant (with the uncertainty) diverges, so the
-  paper's choice is kept;
-* with the pitch-acceleration input decoupled, an additive collective (a1) fault is
-  also explained by an s4 bias in steady state (its direction lies within 0.4 % of what
-  an s4 bias and the decoupled input can produce); the signature decisions still isolate
-  it, in the transient after the onset (MDWT-ST 1.00 over 100 runs, median 7 steps).
+* only the uncertainty input is decoupled (q = 1, chi2(3): the paper's 14.86 = chi2(4) is not this
+  statistic's threshold); decoupling the disturbance too (q = 2) hides the actuator faults;
+  undecoupled, ``3 sin 10t`` leaks (fault-free means up to 8.6, not 3), so "our" thresholds are
+  calibrated per filter on fault-free runs (``calibrate_thresholds``), per decision then per run;
+* tracking ``q`` (paper's ``H_r``) leaves a closed-loop eigenvalue at 1 (pitch ramps under the -5
+  command); tracking ``theta`` stabilises the nominal model but the true plant diverges: kept ``q``;
+* with pitch acceleration decoupled, an additive a1 fault is also explained by an s4 bias in steady state
+  (within 0.4 %); signatures still isolate it in the transient (MDWT-ST 1.00 over 100 runs, median 7 steps).
 
 Reference: Lee & Lyou, "Fault Tolerant Controller Design for Linear Stochastic Systems with
 Uncertainties" (CITATION.cff).
@@ -86,8 +73,8 @@ RUN_FALSE_ALARM = 0.01  # family-wise: fault-free runs with any symptom (calibra
 PAPER_THRESHOLD = 14.86       # chi2(4), Pfa 0.005 (the paper's, for m = 4)
 PAPER_WINDOW_THRESHOLD = 34.27  # chi2(16)
 METHODS = ("raw", "window", "MDWT-HT", "MDWT-ST", "MDWT-ST-SV")
-#: MDWT-ST-SV: the detail sigmas are the sample deviations of the run's first steps
-#: (24 blocks of 4, fault-free: every onset is at k >= 100); chi-square sigmas before
+#: MDWT-ST-SV: detail sigmas from the run's first steps (24 blocks of 4, fault-free: onsets are at
+#: k >= 100); chi-square sigmas before
 SIGMA_WINDOW = 96
 
 
@@ -131,10 +118,9 @@ ESTIMATE_AFTER = 30  # steps after the onset at which the fault estimate is scor
 
 
 def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
-    """Faults of every kind in the spec, one at a time, and the fault-free case. The two
-    headline cases are the paper's: s3 step 0.7 from k = 120 and a2 effectiveness 0.5
-    from k = 100. The paper's actuator step/ramp is ``u_i - delta`` / ``u_i - rho k Ts``
-    (negative magnitudes here); ramp slopes are per second (``Ts`` per step)."""
+    """Every fault kind of the spec, one at a time, and fault-free. Headline cases (the paper's): s3 step
+    0.7 from k = 120, a2 effectiveness 0.5 from k = 100. Actuator step/ramp ``u_i - delta`` /
+    ``u_i - rho k Ts`` (negative magnitudes here); ramp slopes per second."""
     Ts = vtol.TS
     return [
         ("a1 effectiveness 0.3", fault("effectiveness", "actuator", 0, onset, 0.3)),
@@ -150,8 +136,7 @@ def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
     ]
 
 
-#: beyond the paper: sensor s3 dead (NaN from the onset) and frozen (its value
-#: at the onset held), found by the loop's channel-health test (``vtol_loop``, step 6)
+#: beyond the paper: s3 dead (NaN from the onset) and frozen (onset value held)
 HEALTH_CASES = ("s3 dead", "s3 frozen")
 
 
@@ -161,8 +146,8 @@ def _health_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
 
 
 def true_bias(f: Fault, k) -> jnp.ndarray:
-    """The value the matched filter's bias ``b`` should estimate at step ``k``: the loss or
-    scaling fraction, or the additive size (``u_i - b``, ``y_j + b``); 0 before the onset."""
+    """What the matched filter's bias ``b`` should estimate at step ``k``: loss or scaling fraction, or
+    additive size (``u_i - b``, ``y_j + b``); 0 before the onset."""
     sign = jnp.where(f.target == Target.ACTUATOR, -1.0, 1.0)
     elapsed = k - f.onset
     value = jnp.select(
@@ -173,10 +158,9 @@ def true_bias(f: Fault, k) -> jnp.ndarray:
 
 
 def decision_values(statistic, design: LoopDesign) -> jnp.ndarray:
-    """The five evaluations (5, T, F) of a (T, F) statistic history: raw ``lambda``, its
-    4-step window sum, and the MDWT reconstructions with hard thresholding, soft with the
-    chi-square sigma and soft with the sample sigma of the first ``SIGMA_WINDOW`` steps
-    (causal: from the first block after the window; the chi-square sigma before it)."""
+    """The five evaluations (5, T, F) of a (T, F) statistic: raw ``lambda``, 4-step window sum, MDWT hard,
+    soft with chi-square sigma, soft with the sample sigma of the first ``SIGMA_WINDOW`` steps (from the
+    first block after the window; chi-square sigma before)."""
     sample_sigma = causal_detail_sigma(statistic, design.levels, SIGMA_WINDOW, design.detail_sigma)
     return jnp.stack([
         statistic,
@@ -188,8 +172,7 @@ def decision_values(statistic, design: LoopDesign) -> jnp.ndarray:
 
 
 def method_alarms(statistic, design: LoopDesign, thresholds) -> jnp.ndarray:
-    """Per-filter alarms (5, T, F) of the five evaluations against ``thresholds`` (5, F):
-    raw and window every step, MDWT once per block (``block_alarms``)."""
+    """Alarms (5, T, F) against ``thresholds`` (5, F): raw, window every step; MDWT once per block."""
     return alarms_from_values(decision_values(statistic, design), design, thresholds)
 
 
@@ -206,8 +189,7 @@ def alarms_from_values(values, design: LoopDesign, thresholds) -> jnp.ndarray:
 
 
 def chi2_thresholds(dof: int, num_filters: int, pfa: float = PFA) -> np.ndarray:
-    """(5, F) thresholds from the chi-square law: ``chi2(dof)`` for raw and MDWT, ``chi2(4 dof)``
-    for the window sum."""
+    """(5, F) chi-square thresholds: ``chi2(dof)`` raw and MDWT, ``chi2(4 dof)`` the window sum."""
     single, window = float(chi2_threshold(dof, pfa)), float(chi2_threshold(4 * dof, pfa))
     return np.repeat(np.array([single, window, single, single, single])[:, None], num_filters, axis=1)
 
@@ -221,22 +203,16 @@ def paper_thresholds(num_filters: int) -> np.ndarray:
 def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_003, steps: int = STEPS,
                          pfa: float = PFA, run_false_alarm: float | None = RUN_FALSE_ALARM,
                          progress: bool = False) -> np.ndarray:
-    """(4, F) thresholds, calibrated on fault-free closed-loop runs of their own seed.
+    """(4, F) thresholds calibrated on fault-free closed-loop runs of their own seed.
 
-    Per decision (``detection.calibration.empirical_threshold``): per method and filter,
-    the larger of the chi-square threshold and the empirical ``1 - pfa`` quantile of the
-    decision value (raw and window values count per step, MDWT values per block, the
-    block's maximum). The disturbance ``3 sin 10t`` is not decoupled (decoupling it too
-    leaves the actuator faults almost invisible), so it leaks into some filters'
-    statistics (fault-free means up to 8.6 for chi2(3)); the quantile absorbs that leak.
-
-    Per run (``run_false_alarm``, default ``RUN_FALSE_ALARM``; ``None`` skips it): a run
-    makes ``steps // block`` decisions, so per-decision levels add up (at Pfa 0.005, 30 %
-    of fault-free runs showed a symptom before step 120). Each method's row is then
-    scaled by the smallest common factor >= 1 (bisection) for which at most
-    ``run_false_alarm`` of the calibration runs show any symptom (``isolate`` leaving the
-    no-fault column) in all ``steps``: a family-wise false-alarm rate per run
-    (``detection.calibration.scale_to_run_false_alarm``).
+    1. Per decision (``detection.calibration.empirical_threshold``): per method and filter, the larger of
+       the chi-square threshold and the empirical ``1 - pfa`` quantile (raw, window per step; MDWT per
+       block, its maximum); the quantile absorbs the undecoupled disturbance's leak (module doc).
+    2. Per run (``run_false_alarm``, default ``RUN_FALSE_ALARM``; ``None`` skips): per-decision levels add
+       up over ``steps // block`` decisions (at Pfa 0.005, 30 % of fault-free runs had a symptom before
+       step 120), so each method's row is scaled by the smallest common factor >= 1 (bisection) leaving at
+       most ``run_false_alarm`` of runs with any symptom (``isolate`` leaving the no-fault column):
+       family-wise per run (``detection.calibration.scale_to_run_false_alarm``).
     """
     if run_false_alarm is not None and not 0.0 <= run_false_alarm < 1.0:
         raise ValueError(f"run_false_alarm: expected a rate in [0, 1) or None, got {run_false_alarm}")
@@ -266,8 +242,8 @@ def calibrate_thresholds(design: LoopDesign, runs: int = 200, seed: int = 1_000_
 
 
 def runs_with_symptoms(values, design: LoopDesign, thresholds) -> jnp.ndarray:
-    """(4,) per method, the fraction of runs whose location symptoms leave the no-fault
-    column at some step; ``values`` (R, 5, T, F) decision values, ``thresholds`` (5, F)."""
+    """(4,) per method, the fraction of runs with a symptom (leaving the no-fault column) at some step;
+    ``values`` (R, 5, T, F), ``thresholds`` (5, F)."""
     L = design.location_component.shape[0]
     alarms = jax.vmap(lambda v: alarms_from_values(v, design, thresholds))(values)        # (R, 5, T, F)
     fired = isolate(location_symptoms(alarms, design.location, L)) != 0                   # (R, 5, T)
@@ -278,13 +254,10 @@ class RunRecord(NamedTuple):
     """Small per-run summary of one closed-loop run.
 
     Attributes:
-      first_alarm: (2, 5) per threshold set (ours, paper's) and method: first step with a
-          symptom (some location inconsistent), -1 none
+      first_alarm: (2, 5) per threshold set (ours, paper's) and method: first step with a symptom, -1 none
       detection_step: (2, 5) the first such step at/after the onset
-      isolation_step: (2, 5) first step at/after the onset whose signature names the true
-          location
-      false_decisions: (2, 5) decisions with a symptom before the onset
-          (raw, window: every step; MDWT: once per block)
+      isolation_step: (2, 5) first step at/after the onset whose signature names the true location
+      false_decisions: (2, 5) decisions with a symptom before the onset (MDWT: once per block)
       online_isolated: () latched location + 1 of the closed loop (0 none)
       online_step: () step at which it latched (-1 none)
       online_kind_right: () bool: latched kind (multiplicative/additive) is the fault's
@@ -312,8 +285,7 @@ class RunRecord(NamedTuple):
 
 
 def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = STEPS) -> RunRecord:
-    """One closed-loop run and its evaluation against ``thresholds`` (2, 5, F): our
-    calibrated set and the paper's (pure; vmap it over runs)."""
+    """One closed-loop run evaluated against ``thresholds`` (2, 5, F): ours and the paper's (pure; vmap it)."""
     history = run_closed_loop(design, key, f, ftc, steps)
     L = design.location_component.shape[0]
     label_true = fault_label(f, 2)
@@ -352,8 +324,8 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
 
 
 def step_health_series(history: LoopStep) -> jnp.ndarray:
-    """(T,) bool: the loop's filters healthy and no bank statistic NaN (``+inf``, a dead
-    sensor's, is evidence: ``metrics.step_health``)."""
+    """(T,) bool: filters healthy, no bank statistic NaN (a dead sensor's ``+inf`` is evidence,
+    ``metrics.step_health``)."""
     return jax.vmap(step_health)(history.healthy, history.statistic)
 
 
@@ -486,13 +458,10 @@ _PROGRAMS: dict = {}
 
 
 def _loop_program(design: LoopDesign, steps: int, output: str):
-    """A closed-loop run of ``design`` with its thresholds as data: ``"statistic"``,
-    ``run(key, _, threshold)`` -> the bank's statistic history of a fault-free run (the
-    calibration); ``"record"``, ``run(_, (fault, ftc, key), (threshold, thresholds))`` ->
-    ``vtol_run`` on the run's own key (common random numbers). The rest of the design
-    stays a constant (the bank's decoupling is checked on concrete matrices when traced);
-    one function per design by value, so other thresholds, seeds and run counts compile
-    nothing new."""
+    """A closed-loop run of ``design``, thresholds as data: ``"statistic"``: ``run(key, _, threshold)`` -> a fault-free
+    run's statistic history (calibration); ``"record"``: ``run(_, (fault, ftc, key), (threshold, thresholds))`` ->
+    ``vtol_run`` on the run's key. The rest of the design is a constant (decoupling checked on concrete matrices); one
+    function per design by value, so thresholds, seeds and run counts compile nothing new."""
     fixed = design._replace(threshold=None)
     leaves = [np.asarray(leaf) for leaf in jax.tree_util.tree_leaves(fixed)]
     fingerprint = hashlib.sha256(b"".join(leaf.tobytes() + str((leaf.dtype, leaf.shape)).encode()
@@ -512,10 +481,9 @@ def _loop_program(design: LoopDesign, steps: int, output: str):
 
 
 def vtol_spec(design: LoopDesign, thresholds, cases: list[tuple[str, Fault]], steps: int = STEPS) -> Study:
-    """The study of ``cases`` with FTC off and on (cases ``"<name> ftc off"``, ``"... on"``,
-    case-major), on common random numbers: run ``i`` of every case flies with key ``i`` of
-    ``split(PRNGKey(seed), runs)``, so the fault-free run ``i`` is its twin. One structure,
-    the closed loop scored by ``vtol_run`` against ``thresholds`` (2, 5, F)."""
+    """``cases`` with FTC off and on (``"<name> ftc off"``, ``"... on"``, case-major); run ``i`` of every case
+    flies with key ``i`` of ``split(PRNGKey(seed), runs)`` (fault-free run ``i`` is its twin). One
+    structure, scored by ``vtol_run`` against ``thresholds`` (2, 5, F)."""
     faults = stack_faults([f for _, f in cases])
     num_cases = len(cases)
     names = tuple(f"{name} ftc {state}" for name, _ in cases for state in ("off", "on"))
@@ -536,18 +504,15 @@ def vtol_spec(design: LoopDesign, thresholds, cases: list[tuple[str, Fault]], st
 def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopDesign | None = None,
                cases: list[tuple[str, Fault]] | None = None, calibration_runs: int = 200,
                chunk_size: int | None = None, progress: bool = False, methods=None) -> VTOLStudy:
-    """Every fault case with FTC off and on, ``runs`` runs each, on common random numbers
-    (run i of every case has the same noise, so the fault-free run i is its twin).
+    """Every fault case with FTC off and on, ``runs`` runs each, common random numbers (``vtol_spec``).
+    Needs float64 (``jaxfdi.enable_x64()``).
 
-    Thresholds ("ours") are calibrated first on ``calibration_runs`` fault-free runs of
-    another seed (``calibrate_thresholds``); the closed loop decides with the MDWT-ST
-    row. Every run is also evaluated with the paper's 14.86 / 34.27. The design used is
-    returned in ``config`` via its thresholds. ``methods``: the subset of ``METHODS`` to
-    report (all by default; the closed loop always decides with MDWT-ST). Runs whose
-    filters went unhealthy are counted in each row's ``unhealthy_runs`` and left out of
-    its rates. Both Monte Carlos run on the study engine (``vtol_spec``; ``chunk_size``
-    its runs per compiled call, default the backend's). Needs float64
-    (``jaxfdi.enable_x64()``)."""
+    - "our" thresholds calibrated first on ``calibration_runs`` fault-free runs of another seed
+      (``calibrate_thresholds``); the loop always decides with the MDWT-ST row; every run is also
+      evaluated with the paper's 14.86 / 34.27; the design's thresholds are returned in ``config``;
+    - ``methods``: the subset of ``METHODS`` reported (default all);
+    - unhealthy runs are counted in ``unhealthy_runs`` and left out of the rates;
+    - ``chunk_size``: runs per compiled call (default the backend's)."""
     selected = check_methods(methods, METHODS)
     require_x64("vtol_study")
     check_study(runs, seed, steps=steps, calibration_runs=calibration_runs)
@@ -586,8 +551,7 @@ def vtol_study(runs: int = 100, seed: int = 0, steps: int = STEPS, design: LoopD
 
 
 def _case_table(row: dict[str, Any]) -> str:
-    """One case's block: every rate with its 95 % Clopper-Pearson interval over the ``n``
-    healthy runs (FTC off)."""
+    """One case's block: rates with 95 % Clopper-Pearson intervals over the ``n`` healthy runs (FTC off)."""
     onset = row["onset"]
     n = row["runs"] - row.get("unhealthy_runs", {}).get("no_ftc", 0)
 
@@ -645,8 +609,8 @@ def _headline(study: VTOLStudy) -> str:
 
 
 def vtol_examples(design: LoopDesign, seed: int = 0, steps: int = STEPS) -> dict[str, LoopStep]:
-    """Run 0's full histories for the figures: the s3 step and the a2 effectiveness loss,
-    each with FTC off and on, and the fault-free run (same noise)."""
+    """Run 0's histories for the figures: s3 step and a2 effectiveness loss, FTC off and on, and fault-free
+    (same noise)."""
     cases = dict(vtol_faults())
     chosen = [("s3 step 0.7", False), ("a2 effectiveness 0.5", False), ("a2 effectiveness 0.5", True),
               ("none", False)]
@@ -660,7 +624,7 @@ def vtol_examples(design: LoopDesign, seed: int = 0, steps: int = STEPS) -> dict
 
 
 def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesign, out) -> list[str]:
-    """Figures like Figs. 3-5 of Lee and Lyou; returns the paths written (each atomically)."""
+    """Figs. 3-5 of Lee and Lyou; returns the paths written (each atomically)."""
     import matplotlib.pyplot as plt
 
     from pathlib import Path

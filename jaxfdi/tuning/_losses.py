@@ -1,21 +1,18 @@
-"""Differentiable losses on labelled runs (labels from the simulator: ``SimStep.mode``
-per step, the fault onset per run).
+"""Differentiable losses on labelled runs (simulator labels: ``SimStep.mode`` per step, fault onset per run).
 
-* ``mode_cross_entropy``: mean over steps of ``-log mu_{true mode}(k)``, for IMM/MM
-  mode probabilities (the log-loss of a probabilistic classifier, Bishop 2006 eq. 4.108);
-* ``soft_detection_loss``: a threshold test ``alarm_k = [s_k >= h]`` relaxed to
-  ``a_k = sigmoid((s_k - h) / temperature)`` and read as independent per-step alarm
-  probabilities; then ``P(no alarm before the onset) = prod_{k<onset} (1 - a_k)``,
-  ``P(first alarm at k >= onset) = a_k prod_{onset<=j<k} (1 - a_j)``, and the loss is
-  ``w_fa P(false alarm) + w_miss P(missed) + w_delay E[delay] / horizon`` with the
-  missed runs counted at the full horizon. With an isolation margin ``m_k`` (> 0 when
-  the label the detector would give at step k is wrong, e.g. ``max_{j != true} mu_j -
-  mu_true``) it adds ``w_iso P(misisolated)``, ``P(misisolated) = sum_{k >= onset}
-  P(first alarm at k) sigmoid(m_k / temperature)``. As ``temperature -> 0`` these become
-  the hard rates of ``metrics`` (tested);
-* ``innovation_nll``: ``-(1/T) sum_k log N(r_k; 0, S_k)``, whose minimiser over ``Q, R``
-  is the maximum-likelihood estimate (Mehra 1970; Shumway & Stoffer 1982).
-All are per run; average them over a batch with ``jax.vmap`` and ``jnp.mean``.
+* ``mode_cross_entropy``: mean over steps of ``-log mu_{true mode}(k)`` for IMM/MM mode probabilities (log-loss of
+  a probabilistic classifier, Bishop 2006 eq. 4.108);
+* ``soft_detection_loss``: alarm ``[s_k >= h]`` relaxed to ``a_k = sigmoid((s_k - h) / temperature)``, independent
+  per-step alarm probabilities: ``P(no alarm before the onset) = prod_{k<onset} (1 - a_k)``,
+  ``P(first alarm at k >= onset) = a_k prod_{onset<=j<k} (1 - a_j)``; loss
+  ``w_fa P(false alarm) + w_miss P(missed) + w_delay E[delay] / horizon``, missed runs at the full horizon. With an
+  isolation margin ``m_k`` (> 0 when the label at step k would be wrong, e.g. ``max_{j != true} mu_j - mu_true``)
+  it adds ``w_iso P(misisolated)``, ``P(misisolated) = sum_{k >= onset} P(first alarm at k) sigmoid(m_k /
+  temperature)``. As ``temperature -> 0``: the hard rates of ``metrics`` (tested);
+* ``innovation_nll``: ``-(1/T) sum_k log N(r_k; 0, S_k)``, minimised over ``Q, R`` by the maximum-likelihood
+  estimate (Mehra 1970; Shumway & Stoffer 1982).
+
+All per run; average over a batch with ``jax.vmap`` and ``jnp.mean``.
 """
 from __future__ import annotations
 
@@ -35,12 +32,10 @@ def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e
     Args:
       log_mode_prob: (T, M) log mode probabilities (``IMMInfo.log_mode_prob``).
       true_mode: (T,) int true mode per step (``SimStep.mode``).
-      floor: probability floor, so that a structurally impossible mode costs
-        ``-log(floor)`` (finite, with a finite gradient) rather than infinity.
+      floor: probability floor: an impossible mode costs ``-log(floor)`` (finite, finite gradient), not infinity.
 
     Returns:
-      () the mean over the T steps of ``-log(mu_true + floor)`` [nats], in ``(0,
-      -log(floor)]``, differentiable in ``log_mode_prob``.
+      () mean over the T steps of ``-log(mu_true + floor)`` [nats], in ``(0, -log(floor)]``, differentiable.
     """
     _checks.check_scalar("floor", floor, 0.0, 1.0, low_open=True, meaning="a probability floor in (0, 1]")
     _checks.check_shape("log_mode_prob", log_mode_prob, (None, None), "(T, M) log mode probabilities")
@@ -74,13 +69,11 @@ def soft_detection_loss(
       statistic: (T,) test statistic ``s_k`` (alarm when ``s_k >= threshold``).
       threshold, temperature: () scalars (may be traced and tuned).
       onset: () int fault onset step (``faults.NEVER`` or >= T: fault-free run).
-      wrong_label_margin: optional (T,) margin ``m_k``, > 0 where an alarm at step k
-        would isolate the wrong fault.
+      wrong_label_margin: optional (T,) margin ``m_k``, > 0 where an alarm at step k would isolate the wrong fault.
 
     Returns:
-      ``(loss, parts)``; ``parts`` has ``false_alarm``, ``missed`` (probabilities) and
-      ``delay`` (expected, in steps; missed runs count ``T - onset``), and
-      ``misisolated`` (probability) when a margin is given.
+      ``(loss, parts)``; ``parts`` has ``false_alarm``, ``missed`` (probabilities), ``delay`` (expected, steps;
+      missed runs count ``T - onset``) and ``misisolated`` (probability) when a margin is given.
     """
     _checks.check_positive("temperature", temperature, "a positive temperature")
     for name, weight in (("false_alarm_weight", false_alarm_weight), ("miss_weight", miss_weight),

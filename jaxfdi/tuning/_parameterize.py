@@ -1,25 +1,19 @@
 """Unconstrained parameterisations of the quantities a tuner may change.
 
-A gradient step moves parameters anywhere in R^d; these maps turn any such point into a
-valid object, and back (``inverse(forward(x)) = x`` up to round-off, and
+These maps turn any point of R^d into a valid object and back (``inverse(forward(x)) = x`` up to round-off,
 ``forward(inverse(p)) = p`` for every valid ``p``):
 
-* ``stochastic_rows(mask)``: a row-stochastic matrix from logits, ``pi_ij = exp(l_ij) /
-  sum_k exp(l_ik)`` over the allowed entries; ``mask`` (static, bool) marks structural
-  zeros, which stay exactly 0 with zero gradient (log-space softmax, Bishop 2006 sec. 4.3.4);
-* ``log_diagonal()``: a diagonal covariance ``diag(exp(d))``;
-* ``cholesky_factor()``: a full covariance ``L L^T`` with ``L`` lower triangular whose
-  diagonal is ``exp`` of the parameters (Pinheiro & Bates 1996, the log-Cholesky form);
-* ``positive()``: ``softplus(x)``, for thresholds and noise levels of order one;
-* ``log_scale()``: ``exp(x)``, for positive quantities that span decades (an inflation
-  factor of 1e4, a bias random walk of 1e-12): a gradient step is a relative change;
-* ``unit_interval()``: ``sigmoid(x)``, for probability thresholds;
-* ``identity()``: unconstrained reals.
+* ``stochastic_rows(mask)``: row-stochastic ``pi_ij = exp(l_ij) / sum_k exp(l_ik)`` over allowed entries; structural
+  zeros (static bool ``mask``) stay exactly 0 with zero gradient (log-space softmax, Bishop 2006 sec. 4.3.4);
+* ``log_diagonal()``: ``diag(exp(d))``; ``cholesky_factor()``: ``L L^T``, ``L`` lower triangular with ``exp``
+  diagonal (log-Cholesky, Pinheiro & Bates 1996);
+* ``positive()``: ``softplus(x)`` (thresholds, noise levels of order one); ``log_scale()``: ``exp(x)`` (positive
+  quantities spanning decades, e.g. inflation 1e4, bias walk 1e-12: a step is a relative change);
+  ``unit_interval()``: ``sigmoid(x)`` (probability thresholds); ``identity()``: unconstrained reals.
 
-A *parameterisation* is a dict ``name -> Transform``; ``constrain``/``unconstrain`` map
-whole parameter dicts, and ``partition`` splits the trainable entries from the frozen
-ones (static mask). The transform names and options are what ``save_params`` records,
-so a file can be read back into the same parameterisation.
+A *parameterisation* is a dict ``name -> Transform``; ``constrain``/``unconstrain`` map whole parameter dicts,
+``partition`` splits trainable from frozen entries (static mask). ``save_params`` records transform names and
+options, so a file reads back into the same parameterisation.
 """
 from __future__ import annotations
 
@@ -34,8 +28,7 @@ from jaxfdi import _checks, _linalg
 
 
 class Transform(NamedTuple):
-    """``forward: unconstrained -> constrained`` and its ``inverse``, with a name and
-    static options (recorded when parameters are saved)."""
+    """``forward: unconstrained -> constrained``, its ``inverse``, a name and static options (saved with params)."""
 
     forward: Callable[[Array], Array]
     inverse: Callable[[Array], Array]
@@ -49,13 +42,11 @@ def identity() -> Transform:
 
 
 def positive(floor: float = 0.0) -> Transform:
-    """``p = floor + softplus(x)``; inverse ``x = log(expm1(p - floor))`` written stably.
-    ``floor`` >= 0, finite.
+    """``p = floor + softplus(x)``; inverse ``x = log(expm1(p - floor))`` written stably; ``floor`` >= 0, finite.
 
     Returns:
-      ``Transform`` named ``"positive"`` with options ``{"floor": floor}``: ``forward`` maps
-      an array of any shape elementwise to values above ``floor``, ``inverse`` maps values
-      above ``floor`` back to raw reals of the same shape.
+      ``Transform`` named ``"positive"``, options ``{"floor": floor}``: ``forward`` maps any-shape arrays
+      elementwise above ``floor``, ``inverse`` maps them back to raw reals of the same shape.
     """
     _checks.check_scalar("floor", floor, 0.0, meaning="a lower bound >= 0")
 
@@ -71,8 +62,7 @@ def positive(floor: float = 0.0) -> Transform:
 
 
 def log_scale() -> Transform:
-    """``p = exp(x)`` elementwise, any shape; inverse ``log p``. A step of size ``eta``
-    changes ``p`` by the factor ``exp(eta)`` whatever its magnitude."""
+    """``p = exp(x)`` elementwise, any shape; inverse ``log p``; a step ``eta`` scales ``p`` by ``exp(eta)``."""
     return Transform(jnp.exp, lambda p: jnp.log(jnp.asarray(p)), "log_scale", {})
 
 
@@ -87,19 +77,17 @@ def unit_interval() -> Transform:
 
 
 def _log_probability(p: Array) -> Array:
-    """``log p``, and ``log(tiny)`` (about -708 in float64) where ``p == 0``: a finite
-    logit that softmax maps back to ~0."""
+    """``log p``, and ``log(tiny)`` (about -708 in float64) where ``p == 0``: a finite logit softmax maps to ~0."""
     return jnp.where(p > 0, jnp.log(jnp.where(p > 0, p, 1.0)), jnp.log(jnp.finfo(p.dtype).tiny))
 
 
 def simplex() -> Transform:
-    """Probability vector ``p = softmax(x)`` (e.g. an IMM's initial mode probabilities);
-    ``inverse`` returns ``log p`` (log-sum-exp 0), ``log(tiny)`` at a zero.
+    """Probability vector ``p = softmax(x)`` (e.g. an IMM's initial mode probabilities); ``inverse`` returns
+    ``log p`` (log-sum-exp 0), ``log(tiny)`` at a zero.
 
     Returns:
-      ``Transform`` named ``"simplex"`` (no options): ``forward`` maps (M,) logits to an
-      (M,) probability vector (positive, summing to 1), ``inverse`` an (M,) probability
-      vector to (M,) logits.
+      ``Transform`` named ``"simplex"`` (no options): ``forward`` maps (M,) logits to an (M,) probability vector
+      (positive, summing to 1), ``inverse`` the reverse.
     """
 
     def forward(logits):
@@ -114,12 +102,10 @@ def simplex() -> Transform:
 
 
 def stochastic_rows(mask: Any = None) -> Transform:
-    """Row-stochastic (M, M) matrix from (M, M) logits; ``mask[i, j] = False`` fixes
-    ``pi_ij = 0``; every row needs an allowed entry. The logits of a row are defined up
-    to a constant; ``inverse`` returns ``log pi`` (row log-sum-exp 0), 0 where the mask
-    forbids, and ``log(tiny)`` (about -708 in float64) at a zero the mask allows, which
-    ``forward`` maps back to ~1e-308: such an entry stays zero in training (its gradient
-    vanishes with it); start it at a small positive value to let it be learned."""
+    """Row-stochastic (M, M) matrix from (M, M) logits; ``mask[i, j] = False`` fixes ``pi_ij = 0``; every row needs
+    an allowed entry. Row logits are defined up to a constant; ``inverse`` returns ``log pi`` (row log-sum-exp 0), 0
+    where the mask forbids, and ``log(tiny)`` (about -708 in float64) at an allowed zero, which ``forward`` maps to
+    ~1e-308: it stays zero in training (its gradient vanishes with it); start it small positive to learn it."""
     if mask is not None and _checks.shape_of(mask) and np.asarray(mask).dtype != bool:
         raise TypeError(f"mask: expected a boolean (M, M) array, got {_checks.received(mask)}")
     mask_np = None if mask is None else np.asarray(mask, bool)
@@ -161,15 +147,12 @@ def log_diagonal() -> Transform:
 
 
 def cholesky_factor() -> Transform:
-    """Full covariance ``L L^T`` from an (n, n) array: its strict lower triangle is the
-    off-diagonal of ``L``, its diagonal the log of ``L``'s diagonal (upper triangle
-    ignored). Symmetric positive definite for every finite input.
+    """Full covariance ``L L^T`` from an (n, n) array: strict lower triangle = ``L``'s off-diagonal, diagonal = log
+    of ``L``'s diagonal (upper triangle ignored). SPD for every finite input.
 
     Returns:
-      ``Transform`` named ``"cholesky_factor"`` (no options): ``forward`` maps (n, n) raw
-      parameters to the (n, n) covariance ``L L^T``, ``inverse`` maps a symmetric positive
-      definite (n, n) covariance to its (n, n) log-Cholesky parameters (zero above the
-      diagonal).
+      ``Transform`` named ``"cholesky_factor"`` (no options): ``forward`` maps (n, n) raw parameters to the (n, n)
+      covariance, ``inverse`` an SPD (n, n) covariance to its log-Cholesky parameters (zero above the diagonal).
     """
 
     def forward(raw):
@@ -186,10 +169,9 @@ def cholesky_factor() -> Transform:
 
 
 def sticky_log_prior(pi: Array, target: Array, concentration: float) -> Array:
-    """Dirichlet log-density (up to a constant) of each row of ``pi`` around ``target``:
-    ``sum_ij (c target_ij) log pi_ij`` (Dirichlet with ``alpha = 1 + c target``, mode at
-    ``target``), summed over rows; entries where ``target`` is 0 do not count. Added to
-    a tuning loss (negated) it keeps a learned transition matrix near a sticky design."""
+    """Dirichlet log-density (up to a constant) of each row of ``pi`` around ``target``, summed over rows:
+    ``sum_ij (c target_ij) log pi_ij`` (``alpha = 1 + c target``, mode at ``target``; entries with ``target`` 0 do not
+    count). Added (negated) to a tuning loss it keeps a learned transition matrix near a sticky design."""
     _checks.check_scalar("concentration", concentration, 0.0, meaning="a concentration >= 0")
     _checks.check_shape("target", target, _checks.shape_of(pi), "the shape of pi")
     target = jnp.asarray(target, jnp.result_type(pi))
@@ -220,8 +202,8 @@ def constrain(parameterization: dict[str, Transform], raw: dict[str, Array]) -> 
     """Unconstrained -> constrained, entry by entry.
 
     Returns:
-      dict with the keys of ``raw``: ``parameterization[name].forward(raw[name])`` for each
-      (entries of ``parameterization`` without a raw value are left out).
+      dict with the keys of ``raw``: ``parameterization[name].forward(raw[name])`` (transforms without a raw value
+      are left out).
 
     Raises:
       ValueError: a key of ``raw`` without a transform.

@@ -1,16 +1,14 @@
-"""Gradient-based tuning with optax: a jitted training step, mini-batches, a validation
-set, early stopping, progress, and parameters saved with their parameterisation.
+"""Gradient-based tuning with optax: a jitted training step, mini-batches, a validation set, early stopping,
+progress, and parameters saved with their parameterisation.
 
-The loss is any ``loss(raw, batch) -> scalar`` of the *unconstrained* parameters
-``raw`` (a dict; map them with ``parameterize.constrain`` inside the loss). Batches come
-from ``train_batch(step)``: freshly simulated labelled runs (run keys folded from a
-training seed, ``jax.random.fold_in(key, step)``, so validation and test data, drawn from
-other seeds, are never trained on) or slices of a fixed dataset (``fixed_batches``). Only the names in
-``trainable`` move; the others are passed to the loss unchanged.
+The loss is any ``loss(raw, batch) -> scalar`` of the *unconstrained* parameters ``raw`` (a dict; map them with
+``parameterize.constrain`` inside). Batches come from ``train_batch(step)``: freshly simulated labelled runs (keys
+``jax.random.fold_in(key, step)`` of a training seed, so validation and test data from other seeds are never
+trained on) or slices of a fixed dataset (``fixed_batches``). Only ``trainable`` names move; the others reach the
+loss unchanged.
 
-Long runs: ``checkpointed(filter)`` wraps a filter's step in ``jax.checkpoint``, so the
-reverse pass recomputes each step's internals instead of storing them (memory per step
-falls to the carried state; see benchmarks/RESULTS.md for the measured peak memory).
+Long runs: ``checkpointed(filter)`` wraps a filter's step in ``jax.checkpoint``: the reverse pass recomputes each
+step's internals instead of storing them (memory per step falls to the carried state; benchmarks/RESULTS.md).
 """
 from __future__ import annotations
 
@@ -40,8 +38,8 @@ class TrainHistory(NamedTuple):
       train_loss: (E,) training mini-batch loss at that step
       val_loss: (E,) validation loss at that step
       best_step: the step whose parameters are returned
-      stopped_early: training stopped before ``steps``: no improvement for ``patience``
-          evaluations, or a non-finite loss or gradient
+      stopped_early: training stopped before ``steps``: no improvement for ``patience`` evaluations, or a
+        non-finite loss or gradient
     """
 
     step: np.ndarray
@@ -64,8 +62,7 @@ class TrainResult(NamedTuple):
 
 
 def checkpointed(filt: Filter) -> Filter:
-    """The same filter with its ``step`` (and its batch kernel's) rematerialised in the
-    reverse pass."""
+    """The same filter with its ``step`` (and its batch kernel's) rematerialised in the reverse pass."""
     if getattr(filt, "batch", None) is not None:
         filt = filt._replace(batch=filt.batch._replace(step=jax.checkpoint(filt.batch.step)))
     return filt._replace(step=jax.checkpoint(filt.step))
@@ -91,12 +88,9 @@ def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[in
 
 
 def strongly_typed(tree):
-    """``tree`` with every leaf a JAX array of its own dtype and no weak type.
-
-    A parameter given as a Python number (or made from one, e.g. ``jnp.full(5, 0.1)``) is
-    weakly typed; after one optimiser step it is not, and a jitted function called with
-    both compiles twice (the tuning CLI compiled its training step three times per design,
-    about 30 s each on 2 cores). Fixing the types once at the entry avoids it."""
+    """``tree`` with every leaf a JAX array of its own dtype, no weak type: a Python-number parameter (or one made
+    from it, e.g. ``jnp.full(5, 0.1)``) is weakly typed until one optimiser step, and a jitted function called with
+    both compiles twice (the tuning CLI compiled its step three times per design, ~30 s each on 2 cores)."""
     return jax.tree.map(lambda leaf: jnp.asarray(leaf, dtype=jnp.result_type(leaf)), tree)
 
 
@@ -114,17 +108,13 @@ def fit(
 ) -> TrainResult:
     """Minimise ``loss`` over the ``trainable`` entries of ``raw0`` (default: all).
 
-    Every ``eval_every`` steps (and at step 0 and the end) the validation loss is
-    computed; the parameters with the lowest one are returned, and training stops after
-    ``patience`` evaluations without improvement. Non-finite losses or gradients stop
-    training (the best parameters so far are kept) rather than poisoning the state.
+    The validation loss is computed every ``eval_every`` steps (and at step 0 and the end); the parameters with the
+    lowest are returned; training stops after ``patience`` evaluations without improvement, or at a non-finite loss
+    or gradient (best parameters so far kept).
 
     Returns:
-      ``TrainResult(raw, history)``: ``raw``, a dict with the keys of ``raw0``: the
-      trainable entries at the evaluation with the lowest validation loss and the frozen
-      ones unchanged; ``history``, a ``TrainHistory`` of the E evaluations (step 0 first):
-      (E,) ``step``, ``train_loss`` (NaN at step 0) and ``val_loss``, the ``best_step`` and
-      ``stopped_early``.
+      ``TrainResult``: ``raw`` with ``raw0``'s keys (trainable entries at the lowest validation loss, frozen ones
+      unchanged); ``history`` of the E evaluations (step 0 first, ``train_loss`` NaN there).
     """
     _checks.check_callable("loss", loss, "a function (raw params, batch) -> scalar loss")
     _checks.check_callable("train_batch", train_batch, "a function step -> batch")
@@ -182,8 +172,8 @@ def fit(
 
 
 def save_params(path: str | Path, raw: dict, parameterization: dict[str, Transform], meta: dict | None = None) -> Path:
-    """Write the constrained parameters, the parameterisation (transform names and
-    options) and ``meta`` to ``.npz`` or ``.json``, completely or not at all.
+    """Write the constrained parameters, the parameterisation (transform names, options) and ``meta`` to ``.npz``
+    or ``.json``, completely or not at all.
 
     Returns:
       the ``Path`` of the file written (``path``; its folder is created if missing).
@@ -207,13 +197,12 @@ def save_params(path: str | Path, raw: dict, parameterization: dict[str, Transfo
 
 
 def load_params(path: str | Path) -> tuple[dict, dict[str, Transform], dict]:
-    """Read a file written by ``save_params``; a file that is not one (truncated, another
-    format, a field missing) raises a ``ValueError`` naming the file and what is wrong.
+    """Read a file written by ``save_params``; any other file (truncated, another format, a field missing) raises
+    a ``ValueError`` naming the file and the problem.
 
     Returns:
-      ``(raw, parameterization, meta)``: the unconstrained parameters (a dict of JAX arrays,
-      ``unconstrain`` of the saved constrained values), the dict ``name -> Transform``
-      rebuilt from the recorded transform names and options, and the saved ``meta`` dict.
+      ``(raw, parameterization, meta)``: unconstrained parameters (dict of JAX arrays, ``unconstrain`` of the saved
+      values), ``name -> Transform`` rebuilt from the recorded names and options, and the saved ``meta`` dict.
     """
     path = Path(path)
     if path.suffix not in (".json", ".npz"):

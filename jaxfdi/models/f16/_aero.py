@@ -11,10 +11,9 @@ the actual c.g. is applied in ``dynamics``), angles in degrees, rates in rad/s::
     Cm = CM(alpha, el) + Cmq cq
     Cn = CN(alpha, |beta|) sgn(beta) + DNDA(alpha, beta) ail/20 + DNDR(alpha, beta) rdr/30 + b2v (Cnr r + Cnp p)
 
-with ``b2v = b / (2 V)`` and the damping derivatives ``CXq ... Cnp`` from ``DAMP(alpha)``.
-``sgn(beta)`` is the Fortran ``SIGN(1.0, BETA)`` (+1 at 0), and ``|beta|`` is taken on the
-same branch, so the derivative at ``beta = 0`` is the table's slope (``jnp.sign`` would
-give 0 there and break the linearisation of every symmetric trim).
+with ``b2v = b / (2 V)`` and the damping derivatives ``CXq ... Cnp`` from ``DAMP(alpha)``. ``sgn(beta)`` is the Fortran
+``SIGN(1.0, BETA)`` (+1 at 0), and ``|beta|`` is taken on the same branch, so the derivative at ``beta = 0`` is the
+table's slope (``jnp.sign`` would give 0 there and break the linearisation of every symmetric trim).
 """
 from __future__ import annotations
 

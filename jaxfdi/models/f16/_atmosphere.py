@@ -34,8 +34,7 @@ class AirData(NamedTuple):
 
 
 def air_data(vt: Array, altitude: Array, atm: AtmosphereData) -> AirData:
-    """Mach number, dynamic pressure, density and temperature at true airspeed ``vt``
-    (ft/s) and altitude (ft)."""
+    """Mach number, dynamic pressure, density and temperature at true airspeed ``vt`` (ft/s) and altitude (ft)."""
     tfac = 1.0 - atm.tfac_slope * altitude
     temperature = jnp.where(altitude >= atm.strat_alt, atm.T_strat, atm.T0 * tfac)
     density = atm.rho0 * tfac**atm.exponent

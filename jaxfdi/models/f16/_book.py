@@ -1,12 +1,10 @@
-"""The book's trim tables beside ours: Stevens & Lewis (2003), Table 3.6-2 (level flight at
-sea level, 130-800 ft/s, xcg = 0.35) and Table 3.6-3 (502 ft/s at sea level: level flight
-at xcg = 0.35, 0.30, 0.38 and a 0.3 rad/s coordinated turn at xcg = 0.30), as transcribed
-in ``f16_stevens_lewis.json`` (``reference_trim_points``).
+"""The book's trim tables beside ours: Stevens & Lewis (2003), Table 3.6-2 (level flight at sea level, 130-800 ft/s,
+xcg = 0.35) and Table 3.6-3 (502 ft/s at sea level: level flight at xcg = 0.35, 0.30, 0.38 and a 0.3 rad/s coordinated
+turn at xcg = 0.30), as transcribed in ``f16_stevens_lewis.json`` (``reference_trim_points``).
 
-All twenty cases are trimmed in one vmapped solve (``trim_book_cases``). Printed
-precision (``printed_decimals``): Table 3.6-2 prints three significant digits and at most
-three decimals (the data file drops trailing zeros: its 0.2 is the book's 0.200, its
--0.09 the book's -0.090); Table 3.6-3 is taken with the digits of the data file.
+All twenty cases are trimmed in one vmapped solve (``trim_book_cases``). Printed precision
+(``printed_decimals``): Table 3.6-2 three significant digits, at most three decimals (the data file drops
+trailing zeros: 0.2 is 0.200, -0.09 is -0.090); Table 3.6-3 the data file's digits.
 """
 from __future__ import annotations
 
@@ -68,9 +66,7 @@ def book_cases() -> list[BookCase]:
 
 
 def trim_book_cases(params: F16Params, cases: list[BookCase] | None = None) -> TrimResult:
-    """Every case trimmed at once (``trim_batch``: one compiled, vmapped solve over the
-    conditions and the c.g. positions; sea level, no climb). Returns a stacked
-    ``TrimResult`` (N, ...)."""
+    """Every case trimmed at once (``trim_batch``; sea level, no climb); a stacked ``TrimResult`` (N, ...)."""
     cases = book_cases() if cases is None else cases
     dtype = params.mass.dtype
     conditions = trim_condition(np.array([c.airspeed for c in cases]), 0.0, 0.0,
@@ -97,8 +93,8 @@ def ours(result: TrimResult, i: int, quantity: str) -> float:
 
 
 def comparison_rows(result: TrimResult, cases: list[BookCase] | None = None) -> list[dict]:
-    """One JSON-ready row per case: each printed quantity beside ours, the difference in
-    units of half the last printed digit (``half_units``), the trim residual and flags."""
+    """A JSON-ready row per case: printed quantities beside ours, differences in half last printed digits
+    (``half_units``), trim residual and flags."""
     cases = book_cases() if cases is None else cases
     rows = []
     for i, case in enumerate(cases):

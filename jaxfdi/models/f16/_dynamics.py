@@ -2,10 +2,9 @@
 2nd ed., sec. 2.5 and ``SUBROUTINE F`` of App. A): rigid body, flat non-rotating earth,
 constant mass; the aircraft of Park, Kim, Park & Roh (2004, eqs. 31-42).
 
-State ``x = [VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]`` (ft/s, rad,
-rad/s, ft, engine power %), controls ``u = [thtl, el, ail, rdr]`` (throttle 0..1, surface
-deflections in degrees, the book's units). With ``U, V, W`` the body velocities
-(``U = VT cos(alpha) cos(beta)``, ``V = VT sin(beta)``, ``W = VT sin(alpha) cos(beta)``)::
+``x = [VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]`` (ft/s, rad, rad/s, ft, power %),
+``u = [thtl, el, ail, rdr]`` (throttle 0..1, surfaces in deg). Body velocities ``U = VT cos(alpha)
+cos(beta)``, ``V = VT sin(beta)``, ``W = VT sin(alpha) cos(beta)``::
 
     U' = R V - Q W - g sin(theta) + (qbar S CX + T) / m
     V' = P W - R U + g cos(theta) sin(phi) + qbar S CY / m
@@ -16,15 +15,10 @@ deflections in degrees, the book's units). With ``U, V, W`` the body velocities
     Q' = (c5 P - c7 hx) R + c6 (R^2 - P^2) + qbar S cbar c7 Cm
     R' = (c8 P - c2 R + c9 hx) Q + qbar S b (c4 Cl + c9 Cn)
 
-(Stevens & Lewis eq. 2.5-16 with the engine's angular momentum ``hx`` along body x;
-``c1 .. c9`` from ``Jxx, Jyy, Jzz, Jxz``, eq. 2.4-6), the Euler-angle kinematics and the
-navigation equations (the body-to-earth rotation; ``h' = U sin(theta) - V sin(phi)
-cos(theta) - W cos(phi) cos(theta)``), and the engine's power lag (``engine``).
-
-The c.g. shift from ``xcg_ref`` to ``xcg`` (fractions of ``cbar``) is applied to both
-aerodynamic models: ``Cm += CZ (xcg_ref - xcg)``, ``Cn -= CY (xcg_ref - xcg) cbar / b``.
-Control limits are parameters (``saturate``); ``f16_dynamics`` itself does not clip (a
-trim must be found, and checked, without it).
+(Stevens & Lewis eq. 2.5-16, engine momentum ``hx`` along body x; ``c1 .. c9`` eq. 2.4-6), Euler kinematics, navigation
+(``h' = U sin(theta) - V sin(phi) cos(theta) - W cos(phi) cos(theta)``) and the engine's power lag (``engine``). C.g.
+shift (fractions of ``cbar``), both aero models: ``Cm += CZ (xcg_ref - xcg)``, ``Cn -= CY (xcg_ref - xcg) cbar / b``.
+``f16_dynamics`` does not clip (trims are found and checked without it; limits: ``saturate``).
 """
 from __future__ import annotations
 
@@ -93,11 +87,9 @@ def f16_params(aero: str = "tables", profile: str = "stevens_lewis_2nd_ed", xcg:
     """The Stevens & Lewis F-16 (``f16_stevens_lewis.json``).
 
     Args:
-      aero: ``"tables"`` (the book's tables, ``aero.py``) or ``"morelli"`` (Morelli's
-        1998 polynomial, ``morelli.py``).
-      profile: table version for ``aero="tables"`` and the thrust tables
-        (``tables.PROFILES``); the default is the 2nd-edition book tables, the ones its
-        trim tables 3.6-2 and 3.6-3 were computed with.
+      aero: ``"tables"`` (the book's, ``aero.py``) or ``"morelli"`` (Morelli's 1998 polynomial).
+      profile: table version for ``aero="tables"`` and thrust (``tables.PROFILES``); default the
+        2nd-edition tables, with which trim tables 3.6-2 and 3.6-3 were computed.
       xcg: centre of gravity, fraction of the mean chord (the book: 0.35; 0.30, 0.38).
       mass: slug (default 636.94 = 20 490.4 lbf / 32.17, the data file's).
       jxz: product of inertia ``Jxz`` (default 982 slug ft^2).
@@ -105,12 +97,8 @@ def f16_params(aero: str = "tables", profile: str = "stevens_lewis_2nd_ed", xcg:
       dtype: float dtype of every leaf (default: JAX's default float).
 
     Returns:
-      ``F16Params``: the aerodynamic model (``AeroTables`` or ``MorelliCoefficients``, per
-      ``aero``), the engine and atmosphere data, () ``mass`` [slug], (4,) ``inertia``
-      ``[Jxx, Jyy, Jzz, Jxz]`` [slug ft^2], () ``area``, ``span``, ``chord``, ``xcg_ref``,
-      ``xcg``, ``engine_momentum`` and ``gravity``, and the (4,) control limits
-      ``control_lower``, ``control_upper`` of ``[thtl, el, ail, rdr]`` (aileron
-      ``+-aileron_limit`` deg); every leaf in ``dtype``.
+      ``F16Params`` (every leaf in ``dtype``): ``aero`` an ``AeroTables`` or ``MorelliCoefficients``;
+      control limits with aileron ``+-aileron_limit`` deg.
     """
     if aero not in ("tables", "morelli"):
         raise ValueError(f"aero: expected 'tables' or 'morelli', got {aero!r}")
@@ -153,9 +141,8 @@ def inertia_constants(inertia: Array) -> tuple[Array, ...]:
 
 
 def aero_coefficients(params: F16Params, x: Array, u: Array, gust: Array | None = None) -> AeroCoefficients:
-    """Total coefficients at the actual c.g. (``params.xcg``): the aerodynamic model
-    chosen by ``params.aero``'s type, and the c.g. shift. ``gust`` (2,): angle-of-attack
-    and sideslip increments (rad) seen by the aerodynamics only."""
+    """Total coefficients at ``params.xcg`` (model by ``params.aero``'s type, plus the c.g. shift);
+    ``gust`` (2,): alpha and beta increments (rad) seen by the aerodynamics only."""
     alpha, beta = x[ALPHA], x[BETA]
     if gust is not None:
         alpha, beta = alpha + gust[0], beta + gust[1]
@@ -171,10 +158,8 @@ def aero_coefficients(params: F16Params, x: Array, u: Array, gust: Array | None 
 
 def moment_equations(p: Array, q: Array, r: Array, c: AeroCoefficients, qs: Array,
                      params: F16Params) -> tuple[Array, Array, Array]:
-    """``(P', Q', R')`` of the body rates (Park et al. 2004, eqs. 34-36; Stevens & Lewis eq. 2.5-16
-    with the engine's angular momentum ``hx``) from the coefficients ``c`` and
-    ``qs = qbar S``: the part of ``f16_dynamics`` that ``models.f16.rates`` (the UKF's
-    model) also uses."""
+    """``(P', Q', R')`` (Park et al. 2004, eqs. 34-36; Stevens & Lewis eq. 2.5-16 with ``hx``) from the
+    coefficients ``c`` and ``qs = qbar S``; shared with ``models.f16.rates`` (the UKF's model)."""
     c1, c2, c3, c4, c5, c6, c7, c8, c9 = inertia_constants(params.inertia)
     hx = params.engine_momentum
     qsb = qs * params.span
@@ -187,14 +172,11 @@ def moment_equations(p: Array, q: Array, r: Array, c: AeroCoefficients, qs: Arra
 def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = None) -> Array:
     """``x'`` (13,) of the state ``x`` (13,) under the controls ``u`` (4,) (module doc).
 
-    ``gust``: optional (2,) angle-of-attack and sideslip increments (rad) of a wind gust,
-    added to the angles the aerodynamic model sees (the kinematics keep ``x``'s).
+    ``gust``: optional (2,) alpha and beta increments (rad), seen by the aerodynamics only.
 
     Returns:
-      (13,) time derivative of ``x``, in its order: ``VT'`` [ft/s^2], ``alpha'``, ``beta'``,
-      ``phi'``, ``theta'``, ``psi'`` [rad/s], ``P'``, ``Q'``, ``R'`` [rad/s^2], the north,
-      east and up velocities ``pn'``, ``pe'``, ``h'`` [ft/s] and ``pow'`` [%/s]; controls are
-      not clipped (``saturate``).
+      (13,) ``x'``: ``VT'`` [ft/s^2], angle rates [rad/s], ``P'``, ``Q'``, ``R'`` [rad/s^2], ``pn'``,
+      ``pe'``, ``h'`` [ft/s] (north, east, up), ``pow'`` [%/s]; controls not clipped (``saturate``).
     """
     _checks.check_real("x", x, "a real state")
     _checks.check_real("u", u, "real controls")

@@ -3,10 +3,9 @@
 
 - Throttle gearing, commanded power ``P_c`` (%) from the throttle ``t`` in [0, 1]:
   ``P_c = 64.94 t`` for ``t <= 0.77``, else ``217.38 t - 117.38`` (afterburner above 50 %).
-- Power lag, ``P' = rate (target - P)``: with ``P_c >= 50``: ``P >= 50`` gives
-  ``(5, P_c)``, else ``(rtau(60 - P), 60)``; with ``P_c < 50``: ``P >= 50`` gives
-  ``(5, 40)``, else ``(rtau(P_c - P), P_c)``; ``rtau(dp)`` = 1 for ``dp <= 25``, 0.1 for
-  ``dp >= 50``, ``1.9 - 0.036 dp`` between (1/s).
+- Power lag, ``P' = rate (target - P)``: with ``P_c >= 50``: ``P >= 50`` gives ``(5, P_c)``, else
+  ``(rtau(60 - P), 60)``; with ``P_c < 50``: ``P >= 50`` gives ``(5, 40)``, else ``(rtau(P_c - P), P_c)``;
+  ``rtau(dp)`` = 1 for ``dp <= 25``, 0.1 for ``dp >= 50``, ``1.9 - 0.036 dp`` between (1/s).
 - Thrust (lbf), bilinear in Mach and altitude (``tables.lookup2``): below 50 % power
   ``T = T_idle + (T_mil - T_idle) P / 50``, above ``T = T_mil + (T_max - T_mil)(P - 50)/50``.
 """

@@ -1,27 +1,18 @@
 """Linear models of the F-16 about a trim by ``jax.jacfwd``, its longitudinal and lateral
 parts, and their modes (Stevens & Lewis 2003, sec. 3.7 and 4.4).
 
-``A = df/dx``, ``B = df/du`` of ``f16_dynamics`` at ``(x_trim, u_trim)``: exact
-derivatives of the piecewise-linear tables (forward mode), no finite-difference step to
-choose. About a wings-level symmetric trim the 13 states split into
+``A = df/dx``, ``B = df/du`` of ``f16_dynamics`` at the trim: exact derivatives of the piecewise-linear tables (forward
+mode), no finite-difference step. About a wings-level trim the states split into longitudinal ``[VT, alpha, theta, Q]``
+(+ ``h``, ``pow`` in a design holding altitude with the engine), inputs ``[thtl, el]``, and lateral
+``[beta, phi, P, R]``, inputs ``[ail, rdr]`` (``psi``, ``pn``, ``pe`` feed nothing back).
 
-- longitudinal ``[VT, alpha, theta, Q]`` (with ``h`` and ``pow`` when the altitude and the
-  engine are part of a design), inputs ``[thtl, el]``;
-- lateral-directional ``[beta, phi, P, R]``, inputs ``[ail, rdr]``,
-
-(``psi``, ``pn``, ``pe`` feed nothing back). Modes are named from the eigenvalues of the
-4-state blocks: longitudinally the two of largest modulus are the short period and the
-two smallest the phugoid (a complex pair each, or two real roots when the c.g. is aft
-of the manoeuvre point); laterally the complex pair is the Dutch roll, and of the two
-real roots the faster is the roll subsidence and the slower the spiral (without a
-complex pair: the fastest root is the roll, the slowest the spiral, the middle two the
-Dutch roll). Each mode reports its roots, natural frequency ``|lambda|``, damping ratio
-``-Re(lambda)/|lambda|``, for real roots the time constant ``-1/lambda`` (negative:
-unstable, with time to double ``ln 2 / lambda``), and each root's eigenvector magnitudes
-(``shapes``), since near the neutral point the names by speed stop saying what moves: at
-xcg = 0.35 the unstable root's eigenvector is mostly pitch attitude and airspeed
-(``theta`` 1, ``VT/V0`` 0.53, ``alpha`` 0.14), a divergence of the phugoid's kind, while
-the -1.91 root is the short period's angle of attack and pitch rate.
+Modes from the 4-state blocks' eigenvalues: longitudinal, the two largest are the short period, the two smallest the
+phugoid (a pair each, or two real roots with the c.g. aft of the manoeuvre point); lateral, the pair is the Dutch roll,
+the faster real root the roll, the slower the spiral (no pair: fastest roll, slowest spiral, middle two Dutch roll).
+Each reports roots, ``|lambda|``, damping ``-Re(lambda)/|lambda|``, real roots' time constant ``-1/lambda`` (negative:
+unstable, doubling in ``ln 2 / lambda``) and eigenvector magnitudes (``shapes``): near the neutral point speed-based
+names mislead; at xcg = 0.35 the unstable root is mostly pitch attitude and airspeed (``theta`` 1, ``VT/V0`` 0.53,
+``alpha`` 0.14, a phugoid-like divergence), the -1.91 root the short period's alpha and pitch rate.
 """
 from __future__ import annotations
 
@@ -71,8 +62,7 @@ class Mode(NamedTuple):
       damping_ratio: -Re/|lambda| (nan for two real roots)
       time_constant: s, -1/lambda of the slowest real root (nan for a complex pair)
       stable: every root has a negative real part
-      shapes: per root: |eigenvector| over the block's states, max 1
-          (VT divided by the trim airspeed)
+      shapes: per root: |eigenvector| over the block's states, max 1 (VT divided by the trim airspeed)
     """
 
     name: str
@@ -113,8 +103,7 @@ def linearize(params: F16Params, x: Array, u: Array) -> LinearF16:
     """Jacobians of ``f16_dynamics`` at ``(x, u)`` (``jax.jacfwd``).
 
     Returns:
-      ``LinearF16(A, B, x, u)``: ``A = df/dx`` (13, 13) and ``B = df/du`` (13, 4) at the
-      point, and the (13,) state and (4,) controls it was taken at (``dx' = A dx + B du``).
+      ``LinearF16(A, B, x, u)`` (``dx' = A dx + B du``).
     """
     _checks.check_shape("x", x, (13,), "trim state")
     _checks.check_shape("u", u, (4,), "trim controls")
@@ -167,10 +156,9 @@ def _shapes(A: Array, roots: np.ndarray, scale: np.ndarray) -> list[tuple[float,
 
 
 def longitudinal_modes(A_lon: Array, airspeed: float = 1.0) -> list[Mode]:
-    """Short period and phugoid of the (4, 4) ``[VT, alpha, theta, Q]`` block: two complex
-    pairs, the faster is the short period; one pair and two real roots, the pair is the
-    phugoid unless it is faster than both real roots (then the short period); four real
-    roots, the two of largest modulus are the short period."""
+    """Short period and phugoid of the ``[VT, alpha, theta, Q]`` block: two pairs, the faster is the short
+    period; a pair and two real roots, the pair is the phugoid unless faster than both (then the short
+    period); four real roots, the two largest are the short period."""
     _checks.check_matrix("A_lon", A_lon, (4, 4), "[VT, alpha, theta, Q] block")
     roots = _canonical(np.linalg.eigvals(np.asarray(A_lon, np.float64)))
     is_complex = np.abs(roots.imag) > 0

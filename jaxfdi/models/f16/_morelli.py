@@ -2,11 +2,9 @@
 nonlinear parametric modeling with application to F-16 aerodynamics", Proc. American
 Control Conference; fitted to the NASA TP-1538 / Stevens & Lewis data).
 
-Coefficients ``a`` .. ``s`` (110 numbers) and their terms are read from
-``jaxfdi.data.data_path("f16_morelli.json")``: each coefficient function is
-``sum_i c_i m_i(alpha, beta, de, da, dr)``, ``m_i`` a monomial (angles in radians), and
-the totals, with nondimensional rates ``phat = p b/(2V)``, ``qhat = q cbar/(2V)``,
-``rhat = r b/(2V)``::
+Coefficients ``a`` .. ``s`` (110 numbers) and terms from ``jaxfdi.data.data_path("f16_morelli.json")``: each
+function ``sum_i c_i m_i(alpha, beta, de, da, dr)``, ``m_i`` monomials (rad); with ``phat = p b/(2V)``,
+``qhat = q cbar/(2V)``, ``rhat = r b/(2V)``::
 
     Cx = Cx0(alpha, de) + Cxq(alpha) qhat
     Cy = Cy0(beta, da, dr) + Cyp(alpha) phat + Cyr(alpha) rhat
@@ -15,9 +13,8 @@ the totals, with nondimensional rates ``phat = p b/(2V)``, ``qhat = q cbar/(2V)`
     Cm = Cm0(alpha, de) + Cmq(alpha) qhat
     Cn = Cn0(alpha, beta) + Cnp phat + Cnr rhat + Cnda(alpha, beta) da + Cndr(alpha, beta) dr
 
-about ``xcg_ref = 0.35 cbar`` (the c.g. shift is applied in ``dynamics``). The damping is
-counted once: AeroBench's ``subf16_model`` adds the table model's DAMP terms on top of
-these, which counts it twice.
+about ``xcg_ref = 0.35 cbar`` (c.g. shift in ``dynamics``). Damping counted once (AeroBench's
+``subf16_model`` adds the tables' DAMP on top: twice).
 """
 from __future__ import annotations
 

@@ -1,24 +1,16 @@
-"""The F-16 as a sampled plant: RK4 integration with gusts, the sensors and their noise,
-and the view the flight controller reads, whose body rates are a *selected* rate (Park,
-Kim, Park & Roh 2004). The loop stages built on it (the plant with noise and faults, the
-fault-free FDI stage) are ``jaxfdi.control._f16_loop``.
+"""The F-16 as a sampled plant: RK4 with gusts, noisy sensors, and the controller's view whose body rates
+are a *selected* rate (Park, Kim, Park & Roh 2004); loop stages in ``jaxfdi.control._f16_loop``.
 
-State of the sampled plant ``x_s = [x (13), w_g, v_g]``: the aircraft and a vertical and
-a lateral gust velocity (ft/s), a first-order Gauss-Markov (Dryden-like) process
-``g[k+1] = a g[k] + sigma_g sqrt(1 - a^2) n[k]``, ``a = exp(-V0 dt / L)``, seen by the
-aerodynamics as ``alpha_g = w_g / VT``, ``beta_g = v_g / VT`` (``f16_dynamics(gust=...)``).
-One sample ``dt`` is ``substeps`` classical RK4 steps with the controls (saturated to the
-limits) and the gust held (``sampled_transition``).
+State ``x_s = [x (13), w_g, v_g]``: aircraft, vertical and lateral gust velocity (ft/s), first-order
+Gauss-Markov (Dryden-like) ``g[k+1] = a g[k] + sigma_g sqrt(1 - a^2) n[k]``, ``a = exp(-V0 dt / L)``, seen
+as ``alpha_g = w_g / VT``, ``beta_g = v_g / VT`` (``f16_dynamics(gust=...)``). One sample ``dt``:
+``substeps`` RK4 steps, controls (saturated) and gust held (``sampled_transition``).
 
-Measurement ``y`` (``MEASUREMENT_NAMES``): air data ``[VT, alpha, beta]``, attitude
-``[phi, theta, psi]``, altitude, engine power, and the rate sensors
-``m = H [P, Q, R]`` (``rate_axes`` ``H``, one row per input axis), each with white
-Gaussian noise (``measurement_cov``). Park et al. (2004) fly three two-degree-of-freedom rate sensors, ``H`` 6x3
-(``skewed_rate_axes``), sigma = 0.01 rad/s on every axis; the paper leaves the other
-sensors' noise at "an appropriate level" (defaults in ``f16_sensors``).
-
-The controller does not read ``m`` but a ``FlightView`` (``flight_view``) whose rates an
-FDI stage selects, e.g. the least-squares rate ``(H^T H)^-1 H^T m`` (``rate_estimator``).
+``y`` (``MEASUREMENT_NAMES``): air data ``[VT, alpha, beta]``, attitude ``[phi, theta, psi]``, altitude,
+power, rate sensors ``m = H [P, Q, R]`` (``rate_axes``, one row per input axis), white Gaussian noise
+(``measurement_cov``). Park et al. fly three 2-DOF rate sensors, ``H`` 6x3 (``skewed_rate_axes``),
+sigma = 0.01 rad/s; other noise is "an appropriate level" (defaults: ``f16_sensors``). The controller reads a
+``FlightView`` whose rates an FDI stage selects, e.g. ``(H^T H)^-1 H^T m`` (``rate_estimator``).
 """
 from __future__ import annotations
 
@@ -107,14 +99,11 @@ def skewed_rate_axes(dtype=None) -> Array:
 def f16_sensors(rate_axes: Array | None = None, rate_sigma: float = 0.01, air_data_sigma=(0.5, 1e-3, 1e-3),
                 attitude_sigma=(1e-3, 1e-3, 1e-3), altitude_sigma: float = 2.0, power_sigma: float = 0.1,
                 dtype=None) -> F16Sensors:
-    """Sensors of the flight: the rate sensors of Park et al. 2004 (0.01 rad/s) by default; air data
-    0.5 ft/s and 1 mrad (0.06 deg), attitude 1 mrad, altitude 2 ft, engine power 0.1 %
-    (choices: the paper gives only the rate sensors' noise).
+    """Flight sensors: Park et al.'s rate sensors (0.01 rad/s) by default; our choices (the paper gives only
+    the rates'): air data 0.5 ft/s and 1 mrad (0.06 deg), attitude 1 mrad, altitude 2 ft, power 0.1 %.
 
     Returns:
-      ``F16Sensors`` in ``dtype``: ``rate_axes`` (m_r, 3) (default ``skewed_rate_axes``,
-      m_r = 6), () ``rate_sigma`` [rad/s], (3,) ``air_data_sigma`` [ft/s, rad, rad], (3,)
-      ``attitude_sigma`` [rad], () ``altitude_sigma`` [ft] and () ``power_sigma`` [%].
+      ``F16Sensors`` in ``dtype`` (``rate_axes`` default ``skewed_rate_axes``, m_r = 6).
     """
     dtype = dtype or jnp.result_type(float)
     axes = skewed_rate_axes(dtype) if rate_axes is None else jnp.asarray(rate_axes, dtype)
@@ -150,11 +139,9 @@ def measurement_cov(sensors: F16Sensors) -> Array:
 def sampled_transition(substeps: int = 1):
     """``f(x_s, u, plant) -> x_s[k+1]`` of the sampled plant (module doc), without noise.
 
-    Rematerialised (``jax.checkpoint``): reverse-mode differentiation of a flight keeps
-    each sample's inputs rather than every intermediate of its four RK4 stages and
-    recomputes them on the way back (memory per step ~ the state instead of ~10^4 values).
-    The RK4 stages are a loop (``rk4(loop_stages=True)``): the tables compile once, not
-    four times, in every flight program."""
+    Rematerialised (``jax.checkpoint``): reverse mode keeps each sample's inputs, not the RK4
+    intermediates (memory per step ~ the state, not ~10^4 values). RK4 stages as a loop
+    (``rk4(loop_stages=True)``): the tables compile once, not four times."""
 
     @jax.checkpoint
     def transition(xs: Array, u: Array, plant: SampledF16) -> Array:

@@ -1,18 +1,10 @@
 """The F-16's body rates alone: the UKF process model of Park, Kim, Park & Roh (2004,
 Sec. III: "the UKF's system model is the moment equations (34)-(36) only").
 
-State ``w = [P, Q, R]`` (rad/s); input ``v = [VT, alpha, beta, h, thtl, el, ail, rdr]``
-(``RATE_INPUT_NAMES``): the measured air data and altitude, which the moment equations
-take as known, and the controls the flight controller commanded. The derivative is the
-moment part of ``dynamics.f16_dynamics`` (``moment_equations``: Stevens & Lewis eq.
-2.5-16 with the engine's angular momentum) with the aerodynamic moment coefficients
-scaled, ``Cl (1 + e_l)``, ``Cm (1 + e_m)``, ``Cn (1 + e_n)``: the paper runs its UKF on a
-model with aerodynamic-coefficient errors to show the method does not need an exact
-model. The model's c.g. is its own (the design's), not the flight's.
-
-``rate_transition`` is one classical RK4 step over ``dt`` with the input held (the
-plant's integrator); ``rate_observation`` is the rate sensors' ``H w`` (``H`` the
-``rate_axes``, one row per input axis).
+State ``w = [P, Q, R]`` (rad/s); input ``v = [VT, alpha, beta, h, thtl, el, ail, rdr]`` (``RATE_INPUT_NAMES``): measured
+air data and altitude (taken as known) and the commanded controls. Derivative: ``moment_equations`` (Stevens & Lewis eq.
+2.5-16 with engine momentum) with ``Cl (1 + e_l)``, ``Cm (1 + e_m)``, ``Cn (1 + e_n)`` (the paper's coefficient errors:
+the method needs no exact model); the model's c.g. is the design's, not the flight's.
 """
 from __future__ import annotations
 
@@ -47,14 +39,12 @@ class RateModel(NamedTuple):
 
 
 def rate_model(aircraft: F16Params, rate_axes: Array, dt: float = 0.01, coefficient_error=(0.0, 0.0, 0.0)) -> RateModel:
-    """The rate model of ``aircraft`` with relative errors ``coefficient_error`` (3,) on
-    ``Cl, Cm, Cn`` (e.g. ``(0.1, -0.1, 0.1)``: rolling and yawing moments 10 % too large,
-    pitching moment 10 % too small).
+    """The rate model of ``aircraft`` with relative errors ``coefficient_error`` (3,) on ``Cl, Cm, Cn`` (e.g.
+    ``(0.1, -0.1, 0.1)``: roll and yaw moments 10 % too large, pitch 10 % too small).
 
     Returns:
-      ``RateModel``: ``aircraft`` itself, the (3,) ``coefficient_scale``
-      ``1 + coefficient_error``, the (m_r, 3) ``rate_axes`` and the () ``dt`` [s], in the
-      dtype of ``aircraft.mass``; the params of ``rate_transition`` and ``rate_observation``.
+      ``RateModel`` in ``aircraft.mass``'s dtype, ``coefficient_scale = 1 + coefficient_error``; the params
+      of ``rate_transition`` and ``rate_observation``.
     """
     dtype = aircraft.mass.dtype
     _checks.check_matrix("rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel")
@@ -89,13 +79,12 @@ def rate_derivative(rates: Array, inputs: Array, model: RateModel) -> Array:
 
 
 def rate_transition(rates: Array, inputs: Array, model: RateModel) -> Array:
-    """``w[k+1]``: one classical RK4 step of ``rate_derivative`` over ``model.dt`` (its
-    stages a loop: the aerodynamic tables compile once)."""
+    """``w[k+1]``: one RK4 step over ``model.dt``, input held (stages a loop: the tables compile once)."""
     return rk4(lambda x, t: rate_derivative(x, inputs, model), rates, model.dt, loop_stages=True)
 
 
 def rate_observation(rates: Array, inputs: Array, model: RateModel) -> Array:
-    """``H w`` (m_r,): what the rate channels read without noise."""
+    """``H w`` (m_r,): the rate channels without noise (``H``: ``rate_axes``, a row per input axis)."""
     return model.rate_axes @ rates
 
 

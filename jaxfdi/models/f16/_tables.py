@@ -1,26 +1,17 @@
 """The Stevens & Lewis F-16 data as JAX arrays, and the book's table interpolation.
 
-Data: ``jaxfdi.data.data_path("f16_stevens_lewis.json")`` (aerodynamic tables after NASA
-TP-1538, engine, atmosphere, mass and geometry of Stevens & Lewis 2003, *Aircraft Control
-and Simulation*, 2nd ed., Appendix A; provenance of every number in the data README).
-``values`` are the 2nd-edition book tables; a *profile* overrides cells to reproduce
-another published version (``PROFILES``): ``nasa_morelli_tm2003_212145`` (Morelli's NASA
-TM-2003-212145 / the 3rd edition: fixes the book's Cmq at alpha = -5 deg and CYp at 45 deg
-and has other CL cells at alpha 15-25 deg) or ``aerobench_python``.
+Data: ``jaxfdi.data.data_path("f16_stevens_lewis.json")``: aerodynamic tables after NASA TP-1538, engine, atmosphere,
+mass and geometry of Stevens & Lewis 2003, *Aircraft Control and Simulation*, 2nd ed., App. A (provenance in the data
+README). ``values``: the 2nd-edition tables; a profile (``PROFILES``) overrides cells: ``nasa_morelli_tm2003_212145``
+(Morelli's NASA TM-2003-212145 / 3rd edition: fixes Cmq at alpha = -5 deg and CYp at 45 deg, other CL cells at alpha
+15-25 deg) or ``aerobench_python``.
 
-Interpolation (the book's Fortran, e.g. ``FUNCTION CX``): on a uniform grid
-``x_0 < ... < x_{n-1}`` with step ``h``, ``i = clip(floor((x - x_0) / h), 0, n - 2)`` and
-``f = (x - x_0) / h - i``::
-
-    T(x) = (1 - f) T_i + f T_{i+1}
-
-linear between neighbouring breakpoints and, beyond the ends (``f < 0`` or ``f > 1``),
-linear extrapolation from the end segment; 2-D tables are bilinear (``interpolate2``).
-The segment of each argument is found once (``segment``) and shared by every table
-indexed by it; a lookup reads its two cells (2x2 block) with one ``dynamic_slice``. Under
-``vmap`` on CPU that is 10x faster than writing the lookup as a product with a one-hot
-weight vector (measured on 10^4 points). ``CL`` and
-``CN`` are tabulated against ``|beta|`` and multiplied by ``sign(beta)`` (``aero.py``).
+Interpolation (the book's Fortran, e.g. ``FUNCTION CX``), uniform grid step ``h``:
+``i = clip(floor((x - x_0) / h), 0, n - 2)``, ``f = (x - x_0) / h - i``, ``T(x) = (1 - f) T_i + f T_{i+1}``;
+beyond the ends (``f < 0`` or ``> 1``) linear extrapolation from the end segment; 2-D bilinear
+(``interpolate2``). Each argument's segment is found once (``segment``) and shared; a lookup reads
+its 2x2 block with one ``dynamic_slice`` (10x faster under ``vmap`` on CPU than a one-hot product, 10^4
+points). ``CL``, ``CN`` are tabulated against ``|beta|`` and multiplied by ``sign(beta)`` (``aero.py``).
 """
 from __future__ import annotations
 
@@ -177,9 +168,8 @@ def _grid(values, name: str) -> np.ndarray:
 
 
 def table_arrays(profile: str = "stevens_lewis_2nd_ed") -> dict[str, np.ndarray]:
-    """Every table of the data file as float64 NumPy, with ``profile``'s cell overrides
-    applied (keys: the aero table names, ``thrust_idle``, ``thrust_military``,
-    ``thrust_maximum`` and the breakpoint grids)."""
+    """Every table as float64 NumPy with ``profile``'s overrides (keys: aero table names, ``thrust_idle``,
+    ``thrust_military``, ``thrust_maximum``, breakpoint grids)."""
     if profile not in PROFILES:
         raise ValueError(f"profile: expected one of {list(PROFILES)}, got {profile!r}")
     data = stevens_lewis_data()
@@ -245,9 +235,8 @@ def atmosphere_data(dtype=None) -> AtmosphereData:
 # --- the book's interpolation -----------------------------------------------------
 
 def segment(x: Array, grid: Array) -> tuple[Array, Array]:
-    """``(i, f)`` of the book's interpolation on the uniform ``grid`` (n,):
-    ``i = clip(floor((x - x_0)/h), 0, n - 2)`` (int32) and ``f = (x - x_0)/h - i``, which
-    lies outside [0, 1] beyond the ends (extrapolation from the end segment)."""
+    """``(i, f)`` on the uniform ``grid`` (n,): ``i`` (int32) and ``f`` as in the module doc (``f`` outside
+    [0, 1] beyond the ends)."""
     n = grid.shape[0]
     position = (x - grid[0]) / (grid[1] - grid[0])
     index = jnp.clip(jnp.floor(position), 0, n - 2)
@@ -263,10 +252,9 @@ def interpolate1(values: Array, i: Array, f: Array) -> Array:
 
 
 def interpolate2(values: Array, i: Array, f: Array, j: Array, g: Array) -> Array:
-    """Bilinear ``T(row, col)`` of ``values`` (rows, cols) from the row segment ``(i, f)``
-    and the column segment ``(j, g)``: along the columns first, then the rows (the book's
-    order). The 2x2 block is one ``dynamic_slice`` (one gather under ``vmap``: 17 % faster
-    than four single-cell gathers, 3x faster than gathering whole rows)."""
+    """Bilinear ``T(row, col)`` of ``values`` (rows, cols) from segments ``(i, f)``, ``(j, g)``: columns
+    first, then rows (the book's order); the 2x2 block is one ``dynamic_slice`` (under ``vmap`` 17 %
+    faster than four cell gathers, 3x faster than whole rows)."""
     block = jax.lax.dynamic_slice(values, (i, j), (2, 2))
     low = block[0, 0] + g * (block[0, 1] - block[0, 0])
     return low + f * (block[1, 0] + g * (block[1, 1] - block[1, 0]) - low)

@@ -1,32 +1,28 @@
-"""Trim of the F-16 for steady flight: level, climbing, coordinated turn and pull-up
-(Stevens & Lewis 2003, sec. 3.6), solved by Levenberg-Marquardt
-(``jaxfdi.optimize.levenberg_marquardt``).
+"""Trim of the F-16 for steady flight: level, climbing, coordinated turn and pull-up (Stevens & Lewis 2003, sec. 3.6),
+solved by Levenberg-Marquardt (``jaxfdi.optimize.levenberg_marquardt``).
 
-A ``TrimCondition`` fixes the airspeed ``VT``, altitude ``h``, flight-path (climb) angle
-``gamma``, turn rate ``psi'`` and pull-up rate ``theta'``. The unknowns are
-``z = [thtl, el, ail, rdr, alpha, beta]``; the rest of the state follows from constraints:
+A ``TrimCondition`` fixes ``VT``, ``h``, ``gamma``, ``psi'`` and ``theta'``; unknowns
+``z = [thtl, el, ail, rdr, alpha, beta]``; the rest follows from constraints:
 
-- bank angle from the turn coordination constraint (Stevens & Lewis eq. 3.6-5), with
-  ``G = psi' VT / g``, ``a = 1 - G tan(alpha) sin(beta)``, ``b = sin(gamma)/cos(beta)``,
-  ``c = 1 + G^2 cos^2(beta)``::
+- bank, turn coordination (Stevens & Lewis eq. 3.6-5), ``G = psi' VT / g``,
+  ``a = 1 - G tan(alpha) sin(beta)``, ``b = sin(gamma)/cos(beta)``, ``c = 1 + G^2 cos^2(beta)``::
 
       tan(phi) = G cos(beta)/cos(alpha) [(a - b^2) + b tan(alpha) sqrt(c (1 - b^2) + G^2 sin^2(beta))]
                  / [a^2 - b^2 (1 + c tan^2(alpha))]
 
   (``phi = 0`` without a turn);
-- pitch angle from the rate-of-climb constraint (eq. 3.6-3), ``a = cos(alpha) cos(beta)``,
+- pitch, rate of climb (eq. 3.6-3), ``a = cos(alpha) cos(beta)``,
   ``b = sin(phi) sin(beta) + cos(phi) sin(alpha) cos(beta)``::
 
       tan(theta) = (a b + sin(gamma) sqrt(a^2 - sin^2(gamma) + b^2)) / (a^2 - sin^2(gamma));
 
-- body rates from the Euler rates ``(0, theta', psi')``: ``P = -psi' sin(theta)``,
+- body rates from Euler rates ``(0, theta', psi')``: ``P = -psi' sin(theta)``,
   ``Q = theta' cos(phi) + psi' sin(phi) cos(theta)``, ``R = -theta' sin(phi) + psi' cos(phi) cos(theta)``;
 - engine power at its commanded value ``P = P_c(thtl)`` (no lag), ``psi = pn = pe = 0``.
 
-The six residuals are ``[VT', alpha', beta', P', Q', R']`` of ``f16_dynamics``: a square
-system solved to round-off (``TrimResult.residual``), where the book's simplex minimised
-a weighted sum of their squares. ``trim`` is pure JAX: ``jax.vmap`` it over conditions
-(and over ``params`` leaves such as ``xcg``) to trim a whole flight envelope in one solve.
+Residuals ``[VT', alpha', beta', P', Q', R']`` of ``f16_dynamics``: a square system solved to round-off
+(the book's simplex minimised a weighted sum of squares). Pure JAX: ``jax.vmap`` over conditions (and
+``params`` leaves such as ``xcg``) trims an envelope in one solve.
 """
 from __future__ import annotations
 
@@ -88,10 +84,9 @@ class TrimResult(NamedTuple):
 
 def trim_condition(airspeed, altitude=0.0, climb_angle=0.0, turn_rate=0.0, pull_up_rate=0.0,
                    dtype=None) -> TrimCondition:
-    """A ``TrimCondition``; arrays of equal shape give a stack (vmap over axis 0). Checked
-    when concrete: a positive finite ``airspeed`` [ft/s], an ``altitude`` [ft] within the
-    data's validity (0 to 50 000 ft, the thrust tables' range), a climb angle in (-pi/2, pi/2)
-    rad, finite angles and rates."""
+    """A ``TrimCondition``; equal-shape arrays give a stack (vmap over axis 0). Checked when concrete:
+    ``airspeed`` [ft/s] positive finite, ``altitude`` [ft] in 0-50 000 (the thrust tables' range), climb
+    angle in (-pi/2, pi/2) rad, finite angles and rates."""
     dtype = dtype or jnp.result_type(float)
     for name, value, valid, expected in (
             ("airspeed", airspeed, lambda v: v > 0.0, "a positive finite airspeed [ft/s]"),
@@ -178,9 +173,8 @@ def trim_residual(z: Array, condition: TrimCondition, params: F16Params) -> Arra
 
 
 def initial_guess(condition: TrimCondition, params: F16Params) -> Array:
-    """A starting point from the lift the condition needs: load factor ``n`` (turn and
-    pull-up), ``C_L = n W / (qbar S)``, ``alpha = (C_L - 0.1) / 0.063`` deg (the book's CZ
-    table near alpha 0-10 deg), clipped to -5..40 deg; throttle 0.5, surfaces 0."""
+    """Start from the needed lift: load factor ``n`` (turn, pull-up), ``C_L = n W / (qbar S)``,
+    ``alpha = (C_L - 0.1) / 0.063`` deg (CZ table near 0-10 deg) clipped to -5..40; throttle 0.5, surfaces 0."""
     g, vt = params.gravity, condition.airspeed
     G = condition.turn_rate * vt / g
     load = jnp.sqrt(1.0 + G * G) + vt * condition.pull_up_rate / g
@@ -205,11 +199,8 @@ def trim(params: F16Params, condition: TrimCondition, guess: Array | None = None
         ``1000 eps g``: 7e-12 in float64, 4e-3 in float32).
 
     Returns:
-      ``TrimResult``: the (13,) trimmed ``state`` (``psi = pn = pe = 0``, power at its
-      commanded value), the (4,) ``control`` ``[thtl, el, ail, rdr]``, the (6,) ``residual``
-      ``[VT', alpha', beta', P', Q', R']`` there, () bool ``converged`` (finite and
-      ``max |residual| <= tolerance``) and ``within_limits`` (controls inside ``params``'
-      limits), and the () int Levenberg-Marquardt ``steps``.
+      ``TrimResult`` (``psi = pn = pe = 0``, power at its commanded value; ``converged``: finite and
+      ``max |residual| <= tolerance``).
     """
     for name, leaf in zip(TrimCondition._fields, condition):
         _checks.check_shape(f"condition.{name}", leaf, (), "a scalar (vmap over a stack of conditions)")
@@ -228,7 +219,7 @@ def trim(params: F16Params, condition: TrimCondition, guess: Array | None = None
 
 @jax.jit
 def trim_batch(params: F16Params, conditions: TrimCondition, xcg: Array) -> TrimResult:
-    """``trim`` of a stack of conditions (leaves (N,)) at the c.g. positions ``xcg`` (N,),
-    the other parameters shared: one compiled, vmapped solve (a new compilation per N)."""
+    """``trim`` of stacked conditions (leaves (N,)) at ``xcg`` (N,), other parameters shared: one vmapped
+    solve (compiled per N)."""
     _checks.check_shape("xcg", xcg, _checks.shape_of(conditions.airspeed)[:1], "one c.g. per condition")
     return jax.vmap(lambda c, x: trim(params._replace(xcg=x), c))(conditions, xcg)

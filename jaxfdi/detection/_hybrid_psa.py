@@ -271,10 +271,10 @@ def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, val
     masked = jnp.where(trusted[None, :] & (jnp.arange(valid.shape[0]) > 0)[:, None], entries.channels, jnp.nan)
     state, infos = replay_filter(filt, restart, masked, entries.inputs, valid)
     post = filt.update(state, jnp.where(trusted, channels, jnp.nan), entries.inputs[-1])
-    residual = channels - config.space.H @ post.mean
+    residual = channels - config.space.H @ post.filtered_mean
     norms = jnp.linalg.norm(residual[config.space.groups], axis=-1)
     healthy = post.healthy & jnp.all(infos.healthy | ~valid) & jnp.all(jnp.isfinite(norms))
-    return norms, residual, post.mean, healthy
+    return norms, residual, post.filtered_mean, healthy
 
 
 def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[[Array], Array],

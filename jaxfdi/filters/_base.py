@@ -44,7 +44,9 @@ class GaussianState(NamedTuple):
 
 class FilterInfo(NamedTuple):
     """Per-step outputs shared by all Gaussian filters (KF, EKF, UKF), so that detectors,
-    metrics and the contract tests treat them alike.
+    metrics and the contract tests treat them alike; also what a measurement update
+    returns (``predicted_*``: the prior it conditioned; ``healthy``: S positive definite and
+    x[k|k] finite, to which the step adds P[k|k] and the prediction).
 
     Attributes:
       predicted_mean: (n,) x[k|k-1]
@@ -63,30 +65,6 @@ class FilterInfo(NamedTuple):
     predicted_cov: Array
     filtered_mean: Array
     filtered_cov: Array
-    innovation: Array
-    innovation_cov: Array
-    log_likelihood: Array
-    nis: Array
-    num_observed: Array
-    healthy: Array
-
-
-class ConditionedGaussian(NamedTuple):
-    """Result of one measurement update: the posterior and what the update saw.
-
-    Attributes:
-      mean: (n,) x[k|k]
-      cov: (n, n) P[k|k]
-      innovation: (m,)
-      innovation_cov: (m, m)
-      log_likelihood: ()
-      nis: ()
-      num_observed: ()
-      healthy: () bool
-    """
-
-    mean: Array
-    cov: Array
     innovation: Array
     innovation_cov: Array
     log_likelihood: Array
@@ -134,7 +112,7 @@ class Filter(NamedTuple):
 
     Gaussian filters (KF, EKF, UKF) also expose the two halves of ``step``, which is
     what multiple-model filters need to mix between them:
-    ``update(state, y, u) -> ConditionedGaussian`` and
+    ``update(state, y, u) -> FilterInfo`` and
     ``predict(posterior: GaussianState, u) -> GaussianState``; ``step`` is
     ``predict(update(...))`` plus the ``FilterInfo``.
 
@@ -148,7 +126,7 @@ class Filter(NamedTuple):
         more arguments)
       step: ``step(state, y, u) -> (state, info)``: ``y`` (m,), ``u`` (nu,); the next prior
         and the step's outputs (``FilterInfo`` for the Gaussian filters)
-      update: ``update(state, y, u) -> ConditionedGaussian``, or ``None``
+      update: ``update(state, y, u) -> FilterInfo``, or ``None``
       predict: ``predict(posterior: GaussianState, u) -> GaussianState``, or ``None``
       batch: ``BatchKernel`` for N runs at once, or ``None``
       parallel: ``parallel(init_state, ys, us) -> (final, info)``, the associative scan
@@ -157,35 +135,24 @@ class Filter(NamedTuple):
 
     init: Callable[..., Any]
     step: Callable[[Any, Array, Array], tuple[Any, Any]]
-    update: Callable[[Any, Array, Array], ConditionedGaussian] | None = None
+    update: Callable[[Any, Array, Array], FilterInfo] | None = None
     predict: Callable[[GaussianState, Array], GaussianState] | None = None
     batch: BatchKernel | None = None
     parallel: Callable[[Any, Array, Array | None], tuple[Any, Any]] | None = None
 
 
-def finish_step(prior: GaussianState, post: ConditionedGaussian, prediction: GaussianState, unroll: bool = True):
-    """Assemble the next state and the step's ``FilterInfo``; checks ``P[k|k]`` is PD."""
-    chol_P = _linalg.cholesky(post.cov, unroll)
+def finish_step(post: FilterInfo, prediction: GaussianState, unroll: bool = True):
+    """The next state and the step's ``FilterInfo``, whose ``healthy`` also checks that
+    ``P[k|k]`` is positive definite and the prediction finite."""
+    chol_P = _linalg.cholesky(post.filtered_cov, unroll)
     healthy = (post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
                & ~jnp.isnan(post.nis) & jnp.isfinite(post.log_likelihood))  # an overflowing outlier
-    info = FilterInfo(
-        predicted_mean=prior.mean,
-        predicted_cov=prior.cov,
-        filtered_mean=post.mean,
-        filtered_cov=post.cov,
-        innovation=post.innovation,
-        innovation_cov=post.innovation_cov,
-        log_likelihood=post.log_likelihood,
-        nis=post.nis,
-        num_observed=post.num_observed,
-        healthy=healthy,
-    )
-    return prediction, info
+    return prediction, post._replace(healthy=healthy)
 
 
 def gaussian_filter(
     n: int,
-    update: Callable[[GaussianState, Array, Array], ConditionedGaussian],
+    update: Callable[[GaussianState, Array, Array], FilterInfo],
     predict: Callable[[GaussianState, Array], GaussianState],
     unroll_factorizations: bool = True,
 ) -> Filter:
@@ -194,7 +161,8 @@ def gaussian_filter(
 
     def step(state: GaussianState, y: Array, u: Array):
         post = update(state, y, u)
-        return finish_step(state, post, predict(GaussianState(post.mean, post.cov), u), unroll_factorizations)
+        prediction = predict(GaussianState(post.filtered_mean, post.filtered_cov), u)
+        return finish_step(post, prediction, unroll_factorizations)
 
     return Filter(gaussian_init(n), step, update, predict)
 

@@ -87,7 +87,8 @@ def interacting_multiple_model(
         post = bank_update(mode_filter, mode_params, state, y, u)
         log_mu, log_lik = bayes_mode_update(state.log_mode_prob, post.log_likelihood)
         log_cbar, weights = mixing(log_mu, log_transition.astype(log_mu.dtype))
-        mixed_mean, mixed_cov = jax.vmap(moment_match, in_axes=(1, None, None))(weights, post.mean, post.cov)
+        mixed_mean, mixed_cov = jax.vmap(moment_match, in_axes=(1, None, None))(weights, post.filtered_mean,
+                                                                                  post.filtered_cov)
         prediction = bank_predict(mode_filter, mode_params, mixed_mean, mixed_cov, u)
         return finish_mixture_step(post, log_mu, log_lik, prediction, log_cbar)
 

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (ConditionedGaussian, Filter, GaussianState, check_step_inputs, gaussian_filter,
+from jaxfdi.filters._base import (Filter, FilterInfo, GaussianState, check_step_inputs, gaussian_filter,
                                   dead_components, mask_innovation_cov, observed_mask, observed_rows, report_dead,
                                   used_innovation)
 from jaxfdi.filters._kalman_batch import check_per_run_model, kalman_batch_kernel, per_run_leaves, supports
@@ -24,7 +24,7 @@ from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 def joseph_update(
     mean: Array, cov: Array, y: Array, y_pred: Array, H: Array, R: Array, missing_measurements: bool = False,
     unroll: bool = True,
-) -> ConditionedGaussian:
+) -> FilterInfo:
     """Condition ``N(mean, cov)`` on ``y = H x + v``, ``v ~ N(0, R)``, predicted ``y_pred``.
 
     With ``missing_measurements`` (static) NaN components of ``y`` are missing: rows of ``H`` zeroed, innovation 0,
@@ -53,7 +53,7 @@ def joseph_update(
     log_lik = _linalg.gaussian_log_likelihood(whitened, chol_S, num_observed if missing_measurements else y.shape[0])
     healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(new_mean))
     innovation, nis = report_dead(innovation, jnp.sum(whitened**2), dead_components(y, missing_measurements))
-    return ConditionedGaussian(new_mean, new_cov, innovation, S, log_lik, nis, num_observed, healthy)
+    return FilterInfo(mean, cov, new_mean, new_cov, innovation, S, log_lik, nis, num_observed, healthy)
 
 
 def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False,
@@ -88,7 +88,7 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
         return _per_run_kalman_filter(model, missing_measurements)
     n, nu, m = validate_linear_model(model)
 
-    def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
+    def update(state: GaussianState, y: Array, u: Array) -> FilterInfo:
         check_step_inputs(y, u, m, nu)
         y_pred = _linalg.matmul(model.C, state.mean) + _linalg.matmul(model.D, u)
         return joseph_update(state.mean, state.cov, y, y_pred, model.C, model.R, missing_measurements,

@@ -52,7 +52,7 @@ def multiple_model(mode_filter: Callable[[Any], Filter], mode_params: Any, floor
         post = bank_update(mode_filter, mode_params, state, y, u)
         log_mu, log_lik = bayes_mode_update(state.log_mode_prob, post.log_likelihood)
         log_mu = apply_floor(log_mu, floor)
-        prediction = bank_predict(mode_filter, mode_params, post.mean, post.cov, u)
+        prediction = bank_predict(mode_filter, mode_params, post.filtered_mean, post.filtered_cov, u)
         return finish_mixture_step(post, log_mu, log_lik, prediction, log_mu)
 
     return Filter(init, step)

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (ConditionedGaussian, Filter, GaussianState, ModelFunction, check_step_inputs,
+from jaxfdi.filters._base import (Filter, FilterInfo, GaussianState, ModelFunction, check_step_inputs,
                                   dead_components, gaussian_filter, mask_innovation_cov, observed_mask, report_dead,
                                   used_innovation)
 
@@ -203,7 +203,7 @@ def unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Arr
     n, m, alpha, beta, w, scale, use_taylor = scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences)
     cross_w = beta - alpha**2
 
-    def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
+    def update(state: GaussianState, y: Array, u: Array) -> FilterInfo:
         check_step_inputs(y, u, m, None)
         taylor = use_taylor(state.mean)
         points, chol = sigma_points(state.mean, state.cov, scale)
@@ -223,9 +223,11 @@ def unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Arr
         whitened = _linalg.whiten(chol_S, innovation)
         mean = state.mean + gain @ innovation
         reported, nis = report_dead(innovation, jnp.sum(whitened**2), dead_components(y, missing_measurements))
-        return ConditionedGaussian(
-            mean=mean,
-            cov=joseph_like_cov(chol, points, dy, Pxy, gain, R, w, cross_w),
+        return FilterInfo(
+            predicted_mean=state.mean,
+            predicted_cov=state.cov,
+            filtered_mean=mean,
+            filtered_cov=joseph_like_cov(chol, points, dy, Pxy, gain, R, w, cross_w),
             innovation=reported,
             innovation_cov=S,
             log_likelihood=_linalg.gaussian_log_likelihood(whitened, chol_S, num_observed if missing_measurements

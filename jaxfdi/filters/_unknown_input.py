@@ -22,7 +22,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (ConditionedGaussian, Filter, GaussianState, check_step_inputs, dead_components,
+from jaxfdi.filters._base import (Filter, FilterInfo, GaussianState, check_step_inputs, dead_components,
                                   gaussian_filter, mask_innovation_cov, observed_rows, report_dead, used_innovation)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
@@ -118,7 +118,7 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array, missi
     E = jnp.asarray(unknown_input)
     mm = _linalg.matmul
 
-    def update(state: GaussianState, y: Array, u: Array) -> ConditionedGaussian:
+    def update(state: GaussianState, y: Array, u: Array) -> FilterInfo:
         check_step_inputs(y, u, m, nu)
         innovation = used_innovation(y, mm(model.C, state.mean) + mm(model.D, u))  # a dead component: 0
         C, R, dof = model.C, model.R, jnp.asarray(m - q, jnp.int32)
@@ -144,7 +144,7 @@ def unknown_input_filter(model: LinearGaussianModel, unknown_input: Array, missi
             dof = jnp.where(blind, 0, dof).astype(jnp.int32)
         healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(mean))
         innovation, statistic = report_dead(innovation, statistic, dead_components(y, missing_measurements))
-        return ConditionedGaussian(mean, cov, innovation, S, log_lik, statistic, dof, healthy)
+        return FilterInfo(state.mean, state.cov, mean, cov, innovation, S, log_lik, statistic, dof, healthy)
 
     def predict(post: GaussianState, u: Array) -> GaussianState:
         mean = mm(model.Phi, post.mean) + mm(model.Gamma, u)

@@ -167,8 +167,8 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
         post = joseph_update(jnp.zeros((STATE_SIZE,), dtype), state.cov, z, jnp.zeros_like(z),
                              measurement_matrix(dtype), R)
         used = jnp.asarray(fix.valid, bool) & jnp.all(jnp.isfinite(z))
-        correction = jnp.where(used, post.mean, 0.0)
-        cov = jnp.where(used, post.cov, state.cov)
+        correction = jnp.where(used, post.filtered_mean, 0.0)
+        cov = jnp.where(used, post.filtered_cov, state.cov)
         return post, used, correction, cov
 
     def propagate(nav: NavState, samples: Array, accel_bias: Array, gyro_bias: Array):

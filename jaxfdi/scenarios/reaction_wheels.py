@@ -316,8 +316,9 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
         frozen = verdict.alarm & jnp.isfinite(verdict.statistic)  # +inf: a dead sample, not a frozen gyro
         out = c["out"] | (frozen & (labels == verdict.label))
         post = view_filter.update(c["view"], jnp.where(out, jnp.nan, reading.rate), c["u"])
-        rate = jnp.where(out | ~jnp.isfinite(reading.rate), post.mean, reading.rate)
-        c = dict(c, health=health, verdict=verdict, out=out, view=GaussianState(post.mean, post.cov),
+        rate = jnp.where(out | ~jnp.isfinite(reading.rate), post.filtered_mean, reading.rate)
+        c = dict(c, health=health, verdict=verdict, out=out,
+                 view=GaussianState(post.filtered_mean, post.filtered_cov),
                  view_healthy=post.healthy)
         return c, reading._replace(rate=rate)
 

@@ -123,12 +123,12 @@ def test_an_unknown_input_filter_that_loses_decoupling_keeps_its_prediction():
     prior = filt.init(jnp.array([0.3, -0.2]), jnp.eye(2))
     for y in ([np.nan, 1.0, np.nan], [np.inf, 1.0, np.nan]):
         post = filt.update(prior, jnp.asarray(y), jnp.zeros(0))
-        np.testing.assert_array_equal(np.asarray(post.mean), np.asarray(prior.mean))
-        np.testing.assert_array_equal(np.asarray(post.cov), np.asarray(prior.cov))
+        np.testing.assert_array_equal(np.asarray(post.filtered_mean), np.asarray(prior.mean))
+        np.testing.assert_array_equal(np.asarray(post.filtered_cov), np.asarray(prior.cov))
         assert bool(post.healthy) and int(post.num_observed) == 0
         assert float(post.nis) == (np.inf if np.isinf(y[0]) else 0.0)
     post = filt.update(prior, jnp.asarray([np.nan, 1.0, 0.4]), jnp.zeros(0))
-    assert bool(post.healthy) and not np.allclose(np.asarray(post.mean), np.asarray(prior.mean))
+    assert bool(post.healthy) and not np.allclose(np.asarray(post.filtered_mean), np.asarray(prior.mean))
     assert int(post.num_observed) == 1
 
 

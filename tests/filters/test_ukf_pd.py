@@ -143,6 +143,6 @@ def test_missing_component_is_skipped_by_the_joseph_like_update():
         return nonlinear_gyros(w, tau, params)[jnp.array(kept)]
 
     mean, cov = textbook_update(M0, P0, y[kept], observed, R[np.ix_(kept, kept)], 1e-3)
-    np.testing.assert_allclose(post.cov, cov, rtol=0, atol=1e-10 * np.max(np.abs(cov)))
-    np.testing.assert_allclose(post.mean, mean, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(post.filtered_cov, cov, rtol=0, atol=1e-10 * np.max(np.abs(cov)))
+    np.testing.assert_allclose(post.filtered_mean, mean, rtol=0, atol=1e-10)
     assert int(post.num_observed) == 2

@@ -75,7 +75,7 @@ def worker(workload: str, runs: int, repeats: int, out: str) -> None:
 
         def one(key):
             history = run_closed_loop(design, key, f, jnp.asarray(True), 300)
-            return (history.state[-1], history.statistic[-1], history.isolated[-1])
+            return (history.state[-1], history.fdi.statistic[-1], history.fdi.isolated[-1])
 
     start = time.perf_counter()
     compiled = jax.jit(jax.vmap(one)).lower(keys).compile()

@@ -60,7 +60,7 @@ def main() -> None:
                                     in_axes=(None, 0)), in_axes=(0, None)))
     history = jax.tree_util.tree_map(np.asarray, run(faults, keys))       # leaves (cases, runs, T, ...)
     C = np.asarray(design.model.C)
-    baseline = history.statistic[-1].mean(axis=0)                       # (T, F) fault-free mean per step
+    baseline = history.fdi.statistic[-1].mean(axis=0)                       # (T, F) fault-free mean per step
     rows = []
     for c, (name, f) in enumerate(cases[:-1]):
         if name in sv.HEALTH_CASES:   # a dead or frozen sensor has no additive/multiplicative kind
@@ -70,7 +70,7 @@ def main() -> None:
         mult = bool(is_multiplicative(f))
         own = location + (0 if mult else 6)
         other = location + (6 if mult else 0)
-        stat = history.statistic[c]                                        # (R, T, F)
+        stat = history.fdi.statistic[c]                                        # (R, T, F)
         if location < 2:
             signal = history.control[c][:, :, location]                   # u_i
         else:

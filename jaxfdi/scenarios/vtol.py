@@ -292,10 +292,10 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
     k = jnp.arange(steps)
 
     def evaluate(thresholds):
-        alarms = method_alarms(history.statistic, design, thresholds)             # (5, T, F)
+        alarms = method_alarms(history.fdi.statistic, design, thresholds)             # (5, T, F)
         labels = isolate(location_symptoms(alarms, design.location, L))           # (5, T)
         # the channel-health test (a dead or frozen sensor) decides ahead of every method
-        labels = jnp.where(history.health_label > 0, history.health_label, labels)
+        labels = jnp.where(history.fdi.health_label > 0, history.fdi.health_label, labels)
         fired = labels != 0   # some location inconsistent: the symptoms leave the no-fault column
         detected = jax.vmap(record_from_alarms, in_axes=(0, None))(fired, f.onset)
         isolated = jax.vmap(record_from_alarms, in_axes=(0, None))(labels == label_true, f.onset)
@@ -303,7 +303,7 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
 
     first_alarm, detection, isolation, false_decisions = (
         jnp.stack(parts) for parts in zip(*(evaluate(t) for t in thresholds)))
-    latched = history.isolated[-1]
+    latched = history.fdi.isolated[-1]
     matched = jnp.argmax((design.location == label_true - 1) & (design.multiplicative == is_multiplicative(f)))
     when = jnp.array([jnp.minimum(f.onset + ESTIMATE_AFTER, steps - 1), steps - 1])
     start = jnp.where(f.onset < steps, f.onset, ONSET)
@@ -314,9 +314,9 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
 
     return RunRecord(
         first_alarm, detection, isolation, false_decisions, latched,
-        record_from_alarms(history.isolated > 0, f.onset).first_alarm,
-        history.isolated_kind[-1] == is_multiplicative(f),
-        history.bias[when, matched], jax.vmap(lambda s: true_bias(f, s))(when),
+        record_from_alarms(history.fdi.isolated > 0, f.onset).first_alarm,
+        history.fdi.isolated_kind[-1] == is_multiplicative(f),
+        history.fdi.bias[when, matched], jax.vmap(lambda s: true_bias(f, s))(when),
         rms(jnp.sum(error**2, axis=1)), rms(error[:, 0] ** 2),
         history.state.astype(jnp.float32),
         record_from_alarms(~step_health_series(history), 0).first_alarm,
@@ -326,7 +326,7 @@ def vtol_run(design: LoopDesign, thresholds, key, f: Fault, ftc, steps: int = ST
 def step_health_series(history: LoopStep) -> jnp.ndarray:
     """(T,) bool: filters healthy, no bank statistic NaN (a dead sensor's ``+inf`` is evidence,
     ``metrics.step_health``)."""
-    return jax.vmap(step_health)(history.healthy, history.statistic)
+    return jax.vmap(step_health)(history.fdi.healthy, history.fdi.statistic)
 
 
 #: why the closed loop's "kind right" is 0 on the additive faults
@@ -471,7 +471,7 @@ def _loop_program(design: LoopDesign, steps: int, output: str):
         if output == "statistic":
             def run(key, _, threshold):
                 chosen = fixed._replace(threshold=threshold)
-                return run_closed_loop(chosen, key, no_fault(), jnp.asarray(False), steps).statistic
+                return run_closed_loop(chosen, key, no_fault(), jnp.asarray(False), steps).fdi.statistic
         else:
             def run(_, data, shared):
                 (f, ftc, key), (threshold, thresholds) = data, shared
@@ -642,7 +642,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
         paths.append(str(path))
 
     # Fig. 3: one filter's statistic under the s3 step, raw and denoised
-    stat = examples["s3 step"].statistic[:, shown]
+    stat = examples["s3 step"].fdi.statistic[:, shown]
     fig, axes = plt.subplots(3, 1, figsize=(COLUMN_WIDTH_IN, 6.0), sharex=True, layout="constrained")
     series = [("raw", stat), ("MDWT-HT (block mean)", np.asarray(haar_denoise(stat, design.levels, "hard"))),
               ("MDWT-ST", np.asarray(haar_denoise(stat, design.levels, "soft", design.detail_sigma, design.c_mult)))]
@@ -663,8 +663,8 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
 
     # Fig. 4: the a2 effectiveness estimate of the matched filter
     fig, ax = plt.subplots(figsize=(COLUMN_WIDTH_IN, 3.0), layout="constrained")
-    ax.plot(t, examples["a2 no FTC"].bias[:, 1], lw=1, label="a2 filter estimate, no FTC")
-    ax.plot(t, examples["a2 FTC"].bias[:, 1], lw=1, label="a2 filter estimate, FTC")
+    ax.plot(t, examples["a2 no FTC"].fdi.bias[:, 1], lw=1, label="a2 filter estimate, no FTC")
+    ax.plot(t, examples["a2 FTC"].fdi.bias[:, 1], lw=1, label="a2 filter estimate, FTC")
     ax.plot(t, np.where(t >= 100, 0.5, 0.0), "k--", lw=1, label="true loss")
     ax.set(xlabel="step k", ylabel="effectiveness loss", ylim=(-0.5, 1.0),
            title="Fig. 4: a2 effectiveness 0.5 from k = 100 (run 0)")

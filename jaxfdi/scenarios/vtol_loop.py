@@ -121,33 +121,6 @@ class LoopDesign(NamedTuple):
     frozen_pfa: float = 1e-6
 
 
-class LoopStep(NamedTuple):
-    """Per-step record of one closed-loop run.
-
-    Attributes:
-      state: (n,) true model states
-      estimate: (n,) x_hat[k|k] of the feedback estimator
-      control: (nu,) commanded u
-      statistic: (F,) bank statistics lambda
-      bias: (F,) bank fault estimates b[k|k]
-      isolated: () int: latched location + 1 (0: none yet)
-      isolated_kind: () bool: latched fault is multiplicative
-      healthy: () bool: every filter healthy
-      health_label: () int: location + 1 of a sensor the health test finds dead or frozen now, 0
-          none
-    """
-
-    state: Array
-    estimate: Array
-    control: Array
-    statistic: Array
-    bias: Array
-    isolated: Array
-    isolated_kind: Array
-    healthy: Array
-    health_label: Array
-
-
 class BankState(NamedTuple):
     """The FDI's carry: estimator prior, bank, block buffer, latched decision and the
     step's reconfiguration (set by ``observe``, used by ``step``).
@@ -195,6 +168,20 @@ class BankOutput(NamedTuple):
     isolated_kind: Array
     healthy: Array
     health_label: Array
+
+
+class LoopStep(NamedTuple):
+    """Per-step record of one closed-loop run.
+
+    Attributes:
+      state: (n,) true model states
+      control: (nu,) commanded u
+      fdi: the FDI's ``BankOutput``, its ``healthy`` also covering the feedback estimator's update
+    """
+
+    state: Array
+    control: Array
+    fdi: BankOutput
 
 
 def _estimator(design: LoopDesign):
@@ -324,8 +311,7 @@ def run_closed_loop(design: LoopDesign, key: Array, fault: Fault, ftc: Array, st
                       u0=jnp.zeros((nu,), design.model.Phi.dtype), keep_history=True)
     trace = result.history
     (_, estimator_healthy), out = trace.view, trace.output
-    return LoopStep(trace.sensed.state[:, :n], out.estimate, trace.control, out.statistic, out.bias, out.isolated,
-                    out.isolated_kind, out.healthy & estimator_healthy, out.health_label)
+    return LoopStep(trace.sensed.state[:, :n], trace.control, out._replace(healthy=out.healthy & estimator_healthy))
 
 
 def is_multiplicative(fault: Fault) -> Array:

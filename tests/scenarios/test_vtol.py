@@ -235,10 +235,10 @@ def test_online_decisions_equal_the_offline_mdwt_st(study, histories):
     thresholds = np.broadcast_to(np.asarray(study.design.threshold), (4, 12))
     for c in range(len(cases)):
         for r in range(5):
-            alarms = method_alarms(h.statistic[c, r], study.design, thresholds)[3]
+            alarms = method_alarms(h.fdi.statistic[c, r], study.design, thresholds)[3]
             labels = np.asarray(isolate(location_symptoms(alarms, study.design.location, 6)))
-            labels = np.where(h.health_label[c, r] > 0, h.health_label[c, r], labels)   # ahead of the bank
-            latched = np.asarray(h.isolated[c, r])
+            labels = np.where(h.fdi.health_label[c, r] > 0, h.fdi.health_label[c, r], labels)   # ahead of the bank
+            latched = np.asarray(h.fdi.isolated[c, r])
             offline_first = int(np.argmax(labels > 0)) if (labels > 0).any() else -1
             online_first = int(np.argmax(latched > 0)) if (latched > 0).any() else -1
             assert online_first == offline_first, (cases[c][0], r)
@@ -252,14 +252,14 @@ def test_matched_location_has_the_smallest_statistic(histories, study):
     # fault-free level (the undecoupled disturbance leaks unequally into the filters),
     # and it stays under its calibrated threshold, in >= 95 % of the runs of every kind
     cases, h = histories
-    fault_free = np.asarray(h.statistic[-1]).mean(axis=(0, 1))                          # (12,)
+    fault_free = np.asarray(h.fdi.statistic[-1]).mean(axis=(0, 1))                          # (12,)
     raw_threshold = np.array(list(study.config["thresholds"]["raw"].values()))
     rates = {}
     for c, (name, f) in enumerate(cases[:-1]):
         if name in HEALTH_CASES:   # every statistic reads the dead or frozen sensor: the health test isolates
             continue
         start = int(f.onset) + 30
-        mean_stat = np.asarray(h.statistic[c, :, start:]).mean(axis=1)                  # (runs, 12)
+        mean_stat = np.asarray(h.fdi.statistic[c, :, start:]).mean(axis=1)                  # (runs, 12)
         relative = mean_stat / fault_free
         per_location = np.minimum(relative[:, :6], relative[:, 6:])                       # (runs, 6)
         true_location = int(fault_label(f, 2)) - 1
@@ -357,8 +357,8 @@ def test_the_controller_never_gets_a_non_finite_estimate(histories):
     """A dead sensor (NaN) never reaches the feedback: the estimator takes its prediction
     for the dead component (``filters._base``) in every run of every case."""
     cases, h = histories
-    assert np.all(np.isfinite(np.asarray(h.estimate))), [name for c, (name, _) in enumerate(cases)
-                                                         if not np.isfinite(np.asarray(h.estimate[c])).all()]
+    assert np.all(np.isfinite(np.asarray(h.fdi.estimate))), [name for c, (name, _) in enumerate(cases)
+                                                             if not np.isfinite(np.asarray(h.fdi.estimate[c])).all()]
     assert np.all(np.isfinite(np.asarray(h.control)))
 
 
@@ -369,7 +369,7 @@ def test_the_health_test_is_silent_on_fault_free_runs(histories, study):
     at all has probability < 0.1 (the moving plant makes the true rate far smaller:
     the bound holds for a constant signal); it fires nowhere."""
     cases, h = histories
-    labels = np.asarray(h.health_label)
+    labels = np.asarray(h.fdi.health_label)
     window = study.config["channel_health_test"]["window"]
     windows = 0
     for c, (name, f) in enumerate(cases):
@@ -428,9 +428,9 @@ def test_s3_step_estimate_swings_with_the_undecoupled_disturbance_and_averages_t
         peak = np.fft.rfftfreq(tail.shape[1])[np.argmax(spectrum)] * 2 * np.pi
         return np.median(tail.mean(axis=1)), np.median(tail.std(axis=1)), peak
 
-    mean, swing, peak = summary(h.bias[s3, :, :, S3_ADD])
+    mean, swing, peak = summary(h.fdi.bias[s3, :, :, S3_ADD])
     assert abs(mean - 0.7) < 0.05 and abs(peak - 1.0) < 0.05, (mean, peak)
-    calm_mean, calm_swing, calm_peak = summary(calm.bias[0, :, :, S3_ADD])
+    calm_mean, calm_swing, calm_peak = summary(calm.fdi.bias[0, :, :, S3_ADD])
     assert abs(calm_mean - 0.7) < 0.05 and abs(calm_peak - 1.0) > 0.3, (calm_mean, calm_peak)
     assert calm_swing < 0.75 * swing, (calm_swing, swing)
 
@@ -449,13 +449,13 @@ def test_s3_isolation_waits_because_the_disturbance_raises_the_thresholds(histor
     names = [name for name, _ in cases]
     raw = np.asarray([study.config["thresholds"]["raw"][name] for name in FILTER_NAMES])
     mismatched = [i for i, name in enumerate(FILTER_NAMES) if not name.startswith("s3")]
-    quantile = np.quantile(np.asarray(h.statistic[names.index("none")])[:, 20:], 0.995, axis=(0, 1))
+    quantile = np.quantile(np.asarray(h.fdi.statistic[names.index("none")])[:, 20:], 0.995, axis=(0, 1))
     assert np.sum(quantile > 1.5 * chi2) >= 4, quantile
-    under = np.median(np.asarray(h.statistic[names.index("s3 step 0.7")])[:, 121:160].mean(axis=1), axis=0)
+    under = np.median(np.asarray(h.fdi.statistic[names.index("s3 step 0.7")])[:, 121:160].mean(axis=1), axis=0)
     assert np.sum(under[mismatched] < 0.8 * raw[mismatched]) >= 4, under / raw
-    calm_quantile = np.quantile(np.asarray(calm.statistic[1])[:, 20:], 0.995, axis=(0, 1))
+    calm_quantile = np.quantile(np.asarray(calm.fdi.statistic[1])[:, 20:], 0.995, axis=(0, 1))
     assert np.all(calm_quantile < 1.1 * chi2), calm_quantile
-    calm_under = np.median(np.asarray(calm.statistic[0])[:, 121:160].mean(axis=1), axis=0)
+    calm_under = np.median(np.asarray(calm.fdi.statistic[0])[:, 121:160].mean(axis=1), axis=0)
     assert np.all(calm_under[mismatched] > 1.3 * chi2), calm_under
 
 
@@ -497,8 +497,11 @@ def test_per_run_calibration_is_the_smallest_scaling_meeting_the_rate(design):
     scale = per_run[:, 0] / per_decision[:, 0]
     np.testing.assert_allclose(per_run, per_decision * scale[:, None], rtol=1e-12)
     assert np.all(scale >= 1.0)
-    histories = monte_carlo(lambda key, _: run_closed_loop(design, key, no_fault(), jnp.asarray(False), steps).statistic,
-                            jax.random.PRNGKey(seed), runs)
+
+    def statistic(key, _):
+        return run_closed_loop(design, key, no_fault(), jnp.asarray(False), steps).fdi.statistic
+
+    histories = monte_carlo(statistic, jax.random.PRNGKey(seed), runs)
     values = jax.vmap(lambda st: decision_values(st, design))(histories)
     assert np.all(np.asarray(runs_with_symptoms(values, design, per_run)) <= 0.1)
     below = np.asarray(runs_with_symptoms(values, design, per_decision * (scale - 1e-6)[:, None]))

@@ -201,6 +201,8 @@ class RaimOutput(NamedTuple):
 
 
 def raim_output(result: EpochIntegrity) -> RaimOutput:
+    """The epoch's ``RaimOutput``: the test's ``Decision`` labelled ``1 + slot`` of the isolated satellite (-1:
+    alarm, none isolated; a dead slot alarms with its label, ``chi2.flag_dead``) and the delivered solution."""
     check = result.check
     label = jnp.where(check.alarm & (check.isolated >= 0), 1 + check.isolated, jnp.where(check.alarm, -1, 0))
     decision = Decision(check.statistic, check.alarm, label.astype(jnp.int32), jnp.max(jnp.abs(check.isolation)))

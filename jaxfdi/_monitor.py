@@ -20,14 +20,15 @@ from jaxfdi.filters._base import Filter, FilterInfo
 from jaxfdi._loop import detection_scorer, feedforward, run_loop
 from jaxfdi._stages import FDI
 from jaxfdi._metrics import DetectionRecord, record_init, record_update, step_health
-from jaxfdi._simulate import SimStep, Simulator
+from jaxfdi._simulate import Actuated, Sensed, Simulator
 
 
 class MonitorHistory(NamedTuple):
-    """Per-step history of a monitored run: labelled truth, filter outputs, statistic, alarm and label.
+    """Per-step history of a monitored run: labelled truth, actuation, filter outputs, statistic, alarm and label.
 
     Attributes:
-      truth: (T, ...) labelled truth
+      truth: (T, ...) labelled truth, the simulator's ``Sensed``
+      moved: (T, ...) what the actuators applied, the simulator's ``Actuated``
       info: (T, ...) filter outputs
       statistic: (T,) test statistic
       alarm: (T,) bool decision
@@ -35,7 +36,8 @@ class MonitorHistory(NamedTuple):
       estimate: (T,) the detector's fault estimate (NaN: none)
     """
 
-    truth: SimStep
+    truth: Sensed
+    moved: Actuated
     info: FilterInfo
     statistic: Array
     alarm: Array
@@ -121,7 +123,7 @@ def monitor(
 
     Returns:
       ``MonitorResult(record, history)``: the run's ``DetectionRecord`` and, with
-      ``keep_history=True``, its ``MonitorHistory`` (truth ``SimStep``, filter info,
+      ``keep_history=True``, its ``MonitorHistory`` (truth ``Sensed``, ``Actuated``, filter info,
       statistic, alarm, label and estimate, each with a leading time axis T), else ``None``.
     """
     us = _checks.check_inputs(us)
@@ -132,11 +134,8 @@ def monitor(
     history = None
     if keep_history:
         trace = result.history
-        sensed, moved = trace.sensed, trace.moved
-        truth = SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
-                        sensed.sensor_fault, sensed.fault_active, sensed.mode)
         info, decision = trace.output
-        history = MonitorHistory(truth, info, *decision)
+        history = MonitorHistory(trace.sensed, trace.moved, info, *decision)
     return MonitorResult(result.score, history)
 
 

@@ -50,7 +50,7 @@ class SimState(NamedTuple):
 
 
 class Sensed(NamedTuple):
-    """What ``measure`` returns besides the state: the sensor half of a ``SimStep``.
+    """What ``measure`` returns besides the state: the step's labelled truth as its sensors saw it.
 
     Attributes:
       state: (n,) true x[k]
@@ -68,7 +68,7 @@ class Sensed(NamedTuple):
 
 
 class Actuated(NamedTuple):
-    """What ``advance`` returns besides the state: the actuator half of a ``SimStep``.
+    """What ``advance`` returns besides the state: what the actuators applied.
 
     Attributes:
       applied_input: (nu,) u after actuator faults (and input noise)
@@ -77,28 +77,6 @@ class Actuated(NamedTuple):
 
     applied_input: Array
     actuator_fault: Array
-
-
-class SimStep(NamedTuple):
-    """Labelled truth of one step (stacked over time by ``simulate``).
-
-    Attributes:
-      state: (n,) true x[k]
-      measurement: (m,) y[k], noisy and faulty
-      applied_input: (nu,) u after actuator faults
-      actuator_fault: (nu,) applied - commanded input
-      sensor_fault: (m,) fault added to y[k]
-      fault_active: (F,) bool per fault
-      mode: () int label of the first active fault, 0 if none
-    """
-
-    state: Array
-    measurement: Array
-    applied_input: Array
-    actuator_fault: Array
-    sensor_fault: Array
-    fault_active: Array
-    mode: Array
 
 
 class Simulator(NamedTuple):
@@ -115,14 +93,13 @@ class Simulator(NamedTuple):
     measure: Callable[[SimState, Array, Array, Array], tuple[SimState, Sensed]]
     advance: Callable[[SimState, Array, Array, Array], tuple[SimState, Actuated]]
 
-    def step(self, sim: SimState, k: Array, u: Array, key: Array) -> tuple[SimState, SimStep]:
-        """One open-loop step with the run's ``key``: ``measure`` then ``advance`` on
-        ``fold_in(key, k)``, their records joined in a ``SimStep``."""
+    def step(self, sim: SimState, k: Array, u: Array, key: Array) -> tuple[SimState, tuple[Sensed, Actuated]]:
+        """One open-loop step with the run's ``key``: ``measure`` then ``advance`` on ``fold_in(key, k)``,
+        and their records ``(Sensed, Actuated)``."""
         step_key = jax.random.fold_in(key, k)
         sim, sensed = self.measure(sim, k, u, step_key)
         sim, moved = self.advance(sim, k, u, step_key)
-        return sim, SimStep(sensed.state, sensed.measurement, moved.applied_input, moved.actuator_fault,
-                            sensed.sensor_fault, sensed.fault_active, sensed.mode)
+        return sim, (sensed, moved)
 
 
 def per_step(name: str, value: Any, size: int) -> Callable[[Array], Array]:
@@ -294,13 +271,14 @@ def linear_simulator(model: LinearGaussianModel, fault: Fault | None = None, **o
     return simulator(linear_transition, linear_observation, model.Q, model.R, model, fault, **options)
 
 
-def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState, SimStep]:
+def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState, Sensed, Actuated]:
     """Run a simulator over ``us`` (T, nu).
 
     Returns:
-      ``(final, truth)``: the final ``SimState`` (true state ``x[T]``, after the last step) and the
-      ``SimStep`` of every step stacked along a leading time axis (``truth.state`` (T, n),
-      ``truth.measurement`` (T, m), ``truth.mode`` (T,), ...).
+      ``(final, truth, moved)``: the final ``SimState`` (true state ``x[T]``, after the last step), and each step's
+      ``Sensed`` (``truth.state`` (T, n), ``truth.measurement`` (T, m), ``truth.mode`` (T,), ...) and ``Actuated``
+      (``moved.applied_input`` (T, nu), ``moved.actuator_fault`` (T, nu)) stacked along a leading time axis, as
+      ``run_loop`` records them.
     """
     us = _checks.check_inputs(us)
     steps = jnp.arange(us.shape[0])
@@ -309,4 +287,5 @@ def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState
         k, u = ku
         return sim.step(state, k, u, key)
 
-    return jax.lax.scan(body, sim.init(x0), (steps, us))
+    final, (truth, moved) = jax.lax.scan(body, sim.init(x0), (steps, us))
+    return final, truth, moved

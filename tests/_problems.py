@@ -15,7 +15,7 @@ def engine_data(T: int = 120, seed: int = 0):
     """Engine model with a simulated fault-free sequence: (model, ys, us, m0, P0)."""
     model = engine_model()
     us = jnp.full((T, 1), 0.01)
-    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.zeros(7), us, jax.random.key(seed))
+    _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.zeros(7), us, jax.random.key(seed))
     return model, np.asarray(truth.measurement), np.asarray(us), np.zeros(7), 10.0 * np.asarray(model.Q)
 
 
@@ -27,7 +27,7 @@ def rigid_body_data(T: int = 150, seed: int = 1, dtype=jnp.float64):
     Q = np.eye(3) * 1e-6
     R = np.eye(3) * 1e-4
     sim = jaxfdi.simulator(rigid_body_transition, rigid_body_observation, Q, R, params)
-    _, truth = jaxfdi.simulate(sim, jnp.array([0.5, -0.3, 0.4], dtype), jnp.asarray(us, dtype), jax.random.key(seed))
+    _, truth, _ = jaxfdi.simulate(sim, jnp.array([0.5, -0.3, 0.4], dtype), jnp.asarray(us, dtype), jax.random.key(seed))
     return params, Q, R, np.asarray(truth.measurement), us, np.zeros(3), 0.1 * np.eye(3)
 
 

@@ -290,7 +290,7 @@ def labelled_runs(runs_per_fault: int, seed: int, duration: float = 4.0, onset_t
 
     @jax.jit
     def one(key, f):
-        _, truth = simulate(linear_simulator(model, f), jnp.zeros(7), us, key)
+        _, truth, _ = simulate(linear_simulator(model, f), jnp.zeros(7), us, key)
         return truth.measurement, truth.mode
 
     ys, modes = jax.vmap(one)(keys, batch)

@@ -1,4 +1,4 @@
-"""Differentiable losses on labelled runs (simulator labels: ``SimStep.mode`` per step, fault onset per run).
+"""Differentiable losses on labelled runs (simulator labels: ``Sensed.mode`` per step, fault onset per run).
 
 * ``mode_cross_entropy``: mean over steps of ``-log mu_{true mode}(k)`` for IMM/MM mode probabilities (log-loss of
   a probabilistic classifier, Bishop 2006 eq. 4.108);
@@ -31,7 +31,7 @@ def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e
 
     Args:
       log_mode_prob: (T, M) log mode probabilities (``IMMInfo.log_mode_prob``).
-      true_mode: (T,) int true mode per step (``SimStep.mode``).
+      true_mode: (T,) int true mode per step (``Sensed.mode``).
       floor: probability floor: an impossible mode costs ``-log(floor)`` (finite, finite gradient), not infinity.
 
     Returns:

@@ -108,7 +108,7 @@ def test_model_without_inputs_end_to_end():
     inputs and its noise-free state follows ``Phi`` alone."""
     model = linear_gaussian_model(PHI, C, Q, R)
     assert model.dims == (3, 0, 2) and model.Gamma.shape == (3, 0) and model.D.shape == (2, 0)
-    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.asarray(X0), jnp.zeros((T, 0)), jax.random.key(1))
+    _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.asarray(X0), jnp.zeros((T, 0)), jax.random.key(1))
     ys = np.asarray(truth.measurement)
     assert ys.shape == (T, 2) and np.all(np.isfinite(ys))
     kf = kalman_filter(model)
@@ -127,7 +127,7 @@ def test_model_without_inputs_end_to_end():
     np.testing.assert_allclose(info_posterior.filtered_mean, prior_means, rtol=1e-10, atol=1e-12)
     # noise-free: the simulator's state is Phi^k x0
     quiet = linear_gaussian_model(PHI, C, np.zeros((3, 3)), np.zeros((2, 2)))
-    _, clean = jaxfdi.simulate(jaxfdi.linear_simulator(quiet), jnp.asarray(X0), jnp.zeros((5, 0)), jax.random.key(0))
+    _, clean, _ = jaxfdi.simulate(jaxfdi.linear_simulator(quiet), jnp.asarray(X0), jnp.zeros((5, 0)), jax.random.key(0))
     np.testing.assert_allclose(clean.state, [np.linalg.matrix_power(PHI, k) @ X0 for k in range(5)], rtol=1e-12)
 
 

@@ -60,7 +60,7 @@ def test_group_fault_applies_each_component_and_is_labelled_as_one():
     group = fault_group("bias", "sensor", [1, 3], onset=10, magnitudes=2.0 * direction, end=25, label=9)
     assert group.kind.shape == (2,) and list(np.asarray(group.label)) == [9, 9]
     model = engine_model()._replace(Q=jnp.zeros((7, 7)), R=jnp.zeros((5, 5)))
-    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model, group), jnp.zeros(7), jnp.full((30, 1), 0.01),
+    _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model, group), jnp.zeros(7), jnp.full((30, 1), 0.01),
                                jax.random.key(0))
     expected = np.zeros((30, 5))
     expected[10:25, 1], expected[10:25, 3] = 2.0 * direction

@@ -100,7 +100,7 @@ def test_noise_free_simulation_equals_numpy_loop_with_simultaneous_faults():
         dict(kind="stuck", target="sensor", component=1, onset=30),
     ]
     faults = stack_faults([fault(**d) for d in spec])
-    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model, faults), jnp.zeros(7), us, jax.random.key(0))
+    _, truth, moved = jaxfdi.simulate(jaxfdi.linear_simulator(model, faults), jnp.zeros(7), us, jax.random.key(0))
     xs, ys = numpy_plant(model, np.zeros(7), us, spec)
     np.testing.assert_allclose(truth.state, xs, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(truth.measurement, ys, rtol=1e-12, atol=1e-15)
@@ -108,7 +108,7 @@ def test_noise_free_simulation_equals_numpy_loop_with_simultaneous_faults():
     expected_mode = np.where(np.arange(T) >= 10, 1, 0)
     np.testing.assert_array_equal(truth.mode, expected_mode)
     np.testing.assert_array_equal(truth.fault_active[:, 1], (np.arange(T) >= 20) & (np.arange(T) < 50))
-    np.testing.assert_allclose(truth.actuator_fault[10:, 0], -0.4 * us[10:, 0], rtol=1e-12)
+    np.testing.assert_allclose(moved.actuator_fault[10:, 0], -0.4 * us[10:, 0], rtol=1e-12)
     assert np.all(truth.sensor_fault[:20, 3] == 0) and np.all(truth.sensor_fault[20:50, 3] != 0)
 
 
@@ -142,8 +142,8 @@ def test_noise_is_per_step_reproducible():
     model = engine_model()
     sim = jaxfdi.linear_simulator(model, fault("bias", "sensor", 0, 5, 10.0))
     key = jax.random.key(11)
-    _, long = jaxfdi.simulate(sim, jnp.zeros(7), jnp.full((40, 1), 0.01), key)
-    _, short = jaxfdi.simulate(sim, jnp.zeros(7), jnp.full((25, 1), 0.01), key)
+    _, long, _ = jaxfdi.simulate(sim, jnp.zeros(7), jnp.full((40, 1), 0.01), key)
+    _, short, _ = jaxfdi.simulate(sim, jnp.zeros(7), jnp.full((25, 1), 0.01), key)
     np.testing.assert_array_equal(long.measurement[:25], short.measurement)
 
 
@@ -155,11 +155,11 @@ def test_fault_batches_vmap_like_data():
     faults = [fault("bias", "sensor", 2, 10, 1.5), fault("scale", "sensor", 0, 5, 0.2),
               fault("effectiveness", "actuator", 0, 0, 1.0), jaxfdi.no_fault()]
     key = jax.random.key(2)
-    run = lambda f: jaxfdi.simulate(jaxfdi.linear_simulator(model, f), jnp.zeros(7), us, key)[1]  # noqa: E731
-    batched = jax.jit(jax.vmap(run))(stack_faults(faults))
+    run = lambda f: jaxfdi.simulate(jaxfdi.linear_simulator(model, f), jnp.zeros(7), us, key)[1:]  # noqa: E731
+    batched, moved = jax.jit(jax.vmap(run))(stack_faults(faults))
     for i, f in enumerate(faults):
-        single = run(f)
+        single, _ = run(f)
         np.testing.assert_allclose(batched.measurement[i], single.measurement, rtol=1e-13, atol=1e-13)
     assert int(FaultKind.EFFECTIVENESS) == int(faults[2].kind)
     # a total loss of effectiveness means the actuator applies nothing
-    np.testing.assert_array_equal(batched.applied_input[2], 0.0)
+    np.testing.assert_array_equal(moved.applied_input[2], 0.0)

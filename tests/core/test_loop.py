@@ -75,9 +75,10 @@ def test_monitor_is_the_feedforward_loop(engine):
     f = jaxfdi.fault("bias", "sensor", 1, ONSET, 30.0)
     result = jaxfdi.monitor(jaxfdi.linear_simulator(model, f), kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q),
                             us, jax.random.key(0), ONSET, keep_history=True)
-    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model, f), jnp.zeros(7), us, jax.random.key(0))
-    for field in truth._fields:
-        np.testing.assert_array_equal(getattr(result.history.truth, field), getattr(truth, field))
+    _, truth, moved = jaxfdi.simulate(jaxfdi.linear_simulator(model, f), jnp.zeros(7), us, jax.random.key(0))
+    for ours, theirs in ((result.history.truth, truth), (result.history.moved, moved)):
+        for field in theirs._fields:
+            np.testing.assert_array_equal(getattr(ours, field), getattr(theirs, field))
     assert int(result.record.detection_step) >= ONSET
 
 
@@ -217,8 +218,8 @@ def test_per_step_covariances_as_tables_and_callables_agree(small_plant):
     table = jaxfdi.simulator(lambda x, u, p: 0.5 * x + u, lambda x, u, p: x, jnp.zeros((2, 2)), Rs)
     function = jaxfdi.simulator(lambda x, u, p: 0.5 * x + u, lambda x, u, p: x, jnp.zeros((2, 2)),
                                 lambda k: jnp.eye(2) * (1.0 + k))
-    _, a = jaxfdi.simulate(table, jnp.zeros(2), us, jax.random.key(0))
-    _, b = jaxfdi.simulate(function, jnp.zeros(2), us, jax.random.key(0))
+    _, a, _ = jaxfdi.simulate(table, jnp.zeros(2), us, jax.random.key(0))
+    _, b, _ = jaxfdi.simulate(function, jnp.zeros(2), us, jax.random.key(0))
     np.testing.assert_allclose(a.measurement, b.measurement, rtol=1e-13)
     with pytest.raises(ValueError, match="R"):
         jaxfdi.simulator(lambda x, u, p: x, lambda x, u, p: x, jnp.zeros((2, 2)), jnp.zeros((steps, 2, 3)))
@@ -229,7 +230,7 @@ def test_per_step_measurement_noise_has_its_step_variance():
     steps, runs = 4, 4000
     sim = jaxfdi.simulator(lambda x, u, p: x, lambda x, u, p: x, jnp.zeros((1, 1)), lambda k: jnp.eye(1) * (1.0 + k))
     keys = jax.random.split(jax.random.key(9), runs)
-    _, truth = jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(1), jnp.zeros((steps, 0)), key))(keys)
+    _, truth, _ = jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(1), jnp.zeros((steps, 0)), key))(keys)
     y = np.asarray(truth.measurement)[:, :, 0]
     for k in range(steps):
         scaled = (runs - 1) * y[:, k].var(ddof=1) / (1.0 + k)
@@ -247,8 +248,8 @@ def test_input_noise_time_argument_noise_gain_and_availability():
                            input_noise=Qu, available=lambda k, x: jnp.array([True, k % 2 == 0]))
     us = jnp.ones((3, 2))
     keys = jax.random.split(jax.random.key(4), runs)
-    _, truth = jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(2), us, key))(keys)
-    noise = np.asarray(truth.actuator_fault)[:, 0, :]                    # applied - commanded
+    _, truth, moved = jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(2), us, key))(keys)
+    noise = np.asarray(moved.actuator_fault)[:, 0, :]                    # applied - commanded
     for i in range(2):
         scaled = (runs - 1) * noise[:, i].var(ddof=1) / float(Qu[i, i])
         assert stats.chi2.ppf(5e-4, runs - 1) < scaled < stats.chi2.ppf(1 - 5e-4, runs - 1)

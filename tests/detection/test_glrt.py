@@ -128,7 +128,7 @@ def monte_carlo(engine):
     us = jnp.full((T_SIM, 1), 0.01)
 
     def one(fault, key, x0):
-        _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model, fault), x0, us, key)
+        _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model, fault), x0, us, key)
         kf = jaxfdi.filters.kalman_filter(model)
         _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us)
         return info.innovation

@@ -29,7 +29,7 @@ def innovations(engine):
     us = jnp.full((T, 1), 0.01)
 
     def one(fault, key):
-        _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model, fault), jnp.zeros(7), us, key)
+        _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model, fault), jnp.zeros(7), us, key)
         kf = jaxfdi.filters.kalman_filter(model)
         return jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us)[1].innovation
 

@@ -195,7 +195,7 @@ def test_monte_carlo_batched_runs_the_kernel():
 
     def data_of(key, q_scale):
         mdl = model._replace(Q=jnp.asarray(model.Q) * q_scale)
-        _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(mdl), jnp.zeros(3), us, key)
+        _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(mdl), jnp.zeros(3), us, key)
         return mdl, truth.measurement
 
     def one(key, q_scale):

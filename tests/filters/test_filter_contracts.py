@@ -47,7 +47,7 @@ def _vtol_case():
     model = jaxfdi.models.LinearGaussianModel(Phi, Gamma, jnp.asarray(vtol.C), jnp.zeros((4, 2)), Q, R)
     T = 40
     us = np.stack([np.sin(0.2 * np.arange(T)), np.cos(0.1 * np.arange(T))], 1)
-    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.array([1.0, 0.5, 0.1, 0.0]), us, jax.random.key(4))
+    _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.array([1.0, 0.5, 0.1, 0.0]), us, jax.random.key(4))
     return model, np.asarray(truth.measurement), us
 
 
@@ -222,7 +222,7 @@ def _linear_problem():
 
     model = small_model()
     us = np.sin(0.3 * np.arange(T_STEPS))[:, None]
-    _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.array([0.5, -0.2, 0.1]), jnp.asarray(us),
+    _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.array([0.5, -0.2, 0.1]), jnp.asarray(us),
                                jax.random.key(3))
     return model, np.asarray(truth.measurement), us
 

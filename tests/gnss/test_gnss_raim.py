@@ -378,9 +378,9 @@ def test_plant_and_solver_agree_and_faults_hit_their_slot(table):
                                  faults.fault("ramp", "sensor", slot, 5, 0.0, 1.0, end=7))
     us = jnp.zeros((steps, 0))
     x0 = jnp.asarray([CLOCK, 0.3])
-    _, clean = simulate(receiver_plant(table, T0, 1.0, path, visible, jnp.zeros((steps, 32))), x0, us,
+    _, clean, _ = simulate(receiver_plant(table, T0, 1.0, path, visible, jnp.zeros((steps, 32))), x0, us,
                         jax.random.key(0))
-    _, faulty = simulate(receiver_plant(table, T0, 1.0, path, visible, jnp.zeros((steps, 32)), fault=fault), x0, us,
+    _, faulty, _ = simulate(receiver_plant(table, T0, 1.0, path, visible, jnp.zeros((steps, 32)), fault=fault), x0, us,
                          jax.random.key(0))
     added = np.asarray(faulty.measurement - clean.measurement)[:, slot]
     np.testing.assert_allclose(added, [0, 100, 0, 100, 100, 0, 1, 0], atol=1e-6)

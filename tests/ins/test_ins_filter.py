@@ -109,7 +109,7 @@ def linear_scst_samples():
     def one(key):
         key_x0, key_run = jax.random.split(key)
         x0 = jax.random.normal(key_x0, (3,))                     # drawn from the filter's prior N(0, I)
-        _, truth = jaxfdi.simulate(jaxfdi.linear_simulator(model), x0, jnp.zeros((steps, 0)), key_run)
+        _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model), x0, jnp.zeros((steps, 0)), key_run)
         _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(3), jnp.eye(3)), truth.measurement)
 
         def body(state, step):

@@ -58,7 +58,7 @@ def test_matching_bias_mode_estimates_the_fault_size(engine, label):
     else:
         f, size = fault(FaultKind.BIAS, Target.SENSOR, label - 2, onset, 8.285), 8.285
     us = jnp.full((T, 1), 0.01)
-    _, truth = simulate(linear_simulator(engine, f), jnp.zeros(7), us, jax.random.PRNGKey(4))
+    _, truth, _ = simulate(linear_simulator(engine, f), jnp.zeros(7), us, jax.random.PRNGKey(4))
     prior = np.array([1e-6, 1e4, 400.0, 4.0, 100.0, 36.0])
     modes = bias_modes(engine, 1e-12, prior)
     kf = kalman_filter(jax.tree.map(lambda a: a[label], modes))

@@ -1,11 +1,9 @@
 """jaxfdi: model-based fault detection and isolation in JAX.
 
-The top level holds what every study uses: faults as data, the simulator, the closed
-loop's stages and its scan, the fused monitor, the Monte Carlo driver, the study engine
-and detection summaries. Estimators are in ``filters``, residual tests and isolation in
-``detection``, plants in ``models``, then ``control``, ``tuning``, ``gnss``, ``ins``, the
-papers' studies in ``scenarios``, and ``plotting``, ``streaming``, ``distributed``. The
-public API is these packages' ``__all__``, listed on one page of the documentation.
+Top level: faults as data, the simulator, the closed loop's stages and scan, the fused monitor, the Monte Carlo driver,
+the study engine, detection summaries. Then ``filters``, ``detection`` (residual tests, isolation), ``models``,
+``control``, ``tuning``, ``gnss``, ``ins``, ``scenarios`` (the papers' studies), ``plotting``, ``streaming``,
+``distributed``; the public API is their ``__all__`` (one documentation page).
 """
 from jaxfdi import _version, detection, filters, models
 from jaxfdi._monitor import MonitorResult, monitor
@@ -33,9 +31,8 @@ def enable_x64(enable: bool = True) -> None:
 
 
 def enable_compilation_cache(path: str | None = None) -> str:
-    """Keep compiled XLA programs on disk so that a repeated run (a CLI call, a notebook
-    re-run) skips most compilation. ``path`` defaults to ``$JAXFDI_CACHE_DIR`` or
-    ``~/.cache/jaxfdi/xla``.
+    """Keep compiled XLA programs on disk (a repeated run skips most compilation); ``path`` defaults to
+    ``$JAXFDI_CACHE_DIR`` or ``~/.cache/jaxfdi/xla``.
 
     Returns:
       str, the folder used for the cache.
@@ -56,8 +53,8 @@ _LAZY_SUBMODULES = ("control", "tuning", "gnss", "ins", "scenarios", "plotting",
 
 
 def __getattr__(name: str):
-    """The subpackages beyond the core (``control`` and ``tuning`` import optax, ~0.1 s)
-    are imported on first use, not by ``import jaxfdi``."""
+    """The subpackages beyond the core (``control`` and ``tuning`` import optax, ~0.1 s) are imported on first use, not
+    by ``import jaxfdi``."""
     if name in _LAZY_SUBMODULES:
         import importlib
 

@@ -1,24 +1,17 @@
 """Study results as data: a tidy pandas DataFrame, and the HTML table a notebook shows.
 
-pandas rather than a table of our own: it is what notebook users already sort, filter, plot
-and join results with, and it writes CSV, HTML and LaTeX. It is imported on first use (the
-``plots`` extra installs it), so the filters and detectors do not depend on it.
+pandas (imported on first use; the ``plots`` extra) is what notebook users already sort, filter, plot and join with.
+A study's rows (``result.rows``, its file's JSON-ready dicts) become the frame's rows by two rules:
 
-A study's rows (``result.rows``, the JSON-ready dicts its file holds) become the frame's rows
-by two rules that keep it tidy:
+* a field holding a dict of dicts (``{"MM": {...}, "IMM": {...}}``) becomes one row per entry, its key in a column named
+  by the field's singular (``methods`` -> ``method``); so do the fields a study names as ``methods`` (one dict per
+  method), the field's name in the ``method`` column;
+* any other dict flattens into ``field.key`` columns; a list stays one cell, NumPy scalars as Python numbers (a CSV cell
+  reads ``[1.5, 0.0]``, as in the JSON).
 
-* a field holding a dict of dicts (per method: ``{"MM": {...}, "IMM": {...}}``) becomes one
-  row per entry, its key in a column named by the field's singular (``methods`` -> ``method``);
-  so do the fields a study names as ``methods`` (one dict per method, each a field of the
-  row), the field's name in the ``method`` column;
-* any other dict flattens into ``field.key`` columns; a list stays one cell, its NumPy
-  scalars as Python numbers (so that a CSV cell reads ``[1.5, 0.0]``, as in the JSON).
-
-Each run rate (``RUN_RATES``) of a row that counts its runs gets its two-sided 95 %
-Clopper-Pearson interval (``rate_interval``) in ``<rate>_low`` and ``<rate>_high``, over the
-healthy runs ``n = runs - unhealthy_runs`` (the column a study names as ``unhealthy``); NaN
-where the rate times ``n`` is not a count (a rate over another denominator), where ``n`` is
-unknown, or where there is no rate.
+Each run rate (``RUN_RATES``) of a row that counts its runs gets its two-sided 95 % Clopper-Pearson interval
+(``rate_interval``) in ``<rate>_low``, ``<rate>_high`` over the healthy runs ``n = runs - unhealthy_runs`` (the study's
+``unhealthy`` column); NaN where rate times ``n`` is not a count (another denominator), ``n`` is unknown, or no rate.
 """
 from __future__ import annotations
 
@@ -52,8 +45,8 @@ def _flat(row: dict, prefix: str = "") -> dict:
 
 
 def tidy_rows(rows: list[dict], methods: tuple[str, ...] = ()) -> list[dict]:
-    """The study's rows as flat dicts, one per table row (module docstring). A key of an
-    inner dict that is also a key of its row is a ``ValueError``: neither may be lost."""
+    """The study's rows as flat dicts, one per table row (module docstring). A key of an inner dict that is also a key
+    of its row is a ``ValueError``: neither may be lost."""
     out = []
     for row in rows:
         per_method = {k: row[k] for k in methods if isinstance(row.get(k), dict)}
@@ -86,9 +79,8 @@ def _interval(rate: Any, n: Any, level: float) -> tuple[float, float]:
 
 def results_frame(rows: list[dict], level: float = 0.95, methods: tuple[str, ...] = (),
                   unhealthy: str = "unhealthy_runs"):
-    """A study's rows as a pandas DataFrame: one row per table row (``tidy_rows``), with
-    the ``level`` Clopper-Pearson interval of each run rate beside it over ``runs`` less
-    the ``unhealthy`` column (module docstring).
+    """A study's rows as a pandas DataFrame: one row per table row (``tidy_rows``), with the ``level`` Clopper-Pearson
+    interval of each run rate beside it over ``runs`` less the ``unhealthy`` column (module docstring).
 
     Returns:
       ``pandas.DataFrame``; ``None`` fields are NaN, the columns in the order first seen.
@@ -112,9 +104,8 @@ def results_frame(rows: list[dict], level: float = 0.95, methods: tuple[str, ...
 
 
 def results_html(frame, config: dict | None = None, group: str = "section") -> str:
-    """The HTML a notebook renders for a study's frame: one table per value of the
-    ``group`` column where the frame has one (only the columns each uses), numbers to
-    four significant digits, ``-`` for none."""
+    """The HTML a notebook renders for a study's frame: one table per value of the ``group`` column where the frame has
+    one (only the columns each uses), numbers to four significant digits, ``-`` for none."""
     group = group if group in frame else None
     parts = []
     if config:
@@ -135,11 +126,9 @@ def results_html(frame, config: dict | None = None, group: str = "section") -> s
 
 def study_result(cls=None, *, group: str = "section", methods: tuple[str, ...] = (),
                  unhealthy: str = "unhealthy_runs"):
-    """Class decorator for a study's result (a NamedTuple with ``config`` and ``rows``):
-    ``to_frame(level=0.95)``, its table as a pandas DataFrame (``results_frame`` with the
-    study's ``methods`` fields and ``unhealthy`` column); ``_repr_html_``, Jupyter's display
-    of it as HTML tables, one per value of the ``group`` column; and a one-line ``repr``
-    (the result's arrays of every run are too long to print).
+    """Class decorator for a study's result (a NamedTuple with ``config``, ``rows``): ``to_frame(level=0.95)``
+    (``results_frame`` with the study's ``methods`` and ``unhealthy``); ``_repr_html_``, HTML tables per ``group``
+    value; a one-line ``repr`` (the per-run arrays are too long to print).
 
     Returns:
       The class, with the three methods attached.
@@ -147,8 +136,8 @@ def study_result(cls=None, *, group: str = "section", methods: tuple[str, ...] =
 
     def attach(cls):
         def to_frame(self, level: float = 0.95):
-            """The study's table as a pandas DataFrame: one row per method and case, every
-            run rate beside its ``level`` Clopper-Pearson interval (``_low``, ``_high``)."""
+            """The study's table as a pandas DataFrame: one row per method and case, every run rate beside its ``level``
+            Clopper-Pearson interval (``_low``, ``_high``)."""
             return results_frame(self.rows, level, methods, unhealthy)
 
         def _repr_html_(self) -> str:

@@ -1,36 +1,25 @@
 """One closed-loop run as one ``lax.scan``: plant -> sensors -> FDI -> controller -> plant.
 
-Every scenario of jaxfdi, open or closed loop, is this scan with its own three parts:
+Every scenario, open or closed loop, is this scan with three parts (types: ``jaxfdi._stages``): a **plant**
+``(init, measure, advance)`` (a ``Simulator``, or a model's own halves, e.g. the reaction wheels); an **FDI**
+``(step, observe)`` (estimator, detector, isolator, reconfiguration); a **controller** ``(init, step)``. Step ``k``
+(``Ts`` apart):
 
-- a **plant** ``(init, measure, advance)`` — a ``Simulator`` is one; a model with more
-  physics (the reaction wheels) writes its own two halves;
-- an **FDI** ``(step, observe)`` — estimator, detector, isolator and reconfiguration;
-- a **controller** ``(init, step)`` — what flies on the FDI's outputs.
-
-Step ``k`` (``Ts`` apart):
-
-1. ``measure(plant, k, u_s, step_key) -> (plant, sensed)``, ``step_key = fold_in(key, k)``:
-   the sensors read ``x[k]`` (noise, sensor faults); ``sensed.measurement`` is ``y[k]``.
-   ``u_s``, the input a feed-through term sees, is ``u[k]`` for a feed-forward
-   controller (computed first) and otherwise ``u[k-1]``, the value the zero-order hold
-   still applies when the sensors sample (no algebraic loop);
-2. ``observe(fdi, k, y) -> (fdi, view)``: the part of the FDI the controller waits for
-   (estimator update, selected or compensated measurements, the isolated label, the
-   reconfiguration). Without ``observe`` the view is ``y`` itself;
+1. ``measure(plant, k, u_s, step_key) -> (plant, sensed)``, ``step_key = fold_in(key, k)``: sensors read ``x[k]``
+   (noise, sensor faults), ``sensed.measurement`` is ``y[k]``; the feed-through sees ``u_s = u[k]`` for a feed-forward
+   controller (computed first), else ``u[k-1]``, still held by the zero-order hold (no algebraic loop);
+2. ``observe(fdi, k, y) -> (fdi, view)``: what the controller waits for (estimator update, selected or compensated
+   measurements, isolated label, reconfiguration); without ``observe`` the view is ``y``;
 3. ``controller.step(ctrl, k, view, exogenous[k]) -> (ctrl, u[k])``;
-4. ``fdi.step(fdi, k, y, u) -> (fdi, output)``: the rest (time update with the input the
-   plant is believed to get, filter banks, detectors, decisions);
+4. ``fdi.step(fdi, k, y, u) -> (fdi, output)``: the rest (time update with the input the plant is believed to get,
+   filter banks, detectors, decisions);
 5. ``advance(plant, k, u, step_key) -> (plant, moved)``: actuator faults, dynamics;
-6. ``scorer.update(score, k, output)``: metrics folded into the carry (a
-   ``DetectionRecord`` per decision, peaks, ...), so a run keeps a handful of numbers
-   unless ``keep_history=True`` asks for the (T, ...) trace.
+6. ``scorer.update(score, k, output)``: metrics folded into the carry (a ``DetectionRecord`` per decision, peaks, ...);
+   ``keep_history=True`` also keeps the (T, ...) trace.
 
-``monitor`` (open loop: precomputed inputs, one filter, one detector) is this scan with
-``feedforward()`` as the controller. A component that must re-run a filter over its last
-``L`` steps (the UKF of Park et al. 2004 restarts 2-3 steps before the detection) keeps a fixed-size
-``filters.history.RingBuffer`` in its own state and replays it with
-``filters.history.replay_filter``: bounded, and ``jit``/``vmap`` friendly. The shapes of
-the three parts and of a scorer are ``jaxfdi._stages``.
+``monitor`` (open loop: precomputed inputs, one filter, one detector) is this scan with ``feedforward()``. A part that
+re-runs a filter over its last ``L`` steps (Park et al. 2004's UKF restarts 2-3 steps before the detection) keeps a
+fixed-size ``filters.history.RingBuffer`` and replays it with ``filters.history.replay_filter`` (bounded, jit/vmap).
 """
 from __future__ import annotations
 
@@ -86,13 +75,12 @@ def feedforward() -> Controller:
 
 
 def state_feedback(gain: Array, reference: Callable[[Array], Array] | None = None) -> Controller:
-    """``u[k] = -K (x_hat[k] - x_ref[k])`` on the view (an estimate; ``u = -K x`` as SciPy's
-    LQR), with ``x_ref`` from ``reference(exogenous)`` or zero.
+    """``u[k] = -K (x_hat[k] - x_ref[k])`` on the view (an estimate; ``u = -K x`` as SciPy's LQR), with ``x_ref`` from
+    ``reference(exogenous)`` or zero.
 
     Returns:
       ``Controller(init, step)`` (not feed-forward) with no state (``init() -> None``):
-      ``step(None, k, view, exogenous) -> (None, u)``, ``u`` (nu,) for a ``gain`` (nu, n)
-      and a view (n,).
+      ``step(None, k, view, exogenous) -> (None, u)``, ``u`` (nu,) for a ``gain`` (nu, n) and a view (n,).
     """
     _checks.check_matrix("gain", gain, (None, None), "K: nu inputs x n states, u = -K x")
     gain = jnp.asarray(gain)
@@ -105,8 +93,8 @@ def state_feedback(gain: Array, reference: Callable[[Array], Array] | None = Non
 
 
 def measurement_of(sensed: Any) -> Any:
-    """``y[k]`` of what a plant's ``measure`` returned: its ``measurement`` field if it
-    has one, else the value itself."""
+    """``y[k]`` of what a plant's ``measure`` returned: its ``measurement`` field if it has one, else the value
+    itself."""
     return getattr(sensed, "measurement", sensed)
 
 
@@ -133,19 +121,17 @@ def run_loop(
       fdi_state0: the FDI's initial state (e.g. ``(filt.init(...), detector.init())``).
       key: PRNG key of the run (the plant draws step ``k``'s noise from it).
       steps: number of steps T; may be omitted when ``exogenous`` is given.
-      exogenous: pytree of (T, ...) per-step data for the controller (feed-forward
-        inputs, references), or ``None``.
+      exogenous: pytree of (T, ...) per-step data for the controller (feed-forward inputs, references), or ``None``.
       controller_state0: the controller's initial state (default ``controller.init()``).
-      u0: the input held before step 0 (what the feed-through sees at step 0 in closed
-        loop); required unless the controller is feed-forward.
+      u0: the input held before step 0 (what the feed-through sees at step 0 in closed loop); required unless the
+        controller is feed-forward.
       scorer: ``Scorer`` of the FDI outputs (e.g. ``detection_scorer``), or ``None``.
       keep_history: also return the stacked ``LoopTrace`` (memory grows with T).
 
     Returns:
-      ``LoopResult(score, history, final)``: the scorer's final value (``None`` without a
-      scorer); with ``keep_history=True`` the ``LoopTrace`` of every step stacked along a
-      leading time axis T (else ``None``); and the ``(plant, fdi, controller)`` states
-      after the last step.
+      ``LoopResult(score, history, final)``: the scorer's final value (``None`` without a scorer); with
+      ``keep_history=True`` the ``LoopTrace`` of every step stacked along a leading time axis T (else ``None``); and the
+      ``(plant, fdi, controller)`` states after the last step.
     """
     for name, part, needed in (("plant", plant, ("init", "measure", "advance")), ("fdi", fdi, ("step",)),
                                ("controller", controller, ("init", "step")),
@@ -219,8 +205,8 @@ def run_loop(
 # --- scoring ----------------------------------------------------------------------
 
 def _decisions(value: Any) -> Any:
-    """``value``, a ``Decision`` or a tuple / named tuple / dict of them, checked: a
-    ``TypeError`` names anything else."""
+    """``value``, a ``Decision`` or a tuple / named tuple / dict of them, checked: a ``TypeError`` names anything
+    else."""
     leaves = jax.tree_util.tree_leaves(value, is_leaf=lambda x: isinstance(x, Decision))
     for leaf in leaves:
         if not isinstance(leaf, Decision):
@@ -232,9 +218,9 @@ def _decisions(value: Any) -> Any:
 def _per_decision_scorer(decisions: Callable[[Any], Any], healthy: Callable[[Any], Array] | None,
                          new_record: Callable[[], Any], fold: Callable[..., Any], record_type: type,
                          single: bool) -> Scorer:
-    """A record (``new_record()``) per decision of the output, each folded with
-    ``fold(record, k, decision, good)``, ``good`` = the step healthy and the decision's
-    statistic not NaN (``metrics.step_health``). ``single``: ``decisions`` gives one decision (no trace to find out)."""
+    """A record (``new_record()``) per decision of the output, each folded with ``fold(record, k, decision, good)``,
+    ``good`` = the step healthy and the decision's statistic not NaN (``metrics.step_health``). ``single``:
+    ``decisions`` gives one decision (no trace to find out)."""
 
     def is_healthy(output):
         return healthy(output) if healthy is not None else getattr(output, "healthy", jnp.ones((), bool))
@@ -269,14 +255,12 @@ def detection_scorer(
 
     Args:
       onset: () fault onset step (``faults.NEVER`` for a fault-free run).
-      decisions: ``output -> Decision``, or a tuple / dict of them: the score is the
-        same structure of records.
-      healthy: ``output -> () bool``: the step's numerics were sound (default: the
-        output's ``healthy`` field when it has one); with the decision's statistic
-        not NaN, it decides the record's ``first_unhealthy``.
+      decisions: ``output -> Decision``, or a tuple / dict of them: the score is the same structure of records.
+      healthy: ``output -> () bool``: the step's numerics were sound (default: the output's ``healthy`` field when it
+        has one); with the decision's statistic not NaN, it decides the record's ``first_unhealthy``.
       estimate_delay: as for ``monitor``.
-      single: ``decisions`` returns one decision: the record is built without tracing a
-        step to find the structure (a structure of several is found by one extra trace).
+      single: ``decisions`` returns one decision: the record is built without tracing a step to find the structure (a
+        structure of several is found by one extra trace).
     """
     _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     dtype = dtype or jnp.result_type(float)
@@ -311,8 +295,8 @@ def episode_scorer(
 
 
 def peak_scorer(values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None) -> Scorer:
-    """Running maxima: ``score[i] = max over the steps k with active(k)[i] of values(output)[i]``
-    (0 before any such step), e.g. the largest statistic before the onset."""
+    """Running maxima: ``score[i] = max over the steps k with active(k)[i] of values(output)[i]`` (0 before any such
+    step), e.g. the largest statistic before the onset."""
     _checks.check_callable("values", values, "a function output -> (n,) values")
     _checks.check_callable("active", active, "a function k -> (n,) bool")
     dtype = dtype or jnp.result_type(float)

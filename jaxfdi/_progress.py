@@ -1,13 +1,8 @@
 """Progress displays and log messages.
 
-A progress hook is a callable ``(done, total, seconds)`` (``jaxfdi.monte_carlo``'s
-``progress=``). ``progress_bar(description, unit)`` makes one: a ``tqdm.auto`` bar when
-tqdm is installed (a widget in Jupyter, a terminal bar elsewhere), otherwise INFO lines
-on the ``"jaxfdi"`` logger at most every ``interval`` seconds and at the end. Messages go
-through Python's ``logging`` (logger ``"jaxfdi"``), so a program or a notebook can
-redirect or silence them (``logging.getLogger("jaxfdi").setLevel(logging.WARNING)``);
-the CLI installs a stderr handler with ``configure_logging`` and ``--quiet`` turns both
-the bars and the INFO messages off.
+``progress_bar`` makes a progress hook: a ``tqdm.auto`` bar when tqdm is installed, else INFO lines. Messages use the
+``logging`` logger ``"jaxfdi"`` (silence: ``logging.getLogger("jaxfdi").setLevel(logging.WARNING)``); the CLI installs a
+stderr handler (``configure_logging``) and ``--quiet`` turns bars and INFO messages off.
 """
 from __future__ import annotations
 
@@ -35,8 +30,7 @@ def tqdm_available() -> bool:
 
 
 class _Bar:
-    """A progress hook on a ``tqdm.auto`` bar, created on the first call and closed when
-    ``done >= total``."""
+    """A progress hook on a ``tqdm.auto`` bar, created on the first call and closed when ``done >= total``."""
 
     def __init__(self, description: str, unit: str, **tqdm_options) -> None:
         self.description, self.unit, self.options = description, unit, tqdm_options
@@ -62,8 +56,8 @@ class _Bar:
 
 
 class _LogLines:
-    """A progress hook that logs ``description: done/total unit, seconds`` at INFO at most
-    every ``interval`` seconds, and always at the end."""
+    """A progress hook that logs ``description: done/total unit, seconds`` at INFO at most every ``interval`` seconds,
+    and always at the end."""
 
     def __init__(self, description: str, unit: str, interval: float) -> None:
         self.description, self.unit, self.interval = description, unit, interval
@@ -83,8 +77,8 @@ class _LogLines:
 
 
 def status(message: str) -> None:
-    """A progress message (what is compiling, what ran): INFO on the ``"jaxfdi"`` logger,
-    or, when logging is not configured (a plain script or a notebook), one line on stderr."""
+    """A progress message (what is compiling, what ran): INFO on the ``"jaxfdi"`` logger, or, when logging is not
+    configured (a plain script or a notebook), one line on stderr."""
     if logger.hasHandlers():
         logger.info(message)
     else:
@@ -111,8 +105,8 @@ def progress_bar(description: str = "monte carlo", unit: str = "runs", *, interv
 
 
 class _CurrentStderr(logging.StreamHandler):
-    """A handler that writes to whatever ``sys.stderr`` is when a message is emitted (a
-    notebook's or a test's capture may replace it after the handler is made)."""
+    """A handler that writes to whatever ``sys.stderr`` is when a message is emitted (a notebook's or a test's capture
+    may replace it after the handler is made)."""
 
     def __init__(self) -> None:
         super().__init__(sys.stderr)
@@ -127,9 +121,8 @@ class _CurrentStderr(logging.StreamHandler):
 
 
 def configure_logging(quiet: bool = False, stream=None) -> logging.Handler:
-    """Send the ``"jaxfdi"`` logger's messages to ``stream`` (default stderr) as plain
-    lines; level INFO, or WARNING with ``quiet``. Replaces a handler installed by an
-    earlier call; returns the handler."""
+    """Send the ``"jaxfdi"`` logger's messages to ``stream`` (default stderr) as plain lines; level INFO, or WARNING
+    with ``quiet``. Replaces a handler installed by an earlier call; returns the handler."""
     for handler in list(logger.handlers):
         if getattr(handler, "_jaxfdi_cli", False):
             logger.removeHandler(handler)

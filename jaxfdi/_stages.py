@@ -1,7 +1,5 @@
-"""The shapes of the closed loop's stages (``loop.run_loop``): a plant, an FDI stage, a
-controller, and a scorer that folds metrics over a run. Types only, at the bottom of the
-package, so that every layer can build a stage without importing the loop.
-"""
+"""The closed loop's stage types (``loop.run_loop``): plant, FDI, controller, scorer; types only, so any layer can build
+a stage without importing the loop."""
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -10,16 +8,14 @@ from jax import Array
 
 
 class Plant(NamedTuple):
-    """``init(x0) -> state``; ``measure(state, k, u, step_key) -> (state, sensed)``;
-    ``advance(state, k, u, step_key) -> (state, moved)``, with ``step_key = fold_in(key, k)``
-    (the loop folds the run's key once per step). ``Simulator`` has these fields.
+    """A plant's two halves, ``step_key = fold_in(key, k)``; ``Simulator`` has these fields.
 
     Attributes:
       init: ``init(x0) -> state``, the plant's initial state from the true initial state
-      measure: ``measure(state, k, u, step_key) -> (state, sensed)``: the sensors read
-        ``x[k]``; ``sensed`` is ``y[k]`` or has it as its ``measurement`` field (e.g. ``Sensed``)
-      advance: ``advance(state, k, u, step_key) -> (state, moved)``: actuator faults and
-        dynamics with ``u[k]``; ``moved`` is kept in the loop's trace (e.g. ``Actuated``)
+      measure: ``measure(state, k, u, step_key) -> (state, sensed)``: the sensors read ``x[k]``; ``sensed`` is ``y[k]``
+        or has it as its ``measurement`` field (e.g. ``Sensed``)
+      advance: ``advance(state, k, u, step_key) -> (state, moved)``: actuator faults and dynamics with ``u[k]``;
+        ``moved`` is kept in the loop's trace (e.g. ``Actuated``)
     """
 
     init: Callable[[Array], Any]
@@ -28,14 +24,12 @@ class Plant(NamedTuple):
 
 
 class FDI(NamedTuple):
-    """``step(state, k, y, u) -> (state, output)``; optional ``observe(state, k, y) ->
-    (state, view)`` runs before the controller (``None``: the controller sees ``y``).
+    """An FDI stage; ``observe`` runs before the controller (``None``: the controller sees ``y``).
 
     Attributes:
-      step: ``step(state, k, y, u) -> (state, output)``: the FDI's step after the controller
-        (time update, detectors, decisions); ``output`` is what a ``Scorer`` folds
-      observe: ``observe(state, k, y) -> (state, view)``, the part the controller waits for,
-        or ``None``
+      step: ``step(state, k, y, u) -> (state, output)``: the FDI's step after the controller (time update, detectors,
+        decisions); ``output`` is what a ``Scorer`` folds
+      observe: ``observe(state, k, y) -> (state, view)``, the part the controller waits for, or ``None``
     """
 
     step: Callable[[Any, Array, Any, Array], tuple[Any, Any]]
@@ -43,15 +37,13 @@ class FDI(NamedTuple):
 
 
 class Controller(NamedTuple):
-    """``init() -> state``; ``step(state, k, view, exogenous) -> (state, u)``.
-
-    ``feedforward=True``: ``u`` does not depend on ``view`` (it is called with ``None``
-    before the sensors read), so the sensors' feed-through sees this step's ``u``.
+    """A controller; ``feedforward=True``: called with ``view=None`` before the sensors read, so their feed-through sees
+    this step's ``u``.
 
     Attributes:
       init: ``init() -> state``, the controller's initial state
-      step: ``step(state, k, view, exogenous) -> (state, u)``: ``u`` (nu,) is ``u[k]``;
-        ``exogenous`` is step ``k``'s slice of the loop's per-step data
+      step: ``step(state, k, view, exogenous) -> (state, u)``: ``u`` (nu,) is ``u[k]``; ``exogenous`` is step ``k``'s
+        slice of the loop's per-step data
       feedforward: bool, ``u`` does not depend on ``view`` (default False)
     """
 
@@ -61,10 +53,8 @@ class Controller(NamedTuple):
 
 
 class Scorer(NamedTuple):
-    """Metrics folded over a run: ``init(example) -> score``, where ``example()`` gives the
-    FDI output's structure (``jax.ShapeDtypeStruct`` leaves; it traces one step, so call
-    it only when the score's shape depends on the output); ``update(score, k, output)
-    -> score``.
+    """Metrics folded over a run; ``example()`` gives the FDI output's structure (``jax.ShapeDtypeStruct`` leaves; it
+    traces one step: call it only when the score's shape depends on the output).
 
     Attributes:
       init: ``init(example) -> score``, the score before the first step

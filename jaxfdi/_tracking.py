@@ -1,13 +1,8 @@
 """Scores of a plant's true state folded over a closed-loop run (tracking errors).
 
-``loop.run_loop``'s scorers see what the FDI outputs; how well a controller follows its
-command is a property of the *true* state, which only the plant knows. ``tracked_plant``
-wraps a ``loop.Plant`` so that its state also carries a ``TrackingScore`` of
-``error(k, sensed)`` (``sensed``: what ``measure`` returned at step ``k``, e.g. a
-``simulate.Sensed`` with the true ``state``): per component, the sum of squares, the
-largest absolute value and the number of steps scored, over the steps where
-``active(k)``. A run keeps ``3 d`` numbers instead of a (T, n) history; the score is
-``LoopResult.final[0][1]``.
+``run_loop``'s scorers see the FDI outputs; tracking is a property of the *true* state, which only the plant knows, so
+``tracked_plant`` folds a ``TrackingScore`` into the plant's state: ``3 d`` numbers per run instead of a (T, n) history,
+read at ``LoopResult.final[0][1]``.
 """
 from __future__ import annotations
 
@@ -52,7 +47,8 @@ def tracking_update(score: TrackingScore, error: Array, active: Array) -> Tracki
 
 def tracked_plant(plant, error: Callable[[Array, Any], Array], size: int,
                   active: Callable[[Array], Array] | None = None, dtype=None) -> Plant:
-    """``plant`` (a ``loop.Plant``) whose state is ``(state, TrackingScore)``.
+    """``plant`` (a ``loop.Plant``) whose state is ``(state, TrackingScore)`` of ``error(k, sensed)`` over the steps
+    where ``active(k)`` (``sensed``: what ``measure`` returned, e.g. a ``simulate.Sensed`` with the true ``state``).
 
     Args:
       plant: the plant to wrap.

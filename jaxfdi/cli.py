@@ -1,12 +1,9 @@
 """Command line: ``jaxfdi run <scenario>``, ``jaxfdi tune <target>``, ``jaxfdi list``.
 
-Every option is checked before anything is computed (``check_options``, then the
-scenario's method or parameter names); a bad one ends the command with exit status 2
-and one line on stderr, ``jaxfdi: --option: expected ..., got ...``. A study writes its
-files into a temporary folder inside ``--out``, published together when it is done
-(``jaxfdi._io.study_output``); SIGINT, SIGTERM and SIGHUP leave ``--out`` as it was.
-A new scenario is a ``Runner`` in ``RUNNERS`` (a tuning target one in ``TUNERS``): its
-``run(args, folder)`` writes into ``folder`` and gets all of this for free.
+Options are checked before anything is computed (``check_options``, then method or parameter names); a bad one: exit
+status 2, one stderr line ``jaxfdi: --option: expected ..., got ...``. Files go to a temporary folder inside ``--out``,
+published together when done (``jaxfdi._io.study_output``); SIGINT, SIGTERM, SIGHUP leave ``--out`` as it was. A new
+scenario is a ``Runner`` in ``RUNNERS`` (tuning target: ``TUNERS``).
 """
 from __future__ import annotations
 
@@ -59,8 +56,8 @@ INTEGER_RANGES = {"runs": (1, MAX_COUNT), "seed": (0, MAX_SEED), "window": (1, M
 FLOAT_RANGES = {"pfa": (0.0, 1.0, False, False), "detection_weight": (0.0, math.inf, True, False),
                 "false_alarm_weight": (0.0, math.inf, True, False), "delay_weight": (0.0, math.inf, True, False),
                 "isolation_weight": (0.0, math.inf, True, False)}
-#: options only some scenarios read: dest -> default. The parser's default is None, so that
-#: an option given to a scenario that does not read it is refused rather than ignored.
+#: options only some scenarios read: dest -> default. The parser's default is None, so that an option given to a
+#: scenario that does not read it is refused rather than ignored.
 RUN_SPECIFIC = {"methods": None, "window": 4, "pfa": 0.005, "estimator": "ekf", "engage_on": "nis"}
 TUNE_SPECIFIC = {"design": "all", "detection_weight": 1.0, "isolation_weight": 5.0, "confirm_steps": 1,
                  "freeze": "", "select_thresholds": False, "selection_runs": 100, "windows": "1,2,4,8"}
@@ -71,13 +68,11 @@ NUM_ENGINE_MODES = 7
 class Runner(NamedTuple):
     """A ``jaxfdi run`` scenario or ``jaxfdi tune`` target.
 
-    ``run(args, folder)`` computes, prints its tables, writes its files into ``folder``
-    (a temporary folder, published into ``--out`` once ``run`` returns) and returns the
-    line that names them under ``--out`` (printed once they are in place). ``options``:
-    the scenario-specific options it reads (dest names of ``RUN_SPECIFIC`` or
-    ``TUNE_SPECIFIC``; the others are refused). ``methods``: the valid ``--methods``
-    names (``None``: one method, no ``--methods``). ``check(args)``:
-    further checks that need the scenario's module, raising ``UsageError`` (``expected``)."""
+    - ``run(args, folder)``: computes, prints tables, writes files into ``folder`` (temporary, published into ``--out``
+      when it returns); returns the line naming them under ``--out``.
+    - ``options``: the scenario-specific options it reads (dest names of ``RUN_SPECIFIC``/``TUNE_SPECIFIC``; others
+      refused); ``methods``: valid ``--methods`` names (``None``: no ``--methods``); ``check(args)``: further checks
+      needing the scenario's module, raising ``UsageError`` (``expected``)."""
     run: Callable[[argparse.Namespace, Path], str]
     help: str
     options: tuple[str, ...] = ()
@@ -124,9 +119,8 @@ def _named(args: argparse.Namespace, folder: Path, path) -> Path:
 
 def _write_study(study, args: argparse.Namespace, folder: Path, name: str, plot: Callable[[Path], list[str]],
                  elapsed: float) -> str:
-    """A scenario study's JSON (config, rows, seconds), its table as CSV beside it
-    (``study.to_frame()``: the same rows, one per method and case, with the rates'
-    intervals) and its figures, and the line that names them."""
+    """Write a study's JSON (config, rows, seconds), its CSV table (``study.to_frame()``, with the rates' intervals) and
+    figures; returns the line naming them."""
     _io.write_json(folder / name, {"config": study.config, "rows": study.rows, "seconds": elapsed})
     csv = Path(name).with_suffix(".csv")
     _io.atomic_write(folder / csv, lambda tmp: study.to_frame().to_csv(tmp, index=False))
@@ -169,8 +163,8 @@ def split_methods(text: str, valid: list[str]) -> tuple[list[str], list[str]]:
 
 
 def _methods_option(args: argparse.Namespace) -> dict:
-    """``{"methods": [...]}`` when the user gave ``--methods`` (checked by ``main``),
-    else ``{}`` (so a study without that keyword still runs)."""
+    """``{"methods": [...]}`` when the user gave ``--methods`` (checked by ``main``), else ``{}`` (so a study without
+    that keyword still runs)."""
     return {} if args.methods is None else {"methods": list(args.methods)}
 
 
@@ -361,8 +355,8 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
 
 def _study_runner(study: Callable, name: str, plot: Callable, header: Callable[[dict, argparse.Namespace], str],
                   runs: str = "runs") -> Callable[[argparse.Namespace, Path], str]:
-    """A runner for a study with a one-line header: ``study(<runs>=--runs, seed, progress)``,
-    its header and table printed, its JSON and figures (``plot(study, folder)``) written."""
+    """A runner for a study with a one-line header: ``study(<runs>=--runs, seed, progress)``, its header and table
+    printed, its JSON and figures (``plot(study, folder)``) written."""
 
     def run(args: argparse.Namespace, folder: Path) -> str:
         start = time.perf_counter()
@@ -452,8 +446,8 @@ TUNERS = {
 RUN_HELP = {name: runner.help for name, runner in RUNNERS.items()}
 TUNE_HELP = {name: runner.help for name, runner in TUNERS.items()}
 
-#: ``jaxfdi --help``'s account of the checks and exit statuses (no line may start with
-#: two spaces: the help test reads those as tuning targets)
+#: ``jaxfdi --help``'s account of the checks and exit statuses (no line may start with two spaces: the help test reads
+#: those as tuning targets)
 CHECKS_HELP = """\
 Options are checked before anything is computed: integers in range (--runs, --train-runs,
 --selection-runs, --steps, --window, --windows, --confirm-steps >= 1; --seed in
@@ -476,8 +470,7 @@ def _listing(title: str, entries: dict[str, str]) -> str:
 
 
 def _version_line() -> str:
-    """``jaxfdi --version``: jaxfdi's version (from the package metadata, without
-    importing JAX)."""
+    """``jaxfdi --version``: jaxfdi's version (from the package metadata, without importing JAX)."""
     from importlib import metadata
 
     try:
@@ -488,9 +481,8 @@ def _version_line() -> str:
 
 
 def _select_agg_backend() -> None:
-    """The CLI draws figures into files: select matplotlib's Agg backend unless a
-    backend was chosen explicitly (``MPLBACKEND``); the library's plotting functions
-    never change the backend themselves."""
+    """The CLI draws figures into files: select matplotlib's Agg backend unless a backend was chosen explicitly
+    (``MPLBACKEND``); the library's plotting functions never change the backend themselves."""
     if os.environ.get("MPLBACKEND"):
         return
     try:
@@ -501,8 +493,8 @@ def _select_agg_backend() -> None:
 
 
 def _add_process_options(run: argparse.ArgumentParser) -> None:
-    """Multi-host Monte Carlo (``jaxfdi.distributed``): every process runs the same
-    command; only process 0 writes ``--out``."""
+    """Multi-host Monte Carlo (``jaxfdi.distributed``): every process runs the same command; only process 0 writes
+    ``--out``."""
     group = run.add_argument_group("several processes (one study over hosts; jaxfdi.distributed)")
     group.add_argument("--num-processes", default=None,
                        help="processes of the study (default: JAXFDI_NUM_PROCESSES, else 1)")
@@ -599,11 +591,9 @@ def _counts(option: str, text: str) -> tuple[int, ...]:
 
 
 def check_options(args: argparse.Namespace, kind: str, name: str, runner: Runner) -> None:
-    """Refuse what ``jaxfdi <kind> <name>`` cannot use (``UsageError``): an option the
-    scenario does not read, an integer out of range, a real number that is not finite
-    or out of range, a malformed list, an output folder that cannot be written. Fills
-    in the defaults of the scenario-specific options. Pure Python: nothing imported,
-    nothing computed, nothing left behind (a probe file tests ``--out``)."""
+    """``UsageError`` for what ``jaxfdi <kind> <name>`` cannot use: an option it does not read, an out-of-range integer,
+    a non-finite or out-of-range real, a malformed list, an unwritable ``--out`` (probe file); fills in the
+    scenario-specific defaults. Pure Python: nothing imported, computed or left behind."""
     specific = RUN_SPECIFIC if kind == "run" else TUNE_SPECIFIC
     registry = RUNNERS if kind == "run" else TUNERS
     reads = set(runner.options) | ({"methods"} if runner.methods is not None else set())
@@ -644,8 +634,8 @@ def check_options(args: argparse.Namespace, kind: str, name: str, runner: Runner
 
 
 def _raised_by_jaxfdi(error: BaseException) -> bool:
-    """Whether ``error`` comes from a ``raise`` statement in jaxfdi's own code (its
-    argument checks), not from inside JAX, NumPy or Python (a bug: shown as a traceback)."""
+    """Whether ``error`` comes from a ``raise`` statement in jaxfdi's own code (its argument checks), not from inside
+    JAX, NumPy or Python (a bug: shown as a traceback)."""
     tb = error.__traceback__
     if tb is None:
         return False
@@ -659,16 +649,10 @@ def _raised_by_jaxfdi(error: BaseException) -> bool:
 
 @contextlib.contextmanager
 def _signals_raise() -> Iterator[None]:
-    """SIGTERM and SIGHUP raise ``Terminated`` (SIGINT raises ``KeyboardInterrupt`` as
-    usual) in the main thread, so that the clean-up in ``_io.study_output`` runs; a signal
-    set to be ignored (``nohup``) stays ignored. The previous handlers come back on exit.
-
-    Python runs a signal handler at the next bytecode of the main thread, which may be a
-    garbage-collector callback or a ``__del__`` (JAX's ``_xla_gc_callback``): there the
-    exception is printed and dropped, and the study would go on to publish its files. So
-    while this is active, a dropped ``KeyboardInterrupt`` (``Terminated`` included) is
-    delivered again 10 ms later (``_thread.interrupt_main`` from a timer thread), until it
-    lands in ordinary code."""
+    """SIGTERM and SIGHUP raise ``Terminated`` (SIGINT: ``KeyboardInterrupt``) in the main thread, so
+    ``_io.study_output``'s clean-up runs; an ignored signal (``nohup``) stays ignored; old handlers restored on exit.
+    A handler raising in a GC callback or ``__del__`` (JAX's ``_xla_gc_callback``) is printed and dropped, so a dropped
+    ``KeyboardInterrupt`` is delivered again 10 ms later (``_thread.interrupt_main``, timer thread) until it lands."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -704,10 +688,8 @@ def _fail(message: str, status: int) -> int:
 
 
 def _die_by(signum: int) -> None:
-    """End the process by ``signum``'s default action, now: the parent sees it killed by
-    the signal (a shell: status 128 + signum), as the convention for SIGINT asks, and the
-    interpreter does not shut down while XLA may still be compiling in a worker thread
-    (that shutdown can crash: the worker calls back into a finalised interpreter)."""
+    """End the process by ``signum``'s default action now: the parent sees it killed by the signal (shell: 128 + signum,
+    the SIGINT convention), and no interpreter shutdown while XLA may compile in a worker (that can crash)."""
     sys.stdout.flush()
     sys.stderr.flush()
     signal.signal(signum, signal.SIG_DFL)
@@ -719,9 +701,9 @@ def _die_by(signum: int) -> None:
 def main(argv: list[str] | None = None) -> int:
     """The command line; returns the exit status (0 done, 2 bad usage or option value).
 
-    Interrupted by SIGINT, SIGTERM or SIGHUP, it cleans up (``--out`` as it was), prints
-    one line, then: run as the program (``argv`` None: ``jaxfdi``, ``python -m jaxfdi``)
-    it ends by that signal (``_die_by``); called with ``argv`` it returns 128 + signum."""
+    Interrupted by SIGINT, SIGTERM or SIGHUP, it cleans up (``--out`` as it was), prints one line, then: run as the
+    program (``argv`` None: ``jaxfdi``, ``python -m jaxfdi``) it ends by that signal (``_die_by``); called with ``argv``
+    it returns 128 + signum."""
     args = build_parser().parse_args(argv)
     if args.command == "list":
         print("\n".join([*sorted(RUNNERS), *(f"tune {name}" for name in sorted(TUNERS))]))
@@ -772,8 +754,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _process_options(args: argparse.Namespace) -> tuple:
-    """``--num-processes/--process-id/--coordinator`` (or the environment), checked
-    (pure Python); ``(None, None, None)`` for one process."""
+    """``--num-processes/--process-id/--coordinator`` (or the environment), checked (pure Python);
+    ``(None, None, None)`` for one process."""
     try:
         return distributed.resolve_options(args.num_processes, args.process_id, args.coordinator)
     except ValueError as e:
@@ -781,9 +763,9 @@ def _process_options(args: argparse.Namespace) -> tuple:
 
 
 def _join_processes(args: argparse.Namespace, processes) -> str | None:
-    """Join the other processes (``jax.distributed``, before any JAX work); processes
-    other than 0 write into a scratch folder, removed at the end (process 0 writes
-    ``--out``: every process has the whole gathered study). Returns that folder."""
+    """Join the other processes (``jax.distributed``, before any JAX work); processes other than 0 write into a scratch
+    folder, removed at the end (process 0 writes ``--out``: every process has the whole gathered study). Returns that
+    folder."""
     if processes is None or processes[0] is None or processes[0] <= 1:
         return None
     distributed.initialize(*processes)

@@ -1,18 +1,13 @@
-"""What every filter in jaxfdi has in common: its shape, its outputs and its driver.
+"""What every filter has in common: ``Filter(init, step)``, its outputs and its driver.
 
-A filter is a ``Filter(init, step)`` of pure functions (optax/blackjax style). The
-state carried between steps is the *prior* of the current step, ``x[k|k-1]``: ``step``
-conditions it on ``y[k]`` and then predicts ``x[k+1|k]`` with ``u[k]``. This matches
-``x[k+1] = f(x[k], u[k])``, ``y[k] = h(x[k], u[k])`` with no off-by-one in the inputs.
+The carried state is the prior ``x[k|k-1]``: ``step`` conditions it on ``y[k]``, then predicts ``x[k+1|k]`` with
+``u[k]`` (matching ``x[k+1] = f(x[k], u[k])``, ``y[k] = h(x[k], u[k])``).
 
-A dead sensor is evidence, never poison. A non-finite component of ``y`` (with
-``missing_measurements=True``, where NaN means 'not measured', an infinite one) does
-not reach the state: the update takes the prediction for it (a zero innovation), and
-the step reports a NaN innovation for that component and ``nis = +inf``, which every
-detector reads as an alarm on that channel. Without ``missing_measurements`` the
-covariance is updated as if the component had been measured, which keeps covariances
-independent of the data (one for all Monte Carlo runs) at the price of an optimistic
-covariance while the channel is dead; ``missing_measurements=True`` excludes it exactly.
+A dead sensor is evidence, never poison: a non-finite component of ``y`` (with ``missing_measurements=True``, where
+NaN means 'not measured': an infinite one) never reaches the state (zero innovation); the step reports a NaN
+innovation for it and ``nis = +inf``, an alarm for every detector. Without ``missing_measurements`` the covariance
+is updated as if it had been measured (data-independent covariances, one for all Monte Carlo runs, optimistic while
+the channel is dead); ``missing_measurements=True`` excludes it exactly.
 """
 from __future__ import annotations
 
@@ -43,10 +38,8 @@ class GaussianState(NamedTuple):
 
 
 class FilterInfo(NamedTuple):
-    """Per-step outputs shared by all Gaussian filters (KF, EKF, UKF), so that detectors,
-    metrics and the contract tests treat them alike; also what a measurement update
-    returns (``predicted_*``: the prior it conditioned; ``healthy``: S positive definite and
-    x[k|k] finite, to which the step adds P[k|k] and the prediction).
+    """Per-step outputs of every Gaussian filter (KF, EKF, UKF); also a measurement update's result
+    (``predicted_*``: its prior; ``healthy``: S positive definite, x[k|k] finite; the step adds P[k|k], prediction).
 
     Attributes:
       predicted_mean: (n,) x[k|k-1]
@@ -74,22 +67,16 @@ class FilterInfo(NamedTuple):
 
 
 class BatchKernel(NamedTuple):
-    """A filter's step for a whole batch of runs in a layout of its own (e.g. structure of
-    arrays), which ``run_filter`` uses for N runs instead of ``vmap`` when a filter has one.
+    """A filter's step for N runs in a layout of its own (e.g. structure of arrays); ``run_filter`` uses it instead of
+    ``vmap``.
 
-    ``pack(state, N)`` lays out the prior shared by the N runs; ``step(carry, y, u)``
-    takes ``y`` (m, N) and ``u`` (nu, N) or (nu, 1); ``unpack_state(carry)`` and
-    ``unpack_info(info)`` (the step's info stacked over time) give back what
-    ``vmap(run_filter)`` gives: a leading run axis on every field.
-
-    ``per_run_only``: the kernel is for runs with their own prior (``pack`` then also
-    takes a ``GaussianState`` with a leading run axis); runs that share the prior keep
-    the ``vmap`` path (the linear KF's, whose covariances XLA computes once).
-
-    ``info_runs_first``: ``step`` returns its info with the run axis first, (N, ...);
-    the driver then writes each step into (N, T, ...) buffers and ``unpack_info`` is not
-    used (a transpose of the stacked info's innermost axis costs as much as a Kalman
-    filter on 100 runs of 1000 steps).
+    - ``pack(state, N)``: lays out the prior shared by the N runs; ``step(carry, y, u)``: ``y`` (m, N), ``u`` (nu, N) or
+      (nu, 1); ``unpack_state(carry)``, ``unpack_info(info stacked over time)``: what ``vmap(run_filter)`` gives (a
+      leading run axis on every field).
+    - ``per_run_only``: only for runs with their own prior (``pack`` also takes a ``GaussianState`` with a run axis);
+      shared-prior runs keep ``vmap`` (the linear KF's, whose covariances XLA computes once).
+    - ``info_runs_first``: ``step`` returns info as (N, ...), written into (N, T, ...) buffers; ``unpack_info`` unused
+      (transposing the stacked info's innermost axis costs a KF on 100 runs of 1000 steps).
     """
 
     pack: Callable[[Any, int], Any]
@@ -105,32 +92,18 @@ ModelFunction = Callable[[Array, Array, Any], Array]
 
 
 class Filter(NamedTuple):
-    """A filter as pure functions.
-
-    ``init(mean, cov) -> state`` builds the prior of the first step;
-    ``step(state, y, u) -> (state, info)`` conditions on ``y[k]`` and predicts with ``u[k]``.
-
-    Gaussian filters (KF, EKF, UKF) also expose the two halves of ``step``, which is
-    what multiple-model filters need to mix between them:
-    ``update(state, y, u) -> FilterInfo`` and
-    ``predict(posterior: GaussianState, u) -> GaussianState``; ``step`` is
-    ``predict(update(...))`` plus the ``FilterInfo``.
-
-    ``batch``, when present, is the same step for a batch of runs (``BatchKernel``),
-    what ``run_filter`` runs for N runs; ``parallel``, when present, is the whole
-    sequence as an associative scan, ``parallel(init_state, ys, us) -> (final, info)``,
-    what ``run_filter(..., parallel=True)`` runs.
+    """A filter as pure functions; Gaussian filters (KF, EKF, UKF) also expose ``step``'s halves, which multiple-model
+    filters mix between: ``step`` is ``predict(update(...))`` plus the ``FilterInfo``.
 
     Attributes:
-      init: ``init(mean, cov) -> state``, the prior of the first step (some filters take
-        more arguments)
-      step: ``step(state, y, u) -> (state, info)``: ``y`` (m,), ``u`` (nu,); the next prior
-        and the step's outputs (``FilterInfo`` for the Gaussian filters)
+      init: ``init(mean, cov) -> state``, the prior of the first step (some filters take more arguments)
+      step: ``step(state, y, u) -> (state, info)``: conditions on ``y[k]`` (m,), predicts with ``u[k]`` (nu,); the next
+        prior and the step's outputs (``FilterInfo`` for the Gaussian filters)
       update: ``update(state, y, u) -> FilterInfo``, or ``None``
       predict: ``predict(posterior: GaussianState, u) -> GaussianState``, or ``None``
-      batch: ``BatchKernel`` for N runs at once, or ``None``
-      parallel: ``parallel(init_state, ys, us) -> (final, info)``, the associative scan
-        over (T, m) measurements, or ``None``
+      batch: ``BatchKernel`` for N runs at once (what ``run_filter`` runs for a batch), or ``None``
+      parallel: ``parallel(init_state, ys, us) -> (final, info)``, the associative scan over (T, m) measurements
+        (``run_filter(..., parallel=True)``), or ``None``
     """
 
     init: Callable[..., Any]
@@ -142,8 +115,7 @@ class Filter(NamedTuple):
 
 
 def finish_step(post: FilterInfo, prediction: GaussianState, unroll: bool = True):
-    """The next state and the step's ``FilterInfo``, whose ``healthy`` also checks that
-    ``P[k|k]`` is positive definite and the prediction finite."""
+    """The next state and the step's ``FilterInfo``; ``healthy`` also checks P[k|k] PD and the prediction finite."""
     chol_P = _linalg.cholesky(post.filtered_cov, unroll)
     healthy = (post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
                & ~jnp.isnan(post.nis) & jnp.isfinite(post.log_likelihood))  # an overflowing outlier
@@ -156,8 +128,8 @@ def gaussian_filter(
     predict: Callable[[GaussianState, Array], GaussianState],
     unroll_factorizations: bool = True,
 ) -> Filter:
-    """A ``Filter`` from its measurement update and time update (state size ``n``);
-    ``unroll_factorizations`` as for the positive-definiteness check of ``P[k|k]``."""
+    """A ``Filter`` from its measurement and time updates (state size ``n``); ``unroll_factorizations``: P[k|k]'s
+    PD check."""
 
     def step(state: GaussianState, y: Array, u: Array):
         post = update(state, y, u)
@@ -177,9 +149,8 @@ def gaussian_init(n: int, name: str = "filter") -> Callable[[Array, Array], Gaus
 
 
 def check_gaussian(mean: Array, cov: Array, n: int, names: tuple[str, str] = ("mean", "cov")) -> tuple[Array, Array]:
-    """A Gaussian prior ``N(mean, cov)`` of size ``n``: real finite ``mean`` (n,), a
-    covariance ``cov`` (n, n); both returned in one float dtype (an integer mean must not
-    make the covariance integer)."""
+    """A prior ``N(mean, cov)``: real finite ``mean`` (n,), covariance ``cov`` (n, n), returned in one float dtype (an
+    integer mean must not make the covariance integer)."""
     _checks.check_real(names[0], mean, "a real initial state mean")
     _checks.check_shape(names[0], mean, (n,), "initial state mean")
     _checks.check_finite(names[0], mean, "initial state mean")
@@ -204,8 +175,7 @@ def check_filter(filt: Any, name: str = "filt") -> None:
 
 
 def check_sequences(ys: Any, us: Any, ys_shape: str, us_shapes: str) -> None:
-    """Trace-time checks of a driver's measurement and input sequences: real numbers
-    (NaN in ``ys`` means 'missing'; ``us`` must be finite when concrete)."""
+    """Trace-time checks of a driver's sequences: real (NaN in ``ys``: 'missing'; ``us`` finite when concrete)."""
     _checks.check_real("ys", ys, f"real measurements of shape {ys_shape}")
     if us is not None:
         _checks.check_real("us", us, f"real inputs of shape {us_shapes}")
@@ -219,28 +189,26 @@ def observed_mask(y: Array) -> tuple[Array, Array, Array]:
 
 
 def dead_components(y: Array, missing_measurements: bool) -> Array:
-    """Components of ``y`` that are evidence of a dead sensor: every non-finite one, or
-    with ``missing_measurements`` (NaN: 'not measured') the infinite ones."""
+    """Dead-sensor components of ``y``: non-finite ones, or with ``missing_measurements`` (NaN: 'not measured') the
+    infinite ones."""
     return jnp.isinf(y) if missing_measurements else ~jnp.isfinite(y)
 
 
 def used_innovation(y: Array, y_pred: Array) -> Array:
-    """``y - y_pred`` where ``y`` is finite and 0 (the prediction) where it is not: what a
-    filter's update may use, so that a dead sensor never reaches the state."""
+    """``y - y_pred`` where ``y`` is finite, else 0 (the prediction): a dead sensor never reaches the state."""
     finite = jnp.isfinite(y)
     return jnp.where(finite, y, 0.0) - jnp.where(finite, y_pred, 0.0)
 
 
 def report_dead(innovation: Array, nis: Array, dead: Array, axis: int = 0) -> tuple[Array, Array]:
-    """What a step reports for dead components (``dead_components``): NaN in the
-    innovation, so a detector can tell which channel, and ``nis = +inf`` (data the model
-    gives zero likelihood), which exceeds every threshold. The state did not use them."""
+    """A step's report of dead components (``dead_components``, unused by the state): NaN innovation (names the channel)
+    and ``nis = +inf`` (zero likelihood, above every threshold)."""
     return jnp.where(dead, jnp.nan, innovation), jnp.where(jnp.any(dead, axis=axis), jnp.inf, nis)
 
 
 def observed_rows(mask: Array, C: Array, R: Array) -> tuple[Array, Array]:
-    """``(C, R)`` with the rows (and columns of ``R``) of missing components zeroed: they
-    neither update the state nor enter ``S`` (then ``mask_innovation_cov``)."""
+    """``(C, R)`` with missing components' rows (and ``R``'s columns) zeroed: out of the state and ``S`` (then
+    ``mask_innovation_cov``)."""
     return jnp.where(mask[:, None], C, 0.0), jnp.where(mask[:, None] & mask[None, :], R, 0.0)
 
 
@@ -261,39 +229,27 @@ def run_filter(
 ) -> tuple[Any, Any]:
     """Run a filter over one sequence, or over a batch of sequences (Monte Carlo runs).
 
-    The one driver of every ``Filter``. One sequence ``ys`` (T, m) is one ``lax.scan`` of
-    ``filt.step``; with ``parallel=True`` it is the filter's associative scan instead
-    (O(log T) depth; the linear Kalman filter built with ``missing_measurements=True``),
-    the same outputs to round-off. A batch ``ys`` (N, T, m) runs all N sequences at once:
-    a filter with a structure-of-arrays kernel (the IMM over ``kalman_filter`` modes; the
-    linear KF when the runs have their own prior) runs it, any other filter is
-    vmapped. When every run shares the model and the initial covariance, a linear Kalman
-    filter's covariances, gains and innovation covariances do not depend on the data:
-    they are computed once for the batch and returned once, without the run axis.
-    ``jax.vmap(run_filter)`` over runs (prior, ``ys``, ``us``) reaches the same batch
-    kernel; its derivative is the scan's.
+    One sequence ``ys`` (T, m): a ``lax.scan`` of ``filt.step``, or with ``parallel=True`` the associative scan (O(log
+    T) depth; linear KF with ``missing_measurements=True``; same outputs to round-off). A batch (N, T, m): the filter's
+    structure-of-arrays kernel (IMM over ``kalman_filter`` modes; linear KF with per-run priors), else vmap; a linear KF
+    whose runs share model and initial covariance computes covariances, gains and innovation covariances once, returned
+    without the run axis. ``jax.vmap(run_filter)`` over runs reaches the same kernel; its derivative is the scan's.
 
     Args:
       filt: a ``Filter``.
-      init_state: ``filt.init(mean, cov)``, the prior of the first step; for a batch of a
-        Gaussian filter also one per run, ``GaussianState(mean (N, n), cov (N, n, n))``
-        (either of the two may be shared).
-      ys: (T, m) measurements of one run, or (N, T, m) of N runs (NaN = not measured
-        for filters built with ``missing_measurements=True``; any other non-finite value
-        is a dead sensor, reported and kept out of the state).
-      us: (T, nu) inputs (shared by the runs of a batch), (N, T, nu) per run, or ``None``
-        for a model without inputs.
+      init_state: ``filt.init(mean, cov)``, the first prior; for a Gaussian batch also per run,
+        ``GaussianState(mean (N, n), cov (N, n, n))`` (either may be shared).
+      ys: (T, m) one run, or (N, T, m) N runs (NaN = not measured with ``missing_measurements=True``; any other
+        non-finite value: a dead sensor, reported and kept out of the state).
+      us: (T, nu) inputs (shared by a batch), (N, T, nu) per run, or ``None`` (no inputs).
       parallel: run the associative scan (``ValueError`` for a filter without one).
-      shared_covariance: for a batch: ``True``: return ``predicted_cov``,
-        ``filtered_cov``, ``innovation_cov`` and the final covariance without the run axis
-        (a ``ValueError`` if they depend on the run: a nonlinear filter, or
-        ``missing_measurements=True``); ``False``: with the run axis, always; ``"auto"``:
-        shared when they are.
+      shared_covariance: for a batch: ``True``: ``predicted_cov``, ``filtered_cov``, ``innovation_cov`` and the final
+        covariance without the run axis (``ValueError`` if they depend on the run: nonlinear filter,
+        ``missing_measurements=True``); ``False``: with it, always; ``"auto"``: shared when they are.
 
     Returns:
-      ``(final_state, info)``: the prior for step T and the per-step outputs stacked
-      along a leading time axis (``info.filtered_mean`` is (T, n)), after a leading run
-      axis N for a batch.
+      ``(final_state, info)``: the prior for step T and per-step outputs stacked on a leading time axis
+      (``info.filtered_mean`` (T, n)), after a leading run axis N for a batch.
     """
     check_filter(filt)
     check_sequences(ys, us, "(T, m) for one run or (N, T, m) for N runs", "(T, nu) or (N, T, nu)")
@@ -312,9 +268,8 @@ def run_filter(
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
     _checks.check_same_length(("ys", "us"), ys, us)
-    # One sequence, no batch: on CPU dot and LAPACK (_linalg's module doc); on a GPU the
-    # written-out algebra (a cuSOLVER call per 7x7 factorisation made the engine KF 2.8x
-    # slower than it on an H200, benchmarks/RESULTS.md).
+    # One sequence: on CPU dot and LAPACK (_linalg); on a GPU written-out algebra (a cuSOLVER call per 7x7 factorisation
+    # made the engine KF 2.8x slower on an H200, benchmarks/RESULTS.md).
     library = _linalg.library_calls if jax.default_backend() == "cpu" else contextlib.nullcontext
     if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((init_state, ys, us))):
         with library():
@@ -329,16 +284,13 @@ def run_filter(
 
 
 def _only_staged(values) -> bool:
-    """Whether every tracer among ``values`` is ``jit``'s, none an outer ``vmap``'s or
-    ``grad``'s (which want the written-out algebra of ``_linalg``)."""
+    """Every tracer among ``values`` is ``jit``'s, none an outer ``vmap``'s or ``grad``'s (written-out algebra)."""
     return all(isinstance(v, DynamicJaxprTracer) or not isinstance(v, jax.core.Tracer) for v in values)
 
 
 def _batchable_scan(filt: Filter) -> Callable[[Any, Array, Array], tuple[Any, Any]]:
-    """The scan of one sequence, whose batching rule (``jax.vmap`` over runs) is
-    ``run_filter`` on the batch, i.e. the filter's batch kernel; its derivative is the
-    plain scan's (``custom_vmap`` has no transpose rule, so ``custom_jvp`` keeps reverse
-    mode on the scan)."""
+    """One sequence's scan whose ``jax.vmap`` over runs is the batch kernel; its derivative is the plain scan's
+    (``custom_vmap`` has no transpose rule, so ``custom_jvp`` keeps reverse mode on the scan)."""
 
     def scan(init_state, ys, us):
         return _scan_filter.__wrapped__(filt, init_state, ys, us)
@@ -417,11 +369,8 @@ def _run_batch(filt: Filter, init_state: Any, ys: Array, us: Array | None, paral
 
 
 def _covariance_sees_data(filt: Filter, prior: GaussianState, y: Array, u: Array, per_run_inputs: bool) -> bool:
-    """Whether a Gaussian filter's covariances depend on the data of a run: JAX's dead-code
-    analysis of the step's jaxpr (``dce_jaxpr``) says which inputs the next covariance and
-    the ``FilterInfo`` covariances need; if neither the mean, ``y`` nor per-run inputs,
-    the covariance of every step is the same for all runs sharing ``P0`` (the linear KF
-    without missing measurements)."""
+    """Whether a Gaussian filter's covariances depend on a run's data: ``dce_jaxpr`` of the step says which inputs the
+    covariances need; none of mean, ``y``, per-run inputs: shared by all runs with one ``P0`` (linear KF)."""
     mean, cov = (jnp.asarray(leaf) for leaf in prior)
     step = lambda mean, cov, y, u: filt.step(GaussianState(mean, cov), y, u)  # noqa: E731
     closed, out_shape = jax.make_jaxpr(step, return_shape=True)(mean[0] if mean.ndim == 2 else mean, cov, y, u)
@@ -433,8 +382,7 @@ def _covariance_sees_data(filt: Filter, prior: GaussianState, y: Array, u: Array
 
 
 def _prior_axes(init_state: GaussianState, num_runs: int) -> GaussianState:
-    """Which of ``mean``/``cov`` carry a leading run axis (0) or are shared (None);
-    checked against the number of runs."""
+    """Which of ``mean``/``cov`` carry a run axis (0) or are shared (None), checked against the run count."""
     mean_shape, cov_shape = _checks.shape_of(init_state.mean), _checks.shape_of(init_state.cov)
     if len(mean_shape) not in (1, 2) or len(cov_shape) not in (2, 3):
         raise ValueError(f"init_state: expected mean (n,) or (N, n) and cov (n, n) or (N, n, n), got shapes "
@@ -466,8 +414,8 @@ def _kernel_scan(kernel: BatchKernel, init_state: Any, ys: Array, us: Array):
 
 
 def kernel_scan(kernel: BatchKernel, init_state: Any, ys: Array, us: Array):
-    """The scan of a ``BatchKernel`` over ``ys`` (N, T, m) and ``us`` (T, nu) or
-    (N, T, nu); returns what ``vmap(run_filter)`` returns (not jitted: callers jit)."""
+    """A ``BatchKernel``'s scan over ``ys`` (N, T, m), ``us`` (T, nu) or (N, T, nu): what ``vmap(run_filter)`` returns
+    (not jitted: callers jit)."""
     num_runs, num_steps = ys.shape[:2]
     ys = jnp.moveaxis(ys, 0, -1)                                          # (T, m, N)
     us = jnp.moveaxis(us, 0, -1) if us.ndim == 3 else us[..., None]       # (T, nu, N or 1)
@@ -491,10 +439,8 @@ def kernel_scan(kernel: BatchKernel, init_state: Any, ys: Array, us: Array):
 
 @partial(jax.jit, static_argnums=0)
 def _scan_filter(filt: Filter, init_state: Any, ys: Array, us: Array) -> tuple[Any, Any]:
-    """The scan itself, compiled once per ``Filter`` object when called eagerly (a fresh
-    scan body would otherwise be traced and compiled on every call). Under an outer
-    transformation it is inlined instead: a nested ``jit`` boundary cost ~15 % on 100
-    vmapped engine runs."""
+    """The scan, compiled once per ``Filter`` eagerly (else retraced every call); inlined under an outer transformation
+    (a nested ``jit`` cost ~15 % on 100 vmapped engine runs)."""
 
     def body(state, yu):
         return filt.step(state, *yu)

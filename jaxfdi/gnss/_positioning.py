@@ -1,24 +1,19 @@
 """Snapshot positioning: iterated weighted least squares on pseudoranges, and DOPs.
 
-Model (Misra & Enge 2011, ch. 6): ``rho_i = |r_i - x| + b - c dt_i + eps_i`` with
-``r_i`` the satellite position at transmission in the ECEF frame of reception (Sagnac
-rotation), ``b`` the receiver clock bias [m] and ``dt_i`` the broadcast satellite clock.
-The transmission time comes from the measurement itself,
-``t_tx = t_rx - rho_i / c - dt_i`` (``t_rx`` the receiver's time tag), so satellite
-positions do not depend on the position estimate. Gauss-Newton from the Earth's centre:
-``H = [-u_i^T, 1]`` (``u_i`` the unit line of sight), the step solves the whitened
-least-squares problem by the masked Householder QR of ``least_squares``; rows of unused
-slots are zero, so the shapes never depend on how many satellites are in view.
+Model (Misra & Enge 2011, ch. 6): ``rho_i = |r_i - x| + b - c dt_i + eps_i``, ``r_i`` the satellite position at
+transmission in the ECEF frame of reception (Sagnac rotation), ``b`` the receiver clock bias [m], ``dt_i`` the broadcast
+satellite clock; ``t_tx = t_rx - rho_i / c - dt_i`` (``t_rx`` the receiver's time tag), so satellite positions do not
+depend on the estimate. Gauss-Newton from the Earth's centre, ``H = [-u_i^T, 1]`` (``u_i`` the unit line of sight),
+each step the whitened problem by ``least_squares``' masked Householder QR; unused slots' rows are zero (shapes never
+depend on the satellites in view).
 
-Several constellations: one receiver clock per constellation (``clocks``, a slot's
-membership of each clock column), ``rho_i = |r_i - x| + b_c(i) - c dt_i + eps_i`` and
-``H = [-u_i^T, e_c(i)^T]``; a clock whose constellation has no used satellite stays at
-its start value and takes no degree of freedom (``least_squares``).
+Several constellations: one receiver clock each (``clocks``: a slot's clock column),
+``rho_i = |r_i - x| + b_c(i) - c dt_i + eps_i``, ``H = [-u_i^T, e_c(i)^T]``; a clock without used satellites stays at
+its start value and takes no degree of freedom.
 
-The returned geometry is expressed in local North-East-Down axes at the solution and
-the clock columns (``H_ned = [-u_ned^T, e_c^T]``), which is what RAIM's slopes and the DOPs
-use: ``(H^T H)^{-1}`` gives ``HDOP = sqrt(q_NN + q_EE)``, ``VDOP = sqrt(q_DD)``,
-``PDOP``, ``TDOP``, ``GDOP`` (Misra & Enge 2011, sec. 6.1.3).
+The returned geometry is in local North-East-Down axes at the solution, ``H_ned = [-u_ned^T, e_c^T]`` (RAIM's slopes,
+DOPs): ``(H^T H)^{-1}`` gives ``HDOP = sqrt(q_NN + q_EE)``, ``VDOP = sqrt(q_DD)``, ``PDOP``, ``TDOP``, ``GDOP`` (Misra &
+Enge 2011, sec. 6.1.3).
 """
 from __future__ import annotations
 
@@ -36,15 +31,15 @@ from jaxfdi.gnss._frames import ecef_to_geodetic, ned_rotation
 from jaxfdi.gnss._least_squares import apply_qt, leading, masked_qr
 from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, Orbit, earth_rotation, satellite_clock, satellite_state
 
-#: Gauss-Newton iterations from the Earth's centre (converged to 1e-8 m after 5 on
-#: 3000 epochs of the benchmark's day; one more as margin)
+#: Gauss-Newton iterations from the Earth's centre (converged to 1e-8 m after 5 on 3000 epochs of the benchmark's day;
+#: one more as margin)
 ITERATIONS = 6
 #: of which the first ones use unit weights (elevations are meaningless until then)
 UNWEIGHTED_ITERATIONS = 3
-#: epochs of a recorded trace are solved EPOCH_CHUNK at a time with the slots padded to a
-#: multiple of it, and several receiver clocks padded to the seven constellations Android
-#: reports (GPS, SBAS, GLONASS, QZSS, BeiDou, Galileo, NavIC): every trace of up to 64
-#: signals shares one compiled program (a padded slot is unused, a padded clock has no satellite)
+#: epochs of a recorded trace are solved EPOCH_CHUNK at a time with the slots padded to a multiple of it, and several
+#: receiver clocks padded to the seven constellations Android reports (GPS, SBAS, GLONASS, QZSS, BeiDou, Galileo,
+#: NavIC): every trace of up to 64 signals shares one compiled program (a padded slot is unused, a padded clock has no
+#: satellite)
 EPOCH_CHUNK = 64
 CONSTELLATIONS = 7
 
@@ -95,24 +90,21 @@ def padded_to(array, shape: tuple, fill) -> np.ndarray:
 
 
 def padded_sizes(epochs: int, slots: int, clocks: int) -> tuple[int, int, int]:
-    """The padded (epochs, slots, clocks) of ``EPOCH_CHUNK`` and ``CONSTELLATIONS``; one
-    clock stays one."""
+    """The padded (epochs, slots, clocks) of ``EPOCH_CHUNK`` and ``CONSTELLATIONS``; one clock stays one."""
     def up(n):
         return -(-n // EPOCH_CHUNK) * EPOCH_CHUNK
     return up(epochs), up(max(slots, 5)), max(clocks, CONSTELLATIONS) if clocks > 1 else clocks
 
 
-#: the leaves of a ``PositionFix`` and of the results built on it with a slot axis (after
-#: the epoch axis); ``geometry`` also has 3 + C clock columns, a per-constellation
-#: ``clock_bias`` C clocks
+#: the leaves of a ``PositionFix`` and of the results built on it with a slot axis (after the epoch axis); ``geometry``
+#: also has 3 + C clock columns, a per-constellation ``clock_bias`` C clocks
 SLOT_FIELDS = frozenset({"residuals", "geometry", "sigma", "used", "elevation", "azimuth", "isolation",
                          "slope_horizontal", "slope_vertical", "minimum_detectable_bias", "dead", "exclusions"})
 
 
 def resized(tree, epochs: int, slots: int, clocks: int, fills: dict | None = None):
-    """A fix or a result built on it (NumPy leaves, leading epoch axis) cut or padded to
-    ``epochs``, ``slots`` and ``clocks`` (``SLOT_FIELDS``); padding takes the leaf's
-    ``fills`` entry by field name (default 0 / False)."""
+    """A fix or a result built on it (NumPy leaves, leading epoch axis) cut or padded to ``epochs``, ``slots`` and
+    ``clocks`` (``SLOT_FIELDS``); padding takes the leaf's ``fills`` entry by field name (default 0 / False)."""
     def one(path, leaf):
         name = path[-1].name
         shape = [epochs, *leaf.shape[1:]]
@@ -127,9 +119,8 @@ def resized(tree, epochs: int, slots: int, clocks: int, fills: dict | None = Non
 
 
 def in_chunks(solve: Callable, epochs: int, *arrays):
-    """``solve(*chunk)`` on ``EPOCH_CHUNK`` epochs at a time of ``arrays`` (pytrees whose
-    leading axis is padded to a multiple of it), the results joined on the host and cut
-    back to ``epochs``: every padded trace reuses the one program of a chunk."""
+    """``solve(*chunk)`` on ``EPOCH_CHUNK`` epochs of ``arrays`` at a time (pytrees, leading axis padded to a multiple),
+    joined on the host and cut back to ``epochs``: one program for every padded trace."""
     rows = jax.tree_util.tree_leaves(arrays)[0].shape[0]
     chunks = [jax.tree_util.tree_map(np.asarray, solve(*jax.tree_util.tree_map(lambda a: a[k:k + EPOCH_CHUNK], arrays)))
               for k in range(0, rows, EPOCH_CHUNK)]
@@ -137,22 +128,21 @@ def in_chunks(solve: Callable, epochs: int, *arrays):
 
 
 def transmit_states(orbit: Orbit, t_receive: Array, pseudoranges: Array) -> tuple[Array, Array]:
-    """``(positions (S, 3), clocks (S,))``: satellite ECEF positions at transmission (frame of
-    transmission) and clock offsets [s] for pseudoranges time-tagged ``t_receive``."""
+    """``(positions (S, 3), clocks (S,))``: satellite ECEF positions at transmission (frame of transmission) and clock
+    offsets [s] for pseudoranges time-tagged ``t_receive``."""
     rho = jnp.where(jnp.isfinite(pseudoranges), pseudoranges, 0.0)
     t_sv = t_receive - rho / SPEED_OF_LIGHT
     return satellite_state(orbit, t_sv - satellite_clock(orbit, t_sv))
 
 
 def dops(geometry: Array, used: Array) -> Dops:
-    """DOPs of an (S, 3 + clocks) NED + clock geometry over the ``used`` rows (unit
-    weights); TDOP is the first clock's; a clock column without used rows is left out.
+    """DOPs of an (S, 3 + clocks) NED + clock geometry over the ``used`` rows (unit weights); TDOP is the first clock's;
+    a clock column without used rows is left out.
 
     Returns:
-      ``Dops(gdop, pdop, hdop, vdop, tdop)``, each a () dimensionless array from the
-      diagonal ``q`` of ``(H^T H)^{-1}``: ``sqrt(trace)``, ``sqrt(q_NN + q_EE + q_DD)``,
-      ``sqrt(q_NN + q_EE)``, ``sqrt(q_DD)`` and ``sqrt(q_tt)`` of the first clock column
-      (NaN when the used rows do not determine the unknowns: a singular ``H^T H``).
+      ``Dops(gdop, pdop, hdop, vdop, tdop)``, each a () dimensionless array from the diagonal ``q`` of ``(H^T H)^{-1}``:
+      ``sqrt(trace)``, ``sqrt(q_NN + q_EE + q_DD)``, ``sqrt(q_NN + q_EE)``, ``sqrt(q_DD)`` and ``sqrt(q_tt)`` of the
+      first clock column (NaN when the used rows do not determine the unknowns: a singular ``H^T H``).
     """
     _checks.check_shape("used", used, _checks.shape_of(geometry)[:1], "one flag per geometry row")
     h = jnp.where(used[:, None], geometry, 0.0)
@@ -170,8 +160,8 @@ def _absent_columns(h: Array) -> Array:
 
 
 def _predict(sat_tx: Array, sat_clock: Array, state: Array, membership: Array) -> tuple[Array, Array, Array]:
-    """Predicted pseudoranges, ECEF unit lines of sight and satellite positions (reception
-    frame) for ``state = [x, y, z, b_1..b_C]`` and the (S, C) clock ``membership``."""
+    """Predicted pseudoranges, ECEF unit lines of sight and satellite positions (reception frame) for
+    ``state = [x, y, z, b_1..b_C]`` and the (S, C) clock ``membership``."""
     travel = jnp.linalg.norm(sat_tx - state[:3], axis=-1) / SPEED_OF_LIGHT
     sat = earth_rotation(sat_tx, travel)
     delta = sat - state[:3]
@@ -201,31 +191,22 @@ def solve_position(
       t_receive: () receiver time tag [s from the reference week's start].
       pseudoranges: (S,) [m]; NaN where not measured.
       available: (S,) bool: slots to use (ANDed with a finite pseudorange).
-      sigma: (S,) standard deviations [m], or a function of the (S,) elevations [rad]
-        seen from the current estimate (applied after ``unweighted_iterations``), or
-        ``None`` (unit weights).
+      sigma: (S,) standard deviations [m], or a function of the (S,) elevations [rad] seen from the current estimate
+        (applied after ``unweighted_iterations``), or ``None`` (unit weights).
       initial: (3 + C,) ``[x, y, z, b_1..b_C]`` start (default the Earth's centre, clocks 0).
       iterations: Gauss-Newton steps (fixed count, so it jits and vmaps).
       transmit: ``transmit_states(orbit, t_receive, pseudoranges)`` if already computed.
-      solver: "normal" (the steps by the normal equations, a written-out 4 x 4 Cholesky:
-        cheapest under ``vmap``) or "qr" (the masked Householder QR); the fix agrees to
-        well below a millimetre (the RAIM statistics always use the QR).
-      atmosphere: the broadcast ionosphere (``broadcast_atmosphere``); then the predicted pseudoranges carry
-        the Klobuchar and Saastamoinen delays seen from the current estimate, and the
-        weights their error variances (``atmosphere_corrections``): ``sigma^2 + var``.
-      mask_angle: elevation mask [rad]: from the second step on, a slot below it as seen
-        from the current estimate is not used (``None``: no mask).
-      clocks: (S, C) bool, slot ``s`` on receiver clock ``c`` (one True per row: its
-        constellation); ``None``: one clock for every slot. The clock bias is then (C,).
+      solver: "normal" (normal equations, written-out 4 x 4 Cholesky: cheapest under ``vmap``) or "qr" (masked
+        Householder QR); fixes agree well below a millimetre (RAIM statistics always use the QR).
+      atmosphere: broadcast ionosphere (``broadcast_atmosphere``): predictions carry the Klobuchar and Saastamoinen
+        delays from the current estimate, weights ``sigma^2 + var`` (``atmosphere_corrections``).
+      mask_angle: elevation mask [rad], applied from the second step on from the current estimate (``None``: none).
+      clocks: (S, C) bool, slot ``s`` on receiver clock ``c`` (one True per row: its constellation); clock bias then
+        (C,); ``None``: one clock.
 
     Returns:
-      ``PositionFix``: the (3,) ECEF position [m] and () clock bias [m] after ``iterations``
-      steps; per slot (S,) the residuals (measured minus predicted) [m], the weights'
-      standard deviations (1 at unused slots), the ``used`` flags (available, finite and
-      above the mask), elevation and azimuth seen from the solution [rad]; the (S, 4) NED
-      + clock geometry ``[-u_ned^T, e_c^T]`` (zero rows at unused slots), its ``dops``,
-      ``num_used`` and ``healthy`` (at least 3 + the clocks in use, finite and the last
-      step below 1 cm).
+      ``PositionFix`` after ``iterations`` steps: ``sigma`` 1 at unused slots; ``used``: available, finite, above the
+      mask; ``geometry`` zero rows at unused slots; ``healthy``: >= 3 + the clocks in use, finite, last step < 1 cm.
     """
     if solver not in ("normal", "qr"):
         raise ValueError(f"solver: expected 'normal' or 'qr', got {solver!r}")
@@ -256,8 +237,8 @@ def solve_position(
     local = callable(sigma) or atmosphere is not None or mask_angle is not None  # angles needed every step
 
     def linearize(state, k):
-        """Predicted pseudoranges, ECEF lines of sight, elevations and azimuths, standard
-        deviations and the used slots at ``state`` in step ``k``."""
+        """Predicted pseudoranges, ECEF lines of sight, elevations and azimuths, standard deviations and the used slots
+        at ``state`` in step ``k``."""
         predicted, los, _ = _predict(sat_tx, sat_clock, state, membership)
         elevation = azimuth = None
         if local:

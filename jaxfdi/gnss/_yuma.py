@@ -1,16 +1,10 @@
 """YUMA almanac reader (NumPy): one record per satellite, checked field by field.
 
-A YUMA file is a list of blocks, one per satellite, each a header line of asterisks and
-13 ``Key: value`` lines (ID, Health, Eccentricity, Time of Applicability, Orbital
-Inclination, Rate of Right Ascen, SQRT(A), Right Ascen at Week (or "at TOA"), Argument
-of Perigee, Mean Anom, Af0, Af1, week), as published by the US Coast Guard Navigation
-Center. Angles are radians (the inclination is the full angle, not the offset from
-0.3 semicircles of the broadcast almanac, IS-GPS-200 Table 20-VI); the week field is
-the 10-bit week, so ``rollovers`` (how many times the 1024-week counter wrapped) gives
-the full GPS week.
-
-The reader accepts LF and CRLF line endings and raises a ``ValueError`` naming the file
-and line of the first malformed, missing or repeated field.
+A YUMA file (US Coast Guard Navigation Center): per satellite a header line of asterisks and 13 ``Key: value`` lines
+(ID, Health, Eccentricity, Time of Applicability, Orbital Inclination, Rate of Right Ascen, SQRT(A), Right Ascen at Week
+(or "at TOA"), Argument of Perigee, Mean Anom, Af0, Af1, week). Angles in radians (inclination the full angle, not the
+offset from 0.3 semicircles of IS-GPS-200 Table 20-VI); the 10-bit week plus ``rollovers`` (1024-week wraps) is the full
+GPS week. LF or CRLF; a ``ValueError`` names the file and line of the first malformed, missing or repeated field.
 """
 from __future__ import annotations
 
@@ -76,8 +70,8 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
     Args:
       text: the file's contents (LF or CRLF line endings).
       name: what error messages call the source (a file name).
-      rollovers: 1024-week rollovers to add to the file's 10-bit week (2 since April
-        2019: file week 38 is GPS week 2086).
+      rollovers: 1024-week rollovers to add to the file's 10-bit week (2 since April 2019: file week 38 is GPS week
+        2086).
 
     Raises:
       ValueError: naming ``name`` and the line of a malformed record.
@@ -145,9 +139,8 @@ def read_yuma(path: str | Path, rollovers: int = 0) -> Almanac:
     """Read a YUMA almanac file (``parse_yuma`` on its ASCII text).
 
     Returns:
-      ``Almanac``: one (N,) NumPy array per field for the file's N satellites, in file
-      order (int PRN, health and full GPS week ``file week + 1024 * rollovers``; float the
-      rest).
+      ``Almanac``: one (N,) NumPy array per field for the file's N satellites, in file order (int PRN, health and full
+      GPS week ``file week + 1024 * rollovers``; float the rest).
     """
     path = Path(path)
     try:

@@ -1,29 +1,19 @@
-"""Nonlinear least squares by Levenberg-Marquardt, as one ``lax.while_loop`` (jit- and
-vmap-friendly: a batch of problems runs until the last one stops).
+"""Nonlinear least squares by Levenberg-Marquardt as one ``lax.while_loop`` (a vmapped batch runs until the last stops).
 
-Minimise ``F(x) = 1/2 ||r(x)||^2`` for ``r: R^n -> R^m``. With ``J = dr/dx`` (``jax.jacfwd``),
-``A = J^T J`` and ``g = J^T r``, each iteration solves the damped normal equations in the
-scaled variables ``x = S z``, ``S = diag(d)^-1/2`` (Marquardt 1963; ``d`` the running
-maximum of ``diag(A)``, as MINPACK keeps its column norms, so the method does not depend
-on the units of ``x``)::
+Minimise ``F(x) = 1/2 ||r(x)||^2``, ``r: R^n -> R^m``; with ``J = dr/dx`` (``jax.jacfwd``), ``A = J^T J``,
+``g = J^T r``, each iteration solves, in scaled variables ``x = S z``, ``S = diag(d)^-1/2`` (Marquardt 1963; ``d`` the
+running max of ``diag(A)``, as MINPACK, so units of ``x`` do not matter)::
 
     (S A S + mu I) S^-1 h = -S g
 
-and takes ``x + h`` when the gain ratio ``rho = (F(x) - F(x + h)) / (L(0) - L(h))`` is
-positive, ``L(0) - L(h) = 1/2 h^T (mu S^-2 h - g)``. The damping follows Nielsen (1999):
-after an accepted step ``mu *= max(1/3, 1 - (2 rho - 1)^3)``, ``nu = 2``; after a rejected
-one ``mu *= nu``, ``nu *= 2`` (Madsen, Nielsen & Tingleff 2004, "Methods for non-linear
-least squares problems", Algorithm 3.16).
+and takes ``x + h`` when ``rho = (F(x) - F(x + h)) / (L(0) - L(h)) > 0``, ``L(0) - L(h) = 1/2 h^T (mu S^-2 h - g)``.
+Damping (Nielsen 1999): accepted ``mu *= max(1/3, 1 - (2 rho - 1)^3)``, ``nu = 2``; rejected ``mu *= nu``, ``nu *= 2``
+(Madsen, Nielsen & Tingleff 2004, "Methods for non-linear least squares problems", Algorithm 3.16).
 
-It stops when ``max |r| <= residual_tol``, ``max |S g| <= gradient_tol``, or the step is
-small, ``||h|| <= step_tol (||x|| + step_tol)`` (``converged``), or after ``max_steps``
-iterations or a non-finite damping (not converged). A small step also ends a search
-stuck at a local minimum with ``r != 0``: callers that solve equations (``r = 0``) check
-``residual`` themselves, as ``jaxfdi.models.f16.trim`` does.
-
-Written here rather than taken from optimistix so that the library keeps its four
-runtime dependencies (jax, numpy, optax, chex); the trim problems it serves have 3-6
-unknowns, where a dense Cholesky per iteration is all that is needed.
+Converged: ``max |r| <= residual_tol``, ``max |S g| <= gradient_tol`` or ``||h|| <= step_tol (||x|| + step_tol)``; not
+converged: ``max_steps`` or a non-finite damping. A small step also ends at a local minimum with ``r != 0``: equation
+solvers (``r = 0``) check ``residual`` themselves (``jaxfdi.models.f16.trim``). Not optimistix, to keep four runtime
+dependencies (jax, numpy, optax, chex); the trim problems have 3-6 unknowns (a dense Cholesky suffices).
 """
 from __future__ import annotations
 
@@ -108,8 +98,7 @@ def levenberg_marquardt(
       max_steps: most iterations (each one evaluates ``residual`` and its Jacobian once).
       residual_tol: stop when ``max |r| <=`` this (default 0: off).
       gradient_tol: stop when the scaled gradient ``max |S J^T r| <=`` this (default 0: off).
-      step_tol: relative step tolerance (default ``eps^0.75`` of the dtype: 1.8e-12 in
-        float64, 6.6e-6 in float32).
+      step_tol: relative step tolerance (default ``eps^0.75`` of the dtype: 1.8e-12 in float64, 6.6e-6 in float32).
       initial_damping: ``mu`` of the first iteration, relative to the scaled ``J^T J``.
 
     Returns:

@@ -1,5 +1,4 @@
-"""What every scenario study checks before it computes: precision, run counts, seeds and
-method names."""
+"""What every scenario study checks before it computes: precision, run counts, seeds and method names."""
 from __future__ import annotations
 
 from typing import Sequence
@@ -17,8 +16,8 @@ def require_x64(study: str) -> None:
 
 
 def check_methods(methods: Sequence[str] | None, valid: Sequence[str]) -> tuple[str, ...]:
-    """The requested subset of ``valid`` in ``valid``'s order (all when ``None``); a
-    ``ValueError`` naming the unknown ones and listing the valid names."""
+    """The requested subset of ``valid`` in ``valid``'s order (all when ``None``); a ``ValueError`` naming the unknown
+    ones and listing the valid names."""
     if methods is None:
         return tuple(valid)
     if isinstance(methods, str):
@@ -30,8 +29,8 @@ def check_methods(methods: Sequence[str] | None, valid: Sequence[str]) -> tuple[
 
 
 def check_study(runs: int, seed: int, runs_name: str = "runs", **counts: int) -> None:
-    """``runs`` a positive int, ``seed`` an int in [0, ``_checks.MAX_SEED``] = [0, 2^32 - 1], and
-    each further keyword a positive count (e.g. ``calibration_runs``, ``steps``)."""
+    """``runs`` a positive int, ``seed`` an int in [0, ``_checks.MAX_SEED``] = [0, 2^32 - 1], and each further keyword a
+    positive count (e.g. ``calibration_runs``, ``steps``)."""
     _checks.check_int(runs_name, runs, 1, meaning="a positive number of runs")
     _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
     for name, value in counts.items():

@@ -1,15 +1,14 @@
 """The engine of Han et al. (2022): Monte Carlo study of the Kalman-filter chi-square detector.
 
-Scenario (Han et al. 2022, as restated in the spec): steady state, a 0.01 kg/s fuel step at t = 0, one abrupt
-(step) fault at t = 2 s, 4 s simulated at 100 Hz, 100 runs per fault. Fault sizes:
-actuator bias 5 % of the command (0.0005 kg/s); sensor biases 0.5 % of the operating
-point of that output (RPM 135, P2 16.99, T2 2.21 K, P4 8.285, T4 5.125 K). Plus a
-fault-free case for the false-alarm rate. The fault-blind KF starts at the true
-(zero) perturbation with ``P0 = Q``; the test is the windowed NIS sum against
-``chi2_threshold(window * 5, pfa)``.
+- Scenario (Han et al. 2022, as the spec restates it): steady state, 0.01 kg/s fuel step at t = 0, one step fault at t =
+  2 s, 4 s at 100 Hz, 100 runs per fault, plus a fault-free case (false-alarm rate).
+- Fault sizes: actuator bias 5 % of the command (0.0005 kg/s); sensor biases 0.5 % of that output's operating point (RPM
+  135, P2 16.99, T2 2.21 K, P4 8.285, T4 5.125 K).
+- The fault-blind KF starts at the true (zero) perturbation with ``P0 = Q``; windowed NIS sum vs
+  ``chi2_threshold(window * 5, pfa)``.
 
-Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
-Generalized Likelihood Ratio Test" (CITATION.cff).
+Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and Generalized
+Likelihood Ratio Test" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -68,10 +67,9 @@ class EngineChi2Result(NamedTuple):
     examples: MonitorHistory
 
     def table(self) -> str:
-        """Per fault: ``FA rate`` is the share of runs with an alarm before the onset (for
-        ``none``: any alarm); delays (mean, median, p90) over the ``clean`` runs, those
-        without one (``metrics.fault_row``). Each rate is followed by its 95 %
-        Clopper-Pearson interval over the ``n`` healthy runs (``metrics.rate_interval``)."""
+        """Per fault: ``FA rate``: runs alarming before the onset (``none``: any alarm); delays (mean, median, p90) over
+        the ``clean`` runs, the others (``metrics.fault_row``); each rate with its 95 % Clopper-Pearson interval over
+        the ``n`` healthy runs (``metrics.rate_interval``)."""
         head = (f"{'fault':<9} {'magnitude':>10} {'n':>4} {'det. rate [95 %]':>21} {'FA rate [95 %]':>20} "
                 f"{'FA/step':>8} {'clean':>5} {'delay mean [s]':>14} {'delay med [s]':>13} {'delay p90 [s]':>13}")
         lines = [head, "-" * len(head)]
@@ -102,17 +100,15 @@ def engine_chi2_study(
 ) -> EngineChi2Result:
     """Run the study; needs float64 (``jaxfdi.enable_x64()``): the engine is stiff.
 
-    ``threshold`` (default ``chi2_threshold(window * 5, pfa)``) and ``filter_noise = (Q,
-    R)`` (default the plant's) set the detector a tuner changed; the plant is always
-    simulated with its own noise.
+    ``threshold`` (default ``chi2_threshold(window * 5, pfa)``), ``filter_noise = (Q, R)`` (default the plant's): a
+    tuner's detector; the plant always uses its own noise.
 
     Returns:
-      ``EngineChi2Result`` over the seven ``engine_faults`` cases (actuator, RPM, P2, T2,
-      P4, T4, none): ``config`` (runs, seed, window, pfa, dof, threshold, Ts, steps, onset
-      step, fuel step), ``rows`` (one per case: magnitude, detection, missed-detection and
-      false-alarm rates, delays in s, unhealthy, pre-onset-alarm and clean runs),
-      ``records`` (a ``DetectionRecord`` of 7 * ``runs`` runs, case-major) and ``examples``
-      (a ``MonitorHistory`` of one extra run per case, leaves (7, T, ...)).
+      ``EngineChi2Result`` over the seven ``engine_faults`` cases (actuator, RPM, P2, T2, P4, T4, none): ``config``
+      (runs, seed, window, pfa, dof, threshold, Ts, steps, onset step, fuel step), ``rows`` (one per case: magnitude,
+      detection, missed-detection and false-alarm rates, delays in s, unhealthy, pre-onset-alarm and clean runs),
+      ``records`` (a ``DetectionRecord`` of 7 * ``runs`` runs, case-major) and ``examples`` (a ``MonitorHistory`` of one
+      extra run per case, leaves (7, T, ...)).
     """
     require_x64("engine_chi2_study (the engine model is stiff)")
     check_study(runs, seed, window=window, **({} if chunk_size is None else {"chunk_size": chunk_size}))
@@ -172,9 +168,8 @@ def engine_chi2_study(
 
 @functools.lru_cache(maxsize=16)
 def _chi2_run(steps: int, window: int):
-    """One run of the KF chi-square detector on the engine (``study.Structure.run``): the
-    filter's ``(Q, R)`` and the threshold are arguments, so a tuner's values share the
-    program; one function per (steps, window)."""
+    """One run of the KF chi-square detector on the engine (``study.Structure.run``): the filter's ``(Q, R)`` and the
+    threshold are arguments, so a tuner's values share the program; one function per (steps, window)."""
     model = engine_model()
     us = jnp.full((steps, 1), FUEL_STEP)
     x0 = jnp.zeros(7)
@@ -190,8 +185,8 @@ def _chi2_run(steps: int, window: int):
 
 
 def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
-    """Two panels: one run's windowed statistic per fault, and the delay distributions
-    (written atomically at ``path`` with its caption)."""
+    """Two panels: one run's windowed statistic per fault, and the delay distributions (written atomically at ``path``
+    with its caption)."""
     import matplotlib.pyplot as plt
 
     cfg = result.config

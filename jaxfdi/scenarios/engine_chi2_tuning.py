@@ -1,20 +1,14 @@
 """The engine of Han et al. (2022): the Kalman-filter chi-square detector tuned by gradient.
 
-Hand-set detector (``engine_chi2_study``): the KF with the plant's ``Q`` and ``R``, the
-windowed NIS sum over ``L = 4`` steps, threshold ``chi2.isf(0.005, 5 L)``. Tuned here on
-labelled runs (training seed, validation seed + 1): the KF's diagonal ``Q`` and ``R``
-(``log_diagonal``) and the threshold (``log_scale``) by Adam on
-
-    soft detection loss of log(windowed NIS) vs log(threshold)
-
-(``tuning.soft_detection_loss``: false alarms before the onset, misses and the delay
-after it; on the log scale the temperature is relative, the same for every window).
-The window is an integer, so it is chosen by the validation loss over a grid, the
-continuous parameters trained for each. The test alone does not isolate; its table has
+Hand-set (``engine_chi2_study``): KF with the plant's ``Q``, ``R``; windowed NIS over ``L = 4`` steps; threshold
+``chi2.isf(0.005, 5 L)``. Tuned on labelled runs (training seed, validation seed + 1): diagonal ``Q``, ``R``
+(``log_diagonal``) and threshold (``log_scale``) by Adam on the soft detection loss of log(windowed NIS) vs
+log(threshold) (``tuning.soft_detection_loss``: false alarms, misses, delay; on the log scale the temperature is
+relative, the same for every window). The integer window: by validation loss over a grid. No isolation: the table has
 detection, false-alarm and delay columns.
 
-Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
-Generalized Likelihood Ratio Test" (CITATION.cff).
+Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and Generalized
+Likelihood Ratio Test" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -97,8 +91,8 @@ class Chi2Tuning(NamedTuple):
 def tune_engine_chi2(windows: tuple[int, ...] = (1, 2, 4, 8), steps: int = 150, train_runs: int = 16,
                      val_runs: int = 4, batch_runs: int = 4, seed: int = 0, learning_rate: float = 0.05,
                      weights: Chi2Weights = Chi2Weights(), progress: bool = False) -> Chi2Tuning:
-    """For each window, train ``Q``, ``R`` and the threshold from the hand-set values
-    (threshold ``chi2.isf(0.005, 5 L)``); keep the window with the lowest validation loss."""
+    """For each window, train ``Q``, ``R`` and the threshold from the hand-set values (threshold
+    ``chi2.isf(0.005, 5 L)``); keep the window with the lowest validation loss."""
     if not windows:
         raise ValueError(f"windows: expected at least one window length, got {windows!r}")
     steps_per_run = int(round(4.0 / TS))  # labelled_runs' default duration
@@ -121,8 +115,8 @@ def tune_engine_chi2(windows: tuple[int, ...] = (1, 2, 4, 8), steps: int = 150, 
 
 def evaluate_engine_chi2(params: dict[str, Any], window: int, runs: int, seed: int,
                          weights: Chi2Weights = Chi2Weights()) -> tuple[list[dict], float]:
-    """Held-out rows of ``engine_chi2_study`` with the detector set to ``params``, and
-    the tuning loss on labelled runs of seed ``seed + 1``."""
+    """Held-out rows of ``engine_chi2_study`` with the detector set to ``params``, and the tuning loss on labelled runs
+    of seed ``seed + 1``."""
     rows = engine_chi2_study(runs, seed, window, threshold=float(params["threshold"]),
                              filter_noise=(params["Q"], params["R"])).rows
     test = labelled_runs(runs, seed + 1)

@@ -1,39 +1,26 @@
 """The engine of Han et al. (2022): the IMMs tuned by gradient against labelled runs.
 
-The paper sets its IMM by hand (transition matrix "adjusted experimentally", mu_T = 0.5).
-Here each engine IMM design is trained with optax on labelled Monte Carlo runs of the
-paper's scenario (6 faults + fault-free, onset 2 s, 4 s at 100 Hz), seeds apart for
-training, validation and the held-out test, starting from its hand-set parameters
-(both designs also train the initial mode probabilities, hand-set to the paper's normal
-row, as ``jaxfdi run engine`` sets them):
+The paper sets its IMM by hand (transition matrix "adjusted experimentally", mu_T = 0.5). Here each design is trained
+with optax from its hand-set parameters on labelled Monte Carlo runs of the paper's scenario (6 faults + fault-free,
+onset 2 s, 4 s at 100 Hz; seeds apart for training, validation, held-out test). Both designs also train the initial
+mode probabilities (hand-set: the paper's normal row, as ``jaxfdi run engine``) and mu_T:
 
-* ``zhang-li`` (``noise_inflation_modes``): the transition matrix (its structural zeros
-  kept), the five sensor-mode inflation factors, the actuator-mode noise, mu_T;
-* ``bias`` (``bias_modes``, 13 states): the transition matrix, the six bias random-walk
-  and six bias-prior variances, mu_T; hand-set: the paper's matrix (``IMM-bias`` of
-  ``jaxfdi run engine``). With it this design raises an alarm before the onset in most
-  runs; those are false-alarm runs, and their "delays" (the alarm still
-  standing at the onset) are not scored: the reference's delays are over its few clean
-  runs (``metrics.fault_row``). Tried against jaxfdi's hand-set sticky matrix instead
-  (``IMM-bias hand-pi``), tuning lowered the held-out cross-entropy by only 25-29 %:
-  by the per-step breakdown, most of what is left is the onset step itself (the
-  actuator fault is not yet in the measurements) and a pre-onset leak of about the
-  prior switch rate per step, which trade against each other through that rate.
+* ``zhang-li`` (``noise_inflation_modes``): transition matrix (structural zeros kept), five sensor-mode inflation
+  factors, actuator-mode noise;
+* ``bias`` (``bias_modes``, 13 states): transition matrix, six bias random-walk and six bias-prior variances; hand-set:
+  the paper's matrix (``IMM-bias``), which alarms before the onset in most runs (false-alarm runs; their standing
+  "delays" unscored, the reference's delays are over its few clean runs: ``metrics.fault_row``). From jaxfdi's sticky
+  matrix (``IMM-bias hand-pi``) tuning lowers the held-out cross-entropy only 25-29 %: what is left is mostly the onset
+  step (the actuator fault not yet measured) and a pre-onset leak of about the prior switch rate per step, traded
+  against each other through that rate.
 
-Loss per run (``imm_loss``):
+Loss per run (``imm_loss``): mode cross-entropy + detection_weight * soft detection loss of max_{j>0} mu_j vs mu_T
+(``tuning.soft_detection_loss``: false alarms, misses, delay, misisolation with margin
+``max_{j != fault} mu_j - mu_fault``). With ``confirm_steps = c`` the loss sees the surrogate
+``confirmed_probabilities``. Held-out comparison: the records and summaries of ``jaxfdi run engine``.
 
-    mode cross-entropy + detection_weight * soft detection loss of max_{j>0} mu_j vs mu_T
-
-where the soft detection loss (``tuning.soft_detection_loss``) counts false alarms,
-misses, delay and misisolation (the label at the first alarm, ``argmax_{j>0} mu_j``, is
-not the fault: margin ``max_{j != fault} mu_j - mu_fault``). With ``confirm_steps = c``
-the detector is ``mode_probability_detector(mu_T, confirm_steps=c)`` and the loss sees its
-surrogate, the fault-mode probabilities' minimum over the last c steps
-(``confirmed_probabilities``). The held-out comparison uses the same records and
-summaries as ``jaxfdi run engine``.
-
-Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
-Generalized Likelihood Ratio Test" (CITATION.cff).
+Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and Generalized
+Likelihood Ratio Test" (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -79,8 +66,7 @@ class ImmDesign(NamedTuple):
       modes: params -> stacked mode models
       initial: params -> (mean, cov) of the state at step 0
       detector_input: ``info -> detector input`` (``monitor``)
-      estimate_delay: steps after the detection within which the fault estimate is read
-          (``monitor``)
+      estimate_delay: steps after the detection within which the fault estimate is read (``monitor``)
     """
 
     name: str
@@ -96,8 +82,8 @@ class ImmDesign(NamedTuple):
 
 def _imm_design(name: str, method: str, tuned: dict[str, Transform], hand: Callable[[], dict[str, Any]],
                 modes, initial, detector_input, estimate_delay: int) -> ImmDesign:
-    """A design that also tunes the transition matrix, the initial mode probabilities and mu_T
-    (hand-set: the paper's matrix, its normal row and the engine study's mu_T)."""
+    """A design that also tunes the transition matrix, the initial mode probabilities and mu_T (hand-set: the paper's
+    matrix, its normal row and the engine study's mu_T)."""
     common = {"transition": stochastic_rows(TRANSITION_MASK), "initial_mode": simplex()}
     hand_common = lambda: {"transition": jnp.asarray(PAPER_TRANSITION),  # noqa: E731
                            "initial_mode": jnp.asarray(PAPER_TRANSITION[0]), **hand(),
@@ -136,18 +122,17 @@ def imm_design(name: str) -> ImmDesign:
 
 
 def imm_filter(design: ImmDesign, params: dict[str, Any]):
-    """``(filter, initial state)`` of the design's IMM with ``params``; the hand-set
-    initial mode probabilities (``params['initial_mode']``; files saved before it was
-    tuned lack it) are the paper's normal row, as in ``jaxfdi run engine``."""
+    """``(filter, initial state)`` of the design's IMM with ``params``; the hand-set initial mode probabilities
+    (``params['initial_mode']``; files saved before it was tuned lack it) are the paper's normal row, as in
+    ``jaxfdi run engine``."""
     filt = interacting_multiple_model(kalman_filter, design.modes(params), params["transition"])
     mean, cov = design.initial(params)
     return filt, filt.init(mean, cov, params.get("initial_mode", jnp.asarray(PAPER_TRANSITION[0])))
 
 
 def filter_params(params: dict[str, Any]) -> dict[str, Any]:
-    """The filter's share of ``params`` (without the detector's ``mu_threshold`` and
-    ``confirm_steps``), strongly typed: the key of one compiled ``mode_log_probs`` for the
-    hand-set and the tuned parameters alike."""
+    """The filter's share of ``params`` (without the detector's ``mu_threshold`` and ``confirm_steps``), strongly typed:
+    the key of one compiled ``mode_log_probs`` for the hand-set and the tuned parameters alike."""
     return strongly_typed({k: v for k, v in params.items() if k not in ("mu_threshold", "confirm_steps")})
 
 
@@ -180,12 +165,10 @@ class LossWeights(NamedTuple):
 
 
 def confirmed_probabilities(fault_mu: jax.Array, confirm_steps) -> jax.Array:
-    """``min_{0 <= i < c_j} mu_j(k - i)`` per fault mode (R, T, J), 0 for ``k < c_j - 1``:
-    the surrogate of ``mode_probability_detector(mu_T, confirm_steps=c)``, exact for
-    ``mu_T >= 0.5`` (a mode at or above 0.5 is the top fault mode): the confirmed alarm
-    at k is ``max_j min_i mu_j(k - i) >= mu_T``, labelled with that j. ``confirm_steps``
-    as the detector takes it: one ``c`` for every mode, or (J + 1,) one per mode with the
-    normal mode's (unused) entry first."""
+    """``min_{0 <= i < c_j} mu_j(k - i)`` per fault mode (R, T, J), 0 for ``k < c_j - 1``: the surrogate of
+    ``mode_probability_detector(mu_T, confirm_steps=c)``, whose alarm is ``max_j min_i mu_j(k - i) >= mu_T`` labelled j
+    (exact for ``mu_T >= 0.5``: such a mode is the top fault mode). ``confirm_steps``: one ``c``, or (J + 1,) per
+    mode, the normal mode's (unused) first."""
     steps = np.asarray(confirm_steps, int)
     steps = np.broadcast_to(steps if steps.ndim == 0 else steps[1:], (fault_mu.shape[-1],))
     confirmed = fault_mu
@@ -197,14 +180,13 @@ def confirmed_probabilities(fault_mu: jax.Array, confirm_steps) -> jax.Array:
 
 def imm_loss(design: ImmDesign, params: dict[str, Any], data: LabelledRuns, weights: LossWeights = LossWeights(),
              remat: bool = True, confirm_steps=1) -> tuple[jax.Array, dict[str, jax.Array]]:
-    """Mean over runs of the mode cross-entropy plus the weighted soft detection loss of
-    the detector with ``confirm_steps`` (an int, or (M,) one per mode as the detector
-    takes it; ``confirmed_probabilities``)."""
+    """Mean over runs of the mode cross-entropy plus the weighted soft detection loss of the detector with
+    ``confirm_steps`` (an int, or (M,) one per mode as the detector takes it; ``confirmed_probabilities``)."""
     log_mu = mode_log_probs(design, params, data.ys, remat)
     cross_entropy = jax.vmap(losses.mode_cross_entropy)(log_mu, data.modes)
     fault_mu = confirmed_probabilities(jnp.exp(log_mu[..., 1:]), confirm_steps)   # (R, T, 6)
-    # eq. 13, with one mu_T per mode allowed: alarm when some mode's excess over its own
-    # threshold is >= 0 (for a scalar mu_T: the largest fault-mode probability >= mu_T)
+    # eq. 13, with one mu_T per mode allowed: alarm when some mode's excess over its own threshold is >= 0 (for a scalar
+    # mu_T: the largest fault-mode probability >= mu_T)
     excess = fault_mu - jnp.broadcast_to(params["mu_threshold"], (NUM_FAULTS + 1,))[1:]
     statistic = jnp.max(excess, axis=-1)
     own = jax.nn.one_hot(data.fault, NUM_FAULTS, dtype=bool)[:, None, :]  # all False for fault-free runs
@@ -221,10 +203,9 @@ def tune_engine_imm(design: ImmDesign, steps: int = 150, train_runs: int = 16, v
                     batch_runs: int = 4, seed: int = 0, learning_rate: float = 0.05,
                     weights: LossWeights = LossWeights(), progress: bool = False,
                     confirm_steps=1, frozen: tuple[str, ...] = ()) -> TrainResult:
-    """Train ``design`` from its hand-set parameters for the detector with
-    ``confirm_steps``. Training runs come from ``seed``, validation from ``seed + 1`` (the
-    CLI tests on ``seed + 1000``). The parameters named in ``frozen`` keep their hand-set
-    values."""
+    """Train ``design`` from its hand-set parameters for the detector with ``confirm_steps``. Training runs come from
+    ``seed``, validation from ``seed + 1`` (the CLI tests on ``seed + 1000``). The parameters named in ``frozen`` keep
+    their hand-set values."""
     unknown = set(frozen) - set(design.parameterization)
     if unknown:
         raise ValueError(f"frozen: unknown parameters {sorted(unknown)}; design {design.name!r} has "
@@ -242,13 +223,10 @@ def tune_engine_imm(design: ImmDesign, steps: int = 150, train_runs: int = 16, v
 
 def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, seed: int,
                         confirm_steps=1) -> tuple[list[dict], float]:
-    """Held-out rows (``summarize_method``: rates, delays) of the detector with
-    ``confirm_steps`` (1: the paper's rule) and the mean mode cross-entropy.
-
-    The runs and their keys are ``run_method``'s; ``params``, the thresholds (as one per
-    mode) and ``confirm_steps`` (as one per mode) enter the compiled program as data
-    of fixed types, so that evaluating the hand-set and the tuned detector compiles once
-    (with ``jaxfdi.enable_compilation_cache``: also across processes)."""
+    """Held-out rows (``summarize_method``: rates, delays) of the detector with ``confirm_steps`` (1: the paper's rule)
+    and the mean mode cross-entropy. Runs and keys: ``run_method``'s; ``params``, thresholds and ``confirm_steps`` (one
+    per mode) are fixed-type data, so hand-set and tuned compile once (across processes with
+    ``jaxfdi.enable_compilation_cache``)."""
     model, us, faults, batch, _ = scenario_runs(runs, seed)
     num_runs = len(faults) * runs
     params = strongly_typed(dict(params, mu_threshold=jnp.broadcast_to(params["mu_threshold"], (NUM_FAULTS + 1,)),
@@ -271,24 +249,23 @@ def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, se
 
 
 def detector_records(mode_prob: jax.Array, onsets: jax.Array, threshold, confirm_steps=1) -> DetectionRecord:
-    """Per-run records of ``mode_probability_detector(threshold, confirm_steps)`` on stored
-    mode probabilities (R, T, M) (``monitor.replay_detector``): the records ``run_monitor``
-    would give without rerunning the filter, for searching thresholds."""
+    """Per-run records of ``mode_probability_detector(threshold, confirm_steps)`` on stored mode probabilities (R, T, M)
+    (``monitor.replay_detector``): the records ``run_monitor`` would give without rerunning the filter, for searching
+    thresholds."""
     detector = mode_probability_detector(threshold, confirm_steps=confirm_steps)
     return jax.vmap(lambda mu, onset: replay_detector(detector, mu, onset))(mode_prob, onsets)
 
 
-#: the reported row metrics and which way is better (delays over the runs with no
-#: pre-onset alarm, whose share ``false_alarm_rate`` is for a fault's runs; a delay the
-#: hand-set design cannot score, no clean run, is not compared)
+#: the reported row metrics and which way is better (delays over the runs with no pre-onset alarm, whose share
+#: ``false_alarm_rate`` is for a fault's runs; a delay the hand-set design cannot score, no clean run, is not compared)
 _BETTER = {"detection_rate": 1, "isolation_rate": 1, "false_alarm_rate": -1, "delay_mean_s": -1,
            "delay_median_s": -1, "delay_p90_s": -1}
 
 
 def shortfall(hand_rows: list[dict], tuned_rows: list[dict]) -> float:
-    """Total amount by which the tuned rows are worse than the hand-set ones, over every
-    reported rate and delay (0 exactly when ``worse_metrics`` lists no row metric; a
-    missing tuned value where the hand-set one exists counts 1)."""
+    """Total amount by which the tuned rows are worse than the hand-set ones, over every reported rate and delay (0
+    exactly when ``worse_metrics`` lists no row metric; a missing tuned value where the hand-set one exists counts
+    1)."""
     total = 0.0
     for h, t in zip(hand_rows, tuned_rows):
         for key, sign in _BETTER.items():
@@ -301,19 +278,15 @@ def shortfall(hand_rows: list[dict], tuned_rows: list[dict]) -> float:
 def select_mode_thresholds(design: ImmDesign, params: dict[str, Any], runs: int, seed: int, confirm_steps=1,
                            grid=np.round(np.arange(0.30, 0.99, 0.02), 2), sweeps: int = 3,
                            cost: Callable[[list[dict]], float] | None = None) -> tuple[jax.Array, dict]:
-    """One ``mu_T`` per fault mode for the tuned ``params``, chosen on selection runs
-    (``runs`` per fault, ``seed``; neither training nor test data) so that no reported
-    metric is worse than the hand-set design's on the same runs, or to minimise ``cost``
-    of the rows (``summarize_method``'s) if given.
+    """One ``mu_T`` per fault mode for the tuned ``params`` on selection runs (``runs`` per fault, ``seed``; neither
+    training nor test data): no reported metric worse than the hand-set design's, or minimal ``cost`` of the rows.
 
-    Coordinate descent over ``grid`` from the trained ``mu_T``: each sweep sets each
-    mode's threshold in turn to the grid value with the smallest cost, by default the
-    ``shortfall`` against the hand-set rows (ties keep the current value). The filter
-    runs once per design; the detector is replayed on its mode probabilities
-    (``detector_records``).
+    Coordinate descent over ``grid`` from the trained ``mu_T``: each sweep sets each mode's threshold to the grid value
+    of least cost (default: ``shortfall`` against the hand-set rows; ties keep the current value); the filter runs once,
+    the detector is replayed (``detector_records``).
 
-    Returns ``((M,) thresholds, {"shortfall": before, after})`` (the cost before and
-    after); the normal mode's entry (not used by the detector) keeps the trained value.
+    Returns ``((M,) thresholds, {"shortfall": before, after})`` (cost before, after); the normal mode's (unused) entry
+    keeps the trained value.
     """
     data = labelled_runs(runs, seed)
     steps = data.ys.shape[1]
@@ -347,8 +320,8 @@ def select_mode_thresholds(design: ImmDesign, params: dict[str, Any], runs: int,
 
 
 def worse_metrics(hand_rows: list[dict], tuned_rows: list[dict], hand_ce: float, tuned_ce: float) -> list[str]:
-    """The reported metrics on which the tuned design is worse than the hand-set one
-    (rows as ``summarize_method`` makes them, or read back from JSON: NaN as ``None``)."""
+    """The reported metrics on which the tuned design is worse than the hand-set one (rows as ``summarize_method`` makes
+    them, or read back from JSON: NaN as ``None``)."""
     worse = [] if tuned_ce <= hand_ce else ["cross-entropy"]
     for h, t in zip(hand_rows, tuned_rows):
         for key, sign in _BETTER.items():
@@ -359,9 +332,8 @@ def worse_metrics(hand_rows: list[dict], tuned_rows: list[dict], hand_ce: float,
 
 
 def comparison_frame(hand_rows: list[dict], tuned_rows: list[dict], level: float = 0.95):
-    """Hand-set (``paper``) beside tuned, per fault, as a pandas DataFrame: the rows of
-    ``evaluate_engine_imm`` with a ``settings`` column, every run rate beside its ``level``
-    Clopper-Pearson interval (``results_frame``).
+    """Hand-set (``paper``) beside tuned, per fault, as a pandas DataFrame: the rows of ``evaluate_engine_imm`` with a
+    ``settings`` column, every run rate beside its ``level`` Clopper-Pearson interval (``results_frame``).
 
     Returns:
       ``pandas.DataFrame``, fault by fault, the paper's row before the tuned one.
@@ -372,8 +344,8 @@ def comparison_frame(hand_rows: list[dict], tuned_rows: list[dict], level: float
 
 
 def comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce) -> str:
-    """Hand-set (``paper``) beside tuned, per fault (``engine.hand_tuned_table``), and the
-    mean mode cross-entropy of each."""
+    """Hand-set (``paper``) beside tuned, per fault (``engine.hand_tuned_table``), and the mean mode cross-entropy of
+    each."""
     return hand_tuned_table(hand_rows, tuned_rows, ("paper", "tuned"), ("paper", "tuned"),
                             f"mean per-step mode cross-entropy: paper {hand_ce:.4f}, tuned {tuned_ce:.4f} "
                             f"({100 * (1 - tuned_ce / hand_ce):.0f} % lower)")

@@ -1,34 +1,22 @@
-"""Yoo et al. (2010), GPS half: RAIM availability on a campus with a blocked sky, and the park
-case's satellite faults detected, isolated and excluded.
+"""Yoo et al. (2010), GPS half: RAIM availability on a campus with a blocked sky; the park case's satellite faults
+detected, isolated and excluded.
 
-Both cases fly a UAV on a racetrack from 2020-01-01 00:45:00 GPS time (week 2086, the day
-of the shipped RINEX navigation file, whose broadcast ephemerides give the real
-constellation), sampled at 1 Hz. A run is the foundation's loop
-(``loop.run_loop``): the plant ``gnss.receiver_plant`` (pseudoranges with the light time,
-Earth rotation, broadcast satellite clocks, a TCXO receiver clock, elevation-dependent
-noise ``sqrt(3^2 + 3^2 / sin^2 el)`` m, a 5 deg mask) and the stateless FDI
-``gnss.raim_fdi`` (least-squares fix, parity test at ``P_fa = 1/15000``, isolation,
-exclusion, protection levels at ``P_md = 1e-3``, NPA alert limit 556 m); Monte Carlo runs
-are a ``vmap`` over keys.
+- Both cases: a UAV racetrack from 2020-01-01 00:45:00 GPS time (week 2086, the shipped RINEX navigation file's day: the
+  real constellation), 1 Hz. A run is ``loop.run_loop`` of the plant ``gnss.receiver_plant`` (light time, Earth
+  rotation, broadcast satellite clocks, TCXO receiver clock, noise ``sqrt(3^2 + 3^2 / sin^2 el)`` m, 5 deg mask) and the
+  stateless FDI ``gnss.raim_fdi`` (least-squares fix, parity test at ``P_fa = 1/15000``, isolation, exclusion,
+  protection levels at ``P_md = 1e-3``, NPA alert limit 556 m); Monte Carlo: a ``vmap`` over keys.
+- **Campus** (the paper's Konkuk University run, Fig. 6-7; Seoul, 37.5419 N 127.0782 E): the east leg passes 6 m west of
+  a 50 m building (wall 60 m long; UAV 20 m above ground), hiding the eastern sky a few seconds each lap (every 310 s).
+  No fault. The paper's point: HDOP exceeds 4 and HPL the 556 m alert limit while the parity statistic stays quiet.
+- **Park** (Haneul Park, 37.5684 N 126.8851 E, open sky): Table 2's faults on one satellite: impulse 100 m at 100 s,
+  bias 100 m over 300-400 s, drift 1 m/s over 500-600 s; beyond the paper a dead channel over 700-800 s (``+inf``:
+  RAIM alarms, isolates, excludes at once) and a frozen one over 850-950 s (held at its onset value: a ramp of tens to
+  hundreds of m/s), as one run's five episodes (``faults.concat_faults``), on each satellite in view the whole run in
+  turn; the headline row: the highest satellite at the start (the paper does not say which).
 
-- **Campus** (the paper's Konkuk University run, Fig. 6-7; Seoul, 37.5419 N 127.0782 E):
-  the circuit's east leg passes 6 m west of a 50 m building (a wall 60 m long; the UAV
-  flies 20 m above ground), which hides the eastern sky for a few seconds each lap
-  (every 310 s). No fault. The paper's point: there HDOP exceeds 4 and HPL the 556 m
-  alert limit, while the parity statistic stays quiet (it cannot see geometry).
-- **Park** (Haneul Park, 37.5684 N 126.8851 E, open sky): Table 2's pseudorange faults on
-  one satellite — impulse 100 m at 100 s, bias 100 m over 300-400 s, drift 1 m/s over
-  500-600 s — and, beyond the paper, a dead channel over 700-800 s (tracked, no value:
-  ``+inf``, which RAIM alarms on, isolates and leaves out at once) and a frozen one over
-  850-950 s (the pseudorange held at its onset value while the range moves at the
-  satellite's range rate: a ramp of tens to hundreds of m/s), as one run's five episodes
-  (``faults.concat_faults``), on each satellite in view for the whole run in turn; the
-  headline row is the highest satellite at the start (the paper does not say which it
-  used).
-
-Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection
-Algorithm for UAV using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781
-(CITATION.cff).
+Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection Algorithm for UAV
+using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781 (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -61,8 +49,8 @@ MASK_DEG = 5.0
 CAMPUS = (37.5419, 127.0782, 60.0)   # deg, deg, m (ellipsoidal)
 PARK = (37.5684, 126.8851, 70.0)
 CAMPUS_STEPS = PARK_STEPS = 1000   # one compiled program for both cases
-#: runs per compiled call: a RAIM step is small, so wide batches amortise the per-step cost
-#: (900 runs on the 2-core CPU: 48 s in one chunk of 900, 59 s in chunks of 64)
+#: runs per compiled call: a RAIM step is small, so wide batches amortise the per-step cost (900 runs on the 2-core CPU:
+#: 48 s in one chunk of 900, 59 s in chunks of 64)
 CHUNK = 1024
 #: racetrack (straight, radius, speed, height above the origin, phase)
 CAMPUS_PATH = (800.0, 140.0, 8.0, 20.0, 400.0 - 8.0 * 170.0)
@@ -73,11 +61,10 @@ CAMPUS_WALL = measurements.Wall(jnp.asarray([-30.0, 6.0]), jnp.asarray([30.0, 6.
 TABLE2_FAULTS = (("impulse 100 m at 100 s", "impulse", 100, 101, 100.0, 0.0),
                  ("bias 100 m, 300-400 s", "bias", 300, 400, 100.0, 0.0),
                  ("drift 1 m/s, 500-600 s", "ramp", 500, 600, 0.0, 1.0))
-#: beyond the paper: a dead channel (tracked, no value: +inf, ``measurements``)
-#: and a frozen one (the pseudorange held at its onset value), each recovering at its end;
-#: the frozen one's error grows at the range rate (up to ~660 m/s here: tens of km by its
-#: end, where the fix with it no longer converges in its fixed Gauss-Newton steps; the
-#: epoch's health is that of the fix delivered after exclusion, ``integrity.delivered_healthy``)
+#: beyond the paper: a dead channel (tracked, no value: +inf, ``measurements``) and a frozen one (the pseudorange held
+#: at its onset value), each recovering at its end; the frozen one's error grows at the range rate (up to ~660 m/s here:
+#: tens of km by its end, where the fix with it no longer converges in its fixed Gauss-Newton steps; the epoch's health
+#: is that of the fix delivered after exclusion, ``integrity.delivered_healthy``)
 DEAD_FROZEN_FAULTS = (("dead 700-800 s", "dead", 700, 800, 0.0, 0.0),
                       ("frozen 850-950 s", "stuck", 850, 950, 0.0, 0.0))
 #: the park run's episodes, in order: Table 2's, then ours
@@ -173,8 +160,7 @@ def _horizontal_error(positions, case: Case):
 
 def gnss_campus_study(runs: int = 100, seed: int = 0, progress: bool = False, all_satellites: bool = True,
                       beyond: bool = True) -> GnssCampusStudy:
-    """Both cases with ``runs`` Monte Carlo runs (campus) and ``runs`` runs per faulted
-    satellite (park); see the module doc.
+    """Both cases: ``runs`` Monte Carlo runs (campus) and ``runs`` per faulted satellite (park).
 
     Args:
       all_satellites: fault every satellite in view in turn (False: the headline one only).
@@ -185,8 +171,8 @@ def gnss_campus_study(runs: int = 100, seed: int = 0, progress: bool = False, al
     if int(runs) < 1:
         raise ValueError(f"runs: expected a positive number of runs, got {runs}")
     table = orbits.ephemeris_table(rinex.read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), WEEK)
-    # campus: `runs` fault-free runs; park: the faults on every satellite in view for the
-    # whole run, `runs` runs each; all in one call
+    # campus: `runs` fault-free runs; park: the faults on every satellite in view for the whole run, `runs` runs each;
+    # all in one call
     campus = _case(table, CAMPUS, CAMPUS_PATH, CAMPUS_STEPS, (CAMPUS_WALL,))
     park = _case(table, PARK, PARK_PATH, PARK_STEPS)
     candidates = np.flatnonzero(np.asarray(park.visible).all(axis=0))
@@ -235,9 +221,9 @@ def gnss_campus_study(runs: int = 100, seed: int = 0, progress: bool = False, al
 
 
 def _beyond(ephemeris) -> dict:
-    """Minimum detectable bias of every satellite over the day at the campus (open sky,
-    broadcast ephemerides) and NPA / LNAV-VNAV availability over a world grid over a day
-    for the real almanac and the 24-satellite standard constellation (geometry only)."""
+    """Each satellite's minimum detectable bias over the day at the campus (open sky, broadcast ephemerides); NPA /
+    LNAV-VNAV availability on a world grid over a day, real almanac and 24-satellite standard constellation
+    (geometry)."""
     mask = math.radians(MASK_DEG)
     tables = raim.raim_tables(int(ephemeris.prn.shape[0]))
     site = frames.geodetic_to_ecef(math.radians(CAMPUS[0]), math.radians(CAMPUS[1]), CAMPUS[2])
@@ -394,8 +380,8 @@ def _spans(indices) -> str:
 
 
 def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
-    """Sky plot, HDOP / HPL and statistic / threshold (campus and park), MDB over the day
-    and availability maps, as PNG files in ``out_dir``; returns their paths."""
+    """Sky plot, HDOP / HPL and statistic / threshold (campus and park), MDB over the day and availability maps, as PNG
+    files in ``out_dir``; returns their paths."""
     from pathlib import Path
 
     from matplotlib.figure import Figure

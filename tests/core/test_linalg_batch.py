@@ -1,5 +1,7 @@
 """The element-wise small-matrix linear algebra against NumPy/SciPy, and the batch driver
 ``run_filter`` against the loop over ``run_filter``."""
+import contextlib
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -90,6 +92,22 @@ def test_matmul_derivatives_equal_the_closed_form_in_both_modes():
     np.testing.assert_allclose(cross, np.einsum("kn,lm->klmn", w, np.eye(4)), rtol=1e-13, atol=1e-13)
     batched = jax.vmap(jax.grad(loss), in_axes=(0, None))(jnp.stack([a, 2 * a]), b)
     np.testing.assert_allclose(batched[1], w @ b.T, rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("library", [False, True])
+def test_joseph_cov_equals_numpy_for_any_gain(library):
+    """Both branches (written out; one block ``M diag(P, R) M^T`` with library calls) equal
+    ``(I - K H) P (I - K H)^T + K R K^T`` in NumPy for a gain that is not the optimal one
+    (where the standard form ``P - K H P`` differs), and are symmetric positive definite."""
+    rng = np.random.default_rng(11)
+    P, R, H, K = random_spd(rng, 7), random_spd(rng, 5), rng.normal(size=(5, 7)), rng.normal(size=(7, 5))
+    A = np.eye(7) - K @ H
+    expected = A @ P @ A.T + K @ R @ K.T
+    with _linalg.library_calls() if library else contextlib.nullcontext():
+        out = np.asarray(jax.jit(lambda *a: _linalg.joseph_cov(*a))(*map(jnp.asarray, (P, K, H, R))))  # a fresh trace
+    np.testing.assert_allclose(out, expected, rtol=1e-12)
+    assert np.array_equal(out, out.T) and np.all(np.linalg.eigvalsh(out) > 0)
+    assert not np.allclose(expected, P - K @ H @ P)
 
 
 def test_cholesky_vmapped_and_not_positive_definite_gives_nan():

@@ -116,9 +116,9 @@ class GnssCampusStudy(NamedTuple):
     """
 
     config: dict
-    rows: list
-    campus: dict
-    park: dict
+    rows: list[dict]
+    campus: dict[str, np.ndarray]
+    park: dict[str, np.ndarray]
     beyond: dict
 
     def table(self) -> str:

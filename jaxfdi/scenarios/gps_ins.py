@@ -192,10 +192,10 @@ class GpsInsStudy(NamedTuple):
     """
 
     config: dict
-    rows: list
-    series: dict
-    curves: dict
-    results: dict
+    rows: list[dict]
+    series: dict[str, Series]
+    curves: dict[tuple[str, str], list[dict]]
+    results: dict[str, RunOutput]
 
     def table(self) -> str:
         return gps_ins_table(self)

@@ -32,6 +32,18 @@ def new_axes(ax=None, figsize: tuple[float, float] = (7.0, 3.5)):
     return fig, fig.add_subplot()
 
 
+def column_figure(height: float):
+    """A house-style figure (``save_figure``): one column wide, ``height`` inches tall, constrained layout, not
+    registered with pyplot.
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
+    """
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(COLUMN_WIDTH_IN, height), layout="constrained")
+
+
 def _time(t, n: int) -> np.ndarray:
     return np.arange(n) if t is None else np.asarray(t)
 

@@ -49,7 +49,7 @@ from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, nois
 from jaxfdi.filters import run_filter
 from jaxfdi._monitor import monitor, replay_detector
 from jaxfdi._montecarlo import monte_carlo
-from jaxfdi.plotting import COLUMN_WIDTH_IN, hypothesis_colors, save_figure
+from jaxfdi.plotting import column_figure, hypothesis_colors, save_figure
 from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi._simulate import linear_simulator, simulate
@@ -726,23 +726,19 @@ def method_paper(name: str) -> str | None:
 def plot_engine(study: EngineStudy, out_dir) -> list[str]:
     """Figs. 3-1/3-2 (mode probabilities) and 4 (GLR) of Han et al. (2022) and the magnitude estimates
     against truth, written atomically; returns the paths."""
-    import matplotlib.pyplot as plt
-
     cfg, paths = study.config, []
     t = np.arange(cfg["steps"]) * cfg["Ts"]
     fault_names = engine_faults(0)[0][:-1]
 
     def save(fig, name, caption):
-        path = save_figure(fig, f"{out_dir}/{name}", caption)
-        plt.close(fig)
-        paths.append(str(path))
+        paths.append(str(save_figure(fig, f"{out_dir}/{name}", caption)))
 
     colors = hypothesis_colors(MODE_NAMES)  # one colour per mode (fault direction) in every figure
     prob_keys = [k for k in study.figures if k.startswith("mode_prob/")]
     if prob_keys:
         # per mode design: the six faults as a 2 x 3 block of panels, the designs one under the other
-        fig, axes = plt.subplots(2 * len(prob_keys), 3, figsize=(COLUMN_WIDTH_IN, 3.3 * len(prob_keys) + 0.6),
-                                 sharex=True, sharey=True, squeeze=False, layout="constrained")
+        fig = column_figure(3.3 * len(prob_keys) + 0.6)
+        axes = fig.subplots(2 * len(prob_keys), 3, sharex=True, sharey=True, squeeze=False)
         for d, key in enumerate(prob_keys):
             block = axes[2 * d:2 * d + 2].flat
             for i, ax in enumerate(block):
@@ -765,7 +761,8 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
              "where the paper's Table 3 has it at once: the paper's faults are about 9-12 sigmas (docs/papers/engine.md).")
 
     if "glr" in study.figures:
-        fig, axes = plt.subplots(3, 2, figsize=(COLUMN_WIDTH_IN, 6.6), sharex=True, sharey=True, layout="constrained")
+        fig = column_figure(6.6)
+        axes = fig.subplots(3, 2, sharex=True, sharey=True)
         for i, ax in enumerate(axes.flat):
             for j, direction in enumerate(MODE_NAMES[1:]):
                 ax.semilogy(t, np.maximum(study.figures["glr"][i, :, j], 1e-2), color=colors[direction],
@@ -790,8 +787,8 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
         r["method"] == m and r["estimate_median"] == r["estimate_median"] for r in study.rows)]
     if with_estimates:
         runs = cfg["runs_per_fault"]
-        fig, axes = plt.subplots(2, 3, figsize=(COLUMN_WIDTH_IN, 0.5 * len(with_estimates) + 2.6), sharex=True,
-                                 sharey=True, layout="constrained")
+        fig = column_figure(0.5 * len(with_estimates) + 2.6)
+        axes = fig.subplots(2, 3, sharex=True, sharey=True)
         for i, ax in enumerate(axes.flat):
             true = engine_faults(0)[1][i].magnitude
             data = []

@@ -29,7 +29,7 @@ from jaxfdi._metrics import (DetectionRecord, cell, fault_row, rate_cell, summar
                              unhealthy_rows_warning)
 from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi._monitor import MonitorHistory, monitor
-from jaxfdi.plotting import COLUMN_WIDTH_IN, hypothesis_colors, save_figure
+from jaxfdi.plotting import column_figure, hypothesis_colors, save_figure
 from jaxfdi._simulate import linear_simulator
 from jaxfdi._study import Structure, Study, run_study
 
@@ -187,11 +187,10 @@ def _chi2_run(steps: int, window: int):
 def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
     """Two panels: one run's windowed statistic per fault, and the delay distributions (written atomically at ``path``
     with its caption)."""
-    import matplotlib.pyplot as plt
-
     cfg = result.config
     t = np.arange(cfg["steps"]) * cfg["Ts"]
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
+    fig = column_figure(3.4)
+    ax0, ax1 = fig.subplots(1, 2)
     stats = np.asarray(result.examples.statistic)
     colors = hypothesis_colors([row["fault"] for row in result.rows])  # the engine figures' colours
     for row, stat in zip(result.rows, stats):
@@ -215,4 +214,3 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
     save_figure(fig, path, "Left: one run per fault of the Kalman filter's windowed NIS and its threshold. Right: the "
                            f"detection delays of the detected runs, {runs} per fault. The paper's Table 3 has no "
                            "chi-square test; this is the baseline its MM, IMM and GLRT improve on.")
-    plt.close(fig)

@@ -44,7 +44,7 @@ from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.models.f16._plant import RATE_OFFSET, flight_view
 from jaxfdi.models.f16._rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
     rate_transition
-from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
+from jaxfdi.plotting import column_figure, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.scenarios.f16_flight import (DT, ERRORS, GUST_SIGMA, Dispersion, FlightSetup, dispersions, flight_setup,
                                          nominal_dispersion, run_flight)
@@ -795,7 +795,6 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     atomically); returns the paths."""
     from pathlib import Path
 
-    from matplotlib.figure import Figure
 
     out = Path(out_dir)
     h, cfg, rows = study.history, study.config, study.rows
@@ -806,7 +805,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
         paths.append(str(save_figure(fig, out / name, caption)))
 
     t, step = h["t"], h["decision_step"]
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 6.4), layout="constrained")
+    fig = column_figure(6.4)
     axes = fig.subplots(2, 2)
     ax = axes[0, 0]
     ax.semilogy(t, np.maximum(h["fd"], 1e-12), lw=0.7)
@@ -845,7 +844,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
          f"Figs. 5-8: FD, the isolation functions around the decision, the UKF's analytic residuals (restarted "
          f"{RESTART_LAG} steps before the decision) and the rates the hybrid FDI selects. As in the paper, PSA flags sensors 1 and 3 and the UKF's residual picks sensor 1.")
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.6), layout="constrained")
+    fig = column_figure(3.6)
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     ax = fig.add_subplot(1, 2, 2)
     for name, i in FOLLOW.items():
@@ -862,7 +861,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
 
     sweep = [r for r in rows if r["section"] == "sweep"]
     fnrs = cfg["sweep"]["fnr"]
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
+    fig = column_figure(3.4)
     for s in range(3):
         ax = fig.add_subplot(1, 3, s + 1, projection="polar")
         for c, v in enumerate(fnrs):
@@ -889,7 +888,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     full = [r for r in rows if r["section"] == "full_flights"]
     counts = sorted({r["flights"] for r in full})
     counts = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]} to {counts[-1]}"
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
+    fig = column_figure(3.4)
     ax = fig.add_subplot(1, 1, 1)
     groups = list(dict.fromkeys((r["kind"], r["size"]) for r in full))
     width = 0.8 / len(FOLLOWS)
@@ -912,7 +911,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
          "excluded); the verified rule keeps every kind at least as safe as never excluding (measured at 10^3 "
          "and 10^4 flights per kind: docs/papers/f16.md).")
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
+    fig = column_figure(3.4)
     axes = fig.subplots(1, 2)
     for r in (r for r in rows if r["section"] == "optimisation"):
         axes[0].plot(r["curve"], label=f"objective: {r['objective']}")

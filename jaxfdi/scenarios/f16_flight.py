@@ -43,7 +43,7 @@ from jaxfdi.models.f16._dynamics import (
 from jaxfdi.models.f16._linearize import (LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, flight_modes, linearize, submodel)
 from jaxfdi.models.f16._plant import F16Sensors, f16_sensors
 from jaxfdi.models._linear import c2d
-from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
+from jaxfdi.plotting import column_figure, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._study import Structure, Study, run_study
 from jaxfdi._tracking import TrackingScore, tracked_plant
@@ -426,7 +426,6 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     """Trajectory and time histories of the sample flights (PNG, atomic); returns the paths."""
     from pathlib import Path
 
-    from matplotlib.figure import Figure
 
     out = Path(out_dir)
     h = study.history
@@ -436,7 +435,7 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     def save(fig, name, caption):
         paths.append(str(save_figure(fig, out / name, caption)))
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.6), layout="constrained")
+    fig = column_figure(3.6)
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     ax = fig.add_subplot(1, 2, 2)
     for i in range(state.shape[0]):
@@ -451,7 +450,7 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
          "the paper's manoeuvre: climb, level-off, 30 deg bank turn. Park et al. (2004) describe the "
          "manoeuvre but show no trajectory.")
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 8.5), layout="constrained")
+    fig = column_figure(8.5)
     axes = fig.subplots(4, 2, sharex=True)
     deg = 180.0 / math.pi
     ref = h["reference_state"]

@@ -35,7 +35,7 @@ from jaxfdi.gnss._protection import ALERT_LIMITS
 from jaxfdi._loop import episode_scorer, feedforward, run_loop
 from jaxfdi._frame import study_result
 from jaxfdi._metrics import cell, rate_cell, summarize_episodes
-from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
+from jaxfdi.plotting import column_figure, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._progress import status
 from jaxfdi._study import Structure, Study, run_study
@@ -384,7 +384,6 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
     files in ``out_dir``; returns their paths."""
     from pathlib import Path
 
-    from matplotlib.figure import Figure
 
     out_dir = Path(out_dir)
     paths_out = []
@@ -395,7 +394,7 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
     campus = study.campus
     over = np.flatnonzero(campus["hpl"] > 556.0)
     blocked = int(over[0]) if over.size else int(np.argmax(campus["hdop"]))
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.8), layout="constrained")
+    fig = column_figure(3.8)
     for i, (k, title) in enumerate(((0, "campus, t = 0 s (open)"), (blocked, f"campus, t = {blocked} s (beside the wall)"))):
         ax = fig.add_subplot(1, 2, i + 1, projection="polar")
         ax.set_theta_zero_location("N")
@@ -413,7 +412,7 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
          "(o: used, x: above the mask but hidden). The paper's campus data were recorded; the wall here is "
          "ours, modelled from its description (one side of the sky shadowed).")
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 5.4), layout="constrained")
+    fig = column_figure(5.4)
     for i, (series, name) in enumerate(((campus, "campus"), (study.park, "park"))):
         ax = fig.add_subplot(2, 1, i + 1)
         t = np.arange(series["hdop"].size) * DT
@@ -434,7 +433,7 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
          "2010, Figs. 6 and 8): behind the wall HDOP rises above 4 "
          "and HPL above the 556 m NPA alert limit, as in the paper, while the parity statistic stays quiet.")
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 5.4), layout="constrained")
+    fig = column_figure(5.4)
     for i, (series, name) in enumerate(((campus, "campus (no fault)"), (study.park, f"park, faults on PRN "
                                                                           f"{study.park['headline_prn']:02d}"))):
         ax = fig.add_subplot(2, 1, i + 1)
@@ -465,7 +464,7 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
     beyond = study.beyond
     if "mdb" not in beyond:
         return paths_out
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.8), layout="constrained")
+    fig = column_figure(3.8)
     ax = fig.add_subplot(1, 1, 1)
     for slot, prn in enumerate(beyond["prn"]):
         if np.isfinite(beyond["mdb"][:, slot]).any():
@@ -478,7 +477,7 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
          f"Minimal detectable bias of every satellite at the campus with open sky, one line per PRN, over "
          f"{len(beyond['mdb_hours'])} epochs of the day: the geometry alone, no noise (beyond the paper).")
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 2.4 * len(MAP_OPERATIONS) + 0.4), layout="constrained")
+    fig = column_figure(2.4 * len(MAP_OPERATIONS) + 0.4)
     keys = list(beyond["maps"])
     for i, key in enumerate(keys):
         ax = fig.add_subplot(len(MAP_OPERATIONS), len(CONSTELLATIONS), 1 + (i % len(MAP_OPERATIONS)) *

@@ -52,7 +52,7 @@ from jaxfdi.gnss._raim import raim_tables
 from jaxfdi.gnss._receiver import MASK_ANGLE, ReceiverEpochs, monitor_receiver, read_observations, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._solution_separation import separate_epochs
-from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
+from jaxfdi.plotting import column_figure, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 
 #: station -> RINEX file stem in jaxfdi/data
@@ -486,9 +486,8 @@ def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
     in ``out_dir``; returns its path."""
     from pathlib import Path
 
-    from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 6.5), layout="constrained")
+    fig = column_figure(6.5)
     axes = fig.subplots(2, 2)
     count = sum(int((study.epochs[station]["gdop"] <= MAX_GDOP).sum()) for station in STATIONS)
     phones = {label: arrays for label, arrays in study.epochs.items() if label in PHONES and arrays["truth"].any()}

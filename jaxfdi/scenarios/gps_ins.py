@@ -45,7 +45,7 @@ from jaxfdi._loop import combine_scorers, detection_scorer, episode_scorer, feed
 from jaxfdi._frame import study_result
 from jaxfdi._metrics import (binomial_interval, binomial_lower_bound, delay_statistics, rate_cell, rate_interval,
                              record_from_alarms, summarize_detection, summarize_episodes)
-from jaxfdi.plotting import COLUMN_WIDTH_IN, save_figure
+from jaxfdi.plotting import column_figure, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 # Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
 from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK, _cell
@@ -809,7 +809,6 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     paths."""
     from pathlib import Path
 
-    from matplotlib.figure import Figure
 
     out_dir = Path(out_dir)
     written = []
@@ -820,7 +819,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
 
     t = np.arange(study.config["flight_s"])
     onset = study.config["fault_onset_s"]
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 5.4), layout="constrained")
+    fig = column_figure(5.4)
     for i, (field, limit, title) in enumerate((("chi2", chi2_limit, "windowed chi-square (10 epochs, 60 dof)"),
                                                ("scst", scst_limit, "SCST (15 dof)"))):
         ax = fig.add_subplot(2, 1, i + 1)
@@ -839,7 +838,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
          "(500-600 s) and after its exclusion: those alarms are the GPS's (the separation), not the INS's.")
 
     s = study.series[f"table3 {TABLE3_DEG_H[0]:g} deg/h"]
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 5.4), layout="constrained")
+    fig = column_figure(5.4)
     ax = fig.add_subplot(2, 1, 1)
     ax.plot(t, s.hdop, label="HDOP")
     twin = ax.twinx()
@@ -869,7 +868,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
              for r in next((row["raim"] for row in study.rows if row["case"] == "table3"), []))
          + f" ({study.config['runs']} flights). A slow fault reaches the filter before RAIM flags it.")
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 6.0), layout="constrained")
+    fig = column_figure(6.0)
     for i, (name, label) in enumerate((("fault-free", "fault-free"), ("table3 60 deg/h", "60 deg/h roll gyro"))):
         s = study.series[name]
         ax = fig.add_subplot(2, 2, 1 + i)
@@ -891,7 +890,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
          "deg/h gyro bias (beyond "
          "the paper, which shows no navigation errors).")
 
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
+    fig = column_figure(3.4)
     ax = fig.add_subplot(1, 2, 1)
     sizes = list(TABLE3_DEG_H)
     rows = [r for r in study.rows if r["case"] == "table3"]
@@ -930,7 +929,7 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
          + " ours; its data were recorded, ours simulated (the operating curve; docs/papers/gnss-ins.md).")
 
     curve = [r for r in study.rows if r["case"] == "operating-curve"]
-    fig = Figure(figsize=(COLUMN_WIDTH_IN, 3.4), layout="constrained")
+    fig = column_figure(3.4)
     ax, right = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
     for test, style in (("chi2", "-"), ("scst", "--")):
         points = [r for r in curve if r["test"] == test]

@@ -102,6 +102,21 @@ def test_library_never_selects_a_backend():
     assert offenders == []
 
 
+def test_library_never_imports_pyplot():
+    """Studies' figures are ``plotting.column_figure``s, like the plot functions' (never registered with pyplot:
+    a notebook's or script's open figures and backend are left alone)."""
+    import re
+    from pathlib import Path
+
+    import jaxfdi
+
+    pyplot = re.compile(r"^\s*(import matplotlib\.pyplot|from matplotlib import pyplot|from matplotlib\.pyplot import)",
+                        re.MULTILINE)
+    files = list(Path(jaxfdi.__file__).parent.rglob("*.py"))
+    assert any("column_figure(" in p.read_text() for p in files if "scenarios" in p.parts)
+    assert [str(p) for p in files if pyplot.search(p.read_text())] == []
+
+
 def test_cli_selects_agg_unless_a_backend_is_named(non_agg_backend, monkeypatch):
     from jaxfdi import cli
 

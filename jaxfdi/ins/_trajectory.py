@@ -176,14 +176,7 @@ def park_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float
         legs += [(50.0, 0.0, climb, 0.0), (_PARK_TURN[0], _PARK_TURN[1], 0.0, 0.0),
                  (50.0, 0.0, 0.0, 0.0), (_PARK_TURN[0], _PARK_TURN[1], 0.0, 0.0)]
         lap += 1
-    total = 0.0
-    trimmed = []
-    for leg in legs:   # cut the last leg at ``duration``
-        take = min(leg[0], duration - total)
-        if take > 0:
-            trimmed.append((take,) + tuple(leg[1:]))
-        total += take
-    return trimmed
+    return _cut_at(legs, duration)
 
 
 def manoeuvre_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float]]:
@@ -195,10 +188,15 @@ def manoeuvre_legs(duration: float = 1200.0) -> list[tuple[float, float, float, 
     legs = [(20.0, 0.0, 0.0, 0.0)]
     while sum(leg[0] for leg in legs) < duration:
         legs += pattern
-    total, trimmed = 0.0, []
+    return _cut_at(legs, duration)
+
+
+def _cut_at(legs: list[tuple], duration: float) -> list[tuple]:
+    """``legs`` (each ``(seconds, ...)``) up to ``duration`` [s], the last one cut short."""
+    total, cut = 0.0, []
     for leg in legs:
         take = min(leg[0], duration - total)
         if take > 0:
-            trimmed.append((take,) + tuple(leg[1:]))
+            cut.append((take,) + tuple(leg[1:]))
         total += take
-    return trimmed
+    return cut

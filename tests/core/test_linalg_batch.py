@@ -147,6 +147,24 @@ def test_batch_driver_equals_loop_and_shares_the_covariance(engine_batch):
     np.testing.assert_allclose(per_run.filtered_cov[1], info.filtered_cov, rtol=1e-12)
 
 
+def test_batch_driver_gradient_with_shared_covariances_equals_the_loops(engine_batch):
+    """The shared covariance recursion (traced once, with dot and LAPACK on CPU) differentiates as the loop over
+    runs does: d/ds of the summed log-likelihood plus the last covariance, R scaled by s, jitted and not."""
+    model, ys_b, us, m0, P0 = engine_batch
+
+    def loss(s, batch):
+        kf = jaxfdi.filters.kalman_filter(model._replace(R=model.R * s))
+        if batch:
+            _, info = jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys_b, us)
+            return jnp.sum(info.log_likelihood) + jnp.sum(info.filtered_cov[-1])
+        runs = [jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys, us)[1] for ys in ys_b]
+        return sum(jnp.sum(info.log_likelihood) for info in runs) + jnp.sum(runs[0].filtered_cov[-1])
+
+    loop = jax.value_and_grad(loss)(1.3, False)
+    for value in (jax.value_and_grad(loss)(1.3, True), jax.jit(jax.value_and_grad(loss), static_argnums=1)(1.3, True)):
+        np.testing.assert_allclose(value, loop, rtol=1e-12)
+
+
 def test_batch_driver_keeps_data_dependent_covariances_per_run(engine_batch):
     model, ys_b, us, m0, P0 = engine_batch
     kf = jaxfdi.filters.kalman_filter(model, missing_measurements=True)

@@ -44,6 +44,16 @@ def column_figure(height: float):
     return Figure(figsize=(COLUMN_WIDTH_IN, height), layout="constrained")
 
 
+def column_subplots(height: float, nrows: int = 1, ncols: int = 1, **kwargs):
+    """``column_figure(height)`` with a grid of axes, ``Figure.subplots(nrows, ncols, **kwargs)``.
+
+    Returns:
+      ``(figure, axes)``, as ``pyplot.subplots`` returns them.
+    """
+    fig = column_figure(height)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
+
+
 def _time(t, n: int) -> np.ndarray:
     return np.arange(n) if t is None else np.asarray(t)
 

@@ -49,7 +49,7 @@ from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, nois
 from jaxfdi.filters import run_filter
 from jaxfdi._monitor import monitor, replay_detector
 from jaxfdi._montecarlo import monte_carlo
-from jaxfdi.plotting import column_figure, hypothesis_colors, save_figure
+from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
 from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi._simulate import linear_simulator, simulate
@@ -737,8 +737,8 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
     prob_keys = [k for k in study.figures if k.startswith("mode_prob/")]
     if prob_keys:
         # per mode design: the six faults as a 2 x 3 block of panels, the designs one under the other
-        fig = column_figure(3.3 * len(prob_keys) + 0.6)
-        axes = fig.subplots(2 * len(prob_keys), 3, sharex=True, sharey=True, squeeze=False)
+        fig, axes = column_subplots(3.3 * len(prob_keys) + 0.6, 2 * len(prob_keys), 3, sharex=True, sharey=True,
+                                    squeeze=False)
         for d, key in enumerate(prob_keys):
             block = axes[2 * d:2 * d + 2].flat
             for i, ax in enumerate(block):
@@ -761,8 +761,7 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
              "where the paper's Table 3 has it at once: the paper's faults are about 9-12 sigmas (docs/papers/engine.md).")
 
     if "glr" in study.figures:
-        fig = column_figure(6.6)
-        axes = fig.subplots(3, 2, sharex=True, sharey=True)
+        fig, axes = column_subplots(6.6, 3, 2, sharex=True, sharey=True)
         for i, ax in enumerate(axes.flat):
             for j, direction in enumerate(MODE_NAMES[1:]):
                 ax.semilogy(t, np.maximum(study.figures["glr"][i, :, j], 1e-2), color=colors[direction],
@@ -787,8 +786,7 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
         r["method"] == m and r["estimate_median"] == r["estimate_median"] for r in study.rows)]
     if with_estimates:
         runs = cfg["runs_per_fault"]
-        fig = column_figure(0.5 * len(with_estimates) + 2.6)
-        axes = fig.subplots(2, 3, sharex=True, sharey=True)
+        fig, axes = column_subplots(0.5 * len(with_estimates) + 2.6, 2, 3, sharex=True, sharey=True)
         for i, ax in enumerate(axes.flat):
             true = engine_faults(0)[1][i].magnitude
             data = []

@@ -29,7 +29,7 @@ from jaxfdi._metrics import (DetectionRecord, cell, fault_row, rate_cell, summar
                              unhealthy_rows_warning)
 from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
 from jaxfdi._monitor import MonitorHistory, monitor
-from jaxfdi.plotting import column_figure, hypothesis_colors, save_figure
+from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
 from jaxfdi._simulate import linear_simulator
 from jaxfdi._study import Structure, Study, run_study
 
@@ -189,8 +189,7 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
     with its caption)."""
     cfg = result.config
     t = np.arange(cfg["steps"]) * cfg["Ts"]
-    fig = column_figure(3.4)
-    ax0, ax1 = fig.subplots(1, 2)
+    fig, (ax0, ax1) = column_subplots(3.4, 1, 2)
     stats = np.asarray(result.examples.statistic)
     colors = hypothesis_colors([row["fault"] for row in result.rows])  # the engine figures' colours
     for row, stat in zip(result.rows, stats):

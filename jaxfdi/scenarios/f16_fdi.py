@@ -44,7 +44,7 @@ from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.models.f16._plant import RATE_OFFSET, flight_view
 from jaxfdi.models.f16._rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
     rate_transition
-from jaxfdi.plotting import column_figure, save_figure
+from jaxfdi.plotting import column_figure, column_subplots, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi.scenarios.f16_flight import (DT, ERRORS, GUST_SIGMA, Dispersion, FlightSetup, dispersions, flight_setup,
                                          nominal_dispersion, run_flight)
@@ -805,8 +805,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
         paths.append(str(save_figure(fig, out / name, caption)))
 
     t, step = h["t"], h["decision_step"]
-    fig = column_figure(6.4)
-    axes = fig.subplots(2, 2)
+    fig, axes = column_subplots(6.4, 2, 2)
     ax = axes[0, 0]
     ax.semilogy(t, np.maximum(h["fd"], 1e-12), lw=0.7)
     ax.axhline(h["td"], color="k", ls="--", lw=1, label="T_D")
@@ -911,8 +910,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
          "excluded); the verified rule keeps every kind at least as safe as never excluding (measured at 10^3 "
          "and 10^4 flights per kind: docs/papers/f16.md).")
 
-    fig = column_figure(3.4)
-    axes = fig.subplots(1, 2)
+    fig, axes = column_subplots(3.4, 1, 2)
     for r in (r for r in rows if r["section"] == "optimisation"):
         axes[0].plot(r["curve"], label=f"objective: {r['objective']}")
     axes[0].set(xlabel="Adam step", ylabel="objective (best start)", title="sensor arrangement by gradient")

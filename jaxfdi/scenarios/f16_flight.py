@@ -43,7 +43,7 @@ from jaxfdi.models.f16._dynamics import (
 from jaxfdi.models.f16._linearize import (LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, flight_modes, linearize, submodel)
 from jaxfdi.models.f16._plant import F16Sensors, f16_sensors
 from jaxfdi.models._linear import c2d
-from jaxfdi.plotting import column_figure, save_figure
+from jaxfdi.plotting import column_figure, column_subplots, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._study import Structure, Study, run_study
 from jaxfdi._tracking import TrackingScore, tracked_plant
@@ -450,8 +450,7 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
          "the paper's manoeuvre: climb, level-off, 30 deg bank turn. Park et al. (2004) describe the "
          "manoeuvre but show no trajectory.")
 
-    fig = column_figure(8.5)
-    axes = fig.subplots(4, 2, sharex=True)
+    fig, axes = column_subplots(8.5, 4, 2, sharex=True)
     deg = 180.0 / math.pi
     ref = h["reference_state"]
     panels = [  # (axis, label, value of a (T, 15) history, the command or reference)

@@ -52,7 +52,7 @@ from jaxfdi.gnss._raim import raim_tables
 from jaxfdi.gnss._receiver import MASK_ANGLE, ReceiverEpochs, monitor_receiver, read_observations, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._solution_separation import separate_epochs
-from jaxfdi.plotting import column_figure, save_figure
+from jaxfdi.plotting import column_subplots, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 
 #: station -> RINEX file stem in jaxfdi/data
@@ -487,8 +487,7 @@ def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
     from pathlib import Path
 
 
-    fig = column_figure(6.5)
-    axes = fig.subplots(2, 2)
+    fig, axes = column_subplots(6.5, 2, 2)
     count = sum(int((study.epochs[station]["gdop"] <= MAX_GDOP).sum()) for station in STATIONS)
     phones = {label: arrays for label, arrays in study.epochs.items() if label in PHONES and arrays["truth"].any()}
     count_phones = sum(int(arrays["truth"].sum()) for arrays in phones.values())

@@ -74,7 +74,7 @@ from jaxfdi._study import Structure, Study, run_study
 from jaxfdi.models._reaction_wheels import (SpacecraftParams, WheelCommand, body_rate_field, filter_input,
                                             gyro_observation, kitsat3_params, stop_hypotheses, wheel_momentum,
                                             wheel_rate_transition)
-from jaxfdi.plotting import column_figure, hypothesis_colors, save_figure
+from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
 
 RPM = 2.0 * math.pi / 60.0
 #: steps in the NIS window of the chi-square detector
@@ -677,8 +677,7 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
         paths.append(str(save_figure(fig, out / name, caption)))
 
     # Figs. 3 and 5: attitude and rates, fault-free and with the stop
-    fig = column_figure(5.0)
-    axes = fig.subplots(2, 2, sharex=True)
+    fig, axes = column_subplots(5.0, 2, 2, sharex=True)
     for col, (name, title) in enumerate([("none", "Fig. 3: fault-free"), ("stop", f"Fig. 5: wheel {wheel + 1} stops at {fault_time:.0f} s")]):
         h = examples[name]
         angle = np.degrees(2.0 * np.arccos(np.clip(np.abs(h.attitude[:, 0]), 0.0, 1.0)))
@@ -696,8 +695,7 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
          f"stopping at {fault_time:.0f} s, as Choi & Park (2009), Figs. 3 and 5 (a single run there too).")
 
     # Figs. 4 and 6: the fault detection parameter, and the NIS test beside it
-    fig = column_figure(5.0)
-    axes = fig.subplots(2, 1, sharex=True)
+    fig, axes = column_subplots(5.0, 2, 1, sharex=True)
     for name, label in [("none", "fault-free"), ("stop", f"wheel {wheel + 1} stop")]:
         axes[0].semilogy(t, np.maximum(examples[name].detection_parameter, 1e-16), lw=0.8, label=label)
         axes[1].plot(t, examples[name].windowed_nis, lw=0.8, label=label)
@@ -717,8 +715,7 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
     # Figs. 8 and 9: the hypothesis bank's F_x and credits; the MM's mode probabilities
     h = examples["stop"]
     zoom = (t >= fault_time - 2.0) & (t <= fault_time + 8.0)
-    fig = column_figure(7.0)
-    axes = fig.subplots(3, 1, sharex=True)
+    fig, axes = column_subplots(7.0, 3, 1, sharex=True)
     names = [f"H{i + 1}: wheel {i + 1} stopped" for i in range(h.credit.shape[1])]
     engaged = h.engaged[zoom]
     colors = hypothesis_colors(["nominal"] + names)  # a hypothesis keeps its colour in the three panels

@@ -53,7 +53,7 @@ from jaxfdi._frame import study_result
 from jaxfdi._metrics import (cell, delay_statistics, rate_cell, record_from_alarms, step_health,
                              unhealthy_warning)
 from jaxfdi.models import _vtol as vtol
-from jaxfdi.plotting import column_figure, save_figure
+from jaxfdi.plotting import column_subplots, save_figure
 from jaxfdi.scenarios._common import check_methods, check_study, require_x64
 from jaxfdi.scenarios.vtol_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
 from jaxfdi._study import Structure, Study, run_study
@@ -639,8 +639,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
 
     # Fig. 3: one filter's statistic under the s3 step, raw and denoised
     stat = examples["s3 step"].fdi.statistic[:, shown]
-    fig = column_figure(6.0)
-    axes = fig.subplots(3, 1, sharex=True)
+    fig, axes = column_subplots(6.0, 3, 1, sharex=True)
     series = [("raw", stat), ("MDWT-HT (block mean)", np.asarray(haar_denoise(stat, design.levels, "hard"))),
               ("MDWT-ST", np.asarray(haar_denoise(stat, design.levels, "soft", design.detail_sigma, design.c_mult)))]
     for ax, (label, values) in zip(axes, series):
@@ -659,8 +658,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
          "threshold calibrated on fault-free runs of another seed.")
 
     # Fig. 4: the a2 effectiveness estimate of the matched filter
-    fig = column_figure(3.0)
-    ax = fig.subplots()
+    fig, ax = column_subplots(3.0)
     ax.plot(t, examples["a2 no FTC"].fdi.bias[:, 1], lw=1, label="a2 filter estimate, no FTC")
     ax.plot(t, examples["a2 FTC"].fdi.bias[:, 1], lw=1, label="a2 filter estimate, FTC")
     ax.plot(t, np.where(t >= 100, 0.5, 0.0), "k--", lw=1, label="true loss")
@@ -673,8 +671,7 @@ def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesig
          "over the runs.")
 
     # Fig. 5: states with and without FTC against the fault-free run
-    fig = column_figure(5.0)
-    axes = fig.subplots(2, 2, sharex=True)
+    fig, axes = column_subplots(5.0, 2, 2, sharex=True)
     for i, (ax, label) in enumerate(zip(axes.ravel(), ["v_h", "v_v", "q", "theta"])):
         ax.plot(t, examples["none"].state[:, i], "k", lw=1, label="fault-free")
         ax.plot(t, examples["a2 no FTC"].state[:, i], lw=1, label="a2 fault, no FTC")

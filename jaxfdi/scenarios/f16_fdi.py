@@ -795,7 +795,6 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     atomically); returns the paths."""
     from pathlib import Path
 
-
     out = Path(out_dir)
     h, cfg, rows = study.history, study.config, study.rows
     paths = []

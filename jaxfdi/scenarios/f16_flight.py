@@ -426,7 +426,6 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     """Trajectory and time histories of the sample flights (PNG, atomic); returns the paths."""
     from pathlib import Path
 
-
     out = Path(out_dir)
     h = study.history
     t, state, control = h["t"], h["state"], h["control"]

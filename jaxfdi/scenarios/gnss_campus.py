@@ -384,7 +384,6 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
     files in ``out_dir``; returns their paths."""
     from pathlib import Path
 
-
     out_dir = Path(out_dir)
     paths_out = []
 

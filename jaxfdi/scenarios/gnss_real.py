@@ -486,7 +486,6 @@ def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
     in ``out_dir``; returns its path."""
     from pathlib import Path
 
-
     fig, axes = column_subplots(6.5, 2, 2)
     count = sum(int((study.epochs[station]["gdop"] <= MAX_GDOP).sum()) for station in STATIONS)
     phones = {label: arrays for label, arrays in study.epochs.items() if label in PHONES and arrays["truth"].any()}

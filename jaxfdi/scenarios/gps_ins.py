@@ -809,7 +809,6 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     paths."""
     from pathlib import Path
 
-
     out_dir = Path(out_dir)
     written = []
     chi2_limit, scst_limit = thresholds()

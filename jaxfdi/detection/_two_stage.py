@@ -116,7 +116,7 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         mm_state, mm_info = mm.step(c["mm"], y, u)
         engaged_before = c["engaged"]
         engaged = engaged_before | (nis_decision.alarm if engage_on == "nis" else fdp_alarm)
-        post = GaussianState(dual_info.estimator.filtered_mean, dual_info.estimator.filtered_cov)
+        post = dual_info.estimator.posterior
         reset_bank, reset_mm = slaved(post, u)
         keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged, a, b), new, old)  # noqa: E731
         if restart_prediction:  # a bank slaved until now starts its prediction from its own posterior

@@ -65,6 +65,11 @@ class FilterInfo(NamedTuple):
     num_observed: Array
     healthy: Array
 
+    @property
+    def posterior(self) -> GaussianState:
+        """``N(filtered_mean, filtered_cov)``, the belief about x[k] given y[0..k]: what ``Filter.predict`` takes."""
+        return GaussianState(self.filtered_mean, self.filtered_cov)
+
 
 class BatchKernel(NamedTuple):
     """A filter's step for N runs in a layout of its own (e.g. structure of arrays); ``run_filter`` uses it instead of
@@ -125,7 +130,7 @@ def gaussian_filter(
 
     def step(state: GaussianState, y: Array, u: Array):
         post = update(state, y, u)
-        prediction = predict(GaussianState(post.filtered_mean, post.filtered_cov), u)
+        prediction = predict(post.posterior, u)
         # the step's health adds P[k|k] positive definite, a finite prediction and likelihood (an overflowing outlier)
         chol_P = _linalg.cholesky(post.filtered_cov, unroll_factorizations)
         healthy = (post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))

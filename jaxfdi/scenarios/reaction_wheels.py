@@ -318,7 +318,7 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
         post = view_filter.update(c["view"], jnp.where(out, jnp.nan, reading.rate), c["u"])
         rate = jnp.where(out | ~jnp.isfinite(reading.rate), post.filtered_mean, reading.rate)
         c = dict(c, health=health, verdict=verdict, out=out,
-                 view=GaussianState(post.filtered_mean, post.filtered_cov),
+                 view=post.posterior,
                  view_healthy=post.healthy)
         return c, reading._replace(rate=rate)
 

@@ -222,7 +222,7 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
         loss = jnp.where(on & is_actuator & kind, jnp.clip(b_hat, 0.0, 1.0), 0.0)
         additive = jnp.where(on & is_actuator & ~kind, b_hat, 0.0) * jax.nn.one_hot(component, nu, dtype=dtype)
         view = Reconfiguration(post.filtered_mean, loss, component, additive)
-        posterior = GaussianState(post.filtered_mean, post.filtered_cov)
+        posterior = post.posterior
         return state._replace(posterior=posterior, reconfiguration=view), (view, post.healthy)
 
     def step(state: BankState, k: Array, y: Array, u: Array):

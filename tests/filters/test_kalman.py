@@ -86,6 +86,23 @@ def test_kf_equals_filterpy(engine, run_kf, unroll):
     assert np.all(np.asarray(info.num_observed) == 5)
 
 
+def test_update_and_predict_halves_equal_filterpy(engine):
+    """``update`` (its ``posterior``) then ``predict``, one step at a time as multiple-model
+    filters and closed loops call them, against filterpy's update and predict."""
+    model, ys, us, m0, P0 = engine
+    kf = jaxfdi.filters.kalman_filter(model)
+    ref = filterpy_reference(model, ys[:10], us[:10], m0, P0)
+    state = kf.init(m0, P0)
+    for k in range(10):
+        post = kf.update(state, ys[k], us[k])
+        assert_rel(post.posterior.mean, ref["filtered_mean"][k], RTOL, "filtered_mean")
+        assert_rel(post.posterior.cov, ref["filtered_cov"][k], RTOL, "filtered_cov")
+        state = kf.predict(post.posterior, us[k])
+        if k + 1 < 10:
+            assert_rel(state.mean, ref["predicted_mean"][k + 1], RTOL, "predicted_mean")
+            assert_rel(state.cov, ref["predicted_cov"][k + 1], RTOL, "predicted_cov")
+
+
 def test_missing_measurements_equal_filterpy_predict_only(engine, run_kf_missing):
     model, ys, us, m0, P0 = engine
     missing = {3, 4, 50}

@@ -26,22 +26,20 @@ def new_axes(ax=None, figsize: tuple[float, float] = (7.0, 3.5)):
     """``(figure, ax)``: ``ax`` and its figure, else a new unregistered ``Figure`` of ``figsize`` inches."""
     if ax is not None:
         return ax.figure, ax
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=figsize, layout="constrained")
+    fig = column_figure(figsize[1], figsize[0])
     return fig, fig.add_subplot()
 
 
-def column_figure(height: float):
-    """A house-style figure (``save_figure``): one column wide, ``height`` inches tall, constrained layout, not
-    registered with pyplot.
+def column_figure(height: float, width: float | None = None):
+    """A house-style figure (``save_figure``): ``height`` inches tall, ``width`` wide (default one column,
+    ``COLUMN_WIDTH_IN``), constrained layout, not registered with pyplot.
 
     Returns:
       The ``matplotlib.figure.Figure``.
     """
     from matplotlib.figure import Figure
 
-    return Figure(figsize=(COLUMN_WIDTH_IN, height), layout="constrained")
+    return Figure(figsize=(COLUMN_WIDTH_IN if width is None else width, height), layout="constrained")
 
 
 def column_subplots(height: float, nrows: int = 1, ncols: int = 1, **kwargs):

@@ -55,7 +55,8 @@ from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints, UnscentedKalma
 from jax.scipy.linalg import cho_solve, cholesky  # noqa: E402
 
 import jaxfdi  # noqa: E402
-from jaxfdi.models import engine_model, rigid_body_params
+from jaxfdi.models import engine_model
+from jaxfdi.models._rigid_body import rigid_body_params
 from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 ALPHA, BETA, KAPPA = 1e-3, 2.0, 0.0

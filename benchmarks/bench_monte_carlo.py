@@ -39,7 +39,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import bench_filters as bf  # noqa: E402  (reference implementations: plain scan, dynamax)
 
 import jaxfdi  # noqa: E402
-from jaxfdi.models import engine_model, rigid_body_params
+from jaxfdi.models import engine_model
+from jaxfdi.models._rigid_body import rigid_body_params
 from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition  # noqa: E402
 
 

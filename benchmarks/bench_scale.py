@@ -45,7 +45,6 @@ from jaxfdi.detection import glrt_detector, recursive_glrt_detector  # noqa: E40
 from jaxfdi.filters import (  # noqa: E402
     GaussianState,
     kalman_filter,
-    parallel_rts_smoother,
     rts_smoother,
     run_filter,
 )
@@ -91,7 +90,7 @@ def bench_parallel(cases, repeats, budget, log, eager=True, on_case=None) -> lis
 
         def parallel(ys):
             info = jax.vmap(lambda y: run_filter(kalman_filter(model, missing_measurements=True), prior, y, us, parallel=True)[1])(ys)
-            smooth = jax.vmap(lambda i: parallel_rts_smoother(model, i))(info)
+            smooth = jax.vmap(lambda i: rts_smoother(model, i, parallel=True))(info)
             return info.filtered_mean, info.filtered_cov, info.log_likelihood, smooth.mean, smooth.cov
 
         def sequential_filter(ys):

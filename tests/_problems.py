@@ -6,7 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxfdi
-from jaxfdi.models import engine_model, rigid_body_params
+from jaxfdi.models import engine_model
+from jaxfdi.models._rigid_body import rigid_body_params
 from jaxfdi.models._linear import linear_observation, linear_transition
 from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 

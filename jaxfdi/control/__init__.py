@@ -7,13 +7,11 @@ from jaxfdi.control._closed_loop import reconfigurable_pi
 from jaxfdi.control._eigenstructure import assign_eigenstructure
 from jaxfdi.control._f16_loop import f16_plant
 from jaxfdi.control._flight import design_flight_control, flight_controller
-from jaxfdi.control._lqr import PIDesign, integral_augmentation, lqr_gain, lqr_pi
+from jaxfdi.control._lqr import lqr_gain, lqr_pi
 
 __all__ = [
     "lqr_gain",
     "lqr_pi",
-    "PIDesign",
-    "integral_augmentation",
     "assign_eigenstructure",
     "reconfigurable_pi",
     "slew",

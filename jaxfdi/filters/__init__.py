@@ -10,7 +10,7 @@ from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.filters._time_varying import time_varying
 from jaxfdi.filters._mm import multiple_model
 from jaxfdi.filters._posterior import init_from_posterior
-from jaxfdi.filters._smoother import parallel_rts_smoother, rts_smoother
+from jaxfdi.filters._smoother import rts_smoother
 from jaxfdi.filters._sqrt_kalman import sqrt_kalman_filter
 from jaxfdi.filters._sqrt_ukf import sqrt_unscented_kalman_filter
 from jaxfdi.filters._tskf import actuator_direction, sensor_direction, two_stage_kalman_filter
@@ -36,7 +36,6 @@ __all__ = [
     "unknown_input_filter",
     "time_varying",
     "rts_smoother",
-    "parallel_rts_smoother",
     "init_from_posterior",
     "solve_discrete_are",
     "steady_state_kalman",

@@ -52,29 +52,24 @@ def smoother_gains(Phi: Array, filtered_cov: Array, next_predicted_cov: Array) -
     return _mT(_linalg.stack_cho_solve(chol, Phi @ filtered_cov))
 
 
-def rts_smoother(model: LinearGaussianModel, info: FilterInfo) -> SmootherResult:
-    """Sequential RTS smoother (a backward ``lax.scan``) over a Kalman filter's ``info``.
+def rts_smoother(model: LinearGaussianModel, info: FilterInfo, *, parallel: bool = False) -> SmootherResult:
+    """RTS smoother over a Kalman filter's ``info``: a backward ``lax.scan``, or with ``parallel=True`` the reverse
+    associative scan (module doc, O(log T) depth; equal to round-off), as ``run_filter(..., parallel=True)``.
 
     Args:
       model: the ``LinearGaussianModel`` the filter ran with (``Phi`` is used).
       info: ``FilterInfo`` of ``run_filter(kalman_filter(model), ...)`` (also ``parallel=True``), leading axis T.
+      parallel: the associative scan instead of the sequential one.
 
     Returns:
       ``SmootherResult``: smoothed means ``ms_k`` (T, n) and covariances ``Ps_k`` (T, n, n) of ``x_k`` given
       ``y_0..y_{T-1}``, and gains ``G_k`` (T, n, n), zero at the last step.
     """
+    if not isinstance(parallel, bool):
+        raise TypeError(f"parallel: expected True or False, got {_checks.received(parallel)}")
     Phi, info = _check(model, info)
-    return _sequential(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)
-
-
-def parallel_rts_smoother(model: LinearGaussianModel, info: FilterInfo) -> SmootherResult:
-    """The same smoother by a reverse associative scan (module doc): O(log T) depth.
-
-    Returns:
-      ``SmootherResult`` as ``rts_smoother`` (equal to round-off), gains zero at the last step.
-    """
-    Phi, info = _check(model, info)
-    return _parallel(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)
+    smooth = _parallel if parallel else _sequential
+    return smooth(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)
 
 
 @jax.jit

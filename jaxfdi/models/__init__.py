@@ -3,7 +3,6 @@
 from jaxfdi.models._engine import engine_model
 from jaxfdi.models._linear import LinearGaussianModel, c2d, linear_gaussian_model
 from jaxfdi.models._reaction_wheels import kitsat3_params
-from jaxfdi.models._rigid_body import rigid_body_params
 from jaxfdi.models import f16
 
 __all__ = [
@@ -12,6 +11,5 @@ __all__ = [
     "c2d",
     "engine_model",
     "kitsat3_params",
-    "rigid_body_params",
     "f16",
 ]

@@ -67,7 +67,11 @@ def log_scale() -> Transform:
 
 
 def unit_interval() -> Transform:
-    """``p = sigmoid(x)`` in (0, 1) (a probability threshold such as ``mu_T``); inverse logit."""
+    """``p = sigmoid(x)`` in (0, 1) (a probability threshold such as ``mu_T``); inverse logit.
+
+    Returns:
+      ``Transform`` named ``"unit_interval"`` (no options), elementwise on any shape.
+    """
 
     def inverse(p):
         p = jnp.asarray(p)
@@ -105,7 +109,12 @@ def stochastic_rows(mask: Any = None) -> Transform:
     """Row-stochastic (M, M) matrix from (M, M) logits; ``mask[i, j] = False`` fixes ``pi_ij = 0``; every row needs
     an allowed entry. Row logits are defined up to a constant; ``inverse`` returns ``log pi`` (row log-sum-exp 0), 0
     where the mask forbids, and ``log(tiny)`` (about -708 in float64) at an allowed zero, which ``forward`` maps to
-    ~1e-308: it stays zero in training (its gradient vanishes with it); start it small positive to learn it."""
+    ~1e-308: it stays zero in training (its gradient vanishes with it); start it small positive to learn it.
+
+    Returns:
+      ``Transform`` named ``"stochastic_rows"``, options ``{"mask": mask as nested lists or None}``: ``forward`` maps
+      (M, M) logits to a row-stochastic (M, M) matrix (an IMM's transition matrix with its structural zeros).
+    """
     if mask is not None and _checks.shape_of(mask) and np.asarray(mask).dtype != bool:
         raise TypeError(f"mask: expected a boolean (M, M) array, got {_checks.received(mask)}")
     mask_np = None if mask is None else np.asarray(mask, bool)
@@ -135,7 +144,12 @@ def stochastic_rows(mask: Any = None) -> Transform:
 
 
 def log_diagonal() -> Transform:
-    """Diagonal covariance ``diag(exp(d))`` from (n,) log-variances."""
+    """Diagonal covariance ``diag(exp(d))`` from (n,) log-variances.
+
+    Returns:
+      ``Transform`` named ``"log_diagonal"`` (no options): ``forward`` maps (n,) to an (n, n) diagonal covariance,
+      ``inverse`` an (n, n) covariance's diagonal to (n,) log-variances.
+    """
 
     def forward(log_var):
         return jnp.diag(jnp.exp(jnp.asarray(log_var)))
@@ -213,7 +227,14 @@ def constrain(parameterization: dict[str, Transform], raw: dict[str, Array]) -> 
 
 
 def unconstrain(parameterization: dict[str, Transform], params: dict[str, Any]) -> dict[str, Array]:
-    """Constrained -> unconstrained, entry by entry."""
+    """Constrained -> unconstrained, entry by entry: the raw start of ``fit`` from hand-set values.
+
+    Returns:
+      dict with the keys of ``params``: ``parameterization[name].inverse(params[name])``.
+
+    Raises:
+      ValueError: a key of ``params`` without a transform.
+    """
     _check_keys(parameterization, params, "params")
     return {k: parameterization[k].inverse(v) for k, v in params.items()}
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from jaxfdi.control import assign_eigenstructure, integral_augmentation, lqr_gain, lqr_pi
+from jaxfdi.control import assign_eigenstructure, lqr_gain, lqr_pi
+from jaxfdi.control._lqr import integral_augmentation
 from jaxfdi.control._eigenstructure import effectiveness_input
 from jaxfdi.control._eigenstructure import nominal_eigenstructure
 from jaxfdi.models import _vtol as vtol

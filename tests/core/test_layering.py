@@ -18,7 +18,7 @@ PACKAGE = pathlib.Path(jaxfdi.__file__).parent
 #: unit (a package or a top-level module of jaxfdi) -> layer; lower layers never import higher ones
 LAYERS = {
     "_checks": 0, "_linalg": 0, "_io": 0, "_version": 0, "_progress": 0, "data": 0, "distributed": 0,
-    "_faults": 1, "optimize": 1, "_stages": 1,
+    "_faults": 1, "_levenberg_marquardt": 1, "_stages": 1,
     "models": 2,
     "_riccati": 3, "_simulate": 3,
     "filters": 4,

@@ -1,11 +1,11 @@
-"""Levenberg-Marquardt (``jaxfdi.optimize``) against closed forms and SciPy's MINPACK."""
+"""Levenberg-Marquardt (``jaxfdi._levenberg_marquardt``, the F-16 trim's solver) against closed forms and SciPy's MINPACK."""
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from jaxfdi.optimize import levenberg_marquardt
+from jaxfdi._levenberg_marquardt import levenberg_marquardt
 
 
 def rosenbrock(x):

@@ -26,6 +26,7 @@ import jaxfdi
 from jaxfdi import control, detection, _loop as loop, _metrics as metrics, models, tuning
 from jaxfdi.filters import _time_varying, _history as history
 from jaxfdi.filters import _tskf as tskf
+from jaxfdi.models._rigid_body import rigid_body_params
 from jaxfdi.models._vtol import vtol_model, vtol_true_plant
 from jaxfdi._monitor import filter_detector
 from jaxfdi.scenarios.engine import engine_study
@@ -388,8 +389,8 @@ CASES = {
     "kitsat3_params wheel_inertia NaN": (lambda: models.kitsat3_params(wheel_inertia=float("nan")), V,
                                          "wheel_inertia"),
     "pyramid_axes beta NaN": (lambda: jaxfdi.models._reaction_wheels.pyramid_axes(beta_deg=float("nan")), V, "beta_deg"),
-    "rigid_body_params dt negative": (lambda: models.rigid_body_params(dt=-0.02), V, "dt"),
-    "rigid_body_params inertia zero": (lambda: models.rigid_body_params(inertia=(0.0, 1.0, 1.0)), V, "inertia"),
+    "rigid_body_params dt negative": (lambda: rigid_body_params(dt=-0.02), V, "dt"),
+    "rigid_body_params inertia zero": (lambda: rigid_body_params(inertia=(0.0, 1.0, 1.0)), V, "inertia"),
     # --- tuning --------------------------------------------------------------------------
     "positive floor negative": (lambda: tuning.positive(floor=-1.0), V, "floor"),
     "stochastic_rows empty row": (lambda: jaxfdi.tuning._parameterize.stochastic_rows(jnp.array([[True, False], [False, False]])), V,

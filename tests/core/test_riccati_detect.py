@@ -25,7 +25,8 @@ import pytest
 import scipy.linalg
 
 import jaxfdi
-from jaxfdi.control import integral_augmentation, lqr_gain, lqr_pi
+from jaxfdi.control import lqr_gain, lqr_pi
+from jaxfdi.control._lqr import integral_augmentation
 from jaxfdi.models import _vtol as vtol
 from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
 from test_riccati import PROBLEMS

@@ -98,7 +98,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp
 import numpy as np
 import jaxfdi
-from jaxfdi.filters import GaussianState, kalman_filter, parallel_rts_smoother, rts_smoother, run_filter
+from jaxfdi.filters import GaussianState, kalman_filter, rts_smoother, run_filter
 from jaxfdi.models import engine_model
 
 model, T = engine_model(), int(sys.argv[1])
@@ -106,7 +106,7 @@ us = jnp.full((T, 1), 0.01)
 ys = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.zeros(7), us, jax.random.key(0))[1].measurement
 prior = GaussianState(jnp.zeros(7), 10.0 * model.Q)
 kf = jaxfdi.filters.kalman_filter(model, unroll_factorizations=False)
-parallel = jax.jit(lambda y: (lambda info: (info, parallel_rts_smoother(model, info)))(
+parallel = jax.jit(lambda y: (lambda info: (info, rts_smoother(model, info, parallel=True)))(
     run_filter(kalman_filter(model, missing_measurements=True), prior, y, us, parallel=True)[1]))
 for _ in range(3):  # with LAPACK inside, the 2nd or 1st call never returned
     info, smooth = jax.block_until_ready(parallel(ys))

@@ -8,7 +8,6 @@ from _linear_gaussian_cases import condition, engine_filtered, joint_gaussian, s
 from jaxfdi.filters import (
     GaussianState,
     kalman_filter,
-    parallel_rts_smoother,
     rts_smoother,
     run_filter,
 )
@@ -20,7 +19,7 @@ def _rel(a, b):
 
 def test_parallel_equals_sequential_on_the_engine():
     model, *_, (_, info) = engine_filtered()
-    sequential, parallel = rts_smoother(model, info), parallel_rts_smoother(model, info)
+    sequential, parallel = rts_smoother(model, info), rts_smoother(model, info, parallel=True)
     assert _rel(parallel.mean, sequential.mean) < 1e-9 and _rel(parallel.cov, sequential.cov) < 1e-9
     assert _rel(parallel.gain, sequential.gain) < 1e-9
     # the last step is the filtered one; smoothing shrinks the variances
@@ -29,8 +28,8 @@ def test_parallel_equals_sequential_on_the_engine():
                   * (1 + 1e-12))
 
 
-@pytest.mark.parametrize("smoother", [rts_smoother, parallel_rts_smoother])
-def test_smoother_equals_dense_conditioning(smoother):
+@pytest.mark.parametrize("parallel", [False, True])
+def test_smoother_equals_dense_conditioning(parallel):
     """N(x_k | y_0..y_{T-1}) of the joint Gaussian by one dense solve, from the
     sequential and from the parallel filter's outputs."""
     model, T = small_model(), 13
@@ -42,7 +41,7 @@ def test_smoother_equals_dense_conditioning(smoother):
     infos = (run_filter(kf, kf.init(m0, P0), ys, us)[1],
              run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us, parallel=True)[1])
     for info in infos:
-        result = smoother(model, info)
+        result = rts_smoother(model, info, parallel=parallel)
         np.testing.assert_allclose(result.mean, mean.reshape(T, 3), rtol=1e-9, atol=1e-12)
         blocks = np.stack([cov[3 * k:3 * k + 3, 3 * k:3 * k + 3] for k in range(T)])
         np.testing.assert_allclose(result.cov, blocks, rtol=1e-9, atol=1e-12)
@@ -54,4 +53,6 @@ def test_bad_input():
     with pytest.raises(TypeError, match="info"):
         rts_smoother(model, (info.filtered_mean, info.filtered_cov))
     with pytest.raises(ValueError, match="info.filtered_cov"):
-        parallel_rts_smoother(model, info._replace(filtered_cov=info.filtered_cov[:, :2]))
+        rts_smoother(model, info._replace(filtered_cov=info.filtered_cov[:, :2]), parallel=True)
+    with pytest.raises(TypeError, match="^parallel: expected True or False"):
+        rts_smoother(model, info, parallel=1)

@@ -20,7 +20,8 @@ _CHILD = r"""
 import json, sys
 import jax, numpy as np
 assert not jax.config.jax_enable_x64
-from jaxfdi.models import engine_model, kitsat3_params, rigid_body_params, _vtol as vtol
+from jaxfdi.models import engine_model, kitsat3_params, _vtol as vtol
+from jaxfdi.models._rigid_body import rigid_body_params
 from jaxfdi.models._fault_modes import bias_modes, noise_inflation_modes
 out = {}
 def put(name, tree):
@@ -57,7 +58,8 @@ def float32_run():
 
 
 def _float64_models():
-    from jaxfdi.models import kitsat3_params, rigid_body_params
+    from jaxfdi.models import kitsat3_params
+    from jaxfdi.models._rigid_body import rigid_body_params
     from jaxfdi.models._fault_modes import bias_modes, noise_inflation_modes
 
     engine = engine_model(dtype=jnp.float64)

@@ -11,6 +11,7 @@ from jax.test_util import check_grads
 import jaxfdi
 from jaxfdi import tuning
 from jaxfdi.models import LinearGaussianModel
+from jaxfdi.models._fault_modes import noise_inflation_modes
 
 PAPER_PI = np.array([
     [0.94, 0.03, 0.03],
@@ -24,7 +25,7 @@ PAPER_PI = np.array([
 def test_stochastic_rows_valid_at_extreme_logits_and_structural_zeros_stay_zero(scale):
     rng = np.random.default_rng(0)
     mask = PAPER_PI > 0
-    t = jaxfdi.tuning._parameterize.stochastic_rows(mask)
+    t = tuning.stochastic_rows(mask)
     pi = np.asarray(t.forward(jnp.asarray(scale * rng.normal(size=(3, 3)))))
     assert np.all(np.isfinite(pi)) and np.all(pi >= 0)
     np.testing.assert_allclose(pi.sum(axis=1), 1.0, atol=1e-12)
@@ -40,17 +41,17 @@ def test_every_transform_round_trips():
     a = rng.normal(size=(4, 4))
     cov = a @ a.T + 0.1 * np.eye(4)
     cases = [
-        (jaxfdi.tuning._parameterize.stochastic_rows(PAPER_PI > 0), PAPER_PI),
-        (jaxfdi.tuning._parameterize.stochastic_rows(), np.full((3, 3), 1 / 3)),
-        (jaxfdi.tuning._parameterize.stochastic_rows(), np.array([[0.9, 0.1, 0.0], [0.0, 1.0, 0.0], [0.2, 0.0, 0.8]])),  # allowed zeros
+        (tuning.stochastic_rows(PAPER_PI > 0), PAPER_PI),
+        (tuning.stochastic_rows(), np.full((3, 3), 1 / 3)),
+        (tuning.stochastic_rows(), np.array([[0.9, 0.1, 0.0], [0.0, 1.0, 0.0], [0.2, 0.0, 0.8]])),  # allowed zeros
         (tuning.simplex(), np.array([0.94, 0.01, 0.05, 0.0])),
-        (jaxfdi.tuning._parameterize.log_diagonal(), np.diag([1e-8, 1.0, 1e6])),
+        (tuning.log_diagonal(), np.diag([1e-8, 1.0, 1e6])),
         (tuning.cholesky_factor(), cov),
         (tuning.positive(), np.array([1e-8, 0.5, 30.0, 1e3])),
         (tuning.positive(floor=1.0), np.array([1.0 + 1e-6, 2.0, 1e4])),
         (jaxfdi.tuning._parameterize.log_scale(), np.array([1e-12, 1.0, 1e4])),
         (jaxfdi.tuning._parameterize.identity(), np.array([-3.0, 4.0])),
-        (jaxfdi.tuning._parameterize.unit_interval(), np.array([1e-9, 0.5, 1 - 1e-9])),
+        (tuning.unit_interval(), np.array([1e-9, 0.5, 1 - 1e-9])),
     ]
     for t, value in cases:
         np.testing.assert_allclose(t.forward(t.inverse(jnp.asarray(value))), value, rtol=1e-9, atol=1e-14,
@@ -66,15 +67,15 @@ def test_every_transform_round_trips():
 @pytest.mark.parametrize("scale", [1.0, 10.0])
 def test_covariance_transforms_give_symmetric_positive_definite_matrices(scale):
     rng = np.random.default_rng(2)
-    for t, shape in [(tuning.cholesky_factor(), (5, 5)), (jaxfdi.tuning._parameterize.log_diagonal(), (5,))]:
+    for t, shape in [(tuning.cholesky_factor(), (5, 5)), (tuning.log_diagonal(), (5,))]:
         cov = np.asarray(t.forward(jnp.asarray(scale * rng.normal(size=shape))))
         np.testing.assert_array_equal(cov, cov.T)
         assert np.linalg.eigvalsh(cov).min() > 0
 
 
 def test_partition_constrain_and_bad_names():
-    parameterization = {"pi": jaxfdi.tuning._parameterize.stochastic_rows(), "h": tuning.positive()}
-    raw = jaxfdi.tuning._parameterize.unconstrain(parameterization, {"pi": PAPER_PI, "h": 2.0})
+    parameterization = {"pi": tuning.stochastic_rows(), "h": tuning.positive()}
+    raw = tuning.unconstrain(parameterization, {"pi": PAPER_PI, "h": 2.0})
     train, frozen = jaxfdi.tuning._parameterize.partition(raw, ["h"])
     assert list(train) == ["h"] and list(frozen) == ["pi"]
     np.testing.assert_allclose(tuning.constrain(parameterization, jaxfdi.tuning._parameterize.merge(train, frozen))["h"], 2.0)
@@ -83,7 +84,7 @@ def test_partition_constrain_and_bad_names():
     with pytest.raises(ValueError, match="no transform for"):
         tuning.constrain({"h": tuning.positive()}, raw)
     with pytest.raises(ValueError, match="mask: expected at least one allowed"):
-        jaxfdi.tuning._parameterize.stochastic_rows(np.eye(3, dtype=bool) & False)
+        tuning.stochastic_rows(np.eye(3, dtype=bool) & False)
     with pytest.raises(ValueError, match="logits"):
         tuning.simplex().forward(jnp.zeros((3, 3)))
 
@@ -142,14 +143,14 @@ def test_innovation_nll_gradient_matches_finite_differences_and_equals_exact_lik
 
 def test_mode_cross_entropy_matches_direct_formula_and_gradients_through_an_imm():
     model = small_model()
-    modes = jaxfdi.models._fault_modes.noise_inflation_modes(model, 100.0, 0.5)  # 1 + 1 + 2 = 4 modes
+    modes = noise_inflation_modes(model, 100.0, 0.5)  # 1 + 1 + 2 = 4 modes
     mask = np.ones((4, 4), bool)
-    pi_t = jaxfdi.tuning._parameterize.stochastic_rows(mask)
+    pi_t = tuning.stochastic_rows(mask)
     ys, us = small_data(1, 40, 3)
     labels = jnp.concatenate([jnp.zeros(20, jnp.int32), jnp.full(20, 2, jnp.int32)])
 
     def loss(raw):
-        m = jaxfdi.models._fault_modes.noise_inflation_modes(model, jnp.exp(raw["log_inflation"]), 0.5)
+        m = noise_inflation_modes(model, jnp.exp(raw["log_inflation"]), 0.5)
         imm = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, m, pi_t.forward(raw["logits"]))
         _, info = jaxfdi.filters.run_filter(imm, imm.init(jnp.zeros(2), model.Q, jnp.full(4, 0.25)), ys[0], us)
         return tuning.mode_cross_entropy(info.log_mode_prob, labels)
@@ -221,9 +222,9 @@ def ml_fit():
     """Maximum likelihood of log-diagonal Q and R from a wrong start (x10 / x0.1)."""
     train = small_data(16, 500, 10)
     val = small_data(4, 500, 11)
-    parameterization = {"Q": jaxfdi.tuning._parameterize.log_diagonal(), "R": jaxfdi.tuning._parameterize.log_diagonal()}
+    parameterization = {"Q": tuning.log_diagonal(), "R": tuning.log_diagonal()}
     start = {"Q": 10.0 * small_model().Q, "R": 0.1 * small_model().R}
-    raw0 = jaxfdi.tuning._parameterize.unconstrain(parameterization, start)
+    raw0 = tuning.unconstrain(parameterization, start)
 
     def loss(raw, batch):
         return kf_nll({"log_q": raw["Q"], "log_r": raw["R"]}, batch)
@@ -260,10 +261,10 @@ def test_fit_keeps_the_best_validation_step_and_stops_early():
 
 @pytest.mark.parametrize("suffix", [".npz", ".json"])
 def test_save_and_load_round_trip_with_the_parameterisation(tmp_path, suffix):
-    parameterization = {"pi": jaxfdi.tuning._parameterize.stochastic_rows(PAPER_PI > 0), "Q": tuning.cholesky_factor(),
+    parameterization = {"pi": tuning.stochastic_rows(PAPER_PI > 0), "Q": tuning.cholesky_factor(),
                         "h": tuning.positive(floor=1.0)}
     params = {"pi": PAPER_PI, "Q": np.array([[2.0, 0.3], [0.3, 1.0]]), "h": np.array(4.0)}
-    raw = jaxfdi.tuning._parameterize.unconstrain(parameterization, params)
+    raw = tuning.unconstrain(parameterization, params)
     path = tuning.save_params(tmp_path / f"tuned{suffix}", raw, parameterization, {"note": "test"})
     raw2, parameterization2, meta = tuning.load_params(path)
     assert meta == {"note": "test"} and parameterization2["h"].options == {"floor": 1.0}
@@ -279,7 +280,7 @@ def test_a_corrupted_parameter_file_names_the_file_and_the_problem(tmp_path):
     """Truncated, not a zip, a field missing, and a good file renamed to the other format:
     each a ValueError naming the file (never a bare zip, JSON or pickle error)."""
     parameterization = {"h": tuning.positive(floor=1.0)}
-    raw = jaxfdi.tuning._parameterize.unconstrain(parameterization, {"h": np.array(4.0)})
+    raw = tuning.unconstrain(parameterization, {"h": np.array(4.0)})
     good = tuning.save_params(tmp_path / "good.npz", raw, parameterization)
     cases = {
         "truncated.npz": good.read_bytes()[: len(good.read_bytes()) // 2],

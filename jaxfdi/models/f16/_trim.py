@@ -1,5 +1,5 @@
 """Trim of the F-16 for steady flight: level, climbing, coordinated turn and pull-up (Stevens & Lewis 2003, sec. 3.6),
-solved by Levenberg-Marquardt (``jaxfdi.optimize.levenberg_marquardt``).
+solved by Levenberg-Marquardt (``jaxfdi._levenberg_marquardt``).
 
 A ``TrimCondition`` fixes ``VT``, ``h``, ``gamma``, ``psi'`` and ``theta'``; unknowns
 ``z = [thtl, el, ail, rdr, alpha, beta]``; the rest follows from constraints:
@@ -36,7 +36,7 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.models.f16._dynamics import ALPHA, BETA, P, Q, R, VT, F16Params, f16_dynamics
 from jaxfdi.models.f16._engine import throttle_gearing
-from jaxfdi.optimize._least_squares import levenberg_marquardt
+from jaxfdi._levenberg_marquardt import levenberg_marquardt
 
 #: the trim unknowns, in order
 TRIM_VARIABLES = ("thtl", "el", "ail", "rdr", "alpha", "beta")

@@ -30,6 +30,7 @@ from jaxfdi.filters._base import Filter
 from jaxfdi.filters._kalman import joseph_update
 from jaxfdi.ins import _error_state as error_state, _mechanization as mechanization
 from jaxfdi.ins._error_state import STATE_SIZE, ImuNoise
+from jaxfdi.ins._imu import ImuModel, noise_model
 from jaxfdi.ins._mechanization import NavState
 
 MEASUREMENT_SIZE = 6
@@ -119,11 +120,11 @@ def measurement_matrix(dtype) -> Array:
     return jnp.eye(MEASUREMENT_SIZE, STATE_SIZE, dtype=dtype)
 
 
-def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filter:
+def loosely_coupled_filter(imu: ImuModel, dt: float, chunks: int = 1) -> Filter:
     """The error-state EKF (module doc) for IMU samples ``dt`` [s] apart.
 
     Args:
-      noise: the IMU's noise densities the filter assumes (``imu.noise_model``).
+      imu: the IMU model the filter assumes (e.g. ``hg1900()``): its white-noise and bias random-walk densities.
       dt: IMU sample interval [s]; an epoch is ``u.shape[0]`` samples.
       chunks: Jacobian evaluations per epoch (must divide the samples per epoch; each at its chunk's midpoint).
 
@@ -134,8 +135,11 @@ def loosely_coupled_filter(noise: ImuNoise, dt: float, chunks: int = 1) -> Filte
     """
     _checks.check_positive("dt", dt, "the IMU sample interval in seconds")
     chunks = _checks.check_int("chunks", chunks, 1, meaning="a positive number of Jacobians per epoch")
+    if not isinstance(imu, ImuModel):
+        raise TypeError(f"imu: expected an ImuModel (e.g. jaxfdi.ins.hg1900()), got {_checks.received(imu)}")
     for name in ImuNoise._fields:
-        _checks.check_scalar(f"noise.{name}", getattr(noise, name), 0.0, meaning="a noise density >= 0")
+        _checks.check_scalar(f"imu.{name}", getattr(imu, name), 0.0, meaning="a noise density >= 0")
+    noise = noise_model(imu)
 
     def init(nav: NavState, cov: Array, accel_bias: Array | None = None, gyro_bias: Array | None = None) -> InsState:
         _checks.check_shape("nav.position", nav.position, (3,), "lat, lon [rad], h [m]")

@@ -210,7 +210,7 @@ def thresholds() -> tuple[float, float]:
 def design(model: imu.ImuModel, dt: float):
     """The filter and the tests of the study: ``(filter, chi2 detector, SCST, IMU health)``."""
     chi2_limit, scst_limit = thresholds()
-    return (loosely_coupled_filter(imu.noise_model(model), dt), chi2_detector(chi2_limit, CHI2_WINDOW),
+    return (loosely_coupled_filter(model, dt), chi2_detector(chi2_limit, CHI2_WINDOW),
             scst.state_chi2_test(SCST_PERIOD, scst_limit), integrity.imu_health_test(model, dt))
 
 

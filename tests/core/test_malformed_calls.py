@@ -556,8 +556,10 @@ CASES = {
     "imu measure samples (10, 5)": (lambda: _ins().imu.measure(jnp.zeros((10, 5)), None, KEY, _ins().imu.hg1900(),
                                                                0.01), V, "true_samples"),
     "loosely_coupled_filter negative random walk": (lambda: _ins().loosely_coupled.loosely_coupled_filter(
-        _ins().imu.noise_model(_ins().imu.hg1900())._replace(velocity_random_walk=-1e-3), 0.1), V,
-                                                    "noise.velocity_random_walk"),
+        _ins().imu.hg1900()._replace(velocity_random_walk=-1e-3), 0.1), V, "imu.velocity_random_walk"),
+    "loosely_coupled_filter noise densities instead of an ImuModel": (
+        lambda: _ins().loosely_coupled.loosely_coupled_filter(_ins().imu.noise_model(_ins().imu.hg1900()), 0.1), T_,
+        "imu"),
     "ins init attitude not unit": (lambda: _ins_init(attitude=2.0 * jnp.array([1.0, 0.0, 0.0, 0.0])), V,
                                    "nav.attitude"),
     "ins init accel_bias (2,)": (lambda: _ins_init(accel_bias=jnp.zeros(2)), V, "accel_bias"),
@@ -721,7 +723,7 @@ def _ins():
 
 def _ins_init(attitude=jnp.array([1.0, 0.0, 0.0, 0.0]), accel_bias=None):
     from jaxfdi.ins._mechanization import NavState
-    filt = _ins().loosely_coupled.loosely_coupled_filter(_ins().imu.noise_model(_ins().imu.hg1900()), 0.1)
+    filt = _ins().loosely_coupled.loosely_coupled_filter(_ins().imu.hg1900(), 0.1)
     nav = NavState(jnp.array([0.6, 2.2, 100.0]), jnp.zeros(3), attitude)
     return filt.init(nav, jnp.eye(15), accel_bias=accel_bias)
 

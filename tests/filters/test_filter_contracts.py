@@ -194,7 +194,7 @@ def _ins_build(theta, dtype):
     from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
 
     nav, _, _ = _ins_problem()
-    filt = loosely_coupled_filter(imu.noise_model(imu.hg1900()), 0.01)
+    filt = loosely_coupled_filter(imu.hg1900(), 0.01)
     prior = jnp.diag(jnp.asarray([4, 4, 9, .01, .01, .01, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4, 1e-4, 1e-11, 1e-11, 1e-11]))
     return filt, filt.init(_cast(nav, dtype), jnp.asarray(theta * prior, dtype))
 

@@ -48,7 +48,7 @@ def test_update_equals_an_independent_kalman_update():
                                                          jnp.zeros(3)]))
     R_p = np.diag([9.0, 6.0, 20.0]) + 1.0
     fix = GpsFix(fix_nav.position, fix_nav.velocity, jnp.asarray(R_p), 0.01 * jnp.eye(3), jnp.asarray(True))
-    filt = loosely_coupled.loosely_coupled_filter(imu.noise_model(imu.hg1900()), 0.01)
+    filt = loosely_coupled.loosely_coupled_filter(imu.hg1900(), 0.01)
     state = filt.init(nav, jnp.asarray(prior))
     samples = jnp.tile(jnp.asarray([0.0, 0.0, -9.8, 0.0, 0.0, 0.0]), (100, 1))
     _, info = jax.jit(filt.step)(state, fix, samples)
@@ -139,7 +139,7 @@ def test_bad_arguments_are_refused_by_name():
         scst.state_chi2_test(25, 32.8)
     with pytest.raises(ValueError, match="period"):
         scst.state_chi2_test(1, 32.8)
-    filt = loosely_coupled.loosely_coupled_filter(imu.noise_model(imu.hg1900()), 0.01)
+    filt = loosely_coupled.loosely_coupled_filter(imu.hg1900(), 0.01)
     state = filt.init(_nav(), jnp.eye(15))
     fix = GpsFix(_nav().position, _nav().velocity, jnp.eye(3), jnp.eye(3), jnp.asarray(True))
     with pytest.raises(ValueError, match="u: expected"):
@@ -177,7 +177,7 @@ def test_hold_last_finite_against_a_loop():
 def test_a_dead_imu_channel_keeps_the_ins_finite():
     """One epoch with the roll gyro NaN from its 30th sample equals the epoch with those
     samples replaced by the 29th (the filter coasts on the last finite sample)."""
-    filt = loosely_coupled.loosely_coupled_filter(imu.noise_model(imu.hg1900()), 0.01)
+    filt = loosely_coupled.loosely_coupled_filter(imu.hg1900(), 0.01)
     state = filt.init(_nav(), jnp.eye(15) * 1e-2)
     fix = GpsFix(_nav().position, _nav().velocity, jnp.eye(3), jnp.eye(3), jnp.asarray(False))
     samples = np.tile([0.1, -0.2, -9.8, 0.01, 0.0, 0.002], (100, 1)) + np.random.default_rng(5).normal(size=(100, 6)) * 1e-3

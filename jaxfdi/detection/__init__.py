@@ -9,9 +9,9 @@ from jaxfdi.detection._chi2 import (
     moving_window_sum,
 )
 from jaxfdi.detection._frozen import frozen_channel_detector
-from jaxfdi.detection._glrt import fault_directions, fault_signatures, glrt_detector, glrt_threshold
+from jaxfdi.detection._glrt import fault_directions, fault_signatures, glrt_threshold
 from jaxfdi.detection._glrt_correction import corrected_glrt
-from jaxfdi.detection._glrt_recursive import recursive_glrt_detector
+from jaxfdi.detection._glrt_recursive import glrt_detector
 from jaxfdi.detection._glrt_transient import transient_glrt_detector
 from jaxfdi.detection._hybrid_psa import hybrid_psa_config, hybrid_psa_fdi
 from jaxfdi.detection._known_change import known_change_detector
@@ -31,7 +31,6 @@ __all__ = [
     "frozen_channel_detector",
     "glrt_detector",
     "glrt_threshold",
-    "recursive_glrt_detector",
     "corrected_glrt",
     "transient_glrt_detector",
     "known_change_detector",

@@ -25,7 +25,7 @@ A sensor fault shows at onset (``G[0] = e_j``), an actuator fault one step later
 ``G[1] = C Gamma_i``) unless it also passes through ``D``.
 
 Steady state required (constant ``K``, ``S``; ``P[k|k-1] = P_ss``, the DARE solution of ``steady_state_kalman``):
-``glrt_detector``, ``recursive_glrt_detector`` and ``corrected_glrt`` raise ``ValueError`` (naming ``gain``,
+``glrt_detector`` (either engine) and ``corrected_glrt`` raise ``ValueError`` (naming ``gain``,
 ``innovation_cov`` or ``cov`` and the expected ``steady_state_kalman(model)`` field) when a concrete value differs
 from it by more than ``steady_state_tolerance(dtype)``; the check is skipped under ``jit``/``vmap`` of the
 construction. Another prior: ``transient_glrt_detector`` (time-varying gains and signatures).
@@ -217,40 +217,6 @@ def glrt_threshold(pfa, num_directions: int, window: int, method: str = "paper")
     _check_representable(None if value is None else value / tests, dtype,
                          f"the Bonferroni per-test probability pfa / (num_directions * window) = pfa / {tests}")
     return chi2_threshold(jnp.asarray(1, dtype), jnp.asarray(pfa, dtype) / tests)
-
-
-def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
-                  isolation: str = "max", actuator_feedthrough: bool = False, overlap_sensor: int = -1) -> Detector:
-    """Online windowed GLRT on the innovations of a fault-blind steady-state Kalman filter.
-
-    ``step`` at step ``k``: statistic = ``max_i max_theta l_i(theta)`` over the onsets in the data seen, alarm =
-    statistic > threshold, label = ``1 + i`` of the isolated direction (every step), estimate = its ``nu_hat``;
-    ``theta_hat = k - state.onset_offset``. O(N^2) per step (``recursive_glrt_detector``: same decisions, O(N)).
-
-    Isolation:
-      ``"max"``: the direction with the largest GLR.
-      ``"paper"``: Han et al. (2022) eq. (24), read as: actuator if the largest actuator GLR and the
-        ``overlap_sensor`` GLR (T4, the last sensor) both exceed the threshold; else the largest sensor if one
-        exceeds it; else an actuator if one alone exceeds it; with no alarm, as ``"max"``.
-
-    Args:
-      model: the plant the filter assumes (``Phi``, ``Gamma``, ``C``, ``D``).
-      gain: (n, m) steady-state measurement-update gain ``K`` (``steady_state_kalman``).
-      innovation_cov: (m, m) steady-state ``S``.
-      window: N >= 1 steps.
-      threshold: > 0, e.g. ``PAPER_USED_THRESHOLD`` or ``glrt_threshold(...)``.
-      isolation: ``"max"``, ``"paper"`` or a () bool array (``True``: ``"paper"``; both rules in one program).
-      actuator_feedthrough: see ``fault_directions``.
-      overlap_sensor: sensor index (into the outputs) of eq. (24)'s T4.
-
-    Returns:
-      ``Detector(init, step)``: ``init()`` gives an empty ``GLRTState`` (zero (N, m) window);
-      ``step(state, innovation (m,)) -> (state, Decision)``; a non-finite component alarms and isolates its sensor.
-    """
-    setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
-                           overlap_sensor)
-    whitener, engine = windowed_engine(setup)
-    return engine_detector(setup, whitener, engine)
 
 
 def whiten_finite(whitener: Array, innovation: Array) -> Array:

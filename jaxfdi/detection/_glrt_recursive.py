@@ -1,4 +1,5 @@
-"""The windowed GLRT by running sums: O(N) per step instead of O(N^2) (Willsky & Jones 1976, sec. 3).
+"""The windowed GLRT by running sums: O(N) per step instead of O(N^2) (Willsky & Jones 1976, sec. 3), and the online
+``glrt_detector`` on either engine.
 
 ``glrt.py`` recomputes at every step ``k`` the correlation of the last ``N`` whitened innovations ``w_j`` with the
 whitened signature of every onset ``theta = k - o`` in the window, an (N, N, m, d) contraction::
@@ -25,9 +26,10 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi import _checks
 from jaxfdi.detection._chi2 import Detector
 from jaxfdi.detection._glrt import (DetectorSetup, GLREngine, GLRResult, _maximise, _onset_tensors, _whitener,
-                                    detector_setup, engine_detector, glr_from_correlation)
+                                    detector_setup, engine_detector, glr_from_correlation, windowed_engine)
 from jaxfdi.models._linear import LinearGaussianModel
 
 
@@ -43,22 +45,6 @@ class RecursiveGLRTState(NamedTuple):
     correlation: Array
     count: Array
     onset_offset: Array
-
-
-def recursive_glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
-                            isolation: str = "max", actuator_feedthrough: bool = False,
-                            overlap_sensor: int = -1) -> Detector:
-    """``glrt_detector`` with running sums: the same ``Decision`` each step (to round-off) at O(N m d) a step
-    instead of O(N^2 m d); same arguments and state meaning (``theta_hat = k - onset_offset``).
-
-    Returns:
-      ``Detector(init, step)``: ``init()`` gives a zero ``RecursiveGLRTState`` (correlations (N, d),
-      ``d = nu + m``); ``step(state, innovation (m,)) -> (state, Decision)`` as ``glrt_detector``'s.
-    """
-    setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
-                           overlap_sensor)
-    whitener, engine = recursive_engine(setup)
-    return engine_detector(setup, whitener, engine)
 
 
 def recursive_engine(setup: DetectorSetup, removable: bool = False) -> tuple[Array, GLREngine]:
@@ -101,3 +87,43 @@ def _recursive_tensors(signatures: Array, innovation_cov: Array) -> tuple[Array,
     whitener = _whitener(innovation_cov)
     white = jnp.einsum("ab,lbd->lad", whitener, signatures)
     return whitener, white, jnp.cumsum(jnp.sum(white**2, axis=1), axis=0)
+
+
+def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
+                  isolation: str = "max", actuator_feedthrough: bool = False, overlap_sensor: int = -1,
+                  recursive: bool = False) -> Detector:
+    """Online windowed GLRT on the innovations of a fault-blind steady-state Kalman filter.
+
+    ``step`` at step ``k``: statistic = ``max_i max_theta l_i(theta)`` over the onsets in the data seen, alarm =
+    statistic > threshold, label = ``1 + i`` of the isolated direction (every step), estimate = its ``nu_hat``;
+    ``theta_hat = k - state.onset_offset``. O(N^2 m d) per step; ``recursive=True``: the running sums (module
+    doc), the same decisions to round-off at O(N m d).
+
+    Isolation:
+      ``"max"``: the direction with the largest GLR.
+      ``"paper"``: Han et al. (2022) eq. (24), read as: actuator if the largest actuator GLR and the
+        ``overlap_sensor`` GLR (T4, the last sensor) both exceed the threshold; else the largest sensor if one
+        exceeds it; else an actuator if one alone exceeds it; with no alarm, as ``"max"``.
+
+    Args:
+      model: the plant the filter assumes (``Phi``, ``Gamma``, ``C``, ``D``).
+      gain: (n, m) steady-state measurement-update gain ``K`` (``steady_state_kalman``).
+      innovation_cov: (m, m) steady-state ``S``.
+      window: N >= 1 steps.
+      threshold: > 0, e.g. ``PAPER_USED_THRESHOLD`` or ``glrt_threshold(...)``.
+      isolation: ``"max"``, ``"paper"`` or a () bool array (``True``: ``"paper"``; both rules in one program).
+      actuator_feedthrough: see ``fault_directions``.
+      overlap_sensor: sensor index (into the outputs) of eq. (24)'s T4.
+      recursive: the running-sum engine instead of the window's.
+
+    Returns:
+      ``Detector(init, step)``: ``init()`` gives an empty ``GLRTState`` (zero (N, m) window), or with ``recursive``
+      a zero ``RecursiveGLRTState`` (correlations (N, d), ``d = nu + m``); ``step(state, innovation (m,)) -> (state,
+      Decision)``; a non-finite component alarms and isolates its sensor.
+    """
+    setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
+                           overlap_sensor)
+    if not isinstance(recursive, bool):
+        raise TypeError(f"recursive: expected True or False, got {_checks.received(recursive)}")
+    whitener, engine = recursive_engine(setup) if recursive else windowed_engine(setup)
+    return engine_detector(setup, whitener, engine)

@@ -35,7 +35,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import _checks
-from jaxfdi.detection._glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_detector, glrt_threshold
+from jaxfdi.detection._glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_threshold
+from jaxfdi.detection._glrt_recursive import glrt_detector
 from jaxfdi.detection._mode_probability import mode_probability_detector
 from jaxfdi._faults import Fault, fault, fault_label, sensor_labels, stack_faults
 from jaxfdi.filters._imm import interacting_multiple_model

@@ -19,7 +19,6 @@ from jaxfdi.detection import (
     glrt_detector,
     glrt_threshold,
     moving_window_sum,
-    recursive_glrt_detector,
 )
 from jaxfdi.detection._credits import credit_isolator
 from jaxfdi.detection._wavelet import block_alarms
@@ -68,7 +67,7 @@ def _detectors(model, steady, sigma):
     sizes = jnp.asarray(np.r_[np.full(nu, 0.01), 4 * sigma])
     return {
         "windowed GLRT": glrt_detector(model, steady.gain, steady.innovation_cov, WINDOW, threshold),
-        "recursive GLRT": recursive_glrt_detector(model, steady.gain, steady.innovation_cov, WINDOW, threshold),
+        "recursive GLRT": glrt_detector(model, steady.gain, steady.innovation_cov, WINDOW, threshold, recursive=True),
         "CUSUM (known change, tail)": known_change_detector(model, steady.gain, steady.innovation_cov, sizes, WINDOW,
                                                             8.0, tail=True),
         "corrected GLRT": threshold,

@@ -15,9 +15,9 @@ from jaxfdi.detection._glrt import (
     glr_by_onset,
     glr_sequence,
     glr_statistic,
-    glrt_detector,
     glrt_threshold,
 )
+from jaxfdi.detection import glrt_detector
 from jaxfdi.models import engine_model
 from jaxfdi._riccati import steady_state_kalman
 

@@ -19,7 +19,6 @@ from jaxfdi.detection import (
     fault_signatures,
     glrt_detector,
     glrt_threshold,
-    recursive_glrt_detector,
     transient_glrt_detector,
 )
 from jaxfdi.detection._glrt_transient import time_varying_signatures
@@ -145,18 +144,18 @@ def test_steady_state_check_fires_off_p_ss_and_not_at_it(engine, threshold):
     algo = corrected_glrt(engine, WINDOW, threshold)
     algo.init(np.zeros(7), P)  # scipy's P_ss: accepted
     glrt_detector(engine, K, S, WINDOW, threshold)
-    recursive_glrt_detector(engine, K, S, WINDOW, threshold)
+    glrt_detector(engine, K, S, WINDOW, threshold, recursive=True)
     for cov in (10 * P, Q, P * (1 + 1e-4)):
         with pytest.raises(ValueError, match=r"^cov: expected steady_state_kalman\(model\).predicted_cov"):
             algo.init(np.zeros(7), cov)
     # the gain and S of a KF started at Q, one step in: a transient filter
     S1 = C @ Q @ C.T + R
     K1 = np.linalg.solve(S1, C @ Q).T
-    for make in (glrt_detector, recursive_glrt_detector):
+    for recursive in (False, True):
         with pytest.raises(ValueError, match=r"^gain: expected steady_state_kalman\(model\).gain"):
-            make(engine, K1, S, WINDOW, threshold)
+            glrt_detector(engine, K1, S, WINDOW, threshold, recursive=recursive)
         with pytest.raises(ValueError, match=r"^innovation_cov: expected steady_state_kalman\(model\)"):
-            make(engine, K, S1, WINDOW, threshold)
+            glrt_detector(engine, K, S1, WINDOW, threshold, recursive=recursive)
     for confirm in (0, WINDOW + 1):
         with pytest.raises(ValueError, match="^confirm:"):
             corrected_glrt(engine, WINDOW, threshold, confirm=confirm)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi.detection import glrt_detector, glrt_threshold, recursive_glrt_detector
+from jaxfdi.detection import glrt_detector, glrt_threshold
 from jaxfdi.detection._glrt import fault_directions, fault_signatures
 from jaxfdi.models import engine_model
 from jaxfdi._riccati import steady_state_kalman
@@ -50,7 +50,7 @@ def test_recursive_equals_windowed(engine, innovations, window, isolation):
     threshold = glrt_threshold(1e-4, 6, window, "bonferroni")
     args = (model, steady.gain, steady.innovation_cov, window, threshold, isolation)
     final_w, windowed = _decisions(glrt_detector(*args), innovations)
-    final_r, recursive = _decisions(recursive_glrt_detector(*args), innovations)
+    final_r, recursive = _decisions(glrt_detector(*args, recursive=True), innovations)
     np.testing.assert_allclose(recursive.statistic, windowed.statistic, rtol=1e-10, atol=0)
     np.testing.assert_allclose(recursive.estimate, windowed.estimate, rtol=1e-10, atol=1e-14)
     np.testing.assert_array_equal(recursive.label, windowed.label)
@@ -68,7 +68,7 @@ def test_recursive_equals_numpy_double_loop(engine, innovations):
     window = 8
     G = np.asarray(fault_signatures(model, steady.gain, fault_directions(model), window))
     S_inv = np.linalg.inv(np.asarray(steady.innovation_cov))
-    det = recursive_glrt_detector(model, steady.gain, steady.innovation_cov, window, 50.0)
+    det = glrt_detector(model, steady.gain, steady.innovation_cov, window, 50.0, recursive=True)
     _, got = _decisions(det, innovations[1:2])
     eps = innovations[1]
     for k in (0, 3, ONSET + 2, ONSET + 9, T - 1):
@@ -88,14 +88,16 @@ def test_recursive_equals_numpy_double_loop(engine, innovations):
 
 def test_float32_and_bad_input(engine, innovations):
     model, steady = engine
-    det = recursive_glrt_detector(model, jnp.asarray(steady.gain, jnp.float32),
-                                  jnp.asarray(steady.innovation_cov, jnp.float32), 10, 50.0)
+    det = glrt_detector(model, jnp.asarray(steady.gain, jnp.float32), jnp.asarray(steady.innovation_cov, jnp.float32),
+                        10, 50.0, recursive=True)
     state, decision = jax.jit(det.step)(det.init(), jnp.asarray(innovations[1, 0], jnp.float32))
     assert state.correlation.dtype == jnp.float32 and decision.statistic.dtype == jnp.float32
     assert np.isfinite(decision.statistic)
     with pytest.raises(ValueError, match="window"):
-        recursive_glrt_detector(model, steady.gain, steady.innovation_cov, 0, 50.0)
+        glrt_detector(model, steady.gain, steady.innovation_cov, 0, 50.0, recursive=True)
     with pytest.raises(ValueError, match="threshold"):
-        recursive_glrt_detector(model, steady.gain, steady.innovation_cov, 10, -1.0)
+        glrt_detector(model, steady.gain, steady.innovation_cov, 10, -1.0, recursive=True)
+    with pytest.raises(TypeError, match="^recursive: expected True or False"):
+        glrt_detector(model, steady.gain, steady.innovation_cov, 10, 50.0, recursive="yes")
     with pytest.raises(ValueError, match="innovation"):
         det.step(det.init(), jnp.zeros(4))

@@ -10,9 +10,8 @@ from jaxfdi._monitor import MonitorResult, monitor
 from jaxfdi._simulate import linear_simulator, simulate, simulator
 from jaxfdi._faults import Fault, FaultKind, concat_faults, fault, fault_group, no_fault, stack_faults
 from jaxfdi._loop import LoopResult, run_loop, state_feedback
-from jaxfdi._metrics import DetectionSummary, rate_interval, summarize_detection
+from jaxfdi._metrics import DetectionRecord, DetectionSummary, summarize_detection
 from jaxfdi._montecarlo import monte_carlo
-from jaxfdi._progress import progress_bar
 from jaxfdi._stages import FDI, Controller, Plant, Scorer
 from jaxfdi._study import Structure, Study, run_study
 
@@ -72,8 +71,8 @@ __all__ = [
     "linear_simulator", "simulate",
     # the closed loop, the monitor, Monte Carlo, studies, summaries
     "Plant", "FDI", "Controller", "Scorer", "run_loop", "state_feedback", "LoopResult", "monitor",
-    "MonitorResult", "monte_carlo", "Study", "Structure", "run_study", "summarize_detection",
-    "DetectionSummary", "rate_interval", "progress_bar",
+    "MonitorResult", "monte_carlo", "Study", "Structure", "run_study", "DetectionRecord",
+    "summarize_detection", "DetectionSummary",
     # set-up
     "enable_x64", "enable_compilation_cache",
     # subpackages

@@ -317,16 +317,6 @@ def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: i
     return counts.reshape(num_classes, num_classes + 1)
 
 
-def isolation_accuracy(confusion: Array) -> Array:
-    """Per true class, the fraction of runs isolated as that class."""
-    shape = _checks.shape_of(confusion)
-    if len(shape) != 2 or shape[1] < shape[0]:
-        raise ValueError(f"confusion: expected a (C, C + 1) confusion matrix (confusion_matrix), got shape {shape}")
-    confusion = jnp.asarray(confusion)
-    diagonal = jnp.diagonal(confusion[:, : confusion.shape[0]])
-    return diagonal / jnp.maximum(confusion.sum(axis=1), 1)
-
-
 class EpisodeRecord(NamedTuple):
     """Per-run record of several fault episodes (E of them; see the module docstring).
 

@@ -18,6 +18,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from jaxfdi import _io
+from jaxfdi._metrics import confusion_matrix
 
 __all__ = ["plot_statistic", "plot_mode_probabilities", "plot_estimate", "plot_delays", "plot_confusion"]
 
@@ -177,63 +178,32 @@ def plot_delays(delays: Mapping[str, Sequence[float]], *, unit: str = "s", ax=No
     return fig
 
 
-def plot_confusion(matrix, labels: Sequence[str], *, normalize: bool = True, ax=None):
-    """A confusion matrix (rows: true fault, columns: decided) as an annotated image.
+def plot_confusion(true_labels, predicted_labels, names: Sequence[str], *, normalize: bool = True, ax=None):
+    """Isolation outcomes as an annotated confusion matrix: rows the true fault, columns the one isolated, and a last
+    column "none" for runs that isolated nothing.
 
     Args:
-      matrix: ``(K, K)`` counts, e.g. ``jaxfdi._metrics.confusion_matrix``.
-      labels: K class names.
+      true_labels: (R,) int in [0, K), each run's true label (its fault's label; 0 fault-free).
+      predicted_labels: (R,) int < K, the label each run isolated (``DetectionRecord.isolated``; negative: none).
+      names: K class names.
       normalize: show each row as shares of its runs.
 
     Returns:
       The ``matplotlib.figure.Figure``.
     """
-    m = np.asarray(matrix, dtype=float)
-    if m.ndim != 2 or m.shape[0] != m.shape[1]:
-        raise ValueError(f"matrix: expected a square (K, K) matrix, got shape {m.shape}")
-    if len(labels) != m.shape[0]:
-        raise ValueError(f"labels: expected {m.shape[0]} names, got {len(labels)}")
+    m = np.asarray(confusion_matrix(true_labels, predicted_labels, len(names)), dtype=float)   # (K, K + 1)
     shown = m / np.maximum(m.sum(axis=1, keepdims=True), 1) if normalize else m
     size = 1.0 + 0.6 * m.shape[0]
-    fig, ax = new_axes(ax, figsize=(size + 1.0, size))
+    fig, ax = new_axes(ax, figsize=(size + 1.6, size))
     image = ax.imshow(shown, cmap="Blues", vmin=0.0, vmax=1.0 if normalize else None)
     for i in range(m.shape[0]):
         for j in range(m.shape[1]):
             ax.text(j, i, f"{shown[i, j]:.2f}" if normalize else f"{m[i, j]:.0f}", ha="center", va="center",
                     fontsize="small", color="white" if shown[i, j] > 0.6 * np.nanmax(shown) else "black")
-    ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right")
-    ax.set_yticks(range(len(labels)), labels)
-    ax.set(xlabel="decided", ylabel="true")
+    ax.set_xticks(range(m.shape[1]), [*names, "none"], rotation=45, ha="right")
+    ax.set_yticks(range(m.shape[0]), names)
+    ax.set(xlabel="isolated", ylabel="true")
     fig.colorbar(image, ax=ax, shrink=0.8)
-    return fig
-
-
-def plot_loss_history(step, train=None, validation=None, *, best_step: int | None = None, log: bool = True,
-                      ax=None):
-    """Training and validation loss against the optimiser step (``tuning.fit``'s history).
-
-    Args:
-      step: ``(N,)`` steps at which the losses were recorded.
-      train: ``(N,)`` training losses (NaN where not recorded), or ``None``.
-      validation: ``(N,)`` validation losses, or ``None``.
-      best_step: the step kept (dotted vertical line), or ``None``.
-      log: logarithmic y axis.
-
-    Returns:
-      The ``matplotlib.figure.Figure``.
-    """
-    steps = np.asarray(step)
-    fig, ax = new_axes(ax)
-    if train is not None:
-        ax.plot(steps, np.asarray(train, dtype=float), marker=".", lw=1.0, label="train")
-    if validation is not None:
-        ax.plot(steps, np.asarray(validation, dtype=float), marker=".", lw=1.0, label="validation")
-    if best_step is not None:
-        ax.axvline(best_step, color="k", ls=":", lw=1.0, label="kept")
-    if log:
-        ax.set_yscale("log")
-    ax.set(xlabel="optimiser step", ylabel="loss")
-    ax.legend(loc="best", fontsize="small")
     return fig
 
 

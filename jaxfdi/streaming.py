@@ -27,7 +27,7 @@ import numpy as np
 from jaxfdi import _checks
 from jaxfdi._metrics import DetectionRecord, DetectionSummary
 
-__all__ = ["detection_reducer"]
+__all__ = ["detection_reducer", "summarize_counts"]
 
 class DetectionCounts(NamedTuple):
     """Exact counts over runs (host-side NumPy int64); merge with ``merge_counts``.
@@ -205,7 +205,14 @@ def delay_quantile(counts: DetectionCounts, q: float, Ts: float = 1.0) -> float:
 
 
 def summarize_counts(counts: DetectionCounts, Ts: float = 1.0) -> DetectionSummary:
-    """``DetectionSummary`` as ``summarize_detection`` of the records (median, p90 within ``quantile_resolution``)."""
+    """The ``DetectionSummary`` of a ``detection_reducer``'s final counts: every count and rate exact, as
+    ``summarize_detection`` of the records; the median and 90th-percentile delays from the histogram, within
+    ``(bin_width - 1) / 2`` steps.
+
+    Returns:
+      ``DetectionSummary`` of Python ints and floats (delays in the unit of ``Ts``); NaN where a rate or delay has no
+      runs.
+    """
     _checks.check_positive("Ts", Ts, "a positive sample period")
     nan = float("nan")
     faulty, detected, scored = int(counts.faulty_runs), int(counts.detected_runs), int(counts.delay_runs)

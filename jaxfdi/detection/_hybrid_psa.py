@@ -225,9 +225,20 @@ def subset_statistics(config: HybridPSAConfig, channels: Array) -> Array:
 
 def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: int = 3,
                     follow: str | Array = "hybrid") -> HybridPSAState:
-    """The FDI's initial state: empty history of ``restart_lag`` steps (restart that many steps before the
-    decision; Park et al. 2004: 2-3), no decision. ``input_example``: shaped like the filter input (nu,).
-    ``follow``: a ``FOLLOW`` name or its code (an array: one compiled flight for every mode)."""
+    """The initial state of ``hybrid_psa_fdi``: an empty history of ``restart_lag`` steps (the filter restarts that
+    many steps before the decision; Park et al. 2004: 2-3), no decision.
+
+    Args:
+      config: ``hybrid_psa_config(...)``.
+      input_example: shaped like the filter input (nu,).
+      restart_lag: steps kept for the replay, >= 1.
+      follow: the decision whose exclusion the controller's view obeys (module doc): "verified", "hybrid", "psa"
+        (largest ``FI``) or "none" (never exclude); or its ``FOLLOW`` code as an array (one compiled flight for every
+        mode).
+
+    Returns:
+      ``HybridPSAState``: the state ``hybrid_psa_fdi``'s ``observe`` and ``step`` carry.
+    """
     restart_lag = _checks.check_int("restart_lag", restart_lag, 1, meaning="a number of steps >= 1")
     if isinstance(follow, str):
         _checks.check_choice("follow", follow, list(FOLLOW))

@@ -189,7 +189,7 @@ def two_stage_kalman_filter(
       ``Filter(init, step)``: ``init(mean, cov, bias_mean=None, bias_cov=None)`` (prior of the first step, ``x``
       and ``b`` independent; bias default 0 with zero covariance: fault-free at the start, ``bias_walk`` opens
       it); ``step(state, y, u) -> (state, TSKFInfo)``; run with ``run_filter``. ``TSKFInfo.statistic`` ~ chi2 with
-      ``tskf_statistic_dof(model, unknown_input)`` (``m - q``) dof under the filter's hypothesis.
+      ``m - q`` dof under the filter's hypothesis (``m`` outputs, ``q = rank(E)``; 0 without ``unknown_input``).
     """
     n, nu, m = validate_linear_model(model)
     _checks.check_shape("direction.state", direction.state, (n, None), "n states x p biases")

@@ -10,12 +10,12 @@ availability over grids), ``receiver`` (a real receiver's epochs: observation fi
 """
 from jaxfdi.gnss._android import read_android
 from jaxfdi.gnss._frames import ecef_to_geodetic, geodetic_to_ecef
-from jaxfdi.gnss._integrity import monitor_epochs, raim_fdi
-from jaxfdi.gnss._orbits import satellite_position
+from jaxfdi.gnss._integrity import monitor_epochs
+from jaxfdi.gnss._orbits import orbit_table, satellite_position, select_orbits
 from jaxfdi.gnss._positioning import solve_position
 from jaxfdi.gnss._protection import protection_levels
 from jaxfdi.gnss._receiver import monitor_receiver, read_observations
-from jaxfdi.gnss._raim import parity_check
+from jaxfdi.gnss._raim import parity_check, raim_tables
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._yuma import read_yuma
 
@@ -24,12 +24,14 @@ __all__ = [
     "read_observations",
     "read_android",
     "read_yuma",
+    "orbit_table",
+    "select_orbits",
     "satellite_position",
     "ecef_to_geodetic",
     "geodetic_to_ecef",
     "solve_position",
+    "raim_tables",
     "parity_check",
-    "raim_fdi",
     "protection_levels",
     "monitor_epochs",
     "monitor_receiver",

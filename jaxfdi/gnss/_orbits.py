@@ -321,10 +321,38 @@ def almanac_table(almanac: Almanac, reference_week: int | None = None, slot_prns
     return _table(alm.prn, slot_prns, columns, valid, np.full(alm.prn.shape, np.inf), dtype)
 
 
+def orbit_table(records: Ephemerides | Almanac, reference_week: int | None = None, slot_prns=None,
+                include_unhealthy: bool = False, dtype=None) -> OrbitTable:
+    """Broadcast records (``read_rinex_nav``'s ephemerides or ``read_yuma``'s almanac) as the ``OrbitTable`` that
+    ``select_orbits``, ``monitor_epochs`` and the receiver chain read, times ``t`` from the start of ``reference_week``.
+
+    Args:
+      records: ``Ephemerides`` or ``Almanac``.
+      reference_week: the GPS week whose start is ``t = 0`` (default: the records' first week).
+      slot_prns: (S,) PRN of each slot (default: PRNs 1..32 for ephemerides, the almanac's in file order).
+      include_unhealthy: keep records whose health word is not 0 (default: dropped).
+      dtype: float dtype (default: JAX's default float).
+
+    Returns:
+      ``OrbitTable``: every record of the S slots, padded (leaves (S, R)); an almanac's records never expire.
+    """
+    if isinstance(records, Almanac):
+        return almanac_table(records, reference_week, slot_prns, include_unhealthy, dtype)
+    if not isinstance(records, Ephemerides):
+        raise TypeError(f"records: expected Ephemerides (read_rinex_nav) or an Almanac (read_yuma), got "
+                        f"{_checks.received(records)}")
+    week = int(np.min(records.week)) if reference_week is None else reference_week
+    return ephemeris_table(records, week, slot_prns, include_unhealthy, dtype)
+
+
 def select_orbits(table: OrbitTable, t: Array) -> tuple[Orbit, Array]:
-    """Each slot's record for epoch ``t``: ``(orbit with (S,) leaves, (S,) bool available)``: smallest
-    ``|t - toe|`` among valid records within their validity (RTKLIB's ``seleph``), never one with an
-    ``orbit_problem``; a slot with none is unavailable (its orbit then is filler, never to be used).
+    """Each slot's record for epoch ``t``: smallest ``|t - toe|`` among valid records within their validity (RTKLIB's
+    ``seleph``), never one with an ``orbit_problem``; a slot with none is unavailable (its orbit then is filler, never
+    to be used).
+
+    Returns:
+      ``(orbit, available)``: the ``Orbit`` with (S,) leaves that ``satellite_position`` and ``solve_position`` take,
+      and (S,) bool.
     """
     age = jnp.abs(_wrap_half_week(t - table.orbit.toe))
     usable = table.valid & (age <= table.validity) & (orbit_problem(table.orbit) == 0)

@@ -96,6 +96,10 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
       num_slots: S, the number of satellite slots.
       pfa: false-alarm probability per test; pmd: missed-detection probability.
       rule: "chi2" (``chi2_threshold(k, pfa)``) or "paper" (eq. 8: ``2 ln(1/pfa)``).
+
+    Returns:
+      ``RaimTables``: (S - 3,) ``threshold`` and ``noncentrality`` per degrees of freedom (entry 0: no test), what
+      ``parity_check``, ``protection_levels`` and ``monitor_epochs`` take as ``tables``.
     """
     if rule not in RULES:
         raise ValueError(f"rule: expected one of {list(RULES)}, got {rule!r}")

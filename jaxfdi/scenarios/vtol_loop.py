@@ -1,6 +1,6 @@
 """Lee & Lyou's VTOL example in closed loop: fault detection, isolation and fault-tolerant control (their Fig. 2).
 
-``run_closed_loop`` = ``run_loop(true_plant, tskf_bank_fdi, control.reconfigurable_pi)``. Step ``k``:
+``run_closed_loop`` = ``run_loop(true_plant, tskf_bank_fdi, reconfigurable_pi)``. Step ``k``:
 
 1. the true plant (its own matrices, uncertainty and disturbance states included) is measured, ``y = C_t x_t + v``; a
    sensor fault acts on ``y``;

@@ -31,9 +31,7 @@ def calls():
                                                                                threshold=0.9, onset=0.2, ax=ax),
         "estimate": lambda ax=None: plotting.plot_estimate(statistic, statistic + 0.1, np.ones(T), t=t, ax=ax),
         "delays": lambda ax=None: plotting.plot_delays({"RPM": [0.01, 0.02, np.nan], "P2": [0.03, 0.05]}, ax=ax),
-        "confusion": lambda ax=None: plotting.plot_confusion(np.array([[9, 1], [2, 8]]), ["none", "P2"], ax=ax),
-        "loss history": lambda ax=None: plotting.plot_loss_history([0, 10, 20], [np.nan, 2.0, 1.0], [3.0, 2.5, 1.5],
-                                                                   best_step=20, ax=ax),
+        "confusion": lambda ax=None: plotting.plot_confusion([0, 0, 1, 1], [0, -1, 1, 0], ["normal", "P2"], ax=ax),
     }
 
 
@@ -67,10 +65,16 @@ def test_statistic_lines_hold_the_data():
     assert list(lines["onset"].get_xdata()) == [0.2, 0.2]
 
 
-def test_confusion_shows_row_shares():
-    fig = plotting.plot_confusion(np.array([[9, 1], [2, 8]]), ["none", "P2"])
-    np.testing.assert_allclose(fig.axes[0].images[0].get_array(), [[0.9, 0.1], [0.2, 0.8]])
-    assert sorted(text.get_text() for text in fig.axes[0].texts) == ["0.10", "0.20", "0.80", "0.90"]
+def test_confusion_counts_the_runs_and_shows_row_shares():
+    """10 fault-free runs (9 isolate nothing, 1 isolates P2) and 10 P2 runs (8 right, 1 wrong, 1 nothing),
+    tabulated by hand."""
+    true = [0] * 10 + [1] * 10
+    isolated = [-1] * 9 + [1] + [1] * 8 + [0, -1]
+    fig = plotting.plot_confusion(true, isolated, ["normal", "P2"])
+    np.testing.assert_allclose(fig.axes[0].images[0].get_array(), [[0.0, 0.1, 0.9], [0.1, 0.8, 0.1]])
+    assert [tick.get_text() for tick in fig.axes[0].get_xticklabels()] == ["normal", "P2", "none"]
+    counts = plotting.plot_confusion(true, isolated, ["normal", "P2"], normalize=False)
+    assert sorted(text.get_text() for text in counts.axes[0].texts) == ["0", "1", "1", "1", "8", "9"]
 
 
 def test_delays_leave_out_and_count_the_missed():
@@ -83,7 +87,8 @@ def test_delays_leave_out_and_count_the_missed():
 @pytest.mark.parametrize("call,argument", [
     (lambda: plotting.plot_statistic(np.zeros((2, 2, 2))), "statistic"),
     (lambda: plotting.plot_mode_probabilities(np.zeros((5, 2)), ["a"]), "names"),
-    (lambda: plotting.plot_confusion(np.zeros((2, 3)), ["a", "b"]), "matrix"),
+    (lambda: plotting.plot_confusion([0, 2], [0, 1], ["a", "b"]), "true_labels"),
+    (lambda: plotting.plot_confusion([0, 1], [0, 1, 1], ["a", "b"]), "predicted_labels"),
     (lambda: plotting.plot_delays({}), "delays"),
 ])
 def test_bad_input_names_the_argument(call, argument):

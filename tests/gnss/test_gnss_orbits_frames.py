@@ -10,7 +10,8 @@ import pyrtklib as rtk
 import pytest
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss import ecef_to_geodetic, geodetic_to_ecef, read_rinex_nav, read_yuma, satellite_position
+from jaxfdi.gnss import (ecef_to_geodetic, geodetic_to_ecef, orbit_table, read_rinex_nav, read_yuma,
+                         satellite_position)
 from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, ned_to_ecef
 from jaxfdi.gnss._orbits import (
     almanac_table,
@@ -120,13 +121,22 @@ def test_almanac_matches_rtklib_and_the_broadcast_orbits(ephemerides):
             np.testing.assert_allclose(ours[s], [rs[0], rs[1], rs[2]], atol=1e-3)
             assert clocks[s] == pytest.approx(dts[0], abs=1e-15)     # af0 + af1 t_k
     # the almanac (TOA 2.8 days later) and the broadcast orbits agree to a few km on 2020-01-01
-    broadcast = ephemeris_table(ephemerides, 2086)
-    alm_table = almanac_table(almanac, slot_prns=np.arange(1, 33))
+    broadcast = orbit_table(ephemerides, 2086)                    # the public path to both tables
+    alm_table = orbit_table(almanac, slot_prns=np.arange(1, 33))
     t = 259200.0 + 6 * 3600.0
     (orbit_b, ok_b), (orbit_a, ok_a) = select_orbits(broadcast, t), select_orbits(alm_table, t)
     both = np.asarray(ok_b & ok_a)
     gap = np.linalg.norm(np.asarray(satellite_position(orbit_b, t) - satellite_position(orbit_a, t)), axis=1)
     assert both.sum() == 30 and np.max(gap[both]) < 10e3, np.round(gap[both])
+
+
+def test_orbit_table_is_the_records_table_from_their_first_week(ephemerides):
+    """``orbit_table`` of ephemerides, week defaulted, is ``ephemeris_table`` at the records' first GPS week; a
+    record set of another kind is refused by name."""
+    week = int(np.min(ephemerides.week))
+    jax.tree_util.tree_map(np.testing.assert_array_equal, orbit_table(ephemerides), ephemeris_table(ephemerides, week))
+    with pytest.raises(TypeError, match="^records: expected Ephemerides"):
+        orbit_table({"prn": [1]})
 
 
 def test_select_orbits_takes_the_nearest_valid_record(ephemerides):

@@ -30,7 +30,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-import jaxfdi
 from jaxfdi.detection import chi2_detector, chi2_threshold, frozen_channel_detector, glrt_detector
 from jaxfdi.detection import _parity as ps
 from jaxfdi._faults import fault

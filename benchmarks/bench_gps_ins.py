@@ -90,10 +90,9 @@ def design():
 
 
 def initial(flight):
-    ins_filter, chi2, test, health = design()
     nav0 = NavState(flight.position[0], flight.velocity[0], flight.attitude[0])
     cov0 = gps_ins.initial_covariance(MODEL)
-    return integrity.GpsInsFdiState(ins_filter.init(nav0, cov0), chi2.init(), test.init(15), health.init()), cov0
+    return integrity.ins_fdi(*design()).init(nav0, cov0), cov0
 
 
 # --- jaxfdi ---------------------------------------------------------------------------------

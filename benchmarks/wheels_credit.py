@@ -66,14 +66,14 @@ def run_once(design, f, key, noise_scale, steps, restart, history=False):
     the engagement step, the bank's ``F_x`` at ``LAGS`` after it (and the history)."""
     params = design.params
     N = params.wheel_axes.shape[0]
-    fdi, fdi0 = rw.wheel_fdi(design, restart_prediction=restart, gyro_health=False)  # the credit bank alone
+    fdi = rw.wheel_fdi(design, restart_prediction=restart, gyro_health=False)  # the credit bank alone
     plant = wheel_plant(params, f, noise_scale * design.gyro_sigma, noise_scale * design.disturbance_sigma,
                         noise_scale * design.wheel_noise_sigma)
     controller = wheel_attitude_controller(params, design.gains, design.profile, design.initial_speeds)
     x0 = jnp.concatenate([jnp.array([1.0, 0, 0, 0]), jnp.zeros(3), design.initial_speeds])
     u0 = WheelCommand(design.initial_speeds, jnp.zeros(N))
     scorer = detection_scorer(f.onset, lambda out: (out.decisions[2], out.decisions[3]))
-    result = run_loop(plant, fdi, controller, x0, fdi0, key, steps, u0=u0, scorer=scorer, keep_history=True)
+    result = run_loop(plant, fdi, controller, x0, fdi.init(), key, steps, u0=u0, scorer=scorer, keep_history=True)
     out = result.history.output
     engaged = jnp.argmax(out.engaged)  # first step the banks ran on their own (the step after the alarm)
     at = jnp.clip(engaged - 1 + jnp.asarray(LAGS), 0, steps - 1)

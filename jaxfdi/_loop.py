@@ -118,7 +118,7 @@ def run_loop(
     Args:
       plant, fdi, controller: the three parts (``Plant``, ``FDI``, ``Controller``).
       x0: the plant's initial state (``plant.init(x0)``).
-      fdi_state0: the FDI's initial state (e.g. ``(filt.init(...), detector.init())``).
+      fdi_state0: the FDI's initial state, ``fdi.init(...)``.
       key: PRNG key of the run (the plant draws step ``k``'s noise from it).
       steps: number of steps T; may be omitted when ``exogenous`` is given.
       exogenous: pytree of (T, ...) per-step data for the controller (feed-forward inputs, references), or ``None``.
@@ -133,7 +133,7 @@ def run_loop(
       ``keep_history=True`` the ``LoopTrace`` of every step stacked along a leading time axis T (else ``None``); and the
       ``(plant, fdi, controller)`` states after the last step.
     """
-    for name, part, needed in (("plant", plant, ("init", "measure", "advance")), ("fdi", fdi, ("step",)),
+    for name, part, needed in (("plant", plant, ("init", "measure", "advance")), ("fdi", fdi, ("init", "step")),
                                ("controller", controller, ("init", "step")),
                                ("scorer", scorer, () if scorer is None else ("init", "update"))):
         if not all(callable(getattr(part, field, None)) for field in needed):

@@ -67,11 +67,11 @@ def dead_channels(info: Any) -> Array | None:
 
 def filter_detector(filt: Filter, detector: Detector, detector_input: Callable[[Any], Array] | None = None,
                     channel_labels: Array | None = None) -> FDI:
-    """The open-loop FDI: a fault-blind filter and a detector reading its info
-    (``detector_input``; the NIS by default). Its state is ``(filter state, detector
-    state)``; its output ``(info, Decision)``. A step whose filter reports a dead channel
-    ``j`` alarms, with label ``channel_labels[j]`` (``chi2.flag_dead``; ``None``: the
-    detector's own label), whatever the detector reads."""
+    """The open-loop FDI: a fault-blind filter and a detector reading its info (``detector_input``; the NIS by
+    default). Its state is ``(filter state, detector state)``, from ``init(*args)``: the filter's ``init(*args)`` and
+    the detector's ``init()``; its output ``(info, Decision)``. A step whose filter reports a dead channel ``j``
+    alarms, with label ``channel_labels[j]`` (``chi2.flag_dead``; ``None``: the detector's own label), whatever the
+    detector reads."""
     detector_input = detector_input or (lambda info: info.nis)
 
     def step(state, k, y, u):
@@ -83,7 +83,7 @@ def filter_detector(filt: Filter, detector: Detector, detector_input: Callable[[
             decision = flag_dead(decision, dead, channel_labels)
         return (filt_state, det_state), (info, decision)
 
-    return FDI(step)
+    return FDI(lambda *args, **kwargs: (filt.init(*args, **kwargs), detector.init()), step)
 
 
 def monitor(

@@ -24,14 +24,18 @@ class Plant(NamedTuple):
 
 
 class FDI(NamedTuple):
-    """An FDI stage; ``observe`` runs before the controller (``None``: the controller sees ``y``).
+    """An FDI stage, built like a ``Filter``: ``init`` makes its state, ``observe`` runs before the controller
+    (``None``: the controller sees ``y``), ``step`` after it.
 
     Attributes:
+      init: ``init(*args) -> state``, the FDI's initial state from its own arguments (e.g. its filter's prior ``(mean,
+        cov)``); a stateless FDI's ``init()`` gives ``None``
       step: ``step(state, k, y, u) -> (state, output)``: the FDI's step after the controller (time update, detectors,
         decisions); ``output`` is what a ``Scorer`` folds
       observe: ``observe(state, k, y) -> (state, view)``, the part the controller waits for, or ``None``
     """
 
+    init: Callable[..., Any]
     step: Callable[[Any, Array, Any, Array], tuple[Any, Any]]
     observe: Callable[[Any, Array, Any], tuple[Any, Any]] | None = None
 

@@ -94,13 +94,14 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
 
 
 def rate_passthrough_fdi(rate_axes: Array) -> FDI:
-    """Fault-free ``loop.FDI``: no detection, least-squares rates of all channels (state, output ``None``)."""
+    """Fault-free ``loop.FDI``: no detection, least-squares rates of all channels (``init()``, state and output
+    ``None``)."""
     estimator = rate_estimator(jnp.asarray(rate_axes))  # once: a solve inside the step costs 4x the flight (vmapped LU)
 
     def observe(state, k, y):
         return state, flight_view(y, estimator.astype(y.dtype) @ y[RATE_OFFSET:])
 
-    return FDI(lambda state, k, y, u: (state, None), observe)
+    return FDI(lambda: None, lambda state, k, y, u: (state, None), observe)
 
 
 __all__ = ["f16_plant", "rate_passthrough_fdi"]

@@ -13,7 +13,7 @@ from jaxfdi.detection._glrt import fault_directions, fault_signatures, glrt_thre
 from jaxfdi.detection._glrt_correction import corrected_glrt
 from jaxfdi.detection._glrt_recursive import glrt_detector
 from jaxfdi.detection._glrt_transient import transient_glrt_detector
-from jaxfdi.detection._hybrid_psa import hybrid_psa_config, hybrid_psa_fdi, hybrid_psa_init
+from jaxfdi.detection._hybrid_psa import hybrid_psa_config, hybrid_psa_fdi
 from jaxfdi.detection._known_change import known_change_detector
 from jaxfdi.detection._mode_probability import mode_probability_detector
 from jaxfdi.detection._parity import parity_space
@@ -43,6 +43,5 @@ __all__ = [
     "dual_filter",
     "two_stage_isolation",
     "hybrid_psa_config",
-    "hybrid_psa_init",
     "hybrid_psa_fdi",
 ]

@@ -31,6 +31,7 @@ numbers, filter cost paid a few steps per batch.
 """
 from __future__ import annotations
 
+from functools import partial
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -291,7 +292,7 @@ def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, val
 def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[[Array], Array],
                    filter_input: Callable[[Array, Array], Array], view: Callable[[Array, Array], Any],
                    batch_axis: str | None = None):
-    """The hybrid FDI (module doc) as an ``FDI(step, observe)``; state ``hybrid_psa_init(config, ...)``.
+    """The hybrid FDI (module doc) as an ``FDI(init, step, observe)``.
 
     Args:
       config: ``hybrid_psa_config(...)``.
@@ -305,7 +306,10 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
       batch_axis: name of the ``vmap`` axis of a batch of runs, or ``None`` (module doc).
 
     Returns:
-      ``FDI(step, observe)`` on a ``HybridPSAState``: ``observe(state, k, y) -> (state, view)`` runs the tests,
+      ``FDI(init, step, observe)`` on a ``HybridPSAState``: ``init(input_example, restart_lag=3, follow="hybrid")``
+      the state before the first step (``input_example`` shaped like the filter input (nu,), ``restart_lag`` steps of
+      history, ``follow`` the decision the view obeys: "verified", "hybrid", "psa" or "none", module doc);
+      ``observe(state, k, y) -> (state, view)`` runs the tests,
       latches the decision and gives ``view(y, x_selected)``; ``step(state, k, y, u) -> (state,
       HybridPSAOutput)`` reports the step's statistics and ``Decision``s and stores the step for the replay.
     """
@@ -374,7 +378,7 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
             ~jnp.isnan(c.statistic) & d.filter_healthy)
         return state._replace(history=push(state.history, entry)), output
 
-    return FDI(step, observe)
+    return FDI(partial(hybrid_psa_init, config), step, observe)
 
 
 def _excluded(decision: HybridDecision, follow: Array) -> Array:

@@ -228,8 +228,8 @@ def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=
     """``monitor_epoch`` as a stateless ``loop.FDI``; step ``k``'s pseudoranges are tagged ``t0 + k dt``.
 
     Returns:
-      ``FDI`` with ``step(state, k, y, u) -> (state, RaimOutput)``, no ``observe``: ``state`` passed
-      through, ``y`` (S,) pseudoranges [m] (NaN: not measured, inf: dead channel), ``u`` unused.
+      ``FDI`` with ``init() -> None`` and ``step(state, k, y, u) -> (state, RaimOutput)``, no ``observe``: ``state``
+      passed through, ``y`` (S,) pseudoranges [m] (NaN: not measured, inf: dead channel), ``u`` unused.
     """
     _checks.check_positive("dt", dt, "a positive epoch interval (s)")
 
@@ -238,7 +238,7 @@ def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=
         orbit, available = select_orbits(table, t)
         return state, raim_output(monitor_epoch(orbit, available, t, y, tables, sigma, operation, exclude))
 
-    return FDI(step)
+    return FDI(lambda: None, step)
 
 
 # --- geometry-only studies: protection levels without measurements ---------------------

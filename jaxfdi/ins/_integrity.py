@@ -40,6 +40,7 @@ from jaxfdi.gnss._orbits import OrbitTable, select_orbits
 from jaxfdi.gnss._positioning import PositionFix
 from jaxfdi.gnss._raim import RaimTables
 from jaxfdi.ins import _imu as imu
+from jaxfdi.ins._error_state import STATE_SIZE
 from jaxfdi.ins._loosely_coupled import GpsFix, InsState
 from jaxfdi.ins._mechanization import NavState
 from jaxfdi.ins._scst import ScstState, StateChi2Test
@@ -166,15 +167,22 @@ def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, he
     return GpsInsFdiState(ins, window, scst_state, health_state), out
 
 
+def ins_fdi_init(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector):
+    """The INS monitor's ``init(nav, cov, accel_bias=None, gyro_bias=None) -> GpsInsFdiState``: the EKF's prior
+    (``ins_filter.init``) and the three tests' empty states."""
+    return lambda *args, **kwargs: GpsInsFdiState(ins_filter.init(*args, **kwargs), chi2.init(),
+                                                  scst.init(STATE_SIZE), health.init())
+
+
 def ins_fdi(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector) -> FDI:
     """The INS tests alone as a ``loop.FDI``: step ``k`` takes ``(GpsFix, samples (n, 6))`` (a receiver's
-    validated solution, e.g. from a log) and returns an ``InsTestOutput``."""
+    validated solution, e.g. from a log) and returns an ``InsTestOutput``; ``init`` as ``ins_fdi_init``."""
 
     def step(state: GpsInsFdiState, k, y, u):
         fix, samples = y
         return ins_monitor_step(ins_filter, chi2, scst, health, state, fix, samples)
 
-    return FDI(step)
+    return FDI(ins_fdi_init(ins_filter, chi2, scst, health), step)
 
 
 def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Filter, chi2: Detector,
@@ -183,8 +191,7 @@ def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Fi
 
     Returns:
       ``FDI`` with ``step(state, k, y, u) -> (state, GpsInsOutput)``, no ``observe``; ``y`` a
-      ``plant.GpsInsMeasurement`` tagged ``t0 + k`` s, ``u`` unused; state ``GpsInsFdiState(
-      ins_filter.init(...), chi2.init(), scst.init(15), health.init())``.
+      ``plant.GpsInsMeasurement`` tagged ``t0 + k`` s, ``u`` unused; ``init(nav, cov, ...)`` as ``ins_fdi_init``.
     """
     _checks.check_positive("velocity_sigma", velocity_sigma, "a velocity standard deviation (m/s)")
 
@@ -202,7 +209,7 @@ def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Fi
         return state, GpsInsOutput(raim, check.threshold, protection.hpl, fix.dops.hdop, fix.num_used, ins,
                                    ins.healthy)
 
-    return FDI(step)
+    return FDI(ins_fdi_init(ins_filter, chi2, scst, health), step)
 
 
 def initial_covariance(position_sigma: float, velocity_sigma: float, tilt_sigma: float, heading_sigma: float,

@@ -206,7 +206,8 @@ def run_flight(setup: FlightSetup, key: Array, dispersion: Dispersion, keep_hist
     params = setup.params._replace(xcg=dispersion.xcg)
     plant = f16_plant(params, setup.sensors, DT, gust_sigma=setup.gust_sigma, fault=fault)
     if fdi is None:
-        fdi, fdi_state0 = rate_passthrough_fdi(setup.sensors.rate_axes), None
+        fdi = rate_passthrough_fdi(setup.sensors.rate_axes)
+        fdi_state0 = fdi.init()
     steps = setup.reference.state.shape[0]
     reference = setup.reference
     degrees = 180.0 / math.pi

@@ -144,7 +144,7 @@ def _run(key, case, sky):
     x0 = jnp.asarray([measurements.ClockModel().bias, measurements.ClockModel().drift])
     plant = measurements.receiver_plant(table, START_TOW, DT, paths[c], visible[c], sigma[c], fault=one_fault)
     scorer = episode_scorer(flt.episodes(one_fault, 0), lambda o: o.decision, single=True)
-    return run_loop(plant, fdi, feedforward(), x0, None, key, steps, exogenous=jnp.zeros((steps, 0)),
+    return run_loop(plant, fdi, feedforward(), x0, fdi.init(), key, steps, exogenous=jnp.zeros((steps, 0)),
                     scorer=scorer, keep_history=True)
 
 

@@ -234,8 +234,7 @@ def _run(world: World, case: RunCase, key: jax.Array) -> RunOutput:
     cov0 = initial_covariance(model)
     nav_error = jnp.linalg.cholesky(cov0[:9, :9]) @ jax.random.normal(key_init, (9,), cov0.dtype)
     truth0 = NavState(world.flight.position[0], world.flight.velocity[0], world.flight.attitude[0])
-    ins0 = ins_filter.init(error_state.correct(truth0, -nav_error), cov0)   # INS = truth + error; biases unknown
-    fdi0 = integrity.GpsInsFdiState(ins0, chi2.init(), test.init(error_state.STATE_SIZE), health.init())
+    fdi0 = monitor.init(error_state.correct(truth0, -nav_error), cov0)   # INS = truth + error; biases unknown
     clock = measurements.ClockModel()
     scorer = combine_scorers(
         chi2=detection_scorer(case.onset, lambda o: o.chi2, single=True),

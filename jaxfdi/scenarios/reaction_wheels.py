@@ -269,7 +269,7 @@ class WheelHistory(NamedTuple):
 def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis", restart_prediction: bool = True,
               gyro_health: bool = True):
     """The two-stage FDI of Choi and Park (2009) (``detection.two_stage``: ``F``, the NIS test, the credit and
-    likelihood banks) as a ``loop.FDI`` on the gyro readings and wheel commands, and its initial state.
+    likelihood banks) as a ``loop.FDI`` on the gyro readings and wheel commands (``init()``: the state before step 0).
 
     ``restart_prediction`` (default): at engagement each hypothesis's prediction filter starts from its own EKF's
     posterior, not the nominal filter's predicted mean, which lags a stop's rate jump (``I^-1 I_w Omega_i a_i``, ~0.017
@@ -330,7 +330,7 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
                                  healthy=output.healthy & c["view_healthy"])
         return dict(c, stages=stages_state, view=view, u=u), output
 
-    return FDI(step, observe if gyro_health else None), state0
+    return FDI(lambda: state0, step, observe if gyro_health else None)
 
 
 def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, estimator: str = "ekf",
@@ -342,7 +342,7 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
     params = design.params
     dtype = params.inertia.dtype
     N = params.wheel_axes.shape[0]
-    fdi, fdi0 = wheel_fdi(design, estimator, engage_on)
+    fdi = wheel_fdi(design, estimator, engage_on)
     plant = wheel_plant(params, f, design.gyro_sigma, design.disturbance_sigma, design.wheel_noise_sigma)
     controller = wheel_attitude_controller(params, design.gains, design.profile, design.initial_speeds)
 
@@ -357,7 +357,7 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
     )
     x0 = jnp.concatenate([jnp.array([1.0, 0, 0, 0], dtype), jnp.zeros(3, dtype), design.initial_speeds])
     u0 = WheelCommand(design.initial_speeds, jnp.zeros(N, dtype))
-    result = run_loop(plant, fdi, controller, x0, fdi0, key, steps, u0=u0, scorer=scorer, keep_history=history)
+    result = run_loop(plant, fdi, controller, x0, fdi.init(), key, steps, u0=u0, scorer=scorer, keep_history=history)
     score = result.score
     out = RunOutput(*score["records"], *score["peaks"], score["healthy"])
     if not history:

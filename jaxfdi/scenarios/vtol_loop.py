@@ -249,7 +249,7 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
         return state._replace(estimator=est_next, bank=bank_next, buffer=buffer, isolated=isolated, kind=kind,
                               health=health, excluded=excluded), output
 
-    return FDI(step, observe)
+    return FDI(lambda: tskf_bank_init(design), step, observe)
 
 
 def tskf_bank_init(design: LoopDesign) -> BankState:
@@ -288,8 +288,9 @@ def run_closed_loop(design: LoopDesign, key: Array, fault: Fault, ftc: Array, st
     n, nu = design.model.Phi.shape[0], design.model.Gamma.shape[1]
     controller = reconfigurable_pi(design.gain, design.schedule, design.H, design.command, design.Ts,
                                    design.model.Phi.dtype)
-    result = run_loop(true_plant(design, fault), tskf_bank_fdi(design, ftc), controller,
-                      design.plant_x0, tskf_bank_init(design), key, steps,
+    fdi = tskf_bank_fdi(design, ftc)
+    result = run_loop(true_plant(design, fault), fdi, controller,
+                      design.plant_x0, fdi.init(), key, steps,
                       u0=jnp.zeros((nu,), design.model.Phi.dtype), keep_history=True)
     trace = result.history
     (_, estimator_healthy), out = trace.view, trace.output

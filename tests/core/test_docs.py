@@ -8,6 +8,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -53,19 +54,26 @@ def test_concept_pages_code_runs():
     """The concept pages' Python blocks, in order in one namespace."""
     namespace = {}
     ran = 0
-    for page in ("faults", "filters", "monte-carlo", "detectors", "control"):
+    for page in ("faults", "filters", "monte-carlo", "detectors", "control", "studies"):
         for block in re.findall(r"```python\n(.*?)```", (DOCS / "concepts" / f"{page}.md").read_text(), re.S):
             if "class Filter(NamedTuple)" in block:  # the shape of a Filter, not runnable code
                 continue
             exec(block.replace("1000, jnp.ones(1000)", "16, jnp.ones(16)"), namespace)
             ran += 1
-    assert ran == 6
+    assert ran == 8
     assert namespace["info"].nis.shape == (50,) and namespace["out"].shape == (16,)
     truth = namespace["truth"]                # faults.md: the bias enters sensor 1 from step 20
     assert truth.measurement.shape == (50, 2) and float(truth.sensor_fault[19, 1]) == 0.0
     assert float(truth.sensor_fault[20, 1]) == 0.5 and float(truth.sensor_fault[20, 0]) == 0.0
     assert abs(float(namespace["threshold"]) - 39.9968) < 1e-3          # scipy.stats.chi2.isf(0.005, 20)
     assert bool(namespace["converged"])
+    # studies.md: the closed loop holds the open-loop unstable plant near 0 from x0 = (1, 0) ...
+    states = np.asarray(namespace["true_states"])
+    assert states.shape == (200, 2) and np.max(np.abs(states[-50:])) < 0.1
+    # ... and on the same runs a lower threshold detects at least as often (an alarm at 13.8 is one at 9.2)
+    detected = namespace["detected"]
+    assert detected["R x1, 9.2"] >= detected["R x1, 13.8"] and set(detected) == {"R x1, 9.2", "R x1, 13.8",
+                                                                                 "R x1.5, 13.8"}
 
 
 def _hooks():

@@ -96,9 +96,9 @@ def test_closed_loop_lqr_with_a_perfect_sensor_is_the_closed_form_response():
     K = _lqr(Phi, Gamma, np.eye(n), np.eye(nu))
     model = LinearGaussianModel(jnp.asarray(Phi), jnp.asarray(Gamma), jnp.eye(n), jnp.zeros((n, nu)),
                                 jnp.zeros((n, n)), jnp.zeros((n, n)))
-    passthrough = jaxfdi.FDI(lambda state, k, y, u: (state, None))
+    passthrough = jaxfdi.FDI(lambda: None, lambda state, k, y, u: (state, None))
     x0 = jnp.asarray(rng.normal(size=n))
-    result = loop.run_loop(jaxfdi.linear_simulator(model), passthrough, loop.state_feedback(K), x0, None,
+    result = loop.run_loop(jaxfdi.linear_simulator(model), passthrough, loop.state_feedback(K), x0, passthrough.init(),
                            jax.random.key(0), 40, u0=jnp.zeros(nu), keep_history=True)
     expected = [np.asarray(x0)]
     for _ in range(39):
@@ -114,8 +114,9 @@ def test_closed_loop_feedthrough_sees_the_held_input():
     model = LinearGaussianModel(jnp.eye(1) * 0.5, jnp.eye(1), jnp.eye(1), jnp.eye(1) * 2.0,
                                 jnp.zeros((1, 1)), jnp.zeros((1, 1)))
     counter = jaxfdi.Controller(lambda: jnp.zeros(1), lambda s, k, view, exo: (s + 1.0, s + 1.0))
-    result = loop.run_loop(jaxfdi.linear_simulator(model), jaxfdi.FDI(lambda s, k, y, u: (s, None)), counter,
-                           jnp.zeros(1), None, jax.random.key(0), 5, u0=jnp.full(1, 7.0), keep_history=True)
+    passthrough = jaxfdi.FDI(lambda: None, lambda s, k, y, u: (s, None))
+    result = loop.run_loop(jaxfdi.linear_simulator(model), passthrough, counter, jnp.zeros(1), passthrough.init(),
+                           jax.random.key(0), 5, u0=jnp.full(1, 7.0), keep_history=True)
     u = np.asarray(result.history.control)[:, 0]
     x = np.asarray(result.history.sensed.state)[:, 0]
     held = np.concatenate([[7.0], u[:-1]])
@@ -144,10 +145,10 @@ def test_replay_over_the_ring_buffer_equals_the_original_estimates():
         last = jnp.sum(valid) - 1
         return (post, buffer), (info.filtered_mean, replayed.filtered_mean[last], buffer.count)
 
-    fdi = jaxfdi.FDI(step)
+    fdi = jaxfdi.FDI(lambda: (prior0, history.ring_buffer(L, example)), step)
     us = jnp.asarray(rng.normal(size=(25, 1)))
-    result = loop.run_loop(jaxfdi.linear_simulator(model), fdi, loop.feedforward(), jnp.zeros(n),
-                           (prior0, history.ring_buffer(L, example)), jax.random.key(3), exogenous=us, keep_history=True)
+    result = loop.run_loop(jaxfdi.linear_simulator(model), fdi, loop.feedforward(), jnp.zeros(n), fdi.init(),
+                           jax.random.key(3), exogenous=us, keep_history=True)
     original, replayed, count = result.history.output
     np.testing.assert_allclose(replayed, original, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(count, np.arange(1, 26))
@@ -287,7 +288,7 @@ def test_a_dead_sensor_mid_run_is_an_alarm_not_ill_health(engine):
 def test_loop_input_errors():
     model = engine_model()
     sim = jaxfdi.linear_simulator(model)
-    fdi = jaxfdi.FDI(lambda s, k, y, u: (s, None))
+    fdi = jaxfdi.FDI(lambda: None, lambda s, k, y, u: (s, None))
     with pytest.raises(ValueError, match="u0"):
         loop.run_loop(sim, fdi, loop.state_feedback(jnp.zeros((1, 7))), jnp.zeros(7), None, jax.random.key(0), 5)
     with pytest.raises(ValueError, match="steps"):

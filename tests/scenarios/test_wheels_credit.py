@@ -42,12 +42,13 @@ def batch():
     params = design.params
 
     def run(f, key, noise):
-        fdi, fdi0 = rw.wheel_fdi(design, gyro_health=False)  # noise-free gyros would look frozen to it
+        fdi = rw.wheel_fdi(design, gyro_health=False)  # noise-free gyros would look frozen to it
         plant = wheel_plant(params, f, noise * design.gyro_sigma, noise * design.disturbance_sigma,
                             noise * design.wheel_noise_sigma)
         controller = wheel_attitude_controller(params, design.gains, design.profile, design.initial_speeds)
         x0 = jnp.concatenate([jnp.array([1.0, 0, 0, 0]), jnp.zeros(3), design.initial_speeds])
-        result = run_loop(plant, fdi, controller, x0, fdi0, key, STEPS, u0=WheelCommand(design.initial_speeds, jnp.zeros(4)),
+        result = run_loop(plant, fdi, controller, x0, fdi.init(), key, STEPS,
+                          u0=WheelCommand(design.initial_speeds, jnp.zeros(4)),
                           scorer=detection_scorer(f.onset, lambda out: out.decisions[2], single=True), keep_history=True)
         h = result.history
         return dict(credit=result.score, y=h.sensed.measurement.rate, engaged=h.output.engaged,

@@ -84,11 +84,10 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
     ``lambda s, k, y, u: filt.step(s, y, u)`` (the state counts its own steps).
 
     The filter is ``kalman_filter(model)`` at steady state (gain ``K``, ``P = P_ss``) with the faults found so far
-    accommodated: ``eps_k = y_k - C m_k - D u_k - H b``, ``m_{k+1} = Phi (m_k + K eps_k) + Gamma u_k + G b``
-    (``G, H`` = ``fault_directions``). ``eps_k`` feeds ``glrt_detector``'s GLRT (``recursive``:
-    ``glrt_detector(..., recursive=True)``'s running sums, same decisions to round-off). A detection is confirmed when the
-    alarm has held ``confirm`` consecutive steps; then, for isolated direction ``i``, ``theta_hat = k - o``,
-    ``nu_hat``::
+    accommodated: ``eps_k = y_k - C m_k - D u_k - H b``, ``m_{k+1} = Phi (m_k + K eps_k) + Gamma u_k + G b`` (``G, H`` =
+    ``fault_directions``). ``eps_k`` feeds ``glrt_detector``'s GLRT (``recursive``: its running sums, same decisions to
+    round-off). A detection is confirmed when the alarm has held ``confirm`` consecutive steps; then, for isolated
+    direction ``i``, ``theta_hat = k - o``, ``nu_hat``::
 
         m_{k+1} += E_i[o + 1] nu_hat,   b_i += nu_hat,   window -= Gw_i[. - theta_hat] nu_hat
 

@@ -4,8 +4,8 @@ detected, isolated and excluded.
 - Both cases: a UAV racetrack from 2020-01-01 00:45:00 GPS time (week 2086, the shipped RINEX navigation file's day: the
   real constellation), 1 Hz. A run is ``loop.run_loop`` of the plant ``gnss.receiver_plant`` (light time, Earth
   rotation, broadcast satellite clocks, TCXO receiver clock, noise ``sqrt(3^2 + 3^2 / sin^2 el)`` m, 5 deg mask) and the
-  stateless FDI ``gnss._integrity.raim_fdi`` (least-squares fix, parity test at ``P_fa = 1/15000``, isolation, exclusion,
-  protection levels at ``P_md = 1e-3``, NPA alert limit 556 m); Monte Carlo: a ``vmap`` over keys.
+  stateless FDI ``gnss._integrity.raim_fdi`` (least-squares fix, parity test at ``P_fa = 1/15000``, isolation,
+  exclusion, protection levels at ``P_md = 1e-3``, NPA alert limit 556 m); Monte Carlo: a ``vmap`` over keys.
 - **Campus** (the paper's Konkuk University run, Fig. 6-7; Seoul, 37.5419 N 127.0782 E): the east leg passes 6 m west of
   a 50 m building (wall 60 m long; UAV 20 m above ground), hiding the eastern sky a few seconds each lap (every 310 s).
   No fault. The paper's point: HDOP exceeds 4 and HPL the 556 m alert limit while the parity statistic stays quiet.

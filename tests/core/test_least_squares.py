@@ -1,4 +1,5 @@
-"""Levenberg-Marquardt (``jaxfdi._levenberg_marquardt``, the F-16 trim's solver) against closed forms and SciPy's MINPACK."""
+"""Levenberg-Marquardt (``jaxfdi._levenberg_marquardt``, the F-16 trim's solver) against closed forms and SciPy's
+MINPACK."""
 import jax
 import jax.numpy as jnp
 import numpy as np

@@ -70,8 +70,8 @@ def _detector_registry():
             lambda: frozen_channel_detector(jnp.asarray([0.1, 0.1]), window, 1e-3, jnp.asarray([3, 4])),
             lambda rng, shape: jnp.asarray(rng.normal(size=shape + (2,))), alternating),
         "glrt_detector": DetectorCase(lambda: glrt_detector(model, gain, S, window, 30.0), _innovations, zeros),
-        "glrt_detector(recursive=True)": DetectorCase(lambda: glrt_detector(model, gain, S, window, 30.0, recursive=True),
-                                                _innovations, zeros),
+        "glrt_detector(recursive=True)": DetectorCase(
+            lambda: glrt_detector(model, gain, S, window, 30.0, recursive=True), _innovations, zeros),
         "transient_glrt_detector": DetectorCase(lambda: transient_glrt_detector(model, 4.0 * model.Q, window, 30.0),
                                                 _innovations, zeros),
         "known_change_bank": DetectorCase(lambda: known_change_bank(signatures, S, sizes, 10.0, tail=True),

@@ -275,6 +275,12 @@ def check_choice(name: str, value: Any, options: Iterable[Any]) -> None:
         raise ValueError(f"{name}: expected one of {options}, got {value!r}")
 
 
+def check_flag(name: str, value: Any) -> None:
+    """``value`` is a Python ``bool`` (a switch between algorithms, decided at trace time)."""
+    if not isinstance(value, bool):
+        raise TypeError(f"{name}: expected True or False, got {received(value)}")
+
+
 def check_callable(name: str, value: Any, meaning: str = "a function") -> None:
     if not callable(value):
         raise TypeError(f"{name}: expected {meaning}, got {received(value)}")

@@ -123,7 +123,6 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
     """
     setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
                            overlap_sensor)
-    if not isinstance(recursive, bool):
-        raise TypeError(f"recursive: expected True or False, got {_checks.received(recursive)}")
+    _checks.check_flag("recursive", recursive)
     whitener, engine = recursive_engine(setup) if recursive else windowed_engine(setup)
     return engine_detector(setup, whitener, engine)

@@ -65,8 +65,7 @@ def rts_smoother(model: LinearGaussianModel, info: FilterInfo, *, parallel: bool
       ``SmootherResult``: smoothed means ``ms_k`` (T, n) and covariances ``Ps_k`` (T, n, n) of ``x_k`` given
       ``y_0..y_{T-1}``, and gains ``G_k`` (T, n, n), zero at the last step.
     """
-    if not isinstance(parallel, bool):
-        raise TypeError(f"parallel: expected True or False, got {_checks.received(parallel)}")
+    _checks.check_flag("parallel", parallel)
     Phi, info = _check(model, info)
     smooth = _parallel if parallel else _sequential
     return smooth(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)

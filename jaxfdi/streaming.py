@@ -27,7 +27,7 @@ import numpy as np
 from jaxfdi import _checks
 from jaxfdi._metrics import DetectionRecord, DetectionSummary
 
-__all__ = ["detection_reducer", "summarize_counts"]
+__all__ = ["detection_reducer", "detection_summary", "summarize_counts"]
 
 class DetectionCounts(NamedTuple):
     """Exact counts over runs (host-side NumPy int64); merge with ``merge_counts``.
@@ -263,8 +263,12 @@ def detection_reducer(horizon: int, bin_width: int = 1, record: Callable[[Any], 
 
 
 class DeviceSummary(NamedTuple):
-    """``summary`` for ``monte_carlo(..., summary=summary)`` (counts summed on the device) and
-    ``counts(totals) -> DetectionCounts`` for its result."""
+    """Detection counts summed on the device by ``monte_carlo(..., summary=...)``.
+
+    Attributes:
+      summary: ``summary(outputs, weight) -> (None, totals)``, what ``monte_carlo``'s ``summary`` takes
+      counts: ``counts(totals) -> DetectionCounts``, the counts of ``monte_carlo``'s ``totals``
+    """
 
     summary: Callable[[Any, Any], Any]
     counts: Callable[[Any], DetectionCounts]
@@ -277,7 +281,11 @@ def detection_summary(horizon: int, bin_width: int = 1, record: Callable[[Any], 
     of their records (last chunk's padding weighs 0). ``record``/``label`` as in ``detection_reducer``. Counts in
     JAX's default integer (int64 with ``jaxfdi.enable_x64()``, else int32: exact up to 2^31 - 1 steps); a delay
     outside ``[0, horizon)`` cannot raise in the program, so it is counted apart and ``counts`` raises
-    ``detection_counts``' ``ValueError``."""
+    ``detection_counts``' ``ValueError``.
+
+    Returns:
+      ``DeviceSummary(summary, counts)``; ``summarize_counts(s.counts(totals))`` is the ``DetectionSummary``.
+    """
     empty = empty_counts(horizon, bin_width)  # checks the arguments now
     pick = record or (lambda outputs: outputs)
 

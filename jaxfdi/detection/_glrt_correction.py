@@ -105,6 +105,8 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
     """
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)
+    _checks.check_flag("correct", correct)
+    _checks.check_flag("recursive", recursive)
     confirm = _checks.check_int("confirm", confirm, minimum=1, maximum=window,
                                 meaning="a number of consecutive alarm steps (at most the window N)")
     steady = steady_state_kalman(model)

@@ -121,6 +121,7 @@ def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)
     _checks.check_covariance("prior_cov", prior_cov, n)
+    _checks.check_flag("recursive", recursive)
     _check_decision_args(threshold, isolation, overlap_sensor, m)
     setup = DetectorSetup(None, None, threshold, isolation, nu, nu + int(overlap_sensor) % m)
     dtype = jnp.result_type(model.Phi, prior_cov)

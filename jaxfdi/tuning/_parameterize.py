@@ -182,17 +182,6 @@ def cholesky_factor() -> Transform:
     return Transform(forward, inverse, "cholesky_factor", {})
 
 
-def sticky_log_prior(pi: Array, target: Array, concentration: float) -> Array:
-    """Dirichlet log-density (up to a constant) of each row of ``pi`` around ``target``, summed over rows:
-    ``sum_ij (c target_ij) log pi_ij`` (``alpha = 1 + c target``, mode at ``target``; entries with ``target`` 0 do not
-    count). Added (negated) to a tuning loss it keeps a learned transition matrix near a sticky design."""
-    _checks.check_scalar("concentration", concentration, 0.0, meaning="a concentration >= 0")
-    _checks.check_shape("target", target, _checks.shape_of(pi), "the shape of pi")
-    target = jnp.asarray(target, jnp.result_type(pi))
-    weight = concentration * target
-    return jnp.sum(jnp.where(weight > 0, weight * jnp.log(jnp.where(pi > 0, pi, 1.0)), 0.0))
-
-
 TRANSFORMS = {
     "identity": identity,
     "positive": positive,

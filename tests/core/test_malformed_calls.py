@@ -396,8 +396,6 @@ CASES = {
     "positive floor negative": (lambda: tuning.positive(floor=-1.0), V, "floor"),
     "stochastic_rows empty row": (lambda: jaxfdi.tuning._parameterize.stochastic_rows(jnp.array([[True, False], [False, False]])), V,
                                   "mask"),
-    "sticky_log_prior concentration negative": (lambda: jaxfdi.tuning._parameterize.sticky_log_prior(
-        jnp.eye(2), jnp.eye(2), -1.0), V, "concentration"),
     "fit steps negative": (lambda: tuning.fit(lambda raw, b: 0.0, {"a": jnp.zeros(1)}, optax.adam(1e-2),
                                               lambda i: None, None, steps=-1), V, "steps"),
     "fit eval_every zero": (lambda: tuning.fit(lambda raw, b: 0.0, {"a": jnp.zeros(1)}, optax.adam(1e-2),
@@ -585,8 +583,6 @@ CASES = {
     "detection_summary horizon shorter than the runs": (lambda: (lambda s: s.counts(s.summary(
         _late_records(), jnp.ones(2))[1]))(_streaming().detection_summary(20)), V, "horizon"),
     "merge_counts not counts": (lambda: _streaming().merge_counts(_streaming().empty_counts(10), None), T_, "parts"),
-    "sticky_log_prior target shape": (lambda: jaxfdi.tuning._parameterize.sticky_log_prior(jnp.full((2, 2), 0.5), jnp.eye(3), 1.0), V,
-                                      "target"),
     "fit loss not scalar": (lambda: tuning.fit(lambda raw, b: raw["a"] ** 2, {"a": jnp.ones(2)}, optax.adam(1e-2),
                                                lambda i: None, None, steps=1), V, "loss"),
     "mode_cross_entropy float labels": (lambda: tuning.mode_cross_entropy(jnp.zeros((3, 2)), jnp.full(3, 0.7)), T_,

@@ -99,5 +99,11 @@ def test_float32_and_bad_input(engine, innovations):
         glrt_detector(model, steady.gain, steady.innovation_cov, 10, -1.0, recursive=True)
     with pytest.raises(TypeError, match="^recursive: expected True or False"):
         glrt_detector(model, steady.gain, steady.innovation_cov, 10, 50.0, recursive="yes")
+    with pytest.raises(TypeError, match="^recursive: expected True or False"):  # the other two GLRTs' engine switch
+        jaxfdi.detection.transient_glrt_detector(model, jnp.eye(model.Phi.shape[0]), 10, 50.0, recursive=1)
+    with pytest.raises(TypeError, match="^recursive: expected True or False"):
+        jaxfdi.detection.corrected_glrt(model, 10, 50.0, recursive=None)
+    with pytest.raises(TypeError, match="^correct: expected True or False"):
+        jaxfdi.detection.corrected_glrt(model, 10, 50.0, correct="no")
     with pytest.raises(ValueError, match="innovation"):
         det.step(det.init(), jnp.zeros(4))

@@ -168,18 +168,6 @@ def _methods_option(args: argparse.Namespace) -> dict:
     return {} if args.methods is None else {"methods": list(args.methods)}
 
 
-def _engine_method_names() -> list[str]:
-    return engine_method_names()
-
-
-def _vtol_method_names() -> list[str]:
-    return list(VTOL_METHODS)
-
-
-def _wheel_method_names() -> list[str]:
-    return list(WHEEL_METHODS)
-
-
 def _run_engine(args: argparse.Namespace, folder: Path) -> str:
     start = time.perf_counter()
     study = engine_study(runs=args.runs, seed=args.seed, progress=not args.quiet,
@@ -415,12 +403,12 @@ _run_gnss_real = _study_runner(gnss_real_study, "gnss-real.json", plot_gnss_real
 
 RUNNERS = {
     "engine": Runner(_run_engine, "Han et al. (2022) turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
-                                  "the paper's Table 3", methods=_engine_method_names),
+                                  "the paper's Table 3", methods=engine_method_names),
     "engine-chi2": Runner(_run_engine_chi2, "Han et al. (2022) turbojet: the Kalman-filter chi-square test (--window, --pfa)",
                           options=("window", "pfa")),
     "reaction-wheels": Runner(_run_reaction_wheels, "Choi & Park (2009) satellite, 4-wheel pyramid: dual filter F, NIS, "
                               "credits, MM isolator (--estimator, --engage-on)", options=("estimator", "engage_on"),
-                              methods=_wheel_method_names),
+                              methods=lambda: WHEEL_METHODS),
     "f16": Runner(_run_f16, "Park et al. (2004) F-16 rate sensors: parity space with the UKF's analytic redundancy on "
                             "demand, the paper's case, direction x magnitude sweep, envelope, sensor layout"),
     "f16-flight": Runner(_run_f16_flight, "Park et al. (2004) F-16: book trim tables beside ours, modes, LQR SAS with "
@@ -432,7 +420,7 @@ RUNNERS = {
                                         "solution-separation PLs (Stanford diagrams), injected step and ramp faults; "
                                         "smartphones (every constellation) beside Google and gnss_lib_py"),
     "vtol": Runner(_run_vtol, "Lee & Lyou VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
-                              "fault-tolerant control", methods=_vtol_method_names),
+                              "fault-tolerant control", methods=lambda: VTOL_METHODS),
 }
 TUNERS = {
     "engine-chi2": Runner(_tune_engine_chi2, "Q, R and the threshold of the engine chi-square test by gradient, "

@@ -1,11 +1,14 @@
-"""What every scenario study checks before it computes: precision, run counts, seeds and method names."""
+"""What every scenario study checks before it computes (precision, run counts, seeds and method names), and how its
+figures are written."""
 from __future__ import annotations
 
-from typing import Sequence
+from pathlib import Path
+from typing import Any, Callable, Sequence
 
 import jax
 
 from jaxfdi import _checks
+from jaxfdi.plotting import save_figure
 
 
 
@@ -35,3 +38,14 @@ def check_study(runs: int, seed: int, runs_name: str = "runs", **counts: int) ->
     _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
     for name, value in counts.items():
         _checks.check_int(name, value, 1, meaning="a positive count")
+
+
+def figure_saver(out_dir) -> tuple[Callable[[Any, str, str], None], list[str]]:
+    """``save(fig, name, caption)``, writing ``out_dir / name`` with ``plotting.save_figure`` (house style, caption,
+    atomic), and the list of the paths it wrote, in order (what a study's ``plot_*`` returns)."""
+    paths: list[str] = []
+
+    def save(fig, name: str, caption: str) -> None:
+        paths.append(str(save_figure(fig, Path(out_dir) / name, caption)))
+
+    return save, paths

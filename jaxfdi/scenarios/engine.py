@@ -42,7 +42,7 @@ from jaxfdi._faults import Fault, fault, fault_label, sensor_labels, stack_fault
 from jaxfdi.filters._imm import interacting_multiple_model
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.filters._mm import multiple_model
-from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 from jaxfdi._frame import study_result
 from jaxfdi._metrics import DetectionRecord, cell, fault_row, rate_cell, unhealthy_rows_warning
 from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
@@ -50,7 +50,7 @@ from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, nois
 from jaxfdi.filters import run_filter
 from jaxfdi._monitor import monitor, replay_detector
 from jaxfdi._montecarlo import monte_carlo
-from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
+from jaxfdi.plotting import column_subplots, hypothesis_colors
 from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi._simulate import linear_simulator, simulate
@@ -727,12 +727,10 @@ def method_paper(name: str) -> str | None:
 def plot_engine(study: EngineStudy, out_dir) -> list[str]:
     """Figs. 3-1/3-2 (mode probabilities) and 4 (GLR) of Han et al. (2022) and the magnitude estimates
     against truth, written atomically; returns the paths."""
-    cfg, paths = study.config, []
+    cfg = study.config
+    save, paths = figure_saver(out_dir)
     t = np.arange(cfg["steps"]) * cfg["Ts"]
     fault_names = engine_faults(0)[0][:-1]
-
-    def save(fig, name, caption):
-        paths.append(str(save_figure(fig, f"{out_dir}/{name}", caption)))
 
     colors = hypothesis_colors(MODE_NAMES)  # one colour per mode (fault direction) in every figure
     prob_keys = [k for k in study.figures if k.startswith("mode_prob/")]

@@ -44,8 +44,8 @@ from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.models.f16._plant import RATE_OFFSET, flight_view
 from jaxfdi.models.f16._rates import RATE_INPUT_NAMES, RateModel, rate_model, rate_model_input, rate_observation, \
     rate_transition
-from jaxfdi.plotting import column_figure, column_subplots, save_figure
-from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.plotting import column_figure, column_subplots
+from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 from jaxfdi.scenarios.f16_flight import (DT, ERRORS, GUST_SIGMA, Dispersion, FlightSetup, dispersions, flight_setup,
                                          nominal_dispersion, run_flight)
 from jaxfdi._study import Structure, Study, run_study
@@ -495,11 +495,6 @@ def _geometry_rows(space, fdi: FDISetup, calibration) -> list[dict]:
     return rows
 
 
-def _rate(x) -> float:
-    x = np.asarray(x)
-    return float(np.mean(x)) if x.size else float("nan")
-
-
 def _sweep_rows(decision, sensor, grid, runs: int, onset: int, n_sweep: int) -> list[dict]:
     rows = []
     step = np.asarray(decision.decision_step)[:n_sweep]
@@ -666,6 +661,11 @@ def _interval(bounds) -> str:
     return f"[{bounds[0]:.3f}, {bounds[1]:.3f}]"
 
 
+def _fault_name(kind: str, size: float) -> str:
+    """A fault case as the tables and figures name it: "fault-free", "stuck", "dead" or "<kind> <size>"."""
+    return "fault-free" if kind == "none" else (kind if kind in ("stuck", "dead") else f"{kind} {size:g}")
+
+
 def kind_table(rows: list[dict], config: dict) -> str:
     """Misisolations and envelope exits per fault kind and view, with 99 % intervals."""
     lines = [f"Fault kinds, {config['runs']} flights each of {config['duration_s']:.0f} s, fault at "
@@ -677,8 +677,7 @@ def kind_table(rows: list[dict], config: dict) -> str:
     for r in rows:
         if r["section"] != "full_flights":
             continue
-        name = "fault-free" if r["kind"] == "none" else (
-            r["kind"] if r["kind"] in ("stuck", "dead") else f"{r['kind']} {r['size']:g}")
+        name = _fault_name(r["kind"], r["size"])
         if r["kind"] == "none":
             mid = f"{r['decisions']:>8} {'-':>11} {'':>16} {'-':>7}"
         else:
@@ -761,8 +760,7 @@ def study_table(study: F16FDIStudy) -> str:
                  f"{'wrong':>6} {'wrong 99 %':>15} {'exits':>6} {'exit rate 99 %':>15} {'max alt ft':>10} {'max bank':>8} "
                  f"{'max beta':>8}")
     for r in by("full_flights"):
-        name = "fault-free" if r["kind"] == "none" else (
-            f"{r['kind']} {r['size']:g}" if r["kind"] not in ("stuck", "dead") else r["kind"])
+        name = _fault_name(r["kind"], r["size"])
         if r["kind"] == "none":
             mid = f"{'-':>19} {'-':>19} {'-':>19} {'-':>6} {'':>15}"
         else:
@@ -793,15 +791,9 @@ def study_table(study: F16FDIStudy) -> str:
 def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
     """Figs. 5-8 for the paper's case, trajectory, sweep (polar), envelope, sensor arrangement (PNG, written
     atomically); returns the paths."""
-    from pathlib import Path
-
-    out = Path(out_dir)
+    save, paths = figure_saver(out_dir)
     h, cfg, rows = study.history, study.config, study.rows
-    paths = []
     deg = 180.0 / math.pi
-
-    def save(fig, name, caption):
-        paths.append(str(save_figure(fig, out / name, caption)))
 
     t, step = h["t"], h["decision_step"]
     fig, axes = column_subplots(6.4, 2, 2)
@@ -897,8 +889,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
             values.append(match[0]["within_envelope"] / match[0]["flights"] if match else np.nan)
         ax.bar(np.arange(len(groups)) + (j - (len(FOLLOWS) - 1) / 2) * width, values, width, label=f"view: {follow}")
     ax.set_xticks(np.arange(len(groups)))
-    ax.set_xticklabels(["fault-free" if k == "none" else (k if k in ("stuck", "dead") else f"{k} {s:g}")
-                        for k, s in groups])
+    ax.set_xticklabels([_fault_name(k, s) for k, s in groups])
     ax.set(xlabel="fault kind and size", ylabel="share of flights within the envelope", ylim=(0, 1.05),
            title="Safe envelope with and without FDI")
     ax.legend(fontsize=8)

@@ -43,8 +43,8 @@ from jaxfdi.models.f16._dynamics import (
 from jaxfdi.models.f16._linearize import (LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, flight_modes, linearize, submodel)
 from jaxfdi.models.f16._plant import F16Sensors, f16_sensors
 from jaxfdi.models._linear import c2d
-from jaxfdi.plotting import column_figure, column_subplots, save_figure
-from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.plotting import column_figure, column_subplots
+from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 from jaxfdi._study import Structure, Study, run_study
 from jaxfdi._tracking import TrackingScore, tracked_plant
 
@@ -425,15 +425,9 @@ def study_table(study: F16FlightStudy) -> str:
 
 def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
     """Trajectory and time histories of the sample flights (PNG, atomic); returns the paths."""
-    from pathlib import Path
-
-    out = Path(out_dir)
+    save, paths = figure_saver(out_dir)
     h = study.history
     t, state, control = h["t"], h["state"], h["control"]
-    paths = []
-
-    def save(fig, name, caption):
-        paths.append(str(save_figure(fig, out / name, caption)))
 
     fig = column_figure(3.6)
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")

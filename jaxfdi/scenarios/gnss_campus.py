@@ -35,8 +35,8 @@ from jaxfdi.gnss._protection import ALERT_LIMITS
 from jaxfdi._loop import episode_scorer, feedforward, run_loop
 from jaxfdi._frame import study_result
 from jaxfdi._metrics import cell, rate_cell, summarize_episodes
-from jaxfdi.plotting import column_figure, save_figure
-from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.plotting import column_figure
+from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 from jaxfdi._progress import status
 from jaxfdi._study import Structure, Study, run_study
 
@@ -168,8 +168,6 @@ def gnss_campus_study(runs: int = 100, seed: int = 0, progress: bool = False, al
     """
     require_x64("gnss-campus")
     check_study(runs, seed)
-    if int(runs) < 1:
-        raise ValueError(f"runs: expected a positive number of runs, got {runs}")
     table = orbits.ephemeris_table(rinex.read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), WEEK)
     # campus: `runs` fault-free runs; park: the faults on every satellite in view for the whole run, `runs` runs each;
     # all in one call
@@ -382,14 +380,7 @@ def _spans(indices) -> str:
 def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
     """Sky plot, HDOP / HPL and statistic / threshold (campus and park), MDB over the day and availability maps, as PNG
     files in ``out_dir``; returns their paths."""
-    from pathlib import Path
-
-    out_dir = Path(out_dir)
-    paths_out = []
-
-    def save(fig, name, caption):
-        paths_out.append(str(save_figure(fig, out_dir / name, caption)))
-
+    save, paths_out = figure_saver(out_dir)
     campus = study.campus
     over = np.flatnonzero(campus["hpl"] > 556.0)
     blocked = int(over[0]) if over.size else int(np.argmax(campus["hdop"]))

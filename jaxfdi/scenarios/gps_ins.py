@@ -45,8 +45,8 @@ from jaxfdi._loop import combine_scorers, detection_scorer, episode_scorer, feed
 from jaxfdi._frame import study_result
 from jaxfdi._metrics import (binomial_interval, binomial_lower_bound, delay_statistics, rate_cell, rate_interval,
                              record_from_alarms, summarize_detection, summarize_episodes)
-from jaxfdi.plotting import column_figure, save_figure
-from jaxfdi.scenarios._common import check_study, require_x64
+from jaxfdi.plotting import column_figure
+from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 # Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
 from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK, _cell
 from jaxfdi._study import Structure, Study, case_slices, run_study
@@ -220,8 +220,9 @@ def initial_covariance(model: imu.ImuModel):
                                         model.gyro_bias)
 
 
-def _run(world: World, case: RunCase, key: jax.Array) -> RunOutput:
-    """One flight: the loop of plant and FDI, its scores and its traces."""
+def _flight(key: jax.Array, case: RunCase, world: World) -> RunOutput:
+    """One flight: the loop of plant and FDI, its scores and its traces (the study engine's order: the world is the
+    shared data of every run)."""
     model = imu.hg1900()
     epochs, per_epoch = world.flight.imu.shape[:2]
     ins_filter, chi2, test, health = design(model, 1.0 / per_epoch)
@@ -258,11 +259,6 @@ def _run(world: World, case: RunCase, key: jax.Array) -> RunOutput:
     return RunOutput(result.score["chi2"], result.score["scst"], result.score["raim"], result.score["health"], series)
 
 
-def _flight(key: jax.Array, case: RunCase, world: World) -> RunOutput:
-    """One flight (``_run``) in the study engine's order, the world shared by every run."""
-    return _run(world, case, key)
-
-
 def flights_spec(world: World, groups: list[tuple[str, RunCase]], name: str) -> Study:
     """A study of flights over one ``world``: ``groups`` of (name, stacked ``RunCase``, one per run), each a case with
     its own number of runs (run it with those counts); the world is the structure's shared data (one compiled program
@@ -273,9 +269,8 @@ def flights_spec(world: World, groups: list[tuple[str, RunCase]], name: str) -> 
     return Study(name, lambda runs, seed: stacked, names, (flights,))
 
 
-def build_world(legs, start, speed: float, blend: float, table=None, size: StudySize = PAPER_SIZE) -> World:
+def build_world(legs, start, speed: float, blend: float, table: orbits.OrbitTable, size: StudySize = PAPER_SIZE) -> World:
     """The tables of a flight: truth and IMU per epoch, the sky seen from its path."""
-    table = _ephemeris() if table is None else table
     flight = plant.flight_tables(trajectory.fly(legs, start, speed, blend=blend, rate=size.imu_rate), size.flight_s)
     path = frames.geodetic_to_ecef(flight.position[:, 0], flight.position[:, 1], flight.position[:, 2])
     times = START_TOW + jnp.arange(size.flight_s, dtype=path.dtype)
@@ -304,14 +299,6 @@ def flight_world(name: str, table=None, size: StudySize = PAPER_SIZE) -> World:
     legs, start, speed, blend = _FLIGHTS[name]
     table = receiver_slots(_ephemeris(), size.flight_s) if table is None else table
     return build_world(legs(size.flight_s), start, speed, blend, table, size)
-
-
-def park_world(table=None, size: StudySize = PAPER_SIZE) -> World:
-    return flight_world("park", table, size)
-
-
-def manoeuvre_world(table=None, size: StudySize = PAPER_SIZE) -> World:
-    return flight_world("manoeuvre", table, size)
 
 
 def _ephemeris():
@@ -355,14 +342,6 @@ def cases_of(specs, onset_s: int = ONSET_S) -> RunCase:
     return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *built)
 
 
-def gyro_rad_s(deg_h: float) -> float:
-    return deg_h * imu.DEG_PER_HOUR
-
-
-def accel_m_s2(mg: float) -> float:
-    return mg * imu.MILLI_G
-
-
 def gps_ins_study(runs: int = 100, seed: int = 0, progress: bool = False, beyond: bool = True,
                   size: StudySize = PAPER_SIZE, beyond_runs: int | None = None) -> GpsInsStudy:
     """Table 3 and the fault-free false alarms over ``runs`` flights per case, and (with ``beyond``) the detection-time
@@ -375,21 +354,21 @@ def gps_ins_study(runs: int = 100, seed: int = 0, progress: bool = False, beyond
     if not (0 < size.onset_s < size.flight_s and size.imu_rate >= 2):
         raise ValueError(f"size: expected 0 < onset_s < flight_s and imu_rate >= 2, got {size}")
     table = receiver_slots(_ephemeris(), size.flight_s)
-    park = park_world(table, size)
+    park = flight_world("park", table, size)
     slot = headline_slot(park)
     small = max(int(runs) // 4, 2) if beyond_runs is None else int(beyond_runs)
     groups = [("fault-free", None, None, 0.0, runs)]
-    groups += [(f"table3 {b:g} deg/h", slot, ROLL_GYRO, gyro_rad_s(b), runs) for b in TABLE3_DEG_H]
+    groups += [(f"table3 {b:g} deg/h", slot, ROLL_GYRO, b * imu.DEG_PER_HOUR, runs) for b in TABLE3_DEG_H]
     groups += [(f"imu roll gyro {name}", None, ROLL_GYRO, 0.0, small, kind) for name, kind in IMU_HEALTH_CASES.items()]
     if beyond:
-        groups += [(f"park gyro {b:g} deg/h", None, ROLL_GYRO, gyro_rad_s(b), small) for b in BEYOND_GYRO_DEG_H]
-        groups += [(f"park accel {a:g} mg", None, X_ACCEL, accel_m_s2(a), small) for a in BEYOND_ACCEL_MG]
+        groups += [(f"park gyro {b:g} deg/h", None, ROLL_GYRO, b * imu.DEG_PER_HOUR, small) for b in BEYOND_GYRO_DEG_H]
+        groups += [(f"park accel {a:g} mg", None, X_ACCEL, a * imu.MILLI_G, small) for a in BEYOND_ACCEL_MG]
     worlds = {"park": park}
     plan = [("park", g) for g in groups]
     if beyond:
-        worlds["manoeuvre"] = manoeuvre_world(table, size)
+        worlds["manoeuvre"] = flight_world("manoeuvre", table, size)
         plan += [("manoeuvre", ("manoeuvre fault-free", None, None, 0.0, small))]
-        plan += [("manoeuvre", (f"manoeuvre gyro {b:g} deg/h", None, ROLL_GYRO, gyro_rad_s(b), small))
+        plan += [("manoeuvre", (f"manoeuvre gyro {b:g} deg/h", None, ROLL_GYRO, b * imu.DEG_PER_HOUR, small))
                  for b in TABLE3_DEG_H]
     results = {}
     key = jax.random.key(seed)
@@ -806,14 +785,8 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
     """Statistics vs thresholds (Yoo et al. 2010, Figs. 10-11), RAIM (Figs. 8-9), navigation errors, detection time vs
     bias size, and Table 3 along the threshold (the operating curve), as PNG files in ``out_dir``; returns their
     paths."""
-    from pathlib import Path
-
-    out_dir = Path(out_dir)
-    written = []
+    save, written = figure_saver(out_dir)
     chi2_limit, scst_limit = thresholds()
-
-    def save(fig, name, caption):
-        written.append(str(save_figure(fig, out_dir / name, caption)))
 
     t = np.arange(study.config["flight_s"])
     onset = study.config["fault_onset_s"]

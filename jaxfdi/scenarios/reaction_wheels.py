@@ -69,12 +69,12 @@ from jaxfdi._loop import combine_scorers, detection_scorer, health_scorer, peak_
 from jaxfdi._stages import FDI
 from jaxfdi._frame import study_result
 from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, cell, rate_cell, unhealthy_warning
-from jaxfdi.scenarios._common import check_methods, check_study, require_x64
+from jaxfdi.scenarios._common import check_methods, check_study, figure_saver, require_x64
 from jaxfdi._study import Structure, Study, run_study
 from jaxfdi.models._reaction_wheels import (SpacecraftParams, WheelCommand, body_rate_field, filter_input,
                                             gyro_observation, kitsat3_params, stop_hypotheses, wheel_momentum,
                                             wheel_rate_transition)
-from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
+from jaxfdi.plotting import column_subplots, hypothesis_colors
 
 RPM = 2.0 * math.pi / 60.0
 #: steps in the NIS window of the chi-square detector
@@ -665,16 +665,10 @@ def wheel_examples(design: WheelDesign, seed: int = 0, wheel: int = 0, onset: in
 def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel: int = 0, onset: int = 200) -> list[str]:
     """Figs. 3-9 of Choi and Park (2009) (attitude, F, F_x, credits) and the MM's mode probabilities;
     returns the paths written (each atomically)."""
-    from pathlib import Path
-
-    out = Path(out)
+    save, paths = figure_saver(out)
     cfg = study.config
     t = np.arange(cfg["steps"]) * cfg["dt"]
     fault_time = onset * cfg["dt"]
-    paths = []
-
-    def save(fig, name, caption):
-        paths.append(str(save_figure(fig, out / name, caption)))
 
     # Figs. 3 and 5: attitude and rates, fault-free and with the stop
     fig, axes = column_subplots(5.0, 2, 2, sharex=True)

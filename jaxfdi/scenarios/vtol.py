@@ -53,8 +53,8 @@ from jaxfdi._frame import study_result
 from jaxfdi._metrics import (cell, delay_statistics, rate_cell, record_from_alarms, step_health,
                              unhealthy_warning)
 from jaxfdi.models import _vtol as vtol
-from jaxfdi.plotting import column_subplots, save_figure
-from jaxfdi.scenarios._common import check_methods, check_study, require_x64
+from jaxfdi.plotting import column_subplots
+from jaxfdi.scenarios._common import check_methods, check_study, figure_saver, require_x64
 from jaxfdi.scenarios.vtol_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
 from jaxfdi._study import Structure, Study, run_study
 
@@ -625,17 +625,11 @@ def vtol_examples(design: LoopDesign, seed: int = 0, steps: int = STEPS) -> dict
 
 def plot_vtol(study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesign, out) -> list[str]:
     """Figs. 3-5 of Lee and Lyou; returns the paths written (each atomically)."""
-    from pathlib import Path
-
-    out = Path(out)
+    save, paths = figure_saver(out)
     cfg = study.config
     t = np.arange(cfg["steps"])
     shown = FILTER_NAMES.index("s1-mult")                      # the paper's Fig. 3 shows the s1 filter
     threshold = cfg["thresholds"]["MDWT-ST"][FILTER_NAMES[shown]]
-    paths = []
-
-    def save(fig, name, caption):
-        paths.append(str(save_figure(fig, out / name, caption)))
 
     # Fig. 3: one filter's statistic under the s3 step, raw and denoised
     stat = examples["s3 step"].fdi.statistic[:, shown]

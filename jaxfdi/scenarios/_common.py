@@ -11,7 +11,6 @@ from jaxfdi import _checks
 from jaxfdi.plotting import save_figure
 
 
-
 def require_x64(study: str) -> None:
     """A clear error, before any compilation, when a study that needs float64 runs without it."""
     if not jax.config.jax_enable_x64:

@@ -61,7 +61,7 @@ from jaxfdi.detection._chi2 import Decision, chi2_threshold
 from jaxfdi.detection._credits import hypothesis_credits
 from jaxfdi.detection._frozen import frozen_channel_detector
 from jaxfdi.detection._two_stage import two_stage_isolation
-from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, no_fault, sensor_labels
+from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, no_fault, sensor_labels, stack_faults
 from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters._ekf import extended_kalman_filter
 from jaxfdi.filters._ukf import unscented_kalman_filter
@@ -407,7 +407,7 @@ def case_faults(cases: list[tuple[str, int]], runs: int, key: Array) -> Fault:
         for onset in onset_row:
             faults.append(no_fault() if kind == "none" else gyro_fault(kind, component, int(onset))
                           if kind in GYRO_KINDS else wheel_fault(kind, component, int(onset), KINDS[kind]))
-    return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *faults)
+    return stack_faults(faults)
 
 
 @functools.lru_cache(maxsize=None)
@@ -657,7 +657,7 @@ def wheel_examples(design: WheelDesign, seed: int = 0, wheel: int = 0, onset: in
     """One fault-free run and one stop of ``wheel`` at ``onset`` (same noise), with histories."""
     run = jax.jit(jax.vmap(lambda f: run_wheels(design, jax.random.key(seed), f, steps, estimator, engage_on,
                                                 history=True)[1]))
-    both = run(jax.tree_util.tree_map(lambda *x: jnp.stack(x), no_fault(), wheel_fault("stop", wheel, onset)))
+    both = run(stack_faults([no_fault(), wheel_fault("stop", wheel, onset)]))
     both = jax.tree_util.tree_map(np.asarray, both)
     return {name: jax.tree_util.tree_map(lambda leaf: leaf[i], both) for i, name in enumerate(["none", "stop"])}
 

@@ -552,12 +552,15 @@ def bench_filter(kind: str, prob: dict, args, log) -> dict:
     return result
 
 
-def bench_driver_compile(prob: dict, log) -> list[dict]:
+def bench_driver_compile(prob: dict, log, rounds: int = 3) -> list[dict]:
     """Compile time (trace + lower + XLA compile) of each KF driver on the engine, the
     plain scan beside them: eager ``run_filter`` (what a one-shot script calls; traced
     with library calls, ``_linalg.library_calls``), ``jit(run_filter)`` (the inlined,
     written-out path of ``vmap``), ``run_filter`` shared and per-run P0, and
-    ``run_filter`` with a per-run Q; every ``FilterInfo`` field returned."""
+    ``run_filter`` with a per-run Q; every ``FilterInfo`` field returned. Beside them the one-sequence call that returns
+    what the plain scan and dynamax return (means, covariances, log-likelihood), and dynamax's. The drivers are compiled
+    in turn, ``rounds`` times, caches cleared before each compile, and each keeps its fastest round: the first compile in
+    a process also pays JAX's one-time set-up, so a single pass favours whichever driver comes later."""
     from jaxfdi import _linalg
     from jaxfdi.filters._base import _scan_filter
 
@@ -567,6 +570,8 @@ def bench_driver_compile(prob: dict, log) -> list[dict]:
     P0s = jnp.broadcast_to(P0, (N,) + P0.shape) * 1.5
     cases = {
         "plain scan, 1 sequence (means, covs, loglik)": lambda: jax.jit(plain_kf).lower(model, m0, P0, ys[0], us),
+        "dynamax, 1 sequence (means, covs, loglik)": lambda: jax.jit(dynamax_kf).lower(model, m0, P0, ys[0], us),
+        "jit(run_filter), 1 sequence (means, covs, loglik)": lambda: jax.jit(jaxfdi_kf).lower(model, m0, P0, ys[0], us),
         "run_filter eager, 1 sequence (full info)": lambda: _scan_filter.lower(kf, kf.init(m0, P0), ys[0], us),
         "jit(run_filter), 1 sequence (full info)": lambda: jax.jit(jaxfdi_kf_full_info).lower(model, m0, P0, ys[0], us),
         f"run_filter shared, {N} seq (full info)": lambda: jax.jit(
@@ -577,26 +582,30 @@ def bench_driver_compile(prob: dict, log) -> list[dict]:
             lambda q: jaxfdi.filters.run_filter(jaxfdi.filters.kalman_filter(model._replace(Q=q)), jaxfdi.filters.GaussianState(m0, P0), ys, us)
         ).lower(P0s),
     }
-    rows = []
-    for name, lower in cases.items():
-        jax.clear_caches()
-        t0 = time.perf_counter()
-        if name.startswith("run_filter eager"):
-            with _linalg.library_calls():
+    best: dict[str, dict] = {}
+    for round_ in range(rounds):
+        for name, lower in cases.items():
+            jax.clear_caches()
+            t0 = time.perf_counter()
+            if name.startswith("run_filter eager"):
+                with _linalg.library_calls():
+                    lowered = lower()
+            else:
                 lowered = lower()
-        else:
-            lowered = lower()
-        t1 = time.perf_counter()
-        compiled = lowered.compile()
-        t2 = time.perf_counter()
-        rows.append({"driver": name, "trace_lower_s": t1 - t0, "xla_compile_s": t2 - t1, "compile_s": t2 - t0,
-                     "hlo_lines": len(compiled.as_text().splitlines())})
-        log(f"  compile {name:<52} {t2 - t0:6.3f} s  ({len(compiled.as_text().splitlines())} HLO lines)")
-    return rows
+            t1 = time.perf_counter()
+            compiled = lowered.compile()
+            t2 = time.perf_counter()
+            row = {"driver": name, "trace_lower_s": t1 - t0, "xla_compile_s": t2 - t1, "compile_s": t2 - t0,
+                   "hlo_lines": len(compiled.as_text().splitlines()), "rounds": rounds}
+            if name not in best or row["compile_s"] < best[name]["compile_s"]:
+                best[name] = row
+            log(f"  compile (round {round_}) {name:<52} {t2 - t0:6.3f} s  ({row['hlo_lines']} HLO lines)")
+    return list(best.values())
 
 
 def format_driver_compile(rows: list[dict]) -> str:
-    lines = ["Driver compile time (engine KF, T = 1000; trace + lower + XLA compile, caches cleared before each)",
+    lines = [f"Driver compile time (engine KF, T = 1000; trace + lower + XLA compile, caches cleared before each; "
+             f"fastest of {rows[0]['rounds']} interleaved rounds)",
              f"{'driver':<54} {'trace+lower [s]':>15} {'XLA [s]':>8} {'total [s]':>9} {'HLO lines':>10}"]
     for r in rows:
         lines.append(f"{r['driver']:<54} {r['trace_lower_s']:15.3f} {r['xla_compile_s']:8.3f} {r['compile_s']:9.3f} "

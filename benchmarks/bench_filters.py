@@ -559,8 +559,8 @@ def bench_driver_compile(prob: dict, log, rounds: int = 3) -> list[dict]:
     written-out path of ``vmap``), ``run_filter`` shared and per-run P0, and
     ``run_filter`` with a per-run Q; every ``FilterInfo`` field returned. Beside them the one-sequence call that returns
     what the plain scan and dynamax return (means, covariances, log-likelihood), and dynamax's. The drivers are compiled
-    in turn, ``rounds`` times, caches cleared before each compile, and each keeps its fastest round: the first compile in
-    a process also pays JAX's one-time set-up, so a single pass favours whichever driver comes later."""
+    in turn, ``rounds`` times, caches cleared before each compile, and each keeps its fastest round: the first compile
+    in a process also pays JAX's one-time set-up, so a single pass favours whichever driver comes later."""
     from jaxfdi import _linalg
     from jaxfdi.filters._base import _scan_filter
 

@@ -269,7 +269,8 @@ def flights_spec(world: World, groups: list[tuple[str, RunCase]], name: str) -> 
     return Study(name, lambda runs, seed: stacked, names, (flights,))
 
 
-def build_world(legs, start, speed: float, blend: float, table: orbits.OrbitTable, size: StudySize = PAPER_SIZE) -> World:
+def build_world(legs, start, speed: float, blend: float, table: orbits.OrbitTable,
+                size: StudySize = PAPER_SIZE) -> World:
     """The tables of a flight: truth and IMU per epoch, the sky seen from its path."""
     flight = plant.flight_tables(trajectory.fly(legs, start, speed, blend=blend, rate=size.imu_rate), size.flight_s)
     path = frames.geodetic_to_ecef(flight.position[:, 0], flight.position[:, 1], flight.position[:, 2])

@@ -43,6 +43,8 @@ from jaxfdi._study import Structure, Study, run_study
 #: the GNSS studies' table cells say "n/a" where there is no number (they print them in sentences)
 _cell = functools.partial(cell, missing="n/a")
 WEEK = 2086
+#: the broadcast orbits of 2020-01-01 (RINEX 2 navigation file, `jaxfdi.data`)
+EPHEMERIS = "gps_nav_rinex2_sugl0010.20n"
 START_TOW = 259200.0 + 2700.0        # 2020-01-01 00:45:00 GPST
 DT = 1.0
 MASK_DEG = 5.0
@@ -153,6 +155,11 @@ def _park_fault(slot):
                                for _, kind, onset, end, magnitude, slope in PARK_FAULTS))
 
 
+def _ephemeris() -> orbits.OrbitTable:
+    """The day's broadcast orbits (``EPHEMERIS``), times from the start of ``WEEK``; the GPS/INS study's too."""
+    return orbits.ephemeris_table(rinex.read_rinex_nav(data_path(EPHEMERIS)), WEEK)
+
+
 def _horizontal_error(positions, case: Case):
     ned = frames.ecef_to_ned(positions, case.path)
     return np.asarray(jnp.hypot(ned[..., 0], ned[..., 1]))
@@ -168,7 +175,7 @@ def gnss_campus_study(runs: int = 100, seed: int = 0, progress: bool = False, al
     """
     require_x64("gnss-campus")
     check_study(runs, seed)
-    table = orbits.ephemeris_table(rinex.read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), WEEK)
+    table = _ephemeris()
     # campus: `runs` fault-free runs; park: the faults on every satellite in view for the whole run, `runs` runs each;
     # all in one call
     campus = _case(table, CAMPUS, CAMPUS_PATH, CAMPUS_STEPS, (CAMPUS_WALL,))
@@ -199,7 +206,7 @@ def gnss_campus_study(runs: int = 100, seed: int = 0, progress: bool = False, al
     extra = _beyond(table) if beyond else {"rows": []}
     config = {
         "start": "2020-01-01 00:45:00 GPST", "week": WEEK, "start_tow_s": START_TOW, "dt_s": DT,
-        "ephemeris": "gps_nav_rinex2_sugl0010.20n", "mask_deg": MASK_DEG, "pfa": raim.DEFAULT_PFA,
+        "ephemeris": EPHEMERIS, "mask_deg": MASK_DEG, "pfa": raim.DEFAULT_PFA,
         "pmd": raim.DEFAULT_PMD, "threshold_rule": "chi2", "horizontal_alert_limit_m": 556.0,
         "sigma_model_m": "sqrt(3^2 + 3^2 / sin^2 el)", "runs": int(runs), "seed": int(seed),
         "campus": {"site_deg_m": CAMPUS, "steps": CAMPUS_STEPS, "racetrack": dict(zip(

@@ -35,9 +35,8 @@ from scipy import stats as _scipy_stats
 
 from jaxfdi._progress import status
 from jaxfdi import _faults as flt
-from jaxfdi.data import data_path
 from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
-from jaxfdi.gnss import _frames as frames, _measurements as measurements, _orbits as orbits, _raim as raim, _rinex as rinex
+from jaxfdi.gnss import _frames as frames, _measurements as measurements, _orbits as orbits, _raim as raim
 from jaxfdi.ins import _error_state as error_state, _imu as imu, _integrity as integrity, _plant as plant, _scst as scst, _trajectory as trajectory
 from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
 from jaxfdi.ins._mechanization import NavState
@@ -48,7 +47,7 @@ from jaxfdi._metrics import (binomial_interval, binomial_lower_bound, delay_stat
 from jaxfdi.plotting import column_figure
 from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 # Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
-from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK, _cell
+from jaxfdi.scenarios.gnss_campus import MASK_DEG, PARK, START_TOW, TABLE2_FAULTS, WEEK, _cell, _ephemeris
 from jaxfdi._study import Structure, Study, case_slices, run_study
 
 FLIGHT_S = 1200
@@ -300,10 +299,6 @@ def flight_world(name: str, table=None, size: StudySize = PAPER_SIZE) -> World:
     legs, start, speed, blend = _FLIGHTS[name]
     table = receiver_slots(_ephemeris(), size.flight_s) if table is None else table
     return build_world(legs(size.flight_s), start, speed, blend, table, size)
-
-
-def _ephemeris():
-    return orbits.ephemeris_table(rinex.read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), WEEK)
 
 
 def headline_slot(world: World) -> int:

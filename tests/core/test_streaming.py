@@ -124,6 +124,15 @@ def test_device_summary_equals_the_host_counts_of_the_same_records(chunk_size):
         summary = streaming.summarize_counts(got)
         assert abs(summary.delay_median - full.delay_median) <= resolution
         assert abs(summary.delay_p90 - full.delay_p90) <= resolution
+        # independently of the host counts (the same _counts on NumPy): metrics.summarize_detection on the records and
+        # a plain count of correct isolations; the padded runs of the last chunk must weigh nothing in either
+        for name in ("runs", "faulty_runs", "unhealthy_runs", "clean_runs", "delay_runs", "detection_rate",
+                     "false_alarm_rate", "false_alarm_rate_per_step", "pre_onset_alarm_rate"):
+            assert getattr(summary, name) == getattr(full, name), name
+        np.testing.assert_allclose(summary.delay_mean, full.delay_mean, rtol=1e-14)
+        faulty = (record.first_unhealthy < 0) & (record.onset < HORIZON)
+        correct = faulty & (record.detection_step >= 0) & (record.isolated == labels)
+        assert int(got.isolated_runs) == correct.sum() and int(got.labelled_runs) == faulty.sum()
     late = record._replace(onset=np.zeros(3000, np.int32), detection_step=np.full(3000, 450, np.int32),
                            first_unhealthy=-np.ones(3000, np.int32), false_alarms=np.zeros(3000, np.int32))
     device = streaming.detection_summary(HORIZON)

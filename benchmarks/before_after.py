@@ -15,6 +15,7 @@ The revision is checked out with ``git worktree`` into a temporary folder and im
 through ``PYTHONPATH``; the JSON of the two must agree (same seed, same tables) to 1e-9
 relative, or the script says where they differ.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -44,7 +45,9 @@ open(sys.argv[1], "w").write(json.dumps(seen))
 """
 
 
-def run(study: str, runs: int, out: Path, pythonpath: str | None, compile_counts: bool = False) -> dict:
+def run(
+    study: str, runs: int, out: Path, pythonpath: str | None, compile_counts: bool = False
+) -> dict:
     env = dict(os.environ)
     env.pop("PYTHONPATH", None)
     if pythonpath:
@@ -54,13 +57,23 @@ def run(study: str, runs: int, out: Path, pythonpath: str | None, compile_counts
         with tempfile.TemporaryDirectory() as cache:
             env["JAXFDI_CACHE_DIR"] = cache
             counts = out.with_suffix(".compile.json")
-            subprocess.run([sys.executable, "-c", _COUNTED, str(counts), *cli], check=True, env=env,
-                           cwd=tempfile.gettempdir(), stdout=subprocess.DEVNULL)
+            subprocess.run(
+                [sys.executable, "-c", _COUNTED, str(counts), *cli],
+                check=True,
+                env=env,
+                cwd=tempfile.gettempdir(),
+                stdout=subprocess.DEVNULL,
+            )
         report = json.loads(next(out.glob("*.json")).read_text())
         report["compilation"] = json.loads(counts.read_text())
         return report
-    subprocess.run([sys.executable, "-m", "jaxfdi", *cli], check=True, env=env, cwd=tempfile.gettempdir(),
-                   stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [sys.executable, "-m", "jaxfdi", *cli],
+        check=True,
+        env=env,
+        cwd=tempfile.gettempdir(),
+        stdout=subprocess.DEVNULL,
+    )
     return json.loads(next(out.glob("*.json")).read_text())
 
 
@@ -81,7 +94,9 @@ def differences(a, b, path="") -> list[str]:
             return [path]
         return [d for i, (x, y) in enumerate(zip(a, b)) for d in differences(x, y, f"{path}[{i}]")]
     if isinstance(a, float) and isinstance(b, float):
-        same = a == b or (math.isnan(a) and math.isnan(b)) or abs(a - b) <= 1e-9 * max(abs(a), abs(b))
+        same = (
+            a == b or (math.isnan(a) and math.isnan(b)) or abs(a - b) <= 1e-9 * max(abs(a), abs(b))
+        )
         return [] if same else [f"{path}: {a} vs {b}"]
     return [] if a == b else [f"{path}: {a} vs {b}"]
 
@@ -92,13 +107,18 @@ def main() -> None:
     parser.add_argument("--study", default="engine")
     parser.add_argument("--runs", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--compile", action="store_true", help="cold runs: count compiled programs and seconds")
+    parser.add_argument(
+        "--compile", action="store_true", help="cold runs: count compiled programs and seconds"
+    )
     args = parser.parse_args()
     if args.compile:
         return compile_cost(args)
     with tempfile.TemporaryDirectory() as tmp:
         old = Path(tmp) / "old"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-f", "-q", str(old), args.revision], check=True)
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "-f", "-q", str(old), args.revision],
+            check=True,
+        )
         try:
             times = {"before": [], "after": []}
             reports = {}
@@ -110,10 +130,14 @@ def main() -> None:
                         times[which].append(run_seconds(reports[which]))
                         print(f"{which}: {times[which][-1]:.2f} s", flush=True)
         finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=True)
+            subprocess.run(
+                ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=True
+            )
     before, after = (sorted(times[k])[len(times[k]) // 2] for k in ("before", "after"))
-    print(f"{args.study} --runs {args.runs}: run (compile excluded), median of {args.repeats}: before "
-          f"{args.revision} {before:.2f} s, after {after:.2f} s, ratio {after / before:.3f}")
+    print(
+        f"{args.study} --runs {args.runs}: run (compile excluded), median of {args.repeats}: before "
+        f"{args.revision} {before:.2f} s, after {after:.2f} s, ratio {after / before:.3f}"
+    )
     diff = differences(reports["before"], reports["after"])
     print("same tables (1e-9 relative)" if not diff else "DIFFERENT: " + "; ".join(diff[:10]))
 
@@ -122,16 +146,26 @@ def compile_cost(args) -> None:
     """``--compile``: cold runs, before and after alternating, each in a fresh process."""
     with tempfile.TemporaryDirectory() as tmp:
         old = Path(tmp) / "old"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "-f", "-q", str(old), args.revision], check=True)
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "-f", "-q", str(old), args.revision],
+            check=True,
+        )
         try:
             reports = {}
             for i in range(args.repeats):
                 for which, path in (("before", str(old)), ("after", None)):
-                    reports[which] = run(args.study, args.runs, Path(tmp) / f"{which}{i}", path, compile_counts=True)
+                    reports[which] = run(
+                        args.study, args.runs, Path(tmp) / f"{which}{i}", path, compile_counts=True
+                    )
                     c = reports[which]["compilation"]
-                    print(f"{which}: {c['programs']} programs compiled in {c['compile_s']:.1f} s", flush=True)
+                    print(
+                        f"{which}: {c['programs']} programs compiled in {c['compile_s']:.1f} s",
+                        flush=True,
+                    )
         finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=True)
+            subprocess.run(
+                ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=True
+            )
     diff = differences(reports["before"], reports["after"])
     print("same tables (1e-9 relative)" if not diff else "DIFFERENT: " + "; ".join(diff[:10]))
 

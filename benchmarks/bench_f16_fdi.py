@@ -26,6 +26,7 @@ Run:   python benchmarks/bench_f16_fdi.py                       (10^4 flights; m
 Quick: python benchmarks/bench_f16_fdi.py --flights 1 100 --numpy-flights 1 --repeats 1
 Writes benchmarks/results_f16_fdi.json.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,18 +42,25 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import f16_numpy_baseline as baseline  # noqa: E402
-from bench_f16_flight import numpy_design  # noqa: E402
+import f16_numpy_baseline as baseline
+from bench_f16_flight import numpy_design
 
-from jaxfdi import _io  # noqa: E402
-from jaxfdi.data import data_path  # noqa: E402
-from jaxfdi.detection._hybrid_psa import FOLLOW  # noqa: E402
-from jaxfdi.scenarios import f16_fdi as sf  # noqa: E402
-from jaxfdi.scenarios.f16_flight import DT, GUST_SIGMA, dispersions, flight_setup, run_flight, run_flights  # noqa: E402
+from jaxfdi import _io
+from jaxfdi.data import data_path
+from jaxfdi.detection._hybrid_psa import FOLLOW
+from jaxfdi.scenarios import f16_fdi as sf
+from jaxfdi.scenarios.f16_flight import (
+    DT,
+    GUST_SIGMA,
+    dispersions,
+    flight_setup,
+    run_flight,
+    run_flights,
+)
 
 
 def _parse(argv=None):
@@ -60,22 +68,35 @@ def _parse(argv=None):
     parser.add_argument("--flights", type=int, nargs="+", default=[1, 100, 10000])
     parser.add_argument("--numpy-flights", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)),
-                                                      "results_f16_fdi.json"))
+    parser.add_argument(
+        "--out",
+        default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results_f16_fdi.json"),
+    )
     return parser.parse_args(argv)
 
 
 # --- the FDI in NumPy ----------------------------------------------------------------
 
+
 def numpy_fdi(setup, fdi) -> dict:
     """The FDI's arrays as NumPy (from jaxfdi's setup: thresholds, V, bases, estimators)."""
     h = fdi.hybrid
-    return dict(V=np.asarray(h.space.V), bases=np.asarray(h.space.fault_bases), groups=np.asarray(h.space.groups),
-                H=np.asarray(h.space.H), td=float(h.detection_threshold), ti=float(h.isolation_threshold),
-                estimators=np.asarray(h.estimators), restart_cov=np.asarray(h.restart_cov),
-                Q=np.asarray(fdi.process_cov), R=np.asarray(fdi.noise_cov), scale=np.asarray(fdi.rates.coefficient_scale),
-                xcg=float(fdi.rates.aircraft.xcg), lag=sf.RESTART_LAG,
-                ut=(sf.UKF_ALPHA, sf.UKF_BETA, sf.UKF_KAPPA))
+    return dict(
+        V=np.asarray(h.space.V),
+        bases=np.asarray(h.space.fault_bases),
+        groups=np.asarray(h.space.groups),
+        H=np.asarray(h.space.H),
+        td=float(h.detection_threshold),
+        ti=float(h.isolation_threshold),
+        estimators=np.asarray(h.estimators),
+        restart_cov=np.asarray(h.restart_cov),
+        Q=np.asarray(fdi.process_cov),
+        R=np.asarray(fdi.noise_cov),
+        scale=np.asarray(fdi.rates.coefficient_scale),
+        xcg=float(fdi.rates.aircraft.xcg),
+        lag=sf.RESTART_LAG,
+        ut=(sf.UKF_ALPHA, sf.UKF_BETA, sf.UKF_KAPPA),
+    )
 
 
 def rate_derivative(T, w, v, xcg, scale):
@@ -88,11 +109,17 @@ def rate_derivative(T, w, v, xcg, scale):
     dail, drdr = ail / 20.0, rdr / 30.0
     cyt = baseline.cy(beta, ail, rdr)
     czt = baseline.cz(T, alpha, beta, el)
-    clt = baseline._abs_beta_table(T.cl, alpha, beta) + baseline._beta_table(T.dlda, alpha, beta) * dail \
+    clt = (
+        baseline._abs_beta_table(T.cl, alpha, beta)
+        + baseline._beta_table(T.dlda, alpha, beta) * dail
         + baseline._beta_table(T.dldr, alpha, beta) * drdr
+    )
     cmt = baseline.cm(T, alpha, el)
-    cnt = baseline._abs_beta_table(T.cn, alpha, beta) + baseline._beta_table(T.dnda, alpha, beta) * dail \
+    cnt = (
+        baseline._abs_beta_table(T.cn, alpha, beta)
+        + baseline._beta_table(T.dnda, alpha, beta) * dail
         + baseline._beta_table(T.dndr, alpha, beta) * drdr
+    )
     tvt = 0.5 / vt
     b2v = T.b * tvt
     cq = T.cbar * q * tvt
@@ -105,20 +132,24 @@ def rate_derivative(T, w, v, xcg, scale):
     clt, cmt, cnt = clt * scale[0], cmt * scale[1], cnt * scale[2]
     qs = qbar * T.s
     qsb = qs * T.b
-    gam = T.jxx * T.jzz - T.jxz ** 2
+    gam = T.jxx * T.jzz - T.jxz**2
     xpq = T.jxz * (T.jxx - T.jyy + T.jzz)
-    xqr = T.jzz * (T.jzz - T.jyy) + T.jxz ** 2
-    zpq = (T.jxx - T.jyy) * T.jxx + T.jxz ** 2
+    xqr = T.jzz * (T.jzz - T.jyy) + T.jxz**2
+    zpq = (T.jxx - T.jyy) * T.jxx + T.jxz**2
     ypr = T.jzz - T.jxx
     roll, pitch, yaw = qsb * clt, qs * T.cbar * cmt, qsb * cnt
     pq, qr, qhx = p * q, q * r, q * T.hx
-    return np.array([(xpq * pq - xqr * qr + T.jzz * roll + T.jxz * (yaw + qhx)) / gam,
-                     (ypr * p * r - T.jxz * (p * p - r * r) + pitch - r * T.hx) / T.jyy,
-                     (zpq * pq - xpq * qr + T.jxz * roll + T.jxx * (yaw + qhx)) / gam])
+    return np.array(
+        [
+            (xpq * pq - xqr * qr + T.jzz * roll + T.jxz * (yaw + qhx)) / gam,
+            (ypr * p * r - T.jxz * (p * p - r * r) + pitch - r * T.hx) / T.jyy,
+            (zpq * pq - xpq * qr + T.jxz * roll + T.jxx * (yaw + qhx)) / gam,
+        ]
+    )
 
 
 def rate_transition(T, w, v, F):
-    f = lambda x: rate_derivative(T, x, v, F["xcg"], F["scale"])  # noqa: E731
+    f = lambda x: rate_derivative(T, x, v, F["xcg"], F["scale"])
     k1 = f(w)
     k2 = f(w + 0.5 * DT * k1)
     k3 = f(w + 0.5 * DT * k2)
@@ -183,15 +214,19 @@ def fly_fdi(T, design: dict, F: dict, x0, xcg, rng, fault, noise=True):
     history = []  # the last `lag` (channels, filter input, LS estimate)
     detection, decision, psa, hybrid, suspects_at, norms_at = -1, -1, 0, 0, None, np.full(G, np.nan)
     for k in range(steps):
-        y = np.concatenate([x[[0, 1, 2, 3, 4, 5, 11, 12]], H @ x[6:9]]) + sigma * rng.standard_normal(sigma.size)
+        y = np.concatenate(
+            [x[[0, 1, 2, 3, 4, 5, 11, 12]], H @ x[6:9]]
+        ) + sigma * rng.standard_normal(sigma.size)
         if k >= onset:
-            y[8 + 2 * sensor: 10 + 2 * sensor] += bias
+            y[8 + 2 * sensor : 10 + 2 * sensor] += bias
         m = y[8:]
         # FDI: parity, FD, FI, decision (latched), the UKF's replay when two suspects remain
         p = V @ m
         fd = p @ p
         size = math.sqrt(fd)
-        fi = np.array([1.0 - np.linalg.norm(p - Q @ (Q.T @ p)) / size if size > 0 else 0.0 for Q in bases])
+        fi = np.array(
+            [1.0 - np.linalg.norm(p - Q @ (Q.T @ p)) / size if size > 0 else 0.0 for Q in bases]
+        )
         alarm = fd > F["td"]
         suspects = fi > F["ti"]
         if detection < 0 and alarm:
@@ -237,8 +272,11 @@ def fly_fdi(T, design: dict, F: dict, x0, xcg, rng, fault, noise=True):
 
 # --- jaxfdi --------------------------------------------------------------------------
 
+
 def block(x):
-    return jax.tree_util.tree_map(lambda a: a.block_until_ready() if hasattr(a, "block_until_ready") else a, x)
+    return jax.tree_util.tree_map(
+        lambda a: a.block_until_ready() if hasattr(a, "block_until_ready") else a, x
+    )
 
 
 def timed(fn, repeats):
@@ -255,7 +293,9 @@ def timed(fn, repeats):
 
 def random_cases(n: int, seed: int, dtype):
     rng = np.random.default_rng(seed)
-    draws = [(int(rng.integers(3)), float(rng.uniform(0, 360))) for _ in range(n)]  # the same draws as before
+    draws = [
+        (int(rng.integers(3)), float(rng.uniform(0, 360))) for _ in range(n)
+    ]  # the same draws as before
     sensor, angle = (np.asarray(column) for column in zip(*draws))
     return sf.fault_case("bias", sensor, 10.0, angle, dtype=dtype)
 
@@ -272,26 +312,50 @@ def fdi_flights(setup, fdi, keys, disp, cases):
 
 def check_agreement(setup, fdi, tables, design, F) -> dict:
     """The paper's case without noise or gusts, jaxfdi against NumPy."""
-    zero = jax.tree_util.tree_map(lambda a: 0.0 * a, setup.sensors)._replace(rate_axes=setup.sensors.rate_axes)
+    zero = jax.tree_util.tree_map(lambda a: 0.0 * a, setup.sensors)._replace(
+        rate_axes=setup.sensors.rate_axes
+    )
     quiet = setup._replace(sensors=zero, gust_sigma=0.0 * setup.gust_sigma)
     case = sf.fault_case(dtype=setup.x0.dtype)
-    fault = sf.sensor_fault(case, setup.sensors.rate_sigma)  # the bias of the noisy sensors (0.1 rad/s per axis)
+    fault = sf.sensor_fault(
+        case, setup.sensors.rate_sigma
+    )  # the bias of the noisy sensors (0.1 rad/s per axis)
     disp = jax.tree_util.tree_map(lambda a: a[0], dispersions(jax.random.key(0), setup, 1))
     disp = disp._replace(initial=0.0 * disp.initial, xcg=setup.params.xcg)
-    out, hist = jax.jit(lambda s, f: run_flight(s, jax.random.key(0), disp, True, fdi=sf.f16_hybrid_fdi(f),
-                                                fdi_state0=sf.fdi_state0(f), fault=fault))(quiet, fdi)
+    out, hist = jax.jit(
+        lambda s, f: run_flight(
+            s,
+            jax.random.key(0),
+            disp,
+            True,
+            fdi=sf.f16_hybrid_fdi(f),
+            fdi_state0=sf.fdi_state0(f),
+            fault=fault,
+        )
+    )(quiet, fdi)
     ours = np.asarray(hist.state[:, :13])
     bias = np.asarray(fault.magnitude)
-    ref, _, dec = fly_fdi(tables, design, F, np.asarray(setup.x0), float(setup.params.xcg), np.random.default_rng(0),
-                          (0, bias, int(case.onset)), noise=False)
+    ref, _, dec = fly_fdi(
+        tables,
+        design,
+        F,
+        np.asarray(setup.x0),
+        float(setup.params.xcg),
+        np.random.default_rng(0),
+        (0, bias, int(case.onset)),
+        noise=False,
+    )
     d = out.fdi.decision
     norms = np.asarray(d.analytic_residuals)
-    return {"state_max_relative": float(np.max(np.abs(ours - ref) / np.maximum(np.abs(ours), 1.0))),
-            "decision_jaxfdi": [int(d.detection_step), int(d.decision_step), int(d.psa), int(d.hybrid)],
-            "decision_numpy": [int(v) for v in dec[:4]],
-            "suspects": [np.asarray(d.suspects).tolist(), np.asarray(dec[4]).tolist()],
-            "residuals_jaxfdi": norms.tolist(), "residuals_numpy": np.asarray(dec[5]).tolist(),
-            "residual_max_relative": float(np.max(np.abs(norms - dec[5])) / np.max(np.abs(dec[5])))}
+    return {
+        "state_max_relative": float(np.max(np.abs(ours - ref) / np.maximum(np.abs(ours), 1.0))),
+        "decision_jaxfdi": [int(d.detection_step), int(d.decision_step), int(d.psa), int(d.hybrid)],
+        "decision_numpy": [int(v) for v in dec[:4]],
+        "suspects": [np.asarray(d.suspects).tolist(), np.asarray(dec[4]).tolist()],
+        "residuals_jaxfdi": norms.tolist(),
+        "residuals_numpy": np.asarray(dec[5]).tolist(),
+        "residual_max_relative": float(np.max(np.abs(norms - dec[5])) / np.max(np.abs(dec[5]))),
+    }
 
 
 def time_numpy(setup, fdi, tables, design, F, flights: int) -> dict:
@@ -303,13 +367,24 @@ def time_numpy(setup, fdi, tables, design, F, flights: int) -> dict:
         case = jax.tree_util.tree_map(lambda a: a[i], cases)
         bias = np.asarray(sf.sensor_fault(case, setup.sensors.rate_sigma).magnitude)
         w, c = time.perf_counter(), time.process_time()
-        _, _, dec = fly_fdi(tables, design, F, np.asarray(setup.x0 + disp.initial[i]), float(disp.xcg[i]), rng,
-                            (int(case.sensor), bias, int(case.onset)))
+        _, _, dec = fly_fdi(
+            tables,
+            design,
+            F,
+            np.asarray(setup.x0 + disp.initial[i]),
+            float(disp.xcg[i]),
+            rng,
+            (int(case.sensor), bias, int(case.onset)),
+        )
         walls.append(time.perf_counter() - w)
         cpus.append(time.process_time() - c)
         used += int(np.isfinite(dec[5]).all())
-    return {"flights": flights, "per_flight_s": float(np.mean(walls)), "per_flight_cpu_s": float(np.mean(cpus)),
-            "ukf_used": used}
+    return {
+        "flights": flights,
+        "per_flight_s": float(np.mean(walls)),
+        "per_flight_cpu_s": float(np.mean(cpus)),
+        "ukf_used": used,
+    }
 
 
 def time_jaxfdi(setup, fdi, flights: int, repeats: int) -> dict:
@@ -317,64 +392,105 @@ def time_jaxfdi(setup, fdi, flights: int, repeats: int) -> dict:
     disp = dispersions(jax.random.key(3), setup, flights)
     cases = random_cases(flights, 2, setup.x0.dtype)
     rows = {}
-    for name, fn, args in (("fdi", jax.jit(fdi_flights), (setup, fdi, keys, disp, cases)),
-                           ("bare", jax.jit(lambda s, k, d: run_flights(s, k, d)), (setup, keys, disp))):
+    for name, fn, args in (
+        ("fdi", jax.jit(fdi_flights), (setup, fdi, keys, disp, cases)),
+        ("bare", jax.jit(lambda s, k, d: run_flights(s, k, d)), (setup, keys, disp)),
+    ):
         t0 = time.perf_counter()
         compiled = fn.lower(*args).compile()
         compile_s = time.perf_counter() - t0
         run_s, cpu_s, out = timed(lambda: block(compiled(*args)), repeats)
-        row = {"compile_s": compile_s, "run_s": run_s, "run_cpu_s": cpu_s, "per_flight_s": run_s / flights,
-               "flights_per_s": flights / run_s, "healthy": int(np.sum(np.asarray(out.healthy)))}
+        row = {
+            "compile_s": compile_s,
+            "run_s": run_s,
+            "run_cpu_s": cpu_s,
+            "per_flight_s": run_s / flights,
+            "flights_per_s": flights / run_s,
+            "healthy": int(np.sum(np.asarray(out.healthy))),
+        }
         if name == "fdi":
             d = out.fdi
-            row.update(ukf_used=int(np.sum(np.asarray(d.filter_used))),
-                       isolated=int(np.sum(np.asarray(d.hybrid) == np.asarray(cases.sensor) + 1)),
-                       psa_isolated=int(np.sum(np.asarray(d.psa) == np.asarray(cases.sensor) + 1)))
+            row.update(
+                ukf_used=int(np.sum(np.asarray(d.filter_used))),
+                isolated=int(np.sum(np.asarray(d.hybrid) == np.asarray(cases.sensor) + 1)),
+                psa_isolated=int(np.sum(np.asarray(d.psa) == np.asarray(cases.sensor) + 1)),
+            )
         rows[name] = row
-    return {"flights": flights, **rows, "fdi_over_bare": rows["fdi"]["run_s"] / rows["bare"]["run_s"]}
+    return {
+        "flights": flights,
+        **rows,
+        "fdi_over_bare": rows["fdi"]["run_s"] / rows["bare"]["run_s"],
+    }
 
 
 def main() -> int:
     args = _parse() if __name__ == "__main__" else _parse([])
-    print(f"jax {jax.__version__} on {jax.default_backend()}: {[d.device_kind for d in jax.devices()]}", flush=True)
+    print(
+        f"jax {jax.__version__} on {jax.default_backend()}: {[d.device_kind for d in jax.devices()]}",
+        flush=True,
+    )
     setup, _ = flight_setup(gust_sigma=GUST_SIGMA)
     fdi, _ = sf.fdi_setup(setup)
     tables = baseline.Tables(data_path("f16_stevens_lewis.json"))
     design = numpy_design(setup)
     F = numpy_fdi(setup, fdi)
     agreement = check_agreement(setup, fdi, tables, design, F)
-    print(f"paper's case without noise, jaxfdi vs NumPy: states within {agreement['state_max_relative']:.1e} "
-          f"relative; decision (detection, decision step, PSA, hybrid) {agreement['decision_jaxfdi']} vs "
-          f"{agreement['decision_numpy']}; UKF residuals {np.round(agreement['residuals_jaxfdi'], 6).tolist()} vs "
-          f"{np.round(agreement['residuals_numpy'], 6).tolist()} (largest difference {agreement['residual_max_relative']:.1e} of the largest)",
-          flush=True)
-    if not (agreement["state_max_relative"] < 1e-8 and agreement["decision_jaxfdi"] == agreement["decision_numpy"]
-            and agreement["residual_max_relative"] < 1e-6):
+    print(
+        f"paper's case without noise, jaxfdi vs NumPy: states within {agreement['state_max_relative']:.1e} "
+        f"relative; decision (detection, decision step, PSA, hybrid) {agreement['decision_jaxfdi']} vs "
+        f"{agreement['decision_numpy']}; UKF residuals {np.round(agreement['residuals_jaxfdi'], 6).tolist()} vs "
+        f"{np.round(agreement['residuals_numpy'], 6).tolist()} (largest difference "
+        f"{agreement['residual_max_relative']:.1e} of the largest)",
+        flush=True,
+    )
+    if not (
+        agreement["state_max_relative"] < 1e-8
+        and agreement["decision_jaxfdi"] == agreement["decision_numpy"]
+        and agreement["residual_max_relative"] < 1e-6
+    ):
         print("the two implementations disagree: no timing", file=sys.stderr)
         return 1
     numpy_row = time_numpy(setup, fdi, tables, design, F, args.numpy_flights)
-    print(f"numpy FDI loop: {numpy_row['per_flight_s']:.3f} s per flight (mean of {args.numpy_flights}; CPU "
-          f"{numpy_row['per_flight_cpu_s']:.3f} s; UKF used in {numpy_row['ukf_used']})", flush=True)
+    print(
+        f"numpy FDI loop: {numpy_row['per_flight_s']:.3f} s per flight (mean of {args.numpy_flights}; CPU "
+        f"{numpy_row['per_flight_cpu_s']:.3f} s; UKF used in {numpy_row['ukf_used']})",
+        flush=True,
+    )
     rows = []
     for n in args.flights:
         row = time_jaxfdi(setup, fdi, n, args.repeats)
         f, b = row["fdi"], row["bare"]
-        row.update(ratio_vs_numpy=numpy_row["per_flight_s"] / f["per_flight_s"],
-                   ratio_vs_numpy_cpu=numpy_row["per_flight_cpu_s"] / (f["run_cpu_s"] / n))
+        row.update(
+            ratio_vs_numpy=numpy_row["per_flight_s"] / f["per_flight_s"],
+            ratio_vs_numpy_cpu=numpy_row["per_flight_cpu_s"] / (f["run_cpu_s"] / n),
+        )
         rows.append(row)
-        print(f"jaxfdi {n:>6} flights: FDI flight compile {f['compile_s']:.1f} s, run {f['run_s']:.3f} s (CPU "
-              f"{f['run_cpu_s']:.3f} s), {f['per_flight_s'] * 1e3:.3f} ms per flight, {f['flights_per_s']:.0f} "
-              f"flights/s, {row['ratio_vs_numpy']:.0f}x numpy (CPU {row['ratio_vs_numpy_cpu']:.0f}x); UKF used in "
-              f"{f['ukf_used']}, hybrid isolated {f['isolated']} (PSA alone {f['psa_isolated']}); bare flight "
-              f"{b['per_flight_s'] * 1e3:.3f} ms per flight: FDI costs {row['fdi_over_bare']:.2f}x the bare flight",
-              flush=True)
-    _io.write_json(args.out, {
-        "date": datetime.datetime.now().isoformat(timespec="seconds"), "command": " ".join(sys.argv),
-        "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__,
-                    "backend": jax.default_backend(), "devices": [d.device_kind for d in jax.devices()],
-                    "load_average": list(os.getloadavg())},
-        "agreement": agreement, "numpy": numpy_row, "jaxfdi": rows,
-    })
+        print(
+            f"jaxfdi {n:>6} flights: FDI flight compile {f['compile_s']:.1f} s, run {f['run_s']:.3f} s (CPU "
+            f"{f['run_cpu_s']:.3f} s), {f['per_flight_s'] * 1e3:.3f} ms per flight, {f['flights_per_s']:.0f} "
+            f"flights/s, {row['ratio_vs_numpy']:.0f}x numpy (CPU {row['ratio_vs_numpy_cpu']:.0f}x); UKF used in "
+            f"{f['ukf_used']}, hybrid isolated {f['isolated']} (PSA alone {f['psa_isolated']}); bare flight "
+            f"{b['per_flight_s'] * 1e3:.3f} ms per flight: FDI costs {row['fdi_over_bare']:.2f}x the bare flight",
+            flush=True,
+        )
+    _io.write_json(
+        args.out,
+        {
+            "date": datetime.datetime.now().isoformat(timespec="seconds"),
+            "command": " ".join(sys.argv),
+            "machine": {
+                "cpu_count": os.cpu_count(),
+                "platform": platform.platform(),
+                "jax": jax.__version__,
+                "backend": jax.default_backend(),
+                "devices": [d.device_kind for d in jax.devices()],
+                "load_average": list(os.getloadavg()),
+            },
+            "agreement": agreement,
+            "numpy": numpy_row,
+            "jaxfdi": rows,
+        },
+    )
     print(f"wrote {args.out}")
     return 0
 

@@ -20,6 +20,7 @@ sequence end to end (jaxfdi vs filterpy), and jaxfdi with a persistent compilati
 Run:  python benchmarks/bench_filters.py            (full, several minutes on 2 cores)
       python benchmarks/bench_filters.py --quick    (smoke test, < 1 minute)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,30 +42,33 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-from dynamax.linear_gaussian_ssm import (  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+from dynamax.linear_gaussian_ssm import (
     ParamsLGSSM,
     ParamsLGSSMDynamics,
     ParamsLGSSMEmissions,
     ParamsLGSSMInitial,
     lgssm_filter,
 )
-from dynamax.nonlinear_gaussian_ssm import ParamsNLGSSM, UKFHyperParams, unscented_kalman_filter  # noqa: E402
-from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter  # noqa: E402
-from jax.scipy.linalg import cho_solve, cholesky  # noqa: E402
+from dynamax.nonlinear_gaussian_ssm import ParamsNLGSSM, UKFHyperParams, unscented_kalman_filter
+from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+from jax.scipy.linalg import cho_solve, cholesky
 
-import jaxfdi  # noqa: E402
+import jaxfdi
 from jaxfdi.models import engine_model
-from jaxfdi.models._rigid_body import rigid_body_params
-from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
+from jaxfdi.models._rigid_body import (
+    rigid_body_observation,
+    rigid_body_params,
+    rigid_body_transition,
+)
 
 ALPHA, BETA, KAPPA = 1e-3, 2.0, 0.0
 T_KF, T_UKF = 1000, 600
 LOG_2PI = math.log(2.0 * math.pi)
 # Agreement required between implementations (max |a - b| / max |b| over a field).
-TOL_KF = 1e-6    # dynamax adds 1e-9 to the diagonal of S in psd_solve
-TOL_UKF = 1e-6   # textbook UT sums with alpha = 1e-3 (weights ~ -1e6) lose ~1e-9 in float64
+TOL_KF = 1e-6  # dynamax adds 1e-9 to the diagonal of S in psd_solve
+TOL_UKF = 1e-6  # textbook UT sums with alpha = 1e-3 (weights ~ -1e6) lose ~1e-9 in float64
 # dynamax's psd_solve adds 1e-9 to the diagonal of S before solving for the gain. With the
 # rigid body's R = 1e-4 I that moves S by ~1e-5 relatively, so its timed UKF covariances
 # differ from the others by ~2e-5. The untimed row "dynamax_no_boost" (boost set to 0)
@@ -85,7 +89,11 @@ def engine_problem(num_sequences: int, seed: int = 0) -> dict:
     us = (0.01 + 0.002 * np.sin(2 * np.pi * k / 250.0)).reshape(T_KF, 1)
     sim = jaxfdi.linear_simulator(model)
     keys = jax.random.split(jax.random.key(seed), num_sequences)
-    ys = jax.jit(jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(7), jnp.asarray(us), key)[1].measurement))(keys)
+    ys = jax.jit(
+        jax.vmap(
+            lambda key: jaxfdi.simulate(sim, jnp.zeros(7), jnp.asarray(us), key)[1].measurement
+        )
+    )(keys)
     return dict(model=model, m0=jnp.zeros(7), P0=10.0 * model.Q, ys=ys, us=jnp.asarray(us))
 
 
@@ -98,8 +106,12 @@ def rigid_body_problem(num_sequences: int, seed: int = 1) -> dict:
     key_x0, key_noise = jax.random.split(jax.random.key(seed))
     x0s = jnp.array([0.5, -0.3, 0.4]) + 0.1 * jax.random.normal(key_x0, (num_sequences, 3))
     keys = jax.random.split(key_noise, num_sequences)
-    ys = jax.jit(jax.vmap(lambda x0, key: jaxfdi.simulate(sim, x0, jnp.asarray(us), key)[1].measurement))(x0s, keys)
-    return dict(params=params, Q=Q, R=R, m0=jnp.zeros(3), P0=0.1 * jnp.eye(3), ys=ys, us=jnp.asarray(us))
+    ys = jax.jit(
+        jax.vmap(lambda x0, key: jaxfdi.simulate(sim, x0, jnp.asarray(us), key)[1].measurement)
+    )(x0s, keys)
+    return dict(
+        params=params, Q=Q, R=R, m0=jnp.zeros(3), P0=0.1 * jnp.eye(3), ys=ys, us=jnp.asarray(us)
+    )
 
 
 # --------------------------------------------------------------------- jaxfdi (library)
@@ -145,7 +157,8 @@ def jaxfdi_kf_kernel(model, m0, P0, ys, us):
         _, info = jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m0, P0), ys, us)
     else:
         _, info = jaxfdi.filters.run_filter(
-            jaxfdi.filters.kalman_filter(model), jaxfdi.filters.GaussianState(m0, P0), ys, us)
+            jaxfdi.filters.kalman_filter(model), jaxfdi.filters.GaussianState(m0, P0), ys, us
+        )
     return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
 
 
@@ -160,7 +173,11 @@ def jaxfdi_ukf_batch(Q, R, params, m0, P0, ys, us):
 # ------------------------------------------------------- plain lax.scan (the baseline)
 def _gaussian_loglik(chol_S, innovation):
     whitened = jax.scipy.linalg.solve_triangular(chol_S, innovation, lower=True)
-    return -0.5 * (whitened @ whitened + 2.0 * jnp.sum(jnp.log(jnp.diag(chol_S))) + innovation.shape[0] * LOG_2PI)
+    return -0.5 * (
+        whitened @ whitened
+        + 2.0 * jnp.sum(jnp.log(jnp.diag(chol_S)))
+        + innovation.shape[0] * LOG_2PI
+    )
 
 
 def plain_kf(model, m0, P0, ys, us):
@@ -242,10 +259,16 @@ def dynamax_kf(model, m0, P0, ys, us):
     params = ParamsLGSSM(
         initial=ParamsLGSSMInitial(mean=m0, cov=P0),
         dynamics=ParamsLGSSMDynamics(
-            weights=Phi, bias=jnp.zeros(n), input_weights=jnp.concatenate([Gamma, jnp.zeros((n, nu))], 1), cov=Q
+            weights=Phi,
+            bias=jnp.zeros(n),
+            input_weights=jnp.concatenate([Gamma, jnp.zeros((n, nu))], 1),
+            cov=Q,
         ),
         emissions=ParamsLGSSMEmissions(
-            weights=C, bias=jnp.zeros(m), input_weights=jnp.concatenate([jnp.zeros((m, nu)), D], 1), cov=R
+            weights=C,
+            bias=jnp.zeros(m),
+            input_weights=jnp.concatenate([jnp.zeros((m, nu)), D], 1),
+            cov=R,
         ),
     )
     post = lgssm_filter(params, ys, inputs=_dynamax_inputs(us))
@@ -318,11 +341,13 @@ def _rigid_body_transition_numpy(inertia, dt):
     def deriv(w, tau):
         p, q, r = w
         # (tau - w x (I w)) / I
-        return np.array([
-            (tau[0] - (q * Iz * r - r * Iy * q)) / Ix,
-            (tau[1] - (r * Ix * p - p * Iz * r)) / Iy,
-            (tau[2] - (p * Iy * q - q * Ix * p)) / Iz,
-        ])
+        return np.array(
+            [
+                (tau[0] - (q * Iz * r - r * Iy * q)) / Ix,
+                (tau[1] - (r * Ix * p - p * Iz * r)) / Iy,
+                (tau[2] - (p * Iy * q - q * Ix * p)) / Iz,
+            ]
+        )
 
     def fx(w, _dt, u):
         k1 = deriv(w, u)
@@ -343,7 +368,12 @@ def filterpy_ukf_sequences(Q, R, params, m0, P0, ys, us):
     for y_seq in np.asarray(ys):
         points = MerweScaledSigmaPoints(n, ALPHA, BETA, KAPPA)
         ukf = UnscentedKalmanFilter(n, y_seq.shape[1], dt, hx=lambda x: x, fx=fx, points=points)
-        ukf.x, ukf.P, ukf.Q, ukf.R = np.asarray(m0).copy(), np.asarray(P0).copy(), np.asarray(Q), np.asarray(R)
+        ukf.x, ukf.P, ukf.Q, ukf.R = (
+            np.asarray(m0).copy(),
+            np.asarray(P0).copy(),
+            np.asarray(Q),
+            np.asarray(R),
+        )
         ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # first update starts from N(m0, P0)
         seq_means, seq_covs = np.empty((len(y_seq), n)), np.empty((len(y_seq), n, n))
         for k in range(len(y_seq)):
@@ -358,10 +388,14 @@ def filterpy_ukf_sequences(Q, R, params, m0, P0, ys, us):
 
 # ------------------------------------------------------------------------------ timing
 def block(tree):
-    return jax.tree_util.tree_map(lambda x: x.block_until_ready() if hasattr(x, "block_until_ready") else x, tree)
+    return jax.tree_util.tree_map(
+        lambda x: x.block_until_ready() if hasattr(x, "block_until_ready") else x, tree
+    )
 
 
-def compiled_timing(fn: Callable[..., Any], args: tuple, repeats: int, budget_s: float = 60.0) -> tuple[dict, Any]:
+def compiled_timing(
+    fn: Callable[..., Any], args: tuple, repeats: int, budget_s: float = 60.0
+) -> tuple[dict, Any]:
     """Compile ``jit(fn)`` for ``args`` (timed apart), run it once for its output, then time
     it (``repeat_timing``); adds XLA's temporary and output buffer sizes in bytes."""
     t0 = time.perf_counter()
@@ -370,8 +404,11 @@ def compiled_timing(fn: Callable[..., Any], args: tuple, repeats: int, budget_s:
     out = block(compiled(*args))
     timing = repeat_timing(lambda: block(compiled(*args)), repeats, budget_s)
     memory = compiled.memory_analysis()
-    timing.update(compile_s=compile_s, temp_bytes=int(getattr(memory, "temp_size_in_bytes", -1)),
-                  output_bytes=int(getattr(memory, "output_size_in_bytes", -1)))
+    timing.update(
+        compile_s=compile_s,
+        temp_bytes=int(getattr(memory, "temp_size_in_bytes", -1)),
+        output_bytes=int(getattr(memory, "output_size_in_bytes", -1)),
+    )
     return timing, out
 
 
@@ -399,7 +436,9 @@ def time_jax(fn: Callable, args: tuple, in_axes, repeats: int, budget_s: float) 
     out = block(compiled(*args))  # warm-up (first call of the executable)
     t3 = time.perf_counter()
     timing = repeat_timing(lambda: block(compiled(*args)), repeats, budget_s)
-    timing.update(trace_lower_s=t1 - t0, xla_compile_s=t2 - t1, compile_s=t2 - t0, first_run_s=t3 - t2)
+    timing.update(
+        trace_lower_s=t1 - t0, xla_compile_s=t2 - t1, compile_s=t2 - t0, first_run_s=t3 - t2
+    )
     return timing, out
 
 
@@ -407,6 +446,7 @@ def _means_and_loglik(fn):
     def selected(*args):
         out = fn(*args)
         return out[0], out[2]
+
     return selected
 
 
@@ -430,8 +470,16 @@ def agreement(reference_name, ref, others: dict, tol: float) -> list[dict]:
         if len(out) > 2 and len(ref) > 2:
             fields["log_likelihood"] = rel_diff(out[2], ref[2])
         worst = max(fields.values())
-        rows.append({"impl": name, "reference": reference_name, **fields, "max_rel_diff": worst,
-                     "tol": row_tol, "ok": bool(worst < row_tol)})
+        rows.append(
+            {
+                "impl": name,
+                "reference": reference_name,
+                **fields,
+                "max_rel_diff": worst,
+                "tol": row_tol,
+                "ok": bool(worst < row_tol),
+            }
+        )
     return rows
 
 
@@ -442,13 +490,25 @@ def bench_filter(kind: str, prob: dict, args, log) -> dict:
     N = prob["ys"].shape[0]
     reps, budget = args.repeats, args.budget
     if kind == "kf":
-        lib, lib_full, plain, dmx, fpy = jaxfdi_kf, jaxfdi_kf_full_info, plain_kf, dynamax_kf, filterpy_kf_sequences
+        lib, lib_full, plain, dmx, fpy = (
+            jaxfdi_kf,
+            jaxfdi_kf_full_info,
+            plain_kf,
+            dynamax_kf,
+            filterpy_kf_sequences,
+        )
         lib_batch = jaxfdi_kf_batch
         head = (prob["model"],)
         n_head = 1
         tol = TOL_KF
     else:
-        lib, lib_full, plain, dmx, fpy = jaxfdi_ukf, jaxfdi_ukf_full_info, plain_ukf, dynamax_ukf, filterpy_ukf_sequences
+        lib, lib_full, plain, dmx, fpy = (
+            jaxfdi_ukf,
+            jaxfdi_ukf_full_info,
+            plain_ukf,
+            dynamax_ukf,
+            filterpy_ukf_sequences,
+        )
         lib_batch = jaxfdi_ukf_batch
         head = (prob["Q"], prob["R"], prob["params"])
         n_head = 3
@@ -466,42 +526,93 @@ def bench_filter(kind: str, prob: dict, args, log) -> dict:
             call_args = head + (m0, P0, ys if batch else ys[0], us)
             timing, out = time_jax(fn, call_args, in_axes, reps, budget)
             outs[name] = out
-            result["rows"].append({"case": label, "impl": name, "sequences_timed": N if batch else 1, **timing})
-            log(f"  {kind} {label:>13} {name:<17} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms")
+            result["rows"].append(
+                {"case": label, "impl": name, "sequences_timed": N if batch else 1, **timing}
+            )
+            log(
+                f"  {kind} {label:>13} {name:<17} compile {timing['compile_s']:7.3f} s   run "
+                f"{timing['run_s'] * 1e3:10.3f} ms"
+            )
         if batch:  # the library's batch driver: takes (N, T, m), returns shared covariances once
             timing, out = time_jax(lib_batch, head + (m0, P0, ys, us), None, reps, budget)
             mean, cov, loglik = out
-            outs["jaxfdi_batch"] = (mean, jnp.broadcast_to(cov, mean.shape[:1] + cov.shape[-3:]), loglik)
-            result["rows"].append({"case": label, "impl": "jaxfdi_batch", "sequences_timed": N, **timing,
-                                   "note": "run_filter; shared covariances returned once" if cov.ndim == 3 else
-                                           "run_filter; covariances per run (they depend on the data)"})
-            log(f"  {kind} {label:>13} {'jaxfdi_batch':<17} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms")
+            outs["jaxfdi_batch"] = (
+                mean,
+                jnp.broadcast_to(cov, mean.shape[:1] + cov.shape[-3:]),
+                loglik,
+            )
+            result["rows"].append(
+                {
+                    "case": label,
+                    "impl": "jaxfdi_batch",
+                    "sequences_timed": N,
+                    **timing,
+                    "note": "run_filter; shared covariances returned once"
+                    if cov.ndim == 3
+                    else "run_filter; covariances per run (they depend on the data)",
+                }
+            )
+            log(
+                f"  {kind} {label:>13} {'jaxfdi_batch':<17} compile {timing['compile_s']:7.3f} s  "
+                f" run {timing['run_s'] * 1e3:10.3f} ms"
+            )
         # filterpy: a Python loop, on fewer sequences for the batch (scaled linearly)
         n_fp = min(args.filterpy_sequences, N) if batch else 1
         fp_ys = ys[:n_fp] if batch else ys[:1]
         fp_holder = {}
-        timing = repeat_timing(lambda: fp_holder.update(out=fpy(*head, m0, P0, fp_ys, us)),
-                               args.filterpy_repeats, budget)
+        timing = repeat_timing(
+            lambda: fp_holder.update(out=fpy(*head, m0, P0, fp_ys, us)),
+            args.filterpy_repeats,
+            budget,
+        )
         scale = (N / n_fp) if batch else 1.0
-        timing_scaled = {"run_s": timing["run_s"] * scale, "run_min_s": timing["run_min_s"] * scale,
-                         "repeats": timing["repeats"], "compile_s": 0.0}
-        fp_row = {"case": label, "impl": "filterpy", "sequences_timed": n_fp,
-                  "scaled_from_sequences": n_fp if batch and n_fp < N else None, **timing_scaled}
+        timing_scaled = {
+            "run_s": timing["run_s"] * scale,
+            "run_min_s": timing["run_min_s"] * scale,
+            "repeats": timing["repeats"],
+            "compile_s": 0.0,
+        }
+        fp_row = {
+            "case": label,
+            "impl": "filterpy",
+            "sequences_timed": n_fp,
+            "scaled_from_sequences": n_fp if batch and n_fp < N else None,
+            **timing_scaled,
+        }
         result["rows"].append(fp_row)
-        log(f"  {kind} {label:>13} {'filterpy':<17} (timed {n_fp} seq{', scaled x%.0f' % scale if scale != 1 else ''})"
-            f"   run {timing_scaled['run_s'] * 1e3:10.3f} ms")
+        log(
+            f"  {kind} {label:>13} {'filterpy':<17} (timed {n_fp} seq{', scaled x%.0f' % scale if scale != 1 else ''})"
+            f"   run {timing_scaled['run_s'] * 1e3:10.3f} ms"
+        )
         # correctness: all against jaxfdi (filterpy on the sequences it ran)
         ref = outs["jaxfdi"]
-        ref_fp = tuple(np.asarray(x)[:n_fp] for x in ref[:2]) if batch else tuple(np.asarray(x) for x in ref[:2])
-        result["agreement"] += [dict(case=label, **row) for row in agreement("jaxfdi", ref_fp, {"filterpy": fp_holder["out"]}, tol)]
+        ref_fp = (
+            tuple(np.asarray(x)[:n_fp] for x in ref[:2])
+            if batch
+            else tuple(np.asarray(x) for x in ref[:2])
+        )
+        result["agreement"] += [
+            dict(case=label, **row)
+            for row in agreement("jaxfdi", ref_fp, {"filterpy": fp_holder["out"]}, tol)
+        ]
         others = {k: v for k, v in outs.items() if k in ("plain_scan", "dynamax", "jaxfdi_batch")}
         with dynamax_without_diagonal_boost():  # untimed, fresh trace
-            f = jax.jit(lambda *a: dmx(*a)) if not batch else jax.jit(jax.vmap(lambda *a: dmx(*a), in_axes=shared))
+            f = (
+                jax.jit(lambda *a: dmx(*a))
+                if not batch
+                else jax.jit(jax.vmap(lambda *a: dmx(*a), in_axes=shared))
+            )
             others["dynamax_no_boost"] = f(*head, m0, P0, ys if batch else ys[0], us)
         if "jaxfdi_full_info" in outs:
             full = outs["jaxfdi_full_info"]
-            others["jaxfdi_full_info"] = (full.filtered_mean, full.filtered_cov, jnp.sum(full.log_likelihood, axis=-1))
-        result["agreement"] += [dict(case=label, **row) for row in agreement("jaxfdi", ref, others, tol)]
+            others["jaxfdi_full_info"] = (
+                full.filtered_mean,
+                full.filtered_cov,
+                jnp.sum(full.log_likelihood, axis=-1),
+            )
+        result["agreement"] += [
+            dict(case=label, **row) for row in agreement("jaxfdi", ref, others, tol)
+        ]
 
     # N sequences again, returning only what a Monte Carlo statistic needs (means and
     # log-likelihood). With a shared P0 and model the covariances of the plain scan and
@@ -513,10 +624,18 @@ def bench_filter(kind: str, prob: dict, args, log) -> dict:
         timing, out = time_jax(_means_and_loglik(fn), head + (m0, P0, ys, us), shared, reps, budget)
         outs[name] = (out[0], None, out[1])
         result["rows"].append({"case": label, "impl": name, "sequences_timed": N, **timing})
-        log(f"  {kind} {label} {name:<10} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms")
-    result["rows"].append({**fp_row, "case": label, "note": "same filterpy timing as the full-output case"})
-    result["agreement"] += [dict(case=label, **row) for row in agreement(
-        "jaxfdi", outs["jaxfdi"], {k: v for k, v in outs.items() if k != "jaxfdi"}, tol)]
+        log(
+            f"  {kind} {label} {name:<10} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms"
+        )
+    result["rows"].append(
+        {**fp_row, "case": label, "note": "same filterpy timing as the full-output case"}
+    )
+    result["agreement"] += [
+        dict(case=label, **row)
+        for row in agreement(
+            "jaxfdi", outs["jaxfdi"], {k: v for k, v in outs.items() if k != "jaxfdi"}, tol
+        )
+    ]
 
     # Monte Carlo with a covariance per run: P0 per run, then Q per run (a model per run)
     key_p, key_q = jax.random.split(jax.random.key(42))
@@ -539,16 +658,35 @@ def bench_filter(kind: str, prob: dict, args, log) -> dict:
             timing, out = time_jax(fn, call_args, in_axes, reps, budget)
             outs[name] = out
             result["rows"].append({"case": label, "impl": name, "sequences_timed": N, **timing})
-            log(f"  {kind} {label:>20} {name:<10} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms")
+            log(
+                f"  {kind} {label:>20} {name:<10} compile {timing['compile_s']:7.3f} s   run "
+                f"{timing['run_s'] * 1e3:10.3f} ms"
+            )
         if kind == "kf":  # the batch kernel: the model/prior per run carries its run axis, no vmap
             timing, out = time_jax(jaxfdi_kf_kernel, call_args, None, reps, budget)
             outs["jaxfdi_batch"] = out
-            result["rows"].append({"case": label, "impl": "jaxfdi_batch", "sequences_timed": N, **timing,
-                                   "note": "structure-of-arrays kernel (run_filter, a prior or a model per run)"})
-            log(f"  {kind} {label:>20} {'jaxfdi_batch':<10} compile {timing['compile_s']:7.3f} s   run {timing['run_s'] * 1e3:10.3f} ms")
-        result["rows"].append({**fp_row, "case": label, "note": "same filterpy timing as the 100-sequence case"})
-        result["agreement"] += [dict(case=label, **row) for row in agreement(
-            "jaxfdi", outs["jaxfdi"], {k: v for k, v in outs.items() if k != "jaxfdi"}, tol)]
+            result["rows"].append(
+                {
+                    "case": label,
+                    "impl": "jaxfdi_batch",
+                    "sequences_timed": N,
+                    **timing,
+                    "note": "structure-of-arrays kernel (run_filter, a prior or a model per run)",
+                }
+            )
+            log(
+                f"  {kind} {label:>20} {'jaxfdi_batch':<10} compile {timing['compile_s']:7.3f} s  "
+                f" run {timing['run_s'] * 1e3:10.3f} ms"
+            )
+        result["rows"].append(
+            {**fp_row, "case": label, "note": "same filterpy timing as the 100-sequence case"}
+        )
+        result["agreement"] += [
+            dict(case=label, **row)
+            for row in agreement(
+                "jaxfdi", outs["jaxfdi"], {k: v for k, v in outs.items() if k != "jaxfdi"}, tol
+            )
+        ]
     return result
 
 
@@ -569,17 +707,34 @@ def bench_driver_compile(prob: dict, log, rounds: int = 3) -> list[dict]:
     kf = jaxfdi.filters.kalman_filter(model)
     P0s = jnp.broadcast_to(P0, (N,) + P0.shape) * 1.5
     cases = {
-        "plain scan, 1 sequence (means, covs, loglik)": lambda: jax.jit(plain_kf).lower(model, m0, P0, ys[0], us),
-        "dynamax, 1 sequence (means, covs, loglik)": lambda: jax.jit(dynamax_kf).lower(model, m0, P0, ys[0], us),
-        "jit(run_filter), 1 sequence (means, covs, loglik)": lambda: jax.jit(jaxfdi_kf).lower(model, m0, P0, ys[0], us),
-        "run_filter eager, 1 sequence (full info)": lambda: _scan_filter.lower(kf, kf.init(m0, P0), ys[0], us),
-        "jit(run_filter), 1 sequence (full info)": lambda: jax.jit(jaxfdi_kf_full_info).lower(model, m0, P0, ys[0], us),
+        "plain scan, 1 sequence (means, covs, loglik)": lambda: jax.jit(plain_kf).lower(
+            model, m0, P0, ys[0], us
+        ),
+        "dynamax, 1 sequence (means, covs, loglik)": lambda: jax.jit(dynamax_kf).lower(
+            model, m0, P0, ys[0], us
+        ),
+        "jit(run_filter), 1 sequence (means, covs, loglik)": lambda: jax.jit(jaxfdi_kf).lower(
+            model, m0, P0, ys[0], us
+        ),
+        "run_filter eager, 1 sequence (full info)": lambda: _scan_filter.lower(
+            kf, kf.init(m0, P0), ys[0], us
+        ),
+        "jit(run_filter), 1 sequence (full info)": lambda: jax.jit(jaxfdi_kf_full_info).lower(
+            model, m0, P0, ys[0], us
+        ),
         f"run_filter shared, {N} seq (full info)": lambda: jax.jit(
-            lambda y: jaxfdi.filters.run_filter(kf, kf.init(m0, P0), y, us)).lower(ys),
+            lambda y: jaxfdi.filters.run_filter(kf, kf.init(m0, P0), y, us)
+        ).lower(ys),
         f"run_filter P0 per run, {N} runs (full info)": lambda: jax.jit(
-            lambda p: jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m0, p), ys, us)).lower(P0s),
+            lambda p: jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m0, p), ys, us)
+        ).lower(P0s),
         f"run_filter Q per run, {N} runs (full info)": lambda: jax.jit(
-            lambda q: jaxfdi.filters.run_filter(jaxfdi.filters.kalman_filter(model._replace(Q=q)), jaxfdi.filters.GaussianState(m0, P0), ys, us)
+            lambda q: jaxfdi.filters.run_filter(
+                jaxfdi.filters.kalman_filter(model._replace(Q=q)),
+                jaxfdi.filters.GaussianState(m0, P0),
+                ys,
+                us,
+            )
         ).lower(P0s),
     }
     best: dict[str, dict] = {}
@@ -595,21 +750,33 @@ def bench_driver_compile(prob: dict, log, rounds: int = 3) -> list[dict]:
             t1 = time.perf_counter()
             compiled = lowered.compile()
             t2 = time.perf_counter()
-            row = {"driver": name, "trace_lower_s": t1 - t0, "xla_compile_s": t2 - t1, "compile_s": t2 - t0,
-                   "hlo_lines": len(compiled.as_text().splitlines()), "rounds": rounds}
+            row = {
+                "driver": name,
+                "trace_lower_s": t1 - t0,
+                "xla_compile_s": t2 - t1,
+                "compile_s": t2 - t0,
+                "hlo_lines": len(compiled.as_text().splitlines()),
+                "rounds": rounds,
+            }
             if name not in best or row["compile_s"] < best[name]["compile_s"]:
                 best[name] = row
-            log(f"  compile (round {round_}) {name:<52} {t2 - t0:6.3f} s  ({row['hlo_lines']} HLO lines)")
+            log(
+                f"  compile (round {round_}) {name:<52} {t2 - t0:6.3f} s  ({row['hlo_lines']} HLO lines)"
+            )
     return list(best.values())
 
 
 def format_driver_compile(rows: list[dict]) -> str:
-    lines = [f"Driver compile time (engine KF, T = 1000; trace + lower + XLA compile, caches cleared before each; "
-             f"fastest of {rows[0]['rounds']} interleaved rounds)",
-             f"{'driver':<54} {'trace+lower [s]':>15} {'XLA [s]':>8} {'total [s]':>9} {'HLO lines':>10}"]
+    lines = [
+        f"Driver compile time (engine KF, T = 1000; trace + lower + XLA compile, caches cleared before each; "
+        f"fastest of {rows[0]['rounds']} interleaved rounds)",
+        f"{'driver':<54} {'trace+lower [s]':>15} {'XLA [s]':>8} {'total [s]':>9} {'HLO lines':>10}",
+    ]
     for r in rows:
-        lines.append(f"{r['driver']:<54} {r['trace_lower_s']:15.3f} {r['xla_compile_s']:8.3f} {r['compile_s']:9.3f} "
-                     f"{r['hlo_lines']:10d}")
+        lines.append(
+            f"{r['driver']:<54} {r['trace_lower_s']:15.3f} {r['xla_compile_s']:8.3f} {r['compile_s']:9.3f} "
+            f"{r['hlo_lines']:10d}"
+        )
     return "\n".join(lines)
 
 
@@ -657,14 +824,17 @@ for k in range(len(ys)):
     means[k] = kf.x[:, 0]
     kf.predict(u=us[k].reshape(nu, 1))
 t2 = time.perf_counter()
-print(json.dumps({'import_s': t1 - t0, 'build_and_run_s': t2 - t1, 'checksum': float(means.sum()), 'last': means[-1].tolist()}))
+print(json.dumps({'import_s': t1 - t0, 'build_and_run_s': t2 - t1, 'checksum': float(means.sum()),
+                  'last': means[-1].tolist()}))
 """
 
 
 def _run_oneshot(script: str, *argv: str) -> dict:
     env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_COMPILATION_CACHE")}
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", script, *argv], capture_output=True, text=True, env=env, check=False)
+    proc = subprocess.run(
+        [sys.executable, "-c", script, *argv], capture_output=True, text=True, env=env, check=False
+    )
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f"one-shot process failed:\n{proc.stderr[-3000:]}")
@@ -678,9 +848,20 @@ def bench_oneshot(prob: dict, repeats: int, log) -> dict:
     model = prob["model"]
     with tempfile.TemporaryDirectory(prefix="jaxfdi_bench_") as tmp:
         data = os.path.join(tmp, "engine.npz")
-        np.savez(data, ys=np.asarray(prob["ys"][0]), us=np.asarray(prob["us"]), m0=np.asarray(prob["m0"]),
-                 P0=np.asarray(prob["P0"]), **{k: np.asarray(v) for k, v in model._asdict().items()})
-        runs = {"jaxfdi": [], "filterpy": [], "jaxfdi_cache_first_start": [], "jaxfdi_cache_second_start": []}
+        np.savez(
+            data,
+            ys=np.asarray(prob["ys"][0]),
+            us=np.asarray(prob["us"]),
+            m0=np.asarray(prob["m0"]),
+            P0=np.asarray(prob["P0"]),
+            **{k: np.asarray(v) for k, v in model._asdict().items()},
+        )
+        runs = {
+            "jaxfdi": [],
+            "filterpy": [],
+            "jaxfdi_cache_first_start": [],
+            "jaxfdi_cache_second_start": [],
+        }
         for i in range(repeats):
             runs["filterpy"].append(_run_oneshot(_ONESHOT_FILTERPY, data))
             runs["jaxfdi"].append(_run_oneshot(_ONESHOT_JAXFDI, data, "-"))
@@ -688,7 +869,10 @@ def bench_oneshot(prob: dict, repeats: int, log) -> dict:
             os.makedirs(cache)
             runs["jaxfdi_cache_first_start"].append(_run_oneshot(_ONESHOT_JAXFDI, data, cache))
             runs["jaxfdi_cache_second_start"].append(_run_oneshot(_ONESHOT_JAXFDI, data, cache))
-            log(f"  one-shot repeat {i + 1}/{repeats}: " + ", ".join(f"{k} {v[-1]['wall_s']:.2f} s" for k, v in runs.items()))
+            log(
+                f"  one-shot repeat {i + 1}/{repeats}: "
+                + ", ".join(f"{k} {v[-1]['wall_s']:.2f} s" for k, v in runs.items())
+            )
     summary = {}
     for name, rs in runs.items():
         summary[name] = {
@@ -702,10 +886,15 @@ def bench_oneshot(prob: dict, repeats: int, log) -> dict:
             summary[name]["filter_s"] = statistics.median(r["filter_s"] for r in rs)
     last_j = np.array(runs["jaxfdi"][0]["last"])
     last_f = np.array(runs["filterpy"][0]["last"])
-    summary["agreement_last_mean_rel_diff"] = float(np.max(np.abs(last_j - last_f)) / np.max(np.abs(last_f)))
-    summary["ratio_jaxfdi_over_filterpy_wall"] = summary["jaxfdi"]["wall_s"] / summary["filterpy"]["wall_s"]
+    summary["agreement_last_mean_rel_diff"] = float(
+        np.max(np.abs(last_j - last_f)) / np.max(np.abs(last_f))
+    )
+    summary["ratio_jaxfdi_over_filterpy_wall"] = (
+        summary["jaxfdi"]["wall_s"] / summary["filterpy"]["wall_s"]
+    )
     summary["ratio_cache_second_over_first_wall"] = (
-        summary["jaxfdi_cache_second_start"]["wall_s"] / summary["jaxfdi_cache_first_start"]["wall_s"]
+        summary["jaxfdi_cache_second_start"]["wall_s"]
+        / summary["jaxfdi_cache_first_start"]["wall_s"]
     )
     return summary
 
@@ -721,13 +910,18 @@ def ratios(result: dict) -> list[dict]:
         base = impls["jaxfdi"]["run_s"]
         for impl, row in impls.items():
             if impl != "jaxfdi":
-                rows.append({"case": case, "impl": impl, "ratio_other_over_jaxfdi": row["run_s"] / base})
+                rows.append(
+                    {"case": case, "impl": impl, "ratio_other_over_jaxfdi": row["run_s"] / base}
+                )
     return rows
 
 
 def format_table(kind: str, result: dict) -> str:
-    lines = [f"{kind.upper()}  (T = {result['T']}, float64)",
-             f"{'case':<22} {'implementation':<17} {'compile [s]':>11} {'run [ms]':>12} {'per seq [ms]':>13} {'x jaxfdi':>9}  note"]
+    lines = [
+        f"{kind.upper()}  (T = {result['T']}, float64)",
+        f"{'case':<22} {'implementation':<17} {'compile [s]':>11} {'run [ms]':>12} "
+        f"{'per seq [ms]':>13} {'x jaxfdi':>9}  note",
+    ]
     base = {row["case"]: row["run_s"] for row in result["rows"] if row["impl"] == "jaxfdi"}
     for row in result["rows"]:
         n_seq = result["N"] if row["case"] != "1 sequence" else 1
@@ -737,20 +931,28 @@ def format_table(kind: str, result: dict) -> str:
         if row["impl"] == "filterpy":
             note = (note + "; " if note else "") + "Python loop, no compile"
         compile_s = f"{row['compile_s']:.3f}" if row["impl"] != "filterpy" else "-"
-        lines.append(f"{row['case']:<22} {row['impl']:<17} {compile_s:>11} {row['run_s'] * 1e3:12.3f} "
-                     f"{row['run_s'] * 1e3 / n_seq:13.4f} {row['run_s'] / base[row['case']]:9.2f}  {note}")
+        lines.append(
+            f"{row['case']:<22} {row['impl']:<17} {compile_s:>11} {row['run_s'] * 1e3:12.3f} "
+            f"{row['run_s'] * 1e3 / n_seq:13.4f} {row['run_s'] / base[row['case']]:9.2f}  {note}"
+        )
     lines.append("'x jaxfdi' = run time / jaxfdi run time in the same case (> 1: jaxfdi faster).")
     return "\n".join(lines)
 
 
 def format_agreement(kind: str, result: dict) -> str:
-    lines = [f"{kind.upper()} agreement with jaxfdi (max |a-b|/max|b| per sequence; tol {result['agreement'][0]['tol']:.0e}, "
-             f"dynamax {TOL_DYNAMAX:.0e}: its psd_solve adds 1e-9 to diag(S); dynamax_no_boost = same without it, untimed)",
-             f"{'case':<22} {'implementation':<17} {'mean':>10} {'cov':>10} {'loglik':>10}  ok"]
+    lines = [
+        f"{kind.upper()} agreement with jaxfdi (max |a-b|/max|b| per sequence; tol "
+        f"{result['agreement'][0]['tol']:.0e}, "
+        f"dynamax {TOL_DYNAMAX:.0e}: its psd_solve adds 1e-9 to diag(S); dynamax_no_boost = same without it, untimed)",
+        f"{'case':<22} {'implementation':<17} {'mean':>10} {'cov':>10} {'loglik':>10}  ok",
+    ]
     for row in result["agreement"]:
         ll = f"{row['log_likelihood']:.1e}" if "log_likelihood" in row else "-"
         cov = f"{row['filtered_cov']:.1e}" if "filtered_cov" in row else "-"
-        lines.append(f"{row['case']:<22} {row['impl']:<17} {row['filtered_mean']:10.1e} {cov:>10} {ll:>10}  {'yes' if row['ok'] else 'NO'} (tol {row['tol']:.0e})")
+        lines.append(
+            f"{row['case']:<22} {row['impl']:<17} {row['filtered_mean']:10.1e} {cov:>10} {ll:>10} "
+            f" {'yes' if row['ok'] else 'NO'} (tol {row['tol']:.0e})"
+        )
     return "\n".join(lines)
 
 
@@ -759,46 +961,89 @@ def format_targets(results: dict) -> tuple[str, list[dict]]:
     checks = []
     for (kind, other), target in TARGETS.items():
         res = results[kind]
-        readings = [(f"{res['N']} sequences", "jaxfdi"), (f"{res['N']} sequences", "jaxfdi_batch"),
-                    (f"{res['N']} seq, means+loglik", "jaxfdi")]
+        readings = [
+            (f"{res['N']} sequences", "jaxfdi"),
+            (f"{res['N']} sequences", "jaxfdi_batch"),
+            (f"{res['N']} seq, means+loglik", "jaxfdi"),
+        ]
         for case, mine in readings:
             rows = {r["impl"]: r for r in res["rows"] if r["case"] == case}
             if mine not in rows:
                 continue
             speedup = rows[other]["run_s"] / rows[mine]["run_s"]
             ok = speedup >= target
-            checks.append({"filter": kind, "other": other, "case": case, "jaxfdi_driver": mine,
-                           "target_speedup": target, "speedup": speedup, "met": bool(ok)})
-            lines.append(f"  {kind.upper():<4} {mine:<13} vs {other:<9} {case:<22} target >= {target:6.1f}x   "
-                         f"measured {speedup:9.2f}x   {'MET' if ok else 'MISSED'}")
-    lines.append("  (the target is stated for '%d sequences': vmap(run_filter) returning N copies of every field, and "
-                 "run_filter returning shared covariances once; means+loglik is a third reading)" % res["N"])
+            checks.append(
+                {
+                    "filter": kind,
+                    "other": other,
+                    "case": case,
+                    "jaxfdi_driver": mine,
+                    "target_speedup": target,
+                    "speedup": speedup,
+                    "met": bool(ok),
+                }
+            )
+            lines.append(
+                f"  {kind.upper():<4} {mine:<13} vs {other:<9} {case:<22} target >= {target:6.1f}x   "
+                f"measured {speedup:9.2f}x   {'MET' if ok else 'MISSED'}"
+            )
+    lines.append(
+        "  (the target is stated for '%d sequences': vmap(run_filter) returning N copies of every field, and "
+        "run_filter returning shared covariances once; means+loglik is a third reading)" % res["N"]
+    )
     res = results["kf"]
     for case in (f"{res['N']} runs, P0 per run", f"{res['N']} runs, Q per run"):
         rows = {r["impl"]: r for r in res["rows"] if r["case"] == case}
         if "jaxfdi_batch" not in rows:
             continue
-        for other, target in (("plain_scan", 3.0), ("jaxfdi", None), ("dynamax", None), ("filterpy", None)):
+        for other, target in (
+            ("plain_scan", 3.0),
+            ("jaxfdi", None),
+            ("dynamax", None),
+            ("filterpy", None),
+        ):
             speedup = rows[other]["run_s"] / rows["jaxfdi_batch"]["run_s"]
             ok = target is None or speedup >= target
-            checks.append({"filter": "kf", "other": other, "case": case, "jaxfdi_driver": "jaxfdi_batch",
-                           "target_speedup": target, "speedup": speedup, "met": bool(ok)})
+            checks.append(
+                {
+                    "filter": "kf",
+                    "other": other,
+                    "case": case,
+                    "jaxfdi_driver": "jaxfdi_batch",
+                    "target_speedup": target,
+                    "speedup": speedup,
+                    "met": bool(ok),
+                }
+            )
             goal = f"target >= {target:6.1f}x" if target else "(no target)    "
-            lines.append(f"  KF   jaxfdi_batch  vs {other:<10} {case:<22} {goal}   measured {speedup:9.2f}x   "
-                         f"{'MET' if ok and target else ('MISSED' if target else '')}")
+            lines.append(
+                f"  KF   jaxfdi_batch  vs {other:<10} {case:<22} {goal}   measured {speedup:9.2f}x   "
+                f"{'MET' if ok and target else ('MISSED' if target else '')}"
+            )
     return "\n".join(lines), checks
 
 
 def format_oneshot(s: dict) -> str:
-    lines = ["One-shot processes: `python -c` that imports, builds the engine KF and filters one sequence (T = 1000)",
-             f"{'process':<28} {'wall [s]':>9} {'import [s]':>11} {'build+run [s]':>14} {'of which model [s]':>19} {'filter [s]':>11}"]
+    lines = [
+        "One-shot processes: `python -c` that imports, builds the engine KF and filters one sequence (T = 1000)",
+        f"{'process':<28} {'wall [s]':>9} {'import [s]':>11} {'build+run [s]':>14} "
+        f"{'of which model [s]':>19} {'filter [s]':>11}",
+    ]
     for name in ("filterpy", "jaxfdi", "jaxfdi_cache_first_start", "jaxfdi_cache_second_start"):
         r = s[name]
-        parts = f"{r['model_s']:19.3f} {r['filter_s']:11.3f}" if "model_s" in r else f"{'-':>19} {'-':>11}"
-        lines.append(f"{name:<28} {r['wall_s']:9.3f} {r['import_s']:11.3f} {r['build_and_run_s']:14.3f} {parts}")
-    lines.append(f"jaxfdi / filterpy wall time: {s['ratio_jaxfdi_over_filterpy_wall']:.2f}x;  "
-                 f"persistent cache, second start / first start: {s['ratio_cache_second_over_first_wall']:.2f}x;  "
-                 f"results agree to {s['agreement_last_mean_rel_diff']:.1e} (median of {s['jaxfdi']['repeats']})")
+        parts = (
+            f"{r['model_s']:19.3f} {r['filter_s']:11.3f}"
+            if "model_s" in r
+            else f"{'-':>19} {'-':>11}"
+        )
+        lines.append(
+            f"{name:<28} {r['wall_s']:9.3f} {r['import_s']:11.3f} {r['build_and_run_s']:14.3f} {parts}"
+        )
+    lines.append(
+        f"jaxfdi / filterpy wall time: {s['ratio_jaxfdi_over_filterpy_wall']:.2f}x;  "
+        f"persistent cache, second start / first start: {s['ratio_cache_second_over_first_wall']:.2f}x;  "
+        f"results agree to {s['agreement_last_mean_rel_diff']:.1e} (median of {s['jaxfdi']['repeats']})"
+    )
     return "\n".join(lines)
 
 
@@ -831,16 +1076,52 @@ def cpu_model() -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sequences", type=int, default=None, help="Monte Carlo sequences N (default 100; 100 with --quick too)")
-    parser.add_argument("--repeats", type=int, default=None, help="timed repeats per measurement, median reported (default 10; 3 with --quick)")
-    parser.add_argument("--filterpy-sequences", type=int, default=None, help="sequences filterpy runs for the N-sequence case, scaled to N (default 20; 2 with --quick)")
-    parser.add_argument("--filterpy-repeats", type=int, default=None, help="repeats of each filterpy timing (default 3; 1 with --quick)")
-    parser.add_argument("--oneshot-repeats", type=int, default=None, help="repeats of the one-shot process timings (default 3; 1 with --quick)")
-    parser.add_argument("--budget", type=float, default=None, help="seconds after which a measurement stops repeating (at least 3 repeats)")
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--sequences",
+        type=int,
+        default=None,
+        help="Monte Carlo sequences N (default 100; 100 with --quick too)",
+    )
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=None,
+        help="timed repeats per measurement, median reported (default 10; 3 with --quick)",
+    )
+    parser.add_argument(
+        "--filterpy-sequences",
+        type=int,
+        default=None,
+        help="sequences filterpy runs for the N-sequence case, scaled to N (default 20; 2 with --quick)",
+    )
+    parser.add_argument(
+        "--filterpy-repeats",
+        type=int,
+        default=None,
+        help="repeats of each filterpy timing (default 3; 1 with --quick)",
+    )
+    parser.add_argument(
+        "--oneshot-repeats",
+        type=int,
+        default=None,
+        help="repeats of the one-shot process timings (default 3; 1 with --quick)",
+    )
+    parser.add_argument(
+        "--budget",
+        type=float,
+        default=None,
+        help="seconds after which a measurement stops repeating (at least 3 repeats)",
+    )
     parser.add_argument("--quick", action="store_true", help="smoke test, < 1 minute")
-    parser.add_argument("--skip-oneshot", action="store_true", help="skip the one-shot process timings")
-    parser.add_argument("--out", default="benchmarks/results.json", help="JSON results (written atomically)")
+    parser.add_argument(
+        "--skip-oneshot", action="store_true", help="skip the one-shot process timings"
+    )
+    parser.add_argument(
+        "--out", default="benchmarks/results.json", help="JSON results (written atomically)"
+    )
     args = parser.parse_args(argv)
     q = args.quick
     args.sequences = args.sequences or 100
@@ -860,14 +1141,23 @@ def main(argv=None) -> int:
     meta = {
         "command": " ".join([os.path.basename(sys.executable)] + sys.argv),
         "date_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "cpu": cpu_model(), "cpu_count": os.cpu_count(), "jax_backend": jax.default_backend(),
-        "python": platform.python_version(), "jax": jax.__version__, "jaxfdi": jaxfdi.__version__,
-        "dynamax": getattr(dynamax, "__version__", "?"), "filterpy": filterpy.__version__, "numpy": np.__version__,
-        "args": vars(args), "alpha_beta_kappa": [ALPHA, BETA, KAPPA],
+        "cpu": cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "jax_backend": jax.default_backend(),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "jaxfdi": jaxfdi.__version__,
+        "dynamax": getattr(dynamax, "__version__", "?"),
+        "filterpy": filterpy.__version__,
+        "numpy": np.__version__,
+        "args": vars(args),
+        "alpha_beta_kappa": [ALPHA, BETA, KAPPA],
     }
     payload: dict[str, Any] = {"meta": meta}
-    log(f"jax {jax.__version__} on {jax.default_backend()} ({meta['cpu']}, {meta['cpu_count']} cores); "
-        f"N = {args.sequences}, repeats = {args.repeats}, filterpy on {args.filterpy_sequences} sequences")
+    log(
+        f"jax {jax.__version__} on {jax.default_backend()} ({meta['cpu']}, {meta['cpu_count']} cores); "
+        f"N = {args.sequences}, repeats = {args.repeats}, filterpy on {args.filterpy_sequences} sequences"
+    )
 
     engine = engine_problem(args.sequences)
     rigid = rigid_body_problem(args.sequences)
@@ -884,7 +1174,9 @@ def main(argv=None) -> int:
         payload["oneshot"] = bench_oneshot(engine, args.oneshot_repeats, log)
 
     target_text, payload["targets"] = format_targets(payload)
-    payload["all_agree"] = all(r["ok"] for kind in ("kf", "ukf") for r in payload[kind]["agreement"])
+    payload["all_agree"] = all(
+        r["ok"] for kind in ("kf", "ukf") for r in payload[kind]["agreement"]
+    )
     payload["elapsed_s"] = time.perf_counter() - started
     write_json_atomic(args.out, payload)
 
@@ -900,8 +1192,10 @@ def main(argv=None) -> int:
     if "oneshot" in payload:
         print()
         print(format_oneshot(payload["oneshot"]))
-    print(f"\nall implementations agree within tolerance: {payload['all_agree']};  "
-          f"elapsed {payload['elapsed_s']:.0f} s;  results written to {args.out}")
+    print(
+        f"\nall implementations agree within tolerance: {payload['all_agree']};  "
+        f"elapsed {payload['elapsed_s']:.0f} s;  results written to {args.out}"
+    )
     return 0 if payload["all_agree"] else 1
 
 

@@ -26,6 +26,7 @@ reported. Compile time apart from run time (median of repeats).
 Run:  python benchmarks/bench_gnss_raim.py                      (~3 minutes on 2 cores)
       python benchmarks/bench_gnss_raim.py --epochs 20000 --numpy-epochs 300 --glp-epochs 100   (quick)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,17 +41,23 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
-from jaxfdi import _io  # noqa: E402
-from jaxfdi.data import data_path  # noqa: E402
-from jaxfdi.gnss import geodetic_to_ecef, _integrity as integrity, read_rinex_nav
-from jaxfdi.gnss._orbits import ephemeris_table, select_orbits, transmission_geometry
+from jaxfdi import _io
+from jaxfdi.data import data_path
+from jaxfdi.gnss import _integrity as integrity
+from jaxfdi.gnss import geodetic_to_ecef, read_rinex_nav
+from jaxfdi.gnss._frames import elevation_azimuth
+from jaxfdi.gnss._orbits import (
+    OMEGA_E,
+    SPEED_OF_LIGHT,
+    ephemeris_table,
+    select_orbits,
+    transmission_geometry,
+)
+from jaxfdi.gnss._positioning import transmit_states
 from jaxfdi.gnss._raim import raim_tables
-from jaxfdi.gnss._frames import elevation_azimuth  # noqa: E402
-from jaxfdi.gnss._orbits import OMEGA_E, SPEED_OF_LIGHT  # noqa: E402
-from jaxfdi.gnss._positioning import transmit_states  # noqa: E402
 
 SIGMA = 5.0
 MASK = math.radians(5.0)
@@ -68,7 +75,11 @@ def compiled_timing(fn, args, repeats):
         t0 = time.perf_counter()
         jax.block_until_ready(compiled(*args))
         runs.append(time.perf_counter() - t0)
-    return {"compile_s": compile_s, "median_s": float(np.median(runs)), "min_s": float(np.min(runs))}, out
+    return {
+        "compile_s": compile_s,
+        "median_s": float(np.median(runs)),
+        "min_s": float(np.min(runs)),
+    }, out
 
 
 def cpu_model() -> str:
@@ -85,7 +96,9 @@ def cpu_model() -> str:
 def make_data(table, epochs: int, seed: int = 0):
     """(times, sat_tx (E,S,3), clocks (E,S), rho (E,S) NaN where not visible, faulted slot (E,))."""
     rng = np.random.default_rng(seed)
-    sites = geodetic_to_ecef(jnp.radians(rng.uniform(-60, 60, 20)), jnp.radians(rng.uniform(-180, 180, 20)), 100.0)
+    sites = geodetic_to_ecef(
+        jnp.radians(rng.uniform(-60, 60, 20)), jnp.radians(rng.uniform(-180, 180, 20)), 100.0
+    )
     times = DAY0 + np.sort(rng.uniform(0, 86000, epochs))
     site_of = rng.integers(0, 20, epochs)
     fault_on = rng.uniform(size=epochs) < 0.1
@@ -96,13 +109,16 @@ def make_data(table, epochs: int, seed: int = 0):
         el, _ = elevation_azimuth(site, orbit_positions(orbit, t))
         visible = ok & (el > MASK)
         rho = ranges - SPEED_OF_LIGHT * clock + SIGMA * jax.random.normal(key, ranges.shape)
-        slot = jnp.argmax(jnp.where(visible, jax.random.uniform(jax.random.fold_in(key, 1), ranges.shape), -1.0))
+        slot = jnp.argmax(
+            jnp.where(visible, jax.random.uniform(jax.random.fold_in(key, 1), ranges.shape), -1.0)
+        )
         rho = rho + jnp.where(faulty & (jnp.arange(rho.shape[0]) == slot), 200.0, 0.0)
         rho = jnp.where(visible, rho, jnp.nan)
         sat_tx, clk = transmit_states(orbit, t, rho)
         return sat_tx, clk, rho, jnp.where(faulty, slot, -1)
 
-    from jaxfdi.gnss._orbits import satellite_position as orbit_positions  # noqa: E402
+    from jaxfdi.gnss._orbits import satellite_position as orbit_positions
+
     keys = jax.random.split(jax.random.key(seed), epochs)
     out = jax.jit(jax.vmap(one))(jnp.asarray(times), sites[site_of], keys, jnp.asarray(fault_on))
     return (times,) + tuple(np.asarray(o) for o in out)
@@ -113,15 +129,24 @@ def jax_monitor(tables, batch_size):
         used = jnp.isfinite(rho)
         sigma = jnp.full(rho.shape, SIGMA)
         result = integrity.monitor_epoch(None, used, t, rho, tables, sigma, transmit=(sat_tx, clk))
-        return (result.check.statistic, result.protection.hpl, result.check.isolated, result.check.alarm,
-                result.excluded, result.fix.position)
+        return (
+            result.check.statistic,
+            result.protection.hpl,
+            result.check.isolated,
+            result.check.alarm,
+            result.excluded,
+            result.fix.position,
+        )
 
     if not batch_size:
         return jax.vmap(one)
-    return lambda *args: jax.lax.map(lambda a: one(*a), args, batch_size=batch_size)   # cache-sized chunks
+    return lambda *args: jax.lax.map(
+        lambda a: one(*a), args, batch_size=batch_size
+    )  # cache-sized chunks
 
 
 # --- the NumPy loop ----------------------------------------------------------------------
+
 
 def _geodetic(x):
     a, f = 6378137.0, 1.0 / 298.257223563
@@ -130,7 +155,9 @@ def _geodetic(x):
     lon = math.atan2(x[1], x[0])
     beta = math.atan2(x[2], (1 - f) * p)
     for _ in range(5):
-        lat = math.atan2(x[2] + e2 / (1 - e2) * b * math.sin(beta) ** 3, p - e2 * a * math.cos(beta) ** 3)
+        lat = math.atan2(
+            x[2] + e2 / (1 - e2) * b * math.sin(beta) ** 3, p - e2 * a * math.cos(beta) ** 3
+        )
         beta = math.atan2((1 - f) * math.sin(lat), math.cos(lat))
     return lat, lon
 
@@ -139,8 +166,14 @@ def _wls(sat, clk, rho, sigma, x, iterations):
     for _ in range(iterations):
         tau = np.linalg.norm(sat - x[:3], axis=1) / SPEED_OF_LIGHT
         ang = OMEGA_E * tau
-        rot = np.stack([np.cos(ang) * sat[:, 0] + np.sin(ang) * sat[:, 1],
-                        -np.sin(ang) * sat[:, 0] + np.cos(ang) * sat[:, 1], sat[:, 2]], axis=1)
+        rot = np.stack(
+            [
+                np.cos(ang) * sat[:, 0] + np.sin(ang) * sat[:, 1],
+                -np.sin(ang) * sat[:, 0] + np.cos(ang) * sat[:, 1],
+                sat[:, 2],
+            ],
+            axis=1,
+        )
         d = rot - x[:3]
         r = np.linalg.norm(d, axis=1)
         h = np.hstack([-d / r[:, None], np.ones((len(r), 1))]) / sigma[:, None]
@@ -168,7 +201,12 @@ def _assess(sat_rot, x, rho, clk, sigma, threshold, lam):
     gain = np.linalg.solve(rr[:4], q[:, :4].T)
     slope = np.hypot(gain[0], gain[1]) / np.sqrt(s_diag)
     dof = n - 4
-    return stat, threshold[dof], float(slope.max() * math.sqrt(lam[dof])), int(np.argmax(np.abs(ts))) if n >= 6 else -1
+    return (
+        stat,
+        threshold[dof],
+        float(slope.max() * math.sqrt(lam[dof])),
+        int(np.argmax(np.abs(ts))) if n >= 6 else -1,
+    )
 
 
 def numpy_epoch(t, sat_tx, clk, rho, threshold, lam):
@@ -188,10 +226,13 @@ def numpy_epoch(t, sat_tx, clk, rho, threshold, lam):
 
 # --- gnss-lib-py ---------------------------------------------------------------------------
 
+
 def glp_navdata(times, sat_tx, clk, rho):
     from gnss_lib_py.navdata.navdata import NavData
 
-    rows = {k: [] for k in ("gps_millis", "sv_id", "x_sv_m", "y_sv_m", "z_sv_m", "b_sv_m", "corr_pr_m")}
+    rows = {
+        k: [] for k in ("gps_millis", "sv_id", "x_sv_m", "y_sv_m", "z_sv_m", "b_sv_m", "corr_pr_m")
+    }
     for e in range(len(times)):
         for s in np.flatnonzero(np.isfinite(rho[e])):
             rows["gps_millis"].append((2086 * 604800.0 + times[e]) * 1e3)
@@ -214,31 +255,45 @@ def main(argv=None) -> int:
     parser.add_argument("--numpy-epochs", type=int, default=2000)
     parser.add_argument("--glp-epochs", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--channels", type=int, default=16, help="receiver channels (fixed slots) for jaxfdi")
-    parser.add_argument("--batch", type=int, default=128, help="epochs per vmapped chunk (0: all at once)")
-    parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "results_gnss_raim.json"))
+    parser.add_argument(
+        "--channels", type=int, default=16, help="receiver channels (fixed slots) for jaxfdi"
+    )
+    parser.add_argument(
+        "--batch", type=int, default=128, help="epochs per vmapped chunk (0: all at once)"
+    )
+    parser.add_argument(
+        "--out", default=os.path.join(os.path.dirname(__file__), "results_gnss_raim.json")
+    )
     args = parser.parse_args(argv)
 
     table = ephemeris_table(read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
     tables = raim_tables(32)
     t0 = time.perf_counter()
     times, sat_tx, clk, rho, faulted = make_data(table, args.epochs)
-    print(f"data: {args.epochs} epochs, {np.isfinite(rho).sum(1).min()}-{np.isfinite(rho).sum(1).max()} satellites, "
-          f"{(faulted >= 0).mean():.1%} faulted ({time.perf_counter() - t0:.1f} s)", flush=True)
+    print(
+        f"data: {args.epochs} epochs, {np.isfinite(rho).sum(1).min()}-{np.isfinite(rho).sum(1).max()} satellites, "
+        f"{(faulted >= 0).mean():.1%} faulted ({time.perf_counter() - t0:.1f} s)",
+        flush=True,
+    )
 
     # a receiver's fixed channel count: the visible satellites first, CHANNELS slots an epoch
-    order = np.argsort(~np.isfinite(rho), axis=1, kind="stable")[:, :args.channels]
+    order = np.argsort(~np.isfinite(rho), axis=1, kind="stable")[:, : args.channels]
     assert np.isfinite(rho).sum(1).max() <= args.channels
-    take = lambda a: np.take_along_axis(a, order.reshape(order.shape + (1,) * (a.ndim - 2)), axis=1)  # noqa: E731
+    take = lambda a: np.take_along_axis(a, order.reshape(order.shape + (1,) * (a.ndim - 2)), axis=1)
     inputs = tuple(jnp.asarray(a) for a in (times, take(sat_tx), take(clk), take(rho)))
     channel_tables = raim_tables(args.channels)
     timing, out = compiled_timing(jax_monitor(channel_tables, args.batch), inputs, args.repeats)
     stat, hpl, iso, alarm, excluded, _ = (np.asarray(o) for o in out)
-    slot_of = lambda c: np.where(c >= 0, np.take_along_axis(order, np.maximum(c, 0)[:, None], 1)[:, 0], -1)  # noqa: E731
+    slot_of = lambda c: np.where(
+        c >= 0, np.take_along_axis(order, np.maximum(c, 0)[:, None], 1)[:, 0], -1
+    )
     iso, excluded = slot_of(iso), slot_of(excluded)
     jax_epoch_us = timing["median_s"] / args.epochs * 1e6
-    print(f"jaxfdi: compile {timing['compile_s']:.1f} s, run {timing['median_s']:.3f} s for {args.epochs} epochs "
-          f"({jax_epoch_us:.2f} us/epoch)", flush=True)
+    print(
+        f"jaxfdi: compile {timing['compile_s']:.1f} s, run {timing['median_s']:.3f} s for {args.epochs} epochs "
+        f"({jax_epoch_us:.2f} us/epoch)",
+        flush=True,
+    )
 
     threshold, lam = np.asarray(tables.threshold), np.asarray(tables.noncentrality)
     picks = np.linspace(0, args.epochs - 1, args.numpy_epochs).astype(int)
@@ -251,13 +306,16 @@ def main(argv=None) -> int:
     worst_hpl = float(np.max(np.abs(hpl[picks] - ref_hpl) / ref_hpl))
     iso_equal = bool(np.all(iso[picks] == ref_iso))
     assert worst_stat < 1e-6 and worst_hpl < 1e-6 and iso_equal, (worst_stat, worst_hpl, iso_equal)
-    print(f"numpy loop: {numpy_epoch_us:.0f} us/epoch ({len(picks)} epochs in {numpy_s:.1f} s); agreement: "
-          f"statistic {worst_stat:.1e}, HPL {worst_hpl:.1e} relative, isolated satellite equal", flush=True)
+    print(
+        f"numpy loop: {numpy_epoch_us:.0f} us/epoch ({len(picks)} epochs in {numpy_s:.1f} s); agreement: "
+        f"statistic {worst_stat:.1e}, HPL {worst_hpl:.1e} relative, isolated satellite equal",
+        flush=True,
+    )
 
     glp = None
     try:
-        from gnss_lib_py.algorithms.fde import solve_fde
         import gnss_lib_py
+        from gnss_lib_py.algorithms.fde import solve_fde
     except ImportError:
         print("gnss-lib-py not installed: skipped (pip install gnss-lib-py)")
     else:
@@ -265,7 +323,9 @@ def main(argv=None) -> int:
         nav = glp_navdata(times[gpicks], sat_tx[gpicks], clk[gpicks], rho[gpicks])
         median_dof = int(np.median(np.isfinite(rho).sum(1) - 4))
         t0 = time.perf_counter()
-        result = solve_fde(nav, method="residual", threshold=SIGMA**2 * float(threshold[median_dof]))
+        result = solve_fde(
+            nav, method="residual", threshold=SIGMA**2 * float(threshold[median_dof])
+        )
         glp_s = time.perf_counter() - t0
         flags = np.asarray(result["fault_residual"])
         sv = np.asarray(result["sv_id"]) - 1
@@ -276,27 +336,53 @@ def main(argv=None) -> int:
             if f == 1 and faulted[gpicks][epoch_of[m]] == s:
                 hit[epoch_of[m]] = True
         faulty_epochs = faulted[gpicks] >= 0
-        glp = {"version": gnss_lib_py.__version__, "epochs": len(gpicks), "seconds": glp_s,
-               "us_per_epoch": glp_s / len(gpicks) * 1e6,
-               "faulted_epochs_flagging_the_faulty_satellite": float(hit[faulty_epochs].mean()),
-               "jaxfdi_same_epochs_excluding_it": float((excluded[gpicks] == faulted[gpicks])[faulty_epochs].mean())}
-        print(f"gnss-lib-py {gnss_lib_py.__version__}: {glp['us_per_epoch']:.0f} us/epoch ({len(gpicks)} epochs in "
-              f"{glp_s:.1f} s); faulty satellite flagged on {glp['faulted_epochs_flagging_the_faulty_satellite']:.1%} "
-              f"of the faulted epochs (jaxfdi excludes it on {glp['jaxfdi_same_epochs_excluding_it']:.1%})", flush=True)
+        glp = {
+            "version": gnss_lib_py.__version__,
+            "epochs": len(gpicks),
+            "seconds": glp_s,
+            "us_per_epoch": glp_s / len(gpicks) * 1e6,
+            "faulted_epochs_flagging_the_faulty_satellite": float(hit[faulty_epochs].mean()),
+            "jaxfdi_same_epochs_excluding_it": float(
+                (excluded[gpicks] == faulted[gpicks])[faulty_epochs].mean()
+            ),
+        }
+        print(
+            f"gnss-lib-py {gnss_lib_py.__version__}: {glp['us_per_epoch']:.0f} us/epoch ({len(gpicks)} epochs in "
+            f"{glp_s:.1f} s); faulty satellite flagged on {glp['faulted_epochs_flagging_the_faulty_satellite']:.1%} "
+            f"of the faulted epochs (jaxfdi excludes it on {glp['jaxfdi_same_epochs_excluding_it']:.1%})",
+            flush=True,
+        )
 
     summary = {
-        "epochs": args.epochs, "channels": args.channels, "batch": args.batch, "jax_compile_s": timing["compile_s"], "jax_run_s": timing["median_s"],
-        "jax_us_per_epoch": jax_epoch_us, "numpy_us_per_epoch": numpy_epoch_us,
+        "epochs": args.epochs,
+        "channels": args.channels,
+        "batch": args.batch,
+        "jax_compile_s": timing["compile_s"],
+        "jax_run_s": timing["median_s"],
+        "jax_us_per_epoch": jax_epoch_us,
+        "numpy_us_per_epoch": numpy_epoch_us,
         "speedup_vs_numpy": numpy_epoch_us / jax_epoch_us,
         "speedup_vs_gnss_lib_py": None if glp is None else glp["us_per_epoch"] / jax_epoch_us,
-        "gnss_lib_py": glp, "agreement": {"statistic_rel": worst_stat, "hpl_rel": worst_hpl, "isolated_equal": iso_equal},
+        "gnss_lib_py": glp,
+        "agreement": {
+            "statistic_rel": worst_stat,
+            "hpl_rel": worst_hpl,
+            "isolated_equal": iso_equal,
+        },
         "faulted_epochs_excluded_jax": float((excluded == faulted)[faulted >= 0].mean()),
         "fault_free_alarm_rate_jax": float(alarm[faulted < 0].mean()),
-        "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
-                    "jax": jax.__version__, "date": datetime.date.today().isoformat()},
+        "machine": {
+            "cpu": cpu_model(),
+            "cores": os.cpu_count(),
+            "python": platform.python_version(),
+            "jax": jax.__version__,
+            "date": datetime.date.today().isoformat(),
+        },
     }
-    print(f"speed-up: {summary['speedup_vs_numpy']:.0f}x the numpy loop"
-          + ("" if glp is None else f", {summary['speedup_vs_gnss_lib_py']:.0f}x gnss-lib-py"))
+    print(
+        f"speed-up: {summary['speedup_vs_numpy']:.0f}x the numpy loop"
+        + ("" if glp is None else f", {summary['speedup_vs_gnss_lib_py']:.0f}x gnss-lib-py")
+    )
     _io.write_json(args.out, summary)
     print(f"wrote {args.out}")
     return 0

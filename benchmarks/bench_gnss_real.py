@@ -24,6 +24,7 @@ GEONET hour, jaxfdi beside RTKLIB, and on a smartphone trace, jaxfdi beside gnss
 
 Run:  python benchmarks/bench_gnss_real.py        (~2 minutes on 2 cores; writes benchmarks/gnss_real.json)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,16 +41,16 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
-from jaxfdi.data import data_path  # noqa: E402
-from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, select_orbits  # noqa: E402
-from jaxfdi.gnss._positioning import transmit_states  # noqa: E402
-from jaxfdi.gnss._receiver import monitor_receiver, read_observations, receiver_epochs  # noqa: E402
-from jaxfdi.gnss._rinex import read_rinex_nav  # noqa: E402
-from jaxfdi.gnss._solution_separation import solution_separation  # noqa: E402
-from jaxfdi.scenarios.gnss_real import _peer_navdata, load_phone  # noqa: E402
+from jaxfdi.data import data_path
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, select_orbits
+from jaxfdi.gnss._positioning import transmit_states
+from jaxfdi.gnss._receiver import monitor_receiver, read_observations, receiver_epochs
+from jaxfdi.gnss._rinex import read_rinex_nav
+from jaxfdi.gnss._solution_separation import solution_separation
+from jaxfdi.scenarios.gnss_real import _peer_navdata, load_phone
 
 PHONE = "GSDC 2021 Pixel 4 XL"
 
@@ -69,8 +70,12 @@ def _timed(run, repeats: int) -> tuple[float, float]:
 
 def phone_timing(copies: int, repeats: int) -> dict:
     phone = load_phone(PHONE)
-    tiled = phone._replace(**{f: np.tile(getattr(phone, f), (copies,) + (1,) * (getattr(phone, f).ndim - 1))
-                              for f in ("pseudorange", "sigma", "satellite")})
+    tiled = phone._replace(
+        **{
+            f: np.tile(getattr(phone, f), (copies,) + (1,) * (getattr(phone, f).ndim - 1))
+            for f in ("pseudorange", "sigma", "satellite")
+        }
+    )
     separate = jax.jit(jax.vmap(solution_separation))
 
     def run():
@@ -97,7 +102,11 @@ def _gnss_lib_py_rate(make_nav, count: int, repeats: int) -> dict:
             solve_wls(nav)
             solve_fde(nav, method="residual", threshold=3000.0, max_faults=1)
             times.append(time.perf_counter() - start)
-    return {"epochs": count, "run_s": float(np.median(times)), "epochs_per_s": count / float(np.median(times))}
+    return {
+        "epochs": count,
+        "run_s": float(np.median(times)),
+        "epochs_per_s": count / float(np.median(times)),
+    }
 
 
 def gnss_lib_py_timing(repeats: int) -> dict:
@@ -109,7 +118,9 @@ def gnss_lib_py_geonet_timing(repeats: int) -> dict:
     """gnss_lib_py's WLS + residual FDE on station 0759's hour (module doc)."""
     from gnss_lib_py.navdata.navdata import NavData
 
-    epochs = receiver_epochs(read_observations(data_path("07590920.05o")), read_rinex_nav(data_path("07590920.05n")))
+    epochs = receiver_epochs(
+        read_observations(data_path("07590920.05o")), read_rinex_nav(data_path("07590920.05n"))
+    )
     used = np.asarray(monitor_receiver(epochs).fix.used)
 
     def states(t, rho):
@@ -122,7 +133,9 @@ def gnss_lib_py_geonet_timing(repeats: int) -> dict:
     def make_nav():
         nav = NavData()
         nav["gps_millis"] = np.asarray(epochs.times)[at] * 1e3
-        nav["corr_pr_m"] = np.asarray(epochs.pseudoranges)[at, slot] + SPEED_OF_LIGHT * clock[at, slot]
+        nav["corr_pr_m"] = (
+            np.asarray(epochs.pseudoranges)[at, slot] + SPEED_OF_LIGHT * clock[at, slot]
+        )
         for i, axis in enumerate("xyz"):
             nav[f"{axis}_sv_m"] = position[at, slot, i]
         nav["b_sv_m"] = np.zeros(at.size)
@@ -132,8 +145,13 @@ def gnss_lib_py_geonet_timing(repeats: int) -> dict:
 
 
 def jaxfdi_timing(copies: int, repeats: int) -> dict:
-    epochs = receiver_epochs(read_observations(data_path("07590920.05o")), read_rinex_nav(data_path("07590920.05n")))
-    tiled = epochs._replace(times=jnp.tile(epochs.times, copies), pseudoranges=jnp.tile(epochs.pseudoranges, (copies, 1)))
+    epochs = receiver_epochs(
+        read_observations(data_path("07590920.05o")), read_rinex_nav(data_path("07590920.05n"))
+    )
+    tiled = epochs._replace(
+        times=jnp.tile(epochs.times, copies),
+        pseudoranges=jnp.tile(epochs.pseudoranges, (copies, 1)),
+    )
     separate = jax.jit(jax.vmap(solution_separation))
 
     def run():
@@ -164,45 +182,73 @@ def rtklib_timing(raim: bool, repeats: int) -> dict:
             for i, c in enumerate(str(out)):
                 name[i] = c
             start = time.perf_counter()
-            status = rtk.postpos(rtk.gtime_t(), rtk.gtime_t(), 0.0, 0.0, popt, sopt, fopt, files, 2, name, "", "")
+            status = rtk.postpos(
+                rtk.gtime_t(), rtk.gtime_t(), 0.0, 0.0, popt, sopt, fopt, files, 2, name, "", ""
+            )
             times.append(time.perf_counter() - start)
             assert status == 0
             solved = sum(1 for line in out.read_text().splitlines() if not line.startswith("%"))
-    return {"epochs": 120, "solved": solved, "run_s": float(np.median(times)), "epochs_per_s": 120 / float(np.median(times))}
+    return {
+        "epochs": 120,
+        "solved": solved,
+        "run_s": float(np.median(times)),
+        "epochs_per_s": 120 / float(np.median(times)),
+    }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--copies", type=int, default=10, help="tiles of the 120-epoch hour for jaxfdi (default 10)")
+    parser.add_argument(
+        "--copies", type=int, default=10, help="tiles of the 120-epoch hour for jaxfdi (default 10)"
+    )
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--out", default="benchmarks/gnss_real.json", help="JSON results (written atomically)")
+    parser.add_argument(
+        "--out", default="benchmarks/gnss_real.json", help="JSON results (written atomically)"
+    )
     args = parser.parse_args()
-    results = {"machine": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-                           "jax": jax.__version__, "device": str(jax.devices()[0])}, "copies": args.copies}
+    results = {
+        "machine": {
+            "cpu": platform.processor() or platform.machine(),
+            "cores": os.cpu_count(),
+            "jax": jax.__version__,
+            "device": str(jax.devices()[0]),
+        },
+        "copies": args.copies,
+    }
     ours = jaxfdi_timing(args.copies, args.repeats)
     results["geonet"] = {"jaxfdi": ours}
-    print(f"jaxfdi: {ours['epochs']} epochs, first call {ours['first_call_s']:.1f} s (compile), then "
-          f"{ours['run_s'] * 1e3:.1f} ms: {ours['epochs_per_s']:.0f} epochs/s (fix, parity test, slope and "
-          f"solution-separation PLs, exclusion)")
+    print(
+        f"jaxfdi: {ours['epochs']} epochs, first call {ours['first_call_s']:.1f} s (compile), then "
+        f"{ours['run_s'] * 1e3:.1f} ms: {ours['epochs_per_s']:.0f} epochs/s (fix, parity test, slope and "
+        f"solution-separation PLs, exclusion)"
+    )
     for raim in (False, True):
         peer = rtklib_timing(raim, args.repeats)
         results["geonet"]["rtklib_raim_fde" if raim else "rtklib"] = peer
-        print(f"RTKLIB postpos{' with RAIM FDE' if raim else ''}: {peer['solved']} of 120 epochs solved in "
-              f"{peer['run_s'] * 1e3:.1f} ms (reading and writing files included): {peer['epochs_per_s']:.0f} epochs/s; "
-              f"jaxfdi/RTKLIB = {ours['epochs_per_s'] / peer['epochs_per_s']:.1f}x")
+        print(
+            f"RTKLIB postpos{' with RAIM FDE' if raim else ''}: {peer['solved']} of 120 epochs solved in "
+            f"{peer['run_s'] * 1e3:.1f} ms (reading and writing files included): {peer['epochs_per_s']:.0f} epochs/s; "
+            f"jaxfdi/RTKLIB = {ours['epochs_per_s'] / peer['epochs_per_s']:.1f}x"
+        )
     peer = gnss_lib_py_geonet_timing(args.repeats)
     results["geonet"]["gnss_lib_py"] = peer
-    print(f"gnss_lib_py solve_wls + residual FDE on the same hour: {peer['epochs']} epochs in "
-          f"{peer['run_s'] * 1e3:.0f} ms: {peer['epochs_per_s']:.0f} epochs/s (satellite states given, no protection "
-          f"levels); jaxfdi/gnss_lib_py = {ours['epochs_per_s'] / peer['epochs_per_s']:.0f}x")
+    print(
+        f"gnss_lib_py solve_wls + residual FDE on the same hour: {peer['epochs']} epochs in "
+        f"{peer['run_s'] * 1e3:.0f} ms: {peer['epochs_per_s']:.0f} epochs/s (satellite states given, no protection "
+        f"levels); jaxfdi/gnss_lib_py = {ours['epochs_per_s'] / peer['epochs_per_s']:.0f}x"
+    )
     phone = phone_timing(args.copies, args.repeats)
-    print(f"jaxfdi, {PHONE}: {phone['epochs']} epochs, first call {phone['first_call_s']:.1f} s (compile), then "
-          f"{phone['run_s'] * 1e3:.1f} ms: {phone['epochs_per_s']:.0f} epochs/s (a clock per constellation, parity "
-          "test, slope and solution-separation PLs, exclusion)")
+    print(
+        f"jaxfdi, {PHONE}: {phone['epochs']} epochs, first call {phone['first_call_s']:.1f} s (compile), then "
+        f"{phone['run_s'] * 1e3:.1f} ms: {phone['epochs_per_s']:.0f} epochs/s (a clock per constellation, parity "
+        "test, slope and solution-separation PLs, exclusion)"
+    )
     peer = gnss_lib_py_timing(args.repeats)
-    print(f"gnss_lib_py solve_wls + residual FDE, {PHONE}: {peer['epochs']} epochs in {peer['run_s'] * 1e3:.0f} ms: "
-          f"{peer['epochs_per_s']:.0f} epochs/s (no protection levels); jaxfdi/gnss_lib_py = "
-          f"{phone['epochs_per_s'] / peer['epochs_per_s']:.0f}x")
+    print(
+        f"gnss_lib_py solve_wls + residual FDE, {PHONE}: {peer['epochs']} epochs in {peer['run_s'] * 1e3:.0f} ms: "
+        f"{peer['epochs_per_s']:.0f} epochs/s (no protection levels); jaxfdi/gnss_lib_py = "
+        f"{phone['epochs_per_s'] / peer['epochs_per_s']:.0f}x"
+    )
     results["phone"] = {"trace": PHONE, "jaxfdi": phone, "gnss_lib_py": peer}
     tmp = f"{args.out}.tmp"
     with open(tmp, "w") as handle:

@@ -25,6 +25,7 @@ flights per wall second.
 Run:  python benchmarks/bench_gps_ins.py                        (~5 minutes on 2 cores)
       python benchmarks/bench_gps_ins.py --flights 20 --seconds 300 --numpy-flights 1   (quick)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,24 +40,30 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
-from jaxfdi import _io  # noqa: E402
-from jaxfdi.gnss import _integrity as gnss_integrity  # noqa: E402
-from jaxfdi.gnss import _measurements as measurements  # noqa: E402
-from jaxfdi.ins import _error_state as error_state, _imu as imu, _integrity as integrity, _plant as plant, _scst as scst, _trajectory as trajectory  # noqa: E402
-from jaxfdi.ins._loosely_coupled import GpsFix  # noqa: E402
-from jaxfdi.ins._mechanization import NavState  # noqa: E402
+from jaxfdi import _io
 from jaxfdi._loop import combine_scorers, detection_scorer, feedforward, run_loop
-from jaxfdi._stages import Plant  # noqa: E402
-from jaxfdi.scenarios import gps_ins  # noqa: E402
+from jaxfdi._stages import Plant
+from jaxfdi.gnss import _integrity as gnss_integrity
+from jaxfdi.gnss import _measurements as measurements
+from jaxfdi.ins import _error_state as error_state
+from jaxfdi.ins import _imu as imu
+from jaxfdi.ins import _integrity as integrity
+from jaxfdi.ins import _plant as plant
+from jaxfdi.ins import _scst as scst
+from jaxfdi.ins import _trajectory as trajectory
+from jaxfdi.ins._loosely_coupled import GpsFix
+from jaxfdi.ins._mechanization import NavState
+from jaxfdi.scenarios import gps_ins
 
 VELOCITY_SIGMA = 0.1
 MODEL = imu.hg1900()
 
 
 # --- the shared inputs --------------------------------------------------------------------
+
 
 def setup(seconds: int):
     """The flight tables and the per-epoch NED covariance of the GPS fix along the path."""
@@ -65,10 +72,15 @@ def setup(seconds: int):
     flight = plant.flight_tables(traj, seconds)
     from jaxfdi.gnss import _frames as frames
 
-    path = frames.geodetic_to_ecef(flight.position[:, 0], flight.position[:, 1], flight.position[:, 2])
+    path = frames.geodetic_to_ecef(
+        flight.position[:, 0], flight.position[:, 1], flight.position[:, 2]
+    )
     times = gps_ins.START_TOW + jnp.arange(seconds, dtype=float)
-    fixes = jax.vmap(lambda t, x: gnss_integrity.geometry_fix(table, t, x, math.radians(gps_ins.MASK_DEG),
-                                                               measurements.elevation_sigma))(times, path)
+    fixes = jax.vmap(
+        lambda t, x: gnss_integrity.geometry_fix(
+            table, t, x, math.radians(gps_ins.MASK_DEG), measurements.elevation_sigma
+        )
+    )(times, path)
     return flight, jax.vmap(integrity.fix_covariance)(fixes)
 
 
@@ -76,11 +88,15 @@ def make_fixes(key, flight, position_cov):
     """One flight's GPS fixes: the truth moved by N(0, R_p) in NED and N(0, 0.1^2 I) in velocity."""
     k1, k2 = jax.random.split(key)
     T = position_cov.shape[0]
-    noise = jnp.einsum("tij,tj->ti", jnp.linalg.cholesky(position_cov), jax.random.normal(k1, (T, 3)))
+    noise = jnp.einsum(
+        "tij,tj->ti", jnp.linalg.cholesky(position_cov), jax.random.normal(k1, (T, 3))
+    )
     vel_noise = VELOCITY_SIGMA * jax.random.normal(k2, (T, 3))
     truth = NavState(flight.position, flight.velocity, flight.attitude)
     error = jnp.concatenate([noise, vel_noise, jnp.zeros((T, 3))], axis=1)
-    fix = jax.vmap(lambda nav, e: error_state.correct(nav, -e))(truth, error)   # error(fix, truth) = e
+    fix = jax.vmap(lambda nav, e: error_state.correct(nav, -e))(
+        truth, error
+    )  # error(fix, truth) = e
     return fix.position, fix.velocity
 
 
@@ -97,15 +113,24 @@ def initial(flight):
 
 # --- jaxfdi ---------------------------------------------------------------------------------
 
+
 def imu_fix_plant(flight, position_cov, fix_position, fix_velocity, replay=None) -> Plant:
     """IMU samples (simulated, or ``replay`` (T, n, 6)) and the given fixes, one epoch a step."""
     dt = 1.0 / flight.imu.shape[1]
 
     def measure(errors, k, u, key):
-        samples = imu.measure(flight.imu[k], errors, jax.random.fold_in(key, 1), MODEL, dt) if replay is None \
+        samples = (
+            imu.measure(flight.imu[k], errors, jax.random.fold_in(key, 1), MODEL, dt)
+            if replay is None
             else replay[k]
-        fix = GpsFix(fix_position[k], fix_velocity[k], position_cov[k], VELOCITY_SIGMA**2 * jnp.eye(3),
-                     jnp.asarray(True))
+        )
+        fix = GpsFix(
+            fix_position[k],
+            fix_velocity[k],
+            position_cov[k],
+            VELOCITY_SIGMA**2 * jnp.eye(3),
+            jnp.asarray(True),
+        )
         return errors, (fix, samples)
 
     def advance(errors, k, u, key):
@@ -123,11 +148,21 @@ def jax_flights(flight, position_cov, keys):
         k_fix, k_imu, k_loop = jax.random.split(key, 3)
         position, velocity = make_fixes(k_fix, flight, position_cov)
         state0, _ = initial(flight)
-        scorer = combine_scorers(chi2=detection_scorer(gps_ins.ONSET_S, lambda o: o.chi2, single=True),
-                                 scst=detection_scorer(gps_ins.ONSET_S, lambda o: o.scst, single=True))
-        result = run_loop(imu_fix_plant(flight, position_cov, position, velocity), fdi, feedforward(),
-                          imu.draw_errors(k_imu, MODEL), state0, k_loop, T, exogenous=jnp.zeros((T, 0)),
-                          scorer=scorer)
+        scorer = combine_scorers(
+            chi2=detection_scorer(gps_ins.ONSET_S, lambda o: o.chi2, single=True),
+            scst=detection_scorer(gps_ins.ONSET_S, lambda o: o.scst, single=True),
+        )
+        result = run_loop(
+            imu_fix_plant(flight, position_cov, position, velocity),
+            fdi,
+            feedforward(),
+            imu.draw_errors(k_imu, MODEL),
+            state0,
+            k_loop,
+            T,
+            exogenous=jnp.zeros((T, 0)),
+            scorer=scorer,
+        )
         return result.score, result.final[1].ins.nav.position
 
     return jax.vmap(one)(keys)
@@ -147,10 +182,14 @@ def np_radii(s):
 
 
 def np_qmul(p, q):
-    return np.array([p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
-                     p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
-                     p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
-                     p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0]])
+    return np.array(
+        [
+            p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
+            p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
+            p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
+            p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0],
+        ]
+    )
 
 
 def np_rotate(q, v):
@@ -160,8 +199,12 @@ def np_rotate(q, v):
 
 def np_small_q(r):
     x2 = r @ r
-    return np.concatenate([[1 - x2 / 8 + x2 * x2 / 384 - x2**3 / 46080],
-                           (0.5 - x2 / 48 + x2 * x2 / 3840 - x2**3 / 645120) * r])
+    return np.concatenate(
+        [
+            [1 - x2 / 8 + x2 * x2 / 384 - x2**3 / 46080],
+            (0.5 - x2 / 48 + x2 * x2 / 3840 - x2**3 / 645120) * r,
+        ]
+    )
 
 
 def np_q(r):
@@ -184,8 +227,12 @@ def np_step(pos, vel, q, f, w, dt):
     lat, lon, h = pos
     s, c = math.sin(lat), math.cos(lat)
     rn, re, iw = np_radii(s)
-    g_down = GE * (1 + SOMIGLIANA * s * s) * iw * (1 - 2 / A * (1 + F_FLAT * (1 - 2 * s * s) + M_GRAV) * h
-                                                    + 3 * h * h / A**2)
+    g_down = (
+        GE
+        * (1 + SOMIGLIANA * s * s)
+        * iw
+        * (1 - 2 / A * (1 + F_FLAT * (1 - 2 * s * s) + M_GRAV) * h + 3 * h * h / A**2)
+    )
     gravity = np.array([-8.08e-9 * h * 2 * s * c, 0.0, g_down])
     w_ie = OMEGA * np.array([c, 0.0, -s])
     w_en = np.array([vel[1] / (re + h), -vel[0] / (rn + h), -vel[1] * s / (c * (re + h))])
@@ -223,11 +270,22 @@ def np_discretize(F, T):
     a = F * T
     a2 = a @ a
     phi = np.eye(15) + a + 0.5 * a2 + a2 @ a / 6.0
-    white = np.concatenate([np.full(3, float(noise.velocity_random_walk) ** 2),
-                            np.full(3, float(noise.angle_random_walk) ** 2)])
+    white = np.concatenate(
+        [
+            np.full(3, float(noise.velocity_random_walk) ** 2),
+            np.full(3, float(noise.angle_random_walk) ** 2),
+        ]
+    )
     gain = F[:, 9:]
-    q = (gain * white) @ gain.T + np.diag(np.concatenate([np.zeros(9), np.full(3, float(noise.accel_bias_walk) ** 2),
-                                                          np.full(3, float(noise.gyro_bias_walk) ** 2)]))
+    q = (gain * white) @ gain.T + np.diag(
+        np.concatenate(
+            [
+                np.zeros(9),
+                np.full(3, float(noise.accel_bias_walk) ** 2),
+                np.full(3, float(noise.gyro_bias_walk) ** 2),
+            ]
+        )
+    )
     fq = F @ q
     qd = q * T + 0.5 * (fq + fq.T) * T**2 + fq @ F.T * T**3 / 3.0
     return phi, 0.5 * (qd + qd.T)
@@ -254,7 +312,7 @@ class NumpyMonitor:
         R[:3, :3], R[3:, 3:] = R_p, VELOCITY_SIGMA**2 * np.eye(3)
         S = self.P[:6, :6] + R
         L = np.linalg.cholesky(S)
-        K = np.linalg.solve(L.T, np.linalg.solve(L, self.P[:6, :])).T          # P H^T S^-1
+        K = np.linalg.solve(L.T, np.linalg.solve(L, self.P[:6, :])).T  # P H^T S^-1
         dx = K @ z
         IKH = np.eye(15)
         IKH[:, :6] -= K
@@ -265,7 +323,7 @@ class NumpyMonitor:
         self.pos, self.vel, self.q = np_correct(self.pos, self.vel, self.q, dx)
         self.ba, self.bg = self.ba + dx[9:12], self.bg + dx[12:15]
         # chi-square window over the last 10 epochs
-        self.window = (self.window + [nis])[-gps_ins.CHI2_WINDOW:]
+        self.window = (self.window + [nis])[-gps_ins.CHI2_WINDOW :]
         chi2 = sum(self.window)
         # SCST (scst.state_chi2_test)
         started = self.age >= 0
@@ -275,7 +333,11 @@ class NumpyMonitor:
         used = int(np.argmax(age))
         statistic = self._statistic(beta[used], Pm[used] - P)
         offsets = np.array([0, gps_ins.SCST_PERIOD // 2])
-        reset = (self.epoch > 0) & ((self.epoch - offsets) % gps_ins.SCST_PERIOD == 0) & (self.epoch >= offsets)
+        reset = (
+            (self.epoch > 0)
+            & ((self.epoch - offsets) % gps_ins.SCST_PERIOD == 0)
+            & (self.epoch >= offsets)
+        )
         beta[reset], Pm[reset], age[reset] = 0.0, P, 0
         # 100 strapdown steps, F at the midpoint sample, discretisation, prediction
         corrected = samples - np.concatenate([self.ba, self.bg])
@@ -284,7 +346,9 @@ class NumpyMonitor:
             if i == n // 2:
                 mean = corrected.mean(axis=0)
                 F = np.asarray(_JACOBIAN(NavState(self.pos, self.vel, self.q), mean[:3], mean[3:]))
-            self.pos, self.vel, self.q = np_step(self.pos, self.vel, self.q, corrected[i, :3], corrected[i, 3:], dt)
+            self.pos, self.vel, self.q = np_step(
+                self.pos, self.vel, self.q, corrected[i, :3], corrected[i, 3:], dt
+            )
         phi, qd = np_discretize(F, n * dt)
         self.P = phi @ P @ phi.T + qd
         self.P = 0.5 * (self.P + self.P.T)
@@ -320,20 +384,32 @@ def numpy_flight(flight, position_cov, fix_pos, fix_vel, rng, samples=None):
     T, n = true.shape[:2]
     dt = 1.0 / n
     rng = rng if rng is not None else np.random.default_rng(0)
-    biases = np.concatenate([float(MODEL.accel_bias) * rng.standard_normal(3),
-                             float(MODEL.gyro_bias) * rng.standard_normal(3)])
-    density = np.concatenate([np.full(3, float(MODEL.velocity_random_walk)),
-                              np.full(3, float(MODEL.angle_random_walk))]) / math.sqrt(dt)
-    walk = np.concatenate([np.full(3, float(MODEL.accel_bias_walk)), np.full(3, float(MODEL.gyro_bias_walk))])
+    biases = np.concatenate(
+        [
+            float(MODEL.accel_bias) * rng.standard_normal(3),
+            float(MODEL.gyro_bias) * rng.standard_normal(3),
+        ]
+    )
+    density = np.concatenate(
+        [np.full(3, float(MODEL.velocity_random_walk)), np.full(3, float(MODEL.angle_random_walk))]
+    ) / math.sqrt(dt)
+    walk = np.concatenate(
+        [np.full(3, float(MODEL.accel_bias_walk)), np.full(3, float(MODEL.gyro_bias_walk))]
+    )
     out = []
     for k in range(T):
-        block = samples[k] if samples is not None else true[k] + biases + density * rng.standard_normal((n, 6))
+        block = (
+            samples[k]
+            if samples is not None
+            else true[k] + biases + density * rng.standard_normal((n, 6))
+        )
         out.append(monitor.step(fix_pos[k], fix_vel[k], R[k], block, dt))
         biases = biases + walk * rng.standard_normal(6)
     return np.array(out), monitor.pos
 
 
 # --- the run -----------------------------------------------------------------------------
+
 
 def check_agreement(flight, position_cov, epochs: int) -> dict:
     """One flight, the same IMU samples and fixes in both: statistics and positions."""
@@ -342,22 +418,52 @@ def check_agreement(flight, position_cov, epochs: int) -> dict:
     key = jax.random.key(99)
     position, velocity = make_fixes(key, flight, position_cov)
     errors = imu.draw_errors(jax.random.fold_in(key, 1), MODEL)
-    samples = jax.vmap(lambda k, s: imu.measure(s, errors, jax.random.fold_in(key, k), MODEL, 0.01))(
-        jnp.arange(epochs), flight.imu)
+    samples = jax.vmap(
+        lambda k, s: imu.measure(s, errors, jax.random.fold_in(key, k), MODEL, 0.01)
+    )(jnp.arange(epochs), flight.imu)
     state0, _ = initial(flight)
-    result = run_loop(imu_fix_plant(flight, position_cov, position, velocity, replay=samples),
-                      integrity.ins_fdi(*design()), feedforward(), errors, state0, key, epochs,
-                      exogenous=jnp.zeros((epochs, 0)), keep_history=True)
+    result = run_loop(
+        imu_fix_plant(flight, position_cov, position, velocity, replay=samples),
+        integrity.ins_fdi(*design()),
+        feedforward(),
+        errors,
+        state0,
+        key,
+        epochs,
+        exogenous=jnp.zeros((epochs, 0)),
+        keep_history=True,
+    )
     out = result.history.output
-    stats_np, final_np = numpy_flight(flight, position_cov, position, velocity, None, np.asarray(samples))
+    stats_np, final_np = numpy_flight(
+        flight, position_cov, position, velocity, None, np.asarray(samples)
+    )
     chi2_j, scst_j = np.asarray(out.chi2.statistic), np.asarray(out.scst.statistic)
-    return {"epochs": epochs,
-            "chi2_max_rel_diff": float(np.max(np.abs(chi2_j - stats_np[:, 0]) / np.maximum(chi2_j, 1e-9))),
-            "scst_max_abs_diff": float(np.max(np.abs(scst_j - stats_np[:, 1]))),
-            "scst_max": float(np.max(scst_j)),
-            "final_position_diff_m": float(np.max(np.abs(np.asarray(error_state.navigation_error(
-                NavState(result.final[1].ins.nav.position, jnp.zeros(3), jnp.asarray([1.0, 0, 0, 0])),
-                NavState(jnp.asarray(final_np), jnp.zeros(3), jnp.asarray([1.0, 0, 0, 0]))))[:3])))}
+    return {
+        "epochs": epochs,
+        "chi2_max_rel_diff": float(
+            np.max(np.abs(chi2_j - stats_np[:, 0]) / np.maximum(chi2_j, 1e-9))
+        ),
+        "scst_max_abs_diff": float(np.max(np.abs(scst_j - stats_np[:, 1]))),
+        "scst_max": float(np.max(scst_j)),
+        "final_position_diff_m": float(
+            np.max(
+                np.abs(
+                    np.asarray(
+                        error_state.navigation_error(
+                            NavState(
+                                result.final[1].ins.nav.position,
+                                jnp.zeros(3),
+                                jnp.asarray([1.0, 0, 0, 0]),
+                            ),
+                            NavState(
+                                jnp.asarray(final_np), jnp.zeros(3), jnp.asarray([1.0, 0, 0, 0])
+                            ),
+                        )
+                    )[:3]
+                )
+            )
+        ),
+    }
 
 
 def cpu_model() -> str:
@@ -378,16 +484,24 @@ def main() -> None:
     parser.add_argument("--numpy-flights", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--check-epochs", type=int, default=120)
-    parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "results_gps_ins.json"))
+    parser.add_argument(
+        "--out", default=os.path.join(os.path.dirname(__file__), "results_gps_ins.json")
+    )
     args = parser.parse_args()
 
     t0 = time.perf_counter()
     flight, position_cov = setup(args.seconds)
-    print(f"setup (trajectory, IMU table, fix covariances): {time.perf_counter() - t0:.1f} s", flush=True)
+    print(
+        f"setup (trajectory, IMU table, fix covariances): {time.perf_counter() - t0:.1f} s",
+        flush=True,
+    )
     agreement = check_agreement(flight, position_cov, min(args.check_epochs, args.seconds))
     print(f"agreement on one flight of {agreement['epochs']} s: {agreement}", flush=True)
-    if agreement["chi2_max_rel_diff"] > 1e-6 or agreement["scst_max_abs_diff"] > 1e-4 * max(1.0, agreement["scst_max"]) \
-            or agreement["final_position_diff_m"] > 1e-6:
+    if (
+        agreement["chi2_max_rel_diff"] > 1e-6
+        or agreement["scst_max_abs_diff"] > 1e-4 * max(1.0, agreement["scst_max"])
+        or agreement["final_position_diff_m"] > 1e-6
+    ):
         sys.exit("jaxfdi and the NumPy loop disagree; not timing")
 
     keys = jax.random.split(jax.random.key(0), args.flights)
@@ -402,30 +516,55 @@ def main() -> None:
         runs.append(time.perf_counter() - t0)
     jax_s = float(np.median(runs))
     fa_chi2 = float(np.mean(np.asarray(scores["chi2"].false_alarms) > 0))
-    print(f"jaxfdi: {args.flights} flights x {args.seconds} s: compile {compile_s:.1f} s, run {jax_s:.2f} s "
-          f"(median of {args.repeats}); flights with a chi2 alarm {fa_chi2:.2f}", flush=True)
+    print(
+        f"jaxfdi: {args.flights} flights x {args.seconds} s: compile {compile_s:.1f} s, run {jax_s:.2f} s "
+        f"(median of {args.repeats}); flights with a chi2 alarm {fa_chi2:.2f}",
+        flush=True,
+    )
 
     rng = np.random.default_rng(0)
     numpy_runs = []
     for i in range(args.numpy_flights):
-        position, velocity = make_fixes(jax.random.fold_in(jax.random.key(1), i), flight, position_cov)
+        position, velocity = make_fixes(
+            jax.random.fold_in(jax.random.key(1), i), flight, position_cov
+        )
         t0 = time.perf_counter()
         numpy_flight(flight, position_cov, position, velocity, rng)
         numpy_runs.append(time.perf_counter() - t0)
-        print(f"numpy loop: flight {i + 1}/{args.numpy_flights}: {numpy_runs[-1]:.1f} s", flush=True)
+        print(
+            f"numpy loop: flight {i + 1}/{args.numpy_flights}: {numpy_runs[-1]:.1f} s", flush=True
+        )
     per_flight = float(np.mean(numpy_runs))
     numpy_s = per_flight * args.flights
     ratio = numpy_s / jax_s
     realtime = args.flights * args.seconds / jax_s
-    print(f"numpy loop: {per_flight:.1f} s per flight -> {numpy_s:.0f} s for {args.flights} flights (scaled)")
-    print(f"speed-up {ratio:.0f}x (target 200x); real-time factor {realtime:.0f} (simulated s / wall s, all flights); "
-          f"per flight-epoch {jax_s / (args.flights * args.seconds) * 1e6:.1f} us vs "
-          f"{per_flight / args.seconds * 1e6:.0f} us")
-    _io.write_json(args.out, {
-        "date": datetime.date.today().isoformat(), "cpu": cpu_model(), "cores": os.cpu_count(),
-        "load_average": list(os.getloadavg()), "jax": jax.__version__, "args": vars(args), "agreement": agreement,
-        "jax_compile_s": compile_s, "jax_run_s": jax_s, "jax_runs_s": runs, "numpy_flight_s": numpy_runs,
-        "numpy_scaled_s": numpy_s, "speedup": ratio, "realtime_factor": realtime})
+    print(
+        f"numpy loop: {per_flight:.1f} s per flight -> {numpy_s:.0f} s for {args.flights} flights (scaled)"
+    )
+    print(
+        f"speed-up {ratio:.0f}x (target 200x); real-time factor {realtime:.0f} (simulated s / wall s, all flights); "
+        f"per flight-epoch {jax_s / (args.flights * args.seconds) * 1e6:.1f} us vs "
+        f"{per_flight / args.seconds * 1e6:.0f} us"
+    )
+    _io.write_json(
+        args.out,
+        {
+            "date": datetime.date.today().isoformat(),
+            "cpu": cpu_model(),
+            "cores": os.cpu_count(),
+            "load_average": list(os.getloadavg()),
+            "jax": jax.__version__,
+            "args": vars(args),
+            "agreement": agreement,
+            "jax_compile_s": compile_s,
+            "jax_run_s": jax_s,
+            "jax_runs_s": runs,
+            "numpy_flight_s": numpy_runs,
+            "numpy_scaled_s": numpy_s,
+            "speedup": ratio,
+            "realtime_factor": realtime,
+        },
+    )
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ sequences x 1000 steps, N = 10, 20, 40: run time per step and per sequence.
 Run:  python benchmarks/bench_imm.py [--sequences 100] [--repeats 5] [--filterpy-sequences 10]
 Writes benchmarks/results_imm.json.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,17 +30,17 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-from filterpy.kalman import IMMEstimator, KalmanFilter  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+from filterpy.kalman import IMMEstimator, KalmanFilter
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_filters import cpu_model, rel_diff, time_jax, write_json_atomic  # noqa: E402
+from bench_filters import cpu_model, rel_diff, time_jax, write_json_atomic
 
-import jaxfdi  # noqa: E402
+import jaxfdi
 from jaxfdi.models import engine_model
-from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes  # noqa: E402
-from jaxfdi.scenarios.engine import PAPER_TRANSITION, EngineSettings  # noqa: E402
+from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi.scenarios.engine import PAPER_TRANSITION, EngineSettings
 
 T = 1000
 TOL = 1e-7
@@ -60,11 +61,16 @@ def designs(model):
     zl = noise_inflation_modes(model, s.sensor_inflation, s.actuator_noise)
     bm = bias_modes(model, jnp.asarray(s.bias_walk), jnp.asarray(s.bias_prior))
     z0, Z0 = bias_mode_initial_state(model, jnp.zeros(7), model.Q, jnp.asarray(s.bias_prior))
-    return {"zhang-li (7 states)": (zl, jnp.zeros(7), model.Q), "fault-bias (13 states)": (bm, z0, Z0)}
+    return {
+        "zhang-li (7 states)": (zl, jnp.zeros(7), model.Q),
+        "fault-bias (13 states)": (bm, z0, Z0),
+    }
 
 
 def jaxfdi_imm(modes, m0, P0):
-    imm = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, modes, PAPER_TRANSITION)
+    imm = jaxfdi.filters.interacting_multiple_model(
+        jaxfdi.filters.kalman_filter, modes, PAPER_TRANSITION
+    )
     mu0 = jnp.asarray(PAPER_TRANSITION[0] @ PAPER_TRANSITION)  # filterpy's first prior: mu0 @ pi
 
     def run(ys, us):
@@ -76,7 +82,9 @@ def jaxfdi_imm(modes, m0, P0):
 
 def jaxfdi_imm_batch(modes, m0, P0):
     """``run_filter``: the whole batch in one call (ys (N, T, m), shared us)."""
-    imm = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, modes, PAPER_TRANSITION)
+    imm = jaxfdi.filters.interacting_multiple_model(
+        jaxfdi.filters.kalman_filter, modes, PAPER_TRANSITION
+    )
     mu0 = jnp.asarray(PAPER_TRANSITION[0] @ PAPER_TRANSITION)
 
     def run(ys, us):
@@ -130,26 +138,38 @@ def bench_imm(args, log) -> list[dict]:
         err_mu = max(err_mu, rel_diff(np.asarray(out_batch[0])[:S], ref_mu))
         err_x = max(err_x, rel_diff(np.asarray(out_batch[1])[:S], ref_x))
         if max(err_mu, err_x) > TOL:
-            raise SystemExit(f"{name}: jaxfdi and filterpy disagree (mode prob {err_mu:.2e}, mean {err_x:.2e})")
+            raise SystemExit(
+                f"{name}: jaxfdi and filterpy disagree (mode prob {err_mu:.2e}, mean {err_x:.2e})"
+            )
         row = {
-            "design": name, "steps": T, "sequences": args.sequences, "filterpy_sequences_timed": S,
-            "jaxfdi_1_s": one["run_s"], "jaxfdi_1_compile_s": one["compile_s"],
-            "jaxfdi_N_s": many["run_s"], "jaxfdi_N_compile_s": many["compile_s"],
-            "filterpy_1_s": filterpy_per_seq, "filterpy_N_s": filterpy_per_seq * args.sequences,
+            "design": name,
+            "steps": T,
+            "sequences": args.sequences,
+            "filterpy_sequences_timed": S,
+            "jaxfdi_1_s": one["run_s"],
+            "jaxfdi_1_compile_s": one["compile_s"],
+            "jaxfdi_N_s": many["run_s"],
+            "jaxfdi_N_compile_s": many["compile_s"],
+            "filterpy_1_s": filterpy_per_seq,
+            "filterpy_N_s": filterpy_per_seq * args.sequences,
             "speedup_1": filterpy_per_seq / one["run_s"],
             "speedup_N": filterpy_per_seq * args.sequences / many["run_s"],
-            "jaxfdi_batch_N_s": batch["run_s"], "jaxfdi_batch_N_compile_s": batch["compile_s"],
+            "jaxfdi_batch_N_s": batch["run_s"],
+            "jaxfdi_batch_N_compile_s": batch["compile_s"],
             "batch_kernel": has_kernel,
             "speedup_batch_N": filterpy_per_seq * args.sequences / batch["run_s"],
-            "agreement_mode_prob": err_mu, "agreement_mean": err_x,
+            "agreement_mode_prob": err_mu,
+            "agreement_mean": err_x,
         }
-        log(f"IMM {name}: 1 seq jaxfdi {one['run_s'] * 1e3:.1f} ms (compile {one['compile_s']:.2f} s), filterpy "
+        log(
+            f"IMM {name}: 1 seq jaxfdi {one['run_s'] * 1e3:.1f} ms (compile {one['compile_s']:.2f} s), filterpy "
             f"{filterpy_per_seq * 1e3:.0f} ms -> {row['speedup_1']:.0f}x; {args.sequences} seq jaxfdi "
             f"{many['run_s'] * 1e3:.0f} ms (compile {many['compile_s']:.2f} s), filterpy "
             f"{row['filterpy_N_s']:.1f} s (extrapolated from {S}) -> {row['speedup_N']:.0f}x; "
             f"run_filter ({'structure-of-arrays kernel' if has_kernel else 'vmap, no kernel'}) "
             f"{batch['run_s'] * 1e3:.0f} ms (compile {batch['compile_s']:.2f} s) -> {row['speedup_batch_N']:.0f}x; "
-            f"agreement {max(err_mu, err_x):.1e}")
+            f"agreement {max(err_mu, err_x):.1e}"
+        )
         rows.append(row)
     return rows
 
@@ -169,10 +189,20 @@ def bench_glrt(args, log) -> list[dict]:
 
         timing, _ = time_jax(run, (innovations,), 0, args.repeats, 30.0)
         per_step = timing["run_s"] / (args.sequences * T)
-        rows.append({"window": N, "sequences": args.sequences, "steps": T, "run_s": timing["run_s"],
-                     "compile_s": timing["compile_s"], "per_step_per_sequence_us": per_step * 1e6})
-        log(f"GLRT N={N}: {args.sequences} x {T} steps in {timing['run_s'] * 1e3:.1f} ms "
-            f"({per_step * 1e6:.3f} us per step per sequence), compile {timing['compile_s']:.2f} s")
+        rows.append(
+            {
+                "window": N,
+                "sequences": args.sequences,
+                "steps": T,
+                "run_s": timing["run_s"],
+                "compile_s": timing["compile_s"],
+                "per_step_per_sequence_us": per_step * 1e6,
+            }
+        )
+        log(
+            f"GLRT N={N}: {args.sequences} x {T} steps in {timing['run_s'] * 1e3:.1f} ms "
+            f"({per_step * 1e6:.3f} us per step per sequence), compile {timing['compile_s']:.2f} s"
+        )
     return rows
 
 
@@ -180,17 +210,31 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sequences", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--filterpy-sequences", type=int, default=10,
-                        help="filterpy sequences actually run; its N-sequence time is this per-sequence time x N")
-    parser.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results_imm.json"))
+    parser.add_argument(
+        "--filterpy-sequences",
+        type=int,
+        default=10,
+        help="filterpy sequences actually run; its N-sequence time is this per-sequence time x N",
+    )
+    parser.add_argument(
+        "--out",
+        default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results_imm.json"),
+    )
     args = parser.parse_args(argv)
-    log = lambda msg: print(msg, flush=True)  # noqa: E731
-    log(f"jax {jax.__version__} on {jax.devices()[0].device_kind} ({cpu_model()}, {os.cpu_count()} cores)")
+    log = lambda msg: print(msg, flush=True)
+    log(
+        f"jax {jax.__version__} on {jax.devices()[0].device_kind} ({cpu_model()}, {os.cpu_count()} cores)"
+    )
     result = {
-        "date": datetime.datetime.now().isoformat(timespec="seconds"), "jax": jax.__version__,
-        "device": jax.devices()[0].device_kind, "cpu": cpu_model(), "cores": os.cpu_count(),
-        "python": platform.python_version(), "command": " ".join(["python", *sys.argv]),
-        "imm": bench_imm(args, log), "glrt": bench_glrt(args, log),
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "jax": jax.__version__,
+        "device": jax.devices()[0].device_kind,
+        "cpu": cpu_model(),
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "command": " ".join(["python", *sys.argv]),
+        "imm": bench_imm(args, log),
+        "glrt": bench_glrt(args, log),
     }
     write_json_atomic(args.out, result)
     log(f"wrote {args.out}")

@@ -16,6 +16,7 @@ compile) is reported apart from run time (median of ``--repeats`` full passes).
 Run:  python benchmarks/bench_monte_carlo.py --runs 1000 10000 [--out FILE]
       (on a GPU: --runs 1000 10000 100000 1000000 --chunk 100000)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,17 +32,20 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-import bench_filters as bf  # noqa: E402  (reference implementations: plain scan, dynamax)
+import bench_filters as bf  # reference implementations: plain scan, dynamax
 
-import jaxfdi  # noqa: E402
+import jaxfdi
 from jaxfdi.models import engine_model
-from jaxfdi.models._rigid_body import rigid_body_params
-from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition  # noqa: E402
+from jaxfdi.models._rigid_body import (
+    rigid_body_observation,
+    rigid_body_params,
+    rigid_body_transition,
+)
 
 
 def kf_runners(T: int):
@@ -71,7 +75,9 @@ def kf_runners(T: int):
 def ukf_runners(T: int):
     params = rigid_body_params()
     k = np.arange(T)
-    us = jnp.asarray(np.stack([2000 * np.sin(0.05 * k), 5000 * np.cos(0.03 * k), 3000 * np.ones(T)], 1))
+    us = jnp.asarray(
+        np.stack([2000 * np.sin(0.05 * k), 5000 * np.cos(0.03 * k), 3000 * np.ones(T)], 1)
+    )
     Q, R = 1e-6 * jnp.eye(3), 1e-4 * jnp.eye(3)
     sim = jaxfdi.simulator(rigid_body_transition, rigid_body_observation, Q, R, params)
     m0, P0 = jnp.zeros(3), 0.1 * jnp.eye(3)
@@ -82,8 +88,9 @@ def ukf_runners(T: int):
         return jaxfdi.simulate(sim, x0, us, key_noise)[1].measurement
 
     def jaxfdi_run(key):
-        ukf = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params,
-                                             bf.ALPHA, bf.BETA, bf.KAPPA)
+        ukf = jaxfdi.filters.unscented_kalman_filter(
+            rigid_body_transition, rigid_body_observation, Q, R, params, bf.ALPHA, bf.BETA, bf.KAPPA
+        )
         _, info = jaxfdi.filters.run_filter(ukf, ukf.init(m0, P0), data(key), us)
         return jnp.sum(info.log_likelihood)
 
@@ -104,8 +111,16 @@ def monitor_runners(T: int):
 
     def run(key):
         kf = jaxfdi.filters.kalman_filter(model)
-        result = jaxfdi.monitor(jaxfdi.linear_simulator(model, p2_bias), kf, jaxfdi.detection.chi2_detector(threshold, 4),
-                                jnp.zeros(7), kf.init(jnp.zeros(7), model.Q), us, key, p2_bias.onset)
+        result = jaxfdi.monitor(
+            jaxfdi.linear_simulator(model, p2_bias),
+            kf,
+            jaxfdi.detection.chi2_detector(threshold, 4),
+            jnp.zeros(7),
+            kf.init(jnp.zeros(7), model.Q),
+            us,
+            key,
+            p2_bias.onset,
+        )
         return result.record.detection_step.astype(jnp.float64)
 
     return {"jaxfdi": run}, 0.0
@@ -120,7 +135,7 @@ def time_chunks(fn, keys: jax.Array, chunk: int, repeats: int):
     compile_s = time.perf_counter() - t0
 
     def one_pass():
-        outs = [compiled(keys[i:i + size]) for i in range(0, keys.shape[0], size)]
+        outs = [compiled(keys[i : i + size]) for i in range(0, keys.shape[0], size)]
         return np.concatenate([np.asarray(jax.block_until_ready(o)) for o in outs])
 
     t0 = time.perf_counter()
@@ -143,12 +158,26 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="benchmarks/montecarlo_results.json")
     args = parser.parse_args(argv)
     device = jax.devices()[0]
-    meta = {"command": " ".join(["python"] + sys.argv), "date_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            "backend": jax.default_backend(), "device": getattr(device, "device_kind", str(device)),
-            "cpu": bf.cpu_model(), "cpu_count": os.cpu_count(), "python": platform.python_version(), "jax": jax.__version__,
-            "args": vars(args)}
-    print(f"jax {jax.__version__} on {meta['backend']} ({meta['device']}); runs {args.runs}, chunk {args.chunk}", flush=True)
-    builders = {"kf": (kf_runners, 1000), "ukf": (ukf_runners, 600), "monitor": (monitor_runners, 400)}
+    meta = {
+        "command": " ".join(["python"] + sys.argv),
+        "date_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "backend": jax.default_backend(),
+        "device": getattr(device, "device_kind", str(device)),
+        "cpu": bf.cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "args": vars(args),
+    }
+    print(
+        f"jax {jax.__version__} on {meta['backend']} ({meta['device']}); runs {args.runs}, chunk {args.chunk}",
+        flush=True,
+    )
+    builders = {
+        "kf": (kf_runners, 1000),
+        "ukf": (ukf_runners, 600),
+        "monitor": (monitor_runners, 400),
+    }
     rows, ok = [], True
     for workload in args.workloads:
         build, T = builders[workload]
@@ -159,21 +188,47 @@ def main(argv=None) -> int:
             for name, fn in impls.items():
                 timing, out = time_chunks(fn, keys, args.chunk, args.repeats)
                 outs[name] = out
-                diff = 0.0 if name in ("jaxfdi", "simulate_only") else float(
-                    np.max(np.abs(out - outs["jaxfdi"]) / np.maximum(np.abs(outs["jaxfdi"]), 1e-300)))
+                diff = (
+                    0.0
+                    if name in ("jaxfdi", "simulate_only")
+                    else float(
+                        np.max(
+                            np.abs(out - outs["jaxfdi"])
+                            / np.maximum(np.abs(outs["jaxfdi"]), 1e-300)
+                        )
+                    )
+                )
                 agree = diff <= tol
                 ok &= agree
-                row = {"workload": workload, "T": T, "runs": num_runs, "impl": name, **timing,
-                       "runs_per_s": num_runs / timing["run_s"], "max_rel_diff_vs_jaxfdi": diff, "agrees": agree}
+                row = {
+                    "workload": workload,
+                    "T": T,
+                    "runs": num_runs,
+                    "impl": name,
+                    **timing,
+                    "runs_per_s": num_runs / timing["run_s"],
+                    "max_rel_diff_vs_jaxfdi": diff,
+                    "agrees": agree,
+                }
                 rows.append(row)
-                print(f"  {workload:<8} N={num_runs:>8} {name:<14} compile {timing['compile_s']:6.2f} s  "
-                      f"run {timing['run_s']:9.4f} s  {row['runs_per_s']:12.0f} runs/s  diff {diff:.1e}", flush=True)
+                print(
+                    f"  {workload:<8} N={num_runs:>8} {name:<14} compile {timing['compile_s']:6.2f} s  "
+                    f"run {timing['run_s']:9.4f} s  {row['runs_per_s']:12.0f} runs/s  diff {diff:.1e}",
+                    flush=True,
+                )
     base = {(r["workload"], r["runs"]): r["run_s"] for r in rows if r["impl"] == "jaxfdi"}
-    print("\nworkload  runs      implementation  compile [s]   run [s]     runs/s   x jaxfdi  rel diff")
+    print(
+        "\nworkload  runs      implementation  compile [s]   run [s]     runs/s   x jaxfdi  rel diff"
+    )
     for r in rows:
-        print(f"{r['workload']:<9} {r['runs']:<9} {r['impl']:<15} {r['compile_s']:11.2f} {r['run_s']:9.4f} "
-              f"{r['runs_per_s']:10.0f} {r['run_s'] / base[(r['workload'], r['runs'])]:9.2f}  {r['max_rel_diff_vs_jaxfdi']:.1e}")
-    print("'x jaxfdi' = run time / jaxfdi run time (> 1: jaxfdi faster); simulate_only = the data generation alone")
+        print(
+            f"{r['workload']:<9} {r['runs']:<9} {r['impl']:<15} {r['compile_s']:11.2f} {r['run_s']:9.4f} "
+            f"{r['runs_per_s']:10.0f} {r['run_s'] / base[(r['workload'], r['runs'])]:9.2f}  "
+            f"{r['max_rel_diff_vs_jaxfdi']:.1e}"
+        )
+    print(
+        "'x jaxfdi' = run time / jaxfdi run time (> 1: jaxfdi faster); simulate_only = the data generation alone"
+    )
     tmp = args.out + ".tmp"
     with open(tmp, "w") as fh:
         json.dump({"meta": meta, "rows": rows, "all_agree": ok}, fh, indent=1)

@@ -39,6 +39,7 @@ Run:  python benchmarks/bench_reaction_wheels.py                 (1000 runs; ~1 
       python benchmarks/bench_reaction_wheels.py --runs 100 --repeats 3 --filterpy-sequences 2   (quick)
 Writes benchmarks/results_reaction_wheels.json.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -52,24 +53,25 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-from filterpy.kalman import ExtendedKalmanFilter  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic  # noqa: E402
+from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic
 
-from jaxfdi import _linalg  # noqa: E402
-from jaxfdi.detection._credits import hypothesis_credits  # noqa: E402
-from jaxfdi.detection._dual_filter import dual_filter  # noqa: E402
-from jaxfdi.filters._base import Filter, run_filter  # noqa: E402
-from jaxfdi.filters._mm import multiple_model  # noqa: E402
-from jaxfdi.models._reaction_wheels import (  # noqa: E402
-    body_rate_field,
-    stop_hypotheses,
-    wheel_rate_transition,
+from jaxfdi import _linalg
+from jaxfdi.detection._credits import hypothesis_credits
+from jaxfdi.detection._dual_filter import dual_filter
+from jaxfdi.filters._base import Filter, run_filter
+from jaxfdi.filters._mm import multiple_model
+from jaxfdi.models._reaction_wheels import body_rate_field, stop_hypotheses, wheel_rate_transition
+from jaxfdi.scenarios.reaction_wheels import (
+    estimation_filter,
+    run_wheels,
+    wheel_design,
+    wheel_fault,
 )
-from jaxfdi.scenarios.reaction_wheels import estimation_filter, run_wheels, wheel_design, wheel_fault  # noqa: E402
 
 T = 600
 FAULT_WHEEL, FAULT_STEP = 0, 300
@@ -88,7 +90,7 @@ def wheel_data(design, runs: int, seed: int = 0, chunk: int = 100):
     chunk = min(chunk, runs)
     pad = -runs % chunk
     keys = jnp.concatenate([keys, keys[:pad]]) if pad else keys
-    parts = [sim(keys[i:i + chunk]) for i in range(0, runs + pad, chunk)]
+    parts = [sim(keys[i : i + chunk]) for i in range(0, runs + pad, chunk)]
     measurement = np.concatenate([np.asarray(h.measurement) for h in parts])[:runs]
     speeds = np.concatenate([np.asarray(h.commanded_speed) for h in parts])[:runs]
     ys = measurement[:, :T]
@@ -106,8 +108,12 @@ def prior(design):
 def detector_run(design, kind: str):
     """(a) / (d): the nominal dual filter; -> (F (T,), x_EKF[k|k] (T, 3))."""
     params = design.params
-    filt = dual_filter(estimation_filter(params, design.estimator_q, design.gyro_sigma, kind),
-                       wheel_rate_transition, body_rate_field, params)
+    filt = dual_filter(
+        estimation_filter(params, design.estimator_q, design.gyro_sigma, kind),
+        wheel_rate_transition,
+        body_rate_field,
+        params,
+    )
     m0, P0 = prior(design)
 
     def run(ys, us):
@@ -124,8 +130,12 @@ def credit_bank_run(design):
     m0, P0 = prior(design)
 
     def member(p):
-        return dual_filter(estimation_filter(p, design.bank_q, design.gyro_sigma, "ekf"),
-                           wheel_rate_transition, body_rate_field, p)
+        return dual_filter(
+            estimation_filter(p, design.bank_q, design.gyro_sigma, "ekf"),
+            wheel_rate_transition,
+            body_rate_field,
+            p,
+        )
 
     def init():
         return jax.vmap(lambda p: member(p).init(m0, P0))(hypotheses)
@@ -146,7 +156,11 @@ def likelihood_bank_run(design):
     """(c): static MM over the nominal model + 4 stop hypotheses; -> mode probabilities (T, 5)."""
     modes = stop_hypotheses(design.params, include_nominal=True)
     M = modes.wheel_mask.shape[0]
-    mm = multiple_model(lambda p: estimation_filter(p, design.bank_q, design.gyro_sigma, "ekf"), modes, design.mm_floor)
+    mm = multiple_model(
+        lambda p: estimation_filter(p, design.bank_q, design.gyro_sigma, "ekf"),
+        modes,
+        design.mm_floor,
+    )
     m0, P0 = prior(design)
     uniform = jnp.full((M,), 1.0 / M, m0.dtype)
 
@@ -168,15 +182,19 @@ def numpy_model(design):
     I = np.asarray(p.inertia)
     I_inv = np.linalg.inv(I)
     dt = float(p.dt)
-    HwT = float(p.wheel_inertia) * np.asarray(p.wheel_axes).T         # (3, N): h_w = HwT @ Omega
+    HwT = float(p.wheel_inertia) * np.asarray(p.wheel_axes).T  # (3, N): h_w = HwT @ Omega
     N = HwT.shape[1]
     eye = np.eye(3)
 
     def field_and_jacobian(w, speeds, accel):
         m = I @ w + HwT @ speeds
-        cross = np.array([w[1] * m[2] - w[2] * m[1], w[2] * m[0] - w[0] * m[2], w[0] * m[1] - w[1] * m[0]])
+        cross = np.array(
+            [w[1] * m[2] - w[2] * m[1], w[2] * m[0] - w[0] * m[2], w[0] * m[1] - w[1] * m[0]]
+        )
         g = I_inv @ (-cross - HwT @ accel)
-        wI = np.array([w[1] * I[2] - w[2] * I[1], w[2] * I[0] - w[0] * I[2], w[0] * I[1] - w[1] * I[0]])  # [w]x I
+        wI = np.array(
+            [w[1] * I[2] - w[2] * I[1], w[2] * I[0] - w[0] * I[2], w[0] * I[1] - w[1] * I[0]]
+        )  # [w]x I
         skew_m = np.array([[0.0, -m[2], m[1]], [m[2], 0.0, -m[0]], [-m[1], m[0], 0.0]])
         return g, -I_inv @ (wI - skew_m)
 
@@ -190,7 +208,9 @@ def numpy_model(design):
         J3 = A3 @ (eye + 0.5 * h * J2)
         k4, A4 = field_and_jacobian(x + h * k3, speeds + h * accel, accel)
         J4 = A4 @ (eye + h * J3)
-        return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4), eye + h / 6.0 * (J1 + 2 * J2 + 2 * J3 + J4)
+        return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4), eye + h / 6.0 * (
+            J1 + 2 * J2 + 2 * J3 + J4
+        )
 
     def transition(x, u):
         """``f`` alone (the prediction filter needs no Jacobian)."""
@@ -199,7 +219,9 @@ def numpy_model(design):
 
         def g(w, speeds):
             m = I @ w + HwT @ speeds
-            cross = np.array([w[1] * m[2] - w[2] * m[1], w[2] * m[0] - w[0] * m[2], w[0] * m[1] - w[1] * m[0]])
+            cross = np.array(
+                [w[1] * m[2] - w[2] * m[1], w[2] * m[0] - w[0] * m[2], w[0] * m[1] - w[1] * m[0]]
+            )
             return I_inv @ (-cross - HwT @ accel)
 
         k1 = g(x, speeds)
@@ -210,7 +232,11 @@ def numpy_model(design):
 
     def det3(a):
         (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = a.tolist()
-        return a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
+        return (
+            a00 * (a11 * a22 - a12 * a21)
+            - a01 * (a10 * a22 - a12 * a20)
+            + a02 * (a10 * a21 - a11 * a20)
+        )
 
     zero = np.zeros(N)
 
@@ -227,7 +253,7 @@ def jax_wrapped_model(design):
     """jaxfdi's transition with its ``jax.jacfwd`` Jacobian, and the prediction filter and
     ``F``, each one jitted call per step from Python (numpy in, numpy out)."""
     params = design.params
-    f = lambda x, u: wheel_rate_transition(x, u, params)  # noqa: E731
+    f = lambda x, u: wheel_rate_transition(x, u, params)
     both = jax.jit(lambda x, u: (f(x, u), jax.jacfwd(f)(x, u)))
 
     def det_a(x, u):
@@ -266,8 +292,8 @@ def filterpy_dual(design, model, ys, us):
     R = float(design.gyro_sigma) ** 2 * np.eye(3)
     m0, P0 = (np.asarray(a) for a in prior(design))
     eye = np.eye(3)
-    jac_h = lambda x: eye  # noqa: E731
-    h = lambda x: x  # noqa: E731
+    jac_h = lambda x: eye
+    h = lambda x: x
     F_all, x_all = np.empty((S, T)), np.empty((S, T, 3))
     for s in range(S):
         ekf = RateEKF(transition_and_jacobian, Q, R, m0, P0)
@@ -293,15 +319,29 @@ CASES = [
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=1000, help="sequences in the vmapped batch")
-    parser.add_argument("--repeats", type=int, default=5, help="timed calls per measurement (median reported)")
-    parser.add_argument("--budget", type=float, default=15.0,
-                        help="seconds after which a measurement stops repeating (at least 3 calls)")
-    parser.add_argument("--filterpy-sequences", type=int, default=3, help="sequences the filterpy loops run")
-    parser.add_argument("--sim-chunk", type=int, default=100, help="runs per call of the data simulation")
-    parser.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)),
-                                                      "results_reaction_wheels.json"))
+    parser.add_argument(
+        "--repeats", type=int, default=5, help="timed calls per measurement (median reported)"
+    )
+    parser.add_argument(
+        "--budget",
+        type=float,
+        default=15.0,
+        help="seconds after which a measurement stops repeating (at least 3 calls)",
+    )
+    parser.add_argument(
+        "--filterpy-sequences", type=int, default=3, help="sequences the filterpy loops run"
+    )
+    parser.add_argument(
+        "--sim-chunk", type=int, default=100, help="runs per call of the data simulation"
+    )
+    parser.add_argument(
+        "--out",
+        default=os.path.join(
+            os.path.dirname(os.path.abspath(__file__)), "results_reaction_wheels.json"
+        ),
+    )
     args = parser.parse_args(argv)
-    log = lambda *a: print(*a, file=sys.stderr, flush=True)  # noqa: E731
+    log = lambda *a: print(*a, file=sys.stderr, flush=True)
     t_start = time.perf_counter()
     load_start = os.getloadavg()
 
@@ -309,34 +349,44 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     ys, us = wheel_data(design, args.runs, chunk=args.sim_chunk)
     sim_s = time.perf_counter() - t0
-    log(f"data: {args.runs} runs x {T} steps (wheel {FAULT_WHEEL + 1} stops at step {FAULT_STEP}) simulated in "
-        f"{sim_s:.1f} s; jax {jax.__version__} on {jax.devices()[0].device_kind}, {os.cpu_count()} cores")
+    log(
+        f"data: {args.runs} runs x {T} steps (wheel {FAULT_WHEEL + 1} stops at step {FAULT_STEP}) simulated in "
+        f"{sim_s:.1f} s; jax {jax.__version__} on {jax.devices()[0].device_kind}, {os.cpu_count()} cores"
+    )
     ys_j, us_j = jnp.asarray(ys), jnp.asarray(us)
 
-    runs = {"a": detector_run(design, "ekf"), "b": credit_bank_run(design), "c": likelihood_bank_run(design),
-            "d": detector_run(design, "ukf")}
+    runs = {
+        "a": detector_run(design, "ekf"),
+        "b": credit_bank_run(design),
+        "c": likelihood_bank_run(design),
+        "d": detector_run(design, "ukf"),
+    }
     timings, outputs = {}, {}
     for key, name, _ in CASES:
         one, _ = compiled_timing(runs[key], (ys_j[0], us_j[0]), args.repeats, args.budget)
         many, out = compiled_timing(jax.vmap(runs[key]), (ys_j, us_j), args.repeats, args.budget)
-        finite = all(bool(np.all(np.isfinite(np.asarray(leaf)))) for leaf in jax.tree_util.tree_leaves(out))
+        finite = all(
+            bool(np.all(np.isfinite(np.asarray(leaf)))) for leaf in jax.tree_util.tree_leaves(out)
+        )
         if not finite:
             raise SystemExit(f"({key}) {name}: non-finite outputs")
         for t, n in ((one, 1), (many, args.runs)):
             t["per_step_per_sequence_us"] = t["run_s"] / (T * n) * 1e6
         timings[key] = {"one": one, "batch": many}
         outputs[key] = out
-        log(f"({key}) {name}: 1 seq {one['run_s'] * 1e3:.2f} ms (compile {one['compile_s']:.2f} s); "
+        log(
+            f"({key}) {name}: 1 seq {one['run_s'] * 1e3:.2f} ms (compile {one['compile_s']:.2f} s); "
             f"{args.runs} seq {many['run_s'] * 1e3:.0f} ms (compile {many['compile_s']:.2f} s), "
-            f"{many['per_step_per_sequence_us']:.3f} us/step/seq")
+            f"{many['per_step_per_sequence_us']:.3f} us/step/seq"
+        )
 
     # a light sanity reading of the banks on the same data (they run standalone from step 0)
-    mode_prob = np.asarray(outputs["c"])                              # (runs, T, 5)
+    mode_prob = np.asarray(outputs["c"])  # (runs, T, 5)
     mm_isolated = float(np.mean(np.argmax(mode_prob[:, -1], axis=-1) == FAULT_WHEEL + 1))
     mm_nominal_before = float(np.mean(np.argmax(mode_prob[:, FAULT_STEP - 1], axis=-1) == 0))
     fdp = np.asarray(outputs["a"][0])
     before = np.max(fdp[:, :FAULT_STEP], axis=1)
-    fdp_jump_2s = float(np.median(np.max(fdp[:, FAULT_STEP:FAULT_STEP + 20], axis=1) / before))
+    fdp_jump_2s = float(np.median(np.max(fdp[:, FAULT_STEP : FAULT_STEP + 20], axis=1) / before))
     fdp_jump = float(np.median(np.max(fdp[:, FAULT_STEP:], axis=1) / before))
 
     # filterpy baselines, checked against jaxfdi's detector (a)
@@ -344,71 +394,123 @@ def main(argv=None) -> int:
     ref_F, ref_x = np.asarray(outputs["a"][0])[:S], np.asarray(outputs["a"][1])[:S]
     baselines = {}
     for label, model in (("numpy", numpy_model(design)), ("jax-jit", jax_wrapped_model(design))):
-        filterpy_dual(design, model, ys[:1, :5], us[:1, :5])          # warm-up (jit compiles for jax-jit)
+        filterpy_dual(design, model, ys[:1, :5], us[:1, :5])  # warm-up (jit compiles for jax-jit)
         t0 = time.perf_counter()
         F_fp, x_fp = filterpy_dual(design, model, ys[:S], us[:S])
         per_seq = (time.perf_counter() - t0) / S
-        agree = {"detection_parameter": rel_diff(F_fp, ref_F), "filtered_mean": rel_diff(x_fp, ref_x)}
+        agree = {
+            "detection_parameter": rel_diff(F_fp, ref_F),
+            "filtered_mean": rel_diff(x_fp, ref_x),
+        }
         if max(agree.values()) > TOL:
             raise SystemExit(f"filterpy ({label}) and jaxfdi's dual filter disagree: {agree}")
-        baselines[label] = {"per_sequence_s": per_seq, "sequences_timed": S,
-                            "per_step_per_sequence_us": per_seq / T * 1e6, "agreement": agree}
-        log(f"filterpy dual filter ({label}): {per_seq * 1e3:.0f} ms per sequence ({S} timed), "
-            f"agreement F {agree['detection_parameter']:.1e}, mean {agree['filtered_mean']:.1e}")
+        baselines[label] = {
+            "per_sequence_s": per_seq,
+            "sequences_timed": S,
+            "per_step_per_sequence_us": per_seq / T * 1e6,
+            "agreement": agree,
+        }
+        log(
+            f"filterpy dual filter ({label}): {per_seq * 1e3:.0f} ms per sequence ({S} timed), "
+            f"agreement F {agree['detection_parameter']:.1e}, mean {agree['filtered_mean']:.1e}"
+        )
 
     a = timings["a"]
     ratios = {}
     for key in ("b", "c", "d"):
-        ratios[f"{key}/a"] = {scope: timings[key][scope]["run_s"] / a[scope]["run_s"] for scope in ("one", "batch")}
+        ratios[f"{key}/a"] = {
+            scope: timings[key][scope]["run_s"] / a[scope]["run_s"] for scope in ("one", "batch")
+        }
     best = min(baselines, key=lambda k: baselines[k]["per_step_per_sequence_us"])
     fp_us = baselines[best]["per_step_per_sequence_us"]
     speedup = {scope: fp_us / a[scope]["per_step_per_sequence_us"] for scope in ("one", "batch")}
-    speedup_all = {label: {scope: b["per_step_per_sequence_us"] / a[scope]["per_step_per_sequence_us"]
-                           for scope in ("one", "batch")} for label, b in baselines.items()}
+    speedup_all = {
+        label: {
+            scope: b["per_step_per_sequence_us"] / a[scope]["per_step_per_sequence_us"]
+            for scope in ("one", "batch")
+        }
+        for label, b in baselines.items()
+    }
 
     result = {
-        "date": datetime.date.today().isoformat(), "command": " ".join(["python", *sys.argv]),
-        "machine": cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(), "jax": jax.__version__,
-        "device": jax.devices()[0].device_kind, "load_average_1_5_15": {"start": load_start, "end": os.getloadavg()},
-        "dtype": "float64", "steps": T, "runs": args.runs,
-        "repeats": args.repeats, "data": {"fault": f"stop of wheel {FAULT_WHEEL + 1} at step {FAULT_STEP}",
-                                          "simulation_s": sim_s},
-        "cases": {key: {"name": name, "filters": what, **timings[key]} for key, name, what in CASES},
+        "date": datetime.date.today().isoformat(),
+        "command": " ".join(["python", *sys.argv]),
+        "machine": cpu_model(),
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "device": jax.devices()[0].device_kind,
+        "load_average_1_5_15": {"start": load_start, "end": os.getloadavg()},
+        "dtype": "float64",
+        "steps": T,
+        "runs": args.runs,
+        "repeats": args.repeats,
+        "data": {
+            "fault": f"stop of wheel {FAULT_WHEEL + 1} at step {FAULT_STEP}",
+            "simulation_s": sim_s,
+        },
+        "cases": {
+            key: {"name": name, "filters": what, **timings[key]} for key, name, what in CASES
+        },
         "ratios_vs_detector": ratios,
-        "filterpy": baselines, "filterpy_reported": best,
-        "speedup_dual_filter_vs_filterpy": speedup, "speedup_by_baseline": speedup_all,
-        "sanity": {"mm_final_mode_is_stopped_wheel": mm_isolated, "mm_nominal_before_fault": mm_nominal_before,
-                   "median_F_max_2s_after_over_before": fdp_jump_2s,
-                   "median_F_max_after_over_before": fdp_jump},
+        "filterpy": baselines,
+        "filterpy_reported": best,
+        "speedup_dual_filter_vs_filterpy": speedup,
+        "speedup_by_baseline": speedup_all,
+        "sanity": {
+            "mm_final_mode_is_stopped_wheel": mm_isolated,
+            "mm_nominal_before_fault": mm_nominal_before,
+            "median_F_max_2s_after_over_before": fdp_jump_2s,
+            "median_F_max_after_over_before": fdp_jump,
+        },
     }
     write_json_atomic(args.out, result)
 
     n = args.runs
-    print(f"Reaction wheels (seed 004), T = {T}, float64, {jax.devices()[0].device_kind} "
-          f"({result['machine']}, {result['cores']} cores); same gyro data for every filter")
-    head = (f"{'case':<34} {'compile 1 [s]':>13} {'run 1 [ms]':>10} {'us/step':>8}   "
-            f"{'compile N [s]':>13} {'run N [ms]':>10} {'us/step/seq':>11}  {'x (a) 1/N':>12}")
+    print(
+        f"Reaction wheels (seed 004), T = {T}, float64, {jax.devices()[0].device_kind} "
+        f"({result['machine']}, {result['cores']} cores); same gyro data for every filter"
+    )
+    head = (
+        f"{'case':<34} {'compile 1 [s]':>13} {'run 1 [ms]':>10} {'us/step':>8}   "
+        f"{'compile N [s]':>13} {'run N [ms]':>10} {'us/step/seq':>11}  {'x (a) 1/N':>12}"
+    )
     print(head)
     print("-" * len(head))
     for key, name, _ in CASES:
         one, many = timings[key]["one"], timings[key]["batch"]
-        ratio = "" if key == "a" else f"{ratios[f'{key}/a']['one']:5.2f}/{ratios[f'{key}/a']['batch']:5.2f}"
-        print(f"({key}) {name:<30} {one['compile_s']:>13.2f} {one['run_s'] * 1e3:>10.2f} "
-              f"{one['per_step_per_sequence_us']:>8.2f}   {many['compile_s']:>13.2f} {many['run_s'] * 1e3:>10.0f} "
-              f"{many['per_step_per_sequence_us']:>11.3f}  {ratio:>12}")
+        ratio = (
+            ""
+            if key == "a"
+            else f"{ratios[f'{key}/a']['one']:5.2f}/{ratios[f'{key}/a']['batch']:5.2f}"
+        )
+        print(
+            f"({key}) {name:<30} {one['compile_s']:>13.2f} {one['run_s'] * 1e3:>10.2f} "
+            f"{one['per_step_per_sequence_us']:>8.2f}   {many['compile_s']:>13.2f} {many['run_s'] * 1e3:>10.0f} "
+            f"{many['per_step_per_sequence_us']:>11.3f}  {ratio:>12}"
+        )
     for label, b in baselines.items():
-        print(f"filterpy EKF dual filter ({label:<7})  {'-':>13} {b['per_sequence_s'] * 1e3:>10.1f} "
-              f"{b['per_step_per_sequence_us']:>8.1f}   Python loop, {b['sequences_timed']} sequences timed")
+        print(
+            f"filterpy EKF dual filter ({label:<7})  {'-':>13} {b['per_sequence_s'] * 1e3:>10.1f} "
+            f"{b['per_step_per_sequence_us']:>8.1f}   Python loop, {b['sequences_timed']} sequences timed"
+        )
     print(f"N = {n}; 'x (a)' = run time / detector (a) run time, 1 sequence / N sequences.")
-    print(f"jaxfdi dual filter vs filterpy ({best}, the faster baseline), per sequence-step: "
-          f"{speedup['one']:.0f}x (1 sequence), {speedup['batch']:.0f}x ({n} sequences); "
-          f"vs filterpy (jax-jit): {speedup_all['jax-jit']['one']:.0f}x / {speedup_all['jax-jit']['batch']:.0f}x")
+    print(
+        f"jaxfdi dual filter vs filterpy ({best}, the faster baseline), per sequence-step: "
+        f"{speedup['one']:.0f}x (1 sequence), {speedup['batch']:.0f}x ({n} sequences); "
+        f"vs filterpy (jax-jit): {speedup_all['jax-jit']['one']:.0f}x / {speedup_all['jax-jit']['batch']:.0f}x"
+    )
     agree = max(max(b["agreement"].values()) for b in baselines.values())
-    print(f"agreement filterpy vs jaxfdi (F and x_EKF): {agree:.1e}; MM picks the stopped wheel at the last step in "
-          f"{mm_isolated:.2f} of runs (nominal before the stop {mm_nominal_before:.2f}); median F max after/before the stop "
-          f"{fdp_jump_2s:.1f}x within 2 s, {fdp_jump:.0f}x over steps {FAULT_STEP}-{T - 1}")
-    print(f"load average (1 min) {load_start[0]:.1f} at start, {os.getloadavg()[0]:.1f} at end on {os.cpu_count()} cores "
-          f"(> cores: other processes shared the CPU)")
+    print(
+        f"agreement filterpy vs jaxfdi (F and x_EKF): {agree:.1e}; MM picks the stopped wheel at the last step in "
+        f"{mm_isolated:.2f} of runs (nominal before the stop {mm_nominal_before:.2f}); median F "
+        "max after/before the stop "
+        f"{fdp_jump_2s:.1f}x within 2 s, {fdp_jump:.0f}x over steps {FAULT_STEP}-{T - 1}"
+    )
+    print(
+        f"load average (1 min) {load_start[0]:.1f} at start, {os.getloadavg()[0]:.1f} at end on {os.cpu_count()} cores "
+        f"(> cores: other processes shared the CPU)"
+    )
     print(f"wrote {args.out} ({time.perf_counter() - t_start:.0f} s in all)")
     return 0
 

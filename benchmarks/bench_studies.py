@@ -14,6 +14,7 @@ engine's ``config["seconds"]``) the seconds per structure and the XLA compile se
 is the smaller program unless the other wins by 1.5x). Results go to
 ``benchmarks/results_studies.json`` (written whole or not at all).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,7 +30,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from jaxfdi._io import write_json  # noqa: E402
+from jaxfdi._io import write_json
 
 ENGINE_IN_PROCESS = """
 import json, sys, time
@@ -74,32 +75,58 @@ def _study_case(study: str, runs: int | None, cache: str) -> dict:
 
 
 def _engine_linalg(unrolled: bool, runs: int, cache: str) -> dict:
-    result = _run([sys.executable, "-c", ENGINE_IN_PROCESS.format(runs=runs, unrolled=unrolled)], cache)
+    result = _run(
+        [sys.executable, "-c", ENGINE_IN_PROCESS.format(runs=runs, unrolled=unrolled)], cache
+    )
     result.update(json.loads(result.pop("stdout_tail").strip().splitlines()[-1]))
     return result
 
 
 def _seconds(case: dict) -> str:
-    return f"{case['wall_s']:.1f} s" if case["wall_s"] is not None else f"> {case['timed_out_after_s']:.0f} s (stopped)"
+    return (
+        f"{case['wall_s']:.1f} s"
+        if case["wall_s"] is not None
+        else f"> {case['timed_out_after_s']:.0f} s (stopped)"
+    )
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--studies", nargs="+", default=["engine"])
-    parser.add_argument("--runs", type=int, default=None, help="--runs for every study (default: the CLI's)")
-    parser.add_argument("--linalg", action="store_true", help="only the engine's linear-algebra comparison")
-    parser.add_argument("--cold-only", action="store_true", help="no warm run (the issue's target for the other studies)")
+    parser.add_argument(
+        "--runs", type=int, default=None, help="--runs for every study (default: the CLI's)"
+    )
+    parser.add_argument(
+        "--linalg", action="store_true", help="only the engine's linear-algebra comparison"
+    )
+    parser.add_argument(
+        "--cold-only",
+        action="store_true",
+        help="no warm run (the issue's target for the other studies)",
+    )
     parser.add_argument("--out", default=str(HERE / "results_studies.json"))
-    parser.add_argument("--timeout", type=float, default=None, help="give a study up after this many seconds")
+    parser.add_argument(
+        "--timeout", type=float, default=None, help="give a study up after this many seconds"
+    )
     args = parser.parse_args()
     global TIMEOUT_S
     TIMEOUT_S = args.timeout
     import jax
 
-    report = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version(),
-                          "jax": jax.__version__, "backend": jax.default_backend(),
-                          "device": str(jax.devices()[0].device_kind)},
-              "date": time.strftime("%Y-%m-%d %H:%M"), "cases": {}}
+    report = {
+        "machine": {
+            "platform": platform.platform(),
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "jax": jax.__version__,
+            "backend": jax.default_backend(),
+            "device": str(jax.devices()[0].device_kind),
+        },
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "cases": {},
+    }
     if args.linalg:
         for unrolled in (False, True):
             with tempfile.TemporaryDirectory() as cache:
@@ -114,7 +141,11 @@ def main() -> None:
                 cold = _study_case(study, args.runs, cache)
                 warm = None if args.cold_only else _study_case(study, args.runs, cache)
             report["cases"][study] = {"runs": args.runs, "cold": cold, "warm": warm}
-            print(f"{study}: cold {_seconds(cold)}" + ("" if warm is None else f", warm {_seconds(warm)}"), flush=True)
+            print(
+                f"{study}: cold {_seconds(cold)}"
+                + ("" if warm is None else f", warm {_seconds(warm)}"),
+                flush=True,
+            )
     previous = json.loads(Path(args.out).read_text()) if Path(args.out).exists() else {}
     previous.setdefault("runs", []).append(report)
     write_json(args.out, previous)

@@ -21,6 +21,7 @@ and ``tracemalloc``'s peak for the NumPy loop (per timed run).
 Run:  python benchmarks/bench_tskf_bank.py                (1000 runs; ~2 minutes on 2 cores)
       python benchmarks/bench_tskf_bank.py --runs 100 --numpy-runs 2 --repeats 2   (quick)
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,16 +36,21 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic  # noqa: E402
+from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic
 
-from jaxfdi.filters._tskf import actuator_direction, run_tskf_bank, sensor_direction, stack_directions  # noqa: E402
-from jaxfdi.control._lqr import lqr_pi  # noqa: E402
-from jaxfdi.models import _vtol as vtol  # noqa: E402
-from jaxfdi.scenarios.vtol import BIAS_WALK, COMMAND, INIT_BIAS_COV, INIT_COV, LQR_Q, LQR_R, TRACKED  # noqa: E402
+from jaxfdi.control._lqr import lqr_pi
+from jaxfdi.filters._tskf import (
+    actuator_direction,
+    run_tskf_bank,
+    sensor_direction,
+    stack_directions,
+)
+from jaxfdi.models import _vtol as vtol
+from jaxfdi.scenarios.vtol import BIAS_WALK, COMMAND, INIT_BIAS_COV, INIT_COV, LQR_Q, LQR_R, TRACKED
 
 T = 300
 TOL = 1e-8
@@ -64,11 +70,16 @@ def vtol_data(runs: int, seed: int = 0):
     ys, us = np.empty((runs, T, 4)), np.empty((runs, T, 2))
     for k in range(T):
         ys[:, k] = x @ C.T + vtol.MEASUREMENT_NOISE_STD * rng.standard_normal((runs, 4))
-        u = -np.concatenate([x, z], axis=1) @ K.T                      # u = -K [x; z]
+        u = -np.concatenate([x, z], axis=1) @ K.T  # u = -K [x; z]
         us[:, k] = u
         z = z + vtol.TS * (COMMAND - x @ H.T)
-        d = x @ vtol.UNCERTAINTY_GAIN.T                                   # (runs, 1)
-        x = x @ Phi.T + u @ Gamma.T + d @ E.T + vtol.PROCESS_NOISE_STD * rng.standard_normal((runs, 4))
+        d = x @ vtol.UNCERTAINTY_GAIN.T  # (runs, 1)
+        x = (
+            x @ Phi.T
+            + u @ Gamma.T
+            + d @ E.T
+            + vtol.PROCESS_NOISE_STD * rng.standard_normal((runs, 4))
+        )
     return model, E, ys, us
 
 
@@ -80,9 +91,18 @@ def paper_bank(model):
 
 def jaxfdi_bank(model, directions, unknown_input):
     def run(ys, us):
-        info = run_tskf_bank(model, directions, jnp.full((1, 1), BIAS_WALK), jnp.asarray(vtol.X0),
-                             INIT_COV * jnp.eye(4), jnp.full((1, 1), INIT_BIAS_COV), ys, us, unknown_input)
-        return info.statistic, info.bias_mean[..., 0]                      # (F, T) each
+        info = run_tskf_bank(
+            model,
+            directions,
+            jnp.full((1, 1), BIAS_WALK),
+            jnp.asarray(vtol.X0),
+            INIT_COV * jnp.eye(4),
+            jnp.full((1, 1), INIT_BIAS_COV),
+            ys,
+            us,
+            unknown_input,
+        )
+        return info.statistic, info.bias_mean[..., 0]  # (F, T) each
 
     return jax.vmap(run)
 
@@ -107,7 +127,9 @@ def augmented_bank(model, directions):
             b = m[4]
             Fa = direction.state[:, 0] + Gamma @ (direction.input_scaled[:, 0] * u)
             F = jnp.block([[Phi, Fa[:, None]], [jnp.zeros((1, 4)), jnp.ones((1, 1))]])
-            Qa = jnp.block([[Q, jnp.zeros((4, 1))], [jnp.zeros((1, 4)), jnp.full((1, 1), BIAS_WALK)]])
+            Qa = jnp.block(
+                [[Q, jnp.zeros((4, 1))], [jnp.zeros((1, 4)), jnp.full((1, 1), BIAS_WALK)]]
+            )
             m = F @ m + jnp.concatenate([Gamma @ u, jnp.zeros(1)])
             P = F @ P @ F.T + Qa
             return (m, P), (stat, b)
@@ -117,13 +139,15 @@ def augmented_bank(model, directions):
         return jax.lax.scan(step, (m0, P0), (ys, us))[1]
 
     bank = jax.vmap(jax.vmap(one, in_axes=(0, None, None)), in_axes=(None, 0, 0))
-    return lambda ys, us: bank(directions, ys, us)                       # (runs, F, T) each
+    return lambda ys, us: bank(directions, ys, us)  # (runs, F, T) each
 
 
 def numpy_tskf(model, direction, E, ys, us):
     """The robust TSKF of ``jaxfdi.filters._tskf`` in plain NumPy, one run: (T,) statistics
     and bias estimates."""
-    Phi, Gamma, C, Q, R = (np.asarray(a) for a in (model.Phi, model.Gamma, model.C, model.Q, model.R))
+    Phi, Gamma, C, Q, R = (
+        np.asarray(a) for a in (model.Phi, model.Gamma, model.C, model.Q, model.R)
+    )
     st, iu, out, os_ = (np.asarray(a)[:, 0] for a in direction)
     n, m = 4, 4
     x_bar, P_bar = vtol.X0.copy(), INIT_COV * np.eye(n)
@@ -169,24 +193,39 @@ def numpy_tskf(model, direction, E, ys, us):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=1000)
-    parser.add_argument("--numpy-runs", type=int, default=5, help="runs of the NumPy loop actually timed")
+    parser.add_argument(
+        "--numpy-runs", type=int, default=5, help="runs of the NumPy loop actually timed"
+    )
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "results_tskf_bank.json"))
+    parser.add_argument(
+        "--out", default=os.path.join(os.path.dirname(__file__), "results_tskf_bank.json")
+    )
     args = parser.parse_args(argv)
-    log = lambda *a: print(*a, file=sys.stderr, flush=True)  # noqa: E731
+    log = lambda *a: print(*a, file=sys.stderr, flush=True)
 
     model, E, ys, us = vtol_data(args.runs)
     directions = paper_bank(model)
     ys_j, us_j = jnp.asarray(ys), jnp.asarray(us)
     log(f"data: {args.runs} runs x {T} steps; device {jax.devices()[0].device_kind}")
 
-    robust, (stat_r, bias_r) = compiled_timing(jaxfdi_bank(model, directions, jnp.asarray(E)), (ys_j, us_j), args.repeats, 120.0)
+    robust, (stat_r, bias_r) = compiled_timing(
+        jaxfdi_bank(model, directions, jnp.asarray(E)), (ys_j, us_j), args.repeats, 120.0
+    )
     log(f"jaxfdi robust bank: run {robust['run_s']:.3f} s, compile {robust['compile_s']:.1f} s")
-    optimal, (stat_o, bias_o) = compiled_timing(jaxfdi_bank(model, directions, None), (ys_j, us_j), args.repeats, 120.0)
+    optimal, (stat_o, bias_o) = compiled_timing(
+        jaxfdi_bank(model, directions, None), (ys_j, us_j), args.repeats, 120.0
+    )
     log(f"jaxfdi optimal bank: run {optimal['run_s']:.3f} s, compile {optimal['compile_s']:.1f} s")
-    augmented, (stat_a, bias_a) = compiled_timing(augmented_bank(model, directions), (ys_j, us_j), args.repeats, 120.0)
-    log(f"augmented KF bank: run {augmented['run_s']:.3f} s, compile {augmented['compile_s']:.1f} s")
-    agree_aug = max(rel_diff(np.asarray(stat_a), np.asarray(stat_o)), rel_diff(np.asarray(bias_a), np.asarray(bias_o)))
+    augmented, (stat_a, bias_a) = compiled_timing(
+        augmented_bank(model, directions), (ys_j, us_j), args.repeats, 120.0
+    )
+    log(
+        f"augmented KF bank: run {augmented['run_s']:.3f} s, compile {augmented['compile_s']:.1f} s"
+    )
+    agree_aug = max(
+        rel_diff(np.asarray(stat_a), np.asarray(stat_o)),
+        rel_diff(np.asarray(bias_a), np.asarray(bias_o)),
+    )
     if agree_aug > TOL:
         raise SystemExit(f"augmented KF and optimal TSKF disagree: {agree_aug:.2e}")
 
@@ -202,33 +241,57 @@ def main(argv=None) -> int:
     numpy_per_run = (time.perf_counter() - t0) / S
     numpy_peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    agree_np = max(rel_diff(np.asarray(stat_r)[:S], np_stats), rel_diff(np.asarray(bias_r)[:S], np_bias))
+    agree_np = max(
+        rel_diff(np.asarray(stat_r)[:S], np_stats), rel_diff(np.asarray(bias_r)[:S], np_bias)
+    )
     if agree_np > TOL:
         raise SystemExit(f"numpy loop and jaxfdi robust bank disagree: {agree_np:.2e}")
     log(f"numpy loop: {numpy_per_run:.3f} s per run ({S} runs timed)")
 
     numpy_all = numpy_per_run * args.runs
     result = {
-        "date": datetime.date.today().isoformat(), "machine": cpu_model(), "python": platform.python_version(),
-        "jax": jax.__version__, "device": jax.devices()[0].device_kind, "runs": args.runs, "steps": T, "filters": 6,
-        "jaxfdi_robust": robust, "jaxfdi_optimal": optimal, "augmented_kf": augmented,
-        "numpy_loop": {"per_run_s": numpy_per_run, "runs_timed": S, "all_runs_s_scaled": numpy_all,
-                       "peak_bytes_per_run_loop": numpy_peak},
+        "date": datetime.date.today().isoformat(),
+        "machine": cpu_model(),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "device": jax.devices()[0].device_kind,
+        "runs": args.runs,
+        "steps": T,
+        "filters": 6,
+        "jaxfdi_robust": robust,
+        "jaxfdi_optimal": optimal,
+        "augmented_kf": augmented,
+        "numpy_loop": {
+            "per_run_s": numpy_per_run,
+            "runs_timed": S,
+            "all_runs_s_scaled": numpy_all,
+            "peak_bytes_per_run_loop": numpy_peak,
+        },
         "agreement": {"numpy_vs_jaxfdi_robust": agree_np, "augmented_vs_jaxfdi_optimal": agree_aug},
-        "speedup": {"robust_vs_numpy": numpy_all / robust["run_s"],
-                    "optimal_vs_augmented": augmented["run_s"] / optimal["run_s"]},
+        "speedup": {
+            "robust_vs_numpy": numpy_all / robust["run_s"],
+            "optimal_vs_augmented": augmented["run_s"] / optimal["run_s"],
+        },
     }
     write_json_atomic(args.out, result)
     print(f"6-filter bank, {args.runs} runs x {T} steps ({result['device']}):")
-    print(f"  jaxfdi robust TSKF bank   run {robust['run_s']:.3f} s  compile {robust['compile_s']:.1f} s  "
-          f"temp {robust['temp_bytes'] / 2**20:.1f} MiB  out {robust['output_bytes'] / 2**20:.1f} MiB")
-    print(f"  numpy loop (same bank)    {numpy_all:.1f} s scaled from {S} runs ({numpy_per_run * 1e3:.0f} ms/run)  "
-          f"peak {numpy_peak / 2**20:.2f} MiB  -> jaxfdi {numpy_all / robust['run_s']:.0f}x faster")
-    print(f"  jaxfdi optimal TSKF bank  run {optimal['run_s']:.3f} s  compile {optimal['compile_s']:.1f} s  "
-          f"temp {optimal['temp_bytes'] / 2**20:.1f} MiB")
-    print(f"  augmented-state KF bank   run {augmented['run_s']:.3f} s  compile {augmented['compile_s']:.1f} s  "
-          f"temp {augmented['temp_bytes'] / 2**20:.1f} MiB  -> TSKF/augmented time ratio "
-          f"{optimal['run_s'] / augmented['run_s']:.2f}")
+    print(
+        f"  jaxfdi robust TSKF bank   run {robust['run_s']:.3f} s  compile {robust['compile_s']:.1f} s  "
+        f"temp {robust['temp_bytes'] / 2**20:.1f} MiB  out {robust['output_bytes'] / 2**20:.1f} MiB"
+    )
+    print(
+        f"  numpy loop (same bank)    {numpy_all:.1f} s scaled from {S} runs ({numpy_per_run * 1e3:.0f} ms/run)  "
+        f"peak {numpy_peak / 2**20:.2f} MiB  -> jaxfdi {numpy_all / robust['run_s']:.0f}x faster"
+    )
+    print(
+        f"  jaxfdi optimal TSKF bank  run {optimal['run_s']:.3f} s  compile {optimal['compile_s']:.1f} s  "
+        f"temp {optimal['temp_bytes'] / 2**20:.1f} MiB"
+    )
+    print(
+        f"  augmented-state KF bank   run {augmented['run_s']:.3f} s  compile {augmented['compile_s']:.1f} s  "
+        f"temp {augmented['temp_bytes'] / 2**20:.1f} MiB  -> TSKF/augmented time ratio "
+        f"{optimal['run_s'] / augmented['run_s']:.2f}"
+    )
     print(f"  agreement: numpy vs jaxfdi {agree_np:.1e}, augmented vs optimal TSKF {agree_aug:.1e}")
     print(f"wrote {args.out}")
     return 0

@@ -6,6 +6,7 @@ as JSON.
 
     python benchmarks/engine_fault_sizes.py --runs 100 --seed 4242
 """
+
 from __future__ import annotations
 
 import argparse
@@ -15,8 +16,8 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from jaxfdi import _io  # noqa: E402
-from jaxfdi.scenarios.engine import fault_size_study  # noqa: E402
+from jaxfdi import _io
+from jaxfdi.scenarios.engine import fault_size_study
 
 
 def main() -> None:
@@ -30,8 +31,15 @@ def main() -> None:
     wall = time.perf_counter() - start
     print(study.table())
     print(f"{wall:.1f} s")
-    _io.write_json(args.out, {"config": study.config, "rows": study.rows, "seconds": wall,
-                              "command": f"python benchmarks/engine_fault_sizes.py --runs {args.runs} --seed {args.seed}"})
+    _io.write_json(
+        args.out,
+        {
+            "config": study.config,
+            "rows": study.rows,
+            "seconds": wall,
+            "command": f"python benchmarks/engine_fault_sizes.py --runs {args.runs} --seed {args.seed}",
+        },
+    )
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ is scored once on the held-out runs.
     jaxfdi tune engine-imm --design bias --confirm-steps 2 --delay-weight 20 --out results
     python benchmarks/engine_imm_front.py results/engine-imm-*-tuned.npz [--seed 3000]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,10 +44,10 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from jaxfdi import _io  # noqa: E402
-from jaxfdi.scenarios import engine_tuning as et  # noqa: E402
-from jaxfdi.scenarios.engine import labelled_runs, summarize_method  # noqa: E402
-from jaxfdi.tuning import constrain, load_params  # noqa: E402
+from jaxfdi import _io
+from jaxfdi.scenarios import engine_tuning as et
+from jaxfdi.scenarios.engine import labelled_runs, summarize_method
+from jaxfdi.tuning import constrain, load_params
 
 TARGET = {"false_alarm": 0.01, "isolation": 0.97, "delay_median_s": 0.05}
 
@@ -58,14 +59,18 @@ def operating_point(rows: list[dict]) -> dict:
         "runs": none["runs"],
         "false_alarm": none["false_alarm_rate"],
         "isolation_min": min(r["isolation_rate"] for r in faults),
-        "delay_median_max_s": max(np.inf if r["delay_median_s"] != r["delay_median_s"] else r["delay_median_s"]
-                                  for r in faults),
+        "delay_median_max_s": max(
+            np.inf if r["delay_median_s"] != r["delay_median_s"] else r["delay_median_s"]
+            for r in faults
+        ),
         "isolation": {r["fault"]: r["isolation_rate"] for r in faults},
         "delay_median_s": {r["fault"]: r["delay_median_s"] for r in faults},
     }
-    point["meets_target"] = bool(point["false_alarm"] <= TARGET["false_alarm"]
-                                 and point["isolation_min"] >= TARGET["isolation"]
-                                 and point["delay_median_max_s"] <= TARGET["delay_median_s"])
+    point["meets_target"] = bool(
+        point["false_alarm"] <= TARGET["false_alarm"]
+        and point["isolation_min"] >= TARGET["isolation"]
+        and point["delay_median_max_s"] <= TARGET["delay_median_s"]
+    )
     return point
 
 
@@ -79,8 +84,10 @@ def target_margins(point: dict) -> np.ndarray:
     margins = [(TARGET["false_alarm"] - point["false_alarm"]) / fa_se]
     for fault, iso in point["isolation"].items():
         delay = point["delay_median_s"][fault]
-        margins += [(iso - TARGET["isolation"]) / iso_se,
-                    (TARGET["delay_median_s"] - (np.inf if delay != delay else delay)) / 0.01]
+        margins += [
+            (iso - TARGET["isolation"]) / iso_se,
+            (TARGET["delay_median_s"] - (np.inf if delay != delay else delay)) / 0.01,
+        ]
     return np.asarray(margins)
 
 
@@ -97,10 +104,13 @@ def pareto(points: list[dict]) -> list[dict]:
         return np.array([p["false_alarm"], -p["isolation_min"], p["delay_median_max_s"]])
 
     keys = [key(p) for p in points]
-    front = [p for p, k in zip(points, keys)
-             if not any(np.all(o <= k) and np.any(o < k) for o in keys)]
+    front = [
+        p for p, k in zip(points, keys) if not any(np.all(o <= k) and np.any(o < k) for o in keys)
+    ]
     unique = {}
-    for p in sorted(front, key=lambda p: (p["false_alarm"], -p["isolation_min"], p["delay_median_max_s"])):
+    for p in sorted(
+        front, key=lambda p: (p["false_alarm"], -p["isolation_min"], p["delay_median_max_s"])
+    ):
         unique.setdefault((p["false_alarm"], p["isolation_min"], p["delay_median_max_s"]), p)
     return list(unique.values())
 
@@ -116,8 +126,11 @@ def evaluate(design, mode_prob, data, threshold, confirm, label: str) -> dict:
     runs, steps = data.ys.shape[0] // 7, data.ys.shape[1]
     records = et.detector_records(mode_prob, data.onsets, jnp.asarray(threshold), confirm)
     point = operating_point(summarize_method(design.method, "IMM", records, runs, steps))
-    point.update(source=label, confirm_steps=np.asarray(confirm).tolist(),
-                 mu_threshold=np.round(np.asarray(threshold, float), 2).tolist())
+    point.update(
+        source=label,
+        confirm_steps=np.asarray(confirm).tolist(),
+        mu_threshold=np.round(np.asarray(threshold, float), 2).tolist(),
+    )
     return point
 
 
@@ -128,13 +141,19 @@ def sweep(design, mode_prob, data, label, grid, confirms) -> list[dict]:
         replay = jax.jit(lambda t, c=confirm: et.detector_records(mode_prob, data.onsets, t, c))
         runs, steps = data.ys.shape[0] // 7, data.ys.shape[1]
         for threshold in grid:
-            point = operating_point(summarize_method(design.method, "IMM", replay(jnp.asarray(threshold)), runs, steps))
-            point.update(source=label, confirm_steps=confirm, mu_threshold=round(float(threshold), 2))
+            point = operating_point(
+                summarize_method(design.method, "IMM", replay(jnp.asarray(threshold)), runs, steps)
+            )
+            point.update(
+                source=label, confirm_steps=confirm, mu_threshold=round(float(threshold), 2)
+            )
             points.append(point)
     return points
 
 
-def choose_operating_point(design, tuned, selection, args, grid, confirms) -> tuple[dict, list[dict]]:
+def choose_operating_point(
+    design, tuned, selection, args, grid, confirms
+) -> tuple[dict, list[dict]]:
     """The claimed operating point, chosen on the selection runs only: the best scalar
     ``mu_T`` per confirmation length, then per-mode thresholds from there, then per-mode
     confirmation lengths, then the thresholds again (coordinate descent on ``target_cost``)."""
@@ -143,8 +162,14 @@ def choose_operating_point(design, tuned, selection, args, grid, confirms) -> tu
     for confirm in confirms:
         start = min((p for p in candidates if p["confirm_steps"] == confirm), key=target_cost)
         per_mode, _ = et.select_mode_thresholds(
-            design, dict(tuned, mu_threshold=jnp.asarray(start["mu_threshold"])), args.select_runs, args.select_seed,
-            confirm, grid, cost=lambda rows: target_cost(operating_point(rows)))
+            design,
+            dict(tuned, mu_threshold=jnp.asarray(start["mu_threshold"])),
+            args.select_runs,
+            args.select_seed,
+            confirm,
+            grid,
+            cost=lambda rows: target_cost(operating_point(rows)),
+        )
         candidates.append(evaluate(design, mode_prob, selection, per_mode, confirm, "tuned"))
     best = min(candidates, key=lambda p: (target_cost(p), p["false_alarm"]))
     threshold = np.broadcast_to(np.asarray(best["mu_threshold"], float), (et.NUM_FAULTS + 1,))
@@ -155,13 +180,21 @@ def choose_operating_point(design, tuned, selection, args, grid, confirms) -> tu
             for length in confirms:
                 trial = lengths.copy()
                 trial[mode] = length
-                point = evaluate(design, mode_prob, selection, threshold, tuple(int(c) for c in trial), "tuned")
+                point = evaluate(
+                    design, mode_prob, selection, threshold, tuple(int(c) for c in trial), "tuned"
+                )
                 if target_cost(point) < best_cost - 1e-12:
                     best, best_cost, lengths = point, target_cost(point), trial
     confirm = tuple(int(c) for c in lengths)  # and the thresholds once more, for these lengths
-    per_mode, _ = et.select_mode_thresholds(design, dict(tuned, mu_threshold=jnp.asarray(threshold)), args.select_runs,
-                                            args.select_seed, confirm, grid,
-                                            cost=lambda rows: target_cost(operating_point(rows)))
+    per_mode, _ = et.select_mode_thresholds(
+        design,
+        dict(tuned, mu_threshold=jnp.asarray(threshold)),
+        args.select_runs,
+        args.select_seed,
+        confirm,
+        grid,
+        cost=lambda rows: target_cost(operating_point(rows)),
+    )
     point = evaluate(design, mode_prob, selection, per_mode, confirm, "tuned")
     if target_cost(point) < best_cost - 1e-12:
         best = point
@@ -170,57 +203,114 @@ def choose_operating_point(design, tuned, selection, args, grid, confirms) -> tu
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("params", nargs="+", help="engine-imm-<design>-tuned.npz files from jaxfdi tune engine-imm")
-    parser.add_argument("--runs", type=int, default=100, help="held-out runs per fault (default 100)")
-    parser.add_argument("--seed", type=int, default=1000, help="held-out seed (default 1000, the CLI's for --seed 0)")
-    parser.add_argument("--select-seed", type=int, default=2,
-                        help="seed of the selection runs that choose the claimed operating point (default 2)")
-    parser.add_argument("--select-runs", type=int, default=300,
-                        help="selection runs per fault (default 300: a 3 %% isolation miss shows as 9 runs, not 3)")
-    parser.add_argument("--confirm", default="1,2,3,4", help="confirmation lengths to sweep (default 1,2,3,4)")
-    parser.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)),
-                                                      "results_engine_imm_front.json"))
+    parser.add_argument(
+        "params", nargs="+", help="engine-imm-<design>-tuned.npz files from jaxfdi tune engine-imm"
+    )
+    parser.add_argument(
+        "--runs", type=int, default=100, help="held-out runs per fault (default 100)"
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=1000,
+        help="held-out seed (default 1000, the CLI's for --seed 0)",
+    )
+    parser.add_argument(
+        "--select-seed",
+        type=int,
+        default=2,
+        help="seed of the selection runs that choose the claimed operating point (default 2)",
+    )
+    parser.add_argument(
+        "--select-runs",
+        type=int,
+        default=300,
+        help="selection runs per fault (default 300: a 3 %% isolation miss shows as 9 runs, not 3)",
+    )
+    parser.add_argument(
+        "--confirm", default="1,2,3,4", help="confirmation lengths to sweep (default 1,2,3,4)"
+    )
+    parser.add_argument(
+        "--out",
+        default=os.path.join(
+            os.path.dirname(os.path.abspath(__file__)), "results_engine_imm_front.json"
+        ),
+    )
     args = parser.parse_args(argv)
     confirms = [int(c) for c in args.confirm.split(",")]
     grid = np.round(np.arange(0.30, 0.99, 0.02), 2)
     data = labelled_runs(args.runs, args.seed)
     selection = labelled_runs(args.select_runs, args.select_seed)
-    report = {"config": {"runs": args.runs, "seed": args.seed, "select_seed": args.select_seed,
-                         "select_runs": args.select_runs,
-                         "confirm_steps": confirms, "grid": grid.tolist(), "target": TARGET, "files": args.params},
-              "designs": {}}
+    report = {
+        "config": {
+            "runs": args.runs,
+            "seed": args.seed,
+            "select_seed": args.select_seed,
+            "select_runs": args.select_runs,
+            "confirm_steps": confirms,
+            "grid": grid.tolist(),
+            "target": TARGET,
+            "files": args.params,
+        },
+        "designs": {},
+    }
     for path in args.params:
         raw, parameterization, meta = load_params(path)
         design = et.imm_design(meta["design"])
         tuned = constrain(parameterization, raw)
-        print(f"{design.name}: sweeping {len(grid)} thresholds x confirm {confirms} on {args.runs} runs per "
-              f"fault (seed {args.seed})", file=sys.stderr, flush=True)
+        print(
+            f"{design.name}: sweeping {len(grid)} thresholds x confirm {confirms} on {args.runs} runs per "
+            f"fault (seed {args.seed})",
+            file=sys.stderr,
+            flush=True,
+        )
         held_out_prob = mode_probabilities(design, tuned, data)
         points = sweep(design, held_out_prob, data, "tuned", grid, confirms)
-        points += sweep(design, mode_probabilities(design, design.hand(), data), data, "paper", grid, confirms)
+        points += sweep(
+            design, mode_probabilities(design, design.hand(), data), data, "paper", grid, confirms
+        )
         front = pareto(points)
         chosen, _ = choose_operating_point(design, tuned, selection, args, grid, confirms)
         confirm = chosen["confirm_steps"]
-        held_out = evaluate(design, held_out_prob, data, chosen["mu_threshold"],
-                            confirm if isinstance(confirm, int) else tuple(confirm), "tuned")
+        held_out = evaluate(
+            design,
+            held_out_prob,
+            data,
+            chosen["mu_threshold"],
+            confirm if isinstance(confirm, int) else tuple(confirm),
+            "tuned",
+        )
         claim = {"selection": chosen, "held_out": held_out}
         report["designs"][design.name] = {"front": front, "points": points, "claim": claim}
-        print(f"\n{design.name}: non-dominated operating points (FA = fault-free runs with an alarm; iso min = "
-              f"lowest isolation rate over the six faults; delay max = largest median delay) on {args.runs} "
-              f"held-out runs per fault; target FA <= 0.01, iso min >= 0.97, delay max <= 0.05 s")
-        print(f"{'params':<7} {'confirm':>7} {'mu_T':<38} {'FA':>5} {'iso min':>8} {'delay max [s]':>13}  target")
+        print(
+            f"\n{design.name}: non-dominated operating points (FA = fault-free runs with an alarm; iso min = "
+            f"lowest isolation rate over the six faults; delay max = largest median delay) on {args.runs} "
+            f"held-out runs per fault; target FA <= 0.01, iso min >= 0.97, delay max <= 0.05 s"
+        )
+        print(
+            f"{'params':<7} {'confirm':>7} {'mu_T':<38} {'FA':>5} {'iso min':>8} {'delay max [s]':>13}  target"
+        )
         for p in front:
-            print(f"{p['source']:<7} {str(p['confirm_steps']):>7} {str(p['mu_threshold']):<38} {p['false_alarm']:>5.2f} "
-                  f"{p['isolation_min']:>8.2f} {p['delay_median_max_s']:>13.3f}  {'met' if p['meets_target'] else '-'}")
+            print(
+                f"{p['source']:<7} {str(p['confirm_steps']):>7} {str(p['mu_threshold']):<38} {p['false_alarm']:>5.2f} "
+                f"{p['isolation_min']:>8.2f} {p['delay_median_max_s']:>13.3f}  {'met' if p['meets_target'] else '-'}"
+            )
         met = [p for p in points if p["meets_target"] and p["source"] == "tuned"]
-        print(f"tuned points meeting the target on these held-out runs: {len(met)} of "
-              f"{sum(p['source'] == 'tuned' for p in points)}")
+        print(
+            f"tuned points meeting the target on these held-out runs: {len(met)} of "
+            f"{sum(p['source'] == 'tuned' for p in points)}"
+        )
         for name, p in (("selection runs", chosen), ("held-out runs", held_out)):
-            print(f"chosen on the selection runs (seed {args.select_seed}): confirm {chosen['confirm_steps']}, mu_T "
-                  f"{chosen['mu_threshold']}; on the {name}: FA {p['false_alarm']:.2f}, iso min {p['isolation_min']:.2f}, "
-                  f"delay max {p['delay_median_max_s']:.3f} s, target {'met' if p['meets_target'] else 'not met'}")
-        print(f"  held-out per fault: isolation {held_out['isolation']}, median delay [s] "
-              f"{ {k: round(v, 3) for k, v in held_out['delay_median_s'].items()} }")
+            print(
+                f"chosen on the selection runs (seed {args.select_seed}): confirm {chosen['confirm_steps']}, mu_T "
+                f"{chosen['mu_threshold']}; on the {name}: FA {p['false_alarm']:.2f}, iso min "
+                f"{p['isolation_min']:.2f}, "
+                f"delay max {p['delay_median_max_s']:.3f} s, target {'met' if p['meets_target'] else 'not met'}"
+            )
+        print(
+            f"  held-out per fault: isolation {held_out['isolation']}, median delay [s] "
+            f"{ {k: round(v, 3) for k, v in held_out['delay_median_s'].items()} }"
+        )
     _io.write_json(args.out, report)
     print(f"wrote {args.out}")
     return 0

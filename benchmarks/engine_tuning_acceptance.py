@@ -34,6 +34,7 @@ Prints each check and its outcome and the seconds the command took; writes every
 ``--json`` (default ``results_engine_tuning_acceptance.json`` beside this script, written
 completely or not at all); exits 0 when every check passes, 1 otherwise.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -46,8 +47,18 @@ from pathlib import Path
 
 import numpy as np
 
-COMMAND = ["tune", "engine-imm", "--design", "zhang-li", "--delay-weight", "20", "--freeze", "mu_threshold",
-           "--select-thresholds", "--quiet"]
+COMMAND = [
+    "tune",
+    "engine-imm",
+    "--design",
+    "zhang-li",
+    "--delay-weight",
+    "20",
+    "--freeze",
+    "mu_threshold",
+    "--select-thresholds",
+    "--quiet",
+]
 FULL_SIZE = {"steps": 150, "train_runs": 16, "test_runs": 100, "selection_runs": 100}
 RATES = ("detection_rate", "isolation_rate", "false_alarm_rate")
 DELAYS = ("delay_mean_s", "delay_median_s", "delay_p90_s")  # issue 27: over the clean runs
@@ -86,27 +97,48 @@ def check(report: dict) -> list[tuple[str, bool, str]]:
     pi = np.asarray(result["tuned_params"]["transition"])
     return [
         ("full size (steps, train, test, selection runs)", sizes == FULL_SIZE, f"{sizes}"),
-        (f"cross-entropy at least {CE_REDUCTION:.0%} lower", ce["tuned"] <= (1 - CE_REDUCTION) * ce["paper"],
-         f"paper {ce['paper']:.4f}, tuned {ce['tuned']:.4f} ({100 * (1 - ce['tuned'] / ce['paper']):.0f} % lower)"),
-        ("report's worse list = worse_metrics of its tables",
-         result["worse"] == et.worse_metrics(result["paper"], result["tuned"], ce["paper"], ce["tuned"]),
-         f"worse than the paper's: {', '.join(result['worse']) or 'none'}"),
-        (f"every reported metric compared (6 faults x {len(RATES + DELAYS)} + fault-free FA)",
-         len(excess) == 6 * len(RATES + DELAYS) + 1,
-         f"{len(excess)} metrics"),
-        (f"no metric worse than the paper's by more than one step ({STEP})", excess[worst] <= STEP + 1e-9,
-         f"largest excess {excess[worst]:+.3f} ({worst})"),
-        ("tuned transition matrix non-negative", bool(np.all(pi >= 0)), f"min entry {pi.min():.3g}"),
+        (
+            f"cross-entropy at least {CE_REDUCTION:.0%} lower",
+            ce["tuned"] <= (1 - CE_REDUCTION) * ce["paper"],
+            f"paper {ce['paper']:.4f}, tuned {ce['tuned']:.4f} ({100 * (1 - ce['tuned'] / ce['paper']):.0f} % lower)",
+        ),
+        (
+            "report's worse list = worse_metrics of its tables",
+            result["worse"]
+            == et.worse_metrics(result["paper"], result["tuned"], ce["paper"], ce["tuned"]),
+            f"worse than the paper's: {', '.join(result['worse']) or 'none'}",
+        ),
+        (
+            f"every reported metric compared (6 faults x {len(RATES + DELAYS)} + fault-free FA)",
+            len(excess) == 6 * len(RATES + DELAYS) + 1,
+            f"{len(excess)} metrics",
+        ),
+        (
+            f"no metric worse than the paper's by more than one step ({STEP})",
+            excess[worst] <= STEP + 1e-9,
+            f"largest excess {excess[worst]:+.3f} ({worst})",
+        ),
+        (
+            "tuned transition matrix non-negative",
+            bool(np.all(pi >= 0)),
+            f"min entry {pi.min():.3g}",
+        ),
     ]
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--report", help="check this engine-imm-tuning.json instead of running the command")
+    parser.add_argument(
+        "--report", help="check this engine-imm-tuning.json instead of running the command"
+    )
     parser.add_argument("--out", help="--out folder for the command (default: a temporary folder)")
-    parser.add_argument("--json", default=os.path.join(os.path.dirname(os.path.abspath(__file__)),
-                                                       "results_engine_tuning_acceptance.json"),
-                        help="where to write the outcome (JSON)")
+    parser.add_argument(
+        "--json",
+        default=os.path.join(
+            os.path.dirname(os.path.abspath(__file__)), "results_engine_tuning_acceptance.json"
+        ),
+        help="where to write the outcome (JSON)",
+    )
     args = parser.parse_args(argv)
 
     from jaxfdi import _io
@@ -136,12 +168,20 @@ def main(argv: list[str] | None = None) -> int:
     if seconds is not None:
         print(f"command: {seconds:.0f} s (compilation included)")
     print("acceptance (issue 4, Zhang & Li, full size):", "met" if ok else "NOT met")
-    _io.write_json(args.json, {
-        "command": command, "seconds": seconds, "met": ok,
-        "checks": [{"name": n, "passed": p, "detail": d} for n, p, d in checks],
-        "config": report["config"], "zhang-li": {k: report["designs"]["zhang-li"][k]
-                                                 for k in ("paper", "tuned", "cross_entropy", "worse", "shortfall")},
-    })
+    _io.write_json(
+        args.json,
+        {
+            "command": command,
+            "seconds": seconds,
+            "met": ok,
+            "checks": [{"name": n, "passed": p, "detail": d} for n, p, d in checks],
+            "config": report["config"],
+            "zhang-li": {
+                k: report["designs"]["zhang-li"][k]
+                for k in ("paper", "tuned", "cross_entropy", "worse", "shortfall")
+            },
+        },
+    )
     print(f"wrote {args.json}")
     return 0 if ok else 1
 

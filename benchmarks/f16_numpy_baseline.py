@@ -11,6 +11,7 @@ book's equations, independently of jaxfdi's code (which is used only to build th
 design: gains and reference); ``bench_f16_flight.py`` checks that the noise-free
 trajectories agree.
 """
+
 from __future__ import annotations
 
 import json
@@ -37,11 +38,15 @@ class Tables:
         self.idle, self.mil, self.max = (np.array(th[k]) for k in ("idle", "military", "maximum"))
         mg = d["mass_geometry"]
         self.mass = mg["mass_slug"]["value"]
-        self.jxx, self.jyy, self.jzz, self.jxz = (mg[k] for k in ("Jxx_slug_ft2", "Jyy_slug_ft2", "Jzz_slug_ft2",
-                                                                   "Jxz_slug_ft2"))
+        self.jxx, self.jyy, self.jzz, self.jxz = (
+            mg[k] for k in ("Jxx_slug_ft2", "Jyy_slug_ft2", "Jzz_slug_ft2", "Jxz_slug_ft2")
+        )
         self.s, self.b, self.cbar = mg["S_ft2"], mg["b_ft"], mg["cbar_ft"]
-        self.xcgr, self.hx, self.g = mg["xcg_ref_frac_cbar"], mg["hx_engine_angular_momentum_slug_ft2_s"]["value"], \
-            mg["g0_ft_s2"]["value"]
+        self.xcgr, self.hx, self.g = (
+            mg["xcg_ref_frac_cbar"],
+            mg["hx_engine_angular_momentum_slug_ft2_s"]["value"],
+            mg["g0_ft_s2"]["value"],
+        )
 
 
 def _fix(x):
@@ -57,17 +62,17 @@ def _alpha_index(alpha):
     if k >= 9:
         k = 8
     da = s - k
-    l = k + _fix(math.copysign(1.1, da))  # noqa: E741
+    l = k + _fix(math.copysign(1.1, da))
     return k + 2, l + 2, da
 
 
 def damp(T, alpha):
-    k, l, da = _alpha_index(alpha)  # noqa: E741
+    k, l, da = _alpha_index(alpha)
     return T.damp[:, k] + abs(da) * (T.damp[:, l] - T.damp[:, k])
 
 
 def _el_table(A, alpha, el):
-    k, l, da = _alpha_index(alpha)  # noqa: E741
+    k, l, da = _alpha_index(alpha)
     s = el / 12.0
     m = _fix(s)
     if m <= -2:
@@ -91,7 +96,7 @@ def cm(T, alpha, el):
 
 
 def cz(T, alpha, beta, el):
-    k, l, da = _alpha_index(alpha)  # noqa: E741
+    k, l, da = _alpha_index(alpha)
     s = T.cz[k] + abs(da) * (T.cz[l] - T.cz[k])
     return s * (1 - (beta / 57.3) ** 2) - 0.19 * (el / 25.0)
 
@@ -101,7 +106,7 @@ def cy(beta, ail, rdr):
 
 
 def _abs_beta_table(A, alpha, beta):
-    k, l, da = _alpha_index(alpha)  # noqa: E741
+    k, l, da = _alpha_index(alpha)
     s = 0.2 * abs(beta)
     m = _fix(s)
     if m == 0:
@@ -117,7 +122,7 @@ def _abs_beta_table(A, alpha, beta):
 
 
 def _beta_table(A, alpha, beta):
-    k, l, da = _alpha_index(alpha)  # noqa: E741
+    k, l, da = _alpha_index(alpha)
     s = 0.1 * beta
     m = _fix(s)
     if m <= -3:
@@ -136,7 +141,7 @@ def _beta_table(A, alpha, beta):
 def adc(vt, alt):
     tfac = 1.0 - 0.703e-5 * alt
     t = 390.0 if alt >= 35000.0 else 519.0 * tfac
-    rho = 2.377e-3 * tfac ** 4.14
+    rho = 2.377e-3 * tfac**4.14
     return vt / math.sqrt(1.4 * 1716.3 * t), 0.5 * rho * vt * vt
 
 
@@ -215,11 +220,17 @@ def dynamics(T, x, u, xcg, gust):
     cxt = cx(T, alpha, el)
     cyt = cy(beta, ail, rdr)
     czt = cz(T, alpha, beta, el)
-    clt = _abs_beta_table(T.cl, alpha, beta) + _beta_table(T.dlda, alpha, beta) * dail \
+    clt = (
+        _abs_beta_table(T.cl, alpha, beta)
+        + _beta_table(T.dlda, alpha, beta) * dail
         + _beta_table(T.dldr, alpha, beta) * drdr
+    )
     cmt = cm(T, alpha, el)
-    cnt = _abs_beta_table(T.cn, alpha, beta) + _beta_table(T.dnda, alpha, beta) * dail \
+    cnt = (
+        _abs_beta_table(T.cn, alpha, beta)
+        + _beta_table(T.dnda, alpha, beta) * dail
         + _beta_table(T.dndr, alpha, beta) * drdr
+    )
     tvt = 0.5 / vt
     b2v = T.b * tvt
     cq = T.cbar * q * tvt
@@ -252,10 +263,10 @@ def dynamics(T, x, u, xcg, gust):
     xd[3] = p + (sth / cth) * (qsph + r * cph)
     xd[4] = q * cph - r * sph
     xd[5] = (qsph + r * cph) / cth
-    gam = T.jxx * T.jzz - T.jxz ** 2
+    gam = T.jxx * T.jzz - T.jxz**2
     xpq = T.jxz * (T.jxx - T.jyy + T.jzz)
-    xqr = T.jzz * (T.jzz - T.jyy) + T.jxz ** 2
-    zpq = (T.jxx - T.jyy) * T.jxx + T.jxz ** 2
+    xqr = T.jzz * (T.jzz - T.jyy) + T.jxz**2
+    zpq = (T.jxx - T.jyy) * T.jxx + T.jxz**2
     ypr = T.jzz - T.jxx
     roll, pitch, yaw = qsb * clt, qs * T.cbar * cmt, qsb * cnt
     pq, qr, qhx = p * q, q * r, q * T.hx
@@ -300,7 +311,9 @@ def fly(T, design: dict, x0, xcg, rng, noise=True):
     states, controls = np.empty((steps, 13)), np.empty((steps, 4))
     for k in range(steps):
         # sensors
-        y = np.concatenate([x[[0, 1, 2, 3, 4, 5, 11, 12]], H @ x[6:9]]) + sigma * rng.standard_normal(sigma.size)
+        y = np.concatenate(
+            [x[[0, 1, 2, 3, 4, 5, 11, 12]], H @ x[6:9]]
+        ) + sigma * rng.standard_normal(sigma.size)
         rates = pinv @ y[8:]
         x_lon = np.array([y[0], y[1], y[4], rates[1], y[6], y[7]])
         x_lat = np.array([y[2], y[3], rates[0], rates[2]])

@@ -9,6 +9,7 @@ still says how far it got.
     python benchmarks/gpu_scale.py --flights 10000 100000 --single 30000 100000
     python benchmarks/gpu_scale.py --flights 64 128 --single 64 --chunk 64   # a CPU check
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,16 +21,16 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_f16_fdi import fdi_flights, random_cases  # noqa: E402
+from bench_f16_fdi import fdi_flights, random_cases
 
-from jaxfdi.detection._hybrid_psa import FOLLOW  # noqa: E402
-from jaxfdi._montecarlo import default_chunk_size  # noqa: E402
-from jaxfdi.scenarios import f16_fdi as sf  # noqa: E402
-from jaxfdi.scenarios.f16_flight import GUST_SIGMA, dispersions, flight_setup  # noqa: E402
+from jaxfdi._montecarlo import default_chunk_size
+from jaxfdi.detection._hybrid_psa import FOLLOW
+from jaxfdi.scenarios import f16_fdi as sf
+from jaxfdi.scenarios.f16_flight import GUST_SIGMA, dispersions, flight_setup
 
 
 def _flights(setup, n: int):
@@ -46,9 +47,12 @@ def chunked(setup, fdi, n: int, chunk: int | None) -> None:
     wall = time.perf_counter() - start
     d = out.fdi
     isolated = int(np.sum(np.asarray(d.hybrid) == np.asarray(cases.sensor) + 1))
-    print(f"chunked {n:>7} flights (chunk {chunk or default_chunk_size()}): {wall:.2f} s with compilation, "
-          f"{n / wall:.0f} flights/s; healthy {int(np.sum(np.asarray(out.healthy)))}, hybrid isolated {isolated}, "
-          f"UKF used {int(np.sum(np.asarray(d.filter_used)))}", flush=True)
+    print(
+        f"chunked {n:>7} flights (chunk {chunk or default_chunk_size()}): {wall:.2f} s with compilation, "
+        f"{n / wall:.0f} flights/s; healthy {int(np.sum(np.asarray(out.healthy)))}, hybrid isolated {isolated}, "
+        f"UKF used {int(np.sum(np.asarray(d.filter_used)))}",
+        flush=True,
+    )
 
 
 def single(setup, fdi, n: int) -> None:
@@ -60,23 +64,36 @@ def single(setup, fdi, n: int) -> None:
     temp = getattr(memory, "temp_size_in_bytes", float("nan")) / 2**30
     stats = jax.devices()[0].memory_stats() or {}
     limit = stats.get("bytes_limit", float("nan")) / 2**30
-    print(f"one batch {n:>7} flights: compiled in {compile_s:.1f} s; scratch {temp:.2f} GiB "
-          f"({temp / n * 2**20:.1f} KiB per flight) of {limit:.1f} GiB on the device", flush=True)
+    print(
+        f"one batch {n:>7} flights: compiled in {compile_s:.1f} s; scratch {temp:.2f} GiB "
+        f"({temp / n * 2**20:.1f} KiB per flight) of {limit:.1f} GiB on the device",
+        flush=True,
+    )
     for repeat in range(2):
         start = time.perf_counter()
         out = jax.block_until_ready(compiled(setup, fdi, keys, disp, cases))
         run_s = time.perf_counter() - start
-        print(f"one batch {n:>7} flights: run {repeat + 1} {run_s:.2f} s, {n / run_s:.0f} flights/s; "
-              f"UKF used {int(np.sum(np.asarray(out.fdi.filter_used)))}", flush=True)
+        print(
+            f"one batch {n:>7} flights: run {repeat + 1} {run_s:.2f} s, {n / run_s:.0f} flights/s; "
+            f"UKF used {int(np.sum(np.asarray(out.fdi.filter_used)))}",
+            flush=True,
+        )
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--flights", type=int, nargs="*", default=[10000, 100000])
     parser.add_argument("--single", type=int, nargs="*", default=[30000, 100000])
-    parser.add_argument("--chunk", type=int, default=None, help="runs per chunk (default: the backend's)")
+    parser.add_argument(
+        "--chunk", type=int, default=None, help="runs per chunk (default: the backend's)"
+    )
     args = parser.parse_args()
-    print(f"jax {jax.__version__} on {jax.default_backend()}: {[d.device_kind for d in jax.devices()]}", flush=True)
+    print(
+        f"jax {jax.__version__} on {jax.default_backend()}: {[d.device_kind for d in jax.devices()]}",
+        flush=True,
+    )
     setup, _ = flight_setup(gust_sigma=GUST_SIGMA)
     fdi, _ = sf.fdi_setup(setup)
     for n in args.flights:

@@ -13,6 +13,7 @@ line per measurement and writes ``--out`` (JSON, atomically).
 
     python benchmarks/gpu_vmap_filter.py --runs 100 10000 100000 --out $OUT/gpu_vmap_filter.json
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,7 +38,9 @@ def _problem(num_runs: int):
     us = jnp.asarray((0.01 + 0.002 * np.sin(2 * np.pi * np.arange(T) / 250.0)).reshape(T, 1))
     sim = jaxfdi.linear_simulator(model)
     keys = jax.random.split(jax.random.key(0), num_runs)
-    ys = jax.jit(jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(7), us, key)[1].measurement))(keys)
+    ys = jax.jit(jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(7), us, key)[1].measurement))(
+        keys
+    )
     scales = jnp.linspace(5.0, 20.0, num_runs)[:, None, None]
     return model, us, ys, jnp.zeros((num_runs, 7)), scales * model.Q
 
@@ -72,44 +75,72 @@ def main() -> int:
         return info.filtered_mean, info.filtered_cov, jnp.sum(info.log_likelihood, axis=-1)
 
     def users_path(m0, P0, ys, us):
-        return outputs(jax.vmap(lambda m, P, y: jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m, P), y, us)[1])(
-            m0, P0, ys))
+        return outputs(
+            jax.vmap(
+                lambda m, P, y: jaxfdi.filters.run_filter(
+                    kf, jaxfdi.filters.GaussianState(m, P), y, us
+                )[1]
+            )(m0, P0, ys)
+        )
 
     def batch_call(m0, P0, ys, us):
-        return outputs(jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m0, P0), ys, us)[1])
+        return outputs(
+            jaxfdi.filters.run_filter(kf, jaxfdi.filters.GaussianState(m0, P0), ys, us)[1]
+        )
 
     def plain_vmap(m0, P0, ys, us):
         def one(m, P, y):
-            return jax.lax.scan(lambda s, yu: kf.step(s, *yu), jaxfdi.filters.GaussianState(m, P), (y, us))[1]
+            return jax.lax.scan(
+                lambda s, yu: kf.step(s, *yu), jaxfdi.filters.GaussianState(m, P), (y, us)
+            )[1]
+
         return outputs(jax.vmap(one)(m0, P0, ys))
 
     for num_runs in args.runs:
         _, us, ys, m0, P0 = _problem(num_runs)
         results = {}
-        for name, fn in (("vmap(run_filter)", users_path), ("run_filter(batch)", batch_call),
-                         ("vmap(plain scan)", plain_vmap)):
+        for name, fn in (
+            ("vmap(run_filter)", users_path),
+            ("run_filter(batch)", batch_call),
+            ("vmap(plain scan)", plain_vmap),
+        ):
             row = dict(runs=num_runs, path=name, **_timed(fn, (m0, P0, ys, us), args.repeats))
             results[name] = jax.jit(fn)(m0, P0, ys, us)
             rows.append(row)
-            print(f"N={num_runs:>7} {name:<18} compile {row['compile_s']:6.2f} s  run {row['run_ms']:9.2f} ms",
-                  flush=True)
+            print(
+                f"N={num_runs:>7} {name:<18} compile {row['compile_s']:6.2f} s  run {row['run_ms']:9.2f} ms",
+                flush=True,
+            )
         ref = results["vmap(plain scan)"]
         for name in ("vmap(run_filter)", "run_filter(batch)"):
-            diff = max(float(jnp.max(jnp.abs(a - b) / (1e-12 + jnp.abs(b)))) for a, b in zip(results[name], ref))
-            print(f"N={num_runs:>7} {name} vs vmap(plain scan): max relative difference {diff:.1e}", flush=True)
+            diff = max(
+                float(jnp.max(jnp.abs(a - b) / (1e-12 + jnp.abs(b))))
+                for a, b in zip(results[name], ref)
+            )
+            print(
+                f"N={num_runs:>7} {name} vs vmap(plain scan): max relative difference {diff:.1e}",
+                flush=True,
+            )
     _, us, ys, m0, P0 = _problem(1)
 
     def one_sequence(y):
         return outputs(jaxfdi.filters.run_filter(kf, kf.init(m0[0], P0[0]), y, us)[1])
 
     def one_plain(y):
-        return outputs(jax.lax.scan(lambda s, yu: kf.step(s, *yu), kf.init(m0[0], P0[0]), (y, us))[1])
+        return outputs(
+            jax.lax.scan(lambda s, yu: kf.step(s, *yu), kf.init(m0[0], P0[0]), (y, us))[1]
+        )
 
     for name, fn in (("jit(run_filter) 1 seq", one_sequence), ("plain scan 1 seq", one_plain)):
         row = dict(runs=1, path=name, **_timed(fn, (ys[0],), args.repeats))
         rows.append(row)
-        print(f"N=      1 {name:<22} compile {row['compile_s']:6.2f} s  run {row['run_ms']:9.2f} ms", flush=True)
-    payload = dict(device=device, backend=jax.default_backend(), jax=jax.__version__, T=T, rows=rows)
+        print(
+            f"N=      1 {name:<22} compile {row['compile_s']:6.2f} s  run {row['run_ms']:9.2f} ms",
+            flush=True,
+        )
+    payload = dict(
+        device=device, backend=jax.default_backend(), jax=jax.__version__, T=T, rows=rows
+    )
     folder = os.path.dirname(os.path.abspath(args.out))
     with tempfile.NamedTemporaryFile("w", dir=folder, delete=False, suffix=".tmp") as handle:
         json.dump(payload, handle, indent=1)

@@ -7,6 +7,7 @@ patched in, and dynamax (its standard form), interleaved in one process (best of
 
     python benchmarks/kf_covariance_update.py
 """
+
 from __future__ import annotations
 
 import os
@@ -18,8 +19,9 @@ import jax.numpy as jnp
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-import bench_filters as B  # noqa: E402
-from jaxfdi import _linalg  # noqa: E402
+import bench_filters as B
+
+from jaxfdi import _linalg
 
 BLOCK = _linalg.joseph_cov
 
@@ -36,7 +38,9 @@ def standard_cov(cov, gain, H, noise_cov):
 
 
 def best_ms(fn, args, repeats: int = 40) -> float:
-    timing, _ = B.compiled_timing(lambda *a: fn(*a), args, repeats)  # a fresh trace: the patch is seen
+    timing, _ = B.compiled_timing(
+        lambda *a: fn(*a), args, repeats
+    )  # a fresh trace: the patch is seen
     return 1e3 * timing["run_min_s"]
 
 
@@ -45,13 +49,18 @@ def main() -> int:
     args = (prob["model"], prob["m0"], prob["P0"], prob["ys"][0], prob["us"])
     for round_ in range(3):
         times = {}
-        for name, update in (("Joseph in one block", BLOCK), ("Joseph as five products", five_products),
-                             ("standard form", standard_cov)):
+        for name, update in (
+            ("Joseph in one block", BLOCK),
+            ("Joseph as five products", five_products),
+            ("standard form", standard_cov),
+        ):
             _linalg.joseph_cov = update
             times[name] = best_ms(B.jaxfdi_kf, args)
         _linalg.joseph_cov = BLOCK
         times["dynamax"] = best_ms(B.dynamax_kf, args)
-        print(f"round {round_}: " + ", ".join(f"{k} {v:.2f} ms" for k, v in times.items()), flush=True)
+        print(
+            f"round {round_}: " + ", ".join(f"{k} {v:.2f} ms" for k, v in times.items()), flush=True
+        )
     return 0
 
 

@@ -25,6 +25,7 @@ For every fault case (FTC off, ``--runs`` runs, seed 0) this prints:
 
     python benchmarks/vtol_fault_kind.py [--runs 20]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -47,70 +48,104 @@ WINDOWS = (4, 20, 60)
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=20)
-    parser.add_argument("--json", default=os.path.join(os.path.dirname(os.path.abspath(__file__)),
-                                                       "results_vtol_fault_kind.json"))
+    parser.add_argument(
+        "--json",
+        default=os.path.join(
+            os.path.dirname(os.path.abspath(__file__)), "results_vtol_fault_kind.json"
+        ),
+    )
     args = parser.parse_args()
     jaxfdi.enable_x64()
     design = sv.vtol_design()
-    cases = sv.vtol_faults()          # the fault-free case last: each filter's baseline
+    cases = sv.vtol_faults()  # the fault-free case last: each filter's baseline
     faults = stack_faults([f for _, f in cases])
     keys = jax.random.split(jax.random.PRNGKey(0), args.runs)
     start = time.time()
-    run = jax.jit(jax.vmap(jax.vmap(lambda f, key: run_closed_loop(design, key, f, jnp.asarray(False), sv.STEPS),
-                                    in_axes=(None, 0)), in_axes=(0, None)))
-    history = jax.tree_util.tree_map(np.asarray, run(faults, keys))       # leaves (cases, runs, T, ...)
+    run = jax.jit(
+        jax.vmap(
+            jax.vmap(
+                lambda f, key: run_closed_loop(design, key, f, jnp.asarray(False), sv.STEPS),
+                in_axes=(None, 0),
+            ),
+            in_axes=(0, None),
+        )
+    )
+    history = jax.tree_util.tree_map(np.asarray, run(faults, keys))  # leaves (cases, runs, T, ...)
     C = np.asarray(design.model.C)
-    baseline = history.fdi.statistic[-1].mean(axis=0)                       # (T, F) fault-free mean per step
+    baseline = history.fdi.statistic[-1].mean(axis=0)  # (T, F) fault-free mean per step
     rows = []
     for c, (name, f) in enumerate(cases[:-1]):
-        if name in sv.HEALTH_CASES:   # a dead or frozen sensor has no additive/multiplicative kind
+        if name in sv.HEALTH_CASES:  # a dead or frozen sensor has no additive/multiplicative kind
             continue
         onset = int(f.onset)
-        location = int(f.component) + (0 if int(f.target) == int(jaxfdi._faults.Target.ACTUATOR) else 2)
+        location = int(f.component) + (
+            0 if int(f.target) == int(jaxfdi._faults.Target.ACTUATOR) else 2
+        )
         mult = bool(is_multiplicative(f))
         own = location + (0 if mult else 6)
         other = location + (6 if mult else 0)
-        stat = history.fdi.statistic[c]                                        # (R, T, F)
+        stat = history.fdi.statistic[c]  # (R, T, F)
         if location < 2:
-            signal = history.control[c][:, :, location]                   # u_i
+            signal = history.control[c][:, :, location]  # u_i
         else:
-            signal = history.state[c] @ C[location - 2]                # (C x)_j, the model's output
+            signal = history.state[c] @ C[location - 2]  # (C x)_j, the model's output
         row = {"fault": name, "multiplicative": mult}
         for W in WINDOWS:
             window = slice(onset, onset + W)
             s = signal[:, window]
             cv = np.std(s, axis=1) / np.maximum(np.abs(np.mean(s, axis=1)), 1e-12)
             margin = stat[:, window, other].sum(1) - stat[:, window, own].sum(1)
-            excess = stat[:, window] - baseline[None, window]             # over each filter's fault-free mean
+            excess = stat[:, window] - baseline[None, window]  # over each filter's fault-free mean
             corrected = excess[:, :, other].sum(1) - excess[:, :, own].sum(1)
-            row[f"W{W}"] = {"cv_median": float(np.median(cv)), "right_kind": float(np.mean(margin > 0)),
-                            "margin_median": float(np.median(margin)),
-                            "margin_iqr": [float(v) for v in np.percentile(margin, [25, 75])],
-                            "right_kind_corrected": float(np.mean(corrected > 0)),
-                            "corrected_median": float(np.median(corrected)),
-                            "corrected_iqr": [float(v) for v in np.percentile(corrected, [25, 75])]}
+            row[f"W{W}"] = {
+                "cv_median": float(np.median(cv)),
+                "right_kind": float(np.mean(margin > 0)),
+                "margin_median": float(np.median(margin)),
+                "margin_iqr": [float(v) for v in np.percentile(margin, [25, 75])],
+                "right_kind_corrected": float(np.mean(corrected > 0)),
+                "corrected_median": float(np.median(corrected)),
+                "corrected_iqr": [float(v) for v in np.percentile(corrected, [25, 75])],
+            }
         rows.append(row)
     seconds = time.time() - start
-    print(f"VTOL fault kind by windowed likelihood ({args.runs} runs per case, FTC off, seed 0; {seconds:.0f} s)")
-    print(f"{'fault':<22} {'kind':<6} " + " ".join(f"{'W=' + str(W) + ' cv':>9} {'right':>6} {'margin (IQR)':>24}"
-                                                    for W in WINDOWS))
+    print(
+        f"VTOL fault kind by windowed likelihood ({args.runs} runs per case, FTC off, seed 0; {seconds:.0f} s)"
+    )
+    print(
+        f"{'fault':<22} {'kind':<6} "
+        + " ".join(f"{'W=' + str(W) + ' cv':>9} {'right':>6} {'margin (IQR)':>24}" for W in WINDOWS)
+    )
     for row in rows:
         cells = []
         for W in WINDOWS:
             r = row[f"W{W}"]
-            cells.append(f"{r['cv_median']:>9.3f} {r['right_kind']:>6.2f} "
-                         f"{r['margin_median']:>8.2f} ({r['margin_iqr'][0]:>6.1f},{r['margin_iqr'][1]:>6.1f})")
-        print(f"{row['fault']:<22} {'mult' if row['multiplicative'] else 'add':<6} " + " ".join(cells))
-    print("the same with each filter's fault-free mean statistic (per step, from the fault-free runs) subtracted:")
+            cells.append(
+                f"{r['cv_median']:>9.3f} {r['right_kind']:>6.2f} "
+                f"{r['margin_median']:>8.2f} ({r['margin_iqr'][0]:>6.1f},{r['margin_iqr'][1]:>6.1f})"
+            )
+        print(
+            f"{row['fault']:<22} {'mult' if row['multiplicative'] else 'add':<6} " + " ".join(cells)
+        )
+    print(
+        "the same with each filter's fault-free mean statistic (per step, from the fault-free runs) subtracted:"
+    )
     for row in rows:
         cells = []
         for W in WINDOWS:
             r = row[f"W{W}"]
-            cells.append(f"{'':>9} {r['right_kind_corrected']:>6.2f} {r['corrected_median']:>8.2f} "
-                         f"({r['corrected_iqr'][0]:>6.1f},{r['corrected_iqr'][1]:>6.1f})")
-        print(f"{row['fault']:<22} {'mult' if row['multiplicative'] else 'add':<6} " + " ".join(cells))
+            cells.append(
+                f"{'':>9} {r['right_kind_corrected']:>6.2f} {r['corrected_median']:>8.2f} "
+                f"({r['corrected_iqr'][0]:>6.1f},{r['corrected_iqr'][1]:>6.1f})"
+            )
+        print(
+            f"{row['fault']:<22} {'mult' if row['multiplicative'] else 'add':<6} " + " ".join(cells)
+        )
     with open(args.json, "w") as fh:
-        json.dump({"runs": args.runs, "seed": 0, "windows": WINDOWS, "rows": rows, "seconds": seconds}, fh, indent=1)
+        json.dump(
+            {"runs": args.runs, "seed": 0, "windows": WINDOWS, "rows": rows, "seconds": seconds},
+            fh,
+            indent=1,
+        )
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ SHA-256, the sizes and the versions in its metadata (``jaxfdi_docs``); re-run th
 script after changing a notebook. The notebooks' tests execute them again in CI at
 a smaller size.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -32,8 +33,12 @@ TARGET = ROOT / "docs" / "examples"
 SIZES = {
     "01": {"JAXFDI_NB_RUNS": "20"},
     "02": {"JAXFDI_NB_RUNS": "20"},
-    "03": {"JAXFDI_NB_STEPS": "40", "JAXFDI_NB_TRAIN_RUNS": "4", "JAXFDI_NB_RUNS": "20",
-           "JAXFDI_NB_SELECTION_RUNS": "10"},
+    "03": {
+        "JAXFDI_NB_STEPS": "40",
+        "JAXFDI_NB_TRAIN_RUNS": "4",
+        "JAXFDI_NB_RUNS": "20",
+        "JAXFDI_NB_SELECTION_RUNS": "10",
+    },
     "04": {"JAXFDI_NB_RUNS": "10"},
     "05": {"JAXFDI_NB_RUNS": "10"},
     "06": {"JAXFDI_NB_RUNS": "4"},
@@ -51,8 +56,12 @@ def execute(path: Path, timeout: int = 1800) -> Path:
     os.environ.update(sizes)
     start = time.perf_counter()
     try:
-        NotebookClient(nb, timeout=timeout, kernel_name="python3",
-                       resources={"metadata": {"path": str(SOURCE)}}).execute()
+        NotebookClient(
+            nb,
+            timeout=timeout,
+            kernel_name="python3",
+            resources={"metadata": {"path": str(SOURCE)}},
+        ).execute()
     finally:
         for k, v in saved.items():
             if v is None:
@@ -63,10 +72,15 @@ def execute(path: Path, timeout: int = 1800) -> Path:
 
     import jaxfdi
 
-    nb.metadata["jaxfdi_docs"] = {"source": f"notebooks/{path.name}",
-                                  "source_sha256": hashlib.sha256(source).hexdigest(), "sizes": sizes,
-                                  "seconds": round(time.perf_counter() - start, 1), "jaxfdi": jaxfdi.__version__,
-                                  "jax": jax.__version__, "executed": time.strftime("%Y-%m-%d", time.gmtime())}
+    nb.metadata["jaxfdi_docs"] = {
+        "source": f"notebooks/{path.name}",
+        "source_sha256": hashlib.sha256(source).hexdigest(),
+        "sizes": sizes,
+        "seconds": round(time.perf_counter() - start, 1),
+        "jaxfdi": jaxfdi.__version__,
+        "jax": jax.__version__,
+        "executed": time.strftime("%Y-%m-%d", time.gmtime()),
+    }
     TARGET.mkdir(parents=True, exist_ok=True)
     out = TARGET / path.name
     nbformat.write(nb, out)
@@ -94,14 +108,23 @@ def refresh_text(path: Path) -> Path:
 def main(prefixes: list[str]) -> int:
     text_only = "--text" in prefixes
     prefixes = [p for p in prefixes if p != "--text"]
-    paths = sorted(p for p in SOURCE.glob("*.ipynb") if not prefixes or any(p.name.startswith(x) for x in prefixes))
+    paths = sorted(
+        p
+        for p in SOURCE.glob("*.ipynb")
+        if not prefixes or any(p.name.startswith(x) for x in prefixes)
+    )
     for path in paths:
         if text_only:
-            print(f"{path.name}: text refreshed -> {refresh_text(path).relative_to(ROOT)}", flush=True)
+            print(
+                f"{path.name}: text refreshed -> {refresh_text(path).relative_to(ROOT)}", flush=True
+            )
             continue
         start = time.perf_counter()
         out = execute(path)
-        print(f"{path.name}: {time.perf_counter() - start:.0f} s -> {out.relative_to(ROOT)}", flush=True)
+        print(
+            f"{path.name}: {time.perf_counter() - start:.0f} s -> {out.relative_to(ROOT)}",
+            flush=True,
+        )
     return 0
 
 

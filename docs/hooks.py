@@ -7,6 +7,7 @@
   (``docs/execute_notebooks.py``): a copy whose code cells are unchanged takes the new
   text and keeps its outputs; any other is executed again at its docs size (minutes).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -26,7 +27,11 @@ def stale_copies(root: Path = ROOT) -> list[str]:
     stale = []
     for source in sorted((root / "notebooks").glob("*.ipynb")):
         copy = root / "docs" / "examples" / source.name
-        meta = json.loads(copy.read_text()).get("metadata", {}).get("jaxfdi_docs", {}) if copy.exists() else {}
+        meta = (
+            json.loads(copy.read_text()).get("metadata", {}).get("jaxfdi_docs", {})
+            if copy.exists()
+            else {}
+        )
         if meta.get("source_sha256") != hashlib.sha256(source.read_bytes()).hexdigest():
             stale.append(source.name)
     return stale
@@ -35,7 +40,9 @@ def stale_copies(root: Path = ROOT) -> list[str]:
 def regenerate(names: list[str], root: Path = ROOT) -> None:
     """Bring the copies of ``names`` up to date: the text alone when the code is unchanged,
     else a fresh execution."""
-    spec = importlib.util.spec_from_file_location("execute_notebooks", root / "docs" / "execute_notebooks.py")
+    spec = importlib.util.spec_from_file_location(
+        "execute_notebooks", root / "docs" / "execute_notebooks.py"
+    )
     runner = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(runner)
     for name in names:
@@ -54,9 +61,14 @@ def on_pre_build(config, **kwargs):
         regenerate(names, ROOT)
         names = stale_copies(ROOT)
     for name in names:
-        log.warning("examples: docs/examples/%s is missing or was executed from an older notebooks/%s: "
-                    "%s=1 mkdocs build, or python docs/execute_notebooks.py [--text] %s", name, name, REGENERATE,
-                    name[:2])
+        log.warning(
+            "examples: docs/examples/%s is missing or was executed from an older notebooks/%s: "
+            "%s=1 mkdocs build, or python docs/execute_notebooks.py [--text] %s",
+            name,
+            name,
+            REGENERATE,
+            name[:2],
+        )
     for copy in sorted((ROOT / "docs" / "examples").glob("*.ipynb")):
         if not (ROOT / "notebooks" / copy.name).exists():
             log.warning("examples: %s has no source notebook", copy.name)

@@ -5,13 +5,22 @@ the study engine, detection summaries. Then ``filters``, ``detection`` (residual
 ``control``, ``tuning``, ``gnss``, ``ins``, ``scenarios`` (the papers' studies), ``plotting``, ``streaming``,
 ``distributed``; the public API is their ``__all__`` (one documentation page).
 """
+
 from jaxfdi import _version, detection, filters, models
-from jaxfdi._monitor import MonitorResult, monitor
-from jaxfdi._simulate import linear_simulator, simulate, simulator
-from jaxfdi._faults import Fault, FaultKind, concat_faults, fault, fault_group, no_fault, stack_faults
+from jaxfdi._faults import (
+    Fault,
+    FaultKind,
+    concat_faults,
+    fault,
+    fault_group,
+    no_fault,
+    stack_faults,
+)
 from jaxfdi._loop import LoopResult, run_loop, state_feedback
 from jaxfdi._metrics import DetectionRecord, DetectionSummary, summarize_detection
+from jaxfdi._monitor import MonitorResult, monitor
 from jaxfdi._montecarlo import monte_carlo
+from jaxfdi._simulate import linear_simulator, simulate, simulator
 from jaxfdi._stages import FDI, Controller, Plant, Scorer
 from jaxfdi._study import Structure, Study, run_study
 
@@ -41,14 +50,25 @@ def enable_compilation_cache(path: str | None = None) -> str:
 
     import jax
 
-    cache = path or os.environ.get("JAXFDI_CACHE_DIR", str(Path.home() / ".cache" / "jaxfdi" / "xla"))
+    cache = path or os.environ.get(
+        "JAXFDI_CACHE_DIR", str(Path.home() / ".cache" / "jaxfdi" / "xla")
+    )
     jax.config.update("jax_compilation_cache_dir", cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
     return cache
 
 
-_LAZY_SUBMODULES = ("control", "tuning", "gnss", "ins", "scenarios", "plotting", "streaming", "distributed")
+_LAZY_SUBMODULES = (
+    "control",
+    "tuning",
+    "gnss",
+    "ins",
+    "scenarios",
+    "plotting",
+    "streaming",
+    "distributed",
+)
 
 
 def __getattr__(name: str):
@@ -67,15 +87,46 @@ def __dir__():
 
 __all__ = [
     # faults and simulation
-    "Fault", "FaultKind", "fault", "fault_group", "no_fault", "stack_faults", "concat_faults", "simulator",
-    "linear_simulator", "simulate",
+    "Fault",
+    "FaultKind",
+    "fault",
+    "fault_group",
+    "no_fault",
+    "stack_faults",
+    "concat_faults",
+    "simulator",
+    "linear_simulator",
+    "simulate",
     # the closed loop, the monitor, Monte Carlo, studies, summaries
-    "Plant", "FDI", "Controller", "Scorer", "run_loop", "state_feedback", "LoopResult", "monitor",
-    "MonitorResult", "monte_carlo", "Study", "Structure", "run_study", "DetectionRecord",
-    "summarize_detection", "DetectionSummary",
+    "Plant",
+    "FDI",
+    "Controller",
+    "Scorer",
+    "run_loop",
+    "state_feedback",
+    "LoopResult",
+    "monitor",
+    "MonitorResult",
+    "monte_carlo",
+    "Study",
+    "Structure",
+    "run_study",
+    "DetectionRecord",
+    "summarize_detection",
+    "DetectionSummary",
     # set-up
-    "enable_x64", "enable_compilation_cache",
+    "enable_x64",
+    "enable_compilation_cache",
     # subpackages
-    "filters", "detection", "models", "control", "tuning", "gnss", "ins", "scenarios", "plotting",
-    "streaming", "distributed",
+    "filters",
+    "detection",
+    "models",
+    "control",
+    "tuning",
+    "gnss",
+    "ins",
+    "scenarios",
+    "plotting",
+    "streaming",
+    "distributed",
 ]

@@ -1,4 +1,5 @@
-from jaxfdi.cli import main
 import sys
+
+from jaxfdi.cli import main
 
 sys.exit(main())

@@ -17,6 +17,7 @@ Tolerances (``eps`` of the array's float dtype), relative so that a covariance o
 - PSD: ``lambda_min >= -100 n eps lambda_max`` (eigenvalues of the symmetric part, in float64); positive definite:
   ``lambda_min > 100 n eps lambda_max`` and ``lambda_max > 0``.
 """
+
 from __future__ import annotations
 
 import numbers
@@ -107,7 +108,9 @@ def check_finite(name: str, x: Any, meaning: str = "") -> None:
         where = tuple(int(i) for i in np.argwhere(~np.isfinite(value))[0]) if value.ndim else ()
         at = f" at index {where}" if where else ""
         extra = f" ({meaning})" if meaning else ""
-        raise ValueError(f"{name}: expected finite values{extra}, got {received(value)} (non-finite{at})")
+        raise ValueError(
+            f"{name}: expected finite values{extra}, got {received(value)} (non-finite{at})"
+        )
 
 
 def check_inputs(us: Any) -> jax.Array:
@@ -132,9 +135,7 @@ def float_dtype(*arrays: Any):
 def check_shape(name: str, x: Any, expected: tuple, meaning: str = "") -> None:
     """Raise if ``x`` does not have shape ``expected`` (``None`` entries match anything)."""
     shape = shape_of(x)
-    ok = len(shape) == len(expected) and all(
-        e is None or e == s for e, s in zip(expected, shape)
-    )
+    ok = len(shape) == len(expected) and all(e is None or e == s for e, s in zip(expected, shape))
     if not ok:
         exp = _fmt(tuple("*" if e is None else e for e in expected))
         extra = f" ({meaning})" if meaning else ""
@@ -155,7 +156,9 @@ def check_square(name: str, x: Any, size: int | None = None, meaning: str = "") 
     if len(shape) != 2 or shape[0] != shape[1] or (size is not None and shape[0] != size):
         n = size if size is not None else "n"
         extra = f" ({meaning})" if meaning else ""
-        raise ValueError(f"{name}: expected a square matrix of shape ({n}, {n}){extra}, got {_fmt(shape)}")
+        raise ValueError(
+            f"{name}: expected a square matrix of shape ({n}, {n}){extra}, got {_fmt(shape)}"
+        )
     check_finite(name, x, meaning)
     return shape[0]
 
@@ -174,20 +177,28 @@ def check_covariance(name: str, x: Any, size: int | None = None, definite: bool 
     eps = _eps(value)
     scale = float(np.max(np.abs(value)))
     if np.max(np.abs(value - value.T)) > 1e3 * eps * scale:
-        raise ValueError(f"{name}: covariance of shape ({n}, {n}) must be symmetric, got {received(value)} "
-                         f"(max |X - X^T| = {np.max(np.abs(value - value.T)):.3g})")
+        raise ValueError(
+            f"{name}: covariance of shape ({n}, {n}) must be symmetric, got {received(value)} "
+            f"(max |X - X^T| = {np.max(np.abs(value - value.T)):.3g})"
+        )
     if np.any(np.diagonal(value) < 0):
-        raise ValueError(f"{name}: covariance of shape ({n}, {n}) has a negative variance on its diagonal, got "
-                         f"{received(np.diagonal(value))}")
+        raise ValueError(
+            f"{name}: covariance of shape ({n}, {n}) has a negative variance on its diagonal, got "
+            f"{received(np.diagonal(value))}"
+        )
     eig = np.linalg.eigvalsh(0.5 * (value + value.T).astype(np.float64))
     top = max(float(eig[-1]), 0.0)
     tol = 100.0 * n * eps * top
     if definite and not (eig[0] > tol and top > 0):
-        raise ValueError(f"{name}: expected a positive definite covariance of shape ({n}, {n}), got smallest "
-                         f"eigenvalue {eig[0]:.3g} (largest {eig[-1]:.3g}; tolerance {tol:.3g})")
+        raise ValueError(
+            f"{name}: expected a positive definite covariance of shape ({n}, {n}), got smallest "
+            f"eigenvalue {eig[0]:.3g} (largest {eig[-1]:.3g}; tolerance {tol:.3g})"
+        )
     if eig[0] < -tol:
-        raise ValueError(f"{name}: expected a positive semi-definite covariance of shape ({n}, {n}), got smallest "
-                         f"eigenvalue {eig[0]:.3g} (largest {eig[-1]:.3g}; tolerance {tol:.3g})")
+        raise ValueError(
+            f"{name}: expected a positive semi-definite covariance of shape ({n}, {n}), got smallest "
+            f"eigenvalue {eig[0]:.3g} (largest {eig[-1]:.3g}; tolerance {tol:.3g})"
+        )
     return n
 
 
@@ -203,13 +214,20 @@ def check_probability(name: str, p: Any, open_interval: bool = True) -> None:
         raise ValueError(f"{name}: expected a probability in {rng}, got {received(value)}")
 
 
-def check_int(name: str, value: Any, minimum: int | None = None, maximum: int | None = None,
-              meaning: str = "an integer") -> int:
+def check_int(
+    name: str,
+    value: Any,
+    minimum: int | None = None,
+    maximum: int | None = None,
+    meaning: str = "an integer",
+) -> int:
     """A concrete integer count or index (Python/NumPy integer or 0-d integer array; not a bool, not an integral
     float) in ``[minimum, maximum]``; returned as int."""
     kind = _kind(value)
     if isinstance(value, jax.core.Tracer):
-        raise TypeError(f"{name}: expected {meaning} known at trace time (a Python int), got {received(value)}")
+        raise TypeError(
+            f"{name}: expected {meaning} known at trace time (a Python int), got {received(value)}"
+        )
     if kind not in "iu" or np.ndim(value) != 0:
         raise TypeError(f"{name}: expected {meaning} (a Python int), got {received(value)}")
     number = int(value)
@@ -220,8 +238,13 @@ def check_int(name: str, value: Any, minimum: int | None = None, maximum: int | 
     return number
 
 
-def check_int_array(name: str, value: Any, minimum: int | None = None, maximum: int | None = None,
-                    meaning: str = "integers") -> None:
+def check_int_array(
+    name: str,
+    value: Any,
+    minimum: int | None = None,
+    maximum: int | None = None,
+    meaning: str = "integers",
+) -> None:
     """Integer entries (any shape; floats refused), within ``[minimum, maximum]`` when concrete (traced integer
     arrays pass: checked by whoever made them)."""
     kind = _kind(value)
@@ -230,18 +253,30 @@ def check_int_array(name: str, value: Any, minimum: int | None = None, maximum: 
     array = concrete(value)
     if array is None or array.size == 0:
         return
-    if (minimum is not None and array.min() < minimum) or (maximum is not None and array.max() > maximum):
+    if (minimum is not None and array.min() < minimum) or (
+        maximum is not None and array.max() > maximum
+    ):
         low = "-inf" if minimum is None else minimum
         high = "inf" if maximum is None else maximum
         raise ValueError(f"{name}: expected {meaning} in [{low}, {high}], got {received(array)}")
 
 
-def check_scalar(name: str, value: Any, low: float | None = None, high: float | None = None, *,
-                 low_open: bool = False, high_open: bool = False, meaning: str = "a real scalar") -> None:
+def check_scalar(
+    name: str,
+    value: Any,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+    meaning: str = "a real scalar",
+) -> None:
     """A real finite scalar in ``low .. high`` (open or closed ends) when concrete; a traced scalar passes."""
     check_real(name, value, meaning)
     if np.ndim(value) != 0:
-        raise ValueError(f"{name}: expected {meaning} (shape ()), got shape {_fmt(shape_of(value))}")
+        raise ValueError(
+            f"{name}: expected {meaning} (shape ()), got shape {_fmt(shape_of(value))}"
+        )
     array = concrete(value)
     if array is None:
         return
@@ -251,8 +286,12 @@ def check_scalar(name: str, value: Any, low: float | None = None, high: float | 
     if not np.isfinite(number) or below or above:
         left = "(" if low_open else "["
         right = ")" if high_open else "]"
-        interval = f"{left}{'-inf' if low is None else low}, {'inf' if high is None else high}{right}"
-        raise ValueError(f"{name}: expected {meaning}, finite, in {interval}, got {received(value)}")
+        interval = (
+            f"{left}{'-inf' if low is None else low}, {'inf' if high is None else high}{right}"
+        )
+        raise ValueError(
+            f"{name}: expected {meaning}, finite, in {interval}, got {received(value)}"
+        )
 
 
 def check_positive(name: str, value: Any, meaning: str = "a positive real scalar") -> None:

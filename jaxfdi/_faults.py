@@ -13,6 +13,7 @@ fault (``active_label``).
 A plant may give a kind more physics: the reaction-wheel scenario reads STOP as "speed to 0, momentum to the body"
 and STUCK as "speed freezes" (``scenarios.reaction_wheels.wheel_fault``).
 """
+
 from __future__ import annotations
 
 import enum
@@ -43,6 +44,7 @@ class FaultKind(enum.IntEnum):
       STOP: 7, ``0``: the component stops (no output)
       DEAD: 8, ``NaN``: a dead or disconnected sensor (sensors only)
     """
+
     NONE = 0
     BIAS = 1
     RAMP = 2
@@ -56,6 +58,7 @@ class FaultKind(enum.IntEnum):
 
 class Target(enum.IntEnum):
     """Where a fault acts: on an actuator (input) or a sensor (measurement) component."""
+
     ACTUATOR = 0
     SENSOR = 1
 
@@ -93,11 +96,15 @@ def _enum_value(name: str, value, enum_type):
         return enum_type[value.upper()]
     if isinstance(value, enum_type):
         return value
-    _checks.check_int_array(name, value, meaning=f"one of {expected} (a name, the enum or its integer)")
+    _checks.check_int_array(
+        name, value, meaning=f"one of {expected} (a name, the enum or its integer)"
+    )
     concrete = _checks.concrete(value)
     if concrete is not None and not np.all(np.isin(concrete, [e.value for e in enum_type])):
-        raise ValueError(f"{name}: expected one of {expected} (or their integers "
-                         f"{[e.value for e in enum_type]}), got {_checks.received(concrete)}")
+        raise ValueError(
+            f"{name}: expected one of {expected} (or their integers "
+            f"{[e.value for e in enum_type]}), got {_checks.received(concrete)}"
+        )
     return value
 
 
@@ -124,17 +131,33 @@ def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, l
         _checks.check_finite(name, value)
     onsets, ends = _checks.concrete(onset), _checks.concrete(end)
     if onsets is not None and ends is not None and np.any((ends <= onsets) & (onsets < NEVER)):
-        raise ValueError(f"end: expected a step after the onset (end > onset), got end {_checks.received(ends)} "
-                         f"for onset {_checks.received(onsets)}")
-    kinds, sizes, targets = _checks.concrete(kind), _checks.concrete(magnitude), _checks.concrete(target)
-    if kinds is not None and targets is not None and np.any((kinds == FaultKind.DEAD) & (targets == Target.ACTUATOR)):
-        raise ValueError("kind: DEAD (a NaN output) is a sensor fault; an actuator that stops is STOP, got DEAD on "
-                         "an actuator")
+        raise ValueError(
+            f"end: expected a step after the onset (end > onset), got end {_checks.received(ends)} "
+            f"for onset {_checks.received(onsets)}"
+        )
+    kinds, sizes, targets = (
+        _checks.concrete(kind),
+        _checks.concrete(magnitude),
+        _checks.concrete(target),
+    )
+    if (
+        kinds is not None
+        and targets is not None
+        and np.any((kinds == FaultKind.DEAD) & (targets == Target.ACTUATOR))
+    ):
+        raise ValueError(
+            "kind: DEAD (a NaN output) is a sensor fault; an actuator that stops is STOP, got DEAD on "
+            "an actuator"
+        )
     if kinds is not None and sizes is not None:
-        loss = np.broadcast_to(kinds == FaultKind.EFFECTIVENESS, np.broadcast_shapes(np.shape(kinds), np.shape(sizes)))
+        loss = np.broadcast_to(
+            kinds == FaultKind.EFFECTIVENESS, np.broadcast_shapes(np.shape(kinds), np.shape(sizes))
+        )
         if np.any(loss & ((sizes < 0) | (sizes > 1))):
-            raise ValueError(f"magnitude: expected an effectiveness loss in [0, 1] (1 = no effect at all), got "
-                             f"{_checks.received(sizes)}")
+            raise ValueError(
+                f"magnitude: expected an effectiveness loss in [0, 1] (1 = no effect at all), got "
+                f"{_checks.received(sizes)}"
+            )
     return Fault(
         kind=jnp.asarray(kind, jnp.int32),
         target=jnp.asarray(target, jnp.int32),
@@ -147,7 +170,9 @@ def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, l
     )
 
 
-def fault_group(kind, target, components, onset, magnitudes, slopes=0.0, end=NEVER, label=-1) -> Fault:
+def fault_group(
+    kind, target, components, onset, magnitudes, slopes=0.0, end=NEVER, label=-1
+) -> Fault:
     """One fault on a group of components, labelled as one: a stack (leading axis G).
 
     Entry ``g`` acts on ``components[g]`` with ``magnitudes[g]``, ``slopes[g]`` (scalars broadcast), sharing kind,
@@ -163,19 +188,33 @@ def fault_group(kind, target, components, onset, magnitudes, slopes=0.0, end=NEV
       ``Fault`` with leaves of a leading axis G (for ``concat_faults`` and the simulator).
     """
     if np.size(components) == 0:
-        raise ValueError(f"components: expected shape (G,) with G >= 1, got {_checks.received(components)}")
+        raise ValueError(
+            f"components: expected shape (G,) with G >= 1, got {_checks.received(components)}"
+        )
     _checks.check_int_array("components", components, 0, meaning="component indices >= 0")
     components = jnp.asarray(components, jnp.int32)
     if components.ndim != 1 or components.shape[0] < 1:
-        raise ValueError(f"components: expected shape (G,) with G >= 1, got {tuple(components.shape)}")
+        raise ValueError(
+            f"components: expected shape (G,) with G >= 1, got {tuple(components.shape)}"
+        )
     size = components.shape[0]
     for name, value in (("magnitudes", magnitudes), ("slopes", slopes)):
         shape = _checks.shape_of(value)
         if len(shape) not in (0, 1) or (len(shape) == 1 and shape[0] != size):
-            raise ValueError(f"{name}: expected a scalar or shape ({size},) like components, got {shape}")
+            raise ValueError(
+                f"{name}: expected a scalar or shape ({size},) like components, got {shape}"
+            )
     entries = [
-        fault(kind, target, components[g], onset, jnp.broadcast_to(jnp.asarray(magnitudes), (size,))[g],
-              jnp.broadcast_to(jnp.asarray(slopes), (size,))[g], end, label)
+        fault(
+            kind,
+            target,
+            components[g],
+            onset,
+            jnp.broadcast_to(jnp.asarray(magnitudes), (size,))[g],
+            jnp.broadcast_to(jnp.asarray(slopes), (size,))[g],
+            end,
+            label,
+        )
         for g in range(size)
     ]
     return stack_faults(entries)
@@ -209,9 +248,13 @@ def concat_faults(*faults: Fault) -> Fault:
         raise ValueError("faults: expected at least one Fault, got none")
     for i, f in enumerate(faults):
         if not isinstance(f, Fault):
-            raise TypeError(f"faults: expected Fault arguments (fault, fault_group, ...), got {_checks.received(f)} "
-                            f"at position {i}")
-    return jax.tree_util.tree_map(lambda *leaves: jnp.concatenate(leaves), *(as_stack(f) for f in faults))
+            raise TypeError(
+                f"faults: expected Fault arguments (fault, fault_group, ...), got {_checks.received(f)} "
+                f"at position {i}"
+            )
+    return jax.tree_util.tree_map(
+        lambda *leaves: jnp.concatenate(leaves), *(as_stack(f) for f in faults)
+    )
 
 
 def is_active(f: Fault, k: Array) -> Array:
@@ -251,23 +294,33 @@ def episodes(faults: Fault, num_inputs: int) -> tuple[Array, Array, Array]:
     ``onset = end = NEVER``, label 0. Fixed shapes (jits, vmaps over runs); feeds ``metrics.episode_record_init``.
     """
     faults = as_stack(faults)
-    ends = jnp.where(faults.kind == FaultKind.IMPULSE, jnp.minimum(faults.end, faults.onset + 1), faults.end)
+    ends = jnp.where(
+        faults.kind == FaultKind.IMPULSE, jnp.minimum(faults.end, faults.onset + 1), faults.end
+    )
     labels = jax.vmap(fault_label, in_axes=(0, None))(faults, num_inputs)
     count = faults.kind.shape[0]
-    same = ((faults.onset[:, None] == faults.onset[None, :]) & (ends[:, None] == ends[None, :])
-            & (labels[:, None] == labels[None, :]) & (faults.kind != FaultKind.NONE)[None, :])
+    same = (
+        (faults.onset[:, None] == faults.onset[None, :])
+        & (ends[:, None] == ends[None, :])
+        & (labels[:, None] == labels[None, :])
+        & (faults.kind != FaultKind.NONE)[None, :]
+    )
     earlier = jnp.arange(count)[None, :] < jnp.arange(count)[:, None]
     valid = (faults.kind != FaultKind.NONE) & ~jnp.any(same & earlier, axis=1)
     never = jnp.asarray(NEVER, jnp.int32)
-    return (jnp.where(valid, faults.onset, never).astype(jnp.int32), jnp.where(valid, ends, never).astype(jnp.int32),
-            jnp.where(valid, labels, 0).astype(jnp.int32))
+    return (
+        jnp.where(valid, faults.onset, never).astype(jnp.int32),
+        jnp.where(valid, ends, never).astype(jnp.int32),
+        jnp.where(valid, labels, 0).astype(jnp.int32),
+    )
 
 
 def as_stack(f: Fault) -> Fault:
     """Leaves (F,): scalar faults become a stack of one; a stack's scalar leaf (hand-built, no ``label``) broadcast."""
     shape = jnp.shape(f.kind) if jnp.ndim(f.kind) else (1,)
     return jax.tree_util.tree_map(
-        lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), shape) if jnp.ndim(leaf) == 0 else leaf, f)
+        lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), shape) if jnp.ndim(leaf) == 0 else leaf, f
+    )
 
 
 def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> tuple[Array, Array]:
@@ -315,7 +368,9 @@ def apply_fault(f: Fault, k: Array, signal: Array, target: int, held: Array) -> 
     return jnp.where(here, faulty, signal).astype(signal.dtype), held
 
 
-def apply_faults(faults: Fault, k: Array, signal: Array, target: int, held: Array) -> tuple[Array, Array]:
+def apply_faults(
+    faults: Fault, k: Array, signal: Array, target: int, held: Array
+) -> tuple[Array, Array]:
     """Apply a stack of faults (leaves with a leading axis F) in order; ``held`` is (F,)."""
 
     def body(sig, fault_and_held):

@@ -13,6 +13,7 @@ Each run rate (``RUN_RATES``) of a row that counts its runs gets its two-sided 9
 (``rate_interval``) in ``<rate>_low``, ``<rate>_high`` over the healthy runs ``n = runs - unhealthy_runs`` (the study's
 ``unhealthy`` column); NaN where rate times ``n`` is not a count (another denominator), ``n`` is unknown, or no rate.
 """
+
 from __future__ import annotations
 
 import html
@@ -24,7 +25,13 @@ import numpy as np
 from jaxfdi._metrics import rate_interval
 
 #: the per-run rates of ``fault_row`` whose intervals the frame adds
-RUN_RATES = ("detection_rate", "missed_detection_rate", "isolation_rate", "false_alarm_rate", "pre_onset_alarm_rate")
+RUN_RATES = (
+    "detection_rate",
+    "missed_detection_rate",
+    "isolation_rate",
+    "false_alarm_rate",
+    "pre_onset_alarm_rate",
+)
 
 
 def _plain(value: Any) -> Any:
@@ -52,8 +59,14 @@ def tidy_rows(rows: list[dict], methods: tuple[str, ...] = ()) -> list[dict]:
         per_method = {k: row[k] for k in methods if isinstance(row.get(k), dict)}
         if per_method:
             row = {**{k: v for k, v in row.items() if k not in per_method}, "methods": per_method}
-        nested = next((k for k, v in row.items()
-                       if isinstance(v, dict) and v and all(isinstance(x, dict) for x in v.values())), None)
+        nested = next(
+            (
+                k
+                for k, v in row.items()
+                if isinstance(v, dict) and v and all(isinstance(x, dict) for x in v.values())
+            ),
+            None,
+        )
         if nested is None:
             out.append(_flat(row))
             continue
@@ -62,14 +75,22 @@ def tidy_rows(rows: list[dict], methods: tuple[str, ...] = ()) -> list[dict]:
         for name, inner in row[nested].items():
             clash = (set(inner) | {column}) & set(rest)
             if clash:
-                raise ValueError(f"rows: the entries of {nested!r} repeat the row's keys {sorted(clash)}")
+                raise ValueError(
+                    f"rows: the entries of {nested!r} repeat the row's keys {sorted(clash)}"
+                )
             out.extend(tidy_rows([{**rest, column: name, **inner}]))
     return out
 
 
 def _interval(rate: Any, n: Any, level: float) -> tuple[float, float]:
     nan = float("nan")
-    if rate is None or n is None or isinstance(rate, (str, bool)) or not math.isfinite(rate) or not n > 0:
+    if (
+        rate is None
+        or n is None
+        or isinstance(rate, (str, bool))
+        or not math.isfinite(rate)
+        or not n > 0
+    ):
         return nan, nan
     count = rate * n
     if abs(count - round(count)) > 1e-6:
@@ -77,8 +98,12 @@ def _interval(rate: Any, n: Any, level: float) -> tuple[float, float]:
     return rate_interval(int(round(count)), int(n), level)
 
 
-def results_frame(rows: list[dict], level: float = 0.95, methods: tuple[str, ...] = (),
-                  unhealthy: str = "unhealthy_runs"):
+def results_frame(
+    rows: list[dict],
+    level: float = 0.95,
+    methods: tuple[str, ...] = (),
+    unhealthy: str = "unhealthy_runs",
+):
     """A study's rows as a pandas DataFrame: one row per table row (``tidy_rows``), with the ``level`` Clopper-Pearson
     interval of each run rate beside it over ``runs`` less the ``unhealthy`` column (module docstring).
 
@@ -95,7 +120,11 @@ def results_frame(rows: list[dict], level: float = 0.95, methods: tuple[str, ...
         bounds = []
         for row in flat:
             known = unhealthy in row or not any(k.startswith("unhealthy") for k in row)
-            n = row["runs"] - (row.get(unhealthy) or 0) if known and row.get("runs") is not None else None
+            n = (
+                row["runs"] - (row.get(unhealthy) or 0)
+                if known and row.get("runs") is not None
+                else None
+            )
             bounds.append(_interval(row.get(rate), n, level))
         at = frame.columns.get_loc(rate) + 1
         frame.insert(at, f"{rate}_low", [b[0] for b in bounds])
@@ -112,20 +141,34 @@ def results_html(frame, config: dict | None = None, group: str = "section") -> s
         runs = config.get("runs", config.get("runs_per_fault", config.get("runs_per_case")))
         seed = config.get("seed")
         if runs is not None:
-            parts.append(f"<p>{html.escape(str(runs))} runs per case, seed {html.escape(str(seed))}; "
-                         "rates with their 95 % Clopper-Pearson intervals (<code>_low</code>, <code>_high</code>)</p>")
-    groups = ([(None, frame)] if group is None
-              else [(name, part) for name, part in frame.groupby(group, sort=False, dropna=False)])
+            parts.append(
+                f"<p>{html.escape(str(runs))} runs per case, seed {html.escape(str(seed))}; "
+                "rates with their 95 % Clopper-Pearson intervals (<code>_low</code>, <code>_high</code>)</p>"
+            )
+    groups = (
+        [(None, frame)]
+        if group is None
+        else [(name, part) for name, part in frame.groupby(group, sort=False, dropna=False)]
+    )
     for name, part in groups:
         if name is not None:
             parts.append(f"<h4>{html.escape(str(name))}</h4>")
             part = part.drop(columns=[group])
-        parts.append(part.dropna(axis=1, how="all").to_html(index=False, na_rep="-", float_format="{:.4g}".format))
+        parts.append(
+            part.dropna(axis=1, how="all").to_html(
+                index=False, na_rep="-", float_format="{:.4g}".format
+            )
+        )
     return "\n".join(parts)
 
 
-def study_result(cls=None, *, group: str = "section", methods: tuple[str, ...] = (),
-                 unhealthy: str = "unhealthy_runs"):
+def study_result(
+    cls=None,
+    *,
+    group: str = "section",
+    methods: tuple[str, ...] = (),
+    unhealthy: str = "unhealthy_runs",
+):
     """Class decorator for a study's result (a NamedTuple with ``config``, ``rows``): ``to_frame(level=0.95)``
     (``results_frame`` with the study's ``methods`` and ``unhealthy``); ``_repr_html_``, HTML tables per ``group``
     value; a one-line ``repr`` (the per-run arrays are too long to print).

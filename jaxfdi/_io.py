@@ -20,6 +20,7 @@ power cut.
 Provenance: every JSON object from ``write_json`` gets a ``"provenance"`` entry (``provenance()``); the CLI names
 command line and seed with ``recording(argv, seed)``, and its ``.npz`` files carry the same record.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -42,7 +43,9 @@ from jaxfdi._version import __version__
 #: prefix of a study's temporary folder inside its output folder
 TEMP_PREFIX = ".jaxfdi-tmp-"
 #: signals held back while files are published or a temporary folder is removed
-_HELD = tuple(s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s is not None)
+_HELD = tuple(
+    s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s is not None
+)
 
 
 def current_umask() -> int:
@@ -164,7 +167,9 @@ def check_output_dir(out: str | Path, name: str = "out") -> None:
     base = out
     while not base.exists():
         if base.is_symlink():
-            raise ValueError(f"{name}: expected a folder, got {str(out)!r} ({str(base)!r} is a broken link)")
+            raise ValueError(
+                f"{name}: expected a folder, got {str(out)!r} ({str(base)!r} is a broken link)"
+            )
         if base.parent == base:
             break
         base = base.parent
@@ -177,8 +182,9 @@ def check_output_dir(out: str | Path, name: str = "out") -> None:
         os.unlink(probe)
     except OSError as e:
         where = "" if base == out else f" (to be created in {str(base)!r})"
-        raise ValueError(f"{name}: expected a writable folder, got {str(out)!r}{where}: "
-                         f"{e.strerror or e}") from None
+        raise ValueError(
+            f"{name}: expected a writable folder, got {str(out)!r}{where}: {e.strerror or e}"
+        ) from None
 
 
 @contextlib.contextmanager
@@ -196,7 +202,9 @@ def _signals_held() -> Iterator[None]:
 
 def _publish(tmp: Path, out: Path) -> list[Path]:
     """Move every file under ``tmp`` to its place under ``out``, JSON last; a folder target fails before any move."""
-    files = sorted((p for p in tmp.rglob("*") if not p.is_dir()), key=lambda p: (p.suffix == ".json", str(p)))
+    files = sorted(
+        (p for p in tmp.rglob("*") if not p.is_dir()), key=lambda p: (p.suffix == ".json", str(p))
+    )
     targets = [out / p.relative_to(tmp) for p in files]
     clash = [str(t) for t in targets if t.is_dir() and not t.is_symlink()]
     if clash:

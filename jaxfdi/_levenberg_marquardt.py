@@ -15,6 +15,7 @@ converged: ``max_steps`` or a non-finite damping. A small step also ends at a lo
 solvers (``r = 0``) check ``residual`` themselves (``jaxfdi.models.f16.trim``). Not optimistix, to keep four runtime
 dependencies (jax, numpy, optax, chex); the trim problems have 3-6 unknowns (a dense Cholesky suffices).
 """
+
 from __future__ import annotations
 
 from typing import Callable, NamedTuple
@@ -106,7 +107,9 @@ def levenberg_marquardt(
     """
     x0 = jnp.asarray(x0)
     if x0.ndim != 1 or not jnp.issubdtype(x0.dtype, jnp.floating):
-        raise ValueError(f"x0: expected a 1-D float array (n,), got shape {tuple(x0.shape)} dtype {x0.dtype}")
+        raise ValueError(
+            f"x0: expected a 1-D float array (n,), got shape {tuple(x0.shape)} dtype {x0.dtype}"
+        )
     if int(max_steps) < 1:
         raise ValueError(f"max_steps: expected a positive number of iterations, got {max_steps}")
     dtype = x0.dtype
@@ -150,12 +153,23 @@ def levenberg_marquardt(
         first = s.steps == 0
         gain = (s.cost - cost_new) / s.predicted
         accept = first | ((gain > 0) & (s.predicted > 0) & jnp.isfinite(cost_new))
-        damping = jnp.where(first, s.damping,
-                            jnp.where(accept, s.damping * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3),
-                                      s.damping * s.nu))
+        damping = jnp.where(
+            first,
+            s.damping,
+            jnp.where(
+                accept,
+                s.damping * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3),
+                s.damping * s.nu,
+            ),
+        )
         nu = jnp.where(accept, 2.0, 2.0 * s.nu)
-        pick = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
-        x, r, J, cost = pick(candidate, s.x), pick(r_new, s.residual), pick(J_new, s.jacobian), pick(cost_new, s.cost)
+        pick = lambda new, old: jnp.where(accept, new, old)
+        x, r, J, cost = (
+            pick(candidate, s.x),
+            pick(r_new, s.residual),
+            pick(J_new, s.jacobian),
+            pick(cost_new, s.cost),
+        )
         step, predicted, scale, small = next_step(x, r, J, s.scale, damping)
         steps = s.steps + 1
         converged = (jnp.max(jnp.abs(r)) <= tol_r) | small
@@ -163,10 +177,26 @@ def levenberg_marquardt(
         return _State(x, r, J, cost, scale, damping, nu, step, predicted, steps, done, converged)
 
     zero = jnp.zeros((), dtype)
-    state0 = _State(x0, jnp.zeros((m,), dtype), jnp.zeros((m, n), dtype), jnp.asarray(jnp.inf, dtype),
-                    jnp.zeros((n,), dtype), jnp.asarray(initial_damping, dtype), jnp.asarray(2.0, dtype),
-                    jnp.zeros((n,), dtype), zero + 1.0, jnp.zeros((), jnp.int32), jnp.zeros((), bool),
-                    jnp.zeros((), bool))
+    state0 = _State(
+        x0,
+        jnp.zeros((m,), dtype),
+        jnp.zeros((m, n), dtype),
+        jnp.asarray(jnp.inf, dtype),
+        jnp.zeros((n,), dtype),
+        jnp.asarray(initial_damping, dtype),
+        jnp.asarray(2.0, dtype),
+        jnp.zeros((n,), dtype),
+        zero + 1.0,
+        jnp.zeros((), jnp.int32),
+        jnp.zeros((), bool),
+        jnp.zeros((), bool),
+    )
     final = jax.lax.while_loop(lambda s: ~s.done, body, state0)
-    return LeastSquaresResult(final.x, final.residual, final.cost, final.jacobian.T @ final.residual, final.steps,
-                              final.converged)
+    return LeastSquaresResult(
+        final.x,
+        final.residual,
+        final.cost,
+        final.jacobian.T @ final.residual,
+        final.steps,
+        final.converged,
+    )

@@ -22,6 +22,7 @@ vectorise and the written-out algebra only bloats it (engine KF scan: 13.7k HLO 
 Under ``vmap`` or ``grad``, and on GPU (a cuSOLVER call per small factorisation costs more: engine KF 2.8x slower on
 an H200), the algebra stays written out.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -120,7 +121,9 @@ def materialize(tree):
     """
     leaves = jax.tree.leaves(tree)
     first = jnp.ravel(leaves[0])[0]
-    bits = jax.lax.bitcast_convert_type(first, {2: jnp.uint16, 4: jnp.uint32, 8: jnp.uint64}[first.dtype.itemsize])
+    bits = jax.lax.bitcast_convert_type(
+        first, {2: jnp.uint16, 4: jnp.uint32, 8: jnp.uint64}[first.dtype.itemsize]
+    )
     always = (bits | jnp.ones((), bits.dtype)) != 0
     return jax.lax.cond(always, lambda t: t, lambda t: jax.tree.map(jnp.zeros_like, t), tree)
 
@@ -128,6 +131,7 @@ def materialize(tree):
 # Structure-of-arrays forms: a (rows, cols, *batch) stack makes each A[i, j] a contiguous batch vector, so the
 # written-out algorithms below are element-wise over whole batch vectors, which XLA:CPU vectorises (batch-first
 # leaves 5-element strided rows). The 2-D case (no batch axes) is what ``matmul``, ``cholesky`` and solves unroll.
+
 
 def soa_transpose(a: Array) -> Array:
     """Per-matrix transpose of a (rows, cols, *batch) stack."""
@@ -278,20 +282,20 @@ def solve_pivoted(matrix: Array, rhs: Array) -> Array:
     ``tests/filters/test_parallel_kalman.py``); this form has no custom call to wedge. Singular ``A``: inf/NaN, as LU.
     """
     n = matrix.shape[-1]
-    augmented = jnp.concatenate([matrix, rhs.astype(matrix.dtype)], axis=-1)   # (..., n, n + k)
+    augmented = jnp.concatenate([matrix, rhs.astype(matrix.dtype)], axis=-1)  # (..., n, n + k)
     rows = jnp.arange(n)
 
     def eliminate(k, a):
-        column = jnp.where(rows >= k, jnp.abs(a[..., :, k]), -1.0)          # candidates: rows k..n-1
-        pivot = jnp.argmax(column, axis=-1)                                  # (...,)
-        is_pivot = (rows == pivot[..., None]).astype(a.dtype)[..., None]     # (..., n, 1)
-        is_k = (rows == k).astype(a.dtype)[:, None]                          # (n, 1)
-        row_pivot = jnp.sum(is_pivot * a, axis=-2)                           # (..., n + k)
+        column = jnp.where(rows >= k, jnp.abs(a[..., :, k]), -1.0)  # candidates: rows k..n-1
+        pivot = jnp.argmax(column, axis=-1)  # (...,)
+        is_pivot = (rows == pivot[..., None]).astype(a.dtype)[..., None]  # (..., n, 1)
+        is_k = (rows == k).astype(a.dtype)[:, None]  # (n, 1)
+        row_pivot = jnp.sum(is_pivot * a, axis=-2)  # (..., n + k)
         row_k = a[..., k, :]
-        a = a + (is_k - is_pivot) * (row_pivot - row_k)[..., None, :]        # swap rows k and pivot
+        a = a + (is_k - is_pivot) * (row_pivot - row_k)[..., None, :]  # swap rows k and pivot
         normalised = row_pivot / row_pivot[..., k, None]
-        a = a - a[..., :, k, None] * normalised[..., None, :]              # zero column k off row k
-        return a + is_k * normalised[..., None, :]                           # row k = the normalised pivot row
+        a = a - a[..., :, k, None] * normalised[..., None, :]  # zero column k off row k
+        return a + is_k * normalised[..., None, :]  # row k = the normalised pivot row
 
     return jax.lax.fori_loop(0, n, eliminate, augmented)[..., n:]
 
@@ -306,9 +310,11 @@ def det(matrix: Array) -> Array:
         return matrix[..., 0, 0] * matrix[..., 1, 1] - matrix[..., 0, 1] * matrix[..., 1, 0]
     if n == 3:
         a = matrix
-        return (a[..., 0, 0] * (a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1])
-                - a[..., 0, 1] * (a[..., 1, 0] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 0])
-                + a[..., 0, 2] * (a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0]))
+        return (
+            a[..., 0, 0] * (a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1])
+            - a[..., 0, 1] * (a[..., 1, 0] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 0])
+            + a[..., 0, 2] * (a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0])
+        )
     return jnp.linalg.det(matrix)
 
 

@@ -21,6 +21,7 @@ Every scenario, open or closed loop, is this scan with three parts (types: ``jax
 re-runs a filter over its last ``L`` steps (Park et al. 2004's UKF restarts 2-3 steps before the detection) keeps a
 fixed-size ``filters.history.RingBuffer`` and replays it with ``filters.history.replay_filter`` (bounded, jit/vmap).
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -30,11 +31,18 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection._chi2 import Decision
-from jaxfdi._metrics import (DetectionRecord, EpisodeRecord, episode_record_init, episode_record_update, record_init,
-                             record_update, step_health)
+from jaxfdi._metrics import (
+    DetectionRecord,
+    EpisodeRecord,
+    episode_record_init,
+    episode_record_update,
+    record_init,
+    record_update,
+    step_health,
+)
 from jaxfdi._montecarlo import _is_key
 from jaxfdi._stages import FDI, Controller, Plant, Scorer
+from jaxfdi.detection._chi2 import Decision
 
 
 class LoopTrace(NamedTuple):
@@ -71,7 +79,9 @@ class LoopResult(NamedTuple):
 
 def feedforward() -> Controller:
     """The open-loop controller: ``u[k] = exogenous[k]`` (precomputed inputs)."""
-    return Controller(lambda: None, lambda state, k, view, u: (state, jnp.asarray(u)), feedforward=True)
+    return Controller(
+        lambda: None, lambda state, k, view, u: (state, jnp.asarray(u)), feedforward=True
+    )
 
 
 def state_feedback(gain: Array, reference: Callable[[Array], Array] | None = None) -> Controller:
@@ -133,30 +143,47 @@ def run_loop(
       ``keep_history=True`` the ``LoopTrace`` of every step stacked along a leading time axis T (else ``None``); and the
       ``(plant, fdi, controller)`` states after the last step.
     """
-    for name, part, needed in (("plant", plant, ("init", "measure", "advance")), ("fdi", fdi, ("init", "step")),
-                               ("controller", controller, ("init", "step")),
-                               ("scorer", scorer, () if scorer is None else ("init", "update"))):
+    for name, part, needed in (
+        ("plant", plant, ("init", "measure", "advance")),
+        ("fdi", fdi, ("init", "step")),
+        ("controller", controller, ("init", "step")),
+        ("scorer", scorer, () if scorer is None else ("init", "update")),
+    ):
         if not all(callable(getattr(part, field, None)) for field in needed):
-            raise TypeError(f"{name}: expected an object with callable {', '.join(needed)} (a "
-                            f"{name.capitalize() if name != 'fdi' else 'FDI'}), got {_checks.received(part)}")
-    if not _is_key(key) or (jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) and key.shape != ()):
-        raise TypeError(f"key: expected one PRNG key (jax.random.key(seed)), got {_checks.received(key)}")
+            raise TypeError(
+                f"{name}: expected an object with callable {', '.join(needed)} (a "
+                f"{name.capitalize() if name != 'fdi' else 'FDI'}), got {_checks.received(part)}"
+            )
+    if not _is_key(key) or (
+        jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) and key.shape != ()
+    ):
+        raise TypeError(
+            f"key: expected one PRNG key (jax.random.key(seed)), got {_checks.received(key)}"
+        )
     for leaf in jax.tree_util.tree_leaves(exogenous):
         if jnp.ndim(leaf) == 0:
-            raise ValueError(f"exogenous: expected (T, ...) leaves with a leading axis of steps, got a scalar leaf "
-                             f"{_checks.received(leaf)}")
+            raise ValueError(
+                f"exogenous: expected (T, ...) leaves with a leading axis of steps, got a scalar leaf "
+                f"{_checks.received(leaf)}"
+            )
     lengths = {leaf.shape[0] for leaf in jax.tree_util.tree_leaves(exogenous)}
     if len(lengths) > 1:
-        raise ValueError(f"exogenous: every leaf needs the same leading number of steps T, got {sorted(lengths)}")
+        raise ValueError(
+            f"exogenous: every leaf needs the same leading number of steps T, got {sorted(lengths)}"
+        )
     if steps is None:
         if not lengths:
-            raise ValueError("steps: expected the number of steps (no exogenous data to take it from)")
+            raise ValueError(
+                "steps: expected the number of steps (no exogenous data to take it from)"
+            )
         steps = lengths.pop()
     steps = _checks.check_int("steps", steps, 1, meaning="a positive number of steps")
     if lengths and lengths != {steps}:
         raise ValueError(f"exogenous: expected {steps} steps along axis 0, got {sorted(lengths)}")
     if not controller.feedforward and u0 is None:
-        raise ValueError("u0: a closed loop needs the input held before step 0 (e.g. jnp.zeros(nu))")
+        raise ValueError(
+            "u0: a closed loop needs the input held before step 0 (e.g. jnp.zeros(nu))"
+        )
     ctrl0 = controller.init() if controller_state0 is None else controller_state0
     held0 = None if controller.feedforward else jax.tree_util.tree_map(jnp.asarray, u0)
 
@@ -166,15 +193,21 @@ def run_loop(
             ctrl_state, u = controller.step(ctrl_state, k, None, exo)
             plant_state, sensed = plant.measure(plant_state, k, u, step_key)
             y = measurement_of(sensed)
-            fdi_state, view = (fdi_state, y) if fdi.observe is None else fdi.observe(fdi_state, k, y)
+            fdi_state, view = (
+                (fdi_state, y) if fdi.observe is None else fdi.observe(fdi_state, k, y)
+            )
         else:
             plant_state, sensed = plant.measure(plant_state, k, held, step_key)
             y = measurement_of(sensed)
-            fdi_state, view = (fdi_state, y) if fdi.observe is None else fdi.observe(fdi_state, k, y)
+            fdi_state, view = (
+                (fdi_state, y) if fdi.observe is None else fdi.observe(fdi_state, k, y)
+            )
             ctrl_state, u = controller.step(ctrl_state, k, view, exo)
         fdi_state, output = fdi.step(fdi_state, k, y, u)
         plant_state, moved = plant.advance(plant_state, k, u, step_key)
-        return (plant_state, fdi_state, ctrl_state, None if held is None else u), LoopTrace(sensed, view, u, output, moved)
+        return (plant_state, fdi_state, ctrl_state, None if held is None else u), LoopTrace(
+            sensed, view, u, output, moved
+        )
 
     plant0 = plant.init(x0)
     score0 = None
@@ -184,8 +217,15 @@ def run_loop(
 
         def example():
             if not cache:
-                cache.append(jax.eval_shape(
-                    lambda: one_step(plant0, fdi_state0, ctrl0, held0, jnp.arange(1)[0], exo0)[1].output))
+                cache.append(
+                    jax.eval_shape(
+                        lambda: (
+                            one_step(plant0, fdi_state0, ctrl0, held0, jnp.arange(1)[0], exo0)[
+                                1
+                            ].output
+                        )
+                    )
+                )
             return cache[0]
 
         score0 = scorer.init(example)
@@ -198,11 +238,13 @@ def run_loop(
         return (states, score), (trace if keep_history else None)
 
     ((plant_state, fdi_state, ctrl_state, _), score), history = jax.lax.scan(
-        body, ((plant0, fdi_state0, ctrl0, held0), score0), (jnp.arange(int(steps)), exogenous))
+        body, ((plant0, fdi_state0, ctrl0, held0), score0), (jnp.arange(int(steps)), exogenous)
+    )
     return LoopResult(score, history, (plant_state, fdi_state, ctrl_state))
 
 
 # --- scoring ----------------------------------------------------------------------
+
 
 def _decisions(value: Any) -> Any:
     """``value``, a ``Decision`` or a tuple / named tuple / dict of them, checked: a ``TypeError`` names anything
@@ -210,26 +252,39 @@ def _decisions(value: Any) -> Any:
     leaves = jax.tree_util.tree_leaves(value, is_leaf=lambda x: isinstance(x, Decision))
     for leaf in leaves:
         if not isinstance(leaf, Decision):
-            raise TypeError(f"decisions: expected the output's Decision, or a tuple / dict of Decisions, got "
-                            f"{_checks.received(leaf)} in a {type(value).__name__}")
+            raise TypeError(
+                f"decisions: expected the output's Decision, or a tuple / dict of Decisions, got "
+                f"{_checks.received(leaf)} in a {type(value).__name__}"
+            )
     return value
 
 
-def _per_decision_scorer(decisions: Callable[[Any], Any], healthy: Callable[[Any], Array] | None,
-                         new_record: Callable[[], Any], fold: Callable[..., Any], record_type: type,
-                         single: bool) -> Scorer:
+def _per_decision_scorer(
+    decisions: Callable[[Any], Any],
+    healthy: Callable[[Any], Array] | None,
+    new_record: Callable[[], Any],
+    fold: Callable[..., Any],
+    record_type: type,
+    single: bool,
+) -> Scorer:
     """A record (``new_record()``) per decision of the output, each folded with ``fold(record, k, decision, good)``,
     ``good`` = the step healthy and the decision's statistic not NaN (``metrics.step_health``). ``single``:
     ``decisions`` gives one decision (no trace to find out)."""
 
     def is_healthy(output):
-        return healthy(output) if healthy is not None else getattr(output, "healthy", jnp.ones((), bool))
+        return (
+            healthy(output)
+            if healthy is not None
+            else getattr(output, "healthy", jnp.ones((), bool))
+        )
 
     def init(example):
         if single:
             return new_record()
         found = jax.eval_shape(lambda out: _decisions(decisions(out)), example())
-        return jax.tree_util.tree_map(lambda _: new_record(), found, is_leaf=lambda x: isinstance(x, Decision))
+        return jax.tree_util.tree_map(
+            lambda _: new_record(), found, is_leaf=lambda x: isinstance(x, Decision)
+        )
 
     def update(score, k, output):
         found = _decisions(decisions(output))
@@ -238,7 +293,9 @@ def _per_decision_scorer(decisions: Callable[[Any], Any], healthy: Callable[[Any
         def one(record, decision: Decision):
             return fold(record, k, decision, step_health(ok, decision.statistic))
 
-        return jax.tree_util.tree_map(one, score, found, is_leaf=lambda x: isinstance(x, (Decision, record_type)))
+        return jax.tree_util.tree_map(
+            one, score, found, is_leaf=lambda x: isinstance(x, (Decision, record_type))
+        )
 
     return Scorer(init, update)
 
@@ -266,9 +323,19 @@ def detection_scorer(
     dtype = dtype or jnp.result_type(float)
 
     def fold(record: DetectionRecord, k, decision: Decision, good) -> DetectionRecord:
-        return record_update(record, k, decision.alarm, decision.label, decision.estimate, estimate_delay, healthy=good)
+        return record_update(
+            record,
+            k,
+            decision.alarm,
+            decision.label,
+            decision.estimate,
+            estimate_delay,
+            healthy=good,
+        )
 
-    return _per_decision_scorer(decisions, healthy, lambda: record_init(onset, dtype), fold, DetectionRecord, single)
+    return _per_decision_scorer(
+        decisions, healthy, lambda: record_init(onset, dtype), fold, DetectionRecord, single
+    )
 
 
 def episode_scorer(
@@ -290,11 +357,19 @@ def episode_scorer(
     def fold(record: EpisodeRecord, k, decision: Decision, good) -> EpisodeRecord:
         return episode_record_update(record, k, decision.alarm, decision.label, healthy=good)
 
-    return _per_decision_scorer(decisions, healthy, lambda: episode_record_init(*episodes, grace), fold, EpisodeRecord,
-                                single)
+    return _per_decision_scorer(
+        decisions,
+        healthy,
+        lambda: episode_record_init(*episodes, grace),
+        fold,
+        EpisodeRecord,
+        single,
+    )
 
 
-def peak_scorer(values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None) -> Scorer:
+def peak_scorer(
+    values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None
+) -> Scorer:
     """Running maxima: ``score[i] = max over the steps k with active(k)[i] of values(output)[i]`` (0 before any such
     step), e.g. the largest statistic before the onset."""
     _checks.check_callable("values", values, "a function output -> (n,) values")
@@ -313,7 +388,10 @@ def peak_scorer(values: Callable[[Any], Array], active: Callable[[Array], Array]
 def health_scorer(healthy: Callable[[Any], Array] | None = None) -> Scorer:
     """() bool: every step healthy (default: the output's ``healthy`` field)."""
     healthy = healthy or (lambda output: output.healthy)
-    return Scorer(lambda example: jnp.ones((), bool), lambda score, k, output: score & jnp.all(healthy(output)))
+    return Scorer(
+        lambda example: jnp.ones((), bool),
+        lambda score, k, output: score & jnp.all(healthy(output)),
+    )
 
 
 def combine_scorers(**scorers: Scorer) -> Scorer:

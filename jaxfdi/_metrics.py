@@ -24,13 +24,14 @@ memory (a windowed test alarms about a window after a transient fault clears). A
 false alarms (count, first step). Same-onset episodes share a window: detected by the same alarm, each isolated only
 by its own label.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
-import jax
 from jax import Array
 
 from jaxfdi import _checks
@@ -75,17 +76,33 @@ def step_health(healthy: Array, *values) -> Array:
 
 def record_init(onset: Array, dtype=None) -> DetectionRecord:
     """An empty record of a run whose fault starts at step ``onset`` (int >= 0; ``faults.NEVER``: fault-free)."""
-    _checks.check_int_array("onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)")
+    _checks.check_int_array(
+        "onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)"
+    )
     minus_one = jnp.asarray(-1, jnp.int32)
     zero = jnp.asarray(0, jnp.int32)
     nan = jnp.asarray(jnp.nan, dtype or jnp.result_type(float))
-    return DetectionRecord(jnp.asarray(onset, jnp.int32), minus_one, minus_one, zero, zero, minus_one, minus_one, nan,
-                           minus_one)
+    return DetectionRecord(
+        jnp.asarray(onset, jnp.int32),
+        minus_one,
+        minus_one,
+        zero,
+        zero,
+        minus_one,
+        minus_one,
+        nan,
+        minus_one,
+    )
 
 
 def record_update(
-    record: DetectionRecord, k: Array, alarm: Array, label: Array = -1, estimate: Array | None = None,
-    estimate_delay: int = 0, healthy: Array = True,
+    record: DetectionRecord,
+    k: Array,
+    alarm: Array,
+    label: Array = -1,
+    estimate: Array | None = None,
+    estimate_delay: int = 0,
+    healthy: Array = True,
 ) -> DetectionRecord:
     """Fold step ``k``'s decision (alarm, label, estimate) into the record; ``healthy`` False marks the run
     unhealthy from ``k`` on (``step_health``)."""
@@ -101,7 +118,9 @@ def record_update(
         # the estimate of the isolated fault: steps whose label has moved on do not count
         isolated = jnp.where(new_detection, label, record.isolated)
         keep_updating = (detection >= 0) & (k <= detection + estimate_delay) & (label == isolated)
-        estimate_value = jnp.where(keep_updating, jnp.asarray(estimate, record.estimate.dtype), record.estimate)
+        estimate_value = jnp.where(
+            keep_updating, jnp.asarray(estimate, record.estimate.dtype), record.estimate
+        )
     return DetectionRecord(
         record.onset,
         jnp.where(new_first, k, record.first_alarm),
@@ -120,14 +139,22 @@ def _first_unhealthy(first: Array, k: Array, healthy: Array) -> Array:
     return jnp.where((first < 0) & ~jnp.asarray(healthy, bool), k, first)
 
 
-def record_from_alarms(alarms: Array, onset: Array, healthy: Array | None = None) -> DetectionRecord:
+def record_from_alarms(
+    alarms: Array, onset: Array, healthy: Array | None = None
+) -> DetectionRecord:
     """The same record from a whole (T,) alarm history (and optional (T,) bool ``healthy``) at once."""
     if _checks._kind(alarms) not in "biu":
-        raise TypeError(f"alarms: expected a (T,) bool alarm history, got {_checks.received(alarms)}")
+        raise TypeError(
+            f"alarms: expected a (T,) bool alarm history, got {_checks.received(alarms)}"
+        )
     _checks.check_shape("alarms", alarms, (None,), "a (T,) alarm history")
-    _checks.check_int_array("onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)")
+    _checks.check_int_array(
+        "onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)"
+    )
     if healthy is not None:
-        _checks.check_shape("healthy", healthy, _checks.shape_of(alarms), "one flag per step of alarms")
+        _checks.check_shape(
+            "healthy", healthy, _checks.shape_of(alarms), "one flag per step of alarms"
+        )
     k = jnp.arange(alarms.shape[0])
     before = k < onset
     after = alarms & ~before
@@ -197,8 +224,10 @@ def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) 
     _checks.check_positive("Ts", Ts, "a positive sample period")
     seen = np.maximum(np.asarray(record.pre_onset_steps), np.asarray(record.first_alarm) + 1)
     if np.any(seen > horizon):
-        raise ValueError(f"horizon: expected the runs' length, got {horizon}, but {int(np.sum(seen > horizon))} "
-                         f"record(s) saw {int(np.max(seen))} steps")
+        raise ValueError(
+            f"horizon: expected the runs' length, got {horizon}, but {int(np.sum(seen > horizon))} "
+            f"record(s) saw {int(np.max(seen))} steps"
+        )
     onset = np.asarray(record.onset)
     healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
     detection = np.asarray(record.detection_step)
@@ -237,10 +266,14 @@ def delay_statistics(onset, first_alarm, detection_step, Ts: float = 1.0) -> dic
     Returns ``pre_onset_alarm_rate``, ``clean_runs``, ``delay_runs`` and ``delay_mean``, ``delay_median``,
     ``delay_p90`` (unit of ``Ts``) over the clean detected runs; NaN where there are none."""
     _checks.check_positive("Ts", Ts, "a positive sample period")
-    onset, first, detection = (np.asarray(a).astype(np.int64).ravel() for a in (onset, first_alarm, detection_step))
+    onset, first, detection = (
+        np.asarray(a).astype(np.int64).ravel() for a in (onset, first_alarm, detection_step)
+    )
     if not onset.shape == first.shape == detection.shape:
-        raise ValueError(f"onset, first_alarm, detection_step: expected three (R,) arrays, got shapes "
-                         f"{onset.shape}, {first.shape}, {detection.shape}")
+        raise ValueError(
+            f"onset, first_alarm, detection_step: expected three (R,) arrays, got shapes "
+            f"{onset.shape}, {first.shape}, {detection.shape}"
+        )
     pre_alarm = (first >= 0) & (first < onset)
     scored = ~pre_alarm & (detection >= 0)
     delays = (detection[scored] - onset[scored]) * Ts
@@ -255,7 +288,9 @@ def delay_statistics(onset, first_alarm, detection_step, Ts: float = 1.0) -> dic
     }
 
 
-def fault_row(record: DetectionRecord, horizon: int, Ts: float = 1.0, label: int | None = None) -> dict:
+def fault_row(
+    record: DetectionRecord, horizon: int, Ts: float = 1.0, label: int | None = None
+) -> dict:
     """The per-fault table columns from stacked records of one fault's (or the fault-free) runs: ``runs``,
     ``unhealthy_runs``, ``detection_rate``, ``isolation_rate`` (faulty runs detected with ``record.isolated ==
     label`` / faulty runs; NaN without ``label`` or fault-free), ``false_alarm_rate`` (runs alarming before the onset
@@ -271,10 +306,17 @@ def fault_row(record: DetectionRecord, horizon: int, Ts: float = 1.0, label: int
         detected = np.broadcast_to(np.asarray(record.detection_step), onset.shape) >= 0
         isolation = float(np.mean((isolated == label) & detected, where=faulty))
     return {
-        "runs": s.runs, "unhealthy_runs": s.unhealthy_runs, "detection_rate": s.detection_rate,
-        "isolation_rate": isolation, "false_alarm_rate": s.false_alarm_rate,
-        "pre_onset_alarm_rate": s.pre_onset_alarm_rate, "clean_runs": s.clean_runs, "delay_runs": s.delay_runs,
-        "delay_mean_s": s.delay_mean, "delay_median_s": s.delay_median, "delay_p90_s": s.delay_p90,
+        "runs": s.runs,
+        "unhealthy_runs": s.unhealthy_runs,
+        "detection_rate": s.detection_rate,
+        "isolation_rate": isolation,
+        "false_alarm_rate": s.false_alarm_rate,
+        "pre_onset_alarm_rate": s.pre_onset_alarm_rate,
+        "clean_runs": s.clean_runs,
+        "delay_runs": s.delay_runs,
+        "delay_mean_s": s.delay_mean,
+        "delay_median_s": s.delay_median,
+        "delay_p90_s": s.delay_p90,
     }
 
 
@@ -285,15 +327,21 @@ def unhealthy_warning(unhealthy: int, runs: int, detail: str = "", what: str = "
         return ""
     detail = f": {detail}" if detail else ""
     what = f"{what}: " if what else ""
-    return (f"WARNING: {what}{unhealthy} of {runs} runs went numerically bad (filter unhealthy or non-finite "
-            f"statistic{detail}); they are excluded from the rates above")
+    return (
+        f"WARNING: {what}{unhealthy} of {runs} runs went numerically bad (filter unhealthy or non-finite "
+        f"statistic{detail}); they are excluded from the rates above"
+    )
 
 
 def unhealthy_rows_warning(rows: list[dict], what: str = "") -> str:
     """``unhealthy_warning`` for table rows (dicts with ``runs``, ``fault``, maybe ``unhealthy_runs``), per fault."""
     bad = [r for r in rows if r.get("unhealthy_runs")]
-    return unhealthy_warning(sum(r["unhealthy_runs"] for r in bad), sum(r["runs"] for r in rows),
-                             ", ".join(f"{r['fault']} {r['unhealthy_runs']}" for r in bad), what)
+    return unhealthy_warning(
+        sum(r["unhealthy_runs"] for r in bad),
+        sum(r["runs"] for r in rows),
+        ", ".join(f"{r['fault']} {r['unhealthy_runs']}" for r in bad),
+        what,
+    )
 
 
 def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: int) -> Array:
@@ -302,13 +350,22 @@ def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: i
     The last column counts negative predictions (nothing isolated). A label outside ``[0, num_classes)`` (true, or
     a prediction >= num_classes) is refused, not dropped: every run counts once.
     """
-    num_classes = _checks.check_int("num_classes", num_classes, 1, meaning="a positive number of classes")
+    num_classes = _checks.check_int(
+        "num_classes", num_classes, 1, meaning="a positive number of classes"
+    )
     _checks.check_int_array("true_labels", true_labels, 0, num_classes - 1, "class labels")
-    _checks.check_int_array("predicted_labels", predicted_labels, None, num_classes - 1,
-                            "class labels (negative: nothing isolated)")
+    _checks.check_int_array(
+        "predicted_labels",
+        predicted_labels,
+        None,
+        num_classes - 1,
+        "class labels (negative: nothing isolated)",
+    )
     if _checks.shape_of(true_labels) != _checks.shape_of(predicted_labels):
-        raise ValueError(f"predicted_labels: expected the shape of true_labels {_checks.shape_of(true_labels)}, got "
-                         f"{_checks.shape_of(predicted_labels)}")
+        raise ValueError(
+            f"predicted_labels: expected the shape of true_labels {_checks.shape_of(true_labels)}, got "
+            f"{_checks.shape_of(predicted_labels)}"
+        )
     true_labels = jnp.asarray(true_labels, jnp.int32)
     predicted = jnp.asarray(predicted_labels, jnp.int32)
     predicted = jnp.where(predicted < 0, num_classes, predicted)
@@ -356,11 +413,15 @@ def episode_record_init(onsets: Array, ends: Array, labels: Array, grace: int = 
     Window of episode ``e``: ``[onset_e, min(end_e + grace, min{onset_j > onset_e}))``.
     """
     _checks.check_int_array("grace", grace, 0, meaning="a number of steps >= 0")
-    _checks.check_int_array("onsets", onsets, 0, meaning="episode onset steps >= 0 (faults.NEVER: no episode)")
+    _checks.check_int_array(
+        "onsets", onsets, 0, meaning="episode onset steps >= 0 (faults.NEVER: no episode)"
+    )
     onsets, ends, labels = (jnp.asarray(a, jnp.int32) for a in (onsets, ends, labels))
     if onsets.ndim != 1 or ends.shape != onsets.shape or labels.shape != onsets.shape:
-        raise ValueError(f"onsets, ends, labels: expected three (E,) arrays, got shapes "
-                         f"{onsets.shape}, {ends.shape}, {labels.shape}")
+        raise ValueError(
+            f"onsets, ends, labels: expected three (E,) arrays, got shapes "
+            f"{onsets.shape}, {ends.shape}, {labels.shape}"
+        )
     if isinstance(grace, (int, np.integer)) and grace < 0:
         raise ValueError(f"grace: expected an integer >= 0 (steps), got {grace}")
     later = onsets[None, :] > onsets[:, None]
@@ -368,11 +429,14 @@ def episode_record_init(onsets: Array, ends: Array, labels: Array, grace: int = 
     close = jnp.minimum(jnp.minimum(ends, NEVER) + jnp.asarray(grace, jnp.int32), next_onset)
     minus_one, zero = jnp.asarray(-1, jnp.int32), jnp.asarray(0, jnp.int32)
     none = jnp.full(onsets.shape, -1, jnp.int32)
-    return EpisodeRecord(onsets, close.astype(jnp.int32), labels, none, none, zero, minus_one, zero, zero, minus_one)
+    return EpisodeRecord(
+        onsets, close.astype(jnp.int32), labels, none, none, zero, minus_one, zero, zero, minus_one
+    )
 
 
-def episode_record_update(record: EpisodeRecord, k: Array, alarm: Array, label: Array = -1,
-                          healthy: Array = True) -> EpisodeRecord:
+def episode_record_update(
+    record: EpisodeRecord, k: Array, alarm: Array, label: Array = -1, healthy: Array = True
+) -> EpisodeRecord:
     """Fold the decision of step ``k`` (alarm, isolated label, health) into the record."""
     k = jnp.asarray(k, jnp.int32)
     alarm = jnp.asarray(alarm, bool)
@@ -381,7 +445,9 @@ def episode_record_update(record: EpisodeRecord, k: Array, alarm: Array, label: 
     outside = ~jnp.any(inside)
     false_alarm = alarm & outside
     return EpisodeRecord(
-        record.onset, record.close, record.label,
+        record.onset,
+        record.close,
+        record.label,
         jnp.where(new_detection, k, record.detection_step),
         jnp.where(new_detection, jnp.asarray(label, jnp.int32), record.isolated),
         record.false_alarms + false_alarm.astype(jnp.int32),
@@ -441,7 +507,11 @@ def summarize_episodes(records: EpisodeRecord, Ts: float = 1.0) -> EpisodeSummar
     stats = []
     for e in range(onset.shape[1]):
         delays = (detection[detected[:, e], e] - onset[detected[:, e], e]) * Ts
-        stats.append((delays.mean(), np.median(delays), np.percentile(delays, 90)) if delays.size else (nan,) * 3)
+        stats.append(
+            (delays.mean(), np.median(delays), np.percentile(delays, 90))
+            if delays.size
+            else (nan,) * 3
+        )
     stats = np.asarray(stats, float).reshape(onset.shape[1], 3)
     false_alarms = np.asarray(records.false_alarms)[healthy]
     outside = int(np.asarray(records.outside_steps)[healthy].sum())
@@ -485,13 +555,19 @@ def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[flo
     from scipy import stats
 
     trials = _checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
-    successes = _checks.check_int("successes", successes, 0, trials, meaning=f"a count in [0, trials = {trials}]")
+    successes = _checks.check_int(
+        "successes", successes, 0, trials, meaning=f"a count in [0, trials = {trials}]"
+    )
     _checks.check_probability("level", level)
     if trials == 0:
         return float("nan"), float("nan")
     tail = (1.0 - level) / 2.0
     low = 0.0 if successes == 0 else float(stats.beta.ppf(tail, successes, trials - successes + 1))
-    high = 1.0 if successes == trials else float(stats.beta.ppf(1.0 - tail, successes + 1, trials - successes))
+    high = (
+        1.0
+        if successes == trials
+        else float(stats.beta.ppf(1.0 - tail, successes + 1, trials - successes))
+    )
     return low, high
 
 
@@ -516,7 +592,9 @@ def rate_cell(rate, trials: int, width: int = 16, digits: int = 2) -> str:
 
 def cell(value, spec: str = ".3f", width: int = 0, missing: str = "-") -> str:
     """``format(value, spec)`` right-aligned in ``width``; ``missing`` for ``None`` or a non-finite number."""
-    absent = value is None or (isinstance(value, (int, float, np.number)) and not np.isfinite(value))
+    absent = value is None or (
+        isinstance(value, (int, float, np.number)) and not np.isfinite(value)
+    )
     return f"{missing if absent else format(value, spec):>{width}}"
 
 
@@ -533,6 +611,13 @@ def binomial_upper_bound(successes: int, trials: int, confidence: float = 0.95) 
 
 
 def _one_sided_interval(successes: int, trials: int, confidence: float) -> tuple[float, float]:
-    _checks.check_scalar("confidence", confidence, 0.5, 1.0, low_open=True, high_open=True,
-                         meaning="a one-sided confidence in (0.5, 1)")
+    _checks.check_scalar(
+        "confidence",
+        confidence,
+        0.5,
+        1.0,
+        low_open=True,
+        high_open=True,
+        meaning="a one-sided confidence in (0.5, 1)",
+    )
     return rate_interval(successes, trials, 2.0 * confidence - 1.0)

@@ -6,6 +6,7 @@ is what lets 10^5 runs fit in memory. The filter may be any ``Filter`` (KF, IMM,
 the detector any ``Detector``; ``detector_input`` picks what the detector reads from the
 filter's info (the NIS by default; innovations for a GLRT, mode probabilities for an IMM).
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -15,12 +16,12 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection._chi2 import Detector, flag_dead
-from jaxfdi.filters._base import Filter, FilterInfo
 from jaxfdi._loop import detection_scorer, feedforward, run_loop
-from jaxfdi._stages import FDI
 from jaxfdi._metrics import DetectionRecord, record_init, record_update, step_health
 from jaxfdi._simulate import Actuated, Sensed, Simulator
+from jaxfdi._stages import FDI
+from jaxfdi.detection._chi2 import Detector, flag_dead
+from jaxfdi.filters._base import Filter, FilterInfo
 
 
 class MonitorHistory(NamedTuple):
@@ -53,6 +54,7 @@ class MonitorResult(NamedTuple):
       history: the ``MonitorHistory`` of (T, ...) per-step arrays with ``keep_history=True``,
         else ``None``
     """
+
     record: DetectionRecord
     history: MonitorHistory | None
 
@@ -65,8 +67,12 @@ def dead_channels(info: Any) -> Array | None:
     return getattr(info, "dead", None)
 
 
-def filter_detector(filt: Filter, detector: Detector, detector_input: Callable[[Any], Array] | None = None,
-                    channel_labels: Array | None = None) -> FDI:
+def filter_detector(
+    filt: Filter,
+    detector: Detector,
+    detector_input: Callable[[Any], Array] | None = None,
+    channel_labels: Array | None = None,
+) -> FDI:
     """The open-loop FDI: a fault-blind filter and a detector reading its info (``detector_input``; the NIS by
     default). Its state is ``(filter state, detector state)``, from ``init(*args)``: the filter's ``init(*args)`` and
     the detector's ``init()``; its output ``(info, Decision)``. A step whose filter reports a dead channel ``j``
@@ -127,10 +133,25 @@ def monitor(
       statistic, alarm, label and estimate, each with a leading time axis T), else ``None``.
     """
     us = _checks.check_inputs(us)
-    scorer = detection_scorer(onset, lambda out: out[1], lambda out: out[0].healthy, estimate_delay,
-                              jnp.asarray(x0).dtype, single=True)
-    result = run_loop(sim, filter_detector(filt, detector, detector_input, channel_labels), feedforward(), x0,
-                      (filter_state0, detector.init()), key, exogenous=us, scorer=scorer, keep_history=keep_history)
+    scorer = detection_scorer(
+        onset,
+        lambda out: out[1],
+        lambda out: out[0].healthy,
+        estimate_delay,
+        jnp.asarray(x0).dtype,
+        single=True,
+    )
+    result = run_loop(
+        sim,
+        filter_detector(filt, detector, detector_input, channel_labels),
+        feedforward(),
+        x0,
+        (filter_state0, detector.init()),
+        key,
+        exogenous=us,
+        scorer=scorer,
+        keep_history=keep_history,
+    )
     history = None
     if keep_history:
         trace = result.history
@@ -139,9 +160,15 @@ def monitor(
     return MonitorResult(result.score, history)
 
 
-def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_delay: int = 0,
-                    healthy: Array | None = None, dead: Array | None = None,
-                    channel_labels: Array | None = None) -> DetectionRecord:
+def replay_detector(
+    detector: Detector,
+    inputs: Any,
+    onset: Array,
+    estimate_delay: int = 0,
+    healthy: Array | None = None,
+    dead: Array | None = None,
+    channel_labels: Array | None = None,
+) -> DetectionRecord:
     """The detection record of ``detector`` over a stored (T, ...) input sequence, the
     detector half of ``monitor`` without the plant and filter (e.g. to try thresholds on
     mode probabilities computed once, or after a batch filter kernel). ``healthy`` (T,)
@@ -162,9 +189,21 @@ def replay_detector(detector: Detector, inputs: Any, onset: Array, estimate_dela
         det_state, decision = detector.step(det_state, x)
         decision = flag_dead(decision, dead_k, channel_labels)
         ok = step_health(ok, decision.statistic)
-        return (det_state, record_update(record, k, decision.alarm, decision.label, decision.estimate,
-                                         estimate_delay, healthy=ok)), None
+        return (
+            det_state,
+            record_update(
+                record,
+                k,
+                decision.alarm,
+                decision.label,
+                decision.estimate,
+                estimate_delay,
+                healthy=ok,
+            ),
+        ), None
 
     dtype = jnp.result_type(*jax.tree.leaves(inputs))
-    (_, record), _ = jax.lax.scan(body, (detector.init(), record_init(onset, dtype)), (steps, inputs, healthy, dead))
+    (_, record), _ = jax.lax.scan(
+        body, (detector.init(), record_init(onset, dtype)), (steps, inputs, healthy, dead)
+    )
     return record

@@ -16,6 +16,7 @@ The device never waits for the host: chunk ``c + 1`` is dispatched before chunk 
 stay on the device until one final transfer, and ``summary`` (anything additive: counts, sums, histograms) is summed
 on the device in the chunk's program. Progress counts finished chunks; the first chunk's compilation is reported.
 """
+
 from __future__ import annotations
 
 import functools
@@ -29,19 +30,23 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from jaxfdi import _checks
-from jaxfdi.distributed import allgather
 from jaxfdi._progress import progress_bar, status
+from jaxfdi.distributed import allgather
 
 ProgressFn = Callable[[int, int, float], None]
 
 
 def _num_runs_of(per_run: Any) -> set[int]:
-    return {np.shape(leaf)[0] if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(per_run)}
+    return {
+        np.shape(leaf)[0] if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(per_run)
+    }
 
 
 def _is_key(key: Any) -> bool:
-    return isinstance(key, jax.Array) and (jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
-                                           or (key.dtype == jnp.uint32 and key.shape == (2,)))
+    return isinstance(key, jax.Array) and (
+        jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+        or (key.dtype == jnp.uint32 and key.shape == (2,))
+    )
 
 
 def _split_is_foldlike(key: jax.Array) -> bool:
@@ -69,9 +74,11 @@ def run_keys(key: jax.Array, index: np.ndarray, num_runs: int) -> jax.Array:
         return jax.random.split(key, num_runs)[jnp.asarray(index)]
     typed = jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
     wide = index.astype(np.uint64)
-    bits = _threefry_index_keys(jax.random.key_data(key) if typed else key,
-                                jnp.asarray((wide >> np.uint64(32)).astype(np.uint32)),
-                                jnp.asarray((wide & np.uint64(0xFFFFFFFF)).astype(np.uint32)))
+    bits = _threefry_index_keys(
+        jax.random.key_data(key) if typed else key,
+        jnp.asarray((wide >> np.uint64(32)).astype(np.uint32)),
+        jnp.asarray((wide & np.uint64(0xFFFFFFFF)).astype(np.uint32)),
+    )
     return jax.random.wrap_key_data(bits, impl=jax.random.key_impl(key)) if typed else bits
 
 
@@ -138,25 +145,42 @@ def monte_carlo(
     _checks.check_callable("run_one", run_one, "a function (key, per_run_slice) -> outputs")
     num_runs = _checks.check_int("num_runs", num_runs, 1, meaning="a positive number of runs")
     if chunk_size is not None:
-        chunk_size = _checks.check_int("chunk_size", chunk_size, 1, meaning="a positive number of runs per call")
+        chunk_size = _checks.check_int(
+            "chunk_size", chunk_size, 1, meaning="a positive number of runs per call"
+        )
     if not _is_key(key):
-        raise TypeError(f"key: expected a PRNG key (jax.random.key(seed)), got {_checks.received(key)}")
+        raise TypeError(
+            f"key: expected a PRNG key (jax.random.key(seed)), got {_checks.received(key)}"
+        )
     if not (progress is None or isinstance(progress, bool) or callable(progress)):
-        raise TypeError(f"progress: expected True/False or a callable (done, total, seconds), got "
-                        f"{_checks.received(progress)}")
-    if reduce is not None and not all(callable(getattr(reduce, name, None)) for name in ("init", "update", "merge")):
-        raise TypeError(f"reduce: expected a Reducer(init, update, merge) such as streaming.detection_reducer(...), "
-                        f"got {_checks.received(reduce)}")
+        raise TypeError(
+            f"progress: expected True/False or a callable (done, total, seconds), got "
+            f"{_checks.received(progress)}"
+        )
+    if reduce is not None and not all(
+        callable(getattr(reduce, name, None)) for name in ("init", "update", "merge")
+    ):
+        raise TypeError(
+            f"reduce: expected a Reducer(init, update, merge) such as streaming.detection_reducer(...), "
+            f"got {_checks.received(reduce)}"
+        )
     if summary is not None:
-        _checks.check_callable("summary", summary, "a function (outputs, weight) -> additive pytree")
+        _checks.check_callable(
+            "summary", summary, "a function (outputs, weight) -> additive pytree"
+        )
         if reduce is not None:
             raise ValueError("summary: expected None with reduce (one way to fold the outputs)")
     sizes = _num_runs_of(per_run)
     if sizes and sizes != {num_runs}:
-        raise ValueError(f"per_run: every leaf needs leading axis num_runs = {num_runs}, got leading sizes {sorted(sizes)}")
-    devices, multiprocess, chunk, sharding, compiled, shared = _plan(run_one, num_runs, chunk_size, devices, batched,
-                                                                      summary, shared)
-    report = progress_bar(label, "runs") if progress is True else (progress or None)  # tqdm.auto or log lines
+        raise ValueError(
+            f"per_run: every leaf needs leading axis num_runs = {num_runs}, got leading sizes {sorted(sizes)}"
+        )
+    devices, multiprocess, chunk, sharding, compiled, shared = _plan(
+        run_one, num_runs, chunk_size, devices, batched, summary, shared
+    )
+    report = (
+        progress_bar(label, "runs") if progress is True else (progress or None)
+    )  # tqdm.auto or log lines
     rows = _local_rows(devices, chunk) if multiprocess else slice(0, chunk)
 
     state = reduce.init() if reduce is not None else None
@@ -186,7 +210,9 @@ def monte_carlo(
     try:
         for start in range(0, num_runs, chunk):
             stop = min(start + chunk, num_runs)
-            index = np.minimum(np.arange(start, start + chunk), num_runs - 1)  # pad by repeating the last run
+            index = np.minimum(
+                np.arange(start, start + chunk), num_runs - 1
+            )  # pad by repeating the last run
             valid = np.arange(start, start + chunk)[rows] < stop
             weight = np.arange(start, start + chunk) < stop
             first = start == 0
@@ -198,17 +224,30 @@ def monte_carlo(
                     heartbeat = _Heartbeat(f"{label}: still compiling", start_time)
             try:
                 if multiprocess:
-                    result = _chunk_multiprocess(compiled, sharding, key, index[rows], num_runs, per_run, chunk,
-                                                 valid, shared)
+                    result = _chunk_multiprocess(
+                        compiled,
+                        sharding,
+                        key,
+                        index[rows],
+                        num_runs,
+                        per_run,
+                        chunk,
+                        valid,
+                        shared,
+                    )
                 else:  # dispatched: the device works on
-                    result = compiled(*_chunk_args(key, index, num_runs, per_run, weight, sharding), *shared)
+                    result = compiled(
+                        *_chunk_args(key, index, num_runs, per_run, weight, sharding), *shared
+                    )
             finally:
                 if heartbeat is not None:
                     heartbeat.stop()
             if first and progress and _cache_size(compiled) > programs:
                 status(f"{label}: compiled in {time.perf_counter() - start_time:.1f} s")
             if first and report:
-                running = _Heartbeat(lambda: f"{label}: running, {done[0]}/{num_runs} runs done", start_time)
+                running = _Heartbeat(
+                    lambda: f"{label}: running, {done[0]}/{num_runs} runs done", start_time
+                )
             result, part = result if summary is not None else (result, None)
             if pending is not None:
                 finish(pending)  # the previous chunk, while this one runs
@@ -228,8 +267,9 @@ def monte_carlo(
     elif len(outputs) == 1:
         stacked = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[:num_runs], outputs[0])
     else:  # one transfer of every chunk, joined on the host (no program per number of chunks)
-        stacked = jax.tree_util.tree_map(lambda *parts: np.concatenate(parts, axis=0)[:num_runs],
-                                         *jax.device_get(outputs))
+        stacked = jax.tree_util.tree_map(
+            lambda *parts: np.concatenate(parts, axis=0)[:num_runs], *jax.device_get(outputs)
+        )
     return (stacked, total) if summary is not None else stacked
 
 
@@ -241,7 +281,9 @@ class _Heartbeat:
     def __init__(self, message, start: float, interval: float = 5.0) -> None:
         self._done = threading.Event()
         self._last = time.perf_counter()
-        self._thread = threading.Thread(target=self._beat, args=(message, start, interval), daemon=True)
+        self._thread = threading.Thread(
+            target=self._beat, args=(message, start, interval), daemon=True
+        )
         self._thread.start()
 
     def _beat(self, message, start: float, interval: float) -> None:
@@ -264,9 +306,14 @@ def _plan(run_one, num_runs, chunk_size, devices, batched, summary, shared):
     multiprocess = len({d.process_index for d in devices}) > 1
     if multiprocess:
         devices = sorted(devices, key=lambda d: (d.process_index, d.id))
-        per_process = {p: sum(d.process_index == p for d in devices) for p in {d.process_index for d in devices}}
+        per_process = {
+            p: sum(d.process_index == p for d in devices)
+            for p in {d.process_index for d in devices}
+        }
         if len(set(per_process.values())) != 1:
-            raise ValueError(f"devices: every process needs the same number of devices, got {per_process}")
+            raise ValueError(
+                f"devices: every process needs the same number of devices, got {per_process}"
+            )
     n_dev = len(devices)
     if chunk_size is None:
         smallest = max(MIN_CHUNK * n_dev, 1 << max(int(num_runs) - 1, 0).bit_length())
@@ -283,7 +330,9 @@ def _plan(run_one, num_runs, chunk_size, devices, batched, summary, shared):
     return devices, multiprocess, chunk, sharding, compiled, shared
 
 
-def _chunk_args(key, index: np.ndarray, num_runs: int, per_run: Any, weight: np.ndarray, sharding) -> tuple:
+def _chunk_args(
+    key, index: np.ndarray, num_runs: int, per_run: Any, weight: np.ndarray, sharding
+) -> tuple:
     """A chunk's keys, per-run data and weights, on the devices (one process)."""
     chunk_keys = run_keys(key, index, num_runs)
     chunk_data = jax.tree_util.tree_map(lambda leaf: _take(leaf, index), per_run)
@@ -303,10 +352,14 @@ def _cache_size(compiled) -> int:
         return 0
 
 
-def _chunk_program(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
+def _chunk_program(
+    run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool
+) -> Callable:
     """``jit`` of one chunk: ``(keys, per_run, weight[, shared]) -> outputs``, or with ``summary``
     ``summary(outputs, weight) = (kept, totals)``."""
-    runs = run_one if batched else jax.vmap(run_one, in_axes=(0, 0, None) if with_shared else (0, 0))
+    runs = (
+        run_one if batched else jax.vmap(run_one, in_axes=(0, 0, None) if with_shared else (0, 0))
+    )
 
     def chunk(keys, data, weight, *shared):
         out = runs(keys, data, *shared)
@@ -316,7 +369,9 @@ def _chunk_program(run_one: Callable, batched: bool, summary: Callable | None, w
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool) -> Callable:
+def _compiled(
+    run_one: Callable, batched: bool, summary: Callable | None, with_shared: bool
+) -> Callable:
     """``_chunk_program``, one per ``run_one``: another study with the same function (e.g. its streaming summary
     after its records) reuses the compiled executables."""
     return _chunk_program(run_one, batched, summary, with_shared)
@@ -331,17 +386,25 @@ def _local_rows(devices: list, chunk: int) -> slice:
     return slice(mine[0] * per_device, (mine[-1] + 1) * per_device)
 
 
-def _chunk_multiprocess(compiled, sharding, key, local_index, num_runs, per_run, chunk, local_valid, shared):
+def _chunk_multiprocess(
+    compiled, sharding, key, local_index, num_runs, per_run, chunk, local_valid, shared
+):
     """One chunk over the global mesh: this process builds only its rows, every process runs the same program
     (dispatched; ``_to_host`` takes this process's rows)."""
     local_keys = run_keys(key, local_index, num_runs)
     local_data = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[local_index], per_run)
 
     def global_array(local):
-        return jax.make_array_from_process_local_data(sharding, local, (chunk,) + tuple(np.shape(local)[1:]))
+        return jax.make_array_from_process_local_data(
+            sharding, local, (chunk,) + tuple(np.shape(local)[1:])
+        )
 
-    return compiled(global_array(local_keys), jax.tree_util.tree_map(global_array, local_data),
-                    global_array(np.asarray(local_valid)), *shared)
+    return compiled(
+        global_array(local_keys),
+        jax.tree_util.tree_map(global_array, local_data),
+        global_array(np.asarray(local_valid)),
+        *shared,
+    )
 
 
 def _to_host(array: jax.Array) -> np.ndarray:
@@ -352,12 +415,13 @@ def _to_host(array: jax.Array) -> np.ndarray:
 
 def _gather_runs(outputs: list, num_runs: int) -> Any:
     """One all-gather of every process's rows of every chunk, put back in run order."""
-    local = jax.tree_util.tree_map(lambda *parts: np.stack(parts), *outputs)   # (chunks, local rows, ...)
-    everyone = allgather(local)                                                 # [process](chunks, rows, ...)
+    local = jax.tree_util.tree_map(
+        lambda *parts: np.stack(parts), *outputs
+    )  # (chunks, local rows, ...)
+    everyone = allgather(local)  # [process](chunks, rows, ...)
 
     def order(*per_process):
-        stacked = np.stack(per_process, axis=1)                                 # (chunks, processes, rows, ...)
+        stacked = np.stack(per_process, axis=1)  # (chunks, processes, rows, ...)
         return stacked.reshape((-1,) + stacked.shape[3:])[:num_runs]
 
     return jax.tree_util.tree_map(order, *everyone)
-

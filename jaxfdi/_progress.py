@@ -4,6 +4,7 @@
 ``logging`` logger ``"jaxfdi"`` (silence: ``logging.getLogger("jaxfdi").setLevel(logging.WARNING)``); the CLI installs a
 stderr handler (``configure_logging``) and ``--quiet`` turns bars and INFO messages off.
 """
+
 from __future__ import annotations
 
 import logging
@@ -36,11 +37,15 @@ class _Bar:
         self.description, self.unit, self.options = description, unit, tqdm_options
         self.bar, self.done = None, 0
 
-    def __call__(self, done: int, total: int, seconds: float = 0.0, postfix: str | None = None) -> None:
+    def __call__(
+        self, done: int, total: int, seconds: float = 0.0, postfix: str | None = None
+    ) -> None:
         from tqdm.auto import tqdm
 
         if self.bar is None:
-            self.bar = tqdm(total=total, desc=self.description, unit=f" {self.unit}", leave=True, **self.options)
+            self.bar = tqdm(
+                total=total, desc=self.description, unit=f" {self.unit}", leave=True, **self.options
+            )
         if postfix is not None:
             self.bar.set_postfix_str(postfix, refresh=False)
         self.bar.update(max(done - self.done, 0))
@@ -63,7 +68,9 @@ class _LogLines:
         self.description, self.unit, self.interval = description, unit, interval
         self.last = -float("inf")
 
-    def __call__(self, done: int, total: int, seconds: float = 0.0, postfix: str | None = None) -> None:
+    def __call__(
+        self, done: int, total: int, seconds: float = 0.0, postfix: str | None = None
+    ) -> None:
         now = time.monotonic()
         if done < total and now - self.last < self.interval:
             return
@@ -85,8 +92,14 @@ def status(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
-def progress_bar(description: str = "monte carlo", unit: str = "runs", *, interval: float = 5.0,
-                 use_tqdm: bool | None = None, **tqdm_options) -> ProgressFn:
+def progress_bar(
+    description: str = "monte carlo",
+    unit: str = "runs",
+    *,
+    interval: float = 5.0,
+    use_tqdm: bool | None = None,
+    **tqdm_options,
+) -> ProgressFn:
     """A progress hook ``(done, total, seconds[, postfix])``.
 
     Args:
@@ -101,7 +114,11 @@ def progress_bar(description: str = "monte carlo", unit: str = "runs", *, interv
     """
     if use_tqdm is None:
         use_tqdm = tqdm_available()
-    return _Bar(description, unit, **tqdm_options) if use_tqdm else _LogLines(description, unit, interval)
+    return (
+        _Bar(description, unit, **tqdm_options)
+        if use_tqdm
+        else _LogLines(description, unit, interval)
+    )
 
 
 class _CurrentStderr(logging.StreamHandler):

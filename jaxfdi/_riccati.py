@@ -35,6 +35,7 @@ lose forward mode. The solver's loop is never differentiated.
 The filter Riccati equation of ``jaxfdi.filters._kalman`` (``P' = Phi P+ Phi^T + Q``, ``Q`` the per-step process
 noise, not ``Gamma Q Gamma^T``) is the DARE with ``A = Phi^T``, ``B = C^T``; LQR's is ``(Phi, Gamma, Q_x, R_u)``.
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -106,14 +107,18 @@ def _float_dtype(*arrays):
 
 
 def _settings(dtype, tol, max_iter) -> tuple[float, int]:
-    max_iter = _checks.check_int("max_iter", max_iter, minimum=1, meaning="a number of doubling steps")
+    max_iter = _checks.check_int(
+        "max_iter", max_iter, minimum=1, meaning="a number of doubling steps"
+    )
     if tol is None:
         return 100.0 * float(jnp.finfo(dtype).eps), max_iter
     _checks.check_positive("tol", tol, "a positive relative tolerance (a Python float)")
     return float(tol), max_iter
 
 
-def solve_discrete_are_info(A: Array, B: Array, Q: Array, R: Array, tol=None, max_iter: int = 64) -> DareSolution:
+def solve_discrete_are_info(
+    A: Array, B: Array, Q: Array, R: Array, tol=None, max_iter: int = 64
+) -> DareSolution:
     """Stabilising solution of ``X = A^T X A - A^T X B (R + B^T X B)^-1 B^T X A + Q`` by structure-preserving
     doubling (Chu, Fan & Lin 2005), verified (module doc).
 
@@ -138,7 +143,9 @@ def solve_discrete_are_info(A: Array, B: Array, Q: Array, R: Array, tol=None, ma
     return _solve(*(jnp.asarray(x, dtype) for x in (A, B, Q, R)), tol, max_iter)
 
 
-def solve_discrete_are(A: Array, B: Array, Q: Array, R: Array, tol=None, max_iter: int = 64) -> Array:
+def solve_discrete_are(
+    A: Array, B: Array, Q: Array, R: Array, tol=None, max_iter: int = 64
+) -> Array:
     """(n, n) stabilising DARE solution ``X`` (``scipy.linalg.solve_discrete_are(A, B, Q, R)`` convention).
 
     Raises ``ValueError`` when the arguments are concrete and no stabilising solution was found; under
@@ -148,12 +155,18 @@ def solve_discrete_are(A: Array, B: Array, Q: Array, R: Array, tol=None, max_ite
       (n, n) ``X``, the stabilising solution, in the dtype of ``A`` promoted with the others.
     """
     result = solve_discrete_are_info(A, B, Q, R, tol, max_iter)
-    require_stabilising(result, (A, B, Q, R), "A, B, Q, R",
-                        "(A, B) is not stabilisable or (Q, A) has an unobservable mode on the unit circle")
+    require_stabilising(
+        result,
+        (A, B, Q, R),
+        "A, B, Q, R",
+        "(A, B) is not stabilisable or (Q, A) has an unobservable mode on the unit circle",
+    )
     return result.solution
 
 
-def require_stabilising(result, arguments, names: str, why: str, allow_marginal: bool = False) -> None:
+def require_stabilising(
+    result, arguments, names: str, why: str, allow_marginal: bool = False
+) -> None:
     """Raise ``ValueError`` (naming ``names``) when all ``arguments`` are concrete and ``result`` (``DareSolution``
     or ``SteadyStateKalman``) is not stabilising; nothing under ``jit``/``vmap`` (the caller has the flag).
     ``allow_marginal`` also accepts a finite solution with closed-loop eigenvalues on the unit circle (within
@@ -169,9 +182,13 @@ def require_stabilising(result, arguments, names: str, why: str, allow_marginal:
         margin = float(np.sqrt(np.finfo(np.asarray(result.spectral_radius).dtype).eps))
         if np.isfinite(residual) and abs(radius - 1.0) <= margin:
             return
-    steps = f", after {int(result.iterations)} doubling steps" if hasattr(result, "iterations") else ""
-    raise ValueError(f"{names}: {NO_SOLUTION}: {why} (closed-loop spectral radius {radius:.6g}, "
-                     f"relative residual {residual:.3g}{steps})")
+    steps = (
+        f", after {int(result.iterations)} doubling steps" if hasattr(result, "iterations") else ""
+    )
+    raise ValueError(
+        f"{names}: {NO_SOLUTION}: {why} (closed-loop spectral radius {radius:.6g}, "
+        f"relative residual {residual:.3g}{steps})"
+    )
 
 
 @partial(jax.jit, static_argnums=(4, 5))
@@ -179,7 +196,9 @@ def _solve(A: Array, B: Array, Q: Array, R: Array, tol: float, max_iter: int) ->
     X, iterations = _stabilising_solution(A, B, Q, R, tol, max_iter)
     residual, radius = _verify(*(jax.lax.stop_gradient(a) for a in (A, B, Q, R, X)))
     eps = jnp.finfo(X.dtype).eps
-    converged = jnp.all(jnp.isfinite(X)) & (residual <= jnp.sqrt(eps)) & (radius < 1.0 - jnp.sqrt(eps))
+    converged = (
+        jnp.all(jnp.isfinite(X)) & (residual <= jnp.sqrt(eps)) & (radius < 1.0 - jnp.sqrt(eps))
+    )
     return DareSolution(X, converged, iterations, residual, radius)
 
 
@@ -207,15 +226,21 @@ def _verify(A: Array, B: Array, Q: Array, R: Array, X: Array) -> tuple[Array, Ar
 
 
 @partial(jax.custom_jvp, nondiff_argnums=(4, 5))
-def _stabilising_solution(A: Array, B: Array, Q: Array, R: Array, tol: float, max_iter: int) -> tuple[Array, Array]:
+def _stabilising_solution(
+    A: Array, B: Array, Q: Array, R: Array, tol: float, max_iter: int
+) -> tuple[Array, Array]:
     """``(X, iterations)`` by doubling; differentiated implicitly (``_solution_jvp``)."""
     return _doubling(A, B, Q, R, tol, max_iter)
 
 
-def _doubling(A: Array, B: Array, Q: Array, R: Array, tol: float, max_iter: int) -> tuple[Array, Array]:
+def _doubling(
+    A: Array, B: Array, Q: Array, R: Array, tol: float, max_iter: int
+) -> tuple[Array, Array]:
     n = A.shape[0]
     eye = jnp.eye(n, dtype=A.dtype)
-    G = _linalg.symmetrize(B @ jsl.cho_solve(jsl.cho_factor(_linalg.symmetrize(R), lower=True), B.T))  # B R^-1 B^T
+    G = _linalg.symmetrize(
+        B @ jsl.cho_solve(jsl.cho_factor(_linalg.symmetrize(R), lower=True), B.T)
+    )  # B R^-1 B^T
     H = _linalg.symmetrize(Q)
 
     def cond(carry):
@@ -232,7 +257,11 @@ def _doubling(A: Array, B: Array, Q: Array, R: Array, tol: float, max_iter: int)
         G_next = _linalg.symmetrize(G_k + A_k @ W_inv_GAt)
         A_next = A_k @ W_inv_A
         small = jnp.linalg.norm(increment) <= tol * jnp.linalg.norm(H_next)
-        finite = jnp.all(jnp.isfinite(H_next)) & jnp.all(jnp.isfinite(A_next)) & jnp.all(jnp.isfinite(G_next))
+        finite = (
+            jnp.all(jnp.isfinite(H_next))
+            & jnp.all(jnp.isfinite(A_next))
+            & jnp.all(jnp.isfinite(G_next))
+        )
         return A_next, G_next, H_next, k + 1, small | ~finite  # stop at round-off or at overflow
 
     init = (A, G, H, jnp.zeros((), jnp.int32), jnp.zeros((), bool))
@@ -261,7 +290,8 @@ def stein_solve(closed_loop: Array, forcing: Array) -> Array:
         return Y - closed_loop.T @ Y @ closed_loop
 
     return jax.lax.custom_linear_solve(
-        stein, forcing,
+        stein,
+        forcing,
         solve=lambda _, b: _smith_doubling(closed_loop, b),
         transpose_solve=lambda _, b: _smith_doubling(closed_loop.T, b),
     )
@@ -283,11 +313,15 @@ def _smith_doubling(closed_loop: Array, forcing: Array, max_iter: int = 64) -> A
         small = jnp.linalg.norm(increment) <= eps * jnp.linalg.norm(Y_next)
         return Y_next, P @ P, j + 1, small | ~jnp.all(jnp.isfinite(Y_next))
 
-    Y, _, _, _ = jax.lax.while_loop(cond, body, (forcing, closed_loop, jnp.zeros((), jnp.int32), jnp.zeros((), bool)))
+    Y, _, _, _ = jax.lax.while_loop(
+        cond, body, (forcing, closed_loop, jnp.zeros((), jnp.int32), jnp.zeros((), bool))
+    )
     return Y
 
 
-def steady_state_kalman(model: LinearGaussianModel, tol=None, max_iter: int = 64) -> SteadyStateKalman:
+def steady_state_kalman(
+    model: LinearGaussianModel, tol=None, max_iter: int = 64
+) -> SteadyStateKalman:
     """Steady-state Kalman filter of ``model``, as ``jaxfdi.filters.kalman_filter`` converges to.
 
     ``P = Phi (P - P C^T S^-1 C P) Phi^T + Q`` is the DARE with ``A = Phi^T``, ``B = C^T`` (Anderson & Moore 1979,
@@ -301,19 +335,30 @@ def steady_state_kalman(model: LinearGaussianModel, tol=None, max_iter: int = 64
       ``SteadyStateKalman``: ``P_ss``, ``S``, ``K`` and the solver's checks.
     """
     validate_linear_model(model)
-    _check_dare(jnp.asarray(model.Phi).T, jnp.asarray(model.C).T, model.Q, model.R,
-                ("model.Phi", "model.C", "model.Q", "model.R"))
+    _check_dare(
+        jnp.asarray(model.Phi).T,
+        jnp.asarray(model.C).T,
+        model.Q,
+        model.R,
+        ("model.Phi", "model.C", "model.Q", "model.R"),
+    )
     dtype = _float_dtype(model.Phi, model.C, model.Q, model.R)
     tol, max_iter = _settings(dtype, tol, max_iter)
     arrays = tuple(jnp.asarray(a, dtype) for a in (model.Phi, model.C, model.Q, model.R))
     steady = _steady_state(*arrays, tol, max_iter)
-    require_stabilising(steady, arrays, "model.Phi, model.C, model.Q",
-                        "(C, Phi) is not detectable or (Phi, Q) has an uncontrollable mode on the unit circle")
+    require_stabilising(
+        steady,
+        arrays,
+        "model.Phi, model.C, model.Q",
+        "(C, Phi) is not detectable or (Phi, Q) has an uncontrollable mode on the unit circle",
+    )
     return steady
 
 
 @partial(jax.jit, static_argnums=(4, 5))
-def _steady_state(Phi: Array, C: Array, Q: Array, R: Array, tol: float, max_iter: int) -> SteadyStateKalman:
+def _steady_state(
+    Phi: Array, C: Array, Q: Array, R: Array, tol: float, max_iter: int
+) -> SteadyStateKalman:
     """One compiled executable; LAPACK factorisations compile faster here than ``_linalg``'s element-wise
     small-matrix versions (made for vmapped loops)."""
     dare = _solve.__wrapped__(Phi.T, C.T, Q, R, tol, max_iter)

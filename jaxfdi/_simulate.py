@@ -23,6 +23,7 @@ sensors at step ``k`` and ``advance`` moves the plant with the input applied at 
 which is what a closed loop needs (``jaxfdi._loop``: the controller acts between the two);
 ``step`` is the two together, for open-loop runs (``simulate``).
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -34,7 +35,12 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
-from jaxfdi.models._linear import LinearGaussianModel, linear_observation, linear_transition, validate_linear_model
+from jaxfdi.models._linear import (
+    LinearGaussianModel,
+    linear_observation,
+    linear_transition,
+    validate_linear_model,
+)
 
 
 class SimState(NamedTuple):
@@ -93,7 +99,9 @@ class Simulator(NamedTuple):
     measure: Callable[[SimState, Array, Array, Array], tuple[SimState, Sensed]]
     advance: Callable[[SimState, Array, Array, Array], tuple[SimState, Actuated]]
 
-    def step(self, sim: SimState, k: Array, u: Array, key: Array) -> tuple[SimState, tuple[Sensed, Actuated]]:
+    def step(
+        self, sim: SimState, k: Array, u: Array, key: Array
+    ) -> tuple[SimState, tuple[Sensed, Actuated]]:
         """One open-loop step with the run's ``key``: ``measure`` then ``advance`` on ``fold_in(key, k)``,
         and their records ``(Sensed, Actuated)``."""
         step_key = jax.random.fold_in(key, k)
@@ -110,7 +118,9 @@ def per_step(name: str, value: Any, size: int) -> Callable[[Array], Array]:
         return value
     shape = _checks.shape_of(value)
     if len(shape) == 3:
-        _checks.check_matrix(name, value, (None, size, size), f"T per-step ({size}, {size}) covariances")
+        _checks.check_matrix(
+            name, value, (None, size, size), f"T per-step ({size}, {size}) covariances"
+        )
         table = _checks.concrete(value)
         for k in range(table.shape[0] if table is not None else 0):
             _checks.check_covariance(f"{name}[{k}]", table[k], size)
@@ -135,8 +145,10 @@ def _matrix_size(name: str, value: Any) -> int:
     sample = value(jnp.asarray(0)) if callable(value) else value
     shape = _checks.shape_of(sample)
     if len(shape) not in (2, 3) or shape[-1] != shape[-2]:
-        raise ValueError(f"{name}: expected a (d, d) covariance, a (T, d, d) array or a callable k -> (d, d), "
-                         f"got shape {shape}")
+        raise ValueError(
+            f"{name}: expected a (d, d) covariance, a (T, d, d) array or a callable k -> (d, d), "
+            f"got shape {shape}"
+        )
     return shape[-1]
 
 
@@ -183,21 +195,31 @@ def simulator(
     nw = _matrix_size("Q", Q)
     m = _matrix_size("R", R)
     if noise_gain is not None:
-        _checks.check_matrix("noise_gain", noise_gain, (None, nw), f"n states x {nw} noise inputs (Q is {nw} x {nw})")
+        _checks.check_matrix(
+            "noise_gain", noise_gain, (None, nw), f"n states x {nw} noise inputs (Q is {nw} x {nw})"
+        )
         G = jnp.asarray(noise_gain)
         n = G.shape[0]
     else:
         G, n = None, nw
     sqrt_Q = _noise_sqrt("Q", Q, nw)
     sqrt_R = _noise_sqrt("R", R, m)
-    sqrt_U = None if input_noise is None else _noise_sqrt("input_noise", input_noise, _matrix_size("input_noise", input_noise))
+    sqrt_U = (
+        None
+        if input_noise is None
+        else _noise_sqrt("input_noise", input_noise, _matrix_size("input_noise", input_noise))
+    )
     if available is not None and not callable(available):
-        _checks.check_shape("available", available, (None, m), f"T steps x {m} measurement components")
+        _checks.check_shape(
+            "available", available, (None, m), f"T steps x {m} measurement components"
+        )
         available_table = jnp.asarray(available, bool)
-        available = lambda k, x: available_table[k]  # noqa: E731
+        available = lambda k, x: available_table[k]
     if fault is not None and not isinstance(fault, Fault):
-        raise TypeError(f"fault: expected a Fault (jaxfdi.fault, fault_group, concat_faults) or None, got "
-                        f"{_checks.received(fault)}")
+        raise TypeError(
+            f"fault: expected a Fault (jaxfdi.fault, fault_group, concat_faults) or None, got "
+            f"{_checks.received(fault)}"
+        )
     faults = as_stack(no_fault() if fault is None else fault)
     if any(jnp.ndim(leaf) != 1 for leaf in faults):
         raise ValueError("fault: expected scalar leaves or a stack with shape (F,) leaves")
@@ -248,18 +270,24 @@ def check_fault_components(faults: Fault, target: int, size: int) -> None:
     """Every (concrete) fault of the stack on ``target`` acts on a component in
     ``[0, size)``: a fault on a sensor that does not exist would label the run as faulty
     and change nothing."""
-    kinds, targets, components = (_checks.concrete(leaf) for leaf in (faults.kind, faults.target, faults.component))
+    kinds, targets, components = (
+        _checks.concrete(leaf) for leaf in (faults.kind, faults.target, faults.component)
+    )
     if kinds is None or targets is None or components is None:
         return
     mine = (targets == target) & (kinds != 0)
     if np.any(mine & ((components < 0) | (components >= size))):
         what = "sensor" if target == Target.SENSOR else "actuator"
         signal = "y has" if target == Target.SENSOR else "u has"
-        raise ValueError(f"fault: expected {what} components in [0, {size}) ({signal} {size} components), got "
-                         f"component(s) {sorted(set(components[mine].tolist()))}")
+        raise ValueError(
+            f"fault: expected {what} components in [0, {size}) ({signal} {size} components), got "
+            f"component(s) {sorted(set(components[mine].tolist()))}"
+        )
 
 
-def linear_simulator(model: LinearGaussianModel, fault: Fault | None = None, **options) -> Simulator:
+def linear_simulator(
+    model: LinearGaussianModel, fault: Fault | None = None, **options
+) -> Simulator:
     """``simulator`` for a ``LinearGaussianModel`` (its own ``Q`` and ``R``); ``options``
     as for ``simulator`` (``input_noise``, ``available``, ...).
 
@@ -268,7 +296,9 @@ def linear_simulator(model: LinearGaussianModel, fault: Fault | None = None, **o
       (as ``simulator`` returns).
     """
     validate_linear_model(model)
-    return simulator(linear_transition, linear_observation, model.Q, model.R, model, fault, **options)
+    return simulator(
+        linear_transition, linear_observation, model.Q, model.R, model, fault, **options
+    )
 
 
 def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState, Sensed, Actuated]:

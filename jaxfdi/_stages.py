@@ -1,5 +1,6 @@
 """The closed loop's stage types (``loop.run_loop``): plant, FDI, controller, scorer; types only, so any layer can build
 a stage without importing the loop."""
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple

@@ -22,6 +22,7 @@ Example (two thresholds of one chi-square detector on one Kalman filter, one pro
     result = run_study(study, runs=100, seed=0)
     result.outputs["chi2 1%"]          # (cases * runs, ...) case-major
 """
+
 from __future__ import annotations
 
 import functools
@@ -117,8 +118,15 @@ def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
     def run(key, case):
         fn = structure.run
         for axis in reversed(range(count)):
-            fn = jax.vmap(fn, in_axes=(None, None, *(0 if j == axis else None for j in range(count)),
-                                       *(None for _ in extra)))
+            fn = jax.vmap(
+                fn,
+                in_axes=(
+                    None,
+                    None,
+                    *(0 if j == axis else None for j in range(count)),
+                    *(None for _ in extra),
+                ),
+            )
         out = fn(key, case, *structure.axes, *extra)
         if structure.batched:
             out = jax.tree_util.tree_map(lambda leaf: jnp.moveaxis(leaf, count, 0), out)
@@ -133,8 +141,10 @@ def case_slices(runs, num_cases: int) -> list[slice]:
     try:
         counts = np.broadcast_to(np.asarray(runs, int), (num_cases,))
     except ValueError:
-        raise ValueError(f"runs: expected one count or {num_cases} counts (one per case), got "
-                         f"{_checks.received(runs)}") from None
+        raise ValueError(
+            f"runs: expected one count or {num_cases} counts (one per case), got "
+            f"{_checks.received(runs)}"
+        ) from None
     if np.any(counts < 0):
         raise ValueError(f"runs: expected counts >= 0, got {_checks.received(runs)}")
     starts = np.concatenate([[0], np.cumsum(counts)])
@@ -144,11 +154,18 @@ def case_slices(runs, num_cases: int) -> list[slice]:
 def _run_counts(runs, num_cases: int) -> tuple[int, ...]:
     """``runs`` (one count, or one per case) as a count per case, each checked positive."""
     if np.ndim(runs) == 0:
-        return (_checks.check_int("runs", runs, 1, meaning="a positive number of runs per case"),) * num_cases
+        return (
+            _checks.check_int("runs", runs, 1, meaning="a positive number of runs per case"),
+        ) * num_cases
     counts = tuple(runs)
     if len(counts) != num_cases:
-        raise ValueError(f"runs: expected one count or {num_cases} counts (one per case), got {len(counts)}")
-    return tuple(_checks.check_int(f"runs[{i}]", n, 1, meaning="a positive number of runs") for i, n in enumerate(counts))
+        raise ValueError(
+            f"runs: expected one count or {num_cases} counts (one per case), got {len(counts)}"
+        )
+    return tuple(
+        _checks.check_int(f"runs[{i}]", n, 1, meaning="a positive number of runs")
+        for i, n in enumerate(counts)
+    )
 
 
 def _check_study(study: Study) -> int:
@@ -159,36 +176,54 @@ def _check_study(study: Study) -> int:
     else:
         sizes = _num_runs_of(study.cases)
         if len(sizes) != 1 or -1 in sizes:
-            raise ValueError(f"study.cases: expected leaves with one leading case axis, got leading sizes {sorted(sizes)}")
+            raise ValueError(
+                f"study.cases: expected leaves with one leading case axis, got leading sizes {sorted(sizes)}"
+            )
         num_cases = sizes.pop()
     if not num_cases:
         raise ValueError("study.case_names: expected at least one case")
     if len(study.case_names) != num_cases:
-        raise ValueError(f"study.case_names: expected {num_cases} names (one per case), got {len(study.case_names)}")
+        raise ValueError(
+            f"study.case_names: expected {num_cases} names (one per case), got {len(study.case_names)}"
+        )
     if not study.structures:
         raise ValueError("study.structures: expected at least one Structure")
     seen = set()
     for s in study.structures:
         if not isinstance(s, Structure):
-            raise TypeError(f"study.structures: expected Structure entries, got {_checks.received(s)}")
+            raise TypeError(
+                f"study.structures: expected Structure entries, got {_checks.received(s)}"
+            )
         lengths = []
         for a, axis in enumerate(s.axes):
             leading = _num_runs_of(axis)
             if len(leading) != 1 or -1 in leading:
-                raise ValueError(f"{s.name}.axes[{a}]: expected leaves with one leading axis, got {sorted(leading)}")
+                raise ValueError(
+                    f"{s.name}.axes[{a}]: expected leaves with one leading axis, got {sorted(leading)}"
+                )
             lengths.append(leading.pop())
         for method, cell in s.methods.items():
             if method in seen:
                 raise ValueError(f"{s.name}.methods: method {method!r} named twice in the study")
             seen.add(method)
             if len(cell) != len(lengths) or not all(0 <= i < n for i, n in zip(cell, lengths)):
-                raise ValueError(f"{s.name}.methods[{method!r}]: expected one index per axis within {lengths}, "
-                                 f"got {cell}")
+                raise ValueError(
+                    f"{s.name}.methods[{method!r}]: expected one index per axis within {lengths}, "
+                    f"got {cell}"
+                )
     return num_cases
 
 
-def run_study(study: Study, runs, seed: int, *, progress: bool = False, chunk_size: int | None = None,
-              structures: list[str] | None = None, key: jax.Array | None = None) -> StudyResult:
+def run_study(
+    study: Study,
+    runs,
+    seed: int,
+    *,
+    progress: bool = False,
+    chunk_size: int | None = None,
+    structures: list[str] | None = None,
+    key: jax.Array | None = None,
+) -> StudyResult:
     """Run ``runs`` runs of every case of ``study`` through each structure.
 
     Args:
@@ -214,7 +249,10 @@ def run_study(study: Study, runs, seed: int, *, progress: bool = False, chunk_si
     chosen = [s for s in study.structures if structures is None or s.name in structures]
     total = sum(counts)
     key = jax.random.key(seed) if key is None else key
-    per_run = (_per_run_cases(study, runs, counts, seed), np.repeat(np.arange(num_cases, dtype=np.int32), counts))
+    per_run = (
+        _per_run_cases(study, runs, counts, seed),
+        np.repeat(np.arange(num_cases, dtype=np.int32), counts),
+    )
     outputs, means, seconds, compile_seconds = {}, {}, {}, {}
     for k, structure in enumerate(chosen, start=1):
         label = f"{study.name}: {structure.name} ({k} of {len(chosen)})"
@@ -222,30 +260,50 @@ def run_study(study: Study, runs, seed: int, *, progress: bool = False, chunk_si
         summary = _case_mean_summary(num_cases) if structure.averaged else None
         compile_before = _compile_time_probe()
         start = time.perf_counter()
-        result = monte_carlo(program, key, total, per_run, chunk_size=chunk_size, progress=progress, summary=summary,
-                             shared=(structure.axes, structure.shared), label=label, batched=structure.batched)
+        result = monte_carlo(
+            program,
+            key,
+            total,
+            per_run,
+            chunk_size=chunk_size,
+            progress=progress,
+            summary=summary,
+            shared=(structure.axes, structure.shared),
+            label=label,
+            batched=structure.batched,
+        )
         seconds[structure.name] = time.perf_counter() - start
         compile_seconds[structure.name] = _compile_time_probe() - compile_before
         out, sums = result if summary is not None else (result, None)
         for method, cell in structure.methods.items():
-            outputs[method] = jax.tree_util.tree_map(lambda leaf, c=cell: leaf[(slice(None), *c)], out)
+            outputs[method] = jax.tree_util.tree_map(
+                lambda leaf, c=cell: leaf[(slice(None), *c)], out
+            )
             if sums is not None:
                 totals, counts = sums
-                means[method] = jax.tree_util.tree_map(lambda leaf, c=cell: _per_case_mean(leaf, c, counts), totals)
+                means[method] = jax.tree_util.tree_map(
+                    lambda leaf, c=cell: _per_case_mean(leaf, c, counts), totals
+                )
         if progress:
             status(f"{label}: {total} runs in {seconds[structure.name]:.1f} s")
-    return StudyResult(study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds)
+    return StudyResult(
+        study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds
+    )
 
 
 def _per_run_cases(study: Study, runs, counts: tuple[int, ...], seed: int):
     """Every run's case: the study's cases repeated ``counts`` times each, or its ``draw``."""
     if not callable(study.cases):
-        return jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), counts, axis=0), study.cases)
+        return jax.tree_util.tree_map(
+            lambda leaf: np.repeat(np.asarray(leaf), counts, axis=0), study.cases
+        )
     drawn = study.cases(runs, seed)
     sizes = _num_runs_of(drawn)
     if sizes != {sum(counts)}:
-        raise ValueError(f"study.cases: the draw(runs={runs}, seed={seed}) must give leaves with a leading axis of "
-                         f"{sum(counts)} (the runs of every case), got leading sizes {sorted(sizes)}")
+        raise ValueError(
+            f"study.cases: the draw(runs={runs}, seed={seed}) must give leaves with a leading axis of "
+            f"{sum(counts)} (the runs of every case), got leading sizes {sorted(sizes)}"
+        )
     return drawn
 
 
@@ -288,7 +346,10 @@ def _case_mean_summary(num_cases: int):
             weighted = leaf * w.reshape((-1,) + (1,) * (leaf.ndim - 1))
             return jax.ops.segment_sum(weighted, case_index, num_segments=num_cases)
 
-        totals = jax.tree_util.tree_map(per_case, values), jax.ops.segment_sum(w, case_index, num_segments=num_cases)
+        totals = (
+            jax.tree_util.tree_map(per_case, values),
+            jax.ops.segment_sum(w, case_index, num_segments=num_cases),
+        )
         return out, totals
 
     return summary

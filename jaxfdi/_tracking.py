@@ -4,6 +4,7 @@
 ``tracked_plant`` folds a ``TrackingScore`` into the plant's state: ``3 d`` numbers per run instead of a (T, n) history,
 read at ``LoopResult.final[0][1]``.
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -34,19 +35,28 @@ class TrackingScore(NamedTuple):
 
 def tracking_init(size: int, dtype=None) -> TrackingScore:
     dtype = dtype or jnp.result_type(float)
-    return TrackingScore(jnp.zeros((size,), dtype), jnp.zeros((size,), dtype), jnp.zeros((size,), jnp.int32))
+    return TrackingScore(
+        jnp.zeros((size,), dtype), jnp.zeros((size,), dtype), jnp.zeros((size,), jnp.int32)
+    )
 
 
 def tracking_update(score: TrackingScore, error: Array, active: Array) -> TrackingScore:
     """Fold one step's ``error`` (d,) into ``score`` where ``active`` (d,) bool."""
     error = jnp.asarray(error, score.sum_sq.dtype)
-    return TrackingScore(score.sum_sq + jnp.where(active, error * error, 0.0),
-                         jnp.where(active, jnp.maximum(score.max_abs, jnp.abs(error)), score.max_abs),
-                         score.count + active.astype(jnp.int32))
+    return TrackingScore(
+        score.sum_sq + jnp.where(active, error * error, 0.0),
+        jnp.where(active, jnp.maximum(score.max_abs, jnp.abs(error)), score.max_abs),
+        score.count + active.astype(jnp.int32),
+    )
 
 
-def tracked_plant(plant, error: Callable[[Array, Any], Array], size: int,
-                  active: Callable[[Array], Array] | None = None, dtype=None) -> Plant:
+def tracked_plant(
+    plant,
+    error: Callable[[Array, Any], Array],
+    size: int,
+    active: Callable[[Array], Array] | None = None,
+    dtype=None,
+) -> Plant:
     """``plant`` (a ``loop.Plant``) whose state is ``(state, TrackingScore)`` of ``error(k, sensed)`` over the steps
     where ``active(k)`` (``sensed``: what ``measure`` returned, e.g. a ``simulate.Sensed`` with the true ``state``).
 
@@ -66,7 +76,11 @@ def tracked_plant(plant, error: Callable[[Array, Any], Array], size: int,
     def measure(state, k, u, step_key):
         inner, score = state
         inner, sensed = plant.measure(inner, k, u, step_key)
-        on = jnp.ones((int(size),), bool) if active is None else jnp.broadcast_to(active(k), (int(size),))
+        on = (
+            jnp.ones((int(size),), bool)
+            if active is None
+            else jnp.broadcast_to(active(k), (int(size),))
+        )
         return (inner, tracking_update(score, error(k, sensed), on)), sensed
 
     def advance(state, k, u, step_key):

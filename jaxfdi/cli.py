@@ -5,6 +5,7 @@ status 2, one stderr line ``jaxfdi: --option: expected ..., got ...``. Files go 
 published together when done (``jaxfdi._io.study_output``); SIGINT, SIGTERM, SIGHUP leave ``--out`` as it was. A new
 scenario is a ``Runner`` in ``RUNNERS`` (tuning target: ``TUNERS``).
 """
+
 from __future__ import annotations
 
 import _thread
@@ -26,7 +27,8 @@ from typing import Callable, Iterator, NamedTuple, Sequence
 import numpy as np
 
 import jaxfdi
-from jaxfdi import _io, distributed, _progress as progress
+from jaxfdi import _io, distributed
+from jaxfdi import _progress as progress
 from jaxfdi._checks import MAX_SEED  # seeds: see its comment
 from jaxfdi.scenarios import engine_chi2_tuning as ct
 from jaxfdi.scenarios import engine_tuning as et
@@ -50,17 +52,35 @@ logger = logging.getLogger("jaxfdi")
 #: the largest count an option takes (runs, steps, windows: JAX indexes them in int32)
 MAX_COUNT = 2**31 - 1
 #: integer options: dest -> (lowest, highest)
-INTEGER_RANGES = {"runs": (1, MAX_COUNT), "seed": (0, MAX_SEED), "window": (1, MAX_COUNT), "steps": (1, MAX_COUNT),
-                  "train_runs": (1, MAX_COUNT), "selection_runs": (1, MAX_COUNT)}
+INTEGER_RANGES = {
+    "runs": (1, MAX_COUNT),
+    "seed": (0, MAX_SEED),
+    "window": (1, MAX_COUNT),
+    "steps": (1, MAX_COUNT),
+    "train_runs": (1, MAX_COUNT),
+    "selection_runs": (1, MAX_COUNT),
+}
 #: real options: dest -> (lowest, highest, lowest allowed, highest allowed); NaN and inf never
-FLOAT_RANGES = {"pfa": (0.0, 1.0, False, False), "detection_weight": (0.0, math.inf, True, False),
-                "false_alarm_weight": (0.0, math.inf, True, False), "delay_weight": (0.0, math.inf, True, False),
-                "isolation_weight": (0.0, math.inf, True, False)}
+FLOAT_RANGES = {
+    "pfa": (0.0, 1.0, False, False),
+    "detection_weight": (0.0, math.inf, True, False),
+    "false_alarm_weight": (0.0, math.inf, True, False),
+    "delay_weight": (0.0, math.inf, True, False),
+    "isolation_weight": (0.0, math.inf, True, False),
+}
 #: options only some scenarios read: dest -> default. The parser's default is None, so that an option given to a
 #: scenario that does not read it is refused rather than ignored.
 RUN_SPECIFIC = {"methods": None, "window": 4, "pfa": 0.005, "estimator": "ekf", "engage_on": "nis"}
-TUNE_SPECIFIC = {"design": "all", "detection_weight": 1.0, "isolation_weight": 5.0, "confirm_steps": 1,
-                 "freeze": "", "select_thresholds": False, "selection_runs": 100, "windows": "1,2,4,8"}
+TUNE_SPECIFIC = {
+    "design": "all",
+    "detection_weight": 1.0,
+    "isolation_weight": 5.0,
+    "confirm_steps": 1,
+    "freeze": "",
+    "select_thresholds": False,
+    "selection_runs": 100,
+    "windows": "1,2,4,8",
+}
 #: engine-imm's --confirm-steps: one length, or one per mode (normal, actuator, RPM, P2, T2, P4, T4)
 NUM_ENGINE_MODES = 7
 
@@ -73,6 +93,7 @@ class Runner(NamedTuple):
     - ``options``: the scenario-specific options it reads (dest names of ``RUN_SPECIFIC``/``TUNE_SPECIFIC``; others
       refused); ``methods``: valid ``--methods`` names (``None``: no ``--methods``); ``check(args)``: further checks
       needing the scenario's module, raising ``UsageError`` (``expected``)."""
+
     run: Callable[[argparse.Namespace, Path], str]
     help: str
     options: tuple[str, ...] = ()
@@ -117,8 +138,14 @@ def _named(args: argparse.Namespace, folder: Path, path) -> Path:
     return Path(args.out) / Path(path).relative_to(folder)
 
 
-def _write_study(study, args: argparse.Namespace, folder: Path, name: str, plot: Callable[[Path], list[str]],
-                 elapsed: float) -> str:
+def _write_study(
+    study,
+    args: argparse.Namespace,
+    folder: Path,
+    name: str,
+    plot: Callable[[Path], list[str]],
+    elapsed: float,
+) -> str:
     """Write a study's JSON (config, rows, seconds), its CSV table (``study.to_frame()``, with the rates' intervals) and
     figures; returns the line naming them."""
     _io.write_json(folder / name, {"config": study.config, "rows": study.rows, "seconds": elapsed})
@@ -131,11 +158,13 @@ def _write_study(study, args: argparse.Namespace, folder: Path, name: str, plot:
 def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
     start = time.perf_counter()
     result = engine_chi2_study(
-        runs=args.runs, seed=args.seed, window=args.window, pfa=args.pfa, progress=not args.quiet,
+        runs=args.runs, seed=args.seed, window=args.window, pfa=args.pfa, progress=not args.quiet
     )
     elapsed = time.perf_counter() - start
-    print(f"engine-chi2: KF chi-square test on the turbojet of Han et al. (2022), {args.runs} runs per fault, "
-          f"window {result.config['window']}, Pfa {result.config['pfa']}, threshold {result.config['threshold']:.2f}")
+    print(
+        f"engine-chi2: KF chi-square test on the turbojet of Han et al. (2022), {args.runs} runs per fault, "
+        f"window {result.config['window']}, Pfa {result.config['pfa']}, threshold {result.config['threshold']:.2f}"
+    )
     print(result.table())
 
     def plot(where: Path) -> list[Path]:
@@ -158,7 +187,7 @@ def split_methods(text: str, valid: list[str]) -> tuple[list[str], list[str]]:
                 unknown.append(name.strip())
         else:
             chosen.append(name)
-        rest = rest[len(name):].lstrip(",").strip()
+        rest = rest[len(name) :].lstrip(",").strip()
     return chosen, unknown
 
 
@@ -170,18 +199,27 @@ def _methods_option(args: argparse.Namespace) -> dict:
 
 def _run_engine(args: argparse.Namespace, folder: Path) -> str:
     start = time.perf_counter()
-    study = engine_study(runs=args.runs, seed=args.seed, progress=not args.quiet,
-                         **_methods_option(args))
+    study = engine_study(
+        runs=args.runs, seed=args.seed, progress=not args.quiet, **_methods_option(args)
+    )
     elapsed = time.perf_counter() - start
-    print(f"engine: the turbojet of Han et al. (2022), MM / IMM (two mode designs) / GLRT on the same {args.runs} runs per fault, "
-          f"mu_T = {study.config['settings']['mu_threshold']}")
+    print(
+        "engine: the turbojet of Han et al. (2022), MM / IMM (two mode designs) / GLRT on the "
+        f"same {args.runs} runs per fault, "
+        f"mu_T = {study.config['settings']['mu_threshold']}"
+    )
     print(study.overview())
     print()
-    print("Per method and fault; pre-FA = share of runs with an alarm before the onset (false-alarm runs); delays "
-          "[s] over the 'clean' runs only, those without one; 'paper' = Table 3 of Han et al. (2022), a mean delay (beside our "
-          "mean); estimate = median over correctly isolated runs")
+    print(
+        "Per method and fault; pre-FA = share of runs with an alarm before the onset (false-alarm runs); delays "
+        "[s] over the 'clean' runs only, those without one; 'paper' = Table 3 of Han et al. "
+        "(2022), a mean delay (beside our "
+        "mean); estimate = median over correctly isolated runs"
+    )
     print(study.table())
-    return _write_study(study, args, folder, "engine.json", lambda where: plot_engine(study, where), elapsed)
+    return _write_study(
+        study, args, folder, "engine.json", lambda where: plot_engine(study, where), elapsed
+    )
 
 
 def _engine_imm_designs(args: argparse.Namespace) -> list[str]:
@@ -195,10 +233,17 @@ def _check_engine_imm(args: argparse.Namespace) -> None:
         params = sorted(et.imm_design(name).parameterization)
         unknown = sorted(set(frozen) - set(params))
         if unknown:
-            raise expected("--freeze", f"parameter names of design {name}, comma-separated, among {params}",
-                             f"unknown {unknown}")
+            raise expected(
+                "--freeze",
+                f"parameter names of design {name}, comma-separated, among {params}",
+                f"unknown {unknown}",
+            )
         if set(params) <= set(frozen):
-            raise expected("--freeze", f"at least one parameter of design {name} left to train", repr(args.freeze))
+            raise expected(
+                "--freeze",
+                f"at least one parameter of design {name} left to train",
+                repr(args.freeze),
+            )
     args.freeze = frozen
 
 
@@ -206,51 +251,97 @@ def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
     test_seed = args.seed + 1000
     frozen = args.freeze
     report, paths = {}, []
-    weights = et.LossWeights(detection=args.detection_weight, false_alarm=args.false_alarm_weight,
-                             delay=args.delay_weight, isolation=args.isolation_weight)
+    weights = et.LossWeights(
+        detection=args.detection_weight,
+        false_alarm=args.false_alarm_weight,
+        delay=args.delay_weight,
+        isolation=args.isolation_weight,
+    )
     for name in _engine_imm_designs(args):
         start = time.perf_counter()
         design = et.imm_design(name)
         logger.info("%s: training", name)  # logging: --quiet drops it
-        result = et.tune_engine_imm(design, steps=args.steps, train_runs=args.train_runs, seed=args.seed,
-                                    weights=weights, progress=not args.quiet, confirm_steps=args.confirm_steps,
-                                    frozen=frozen)
+        result = et.tune_engine_imm(
+            design,
+            steps=args.steps,
+            train_runs=args.train_runs,
+            seed=args.seed,
+            weights=weights,
+            progress=not args.quiet,
+            confirm_steps=args.confirm_steps,
+            frozen=frozen,
+        )
         tuned = constrain(design.parameterization, result.raw)
         selection = None
         if args.select_thresholds:
-            logger.info(f"{name}: selecting one mu_T per mode on {args.selection_runs} runs per fault "
-                        f"(seed {args.seed + 2})")
+            logger.info(
+                f"{name}: selecting one mu_T per mode on {args.selection_runs} runs per fault "
+                f"(seed {args.seed + 2})"
+            )
             tuned["mu_threshold"], selection = et.select_mode_thresholds(
-                design, tuned, args.selection_runs, args.seed + 2, args.confirm_steps)
+                design, tuned, args.selection_runs, args.seed + 2, args.confirm_steps
+            )
             result = result._replace(raw=unconstrain(design.parameterization, tuned))
         hand_rows, hand_ce = et.evaluate_engine_imm(design, design.hand(), args.runs, test_seed)
-        tuned_rows, tuned_ce = et.evaluate_engine_imm(design, tuned, args.runs, test_seed, args.confirm_steps)
+        tuned_rows, tuned_ce = et.evaluate_engine_imm(
+            design, tuned, args.runs, test_seed, args.confirm_steps
+        )
         worse = et.worse_metrics(hand_rows, tuned_rows, hand_ce, tuned_ce)
         elapsed = time.perf_counter() - start
-        print(f"tune engine-imm, design {name} ({design.method}): {args.steps} Adam steps on {args.train_runs} "
-              f"runs per fault (seed {args.seed}, best step {result.history.best_step}); held-out test: "
-              f"{args.runs} runs per fault (seed {test_seed}); loss weights {dict(weights._asdict())}; "
-              f"tuned detector confirms over {args.confirm_steps} step(s), the paper's over 1; frozen "
-              f"{list(frozen) or 'none'}")
+        print(
+            f"tune engine-imm, design {name} ({design.method}): {args.steps} Adam steps on {args.train_runs} "
+            f"runs per fault (seed {args.seed}, best step {result.history.best_step}); held-out test: "
+            f"{args.runs} runs per fault (seed {test_seed}); loss weights {dict(weights._asdict())}; "
+            f"tuned detector confirms over {args.confirm_steps} step(s), the paper's over 1; frozen "
+            f"{list(frozen) or 'none'}"
+        )
         if selection is not None:
-            print(f"mu_T per mode (normal, actuator, RPM, P2, T2, P4, T4) chosen on {args.selection_runs} runs per "
-                  f"fault (seed {args.seed + 2}): {np.round(np.asarray(tuned['mu_threshold']), 2).tolist()}; "
-                  f"shortfall against the paper's there {selection['shortfall']['trained']:.3f} -> "
-                  f"{selection['shortfall']['selected']:.3f}")
+            print(
+                f"mu_T per mode (normal, actuator, RPM, P2, T2, P4, T4) chosen on {args.selection_runs} runs per "
+                f"fault (seed {args.seed + 2}): {np.round(np.asarray(tuned['mu_threshold']), 2).tolist()}; "
+                f"shortfall against the paper's there {selection['shortfall']['trained']:.3f} -> "
+                f"{selection['shortfall']['selected']:.3f}"
+            )
         print(et.comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce))
         print(f"worse than the paper's: {', '.join(worse) if worse else 'none'}\n")
-        paths.append(save_params(folder / f"engine-imm-{name}-tuned.npz", result.raw, design.parameterization,
-                                 {"best_step": result.history.best_step, "seed": args.seed, "design": name,
-                                  "confirm_steps": args.confirm_steps, "provenance": _io.provenance()}))
+        paths.append(
+            save_params(
+                folder / f"engine-imm-{name}-tuned.npz",
+                result.raw,
+                design.parameterization,
+                {
+                    "best_step": result.history.best_step,
+                    "seed": args.seed,
+                    "design": name,
+                    "confirm_steps": args.confirm_steps,
+                    "provenance": _io.provenance(),
+                },
+            )
+        )
         report[name] = {
-            "paper": hand_rows, "tuned": tuned_rows, "cross_entropy": {"paper": hand_ce, "tuned": tuned_ce},
-            "worse": worse, "shortfall": et.shortfall(hand_rows, tuned_rows), "frozen": list(frozen),
+            "paper": hand_rows,
+            "tuned": tuned_rows,
+            "cross_entropy": {"paper": hand_ce, "tuned": tuned_ce},
+            "worse": worse,
+            "shortfall": et.shortfall(hand_rows, tuned_rows),
+            "frozen": list(frozen),
             "threshold_selection": selection,
-            "history": _as_lists(result.history._asdict()), "paper_params": _as_lists(design.hand()),
-            "tuned_params": _as_lists(tuned), "seconds": elapsed}
-    config = {"steps": args.steps, "train_runs": args.train_runs, "test_runs": args.runs, "seed": args.seed,
-              "test_seed": test_seed, "weights": weights._asdict(), "confirm_steps": args.confirm_steps,
-              "select_thresholds": args.select_thresholds, "selection_runs": args.selection_runs}
+            "history": _as_lists(result.history._asdict()),
+            "paper_params": _as_lists(design.hand()),
+            "tuned_params": _as_lists(tuned),
+            "seconds": elapsed,
+        }
+    config = {
+        "steps": args.steps,
+        "train_runs": args.train_runs,
+        "test_runs": args.runs,
+        "seed": args.seed,
+        "test_seed": test_seed,
+        "weights": weights._asdict(),
+        "confirm_steps": args.confirm_steps,
+        "select_thresholds": args.select_thresholds,
+        "selection_runs": args.selection_runs,
+    }
     _io.write_json(folder / "engine-imm-tuning.json", {"config": config, "designs": report})
     named = ", ".join(str(_named(args, folder, p)) for p in paths)
     return f"wrote {named} and {Path(args.out) / 'engine-imm-tuning.json'}"
@@ -260,89 +351,172 @@ def _tune_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
     start = time.perf_counter()
     windows = args.windows
     weights = ct.Chi2Weights(false_alarm=args.false_alarm_weight, delay=args.delay_weight)
-    tuning = ct.tune_engine_chi2(windows, steps=args.steps, train_runs=args.train_runs, seed=args.seed,
-                                 weights=weights, progress=not args.quiet)
+    tuning = ct.tune_engine_chi2(
+        windows,
+        steps=args.steps,
+        train_runs=args.train_runs,
+        seed=args.seed,
+        weights=weights,
+        progress=not args.quiet,
+    )
     tuned = constrain(ct.PARAMETERIZATION, tuning.result.raw)
     test_seed = args.seed + 1000
-    hand_rows, hand_loss = ct.evaluate_engine_chi2(ct.hand_params(), ct.HAND_WINDOW, args.runs, test_seed, weights)
-    tuned_rows, tuned_loss = ct.evaluate_engine_chi2(tuned, tuning.window, args.runs, test_seed, weights)
+    hand_rows, hand_loss = ct.evaluate_engine_chi2(
+        ct.hand_params(), ct.HAND_WINDOW, args.runs, test_seed, weights
+    )
+    tuned_rows, tuned_loss = ct.evaluate_engine_chi2(
+        tuned, tuning.window, args.runs, test_seed, weights
+    )
     elapsed = time.perf_counter() - start
     out = Path(args.out)
-    print(f"tune engine-chi2: KF chi-square test, Q, R and threshold by {args.steps} Adam steps on "
-          f"{args.train_runs} runs per fault (seed {args.seed}) for windows {list(windows)}; validation loss "
-          + ", ".join(f"L={w}: {v:.4f}" for w, v in tuning.val_loss.items())
-          + f"; held-out test: {args.runs} runs per fault (seed {test_seed})")
-    print(ct.comparison_table(hand_rows, tuned_rows, ct.HAND_WINDOW, tuning.window, hand_loss, tuned_loss))
-    save_params(folder / "engine-chi2-tuned.npz", tuning.result.raw, ct.PARAMETERIZATION,
-                {"best_step": tuning.result.history.best_step, "seed": args.seed, "window": tuning.window,
-                 "provenance": _io.provenance()})
-    _io.write_json(folder / "engine-chi2-tuning.json", {
-        "config": {"steps": args.steps, "train_runs": args.train_runs, "test_runs": args.runs, "seed": args.seed,
-                   "test_seed": test_seed, "windows": list(windows), "weights": weights._asdict()},
-        "window": tuning.window, "val_loss": {str(w): v for w, v in tuning.val_loss.items()},
-        "hand": hand_rows, "tuned": tuned_rows, "held_out_loss": {"hand": hand_loss, "tuned": tuned_loss},
-        "history": _as_lists(tuning.result.history._asdict()), "hand_params": _as_lists(ct.hand_params()),
-        "tuned_params": _as_lists(tuned), "seconds": elapsed})
+    print(
+        f"tune engine-chi2: KF chi-square test, Q, R and threshold by {args.steps} Adam steps on "
+        f"{args.train_runs} runs per fault (seed {args.seed}) for windows {list(windows)}; validation loss "
+        + ", ".join(f"L={w}: {v:.4f}" for w, v in tuning.val_loss.items())
+        + f"; held-out test: {args.runs} runs per fault (seed {test_seed})"
+    )
+    print(
+        ct.comparison_table(
+            hand_rows, tuned_rows, ct.HAND_WINDOW, tuning.window, hand_loss, tuned_loss
+        )
+    )
+    save_params(
+        folder / "engine-chi2-tuned.npz",
+        tuning.result.raw,
+        ct.PARAMETERIZATION,
+        {
+            "best_step": tuning.result.history.best_step,
+            "seed": args.seed,
+            "window": tuning.window,
+            "provenance": _io.provenance(),
+        },
+    )
+    _io.write_json(
+        folder / "engine-chi2-tuning.json",
+        {
+            "config": {
+                "steps": args.steps,
+                "train_runs": args.train_runs,
+                "test_runs": args.runs,
+                "seed": args.seed,
+                "test_seed": test_seed,
+                "windows": list(windows),
+                "weights": weights._asdict(),
+            },
+            "window": tuning.window,
+            "val_loss": {str(w): v for w, v in tuning.val_loss.items()},
+            "hand": hand_rows,
+            "tuned": tuned_rows,
+            "held_out_loss": {"hand": hand_loss, "tuned": tuned_loss},
+            "history": _as_lists(tuning.result.history._asdict()),
+            "hand_params": _as_lists(ct.hand_params()),
+            "tuned_params": _as_lists(tuned),
+            "seconds": elapsed,
+        },
+    )
     return f"wrote {out / 'engine-chi2-tuned.npz'} and {out / 'engine-chi2-tuning.json'} ({elapsed:.1f} s)"
 
 
 def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
     start = time.perf_counter()
     design = vtol_design()
-    study = vtol_study(runs=args.runs, seed=args.seed, design=design, progress=not args.quiet, **_methods_option(args))
+    study = vtol_study(
+        runs=args.runs,
+        seed=args.seed,
+        design=design,
+        progress=not args.quiet,
+        **_methods_option(args),
+    )
     examples = vtol_examples(study.design, seed=args.seed)
     elapsed = time.perf_counter() - start
     cfg = study.config
-    print(f"vtol: the VTOL of Lee & Lyou, bank of 12 robust TSKFs (multiplicative + additive per location), "
-          f"{args.runs} closed-loop runs per fault with FTC off and on; statistic chi2({cfg['dof']}): "
-          f"chi2 thresholds {cfg['chi2_threshold']:.2f} / window {cfg['chi2_window_threshold']:.2f}, paper's "
-          f"{cfg['paper_threshold']} / {cfg['paper_window_threshold']}; MDWT M = {cfg['levels']}, c = {cfg['c_mult']}")
-    print("'ours' thresholds: per filter, the larger of the chi2 one and the fault-free 99.5 % quantile, then "
-          f"per method scaled so that at most {cfg['run_false_alarm']:.0%} of the fault-free runs show a symptom "
-          f"({cfg['calibration_runs']} calibration runs, another seed):")
+    print(
+        f"vtol: the VTOL of Lee & Lyou, bank of 12 robust TSKFs (multiplicative + additive per location), "
+        f"{args.runs} closed-loop runs per fault with FTC off and on; statistic chi2({cfg['dof']}): "
+        f"chi2 thresholds {cfg['chi2_threshold']:.2f} / window {cfg['chi2_window_threshold']:.2f}, paper's "
+        f"{cfg['paper_threshold']} / {cfg['paper_window_threshold']}; MDWT M = {cfg['levels']}, c = {cfg['c_mult']}"
+    )
+    print(
+        "'ours' thresholds: per filter, the larger of the chi2 one and the fault-free 99.5 % quantile, then "
+        f"per method scaled so that at most {cfg['run_false_alarm']:.0%} of the fault-free runs show a symptom "
+        f"({cfg['calibration_runs']} calibration runs, another seed):"
+    )
     for method, row in cfg["thresholds"].items():
         print(f"  {method:<8} " + " ".join(f"{name} {value:.1f}" for name, value in row.items()))
-    print("Rates over runs; delays in steps (median over the 'clean' runs, those with no symptom before the onset); "
-          "detection = some location's filters all alarm (the symptom vector leaves the no-fault column), isolation "
-          "= it matches the true fault's column\n")
+    print(
+        "Rates over runs; delays in steps (median over the 'clean' runs, those with no symptom before the onset); "
+        "detection = some location's filters all alarm (the symptom vector leaves the no-fault column), isolation "
+        "= it matches the true fault's column\n"
+    )
     print(study.table())
     print()
     print(study.headline())
-    return _write_study(study, args, folder, "vtol.json",
-                        lambda where: plot_vtol(study, examples, study.design, where), elapsed)
+    return _write_study(
+        study,
+        args,
+        folder,
+        "vtol.json",
+        lambda where: plot_vtol(study, examples, study.design, where),
+        elapsed,
+    )
 
 
 def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
     start = time.perf_counter()
-    study = wheel_study(runs=args.runs, seed=args.seed, calibration_runs=max(20, 2 * args.runs),
-                        estimator=args.estimator, engage_on=args.engage_on, progress=not args.quiet,
-                        **_methods_option(args))
+    study = wheel_study(
+        runs=args.runs,
+        seed=args.seed,
+        calibration_runs=max(20, 2 * args.runs),
+        estimator=args.estimator,
+        engage_on=args.engage_on,
+        progress=not args.quiet,
+        **_methods_option(args),
+    )
     design = wheel_design()._replace(detection_threshold=study.config["fdp_threshold"])
-    examples = wheel_examples(design, seed=args.seed, estimator=args.estimator, engage_on=args.engage_on)
+    examples = wheel_examples(
+        design, seed=args.seed, estimator=args.estimator, engage_on=args.engage_on
+    )
     elapsed = time.perf_counter() - start
     cfg = study.config
-    print(f"reaction-wheels: KITSAT-3 (Choi & Park 2009) with a 4-wheel pyramid, {cfg['slew_deg']:.0f} deg slew in 40 s, "
-          f"60 s at 10 Hz, {args.runs} runs per case (noise and onset uniform in 15-25 s); estimation filter "
-          f"{args.estimator.upper()}, banks engaged on the {'NIS test' if args.engage_on == 'nis' else 'dual filter F'}")
-    print(f"thresholds: F_T = {cfg['fdp_threshold']:.3e} ({cfg['fdp_margin']} x the largest F of "
-          f"{cfg['calibration_runs']} fault-free runs, another seed); NIS over {cfg['nis_window']} steps "
-          f"{cfg['nis_threshold']:.2f} (chi2, Pfa 1e-5); relative credit {cfg['credit_threshold']}; "
-          f"mu_T {cfg['mode_threshold']}; isolators confirm over {cfg['confirm_steps']} steps")
-    print("det = decided at or after the onset; isol = its first decision names the faulty wheel or gyro (- : "
-          "the method never names one: F and NIS for a wheel); <=2s = detected (F, NIS) or isolated (credit, MM, gyro "
-          "health test) within 2 s of the onset, in the runs with no decision before it; delays over those runs "
-          "(mean, median, p90); FA = share of runs with a decision before the onset, clean = the others; gyro cases "
-          f"the x gyro dead (NaN) or frozen, gyro health test = stuck-at test over {cfg['health_window']} "
-          f"samples, P_fa {cfg['health_pfa_per_window']:g} per window and gyro\n")
+    print(
+        f"reaction-wheels: KITSAT-3 (Choi & Park 2009) with a 4-wheel pyramid, {cfg['slew_deg']:.0f} deg slew in 40 s, "
+        f"60 s at 10 Hz, {args.runs} runs per case (noise and onset uniform in 15-25 s); estimation filter "
+        f"{args.estimator.upper()}, banks engaged on the {'NIS test' if args.engage_on == 'nis' else 'dual filter F'}"
+    )
+    print(
+        f"thresholds: F_T = {cfg['fdp_threshold']:.3e} ({cfg['fdp_margin']} x the largest F of "
+        f"{cfg['calibration_runs']} fault-free runs, another seed); NIS over {cfg['nis_window']} steps "
+        f"{cfg['nis_threshold']:.2f} (chi2, Pfa 1e-5); relative credit {cfg['credit_threshold']}; "
+        f"mu_T {cfg['mode_threshold']}; isolators confirm over {cfg['confirm_steps']} steps"
+    )
+    print(
+        "det = decided at or after the onset; isol = its first decision names the faulty wheel or gyro (- : "
+        "the method never names one: F and NIS for a wheel); <=2s = detected (F, NIS) or isolated (credit, MM, gyro "
+        "health test) within 2 s of the onset, in the runs with no decision before it; delays over those runs "
+        "(mean, median, p90); FA = share of runs with a decision before the onset, clean = the others; gyro cases "
+        f"the x gyro dead (NaN) or frozen, gyro health test = stuck-at test over {cfg['health_window']} "
+        f"samples, P_fa {cfg['health_pfa_per_window']:g} per window and gyro\n"
+    )
     print(study.table())
     print()
     print(study.headline())
-    return _write_study(study, args, folder, "reaction-wheels.json",
-                        lambda where: plot_wheels(study, examples, where), elapsed)
+    return _write_study(
+        study,
+        args,
+        folder,
+        "reaction-wheels.json",
+        lambda where: plot_wheels(study, examples, where),
+        elapsed,
+    )
 
 
-def _study_runner(study: Callable, name: str, plot: Callable, header: Callable[[dict, argparse.Namespace], str],
-                  runs: str = "runs") -> Callable[[argparse.Namespace, Path], str]:
+def _study_runner(
+    study: Callable,
+    name: str,
+    plot: Callable,
+    header: Callable[[dict, argparse.Namespace], str],
+    runs: str = "runs",
+) -> Callable[[argparse.Namespace, Path], str]:
     """A runner for a study with a one-line header: ``study(<runs>=--runs, seed, progress)``, its header and table
     printed, its JSON and figures (``plot(study, folder)``) written."""
 
@@ -359,76 +533,133 @@ def _study_runner(study: Callable, name: str, plot: Callable, header: Callable[[
 
 def _f16_flight_header(cfg: dict, args: argparse.Namespace) -> str:
     trim = cfg["design_trim"]
-    return (f"f16-flight: F-16 of Park et al. (2004) (Stevens & Lewis 2nd-ed. tables), climb "
-            f"{cfg['plan']['climb_rate_ft_s']:.0f} ft/s for 0-5 s, then altitude hold and a "
-            f"{cfg['plan']['bank_angle_deg']:.0f} deg bank turn to {cfg['duration_s']:.0f} s; design trim "
-            f"{trim['airspeed_ft_s']:.0f} ft/s, sea level, xcg {trim['xcg']}; {cfg['flights']} flights, RK4 at "
-            f"{cfg['dt_s']} s")
+    return (
+        f"f16-flight: F-16 of Park et al. (2004) (Stevens & Lewis 2nd-ed. tables), climb "
+        f"{cfg['plan']['climb_rate_ft_s']:.0f} ft/s for 0-5 s, then altitude hold and a "
+        f"{cfg['plan']['bank_angle_deg']:.0f} deg bank turn to {cfg['duration_s']:.0f} s; design trim "
+        f"{trim['airspeed_ft_s']:.0f} ft/s, sea level, xcg {trim['xcg']}; {cfg['flights']} flights, RK4 at "
+        f"{cfg['dt_s']} s"
+    )
 
 
 def _f16_header(cfg: dict, args: argparse.Namespace) -> str:
-    return (f"f16: hybrid FDI of Park et al. (2004), three 2-DOF rate sensors (sigma {cfg['rate_sigma_rad_s']:g} "
-            f"rad/s) on the closed-loop F-16, parity space + UKF on demand (restart {cfg['restart_lag_steps']} steps "
-            f"back, Cl/Cm/Cn errors {cfg['coefficient_error_Cl_Cm_Cn']}); {args.runs} runs per case")
+    return (
+        f"f16: hybrid FDI of Park et al. (2004), three 2-DOF rate sensors (sigma {cfg['rate_sigma_rad_s']:g} "
+        f"rad/s) on the closed-loop F-16, parity space + UKF on demand (restart {cfg['restart_lag_steps']} steps "
+        f"back, Cl/Cm/Cn errors {cfg['coefficient_error_Cl_Cm_Cn']}); {args.runs} runs per case"
+    )
 
 
 def _gnss_campus_header(cfg: dict, args: argparse.Namespace) -> str:
-    return (f"gnss-campus: GPS RAIM of Yoo et al. (2010) from {cfg['start']} (broadcast ephemerides "
-            f"{cfg['ephemeris']}), 1 Hz, {cfg['mask_deg']:.0f} deg mask, P_fa {cfg['pfa']:.2e}, P_md {cfg['pmd']:g}, "
-            f"NPA HAL 556 m; {args.runs} runs per case")
+    return (
+        f"gnss-campus: GPS RAIM of Yoo et al. (2010) from {cfg['start']} (broadcast ephemerides "
+        f"{cfg['ephemeris']}), 1 Hz, {cfg['mask_deg']:.0f} deg mask, P_fa {cfg['pfa']:.2e}, P_md {cfg['pmd']:g}, "
+        f"NPA HAL 556 m; {args.runs} runs per case"
+    )
 
 
 def _gnss_real_header(cfg: dict, args: argparse.Namespace) -> str:
-    return (f"gnss-real: GPS integrity on real receivers, GEONET stations {' and '.join(cfg['stations'])} "
-            f"({cfg['data']}, 30 s), RTKLIB's single-point model, {cfg['mask_deg']:.0f} deg mask, parity test "
-            f"P_fa {cfg['pfa']:g}, slope PLs P_md {cfg['pmd']:g}, solution-separation PLs (ARAIM LPV-200); faults "
-            f"injected into station {cfg['fault_station']}, {args.runs} trials per size and rate; "
-            f"{len(cfg['phones'])} smartphone traces (GSDC 2021-2023), every constellation, a clock per "
-            "constellation, beside Google's fixes and gnss_lib_py's FDE")
+    return (
+        f"gnss-real: GPS integrity on real receivers, GEONET stations {' and '.join(cfg['stations'])} "
+        f"({cfg['data']}, 30 s), RTKLIB's single-point model, {cfg['mask_deg']:.0f} deg mask, parity test "
+        f"P_fa {cfg['pfa']:g}, slope PLs P_md {cfg['pmd']:g}, solution-separation PLs (ARAIM LPV-200); faults "
+        f"injected into station {cfg['fault_station']}, {args.runs} trials per size and rate; "
+        f"{len(cfg['phones'])} smartphone traces (GSDC 2021-2023), every constellation, a clock per "
+        "constellation, beside Google's fixes and gnss_lib_py's FDE"
+    )
 
 
 def _gps_ins_header(cfg: dict, args: argparse.Namespace) -> str:
-    return (f"gps-ins: INS/GPS integrity of Yoo et al. (2010), park flight {cfg['flight_s']} s from {cfg['start']}, "
-            f"HG1900-class IMU {cfg['imu_rate_hz']} Hz, GPS 1 Hz (RAIM-passed fixes only), 15-state error-state EKF; "
-            f"chi-square {cfg['chi2']['threshold']:.2f} (60 dof), SCST {cfg['scst']['threshold']:.2f} (15 dof, "
-            f"propagators reset every {cfg['scst']['period_s']} s); {args.runs} runs per case")
+    return (
+        f"gps-ins: INS/GPS integrity of Yoo et al. (2010), park flight {cfg['flight_s']} s from {cfg['start']}, "
+        f"HG1900-class IMU {cfg['imu_rate_hz']} Hz, GPS 1 Hz (RAIM-passed fixes only), 15-state error-state EKF; "
+        f"chi-square {cfg['chi2']['threshold']:.2f} (60 dof), SCST {cfg['scst']['threshold']:.2f} (15 dof, "
+        f"propagators reset every {cfg['scst']['period_s']} s); {args.runs} runs per case"
+    )
 
 
-_run_f16_flight = _study_runner(f16_flight_study, "f16-flight.json", plot_f16_flight, _f16_flight_header, "flights")
+_run_f16_flight = _study_runner(
+    f16_flight_study, "f16-flight.json", plot_f16_flight, _f16_flight_header, "flights"
+)
 _run_f16 = _study_runner(f16_fdi_study, "f16.json", plot_f16_fdi, _f16_header)
-_run_gnss_campus = _study_runner(gnss_campus_study, "gnss-campus.json", plot_gnss_campus, _gnss_campus_header)
+_run_gnss_campus = _study_runner(
+    gnss_campus_study, "gnss-campus.json", plot_gnss_campus, _gnss_campus_header
+)
 _run_gps_ins = _study_runner(gps_ins_study, "gps-ins.json", plot_gps_ins, _gps_ins_header)
 _run_gnss_real = _study_runner(gnss_real_study, "gnss-real.json", plot_gnss_real, _gnss_real_header)
 
 
 RUNNERS = {
-    "engine": Runner(_run_engine, "Han et al. (2022) turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
-                                  "the paper's Table 3", methods=engine_method_names),
-    "engine-chi2": Runner(_run_engine_chi2, "Han et al. (2022) turbojet: the Kalman-filter chi-square test (--window, --pfa)",
-                          options=("window", "pfa")),
-    "reaction-wheels": Runner(_run_reaction_wheels, "Choi & Park (2009) satellite, 4-wheel pyramid: dual filter F, NIS, "
-                              "credits, MM isolator (--estimator, --engage-on)", options=("estimator", "engage_on"),
-                              methods=lambda: WHEEL_METHODS),
-    "f16": Runner(_run_f16, "Park et al. (2004) F-16 rate sensors: parity space with the UKF's analytic redundancy on "
-                            "demand, the paper's case, direction x magnitude sweep, envelope, sensor layout"),
-    "f16-flight": Runner(_run_f16_flight, "Park et al. (2004) F-16: book trim tables beside ours, modes, LQR SAS with "
-                                          "altitude and bank hold flying the paper's climb and bank turn"),
-    "gps-ins": Runner(_run_gps_ins, "Yoo et al. (2010) INS/GPS: 15-state EKF, windowed chi-square and SCST, Table 3 (gyro bias)"),
-    "gnss-campus": Runner(_run_gnss_campus, "Yoo et al. (2010) GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
-                                            "park satellite faults detected, isolated and excluded"),
-    "gnss-real": Runner(_run_gnss_real, "GEONET stations (real GPS, one hour): positions beside RTKLIB's, slope and "
-                                        "solution-separation PLs (Stanford diagrams), injected step and ramp faults; "
-                                        "smartphones (every constellation) beside Google and gnss_lib_py"),
-    "vtol": Runner(_run_vtol, "Lee & Lyou VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
-                              "fault-tolerant control", methods=lambda: VTOL_METHODS),
+    "engine": Runner(
+        _run_engine,
+        "Han et al. (2022) turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
+        "the paper's Table 3",
+        methods=engine_method_names,
+    ),
+    "engine-chi2": Runner(
+        _run_engine_chi2,
+        "Han et al. (2022) turbojet: the Kalman-filter chi-square test (--window, --pfa)",
+        options=("window", "pfa"),
+    ),
+    "reaction-wheels": Runner(
+        _run_reaction_wheels,
+        "Choi & Park (2009) satellite, 4-wheel pyramid: dual filter F, NIS, "
+        "credits, MM isolator (--estimator, --engage-on)",
+        options=("estimator", "engage_on"),
+        methods=lambda: WHEEL_METHODS,
+    ),
+    "f16": Runner(
+        _run_f16,
+        "Park et al. (2004) F-16 rate sensors: parity space with the UKF's analytic redundancy on "
+        "demand, the paper's case, direction x magnitude sweep, envelope, sensor layout",
+    ),
+    "f16-flight": Runner(
+        _run_f16_flight,
+        "Park et al. (2004) F-16: book trim tables beside ours, modes, LQR SAS with "
+        "altitude and bank hold flying the paper's climb and bank turn",
+    ),
+    "gps-ins": Runner(
+        _run_gps_ins,
+        "Yoo et al. (2010) INS/GPS: 15-state EKF, windowed chi-square and SCST, Table 3 (gyro bias)",
+    ),
+    "gnss-campus": Runner(
+        _run_gnss_campus,
+        "Yoo et al. (2010) GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
+        "park satellite faults detected, isolated and excluded",
+    ),
+    "gnss-real": Runner(
+        _run_gnss_real,
+        "GEONET stations (real GPS, one hour): positions beside RTKLIB's, slope and "
+        "solution-separation PLs (Stanford diagrams), injected step and ramp faults; "
+        "smartphones (every constellation) beside Google and gnss_lib_py",
+    ),
+    "vtol": Runner(
+        _run_vtol,
+        "Lee & Lyou VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
+        "fault-tolerant control",
+        methods=lambda: VTOL_METHODS,
+    ),
 }
 TUNERS = {
-    "engine-chi2": Runner(_tune_engine_chi2, "Q, R and the threshold of the engine chi-square test by gradient, "
-                                             "window by validation", options=("windows",)),
-    "engine-imm": Runner(_tune_engine_imm, "the engine IMMs' transition matrix, mode noise and mu_T by gradient "
-                                           "(--design)",
-                         options=("design", "detection_weight", "isolation_weight", "confirm_steps", "freeze",
-                                  "select_thresholds", "selection_runs"), check=_check_engine_imm),
+    "engine-chi2": Runner(
+        _tune_engine_chi2,
+        "Q, R and the threshold of the engine chi-square test by gradient, window by validation",
+        options=("windows",),
+    ),
+    "engine-imm": Runner(
+        _tune_engine_imm,
+        "the engine IMMs' transition matrix, mode noise and mu_T by gradient (--design)",
+        options=(
+            "design",
+            "detection_weight",
+            "isolation_weight",
+            "confirm_steps",
+            "freeze",
+            "select_thresholds",
+            "selection_runs",
+        ),
+        check=_check_engine_imm,
+    ),
 }
 #: one line per scenario and tuning target, for ``jaxfdi --help``
 RUN_HELP = {name: runner.help for name, runner in RUNNERS.items()}
@@ -454,7 +685,9 @@ it was. --traceback: a traceback instead of the one line."""
 
 def _listing(title: str, entries: dict[str, str]) -> str:
     width = max(map(len, entries)) + 2
-    return "\n".join([title, *(f"  {name:<{width}}{text}" for name, text in sorted(entries.items()))])
+    return "\n".join(
+        [title, *(f"  {name:<{width}}{text}" for name, text in sorted(entries.items()))]
+    )
 
 
 def _version_line() -> str:
@@ -484,82 +717,181 @@ def _add_process_options(run: argparse.ArgumentParser) -> None:
     """Multi-host Monte Carlo (``jaxfdi.distributed``): every process runs the same command; only process 0 writes
     ``--out``."""
     group = run.add_argument_group("several processes (one study over hosts; jaxfdi.distributed)")
-    group.add_argument("--num-processes", default=None,
-                       help="processes of the study (default: JAXFDI_NUM_PROCESSES, else 1)")
-    group.add_argument("--process-id", default=None,
-                       help="this process's index in [0, N) (default: JAXFDI_PROCESS_ID)")
-    group.add_argument("--coordinator", default=None,
-                       help="HOST:PORT of process 0 (default: JAX_COORDINATOR_ADDRESS)")
+    group.add_argument(
+        "--num-processes",
+        default=None,
+        help="processes of the study (default: JAXFDI_NUM_PROCESSES, else 1)",
+    )
+    group.add_argument(
+        "--process-id",
+        default=None,
+        help="this process's index in [0, N) (default: JAXFDI_PROCESS_ID)",
+    )
+    group.add_argument(
+        "--coordinator",
+        default=None,
+        help="HOST:PORT of process 0 (default: JAX_COORDINATOR_ADDRESS)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="jaxfdi", description="Fault detection and isolation studies in JAX",
+        prog="jaxfdi",
+        description="Fault detection and isolation studies in JAX",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="\n\n".join([_listing("scenarios (jaxfdi run <scenario>):", RUN_HELP),
-                             _listing("tuning targets (jaxfdi tune <target>):", TUNE_HELP),
-                             "jaxfdi run -h / jaxfdi tune -h: the options", CHECKS_HELP]))
+        epilog="\n\n".join(
+            [
+                _listing("scenarios (jaxfdi run <scenario>):", RUN_HELP),
+                _listing("tuning targets (jaxfdi tune <target>):", TUNE_HELP),
+                "jaxfdi run -h / jaxfdi tune -h: the options",
+                CHECKS_HELP,
+            ]
+        ),
+    )
     parser.add_argument("--version", action="version", version=_version_line())
     sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run a paper scenario end to end", formatter_class=argparse.RawDescriptionHelpFormatter,
-                         epilog="\n\n".join([_listing("scenarios:", RUN_HELP), CHECKS_HELP]))
+    run = sub.add_parser(
+        "run",
+        help="run a paper scenario end to end",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="\n\n".join([_listing("scenarios:", RUN_HELP), CHECKS_HELP]),
+    )
     run.add_argument("scenario", choices=sorted(RUNNERS))
-    run.add_argument("--methods", default=None,
-                     help="run only these methods, comma-separated (engine, vtol, reaction-wheels; default all; "
-                          "an unknown name lists the valid ones)")
-    run.add_argument("--runs", type=int, default=100, help="Monte Carlo runs per fault, >= 1 (default 100)")
+    run.add_argument(
+        "--methods",
+        default=None,
+        help="run only these methods, comma-separated (engine, vtol, reaction-wheels; default all; "
+        "an unknown name lists the valid ones)",
+    )
+    run.add_argument(
+        "--runs", type=int, default=100, help="Monte Carlo runs per fault, >= 1 (default 100)"
+    )
     run.add_argument("--seed", type=int, default=0, help="PRNG seed in [0, 2**32 - 1] (default 0)")
-    run.add_argument("--out", default="results", help="output folder for JSON and PNG (default ./results)")
-    run.add_argument("--window", type=int, default=None, help="engine-chi2: window length in steps, >= 1 (default 4)")
-    run.add_argument("--pfa", type=float, default=None,
-                     help="engine-chi2: design false-alarm probability in (0, 1) (default 0.005)")
-    run.add_argument("--estimator", default=None, choices=["ekf", "ukf"],
-                     help="reaction-wheels: the estimation filter (default ekf, the paper's)")
-    run.add_argument("--engage-on", default=None, choices=["nis", "fdp"],
-                     help="reaction-wheels: the detector that engages the hypothesis banks (default nis; fdp = "
-                          "the paper's F)")
+    run.add_argument(
+        "--out", default="results", help="output folder for JSON and PNG (default ./results)"
+    )
+    run.add_argument(
+        "--window",
+        type=int,
+        default=None,
+        help="engine-chi2: window length in steps, >= 1 (default 4)",
+    )
+    run.add_argument(
+        "--pfa",
+        type=float,
+        default=None,
+        help="engine-chi2: design false-alarm probability in (0, 1) (default 0.005)",
+    )
+    run.add_argument(
+        "--estimator",
+        default=None,
+        choices=["ekf", "ukf"],
+        help="reaction-wheels: the estimation filter (default ekf, the paper's)",
+    )
+    run.add_argument(
+        "--engage-on",
+        default=None,
+        choices=["nis", "fdp"],
+        help="reaction-wheels: the detector that engages the hypothesis banks (default nis; fdp = "
+        "the paper's F)",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress display")
-    run.add_argument("--traceback", action="store_true",
-                     help="on an error the library reports as a bad argument, a traceback instead of one line")
+    run.add_argument(
+        "--traceback",
+        action="store_true",
+        help="on an error the library reports as a bad argument, a traceback instead of one line",
+    )
     _add_process_options(run)
-    tune = sub.add_parser("tune", help="tune a scenario's filter and detector by gradient, then compare on held-out runs",
-                          formatter_class=argparse.RawDescriptionHelpFormatter,
-                          epilog="\n\n".join([_listing("tuning targets:", TUNE_HELP), CHECKS_HELP]))
+    tune = sub.add_parser(
+        "tune",
+        help="tune a scenario's filter and detector by gradient, then compare on held-out runs",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="\n\n".join([_listing("tuning targets:", TUNE_HELP), CHECKS_HELP]),
+    )
     tune.add_argument("target", choices=sorted(TUNERS))
     tune.add_argument("--steps", type=int, default=150, help="optimiser steps, >= 1 (default 150)")
-    tune.add_argument("--train-runs", type=int, default=16, help="training runs per fault, >= 1 (default 16)")
-    tune.add_argument("--runs", type=int, default=100, help="held-out test runs per fault, >= 1 (default 100)")
-    tune.add_argument("--seed", type=int, default=0,
-                      help="training seed in [0, 2**32 - 1]; validation seed+1, test seed+1000")
+    tune.add_argument(
+        "--train-runs", type=int, default=16, help="training runs per fault, >= 1 (default 16)"
+    )
+    tune.add_argument(
+        "--runs", type=int, default=100, help="held-out test runs per fault, >= 1 (default 100)"
+    )
+    tune.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="training seed in [0, 2**32 - 1]; validation seed+1, test seed+1000",
+    )
     tune.add_argument("--out", default="results", help="output folder (default ./results)")
-    tune.add_argument("--design", default=None, choices=["all", "bias", "zhang-li"],
-                      help="engine-imm: which IMM mode design (default all)")
-    tune.add_argument("--detection-weight", type=float, default=None,
-                      help="engine-imm: weight of the soft detection loss against the mode cross-entropy "
-                           "(default 1; 0 trains on the cross-entropy alone)")
-    tune.add_argument("--false-alarm-weight", type=float, default=5.0,
-                      help="loss weight of P(alarm before the onset), finite, >= 0 (default 5)")
-    tune.add_argument("--delay-weight", type=float, default=1.0,
-                      help="loss weight of the expected delay / steps after the onset, finite, >= 0 (default 1)")
-    tune.add_argument("--confirm-steps", type=_confirm_steps, default=None,
-                      help="engine-imm: the tuned detector alarms once the same fault mode has led at or above "
-                           "mu_T for this many steps; trained for it (default 1, the paper's rule); or 7 "
-                           "comma-separated lengths, one per mode (normal, actuator, RPM, P2, T2, P4, T4)")
-    tune.add_argument("--freeze", default=None,
-                      help="engine-imm: parameters kept at their hand-set values, comma-separated "
-                           "(e.g. mu_threshold)")
-    tune.add_argument("--select-thresholds", action="store_true", default=None,
-                      help="engine-imm: after training, choose one mu_T per fault mode on selection runs "
-                           "(seed+2) so that no reported metric is worse than the paper's there")
-    tune.add_argument("--selection-runs", type=int, default=None,
-                      help="engine-imm: runs per fault for --select-thresholds, >= 1 (default 100)")
-    tune.add_argument("--isolation-weight", type=float, default=None,
-                      help="engine-imm: loss weight of P(first alarm names the wrong fault), finite, >= 0 (default 5)")
-    tune.add_argument("--windows", default=None,
-                      help="engine-chi2: window lengths to try, comma-separated (default 1,2,4,8)")
+    tune.add_argument(
+        "--design",
+        default=None,
+        choices=["all", "bias", "zhang-li"],
+        help="engine-imm: which IMM mode design (default all)",
+    )
+    tune.add_argument(
+        "--detection-weight",
+        type=float,
+        default=None,
+        help="engine-imm: weight of the soft detection loss against the mode cross-entropy "
+        "(default 1; 0 trains on the cross-entropy alone)",
+    )
+    tune.add_argument(
+        "--false-alarm-weight",
+        type=float,
+        default=5.0,
+        help="loss weight of P(alarm before the onset), finite, >= 0 (default 5)",
+    )
+    tune.add_argument(
+        "--delay-weight",
+        type=float,
+        default=1.0,
+        help="loss weight of the expected delay / steps after the onset, finite, >= 0 (default 1)",
+    )
+    tune.add_argument(
+        "--confirm-steps",
+        type=_confirm_steps,
+        default=None,
+        help="engine-imm: the tuned detector alarms once the same fault mode has led at or above "
+        "mu_T for this many steps; trained for it (default 1, the paper's rule); or 7 "
+        "comma-separated lengths, one per mode (normal, actuator, RPM, P2, T2, P4, T4)",
+    )
+    tune.add_argument(
+        "--freeze",
+        default=None,
+        help="engine-imm: parameters kept at their hand-set values, comma-separated "
+        "(e.g. mu_threshold)",
+    )
+    tune.add_argument(
+        "--select-thresholds",
+        action="store_true",
+        default=None,
+        help="engine-imm: after training, choose one mu_T per fault mode on selection runs "
+        "(seed+2) so that no reported metric is worse than the paper's there",
+    )
+    tune.add_argument(
+        "--selection-runs",
+        type=int,
+        default=None,
+        help="engine-imm: runs per fault for --select-thresholds, >= 1 (default 100)",
+    )
+    tune.add_argument(
+        "--isolation-weight",
+        type=float,
+        default=None,
+        help="engine-imm: loss weight of P(first alarm names the wrong fault), finite, >= 0 (default 5)",
+    )
+    tune.add_argument(
+        "--windows",
+        default=None,
+        help="engine-chi2: window lengths to try, comma-separated (default 1,2,4,8)",
+    )
     tune.add_argument("--quiet", action="store_true", help="no progress display")
-    tune.add_argument("--traceback", action="store_true",
-                      help="on an error the library reports as a bad argument, a traceback instead of one line")
+    tune.add_argument(
+        "--traceback",
+        action="store_true",
+        help="on an error the library reports as a bad argument, a traceback instead of one line",
+    )
     sub.add_parser("list", help="list the scenarios")
     return parser
 
@@ -593,8 +925,11 @@ def check_options(args: argparse.Namespace, kind: str, name: str, runner: Runner
             if dest == "methods":
                 raise expected("--methods", f"none: {name} has one method", repr(value))
             users = sorted(n for n, r in registry.items() if dest in r.options)
-            raise expected(_flag(dest), f"no value: {kind} {name} does not read it (read by {', '.join(users)})",
-                           repr(value))
+            raise expected(
+                _flag(dest),
+                f"no value: {kind} {name} does not read it (read by {', '.join(users)})",
+                repr(value),
+            )
     for dest, (low, high) in INTEGER_RANGES.items():
         value = getattr(args, dest, None)
         if value is not None and not low <= value <= high:
@@ -604,16 +939,24 @@ def check_options(args: argparse.Namespace, kind: str, name: str, runner: Runner
         if value is None:
             continue
         low, high, low_ok, high_ok = bounds
-        inside = (value >= low if low_ok else value > low) and (value <= high if high_ok else value < high)
+        inside = (value >= low if low_ok else value > low) and (
+            value <= high if high_ok else value < high
+        )
         if not (math.isfinite(value) and inside):
-            raise expected(_flag(dest), f"a finite number {'in ' if high < math.inf else ''}"
-                                        f"{_interval(*bounds)}", value)
+            raise expected(
+                _flag(dest),
+                f"a finite number {'in ' if high < math.inf else ''}{_interval(*bounds)}",
+                value,
+            )
     if kind == "tune":
         steps = args.confirm_steps
         values = steps if isinstance(steps, tuple) else (steps,)
         if len(values) not in (1, NUM_ENGINE_MODES) or not all(1 <= v <= MAX_COUNT for v in values):
-            raise expected("--confirm-steps", f"one integer >= 1 or {NUM_ENGINE_MODES} of them, comma-separated "
-                                              "(one per mode)", repr(",".join(map(str, values))))
+            raise expected(
+                "--confirm-steps",
+                f"one integer >= 1 or {NUM_ENGINE_MODES} of them, comma-separated (one per mode)",
+                repr(",".join(map(str, values))),
+            )
         args.windows = _counts("--windows", args.windows)
     try:
         _io.check_output_dir(args.out, "--out")
@@ -714,8 +1057,11 @@ def main(argv: list[str] | None = None) -> int:
                 valid = list(runner.methods())
                 chosen, unknown = split_methods(args.methods, valid)
                 if unknown or not chosen:
-                    raise expected("--methods", "names among " + "; ".join(valid) + " (comma-separated)",
-                                   f"unknown {unknown}" if unknown else repr(args.methods))
+                    raise expected(
+                        "--methods",
+                        "names among " + "; ".join(valid) + " (comma-separated)",
+                        f"unknown {unknown}" if unknown else repr(args.methods),
+                    )
                 args.methods = chosen
             if runner.check is not None:
                 runner.check(args)
@@ -725,7 +1071,9 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(str(e), 2)
     except KeyboardInterrupt as e:
         signum = e.signum if isinstance(e, Terminated) else signal.SIGINT
-        status = _fail(f"interrupted by {signal.Signals(signum).name}; {args.out} left as it was", 128 + signum)
+        status = _fail(
+            f"interrupted by {signal.Signals(signum).name}; {args.out} left as it was", 128 + signum
+        )
         if argv is None:
             _die_by(signum)
         return status

@@ -18,6 +18,7 @@ local processes simulate a cluster::
 
 starts N copies of the command with those variables set (a free port on 127.0.0.1) and stops all if one fails.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -44,10 +45,13 @@ class ProcessInfo(NamedTuple):
     global_devices: int
 
 
-def check_options(num_processes: Any = None, process_id: Any = None, coordinator: Any = None) -> tuple:
+def check_options(
+    num_processes: Any = None, process_id: Any = None, coordinator: Any = None
+) -> tuple:
     """Check the launcher options (``None``: not given); return ``(num_processes, process_id, coordinator)`` with
     ints; ``ValueError`` naming the option. ``num_processes > 1`` needs all three (options or environment, module
     doc) unless a cluster manager provides them."""
+
     def as_int(name, value, minimum):
         if value is None:
             return None
@@ -66,15 +70,26 @@ def check_options(num_processes: Any = None, process_id: Any = None, coordinator
     num_processes = as_int("--num-processes", num_processes, 1)
     process_id = as_int("--process-id", process_id, 0)
     if num_processes is not None and process_id is not None and process_id >= num_processes:
-        raise ValueError(f"--process-id: expected an integer in [0, {num_processes - 1}] for --num-processes "
-                         f"{num_processes}, got {process_id}")
+        raise ValueError(
+            f"--process-id: expected an integer in [0, {num_processes - 1}] for --num-processes "
+            f"{num_processes}, got {process_id}"
+        )
     if coordinator is not None:
         host, _, port = str(coordinator).rpartition(":")
         if not host or not port.isdigit() or not 0 < int(port) < 65536:
-            raise ValueError(f"--coordinator: expected HOST:PORT (e.g. 10.0.0.1:8476), got {coordinator!r}")
-    if num_processes is not None and num_processes > 1 and (process_id is None or coordinator is None):
-        missing = [name for name, value in (("--process-id", process_id), ("--coordinator", coordinator))
-                   if value is None]
+            raise ValueError(
+                f"--coordinator: expected HOST:PORT (e.g. 10.0.0.1:8476), got {coordinator!r}"
+            )
+    if (
+        num_processes is not None
+        and num_processes > 1
+        and (process_id is None or coordinator is None)
+    ):
+        missing = [
+            name
+            for name, value in (("--process-id", process_id), ("--coordinator", coordinator))
+            if value is None
+        ]
         raise ValueError(f"--num-processes {num_processes}: also needs {' and '.join(missing)}")
     if num_processes is None and (process_id is not None or coordinator is not None):
         raise ValueError("--process-id / --coordinator: also need --num-processes")
@@ -84,13 +99,19 @@ def check_options(num_processes: Any = None, process_id: Any = None, coordinator
 def resolve_options(num_processes=None, process_id=None, coordinator=None) -> tuple:
     """The options, each taken from the environment when not given (module doc), checked."""
     env = os.environ
-    return check_options(num_processes if num_processes is not None else env.get(ENV_NUM_PROCESSES),
-                         process_id if process_id is not None else env.get(ENV_PROCESS_ID),
-                         coordinator if coordinator is not None else env.get(ENV_COORDINATOR))
+    return check_options(
+        num_processes if num_processes is not None else env.get(ENV_NUM_PROCESSES),
+        process_id if process_id is not None else env.get(ENV_PROCESS_ID),
+        coordinator if coordinator is not None else env.get(ENV_COORDINATOR),
+    )
 
 
-def initialize(num_processes: int | None = None, process_id: int | None = None, coordinator: str | None = None,
-               timeout_s: int = 300) -> ProcessInfo:
+def initialize(
+    num_processes: int | None = None,
+    process_id: int | None = None,
+    coordinator: str | None = None,
+    timeout_s: int = 300,
+) -> ProcessInfo:
     """Join the other processes of a multi-process study; a no-op for one process.
 
     Call before any other JAX work. Values not given come from the environment (``JAXFDI_NUM_PROCESSES``,
@@ -105,14 +126,24 @@ def initialize(num_processes: int | None = None, process_id: int | None = None, 
     num_processes, process_id, coordinator = resolve_options(num_processes, process_id, coordinator)
     if num_processes is not None and num_processes > 1:
         _checks_timeout(timeout_s)
-        if jax.config.jax_cpu_collectives_implementation != "mpi":  # CPU collectives across processes
+        if (
+            jax.config.jax_cpu_collectives_implementation != "mpi"
+        ):  # CPU collectives across processes
             jax.config.update("jax_cpu_collectives_implementation", "gloo")
         try:
-            jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes,
-                                       process_id=process_id, initialization_timeout=int(timeout_s))
+            jax.distributed.initialize(
+                coordinator_address=coordinator,
+                num_processes=num_processes,
+                process_id=process_id,
+                initialization_timeout=int(timeout_s),
+            )
         except RuntimeError as error:
-            raise RuntimeError(f"jaxfdi.distributed.initialize: {error} (call it before any other JAX work)") from None
-    return ProcessInfo(jax.process_index(), jax.process_count(), jax.local_device_count(), jax.device_count())
+            raise RuntimeError(
+                f"jaxfdi.distributed.initialize: {error} (call it before any other JAX work)"
+            ) from None
+    return ProcessInfo(
+        jax.process_index(), jax.process_count(), jax.local_device_count(), jax.device_count()
+    )
 
 
 def _checks_timeout(timeout_s) -> None:
@@ -133,8 +164,14 @@ def allgather(tree: Any) -> list:
         leaf = np.asarray(leaf)
         if leaf.dtype.kind in "iub":
             wide = leaf.astype(np.int64).view(np.uint64)
-            packed.append(np.stack([(wide >> np.uint64(32)).astype(np.uint32), (wide & np.uint64(0xFFFFFFFF)).astype(
-                np.uint32)]))
+            packed.append(
+                np.stack(
+                    [
+                        (wide >> np.uint64(32)).astype(np.uint32),
+                        (wide & np.uint64(0xFFFFFFFF)).astype(np.uint32),
+                    ]
+                )
+            )
         else:
             packed.append(leaf)
     gathered = multihost_utils.process_allgather(packed, tiled=False)
@@ -165,6 +202,7 @@ def barrier(name: str, timeout_s: int = 3600) -> None:
     _BARRIERS[0] += 1
     try:
         from jax._src.distributed import global_state
+
         client = global_state.client
     except ImportError:  # another JAX layout: no barrier, gloo's own wait only
         return
@@ -179,8 +217,13 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
-def launch_local(command: Sequence[str], num_processes: int, timeout_s: float = 600.0, port: int | None = None,
-                 env: dict | None = None) -> list[subprocess.CompletedProcess]:
+def launch_local(
+    command: Sequence[str],
+    num_processes: int,
+    timeout_s: float = 600.0,
+    port: int | None = None,
+    env: dict | None = None,
+) -> list[subprocess.CompletedProcess]:
     """Run ``num_processes`` copies of ``command`` here as one multi-process study (simulated cluster), each with
     ``JAX_COORDINATOR_ADDRESS=127.0.0.1:PORT``, ``JAXFDI_NUM_PROCESSES`` and its ``JAXFDI_PROCESS_ID``. Waits for
     all; if one fails or ``timeout_s`` passes the others are stopped. Returns the completed processes (output
@@ -190,10 +233,23 @@ def launch_local(command: Sequence[str], num_processes: int, timeout_s: float = 
     base = dict(os.environ if env is None else env)
     procs = []
     for rank in range(num_processes):
-        child_env = dict(base, **{ENV_COORDINATOR: f"127.0.0.1:{port}", ENV_NUM_PROCESSES: str(num_processes),
-                                  ENV_PROCESS_ID: str(rank)})
-        procs.append(subprocess.Popen(list(command), env=child_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                      text=True))
+        child_env = dict(
+            base,
+            **{
+                ENV_COORDINATOR: f"127.0.0.1:{port}",
+                ENV_NUM_PROCESSES: str(num_processes),
+                ENV_PROCESS_ID: str(rank),
+            },
+        )
+        procs.append(
+            subprocess.Popen(
+                list(command),
+                env=child_env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+        )
     deadline = time.monotonic() + timeout_s
     outputs: dict[int, tuple[str, str]] = {}
     failed = None
@@ -218,19 +274,35 @@ def launch_local(command: Sequence[str], num_processes: int, timeout_s: float = 
                     proc.kill()
                     outputs[rank] = proc.communicate()
     if failed is not None or len(outputs) < num_processes or any(p.returncode != 0 for p in procs):
-        rank = failed if failed is not None else next((r for r, p in enumerate(procs) if p.returncode != 0), 0)
-        reason = f"process {rank} exited with {procs[rank].returncode}" if failed is not None else \
-            f"timed out after {timeout_s:.0f} s"
-        raise RuntimeError(f"launch_local: {reason}; its stderr:\n{outputs.get(rank, ('', ''))[1][-4000:]}")
-    return [subprocess.CompletedProcess(list(command), p.returncode, *outputs[r]) for r, p in enumerate(procs)]
+        rank = (
+            failed
+            if failed is not None
+            else next((r for r, p in enumerate(procs) if p.returncode != 0), 0)
+        )
+        reason = (
+            f"process {rank} exited with {procs[rank].returncode}"
+            if failed is not None
+            else f"timed out after {timeout_s:.0f} s"
+        )
+        raise RuntimeError(
+            f"launch_local: {reason}; its stderr:\n{outputs.get(rank, ('', ''))[1][-4000:]}"
+        )
+    return [
+        subprocess.CompletedProcess(list(command), p.returncode, *outputs[r])
+        for r, p in enumerate(procs)
+    ]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m jaxfdi.distributed --num-processes N [--timeout S] -- COMMAND ...``"""
-    parser = argparse.ArgumentParser(prog="python -m jaxfdi.distributed",
-                                     description="Run N local copies of COMMAND as one multi-process JAX study.")
+    parser = argparse.ArgumentParser(
+        prog="python -m jaxfdi.distributed",
+        description="Run N local copies of COMMAND as one multi-process JAX study.",
+    )
     parser.add_argument("--num-processes", "-n", type=int, required=True)
-    parser.add_argument("--timeout", type=float, default=3600.0, help="seconds before all are stopped")
+    parser.add_argument(
+        "--timeout", type=float, default=3600.0, help="seconds before all are stopped"
+    )
     parser.add_argument("command", nargs=argparse.REMAINDER, help="the command, after --")
     args = parser.parse_args(argv)
     command = args.command[1:] if args.command[:1] == ["--"] else args.command

@@ -9,6 +9,7 @@ Studies' figures keep a house style (``save_figure``): one text column wide at t
 axes labelled with units, labelled curves in a legend, one colour per hypothesis across panels and
 figures (``hypothesis_colors``), a caption giving the number of runs.
 """
+
 from __future__ import annotations
 
 import re
@@ -20,7 +21,13 @@ import numpy as np
 from jaxfdi import _io
 from jaxfdi._metrics import confusion_matrix
 
-__all__ = ["plot_statistic", "plot_mode_probabilities", "plot_estimate", "plot_delays", "plot_confusion"]
+__all__ = [
+    "plot_statistic",
+    "plot_mode_probabilities",
+    "plot_estimate",
+    "plot_delays",
+    "plot_confusion",
+]
 
 
 def new_axes(ax=None, figsize: tuple[float, float] = (7.0, 3.5)):
@@ -40,7 +47,9 @@ def column_figure(height: float, width: float | None = None):
     """
     from matplotlib.figure import Figure
 
-    return Figure(figsize=(COLUMN_WIDTH_IN if width is None else width, height), layout="constrained")
+    return Figure(
+        figsize=(COLUMN_WIDTH_IN if width is None else width, height), layout="constrained"
+    )
 
 
 def column_subplots(height: float, nrows: int = 1, ncols: int = 1, **kwargs):
@@ -57,8 +66,16 @@ def _time(t, n: int) -> np.ndarray:
     return np.arange(n) if t is None else np.asarray(t)
 
 
-def plot_statistic(statistic, threshold=None, *, t=None, onset=None, label: str = "statistic",
-                   log: bool = False, ax=None):
+def plot_statistic(
+    statistic,
+    threshold=None,
+    *,
+    t=None,
+    onset=None,
+    label: str = "statistic",
+    log: bool = False,
+    ax=None,
+):
     """A detection statistic over time with its threshold and the fault onset.
 
     Args:
@@ -78,8 +95,14 @@ def plot_statistic(statistic, threshold=None, *, t=None, onset=None, label: str 
     time = _time(t, runs.shape[1])
     fig, ax = new_axes(ax)
     for i, run in enumerate(runs):
-        ax.plot(time, run, color="C0", lw=1.2 if len(runs) == 1 else 0.6, alpha=1.0 if len(runs) == 1 else 0.5,
-                label=label if i == 0 else None)
+        ax.plot(
+            time,
+            run,
+            color="C0",
+            lw=1.2 if len(runs) == 1 else 0.6,
+            alpha=1.0 if len(runs) == 1 else 0.5,
+            label=label if i == 0 else None,
+        )
     if threshold is not None:
         level = np.broadcast_to(np.asarray(threshold, dtype=float), time.shape)
         ax.plot(time, level, color="C3", ls="--", lw=1.0, label="threshold")
@@ -92,8 +115,9 @@ def plot_statistic(statistic, threshold=None, *, t=None, onset=None, label: str 
     return fig
 
 
-def plot_mode_probabilities(mode_prob, names: Sequence[str] | None = None, *, t=None, onset=None,
-                            threshold=None, ax=None):
+def plot_mode_probabilities(
+    mode_prob, names: Sequence[str] | None = None, *, t=None, onset=None, threshold=None, ax=None
+):
     """Mode probabilities over time (an IMM's or a multiple-model filter's ``mode_prob``).
 
     Args:
@@ -119,7 +143,9 @@ def plot_mode_probabilities(mode_prob, names: Sequence[str] | None = None, *, t=
         ax.axhline(float(threshold), color="k", ls="--", lw=0.8, label="threshold")
     if onset is not None:
         ax.axvline(onset, color="k", ls=":", lw=1.0)
-    ax.set(xlabel="time" if t is not None else "step", ylabel="mode probability", ylim=(-0.02, 1.02))
+    ax.set(
+        xlabel="time" if t is not None else "step", ylabel="mode probability", ylim=(-0.02, 1.02)
+    )
     ax.legend(loc="best", fontsize="small", ncol=2)
     return fig
 
@@ -178,7 +204,9 @@ def plot_delays(delays: Mapping[str, Sequence[float]], *, unit: str = "s", ax=No
     return fig
 
 
-def plot_confusion(true_labels, predicted_labels, names: Sequence[str], *, normalize: bool = True, ax=None):
+def plot_confusion(
+    true_labels, predicted_labels, names: Sequence[str], *, normalize: bool = True, ax=None
+):
     """Isolation outcomes as an annotated confusion matrix: rows the true fault, columns the one isolated, and a last
     column "none" for runs that isolated nothing.
 
@@ -191,15 +219,24 @@ def plot_confusion(true_labels, predicted_labels, names: Sequence[str], *, norma
     Returns:
       The ``matplotlib.figure.Figure``.
     """
-    m = np.asarray(confusion_matrix(true_labels, predicted_labels, len(names)), dtype=float)   # (K, K + 1)
+    m = np.asarray(
+        confusion_matrix(true_labels, predicted_labels, len(names)), dtype=float
+    )  # (K, K + 1)
     shown = m / np.maximum(m.sum(axis=1, keepdims=True), 1) if normalize else m
     size = 1.0 + 0.6 * m.shape[0]
     fig, ax = new_axes(ax, figsize=(size + 1.6, size))
     image = ax.imshow(shown, cmap="Blues", vmin=0.0, vmax=1.0 if normalize else None)
     for i in range(m.shape[0]):
         for j in range(m.shape[1]):
-            ax.text(j, i, f"{shown[i, j]:.2f}" if normalize else f"{m[i, j]:.0f}", ha="center", va="center",
-                    fontsize="small", color="white" if shown[i, j] > 0.6 * np.nanmax(shown) else "black")
+            ax.text(
+                j,
+                i,
+                f"{shown[i, j]:.2f}" if normalize else f"{m[i, j]:.0f}",
+                ha="center",
+                va="center",
+                fontsize="small",
+                color="white" if shown[i, j] > 0.6 * np.nanmax(shown) else "black",
+            )
     ax.set_xticks(range(m.shape[1]), [*names, "none"], rotation=45, ha="right")
     ax.set_yticks(range(m.shape[0]), names)
     ax.set(xlabel="isolated", ylabel="true")
@@ -216,8 +253,11 @@ SMALL_FONT_PT = 8.0
 #: the colour of a hypothesis (mode, fault, method) that is no fault
 NO_FAULT_COLOR = "0.25"
 _NO_FAULT = {"none", "normal", "fault-free", "no fault", "nominal"}
-_RUN_COUNT = re.compile(r"\b(\d[\d,]*|one|two|three|four|five|ten)\s+(\w+\s+){0,2}"
-                        r"(runs?|flights?|epochs?|trials?|realisations?|realizations?)\b", re.IGNORECASE)
+_RUN_COUNT = re.compile(
+    r"\b(\d[\d,]*|one|two|three|four|five|ten)\s+(\w+\s+){0,2}"
+    r"(runs?|flights?|epochs?|trials?|realisations?|realizations?)\b",
+    re.IGNORECASE,
+)
 
 
 def hypothesis_colors(names: Sequence[str]) -> dict[str, str]:
@@ -244,10 +284,17 @@ def _check_figure(fig, caption: str) -> None:
     """House rules: every panel's axes labelled (or sharing a row/column neighbour's label), every labelled
     curve in a legend, the caption giving the number of runs (flights, epochs)."""
     if not _RUN_COUNT.search(caption):
-        raise ValueError(f"caption: expected the number of runs (flights, epochs) the figure shows, got {caption!r}")
+        raise ValueError(
+            f"caption: expected the number of runs (flights, epochs) the figure shows, got {caption!r}"
+        )
     # a polar panel's angle and radius are named by its title
-    panels = [ax for ax in fig.axes
-              if ax.get_label() != "<colorbar>" and ax.get_subplotspec() is not None and ax.name != "polar"]
+    panels = [
+        ax
+        for ax in fig.axes
+        if ax.get_label() != "<colorbar>"
+        and ax.get_subplotspec() is not None
+        and ax.name != "polar"
+    ]
     for axis in ("x", "y"):
         groups: dict = {}
         for ax in panels:
@@ -257,7 +304,11 @@ def _check_figure(fig, caption: str) -> None:
             groups.setdefault(key, []).append(bool(label.strip()) or not ax.axison)
         if not all(any(labelled) for labelled in groups.values()):
             raise ValueError(f"fig: a panel without an {axis} label (what it shows, with its unit)")
-    legends = [legend for legend in [*(ax.get_legend() for ax in panels), *fig.legends] if legend is not None]
+    legends = [
+        legend
+        for legend in [*(ax.get_legend() for ax in panels), *fig.legends]
+        if legend is not None
+    ]
     shown = {text.get_text() for legend in legends for text in legend.get_texts()}
     labels = {label for ax in panels for label in ax.get_legend_handles_labels()[1]}
     if legends and labels - shown:
@@ -287,13 +338,19 @@ def save_figure(fig, path, caption: str, dpi: int = DPI):
     ``caption`` under it (what it shows, over how many runs, how it differs from the paper's), wrapped
     to the figure's width; ``ValueError`` if the house rules (``_check_figure``) fail. Returns the path."""
     if not isinstance(caption, str) or not caption.strip():
-        raise ValueError(f"caption: expected a sentence saying what the figure shows, got {caption!r}")
+        raise ValueError(
+            f"caption: expected a sentence saying what the figure shows, got {caption!r}"
+        )
     _check_figure(fig, caption)
     _house_style(fig)
     width, height = fig.get_size_inches()
-    lines = textwrap.wrap(" ".join(caption.split()), width=max(int(width * 72 / (0.55 * SMALL_FONT_PT)), 40))
+    lines = textwrap.wrap(
+        " ".join(caption.split()), width=max(int(width * 72 / (0.55 * SMALL_FONT_PT)), 40)
+    )
     bottom = min((len(lines) * SMALL_FONT_PT * 1.25 / 72 + 0.1) / height, 0.4)
-    fig.text(0.01, 0.01, "\n".join(lines), ha="left", va="bottom", fontsize=SMALL_FONT_PT, wrap=False)
+    fig.text(
+        0.01, 0.01, "\n".join(lines), ha="left", va="bottom", fontsize=SMALL_FONT_PT, wrap=False
+    )
     engine = fig.get_layout_engine()
     if engine is not None and type(engine).__name__ == "ConstrainedLayoutEngine":
         engine.set(rect=(0.0, bottom, 1.0, 1.0 - bottom))

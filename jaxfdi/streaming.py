@@ -16,6 +16,7 @@ integer delays, ``b w + (w - 1) / 2``: within ``(w - 1) / 2`` steps of NumPy (``
 the same counts on the device in each chunk's program (``monte_carlo(..., summary=...)``), moved to the host once:
 no round-trip per chunk, no per-run output kept (a GPU study of 10^8 runs holds a histogram, not 10^8 records).
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -28,6 +29,7 @@ from jaxfdi import _checks
 from jaxfdi._metrics import DetectionRecord, DetectionSummary
 
 __all__ = ["detection_reducer", "detection_summary", "summarize_counts"]
+
 
 class DetectionCounts(NamedTuple):
     """Exact counts over runs (host-side NumPy int64); merge with ``merge_counts``.
@@ -79,13 +81,23 @@ class Reducer(NamedTuple):
 def empty_counts(horizon: int, bin_width: int = 1) -> DetectionCounts:
     """Counts of no runs, for runs ``horizon`` steps long and delay bins ``bin_width`` wide."""
     horizon = _checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
-    bin_width = _checks.check_int("bin_width", bin_width, 1, meaning="a positive number of steps per delay bin")
+    bin_width = _checks.check_int(
+        "bin_width", bin_width, 1, meaning="a positive number of steps per delay bin"
+    )
     zero = np.zeros((), np.int64)
-    return DetectionCounts(*(zero,) * 10, np.zeros(-(-horizon // bin_width), np.int64), zero, zero,
-                           np.int64(horizon), np.int64(bin_width))
+    return DetectionCounts(
+        *(zero,) * 10,
+        np.zeros(-(-horizon // bin_width), np.int64),
+        zero,
+        zero,
+        np.int64(horizon),
+        np.int64(bin_width),
+    )
 
 
-def detection_counts(record: DetectionRecord, horizon: int, bin_width: int = 1, labels: Any = None) -> DetectionCounts:
+def detection_counts(
+    record: DetectionRecord, horizon: int, bin_width: int = 1, labels: Any = None
+) -> DetectionCounts:
     """Counts of stacked records (leading run axis), definitions as ``summarize_detection``.
 
     Args:
@@ -98,12 +110,16 @@ def detection_counts(record: DetectionRecord, horizon: int, bin_width: int = 1, 
     empty = empty_counts(horizon, bin_width)
     onset = np.asarray(record.onset)
     if labels is not None and np.shape(labels) != onset.shape:
-        raise ValueError(f"labels: expected one label per run, shape {onset.shape}, got {np.shape(labels)}")
+        raise ValueError(
+            f"labels: expected one label per run, shape {onset.shape}, got {np.shape(labels)}"
+        )
     totals = _counts(np, record, np.ones(onset.shape, bool), labels, horizon, bin_width, np.int64)
     return _finish(totals, empty)
 
 
-def _counts(xp, record: DetectionRecord, valid, labels, horizon: int, bin_width: int, integer) -> dict:
+def _counts(
+    xp, record: DetectionRecord, valid, labels, horizon: int, bin_width: int, integer
+) -> dict:
     """``DetectionCounts`` counts (and ``delays_outside``) of the ``valid`` runs of ``record``, ``xp`` NumPy (host,
     int64) or ``jax.numpy`` (in a program)."""
     onset = xp.asarray(record.onset).astype(integer)
@@ -113,11 +129,13 @@ def _counts(xp, record: DetectionRecord, valid, labels, horizon: int, bin_width:
     false_alarms = xp.broadcast_to(xp.asarray(record.false_alarms), onset.shape).astype(integer)
     pre_steps = xp.broadcast_to(xp.asarray(record.pre_onset_steps), onset.shape).astype(integer)
     first_alarm = xp.broadcast_to(xp.asarray(record.first_alarm), onset.shape).astype(integer)
-    longer = valid & (xp.maximum(pre_steps, first_alarm + 1) > horizon)   # the runs are longer than horizon
+    longer = valid & (
+        xp.maximum(pre_steps, first_alarm + 1) > horizon
+    )  # the runs are longer than horizon
     faulty = (onset < horizon) & healthy
     detected = faulty & (detection >= 0)
     pre_alarm = faulty & (false_alarms > 0)
-    scored = detected & ~pre_alarm   # delays of clean runs only (metrics.summarize_detection)
+    scored = detected & ~pre_alarm  # delays of clean runs only (metrics.summarize_detection)
     delay = xp.where(scored, detection - onset, 0)
     inside = scored & (delay >= 0) & (delay < horizon)
 
@@ -135,28 +153,47 @@ def _counts(xp, record: DetectionRecord, valid, labels, horizon: int, bin_width:
         isolated = count(detected & same)
     bins = -(-horizon // bin_width)
     index = xp.where(inside, delay // bin_width, 0)
-    histogram = (np.bincount(index, weights=inside, minlength=bins).astype(integer) if xp is np
-                 else jax.ops.segment_sum(inside.astype(integer), index, num_segments=bins))
+    histogram = (
+        np.bincount(index, weights=inside, minlength=bins).astype(integer)
+        if xp is np
+        else jax.ops.segment_sum(inside.astype(integer), index, num_segments=bins)
+    )
     return dict(
-        runs=count(valid), unhealthy_runs=count(valid & ~healthy), faulty_runs=count(faulty),
-        detected_runs=count(detected), labelled_runs=labelled, isolated_runs=isolated,
-        false_alarm_runs=count(healthy & (false_alarms > 0)), false_alarm_steps=total(false_alarms, healthy),
-        pre_onset_steps=total(pre_steps, healthy), delay_sum=total(delay, inside), delay_histogram=histogram,
-        pre_alarm_runs=count(pre_alarm), delay_runs=count(scored), delays_outside=count(scored & ~inside),
-        runs_longer=count(longer))
+        runs=count(valid),
+        unhealthy_runs=count(valid & ~healthy),
+        faulty_runs=count(faulty),
+        detected_runs=count(detected),
+        labelled_runs=labelled,
+        isolated_runs=isolated,
+        false_alarm_runs=count(healthy & (false_alarms > 0)),
+        false_alarm_steps=total(false_alarms, healthy),
+        pre_onset_steps=total(pre_steps, healthy),
+        delay_sum=total(delay, inside),
+        delay_histogram=histogram,
+        pre_alarm_runs=count(pre_alarm),
+        delay_runs=count(scored),
+        delays_outside=count(scored & ~inside),
+        runs_longer=count(longer),
+    )
 
 
 def _finish(totals: dict, empty: DetectionCounts) -> DetectionCounts:
     """``DetectionCounts`` of ``_counts``' totals (host int64); a delay outside the horizon raises (runs longer)."""
     host = {name: np.asarray(value, np.int64) for name, value in totals.items()}
     longer = int(host.pop("runs_longer"))
-    if longer:   # as metrics.summarize_detection: an onset past a short horizon would count as fault-free
-        raise ValueError(f"horizon: expected the runs' length, got {int(empty.horizon)}, but {longer} record(s) saw "
-                         f"more steps (an alarm or steps before the onset at or after step {int(empty.horizon)})")
+    if (
+        longer
+    ):  # as metrics.summarize_detection: an onset past a short horizon would count as fault-free
+        raise ValueError(
+            f"horizon: expected the runs' length, got {int(empty.horizon)}, but {longer} record(s) saw "
+            f"more steps (an alarm or steps before the onset at or after step {int(empty.horizon)})"
+        )
     outside = int(host.pop("delays_outside"))
     if outside:
-        raise ValueError(f"record: {outside} detection delays outside [0, horizon = {int(empty.horizon)}); is "
-                         f"horizon the runs' length?")
+        raise ValueError(
+            f"record: {outside} detection delays outside [0, horizon = {int(empty.horizon)}); is "
+            f"horizon the runs' length?"
+        )
     return DetectionCounts(**host, horizon=empty.horizon, bin_width=empty.bin_width)
 
 
@@ -166,15 +203,21 @@ def merge_counts(*parts: DetectionCounts) -> DetectionCounts:
         raise ValueError("parts: expected at least one DetectionCounts")
     for part in parts:
         if not isinstance(part, DetectionCounts):
-            raise TypeError(f"parts: expected DetectionCounts (streaming.detection_counts), got "
-                            f"{_checks.received(part)}")
+            raise TypeError(
+                f"parts: expected DetectionCounts (streaming.detection_counts), got "
+                f"{_checks.received(part)}"
+            )
     first = parts[0]
     for part in parts[1:]:
         if int(part.horizon) != int(first.horizon) or int(part.bin_width) != int(first.bin_width):
-            raise ValueError(f"parts: counts of runs of {int(first.horizon)} steps in bins of {int(first.bin_width)} "
-                             f"cannot be merged with {int(part.horizon)} steps in bins of {int(part.bin_width)}")
-    summed = [np.sum([np.asarray(getattr(p, name), np.int64) for p in parts], axis=0)
-              for name in DetectionCounts._fields[:-2]]
+            raise ValueError(
+                f"parts: counts of runs of {int(first.horizon)} steps in bins of {int(first.bin_width)} "
+                f"cannot be merged with {int(part.horizon)} steps in bins of {int(part.bin_width)}"
+            )
+    summed = [
+        np.sum([np.asarray(getattr(p, name), np.int64) for p in parts], axis=0)
+        for name in DetectionCounts._fields[:-2]
+    ]
     return DetectionCounts(*summed, first.horizon, first.bin_width)
 
 
@@ -193,7 +236,7 @@ def delay_quantile(counts: DetectionCounts, q: float, Ts: float = 1.0) -> float:
     width = int(counts.bin_width)
     cumulative = np.cumsum(histogram)
 
-    def order_statistic(j: int) -> float:   # d_j, j = 0..total-1, as the middle of its bin
+    def order_statistic(j: int) -> float:  # d_j, j = 0..total-1, as the middle of its bin
         bin_index = int(np.searchsorted(cumulative, j, side="right"))
         return bin_index * width + (width - 1) / 2
 
@@ -215,7 +258,11 @@ def summarize_counts(counts: DetectionCounts, Ts: float = 1.0) -> DetectionSumma
     """
     _checks.check_positive("Ts", Ts, "a positive sample period")
     nan = float("nan")
-    faulty, detected, scored = int(counts.faulty_runs), int(counts.detected_runs), int(counts.delay_runs)
+    faulty, detected, scored = (
+        int(counts.faulty_runs),
+        int(counts.detected_runs),
+        int(counts.delay_runs),
+    )
     healthy = int(counts.runs) - int(counts.unhealthy_runs)
     pre_steps = int(counts.pre_onset_steps)
     rate = detected / faulty if faulty else nan
@@ -242,8 +289,12 @@ def isolation_rate(counts: DetectionCounts) -> float:
     return int(counts.isolated_runs) / labelled if labelled else float("nan")
 
 
-def detection_reducer(horizon: int, bin_width: int = 1, record: Callable[[Any], DetectionRecord] | None = None,
-                      label: Callable[[Any], Any] | None = None) -> Reducer:
+def detection_reducer(
+    horizon: int,
+    bin_width: int = 1,
+    record: Callable[[Any], DetectionRecord] | None = None,
+    label: Callable[[Any], Any] | None = None,
+) -> Reducer:
     """A ``Reducer`` of ``DetectionCounts`` for ``monte_carlo(..., reduce=...)``; ``record(outputs)`` picks the
     records from ``run_one``'s outputs (default: the outputs), ``label(outputs)`` the true labels (optional).
 
@@ -259,7 +310,9 @@ def detection_reducer(horizon: int, bin_width: int = 1, record: Callable[[Any], 
         labels = None if label is None else label(outputs)
         return merge_counts(counts, detection_counts(pick(outputs), horizon, bin_width, labels))
 
-    return Reducer(lambda: empty_counts(horizon, bin_width), update, lambda states: merge_counts(*states))
+    return Reducer(
+        lambda: empty_counts(horizon, bin_width), update, lambda states: merge_counts(*states)
+    )
 
 
 class DeviceSummary(NamedTuple):
@@ -274,8 +327,12 @@ class DeviceSummary(NamedTuple):
     counts: Callable[[Any], DetectionCounts]
 
 
-def detection_summary(horizon: int, bin_width: int = 1, record: Callable[[Any], DetectionRecord] | None = None,
-                      label: Callable[[Any], Any] | None = None) -> DeviceSummary:
+def detection_summary(
+    horizon: int,
+    bin_width: int = 1,
+    record: Callable[[Any], DetectionRecord] | None = None,
+    label: Callable[[Any], Any] | None = None,
+) -> DeviceSummary:
     """``detection_counts`` on the device: ``monte_carlo(run_one, key, n, summary=s.summary)`` returns
     ``(None, totals)``, ``s.counts(totals)`` the ``DetectionCounts`` of all ``n`` runs, equal to ``detection_counts``
     of their records (last chunk's padding weighs 0). ``record``/``label`` as in ``detection_reducer``. Counts in
@@ -291,6 +348,8 @@ def detection_summary(horizon: int, bin_width: int = 1, record: Callable[[Any], 
 
     def summary(outputs, weight):
         labels = None if label is None else label(outputs)
-        return None, _counts(jnp, pick(outputs), weight, labels, horizon, bin_width, jnp.result_type(int))
+        return None, _counts(
+            jnp, pick(outputs), weight, labels, horizon, bin_width, jnp.result_type(int)
+        )
 
     return DeviceSummary(summary, lambda totals: _finish(totals, empty))

@@ -1,4 +1,5 @@
 """Counting XLA compilations (the backend compile events of ``jax.monitoring``)."""
+
 import contextlib
 
 import jax

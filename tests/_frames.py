@@ -1,5 +1,6 @@
 """A study's table (``to_frame()`` or the CSV the CLI writes) holds the same numbers as its
 JSON rows: walked row by row, without the library's flattening code."""
+
 import ast
 import math
 
@@ -8,9 +9,15 @@ import numpy as np
 
 def _same(table_value, json_value, where):
     if json_value is None or (isinstance(json_value, float) and math.isnan(json_value)):
-        assert table_value is None or (isinstance(table_value, float) and math.isnan(table_value)), where
+        assert table_value is None or (
+            isinstance(table_value, float) and math.isnan(table_value)
+        ), where
     elif isinstance(json_value, list):
-        parsed = ast.literal_eval(table_value.replace("nan", "None")) if isinstance(table_value, str) else table_value
+        parsed = (
+            ast.literal_eval(table_value.replace("nan", "None"))
+            if isinstance(table_value, str)
+            else table_value
+        )
         try:
             numbers = np.asarray(json_value, float), np.asarray(parsed, float)
         except (TypeError, ValueError):
@@ -20,7 +27,9 @@ def _same(table_value, json_value, where):
     elif isinstance(json_value, bool):
         assert table_value in (json_value, str(json_value)), where
     elif isinstance(json_value, (int, float)):
-        assert float(table_value) == float(json_value), f"{where}: {table_value!r} in the table, {json_value!r} in JSON"
+        assert float(table_value) == float(json_value), (
+            f"{where}: {table_value!r} in the table, {json_value!r} in JSON"
+        )
     else:
         assert str(table_value) == str(json_value), where
 
@@ -44,8 +53,14 @@ def assert_table_is_the_json(frame, rows: list[dict], methods: tuple[str, ...] =
     at = 0
     for i, row in enumerate(rows):
         per_method = {k: row[k] for k in methods if isinstance(row.get(k), dict)}
-        nested = next((k for k, v in row.items() if isinstance(v, dict) and v
-                       and all(isinstance(x, dict) for x in v.values())), None)
+        nested = next(
+            (
+                k
+                for k, v in row.items()
+                if isinstance(v, dict) and v and all(isinstance(x, dict) for x in v.values())
+            ),
+            None,
+        )
         key = "method"
         if not per_method and nested:
             per_method, key = row[nested], nested[:-1] if nested.endswith("s") else nested
@@ -59,11 +74,16 @@ def assert_table_is_the_json(frame, rows: list[dict], methods: tuple[str, ...] =
                 _same(record[column], value, f"row {i} ({name}) {column}")
             if name is not None:
                 got = record[key]
-                assert str(got) == str(name) or (isinstance(got, float) and str(name).isdigit() and got == int(name)), \
-                    f"row {i}: {key} {got!r}, expected {name!r}"  # a CSV reads the key 30 back as 30.0
+                assert str(got) == str(name) or (
+                    isinstance(got, float) and str(name).isdigit() and got == int(name)
+                ), (
+                    f"row {i}: {key} {got!r}, expected {name!r}"
+                )  # a CSV reads the key 30 back as 30.0
             extra = set(record) - set(expected) - {key}
             for column in extra:
                 value = record[column]
                 empty = value is None or (isinstance(value, float) and math.isnan(value))
-                assert empty or column.endswith(("_low", "_high")), f"row {i} ({name}): unexpected {column} = {value!r}"
+                assert empty or column.endswith(("_low", "_high")), (
+                    f"row {i} ({name}): unexpected {column} = {value!r}"
+                )
     assert at == len(records), f"{len(records) - at} table rows beyond the JSON's"

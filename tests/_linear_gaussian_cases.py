@@ -2,6 +2,7 @@
 small model, the engine run through the sequential KF once per process, and the whole
 state and measurement sequence of a linear Gaussian model as one joint Gaussian (NumPy,
 float64), the independent reference on small cases (conditioning by one dense solve)."""
+
 from __future__ import annotations
 
 import functools
@@ -12,8 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 import scipy.stats
-
 from _problems import engine_data
+
 from jaxfdi.filters import kalman_filter, run_filter
 from jaxfdi.models import LinearGaussianModel
 
@@ -22,8 +23,14 @@ def small_model() -> LinearGaussianModel:
     """3 states, 1 input, 2 outputs with feed-through and correlated noises."""
     Phi = np.array([[0.9, 0.1, 0.0], [0.0, 0.8, 0.2], [0.1, 0.0, 0.7]])
     Q = np.array([[0.05, 0.01, 0.0], [0.01, 0.02, 0.0], [0.0, 0.0, 0.03]])
-    return LinearGaussianModel(Phi, np.array([[0.5], [0.0], [0.3]]), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]]),
-                               np.array([[0.2], [0.0]]), Q, np.array([[0.1, 0.02], [0.02, 0.2]]))
+    return LinearGaussianModel(
+        Phi,
+        np.array([[0.5], [0.0], [0.3]]),
+        np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]]),
+        np.array([[0.2], [0.0]]),
+        Q,
+        np.array([[0.1, 0.02], [0.02, 0.2]]),
+    )
 
 
 @functools.lru_cache(maxsize=1)
@@ -37,11 +44,11 @@ def engine_filtered(T: int = 64):
 
 class JointGaussian(NamedTuple):
     mean_x: np.ndarray  # (T n,)  X = (x_0..x_{T-1})
-    cov_x: np.ndarray   # (T n, T n)
+    cov_x: np.ndarray  # (T n, T n)
     mean_y: np.ndarray  # (T m,)  Y = (y_0..y_{T-1})
-    cov_y: np.ndarray   # (T m, T m)
-    cross: np.ndarray   # (T n, T m) Cov(X, Y)
-    m: int              # outputs per step
+    cov_y: np.ndarray  # (T m, T m)
+    cross: np.ndarray  # (T n, T m) Cov(X, Y)
+    m: int  # outputs per step
 
 
 def joint_gaussian(model, m0, P0, us, T: int) -> JointGaussian:
@@ -57,7 +64,7 @@ def joint_gaussian(model, m0, P0, us, T: int) -> JointGaussian:
     L = np.zeros((T * n, T * n))
     for k in range(T):
         for i in range(k + 1):
-            L[k * n:(k + 1) * n, i * n:(i + 1) * n] = np.linalg.matrix_power(Phi, k - i)
+            L[k * n : (k + 1) * n, i * n : (i + 1) * n] = np.linalg.matrix_power(Phi, k - i)
     cov_x = L @ scipy.linalg.block_diag(np.asarray(P0, np.float64), *([Q] * (T - 1))) @ L.T
     H = np.kron(np.eye(T), C)
     mean_y = H @ mean_x.ravel() + (us[:T] @ D.T).ravel()
@@ -73,7 +80,9 @@ def condition(joint: JointGaussian, ys, steps: int | None = None):
     Syy = joint.cov_y[:rows, :rows]
     residual = ys[:rows] - joint.mean_y[:rows]
     cross = joint.cross[:, :rows]
-    solved = scipy.linalg.solve(Syy, np.concatenate([residual[:, None], cross.T], axis=1), assume_a="pos")
+    solved = scipy.linalg.solve(
+        Syy, np.concatenate([residual[:, None], cross.T], axis=1), assume_a="pos"
+    )
     mean = joint.mean_x + cross @ solved[:, 0]
     cov = joint.cov_x - cross @ solved[:, 1:]
     return mean, cov, scipy.stats.multivariate_normal(joint.mean_y[:rows], Syy).logpdf(ys[:rows])

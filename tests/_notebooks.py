@@ -11,6 +11,7 @@ so that ``pytest-xdist --dist loadfile`` can spread them over the workers) and, 
 the notebook computes what a CLI test of that file computes at the same size, shares
 that test's XLA compilation cache: the programs are compiled once in the file.
 """
+
 from __future__ import annotations
 
 import os
@@ -28,7 +29,11 @@ KERNEL = "python3"
 CELL_TIMEOUT_S = 300
 FAULT_NAMES = ("actuator", "RPM", "P2", "T2", "P4", "T4", "none")
 # jupyter_client replaces these argv[0] values by sys.executable when it starts a kernel
-_PYTHON_ALIASES = {"python", f"python{sys.version_info[0]}", "python{}.{}".format(*sys.version_info[:2])}
+_PYTHON_ALIASES = {
+    "python",
+    f"python{sys.version_info[0]}",
+    "python{}.{}".format(*sys.version_info[:2]),
+}
 
 
 def _runs_this_interpreter(argv: list[str]) -> bool:
@@ -74,7 +79,10 @@ def python3_kernel(tmp_path_factory, monkeypatch) -> str:
         prefix = tmp_path_factory.mktemp("jupyter-prefix")
         kernelspec.install(prefix=str(prefix), kernel_name=KERNEL)
         data_dir = prefix / "share" / "jupyter"
-        monkeypatch.setenv("JUPYTER_PATH", os.pathsep.join(filter(None, [str(data_dir), os.environ.get("JUPYTER_PATH")])))
+        monkeypatch.setenv(
+            "JUPYTER_PATH",
+            os.pathsep.join(filter(None, [str(data_dir), os.environ.get("JUPYTER_PATH")])),
+        )
     assert _usable_kernel(), "could not provide a python3 Jupyter kernel for this interpreter"
     return KERNEL
 
@@ -116,7 +124,9 @@ def run_clean(name: str, kernel: str, monkeypatch, env: dict[str, str], epilogue
     before = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
     nb = _execute(name, kernel, epilogue)
     after = sorted(p.relative_to(NOTEBOOKS) for p in NOTEBOOKS.rglob("*"))
-    assert after == before, f"the notebook wrote files into the repo: {sorted(set(after) - set(before))}"
+    assert after == before, (
+        f"the notebook wrote files into the repo: {sorted(set(after) - set(before))}"
+    )
     outputs = list(_outputs(nb))
     errors = [o for o in outputs if o.output_type == "error"]
     assert not errors, f"{errors[0].ename}: {errors[0].evalue}"
@@ -126,8 +136,11 @@ def run_clean(name: str, kernel: str, monkeypatch, env: dict[str, str], epilogue
 def tables(outputs) -> str:
     """The HTML of the notebook's DataFrame tables (a study result or a DataFrame as a
     cell's value renders as ``<table class="dataframe">``), joined."""
-    return "\n".join(o["data"]["text/html"] for o in outputs
-                     if 'class="dataframe"' in o.get("data", {}).get("text/html", ""))
+    return "\n".join(
+        o["data"]["text/html"]
+        for o in outputs
+        if 'class="dataframe"' in o.get("data", {}).get("text/html", "")
+    )
 
 
 def cells_of_column(html: str, value: str) -> int:

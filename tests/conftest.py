@@ -34,6 +34,7 @@ everything it uses once. (Compiling at LLVM optimisation level 0, ``--xla_backen
 was tried and made the suite slower: 1727 s and 54.7 CPU-minutes for a fresh-clone run,
 the programs' runs being slower by more than their compilation got cheaper, and a float32
 square-root UKF test moved by 4 %.)"""
+
 import gc
 import os
 import shutil
@@ -43,6 +44,9 @@ import jax
 import pytest
 
 jax.config.update("jax_enable_x64", True)
+
+#: fixtures shared by the notebook tests (``python3_kernel``)
+pytest_plugins = ["_notebooks"]
 
 #: the run's shared XLA cache folder (set by the controller, inherited by the workers)
 _CACHE_ENV = "JAXFDI_TEST_XLA_CACHE"
@@ -77,7 +81,9 @@ def pytest_configure(config):
     if hasattr(config.option, "loadscopereorder"):  # pytest-xdist >= 3.7
         config.option.loadscopereorder = False
     if not hasattr(config, "workerinput") and _CACHE_ENV not in os.environ:  # the controller
-        config._jaxfdi_xla_cache = os.environ[_CACHE_ENV] = tempfile.mkdtemp(prefix="jaxfdi-test-xla-")
+        config._jaxfdi_xla_cache = os.environ[_CACHE_ENV] = tempfile.mkdtemp(
+            prefix="jaxfdi-test-xla-"
+        )
     cache = os.environ.get(_CACHE_ENV)
     if cache:
         import jaxfdi

@@ -15,6 +15,7 @@ The wheels deliver ``-H^T tau``, so ``tau = -H (H^T H)^-1 T_c`` (minimum norm), 
 (direction kept) if a wheel would exceed ``max_wheel_torque``. Loop parts (``jaxfdi._loop``):
 ``wheel_attitude_controller`` and ``wheel_plant``.
 """
+
 from __future__ import annotations
 
 import math
@@ -27,8 +28,15 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi._faults import Target, apply_fault
 from jaxfdi._stages import Controller, Plant
-from jaxfdi.models._reaction_wheels import (AttitudeReading, SpacecraftParams, WheelCommand, delivered_torque,
-                                            spacecraft_step, stop_transfer, wheel_momentum)
+from jaxfdi.models._reaction_wheels import (
+    AttitudeReading,
+    SpacecraftParams,
+    WheelCommand,
+    delivered_torque,
+    spacecraft_step,
+    stop_transfer,
+    wheel_momentum,
+)
 from jaxfdi.models._rotation import quaternion_conjugate, quaternion_multiply, rotate
 
 
@@ -62,7 +70,13 @@ class AttitudeGains(NamedTuple):
     max_wheel_torque: Array
 
 
-def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, duration: float = 40.0, dtype=None) -> Slew:
+def slew(
+    axis=(1.0, 1.0, 1.0),
+    angle_deg: float = 20.0,
+    start: float = 0.0,
+    duration: float = 40.0,
+    dtype=None,
+) -> Slew:
     """An eigen-axis slew of ``angle_deg`` degrees about ``axis`` from ``start`` over ``duration`` seconds.
 
     Returns:
@@ -76,20 +90,35 @@ def slew(axis=(1.0, 1.0, 1.0), angle_deg: float = 20.0, start: float = 0.0, dura
     _checks.check_scalar("angle_deg", angle_deg, meaning="a slew angle in degrees")
     _checks.check_scalar("start", start, meaning="a start time in seconds")
     _checks.check_positive("duration", duration, "a positive slew time in seconds")
-    return Slew(axis / jnp.linalg.norm(axis), jnp.asarray(math.radians(angle_deg), dtype),
-                jnp.asarray(start, dtype), jnp.asarray(duration, dtype))
+    return Slew(
+        axis / jnp.linalg.norm(axis),
+        jnp.asarray(math.radians(angle_deg), dtype),
+        jnp.asarray(start, dtype),
+        jnp.asarray(duration, dtype),
+    )
 
 
-def pd_gains(inertia: Array, natural_frequency: float = 0.1, damping: float = 0.9,
-             max_wheel_torque: float = 0.02) -> AttitudeGains:
+def pd_gains(
+    inertia: Array,
+    natural_frequency: float = 0.1,
+    damping: float = 0.9,
+    max_wheel_torque: float = 0.02,
+) -> AttitudeGains:
     """``K_p = I w_n^2``, ``K_d = 2 zeta w_n I`` (decoupled second-order axes)."""
-    _checks.check_covariance("inertia", inertia, 3, definite=True)  # symmetric positive definite, like a covariance
+    _checks.check_covariance(
+        "inertia", inertia, 3, definite=True
+    )  # symmetric positive definite, like a covariance
     inertia = jnp.asarray(inertia, _checks.float_dtype(inertia))
-    _checks.check_positive("natural_frequency", natural_frequency, "a positive natural frequency in rad/s")
+    _checks.check_positive(
+        "natural_frequency", natural_frequency, "a positive natural frequency in rad/s"
+    )
     _checks.check_positive("damping", damping, "a positive damping ratio")
     _checks.check_positive("max_wheel_torque", max_wheel_torque, "a positive torque limit in N m")
-    return AttitudeGains(inertia * natural_frequency**2, 2.0 * damping * natural_frequency * inertia,
-                         jnp.asarray(max_wheel_torque, inertia.dtype))
+    return AttitudeGains(
+        inertia * natural_frequency**2,
+        2.0 * damping * natural_frequency * inertia,
+        jnp.asarray(max_wheel_torque, inertia.dtype),
+    )
 
 
 def slew_reference(t: Array, profile: Slew) -> tuple[Array, Array, Array]:
@@ -99,13 +128,22 @@ def slew_reference(t: Array, profile: Slew) -> tuple[Array, Array, Array]:
     two_pi = 2.0 * jnp.pi
     theta = profile.angle * (s - jnp.sin(two_pi * s) / two_pi)
     rate = jnp.where(inside, profile.angle / profile.duration * (1.0 - jnp.cos(two_pi * s)), 0.0)
-    accel = jnp.where(inside, profile.angle / profile.duration**2 * two_pi * jnp.sin(two_pi * s), 0.0)
+    accel = jnp.where(
+        inside, profile.angle / profile.duration**2 * two_pi * jnp.sin(two_pi * s), 0.0
+    )
     q_ref = jnp.concatenate([jnp.cos(0.5 * theta)[None], jnp.sin(0.5 * theta) * profile.axis])
     return q_ref, rate * profile.axis, accel * profile.axis
 
 
-def control_torque(q: Array, w: Array, wheel_momentum: Array, t: Array, profile: Slew, gains: AttitudeGains,
-                   inertia: Array) -> Array:
+def control_torque(
+    q: Array,
+    w: Array,
+    wheel_momentum: Array,
+    t: Array,
+    profile: Slew,
+    gains: AttitudeGains,
+    inertia: Array,
+) -> Array:
     """Commanded body torque from attitude ``q``, gyro rate ``w`` and the believed wheel momentum ``h_w``.
 
     Returns:
@@ -115,8 +153,12 @@ def control_torque(q: Array, w: Array, wheel_momentum: Array, t: Array, profile:
     dq = quaternion_multiply(quaternion_conjugate(q_ref), q)
     dq = jnp.where(dq[0] < 0, -dq, dq)
     w_ref_body = rotate(quaternion_conjugate(dq), w_ref)
-    return (inertia @ alpha_ref + jnp.cross(w, inertia @ w + wheel_momentum)
-            - 2.0 * gains.kp @ dq[1:] - gains.kd @ (w - w_ref_body))
+    return (
+        inertia @ alpha_ref
+        + jnp.cross(w, inertia @ w + wheel_momentum)
+        - 2.0 * gains.kp @ dq[1:]
+        - gains.kd @ (w - w_ref_body)
+    )
 
 
 def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: Array) -> Array:
@@ -130,16 +172,24 @@ def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: A
     return tau * jnp.minimum(1.0, max_wheel_torque / jnp.maximum(peak, 1e-30))
 
 
-def wheel_attitude_controller(params: SpacecraftParams, gains: AttitudeGains, profile: Slew,
-                              initial_speeds: Array) -> Controller:
+def wheel_attitude_controller(
+    params: SpacecraftParams, gains: AttitudeGains, profile: Slew, initial_speeds: Array
+) -> Controller:
     """The attitude loop as a ``loop.Controller`` on an ``AttitudeReading`` (``control_torque``,
     ``allocate_wheel_torques``); state: commanded speeds ``Omega_cmd[k+1] = Omega_cmd[k] + dt tau[k] / I_w``.
     Returns a ``WheelCommand``."""
 
     def step(commanded: Array, k: Array, reading, exogenous):
         t = k * params.dt
-        torque = control_torque(reading.quaternion, reading.rate, wheel_momentum(commanded, params), t, profile, gains,
-                                params.inertia)
+        torque = control_torque(
+            reading.quaternion,
+            reading.rate,
+            wheel_momentum(commanded, params),
+            t,
+            profile,
+            gains,
+            params.inertia,
+        )
         tau = allocate_wheel_torques(torque, params.wheel_axes, gains.max_wheel_torque)
         return commanded + params.dt * tau / params.wheel_inertia, WheelCommand(commanded, tau)
 
@@ -147,6 +197,7 @@ def wheel_attitude_controller(params: SpacecraftParams, gains: AttitudeGains, pr
 
 
 # --- the truth as a closed-loop plant ----------------------------------------------
+
 
 class WheelSensed(NamedTuple):
     """The spacecraft plant's output at step ``k``: the truth and the sensors' reading.
@@ -160,8 +211,13 @@ class WheelSensed(NamedTuple):
     measurement: AttitudeReading
 
 
-def wheel_plant(params: SpacecraftParams, fault, gyro_sigma: Array, disturbance_sigma: Array,
-                wheel_noise_sigma: Array) -> Plant:
+def wheel_plant(
+    params: SpacecraftParams,
+    fault,
+    gyro_sigma: Array,
+    disturbance_sigma: Array,
+    wheel_noise_sigma: Array,
+) -> Plant:
     """The spacecraft truth as a ``loop.Plant`` under ``fault`` (scalar leaves): wheel (``Target.ACTUATOR``,
     component = wheel) or gyro (``Target.SENSOR``, component = axis; ``faults.apply_fault`` on the reading:
     DEAD = NaN, STUCK = onset reading held to the last bit).
@@ -191,9 +247,13 @@ def wheel_plant(params: SpacecraftParams, fault, gyro_sigma: Array, disturbance_
     def advance(plant, k: Array, command: WheelCommand, step_key: Array):
         state, held = plant
         _, k_dist, k_wheel = keys(step_key)
-        delivered = delivered_torque(fault, k, command.torque) + wheel_noise_sigma * jax.random.normal(k_wheel, (N,), dtype)
+        delivered = delivered_torque(
+            fault, k, command.torque
+        ) + wheel_noise_sigma * jax.random.normal(k_wheel, (N,), dtype)
         disturbance = disturbance_sigma * jax.random.normal(k_dist, (3,), dtype)
-        state = spacecraft_step(stop_transfer(state, fault, k, params), delivered, disturbance, params)
+        state = spacecraft_step(
+            stop_transfer(state, fault, k, params), delivered, disturbance, params
+        )
         return (state, held), delivered
 
     return Plant(init, measure, advance)

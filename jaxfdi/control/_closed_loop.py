@@ -1,6 +1,7 @@
 """A reconfigurable PI controller for fault-tolerant control (Lee & Lyou, eqs. 22-29), fed a
 ``Reconfiguration`` by a ``jaxfdi._loop`` FDI stage (the VTOL loop: ``jaxfdi.scenarios.vtol_loop``).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -9,8 +10,8 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _linalg
-from jaxfdi.control._eigenstructure import GainSchedule, scheduled_gain
 from jaxfdi._stages import Controller
+from jaxfdi.control._eigenstructure import GainSchedule, scheduled_gain
 
 
 class Reconfiguration(NamedTuple):
@@ -30,8 +31,9 @@ class Reconfiguration(NamedTuple):
     additive: Array
 
 
-def reconfigurable_pi(gain: Array, schedule: GainSchedule, H: Array, command: Array, Ts: float,
-                      dtype=None) -> Controller:
+def reconfigurable_pi(
+    gain: Array, schedule: GainSchedule, H: Array, command: Array, Ts: float, dtype=None
+) -> Controller:
     """PI state feedback of eq. 22, ``u = -K [x_hat; z]`` plus an isolated additive actuator fault's estimate;
     ``K`` the nominal ``gain`` (nu, n + g), or while an effectiveness loss ``b`` is isolated the
     eigenstructure gain for ``B_f = B (I - diag(b))`` (``scheduled_gain`` of the once-tabulated

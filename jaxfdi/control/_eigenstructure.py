@@ -17,17 +17,17 @@ integrators, a mode at 1 becomes uncontrollable), ``V^f`` is singular, ``K_f`` i
 ``K_f V^f = -[alpha_i]``, and ``assignment_residual`` shows which eigenvalues were kept. (The paper's design, tracking
 ``v_h`` and ``q``, has that mode at 1 already, so either actuator alone keeps every eigenvalue.)
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
-import jax
 from jax import Array
 
 from jaxfdi import _checks
-
 
 #: relative singular-value cut-off for null spaces and pseudo-inverses.
 NULL_RTOL = 1e-10
@@ -63,7 +63,9 @@ def nominal_eigenstructure(A_bar, B_bar, K_nominal) -> tuple[np.ndarray, np.ndar
     return np.linalg.eig(closed)
 
 
-def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eigenvectors: Array) -> EigenstructureResult:
+def assign_eigenstructure(
+    A_bar: Array, B_faulty: Array, eigenvalues: Array, eigenvectors: Array
+) -> EigenstructureResult:
     """Reconfigured gain ``K_f`` (``u = -K_f x``): ``A_bar - B_f K_f`` keeps ``eigenvalues``, eigenvectors
     projected onto the admissible subspaces (eq. 26, ``W_i = I``). Traceable (``jit``/``vmap`` over
     ``B_faulty``: reconfigure from an online fault estimate).
@@ -98,15 +100,17 @@ def assign_eigenstructure(A_bar: Array, B_faulty: Array, eigenvalues: Array, eig
         S = jnp.concatenate([lam_i * eye - A_bar.astype(ctype), -B_f], axis=1)
         _, sv, Vh = jnp.linalg.svd(S, full_matrices=True)
         in_null = jnp.concatenate([sv <= NULL_RTOL * sv[0], jnp.ones((p,), bool)])
-        null = Vh.conj().T * in_null[None, :]                          # (N + p, N + p), zero columns off the null space
-        beta = jnp.linalg.pinv(null[:N], rtol=NULL_RTOL) @ v_i          # eq. 26 with W_i = I
+        null = Vh.conj().T * in_null[None, :]  # (N + p, N + p), zero columns off the null space
+        beta = jnp.linalg.pinv(null[:N], rtol=NULL_RTOL) @ v_i  # eq. 26 with W_i = I
         return null[:N] @ beta, null[N:] @ beta
 
     V_f, alphas = jax.vmap(column, in_axes=(0, 1), out_axes=(1, 1))(lam, V)
     # K_f V^f = -[alpha_i] (u = -K x); least squares (pseudo-inverse) where V^f is singular
     K_complex = -alphas @ jnp.linalg.pinv(V_f, rtol=NULL_RTOL)
     closed = A_bar.astype(ctype) - B_f @ K_complex.real.astype(ctype)
-    residual = jnp.linalg.norm(closed @ V_f - V_f * lam[None, :], axis=0) / jnp.maximum(jnp.linalg.norm(V_f, axis=0), 1e-300)
+    residual = jnp.linalg.norm(closed @ V_f - V_f * lam[None, :], axis=0) / jnp.maximum(
+        jnp.linalg.norm(V_f, axis=0), 1e-300
+    )
     singular = jnp.linalg.svd(V_f, compute_uv=False)
     return EigenstructureResult(
         gain=K_complex.real,
@@ -131,12 +135,15 @@ class GainSchedule(NamedTuple):
     max_residual: Array
 
 
-def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, eigenvectors: Array,
-                                num_losses: int = 201) -> GainSchedule:
+def effectiveness_gain_schedule(
+    A_bar: Array, B_bar: Array, eigenvalues: Array, eigenvectors: Array, num_losses: int = 201
+) -> GainSchedule:
     """``assign_eigenstructure`` for each input's loss on a uniform grid over [0, 1], so a loop looks the
     gain up (``scheduled_gain``) instead of ``2 (N + 1)`` SVDs a step: exact at grid points, linear
     between (smooth in the loss away from 1)."""
-    num_losses = _checks.check_int("num_losses", num_losses, 2, meaning="a number of grid points >= 2 over [0, 1]")
+    num_losses = _checks.check_int(
+        "num_losses", num_losses, 2, meaning="a number of grid points >= 2 over [0, 1]"
+    )
     p = _checks.shape_of(B_bar)[1]
     losses = jnp.linspace(0.0, 1.0, num_losses, dtype=jnp.asarray(A_bar).dtype)
 
@@ -145,7 +152,9 @@ def effectiveness_gain_schedule(A_bar: Array, B_bar: Array, eigenvalues: Array, 
         result = assign_eigenstructure(A_bar, B_f, eigenvalues, eigenvectors)
         return result.gain, jnp.max(result.assignment_residual)
 
-    gains, residual = jax.jit(jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None)))(jnp.arange(p), losses)
+    gains, residual = jax.jit(jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None)))(
+        jnp.arange(p), losses
+    )
     return GainSchedule(losses, gains, residual)
 
 

@@ -4,6 +4,7 @@ fault-free FDI stage that gives the flight controller its ``FlightView`` (Park, 
 ``rate_passthrough_fdi`` flies the controller on the least-squares rate ``(H^T H)^-1 H^T m`` of all rate channels; an
 isolating FDI stage (Park et al.'s parity space + UKF) returns the same view with its own selected rate.
 """
+
 from __future__ import annotations
 
 import jax
@@ -12,15 +13,31 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi._faults import Target, active_label, apply_faults, as_stack, is_active
+from jaxfdi._simulate import Actuated, Sensed, SimState, check_fault_components
 from jaxfdi._stages import FDI, Plant
 from jaxfdi.models.f16._dynamics import F16Params
-from jaxfdi.models.f16._plant import (RATE_OFFSET, F16Sensors, SampledF16, flight_view, measurement_cov, rate_estimator,
-                                      sampled_observation, sampled_transition)
-from jaxfdi._simulate import Actuated, Sensed, SimState, check_fault_components
+from jaxfdi.models.f16._plant import (
+    RATE_OFFSET,
+    F16Sensors,
+    SampledF16,
+    flight_view,
+    measurement_cov,
+    rate_estimator,
+    sampled_observation,
+    sampled_transition,
+)
 
 
-def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, substeps: int = 1, gust_sigma: float = 0.0,
-              gust_length: float = 1750.0, reference_speed: float = 502.0, fault=None) -> Plant:
+def f16_plant(
+    aircraft: F16Params,
+    sensors: F16Sensors,
+    dt: float = 0.01,
+    substeps: int = 1,
+    gust_sigma: float = 0.0,
+    gust_length: float = 1750.0,
+    reference_speed: float = 502.0,
+    fault=None,
+) -> Plant:
     """The sampled F-16 as a ``loop.Plant`` with state ``simulate.SimState([x (13), w_g, v_g], held)``.
 
     One sample ``dt`` by ``sampled_transition``, ``y`` by ``sampled_observation`` + white noise
@@ -44,11 +61,17 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
       ``measure(state, k, u, step_key) -> (state, Sensed)``, ``y`` (m,); ``advance(state, k, u, step_key)
       -> (state, Actuated)``, ``u`` (4,) ``[thtl, el, ail, rdr]``.
     """
-    substeps = _checks.check_int("substeps", substeps, 1, meaning="a positive number of RK4 steps per sample")
+    substeps = _checks.check_int(
+        "substeps", substeps, 1, meaning="a positive number of RK4 steps per sample"
+    )
     _checks.check_positive("dt", dt, "a positive sample period (s)")
-    _checks.check_scalar("gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)")
+    _checks.check_scalar(
+        "gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)"
+    )
     _checks.check_positive("gust_length", gust_length, "a positive gust correlation length (ft)")
-    _checks.check_positive("reference_speed", reference_speed, "a positive reference airspeed (ft/s)")
+    _checks.check_positive(
+        "reference_speed", reference_speed, "a positive reference airspeed (ft/s)"
+    )
     dtype = aircraft.mass.dtype
     dt_arr = jnp.asarray(dt, dtype)
     decay = jnp.exp(-jnp.asarray(reference_speed, dtype) * dt_arr / jnp.asarray(gust_length, dtype))
@@ -75,10 +98,14 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
         noise = noise_std * jax.random.normal(key_v, (m,), noise_dtype).astype(dtype)
         y_clean = sampled_observation(x, u, plant) + noise
         if faults is None:
-            return sim, Sensed(x, y_clean, jnp.zeros_like(y_clean), jnp.zeros((0,), bool), jnp.zeros((), jnp.int32))
+            return sim, Sensed(
+                x, y_clean, jnp.zeros_like(y_clean), jnp.zeros((0,), bool), jnp.zeros((), jnp.int32)
+            )
         y, held = apply_faults(faults, k, y_clean, Target.SENSOR, sim.held)
         active = jax.vmap(is_active, in_axes=(0, None))(faults, k)
-        return SimState(x, held), Sensed(x, y, y - y_clean, active, active_label(faults, k, u.shape[0]))
+        return SimState(x, held), Sensed(
+            x, y, y - y_clean, active, active_label(faults, k, u.shape[0])
+        )
 
     def advance(sim, k: Array, u: Array, step_key: Array):
         key_w, _ = jax.random.split(step_key)
@@ -96,7 +123,9 @@ def f16_plant(aircraft: F16Params, sensors: F16Sensors, dt: float = 0.01, subste
 def rate_passthrough_fdi(rate_axes: Array) -> FDI:
     """Fault-free ``loop.FDI``: no detection, least-squares rates of all channels (``init()``, state and output
     ``None``)."""
-    estimator = rate_estimator(jnp.asarray(rate_axes))  # once: a solve inside the step costs 4x the flight (vmapped LU)
+    estimator = rate_estimator(
+        jnp.asarray(rate_axes)
+    )  # once: a solve inside the step costs 4x the flight (vmapped LU)
 
     def observe(state, k, y):
         return state, flight_view(y, estimator.astype(y.dtype) @ y[RATE_OFFSET:])

@@ -22,6 +22,7 @@ shapes the level-off (120 -> 0 ft/s over ``level_off`` s centred on t = 5 s; 600
 roll-in (to 30 deg over ``roll_in`` s from t = 5 s). Peak normal-load change ``1.5 x 120 / (g T)``
 for a level-off in ``T`` s: 1.4 g for T = 4 s, whatever the airspeed (the paper's flight is brisk).
 """
+
 from __future__ import annotations
 
 import math
@@ -33,17 +34,29 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.control._lqr import lqr_pi
 from jaxfdi._stages import Controller
-from jaxfdi.models.f16._dynamics import AIL, ALPHA, EL, H, P, PHI, Q, RDR, THETA, THTL, F16Params
-from jaxfdi.models.f16._linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, LinearF16, submodel
-from jaxfdi.models.f16._plant import FlightView
-from jaxfdi.models.f16._trim import TrimResult, climb, coordinated_turn, level_flight, pull_up, trim_batch
+from jaxfdi.control._lqr import lqr_pi
 from jaxfdi.models._linear import c2d
+from jaxfdi.models.f16._dynamics import AIL, ALPHA, EL, PHI, RDR, THETA, THTL, F16Params, H, P, Q
+from jaxfdi.models.f16._linearize import (
+    LATERAL_STATES,
+    LONGITUDINAL_DESIGN_STATES,
+    LinearF16,
+    submodel,
+)
+from jaxfdi.models.f16._plant import FlightView
+from jaxfdi.models.f16._trim import (
+    TrimResult,
+    climb,
+    coordinated_turn,
+    level_flight,
+    pull_up,
+    trim_batch,
+)
 
 #: tracked outputs of each axis (indices into its design states)
 LONGITUDINAL_TRACKED = (0, 4)  # VT, h
-LATERAL_TRACKED = (1,)         # phi
+LATERAL_TRACKED = (1,)  # phi
 
 
 class FlightWeights(NamedTuple):
@@ -138,30 +151,65 @@ class FlightControllerState(NamedTuple):
     lateral_integral: Array
 
 
-def flight_plan(airspeed: float = 502.0, altitude: float = 0.0, climb_rate: float = 120.0, climb_time: float = 5.0,
-                level_off: float = 4.0, bank_angle_deg: float = 30.0, bank_start: float = 5.0, roll_in: float = 2.0,
-                duration: float = 15.0) -> FlightPlan:
+def flight_plan(
+    airspeed: float = 502.0,
+    altitude: float = 0.0,
+    climb_rate: float = 120.0,
+    climb_time: float = 5.0,
+    level_off: float = 4.0,
+    bank_angle_deg: float = 30.0,
+    bank_start: float = 5.0,
+    roll_in: float = 2.0,
+    duration: float = 15.0,
+) -> FlightPlan:
     """The flight of Park et al. (2004) at the book's 502 ft/s sea-level trim (module doc)."""
-    for name, value in (("airspeed", airspeed), ("altitude", altitude), ("climb_rate", climb_rate),
-                        ("climb_time", climb_time), ("level_off", level_off), ("bank_angle_deg", bank_angle_deg),
-                        ("bank_start", bank_start), ("roll_in", roll_in), ("duration", duration)):
+    for name, value in (
+        ("airspeed", airspeed),
+        ("altitude", altitude),
+        ("climb_rate", climb_rate),
+        ("climb_time", climb_time),
+        ("level_off", level_off),
+        ("bank_angle_deg", bank_angle_deg),
+        ("bank_start", bank_start),
+        ("roll_in", roll_in),
+        ("duration", duration),
+    ):
         _checks.check_scalar(name, value, meaning="a real number")
     if not (airspeed > 0 and duration > 0 and level_off > 0 and roll_in > 0):
-        raise ValueError("airspeed, duration, level_off, roll_in: expected positive values, got "
-                         f"{airspeed}, {duration}, {level_off}, {roll_in}")
+        raise ValueError(
+            "airspeed, duration, level_off, roll_in: expected positive values, got "
+            f"{airspeed}, {duration}, {level_off}, {roll_in}"
+        )
     if not abs(climb_rate) < airspeed:
-        raise ValueError(f"climb_rate: expected |climb_rate| < airspeed {airspeed}, got {climb_rate}")
+        raise ValueError(
+            f"climb_rate: expected |climb_rate| < airspeed {airspeed}, got {climb_rate}"
+        )
     if not 0.5 * level_off <= climb_time:
-        raise ValueError(f"level_off: expected at most 2 climb_time = {2 * climb_time} s, got {level_off}")
-    return FlightPlan(float(airspeed), float(altitude), float(climb_rate), float(climb_time), float(level_off),
-                      math.radians(bank_angle_deg), float(bank_start), float(roll_in), float(duration))
+        raise ValueError(
+            f"level_off: expected at most 2 climb_time = {2 * climb_time} s, got {level_off}"
+        )
+    return FlightPlan(
+        float(airspeed),
+        float(altitude),
+        float(climb_rate),
+        float(climb_time),
+        float(level_off),
+        math.radians(bank_angle_deg),
+        float(bank_start),
+        float(roll_in),
+        float(duration),
+    )
 
 
-def bryson_weights(longitudinal, longitudinal_input, lateral, lateral_input, dtype=None) -> FlightWeights:
+def bryson_weights(
+    longitudinal, longitudinal_input, lateral, lateral_input, dtype=None
+) -> FlightWeights:
     """Bryson's rule: weight ``1 / (largest acceptable value)^2`` (angles in rad, surfaces in deg)."""
     dtype = dtype or jnp.result_type(float)
-    inv_sq = lambda v: 1.0 / jnp.asarray(v, dtype) ** 2  # noqa: E731
-    return FlightWeights(inv_sq(longitudinal), inv_sq(longitudinal_input), inv_sq(lateral), inv_sq(lateral_input))
+    inv_sq = lambda v: 1.0 / jnp.asarray(v, dtype) ** 2
+    return FlightWeights(
+        inv_sq(longitudinal), inv_sq(longitudinal_input), inv_sq(lateral), inv_sq(lateral_input)
+    )
 
 
 def default_weights(dtype=None) -> FlightWeights:
@@ -170,8 +218,13 @@ def default_weights(dtype=None) -> FlightWeights:
     Chosen on 64 dispersed flights (noise, gusts) for altitude errors < 10 ft, bank errors < 1 deg once rolled in,
     control noise ~1 deg per sample."""
     deg = math.pi / 180.0
-    return bryson_weights([10.0, 2 * deg, 5 * deg, 20 * deg, 20.0, 30.0, 20.0, 20.0], [0.3, 5.0],
-                          [2 * deg, 5 * deg, 45 * deg, 20 * deg, 5 * deg], [15.0, 20.0], dtype)
+    return bryson_weights(
+        [10.0, 2 * deg, 5 * deg, 20 * deg, 20.0, 30.0, 20.0, 20.0],
+        [0.3, 5.0],
+        [2 * deg, 5 * deg, 45 * deg, 20 * deg, 5 * deg],
+        [15.0, 20.0],
+        dtype,
+    )
 
 
 def design_flight_control(linear: LinearF16, dt: float, weights: FlightWeights) -> FlightDesign:
@@ -183,30 +236,51 @@ def design_flight_control(linear: LinearF16, dt: float, weights: FlightWeights) 
       (< 1 is stable) and the Riccati ``converged`` flags (2,).
     """
     _checks.check_positive("dt", dt, "a positive sample period (s)")
-    _checks.check_shape("weights.longitudinal", weights.longitudinal, (8,),
-                        "VT, alpha, theta, Q, h, pow, int VT, int h")
+    _checks.check_shape(
+        "weights.longitudinal",
+        weights.longitudinal,
+        (8,),
+        "VT, alpha, theta, Q, h, pow, int VT, int h",
+    )
     _checks.check_shape("weights.longitudinal_input", weights.longitudinal_input, (2,), "thtl, el")
     _checks.check_shape("weights.lateral", weights.lateral, (5,), "beta, phi, P, R, int phi")
     _checks.check_shape("weights.lateral_input", weights.lateral_input, (2,), "ail, rdr")
-    for name, low_open in (("longitudinal", False), ("longitudinal_input", True), ("lateral", False),
-                           ("lateral_input", True)):
-        value = _checks.concrete(getattr(weights, name))   # traced when differentiated: unchecked
-        if value is not None and not (np.all(np.isfinite(value)) and np.all(value > 0 if low_open else value >= 0)):
-            raise ValueError(f"weights.{name}: expected finite LQR weights {'> 0' if low_open else '>= 0'}, got "
-                             f"{_checks.received(value)}")
+    for name, low_open in (
+        ("longitudinal", False),
+        ("longitudinal_input", True),
+        ("lateral", False),
+        ("lateral_input", True),
+    ):
+        value = _checks.concrete(getattr(weights, name))  # traced when differentiated: unchecked
+        if value is not None and not (
+            np.all(np.isfinite(value)) and np.all(value > 0 if low_open else value >= 0)
+        ):
+            raise ValueError(
+                f"weights.{name}: expected finite LQR weights {'> 0' if low_open else '>= 0'}, got "
+                f"{_checks.received(value)}"
+            )
     dtype = weights.longitudinal.dtype
     designs = []
     for states, inputs, tracked, q, r in (
-            (LONGITUDINAL_DESIGN_STATES, (THTL, EL), LONGITUDINAL_TRACKED, weights.longitudinal,
-             weights.longitudinal_input),
-            (LATERAL_STATES, (AIL, RDR), LATERAL_TRACKED, weights.lateral, weights.lateral_input)):
+        (
+            LONGITUDINAL_DESIGN_STATES,
+            (THTL, EL),
+            LONGITUDINAL_TRACKED,
+            weights.longitudinal,
+            weights.longitudinal_input,
+        ),
+        (LATERAL_STATES, (AIL, RDR), LATERAL_TRACKED, weights.lateral, weights.lateral_input),
+    ):
         A, B = submodel(linear, states, inputs)
         Phi, Gamma = c2d(A, B, dt, dtype=dtype)
         H = jnp.eye(len(states), dtype=dtype)[jnp.asarray(tracked)]
         designs.append(lqr_pi(Phi, Gamma, H, jnp.diag(q), jnp.diag(r), dt))
     lon, lat = designs
-    return FlightDesign(FlightGains(lon.gain, lat.gain), jnp.stack([lon.spectral_radius, lat.spectral_radius]),
-                        jnp.stack([lon.converged, lat.converged]))
+    return FlightDesign(
+        FlightGains(lon.gain, lat.gain),
+        jnp.stack([lon.spectral_radius, lat.spectral_radius]),
+        jnp.stack([lon.converged, lat.converged]),
+    )
 
 
 #: load factor of the pull-up trim that gives the controls per g (``plan_trims``)
@@ -221,19 +295,29 @@ def plan_trims(params: F16Params, plan: FlightPlan) -> TrimResult:
     top = plan.altitude + plan.climb_rate * plan.climb_time
     gamma = math.asin(plan.climb_rate / plan.airspeed)
     turn_rate = float(params.gravity) * math.tan(plan.bank_angle) / plan.airspeed
-    conditions = [level_flight(plan.airspeed, plan.altitude, dtype),
-                  climb(plan.airspeed, gamma, 0.5 * (plan.altitude + top), dtype),
-                  coordinated_turn(plan.airspeed, turn_rate, top, dtype=dtype),
-                  pull_up(plan.airspeed, float(params.gravity) * (PULL_UP_LOAD - 1.0) / plan.airspeed, plan.altitude,
-                          dtype=dtype)]
+    conditions = [
+        level_flight(plan.airspeed, plan.altitude, dtype),
+        climb(plan.airspeed, gamma, 0.5 * (plan.altitude + top), dtype),
+        coordinated_turn(plan.airspeed, turn_rate, top, dtype=dtype),
+        pull_up(
+            plan.airspeed,
+            float(params.gravity) * (PULL_UP_LOAD - 1.0) / plan.airspeed,
+            plan.altitude,
+            dtype=dtype,
+        ),
+    ]
     stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *conditions)
     return trim_batch(params, stacked, jnp.full((len(conditions),), params.xcg, dtype))
 
 
 def _check_trims(trims: TrimResult) -> None:
     """``trims`` must be ``plan_trims``' stack of 4 (fewer rows would be silently clamped to the last)."""
-    _checks.check_shape("trims.state", trims.state, (4, 13), "plan_trims' level, climb, turn and pull-up trims")
-    _checks.check_shape("trims.control", trims.control, (4, 4), "plan_trims' level, climb, turn and pull-up trims")
+    _checks.check_shape(
+        "trims.state", trims.state, (4, 13), "plan_trims' level, climb, turn and pull-up trims"
+    )
+    _checks.check_shape(
+        "trims.control", trims.control, (4, 4), "plan_trims' level, climb, turn and pull-up trims"
+    )
 
 
 def initial_condition(plan: FlightPlan, trims: TrimResult) -> tuple[Array, Array]:
@@ -289,12 +373,19 @@ def commanded_profile(plan: FlightPlan, t: Array) -> Profile:
     climb_weight = 1.0 - _smoothstep(s_climb)
     bank_weight = _smoothstep(s_bank)
     climbed = t - _smoothstep_integral(t - start, plan.level_off)
-    return Profile(climb_weight, bank_weight, -_smoothstep_rate(s_climb) / plan.level_off,
-                   _smoothstep_rate(s_bank) / plan.roll_in, plan.altitude + plan.climb_rate * climbed,
-                   plan.bank_angle * bank_weight)
+    return Profile(
+        climb_weight,
+        bank_weight,
+        -_smoothstep_rate(s_climb) / plan.level_off,
+        _smoothstep_rate(s_bank) / plan.roll_in,
+        plan.altitude + plan.climb_rate * climbed,
+        plan.bank_angle * bank_weight,
+    )
 
 
-def flight_reference(params: F16Params, plan: FlightPlan, trims: TrimResult, dt: float, steps: int) -> FlightReference:
+def flight_reference(
+    params: F16Params, plan: FlightPlan, trims: TrimResult, dt: float, steps: int
+) -> FlightReference:
     """``x_ref``/``u_ref`` at ``t = k dt``: level trim + climb and turn trims' departures weighted by
     ``commanded_profile``; ``h_ref``, ``phi_ref`` commanded; ``Q += cos(phi) theta_ref'``,
     ``P += phi_ref'``; the level-off's load ``dn = h_cmd'' / (g cos(gamma))`` added to alpha (and theta,
@@ -308,16 +399,33 @@ def flight_reference(params: F16Params, plan: FlightPlan, trims: TrimResult, dt:
     level, climbing, turning, pulling = (trims.state[i] for i in range(4))
     c, b = prof.climb_weight[:, None], prof.bank_weight[:, None]
     state = level + c * (climbing - level) + b * (turning - level)
-    theta_rate = prof.climb_rate * (climbing[THETA] - level[THETA]) + prof.bank_rate * (turning[THETA] - level[THETA])
+    theta_rate = prof.climb_rate * (climbing[THETA] - level[THETA]) + prof.bank_rate * (
+        turning[THETA] - level[THETA]
+    )
     gamma = jnp.arcsin(plan.climb_rate * prof.climb_weight / plan.airspeed)
     load = plan.climb_rate * prof.climb_rate / (params.gravity * jnp.cos(gamma))
     extra_alpha = load / (PULL_UP_LOAD - 1.0) * (pulling[ALPHA] - level[ALPHA])
-    state = (state.at[:, H].set(prof.altitude).at[:, PHI].set(prof.bank)
-             .at[:, Q].add(jnp.cos(prof.bank) * theta_rate).at[:, P].add(plan.bank_angle * prof.bank_rate)
-             .at[:, ALPHA].add(extra_alpha).at[:, THETA].add(jnp.cos(prof.bank) * extra_alpha))
+    state = (
+        state.at[:, H]
+        .set(prof.altitude)
+        .at[:, PHI]
+        .set(prof.bank)
+        .at[:, Q]
+        .add(jnp.cos(prof.bank) * theta_rate)
+        .at[:, P]
+        .add(plan.bank_angle * prof.bank_rate)
+        .at[:, ALPHA]
+        .add(extra_alpha)
+        .at[:, THETA]
+        .add(jnp.cos(prof.bank) * extra_alpha)
+    )
     u_level, u_climb, u_turn, u_pull = (trims.control[i] for i in range(4))
-    control = (u_level + c * (u_climb - u_level) + b * (u_turn - u_level)
-               + (load / (PULL_UP_LOAD - 1.0))[:, None] * (u_pull - u_level))
+    control = (
+        u_level
+        + c * (u_climb - u_level)
+        + b * (u_turn - u_level)
+        + (load / (PULL_UP_LOAD - 1.0))[:, None] * (u_pull - u_level)
+    )
     return FlightReference(state, control)
 
 
@@ -340,14 +448,20 @@ def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array)
       ``step(state, k, view, (x_ref, u_ref)) -> (state, u)``, ``u`` (4,) ``[thtl, el, ail, rdr]`` in ``[lower, upper]``.
     """
     _checks.check_positive("dt", dt, "a positive sample period (s)")
-    _checks.check_shape("gains.longitudinal", gains.longitudinal, (2, 8), "u_lon = -K [dx_lon (6); z_lon (2)]")
-    _checks.check_shape("gains.lateral", gains.lateral, (2, 5), "u_lat = -K [dx_lat (4); z_lat (1)]")
+    _checks.check_shape(
+        "gains.longitudinal", gains.longitudinal, (2, 8), "u_lon = -K [dx_lon (6); z_lon (2)]"
+    )
+    _checks.check_shape(
+        "gains.lateral", gains.lateral, (2, 5), "u_lat = -K [dx_lat (4); z_lat (1)]"
+    )
     _checks.check_shape("lower", lower, (4,), "control limits thtl, el, ail, rdr")
     _checks.check_shape("upper", upper, (4,), "control limits thtl, el, ail, rdr")
     low, high = _checks.concrete(lower), _checks.concrete(upper)
     if low is not None and high is not None and np.any(np.asarray(low) > np.asarray(high)):
-        raise ValueError(f"lower: expected control limits below upper (thtl, el, ail, rdr), got lower "
-                         f"{_checks.received(low)} and upper {_checks.received(high)}")
+        raise ValueError(
+            f"lower: expected control limits below upper (thtl, el, ail, rdr), got lower "
+            f"{_checks.received(low)} and upper {_checks.received(high)}"
+        )
 
     lon_idx = jnp.asarray(LONGITUDINAL_DESIGN_STATES)
     lat_idx = jnp.asarray(LATERAL_STATES)
@@ -364,24 +478,50 @@ def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array)
         x_lon, x_lat = measured_state(view)
         d_lon = x_lon - x_ref[lon_idx]
         d_lat = x_lat - x_ref[lat_idx]
-        u_lon = u_ref[jnp.array([THTL, EL])] - K_lon @ jnp.concatenate([d_lon, state.longitudinal_integral])
-        u_lat = u_ref[jnp.array([AIL, RDR])] - K_lat @ jnp.concatenate([d_lat, state.lateral_integral])
+        u_lon = u_ref[jnp.array([THTL, EL])] - K_lon @ jnp.concatenate(
+            [d_lon, state.longitudinal_integral]
+        )
+        u_lat = u_ref[jnp.array([AIL, RDR])] - K_lat @ jnp.concatenate(
+            [d_lat, state.lateral_integral]
+        )
         wanted = jnp.stack([u_lon[0], u_lon[1], u_lat[0], u_lat[1]])
         u = jnp.clip(wanted, lower, upper)
         # conditional integration (anti-windup): an axis integrates only while its controls are inside the limits
         free = wanted == u
         lon_free, lat_free = free[0] & free[1], free[2] & free[3]
         new = FlightControllerState(
-            jnp.where(lon_free, state.longitudinal_integral - dt * d_lon[lon_track], state.longitudinal_integral),
-            jnp.where(lat_free, state.lateral_integral - dt * d_lat[lat_track], state.lateral_integral))
+            jnp.where(
+                lon_free,
+                state.longitudinal_integral - dt * d_lon[lon_track],
+                state.longitudinal_integral,
+            ),
+            jnp.where(
+                lat_free, state.lateral_integral - dt * d_lat[lat_track], state.lateral_integral
+            ),
+        )
         return new, u
 
     return Controller(init, step)
 
 
 __all__ = [
-    "FlightWeights", "FlightGains", "FlightDesign", "FlightPlan", "FlightReference", "FlightControllerState",
-    "flight_plan", "bryson_weights", "default_weights", "design_flight_control", "plan_trims", "initial_condition",
-    "Profile", "commanded_profile",
-    "flight_reference", "measured_state", "flight_controller", "LONGITUDINAL_TRACKED", "LATERAL_TRACKED",
+    "FlightWeights",
+    "FlightGains",
+    "FlightDesign",
+    "FlightPlan",
+    "FlightReference",
+    "FlightControllerState",
+    "flight_plan",
+    "bryson_weights",
+    "default_weights",
+    "design_flight_control",
+    "plan_trims",
+    "initial_condition",
+    "Profile",
+    "commanded_profile",
+    "flight_reference",
+    "measured_state",
+    "flight_controller",
+    "LONGITUDINAL_TRACKED",
+    "LATERAL_TRACKED",
 ]

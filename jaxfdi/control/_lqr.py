@@ -15,6 +15,7 @@ A stabilising gain needs no transmission zero of ``(A, B, H)`` at ``z = 1``. The
 eigenvalue stays at exactly 1 (SciPy's ``solve_discrete_are`` refuses it): a constant pitch-rate command
 ramps the pitch angle, with no divergence elsewhere (``lqr_pi``'s ``allow_marginal``).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -26,9 +27,13 @@ from jaxfdi import _checks
 from jaxfdi._riccati import DareSolution, require_stabilising, solve_discrete_are_info
 
 #: why an LQR design has no stabilising solution
-_NOT_STABILISABLE = "(A, B) is not stabilisable or (Q, A) has an unobservable mode on the unit circle"
-_PI_NOT_STABILISABLE = ("(A_bar, B_bar) is not stabilisable ((A, B) is not, or (A, B, H) has a zero at z = 1) or "
-                        "(Q, A_bar) has an unobservable mode on the unit circle")
+_NOT_STABILISABLE = (
+    "(A, B) is not stabilisable or (Q, A) has an unobservable mode on the unit circle"
+)
+_PI_NOT_STABILISABLE = (
+    "(A_bar, B_bar) is not stabilisable ((A, B) is not, or (A, B, H) has a zero at z = 1) or "
+    "(Q, A_bar) has an unobservable mode on the unit circle"
+)
 
 
 class PIDesign(NamedTuple):
@@ -53,7 +58,9 @@ class PIDesign(NamedTuple):
     spectral_radius: Array
 
 
-def lqr_gain(A: Array, B: Array, Q: Array, R: Array, allow_marginal: bool = False) -> tuple[Array, Array, Array]:
+def lqr_gain(
+    A: Array, B: Array, Q: Array, R: Array, allow_marginal: bool = False
+) -> tuple[Array, Array, Array]:
     """Discrete LQR: ``(K, X, converged)`` with ``u = -K x`` (SciPy/MATLAB sign).
 
     ``K = (R + B^T X B)^-1 B^T X A`` minimises ``sum x^T Q x + u^T R u`` for ``x[k+1] = A x + B u``, ``X``
@@ -107,7 +114,9 @@ def integral_augmentation(A: Array, B: Array, H: Array, Ts: float) -> tuple[Arra
     return A_bar, B_bar, G
 
 
-def lqr_pi(A: Array, B: Array, H: Array, Q: Array, R: Array, Ts: float, allow_marginal: bool = True) -> PIDesign:
+def lqr_pi(
+    A: Array, B: Array, H: Array, Q: Array, R: Array, Ts: float, allow_marginal: bool = True
+) -> PIDesign:
     """LQR-PI design of eqs. 21-22: ``Q`` (n + g, n + g), ``R`` (p, p).
 
     Control ``u = -design.gain @ [x; z]`` (the paper's eq. 22 ``u = K [x; z]`` uses ``-design.gain``).
@@ -123,5 +132,9 @@ def lqr_pi(A: Array, B: Array, H: Array, Q: Array, R: Array, Ts: float, allow_ma
     _checks.check_covariance("Q", Q, A_bar.shape[0])
     _checks.check_covariance("R", R, B_bar.shape[1], definite=True)
     solution, K = _lqr(A_bar, B_bar, Q, R)
-    require_stabilising(solution, (A, B, H, Q, R, Ts), "A, B, H, Q, R", _PI_NOT_STABILISABLE, allow_marginal)
-    return PIDesign(A_bar, B_bar, G, K, solution.solution, solution.converged, solution.spectral_radius)
+    require_stabilising(
+        solution, (A, B, H, Q, R, Ts), "A, B, H, Q, R", _PI_NOT_STABILISABLE, allow_marginal
+    )
+    return PIDesign(
+        A_bar, B_bar, G, K, solution.solution, solution.converged, solution.spectral_radius
+    )

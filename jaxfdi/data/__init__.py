@@ -1,5 +1,6 @@
 """Public reference data shipped with jaxfdi (provenance and how to read each file:
 ``README.md`` beside this module). The files are byte-exact copies of ``shared/data``."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -19,6 +20,10 @@ def data_path(name: str) -> Path:
     """
     path = DATA_DIR / name
     if not path.is_file():
-        available = sorted(p.name for p in DATA_DIR.iterdir() if p.suffix in (".json", ".txt", ".20n", ".05o", ".05n"))
+        available = sorted(
+            p.name
+            for p in DATA_DIR.iterdir()
+            if p.suffix in (".json", ".txt", ".20n", ".05o", ".05n")
+        )
         raise ValueError(f"name: expected one of {available}, got {name!r}")
     return path

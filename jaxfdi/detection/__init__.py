@@ -1,5 +1,5 @@
 """Residual evaluation: tests that turn filter outputs into fault decisions."""
-from jaxfdi.detection._dual_filter import dual_filter
+
 from jaxfdi.detection._chi2 import (
     Decision,
     Detector,
@@ -8,6 +8,7 @@ from jaxfdi.detection._chi2 import (
     first_crossing,
     moving_window_sum,
 )
+from jaxfdi.detection._dual_filter import dual_filter
 from jaxfdi.detection._frozen import frozen_channel_detector
 from jaxfdi.detection._glrt import fault_directions, fault_signatures, glrt_threshold
 from jaxfdi.detection._glrt_correction import corrected_glrt

@@ -10,6 +10,7 @@ denoiser makes the fault-free statistic heavier-tailed. Two calibrations:
 
 Used by the VTOL study (Lee & Lyou): its two-stage filter bank sees the ``3 sin 10 t`` disturbance leak in.
 """
+
 from __future__ import annotations
 
 from typing import Callable
@@ -29,15 +30,24 @@ def empirical_threshold(values, pfa: float, floor=None) -> np.ndarray:
     values = np.asarray(values)
     if values.ndim == 0 or values.shape[0] < 1:
         raise ValueError(f"values: expected samples along a leading axis, got shape {values.shape}")
-    if not np.all(np.isfinite(values)):  # a NaN would make the threshold NaN: a detector that never alarms
-        raise ValueError(f"values: expected finite fault-free decision values, got {int(np.sum(~np.isfinite(values)))} "
-                         f"non-finite (a calibration run went bad)")
+    if not np.all(
+        np.isfinite(values)
+    ):  # a NaN would make the threshold NaN: a detector that never alarms
+        raise ValueError(
+            f"values: expected finite fault-free decision values, got {int(np.sum(~np.isfinite(values)))} "
+            f"non-finite (a calibration run went bad)"
+        )
     quantile = np.quantile(values, 1.0 - pfa, axis=0)
     return quantile if floor is None else np.maximum(np.asarray(floor), quantile)
 
 
-def scale_to_run_false_alarm(rate: Callable[[np.ndarray], np.ndarray], target: float, groups: int,
-                             upper: float = 16.0, iterations: int = 40) -> np.ndarray:
+def scale_to_run_false_alarm(
+    rate: Callable[[np.ndarray], np.ndarray],
+    target: float,
+    groups: int,
+    upper: float = 16.0,
+    iterations: int = 40,
+) -> np.ndarray:
     """(groups,) the smallest factors ``s >= 1`` with ``rate(s)[g] <= target``, by bisection.
 
     ``rate(scales (groups,)) -> (groups,)``: each group's share of fault-free runs with any alarm at thresholds times
@@ -53,14 +63,18 @@ def scale_to_run_false_alarm(rate: Callable[[np.ndarray], np.ndarray], target: f
 
     def rate(scale, _rate=rate):
         rates = np.asarray(_rate(scale))
-        if not np.all((rates >= 0.0) & (rates <= 1.0)):  # NaN included: never read as "within the target"
+        if not np.all(
+            (rates >= 0.0) & (rates <= 1.0)
+        ):  # NaN included: never read as "within the target"
             raise ValueError(f"rate: expected rates in [0, 1], got {rates}")
         return rates
 
     at_upper = rate(high)
     if np.any(at_upper > target):
-        raise ValueError(f"target: {target} is not reached even with the thresholds scaled by {upper} "
-                         f"(rates {at_upper})")
+        raise ValueError(
+            f"target: {target} is not reached even with the thresholds scaled by {upper} "
+            f"(rates {at_upper})"
+        )
     high[rate(low) <= target] = 1.0
     for _ in range(int(iterations)):  # invariant: rate(high) <= target < rate(low), where high > 1
         mid = 0.5 * (low + high)

@@ -4,6 +4,7 @@ Fault-free, a correctly tuned Kalman filter's innovation is white, ``r ~ N(0, S)
 ``chi2(m)`` and its sum over ``L`` steps ``chi2(L m)`` (Mehra & Peschon 1971; Bar-Shalom, Li & Kirubarajan 2001,
 sec. 5.4). A fault is declared when the statistic exceeds ``chi2_threshold(dof, pfa)``.
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -43,7 +44,9 @@ def chi2_threshold(dof, pfa) -> Array:
     _checks.check_finite("dof", dof, "degrees of freedom")
     dof_value = _checks.concrete(dof)
     if dof_value is not None and np.any(dof_value <= 0):
-        raise ValueError(f"dof: expected positive degrees of freedom, got {_checks.received(dof_value)}")
+        raise ValueError(
+            f"dof: expected positive degrees of freedom, got {_checks.received(dof_value)}"
+        )
     _checks.check_probability("pfa", pfa)
     dtype = _checks.float_dtype(dof, pfa)
     _check_representable(pfa, dtype)
@@ -60,10 +63,14 @@ def _check_representable(pfa, dtype, what: str = "pfa") -> None:
     cast = np.asarray(value, dtype)
     if np.any(cast < info.tiny):
         advice = "; a smaller pfa needs float64 (jaxfdi.enable_x64())" if info.bits < 64 else ""
-        raise ValueError(f"pfa: expected {what} >= {info.tiny:.4g} (np.finfo({name}).tiny, the smallest normal "
-                         f"{name}), got {_checks.received(value)}{advice}")
+        raise ValueError(
+            f"pfa: expected {what} >= {info.tiny:.4g} (np.finfo({name}).tiny, the smallest normal "
+            f"{name}), got {_checks.received(value)}{advice}"
+        )
     if np.any(cast >= 1):
-        raise ValueError(f"pfa: expected {what} that stays below 1 in {name}, got {_checks.received(value)}")
+        raise ValueError(
+            f"pfa: expected {what} that stays below 1 in {name}, got {_checks.received(value)}"
+        )
 
 
 #: Newton steps on ``log Q`` (quadratic convergence; 30 cover every dof and pfa tested)
@@ -84,9 +91,14 @@ def log_upper_gamma(a: Array, x: Array) -> Array:
     tiny = jnp.finfo(dtype).tiny
     log_prefactor = a * jnp.log(x) - x - gammaln(a)
     use_fraction = (x > a + 1.0) & (log_prefactor < 0.5 * jnp.log(tiny))
-    x_fraction = jnp.where(use_fraction, x, 2.0 * a + 50.0)   # safe inputs for the branch not taken
+    x_fraction = jnp.where(use_fraction, x, 2.0 * a + 50.0)  # safe inputs for the branch not taken
     x_series = jnp.where(use_fraction, a, x)
-    log_q_fraction = a * jnp.log(x_fraction) - x_fraction - gammaln(a) + jnp.log(_legendre_fraction(a, x_fraction))
+    log_q_fraction = (
+        a * jnp.log(x_fraction)
+        - x_fraction
+        - gammaln(a)
+        + jnp.log(_legendre_fraction(a, x_fraction))
+    )
     log_q_series = jnp.log(gammaincc(a, x_series))
     return jnp.where(use_fraction, log_q_fraction, log_q_series)
 
@@ -135,7 +147,9 @@ def _chi2_isf(dof: Array, pfa: Array) -> Array:
     c = 2.0 / (9.0 * jax.lax.stop_gradient(dof))
     cube_root = 1.0 - c + z * jnp.sqrt(c)
     # near pfa = 1 (cube_root small) x is small and P(a, x/2) ~ (x/2)^a / Gamma(a + 1)
-    small_x = 2.0 * jnp.exp((jnp.log1p(-jax.lax.stop_gradient(pfa)) + gammaln(a_fixed + 1.0)) / a_fixed)
+    small_x = 2.0 * jnp.exp(
+        (jnp.log1p(-jax.lax.stop_gradient(pfa)) + gammaln(a_fixed + 1.0)) / a_fixed
+    )
     start = jnp.where(cube_root > 0.1, jax.lax.stop_gradient(dof) * cube_root**3, small_x)
     x = jax.lax.stop_gradient(jax.lax.fori_loop(0, _NEWTON_STEPS, newton, jnp.maximum(start, tiny)))
     # one differentiated Newton step: its derivative is the implicit one, -d(log Q - log pfa) / slope
@@ -159,7 +173,9 @@ def moving_window_sum(x: Array, window: int) -> Array:
     Returns:
       array of ``x``'s shape (T, ...): entry ``k`` is ``sum x[max(0, k-window+1)..k]`` (``+inf`` as above).
     """
-    window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
+    window = _checks.check_int(
+        "window", window, minimum=1, meaning="a positive integer number of steps"
+    )
     _checks.check_real("x", x, "real statistics")
     return _moving_window_sum(jnp.asarray(x), window)
 
@@ -171,7 +187,9 @@ def _moving_window_sum(x: Array, window: int) -> Array:
 
     def windowed(values):
         c = jnp.cumsum(values, axis=0)
-        shifted = jnp.concatenate([jnp.zeros((window,) + x.shape[1:], c.dtype), c[:-window]], axis=0)[: x.shape[0]]
+        shifted = jnp.concatenate(
+            [jnp.zeros((window,) + x.shape[1:], c.dtype), c[:-window]], axis=0
+        )[: x.shape[0]]
         return c - shifted
 
     return jnp.where(windowed(bad.astype(jnp.int32)) > 0, jnp.inf, windowed(jnp.where(bad, 0.0, x)))
@@ -226,11 +244,18 @@ def flag_dead(decision: Decision, dead: Array, labels: Array | None = None) -> D
     if dead.size == 0:
         return decision
     any_dead = jnp.any(dead)
-    label = decision.label if labels is None else jnp.where(
-        any_dead, jnp.asarray(labels, jnp.int32)[jnp.argmax(dead)], decision.label)
+    label = (
+        decision.label
+        if labels is None
+        else jnp.where(any_dead, jnp.asarray(labels, jnp.int32)[jnp.argmax(dead)], decision.label)
+    )
     statistic = jnp.asarray(decision.statistic)
-    return Decision(jnp.where(any_dead, jnp.inf, statistic), decision.alarm | any_dead, label.astype(jnp.int32),
-                    jnp.where(any_dead, jnp.nan, decision.estimate).astype(statistic.dtype))
+    return Decision(
+        jnp.where(any_dead, jnp.inf, statistic),
+        decision.alarm | any_dead,
+        label.astype(jnp.int32),
+        jnp.where(any_dead, jnp.nan, decision.estimate).astype(statistic.dtype),
+    )
 
 
 class Detector(NamedTuple):
@@ -257,7 +282,9 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
       ``Detector(init, step)``: ``init()`` gives a ``WindowState`` (zero (window,) buffer of ``dtype``);
       ``step(state, nis ()) -> (state, Decision)``.
     """
-    window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps")
+    window = _checks.check_int(
+        "window", window, minimum=1, meaning="a positive integer number of steps"
+    )
     _checks.check_real("threshold", threshold, "a real threshold")
     _checks.check_finite("threshold", threshold, "a detection threshold")
     dtype = dtype or jnp.result_type(float)
@@ -269,8 +296,12 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
         nis = jnp.asarray(nis)
         buffer = state.buffer.at[state.index].set(jnp.where(jnp.isnan(nis), jnp.inf, nis))
         statistic = jnp.sum(buffer)
-        decision = Decision(statistic, statistic > threshold, jnp.asarray(-1, jnp.int32),
-                            jnp.full((), jnp.nan, statistic.dtype))
+        decision = Decision(
+            statistic,
+            statistic > threshold,
+            jnp.asarray(-1, jnp.int32),
+            jnp.full((), jnp.nan, statistic.dtype),
+        )
         return WindowState(buffer, (state.index + 1) % window), decision
 
     return Detector(init, step)

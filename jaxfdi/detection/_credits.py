@@ -13,6 +13,7 @@ hypothesis's discrepancy only along ``g_x``; a wrong hypothesis drifting nearly 
 small as the right one's (reaction-wheel pyramid: wheel 1 stopped vs hypothesis 3, the opposite wheel) and noise
 decides. A likelihood bank on the innovation vectors has no such blind direction.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -30,7 +31,9 @@ def hypothesis_credits(detection_parameters: Array) -> Array:
     return jnp.maximum(mean - detection_parameters, 0.0)
 
 
-def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, confirm_steps: int = 1) -> Detector:
+def credit_isolator(
+    threshold, relative: bool = True, label_offset: int = 0, confirm_steps: int = 1
+) -> Detector:
     """Online isolator on the bank's ``F`` (M,): names ``argmax C_x`` once it is above ``threshold``.
 
     Args:
@@ -50,7 +53,9 @@ def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, con
     def step(state, detection_parameters: Array):
         detection_parameters = jnp.asarray(detection_parameters)
         if detection_parameters.ndim != 1:
-            raise ValueError(f"detection_parameters: expected shape (M,), got {tuple(detection_parameters.shape)}")
+            raise ValueError(
+                f"detection_parameters: expected shape (M,), got {tuple(detection_parameters.shape)}"
+            )
         credit = hypothesis_credits(detection_parameters)
         mean = jnp.mean(detection_parameters)
         if relative:
@@ -59,7 +64,10 @@ def credit_isolator(threshold, relative: bool = True, label_offset: int = 0, con
         statistic = credit[best]
         state, alarm = confirm(state, best, statistic >= threshold, confirm_steps)
         decision = Decision(statistic, alarm, best + label_offset, mean)
-        return state, flag_dead(decision, ~jnp.isfinite(detection_parameters),
-                                jnp.full(detection_parameters.shape, -1, jnp.int32))
+        return state, flag_dead(
+            decision,
+            ~jnp.isfinite(detection_parameters),
+            jnp.full(detection_parameters.shape, -1, jnp.int32),
+        )
 
     return Detector(confirmation_init, step)

@@ -14,6 +14,7 @@ conserves momentum): ``F`` sees a fault only through the *model's* momentum erro
 cubic projection blind where ``grad det A`` is small (stopping the wheel nearest the slew axis leaves ``F``
 unchanged for seconds).
 """
+
 from __future__ import annotations
 
 from typing import Any, NamedTuple
@@ -63,7 +64,9 @@ def system_matrix_det(field: ModelFunction, x: Array, u: Array, params: Any) -> 
     return _linalg.det(jax.jacfwd(field)(x, u, params))
 
 
-def dual_filter(estimator: Filter, transition: ModelFunction, field: ModelFunction, params: Any = None) -> Filter:
+def dual_filter(
+    estimator: Filter, transition: ModelFunction, field: ModelFunction, params: Any = None
+) -> Filter:
     """Prediction filter + estimation filter with the fault detection parameter ``F``.
 
     Args:
@@ -78,7 +81,9 @@ def dual_filter(estimator: Filter, transition: ModelFunction, field: ModelFuncti
       ``step(state, y, u) -> (DualFilterState, DualFilterInfo)``.
     """
     if not isinstance(estimator, Filter):
-        raise ValueError(f"estimator: expected a Filter (e.g. extended_kalman_filter(...)), got {type(estimator).__name__}")
+        raise ValueError(
+            f"estimator: expected a Filter (e.g. extended_kalman_filter(...)), got {type(estimator).__name__}"
+        )
 
     def init(mean: Array, cov: Array) -> DualFilterState:
         return DualFilterState(estimator.init(mean, cov), jnp.asarray(mean))
@@ -86,14 +91,22 @@ def dual_filter(estimator: Filter, transition: ModelFunction, field: ModelFuncti
     def step(state: DualFilterState, y: Array, u: Array) -> tuple[DualFilterState, DualFilterInfo]:
         n = _checks.shape_of(state.prediction)
         for name, fn in (("field(x, u, params)", field), ("transition(x, u, params)", transition)):
-            _checks.check_shape(name, jax.eval_shape(fn, state.prediction, u, params), n, "the state's shape")
+            _checks.check_shape(
+                name, jax.eval_shape(fn, state.prediction, u, params), n, "the state's shape"
+            )
         estimator_state, info = estimator.step(state.estimator, y, u)
         det_prediction = system_matrix_det(field, state.prediction, u, params)
         det_estimation = system_matrix_det(field, info.filtered_mean, u, params)
         parameter = jnp.abs(det_prediction - det_estimation)
         next_prediction = transition(state.prediction, u, params)
-        healthy = jnp.asarray(getattr(info, "healthy", True)) & jnp.isfinite(parameter) & jnp.all(jnp.isfinite(next_prediction))
-        out = DualFilterInfo(info, state.prediction, det_prediction, det_estimation, parameter, healthy)
+        healthy = (
+            jnp.asarray(getattr(info, "healthy", True))
+            & jnp.isfinite(parameter)
+            & jnp.all(jnp.isfinite(next_prediction))
+        )
+        out = DualFilterInfo(
+            info, state.prediction, det_prediction, det_estimation, parameter, healthy
+        )
         return DualFilterState(estimator_state, next_prediction), out
 
     return Filter(init, step)

@@ -13,6 +13,7 @@ window holds only frozen samples, ``L - 1`` steps after the onset (the onset sam
 exceed the true noise (a quantising sensor with step above its noise repeats values by itself: use the step's
 ``1/sqrt(12)``, or a longer window).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -54,7 +55,9 @@ def frozen_statistic(samples: Array, sigma: Array) -> Array:
     return jnp.sum(deviation**2, axis=0) / jnp.square(sigma)
 
 
-def frozen_channel_detector(sigma, window: int, pfa, channel_labels: Array | None = None) -> Detector:
+def frozen_channel_detector(
+    sigma, window: int, pfa, channel_labels: Array | None = None
+) -> Detector:
     """Online stuck-at test on raw measurements ``y`` (m,).
 
     Statistic ``min_j frozen_statistic_j`` over the last ``window`` samples; alarm once ``window`` samples are in and
@@ -77,11 +80,15 @@ def frozen_channel_detector(sigma, window: int, pfa, channel_labels: Array | Non
     _checks.check_finite("sigma", sigma, "noise standard deviations")
     value = _checks.concrete(sigma)
     if value is not None and not np.all(value > 0):
-        raise ValueError(f"sigma: expected positive noise standard deviations, got {_checks.received(value)}")
+        raise ValueError(
+            f"sigma: expected positive noise standard deviations, got {_checks.received(value)}"
+        )
     m = _checks.shape_of(sigma)[0]
     window = _checks.check_int("window", window, minimum=2, meaning="a window of L >= 2 samples")
     if channel_labels is not None:
-        _checks.check_shape("channel_labels", channel_labels, (m,), "one fault label per channel, as sigma")
+        _checks.check_shape(
+            "channel_labels", channel_labels, (m,), "one fault label per channel, as sigma"
+        )
     dtype = _checks.float_dtype(sigma)
     threshold = frozen_threshold(window, pfa, dtype)
     sigma = jnp.asarray(sigma, dtype)
@@ -96,13 +103,25 @@ def frozen_channel_detector(sigma, window: int, pfa, channel_labels: Array | Non
         buffer = state.buffer.at[state.index].set(y)
         count = jnp.minimum(state.count + 1, window)
         dead_in_window = jnp.any(~jnp.isfinite(buffer), axis=0)
-        per_channel = jnp.where(dead_in_window, jnp.inf,
-                                frozen_statistic(jnp.where(jnp.isfinite(buffer), buffer, 0.0), sigma))
+        per_channel = jnp.where(
+            dead_in_window,
+            jnp.inf,
+            frozen_statistic(jnp.where(jnp.isfinite(buffer), buffer, 0.0), sigma),
+        )
         channel = jnp.argmin(per_channel)
         statistic = per_channel[channel]
-        label = jnp.asarray(-1 if channel_labels is None else jnp.asarray(channel_labels)[channel], jnp.int32)
-        decision = Decision(statistic, (count == window) & (statistic < threshold), label, buffer[state.index, channel])
-        decision = flag_dead(decision, ~jnp.isfinite(y), None if channel_labels is None else channel_labels)
+        label = jnp.asarray(
+            -1 if channel_labels is None else jnp.asarray(channel_labels)[channel], jnp.int32
+        )
+        decision = Decision(
+            statistic,
+            (count == window) & (statistic < threshold),
+            label,
+            buffer[state.index, channel],
+        )
+        decision = flag_dead(
+            decision, ~jnp.isfinite(y), None if channel_labels is None else channel_labels
+        )
         return FrozenState(buffer, (state.index + 1) % window, count), decision
 
     return Detector(init, step)

@@ -34,6 +34,7 @@ Timing: the window ends at step ``k``; onset offset ``o`` in ``0..N-1`` means ``
 ``k - onset_offset``). Shared by the forms: ``detector_setup``, ``GLREngine`` (``windowed_engine``;
 ``glrt_recursive.recursive_engine``), ``engine_detector``, ``decide``.
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -46,10 +47,16 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection._chi2 import Decision, Detector, _check_representable, chi2_threshold, flag_dead
 from jaxfdi._faults import sensor_labels
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 from jaxfdi._riccati import steady_state_kalman
+from jaxfdi.detection._chi2 import (
+    Decision,
+    Detector,
+    _check_representable,
+    chi2_threshold,
+    flag_dead,
+)
+from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 #: the threshold Han et al. (2022) use (set by simulation to suppress T4 false alarms, sec. 3.3).
 PAPER_USED_THRESHOLD = 200.0
@@ -108,7 +115,9 @@ class GLRTState(NamedTuple):
     onset_offset: Array
 
 
-def fault_directions(model: LinearGaussianModel, actuator_feedthrough: bool = False) -> FaultDirections:
+def fault_directions(
+    model: LinearGaussianModel, actuator_feedthrough: bool = False
+) -> FaultDirections:
     """Unit step-fault directions ``(g, h)``: actuators ``1..nu``, then sensors ``1..m``.
 
     Actuator ``i``: ``g = Gamma[:, i]``, ``h = 0`` (Han et al. 2022 eq. 4 and ``jaxfdi.simulate`` feed the commanded
@@ -130,7 +139,9 @@ def _directions(Gamma: Array, D: Array, actuator_feedthrough: bool) -> FaultDire
     return FaultDirections(state, output)
 
 
-def fault_signatures(model: LinearGaussianModel, gain: Array, directions: FaultDirections, window: int) -> Array:
+def fault_signatures(
+    model: LinearGaussianModel, gain: Array, directions: FaultDirections, window: int
+) -> Array:
     """(window, m, d) innovation signatures ``G[l]`` of a unit step fault, lag ``l = k - theta``.
 
     ``G[0] = h``, ``E[1] = g - Phi K h``, ``G[l] = C E[l] + h``, ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h``,
@@ -144,12 +155,19 @@ def fault_signatures(model: LinearGaussianModel, gain: Array, directions: FaultD
     _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
     _check_directions(directions, n, m)
     dtype = jnp.result_type(gain)
-    return step_response(*(jnp.asarray(a, dtype) for a in (model.Phi, model.C, gain, directions.state,
-                                                            directions.output)), window)[1]
+    return step_response(
+        *(
+            jnp.asarray(a, dtype)
+            for a in (model.Phi, model.C, gain, directions.state, directions.output)
+        ),
+        window,
+    )[1]
 
 
 @partial(jax.jit, static_argnums=5)
-def step_response(Phi: Array, C: Array, gain: Array, g: Array, h: Array, length: int) -> tuple[Array, Array]:
+def step_response(
+    Phi: Array, C: Array, gain: Array, g: Array, h: Array, length: int
+) -> tuple[Array, Array]:
     """A unit step's share of the steady-state filter's prediction error ``E[l]`` (length, n, d) and innovation
     ``G[l] = C E[l] + h`` (length, m, d), lags ``0..length-1``: ``E[0] = 0``,
     ``E[l+1] = Phi (I - K C) E[l] + g - Phi K h``."""
@@ -162,8 +180,9 @@ def step_response(Phi: Array, C: Array, gain: Array, g: Array, h: Array, length:
     return jax.lax.scan(lag, jnp.zeros_like(g), None, length=length)[1]
 
 
-def glr_by_onset(innovations: Array, signatures: Array, innovation_cov: Array | None = None,
-                 num_valid=None) -> OnsetGLR:
+def glr_by_onset(
+    innovations: Array, signatures: Array, innovation_cov: Array | None = None, num_valid=None
+) -> OnsetGLR:
     """GLR ``l_i(theta)`` and ``nu_hat_i(theta)`` for every onset ``theta = k - o`` of the window.
 
     Args:
@@ -173,7 +192,9 @@ def glr_by_onset(innovations: Array, signatures: Array, innovation_cov: Array | 
         whitened (``L^-1 eps``, ``L^-1 G`` with ``S = L L^T``).
       num_valid: () number of most recent rows that are data (older onsets not considered); default N.
     """
-    innovations, signatures, innovation_cov = _check_glr_inputs(innovations, signatures, innovation_cov)
+    innovations, signatures, innovation_cov = _check_glr_inputs(
+        innovations, signatures, innovation_cov
+    )
     num_valid = innovations.shape[0] if num_valid is None else num_valid
     return _glr_by_onset(innovations, signatures, innovation_cov, num_valid)
 
@@ -182,12 +203,16 @@ def glr_by_onset(innovations: Array, signatures: Array, innovation_cov: Array | 
 def _glr_by_onset(innovations, signatures, innovation_cov, num_valid) -> OnsetGLR:
     if innovation_cov is not None:
         whitener = _whitener(innovation_cov)
-        innovations, signatures = innovations @ whitener.T, jnp.einsum("ab,lbd->lad", whitener, signatures)
+        innovations, signatures = (
+            innovations @ whitener.T,
+            jnp.einsum("ab,lbd->lad", whitener, signatures),
+        )
     return _glr_core(innovations, *_onset_tensors(signatures), num_valid)
 
 
-def glr_statistic(innovations: Array, signatures: Array, innovation_cov: Array | None = None,
-                  num_valid=None) -> GLRResult:
+def glr_statistic(
+    innovations: Array, signatures: Array, innovation_cov: Array | None = None, num_valid=None
+) -> GLRResult:
     """GLR of each direction maximised over the onsets of the window (Willsky & Jones 1976).
 
     Same arguments as ``glr_by_onset``; returns ``GLRResult`` ((d,) each), ``theta_hat = k - onset_offset``.
@@ -208,14 +233,19 @@ def glrt_threshold(pfa, num_directions: int, window: int, method: str = "paper")
     """
     _checks.check_choice("method", method, ("paper", "bonferroni"))
     _checks.check_probability("pfa", pfa)
-    tests = _checks.check_int("num_directions", num_directions, minimum=1, meaning="a positive number of directions")
+    tests = _checks.check_int(
+        "num_directions", num_directions, minimum=1, meaning="a positive number of directions"
+    )
     tests *= _check_window(window)
     dtype = _checks.float_dtype(pfa)
     if method == "paper":
         return chi2_threshold(jnp.asarray(tests, dtype), pfa)
     value = _checks.concrete(pfa)
-    _check_representable(None if value is None else value / tests, dtype,
-                         f"the Bonferroni per-test probability pfa / (num_directions * window) = pfa / {tests}")
+    _check_representable(
+        None if value is None else value / tests,
+        dtype,
+        f"the Bonferroni per-test probability pfa / (num_directions * window) = pfa / {tests}",
+    )
     return chi2_threshold(jnp.asarray(1, dtype), jnp.asarray(pfa, dtype) / tests)
 
 
@@ -233,11 +263,15 @@ def engine_detector(setup: DetectorSetup, whitener: Array, engine: GLREngine) ->
     channel_labels = sensor_labels(setup.num_inputs, m)
 
     def step(state, innovation: Array):
-        _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
+        _checks.check_shape(
+            "innovation", innovation, (m,), "one step's innovation of the fault-blind filter"
+        )
         innovation = jnp.asarray(innovation, dtype)
         state, result = engine.update(state, whiten_finite(whitener, innovation))
         decision, onset_offset = decide(setup, result)
-        return state._replace(onset_offset=onset_offset), flag_dead(decision, ~jnp.isfinite(innovation), channel_labels)
+        return state._replace(onset_offset=onset_offset), flag_dead(
+            decision, ~jnp.isfinite(innovation), channel_labels
+        )
 
     return Detector(engine.init, step)
 
@@ -262,8 +296,16 @@ class DetectorSetup(NamedTuple):
     sensor_t4: int
 
 
-def detector_setup(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
-                   isolation: str, actuator_feedthrough: bool, overlap_sensor: int) -> DetectorSetup:
+def detector_setup(
+    model: LinearGaussianModel,
+    gain: Array,
+    innovation_cov: Array,
+    window: int,
+    threshold,
+    isolation: str,
+    actuator_feedthrough: bool,
+    overlap_sensor: int,
+) -> DetectorSetup:
     """Check a GLRT detector's arguments (``glrt_detector``) and compute its signatures.
 
     ``gain`` and ``innovation_cov`` must be the model's steady state (``check_steady_state``)."""
@@ -274,9 +316,17 @@ def detector_setup(model: LinearGaussianModel, gain: Array, innovation_cov: Arra
     check_steady_state(model, gain=gain, innovation_cov=innovation_cov)
     _check_decision_args(threshold, isolation, overlap_sensor, m)
     dtype = jnp.result_type(gain, innovation_cov)
-    signatures = fault_signatures(model, jnp.asarray(gain, dtype), fault_directions(model, actuator_feedthrough), window)
-    return DetectorSetup(signatures, jnp.asarray(innovation_cov, dtype), threshold, isolation, nu,
-                         nu + int(overlap_sensor) % m)
+    signatures = fault_signatures(
+        model, jnp.asarray(gain, dtype), fault_directions(model, actuator_feedthrough), window
+    )
+    return DetectorSetup(
+        signatures,
+        jnp.asarray(innovation_cov, dtype),
+        threshold,
+        isolation,
+        nu,
+        nu + int(overlap_sensor) % m,
+    )
 
 
 def _check_decision_args(threshold, isolation: str, overlap_sensor: int, m: int) -> None:
@@ -286,10 +336,18 @@ def _check_decision_args(threshold, isolation: str, overlap_sensor: int, m: int)
     if isinstance(isolation, str):
         if isolation not in ("max", "paper"):
             raise ValueError(f"isolation: expected 'max' or 'paper', got {isolation!r}")
-    elif not (hasattr(isolation, "dtype") and jnp.asarray(isolation).dtype == bool and jnp.ndim(isolation) == 0):
-        raise ValueError(f"isolation: expected 'max', 'paper' or a () bool array (True: 'paper'), got {isolation!r}")
+    elif not (
+        hasattr(isolation, "dtype")
+        and jnp.asarray(isolation).dtype == bool
+        and jnp.ndim(isolation) == 0
+    ):
+        raise ValueError(
+            f"isolation: expected 'max', 'paper' or a () bool array (True: 'paper'), got {isolation!r}"
+        )
     if not -m <= int(overlap_sensor) < m:
-        raise ValueError(f"overlap_sensor: expected a sensor index in [-{m}, {m}), got {overlap_sensor}")
+        raise ValueError(
+            f"overlap_sensor: expected a sensor index in [-{m}, {m}), got {overlap_sensor}"
+        )
 
 
 def decide(setup: DetectorSetup, result: GLRResult) -> tuple[Decision, Array]:
@@ -298,11 +356,17 @@ def decide(setup: DetectorSetup, result: GLRResult) -> tuple[Decision, Array]:
     alarm = statistic > setup.threshold
     direction = jnp.argmax(result.statistic)
     if not isinstance(setup.isolation, str):  # data: both rules in one program
-        paper = _paper_isolation(result.statistic, setup.threshold, setup.num_inputs, setup.sensor_t4, direction)
+        paper = _paper_isolation(
+            result.statistic, setup.threshold, setup.num_inputs, setup.sensor_t4, direction
+        )
         direction = jnp.where(setup.isolation, paper, direction)
     elif setup.isolation == "paper":
-        direction = _paper_isolation(result.statistic, setup.threshold, setup.num_inputs, setup.sensor_t4, direction)
-    decision = Decision(statistic, alarm, (1 + direction).astype(jnp.int32), result.magnitude[direction])
+        direction = _paper_isolation(
+            result.statistic, setup.threshold, setup.num_inputs, setup.sensor_t4, direction
+        )
+    decision = Decision(
+        statistic, alarm, (1 + direction).astype(jnp.int32), result.magnitude[direction]
+    )
     return decision, result.onset_offset[direction]
 
 
@@ -311,23 +375,33 @@ def steady_state_tolerance(dtype) -> float:
     return max(1e-6, float(np.sqrt(np.finfo(dtype).eps)))
 
 
-def check_steady_state(model: LinearGaussianModel, gain=None, innovation_cov=None, cov=None) -> None:
+def check_steady_state(
+    model: LinearGaussianModel, gain=None, innovation_cov=None, cov=None
+) -> None:
     """Raise ``ValueError`` unless the given filter quantities are the model's steady state.
 
     ``gain`` (K), ``innovation_cov`` (S), ``cov`` (prior ``P[0|-1]``) vs ``steady_state_kalman(model)``: relative
     Frobenius difference <= ``steady_state_tolerance(dtype)``. Skipped for values unknown at trace time.
     """
-    given = {name: value for name, value in (("gain", gain), ("innovation_cov", innovation_cov), ("cov", cov))
-             if value is not None}
+    given = {
+        name: value
+        for name, value in (("gain", gain), ("innovation_cov", innovation_cov), ("cov", cov))
+        if value is not None
+    }
     values = {name: _checks.concrete(value) for name, value in given.items()}
     fixed = [_checks.concrete(a) for a in (model.Phi, model.C, model.Q, model.R)]
     if not values or any(v is None for v in values.values()) or any(a is None for a in fixed):
         return
     with jax.ensure_compile_time_eval():  # concrete inputs, also while a caller traces
         steady = steady_state_kalman(model)
-    expected = {"gain": (steady.gain, "steady_state_kalman(model).gain"),
-                "innovation_cov": (steady.innovation_cov, "steady_state_kalman(model).innovation_cov"),
-                "cov": (steady.predicted_cov, "steady_state_kalman(model).predicted_cov (P_ss, the DARE solution)")}
+    expected = {
+        "gain": (steady.gain, "steady_state_kalman(model).gain"),
+        "innovation_cov": (steady.innovation_cov, "steady_state_kalman(model).innovation_cov"),
+        "cov": (
+            steady.predicted_cov,
+            "steady_state_kalman(model).predicted_cov (P_ss, the DARE solution)",
+        ),
+    }
     for name, value in values.items():
         reference, what = expected[name]
         reference = np.asarray(reference, np.float64)
@@ -341,7 +415,8 @@ def check_steady_state(model: LinearGaussianModel, gain=None, innovation_cov=Non
                 f"(constant gain, P[k|k-1] = P_ss); got one that differs from it by {difference:.3g} relative "
                 f"(Frobenius), over the tolerance {tol:.3g}. Start the filter at "
                 "kf.init(mean, steady_state_kalman(model).predicted_cov), or test a filter started from "
-                "another prior with transient_glrt_detector(model, prior_cov, ...)")
+                "another prior with transient_glrt_detector(model, prior_cov, ...)"
+            )
 
 
 class GLREngine(NamedTuple):
@@ -357,7 +432,9 @@ class GLREngine(NamedTuple):
 
 def windowed_engine(setup: DetectorSetup) -> tuple[Array, GLREngine]:
     """The whitener ``L^-1`` and the windowed (O(N^2) a step) engine of ``glrt_detector``."""
-    whitener, onset_signatures, information = _detector_tensors(setup.signatures, setup.innovation_cov)
+    whitener, onset_signatures, information = _detector_tensors(
+        setup.signatures, setup.innovation_cov
+    )
     window, m = setup.signatures.shape[:2]
     dtype = setup.innovation_cov.dtype
 
@@ -372,7 +449,9 @@ def windowed_engine(setup: DetectorSetup) -> tuple[Array, GLREngine]:
         return state._replace(window=buffer, count=count), result
 
     def remove(state: GLRTState, direction, offset, size) -> GLRTState:
-        return state._replace(window=state.window - size * onset_signatures[offset, :, :, direction])
+        return state._replace(
+            window=state.window - size * onset_signatures[offset, :, :, direction]
+        )
 
     return whitener, GLREngine(init, update, remove, information)
 
@@ -381,12 +460,17 @@ def glr_sequence(setup: DetectorSetup, innovations: Array) -> GLRResult:
     """Every direction's windowed GLR at every step of ``innovations`` (T, m): the ``GLRResult`` (T, d) that
     ``glrt_detector`` maximises over directions (for figures)."""
     whitener, engine = windowed_engine(setup)
-    _, result = jax.lax.scan(lambda state, e: engine.update(state, whiten_finite(whitener, e)), engine.init(),
-                             innovations)
+    _, result = jax.lax.scan(
+        lambda state, e: engine.update(state, whiten_finite(whitener, e)),
+        engine.init(),
+        innovations,
+    )
     return result
 
 
-def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallback: Array) -> Array:
+def _paper_isolation(
+    statistic: Array, threshold, nu: int, sensor_t4: int, fallback: Array
+) -> Array:
     """Eq. (24) of Han et al. (2022): index of the isolated direction (see ``glrt_detector``)."""
     actuator = jnp.argmax(statistic[:nu])
     sensor = nu + jnp.argmax(statistic[nu:])
@@ -400,7 +484,9 @@ def _paper_isolation(statistic: Array, threshold, nu: int, sensor_t4: int, fallb
 
 
 def _check_window(window) -> int:
-    return _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps N")
+    return _checks.check_int(
+        "window", window, minimum=1, meaning="a positive integer number of steps N"
+    )
 
 
 def _check_directions(directions: FaultDirections, n: int, m: int) -> None:
@@ -411,7 +497,9 @@ def _check_directions(directions: FaultDirections, n: int, m: int) -> None:
 
 
 def _check_glr_inputs(innovations, signatures, innovation_cov):
-    _checks.check_shape("signatures", signatures, (None, None, None), "(N, m, d) from fault_signatures")
+    _checks.check_shape(
+        "signatures", signatures, (None, None, None), "(N, m, d) from fault_signatures"
+    )
     N, m, _ = _checks.shape_of(signatures)
     _checks.check_shape("innovations", innovations, (N, m), "N steps x m outputs, oldest first")
     dtype = jnp.result_type(innovations, signatures)
@@ -423,8 +511,12 @@ def _check_glr_inputs(innovations, signatures, innovation_cov):
 
 def _whitener(innovation_cov: Array) -> Array:
     """``L^-1`` with ``S = L L^T``: whitened innovations ``L^-1 eps`` are N(0, I)."""
-    chol = jsl.cholesky(_linalg.symmetrize(innovation_cov), lower=True)  # one-off: LAPACK compiles faster
-    return jsl.solve_triangular(chol, jnp.eye(innovation_cov.shape[0], dtype=innovation_cov.dtype), lower=True)
+    chol = jsl.cholesky(
+        _linalg.symmetrize(innovation_cov), lower=True
+    )  # one-off: LAPACK compiles faster
+    return jsl.solve_triangular(
+        chol, jnp.eye(innovation_cov.shape[0], dtype=innovation_cov.dtype), lower=True
+    )
 
 
 @jax.jit
@@ -440,12 +532,16 @@ def _onset_tensors(white_signatures: Array) -> tuple[Array, Array]:
     offset = jnp.arange(N)[:, None]
     position = jnp.arange(N)[None, :]
     lag = position + offset - (N - 1)
-    onset_signatures = jnp.where((lag >= 0)[..., None, None], white_signatures[jnp.maximum(lag, 0)], 0.0)
+    onset_signatures = jnp.where(
+        (lag >= 0)[..., None, None], white_signatures[jnp.maximum(lag, 0)], 0.0
+    )
     information = jnp.cumsum(jnp.sum(white_signatures**2, axis=1), axis=0)
     return onset_signatures, information
 
 
-def _glr_core(white_window: Array, onset_signatures: Array, information: Array, num_valid) -> OnsetGLR:
+def _glr_core(
+    white_window: Array, onset_signatures: Array, information: Array, num_valid
+) -> OnsetGLR:
     """``d[o, i] = sum_p T[o, p]^T w_p``, ``nu_hat = d / I``, ``l = d^2 / I`` for all onsets."""
     correlation = jnp.einsum("opmi,pm->oi", onset_signatures, white_window)
     return glr_from_correlation(correlation, information, num_valid)

@@ -15,6 +15,7 @@ fault-free error. So a confirmed decision at step ``k`` (onset ``theta_hat = k -
 test re-arms): exactly the known-fault filter and its innovations (``corrected_glrt``). Steady state as in ``glrt``.
 produced. Steady state assumed as in ``glrt``.
 """
+
 from __future__ import annotations
 
 from typing import Any, NamedTuple
@@ -24,14 +25,21 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection._chi2 import Decision, flag_dead
-from jaxfdi.detection._glrt import (_check_window, check_steady_state, decide, detector_setup, fault_directions,
-                                    step_response, windowed_engine)
-from jaxfdi.detection._glrt_recursive import recursive_engine
 from jaxfdi._faults import sensor_labels
+from jaxfdi._riccati import steady_state_kalman
+from jaxfdi.detection._chi2 import Decision, flag_dead
+from jaxfdi.detection._glrt import (
+    _check_window,
+    check_steady_state,
+    decide,
+    detector_setup,
+    fault_directions,
+    step_response,
+    windowed_engine,
+)
+from jaxfdi.detection._glrt_recursive import recursive_engine
 from jaxfdi.filters._base import Filter
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
-from jaxfdi._riccati import steady_state_kalman
 
 
 class CorrectedGLRTState(NamedTuple):
@@ -76,9 +84,17 @@ class CorrectedGLRTInfo(NamedTuple):
     healthy: Array
 
 
-def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation: str = "max",
-                   actuator_feedthrough: bool = False, overlap_sensor: int = -1, confirm: int = 1,
-                   correct: bool = True, recursive: bool = False) -> Filter:
+def corrected_glrt(
+    model: LinearGaussianModel,
+    window: int,
+    threshold,
+    isolation: str = "max",
+    actuator_feedthrough: bool = False,
+    overlap_sensor: int = -1,
+    confirm: int = 1,
+    correct: bool = True,
+    recursive: bool = False,
+) -> Filter:
     """Steady-state Kalman filter + windowed GLRT with the Willsky-Jones correction (module docstring), as a
     ``Filter``; ``run_filter`` drives it (one run or a batch); in a ``loop.FDI`` its step is
     ``lambda s, k, y, u: filt.step(s, y, u)`` (the state counts its own steps).
@@ -107,17 +123,32 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
     window = _check_window(window)
     _checks.check_flag("correct", correct)
     _checks.check_flag("recursive", recursive)
-    confirm = _checks.check_int("confirm", confirm, minimum=1, maximum=window,
-                                meaning="a number of consecutive alarm steps (at most the window N)")
+    confirm = _checks.check_int(
+        "confirm",
+        confirm,
+        minimum=1,
+        maximum=window,
+        meaning="a number of consecutive alarm steps (at most the window N)",
+    )
     steady = steady_state_kalman(model)
-    setup = detector_setup(model, steady.gain, steady.innovation_cov, window, threshold, isolation,
-                           actuator_feedthrough, overlap_sensor)
+    setup = detector_setup(
+        model,
+        steady.gain,
+        steady.innovation_cov,
+        window,
+        threshold,
+        isolation,
+        actuator_feedthrough,
+        overlap_sensor,
+    )
     dtype = setup.innovation_cov.dtype
     if recursive:
         whitener, engine = recursive_engine(setup, removable=True)
     else:
         whitener, engine = windowed_engine(setup)
-    Phi, Gamma, C, D, gain = (jnp.asarray(a, dtype) for a in (model.Phi, model.Gamma, model.C, model.D, steady.gain))
+    Phi, Gamma, C, D, gain = (
+        jnp.asarray(a, dtype) for a in (model.Phi, model.Gamma, model.C, model.D, steady.gain)
+    )
     directions = fault_directions(model, actuator_feedthrough)
     g, h = jnp.asarray(directions.state, dtype), jnp.asarray(directions.output, dtype)
     errors = step_response(Phi, C, gain, g, h, window + 1)[0]  # E[0..N], (N + 1, n, d)
@@ -129,14 +160,18 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
             _checks.check_covariance("cov", cov, n)
             check_steady_state(model, cov=cov)
         zero = jnp.zeros((), jnp.int32)
-        return CorrectedGLRTState(jnp.asarray(mean, dtype), jnp.zeros(num_directions, dtype), engine.init(), zero, zero)
+        return CorrectedGLRTState(
+            jnp.asarray(mean, dtype), jnp.zeros(num_directions, dtype), engine.init(), zero, zero
+        )
 
     def step(state: CorrectedGLRTState, y: Array, u: Array):
         _checks.check_shape("y", y, (m,), "one step's measurement")
         _checks.check_shape("u", u, (nu,), "one step's input")
         y, u = jnp.asarray(y, dtype), jnp.asarray(u, dtype)
         dead = ~jnp.isfinite(y)
-        innovation = jnp.where(dead, 0.0, y - C @ state.mean - D @ u - h @ state.fault)  # a dead sensor: the prediction
+        innovation = jnp.where(
+            dead, 0.0, y - C @ state.mean - D @ u - h @ state.fault
+        )  # a dead sensor: the prediction
         detector, result = engine.update(state.detector, whitener @ innovation)
         decision, offset = decide(setup, result)
         dead_decision = flag_dead(decision, dead, sensor_labels(nu, m))
@@ -150,8 +185,16 @@ def corrected_glrt(model: LinearGaussianModel, window: int, threshold, isolation
         detector = engine.remove(detector, direction, offset, size)._replace(onset_offset=offset)
         if correct:
             alarm_run = jnp.where(confirmed, 0, alarm_run)
-        info = CorrectedGLRTInfo(dead_decision, state.step - offset, engine.information[offset, direction], confirmed,
-                                 jnp.where(dead, jnp.nan, innovation), mean, fault, jnp.all(jnp.isfinite(mean)))
+        info = CorrectedGLRTInfo(
+            dead_decision,
+            state.step - offset,
+            engine.information[offset, direction],
+            confirmed,
+            jnp.where(dead, jnp.nan, innovation),
+            mean,
+            fault,
+            jnp.all(jnp.isfinite(mean)),
+        )
         return CorrectedGLRTState(mean, fault, detector, state.step + 1, alarm_run), info
 
     return Filter(init, step)

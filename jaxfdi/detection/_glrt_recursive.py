@@ -18,6 +18,7 @@ here ``d_i'(k - o') -= nu_hat X[o', o_hat, i', i]``, cross-information
 ``X[o', o, i', i] = sum_p T[o', p, :, i'] . T[o, p, :, i]`` (N, N, d, d) of the onsets' whitened signatures ``T``
 (``glrt._onset_tensors``). Steady state as in ``glrt``.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -28,8 +29,18 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.detection._chi2 import Detector
-from jaxfdi.detection._glrt import (DetectorSetup, GLREngine, GLRResult, _maximise, _onset_tensors, _whitener,
-                                    detector_setup, engine_detector, glr_from_correlation, windowed_engine)
+from jaxfdi.detection._glrt import (
+    DetectorSetup,
+    GLREngine,
+    GLRResult,
+    _maximise,
+    _onset_tensors,
+    _whitener,
+    detector_setup,
+    engine_detector,
+    glr_from_correlation,
+    windowed_engine,
+)
 from jaxfdi.models._linear import LinearGaussianModel
 
 
@@ -50,7 +61,9 @@ class RecursiveGLRTState(NamedTuple):
 def recursive_engine(setup: DetectorSetup, removable: bool = False) -> tuple[Array, GLREngine]:
     """The whitener ``L^-1`` and the running-sum engine; ``removable`` builds the cross-information ``X``
     (N, N, d, d) that ``remove`` needs (else ``remove`` raises)."""
-    whitener, white_signatures, information = _recursive_tensors(setup.signatures, setup.innovation_cov)
+    whitener, white_signatures, information = _recursive_tensors(
+        setup.signatures, setup.innovation_cov
+    )
     window, _, num_directions = white_signatures.shape
     dtype = setup.innovation_cov.dtype
     cross = _cross_information(white_signatures) if removable else None
@@ -60,7 +73,9 @@ def recursive_engine(setup: DetectorSetup, removable: bool = False) -> tuple[Arr
         return RecursiveGLRTState(jnp.zeros((window, num_directions), dtype), zero, zero)
 
     def update(state: RecursiveGLRTState, white: Array) -> tuple[RecursiveGLRTState, GLRResult]:
-        older = jnp.concatenate([jnp.zeros((1, num_directions), dtype), state.correlation[:-1]], axis=0)
+        older = jnp.concatenate(
+            [jnp.zeros((1, num_directions), dtype), state.correlation[:-1]], axis=0
+        )
         correlation = older + jnp.einsum("lmd,m->ld", white_signatures, white)
         count = jnp.minimum(state.count + 1, window)
         result = _maximise(glr_from_correlation(correlation, information, count))
@@ -89,9 +104,17 @@ def _recursive_tensors(signatures: Array, innovation_cov: Array) -> tuple[Array,
     return whitener, white, jnp.cumsum(jnp.sum(white**2, axis=1), axis=0)
 
 
-def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, window: int, threshold,
-                  isolation: str = "max", actuator_feedthrough: bool = False, overlap_sensor: int = -1,
-                  recursive: bool = False) -> Detector:
+def glrt_detector(
+    model: LinearGaussianModel,
+    gain: Array,
+    innovation_cov: Array,
+    window: int,
+    threshold,
+    isolation: str = "max",
+    actuator_feedthrough: bool = False,
+    overlap_sensor: int = -1,
+    recursive: bool = False,
+) -> Detector:
     """Online windowed GLRT on the innovations of a fault-blind steady-state Kalman filter.
 
     ``step`` at step ``k``: statistic = ``max_i max_theta l_i(theta)`` over the onsets in the data seen, alarm =
@@ -121,8 +144,16 @@ def glrt_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array
       a zero ``RecursiveGLRTState`` (correlations (N, d), ``d = nu + m``); ``step(state, innovation (m,)) -> (state,
       Decision)``; a non-finite component alarms and isolates its sensor.
     """
-    setup = detector_setup(model, gain, innovation_cov, window, threshold, isolation, actuator_feedthrough,
-                           overlap_sensor)
+    setup = detector_setup(
+        model,
+        gain,
+        innovation_cov,
+        window,
+        threshold,
+        isolation,
+        actuator_feedthrough,
+        overlap_sensor,
+    )
     _checks.check_flag("recursive", recursive)
     whitener, engine = recursive_engine(setup) if recursive else windowed_engine(setup)
     return engine_detector(setup, whitener, engine)

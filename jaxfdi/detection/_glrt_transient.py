@@ -18,6 +18,7 @@ last ``N`` steps, for every onset ``theta = k - o``::
 
 With ``P[0] = P_ss``, ``transient_glrt_detector`` equals ``glrt_detector``.
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -29,11 +30,20 @@ import jax.scipy.linalg as jsl
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection._chi2 import Detector, flag_dead
-from jaxfdi.detection._glrt import (DetectorSetup, FaultDirections, _check_decision_args, _check_directions,
-                                    _check_window, _maximise, decide, fault_directions, glr_from_correlation,
-                                    whiten_finite)
 from jaxfdi._faults import sensor_labels
+from jaxfdi.detection._chi2 import Detector, flag_dead
+from jaxfdi.detection._glrt import (
+    DetectorSetup,
+    FaultDirections,
+    _check_decision_args,
+    _check_directions,
+    _check_window,
+    _maximise,
+    decide,
+    fault_directions,
+    glr_from_correlation,
+    whiten_finite,
+)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
@@ -61,8 +71,13 @@ class TransientGLRTState(NamedTuple):
     onset_offset: Array
 
 
-def time_varying_signatures(model: LinearGaussianModel, prior_cov: Array, directions: FaultDirections, onset: int,
-                            length: int) -> Array:
+def time_varying_signatures(
+    model: LinearGaussianModel,
+    prior_cov: Array,
+    directions: FaultDirections,
+    onset: int,
+    length: int,
+) -> Array:
     """(length, m, d) innovation signatures ``G[theta + l, theta]`` of a unit step from ``theta = onset`` for
     ``kalman_filter(model)`` started at ``prior_cov`` (module docstring's recursion); ``onset`` may be traced (vmap
     over onsets)."""
@@ -103,9 +118,16 @@ def _riccati_step(Phi, C, Q, R, P):
     return gain, whitener, P_next
 
 
-def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window: int, threshold,
-                            isolation: str = "max", actuator_feedthrough: bool = False, overlap_sensor: int = -1,
-                            recursive: bool = False) -> Detector:
+def transient_glrt_detector(
+    model: LinearGaussianModel,
+    prior_cov: Array,
+    window: int,
+    threshold,
+    isolation: str = "max",
+    actuator_feedthrough: bool = False,
+    overlap_sensor: int = -1,
+    recursive: bool = False,
+) -> Detector:
     """The windowed GLRT of ``glrt_detector`` for a ``kalman_filter(model)`` started at any ``prior_cov``
     (``kf.init(mean, prior_cov)``): time-varying ``G[k, theta]`` (``time_varying_signatures``), ``S_k`` whitening.
 
@@ -125,7 +147,9 @@ def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window
     _check_decision_args(threshold, isolation, overlap_sensor, m)
     setup = DetectorSetup(None, None, threshold, isolation, nu, nu + int(overlap_sensor) % m)
     dtype = jnp.result_type(model.Phi, prior_cov)
-    Phi, C, Q, R, P0 = (jnp.asarray(a, dtype) for a in (model.Phi, model.C, model.Q, model.R, prior_cov))
+    Phi, C, Q, R, P0 = (
+        jnp.asarray(a, dtype) for a in (model.Phi, model.C, model.Q, model.R, prior_cov)
+    )
     g, h = (jnp.asarray(a, dtype) for a in fault_directions(model, actuator_feedthrough))
     d = g.shape[1]
     N = window
@@ -133,21 +157,36 @@ def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window
     def init() -> TransientGLRTState:
         zero = jnp.zeros((), jnp.int32)
         size = 0 if recursive else N
-        return TransientGLRTState(P0, jnp.zeros((N, n, d), dtype), jnp.zeros((size, m), dtype),
-                                  jnp.zeros((size, size, m, d), dtype), jnp.zeros((N, d), dtype),
-                                  jnp.zeros((N, d), dtype), zero, zero)
+        return TransientGLRTState(
+            P0,
+            jnp.zeros((N, n, d), dtype),
+            jnp.zeros((size, m), dtype),
+            jnp.zeros((size, size, m, d), dtype),
+            jnp.zeros((N, d), dtype),
+            jnp.zeros((N, d), dtype),
+            zero,
+            zero,
+        )
 
     def step(state: TransientGLRTState, innovation: Array):
-        _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
+        _checks.check_shape(
+            "innovation", innovation, (m,), "one step's innovation of the fault-blind filter"
+        )
         gain, whitener, P_next = _riccati_step(Phi, C, Q, R, state.cov)
-        errors = jnp.concatenate([jnp.zeros((1, n, d), dtype), state.errors[:-1]], axis=0)  # E[k] of onset k - o
-        white_signatures = jnp.einsum("ab,obd->oad", whitener, jnp.einsum("ab,obd->oad", C, errors) + h)
+        errors = jnp.concatenate(
+            [jnp.zeros((1, n, d), dtype), state.errors[:-1]], axis=0
+        )  # E[k] of onset k - o
+        white_signatures = jnp.einsum(
+            "ab,obd->oad", whitener, jnp.einsum("ab,obd->oad", C, errors) + h
+        )
         innovation = jnp.asarray(innovation, dtype)
         white = whiten_finite(whitener, innovation)
         count = jnp.minimum(state.count + 1, N)
         if recursive:
-            older = lambda a: jnp.concatenate([jnp.zeros((1, d), dtype), a[:-1]], axis=0)  # noqa: E731
-            correlation = older(state.correlation) + jnp.einsum("omd,m->od", white_signatures, white)
+            older = lambda a: jnp.concatenate([jnp.zeros((1, d), dtype), a[:-1]], axis=0)
+            correlation = older(state.correlation) + jnp.einsum(
+                "omd,m->od", white_signatures, white
+            )
             information = older(state.information) + jnp.sum(white_signatures**2, axis=1)
             buffer, table = state.window, state.signatures
         else:
@@ -161,7 +200,8 @@ def transient_glrt_detector(model: LinearGaussianModel, prior_cov: Array, window
         closed = Phi @ (jnp.eye(n, dtype=dtype) - gain @ C)
         errors_next = jnp.einsum("ab,obd->oad", closed, errors) + (g - Phi @ (gain @ h))
         decision = flag_dead(decision, ~jnp.isfinite(innovation), sensor_labels(nu, m))
-        return TransientGLRTState(P_next, errors_next, buffer, table, correlation, information, count,
-                                  onset_offset), decision
+        return TransientGLRTState(
+            P_next, errors_next, buffer, table, correlation, information, count, onset_offset
+        ), decision
 
     return Detector(init, step)

@@ -29,6 +29,7 @@ and least-squares estimates) is bounded and inside the scan: the hybrid vmaps ov
 ``monte_carlo(..., batched=True)``) the replay runs only at steps where some flight needs it (``psum``): same
 numbers, filter cost paid a few steps per batch.
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -39,10 +40,10 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi._stages import FDI
 from jaxfdi.detection._chi2 import Decision, chi2_threshold
 from jaxfdi.detection._parity import ParitySpace, parity_tests
 from jaxfdi.filters._history import ordered, push, replay_filter, ring_buffer
-from jaxfdi._stages import FDI
 
 #: ``follow`` names and their codes
 FOLLOW = {"none": 0, "psa": 1, "hybrid": 2, "verified": 3}
@@ -182,8 +183,9 @@ def exclusion_estimators(space: ParitySpace) -> Array:
     return jnp.linalg.solve(jnp.swapaxes(Hk, 1, 2) @ Hk, jnp.swapaxes(Hk, 1, 2))
 
 
-def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_threshold,
-                      verification_pfa=None) -> HybridPSAConfig:
+def hybrid_psa_config(
+    space: ParitySpace, sigma, detection_threshold, isolation_threshold, verification_pfa=None
+) -> HybridPSAConfig:
     """The arrays of the hybrid FDI for ``space``, channel noise ``sigma`` and thresholds ``T_D``, ``T_I``
     (``parity.detection_threshold``, ``parity.isolation_threshold``); ``verification_pfa``: per-step false-alarm
     probability ``P_V`` of the verification (module doc, step 5; ``None`` or no redundancy left without a group:
@@ -193,22 +195,39 @@ def hybrid_psa_config(space: ParitySpace, sigma, detection_threshold, isolation_
       ``HybridPSAConfig`` in ``space.H``'s dtype (channel groups int32; ``T_V = inf`` without verification).
     """
     _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
-    _checks.check_scalar("detection_threshold", detection_threshold, 0.0, low_open=True, meaning="T_D > 0")
-    _checks.check_scalar("isolation_threshold", isolation_threshold, 0.0, 1.0, meaning="T_I in [0, 1]")
+    _checks.check_scalar(
+        "detection_threshold", detection_threshold, 0.0, low_open=True, meaning="T_D > 0"
+    )
+    _checks.check_scalar(
+        "isolation_threshold", isolation_threshold, 0.0, 1.0, meaning="T_I in [0, 1]"
+    )
     H = space.H
     dtype = H.dtype
     m = H.shape[0]
     G, d = space.groups.shape
-    channel_group = jnp.full((m,), -1, jnp.int32).at[space.groups.ravel()].set(jnp.repeat(jnp.arange(G, dtype=jnp.int32), d))
+    channel_group = (
+        jnp.full((m,), -1, jnp.int32)
+        .at[space.groups.ravel()]
+        .set(jnp.repeat(jnp.arange(G, dtype=jnp.int32), d))
+    )
     restart_cov = jnp.square(jnp.asarray(sigma, dtype)) * jnp.linalg.inv(H.T @ H)
     dof = m - d - H.shape[1]  # the redundancy left without one group
     if verification_pfa is None or dof < 1:
         verification = jnp.asarray(jnp.inf, dtype)
     else:
         _checks.check_probability("verification_pfa", verification_pfa)
-        verification = jnp.square(jnp.asarray(sigma, dtype)) * chi2_threshold(dof, jnp.asarray(verification_pfa, dtype))
-    return HybridPSAConfig(space, jnp.asarray(detection_threshold, dtype), jnp.asarray(isolation_threshold, dtype),
-                           exclusion_estimators(space), 0.5 * (restart_cov + restart_cov.T), channel_group, verification)
+        verification = jnp.square(jnp.asarray(sigma, dtype)) * chi2_threshold(
+            dof, jnp.asarray(verification_pfa, dtype)
+        )
+    return HybridPSAConfig(
+        space,
+        jnp.asarray(detection_threshold, dtype),
+        jnp.asarray(isolation_threshold, dtype),
+        exclusion_estimators(space),
+        0.5 * (restart_cov + restart_cov.T),
+        channel_group,
+        verification,
+    )
 
 
 def subset_statistics(config: HybridPSAConfig, channels: Array) -> Array:
@@ -218,14 +237,20 @@ def subset_statistics(config: HybridPSAConfig, channels: Array) -> Array:
     G = config.space.groups.shape[0]
     finite = jnp.isfinite(channels)
     m0 = jnp.where(finite, channels, 0.0)
-    residual = m0[None, :] - (config.estimators[1:].astype(m0.dtype) @ m0) @ H.T.astype(m0.dtype)   # (G, m)
+    residual = m0[None, :] - (config.estimators[1:].astype(m0.dtype) @ m0) @ H.T.astype(
+        m0.dtype
+    )  # (G, m)
     keep = config.channel_group[None, :] != jnp.arange(G)[:, None]
     residual = jnp.where(keep, jnp.where(finite[None, :], residual, jnp.inf), 0.0)
     return jnp.sum(jnp.square(residual), axis=-1)
 
 
-def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: int = 3,
-                    follow: str | Array = "hybrid") -> HybridPSAState:
+def hybrid_psa_init(
+    config: HybridPSAConfig,
+    input_example: Array,
+    restart_lag: int = 3,
+    follow: str | Array = "hybrid",
+) -> HybridPSAState:
     """The initial state of ``hybrid_psa_fdi``: an empty history of ``restart_lag`` steps (the filter restarts that
     many steps before the decision; Park et al. 2004: 2-3), no decision.
 
@@ -245,24 +270,53 @@ def hybrid_psa_init(config: HybridPSAConfig, input_example: Array, restart_lag: 
         _checks.check_choice("follow", follow, list(FOLLOW))
         follow = FOLLOW[follow]
     else:
-        _checks.check_int_array("follow", follow, 0, 3, "a FOLLOW code (0 none, 1 psa, 2 hybrid, 3 verified)")
+        _checks.check_int_array(
+            "follow", follow, 0, 3, "a FOLLOW code (0 none, 1 psa, 2 hybrid, 3 verified)"
+        )
     dtype = config.space.H.dtype
     m, n = config.space.H.shape
     G = config.space.groups.shape[0]
-    example = HistoryEntry(jnp.zeros((m,), dtype), jnp.zeros(jnp.shape(input_example), dtype), jnp.zeros((n,), dtype))
+    example = HistoryEntry(
+        jnp.zeros((m,), dtype), jnp.zeros(jnp.shape(input_example), dtype), jnp.zeros((n,), dtype)
+    )
     nan_g = jnp.full((G,), jnp.nan, dtype)
     false_g = jnp.zeros((G,), bool)
     minus_one = jnp.asarray(-1, jnp.int32)
     zero = jnp.asarray(0, jnp.int32)
-    current = StepValues(jnp.zeros((), dtype), jnp.zeros((), bool), jnp.zeros((G,), dtype), false_g, nan_g,
-                         jnp.zeros((), bool))
-    decision = HybridDecision(minus_one, minus_one, zero, zero, false_g, nan_g, nan_g, jnp.zeros((), bool),
-                              jnp.ones((), bool), zero, zero)
-    return HybridPSAState(ring_buffer(restart_lag, example), current, decision, jnp.asarray(follow, jnp.int32))
+    current = StepValues(
+        jnp.zeros((), dtype),
+        jnp.zeros((), bool),
+        jnp.zeros((G,), dtype),
+        false_g,
+        nan_g,
+        jnp.zeros((), bool),
+    )
+    decision = HybridDecision(
+        minus_one,
+        minus_one,
+        zero,
+        zero,
+        false_g,
+        nan_g,
+        nan_g,
+        jnp.zeros((), bool),
+        jnp.ones((), bool),
+        zero,
+        zero,
+    )
+    return HybridPSAState(
+        ring_buffer(restart_lag, example), current, decision, jnp.asarray(follow, jnp.int32)
+    )
 
 
-def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, valid: Array, channels: Array,
-                       trusted: Array) -> tuple[Array, Array, Array, Array]:
+def analytic_residuals(
+    filt,
+    config: HybridPSAConfig,
+    entries: HistoryEntry,
+    valid: Array,
+    channels: Array,
+    trusted: Array,
+) -> tuple[Array, Array, Array, Array]:
     """Restart ``filt`` at the oldest stored step, run it to now on the ``trusted`` channels (Park et al., eq. 30).
 
     Args:
@@ -280,7 +334,9 @@ def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, val
     # the restart point is its own step's prior with nothing measured (all NaN: update keeps it), so one scan
     # does every prediction
     restart = filt.init(entries.estimate[0], config.restart_cov)
-    masked = jnp.where(trusted[None, :] & (jnp.arange(valid.shape[0]) > 0)[:, None], entries.channels, jnp.nan)
+    masked = jnp.where(
+        trusted[None, :] & (jnp.arange(valid.shape[0]) > 0)[:, None], entries.channels, jnp.nan
+    )
     state, infos = replay_filter(filt, restart, masked, entries.inputs, valid)
     post = filt.update(state, jnp.where(trusted, channels, jnp.nan), entries.inputs[-1])
     residual = channels - config.space.H @ post.filtered_mean
@@ -289,9 +345,14 @@ def analytic_residuals(filt, config: HybridPSAConfig, entries: HistoryEntry, val
     return norms, residual, post.filtered_mean, healthy
 
 
-def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[[Array], Array],
-                   filter_input: Callable[[Array, Array], Array], view: Callable[[Array, Array], Any],
-                   batch_axis: str | None = None):
+def hybrid_psa_fdi(
+    config: HybridPSAConfig,
+    analytic_filter,
+    channels: Callable[[Array], Array],
+    filter_input: Callable[[Array, Array], Array],
+    view: Callable[[Array, Array], Any],
+    batch_axis: str | None = None,
+):
     """The hybrid FDI (module doc) as an ``FDI(init, step, observe)``.
 
     Args:
@@ -316,14 +377,18 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
     for name, fn in (("channels", channels), ("filter_input", filter_input), ("view", view)):
         _checks.check_callable(name, fn)
     if not all(callable(getattr(analytic_filter, f, None)) for f in ("init", "update", "predict")):
-        raise TypeError(f"analytic_filter: expected a Gaussian Filter with init, update and predict (e.g. "
-                        f"unscented_kalman_filter(...)), got {_checks.received(analytic_filter)}")
+        raise TypeError(
+            f"analytic_filter: expected a Gaussian Filter with init, update and predict (e.g. "
+            f"unscented_kalman_filter(...)), got {_checks.received(analytic_filter)}"
+        )
     space = config.space
     G = space.groups.shape[0]
 
     def observe(state: HybridPSAState, k, y):
         m = channels(y)
-        statistic, fi = parity_tests(space, m)  # a dead channel: FD = +inf, its group the one suspect
+        statistic, fi = parity_tests(
+            space, m
+        )  # a dead channel: FD = +inf, its group the one suspect
         alarm = statistic > config.detection_threshold
         suspects = fi > config.isolation_threshold
         count = jnp.sum(suspects)
@@ -336,29 +401,47 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
         nan_g = jnp.full((G,), jnp.nan, m.dtype)
 
         def replay(_):
-            norms, _, _, healthy = analytic_residuals(analytic_filter, config, entries, valid, m, trusted)
+            norms, _, _, healthy = analytic_residuals(
+                analytic_filter, config, entries, valid, m, trusted
+            )
             return norms, healthy
 
         norms, healthy = jax.lax.cond(run, replay, lambda _: (nan_g, jnp.ones((), bool)), None)
         norms = jnp.where(need, norms, nan_g)
         healthy = jnp.where(need, healthy, True)
         psa = jnp.argmax(jnp.where(suspects, fi, -jnp.inf)).astype(jnp.int32) + 1
-        by_residual = jnp.argmax(jnp.where(suspects, jnp.nan_to_num(norms, nan=-jnp.inf), -jnp.inf)).astype(jnp.int32) + 1
+        by_residual = (
+            jnp.argmax(jnp.where(suspects, jnp.nan_to_num(norms, nan=-jnp.inf), -jnp.inf)).astype(
+                jnp.int32
+            )
+            + 1
+        )
         hybrid = jnp.where(need & healthy, by_residual, psa)
-        pick = lambda new, old: jnp.where(decide, new, old)  # noqa: E731
+        pick = lambda new, old: jnp.where(decide, new, old)
         # verification of the exclusion made at an earlier step (step 5)
         subset = subset_statistics(config, m)
-        revise = (d.decision_step >= 0) & (subset[jnp.clip(d.verified - 1, 0, G - 1)] > config.verification_threshold)
+        revise = (d.decision_step >= 0) & (
+            subset[jnp.clip(d.verified - 1, 0, G - 1)] > config.verification_threshold
+        )
         moved = jnp.where(revise, jnp.argmin(subset).astype(jnp.int32) + 1, d.verified)
         decision = HybridDecision(
             jnp.where((d.detection_step < 0) & alarm, jnp.asarray(k, jnp.int32), d.detection_step),
-            pick(jnp.asarray(k, jnp.int32), d.decision_step), pick(psa, d.psa), pick(hybrid, d.hybrid),
-            pick(suspects, d.suspects), pick(fi, d.isolation_functions), pick(norms, d.analytic_residuals),
-            pick(need, d.filter_used), pick(healthy, d.filter_healthy), pick(hybrid, moved),
-            d.revisions + (moved != d.verified).astype(jnp.int32))
+            pick(jnp.asarray(k, jnp.int32), d.decision_step),
+            pick(psa, d.psa),
+            pick(hybrid, d.hybrid),
+            pick(suspects, d.suspects),
+            pick(fi, d.isolation_functions),
+            pick(norms, d.analytic_residuals),
+            pick(need, d.filter_used),
+            pick(healthy, d.filter_healthy),
+            pick(hybrid, moved),
+            d.revisions + (moved != d.verified).astype(jnp.int32),
+        )
         excluded = _excluded(decision, state.follow)
         # a dead channel's column of its exclusion estimator is 0, and 0 * NaN must not reach the view
-        x_selected = config.estimators[excluded].astype(m.dtype) @ jnp.where(jnp.isfinite(m), m, 0.0)
+        x_selected = config.estimators[excluded].astype(m.dtype) @ jnp.where(
+            jnp.isfinite(m), m, 0.0
+        )
         current = StepValues(statistic, alarm, fi, suspects, norms, need)
         return state._replace(current=current, decision=decision), view(y, x_selected)
 
@@ -375,7 +458,8 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
             Decision(c.statistic, decided, d.hybrid, nan),
             Decision(c.statistic, decided, d.verified, nan),
             _excluded(d, state.follow),
-            ~jnp.isnan(c.statistic) & d.filter_healthy)
+            ~jnp.isnan(c.statistic) & d.filter_healthy,
+        )
         return state._replace(history=push(state.history, entry)), output
 
     return FDI(partial(hybrid_psa_init, config), step, observe)
@@ -383,10 +467,25 @@ def hybrid_psa_fdi(config: HybridPSAConfig, analytic_filter, channels: Callable[
 
 def _excluded(decision: HybridDecision, follow: Array) -> Array:
     """The group + 1 the view leaves out under ``follow`` (0: none)."""
-    return jnp.select([follow == FOLLOW["verified"], follow == FOLLOW["hybrid"], follow == FOLLOW["psa"]],
-                      [decision.verified, decision.hybrid, decision.psa], 0).astype(jnp.int32)
+    return jnp.select(
+        [follow == FOLLOW["verified"], follow == FOLLOW["hybrid"], follow == FOLLOW["psa"]],
+        [decision.verified, decision.hybrid, decision.psa],
+        0,
+    ).astype(jnp.int32)
 
 
-__all__ = ["FOLLOW", "HybridPSAConfig", "HistoryEntry", "StepValues", "HybridDecision", "HybridPSAState",
-           "HybridPSAOutput", "exclusion_estimators", "hybrid_psa_config", "subset_statistics", "hybrid_psa_init", "analytic_residuals",
-           "hybrid_psa_fdi"]
+__all__ = [
+    "FOLLOW",
+    "HybridPSAConfig",
+    "HistoryEntry",
+    "StepValues",
+    "HybridDecision",
+    "HybridPSAState",
+    "HybridPSAOutput",
+    "exclusion_estimators",
+    "hybrid_psa_config",
+    "subset_statistics",
+    "hybrid_psa_init",
+    "analytic_residuals",
+    "hybrid_psa_fdi",
+]

@@ -41,6 +41,7 @@ change in distribution, Ann. Math. Stat. 42; Basseville & Nikiforov (1993), Dete
 Nikiforov (1995), A generalized change detection problem, IEEE Trans. Inf. Theory 41; Moustakides (1986), Optimal
 stopping times for detecting changes in distributions, Ann. Stat. 14; Willsky & Jones (1976), IEEE TAC 21.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -51,9 +52,14 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection._chi2 import Decision, Detector, flag_dead
-from jaxfdi.detection._glrt import check_steady_state, fault_directions, fault_signatures, whiten_finite
 from jaxfdi._faults import sensor_labels
+from jaxfdi.detection._chi2 import Decision, Detector, flag_dead
+from jaxfdi.detection._glrt import (
+    check_steady_state,
+    fault_directions,
+    fault_signatures,
+    whiten_finite,
+)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
@@ -87,7 +93,9 @@ class KnownChangeTerms(NamedTuple):
     drift: Array
 
 
-def known_change_terms(signatures: Array, innovation_cov: Array, magnitudes: Array) -> KnownChangeTerms:
+def known_change_terms(
+    signatures: Array, innovation_cov: Array, magnitudes: Array
+) -> KnownChangeTerms:
     """Check the bank's data and whiten it.
 
     Args:
@@ -96,11 +104,15 @@ def known_change_terms(signatures: Array, innovation_cov: Array, magnitudes: Arr
       magnitudes: (d,) known fault sizes ``nu_i`` (finite, non-zero; the sign matters).
     """
     _checks.check_real("signatures", signatures, "real signatures (N, m, d)")
-    _checks.check_shape("signatures", signatures, (None, None, None), "(N, m, d) from fault_signatures")
+    _checks.check_shape(
+        "signatures", signatures, (None, None, None), "(N, m, d) from fault_signatures"
+    )
     N, m, d = _checks.shape_of(signatures)
     if N < 1:
-        raise ValueError(f"signatures: expected a window of N >= 1 lags (shape (N, m, d)), got shape "
-                         f"{_checks.shape_of(signatures)}")
+        raise ValueError(
+            f"signatures: expected a window of N >= 1 lags (shape (N, m, d)), got shape "
+            f"{_checks.shape_of(signatures)}"
+        )
     _checks.check_finite("signatures", signatures, "fault signatures")
     _checks.check_covariance("innovation_cov", innovation_cov, m, definite=True)
     _checks.check_real("magnitudes", magnitudes, "known fault sizes")
@@ -108,7 +120,9 @@ def known_change_terms(signatures: Array, innovation_cov: Array, magnitudes: Arr
     _checks.check_finite("magnitudes", magnitudes, "known fault sizes")
     value = _checks.concrete(magnitudes)
     if value is not None and np.any(value == 0):
-        raise ValueError(f"magnitudes: expected non-zero known fault sizes, got {_checks.received(value)}")
+        raise ValueError(
+            f"magnitudes: expected non-zero known fault sizes, got {_checks.received(value)}"
+        )
     dtype = _checks.float_dtype(signatures, innovation_cov, magnitudes)
     S = _linalg.symmetrize(jnp.asarray(innovation_cov, dtype))
     chol = jsl.cholesky(S, lower=True)
@@ -118,8 +132,15 @@ def known_change_terms(signatures: Array, innovation_cov: Array, magnitudes: Arr
     return KnownChangeTerms(whitener, white * nu, 0.5 * nu**2 * jnp.sum(white**2, axis=1))
 
 
-def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Array, threshold,
-                      tail: bool = False, isolation: str = "max", channel_labels: Array | None = None) -> Detector:
+def known_change_bank(
+    signatures: Array,
+    innovation_cov: Array,
+    magnitudes: Array,
+    threshold,
+    tail: bool = False,
+    isolation: str = "max",
+    channel_labels: Array | None = None,
+) -> Detector:
     """Online bank of known-change GLR (CUSUM) tests (module docstring) on a fault-blind filter's innovations.
 
     ``step(state, innovation (m,)) -> (state, Decision)``; jit- and vmap-able. ``signatures``, ``innovation_cov``,
@@ -129,7 +150,9 @@ def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Arra
     ``None``: the bank's own); that component enters as 0, its fault-free mean: recovery with the sensor.
     """
     terms = known_change_terms(signatures, innovation_cov, magnitudes)
-    _checks.check_positive("threshold", threshold, "a positive threshold on the log-likelihood ratio")
+    _checks.check_positive(
+        "threshold", threshold, "a positive threshold on the log-likelihood ratio"
+    )
     _checks.check_choice("isolation", isolation, ("max", "pairwise"))
     N, m, d = terms.gain.shape
     dtype = terms.drift.dtype
@@ -137,15 +160,23 @@ def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Arra
 
     def init() -> KnownChangeState:
         minus_inf = jnp.full((N, d), -jnp.inf, dtype)
-        return KnownChangeState(minus_inf, jnp.full((d,), -jnp.inf, dtype), jnp.zeros((), jnp.int32),
-                                jnp.zeros((), jnp.int32))
+        return KnownChangeState(
+            minus_inf,
+            jnp.full((d,), -jnp.inf, dtype),
+            jnp.zeros((), jnp.int32),
+            jnp.zeros((), jnp.int32),
+        )
 
     def step(state: KnownChangeState, innovation: Array):
-        _checks.check_shape("innovation", innovation, (m,), "one step's innovation of the fault-blind filter")
+        _checks.check_shape(
+            "innovation", innovation, (m,), "one step's innovation of the fault-blind filter"
+        )
         innovation = jnp.asarray(innovation, dtype)
         white = whiten_finite(terms.whitener, innovation)
-        llr = jnp.einsum("lmd,m->ld", terms.gain, white) - terms.drift                    # (N, d), lag = offset
-        older = jnp.concatenate([jnp.zeros((1, d), dtype), state.log_ratio[:-1]], axis=0)  # L(k-1, o-1)
+        llr = jnp.einsum("lmd,m->ld", terms.gain, white) - terms.drift  # (N, d), lag = offset
+        older = jnp.concatenate(
+            [jnp.zeros((1, d), dtype), state.log_ratio[:-1]], axis=0
+        )  # L(k-1, o-1)
         log_ratio = older + llr
         count = jnp.minimum(state.count + 1, N)
         log_ratio = jnp.where((jnp.arange(N) < count)[:, None], log_ratio, -jnp.inf)
@@ -155,14 +186,20 @@ def known_change_bank(signatures: Array, innovation_cov: Array, magnitudes: Arra
         else:
             tail_ratio = state.tail
         in_window = jnp.max(log_ratio, axis=0)
-        per_direction = jnp.maximum(in_window, tail_ratio)                                 # s_i(k)
+        per_direction = jnp.maximum(in_window, tail_ratio)  # s_i(k)
         if isolation == "pairwise":
             per_direction = _against_rivals(per_direction)
         direction = jnp.argmax(per_direction)
         statistic = per_direction[direction]
-        offset = jnp.where(in_window[direction] >= tail_ratio[direction], jnp.argmax(log_ratio[:, direction]), -1)
-        decision = Decision(statistic, statistic > threshold, (1 + direction).astype(jnp.int32),
-                            jnp.asarray(magnitudes, dtype)[direction])
+        offset = jnp.where(
+            in_window[direction] >= tail_ratio[direction], jnp.argmax(log_ratio[:, direction]), -1
+        )
+        decision = Decision(
+            statistic,
+            statistic > threshold,
+            (1 + direction).astype(jnp.int32),
+            jnp.asarray(magnitudes, dtype)[direction],
+        )
         decision = flag_dead(decision, ~jnp.isfinite(innovation), channel_labels)
         return KnownChangeState(log_ratio, tail_ratio, count, offset.astype(jnp.int32)), decision
 
@@ -176,9 +213,17 @@ def _against_rivals(statistic: Array) -> Array:
     return statistic - jnp.maximum(rivals, 0.0)
 
 
-def known_change_detector(model: LinearGaussianModel, gain: Array, innovation_cov: Array, magnitudes: Array,
-                          window: int, threshold, tail: bool = False, actuator_feedthrough: bool = False,
-                          isolation: str = "max") -> Detector:
+def known_change_detector(
+    model: LinearGaussianModel,
+    gain: Array,
+    innovation_cov: Array,
+    magnitudes: Array,
+    window: int,
+    threshold,
+    tail: bool = False,
+    actuator_feedthrough: bool = False,
+    isolation: str = "max",
+) -> Detector:
     """``known_change_bank`` with ``fault_directions(model)``'s signatures for the steady-state filter
     ``(gain, innovation_cov)`` (checked as ``glrt_detector`` does), over ``window`` onsets.
 
@@ -196,23 +241,38 @@ def known_change_detector(model: LinearGaussianModel, gain: Array, innovation_co
       non-finite component alarms and isolates its sensor.
     """
     n, _, m = validate_linear_model(model)
-    window = _checks.check_int("window", window, minimum=1, meaning="a positive integer number of steps N")
+    window = _checks.check_int(
+        "window", window, minimum=1, meaning="a positive integer number of steps N"
+    )
     _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
     _checks.check_covariance("innovation_cov", innovation_cov, m, definite=True)
     check_steady_state(model, gain=gain, innovation_cov=innovation_cov)
-    signatures = fault_signatures(model, gain, fault_directions(model, actuator_feedthrough), window)
-    return known_change_bank(signatures, innovation_cov, magnitudes, threshold, tail, isolation,
-                             sensor_labels(model.Gamma.shape[1], m))
+    signatures = fault_signatures(
+        model, gain, fault_directions(model, actuator_feedthrough), window
+    )
+    return known_change_bank(
+        signatures,
+        innovation_cov,
+        magnitudes,
+        threshold,
+        tail,
+        isolation,
+        sensor_labels(model.Gamma.shape[1], m),
+    )
 
 
-def known_change_by_onset(innovations: Array, signatures: Array, innovation_cov: Array, magnitudes: Array) -> Array:
+def known_change_by_onset(
+    innovations: Array, signatures: Array, innovation_cov: Array, magnitudes: Array
+) -> Array:
     """(N, d) ``Lambda_i(k, k - o)`` for every onset offset of a window of innovations (N, m), oldest first, row
     N-1 = step k (all N onsets allowed): the offline bank statistic (``max`` over axis 0)."""
     terms = known_change_terms(signatures, innovation_cov, magnitudes)
     N, m, d = terms.gain.shape
     _checks.check_shape("innovations", innovations, (N, m), "N steps x m outputs, oldest first")
-    white = jnp.asarray(innovations, terms.drift.dtype) @ terms.whitener.T            # (N, m) by position p
-    lag = jnp.arange(N)[None, :] - (N - 1 - jnp.arange(N))[:, None]                    # (o, p): p - theta
-    gain = jnp.where((lag >= 0)[..., None, None], terms.gain[jnp.maximum(lag, 0)], 0.0)  # (o, p, m, d)
-    drift = jnp.where((lag >= 0)[..., None], terms.drift[jnp.maximum(lag, 0)], 0.0)    # (o, p, d)
+    white = jnp.asarray(innovations, terms.drift.dtype) @ terms.whitener.T  # (N, m) by position p
+    lag = jnp.arange(N)[None, :] - (N - 1 - jnp.arange(N))[:, None]  # (o, p): p - theta
+    gain = jnp.where(
+        (lag >= 0)[..., None, None], terms.gain[jnp.maximum(lag, 0)], 0.0
+    )  # (o, p, m, d)
+    drift = jnp.where((lag >= 0)[..., None], terms.drift[jnp.maximum(lag, 0)], 0.0)  # (o, p, d)
     return jnp.einsum("opmd,pm->od", gain, white) - jnp.sum(drift, axis=1)

@@ -8,6 +8,7 @@ for ``c`` consecutive steps. An engine actuator fault first shows in P4 alone, s
 explains it as well and first-crossing isolates it as P4 in ~10 % of runs; ``c`` steps let the slower T4 and RPM
 responses decide. Per-mode ``c_j``: a mode nothing mimics (engine P2 bias) is declared before the actuator/P4 pair.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -36,9 +37,13 @@ def check_confirm_steps(confirm_steps) -> None:
     """``TypeError`` unless integers, ``ValueError`` unless one integer >= 1 or a 1-D sequence of them."""
     if isinstance(confirm_steps, (list, tuple)):
         confirm_steps = np.asarray(confirm_steps)
-    _checks.check_int_array("confirm_steps", confirm_steps, 1, meaning="an integer >= 1, or one per mode (M,)")
+    _checks.check_int_array(
+        "confirm_steps", confirm_steps, 1, meaning="an integer >= 1, or one per mode (M,)"
+    )
     if np.ndim(confirm_steps) > 1 or np.size(confirm_steps) == 0:
-        raise ValueError(f"confirm_steps: expected an integer >= 1, or one per mode (M,), got {confirm_steps}")
+        raise ValueError(
+            f"confirm_steps: expected an integer >= 1, or one per mode (M,), got {confirm_steps}"
+        )
 
 
 def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) -> Detector:
@@ -62,13 +67,19 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
     _checks.check_real("threshold", threshold, "a probability mu_T in (0, 1], or one per mode (M,)")
     value = _checks.concrete(threshold)
     if value is not None and not (value.ndim <= 1 and np.all((0.0 < value) & (value <= 1.0))):
-        raise ValueError(f"threshold: expected a probability mu_T in (0, 1], or one per mode (M,), got {threshold}")
+        raise ValueError(
+            f"threshold: expected a probability mu_T in (0, 1], or one per mode (M,), got {threshold}"
+        )
     _checks.check_int("normal_mode", normal_mode, 0, meaning="the index of the fault-free mode")
     check_confirm_steps(confirm_steps)
     if _checks.concrete(confirm_steps) is None:  # traced: data of the compiled program
         steps = jnp.asarray(confirm_steps, jnp.int32)
     else:
-        steps = int(confirm_steps) if np.ndim(confirm_steps) == 0 else np.asarray(confirm_steps, np.int32)
+        steps = (
+            int(confirm_steps)
+            if np.ndim(confirm_steps) == 0
+            else np.asarray(confirm_steps, np.int32)
+        )
 
     def step(state, inputs):
         mode_prob, estimates = inputs if isinstance(inputs, tuple) else (inputs, None)
@@ -76,18 +87,31 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
         if mode_prob.ndim != 1:
             raise ValueError(f"mode_prob: expected shape (M,), got {tuple(mode_prob.shape)}")
         if not -mode_prob.shape[0] <= normal_mode < mode_prob.shape[0]:
-            raise ValueError(f"normal_mode: expected a mode index in [0, {mode_prob.shape[0]}), got {normal_mode}")
+            raise ValueError(
+                f"normal_mode: expected a mode index in [0, {mode_prob.shape[0]}), got {normal_mode}"
+            )
         fault_prob = mode_prob.at[normal_mode].set(-jnp.inf)
         label = jnp.argmax(fault_prob).astype(jnp.int32)
         statistic = fault_prob[label]
         level = jnp.asarray(threshold)
         if level.ndim == 1:
-            _checks.check_shape("threshold", level, mode_prob.shape, "one mu_T per mode, or a scalar")
+            _checks.check_shape(
+                "threshold", level, mode_prob.shape, "one mu_T per mode, or a scalar"
+            )
             level = level[label]
         if np.ndim(steps) == 1:
-            _checks.check_shape("confirm_steps", steps, mode_prob.shape, "one confirmation length per mode, or an int")
+            _checks.check_shape(
+                "confirm_steps",
+                steps,
+                mode_prob.shape,
+                "one confirmation length per mode, or an int",
+            )
         state, alarm = confirm(state, label, statistic >= level, steps)
-        estimate = jnp.full((), jnp.nan, mode_prob.dtype) if estimates is None else jnp.asarray(estimates)[label]
+        estimate = (
+            jnp.full((), jnp.nan, mode_prob.dtype)
+            if estimates is None
+            else jnp.asarray(estimates)[label]
+        )
         return state, Decision(statistic, alarm, label, estimate)
 
     return Detector(confirmation_init, step)

@@ -16,6 +16,7 @@ RAIM's protection level (Brown & Chin 1992): ``noncentrality_for_missed_detectio
 ``F(threshold; k, lambda) = p_md`` (the bias the test at ``threshold`` misses with probability ``p_md``);
 ``ncx2_quantile`` inverts in ``x``. Both by fixed-count bisection (the CDF is monotone in each argument).
 """
+
 from __future__ import annotations
 
 import jax
@@ -87,7 +88,9 @@ def ncx2_quantile(p, dof, noncentrality) -> Array:
     """``x`` with ``P(X <= x) = p`` for ``X ~ ncx2(dof, noncentrality)`` (scipy's ``ppf``)."""
     _checks.check_probability("p", p)
     dtype = _dtype(p, dof, noncentrality)
-    return _quantile(*jnp.broadcast_arrays(*(jnp.asarray(v, dtype) for v in (p, dof, noncentrality))))
+    return _quantile(
+        *jnp.broadcast_arrays(*(jnp.asarray(v, dtype) for v in (p, dof, noncentrality)))
+    )
 
 
 @jax.jit
@@ -106,7 +109,9 @@ def noncentrality_for_missed_detection(threshold, dof, p_md) -> Array:
     """
     _checks.check_probability("p_md", p_md)
     dtype = _dtype(threshold, dof, p_md)
-    return _noncentrality(*jnp.broadcast_arrays(*(jnp.asarray(v, dtype) for v in (threshold, dof, p_md))))
+    return _noncentrality(
+        *jnp.broadcast_arrays(*(jnp.asarray(v, dtype) for v in (threshold, dof, p_md)))
+    )
 
 
 @jax.jit

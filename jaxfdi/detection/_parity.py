@@ -20,6 +20,7 @@ Measurements ``m = H x + eps + f``: ``H`` (m, n) full column rank, ``m > n``, in
 
 Array arithmetic only (no scan): vmaps over sensor sets, jits, differentiable in the measurements.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -99,7 +100,9 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
     H = jnp.asarray(H, _checks.float_dtype(H))
     m, n = H.shape
     if m <= n:
-        raise ValueError(f"H: expected more channels than states (m > n) for a parity space, got shape {H.shape}")
+        raise ValueError(
+            f"H: expected more channels than states (m > n) for a parity space, got shape {H.shape}"
+        )
     groups = jnp.arange(m)[:, None] if groups is None else groups
     _checks.check_int_array("groups", groups, 0, m - 1, "channel indices of H's rows")
     groups = jnp.asarray(groups, jnp.int32)
@@ -107,14 +110,23 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
         raise ValueError(f"groups: expected shape (G, d) with G, d >= 1, got {groups.shape}")
     values = _checks.concrete(groups)
     if values is not None and len(np.unique(values)) != values.size:
-        raise ValueError(f"groups: expected every channel in at most one group, got {_checks.received(values)}")
+        raise ValueError(
+            f"groups: expected every channel in at most one group, got {_checks.received(values)}"
+        )
     if groups.shape[1] > m - n:
-        raise ValueError(f"groups: expected at most q = m - n = {m - n} channels per group (a group's fault must be "
-                         f"able to fill a subspace of the {m - n}-dimensional parity space), got {groups.shape[1]}")
+        raise ValueError(
+            f"groups: expected at most q = m - n = {m - n} channels per group (a group's fault must be "
+            f"able to fill a subspace of the {m - n}-dimensional parity space), got {groups.shape[1]}"
+        )
     U, s, _ = jnp.linalg.svd(H, full_matrices=True)
     singular = _checks.concrete(s)
-    if singular is not None and not singular[-1] > 100 * m * np.finfo(singular.dtype).eps * singular[0]:
-        raise ValueError(f"H: expected full column rank {n}, got singular values {_checks.received(singular)}")
+    if (
+        singular is not None
+        and not singular[-1] > 100 * m * np.finfo(singular.dtype).eps * singular[0]
+    ):
+        raise ValueError(
+            f"H: expected full column rank {n}, got singular values {_checks.received(singular)}"
+        )
     V = U[:, n:].T
     columns = jnp.moveaxis(V[:, groups], 1, 0)  # (G, q, d)
     bases, spans, _ = jnp.linalg.svd(columns, full_matrices=False)
@@ -123,10 +135,12 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
         tiny = 100 * m * np.finfo(spans.dtype).eps
         bad = np.nonzero(spans[:, -1] <= tiny)[0]
         if bad.size:
-            raise ValueError(f"groups: the fault subspace of group {int(bad[0])} (channels "
-                             f"{np.asarray(values)[bad[0]].tolist() if values is not None else '?'}) has fewer than "
-                             f"{groups.shape[1]} dimensions: a fault of that sensor along some direction leaves no "
-                             f"parity (not enough redundancy); its singular values are {_checks.received(spans[bad[0]])}")
+            raise ValueError(
+                f"groups: the fault subspace of group {int(bad[0])} (channels "
+                f"{np.asarray(values)[bad[0]].tolist() if values is not None else '?'}) has fewer than "
+                f"{groups.shape[1]} dimensions: a fault of that sensor along some direction leaves no "
+                f"parity (not enough redundancy); its singular values are {_checks.received(spans[bad[0]])}"
+            )
     return ParitySpace(H, V, groups, bases)
 
 
@@ -162,7 +176,9 @@ def parity_tests(space: ParitySpace, measurement: Array) -> tuple[Array, Array]:
     parity = parity_vector(space, jnp.where(jnp.isfinite(measurement), measurement, 0.0))
     any_dead = jnp.any(dead, axis=-1)
     fd = jnp.where(any_dead, jnp.inf, fault_detection_statistic(parity))
-    fi = jnp.where(any_dead[..., None], dead.astype(parity.dtype), isolation_functions(space, parity))
+    fi = jnp.where(
+        any_dead[..., None], dead.astype(parity.dtype), isolation_functions(space, parity)
+    )
     return fd, fi
 
 
@@ -170,7 +186,9 @@ def detection_threshold(space: ParitySpace, sigma, pfa) -> Array:
     """``T_D = sigma^2 chi2_isf(q, P_fa)``: fault-free, ``P(FD > T_D) = P_fa`` per sample."""
     _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
     q = space.V.shape[0]
-    return jnp.square(jnp.asarray(sigma, space.V.dtype)) * chi2_threshold(q, jnp.asarray(pfa, space.V.dtype))
+    return jnp.square(jnp.asarray(sigma, space.V.dtype)) * chi2_threshold(
+        q, jnp.asarray(pfa, space.V.dtype)
+    )
 
 
 def out_of_subspace(space: ParitySpace, parity: Array) -> Array:
@@ -188,7 +206,9 @@ def isolation_functions(space: ParitySpace, parity: Array) -> Array:
     parity = jnp.asarray(parity)
     size = jnp.linalg.norm(parity, axis=-1)[..., None]
     positive = size > 0
-    fi = jnp.where(positive, 1.0 - out_of_subspace(space, parity) / jnp.where(positive, size, 1.0), 0.0)
+    fi = jnp.where(
+        positive, 1.0 - out_of_subspace(space, parity) / jnp.where(positive, size, 1.0), 0.0
+    )
     return jnp.where(jnp.isfinite(size), fi, jnp.nan)
 
 
@@ -218,8 +238,10 @@ def singular_directions(space: ParitySpace) -> SingularDirections:
     left, values, _ = jnp.linalg.svd(products)
     direction = jnp.einsum("iqd,ikd->ikq", space.fault_bases, left[..., :, 0])
     eye = jnp.eye(space.groups.shape[0], dtype=bool)
-    return SingularDirections(jnp.where(eye[..., None], 0.0, direction),
-                              jnp.where(eye, 1.0, jnp.clip(values[..., 0], 0.0, 1.0)))
+    return SingularDirections(
+        jnp.where(eye[..., None], 0.0, direction),
+        jnp.where(eye, 1.0, jnp.clip(values[..., 0], 0.0, 1.0)),
+    )
 
 
 def singular_faults(space: ParitySpace) -> Array:
@@ -227,7 +249,7 @@ def singular_faults(space: ParitySpace) -> Array:
     shared with group ``k`` (least squares ``V_i^+ direction``): it cannot be told between ``i`` and ``k``. Sign:
     first nonzero entry positive; diagonal 0."""
     columns = jnp.moveaxis(space.V[:, space.groups], 1, 0)  # (G, q, d)
-    dirs = singular_directions(space).direction               # (G, G, q)
+    dirs = singular_directions(space).direction  # (G, G, q)
     faults = jnp.einsum("idq,ikq->ikd", jnp.linalg.pinv(columns), dirs)
     norms = jnp.linalg.norm(faults, axis=-1, keepdims=True)
     faults = faults / jnp.where(norms > 0, norms, 1.0)
@@ -243,8 +265,15 @@ def group_fault(space: ParitySpace, group: Array, fault: Array) -> Array:
     return jnp.zeros((m,), jnp.result_type(fault, space.V.dtype)).at[space.groups[group]].set(fault)
 
 
-def isolation_threshold(space: ParitySpace, sigma, fault_to_noise, missed_isolation, detection_threshold: Array,
-                        key: Array, samples: int = 100_000) -> IsolationCalibration:
+def isolation_threshold(
+    space: ParitySpace,
+    sigma,
+    fault_to_noise,
+    missed_isolation,
+    detection_threshold: Array,
+    key: Array,
+    samples: int = 100_000,
+) -> IsolationCalibration:
     """``T_I`` by Monte Carlo from a missed-isolation probability (Park et al. 2004, Sec. 2.1).
 
     Each sample: group ``g`` uniform, fault direction uniform on the unit sphere of its ``d`` channels, RMS size per
@@ -280,15 +309,29 @@ def isolation_threshold(space: ParitySpace, sigma, fault_to_noise, missed_isolat
     fi_true = jnp.take_along_axis(isolation_functions(space, parity), group[:, None], axis=-1)[:, 0]
     ordered = jnp.sort(jnp.where(detected, fi_true, jnp.inf))
     count = jnp.sum(detected)
-    j = jnp.clip(jnp.floor(jnp.asarray(missed_isolation, dtype) * count).astype(jnp.int32), 1, samples - 1)
+    j = jnp.clip(
+        jnp.floor(jnp.asarray(missed_isolation, dtype) * count).astype(jnp.int32), 1, samples - 1
+    )
     threshold = 0.5 * (ordered[j - 1] + ordered[j])
     missed = jnp.sum(detected & (fi_true <= threshold)) / jnp.maximum(count, 1)
     return IsolationCalibration(threshold, missed, count, jnp.asarray(samples))
 
 
 __all__ = [
-    "ParitySpace", "SingularDirections", "IsolationCalibration", "parity_space", "parity_vector",
-    "parity_statistic", "fault_detection_statistic", "detection_threshold", "out_of_subspace", "isolation_functions",
-    "subspace_cosines", "subspace_angles", "singular_directions", "singular_faults", "group_fault",
+    "ParitySpace",
+    "SingularDirections",
+    "IsolationCalibration",
+    "parity_space",
+    "parity_vector",
+    "parity_statistic",
+    "fault_detection_statistic",
+    "detection_threshold",
+    "out_of_subspace",
+    "isolation_functions",
+    "subspace_cosines",
+    "subspace_angles",
+    "singular_directions",
+    "singular_faults",
+    "group_fault",
     "isolation_threshold",
 ]

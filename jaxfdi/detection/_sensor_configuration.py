@@ -18,6 +18,7 @@ Isolability from the projector ``P = I - H (H^T H)^-1 H^T = V^T V`` (no SVD of `
   noise, ``sigmoid(FD / sigma^2 - chi2_isf(q, P_fa)) sigmoid((FI_true - max_other FI) / tau)``, smooth "detected,
   and PSA alone picks the faulty sensor" (``parity``'s ``FD``, ``FI``).
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -119,29 +120,36 @@ def isolability(H: Array, groups: Array) -> Isolability:
 def _isolability(H: Array, groups: Array) -> Isolability:
     """``isolability`` once ``H`` is checked, as one program."""
     _, gram, cross = _pair_geometry(H, groups)
-    cos2 = _smallest_eigenvalue(jnp.einsum("ikba,ikbc->ikac", cross, cross))  # smallest squared cosine
+    cos2 = _smallest_eigenvalue(
+        jnp.einsum("ikba,ikbc->ikac", cross, cross)
+    )  # smallest squared cosine
     sin2 = jnp.clip(1.0 - cos2, 0.0, 1.0)
     dihedral = jnp.arcsin(jnp.sqrt(sin2))
     eye = jnp.eye(groups.shape[0], dtype=bool)
     dihedral = jnp.where(eye, 0.0, dihedral)
     normal = H.T @ H
     isotropy = jnp.linalg.norm(3.0 * normal / jnp.trace(normal) - jnp.eye(3, dtype=H.dtype))
-    return Isolability(dihedral, jnp.min(jnp.where(eye, jnp.inf, dihedral)),
-                       _smallest_eigenvalue(gram), isotropy)
+    return Isolability(
+        dihedral, jnp.min(jnp.where(eye, jnp.inf, dihedral)), _smallest_eigenvalue(gram), isotropy
+    )
 
 
 def _soft_min(values: Array, temperature: float) -> Array:
     return -temperature * jax.nn.logsumexp(-values / temperature)
 
 
-def separation_objective(H: Array, groups: Array, temperature: float = 0.02, detectability_weight: float = 1.0) -> Array:
+def separation_objective(
+    H: Array, groups: Array, temperature: float = 0.02, detectability_weight: float = 1.0
+) -> Array:
     """Soft min of dihedral angles' ``sin^2`` + ``detectability_weight`` x soft min of detectabilities (maximise)."""
     _, gram, cross = _pair_geometry(H, groups)
     cos2 = _smallest_eigenvalue(jnp.einsum("ikba,ikbc->ikac", cross, cross))
     S = groups.shape[0]
     upper = jnp.triu_indices(S, 1)
     sin2 = 1.0 - cos2[upper]
-    return _soft_min(sin2, temperature) + detectability_weight * _soft_min(_smallest_eigenvalue(gram), temperature)
+    return _soft_min(sin2, temperature) + detectability_weight * _soft_min(
+        _smallest_eigenvalue(gram), temperature
+    )
 
 
 def _draws(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Array, samples: int):
@@ -153,9 +161,14 @@ def _draws(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Ar
     sensor = jax.random.randint(k_group, (samples,), 0, S)
     direction = jax.random.normal(k_dir, (samples, d), H.dtype)
     direction = direction / jnp.linalg.norm(direction, axis=-1, keepdims=True)
-    faults = jnp.zeros((samples, m), H.dtype).at[jnp.arange(samples)[:, None], groups[sensor]].set(
-        fault_to_noise * sigma * np.sqrt(d) * direction)
-    residual = (faults + sigma * jax.random.normal(k_noise, (samples, m), H.dtype)) @ P  # V^T p: ||.|| = ||p||
+    faults = (
+        jnp.zeros((samples, m), H.dtype)
+        .at[jnp.arange(samples)[:, None], groups[sensor]]
+        .set(fault_to_noise * sigma * np.sqrt(d) * direction)
+    )
+    residual = (
+        faults + sigma * jax.random.normal(k_noise, (samples, m), H.dtype)
+    ) @ P  # V^T p: ||.|| = ||p||
     statistic = jnp.sum(residual * residual, axis=-1) / sigma**2
     return P, sensor, statistic, _isolation_functions_from_projector(P, groups, residual)
 
@@ -166,8 +179,16 @@ def _threshold(H: Array, pfa) -> Array:
         return chi2_threshold(H.shape[0] - H.shape[1], jnp.asarray(pfa, H.dtype))
 
 
-def isolation_surrogate(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Array,
-                        samples: int = 4096, pfa: float = 1e-6, temperature: float = 0.02) -> Array:
+def isolation_surrogate(
+    H: Array,
+    groups: Array,
+    sigma: float,
+    fault_to_noise: float,
+    key: Array,
+    samples: int = 4096,
+    pfa: float = 1e-6,
+    temperature: float = 0.02,
+) -> Array:
     """Smooth Monte Carlo rate of "detected, and PSA alone picks the faulty sensor" (module doc): common random
     numbers from ``key``, faults of RMS ``fault_to_noise * sigma`` per axis, detection
     ``FD > sigma^2 chi2_isf(q, pfa)`` smoothed over one unit of ``FD / sigma^2``."""
@@ -182,7 +203,7 @@ def isolation_surrogate(H: Array, groups: Array, sigma: float, fault_to_noise: f
 def _isolation_functions_from_projector(P: Array, groups: Array, residual: Array) -> Array:
     """``FI_i`` of parity vectors given as ``V^T p`` (rows of ``residual``, in ``range(P)``); sensor ``i``'s subspace
     ``span(P E_i)`` orthonormalised by ``G_i^-1/2``."""
-    cols = P[:, groups]                                   # (m, S, d)
+    cols = P[:, groups]  # (m, S, d)
     gram = jnp.einsum("msa,msb->sab", cols, cols)
     basis = jnp.einsum("msa,sab->smb", cols, jax.vmap(_inverse_sqrt)(gram))  # (S, m, d) orthonormal
     coords = jnp.einsum("smd,nm->nsd", basis, residual)
@@ -192,18 +213,34 @@ def _isolation_functions_from_projector(P: Array, groups: Array, residual: Array
 
 
 @partial(jax.jit, static_argnames=("samples",))
-def isolation_rate(H: Array, groups: Array, sigma: float, fault_to_noise: float, key: Array,
-                   samples: int = 100_000, pfa: float = 1e-6) -> Array:
+def isolation_rate(
+    H: Array,
+    groups: Array,
+    sigma: float,
+    fault_to_noise: float,
+    key: Array,
+    samples: int = 100_000,
+    pfa: float = 1e-6,
+) -> Array:
     """Hard Monte Carlo rate of the same draws: detected (``FD > T_D``) and ``argmax FI`` the faulty sensor."""
     _, sensor, statistic, fi = _draws(H, groups, sigma, fault_to_noise, key, samples)
     detected = statistic > _threshold(H, pfa)
     return jnp.mean(detected & (jnp.argmax(fi, axis=1) == sensor))
 
 
-def optimize_configuration(key: Array, sensors: int = 3, starts: int = 16, steps: int = 400,
-                           learning_rate: float = 0.05, objective: str = "separation", sigma: float = 0.01,
-                           fault_to_noise: float = 10.0, samples: int = 4096, pfa: float = 1e-6,
-                           dtype=None) -> ConfigurationResult:
+def optimize_configuration(
+    key: Array,
+    sensors: int = 3,
+    starts: int = 16,
+    steps: int = 400,
+    learning_rate: float = 0.05,
+    objective: str = "separation",
+    sigma: float = 0.01,
+    fault_to_noise: float = 10.0,
+    samples: int = 4096,
+    pfa: float = 1e-6,
+    dtype=None,
+) -> ConfigurationResult:
     """Adam (optax) from ``starts`` random quaternions per sensor, vmapped over the starts.
 
     Args:
@@ -222,21 +259,48 @@ def optimize_configuration(key: Array, sensors: int = 3, starts: int = 16, steps
     _checks.check_positive("learning_rate", learning_rate)
     _checks.check_choice("objective", objective, ["separation", "isolation"])
     dtype = dtype or jnp.result_type(float)
-    return _optimize(key, sensors, starts, steps, float(learning_rate), objective, float(sigma), float(fault_to_noise),
-                     int(samples), float(pfa), jnp.dtype(dtype))
+    return _optimize(
+        key,
+        sensors,
+        starts,
+        steps,
+        float(learning_rate),
+        objective,
+        float(sigma),
+        float(fault_to_noise),
+        int(samples),
+        float(pfa),
+        jnp.dtype(dtype),
+    )
 
 
 @partial(jax.jit, static_argnums=tuple(range(1, 11)))
-def _optimize(key, sensors, starts, steps, learning_rate, objective, sigma, fault_to_noise, samples, pfa, dtype):
+def _optimize(
+    key,
+    sensors,
+    starts,
+    steps,
+    learning_rate,
+    objective,
+    sigma,
+    fault_to_noise,
+    samples,
+    pfa,
+    dtype,
+):
     """``optimize_configuration`` as one compiled program (starts, the Adam scan, results)."""
     groups = jnp.arange(2 * sensors, dtype=jnp.int32).reshape(sensors, 2)
     k_start, k_mc = jax.random.split(key)
     if objective == "separation":
+
         def value(q):
             return separation_objective(sensor_axes(q), groups)
     else:
+
         def value(q):
-            return isolation_surrogate(sensor_axes(q), groups, sigma, fault_to_noise, k_mc, samples, pfa)
+            return isolation_surrogate(
+                sensor_axes(q), groups, sigma, fault_to_noise, k_mc, samples, pfa
+            )
 
     optimizer = optax.adam(learning_rate)
 
@@ -244,7 +308,9 @@ def _optimize(key, sensors, starts, steps, learning_rate, objective, sigma, faul
         def body(carry, _):
             q, opt_state = carry
             v, g = jax.value_and_grad(value)(q)
-            updates, opt_state = optimizer.update(jax.tree_util.tree_map(jnp.negative, g), opt_state, q)
+            updates, opt_state = optimizer.update(
+                jax.tree_util.tree_map(jnp.negative, g), opt_state, q
+            )
             return (optax.apply_updates(q, updates), opt_state), v
 
         (q, _), values = jax.lax.scan(body, (q0, optimizer.init(q0)), None, length=steps)
@@ -253,9 +319,22 @@ def _optimize(key, sensors, starts, steps, learning_rate, objective, sigma, faul
     q0 = jax.random.normal(k_start, (starts, sensors, 4), dtype)
     quaternions, values = jax.vmap(run)(q0)
     finals = jax.vmap(value)(quaternions)
-    return ConfigurationResult(quaternions, jax.vmap(sensor_axes)(quaternions), values,
-                               jnp.argmax(finals).astype(jnp.int32))
+    return ConfigurationResult(
+        quaternions,
+        jax.vmap(sensor_axes)(quaternions),
+        values,
+        jnp.argmax(finals).astype(jnp.int32),
+    )
 
 
-__all__ = ["Isolability", "ConfigurationResult", "quaternion_axes", "sensor_axes", "isolability",
-           "separation_objective", "isolation_surrogate", "isolation_rate", "optimize_configuration"]
+__all__ = [
+    "Isolability",
+    "ConfigurationResult",
+    "quaternion_axes",
+    "sensor_axes",
+    "isolability",
+    "separation_objective",
+    "isolation_surrogate",
+    "isolation_rate",
+    "optimize_configuration",
+]

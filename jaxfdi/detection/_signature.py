@@ -4,6 +4,7 @@ One filter per fault hypothesis: under fault i filter i's statistic stays low, e
 ``S``: one bit per filter (statistic over threshold). Signature matrix: a "no fault" column of zeros and, for fault
 i, ones with a 0 in row i; isolation returns the column equal to ``S``.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -19,7 +20,9 @@ UNMATCHED = -1
 
 def signature_matrix(num_filters: int) -> np.ndarray:
     """(F, F + 1) bool: column 0 "no fault", column ``i + 1`` fault i (all ones but row i)."""
-    num_filters = _checks.check_int("num_filters", num_filters, 1, meaning="a positive number of filters")
+    num_filters = _checks.check_int(
+        "num_filters", num_filters, 1, meaning="a positive number of filters"
+    )
     faults = ~np.eye(num_filters, dtype=bool)
     return np.hstack([np.zeros((num_filters, 1), bool), faults])
 
@@ -35,7 +38,9 @@ def isolate(symptoms: Array, matrix: Array | None = None) -> Array:
     F = symptoms.shape[-1]
     matrix = jnp.asarray(signature_matrix(F) if matrix is None else matrix, bool)
     if matrix.ndim != 2 or matrix.shape[0] != F:
-        raise ValueError(f"matrix: expected shape ({F}, K) for {F} filters, got {tuple(matrix.shape)}")
+        raise ValueError(
+            f"matrix: expected shape ({F}, K) for {F} filters, got {tuple(matrix.shape)}"
+        )
     match = jnp.all(symptoms[..., :, None] == matrix, axis=-2)  # (..., K)
     return jnp.where(jnp.any(match, axis=-1), jnp.argmax(match, axis=-1), UNMATCHED)
 
@@ -44,9 +49,11 @@ def location_symptoms(alarms: Array, location: Array, num_locations: int) -> Arr
     """Per-location symptoms (..., L) from per-filter alarms (..., F) for banks with several filters per location
     (e.g. multiplicative and additive hypotheses): set when every filter of the location alarms, so a fault there
     leaves it clear while one of its hypotheses explains the data."""
-    num_locations = _checks.check_int("num_locations", num_locations, 1, meaning="a positive number of locations")
+    num_locations = _checks.check_int(
+        "num_locations", num_locations, 1, meaning="a positive number of locations"
+    )
     _checks.check_index("location", location, num_locations, "a location index per filter")
     alarms = jnp.asarray(alarms, bool)
     location = jnp.asarray(location, jnp.int32)
-    hit = location[:, None] == jnp.arange(num_locations)[None, :]               # (F, L)
+    hit = location[:, None] == jnp.arange(num_locations)[None, :]  # (F, L)
     return jnp.all(alarms[..., :, None] | ~hit, axis=-2)

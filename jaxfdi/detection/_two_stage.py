@@ -17,6 +17,7 @@ filter's posterior ``f(m_x, u; p_x)``, not the nominal prediction (which keeps t
 A non-finite measurement component is a dead sensor: every filter takes its prediction there and reports it; all
 four decisions alarm then with the channel's label (``chi2.flag_dead`` on their own filters' dead report).
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -55,10 +56,27 @@ class TwoStageOutput(NamedTuple):
     engaged: Array
 
 
-def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], transition: Callable, field: Callable,
-                        params: Any, hypotheses: Any, modes: Any, *, detection_threshold, nis_threshold,
-                        nis_window: int, credit_threshold, mode_threshold, mm_floor, engage_cov, confirm_steps: int = 1,
-                        engage_on: str = "nis", restart_prediction: bool = True, channel_labels=None) -> Filter:
+def two_stage_isolation(
+    nominal: Filter,
+    bank_filter: Callable[[Any], Filter],
+    transition: Callable,
+    field: Callable,
+    params: Any,
+    hypotheses: Any,
+    modes: Any,
+    *,
+    detection_threshold,
+    nis_threshold,
+    nis_window: int,
+    credit_threshold,
+    mode_threshold,
+    mm_floor,
+    engage_cov,
+    confirm_steps: int = 1,
+    engage_on: str = "nis",
+    restart_prediction: bool = True,
+    channel_labels=None,
+) -> Filter:
     """The two stages (module doc) on ``x[k+1] = transition(x, u, p)``, ``x' = field(x, u, p)``, as a ``Filter``
     (``run_filter`` drives it; decisions in ``output.decisions``).
 
@@ -84,7 +102,9 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         return dual_filter(bank_filter(p), transition, field, p)
 
     mm = multiple_model(bank_filter, modes, mm_floor)
-    credits = credit_isolator(credit_threshold, relative=True, label_offset=1, confirm_steps=confirm_steps)
+    credits = credit_isolator(
+        credit_threshold, relative=True, label_offset=1, confirm_steps=confirm_steps
+    )
     mode_decision = mode_probability_detector(mode_threshold, confirm_steps=confirm_steps)
     num_modes = jax.tree_util.tree_leaves(modes)[0].shape[0]
 
@@ -94,12 +114,22 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         bank_prior = jax.vmap(lambda p: bank_filter(p).predict(start, u))(hypotheses)
         mode_prior = jax.vmap(lambda p: bank_filter(p).predict(start, u))(modes)
         uniform = jnp.full((num_modes,), 1.0 / num_modes, post.mean.dtype)
-        return DualFilterState(bank_prior, bank_prior.mean), mm.init(mode_prior.mean, mode_prior.cov, uniform)
+        return DualFilterState(bank_prior, bank_prior.mean), mm.init(
+            mode_prior.mean, mode_prior.cov, uniform
+        )
 
     def init(mean: Array, cov: Array, u0: Array):
         bank0, mm0 = slaved(GaussianState(mean, cov), u0)
-        return dict(dual=detector.init(mean, cov), nis_filter=nis_filter.init(mean, cov), nis=nis_test.init(),
-                    bank=bank0, mm=mm0, engaged=jnp.zeros((), bool), credit=credits.init(), mode=mode_decision.init())
+        return dict(
+            dual=detector.init(mean, cov),
+            nis_filter=nis_filter.init(mean, cov),
+            nis=nis_test.init(),
+            bank=bank0,
+            mm=mm0,
+            engaged=jnp.zeros((), bool),
+            credit=credits.init(),
+            mode=mode_decision.init(),
+        )
 
     def step(c, y: Array, u: Array):
         dtype = y.dtype
@@ -118,29 +148,68 @@ def two_stage_isolation(nominal: Filter, bank_filter: Callable[[Any], Filter], t
         engaged = engaged_before | (nis_decision.alarm if engage_on == "nis" else fdp_alarm)
         post = dual_info.estimator.posterior
         reset_bank, reset_mm = slaved(post, u)
-        keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged, a, b), new, old)  # noqa: E731
-        if restart_prediction:  # a bank slaved until now starts its prediction from its own posterior
-            restart = jax.vmap(lambda p, m: transition(m, u, p))(hypotheses, bank_info.estimator.filtered_mean)
+        keep = lambda new, old: jax.tree_util.tree_map(
+            lambda a, b: jnp.where(engaged, a, b), new, old
+        )
+        if (
+            restart_prediction
+        ):  # a bank slaved until now starts its prediction from its own posterior
+            restart = jax.vmap(lambda p, m: transition(m, u, p))(
+                hypotheses, bank_info.estimator.filtered_mean
+            )
             bank = bank._replace(prediction=jnp.where(engaged_before, bank.prediction, restart))
         bank, mm_state = keep(bank, reset_bank), keep(mm_state, reset_mm)
         credit_state, credit_out = credits.step(c["credit"], bank_info.detection_parameter)
         mode_state, mode_out = mode_decision.step(c["mode"], mm_info.mode_prob)
-        idle = lambda new, fresh: jax.tree_util.tree_map(lambda a, b: jnp.where(engaged_before, a, b), new, fresh)  # noqa: E731
-        credit_state, mode_state = idle(credit_state, credits.init()), idle(mode_state, mode_decision.init())
+        idle = lambda new, fresh: jax.tree_util.tree_map(
+            lambda a, b: jnp.where(engaged_before, a, b), new, fresh
+        )
+        credit_state, mode_state = (
+            idle(credit_state, credits.init()),
+            idle(mode_state, mode_decision.init()),
+        )
         labels = jnp.full(y.shape, -1, jnp.int32) if channel_labels is None else channel_labels
         dead = jnp.isnan  # the filters' dead report: NaN innovation on a dead component
         decisions = (
-            flag_dead(Decision(fdp, fdp_alarm, no_label, nan), dead(dual_info.estimator.innovation), labels),
+            flag_dead(
+                Decision(fdp, fdp_alarm, no_label, nan),
+                dead(dual_info.estimator.innovation),
+                labels,
+            ),
             flag_dead(nis_decision._replace(estimate=nan), dead(nis_info.innovation), labels),
-            flag_dead(Decision(credit_out.statistic, engaged_before & credit_out.alarm, credit_out.label, nan),
-                      jnp.any(dead(bank_info.estimator.innovation), axis=0), labels),
-            flag_dead(Decision(mode_out.statistic, engaged_before & mode_out.alarm, mode_out.label, nan),
-                      mm_info.dead, labels),
+            flag_dead(
+                Decision(
+                    credit_out.statistic, engaged_before & credit_out.alarm, credit_out.label, nan
+                ),
+                jnp.any(dead(bank_info.estimator.innovation), axis=0),
+                labels,
+            ),
+            flag_dead(
+                Decision(mode_out.statistic, engaged_before & mode_out.alarm, mode_out.label, nan),
+                mm_info.dead,
+                labels,
+            ),
         )
-        healthy = dual_info.healthy & nis_info.healthy & jnp.all(bank_info.healthy) & mm_info.healthy
-        new = dict(dual=dual, nis_filter=nis_filter_state, nis=nis_state, bank=bank, mm=mm_state, engaged=engaged,
-                   credit=credit_state, mode=mode_state)
-        return new, TwoStageOutput(decisions, jnp.stack([fdp, nis_decision.statistic]), healthy,
-                                   bank_info.detection_parameter, mm_info.mode_prob, engaged_before)
+        healthy = (
+            dual_info.healthy & nis_info.healthy & jnp.all(bank_info.healthy) & mm_info.healthy
+        )
+        new = dict(
+            dual=dual,
+            nis_filter=nis_filter_state,
+            nis=nis_state,
+            bank=bank,
+            mm=mm_state,
+            engaged=engaged,
+            credit=credit_state,
+            mode=mode_state,
+        )
+        return new, TwoStageOutput(
+            decisions,
+            jnp.stack([fdp, nis_decision.statistic]),
+            healthy,
+            bank_info.detection_parameter,
+            mm_info.mode_prob,
+            engaged_before,
+        )
 
     return Filter(init, step)

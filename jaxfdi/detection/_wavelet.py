@@ -15,6 +15,7 @@ Denoising thresholds the details and reconstructs:
 A block is complete only at its last sample, so decisions are once per block (``block_alarms``): detection lags the
 onset by at most ``2^M`` steps; a block uses only its own samples (causal at block resolution).
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -27,12 +28,15 @@ MODES = ("hard", "soft", "none")
 
 
 def _check(statistic: Array, levels: int) -> Array:
-    levels = _checks.check_int("levels", levels, 1, meaning="an integer M >= 1 (blocks of 2^M samples)")
+    levels = _checks.check_int(
+        "levels", levels, 1, meaning="an integer M >= 1 (blocks of 2^M samples)"
+    )
     _checks.check_real("statistic", statistic, "a real statistic of shape (T, ...)")
     statistic = jnp.asarray(statistic)
     if statistic.ndim < 1 or statistic.shape[0] % (2**levels):
         raise ValueError(
-            f"statistic: expected shape (T, ...) with T a multiple of 2^levels = {2**levels}, got {tuple(statistic.shape)}"
+            f"statistic: expected shape (T, ...) with T a multiple of 2^levels = {2**levels}, got "
+            f"{tuple(statistic.shape)}"
         )
     return statistic
 
@@ -73,8 +77,13 @@ def sample_detail_sigma(statistic: Array, levels: int, window: int) -> Array:
     blocks within the first ``window`` steps of ``statistic`` (T, ...): Lee and Lyou's sigma, from a fault-free
     calibration window."""
     x = _check(statistic, levels)
-    window = _checks.check_int("window", window, 2**levels, x.shape[0],
-                               meaning=f"a number of steps in [2^levels = {2**levels}, T = {x.shape[0]}]")
+    window = _checks.check_int(
+        "window",
+        window,
+        2**levels,
+        x.shape[0],
+        meaning=f"a number of steps in [2^levels = {2**levels}, T = {x.shape[0]}]",
+    )
     blocks = window // 2**levels
     if blocks < 2:
         raise ValueError(f"window: expected at least two blocks of {2**levels} steps, got {window}")
@@ -90,9 +99,11 @@ def causal_detail_sigma(statistic: Array, levels: int, window: int, prior_sigma:
     estimate = sample_detail_sigma(x, levels, window)
     size = 2**levels
     B = x.shape[0] // size
-    block_end = (jnp.arange(B) + 1) * size          # a block's decision is made at its last step
-    prior = jnp.broadcast_to(jnp.asarray(prior_sigma, estimate.dtype).reshape(
-        (levels,) + (1,) * (estimate.ndim - 1)), estimate.shape)
+    block_end = (jnp.arange(B) + 1) * size  # a block's decision is made at its last step
+    prior = jnp.broadcast_to(
+        jnp.asarray(prior_sigma, estimate.dtype).reshape((levels,) + (1,) * (estimate.ndim - 1)),
+        estimate.shape,
+    )
     after = (block_end > (window // size) * size).reshape((B,) + (1,) * estimate.ndim)
     return jnp.where(after, estimate[None], prior[None])
 
@@ -102,8 +113,13 @@ def soft_threshold(x: Array, threshold: Array) -> Array:
     return jnp.sign(x) * jnp.maximum(jnp.abs(x) - threshold, 0.0)
 
 
-def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: Array | None = None,
-                 c_mult: float = 2.0) -> Array:
+def haar_denoise(
+    statistic: Array,
+    levels: int = 2,
+    mode: str = "soft",
+    sigma: Array | None = None,
+    c_mult: float = 2.0,
+) -> Array:
     """Denoise ``statistic`` (T, ...) block by block (blocks of ``2^levels``; module docstring).
 
     Args:
@@ -126,15 +142,27 @@ def haar_denoise(statistic: Array, levels: int = 2, mode: str = "soft", sigma: A
         details = [jnp.zeros_like(d) for d in details]
     elif mode == "soft":
         if sigma is None:
-            raise ValueError("sigma: soft thresholding needs the (M,) detail standard deviations (see chi2_detail_sigma)")
+            raise ValueError(
+                "sigma: soft thresholding needs the (M,) detail standard deviations (see chi2_detail_sigma)"
+            )
         sigma = jnp.asarray(sigma, approx.dtype)
         B = approx.shape[0]
-        per_block = sigma.ndim >= 2 and sigma.shape[:2] == (B, levels) and sigma.shape[2:] in ((), approx.shape[1:])
-        if not per_block and (sigma.shape[:1] != (levels,) or sigma.shape[1:] not in ((), approx.shape[1:])):
-            raise ValueError(f"sigma: expected shape ({levels},), ({levels}, *{approx.shape[1:]}) or per block "
-                             f"({B}, {levels}[, *{approx.shape[1:]}]), got {tuple(sigma.shape)}")
+        per_block = (
+            sigma.ndim >= 2
+            and sigma.shape[:2] == (B, levels)
+            and sigma.shape[2:] in ((), approx.shape[1:])
+        )
+        if not per_block and (
+            sigma.shape[:1] != (levels,) or sigma.shape[1:] not in ((), approx.shape[1:])
+        ):
+            raise ValueError(
+                f"sigma: expected shape ({levels},), ({levels}, *{approx.shape[1:]}) or per block "
+                f"({B}, {levels}[, *{approx.shape[1:]}]), got {tuple(sigma.shape)}"
+            )
         if per_block:  # (B, M, ...) -> scale j's threshold broadcast over that block's details
-            details = [soft_threshold(d, c_mult * sigma[:, j][:, None]) for j, d in enumerate(details)]
+            details = [
+                soft_threshold(d, c_mult * sigma[:, j][:, None]) for j, d in enumerate(details)
+            ]
         else:
             details = [soft_threshold(d, c_mult * sigma[j]) for j, d in enumerate(details)]
     return haar_reconstruct(approx, details)

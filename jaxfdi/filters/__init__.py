@@ -3,20 +3,21 @@
 Gaussian filters (KF, EKF, UKF), the multiple-model filters built on them (IMM, MM), the two-stage (bias) Kalman
 filter, optimal or robust to an unknown input, and the unbiased minimum-variance filter decoupling an unknown input.
 """
+
+from jaxfdi._riccati import solve_discrete_are, steady_state_kalman
 from jaxfdi.filters._base import Filter, FilterInfo, GaussianState, run_filter
 from jaxfdi.filters._ekf import extended_kalman_filter
 from jaxfdi.filters._imm import interacting_multiple_model
 from jaxfdi.filters._kalman import kalman_filter
-from jaxfdi.filters._time_varying import time_varying
 from jaxfdi.filters._mm import multiple_model
 from jaxfdi.filters._posterior import init_from_posterior
 from jaxfdi.filters._smoother import rts_smoother
 from jaxfdi.filters._sqrt_kalman import sqrt_kalman_filter
 from jaxfdi.filters._sqrt_ukf import sqrt_unscented_kalman_filter
+from jaxfdi.filters._time_varying import time_varying
 from jaxfdi.filters._tskf import actuator_direction, sensor_direction, two_stage_kalman_filter
 from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.filters._unknown_input import unknown_input_filter
-from jaxfdi._riccati import solve_discrete_are, steady_state_kalman
 
 __all__ = [
     "Filter",

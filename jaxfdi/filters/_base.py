@@ -9,6 +9,7 @@ innovation for it and ``nis = +inf``, an alarm for every detector. Without ``mis
 is updated as if it had been measured (data-independent covariances, one for all Monte Carlo runs, optimistic while
 the channel is dead); ``missing_measurements=True`` excludes it exactly.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -133,8 +134,13 @@ def gaussian_filter(
         prediction = predict(post.posterior, u)
         # the step's health adds P[k|k] positive definite, a finite prediction and likelihood (an overflowing outlier)
         chol_P = _linalg.cholesky(post.filtered_cov, unroll_factorizations)
-        healthy = (post.healthy & _linalg.cholesky_is_finite(chol_P) & jnp.all(jnp.isfinite(prediction.mean))
-                   & ~jnp.isnan(post.nis) & jnp.isfinite(post.log_likelihood))
+        healthy = (
+            post.healthy
+            & _linalg.cholesky_is_finite(chol_P)
+            & jnp.all(jnp.isfinite(prediction.mean))
+            & ~jnp.isnan(post.nis)
+            & jnp.isfinite(post.log_likelihood)
+        )
         return prediction, post._replace(healthy=healthy)
 
     return Filter(gaussian_init(n), step, update, predict)
@@ -149,7 +155,9 @@ def gaussian_init(n: int, name: str = "filter") -> Callable[[Array, Array], Gaus
     return init
 
 
-def check_gaussian(mean: Array, cov: Array, n: int, names: tuple[str, str] = ("mean", "cov")) -> tuple[Array, Array]:
+def check_gaussian(
+    mean: Array, cov: Array, n: int, names: tuple[str, str] = ("mean", "cov")
+) -> tuple[Array, Array]:
     """A prior ``N(mean, cov)``: real finite ``mean`` (n,), covariance ``cov`` (n, n), returned in one float dtype (an
     integer mean must not make the covariance integer)."""
     _checks.check_real(names[0], mean, "a real initial state mean")
@@ -171,8 +179,10 @@ def check_step_inputs(y: Array, u: Array, m: int, nu: int | None) -> None:
 def check_filter(filt: Any, name: str = "filt") -> None:
     """``filt`` is a ``Filter`` (what ``kalman_filter`` and friends return)."""
     if not isinstance(filt, Filter):
-        raise TypeError(f"{name}: expected a Filter(init, step, ...) such as kalman_filter(model) returns, "
-                        f"got {_checks.received(filt)}")
+        raise TypeError(
+            f"{name}: expected a Filter(init, step, ...) such as kalman_filter(model) returns, "
+            f"got {_checks.received(filt)}"
+        )
 
 
 def check_sequences(ys: Any, us: Any, ys_shape: str, us_shapes: str) -> None:
@@ -258,9 +268,13 @@ def run_filter(
     if ys.ndim == 3:
         return _run_batch(filt, init_state, ys, us, parallel, shared_covariance)
     if ys.ndim != 2:
-        raise ValueError(f"ys: expected shape (T, m) for one run or (N, T, m) for N runs, got {tuple(ys.shape)}")
+        raise ValueError(
+            f"ys: expected shape (T, m) for one run or (N, T, m) for N runs, got {tuple(ys.shape)}"
+        )
     if shared_covariance not in (True, False, "auto"):
-        raise ValueError(f"shared_covariance: expected True, False or 'auto', got {shared_covariance!r}")
+        raise ValueError(
+            f"shared_covariance: expected True, False or 'auto', got {shared_covariance!r}"
+        )
     if parallel:
         return _check_parallel(filt)(init_state, ys, us)
     if us is None:
@@ -269,14 +283,19 @@ def run_filter(
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
     _checks.check_same_length(("ys", "us"), ys, us)
-    if not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves((init_state, ys, us))):
+    if not any(
+        isinstance(leaf, jax.core.Tracer)
+        for leaf in jax.tree_util.tree_leaves((init_state, ys, us))
+    ):
         with _one_covariance():
             return _scan_filter(filt, init_state, ys, us)
     closed_over = jax.make_jaxpr(filt.step)(init_state, ys[0], us[0]).consts
     if _only_staged(closed_over) and _only_staged(jax.tree_util.tree_leaves((init_state, ys, us))):
         with _one_covariance():  # under jit alone: still one sequence
             return _scan_filter.__wrapped__(filt, init_state, ys, us)
-    if filt.batch is not None and _only_staged(closed_over):  # a jax.vmap over runs reaches the kernel
+    if filt.batch is not None and _only_staged(
+        closed_over
+    ):  # a jax.vmap over runs reaches the kernel
         return _batchable_scan(filt)(init_state, ys, us)
     return _scan_filter.__wrapped__(filt, init_state, ys, us)  # inline, written out (_linalg)
 
@@ -290,7 +309,9 @@ def _one_covariance():
 
 def _only_staged(values) -> bool:
     """Every tracer among ``values`` is ``jit``'s, none an outer ``vmap``'s or ``grad``'s (written-out algebra)."""
-    return all(isinstance(v, DynamicJaxprTracer) or not isinstance(v, jax.core.Tracer) for v in values)
+    return all(
+        isinstance(v, DynamicJaxprTracer) or not isinstance(v, jax.core.Tracer) for v in values
+    )
 
 
 def _batchable_scan(filt: Filter) -> Callable[[Any, Array, Array], tuple[Any, Any]]:
@@ -307,10 +328,15 @@ def _batchable_scan(filt: Filter) -> Callable[[Any, Array, Array], tuple[Any, An
     @batchable.def_vmap
     def _over_runs(axis_size, in_batched, init_state, ys, us):
         state_batched, ys_batched, us_batched = in_batched
-        if not isinstance(init_state, GaussianState) and any(jax.tree_util.tree_leaves(state_batched)):
+        if not isinstance(init_state, GaussianState) and any(
+            jax.tree_util.tree_leaves(state_batched)
+        ):
             axes = jax.tree_util.tree_map(lambda batched: 0 if batched else None, state_batched)
-            out = jax.vmap(scan, in_axes=(axes, 0 if ys_batched else None, 0 if us_batched else None))(
-                init_state, ys, us)  # a kernel takes one prior for all runs (or a Gaussian one per run)
+            out = jax.vmap(
+                scan, in_axes=(axes, 0 if ys_batched else None, 0 if us_batched else None)
+            )(
+                init_state, ys, us
+            )  # a kernel takes one prior for all runs (or a Gaussian one per run)
         else:
             ys = ys if ys_batched else jnp.broadcast_to(ys, (axis_size,) + ys.shape)
             out = _run_batch(filt, init_state, ys, us, False, False)
@@ -326,26 +352,38 @@ def _batchable_scan(filt: Filter) -> Callable[[Any, Array, Array], tuple[Any, An
 
 def _check_parallel(filt: Filter) -> Callable[[Any, Array, Array | None], tuple[Any, Any]]:
     if filt.parallel is None:
-        raise ValueError("parallel: this filter has no parallel-in-time form; the associative scan is the linear "
-                         "Kalman filter's, kalman_filter(model, missing_measurements=True)")
+        raise ValueError(
+            "parallel: this filter has no parallel-in-time form; the associative scan is the linear "
+            "Kalman filter's, kalman_filter(model, missing_measurements=True)"
+        )
     return filt.parallel
 
 
 _COVARIANCE_FIELDS = ("predicted_cov", "filtered_cov", "innovation_cov")
 
 
-def _run_batch(filt: Filter, init_state: Any, ys: Array, us: Array | None, parallel: bool,
-               shared_covariance: bool | str) -> tuple[Any, Any]:
+def _run_batch(
+    filt: Filter,
+    init_state: Any,
+    ys: Array,
+    us: Array | None,
+    parallel: bool,
+    shared_covariance: bool | str,
+) -> tuple[Any, Any]:
     """``run_filter`` over N runs, ``ys`` (N, T, m)."""
     if us is None:
         us = jnp.zeros(ys.shape[1:2] + (0,), ys.dtype)
     us = jnp.asarray(us)
     if us.ndim not in (2, 3):
-        raise ValueError(f"us: expected shape (T, nu) shared or (N, T, nu) per run, got {tuple(us.shape)}")
+        raise ValueError(
+            f"us: expected shape (T, nu) shared or (N, T, nu) per run, got {tuple(us.shape)}"
+        )
     if us.ndim == 3 and us.shape[0] != ys.shape[0]:
         raise ValueError(f"us: expected {ys.shape[0]} runs like ys, got shape {tuple(us.shape)}")
     if shared_covariance not in (True, False, "auto"):
-        raise ValueError(f"shared_covariance: expected True, False or 'auto', got {shared_covariance!r}")
+        raise ValueError(
+            f"shared_covariance: expected True, False or 'auto', got {shared_covariance!r}"
+        )
     us_axis = 0 if us.ndim == 3 else None
     if parallel:
         return jax.vmap(_check_parallel(filt), in_axes=(None, 0, us_axis))(init_state, ys, us)
@@ -358,27 +396,39 @@ def _run_batch(filt: Filter, init_state: Any, ys: Array, us: Array | None, paral
     init_axes = _prior_axes(init_state, ys.shape[0]) if gaussian else None
     per_run_prior = init_axes is not None and init_axes != GaussianState(None, None)
     if per_run_prior and shared_covariance is True and init_axes.cov is not None:
-        raise ValueError("shared_covariance: the runs have their own initial covariance, so their covariances "
-                         "differ; use shared_covariance=False or 'auto'")
+        raise ValueError(
+            "shared_covariance: the runs have their own initial covariance, so their covariances "
+            "differ; use shared_covariance=False or 'auto'"
+        )
     if filt.batch is not None and (per_run_prior or not filt.batch.per_run_only):
         return _kernel_scan(filt.batch, init_state, ys, us)
     init_axes = init_axes if per_run_prior else None
     per_run_cov = per_run_prior and init_axes.cov is not None
     u = us[0, 0] if us_axis == 0 else us[0]
-    shared = (shared_covariance is not False and gaussian and not per_run_cov
-              and not _covariance_sees_data(filt, init_state, ys[0, 0], u, us_axis == 0))
+    shared = (
+        shared_covariance is not False
+        and gaussian
+        and not per_run_cov
+        and not _covariance_sees_data(filt, init_state, ys[0, 0], u, us_axis == 0)
+    )
     if shared_covariance is True and not shared:
-        raise ValueError("shared_covariance: the covariances depend on the run (nonlinear filter, "
-                         "missing_measurements=True or per-run model); use shared_covariance=False")
+        raise ValueError(
+            "shared_covariance: the covariances depend on the run (nonlinear filter, "
+            "missing_measurements=True or per-run model); use shared_covariance=False"
+        )
     return _batch_scan(filt, init_state, ys, us, us_axis, shared, init_axes)
 
 
-def _covariance_sees_data(filt: Filter, prior: GaussianState, y: Array, u: Array, per_run_inputs: bool) -> bool:
+def _covariance_sees_data(
+    filt: Filter, prior: GaussianState, y: Array, u: Array, per_run_inputs: bool
+) -> bool:
     """Whether a Gaussian filter's covariances depend on a run's data: ``dce_jaxpr`` of the step says which inputs the
     covariances need; none of mean, ``y``, per-run inputs: shared by all runs with one ``P0`` (linear KF)."""
     mean, cov = (jnp.asarray(leaf) for leaf in prior)
-    step = lambda mean, cov, y, u: filt.step(GaussianState(mean, cov), y, u)  # noqa: E731
-    closed, out_shape = jax.make_jaxpr(step, return_shape=True)(mean[0] if mean.ndim == 2 else mean, cov, y, u)
+    step = lambda mean, cov, y, u: filt.step(GaussianState(mean, cov), y, u)
+    closed, out_shape = jax.make_jaxpr(step, return_shape=True)(
+        mean[0] if mean.ndim == 2 else mean, cov, y, u
+    )
     structure = jax.tree.structure(out_shape)
     state, info = jax.tree.unflatten(structure, range(structure.num_leaves))
     covariances = {state.cov, *(getattr(info, name) for name in _COVARIANCE_FIELDS)}
@@ -390,22 +440,30 @@ def _prior_axes(init_state: GaussianState, num_runs: int) -> GaussianState:
     """Which of ``mean``/``cov`` carry a run axis (0) or are shared (None), checked against the run count."""
     mean_shape, cov_shape = _checks.shape_of(init_state.mean), _checks.shape_of(init_state.cov)
     if len(mean_shape) not in (1, 2) or len(cov_shape) not in (2, 3):
-        raise ValueError(f"init_state: expected mean (n,) or (N, n) and cov (n, n) or (N, n, n), got shapes "
-                         f"{mean_shape} and {cov_shape}")
+        raise ValueError(
+            f"init_state: expected mean (n,) or (N, n) and cov (n, n) or (N, n, n), got shapes "
+            f"{mean_shape} and {cov_shape}"
+        )
     for name, shape, per_run_ndim in (("mean", mean_shape, 2), ("cov", cov_shape, 3)):
         if len(shape) == per_run_ndim and shape[0] != num_runs:
-            raise ValueError(f"init_state.{name}: a per-run prior needs a leading axis of {num_runs} runs (as ys), "
-                             f"got shape {shape}")
+            raise ValueError(
+                f"init_state.{name}: a per-run prior needs a leading axis of {num_runs} runs (as ys), "
+                f"got shape {shape}"
+            )
     return GaussianState(0 if len(mean_shape) == 2 else None, 0 if len(cov_shape) == 3 else None)
 
 
 @partial(jax.jit, static_argnums=(0, 4, 5, 6))
-def _batch_scan(filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, shared: bool, init_axes=None):
+def _batch_scan(
+    filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, shared: bool, init_axes=None
+):
     """``vmap`` of the scan over runs; with ``shared`` covariances their recursion is one sequence's
     (``_one_covariance``: engine KF, 100 runs, compile 0.75 -> 0.33 s, run 11.2 -> 9.7 ms)."""
     if shared:
         final_axes = GaussianState(0, None)
-        info_axes = FilterInfo(*(None if name in _COVARIANCE_FIELDS else 0 for name in FilterInfo._fields))
+        info_axes = FilterInfo(
+            *(None if name in _COVARIANCE_FIELDS else 0 for name in FilterInfo._fields)
+        )
     else:
         final_axes = info_axes = 0
     with _one_covariance() if shared else contextlib.nullcontext():
@@ -413,7 +471,9 @@ def _batch_scan(filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, sh
             run_one = partial(_scan_filter.__wrapped__, filt, init_state)
             return jax.vmap(run_one, in_axes=(0, us_axis), out_axes=(final_axes, info_axes))(ys, us)
         run_one = partial(_scan_filter.__wrapped__, filt)
-        return jax.vmap(run_one, in_axes=(init_axes, 0, us_axis), out_axes=(final_axes, info_axes))(init_state, ys, us)
+        return jax.vmap(run_one, in_axes=(init_axes, 0, us_axis), out_axes=(final_axes, info_axes))(
+            init_state, ys, us
+        )
 
 
 @partial(jax.jit, static_argnums=0)
@@ -425,20 +485,26 @@ def kernel_scan(kernel: BatchKernel, init_state: Any, ys: Array, us: Array):
     """A ``BatchKernel``'s scan over ``ys`` (N, T, m), ``us`` (T, nu) or (N, T, nu): what ``vmap(run_filter)`` returns
     (not jitted: callers jit)."""
     num_runs, num_steps = ys.shape[:2]
-    ys = jnp.moveaxis(ys, 0, -1)                                          # (T, m, N)
-    us = jnp.moveaxis(us, 0, -1) if us.ndim == 3 else us[..., None]       # (T, nu, N or 1)
+    ys = jnp.moveaxis(ys, 0, -1)  # (T, m, N)
+    us = jnp.moveaxis(us, 0, -1) if us.ndim == 3 else us[..., None]  # (T, nu, N or 1)
     carry = kernel.pack(init_state, num_runs)
     if not kernel.info_runs_first:
         final, info = jax.lax.scan(lambda state, yu: kernel.step(state, *yu), carry, (ys, us))
         return kernel.unpack_state(final), kernel.unpack_info(info)
-    info_shapes = jax.eval_shape(lambda state, y, u: kernel.step(state, y, u)[1], carry, ys[0], us[0])
-    buffers = jax.tree.map(lambda a: jnp.zeros((a.shape[0], num_steps) + a.shape[1:], a.dtype), info_shapes)
+    info_shapes = jax.eval_shape(
+        lambda state, y, u: kernel.step(state, y, u)[1], carry, ys[0], us[0]
+    )
+    buffers = jax.tree.map(
+        lambda a: jnp.zeros((a.shape[0], num_steps) + a.shape[1:], a.dtype), info_shapes
+    )
 
     def body(state_and_buffers, yuk):
         state, buffers = state_and_buffers
         y, u, k = yuk
         state, info = kernel.step(state, y, u)
-        buffers = jax.tree.map(lambda b, v: jax.lax.dynamic_update_index_in_dim(b, v, k, 1), buffers, info)
+        buffers = jax.tree.map(
+            lambda b, v: jax.lax.dynamic_update_index_in_dim(b, v, k, 1), buffers, info
+        )
         return (state, buffers), None
 
     (final, info), _ = jax.lax.scan(body, (carry, buffers), (ys, us, jnp.arange(num_steps)))

@@ -3,6 +3,7 @@
 ``H = dh/dx (m, u)``, ``r = y - h(m, u)``, Joseph update as ``kalman``; ``F = df/dx (m+, u)``, ``m' = f(m+, u)``,
 ``P' = F P+ F^T + Q``. Jacobians are never hand-typed (printed ones carry typos).
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -11,12 +12,24 @@ import jax
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, GaussianState, ModelFunction, check_step_inputs, gaussian_filter
+from jaxfdi.filters._base import (
+    Filter,
+    GaussianState,
+    ModelFunction,
+    check_step_inputs,
+    gaussian_filter,
+)
 from jaxfdi.filters._kalman import joseph_update
 
 
-def extended_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Array, params: Any = None,
-                           missing_measurements: bool = False) -> Filter:
+def extended_kalman_filter(
+    f: ModelFunction,
+    h: ModelFunction,
+    Q: Array,
+    R: Array,
+    params: Any = None,
+    missing_measurements: bool = False,
+) -> Filter:
     """EKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
     Args:

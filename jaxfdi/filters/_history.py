@@ -2,6 +2,7 @@
 carry, and a fixed-length scan re-running a filter over it (for detectors restarting their estimator a few steps
 before a detection, e.g. Park et al. 2004's hybrid parity-space FDI). Bounded: ``jit``/``vmap`` friendly.
 """
+
 from __future__ import annotations
 
 from typing import Any, NamedTuple
@@ -32,8 +33,9 @@ class RingBuffer(NamedTuple):
 def ring_buffer(length: int, example: Any) -> RingBuffer:
     """An empty buffer of ``length`` entries shaped like ``example``."""
     length = _checks.check_int("length", length, 1, meaning="a positive number of entries")
-    data = jax.tree_util.tree_map(lambda leaf: jnp.zeros((int(length),) + jnp.shape(leaf), jnp.result_type(leaf)),
-                                  example)
+    data = jax.tree_util.tree_map(
+        lambda leaf: jnp.zeros((int(length),) + jnp.shape(leaf), jnp.result_type(leaf)), example
+    )
     return RingBuffer(data, jnp.zeros((), jnp.int32))
 
 
@@ -54,7 +56,9 @@ def ordered(buffer: RingBuffer) -> tuple[Any, Array]:
     return entries, jnp.arange(L) < jnp.minimum(buffer.count, L)
 
 
-def replay_filter(filt, state: Any, ys: Array, us: Array, valid: Array | None = None) -> tuple[Any, Any]:
+def replay_filter(
+    filt, state: Any, ys: Array, us: Array, valid: Array | None = None
+) -> tuple[Any, Any]:
     """Re-run ``filt`` from ``state`` (prior of the first entry) over (L, ...) stored ``ys``, ``us``; ``valid ==
     False`` steps keep the state. Returns the final state and the (L, ...) infos (fixed-length scan)."""
     ys, us = jnp.asarray(ys), jnp.asarray(us)

@@ -14,6 +14,7 @@ The moment-matched ``x = sum_j mu_j x_j`` is an output, never fed back. The bank
 over ``mode_params`` (leading mode axis): ``kalman_filter`` over stacked ``LinearGaussianModel`` s or an EKF/UKF over
 stacked params; modes share the state (so mixing is defined). Steps 1-4: filterpy's ``IMMEstimator.update, .predict``.
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable
@@ -24,19 +25,29 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.filters._base import Filter
-from jaxfdi.filters._mixture import (IMMInfo, IMMState, bank_init, bank_predict, bank_update, bayes_mode_update,
-                                     check_distribution, check_mode_filter, finish_mixture_step, mixing, moment_match,
-                                     num_modes, safe_log)
 from jaxfdi.filters._imm_batch import kalman_imm_batch_kernel, supports
 from jaxfdi.filters._kalman import kalman_filter
+from jaxfdi.filters._mixture import (
+    IMMInfo,
+    IMMState,
+    bank_init,
+    bank_predict,
+    bank_update,
+    bayes_mode_update,
+    check_distribution,
+    check_mode_filter,
+    finish_mixture_step,
+    mixing,
+    moment_match,
+    num_modes,
+    safe_log,
+)
 from jaxfdi.filters._posterior import posterior_input
 from jaxfdi.models._linear import LinearGaussianModel
 
 
 def interacting_multiple_model(
-    mode_filter: Callable[[Any], Filter],
-    mode_params: Any,
-    transition: Array,
+    mode_filter: Callable[[Any], Filter], mode_params: Any, transition: Array
 ) -> Filter:
     """IMM filter over a bank of mode-matched Gaussian filters.
 
@@ -60,35 +71,54 @@ def interacting_multiple_model(
     _checks.check_real("transition", transition, "a real row-stochastic matrix")
     transition = jnp.asarray(transition)
     M = transition.shape[0] if transition.ndim == 2 else None
-    _checks.check_shape("transition", transition, (M, M), "row-stochastic mode transition matrix pi[i, j]")
+    _checks.check_shape(
+        "transition", transition, (M, M), "row-stochastic mode transition matrix pi[i, j]"
+    )
     num_modes(mode_params, expected=M)
     check_mode_filter(mode_filter, mode_params)
     check_distribution("transition", transition, axis=1)
     log_transition = safe_log(transition)
     batch = None
-    if mode_filter is kalman_filter and isinstance(mode_params, LinearGaussianModel) and supports(mode_params):
+    if (
+        mode_filter is kalman_filter
+        and isinstance(mode_params, LinearGaussianModel)
+        and supports(mode_params)
+    ):
         batch = kalman_imm_batch_kernel(mode_params, log_transition)  # run_filter's path
 
-    def init(mean: Array, cov: Array, mode_prob: Array, *, posterior: bool = False, u: Array | None = None) -> IMMState:
+    def init(
+        mean: Array,
+        cov: Array,
+        mode_prob: Array,
+        *,
+        posterior: bool = False,
+        u: Array | None = None,
+    ) -> IMMState:
         state = bank_init(mode_filter, mode_params, M, mean, cov, mode_prob)
         if not posterior:
             if u is not None:
-                raise ValueError("u: only used with posterior=True (the input of the first prediction)")
+                raise ValueError(
+                    "u: only used with posterior=True (the input of the first prediction)"
+                )
             return state
         # steps 3-4 of the cycle from the posteriors (state holds them): mix, then predict
         dtype = state.mode_mean.dtype
         log_cbar, weights = mixing(state.log_mode_prob, log_transition.astype(dtype))
-        mixed_mean, mixed_cov = jax.vmap(moment_match, in_axes=(1, None, None))(weights, state.mode_mean,
-                                                                                 state.mode_cov)
-        prediction = bank_predict(mode_filter, mode_params, mixed_mean, mixed_cov, posterior_input(u, dtype))
+        mixed_mean, mixed_cov = jax.vmap(moment_match, in_axes=(1, None, None))(
+            weights, state.mode_mean, state.mode_cov
+        )
+        prediction = bank_predict(
+            mode_filter, mode_params, mixed_mean, mixed_cov, posterior_input(u, dtype)
+        )
         return IMMState(prediction.mean, prediction.cov, log_cbar.astype(dtype))
 
     def step(state: IMMState, y: Array, u: Array) -> tuple[IMMState, IMMInfo]:
         post = bank_update(mode_filter, mode_params, state, y, u)
         log_mu, log_lik = bayes_mode_update(state.log_mode_prob, post.log_likelihood)
         log_cbar, weights = mixing(log_mu, log_transition.astype(log_mu.dtype))
-        mixed_mean, mixed_cov = jax.vmap(moment_match, in_axes=(1, None, None))(weights, post.filtered_mean,
-                                                                                  post.filtered_cov)
+        mixed_mean, mixed_cov = jax.vmap(moment_match, in_axes=(1, None, None))(
+            weights, post.filtered_mean, post.filtered_cov
+        )
         prediction = bank_predict(mode_filter, mode_params, mixed_mean, mixed_cov, u)
         return finish_mixture_step(post, log_mu, log_lik, prediction, log_cbar)
 

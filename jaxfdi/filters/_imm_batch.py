@@ -17,6 +17,7 @@ written-out products and solves into consumers and recomputes them per element (
 each (2.8x faster than ``vmap``). Engine timings (7 modes, 100 runs x 1000 steps, ``benchmarks/bench_imm.py``):
 ``benchmarks/RESULTS.md``.
 """
+
 from __future__ import annotations
 
 import math
@@ -35,7 +36,9 @@ mm, mv, tr = _linalg.soa_matmul, _linalg.soa_matvec, _linalg.soa_transpose
 
 def soa_modes(modes: LinearGaussianModel) -> LinearGaussianModel:
     """Mode models (M, rows, cols) -> (rows, cols, M, 1): mode axis behind the matrix axes, broadcast over runs."""
-    return LinearGaussianModel(*(jnp.moveaxis(jnp.asarray(leaf), 0, -1)[..., None] for leaf in modes))
+    return LinearGaussianModel(
+        *(jnp.moveaxis(jnp.asarray(leaf), 0, -1)[..., None] for leaf in modes)
+    )
 
 
 def soa_symmetrize(a: Array) -> Array:
@@ -62,7 +65,11 @@ def supports(modes: LinearGaussianModel) -> bool:
     """True when the kernel takes these stacked modes: every dimension >= 1, at most ``KERNEL_MAX_STATES`` states and
     ``_linalg.UNROLL_MAX`` outputs and inputs."""
     n, nu, m = modes.Phi.shape[-1], modes.Gamma.shape[-1], modes.C.shape[-2]
-    return 1 <= n <= KERNEL_MAX_STATES and 1 <= nu <= _linalg.UNROLL_MAX and 1 <= m <= _linalg.UNROLL_MAX
+    return (
+        1 <= n <= KERNEL_MAX_STATES
+        and 1 <= nu <= _linalg.UNROLL_MAX
+        and 1 <= m <= _linalg.UNROLL_MAX
+    )
 
 
 def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -> BatchKernel:
@@ -86,7 +93,7 @@ def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -
         u = u[:, None]
         # 1. every mode's measurement update (standard form, see the module doc)
         innovation = used_innovation(y[:, None], mv(soa.C, x) + mv(soa.D, u))
-        cross_cov = mm(P, tr(soa.C))                       # P C^T      (n, m, M, N)
+        cross_cov = mm(P, tr(soa.C))  # P C^T      (n, m, M, N)
         chol_S = _linalg.soa_cholesky(soa_symmetrize(mm(soa.C, cross_cov) + soa.R))
         G_t = _linalg.soa_solve_lower(chol_S, tr(cross_cov))  # G^T = L^-1 C P  (m, n, M, N)
         whitened = _linalg.soa_solve_lower(chol_S, innovation)
@@ -120,17 +127,30 @@ def kalman_imm_batch_kernel(modes: LinearGaussianModel, log_transition: Array) -
             & jnp.all(jnp.isfinite(mean[:, 0]), axis=0)
             & jnp.all(jnp.isfinite(next_mean), axis=(0, 1))
         )
-        info = IMMInfo(mode_prob, log_mu, mean[:, 0], cov[:, :, 0], post_mean, post_cov, mode_log_lik, log_lik,
-                       healthy, ~jnp.isfinite(y))
+        info = IMMInfo(
+            mode_prob,
+            log_mu,
+            mean[:, 0],
+            cov[:, :, 0],
+            post_mean,
+            post_cov,
+            mode_log_lik,
+            log_lik,
+            healthy,
+            ~jnp.isfinite(y),
+        )
         return IMMState(next_mean, next_cov, log_cbar.astype(log_mu.dtype)), info
 
     def unpack_state(state: IMMState) -> IMMState:
-        return IMMState(jnp.transpose(state.mode_mean, (2, 1, 0)), jnp.transpose(state.mode_cov, (3, 2, 0, 1)),
-                        state.log_mode_prob.T)
+        return IMMState(
+            jnp.transpose(state.mode_mean, (2, 1, 0)),
+            jnp.transpose(state.mode_cov, (3, 2, 0, 1)),
+            state.log_mode_prob.T,
+        )
 
     def unpack_info(info: IMMInfo) -> IMMInfo:
         """(T, ..., N) -> (N, T, ...) with the per-run field shapes of ``IMMInfo``."""
-        run_first = lambda a: jnp.moveaxis(a, -1, 0)  # noqa: E731
+        run_first = lambda a: jnp.moveaxis(a, -1, 0)
         return IMMInfo(
             mode_prob=run_first(info.mode_prob),
             log_mode_prob=run_first(info.log_mode_prob),

@@ -5,6 +5,7 @@ Update: ``r = y - C m - D u``, ``S = C P C^T + R``, ``K = P C^T S^-1``, ``m+ = m
 ``P' = Phi P+ Phi^T + Q``. With ``missing_measurements=True`` NaN components of ``y`` are skipped component-wise; a
 dead (non-finite) component is reported, never used (``filters._base``).
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -13,16 +14,37 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (Filter, FilterInfo, GaussianState, check_step_inputs, gaussian_filter,
-                                  dead_components, mask_innovation_cov, observed_mask, observed_rows, report_dead,
-                                  used_innovation)
-from jaxfdi.filters._kalman_batch import check_per_run_model, kalman_batch_kernel, per_run_leaves, supports
+from jaxfdi.filters._base import (
+    Filter,
+    FilterInfo,
+    GaussianState,
+    check_step_inputs,
+    dead_components,
+    gaussian_filter,
+    mask_innovation_cov,
+    observed_mask,
+    observed_rows,
+    report_dead,
+    used_innovation,
+)
+from jaxfdi.filters._kalman_batch import (
+    check_per_run_model,
+    kalman_batch_kernel,
+    per_run_leaves,
+    supports,
+)
 from jaxfdi.filters._parallel import parallel_scan
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
 def joseph_update(
-    mean: Array, cov: Array, y: Array, y_pred: Array, H: Array, R: Array, missing_measurements: bool = False,
+    mean: Array,
+    cov: Array,
+    y: Array,
+    y_pred: Array,
+    H: Array,
+    R: Array,
+    missing_measurements: bool = False,
     unroll: bool = True,
 ) -> FilterInfo:
     """Condition ``N(mean, cov)`` on ``y = H x + v``, ``v ~ N(0, R)``, predicted ``y_pred``.
@@ -50,14 +72,23 @@ def joseph_update(
     whitened = _linalg.whiten(chol_S, innovation, unroll)
     new_cov = _linalg.joseph_cov(cov, gain, H, R)
     new_mean = mean + mm(gain, innovation)
-    log_lik = _linalg.gaussian_log_likelihood(whitened, chol_S, num_observed if missing_measurements else y.shape[0])
+    log_lik = _linalg.gaussian_log_likelihood(
+        whitened, chol_S, num_observed if missing_measurements else y.shape[0]
+    )
     healthy = _linalg.cholesky_is_finite(chol_S) & jnp.all(jnp.isfinite(new_mean))
-    innovation, nis = report_dead(innovation, jnp.sum(whitened**2), dead_components(y, missing_measurements))
-    return FilterInfo(mean, cov, new_mean, new_cov, innovation, S, log_lik, nis, num_observed, healthy)
+    innovation, nis = report_dead(
+        innovation, jnp.sum(whitened**2), dead_components(y, missing_measurements)
+    )
+    return FilterInfo(
+        mean, cov, new_mean, new_cov, innovation, S, log_lik, nis, num_observed, healthy
+    )
 
 
-def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False,
-                  unroll_factorizations: bool = True) -> Filter:
+def kalman_filter(
+    model: LinearGaussianModel,
+    missing_measurements: bool = False,
+    unroll_factorizations: bool = True,
+) -> Filter:
     """Linear Kalman filter for a ``LinearGaussianModel``.
 
     Args:
@@ -91,44 +122,65 @@ def kalman_filter(model: LinearGaussianModel, missing_measurements: bool = False
     def update(state: GaussianState, y: Array, u: Array) -> FilterInfo:
         check_step_inputs(y, u, m, nu)
         y_pred = _linalg.matmul(model.C, state.mean) + _linalg.matmul(model.D, u)
-        return joseph_update(state.mean, state.cov, y, y_pred, model.C, model.R, missing_measurements,
-                             unroll_factorizations)
+        return joseph_update(
+            state.mean,
+            state.cov,
+            y,
+            y_pred,
+            model.C,
+            model.R,
+            missing_measurements,
+            unroll_factorizations,
+        )
 
     def predict(post: GaussianState, u: Array) -> GaussianState:
         mm = _linalg.matmul
         next_mean = mm(model.Phi, post.mean) + mm(model.Gamma, u)
-        return GaussianState(next_mean, _linalg.symmetrize(mm(mm(model.Phi, post.cov), model.Phi.T) + model.Q))
+        return GaussianState(
+            next_mean, _linalg.symmetrize(mm(mm(model.Phi, post.cov), model.Phi.T) + model.Q)
+        )
 
     filt = gaussian_filter(n, update, predict, unroll_factorizations)
     if missing_measurements:  # dead components left out exactly, as the associative scan does
         return filt._replace(parallel=partial(parallel_scan, model))
     if not supports(model):
         return filt
-    return filt._replace(batch=kalman_batch_kernel(model))  # run_filter over runs with their own prior
+    return filt._replace(
+        batch=kalman_batch_kernel(model)
+    )  # run_filter over runs with their own prior
 
 
 def _per_run_kalman_filter(model: LinearGaussianModel, missing_measurements: bool) -> Filter:
     """``kalman_filter`` of a model with a run axis on some leaves: ``init`` takes a shared or per-run prior,
     ``step`` refuses a single sequence, ``batch`` is the kernel."""
     if missing_measurements:
-        raise ValueError("missing_measurements: a model per run runs the batch kernel, which reports a non-finite "
-                         "component and keeps it out of the mean but not out of the covariance; use jax.vmap over "
-                         "kalman_filter(model_of_one_run, missing_measurements=True)")
+        raise ValueError(
+            "missing_measurements: a model per run runs the batch kernel, which reports a non-finite "
+            "component and keeps it out of the mean but not out of the covariance; use jax.vmap over "
+            "kalman_filter(model_of_one_run, missing_measurements=True)"
+        )
     model, per_run, num_runs = check_per_run_model(model)
     n = _checks.shape_of(model.Phi)[-1]
 
     def init(mean: Array, cov: Array) -> GaussianState:
-        for name, value, shapes in (("mean", mean, ((n,), (num_runs, n))), ("cov", cov, ((n, n), (num_runs, n, n)))):
+        for name, value, shapes in (
+            ("mean", mean, ((n,), (num_runs, n))),
+            ("cov", cov, ((n, n), (num_runs, n, n))),
+        ):
             _checks.check_real(name, value, "a real prior")
             _checks.check_finite(name, value, "prior")
             if _checks.shape_of(value) not in shapes:
-                raise ValueError(f"{name}: expected shape {shapes[0]} shared or {shapes[1]} per run, got "
-                                 f"{_checks.shape_of(value)}")
+                raise ValueError(
+                    f"{name}: expected shape {shapes[0]} shared or {shapes[1]} per run, got "
+                    f"{_checks.shape_of(value)}"
+                )
         dtype = jnp.result_type(model.Phi, mean, cov)
         return GaussianState(jnp.asarray(mean, dtype), jnp.asarray(cov, dtype))
 
     def step(state: GaussianState, y: Array, u: Array):
-        raise ValueError(f"model: a model with a run axis ({num_runs} runs) runs over its runs at once: pass ys of "
-                         f"shape ({num_runs}, T, m) to run_filter")
+        raise ValueError(
+            f"model: a model with a run axis ({num_runs} runs) runs over its runs at once: pass ys of "
+            f"shape ({num_runs}, T, m) to run_filter"
+        )
 
     return Filter(init, step, batch=kalman_batch_kernel(model, per_run))

@@ -13,6 +13,7 @@ Products with a shared matrix (``C``, ``Phi``) are matrix products of the whole 
 once (written-out chains would be fused into loops recomputing the inner product per element); ``G`` is stored once
 (``_linalg.materialize``). Info goes run-first into (N, T, ...) buffers (``BatchKernel.info_runs_first``).
 """
+
 from __future__ import annotations
 
 import math
@@ -21,8 +22,14 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (BatchKernel, FilterInfo, GaussianState, check_step_inputs, report_dead,
-                                  used_innovation)
+from jaxfdi.filters._base import (
+    BatchKernel,
+    FilterInfo,
+    GaussianState,
+    check_step_inputs,
+    report_dead,
+    used_innovation,
+)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 tr = _linalg.soa_transpose
@@ -52,8 +59,12 @@ def _congruence(a: Array, sym: Array) -> Array:
 
 def soa_model(model: LinearGaussianModel, per_run: LinearGaussianModel) -> LinearGaussianModel:
     """Leaves ``(rows, cols)`` -> ``(rows, cols, 1)``; ``per_run`` leaves ``(N, rows, cols)`` -> ``(rows, cols, N)``."""
-    return LinearGaussianModel(*(jnp.moveaxis(leaf, 0, -1) if batched else leaf[..., None]
-                                 for leaf, batched in zip(model, per_run)))
+    return LinearGaussianModel(
+        *(
+            jnp.moveaxis(leaf, 0, -1) if batched else leaf[..., None]
+            for leaf, batched in zip(model, per_run)
+        )
+    )
 
 
 def kalman_step_soa(model: LinearGaussianModel, state: GaussianState, y: Array, u: Array):
@@ -63,30 +74,37 @@ def kalman_step_soa(model: LinearGaussianModel, state: GaussianState, y: Array, 
     x, P = state
     m = model.C.shape[0]
     innovation = used_innovation(y, _matvec(model.C, x) + _matvec(model.D, u))
-    CP = _left_product(model.C, P)                                        # C P = (P C^T)^T, (m, n, N)
+    CP = _left_product(model.C, P)  # C P = (P C^T)^T, (m, n, N)
     S = _linalg.soa_symmetrize(_left_product(model.C, tr(CP)) + model.R)
     chol_S = _linalg.soa_cholesky(S)
-    G = _linalg.materialize(_linalg.soa_solve_lower(chol_S, CP))          # L^-1 C P, (m, n, N)
+    G = _linalg.materialize(_linalg.soa_solve_lower(chol_S, CP))  # L^-1 C P, (m, n, N)
     whitened = _linalg.soa_solve_lower(chol_S, innovation)
     post_mean = x + _matvec(tr(G), whitened)
-    post_cov = P - _linalg.soa_matmul(tr(G), G)                           # exactly symmetric
+    post_cov = P - _linalg.soa_matmul(tr(G), G)  # exactly symmetric
     next_mean = _matvec(model.Phi, post_mean) + _matvec(model.Gamma, u)
     next_cov = _linalg.soa_symmetrize(_congruence(model.Phi, post_cov) + model.Q)
     nis = jnp.sum(whitened**2, axis=0)
     log_det = 2.0 * sum(jnp.log(chol_S[i, i]) for i in range(m))
     log_likelihood = -0.5 * (nis + log_det + m * math.log(2.0 * math.pi))
-    healthy = (jnp.all(jnp.isfinite(chol_S), axis=(0, 1))
-               & jnp.all(jnp.isfinite(post_mean), axis=0)
-               & jnp.all(jnp.isfinite(_linalg.soa_cholesky(post_cov)), axis=(0, 1))
-               & jnp.all(jnp.isfinite(next_mean), axis=0)
-               & jnp.isfinite(nis) & jnp.isfinite(log_likelihood))
+    healthy = (
+        jnp.all(jnp.isfinite(chol_S), axis=(0, 1))
+        & jnp.all(jnp.isfinite(post_mean), axis=0)
+        & jnp.all(jnp.isfinite(_linalg.soa_cholesky(post_cov)), axis=(0, 1))
+        & jnp.all(jnp.isfinite(next_mean), axis=0)
+        & jnp.isfinite(nis)
+        & jnp.isfinite(log_likelihood)
+    )
     num_observed = jnp.sum(jnp.isfinite(y), axis=0).astype(jnp.int32)
     innovation, nis = report_dead(innovation, nis, ~jnp.isfinite(y))
-    info = FilterInfo(x, P, post_mean, post_cov, innovation, S, log_likelihood, nis, num_observed, healthy)
+    info = FilterInfo(
+        x, P, post_mean, post_cov, innovation, S, log_likelihood, nis, num_observed, healthy
+    )
     return GaussianState(next_mean, next_cov), info
 
 
-def kalman_batch_kernel(model: LinearGaussianModel, per_run: LinearGaussianModel | None = None) -> BatchKernel:
+def kalman_batch_kernel(
+    model: LinearGaussianModel, per_run: LinearGaussianModel | None = None
+) -> BatchKernel:
     """``BatchKernel`` of ``kalman_filter(model)`` for runs with their own prior (``pack`` takes a shared or per-run
     ``GaussianState``); ``per_run`` marks ``model``'s leaves with a leading run axis (default none). No array work
     at build time, so ``kalman_filter`` always attaches it."""
@@ -96,8 +114,10 @@ def kalman_batch_kernel(model: LinearGaussianModel, per_run: LinearGaussianModel
     def pack(state: GaussianState, num_runs: int) -> GaussianState:
         for name, leaf, batched in zip(model._fields, model, per_run):
             if batched and leaf.shape[0] != num_runs:
-                raise ValueError(f"model.{name}: a per-run leaf needs a leading axis of {num_runs} runs (as ys), "
-                                 f"got shape {tuple(leaf.shape)}")
+                raise ValueError(
+                    f"model.{name}: a per-run leaf needs a leading axis of {num_runs} runs (as ys), "
+                    f"got shape {tuple(leaf.shape)}"
+                )
         return pack_prior(state, n, num_runs)
 
     def step(state: GaussianState, y: Array, u: Array):
@@ -110,7 +130,9 @@ def kalman_batch_kernel(model: LinearGaussianModel, per_run: LinearGaussianModel
         """(T, N, ...) -> (N, T, ...): not used by the driver (``info_runs_first``)."""
         return FilterInfo(*(jnp.swapaxes(leaf, 0, 1) for leaf in info))
 
-    return BatchKernel(pack, step, unpack_state, unpack_info, per_run_only=not any(per_run), info_runs_first=True)
+    return BatchKernel(
+        pack, step, unpack_state, unpack_info, per_run_only=not any(per_run), info_runs_first=True
+    )
 
 
 def pack_prior(state: GaussianState, n: int, num_runs: int) -> GaussianState:
@@ -119,8 +141,10 @@ def pack_prior(state: GaussianState, n: int, num_runs: int) -> GaussianState:
     mean = jnp.moveaxis(mean, 0, -1) if mean.ndim == 2 else mean[:, None]
     cov = jnp.moveaxis(cov, 0, -1) if cov.ndim == 3 else cov[..., None]
     dtype = jnp.result_type(mean, cov)
-    return GaussianState(jnp.broadcast_to(mean, (n, num_runs)).astype(dtype),
-                         jnp.broadcast_to(cov, (n, n, num_runs)).astype(dtype))
+    return GaussianState(
+        jnp.broadcast_to(mean, (n, num_runs)).astype(dtype),
+        jnp.broadcast_to(cov, (n, n, num_runs)).astype(dtype),
+    )
 
 
 def unpack_state(state: GaussianState) -> GaussianState:
@@ -138,7 +162,9 @@ def per_run_leaves(model: LinearGaussianModel) -> LinearGaussianModel:
     return LinearGaussianModel(*(len(_checks.shape_of(leaf)) == 3 for leaf in model))
 
 
-def check_per_run_model(model: LinearGaussianModel) -> tuple[LinearGaussianModel, LinearGaussianModel, int]:
+def check_per_run_model(
+    model: LinearGaussianModel,
+) -> tuple[LinearGaussianModel, LinearGaussianModel, int]:
     """A model with a run axis on some leaves: ``(model in one float dtype, per_run, N)``; every leaf checked
     against the shared shapes and one ``N``."""
     per_run = per_run_leaves(model)
@@ -147,22 +173,34 @@ def check_per_run_model(model: LinearGaussianModel) -> tuple[LinearGaussianModel
     for name, leaf in zip(model._fields, model):
         shape = _checks.shape_of(leaf)
         if len(shape) not in (2, 3):
-            raise ValueError(f"model.{name}: expected a matrix, or one per run with a leading axis of "
-                             f"{num_runs}, got shape {shape}")
+            raise ValueError(
+                f"model.{name}: expected a matrix, or one per run with a leading axis of "
+                f"{num_runs}, got shape {shape}"
+            )
         if len(shape) == 3 and shape[0] != num_runs:
-            raise ValueError(f"model.{name}: every per-run leaf needs the same leading axis of runs "
-                             f"({sorted(sizes)} given), got shape {shape}")
-    first = LinearGaussianModel(*(jnp.asarray(leaf)[0] if batched else jnp.asarray(leaf)
-                                  for leaf, batched in zip(model, per_run)))
+            raise ValueError(
+                f"model.{name}: every per-run leaf needs the same leading axis of runs "
+                f"({sorted(sizes)} given), got shape {shape}"
+            )
+    first = LinearGaussianModel(
+        *(
+            jnp.asarray(leaf)[0] if batched else jnp.asarray(leaf)
+            for leaf, batched in zip(model, per_run)
+        )
+    )
     validate_linear_model(first)
     for name, leaf, batched, ref in zip(model._fields, model, per_run, first):
         if batched and _checks.shape_of(leaf)[1:] != _checks.shape_of(ref):
-            raise ValueError(f"model.{name}: expected shape ({num_runs}, *{_checks.shape_of(ref)}), got "
-                             f"{_checks.shape_of(leaf)}")
+            raise ValueError(
+                f"model.{name}: expected shape ({num_runs}, *{_checks.shape_of(ref)}), got "
+                f"{_checks.shape_of(leaf)}"
+            )
     if not supports(first):
         n, m = _checks.shape_of(first.Phi)[-1], _checks.shape_of(first.C)[0]
-        raise ValueError(f"model: a model per run runs the batch kernel, which takes up to {KERNEL_MAX_STATES} "
-                         f"states and {_linalg.UNROLL_MAX} outputs, got {n} states and {m} outputs; use "
-                         "jax.vmap over kalman_filter of each run's model")
+        raise ValueError(
+            f"model: a model per run runs the batch kernel, which takes up to {KERNEL_MAX_STATES} "
+            f"states and {_linalg.UNROLL_MAX} outputs, got {n} states and {m} outputs; use "
+            "jax.vmap over kalman_filter of each run's model"
+        )
     dtype = _checks.float_dtype(*model)
     return LinearGaussianModel(*(jnp.asarray(leaf, dtype) for leaf in model)), per_run, num_runs

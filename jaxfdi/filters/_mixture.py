@@ -5,6 +5,7 @@ A bank of M mode-matched filters is ONE Gaussian filter vmapped over a params py
 (STYLE.md rule 3), never a Python list. Mode probabilities are logs normalised by log-sum-exp: the wrong modes'
 likelihoods ``L_j = N(r_j; 0, S_j)`` of a 5-output engine are routinely below 1e-300 (1e-38 in float32).
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -65,7 +66,9 @@ def num_modes(mode_params: Any, expected: int | None = None) -> int:
     """The common leading (mode) axis of every leaf of ``mode_params``; trace-time checks."""
     leaves = jax.tree.leaves(mode_params)
     if not leaves:
-        raise ValueError("mode_params: expected a pytree of arrays with a leading mode axis M, got no arrays")
+        raise ValueError(
+            "mode_params: expected a pytree of arrays with a leading mode axis M, got no arrays"
+        )
     shapes = [_checks.shape_of(leaf) for leaf in leaves]
     size = expected if expected is not None else (shapes[0][0] if shapes[0] else None)
     for shape in shapes:
@@ -80,7 +83,9 @@ def num_modes(mode_params: Any, expected: int | None = None) -> int:
 
 def check_mode_filter(mode_filter: Callable[[Any], Filter], mode_params: Any) -> None:
     """``mode_filter`` must build a Gaussian filter (with ``update`` and ``predict``)."""
-    _checks.check_callable("mode_filter", mode_filter, "a callable params -> Filter (e.g. kalman_filter)")
+    _checks.check_callable(
+        "mode_filter", mode_filter, "a callable params -> Filter (e.g. kalman_filter)"
+    )
     filt = mode_filter(first_mode(mode_params))
     if not isinstance(filt, Filter) or filt.update is None or filt.predict is None:
         raise ValueError(
@@ -93,16 +98,22 @@ def first_mode(mode_params: Any) -> Any:
     return jax.tree.map(lambda leaf: leaf[0], mode_params)
 
 
-def bank_init(mode_filter, mode_params, M: int, mean: Array, cov: Array, mode_prob: Array) -> IMMState:
+def bank_init(
+    mode_filter, mode_params, M: int, mean: Array, cov: Array, mode_prob: Array
+) -> IMMState:
     """Per-mode priors from a shared ``(n,), (n, n)`` or per-mode ``(M, n), (M, n, n)`` initial Gaussian, validated
     by the mode filter's own ``init``; ``log mode_prob``."""
     ndim = len(_checks.shape_of(mean))
     if ndim not in (1, 2) or (ndim == 2 and _checks.shape_of(mean)[0] != M):
-        raise ValueError(f"mean: expected shape (n,) shared by the modes or ({M}, n) per mode, got {_checks.shape_of(mean)}")
+        raise ValueError(
+            f"mean: expected shape (n,) shared by the modes or ({M}, n) per mode, got {_checks.shape_of(mean)}"
+        )
     if ndim == 2:
         _checks.check_shape("cov", cov, (M, None, None), "one covariance per mode")
     axis = 0 if ndim == 2 else None
-    prior = jax.vmap(lambda p, m, c: mode_filter(p).init(m, c), in_axes=(0, axis, axis))(mode_params, mean, cov)
+    prior = jax.vmap(lambda p, m, c: mode_filter(p).init(m, c), in_axes=(0, axis, axis))(
+        mode_params, mean, cov
+    )
     _checks.check_shape("mode_prob", mode_prob, (M,), "one prior probability per mode")
     check_distribution("mode_prob", mode_prob)
     dtype = prior.mean.dtype
@@ -119,7 +130,9 @@ def check_distribution(name: str, prob: Any, axis: int = -1) -> None:
     if not np.all(np.isfinite(value)) or np.any(value < 0):
         raise ValueError(f"{name}: expected non-negative finite probabilities, got {value}")
     if np.max(np.abs(np.sum(value, axis=axis) - 1.0)) > np.sqrt(eps):
-        what = "every row to sum to 1 (row-stochastic)" if value.ndim == 2 else "entries summing to 1"
+        what = (
+            "every row to sum to 1 (row-stochastic)" if value.ndim == 2 else "entries summing to 1"
+        )
         raise ValueError(f"{name}: expected {what}, got sums {np.sum(value, axis=axis)}")
 
 
@@ -135,10 +148,14 @@ def log_normalizer(logits: Array, axis: int = -1) -> Array:
     top = jnp.where(jnp.isfinite(top), top, 0.0)
     total = jnp.sum(jnp.exp(logits - top), axis=axis)
     positive = total > 0
-    return jnp.where(positive, jnp.log(jnp.where(positive, total, 1.0)) + jnp.squeeze(top, axis), -jnp.inf)
+    return jnp.where(
+        positive, jnp.log(jnp.where(positive, total, 1.0)) + jnp.squeeze(top, axis), -jnp.inf
+    )
 
 
-def bayes_mode_update(log_prior: Array, log_likelihood: Array, axis: int = -1) -> tuple[Array, Array]:
+def bayes_mode_update(
+    log_prior: Array, log_likelihood: Array, axis: int = -1
+) -> tuple[Array, Array]:
     """``log mu_j = log L_j + log prior_j - log sum_i L_i prior_i`` (modes along ``axis``) and the mixture
     log-likelihood ``log sum_i L_i prior_i`` (Bar-Shalom et al. 2001, eq. 11.6.6-19)."""
     joint = log_likelihood + log_prior
@@ -182,16 +199,24 @@ def bank_update(mode_filter, mode_params, state: IMMState, y: Array, u: Array) -
 
 def bank_predict(mode_filter, mode_params, means: Array, covs: Array, u: Array) -> GaussianState:
     """Every mode's time update with ``u[k]`` from its own (mixed) posterior."""
-    return jax.vmap(lambda p, s: mode_filter(p).predict(s, u))(mode_params, GaussianState(means, covs))
+    return jax.vmap(lambda p, s: mode_filter(p).predict(s, u))(
+        mode_params, GaussianState(means, covs)
+    )
 
 
 def finish_mixture_step(
-    post: FilterInfo, log_mode_prob: Array, log_likelihood: Array, prediction: GaussianState, log_next_prob: Array
+    post: FilterInfo,
+    log_mode_prob: Array,
+    log_likelihood: Array,
+    prediction: GaussianState,
+    log_next_prob: Array,
 ) -> tuple[IMMState, IMMInfo]:
     """Combine the mode posteriors by moment matching, check health, build state and info."""
     mode_prob = jnp.exp(log_mode_prob)
     mean, cov = moment_match(mode_prob, post.filtered_mean, post.filtered_cov)
-    posterior_pd = jax.vmap(lambda c: _linalg.cholesky_is_finite(_linalg.cholesky(c)))(post.filtered_cov)
+    posterior_pd = jax.vmap(lambda c: _linalg.cholesky_is_finite(_linalg.cholesky(c)))(
+        post.filtered_cov
+    )
     healthy = (
         jnp.all(post.healthy)
         & jnp.all(posterior_pd)
@@ -200,8 +225,22 @@ def finish_mixture_step(
         & jnp.all(jnp.isfinite(mean))
         & jnp.all(jnp.isfinite(prediction.mean))
     )
-    dead = jnp.isnan(post.innovation[0])  # filters._base: a dead component's innovation is reported as NaN
-    info = IMMInfo(mode_prob, log_mode_prob, mean, cov, post.filtered_mean, post.filtered_cov, post.log_likelihood,
-                   log_likelihood, healthy, dead)
-    next_state = IMMState(prediction.mean, prediction.cov, log_next_prob.astype(log_mode_prob.dtype))
+    dead = jnp.isnan(
+        post.innovation[0]
+    )  # filters._base: a dead component's innovation is reported as NaN
+    info = IMMInfo(
+        mode_prob,
+        log_mode_prob,
+        mean,
+        cov,
+        post.filtered_mean,
+        post.filtered_cov,
+        post.log_likelihood,
+        log_likelihood,
+        healthy,
+        dead,
+    )
+    next_state = IMMState(
+        prediction.mean, prediction.cov, log_next_prob.astype(log_mode_prob.dtype)
+    )
     return next_state, info

@@ -5,6 +5,7 @@ log space. Without a floor an underflowed mode never comes back (a fault after a
 recognised); ``floor`` keeps ``mu_j >= floor`` by mixing in the uniform, ``mu <- floor + (1 - M floor) mu`` (Maybeck
 1999). ``floor = 0``: the textbook MM, equal to an IMM with ``pi = I``.
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable
@@ -14,8 +15,17 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.filters._base import Filter
-from jaxfdi.filters._mixture import (IMMInfo, IMMState, bank_init, bank_predict, bank_update, bayes_mode_update,
-                                     check_mode_filter, finish_mixture_step, num_modes)
+from jaxfdi.filters._mixture import (
+    IMMInfo,
+    IMMState,
+    bank_init,
+    bank_predict,
+    bank_update,
+    bayes_mode_update,
+    check_mode_filter,
+    finish_mixture_step,
+    num_modes,
+)
 
 
 def apply_floor(log_mode_prob: Array, floor: Array) -> Array:
@@ -26,7 +36,9 @@ def apply_floor(log_mode_prob: Array, floor: Array) -> Array:
     return jnp.logaddexp(log_floor, jnp.log1p(-M * floor) + log_mode_prob)
 
 
-def multiple_model(mode_filter: Callable[[Any], Filter], mode_params: Any, floor: float | Array = 0.0) -> Filter:
+def multiple_model(
+    mode_filter: Callable[[Any], Filter], mode_params: Any, floor: float | Array = 0.0
+) -> Filter:
     """Static MM filter over a bank of mode-matched Gaussian filters.
 
     Args:
@@ -42,7 +54,9 @@ def multiple_model(mode_filter: Callable[[Any], Filter], mode_params: Any, floor
     check_mode_filter(mode_filter, mode_params)
     value = _checks.concrete(floor)
     if value is not None and not (value.shape == () and 0.0 <= value < 1.0 / M):
-        raise ValueError(f"floor: expected a scalar probability in [0, 1/M) = [0, {1.0 / M:.4g}), got {floor}")
+        raise ValueError(
+            f"floor: expected a scalar probability in [0, 1/M) = [0, {1.0 / M:.4g}), got {floor}"
+        )
     floor = jnp.asarray(floor)
 
     def init(mean: Array, cov: Array, mode_prob: Array) -> IMMState:
@@ -52,7 +66,9 @@ def multiple_model(mode_filter: Callable[[Any], Filter], mode_params: Any, floor
         post = bank_update(mode_filter, mode_params, state, y, u)
         log_mu, log_lik = bayes_mode_update(state.log_mode_prob, post.log_likelihood)
         log_mu = apply_floor(log_mu, floor)
-        prediction = bank_predict(mode_filter, mode_params, post.filtered_mean, post.filtered_cov, u)
+        prediction = bank_predict(
+            mode_filter, mode_params, post.filtered_mean, post.filtered_cov, u
+        )
         return finish_mixture_step(post, log_mu, log_lik, prediction, log_mu)
 
     return Filter(init, step)

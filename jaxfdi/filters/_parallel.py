@@ -29,6 +29,7 @@ Cholesky use ``_linalg``'s written-out forms, not LAPACK (with batched LAPACK in
 never returned for T >= 2048-4096; ``tests/filters/test_parallel_kalman.py``); above ``_linalg.UNROLL_MAX`` (8)
 states Cholesky is LAPACK again (long sequences untested on CPU).
 """
+
 from __future__ import annotations
 
 import math
@@ -39,7 +40,13 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import FilterInfo, GaussianState, check_gaussian, check_sequences, report_dead
+from jaxfdi.filters._base import (
+    FilterInfo,
+    GaussianState,
+    check_gaussian,
+    check_sequences,
+    report_dead,
+)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
@@ -82,32 +89,40 @@ def _observed(model: LinearGaussianModel, ys: Array) -> tuple[Array, Array, Arra
     """``(mask, C_k, R_k, ys with 0)``: per step, rows of ``C`` and ``R`` for the finite components of ``ys`` (T, m);
     a dead one's row is 0, its ``R`` entry 1 (unit variance, uncorrelated, innovation 0: it moves nothing)."""
     mask = jnp.isfinite(ys)
-    C = jnp.where(mask[:, :, None], model.C, 0.0)                               # (T, m, n)
+    C = jnp.where(mask[:, :, None], model.C, 0.0)  # (T, m, n)
     both = mask[:, :, None] & mask[:, None, :]
     R = jnp.where(both, model.R, jnp.eye(model.R.shape[0], dtype=model.R.dtype))  # (T, m, m)
     return mask, C, R, jnp.where(mask, ys, 0.0)
 
 
-def filtering_elements(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array, us: Array) -> FilteringElement:
+def filtering_elements(
+    model: LinearGaussianModel, m0: Array, P0: Array, ys: Array, us: Array
+) -> FilteringElement:
     """The T elements of ``ys`` (T, m), inputs ``us`` (T, nu) (module doc; non-finite components left out)."""
     Phi, Gamma, _, D, Q, _ = model
     mask, C, R, ys = _observed(model, ys)
     n = Phi.shape[0]
     eye = jnp.eye(n, dtype=m0.dtype)
-    bias = jnp.concatenate([jnp.zeros((1, n), m0.dtype), us[:-1] @ Gamma.T])     # Gamma u_{k-1}, (T, n)
-    prior_mean = jnp.concatenate([m0[None], bias[1:]])                          # mean of x_k given x_{k-1} = 0
+    bias = jnp.concatenate(
+        [jnp.zeros((1, n), m0.dtype), us[:-1] @ Gamma.T]
+    )  # Gamma u_{k-1}, (T, n)
+    prior_mean = jnp.concatenate([m0[None], bias[1:]])  # mean of x_k given x_{k-1} = 0
     prior_cov = jnp.concatenate([P0[None], jnp.broadcast_to(Q, (ys.shape[0] - 1, n, n))])
-    residual = jnp.where(mask, ys - us @ D.T - _mv(C, prior_mean), 0.0)        # e, (T, m)
+    residual = jnp.where(mask, ys - us @ D.T - _mv(C, prior_mean), 0.0)  # e, (T, m)
     S = _sym(C @ prior_cov @ _mT(C) + R)
-    gain = _mT(_psd_solve(S, C @ prior_cov))                                   # (T, n, m)
+    gain = _mT(_psd_solve(S, C @ prior_cov))  # (T, n, m)
     contraction = eye - gain @ C
     cov = _sym(contraction @ prior_cov @ _mT(contraction) + gain @ R @ _mT(gain))
     A = jnp.concatenate([jnp.zeros((1, n, n), m0.dtype), contraction[1:] @ Phi])
-    CPhi = C[1:] @ Phi                                                         # (T - 1, m, n)
+    CPhi = C[1:] @ Phi  # (T - 1, m, n)
     S_inv_C_Phi = _psd_solve(S[1:], CPhi)
-    S_inv_residual = _psd_solve(S[1:], residual[1:, :, None])[..., 0]          # (T - 1, m)
-    eta = jnp.concatenate([jnp.zeros((1, n), m0.dtype), jnp.einsum("tm,tmn->tn", S_inv_residual, CPhi)])
-    J = jnp.concatenate([jnp.zeros((1, n, n), m0.dtype), _sym(jnp.einsum("tmi,tmj->tij", CPhi, S_inv_C_Phi))])
+    S_inv_residual = _psd_solve(S[1:], residual[1:, :, None])[..., 0]  # (T - 1, m)
+    eta = jnp.concatenate(
+        [jnp.zeros((1, n), m0.dtype), jnp.einsum("tm,tmn->tn", S_inv_residual, CPhi)]
+    )
+    J = jnp.concatenate(
+        [jnp.zeros((1, n, n), m0.dtype), _sym(jnp.einsum("tmi,tmj->tij", CPhi, S_inv_C_Phi))]
+    )
     return FilteringElement(A, prior_mean + _mv(gain, residual), cov, eta, J)
 
 
@@ -116,8 +131,8 @@ def combine_filtering(earlier: FilteringElement, later: FilteringElement) -> Fil
     A1, b1, C1, eta1, J1 = earlier
     A2, b2, C2, eta2, J2 = later
     M = jnp.eye(A1.shape[-1], dtype=A1.dtype) + C1 @ J2
-    A2_Minv = _mT(_linalg.solve_pivoted(_mT(M), _mT(A2)))                      # A_j M^-1 (no LAPACK: _linalg)
-    Minv_A1 = _linalg.solve_pivoted(M, A1)                                      # M^-1 A_i; A_i^T M^-T = its transpose
+    A2_Minv = _mT(_linalg.solve_pivoted(_mT(M), _mT(A2)))  # A_j M^-1 (no LAPACK: _linalg)
+    Minv_A1 = _linalg.solve_pivoted(M, A1)  # M^-1 A_i; A_i^T M^-T = its transpose
     return FilteringElement(
         A=A2_Minv @ A1,
         b=_mv(A2_Minv, b1 + _mv(C1, eta2)) + b2,
@@ -127,8 +142,9 @@ def combine_filtering(earlier: FilteringElement, later: FilteringElement) -> Fil
     )
 
 
-def parallel_scan(model: LinearGaussianModel, init_state: GaussianState, ys: Array,
-                  us: Array | None = None) -> tuple[GaussianState, FilterInfo]:
+def parallel_scan(
+    model: LinearGaussianModel, init_state: GaussianState, ys: Array, us: Array | None = None
+) -> tuple[GaussianState, FilterInfo]:
     """Kalman filter over a whole sequence by an associative scan (module doc), as run by
     ``run_filter(kalman_filter(model, missing_measurements=True), ..., parallel=True)``.
 
@@ -144,9 +160,13 @@ def parallel_scan(model: LinearGaussianModel, init_state: GaussianState, ys: Arr
     """
     n, nu, m = validate_linear_model(model)
     if not isinstance(init_state, GaussianState):
-        raise TypeError(f"init_state: expected a GaussianState(mean, cov) (kalman_filter(model).init(m0, P0)), "
-                        f"got {_checks.received(init_state)}")
-    m0, P0 = check_gaussian(init_state.mean, init_state.cov, n, ("init_state.mean", "init_state.cov"))
+        raise TypeError(
+            f"init_state: expected a GaussianState(mean, cov) (kalman_filter(model).init(m0, P0)), "
+            f"got {_checks.received(init_state)}"
+        )
+    m0, P0 = check_gaussian(
+        init_state.mean, init_state.cov, n, ("init_state.mean", "init_state.cov")
+    )
     check_sequences(ys, us, "(T, m)", "(T, nu)")
     _checks.check_shape("ys", ys, (None, m), "T steps x m outputs")
     if _checks.shape_of(ys)[0] < 1:
@@ -156,8 +176,13 @@ def parallel_scan(model: LinearGaussianModel, init_state: GaussianState, ys: Arr
         us = jnp.zeros((num_steps, nu))
     _checks.check_shape("us", us, (num_steps, nu), "T steps x nu inputs, as many steps as ys")
     dtype = jnp.result_type(m0, P0, ys, *model)
-    return _parallel_filter(LinearGaussianModel(*(jnp.asarray(a, dtype) for a in model)), m0.astype(dtype),
-                            P0.astype(dtype), jnp.asarray(ys, dtype), jnp.asarray(us, dtype))
+    return _parallel_filter(
+        LinearGaussianModel(*(jnp.asarray(a, dtype) for a in model)),
+        m0.astype(dtype),
+        P0.astype(dtype),
+        jnp.asarray(ys, dtype),
+        jnp.asarray(us, dtype),
+    )
 
 
 @jax.jit
@@ -167,7 +192,7 @@ def _parallel_filter(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array
     elements = filtering_elements(model, m0, P0, ys, us)
     filtered = jax.lax.associative_scan(combine_filtering, elements)
     mean, cov = filtered.b, filtered.C
-    next_mean = mean @ Phi.T + us @ Gamma.T                                     # x[k+1|k], (T, n)
+    next_mean = mean @ Phi.T + us @ Gamma.T  # x[k+1|k], (T, n)
     next_cov = _sym(Phi @ cov @ Phi.T + Q)
     predicted_mean = jnp.concatenate([m0[None], next_mean[:-1]])
     predicted_cov = jnp.concatenate([P0[None], next_cov[:-1]])
@@ -180,10 +205,25 @@ def _parallel_filter(model: LinearGaussianModel, m0: Array, P0: Array, ys: Array
     num_observed = jnp.sum(mask, axis=-1).astype(jnp.int32)
     log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol_S, axis1=-2, axis2=-1)), axis=-1)
     log_likelihood = -0.5 * (nis + log_det + num_observed * math.log(2.0 * math.pi))
-    healthy = (jnp.all(jnp.isfinite(chol_S), axis=(-2, -1)) & jnp.all(jnp.isfinite(mean), axis=-1)
-               & jnp.all(jnp.isfinite(_linalg.stack_cholesky(cov)), axis=(-2, -1))
-               & jnp.all(jnp.isfinite(next_mean), axis=-1) & jnp.isfinite(nis) & jnp.isfinite(log_likelihood))
+    healthy = (
+        jnp.all(jnp.isfinite(chol_S), axis=(-2, -1))
+        & jnp.all(jnp.isfinite(mean), axis=-1)
+        & jnp.all(jnp.isfinite(_linalg.stack_cholesky(cov)), axis=(-2, -1))
+        & jnp.all(jnp.isfinite(next_mean), axis=-1)
+        & jnp.isfinite(nis)
+        & jnp.isfinite(log_likelihood)
+    )
     innovation, nis = report_dead(innovation, nis, dead, axis=-1)
-    info = FilterInfo(predicted_mean, predicted_cov, mean, cov, innovation, S, log_likelihood, nis, num_observed,
-                      healthy)
+    info = FilterInfo(
+        predicted_mean,
+        predicted_cov,
+        mean,
+        cov,
+        innovation,
+        S,
+        log_likelihood,
+        nis,
+        num_observed,
+        healthy,
+    )
     return GaussianState(next_mean[-1], next_cov[-1]), info

@@ -6,6 +6,7 @@ the step-0 prior by one time update with ``u[-1]``: ``x[0|-1] = Phi x0 + Gamma u
 Q`` for a KF. For an IMM (per-mode posterior, mode probabilities ``mu0``): mixing and mode-matched predictions
 (Bar-Shalom, Li & Kirubarajan 2001, sec. 11.6.6, steps 1 and 4), as filterpy's ``IMMEstimator.predict`` first does.
 """
+
 from __future__ import annotations
 
 import inspect
@@ -17,8 +18,9 @@ from jax import Array
 from jaxfdi.filters._base import Filter, GaussianState
 
 
-def init_from_posterior(filt: Filter, mean: Array, cov: Array, u: Array | None = None,
-                        mode_prob: Array | None = None) -> Any:
+def init_from_posterior(
+    filt: Filter, mean: Array, cov: Array, u: Array | None = None, mode_prob: Array | None = None
+) -> Any:
     """The prior of step 0 from a posterior ``N(mean, cov)`` of step -1.
 
     Args:
@@ -40,15 +42,21 @@ def init_from_posterior(filt: Filter, mean: Array, cov: Array, u: Array | None =
     """
     if mode_prob is not None:
         if "posterior" not in inspect.signature(filt.init).parameters:
-            raise ValueError("mode_prob: only given for a multiple-model filter that starts from a posterior "
-                             "(interacting_multiple_model); this filter's init has no posterior option")
+            raise ValueError(
+                "mode_prob: only given for a multiple-model filter that starts from a posterior "
+                "(interacting_multiple_model); this filter's init has no posterior option"
+            )
         return filt.init(mean, cov, mode_prob, posterior=True, u=u)
     if filt.predict is None:
-        raise ValueError("filt: expected a Gaussian filter with predict (kalman_filter, extended_kalman_filter, "
-                         "unscented_kalman_filter), or an interacting_multiple_model with mode_prob")
+        raise ValueError(
+            "filt: expected a Gaussian filter with predict (kalman_filter, extended_kalman_filter, "
+            "unscented_kalman_filter), or an interacting_multiple_model with mode_prob"
+        )
     posterior = filt.init(mean, cov)  # validates the shapes and takes the mean's dtype
     if not isinstance(posterior, GaussianState):
-        raise ValueError(f"filt: expected init(mean, cov) to give a GaussianState, got {type(posterior).__name__}")
+        raise ValueError(
+            f"filt: expected init(mean, cov) to give a GaussianState, got {type(posterior).__name__}"
+        )
     return filt.predict(posterior, posterior_input(u, posterior.mean.dtype))
 
 

@@ -11,6 +11,7 @@ Parallel form: element ``(E, g, L) = (G_k, m_k - G_k m_{k+1}^-, P_k - G_k P_{k+1
 ``(0, m_{T-1}, P_{T-1})``) of ``p(x_k | x_{k+1}, y_0..y_k) = N(E x_{k+1} + g, L)``; combination
 ``(E_i E_j, E_i g_j + g_i, E_i L_j E_i^T + L_i)`` (``i`` before ``j``); reverse scan: ``N(ms_k, Ps_k) = N(g, L)``.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -21,7 +22,11 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import FilterInfo
-from jaxfdi.filters._parallel import _mT, _mv, _sym  # batched transpose, symmetric part, matrix-vector
+from jaxfdi.filters._parallel import (  # batched transpose, symmetric part, matrix-vector
+    _mT,
+    _mv,
+    _sym,
+)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
@@ -48,11 +53,15 @@ class SmoothingElement(NamedTuple):
 def smoother_gains(Phi: Array, filtered_cov: Array, next_predicted_cov: Array) -> Array:
     """``G_k = P_k Phi^T (P_{k+1}^-)^-1`` for stacks (T - 1, n, n), by a Cholesky solve of the symmetric
     ``P_{k+1}^-``: ``G^T = (P^-)^-1 Phi P_k``."""
-    chol = _linalg.stack_cholesky(_sym(next_predicted_cov))    # no LAPACK for small n: _linalg.solve_pivoted
+    chol = _linalg.stack_cholesky(
+        _sym(next_predicted_cov)
+    )  # no LAPACK for small n: _linalg.solve_pivoted
     return _mT(_linalg.stack_cho_solve(chol, Phi @ filtered_cov))
 
 
-def rts_smoother(model: LinearGaussianModel, info: FilterInfo, *, parallel: bool = False) -> SmootherResult:
+def rts_smoother(
+    model: LinearGaussianModel, info: FilterInfo, *, parallel: bool = False
+) -> SmootherResult:
     """RTS smoother over a Kalman filter's ``info``: a backward ``lax.scan``, or with ``parallel=True`` the reverse
     associative scan (module doc, O(log T) depth; equal to round-off), as ``run_filter(..., parallel=True)``.
 
@@ -68,7 +77,9 @@ def rts_smoother(model: LinearGaussianModel, info: FilterInfo, *, parallel: bool
     _checks.check_flag("parallel", parallel)
     Phi, info = _check(model, info)
     smooth = _parallel if parallel else _sequential
-    return smooth(Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov)
+    return smooth(
+        Phi, info.filtered_mean, info.filtered_cov, info.predicted_mean, info.predicted_cov
+    )
 
 
 @jax.jit
@@ -82,17 +93,27 @@ def _sequential(Phi, mean, cov, predicted_mean, predicted_cov) -> SmootherResult
         P_s = _sym(P + G @ (smoothed_cov - P_next) @ G.T)
         return (m_s, P_s), (m_s, P_s)
 
-    _, (means, covs) = jax.lax.scan(back, (mean[-1], cov[-1]),
-                                    (mean[:-1], cov[:-1], predicted_mean[1:], predicted_cov[1:], gains), reverse=True)
+    _, (means, covs) = jax.lax.scan(
+        back,
+        (mean[-1], cov[-1]),
+        (mean[:-1], cov[:-1], predicted_mean[1:], predicted_cov[1:], gains),
+        reverse=True,
+    )
     last_gain = jnp.zeros_like(cov[:1])
-    return SmootherResult(jnp.concatenate([means, mean[-1:]]), jnp.concatenate([covs, cov[-1:]]),
-                          jnp.concatenate([gains, last_gain]))
+    return SmootherResult(
+        jnp.concatenate([means, mean[-1:]]),
+        jnp.concatenate([covs, cov[-1:]]),
+        jnp.concatenate([gains, last_gain]),
+    )
 
 
 def combine_smoothing(later: SmoothingElement, earlier: SmoothingElement) -> SmoothingElement:
     """``earlier ⊗ later`` as ``associative_scan(..., reverse=True)`` calls it (later element first)."""
-    return SmoothingElement(earlier.E @ later.E, _mv(earlier.E, later.g) + earlier.g,
-                            _sym(earlier.E @ later.L @ _mT(earlier.E) + earlier.L))
+    return SmoothingElement(
+        earlier.E @ later.E,
+        _mv(earlier.E, later.g) + earlier.g,
+        _sym(earlier.E @ later.L @ _mT(earlier.E) + earlier.L),
+    )
 
 
 @jax.jit
@@ -100,8 +121,11 @@ def _parallel(Phi, mean, cov, predicted_mean, predicted_cov) -> SmootherResult:
     gains = smoother_gains(Phi, cov[:-1], predicted_cov[1:])
     g = mean[:-1] - _mv(gains, predicted_mean[1:])
     L = _sym(cov[:-1] - gains @ predicted_cov[1:] @ _mT(gains))
-    elements = SmoothingElement(jnp.concatenate([gains, jnp.zeros_like(cov[:1])]), jnp.concatenate([g, mean[-1:]]),
-                                jnp.concatenate([L, cov[-1:]]))
+    elements = SmoothingElement(
+        jnp.concatenate([gains, jnp.zeros_like(cov[:1])]),
+        jnp.concatenate([g, mean[-1:]]),
+        jnp.concatenate([L, cov[-1:]]),
+    )
     smoothed = jax.lax.associative_scan(combine_smoothing, elements, reverse=True)
     return SmootherResult(smoothed.g, smoothed.L, elements.E)
 
@@ -109,8 +133,10 @@ def _parallel(Phi, mean, cov, predicted_mean, predicted_cov) -> SmootherResult:
 def _check(model: LinearGaussianModel, info: FilterInfo):
     n, _, _ = validate_linear_model(model)
     if not isinstance(info, FilterInfo):
-        raise TypeError(f"info: expected the FilterInfo of run_filter(kalman_filter(model), ...), got "
-                        f"{_checks.received(info)}")
+        raise TypeError(
+            f"info: expected the FilterInfo of run_filter(kalman_filter(model), ...), got "
+            f"{_checks.received(info)}"
+        )
     _checks.check_shape("info.filtered_mean", info.filtered_mean, (None, n), "T steps x n states")
     T = _checks.shape_of(info.filtered_mean)[0]
     for name in ("filtered_cov", "predicted_cov"):

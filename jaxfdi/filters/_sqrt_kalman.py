@@ -11,6 +11,7 @@ so ``K = Kbar L_S^-1``, ``m+ = m + Kbar w``, ``w = L_S^-1 r``, ``log det S = 2 s
 triangular factor of ``[Phi L+, L_Q]`` (``tria``). ``S``, ``P[k|k]``, ``P[k+1|k]`` are never formed from
 differences; ``FilterInfo`` covariances are Gram matrices of the factors (PSD by construction).
 """
+
 from __future__ import annotations
 
 import math
@@ -20,7 +21,14 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, FilterInfo, check_gaussian, check_step_inputs, report_dead, used_innovation
+from jaxfdi.filters._base import (
+    Filter,
+    FilterInfo,
+    check_gaussian,
+    check_step_inputs,
+    report_dead,
+    used_innovation,
+)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
@@ -55,7 +63,9 @@ def sqrt_update(mean: Array, chol: Array, y: Array, y_pred: Array, H: Array, cho
     return sqrt_update_linearised(mean, chol, used_innovation(y, y_pred), H @ chol, chol_R)
 
 
-def sqrt_update_linearised(mean: Array, chol: Array, innovation: Array, H_chol: Array, chol_noise: Array):
+def sqrt_update_linearised(
+    mean: Array, chol: Array, innovation: Array, H_chol: Array, chol_noise: Array
+):
     """Array-form update from ``H L`` (m, n), the innovation and the noise factor (m, k):
     ``[[L_noise, H L], [0, L]]`` -> ``[[L_S, 0], [Kbar, L+]]``."""
     n, m, k = mean.shape[0], innovation.shape[0], chol_noise.shape[1]
@@ -96,18 +106,28 @@ def sqrt_kalman_filter(model: LinearGaussianModel) -> Filter:
         check_step_inputs(y, u, m, nu)
         mm = _linalg.matmul
         y_pred = mm(model.C, state.mean) + mm(model.D, u)
-        mean, chol, innovation, chol_S, whitened = sqrt_update(state.mean, state.chol, y, y_pred, model.C,
-                                                                 chol_R.astype(state.chol.dtype))
+        mean, chol, innovation, chol_S, whitened = sqrt_update(
+            state.mean, state.chol, y, y_pred, model.C, chol_R.astype(state.chol.dtype)
+        )
         next_mean = mm(model.Phi, mean) + mm(model.Gamma, u)
         next_chol = tria(jnp.concatenate([mm(model.Phi, chol), chol_Q.astype(chol.dtype)], axis=1))
-        return SqrtGaussianState(next_mean, next_chol), sqrt_info(state, mean, chol, innovation, chol_S, whitened,
-                                                                  next_mean, ~jnp.isfinite(y))
+        return SqrtGaussianState(next_mean, next_chol), sqrt_info(
+            state, mean, chol, innovation, chol_S, whitened, next_mean, ~jnp.isfinite(y)
+        )
 
     return Filter(init, step)
 
 
-def sqrt_info(prior: SqrtGaussianState, mean: Array, chol: Array, innovation: Array, chol_S: Array,
-              whitened: Array, next_mean: Array, dead: Array) -> FilterInfo:
+def sqrt_info(
+    prior: SqrtGaussianState,
+    mean: Array,
+    chol: Array,
+    innovation: Array,
+    chol_S: Array,
+    whitened: Array,
+    next_mean: Array,
+    dead: Array,
+) -> FilterInfo:
     """The step's ``FilterInfo`` from the factors (covariances as Gram matrices); healthy when the factors of ``S``
     and ``P[k|k]`` have non-zero finite diagonals and every output is finite; ``dead`` (m,) as ``report_dead``."""
     m = innovation.shape[0]
@@ -115,18 +135,37 @@ def sqrt_info(prior: SqrtGaussianState, mean: Array, chol: Array, innovation: Ar
     diag_S = jnp.diagonal(chol_S)
     log_likelihood = -0.5 * (nis + 2.0 * jnp.sum(jnp.log(diag_S)) + m * math.log(2.0 * math.pi))
     diag_P = jnp.abs(jnp.diagonal(chol))
-    healthy = (jnp.all(jnp.isfinite(chol_S)) & jnp.all(diag_S > 0) & jnp.all(jnp.isfinite(chol)) & jnp.all(diag_P > 0)
-               & jnp.all(jnp.isfinite(mean)) & jnp.all(jnp.isfinite(next_mean)) & jnp.isfinite(nis)
-               & jnp.isfinite(log_likelihood))
-    gram = lambda L: L @ L.T  # noqa: E731
+    healthy = (
+        jnp.all(jnp.isfinite(chol_S))
+        & jnp.all(diag_S > 0)
+        & jnp.all(jnp.isfinite(chol))
+        & jnp.all(diag_P > 0)
+        & jnp.all(jnp.isfinite(mean))
+        & jnp.all(jnp.isfinite(next_mean))
+        & jnp.isfinite(nis)
+        & jnp.isfinite(log_likelihood)
+    )
+    gram = lambda L: L @ L.T
     innovation, nis = report_dead(innovation, nis, dead)
-    return FilterInfo(prior.mean, gram(prior.chol), mean, gram(chol), innovation, gram(chol_S), log_likelihood, nis,
-                      jnp.sum(~dead).astype(jnp.int32), healthy)
+    return FilterInfo(
+        prior.mean,
+        gram(prior.chol),
+        mean,
+        gram(chol),
+        innovation,
+        gram(chol_S),
+        log_likelihood,
+        nis,
+        jnp.sum(~dead).astype(jnp.int32),
+        healthy,
+    )
 
 
 def check_sqrt_state(state, n: int) -> None:
     """``state`` is a ``SqrtGaussianState`` of size ``n`` (trace-time)."""
     if not isinstance(state, SqrtGaussianState):
-        raise TypeError(f"state: expected a SqrtGaussianState(mean, chol) from the filter's init, got "
-                        f"{_checks.received(state)}")
+        raise TypeError(
+            f"state: expected a SqrtGaussianState(mean, chol) from the filter's init, got "
+            f"{_checks.received(state)}"
+        )
     _checks.check_shape("state.chol", state.chol, (n, n), "lower triangular factor")

@@ -8,6 +8,7 @@
 a (T, ...) table, or compute from ``k``); shapes are checked at trace time. Linear per-step matrices:
 ``model_at(model, Q=Qs, ...)``.
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -27,6 +28,7 @@ class TimedState(NamedTuple):
       step: () int, the step the inner state is the prior of
       inner: the wrapped filter's state
     """
+
     step: Array
     inner: Any
 
@@ -40,11 +42,16 @@ def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter
     Returns:
       ``Filter(init, step)``, state ``TimedState(step, inner)``; ``step`` is the step-``k`` filter's (its info).
     """
-    _checks.check_callable("filter_at", filter_at, "a function k -> Filter (e.g. lambda k: kalman_filter(at(k)))")
+    _checks.check_callable(
+        "filter_at", filter_at, "a function k -> Filter (e.g. lambda k: kalman_filter(at(k)))"
+    )
     start = _checks.check_int("start", start, 0, meaning="the first step's index")
 
     def init(*args, **kwargs) -> TimedState:
-        return TimedState(jnp.asarray(start, jnp.int32), filter_at(jnp.asarray(start, jnp.int32)).init(*args, **kwargs))
+        return TimedState(
+            jnp.asarray(start, jnp.int32),
+            filter_at(jnp.asarray(start, jnp.int32)).init(*args, **kwargs),
+        )
 
     def step(state: TimedState, y: Array, u: Array):
         inner, info = filter_at(state.step).step(state.inner, y, u)
@@ -53,7 +60,9 @@ def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter
     return Filter(init, step)
 
 
-def model_at(model: LinearGaussianModel, **per_step: Array) -> Callable[[Array], LinearGaussianModel]:
+def model_at(
+    model: LinearGaussianModel, **per_step: Array
+) -> Callable[[Array], LinearGaussianModel]:
     """``k -> model`` with the named fields (``Phi``, ``Gamma``, ``C``, ``D``, ``Q``, ``R``) from (T, ...) per-step
     arrays, the others constant; e.g. ``time_varying(lambda k: kalman_filter(at(k)))``,
     ``at = model_at(model, Q=Qs, R=Rs, C=Cs)``.
@@ -62,16 +71,22 @@ def model_at(model: LinearGaussianModel, **per_step: Array) -> Callable[[Array],
     lengths = set()
     for name, table in per_step.items():
         if name not in fields:
-            raise ValueError(f"{name}: not a LinearGaussianModel field; expected one of {list(fields)}")
+            raise ValueError(
+                f"{name}: not a LinearGaussianModel field; expected one of {list(fields)}"
+            )
         constant = _checks.shape_of(getattr(model, name))
-        _checks.check_matrix(name, table, (None,) + constant, f"T per-step copies of model.{name} {constant}")
+        _checks.check_matrix(
+            name, table, (None,) + constant, f"T per-step copies of model.{name} {constant}"
+        )
         if name in ("Q", "R"):
             value = _checks.concrete(table)
             for k in range(value.shape[0] if value is not None else 0):
                 _checks.check_covariance(f"{name}[{k}]", value[k], constant[0])
         lengths.add(_checks.shape_of(table)[0])
     if len(lengths) > 1:
-        raise ValueError(f"per-step tables: expected the same number of steps T, got {sorted(lengths)}")
+        raise ValueError(
+            f"per-step tables: expected the same number of steps T, got {sorted(lengths)}"
+        )
     tables = {name: jnp.asarray(table) for name, table in per_step.items()}
 
     def at(k: Array) -> LinearGaussianModel:

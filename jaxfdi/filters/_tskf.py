@@ -29,6 +29,7 @@ Time-varying directions (``FaultDirection``): effectiveness loss ``Gamma (I - di
 ``Fa[k] = -Gamma diag(u[k])`` (``input_scaled``), sensor scaling ``(I + diag(xi)) C x`` has ``Fs[k] = diag(C x_hat)``
 (``output_scaled``) at the prior mean ``x[k|k-1]`` (the paper's ``x[k|k]`` does not exist yet).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -40,7 +41,11 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, report_dead, run_filter
-from jaxfdi.filters._unknown_input import check_decoupling, diffuse_log_likelihood, unbiased_minimum_variance_gain
+from jaxfdi.filters._unknown_input import (
+    check_decoupling,
+    diffuse_log_likelihood,
+    unbiased_minimum_variance_gain,
+)
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
@@ -61,7 +66,9 @@ class FaultDirection(NamedTuple):
     output_scaled: Array
 
 
-def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "effectiveness") -> FaultDirection:
+def actuator_direction(
+    model: LinearGaussianModel, component: int, kind: str = "effectiveness"
+) -> FaultDirection:
     """One actuator's fault direction: ``"effectiveness"`` (``Fa = -Gamma[:, i] u_i``, bias = lost fraction) or
     ``"additive"`` (``Fa = -Gamma[:, i]``, bias = amount subtracted from ``u_i``).
 
@@ -81,7 +88,9 @@ def actuator_direction(model: LinearGaussianModel, component: int, kind: str = "
     raise ValueError(f"kind: expected 'effectiveness' or 'additive', got {kind!r}")
 
 
-def sensor_direction(model: LinearGaussianModel, component: int, kind: str = "scaling") -> FaultDirection:
+def sensor_direction(
+    model: LinearGaussianModel, component: int, kind: str = "scaling"
+) -> FaultDirection:
     """One sensor's fault direction: ``"scaling"`` (``Fs = e_j (C x_hat + D u)_j``, bias = relative gain error) or
     ``"additive"`` (``Fs = e_j``, bias added to ``y_j``).
 
@@ -111,7 +120,9 @@ def actuator_matrix(direction: FaultDirection, model: LinearGaussianModel, u: Ar
     return direction.state + _linalg.matmul(model.Gamma, direction.input_scaled * u[:, None])
 
 
-def sensor_matrix(direction: FaultDirection, model: LinearGaussianModel, x_hat: Array, u: Array) -> Array:
+def sensor_matrix(
+    direction: FaultDirection, model: LinearGaussianModel, x_hat: Array, u: Array
+) -> Array:
     """``Fs[k]`` (m, p) at the state estimate ``x_hat``."""
     y_hat = _linalg.matmul(model.C, x_hat) + _linalg.matmul(model.D, u)
     return direction.output + y_hat[:, None] * direction.output_scaled
@@ -194,29 +205,40 @@ def two_stage_kalman_filter(
     n, nu, m = validate_linear_model(model)
     _checks.check_shape("direction.state", direction.state, (n, None), "n states x p biases")
     p = _checks.shape_of(direction.state)[1]
-    _checks.check_shape("direction.input_scaled", direction.input_scaled, (nu, p), "nu inputs x p biases")
+    _checks.check_shape(
+        "direction.input_scaled", direction.input_scaled, (nu, p), "nu inputs x p biases"
+    )
     _checks.check_shape("direction.output", direction.output, (m, p), "m outputs x p biases")
-    _checks.check_shape("direction.output_scaled", direction.output_scaled, (m, p), "m outputs x p biases")
+    _checks.check_shape(
+        "direction.output_scaled", direction.output_scaled, (m, p), "m outputs x p biases"
+    )
     _checks.check_covariance("bias_walk", bias_walk, p)
     q = 0 if unknown_input is None else check_decoupling(model, unknown_input)
     dof = m - q
     mm = _linalg.matmul
 
-    def init(mean: Array, cov: Array, bias_mean: Array | None = None, bias_cov: Array | None = None) -> TSKFState:
+    def init(
+        mean: Array, cov: Array, bias_mean: Array | None = None, bias_cov: Array | None = None
+    ) -> TSKFState:
         mean, cov = check_gaussian(mean, cov, n)
         dtype = mean.dtype
         bias_mean = jnp.zeros((p,), dtype) if bias_mean is None else bias_mean
         bias_cov = jnp.zeros((p, p), dtype) if bias_cov is None else bias_cov
         bias_mean, bias_cov = check_gaussian(bias_mean, bias_cov, p, ("bias_mean", "bias_cov"))
-        return TSKFState(mean, cov, jnp.asarray(bias_mean, dtype), jnp.asarray(bias_cov, dtype),
-                         jnp.zeros((n, p), dtype))
+        return TSKFState(
+            mean,
+            cov,
+            jnp.asarray(bias_mean, dtype),
+            jnp.asarray(bias_cov, dtype),
+            jnp.zeros((n, p), dtype),
+        )
 
     def step(state: TSKFState, y: Array, u: Array):
         check_step_inputs(y, u, m, nu)
         x_bar, P_bar, b, Pb, V = state
         prior_mean = x_bar + mm(V, b)
         Fs = sensor_matrix(direction, model, prior_mean, u)
-        H_b = mm(model.C, V) + Fs                                          # (m, p)
+        H_b = mm(model.C, V) + Fs  # (m, p)
         # a dead (non-finite) component takes its prediction: a zero innovation (filters._base)
         dead = ~jnp.isfinite(y)
         y = jnp.where(dead, mm(model.C, prior_mean) + mm(model.D, u) + mm(Fs, b), y)
@@ -232,16 +254,18 @@ def two_stage_kalman_filter(
         V_post = V - mm(K_bar, H_b)
 
         # bias filter on the decoupled, whitened innovation
-        G = mm(basis.T, _linalg.solve_lower(chol_S, H_b))                  # (m - q, p)
-        e = mm(basis.T, _linalg.whiten(chol_S, r_bar - mm(H_b, b)))        # (m - q,)
+        G = mm(basis.T, _linalg.solve_lower(chol_S, H_b))  # (m - q, p)
+        e = mm(basis.T, _linalg.whiten(chol_S, r_bar - mm(H_b, b)))  # (m - q,)
         S_b = _linalg.symmetrize(mm(mm(G, Pb), G.T) + jnp.eye(dof, dtype=Pb.dtype))
         chol_Sb = _linalg.cholesky(S_b)
-        K_b = _linalg.gain_from_cross_cov(mm(Pb, G.T), chol_Sb)           # (p, m - q)
+        K_b = _linalg.gain_from_cross_cov(mm(Pb, G.T), chol_Sb)  # (p, m - q)
         b_post = b + mm(K_b, e)
         Pb_post = _linalg.joseph_cov(Pb, K_b, G, jnp.eye(dof, dtype=Pb.dtype))
         statistic = jnp.sum(_linalg.whiten(chol_Sb, e) ** 2)
-        S_aug = _linalg.symmetrize(S_bar + mm(mm(H_b, Pb), H_b.T))       # augmented S, without d
-        log_lik = diffuse_log_likelihood(statistic, _linalg.cholesky(S_aug), model.C, unknown_input, dof)
+        S_aug = _linalg.symmetrize(S_bar + mm(mm(H_b, Pb), H_b.T))  # augmented S, without d
+        log_lik = diffuse_log_likelihood(
+            statistic, _linalg.cholesky(S_aug), model.C, unknown_input, dof
+        )
 
         mean_post = x_bar_post + mm(V_post, b_post)
         cov_post = _linalg.symmetrize(P_bar_post + mm(mm(V_post, Pb_post), V_post.T))
@@ -263,17 +287,32 @@ def two_stage_kalman_filter(
         V_next = _linalg.psd_solve(Pb_next, mm(U, Pb_post).T).T
         x_bar_next = mm(model.Phi, x_bar_post) + mm(model.Gamma, u) + mm(U - V_next, b_post)
         P_bar_next = _linalg.symmetrize(
-            mm(mm(model.Phi, P_bar_post), model.Phi.T) + model.Q
-            + mm(mm(U, Pb_post), U.T) - mm(mm(V_next, Pb_next), V_next.T)
+            mm(mm(model.Phi, P_bar_post), model.Phi.T)
+            + model.Q
+            + mm(mm(U, Pb_post), U.T)
+            - mm(mm(V_next, Pb_next), V_next.T)
         )
         healthy = (
-            _linalg.cholesky_is_finite(chol_S) & _linalg.cholesky_is_finite(chol_Sb)
+            _linalg.cholesky_is_finite(chol_S)
+            & _linalg.cholesky_is_finite(chol_Sb)
             & _linalg.cholesky_is_finite(_linalg.cholesky(cov_post))
-            & jnp.all(jnp.isfinite(x_bar_next)) & jnp.all(jnp.isfinite(b_post))
-            & jnp.isfinite(statistic) & jnp.isfinite(log_lik)
+            & jnp.all(jnp.isfinite(x_bar_next))
+            & jnp.all(jnp.isfinite(b_post))
+            & jnp.isfinite(statistic)
+            & jnp.isfinite(log_lik)
         )
         residual, statistic = report_dead(residual, statistic, dead)
-        info = TSKFInfo(mean_post, cov_post, b_post, Pb_post, residual, residual_cov, statistic, log_lik, healthy)
+        info = TSKFInfo(
+            mean_post,
+            cov_post,
+            b_post,
+            Pb_post,
+            residual,
+            residual_cov,
+            statistic,
+            log_lik,
+            healthy,
+        )
         return TSKFState(x_bar_next, P_bar_next, b_post, Pb_next, V_next), info
 
     return Filter(init, step)
@@ -303,13 +342,20 @@ def run_tskf_bank(
       ``TSKFInfo`` with leading axes (F, T).
     """
     leaves = jax.tree_util.tree_leaves(directions)
-    if any(np.ndim(leaf) != 3 for leaf in leaves) or len({np.shape(leaf)[0] for leaf in leaves}) != 1:
-        raise ValueError("directions: expected a stack of FaultDirection (leaves of shape (F, *, p)); use stack_directions")
+    if (
+        any(np.ndim(leaf) != 3 for leaf in leaves)
+        or len({np.shape(leaf)[0] for leaf in leaves}) != 1
+    ):
+        raise ValueError(
+            "directions: expected a stack of FaultDirection (leaves of shape (F, *, p)); use stack_directions"
+        )
     p = np.shape(directions.state)[-1]
 
     def one(direction):
         filt = two_stage_kalman_filter(model, direction, bias_walk, unknown_input)
-        init = filt.init(init_mean, init_cov, jnp.zeros((p,), jnp.asarray(init_mean).dtype), init_bias_cov)
+        init = filt.init(
+            init_mean, init_cov, jnp.zeros((p,), jnp.asarray(init_mean).dtype), init_bias_cov
+        )
         return run_filter(filt, init, ys, us)[1]
 
     return jax.vmap(one)(directions)

@@ -26,6 +26,7 @@ with noise ``R + Lambda``, formed as ``F F^T + G G^T + (beta - alpha^2) (K delta
 (``F = (I - K H) chol P``, ``G = K [sqrt(W_i) e_i]``): for ``beta >= alpha^2`` a sum of Gram matrices, indefinite by
 at most ``eps`` of its own size. For a linear ``h``, ``Lambda = 0``: the EKF's/KF's Joseph update.
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -35,9 +36,19 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import (Filter, FilterInfo, GaussianState, ModelFunction, check_step_inputs,
-                                  dead_components, gaussian_filter, mask_innovation_cov, observed_mask, report_dead,
-                                  used_innovation)
+from jaxfdi.filters._base import (
+    Filter,
+    FilterInfo,
+    GaussianState,
+    ModelFunction,
+    check_step_inputs,
+    dead_components,
+    gaussian_filter,
+    mask_innovation_cov,
+    observed_mask,
+    report_dead,
+    used_innovation,
+)
 
 
 class SigmaPoints(NamedTuple):
@@ -52,31 +63,37 @@ class SigmaPoints(NamedTuple):
     offsets: Array
 
 
-def unscented_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, float, float]:
+def unscented_weights(
+    n: int, alpha: float, beta: float, kappa: float
+) -> tuple[float, float, float]:
     """``(Wi, Wm0, Wc0)`` of the scaled unscented transform for state size ``n``; ``n + lambda = alpha^2 (n + kappa)``
     is formed directly (as ``n + lambda`` it cancels, ``alpha = 1e-3``: ``3 + (3e-6 - 3)``, losing ~1e-10)."""
     spread = alpha**2 * (n + kappa)  # n + lambda
     w = 1.0 / (2.0 * spread)
-    wm0 = 1.0 - n / spread           # lambda / (n + lambda)
+    wm0 = 1.0 - n / spread  # lambda / (n + lambda)
     return w, wm0, wm0 + 1.0 - alpha**2 + beta
 
 
 def sigma_points(mean: Array, cov: Array, scale: float) -> tuple[SigmaPoints, Array]:
     """Centred sigma points ``m +/- scale * col_i(chol P)``; also returns ``chol P``."""
     chol = _linalg.cholesky(cov)
-    plus = mean[None, :] + scale * chol.T        # rows = m + s_i
-    s = plus - mean[None, :]                      # symmetric rounding
+    plus = mean[None, :] + scale * chol.T  # rows = m + s_i
+    s = plus - mean[None, :]  # symmetric rounding
     return SigmaPoints(mean, jnp.concatenate([s, -s], axis=0)), chol
 
 
-def _centred_differences_direct(points: SigmaPoints, g: Callable[[Array], Array]) -> tuple[Array, Array]:
+def _centred_differences_direct(
+    points: SigmaPoints, g: Callable[[Array], Array]
+) -> tuple[Array, Array]:
     """``(g(c), d_i = g(c + s_i) - g(c))`` by evaluating ``g`` at every sigma point."""
     y0 = g(points.centre)
     ys = jax.vmap(g)(points.centre[None, :] + points.offsets)
     return y0, ys - y0[None, :]
 
 
-def _centred_differences_taylor(points: SigmaPoints, g: Callable[[Array], Array]) -> tuple[Array, Array]:
+def _centred_differences_taylor(
+    points: SigmaPoints, g: Callable[[Array], Array]
+) -> tuple[Array, Array]:
     """``d(+/-i) = +/- J s_i + (1/2) s_i^T H s_i`` by nested forward-mode AD: the second-order Taylor expansion of
     ``g(c +/- s_i) - g(c)``, no subtraction of nearly equal numbers, so full relative precision in float32.
     Truncation error O(|s|^3) per point, O(alpha^2) relative in the moments: exact scaled UT as ``alpha -> 0``.
@@ -88,6 +105,7 @@ def _centred_differences_taylor(points: SigmaPoints, g: Callable[[Array], Array]
     def first_and_second(direction):
         def directional(x):
             return jax.jvp(g, (x,), (direction,))
+
         (y0, js), (_, hss) = jax.jvp(directional, (c,), (direction,))
         return y0, js, hss
 
@@ -105,13 +123,17 @@ def unscented_moments(
     return _moments(points, y0, dy, w, cross_w)
 
 
-def _propagate(points: SigmaPoints, g: Callable[[Array], Array], taylor: bool) -> tuple[Array, Array]:
+def _propagate(
+    points: SigmaPoints, g: Callable[[Array], Array], taylor: bool
+) -> tuple[Array, Array]:
     """``(g(c), d_i = g(c + s_i) - g(c))`` by direct evaluation or by the Taylor form."""
     differences = _centred_differences_taylor if taylor else _centred_differences_direct
     return differences(points, g)
 
 
-def _moments(points: SigmaPoints, y0: Array, dy: Array, w: float, cross_w: float) -> tuple[Array, Array, Array]:
+def _moments(
+    points: SigmaPoints, y0: Array, dy: Array, w: float, cross_w: float
+) -> tuple[Array, Array, Array]:
     dx = points.offsets
     delta_y = w * jnp.sum(dy, axis=0)
     delta_x = w * jnp.sum(dx, axis=0)
@@ -121,8 +143,16 @@ def _moments(points: SigmaPoints, y0: Array, dy: Array, w: float, cross_w: float
     return mean, _linalg.symmetrize(cov), cross
 
 
-def joseph_like_cov(chol: Array, points: SigmaPoints, dy: Array, cross_cov: Array, gain: Array, R: Array,
-                    w: float, cross_w: float) -> Array:
+def joseph_like_cov(
+    chol: Array,
+    points: SigmaPoints,
+    dy: Array,
+    cross_cov: Array,
+    gain: Array,
+    R: Array,
+    w: float,
+    cross_w: float,
+) -> Array:
     """``P - K S K^T`` as ``(I - K H) P (I - K H)^T + K (R + Lambda) K^T`` (module doc).
 
     Args:
@@ -135,14 +165,18 @@ def joseph_like_cov(chol: Array, points: SigmaPoints, dy: Array, cross_cov: Arra
       w, cross_w: ``W_i`` and ``beta - alpha^2``.
     """
     mm = _linalg.matmul
-    whitened_cross = _linalg.solve_lower(chol, cross_cov)                       # B = L^-1 Pxy, so H L = B^T
-    linearisation_t = _linalg.solve_lower_transposed(chol, whitened_cross)     # H^T = P^-1 Pxy, (n, m)
-    residuals = dy - mm(points.offsets, linearisation_t)                       # e_i = d_i - H dx_i, (2n, m)
-    contraction = chol - mm(gain, whitened_cross.T)                            # (I - K H) L = L - K B^T
-    spread = mm(jnp.sqrt(w) * residuals, gain.T)                               # rows sqrt(W_i) K e_i
-    centre = mm(gain, w * jnp.sum(dy, axis=0))                                 # K delta
-    cov = (mm(contraction, contraction.T) + mm(spread.T, spread) + cross_w * jnp.outer(centre, centre)
-           + mm(mm(gain, R), gain.T))
+    whitened_cross = _linalg.solve_lower(chol, cross_cov)  # B = L^-1 Pxy, so H L = B^T
+    linearisation_t = _linalg.solve_lower_transposed(chol, whitened_cross)  # H^T = P^-1 Pxy, (n, m)
+    residuals = dy - mm(points.offsets, linearisation_t)  # e_i = d_i - H dx_i, (2n, m)
+    contraction = chol - mm(gain, whitened_cross.T)  # (I - K H) L = L - K B^T
+    spread = mm(jnp.sqrt(w) * residuals, gain.T)  # rows sqrt(W_i) K e_i
+    centre = mm(gain, w * jnp.sum(dy, axis=0))  # K delta
+    cov = (
+        mm(contraction, contraction.T)
+        + mm(spread.T, spread)
+        + cross_w * jnp.outer(centre, centre)
+        + mm(mm(gain, R), gain.T)
+    )
     return _linalg.symmetrize(cov)
 
 
@@ -157,16 +191,22 @@ def scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences: str):
     for name, value in (("alpha", alpha), ("beta", beta), ("kappa", kappa)):
         _checks.check_real(name, value, "a real scalar (static)")
         if _checks.concrete(value) is None:
-            raise TypeError(f"{name}: expected a Python float (a static scaled-UT parameter), "
-                            f"got {_checks.received(value)}")
+            raise TypeError(
+                f"{name}: expected a Python float (a static scaled-UT parameter), "
+                f"got {_checks.received(value)}"
+            )
     _checks.check_positive("alpha", alpha, "a positive scalar")
     _checks.check_scalar("beta", beta, meaning="a real scalar")
     _checks.check_scalar("kappa", kappa, meaning="a real scalar")
     alpha, beta, kappa = float(alpha), float(beta), float(kappa)
     if alpha**2 * (n + kappa) <= 0:
-        raise ValueError(f"kappa: expected alpha^2 (n + kappa) > 0 for n = {n}, got kappa = {kappa}")
+        raise ValueError(
+            f"kappa: expected alpha^2 (n + kappa) > 0 for n = {n}, got kappa = {kappa}"
+        )
     if sigma_differences not in ("auto", "direct", "taylor"):
-        raise ValueError(f"sigma_differences: expected 'auto', 'direct' or 'taylor', got {sigma_differences!r}")
+        raise ValueError(
+            f"sigma_differences: expected 'auto', 'direct' or 'taylor', got {sigma_differences!r}"
+        )
     w, _, _ = unscented_weights(n, alpha, beta, kappa)
 
     def use_taylor(mean: Array) -> bool:
@@ -177,9 +217,18 @@ def scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences: str):
     return n, m, alpha, beta, w, (alpha**2 * (n + kappa)) ** 0.5, use_taylor
 
 
-def unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Array, params: Any = None,
-                            alpha: float = 1e-3, beta: float = 2.0, kappa: float = 0.0,
-                            sigma_differences: str = "auto", missing_measurements: bool = False) -> Filter:
+def unscented_kalman_filter(
+    f: ModelFunction,
+    h: ModelFunction,
+    Q: Array,
+    R: Array,
+    params: Any = None,
+    alpha: float = 1e-3,
+    beta: float = 2.0,
+    kappa: float = 0.0,
+    sigma_differences: str = "auto",
+    missing_measurements: bool = False,
+) -> Filter:
     """UKF for ``x[k+1] = f(x, u, params) + w``, ``y = h(x, u, params) + v``.
 
     Sigma points are redrawn from ``N(m, P)`` before each update (the additive ``Q`` reaches the predicted
@@ -200,7 +249,9 @@ def unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Arr
       ``Filter(init, step, update, predict)``: ``init(mean (n,), cov (n, n)) -> GaussianState``;
       ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``, unscented update then prediction through ``f``.
     """
-    n, m, alpha, beta, w, scale, use_taylor = scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences)
+    n, m, alpha, beta, w, scale, use_taylor = scaled_transform(
+        f, h, Q, R, alpha, beta, kappa, sigma_differences
+    )
     cross_w = beta - alpha**2
 
     def update(state: GaussianState, y: Array, u: Array) -> FilterInfo:
@@ -217,12 +268,17 @@ def unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Arr
             S = mask_innovation_cov(S, mask)
             Pxy = jnp.where(mask[None, :], Pxy, 0.0)
         else:
-            innovation, num_observed = used_innovation(y, y_pred), jnp.sum(jnp.isfinite(y)).astype(jnp.int32)
+            innovation, num_observed = (
+                used_innovation(y, y_pred),
+                jnp.sum(jnp.isfinite(y)).astype(jnp.int32),
+            )
         chol_S = _linalg.cholesky(S)
         gain = _linalg.gain_from_cross_cov(Pxy, chol_S)
         whitened = _linalg.whiten(chol_S, innovation)
         mean = state.mean + gain @ innovation
-        reported, nis = report_dead(innovation, jnp.sum(whitened**2), dead_components(y, missing_measurements))
+        reported, nis = report_dead(
+            innovation, jnp.sum(whitened**2), dead_components(y, missing_measurements)
+        )
         return FilterInfo(
             predicted_mean=state.mean,
             predicted_cov=state.cov,
@@ -230,17 +286,23 @@ def unscented_kalman_filter(f: ModelFunction, h: ModelFunction, Q: Array, R: Arr
             filtered_cov=joseph_like_cov(chol, points, dy, Pxy, gain, R, w, cross_w),
             innovation=reported,
             innovation_cov=S,
-            log_likelihood=_linalg.gaussian_log_likelihood(whitened, chol_S, num_observed if missing_measurements
-                                                           else m),
+            log_likelihood=_linalg.gaussian_log_likelihood(
+                whitened, chol_S, num_observed if missing_measurements else m
+            ),
             nis=nis,
             num_observed=num_observed,
-            healthy=(_linalg.cholesky_is_finite(chol_S) & _linalg.cholesky_is_finite(chol)
-                     & jnp.all(jnp.isfinite(mean))),
+            healthy=(
+                _linalg.cholesky_is_finite(chol_S)
+                & _linalg.cholesky_is_finite(chol)
+                & jnp.all(jnp.isfinite(mean))
+            ),
         )
 
     def predict(post: GaussianState, u: Array) -> GaussianState:
         points, _ = sigma_points(post.mean, post.cov, scale)
-        next_mean, next_cov, _ = unscented_moments(points, lambda x: f(x, u, params), w, cross_w, use_taylor(post.mean))
+        next_mean, next_cov, _ = unscented_moments(
+            points, lambda x: f(x, u, params), w, cross_w, use_taylor(post.mean)
+        )
         _checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
         return GaussianState(next_mean, _linalg.symmetrize(next_cov + Q))
 

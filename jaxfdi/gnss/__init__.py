@@ -8,14 +8,15 @@ orbits), ``frames`` (WGS-84), ``atmosphere`` (Klobuchar, Saastamoinen), ``paths`
 ``solution_separation`` (ARAIM's levels), ``integrity`` (one epoch end to end with exclusion, the loop's FDI stage,
 availability over grids), ``receiver`` (a real receiver's epochs: observation files, logs and phones).
 """
+
 from jaxfdi.gnss._android import read_android
 from jaxfdi.gnss._frames import ecef_to_geodetic, geodetic_to_ecef
 from jaxfdi.gnss._integrity import monitor_epochs
 from jaxfdi.gnss._orbits import orbit_table, satellite_position, select_orbits
 from jaxfdi.gnss._positioning import solve_position
 from jaxfdi.gnss._protection import protection_levels
-from jaxfdi.gnss._receiver import monitor_receiver, read_observations
 from jaxfdi.gnss._raim import parity_check, raim_tables
+from jaxfdi.gnss._receiver import monitor_receiver, read_observations
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._yuma import read_yuma
 

@@ -17,6 +17,7 @@ Constellations: Android ``GnssStatus`` codes (1 GPS, 3 GLONASS, 4 QZSS, 5 BeiDou
 as RINEX letters. Parsed with the standard ``csv`` (tests check every column against gnss_lib_py, kept
 out of the core install: plotting and data-frame dependencies for twenty columns).
 """
+
 from __future__ import annotations
 
 import csv
@@ -39,17 +40,38 @@ DERIVED_DELAY_MS = 1000
 HEIGHT_CORRECTION_2021_M = 61.0
 
 _LAYOUTS = {
-    "2021": dict(time="millisSinceGpsEpoch", constellation="constellationType", svid="svid", signal="signalType",
-                 position=("xSatPosM", "ySatPosM", "zSatPosM"), clock="satClkBiasM", raw="rawPrM",
-                 sigma="rawPrUncM", isrb="isrbM", iono="ionoDelayM", tropo="tropoDelayM", cn0=None, wls=None,
-                 sent="receivedSvTimeInGpsNanos"),
-    "device_gnss": dict(time="utcTimeMillis", constellation="ConstellationType", svid="Svid", signal="SignalType",
-                        position=("SvPositionXEcefMeters", "SvPositionYEcefMeters", "SvPositionZEcefMeters"),
-                        clock="SvClockBiasMeters", raw="RawPseudorangeMeters",
-                        sigma="RawPseudorangeUncertaintyMeters", isrb="IsrbMeters", iono="IonosphericDelayMeters",
-                        tropo="TroposphericDelayMeters", cn0="Cn0DbHz",
-                        wls=("WlsPositionXEcefMeters", "WlsPositionYEcefMeters", "WlsPositionZEcefMeters"),
-                        sent=None),
+    "2021": dict(
+        time="millisSinceGpsEpoch",
+        constellation="constellationType",
+        svid="svid",
+        signal="signalType",
+        position=("xSatPosM", "ySatPosM", "zSatPosM"),
+        clock="satClkBiasM",
+        raw="rawPrM",
+        sigma="rawPrUncM",
+        isrb="isrbM",
+        iono="ionoDelayM",
+        tropo="tropoDelayM",
+        cn0=None,
+        wls=None,
+        sent="receivedSvTimeInGpsNanos",
+    ),
+    "device_gnss": dict(
+        time="utcTimeMillis",
+        constellation="ConstellationType",
+        svid="Svid",
+        signal="SignalType",
+        position=("SvPositionXEcefMeters", "SvPositionYEcefMeters", "SvPositionZEcefMeters"),
+        clock="SvClockBiasMeters",
+        raw="RawPseudorangeMeters",
+        sigma="RawPseudorangeUncertaintyMeters",
+        isrb="IsrbMeters",
+        iono="IonosphericDelayMeters",
+        tropo="TroposphericDelayMeters",
+        cn0="Cn0DbHz",
+        wls=("WlsPositionXEcefMeters", "WlsPositionYEcefMeters", "WlsPositionZEcefMeters"),
+        sent=None,
+    ),
 }
 
 
@@ -89,8 +111,10 @@ def unix_to_gps_millis(unix_ms: np.ndarray) -> np.ndarray:
     """GPS milliseconds of Unix (UTC) milliseconds from 2017 on (18 leap seconds)."""
     unix_ms = np.asarray(unix_ms, np.int64)
     if np.any(unix_ms < LEAP_VALID_FROM_UNIX_MS):
-        raise ValueError("utcTimeMillis: expected times from 2017-01-01 on (GPS - UTC = 18 s), got "
-                         f"{int(unix_ms.min())} ms")
+        raise ValueError(
+            "utcTimeMillis: expected times from 2017-01-01 on (GPS - UTC = 18 s), got "
+            f"{int(unix_ms.min())} ms"
+        )
     return unix_ms - GPS_EPOCH_UNIX_MS + LEAP_SECONDS_MS
 
 
@@ -98,7 +122,9 @@ def geodetic_ecef64(lat_deg, lon_deg, height) -> np.ndarray:
     """(..., 3) float64 ECEF [m] of lat, lon [deg], ellipsoidal height [m], whatever the x64 flag
     (float32 would round a ground truth to 0.5 m)."""
     with jax.enable_x64(True):
-        return np.asarray(geodetic_to_ecef(np.radians(lat_deg), np.radians(lon_deg), np.asarray(height, float)))
+        return np.asarray(
+            geodetic_to_ecef(np.radians(lat_deg), np.radians(lon_deg), np.asarray(height, float))
+        )
 
 
 def _float(text: str) -> float:
@@ -121,14 +147,33 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
         try:
             header = next(reader)
         except StopIteration:
-            raise ValueError(f"{path}: empty file, expected a GSDC measurement CSV header") from None
+            raise ValueError(
+                f"{path}: empty file, expected a GSDC measurement CSV header"
+            ) from None
         layout = next((_LAYOUTS[k] for k in _LAYOUTS if _LAYOUTS[k]["time"] in header), None)
         if layout is None:
-            raise ValueError(f"{path}:1: expected a GSDC measurement CSV header (millisSinceGpsEpoch or "
-                             f"utcTimeMillis), got {header[:4]}")
-        names = [layout[k] for k in ("time", "constellation", "svid", "signal", "clock", "raw", "sigma", "isrb",
-                                     "iono", "tropo")] + list(layout["position"])
-        names += [layout[k] for k in ("cn0", "sent") if layout[k]] + (list(layout["wls"]) if layout["wls"] else [])
+            raise ValueError(
+                f"{path}:1: expected a GSDC measurement CSV header (millisSinceGpsEpoch or "
+                f"utcTimeMillis), got {header[:4]}"
+            )
+        names = [
+            layout[k]
+            for k in (
+                "time",
+                "constellation",
+                "svid",
+                "signal",
+                "clock",
+                "raw",
+                "sigma",
+                "isrb",
+                "iono",
+                "tropo",
+            )
+        ] + list(layout["position"])
+        names += [layout[k] for k in ("cn0", "sent") if layout[k]] + (
+            list(layout["wls"]) if layout["wls"] else []
+        )
         missing = [n for n in names if n not in header]
         if missing:
             raise ValueError(f"{path}:1: missing columns {missing}")
@@ -137,14 +182,16 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
         rows = []
         for line, row in enumerate(reader, start=2):
             if not row or (kind is not None and row[kind] != "Raw"):
-                continue     # not a measurement
+                continue  # not a measurement
             try:
                 value = {n: row[column[n]] for n in names}
                 if not value[layout["signal"]].strip():
-                    continue     # a measurement Google's pipeline left without a signal type
+                    continue  # a measurement Google's pipeline left without a signal type
                 code = int(value[layout["constellation"]])
                 if code not in CONSTELLATIONS:
-                    raise ValueError(f"constellation type {code} (expected one of {sorted(CONSTELLATIONS)})")
+                    raise ValueError(
+                        f"constellation type {code} (expected one of {sorted(CONSTELLATIONS)})"
+                    )
                 time = int(float(value[layout["time"]]))
                 numbers = {n: _float(value[n]) for n in names[4:]}
                 slot = f"{CONSTELLATIONS[code]}{int(value[layout['svid']]):02d} {value[layout['signal']]}"
@@ -156,7 +203,7 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
     times = np.array([r[0] for r in rows], np.int64)
     if layout["wls"]:
         times = unix_to_gps_millis(times)
-    if layout["sent"]:     # the 2021 corrections (module doc)
+    if layout["sent"]:  # the 2021 corrections (module doc)
         times = times - DERIVED_DELAY_MS
         flight = times - np.array([r[2][layout["sent"]] for r in rows]) / 1e6
         keep = (flight > 0.0) & (flight < 300.0)
@@ -169,7 +216,9 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
     seen = set()
     for k, (_, slot, _) in zip(epoch_of, rows):
         if (k, slot) in seen:
-            raise ValueError(f"{path}: two rows of {slot} at {int(epochs[k])} ms (GPS): expected one per signal and epoch")
+            raise ValueError(
+                f"{path}: two rows of {slot} at {int(epochs[k])} ms (GPS): expected one per signal and epoch"
+            )
         seen.add((k, slot))
     shape = (epochs.size, len(signal))
     pseudorange, sigma, cn0 = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
@@ -177,8 +226,13 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
     wls = np.full((epochs.size, 3), np.nan)
     for k, (_, slot, v) in zip(epoch_of, rows):
         s = slot_of[slot]
-        pseudorange[k, s] = v[layout["raw"]] + v[layout["clock"]] - v[layout["isrb"]] - v[layout["iono"]] \
+        pseudorange[k, s] = (
+            v[layout["raw"]]
+            + v[layout["clock"]]
+            - v[layout["isrb"]]
+            - v[layout["iono"]]
             - v[layout["tropo"]]
+        )
         sigma[k, s] = v[layout["sigma"]]
         satellite[k, s] = [v[n] for n in layout["position"]]
         if layout["cn0"]:
@@ -193,8 +247,17 @@ def read_android(path, ground_truth=None) -> PhoneEpochs:
         if not found.any():
             raise ValueError(f"ground_truth: {ground_truth} has no row at the epochs of {path}")
         truth[found] = geodetic_ecef64(*lat_lon_height[at[found]].T)
-    return PhoneEpochs(epochs, signal, np.array([s[0] for s in signal]), pseudorange, sigma, cn0, satellite, wls,
-                       truth)
+    return PhoneEpochs(
+        epochs,
+        signal,
+        np.array([s[0] for s in signal]),
+        pseudorange,
+        sigma,
+        cn0,
+        satellite,
+        wls,
+        truth,
+    )
 
 
 def read_android_ground_truth(path) -> tuple[np.ndarray, np.ndarray]:
@@ -206,12 +269,20 @@ def read_android_ground_truth(path) -> tuple[np.ndarray, np.ndarray]:
         reader = csv.DictReader(handle)
         header = reader.fieldnames or []
         if "millisSinceGpsEpoch" in header:
-            names, unix = ("millisSinceGpsEpoch", "latDeg", "lngDeg", "heightAboveWgs84EllipsoidM"), False
+            names, unix = (
+                ("millisSinceGpsEpoch", "latDeg", "lngDeg", "heightAboveWgs84EllipsoidM"),
+                False,
+            )
         elif "UnixTimeMillis" in header:
-            names, unix = ("UnixTimeMillis", "LatitudeDegrees", "LongitudeDegrees", "AltitudeMeters"), True
+            names, unix = (
+                ("UnixTimeMillis", "LatitudeDegrees", "LongitudeDegrees", "AltitudeMeters"),
+                True,
+            )
         else:
-            raise ValueError(f"{path}:1: expected a GSDC ground-truth header (millisSinceGpsEpoch or "
-                             f"UnixTimeMillis), got {header[:4]}")
+            raise ValueError(
+                f"{path}:1: expected a GSDC ground-truth header (millisSinceGpsEpoch or "
+                f"UnixTimeMillis), got {header[:4]}"
+            )
         times, points = [], []
         for line, row in enumerate(reader, start=2):
             try:

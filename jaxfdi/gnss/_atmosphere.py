@@ -17,6 +17,7 @@ Error variances (RTKLIB manual, Takasu 2013, E.6): ``(0.5 I)^2`` (ionosphere ``I
 delays are zero below the horizon and for a receiver > 1 km below the ellipsoid (troposphere: outside
 -100 m to 10 km), so an iteration from the Earth's centre sees none.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -30,7 +31,7 @@ from jaxfdi.gnss._orbits import SPEED_OF_LIGHT
 
 #: RTKLIB's default broadcast ionosphere (2004-01-01), used when a file gives none
 DEFAULT_ION_ALPHA = (0.1118e-07, -0.7451e-08, -0.5961e-07, 0.1192e-06)
-DEFAULT_ION_BETA = (0.1167e+06, -0.2294e+06, -0.1311e+06, 0.1049e+07)
+DEFAULT_ION_BETA = (0.1167e06, -0.2294e06, -0.1311e06, 0.1049e07)
 #: relative humidity of the Saastamoinen standard atmosphere
 HUMIDITY = 0.7
 #: the error model: broadcast ionosphere error factor, Saastamoinen error [m]
@@ -61,15 +62,25 @@ def broadcast_atmosphere(ion_alpha=None, ion_beta=None) -> Atmosphere:
     beta = np.asarray(DEFAULT_ION_BETA if ion_beta is None else ion_beta, float)
     for name, value in (("ion_alpha", alpha), ("ion_beta", beta)):
         if value.shape != (4,):
-            raise ValueError(f"{name}: expected the 4 Klobuchar coefficients of a navigation header, got shape "
-                             f"{value.shape}")
+            raise ValueError(
+                f"{name}: expected the 4 Klobuchar coefficients of a navigation header, got shape "
+                f"{value.shape}"
+            )
     if not (np.all(np.isfinite(alpha)) and np.all(np.isfinite(beta))):
         alpha, beta = np.asarray(DEFAULT_ION_ALPHA), np.asarray(DEFAULT_ION_BETA)
     return Atmosphere(jnp.asarray(alpha), jnp.asarray(beta))
 
 
-def klobuchar_delay(ion_alpha: Array, ion_beta: Array, latitude: Array, longitude: Array, height: Array,
-                    elevation: Array, azimuth: Array, time_of_week: Array) -> Array:
+def klobuchar_delay(
+    ion_alpha: Array,
+    ion_beta: Array,
+    latitude: Array,
+    longitude: Array,
+    height: Array,
+    elevation: Array,
+    azimuth: Array,
+    time_of_week: Array,
+) -> Array:
     """L1 ionospheric delay of the broadcast model (module docstring).
 
     Returns:
@@ -92,7 +103,9 @@ def klobuchar_delay(ion_alpha: Array, ion_beta: Array, latitude: Array, longitud
     return jnp.where((height < -1e3) | (elevation <= 0.0), 0.0, delay)
 
 
-def saastamoinen_delay(latitude: Array, height: Array, elevation: Array, humidity: float = HUMIDITY) -> Array:
+def saastamoinen_delay(
+    latitude: Array, height: Array, elevation: Array, humidity: float = HUMIDITY
+) -> Array:
     """Tropospheric delay of the Saastamoinen model in the standard atmosphere (module docstring).
 
     Returns:
@@ -102,15 +115,18 @@ def saastamoinen_delay(latitude: Array, height: Array, elevation: Array, humidit
     pressure = 1013.25 * (1.0 - 2.2557e-5 * h) ** 5.2568
     temperature = 15.0 - 6.5e-3 * h + 273.16
     vapour = 6.108 * humidity * jnp.exp((17.15 * temperature - 4684.0) / (temperature - 38.45))
-    cos_z = jnp.sin(elevation)   # cos of the zenith angle
-    hydrostatic = 0.0022768 * pressure / (1.0 - 0.00266 * jnp.cos(2.0 * latitude) - 0.00028 * h / 1e3) / cos_z
+    cos_z = jnp.sin(elevation)  # cos of the zenith angle
+    hydrostatic = (
+        0.0022768 * pressure / (1.0 - 0.00266 * jnp.cos(2.0 * latitude) - 0.00028 * h / 1e3) / cos_z
+    )
     wet = 0.002277 * (1255.0 / temperature + 0.05) * vapour / cos_z
     outside = (height < -100.0) | (height > 1e4) | (elevation <= 0.0)
     return jnp.where(outside, 0.0, hydrostatic + wet)
 
 
-def atmosphere_corrections(atmosphere: Atmosphere, time: Array, receiver_ecef: Array, elevation: Array,
-                           azimuth: Array) -> tuple[Array, Array]:
+def atmosphere_corrections(
+    atmosphere: Atmosphere, time: Array, receiver_ecef: Array, elevation: Array, azimuth: Array
+) -> tuple[Array, Array]:
     """Delays and model error variances for satellites at ``elevation``/``azimuth`` (S,) [rad] from
     ``receiver_ecef`` (3,) at GPS ``time`` [s from any week's start: read modulo a day].
 
@@ -118,9 +134,11 @@ def atmosphere_corrections(atmosphere: Atmosphere, time: Array, receiver_ecef: A
       ``(delay, variance)``, (S,) each: Klobuchar + Saastamoinen [m], their variances [m^2] (module doc).
     """
     lat, lon, height = ecef_to_geodetic(receiver_ecef)
-    ionosphere = klobuchar_delay(atmosphere.ion_alpha, atmosphere.ion_beta, lat, lon, height, elevation, azimuth,
-                                 time)
+    ionosphere = klobuchar_delay(
+        atmosphere.ion_alpha, atmosphere.ion_beta, lat, lon, height, elevation, azimuth, time
+    )
     troposphere = saastamoinen_delay(lat, height, elevation)
-    variance = (IONOSPHERE_ERROR_FACTOR * ionosphere) ** 2 \
-        + (TROPOSPHERE_ERROR / (jnp.sin(jnp.maximum(elevation, 0.0)) + 0.1)) ** 2
+    variance = (IONOSPHERE_ERROR_FACTOR * ionosphere) ** 2 + (
+        TROPOSPHERE_ERROR / (jnp.sin(jnp.maximum(elevation, 0.0)) + 0.1)
+    ) ** 2
     return ionosphere + troposphere, variance

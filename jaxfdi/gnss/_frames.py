@@ -7,6 +7,7 @@ frame NED at the geodetic point (Misra & Enge 2011, sec. 4.2); azimuth clockwise
 
 Angles are radians; every function takes leading batch axes (``...``).
 """
+
 from __future__ import annotations
 
 from functools import partial
@@ -35,8 +36,10 @@ def geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
     try:
         jnp.broadcast_shapes(lat.shape, lon.shape, height.shape)
     except ValueError:
-        raise ValueError(f"lat, lon, height: expected arrays that broadcast together, got shapes {lat.shape}, "
-                         f"{lon.shape}, {height.shape}") from None
+        raise ValueError(
+            f"lat, lon, height: expected arrays that broadcast together, got shapes {lat.shape}, "
+            f"{lon.shape}, {height.shape}"
+        ) from None
     return _geodetic_to_ecef(lat, lon, height)
 
 
@@ -46,9 +49,14 @@ def _geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
     ``_`` programs here)."""
     sin_lat = jnp.sin(lat)
     radius = WGS84_A / jnp.sqrt(1.0 - WGS84_E2 * sin_lat**2)
-    return jnp.stack([(radius + height) * jnp.cos(lat) * jnp.cos(lon),
-                      (radius + height) * jnp.cos(lat) * jnp.sin(lon),
-                      (radius * (1.0 - WGS84_E2) + height) * sin_lat], axis=-1)
+    return jnp.stack(
+        [
+            (radius + height) * jnp.cos(lat) * jnp.cos(lon),
+            (radius + height) * jnp.cos(lat) * jnp.sin(lon),
+            (radius * (1.0 - WGS84_E2) + height) * sin_lat,
+        ],
+        axis=-1,
+    )
 
 
 def ecef_to_geodetic(ecef: Array, iterations: int = 5) -> tuple[Array, Array, Array]:
@@ -72,7 +80,9 @@ def _ecef_to_geodetic(ecef: Array, iterations: int) -> tuple[Array, Array, Array
     beta = jnp.arctan2(z, (1.0 - WGS84_F) * p)  # parametric latitude, first guess
     lat = beta
     for _ in range(iterations):
-        lat = jnp.arctan2(z + ep2 * WGS84_B * jnp.sin(beta) ** 3, p - WGS84_E2 * WGS84_A * jnp.cos(beta) ** 3)
+        lat = jnp.arctan2(
+            z + ep2 * WGS84_B * jnp.sin(beta) ** 3, p - WGS84_E2 * WGS84_A * jnp.cos(beta) ** 3
+        )
         beta = jnp.arctan2((1.0 - WGS84_F) * jnp.sin(lat), jnp.cos(lat))
     sin_lat, cos_lat = jnp.sin(lat), jnp.cos(lat)
     radius = WGS84_A / jnp.sqrt(1.0 - WGS84_E2 * sin_lat**2)

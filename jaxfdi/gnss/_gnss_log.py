@@ -19,12 +19,18 @@ A malformed record raises ``ValueError`` naming the file and line.
 Not gnss_lib_py's ``AndroidRawGnss``: it raises ``KeyError`` without a ``CodeType`` column (the 2021 Pixel 4
 log here) and uses float64 seconds (~1 cm of range); here the nanoseconds stay integers.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-from jaxfdi.gnss._android import (CONSTELLATIONS, GPS_EPOCH_UNIX_MS, LEAP_SECONDS_MS, LEAP_VALID_FROM_UNIX_MS,
-                                  geodetic_ecef64)
+from jaxfdi.gnss._android import (
+    CONSTELLATIONS,
+    GPS_EPOCH_UNIX_MS,
+    LEAP_SECONDS_MS,
+    LEAP_VALID_FROM_UNIX_MS,
+    geodetic_ecef64,
+)
 from jaxfdi.gnss._orbits import SPEED_OF_LIGHT
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK
 from jaxfdi.gnss._rinex_obs import CODE_PRIORITY, Observations, _fail
@@ -37,8 +43,18 @@ TOW_DECODED, TOW_KNOWN, GLO_TOD_DECODED, GLO_TOD_KNOWN = 0x8, 0x4000, 0x80, 0x80
 MAX_TIME_UNCERTAINTY_NS = 500.0
 #: Android constellation codes with no RINEX slot here (SBAS 2, IRNSS 7) or unknown (0)
 SKIPPED = (0, 2, 7)
-_FIELDS = ("TimeNanos", "FullBiasNanos", "BiasNanos", "TimeOffsetNanos", "Svid", "State", "ReceivedSvTimeNanos",
-           "ReceivedSvTimeUncertaintyNanos", "Cn0DbHz", "ConstellationType")
+_FIELDS = (
+    "TimeNanos",
+    "FullBiasNanos",
+    "BiasNanos",
+    "TimeOffsetNanos",
+    "Svid",
+    "State",
+    "ReceivedSvTimeNanos",
+    "ReceivedSvTimeUncertaintyNanos",
+    "Cn0DbHz",
+    "ConstellationType",
+)
 
 
 def _band(system: str, frequency_hz: float) -> str:
@@ -48,10 +64,18 @@ def _band(system: str, frequency_hz: float) -> str:
     mhz = frequency_hz / 1e6
     if 1590.0 < mhz < 1610.0 and system == "R":
         return "1"
-    for band, centre in (("1", 1575.42), ("2", 1561.098), ("5", 1176.45), ("7", 1207.14), ("6", 1268.52)):
+    for band, centre in (
+        ("1", 1575.42),
+        ("2", 1561.098),
+        ("5", 1176.45),
+        ("7", 1207.14),
+        ("6", 1268.52),
+    ):
         if abs(mhz - centre) < 1.0:
             return band
-    raise ValueError(f"CarrierFrequencyHz: expected an L1/E1/G1, B1I, L5/E5a, E5b or E6 carrier, got {frequency_hz}")
+    raise ValueError(
+        f"CarrierFrequencyHz: expected an L1/E1/G1, B1I, L5/E5a, E5b or E6 carrier, got {frequency_hz}"
+    )
 
 
 def _frame(system: str) -> tuple[int, int]:
@@ -92,46 +116,67 @@ def parse_gnss_log(text: str, name: str = "<string>") -> Observations:
     epochs, records = {}, {}
     for line_no, fields in raw:
         if len(fields) != len(header):
-            _fail(name, line_no, f"expected {len(header)} fields as the '# Raw' header, got {len(fields)}")
+            _fail(
+                name,
+                line_no,
+                f"expected {len(header)} fields as the '# Raw' header, got {len(fields)}",
+            )
         value = {f: fields[column[f]] for f in header}
         try:
             code = int(value["ConstellationType"])
             if code in SKIPPED:
                 continue
             if code not in CONSTELLATIONS:
-                raise ValueError(f"ConstellationType {code} (expected one of {sorted(CONSTELLATIONS)} or "
-                                 f"{list(SKIPPED)})")
+                raise ValueError(
+                    f"ConstellationType {code} (expected one of {sorted(CONSTELLATIONS)} or "
+                    f"{list(SKIPPED)})"
+                )
             system, svid = CONSTELLATIONS[code], int(value["Svid"])
             if system == "R" and not 1 <= svid <= 24:
-                continue     # a frequency channel, not a slot number
+                continue  # a frequency channel, not a slot number
             satellite = f"{system}{svid - 192 if system == 'J' else svid:02d}"
             time_nanos, full_bias = int(value["TimeNanos"]), int(value["FullBiasNanos"])
             bias_ns = float(value["BiasNanos"] or 0.0)
             sub_ns = float(value["TimeOffsetNanos"] or 0.0) - bias_ns
-            frequency = float(value["CarrierFrequencyHz"]) if value.get("CarrierFrequencyHz") else np.nan
+            frequency = (
+                float(value["CarrierFrequencyHz"]) if value.get("CarrierFrequencyHz") else np.nan
+            )
             attribute = value.get("CodeType") or ("I" if system == "C" else "C")
             rinex = f"C{_band(system, frequency)}{attribute}"
             state, sent = int(value["State"]), int(value["ReceivedSvTimeNanos"])
-            uncertainty, cn0 = float(value["ReceivedSvTimeUncertaintyNanos"]), float(value["Cn0DbHz"] or "nan")
+            uncertainty, cn0 = (
+                float(value["ReceivedSvTimeUncertaintyNanos"]),
+                float(value["Cn0DbHz"] or "nan"),
+            )
         except ValueError as error:
             _fail(name, line_no, str(error))
         if full_bias >= 0:
-            _fail(name, line_no, f"FullBiasNanos: expected a negative number (the receiver's clock against GPS "
-                                 f"time), got {full_bias}")
-        gps_ns = time_nanos - full_bias     # exact integer nanoseconds since the GPS epoch
+            _fail(
+                name,
+                line_no,
+                f"FullBiasNanos: expected a negative number (the receiver's clock against GPS "
+                f"time), got {full_bias}",
+            )
+        gps_ns = time_nanos - full_bias  # exact integer nanoseconds since the GPS epoch
         if (gps_ns // 10**6) + GPS_EPOCH_UNIX_MS - LEAP_SECONDS_MS < LEAP_VALID_FROM_UNIX_MS:
             _fail(name, line_no, "expected a log from 2017-01-01 on (GPS - UTC = 18 s)")
         epochs.setdefault(time_nanos, (gps_ns, -bias_ns))
         key = (time_nanos, satellite, rinex)
         if key in records:
-            _fail(name, line_no, f"a second record of {satellite} {rinex} at TimeNanos {time_nanos}")
+            _fail(
+                name, line_no, f"a second record of {satellite} {rinex} at TimeNanos {time_nanos}"
+            )
         offset, period = _frame(system)
-        time_known = state & (GLO_TOD_DECODED | GLO_TOD_KNOWN if system == "R" else TOW_DECODED | TOW_KNOWN)
+        time_known = state & (
+            GLO_TOD_DECODED | GLO_TOD_KNOWN if system == "R" else TOW_DECODED | TOW_KNOWN
+        )
         flight = ((gps_ns + offset - sent + period // 2) % period) - period // 2
         valid = bool(time_known) and uncertainty < MAX_TIME_UNCERTAINTY_NS
         records[key] = ((flight + sub_ns) * SPEED_OF_LIGHT * 1e-9 if valid else np.nan, cn0)
     if not records:
-        _fail(name, len(text.splitlines()), "no Raw record of GPS, GLONASS, QZSS, BeiDou or Galileo")
+        _fail(
+            name, len(text.splitlines()), "no Raw record of GPS, GLONASS, QZSS, BeiDou or Galileo"
+        )
     times = sorted(epochs)
     satellites = sorted({sat for _, sat, _ in records})
     codes = {}
@@ -140,7 +185,10 @@ def parse_gnss_log(text: str, name: str = "<string>") -> Observations:
         codes[system] = next((c for c in CODE_PRIORITY[system] if c in seen), None)
     satellites = [sat for sat in satellites if codes[sat[0]] is not None]
     row, col = {t: i for i, t in enumerate(times)}, {s: i for i, s in enumerate(satellites)}
-    pseudorange, cn0 = np.full((len(times), len(satellites)), np.nan), np.full((len(times), len(satellites)), np.nan)
+    pseudorange, cn0 = (
+        np.full((len(times), len(satellites)), np.nan),
+        np.full((len(times), len(satellites)), np.nan),
+    )
     for (time_nanos, sat, code), (rho, strength) in records.items():
         if sat in col and code == codes[sat[0]]:
             pseudorange[row[time_nanos], col[sat]], cn0[row[time_nanos], col[sat]] = rho, strength
@@ -148,12 +196,18 @@ def parse_gnss_log(text: str, name: str = "<string>") -> Observations:
     approx = np.full(3, np.nan)
     if fix is not None:
         try:
-            lat, lon, height = (float(fix[1][f]) for f in ("LatitudeDegrees", "LongitudeDegrees", "AltitudeMeters"))
+            lat, lon, height = (
+                float(fix[1][f]) for f in ("LatitudeDegrees", "LongitudeDegrees", "AltitudeMeters")
+            )
         except (KeyError, ValueError) as error:
             _fail(name, fix[0], f"Fix record: {error}")
         approx = geodetic_ecef64(lat, lon, height)
     return Observations(
         week=gps_ns // WEEK_NS,
         time_of_week=(gps_ns % WEEK_NS) * 1e-9 + np.array([epochs[t][1] for t in times]) * 1e-9,
-        satellite=np.array(satellites, dtype="<U3"), code=np.array([codes[s[0]] for s in satellites], dtype="<U3"),
-        pseudorange=pseudorange, cn0=cn0, approx_position=approx)
+        satellite=np.array(satellites, dtype="<U3"),
+        code=np.array([codes[s[0]] for s in satellites], dtype="<U3"),
+        pseudorange=pseudorange,
+        cn0=cn0,
+        approx_position=approx,
+    )

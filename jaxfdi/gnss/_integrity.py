@@ -8,6 +8,7 @@ reported as the excluded slot when the parity test excludes none. Snapshot metho
 sensor label in a plant without inputs). ``geometry_fix`` and ``availability_grid``: the same protection levels without
 measurements (geometry and noise model only), over receiver/epoch grids.
 """
+
 from __future__ import annotations
 
 from typing import Callable, NamedTuple
@@ -18,6 +19,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
+from jaxfdi._stages import FDI
 from jaxfdi.detection._chi2 import Decision, flag_dead
 from jaxfdi.gnss._atmosphere import Atmosphere
 from jaxfdi.gnss._frames import elevation_azimuth, line_of_sight_ned
@@ -26,7 +28,6 @@ from jaxfdi.gnss._orbits import OrbitTable, satellite_position, select_orbits
 from jaxfdi.gnss._positioning import Dops, PositionFix, dops, solve_position, transmit_states
 from jaxfdi.gnss._protection import ProtectionLevels, protection_levels
 from jaxfdi.gnss._raim import ParityCheck, RaimTables, parity_check, whitened
-from jaxfdi._stages import FDI
 
 #: Gauss-Newton steps of the re-solve without the excluded satellite (from the full fix)
 EXCLUSION_ITERATIONS = 3
@@ -63,21 +64,34 @@ def exclusion_rounds(exclude: bool | int) -> int:
     """The number of exclusion rounds ``exclude`` asks for (``True``: 1, ``False``: 0)."""
     if isinstance(exclude, (bool, np.bool_)):
         return int(exclude)
-    return _checks.check_int("exclude", exclude, 0, meaning="the most satellites to exclude (or a bool: 1 or none)")
+    return _checks.check_int(
+        "exclude", exclude, 0, meaning="the most satellites to exclude (or a bool: 1 or none)"
+    )
 
 
-def assess(fix: PositionFix, tables: RaimTables, operation="npa") -> tuple[ParityCheck, ProtectionLevels]:
+def assess(
+    fix: PositionFix, tables: RaimTables, operation="npa"
+) -> tuple[ParityCheck, ProtectionLevels]:
     """Parity check and protection levels of a fix (one QR of the whitened geometry)."""
     h, _ = whitened(fix)
     qr = masked_qr(h, fix.used)
     return parity_check(fix, tables, qr), protection_levels(fix, tables, operation, qr)
 
 
-def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array, tables: RaimTables,
-                  sigma: Array | Callable[[Array], Array] | None = None, operation="npa",
-                  exclude: bool | int = True, transmit: tuple[Array, Array] | None = None,
-                  atmosphere: Atmosphere | None = None, mask_angle: float | None = None,
-                  clocks: Array | None = None) -> EpochIntegrity:
+def monitor_epoch(
+    orbit,
+    available: Array,
+    t_receive: Array,
+    pseudoranges: Array,
+    tables: RaimTables,
+    sigma: Array | Callable[[Array], Array] | None = None,
+    operation="npa",
+    exclude: bool | int = True,
+    transmit: tuple[Array, Array] | None = None,
+    atmosphere: Atmosphere | None = None,
+    mask_angle: float | None = None,
+    clocks: Array | None = None,
+) -> EpochIntegrity:
     """Fix, RAIM, protection levels and exclusion of one epoch (module doc).
 
     Args:
@@ -93,8 +107,17 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
       atmosphere, mask_angle, clocks: as for ``positioning.solve_position``.
     """
     transmit = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
-    fix = solve_position(orbit, t_receive, pseudoranges, available, sigma, transmit=transmit, atmosphere=atmosphere,
-                         mask_angle=mask_angle, clocks=clocks)
+    fix = solve_position(
+        orbit,
+        t_receive,
+        pseudoranges,
+        available,
+        sigma,
+        transmit=transmit,
+        atmosphere=atmosphere,
+        mask_angle=mask_angle,
+        clocks=clocks,
+    )
     check, protection = assess(fix, tables, operation)
     dead = jnp.asarray(available, bool) & jnp.isinf(jnp.asarray(pseudoranges))
     rounds = exclusion_rounds(exclude)
@@ -106,28 +129,62 @@ def monitor_epoch(orbit, available: Array, t_receive: Array, pseudoranges: Array
         """Leave out the slot the current fix's parity test isolates, if it alarms."""
         keep, first, current = carry
         now_fix, now_check = current[0], current[1]
-        drop = jnp.where(now_check.alarm & (now_check.isolated >= 0), now_check.isolated, -1).astype(jnp.int32)
+        drop = jnp.where(
+            now_check.alarm & (now_check.isolated >= 0), now_check.isolated, -1
+        ).astype(jnp.int32)
         keep = keep & (jnp.arange(keep.shape[0]) != drop)
         initial = jnp.concatenate([now_fix.position, jnp.atleast_1d(now_fix.clock_bias)])
-        refit = solve_position(orbit, t_receive, pseudoranges, keep, sigma, initial=initial,
-                               iterations=EXCLUSION_ITERATIONS, unweighted_iterations=0, transmit=transmit,
-                               atmosphere=atmosphere, mask_angle=mask_angle, clocks=clocks)
+        refit = solve_position(
+            orbit,
+            t_receive,
+            pseudoranges,
+            keep,
+            sigma,
+            initial=initial,
+            iterations=EXCLUSION_ITERATIONS,
+            unweighted_iterations=0,
+            transmit=transmit,
+            atmosphere=atmosphere,
+            mask_angle=mask_angle,
+            clocks=clocks,
+        )
         refit = (refit,) + assess(refit, tables, operation)
         current = jax.tree_util.tree_map(lambda u, v: jnp.where(drop >= 0, u, v), refit, current)
         return (keep, jnp.where(first >= 0, first, drop), current), None
 
     keep = jnp.asarray(available, bool)
     (keep, first, (fix_x, check_x, protection_x)), _ = jax.lax.scan(
-        exclude_one, (keep, none, (fix, check, protection)), None, length=rounds)
+        exclude_one, (keep, none, (fix, check, protection)), None, length=rounds
+    )
     # a dead slot (already left out) is reported when the parity test isolated nothing: detected, isolated, excluded
-    excluded = jnp.where(first >= 0, first, jnp.where(jnp.any(dead), jnp.argmax(dead), -1)).astype(jnp.int32)
-    return EpochIntegrity(fix, check, protection, excluded, fix_x, check_x, protection_x, dead,
-                          (jnp.asarray(available, bool) & ~keep) | dead)
+    excluded = jnp.where(first >= 0, first, jnp.where(jnp.any(dead), jnp.argmax(dead), -1)).astype(
+        jnp.int32
+    )
+    return EpochIntegrity(
+        fix,
+        check,
+        protection,
+        excluded,
+        fix_x,
+        check_x,
+        protection_x,
+        dead,
+        (jnp.asarray(available, bool) & ~keep) | dead,
+    )
 
 
-def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables: RaimTables,
-                   sigma=None, operation="npa", exclude: bool | int = True, batch_size: int | None = None,
-                   atmosphere: Atmosphere | None = None, mask_angle: float | None = None) -> EpochIntegrity:
+def monitor_epochs(
+    table: OrbitTable,
+    times: Array,
+    pseudoranges: Array,
+    tables: RaimTables,
+    sigma=None,
+    operation="npa",
+    exclude: bool | int = True,
+    batch_size: int | None = None,
+    atmosphere: Atmosphere | None = None,
+    mask_angle: float | None = None,
+) -> EpochIntegrity:
     """``monitor_epoch`` vmapped over epochs: ``times`` (T,), ``pseudoranges`` (T, S) (NaN: not measured; a fixed sigma
     array is (T, S)); ``atmosphere`` (one for all) and ``mask_angle`` as ``positioning.solve_position``. ``batch_size``:
     chunks of epochs in sequence (``lax.map``), keeping intermediates in cache (~1.7x faster for 10^4-10^5 epochs on CPU
@@ -140,19 +197,41 @@ def monitor_epochs(table: OrbitTable, times: Array, pseudoranges: Array, tables:
     """
     _checks.check_shape("times", times, (None,), "one time tag per epoch")
     epochs = _checks.shape_of(times)[0]
-    _checks.check_shape("pseudoranges", pseudoranges, (epochs, _checks.shape_of(table.prn)[0]),
-                        "T epochs (times') x S slots (table's)")
+    _checks.check_shape(
+        "pseudoranges",
+        pseudoranges,
+        (epochs, _checks.shape_of(table.prn)[0]),
+        "T epochs (times') x S slots (table's)",
+    )
     if sigma is not None and not callable(sigma):
-        _checks.check_shape("sigma", sigma, _checks.shape_of(pseudoranges), "one standard deviation per pseudorange")
+        _checks.check_shape(
+            "sigma", sigma, _checks.shape_of(pseudoranges), "one standard deviation per pseudorange"
+        )
     if batch_size is not None:
-        batch_size = _checks.check_int("batch_size", batch_size, 1, meaning="a positive number of epochs per chunk")
+        batch_size = _checks.check_int(
+            "batch_size", batch_size, 1, meaning="a positive number of epochs per chunk"
+        )
 
     def one(t, rho, sig):
         orbit, available = select_orbits(table, t)
-        return monitor_epoch(orbit, available, t, rho, tables, sig if sigma is not None and not callable(sigma)
-                             else sigma, operation, exclude, atmosphere=atmosphere, mask_angle=mask_angle)
+        return monitor_epoch(
+            orbit,
+            available,
+            t,
+            rho,
+            tables,
+            sig if sigma is not None and not callable(sigma) else sigma,
+            operation,
+            exclude,
+            atmosphere=atmosphere,
+            mask_angle=mask_angle,
+        )
 
-    sig = jnp.zeros(_checks.shape_of(pseudoranges)) if sigma is None or callable(sigma) else jnp.asarray(sigma)
+    sig = (
+        jnp.zeros(_checks.shape_of(pseudoranges))
+        if sigma is None or callable(sigma)
+        else jnp.asarray(sigma)
+    )
     args = (jnp.asarray(times), jnp.asarray(pseudoranges), sig)
     if batch_size is None:
         return jax.vmap(one)(*args)
@@ -204,14 +283,33 @@ def raim_output(result: EpochIntegrity) -> RaimOutput:
     """The epoch's ``RaimOutput``: the test's ``Decision`` labelled ``1 + slot`` of the isolated satellite (-1:
     alarm, none isolated; a dead slot alarms with its label, ``chi2.flag_dead``) and the delivered solution."""
     check = result.check
-    label = jnp.where(check.alarm & (check.isolated >= 0), 1 + check.isolated, jnp.where(check.alarm, -1, 0))
-    decision = Decision(check.statistic, check.alarm, label.astype(jnp.int32), jnp.max(jnp.abs(check.isolation)))
-    decision = flag_dead(decision, result.dead, 1 + jnp.arange(result.dead.shape[0], dtype=jnp.int32))
-    return RaimOutput(decision, check.threshold, check.dof, result.fix.num_used, result.fix.dops,
-                      result.protection.hpl, result.protection.vpl, result.protection.available,
-                      result.fix.position, result.fix.clock_bias, result.excluded, result.fix_excluded.position,
-                      result.check_excluded.statistic, result.check_excluded.threshold,
-                      result.protection_excluded.hpl, delivered_healthy(result))
+    label = jnp.where(
+        check.alarm & (check.isolated >= 0), 1 + check.isolated, jnp.where(check.alarm, -1, 0)
+    )
+    decision = Decision(
+        check.statistic, check.alarm, label.astype(jnp.int32), jnp.max(jnp.abs(check.isolation))
+    )
+    decision = flag_dead(
+        decision, result.dead, 1 + jnp.arange(result.dead.shape[0], dtype=jnp.int32)
+    )
+    return RaimOutput(
+        decision,
+        check.threshold,
+        check.dof,
+        result.fix.num_used,
+        result.fix.dops,
+        result.protection.hpl,
+        result.protection.vpl,
+        result.protection.available,
+        result.fix.position,
+        result.fix.clock_bias,
+        result.excluded,
+        result.fix_excluded.position,
+        result.check_excluded.statistic,
+        result.check_excluded.threshold,
+        result.protection_excluded.hpl,
+        delivered_healthy(result),
+    )
 
 
 def delivered_healthy(result: EpochIntegrity) -> Array:
@@ -219,12 +317,22 @@ def delivered_healthy(result: EpochIntegrity) -> Array:
     fault of tens of km can stop the full fix converging in its fixed Gauss-Newton steps; that fix is
     evidence, not the answer), else the full fix."""
     excluded = result.excluded >= 0
-    return jnp.where(excluded, result.fix_excluded.healthy & result.check_excluded.healthy,
-                     result.fix.healthy & result.check.healthy)
+    return jnp.where(
+        excluded,
+        result.fix_excluded.healthy & result.check_excluded.healthy,
+        result.fix.healthy & result.check.healthy,
+    )
 
 
-def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=None, operation="npa",
-             exclude: bool | int = True) -> FDI:
+def raim_fdi(
+    table: OrbitTable,
+    t0: float,
+    dt: float,
+    tables: RaimTables,
+    sigma=None,
+    operation="npa",
+    exclude: bool | int = True,
+) -> FDI:
     """``monitor_epoch`` as a stateless ``loop.FDI``; step ``k``'s pseudoranges are tagged ``t0 + k dt``.
 
     Returns:
@@ -236,15 +344,23 @@ def raim_fdi(table: OrbitTable, t0: float, dt: float, tables: RaimTables, sigma=
     def step(state, k, y, u):
         t = t0 + k * dt
         orbit, available = select_orbits(table, t)
-        return state, raim_output(monitor_epoch(orbit, available, t, y, tables, sigma, operation, exclude))
+        return state, raim_output(
+            monitor_epoch(orbit, available, t, y, tables, sigma, operation, exclude)
+        )
 
     return FDI(lambda: None, step)
 
 
 # --- geometry-only studies: protection levels without measurements ---------------------
 
-def geometry_fix(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: float,
-                 sigma: Callable[[Array], Array]) -> PositionFix:
+
+def geometry_fix(
+    table: OrbitTable,
+    t: Array,
+    receiver_ecef: Array,
+    mask_angle: float,
+    sigma: Callable[[Array], Array],
+) -> PositionFix:
     """The error-free fix of a receiver at ``receiver_ecef`` (3,) at ``t``: true position, zero residuals, satellites
     above ``mask_angle`` [rad], ``sigma(elevation)`` weights (DOPs, protection levels and MDBs depend on these only)."""
     _checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
@@ -254,10 +370,22 @@ def geometry_fix(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: 
     los = line_of_sight_ned(receiver_ecef, sat)
     elevation, azimuth = elevation_azimuth(receiver_ecef, sat)
     used = has_orbit & (elevation > mask_angle)
-    geometry = jnp.where(used[:, None], jnp.concatenate([-los, jnp.ones_like(elevation)[:, None]], axis=1), 0.0)
-    return PositionFix(receiver_ecef, jnp.zeros((), receiver_ecef.dtype), jnp.zeros_like(elevation), geometry,
-                       jnp.where(used, sigma(elevation), 1.0), used, jnp.sum(used), elevation, azimuth,
-                       dops(geometry, used), jnp.sum(used) >= 4)
+    geometry = jnp.where(
+        used[:, None], jnp.concatenate([-los, jnp.ones_like(elevation)[:, None]], axis=1), 0.0
+    )
+    return PositionFix(
+        receiver_ecef,
+        jnp.zeros((), receiver_ecef.dtype),
+        jnp.zeros_like(elevation),
+        geometry,
+        jnp.where(used, sigma(elevation), 1.0),
+        used,
+        jnp.sum(used),
+        elevation,
+        azimuth,
+        dops(geometry, used),
+        jnp.sum(used) >= 4,
+    )
 
 
 class GridAvailability(NamedTuple):
@@ -280,20 +408,33 @@ class GridAvailability(NamedTuple):
     minimum_detectable_bias: Array
 
 
-def availability_grid(table: OrbitTable, times: Array, receivers_ecef: Array, tables: RaimTables,
-                      mask_angle: float, sigma: Callable[[Array], Array], operation="npa",
-                      batch_size: int = 64) -> GridAvailability:
+def availability_grid(
+    table: OrbitTable,
+    times: Array,
+    receivers_ecef: Array,
+    tables: RaimTables,
+    mask_angle: float,
+    sigma: Callable[[Array], Array],
+    operation="npa",
+    batch_size: int = 64,
+) -> GridAvailability:
     """Protection levels and availability for receivers (P, 3) x epochs (T,): ``geometry_fix`` then
     ``protection_levels``, vmapped over epochs, receivers ``batch_size`` at a time (bounded memory)."""
-    _checks.check_shape("receivers_ecef", receivers_ecef, (None, 3), "P receivers' ECEF positions [m]")
+    _checks.check_shape(
+        "receivers_ecef", receivers_ecef, (None, 3), "P receivers' ECEF positions [m]"
+    )
     _checks.check_shape("times", times, (None,), "T epochs")
-    batch_size = _checks.check_int("batch_size", batch_size, 1, meaning="a positive number of receivers per chunk")
+    batch_size = _checks.check_int(
+        "batch_size", batch_size, 1, meaning="a positive number of receivers per chunk"
+    )
     times = jnp.asarray(times)
 
     def at(receiver, t):
         fix = geometry_fix(table, t, receiver, mask_angle, sigma)
         _, pl = assess(fix, tables, operation)
-        return GridAvailability(fix.num_used, fix.dops.hdop, pl.hpl, pl.vpl, pl.available, pl.minimum_detectable_bias)
+        return GridAvailability(
+            fix.num_used, fix.dops.hdop, pl.hpl, pl.vpl, pl.available, pl.minimum_detectable_bias
+        )
 
     def receiver_row(receiver):
         return jax.vmap(at, in_axes=(None, 0))(receiver, times)

@@ -13,6 +13,7 @@ A column zero on every used row (a clock with no satellite in view) takes no piv
 0), zero column of ``Q1``; ``num_pivots`` counts the others, the parity space has ``n - num_pivots`` dimensions.
 Element-wise code over the S rows (no LAPACK call per epoch), vectorised by XLA under vmap.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -52,7 +53,7 @@ def masked_qr(matrix: Array, used: Array) -> MaskedQR:
     num_cols = matrix.shape[1]
     rank = jnp.where(used, jnp.cumsum(used) - 1, -1)
     work = jnp.where(used[:, None], matrix, 0.0)
-    carried = jnp.any(work != 0.0, axis=0)       # (m,) exact: reflections keep a zero column zero
+    carried = jnp.any(work != 0.0, axis=0)  # (m,) exact: reflections keep a zero column zero
     pivot_of = jnp.cumsum(carried) - 1
     reflectors, rows = [], []
     for j in range(num_cols):
@@ -66,7 +67,9 @@ def masked_qr(matrix: Array, used: Array) -> MaskedQR:
         work = work - 2.0 * v[:, None] * (v @ work)[None, :]
         reflectors.append(v)
         unit = (jnp.arange(num_cols) == j).astype(work.dtype)
-        rows.append(jnp.where(carried[j], jnp.sum(jnp.where(pivot[:, None], work, 0.0), axis=0), unit))
+        rows.append(
+            jnp.where(carried[j], jnp.sum(jnp.where(pivot[:, None], work, 0.0), axis=0), unit)
+        )
     r = jnp.triu(jnp.stack(rows))
     pivots = jnp.where(carried, pivot_of, -1)
     return MaskedQR(jnp.stack(reflectors), r, rank, jnp.sum(used), pivots, jnp.sum(carried))
@@ -109,7 +112,7 @@ def parity_rows(qr: MaskedQR) -> tuple[Array, Array]:
     """``(P, valid)``: P (S, S), the orthonormal parity matrix of the used rows in its
     ``n - num_pivots`` rows ``valid`` ((S,) bool); the other rows are zero."""
     index = jnp.arange(qr.reflectors.shape[1])
-    units = (qr.rank[:, None] == index[None, :]).astype(qr.r.dtype)      # (S, S)
+    units = (qr.rank[:, None] == index[None, :]).astype(qr.r.dtype)  # (S, S)
     complement = _apply_q(qr, units).T
     valid = (index >= qr.num_pivots) & (index < qr.num_used)
     return jnp.where(valid[:, None], complement, 0.0), valid

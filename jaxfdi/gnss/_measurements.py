@@ -18,6 +18,7 @@ satellite faults, as a plant for the foundation's loop.
 
 ``receiver_plant`` is a ``simulate.Simulator`` for ``simulate.simulate`` and ``loop.run_loop``.
 """
+
 from __future__ import annotations
 
 import math
@@ -30,9 +31,15 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
-from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, line_of_sight_ned
-from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, OrbitTable, satellite_position, select_orbits, transmission_geometry
 from jaxfdi._simulate import Actuated, Sensed, SimState, Simulator, check_fault_components
+from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, line_of_sight_ned
+from jaxfdi.gnss._orbits import (
+    SPEED_OF_LIGHT,
+    OrbitTable,
+    satellite_position,
+    select_orbits,
+    transmission_geometry,
+)
 
 
 class Wall(NamedTuple):
@@ -54,14 +61,24 @@ class ClockModel(NamedTuple):
     drift: float = 0.5
 
 
-def elevation_sigma(elevation: Array, zenith: float = 3.0, slant: float = 3.0,
-                    min_elevation: float = math.radians(2.0)) -> Array:
+def elevation_sigma(
+    elevation: Array,
+    zenith: float = 3.0,
+    slant: float = 3.0,
+    min_elevation: float = math.radians(2.0),
+) -> Array:
     """``sqrt(a^2 + b^2 / sin^2 el)`` [m]: ``a = zenith``, ``b = slant``; elevations below
     ``min_elevation`` are taken at it (the satellite is masked anyway)."""
     _checks.check_scalar("zenith", zenith, 0.0, meaning="a standard deviation >= 0 [m]")
     _checks.check_scalar("slant", slant, 0.0, meaning="a standard deviation >= 0 [m]")
-    _checks.check_scalar("min_elevation", min_elevation, 0.0, 0.5 * math.pi, low_open=True,
-                         meaning="an elevation in (0, pi/2] rad")
+    _checks.check_scalar(
+        "min_elevation",
+        min_elevation,
+        0.0,
+        0.5 * math.pi,
+        low_open=True,
+        meaning="an elevation in (0, pi/2] rad",
+    )
     sin_el = jnp.sin(jnp.maximum(elevation, min_elevation))
     return jnp.sqrt(zenith**2 + (slant / sin_el) ** 2)
 
@@ -79,13 +96,15 @@ def wall_blocks(receiver_ned: Array, line_of_sight: Array, wall: Wall) -> Array:
 
     denom = cross(d, edge)
     safe = jnp.where(jnp.abs(denom) > 1e-12, denom, 1.0)
-    s = cross(offset, edge) / safe            # along the ray (unit 3-D direction)
-    t = cross(offset, d) / safe               # along the wall's base, 0..1
+    s = cross(offset, edge) / safe  # along the ray (unit 3-D direction)
+    t = cross(offset, d) / safe  # along the wall's base, 0..1
     up_at_wall = -(receiver_ned[2] + s * line_of_sight[:, 2])
     return (jnp.abs(denom) > 1e-12) & (s > 0) & (t >= 0) & (t <= 1) & (up_at_wall <= wall.height)
 
 
-def sky_geometry(table: OrbitTable, t: Array, receiver_ecef: Array) -> tuple[Array, Array, Array, Array]:
+def sky_geometry(
+    table: OrbitTable, t: Array, receiver_ecef: Array
+) -> tuple[Array, Array, Array, Array]:
     """``(elevation, azimuth, line_of_sight_ned, has_orbit)`` over S slots from ``receiver_ecef`` (3,) at
     ``t`` (positions at ``t``; light time changes an elevation < 1e-4 rad)."""
     orbit, has_orbit = select_orbits(table, t)
@@ -94,20 +113,39 @@ def sky_geometry(table: OrbitTable, t: Array, receiver_ecef: Array) -> tuple[Arr
     return elevation, azimuth, line_of_sight_ned(receiver_ecef, sat), has_orbit
 
 
-def visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: float,
-               origin_ecef: Array | None = None, walls: tuple[Wall, ...] = ()) -> tuple[Array, Array, Array]:
+def visibility(
+    table: OrbitTable,
+    t: Array,
+    receiver_ecef: Array,
+    mask_angle: float,
+    origin_ecef: Array | None = None,
+    walls: tuple[Wall, ...] = (),
+) -> tuple[Array, Array, Array]:
     """``(visible, elevation, azimuth)`` over the S slots: valid healthy ephemeris, above ``mask_angle`` [rad] and not
     behind any of ``walls`` (whose NED frame is at ``origin_ecef``)."""
-    _checks.check_scalar("mask_angle", mask_angle, -0.5 * math.pi, 0.5 * math.pi,
-                         meaning="an elevation mask in [-pi/2, pi/2] rad")
+    _checks.check_scalar(
+        "mask_angle",
+        mask_angle,
+        -0.5 * math.pi,
+        0.5 * math.pi,
+        meaning="an elevation mask in [-pi/2, pi/2] rad",
+    )
     if walls and origin_ecef is None:
-        raise ValueError("origin_ecef: expected the (3,) ECEF origin of the walls' NED frame, got None")
+        raise ValueError(
+            "origin_ecef: expected the (3,) ECEF origin of the walls' NED frame, got None"
+        )
     return _visibility(table, t, receiver_ecef, mask_angle, origin_ecef, tuple(walls))
 
 
 @jax.jit
-def _visibility(table: OrbitTable, t: Array, receiver_ecef: Array, mask_angle: Array, origin_ecef: Array | None,
-                walls: tuple[Wall, ...]) -> tuple[Array, Array, Array]:
+def _visibility(
+    table: OrbitTable,
+    t: Array,
+    receiver_ecef: Array,
+    mask_angle: Array,
+    origin_ecef: Array | None,
+    walls: tuple[Wall, ...],
+) -> tuple[Array, Array, Array]:
     """``visibility`` after the checks, one program (a vmapped call outside ``jit`` compiles once)."""
     elevation, azimuth, los, has_orbit = sky_geometry(table, t, receiver_ecef)
     visible = has_orbit & (elevation > mask_angle)
@@ -123,11 +161,21 @@ def clock_process_noise(clock: ClockModel, dt: float, dtype=None) -> Array:
     dtype = dtype or jnp.result_type(float)
     c2 = SPEED_OF_LIGHT**2
     qb, qd = 0.5 * clock.h0 * c2, 2.0 * math.pi**2 * clock.h_minus2 * c2
-    return jnp.asarray([[qb * dt + qd * dt**3 / 3.0, qd * dt**2 / 2.0], [qd * dt**2 / 2.0, qd * dt]], dtype)
+    return jnp.asarray(
+        [[qb * dt + qd * dt**3 / 3.0, qd * dt**2 / 2.0], [qd * dt**2 / 2.0, qd * dt]], dtype
+    )
 
 
-def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, visible: Array, sigma: Array,
-                   clock: ClockModel = ClockModel(), fault: Fault | None = None) -> Simulator:
+def receiver_plant(
+    table: OrbitTable,
+    t0: float,
+    dt: float,
+    path_ecef: Array,
+    visible: Array,
+    sigma: Array,
+    clock: ClockModel = ClockModel(),
+    fault: Fault | None = None,
+) -> Simulator:
     """A GPS receiver on a known path, as a ``Simulator`` over the state ``[b, d]``.
 
     Args:
@@ -143,11 +191,19 @@ def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, vi
     _checks.check_positive("dt", dt, "a positive epoch interval (s)")
     value = _checks.concrete(sigma)
     if value is not None and np.any(value < 0):
-        raise ValueError(f"sigma: expected pseudorange standard deviations >= 0 [m], got {_checks.received(value)}")
-    path_ecef, visible, sigma = jnp.asarray(path_ecef), jnp.asarray(visible, bool), jnp.asarray(sigma)
+        raise ValueError(
+            f"sigma: expected pseudorange standard deviations >= 0 [m], got {_checks.received(value)}"
+        )
+    path_ecef, visible, sigma = (
+        jnp.asarray(path_ecef),
+        jnp.asarray(visible, bool),
+        jnp.asarray(sigma),
+    )
     _checks.check_shape("path_ecef", path_ecef, (None, 3), "T ECEF receiver positions")
     steps, slots = visible.shape if visible.ndim == 2 else (None, None)
-    _checks.check_shape("visible", visible, (path_ecef.shape[0], table.prn.shape[0]), "T steps x S slots")
+    _checks.check_shape(
+        "visible", visible, (path_ecef.shape[0], table.prn.shape[0]), "T steps x S slots"
+    )
     _checks.check_shape("sigma", sigma, (steps, slots), "T steps x S slots")
     faults = as_stack(no_fault() if fault is None else fault)
     check_fault_components(faults, Target.SENSOR, table.prn.shape[0])
@@ -164,7 +220,9 @@ def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, vi
         bias = sim.state[0]
         t_tag = t0 + k * dt
         orbit, _ = select_orbits(table, t_tag)
-        _, ranges, _, sat_clock = transmission_geometry(orbit, t_tag - bias / SPEED_OF_LIGHT, path_ecef[k])
+        _, ranges, _, sat_clock = transmission_geometry(
+            orbit, t_tag - bias / SPEED_OF_LIGHT, path_ecef[k]
+        )
         clean = ranges + bias - SPEED_OF_LIGHT * sat_clock
         _, key_v = jax.random.split(step_key)
         noisy = clean + sigma[k] * jax.random.normal(key_v, clean.shape, clean.dtype)
@@ -172,8 +230,9 @@ def receiver_plant(table: OrbitTable, t0: float, dt: float, path_ecef: Array, vi
         # NaN: not tracked; a tracked channel gone non-finite (DEAD) is a dead channel, +inf
         measured = jnp.where(visible[k], jnp.where(jnp.isfinite(faulty), faulty, jnp.inf), jnp.nan)
         active = jax.vmap(is_active, in_axes=(0, None))(faults, k)
-        return SimState(sim.state, held), Sensed(sim.state, measured, faulty - noisy, active,
-                                                 active_label(faults, k, u.shape[0]))
+        return SimState(sim.state, held), Sensed(
+            sim.state, measured, faulty - noisy, active, active_label(faults, k, u.shape[0])
+        )
 
     def advance(sim: SimState, k: Array, u: Array, step_key: Array):
         key_w, _ = jax.random.split(step_key)

@@ -14,6 +14,7 @@ relativistic term, as RTKLIB's ``alm2pos``). Time differences wrapped into +/- h
 ``Orbit``: one element set per slot (leaves (S,)); ``OrbitTable``: every record (leaves (S, R), padded);
 ``select_orbits`` picks each slot's nearest valid record (RTKLIB's rule), so one compiled function serves a whole day.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -28,9 +29,9 @@ from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides
 from jaxfdi.gnss._yuma import Almanac
 
 #: WGS-84 / IS-GPS-200 constants
-MU = 3.986005e14               # m^3/s^2, Earth's gravitational parameter (GPS value)
-OMEGA_E = 7.2921151467e-5      # rad/s, Earth rotation rate
-SPEED_OF_LIGHT = 299792458.0   # m/s
+MU = 3.986005e14  # m^3/s^2, Earth's gravitational parameter (GPS value)
+OMEGA_E = 7.2921151467e-5  # rad/s, Earth rotation rate
+SPEED_OF_LIGHT = 299792458.0  # m/s
 RELATIVITY_F = -4.442807633e-10  # s/m^0.5, -2 sqrt(mu) / c^2
 HALF_WEEK = 302400.0
 #: validity half-width of a broadcast ephemeris with fit interval 0 / 4 h [s]
@@ -112,7 +113,12 @@ class OrbitTable(NamedTuple):
 
 
 #: why a broadcast record is impossible (``orbit_problem``'s codes)
-ORBIT_PROBLEMS = ("none", "a non-finite element", "an eccentricity outside [0, 1)", "a semi-major axis <= 0")
+ORBIT_PROBLEMS = (
+    "none",
+    "a non-finite element",
+    "an eccentricity outside [0, 1)",
+    "a semi-major axis <= 0",
+)
 
 
 def orbit_problem(orbit: Orbit) -> Array:
@@ -120,11 +126,17 @@ def orbit_problem(orbit: Orbit) -> Array:
     a record is excluded alone (Kepler has no solution; it would turn the whole fix NaN)."""
     finite = jnp.all(jnp.stack([jnp.isfinite(jnp.asarray(leaf)) for leaf in orbit]), axis=0)
     e = jnp.asarray(orbit.eccentricity)
-    return jnp.where(~finite, 1, jnp.where((e < 0) | (e >= 1), 2, jnp.where(jnp.asarray(orbit.sqrt_a) <= 0, 3, 0)))
+    return jnp.where(
+        ~finite,
+        1,
+        jnp.where((e < 0) | (e >= 1), 2, jnp.where(jnp.asarray(orbit.sqrt_a) <= 0, 3, 0)),
+    )
 
 
 def _wrap_half_week(dt: Array) -> Array:
-    return jnp.where(dt > HALF_WEEK, dt - SECONDS_PER_WEEK, jnp.where(dt < -HALF_WEEK, dt + SECONDS_PER_WEEK, dt))
+    return jnp.where(
+        dt > HALF_WEEK, dt - SECONDS_PER_WEEK, jnp.where(dt < -HALF_WEEK, dt + SECONDS_PER_WEEK, dt)
+    )
 
 
 def _sin_cos_step(sin_x: Array, cos_x: Array, step: Array) -> tuple[Array, Array]:
@@ -136,8 +148,9 @@ def _sin_cos_step(sin_x: Array, cos_x: Array, step: Array) -> tuple[Array, Array
     return sin_x * cos_d + cos_x * sin_d, cos_x * cos_d - sin_x * sin_d
 
 
-def kepler(mean_anomaly: Array, eccentricity: Array, iterations: int = KEPLER_ITERATIONS
-           ) -> tuple[Array, Array, Array]:
+def kepler(
+    mean_anomaly: Array, eccentricity: Array, iterations: int = KEPLER_ITERATIONS
+) -> tuple[Array, Array, Array]:
     """``(E, sin E, cos E)`` with ``M = E - e sin E``: fixed-count Newton from ``E = M``, ``sin E``/``cos E``
     carried by angle addition (steps <= ``e / (1 - e)``): one ``sin``/``cos`` pair per solve."""
     E = mean_anomaly
@@ -163,25 +176,38 @@ def _position(orbit: Orbit, tk: Array, sin_e: Array, cos_e: Array, a: Array) -> 
     denom = 1.0 - e * cos_e
     sin_nu, cos_nu = jnp.sqrt(1.0 - e**2) * sin_e / denom, (cos_e - e) / denom
     sin_w, cos_w = jnp.sin(orbit.argument_of_perigee), jnp.cos(orbit.argument_of_perigee)
-    sin_phi, cos_phi = sin_nu * cos_w + cos_nu * sin_w, cos_nu * cos_w - sin_nu * sin_w   # Phi = nu + omega
+    sin_phi, cos_phi = (
+        sin_nu * cos_w + cos_nu * sin_w,
+        cos_nu * cos_w - sin_nu * sin_w,
+    )  # Phi = nu + omega
     sin2, cos2 = 2.0 * sin_phi * cos_phi, cos_phi**2 - sin_phi**2
     sin_u, cos_u = _sin_cos_step(sin_phi, cos_phi, orbit.cus * sin2 + orbit.cuc * cos2)
     r = a * denom + orbit.crs * sin2 + orbit.crc * cos2
-    sin_i, cos_i = _sin_cos_step(jnp.sin(orbit.i0), jnp.cos(orbit.i0),
-                                 orbit.cis * sin2 + orbit.cic * cos2 + orbit.idot * tk)
+    sin_i, cos_i = _sin_cos_step(
+        jnp.sin(orbit.i0), jnp.cos(orbit.i0), orbit.cis * sin2 + orbit.cic * cos2 + orbit.idot * tk
+    )
     x_plane, y_plane = r * cos_u, r * sin_u
     toe_of_week = orbit.toe - orbit.week_start
     node = orbit.omega0 + (orbit.omega_dot - OMEGA_E) * tk - OMEGA_E * toe_of_week
     cos_node, sin_node = jnp.cos(node), jnp.sin(node)
-    return jnp.stack([x_plane * cos_node - y_plane * cos_i * sin_node,
-                      x_plane * sin_node + y_plane * cos_i * cos_node,
-                      y_plane * sin_i], axis=-1)
+    return jnp.stack(
+        [
+            x_plane * cos_node - y_plane * cos_i * sin_node,
+            x_plane * sin_node + y_plane * cos_i * cos_node,
+            y_plane * sin_i,
+        ],
+        axis=-1,
+    )
 
 
 def _clock(orbit: Orbit, t: Array, sin_e: Array, l1_group_delay: bool) -> Array:
     dt = _wrap_half_week(t - orbit.toc)
-    clock = orbit.af0 + orbit.af1 * dt + orbit.af2 * dt**2 \
+    clock = (
+        orbit.af0
+        + orbit.af1 * dt
+        + orbit.af2 * dt**2
         + orbit.relativity * RELATIVITY_F * orbit.eccentricity * orbit.sqrt_a * sin_e
+    )
     return clock - orbit.tgd if l1_group_delay else clock
 
 
@@ -219,14 +245,15 @@ def satellite_clock(orbit: Orbit, t: Array, l1_group_delay: bool = True) -> Arra
 def earth_rotation(position: Array, travel_time: Array) -> Array:
     """(..., 3) positions rotated about z by ``-Omega_e * travel_time``: from the ECEF frame of transmission
     to that of reception (Sagnac correction)."""
-    angle = OMEGA_E * travel_time    # < 1e-6 rad: series to 4th order, exact in float64
+    angle = OMEGA_E * travel_time  # < 1e-6 rad: series to 4th order, exact in float64
     c, s = 1.0 - 0.5 * angle**2 * (1.0 - angle**2 / 12.0), angle * (1.0 - angle**2 / 6.0)
     x, y, z = position[..., 0], position[..., 1], position[..., 2]
     return jnp.stack([c * x + s * y, -s * x + c * y, z], axis=-1)
 
 
-def transmission_geometry(orbit: Orbit, t_receive: Array, receiver_ecef: Array,
-                          iterations: int = 3) -> tuple[Array, Array, Array, Array]:
+def transmission_geometry(
+    orbit: Orbit, t_receive: Array, receiver_ecef: Array, iterations: int = 3
+) -> tuple[Array, Array, Array, Array]:
     """Light-time solution for a receiver at ``receiver_ecef`` (3,) at true GPS time ``t_receive``:
     ``tau = |R(tau) r_s(t - tau) - r_r| / c`` by fixed point (contracts ~1e-5 a step: pm after 3).
 
@@ -246,13 +273,22 @@ def transmission_geometry(orbit: Orbit, t_receive: Array, receiver_ecef: Array,
 
 # --- from records to tables ------------------------------------------------------------
 
-def _table(prns: np.ndarray, slot_prns: np.ndarray, columns: dict, valid: np.ndarray, validity: np.ndarray,
-           dtype) -> OrbitTable:
+
+def _table(
+    prns: np.ndarray,
+    slot_prns: np.ndarray,
+    columns: dict,
+    valid: np.ndarray,
+    validity: np.ndarray,
+    dtype,
+) -> OrbitTable:
     slot_prns = np.asarray(slot_prns, int)
     repeated = sorted({int(p) for p in slot_prns if np.sum(slot_prns == p) > 1})
     if repeated:
-        raise ValueError(f"slot_prns: expected each satellite once, got PRN {repeated} more than once "
-                         f"(it would be counted twice in every fix)")
+        raise ValueError(
+            f"slot_prns: expected each satellite once, got PRN {repeated} more than once "
+            f"(it would be counted twice in every fix)"
+        )
     counts = [int(np.sum(prns == p)) for p in slot_prns]
     width = max(max(counts), 1)
     index = np.zeros((slot_prns.size, width), int)
@@ -261,17 +297,28 @@ def _table(prns: np.ndarray, slot_prns: np.ndarray, columns: dict, valid: np.nda
         rows = np.flatnonzero(prns == p)
         index[s, : rows.size] = rows
         present[s, : rows.size] = True
-    take = lambda values: jnp.asarray(np.where(present, np.asarray(values, float)[index], 0.0), dtype)  # noqa: E731
+    take = lambda values: jnp.asarray(
+        np.where(present, np.asarray(values, float)[index], 0.0), dtype
+    )
     orbit = Orbit(**{name: take(columns[name]) for name in Orbit._fields})
     raw = Orbit(**{name: np.asarray(columns[name], float)[index] for name in Orbit._fields})
     problem = np.where(present, np.asarray(orbit_problem(raw)), 0)
-    return OrbitTable(orbit, jnp.asarray(present & np.asarray(valid)[index] & (problem == 0)),
-                      jnp.asarray(np.where(present, np.asarray(validity, float)[index], 0.0), dtype),
-                      jnp.asarray(slot_prns, jnp.int32), jnp.asarray(problem, jnp.int32))
+    return OrbitTable(
+        orbit,
+        jnp.asarray(present & np.asarray(valid)[index] & (problem == 0)),
+        jnp.asarray(np.where(present, np.asarray(validity, float)[index], 0.0), dtype),
+        jnp.asarray(slot_prns, jnp.int32),
+        jnp.asarray(problem, jnp.int32),
+    )
 
 
-def ephemeris_table(ephemerides: Ephemerides, reference_week: int, slot_prns=None,
-                    include_unhealthy: bool = False, dtype=None) -> OrbitTable:
+def ephemeris_table(
+    ephemerides: Ephemerides,
+    reference_week: int,
+    slot_prns=None,
+    include_unhealthy: bool = False,
+    dtype=None,
+) -> OrbitTable:
     """The RINEX records as an ``OrbitTable`` with times from the start of ``reference_week``.
 
     Args:
@@ -285,13 +332,29 @@ def ephemeris_table(ephemerides: Ephemerides, reference_week: int, slot_prns=Non
     eph = ephemerides
     week_start = (eph.week - int(reference_week)) * SECONDS_PER_WEEK
     columns = {
-        "toe": week_start + eph.toe, "week_start": week_start, "sqrt_a": eph.sqrt_a,
-        "eccentricity": eph.eccentricity, "i0": eph.i0, "omega0": eph.omega0,
-        "argument_of_perigee": eph.argument_of_perigee, "m0": eph.m0, "delta_n": eph.delta_n,
-        "omega_dot": eph.omega_dot, "idot": eph.idot, "cuc": eph.cuc, "cus": eph.cus, "crc": eph.crc,
-        "crs": eph.crs, "cic": eph.cic, "cis": eph.cis,
+        "toe": week_start + eph.toe,
+        "week_start": week_start,
+        "sqrt_a": eph.sqrt_a,
+        "eccentricity": eph.eccentricity,
+        "i0": eph.i0,
+        "omega0": eph.omega0,
+        "argument_of_perigee": eph.argument_of_perigee,
+        "m0": eph.m0,
+        "delta_n": eph.delta_n,
+        "omega_dot": eph.omega_dot,
+        "idot": eph.idot,
+        "cuc": eph.cuc,
+        "cus": eph.cus,
+        "crc": eph.crc,
+        "crs": eph.crs,
+        "cic": eph.cic,
+        "cis": eph.cis,
         "toc": (eph.toc_week - int(reference_week)) * SECONDS_PER_WEEK + eph.toc,
-        "af0": eph.af0, "af1": eph.af1, "af2": eph.af2, "tgd": eph.tgd, "relativity": np.ones(eph.prn.shape),
+        "af0": eph.af0,
+        "af1": eph.af1,
+        "af2": eph.af2,
+        "tgd": eph.tgd,
+        "relativity": np.ones(eph.prn.shape),
     }
     validity = np.where(eph.fit_interval > 4.0, eph.fit_interval * 1800.0, EPHEMERIS_VALIDITY)
     valid = np.ones(eph.prn.shape, bool) if include_unhealthy else eph.health == 0
@@ -299,8 +362,13 @@ def ephemeris_table(ephemerides: Ephemerides, reference_week: int, slot_prns=Non
     return _table(eph.prn, slot_prns, columns, valid, validity, dtype)
 
 
-def almanac_table(almanac: Almanac, reference_week: int | None = None, slot_prns=None,
-                  include_unhealthy: bool = False, dtype=None) -> OrbitTable:
+def almanac_table(
+    almanac: Almanac,
+    reference_week: int | None = None,
+    slot_prns=None,
+    include_unhealthy: bool = False,
+    dtype=None,
+) -> OrbitTable:
     """An almanac as an ``OrbitTable`` (one record a slot, valid at any time); ``reference_week``
     defaults to the almanac's, slots to its PRNs in file order."""
     dtype = dtype or jnp.result_type(float)
@@ -309,20 +377,42 @@ def almanac_table(almanac: Almanac, reference_week: int | None = None, slot_prns
     week_start = (alm.week - reference_week) * SECONDS_PER_WEEK
     zeros = np.zeros(alm.prn.shape)
     columns = {
-        "toe": week_start + alm.toa, "week_start": week_start, "sqrt_a": alm.sqrt_a,
-        "eccentricity": alm.eccentricity, "i0": alm.inclination, "omega0": alm.omega0,
-        "argument_of_perigee": alm.argument_of_perigee, "m0": alm.mean_anomaly, "delta_n": zeros,
-        "omega_dot": alm.omega_dot, "idot": zeros, "cuc": zeros, "cus": zeros, "crc": zeros, "crs": zeros,
-        "cic": zeros, "cis": zeros, "toc": week_start + alm.toa, "af0": alm.af0, "af1": alm.af1, "af2": zeros,
-        "tgd": zeros, "relativity": zeros,
+        "toe": week_start + alm.toa,
+        "week_start": week_start,
+        "sqrt_a": alm.sqrt_a,
+        "eccentricity": alm.eccentricity,
+        "i0": alm.inclination,
+        "omega0": alm.omega0,
+        "argument_of_perigee": alm.argument_of_perigee,
+        "m0": alm.mean_anomaly,
+        "delta_n": zeros,
+        "omega_dot": alm.omega_dot,
+        "idot": zeros,
+        "cuc": zeros,
+        "cus": zeros,
+        "crc": zeros,
+        "crs": zeros,
+        "cic": zeros,
+        "cis": zeros,
+        "toc": week_start + alm.toa,
+        "af0": alm.af0,
+        "af1": alm.af1,
+        "af2": zeros,
+        "tgd": zeros,
+        "relativity": zeros,
     }
     valid = np.ones(alm.prn.shape, bool) if include_unhealthy else alm.health == 0
     slot_prns = alm.prn if slot_prns is None else np.asarray(slot_prns)
     return _table(alm.prn, slot_prns, columns, valid, np.full(alm.prn.shape, np.inf), dtype)
 
 
-def orbit_table(records: Ephemerides | Almanac, reference_week: int | None = None, slot_prns=None,
-                include_unhealthy: bool = False, dtype=None) -> OrbitTable:
+def orbit_table(
+    records: Ephemerides | Almanac,
+    reference_week: int | None = None,
+    slot_prns=None,
+    include_unhealthy: bool = False,
+    dtype=None,
+) -> OrbitTable:
     """Broadcast records (``read_rinex_nav``'s ephemerides or ``read_yuma``'s almanac) as the ``OrbitTable`` that
     ``select_orbits``, ``monitor_epochs`` and the receiver chain read, times ``t`` from the start of ``reference_week``.
 
@@ -339,8 +429,10 @@ def orbit_table(records: Ephemerides | Almanac, reference_week: int | None = Non
     if isinstance(records, Almanac):
         return almanac_table(records, reference_week, slot_prns, include_unhealthy, dtype)
     if not isinstance(records, Ephemerides):
-        raise TypeError(f"records: expected Ephemerides (read_rinex_nav) or an Almanac (read_yuma), got "
-                        f"{_checks.received(records)}")
+        raise TypeError(
+            f"records: expected Ephemerides (read_rinex_nav) or an Almanac (read_yuma), got "
+            f"{_checks.received(records)}"
+        )
     week = int(np.min(records.week)) if reference_week is None else reference_week
     return ephemeris_table(records, week, slot_prns, include_unhealthy, dtype)
 
@@ -357,5 +449,7 @@ def select_orbits(table: OrbitTable, t: Array) -> tuple[Orbit, Array]:
     age = jnp.abs(_wrap_half_week(t - table.orbit.toe))
     usable = table.valid & (age <= table.validity) & (orbit_problem(table.orbit) == 0)
     index = jnp.argmin(jnp.where(usable, age, jnp.inf), axis=1)
-    orbit = jax.tree_util.tree_map(lambda leaf: jnp.take_along_axis(leaf, index[:, None], axis=1)[:, 0], table.orbit)
+    orbit = jax.tree_util.tree_map(
+        lambda leaf: jnp.take_along_axis(leaf, index[:, None], axis=1)[:, 0], table.orbit
+    )
     return orbit, jnp.any(usable, axis=1)

@@ -15,6 +15,7 @@ The returned geometry is in local North-East-Down axes at the solution, ``H_ned 
 DOPs): ``(H^T H)^{-1}`` gives ``HDOP = sqrt(q_NN + q_EE)``, ``VDOP = sqrt(q_DD)``, ``PDOP``, ``TDOP``, ``GDOP`` (Misra &
 Enge 2011, sec. 6.1.3).
 """
+
 from __future__ import annotations
 
 import math
@@ -29,7 +30,13 @@ from jaxfdi import _checks, _linalg
 from jaxfdi.gnss._atmosphere import Atmosphere, atmosphere_corrections
 from jaxfdi.gnss._frames import ecef_to_geodetic, ned_rotation
 from jaxfdi.gnss._least_squares import apply_qt, leading, masked_qr
-from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, Orbit, earth_rotation, satellite_clock, satellite_state
+from jaxfdi.gnss._orbits import (
+    SPEED_OF_LIGHT,
+    Orbit,
+    earth_rotation,
+    satellite_clock,
+    satellite_state,
+)
 
 #: Gauss-Newton iterations from the Earth's centre (converged to 1e-8 m after 5 on 3000 epochs of the benchmark's day;
 #: one more as margin)
@@ -46,6 +53,7 @@ CONSTELLATIONS = 7
 
 class Dops(NamedTuple):
     """Dilutions of precision: geometric, position, horizontal, vertical and time."""
+
     gdop: Array
     pdop: Array
     hdop: Array
@@ -91,20 +99,37 @@ def padded_to(array, shape: tuple, fill) -> np.ndarray:
 
 def padded_sizes(epochs: int, slots: int, clocks: int) -> tuple[int, int, int]:
     """The padded (epochs, slots, clocks) of ``EPOCH_CHUNK`` and ``CONSTELLATIONS``; one clock stays one."""
+
     def up(n):
         return -(-n // EPOCH_CHUNK) * EPOCH_CHUNK
+
     return up(epochs), up(max(slots, 5)), max(clocks, CONSTELLATIONS) if clocks > 1 else clocks
 
 
 #: the leaves of a ``PositionFix`` and of the results built on it with a slot axis (after the epoch axis); ``geometry``
 #: also has 3 + C clock columns, a per-constellation ``clock_bias`` C clocks
-SLOT_FIELDS = frozenset({"residuals", "geometry", "sigma", "used", "elevation", "azimuth", "isolation",
-                         "slope_horizontal", "slope_vertical", "minimum_detectable_bias", "dead", "exclusions"})
+SLOT_FIELDS = frozenset(
+    {
+        "residuals",
+        "geometry",
+        "sigma",
+        "used",
+        "elevation",
+        "azimuth",
+        "isolation",
+        "slope_horizontal",
+        "slope_vertical",
+        "minimum_detectable_bias",
+        "dead",
+        "exclusions",
+    }
+)
 
 
 def resized(tree, epochs: int, slots: int, clocks: int, fills: dict | None = None):
     """A fix or a result built on it (NumPy leaves, leading epoch axis) cut or padded to ``epochs``, ``slots`` and
     ``clocks`` (``SLOT_FIELDS``); padding takes the leaf's ``fills`` entry by field name (default 0 / False)."""
+
     def one(path, leaf):
         name = path[-1].name
         shape = [epochs, *leaf.shape[1:]]
@@ -115,6 +140,7 @@ def resized(tree, epochs: int, slots: int, clocks: int, fills: dict | None = Non
         elif name == "clock_bias" and leaf.ndim == 2:
             shape[1] = clocks
         return padded_to(leaf[tuple(slice(0, n) for n in shape)], shape, (fills or {}).get(name, 0))
+
     return jax.tree_util.tree_map_with_path(one, tree)
 
 
@@ -122,8 +148,12 @@ def in_chunks(solve: Callable, epochs: int, *arrays):
     """``solve(*chunk)`` on ``EPOCH_CHUNK`` epochs of ``arrays`` at a time (pytrees, leading axis padded to a multiple),
     joined on the host and cut back to ``epochs``: one program for every padded trace."""
     rows = jax.tree_util.tree_leaves(arrays)[0].shape[0]
-    chunks = [jax.tree_util.tree_map(np.asarray, solve(*jax.tree_util.tree_map(lambda a: a[k:k + EPOCH_CHUNK], arrays)))
-              for k in range(0, rows, EPOCH_CHUNK)]
+    chunks = [
+        jax.tree_util.tree_map(
+            np.asarray, solve(*jax.tree_util.tree_map(lambda a: a[k : k + EPOCH_CHUNK], arrays))
+        )
+        for k in range(0, rows, EPOCH_CHUNK)
+    ]
     return jax.tree_util.tree_map(lambda *chunk: np.concatenate(chunk)[:epochs], *chunks)
 
 
@@ -150,8 +180,13 @@ def dops(geometry: Array, used: Array) -> Dops:
     normal = h.T @ h + jnp.diag(absent.astype(h.dtype))
     cov = _linalg.cho_solve(_linalg.cholesky(normal), jnp.eye(h.shape[1], dtype=h.dtype))
     var = jnp.where(absent, 0.0, jnp.diagonal(cov))
-    return Dops(jnp.sqrt(jnp.sum(var)), jnp.sqrt(var[0] + var[1] + var[2]), jnp.sqrt(var[0] + var[1]),
-                jnp.sqrt(var[2]), jnp.sqrt(var[3]))
+    return Dops(
+        jnp.sqrt(jnp.sum(var)),
+        jnp.sqrt(var[0] + var[1] + var[2]),
+        jnp.sqrt(var[0] + var[1]),
+        jnp.sqrt(var[2]),
+        jnp.sqrt(var[3]),
+    )
 
 
 def _absent_columns(h: Array) -> Array:
@@ -159,14 +194,20 @@ def _absent_columns(h: Array) -> Array:
     return (jnp.arange(h.shape[1]) >= 3) & ~jnp.any(h != 0.0, axis=0)
 
 
-def _predict(sat_tx: Array, sat_clock: Array, state: Array, membership: Array) -> tuple[Array, Array, Array]:
+def _predict(
+    sat_tx: Array, sat_clock: Array, state: Array, membership: Array
+) -> tuple[Array, Array, Array]:
     """Predicted pseudoranges, ECEF unit lines of sight and satellite positions (reception frame) for
     ``state = [x, y, z, b_1..b_C]`` and the (S, C) clock ``membership``."""
     travel = jnp.linalg.norm(sat_tx - state[:3], axis=-1) / SPEED_OF_LIGHT
     sat = earth_rotation(sat_tx, travel)
     delta = sat - state[:3]
     distance = jnp.linalg.norm(delta, axis=-1)
-    return distance + membership @ state[3:] - SPEED_OF_LIGHT * sat_clock, delta / distance[:, None], sat
+    return (
+        distance + membership @ state[3:] - SPEED_OF_LIGHT * sat_clock,
+        delta / distance[:, None],
+        sat,
+    )
 
 
 def solve_position(
@@ -217,24 +258,39 @@ def solve_position(
         _checks.check_shape("sigma", sigma, slots, "one standard deviation per satellite slot [m]")
         value = _checks.concrete(sigma)
         if value is not None and not np.all(value > 0):
-            raise ValueError(f"sigma: expected standard deviations > 0 [m], got {_checks.received(value)}")
-    if mask_angle is not None and not (isinstance(mask_angle, (int, float))
-                                       and -math.pi / 2 <= mask_angle < math.pi / 2):
-        raise ValueError(f"mask_angle: expected an elevation in [-pi/2, pi/2) rad, got {mask_angle!r}")
+            raise ValueError(
+                f"sigma: expected standard deviations > 0 [m], got {_checks.received(value)}"
+            )
+    if mask_angle is not None and not (
+        isinstance(mask_angle, (int, float)) and -math.pi / 2 <= mask_angle < math.pi / 2
+    ):
+        raise ValueError(
+            f"mask_angle: expected an elevation in [-pi/2, pi/2) rad, got {mask_angle!r}"
+        )
     if clocks is not None:
-        _checks.check_shape("clocks", clocks, (slots[0], None), "(S, C) bool: each slot's receiver clock")
+        _checks.check_shape(
+            "clocks", clocks, (slots[0], None), "(S, C) bool: each slot's receiver clock"
+        )
     pseudoranges = jnp.asarray(pseudoranges)
     dtype = pseudoranges.dtype
-    membership = jnp.ones(slots + (1,), dtype) if clocks is None else jnp.asarray(clocks, bool).astype(dtype)
+    membership = (
+        jnp.ones(slots + (1,), dtype) if clocks is None else jnp.asarray(clocks, bool).astype(dtype)
+    )
     unknown = 3 + membership.shape[1]
     if initial is not None:
-        _checks.check_shape("initial", initial, (unknown,), f"[x, y, z] and {unknown - 3} clock(s) [m]")
+        _checks.check_shape(
+            "initial", initial, (unknown,), f"[x, y, z] and {unknown - 3} clock(s) [m]"
+        )
     measured = jnp.asarray(available, bool) & jnp.isfinite(pseudoranges)
     rho = jnp.where(measured, pseudoranges, 0.0)
-    sat_tx, sat_clock = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
+    sat_tx, sat_clock = (
+        transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
+    )
     state0 = jnp.zeros(unknown, dtype) if initial is None else jnp.asarray(initial, dtype)
     ones = jnp.ones_like(rho)
-    local = callable(sigma) or atmosphere is not None or mask_angle is not None  # angles needed every step
+    local = (
+        callable(sigma) or atmosphere is not None or mask_angle is not None
+    )  # angles needed every step
 
     def linearize(state, k):
         """Predicted pseudoranges, ECEF lines of sight, elevations and azimuths, standard deviations and the used slots
@@ -243,11 +299,18 @@ def solve_position(
         elevation = azimuth = None
         if local:
             elevation, azimuth = _look_angles(state, los)
-        std = ones if sigma is None else jnp.asarray(sigma, dtype) if not callable(sigma) else \
-            jnp.where(k < unweighted_iterations, ones, sigma(elevation))
+        std = (
+            ones
+            if sigma is None
+            else jnp.asarray(sigma, dtype)
+            if not callable(sigma)
+            else jnp.where(k < unweighted_iterations, ones, sigma(elevation))
+        )
         used = measured if mask_angle is None else measured & ((k < 1) | (elevation >= mask_angle))
         if atmosphere is not None:
-            delay, variance = atmosphere_corrections(atmosphere, t_receive, state[:3], elevation, azimuth)
+            delay, variance = atmosphere_corrections(
+                atmosphere, t_receive, state[:3], elevation, azimuth
+            )
             predicted = predicted + delay
             std = jnp.where(k < unweighted_iterations, std, jnp.sqrt(std**2 + variance))
         return predicted, los, elevation, azimuth, std, used
@@ -255,17 +318,21 @@ def solve_position(
     def gauss_newton(k, carry):
         state, _ = carry
         predicted, los, _, _, std, used = linearize(state, k)
-        h = jnp.where(used[:, None], jnp.concatenate([-los, membership], axis=1) / std[:, None], 0.0)
+        h = jnp.where(
+            used[:, None], jnp.concatenate([-los, membership], axis=1) / std[:, None], 0.0
+        )
         y = jnp.where(used, (rho - predicted) / std, 0.0)
         if solver == "qr":
             qr = masked_qr(h, used)
             step = _linalg.solve_upper(qr.r, leading(qr, apply_qt(qr, y)))
-        else:   # normal equations, Cholesky written out (element-wise over a batch)
+        else:  # normal equations, Cholesky written out (element-wise over a batch)
             normal = jnp.einsum("si,sj->ij", h, h) + jnp.diag(_absent_columns(h).astype(dtype))
             step = _linalg.cho_solve(_linalg.cholesky(normal), jnp.einsum("si,s->i", h, y))
         return state + step, step
 
-    state, step = jax.lax.fori_loop(0, int(iterations), gauss_newton, (state0, jnp.zeros(unknown, dtype)))
+    state, step = jax.lax.fori_loop(
+        0, int(iterations), gauss_newton, (state0, jnp.zeros(unknown, dtype))
+    )
     predicted, los, elevation, azimuth, std, used = linearize(state, int(iterations))
     los_ned = los @ _ned_at(state).T
     if not local:
@@ -273,13 +340,24 @@ def solve_position(
     geometry = jnp.where(used[:, None], jnp.concatenate([-los_ned, membership], axis=1), 0.0)
     num_used = jnp.sum(used)
     clocks_in_use = jnp.sum(jnp.any(used[:, None] & (membership > 0), axis=0))
-    healthy = (num_used >= 3 + clocks_in_use) & jnp.all(jnp.isfinite(state)) & (jnp.linalg.norm(step[:3]) < 1e-2)
+    healthy = (
+        (num_used >= 3 + clocks_in_use)
+        & jnp.all(jnp.isfinite(state))
+        & (jnp.linalg.norm(step[:3]) < 1e-2)
+    )
     return PositionFix(
-        position=state[:3], clock_bias=state[3] if clocks is None else state[3:],
+        position=state[:3],
+        clock_bias=state[3] if clocks is None else state[3:],
         residuals=jnp.where(used, rho - predicted, 0.0),
-        geometry=geometry, sigma=jnp.where(used, std, 1.0), used=used, num_used=num_used,
-        elevation=jnp.where(used, elevation, 0.0), azimuth=jnp.where(used, azimuth, 0.0),
-        dops=dops(geometry, used), healthy=healthy)
+        geometry=geometry,
+        sigma=jnp.where(used, std, 1.0),
+        used=used,
+        num_used=num_used,
+        elevation=jnp.where(used, elevation, 0.0),
+        azimuth=jnp.where(used, azimuth, 0.0),
+        dops=dops(geometry, used),
+        healthy=healthy,
+    )
 
 
 def _ned_at(state: Array) -> Array:

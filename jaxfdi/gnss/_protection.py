@@ -17,6 +17,7 @@ or fewer there is no test and the levels are infinite. ``ALERT_LIMITS`` (RTCA DO
 non-precision approach HAL 556 m (the paper's Table 1, accuracy 220 m), terminal 1852 m, en route
 3704 m, oceanic 7408 m, LNAV/VNAV 556 m / 50 m, LPV 40 m / 50 m.
 """
+
 from __future__ import annotations
 
 import math
@@ -62,8 +63,12 @@ class ProtectionLevels(NamedTuple):
     available: Array
 
 
-def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tuple[float, float] = "npa",
-                      qr: MaskedQR | None = None) -> ProtectionLevels:
+def protection_levels(
+    fix: PositionFix,
+    tables: RaimTables,
+    operation: str | tuple[float, float] = "npa",
+    qr: MaskedQR | None = None,
+) -> ProtectionLevels:
     """Slopes, HPL, VPL, minimum detectable biases and availability of one fix.
 
     Args:
@@ -78,13 +83,22 @@ def protection_levels(fix: PositionFix, tables: RaimTables, operation: str | tup
     """
     if isinstance(operation, str):
         if operation not in ALERT_LIMITS:
-            raise ValueError(f"operation: expected one of {sorted(ALERT_LIMITS)} or (HAL, VAL), got {operation!r}")
+            raise ValueError(
+                f"operation: expected one of {sorted(ALERT_LIMITS)} or (HAL, VAL), got {operation!r}"
+            )
         hal, val = ALERT_LIMITS[operation]
     else:
         limits = _checks.concrete(operation)
-        if limits is None or limits.shape != (2,) or limits.dtype.kind not in "fiu" or not np.all(limits > 0):
-            raise ValueError(f"operation: expected one of {sorted(ALERT_LIMITS)} or (HAL, VAL), two alert limits > 0 "
-                             f"[m] (inf: none), got {operation!r}")
+        if (
+            limits is None
+            or limits.shape != (2,)
+            or limits.dtype.kind not in "fiu"
+            or not np.all(limits > 0)
+        ):
+            raise ValueError(
+                f"operation: expected one of {sorted(ALERT_LIMITS)} or (HAL, VAL), two alert limits > 0 "
+                f"[m] (inf: none), got {operation!r}"
+            )
         hal, val = operation
     check_tables(tables, fix)
     h, _ = whitened(fix)

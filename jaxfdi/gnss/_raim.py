@@ -18,6 +18,7 @@ the used slots. A second clock costs a dof (higher threshold and protection leve
 
 One entry per satellite slot (S); unused slots masked, never dropped: one program for any number visible.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -30,7 +31,14 @@ from jaxfdi import _checks
 from jaxfdi.detection._chi2 import chi2_threshold
 from jaxfdi.detection._noncentral_chi2 import noncentrality_for_missed_detection
 from jaxfdi.detection._parity import parity_statistic
-from jaxfdi.gnss._least_squares import MaskedQR, apply_qt, masked_qr, parity_column_norms, parity_rows, thin_q
+from jaxfdi.gnss._least_squares import (
+    MaskedQR,
+    apply_qt,
+    masked_qr,
+    parity_column_norms,
+    parity_rows,
+    thin_q,
+)
 from jaxfdi.gnss._positioning import PositionFix
 
 #: Brown & Chin (1992), RTCA DO-208 for non-precision approach: P_fa = 1/15000 per test
@@ -82,14 +90,29 @@ def paper_threshold(num_visible, pfa, sigma) -> Array:
     _checks.check_real("sigma", sigma, "a pseudorange standard deviation [m]")
     value = _checks.concrete(sigma)
     if value is not None and not np.all(value > 0):
-        raise ValueError(f"sigma: expected a standard deviation > 0 [m], got {_checks.received(value)}")
+        raise ValueError(
+            f"sigma: expected a standard deviation > 0 [m], got {_checks.received(value)}"
+        )
     dof = jnp.asarray(num_visible) - 4.0
-    return jnp.where(dof > 0, jnp.sqrt(2.0 * jnp.log(1.0 / jnp.asarray(pfa)) * jnp.asarray(sigma) ** 2
-                                       / jnp.where(dof > 0, dof, 1.0)), jnp.nan)
+    return jnp.where(
+        dof > 0,
+        jnp.sqrt(
+            2.0
+            * jnp.log(1.0 / jnp.asarray(pfa))
+            * jnp.asarray(sigma) ** 2
+            / jnp.where(dof > 0, dof, 1.0)
+        ),
+        jnp.nan,
+    )
 
 
-def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_PMD, rule: str = "chi2",
-                dtype=None) -> RaimTables:
+def raim_tables(
+    num_slots: int,
+    pfa: float = DEFAULT_PFA,
+    pmd: float = DEFAULT_PMD,
+    rule: str = "chi2",
+    dtype=None,
+) -> RaimTables:
     """Thresholds on ``TS_D`` and protection-level noncentralities for ``k = 0..S-4``.
 
     Args:
@@ -103,7 +126,9 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
     """
     if rule not in RULES:
         raise ValueError(f"rule: expected one of {list(RULES)}, got {rule!r}")
-    num_slots = _checks.check_int("num_slots", num_slots, 5, meaning="a number of satellite slots (at least 5)")
+    num_slots = _checks.check_int(
+        "num_slots", num_slots, 5, meaning="a number of satellite slots (at least 5)"
+    )
     _checks.check_probability("pfa", pfa)
     _checks.check_probability("pmd", pmd)
     dtype = dtype or jnp.result_type(float)
@@ -117,8 +142,10 @@ def raim_tables(num_slots: int, pfa: float = DEFAULT_PFA, pmd: float = DEFAULT_P
     lam = noncentrality_for_missed_detection(threshold, dof, jnp.asarray(pmd, dtype))
     inf = jnp.full((1,), jnp.inf, dtype)
     keep = int(num_slots) - 4
-    return RaimTables(jnp.concatenate([inf, threshold[:keep]]),
-                      jnp.concatenate([jnp.full((1,), jnp.nan, dtype), lam[:keep]]))
+    return RaimTables(
+        jnp.concatenate([inf, threshold[:keep]]),
+        jnp.concatenate([jnp.full((1,), jnp.nan, dtype), lam[:keep]]),
+    )
 
 
 def unknowns(fix: PositionFix) -> int:
@@ -126,7 +153,9 @@ def unknowns(fix: PositionFix) -> int:
     counts only clocks with a used satellite (``MaskedQR.num_pivots``)."""
     shape = _checks.shape_of(fix.geometry)
     if len(shape) != 2 or shape[1] < 4:
-        raise ValueError(f"fix.geometry: expected (S, 3 + clocks) with at least one clock column, got shape {shape}")
+        raise ValueError(
+            f"fix.geometry: expected (S, 3 + clocks) with at least one clock column, got shape {shape}"
+        )
     return shape[1]
 
 
@@ -136,10 +165,12 @@ def check_tables(tables: RaimTables, fix: PositionFix) -> None:
     slots = _checks.shape_of(fix.used)[0]
     size = _checks.shape_of(tables.threshold)[0]
     unknowns(fix)
-    most = slots - 4          # every used satellite on one clock
+    most = slots - 4  # every used satellite on one clock
     if size < most + 1:
-        raise ValueError(f"tables: built for {size + 3} satellite slots (raim_tables({size + 3})), but the fix has "
-                         f"{slots}: up to {most} degrees of freedom need raim_tables({most + 4}) or more")
+        raise ValueError(
+            f"tables: built for {size + 3} satellite slots (raim_tables({size + 3})), but the fix has "
+            f"{slots}: up to {most} degrees of freedom need raim_tables({most + 4}) or more"
+        )
 
 
 def whitened(fix: PositionFix) -> tuple[Array, Array]:
@@ -165,14 +196,21 @@ def parity_check(fix: PositionFix, tables: RaimTables, qr: MaskedQR | None = Non
     h, y = whitened(fix)
     qr = masked_qr(h, fix.used) if qr is None else qr
     q1 = thin_q(qr)
-    rotated = apply_qt(qr, y)                            # parity vector at used non-pivot slots
+    rotated = apply_qt(qr, y)  # parity vector at used non-pivot slots
     num, u = qr.num_used, qr.num_pivots
     dof = jnp.maximum(num - u, 0)
     statistic = jnp.where(dof > 0, parity_statistic(rotated, qr.rank >= u), 0.0)
-    projected = y - q1 @ (q1.T @ y)                       # S y_w = P^T p
+    projected = y - q1 @ (q1.T @ y)  # S y_w = P^T p
     norm, observable = parity_column_norms(q1, fix.used)  # ||P[:, j]||
     isolation = jnp.where(observable, projected / norm, 0.0)
     threshold = tables.threshold[jnp.minimum(dof, tables.threshold.shape[0] - 1)]
     isolated = jnp.where(num >= u + 2, jnp.argmax(jnp.abs(isolation)), -1).astype(jnp.int32)
-    return ParityCheck(statistic, dof.astype(jnp.int32), threshold, statistic > threshold, isolation, isolated,
-                       jnp.isfinite(statistic))
+    return ParityCheck(
+        statistic,
+        dof.astype(jnp.int32),
+        threshold,
+        statistic > threshold,
+        isolation,
+        isolated,
+        jnp.isfinite(statistic),
+    )

@@ -9,6 +9,7 @@ Numbers are read as a sequence, not fixed ``D19.12`` columns (the shipped ``gps_
 ephVote, writes 20 wide): Fortran ``D`` exponents accepted, adjacent numbers split, any other content rejected. LF and
 CRLF accepted; a malformed header or record raises ``ValueError`` naming the file and line.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -114,15 +115,22 @@ class Ephemerides(NamedTuple):
     ion_beta: np.ndarray
 
 
-def gps_week_seconds(year: int, month: int, day: int, hour: int = 0, minute: int = 0,
-                     second: float = 0.0) -> tuple[int, float]:
+def gps_week_seconds(
+    year: int, month: int, day: int, hour: int = 0, minute: int = 0, second: float = 0.0
+) -> tuple[int, float]:
     """``(week, seconds of week)`` of a GPS-time calendar date (no leap seconds: GPS time)."""
-    for name, value, high in (("hour", hour, 24.0), ("minute", minute, 60.0), ("second", second, 60.0)):
+    for name, value, high in (
+        ("hour", hour, 24.0),
+        ("minute", minute, 60.0),
+        ("second", second, 60.0),
+    ):
         if not (isinstance(value, (int, float, np.integer, np.floating)) and 0 <= value < high):
             raise ValueError(f"{name}: expected a number in [0, {high:g}), got {value!r}")
     days = (_dt.date(int(year), int(month), int(day)) - GPS_EPOCH).days
     if days < 0:
-        raise ValueError(f"date: expected a date on or after {GPS_EPOCH} (GPS week 0), got {year}-{month}-{day}")
+        raise ValueError(
+            f"date: expected a date on or after {GPS_EPOCH} (GPS week 0), got {year}-{month}-{day}"
+        )
     week, weekday = divmod(days, 7)
     return week, weekday * 86400.0 + hour * 3600.0 + minute * 60.0 + float(second)
 
@@ -139,19 +147,27 @@ def _numbers(text: str, name: str, line_no: int, what: str) -> list[float]:
 def _parse_header(lines: list[str], name: str) -> tuple[int, np.ndarray, np.ndarray]:
     """Index of the first record line, and the header's ION ALPHA / ION BETA."""
     if not lines:
-        raise ValueError(f"{name}:1: expected a 'RINEX VERSION / TYPE' header line, got an empty file")
+        raise ValueError(
+            f"{name}:1: expected a 'RINEX VERSION / TYPE' header line, got an empty file"
+        )
     first = lines[0]
     if first[60:].strip() != "RINEX VERSION / TYPE":
-        raise ValueError(f"{name}:1: expected 'RINEX VERSION / TYPE' in columns 61-80, got {first!r}")
+        raise ValueError(
+            f"{name}:1: expected 'RINEX VERSION / TYPE' in columns 61-80, got {first!r}"
+        )
     try:
         version = float(first[:9])
     except ValueError:
-        raise ValueError(f"{name}:1: expected the RINEX version in columns 1-9, got {first[:9]!r}") from None
+        raise ValueError(
+            f"{name}:1: expected the RINEX version in columns 1-9, got {first[:9]!r}"
+        ) from None
     if not 2.0 <= version < 3.0:
         raise ValueError(f"{name}:1: expected a RINEX 2.x file, got version {version}")
     if first[20:21] != "N":
-        raise ValueError(f"{name}:1: expected file type 'N' (GPS navigation message) in column 21, "
-                         f"got {first[20:21]!r}")
+        raise ValueError(
+            f"{name}:1: expected file type 'N' (GPS navigation message) in column 21, "
+            f"got {first[20:21]!r}"
+        )
     alpha = np.full(4, np.nan)
     beta = np.full(4, np.nan)
     for index, line in enumerate(lines[1:], start=1):
@@ -161,9 +177,13 @@ def _parse_header(lines: list[str], name: str) -> tuple[int, np.ndarray, np.ndar
         if label in ("ION ALPHA", "ION BETA"):
             values = _numbers(line[:60], name, index + 1, label)
             if len(values) != 4:
-                raise ValueError(f"{name}:{index + 1}: {label}: expected 4 numbers, got {len(values)}")
+                raise ValueError(
+                    f"{name}:{index + 1}: {label}: expected 4 numbers, got {len(values)}"
+                )
             (alpha if label == "ION ALPHA" else beta)[:] = values
-    raise ValueError(f"{name}:{len(lines)}: expected an 'END OF HEADER' line, reached the end of the file")
+    raise ValueError(
+        f"{name}:{len(lines)}: expected an 'END OF HEADER' line, reached the end of the file"
+    )
 
 
 def parse_rinex_nav(text: str, name: str = "<string>") -> Ephemerides:
@@ -182,33 +202,54 @@ def parse_rinex_nav(text: str, name: str = "<string>") -> Ephemerides:
     while position < len(body):
         line_no, epoch = body[position]
         if len(body) - position < 8:
-            raise ValueError(f"{name}:{line_no}: record starting here has {len(body) - position} lines, expected 8 "
-                             f"(the epoch line and 7 broadcast-orbit lines)")
+            raise ValueError(
+                f"{name}:{line_no}: record starting here has {len(body) - position} lines, expected 8 "
+                f"(the epoch line and 7 broadcast-orbit lines)"
+            )
         try:
             prn = int(epoch[0:2])
-            year, month, day, hour, minute = (int(epoch[i:i + 3]) for i in range(2, 17, 3))
+            year, month, day, hour, minute = (int(epoch[i : i + 3]) for i in range(2, 17, 3))
             second = float(epoch[17:22])
         except ValueError:
-            raise ValueError(f"{name}:{line_no}: expected a record's first line 'PRN yy mm dd hh mm ss.s' "
-                             f"(I2, 5I3, F5.1), got {epoch!r}") from None
+            raise ValueError(
+                f"{name}:{line_no}: expected a record's first line 'PRN yy mm dd hh mm ss.s' "
+                f"(I2, 5I3, F5.1), got {epoch!r}"
+            ) from None
         if not 1 <= prn <= 32 or not 1 <= month <= 12 or not 1 <= day <= 31 or not 0 <= hour < 24:
-            raise ValueError(f"{name}:{line_no}: expected PRN 1-32 and a valid date/time, got {epoch[:22]!r}")
+            raise ValueError(
+                f"{name}:{line_no}: expected PRN 1-32 and a valid date/time, got {epoch[:22]!r}"
+            )
         clock = _numbers(epoch[22:], name, line_no, "SV clock bias, drift, drift rate")
         if len(clock) != 3:
-            raise ValueError(f"{name}:{line_no}: expected 3 numbers (af0, af1, af2) after the epoch, got {len(clock)}")
+            raise ValueError(
+                f"{name}:{line_no}: expected 3 numbers (af0, af1, af2) after the epoch, got {len(clock)}"
+            )
         year += 2000 if year < 80 else 1900
         try:
             toc_week, toc = gps_week_seconds(year, month, day, hour, minute, second)
         except ValueError:
-            raise ValueError(f"{name}:{line_no}: expected a valid epoch date, got {epoch[:22]!r}") from None
-        record = {"prn": prn, "toc_week": toc_week, "toc": toc, "af0": clock[0], "af1": clock[1], "af2": clock[2]}
+            raise ValueError(
+                f"{name}:{line_no}: expected a valid epoch date, got {epoch[:22]!r}"
+            ) from None
+        record = {
+            "prn": prn,
+            "toc_week": toc_week,
+            "toc": toc,
+            "af0": clock[0],
+            "af1": clock[1],
+            "af2": clock[2],
+        }
         for offset, (fields, required) in enumerate(zip(_ORBIT_LINES, _REQUIRED), start=1):
             orbit_no, orbit = body[position + offset]
-            values = _numbers(orbit, name, orbit_no, f"broadcast orbit line {offset} of PRN {prn:02d}")
+            values = _numbers(
+                orbit, name, orbit_no, f"broadcast orbit line {offset} of PRN {prn:02d}"
+            )
             if not required <= len(values) <= 4:
-                raise ValueError(f"{name}:{orbit_no}: broadcast orbit line {offset} of PRN {prn:02d} "
-                                 f"({', '.join(fields)}): expected {required if required == 4 else f'{required}-4'} "
-                                 f"numbers, got {len(values)}")
+                raise ValueError(
+                    f"{name}:{orbit_no}: broadcast orbit line {offset} of PRN {prn:02d} "
+                    f"({', '.join(fields)}): expected {required if required == 4 else f'{required}-4'} "
+                    f"numbers, got {len(values)}"
+                )
             values += [0.0] * (len(fields) - len(values))
             record.update(zip(fields, values[: len(fields)]))
         records.append(record)
@@ -216,8 +257,11 @@ def parse_rinex_nav(text: str, name: str = "<string>") -> Ephemerides:
     if not records:
         raise ValueError(f"{name}: no ephemeris record after the header")
     ints = {"prn", "toc_week", "week", "health"}
-    columns = {field: np.asarray([r[field] for r in records], dtype=int if field in ints else float)
-               for field in Ephemerides._fields if field not in ("ion_alpha", "ion_beta")}
+    columns = {
+        field: np.asarray([r[field] for r in records], dtype=int if field in ints else float)
+        for field in Ephemerides._fields
+        if field not in ("ion_alpha", "ion_beta")
+    }
     return Ephemerides(**columns, ion_alpha=alpha, ion_beta=beta)
 
 
@@ -242,4 +286,6 @@ def read_ascii(path: str | Path) -> str:
         return data.decode("ascii")
     except UnicodeDecodeError as err:
         line = data[: err.start].count(b"\n") + 1
-        raise ValueError(f"{path}:{line}: expected ASCII text, got byte {data[err.start]:#04x}") from None
+        raise ValueError(
+            f"{path}:{line}: expected ASCII text, got byte {data[err.start]:#04x}"
+        ) from None

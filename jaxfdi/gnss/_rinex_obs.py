@@ -11,6 +11,7 @@ Kept per system: the first single-frequency code of ``CODE_PRIORITY`` in the hea
 Flags 0 (ok) and 1 (power failure) are observations; events (2-5) and cycle slips (6) are skipped. A
 malformed header or record raises ``ValueError`` naming the file and line.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -70,24 +71,38 @@ def _header(lines: list[str], name: str):
     except ValueError:
         _fail(name, 1, f"expected the RINEX version in columns 1-9, got {first[:9]!r}")
     if not 2.0 <= version < 4.0 or first[20:21] != "O":
-        _fail(name, 1, f"expected a RINEX 2 or 3 observation file (type 'O' in column 21), got version "
-                       f"{version} type {first[20:21]!r}")
+        _fail(
+            name,
+            1,
+            f"expected a RINEX 2 or 3 observation file (type 'O' in column 21), got version "
+            f"{version} type {first[20:21]!r}",
+        )
     default_system = first[40:41].strip() or "G"
     types: dict[str, list[str]] = {}
     approx = np.full(3, np.nan)
-    pending: tuple[str, int] | None = None  # (system, count) of a type list continued on the next line
+    pending: tuple[str, int] | None = (
+        None  # (system, count) of a type list continued on the next line
+    )
     for index, line in enumerate(lines[1:], start=2):
         label = line[60:].strip()
         if label == "END OF HEADER":
             if not types:
-                _fail(name, index, "expected the observation types ('# / TYPES OF OBSERV' or "
-                                   "'SYS / # / OBS TYPES') before 'END OF HEADER'")
+                _fail(
+                    name,
+                    index,
+                    "expected the observation types ('# / TYPES OF OBSERV' or "
+                    "'SYS / # / OBS TYPES') before 'END OF HEADER'",
+                )
             return version, index, types, approx
         if label == "APPROX POSITION XYZ":
             try:
-                approx = np.array([float(line[i:i + 14]) for i in (0, 14, 28)])
+                approx = np.array([float(line[i : i + 14]) for i in (0, 14, 28)])
             except ValueError:
-                _fail(name, index, f"APPROX POSITION XYZ: expected 3 numbers (3F14.4), got {line[:42]!r}")
+                _fail(
+                    name,
+                    index,
+                    f"APPROX POSITION XYZ: expected 3 numbers (3F14.4), got {line[:42]!r}",
+                )
             continue
         if label == "# / TYPES OF OBSERV" and version < 3:
             if pending is None:
@@ -101,13 +116,19 @@ def _header(lines: list[str], name: str):
                 pending = (line[0], count)
                 types[line[0]] = []
             elif pending is None:
-                _fail(name, index, "SYS / # / OBS TYPES: a continuation line without a system line before it")
+                _fail(
+                    name,
+                    index,
+                    "SYS / # / OBS TYPES: a continuation line without a system line before it",
+                )
             types[pending[0]] += line[7:60].split()
         else:
             continue
         key = "*" if version < 3 else pending[0]
         if len(types[key]) > pending[1]:
-            _fail(name, index, f"{label}: {len(types[key])} types listed, the count says {pending[1]}")
+            _fail(
+                name, index, f"{label}: {len(types[key])} types listed, the count says {pending[1]}"
+            )
         if len(types[key]) == pending[1]:
             pending = None
     _fail(name, len(lines), "expected an 'END OF HEADER' line, reached the end of the file")
@@ -126,10 +147,14 @@ def _count(text: str, name: str, line_no: int, label: str) -> int:
 def _flag_count(line: str, at: int, name: str, line_no: int) -> tuple[int, int]:
     """The epoch flag (column ``at + 1``) and the count after it (I3): an event's date may be blank."""
     try:
-        return int(line[at]), int(line[at + 1:at + 4])
+        return int(line[at]), int(line[at + 1 : at + 4])
     except (ValueError, IndexError):
-        _fail(name, line_no, f"expected the epoch flag (I1) and the number of satellites or records (I3) in "
-                             f"columns {at + 1}-{at + 4}, got {line!r}")
+        _fail(
+            name,
+            line_no,
+            f"expected the epoch flag (I1) and the number of satellites or records (I3) in "
+            f"columns {at + 1}-{at + 4}, got {line!r}",
+        )
 
 
 def _epoch_time(text: str, name: str, line_no: int, two_digit_year: bool) -> tuple[int, float]:
@@ -147,17 +172,23 @@ def _epoch_time(text: str, name: str, line_no: int, two_digit_year: bool) -> tup
         _fail(name, line_no, f"expected a valid epoch date and time, got {text!r} ({err})")
 
 
-def _values(text: str, types: list[str], name: str, line_no: int, satellite: str) -> dict[str, float]:
+def _values(
+    text: str, types: list[str], name: str, line_no: int, satellite: str
+) -> dict[str, float]:
     """The observation fields of one satellite's record (``text``: its fields only)."""
     out = {}
     for k, kind in enumerate(types):
-        field = text[k * FIELD:k * FIELD + 14]
+        field = text[k * FIELD : k * FIELD + 14]
         if field.strip():
             try:
                 out[kind] = float(field)
             except ValueError:
-                _fail(name, line_no, f"{satellite} {kind}: expected a number (F14.3) in columns "
-                                     f"{k * FIELD + 1}-{k * FIELD + 14} of its fields, got {field!r}")
+                _fail(
+                    name,
+                    line_no,
+                    f"{satellite} {kind}: expected a number (F14.3) in columns "
+                    f"{k * FIELD + 1}-{k * FIELD + 14} of its fields, got {field!r}",
+                )
     return out
 
 
@@ -187,27 +218,45 @@ def _record_v2(lines, position, types, name):
     satellites, at = [], position
     while len(satellites) < count:
         if at >= len(lines):
-            _fail(name, at, f"the epoch of line {line_no} lists {count} satellites, the file ends after "
-                            f"{len(satellites)}")
+            _fail(
+                name,
+                at,
+                f"the epoch of line {line_no} lists {count} satellites, the file ends after "
+                f"{len(satellites)}",
+            )
         names = lines[at][32:68]
         if at != position and lines[at][:32].strip():
-            _fail(name, at + 1, f"expected the satellite list of the epoch of line {line_no} continued in "
-                                f"columns 33-68, got {lines[at]!r}")
+            _fail(
+                name,
+                at + 1,
+                f"expected the satellite list of the epoch of line {line_no} continued in "
+                f"columns 33-68, got {lines[at]!r}",
+            )
         for k in range(0, min(36, 3 * (count - len(satellites))), 3):
-            sat = names[k:k + 3]
+            sat = names[k : k + 3]
             system = sat[0] if sat[0] != " " else "G"
             try:
                 satellites.append(f"{system}{int(sat[1:]):02d}")
             except ValueError:
-                _fail(name, at + 1, f"expected a satellite (A1, I2) in columns {33 + k}-{35 + k}, got {sat!r}")
+                _fail(
+                    name,
+                    at + 1,
+                    f"expected a satellite (A1, I2) in columns {33 + k}-{35 + k}, got {sat!r}",
+                )
         at += 1
     rows = -(-len(kinds) // per_line)
     record = {}
     for sat in satellites:
         if at + rows > len(lines):
-            _fail(name, len(lines), f"the epoch of line {line_no}: {sat}'s {rows} observation lines are "
-                                    f"missing (the file ends)")
-        text = "".join(lines[at + r][:FIELD * per_line].ljust(FIELD * per_line) for r in range(rows))
+            _fail(
+                name,
+                len(lines),
+                f"the epoch of line {line_no}: {sat}'s {rows} observation lines are "
+                f"missing (the file ends)",
+            )
+        text = "".join(
+            lines[at + r][: FIELD * per_line].ljust(FIELD * per_line) for r in range(rows)
+        )
         record[sat] = _values(text, kinds, name, at + 1, sat)
         at += rows
     return at, (week, tow, record)
@@ -223,21 +272,37 @@ def _record_v3(lines, position, types, name):
         return position + 1 + count, None
     week, tow = _epoch_time(line[1:29], name, line_no, False)
     if position + count >= len(lines):
-        _fail(name, len(lines), f"the epoch of line {line_no} lists {count} satellites, the file ends "
-                                f"after {len(lines) - 1 - position}")
+        _fail(
+            name,
+            len(lines),
+            f"the epoch of line {line_no} lists {count} satellites, the file ends "
+            f"after {len(lines) - 1 - position}",
+        )
     record = {}
     for at in range(position + 1, position + 1 + count):
         text = lines[at]
         if text.startswith(">"):
-            _fail(name, at + 1, f"the epoch of line {line_no} lists {count} satellites, found "
-                                f"{at - position - 1} before the next epoch")
+            _fail(
+                name,
+                at + 1,
+                f"the epoch of line {line_no} lists {count} satellites, found "
+                f"{at - position - 1} before the next epoch",
+            )
         system = text[0]
         try:
             sat = f"{system}{int(text[1:3]):02d}"
         except ValueError:
-            _fail(name, at + 1, f"expected a satellite identifier (A1, I2) in columns 1-3, got {text[:3]!r}")
+            _fail(
+                name,
+                at + 1,
+                f"expected a satellite identifier (A1, I2) in columns 1-3, got {text[:3]!r}",
+            )
         if system not in types:
-            _fail(name, at + 1, f"satellite {sat}: its system {system!r} has no 'SYS / # / OBS TYPES' line")
+            _fail(
+                name,
+                at + 1,
+                f"satellite {sat}: its system {system!r} has no 'SYS / # / OBS TYPES' line",
+            )
         record[sat] = _values(text[3:], types[system], name, at + 1, sat)
     return position + 1 + count, (week, tow, record)
 
@@ -263,7 +328,9 @@ def parse_rinex_obs(text: str, name: str = "<string>") -> Observations:
 
     codes = {}
     for system in {sat[0] for sat in satellites}:
-        codes[system] = next((c for c in CODE_PRIORITY.get(system, ()) if c in listed(system)), None)
+        codes[system] = next(
+            (c for c in CODE_PRIORITY.get(system, ()) if c in listed(system)), None
+        )
     satellites = [sat for sat in satellites if codes[sat[0]] is not None]
     epochs, count = len(records), len(satellites)
     pseudorange = np.full((epochs, count), np.nan)
@@ -275,6 +342,11 @@ def parse_rinex_obs(text: str, name: str = "<string>") -> Observations:
             pseudorange[e, s] = values.get(code, np.nan)
             cn0[e, s] = values.get("S" + code[1:], np.nan)
     return Observations(
-        week=np.array([r[0] for r in records], int), time_of_week=np.array([r[1] for r in records]),
-        satellite=np.array(satellites, dtype="<U3"), code=np.array([codes[s[0]] for s in satellites], dtype="<U3"),
-        pseudorange=pseudorange, cn0=cn0, approx_position=approx)
+        week=np.array([r[0] for r in records], int),
+        time_of_week=np.array([r[1] for r in records]),
+        satellite=np.array(satellites, dtype="<U3"),
+        code=np.array([codes[s[0]] for s in satellites], dtype="<U3"),
+        pseudorange=pseudorange,
+        cn0=cn0,
+        approx_position=approx,
+    )

@@ -20,6 +20,7 @@ by bisection (``P_HMI,q``: ``P_HMI_H / 2`` per horizontal axis, ``P_HMI_V`` down
 PL_E^2)``, ``VPL = PL_D``; never below the fault-free levels ``sigma_0,q Q^-1(P_HMI,q' / 2)``
 (``fault_free_levels``); infinite when the unmonitored probability exceeds the budget.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -73,14 +74,19 @@ def _q_inverse(p: Array) -> Array:
     return -ndtri(p)
 
 
-def _solve_level(sigma0: Array, threshold: Array, sigma: Array, prior: Array, budget: Array) -> Array:
+def _solve_level(
+    sigma0: Array, threshold: Array, sigma: Array, prior: Array, budget: Array
+) -> Array:
     """The ``PL`` of ``2 Q(PL / sigma0) + sum_k prior_k Q((PL - T_k) / sigma_k) = budget``
     (monitored modes only in ``prior``), by bisection on a bracket from the terms alone."""
     count = jnp.sum(prior > 0) + 1.0
     share = budget / count
     low = sigma0 * _q_inverse(budget / 2.0)
-    upper_k = jnp.where(prior > 0, threshold + sigma * _q_inverse(jnp.minimum(share / jnp.maximum(prior, 1e-300), 0.5)),
-                        -jnp.inf)
+    upper_k = jnp.where(
+        prior > 0,
+        threshold + sigma * _q_inverse(jnp.minimum(share / jnp.maximum(prior, 1e-300), 0.5)),
+        -jnp.inf,
+    )
     high = jnp.maximum(sigma0 * _q_inverse(share / 2.0), jnp.max(upper_k))
 
     def excess(level):
@@ -97,9 +103,13 @@ def _solve_level(sigma0: Array, threshold: Array, sigma: Array, prior: Array, bu
     return jnp.where(budget > 0.0, level, jnp.inf)
 
 
-def solution_separation(fix: PositionFix, p_satellite: float = P_SATELLITE, p_constellation=P_CONSTELLATION,
-                        p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL),
-                        p_fa: tuple[float, float] = (P_FA_HORIZONTAL, P_FA_VERTICAL)) -> SolutionSeparation:
+def solution_separation(
+    fix: PositionFix,
+    p_satellite: float = P_SATELLITE,
+    p_constellation=P_CONSTELLATION,
+    p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL),
+    p_fa: tuple[float, float] = (P_FA_HORIZONTAL, P_FA_VERTICAL),
+) -> SolutionSeparation:
     """Solution-separation test and protection levels of ``fix`` (module docstring).
 
     Args:
@@ -118,11 +128,17 @@ def solution_separation(fix: PositionFix, p_satellite: float = P_SATELLITE, p_co
     dtype = h.dtype
     used = fix.used
     constellation = jnp.argmax(jnp.abs(fix.geometry[:, 3:]), axis=1)
-    member = used[:, None] & (constellation[:, None] == jnp.arange(clocks))           # (S, C)
-    masks = jnp.concatenate([used[None, :] & ~jnp.eye(slots, dtype=bool), (used[:, None] & ~member).T])  # (K, S)
-    present = jnp.concatenate([used, jnp.any(member, axis=0)])                         # modes that exist
-    prior = jnp.concatenate([jnp.full(slots, p_satellite, dtype),
-                             jnp.broadcast_to(jnp.asarray(p_constellation, dtype), (clocks,))])
+    member = used[:, None] & (constellation[:, None] == jnp.arange(clocks))  # (S, C)
+    masks = jnp.concatenate(
+        [used[None, :] & ~jnp.eye(slots, dtype=bool), (used[:, None] & ~member).T]
+    )  # (K, S)
+    present = jnp.concatenate([used, jnp.any(member, axis=0)])  # modes that exist
+    prior = jnp.concatenate(
+        [
+            jnp.full(slots, p_satellite, dtype),
+            jnp.broadcast_to(jnp.asarray(p_constellation, dtype), (clocks,)),
+        ]
+    )
     prior = jnp.where(present, prior, 0.0)
 
     def normal_inverse(mask):
@@ -130,7 +146,9 @@ def solution_separation(fix: PositionFix, p_satellite: float = P_SATELLITE, p_co
         weights = mask.astype(dtype)
         normal = jnp.einsum("s,si,sj->ij", weights, h, h)
         dropped = jnp.concatenate([jnp.zeros(3, bool), ~kept_clocks])
-        normal = normal + jnp.diag(jnp.where(dropped, 1.0, 0.0))       # a clock without satellites: unknown removed
+        normal = normal + jnp.diag(
+            jnp.where(dropped, 1.0, 0.0)
+        )  # a clock without satellites: unknown removed
         solvable = jnp.sum(mask) >= 3 + jnp.sum(kept_clocks)
         inverse = _linalg.psd_solve(normal, jnp.eye(unknowns, dtype=dtype))
         return inverse, weights, solvable
@@ -158,22 +176,36 @@ def solution_separation(fix: PositionFix, p_satellite: float = P_SATELLITE, p_co
     isolated = jnp.where(alarm, jnp.argmax(jnp.max(ratio, axis=1)), -1).astype(jnp.int32)
     scale = jnp.maximum(1.0 - unmonitored / (hmi_h + hmi_v), 0.0)
     prior_monitored = jnp.where(monitored, prior, 0.0)
-    budgets = jnp.array([hmi_h / 2.0, hmi_h / 2.0, hmi_v], dtype) * scale           # north, east, down
+    budgets = jnp.array([hmi_h / 2.0, hmi_h / 2.0, hmi_v], dtype) * scale  # north, east, down
     levels = jax.vmap(_solve_level, in_axes=(0, 1, 1, None, 0))(
-        sigma0, threshold, jnp.where(monitored[:, None], sigma, 1.0), prior_monitored, budgets)
+        sigma0, threshold, jnp.where(monitored[:, None], sigma, 1.0), prior_monitored, budgets
+    )
     available = solvable0 & (scale > 0.0)
     hpl = jnp.where(available, jnp.hypot(levels[0], levels[1]), jnp.inf)
     vpl = jnp.where(available, levels[2], jnp.inf)
-    return SolutionSeparation(hpl, vpl, jnp.where(monitored[:, None], separation, 0.0), threshold, sigma, monitored,
-                              unmonitored, alarm, isolated)
+    return SolutionSeparation(
+        hpl,
+        vpl,
+        jnp.where(monitored[:, None], separation, 0.0),
+        threshold,
+        sigma,
+        monitored,
+        unmonitored,
+        alarm,
+        isolated,
+    )
 
 
 _separations = jax.jit(jax.vmap(solution_separation, in_axes=(0, None, None, None, None)))
 
 
-def separate_epochs(fix: PositionFix, p_satellite: float = P_SATELLITE, p_constellation=P_CONSTELLATION,
-                    p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL),
-                    p_fa: tuple[float, float] = (P_FA_HORIZONTAL, P_FA_VERTICAL)) -> SolutionSeparation:
+def separate_epochs(
+    fix: PositionFix,
+    p_satellite: float = P_SATELLITE,
+    p_constellation=P_CONSTELLATION,
+    p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL),
+    p_fa: tuple[float, float] = (P_FA_HORIZONTAL, P_FA_VERTICAL),
+) -> SolutionSeparation:
     """``solution_separation`` per epoch of a fix with a leading axis (T, ...), ``positioning.EPOCH_CHUNK``
     at a time, padded as a phone trace (unused slots, empty clocks, zero prior): fixes of up to 64 slots
     share one program. Arguments as ``solution_separation``.
@@ -184,17 +216,34 @@ def separate_epochs(fix: PositionFix, p_satellite: float = P_SATELLITE, p_conste
     fix = jax.tree_util.tree_map(np.asarray, fix)
     epochs, slots, columns = fix.geometry.shape
     rows, width, wide = padded_sizes(epochs, slots, columns - 3)
-    padded = resized(fix, rows, width, wide, fills={"sigma": 1.0})      # unused slots, clocks without satellites
-    prior = padded_to(np.broadcast_to(np.asarray(p_constellation, fix.residuals.dtype), (columns - 3,)), (wide,), 0.0)
-    out = in_chunks(lambda chunk: _separations(chunk, p_satellite, prior, p_hmi, p_fa), epochs, padded)
-    modes = np.r_[0:slots, width:width + columns - 3]          # the satellites', then the constellations'
+    padded = resized(
+        fix, rows, width, wide, fills={"sigma": 1.0}
+    )  # unused slots, clocks without satellites
+    prior = padded_to(
+        np.broadcast_to(np.asarray(p_constellation, fix.residuals.dtype), (columns - 3,)),
+        (wide,),
+        0.0,
+    )
+    out = in_chunks(
+        lambda chunk: _separations(chunk, p_satellite, prior, p_hmi, p_fa), epochs, padded
+    )
+    modes = np.r_[0:slots, width : width + columns - 3]  # the satellites', then the constellations'
     isolated = np.where(out.isolated >= width, out.isolated - width + slots, out.isolated)
-    return jax.tree_util.tree_map(jnp.asarray, out._replace(
-        separation=out.separation[:, modes], threshold=out.threshold[:, modes], sigma=out.sigma[:, modes],
-        monitored=out.monitored[:, modes], isolated=isolated.astype(out.isolated.dtype)))
+    return jax.tree_util.tree_map(
+        jnp.asarray,
+        out._replace(
+            separation=out.separation[:, modes],
+            threshold=out.threshold[:, modes],
+            sigma=out.sigma[:, modes],
+            monitored=out.monitored[:, modes],
+            isolated=isolated.astype(out.isolated.dtype),
+        ),
+    )
 
 
-def fault_free_levels(fix: PositionFix, p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL)):
+def fault_free_levels(
+    fix: PositionFix, p_hmi: tuple[float, float] = (P_HMI_HORIZONTAL, P_HMI_VERTICAL)
+):
     """All-in-view levels ``sigma_0,q Q^-1(P_HMI,q / 2)`` per axis (``P_HMI_H / 2`` on N and E), the floor
     of the solution-separation levels.
 
@@ -205,4 +254,7 @@ def fault_free_levels(fix: PositionFix, p_hmi: tuple[float, float] = (P_HMI_HORI
     inverse0 = _linalg.psd_solve(h.T @ h, jnp.eye(h.shape[1], dtype=h.dtype))
     sigma0 = jnp.sqrt(jnp.diagonal(inverse0)[:3])
     hmi_h, hmi_v = p_hmi
-    return (jnp.hypot(sigma0[0], sigma0[1]) * _q_inverse(hmi_h / 4.0), sigma0[2] * _q_inverse(hmi_v / 2.0))
+    return (
+        jnp.hypot(sigma0[0], sigma0[1]) * _q_inverse(hmi_h / 4.0),
+        sigma0[2] * _q_inverse(hmi_v / 2.0),
+    )

@@ -6,6 +6,7 @@ A YUMA file (US Coast Guard Navigation Center): per satellite a header line of a
 offset from 0.3 semicircles of IS-GPS-200 Table 20-VI); the 10-bit week plus ``rollovers`` (1024-week wraps) is the full
 GPS week. LF or CRLF; a ``ValueError`` names the file and line of the first malformed, missing or repeated field.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -51,10 +52,21 @@ class Almanac(NamedTuple):
 
 
 #: key prefix as written in YUMA files (lower case) -> field
-_FIELDS = {"id": "prn", "health": "health", "eccentricity": "eccentricity", "time of applicability": "toa",
-           "orbital inclination": "inclination", "rate of right ascen": "omega_dot", "sqrt(a)": "sqrt_a",
-           "right ascen at": "omega0", "argument of perigee": "argument_of_perigee", "mean anom": "mean_anomaly",
-           "af0": "af0", "af1": "af1", "week": "week"}
+_FIELDS = {
+    "id": "prn",
+    "health": "health",
+    "eccentricity": "eccentricity",
+    "time of applicability": "toa",
+    "orbital inclination": "inclination",
+    "rate of right ascen": "omega_dot",
+    "sqrt(a)": "sqrt_a",
+    "right ascen at": "omega0",
+    "argument of perigee": "argument_of_perigee",
+    "mean anom": "mean_anomaly",
+    "af0": "af0",
+    "af1": "af1",
+    "week": "week",
+}
 #: the fields that are whole numbers
 _INTEGER_FIELDS = ("prn", "health", "week")
 
@@ -76,7 +88,9 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
     Raises:
       ValueError: naming ``name`` and the line of a malformed record.
     """
-    rollovers = _checks.check_int("rollovers", rollovers, 0, meaning="a number of 1024-week rollovers >= 0")
+    rollovers = _checks.check_int(
+        "rollovers", rollovers, 0, meaning="a number of 1024-week rollovers >= 0"
+    )
     records: list[dict] = []
     current: dict | None = None
     header_line = 0
@@ -84,7 +98,9 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
     def close(record, line_no):
         missing = [n for n in _FIELDS.values() if n not in record]
         if missing:
-            raise ValueError(f"{name}:{line_no}: almanac record starting on this line lacks {missing}")
+            raise ValueError(
+                f"{name}:{line_no}: almanac record starting on this line lacks {missing}"
+            )
 
     for line_no, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
@@ -97,16 +113,22 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
             current, header_line = {}, line_no
             continue
         if current is None:
-            raise ValueError(f"{name}:{line_no}: expected a '******** ... almanac for PRN-nn ********' header "
-                             f"before the fields, got {line!r}")
+            raise ValueError(
+                f"{name}:{line_no}: expected a '******** ... almanac for PRN-nn ********' header "
+                f"before the fields, got {line!r}"
+            )
         key, sep, value = line.partition(":")
         field = _field_of(key)
         if not sep or field is None:
-            raise ValueError(f"{name}:{line_no}: expected 'Key: value' with a YUMA key "
-                             f"({', '.join(_FIELDS)}), got {line!r}")
+            raise ValueError(
+                f"{name}:{line_no}: expected 'Key: value' with a YUMA key "
+                f"({', '.join(_FIELDS)}), got {line!r}"
+            )
         if field in current:
-            raise ValueError(f"{name}:{line_no}: field {key.strip()!r} repeated in the record starting on line "
-                             f"{header_line}")
+            raise ValueError(
+                f"{name}:{line_no}: field {key.strip()!r} repeated in the record starting on line "
+                f"{header_line}"
+            )
         try:
             number = float(value.strip().replace("D", "E").replace("d", "e"))
             if field in _INTEGER_FIELDS:
@@ -117,8 +139,10 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
                 raise ValueError
         except ValueError:
             wanted = "whole number" if field in _INTEGER_FIELDS else "finite number"
-            raise ValueError(f"{name}:{line_no}: field {key.strip()!r}: expected a {wanted}, "
-                             f"got {value.strip()!r}") from None
+            raise ValueError(
+                f"{name}:{line_no}: field {key.strip()!r}: expected a {wanted}, "
+                f"got {value.strip()!r}"
+            ) from None
         current[field] = number
     if current is not None:
         close(current, header_line)
@@ -129,8 +153,12 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
     repeated = sorted({p for p in prns if prns.count(p) > 1})
     if repeated:
         raise ValueError(f"{name}: PRN(s) {repeated} appear in more than one record")
-    columns = {field: np.asarray([r[field] for r in records], dtype=int if field in _INTEGER_FIELDS else float)
-               for field in _FIELDS.values()}
+    columns = {
+        field: np.asarray(
+            [r[field] for r in records], dtype=int if field in _INTEGER_FIELDS else float
+        )
+        for field in _FIELDS.values()
+    }
     columns["week"] = columns["week"] + 1024 * int(rollovers)
     return Almanac(**columns)
 
@@ -147,5 +175,7 @@ def read_yuma(path: str | Path, rollovers: int = 0) -> Almanac:
         text = path.read_bytes().decode("ascii")
     except UnicodeDecodeError as err:
         line = path.read_bytes()[: err.start].count(b"\n") + 1
-        raise ValueError(f"{path}:{line}: expected ASCII text, got byte {path.read_bytes()[err.start]:#04x}") from None
+        raise ValueError(
+            f"{path}:{line}: expected ASCII text, got byte {path.read_bytes()[err.start]:#04x}"
+        ) from None
     return parse_yuma(text, str(path), rollovers)

@@ -8,6 +8,7 @@ state chi-square test with two propagators (``state_chi2_test``). Inside, and as
 feedback and discretisation, the GPS receiver and IMU as a loop plant, and RAIM -> EKF -> chi-square and SCST as the
 loop's FDI stage. The quaternion algebra is that of the reaction-wheel model.
 """
+
 from jaxfdi.ins._error_state import error_jacobian
 from jaxfdi.ins._imu import hg1900
 from jaxfdi.ins._loosely_coupled import GpsFix, loosely_coupled_filter

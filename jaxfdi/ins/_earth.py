@@ -14,6 +14,7 @@ batches).
 - ``w_ie^n = W [cos L, 0, -sin L]``; ``w_en^n = [v_E / (R_E + h), -v_N / (R_N + h), -v_E tan L / (R_E + h)]``
   (Groves 2013, eqs. 2.123, 5.44; Titterton & Weston 2004, sec. 3.5).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -71,12 +72,17 @@ def surface_gravity(sin_lat: Array, inverse_w: Array | None = None) -> Array:
     return GRAVITY_EQUATOR * (1.0 + SOMIGLIANA_K * sin_lat**2) * inverse_w
 
 
-def gravity_ned(sin_lat: Array, cos_lat: Array, height: Array, inverse_w: Array | None = None) -> Array:
+def gravity_ned(
+    sin_lat: Array, cos_lat: Array, height: Array, inverse_w: Array | None = None
+) -> Array:
     """(3,) gravity ``g^n`` [m/s^2] at a latitude (its sine and cosine) and height [m]."""
     s2 = sin_lat**2
     m = OMEGA_E**2 * WGS84_A**2 * WGS84_B / WGS84_MU
-    down = surface_gravity(sin_lat, inverse_w) * (1.0 - 2.0 / WGS84_A * (1.0 + WGS84_F * (1.0 - 2.0 * s2) + m)
-                                                  * height + 3.0 * height**2 / WGS84_A**2)
+    down = surface_gravity(sin_lat, inverse_w) * (
+        1.0
+        - 2.0 / WGS84_A * (1.0 + WGS84_F * (1.0 - 2.0 * s2) + m) * height
+        + 3.0 * height**2 / WGS84_A**2
+    )
     north = -8.08e-9 * height * 2.0 * sin_lat * cos_lat
     return jnp.stack([north, jnp.zeros_like(down), down])
 
@@ -89,8 +95,13 @@ def earth_rate_ned(sin_lat: Array, cos_lat: Array) -> Array:
 def transport_rate(velocity: Array, height: Array, earth: LocalEarth) -> Array:
     """(3,) ``w_en^n`` [rad/s] of a NED velocity [m/s] at ``height``."""
     east_radius = earth.transverse_radius + height
-    return jnp.stack([velocity[1] / east_radius, -velocity[0] / (earth.meridian_radius + height),
-                      -velocity[1] * earth.sin_lat / (earth.cos_lat * east_radius)])
+    return jnp.stack(
+        [
+            velocity[1] / east_radius,
+            -velocity[0] / (earth.meridian_radius + height),
+            -velocity[1] * earth.sin_lat / (earth.cos_lat * east_radius),
+        ]
+    )
 
 
 def local_earth(position: Array) -> LocalEarth:
@@ -99,6 +110,11 @@ def local_earth(position: Array) -> LocalEarth:
     inverse_w = _inverse_w(sin_lat)
     transverse = WGS84_A * inverse_w
     meridian = transverse * (1.0 - WGS84_E2) * inverse_w**2
-    return LocalEarth(sin_lat, cos_lat, meridian, transverse, gravity_ned(sin_lat, cos_lat, position[2], inverse_w),
-                      earth_rate_ned(sin_lat, cos_lat))
-
+    return LocalEarth(
+        sin_lat,
+        cos_lat,
+        meridian,
+        transverse,
+        gravity_ned(sin_lat, cos_lat, position[2], inverse_w),
+        earth_rate_ned(sin_lat, cos_lat),
+    )

@@ -18,6 +18,7 @@ with the interval's mean ``F`` (``discretize``): ``Phi = I + A + A^2/2 + A^3/6``
 ``T = 1 s``: ``A^4`` terms are Schuler or Earth-rate products < 1e-6),
 ``Q_d = Q T + (F Q + Q F^T) T^2 / 2 + F Q F^T T^3 / 3`` (Brown & Hwang 2012, sec. 3.9).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -30,14 +31,39 @@ from jaxfdi import _checks
 from jaxfdi.ins import _mechanization as mechanization
 from jaxfdi.ins._earth import radii_of_curvature
 from jaxfdi.ins._mechanization import NavState
-from jaxfdi.models._rotation import quaternion_conjugate, quaternion_multiply, rotation_quaternion, rotation_vector
+from jaxfdi.models._rotation import (
+    quaternion_conjugate,
+    quaternion_multiply,
+    rotation_quaternion,
+    rotation_vector,
+)
 
 #: sizes and slices of the error state
 STATE_SIZE = 15
-POSITION, VELOCITY, ATTITUDE, ACCEL_BIAS, GYRO_BIAS = (slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12),
-                                                      slice(12, 15))
-STATE_NAMES = ("dp_N", "dp_E", "dp_D", "dv_N", "dv_E", "dv_D", "psi_N", "psi_E", "psi_D",
-               "db_ax", "db_ay", "db_az", "db_gx", "db_gy", "db_gz")
+POSITION, VELOCITY, ATTITUDE, ACCEL_BIAS, GYRO_BIAS = (
+    slice(0, 3),
+    slice(3, 6),
+    slice(6, 9),
+    slice(9, 12),
+    slice(12, 15),
+)
+STATE_NAMES = (
+    "dp_N",
+    "dp_E",
+    "dp_D",
+    "dv_N",
+    "dv_E",
+    "dv_D",
+    "psi_N",
+    "psi_E",
+    "psi_D",
+    "db_ax",
+    "db_ay",
+    "db_az",
+    "db_gx",
+    "db_gy",
+    "db_gz",
+)
 
 
 class ImuNoise(NamedTuple):
@@ -61,8 +87,12 @@ def navigation_error(ins: NavState, truth: NavState) -> Array:
     lat, height = ins.position[0], ins.position[2]
     meridian, transverse = radii_of_curvature(jnp.sin(lat))
     delta = ins.position - truth.position
-    position = jnp.stack([(meridian + height) * delta[0], (transverse + height) * jnp.cos(lat) * delta[1], -delta[2]])
-    attitude = rotation_vector(quaternion_multiply(ins.attitude, quaternion_conjugate(truth.attitude)))
+    position = jnp.stack(
+        [(meridian + height) * delta[0], (transverse + height) * jnp.cos(lat) * delta[1], -delta[2]]
+    )
+    attitude = rotation_vector(
+        quaternion_multiply(ins.attitude, quaternion_conjugate(truth.attitude))
+    )
     return jnp.concatenate([position, ins.velocity - truth.velocity, attitude])
 
 
@@ -70,8 +100,13 @@ def correct(ins: NavState, error: Array) -> NavState:
     """The state whose ``navigation_error`` from ``ins`` is ``error[:9]`` (exact inverse)."""
     lat, height = ins.position[0], ins.position[2]
     meridian, transverse = radii_of_curvature(jnp.sin(lat))
-    position = ins.position - jnp.stack([error[0] / (meridian + height),
-                                         error[1] / ((transverse + height) * jnp.cos(lat)), -error[2]])
+    position = ins.position - jnp.stack(
+        [
+            error[0] / (meridian + height),
+            error[1] / ((transverse + height) * jnp.cos(lat)),
+            -error[2],
+        ]
+    )
     attitude = quaternion_multiply(rotation_quaternion(-error[6:9]), ins.attitude)
     return NavState(position, ins.velocity - error[3:6], attitude / jnp.sqrt(jnp.sum(attitude**2)))
 
@@ -81,7 +116,9 @@ def error_rate(error: Array, ins: NavState, specific_force: Array, angular_rate:
     ``f_hat`` and ``w_hat`` (module doc); bias errors are constant (their noise is apart)."""
     truth = correct(ins, error)
     ins_rates = mechanization.rates(ins, specific_force, angular_rate)
-    true_rates = mechanization.rates(truth, specific_force - error[ACCEL_BIAS], angular_rate - error[GYRO_BIAS])
+    true_rates = mechanization.rates(
+        truth, specific_force - error[ACCEL_BIAS], angular_rate - error[GYRO_BIAS]
+    )
     _, nav_rate = jax.jvp(navigation_error, (ins, truth), (ins_rates, true_rates))
     return jnp.concatenate([nav_rate, jnp.zeros((6,), nav_rate.dtype)])
 
@@ -100,11 +137,20 @@ def error_jacobian(ins: NavState, specific_force: Array, angular_rate: Array) ->
 def continuous_noise(jacobian: Array, noise: ImuNoise) -> Array:
     """(15, 15) ``Q_c = G diag(VRW^2, ARW^2) G^T + diag(0, bias walks^2)``, ``G = F[:, 9:]``."""
     dtype = jacobian.dtype
-    white = jnp.concatenate([jnp.full((3,), noise.velocity_random_walk**2, dtype),
-                             jnp.full((3,), noise.angle_random_walk**2, dtype)])
+    white = jnp.concatenate(
+        [
+            jnp.full((3,), noise.velocity_random_walk**2, dtype),
+            jnp.full((3,), noise.angle_random_walk**2, dtype),
+        ]
+    )
     gain = jacobian[:, 9:]
-    walks = jnp.concatenate([jnp.zeros((9,), dtype), jnp.full((3,), noise.accel_bias_walk**2, dtype),
-                             jnp.full((3,), noise.gyro_bias_walk**2, dtype)])
+    walks = jnp.concatenate(
+        [
+            jnp.zeros((9,), dtype),
+            jnp.full((3,), noise.accel_bias_walk**2, dtype),
+            jnp.full((3,), noise.gyro_bias_walk**2, dtype),
+        ]
+    )
     return (gain * white) @ gain.T + jnp.diag(walks)
 
 

@@ -14,6 +14,7 @@ factors (0 by default: the 15-state filter does not model them).
 (HG1900, MEMS, is the same class). ``*_bias_walk`` (1 deg/h and 0.1 mg drift over an hour, 1 sigma) is this library's
 assumption (the brochure quotes none).
 """
+
 from __future__ import annotations
 
 import math
@@ -26,8 +27,8 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.ins._error_state import ImuNoise
 
-DEG_PER_HOUR = math.radians(1.0) / 3600.0   # rad/s
-MILLI_G = 9.80665e-3                        # m/s^2
+DEG_PER_HOUR = math.radians(1.0) / 3600.0  # rad/s
+MILLI_G = 9.80665e-3  # m/s^2
 FEET = 0.3048
 
 
@@ -94,15 +95,24 @@ def hg1900(accel_scale_ppm: float = 0.0, gyro_scale_ppm: float = 0.0) -> ImuMode
 
 def noise_model(model: ImuModel) -> ImuNoise:
     """The densities a filter needs (``error_state.ImuNoise``)."""
-    return ImuNoise(model.velocity_random_walk, model.angle_random_walk, model.accel_bias_walk, model.gyro_bias_walk)
+    return ImuNoise(
+        model.velocity_random_walk,
+        model.angle_random_walk,
+        model.accel_bias_walk,
+        model.gyro_bias_walk,
+    )
 
 
 def draw_errors(key: Array, model: ImuModel, dtype=None) -> ImuErrors:
     """Turn-on biases and scale factors of one unit."""
     dtype = dtype or jnp.result_type(float)
     z = jax.random.normal(key, (4, 3), dtype)
-    return ImuErrors(model.accel_bias * z[0], model.gyro_bias * z[1], model.accel_scale * z[2],
-                     model.gyro_scale * z[3])
+    return ImuErrors(
+        model.accel_bias * z[0],
+        model.gyro_bias * z[1],
+        model.accel_scale * z[2],
+        model.gyro_scale * z[3],
+    )
 
 
 def walk_biases(errors: ImuErrors, key: Array, model: ImuModel, interval: float) -> ImuErrors:
@@ -110,20 +120,28 @@ def walk_biases(errors: ImuErrors, key: Array, model: ImuModel, interval: float)
     _checks.check_scalar("interval", interval, 0.0, meaning="a duration >= 0 (s)")
     z = jax.random.normal(key, (2, 3), errors.accel_bias.dtype)
     root = math.sqrt(interval)
-    return errors._replace(accel_bias=errors.accel_bias + model.accel_bias_walk * root * z[0],
-                           gyro_bias=errors.gyro_bias + model.gyro_bias_walk * root * z[1])
+    return errors._replace(
+        accel_bias=errors.accel_bias + model.accel_bias_walk * root * z[0],
+        gyro_bias=errors.gyro_bias + model.gyro_bias_walk * root * z[1],
+    )
 
 
 def sample_sigma(model: ImuModel, dt: float, dtype=None) -> Array:
     """(6,) white noise of a sample ``dt`` [s] long: ``[VRW] * 3 + [ARW] * 3`` over ``sqrt(dt)``."""
     _checks.check_positive("dt", dt, "a positive sample interval (s)")
     dtype = dtype or jnp.result_type(float)
-    return jnp.asarray([model.velocity_random_walk] * 3 + [model.angle_random_walk] * 3, dtype) / math.sqrt(dt)
+    return jnp.asarray(
+        [model.velocity_random_walk] * 3 + [model.angle_random_walk] * 3, dtype
+    ) / math.sqrt(dt)
 
 
-def measure(true_samples: Array, errors: ImuErrors, key: Array, model: ImuModel, dt: float) -> Array:
+def measure(
+    true_samples: Array, errors: ImuErrors, key: Array, model: ImuModel, dt: float
+) -> Array:
     """(n, 6) measured samples of (n, 6) error-free ones (module doc)."""
-    _checks.check_shape("true_samples", true_samples, (None, 6), "n samples of [f^b (3), w_ib^b (3)]")
+    _checks.check_shape(
+        "true_samples", true_samples, (None, 6), "n samples of [f^b (3), w_ib^b (3)]"
+    )
     noise = jax.random.normal(key, true_samples.shape, true_samples.dtype)
     scale = jnp.concatenate([1.0 + errors.accel_scale, 1.0 + errors.gyro_scale])
     bias = jnp.concatenate([errors.accel_bias, errors.gyro_bias])

@@ -21,6 +21,7 @@ cancel (the paper's argument). The INS tests also see satellite faults RAIM has 
 drift reaches the filter 10-25 s before RAIM crosses) and settling after RAIM's exclusion:
 ``attribute_ins_alarms`` gives an INS alarm near a RAIM alarm to the GPS.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -30,6 +31,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
+from jaxfdi._stages import FDI
 from jaxfdi.detection._chi2 import Decision, Detector, WindowState, moving_window_sum
 from jaxfdi.detection._frozen import FrozenState, frozen_channel_detector
 from jaxfdi.filters._base import Filter
@@ -44,8 +46,6 @@ from jaxfdi.ins._error_state import STATE_SIZE
 from jaxfdi.ins._loosely_coupled import GpsFix, InsState
 from jaxfdi.ins._mechanization import NavState
 from jaxfdi.ins._scst import ScstState, StateChi2Test
-from jaxfdi._stages import FDI
-
 
 #: the IMU health test: samples per window, false-alarm probability per window and channel
 #: (union bound per 1200 s flight at 100 Hz: 6 x 1.2e5 windows x 1e-9 < 1e-3)
@@ -132,46 +132,82 @@ def fix_covariance(fix: PositionFix) -> Array:
     return _linalg.symmetrize(inverse[:3, :3])
 
 
-def imu_health_test(model: imu.ImuModel, dt: float, window: int = IMU_HEALTH_WINDOW,
-                    pfa: float = IMU_HEALTH_PFA) -> Detector:
+def imu_health_test(
+    model: imu.ImuModel, dt: float, window: int = IMU_HEALTH_WINDOW, pfa: float = IMU_HEALTH_PFA
+) -> Detector:
     """Step 5: ``detection.frozen_channel_detector`` on a (6,) sample ``dt`` [s] long, noise
     ``imu.sample_sigma``, labels ``1 + channel``."""
-    return frozen_channel_detector(imu.sample_sigma(model, dt), window, pfa, 1 + jnp.arange(6, dtype=jnp.int32))
+    return frozen_channel_detector(
+        imu.sample_sigma(model, dt), window, pfa, 1 + jnp.arange(6, dtype=jnp.int32)
+    )
 
 
 def _epoch_decision(decisions: Decision) -> Decision:
     """An epoch's decision from per-sample ones (leaves (n,)): the first alarmed, else the last."""
     alarm = jnp.any(decisions.alarm)
     index = jnp.where(alarm, jnp.argmax(decisions.alarm), decisions.alarm.shape[0] - 1)
-    return Decision(decisions.statistic[index], alarm, decisions.label[index], decisions.estimate[index])
+    return Decision(
+        decisions.statistic[index], alarm, decisions.label[index], decisions.estimate[index]
+    )
 
 
-def ins_monitor_step(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector,
-                     state: GpsInsFdiState, fix: GpsFix, samples: Array) -> tuple[GpsInsFdiState, InsTestOutput]:
+def ins_monitor_step(
+    ins_filter: Filter,
+    chi2: Detector,
+    scst: StateChi2Test,
+    health: Detector,
+    state: GpsInsFdiState,
+    fix: GpsFix,
+    samples: Array,
+) -> tuple[GpsInsFdiState, InsTestOutput]:
     """Steps 2-5 for one epoch: the EKF with ``fix`` and ``samples`` (n, 6), then the three tests."""
     health_state, verdicts = jax.lax.scan(health.step, state.health, samples)
     ins, info = ins_filter.step(state.ins, fix, samples)
     window, decision = chi2.step(state.chi2, info.nis)
-    window = WindowState(jnp.where(info.used, window.buffer, state.chi2.buffer),
-                         jnp.where(info.used, window.index, state.chi2.index))
+    window = WindowState(
+        jnp.where(info.used, window.buffer, state.chi2.buffer),
+        jnp.where(info.used, window.index, state.chi2.index),
+    )
     held = jnp.sum(state.chi2.buffer)
     dtype = state.ins.cov.dtype
-    chi2_decision = Decision(jnp.where(info.used, decision.statistic, held), info.used & decision.alarm,
-                             jnp.asarray(-1, jnp.int32), jnp.full((), jnp.nan, dtype))
-    scst_state, scst_out = scst.step(state.scst, info.correction, info.filtered_cov, info.transition,
-                                     info.process_cov)
-    healthy = info.healthy & jnp.isfinite(chi2_decision.statistic) & jnp.isfinite(scst_out.decision.statistic)
-    out = InsTestOutput(info.used, chi2_decision, scst_out.decision, scst_out.valid, scst_out.condition, scst_out.age,
-                        _epoch_decision(verdicts), info.nis, info.filtered_nav, info.accel_bias, info.gyro_bias,
-                        info.filtered_cov, healthy)
+    chi2_decision = Decision(
+        jnp.where(info.used, decision.statistic, held),
+        info.used & decision.alarm,
+        jnp.asarray(-1, jnp.int32),
+        jnp.full((), jnp.nan, dtype),
+    )
+    scst_state, scst_out = scst.step(
+        state.scst, info.correction, info.filtered_cov, info.transition, info.process_cov
+    )
+    healthy = (
+        info.healthy
+        & jnp.isfinite(chi2_decision.statistic)
+        & jnp.isfinite(scst_out.decision.statistic)
+    )
+    out = InsTestOutput(
+        info.used,
+        chi2_decision,
+        scst_out.decision,
+        scst_out.valid,
+        scst_out.condition,
+        scst_out.age,
+        _epoch_decision(verdicts),
+        info.nis,
+        info.filtered_nav,
+        info.accel_bias,
+        info.gyro_bias,
+        info.filtered_cov,
+        healthy,
+    )
     return GpsInsFdiState(ins, window, scst_state, health_state), out
 
 
 def ins_fdi_init(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector):
     """The INS monitor's ``init(nav, cov, accel_bias=None, gyro_bias=None) -> GpsInsFdiState``: the EKF's prior
     (``ins_filter.init``) and the three tests' empty states."""
-    return lambda *args, **kwargs: GpsInsFdiState(ins_filter.init(*args, **kwargs), chi2.init(),
-                                                  scst.init(STATE_SIZE), health.init())
+    return lambda *args, **kwargs: GpsInsFdiState(
+        ins_filter.init(*args, **kwargs), chi2.init(), scst.init(STATE_SIZE), health.init()
+    )
 
 
 def ins_fdi(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Detector) -> FDI:
@@ -185,8 +221,17 @@ def ins_fdi(ins_filter: Filter, chi2: Detector, scst: StateChi2Test, health: Det
     return FDI(ins_fdi_init(ins_filter, chi2, scst, health), step)
 
 
-def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Filter, chi2: Detector,
-                scst: StateChi2Test, health: Detector, velocity_sigma: float, operation="npa") -> FDI:
+def gps_ins_fdi(
+    table: OrbitTable,
+    t0: float,
+    tables: RaimTables,
+    ins_filter: Filter,
+    chi2: Detector,
+    scst: StateChi2Test,
+    health: Detector,
+    velocity_sigma: float,
+    operation="npa",
+) -> FDI:
     """The monitor of the module doc as a ``loop.FDI``; ``health``: ``imu_health_test``.
 
     Returns:
@@ -198,34 +243,63 @@ def gps_ins_fdi(table: OrbitTable, t0: float, tables: RaimTables, ins_filter: Fi
     def step(state: GpsInsFdiState, k, y, u):
         t = t0 + k
         orbit, available = select_orbits(table, t)
-        epoch = monitor_epoch(orbit, available, t, y.pseudoranges, tables, elevation_sigma, operation, exclude=False)
+        epoch = monitor_epoch(
+            orbit, available, t, y.pseudoranges, tables, elevation_sigma, operation, exclude=False
+        )
         fix, check, protection = epoch.fix, epoch.check, epoch.protection
         passes = fix.healthy & check.healthy & (check.dof > 0) & ~check.alarm & protection.available
         lat, lon, height = frames.ecef_to_geodetic(fix.position)
-        gps = GpsFix(jnp.stack([lat, lon, height]), y.velocity, fix_covariance(fix),
-                     velocity_sigma**2 * jnp.eye(3, dtype=state.ins.cov.dtype), passes)
+        gps = GpsFix(
+            jnp.stack([lat, lon, height]),
+            y.velocity,
+            fix_covariance(fix),
+            velocity_sigma**2 * jnp.eye(3, dtype=state.ins.cov.dtype),
+            passes,
+        )
         state, ins = ins_monitor_step(ins_filter, chi2, scst, health, state, gps, y.imu)
-        raim = raim_output(epoch).decision   # label 1 + slot; a dead slot alarms (chi2.flag_dead)
-        return state, GpsInsOutput(raim, check.threshold, protection.hpl, fix.dops.hdop, fix.num_used, ins,
-                                   ins.healthy)
+        raim = raim_output(epoch).decision  # label 1 + slot; a dead slot alarms (chi2.flag_dead)
+        return state, GpsInsOutput(
+            raim, check.threshold, protection.hpl, fix.dops.hdop, fix.num_used, ins, ins.healthy
+        )
 
     return FDI(ins_fdi_init(ins_filter, chi2, scst, health), step)
 
 
-def initial_covariance(position_sigma: float, velocity_sigma: float, tilt_sigma: float, heading_sigma: float,
-                       accel_bias_sigma: float, gyro_bias_sigma: float, dtype=None) -> Array:
+def initial_covariance(
+    position_sigma: float,
+    velocity_sigma: float,
+    tilt_sigma: float,
+    heading_sigma: float,
+    accel_bias_sigma: float,
+    gyro_bias_sigma: float,
+    dtype=None,
+) -> Array:
     """(15, 15) diagonal ``P0`` from 1-sigma errors [m, m/s, rad, rad, m/s^2, rad/s]."""
-    for name, value in (("position_sigma", position_sigma), ("velocity_sigma", velocity_sigma),
-                        ("tilt_sigma", tilt_sigma), ("heading_sigma", heading_sigma),
-                        ("accel_bias_sigma", accel_bias_sigma), ("gyro_bias_sigma", gyro_bias_sigma)):
+    for name, value in (
+        ("position_sigma", position_sigma),
+        ("velocity_sigma", velocity_sigma),
+        ("tilt_sigma", tilt_sigma),
+        ("heading_sigma", heading_sigma),
+        ("accel_bias_sigma", accel_bias_sigma),
+        ("gyro_bias_sigma", gyro_bias_sigma),
+    ):
         _checks.check_scalar(name, value, 0.0, meaning="a standard deviation >= 0")
     dtype = dtype or jnp.result_type(float)
-    sigmas = jnp.asarray([position_sigma] * 3 + [velocity_sigma] * 3 + [tilt_sigma] * 2 + [heading_sigma]
-                         + [accel_bias_sigma] * 3 + [gyro_bias_sigma] * 3, dtype)
+    sigmas = jnp.asarray(
+        [position_sigma] * 3
+        + [velocity_sigma] * 3
+        + [tilt_sigma] * 2
+        + [heading_sigma]
+        + [accel_bias_sigma] * 3
+        + [gyro_bias_sigma] * 3,
+        dtype,
+    )
     return jnp.diag(sigmas**2)
 
 
-def attribute_ins_alarms(ins_alarms: Array, gps_alarms: Array, lookahead: int, holdoff: int) -> Array:
+def attribute_ins_alarms(
+    ins_alarms: Array, gps_alarms: Array, lookahead: int, holdoff: int
+) -> Array:
     """The INS's own alarms ``(..., T)`` of ``(..., T)`` bool arrays: an alarm at ``k`` is the GPS's when
     ``any(gps[k - holdoff : k + lookahead + 1])`` (``detection.chi2.moving_window_sum``, history padded
     with ``lookahead`` alarm-free epochs). A causal monitor decides at ``k + lookahead``; ``holdoff``
@@ -234,7 +308,9 @@ def attribute_ins_alarms(ins_alarms: Array, gps_alarms: Array, lookahead: int, h
     holdoff = _checks.check_int("holdoff", holdoff, 0, meaning="a number of epochs >= 0")
     ins_alarms, gps_alarms = jnp.asarray(ins_alarms, bool), jnp.asarray(gps_alarms, bool)
     if ins_alarms.shape != gps_alarms.shape:
-        raise ValueError(f"gps_alarms: expected the shape of ins_alarms {ins_alarms.shape}, got {gps_alarms.shape}")
+        raise ValueError(
+            f"gps_alarms: expected the shape of ins_alarms {ins_alarms.shape}, got {gps_alarms.shape}"
+        )
     counts = jnp.moveaxis(gps_alarms, -1, 0).astype(jnp.float32)
     padded = jnp.concatenate([counts, jnp.zeros((lookahead,) + counts.shape[1:], counts.dtype)])
     near = moving_window_sum(padded, holdoff + lookahead + 1)[lookahead:] > 0

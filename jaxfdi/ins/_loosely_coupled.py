@@ -16,6 +16,7 @@ The 15 x 15 algebra runs at 1 Hz; at 100 Hz only the mechanisation (and ``chunks
 non-finite sample (dead channel) is replaced by its channel's last finite one (``hold_last_finite``):
 the INS coasts instead of turning NaN; the IMU health test (``ins.integrity.imu_health_test``) alarms.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -28,7 +29,8 @@ from jax import Array
 from jaxfdi import _checks, _linalg
 from jaxfdi.filters._base import Filter
 from jaxfdi.filters._kalman import joseph_update
-from jaxfdi.ins import _error_state as error_state, _mechanization as mechanization
+from jaxfdi.ins import _error_state as error_state
+from jaxfdi.ins import _mechanization as mechanization
 from jaxfdi.ins._error_state import STATE_SIZE, ImuNoise
 from jaxfdi.ins._imu import ImuModel, noise_model
 from jaxfdi.ins._mechanization import NavState
@@ -134,14 +136,20 @@ def loosely_coupled_filter(imu: ImuModel, dt: float, chunks: int = 1) -> Filter:
       (state, InsInfo)`` with the epoch's ``GpsFix`` and (n, 6) samples ``u``, state at the next epoch.
     """
     _checks.check_positive("dt", dt, "the IMU sample interval in seconds")
-    chunks = _checks.check_int("chunks", chunks, 1, meaning="a positive number of Jacobians per epoch")
+    chunks = _checks.check_int(
+        "chunks", chunks, 1, meaning="a positive number of Jacobians per epoch"
+    )
     if not isinstance(imu, ImuModel):
-        raise TypeError(f"imu: expected an ImuModel (e.g. jaxfdi.ins.hg1900()), got {_checks.received(imu)}")
+        raise TypeError(
+            f"imu: expected an ImuModel (e.g. jaxfdi.ins.hg1900()), got {_checks.received(imu)}"
+        )
     for name in ImuNoise._fields:
         _checks.check_scalar(f"imu.{name}", getattr(imu, name), 0.0, meaning="a noise density >= 0")
     noise = noise_model(imu)
 
-    def init(nav: NavState, cov: Array, accel_bias: Array | None = None, gyro_bias: Array | None = None) -> InsState:
+    def init(
+        nav: NavState, cov: Array, accel_bias: Array | None = None, gyro_bias: Array | None = None
+    ) -> InsState:
         _checks.check_shape("nav.position", nav.position, (3,), "lat, lon [rad], h [m]")
         _checks.check_shape("nav.velocity", nav.velocity, (3,), "NED velocity")
         _checks.check_shape("nav.attitude", nav.attitude, (4,), "a unit quaternion")
@@ -150,17 +158,22 @@ def loosely_coupled_filter(imu: ImuModel, dt: float, chunks: int = 1) -> Filter:
         if quaternion is not None and quaternion.dtype.kind == "f":
             tolerance = float(np.sqrt(np.finfo(quaternion.dtype).eps))
             if not abs(float(np.linalg.norm(quaternion)) - 1.0) <= tolerance:
-                raise ValueError(f"nav.attitude: expected a unit quaternion (| |q| - 1 | <= {tolerance:.2g}), got "
-                                 f"{_checks.received(quaternion)} of norm {float(np.linalg.norm(quaternion)):.6g}")
+                raise ValueError(
+                    f"nav.attitude: expected a unit quaternion (| |q| - 1 | <= {tolerance:.2g}), got "
+                    f"{_checks.received(quaternion)} of norm {float(np.linalg.norm(quaternion)):.6g}"
+                )
         for name, bias in (("accel_bias", accel_bias), ("gyro_bias", gyro_bias)):
             if bias is not None:
                 _checks.check_shape(name, bias, (3,), "an IMU bias estimate per axis")
         dtype = _checks.float_dtype(nav.position, cov)
         zero = jnp.zeros((3,), dtype)
-        return InsState(jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), nav),
-                        zero if accel_bias is None else jnp.asarray(accel_bias, dtype),
-                        zero if gyro_bias is None else jnp.asarray(gyro_bias, dtype), jnp.asarray(cov, dtype),
-                        jnp.zeros((6,), dtype))
+        return InsState(
+            jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), nav),
+            zero if accel_bias is None else jnp.asarray(accel_bias, dtype),
+            zero if gyro_bias is None else jnp.asarray(gyro_bias, dtype),
+            jnp.asarray(cov, dtype),
+            jnp.zeros((6,), dtype),
+        )
 
     def update(state: InsState, fix: GpsFix):
         dtype = state.cov.dtype
@@ -168,8 +181,14 @@ def loosely_coupled_filter(imu: ImuModel, dt: float, chunks: int = 1) -> Filter:
         z = error_state.navigation_error(state.nav, reference)[:MEASUREMENT_SIZE]
         zero = jnp.zeros((3, 3), dtype)
         R = jnp.block([[fix.position_cov, zero], [zero, fix.velocity_cov]])
-        post = joseph_update(jnp.zeros((STATE_SIZE,), dtype), state.cov, z, jnp.zeros_like(z),
-                             measurement_matrix(dtype), R)
+        post = joseph_update(
+            jnp.zeros((STATE_SIZE,), dtype),
+            state.cov,
+            z,
+            jnp.zeros_like(z),
+            measurement_matrix(dtype),
+            R,
+        )
         used = jnp.asarray(fix.valid, bool) & jnp.all(jnp.isfinite(z))
         correction = jnp.where(used, post.filtered_mean, 0.0)
         cov = jnp.where(used, post.filtered_cov, state.cov)
@@ -196,9 +215,16 @@ def loosely_coupled_filter(imu: ImuModel, dt: float, chunks: int = 1) -> Filter:
 
     def step(state: InsState, fix: GpsFix, samples: Array):
         samples = jnp.asarray(samples)
-        if samples.ndim != 2 or samples.shape[1] != 6 or samples.shape[0] % chunks or samples.shape[0] < 2 * chunks:
-            raise ValueError(f"u: expected (n, 6) IMU samples with n a multiple of chunks = {chunks} and at least "
-                             f"{2 * chunks}, got shape {tuple(samples.shape)}")
+        if (
+            samples.ndim != 2
+            or samples.shape[1] != 6
+            or samples.shape[0] % chunks
+            or samples.shape[0] < 2 * chunks
+        ):
+            raise ValueError(
+                f"u: expected (n, 6) IMU samples with n a multiple of chunks = {chunks} and at least "
+                f"{2 * chunks}, got shape {tuple(samples.shape)}"
+            )
         samples, last_sample = hold_last_finite(samples, state.last_sample)
         post, used, correction, cov = update(state, fix)
         nav = error_state.correct(state.nav, correction)
@@ -208,10 +234,27 @@ def loosely_coupled_filter(imu: ImuModel, dt: float, chunks: int = 1) -> Filter:
         transition, process = error_state.discretize(jacobian, noise, samples.shape[0] * dt)
         predicted = _linalg.symmetrize(transition @ cov @ transition.T + process)
         chol = jnp.linalg.cholesky(cov)
-        healthy = (jnp.where(used, post.healthy, True) & jnp.all(jnp.isfinite(chol)) & jnp.all(jnp.isfinite(predicted))
-                   & jnp.all(jnp.isfinite(next_nav.position)))
-        info = InsInfo(jnp.where(used, post.innovation, 0.0), post.innovation_cov, jnp.where(used, post.nis, 0.0), used,
-                       correction, state.cov, cov, nav, accel_bias, gyro_bias, transition, process, healthy)
+        healthy = (
+            jnp.where(used, post.healthy, True)
+            & jnp.all(jnp.isfinite(chol))
+            & jnp.all(jnp.isfinite(predicted))
+            & jnp.all(jnp.isfinite(next_nav.position))
+        )
+        info = InsInfo(
+            jnp.where(used, post.innovation, 0.0),
+            post.innovation_cov,
+            jnp.where(used, post.nis, 0.0),
+            used,
+            correction,
+            state.cov,
+            cov,
+            nav,
+            accel_bias,
+            gyro_bias,
+            transition,
+            process,
+            healthy,
+        )
         return InsState(next_nav, accel_bias, gyro_bias, predicted, last_sample), info
 
     return Filter(init, step)

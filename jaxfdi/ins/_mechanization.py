@@ -14,6 +14,7 @@ precision form of Groves (2013), sec. 5.4 (Titterton & Weston 2004, ch. 3):
 integrated by ``integrate_position`` reproduces it to round-off (``trajectory``). ``rates``: the continuous-time
 equations (Groves 2013, eqs. 5.46, 5.53, 2.111), linearised by AD for the EKF (``error_state``).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -23,8 +24,16 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.ins._earth import LocalEarth, local_earth, radii_of_curvature, transport_rate
-from jaxfdi.models._rotation import (cross, quaternion_conjugate, quaternion_multiply, quaternion_to_dcm, rotate,
-                                     rotation_quaternion, rotation_vector, small_rotation_quaternion)
+from jaxfdi.models._rotation import (
+    cross,
+    quaternion_conjugate,
+    quaternion_multiply,
+    quaternion_to_dcm,
+    rotate,
+    rotation_quaternion,
+    rotation_vector,
+    small_rotation_quaternion,
+)
 
 
 class NavState(NamedTuple):
@@ -46,8 +55,13 @@ def navigation_rates(nav: NavState, earth: LocalEarth) -> tuple[Array, Array]:
     return earth.earth_rate, transport_rate(nav.velocity, nav.position[2], earth)
 
 
-def integrate_position(position: Array, velocity: Array, new_velocity: Array, dt: Array,
-                       earth: LocalEarth | None = None) -> Array:
+def integrate_position(
+    position: Array,
+    velocity: Array,
+    new_velocity: Array,
+    dt: Array,
+    earth: LocalEarth | None = None,
+) -> Array:
     """Groves (2013) eq. 5.56: the position after ``dt`` from the velocities at both ends.
 
     ``earth``: the ``LocalEarth`` at ``position`` if computed. New latitude's sin/cos by angle addition
@@ -57,20 +71,30 @@ def integrate_position(position: Array, velocity: Array, new_velocity: Array, dt
         sin_lat, cos_lat = jnp.sin(lat), jnp.cos(lat)
         meridian, transverse = radii_of_curvature(sin_lat)
     else:
-        sin_lat, cos_lat, meridian, transverse = earth.sin_lat, earth.cos_lat, earth.meridian_radius, \
-            earth.transverse_radius
+        sin_lat, cos_lat, meridian, transverse = (
+            earth.sin_lat,
+            earth.cos_lat,
+            earth.meridian_radius,
+            earth.transverse_radius,
+        )
     new_height = height - 0.5 * dt * (velocity[2] + new_velocity[2])
-    new_lat = lat + 0.5 * dt * (velocity[0] / (meridian + height) + new_velocity[0] / (meridian + new_height))
+    new_lat = lat + 0.5 * dt * (
+        velocity[0] / (meridian + height) + new_velocity[0] / (meridian + new_height)
+    )
     d = new_lat - lat
     cos_d, sin_d = 1.0 - 0.5 * d * d, d * (1.0 - d * d / 6.0)
     new_sin, new_cos = sin_lat * cos_d + cos_lat * sin_d, cos_lat * cos_d - sin_lat * sin_d
     _, new_transverse = radii_of_curvature(new_sin)
-    new_lon = lon + 0.5 * dt * (velocity[1] / ((transverse + height) * cos_lat)
-                                + new_velocity[1] / ((new_transverse + new_height) * new_cos))
+    new_lon = lon + 0.5 * dt * (
+        velocity[1] / ((transverse + height) * cos_lat)
+        + new_velocity[1] / ((new_transverse + new_height) * new_cos)
+    )
     return jnp.stack([new_lat, new_lon, new_height])
 
 
-def strapdown_step(nav: NavState, specific_force: Array, angular_rate: Array, dt: Array) -> NavState:
+def strapdown_step(
+    nav: NavState, specific_force: Array, angular_rate: Array, dt: Array
+) -> NavState:
     """One strapdown update in NED (module doc) with the interval's mean ``f^b`` [m/s^2]
     and ``w_ib^b`` [rad/s], both already corrected for the estimated IMU errors.
 
@@ -89,25 +113,37 @@ def strapdown_step(nav: NavState, specific_force: Array, angular_rate: Array, dt
     body_turn = small_rotation_quaternion(angular_rate * dt)
     frame_turn = small_rotation_quaternion(-(earth_rate + transport) * dt)
     attitude = quaternion_multiply(frame_turn, quaternion_multiply(nav.attitude, body_turn))
-    attitude = attitude * (1.5 - 0.5 * jnp.sum(attitude**2, axis=0))     # one Newton step of 1 / |q|
-    specific_force_n = 0.5 * (rotate(nav.attitude, specific_force) + rotate(attitude, specific_force))
-    acceleration = specific_force_n + earth.gravity - cross(2.0 * earth_rate + transport, nav.velocity)
+    attitude = attitude * (1.5 - 0.5 * jnp.sum(attitude**2, axis=0))  # one Newton step of 1 / |q|
+    specific_force_n = 0.5 * (
+        rotate(nav.attitude, specific_force) + rotate(attitude, specific_force)
+    )
+    acceleration = (
+        specific_force_n + earth.gravity - cross(2.0 * earth_rate + transport, nav.velocity)
+    )
     velocity = nav.velocity + acceleration * dt
-    return NavState(integrate_position(nav.position, nav.velocity, velocity, dt, earth), velocity, attitude)
+    return NavState(
+        integrate_position(nav.position, nav.velocity, velocity, dt, earth), velocity, attitude
+    )
 
 
-def inverse_step(nav: NavState, new_velocity: Array, new_attitude: Array, dt: Array) -> tuple[Array, Array]:
+def inverse_step(
+    nav: NavState, new_velocity: Array, new_attitude: Array, dt: Array
+) -> tuple[Array, Array]:
     """``(f^b, w_ib^b)`` that take ``strapdown_step`` from ``nav`` to ``new_velocity`` and
     ``new_attitude`` in ``dt`` (the position then follows from ``integrate_position``)."""
     earth = local_earth(nav.position)
     earth_rate, transport = navigation_rates(nav, earth)
     frame_turn_back = rotation_quaternion((earth_rate + transport) * dt)
-    body_turn = quaternion_multiply(quaternion_conjugate(nav.attitude),
-                                    quaternion_multiply(frame_turn_back, new_attitude))
+    body_turn = quaternion_multiply(
+        quaternion_conjugate(nav.attitude), quaternion_multiply(frame_turn_back, new_attitude)
+    )
     angular_rate = rotation_vector(body_turn) / dt
     mean_dcm = 0.5 * (quaternion_to_dcm(nav.attitude) + quaternion_to_dcm(new_attitude))
-    specific_force_n = ((new_velocity - nav.velocity) / dt - earth.gravity
-                        + jnp.cross(2.0 * earth_rate + transport, nav.velocity))
+    specific_force_n = (
+        (new_velocity - nav.velocity) / dt
+        - earth.gravity
+        + jnp.cross(2.0 * earth_rate + transport, nav.velocity)
+    )
     return jnp.linalg.solve(mean_dcm, specific_force_n), angular_rate
 
 
@@ -117,12 +153,21 @@ def rates(nav: NavState, specific_force: Array, angular_rate: Array) -> NavState
     earth = local_earth(nav.position)
     earth_rate, transport = navigation_rates(nav, earth)
     lat, height = nav.position[0], nav.position[2]
-    position_rate = jnp.stack([nav.velocity[0] / (earth.meridian_radius + height),
-                               nav.velocity[1] / ((earth.transverse_radius + height) * jnp.cos(lat)),
-                               -nav.velocity[2]])
-    velocity_rate = (rotate(nav.attitude, specific_force) + earth.gravity
-                     - cross(2.0 * earth_rate + transport, nav.velocity))
+    position_rate = jnp.stack(
+        [
+            nav.velocity[0] / (earth.meridian_radius + height),
+            nav.velocity[1] / ((earth.transverse_radius + height) * jnp.cos(lat)),
+            -nav.velocity[2],
+        ]
+    )
+    velocity_rate = (
+        rotate(nav.attitude, specific_force)
+        + earth.gravity
+        - cross(2.0 * earth_rate + transport, nav.velocity)
+    )
     body = jnp.concatenate([jnp.zeros((1,), angular_rate.dtype), angular_rate])
     frame = jnp.concatenate([jnp.zeros((1,), angular_rate.dtype), earth_rate + transport])
-    attitude_rate = 0.5 * (quaternion_multiply(nav.attitude, body) - quaternion_multiply(frame, nav.attitude))
+    attitude_rate = 0.5 * (
+        quaternion_multiply(nav.attitude, body) - quaternion_multiply(frame, nav.attitude)
+    )
     return NavState(position_rate, velocity_rate, attitude_rate)

@@ -15,6 +15,7 @@ IMU faults: ``jaxfdi.fault(kind, "sensor", component, onset, magnitude, ...)`` o
 every sample of an active epoch. STUCK holds the onset epoch's first (live) sample from the second on; DEAD is NaN from
 the onset epoch's first sample. Truth (``GpsInsTruth``) comes back in ``Sensed.state``.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -25,7 +26,18 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi._faults import Fault, FaultKind, Target, active_label, apply_faults, as_stack, is_active, no_fault
+from jaxfdi._faults import (
+    Fault,
+    FaultKind,
+    Target,
+    active_label,
+    apply_faults,
+    as_stack,
+    is_active,
+    no_fault,
+)
+from jaxfdi._simulate import SimState
+from jaxfdi._stages import Plant
 from jaxfdi.gnss import _frames as frames
 from jaxfdi.gnss._measurements import ClockModel, receiver_plant
 from jaxfdi.gnss._orbits import OrbitTable
@@ -33,8 +45,6 @@ from jaxfdi.ins import _imu as imu
 from jaxfdi.ins._imu import ImuErrors, ImuModel
 from jaxfdi.ins._mechanization import NavState
 from jaxfdi.ins._trajectory import Trajectory
-from jaxfdi._stages import Plant
-from jaxfdi._simulate import SimState
 
 IMU_CHANNELS = 6
 
@@ -121,16 +131,31 @@ def flight_tables(trajectory: Trajectory, epochs: int) -> FlightTables:
     rate = 1.0 / trajectory.dt
     per_epoch = int(round(rate))
     if abs(rate - per_epoch) > 1e-9 or trajectory.imu.shape[0] < epochs * per_epoch:
-        raise ValueError(f"trajectory: expected an integer IMU rate and at least {epochs} s of samples, got "
-                         f"{rate} Hz and {trajectory.imu.shape[0] / rate} s")
+        raise ValueError(
+            f"trajectory: expected an integer IMU rate and at least {epochs} s of samples, got "
+            f"{rate} Hz and {trajectory.imu.shape[0] / rate} s"
+        )
     index = np.arange(epochs) * per_epoch
-    return FlightTables(trajectory.position[index], trajectory.velocity[index], trajectory.attitude[index],
-                        trajectory.imu[: epochs * per_epoch].reshape(epochs, per_epoch, IMU_CHANNELS))
+    return FlightTables(
+        trajectory.position[index],
+        trajectory.velocity[index],
+        trajectory.attitude[index],
+        trajectory.imu[: epochs * per_epoch].reshape(epochs, per_epoch, IMU_CHANNELS),
+    )
 
 
-def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: Array, sigma: Array,
-                  model: ImuModel, velocity_sigma: float = 0.1, clock: ClockModel = ClockModel(),
-                  satellite_fault: Fault | None = None, imu_fault: Fault | None = None) -> Plant:
+def gps_ins_plant(
+    table: OrbitTable,
+    t0: float,
+    flight: FlightTables,
+    visible: Array,
+    sigma: Array,
+    model: ImuModel,
+    velocity_sigma: float = 0.1,
+    clock: ClockModel = ClockModel(),
+    satellite_fault: Fault | None = None,
+    imu_fault: Fault | None = None,
+) -> Plant:
     """The plant of the module doc.
 
     Args:
@@ -150,16 +175,28 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
       GpsInsSensed)``; ``advance(state, k, u, step_key) -> (state, Actuated)`` moves the receiver clock
       and walks the IMU biases one epoch (``u`` passed through, no actuator fault).
     """
-    _checks.check_shape("flight.imu", flight.imu, (None, None, IMU_CHANNELS), "T epochs x n samples x 6")
+    _checks.check_shape(
+        "flight.imu", flight.imu, (None, None, IMU_CHANNELS), "T epochs x n samples x 6"
+    )
     per_epoch = flight.imu.shape[1]
     _checks.check_positive("velocity_sigma", velocity_sigma, "a velocity sigma in m/s")
     imu_faults = as_stack(no_fault() if imu_fault is None else imu_fault)
-    kinds, targets, components = (_checks.concrete(leaf) for leaf in (imu_faults.kind, imu_faults.target,
-                                                                       imu_faults.component))
-    if kinds is not None and targets is not None and components is not None and np.any(
-            (kinds != FaultKind.NONE) & ((targets != Target.SENSOR) | (components >= IMU_CHANNELS))):
-        raise ValueError(f"imu_fault: expected sensor faults on components 0..5 of [f_x, f_y, f_z, w_x, w_y, w_z], "
-                         f"got targets {targets.tolist()} and components {components.tolist()}")
+    kinds, targets, components = (
+        _checks.concrete(leaf)
+        for leaf in (imu_faults.kind, imu_faults.target, imu_faults.component)
+    )
+    if (
+        kinds is not None
+        and targets is not None
+        and components is not None
+        and np.any(
+            (kinds != FaultKind.NONE) & ((targets != Target.SENSOR) | (components >= IMU_CHANNELS))
+        )
+    ):
+        raise ValueError(
+            f"imu_fault: expected sensor faults on components 0..5 of [f_x, f_y, f_z, w_x, w_y, w_z], "
+            f"got targets {targets.tolist()} and components {components.tolist()}"
+        )
     positions, velocities, attitudes, true_samples = flight
     path_ecef = frames.geodetic_to_ecef(positions[:, 0], positions[:, 1], positions[:, 2])
     receiver = receiver_plant(table, t0, 1.0, path_ecef, visible, sigma, clock, satellite_fault)
@@ -176,10 +213,16 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
         """The epoch's samples with IMU faults, and held values: STUCK holds the onset epoch's first sample
         on every later sample (``apply_faults`` alone would hold per epoch)."""
         first, held = apply_faults(imu_faults, k, samples[0], Target.SENSOR, held)
-        rest = jax.vmap(lambda sample: apply_faults(imu_faults, k, sample, Target.SENSOR, held)[0])(samples[1:])
-        stuck = (imu_faults.kind == FaultKind.STUCK) & jax.vmap(is_active, in_axes=(0, None))(imu_faults, k)
-        on_channel = stuck[:, None] & (imu_faults.component[:, None] == jnp.arange(IMU_CHANNELS))    # (F, 6)
-        value = held[jnp.argmax(on_channel, axis=0)]                                                # (6,)
+        rest = jax.vmap(lambda sample: apply_faults(imu_faults, k, sample, Target.SENSOR, held)[0])(
+            samples[1:]
+        )
+        stuck = (imu_faults.kind == FaultKind.STUCK) & jax.vmap(is_active, in_axes=(0, None))(
+            imu_faults, k
+        )
+        on_channel = stuck[:, None] & (
+            imu_faults.component[:, None] == jnp.arange(IMU_CHANNELS)
+        )  # (F, 6)
+        value = held[jnp.argmax(on_channel, axis=0)]  # (6,)
         rest = jnp.where(jnp.any(on_channel, axis=0), value, rest)
         return jnp.concatenate([first[None], rest]), held
 
@@ -188,15 +231,25 @@ def gps_ins_plant(table: OrbitTable, t0: float, flight: FlightTables, visible: A
         key_imu, key_velocity = jax.random.fold_in(step_key, 7), jax.random.fold_in(step_key, 8)
         samples = imu.measure(true_samples[k], state.imu, key_imu, model, dt)
         samples, held = faulty_samples(samples, k, state.held)
-        velocity = velocities[k] + velocity_sigma * jax.random.normal(key_velocity, (3,), velocities.dtype)
+        velocity = velocities[k] + velocity_sigma * jax.random.normal(
+            key_velocity, (3,), velocities.dtype
+        )
         imu_active = jax.vmap(is_active, in_axes=(0, None))(imu_faults, k)
         imu_mode = active_label(imu_faults, k, 0)
         mode = jnp.where(sensed.mode > 0, sensed.mode, imu_mode)
-        truth = GpsInsTruth(NavState(positions[k], velocities[k], attitudes[k]), state.imu.accel_bias,
-                            state.imu.gyro_bias, receiver_state.state)
+        truth = GpsInsTruth(
+            NavState(positions[k], velocities[k], attitudes[k]),
+            state.imu.accel_bias,
+            state.imu.gyro_bias,
+            receiver_state.state,
+        )
         measurement = GpsInsMeasurement(sensed.measurement, velocity, samples)
-        return (state._replace(receiver=receiver_state, held=held),
-                GpsInsSensed(truth, measurement, jnp.concatenate([sensed.fault_active, imu_active]), mode))
+        return (
+            state._replace(receiver=receiver_state, held=held),
+            GpsInsSensed(
+                truth, measurement, jnp.concatenate([sensed.fault_active, imu_active]), mode
+            ),
+        )
 
     def advance(state: GpsInsPlantState, k: Array, u: Array, step_key: Array):
         receiver_state, moved = receiver.advance(state.receiver, k, u, step_key)

@@ -20,6 +20,7 @@ first ``period / 2`` epochs). Resets ignore the decisions, so an alarm clears at
 is positive, the factor finite and ``(max pivot / min pivot)^2`` (a lower bound of the condition number)
 <= ``max_condition``. An invalid epoch decides nothing (alarm False, statistic 0; ``valid``, ``condition`` say so).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -80,7 +81,9 @@ class StateChi2Test(NamedTuple):
     step: callable
 
 
-def scst_statistic(difference: Array, cov_difference: Array, max_condition: float) -> tuple[Array, Array, Array]:
+def scst_statistic(
+    difference: Array, cov_difference: Array, max_condition: float
+) -> tuple[Array, Array, Array]:
     """``(l, valid, condition)`` of ``beta^T B^-1 beta`` with the checks of the module doc."""
     diagonal = jnp.diagonal(cov_difference)
     positive = jnp.all(diagonal > 0)
@@ -90,13 +93,18 @@ def scst_statistic(difference: Array, cov_difference: Array, max_condition: floa
     pivots = jnp.diagonal(chol)
     finite = jnp.all(jnp.isfinite(chol))
     condition = jnp.where(finite & positive, (jnp.max(pivots) / jnp.min(pivots)) ** 2, jnp.inf)
-    whitened = jax.scipy.linalg.solve_triangular(jnp.where(finite, chol, jnp.eye(chol.shape[0], dtype=chol.dtype)),
-                                                 difference / scale, lower=True)
+    whitened = jax.scipy.linalg.solve_triangular(
+        jnp.where(finite, chol, jnp.eye(chol.shape[0], dtype=chol.dtype)),
+        difference / scale,
+        lower=True,
+    )
     valid = finite & positive & (condition <= max_condition)
     return jnp.where(valid, jnp.sum(whitened**2), 0.0), valid, condition
 
 
-def state_chi2_test(period: int, threshold, max_condition: float = DEFAULT_MAX_CONDITION) -> StateChi2Test:
+def state_chi2_test(
+    period: int, threshold, max_condition: float = DEFAULT_MAX_CONDITION
+) -> StateChi2Test:
     """Da's SCST with two propagators reset every ``period`` epochs (module doc).
 
     Args:
@@ -111,8 +119,10 @@ def state_chi2_test(period: int, threshold, max_condition: float = DEFAULT_MAX_C
     """
     period = _checks.check_int("period", period, 2, meaning="an even number of epochs >= 2")
     if period % 2:
-        raise ValueError(f"period: expected an even number of epochs (the propagators are half a period apart), "
-                         f"got {period}")
+        raise ValueError(
+            f"period: expected an even number of epochs (the propagators are half a period apart), "
+            f"got {period}"
+        )
     _checks.check_real("threshold", threshold, "a real threshold")
     _checks.check_finite("threshold", threshold, "a detection threshold")
     _checks.check_positive("max_condition", max_condition, "a positive condition-number limit")
@@ -120,13 +130,27 @@ def state_chi2_test(period: int, threshold, max_condition: float = DEFAULT_MAX_C
 
     def init(n: int, dtype=None) -> ScstState:
         dtype = dtype or jnp.result_type(float)
-        return ScstState(jnp.zeros((2, n), dtype), jnp.zeros((2, n, n), dtype), jnp.full((2,), -1, jnp.int32),
-                         jnp.zeros((), jnp.int32))
+        return ScstState(
+            jnp.zeros((2, n), dtype),
+            jnp.zeros((2, n, n), dtype),
+            jnp.full((2,), -1, jnp.int32),
+            jnp.zeros((), jnp.int32),
+        )
 
-    def step(state: ScstState, correction: Array, filtered_cov: Array, transition: Array, process_cov: Array):
+    def step(
+        state: ScstState,
+        correction: Array,
+        filtered_cov: Array,
+        transition: Array,
+        process_cov: Array,
+    ):
         n = _checks.shape_of(state.difference)[-1]
         _checks.check_shape("correction", correction, (n,), "the filter's correction dx[k|k]")
-        for name, value in (("filtered_cov", filtered_cov), ("transition", transition), ("process_cov", process_cov)):
+        for name, value in (
+            ("filtered_cov", filtered_cov),
+            ("transition", transition),
+            ("process_cov", process_cov),
+        ):
             _checks.check_shape(name, value, (n, n), f"the filter's {n} x {n} matrix")
         started = state.age >= 0
         difference = jnp.where(started[:, None], state.difference + correction, 0.0)
@@ -134,15 +158,23 @@ def state_chi2_test(period: int, threshold, max_condition: float = DEFAULT_MAX_C
         age = jnp.maximum(state.age, 0)
         used = jnp.argmax(age).astype(jnp.int32)
         used_age = age[used]
-        statistic, valid, condition = scst_statistic(difference[used], cov[used] - filtered_cov, max_condition)
+        statistic, valid, condition = scst_statistic(
+            difference[used], cov[used] - filtered_cov, max_condition
+        )
         alarm = valid & (statistic > threshold)
-        reset = (state.epoch > 0) & (jnp.mod(state.epoch - offsets, period) == 0) & (state.epoch >= offsets)
+        reset = (
+            (state.epoch > 0)
+            & (jnp.mod(state.epoch - offsets, period) == 0)
+            & (state.epoch >= offsets)
+        )
         difference = jnp.where(reset[:, None], 0.0, difference)
         cov = jnp.where(reset[:, None, None], filtered_cov, cov)
         age = jnp.where(reset, 0, age)
         propagated = jnp.einsum("ij,pj->pi", transition, difference)
         cov = jnp.einsum("ij,pjk,lk->pil", transition, cov, transition) + process_cov
-        decision = Decision(statistic, alarm, jnp.asarray(-1, jnp.int32), jnp.full((), jnp.nan, statistic.dtype))
+        decision = Decision(
+            statistic, alarm, jnp.asarray(-1, jnp.int32), jnp.full((), jnp.nan, statistic.dtype)
+        )
         out = ScstOutput(decision, valid, condition, used, used_age, reset)
         return ScstState(propagated, _linalg.symmetrize(cov), age + 1, state.epoch + 1), out
 

@@ -9,6 +9,7 @@ inverse step (``mechanization.inverse_step``): an error-free IMU reproduces the 
 after a climb, with a climb and a descent on the way; ``manoeuvre_legs``: the paper's strong-manoeuvre
 caveat (25 m/s, S-turns at 20 deg/s, 42 deg bank, pull-ups and dives, 2 m/s^2 speed changes).
 """
+
 from __future__ import annotations
 
 import math
@@ -61,7 +62,7 @@ def command_profiles(legs, times, blend: float) -> np.ndarray:
     starts = np.concatenate([[0.0], np.cumsum(legs[:, 0])[:-1]])
     commands = np.stack([np.radians(legs[:, 1]), legs[:, 2], legs[:, 3]], axis=1)
     value = np.broadcast_to(commands[0], (times.shape[0], 3)).copy()
-    for i in range(1, len(legs)):   # each change blends in from the leg's start
+    for i in range(1, len(legs)):  # each change blends in from the leg's start
         value += _smoothstep((times - starts[i]) / blend)[:, None] * (commands[i] - commands[i - 1])
     return value
 
@@ -71,12 +72,21 @@ def _check_start(start) -> None:
     navigation equations divide by cos(lat))."""
     value = np.asarray(start, float) if np.ndim(start) == 1 and len(start) == 3 else None
     if value is None or not np.all(np.isfinite(value)) or not abs(value[0]) < 90.0:
-        raise ValueError(f"start: expected (latitude deg in (-90, 90), longitude deg, height m), finite, got "
-                         f"{_checks.received(start)}")
+        raise ValueError(
+            f"start: expected (latitude deg in (-90, 90), longitude deg, height m), finite, got "
+            f"{_checks.received(start)}"
+        )
 
 
-def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: float = 0.0, rate: float = 100.0,
-        blend: float = 5.0, dtype=None) -> Trajectory:
+def fly(
+    legs,
+    start: tuple[float, float, float],
+    speed: float,
+    heading_deg: float = 0.0,
+    rate: float = 100.0,
+    blend: float = 5.0,
+    dtype=None,
+) -> Trajectory:
     """The flight of ``legs`` (module doc) from ``start`` = (lat deg, lon deg, h m) at
     ``speed`` [m/s] and ``heading_deg``, sampled at ``rate`` [Hz].
 
@@ -88,8 +98,10 @@ def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: floa
     """
     legs = np.asarray(legs, float)
     if legs.ndim != 2 or legs.shape[1] != 4 or np.any(legs[:, 0] <= 0):
-        raise ValueError(f"legs: expected rows (duration > 0, turn deg/s, climb m/s, accel m/s^2), got "
-                         f"{_checks.received(legs)}")
+        raise ValueError(
+            f"legs: expected rows (duration > 0, turn deg/s, climb m/s, accel m/s^2), got "
+            f"{_checks.received(legs)}"
+        )
     _checks.check_positive("speed", speed, "a positive airspeed in m/s")
     _checks.check_positive("rate", rate, "a positive IMU rate in Hz")
     _checks.check_positive("blend", blend, "a positive blending time in s")
@@ -100,8 +112,13 @@ def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: floa
     steps = int(round(float(legs[:, 0].sum()) * rate))
     commands = jnp.asarray(command_profiles(legs, np.arange(steps + 1) * dt, blend), dtype)
     position0 = jnp.asarray([math.radians(start[0]), math.radians(start[1]), start[2]], dtype)
-    trajectory, slowest, steepest = _fly(commands, position0, jnp.asarray(speed, dtype),
-                                         jnp.asarray(math.radians(heading_deg), dtype), jnp.asarray(dt, dtype))
+    trajectory, slowest, steepest = _fly(
+        commands,
+        position0,
+        jnp.asarray(speed, dtype),
+        jnp.asarray(math.radians(heading_deg), dtype),
+        jnp.asarray(dt, dtype),
+    )
     if float(slowest) <= 0.0 or float(steepest) >= 1.0:
         raise ValueError("legs: the flight stalls (speed <= 0) or climbs faster than it flies")
     return trajectory._replace(dt=dt)
@@ -111,17 +128,30 @@ def fly(legs, start: tuple[float, float, float], speed: float, heading_deg: floa
 def _fly(commands, position0, speed, heading0, dt):
     """``fly`` once its legs are sampled, as one program: the trajectory, the lowest
     airspeed and the steepest climb (``|climb| / airspeed``)."""
-    def integral(values):   # trapezoidal cumulative integral on the sample grid
-        return jnp.concatenate([jnp.zeros((1,), values.dtype), jnp.cumsum(0.5 * (values[1:] + values[:-1]) * dt)])
+
+    def integral(values):  # trapezoidal cumulative integral on the sample grid
+        return jnp.concatenate(
+            [jnp.zeros((1,), values.dtype), jnp.cumsum(0.5 * (values[1:] + values[:-1]) * dt)]
+        )
 
     turn, climb, accel = commands[:, 0], commands[:, 1], commands[:, 2]
     airspeed = speed + integral(accel)
     heading = heading0 + integral(turn)
     gamma = jnp.arcsin(climb / airspeed)
-    velocity = jnp.stack([airspeed * jnp.cos(gamma) * jnp.cos(heading), airspeed * jnp.cos(gamma) * jnp.sin(heading),
-                          -climb], axis=1)
+    velocity = jnp.stack(
+        [
+            airspeed * jnp.cos(gamma) * jnp.cos(heading),
+            airspeed * jnp.cos(gamma) * jnp.sin(heading),
+            -climb,
+        ],
+        axis=1,
+    )
     attitude = jax.vmap(euler_to_quaternion)(jnp.arctan(airspeed * turn / G0), gamma, heading)
-    return _from_samples(position0, velocity, attitude, dt), jnp.min(airspeed), jnp.max(jnp.abs(climb) / airspeed)
+    return (
+        _from_samples(position0, velocity, attitude, dt),
+        jnp.min(airspeed),
+        jnp.max(jnp.abs(climb) / airspeed),
+    )
 
 
 @jax.jit
@@ -145,11 +175,18 @@ def _imu_samples(position, velocity, attitude, dt):
 
 def _from_samples(position0, velocity, attitude, dt) -> Trajectory:
     position = _integrate_positions(position0, velocity, dt)
-    return Trajectory(dt, position, velocity, attitude, _imu_samples(position, velocity, attitude, dt))
+    return Trajectory(
+        dt, position, velocity, attitude, _imu_samples(position, velocity, attitude, dt)
+    )
 
 
-def stationary(start: tuple[float, float, float], duration: float, rate: float = 100.0,
-               attitude_deg: tuple[float, float, float] = (0.0, 0.0, 0.0), dtype=None) -> Trajectory:
+def stationary(
+    start: tuple[float, float, float],
+    duration: float,
+    rate: float = 100.0,
+    attitude_deg: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    dtype=None,
+) -> Trajectory:
     """A vehicle at rest at ``start`` for ``duration`` [s] with a fixed roll, pitch, yaw."""
     _checks.check_scalar("duration", duration, 0.0, meaning="a duration >= 0 in s")
     _checks.check_positive("rate", rate, "a positive IMU rate in Hz")
@@ -158,7 +195,9 @@ def stationary(start: tuple[float, float, float], duration: float, rate: float =
     steps = int(round(duration * rate))
     q = euler_to_quaternion(*(jnp.asarray(math.radians(a), dtype) for a in attitude_deg))
     position0 = jnp.asarray([math.radians(start[0]), math.radians(start[1]), start[2]], dtype)
-    return _from_samples(position0, jnp.zeros((steps + 1, 3), dtype), jnp.broadcast_to(q, (steps + 1, 4)), 1.0 / rate)
+    return _from_samples(
+        position0, jnp.zeros((steps + 1, 3), dtype), jnp.broadcast_to(q, (steps + 1, 4)), 1.0 / rate
+    )
 
 
 #: the park racetrack of the GPS half (600 m legs, 200 m radius, 12 m/s): a 180 deg turn
@@ -173,8 +212,12 @@ def park_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float
     lap = 0
     while sum(leg[0] for leg in legs) < duration:
         climb = 0.6 if lap == 1 else (-0.6 if lap == 3 else 0.0)
-        legs += [(50.0, 0.0, climb, 0.0), (_PARK_TURN[0], _PARK_TURN[1], 0.0, 0.0),
-                 (50.0, 0.0, 0.0, 0.0), (_PARK_TURN[0], _PARK_TURN[1], 0.0, 0.0)]
+        legs += [
+            (50.0, 0.0, climb, 0.0),
+            (_PARK_TURN[0], _PARK_TURN[1], 0.0, 0.0),
+            (50.0, 0.0, 0.0, 0.0),
+            (_PARK_TURN[0], _PARK_TURN[1], 0.0, 0.0),
+        ]
         lap += 1
     return _cut_at(legs, duration)
 
@@ -183,8 +226,16 @@ def manoeuvre_legs(duration: float = 1200.0) -> list[tuple[float, float, float, 
     """S-turns at +-20 deg/s (9 s each), pull-ups and dives at +-8 m/s, +-2 m/s^2 speed
     changes, until ``duration`` [s]; starts at 25 m/s."""
     _checks.check_positive("duration", duration, "a positive flight duration in s")
-    pattern = [(9.0, 20.0, 0.0, 0.0), (9.0, -20.0, 0.0, 0.0), (6.0, 0.0, 8.0, 2.0), (6.0, 0.0, -8.0, -2.0),
-               (9.0, -20.0, 4.0, 0.0), (9.0, 20.0, -4.0, 0.0), (5.0, 0.0, 0.0, 1.0), (5.0, 0.0, 0.0, -1.0)]
+    pattern = [
+        (9.0, 20.0, 0.0, 0.0),
+        (9.0, -20.0, 0.0, 0.0),
+        (6.0, 0.0, 8.0, 2.0),
+        (6.0, 0.0, -8.0, -2.0),
+        (9.0, -20.0, 4.0, 0.0),
+        (9.0, 20.0, -4.0, 0.0),
+        (5.0, 0.0, 0.0, 1.0),
+        (5.0, 0.0, 0.0, -1.0),
+    ]
     legs = [(20.0, 0.0, 0.0, 0.0)]
     while sum(leg[0] for leg in legs) < duration:
         legs += pattern

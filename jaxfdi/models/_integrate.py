@@ -1,5 +1,6 @@
 """Fixed-step integration of ``x' = field(x, t)``: the classical Runge-Kutta method
 (Kutta 1901), used by every sampled nonlinear model."""
+
 from __future__ import annotations
 
 from typing import Callable
@@ -9,8 +10,13 @@ import jax.numpy as jnp
 from jax import Array
 
 
-def rk4(field: Callable[[Array, Array], Array], x: Array, dt: Array, substeps: int = 1,
-        loop_stages: bool = False) -> Array:
+def rk4(
+    field: Callable[[Array, Array], Array],
+    x: Array,
+    dt: Array,
+    substeps: int = 1,
+    loop_stages: bool = False,
+) -> Array:
     """``substeps`` classical RK4 steps of ``x' = field(x, t)`` over ``[0, dt]``, ``h = dt / substeps``:
 
     ``x+ = x + h/6 (k1 + 2 k2 + 2 k3 + k4)``, ``k1 = f(x, t)``, ``k2 = f(x + h/2 k1, t + h/2)``,
@@ -29,9 +35,12 @@ def rk4(field: Callable[[Array, Array], Array], x: Array, dt: Array, substeps: i
         return k1 + 2 * k2 + 2 * k3 + k4
 
     dtype = jnp.result_type(x)
-    nodes, weights = jnp.asarray((0.0, 0.5, 0.5, 1.0), dtype), jnp.asarray((1.0, 2.0, 2.0, 1.0), dtype)
+    nodes, weights = (
+        jnp.asarray((0.0, 0.5, 0.5, 1.0), dtype),
+        jnp.asarray((1.0, 2.0, 2.0, 1.0), dtype),
+    )
 
-    def stage(i, carry):   # k_i = f(x + c_i h k_(i-1), t + c_i h); s += b_i k_i
+    def stage(i, carry):  # k_i = f(x + c_i h k_(i-1), t + c_i h); s += b_i k_i
         x, t, k, s = carry
         c = nodes[i] * h
         k = field(x + c * k, t + c)

@@ -2,6 +2,7 @@
 
 ``x[k+1] = Phi x[k] + Gamma u[k] + w[k]``, ``y[k] = C x[k] + D u[k] + v[k]``, ``w ~ N(0, Q)``, ``v ~ N(0, R)``.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -40,8 +41,9 @@ class LinearGaussianModel(NamedTuple):
         return self.Phi.shape[-1], self.Gamma.shape[-1], self.C.shape[-2]
 
 
-def linear_gaussian_model(Phi: Array, C: Array, Q: Array, R: Array, Gamma: Array | None = None,
-                          D: Array | None = None) -> LinearGaussianModel:
+def linear_gaussian_model(
+    Phi: Array, C: Array, Q: Array, R: Array, Gamma: Array | None = None, D: Array | None = None
+) -> LinearGaussianModel:
     """A ``LinearGaussianModel``, with ``Gamma``/``D`` optional for a model without inputs.
 
     Missing ``Gamma``: zero-width (n, 0) (no inputs: run with ``us=None`` or ``jnp.zeros((T, 0))``);
@@ -68,8 +70,14 @@ def linear_gaussian_model(Phi: Array, C: Array, Q: Array, R: Array, Gamma: Array
     D = jnp.zeros((m, Gamma.shape[1]), dtype) if D is None else jnp.asarray(D, dtype)
     _checks.check_covariance("Q", Q, n)
     _checks.check_covariance("R", R, m)
-    model = LinearGaussianModel(jnp.asarray(Phi, dtype), Gamma, jnp.asarray(C, dtype), D, jnp.asarray(Q, dtype),
-                                jnp.asarray(R, dtype))
+    model = LinearGaussianModel(
+        jnp.asarray(Phi, dtype),
+        Gamma,
+        jnp.asarray(C, dtype),
+        D,
+        jnp.asarray(Q, dtype),
+        jnp.asarray(R, dtype),
+    )
     validate_linear_model(model)
     return model
 
@@ -78,8 +86,10 @@ def validate_linear_model(model: LinearGaussianModel, name: str = "model") -> tu
     """Check every block of ``model`` (shapes against ``Phi`` and ``C``, real and finite
     entries, ``Q`` and ``R`` symmetric positive semi-definite); return ``(n, nu, m)``."""
     if not isinstance(model, LinearGaussianModel):
-        raise TypeError(f"{name}: expected a LinearGaussianModel (linear_gaussian_model(Phi, C, Q, R, Gamma, D)), "
-                        f"got {_checks.received(model)}")
+        raise TypeError(
+            f"{name}: expected a LinearGaussianModel (linear_gaussian_model(Phi, C, Q, R, Gamma, D)), "
+            f"got {_checks.received(model)}"
+        )
     n = _checks.check_square(f"{name}.Phi", model.Phi, None, "state transition")
     _checks.check_matrix(f"{name}.Gamma", model.Gamma, (n, None), "n states x nu inputs")
     nu = _checks.shape_of(model.Gamma)[1]
@@ -133,11 +143,15 @@ def c2d(A: Array, B: Array, Ts: float, dtype=None) -> tuple[Array, Array]:
         return _zoh(A, jnp.asarray(B, dtype=dtype), jnp.asarray(Ts, dtype=dtype))
     Phi, Gamma = zoh_float64(A_value, B_value, ts)
     if not (np.all(np.isfinite(Phi)) and np.all(np.isfinite(Gamma))):
-        raise ValueError(f"c2d: Phi and Gamma are not finite even in float64 (A Ts has 1-norm "
-                         f"{np.linalg.norm(A_value * ts, 1):.3g}); check A, B and Ts")
+        raise ValueError(
+            f"c2d: Phi and Gamma are not finite even in float64 (A Ts has 1-norm "
+            f"{np.linalg.norm(A_value * ts, 1):.3g}); check A, B and Ts"
+        )
     if max(np.max(np.abs(Phi)), np.max(np.abs(Gamma), initial=0.0)) > np.finfo(dtype).max:
-        raise ValueError(f"c2d: Phi and Gamma are finite in float64 but overflow {jnp.dtype(dtype).name}; "
-                         "use dtype=float64 (jaxfdi.enable_x64())")
+        raise ValueError(
+            f"c2d: Phi and Gamma are finite in float64 but overflow {jnp.dtype(dtype).name}; "
+            "use dtype=float64 (jaxfdi.enable_x64())"
+        )
     return jnp.asarray(Phi, dtype), jnp.asarray(Gamma, dtype)
 
 

@@ -17,6 +17,7 @@ body frame ``(I w + h_w)' = -w x (I w + h_w)`` (norm conserved).
 Jacobians by ``jax.jacfwd``; the closed form ``A = dw'/dw = -I^-1 ([w]x I - [I w + h_w]x)``
 (``rate_jacobian``) is for tests only: the paper's eqs. 3, 5 and 9 have wrong indices and signs.
 """
+
 from __future__ import annotations
 
 import math
@@ -60,12 +61,23 @@ def pyramid_axes(beta_deg: float = 45.0, sigma_deg: float = 45.0, dtype=None) ->
     sb, cb = math.sin(math.radians(beta_deg)), math.cos(math.radians(beta_deg))
     cs, ss = math.cos(math.radians(sigma_deg)), math.sin(math.radians(sigma_deg))
     return jnp.asarray(
-        [[sb * cs, sb * ss, cb], [-sb * cs, sb * ss, cb], [-sb * cs, -sb * ss, cb], [sb * cs, -sb * ss, cb]], dtype
+        [
+            [sb * cs, sb * ss, cb],
+            [-sb * cs, sb * ss, cb],
+            [-sb * cs, -sb * ss, cb],
+            [sb * cs, -sb * ss, cb],
+        ],
+        dtype,
     )
 
 
-def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.055), wheel_inertia: float = 0.000239,
-                   dtype=None) -> SpacecraftParams:
+def kitsat3_params(
+    dt: float = 0.1,
+    wheel_axes=None,
+    inertia=(3.118, 3.050, 4.055),
+    wheel_inertia: float = 0.000239,
+    dtype=None,
+) -> SpacecraftParams:
     """KITSAT-3 (Choi & Park 2009, Table 1): ``I = diag(3.118, 3.050, 4.055)`` kg m^2, ``I_w = 0.000239`` kg m^2, the
     45/45 deg pyramid unless ``wheel_axes`` (N, 3) is given (rows normalised); a (3,) ``inertia`` is its diagonal.
 
@@ -78,7 +90,9 @@ def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.05
     if wheel_axes is not None:
         _checks.check_matrix("wheel_axes", wheel_axes, (None, 3), "one spin axis per row")
         if np.any(np.linalg.norm(np.asarray(wheel_axes, float), axis=1) == 0):
-            raise ValueError(f"wheel_axes: expected non-zero spin axes, got {_checks.received(wheel_axes)}")
+            raise ValueError(
+                f"wheel_axes: expected non-zero spin axes, got {_checks.received(wheel_axes)}"
+            )
     axes = pyramid_axes(dtype=dtype) if wheel_axes is None else jnp.asarray(wheel_axes, dtype)
     axes = axes / jnp.linalg.norm(axes, axis=1, keepdims=True)
     _checks.check_real("inertia", inertia, "a real body inertia")
@@ -87,8 +101,13 @@ def kitsat3_params(dt: float = 0.1, wheel_axes=None, inertia=(3.118, 3.050, 4.05
         inertia = np.diag(np.asarray(inertia, float))
     _checks.check_covariance("inertia", inertia, 3, definite=True)  # symmetric positive definite
     inertia = jnp.asarray(inertia, dtype)
-    return SpacecraftParams(inertia, jnp.asarray(wheel_inertia, dtype), axes,
-                            jnp.ones(axes.shape[0], dtype), jnp.asarray(dt, dtype))
+    return SpacecraftParams(
+        inertia,
+        jnp.asarray(wheel_inertia, dtype),
+        axes,
+        jnp.ones(axes.shape[0], dtype),
+        jnp.asarray(dt, dtype),
+    )
 
 
 def stop_hypotheses(params: SpacecraftParams, include_nominal: bool = False) -> SpacecraftParams:
@@ -101,7 +120,9 @@ def stop_hypotheses(params: SpacecraftParams, include_nominal: bool = False) -> 
     masks = 1.0 - jnp.eye(N, dtype=params.wheel_mask.dtype)
     if include_nominal:
         masks = jnp.concatenate([jnp.ones((1, N), masks.dtype), masks], axis=0)
-    stacked = jax.tree_util.tree_map(lambda leaf: jnp.broadcast_to(leaf, (masks.shape[0],) + jnp.shape(leaf)), params)
+    stacked = jax.tree_util.tree_map(
+        lambda leaf: jnp.broadcast_to(leaf, (masks.shape[0],) + jnp.shape(leaf)), params
+    )
     return stacked._replace(wheel_mask=masks)
 
 
@@ -110,12 +131,19 @@ def wheel_momentum(speeds: Array, params: SpacecraftParams) -> Array:
     return params.wheel_inertia * (params.wheel_mask * speeds) @ params.wheel_axes
 
 
-def rate_derivative(w: Array, speeds: Array, accelerations: Array, params: SpacecraftParams,
-                    external_torque: Array | float = 0.0) -> Array:
+def rate_derivative(
+    w: Array,
+    speeds: Array,
+    accelerations: Array,
+    params: SpacecraftParams,
+    external_torque: Array | float = 0.0,
+) -> Array:
     """``w' = I^-1 (T_ext - w x (I w + h_w) - h_w')`` (Choi & Park 2009, eq. 1, any wheel geometry)."""
     momentum = params.inertia @ w + wheel_momentum(speeds, params)
     wheel_torque_on_body = wheel_momentum(accelerations, params)  # h_w'
-    return jnp.linalg.solve(params.inertia, external_torque - jnp.cross(w, momentum) - wheel_torque_on_body)
+    return jnp.linalg.solve(
+        params.inertia, external_torque - jnp.cross(w, momentum) - wheel_torque_on_body
+    )
 
 
 def split_input(u: Array, params: SpacecraftParams) -> tuple[Array, Array]:
@@ -134,7 +162,11 @@ def body_rate_field(w: Array, u: Array, params: SpacecraftParams) -> Array:
 def wheel_rate_transition(w: Array, u: Array, params: SpacecraftParams) -> Array:
     """The filters' ``f``: one RK4 step of the rates with ``Omega(t) = Omega + t Omega'``."""
     speeds, accelerations = split_input(u, params)
-    return rk4(lambda x, t: rate_derivative(x, speeds + t * accelerations, accelerations, params), w, params.dt)
+    return rk4(
+        lambda x, t: rate_derivative(x, speeds + t * accelerations, accelerations, params),
+        w,
+        params.dt,
+    )
 
 
 def gyro_observation(w: Array, u: Array, params: SpacecraftParams) -> Array:
@@ -150,7 +182,10 @@ def rate_jacobian(w: Array, speeds: Array, params: SpacecraftParams) -> Array:
 
 # --- the truth: attitude, rates and wheel speeds -------------------------------------
 
-def spacecraft_field(state: Array, wheel_torque: Array, external_torque: Array, params: SpacecraftParams) -> Array:
+
+def spacecraft_field(
+    state: Array, wheel_torque: Array, external_torque: Array, params: SpacecraftParams
+) -> Array:
     """``[q', w', Omega']`` of the truth state ``[q (4), w (3), Omega (N)]``."""
     q, w, speeds = state[:4], state[4:7], state[7:]
     accelerations = wheel_torque / params.wheel_inertia
@@ -159,10 +194,20 @@ def spacecraft_field(state: Array, wheel_torque: Array, external_torque: Array, 
     return jnp.concatenate([q_dot, w_dot, accelerations])
 
 
-def spacecraft_step(state: Array, wheel_torque: Array, external_torque: Array, params: SpacecraftParams,
-                    substeps: int = 4) -> Array:
+def spacecraft_step(
+    state: Array,
+    wheel_torque: Array,
+    external_torque: Array,
+    params: SpacecraftParams,
+    substeps: int = 4,
+) -> Array:
     """Truth over one sample: torques held, ``substeps`` RK4 steps, quaternion renormalised."""
-    nxt = rk4(lambda x, t: spacecraft_field(x, wheel_torque, external_torque, params), state, params.dt, substeps)
+    nxt = rk4(
+        lambda x, t: spacecraft_field(x, wheel_torque, external_torque, params),
+        state,
+        params.dt,
+        substeps,
+    )
     return nxt.at[:4].set(nxt[:4] / jnp.linalg.norm(nxt[:4]))
 
 
@@ -173,6 +218,7 @@ def total_momentum(state: Array, params: SpacecraftParams) -> Array:
 
 
 # --- sensors, commands and faults of the truth (its loop.Plant: control.attitude.wheel_plant) ---
+
 
 class AttitudeReading(NamedTuple):
     """The attitude sensors at step ``k``: attitude (taken as exact) and gyro rates.
@@ -207,8 +253,11 @@ def delivered_torque(f, k: Array, command: Array) -> Array:
     """Torques delivered under fault ``f`` (scalar leaves): bias and gain loss act on the command; STOP or
     STUCK deliver none; sensor faults leave the wheels alone."""
     faulty, _ = apply_fault(f, k, command, Target.ACTUATOR, jnp.zeros((), command.dtype))
-    no_torque = (is_active(f, k) & (f.target == Target.ACTUATOR)
-                 & ((f.kind == FaultKind.STOP) | (f.kind == FaultKind.STUCK)))
+    no_torque = (
+        is_active(f, k)
+        & (f.target == Target.ACTUATOR)
+        & ((f.kind == FaultKind.STOP) | (f.kind == FaultKind.STUCK))
+    )
     wheel = jax.nn.one_hot(f.component, command.shape[0], dtype=bool)
     return jnp.where(no_torque & wheel, 0.0, faulty)
 
@@ -217,7 +266,9 @@ def stop_transfer(state: Array, f, k: Array, params: SpacecraftParams) -> Array:
     """At a stop's onset: the wheel's speed -> 0 and its momentum to the body rates."""
     speeds = state[7:]
     stopped = (f.kind == FaultKind.STOP) & (f.target == Target.ACTUATOR) & (k == f.onset)
-    new_speeds = jnp.where(stopped & jax.nn.one_hot(f.component, speeds.shape[0], dtype=bool), 0.0, speeds)
+    new_speeds = jnp.where(
+        stopped & jax.nn.one_hot(f.component, speeds.shape[0], dtype=bool), 0.0, speeds
+    )
     body_momentum = params.inertia @ state[4:7] + wheel_momentum(speeds, params)
     w = jnp.linalg.solve(params.inertia, body_momentum - wheel_momentum(new_speeds, params))
     return jnp.where(stopped, jnp.concatenate([state[:4], w, new_speeds]), state)

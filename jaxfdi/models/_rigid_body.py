@@ -4,6 +4,7 @@
 ``w = [p, q, r]`` (rad/s), torque ``tau`` (N m), one RK4 step per sample; measured ``y = w``. The
 gyroscopic term is quadratic in ``w``, so UKF, EKF and KF differ.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -28,7 +29,9 @@ class RigidBodyParams(NamedTuple):
     dt: Array
 
 
-def rigid_body_params(dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dtype=None) -> RigidBodyParams:
+def rigid_body_params(
+    dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dtype=None
+) -> RigidBodyParams:
     """Principal moments of inertia ``inertia`` (3,) > 0 and the step ``dt`` > 0 (s).
 
     Returns:
@@ -37,7 +40,9 @@ def rigid_body_params(dt: float = 0.02, inertia=(12875.0, 75674.0, 85552.0), dty
     _checks.check_positive("dt", dt, "a positive step in seconds")
     _checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
     if np.any(np.asarray(inertia) <= 0):
-        raise ValueError(f"inertia: expected positive principal moments, got {_checks.received(inertia)}")
+        raise ValueError(
+            f"inertia: expected positive principal moments, got {_checks.received(inertia)}"
+        )
     dtype = dtype or jnp.result_type(float)
     return RigidBodyParams(jnp.asarray(inertia, dtype), jnp.asarray(dt, dtype))
 

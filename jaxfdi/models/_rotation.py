@@ -6,6 +6,7 @@ Rotation vector ``r``: ``exp(r) = [cos(|r|/2), sin(|r|/2) r / |r|]``, ``log`` it
 App. E.6; Titterton & Weston 2004, sec. 3.6). Series near the identity keep values and two derivatives finite (the EKF
 differentiates through them). Euler: roll, pitch, yaw, ``C = R_z(yaw) R_y(pitch) R_x(roll)``.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -28,10 +29,14 @@ def quaternion_multiply(p: Array, q: Array) -> Array:
     """Hamilton product ``p (x) q`` of (4,) quaternions."""
     p0, p1, p2, p3 = p[0], p[1], p[2], p[3]
     q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    return jnp.stack([p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
-                      p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
-                      p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
-                      p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0])
+    return jnp.stack(
+        [
+            p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
+            p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1,
+            p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0,
+        ]
+    )
 
 
 def quaternion_conjugate(q: Array) -> Array:
@@ -46,18 +51,40 @@ def rotate(q: Array, v: Array) -> Array:
 
 
 def cross(a: Array, b: Array) -> Array:
-    return jnp.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    return jnp.stack(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
 
 
 def quaternion_to_dcm(q: Array) -> Array:
     """(3, 3) ``C(q)`` (body to NED for the attitude quaternion)."""
     _check_leading("q", q, 4, "a quaternion [q0, q1, q2, q3]")
     q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    return jnp.stack([
-        jnp.stack([q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)]),
-        jnp.stack([2 * (q1 * q2 + q0 * q3), q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3, 2 * (q2 * q3 - q0 * q1)]),
-        jnp.stack([2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3]),
-    ])
+    return jnp.stack(
+        [
+            jnp.stack(
+                [
+                    q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3,
+                    2 * (q1 * q2 - q0 * q3),
+                    2 * (q1 * q3 + q0 * q2),
+                ]
+            ),
+            jnp.stack(
+                [
+                    2 * (q1 * q2 + q0 * q3),
+                    q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3,
+                    2 * (q2 * q3 - q0 * q1),
+                ]
+            ),
+            jnp.stack(
+                [
+                    2 * (q1 * q3 - q0 * q2),
+                    2 * (q2 * q3 + q0 * q1),
+                    q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3,
+                ]
+            ),
+        ]
+    )
 
 
 def rotation_quaternion(rotation: Array) -> Array:
@@ -87,7 +114,9 @@ def rotation_vector(q: Array) -> Array:
     small = norm2 < _SMALL
     norm = jnp.sqrt(jnp.where(small, 1.0, norm2))
     # 2 atan2(|v|, w) / |v| = 2 / w (1 - |v|^2 / (3 w^2) + ...) near the identity
-    scale = jnp.where(small, 2.0 / q[0] * (1.0 - norm2 / (3.0 * q[0] ** 2)), 2.0 * jnp.arctan2(norm, q[0]) / norm)
+    scale = jnp.where(
+        small, 2.0 / q[0] * (1.0 - norm2 / (3.0 * q[0] ** 2)), 2.0 * jnp.arctan2(norm, q[0]) / norm
+    )
     return scale * vector
 
 
@@ -96,19 +125,35 @@ def euler_to_quaternion(roll: Array, pitch: Array, yaw: Array) -> Array:
     cr, sr = jnp.cos(0.5 * roll), jnp.sin(0.5 * roll)
     cp, sp = jnp.cos(0.5 * pitch), jnp.sin(0.5 * pitch)
     cy, sy = jnp.cos(0.5 * yaw), jnp.sin(0.5 * yaw)
-    return jnp.stack([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                      cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
+    return jnp.stack(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )
 
 
 def quaternion_to_euler(q: Array) -> Array:
     """(3,) roll, pitch, yaw [rad] of an attitude quaternion."""
     c = quaternion_to_dcm(q)
-    return jnp.stack([jnp.arctan2(c[2, 1], c[2, 2]), -jnp.arcsin(jnp.clip(c[2, 0], -1.0, 1.0)),
-                      jnp.arctan2(c[1, 0], c[0, 0])])
+    return jnp.stack(
+        [
+            jnp.arctan2(c[2, 1], c[2, 2]),
+            -jnp.arcsin(jnp.clip(c[2, 0], -1.0, 1.0)),
+            jnp.arctan2(c[1, 0], c[0, 0]),
+        ]
+    )
 
 
 def skew(v: Array) -> Array:
     """``[v x]`` with ``[v x] a = v x a``."""
     zero = jnp.zeros_like(v[0])
-    return jnp.stack([jnp.stack([zero, -v[2], v[1]]), jnp.stack([v[2], zero, -v[0]]),
-                      jnp.stack([-v[1], v[0], zero])])
+    return jnp.stack(
+        [
+            jnp.stack([zero, -v[2], v[1]]),
+            jnp.stack([v[2], zero, -v[0]]),
+            jnp.stack([-v[1], v[0], zero]),
+        ]
+    )

@@ -3,6 +3,7 @@
 States ``[v_h, v_v, q, theta]``, inputs ``[collective, longitudinal cyclic]``. Open loop
 unstable (eigenvalues 0.276 +/- 0.258j). Discretised at ``Ts = 0.1 s``.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -11,12 +12,14 @@ import numpy as np
 from jaxfdi import _checks
 from jaxfdi.models._linear import LinearGaussianModel, c2d
 
-A = np.array([
-    [-0.0366, 0.0271, 0.0188, -0.4555],
-    [0.0482, -1.01, 0.0024, -4.0208],
-    [0.1002, 0.3681, -0.707, 1.420],
-    [0.0, 0.0, 1.0, 0.0],
-])
+A = np.array(
+    [
+        [-0.0366, 0.0271, 0.0188, -0.4555],
+        [0.0482, -1.01, 0.0024, -4.0208],
+        [0.1002, 0.3681, -0.707, 1.420],
+        [0.0, 0.0, 1.0, 0.0],
+    ]
+)
 B = np.array([[0.422, 0.1761], [3.5466, -7.5922], [-5.52, 4.49], [0.0, 0.0]])
 C = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 1.0, 1.0, 1.0]])
 TS = 0.1
@@ -41,8 +44,12 @@ def vtol_model(Ts: float = TS, dtype=None):
     dtype = dtype or jnp.result_type(float)
     Phi, Gamma = c2d(A, B, Ts, dtype=dtype)  # float64 inside, then cast
     return LinearGaussianModel(
-        Phi, Gamma, jnp.asarray(C, dtype), jnp.zeros((4, 2), dtype),
-        PROCESS_NOISE_STD**2 * jnp.eye(4, dtype=dtype), MEASUREMENT_NOISE_STD**2 * jnp.eye(4, dtype=dtype),
+        Phi,
+        Gamma,
+        jnp.asarray(C, dtype),
+        jnp.zeros((4, 2), dtype),
+        PROCESS_NOISE_STD**2 * jnp.eye(4, dtype=dtype),
+        MEASUREMENT_NOISE_STD**2 * jnp.eye(4, dtype=dtype),
     )
 
 
@@ -50,7 +57,11 @@ def vtol_unknown_input(Ts: float = TS, include_disturbance: bool = False, dtype=
     """Discrete distribution ``E`` (4, q) of the unknown input: the zero-order-hold image
     of ``E_c`` (q = 1), and of ``G`` too with ``include_disturbance`` (q = 2)."""
     dtype = dtype or jnp.result_type(float)
-    columns = np.hstack([UNCERTAINTY_INPUT, DISTURBANCE_INPUT]) if include_disturbance else UNCERTAINTY_INPUT
+    columns = (
+        np.hstack([UNCERTAINTY_INPUT, DISTURBANCE_INPUT])
+        if include_disturbance
+        else UNCERTAINTY_INPUT
+    )
     return c2d(A, columns, Ts, dtype=dtype)[1]
 
 
@@ -58,7 +69,9 @@ def vtol_true_plant(Ts: float = TS, uncertainty: float = 1.0, disturbance: float
     """The true plant, discretised exactly: ``A + uncertainty E_c d_c``, the disturbance from an oscillator
     ``w' = [[0, f], [-f, 0]] w`` (``w1 = sin f t``) appended; ``(Phi6, Gamma6, C6)`` for ``[x; w]`` (6,), start
     ``[x0; 0, 1]``; ``uncertainty`` and ``disturbance`` scale the two terms."""
-    _checks.check_scalar("uncertainty", uncertainty, meaning="a real scale of the model uncertainty")
+    _checks.check_scalar(
+        "uncertainty", uncertainty, meaning="a real scale of the model uncertainty"
+    )
     _checks.check_scalar("disturbance", disturbance, meaning="a real scale of the disturbance")
     dtype = dtype or jnp.result_type(float)
     f = DISTURBANCE_FREQUENCY

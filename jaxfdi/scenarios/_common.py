@@ -1,5 +1,6 @@
 """What every scenario study checks before it computes (precision, run counts, seeds and method names), and how its
 figures are written."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -26,7 +27,9 @@ def check_methods(methods: Sequence[str] | None, valid: Sequence[str]) -> tuple[
         methods = [m for m in methods.split(",") if m]
     unknown = [m for m in methods if m not in valid]
     if unknown or not methods:
-        raise ValueError(f"methods: expected a non-empty subset of {list(valid)}, got unknown {unknown or 'none'}")
+        raise ValueError(
+            f"methods: expected a non-empty subset of {list(valid)}, got unknown {unknown or 'none'}"
+        )
     return tuple(m for m in valid if m in methods)
 
 

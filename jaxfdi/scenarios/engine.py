@@ -24,6 +24,7 @@ Methods (filter + online detector, fused with the plant in one scan):
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and
 Generalized Likelihood Ratio Test" (CITATION.cff).
 """
+
 from __future__ import annotations
 
 import functools
@@ -35,40 +36,47 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import _checks
-from jaxfdi.detection._glrt import PAPER_USED_THRESHOLD, detector_setup, glr_sequence, glrt_threshold
+from jaxfdi._faults import Fault, fault, fault_label, sensor_labels, stack_faults
+from jaxfdi._frame import study_result
+from jaxfdi._metrics import DetectionRecord, cell, fault_row, rate_cell, unhealthy_rows_warning
+from jaxfdi._monitor import monitor, replay_detector
+from jaxfdi._montecarlo import monte_carlo
+from jaxfdi._riccati import steady_state_kalman
+from jaxfdi._simulate import linear_simulator, simulate
+from jaxfdi._study import Structure, Study, run_study
+from jaxfdi.detection._glrt import (
+    PAPER_USED_THRESHOLD,
+    detector_setup,
+    glr_sequence,
+    glrt_threshold,
+)
 from jaxfdi.detection._glrt_recursive import glrt_detector
 from jaxfdi.detection._mode_probability import mode_probability_detector
-from jaxfdi._faults import Fault, fault, fault_label, sensor_labels, stack_faults
+from jaxfdi.filters import run_filter
 from jaxfdi.filters._imm import interacting_multiple_model
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.filters._mm import multiple_model
-from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
-from jaxfdi._frame import study_result
-from jaxfdi._metrics import DetectionRecord, cell, fault_row, rate_cell, unhealthy_rows_warning
 from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
-from jaxfdi.filters import run_filter
-from jaxfdi._monitor import monitor, replay_detector
-from jaxfdi._montecarlo import monte_carlo
 from jaxfdi.plotting import column_subplots, hypothesis_colors
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
-from jaxfdi._simulate import linear_simulator, simulate
-from jaxfdi._study import Structure, Study, run_study
 from jaxfdi.tuning._train import fixed_batches
 
 MODE_NAMES = ("normal", "actuator", "RPM", "P2", "T2", "P4", "T4")
 
 #: the transition matrix of Han et al. (2022), rows = from-mode (normal, actuator, RPM, P2, T2, P4, T4).
-PAPER_TRANSITION = np.array([
-    [0.940, 0.010, 0.010, 0.010, 0.010, 0.010, 0.010],
-    [0.001, 0.989, 0.000, 0.000, 0.000, 0.000, 0.010],
-    [0.010, 0.001, 0.989, 0.000, 0.000, 0.000, 0.000],
-    [0.050, 0.000, 0.000, 0.950, 0.000, 0.000, 0.000],
-    [0.010, 0.001, 0.000, 0.000, 0.989, 0.000, 0.000],
-    [0.010, 0.001, 0.000, 0.000, 0.000, 0.989, 0.000],
-    [0.001, 0.001, 0.000, 0.000, 0.000, 0.000, 0.998],
-])
+PAPER_TRANSITION = np.array(
+    [
+        [0.940, 0.010, 0.010, 0.010, 0.010, 0.010, 0.010],
+        [0.001, 0.989, 0.000, 0.000, 0.000, 0.000, 0.010],
+        [0.010, 0.001, 0.989, 0.000, 0.000, 0.000, 0.000],
+        [0.050, 0.000, 0.000, 0.950, 0.000, 0.000, 0.000],
+        [0.010, 0.001, 0.000, 0.000, 0.989, 0.000, 0.000],
+        [0.010, 0.001, 0.000, 0.000, 0.000, 0.989, 0.000],
+        [0.001, 0.001, 0.000, 0.000, 0.000, 0.000, 0.998],
+    ]
+)
 
 #: Table 3 of Han et al. (2022): detection delay [s] at mu_T = 0.5 / l_T = 200 (actuator, RPM, P2, T2, P4, T4).
 PAPER_DELAY = {
@@ -171,7 +179,11 @@ def confirmed_name(settings: "EngineSettings") -> str:
 def mode_confirmed_name(settings: "EngineSettings") -> str:
     """E.g. ``IMM-bias hand-pi confirm 3, P2 2``: the common length, then the exceptions."""
     common = settings.confirm_steps
-    rest = [f"{MODE_NAMES[j]} {c}" for j, c in enumerate(settings.mode_confirm_steps) if j and c != common]
+    rest = [
+        f"{MODE_NAMES[j]} {c}"
+        for j, c in enumerate(settings.mode_confirm_steps)
+        if j and c != common
+    ]
     return ", ".join([f"IMM-bias hand-pi confirm {common}", *rest])
 
 
@@ -182,9 +194,19 @@ def _bonferroni_threshold(settings: EngineSettings) -> float:
 def engine_method_names(settings: EngineSettings = EngineSettings()) -> list[str]:
     """The names of ``engine_methods(settings)`` in table order, without building them (for the CLI's ``--methods``)."""
     bonferroni = _bonferroni_threshold(settings)
-    return ["MM", "IMM", "IMM hand-pi", "MM-bias", "IMM-bias", "IMM-bias hand-pi", confirmed_name(settings),
-            mode_confirmed_name(settings), f"GLRT l_T={settings.glr_threshold:g}", f"GLRT l_T={bonferroni:.1f}",
-            f"GLRT l_T={bonferroni:.1f} eq. 24"]
+    return [
+        "MM",
+        "IMM",
+        "IMM hand-pi",
+        "MM-bias",
+        "IMM-bias",
+        "IMM-bias hand-pi",
+        confirmed_name(settings),
+        mode_confirmed_name(settings),
+        f"GLRT l_T={settings.glr_threshold:g}",
+        f"GLRT l_T={bonferroni:.1f}",
+        f"GLRT l_T={bonferroni:.1f} eq. 24",
+    ]
 
 
 def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Method]:
@@ -195,8 +217,12 @@ def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Met
     mu0 = jnp.asarray(PAPER_TRANSITION[0])  # the normal row: P(mode at step 0)
     hand = sticky_transition(M, settings.to_fault, settings.stay)
     paper_rule = mode_probability_detector(settings.mu_threshold)
-    confirmed = mode_probability_detector(settings.mu_threshold, confirm_steps=settings.confirm_steps)
-    mode_confirmed = mode_probability_detector(settings.mu_threshold, confirm_steps=settings.mode_confirm_steps)
+    confirmed = mode_probability_detector(
+        settings.mu_threshold, confirm_steps=settings.confirm_steps
+    )
+    mode_confirmed = mode_probability_detector(
+        settings.mu_threshold, confirm_steps=settings.mode_confirm_steps
+    )
 
     zl = noise_inflation_modes(model, settings.sensor_inflation, settings.actuator_noise)
     bm = bias_modes(model, jnp.asarray(settings.bias_walk), jnp.asarray(settings.bias_prior))
@@ -206,14 +232,23 @@ def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Met
         return Method(filt, filt.init(x0, P0, mu0), paper_rule, _mode_prob, 0, paper)
 
     def bias(filt, paper, detector=paper_rule):
-        return Method(filt, filt.init(z0, Z0, mu0), detector, _bias_estimates, settings.bias_estimate_delay, paper)
+        return Method(
+            filt,
+            filt.init(z0, Z0, mu0),
+            detector,
+            _bias_estimates,
+            settings.bias_estimate_delay,
+            paper,
+        )
 
     steady = steady_state_kalman(model)
     kf = kalman_filter(model)
     kf0 = kf.init(x0, steady.predicted_cov)  # the GLR signatures assume the steady-state gain
 
     def glrt(threshold, isolation="max"):
-        det = glrt_detector(model, steady.gain, steady.innovation_cov, settings.glr_window, threshold, isolation)
+        det = glrt_detector(
+            model, steady.gain, steady.innovation_cov, settings.glr_window, threshold, isolation
+        )
         return Method(kf, kf0, det, _innovation, settings.glr_estimate_delay, "GLRT")
 
     bonferroni = _bonferroni_threshold(settings)
@@ -235,9 +270,20 @@ def engine_methods(settings: EngineSettings = EngineSettings()) -> dict[str, Met
 
 def run_monitor(method: Method, model, us, key, f, keep_history=False):
     """One run of ``method`` on the engine with fault ``f`` (``monitor``: plant, filter, detector)."""
-    return monitor(linear_simulator(model, f), method.filter, method.detector, jnp.zeros(7), method.init_state,
-                   us, key, f.onset, keep_history, method.detector_input, method.estimate_delay,
-                   sensor_labels(*model.dims[1:]))
+    return monitor(
+        linear_simulator(model, f),
+        method.filter,
+        method.detector,
+        jnp.zeros(7),
+        method.init_state,
+        us,
+        key,
+        f.onset,
+        keep_history,
+        method.detector_input,
+        method.estimate_delay,
+        sensor_labels(*model.dims[1:]),
+    )
 
 
 class ScenarioRuns(NamedTuple):
@@ -258,7 +304,9 @@ class ScenarioRuns(NamedTuple):
     keys: jax.Array
 
 
-def scenario_runs(runs: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> ScenarioRuns:
+def scenario_runs(
+    runs: int, seed: int, duration: float = 4.0, onset_time: float = 2.0
+) -> ScenarioRuns:
     """``runs`` of each engine case (fault-major) with inputs and keys; every engine study, tuning and
     evaluation starts here. Needs float64 (``jaxfdi.enable_x64()``; the CLI enables it)."""
     require_x64("engine scenarios (the engine model is stiff)")
@@ -285,7 +333,9 @@ class LabelledRuns(NamedTuple):
     fault: jax.Array
 
 
-def labelled_runs(runs_per_fault: int, seed: int, duration: float = 4.0, onset_time: float = 2.0) -> LabelledRuns:
+def labelled_runs(
+    runs_per_fault: int, seed: int, duration: float = 4.0, onset_time: float = 2.0
+) -> LabelledRuns:
     """``runs_per_fault`` simulated runs of each engine case, fault-major."""
     model, us, faults, batch, keys = scenario_runs(runs_per_fault, seed, duration, onset_time)
 
@@ -314,41 +364,78 @@ def balanced_batches(data: LabelledRuns, runs_per_fault: int, batch_runs: int, k
     return batch
 
 
-def training_data(train_runs: int, val_runs: int, batch_runs: int, seed: int, steps: int, learning_rate: float):
+def training_data(
+    train_runs: int, val_runs: int, batch_runs: int, seed: int, steps: int, learning_rate: float
+):
     """``(batches, val)`` for ``tuning.fit`` after checking the sizes: labelled runs of
     ``seed`` served as ``balanced_batches``, validation runs of ``seed + 1``."""
-    check_study(train_runs, seed, steps=steps, val_runs=val_runs, batch_runs=batch_runs, runs_name="train_runs")
+    check_study(
+        train_runs,
+        seed,
+        steps=steps,
+        val_runs=val_runs,
+        batch_runs=batch_runs,
+        runs_name="train_runs",
+    )
     _checks.check_positive("learning_rate", learning_rate, "a positive learning rate")
     train = labelled_runs(train_runs, seed)
-    return balanced_batches(train, train_runs, batch_runs, jax.random.key(seed)), labelled_runs(val_runs, seed + 1)
+    return balanced_batches(train, train_runs, batch_runs, jax.random.key(seed)), labelled_runs(
+        val_runs, seed + 1
+    )
 
 
-def hand_tuned_table(hand_rows: list[dict], tuned_rows: list[dict], labels: tuple[str, str], names: tuple[str, str],
-                     footer: str, isolation: bool = True) -> str:
+def hand_tuned_table(
+    hand_rows: list[dict],
+    tuned_rows: list[dict],
+    labels: tuple[str, str],
+    names: tuple[str, str],
+    footer: str,
+    isolation: bool = True,
+) -> str:
     """Hand-set beside tuned rows (``metrics.fault_row``) per fault: detection (isolation) and ``FA`` (pre-onset alarm)
     rates, delays over ``clean`` runs; ``footer``, then each side's ``unhealthy_rows_warning`` under its ``names``."""
     width = max(6, *map(len, labels))
-    head = (f"{'fault':<9} {'':<{width}} {'det':>5} " + (f"{'iso':>5} " if isolation else "")
-            + f"{'FA':>5} {'clean':>5} {'mean [s]':>8} {'delay med [s]':>13} {'p90 [s]':>8}")
+    head = (
+        f"{'fault':<9} {'':<{width}} {'det':>5} "
+        + (f"{'iso':>5} " if isolation else "")
+        + f"{'FA':>5} {'clean':>5} {'mean [s]':>8} {'delay med [s]':>13} {'p90 [s]':>8}"
+    )
     lines = [head, "-" * len(head)]
     rates = ("detection_rate",) + (("isolation_rate",) if isolation else ()) + ("false_alarm_rate",)
     for pair in zip(hand_rows, tuned_rows):
         for label, r in zip(labels, pair):
             clean = "-" if r["fault"] == "none" else r.get("clean_runs", "-")
-            lines.append(f"{r['fault']:<9} {label:<{width}} {' '.join(cell(r[k], '.2f', 5) for k in rates)} "
-                         f"{clean:>5} {cell(r.get('delay_mean_s'), '.3f', 8)} {cell(r['delay_median_s'], '.3f', 13)} "
-                         f"{cell(r['delay_p90_s'], '.3f', 8)}")
-    warnings = [unhealthy_rows_warning(rows, name) for rows, name in zip((hand_rows, tuned_rows), names)]
+            lines.append(
+                f"{r['fault']:<9} {label:<{width}} {' '.join(cell(r[k], '.2f', 5) for k in rates)} "
+                f"{clean:>5} {cell(r.get('delay_mean_s'), '.3f', 8)} {cell(r['delay_median_s'], '.3f', 13)} "
+                f"{cell(r['delay_p90_s'], '.3f', 8)}"
+            )
+    warnings = [
+        unhealthy_rows_warning(rows, name) for rows, name in zip((hand_rows, tuned_rows), names)
+    ]
     return "\n".join(lines + [footer] + [w for w in warnings if w])
 
 
-def run_method(method: Method, runs: int, seed: int = 0, duration: float = 4.0, onset_time: float = 2.0,
-               chunk_size: int = 1024, progress: bool = False) -> DetectionRecord:
+def run_method(
+    method: Method,
+    runs: int,
+    seed: int = 0,
+    duration: float = 4.0,
+    onset_time: float = 2.0,
+    chunk_size: int = 1024,
+    progress: bool = False,
+) -> DetectionRecord:
     """Records of ``runs`` runs of each engine fault and fault-free, fault-major (``engine_faults``);
     run ``i`` has the same key (noise) for every method."""
     model, us, faults, batch, _ = scenario_runs(runs, seed, duration, onset_time)
-    return monte_carlo(lambda key, f: run_monitor(method, model, us, key, f).record, jax.random.key(seed),
-                       len(faults) * runs, batch, chunk_size=chunk_size, progress=progress)
+    return monte_carlo(
+        lambda key, f: run_monitor(method, model, us, key, f).record,
+        jax.random.key(seed),
+        len(faults) * runs,
+        batch,
+        chunk_size=chunk_size,
+        progress=progress,
+    )
 
 
 #: sensor-health cases beside the paper's six: P2 dead (NaN from the onset) and frozen (onset value
@@ -365,50 +452,76 @@ def study_faults(onset_step: int) -> tuple[list[str], list[Fault]]:
 
 
 @functools.lru_cache(maxsize=4)
-def _fault_cases(x64: bool, health: bool) -> tuple[tuple[str, ...], tuple[float, ...], tuple[int, ...]]:
+def _fault_cases(
+    x64: bool, health: bool
+) -> tuple[tuple[str, ...], tuple[float, ...], tuple[int, ...]]:
     """The cases' names, magnitudes (NaN for 'none' and sensor-health cases) and labels, cached per
     precision and case set (the threshold search summarises thousands of replays; 8 ms a build)."""
     names, faults = study_faults(0) if health else engine_faults(0)
     sized = [n not in ("none", *HEALTH_CASES) for n in names]
-    return (tuple(names), tuple(float(f.magnitude) if s else float("nan") for s, f in zip(sized, faults)),
-            tuple(int(fault_label(f, 1)) for f in faults))
+    return (
+        tuple(names),
+        tuple(float(f.magnitude) if s else float("nan") for s, f in zip(sized, faults)),
+        tuple(int(fault_label(f, 1)) for f in faults),
+    )
 
 
-def summarize_method(name: str, paper: str | None, records: DetectionRecord, runs: int, steps: int) -> list[dict]:
+def summarize_method(
+    name: str, paper: str | None, records: DetectionRecord, runs: int, steps: int
+) -> list[dict]:
     """One row per case: ``metrics.fault_row``'s columns (delays in s over runs with no pre-onset alarm),
     the paper's mean delay (``PAPER_DELAY[paper]``), the estimate's error. ``records``: ``runs`` of each
     case of ``engine_faults`` (seven) or ``study_faults`` (nine)."""
     x64, cases = bool(jax.config.jax_enable_x64), np.shape(records.onset)[0] // runs
     names, magnitudes, labels = _fault_cases(x64, cases == len(_fault_cases(x64, True)[0]))
     if cases != len(names) or cases * runs != np.shape(records.onset)[0]:
-        raise ValueError(f"records: expected {runs} runs of each of 7 or 9 cases, got {np.shape(records.onset)[0]}")
+        raise ValueError(
+            f"records: expected {runs} runs of each of 7 or 9 cases, got {np.shape(records.onset)[0]}"
+        )
     records = jax.tree_util.tree_map(np.asarray, records)  # one transfer, not one per fault
     rows = []
     for i, (fault_name, magnitude, label) in enumerate(zip(names, magnitudes, labels)):
-        part = jax.tree_util.tree_map(lambda x: x[i * runs:(i + 1) * runs], records)
+        part = jax.tree_util.tree_map(lambda x: x[i * runs : (i + 1) * runs], records)
         faulty = fault_name != "none"
         columns = fault_row(part, steps, TS, label=label if faulty else None)
         healthy = part.first_unhealthy < 0  # unhealthy runs: counted apart, in no rate
         correct = part.isolated[healthy] == label
-        estimates = part.estimate[healthy][correct] if faulty and magnitude == magnitude else np.zeros(0)
+        estimates = (
+            part.estimate[healthy][correct] if faulty and magnitude == magnitude else np.zeros(0)
+        )
         estimates = estimates[np.isfinite(estimates)]
         estimate = float(np.median(estimates)) if estimates.size else float("nan")
-        paper_delay = PAPER_DELAY[paper][i] if (faulty and paper and i < len(PAPER_DELAY[paper])) else float("nan")
-        rows.append({
-            "method": name, "fault": fault_name, "magnitude": magnitude, "runs": columns["runs"],
-            "detection_rate": columns["detection_rate"],
-            "isolation_rate": float(np.mean(correct)) if faulty and correct.size else float("nan"),
-            "false_alarm_rate": columns["false_alarm_rate"],
-            "false_alarm_steps_per_run": float(np.mean(part.false_alarms[healthy])) if healthy.any() else float("nan"),
-            "delay_median_s": columns["delay_median_s"], "delay_p90_s": columns["delay_p90_s"],
-            "paper_delay_s": paper_delay,
-            "estimate_median": estimate,
-            "estimate_error": (estimate - magnitude) / magnitude if faulty else float("nan"),
-            "unhealthy_runs": columns["unhealthy_runs"],
-            "pre_onset_alarm_rate": columns["pre_onset_alarm_rate"] if faulty else float("nan"),
-            "clean_runs": columns["clean_runs"], "delay_runs": columns["delay_runs"],
-            "delay_mean_s": columns["delay_mean_s"],
-        })
+        paper_delay = (
+            PAPER_DELAY[paper][i]
+            if (faulty and paper and i < len(PAPER_DELAY[paper]))
+            else float("nan")
+        )
+        rows.append(
+            {
+                "method": name,
+                "fault": fault_name,
+                "magnitude": magnitude,
+                "runs": columns["runs"],
+                "detection_rate": columns["detection_rate"],
+                "isolation_rate": float(np.mean(correct))
+                if faulty and correct.size
+                else float("nan"),
+                "false_alarm_rate": columns["false_alarm_rate"],
+                "false_alarm_steps_per_run": float(np.mean(part.false_alarms[healthy]))
+                if healthy.any()
+                else float("nan"),
+                "delay_median_s": columns["delay_median_s"],
+                "delay_p90_s": columns["delay_p90_s"],
+                "paper_delay_s": paper_delay,
+                "estimate_median": estimate,
+                "estimate_error": (estimate - magnitude) / magnitude if faulty else float("nan"),
+                "unhealthy_runs": columns["unhealthy_runs"],
+                "pre_onset_alarm_rate": columns["pre_onset_alarm_rate"] if faulty else float("nan"),
+                "clean_runs": columns["clean_runs"],
+                "delay_runs": columns["delay_runs"],
+                "delay_mean_s": columns["delay_mean_s"],
+            }
+        )
     return rows
 
 
@@ -432,8 +545,10 @@ class EngineStudy(NamedTuple):
         """Per method over the six faults: worst detection and isolation rates, false-alarm rates, largest
         median delay, worst-isolated fault."""
         width = max(26, *(len(name) for name in self.records))
-        head = (f"{'method':<{width}} {'min det':>7} {'min iso':>7} {'FA (no fault)':>13} {'FA (all)':>8} "
-                f"{'max med delay [s]':>17}  worst-isolated")
+        head = (
+            f"{'method':<{width}} {'min det':>7} {'min iso':>7} {'FA (no fault)':>13} {'FA (all)':>8} "
+            f"{'max med delay [s]':>17}  worst-isolated"
+        )
         lines = [head, "-" * len(head)]
         for name in self.records:
             rows = [r for r in self.rows if r["method"] == name]
@@ -453,8 +568,10 @@ class EngineStudy(NamedTuple):
         ``pre-FA``: runs alarming before the onset (``none``: every alarm); ``clean``: the others, whose
         delays count (mean, median, p90). Rates with 95 % Clopper-Pearson intervals (``metrics.rate_cell``)
         over the ``n`` healthy runs."""
-        head = (f"{'fault':<9} {'n':>5} {'det [95 %]':>16} {'iso [95 %]':>16} {'pre-FA [95 %]':>16} {'clean':>5} "
-                f"{'delay mean':>10} {'paper':>6} {'med':>6} {'p90':>6} {'estimate':>10} {'true':>9} {'err %':>6}")
+        head = (
+            f"{'fault':<9} {'n':>5} {'det [95 %]':>16} {'iso [95 %]':>16} {'pre-FA [95 %]':>16} {'clean':>5} "
+            f"{'delay mean':>10} {'paper':>6} {'med':>6} {'p90':>6} {'estimate':>10} {'true':>9} {'err %':>6}"
+        )
 
         blocks = []
         for name in self.records:
@@ -536,16 +653,27 @@ class BiasFilter(NamedTuple):
 
 def _mode_rule(settings: EngineSettings, confirm) -> ModeRule:
     M = len(MODE_NAMES)
-    return ModeRule(np.full(M, settings.mu_threshold), np.broadcast_to(np.asarray(confirm, np.int32), (M,)).copy())
+    return ModeRule(
+        np.full(M, settings.mu_threshold),
+        np.broadcast_to(np.asarray(confirm, np.int32), (M,)).copy(),
+    )
 
 
 def _stack(items):
-    return jax.tree_util.tree_map(lambda *leaves: np.stack([np.asarray(leaf) for leaf in leaves]), *items)
+    return jax.tree_util.tree_map(
+        lambda *leaves: np.stack([np.asarray(leaf) for leaf in leaves]), *items
+    )
 
 
 @functools.lru_cache(maxsize=16)
-def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_estimate_delay: int,
-                    unrolled: bool, kernel: bool) -> dict:
+def _structure_runs(
+    steps: int,
+    glr_window: int,
+    bias_estimate_delay: int,
+    glr_estimate_delay: int,
+    unrolled: bool,
+    kernel: bool,
+) -> dict:
     """The structures' run functions (``study.Structure.run``), one object per static setting so studies
     of these sizes reuse their programs. Each returns ``(DetectionRecord, trace)``; the trace (mode
     probabilities; per-direction GLR) is averaged per fault for the figures."""
@@ -557,67 +685,112 @@ def _structure_runs(steps: int, glr_window: int, bias_estimate_delay: int, glr_e
     mode_kf = functools.partial(kalman_filter, unroll_factorizations=unrolled)
 
     def bank(modes, mixing, imm):
-        return (interacting_multiple_model(mode_kf, modes, mixing) if imm
-                else multiple_model(mode_kf, modes, mixing))
+        return (
+            interacting_multiple_model(mode_kf, modes, mixing)
+            if imm
+            else multiple_model(mode_kf, modes, mixing)
+        )
 
     def mode_bank(design: str, filt: ZhangLiFilter | BiasFilter):
         """A design's mode models, prior, detector input and estimate delay."""
         if design == "zhang-li":
-            return noise_inflation_modes(model, filt.sensor_inflation, filt.actuator_noise), (x0, P0), _mode_prob, 0
-        return (bias_modes(model, filt.bias_walk, filt.bias_prior),
-                bias_mode_initial_state(model, x0, P0, filt.bias_prior), _bias_estimates, bias_estimate_delay)
+            return (
+                noise_inflation_modes(model, filt.sensor_inflation, filt.actuator_noise),
+                (x0, P0),
+                _mode_prob,
+                0,
+            )
+        return (
+            bias_modes(model, filt.bias_walk, filt.bias_prior),
+            bias_mode_initial_state(model, x0, P0, filt.bias_prior),
+            _bias_estimates,
+            bias_estimate_delay,
+        )
 
     def mode_run(design: str, imm: bool):
         def run(key, f, filt: ZhangLiFilter | BiasFilter, rule: ModeRule):
             modes, prior, detector_input, delay = mode_bank(design, filt)
-            method = Method(bank(modes, filt.mixing, imm), None,
-                            mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps),
-                            detector_input, delay)
+            method = Method(
+                bank(modes, filt.mixing, imm),
+                None,
+                mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps),
+                detector_input,
+                delay,
+            )
             method = method._replace(init_state=method.filter.init(*prior, mu0))
             result = run_monitor(method, model, us, key, f, keep_history=imm)
             return (result.record, result.history.info.mode_prob) if imm else result.record
+
         return run
 
     def imm_chunk(design: str):
         """The IMM structures over a chunk: plant per run, the bank through its structure-of-arrays kernel
         (``run_filter``), each rule replayed on the stored mode probabilities and health: ``monitor``'s
         records to round-off (the kernel's covariance update is the standard form)."""
+
         def run(keys, faults, filt: ZhangLiFilter | BiasFilter, rule: ModeRule):
             modes, prior, detector_input, delay = mode_bank(design, filt)
             imm = interacting_multiple_model(kalman_filter, modes, filt.mixing)
-            ys = jax.vmap(lambda k, f: simulate(linear_simulator(model, f), x0, us, k)[1].measurement)(keys, faults)
+            ys = jax.vmap(
+                lambda k, f: simulate(linear_simulator(model, f), x0, us, k)[1].measurement
+            )(keys, faults)
             _, info = run_filter(imm, imm.init(*prior, mu0), ys, us)
             detector = mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps)
             inputs = jax.vmap(jax.vmap(detector_input))(info)
-            records = jax.vmap(lambda x, onset, ok, dead: replay_detector(detector, x, onset, delay, ok, dead,
-                                                                          sensor_labels(*model.dims[1:])))(
-                inputs, faults.onset, info.healthy, info.dead)
+            records = jax.vmap(
+                lambda x, onset, ok, dead: replay_detector(
+                    detector, x, onset, delay, ok, dead, sensor_labels(*model.dims[1:])
+                )
+            )(inputs, faults.onset, info.healthy, info.dead)
             return records, info.mode_prob
+
         return run
 
     steady = steady_state_kalman(model)
-    glr_setup = detector_setup(model, steady.gain, steady.innovation_cov, glr_window, PAPER_USED_THRESHOLD, "max",
-                               False, -1)
+    glr_setup = detector_setup(
+        model,
+        steady.gain,
+        steady.innovation_cov,
+        glr_window,
+        PAPER_USED_THRESHOLD,
+        "max",
+        False,
+        -1,
+    )
     kf = kalman_filter(model, unroll_factorizations=unrolled)
     kf0 = kf.init(x0, steady.predicted_cov)  # the GLR signatures assume the steady-state gain
 
     def glrt_run(key, f, rule: GLRTRule):
-        detector = glrt_detector(model, steady.gain, steady.innovation_cov, glr_window, rule.threshold,
-                                 rule.paper_isolation)
+        detector = glrt_detector(
+            model,
+            steady.gain,
+            steady.innovation_cov,
+            glr_window,
+            rule.threshold,
+            rule.paper_isolation,
+        )
         method = Method(kf, kf0, detector, _innovation, glr_estimate_delay)
         result = run_monitor(method, model, us, key, f, keep_history=True)
         # every direction's GLR per step, for the figure (the detector keeps only the largest)
         return result.record, glr_sequence(glr_setup, result.history.info.innovation).statistic
 
-    return {"MM (Zhang & Li modes)": mode_run("zhang-li", False),
-            "IMM (Zhang & Li modes)": imm_chunk("zhang-li") if kernel else mode_run("zhang-li", True),
-            "MM (bias modes)": mode_run("bias", False),
-            "IMM (bias modes)": imm_chunk("bias") if kernel else mode_run("bias", True), "GLRT": glrt_run}
+    return {
+        "MM (Zhang & Li modes)": mode_run("zhang-li", False),
+        "IMM (Zhang & Li modes)": imm_chunk("zhang-li") if kernel else mode_run("zhang-li", True),
+        "MM (bias modes)": mode_run("bias", False),
+        "IMM (bias modes)": imm_chunk("bias") if kernel else mode_run("bias", True),
+        "GLRT": glrt_run,
+    }
 
 
-def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] | None = None,
-                duration: float = 4.0, onset_time: float = 2.0, unrolled: bool = False,
-                kernel: bool = True) -> Study:
+def engine_spec(
+    settings: EngineSettings = EngineSettings(),
+    methods: list[str] | None = None,
+    duration: float = 4.0,
+    onset_time: float = 2.0,
+    unrolled: bool = False,
+    kernel: bool = True,
+) -> Study:
     """The engine study as data (``jaxfdi._study``): the nine ``study_faults`` and every method of
     ``engine_method_names`` (or ``methods``) in five structures, one compiled program each (MMs and
     IMMs per mode design, GLRTs); methods are cells of a (filter x decision rule) grid, IMMs sharing a
@@ -638,45 +811,88 @@ def engine_spec(settings: EngineSettings = EngineSettings(), methods: list[str] 
     chosen = names if methods is None else list(methods)
     unknown = [m for m in chosen if m not in names]
     if unknown or not chosen:
-        raise ValueError(f"methods: expected a non-empty list of names from {names}, got unknown {unknown or 'none'}")
+        raise ValueError(
+            f"methods: expected a non-empty list of names from {names}, got unknown {unknown or 'none'}"
+        )
     steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
-    runs = _structure_runs(steps, settings.glr_window, settings.bias_estimate_delay, settings.glr_estimate_delay,
-                           bool(unrolled), bool(kernel))
+    runs = _structure_runs(
+        steps,
+        settings.glr_window,
+        settings.bias_estimate_delay,
+        settings.glr_estimate_delay,
+        bool(unrolled),
+        bool(kernel),
+    )
     hand = sticky_transition(len(MODE_NAMES), settings.to_fault, settings.stay)
     paper_rule = _mode_rule(settings, 1)
-    zl = [ZhangLiFilter(np.float64(settings.mm_floor), settings.sensor_inflation, settings.actuator_noise)]
-    zl_imm = [ZhangLiFilter(m, settings.sensor_inflation, settings.actuator_noise) for m in (PAPER_TRANSITION, hand)]
+    zl = [
+        ZhangLiFilter(
+            np.float64(settings.mm_floor), settings.sensor_inflation, settings.actuator_noise
+        )
+    ]
+    zl_imm = [
+        ZhangLiFilter(m, settings.sensor_inflation, settings.actuator_noise)
+        for m in (PAPER_TRANSITION, hand)
+    ]
     walk, prior = np.asarray(settings.bias_walk), np.asarray(settings.bias_prior)
     bias_mm = [BiasFilter(np.float64(settings.mm_floor), walk, prior)]
     bias_imm = [BiasFilter(m, walk, prior) for m in (PAPER_TRANSITION, hand)]
-    rules = [paper_rule, _mode_rule(settings, settings.confirm_steps),
-             _mode_rule(settings, settings.mode_confirm_steps)]
+    rules = [
+        paper_rule,
+        _mode_rule(settings, settings.confirm_steps),
+        _mode_rule(settings, settings.mode_confirm_steps),
+    ]
     bonferroni = _bonferroni_threshold(settings)
-    glrt_rules = [GLRTRule(np.float64(t), np.bool_(p)) for t, p in
-                  ((settings.glr_threshold, False), (bonferroni, False), (bonferroni, True))]
+    glrt_rules = [
+        GLRTRule(np.float64(t), np.bool_(p))
+        for t, p in ((settings.glr_threshold, False), (bonferroni, False), (bonferroni, True))
+    ]
     n = dict(enumerate(names))
     grids = [
         ("MM (Zhang & Li modes)", (_stack(zl), _stack([paper_rule])), {n[0]: (0, 0)}),
-        ("IMM (Zhang & Li modes)", (_stack(zl_imm), _stack([paper_rule])), {n[1]: (0, 0), n[2]: (1, 0)}),
+        (
+            "IMM (Zhang & Li modes)",
+            (_stack(zl_imm), _stack([paper_rule])),
+            {n[1]: (0, 0), n[2]: (1, 0)},
+        ),
         ("MM (bias modes)", (_stack(bias_mm), _stack([paper_rule])), {n[3]: (0, 0)}),
-        ("IMM (bias modes)", (_stack(bias_imm), _stack(rules)),
-         {n[4]: (0, 0), n[5]: (1, 0), n[6]: (1, 1), n[7]: (1, 2)}),
+        (
+            "IMM (bias modes)",
+            (_stack(bias_imm), _stack(rules)),
+            {n[4]: (0, 0), n[5]: (1, 0), n[6]: (1, 1), n[7]: (1, 2)},
+        ),
         ("GLRT", (_stack(glrt_rules),), {n[8]: (0,), n[9]: (1,), n[10]: (2,)}),
     ]
     structures = []
     for name, axes, cells in grids:
         cells = {m: c for m, c in cells.items() if m in chosen}
         if cells:
-            structures.append(Structure(name, runs[name], axes, cells, averaged=name.startswith(("IMM", "GLRT")),
-                                        batched=kernel and name.startswith("IMM")))
+            structures.append(
+                Structure(
+                    name,
+                    runs[name],
+                    axes,
+                    cells,
+                    averaged=name.startswith(("IMM", "GLRT")),
+                    batched=kernel and name.startswith("IMM"),
+                )
+            )
     fault_names, faults = study_faults(onset)
     return Study("engine", stack_faults(faults), tuple(fault_names), tuple(structures))
 
 
-def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = EngineSettings(),
-                 methods: list[str] | None = None, duration: float = 4.0, onset_time: float = 2.0,
-                 progress: bool = False, chunk_size: int | None = None, unrolled: bool = False,
-                 kernel: bool = True) -> EngineStudy:
+def engine_study(
+    runs: int = 100,
+    seed: int = 0,
+    settings: EngineSettings = EngineSettings(),
+    methods: list[str] | None = None,
+    duration: float = 4.0,
+    onset_time: float = 2.0,
+    progress: bool = False,
+    chunk_size: int | None = None,
+    unrolled: bool = False,
+    kernel: bool = True,
+) -> EngineStudy:
     """Run every method (or ``methods``) on the same ``runs`` runs per fault (``engine_spec`` through
     ``study.run_study``: five programs; figure means averaged on the device). Needs float64
     (``jaxfdi.enable_x64()``): the engine is stiff.
@@ -691,12 +907,18 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
     require_x64("engine_study (the engine model is stiff)")
     check_study(runs, seed)
     spec = engine_spec(settings, methods, duration, onset_time, unrolled, kernel)
-    chosen = [m for m in engine_method_names(settings) if any(m in s.methods for s in spec.structures)]
+    chosen = [
+        m for m in engine_method_names(settings) if any(m in s.methods for s in spec.structures)
+    ]
     result = run_study(spec, runs, seed, progress=progress, chunk_size=chunk_size)
     steps = int(round(duration / TS))
     paper = {name: method_paper(name) for name in chosen}
     records = {name: result.outputs[name] for name in chosen}
-    rows = [row for name in chosen for row in summarize_method(name, paper[name], records[name], runs, steps)]
+    rows = [
+        row
+        for name in chosen
+        for row in summarize_method(name, paper[name], records[name], runs, steps)
+    ]
     figures = {}
     for name in ("IMM", confirmed_name(settings)):
         if name in result.means:
@@ -706,13 +928,23 @@ def engine_study(runs: int = 100, seed: int = 0, settings: EngineSettings = Engi
         figures["glr"] = result.means[glrt_name]
     bonferroni = _bonferroni_threshold(settings)
     config = {
-        "scenario": "engine", "runs_per_fault": runs, "seed": seed, "Ts": TS, "steps": steps,
+        "scenario": "engine",
+        "runs_per_fault": runs,
+        "seed": seed,
+        "Ts": TS,
+        "steps": steps,
         "cases": list(spec.case_names),
-        "onset_step": int(round(onset_time / TS)), "fuel_step": FUEL_STEP, "methods": chosen,
-        "settings": settings._asdict(), "paper_transition": PAPER_TRANSITION.tolist(),
-        "hand_transition": sticky_transition(len(MODE_NAMES), settings.to_fault, settings.stay).tolist(),
+        "onset_step": int(round(onset_time / TS)),
+        "fuel_step": FUEL_STEP,
+        "methods": chosen,
+        "settings": settings._asdict(),
+        "paper_transition": PAPER_TRANSITION.tolist(),
+        "hand_transition": sticky_transition(
+            len(MODE_NAMES), settings.to_fault, settings.stay
+        ).tolist(),
         "glr_threshold_theory": float(glrt_threshold(0.005, 6, settings.glr_window)),
-        "glr_threshold_bonferroni": bonferroni, "figure_runs": runs,
+        "glr_threshold_bonferroni": bonferroni,
+        "figure_runs": runs,
         "programs": {s.name: sorted(s.methods, key=chosen.index) for s in spec.structures},
         "seconds": {"structures": result.seconds, "compile": result.compile_seconds},
     }
@@ -736,37 +968,65 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
     prob_keys = [k for k in study.figures if k.startswith("mode_prob/")]
     if prob_keys:
         # per mode design: the six faults as a 2 x 3 block of panels, the designs one under the other
-        fig, axes = column_subplots(3.3 * len(prob_keys) + 0.6, 2 * len(prob_keys), 3, sharex=True, sharey=True,
-                                    squeeze=False)
+        fig, axes = column_subplots(
+            3.3 * len(prob_keys) + 0.6,
+            2 * len(prob_keys),
+            3,
+            sharex=True,
+            sharey=True,
+            squeeze=False,
+        )
         for d, key in enumerate(prob_keys):
-            block = axes[2 * d:2 * d + 2].flat
+            block = axes[2 * d : 2 * d + 2].flat
             for i, ax in enumerate(block):
                 for j, mode in enumerate(MODE_NAMES):
-                    ax.plot(t, study.figures[key][i, :, j], color=colors[mode], lw=1.4 if j in (0, i + 1) else 0.6,
-                            label=mode)
-                ax.axhline(cfg["settings"]["mu_threshold"], color="k", ls="--", lw=0.8, label="mu_T")
+                    ax.plot(
+                        t,
+                        study.figures[key][i, :, j],
+                        color=colors[mode],
+                        lw=1.4 if j in (0, i + 1) else 0.6,
+                        label=mode,
+                    )
+                ax.axhline(
+                    cfg["settings"]["mu_threshold"], color="k", ls="--", lw=0.8, label="mu_T"
+                )
                 ax.set_title(f"{fault_names[i]} fault")
-            for ax in axes[2 * d:2 * d + 2, 0]:
-                ax.set_ylabel("\n".join(textwrap.wrap(key.split("/", 1)[1], 18)) + "\nmode probability", fontsize=8)
+            for ax in axes[2 * d : 2 * d + 2, 0]:
+                ax.set_ylabel(
+                    "\n".join(textwrap.wrap(key.split("/", 1)[1], 18)) + "\nmode probability",
+                    fontsize=8,
+                )
         for ax in axes[-1]:
             ax.set_xlabel("time [s]")
         handles, labels = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="outside upper center", ncol=len(labels))
-        save(fig, "engine-mode-probabilities.png",
-             f"Mean mode probabilities over {cfg['figure_runs']} runs per fault (Han et al. 2022, Figs. 3-1 "
-             "and 3-2, show one run), the fault at 2 s, mu_T dashed; the true fault's mode and the normal mode drawn "
-             "thick. Sensor faults are 0.5 % of the operating point "
-             "(the spec's reading); at that size P2's fault is 3.4 noise sigmas and its mode rises slowly, "
-             "where the paper's Table 3 has it at once: the paper's faults are about 9-12 sigmas (docs/papers/engine.md).")
+        save(
+            fig,
+            "engine-mode-probabilities.png",
+            f"Mean mode probabilities over {cfg['figure_runs']} runs per fault (Han et al. 2022, Figs. 3-1 "
+            "and 3-2, show one run), the fault at 2 s, mu_T dashed; the true fault's mode and the normal mode drawn "
+            "thick. Sensor faults are 0.5 % of the operating point "
+            "(the spec's reading); at that size P2's fault is 3.4 noise sigmas and its mode rises slowly, "
+            "where the paper's Table 3 has it at once: the paper's faults are about 9-12 sigmas "
+            "(docs/papers/engine.md).",
+        )
 
     if "glr" in study.figures:
         fig, axes = column_subplots(6.6, 3, 2, sharex=True, sharey=True)
         for i, ax in enumerate(axes.flat):
             for j, direction in enumerate(MODE_NAMES[1:]):
-                ax.semilogy(t, np.maximum(study.figures["glr"][i, :, j], 1e-2), color=colors[direction],
-                            lw=1.4 if j == i else 0.6, label=direction)
-            for value, style in ((cfg["settings"]["glr_threshold"], "--"), (cfg["glr_threshold_theory"], ":"),
-                                 (cfg["glr_threshold_bonferroni"], "-.")):
+                ax.semilogy(
+                    t,
+                    np.maximum(study.figures["glr"][i, :, j], 1e-2),
+                    color=colors[direction],
+                    lw=1.4 if j == i else 0.6,
+                    label=direction,
+                )
+            for value, style in (
+                (cfg["settings"]["glr_threshold"], "--"),
+                (cfg["glr_threshold_theory"], ":"),
+                (cfg["glr_threshold_bonferroni"], "-."),
+            ):
                 ax.axhline(value, color="k", ls=style, lw=0.8, label=f"l_T = {value:.1f}")
             ax.set_title(f"{fault_names[i]} fault")
         for ax in axes[:, 0]:
@@ -775,14 +1035,22 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
             ax.set_xlabel("time [s]")
         handles, labels = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="outside upper center", ncol=5)
-        save(fig, "engine-glrt.png",
-             f"Mean GLR per fault direction over {cfg['figure_runs']} runs per fault (Han et al. 2022, Fig. 4, "
-             "shows one run), with the paper's l_T = 200, the theoretical 91.95 and our Bonferroni threshold. At the "
-             "spec's 0.5 % the P2 and P4 GLRs level off near 50 and 90, below 200, where the paper detects them "
-             "in 0.06 and 0.04 s: its faults are about 9-12 noise sigmas (docs/papers/engine.md).")
+        save(
+            fig,
+            "engine-glrt.png",
+            f"Mean GLR per fault direction over {cfg['figure_runs']} runs per fault (Han et al. 2022, Fig. 4, "
+            "shows one run), with the paper's l_T = 200, the theoretical 91.95 and our Bonferroni threshold. At the "
+            "spec's 0.5 % the P2 and P4 GLRs level off near 50 and 90, below 200, where the paper detects them "
+            "in 0.06 and 0.04 s: its faults are about 9-12 noise sigmas (docs/papers/engine.md).",
+        )
 
-    with_estimates = [m for m in study.records if any(
-        r["method"] == m and r["estimate_median"] == r["estimate_median"] for r in study.rows)]
+    with_estimates = [
+        m
+        for m in study.records
+        if any(
+            r["method"] == m and r["estimate_median"] == r["estimate_median"] for r in study.rows
+        )
+    ]
     if with_estimates:
         runs = cfg["runs_per_fault"]
         fig, axes = column_subplots(0.5 * len(with_estimates) + 2.6, 2, 3, sharex=True, sharey=True)
@@ -792,7 +1060,9 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
             for m in with_estimates:
                 rec = study.records[m]
                 part = slice(i * runs, (i + 1) * runs)
-                ok = (np.asarray(rec.isolated)[part] == i + 1) & np.isfinite(np.asarray(rec.estimate)[part])
+                ok = (np.asarray(rec.isolated)[part] == i + 1) & np.isfinite(
+                    np.asarray(rec.estimate)[part]
+                )
                 data.append(np.asarray(rec.estimate)[part][ok] / float(true))
             ax.boxplot(data, orientation="horizontal", tick_labels=with_estimates)
             ax.axvline(1.0, color="k", lw=0.8)
@@ -802,11 +1072,14 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
             ax.set_xlabel("estimate / true size")
         for ax in axes[:, 0]:
             ax.set_ylabel("method")
-        save(fig, "engine-estimates.png",
-             f"Fault-size estimates over the correctly isolated runs of {runs} runs per fault, divided by the true size "
-             "(1 = right), for the "
-             "methods that estimate one. The paper reports the GLRT's estimates without numbers and says the IMM "
-             "cannot estimate a size; the bias-mode IMMs here do.")
+        save(
+            fig,
+            "engine-estimates.png",
+            f"Fault-size estimates over the correctly isolated runs of {runs} runs per fault, divided by the true size "
+            "(1 = right), for the "
+            "methods that estimate one. The paper reports the GLRT's estimates without numbers and says the IMM "
+            "cannot estimate a size; the bias-mode IMMs here do.",
+        )
     return paths
 
 
@@ -840,8 +1113,14 @@ def _matched_size(sizes, delays, paper: float) -> float:
     return float("nan")
 
 
-def fault_size_study(runs: int = 100, seed: int = 0, fnr=SIZE_FNR, actuator=SIZE_ACTUATOR, methods=SIZE_METHODS,
-                     progress: bool = False) -> FaultSizeStudy:
+def fault_size_study(
+    runs: int = 100,
+    seed: int = 0,
+    fnr=SIZE_FNR,
+    actuator=SIZE_ACTUATOR,
+    methods=SIZE_METHODS,
+    progress: bool = False,
+) -> FaultSizeStudy:
     """Each method's mean delay (clean runs) against fault size: sensors on fault-to-noise ratios ``fnr``
     (``k sigma_j``, the output's noise std), the actuator on ``actuator`` (multiples of 0.0005 kg/s), the spec's "0.5 %"
     beside; per method and fault the size matching Table 3's delay (``_matched_size``), and the GLRT's settled reading:
@@ -850,90 +1129,184 @@ def fault_size_study(runs: int = 100, seed: int = 0, fnr=SIZE_FNR, actuator=SIZE
     check_study(runs, seed)
     fnr, actuator = tuple(float(v) for v in fnr), tuple(float(v) for v in actuator)
     if len(fnr) != len(actuator) or len(fnr) < 2:
-        raise ValueError(f"fnr, actuator: expected two grids of the same length >= 2, got {len(fnr)} and {len(actuator)}")
+        raise ValueError(
+            f"fnr, actuator: expected two grids of the same length >= 2, got {len(fnr)} and {len(actuator)}"
+        )
     model = engine_model()
     sigma = np.sqrt(np.diag(np.asarray(model.R)))
     onset = 200
     names, paper_faults = engine_faults(onset)
-    points = [("actuator", "grid", a * float(paper_faults[0].magnitude), float("nan")) for a in actuator]
+    points = [
+        ("actuator", "grid", a * float(paper_faults[0].magnitude), float("nan")) for a in actuator
+    ]
     points += [(out, "grid", k * sigma[j], k) for j, out in enumerate(OUTPUT_NAMES) for k in fnr]
-    points += [(name, "0.5 % of the operating point", float(f.magnitude),
-                float(f.magnitude) / sigma[j - 1] if j else float("nan"))
-               for j, (name, f) in enumerate(zip(names[:-1], paper_faults[:-1]))]
+    points += [
+        (
+            name,
+            "0.5 % of the operating point",
+            float(f.magnitude),
+            float(f.magnitude) / sigma[j - 1] if j else float("nan"),
+        )
+        for j, (name, f) in enumerate(zip(names[:-1], paper_faults[:-1]))
+    ]
     points.append(("none", "fault-free", 0.0, float("nan")))
     by_name = dict(zip(names, paper_faults))
-    faults = [by_name[name]._replace(magnitude=jnp.asarray(size, by_name[name].magnitude.dtype))
-              for name, _, size, _ in points]
+    faults = [
+        by_name[name]._replace(magnitude=jnp.asarray(size, by_name[name].magnitude.dtype))
+        for name, _, size, _ in points
+    ]
     spec = engine_spec(methods=list(methods))
-    spec = spec._replace(cases=stack_faults(faults), case_names=tuple(f"{n} {size:.6g}" for n, _, size, _ in points))
+    spec = spec._replace(
+        cases=stack_faults(faults), case_names=tuple(f"{n} {size:.6g}" for n, _, size, _ in points)
+    )
     result = run_study(spec, runs, seed, progress=progress)
     steps = int(round(4.0 / TS))
     rows = []
     for method in methods:
         records = jax.tree_util.tree_map(np.asarray, result.outputs[method])
         for c, (name, point, size, k) in enumerate(points):
-            part = jax.tree_util.tree_map(lambda x: x[c * runs:(c + 1) * runs], records)
+            part = jax.tree_util.tree_map(lambda x: x[c * runs : (c + 1) * runs], records)
             label = int(fault_label(faults[c], 1)) if name != "none" else None
             columns = fault_row(part, steps, TS, label=label)
             index = names.index(name)
             paper = PAPER_DELAY[method_paper(method)][index] if name != "none" else float("nan")
-            rows.append({"case": "point", "method": method, "fault": name, "point": point, "size": size, "fnr": k,
-                         "paper_delay_s": paper, **columns})
+            rows.append(
+                {
+                    "case": "point",
+                    "method": method,
+                    "fault": name,
+                    "point": point,
+                    "size": size,
+                    "fnr": k,
+                    "paper_delay_s": paper,
+                    **columns,
+                }
+            )
     for method in methods:
         for name in names[:-1]:
-            curve = [r for r in rows if r["method"] == method and r["fault"] == name and r["point"] == "grid"]
+            curve = [
+                r
+                for r in rows
+                if r["method"] == method and r["fault"] == name and r["point"] == "grid"
+            ]
             axis = [r["fnr"] if name != "actuator" else a for r, a in zip(curve, actuator)]
-            rows.append({"case": "matched", "method": method, "fault": name, "paper_delay_s": curve[0]["paper_delay_s"],
-                         "unit": "multiple of 0.0005 kg/s" if name == "actuator" else "FNR",
-                         "matched": _matched_size(axis, [r["delay_mean_s"] for r in curve], curve[0]["paper_delay_s"])})
+            rows.append(
+                {
+                    "case": "matched",
+                    "method": method,
+                    "fault": name,
+                    "paper_delay_s": curve[0]["paper_delay_s"],
+                    "unit": "multiple of 0.0005 kg/s" if name == "actuator" else "FNR",
+                    "matched": _matched_size(
+                        axis, [r["delay_mean_s"] for r in curve], curve[0]["paper_delay_s"]
+                    ),
+                }
+            )
     glrt = next((m for m in methods if m.startswith("GLRT")), None)
     if glrt is not None:
-        matched = {r["fault"]: r["matched"] for r in rows
-                   if r["case"] == "matched" and r["method"] == glrt and r["fault"] != "actuator"}
+        matched = {
+            r["fault"]: r["matched"]
+            for r in rows
+            if r["case"] == "matched" and r["method"] == glrt and r["fault"] != "actuator"
+        }
         finite = [v for v in matched.values() if np.isfinite(v)]
-        settled = float(fnr[int(np.argmin(np.abs(np.asarray(fnr) - np.median(finite))))]) if finite else float("nan")
-        rows.append({"case": "reading", "method": glrt, "matched_fnr": matched,
-                     "median_matched_fnr": float(np.median(finite)) if finite else float("nan"), "settled_fnr": settled,
-                     "spec_reading_fnr": {out: float(paper_faults[j + 1].magnitude) / sigma[j]
-                                          for j, out in enumerate(OUTPUT_NAMES)}})
-    config = {"runs": int(runs), "seed": int(seed), "fnr": list(fnr), "actuator_multiples": list(actuator),
-              "sensor_sigma": dict(zip(OUTPUT_NAMES, sigma.tolist())), "methods": list(methods), "onset_step": onset,
-              "paper_delay_s": PAPER_DELAY}
+        settled = (
+            float(fnr[int(np.argmin(np.abs(np.asarray(fnr) - np.median(finite))))])
+            if finite
+            else float("nan")
+        )
+        rows.append(
+            {
+                "case": "reading",
+                "method": glrt,
+                "matched_fnr": matched,
+                "median_matched_fnr": float(np.median(finite)) if finite else float("nan"),
+                "settled_fnr": settled,
+                "spec_reading_fnr": {
+                    out: float(paper_faults[j + 1].magnitude) / sigma[j]
+                    for j, out in enumerate(OUTPUT_NAMES)
+                },
+            }
+        )
+    config = {
+        "runs": int(runs),
+        "seed": int(seed),
+        "fnr": list(fnr),
+        "actuator_multiples": list(actuator),
+        "sensor_sigma": dict(zip(OUTPUT_NAMES, sigma.tolist())),
+        "methods": list(methods),
+        "onset_step": onset,
+        "paper_delay_s": PAPER_DELAY,
+    }
     return FaultSizeStudy(config, rows)
 
 
 def fault_size_table(study: FaultSizeStudy) -> str:
     """The delay curves, matched sizes, and Table 3 at the spec's and the settled reading beside the paper."""
     cfg, rows = study.config, study.rows
-    lines = [f"Delay against fault size, {cfg['runs']} runs per point (mean over the clean runs, s; '-': none detected); "
-             f"sensor faults at k sigma (FNR k), the actuator's at multiples of 0.0005 kg/s"]
+    lines = [
+        f"Delay against fault size, {cfg['runs']} runs per point (mean over the clean runs, s; '-': none detected); "
+        f"sensor faults at k sigma (FNR k), the actuator's at multiples of 0.0005 kg/s"
+    ]
     for method in cfg["methods"]:
         lines.append(f"  {method}: FNR " + " ".join(f"{k:>6g}" for k in cfg["fnr"]) + "   paper")
         for name in ("actuator", *OUTPUT_NAMES):
-            curve = [r for r in rows if r["case"] == "point" and r["method"] == method and r["fault"] == name
-                     and r["point"] == "grid"]
-            lines.append(f"    {name:<9}" + " ".join(cell(r["delay_mean_s"], '.3f', 6) for r in curve)
-                         + f"  {curve[0]['paper_delay_s']:.3f}")
-        lines.append("    matched size (our delay = the paper's): " + ", ".join(
-            f"{r['fault']} {cell(r['matched'], '.2f', 4).strip()}" for r in rows
-            if r["case"] == "matched" and r["method"] == method))
+            curve = [
+                r
+                for r in rows
+                if r["case"] == "point"
+                and r["method"] == method
+                and r["fault"] == name
+                and r["point"] == "grid"
+            ]
+            lines.append(
+                f"    {name:<9}"
+                + " ".join(cell(r["delay_mean_s"], ".3f", 6) for r in curve)
+                + f"  {curve[0]['paper_delay_s']:.3f}"
+            )
+        lines.append(
+            "    matched size (our delay = the paper's): "
+            + ", ".join(
+                f"{r['fault']} {cell(r['matched'], '.2f', 4).strip()}"
+                for r in rows
+                if r["case"] == "matched" and r["method"] == method
+            )
+        )
     for r in (r for r in rows if r["case"] == "reading"):
         spec = ", ".join(f"{k} {v:.1f}" for k, v in r["spec_reading_fnr"].items())
-        lines.append(f"Reading: the spec's \"0.5 % of the operating point\" puts the sensor faults at FNR {spec}; the "
-                     f"paper's {r['method']} delays are met at FNR " + ", ".join(
-                         f"{k} {cell(v, '.1f', 4).strip()}" for k, v in r["matched_fnr"].items())
-                     + f" (median {r['median_matched_fnr']:.1f}): every sensor fault about {r['settled_fnr']:g} sigma")
+        lines.append(
+            f'Reading: the spec\'s "0.5 % of the operating point" puts the sensor faults at FNR {spec}; the '
+            f"paper's {r['method']} delays are met at FNR "
+            + ", ".join(f"{k} {cell(v, '.1f', 4).strip()}" for k, v in r["matched_fnr"].items())
+            + f" (median {r['median_matched_fnr']:.1f}): every sensor fault about {r['settled_fnr']:g} sigma"
+        )
         settled = r["settled_fnr"]
-        lines.append(f"Table 3 at both readings (mean delay, s): spec's 0.5 % | FNR {settled:g} | paper")
+        lines.append(
+            f"Table 3 at both readings (mean delay, s): spec's 0.5 % | FNR {settled:g} | paper"
+        )
         for method in cfg["methods"]:
             cells = []
             for name in ("actuator", *OUTPUT_NAMES):
-                spec_row = next(x for x in rows if x["case"] == "point" and x["method"] == method and x["fault"] == name
-                                and x["point"] != "grid")
-                grid = [x for x in rows if x["case"] == "point" and x["method"] == method and x["fault"] == name
-                        and x["point"] == "grid"]
+                spec_row = next(
+                    x
+                    for x in rows
+                    if x["case"] == "point"
+                    and x["method"] == method
+                    and x["fault"] == name
+                    and x["point"] != "grid"
+                )
+                grid = [
+                    x
+                    for x in rows
+                    if x["case"] == "point"
+                    and x["method"] == method
+                    and x["fault"] == name
+                    and x["point"] == "grid"
+                ]
                 at = grid[cfg["fnr"].index(settled)] if name != "actuator" else spec_row
-                cells.append(f"{name} {cell(spec_row['delay_mean_s'], '.3f', 5).strip()} | "
-                             f"{cell(at['delay_mean_s'], '.3f', 5).strip()} | {spec_row['paper_delay_s']:.3f}")
+                cells.append(
+                    f"{name} {cell(spec_row['delay_mean_s'], '.3f', 5).strip()} | "
+                    f"{cell(at['delay_mean_s'], '.3f', 5).strip()} | {spec_row['paper_delay_s']:.3f}"
+                )
             lines.append(f"  {method}: " + "; ".join(cells))
     return "\n".join(lines)

@@ -10,6 +10,7 @@
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and Generalized
 Likelihood Ratio Test" (CITATION.cff).
 """
+
 from __future__ import annotations
 
 import functools
@@ -20,18 +21,24 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import _checks
-from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
 from jaxfdi._faults import Fault, fault, no_fault, stack_faults
-from jaxfdi.filters._kalman import kalman_filter
-from jaxfdi.scenarios._common import check_study, require_x64
 from jaxfdi._frame import study_result
-from jaxfdi._metrics import (DetectionRecord, cell, fault_row, rate_cell, summarize_detection,
-                             unhealthy_rows_warning)
-from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
+from jaxfdi._metrics import (
+    DetectionRecord,
+    cell,
+    fault_row,
+    rate_cell,
+    summarize_detection,
+    unhealthy_rows_warning,
+)
 from jaxfdi._monitor import MonitorHistory, monitor
-from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
 from jaxfdi._simulate import linear_simulator
 from jaxfdi._study import Structure, Study, run_study
+from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
+from jaxfdi.filters._kalman import kalman_filter
+from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
+from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
+from jaxfdi.scenarios._common import check_study, require_x64
 
 FUEL_STEP = 0.01  # kg/s
 ACTUATOR_BIAS = 0.05 * FUEL_STEP
@@ -70,8 +77,10 @@ class EngineChi2Result(NamedTuple):
         """Per fault: ``FA rate``: runs alarming before the onset (``none``: any alarm); delays (mean, median, p90) over
         the ``clean`` runs, the others (``metrics.fault_row``); each rate with its 95 % Clopper-Pearson interval over
         the ``n`` healthy runs (``metrics.rate_interval``)."""
-        head = (f"{'fault':<9} {'magnitude':>10} {'n':>4} {'det. rate [95 %]':>21} {'FA rate [95 %]':>20} "
-                f"{'FA/step':>8} {'clean':>5} {'delay mean [s]':>14} {'delay med [s]':>13} {'delay p90 [s]':>13}")
+        head = (
+            f"{'fault':<9} {'magnitude':>10} {'n':>4} {'det. rate [95 %]':>21} {'FA rate [95 %]':>20} "
+            f"{'FA/step':>8} {'clean':>5} {'delay mean [s]':>14} {'delay med [s]':>13} {'delay p90 [s]':>13}"
+        )
         lines = [head, "-" * len(head)]
         for r in self.rows:
             clean = "-" if r["fault"] == "none" else str(r.get("clean_runs", "-"))
@@ -79,7 +88,8 @@ class EngineChi2Result(NamedTuple):
             lines.append(
                 f"{r['fault']:<9} {r['magnitude']:>10.4g} {n:>4} {rate_cell(r['detection_rate'], n, 21, digits=3)} "
                 f"{rate_cell(r['false_alarm_rate'], n, 20, digits=3)} "
-                f"{cell(r['false_alarm_rate_per_step'], '.4f', 8)} {clean:>5} {cell(r.get('delay_mean_s', float('nan')), '.3f', 14)} "
+                f"{cell(r['false_alarm_rate_per_step'], '.4f', 8)} {clean:>5} "
+                f"{cell(r.get('delay_mean_s', float('nan')), '.3f', 14)} "
                 f"{cell(r['delay_median_s'], '.3f', 13)} {cell(r['delay_p90_s'], '.3f', 13)}"
             )
         warning = unhealthy_rows_warning(self.rows)
@@ -111,11 +121,19 @@ def engine_chi2_study(
       extra run per case, leaves (7, T, ...)).
     """
     require_x64("engine_chi2_study (the engine model is stiff)")
-    check_study(runs, seed, window=window, **({} if chunk_size is None else {"chunk_size": chunk_size}))
+    check_study(
+        runs, seed, window=window, **({} if chunk_size is None else {"chunk_size": chunk_size})
+    )
     _checks.check_probability("pfa", pfa)
     _checks.check_positive("duration", duration, "a positive run length in seconds")
-    _checks.check_scalar("onset_time", onset_time, 0.0, duration, high_open=True,
-                         meaning="a fault onset time in [0, duration) seconds")
+    _checks.check_scalar(
+        "onset_time",
+        onset_time,
+        0.0,
+        duration,
+        high_open=True,
+        meaning="a fault onset time in [0, duration) seconds",
+    )
     if threshold is not None:
         _checks.check_positive("threshold", threshold, "a positive chi-square threshold")
     model = engine_model()
@@ -125,42 +143,68 @@ def engine_chi2_study(
         raise ValueError(f"window: expected at most the {steps} steps of a run, got {window}")
     dof = window * model.C.shape[0]
     threshold = chi2_threshold(dof, pfa) if threshold is None else jnp.asarray(threshold)
-    filter_model = model if filter_noise is None else model._replace(Q=jnp.asarray(filter_noise[0]),
-                                                                     R=jnp.asarray(filter_noise[1]))
+    filter_model = (
+        model
+        if filter_noise is None
+        else model._replace(Q=jnp.asarray(filter_noise[0]), R=jnp.asarray(filter_noise[1]))
+    )
     names, faults = engine_faults(onset)
     run = _chi2_run(steps, window)
     noise = (filter_model.Q[None], filter_model.R[None])
-    spec = Study("engine-chi2", stack_faults(faults), tuple(names),
-                 (Structure("KF chi-square", run, (noise, jnp.reshape(threshold, (1,))), {"chi2": (0, 0)}),))
+    spec = Study(
+        "engine-chi2",
+        stack_faults(faults),
+        tuple(names),
+        (Structure("KF chi-square", run, (noise, jnp.reshape(threshold, (1,))), {"chi2": (0, 0)}),),
+    )
     key_mc, key_example = jax.random.split(jax.random.key(seed))
-    records = run_study(spec, runs, seed, key=key_mc, chunk_size=chunk_size, progress=progress).outputs["chi2"]
-    examples = jax.jit(jax.vmap(lambda f: run(key_example, f, (filter_model.Q, filter_model.R), threshold,
-                                              keep_history=True).history))(stack_faults(faults))
+    records = run_study(
+        spec, runs, seed, key=key_mc, chunk_size=chunk_size, progress=progress
+    ).outputs["chi2"]
+    examples = jax.jit(
+        jax.vmap(
+            lambda f: (
+                run(
+                    key_example, f, (filter_model.Q, filter_model.R), threshold, keep_history=True
+                ).history
+            )
+        )
+    )(stack_faults(faults))
 
     rows = []
     for i, (name, f) in enumerate(zip(names, faults)):
-        part = jax.tree_util.tree_map(lambda x: x[i * runs:(i + 1) * runs], records)
+        part = jax.tree_util.tree_map(lambda x: x[i * runs : (i + 1) * runs], records)
         s = summarize_detection(part, steps, TS)
         columns = fault_row(part, steps, TS)
-        rows.append({
-            "fault": name,
-            "magnitude": float(f.magnitude),
-            "runs": s.runs,
-            "detection_rate": s.detection_rate,
-            "missed_detection_rate": s.missed_detection_rate,
-            "false_alarm_rate": s.false_alarm_rate,
-            "false_alarm_rate_per_step": s.false_alarm_rate_per_step,
-            "delay_mean_s": s.delay_mean,
-            "delay_median_s": s.delay_median,
-            "delay_p90_s": s.delay_p90,
-            "unhealthy_runs": s.unhealthy_runs,
-            "pre_onset_alarm_rate": columns["pre_onset_alarm_rate"],
-            "clean_runs": columns["clean_runs"],
-            "delay_runs": columns["delay_runs"],
-        })
+        rows.append(
+            {
+                "fault": name,
+                "magnitude": float(f.magnitude),
+                "runs": s.runs,
+                "detection_rate": s.detection_rate,
+                "missed_detection_rate": s.missed_detection_rate,
+                "false_alarm_rate": s.false_alarm_rate,
+                "false_alarm_rate_per_step": s.false_alarm_rate_per_step,
+                "delay_mean_s": s.delay_mean,
+                "delay_median_s": s.delay_median,
+                "delay_p90_s": s.delay_p90,
+                "unhealthy_runs": s.unhealthy_runs,
+                "pre_onset_alarm_rate": columns["pre_onset_alarm_rate"],
+                "clean_runs": columns["clean_runs"],
+                "delay_runs": columns["delay_runs"],
+            }
+        )
     config = {
-        "scenario": "engine-chi2", "runs_per_fault": runs, "seed": seed, "window": window, "pfa": pfa,
-        "dof": dof, "threshold": float(threshold), "Ts": TS, "steps": steps, "onset_step": onset,
+        "scenario": "engine-chi2",
+        "runs_per_fault": runs,
+        "seed": seed,
+        "window": window,
+        "pfa": pfa,
+        "dof": dof,
+        "threshold": float(threshold),
+        "Ts": TS,
+        "steps": steps,
+        "onset_step": onset,
         "fuel_step": FUEL_STEP,
     }
     return EngineChi2Result(config, rows, records, examples)
@@ -177,8 +221,17 @@ def _chi2_run(steps: int, window: int):
     def run(key, f, noise, threshold, keep_history=False):
         filter_model = model._replace(Q=noise[0], R=noise[1])
         kf = kalman_filter(filter_model)
-        result = monitor(linear_simulator(model, f), kf, chi2_detector(threshold, window), x0,
-                         kf.init(x0, filter_model.Q), us, key, f.onset, keep_history)
+        result = monitor(
+            linear_simulator(model, f),
+            kf,
+            chi2_detector(threshold, window),
+            x0,
+            kf.init(x0, filter_model.Q),
+            us,
+            key,
+            f.onset,
+            keep_history,
+        )
         return result if keep_history else result.record
 
     return run
@@ -193,10 +246,16 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
     stats = np.asarray(result.examples.statistic)
     colors = hypothesis_colors([row["fault"] for row in result.rows])  # the engine figures' colours
     for row, stat in zip(result.rows, stats):
-        ax0.semilogy(t, np.maximum(stat, 1e-3), lw=0.8, color=colors[row["fault"]], label=row["fault"])
-    ax0.axhline(cfg["threshold"], color="k", ls="--", lw=1, label=f"threshold {cfg['threshold']:.2f}")
+        ax0.semilogy(
+            t, np.maximum(stat, 1e-3), lw=0.8, color=colors[row["fault"]], label=row["fault"]
+        )
+    ax0.axhline(
+        cfg["threshold"], color="k", ls="--", lw=1, label=f"threshold {cfg['threshold']:.2f}"
+    )
     ax0.axvline(cfg["onset_step"] * cfg["Ts"], color="grey", ls=":", lw=1)
-    ax0.set(xlabel="time [s]", ylabel=f"windowed NIS (L = {cfg['window']})", title="one run per fault")
+    ax0.set(
+        xlabel="time [s]", ylabel=f"windowed NIS (L = {cfg['window']})", title="one run per fault"
+    )
     ax0.legend(fontsize=7, ncol=2)
     runs = cfg["runs_per_fault"]
     onset = np.asarray(result.records.onset)
@@ -209,7 +268,15 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
         delays.append((det[sl][ok] - onset[sl][ok]) * cfg["Ts"])
         labels.append(row["fault"])
     ax1.boxplot(delays, tick_labels=labels)
-    ax1.set(xlabel="fault", ylabel="detection delay [s]", title=f"{runs} runs per fault, Pfa = {cfg['pfa']}")
-    save_figure(fig, path, "Left: one run per fault of the Kalman filter's windowed NIS and its threshold. Right: the "
-                           f"detection delays of the detected runs, {runs} per fault. The paper's Table 3 has no "
-                           "chi-square test; this is the baseline its MM, IMM and GLRT improve on.")
+    ax1.set(
+        xlabel="fault",
+        ylabel="detection delay [s]",
+        title=f"{runs} runs per fault, Pfa = {cfg['pfa']}",
+    )
+    save_figure(
+        fig,
+        path,
+        "Left: one run per fault of the Kalman filter's windowed NIS and its threshold. Right: the "
+        f"detection delays of the detected runs, {runs} per fault. The paper's Table 3 has no "
+        "chi-square test; this is the baseline its MM, IMM and GLRT improve on.",
+    )

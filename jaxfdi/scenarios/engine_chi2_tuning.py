@@ -10,6 +10,7 @@ detection, false-alarm and delay columns.
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and Generalized
 Likelihood Ratio Test" (CITATION.cff).
 """
+
 from __future__ import annotations
 
 from typing import Any, NamedTuple
@@ -52,7 +53,11 @@ class Chi2Weights(NamedTuple):
 
 def hand_params(window: int = HAND_WINDOW) -> dict[str, Any]:
     model = engine_model()
-    return {"Q": model.Q, "R": model.R, "threshold": chi2_threshold(window * model.C.shape[0], HAND_PFA)}
+    return {
+        "Q": model.Q,
+        "R": model.R,
+        "threshold": chi2_threshold(window * model.C.shape[0], HAND_PFA),
+    }
 
 
 def windowed_nis(params: dict[str, Any], ys: jax.Array, window: int) -> jax.Array:
@@ -64,13 +69,22 @@ def windowed_nis(params: dict[str, Any], ys: jax.Array, window: int) -> jax.Arra
     return jax.vmap(lambda y: moving_window_sum(run_filter(kf, state0, y, us)[1].nis, window))(ys)
 
 
-def chi2_loss(params: dict[str, Any], data: LabelledRuns, window: int,
-              weights: Chi2Weights = Chi2Weights()) -> tuple[jax.Array, dict[str, jax.Array]]:
+def chi2_loss(
+    params: dict[str, Any], data: LabelledRuns, window: int, weights: Chi2Weights = Chi2Weights()
+) -> tuple[jax.Array, dict[str, jax.Array]]:
     """Mean over runs of the soft detection loss of the windowed NIS test."""
     log_stat = jnp.log(windowed_nis(params, data.ys, window))
-    loss, parts = jax.vmap(lambda s, o: losses.soft_detection_loss(
-        s, jnp.log(params["threshold"]), o, weights.temperature, weights.false_alarm, weights.miss,
-        weights.delay))(log_stat, data.onsets)
+    loss, parts = jax.vmap(
+        lambda s, o: losses.soft_detection_loss(
+            s,
+            jnp.log(params["threshold"]),
+            o,
+            weights.temperature,
+            weights.false_alarm,
+            weights.miss,
+            weights.delay,
+        )
+    )(log_stat, data.onsets)
     return jnp.mean(loss), {k: jnp.mean(v) for k, v in parts.items()}
 
 
@@ -88,9 +102,17 @@ class Chi2Tuning(NamedTuple):
     val_loss: dict[int, float]
 
 
-def tune_engine_chi2(windows: tuple[int, ...] = (1, 2, 4, 8), steps: int = 150, train_runs: int = 16,
-                     val_runs: int = 4, batch_runs: int = 4, seed: int = 0, learning_rate: float = 0.05,
-                     weights: Chi2Weights = Chi2Weights(), progress: bool = False) -> Chi2Tuning:
+def tune_engine_chi2(
+    windows: tuple[int, ...] = (1, 2, 4, 8),
+    steps: int = 150,
+    train_runs: int = 16,
+    val_runs: int = 4,
+    batch_runs: int = 4,
+    seed: int = 0,
+    learning_rate: float = 0.05,
+    weights: Chi2Weights = Chi2Weights(),
+    progress: bool = False,
+) -> Chi2Tuning:
     """For each window, train ``Q``, ``R`` and the threshold from the hand-set values (threshold
     ``chi2.isf(0.005, 5 L)``); keep the window with the lowest validation loss."""
     if not windows:
@@ -101,32 +123,59 @@ def tune_engine_chi2(windows: tuple[int, ...] = (1, 2, 4, 8), steps: int = 150, 
     train_batch, val = training_data(train_runs, val_runs, batch_runs, seed, steps, learning_rate)
     results, val_loss = {}, {}
     for window in windows:
+
         def loss(raw, data, window=window):
             return chi2_loss(constrain(PARAMETERIZATION, raw), data, window, weights)[0]
 
         raw0 = unconstrain(PARAMETERIZATION, hand_params(window))
-        results[window] = fit(loss, raw0, optax.adam(learning_rate), train_batch, val, steps, eval_every=10,
-                              patience=4, progress=progress)
+        results[window] = fit(
+            loss,
+            raw0,
+            optax.adam(learning_rate),
+            train_batch,
+            val,
+            steps,
+            eval_every=10,
+            patience=4,
+            progress=progress,
+        )
         history = results[window].history
         val_loss[window] = float(np.min(history.val_loss))
     best = min(val_loss, key=val_loss.get)
     return Chi2Tuning(best, results[best], val_loss)
 
 
-def evaluate_engine_chi2(params: dict[str, Any], window: int, runs: int, seed: int,
-                         weights: Chi2Weights = Chi2Weights()) -> tuple[list[dict], float]:
+def evaluate_engine_chi2(
+    params: dict[str, Any], window: int, runs: int, seed: int, weights: Chi2Weights = Chi2Weights()
+) -> tuple[list[dict], float]:
     """Held-out rows of ``engine_chi2_study`` with the detector set to ``params``, and the tuning loss on labelled runs
     of seed ``seed + 1``."""
-    rows = engine_chi2_study(runs, seed, window, threshold=float(params["threshold"]),
-                             filter_noise=(params["Q"], params["R"])).rows
+    rows = engine_chi2_study(
+        runs,
+        seed,
+        window,
+        threshold=float(params["threshold"]),
+        filter_noise=(params["Q"], params["R"]),
+    ).rows
     test = labelled_runs(runs, seed + 1)
     loss = float(jax.jit(chi2_loss, static_argnums=2)(params, test, window, weights)[0])
     return rows, loss
 
 
-def comparison_table(hand_rows: list[dict], tuned_rows: list[dict], hand_window: int, tuned_window: int,
-                     hand_loss: float, tuned_loss: float) -> str:
+def comparison_table(
+    hand_rows: list[dict],
+    tuned_rows: list[dict],
+    hand_window: int,
+    tuned_window: int,
+    hand_loss: float,
+    tuned_loss: float,
+) -> str:
     """Hand-set beside tuned, per fault (``engine.hand_tuned_table``), and the held-out loss."""
-    return hand_tuned_table(hand_rows, tuned_rows, (f"hand L={hand_window}", f"tuned L={tuned_window}"),
-                            ("hand", "tuned"), f"held-out tuning loss: hand {hand_loss:.4f}, tuned {tuned_loss:.4f}",
-                            isolation=False)
+    return hand_tuned_table(
+        hand_rows,
+        tuned_rows,
+        (f"hand L={hand_window}", f"tuned L={tuned_window}"),
+        ("hand", "tuned"),
+        f"held-out tuning loss: hand {hand_loss:.4f}, tuned {tuned_loss:.4f}",
+        isolation=False,
+    )

@@ -22,6 +22,7 @@ Loss per run (``imm_loss``): mode cross-entropy + detection_weight * soft detect
 Reference: Han, Kim, Kim & Lee (2022), "Real Time Fault Diagnosis of UAV Engine Using IMM Filter and Generalized
 Likelihood Ratio Test" (CITATION.cff).
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -31,23 +32,41 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from jaxfdi._frame import results_frame
+from jaxfdi._metrics import DetectionRecord
+from jaxfdi._monitor import replay_detector
+from jaxfdi._montecarlo import monte_carlo
 from jaxfdi.detection._mode_probability import mode_probability_detector
 from jaxfdi.filters._base import run_filter
 from jaxfdi.filters._imm import interacting_multiple_model
 from jaxfdi.filters._kalman import kalman_filter
 from jaxfdi.models._engine import engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
-from jaxfdi._frame import results_frame
-from jaxfdi._metrics import DetectionRecord
-from jaxfdi._monitor import replay_detector
-from jaxfdi._montecarlo import monte_carlo
-from jaxfdi.scenarios.engine import (PAPER_TRANSITION, EngineSettings, LabelledRuns, Method, _bias_estimates,
-                                     _mode_prob, hand_tuned_table, labelled_runs, run_monitor, scenario_runs,
-                                     summarize_method, training_data)
+from jaxfdi.scenarios.engine import (
+    PAPER_TRANSITION,
+    EngineSettings,
+    LabelledRuns,
+    Method,
+    _bias_estimates,
+    _mode_prob,
+    hand_tuned_table,
+    labelled_runs,
+    run_monitor,
+    scenario_runs,
+    summarize_method,
+    training_data,
+)
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP
 from jaxfdi.tuning import _losses as losses
-from jaxfdi.tuning._parameterize import (Transform, constrain, log_scale, simplex, stochastic_rows, unconstrain,
-                                         unit_interval)
+from jaxfdi.tuning._parameterize import (
+    Transform,
+    constrain,
+    log_scale,
+    simplex,
+    stochastic_rows,
+    unconstrain,
+    unit_interval,
+)
 from jaxfdi.tuning._train import TrainResult, checkpointed, fit, strongly_typed
 
 TRANSITION_MASK = (PAPER_TRANSITION > 0) | np.eye(len(PAPER_TRANSITION), dtype=bool)
@@ -80,39 +99,78 @@ class ImmDesign(NamedTuple):
     estimate_delay: int
 
 
-def _imm_design(name: str, method: str, tuned: dict[str, Transform], hand: Callable[[], dict[str, Any]],
-                modes, initial, detector_input, estimate_delay: int) -> ImmDesign:
+def _imm_design(
+    name: str,
+    method: str,
+    tuned: dict[str, Transform],
+    hand: Callable[[], dict[str, Any]],
+    modes,
+    initial,
+    detector_input,
+    estimate_delay: int,
+) -> ImmDesign:
     """A design that also tunes the transition matrix, the initial mode probabilities and mu_T (hand-set: the paper's
     matrix, its normal row and the engine study's mu_T)."""
 
     def hand_set():
-        return {"transition": jnp.asarray(PAPER_TRANSITION), "initial_mode": jnp.asarray(PAPER_TRANSITION[0]),
-                **hand(), "mu_threshold": jnp.asarray(EngineSettings().mu_threshold)}
+        return {
+            "transition": jnp.asarray(PAPER_TRANSITION),
+            "initial_mode": jnp.asarray(PAPER_TRANSITION[0]),
+            **hand(),
+            "mu_threshold": jnp.asarray(EngineSettings().mu_threshold),
+        }
 
-    parameterization = {"transition": stochastic_rows(TRANSITION_MASK), "initial_mode": simplex(), **tuned,
-                        "mu_threshold": unit_interval()}
-    return ImmDesign(name, method, TRANSITION_MASK, parameterization, hand_set, modes, initial, detector_input,
-                     estimate_delay)
+    parameterization = {
+        "transition": stochastic_rows(TRANSITION_MASK),
+        "initial_mode": simplex(),
+        **tuned,
+        "mu_threshold": unit_interval(),
+    }
+    return ImmDesign(
+        name,
+        method,
+        TRANSITION_MASK,
+        parameterization,
+        hand_set,
+        modes,
+        initial,
+        detector_input,
+        estimate_delay,
+    )
 
 
 def _zhang_li() -> ImmDesign:
     settings, model = EngineSettings(), engine_model()
     return _imm_design(
-        "zhang-li", "IMM", {"sensor_inflation": log_scale(), "actuator_noise": log_scale()},
-        lambda: {"sensor_inflation": jnp.full(5, settings.sensor_inflation),
-                 "actuator_noise": jnp.full(1, settings.actuator_noise)},
+        "zhang-li",
+        "IMM",
+        {"sensor_inflation": log_scale(), "actuator_noise": log_scale()},
+        lambda: {
+            "sensor_inflation": jnp.full(5, settings.sensor_inflation),
+            "actuator_noise": jnp.full(1, settings.actuator_noise),
+        },
         lambda p: noise_inflation_modes(model, p["sensor_inflation"], p["actuator_noise"]),
-        lambda p: (jnp.zeros(7), model.Q), _mode_prob, 0)
+        lambda p: (jnp.zeros(7), model.Q),
+        _mode_prob,
+        0,
+    )
 
 
 def _bias() -> ImmDesign:
     settings, model = EngineSettings(), engine_model()
     return _imm_design(
-        "bias", "IMM-bias", {"bias_walk": log_scale(), "bias_prior": log_scale()},
-        lambda: {"bias_walk": jnp.asarray(settings.bias_walk), "bias_prior": jnp.asarray(settings.bias_prior)},
+        "bias",
+        "IMM-bias",
+        {"bias_walk": log_scale(), "bias_prior": log_scale()},
+        lambda: {
+            "bias_walk": jnp.asarray(settings.bias_walk),
+            "bias_prior": jnp.asarray(settings.bias_prior),
+        },
         lambda p: bias_modes(model, p["bias_walk"], p["bias_prior"]),
         lambda p: bias_mode_initial_state(model, jnp.zeros(7), model.Q, p["bias_prior"]),
-        _bias_estimates, settings.bias_estimate_delay)
+        _bias_estimates,
+        settings.bias_estimate_delay,
+    )
 
 
 DESIGNS: dict[str, Callable[[], ImmDesign]] = {"zhang-li": _zhang_li, "bias": _bias}
@@ -136,10 +194,14 @@ def imm_filter(design: ImmDesign, params: dict[str, Any]):
 def filter_params(params: dict[str, Any]) -> dict[str, Any]:
     """The filter's share of ``params`` (without the detector's ``mu_threshold`` and ``confirm_steps``), strongly typed:
     the key of one compiled ``mode_log_probs`` for the hand-set and the tuned parameters alike."""
-    return strongly_typed({k: v for k, v in params.items() if k not in ("mu_threshold", "confirm_steps")})
+    return strongly_typed(
+        {k: v for k, v in params.items() if k not in ("mu_threshold", "confirm_steps")}
+    )
 
 
-def mode_log_probs(design: ImmDesign, params: dict[str, Any], ys: jax.Array, remat: bool = False) -> jax.Array:
+def mode_log_probs(
+    design: ImmDesign, params: dict[str, Any], ys: jax.Array, remat: bool = False
+) -> jax.Array:
     """(R, T, M) log mode probabilities of the design's IMM with ``params`` on ``ys`` (R, T, 5)."""
     filt, state0 = imm_filter(design, params)
     filt = checkpointed(filt) if remat else filt
@@ -181,60 +243,119 @@ def confirmed_probabilities(fault_mu: jax.Array, confirm_steps) -> jax.Array:
     return confirmed
 
 
-def imm_loss(design: ImmDesign, params: dict[str, Any], data: LabelledRuns, weights: LossWeights = LossWeights(),
-             remat: bool = True, confirm_steps=1) -> tuple[jax.Array, dict[str, jax.Array]]:
+def imm_loss(
+    design: ImmDesign,
+    params: dict[str, Any],
+    data: LabelledRuns,
+    weights: LossWeights = LossWeights(),
+    remat: bool = True,
+    confirm_steps=1,
+) -> tuple[jax.Array, dict[str, jax.Array]]:
     """Mean over runs of the mode cross-entropy plus the weighted soft detection loss of the detector with
     ``confirm_steps`` (an int, or (M,) one per mode as the detector takes it; ``confirmed_probabilities``)."""
     log_mu = mode_log_probs(design, params, data.ys, remat)
     cross_entropy = jax.vmap(losses.mode_cross_entropy)(log_mu, data.modes)
-    fault_mu = confirmed_probabilities(jnp.exp(log_mu[..., 1:]), confirm_steps)   # (R, T, 6)
+    fault_mu = confirmed_probabilities(jnp.exp(log_mu[..., 1:]), confirm_steps)  # (R, T, 6)
     # eq. 13, with one mu_T per mode allowed: alarm when some mode's excess over its own threshold is >= 0 (for a scalar
     # mu_T: the largest fault-mode probability >= mu_T)
     excess = fault_mu - jnp.broadcast_to(params["mu_threshold"], (NUM_FAULTS + 1,))[1:]
     statistic = jnp.max(excess, axis=-1)
-    own = jax.nn.one_hot(data.fault, NUM_FAULTS, dtype=bool)[:, None, :]  # all False for fault-free runs
+    own = jax.nn.one_hot(data.fault, NUM_FAULTS, dtype=bool)[
+        :, None, :
+    ]  # all False for fault-free runs
     correct = jnp.sum(jnp.where(own, excess, 0.0), axis=-1)
     wrong = jnp.max(jnp.where(own, -2.0, excess), axis=-1)
-    detection, parts = jax.vmap(lambda s, o, m: losses.soft_detection_loss(
-        s, 0.0, o, weights.temperature, weights.false_alarm, weights.miss, weights.delay,
-        wrong_label_margin=m, isolation_weight=weights.isolation))(statistic, data.onsets, wrong - correct)
+    detection, parts = jax.vmap(
+        lambda s, o, m: losses.soft_detection_loss(
+            s,
+            0.0,
+            o,
+            weights.temperature,
+            weights.false_alarm,
+            weights.miss,
+            weights.delay,
+            wrong_label_margin=m,
+            isolation_weight=weights.isolation,
+        )
+    )(statistic, data.onsets, wrong - correct)
     total = jnp.mean(cross_entropy + weights.detection * detection)
-    return total, {"cross_entropy": jnp.mean(cross_entropy), **{k: jnp.mean(v) for k, v in parts.items()}}
+    return total, {
+        "cross_entropy": jnp.mean(cross_entropy),
+        **{k: jnp.mean(v) for k, v in parts.items()},
+    }
 
 
-def tune_engine_imm(design: ImmDesign, steps: int = 150, train_runs: int = 16, val_runs: int = 4,
-                    batch_runs: int = 4, seed: int = 0, learning_rate: float = 0.05,
-                    weights: LossWeights = LossWeights(), progress: bool = False,
-                    confirm_steps=1, frozen: tuple[str, ...] = ()) -> TrainResult:
+def tune_engine_imm(
+    design: ImmDesign,
+    steps: int = 150,
+    train_runs: int = 16,
+    val_runs: int = 4,
+    batch_runs: int = 4,
+    seed: int = 0,
+    learning_rate: float = 0.05,
+    weights: LossWeights = LossWeights(),
+    progress: bool = False,
+    confirm_steps=1,
+    frozen: tuple[str, ...] = (),
+) -> TrainResult:
     """Train ``design`` from its hand-set parameters for the detector with ``confirm_steps``. Training runs come from
     ``seed``, validation from ``seed + 1`` (the CLI tests on ``seed + 1000``). The parameters named in ``frozen`` keep
     their hand-set values."""
     unknown = set(frozen) - set(design.parameterization)
     if unknown:
-        raise ValueError(f"frozen: unknown parameters {sorted(unknown)}; design {design.name!r} has "
-                         f"{sorted(design.parameterization)}")
+        raise ValueError(
+            f"frozen: unknown parameters {sorted(unknown)}; design {design.name!r} has "
+            f"{sorted(design.parameterization)}"
+        )
     train_batch, val = training_data(train_runs, val_runs, batch_runs, seed, steps, learning_rate)
 
     def loss(raw, data):
-        return imm_loss(design, constrain(design.parameterization, raw), data, weights, confirm_steps=confirm_steps)[0]
+        return imm_loss(
+            design,
+            constrain(design.parameterization, raw),
+            data,
+            weights,
+            confirm_steps=confirm_steps,
+        )[0]
 
     raw0 = unconstrain(design.parameterization, design.hand())
     trainable = [name for name in raw0 if name not in frozen]
-    return fit(loss, raw0, optax.adam(learning_rate), train_batch, val, steps, trainable=trainable, eval_every=10,
-               patience=4, progress=progress)
+    return fit(
+        loss,
+        raw0,
+        optax.adam(learning_rate),
+        train_batch,
+        val,
+        steps,
+        trainable=trainable,
+        eval_every=10,
+        patience=4,
+        progress=progress,
+    )
 
 
-def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, seed: int,
-                        confirm_steps=1) -> tuple[list[dict], float]:
+def evaluate_engine_imm(
+    design: ImmDesign, params: dict[str, Any], runs: int, seed: int, confirm_steps=1
+) -> tuple[list[dict], float]:
     """Held-out rows (``summarize_method``: rates, delays) of the detector with ``confirm_steps`` (1: the paper's rule)
     and the mean mode cross-entropy. Runs and keys: ``run_method``'s; ``params``, thresholds and ``confirm_steps`` (one
     per mode) are fixed-type data, so hand-set and tuned compile once (across processes with
     ``jaxfdi.enable_compilation_cache``)."""
     model, us, faults, batch, _ = scenario_runs(runs, seed)
     num_runs = len(faults) * runs
-    params = strongly_typed(dict(params, mu_threshold=jnp.broadcast_to(params["mu_threshold"], (NUM_FAULTS + 1,)),
-                                 confirm_steps=jnp.broadcast_to(jnp.asarray(confirm_steps, jnp.int32), (NUM_FAULTS + 1,))))
-    per_run = (batch, jax.tree.map(lambda p: jnp.broadcast_to(p, (num_runs,) + jnp.shape(p)), params))
+    params = strongly_typed(
+        dict(
+            params,
+            mu_threshold=jnp.broadcast_to(params["mu_threshold"], (NUM_FAULTS + 1,)),
+            confirm_steps=jnp.broadcast_to(
+                jnp.asarray(confirm_steps, jnp.int32), (NUM_FAULTS + 1,)
+            ),
+        )
+    )
+    per_run = (
+        batch,
+        jax.tree.map(lambda p: jnp.broadcast_to(p, (num_runs,) + jnp.shape(p)), params),
+    )
 
     def run_one(key, data):
         f, p = data
@@ -251,7 +372,9 @@ def evaluate_engine_imm(design: ImmDesign, params: dict[str, Any], runs: int, se
     return rows, cross_entropy
 
 
-def detector_records(mode_prob: jax.Array, onsets: jax.Array, threshold, confirm_steps=1) -> DetectionRecord:
+def detector_records(
+    mode_prob: jax.Array, onsets: jax.Array, threshold, confirm_steps=1
+) -> DetectionRecord:
     """Per-run records of ``mode_probability_detector(threshold, confirm_steps)`` on stored mode probabilities (R, T, M)
     (``monitor.replay_detector``): the records ``run_monitor`` would give without rerunning the filter, for searching
     thresholds."""
@@ -261,8 +384,14 @@ def detector_records(mode_prob: jax.Array, onsets: jax.Array, threshold, confirm
 
 #: the reported row metrics and which way is better (delays over the runs with no pre-onset alarm, whose share
 #: ``false_alarm_rate`` is for a fault's runs; a delay the hand-set design cannot score, no clean run, is not compared)
-_BETTER = {"detection_rate": 1, "isolation_rate": 1, "false_alarm_rate": -1, "delay_mean_s": -1,
-           "delay_median_s": -1, "delay_p90_s": -1}
+_BETTER = {
+    "detection_rate": 1,
+    "isolation_rate": 1,
+    "false_alarm_rate": -1,
+    "delay_mean_s": -1,
+    "delay_median_s": -1,
+    "delay_p90_s": -1,
+}
 
 
 def shortfall(hand_rows: list[dict], tuned_rows: list[dict]) -> float:
@@ -278,9 +407,16 @@ def shortfall(hand_rows: list[dict], tuned_rows: list[dict]) -> float:
     return total
 
 
-def select_mode_thresholds(design: ImmDesign, params: dict[str, Any], runs: int, seed: int, confirm_steps=1,
-                           grid=np.round(np.arange(0.30, 0.99, 0.02), 2), sweeps: int = 3,
-                           cost: Callable[[list[dict]], float] | None = None) -> tuple[jax.Array, dict]:
+def select_mode_thresholds(
+    design: ImmDesign,
+    params: dict[str, Any],
+    runs: int,
+    seed: int,
+    confirm_steps=1,
+    grid=np.round(np.arange(0.30, 0.99, 0.02), 2),
+    sweeps: int = 3,
+    cost: Callable[[list[dict]], float] | None = None,
+) -> tuple[jax.Array, dict]:
     """One ``mu_T`` per fault mode for the tuned ``params`` on selection runs (``runs`` per fault, ``seed``; neither
     training nor test data): no reported metric worse than the hand-set design's, or minimal ``cost`` of the rows.
 
@@ -296,20 +432,25 @@ def select_mode_thresholds(design: ImmDesign, params: dict[str, Any], runs: int,
     log_probs = jax.jit(lambda p, y: mode_log_probs(design, p, y))
     if cost is None:
         hand = design.hand()
-        hand_records = detector_records(jnp.exp(log_probs(filter_params(hand), data.ys)), data.onsets,
-                                        hand["mu_threshold"])
+        hand_records = detector_records(
+            jnp.exp(log_probs(filter_params(hand), data.ys)), data.onsets, hand["mu_threshold"]
+        )
         hand_rows = summarize_method(design.method, "IMM", hand_records, runs, steps)
 
         def cost(rows):
             return shortfall(hand_rows, rows)
 
     mode_prob = jnp.exp(log_probs(filter_params(params), data.ys))
-    replay = jax.jit(lambda thresholds: detector_records(mode_prob, data.onsets, thresholds, confirm_steps))
+    replay = jax.jit(
+        lambda thresholds: detector_records(mode_prob, data.onsets, thresholds, confirm_steps)
+    )
 
     def cost_of(thresholds):
         return cost(summarize_method(design.method, "IMM", replay(thresholds), runs, steps))
 
-    thresholds = np.broadcast_to(np.asarray(params["mu_threshold"], float), (NUM_FAULTS + 1,)).copy()
+    thresholds = np.broadcast_to(
+        np.asarray(params["mu_threshold"], float), (NUM_FAULTS + 1,)
+    ).copy()
     before = best = cost_of(jnp.asarray(thresholds))
     for _ in range(sweeps):
         for mode in range(1, NUM_FAULTS + 1):
@@ -322,14 +463,18 @@ def select_mode_thresholds(design: ImmDesign, params: dict[str, Any], runs: int,
     return jnp.asarray(thresholds), {"shortfall": {"trained": before, "selected": best}}
 
 
-def worse_metrics(hand_rows: list[dict], tuned_rows: list[dict], hand_ce: float, tuned_ce: float) -> list[str]:
+def worse_metrics(
+    hand_rows: list[dict], tuned_rows: list[dict], hand_ce: float, tuned_ce: float
+) -> list[str]:
     """The reported metrics on which the tuned design is worse than the hand-set one (rows as ``summarize_method`` makes
     them, or read back from JSON: NaN as ``None``)."""
     worse = [] if tuned_ce <= hand_ce else ["cross-entropy"]
     for h, t in zip(hand_rows, tuned_rows):
         for key, sign in _BETTER.items():
             hand, tuned = (float("nan") if r.get(key) is None else r[key] for r in (h, t))
-            if hand == hand and not sign * tuned >= sign * hand:  # a NaN tuned value counts as worse
+            if (
+                hand == hand and not sign * tuned >= sign * hand
+            ):  # a NaN tuned value counts as worse
                 worse.append(f"{h['fault']} {key}")
     return worse
 
@@ -341,14 +486,22 @@ def comparison_frame(hand_rows: list[dict], tuned_rows: list[dict], level: float
     Returns:
       ``pandas.DataFrame``, fault by fault, the paper's row before the tuned one.
     """
-    rows = [{"fault": row["fault"], "settings": label, **row}
-            for pair in zip(hand_rows, tuned_rows) for label, row in zip(("paper", "tuned"), pair)]
+    rows = [
+        {"fault": row["fault"], "settings": label, **row}
+        for pair in zip(hand_rows, tuned_rows)
+        for label, row in zip(("paper", "tuned"), pair)
+    ]
     return results_frame(rows, level)
 
 
 def comparison_table(hand_rows, hand_ce, tuned_rows, tuned_ce) -> str:
     """Hand-set (``paper``) beside tuned, per fault (``engine.hand_tuned_table``), and the mean mode cross-entropy of
     each."""
-    return hand_tuned_table(hand_rows, tuned_rows, ("paper", "tuned"), ("paper", "tuned"),
-                            f"mean per-step mode cross-entropy: paper {hand_ce:.4f}, tuned {tuned_ce:.4f} "
-                            f"({100 * (1 - tuned_ce / hand_ce):.0f} % lower)")
+    return hand_tuned_table(
+        hand_rows,
+        tuned_rows,
+        ("paper", "tuned"),
+        ("paper", "tuned"),
+        f"mean per-step mode cross-entropy: paper {hand_ce:.4f}, tuned {tuned_ce:.4f} "
+        f"({100 * (1 - tuned_ce / hand_ce):.0f} % lower)",
+    )

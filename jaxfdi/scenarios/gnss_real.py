@@ -33,6 +33,7 @@ chi-square level), slope protection levels at ``P_md = 1e-3``, exclusion; soluti
   clock column; ``explained`` counts differing exclusions its formula with the clock column would have made ours;
   ``same_exclusion_set``: epochs where up to ``PHONE_EXCLUSIONS`` exclusions agree on both sides.
 """
+
 from __future__ import annotations
 
 import math
@@ -46,10 +47,16 @@ from jaxfdi._frame import study_result
 from jaxfdi._metrics import rate_interval
 from jaxfdi._progress import status
 from jaxfdi.data import data_path
-from jaxfdi.gnss._frames import ecef_to_ned
 from jaxfdi.gnss._android import PhoneEpochs, read_android
+from jaxfdi.gnss._frames import ecef_to_ned
 from jaxfdi.gnss._raim import raim_tables
-from jaxfdi.gnss._receiver import MASK_ANGLE, ReceiverEpochs, monitor_receiver, read_observations, receiver_epochs
+from jaxfdi.gnss._receiver import (
+    MASK_ANGLE,
+    ReceiverEpochs,
+    monitor_receiver,
+    read_observations,
+    receiver_epochs,
+)
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._solution_separation import separate_epochs
 from jaxfdi.plotting import column_subplots, save_figure
@@ -59,8 +66,8 @@ from jaxfdi.scenarios._common import check_study, require_x64
 STATIONS = {"0759": "07590920.05", "3040": "30400920.05"}
 #: the station whose pseudoranges carry the injected faults
 FAULT_STATION = "0759"
-STEP_SIZES = (10.0, 20.0, 30.0, 50.0, 100.0)          # m
-RAMP_RATES = (0.05, 0.1, 0.2, 0.5)                    # m/s
+STEP_SIZES = (10.0, 20.0, 30.0, 50.0, 100.0)  # m
+RAMP_RATES = (0.05, 0.1, 0.2, 0.5)  # m/s
 #: RTKLIB's largest GDOP for a solution (pos1-maxgdop): epochs beyond it are not scored
 MAX_GDOP = 30.0
 #: the phone traces: label -> (measurement file, ground-truth file or None) in jaxfdi/data
@@ -80,6 +87,7 @@ PHONE_EXCLUSIONS = 3
 class GnssRealStudy(NamedTuple):
     """Rows (per station, step size, ramp rate) and per-epoch arrays per station for the figures (``epochs[station]``:
     ``horizontal_error``, ``vertical_error``, ``hpl``, ``vpl``, ``ss_hpl``, ``ss_vpl``, ``alarm``, ``gdop``)."""
+
     config: dict
     rows: list[dict]
     epochs: dict
@@ -107,7 +115,9 @@ def local_errors(position: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, n
 
 def _load(station: str) -> tuple[ReceiverEpochs, np.ndarray]:
     obs = read_observations(data_path(STATIONS[station] + "o"))
-    return receiver_epochs(obs, read_rinex_nav(data_path(STATIONS[station] + "n"))), obs.approx_position
+    return receiver_epochs(
+        obs, read_rinex_nav(data_path(STATIONS[station] + "n"))
+    ), obs.approx_position
 
 
 def _rtklib_difference(station: str, position: np.ndarray, times: np.ndarray) -> float | None:
@@ -127,7 +137,12 @@ def _rtklib_difference(station: str, position: np.ndarray, times: np.ndarray) ->
         for i, c in enumerate(str(out)):
             name[i] = c
         files = [str(data_path(STATIONS[station] + "o")), str(data_path(STATIONS[station] + "n"))]
-        if rtk.postpos(rtk.gtime_t(), rtk.gtime_t(), 0.0, 0.0, popt, sopt, fopt, files, 2, name, "", "") != 0:
+        if (
+            rtk.postpos(
+                rtk.gtime_t(), rtk.gtime_t(), 0.0, 0.0, popt, sopt, fopt, files, 2, name, "", ""
+            )
+            != 0
+        ):
             return None
         lines = [line.split() for line in out.read_text().splitlines() if not line.startswith("%")]
     worst = 0.0
@@ -136,7 +151,10 @@ def _rtklib_difference(station: str, position: np.ndarray, times: np.ndarray) ->
         seconds = int(hour) * 3600 + int(minute) * 60 + float(second)
         at = np.flatnonzero(np.abs(np.mod(times, 86400.0) - seconds) < 0.1)
         if at.size:
-            worst = max(worst, float(np.linalg.norm(position[at[0]] - np.array([float(v) for v in fields[2:5]]))))
+            worst = max(
+                worst,
+                float(np.linalg.norm(position[at[0]] - np.array([float(v) for v in fields[2:5]]))),
+            )
     return worst
 
 
@@ -166,7 +184,11 @@ def _rtklib_fde(station: str):
     rtk.sortobs(obs)
     popt, _, _ = _rtklib_options(rtk)
     popt.posopt[4] = 1
-    starts = [0] + [i for i in range(1, obs.n) if rtk.timediff(obs.data[i].time, obs.data[i - 1].time) != 0] + [obs.n]
+    starts = (
+        [0]
+        + [i for i in range(1, obs.n) if rtk.timediff(obs.data[i].time, obs.data[i - 1].time) != 0]
+        + [obs.n]
+    )
 
     def decide(epoch: int, prn: int, bias: float):
         first, end = starts[epoch], starts[epoch + 1]
@@ -175,20 +197,34 @@ def _rtklib_fde(station: str):
         solution, status, message = rtk.sol_t(), rtk.Arr1Dssat_t(rtk.MAXSAT), rtk.Arr1Dchar(256)
         record.P[0] = clean + bias
         before = [obs.data[i].sat for i in range(first, end)]
-        ok = rtk.pntpos(obs.data[first], end - first, nav, popt, solution, rtk.Arr1Ddouble(2 * (end - first)),
-                        status[0], message)
+        ok = rtk.pntpos(
+            obs.data[first],
+            end - first,
+            nav,
+            popt,
+            solution,
+            rtk.Arr1Ddouble(2 * (end - first)),
+            status[0],
+            message,
+        )
         record.P[0] = clean
         position = np.array([solution.rr[i] for i in range(3)])
         if not ok:
             return "no fix", position
         # a satellite RTKLIB checked (azimuth/elevation set) but left out of the solution
-        gone = [sat for sat in before if status[sat - 1].azel[1] >= MASK_ANGLE and not status[sat - 1].vs]
+        gone = [
+            sat
+            for sat in before
+            if status[sat - 1].azel[1] >= MASK_ANGLE and not status[sat - 1].vs
+        ]
         return ("x" + ",".join(map(str, gone)) if gone else "none"), position
 
     return decide
 
 
-def _position_row(station: str, result, separation, truth: np.ndarray, times: np.ndarray) -> tuple[dict, dict]:
+def _position_row(
+    station: str, result, separation, truth: np.ndarray, times: np.ndarray
+) -> tuple[dict, dict]:
     fix = result.fix
     position = np.asarray(fix.position)
     horizontal, vertical = local_errors(position, truth)
@@ -202,7 +238,10 @@ def _position_row(station: str, result, separation, truth: np.ndarray, times: np
         return int(np.sum(scored & ~alarm & (error > level)))
 
     row = {
-        "section": "positions", "station": f"GEONET {station}", "epochs": int(times.size), "scored_epochs": int(scored.sum()),
+        "section": "positions",
+        "station": f"GEONET {station}",
+        "epochs": int(times.size),
+        "scored_epochs": int(scored.sum()),
         "horizontal_error_median_m": float(np.median(horizontal[scored])),
         "horizontal_error_95_m": float(np.percentile(horizontal[scored], 95)),
         "horizontal_error_max_m": float(horizontal[scored].max()),
@@ -210,14 +249,25 @@ def _position_row(station: str, result, separation, truth: np.ndarray, times: np
         "vertical_error_95_m": float(np.percentile(vertical[scored], 95)),
         "vertical_error_max_m": float(vertical[scored].max()),
         "rtklib_max_difference_m": _rtklib_difference(station, position, times),
-        "parity_alarms": int(alarm[scored].sum()), "ss_alarms": int(np.asarray(separation.alarm)[scored].sum()),
-        "hpl_median_m": float(np.median(hpl[scored])), "vpl_median_m": float(np.median(vpl[scored])),
-        "ss_hpl_median_m": float(np.median(ss_hpl[scored])), "ss_vpl_median_m": float(np.median(ss_vpl[scored])),
+        "parity_alarms": int(alarm[scored].sum()),
+        "ss_alarms": int(np.asarray(separation.alarm)[scored].sum()),
+        "hpl_median_m": float(np.median(hpl[scored])),
+        "vpl_median_m": float(np.median(vpl[scored])),
+        "ss_hpl_median_m": float(np.median(ss_hpl[scored])),
+        "ss_vpl_median_m": float(np.median(ss_vpl[scored])),
         "misleading_slope": misleading(horizontal, hpl) + misleading(vertical, vpl),
         "misleading_ss": misleading(horizontal, ss_hpl) + misleading(vertical, ss_vpl),
     }
-    arrays = {"horizontal_error": horizontal, "vertical_error": vertical, "hpl": hpl, "vpl": vpl, "ss_hpl": ss_hpl,
-              "ss_vpl": ss_vpl, "alarm": alarm, "gdop": gdop}
+    arrays = {
+        "horizontal_error": horizontal,
+        "vertical_error": vertical,
+        "hpl": hpl,
+        "vpl": vpl,
+        "ss_hpl": ss_hpl,
+        "ss_vpl": ss_vpl,
+        "alarm": alarm,
+        "gdop": gdop,
+    }
     return row, arrays
 
 
@@ -234,35 +284,64 @@ def _phone_row(label: str, phone: PhoneEpochs, result, separation) -> tuple[dict
     alarm, dof = result.check.alarm, result.check.dof
     low, high = rate_interval(int(alarm.sum()), int(alarm.size), 0.95)
     hpl, vpl = result.protection.hpl, result.protection.vpl
-    row = {"section": "phones", "trace": label, "epochs": int(alarm.size),
-           "measurements": int(result.fix.num_used.sum()), "constellations": "".join(np.unique(phone.constellation)),
-           "dof_median": float(np.median(dof)), "parity_alarms": int(alarm.sum()), "alarm_rate_low": low,
-           "alarm_rate_high": high, "exclusions": int(excluded.sum()),
-           "excluded_signals": int(np.sum(result.exclusions & ~result.dead)),
-           "alarm_after_exclusion": int(np.sum(alarm & result.check_excluded.alarm)),
-           "ss_alarms": int(separation.alarm.sum()),
-           "statistic_per_dof_median": float(np.median(result.check.statistic / np.maximum(dof, 1))),
-           "hpl_median_m": float(np.median(hpl)), "ss_hpl_median_m": float(np.median(separation.hpl))}
+    row = {
+        "section": "phones",
+        "trace": label,
+        "epochs": int(alarm.size),
+        "measurements": int(result.fix.num_used.sum()),
+        "constellations": "".join(np.unique(phone.constellation)),
+        "dof_median": float(np.median(dof)),
+        "parity_alarms": int(alarm.sum()),
+        "alarm_rate_low": low,
+        "alarm_rate_high": high,
+        "exclusions": int(excluded.sum()),
+        "excluded_signals": int(np.sum(result.exclusions & ~result.dead)),
+        "alarm_after_exclusion": int(np.sum(alarm & result.check_excluded.alarm)),
+        "ss_alarms": int(separation.alarm.sum()),
+        "statistic_per_dof_median": float(np.median(result.check.statistic / np.maximum(dof, 1))),
+        "hpl_median_m": float(np.median(hpl)),
+        "ss_hpl_median_m": float(np.median(separation.hpl)),
+    }
     google = np.all(np.isfinite(phone.wls_position), axis=1)
-    row["google_difference_median_m"] = (float(np.median(np.linalg.norm(delivered - phone.wls_position, axis=1)[google]))
-                                         if google.any() else float("nan"))
+    row["google_difference_median_m"] = (
+        float(np.median(np.linalg.norm(delivered - phone.wls_position, axis=1)[google]))
+        if google.any()
+        else float("nan")
+    )
     truth = np.all(np.isfinite(phone.truth), axis=1)
-    arrays = {"alarm": alarm, "hpl": hpl, "vpl": vpl, "ss_hpl": separation.hpl, "ss_vpl": separation.vpl,
-              "truth": truth}
+    arrays = {
+        "alarm": alarm,
+        "hpl": hpl,
+        "vpl": vpl,
+        "ss_hpl": separation.hpl,
+        "ss_vpl": separation.vpl,
+        "truth": truth,
+    }
     row["truth_epochs"] = int(truth.sum())
     if truth.any():
         horizontal, vertical = local_errors(delivered[truth], phone.truth[truth])
         fix_h, fix_v = local_errors(result.fix.position[truth], phone.truth[truth])
-        row.update({"horizontal_error_median_m": float(np.median(horizontal)),
-                    "horizontal_error_max_m": float(horizontal.max()),
-                    "vertical_error_median_m": float(np.median(vertical)), "vertical_error_max_m": float(vertical.max())})
+        row.update(
+            {
+                "horizontal_error_median_m": float(np.median(horizontal)),
+                "horizontal_error_max_m": float(horizontal.max()),
+                "vertical_error_median_m": float(np.median(vertical)),
+                "vertical_error_max_m": float(vertical.max()),
+            }
+        )
         if google[truth].all():
             g_h, g_v = local_errors(phone.wls_position[truth], phone.truth[truth])
-            row.update({"google_horizontal_error_median_m": float(np.median(g_h)),
-                        "google_vertical_error_median_m": float(np.median(g_v))})
+            row.update(
+                {
+                    "google_horizontal_error_median_m": float(np.median(g_h)),
+                    "google_vertical_error_median_m": float(np.median(g_v)),
+                }
+            )
         quiet = ~alarm[truth]
         row["misleading_slope"] = int(np.sum(quiet & ((fix_h > hpl[truth]) | (fix_v > vpl[truth]))))
-        row["misleading_ss"] = int(np.sum(quiet & ((fix_h > separation.hpl[truth]) | (fix_v > separation.vpl[truth]))))
+        row["misleading_ss"] = int(
+            np.sum(quiet & ((fix_h > separation.hpl[truth]) | (fix_v > separation.vpl[truth])))
+        )
         arrays.update({"horizontal_error": fix_h, "vertical_error": fix_v})
     return row, arrays
 
@@ -271,8 +350,11 @@ def _peer_navdata(phone: PhoneEpochs):
     """gnss_lib_py's NavData of the trace's usable measurements, with their (epoch, slot)."""
     from gnss_lib_py.navdata.navdata import NavData
 
-    at, slot = np.nonzero(np.isfinite(phone.pseudorange) & np.all(np.isfinite(phone.satellite), axis=2)
-                          & (phone.sigma > 0))
+    at, slot = np.nonzero(
+        np.isfinite(phone.pseudorange)
+        & np.all(np.isfinite(phone.satellite), axis=2)
+        & (phone.sigma > 0)
+    )
     nav = NavData()
     nav["gps_millis"] = phone.gps_millis[at].astype(float)
     nav["corr_pr_m"] = phone.pseudorange[at, slot]
@@ -295,18 +377,29 @@ def _peer_row(label: str, phone: PhoneEpochs) -> dict | None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         state = solve_wls(nav)
-        faults, greedy = (np.asarray(solve_fde(nav.copy(), method="residual", threshold=PEER_THRESHOLD,
-                                               max_faults=k)["fault_residual"]) for k in (1, PHONE_EXCLUSIONS))
+        faults, greedy = (
+            np.asarray(
+                solve_fde(nav.copy(), method="residual", threshold=PEER_THRESHOLD, max_faults=k)[
+                    "fault_residual"
+                ]
+            )
+            for k in (1, PHONE_EXCLUSIONS)
+        )
     theirs_position = np.stack([np.asarray(state[f"{axis}_rx_wls_m"]) for axis in "xyz"], axis=1)
     epochs = phone.gps_millis.size
     if not np.array_equal(np.asarray(state["gps_millis"]).astype(np.int64), phone.gps_millis):
-        raise RuntimeError(f"{label}: gnss_lib_py's solve_wls returned other epochs than the trace's")
+        raise RuntimeError(
+            f"{label}: gnss_lib_py's solve_wls returned other epochs than the trace's"
+        )
     unit = phone._replace(sigma=np.where(np.isfinite(phone.sigma), 1.0, np.nan))
     slots = len(phone.signal)
     tables = raim_tables(max(slots, 5))
-    tables = tables._replace(threshold=jnp.where(jnp.arange(tables.threshold.shape[0]) > 0, PEER_THRESHOLD, jnp.inf))
-    ours = jax.tree_util.tree_map(np.asarray, monitor_receiver(unit, tables=tables, clocks="one",
-                                                               exclude=PHONE_EXCLUSIONS))
+    tables = tables._replace(
+        threshold=jnp.where(jnp.arange(tables.threshold.shape[0]) > 0, PEER_THRESHOLD, jnp.inf)
+    )
+    ours = jax.tree_util.tree_map(
+        np.asarray, monitor_receiver(unit, tables=tables, clocks="one", exclude=PHONE_EXCLUSIONS)
+    )
     theirs_excluded = np.full(epochs, -1)
     theirs_excluded[at[faults == 1]] = slot[faults == 1]
     theirs_alarm = theirs_excluded >= 0
@@ -316,21 +409,36 @@ def _peer_row(label: str, phone: PhoneEpochs) -> dict | None:
     both = ours_alarm & theirs_alarm
     differ = both & (ours_excluded != theirs_excluded)
     explained = 0
-    for k in np.flatnonzero(differ):   # gnss_lib_py's normalised residual with and without the clock column
+    for k in np.flatnonzero(
+        differ
+    ):  # gnss_lib_py's normalised residual with and without the clock column
         used = ours.fix.used[k]
         r, h = ours.fix.residuals[k][used], ours.fix.geometry[k][used]
-        lever = lambda g: np.einsum("ij,jk,ik->i", g, np.linalg.inv(g.T @ g), g)  # noqa: E731
+        lever = lambda g: np.einsum("ij,jk,ik->i", g, np.linalg.inv(g.T @ g), g)
         slots_k = np.flatnonzero(used)
         without_clock = slots_k[np.argmax(r**2 / (1.0 - lever(h[:, :3])))]
         with_clock = slots_k[np.argmax(r**2 / (1.0 - lever(h)))]
         explained += int(without_clock == theirs_excluded[k] and with_clock == ours_excluded[k])
-    return {"section": "phone-peers", "trace": label, "epochs": epochs,
-            "wls_max_difference_m": float(np.max(np.linalg.norm(ours.fix.position - theirs_position, axis=1))),
-            "threshold_m2": PEER_THRESHOLD, "both_alarm": int(both.sum()),
-            "jaxfdi_only": int((ours_alarm & ~theirs_alarm).sum()), "gnss_lib_py_only": int((~ours_alarm & theirs_alarm).sum()),
-            "neither": int((~ours_alarm & ~theirs_alarm).sum()), "same_exclusion": int((both & ~differ).sum()),
-            "different_exclusion": int(differ.sum()), "explained": explained, "greedy_rounds": PHONE_EXCLUSIONS,
-            "same_exclusion_set": int(np.all((ours.exclusions & ~ours.dead) == theirs_set, axis=1).sum())}
+    return {
+        "section": "phone-peers",
+        "trace": label,
+        "epochs": epochs,
+        "wls_max_difference_m": float(
+            np.max(np.linalg.norm(ours.fix.position - theirs_position, axis=1))
+        ),
+        "threshold_m2": PEER_THRESHOLD,
+        "both_alarm": int(both.sum()),
+        "jaxfdi_only": int((ours_alarm & ~theirs_alarm).sum()),
+        "gnss_lib_py_only": int((~ours_alarm & theirs_alarm).sum()),
+        "neither": int((~ours_alarm & ~theirs_alarm).sum()),
+        "same_exclusion": int((both & ~differ).sum()),
+        "different_exclusion": int(differ.sum()),
+        "explained": explained,
+        "greedy_rounds": PHONE_EXCLUSIONS,
+        "same_exclusion_set": int(
+            np.all((ours.exclusions & ~ours.dead) == theirs_set, axis=1).sum()
+        ),
+    }
 
 
 def _trials(result, runs: int, seed: int, last: int) -> tuple[np.ndarray, np.ndarray]:
@@ -342,8 +450,13 @@ def _trials(result, runs: int, seed: int, last: int) -> tuple[np.ndarray, np.nda
     return epochs[pick], slots[pick]
 
 
-def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
-                    step_sizes=STEP_SIZES, ramp_rates=RAMP_RATES) -> GnssRealStudy:
+def gnss_real_study(
+    runs: int = 200,
+    seed: int = 0,
+    progress: bool = False,
+    step_sizes=STEP_SIZES,
+    ramp_rates=RAMP_RATES,
+) -> GnssRealStudy:
     """The study of the module docstring.
 
     Args:
@@ -387,9 +500,18 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
         if rtklib is not None:
             # ours in RTKLIB's terms: no alarm; excluded (the fix without it passes); no fix
             passed = ~out.check_excluded.alarm
-            ours = np.where(~out.check.alarm, "none", np.where(passed, np.char.add("x", prns[np.maximum(out.excluded, 0)]
-                                                                                   .astype(str)), "no fix"))
-            delivered = np.where(out.check.alarm[:, None], out.fix_excluded.position, out.fix.position)
+            ours = np.where(
+                ~out.check.alarm,
+                "none",
+                np.where(
+                    passed,
+                    np.char.add("x", prns[np.maximum(out.excluded, 0)].astype(str)),
+                    "no fix",
+                ),
+            )
+            delivered = np.where(
+                out.check.alarm[:, None], out.fix_excluded.position, out.fix.position
+            )
             same, worst = 0, 0.0
             for r in range(runs):
                 decision, position = rtklib(int(at[r]), int(prns[slot[r]]), float(size))
@@ -402,27 +524,40 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
         mdb = mdb_all[at, slot]
         above = size >= mdb
         low, high = rate_interval(int(detected[above].sum()), int(above.sum()), 0.95)
-        rows.append({"section": "step", "bias_m": float(size), "runs": runs,
-                     "detection_rate": float(detected.mean()), "ss_detection_rate": float(ss_detected.mean()),
-                     "exclusion_rate": float(excluded.mean()), "ss_exclusion_rate": float((ss.isolated == slot).mean()),
-                     "mdb_median_m": float(np.median(mdb)),
-                     "runs_at_or_above_mdb": int(above.sum()),
-                     "detection_rate_at_or_above_mdb": float(detected[above].mean()) if above.any() else float("nan"),
-                     "detection_rate_at_or_above_mdb_low": low, "detection_rate_at_or_above_mdb_high": high,
-                     "rtklib_same_decision": same, "rtklib_max_difference_m": worst})
+        rows.append(
+            {
+                "section": "step",
+                "bias_m": float(size),
+                "runs": runs,
+                "detection_rate": float(detected.mean()),
+                "ss_detection_rate": float(ss_detected.mean()),
+                "exclusion_rate": float(excluded.mean()),
+                "ss_exclusion_rate": float((ss.isolated == slot).mean()),
+                "mdb_median_m": float(np.median(mdb)),
+                "runs_at_or_above_mdb": int(above.sum()),
+                "detection_rate_at_or_above_mdb": float(detected[above].mean())
+                if above.any()
+                else float("nan"),
+                "detection_rate_at_or_above_mdb_low": low,
+                "detection_rate_at_or_above_mdb_high": high,
+                "rtklib_same_decision": same,
+                "rtklib_max_difference_m": worst,
+            }
+        )
         if progress:
             status(f"gnss-real: step {size:g} m: detection {detected.mean():.3f}")
 
-    last = rho.shape[0] - 10   # a ramp has ten epochs (5 min) or more to grow
+    last = rho.shape[0] - 10  # a ramp has ten epochs (5 min) or more to grow
     # every run's (E, S) pseudoranges of the station, one run after another: one program
     # for every ramp rate and channel kind
-    monitor_runs = jax.jit(lambda runs: jax.lax.map(lambda r: monitor_receiver(epochs._replace(pseudoranges=r)),
-                                                    runs))
+    monitor_runs = jax.jit(
+        lambda runs: jax.lax.map(lambda r: monitor_receiver(epochs._replace(pseudoranges=r)), runs)
+    )
     at, slot = _trials(clean, runs, seed + 1, last=last)
     steps = np.arange(rho.shape[0])
     for rate in ramp_rates:
-        grow = np.clip(steps[None, :] - at[:, None], 0, None) * 30.0 * rate          # (runs, E)
-        faulty = np.repeat(rho[None], runs, axis=0)                                     # (runs, E, S)
+        grow = np.clip(steps[None, :] - at[:, None], 0, None) * 30.0 * rate  # (runs, E)
+        faulty = np.repeat(rho[None], runs, axis=0)  # (runs, E, S)
         faulty[np.arange(runs), :, slot] += grow
         out = jax.tree_util.tree_map(np.asarray, monitor_runs(jnp.asarray(faulty)))
         alarm = out.check.alarm & (steps[None, :] >= at[:, None])
@@ -431,12 +566,18 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
         delay = (first - at)[detected] * 30.0
         bias = grow[np.arange(runs), first][detected]
         mdb = mdb_all[first, slot][detected]
-        rows.append({"section": "ramp", "rate_m_s": float(rate), "runs": runs,
-                     "detection_rate": float(detected.mean()),
-                     "delay_median_s": float(np.median(delay)) if delay.size else float("nan"),
-                     "bias_at_detection_median_m": float(np.median(bias)) if bias.size else float("nan"),
-                     "bias_at_detection_min_m": float(bias.min()) if bias.size else float("nan"),
-                     "mdb_at_detection_median_m": float(np.median(mdb)) if mdb.size else float("nan")})
+        rows.append(
+            {
+                "section": "ramp",
+                "rate_m_s": float(rate),
+                "runs": runs,
+                "detection_rate": float(detected.mean()),
+                "delay_median_s": float(np.median(delay)) if delay.size else float("nan"),
+                "bias_at_detection_median_m": float(np.median(bias)) if bias.size else float("nan"),
+                "bias_at_detection_min_m": float(bias.min()) if bias.size else float("nan"),
+                "mdb_at_detection_median_m": float(np.median(mdb)) if mdb.size else float("nan"),
+            }
+        )
         if progress:
             status(f"gnss-real: ramp {rate:g} m/s: detection {detected.mean():.3f}")
 
@@ -444,9 +585,11 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
     tracked = np.isfinite(rho)
     for kind in ("frozen", "dead"):
         faulty = np.repeat(rho[None], runs, axis=0)
-        after = (steps[None, :] >= at[:, None]) & tracked[:, slot].T                     # (runs, E)
+        after = (steps[None, :] >= at[:, None]) & tracked[:, slot].T  # (runs, E)
         held = rho[at, slot][:, None] if kind == "frozen" else np.inf
-        faulty[np.arange(runs)[:, None], steps[None, :], slot[:, None]] = np.where(after, held, rho[:, slot].T)
+        faulty[np.arange(runs)[:, None], steps[None, :], slot[:, None]] = np.where(
+            after, held, rho[:, slot].T
+        )
         out = jax.tree_util.tree_map(np.asarray, monitor_runs(jnp.asarray(faulty)))
         flagged = out.check.alarm | out.dead.any(axis=2)
         alarm = flagged & after
@@ -454,17 +597,29 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
         first = np.argmax(alarm, axis=1)
         isolated = out.excluded[np.arange(runs), first] == slot
         moved = np.abs(rho[first, slot] - rho[at, slot])[detected]
-        rows.append({"section": "channel", "kind": kind, "runs": runs, "detection_rate": float(detected.mean()),
-                     "exclusion_rate": float((detected & isolated).mean()),
-                     "delay_median_s": float(np.median((first - at)[detected] * 30.0)) if detected.any() else float("nan"),
-                     "range_change_at_detection_median_m": float(np.median(moved)) if kind == "frozen" and moved.size
-                     else float("nan")})
+        rows.append(
+            {
+                "section": "channel",
+                "kind": kind,
+                "runs": runs,
+                "detection_rate": float(detected.mean()),
+                "exclusion_rate": float((detected & isolated).mean()),
+                "delay_median_s": float(np.median((first - at)[detected] * 30.0))
+                if detected.any()
+                else float("nan"),
+                "range_change_at_detection_median_m": float(np.median(moved))
+                if kind == "frozen" and moved.size
+                else float("nan"),
+            }
+        )
         if progress:
             status(f"gnss-real: {kind} channel: detection {detected.mean():.3f}")
 
     for label in PHONES:
         phone = load_phone(label)
-        result = jax.tree_util.tree_map(np.asarray, monitor_receiver(phone, exclude=PHONE_EXCLUSIONS))
+        result = jax.tree_util.tree_map(
+            np.asarray, monitor_receiver(phone, exclude=PHONE_EXCLUSIONS)
+        )
         separation = jax.tree_util.tree_map(np.asarray, separate_epochs(result.fix))
         row, arrays = _phone_row(label, phone, result, separation)
         rows.append(row)
@@ -474,10 +629,20 @@ def gnss_real_study(runs: int = 200, seed: int = 0, progress: bool = False,
             rows.append(peers)
         if progress:
             status(f"gnss-real: {label}: {row['epochs']} epochs, {row['parity_alarms']} alarms")
-    config = {"stations": list(STATIONS), "fault_station": FAULT_STATION, "runs": runs, "seed": seed,
-              "mask_deg": 15.0, "pfa": 1e-3, "pmd": 1e-3, "max_gdop": MAX_GDOP,
-              "data": "GEONET 2005-04-02 00:00-01:00 GPST", "phones": list(PHONES),
-              "phone_clocks": "one per constellation", "phone_mask_deg": None}
+    config = {
+        "stations": list(STATIONS),
+        "fault_station": FAULT_STATION,
+        "runs": runs,
+        "seed": seed,
+        "mask_deg": 15.0,
+        "pfa": 1e-3,
+        "pmd": 1e-3,
+        "max_gdop": MAX_GDOP,
+        "data": "GEONET 2005-04-02 00:00-01:00 GPST",
+        "phones": list(PHONES),
+        "phone_clocks": "one per constellation",
+        "phone_mask_deg": None,
+    }
     return GnssRealStudy(config, rows, epochs_out)
 
 
@@ -488,33 +653,67 @@ def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
 
     fig, axes = column_subplots(6.5, 2, 2)
     count = sum(int((study.epochs[station]["gdop"] <= MAX_GDOP).sum()) for station in STATIONS)
-    phones = {label: arrays for label, arrays in study.epochs.items() if label in PHONES and arrays["truth"].any()}
+    phones = {
+        label: arrays
+        for label, arrays in study.epochs.items()
+        if label in PHONES and arrays["truth"].any()
+    }
     count_phones = sum(int(arrays["truth"].sum()) for arrays in phones.values())
     for row, (method, prefix) in enumerate((("slope", ""), ("solution separation", "ss_"))):
-        for col, (axis, error) in enumerate((("horizontal", "horizontal_error"), ("vertical", "vertical_error"))):
+        for col, (axis, error) in enumerate(
+            (("horizontal", "horizontal_error"), ("vertical", "vertical_error"))
+        ):
             ax = axes[row, col]
             level = prefix + ("hpl" if axis == "horizontal" else "vpl")
             for station in STATIONS:
                 arrays = study.epochs[station]
                 scored = arrays["gdop"] <= MAX_GDOP
-                ax.loglog(arrays[error][scored], arrays[level][scored], ".", ms=3, label=f"station {station}")
+                ax.loglog(
+                    arrays[error][scored],
+                    arrays[level][scored],
+                    ".",
+                    ms=3,
+                    label=f"station {station}",
+                )
             for label, arrays in phones.items():
                 truth = arrays["truth"]
                 alarm = arrays["alarm"][truth]
                 ax.loglog(arrays[error], arrays[level][truth], "x", ms=4, label=label)
-                ax.loglog(arrays[error][alarm], arrays[level][truth][alarm], "o", ms=6, mfc="none", mec="k",
-                          lw=0.5, label="_alarm" if label != next(iter(phones)) else "parity alarm (phones)")
+                ax.loglog(
+                    arrays[error][alarm],
+                    arrays[level][truth][alarm],
+                    "o",
+                    ms=6,
+                    mfc="none",
+                    mec="k",
+                    lw=0.5,
+                    label="_alarm" if label != next(iter(phones)) else "parity alarm (phones)",
+                )
             ax.plot((1.0, 1e3), (1.0, 1e3), "k-", lw=0.8, label="error = PL")
-            ax.fill_between((1.0, 1e3), (1.0, 1.0), (1.0, 1e3), color="r", alpha=0.1,
-                            label="misleading (error > PL)")
-            ax.set(xlim=(0.05, 1e3), ylim=(1.0, 1e5), xlabel=f"{axis} error [m]",
-                   ylabel=f"{level.replace('ss_', '').upper()} [m]", title=f"{axis}, {method}")
+            ax.fill_between(
+                (1.0, 1e3),
+                (1.0, 1.0),
+                (1.0, 1e3),
+                color="r",
+                alpha=0.1,
+                label="misleading (error > PL)",
+            )
+            ax.set(
+                xlim=(0.05, 1e3),
+                ylim=(1.0, 1e5),
+                xlabel=f"{axis} error [m]",
+                ylabel=f"{level.replace('ss_', '').upper()} [m]",
+                title=f"{axis}, {method}",
+            )
     axes[0, 0].legend(fontsize=6, loc="upper left", ncol=2)
-    path = save_figure(fig, Path(out_dir) / "gnss-real-stanford.png",
-                       f"Stanford diagrams of {count} epochs of GEONET stations 0759 and 3040 (one hour at 30 s, "
-                       "2005-04-02, GDOP <= 30), error from the surveyed position, and of the "
-                       f"{count_phones} smartphone epochs with ground truth (GSDC 2021-2023, crosses; circled: a "
-                       "parity alarm), against the slope protection levels (P_fa = P_md = 1e-3, top) and the "
-                       "solution-separation ones (ARAIM LPV-200 budgets, bottom). A point in the red region "
-                       "without an alarm is misleading information: the table counts them.")
+    path = save_figure(
+        fig,
+        Path(out_dir) / "gnss-real-stanford.png",
+        f"Stanford diagrams of {count} epochs of GEONET stations 0759 and 3040 (one hour at 30 s, "
+        "2005-04-02, GDOP <= 30), error from the surveyed position, and of the "
+        f"{count_phones} smartphone epochs with ground truth (GSDC 2021-2023, crosses; circled: a "
+        "parity alarm), against the slope protection levels (P_fa = P_md = 1e-3, top) and the "
+        "solution-separation ones (ARAIM LPV-200 budgets, bottom). A point in the red region "
+        "without an alarm is misleading information: the table counts them.",
+    )
     return [str(path)]

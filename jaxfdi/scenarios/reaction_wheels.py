@@ -43,6 +43,7 @@ Choices the paper leaves open (documented, tested):
 Reference: Choi & Park (2009), "Design of Fault Isolator of Satellite Reaction Wheel System Using Dual
 Filter and Multi-hypothesis Extended Kalman Filter" (CITATION.cff).
 """
+
 from __future__ import annotations
 
 import functools
@@ -55,26 +56,56 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.control._attitude import (AttitudeGains, Slew, pd_gains, slew, slew_reference, wheel_attitude_controller,
-                                      wheel_plant)
+from jaxfdi._faults import (
+    Fault,
+    FaultKind,
+    Target,
+    fault,
+    fault_label,
+    no_fault,
+    sensor_labels,
+    stack_faults,
+)
+from jaxfdi._frame import study_result
+from jaxfdi._loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
+from jaxfdi._metrics import (
+    DetectionRecord,
+    binomial_lower_bound,
+    cell,
+    rate_cell,
+    unhealthy_warning,
+)
+from jaxfdi._stages import FDI
+from jaxfdi._study import Structure, Study, run_study
+from jaxfdi.control._attitude import (
+    AttitudeGains,
+    Slew,
+    pd_gains,
+    slew,
+    slew_reference,
+    wheel_attitude_controller,
+    wheel_plant,
+)
 from jaxfdi.detection._chi2 import Decision, chi2_threshold
 from jaxfdi.detection._credits import hypothesis_credits
 from jaxfdi.detection._frozen import frozen_channel_detector
 from jaxfdi.detection._two_stage import two_stage_isolation
-from jaxfdi._faults import Fault, FaultKind, Target, fault, fault_label, no_fault, sensor_labels, stack_faults
 from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters._ekf import extended_kalman_filter
 from jaxfdi.filters._ukf import unscented_kalman_filter
-from jaxfdi._loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
-from jaxfdi._stages import FDI
-from jaxfdi._frame import study_result
-from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, cell, rate_cell, unhealthy_warning
-from jaxfdi.scenarios._common import check_methods, check_study, figure_saver, require_x64
-from jaxfdi._study import Structure, Study, run_study
-from jaxfdi.models._reaction_wheels import (SpacecraftParams, WheelCommand, body_rate_field, filter_input,
-                                            gyro_observation, kitsat3_params, stop_hypotheses, wheel_momentum,
-                                            wheel_rate_transition)
+from jaxfdi.models._reaction_wheels import (
+    SpacecraftParams,
+    WheelCommand,
+    body_rate_field,
+    filter_input,
+    gyro_observation,
+    kitsat3_params,
+    stop_hypotheses,
+    wheel_momentum,
+    wheel_rate_transition,
+)
 from jaxfdi.plotting import column_subplots, hypothesis_colors
+from jaxfdi.scenarios._common import check_methods, check_study, figure_saver, require_x64
 
 RPM = 2.0 * math.pi / 60.0
 #: steps in the NIS window of the chi-square detector
@@ -143,26 +174,42 @@ class WheelDesign(NamedTuple):
 MOMENTUM_PATTERNS = {"net": (1.0, 1.0, 1.0, 1.0), "zero": (1.0, -1.0, 1.0, -1.0)}
 
 
-def wheel_design(dt: float = 0.1, bias_rpm: float = 2000.0, detection_threshold: float = 6e-9,
-                 nis_pfa: float = 1e-5, credit_threshold: float = 0.5,
-                 mode_threshold: float = 0.9, momentum: str = "net", dtype=None) -> WheelDesign:
+def wheel_design(
+    dt: float = 0.1,
+    bias_rpm: float = 2000.0,
+    detection_threshold: float = 6e-9,
+    nis_pfa: float = 1e-5,
+    credit_threshold: float = 0.5,
+    mode_threshold: float = 0.9,
+    momentum: str = "net",
+    dtype=None,
+) -> WheelDesign:
     """The scenario's defaults (module doc); ``detection_threshold`` ``F_T`` is a placeholder that
     ``wheel_study`` calibrates on fault-free runs; ``momentum``: a key of ``MOMENTUM_PATTERNS``."""
     _checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
     dtype = dtype or jnp.result_type(float)
     params = kitsat3_params(dt=dt, dtype=dtype)
     null = jnp.asarray(MOMENTUM_PATTERNS[momentum], dtype)
-    arr = lambda v: jnp.asarray(v, dtype)  # noqa: E731
+    arr = lambda v: jnp.asarray(v, dtype)
     return WheelDesign(
         params=params,
         gains=pd_gains(params.inertia, natural_frequency=0.1, damping=0.9, max_wheel_torque=0.02),
-        profile=slew(axis=(1.0, 1.0, 1.0), angle_deg=SLEW_DEG, start=0.0, duration=40.0, dtype=dtype),
+        profile=slew(
+            axis=(1.0, 1.0, 1.0), angle_deg=SLEW_DEG, start=0.0, duration=40.0, dtype=dtype
+        ),
         initial_speeds=bias_rpm * RPM * null,
-        gyro_sigma=arr(3e-4), disturbance_sigma=arr(1e-5), wheel_noise_sigma=arr(2e-5),
-        estimator_q=arr(1e-4), bank_q=arr(1e-5), initial_sigma=arr(1e-3), engage_sigma=arr(2e-3),
-        detection_threshold=arr(detection_threshold), nis_threshold=chi2_threshold(3 * NIS_WINDOW, nis_pfa).astype(dtype),
+        gyro_sigma=arr(3e-4),
+        disturbance_sigma=arr(1e-5),
+        wheel_noise_sigma=arr(2e-5),
+        estimator_q=arr(1e-4),
+        bank_q=arr(1e-5),
+        initial_sigma=arr(1e-3),
+        engage_sigma=arr(2e-3),
+        detection_threshold=arr(detection_threshold),
+        nis_threshold=chi2_threshold(3 * NIS_WINDOW, nis_pfa).astype(dtype),
         credit_threshold=arr(credit_threshold),
-        mode_threshold=arr(mode_threshold), mm_floor=arr(1e-6),
+        mode_threshold=arr(mode_threshold),
+        mm_floor=arr(1e-6),
     )
 
 
@@ -176,7 +223,12 @@ def wheel_fault(kind: str, wheel: int, onset: int, magnitude: float = 0.0) -> Fa
     ``gain``   delivered torque = (1 - ``magnitude``) command
     ========== ============================================================
     """
-    kinds = {"stop": FaultKind.STOP, "stuck": FaultKind.STUCK, "bias": FaultKind.BIAS, "gain": FaultKind.EFFECTIVENESS}
+    kinds = {
+        "stop": FaultKind.STOP,
+        "stuck": FaultKind.STUCK,
+        "bias": FaultKind.BIAS,
+        "gain": FaultKind.EFFECTIVENESS,
+    }
     if kind not in kinds:
         raise ValueError(f"kind: expected one of {sorted(kinds)}, got {kind!r}")
     return fault(kinds[kind], Target.ACTUATOR, wheel, onset, magnitude)
@@ -195,15 +247,29 @@ def gyro_labels(params: SpacecraftParams) -> Array:
     return sensor_labels(params.wheel_axes.shape[0], 3)
 
 
-def estimation_filter(params: SpacecraftParams, q_sigma: Array, gyro_sigma: Array, kind: str = "ekf",
-                      missing_measurements: bool = False):
+def estimation_filter(
+    params: SpacecraftParams,
+    q_sigma: Array,
+    gyro_sigma: Array,
+    kind: str = "ekf",
+    missing_measurements: bool = False,
+):
     """The estimation filter on the rate model: EKF (Choi & Park 2009) or UKF."""
     eye = jnp.eye(3, dtype=params.inertia.dtype)
     Q, R = q_sigma**2 * eye, gyro_sigma**2 * eye
     if kind == "ukf":
-        return unscented_kalman_filter(wheel_rate_transition, gyro_observation, Q, R, params, alpha=0.5,
-                                       missing_measurements=missing_measurements)
-    return extended_kalman_filter(wheel_rate_transition, gyro_observation, Q, R, params, missing_measurements)
+        return unscented_kalman_filter(
+            wheel_rate_transition,
+            gyro_observation,
+            Q,
+            R,
+            params,
+            alpha=0.5,
+            missing_measurements=missing_measurements,
+        )
+    return extended_kalman_filter(
+        wheel_rate_transition, gyro_observation, Q, R, params, missing_measurements
+    )
 
 
 class RunOutput(NamedTuple):
@@ -266,8 +332,13 @@ class WheelHistory(NamedTuple):
     controller_rate: Array
 
 
-def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis", restart_prediction: bool = True,
-              gyro_health: bool = True):
+def wheel_fdi(
+    design: WheelDesign,
+    estimator: str = "ekf",
+    engage_on: str = "nis",
+    restart_prediction: bool = True,
+    gyro_health: bool = True,
+):
     """The two-stage FDI of Choi and Park (2009) (``detection.two_stage``: ``F``, the NIS test, the credit and
     likelihood banks) as a ``loop.FDI`` on the gyro readings and wheel commands (``init()``: the state before step 0).
 
@@ -295,46 +366,90 @@ def wheel_fdi(design: WheelDesign, estimator: str = "ekf", engage_on: str = "nis
     labels = gyro_labels(params)
     stages = two_stage_isolation(
         estimation_filter(params, design.estimator_q, design.gyro_sigma, estimator),
-        lambda p: estimation_filter(p, design.bank_q, design.gyro_sigma, estimator),  # tighter: the NIS test's and banks'
-        wheel_rate_transition, body_rate_field, params, stop_hypotheses(params),
-        stop_hypotheses(params, include_nominal=True), detection_threshold=design.detection_threshold,
-        nis_threshold=design.nis_threshold, nis_window=NIS_WINDOW, credit_threshold=design.credit_threshold,
-        mode_threshold=design.mode_threshold, mm_floor=design.mm_floor, engage_cov=design.engage_sigma**2 * eye,
-        confirm_steps=CONFIRM_STEPS, engage_on=engage_on, restart_prediction=restart_prediction,
-        channel_labels=labels)
-    health_test = frozen_channel_detector(jnp.full((3,), design.gyro_sigma, dtype), HEALTH_WINDOW, HEALTH_PFA, labels)
-    view_filter = estimation_filter(params, design.bank_q, design.gyro_sigma, estimator, missing_measurements=True)
+        lambda p: estimation_filter(
+            p, design.bank_q, design.gyro_sigma, estimator
+        ),  # tighter: the NIS test's and banks'
+        wheel_rate_transition,
+        body_rate_field,
+        params,
+        stop_hypotheses(params),
+        stop_hypotheses(params, include_nominal=True),
+        detection_threshold=design.detection_threshold,
+        nis_threshold=design.nis_threshold,
+        nis_window=NIS_WINDOW,
+        credit_threshold=design.credit_threshold,
+        mode_threshold=design.mode_threshold,
+        mm_floor=design.mm_floor,
+        engage_cov=design.engage_sigma**2 * eye,
+        confirm_steps=CONFIRM_STEPS,
+        engage_on=engage_on,
+        restart_prediction=restart_prediction,
+        channel_labels=labels,
+    )
+    health_test = frozen_channel_detector(
+        jnp.full((3,), design.gyro_sigma, dtype), HEALTH_WINDOW, HEALTH_PFA, labels
+    )
+    view_filter = estimation_filter(
+        params, design.bank_q, design.gyro_sigma, estimator, missing_measurements=True
+    )
     u0 = jnp.concatenate([design.initial_speeds, jnp.zeros(N, dtype)])
     mean0, cov0 = jnp.zeros(3, dtype), design.initial_sigma**2 * eye
-    state0 = dict(stages=stages.init(mean0, cov0, u0), health=health_test.init(),
-                  verdict=Decision(jnp.zeros((), dtype), jnp.zeros((), bool), jnp.asarray(-1, jnp.int32),
-                                   jnp.full((), jnp.nan, dtype)),
-                  out=jnp.zeros((3,), bool), view=GaussianState(mean0, cov0), view_healthy=jnp.ones((), bool), u=u0)
+    state0 = dict(
+        stages=stages.init(mean0, cov0, u0),
+        health=health_test.init(),
+        verdict=Decision(
+            jnp.zeros((), dtype),
+            jnp.zeros((), bool),
+            jnp.asarray(-1, jnp.int32),
+            jnp.full((), jnp.nan, dtype),
+        ),
+        out=jnp.zeros((3,), bool),
+        view=GaussianState(mean0, cov0),
+        view_healthy=jnp.ones((), bool),
+        u=u0,
+    )
 
     def observe(c, k, reading):
         health, verdict = health_test.step(c["health"], reading.rate)
-        frozen = verdict.alarm & jnp.isfinite(verdict.statistic)  # +inf: a dead sample, not a frozen gyro
+        frozen = verdict.alarm & jnp.isfinite(
+            verdict.statistic
+        )  # +inf: a dead sample, not a frozen gyro
         out = c["out"] | (frozen & (labels == verdict.label))
         post = view_filter.update(c["view"], jnp.where(out, jnp.nan, reading.rate), c["u"])
         rate = jnp.where(out | ~jnp.isfinite(reading.rate), post.filtered_mean, reading.rate)
-        c = dict(c, health=health, verdict=verdict, out=out,
-                 view=post.posterior,
-                 view_healthy=post.healthy)
+        c = dict(
+            c,
+            health=health,
+            verdict=verdict,
+            out=out,
+            view=post.posterior,
+            view_healthy=post.healthy,
+        )
         return c, reading._replace(rate=rate)
 
     def step(c, k, reading, command):
         u = filter_input(command, params)
         stages_state, output = stages.step(c["stages"], reading.rate, u)
-        view = view_filter.predict(c["view"], u) if gyro_health else c["view"]  # observe left step k's posterior
-        output = output._replace(decisions=output.decisions + (c["verdict"],),
-                                 healthy=output.healthy & c["view_healthy"])
+        view = (
+            view_filter.predict(c["view"], u) if gyro_health else c["view"]
+        )  # observe left step k's posterior
+        output = output._replace(
+            decisions=output.decisions + (c["verdict"],), healthy=output.healthy & c["view_healthy"]
+        )
         return dict(c, stages=stages_state, view=view, u=u), output
 
     return FDI(lambda: state0, step, observe if gyro_health else None)
 
 
-def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, estimator: str = "ekf",
-               engage_on: str = "nis", history: bool = False):
+def run_wheels(
+    design: WheelDesign,
+    key: Array,
+    f: Fault,
+    steps: int = 600,
+    estimator: str = "ekf",
+    engage_on: str = "nis",
+    history: bool = False,
+):
     """One closed-loop run ``run_loop(wheel_plant, wheel_fdi, wheel_attitude_controller)``; returns
     ``RunOutput`` (and ``WheelHistory`` if ``history``). ``engage_on``: the detector whose first alarm
     engages the banks, ``"nis"`` (default) or ``"fdp"`` (the paper's ``F``); ``estimator``: ``"ekf"``/``"ukf"``.
@@ -343,21 +458,41 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
     dtype = params.inertia.dtype
     N = params.wheel_axes.shape[0]
     fdi = wheel_fdi(design, estimator, engage_on)
-    plant = wheel_plant(params, f, design.gyro_sigma, design.disturbance_sigma, design.wheel_noise_sigma)
-    controller = wheel_attitude_controller(params, design.gains, design.profile, design.initial_speeds)
+    plant = wheel_plant(
+        params, f, design.gyro_sigma, design.disturbance_sigma, design.wheel_noise_sigma
+    )
+    controller = wheel_attitude_controller(
+        params, design.gains, design.profile, design.initial_speeds
+    )
 
     def early(k):  # within the isolation deadline after the onset
         return (k >= f.onset) & ((k - f.onset) * params.dt < ISOLATION_DEADLINE_S)
 
     scorer = combine_scorers(
         records=detection_scorer(f.onset, lambda out: out.decisions, dtype=dtype),  # METHODS' order
-        peaks=peak_scorer(lambda out: jnp.concatenate([out.peaks, out.peaks[:1]]),
-                          lambda k: jnp.stack([k < f.onset, k < f.onset, early(k)]), dtype),
+        peaks=peak_scorer(
+            lambda out: jnp.concatenate([out.peaks, out.peaks[:1]]),
+            lambda k: jnp.stack([k < f.onset, k < f.onset, early(k)]),
+            dtype,
+        ),
         healthy=health_scorer(),
     )
-    x0 = jnp.concatenate([jnp.array([1.0, 0, 0, 0], dtype), jnp.zeros(3, dtype), design.initial_speeds])
+    x0 = jnp.concatenate(
+        [jnp.array([1.0, 0, 0, 0], dtype), jnp.zeros(3, dtype), design.initial_speeds]
+    )
     u0 = WheelCommand(design.initial_speeds, jnp.zeros(N, dtype))
-    result = run_loop(plant, fdi, controller, x0, fdi.init(), key, steps, u0=u0, scorer=scorer, keep_history=history)
+    result = run_loop(
+        plant,
+        fdi,
+        controller,
+        x0,
+        fdi.init(),
+        key,
+        steps,
+        u0=u0,
+        scorer=scorer,
+        keep_history=history,
+    )
     score = result.score
     out = RunOutput(*score["records"], *score["peaks"], score["healthy"])
     if not history:
@@ -366,10 +501,21 @@ def run_wheels(design: WheelDesign, key: Array, f: Fault, steps: int = 600, esti
     truth, reading, o = trace.sensed.state, trace.sensed.measurement, trace.output
     t = jnp.arange(steps) * params.dt
     reference = jax.vmap(lambda s: slew_reference(s, design.profile)[1])(t)
-    return out, WheelHistory(truth[:, :4], truth[:, 4:7], reference, reading.rate, truth[:, 7:], trace.control.speeds,
-                             o.peaks[:, 0], o.peaks[:, 1], o.hypothesis_parameter,
-                             jax.vmap(hypothesis_credits)(o.hypothesis_parameter), o.mode_prob, o.engaged,
-                             trace.view.rate)
+    return out, WheelHistory(
+        truth[:, :4],
+        truth[:, 4:7],
+        reference,
+        reading.rate,
+        truth[:, 7:],
+        trace.control.speeds,
+        o.peaks[:, 0],
+        o.peaks[:, 1],
+        o.hypothesis_parameter,
+        jax.vmap(hypothesis_credits)(o.hypothesis_parameter),
+        o.mode_prob,
+        o.engaged,
+        trace.view.rate,
+    )
 
 
 # --- the Monte Carlo study -------------------------------------------------------
@@ -379,16 +525,24 @@ KINDS = {"stop": 0.0, "stuck": 0.0, "bias": 2e-3, "gain": 0.5}
 #: fault onsets are drawn uniformly from these steps (15 s to 25 s at 10 Hz)
 ONSET_RANGE = (150, 250)
 METHODS = ("fdp", "nis", "credit", "likelihood", "health")
-METHOD_NAMES = {"fdp": "dual filter F (paper)", "nis": "NIS chi-square", "credit": "credit isolator (paper)",
-                "likelihood": "MM likelihood", "health": "gyro health test"}
+METHOD_NAMES = {
+    "fdp": "dual filter F (paper)",
+    "nis": "NIS chi-square",
+    "credit": "credit isolator (paper)",
+    "likelihood": "MM likelihood",
+    "health": "gyro health test",
+}
 #: the methods that name a wheel (F and NIS only detect, the health test names gyros)
 WHEEL_ISOLATORS = ("credit", "likelihood")
 
 
 def study_cases() -> list[tuple[str, int]]:
     """``('none', -1)``, every ``KINDS`` on wheels 0..3, then every ``GYRO_KINDS`` on gyro ``GYRO_AXIS``."""
-    return ([("none", -1)] + [(kind, wheel) for kind in KINDS for wheel in range(4)]
-            + [(kind, GYRO_AXIS) for kind in GYRO_KINDS])
+    return (
+        [("none", -1)]
+        + [(kind, wheel) for kind in KINDS for wheel in range(4)]
+        + [(kind, GYRO_AXIS) for kind in GYRO_KINDS]
+    )
 
 
 def case_name(kind: str, component: int) -> str:
@@ -401,12 +555,19 @@ def case_name(kind: str, component: int) -> str:
 def case_faults(cases: list[tuple[str, int]], runs: int, key: Array) -> Fault:
     """Stacked ``len(cases) * runs`` faults, case-major, random onsets (fault-free: ``faults.NEVER``, the whole run
     counts for false alarms); a case is ``(kind, wheel)`` (``KINDS``) or ``(kind, gyro axis)`` (``GYRO_KINDS``)."""
-    onsets = np.asarray(jax.random.randint(key, (len(cases), runs), ONSET_RANGE[0], ONSET_RANGE[1] + 1))
+    onsets = np.asarray(
+        jax.random.randint(key, (len(cases), runs), ONSET_RANGE[0], ONSET_RANGE[1] + 1)
+    )
     faults = []
     for (kind, component), onset_row in zip(cases, onsets):
         for onset in onset_row:
-            faults.append(no_fault() if kind == "none" else gyro_fault(kind, component, int(onset))
-                          if kind in GYRO_KINDS else wheel_fault(kind, component, int(onset), KINDS[kind]))
+            faults.append(
+                no_fault()
+                if kind == "none"
+                else gyro_fault(kind, component, int(onset))
+                if kind in GYRO_KINDS
+                else wheel_fault(kind, component, int(onset), KINDS[kind])
+            )
     return stack_faults(faults)
 
 
@@ -421,28 +582,45 @@ def _closed_loop(steps: int, estimator: str, engage_on: str):
     return run
 
 
-def wheel_spec(design: WheelDesign, cases: Sequence[tuple[str, int]], steps: int = 600, estimator: str = "ekf",
-               engage_on: str = "nis", name: str = "reaction-wheels") -> Study:
+def wheel_spec(
+    design: WheelDesign,
+    cases: Sequence[tuple[str, int]],
+    steps: int = 600,
+    estimator: str = "ekf",
+    engage_on: str = "nis",
+    name: str = "reaction-wheels",
+) -> Study:
     """The study of ``cases`` (as ``study_cases``) on ``design``: one structure, ``run_wheels`` with the
     design as data; faults ``case_faults(cases, runs, key(seed + 2))``, onsets uniform in
     ``ONSET_RANGE``; every method comes out of the same run (``outputs["closed loop"]``, a ``RunOutput``)."""
     cases = tuple(cases)
     names = tuple(case_name(kind, component) for kind, component in cases)
-    loop = Structure("closed loop", _closed_loop(steps, estimator, engage_on), (), {"closed loop": ()}, shared=design)
-    return Study(name, lambda runs, seed: case_faults(cases, runs, jax.random.key(seed + 2)), names, (loop,))
+    loop = Structure(
+        "closed loop",
+        _closed_loop(steps, estimator, engage_on),
+        (),
+        {"closed loop": ()},
+        shared=design,
+    )
+    return Study(
+        name, lambda runs, seed: case_faults(cases, runs, jax.random.key(seed + 2)), names, (loop,)
+    )
 
 
 #: F_T = FDP_MARGIN x the largest F of the fault-free calibration runs
 FDP_MARGIN = 1.5
 
 
-def calibrate_fdp_threshold(design: WheelDesign, runs: int, seed: int, margin: float = FDP_MARGIN,
-                            **options) -> float:
+def calibrate_fdp_threshold(
+    design: WheelDesign, runs: int, seed: int, margin: float = FDP_MARGIN, **options
+) -> float:
     """``F_T = margin * max F`` over ``runs`` fault-free runs of ``seed`` (the paper sets it by eye; ``F``
     has no known distribution; a new run exceeds the max of ``n`` with probability ``1 / (n + 1)``).
     ``options``: ``steps``, ``estimator``, ``engage_on`` (``wheel_spec``), ``chunk_size``, ``progress``."""
     spec_options = {k: options.pop(k) for k in ("steps", "estimator", "engage_on") if k in options}
-    spec = wheel_spec(design, [("none", -1)], name="reaction-wheels F_T calibration", **spec_options)
+    spec = wheel_spec(
+        design, [("none", -1)], name="reaction-wheels F_T calibration", **spec_options
+    )
     out = run_study(spec, runs, seed, **options).outputs["closed loop"]
     return float(margin * np.max(out.max_fault_free_fdp))
 
@@ -451,11 +629,19 @@ def run_is_healthy(out: RunOutput) -> np.ndarray:
     """(runs,) bool: every filter healthy at every step, no statistic NaN (a dead gyro's +inf is
     evidence, ``metrics.step_health``)."""
     records = (out.fdp, out.nis, out.credit, out.likelihood, out.health)
-    return np.asarray(out.healthy) & np.all([np.asarray(r.first_unhealthy) < 0 for r in records], axis=0)
+    return np.asarray(out.healthy) & np.all(
+        [np.asarray(r.first_unhealthy) < 0 for r in records], axis=0
+    )
 
 
-def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: bool, label: int | None = None,
-                     names_it: bool = True) -> dict:
+def summarize_method(
+    record: DetectionRecord,
+    wheel: int,
+    dt: float,
+    isolating: bool,
+    label: int | None = None,
+    names_it: bool = True,
+) -> dict:
     """Rates and delays of one method over one case's runs (``wheel < 0``: fault-free, false alarms only).
 
     - ``rate``: detected (detectors) or isolated to ``label`` (isolators; default ``wheel + 1``) at or after the onset;
@@ -479,18 +665,20 @@ def summarize_method(record: DetectionRecord, wheel: int, dt: float, isolating: 
     scored = correct & ~pre_alarm
     in_time = scored & (delay <= ISOLATION_DEADLINE_S + 1e-9)
     nan = float("nan")
-    row.update({
-        "rate": float(np.mean(correct)),
-        "rate_within_deadline": float(np.mean(in_time)),
-        "delay_mean_s": float(np.mean(delay[scored])) if scored.any() else nan,
-        "delay_median_s": float(np.median(delay[scored])) if scored.any() else nan,
-        "delay_p90_s": float(np.percentile(delay[scored], 90)) if scored.any() else nan,
-        "decided_rate": float(np.mean(detected)),
-        "isolation_rate": float(np.mean(named)) if names_it else None,
-        "pre_onset_alarm_rate": false_alarm,
-        "clean_runs": int(np.sum(~pre_alarm)),
-        "delay_runs": int(np.sum(scored)),
-    })
+    row.update(
+        {
+            "rate": float(np.mean(correct)),
+            "rate_within_deadline": float(np.mean(in_time)),
+            "delay_mean_s": float(np.mean(delay[scored])) if scored.any() else nan,
+            "delay_median_s": float(np.median(delay[scored])) if scored.any() else nan,
+            "delay_p90_s": float(np.percentile(delay[scored], 90)) if scored.any() else nan,
+            "decided_rate": float(np.mean(detected)),
+            "isolation_rate": float(np.mean(named)) if names_it else None,
+            "pre_onset_alarm_rate": false_alarm,
+            "clean_runs": int(np.sum(~pre_alarm)),
+            "delay_runs": int(np.sum(scored)),
+        }
+    )
     return row
 
 
@@ -501,17 +689,34 @@ def summarize_case(part: RunOutput, kind: str, wheel: int, dt: float, methods=ME
     healthy = run_is_healthy(part)
     clean = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[healthy], part)
     gyro = kind in GYRO_KINDS
-    row = {"case": case_name(kind, wheel), "kind": kind, "wheel": -1 if gyro else wheel,
-           "magnitude": KINDS.get(kind, 0.0)}
+    row = {
+        "case": case_name(kind, wheel),
+        "kind": kind,
+        "wheel": -1 if gyro else wheel,
+        "magnitude": KINDS.get(kind, 0.0),
+    }
     if gyro:
         row["gyro"] = wheel
     # the fault's label: fault_label as the simulator derives it (N = 4 wheels before the gyros)
-    label = None if kind == "none" else int(fault_label(
-        gyro_fault(kind, wheel, 0) if gyro else wheel_fault(kind, wheel, 0, KINDS[kind]), 4))
+    label = (
+        None
+        if kind == "none"
+        else int(
+            fault_label(
+                gyro_fault(kind, wheel, 0) if gyro else wheel_fault(kind, wheel, 0, KINDS[kind]), 4
+            )
+        )
+    )
     for method in methods:
         names_it = gyro or method in WHEEL_ISOLATORS
-        row[method] = summarize_method(getattr(clean, method), wheel, dt, method in (*WHEEL_ISOLATORS, "health"),
-                                       label, names_it)
+        row[method] = summarize_method(
+            getattr(clean, method),
+            wheel,
+            dt,
+            method in (*WHEEL_ISOLATORS, "health"),
+            label,
+            names_it,
+        )
     if kind != "none" and not gyro:
         row["fdp_ratio_median"] = float(np.median(clean.max_early_fdp / clean.max_fault_free_fdp))
     row["healthy_rate"] = float(np.mean(part.healthy))
@@ -533,51 +738,73 @@ class WheelStudy(NamedTuple):
     rows: list[dict]
     outputs: RunOutput
 
-
     def table(self) -> str:
         """Per case and method (``summarize_method``): ``det``, ``isol`` (``-``: never names that kind of
         fault), ``<=2s`` (clean runs: isolated for isolators and the health test, detected for F and NIS),
         ``FA``, ``clean`` and the delays of the right decision over clean runs. The health test's line only
         for fault-free and gyro cases (it names no wheel). Each rate with its 95 % Clopper-Pearson interval
         (``metrics.rate_interval``) over the ``n`` healthy runs (``<=2s``: the clean runs)."""
-        head = (f"{'case':<10} {'method':<24} {'det [95 %]':>19} {'isol [95 %]':>19} {'<=2s [95 %]':>19} "
-                f"{'FA [95 %]':>19} {'n':>4} {'clean':>5} {'mean [s]':>8} {'med [s]':>8} {'p90 [s]':>8}")
+        head = (
+            f"{'case':<10} {'method':<24} {'det [95 %]':>19} {'isol [95 %]':>19} {'<=2s [95 %]':>19} "
+            f"{'FA [95 %]':>19} {'n':>4} {'clean':>5} {'mean [s]':>8} {'med [s]':>8} {'p90 [s]':>8}"
+        )
         lines = [head, "-" * len(head)]
         for row in self.rows:
-            shown = [m for m in METHODS if m in row and (m != "health" or row["kind"] in ("none", *GYRO_KINDS))]
+            shown = [
+                m
+                for m in METHODS
+                if m in row and (m != "health" or row["kind"] in ("none", *GYRO_KINDS))
+            ]
             n = row["runs"] - row.get("unhealthy_runs", 0)
             for method in shown:
                 r = row[method]
                 clean = r.get("clean_runs")
-                isolation = None if "rate" not in r else r.get("isolation_rate")  # None: never isolates (blank)
-                isolation = float("nan") if "rate" in r and isolation is None else isolation  # '-': names none
-                delays = " ".join(" " * 8 if r.get(k) is None else cell(r[k], ".2f", 8)
-                                  for k in ("delay_mean_s", "delay_median_s", "delay_p90_s"))
-                lines.append(f"{row['case']:<10} {METHOD_NAMES[method]:<24} {rate_cell(r.get('decided_rate'), n, 19)} "
-                             f"{rate_cell(isolation, n, 19)} {rate_cell(r.get('rate_within_deadline'), clean, 19)} "
-                             f"{rate_cell(r['false_alarm_rate'], n, 19)} {n:>4} {'' if clean is None else clean:>5} "
-                             f"{delays}")
+                isolation = (
+                    None if "rate" not in r else r.get("isolation_rate")
+                )  # None: never isolates (blank)
+                isolation = (
+                    float("nan") if "rate" in r and isolation is None else isolation
+                )  # '-': names none
+                delays = " ".join(
+                    " " * 8 if r.get(k) is None else cell(r[k], ".2f", 8)
+                    for k in ("delay_mean_s", "delay_median_s", "delay_p90_s")
+                )
+                lines.append(
+                    f"{row['case']:<10} {METHOD_NAMES[method]:<24} {rate_cell(r.get('decided_rate'), n, 19)} "
+                    f"{rate_cell(isolation, n, 19)} {rate_cell(r.get('rate_within_deadline'), clean, 19)} "
+                    f"{rate_cell(r['false_alarm_rate'], n, 19)} {n:>4} {'' if clean is None else clean:>5} "
+                    f"{delays}"
+                )
         bad = [row for row in self.rows if row.get("unhealthy_runs")]
-        warning = unhealthy_warning(sum(row["unhealthy_runs"] for row in bad), sum(row["runs"] for row in self.rows),
-                                    ", ".join(f"{row['case']} {row['unhealthy_runs']}" for row in bad))
+        warning = unhealthy_warning(
+            sum(row["unhealthy_runs"] for row in bad),
+            sum(row["runs"] for row in self.rows),
+            ", ".join(f"{row['case']} {row['unhealthy_runs']}" for row in bad),
+        )
         return "\n".join(lines + ([warning] if warning else []))
 
     def headline(self) -> str:
         """The stop cases beside the paper (qualitative: no numbers there), net momentum then zero; the
         credit rate per wheel with its one-sided 95 % Clopper-Pearson lower bound."""
-        lines = ["Wheel stops (Choi & Park 2009 report one run: F jumps by orders of magnitude at the stop of wheel 1, and",
-                 "credit 1 separates from the others immediately):"]
+        lines = [
+            "Wheel stops (Choi & Park 2009 report one run: F jumps by orders of magnitude at the stop of wheel 1, and",
+            "credit 1 separates from the others immediately):",
+        ]
         blocks = [(self.config.get("momentum", "net"), self.rows)]
         zero = self.config.get("zero_momentum")
         if zero:
             blocks.append(("zero", zero["rows"]))
         for momentum, rows in blocks:
-            lines.append("  net wheel momentum (all wheels biased +2000 rpm; det A not structurally 0):"
-                         if momentum == "net" else
-                         "  zero net momentum (bias speeds in the null space of H^T: det A = 0 on the true trajectory, "
-                         "so F sees a stop only through the model's momentum error):")
+            lines.append(
+                "  net wheel momentum (all wheels biased +2000 rpm; det A not structurally 0):"
+                if momentum == "net"
+                else "  zero net momentum (bias speeds in the null space of H^T: det A = 0 on the true trajectory, "
+                "so F sees a stop only through the model's momentum error):"
+            )
             for row in rows:
-                if row["kind"] != "stop" or not all(m in row for m in ("fdp", "credit", "likelihood")):
+                if row["kind"] != "stop" or not all(
+                    m in row for m in ("fdp", "credit", "likelihood")
+                ):
                     continue
                 credit = row["credit"]
                 right = round(credit["rate"] * (row["runs"] - row.get("unhealthy_runs", 0)))
@@ -586,29 +813,46 @@ class WheelStudy(NamedTuple):
                     f"{cell(row['fdp']['delay_median_s'], '.1f', 4).strip()} s, F after/before "
                     f"{row['fdp_ratio_median']:.1f}x), credits isolate {credit['rate']:.2f} (>= "
                     f"{binomial_lower_bound(right, row['runs'] - row.get('unhealthy_runs', 0)):.2f} at 95 %), "
-                    f"{credit['rate_within_deadline']:.2f} within 2 s; MM {row['likelihood']['rate_within_deadline']:.2f}"
-                    f" within 2 s")
+                    f"{credit['rate_within_deadline']:.2f} within 2 s; MM "
+                    f"{row['likelihood']['rate_within_deadline']:.2f}"
+                    f" within 2 s"
+                )
         return "\n".join(lines)
 
 
-def _cases_study(design: WheelDesign, cases, runs: int, seed: int, calibration_runs: int, selected, options):
+def _cases_study(
+    design: WheelDesign, cases, runs: int, seed: int, calibration_runs: int, selected, options
+):
     threshold = calibrate_fdp_threshold(design, calibration_runs, seed + 1, **options)
-    design = design._replace(detection_threshold=jnp.asarray(threshold, design.detection_threshold.dtype))
+    design = design._replace(
+        detection_threshold=jnp.asarray(threshold, design.detection_threshold.dtype)
+    )
     spec_options = {k: v for k, v in options.items() if k in ("steps", "estimator", "engage_on")}
     run_options = {k: v for k, v in options.items() if k in ("chunk_size", "progress")}
-    out = run_study(wheel_spec(design, cases, **spec_options), runs, seed, **run_options).outputs["closed loop"]
+    out = run_study(wheel_spec(design, cases, **spec_options), runs, seed, **run_options).outputs[
+        "closed loop"
+    ]
     dt = float(design.params.dt)
     rows = []
     for i, (kind, wheel) in enumerate(cases):
-        part = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[i * runs:(i + 1) * runs], out)
+        part = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[i * runs : (i + 1) * runs], out)
         rows.append(summarize_case(part, kind, wheel, dt, selected))
     return threshold, rows, out
 
 
-def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, estimator: str = "ekf",
-                engage_on: str = "nis", steps: int = 600, chunk_size: int | None = None, progress: bool = False,
-                methods: Sequence[str] | None = None, momentum: str = "net",
-                zero_momentum_row: bool = True) -> WheelStudy:
+def wheel_study(
+    runs: int = 100,
+    seed: int = 0,
+    calibration_runs: int = 200,
+    estimator: str = "ekf",
+    engage_on: str = "nis",
+    steps: int = 600,
+    chunk_size: int | None = None,
+    progress: bool = False,
+    methods: Sequence[str] | None = None,
+    momentum: str = "net",
+    zero_momentum_row: bool = True,
+) -> WheelStudy:
     """Every case of ``study_cases`` with ``runs`` Monte Carlo runs (noise and onset), ``F_T`` calibrated
     first on ``calibration_runs`` fault-free runs of seed ``seed + 1``. Needs float64 (``jaxfdi.enable_x64()``).
 
@@ -625,44 +869,93 @@ def wheel_study(runs: int = 100, seed: int = 0, calibration_runs: int = 200, est
     _checks.check_choice("engage_on", engage_on, ["nis", "fdp"])
     _checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
     design = wheel_design(momentum=momentum)
-    kwargs = dict(steps=steps, estimator=estimator, engage_on=engage_on, chunk_size=chunk_size, progress=progress)
+    kwargs = dict(
+        steps=steps,
+        estimator=estimator,
+        engage_on=engage_on,
+        chunk_size=chunk_size,
+        progress=progress,
+    )
     cases = study_cases()
-    threshold, rows, out = _cases_study(design, cases, runs, seed, calibration_runs, selected, kwargs)
+    threshold, rows, out = _cases_study(
+        design, cases, runs, seed, calibration_runs, selected, kwargs
+    )
     dt = float(design.params.dt)
     zero = None
     if zero_momentum_row and momentum != "zero":
-        zero_threshold, zero_rows, _ = _cases_study(wheel_design(momentum="zero"), [("stop", w) for w in range(4)],
-                                                     runs, seed, calibration_runs, selected, kwargs)
+        zero_threshold, zero_rows, _ = _cases_study(
+            wheel_design(momentum="zero"),
+            [("stop", w) for w in range(4)],
+            runs,
+            seed,
+            calibration_runs,
+            selected,
+            kwargs,
+        )
         zero = {"fdp_threshold": zero_threshold, "rows": zero_rows}
     config = {
-        "runs": runs, "seed": seed, "calibration_runs": calibration_runs, "estimator": estimator,
-        "engage_on": engage_on, "steps": steps, "dt": dt, "onset_range_steps": list(ONSET_RANGE),
-        "fdp_threshold": threshold, "nis_threshold": float(design.nis_threshold), "nis_window": NIS_WINDOW,
-        "credit_threshold": float(design.credit_threshold), "mode_threshold": float(design.mode_threshold),
-        "confirm_steps": CONFIRM_STEPS, "fdp_margin": FDP_MARGIN, "kinds": KINDS, "slew_deg": SLEW_DEG,
-        "gyro_kinds": list(GYRO_KINDS), "gyro_axis": GYRO_AXIS,
+        "runs": runs,
+        "seed": seed,
+        "calibration_runs": calibration_runs,
+        "estimator": estimator,
+        "engage_on": engage_on,
+        "steps": steps,
+        "dt": dt,
+        "onset_range_steps": list(ONSET_RANGE),
+        "fdp_threshold": threshold,
+        "nis_threshold": float(design.nis_threshold),
+        "nis_window": NIS_WINDOW,
+        "credit_threshold": float(design.credit_threshold),
+        "mode_threshold": float(design.mode_threshold),
+        "confirm_steps": CONFIRM_STEPS,
+        "fdp_margin": FDP_MARGIN,
+        "kinds": KINDS,
+        "slew_deg": SLEW_DEG,
+        "gyro_kinds": list(GYRO_KINDS),
+        "gyro_axis": GYRO_AXIS,
         "gyro_labels": [int(v) for v in np.asarray(gyro_labels(design.params))],
-        "health_window": HEALTH_WINDOW, "health_pfa_per_window": HEALTH_PFA,
-        "bias_rpm": float(design.initial_speeds[0] / RPM), "momentum": momentum,
+        "health_window": HEALTH_WINDOW,
+        "health_pfa_per_window": HEALTH_PFA,
+        "bias_rpm": float(design.initial_speeds[0] / RPM),
+        "momentum": momentum,
         "wheel_bias_speeds_rpm": [float(v) for v in np.asarray(design.initial_speeds) / RPM],
-        "net_wheel_momentum_Nms": [float(v) for v in np.asarray(wheel_momentum(design.initial_speeds, design.params))],
+        "net_wheel_momentum_Nms": [
+            float(v) for v in np.asarray(wheel_momentum(design.initial_speeds, design.params))
+        ],
     }
     if zero is not None:
         config["zero_momentum"] = zero
     return WheelStudy(config, rows, out)
 
 
-def wheel_examples(design: WheelDesign, seed: int = 0, wheel: int = 0, onset: int = 200, steps: int = 600,
-                   estimator: str = "ekf", engage_on: str = "nis") -> dict[str, WheelHistory]:
+def wheel_examples(
+    design: WheelDesign,
+    seed: int = 0,
+    wheel: int = 0,
+    onset: int = 200,
+    steps: int = 600,
+    estimator: str = "ekf",
+    engage_on: str = "nis",
+) -> dict[str, WheelHistory]:
     """One fault-free run and one stop of ``wheel`` at ``onset`` (same noise), with histories."""
-    run = jax.jit(jax.vmap(lambda f: run_wheels(design, jax.random.key(seed), f, steps, estimator, engage_on,
-                                                history=True)[1]))
+    run = jax.jit(
+        jax.vmap(
+            lambda f: run_wheels(
+                design, jax.random.key(seed), f, steps, estimator, engage_on, history=True
+            )[1]
+        )
+    )
     both = run(stack_faults([no_fault(), wheel_fault("stop", wheel, onset)]))
     both = jax.tree_util.tree_map(np.asarray, both)
-    return {name: jax.tree_util.tree_map(lambda leaf: leaf[i], both) for i, name in enumerate(["none", "stop"])}
+    return {
+        name: jax.tree_util.tree_map(lambda leaf: leaf[i], both)
+        for i, name in enumerate(["none", "stop"])
+    }
 
 
-def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel: int = 0, onset: int = 200) -> list[str]:
+def plot_wheels(
+    study: WheelStudy, examples: dict[str, WheelHistory], out, wheel: int = 0, onset: int = 200
+) -> list[str]:
     """Figs. 3-9 of Choi and Park (2009) (attitude, F, F_x, credits) and the MM's mode probabilities;
     returns the paths written (each atomically)."""
     save, paths = figure_saver(out)
@@ -672,7 +965,12 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
 
     # Figs. 3 and 5: attitude and rates, fault-free and with the stop
     fig, axes = column_subplots(5.0, 2, 2, sharex=True)
-    for col, (name, title) in enumerate([("none", "Fig. 3: fault-free"), ("stop", f"Fig. 5: wheel {wheel + 1} stops at {fault_time:.0f} s")]):
+    for col, (name, title) in enumerate(
+        [
+            ("none", "Fig. 3: fault-free"),
+            ("stop", f"Fig. 5: wheel {wheel + 1} stops at {fault_time:.0f} s"),
+        ]
+    ):
         h = examples[name]
         angle = np.degrees(2.0 * np.arccos(np.clip(np.abs(h.attitude[:, 0]), 0.0, 1.0)))
         axes[0, col].plot(t, angle, lw=1)
@@ -684,27 +982,47 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
         if name == "stop":
             for ax in axes[:, col]:
                 ax.axvline(fault_time, color="grey", ls=":", lw=1)
-    save(fig, "reaction-wheels-fig3-5-attitude.png",
-         f"One run each: attitude (rotation from the start) and body rates, fault-free and with wheel {wheel + 1} "
-         f"stopping at {fault_time:.0f} s, as Choi & Park (2009), Figs. 3 and 5 (a single run there too).")
+    save(
+        fig,
+        "reaction-wheels-fig3-5-attitude.png",
+        f"One run each: attitude (rotation from the start) and body rates, fault-free and with wheel {wheel + 1} "
+        f"stopping at {fault_time:.0f} s, as Choi & Park (2009), Figs. 3 and 5 (a single run there too).",
+    )
 
     # Figs. 4 and 6: the fault detection parameter, and the NIS test beside it
     fig, axes = column_subplots(5.0, 2, 1, sharex=True)
     for name, label in [("none", "fault-free"), ("stop", f"wheel {wheel + 1} stop")]:
-        axes[0].semilogy(t, np.maximum(examples[name].detection_parameter, 1e-16), lw=0.8, label=label)
+        axes[0].semilogy(
+            t, np.maximum(examples[name].detection_parameter, 1e-16), lw=0.8, label=label
+        )
         axes[1].plot(t, examples[name].windowed_nis, lw=0.8, label=label)
-    axes[0].axhline(cfg["fdp_threshold"], color="r", ls="--", lw=1, label=f"F_T = {cfg['fdp_threshold']:.2e}")
-    axes[0].set(ylabel="F = |det A_PF - det A_EKF|", title="Figs. 4 and 6: dual filter fault detection parameter",
-                ylim=(1e-14, None))
-    axes[1].axhline(cfg["nis_threshold"], color="r", ls="--", lw=1, label=f"threshold {cfg['nis_threshold']:.1f}")
+    axes[0].axhline(
+        cfg["fdp_threshold"], color="r", ls="--", lw=1, label=f"F_T = {cfg['fdp_threshold']:.2e}"
+    )
+    axes[0].set(
+        ylabel="F = |det A_PF - det A_EKF|",
+        title="Figs. 4 and 6: dual filter fault detection parameter",
+        ylim=(1e-14, None),
+    )
+    axes[1].axhline(
+        cfg["nis_threshold"],
+        color="r",
+        ls="--",
+        lw=1,
+        label=f"threshold {cfg['nis_threshold']:.1f}",
+    )
     axes[1].set(ylabel=f"NIS over {cfg['nis_window']} steps", xlabel="time [s]", yscale="log")
     for ax in axes:
         ax.axvline(fault_time, color="grey", ls=":", lw=1)
         ax.legend(fontsize=7)
-    save(fig, "reaction-wheels-fig4-6-detection.png",
-         "The same two runs: the dual filter's fault detection parameter F (Choi & Park 2009, Figs. 4 and 6) and, beside the "
-         "paper, the windowed NIS test that engages the isolators. F jumps by orders of magnitude at the stop, as in "
-         "the paper.")
+    save(
+        fig,
+        "reaction-wheels-fig4-6-detection.png",
+        "The same two runs: the dual filter's fault detection parameter F (Choi & Park 2009, "
+        "Figs. 4 and 6) and, beside the "
+        "paper, the windowed NIS test that engages the isolators. F jumps by orders of magnitude at the stop, as in "
+        "the paper.",
+    )
 
     # Figs. 8 and 9: the hypothesis bank's F_x and credits; the MM's mode probabilities
     h = examples["stop"]
@@ -712,23 +1030,47 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
     fig, axes = column_subplots(7.0, 3, 1, sharex=True)
     names = [f"H{i + 1}: wheel {i + 1} stopped" for i in range(h.credit.shape[1])]
     engaged = h.engaged[zoom]
-    colors = hypothesis_colors(["nominal"] + names)  # a hypothesis keeps its colour in the three panels
+    colors = hypothesis_colors(
+        ["nominal"] + names
+    )  # a hypothesis keeps its colour in the three panels
     for i, label in enumerate(names):
-        axes[0].semilogy(t[zoom], np.where(engaged, np.maximum(h.hypothesis_parameter[zoom, i], 1e-16), np.nan), lw=1,
-                         color=colors[label], label=label)
-        axes[1].plot(t[zoom], np.where(engaged, h.credit[zoom, i], np.nan), lw=1, color=colors[label], label=label)
+        axes[0].semilogy(
+            t[zoom],
+            np.where(engaged, np.maximum(h.hypothesis_parameter[zoom, i], 1e-16), np.nan),
+            lw=1,
+            color=colors[label],
+            label=label,
+        )
+        axes[1].plot(
+            t[zoom],
+            np.where(engaged, h.credit[zoom, i], np.nan),
+            lw=1,
+            color=colors[label],
+            label=label,
+        )
     for i, label in enumerate(["nominal"] + names):
         axes[2].plot(t[zoom], h.mode_prob[zoom, i], lw=1, color=colors[label], label=label)
-    axes[0].set(ylabel="F_x", title=f"Fig. 8: the bank's F_x after wheel {wheel + 1} stops (engaged on detection)")
+    axes[0].set(
+        ylabel="F_x",
+        title=f"Fig. 8: the bank's F_x after wheel {wheel + 1} stops (engaged on detection)",
+    )
     axes[1].set(ylabel="credit C_x", title="Fig. 9: credits C_x = max(F_mean - F_x, 0)")
-    axes[2].set(ylabel="mode probability", xlabel="time [s]", title="MM over the same hypotheses (likelihood-based)")
+    axes[2].set(
+        ylabel="mode probability",
+        xlabel="time [s]",
+        title="MM over the same hypotheses (likelihood-based)",
+    )
     for ax in axes:
         ax.axvline(fault_time, color="grey", ls=":", lw=1)
         ax.legend(fontsize=7)
     end = np.flatnonzero(zoom & h.engaged)
     order = np.argsort(h.credit[end[-1]])[::-1] if end.size else np.zeros(2, int)
     leader, second = int(order[0]) + 1, int(order[1]) + 1
-    gap = 1.0 - h.credit[end[-1], order[1]] / max(h.credit[end[-1], order[0]], 1e-300) if end.size else 0.0
+    gap = (
+        1.0 - h.credit[end[-1], order[1]] / max(h.credit[end[-1], order[0]], 1e-300)
+        if end.size
+        else 0.0
+    )
     paper = f"the paper's Fig. 9, where credit {wheel + 1} separates from the others at once"
     if leader != wheel + 1:
         agrees = f"the opposite of {paper}"
@@ -737,10 +1079,16 @@ def plot_wheels(study: WheelStudy, examples: dict[str, WheelHistory], out, wheel
     else:
         agrees = f"as in {paper}"
     leader = leader if end.size else 0
-    save(fig, "reaction-wheels-fig8-9-isolation.png",
-         f"One run, the stop of wheel {wheel + 1}: the hypothesis bank's F_x, the credits and the MM's mode probabilities. In this run "
-         f"hypothesis {leader} holds the largest credit 8 s after the stop of wheel {wheel + 1}, {agrees}. The "
-         "scalar det A behind F_x discards the direction of the discrepancy (benchmarks/RESULTS.md: the credits "
-         "isolate a wheel-1 stop in 66 % of runs 4 s after engagement); the MM, on the innovation vectors, isolates "
-         "99-100 %." if leader else "The stop run: the bank was not engaged in the window shown.")
+    save(
+        fig,
+        "reaction-wheels-fig8-9-isolation.png",
+        f"One run, the stop of wheel {wheel + 1}: the hypothesis bank's F_x, the credits and the "
+        "MM's mode probabilities. In this run "
+        f"hypothesis {leader} holds the largest credit 8 s after the stop of wheel {wheel + 1}, {agrees}. The "
+        "scalar det A behind F_x discards the direction of the discrepancy (benchmarks/RESULTS.md: the credits "
+        "isolate a wheel-1 stop in 66 % of runs 4 s after engagement); the MM, on the innovation vectors, isolates "
+        "99-100 %."
+        if leader
+        else "The stop run: the bank was not engaged in the window shown.",
+    )
     return paths

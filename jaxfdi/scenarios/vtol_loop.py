@@ -24,6 +24,7 @@ Several filters per location (e.g. multiplicative and additive hypotheses): ``lo
 location's symptom is "all its filters alarm"; the kind is its filter with the smaller block statistic. Everything but
 the shapes is data: one compiled scan ``vmap``s over faults, keys and FTC switches.
 """
+
 from __future__ import annotations
 
 from typing import Any, NamedTuple
@@ -33,19 +34,19 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _linalg
+from jaxfdi._faults import Fault, FaultKind
+from jaxfdi._loop import run_loop
+from jaxfdi._simulate import Simulator, simulator
+from jaxfdi._stages import FDI
 from jaxfdi.control._closed_loop import Reconfiguration, reconfigurable_pi
 from jaxfdi.control._eigenstructure import GainSchedule
 from jaxfdi.detection._frozen import FrozenState, frozen_channel_detector
 from jaxfdi.detection._signature import isolate, location_symptoms
 from jaxfdi.detection._wavelet import haar_denoise
-from jaxfdi._faults import Fault, FaultKind
 from jaxfdi.filters._base import GaussianState
 from jaxfdi.filters._tskf import FaultDirection, sensor_matrix, two_stage_kalman_filter
 from jaxfdi.filters._unknown_input import unknown_input_filter
-from jaxfdi._loop import run_loop
-from jaxfdi._stages import FDI
 from jaxfdi.models._linear import LinearGaussianModel
-from jaxfdi._simulate import Simulator, simulator
 
 
 class LoopDesign(NamedTuple):
@@ -181,7 +182,9 @@ def _bank_filter(design: LoopDesign, direction: FaultDirection):
 def _sensor_locations(design: LoopDesign) -> Array:
     """(m,) int: the fault label (location + 1) of each sensor, 0 for a sensor with no location in the design."""
     m = design.model.C.shape[0]
-    match = (~design.location_is_actuator)[None, :] & (design.location_component[None, :] == jnp.arange(m)[:, None])
+    match = (~design.location_is_actuator)[None, :] & (
+        design.location_component[None, :] == jnp.arange(m)[:, None]
+    )
     return jnp.where(jnp.any(match, axis=1), jnp.argmax(match, axis=1) + 1, 0).astype(jnp.int32)
 
 
@@ -189,7 +192,9 @@ def _channel_health_test(design: LoopDesign):
     """The stuck-at test of step 6 on the raw measurements: noise bound ``sqrt(diag R)`` of the nominal model, labels
     ``_sensor_locations`` (a dead sample: ``flag_dead``)."""
     sigma = jnp.sqrt(jnp.diagonal(design.model.R))
-    return frozen_channel_detector(sigma, design.frozen_window, design.frozen_pfa, _sensor_locations(design))
+    return frozen_channel_detector(
+        sigma, design.frozen_window, design.frozen_pfa, _sensor_locations(design)
+    )
 
 
 def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
@@ -217,10 +222,12 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
         Fs = sensor_matrix(direction, model, est.mean, jnp.zeros((nu,), dtype))[:, 0]
         excluded = on & state.excluded
         y_used = jnp.where(on & ~is_actuator & ~jnp.any(excluded), y - Fs * b_hat, y)
-        y_used = jnp.where(excluded, jnp.nan, y_used)   # a dead or frozen sensor: not used
+        y_used = jnp.where(excluded, jnp.nan, y_used)  # a dead or frozen sensor: not used
         post = estimator.update(est, y_used, jnp.zeros((nu,), dtype))
         loss = jnp.where(on & is_actuator & kind, jnp.clip(b_hat, 0.0, 1.0), 0.0)
-        additive = jnp.where(on & is_actuator & ~kind, b_hat, 0.0) * jax.nn.one_hot(component, nu, dtype=dtype)
+        additive = jnp.where(on & is_actuator & ~kind, b_hat, 0.0) * jax.nn.one_hot(
+            component, nu, dtype=dtype
+        )
         view = Reconfiguration(post.filtered_mean, loss, component, additive)
         posterior = post.posterior
         return state._replace(posterior=posterior, reconfiguration=view), (view, post.healthy)
@@ -230,24 +237,44 @@ def tskf_bank_fdi(design: LoopDesign, ftc: Array) -> FDI:
         one_hot = jax.nn.one_hot(view.component, nu, dtype=dtype)
         u_believed = u * (1.0 - view.loss * one_hot) - view.additive
         est_next = estimator.predict(state.posterior, u_believed)
-        bank_next, info = jax.vmap(lambda d, s: _bank_filter(design, d).step(s, y, u))(design.directions, state.bank)
+        bank_next, info = jax.vmap(lambda d, s: _bank_filter(design, d).step(s, y, u))(
+            design.directions, state.bank
+        )
         health, verdict = health_test.step(state.health, y)
         health_label = jnp.where(verdict.alarm, verdict.label, 0)
         buffer = state.buffer.at[k % block].set(info.statistic)
         denoised = haar_denoise(buffer, design.levels, "soft", design.detail_sigma, design.c_mult)
-        alarms = jnp.any(denoised >= design.threshold, axis=0)                       # (F,)
+        alarms = jnp.any(denoised >= design.threshold, axis=0)  # (F,)
         label = isolate(location_symptoms(alarms, design.location, L))
         decide = (k % block == block - 1) & (state.isolated == 0) & (label > 0)
-        decide_health = (state.isolated == 0) & (health_label > 0)   # every step, ahead of the bank
+        decide_health = (state.isolated == 0) & (health_label > 0)  # every step, ahead of the bank
         of_location = design.location == (label - 1)
         best = jnp.argmin(jnp.where(of_location, jnp.mean(buffer, axis=0), jnp.inf))
-        isolated = jnp.where(decide_health, health_label, jnp.where(decide, label, state.isolated)).astype(jnp.int32)
-        kind = jnp.where(decide_health, False, jnp.where(decide, design.multiplicative[best], state.kind))
+        isolated = jnp.where(
+            decide_health, health_label, jnp.where(decide, label, state.isolated)
+        ).astype(jnp.int32)
+        kind = jnp.where(
+            decide_health, False, jnp.where(decide, design.multiplicative[best], state.kind)
+        )
         excluded = state.excluded | (decide_health & (channels == health_label))
-        output = BankOutput(state.posterior.mean, info.statistic, info.bias_mean[:, 0], isolated, kind,
-                            jnp.all(info.healthy), health_label.astype(jnp.int32))
-        return state._replace(estimator=est_next, bank=bank_next, buffer=buffer, isolated=isolated, kind=kind,
-                              health=health, excluded=excluded), output
+        output = BankOutput(
+            state.posterior.mean,
+            info.statistic,
+            info.bias_mean[:, 0],
+            isolated,
+            kind,
+            jnp.all(info.healthy),
+            health_label.astype(jnp.int32),
+        )
+        return state._replace(
+            estimator=est_next,
+            bank=bank_next,
+            buffer=buffer,
+            isolated=isolated,
+            kind=kind,
+            health=health,
+            excluded=excluded,
+        ), output
 
     return FDI(lambda: tskf_bank_init(design), step, observe)
 
@@ -260,14 +287,25 @@ def tskf_bank_init(design: LoopDesign) -> BankState:
     x0 = design.plant_x0[:n]
 
     def bank_init(direction):
-        return _bank_filter(design, direction).init(x0, design.init_cov, jnp.zeros((1,), dtype), design.init_bias_cov)
+        return _bank_filter(design, direction).init(
+            x0, design.init_cov, jnp.zeros((1,), dtype), design.init_bias_cov
+        )
 
     prior = _estimator(design).init(x0, design.init_cov)
-    idle = Reconfiguration(x0, jnp.zeros((), dtype), jnp.zeros((), jnp.int32), jnp.zeros((nu,), dtype))
-    return BankState(prior, jax.vmap(bank_init)(design.directions),
-                     jnp.zeros((2**design.levels, design.location.shape[0]), dtype),
-                     jnp.zeros((), jnp.int32), jnp.zeros((), bool), GaussianState(prior.mean, prior.cov), idle,
-                     _channel_health_test(design).init(), jnp.zeros((m,), bool))
+    idle = Reconfiguration(
+        x0, jnp.zeros((), dtype), jnp.zeros((), jnp.int32), jnp.zeros((nu,), dtype)
+    )
+    return BankState(
+        prior,
+        jax.vmap(bank_init)(design.directions),
+        jnp.zeros((2**design.levels, design.location.shape[0]), dtype),
+        jnp.zeros((), jnp.int32),
+        jnp.zeros((), bool),
+        GaussianState(prior.mean, prior.cov),
+        idle,
+        _channel_health_test(design).init(),
+        jnp.zeros((m,), bool),
+    )
 
 
 def true_plant(design: LoopDesign, fault: Fault) -> Simulator:
@@ -278,23 +316,44 @@ def true_plant(design: LoopDesign, fault: Fault) -> Simulator:
     nt = design.plant_Phi.shape[0]
     mm = _linalg.matmul
     G = jnp.eye(nt, n, dtype=model.Phi.dtype)
-    return simulator(lambda x, u, p: mm(design.plant_Phi, x) + mm(design.plant_Gamma, u),
-                     lambda x, u, p: mm(design.plant_C, x), model.Q, model.R, fault=fault, noise_gain=G)
+    return simulator(
+        lambda x, u, p: mm(design.plant_Phi, x) + mm(design.plant_Gamma, u),
+        lambda x, u, p: mm(design.plant_C, x),
+        model.Q,
+        model.R,
+        fault=fault,
+        noise_gain=G,
+    )
 
 
-def run_closed_loop(design: LoopDesign, key: Array, fault: Fault, ftc: Array, steps: int) -> LoopStep:
+def run_closed_loop(
+    design: LoopDesign, key: Array, fault: Fault, ftc: Array, steps: int
+) -> LoopStep:
     """Simulate ``steps`` steps of the closed loop under ``fault`` (scalar leaves); ``ftc`` (bool) turns the
     reconfiguration on. Returns the stacked ``LoopStep``."""
     n, nu = design.model.Phi.shape[0], design.model.Gamma.shape[1]
-    controller = reconfigurable_pi(design.gain, design.schedule, design.H, design.command, design.Ts,
-                                   design.model.Phi.dtype)
+    controller = reconfigurable_pi(
+        design.gain, design.schedule, design.H, design.command, design.Ts, design.model.Phi.dtype
+    )
     fdi = tskf_bank_fdi(design, ftc)
-    result = run_loop(true_plant(design, fault), fdi, controller,
-                      design.plant_x0, fdi.init(), key, steps,
-                      u0=jnp.zeros((nu,), design.model.Phi.dtype), keep_history=True)
+    result = run_loop(
+        true_plant(design, fault),
+        fdi,
+        controller,
+        design.plant_x0,
+        fdi.init(),
+        key,
+        steps,
+        u0=jnp.zeros((nu,), design.model.Phi.dtype),
+        keep_history=True,
+    )
     trace = result.history
     (_, estimator_healthy), out = trace.view, trace.output
-    return LoopStep(trace.sensed.state[:, :n], trace.control, out._replace(healthy=out.healthy & estimator_healthy))
+    return LoopStep(
+        trace.sensed.state[:, :n],
+        trace.control,
+        out._replace(healthy=out.healthy & estimator_healthy),
+    )
 
 
 def is_multiplicative(fault: Fault) -> Array:

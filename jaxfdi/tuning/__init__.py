@@ -1,7 +1,16 @@
 """Gradient-based tuning: parameterisations, differentiable losses, the optax loop."""
+
 from jaxfdi.tuning._losses import innovation_nll, mode_cross_entropy, soft_detection_loss
-from jaxfdi.tuning._parameterize import (cholesky_factor, constrain, log_diagonal, positive, simplex, stochastic_rows,
-                                         unconstrain, unit_interval)
+from jaxfdi.tuning._parameterize import (
+    cholesky_factor,
+    constrain,
+    log_diagonal,
+    positive,
+    simplex,
+    stochastic_rows,
+    unconstrain,
+    unit_interval,
+)
 from jaxfdi.tuning._train import TrainResult, fit, load_params, save_params
 
 __all__ = [

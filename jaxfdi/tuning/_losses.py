@@ -14,6 +14,7 @@
 
 All per run; average over a batch with ``jax.vmap`` and ``jnp.mean``.
 """
+
 from __future__ import annotations
 
 import math
@@ -37,16 +38,26 @@ def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e
     Returns:
       () mean over the T steps of ``-log(mu_true + floor)`` [nats], in ``(0, -log(floor)]``, differentiable.
     """
-    _checks.check_scalar("floor", floor, 0.0, 1.0, low_open=True, meaning="a probability floor in (0, 1]")
-    _checks.check_shape("log_mode_prob", log_mode_prob, (None, None), "(T, M) log mode probabilities")
+    _checks.check_scalar(
+        "floor", floor, 0.0, 1.0, low_open=True, meaning="a probability floor in (0, 1]"
+    )
+    _checks.check_shape(
+        "log_mode_prob", log_mode_prob, (None, None), "(T, M) log mode probabilities"
+    )
     T = log_mode_prob.shape[0]
     _checks.check_shape("true_mode", true_mode, (T,), "one int mode label per step")
-    _checks.check_int_array("true_mode", true_mode, 0, _checks.shape_of(log_mode_prob)[1] - 1, "mode labels")
-    picked = jnp.take_along_axis(log_mode_prob, jnp.asarray(true_mode)[:, None].astype(jnp.int32), axis=1)[:, 0]
+    _checks.check_int_array(
+        "true_mode", true_mode, 0, _checks.shape_of(log_mode_prob)[1] - 1, "mode labels"
+    )
+    picked = jnp.take_along_axis(
+        log_mode_prob, jnp.asarray(true_mode)[:, None].astype(jnp.int32), axis=1
+    )[:, 0]
     return -jnp.mean(jnp.logaddexp(picked, math.log(floor)))
 
 
-def soft_alarm_log_prob(statistic: Array, threshold: Array, temperature: Array) -> tuple[Array, Array]:
+def soft_alarm_log_prob(
+    statistic: Array, threshold: Array, temperature: Array
+) -> tuple[Array, Array]:
     """``(log a_k, log(1 - a_k))`` with ``a_k = sigmoid((s_k - h) / temperature)``."""
     z = (statistic - threshold) / temperature
     return jax.nn.log_sigmoid(z), jax.nn.log_sigmoid(-z)
@@ -76,15 +87,21 @@ def soft_detection_loss(
       missed runs count ``T - onset``) and ``misisolated`` (probability) when a margin is given.
     """
     _checks.check_positive("temperature", temperature, "a positive temperature")
-    for name, weight in (("false_alarm_weight", false_alarm_weight), ("miss_weight", miss_weight),
-                         ("delay_weight", delay_weight), ("isolation_weight", isolation_weight)):
+    for name, weight in (
+        ("false_alarm_weight", false_alarm_weight),
+        ("miss_weight", miss_weight),
+        ("delay_weight", delay_weight),
+        ("isolation_weight", isolation_weight),
+    ):
         _checks.check_scalar(name, weight, 0.0, meaning="a loss weight >= 0")
     _checks.check_shape("statistic", statistic, (None,), "(T,) test statistic")
     T = statistic.shape[0]
     value = _checks.concrete(onset)
     if value is not None and np.any(value < 0):
-        raise ValueError(f"onset: expected a fault onset step >= 0 (faults.NEVER: fault-free), got "
-                         f"{_checks.received(value)}")
+        raise ValueError(
+            f"onset: expected a fault onset step >= 0 (faults.NEVER: fault-free), got "
+            f"{_checks.received(value)}"
+        )
     k = jnp.arange(T)
     onset = jnp.minimum(jnp.asarray(onset), T)
     log_a, log_not = soft_alarm_log_prob(statistic, threshold, temperature)
@@ -93,18 +110,31 @@ def soft_detection_loss(
     false_alarm = -jnp.expm1(log_quiet_before)
     after_not = jnp.where(before, 0.0, log_not)
     log_quiet_until = jnp.cumsum(after_not) - after_not  # log prod_{onset <= j < k} (1 - a_j)
-    first = jnp.where(before, 0.0, jnp.exp(log_a + log_quiet_until))  # P(first alarm after onset at k)
+    first = jnp.where(
+        before, 0.0, jnp.exp(log_a + log_quiet_until)
+    )  # P(first alarm after onset at k)
     missed = jnp.exp(jnp.sum(after_not))
     faulty = onset < T
     horizon = jnp.maximum(T - onset, 1)
     delay = jnp.sum(first * (k - onset)) + missed * horizon
     loss = false_alarm_weight * false_alarm + jnp.where(
-        faulty, miss_weight * missed + delay_weight * delay / horizon, 0.0)
-    parts = {"false_alarm": false_alarm, "missed": jnp.where(faulty, missed, 0.0),
-             "delay": jnp.where(faulty, delay, 0.0)}
+        faulty, miss_weight * missed + delay_weight * delay / horizon, 0.0
+    )
+    parts = {
+        "false_alarm": false_alarm,
+        "missed": jnp.where(faulty, missed, 0.0),
+        "delay": jnp.where(faulty, delay, 0.0),
+    }
     if wrong_label_margin is not None:
-        _checks.check_shape("wrong_label_margin", wrong_label_margin, (T,), "(T,) margin, > 0 where the label is wrong")
-        misisolated = jnp.where(faulty, jnp.sum(first * jax.nn.sigmoid(wrong_label_margin / temperature)), 0.0)
+        _checks.check_shape(
+            "wrong_label_margin",
+            wrong_label_margin,
+            (T,),
+            "(T,) margin, > 0 where the label is wrong",
+        )
+        misisolated = jnp.where(
+            faulty, jnp.sum(first * jax.nn.sigmoid(wrong_label_margin / temperature)), 0.0
+        )
         loss = loss + isolation_weight * misisolated
         parts["misisolated"] = misisolated
     return loss, parts

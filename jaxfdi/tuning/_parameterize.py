@@ -15,6 +15,7 @@ A *parameterisation* is a dict ``name -> Transform``; ``constrain``/``unconstrai
 ``partition`` splits trainable from frozen entries (static mask). ``save_params`` records transform names and
 options, so a file reads back into the same parameterisation.
 """
+
 from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
@@ -120,7 +121,9 @@ def stochastic_rows(mask: Any = None) -> Transform:
     mask_np = None if mask is None else np.asarray(mask, bool)
     if mask_np is not None:
         if mask_np.ndim != 2 or mask_np.shape[0] != mask_np.shape[1]:
-            raise ValueError(f"mask: expected a square (M, M) boolean array, got shape {mask_np.shape}")
+            raise ValueError(
+                f"mask: expected a square (M, M) boolean array, got shape {mask_np.shape}"
+            )
         if not np.all(mask_np.any(axis=1)):
             raise ValueError("mask: expected at least one allowed (True) entry in every row")
 
@@ -140,7 +143,9 @@ def stochastic_rows(mask: Any = None) -> Transform:
         pi = jnp.asarray(pi)
         return jnp.where(allowed(pi.shape), _log_probability(pi), 0.0)
 
-    return Transform(forward, inverse, "stochastic_rows", {"mask": None if mask_np is None else mask_np.tolist()})
+    return Transform(
+        forward, inverse, "stochastic_rows", {"mask": None if mask_np is None else mask_np.tolist()}
+    )
 
 
 def log_diagonal() -> Transform:
@@ -197,7 +202,9 @@ TRANSFORMS = {
 def from_record(name: str, options: dict) -> Transform:
     """The transform a saved file names (``Transform.name`` and ``.options``)."""
     if name not in TRANSFORMS:
-        raise ValueError(f"name: expected a transform name, one of {sorted(TRANSFORMS)}, got {name!r}")
+        raise ValueError(
+            f"name: expected a transform name, one of {sorted(TRANSFORMS)}, got {name!r}"
+        )
     return TRANSFORMS[name](**options)
 
 
@@ -232,8 +239,12 @@ def partition(raw: dict[str, Array], trainable: set[str] | list[str]) -> tuple[d
     """``(trainable entries, frozen entries)``; ``merge`` puts them back together."""
     unknown = set(trainable) - set(raw)
     if unknown:
-        raise ValueError(f"trainable: unknown names {sorted(unknown)}; expected names from {sorted(raw)}")
-    return {k: v for k, v in raw.items() if k in trainable}, {k: v for k, v in raw.items() if k not in trainable}
+        raise ValueError(
+            f"trainable: unknown names {sorted(unknown)}; expected names from {sorted(raw)}"
+        )
+    return {k: v for k, v in raw.items() if k in trainable}, {
+        k: v for k, v in raw.items() if k not in trainable
+    }
 
 
 def merge(trained: dict, frozen: dict) -> dict:
@@ -244,4 +255,6 @@ def merge(trained: dict, frozen: dict) -> dict:
 def _check_keys(parameterization: dict, values: dict, name: str) -> None:
     missing = set(values) - set(parameterization)
     if missing:
-        raise ValueError(f"{name}: no transform for {sorted(missing)}; the parameterisation has {sorted(parameterization)}")
+        raise ValueError(
+            f"{name}: no transform for {sorted(missing)}; the parameterisation has {sorted(parameterization)}"
+        )

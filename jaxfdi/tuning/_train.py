@@ -10,6 +10,7 @@ loss unchanged.
 Long runs: ``checkpointed(filter)`` wraps a filter's step in ``jax.checkpoint``: the reverse pass recomputes each
 step's internals instead of storing them (memory per step falls to the carried state; benchmarks/RESULTS.md).
 """
+
 from __future__ import annotations
 
 import json
@@ -27,7 +28,14 @@ from jaxfdi import _checks
 from jaxfdi._io import atomic_write
 from jaxfdi._progress import logger, progress_bar
 from jaxfdi.filters._base import Filter
-from jaxfdi.tuning._parameterize import Transform, constrain, from_record, merge, partition, unconstrain
+from jaxfdi.tuning._parameterize import (
+    Transform,
+    constrain,
+    from_record,
+    merge,
+    partition,
+    unconstrain,
+)
 
 
 class TrainHistory(NamedTuple):
@@ -72,7 +80,9 @@ def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[in
     """``step -> batch_size`` runs of ``dataset`` (leading run axis), reshuffled each epoch."""
     num = {np.shape(leaf)[0] for leaf in jax.tree.leaves(dataset)}
     if len(num) != 1:
-        raise ValueError(f"dataset: expected every leaf to have the same leading run axis, got sizes {sorted(num)}")
+        raise ValueError(
+            f"dataset: expected every leaf to have the same leading run axis, got sizes {sorted(num)}"
+        )
     (num,) = num
     batch_size = _checks.check_int("batch_size", batch_size, 1, num, "a number of runs per batch")
     if not 1 <= batch_size <= num:
@@ -81,7 +91,9 @@ def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[in
 
     def batch(step: int):
         epoch, i = divmod(step, per_epoch)
-        order = jax.random.permutation(jax.random.fold_in(key, epoch), num)[i * batch_size:(i + 1) * batch_size]
+        order = jax.random.permutation(jax.random.fold_in(key, epoch), num)[
+            i * batch_size : (i + 1) * batch_size
+        ]
         return jax.tree.map(lambda leaf: leaf[order], dataset)
 
     return batch
@@ -132,14 +144,18 @@ def fit(
     def update(p, opt_state, batch):
         value, grads = jax.value_and_grad(full_loss)(p, batch)
         updates, opt_state = optimizer.update(grads, opt_state, p)
-        finite = jnp.isfinite(value) & jnp.all(jnp.asarray([jnp.all(jnp.isfinite(g)) for g in jax.tree.leaves(grads)]))
+        finite = jnp.isfinite(value) & jnp.all(
+            jnp.asarray([jnp.all(jnp.isfinite(g)) for g in jax.tree.leaves(grads)])
+        )
         return optax.apply_updates(p, updates), opt_state, value, finite
 
     val_loss_fn = jax.jit(full_loss)
     opt_state = optimizer.init(params)
     first = val_loss_fn(params, val_batch)
     if jnp.shape(first) != ():
-        raise ValueError(f"loss: expected a scalar loss (raw params, batch) -> (), got shape {jnp.shape(first)}")
+        raise ValueError(
+            f"loss: expected a scalar loss (raw params, batch) -> (), got shape {jnp.shape(first)}"
+        )
     best, best_val, best_step, bad = params, float(first), 0, 0
     log = {"step": [0], "train": [float("nan")], "val": [best_val]}
     start, stopped = time.perf_counter(), False
@@ -149,7 +165,11 @@ def fit(
         if not bool(finite):
             stopped = True
             if progress:
-                logger.warning("tuning: non-finite loss or gradient at step %d; keeping step %d", step, best_step)
+                logger.warning(
+                    "tuning: non-finite loss or gradient at step %d; keeping step %d",
+                    step,
+                    best_step,
+                )
             break
         params, opt_state = new, new_state
         if step % eval_every == 0 or step == steps:
@@ -160,18 +180,30 @@ def fit(
             else:
                 bad += 1
             if progress:
-                bar(step, steps, time.perf_counter() - start,
-                    postfix=f"train {float(value):.4g}, val {val:.4g} (best {best_val:.4g} at {best_step})")
+                bar(
+                    step,
+                    steps,
+                    time.perf_counter() - start,
+                    postfix=f"train {float(value):.4g}, val {val:.4g} (best {best_val:.4g} at {best_step})",
+                )
             if bad >= patience:
                 stopped = True
                 break
     if progress:
         bar.close()
-    history = TrainHistory(np.asarray(log["step"]), np.asarray(log["train"]), np.asarray(log["val"]), best_step, stopped)
+    history = TrainHistory(
+        np.asarray(log["step"]),
+        np.asarray(log["train"]),
+        np.asarray(log["val"]),
+        best_step,
+        stopped,
+    )
     return TrainResult(merge(best, frozen), history)
 
 
-def save_params(path: str | Path, raw: dict, parameterization: dict[str, Transform], meta: dict | None = None) -> Path:
+def save_params(
+    path: str | Path, raw: dict, parameterization: dict[str, Transform], meta: dict | None = None
+) -> Path:
     """Write the constrained parameters, the parameterisation (transform names, options) and ``meta`` to ``.npz``
     or ``.json``, completely or not at all.
 
@@ -179,18 +211,31 @@ def save_params(path: str | Path, raw: dict, parameterization: dict[str, Transfo
       the ``Path`` of the file written (``path``; its folder is created if missing).
     """
     path = Path(path)
-    params = {k: np.asarray(v).tolist() if path.suffix == ".json" else np.asarray(v)
-              for k, v in constrain(parameterization, raw).items()}
-    record = {k: {"transform": t.name, "options": t.options} for k, t in parameterization.items() if k in raw}
+    params = {
+        k: np.asarray(v).tolist() if path.suffix == ".json" else np.asarray(v)
+        for k, v in constrain(parameterization, raw).items()
+    }
+    record = {
+        k: {"transform": t.name, "options": t.options}
+        for k, t in parameterization.items()
+        if k in raw
+    }
     if path.suffix == ".json":
+
         def write(tmp):
             with open(tmp, "w") as fh:
-                json.dump({"params": params, "parameterization": record, "meta": meta or {}}, fh, indent=1)
+                json.dump(
+                    {"params": params, "parameterization": record, "meta": meta or {}}, fh, indent=1
+                )
     elif path.suffix == ".npz":
+
         def write(tmp):
             with open(tmp, "wb") as fh:
-                np.savez(fh, **{f"param/{k}": v for k, v in params.items()},
-                         __record__=json.dumps({"parameterization": record, "meta": meta or {}}))
+                np.savez(
+                    fh,
+                    **{f"param/{k}": v for k, v in params.items()},
+                    __record__=json.dumps({"parameterization": record, "meta": meta or {}}),
+                )
     else:
         raise ValueError(f"path: expected a .json or .npz file name, got {path.name!r}")
     return atomic_write(path, write)
@@ -214,13 +259,17 @@ def load_params(path: str | Path) -> tuple[dict, dict[str, Transform], dict]:
         else:
             with np.load(path) as data:
                 extra = json.loads(str(data["__record__"]))
-                params = {k[len("param/"):]: data[k] for k in data.files if k.startswith("param/")}
+                params = {k[len("param/") :]: data[k] for k in data.files if k.startswith("param/")}
             record, meta = extra["parameterization"], extra["meta"]
         parameterization = {k: from_record(v["transform"], v["options"]) for k, v in record.items()}
         params = {k: jnp.asarray(v) for k, v in params.items()}
     except FileNotFoundError:
         raise
     except (OSError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile) as error:
-        what = f"missing field {error}" if isinstance(error, KeyError) else f"{type(error).__name__}: {error}"
+        what = (
+            f"missing field {error}"
+            if isinstance(error, KeyError)
+            else f"{type(error).__name__}: {error}"
+        )
         raise ValueError(f"{path}: not a parameter file written by save_params ({what})") from None
     return unconstrain(parameterization, params), parameterization, meta

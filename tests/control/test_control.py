@@ -2,6 +2,7 @@
 eigenstructure assignment: the faulty closed loop
 keeps the nominal eigenvalues (1e-8), the eigenvectors are the eq. 26 projections, the
 gain is real, and a dead actuator gets a zero row."""
+
 from __future__ import annotations
 
 import jax
@@ -11,13 +12,12 @@ import pytest
 import scipy.linalg as sl
 
 from jaxfdi.control import assign_eigenstructure, lqr_gain, lqr_pi
+from jaxfdi.control._eigenstructure import effectiveness_input, nominal_eigenstructure
 from jaxfdi.control._lqr import integral_augmentation
-from jaxfdi.control._eigenstructure import effectiveness_input
-from jaxfdi.control._eigenstructure import nominal_eigenstructure
 from jaxfdi.models import _vtol as vtol
 
-H_PAPER = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0]])   # v_h and q (seed 001, eq. 35)
-H_ANGLE = np.array([[1.0, 0, 0, 0], [0, 0, 0, 1]])   # v_h and theta: stabilisable
+H_PAPER = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0]])  # v_h and q (seed 001, eq. 35)
+H_ANGLE = np.array([[1.0, 0, 0, 0], [0, 0, 0, 1]])  # v_h and theta: stabilisable
 Q_PI, R_PI = np.diag([1.0, 1, 1, 1, 10, 10]), np.eye(2)
 
 
@@ -64,7 +64,9 @@ def test_lqr_pi_equals_scipy_on_the_augmented_system(model):
     np.testing.assert_allclose(design.gain, K_ref, rtol=1e-9, atol=1e-11)
     assert float(design.spectral_radius) < 1.0
     closed = np.asarray(design.A_bar) - np.asarray(design.B_bar) @ K_ref  # u = -K [x; z]
-    np.testing.assert_allclose(float(design.spectral_radius), np.max(np.abs(np.linalg.eigvals(closed))), rtol=1e-9)
+    np.testing.assert_allclose(
+        float(design.spectral_radius), np.max(np.abs(np.linalg.eigvals(closed))), rtol=1e-9
+    )
     # eq. 21 blocks
     np.testing.assert_allclose(design.A_bar[4:, :4], -vtol.TS * H_ANGLE)
     np.testing.assert_allclose(design.G[4:], vtol.TS * np.eye(2))
@@ -74,9 +76,13 @@ def test_paper_pi_design_keeps_an_eigenvalue_at_one(model):
     """Tracking the pitch rate puts a plant zero at z = 1: no stabilising gain exists
     (SciPy refuses: SciPy < 1.17 raises, 1.17 returns a gain whose closed loop keeps an
     eigenvalue within 1e-6 of 1), and the design reports a closed-loop eigenvalue at 1."""
-    rosenbrock = np.block([[np.asarray(model.Phi) - np.eye(4), np.asarray(model.Gamma)], [H_PAPER, np.zeros((2, 2))]])
+    rosenbrock = np.block(
+        [[np.asarray(model.Phi) - np.eye(4), np.asarray(model.Gamma)], [H_PAPER, np.zeros((2, 2))]]
+    )
     assert abs(np.linalg.det(rosenbrock)) < 1e-15
-    A_bar, B_bar = (np.asarray(m) for m in integral_augmentation(model.Phi, model.Gamma, H_PAPER, vtol.TS)[:2])
+    A_bar, B_bar = (
+        np.asarray(m) for m in integral_augmentation(model.Phi, model.Gamma, H_PAPER, vtol.TS)[:2]
+    )
     try:
         K_ref, _ = _scipy_gain(A_bar, B_bar, Q_PI, R_PI)
     except (ValueError, np.linalg.LinAlgError):
@@ -110,13 +116,19 @@ def test_the_papers_pitch_rate_command_has_no_steady_state(model):
                 # the residual is exactly the command's component along w
                 w = U[:, -1]
                 assert s[-1] < 1e-15 * s[0]
-                assert abs(w[4]) < 1e-12 and abs(w[5]) > 0.09   # w's command part: q only
+                assert abs(w[4]) < 1e-12 and abs(w[5]) > 0.09  # w's command part: q only
                 np.testing.assert_allclose(residual, abs(w @ rhs), rtol=1e-6)
-                assert residual > 0.45                           # 5 * |w_q|: no equilibrium
+                assert residual > 0.45  # 5 * |w_q|: no equilibrium
 
 
-LOSSES = {"none": [0.0, 0.0], "a1 0.5": [0.5, 0.0], "a2 0.5": [0.0, 0.5], "both": [0.2, 0.3],
-          "a1 dead": [1.0, 0.0], "a2 dead": [0.0, 1.0]}
+LOSSES = {
+    "none": [0.0, 0.0],
+    "a1 0.5": [0.5, 0.0],
+    "a2 0.5": [0.0, 0.5],
+    "both": [0.2, 0.3],
+    "a1 dead": [1.0, 0.0],
+    "a2 dead": [0.0, 1.0],
+}
 
 
 @pytest.mark.parametrize("H", [H_PAPER, H_ANGLE], ids=["paper (v_h, q)", "(v_h, theta)"])
@@ -166,7 +178,9 @@ def test_eigenvectors_are_the_eq26_projections(model, loss):
     # the projection is the closest admissible vector: the residual is orthogonal to span(E_i)
     # (checked above by equality), and K_f agrees with the paper's eq. 29 (B_f full rank)
     Vf = np.asarray(result.eigenvectors)
-    K29 = -np.linalg.pinv(B_f) @ (Vf @ np.diag(lam) - A_bar @ Vf) @ np.linalg.inv(Vf)  # the paper's u = K x, negated
+    K29 = (
+        -np.linalg.pinv(B_f) @ (Vf @ np.diag(lam) - A_bar @ Vf) @ np.linalg.inv(Vf)
+    )  # the paper's u = K x, negated
     np.testing.assert_allclose(np.asarray(result.gain), K29.real, atol=1e-8)
 
 

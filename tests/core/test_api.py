@@ -1,6 +1,7 @@
 """API a new user expects: starting a KF or an IMM from a posterior (filterpy's
 predict-then-update loop, 1e-10), and a model without inputs end to end (no zero-width
 matrices to write by hand), against filterpy."""
+
 from __future__ import annotations
 
 import jax
@@ -10,7 +11,12 @@ import pytest
 from filterpy.kalman import IMMEstimator, KalmanFilter
 
 import jaxfdi
-from jaxfdi.filters import init_from_posterior, interacting_multiple_model, kalman_filter, run_filter
+from jaxfdi.filters import (
+    init_from_posterior,
+    interacting_multiple_model,
+    kalman_filter,
+    run_filter,
+)
 from jaxfdi.models import LinearGaussianModel, linear_gaussian_model
 from jaxfdi.models._fault_modes import noise_inflation_modes
 
@@ -68,7 +74,12 @@ def test_imm_from_posterior_equals_filterpy_imm_estimator(data, per_mode):
     for j in range(3):
         kf = KalmanFilter(dim_x=3, dim_z=2, dim_u=1)
         kf.F, kf.B, kf.H = np.array(modes.Phi[j]), np.array(modes.Gamma[j]), np.array(modes.C[j])
-        kf.Q, kf.R, kf.x, kf.P = np.array(modes.Q[j]), np.array(modes.R[j]), means[j].copy(), covs[j].copy()
+        kf.Q, kf.R, kf.x, kf.P = (
+            np.array(modes.Q[j]),
+            np.array(modes.R[j]),
+            means[j].copy(),
+            covs[j].copy(),
+        )
         filters.append(kf)
     ref = IMMEstimator(filters, mu0, TRANSITION)
     ref_mu, ref_x, ref_P = [], [], []
@@ -80,7 +91,9 @@ def test_imm_from_posterior_equals_filterpy_imm_estimator(data, per_mode):
     if per_mode:
         state0 = init_from_posterior(imm, means, covs, u_before, mode_prob=mu0)
     else:
-        state0 = imm.init(X0, P0, mu0, posterior=True, u=u_before)  # the init option, shared moments
+        state0 = imm.init(
+            X0, P0, mu0, posterior=True, u=u_before
+        )  # the init option, shared moments
     _, info = run_filter(imm, state0, ys, us)
     np.testing.assert_allclose(info.mode_prob, ref_mu, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(info.mean, ref_x, rtol=1e-10, atol=1e-12)
@@ -93,7 +106,9 @@ def test_init_from_posterior_bad_input():
         init_from_posterior(kf, X0, P0, np.zeros(1), mode_prob=np.ones(1))
     with pytest.raises(ValueError, match="mean"):
         init_from_posterior(kf, X0[:2], P0, np.zeros(1))
-    imm = interacting_multiple_model(kalman_filter, jax.tree.map(lambda a: a[None], kf_model()), np.ones((1, 1)))
+    imm = interacting_multiple_model(
+        kalman_filter, jax.tree.map(lambda a: a[None], kf_model()), np.ones((1, 1))
+    )
     with pytest.raises(ValueError, match="filt"):
         init_from_posterior(imm, X0, P0, np.zeros(1))
 
@@ -108,11 +123,13 @@ def test_model_without_inputs_end_to_end():
     inputs and its noise-free state follows ``Phi`` alone."""
     model = linear_gaussian_model(PHI, C, Q, R)
     assert model.dims == (3, 0, 2) and model.Gamma.shape == (3, 0) and model.D.shape == (2, 0)
-    _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model), jnp.asarray(X0), jnp.zeros((T, 0)), jax.random.key(1))
+    _, truth, _ = jaxfdi.simulate(
+        jaxfdi.linear_simulator(model), jnp.asarray(X0), jnp.zeros((T, 0)), jax.random.key(1)
+    )
     ys = np.asarray(truth.measurement)
     assert ys.shape == (T, 2) and np.all(np.isfinite(ys))
     kf = kalman_filter(model)
-    _, info = run_filter(kf, kf.init(X0, P0), ys)          # us=None
+    _, info = run_filter(kf, kf.init(X0, P0), ys)  # us=None
     _, info_posterior = run_filter(kf, init_from_posterior(kf, X0, P0), ys)
     ref, ref_prior = _filterpy_kf(np.zeros((3, 0))), _filterpy_kf(np.zeros((3, 0)))
     means, prior_means = [], []
@@ -127,8 +144,12 @@ def test_model_without_inputs_end_to_end():
     np.testing.assert_allclose(info_posterior.filtered_mean, prior_means, rtol=1e-10, atol=1e-12)
     # noise-free: the simulator's state is Phi^k x0
     quiet = linear_gaussian_model(PHI, C, np.zeros((3, 3)), np.zeros((2, 2)))
-    _, clean, _ = jaxfdi.simulate(jaxfdi.linear_simulator(quiet), jnp.asarray(X0), jnp.zeros((5, 0)), jax.random.key(0))
-    np.testing.assert_allclose(clean.state, [np.linalg.matrix_power(PHI, k) @ X0 for k in range(5)], rtol=1e-12)
+    _, clean, _ = jaxfdi.simulate(
+        jaxfdi.linear_simulator(quiet), jnp.asarray(X0), jnp.zeros((5, 0)), jax.random.key(0)
+    )
+    np.testing.assert_allclose(
+        clean.state, [np.linalg.matrix_power(PHI, k) @ X0 for k in range(5)], rtol=1e-12
+    )
 
 
 def test_linear_gaussian_model_keeps_given_blocks_and_checks_shapes():

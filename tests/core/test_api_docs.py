@@ -4,6 +4,7 @@ together hold at most 150 names; every function among them documents its result 
 ``Returns:`` section) and every class its fields or members (``Attributes:``); and the
 one API page, ``docs/api/index.md``, renders exactly these namespaces. Every other module
 and name is implementation."""
+
 import importlib
 import inspect
 import pkgutil
@@ -17,8 +18,11 @@ import pytest
 import jaxfdi
 
 PUBLIC_MODULES = ["jaxfdi.plotting", "jaxfdi.streaming", "jaxfdi.distributed"]
-PACKAGES = (["jaxfdi"] + sorted(m.name for m in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi.") if m.ispkg)
-            + PUBLIC_MODULES)
+PACKAGES = (
+    ["jaxfdi"]
+    + sorted(m.name for m in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi.") if m.ispkg)
+    + PUBLIC_MODULES
+)
 MAX_PUBLIC_NAMES = 150
 API_PAGE = Path(__file__).resolve().parents[2] / "docs" / "api" / "index.md"
 
@@ -29,13 +33,22 @@ def public(package: str) -> dict:
     names = getattr(module, "__all__", None)
     assert isinstance(names, (list, tuple)), f"{package} has no __all__"
     assert len(set(names)) == len(names), f"{package}.__all__ repeats a name"
-    return {name: getattr(module, name) if hasattr(module, name) else importlib.import_module(f"{package}.{name}")
-            for name in names}
+    return {
+        name: getattr(module, name)
+        if hasattr(module, name)
+        else importlib.import_module(f"{package}.{name}")
+        for name in names
+    }
 
 
 def own_docstring(obj) -> str:
     doc = obj.__dict__.get("__doc__") if inspect.isclass(obj) else obj.__doc__
-    if inspect.isclass(obj) and doc and hasattr(obj, "_fields") and doc.startswith(f"{obj.__name__}("):
+    if (
+        inspect.isclass(obj)
+        and doc
+        and hasattr(obj, "_fields")
+        and doc.startswith(f"{obj.__name__}(")
+    ):
         return ""  # a NamedTuple's generated text
     return inspect.cleandoc(doc or "")
 
@@ -105,11 +118,15 @@ def test_every_required_argument_of_a_public_function_is_built_by_the_public_api
     names (one of them, for a union) is public, or a public function returns it (its return annotation or its
     ``Returns:`` section names it), or it is a field of such a result (one level down)."""
     objects = _public_objects()
-    functions = [(name, obj) for name, obj in objects.items() if callable(obj) and not inspect.isclass(obj)]
+    functions = [
+        (name, obj) for name, obj in objects.items() if callable(obj) and not inspect.isclass(obj)
+    ]
     built = {obj for obj in objects.values() if inspect.isclass(obj)}
     for _, fn in functions:
         built.update(_library_classes(inspect.signature(fn).return_annotation, fn.__globals__))
-        built.update(_library_classes(own_docstring(fn).partition("\nReturns:\n")[2], fn.__globals__))
+        built.update(
+            _library_classes(own_docstring(fn).partition("\nReturns:\n")[2], fn.__globals__)
+        )
     for cls in list(built):
         module = vars(importlib.import_module(cls.__module__))
         for annotation in getattr(cls, "__annotations__", {}).values():
@@ -125,8 +142,9 @@ def test_every_required_argument_of_a_public_function_is_built_by_the_public_api
     assert unbuildable == [], f"arguments only private code can build: {unbuildable}"
 
 
-DOC_PAGES = ([p for p in (API_PAGE.parents[1]).rglob("*.md") if "api" not in p.parts]
-             + [API_PAGE.parents[2] / "README.md"])
+DOC_PAGES = [p for p in (API_PAGE.parents[1]).rglob("*.md") if "api" not in p.parts] + [
+    API_PAGE.parents[2] / "README.md"
+]
 NOTEBOOKS = sorted((API_PAGE.parents[2] / "notebooks").glob("*.ipynb"))
 
 
@@ -139,8 +157,11 @@ def _private_definitions() -> dict[str, str]:
             continue
         module = importlib.import_module(info.name)
         for name, obj in vars(module).items():
-            if (not name.startswith("_") and (inspect.isfunction(obj) or inspect.isclass(obj))
-                    and obj.__module__ == info.name):
+            if (
+                not name.startswith("_")
+                and (inspect.isfunction(obj) or inspect.isclass(obj))
+                and obj.__module__ == info.name
+            ):
                 found.setdefault(name, info.name)
     return found
 
@@ -150,17 +171,31 @@ def test_the_docs_and_notebooks_name_only_the_public_api():
     name of a private module's function or class fails, unless it is written with its private path (a ``_`` segment:
     an implementation note) or is also a field of a public result (``Plant.measure``)."""
     objects = _public_objects()
-    fields = {field for obj in objects.values() if inspect.isclass(obj) for field in getattr(obj, "_fields", ())}
-    private = {name: module for name, module in _private_definitions().items()
-               if name not in objects and name not in fields}
+    fields = {
+        field
+        for obj in objects.values()
+        if inspect.isclass(obj)
+        for field in getattr(obj, "_fields", ())
+    }
+    private = {
+        name: module
+        for name, module in _private_definitions().items()
+        if name not in objects and name not in fields
+    }
     texts = [(str(p.relative_to(API_PAGE.parents[2])), p.read_text()) for p in DOC_PAGES]
     for path in NOTEBOOKS:
         cells = nbformat.read(path, as_version=4).cells
-        texts += [(f"notebooks/{path.name}", cell.source) for cell in cells if cell.cell_type == "markdown"]
+        texts += [
+            (f"notebooks/{path.name}", cell.source)
+            for cell in cells
+            if cell.cell_type == "markdown"
+        ]
     named = []
     for where, text in texts:
         for reference in re.findall(r"`([A-Za-z_][\w.]*)(?:\(|`)", text):
             name = reference.split(".")[-1]
-            if name in private and not any(part.startswith("_") for part in reference.split(".")[:-1]):
+            if name in private and not any(
+                part.startswith("_") for part in reference.split(".")[:-1]
+            ):
                 named.append(f"{where}: `{reference}` ({private[name]})")
     assert named == [], "private names in the user's docs:\n" + "\n".join(sorted(set(named)))

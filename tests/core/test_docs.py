@@ -4,6 +4,7 @@ notebook has an executed copy with its figures and no error, the README states t
 build command and CI runs it, and the concept pages' code runs. (The getting-started
 page's code, the README's engine example plus a monitor Monte Carlo, is not run here: it
 costs minutes of compilation on two loaded cores.)"""
+
 import json
 import re
 from pathlib import Path
@@ -26,16 +27,23 @@ def test_every_nav_page_exists_and_every_notebook_is_in_the_docs():
     assert len(pages) > 20
     assert [p for p in pages if not (DOCS / p).is_file()] == []
     notebooks = sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb"))
-    assert sorted(Path(p).name for p in pages if p.startswith("examples/") and p.endswith(".ipynb")) == notebooks
+    assert (
+        sorted(Path(p).name for p in pages if p.startswith("examples/") and p.endswith(".ipynb"))
+        == notebooks
+    )
 
 
 @pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb")))
 def test_executed_copy_has_outputs_figures_and_no_error(name):
     copy = json.loads((DOCS / "examples" / name).read_text())
     outputs = [o for c in copy["cells"] if c["cell_type"] == "code" for o in c.get("outputs", [])]
-    assert all(c.get("execution_count") for c in copy["cells"] if c["cell_type"] == "code" and c["source"])
+    assert all(
+        c.get("execution_count") for c in copy["cells"] if c["cell_type"] == "code" and c["source"]
+    )
     assert not [o for o in outputs if o["output_type"] == "error"]
-    assert not [o for o in outputs if o["output_type"] == "stream" and "Traceback" in "".join(o["text"])]
+    assert not [
+        o for o in outputs if o["output_type"] == "stream" and "Traceback" in "".join(o["text"])
+    ]
     assert any("image/png" in o.get("data", {}) for o in outputs), f"{name}: no figure"
     meta = copy["metadata"]["jaxfdi_docs"]
     assert meta["source"] == f"notebooks/{name}" and len(meta["source_sha256"]) == 64
@@ -55,25 +63,30 @@ def test_concept_pages_code_runs():
     namespace = {}
     ran = 0
     for page in ("faults", "filters", "monte-carlo", "detectors", "control", "studies"):
-        for block in re.findall(r"```python\n(.*?)```", (DOCS / "concepts" / f"{page}.md").read_text(), re.S):
+        for block in re.findall(
+            r"```python\n(.*?)```", (DOCS / "concepts" / f"{page}.md").read_text(), re.S
+        ):
             if "class Filter(NamedTuple)" in block:  # the shape of a Filter, not runnable code
                 continue
             exec(block.replace("1000, jnp.ones(1000)", "16, jnp.ones(16)"), namespace)
             ran += 1
     assert ran == 8
     assert namespace["info"].nis.shape == (50,) and namespace["out"].shape == (16,)
-    truth = namespace["truth"]                # faults.md: the bias enters sensor 1 from step 20
+    truth = namespace["truth"]  # faults.md: the bias enters sensor 1 from step 20
     assert truth.measurement.shape == (50, 2) and float(truth.sensor_fault[19, 1]) == 0.0
     assert float(truth.sensor_fault[20, 1]) == 0.5 and float(truth.sensor_fault[20, 0]) == 0.0
-    assert abs(float(namespace["threshold"]) - 39.9968) < 1e-3          # scipy.stats.chi2.isf(0.005, 20)
+    assert abs(float(namespace["threshold"]) - 39.9968) < 1e-3  # scipy.stats.chi2.isf(0.005, 20)
     assert bool(namespace["converged"])
     # studies.md: the closed loop holds the open-loop unstable plant near 0 from x0 = (1, 0) ...
     states = np.asarray(namespace["true_states"])
     assert states.shape == (200, 2) and np.max(np.abs(states[-50:])) < 0.1
     # ... and on the same runs a lower threshold detects at least as often (an alarm at 13.8 is one at 9.2)
     detected = namespace["detected"]
-    assert detected["R x1, 9.2"] >= detected["R x1, 13.8"] and set(detected) == {"R x1, 9.2", "R x1, 13.8",
-                                                                                 "R x1.5, 13.8"}
+    assert detected["R x1, 9.2"] >= detected["R x1, 13.8"] and set(detected) == {
+        "R x1, 9.2",
+        "R x1, 13.8",
+        "R x1.5, 13.8",
+    }
 
 
 def _hooks():
@@ -109,7 +122,9 @@ def test_the_build_finds_stale_copies_and_regenerates_them(tmp_path, monkeypatch
     monkeypatch.delenv(hooks.REGENERATE, raising=False)
     with caplog.at_level("WARNING", logger="mkdocs.hooks.examples"):
         hooks.on_pre_build(config=None)
-    assert [r.getMessage().split(" is missing")[0] for r in caplog.records] == [f"examples: docs/examples/{name}"]
+    assert [r.getMessage().split(" is missing")[0] for r in caplog.records] == [
+        f"examples: docs/examples/{name}"
+    ]
 
     caplog.clear()
     monkeypatch.setenv(hooks.REGENERATE, "1")
@@ -117,10 +132,13 @@ def test_the_build_finds_stale_copies_and_regenerates_them(tmp_path, monkeypatch
         hooks.on_pre_build(config=None)
     assert caplog.records == [] and hooks.stale_copies(tmp_path) == []
     copy = json.loads((tmp_path / "docs" / "examples" / name).read_text())
-    assert "".join(next(c for c in copy["cells"] if c["cell_type"] == "markdown")["source"]).startswith("# A new title")
+    assert "".join(
+        next(c for c in copy["cells"] if c["cell_type"] == "markdown")["source"]
+    ).startswith("# A new title")
     executed = json.loads((DOCS / "examples" / name).read_text())
-    assert ([c["outputs"] for c in copy["cells"] if c["cell_type"] == "code"]
-            == [c["outputs"] for c in executed["cells"] if c["cell_type"] == "code"])
+    assert [c["outputs"] for c in copy["cells"] if c["cell_type"] == "code"] == [
+        c["outputs"] for c in executed["cells"] if c["cell_type"] == "code"
+    ]
 
     shutil.copy(ROOT / "notebooks" / "02_engine_imm_glrt.ipynb", tmp_path / "notebooks")
     assert hooks.stale_copies(tmp_path) == ["02_engine_imm_glrt.ipynb"]
@@ -133,9 +151,15 @@ def test_ci_tries_the_wheel_on_every_python_the_package_claims():
     import tomllib
 
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    version = lambda v: tuple(map(int, v.split(".")))  # noqa: E731
-    claimed = sorted((c.rsplit(":: ", 1)[1] for c in project["classifiers"]
-                      if re.fullmatch(r"Programming Language :: Python :: 3\.\d+", c)), key=version)
+    version = lambda v: tuple(map(int, v.split(".")))
+    claimed = sorted(
+        (
+            c.rsplit(":: ", 1)[1]
+            for c in project["classifiers"]
+            if re.fullmatch(r"Programming Language :: Python :: 3\.\d+", c)
+        ),
+        key=version,
+    )
     floor = project["requires-python"].removeprefix(">=")
     ci = (ROOT / ".ci" / "run").read_text()
     newer = re.search(r"^for minor in ([\d. ]+); do$", ci, re.M).group(1).split()
@@ -154,12 +178,22 @@ def test_notebooks_use_only_the_public_api(name):
     private = []
     for node in ast.walk(ast.parse(code)):
         if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("jaxfdi"):
-            private += [f"{node.module}.{a.name}" for a in node.names
-                        if any(part.startswith("_") for part in [*node.module.split("."), a.name])]
+            private += [
+                f"{node.module}.{a.name}"
+                for a in node.names
+                if any(part.startswith("_") for part in [*node.module.split("."), a.name])
+            ]
         elif isinstance(node, ast.Import):
-            private += [a.name for a in node.names
-                        if a.name.startswith("jaxfdi") and any(p.startswith("_") for p in a.name.split("."))]
-        elif isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
+            private += [
+                a.name
+                for a in node.names
+                if a.name.startswith("jaxfdi") and any(p.startswith("_") for p in a.name.split("."))
+            ]
+        elif (
+            isinstance(node, ast.Attribute)
+            and node.attr.startswith("_")
+            and not node.attr.startswith("__")
+        ):
             root = node.value
             while isinstance(root, ast.Attribute):
                 root = root.value

@@ -1,5 +1,6 @@
 """Group faults, several episodes per run and the multi-episode record, against
 plain-Python references (loops over steps written from the definitions)."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,8 +30,12 @@ KINDS = ["bias", "ramp", "impulse", "scale", "stuck", "none"]
 
 
 def test_unknown_kind_or_target_raises_value_error_naming_it():
-    for call, name in ((lambda: fault("foo", "sensor", 0, 5), "kind"), (lambda: fault("bias", "gyro", 0, 5), "target"),
-                       (lambda: fault(42, "sensor", 0, 5), "kind"), (lambda: fault("bias", 7, 0, 5), "target")):
+    for call, name in (
+        (lambda: fault("foo", "sensor", 0, 5), "kind"),
+        (lambda: fault("bias", "gyro", 0, 5), "target"),
+        (lambda: fault(42, "sensor", 0, 5), "kind"),
+        (lambda: fault("bias", 7, 0, 5), "target"),
+    ):
         with pytest.raises(ValueError, match=f"^{name}: expected one of"):
             call()
     with pytest.raises(ValueError, match="magnitudes: expected a scalar or shape \\(2,\\)"):
@@ -46,8 +51,12 @@ def test_existing_constructions_keep_working():
     assert int(fault_label(f._replace(label=9), 1)) == 9
     assert int(fault("bias", "sensor", 2, 5).label) == -1
     # a stack built by hand without label: the scalar default is broadcast over the stack
-    hand = jaxfdi.Fault(*(jnp.asarray(v) for v in ([1, 1], [1, 0], [2, 0], [5, 8], [0.3, 0.1], [0.0, 0.0],
-                                                   [NEVER, NEVER])))
+    hand = jaxfdi.Fault(
+        *(
+            jnp.asarray(v)
+            for v in ([1, 1], [1, 0], [2, 0], [5, 8], [0.3, 0.1], [0.0, 0.0], [NEVER, NEVER])
+        )
+    )
     assert as_stack(hand).label.tolist() == [-1, -1]
     assert [int(active_label(hand, k, 1)) for k in (4, 5, 8)] == [0, 4, 4]
     assert np.asarray(episodes(hand, 1)[2]).tolist() == [4, 1]
@@ -57,15 +66,23 @@ def test_group_fault_applies_each_component_and_is_labelled_as_one():
     """Both axes of one sensor biased by magnitude * direction, labelled 9; the simulator's
     mode is 9 while it acts (noise-free engine: sensor_fault is exactly the bias)."""
     direction = np.array([0.6, -0.8])
-    group = fault_group("bias", "sensor", [1, 3], onset=10, magnitudes=2.0 * direction, end=25, label=9)
+    group = fault_group(
+        "bias", "sensor", [1, 3], onset=10, magnitudes=2.0 * direction, end=25, label=9
+    )
     assert group.kind.shape == (2,) and list(np.asarray(group.label)) == [9, 9]
     model = engine_model()._replace(Q=jnp.zeros((7, 7)), R=jnp.zeros((5, 5)))
-    _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model, group), jnp.zeros(7), jnp.full((30, 1), 0.01),
-                               jax.random.key(0))
+    _, truth, _ = jaxfdi.simulate(
+        jaxfdi.linear_simulator(model, group),
+        jnp.zeros(7),
+        jnp.full((30, 1), 0.01),
+        jax.random.key(0),
+    )
     expected = np.zeros((30, 5))
     expected[10:25, 1], expected[10:25, 3] = 2.0 * direction
     np.testing.assert_allclose(truth.sensor_fault, expected, atol=1e-12)
-    np.testing.assert_array_equal(truth.mode, np.where((np.arange(30) >= 10) & (np.arange(30) < 25), 9, 0))
+    np.testing.assert_array_equal(
+        truth.mode, np.where((np.arange(30) >= 10) & (np.arange(30) < 25), 9, 0)
+    )
 
 
 def random_stack(rng, size):
@@ -79,11 +96,18 @@ def random_stack(rng, size):
             if d["label"] < 0:
                 d["label"] = int(rng.integers(0, 9))
         else:
-            onset = int(rng.integers(0, 45))  # a fault ends after its onset (fault() refuses end <= onset)
+            onset = int(
+                rng.integers(0, 45)
+            )  # a fault ends after its onset (fault() refuses end <= onset)
             end = NEVER if rng.random() < 0.3 else onset + int(rng.integers(1, 45))
-            d = dict(kind=str(rng.choice(KINDS)), target=str(rng.choice(["actuator", "sensor"])),
-                     component=int(rng.integers(0, 2)), onset=onset, end=end,
-                     label=int(rng.choice([-1, -1, 3, 7])))
+            d = dict(
+                kind=str(rng.choice(KINDS)),
+                target=str(rng.choice(["actuator", "sensor"])),
+                component=int(rng.integers(0, 2)),
+                onset=onset,
+                end=end,
+                label=int(rng.choice([-1, -1, 3, 7])),
+            )
         spec.append(d)
     return spec, stack_faults([fault(magnitude=0.5, **d) for d in spec])
 
@@ -163,9 +187,16 @@ def reference_episode_record(alarms, labels, healthy, onsets, ends, episode_labe
         for e in range(E):
             if alarm and inside[e] and detection[e] < 0:
                 detection[e], isolated[e] = k, label
-    return dict(close=close, detection_step=detection, isolated=isolated, false_alarms=false_alarms,
-                first_false_alarm=first_false, outside_steps=outside_steps, steps=len(alarms),
-                first_unhealthy=first_unhealthy)
+    return dict(
+        close=close,
+        detection_step=detection,
+        isolated=isolated,
+        false_alarms=false_alarms,
+        first_false_alarm=first_false,
+        outside_steps=outside_steps,
+        steps=len(alarms),
+        first_unhealthy=first_unhealthy,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -199,8 +230,15 @@ def random_episode_runs():
 def test_streaming_episode_record_equals_brute_force(random_episode_runs):
     (alarms, labels, healthy, onsets, ends, episode_labels, grace), records = random_episode_runs
     for i in range(alarms.shape[0]):
-        ref = reference_episode_record(list(alarms[i]), list(labels[i]), list(healthy[i]), list(onsets[i]),
-                                       list(ends[i]), list(episode_labels[i]), int(grace[i]))
+        ref = reference_episode_record(
+            list(alarms[i]),
+            list(labels[i]),
+            list(healthy[i]),
+            list(onsets[i]),
+            list(ends[i]),
+            list(episode_labels[i]),
+            int(grace[i]),
+        )
         got = {name: np.asarray(getattr(records, name)[i]).tolist() for name in ref}
         assert got == ref, i
         delay = [d - o if d >= 0 else -1 for d, o in zip(ref["detection_step"], onsets[i])]
@@ -225,28 +263,44 @@ def test_summarize_episodes_equals_counting(random_episode_runs):
         assert s.detection_rate[e] == pytest.approx(len(detected) / len(began))
         assert s.isolation_rate[e] == pytest.approx(len(correct) / len(began))
         assert s.delay_mean[e] == pytest.approx(sum(delays) / len(delays))
-        assert s.delay_median[e] == pytest.approx(sorted(delays)[len(delays) // 2] if len(delays) % 2 else
-                                                  sum(sorted(delays)[len(delays) // 2 - 1:len(delays) // 2 + 1]) / 2)
-    false_alarms, outside_steps = np.asarray(records.false_alarms), np.asarray(records.outside_steps)
+        assert s.delay_median[e] == pytest.approx(
+            sorted(delays)[len(delays) // 2]
+            if len(delays) % 2
+            else sum(sorted(delays)[len(delays) // 2 - 1 : len(delays) // 2 + 1]) / 2
+        )
+    false_alarms, outside_steps = (
+        np.asarray(records.false_alarms),
+        np.asarray(records.outside_steps),
+    )
     fa_runs = [i for i in healthy_runs if false_alarms[i] > 0]
     assert s.false_alarm_runs == len(fa_runs)
     assert s.false_alarm_rate == pytest.approx(len(fa_runs) / len(healthy_runs))
     outside = sum(int(outside_steps[i]) for i in healthy_runs)
-    assert s.false_alarm_rate_per_step == pytest.approx(sum(int(false_alarms[i]) for i in healthy_runs) / outside)
+    assert s.false_alarm_rate_per_step == pytest.approx(
+        sum(int(false_alarms[i]) for i in healthy_runs) / outside
+    )
 
 
 def test_four_episodes_in_one_flight():
     """Four satellite episodes (the GPS/INS shape): two transient, a group, a permanent
     one; a windowed test that lags 2 steps after each clears; grace 2 makes those lags
     no false alarms, grace 0 counts them."""
-    stack = concat_faults(fault("bias", "sensor", 0, 10, 1.0, end=20), fault("ramp", "sensor", 1, 30, 0.0, 0.1, end=40),
-                          fault_group("bias", "sensor", [2, 3], 50, [0.3, 0.4], end=60, label=12),
-                          fault("bias", "sensor", 4, 70, 1.0))
+    stack = concat_faults(
+        fault("bias", "sensor", 0, 10, 1.0, end=20),
+        fault("ramp", "sensor", 1, 30, 0.0, 0.1, end=40),
+        fault_group("bias", "sensor", [2, 3], 50, [0.3, 0.4], end=60, label=12),
+        fault("bias", "sensor", 4, 70, 1.0),
+    )
     onsets, ends, labels = episodes(stack, 1)
     T = 80
     alarm = np.zeros(T, bool)
     label = np.zeros(T, int)
-    for start, stop, lab in ((12, 22, 2), (35, 42, 3), (51, 62, 5), (71, 80, 6)):  # 3rd isolated wrongly
+    for start, stop, lab in (
+        (12, 22, 2),
+        (35, 42, 3),
+        (51, 62, 5),
+        (71, 80, 6),
+    ):  # 3rd isolated wrongly
         alarm[start:stop], label[start:stop] = True, lab
     alarm[3] = True  # one false alarm before any fault
     for grace, false_alarms in ((2, 1), (0, 1 + 2 + 2 + 2)):

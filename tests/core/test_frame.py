@@ -1,49 +1,100 @@
 """Study results as data (``jaxfdi._frame``): tidy rows, the rates' Clopper-Pearson
 intervals against SciPy's exact binomial interval, and the HTML a notebook renders."""
+
 import math
 
 import pytest
+from _frames import assert_table_is_the_json
 from scipy import stats
 
-from _frames import assert_table_is_the_json
 from jaxfdi._frame import results_frame, results_html
 
 ROWS = [
-    {"method": "MM", "fault": "P2", "runs": 20, "unhealthy_runs": 2, "detection_rate": 15 / 18,
-     "isolation_rate": 0.5, "delay_median_s": 0.03, "shape": [1, 2], "noise": {"q": 1.0, "r": 2.0}},
-    {"method": "MM", "fault": "none", "runs": 20, "unhealthy_runs": 0, "detection_rate": None,
-     "false_alarm_rate": 0.05, "delay_median_s": None, "shape": [1, 2], "noise": {"q": 1.0, "r": 2.0}},
+    {
+        "method": "MM",
+        "fault": "P2",
+        "runs": 20,
+        "unhealthy_runs": 2,
+        "detection_rate": 15 / 18,
+        "isolation_rate": 0.5,
+        "delay_median_s": 0.03,
+        "shape": [1, 2],
+        "noise": {"q": 1.0, "r": 2.0},
+    },
+    {
+        "method": "MM",
+        "fault": "none",
+        "runs": 20,
+        "unhealthy_runs": 0,
+        "detection_rate": None,
+        "false_alarm_rate": 0.05,
+        "delay_median_s": None,
+        "shape": [1, 2],
+        "noise": {"q": 1.0, "r": 2.0},
+    },
 ]
 
 
 def test_rows_become_columns_with_their_intervals():
     frame = results_frame(ROWS)
     assert_table_is_the_json(frame, ROWS)
-    assert list(frame.columns[4:7]) == ["detection_rate", "detection_rate_low", "detection_rate_high"]
+    assert list(frame.columns[4:7]) == [
+        "detection_rate",
+        "detection_rate_low",
+        "detection_rate_high",
+    ]
     assert "noise.q" in frame and frame["noise.r"].tolist() == [2.0, 2.0]
     # 15 of the 18 healthy runs: SciPy's exact (Clopper-Pearson) 95 % interval
     ci = stats.binomtest(15, 18).proportion_ci(0.95, method="exact")
     assert frame.loc[0, "detection_rate_low"] == pytest.approx(ci.low, rel=1e-12)
     assert frame.loc[0, "detection_rate_high"] == pytest.approx(ci.high, rel=1e-12)
     ci = stats.binomtest(9, 18).proportion_ci(0.95, method="exact")
-    assert (frame.loc[0, "isolation_rate_low"], frame.loc[0, "isolation_rate_high"]) == pytest.approx((ci.low, ci.high))
+    assert (
+        frame.loc[0, "isolation_rate_low"],
+        frame.loc[0, "isolation_rate_high"],
+    ) == pytest.approx((ci.low, ci.high))
     ci = stats.binomtest(1, 20).proportion_ci(0.99, method="exact")
-    assert results_frame(ROWS, level=0.99).loc[1, "false_alarm_rate_low"] == pytest.approx(ci.low, rel=1e-12)
+    assert results_frame(ROWS, level=0.99).loc[1, "false_alarm_rate_low"] == pytest.approx(
+        ci.low, rel=1e-12
+    )
     # no rate, no interval
-    assert math.isnan(frame.loc[1, "detection_rate_low"]) and math.isnan(frame.loc[0, "false_alarm_rate_low"])
+    assert math.isnan(frame.loc[1, "detection_rate_low"]) and math.isnan(
+        frame.loc[0, "false_alarm_rate_low"]
+    )
 
 
 def test_a_rate_over_another_denominator_gets_no_interval():
-    frame = results_frame([{"runs": 10, "detection_rate": 0.55}])  # 5.5 of 10 runs: not a count of them
-    assert math.isnan(frame.loc[0, "detection_rate_low"]) and math.isnan(frame.loc[0, "detection_rate_high"])
+    frame = results_frame(
+        [{"runs": 10, "detection_rate": 0.55}]
+    )  # 5.5 of 10 runs: not a count of them
+    assert math.isnan(frame.loc[0, "detection_rate_low"]) and math.isnan(
+        frame.loc[0, "detection_rate_high"]
+    )
 
 
 def test_per_method_entries_become_rows():
-    nested = [{"fault": "a1", "runs": 4, "methods": {"raw": {"detection_rate": 1.0}, "window": {"detection_rate": 0.75}}}]
+    nested = [
+        {
+            "fault": "a1",
+            "runs": 4,
+            "methods": {"raw": {"detection_rate": 1.0}, "window": {"detection_rate": 0.75}},
+        }
+    ]
     frame = results_frame(nested)
-    assert frame["method"].tolist() == ["raw", "window"] and frame["detection_rate"].tolist() == [1.0, 0.75]
+    assert frame["method"].tolist() == ["raw", "window"] and frame["detection_rate"].tolist() == [
+        1.0,
+        0.75,
+    ]
     assert_table_is_the_json(frame, nested)
-    fields = [{"case": "stop w1", "runs": 4, "unhealthy_runs": 0, "fdp": {"rate": 1.0}, "nis": {"rate": 0.5}}]
+    fields = [
+        {
+            "case": "stop w1",
+            "runs": 4,
+            "unhealthy_runs": 0,
+            "fdp": {"rate": 1.0},
+            "nis": {"rate": 0.5},
+        }
+    ]
     frame = results_frame(fields, methods=("fdp", "nis"))
     assert frame["method"].tolist() == ["fdp", "nis"] and frame["rate"].tolist() == [1.0, 0.5]
     assert_table_is_the_json(frame, fields, methods=("fdp", "nis"))
@@ -52,9 +103,14 @@ def test_per_method_entries_become_rows():
 
 
 def test_html_is_one_table_per_section_with_its_own_columns():
-    rows = [{"section": "trim", "cell": "thtl", "ours": 0.816}, {"section": "tracking", "error": "q", "rms": 0.1}]
+    rows = [
+        {"section": "trim", "cell": "thtl", "ours": 0.816},
+        {"section": "tracking", "error": "q", "rms": 0.1},
+    ]
     text = results_html(results_frame(rows), {"runs": 3, "seed": 7})
-    assert text.count("<table") == 2 and "<h4>trim</h4>" in text and "3 runs per case, seed 7" in text
+    assert (
+        text.count("<table") == 2 and "<h4>trim</h4>" in text and "3 runs per case, seed 7" in text
+    )
     trim = text.split("<h4>tracking</h4>")[0]
     assert "thtl" in trim and "rms" not in trim
     assert results_html(results_frame(ROWS)).count("<table") == 1

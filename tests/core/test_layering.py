@@ -6,6 +6,7 @@ filters <- metrics and Monte Carlo <- studies and streaming <- detection <- the 
 monitor, tracking, tuning <- GNSS, control <- INS <- plotting <- scenarios <- CLI and the
 package's front door.
 """
+
 import ast
 import pathlib
 
@@ -17,28 +18,47 @@ PACKAGE = pathlib.Path(jaxfdi.__file__).parent
 
 #: unit (a package or a top-level module of jaxfdi) -> layer; lower layers never import higher ones
 LAYERS = {
-    "_checks": 0, "_linalg": 0, "_io": 0, "_version": 0, "_progress": 0, "data": 0, "distributed": 0,
-    "_faults": 1, "_levenberg_marquardt": 1, "_stages": 1,
+    "_checks": 0,
+    "_linalg": 0,
+    "_io": 0,
+    "_version": 0,
+    "_progress": 0,
+    "data": 0,
+    "distributed": 0,
+    "_faults": 1,
+    "_levenberg_marquardt": 1,
+    "_stages": 1,
     "models": 2,
-    "_riccati": 3, "_simulate": 3,
+    "_riccati": 3,
+    "_simulate": 3,
     "filters": 4,
-    "_metrics": 5, "_montecarlo": 5, "_frame": 5,
-    "_study": 6, "streaming": 6,
+    "_metrics": 5,
+    "_montecarlo": 5,
+    "_frame": 5,
+    "_study": 6,
+    "streaming": 6,
     "detection": 7,
     "_loop": 8,
-    "_monitor": 9, "_tracking": 9, "tuning": 9,
-    "gnss": 10, "control": 10,
+    "_monitor": 9,
+    "_tracking": 9,
+    "tuning": 9,
+    "gnss": 10,
+    "control": 10,
     "ins": 11,
     "plotting": 12,
     "scenarios": 13,
-    "cli": 14, "__init__": 14, "__main__": 14,
+    "cli": 14,
+    "__init__": 14,
+    "__main__": 14,
 }
 
 
 def _unit(dotted: str) -> str:
     """``jaxfdi.filters._kalman`` -> ``filters``; ``jaxfdi._loop`` -> ``loop``; ``jaxfdi`` -> ``__init__``."""
     parts = dotted.split(".")
-    if len(parts) == 1 or not ((PACKAGE / parts[1]).is_dir() or (PACKAGE / f"{parts[1]}.py").exists()):
+    if len(parts) == 1 or not (
+        (PACKAGE / parts[1]).is_dir() or (PACKAGE / f"{parts[1]}.py").exists()
+    ):
         return "__init__"  # the package itself, or a name its __init__ exports
     return parts[1]
 
@@ -55,11 +75,22 @@ def _modules():
 def _imports(path: pathlib.Path):
     """(line, imported module, inside a function) for every import of a jaxfdi module."""
     tree = ast.parse(path.read_text())
-    functions = [node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    functions = [
+        node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+    ]
     inside = {id(n) for f in functions for n in ast.walk(f) if n is not f}
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module and node.module.split(".")[0] == "jaxfdi":
-            targets = [node.module] if node.module != "jaxfdi" else [f"jaxfdi.{a.name}" for a in node.names]
+        if (
+            isinstance(node, ast.ImportFrom)
+            and node.level == 0
+            and node.module
+            and node.module.split(".")[0] == "jaxfdi"
+        ):
+            targets = (
+                [node.module]
+                if node.module != "jaxfdi"
+                else [f"jaxfdi.{a.name}" for a in node.names]
+            )
         elif isinstance(node, ast.Import):
             targets = [a.name for a in node.names if a.name.split(".")[0] == "jaxfdi"]
         else:

@@ -1,5 +1,6 @@
 """Levenberg-Marquardt (``jaxfdi._levenberg_marquardt``, the F-16 trim's solver) against closed forms and SciPy's
 MINPACK."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -34,12 +35,23 @@ def test_zero_residual_and_vmap_over_starts():
 def test_nonzero_residual_matches_minpack():
     """A least-squares fit whose optimum has r != 0: same minimiser as SciPy's MINPACK
     Levenberg-Marquardt, gradient ~ 0 there."""
-    out = jax.jit(lambda x0: levenberg_marquardt(exponential_fit, x0, (T, Y)))(jnp.array([1.0, 0.0]))
-    ref = least_squares(lambda x: x[0] * np.exp(x[1] * T) - Y, [1.0, 0.0], method="lm", xtol=1e-15, ftol=1e-15,
-                        gtol=1e-15)
+    out = jax.jit(lambda x0: levenberg_marquardt(exponential_fit, x0, (T, Y)))(
+        jnp.array([1.0, 0.0])
+    )
+    ref = least_squares(
+        lambda x: x[0] * np.exp(x[1] * T) - Y,
+        [1.0, 0.0],
+        method="lm",
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+    )
     np.testing.assert_allclose(out.x, ref.x, rtol=1e-8)
     np.testing.assert_allclose(out.cost, ref.cost, rtol=1e-10)
-    assert bool(out.converged) and float(jnp.max(jnp.abs(out.gradient))) < 1e-9 * float(out.cost) + 1e-12
+    assert (
+        bool(out.converged)
+        and float(jnp.max(jnp.abs(out.gradient))) < 1e-9 * float(out.cost) + 1e-12
+    )
 
 
 def test_float32_and_bad_input():

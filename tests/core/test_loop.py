@@ -2,6 +2,7 @@
 against independent references: the open-loop pipeline written step by step in Python,
 the closed-form closed-loop response, the original filter run, filterpy driven matrix by
 matrix, and sample statistics."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -12,11 +13,11 @@ from scipy import stats
 
 import jaxfdi
 from jaxfdi import _loop as loop
+from jaxfdi._monitor import filter_detector
 from jaxfdi.filters import _history as history
 from jaxfdi.filters._time_varying import model_at, time_varying
 from jaxfdi.models import engine_model
 from jaxfdi.models._linear import LinearGaussianModel
-from jaxfdi._monitor import filter_detector
 
 T = 60
 ONSET = 30
@@ -36,30 +37,49 @@ def test_feedforward_loop_equals_the_open_loop_pipeline(engine):
     record computed in plain Python from the alarm sequence (identical integers)."""
     model, kf, detector, threshold = engine
     us = jnp.full((T, 1), 0.01)
-    faults = jaxfdi.stack_faults([jaxfdi.fault("bias", "sensor", 1, ONSET, 30.0),
-                                  jaxfdi.fault("bias", "actuator", 0, ONSET, 2e-3)])
+    faults = jaxfdi.stack_faults(
+        [
+            jaxfdi.fault("bias", "sensor", 1, ONSET, 30.0),
+            jaxfdi.fault("bias", "actuator", 0, ONSET, 2e-3),
+        ]
+    )
     keys = jax.random.split(jax.random.key(0), 2)
     scorer = loop.detection_scorer(ONSET, lambda out: out[1], lambda out: out[0].healthy)
 
     def closed(f, key):
-        return loop.run_loop(jaxfdi.linear_simulator(model, f), filter_detector(kf, detector), loop.feedforward(),
-                             jnp.zeros(7), (kf.init(jnp.zeros(7), model.Q), detector.init()), key,
-                             exogenous=us, scorer=scorer, keep_history=True)
+        return loop.run_loop(
+            jaxfdi.linear_simulator(model, f),
+            filter_detector(kf, detector),
+            loop.feedforward(),
+            jnp.zeros(7),
+            (kf.init(jnp.zeros(7), model.Q), detector.init()),
+            key,
+            exogenous=us,
+            scorer=scorer,
+            keep_history=True,
+        )
 
     results = jax.jit(jax.vmap(closed))(faults, keys)
-    truths = jax.jit(jax.vmap(lambda f, key: jaxfdi.simulate(jaxfdi.linear_simulator(model, f), jnp.zeros(7), us,
-                                                              key)[1]))(faults, keys)
+    truths = jax.jit(
+        jax.vmap(
+            lambda f, key: jaxfdi.simulate(
+                jaxfdi.linear_simulator(model, f), jnp.zeros(7), us, key
+            )[1]
+        )
+    )(faults, keys)
     for run in range(2):
         result = jax.tree_util.tree_map(lambda leaf: leaf[run], results)
         truth = jax.tree_util.tree_map(lambda leaf: leaf[run], truths)
-        _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), model.Q), truth.measurement, us)
+        _, info = jaxfdi.filters.run_filter(
+            kf, kf.init(jnp.zeros(7), model.Q), truth.measurement, us
+        )
         nis = np.asarray(info.nis)
-        statistic = np.array([nis[max(0, k - 1): k + 1].sum() for k in range(T)])
+        statistic = np.array([nis[max(0, k - 1) : k + 1].sum() for k in range(T)])
         alarms = statistic > float(threshold)
         np.testing.assert_array_equal(result.history.sensed.measurement, truth.measurement)
         np.testing.assert_allclose(result.history.output[1].statistic, statistic, rtol=1e-12)
         record = result.score
-        first = lambda mask: int(np.argmax(mask)) if mask.any() else -1  # noqa: E731
+        first = lambda mask: int(np.argmax(mask)) if mask.any() else -1
         after = alarms & (np.arange(T) >= ONSET)
         assert int(record.first_alarm) == first(alarms)
         assert int(record.detection_step) == first(after)
@@ -73,9 +93,20 @@ def test_monitor_is_the_feedforward_loop(engine):
     model, kf, detector, _ = engine
     us = jnp.full((T, 1), 0.01)
     f = jaxfdi.fault("bias", "sensor", 1, ONSET, 30.0)
-    result = jaxfdi.monitor(jaxfdi.linear_simulator(model, f), kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q),
-                            us, jax.random.key(0), ONSET, keep_history=True)
-    _, truth, moved = jaxfdi.simulate(jaxfdi.linear_simulator(model, f), jnp.zeros(7), us, jax.random.key(0))
+    result = jaxfdi.monitor(
+        jaxfdi.linear_simulator(model, f),
+        kf,
+        detector,
+        jnp.zeros(7),
+        kf.init(jnp.zeros(7), model.Q),
+        us,
+        jax.random.key(0),
+        ONSET,
+        keep_history=True,
+    )
+    _, truth, moved = jaxfdi.simulate(
+        jaxfdi.linear_simulator(model, f), jnp.zeros(7), us, jax.random.key(0)
+    )
     for ours, theirs in ((result.history.truth, truth), (result.history.moved, moved)):
         for field in theirs._fields:
             np.testing.assert_array_equal(getattr(ours, field), getattr(theirs, field))
@@ -94,33 +125,69 @@ def test_closed_loop_lqr_with_a_perfect_sensor_is_the_closed_form_response():
     Phi = rng.normal(size=(n, n)) * 0.6
     Gamma = rng.normal(size=(n, nu))
     K = _lqr(Phi, Gamma, np.eye(n), np.eye(nu))
-    model = LinearGaussianModel(jnp.asarray(Phi), jnp.asarray(Gamma), jnp.eye(n), jnp.zeros((n, nu)),
-                                jnp.zeros((n, n)), jnp.zeros((n, n)))
+    model = LinearGaussianModel(
+        jnp.asarray(Phi),
+        jnp.asarray(Gamma),
+        jnp.eye(n),
+        jnp.zeros((n, nu)),
+        jnp.zeros((n, n)),
+        jnp.zeros((n, n)),
+    )
     passthrough = jaxfdi.FDI(lambda: None, lambda state, k, y, u: (state, None))
     x0 = jnp.asarray(rng.normal(size=n))
-    result = loop.run_loop(jaxfdi.linear_simulator(model), passthrough, loop.state_feedback(K), x0, passthrough.init(),
-                           jax.random.key(0), 40, u0=jnp.zeros(nu), keep_history=True)
+    result = loop.run_loop(
+        jaxfdi.linear_simulator(model),
+        passthrough,
+        loop.state_feedback(K),
+        x0,
+        passthrough.init(),
+        jax.random.key(0),
+        40,
+        u0=jnp.zeros(nu),
+        keep_history=True,
+    )
     expected = [np.asarray(x0)]
     for _ in range(39):
         expected.append((Phi - Gamma @ K) @ expected[-1])
     np.testing.assert_allclose(result.history.sensed.state, np.array(expected), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(result.history.control, -np.array(expected) @ K.T, rtol=0, atol=1e-12)
-    assert np.max(np.abs(np.linalg.eigvals(Phi))) > 1  # open loop unstable: the loop is what holds it
+    np.testing.assert_allclose(
+        result.history.control, -np.array(expected) @ K.T, rtol=0, atol=1e-12
+    )
+    assert (
+        np.max(np.abs(np.linalg.eigvals(Phi))) > 1
+    )  # open loop unstable: the loop is what holds it
 
 
 def test_closed_loop_feedthrough_sees_the_held_input():
     """In closed loop the sensors sample before the controller acts: the feed-through
     term of y[k] carries u[k-1] (zero-order hold), u0 at step 0."""
-    model = LinearGaussianModel(jnp.eye(1) * 0.5, jnp.eye(1), jnp.eye(1), jnp.eye(1) * 2.0,
-                                jnp.zeros((1, 1)), jnp.zeros((1, 1)))
+    model = LinearGaussianModel(
+        jnp.eye(1) * 0.5,
+        jnp.eye(1),
+        jnp.eye(1),
+        jnp.eye(1) * 2.0,
+        jnp.zeros((1, 1)),
+        jnp.zeros((1, 1)),
+    )
     counter = jaxfdi.Controller(lambda: jnp.zeros(1), lambda s, k, view, exo: (s + 1.0, s + 1.0))
     passthrough = jaxfdi.FDI(lambda: None, lambda s, k, y, u: (s, None))
-    result = loop.run_loop(jaxfdi.linear_simulator(model), passthrough, counter, jnp.zeros(1), passthrough.init(),
-                           jax.random.key(0), 5, u0=jnp.full(1, 7.0), keep_history=True)
+    result = loop.run_loop(
+        jaxfdi.linear_simulator(model),
+        passthrough,
+        counter,
+        jnp.zeros(1),
+        passthrough.init(),
+        jax.random.key(0),
+        5,
+        u0=jnp.full(1, 7.0),
+        keep_history=True,
+    )
     u = np.asarray(result.history.control)[:, 0]
     x = np.asarray(result.history.sensed.state)[:, 0]
     held = np.concatenate([[7.0], u[:-1]])
-    np.testing.assert_allclose(np.asarray(result.history.sensed.measurement)[:, 0], x + 2.0 * held, rtol=1e-15)
+    np.testing.assert_allclose(
+        np.asarray(result.history.sensed.measurement)[:, 0], x + 2.0 * held, rtol=1e-15
+    )
 
 
 def test_replay_over_the_ring_buffer_equals_the_original_estimates():
@@ -129,8 +196,14 @@ def test_replay_over_the_ring_buffer_equals_the_original_estimates():
     L = 3
     rng = np.random.default_rng(1)
     n, m = 3, 2
-    model = LinearGaussianModel(jnp.asarray(np.eye(n) * 0.9 + 0.05 * rng.normal(size=(n, n))), jnp.ones((n, 1)),
-                                jnp.asarray(rng.normal(size=(m, n))), jnp.zeros((m, 1)), 0.01 * jnp.eye(n), 0.1 * jnp.eye(m))
+    model = LinearGaussianModel(
+        jnp.asarray(np.eye(n) * 0.9 + 0.05 * rng.normal(size=(n, n))),
+        jnp.ones((n, 1)),
+        jnp.asarray(rng.normal(size=(m, n))),
+        jnp.zeros((m, 1)),
+        0.01 * jnp.eye(n),
+        0.1 * jnp.eye(m),
+    )
     kf = jaxfdi.filters.kalman_filter(model)
     prior0 = kf.init(jnp.zeros(n), jnp.eye(n))
     example = (jnp.zeros(m), jnp.zeros(1), prior0)
@@ -147,8 +220,16 @@ def test_replay_over_the_ring_buffer_equals_the_original_estimates():
 
     fdi = jaxfdi.FDI(lambda: (prior0, history.ring_buffer(L, example)), step)
     us = jnp.asarray(rng.normal(size=(25, 1)))
-    result = loop.run_loop(jaxfdi.linear_simulator(model), fdi, loop.feedforward(), jnp.zeros(n), fdi.init(),
-                           jax.random.key(3), exogenous=us, keep_history=True)
+    result = loop.run_loop(
+        jaxfdi.linear_simulator(model),
+        fdi,
+        loop.feedforward(),
+        jnp.zeros(n),
+        fdi.init(),
+        jax.random.key(3),
+        exogenous=us,
+        keep_history=True,
+    )
     original, replayed, count = result.history.output
     np.testing.assert_allclose(replayed, original, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(count, np.arange(1, 26))
@@ -177,8 +258,14 @@ def test_ring_buffer_before_it_fills():
 def test_time_varying_kalman_filter_matches_filterpy_matrix_by_matrix():
     rng = np.random.default_rng(2)
     n, m, nu, steps = 3, 2, 1, 30
-    model = LinearGaussianModel(jnp.asarray(np.eye(n) + 0.1 * rng.normal(size=(n, n))), jnp.asarray(rng.normal(size=(n, nu))),
-                                jnp.zeros((m, n)), jnp.zeros((m, nu)), jnp.eye(n), jnp.eye(m))
+    model = LinearGaussianModel(
+        jnp.asarray(np.eye(n) + 0.1 * rng.normal(size=(n, n))),
+        jnp.asarray(rng.normal(size=(n, nu))),
+        jnp.zeros((m, n)),
+        jnp.zeros((m, nu)),
+        jnp.eye(n),
+        jnp.eye(m),
+    )
     Cs = rng.normal(size=(steps, m, n))
     Qs = np.stack([np.diag(rng.uniform(0.01, 0.2, n)) for _ in range(steps)])
     Rs = np.stack([np.diag(rng.uniform(0.05, 1.0, m)) for _ in range(steps)])
@@ -186,7 +273,9 @@ def test_time_varying_kalman_filter_matches_filterpy_matrix_by_matrix():
     us = rng.normal(size=(steps, nu))
     at = model_at(model, C=Cs, Q=Qs, R=Rs)
     filt = time_varying(lambda k: jaxfdi.filters.kalman_filter(at(k)))
-    _, info = jaxfdi.filters.run_filter(filt, filt.init(jnp.zeros(n), jnp.eye(n)), jnp.asarray(ys), jnp.asarray(us))
+    _, info = jaxfdi.filters.run_filter(
+        filt, filt.init(jnp.zeros(n), jnp.eye(n)), jnp.asarray(ys), jnp.asarray(us)
+    )
 
     kf = KalmanFilter(dim_x=n, dim_z=m, dim_u=nu)
     kf.F, kf.B = np.asarray(model.Phi), np.asarray(model.Gamma)
@@ -207,8 +296,9 @@ def test_time_varying_kalman_filter_matches_filterpy_matrix_by_matrix():
 
 @pytest.fixture(scope="module")
 def small_plant():
-    model = LinearGaussianModel(0.5 * jnp.eye(2), jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2)), jnp.zeros((2, 2)),
-                                jnp.eye(2))
+    model = LinearGaussianModel(
+        0.5 * jnp.eye(2), jnp.eye(2), jnp.eye(2), jnp.zeros((2, 2)), jnp.zeros((2, 2)), jnp.eye(2)
+    )
     return model
 
 
@@ -217,21 +307,31 @@ def test_per_step_covariances_as_tables_and_callables_agree(small_plant):
     Rs = jnp.stack([jnp.eye(2) * (1.0 + k) for k in range(steps)])
     us = jnp.zeros((steps, 2))
     table = jaxfdi.simulator(lambda x, u, p: 0.5 * x + u, lambda x, u, p: x, jnp.zeros((2, 2)), Rs)
-    function = jaxfdi.simulator(lambda x, u, p: 0.5 * x + u, lambda x, u, p: x, jnp.zeros((2, 2)),
-                                lambda k: jnp.eye(2) * (1.0 + k))
+    function = jaxfdi.simulator(
+        lambda x, u, p: 0.5 * x + u,
+        lambda x, u, p: x,
+        jnp.zeros((2, 2)),
+        lambda k: jnp.eye(2) * (1.0 + k),
+    )
     _, a, _ = jaxfdi.simulate(table, jnp.zeros(2), us, jax.random.key(0))
     _, b, _ = jaxfdi.simulate(function, jnp.zeros(2), us, jax.random.key(0))
     np.testing.assert_allclose(a.measurement, b.measurement, rtol=1e-13)
     with pytest.raises(ValueError, match="R"):
-        jaxfdi.simulator(lambda x, u, p: x, lambda x, u, p: x, jnp.zeros((2, 2)), jnp.zeros((steps, 2, 3)))
+        jaxfdi.simulator(
+            lambda x, u, p: x, lambda x, u, p: x, jnp.zeros((2, 2)), jnp.zeros((steps, 2, 3))
+        )
 
 
 def test_per_step_measurement_noise_has_its_step_variance():
     """Sample variance of y[k] across 4000 runs vs R_k = (1 + k) I: chi-square bounds (1e-3 each)."""
     steps, runs = 4, 4000
-    sim = jaxfdi.simulator(lambda x, u, p: x, lambda x, u, p: x, jnp.zeros((1, 1)), lambda k: jnp.eye(1) * (1.0 + k))
+    sim = jaxfdi.simulator(
+        lambda x, u, p: x, lambda x, u, p: x, jnp.zeros((1, 1)), lambda k: jnp.eye(1) * (1.0 + k)
+    )
     keys = jax.random.split(jax.random.key(9), runs)
-    _, truth, _ = jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(1), jnp.zeros((steps, 0)), key))(keys)
+    _, truth, _ = jax.vmap(
+        lambda key: jaxfdi.simulate(sim, jnp.zeros(1), jnp.zeros((steps, 0)), key)
+    )(keys)
     y = np.asarray(truth.measurement)[:, :, 0]
     for k in range(steps):
         scaled = (runs - 1) * y[:, k].var(ddof=1) / (1.0 + k)
@@ -244,22 +344,35 @@ def test_input_noise_time_argument_noise_gain_and_availability():
     components are NaN."""
     runs = 3000
     Qu = jnp.array([[0.04, 0.01], [0.01, 0.09]])
-    sim = jaxfdi.simulator(lambda x, u, k, p: jnp.array([x[0] + u[0], x[1] + k]), lambda x, u, k, p: x,
-                           jnp.eye(1), jnp.zeros((2, 2)), time_varying=True, noise_gain=jnp.array([[1.0], [0.0]]),
-                           input_noise=Qu, available=lambda k, x: jnp.array([True, k % 2 == 0]))
+    sim = jaxfdi.simulator(
+        lambda x, u, k, p: jnp.array([x[0] + u[0], x[1] + k]),
+        lambda x, u, k, p: x,
+        jnp.eye(1),
+        jnp.zeros((2, 2)),
+        time_varying=True,
+        noise_gain=jnp.array([[1.0], [0.0]]),
+        input_noise=Qu,
+        available=lambda k, x: jnp.array([True, k % 2 == 0]),
+    )
     us = jnp.ones((3, 2))
     keys = jax.random.split(jax.random.key(4), runs)
     _, truth, moved = jax.vmap(lambda key: jaxfdi.simulate(sim, jnp.zeros(2), us, key))(keys)
-    noise = np.asarray(moved.actuator_fault)[:, 0, :]                    # applied - commanded
+    noise = np.asarray(moved.actuator_fault)[:, 0, :]  # applied - commanded
     for i in range(2):
         scaled = (runs - 1) * noise[:, i].var(ddof=1) / float(Qu[i, i])
         assert stats.chi2.ppf(5e-4, runs - 1) < scaled < stats.chi2.ppf(1 - 5e-4, runs - 1)
     corr = np.corrcoef(noise.T)[0, 1]
     assert abs(np.arctanh(corr) - np.arctanh(0.01 / 0.06)) < 3.3 / np.sqrt(runs - 3)
     x = np.asarray(truth.state)
-    np.testing.assert_array_equal(x[:, :, 1], np.broadcast_to([0.0, 0.0, 1.0], (runs, 3)))  # x1 += k, no noise
+    np.testing.assert_array_equal(
+        x[:, :, 1], np.broadcast_to([0.0, 0.0, 1.0], (runs, 3))
+    )  # x1 += k, no noise
     y = np.asarray(truth.measurement)
-    assert np.all(np.isnan(y[:, 1, 1])) and np.all(np.isfinite(y[:, [0, 2], 1])) and np.all(np.isfinite(y[:, :, 0]))
+    assert (
+        np.all(np.isnan(y[:, 1, 1]))
+        and np.all(np.isfinite(y[:, [0, 2], 1]))
+        and np.all(np.isfinite(y[:, :, 0]))
+    )
 
 
 def test_a_dead_sensor_mid_run_is_an_alarm_not_ill_health(engine):
@@ -274,13 +387,25 @@ def test_a_dead_sensor_mid_run_is_an_alarm_not_ill_health(engine):
     labels = 10 + jnp.arange(5)
     records = []
     for onset in (ONSET, jaxfdi._faults.NEVER):
-        result = jaxfdi.monitor(sim, kf, detector, jnp.zeros(7), kf.init(jnp.zeros(7), model.Q), us,
-                                jax.random.key(0), onset, keep_history=True, channel_labels=labels)
+        result = jaxfdi.monitor(
+            sim,
+            kf,
+            detector,
+            jnp.zeros(7),
+            kf.init(jnp.zeros(7), model.Q),
+            us,
+            jax.random.key(0),
+            onset,
+            keep_history=True,
+            channel_labels=labels,
+        )
         assert int(result.record.first_unhealthy) == -1
         assert bool(result.history.alarm[40]) and float(result.history.statistic[40]) == np.inf
         assert int(result.history.label[40]) == 10
         records.append(result.record)
-    faulty, fault_free = (jaxfdi.summarize_detection(jax.tree_util.tree_map(lambda a: a[None], r), T) for r in records)
+    faulty, fault_free = (
+        jaxfdi.summarize_detection(jax.tree_util.tree_map(lambda a: a[None], r), T) for r in records
+    )
     assert faulty.unhealthy_runs == fault_free.unhealthy_runs == 0
     assert faulty.detection_rate == 1.0 and fault_free.false_alarm_rate == 1.0
 
@@ -290,11 +415,28 @@ def test_loop_input_errors():
     sim = jaxfdi.linear_simulator(model)
     fdi = jaxfdi.FDI(lambda: None, lambda s, k, y, u: (s, None))
     with pytest.raises(ValueError, match="u0"):
-        loop.run_loop(sim, fdi, loop.state_feedback(jnp.zeros((1, 7))), jnp.zeros(7), None, jax.random.key(0), 5)
+        loop.run_loop(
+            sim,
+            fdi,
+            loop.state_feedback(jnp.zeros((1, 7))),
+            jnp.zeros(7),
+            None,
+            jax.random.key(0),
+            5,
+        )
     with pytest.raises(ValueError, match="steps"):
         loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(7), None, jax.random.key(0))
     with pytest.raises(ValueError, match="exogenous"):
-        loop.run_loop(sim, fdi, loop.feedforward(), jnp.zeros(7), None, jax.random.key(0), 5, exogenous=jnp.zeros((4, 1)))
+        loop.run_loop(
+            sim,
+            fdi,
+            loop.feedforward(),
+            jnp.zeros(7),
+            None,
+            jax.random.key(0),
+            5,
+            exogenous=jnp.zeros((4, 1)),
+        )
 
 
 def test_episode_scorer_over_a_flight_with_three_fault_episodes(engine):
@@ -304,21 +446,37 @@ def test_episode_scorer_over_a_flight_with_three_fault_episodes(engine):
     model, kf, detector, _ = engine
     steps, grace = 150, 3
     group = jaxfdi._faults.fault_group("bias", "sensor", [1, 3], 20, [25.0, 4.0], end=45, label=9)
-    flight = jaxfdi._faults.concat_faults(group, jaxfdi.fault("bias", "actuator", 0, 70, 2e-3, end=95),
-                                  jaxfdi.fault("ramp", "sensor", 2, 110, 0.0, slope=0.5))
+    flight = jaxfdi._faults.concat_faults(
+        group,
+        jaxfdi.fault("bias", "actuator", 0, 70, 2e-3, end=95),
+        jaxfdi.fault("ramp", "sensor", 2, 110, 0.0, slope=0.5),
+    )
     onsets, ends, labels = jaxfdi._faults.episodes(flight, 1)
     us = jnp.full((steps, 1), 0.01)
-    result = loop.run_loop(jaxfdi.linear_simulator(model, flight), filter_detector(kf, detector), loop.feedforward(),
-                           jnp.zeros(7), (kf.init(jnp.zeros(7), model.Q), detector.init()), jax.random.key(7),
-                           exogenous=us, scorer=loop.episode_scorer((onsets, ends, labels), lambda out: out[1],
-                                                                    lambda out: out[0].healthy, grace),
-                           keep_history=True)
+    result = loop.run_loop(
+        jaxfdi.linear_simulator(model, flight),
+        filter_detector(kf, detector),
+        loop.feedforward(),
+        jnp.zeros(7),
+        (kf.init(jnp.zeros(7), model.Q), detector.init()),
+        jax.random.key(7),
+        exogenous=us,
+        scorer=loop.episode_scorer(
+            (onsets, ends, labels), lambda out: out[1], lambda out: out[0].healthy, grace
+        ),
+        keep_history=True,
+    )
     alarms = np.asarray(result.history.output[1].alarm)
     mode = np.asarray(result.history.sensed.mode)
     record = result.score
     real = [(int(o), int(e), int(l)) for o, e, l in zip(onsets, ends, labels) if o < steps]
     assert [r[2] for r in real] == [9, 1, 4]
-    assert set(mode[20:45]) == {9} and set(mode[70:95]) == {1} and set(mode[110:]) == {4} and mode[50] == 0
+    assert (
+        set(mode[20:45]) == {9}
+        and set(mode[70:95]) == {1}
+        and set(mode[110:]) == {4}
+        and mode[50] == 0
+    )
     starts = sorted(o for o, _, _ in real)
     inside_any = np.zeros(steps, bool)
     for e, (o, end, _) in enumerate(real):

@@ -1,25 +1,26 @@
 """Detection metrics and window statistics against brute-force Python references."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum
-from jaxfdi.detection._chi2 import normalized_innovation_squared
 from jaxfdi._faults import NEVER
 from jaxfdi._metrics import (
     DetectionRecord,
     confusion_matrix,
+    delay_statistics,
+    fault_row,
     record_from_alarms,
     record_init,
     record_update,
     step_health,
-    delay_statistics,
-    fault_row,
     summarize_detection,
     unhealthy_warning,
 )
+from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum
+from jaxfdi.detection._chi2 import normalized_innovation_squared
 
 
 def reference_record(alarms, onset):
@@ -44,7 +45,10 @@ def test_streaming_record_equals_batch_record_equals_brute_force(random_alarms):
     def streaming(alarm_row, onset):
         def body(record, ka):
             return record_update(record, *ka), None
-        return jax.lax.scan(body, record_init(onset), (jnp.arange(alarm_row.shape[0]), alarm_row))[0]
+
+        return jax.lax.scan(body, record_init(onset), (jnp.arange(alarm_row.shape[0]), alarm_row))[
+            0
+        ]
 
     stream = jax.jit(jax.vmap(streaming))(alarms, onsets)
     batch = jax.jit(jax.vmap(record_from_alarms))(alarms, onsets)
@@ -63,16 +67,24 @@ def test_first_unhealthy_streaming_and_batch_equal_first_bad_step(random_alarms)
         def body(record, step):
             k, alarm, ok = step
             return record_update(record, k, alarm, -1, None, 0, ok), None
-        return jax.lax.scan(body, record_init(onset), (jnp.arange(alarm_row.shape[0]), alarm_row, healthy_row))[0]
+
+        return jax.lax.scan(
+            body, record_init(onset), (jnp.arange(alarm_row.shape[0]), alarm_row, healthy_row)
+        )[0]
 
     stream = jax.jit(jax.vmap(streaming))(alarms, healthy, onsets)
     batch = jax.jit(jax.vmap(record_from_alarms))(alarms, onsets, healthy)
-    assert int(record_init(5).first_unhealthy) == -1 and int(record_from_alarms(alarms[0], 5).first_unhealthy) == -1
+    assert (
+        int(record_init(5).first_unhealthy) == -1
+        and int(record_from_alarms(alarms[0], 5).first_unhealthy) == -1
+    )
     for i in range(alarms.shape[0]):
         first_bad = next((k for k, ok in enumerate(healthy[i]) if not ok), -1)
         assert int(stream.first_unhealthy[i]) == first_bad == int(batch.first_unhealthy[i])
         # health does not change the detection fields
-        assert tuple(int(x[i]) for x in stream[:5]) == reference_record(list(alarms[i]), int(onsets[i]))
+        assert tuple(int(x[i]) for x in stream[:5]) == reference_record(
+            list(alarms[i]), int(onsets[i])
+        )
     assert 0 < np.sum(np.asarray(stream.first_unhealthy) >= 0) < alarms.shape[0]
 
 
@@ -97,7 +109,9 @@ def test_record_keeps_label_at_detection_and_estimate_after_a_delay():
         onset = int(rng.integers(0, 45))
         record = record_init(onset)
         for k in range(T):
-            record = record_update(record, k, bool(alarms[k]), int(labels[k]), float(estimates[k]), delay)
+            record = record_update(
+                record, k, bool(alarms[k]), int(labels[k]), float(estimates[k]), delay
+            )
         first, detection = reference_record(list(alarms), onset)[1:3]
         assert int(record.isolated) == (labels[detection] if detection >= 0 else -1)
         assert int(record.first_label) == (labels[first] if first >= 0 else -1)
@@ -121,11 +135,15 @@ def test_summary_on_hand_made_records():
     )
     s = summarize_detection(records, horizon=100, Ts=0.1)
     assert s.runs == 4 and s.faulty_runs == 3
-    assert s.detection_rate == pytest.approx(2 / 3) and s.missed_detection_rate == pytest.approx(1 / 3)
+    assert s.detection_rate == pytest.approx(2 / 3) and s.missed_detection_rate == pytest.approx(
+        1 / 3
+    )
     assert s.false_alarm_rate == pytest.approx(2 / 4)
     assert s.false_alarm_rate_per_step == pytest.approx(4 / 260)
     # run 0's alarm stood before its onset: a false-alarm run, its "delay" 0.2 s is not scored
-    assert s.pre_onset_alarm_rate == pytest.approx(1 / 3) and s.clean_runs == 2 and s.delay_runs == 1
+    assert (
+        s.pre_onset_alarm_rate == pytest.approx(1 / 3) and s.clean_runs == 2 and s.delay_runs == 1
+    )
     assert s.delay_median == pytest.approx(0.5) and s.delay_mean == pytest.approx(0.5)
     assert s.delay_p90 == pytest.approx(0.5)
     assert s.unhealthy_runs == 0
@@ -153,7 +171,10 @@ def test_unhealthy_runs_are_counted_apart_and_never_scored_clean():
     assert s.false_alarm_rate_per_step == pytest.approx(4 / 260)
     all_bad = summarize_detection(records._replace(first_unhealthy=np.zeros(6, int)), horizon=100)
     assert all_bad.unhealthy_runs == 6 and all_bad.faulty_runs == 0
-    assert all(np.isnan(getattr(all_bad, name)) for name in ("detection_rate", "false_alarm_rate", "delay_median"))
+    assert all(
+        np.isnan(getattr(all_bad, name))
+        for name in ("detection_rate", "false_alarm_rate", "delay_median")
+    )
     assert unhealthy_warning(0, 6) == ""
     assert unhealthy_warning(2, 6).startswith("WARNING: 2 of 6 runs went numerically bad")
 
@@ -162,18 +183,28 @@ def test_unhealthy_runs_are_counted_apart_and_never_scored_clean():
 def nan_run():
     """A KF (no missing_measurements) chi-square monitor (window 2) on the engine fed one
     NaN measurement on sensor 2 at step 20 (a one-step dead sensor), with its history."""
-    from jaxfdi._faults import fault
-    from jaxfdi.models import engine_model
     from jaxfdi import monitor
-    from jaxfdi._faults import sensor_labels
+    from jaxfdi._faults import fault, sensor_labels
+    from jaxfdi.models import engine_model
 
     model = engine_model()
     kf = jaxfdi.filters.kalman_filter(model)
     # fault() refuses a NaN magnitude; the corrupted sensor is built by hand on purpose
     f = fault("bias", "sensor", 2, 20, 0.0, end=21)._replace(magnitude=jnp.asarray(jnp.nan))
-    run = jax.jit(lambda key: monitor(jaxfdi.linear_simulator(model, f), kf, chi2_detector(30.0, 2), jnp.zeros(7),
-                                      kf.init(jnp.zeros(7), model.Q), jnp.full((40, 1), 0.01), key, 20, True,
-                                      channel_labels=sensor_labels(*model.dims[1:])))
+    run = jax.jit(
+        lambda key: monitor(
+            jaxfdi.linear_simulator(model, f),
+            kf,
+            chi2_detector(30.0, 2),
+            jnp.zeros(7),
+            kf.init(jnp.zeros(7), model.Q),
+            jnp.full((40, 1), 0.01),
+            key,
+            20,
+            True,
+            channel_labels=sensor_labels(*model.dims[1:]),
+        )
+    )
     return run(jax.random.key(0))
 
 
@@ -184,7 +215,7 @@ def test_a_dead_sensor_sample_is_a_detected_and_isolated_fault(nan_run):
     with delay 0 and the dead sensor isolated (the record folded by hand agrees)."""
     record, history = nan_run
     statistic, alarm = np.asarray(history.statistic), np.asarray(history.alarm)
-    assert np.isnan(np.asarray(history.truth.measurement)[20, 2])                       # the premise
+    assert np.isnan(np.asarray(history.truth.measurement)[20, 2])  # the premise
     assert np.asarray(history.info.healthy).all()
     assert np.all(statistic[20:22] == np.inf) and alarm[20:22].all()
     assert np.all(np.isfinite(statistic[:20])) and np.all(np.isfinite(statistic[22:]))  # recovered
@@ -194,7 +225,9 @@ def test_a_dead_sensor_sample_is_a_detected_and_isolated_fault(nan_run):
         ok = step_health(history.info.healthy[k], history.statistic[k])
         folded = record_update(folded, k, history.alarm[k], history.label[k], None, 0, ok)
     assert int(folded.first_unhealthy) == int(record.first_unhealthy) == -1
-    assert int(folded.first_alarm) == int(record.first_alarm) == 20 and int(record.isolated) == int(history.truth.mode[20])
+    assert int(folded.first_alarm) == int(record.first_alarm) == 20 and int(record.isolated) == int(
+        history.truth.mode[20]
+    )
     s = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[None], record), 40)
     assert s.runs == 1 and s.unhealthy_runs == 0 and s.faulty_runs == 1 and s.detection_rate == 1.0
     assert s.delay_median == 0.0
@@ -207,10 +240,14 @@ def test_a_nan_statistic_is_unhealthy_and_never_clean():
     statistic = np.concatenate([np.full(20, 1.0), np.full(20, np.nan)])
     record = record_init(20)
     for k in range(40):
-        record = record_update(record, k, statistic[k] > 30.0, -1, None, 0, step_health(True, statistic[k]))
+        record = record_update(
+            record, k, statistic[k] > 30.0, -1, None, 0, step_health(True, statistic[k])
+        )
     assert int(record.first_unhealthy) == 20 and int(record.first_alarm) == -1
     s = summarize_detection(jax.tree.map(lambda a: np.asarray(a)[None], record), 40)
-    assert s.runs == 1 and s.unhealthy_runs == 1 and s.faulty_runs == 0 and np.isnan(s.detection_rate)
+    assert (
+        s.runs == 1 and s.unhealthy_runs == 1 and s.faulty_runs == 0 and np.isnan(s.detection_rate)
+    )
     assert np.isnan(s.false_alarm_rate) and np.isnan(s.delay_median)
 
 
@@ -221,7 +258,9 @@ def test_a_horizon_shorter_than_the_runs_is_refused():
     alarms[:, 35] = True
     records = jax.vmap(record_from_alarms)(jnp.asarray(alarms), jnp.asarray([10, 30]))
     assert summarize_detection(records, 40).detection_rate == 1.0
-    with pytest.raises(ValueError, match="horizon: expected the runs' length, got 20, but 2 record"):
+    with pytest.raises(
+        ValueError, match="horizon: expected the runs' length, got 20, but 2 record"
+    ):
         summarize_detection(records, 20)
 
 
@@ -240,7 +279,7 @@ def test_window_sum_first_crossing_and_online_detector_equal_references():
     rng = np.random.default_rng(2)
     x = rng.chisquare(3, size=(50, 4))
     for window in (1, 3, 7):
-        expected = np.stack([x[max(0, k - window + 1):k + 1].sum(0) for k in range(50)])
+        expected = np.stack([x[max(0, k - window + 1) : k + 1].sum(0) for k in range(50)])
         np.testing.assert_allclose(moving_window_sum(jnp.asarray(x), window), expected, rtol=1e-12)
         threshold = 3.0 * window + 4.0
         crossing = np.asarray(first_crossing(jnp.asarray(expected), threshold, start=5))
@@ -263,7 +302,9 @@ def test_nis_equals_explicit_inverse():
     S = A @ np.swapaxes(A, 1, 2) + np.eye(4)
     r = rng.normal(size=(10, 4))
     expected = np.einsum("ki,kij,kj->k", r, np.linalg.inv(S), r)
-    np.testing.assert_allclose(normalized_innovation_squared(jnp.asarray(r), jnp.asarray(S)), expected, rtol=1e-10)
+    np.testing.assert_allclose(
+        normalized_innovation_squared(jnp.asarray(r), jnp.asarray(S)), expected, rtol=1e-10
+    )
 
 
 def brute_force_columns(alarms, onset, labels, true_label, horizon, Ts):
@@ -284,8 +325,11 @@ def brute_force_columns(alarms, onset, labels, true_label, horizon, Ts):
                 delays.append((after[0] - o) * Ts)
     nan = float("nan")
     return {
-        "detection_rate": detected / faulty, "isolation_rate": isolated / faulty, "pre_onset_alarm_rate": pre / faulty,
-        "clean_runs": faulty - pre, "delay_runs": len(delays),
+        "detection_rate": detected / faulty,
+        "isolation_rate": isolated / faulty,
+        "pre_onset_alarm_rate": pre / faulty,
+        "clean_runs": faulty - pre,
+        "delay_runs": len(delays),
         "delay_mean_s": float(np.mean(delays)) if delays else nan,
         "delay_median_s": float(np.median(delays)) if delays else nan,
         "delay_p90_s": float(np.percentile(delays, 90)) if delays else nan,
@@ -308,12 +352,15 @@ def test_delays_scored_only_in_runs_without_a_pre_onset_alarm_equal_brute_force(
     def streaming(alarm_row, label_row, o):
         def body(record, kal):
             return record_update(record, *kal), None
+
         return jax.lax.scan(body, record_init(o), (jnp.arange(T), alarm_row, label_row))[0]
 
     records = jax.jit(jax.vmap(streaming))(alarms, labels, onset)
     got = fault_row(records, T, Ts, label=true_label)
     want = brute_force_columns(alarms, onset, labels, true_label, T, Ts)
-    assert 0 < want["pre_onset_alarm_rate"] < 1 and want["delay_runs"] > 10  # both kinds of run are there
+    assert (
+        0 < want["pre_onset_alarm_rate"] < 1 and want["delay_runs"] > 10
+    )  # both kinds of run are there
     for key, value in want.items():
         assert got[key] == pytest.approx(value, rel=1e-12), key
     stats = delay_statistics(onset, records.first_alarm, records.detection_step, Ts)
@@ -333,7 +380,9 @@ def test_fault_row_of_fault_free_runs_and_of_runs_all_alarming_before_the_onset(
     records = jax.vmap(record_from_alarms)(jnp.asarray(alarms), jnp.asarray(never))
     row = fault_row(records, 20, label=1)
     assert row["false_alarm_rate"] == pytest.approx(0.4) and np.isnan(row["isolation_rate"])
-    assert np.isnan(row["detection_rate"]) and row["clean_runs"] == 0 and np.isnan(row["delay_mean_s"])
+    assert (
+        np.isnan(row["detection_rate"]) and row["clean_runs"] == 0 and np.isnan(row["delay_mean_s"])
+    )
     standing = jax.vmap(record_from_alarms)(jnp.ones((4, 20), bool), jnp.full(4, 10))
     row = fault_row(standing, 20, 0.1)
     assert row["detection_rate"] == 1.0 and row["pre_onset_alarm_rate"] == 1.0
@@ -368,11 +417,21 @@ def test_rate_interval_is_the_clopper_pearson_beta_quantiles():
 
     from jaxfdi._metrics import rate_interval, rate_text
 
-    for k, n, level in ((0, 10, 0.99), (3, 10, 0.95), (10, 10, 0.99), (454, 10000, 0.99), (1, 1, 0.5)):
+    for k, n, level in (
+        (0, 10, 0.99),
+        (3, 10, 0.95),
+        (10, 10, 0.99),
+        (454, 10000, 0.99),
+        (1, 1, 0.5),
+    ):
         low, high = rate_interval(k, n, level)
         a = 1.0 - level
-        np.testing.assert_allclose(low, 0.0 if k == 0 else stats.beta.ppf(a / 2, k, n - k + 1), atol=1e-12)
-        np.testing.assert_allclose(high, 1.0 if k == n else stats.beta.ppf(1 - a / 2, k + 1, n - k), atol=1e-12)
+        np.testing.assert_allclose(
+            low, 0.0 if k == 0 else stats.beta.ppf(a / 2, k, n - k + 1), atol=1e-12
+        )
+        np.testing.assert_allclose(
+            high, 1.0 if k == n else stats.beta.ppf(1 - a / 2, k + 1, n - k), atol=1e-12
+        )
     assert all(np.isnan(rate_interval(0, 0)))
     low, high = rate_interval(97, 100, 0.95)
     assert rate_text(97, 100) == f"0.97 [{low:.2f},{high:.2f}]" and rate_text(0, 0) == "-"
@@ -388,7 +447,11 @@ def test_table_cells_show_a_dash_where_there_is_no_number():
     NaN rate or no runs, blank for ``None`` (no such rate)."""
     from jaxfdi._metrics import cell, rate_cell, rate_text
 
-    assert cell(1.23456, ".2f", 7) == "   1.23" and cell(7, ".4g") == "7" and cell(np.float32(0.5), ".1f") == "0.5"
+    assert (
+        cell(1.23456, ".2f", 7) == "   1.23"
+        and cell(7, ".4g") == "7"
+        and cell(np.float32(0.5), ".1f") == "0.5"
+    )
     for missing in (None, float("nan"), np.inf, -np.inf, np.float32("nan")):
         assert cell(missing, ".2f", 4) == "   -" and cell(missing, ".0f", missing="n/a") == "n/a"
     assert rate_cell(0.97, 100) == f"{rate_text(97, 100):>16}" and len(rate_cell(0.97, 100)) == 16
@@ -406,8 +469,12 @@ def test_one_sided_bounds_are_the_beta_quantiles():
 
     for k, n, c in ((0, 10, 0.95), (3, 10, 0.95), (10, 10, 0.99), (7, 1000, 0.95)):
         low, high = binomial_lower_bound(k, n, c), binomial_upper_bound(k, n, c)
-        np.testing.assert_allclose(low, 0.0 if k == 0 else stats.beta.ppf(1 - c, k, n - k + 1), atol=1e-12)
-        np.testing.assert_allclose(high, 1.0 if k == n else stats.beta.ppf(c, k + 1, n - k), atol=1e-12)
+        np.testing.assert_allclose(
+            low, 0.0 if k == 0 else stats.beta.ppf(1 - c, k, n - k + 1), atol=1e-12
+        )
+        np.testing.assert_allclose(
+            high, 1.0 if k == n else stats.beta.ppf(c, k + 1, n - k), atol=1e-12
+        )
     assert np.isnan(binomial_upper_bound(0, 0))
     with pytest.raises(ValueError, match="confidence"):
         binomial_upper_bound(1, 3, 0.4)

@@ -1,5 +1,6 @@
 """Monte Carlo driver: equals a loop, independent of chunking and of the device count,
 and the chi-square test's false-alarm rate is statistically the design Pfa."""
+
 import os
 import subprocess
 import sys
@@ -10,17 +11,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _problems import engine_false_alarm_study
 from scipy import stats
 
 import jaxfdi
-from _problems import engine_false_alarm_study
 
 TESTS = Path(__file__).resolve().parents[1]  # the shared helpers (_problems)
 
 
 def test_monte_carlo_equals_python_loop_for_any_chunk_size():
     def run_one(key, scale):
-        return {"draw": scale * jax.random.normal(key, (3,)), "label": (scale > 1.5).astype(jnp.int32)}
+        return {
+            "draw": scale * jax.random.normal(key, (3,)),
+            "label": (scale > 1.5).astype(jnp.int32),
+        }
 
     scales = jnp.linspace(1.0, 2.0, 7)
     key = jax.random.key(5)
@@ -37,8 +41,14 @@ def test_monte_carlo_equals_python_loop_for_any_chunk_size():
 
 def test_progress_is_reported_per_chunk():
     calls = []
-    jaxfdi.monte_carlo(lambda k, _: jax.random.normal(k), jax.random.key(0), 10, None, chunk_size=4,
-                       progress=lambda done, total, seconds: calls.append((done, total)))
+    jaxfdi.monte_carlo(
+        lambda k, _: jax.random.normal(k),
+        jax.random.key(0),
+        10,
+        None,
+        chunk_size=4,
+        progress=lambda done, total, seconds: calls.append((done, total)),
+    )
     assert calls == [(4, 10), (8, 10), (10, 10)]
 
 
@@ -60,7 +70,9 @@ def test_sharded_over_two_devices_equals_one_device(single_device_study, tmp_pat
         record, last = engine_false_alarm_study(num_runs=24, T=30, window=2, pfa=0.05, chunk_size=10)
         np.savez({str(out)!r}, last=last, **record._asdict())
     """)
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    env = dict(
+        os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu"
+    )
     subprocess.run([sys.executable, "-c", script], check=True, env=env, timeout=600)
     sharded = np.load(out)
     record, last = single_device_study

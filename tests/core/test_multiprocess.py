@@ -1,14 +1,15 @@
 """Monte Carlo on two local processes (jax.distributed, gloo collectives on CPU) gives the
 records and the streaming counts of one process, bit for bit; run keys depend only on
 the run's index; the launcher options are checked."""
+
 import os
 import sys
 
+import _multiprocess_study as study_module
 import jax
 import numpy as np
 import pytest
 
-import _multiprocess_study as study_module
 from jaxfdi import distributed
 from jaxfdi._montecarlo import run_keys
 
@@ -47,13 +48,23 @@ def test_run_keys_depend_only_on_the_index():
         index = np.array([0, 1, 77, 4095, 99_999])
         full = jax.random.split(key, 100_000)
         got = run_keys(key, index, 100_000)
-        data = (lambda k: jax.random.key_data(k)) if jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) else np.asarray
+        data = (
+            (lambda k: jax.random.key_data(k))
+            if jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+            else np.asarray
+        )
         np.testing.assert_array_equal(data(got), data(full[index]))
-        np.testing.assert_array_equal(data(run_keys(key, index[:3], 80)), data(jax.random.split(key, 80)[index[:3]]))
+        np.testing.assert_array_equal(
+            data(run_keys(key, index[:3], 80)), data(jax.random.split(key, 80)[index[:3]])
+        )
 
 
 def test_allgather_keeps_int64_on_one_process():
-    tree = {"count": np.array([2**40 + 3, -5], np.int64), "flag": np.array([True, False]), "x": np.array([0.5])}
+    tree = {
+        "count": np.array([2**40 + 3, -5], np.int64),
+        "flag": np.array([True, False]),
+        "x": np.array([0.5]),
+    }
     (got,) = distributed.allgather(tree)
     np.testing.assert_array_equal(got["count"], tree["count"])
     np.testing.assert_array_equal(got["flag"], tree["flag"])

@@ -1,6 +1,7 @@
 """jaxfdi.plotting draws on the caller's axes or a new Figure, returns the Figure, and
 never changes matplotlib's backend (issue 28). The drawn data are read back from the
 artists and compared with the inputs."""
+
 import matplotlib
 import numpy as np
 import pytest
@@ -25,13 +26,24 @@ def non_agg_backend():
 def calls():
     prob = np.stack([np.linspace(1, 0, T), np.linspace(0, 1, T)], axis=1)
     return {
-        "statistic": lambda ax=None: plotting.plot_statistic(statistic, 14.86, t=t, onset=0.2, ax=ax),
-        "statistic runs": lambda ax=None: plotting.plot_statistic(np.stack([statistic, statistic / 2]), ax=ax, log=True),
-        "mode probabilities": lambda ax=None: plotting.plot_mode_probabilities(prob, ["normal", "P2"], t=t,
-                                                                               threshold=0.9, onset=0.2, ax=ax),
-        "estimate": lambda ax=None: plotting.plot_estimate(statistic, statistic + 0.1, np.ones(T), t=t, ax=ax),
-        "delays": lambda ax=None: plotting.plot_delays({"RPM": [0.01, 0.02, np.nan], "P2": [0.03, 0.05]}, ax=ax),
-        "confusion": lambda ax=None: plotting.plot_confusion([0, 0, 1, 1], [0, -1, 1, 0], ["normal", "P2"], ax=ax),
+        "statistic": lambda ax=None: plotting.plot_statistic(
+            statistic, 14.86, t=t, onset=0.2, ax=ax
+        ),
+        "statistic runs": lambda ax=None: plotting.plot_statistic(
+            np.stack([statistic, statistic / 2]), ax=ax, log=True
+        ),
+        "mode probabilities": lambda ax=None: plotting.plot_mode_probabilities(
+            prob, ["normal", "P2"], t=t, threshold=0.9, onset=0.2, ax=ax
+        ),
+        "estimate": lambda ax=None: plotting.plot_estimate(
+            statistic, statistic + 0.1, np.ones(T), t=t, ax=ax
+        ),
+        "delays": lambda ax=None: plotting.plot_delays(
+            {"RPM": [0.01, 0.02, np.nan], "P2": [0.03, 0.05]}, ax=ax
+        ),
+        "confusion": lambda ax=None: plotting.plot_confusion(
+            [0, 0, 1, 1], [0, -1, 1, 0], ["normal", "P2"], ax=ax
+        ),
     }
 
 
@@ -71,10 +83,19 @@ def test_confusion_counts_the_runs_and_shows_row_shares():
     true = [0] * 10 + [1] * 10
     isolated = [-1] * 9 + [1] + [1] * 8 + [0, -1]
     fig = plotting.plot_confusion(true, isolated, ["normal", "P2"])
-    np.testing.assert_allclose(fig.axes[0].images[0].get_array(), [[0.0, 0.1, 0.9], [0.1, 0.8, 0.1]])
+    np.testing.assert_allclose(
+        fig.axes[0].images[0].get_array(), [[0.0, 0.1, 0.9], [0.1, 0.8, 0.1]]
+    )
     assert [tick.get_text() for tick in fig.axes[0].get_xticklabels()] == ["normal", "P2", "none"]
     counts = plotting.plot_confusion(true, isolated, ["normal", "P2"], normalize=False)
-    assert sorted(text.get_text() for text in counts.axes[0].texts) == ["0", "1", "1", "1", "8", "9"]
+    assert sorted(text.get_text() for text in counts.axes[0].texts) == [
+        "0",
+        "1",
+        "1",
+        "1",
+        "8",
+        "9",
+    ]
 
 
 def test_delays_leave_out_and_count_the_missed():
@@ -84,13 +105,16 @@ def test_delays_leave_out_and_count_the_missed():
     assert median.get_ydata()[0] == pytest.approx(0.02)
 
 
-@pytest.mark.parametrize("call,argument", [
-    (lambda: plotting.plot_statistic(np.zeros((2, 2, 2))), "statistic"),
-    (lambda: plotting.plot_mode_probabilities(np.zeros((5, 2)), ["a"]), "names"),
-    (lambda: plotting.plot_confusion([0, 2], [0, 1], ["a", "b"]), "true_labels"),
-    (lambda: plotting.plot_confusion([0, 1], [0, 1, 1], ["a", "b"]), "predicted_labels"),
-    (lambda: plotting.plot_delays({}), "delays"),
-])
+@pytest.mark.parametrize(
+    "call,argument",
+    [
+        (lambda: plotting.plot_statistic(np.zeros((2, 2, 2))), "statistic"),
+        (lambda: plotting.plot_mode_probabilities(np.zeros((5, 2)), ["a"]), "names"),
+        (lambda: plotting.plot_confusion([0, 2], [0, 1], ["a", "b"]), "true_labels"),
+        (lambda: plotting.plot_confusion([0, 1], [0, 1, 1], ["a", "b"]), "predicted_labels"),
+        (lambda: plotting.plot_delays({}), "delays"),
+    ],
+)
 def test_bad_input_names_the_argument(call, argument):
     with pytest.raises(ValueError, match=f"^{argument}:"):
         call()
@@ -102,8 +126,11 @@ def test_library_never_selects_a_backend():
 
     import jaxfdi
 
-    offenders = [str(p) for p in Path(jaxfdi.__file__).parent.rglob("*.py")
-                 if "matplotlib.use(" in p.read_text() and p.name != "cli.py"]
+    offenders = [
+        str(p)
+        for p in Path(jaxfdi.__file__).parent.rglob("*.py")
+        if "matplotlib.use(" in p.read_text() and p.name != "cli.py"
+    ]
     assert offenders == []
 
 
@@ -115,8 +142,10 @@ def test_library_never_imports_pyplot():
 
     import jaxfdi
 
-    pyplot = re.compile(r"^\s*(import matplotlib\.pyplot|from matplotlib import pyplot|from matplotlib\.pyplot import)",
-                        re.MULTILINE)
+    pyplot = re.compile(
+        r"^\s*(import matplotlib\.pyplot|from matplotlib import pyplot|from matplotlib\.pyplot import)",
+        re.MULTILINE,
+    )
     files = list(Path(jaxfdi.__file__).parent.rglob("*.py"))
     assert any("column_figure(" in p.read_text() for p in files if "scenarios" in p.parts)
     assert [str(p) for p in files if pyplot.search(p.read_text())] == []
@@ -145,7 +174,9 @@ def test_save_figure_writes_the_caption_under_the_axes(tmp_path, layout):
     path = plotting.save_figure(fig, tmp_path / "f.png", caption)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     (text,) = [t for t in fig.texts if "What the figure shows" in t.get_text()]
-    assert " ".join(text.get_text().split()) == " ".join(caption.split()) and "\n" in text.get_text()
+    assert (
+        " ".join(text.get_text().split()) == " ".join(caption.split()) and "\n" in text.get_text()
+    )
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     renderer = FigureCanvasAgg(fig).get_renderer()
@@ -179,14 +210,19 @@ def test_saved_figures_are_a_column_wide_with_the_house_fonts(tmp_path):
     assert width == round(plotting.COLUMN_WIDTH_IN * plotting.DPI)
     left = fig.axes[0]
     assert left.xaxis.label.get_fontsize() == plotting.FONT_PT
-    assert {text.get_fontsize() for text in left.get_legend().get_texts()} == {plotting.SMALL_FONT_PT}
+    assert {text.get_fontsize() for text in left.get_legend().get_texts()} == {
+        plotting.SMALL_FONT_PT
+    }
 
 
-@pytest.mark.parametrize("case,match", [
-    ("caption without a run count", "number of runs"),
-    ("panel without labels", "y label"),
-    ("curve in no legend", "in no legend"),
-])
+@pytest.mark.parametrize(
+    "case,match",
+    [
+        ("caption without a run count", "number of runs"),
+        ("panel without labels", "y label"),
+        ("curve in no legend", "in no legend"),
+    ],
+)
 def test_save_figure_refuses_a_figure_a_reader_cannot_read(tmp_path, case, match):
     fig, caption = _two_panels(), "One run of the statistic."
     if case == "caption without a run count":
@@ -205,4 +241,6 @@ def test_a_hypothesis_keeps_its_colour():
     colors = plotting.hypothesis_colors(names)
     assert colors["normal"] == plotting.NO_FAULT_COLOR
     assert len({colors[n] for n in names[1:]}) == 3
-    assert plotting.hypothesis_colors(["none", *names[1:]])["P2"] == colors["P2"]  # the same order, the same colour
+    assert (
+        plotting.hypothesis_colors(["none", *names[1:]])["P2"] == colors["P2"]
+    )  # the same order, the same colour

@@ -1,5 +1,6 @@
 """Progress: a tqdm.auto bar when tqdm is installed, log lines otherwise, the callable hook
 unchanged, and --quiet silencing the logger (issue 28)."""
+
 import io
 import logging
 import time
@@ -18,8 +19,14 @@ def run_one(key, scale):
 
 def test_callable_hook_sees_every_chunk():
     seen = []
-    out = jaxfdi.monte_carlo(run_one, jax.random.key(0), 10, jnp.ones(10), chunk_size=4,
-                             progress=lambda done, total, seconds: seen.append((done, total)))
+    out = jaxfdi.monte_carlo(
+        run_one,
+        jax.random.key(0),
+        10,
+        jnp.ones(10),
+        chunk_size=4,
+        progress=lambda done, total, seconds: seen.append((done, total)),
+    )
     assert seen == [(4, 10), (8, 10), (10, 10)] and out.shape == (10,)
 
 
@@ -56,7 +63,10 @@ def test_log_lines_without_tqdm(caplog):
     for done in range(1, 6):
         hook(done, 5, float(done))
     messages = [r.getMessage() for r in caplog.records if r.name == "jaxfdi"]
-    assert messages == ["tuning: 1/5 steps, 1.0 s, 1 steps/s", "tuning: 5/5 steps, 5.0 s, 1 steps/s"]
+    assert messages == [
+        "tuning: 1/5 steps, 1.0 s, 1 steps/s",
+        "tuning: 5/5 steps, 5.0 s, 1 steps/s",
+    ]
 
 
 def test_quiet_logging_drops_info_keeps_warnings():
@@ -86,7 +96,11 @@ def test_without_tqdm_or_logging_setup_plain_lines_on_stderr(monkeypatch, capfd)
     monkeypatch.setattr(progress.logger, "propagate", False)
     jaxfdi.monte_carlo(run_one, jax.random.key(0), 6, jnp.ones(6), chunk_size=3, progress=True)
     err = capfd.readouterr().err
-    assert "\r" not in err and err.startswith("monte carlo: 3/6 runs") and "monte carlo: 6/6 runs" in err
+    assert (
+        "\r" not in err
+        and err.startswith("monte carlo: 3/6 runs")
+        and "monte carlo: 6/6 runs" in err
+    )
 
 
 def test_compilation_is_announced_and_never_silent(caplog, monkeypatch):
@@ -98,19 +112,28 @@ def test_compilation_is_announced_and_never_silent(caplog, monkeypatch):
     monkeypatch.setattr(montecarlo._Heartbeat.__init__, "__defaults__", (0.05,))
     caplog.set_level(logging.INFO, logger="jaxfdi")
 
-    def slow_to_compile(key, scale):  # 300 unrolled steps: a compilation of a good fraction of a second
+    def slow_to_compile(
+        key, scale
+    ):  # 300 unrolled steps: a compilation of a good fraction of a second
         x = scale * jax.random.normal(key, (4,))
         for i in range(300):
             x = jnp.sin(x + i) * jnp.cos(x)
         return x
 
-    jaxfdi.monte_carlo(slow_to_compile, jax.random.key(0), 8, jnp.ones(8), progress=lambda *a: None,
-                       label="toy")
-    messages = [r.getMessage() for r in caplog.records if r.name == "jaxfdi" and "running" not in r.getMessage()]
+    jaxfdi.monte_carlo(
+        slow_to_compile, jax.random.key(0), 8, jnp.ones(8), progress=lambda *a: None, label="toy"
+    )
+    messages = [
+        r.getMessage()
+        for r in caplog.records
+        if r.name == "jaxfdi" and "running" not in r.getMessage()
+    ]
     assert messages[0] == "toy: compiling" and messages[-1].startswith("toy: compiled in ")
     assert any(m.startswith("toy: still compiling") for m in messages[1:-1]), messages
     caplog.clear()
-    jaxfdi.monte_carlo(slow_to_compile, jax.random.key(1), 8, jnp.ones(8), progress=lambda *a: None, label="toy")
+    jaxfdi.monte_carlo(
+        slow_to_compile, jax.random.key(1), 8, jnp.ones(8), progress=lambda *a: None, label="toy"
+    )
     assert not [r for r in caplog.records if "compil" in r.getMessage()]
 
 
@@ -124,12 +147,21 @@ def test_a_long_chunk_is_never_silent(caplog, monkeypatch):
     caplog.set_level(logging.INFO, logger="jaxfdi")
 
     def slow_run(key, x):  # 0.4 s a chunk, on the host
-        wait = lambda v: (time.sleep(0.4), v)[1]  # noqa: E731
-        return jax.pure_callback(wait, jax.ShapeDtypeStruct((), x.dtype), x, vmap_method="broadcast_all")
+        wait = lambda v: (time.sleep(0.4), v)[1]
+        return jax.pure_callback(
+            wait, jax.ShapeDtypeStruct((), x.dtype), x, vmap_method="broadcast_all"
+        )
 
     reports = []
-    jaxfdi.monte_carlo(slow_run, jax.random.key(0), 8, jnp.ones(8), chunk_size=4, label="slow",
-                       progress=lambda done, total, seconds: reports.append(done))
+    jaxfdi.monte_carlo(
+        slow_run,
+        jax.random.key(0),
+        8,
+        jnp.ones(8),
+        chunk_size=4,
+        label="slow",
+        progress=lambda done, total, seconds: reports.append(done),
+    )
     running = [r.getMessage() for r in caplog.records if "running" in r.getMessage()]
     assert reports == [4, 8]
     assert any(m.startswith("slow: running, 0/8 runs done (") for m in running), running

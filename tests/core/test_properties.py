@@ -21,6 +21,7 @@ unknown-input filter         the wrong shape, empty, scalar or complex
                              non-finite magnitudes, effectiveness outside [0, 1]
 ===========================  ==============================================================
 """
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -30,9 +31,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from jaxfdi.detection import chi2_detector, chi2_threshold, frozen_channel_detector, glrt_detector
-from jaxfdi.detection import _parity as ps
 from jaxfdi._faults import fault
+from jaxfdi._riccati import steady_state_kalman
+from jaxfdi.detection import _parity as ps
+from jaxfdi.detection import chi2_detector, chi2_threshold, frozen_channel_detector, glrt_detector
 from jaxfdi.filters import (
     extended_kalman_filter,
     kalman_filter,
@@ -43,16 +45,25 @@ from jaxfdi.filters import (
 )
 from jaxfdi.models import engine_model
 from jaxfdi.models._linear import LinearGaussianModel
-from jaxfdi._riccati import steady_state_kalman
 
-SETTINGS = settings(max_examples=60, deadline=None, derandomize=True, database=None,
-                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+SETTINGS = settings(
+    max_examples=60,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 #: any float, the bad ones often
 ANY = st.one_of(st.floats(-1e3, 1e3), st.sampled_from([np.nan, np.inf, -np.inf]))
 
-MODEL = LinearGaussianModel(Phi=jnp.array([[1.0, 0.1], [0.0, 0.95]]), Gamma=jnp.zeros((2, 0)),
-                            C=jnp.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]), D=jnp.zeros((3, 0)),
-                            Q=0.01 * jnp.eye(2), R=0.1 * jnp.eye(3))
+MODEL = LinearGaussianModel(
+    Phi=jnp.array([[1.0, 0.1], [0.0, 0.95]]),
+    Gamma=jnp.zeros((2, 0)),
+    C=jnp.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]),
+    D=jnp.zeros((3, 0)),
+    Q=0.01 * jnp.eye(2),
+    R=0.1 * jnp.eye(3),
+)
 
 
 #: reaches sensors 0 and 2 only: with both missing, nothing left is free of d
@@ -70,7 +81,9 @@ def _filters():
         "sqrt kf": sqrt_kalman_filter(MODEL),
         "sqrt ukf": sqrt_unscented_kalman_filter(f, h, MODEL.Q, MODEL.R),
         "unknown input": unknown_input_filter(MODEL, UNKNOWN_INPUT),
-        "unknown input missing": unknown_input_filter(MODEL, UNKNOWN_INPUT, missing_measurements=True),
+        "unknown input missing": unknown_input_filter(
+            MODEL, UNKNOWN_INPUT, missing_measurements=True
+        ),
     }
 
     def stepper(f):
@@ -89,7 +102,9 @@ def test_a_filter_step_reports_every_dead_component_and_keeps_its_state(y, name)
     info = STEPS[name](jnp.asarray(y))
     dead = np.isinf(y) if name.endswith("missing") else ~np.isfinite(y)
     assert bool(info.healthy)
-    assert np.all(np.isfinite(np.asarray(info.filtered_mean))) and np.all(np.isfinite(np.asarray(info.filtered_cov)))
+    assert np.all(np.isfinite(np.asarray(info.filtered_mean))) and np.all(
+        np.isfinite(np.asarray(info.filtered_cov))
+    )
     np.testing.assert_array_equal(np.isnan(np.asarray(info.innovation)), dead)
     assert (float(info.nis) == np.inf) == bool(dead.any())
     assert not np.isnan(float(info.nis)) and np.isfinite(float(info.log_likelihood))
@@ -97,12 +112,22 @@ def test_a_filter_step_reports_every_dead_component_and_keeps_its_state(y, name)
 
 #: measurements of the wrong shape (empty included) or dtype: refused at trace time, naming ``y``
 WRONG_Y = st.one_of(
-    hnp.arrays(np.float64, st.sampled_from([(0,), (2,), (4,), (3, 1), (1, 3), ()]), elements=st.floats(-1.0, 1.0)),
+    hnp.arrays(
+        np.float64,
+        st.sampled_from([(0,), (2,), (4,), (3, 1), (1, 3), ()]),
+        elements=st.floats(-1.0, 1.0),
+    ),
     hnp.arrays(np.complex128, (3,), elements=st.complex_numbers(max_magnitude=1.0)),
-)   # (bool is real 0/1 for the library's checks: _checks.check_real)
-FILTERS = {"kf": kalman_filter(MODEL), "kf missing": kalman_filter(MODEL, missing_measurements=True),
-           "sqrt kf": sqrt_kalman_filter(MODEL), "unknown input": unknown_input_filter(MODEL, UNKNOWN_INPUT),
-           "ukf": unscented_kalman_filter(lambda x, u, p: MODEL.Phi @ x, lambda x, u, p: MODEL.C @ x, MODEL.Q, MODEL.R)}
+)  # (bool is real 0/1 for the library's checks: _checks.check_real)
+FILTERS = {
+    "kf": kalman_filter(MODEL),
+    "kf missing": kalman_filter(MODEL, missing_measurements=True),
+    "sqrt kf": sqrt_kalman_filter(MODEL),
+    "unknown input": unknown_input_filter(MODEL, UNKNOWN_INPUT),
+    "ukf": unscented_kalman_filter(
+        lambda x, u, p: MODEL.Phi @ x, lambda x, u, p: MODEL.C @ x, MODEL.Q, MODEL.R
+    ),
+}
 
 
 @SETTINGS
@@ -127,19 +152,26 @@ def test_an_unknown_input_filter_that_loses_decoupling_keeps_its_prediction():
         assert bool(post.healthy) and int(post.num_observed) == 0
         assert float(post.nis) == (np.inf if np.isinf(y[0]) else 0.0)
     post = filt.update(prior, jnp.asarray([np.nan, 1.0, 0.4]), jnp.zeros(0))
-    assert bool(post.healthy) and not np.allclose(np.asarray(post.filtered_mean), np.asarray(prior.mean))
+    assert bool(post.healthy) and not np.allclose(
+        np.asarray(post.filtered_mean), np.asarray(prior.mean)
+    )
     assert int(post.num_observed) == 1
 
 
 @SETTINGS
-@given(nis=hnp.arrays(np.float64, (12,), elements=st.one_of(st.floats(0.0, 50.0),
-                                                             st.sampled_from([np.nan, np.inf]))),
-       window=st.integers(1, 5))
+@given(
+    nis=hnp.arrays(
+        np.float64,
+        (12,),
+        elements=st.one_of(st.floats(0.0, 50.0), st.sampled_from([np.nan, np.inf])),
+    ),
+    window=st.integers(1, 5),
+)
 def test_a_chi2_window_alarms_while_it_holds_a_bad_value_and_is_the_sum_otherwise(nis, window):
     detector = chi2_detector(1e9, window)
     _, decision = jax.lax.scan(detector.step, detector.init(), jnp.asarray(nis))
     for k in range(nis.size):
-        held = nis[max(0, k - window + 1):k + 1]
+        held = nis[max(0, k - window + 1) : k + 1]
         if np.all(np.isfinite(held)):
             assert not bool(decision.alarm[k])
             assert float(decision.statistic[k]) == pytest.approx(held.sum(), rel=1e-12, abs=1e-12)
@@ -148,8 +180,10 @@ def test_a_chi2_window_alarms_while_it_holds_a_bad_value_and_is_the_sum_otherwis
 
 
 @SETTINGS
-@given(dof=st.one_of(st.floats(-5.0, 200.0), st.sampled_from([np.nan, np.inf, 0.0])),
-       pfa=st.one_of(st.floats(-0.5, 1.5), st.sampled_from([np.nan, np.inf, 1e-300, 0.0, 1.0])))
+@given(
+    dof=st.one_of(st.floats(-5.0, 200.0), st.sampled_from([np.nan, np.inf, 0.0])),
+    pfa=st.one_of(st.floats(-0.5, 1.5), st.sampled_from([np.nan, np.inf, 1e-300, 0.0, 1.0])),
+)
 def test_chi2_threshold_is_scipys_or_names_the_bad_argument(dof, pfa):
     try:
         value = float(chi2_threshold(dof, pfa))
@@ -167,20 +201,29 @@ GLRT_RUN = jax.jit(lambda e: jax.lax.scan(GLRT.step, GLRT.init(), e)[1])
 
 
 @SETTINGS
-@given(innovations=hnp.arrays(np.float64, (8, 5), elements=st.one_of(st.floats(-1.0, 1.0),
-                                                                     st.sampled_from([np.nan, np.inf, -np.inf]))))
+@given(
+    innovations=hnp.arrays(
+        np.float64,
+        (8, 5),
+        elements=st.one_of(st.floats(-1.0, 1.0), st.sampled_from([np.nan, np.inf, -np.inf])),
+    )
+)
 def test_the_glrt_alarms_on_every_step_with_a_dead_channel_and_names_the_first(innovations):
     decision = GLRT_RUN(jnp.asarray(innovations))
     for k, row in enumerate(innovations):
         dead = ~np.isfinite(row)
         if dead.any():
             assert bool(decision.alarm[k]) and float(decision.statistic[k]) == np.inf
-            assert int(decision.label[k]) == 1 + 1 + int(np.argmax(dead))    # nu = 1, then the sensors
+            assert int(decision.label[k]) == 1 + 1 + int(
+                np.argmax(dead)
+            )  # nu = 1, then the sensors
         else:
             assert np.isfinite(float(decision.statistic[k]))
 
 
-SPACE = ps.parity_space(jnp.asarray(np.random.default_rng(4).normal(size=(6, 3))), jnp.asarray([[0, 1], [2, 3], [4, 5]]))
+SPACE = ps.parity_space(
+    jnp.asarray(np.random.default_rng(4).normal(size=(6, 3))), jnp.asarray([[0, 1], [2, 3], [4, 5]])
+)
 PARITY = jax.jit(lambda m: ps.parity_tests(SPACE, m))
 
 
@@ -196,9 +239,15 @@ def test_parity_tests_name_exactly_the_dead_groups(measurement):
 
 
 @SETTINGS
-@given(sigma=st.one_of(hnp.arrays(np.float64, (2,), elements=ANY), hnp.arrays(np.float64, st.sampled_from([(), (2, 1)]),
-                                                                                   elements=st.floats(0.1, 2.0))),
-       data=hnp.arrays(np.float64, (10, 2), elements=st.one_of(st.floats(-5.0, 5.0), st.sampled_from([np.nan]))))
+@given(
+    sigma=st.one_of(
+        hnp.arrays(np.float64, (2,), elements=ANY),
+        hnp.arrays(np.float64, st.sampled_from([(), (2, 1)]), elements=st.floats(0.1, 2.0)),
+    ),
+    data=hnp.arrays(
+        np.float64, (10, 2), elements=st.one_of(st.floats(-5.0, 5.0), st.sampled_from([np.nan]))
+    ),
+)
 def test_the_frozen_test_refuses_a_bad_sigma_and_never_reports_nan(sigma, data):
     try:
         detector = frozen_channel_detector(sigma, 4, 0.01, jnp.array([1, 2]))
@@ -214,11 +263,13 @@ def test_the_frozen_test_refuses_a_bad_sigma_and_never_reports_nan(sigma, data):
 
 
 @SETTINGS
-@given(kind=st.sampled_from(["bias", "ramp", "stuck", "dead", "effectiveness", "scale"]),
-       target=st.sampled_from(["actuator", "sensor"]),
-       component=st.one_of(st.integers(-2, 4), st.floats(0.0, 3.0)),
-       onset=st.one_of(st.integers(-5, 50), st.just(2.5)),
-       magnitude=st.one_of(st.floats(-2.0, 2.0), st.sampled_from([np.nan, np.inf])))
+@given(
+    kind=st.sampled_from(["bias", "ramp", "stuck", "dead", "effectiveness", "scale"]),
+    target=st.sampled_from(["actuator", "sensor"]),
+    component=st.one_of(st.integers(-2, 4), st.floats(0.0, 3.0)),
+    onset=st.one_of(st.integers(-5, 50), st.just(2.5)),
+    magnitude=st.one_of(st.floats(-2.0, 2.0), st.sampled_from([np.nan, np.inf])),
+)
 def test_a_fault_is_built_or_refused_by_name(kind, target, component, onset, magnitude):
     try:
         f = fault(kind, target, component, onset, magnitude)

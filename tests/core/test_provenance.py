@@ -4,6 +4,7 @@
 The scenarios are not run (each costs a minute or more): a fake runner goes through the
 same writers (``cli._write_study``, ``_io.write_json``, ``tuning.save_params`` with the
 CLI's meta), and every real runner is checked to write its JSON through them only."""
+
 import ast
 import inspect
 import json
@@ -20,8 +21,20 @@ import pytest
 import jaxfdi
 from jaxfdi import _io, cli
 
-FIELDS = {"jaxfdi", "jax", "jaxlib", "numpy", "python", "backend", "device_kind", "device_count", "x64", "command",
-          "seed", "created"}
+FIELDS = {
+    "jaxfdi",
+    "jax",
+    "jaxlib",
+    "numpy",
+    "python",
+    "backend",
+    "device_kind",
+    "device_count",
+    "x64",
+    "command",
+    "seed",
+    "created",
+}
 
 
 def check_provenance(record, argv, seed):
@@ -37,8 +50,11 @@ def check_provenance(record, argv, seed):
 def fake_study(args, folder):
     """A study written the way the scenario runners write theirs."""
     rows = [{"rate": 1.0}]
-    study = types.SimpleNamespace(config={"runs": args.runs, "seed": args.seed}, rows=rows,
-                                  to_frame=lambda: __import__("pandas").DataFrame(rows))
+    study = types.SimpleNamespace(
+        config={"runs": args.runs, "seed": args.seed},
+        rows=rows,
+        to_frame=lambda: __import__("pandas").DataFrame(rows),
+    )
     return cli._write_study(study, args, folder, "fake.json", lambda where: [], 0.5)
 
 
@@ -48,7 +64,10 @@ def test_study_json_written_by_the_cli_carries_provenance(monkeypatch, tmp_path)
     assert cli.main(argv) == 0
     data = json.loads((tmp_path / "out" / "fake.json").read_text())
     assert data["config"] == {"runs": 3, "seed": 17} and data["rows"] == [{"rate": 1.0}]
-    assert (tmp_path / "out" / "fake.csv").read_text().splitlines() == ["rate", "1.0"]  # the table beside it
+    assert (tmp_path / "out" / "fake.csv").read_text().splitlines() == [
+        "rate",
+        "1.0",
+    ]  # the table beside it
     check_provenance(data["provenance"], argv, 17)
 
 
@@ -57,8 +76,12 @@ def test_tuned_parameters_npz_and_json_carry_provenance(monkeypatch, tmp_path):
     from jaxfdi.tuning import load_params, positive, save_params
 
     def fake_tune(args, folder):
-        save_params(folder / "fake-tuned.npz", {"q": np.zeros(2)}, {"q": positive()},
-                    {"seed": args.seed, "provenance": _io.provenance()})
+        save_params(
+            folder / "fake-tuned.npz",
+            {"q": np.zeros(2)},
+            {"q": positive()},
+            {"seed": args.seed, "provenance": _io.provenance()},
+        )
         _io.write_json(folder / "fake-tuning.json", {"config": {"seed": args.seed}})
         return "wrote"
 
@@ -67,7 +90,9 @@ def test_tuned_parameters_npz_and_json_carry_provenance(monkeypatch, tmp_path):
     assert cli.main(argv) == 0
     _, _, meta = load_params(tmp_path / "out" / "fake-tuned.npz")
     check_provenance(meta["provenance"], argv, 5)
-    check_provenance(json.loads((tmp_path / "out" / "fake-tuning.json").read_text())["provenance"], argv, 5)
+    check_provenance(
+        json.loads((tmp_path / "out" / "fake-tuning.json").read_text())["provenance"], argv, 5
+    )
 
 
 def _calls(function):
@@ -81,19 +106,28 @@ def _calls(function):
     return names, tree
 
 
-@pytest.mark.parametrize("kind,name", [("run", n) for n in sorted(cli.RUNNERS)] + [("tune", n) for n in sorted(cli.TUNERS)])
+@pytest.mark.parametrize(
+    "kind,name",
+    [("run", n) for n in sorted(cli.RUNNERS)] + [("tune", n) for n in sorted(cli.TUNERS)],
+)
 def test_every_cli_command_writes_json_through_the_provenance_writer(kind, name):
     """Each runner writes its JSON with ``_io.write_json`` (directly or by
     ``_write_study``), never ``json.dump``; a tuner's ``save_params`` meta names
     ``provenance``."""
     runner = (cli.RUNNERS if kind == "run" else cli.TUNERS)[name]
     calls, tree = _calls(runner.run)
-    assert calls & {"write_json", "_write_study"}, f"{kind} {name} writes no JSON through _io.write_json"
-    assert not calls & {"dump", "dumps", "savez", "savez_compressed", "save"}, f"{kind} {name} writes files itself"
+    assert calls & {"write_json", "_write_study"}, (
+        f"{kind} {name} writes no JSON through _io.write_json"
+    )
+    assert not calls & {"dump", "dumps", "savez", "savez_compressed", "save"}, (
+        f"{kind} {name} writes files itself"
+    )
     for node in ast.walk(tree):
         if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "save_params":
             meta = node.args[3] if len(node.args) > 3 else None
-            assert isinstance(meta, ast.Dict) and "provenance" in [getattr(k, "value", None) for k in meta.keys]
+            assert isinstance(meta, ast.Dict) and "provenance" in [
+                getattr(k, "value", None) for k in meta.keys
+            ]
 
 
 def test_write_json_keeps_an_existing_provenance_and_leaves_non_dicts_alone(tmp_path):
@@ -105,14 +139,22 @@ def test_write_json_keeps_an_existing_provenance_and_leaves_non_dicts_alone(tmp_
 
 
 def test_version_option():
-    proc = subprocess.run([sys.executable, "-m", "jaxfdi", "--version"], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "jaxfdi", "--version"], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0 and proc.stdout.strip() == f"jaxfdi {jaxfdi.__version__}"
 
 
 # --- a function and its module never share a name ------------------------------------------
 
-FUNCTIONS = [("jaxfdi", "monitor"), ("jaxfdi", "simulate"), ("jaxfdi.filters", "time_varying"),
-             ("jaxfdi.detection", "dual_filter"), ("jaxfdi.models.f16", "linearize"), ("jaxfdi.models.f16", "trim")]
+FUNCTIONS = [
+    ("jaxfdi", "monitor"),
+    ("jaxfdi", "simulate"),
+    ("jaxfdi.filters", "time_varying"),
+    ("jaxfdi.detection", "dual_filter"),
+    ("jaxfdi.models.f16", "linearize"),
+    ("jaxfdi.models.f16", "trim"),
+]
 
 
 @pytest.mark.parametrize("package,name", FUNCTIONS)
@@ -127,7 +169,9 @@ def test_the_package_attribute_is_the_function_and_its_module_is_private(package
     assert inspect.isfunction(function) and function.__module__ == f"{package}._{name}"
     assert type(module) is types.ModuleType
     public = importlib.import_module(package)
-    assert getattr(public, name, function) is function and (name in public.__all__) == hasattr(public, name)
+    assert getattr(public, name, function) is function and (name in public.__all__) == hasattr(
+        public, name
+    )
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module(f"{package}.{name}")
 
@@ -136,8 +180,11 @@ def test_no_module_of_the_package_is_callable():
     import importlib
     import pkgutil
 
-    modules = [importlib.import_module(info.name) for info in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi.")
-               if not info.name.endswith("__main__")]
+    modules = [
+        importlib.import_module(info.name)
+        for info in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi.")
+        if not info.name.endswith("__main__")
+    ]
     assert [m.__name__ for m in modules if type(m) is not types.ModuleType or callable(m)] == []
 
 

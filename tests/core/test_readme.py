@@ -1,5 +1,6 @@
 """The README stays true: its quick start is two commands and its example runs; so do the
 closed-loop and study examples of the docs' "Closed loops and studies" page."""
+
 import re
 from pathlib import Path
 
@@ -7,7 +8,9 @@ import numpy as np
 
 README = (Path(__file__).resolve().parents[2] / "README.md").read_text()
 CI = (Path(__file__).resolve().parents[2] / ".ci" / "run").read_text()
-STUDIES_PAGE = (Path(__file__).resolve().parents[2] / "docs" / "concepts" / "studies.md").read_text()
+STUDIES_PAGE = (
+    Path(__file__).resolve().parents[2] / "docs" / "concepts" / "studies.md"
+).read_text()
 
 
 def test_quick_start_is_two_commands_and_ci_runs_the_test_command():
@@ -33,8 +36,10 @@ def test_closed_loop_example_runs_and_holds_the_unstable_plant():
     exec(compile(code, "README.md", "exec"), namespace)
     states = np.asarray(namespace["true_states"])
     assert states.shape == (200, 2) and abs(states[0, 0]) == 1.0
-    assert np.max(np.abs(states[100:])) < 0.1                            # regulated ...
-    assert np.max(np.abs(np.linalg.eigvals(np.asarray(namespace["Phi"])))) > 1  # ... an unstable plant
+    assert np.max(np.abs(states[100:])) < 0.1  # regulated ...
+    assert (
+        np.max(np.abs(np.linalg.eigvals(np.asarray(namespace["Phi"])))) > 1
+    )  # ... an unstable plant
 
 
 def test_study_example_runs_one_program_and_orders_the_methods():

@@ -1,5 +1,6 @@
 """DARE by doubling against scipy.linalg.solve_discrete_are; the steady-state KF against
 jaxfdi's time-varying KF run from the steady-state prior."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -7,8 +8,8 @@ import pytest
 import scipy.linalg
 
 import jaxfdi
-from jaxfdi.models import engine_model
 from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
+from jaxfdi.models import engine_model
 
 RTOL = 1e-9
 

@@ -16,6 +16,7 @@ differentiated implicitly (a Stein equation in the closed loop), against central
 differences of SciPy's ``solve_discrete_are`` (an independent solver), and forward mode
 against reverse mode, along random directions (symmetric ones for Q and R).
 """
+
 from __future__ import annotations
 
 import jax
@@ -23,31 +24,35 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.linalg
+from test_riccati import PROBLEMS
 
 import jaxfdi
+from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
 from jaxfdi.control import lqr_gain, lqr_pi
 from jaxfdi.control._lqr import integral_augmentation
 from jaxfdi.models import _vtol as vtol
-from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
-from test_riccati import PROBLEMS
 
 #: an unstable mode (1.5) that the input cannot reach
 NOT_STABILISABLE = (np.diag([1.5, 0.5]), np.array([[0.0], [1.0]]), np.eye(2), np.eye(1))
 #: an unstable plant (eigenvalue 1.1) measured by nothing: (C, Phi) not detectable
-BLIND = jaxfdi.models.linear_gaussian_model(np.array([[1.1, 0.1], [0.0, 0.9]]), np.zeros((1, 2)), np.eye(2), np.eye(1))
+BLIND = jaxfdi.models.linear_gaussian_model(
+    np.array([[1.1, 0.1], [0.0, 0.9]]), np.zeros((1, 2)), np.eye(2), np.eye(1)
+)
 
 
 def test_non_stabilisable_is_detected():
     result = solve_discrete_are_info(*NOT_STABILISABLE)
     assert not bool(result.converged)
-    assert int(result.iterations) < 20                      # stopped at the overflow, not after 64 steps
-    np.testing.assert_allclose(result.spectral_radius, 1.5, rtol=1e-9)   # the mode B cannot move
+    assert int(result.iterations) < 20  # stopped at the overflow, not after 64 steps
+    np.testing.assert_allclose(result.spectral_radius, 1.5, rtol=1e-9)  # the mode B cannot move
     assert float(result.residual) > 1e-3
     with pytest.raises(ValueError, match=r"^A, B, Q, R: no stabilising solution.*not stabilisable"):
         solve_discrete_are(*NOT_STABILISABLE)
-    with pytest.raises(ValueError, match=r"^A, B, Q, R: no stabilising solution.*spectral radius 1\.5"):
+    with pytest.raises(
+        ValueError, match=r"^A, B, Q, R: no stabilising solution.*spectral radius 1\.5"
+    ):
         lqr_gain(*NOT_STABILISABLE)
-    with pytest.raises((ValueError, np.linalg.LinAlgError)):   # SciPy has no answer either
+    with pytest.raises((ValueError, np.linalg.LinAlgError)):  # SciPy has no answer either
         scipy.linalg.solve_discrete_are(*NOT_STABILISABLE)
 
 
@@ -56,7 +61,10 @@ def test_undetectable_filter_is_detected():
     result = solve_discrete_are_info(Phi.T, C.T, Q, R)
     assert not bool(result.converged) and int(result.iterations) < 20
     np.testing.assert_allclose(result.spectral_radius, 1.1, rtol=1e-9)
-    with pytest.raises(ValueError, match=r"^model\.Phi, model\.C, model\.Q: no stabilising solution.*not detectable"):
+    with pytest.raises(
+        ValueError,
+        match=r"^model\.Phi, model\.C, model\.Q: no stabilising solution.*not detectable",
+    ):
         steady_state_kalman(BLIND)
     # under jit the flag comes back instead of an error
     steady = jax.jit(steady_state_kalman)(BLIND)
@@ -68,10 +76,13 @@ def test_vmap_flags_each_problem():
     """One stabilisable and one non-stabilisable problem in a batch: a flag each, no error."""
     A, B, Q, R = NOT_STABILISABLE
     reachable = np.array([[1.0], [1.0]])
-    batch = jax.vmap(solve_discrete_are_info)(np.stack([A, A]), np.stack([reachable, B]), np.stack([Q, Q]),
-                                              np.stack([R, R]))
+    batch = jax.vmap(solve_discrete_are_info)(
+        np.stack([A, A]), np.stack([reachable, B]), np.stack([Q, Q]), np.stack([R, R])
+    )
     np.testing.assert_array_equal(batch.converged, [True, False])
-    np.testing.assert_allclose(batch.solution[0], scipy.linalg.solve_discrete_are(A, reachable, Q, R), rtol=1e-9)
+    np.testing.assert_allclose(
+        batch.solution[0], scipy.linalg.solve_discrete_are(A, reachable, Q, R), rtol=1e-9
+    )
     np.testing.assert_allclose(batch.spectral_radius[1], 1.5, rtol=1e-9)
 
 
@@ -84,8 +95,12 @@ def test_a_solvable_problem_keeps_its_solution_and_reports_it():
     assert bool(result.converged)
     assert float(result.residual) < 1e-13
     np.testing.assert_allclose(result.solution, X, rtol=1e-9, atol=1e-12 * np.max(np.abs(X)))
-    np.testing.assert_allclose(result.spectral_radius, np.max(np.abs(np.linalg.eigvals(A - B @ K))), rtol=1e-9)
-    np.testing.assert_allclose(solve_discrete_are(A, B, Q, R), X, rtol=1e-9, atol=1e-12 * np.max(np.abs(X)))
+    np.testing.assert_allclose(
+        result.spectral_radius, np.max(np.abs(np.linalg.eigvals(A - B @ K))), rtol=1e-9
+    )
+    np.testing.assert_allclose(
+        solve_discrete_are(A, B, Q, R), X, rtol=1e-9, atol=1e-12 * np.max(np.abs(X))
+    )
 
 
 def test_steady_state_reports_its_residual_and_error_dynamics():
@@ -97,7 +112,9 @@ def test_steady_state_reports_its_residual_and_error_dynamics():
     assert bool(steady.converged) and float(steady.residual) < 1e-13
     np.testing.assert_allclose(steady.predicted_cov, P, rtol=1e-10)
     error_dynamics = Phi @ (np.eye(2) - np.asarray(steady.gain) @ C)
-    np.testing.assert_allclose(steady.spectral_radius, np.max(np.abs(np.linalg.eigvals(error_dynamics))), rtol=1e-9)
+    np.testing.assert_allclose(
+        steady.spectral_radius, np.max(np.abs(np.linalg.eigvals(error_dynamics))), rtol=1e-9
+    )
     assert float(steady.spectral_radius) < 1.0
 
 
@@ -123,12 +140,18 @@ def test_paper_pi_design_is_marginal_not_refused():
 
 # --- derivatives ---------------------------------------------------------------------
 
+
 def _directions(rng, A, B, Q, R):
     def sym(n):
         a = rng.normal(size=(n, n))
         return 0.5 * (a + a.T)
-    return (0.1 * rng.normal(size=A.shape) * np.max(np.abs(A)), 0.1 * rng.normal(size=B.shape) * np.max(np.abs(B)),
-            0.1 * sym(Q.shape[0]) * np.max(np.abs(Q)), 0.1 * sym(R.shape[0]) * np.min(np.diag(R)))
+
+    return (
+        0.1 * rng.normal(size=A.shape) * np.max(np.abs(A)),
+        0.1 * rng.normal(size=B.shape) * np.max(np.abs(B)),
+        0.1 * sym(Q.shape[0]) * np.max(np.abs(Q)),
+        0.1 * sym(R.shape[0]) * np.min(np.diag(R)),
+    )
 
 
 def _central(f, args, direction, step=1e-5):
@@ -143,7 +166,9 @@ def _scipy_kalman_gain(Phi, C, Q, R):
 
 
 def _kalman_gain(Phi, C, Q, R):
-    model = jaxfdi.models.LinearGaussianModel(Phi, jnp.zeros((Phi.shape[0], 1)), C, jnp.zeros((C.shape[0], 1)), Q, R)
+    model = jaxfdi.models.LinearGaussianModel(
+        Phi, jnp.zeros((Phi.shape[0], 1)), C, jnp.zeros((C.shape[0], 1)), Q, R
+    )
     return steady_state_kalman(model).gain
 
 
@@ -159,8 +184,11 @@ def _lqr(A, B, Q, R):
 
 CASES = {  # (ours, SciPy's, arguments): X stacked over K for the LQR; the Kalman gain
     "lqr X and K": (_lqr, _scipy_lqr, PROBLEMS["lqr"]),
-    "kalman gain": (_kalman_gain, _scipy_kalman_gain,
-                    (PROBLEMS["filter"][0].T, PROBLEMS["filter"][1].T) + PROBLEMS["filter"][2:]),
+    "kalman gain": (
+        _kalman_gain,
+        _scipy_kalman_gain,
+        (PROBLEMS["filter"][0].T, PROBLEMS["filter"][1].T) + PROBLEMS["filter"][2:],
+    ),
 }
 
 
@@ -170,8 +198,12 @@ def test_derivatives_equal_central_differences_of_scipy(name):
     args = tuple(np.asarray(a, np.float64) for a in args)
     rng = np.random.default_rng(7)
     direction = _directions(rng, *args)
-    value, forward = jax.jvp(ours, tuple(jnp.asarray(a) for a in args), tuple(jnp.asarray(d) for d in direction))
-    np.testing.assert_allclose(value, reference(*args), rtol=1e-8, atol=1e-11 * np.max(np.abs(value)))
+    value, forward = jax.jvp(
+        ours, tuple(jnp.asarray(a) for a in args), tuple(jnp.asarray(d) for d in direction)
+    )
+    np.testing.assert_allclose(
+        value, reference(*args), rtol=1e-8, atol=1e-11 * np.max(np.abs(value))
+    )
     central = _central(reference, args, direction)
     scale = np.max(np.abs(central))
     np.testing.assert_allclose(forward, central, rtol=0, atol=1e-6 * scale)
@@ -180,8 +212,12 @@ def test_derivatives_equal_central_differences_of_scipy(name):
     _, pullback = jax.vjp(ours, *(jnp.asarray(a) for a in args))
     cotangents = pullback(jnp.asarray(weights))
     reverse = sum(np.sum(np.asarray(c) * d) for c, d in zip(cotangents, direction))
-    np.testing.assert_allclose(reverse, np.sum(weights * np.asarray(forward)), rtol=1e-10,
-                               atol=1e-12 * np.sum(np.abs(weights * np.asarray(forward))))
+    np.testing.assert_allclose(
+        reverse,
+        np.sum(weights * np.asarray(forward)),
+        rtol=1e-10,
+        atol=1e-12 * np.sum(np.abs(weights * np.asarray(forward))),
+    )
 
 
 def test_gradient_under_jit_and_vmap():
@@ -196,6 +232,8 @@ def test_gradient_under_jit_and_vmap():
     grads = jax.jit(jax.vmap(jax.grad(cost)))(jnp.array([0.5, 2.0]))
     for s, g in zip((0.5, 2.0), np.asarray(grads)):
         step = 1e-6
-        central = (x0 @ scipy.linalg.solve_discrete_are(A, B, (s + step) * Q, R) @ x0
-                   - x0 @ scipy.linalg.solve_discrete_are(A, B, (s - step) * Q, R) @ x0) / (2 * step)
+        central = (
+            x0 @ scipy.linalg.solve_discrete_are(A, B, (s + step) * Q, R) @ x0
+            - x0 @ scipy.linalg.solve_discrete_are(A, B, (s - step) * Q, R) @ x0
+        ) / (2 * step)
         np.testing.assert_allclose(g, central, rtol=1e-7)

@@ -6,6 +6,7 @@ size and of the device count.
 The toy study: a 2-state tracking model, a bias fault on one sensor, a Kalman filter
 whose measurement noise is a filter parameter, and the windowed chi-square detector with
 its threshold as a detector parameter, so the grid is (2 filters) x (3 thresholds)."""
+
 import subprocess
 import sys
 import textwrap
@@ -15,18 +16,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _compiles import counting_compiles
 
 import jaxfdi
-from jaxfdi import _montecarlo as montecarlo, _study as study
+from jaxfdi import _montecarlo as montecarlo
+from jaxfdi import _study as study
 from jaxfdi._faults import fault, no_fault, stack_faults
 from jaxfdi.models._linear import LinearGaussianModel
-from _compiles import counting_compiles
 
 HERE = Path(__file__).resolve().parent
 TESTS = HERE.parent  # the shared helpers (_compiles)
 T = 60
-MODEL = LinearGaussianModel(Phi=np.array([[1.0, 0.1], [0.0, 1.0]]), Gamma=np.array([[0.005], [0.1]]),
-                            C=np.eye(2), D=np.zeros((2, 1)), Q=1e-4 * np.eye(2), R=1e-2 * np.eye(2))
+MODEL = LinearGaussianModel(
+    Phi=np.array([[1.0, 0.1], [0.0, 1.0]]),
+    Gamma=np.array([[0.005], [0.1]]),
+    C=np.eye(2),
+    D=np.zeros((2, 1)),
+    Q=1e-4 * np.eye(2),
+    R=1e-2 * np.eye(2),
+)
 R_SCALES = np.array([1.0, 1.5])
 THRESHOLDS = np.array([6.0, 9.2, 13.8])
 
@@ -36,17 +44,32 @@ def toy_run(key, f, r_scale, threshold):
     us = jnp.ones((T, 1))
     model = MODEL._replace(R=MODEL.R * r_scale)
     kf = jaxfdi.filters.kalman_filter(model, unroll_factorizations=False)
-    result = jaxfdi.monitor(jaxfdi.linear_simulator(MODEL, f), kf, jaxfdi.detection.chi2_detector(threshold, 2), jnp.zeros(2),
-                            kf.init(jnp.zeros(2), MODEL.Q), us, key, f.onset, keep_history=True)
+    result = jaxfdi.monitor(
+        jaxfdi.linear_simulator(MODEL, f),
+        kf,
+        jaxfdi.detection.chi2_detector(threshold, 2),
+        jnp.zeros(2),
+        kf.init(jnp.zeros(2), MODEL.Q),
+        us,
+        key,
+        f.onset,
+        keep_history=True,
+    )
     return result.record, result.history.statistic
 
 
 def toy_study(averaged=True) -> study.Study:
     cases = stack_faults([fault("bias", "sensor", 1, 30, 0.15), no_fault()])
-    methods = {f"R x{r} chi2 {t}": (i, j) for i, r in enumerate(R_SCALES) for j, t in enumerate(THRESHOLDS)}
+    methods = {
+        f"R x{r} chi2 {t}": (i, j) for i, r in enumerate(R_SCALES) for j, t in enumerate(THRESHOLDS)
+    }
     run = toy_run if averaged else _record_only
-    return study.Study("toy", cases, ("sensor 1", "none"),
-                       (study.Structure("kf-chi2", run, (R_SCALES, THRESHOLDS), methods, averaged=averaged),))
+    return study.Study(
+        "toy",
+        cases,
+        ("sensor 1", "none"),
+        (study.Structure("kf-chi2", run, (R_SCALES, THRESHOLDS), methods, averaged=averaged),),
+    )
 
 
 def _record_only(key, f, r_scale, threshold):
@@ -72,7 +95,11 @@ def test_one_program_per_structure_whatever_runs_and_seed():
     assert _program(spec)._cache_size() == 1
     assert len(compiles) == first  # nothing compiled after the first study
     # the default chunk on a CPU is one shape whatever the runs: a small study is padded up to it
-    assert montecarlo.default_chunk_size() == montecarlo.CHUNK_BY_PLATFORM["cpu"] == montecarlo.MIN_CHUNK
+    assert (
+        montecarlo.default_chunk_size()
+        == montecarlo.CHUNK_BY_PLATFORM["cpu"]
+        == montecarlo.MIN_CHUNK
+    )
     with counting_compiles() as compiles:
         study.run_study(spec, 3, 0)
         first = len(compiles)
@@ -87,15 +114,35 @@ def test_methods_as_data_equal_one_by_one():
     spec = toy_study()
     runs, seed = 20, 3
     result = study.run_study(spec, runs, seed)
-    cases = jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), spec.cases)
+    cases = jax.tree_util.tree_map(
+        lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), spec.cases
+    )
     for name, (i, j) in spec.structures[0].methods.items():
-        alone = jaxfdi.monte_carlo(lambda k, f, i=i, j=j: toy_run(k, f, R_SCALES[i], THRESHOLDS[j])[0],
-                                   jax.random.key(seed), 2 * runs, cases, chunk_size=2 * runs)
+        alone = jaxfdi.monte_carlo(
+            lambda k, f, i=i, j=j: toy_run(k, f, R_SCALES[i], THRESHOLDS[j])[0],
+            jax.random.key(seed),
+            2 * runs,
+            cases,
+            chunk_size=2 * runs,
+        )
         grid = result.outputs[name]
-        for field in ("onset", "first_alarm", "detection_step", "false_alarms", "isolated", "first_unhealthy"):
-            np.testing.assert_array_equal(getattr(grid, field), getattr(alone, field), err_msg=f"{name} {field}")
-        np.testing.assert_allclose(grid.estimate, alone.estimate, rtol=1e-12, atol=0, equal_nan=True)
-    detections = [tuple(result.outputs[n].detection_step[:runs]) for n in spec.structures[0].methods]
+        for field in (
+            "onset",
+            "first_alarm",
+            "detection_step",
+            "false_alarms",
+            "isolated",
+            "first_unhealthy",
+        ):
+            np.testing.assert_array_equal(
+                getattr(grid, field), getattr(alone, field), err_msg=f"{name} {field}"
+            )
+        np.testing.assert_allclose(
+            grid.estimate, alone.estimate, rtol=1e-12, atol=0, equal_nan=True
+        )
+    detections = [
+        tuple(result.outputs[n].detection_step[:runs]) for n in spec.structures[0].methods
+    ]
     assert len(set(detections)) > 1, "the thresholds and noise scales must make a difference"
 
 
@@ -108,18 +155,29 @@ def test_drawn_cases_give_each_run_its_own_case():
 
     def draw(runs, seed):
         onsets = np.asarray(jax.random.randint(jax.random.key(seed + 2), (2 * runs,), 10, 50))
-        return stack_faults([fault("bias", "sensor", 1, int(k), 0.15) if i < runs else no_fault()
-                             for i, k in enumerate(onsets)])
+        return stack_faults(
+            [
+                fault("bias", "sensor", 1, int(k), 0.15) if i < runs else no_fault()
+                for i, k in enumerate(onsets)
+            ]
+        )
 
     spec = toy_study(averaged=False)._replace(cases=draw)
     result = study.run_study(spec, runs, seed)
     faults = draw(runs, seed)
-    name = "R x1.5 chi2 9.2"   # one cell: the grid itself is test_methods_as_data_equal_one_by_one's
-    alone = jaxfdi.monte_carlo(lambda k, f: toy_run(k, f, R_SCALES[1], THRESHOLDS[1])[0], jax.random.key(seed),
-                               2 * runs, faults, chunk_size=2 * runs)
+    name = "R x1.5 chi2 9.2"  # one cell: the grid itself is test_methods_as_data_equal_one_by_one's
+    alone = jaxfdi.monte_carlo(
+        lambda k, f: toy_run(k, f, R_SCALES[1], THRESHOLDS[1])[0],
+        jax.random.key(seed),
+        2 * runs,
+        faults,
+        chunk_size=2 * runs,
+    )
     for field in ("onset", "first_alarm", "detection_step", "false_alarms"):
         np.testing.assert_array_equal(getattr(result.outputs[name], field), getattr(alone, field))
-    np.testing.assert_array_equal(result.outputs["R x1.0 chi2 9.2"].onset[:runs], faults.onset[:runs])
+    np.testing.assert_array_equal(
+        result.outputs["R x1.0 chi2 9.2"].onset[:runs], faults.onset[:runs]
+    )
     assert len(set(faults.onset[:runs].tolist())) > 1
     with pytest.raises(ValueError, match="study.cases: the draw"):
         study.run_study(spec._replace(cases=lambda runs, seed: draw(runs + 1, seed)), runs, seed)
@@ -128,8 +186,16 @@ def test_drawn_cases_give_each_run_its_own_case():
 def _shared_model_run(key, f, threshold, model):
     us = jnp.ones((T, 1))
     kf = jaxfdi.filters.kalman_filter(model, unroll_factorizations=False)
-    return jaxfdi.monitor(jaxfdi.linear_simulator(model, f), kf, jaxfdi.detection.chi2_detector(threshold, 2), jnp.zeros(2),
-                          kf.init(jnp.zeros(2), model.Q), us, key, f.onset).record
+    return jaxfdi.monitor(
+        jaxfdi.linear_simulator(model, f),
+        kf,
+        jaxfdi.detection.chi2_detector(threshold, 2),
+        jnp.zeros(2),
+        kf.init(jnp.zeros(2), model.Q),
+        us,
+        key,
+        f.onset,
+    ).record
 
 
 def test_shared_data_is_an_argument_not_a_constant():
@@ -138,19 +204,31 @@ def test_shared_data_is_an_argument_not_a_constant():
     compile nothing new."""
     base = toy_study(averaged=False)
     methods = {f"chi2 {t}": (j,) for j, t in enumerate(THRESHOLDS)}
-    spec = base._replace(structures=(study.Structure("shared model", _shared_model_run, (THRESHOLDS,), methods,
-                                                     shared=MODEL),))
+    spec = base._replace(
+        structures=(
+            study.Structure(
+                "shared model", _shared_model_run, (THRESHOLDS,), methods, shared=MODEL
+            ),
+        )
+    )
     result = study.run_study(spec, 8, 2)
     cases = jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), 8, axis=0), spec.cases)
-    alone = jaxfdi.monte_carlo(lambda k, f: _shared_model_run(k, f, THRESHOLDS[0], MODEL), jax.random.key(2),
-                               16, cases, chunk_size=16)
+    alone = jaxfdi.monte_carlo(
+        lambda k, f: _shared_model_run(k, f, THRESHOLDS[0], MODEL),
+        jax.random.key(2),
+        16,
+        cases,
+        chunk_size=16,
+    )
     np.testing.assert_array_equal(result.outputs["chi2 6.0"].detection_step, alone.detection_step)
     np.testing.assert_array_equal(result.outputs["chi2 6.0"].false_alarms, alone.false_alarms)
     with counting_compiles() as compiles:
         noisier = spec.structures[0]._replace(shared=MODEL._replace(R=4.0 * MODEL.R))
         other = study.run_study(spec._replace(structures=(noisier,)), 8, 2)
     assert not compiles
-    assert any((other.outputs[n].detection_step != result.outputs[n].detection_step).any() for n in methods)
+    assert any(
+        (other.outputs[n].detection_step != result.outputs[n].detection_step).any() for n in methods
+    )
 
 
 def test_cases_may_have_their_own_run_counts():
@@ -163,11 +241,16 @@ def test_cases_may_have_their_own_run_counts():
     assert result.runs == counts
     assert study.case_slices(counts, 2) == [slice(0, 3), slice(3, 10)]
     assert study.case_slices(4, 2) == [slice(0, 4), slice(4, 8)]
-    cases = jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), counts, axis=0), spec.cases)
-    records, traces = jaxfdi.monte_carlo(study.grid_run(spec.structures[0]), jax.random.key(6), 10, cases,
-                                         chunk_size=10)
+    cases = jax.tree_util.tree_map(
+        lambda leaf: np.repeat(np.asarray(leaf), counts, axis=0), spec.cases
+    )
+    records, traces = jaxfdi.monte_carlo(
+        study.grid_run(spec.structures[0]), jax.random.key(6), 10, cases, chunk_size=10
+    )
     for name, (i, j) in spec.structures[0].methods.items():
-        np.testing.assert_array_equal(result.outputs[name].detection_step, records.detection_step[:, i, j])
+        np.testing.assert_array_equal(
+            result.outputs[name].detection_step, records.detection_step[:, i, j]
+        )
         host = [traces[part, i, j].mean(axis=0) for part in study.case_slices(counts, 2)]
         np.testing.assert_allclose(result.means[name], np.stack(host), rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match="runs: expected one count or 2 counts"):
@@ -182,7 +265,9 @@ def test_device_means_equal_host_means():
     spec = toy_study()
     runs, seed = 30, 5
     result = study.run_study(spec, runs, seed, chunk_size=16)  # 60 runs: 4 chunks, the last padded
-    cases = jax.tree_util.tree_map(lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), spec.cases)
+    cases = jax.tree_util.tree_map(
+        lambda leaf: np.repeat(np.asarray(leaf), runs, axis=0), spec.cases
+    )
     grid = study.grid_run(spec.structures[0])
     _, traces = jaxfdi.monte_carlo(grid, jax.random.key(seed), 2 * runs, cases, chunk_size=60)
     for name, (i, j) in spec.structures[0].methods.items():
@@ -197,7 +282,9 @@ def test_chunk_size_does_not_change_decisions(chunk_size):
     other = study.run_study(spec, 25, 9, chunk_size=chunk_size)
     for name in reference.outputs:
         for field in ("first_alarm", "detection_step", "false_alarms", "isolated"):
-            np.testing.assert_array_equal(getattr(other.outputs[name], field), getattr(reference.outputs[name], field))
+            np.testing.assert_array_equal(
+                getattr(other.outputs[name], field), getattr(reference.outputs[name], field)
+            )
 
 
 def test_two_devices_give_the_same_decisions(tmp_path):
@@ -216,9 +303,14 @@ def test_two_devices_give_the_same_decisions(tmp_path):
                                   for f in ("detection_step", "isolated", "false_alarms")}},
                  **{{n + "|mean": r.means[n] for n in r.means}})
     """)
-    env = {**__import__("os").environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
-           "JAX_PLATFORMS": "cpu"}
-    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600)
+    env = {
+        **__import__("os").environ,
+        "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
+        "JAX_PLATFORMS": "cpu",
+    }
+    proc = subprocess.run(
+        [sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     two = np.load(out)
     one = study.run_study(toy_study(), 25, 9, chunk_size=16)

@@ -2,6 +2,7 @@
 empirical quantile against the chi-square law it estimates (scipy) and against its
 defining counts, and the per-run scaling against the closed form of the smallest factor
 (an order statistic of the runs' maxima)."""
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -27,7 +28,7 @@ def test_empirical_threshold_estimates_the_laws_quantile_and_keeps_the_floor():
     with pytest.raises(ValueError, match="values"):
         empirical_threshold(np.float64(3.0), 0.1)
     dead = values.copy()
-    dead[17, 1] = np.nan   # one calibration run's channel went NaN: refused, not a NaN threshold
+    dead[17, 1] = np.nan  # one calibration run's channel went NaN: refused, not a NaN threshold
     with pytest.raises(ValueError, match="values: expected finite .* 1 non-finite"):
         empirical_threshold(dead, pfa)
 
@@ -41,7 +42,7 @@ def test_run_scaling_is_the_smallest_factor_meeting_the_rate():
     runs, steps, alpha = 200, 50, 0.05
     stat = rng.chisquare(4, size=(3, runs, steps)) * np.array([1.0, 1.6, 0.2])[:, None, None]
     thresholds = np.array([14.86, 14.86, 14.86])
-    maxima = stat.max(axis=2) / thresholds[:, None]                       # (3, runs)
+    maxima = stat.max(axis=2) / thresholds[:, None]  # (3, runs)
 
     def rate(scale):
         return np.mean(maxima > np.asarray(scale)[:, None], axis=1)
@@ -59,7 +60,9 @@ def test_run_scaling_refuses_what_it_cannot_reach():
         scale_to_run_false_alarm(lambda s: np.full(2, 0.5), 0.01, 2)
     with pytest.raises(ValueError, match="target"):
         scale_to_run_false_alarm(lambda s: np.zeros(2), 1.0, 2)
-    with pytest.raises(ValueError, match="rate: expected rates in"):   # a NaN rate is not "within the target"
+    with pytest.raises(
+        ValueError, match="rate: expected rates in"
+    ):  # a NaN rate is not "within the target"
         scale_to_run_false_alarm(lambda s: np.array([0.0, np.nan]), 0.1, 2)
     with pytest.raises(ValueError, match="upper"):
         scale_to_run_false_alarm(lambda s: np.zeros(2), 0.1, 2, upper=1.0)

@@ -8,6 +8,7 @@ Reference: ``scipy.stats.chi2.isf`` in float64. Tolerances: 1e-12 relative in fl
 nothing); 5e-5 relative in float32 (``log Q`` carries ``~eps32 * lgamma(dof/2)`` absolute
 error, largest for large dof).
 """
+
 from __future__ import annotations
 
 import jax
@@ -20,9 +21,11 @@ import jaxfdi
 from jaxfdi.detection import chi2_detector, chi2_threshold, glrt_threshold
 
 DOFS = np.array([0.5, 1, 2, 3, 5, 20, 60, 250, 1000])
-PFAS_64 = np.concatenate([[0.999, 0.5], 10.0 ** -np.arange(1.0, 301.0)])         # 1e-1 .. 1e-300
+PFAS_64 = np.concatenate([[0.999, 0.5], 10.0 ** -np.arange(1.0, 301.0)])  # 1e-1 .. 1e-300
 TINY_32 = np.finfo(np.float32).tiny
-PFAS_32 = np.concatenate([[0.99, 0.5], 10.0 ** -np.arange(1.0, 38.0, 0.5), [TINY_32]]).astype(np.float32)
+PFAS_32 = np.concatenate([[0.99, 0.5], 10.0 ** -np.arange(1.0, 38.0, 0.5), [TINY_32]]).astype(
+    np.float32
+)
 
 
 @pytest.fixture(scope="module")
@@ -52,17 +55,30 @@ def test_float32_thresholds_equal_scipy_down_to_the_smallest_normal():
     dof, pfa = (a.astype(np.float32) for a in np.meshgrid(DOFS, PFAS_32))
     threshold = np.asarray(chi2_threshold(dof, pfa))
     assert threshold.dtype == np.float32 and np.all(np.isfinite(threshold))
-    np.testing.assert_allclose(threshold, chi2.isf(pfa.astype(np.float64), dof.astype(np.float64)), rtol=5e-5)
+    np.testing.assert_allclose(
+        threshold, chi2.isf(pfa.astype(np.float64), dof.astype(np.float64)), rtol=5e-5
+    )
 
 
-@pytest.mark.parametrize("call", [
-    lambda: chi2_threshold(np.float32(4), np.float32(1e-39)),
-    lambda: chi2_threshold(4, jnp.asarray([0.01, 1e-40], jnp.float32)),
-    lambda: glrt_threshold(np.float32(1e-39), 6, 10),
-    lambda: glrt_threshold(np.float32(1e-37), 6, 10, "bonferroni"),   # pfa / 60 is below the limit
-    lambda: glrt_threshold(1e-307, 6, 10, "bonferroni"),              # float64: 1.7e-309 is subnormal
-], ids=["chi2 float32", "chi2 float32 array", "glrt paper float32", "glrt bonferroni float32",
-        "glrt bonferroni float64"])
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: chi2_threshold(np.float32(4), np.float32(1e-39)),
+        lambda: chi2_threshold(4, jnp.asarray([0.01, 1e-40], jnp.float32)),
+        lambda: glrt_threshold(np.float32(1e-39), 6, 10),
+        lambda: glrt_threshold(
+            np.float32(1e-37), 6, 10, "bonferroni"
+        ),  # pfa / 60 is below the limit
+        lambda: glrt_threshold(1e-307, 6, 10, "bonferroni"),  # float64: 1.7e-309 is subnormal
+    ],
+    ids=[
+        "chi2 float32",
+        "chi2 float32 array",
+        "glrt paper float32",
+        "glrt bonferroni float32",
+        "glrt bonferroni float64",
+    ],
+)
 def test_below_the_dtype_limit_is_refused_naming_pfa_and_the_limit(call):
     with pytest.raises(ValueError, match=r"^pfa: .*np\.finfo\(float(32|64)\)\.tiny"):
         call()
@@ -70,7 +86,9 @@ def test_below_the_dtype_limit_is_refused_naming_pfa_and_the_limit(call):
 
 def test_glrt_thresholds_in_the_tail_equal_scipy():
     np.testing.assert_allclose(glrt_threshold(1e-300, 6, 10), chi2.isf(1e-300, 60), rtol=1e-12)
-    np.testing.assert_allclose(glrt_threshold(1e-300, 6, 10, "bonferroni"), chi2.isf(1e-300 / 60, 1), rtol=1e-12)
+    np.testing.assert_allclose(
+        glrt_threshold(1e-300, 6, 10, "bonferroni"), chi2.isf(1e-300 / 60, 1), rtol=1e-12
+    )
 
 
 @pytest.mark.parametrize("pfa", [1e-3, 1e-40, 1e-200, 1e-300])
@@ -92,12 +110,19 @@ def test_jit_vmap_and_traced_out_of_range_pfa():
     NaN (never a finite number) for a pfa the dtype cannot represent."""
     dofs, pfas = jnp.array([1.0, 3.0, 60.0]), jnp.array([1e-5, 1e-150, 1e-310])
     traced = jax.jit(jax.vmap(chi2_threshold))(dofs, pfas)
-    np.testing.assert_allclose(traced[:2], chi2.isf(np.asarray(pfas[:2]), np.asarray(dofs[:2])), rtol=1e-12)
+    np.testing.assert_allclose(
+        traced[:2], chi2.isf(np.asarray(pfas[:2]), np.asarray(dofs[:2])), rtol=1e-12
+    )
     assert np.isnan(traced[2])
 
 
 def test_bad_degrees_of_freedom_are_named():
-    for dof, error in ((np.inf, ValueError), (np.nan, ValueError), (-1.0, ValueError), ("3", TypeError)):
+    for dof, error in (
+        (np.inf, ValueError),
+        (np.nan, ValueError),
+        (-1.0, ValueError),
+        ("3", TypeError),
+    ):
         with pytest.raises(error, match="^dof: "):
             chi2_threshold(dof, 0.01)
     assert jaxfdi.detection.chi2_threshold(np.int64(4), 0.005).dtype == jnp.float64

@@ -3,6 +3,7 @@
 
 Every ``Detector`` factory (``DETECTORS``): a step gives a ``Decision`` of scalars, jit and
 vmap over streams under ``lax.scan`` work, a non-finite input alarms, a quiet stream does not."""
+
 import functools
 from typing import NamedTuple
 
@@ -24,12 +25,13 @@ class DetectorCase(NamedTuple):
     make: object
     stream: object
     quiet: object
-    dead: object = lambda value, bad: value.at[0].set(bad)  # noqa: E731
+    dead: object = lambda value, bad: value.at[0].set(bad)
 
 
 @functools.lru_cache(maxsize=None)
 def _glrt_setup():
     from _linear_gaussian_cases import small_model
+
     from jaxfdi._riccati import steady_state_kalman
 
     model = small_model()
@@ -62,29 +64,45 @@ def _detector_registry():
     sizes = jnp.asarray([0.5, 2.0, -2.0])
     alternating = jnp.asarray((-1.0) ** np.arange(T_STEPS))[:, None] * jnp.asarray([1.0, 2.0])
     return {
-        "chi2_detector": DetectorCase(lambda: chi2_detector(20.0, 3),
-                                      lambda rng, shape: jnp.asarray(rng.chisquare(2, size=shape)),
-                                      jnp.full((T_STEPS,), 0.1), lambda value, bad: jnp.asarray(bad)),
+        "chi2_detector": DetectorCase(
+            lambda: chi2_detector(20.0, 3),
+            lambda rng, shape: jnp.asarray(rng.chisquare(2, size=shape)),
+            jnp.full((T_STEPS,), 0.1),
+            lambda value, bad: jnp.asarray(bad),
+        ),
         # a lower-tail test: the quiet stream is a channel far from frozen (it alternates)
         "frozen_channel_detector": DetectorCase(
-            lambda: frozen_channel_detector(jnp.asarray([0.1, 0.1]), window, 1e-3, jnp.asarray([3, 4])),
-            lambda rng, shape: jnp.asarray(rng.normal(size=shape + (2,))), alternating),
-        "glrt_detector": DetectorCase(lambda: glrt_detector(model, gain, S, window, 30.0), _innovations, zeros),
+            lambda: frozen_channel_detector(
+                jnp.asarray([0.1, 0.1]), window, 1e-3, jnp.asarray([3, 4])
+            ),
+            lambda rng, shape: jnp.asarray(rng.normal(size=shape + (2,))),
+            alternating,
+        ),
+        "glrt_detector": DetectorCase(
+            lambda: glrt_detector(model, gain, S, window, 30.0), _innovations, zeros
+        ),
         "glrt_detector(recursive=True)": DetectorCase(
-            lambda: glrt_detector(model, gain, S, window, 30.0, recursive=True), _innovations, zeros),
-        "transient_glrt_detector": DetectorCase(lambda: transient_glrt_detector(model, 4.0 * model.Q, window, 30.0),
-                                                _innovations, zeros),
-        "known_change_bank": DetectorCase(lambda: known_change_bank(signatures, S, sizes, 10.0, tail=True),
-                                          _innovations, zeros),
-        "known_change_detector": DetectorCase(lambda: known_change_detector(model, gain, S, sizes, window, 10.0),
-                                              _innovations, zeros),
+            lambda: glrt_detector(model, gain, S, window, 30.0, recursive=True), _innovations, zeros
+        ),
+        "transient_glrt_detector": DetectorCase(
+            lambda: transient_glrt_detector(model, 4.0 * model.Q, window, 30.0), _innovations, zeros
+        ),
+        "known_change_bank": DetectorCase(
+            lambda: known_change_bank(signatures, S, sizes, 10.0, tail=True), _innovations, zeros
+        ),
+        "known_change_detector": DetectorCase(
+            lambda: known_change_detector(model, gain, S, sizes, window, 10.0), _innovations, zeros
+        ),
         "mode_probability_detector": DetectorCase(
             lambda: mode_probability_detector(0.9, confirm_steps=2),
             lambda rng, shape: jnp.asarray(rng.dirichlet([4.0, 1.0, 1.0], size=shape)),
-            jnp.tile(jnp.asarray([0.98, 0.01, 0.01]), (T_STEPS, 1))),
-        "credit_isolator": DetectorCase(lambda: credit_isolator(0.5, label_offset=1),
-                                        lambda rng, shape: jnp.asarray(np.abs(rng.normal(size=shape + (3,)))),
-                                        jnp.ones((T_STEPS, 3))),
+            jnp.tile(jnp.asarray([0.98, 0.01, 0.01]), (T_STEPS, 1)),
+        ),
+        "credit_isolator": DetectorCase(
+            lambda: credit_isolator(0.5, label_offset=1),
+            lambda rng, shape: jnp.asarray(np.abs(rng.normal(size=shape + (3,)))),
+            jnp.ones((T_STEPS, 3)),
+        ),
     }
 
 
@@ -118,8 +136,12 @@ def test_every_detector_jits_and_vmaps_over_streams_under_scan(detector_case):
 
     batched = jax.jit(jax.vmap(scan))(streams)
     for b in range(3):
-        chex.assert_trees_all_close(jax.tree_util.tree_map(lambda a: a[b], batched), scan(streams[b]),
-                                    rtol=1e-12, atol=1e-12)
+        chex.assert_trees_all_close(
+            jax.tree_util.tree_map(lambda a: a[b], batched),
+            scan(streams[b]),
+            rtol=1e-12,
+            atol=1e-12,
+        )
 
 
 # the mode-probability detector reads a filter's posterior probabilities, not a sensor: a

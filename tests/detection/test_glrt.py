@@ -1,6 +1,7 @@
 """Windowed GLRT: signatures against the Kalman filter's response to a noise-free fault,
 the statistic against a brute-force double loop, its chi2(1) law and the unbiased
 magnitude estimate by Monte Carlo, and the online detector on a faulty engine run."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -8,6 +9,8 @@ import pytest
 import scipy.stats
 
 import jaxfdi
+from jaxfdi._riccati import steady_state_kalman
+from jaxfdi.detection import glrt_detector
 from jaxfdi.detection._glrt import (
     detector_setup,
     fault_directions,
@@ -17,16 +20,20 @@ from jaxfdi.detection._glrt import (
     glr_statistic,
     glrt_threshold,
 )
-from jaxfdi.detection import glrt_detector
 from jaxfdi.models import engine_model
-from jaxfdi._riccati import steady_state_kalman
 
 WINDOW = 10
 NUM_INPUTS = 1
 # (target, component, magnitude) for each direction, in the simulator's label order 1..6;
 # seed 003 sizes: actuator 5 % of the 0.01 kg/s command, sensors 0.5 % of the operating point.
-DIRECTIONS = [("actuator", 0, 0.0005), ("sensor", 0, 135.0), ("sensor", 1, 16.99), ("sensor", 2, 2.21),
-              ("sensor", 3, 8.285), ("sensor", 4, 5.125)]
+DIRECTIONS = [
+    ("actuator", 0, 0.0005),
+    ("sensor", 0, 135.0),
+    ("sensor", 1, 16.99),
+    ("sensor", 2, 2.21),
+    ("sensor", 3, 8.285),
+    ("sensor", 4, 5.125),
+]
 
 
 @pytest.fixture(scope="module")
@@ -75,13 +82,17 @@ def test_signatures_equal_noise_free_filter_response(engine):
     cases = [(i, onset) for onset in onsets for i in range(6)] + [(None, 0)]
     ys = np.stack([_noise_free_measurements(model, i, onset, T) for i, onset in cases])
     kf = jaxfdi.filters.kalman_filter(model)
-    _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, np.full((T, 1), 0.01))
+    _, info = jaxfdi.filters.run_filter(
+        kf, kf.init(jnp.zeros(7), steady.predicted_cov), ys, np.full((T, 1), 0.01)
+    )
     innov = np.asarray(info.innovation)
     G = np.asarray(signatures)
     for (i, onset), response in zip(cases, innov[:-1] - innov[-1]):
         scale = np.max(np.abs(G[:, :, i]))
         np.testing.assert_array_equal(response[:onset], 0.0)
-        np.testing.assert_allclose(response[onset:onset + WINDOW], G[:, :, i], rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(
+            response[onset : onset + WINDOW], G[:, :, i], rtol=0, atol=1e-10 * scale
+        )
 
 
 def _brute_force(eps, G, S, num_valid):
@@ -130,7 +141,9 @@ def monte_carlo(engine):
     def one(fault, key, x0):
         _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model, fault), x0, us, key)
         kf = jaxfdi.filters.kalman_filter(model)
-        _, info = jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us)
+        _, info = jaxfdi.filters.run_filter(
+            kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us
+        )
         return info.innovation
 
     rng = np.random.default_rng(11)
@@ -151,8 +164,12 @@ def test_simulator_timing_matches_signatures(engine, monte_carlo):
         difference = monte_carlo[1 + i, :, : ONSET + WINDOW] - monte_carlo[0, :, : ONSET + WINDOW]
         magnitude = DIRECTIONS[i][2]
         expected = np.concatenate([np.zeros((ONSET, 5)), magnitude * G[:, :, i]])
-        np.testing.assert_allclose(difference, np.broadcast_to(expected, difference.shape), rtol=0,
-                                   atol=1e-9 * magnitude * np.max(np.abs(G[:, :, i])))
+        np.testing.assert_allclose(
+            difference,
+            np.broadcast_to(expected, difference.shape),
+            rtol=0,
+            atol=1e-9 * magnitude * np.max(np.abs(G[:, :, i])),
+        )
 
 
 @jax.jit
@@ -166,7 +183,9 @@ def test_fixed_onset_glr_is_chi2_1_without_fault(engine, monte_carlo):
     _, steady, signatures = engine
     count = T_SIM // WINDOW
     windows = monte_carlo[0, :, : count * WINDOW].reshape(RUNS * count, WINDOW, 5)
-    statistic = np.asarray(_by_onset(windows, signatures, steady.innovation_cov).statistic)[:, OFFSET]
+    statistic = np.asarray(_by_onset(windows, signatures, steady.innovation_cov).statistic)[
+        :, OFFSET
+    ]
     assert statistic.shape == (RUNS * count, 6)
     for i in range(6):
         assert scipy.stats.kstest(statistic[:, i], scipy.stats.chi2(1).cdf).pvalue > 0.01, i
@@ -177,7 +196,7 @@ def test_magnitude_at_true_onset_is_unbiased(engine, monte_carlo):
     true size, variance the Cramer-Rao bound 1 / R(theta)."""
     _, steady, signatures = engine
     end = ONSET + OFFSET + 1
-    windows = monte_carlo[1:, :, end - WINDOW: end].reshape(6 * RUNS, WINDOW, 5)
+    windows = monte_carlo[1:, :, end - WINDOW : end].reshape(6 * RUNS, WINDOW, 5)
     magnitude = np.asarray(_by_onset(windows, signatures, steady.innovation_cov).magnitude)
     chol_inv = np.linalg.inv(np.linalg.cholesky(np.asarray(steady.innovation_cov)))
     for i in range(6):
@@ -204,20 +223,25 @@ def test_detector_matches_glr_statistic(engine, monte_carlo, detect):
     does every direction's statistic from ``glr_sequence``."""
     _, steady, signatures = engine
     innovations = monte_carlo[5, 0]
-    decisions = jax.tree.map(lambda a: np.asarray(a)[0], detect(monte_carlo[5, :3]))  # the shape compiled below
+    decisions = jax.tree.map(
+        lambda a: np.asarray(a)[0], detect(monte_carlo[5, :3])
+    )  # the shape compiled below
     padded = np.concatenate([np.zeros((WINDOW - 1, 5)), innovations])
-    windows = np.stack([padded[k:k + WINDOW] for k in range(T_SIM)])
+    windows = np.stack([padded[k : k + WINDOW] for k in range(T_SIM)])
     num_valid = np.minimum(np.arange(T_SIM) + 1, WINDOW)
-    ref = jax.jit(jax.vmap(glr_statistic, in_axes=(0, None, None, 0)))(windows, signatures, steady.innovation_cov,
-                                                                       num_valid)
+    ref = jax.jit(jax.vmap(glr_statistic, in_axes=(0, None, None, 0)))(
+        windows, signatures, steady.innovation_cov, num_valid
+    )
     best = np.argmax(np.asarray(ref.statistic), axis=1)
-    pick = lambda a: np.take_along_axis(np.asarray(a), best[:, None], 1)[:, 0]  # noqa: E731
+    pick = lambda a: np.take_along_axis(np.asarray(a), best[:, None], 1)[:, 0]
     np.testing.assert_allclose(decisions.statistic, pick(ref.statistic), rtol=1e-10)
     np.testing.assert_array_equal(decisions.label, 1 + best)
     np.testing.assert_allclose(decisions.estimate, pick(ref.magnitude), rtol=1e-10)
     # every direction's statistic per step (the engine study's GLR figure): the same batch reference
     model, _, _ = engine
-    setup = detector_setup(model, steady.gain, steady.innovation_cov, WINDOW, 200.0, "max", False, -1)
+    setup = detector_setup(
+        model, steady.gain, steady.innovation_cov, WINDOW, 200.0, "max", False, -1
+    )
     every = glr_sequence(setup, jnp.asarray(innovations))
     np.testing.assert_allclose(every.statistic, ref.statistic, rtol=1e-10, atol=1e-12)
     np.testing.assert_array_equal(every.onset_offset, ref.onset_offset)
@@ -239,17 +263,25 @@ def test_detector_alarms_after_onset_with_right_label(monte_carlo, detect, index
 
 
 def test_paper_threshold_values():
-    np.testing.assert_allclose(glrt_threshold(0.005, 6, 10), scipy.stats.chi2.isf(0.005, 60), rtol=1e-10)
-    np.testing.assert_allclose(glrt_threshold(0.005, 6, 10, "bonferroni"), scipy.stats.chi2.isf(0.005 / 60, 1),
-                               rtol=1e-10)
+    np.testing.assert_allclose(
+        glrt_threshold(0.005, 6, 10), scipy.stats.chi2.isf(0.005, 60), rtol=1e-10
+    )
+    np.testing.assert_allclose(
+        glrt_threshold(0.005, 6, 10, "bonferroni"), scipy.stats.chi2.isf(0.005 / 60, 1), rtol=1e-10
+    )
 
 
 def test_paper_isolation_logic():
     """Eq. (24): actuator only when the actuator and T4 GLRs both exceed the threshold."""
     from jaxfdi.detection._glrt import _paper_isolation
 
-    cases = [([20, 1, 1, 1, 1, 20], 0), ([20, 1, 1, 1, 15, 5], 4), ([5, 1, 12, 1, 1, 3], 2),
-             ([20, 1, 1, 1, 1, 5], 0), ([3, 1, 1, 1, 1, 5], 5)]
+    cases = [
+        ([20, 1, 1, 1, 1, 20], 0),
+        ([20, 1, 1, 1, 15, 5], 4),
+        ([5, 1, 12, 1, 1, 3], 2),
+        ([20, 1, 1, 1, 1, 5], 0),
+        ([3, 1, 1, 1, 1, 5], 5),
+    ]
     statistic = jnp.asarray([c[0] for c in cases], float)
     fallback = jnp.argmax(statistic, axis=1)
     got = jax.vmap(lambda l, f: _paper_isolation(l, 10.0, NUM_INPUTS, 5, f))(statistic, fallback)
@@ -258,10 +290,19 @@ def test_paper_isolation_logic():
 
 def test_float32_stays_float32(engine):
     model, steady, _ = engine
-    cast = lambda tree: jax.tree.map(lambda a: jnp.asarray(a, jnp.float32), tree)  # noqa: E731
-    det = glrt_detector(cast(model), cast(steady.gain), cast(steady.innovation_cov), WINDOW, 200.0, isolation="paper")
+    cast = lambda tree: jax.tree.map(lambda a: jnp.asarray(a, jnp.float32), tree)
+    det = glrt_detector(
+        cast(model),
+        cast(steady.gain),
+        cast(steady.innovation_cov),
+        WINDOW,
+        200.0,
+        isolation="paper",
+    )
     innovations = np.random.default_rng(4).normal(size=(15, 5)).astype(np.float32) * 3
-    state, decisions = jax.jit(lambda e: jax.lax.scan(det.step, det.init(), e))(jnp.asarray(innovations))
+    state, decisions = jax.jit(lambda e: jax.lax.scan(det.step, det.init(), e))(
+        jnp.asarray(innovations)
+    )
     assert state.window.dtype == jnp.float32
     for value in (decisions.statistic, decisions.estimate):
         assert value.dtype == jnp.float32 and np.all(np.isfinite(np.asarray(value)))
@@ -273,7 +314,11 @@ def test_bad_input_names_the_argument(engine):
     det = glrt_detector(model, K, S, WINDOW, 200.0)
     with pytest.raises(ValueError, match="^innovation:"):
         det.step(det.init(), jnp.zeros(4))
-    for window, error in ((0, ValueError), (-3, ValueError), (2.5, TypeError)):  # a float is not a count
+    for window, error in (
+        (0, ValueError),
+        (-3, ValueError),
+        (2.5, TypeError),
+    ):  # a float is not a count
         with pytest.raises(error, match="^window:"):
             glrt_detector(model, K, S, window, 200.0)
     for threshold in (0.0, -1.0, np.inf):

@@ -5,6 +5,7 @@ knows the fault, on engine runs with an actuator step then a P4 sensor step.
 References: the corrected filter's predicted mean against a plain NumPy Kalman filter
 (covariance recursion from the scipy DARE solution) run on the model with the detected
 step inputs added; the steady-state check against scipy's DARE; rates by binomial bounds."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,6 +14,7 @@ import scipy.linalg
 import scipy.stats
 
 import jaxfdi
+from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.detection import (
     corrected_glrt,
     fault_directions,
@@ -23,7 +25,6 @@ from jaxfdi.detection import (
 )
 from jaxfdi.detection._glrt_transient import time_varying_signatures
 from jaxfdi.models import engine_model
-from jaxfdi._riccati import steady_state_kalman
 
 WINDOW, T, U = 10, 130, 0.01
 # (direction, onset, size): the seed-003 actuator bias (0.0005 kg/s, direction 0), then the
@@ -39,7 +40,10 @@ def engine():
 
 
 def _numpy(model):
-    return [np.asarray(a, np.float64) for a in (model.Phi, model.Gamma, model.C, model.D, model.Q, model.R)]
+    return [
+        np.asarray(a, np.float64)
+        for a in (model.Phi, model.Gamma, model.C, model.D, model.Q, model.R)
+    ]
 
 
 def _directions(model):
@@ -76,7 +80,11 @@ def _numpy_kf(model, ys, faults=(), P=None, u=U):
     (T, n), the innovations (T, m) and their covariances S_k (T, m, m)."""
     Phi, Gamma, C, D, Q, R = _numpy(model)
     g, h = _directions(model)
-    P = scipy.linalg.solve_discrete_are(Phi.T, C.T, Q, R) if P is None else np.asarray(P, np.float64)
+    P = (
+        scipy.linalg.solve_discrete_are(Phi.T, C.T, Q, R)
+        if P is None
+        else np.asarray(P, np.float64)
+    )
     m, means, innovations, covs = np.zeros(Phi.shape[0]), [], [], []
     for k, y in enumerate(ys):
         f = np.zeros(g.shape[1])
@@ -109,10 +117,14 @@ def runner(engine, threshold):
     us = jnp.full((T, 1), U)
 
     def make(correct, recursive):
-        algo = corrected_glrt(engine, WINDOW, threshold, confirm=CONFIRM, correct=correct, recursive=recursive)
+        algo = corrected_glrt(
+            engine, WINDOW, threshold, confirm=CONFIRM, correct=correct, recursive=recursive
+        )
 
         def one(ys):
-            return jax.lax.scan(lambda s, yu: algo.step(s, *yu), algo.init(jnp.zeros(7)), (ys, us))[1]
+            return jax.lax.scan(lambda s, yu: algo.step(s, *yu), algo.init(jnp.zeros(7)), (ys, us))[
+                1
+            ]
 
         return jax.jit(jax.vmap(one))
 
@@ -129,8 +141,16 @@ def study(engine, runner):
 def _events(info, run):
     """(step, direction, onset, size, information) of each confirmed detection of one run."""
     steps = np.flatnonzero(info.confirmed[run])
-    return [(int(k), int(info.decision.label[run, k]) - 1, int(info.onset[run, k]),
-             float(info.decision.estimate[run, k]), float(info.information[run, k])) for k in steps]
+    return [
+        (
+            int(k),
+            int(info.decision.label[run, k]) - 1,
+            int(info.onset[run, k]),
+            float(info.decision.estimate[run, k]),
+            float(info.information[run, k]),
+        )
+        for k in steps
+    ]
 
 
 # ------------------------------------------------------------------ steady-state assumption
@@ -146,7 +166,9 @@ def test_steady_state_check_fires_off_p_ss_and_not_at_it(engine, threshold):
     glrt_detector(engine, K, S, WINDOW, threshold)
     glrt_detector(engine, K, S, WINDOW, threshold, recursive=True)
     for cov in (10 * P, Q, P * (1 + 1e-4)):
-        with pytest.raises(ValueError, match=r"^cov: expected steady_state_kalman\(model\).predicted_cov"):
+        with pytest.raises(
+            ValueError, match=r"^cov: expected steady_state_kalman\(model\).predicted_cov"
+        ):
             algo.init(np.zeros(7), cov)
     # the gain and S of a KF started at Q, one step in: a transient filter
     S1 = C @ Q @ C.T + R
@@ -154,7 +176,9 @@ def test_steady_state_check_fires_off_p_ss_and_not_at_it(engine, threshold):
     for recursive in (False, True):
         with pytest.raises(ValueError, match=r"^gain: expected steady_state_kalman\(model\).gain"):
             glrt_detector(engine, K1, S, WINDOW, threshold, recursive=recursive)
-        with pytest.raises(ValueError, match=r"^innovation_cov: expected steady_state_kalman\(model\)"):
+        with pytest.raises(
+            ValueError, match=r"^innovation_cov: expected steady_state_kalman\(model\)"
+        ):
             glrt_detector(engine, K, S1, WINDOW, threshold, recursive=recursive)
     for confirm in (0, WINDOW + 1):
         with pytest.raises(ValueError, match="^confirm:"):
@@ -171,10 +195,16 @@ def test_time_varying_signatures_equal_two_filter_runs(engine):
     onsets, length = (0, 3, 17), WINDOW
     T_short = max(onsets) + length
     cases = [(i, onset) for onset in onsets for i in range(6)]
-    ys = np.stack([_simulate(engine, [(i, onset, 1.0)], 1, seed=5)[0, :T_short] for i, onset in cases]
-                  + [_simulate(engine, [], 1, seed=5)[0, :T_short]])
+    ys = np.stack(
+        [_simulate(engine, [(i, onset, 1.0)], 1, seed=5)[0, :T_short] for i, onset in cases]
+        + [_simulate(engine, [], 1, seed=5)[0, :T_short]]
+    )
     kf = jaxfdi.filters.kalman_filter(engine)
-    run = jax.jit(lambda y: jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), P0), y, jnp.full((T_short, 1), U))[1])
+    run = jax.jit(
+        lambda y: jaxfdi.filters.run_filter(
+            kf, kf.init(jnp.zeros(7), P0), y, jnp.full((T_short, 1), U)
+        )[1]
+    )
     innovations = np.stack([np.asarray(run(y).innovation) for y in ys])
     directions = fault_directions(engine)
     steady_G = np.asarray(fault_signatures(engine, steady.gain, directions, length))
@@ -182,7 +212,7 @@ def test_time_varying_signatures_equal_two_filter_runs(engine):
         G = np.asarray(time_varying_signatures(engine, P0, directions, onset, length))[:, :, i]
         scale = np.max(np.abs(G))
         np.testing.assert_array_equal(response[:onset], 0.0)
-        np.testing.assert_allclose(response[onset:onset + length], G, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(response[onset : onset + length], G, rtol=0, atol=1e-10 * scale)
         if onset == 0:
             assert np.max(np.abs(steady_G[:, :, i] - G)) > 1e-2 * scale, i
 
@@ -207,12 +237,16 @@ def test_transient_detector_equals_numpy_double_loop(engine):
             for k in range(T_short):
                 ys_free.append(C @ x + h[:, i] * (k >= theta))
                 x = Phi @ x + g[:, i] * (k >= theta)
-            signature[i, theta] = _numpy_kf(engine, np.array(ys_free), P=P0, u=0.0)[1] if theta < T_short else zero
+            signature[i, theta] = (
+                _numpy_kf(engine, np.array(ys_free), P=P0, u=0.0)[1] if theta < T_short else zero
+            )
     outs = {}
     for recursive in (False, True):
         det = transient_glrt_detector(engine, P0, window, 30.0, recursive=recursive)
-        outs[recursive] = jax.tree.map(np.asarray, jax.jit(lambda e, det=det: jax.lax.scan(det.step, det.init(), e))(
-            jnp.asarray(eps))[1])
+        outs[recursive] = jax.tree.map(
+            np.asarray,
+            jax.jit(lambda e, det=det: jax.lax.scan(det.step, det.init(), e))(jnp.asarray(eps))[1],
+        )
     for k in (0, 4, 7, 9, 15, T_short - 1):
         best, magnitude = np.full(6, -np.inf), np.zeros(6)
         for theta in range(max(0, k - window + 1), k + 1):
@@ -250,12 +284,16 @@ def test_corrected_mean_equals_known_fault_filter(engine, study, recursive):
         for j, (k, *_) in enumerate(events):
             known = [(direction, onset, size) for _, direction, onset, size, _ in events[: j + 1]]
             reference = _known_fault_filter(engine, ys[run], known)
-            end = events[j + 1][0] if j + 1 < len(events) else T  # the next correction changes the mean at its step
+            end = (
+                events[j + 1][0] if j + 1 < len(events) else T
+            )  # the next correction changes the mean at its step
             got = info.predicted_mean[run, k:end]
             scale = np.max(np.abs(reference[k:end]), axis=0)  # per state component
             worst = max(worst, np.max(np.abs(got - reference[k:end]) / scale))
             checked += end - k
-    print(f"corrected mean vs known-fault KF: worst relative difference {worst:.2e} over {checked} steps")
+    print(
+        f"corrected mean vs known-fault KF: worst relative difference {worst:.2e} over {checked} steps"
+    )
     assert worst <= 1e-10 and checked > 100
 
 
@@ -268,9 +306,15 @@ def test_recursive_equals_windowed_with_correction(study):
     np.testing.assert_array_equal(recursive.decision.label, windowed.decision.label)
     np.testing.assert_array_equal(recursive.decision.alarm, windowed.decision.alarm)
     np.testing.assert_array_equal(recursive.onset, windowed.onset)
-    np.testing.assert_allclose(recursive.decision.statistic, windowed.decision.statistic, rtol=1e-8, atol=1e-8)
-    np.testing.assert_allclose(recursive.predicted_mean, windowed.predicted_mean, rtol=1e-10,
-                               atol=1e-10 * np.abs(windowed.predicted_mean).max())
+    np.testing.assert_allclose(
+        recursive.decision.statistic, windowed.decision.statistic, rtol=1e-8, atol=1e-8
+    )
+    np.testing.assert_allclose(
+        recursive.predicted_mean,
+        windowed.predicted_mean,
+        rtol=1e-10,
+        atol=1e-10 * np.abs(windowed.predicted_mean).max(),
+    )
 
 
 # ------------------------------------------------------------------ two faults in sequence
@@ -298,16 +342,31 @@ def test_two_faults_in_sequence_both_detected_with_correction(study):
     good, extra = [0, 0], 0
     for run in range(RUNS):
         found, events = _score(info, run)
-        assert not [e for e in events if e[0] < FAULTS[0][1]], events  # no false alarm before the faults
+        assert not [e for e in events if e[0] < FAULTS[0][1]], (
+            events
+        )  # no false alarm before the faults
         extra += len(events) > sum(hit is not None for hit in found)
         for j, ((direction, onset, size), hit) in enumerate(zip(FAULTS, found)):
             if hit is None:
                 continue
             d_hat, theta_hat, nu_hat, information = hit
-            good[j] += (d_hat == direction and abs(theta_hat - onset) <= 2
-                        and abs(nu_hat - size) * np.sqrt(information) <= 4)
-    print("corrected: runs with fault 1 / fault 2 right:", good, "of", RUNS, "minimum", minimum,
-          "runs with another confirmed detection:", extra, "maximum", scipy.stats.binom.isf(1e-3, RUNS, 0.25))
+            good[j] += (
+                d_hat == direction
+                and abs(theta_hat - onset) <= 2
+                and abs(nu_hat - size) * np.sqrt(information) <= 4
+            )
+    print(
+        "corrected: runs with fault 1 / fault 2 right:",
+        good,
+        "of",
+        RUNS,
+        "minimum",
+        minimum,
+        "runs with another confirmed detection:",
+        extra,
+        "maximum",
+        scipy.stats.binom.isf(1e-3, RUNS, 0.25),
+    )
     assert min(good) >= minimum, good
     assert extra <= scipy.stats.binom.isf(1e-3, RUNS, 0.25)
 
@@ -327,8 +386,16 @@ def test_without_correction_the_second_fault_is_missed_or_mislabelled(study):
             count += hit is not None and hit[0] == FAULTS[1][0] and abs(hit[1] - FAULTS[1][1]) <= 2
         right[key] = count
     maximum = scipy.stats.binom.isf(1e-3, RUNS, 0.5)
-    print("second fault confirmed right: corrected", right[(True, False)], "uncorrected", right[(False, False)],
-          "of", RUNS, "uncorrected maximum", maximum)
+    print(
+        "second fault confirmed right: corrected",
+        right[(True, False)],
+        "uncorrected",
+        right[(False, False)],
+        "of",
+        RUNS,
+        "uncorrected maximum",
+        maximum,
+    )
     assert right[(False, False)] <= maximum
     assert right[(True, False)] - right[(False, False)] >= RUNS // 2
 
@@ -336,7 +403,10 @@ def test_without_correction_the_second_fault_is_missed_or_mislabelled(study):
 def test_float32_stays_float32(engine, threshold):
     """A float32 model gives a float32 corrected filter and detector, finite."""
     model = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32), engine)
-    y, u = jnp.asarray(_simulate(engine, [], 1, seed=1)[0, 0], jnp.float32), jnp.full((1,), U, jnp.float32)
+    y, u = (
+        jnp.asarray(_simulate(engine, [], 1, seed=1)[0, 0], jnp.float32),
+        jnp.full((1,), U, jnp.float32),
+    )
     algo = corrected_glrt(model, WINDOW, threshold)
     state, info = jax.jit(algo.step)(algo.init(jnp.zeros(7, jnp.float32)), y, u)
     for value in (state.mean, state.detector.window, info.decision.statistic, info.predicted_mean):

@@ -1,15 +1,16 @@
 """The recursive (running-sum) GLRT against the windowed one and a NumPy double loop:
 statistic, onset, magnitude, label and alarm at every step of faulty engine runs."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import jaxfdi
+from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.detection import glrt_detector, glrt_threshold
 from jaxfdi.detection._glrt import fault_directions, fault_signatures
 from jaxfdi.models import engine_model
-from jaxfdi._riccati import steady_state_kalman
 
 T, ONSET = 90, 40
 SIZES = [0.0005, 135.0, 16.99, 2.21, 8.285, 5.125]  # seed 003: actuator, then sensors 1..5
@@ -31,10 +32,17 @@ def innovations(engine):
     def one(fault, key):
         _, truth, _ = jaxfdi.simulate(jaxfdi.linear_simulator(model, fault), jnp.zeros(7), us, key)
         kf = jaxfdi.filters.kalman_filter(model)
-        return jaxfdi.filters.run_filter(kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us)[1].innovation
+        return jaxfdi.filters.run_filter(
+            kf, kf.init(jnp.zeros(7), steady.predicted_cov), truth.measurement, us
+        )[1].innovation
 
-    faults = jaxfdi.stack_faults([jaxfdi.no_fault(), jaxfdi.fault("bias", "sensor", 3, ONSET, SIZES[4]),
-                                  jaxfdi.fault("bias", "actuator", 0, ONSET, SIZES[0])])
+    faults = jaxfdi.stack_faults(
+        [
+            jaxfdi.no_fault(),
+            jaxfdi.fault("bias", "sensor", 3, ONSET, SIZES[4]),
+            jaxfdi.fault("bias", "actuator", 0, ONSET, SIZES[0]),
+        ]
+    )
     keys = jax.random.split(jax.random.key(3), 3)
     return np.asarray(jax.jit(jax.vmap(one))(faults, keys))
 
@@ -58,7 +66,9 @@ def test_recursive_equals_windowed(engine, innovations, window, isolation):
     np.testing.assert_array_equal(final_r.onset_offset, final_w.onset_offset)
     np.testing.assert_array_equal(final_r.count, final_w.count)
     alarm = np.asarray(recursive.alarm)
-    assert not alarm[:, :ONSET].any() and alarm[1:, ONSET:].any(axis=1).all()  # the faults are found
+    assert (
+        not alarm[:, :ONSET].any() and alarm[1:, ONSET:].any(axis=1).all()
+    )  # the faults are found
 
 
 def test_recursive_equals_numpy_double_loop(engine, innovations):
@@ -80,7 +90,9 @@ def test_recursive_equals_numpy_double_loop(engine, innovations):
             glr = np.where(R > 0, d**2 / np.where(R > 0, R, 1.0), 0.0)
             better = glr > best
             best = np.where(better, glr, best)
-            magnitude = np.where(better, np.where(R > 0, d / np.where(R > 0, R, 1.0), 0.0), magnitude)
+            magnitude = np.where(
+                better, np.where(R > 0, d / np.where(R > 0, R, 1.0), 0.0), magnitude
+            )
         np.testing.assert_allclose(got.statistic[0, k], best.max(), rtol=1e-9)
         assert got.label[0, k] == 1 + np.argmax(best)
         np.testing.assert_allclose(got.estimate[0, k], magnitude[np.argmax(best)], rtol=1e-9)
@@ -88,8 +100,14 @@ def test_recursive_equals_numpy_double_loop(engine, innovations):
 
 def test_float32_and_bad_input(engine, innovations):
     model, steady = engine
-    det = glrt_detector(model, jnp.asarray(steady.gain, jnp.float32), jnp.asarray(steady.innovation_cov, jnp.float32),
-                        10, 50.0, recursive=True)
+    det = glrt_detector(
+        model,
+        jnp.asarray(steady.gain, jnp.float32),
+        jnp.asarray(steady.innovation_cov, jnp.float32),
+        10,
+        50.0,
+        recursive=True,
+    )
     state, decision = jax.jit(det.step)(det.init(), jnp.asarray(innovations[1, 0], jnp.float32))
     assert state.correlation.dtype == jnp.float32 and decision.statistic.dtype == jnp.float32
     assert np.isfinite(decision.statistic)
@@ -99,8 +117,12 @@ def test_float32_and_bad_input(engine, innovations):
         glrt_detector(model, steady.gain, steady.innovation_cov, 10, -1.0, recursive=True)
     with pytest.raises(TypeError, match="^recursive: expected True or False"):
         glrt_detector(model, steady.gain, steady.innovation_cov, 10, 50.0, recursive="yes")
-    with pytest.raises(TypeError, match="^recursive: expected True or False"):  # the other two GLRTs' engine switch
-        jaxfdi.detection.transient_glrt_detector(model, jnp.eye(model.Phi.shape[0]), 10, 50.0, recursive=1)
+    with pytest.raises(
+        TypeError, match="^recursive: expected True or False"
+    ):  # the other two GLRTs' engine switch
+        jaxfdi.detection.transient_glrt_detector(
+            model, jnp.eye(model.Phi.shape[0]), 10, 50.0, recursive=1
+        )
     with pytest.raises(TypeError, match="^recursive: expected True or False"):
         jaxfdi.detection.corrected_glrt(model, 10, 50.0, recursive=None)
     with pytest.raises(TypeError, match="^correct: expected True or False"):

@@ -1,16 +1,17 @@
 """The known-change GLR / CUSUM bank against independent references: a NumPy double loop
 over onsets, Page's CUSUM recursion, the exact Gaussian law of the fault-free statistic
 (scipy), and a noise-free engine fault."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy import stats
 
+from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.detection import fault_directions, fault_signatures, known_change_detector
 from jaxfdi.detection._known_change import known_change_bank, known_change_by_onset
 from jaxfdi.models import engine_model
-from jaxfdi._riccati import steady_state_kalman
 
 T, N, M, D = 24, 5, 3, 2
 
@@ -23,7 +24,11 @@ def case():
     G = rng.normal(size=(N, M, D))
     nu = np.array([1.3, -0.7])
     eps = rng.multivariate_normal(np.zeros(M), S, size=T) + 0.8 * np.concatenate(
-        [np.zeros((T // 2, M)), np.einsum("lmd,d->lm", G[np.minimum(np.arange(T - T // 2), N - 1)], [1.0, 0.0])])
+        [
+            np.zeros((T // 2, M)),
+            np.einsum("lmd,d->lm", G[np.minimum(np.arange(T - T // 2), N - 1)], [1.0, 0.0]),
+        ]
+    )
     return S, G, nu, eps
 
 
@@ -42,11 +47,15 @@ def _brute(S, G, nu, eps, tail, pairwise=False):
             total = np.zeros(G.shape[2])
             for j in range(theta, k + 1):
                 g = G[min(j - theta, N - 1)]
-                total += nu * (g.T @ Sinv @ eps[j]) - 0.5 * nu**2 * np.einsum("md,mn,nd->d", g, Sinv, g)
+                total += nu * (g.T @ Sinv @ eps[j]) - 0.5 * nu**2 * np.einsum(
+                    "md,mn,nd->d", g, Sinv, g
+                )
             out[k] = np.maximum(out[k], total)
         if pairwise:
-            out[k] = [out[k, i] - max([0.0] + [out[k, j] for j in range(len(out[k])) if j != i])
-                      for i in range(len(out[k]))]
+            out[k] = [
+                out[k, i] - max([0.0] + [out[k, j] for j in range(len(out[k])) if j != i])
+                for i in range(len(out[k]))
+            ]
     return out
 
 
@@ -72,14 +81,20 @@ def test_constant_signature_is_page_cusum(case):
     S, G, nu, eps = case
     constant = np.broadcast_to(G[2], G.shape)
     Sinv = np.linalg.inv(S)
-    llr = nu * np.einsum("md,mn,kn->kd", G[2], Sinv, eps) - 0.5 * nu**2 * np.einsum("md,mn,nd->d", G[2], Sinv, G[2])
+    llr = nu * np.einsum("md,mn,kn->kd", G[2], Sinv, eps) - 0.5 * nu**2 * np.einsum(
+        "md,mn,nd->d", G[2], Sinv, G[2]
+    )
     page = np.zeros_like(llr)
     for k in range(T):
         page[k] = np.maximum(0.0, (page[k - 1] if k else 0.0) + llr[k])
     _, decision = _run(known_change_bank(constant, S, nu, threshold=1.0, tail=True), eps)
-    np.testing.assert_allclose(np.maximum(decision.statistic, 0.0), page.max(axis=1), rtol=1e-10, atol=1e-12)
-    partial = np.array([[llr[k - o:k + 1].sum(axis=0) for o in range(min(N, k + 1))] for k in range(T)],
-                       dtype=object)
+    np.testing.assert_allclose(
+        np.maximum(decision.statistic, 0.0), page.max(axis=1), rtol=1e-10, atol=1e-12
+    )
+    partial = np.array(
+        [[llr[k - o : k + 1].sum(axis=0) for o in range(min(N, k + 1))] for k in range(T)],
+        dtype=object,
+    )
     windowed = np.array([np.max(p, axis=0).max() for p in partial])
     _, decision = _run(known_change_bank(constant, S, nu, threshold=1.0), eps)
     np.testing.assert_allclose(decision.statistic, windowed, rtol=1e-10, atol=1e-12)
@@ -106,7 +121,9 @@ def test_fault_free_exceedance_matches_gaussian_law():
     runs = 20000
     eps = rng.multivariate_normal(np.zeros(2), S, size=(runs, 3))
     det = known_change_bank(G, S, nu, threshold=h)
-    statistic = jax.jit(jax.vmap(lambda e: jax.lax.scan(det.step, det.init(), e)[1].statistic))(jnp.asarray(eps))
+    statistic = jax.jit(jax.vmap(lambda e: jax.lax.scan(det.step, det.init(), e)[1].statistic))(
+        jnp.asarray(eps)
+    )
     count = int(np.sum(np.asarray(statistic)[:, 2] > h))
     assert stats.binomtest(count, runs, p_exceed).pvalue > 1e-4, (count / runs, p_exceed)
 
@@ -121,19 +138,31 @@ def test_engine_noise_free_fault_and_transformations():
     sizes = np.array([0.0005, 135.0, 16.99, 2.21, 8.285, 5.125])
     G = np.asarray(fault_signatures(model, steady.gain, fault_directions(model), window))
     S = np.asarray(steady.innovation_cov)
-    det = known_change_detector(model, steady.gain, steady.innovation_cov, sizes, window, threshold=10.0)
+    det = known_change_detector(
+        model, steady.gain, steady.innovation_cov, sizes, window, threshold=10.0
+    )
     onset = 3
     eps = np.zeros((6, window + onset, 5))
     for i in range(6):
         eps[i, onset:] = sizes[i] * G[:window, :, i]
-    final, decision = jax.jit(jax.vmap(lambda e: jax.lax.scan(det.step, det.init(), e)))(jnp.asarray(eps))
+    final, decision = jax.jit(jax.vmap(lambda e: jax.lax.scan(det.step, det.init(), e)))(
+        jnp.asarray(eps)
+    )
     Sinv = np.linalg.inv(S)
-    expected = np.array([0.5 * sizes[i] ** 2 * sum(G[l, :, i] @ Sinv @ G[l, :, i] for l in range(window))
-                         for i in range(6)])
-    own = np.asarray(final.log_ratio)[np.arange(6), window - 1, np.arange(6)]  # onset offset N-1 = true onset
+    expected = np.array(
+        [
+            0.5 * sizes[i] ** 2 * sum(G[l, :, i] @ Sinv @ G[l, :, i] for l in range(window))
+            for i in range(6)
+        ]
+    )
+    own = np.asarray(final.log_ratio)[
+        np.arange(6), window - 1, np.arange(6)
+    ]  # onset offset N-1 = true onset
     np.testing.assert_allclose(own, expected, rtol=1e-9)
     np.testing.assert_array_equal(np.asarray(decision.label)[:, -1], np.arange(1, 7))
-    det32 = known_change_bank(G.astype(np.float32), S.astype(np.float32), sizes.astype(np.float32), 10.0)
+    det32 = known_change_bank(
+        G.astype(np.float32), S.astype(np.float32), sizes.astype(np.float32), 10.0
+    )
     _, d32 = jax.lax.scan(det32.step, det32.init(), jnp.asarray(eps[1], jnp.float32))
     assert d32.statistic.dtype == jnp.float32 and np.all(np.isfinite(np.asarray(d32.statistic)))
 

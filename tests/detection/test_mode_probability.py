@@ -1,5 +1,6 @@
 """Mode-probability decision (seed 003 eq. 13, with optional confirmation) against a
 plain Python loop over random probability sequences."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -20,7 +21,9 @@ def _reference(mu, estimates, threshold, confirm, normal=0):
             candidate = label
         else:
             held, candidate = 0, -1
-        out.append((fault[label], held >= np.broadcast_to(confirm, p.shape)[label], label, e[label]))
+        out.append(
+            (fault[label], held >= np.broadcast_to(confirm, p.shape)[label], label, e[label])
+        )
     return [np.array(column) for column in zip(*out)]
 
 
@@ -35,7 +38,9 @@ def test_equals_reference_loop(confirm, normal):
     mu /= mu.sum(1, keepdims=True)
     estimates = rng.normal(size=(T, M))
     det = mode_probability_detector(0.5, normal_mode=normal, confirm_steps=confirm)
-    _, decision = jax.jit(lambda xs: jax.lax.scan(det.step, det.init(), xs))((jnp.asarray(mu), jnp.asarray(estimates)))
+    _, decision = jax.jit(lambda xs: jax.lax.scan(det.step, det.init(), xs))(
+        (jnp.asarray(mu), jnp.asarray(estimates))
+    )
     statistic, alarm, label, estimate = _reference(mu, estimates, 0.5, confirm, normal)
     assert alarm.any() and not alarm.all()
     np.testing.assert_allclose(decision.statistic, statistic, rtol=1e-12)
@@ -48,16 +53,18 @@ def test_equals_reference_loop(confirm, normal):
 def test_per_mode_thresholds_equal_reference_loop(confirm):
     rng = np.random.default_rng(confirm)
     T, M = 300, 5
-    mu = rng.dirichlet(np.full(M, 0.5), size=T)              # persistent, mid-range probabilities
+    mu = rng.dirichlet(np.full(M, 0.5), size=T)  # persistent, mid-range probabilities
     for k in range(1, T):
         mu[k] = 0.7 * mu[k - 1] + 0.3 * mu[k]
     estimates = rng.normal(size=(T, M))
-    threshold = np.array([1.0, 0.35, 0.6, 0.9, 0.5])   # the normal mode's entry is not used
+    threshold = np.array([1.0, 0.35, 0.6, 0.9, 0.5])  # the normal mode's entry is not used
     det = mode_probability_detector(jnp.asarray(threshold), confirm_steps=confirm)
-    _, decision = jax.jit(lambda xs: jax.lax.scan(det.step, det.init(), xs))((jnp.asarray(mu), jnp.asarray(estimates)))
+    _, decision = jax.jit(lambda xs: jax.lax.scan(det.step, det.init(), xs))(
+        (jnp.asarray(mu), jnp.asarray(estimates))
+    )
     _, alarm, label, _ = _reference(mu, estimates, threshold, confirm)
     scalar = _reference(mu, estimates, 0.5, confirm)[1]
-    assert alarm.any() and not np.array_equal(alarm, scalar)   # the per-mode levels matter here
+    assert alarm.any() and not np.array_equal(alarm, scalar)  # the per-mode levels matter here
     np.testing.assert_array_equal(decision.alarm, alarm)
     np.testing.assert_array_equal(decision.label, label)
 
@@ -70,11 +77,16 @@ def test_per_mode_confirmation_equals_reference_loop():
     mu = np.exp(logits - logits.max(1, keepdims=True))
     mu /= mu.sum(1, keepdims=True)
     estimates = rng.normal(size=(T, M))
-    confirm = np.array([1, 4, 1, 2, 3])   # the normal mode's entry is not used
+    confirm = np.array([1, 4, 1, 2, 3])  # the normal mode's entry is not used
     det = mode_probability_detector(0.5, confirm_steps=confirm)
-    _, decision = jax.jit(lambda xs: jax.lax.scan(det.step, det.init(), xs))((jnp.asarray(mu), jnp.asarray(estimates)))
+    _, decision = jax.jit(lambda xs: jax.lax.scan(det.step, det.init(), xs))(
+        (jnp.asarray(mu), jnp.asarray(estimates))
+    )
     _, alarm, label, _ = _reference(mu, estimates, 0.5, confirm)
-    for uniform in (1, 4):   # neither uniform length gives these decisions: the per-mode lengths matter
+    for uniform in (
+        1,
+        4,
+    ):  # neither uniform length gives these decisions: the per-mode lengths matter
         assert not np.array_equal(alarm, _reference(mu, estimates, 0.5, uniform)[1])
     np.testing.assert_array_equal(decision.alarm, alarm)
     np.testing.assert_array_equal(decision.label, label)
@@ -82,7 +94,9 @@ def test_per_mode_confirmation_equals_reference_loop():
 
 @pytest.mark.parametrize("confirm", [0, 1.5, [1, 0, 2], [[1, 2]], []])
 def test_bad_confirm_steps_raise(confirm):
-    with pytest.raises((ValueError, TypeError), match="confirm_steps: expected an integer >= 1, or one per mode"):
+    with pytest.raises(
+        (ValueError, TypeError), match="confirm_steps: expected an integer >= 1, or one per mode"
+    ):
         mode_probability_detector(0.5, confirm_steps=confirm)
 
 
@@ -103,7 +117,9 @@ def test_confirmation_delays_and_filters_flicker():
         det = mode_probability_detector(0.5, confirm_steps=confirm)
         _, decision = jax.lax.scan(det.step, det.init(), jnp.asarray(mu))
         alarm = np.asarray(decision.alarm)
-        assert int(np.argmax(alarm)) == first and np.asarray(decision.label)[first] == (1 if confirm == 1 else 2)
+        assert int(np.argmax(alarm)) == first and np.asarray(decision.label)[first] == (
+            1 if confirm == 1 else 2
+        )
         assert np.isnan(np.asarray(decision.estimate)).all()
 
 

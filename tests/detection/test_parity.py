@@ -6,6 +6,7 @@ for 2-D fault planes in a 3-D parity space, Table 1 of Park et al. (2004) as pri
 spec, the chi-square law of the fault-free statistic (binomial interval of its false-alarm
 count), an independent NumPy Monte Carlo of the missed-isolation probability.
 """
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -31,9 +32,11 @@ def spec():
 
 def _random_sets():
     rng = np.random.default_rng(4)
-    return [(rng.standard_normal((9, 3)), np.arange(9).reshape(3, 3)),   # three 3-axis sensors
-            (rng.standard_normal((7, 4)), np.arange(7)[:, None]),         # seven single channels, 4 states
-            (rng.standard_normal((8, 3)), np.arange(8).reshape(4, 2))]    # four 2-DOF sensors
+    return [
+        (rng.standard_normal((9, 3)), np.arange(9).reshape(3, 3)),  # three 3-axis sensors
+        (rng.standard_normal((7, 4)), np.arange(7)[:, None]),  # seven single channels, 4 states
+        (rng.standard_normal((8, 3)), np.arange(8).reshape(4, 2)),
+    ]  # four 2-DOF sensors
 
 
 @pytest.mark.parametrize("case", range(4))
@@ -73,11 +76,16 @@ def test_isolation_functions_equal_the_plane_normal_formula(spec):
     angles = np.asarray(ps.subspace_angles(spec))
     Q = np.asarray(spec.fault_bases)
     for i, k in ((0, 1), (0, 2), (1, 2)):
-        np.testing.assert_allclose(angles[i, k], np.sort(scipy.linalg.subspace_angles(Q[i], Q[k])), atol=1e-12)
+        np.testing.assert_allclose(
+            angles[i, k], np.sort(scipy.linalg.subspace_angles(Q[i], Q[k])), atol=1e-12
+        )
     space = ps.parity_space(*_random_sets()[0])
     Q = np.asarray(space.fault_bases)
-    np.testing.assert_allclose(np.asarray(ps.subspace_angles(space))[0, 2],
-                               np.sort(scipy.linalg.subspace_angles(Q[0], Q[2])), atol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(ps.subspace_angles(space))[0, 2],
+        np.sort(scipy.linalg.subspace_angles(Q[0], Q[2])),
+        atol=1e-12,
+    )
 
 
 TABLE_1 = [  # (fault type, sensors that cannot be told apart, fault vectors of each, rate affected)
@@ -110,7 +118,9 @@ def test_table_1(spec, fault_type, pair, vectors, rate):
         k = pair[1] if sensor == pair[0] else pair[0]
         assert abs(abs(faults[sensor, k] @ np.asarray(f, float)) / np.linalg.norm(f) - 1.0) < 1e-12
     angles = np.degrees(np.asarray(ps.subspace_angles(spec)))[pair[0], pair[1]]
-    np.testing.assert_allclose(angles, [0.0, 90.0], atol=1e-9)  # a shared line, and orthogonal planes
+    np.testing.assert_allclose(
+        angles, [0.0, 90.0], atol=1e-9
+    )  # a shared line, and orthogonal planes
 
 
 def test_fd_false_alarm_rate_within_its_binomial_interval(spec):
@@ -124,7 +134,10 @@ def test_fd_false_alarm_rate_within_its_binomial_interval(spec):
     alarms = int(jnp.sum(fd > threshold))
     low, high = scipy.stats.binom.interval(0.999, n, pfa)
     assert low <= alarms <= high, (alarms, low, high)
-    assert scipy.stats.kstest(np.asarray(fd[:20_000]) / SIGMA**2, scipy.stats.chi2(3).cdf).pvalue > 1e-3
+    assert (
+        scipy.stats.kstest(np.asarray(fd[:20_000]) / SIGMA**2, scipy.stats.chi2(3).cdf).pvalue
+        > 1e-3
+    )
 
 
 def test_isolation_threshold_meets_its_missed_isolation_probability(spec):
@@ -157,8 +170,12 @@ def test_isolation_threshold_meets_its_missed_isolation_probability(spec):
 
 def test_transformations_and_bad_input(spec):
     p = jax.random.normal(jax.random.key(2), (5, 3))
-    np.testing.assert_allclose(jax.jit(ps.isolation_functions)(spec, p), ps.isolation_functions(spec, p), atol=1e-15)
-    spaces = jax.vmap(lambda H: ps.parity_space(H, GROUPS))(jnp.stack([skewed_rate_axes(), -skewed_rate_axes()]))
+    np.testing.assert_allclose(
+        jax.jit(ps.isolation_functions)(spec, p), ps.isolation_functions(spec, p), atol=1e-15
+    )
+    spaces = jax.vmap(lambda H: ps.parity_space(H, GROUPS))(
+        jnp.stack([skewed_rate_axes(), -skewed_rate_axes()])
+    )
     np.testing.assert_allclose(jnp.einsum("sqm,smn->sqn", spaces.V, spaces.H), 0.0, atol=1e-12)
     with pytest.raises(ValueError, match="H: expected more channels"):
         ps.parity_space(np.eye(3))
@@ -167,9 +184,13 @@ def test_transformations_and_bad_input(spec):
     with pytest.raises(ValueError, match="groups: expected every channel in at most one group"):
         ps.parity_space(skewed_rate_axes(), [[0, 1], [1, 2]])
     with pytest.raises(ValueError, match="groups: expected at most q = m - n = 1 channels"):
-        ps.parity_space(np.vstack([np.eye(3), [[1.0, 1.0, 1.0]]]), [[0, 1], [2, 3]])  # q = 1 < d = 2
+        ps.parity_space(
+            np.vstack([np.eye(3), [[1.0, 1.0, 1.0]]]), [[0, 1], [2, 3]]
+        )  # q = 1 < d = 2
     with pytest.raises(ValueError, match="groups: the fault subspace of group 0"):
-        ps.parity_space(np.vstack([np.eye(3), np.eye(3)[:2]]), [[2], [0]])  # channel 2 alone measures z
+        ps.parity_space(
+            np.vstack([np.eye(3), np.eye(3)[:2]]), [[2], [0]]
+        )  # channel 2 alone measures z
     with pytest.raises(ValueError, match="groups: expected"):
         ps.parity_space(skewed_rate_axes(), [[0, 9]])
     with pytest.raises(ValueError, match="missed_isolation"):
@@ -186,19 +207,27 @@ def test_sensor_arrangement_geometry_and_optimiser(spec):
         q = rng.standard_normal((3, 4))
         H = sc.sensor_axes(jnp.asarray(q))
         pairs = np.asarray(H).reshape(3, 2, 3)
-        np.testing.assert_allclose(np.einsum("sij,skj->sik", pairs, pairs), np.broadcast_to(np.eye(2), (3, 2, 2)),
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            np.einsum("sij,skj->sik", pairs, pairs),
+            np.broadcast_to(np.eye(2), (3, 2, 2)),
+            atol=1e-12,
+        )
         iso = ISOLABILITY(H, GROUPS)
         angles = np.asarray(ps.subspace_angles(ps.parity_space(H, GROUPS)))[..., 1]
         np.testing.assert_allclose(np.asarray(iso.dihedral), angles * (1 - np.eye(3)), atol=1e-9)
         gram = np.asarray(ps.parity_space(H, GROUPS).V)
-        np.testing.assert_allclose(iso.detectability, [np.linalg.eigvalsh(gram[:, g].T @ gram[:, g])[0] for g in GROUPS],
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            iso.detectability,
+            [np.linalg.eigvalsh(gram[:, g].T @ gram[:, g])[0] for g in GROUPS],
+            atol=1e-12,
+        )
     iso = ISOLABILITY(spec.H, GROUPS)
     assert abs(np.degrees(float(iso.min_dihedral)) - 90.0) < 1e-9
     np.testing.assert_allclose(iso.detectability, 0.5, atol=1e-12)
     assert float(iso.isotropy) < 1e-12
-    result = sc.optimize_configuration(jax.random.key(1), starts=2, steps=150, objective="separation")
+    result = sc.optimize_configuration(
+        jax.random.key(1), starts=2, steps=150, objective="separation"
+    )
     best = ISOLABILITY(result.axes[result.best], GROUPS)
     assert np.all(np.asarray(result.objective[:, -1]) > np.asarray(result.objective[:, 0]))
     assert np.degrees(float(best.min_dihedral)) > 85.0 and float(np.min(best.detectability)) > 0.45

@@ -11,6 +11,7 @@ filter and the isolators run step by step (tolerance 1e-12, float64).
   step, started fresh. (Which hypothesis the credits favour on this toy model is not
   tested here: isolation performance is the wheel scenario's tests'.)
 """
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -48,23 +49,37 @@ ENGAGE = 1e-2 * jnp.eye(2)
 
 
 def stages(**kw):
-    options = dict(detection_threshold=1e30, nis_threshold=1e30, nis_window=3, credit_threshold=0.5,
-                   mode_threshold=0.9, mm_floor=1e-6, engage_cov=ENGAGE, confirm_steps=2)
+    options = dict(
+        detection_threshold=1e30,
+        nis_threshold=1e30,
+        nis_window=3,
+        credit_threshold=0.5,
+        mode_threshold=0.9,
+        mm_floor=1e-6,
+        engage_cov=ENGAGE,
+        confirm_steps=2,
+    )
     options.update(kw)
-    return two_stage_isolation(ekf(1.0, 1e-2), ekf, transition, field, jnp.asarray(1.0), HYPOTHESES, MODES, **options)
+    return two_stage_isolation(
+        ekf(1.0, 1e-2), ekf, transition, field, jnp.asarray(1.0), HYPOTHESES, MODES, **options
+    )
 
 
 def data(steps=40):
     rng = np.random.default_rng(0)
     x, ys = np.array([1.0, -0.8]), []
     for _ in range(steps):
-        x = x + DT * (-2.0 * x**3 + 0.3) + 0.01 * rng.standard_normal(2)  # the truth is hypothesis 2 (p = 2)
+        x = (
+            x + DT * (-2.0 * x**3 + 0.3) + 0.01 * rng.standard_normal(2)
+        )  # the truth is hypothesis 2 (p = 2)
         ys.append(x + 0.1 * rng.standard_normal(2))
     return jnp.asarray(np.array(ys)), jnp.full((2,), 0.3)
 
 
 def close(a, b):
-    jax.tree_util.tree_map(lambda x, y: np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-12), a, b)
+    jax.tree_util.tree_map(
+        lambda x, y: np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-12), a, b
+    )
 
 
 def test_banks_are_slaved_to_the_nominal_posterior_until_engaged():
@@ -81,9 +96,21 @@ def test_banks_are_slaved_to_the_nominal_posterior_until_engaged():
         close(state["bank"].estimator, bank_prior)
         close(state["bank"].prediction, bank_prior.mean)
         mode_prior = jax.vmap(lambda p: ekf(p).predict(start, u))(MODES)
-        close(state["mm"], multiple_model(ekf, MODES, 1e-6).init(mode_prior.mean, mode_prior.cov, jnp.full(4, 0.25)))
-        assert not bool(out.engaged) and not bool(out.decisions[2].alarm) and not bool(out.decisions[3].alarm)
-        close(state["credit"], credit_isolator(0.5, relative=True, label_offset=1, confirm_steps=2).init())
+        close(
+            state["mm"],
+            multiple_model(ekf, MODES, 1e-6).init(
+                mode_prior.mean, mode_prior.cov, jnp.full(4, 0.25)
+            ),
+        )
+        assert (
+            not bool(out.engaged)
+            and not bool(out.decisions[2].alarm)
+            and not bool(out.decisions[3].alarm)
+        )
+        close(
+            state["credit"],
+            credit_isolator(0.5, relative=True, label_offset=1, confirm_steps=2).init(),
+        )
         np.testing.assert_allclose(out.peaks[0], info.detection_parameter, rtol=1e-12)
 
 
@@ -96,7 +123,11 @@ def test_engaged_banks_run_on_their_own_and_the_credits_decide_from_the_next_ste
     credits = credit_isolator(0.5, relative=True, label_offset=1, confirm_steps=2)
     credit_state, credit_step = credits.init(), jax.jit(credits.step)
     step = jax.jit(fdi.step)
-    banks = jax.jit(lambda b, y: jax.vmap(lambda p, s: dual_filter(ekf(p), transition, field, p).step(s, y, u))(HYPOTHESES, b))
+    banks = jax.jit(
+        lambda b, y: jax.vmap(lambda p, s: dual_filter(ekf(p), transition, field, p).step(s, y, u))(
+            HYPOTHESES, b
+        )
+    )
     for y in ys[1:]:
         state, out = step(state, y, u)
         bank, info = banks(bank, y)

@@ -1,10 +1,16 @@
 """Seed 001's soft-threshold sigma from the details' sample variance (issue 27, item 5):
 ``sample_detail_sigma`` against NumPy on a hand-rolled Haar decomposition, the causal
 per-block sigma, and ``haar_denoise`` with per-block sigma equal to the constant form."""
+
 import numpy as np
 import pytest
 
-from jaxfdi.detection._wavelet import causal_detail_sigma, chi2_detail_sigma, haar_denoise, sample_detail_sigma
+from jaxfdi.detection._wavelet import (
+    causal_detail_sigma,
+    chi2_detail_sigma,
+    haar_denoise,
+    sample_detail_sigma,
+)
 
 
 def numpy_details(x, levels):
@@ -12,11 +18,17 @@ def numpy_details(x, levels):
     size = 2**levels
     out = [[] for _ in range(levels)]
     for b in range(x.shape[0] // size):
-        block = x[b * size:(b + 1) * size]
+        block = x[b * size : (b + 1) * size]
         for j in range(1, levels + 1):
             half = 2 ** (j - 1)
             for start in range(0, size, 2**j):
-                out[j - 1].append((block[start:start + half].mean(0) - block[start + half:start + 2 * half].mean(0)) / 2)
+                out[j - 1].append(
+                    (
+                        block[start : start + half].mean(0)
+                        - block[start + half : start + 2 * half].mean(0)
+                    )
+                    / 2
+                )
     return [np.array(d) for d in out]
 
 
@@ -39,20 +51,29 @@ def test_causal_sigma_uses_the_prior_until_the_window_is_complete():
     sigma = np.asarray(causal_detail_sigma(x, 2, 16, prior))
     assert sigma.shape == (10, 2, 3)
     np.testing.assert_array_equal(sigma[:4], np.broadcast_to(prior[None, :, None], (4, 2, 3)))
-    np.testing.assert_allclose(sigma[4:], np.broadcast_to(np.asarray(sample_detail_sigma(x, 2, 16))[None], (6, 2, 3)))
+    np.testing.assert_allclose(
+        sigma[4:], np.broadcast_to(np.asarray(sample_detail_sigma(x, 2, 16))[None], (6, 2, 3))
+    )
     # a constant per-block sigma denoises exactly as the (M, F) form
-    np.testing.assert_allclose(haar_denoise(x, 2, "soft", np.broadcast_to(sigma[-1], (10, 2, 3))),
-                               haar_denoise(x, 2, "soft", sigma[-1]), rtol=1e-14)
+    np.testing.assert_allclose(
+        haar_denoise(x, 2, "soft", np.broadcast_to(sigma[-1], (10, 2, 3))),
+        haar_denoise(x, 2, "soft", sigma[-1]),
+        rtol=1e-14,
+    )
     # and block b only depends on its own sigma
     mixed = np.asarray(haar_denoise(x, 2, "soft", sigma))
-    np.testing.assert_allclose(mixed[:16], np.asarray(haar_denoise(x, 2, "soft", prior))[:16], rtol=1e-14)
-    np.testing.assert_allclose(mixed[16:], np.asarray(haar_denoise(x, 2, "soft", sigma[-1]))[16:], rtol=1e-14)
+    np.testing.assert_allclose(
+        mixed[:16], np.asarray(haar_denoise(x, 2, "soft", prior))[:16], rtol=1e-14
+    )
+    np.testing.assert_allclose(
+        mixed[16:], np.asarray(haar_denoise(x, 2, "soft", sigma[-1]))[16:], rtol=1e-14
+    )
 
 
 def test_bad_windows_and_sigma_shapes_are_refused_by_name():
     x = np.ones((16, 2))
     with pytest.raises(ValueError, match="window"):
-        sample_detail_sigma(x, 2, 4)   # one block: no sample variance
+        sample_detail_sigma(x, 2, 4)  # one block: no sample variance
     with pytest.raises(ValueError, match="window"):
         sample_detail_sigma(x, 2, 32)  # longer than the statistic
     with pytest.raises(ValueError, match="sigma"):

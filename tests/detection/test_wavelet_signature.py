@@ -1,5 +1,6 @@
 """Haar MDWT denoiser against PyWavelets and closed forms; the fault signature matrix
 against the paper's Table 2."""
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -8,7 +9,8 @@ import pytest
 import pywt
 from scipy import stats
 
-from jaxfdi.detection import _signature as signature, _wavelet as wavelet
+from jaxfdi.detection import _signature as signature
+from jaxfdi.detection import _wavelet as wavelet
 
 M = 3
 
@@ -23,7 +25,9 @@ def test_perfect_reconstruction(sequence):
     np.testing.assert_allclose(wavelet.haar_reconstruct(approx, details), sequence, atol=1e-12)
     np.testing.assert_allclose(wavelet.haar_denoise(sequence, M, mode="none"), sequence, atol=1e-12)
     # soft thresholding with a zero threshold is also the identity
-    np.testing.assert_allclose(wavelet.haar_denoise(sequence, M, "soft", np.zeros(M)), sequence, atol=1e-12)
+    np.testing.assert_allclose(
+        wavelet.haar_denoise(sequence, M, "soft", np.zeros(M)), sequence, atol=1e-12
+    )
 
 
 def test_hard_thresholding_is_the_block_mean(sequence):
@@ -39,7 +43,12 @@ def test_decomposition_matches_pywavelets_up_to_normalisation(sequence):
             cA, *cDs = pywt.wavedec(block[:, c], "haar", level=M)  # [cA_M, cD_M, ..., cD_1]
             np.testing.assert_allclose(approx[b, c], cA[0] / 2 ** (M / 2), rtol=1e-12)
             for j in range(1, M + 1):
-                np.testing.assert_allclose(np.asarray(details[j - 1][b, :, c]), cDs[M - j] / 2 ** (j / 2), rtol=1e-12, atol=1e-12)
+                np.testing.assert_allclose(
+                    np.asarray(details[j - 1][b, :, c]),
+                    cDs[M - j] / 2 ** (j / 2),
+                    rtol=1e-12,
+                    atol=1e-12,
+                )
 
 
 def test_soft_thresholding_matches_pywavelets(sequence):
@@ -47,10 +56,16 @@ def test_soft_thresholding_matches_pywavelets(sequence):
     approx, details = wavelet.haar_decompose(sequence, M)
     for j, d in enumerate(details):
         ours = np.asarray(wavelet.soft_threshold(d, 2.0 * sigma[j]))
-        np.testing.assert_allclose(ours, pywt.threshold(np.asarray(d), 2.0 * sigma[j], mode="soft"), atol=1e-14)
+        np.testing.assert_allclose(
+            ours, pywt.threshold(np.asarray(d), 2.0 * sigma[j], mode="soft"), atol=1e-14
+        )
     # and the denoiser is that thresholding followed by the inverse transform
     shrunk = [wavelet.soft_threshold(d, 2.0 * sigma[j]) for j, d in enumerate(details)]
-    np.testing.assert_allclose(wavelet.haar_denoise(sequence, M, "soft", sigma), wavelet.haar_reconstruct(approx, shrunk), atol=1e-12)
+    np.testing.assert_allclose(
+        wavelet.haar_denoise(sequence, M, "soft", sigma),
+        wavelet.haar_reconstruct(approx, shrunk),
+        atol=1e-12,
+    )
 
 
 def test_chi2_detail_sigma_matches_monte_carlo():
@@ -85,14 +100,17 @@ def test_bad_arguments():
 
 
 def test_signature_matrix_is_the_papers_table_2():
-    table = np.array([  # rows: filters a1, a2, s1..s4; columns: no fault, a1, a2, s1..s4
-        [0, 0, 1, 1, 1, 1, 1],
-        [0, 1, 0, 1, 1, 1, 1],
-        [0, 1, 1, 0, 1, 1, 1],
-        [0, 1, 1, 1, 0, 1, 1],
-        [0, 1, 1, 1, 1, 0, 1],
-        [0, 1, 1, 1, 1, 1, 0],
-    ], bool)
+    table = np.array(
+        [  # rows: filters a1, a2, s1..s4; columns: no fault, a1, a2, s1..s4
+            [0, 0, 1, 1, 1, 1, 1],
+            [0, 1, 0, 1, 1, 1, 1],
+            [0, 1, 1, 0, 1, 1, 1],
+            [0, 1, 1, 1, 0, 1, 1],
+            [0, 1, 1, 1, 1, 0, 1],
+            [0, 1, 1, 1, 1, 1, 0],
+        ],
+        bool,
+    )
     np.testing.assert_array_equal(signature.signature_matrix(6), table)
 
 

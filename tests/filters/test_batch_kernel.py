@@ -1,14 +1,15 @@
 """The Kalman filter's structure-of-arrays batch kernel (runs with their own prior or
 model): every output equal to vmap(run_filter) and to filterpy, up to 15 states, health
 flags, float32, gradients, the Monte Carlo driver's batched mode, and bad input."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _linear_gaussian_cases import scan_steps, small_model
 from filterpy.kalman import KalmanFilter
 
 import jaxfdi
-from _linear_gaussian_cases import scan_steps, small_model
 from jaxfdi.filters import GaussianState, kalman_filter, run_filter
 from jaxfdi.models import LinearGaussianModel
 
@@ -24,7 +25,13 @@ def _vmapped(model, model_axes, mean, cov, ys, us):
         kf = kalman_filter(mdl)
         return scan_steps(kf, kf.init(m0, P0), y, u)
 
-    axes = (model_axes, 0 if np.ndim(mean) == 2 else None, 0 if np.ndim(cov) == 3 else None, 0, us_axis)
+    axes = (
+        model_axes,
+        0 if np.ndim(mean) == 2 else None,
+        0 if np.ndim(cov) == 3 else None,
+        0,
+        us_axis,
+    )
     return jax.jit(jax.vmap(one, in_axes=axes))(model, mean, cov, ys, us)
 
 
@@ -60,7 +67,7 @@ def test_per_run_prior_equals_vmap_and_filterpy(data):
     got = run_filter(kf, GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us)
     _assert_same(got, _vmapped(model, None, means, covs, ys, us))
     Phi, Gamma, C, D, Q, R = (np.asarray(a) for a in model)
-    for run in (0, 3):   # filterpy (Joseph form; no feed-through, so D u is taken off y)
+    for run in (0, 3):  # filterpy (Joseph form; no feed-through, so D u is taken off y)
         ref = KalmanFilter(dim_x=3, dim_z=2, dim_u=1)
         ref.F, ref.B, ref.H, ref.Q, ref.R = Phi, Gamma, C, Q, R
         ref.x, ref.P = means[run].copy(), covs[run].copy()
@@ -80,14 +87,26 @@ def test_per_run_model_equals_vmap(data):
     ys, us, means, covs = data
     model = small_model()
     scale = np.linspace(0.5, 2.0, N)[:, None, None]
-    every = model._replace(Phi=np.asarray(model.Phi)[None] * (1 - 0.1 * scale), Q=np.asarray(model.Q)[None] * scale,
-                           R=np.asarray(model.R)[None] / scale)
+    every = model._replace(
+        Phi=np.asarray(model.Phi)[None] * (1 - 0.1 * scale),
+        Q=np.asarray(model.Q)[None] * scale,
+        R=np.asarray(model.R)[None] / scale,
+    )
     axes = LinearGaussianModel(0, None, None, None, 0, 0)
-    got = run_filter(kalman_filter(every), GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us[0])
+    got = run_filter(
+        kalman_filter(every), GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us[0]
+    )
     _assert_same(got, _vmapped(every, axes, means, covs, ys, us[0]))
     only_q = model._replace(Q=np.asarray(model.Q)[None] * scale)
-    got = run_filter(kalman_filter(only_q), GaussianState(jnp.asarray(means), jnp.asarray(covs[0])), ys, us)
-    _assert_same(got, _vmapped(only_q, LinearGaussianModel(None, None, None, None, 0, None), means, covs[0], ys, us))
+    got = run_filter(
+        kalman_filter(only_q), GaussianState(jnp.asarray(means), jnp.asarray(covs[0])), ys, us
+    )
+    _assert_same(
+        got,
+        _vmapped(
+            only_q, LinearGaussianModel(None, None, None, None, 0, None), means, covs[0], ys, us
+        ),
+    )
 
 
 def test_fifteen_states_equal_vmap():
@@ -96,12 +115,25 @@ def test_fifteen_states_equal_vmap():
     n, m = 15, 3
     Phi = np.linalg.qr(rng.normal(size=(n, n)))[0] * 0.95
     C = rng.normal(size=(m, n))
-    model = LinearGaussianModel(Phi, np.zeros((n, 1)), C, np.zeros((m, 1)), np.eye(n) * 0.01, np.eye(m) * 0.1)
+    model = LinearGaussianModel(
+        Phi, np.zeros((n, 1)), C, np.zeros((m, 1)), np.eye(n) * 0.01, np.eye(m) * 0.1
+    )
     per_run = model._replace(Q=np.eye(n)[None] * np.linspace(0.005, 0.05, 3)[:, None, None])
     ys = rng.normal(size=(3, 12, m))
-    got = run_filter(kalman_filter(per_run), GaussianState(jnp.zeros(n), jnp.eye(n)), ys, np.zeros((12, 1)))
-    _assert_same(got, _vmapped(per_run, LinearGaussianModel(None, None, None, None, 0, None), np.zeros(n), np.eye(n),
-                               ys, np.zeros((12, 1))))
+    got = run_filter(
+        kalman_filter(per_run), GaussianState(jnp.zeros(n), jnp.eye(n)), ys, np.zeros((12, 1))
+    )
+    _assert_same(
+        got,
+        _vmapped(
+            per_run,
+            LinearGaussianModel(None, None, None, None, 0, None),
+            np.zeros(n),
+            np.eye(n),
+            ys,
+            np.zeros((12, 1)),
+        ),
+    )
 
 
 def test_vmap_of_run_filter_is_the_kernel_and_differentiates_as_the_scan(data, monkeypatch):
@@ -122,7 +154,9 @@ def test_vmap_of_run_filter_is_the_kernel_and_differentiates_as_the_scan(data, m
     _assert_same(got, _vmapped(model, None, means, covs, ys, us))
 
     def loss(scale, vmapped):
-        one = lambda m0, P0, y, u: run_filter(kf, GaussianState(m0, P0 * scale), y, u)[1].log_likelihood.sum()
+        one = lambda m0, P0, y, u: run_filter(kf, GaussianState(m0, P0 * scale), y, u)[
+            1
+        ].log_likelihood.sum()
         if vmapped:
             return jnp.sum(jax.vmap(one)(jnp.asarray(means), jnp.asarray(covs), ys, us))
         return sum(one(means[i], covs[i], ys[i], us[i]) for i in range(N))
@@ -151,7 +185,7 @@ def test_one_sequence_under_jit_uses_lapack_on_cpu_only(data, monkeypatch, backe
     kf = kalman_filter(small_model())
     state = kf.init(means[0], covs[0])
     monkeypatch.setattr(jax, "default_backend", lambda: backend)
-    run = lambda y: run_filter(kf, state, y, us[0])  # noqa: E731
+    run = lambda y: run_filter(kf, state, y, us[0])
     assert ("cholesky" in _primitives(jax.make_jaxpr(run)(ys[0]).jaxpr)) == library
     _assert_same(jax.jit(run)(ys[0]), jax.jit(lambda y: scan_steps(kf, state, y, us[0]))(ys[0]))
 
@@ -161,26 +195,50 @@ def test_health_float32_and_gradient(data):
     model = small_model()
     bad = ys.copy()
     bad[1, 10, 0] = np.nan
-    _, info = run_filter(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
+    _, info = run_filter(
+        kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us
+    )
     _, ref = _vmapped(model, None, means, covs, bad, us)
-    np.testing.assert_array_equal(info.healthy, ref.healthy)   # a dead channel: evidence, the same as vmap's
+    np.testing.assert_array_equal(
+        info.healthy, ref.healthy
+    )  # a dead channel: evidence, the same as vmap's
     for name in ("filtered_mean", "filtered_cov", "innovation", "nis", "num_observed"):
-        np.testing.assert_allclose(getattr(info, name), getattr(ref, name), rtol=1e-9, atol=1e-12, err_msg=name)
-    assert bool(info.healthy.all()) and float(info.nis[1, 10]) == np.inf and np.isnan(info.innovation[1, 10, 0])
-    bad[0, 3, 1] = 1e250                                       # an overflowing outlier is ill health
-    _, info = run_filter(kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us)
-    assert not bool(info.healthy[0, 3]) and bool(info.healthy[0, :3].all()) and bool(info.healthy[1].all())
+        np.testing.assert_allclose(
+            getattr(info, name), getattr(ref, name), rtol=1e-9, atol=1e-12, err_msg=name
+        )
+    assert (
+        bool(info.healthy.all())
+        and float(info.nis[1, 10]) == np.inf
+        and np.isnan(info.innovation[1, 10, 0])
+    )
+    bad[0, 3, 1] = 1e250  # an overflowing outlier is ill health
+    _, info = run_filter(
+        kalman_filter(model), GaussianState(jnp.asarray(means), jnp.asarray(covs)), bad, us
+    )
+    assert (
+        not bool(info.healthy[0, 3])
+        and bool(info.healthy[0, :3].all())
+        and bool(info.healthy[1].all())
+    )
     model32 = LinearGaussianModel(*(jnp.asarray(a, jnp.float32) for a in model))
-    _, info32 = run_filter(kalman_filter(model32), GaussianState(jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32)),
-                                 jnp.asarray(ys, jnp.float32), jnp.asarray(us, jnp.float32))
+    _, info32 = run_filter(
+        kalman_filter(model32),
+        GaussianState(jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32)),
+        jnp.asarray(ys, jnp.float32),
+        jnp.asarray(us, jnp.float32),
+    )
     assert info32.filtered_cov.dtype == jnp.float32 and bool(info32.healthy.all())
 
     def loss(scale, batched):
         mdl = model._replace(Q=jnp.asarray(model.Q)[None] * scale[:, None, None])
         if batched:
-            info = run_filter(kalman_filter(mdl), GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us)[1]
+            info = run_filter(
+                kalman_filter(mdl), GaussianState(jnp.asarray(means), jnp.asarray(covs)), ys, us
+            )[1]
         else:
-            info = _vmapped(mdl, LinearGaussianModel(None, None, None, None, 0, None), means, covs, ys, us)[1]
+            info = _vmapped(
+                mdl, LinearGaussianModel(None, None, None, None, 0, None), means, covs, ys, us
+            )[1]
         return jnp.mean(info.log_likelihood)
 
     scale = jnp.linspace(0.5, 1.5, N)
@@ -206,7 +264,12 @@ def test_monte_carlo_batched_runs_the_kernel():
     def batch(keys, q_scales):
         models, ys = jax.vmap(data_of)(keys, q_scales)
         per_run = model._replace(Q=models.Q)
-        return jnp.sum(run_filter(kalman_filter(per_run), GaussianState(jnp.zeros(3), jnp.eye(3)), ys, us)[1].log_likelihood, -1)
+        return jnp.sum(
+            run_filter(kalman_filter(per_run), GaussianState(jnp.zeros(3), jnp.eye(3)), ys, us)[
+                1
+            ].log_likelihood,
+            -1,
+        )
 
     scales = np.linspace(0.5, 2.0, 11)
     want = jaxfdi.monte_carlo(one, jax.random.key(4), 11, scales, chunk_size=4)
@@ -218,13 +281,25 @@ def test_bad_input(data):
     ys, us, means, covs = data
     model = small_model()
     with pytest.raises(ValueError, match="model.Q"):
-        run_filter(kalman_filter(model._replace(Q=np.stack([model.Q] * (N + 1)))), GaussianState(jnp.zeros(3), jnp.eye(3)),
-                   ys, us)
+        run_filter(
+            kalman_filter(model._replace(Q=np.stack([model.Q] * (N + 1)))),
+            GaussianState(jnp.zeros(3), jnp.eye(3)),
+            ys,
+            us,
+        )
     with pytest.raises(ValueError, match="init_state.cov"):
         run_filter(kalman_filter(model), GaussianState(jnp.zeros(3), jnp.asarray(covs[:2])), ys, us)
-    with pytest.raises(ValueError, match="states"):  # a model per run takes the kernel, up to 16 states
-        big = LinearGaussianModel(np.eye(17), np.zeros((17, 1)), np.ones((2, 17)), np.zeros((2, 1)),
-                                  np.stack([np.eye(17)] * N), np.eye(2))
+    with pytest.raises(
+        ValueError, match="states"
+    ):  # a model per run takes the kernel, up to 16 states
+        big = LinearGaussianModel(
+            np.eye(17),
+            np.zeros((17, 1)),
+            np.ones((2, 17)),
+            np.zeros((2, 1)),
+            np.stack([np.eye(17)] * N),
+            np.eye(2),
+        )
         kalman_filter(big)
     per_run = model._replace(Q=np.stack([model.Q] * N))
     with pytest.raises(ValueError, match=r"y: expected shape \(2,\)"):
@@ -234,8 +309,13 @@ def test_bad_input(data):
     with pytest.raises(ValueError, match="missing_measurements"):
         kalman_filter(per_run, missing_measurements=True)
     with pytest.raises(ValueError, match="shared_covariance"):
-        run_filter(kalman_filter(model), GaussianState(jnp.zeros(3), jnp.asarray(covs)), ys, us,
-                         shared_covariance=True)
+        run_filter(
+            kalman_filter(model),
+            GaussianState(jnp.zeros(3), jnp.asarray(covs)),
+            ys,
+            us,
+            shared_covariance=True,
+        )
 
 
 def test_imm_kernel_for_ten_states_equals_vmap():
@@ -244,11 +324,19 @@ def test_imm_kernel_for_ten_states_equals_vmap():
     rng = np.random.default_rng(2)
     n, m = 10, 2
     Phi = np.linalg.qr(rng.normal(size=(n, n)))[0] * 0.9
-    base = LinearGaussianModel(Phi, rng.normal(size=(n, 1)) * 0.1, rng.normal(size=(m, n)), np.zeros((m, 1)),
-                               np.eye(n) * 0.02, np.eye(m) * 0.1)
+    base = LinearGaussianModel(
+        Phi,
+        rng.normal(size=(n, 1)) * 0.1,
+        rng.normal(size=(m, n)),
+        np.zeros((m, 1)),
+        np.eye(n) * 0.02,
+        np.eye(m) * 0.1,
+    )
     modes = jax.tree.map(lambda a: jnp.asarray(np.stack([a, a, a])), base)
-    modes = modes._replace(R=modes.R * np.array([1.0, 30.0, 1.0])[:, None, None],
-                           Q=modes.Q * np.array([1.0, 1.0, 20.0])[:, None, None])
+    modes = modes._replace(
+        R=modes.R * np.array([1.0, 30.0, 1.0])[:, None, None],
+        Q=modes.Q * np.array([1.0, 1.0, 20.0])[:, None, None],
+    )
     transition = np.array([[0.9, 0.05, 0.05], [0.1, 0.85, 0.05], [0.1, 0.05, 0.85]])
     imm = jaxfdi.filters.interacting_multiple_model(kalman_filter, modes, transition)
     assert imm.batch is not None
@@ -256,5 +344,7 @@ def test_imm_kernel_for_ten_states_equals_vmap():
     ys, us = rng.normal(size=(3, 15, m)), rng.normal(size=(15, 1))
     final, info = run_filter(imm, init, ys, us)
     ref_final, ref_info = jax.jit(jax.vmap(lambda y: scan_steps(imm, init, y, us)))(ys)
-    for name, got, want in zip(info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)):
+    for name, got, want in zip(
+        info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)
+    ):
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, err_msg=name)

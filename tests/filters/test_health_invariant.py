@@ -18,6 +18,7 @@ structure-of-arrays batch kernel), ``multiple_model``, ``two_stage_kalman_filter
 floating field of the step's info (``FilterInfo``, ``IMMInfo``, ``TSKFInfo``) is
 checked; a log mode probability of ``-inf`` is a probability of 0, not a failure.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -36,15 +37,15 @@ N, M, NU, T = 3, 2, 1, 10
 
 
 class Case(NamedTuple):
-    Phi: np.ndarray    # (n, n)
+    Phi: np.ndarray  # (n, n)
     Gamma: np.ndarray  # (n, nu)
-    C: np.ndarray      # (m, n)
-    Q: np.ndarray      # (n, n)
-    R: np.ndarray      # (m, m)
-    m0: np.ndarray     # (n,)
-    P0: np.ndarray     # (n, n)
-    ys: np.ndarray     # (T, m)
-    us: np.ndarray     # (T, nu)
+    C: np.ndarray  # (m, n)
+    Q: np.ndarray  # (n, n)
+    R: np.ndarray  # (m, m)
+    m0: np.ndarray  # (n,)
+    P0: np.ndarray  # (n, n)
+    ys: np.ndarray  # (T, m)
+    us: np.ndarray  # (T, nu)
     Q_scale: np.ndarray  # (T,) per-step factor of Q for the time-varying filter
 
 
@@ -63,7 +64,9 @@ def _base(rng) -> Case:
     for k in range(T):
         ys.append(C @ x + rng.multivariate_normal(np.zeros(M), R))
         x = Phi @ x + Gamma @ us[k] + rng.multivariate_normal(np.zeros(N), Q)
-    return Case(Phi, Gamma, C, Q, R, np.zeros(N), np.eye(N), np.array(ys), us, 1.0 + rng.uniform(size=T))
+    return Case(
+        Phi, Gamma, C, Q, R, np.zeros(N), np.eye(N), np.array(ys), us, 1.0 + rng.uniform(size=T)
+    )
 
 
 def _rotation(rng, size):
@@ -78,7 +81,7 @@ def _with(case: Case, rng, kind: str) -> Case:
         return case
     if kind == "unstable":
         return case._replace(Phi=case.Phi * 1.5 / 0.9)
-    if kind == "explosive":        # P grows by ~1e40 per step and overflows
+    if kind == "explosive":  # P grows by ~1e40 per step and overflows
         return case._replace(Phi=case.Phi * 1e20)
     if kind == "R variance 1e-24":
         R = case.R.copy()
@@ -128,14 +131,31 @@ def _with(case: Case, rng, kind: str) -> Case:
     raise AssertionError(kind)
 
 
-KINDS = ("nominal", "unstable", "explosive", "R variance 1e-24", "R condition 1e24", "P0 1e12", "P0 1e200",
-         "Q 0, P0 1e-30", "C 0", "y NaN", "y inf", "y 1e250", "u NaN", "Phi NaN", "R NaN", "Q inf", "P0 NaN")
+KINDS = (
+    "nominal",
+    "unstable",
+    "explosive",
+    "R variance 1e-24",
+    "R condition 1e24",
+    "P0 1e12",
+    "P0 1e200",
+    "Q 0, P0 1e-30",
+    "C 0",
+    "y NaN",
+    "y inf",
+    "y 1e250",
+    "u NaN",
+    "Phi NaN",
+    "R NaN",
+    "Q inf",
+    "P0 NaN",
+)
 
 
 def _cases():
     rng = np.random.default_rng(20220)
     names, cases = [], []
-    for repeat in range(2):                           # two random models per kind
+    for repeat in range(2):  # two random models per kind
         for kind in KINDS:
             names.append(f"{kind} #{repeat}")
             cases.append(_with(_base(rng), rng, kind))
@@ -150,7 +170,9 @@ E = np.array([[1.0], [0.0], [0.0]])
 
 def _model(case: Case, C=None) -> jaxfdi.models.LinearGaussianModel:
     C = case.C if C is None else C
-    return jaxfdi.models.LinearGaussianModel(case.Phi, case.Gamma, C, jnp.zeros((M, NU)), case.Q, case.R)
+    return jaxfdi.models.LinearGaussianModel(
+        case.Phi, case.Gamma, C, jnp.zeros((M, NU)), case.Q, case.R
+    )
 
 
 def _modes(model: jaxfdi.models.LinearGaussianModel) -> jaxfdi.models.LinearGaussianModel:
@@ -169,8 +191,11 @@ def _h(x, u, model):
 
 def _kalman(unroll: bool, missing: bool):
     def run(case):
-        filt = jaxfdi.filters.kalman_filter(_model(case), missing_measurements=missing, unroll_factorizations=unroll)
+        filt = jaxfdi.filters.kalman_filter(
+            _model(case), missing_measurements=missing, unroll_factorizations=unroll
+        )
         return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0), case.ys, case.us)[1]
+
     return run
 
 
@@ -190,27 +215,42 @@ TRANSITION = np.array([[0.95, 0.05], [0.05, 0.95]])
 
 
 def _imm(case):
-    filt = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, _modes(_model(case)), TRANSITION)
-    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys, case.us)[1]
+    filt = jaxfdi.filters.interacting_multiple_model(
+        jaxfdi.filters.kalman_filter, _modes(_model(case)), TRANSITION
+    )
+    return jaxfdi.filters.run_filter(
+        filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys, case.us
+    )[1]
 
 
 def _imm_batch_kernel(case):
-    filt = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, _modes(_model(case)), TRANSITION)
+    filt = jaxfdi.filters.interacting_multiple_model(
+        jaxfdi.filters.kalman_filter, _modes(_model(case)), TRANSITION
+    )
     assert filt.batch is not None
-    info = jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys[None],
-                                   case.us)[1]
+    info = jaxfdi.filters.run_filter(
+        filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys[None], case.us
+    )[1]
     return jax.tree_util.tree_map(lambda a: a[0], info)
 
 
 def _mm(case):
-    filt = jaxfdi.filters.multiple_model(jaxfdi.filters.kalman_filter, _modes(_model(case)), floor=0.01)
-    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys, case.us)[1]
+    filt = jaxfdi.filters.multiple_model(
+        jaxfdi.filters.kalman_filter, _modes(_model(case)), floor=0.01
+    )
+    return jaxfdi.filters.run_filter(
+        filt, filt.init(case.m0, case.P0, jnp.array([0.5, 0.5])), case.ys, case.us
+    )[1]
 
 
 def _tskf(case):
     model = _model(case)
-    filt = tskf.two_stage_kalman_filter(model, tskf.sensor_direction(model, 0, "additive"), 1e-4 * jnp.eye(1))
-    return jaxfdi.filters.run_filter(filt, filt.init(case.m0, case.P0, jnp.zeros(1), 0.1 * jnp.eye(1)), case.ys, case.us)[1]
+    filt = tskf.two_stage_kalman_filter(
+        model, tskf.sensor_direction(model, 0, "additive"), 1e-4 * jnp.eye(1)
+    )
+    return jaxfdi.filters.run_filter(
+        filt, filt.init(case.m0, case.P0, jnp.zeros(1), 0.1 * jnp.eye(1)), case.ys, case.us
+    )[1]
 
 
 def _unknown_input(case):
@@ -240,8 +280,20 @@ FILTERS = {
 }
 
 #: filters whose update keeps a dead channel (non-finite y) out of the state and reports it
-DEAD_CHANNEL_FILTERS = ("kalman unrolled", "kalman lapack", "kalman unrolled missing", "kalman lapack missing",
-                        "ekf", "ukf", "imm", "imm batch kernel", "mm", "time varying", "tskf", "unknown input")
+DEAD_CHANNEL_FILTERS = (
+    "kalman unrolled",
+    "kalman lapack",
+    "kalman unrolled missing",
+    "kalman lapack missing",
+    "ekf",
+    "ukf",
+    "imm",
+    "imm batch kernel",
+    "mm",
+    "time varying",
+    "tskf",
+    "unknown input",
+)
 
 #: fields where -inf is a value (log of a zero probability), not a failure
 LOG_PROBABILITIES = ("log_mode_prob",)
@@ -272,23 +324,37 @@ def test_non_finite_output_implies_unhealthy(name):
     healthy = np.asarray(info.healthy)
     assert healthy.shape == (len(NAMES), T)
     bad = _nonfinite_steps(info, ~np.isfinite(CASES.ys))
-    violations = [f"{NAMES[i]} step {k}: {', '.join(f for f, b in bad.items() if b[i, k])}"
-                  for i in range(len(NAMES)) for k in range(T)
-                  if healthy[i, k] and any(b[i, k] for b in bad.values())]
+    violations = [
+        f"{NAMES[i]} step {k}: {', '.join(f for f, b in bad.items() if b[i, k])}"
+        for i in range(len(NAMES))
+        for k in range(T)
+        if healthy[i, k] and any(b[i, k] for b in bad.values())
+    ]
     assert not violations, f"{name}: non-finite outputs flagged healthy:\n" + "\n".join(violations)
     # not vacuous: sound cases are healthy throughout, poisoned ones are flagged
     for i, case_name in enumerate(NAMES):
         if case_name.startswith(("nominal", "unstable")):
-            assert healthy[i].all(), f"{name}: {case_name} flagged unhealthy at steps {np.flatnonzero(~healthy[i])}"
+            assert healthy[i].all(), (
+                f"{name}: {case_name} flagged unhealthy at steps {np.flatnonzero(~healthy[i])}"
+            )
         if case_name.startswith(("Phi NaN", "P0 NaN", "R NaN")):
             assert not healthy[i].all(), f"{name}: {case_name} never flagged"
         if name in DEAD_CHANNEL_FILTERS and case_name.startswith(("y NaN", "y inf")):
             # a dead sensor is evidence, not ill health: reported, and the state stays sound
-            assert healthy[i].all(), f"{name}: {case_name}: a dead channel made the filter unhealthy"
+            assert healthy[i].all(), (
+                f"{name}: {case_name}: a dead channel made the filter unhealthy"
+            )
             step = np.flatnonzero(~np.isfinite(CASES.ys[i]).all(axis=-1))[0]
             if hasattr(info, "dead"):
                 evidence = np.asarray(info.dead)[i, step].any()
             else:
-                evidence = np.asarray(info.nis if hasattr(info, "nis") else info.statistic)[i, step] == np.inf
-            if not (name.endswith("missing") and case_name.startswith("y NaN")):  # there NaN is 'not measured'
-                assert evidence, f"{name}: {case_name}: the dead channel at step {step} is not reported"
+                evidence = (
+                    np.asarray(info.nis if hasattr(info, "nis") else info.statistic)[i, step]
+                    == np.inf
+                )
+            if not (
+                name.endswith("missing") and case_name.startswith("y NaN")
+            ):  # there NaN is 'not measured'
+                assert evidence, (
+                    f"{name}: {case_name}: the dead channel at step {step} is not reported"
+                )

@@ -1,9 +1,11 @@
 """IMM and static MM filters against filterpy, against each other, and their contracts."""
+
 import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _linear_gaussian_cases import scan_steps
 from filterpy.kalman import IMMEstimator, KalmanFilter, MMAEFilterBank
 
 from jaxfdi.filters import (
@@ -13,10 +15,9 @@ from jaxfdi.filters import (
     run_filter,
     unscented_kalman_filter,
 )
-from _linear_gaussian_cases import scan_steps
 from jaxfdi.models import LinearGaussianModel
-from jaxfdi.tuning._train import checkpointed
 from jaxfdi.models._fault_modes import noise_inflation_modes
+from jaxfdi.tuning._train import checkpointed
 
 T = 40
 TRANSITION = np.array([[0.90, 0.05, 0.05], [0.10, 0.88, 0.02], [0.05, 0.0, 0.95]])
@@ -27,7 +28,9 @@ def small_plant():
     Phi = np.array([[0.9, 0.1, 0.0], [0.0, 0.8, 0.2], [0.1, 0.0, 0.7]])
     Gamma = np.array([[0.5], [0.0], [0.3]])
     C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]])
-    return LinearGaussianModel(Phi, Gamma, C, np.zeros((2, 1)), np.diag([0.05, 0.02, 0.03]), np.diag([0.1, 0.2]))
+    return LinearGaussianModel(
+        Phi, Gamma, C, np.zeros((2, 1)), np.diag([0.05, 0.02, 0.03]), np.diag([0.1, 0.2])
+    )
 
 
 @pytest.fixture(scope="module")
@@ -35,14 +38,18 @@ def problem():
     """Modes: normal, actuator (extra input noise), sensor 0 distrusted (inflation 50);
     data with a sensor-0 bias from step 15 so that the probabilities move."""
     plant = small_plant()
-    full = noise_inflation_modes(plant, 50.0, 0.8)          # normal, actuator, sensor 0, sensor 1
+    full = noise_inflation_modes(plant, 50.0, 0.8)  # normal, actuator, sensor 0, sensor 1
     modes = jax.tree.map(lambda a: a[:3], full)
     rng = np.random.default_rng(3)
     x = np.zeros(3)
     us = rng.normal(size=(T, 1))
     ys = np.zeros((T, 2))
     for k in range(T):
-        ys[k] = plant.C @ x + rng.multivariate_normal(np.zeros(2), plant.R) + (np.array([2.5, 0]) if k >= 15 else 0)
+        ys[k] = (
+            plant.C @ x
+            + rng.multivariate_normal(np.zeros(2), plant.R)
+            + (np.array([2.5, 0]) if k >= 15 else 0)
+        )
         x = plant.Phi @ x + plant.Gamma @ us[k] + rng.multivariate_normal(np.zeros(3), plant.Q)
     return modes, ys, us, np.array([0.1, -0.2, 0.3]), np.diag([0.5, 0.4, 0.3])
 
@@ -61,7 +68,9 @@ def filterpy_bank(modes, m0, P0):
 def test_imm_equals_filterpy(problem):
     modes, ys, us, m0, P0 = problem
     mu0 = np.array([0.8, 0.1, 0.1])
-    ref = IMMEstimator(filterpy_bank(modes, m0, P0), mu0, TRANSITION)  # first prior: cbar = mu0 @ pi
+    ref = IMMEstimator(
+        filterpy_bank(modes, m0, P0), mu0, TRANSITION
+    )  # first prior: cbar = mu0 @ pi
     ref_mu, ref_x, ref_P, ref_modes = [], [], [], []
     for k in range(T):
         ref.update(ys[k])
@@ -84,7 +93,11 @@ def test_mm_equals_filterpy(problem):
     ref_p, ref_x, ref_modes = [], [], []
     for k in range(T):
         ref.update(ys[k])
-        ref_p.append(ref.p.copy()), ref_x.append(ref.x.copy()), ref_modes.append([f.x.copy() for f in ref.filters])
+        (
+            ref_p.append(ref.p.copy()),
+            ref_x.append(ref.x.copy()),
+            ref_modes.append([f.x.copy() for f in ref.filters]),
+        )
         ref.predict(us[k])
     mm = multiple_model(kalman_filter, modes, floor=0.0)
     _, info = run_filter(mm, mm.init(m0, P0, mu0), ys, us)
@@ -94,7 +107,9 @@ def test_mm_equals_filterpy(problem):
     # filterpy's MMAE covariance loop zips over the elements of x (a bug); ours is the
     # moment-matched mixture covariance, checked against the definition instead:
     dev = info.mode_mean - info.mean[:, None, :]
-    expect = np.einsum("tj,tjab->tab", info.mode_prob, info.mode_cov + dev[..., :, None] * dev[..., None, :])
+    expect = np.einsum(
+        "tj,tjab->tab", info.mode_prob, info.mode_cov + dev[..., :, None] * dev[..., None, :]
+    )
     np.testing.assert_allclose(info.cov, expect, rtol=1e-10, atol=1e-14)
 
 
@@ -119,15 +134,19 @@ def test_identity_transition_imm_is_mm_without_floor(problem):
     _, a = run_filter(imm, imm.init(m0, P0, mu0), ys, us)
     _, b = run_filter(mm, mm.init(m0, P0, mu0), ys, us)
     for name in ("mode_prob", "mean", "cov", "mode_mean", "mode_cov", "log_likelihood"):
-        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=1e-12, atol=1e-14, err_msg=name)
+        np.testing.assert_allclose(
+            getattr(a, name), getattr(b, name), rtol=1e-12, atol=1e-14, err_msg=name
+        )
 
 
 def test_imm_with_ukf_modes_equals_imm_with_kf_modes(problem):
     """Any Gaussian filter as the mode filter: a UKF on the linear modes gives the KF's IMM."""
     modes, ys, us, m0, P0 = problem
-    f = lambda x, u, p: p.Phi @ x + p.Gamma @ u  # noqa: E731
-    h = lambda x, u, p: p.C @ x + p.D @ u  # noqa: E731
-    ukf_mode = lambda p: unscented_kalman_filter(f, h, p.Q, p.R, p, alpha=0.5, sigma_differences="direct")  # noqa: E731
+    f = lambda x, u, p: p.Phi @ x + p.Gamma @ u
+    h = lambda x, u, p: p.C @ x + p.D @ u
+    ukf_mode = lambda p: unscented_kalman_filter(
+        f, h, p.Q, p.R, p, alpha=0.5, sigma_differences="direct"
+    )
     mu0 = np.array([0.8, 0.1, 0.1])
     a = interacting_multiple_model(ukf_mode, modes, TRANSITION)
     b = interacting_multiple_model(kalman_filter, modes, TRANSITION)
@@ -177,8 +196,13 @@ def test_gradient_wrt_transition_logits_and_inflation_matches_finite_differences
         _, info = run_filter(imm, imm.init(m0, P0, mu0), ys, us)
         return jnp.mean(info.log_likelihood)
 
-    chex.assert_numerical_grads(mean_log_likelihood, (jnp.log(TRANSITION + 0.02), jnp.log(jnp.array([50.0, 20.0]))),
-                                order=1, atol=1e-6, rtol=1e-5)
+    chex.assert_numerical_grads(
+        mean_log_likelihood,
+        (jnp.log(TRANSITION + 0.02), jnp.log(jnp.array([50.0, 20.0]))),
+        order=1,
+        atol=1e-6,
+        rtol=1e-5,
+    )
 
 
 def test_traces_once_vmap_equals_loop_and_float32(problem):
@@ -200,8 +224,12 @@ def test_traces_once_vmap_equals_loop_and_float32(problem):
 
     modes32 = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32), modes)
     imm32 = interacting_multiple_model(kalman_filter, modes32, TRANSITION.astype(np.float32))
-    _, info32 = run_filter(imm32, imm32.init(m0.astype(np.float32), P0.astype(np.float32), mu0.astype(np.float32)),
-                           ys.astype(np.float32), us.astype(np.float32))
+    _, info32 = run_filter(
+        imm32,
+        imm32.init(m0.astype(np.float32), P0.astype(np.float32), mu0.astype(np.float32)),
+        ys.astype(np.float32),
+        us.astype(np.float32),
+    )
     assert info32.mode_prob.dtype == jnp.float32 and info32.mean.dtype == jnp.float32
     np.testing.assert_allclose(info32.mode_prob, loop[0], atol=2e-4)
 
@@ -248,7 +276,9 @@ def test_batch_kernel_equals_vmap_and_filterpy(problem, batch_problem):
     assert imm.batch is not None
     final, info = run_filter(imm, init, ys, us)
     ref_final, ref_info = jax.vmap(lambda y, u: scan_steps(imm, init, y, u))(ys, us)
-    for name, got, want in zip(info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)):
+    for name, got, want in zip(
+        info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)
+    ):
         assert got.shape == want.shape, name
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, err_msg=name)
     assert bool(info.healthy.all())
@@ -266,45 +296,66 @@ def test_batch_kernel_equals_vmap_and_filterpy(problem, batch_problem):
 def test_batch_kernel_shared_inputs_gradient_and_health(problem, batch_problem):
     modes, _, us_shared, m0, P0 = problem
     imm, init, ys, _ = batch_problem
-    _, info = run_filter(imm, init, ys, us_shared)               # (T, nu) shared by the runs
+    _, info = run_filter(imm, init, ys, us_shared)  # (T, nu) shared by the runs
     _, ref = jax.vmap(lambda y: scan_steps(imm, init, y, us_shared))(ys)
     np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)
 
     bad = ys.copy()
-    bad[1, 25, 0] = np.nan                                              # a dead channel in run 1
+    bad[1, 25, 0] = np.nan  # a dead channel in run 1
     _, info = run_filter(imm, init, bad, us_shared)
     _, ref = jax.vmap(lambda y: scan_steps(imm, init, y, us_shared))(bad)
     np.testing.assert_array_equal(info.healthy, ref.healthy)
     np.testing.assert_array_equal(info.dead, ref.dead)
     np.testing.assert_allclose(info.mode_prob, ref.mode_prob, rtol=1e-9, atol=1e-12)
-    assert bool(info.healthy.all()) and np.array_equal(np.argwhere(np.asarray(info.dead)), [[1, 25, 0]])
-    bad[0, 5, 1] = 1e250                                                # an overflowing outlier is ill health
+    assert bool(info.healthy.all()) and np.array_equal(
+        np.argwhere(np.asarray(info.dead)), [[1, 25, 0]]
+    )
+    bad[0, 5, 1] = 1e250  # an overflowing outlier is ill health
     _, info = run_filter(imm, init, bad, us_shared)
-    assert not bool(info.healthy[0, 5]) and bool(info.healthy[0, :5].all()) and bool(info.healthy[1].all())
+    assert (
+        not bool(info.healthy[0, 5])
+        and bool(info.healthy[0, :5].all())
+        and bool(info.healthy[1].all())
+    )
 
     @jax.jit  # compiled once for every evaluation chex makes (same shapes)
     def mean_log_likelihood(logits):
         filt = interacting_multiple_model(kalman_filter, modes, jax.nn.softmax(logits, axis=1))
         return jnp.mean(run_filter(filt, init, ys, us_shared)[1].log_likelihood)
 
-    chex.assert_numerical_grads(mean_log_likelihood, (jnp.log(TRANSITION + 0.02),), order=1, atol=1e-6, rtol=1e-5)
+    chex.assert_numerical_grads(
+        mean_log_likelihood, (jnp.log(TRANSITION + 0.02),), order=1, atol=1e-6, rtol=1e-5
+    )
 
-    def remat_mean_log_likelihood(logits):   # the kernel's step rematerialised: same gradient
-        filt = checkpointed(interacting_multiple_model(kalman_filter, modes, jax.nn.softmax(logits, axis=1)))
+    def remat_mean_log_likelihood(logits):  # the kernel's step rematerialised: same gradient
+        filt = checkpointed(
+            interacting_multiple_model(kalman_filter, modes, jax.nn.softmax(logits, axis=1))
+        )
         return jnp.mean(run_filter(filt, init, ys, us_shared)[1].log_likelihood)
 
     logits = jnp.log(TRANSITION + 0.02)
-    np.testing.assert_allclose(jax.grad(remat_mean_log_likelihood)(logits), jax.grad(mean_log_likelihood)(logits),
-                               rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(
+        jax.grad(remat_mean_log_likelihood)(logits),
+        jax.grad(mean_log_likelihood)(logits),
+        rtol=1e-10,
+        atol=1e-12,
+    )
 
 
 def test_batch_kernel_only_for_small_kalman_modes(problem):
     modes, *_ = problem
     big = jax.tree.map(lambda a: a, modes)._replace(
-        Phi=jnp.broadcast_to(jnp.eye(17) * 0.9, (3, 17, 17)), Gamma=jnp.zeros((3, 17, 1)), C=jnp.zeros((3, 2, 17)),
-        Q=jnp.broadcast_to(jnp.eye(17), (3, 17, 17)))
-    assert interacting_multiple_model(kalman_filter, big, TRANSITION).batch is None  # 17 > 16 states
-    masked = interacting_multiple_model(lambda p: kalman_filter(p, missing_measurements=True), modes, TRANSITION)
+        Phi=jnp.broadcast_to(jnp.eye(17) * 0.9, (3, 17, 17)),
+        Gamma=jnp.zeros((3, 17, 1)),
+        C=jnp.zeros((3, 2, 17)),
+        Q=jnp.broadcast_to(jnp.eye(17), (3, 17, 17)),
+    )
+    assert (
+        interacting_multiple_model(kalman_filter, big, TRANSITION).batch is None
+    )  # 17 > 16 states
+    masked = interacting_multiple_model(
+        lambda p: kalman_filter(p, missing_measurements=True), modes, TRANSITION
+    )
     assert masked.batch is None  # any other mode filter runs under vmap
 
 

@@ -1,11 +1,12 @@
 """Linear Kalman filter against filterpy's KalmanFilter (Joseph form, same model)."""
+
 import jax
 import numpy as np
 import pytest
+from _problems import engine_data
 from filterpy.kalman import KalmanFilter
 
 import jaxfdi
-from _problems import engine_data
 
 RTOL = 1e-9
 
@@ -23,7 +24,14 @@ def filterpy_reference(model, ys, us, m0, P0, missing=()):
     kf.Q, kf.R = np.asarray(model.Q), np.asarray(model.R)
     kf.x, kf.P = m0.reshape(n, 1).copy(), P0.copy()
     D = np.asarray(model.D)
-    out = {"filtered_mean": [], "filtered_cov": [], "predicted_mean": [], "predicted_cov": [], "log_likelihood": [], "innovation": []}
+    out = {
+        "filtered_mean": [],
+        "filtered_cov": [],
+        "predicted_mean": [],
+        "predicted_cov": [],
+        "log_likelihood": [],
+        "innovation": [],
+    }
     for k in range(len(ys)):
         out["predicted_mean"].append(kf.x.ravel().copy())
         out["predicted_cov"].append(kf.P.copy())
@@ -51,8 +59,11 @@ def engine():
 
 def _runner(missing_measurements, unroll_factorizations=True):
     def run(model, m0, P0, ys, us):
-        kf = jaxfdi.filters.kalman_filter(model, missing_measurements=missing_measurements,
-                                  unroll_factorizations=unroll_factorizations)
+        kf = jaxfdi.filters.kalman_filter(
+            model,
+            missing_measurements=missing_measurements,
+            unroll_factorizations=unroll_factorizations,
+        )
         return jaxfdi.filters.run_filter(kf, kf.init(m0, P0), ys, us)
 
     return jax.jit(run)
@@ -140,9 +151,14 @@ def test_dead_channel_is_reported_and_never_reaches_the_state(engine, run_kf):
     assert_rel(info.filtered_cov, ref["filtered_cov"], RTOL, "filtered_cov")
     nis, innovation = np.asarray(info.nis), np.asarray(info.innovation)
     assert np.all(np.isfinite(nis[:10])) and np.all(nis[10:] == np.inf)
-    assert np.array_equal(np.isnan(innovation), ~np.isfinite(bad)) and not np.any(np.isinf(innovation))
+    assert np.array_equal(np.isnan(innovation), ~np.isfinite(bad)) and not np.any(
+        np.isinf(innovation)
+    )
     assert np.asarray(info.healthy).all()
-    assert list(np.asarray(info.num_observed)[8:12]) == [m, m, m - 1, m - 1] and int(info.num_observed[20]) == m - 2
+    assert (
+        list(np.asarray(info.num_observed)[8:12]) == [m, m, m - 1, m - 1]
+        and int(info.num_observed[20]) == m - 2
+    )
 
 
 def test_partially_missing_equals_filter_on_observed_rows(engine):
@@ -192,8 +208,8 @@ def test_log_likelihood_equals_exact_joint_gaussian():
     for i in range(T):
         for j in range(i, T):
             block = np.linalg.matrix_power(Phi, j - i) @ covs[i]
-            cross[j * n:(j + 1) * n, i * n:(i + 1) * n] = block
-            cross[i * n:(i + 1) * n, j * n:(j + 1) * n] = block.T
+            cross[j * n : (j + 1) * n, i * n : (i + 1) * n] = block
+            cross[i * n : (i + 1) * n, j * n : (j + 1) * n] = block.T
     H = np.kron(np.eye(T), C)
     joint_mean = H @ np.concatenate(means)
     joint_cov = H @ cross @ H.T + np.kron(np.eye(T), R)

@@ -2,17 +2,25 @@
 UnscentedKalmanFilter + MerweScaledSigmaPoints on the nonlinear rigid-body model; the
 EKF equal to filterpy's ExtendedKalmanFilter with finite-difference Jacobians; and the
 UKF stays finite and accurate in float32 with alpha = 1e-3."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _problems import engine_data, linear_as_nonlinear, rigid_body_data
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 import jaxfdi
-from _problems import engine_data, linear_as_nonlinear, rigid_body_data
 from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
-FIELDS = ("filtered_mean", "filtered_cov", "predicted_mean", "predicted_cov", "innovation", "log_likelihood")
+FIELDS = (
+    "filtered_mean",
+    "filtered_cov",
+    "predicted_mean",
+    "predicted_cov",
+    "innovation",
+    "log_likelihood",
+)
 
 
 def rel_err(actual, expected):
@@ -78,7 +86,9 @@ def test_ukf_equals_filterpy(rigid, alpha, tol):
     ~1e6 * eps in float64 (weights -1e6), so the reference itself is good to ~1e-8
     only: we check 1e-7 there."""
     params, Q, R, ys, us, m0, P0 = rigid
-    ukf = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params, alpha, 2.0, 0.0)
+    ukf = jaxfdi.filters.unscented_kalman_filter(
+        rigid_body_transition, rigid_body_observation, Q, R, params, alpha, 2.0, 0.0
+    )
     _, info = jaxfdi.filters.run_filter(ukf, ukf.init(m0, P0), ys, us)
     ref = filterpy_ukf(params, Q, R, ys, us, m0, P0, alpha, 2.0, 0.0)
     for name, value in ref.items():
@@ -90,7 +100,13 @@ def test_ekf_equals_filterpy_with_numerical_jacobians(rigid):
     f = jax.jit(lambda x, u: rigid_body_transition(x, u, params))
 
     def fd_jacobian(x, u, eps=1e-6):
-        return np.stack([(np.asarray(f(x + eps * e, u)) - np.asarray(f(x - eps * e, u))) / (2 * eps) for e in np.eye(3)], 1)
+        return np.stack(
+            [
+                (np.asarray(f(x + eps * e, u)) - np.asarray(f(x - eps * e, u))) / (2 * eps)
+                for e in np.eye(3)
+            ],
+            1,
+        )
 
     ref = ExtendedKalmanFilter(3, 3)
     ref.x, ref.P, ref.Q, ref.R = m0.reshape(3, 1).copy(), P0.copy(), Q, R
@@ -102,40 +118,63 @@ def test_ekf_equals_filterpy_with_numerical_jacobians(rigid):
         ref.F = fd_jacobian(ref.x.ravel(), us[k])
         ref.x = np.asarray(f(ref.x.ravel(), us[k])).reshape(3, 1)
         ref.P = ref.F @ ref.P @ ref.F.T + ref.Q
-    ekf = jaxfdi.filters.extended_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
+    ekf = jaxfdi.filters.extended_kalman_filter(
+        rigid_body_transition, rigid_body_observation, Q, R, params
+    )
     _, info = jaxfdi.filters.run_filter(ekf, ekf.init(m0, P0), ys, us)
     assert rel_err(info.filtered_mean, np.array(means)) < 1e-7
-    assert rel_err(info.filtered_cov, np.array(covs)) < 1e-6  # central differences: O(eps^2) + round-off
+    assert (
+        rel_err(info.filtered_cov, np.array(covs)) < 1e-6
+    )  # central differences: O(eps^2) + round-off
 
 
 def test_ukf_float32_alpha_1e3_stays_finite_and_matches_float64(rigid):
     """Acceptance test of the centred/Taylor form: float32, alpha = 1e-3 (Wc0 ~ -1e6)."""
     params, Q, R, ys, us, m0, P0 = rigid
-    ukf64 = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
+    ukf64 = jaxfdi.filters.unscented_kalman_filter(
+        rigid_body_transition, rigid_body_observation, Q, R, params
+    )
     _, ref = jaxfdi.filters.run_filter(ukf64, ukf64.init(m0, P0), ys, us)
 
-    f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
+    f32 = lambda a: jnp.asarray(a, jnp.float32)
     params32 = jax.tree_util.tree_map(f32, params)
-    ukf32 = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, f32(Q), f32(R), params32)
+    ukf32 = jaxfdi.filters.unscented_kalman_filter(
+        rigid_body_transition, rigid_body_observation, f32(Q), f32(R), params32
+    )
     _, info = jaxfdi.filters.run_filter(ukf32, ukf32.init(f32(m0), f32(P0)), f32(ys), f32(us))
     assert info.filtered_mean.dtype == jnp.float32
     assert info.filtered_cov.dtype == jnp.float32
-    assert bool(jnp.all(jnp.isfinite(info.filtered_mean))) and bool(jnp.all(jnp.isfinite(info.filtered_cov)))
+    assert bool(jnp.all(jnp.isfinite(info.filtered_mean))) and bool(
+        jnp.all(jnp.isfinite(info.filtered_cov))
+    )
     assert bool(jnp.all(info.healthy))
     assert rel_err(info.filtered_mean, ref.filtered_mean) < 1e-3
-    assert rel_err(np.sqrt(np.diagonal(info.filtered_cov, axis1=1, axis2=2)),
-                   np.sqrt(np.diagonal(ref.filtered_cov, axis1=1, axis2=2))) < 1e-2
+    assert (
+        rel_err(
+            np.sqrt(np.diagonal(info.filtered_cov, axis1=1, axis2=2)),
+            np.sqrt(np.diagonal(ref.filtered_cov, axis1=1, axis2=2)),
+        )
+        < 1e-2
+    )
 
 
 def test_textbook_differences_in_float32_are_what_the_taylor_form_fixes(rigid):
     """The same float32 run with direct sigma-point differences is far off (> 1e-3),
     which is why ``sigma_differences='auto'`` picks the Taylor form there."""
     params, Q, R, ys, us, m0, P0 = rigid
-    ukf64 = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q, R, params)
+    ukf64 = jaxfdi.filters.unscented_kalman_filter(
+        rigid_body_transition, rigid_body_observation, Q, R, params
+    )
     _, ref = jaxfdi.filters.run_filter(ukf64, ukf64.init(m0, P0), ys, us)
-    f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
-    ukf = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, f32(Q), f32(R),
-                                         jax.tree_util.tree_map(f32, params), sigma_differences="direct")
+    f32 = lambda a: jnp.asarray(a, jnp.float32)
+    ukf = jaxfdi.filters.unscented_kalman_filter(
+        rigid_body_transition,
+        rigid_body_observation,
+        f32(Q),
+        f32(R),
+        jax.tree_util.tree_map(f32, params),
+        sigma_differences="direct",
+    )
     _, info = jaxfdi.filters.run_filter(ukf, ukf.init(f32(m0), f32(P0)), f32(ys), f32(us))
     finite = bool(jnp.all(jnp.isfinite(info.filtered_mean)))
     assert (not finite) or rel_err(info.filtered_mean, ref.filtered_mean) > 1e-3

@@ -1,10 +1,11 @@
 """The associative-scan (parallel-in-time) Kalman filter against the sequential one on
 the engine, and against dense Gaussian conditioning of the whole sequence on a small case."""
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
 from _linear_gaussian_cases import condition, engine_filtered, joint_gaussian, small_model
+
 from jaxfdi.filters import GaussianState, kalman_filter, run_filter
 
 
@@ -17,9 +18,23 @@ def test_parallel_equals_sequential_on_the_engine():
     """Every FilterInfo field and the final prediction within 1e-9 (relative to the
     field's largest value) of run_filter(kalman_filter), float64."""
     model, ys, us, m0, P0, (final, info) = engine_filtered()
-    got_final, got = run_filter(kalman_filter(model, missing_measurements=True), GaussianState(m0, P0), ys, us, parallel=True)
-    for name in ("predicted_mean", "predicted_cov", "filtered_mean", "filtered_cov", "innovation", "innovation_cov",
-                 "log_likelihood", "nis"):
+    got_final, got = run_filter(
+        kalman_filter(model, missing_measurements=True),
+        GaussianState(m0, P0),
+        ys,
+        us,
+        parallel=True,
+    )
+    for name in (
+        "predicted_mean",
+        "predicted_cov",
+        "filtered_mean",
+        "filtered_cov",
+        "innovation",
+        "innovation_cov",
+        "log_likelihood",
+        "nis",
+    ):
         assert _rel(getattr(got, name), getattr(info, name)) < 1e-9, name
     np.testing.assert_array_equal(got.num_observed, info.num_observed)
     np.testing.assert_array_equal(got.healthy, info.healthy)
@@ -33,12 +48,22 @@ def test_parallel_equals_dense_conditioning(T=13):
     rng = np.random.default_rng(4)
     us, ys = rng.normal(size=(T, 1)), rng.normal(size=(T, 2)) * 2.0
     m0, P0 = np.array([0.3, -0.1, 0.2]), np.diag([0.5, 0.4, 0.3])
-    _, info = run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us, parallel=True)
+    _, info = run_filter(
+        kalman_filter(model, missing_measurements=True),
+        GaussianState(jnp.asarray(m0), jnp.asarray(P0)),
+        ys,
+        us,
+        parallel=True,
+    )
     joint = joint_gaussian(model, m0, P0, us, T)
     for k in range(T):
         mean, cov, log_density = condition(joint, ys, k + 1)
-        np.testing.assert_allclose(info.filtered_mean[k], mean[3 * k:3 * k + 3], rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(info.filtered_cov[k], cov[3 * k:3 * k + 3, 3 * k:3 * k + 3], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(
+            info.filtered_mean[k], mean[3 * k : 3 * k + 3], rtol=1e-9, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            info.filtered_cov[k], cov[3 * k : 3 * k + 3, 3 * k : 3 * k + 3], rtol=1e-9, atol=1e-12
+        )
     np.testing.assert_allclose(np.sum(info.log_likelihood), log_density, rtol=1e-10)
 
 
@@ -55,20 +80,35 @@ def test_a_dead_sensor_is_left_out_exactly_and_reported(T=13):
     ys[4:9, 1] = np.nan
     ys[10, 0] = np.inf
     m0, P0 = np.array([0.3, -0.1, 0.2]), np.diag([0.5, 0.4, 0.3])
-    _, info = run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.asarray(m0), jnp.asarray(P0)), ys, us, parallel=True)
+    _, info = run_filter(
+        kalman_filter(model, missing_measurements=True),
+        GaussianState(jnp.asarray(m0), jnp.asarray(P0)),
+        ys,
+        us,
+        parallel=True,
+    )
     joint = joint_gaussian(model, m0, P0, us, T)
     flat = ys.ravel()
     for k in range(T):
-        rows = np.flatnonzero(np.isfinite(flat[:2 * (k + 1)]))
+        rows = np.flatnonzero(np.isfinite(flat[: 2 * (k + 1)]))
         Syy = joint.cov_y[np.ix_(rows, rows)]
         cross = joint.cross[:, rows]
-        solved = scipy.linalg.solve(Syy, np.concatenate([(flat[rows] - joint.mean_y[rows])[:, None], cross.T], 1),
-                                    assume_a="pos")
+        solved = scipy.linalg.solve(
+            Syy,
+            np.concatenate([(flat[rows] - joint.mean_y[rows])[:, None], cross.T], 1),
+            assume_a="pos",
+        )
         mean, cov = joint.mean_x + cross @ solved[:, 0], joint.cov_x - cross @ solved[:, 1:]
-        np.testing.assert_allclose(info.filtered_mean[k], mean[3 * k:3 * k + 3], rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(info.filtered_cov[k], cov[3 * k:3 * k + 3, 3 * k:3 * k + 3], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(
+            info.filtered_mean[k], mean[3 * k : 3 * k + 3], rtol=1e-9, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            info.filtered_cov[k], cov[3 * k : 3 * k + 3, 3 * k : 3 * k + 3], rtol=1e-9, atol=1e-12
+        )
     rows = np.flatnonzero(np.isfinite(flat))
-    log_density = scipy.stats.multivariate_normal(joint.mean_y[rows], joint.cov_y[np.ix_(rows, rows)]).logpdf(flat[rows])
+    log_density = scipy.stats.multivariate_normal(
+        joint.mean_y[rows], joint.cov_y[np.ix_(rows, rows)]
+    ).logpdf(flat[rows])
     np.testing.assert_allclose(np.sum(info.log_likelihood), log_density, rtol=1e-10)
     dead = ~np.isfinite(ys)
     np.testing.assert_array_equal(np.isnan(np.asarray(info.innovation)), dead)
@@ -82,13 +122,29 @@ def test_bad_input():
     ys, us = np.zeros((13, 2)), np.zeros((13, 1))
     prior = GaussianState(jnp.zeros(3), jnp.eye(3))
     with pytest.raises(ValueError, match="ys"):
-        run_filter(kalman_filter(model, missing_measurements=True), prior, ys[:, :1], us, parallel=True)
+        run_filter(
+            kalman_filter(model, missing_measurements=True), prior, ys[:, :1], us, parallel=True
+        )
     with pytest.raises(ValueError, match="us"):
-        run_filter(kalman_filter(model, missing_measurements=True), prior, ys, us[:5], parallel=True)
+        run_filter(
+            kalman_filter(model, missing_measurements=True), prior, ys, us[:5], parallel=True
+        )
     with pytest.raises(TypeError, match="init_state"):
-        run_filter(kalman_filter(model, missing_measurements=True), (jnp.zeros(3), jnp.eye(3)), ys, us, parallel=True)
+        run_filter(
+            kalman_filter(model, missing_measurements=True),
+            (jnp.zeros(3), jnp.eye(3)),
+            ys,
+            us,
+            parallel=True,
+        )
     with pytest.raises(ValueError, match="init_state.cov"):
-        run_filter(kalman_filter(model, missing_measurements=True), GaussianState(jnp.zeros(3), -jnp.eye(3)), ys, us, parallel=True)
+        run_filter(
+            kalman_filter(model, missing_measurements=True),
+            GaussianState(jnp.zeros(3), -jnp.eye(3)),
+            ys,
+            us,
+            parallel=True,
+        )
 
 
 _LONG_SEQUENCE = r"""
@@ -127,6 +183,8 @@ def test_long_sequence_completes_on_cpu():
     import subprocess
     import sys
 
-    proc = subprocess.run([sys.executable, "-c", _LONG_SEQUENCE, "4096"], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", _LONG_SEQUENCE, "4096"], capture_output=True, text=True, timeout=300
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert float(proc.stdout.strip().splitlines()[-1]) < 1e-9

@@ -2,6 +2,7 @@
 (filterpy, float64, 1e-9) for actuator and sensor biases with constant and time-varying
 distributions; the robust variant equals a NumPy augmented unbiased-minimum-variance
 filter (Kitanidis 1987) and its residuals do not see the unknown input."""
+
 from __future__ import annotations
 
 import jax
@@ -29,7 +30,9 @@ def _data(model, seed=0, bias_fn=None, d_scale=0.0, E=None):
     """Noisy VTOL data with inputs that excite every direction; an optional fault."""
     rng = np.random.default_rng(seed)
     Phi, Gamma, C = (np.asarray(a) for a in (model.Phi, model.Gamma, model.C))
-    us = np.stack([0.3 * np.sin(0.2 * np.arange(T)) + 1.0, 0.2 * np.cos(0.13 * np.arange(T)) - 0.5], axis=1)
+    us = np.stack(
+        [0.3 * np.sin(0.2 * np.arange(T)) + 1.0, 0.2 * np.cos(0.13 * np.arange(T)) - 0.5], axis=1
+    )
     x = vtol.X0 * 0.1
     ys = []
     for k in range(T):
@@ -51,7 +54,9 @@ def _rel_err(ours, ref) -> float:
 
 def _filterpy_augmented(model, direction, ys, us, pb0=PB0):
     """Augmented-state KF with per-step F and H (filterpy), same update/predict order."""
-    Phi, Gamma, C, Q, R = (np.asarray(a) for a in (model.Phi, model.Gamma, model.C, model.Q, model.R))
+    Phi, Gamma, C, Q, R = (
+        np.asarray(a) for a in (model.Phi, model.Gamma, model.C, model.Q, model.R)
+    )
     d = jax.tree_util.tree_map(np.asarray, direction)
     n, p = d.state.shape
     kf = KalmanFilter(dim_x=n + p, dim_z=4, dim_u=2)
@@ -102,10 +107,22 @@ def _actuator_step(k, signal, x, u, target):
 
 
 CASES = {
-    "actuator effectiveness (Fa = -Gamma diag u)": (lambda m: tskf.actuator_direction(m, 1, "effectiveness"), _effectiveness_loss),
-    "actuator additive (constant Fa)": (lambda m: tskf.actuator_direction(m, 0, "additive"), _actuator_step),
-    "sensor scaling (Fs = diag C x_hat)": (lambda m: tskf.sensor_direction(m, 2, "scaling"), _sensor_scaling),
-    "sensor additive (constant Fs)": (lambda m: tskf.sensor_direction(m, 2, "additive"), _sensor_step),
+    "actuator effectiveness (Fa = -Gamma diag u)": (
+        lambda m: tskf.actuator_direction(m, 1, "effectiveness"),
+        _effectiveness_loss,
+    ),
+    "actuator additive (constant Fa)": (
+        lambda m: tskf.actuator_direction(m, 0, "additive"),
+        _actuator_step,
+    ),
+    "sensor scaling (Fs = diag C x_hat)": (
+        lambda m: tskf.sensor_direction(m, 2, "scaling"),
+        _sensor_scaling,
+    ),
+    "sensor additive (constant Fs)": (
+        lambda m: tskf.sensor_direction(m, 2, "additive"),
+        _sensor_step,
+    ),
 }
 
 
@@ -116,8 +133,13 @@ def test_optimal_tskf_equals_augmented_kalman_filter(model, case):
     ys, us = _data(model, seed=1, bias_fn=fault)
     _, info = _run_tskf(model, direction, ys, us)
     ref = _filterpy_augmented(model, direction, ys, us)
-    for name, ours in (("mean", info.filtered_mean), ("cov", info.filtered_cov), ("bias", info.bias_mean),
-                       ("nis", info.statistic), ("loglik", info.log_likelihood)):
+    for name, ours in (
+        ("mean", info.filtered_mean),
+        ("cov", info.filtered_cov),
+        ("bias", info.bias_mean),
+        ("nis", info.statistic),
+        ("loglik", info.log_likelihood),
+    ):
         err = _rel_err(ours, ref[name])
         assert err < TOL, f"{case}: {name} differs from the augmented KF by {err:.2e}"
     assert bool(jnp.all(info.healthy))
@@ -130,9 +152,15 @@ def test_tskf_is_a_filter_and_its_bias_prior_defaults_to_a_known_zero(model):
     filt = tskf.two_stage_kalman_filter(model, direction, QB * jnp.eye(1))
     assert type(filt) is jaxfdi.filters.Filter and tskf.tskf_statistic_dof(model) == 4
     ys, us = _data(model, seed=4, bias_fn=_actuator_step)
-    _, info = jaxfdi.filters.run_filter(filt, filt.init(jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4)), ys, us)
+    _, info = jaxfdi.filters.run_filter(
+        filt, filt.init(jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4)), ys, us
+    )
     ref = _filterpy_augmented(model, direction, ys, us, pb0=0.0)
-    for name, ours in (("mean", info.filtered_mean), ("bias", info.bias_mean), ("nis", info.statistic)):
+    for name, ours in (
+        ("mean", info.filtered_mean),
+        ("bias", info.bias_mean),
+        ("nis", info.statistic),
+    ):
         err = _rel_err(ours, ref[name])
         assert err < TOL, f"{name} differs from the augmented KF by {err:.2e}"
     assert bool(jnp.all(info.healthy))
@@ -140,7 +168,10 @@ def test_tskf_is_a_filter_and_its_bias_prior_defaults_to_a_known_zero(model):
 
 def test_two_bias_directions_stack(model):
     """A bias with p = 2 (both actuators, additive) also equals the augmented KF."""
-    d0, d1 = tskf.actuator_direction(model, 0, "additive"), tskf.actuator_direction(model, 1, "additive")
+    d0, d1 = (
+        tskf.actuator_direction(model, 0, "additive"),
+        tskf.actuator_direction(model, 1, "additive"),
+    )
     both = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b], axis=1), d0, d1)
     ys, us = _data(model, seed=2, bias_fn=_actuator_step)
     _, info = _run_tskf(model, both, ys, us)
@@ -151,7 +182,9 @@ def test_two_bias_directions_stack(model):
 
 def _umv_augmented(model, direction, E, ys, us):
     """NumPy reference: unbiased minimum-variance filter (Kitanidis 1987) on [x; b]."""
-    Phi, Gamma, C, Q, R = (np.asarray(a) for a in (model.Phi, model.Gamma, model.C, model.Q, model.R))
+    Phi, Gamma, C, Q, R = (
+        np.asarray(a) for a in (model.Phi, model.Gamma, model.C, model.Q, model.R)
+    )
     d = jax.tree_util.tree_map(np.asarray, direction)
     E = np.asarray(E)
     n, p = d.state.shape
@@ -187,7 +220,9 @@ def _umv_augmented(model, direction, E, ys, us):
     return {k: np.array(v) for k, v in out.items()}
 
 
-@pytest.mark.parametrize("case", ["actuator effectiveness (Fa = -Gamma diag u)", "sensor scaling (Fs = diag C x_hat)"])
+@pytest.mark.parametrize(
+    "case", ["actuator effectiveness (Fa = -Gamma diag u)", "sensor scaling (Fs = diag C x_hat)"]
+)
 @pytest.mark.parametrize("q", [1, 2])
 def test_robust_tskf_equals_augmented_umv_filter(model, case, q):
     make_direction, fault = CASES[case]
@@ -197,10 +232,18 @@ def test_robust_tskf_equals_augmented_umv_filter(model, case, q):
     filt, info = _run_tskf(model, direction, ys, us, E)
     assert isinstance(filt, jaxfdi.filters.Filter) and tskf.tskf_statistic_dof(model, E) == 4 - q
     ref = _umv_augmented(model, direction, E, ys, us)
-    for name, ours in (("mean", info.filtered_mean), ("cov", info.filtered_cov), ("bias", info.bias_mean),
-                       ("residual", info.residual), ("W", info.residual_cov), ("stat", info.statistic)):
+    for name, ours in (
+        ("mean", info.filtered_mean),
+        ("cov", info.filtered_cov),
+        ("bias", info.bias_mean),
+        ("residual", info.residual),
+        ("W", info.residual_cov),
+        ("stat", info.statistic),
+    ):
         err = _rel_err(ours, ref[name])
-        assert err < 1e-8, f"{case}, q={q}: {name} differs from the augmented UMV filter by {err:.2e}"
+        assert err < 1e-8, (
+            f"{case}, q={q}: {name} differs from the augmented UMV filter by {err:.2e}"
+        )
     # W has rank m - q: the decoupled residual lives in m - q dimensions
     ranks = np.linalg.matrix_rank(np.asarray(info.residual_cov[10:]), tol=1e-10)
     assert np.all(ranks == 4 - q)
@@ -246,13 +289,17 @@ def unknown_input_runs(model):
             x, b = carry
             u, w_k, wb_k, v_k, d_k = inputs
             y = model.C @ x + v_k
-            x_next = model.Phi @ x + model.Gamma @ u - model.Gamma[:, 0] * u[0] * b + E[:, 0] * d_k + w_k
+            x_next = (
+                model.Phi @ x + model.Gamma @ u - model.Gamma[:, 0] * u[0] * b + E[:, 0] * d_k + w_k
+            )
             return (x_next, b + wb_k), y
 
         return jax.lax.scan(body, (x0, b0), (us, w, wb, v, d))[1]
 
     def run(filt, ys):
-        init = filt.init(jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4), jnp.zeros(1), PB0 * jnp.eye(1))
+        init = filt.init(
+            jnp.asarray(0.1 * vtol.X0), P0 * jnp.eye(4), jnp.zeros(1), PB0 * jnp.eye(1)
+        )
         return jaxfdi.filters.run_filter(filt, init, ys, us)[1].statistic
 
     scales = (0.0, 1.0, 100.0)
@@ -263,7 +310,10 @@ def unknown_input_runs(model):
         ys = ys.reshape((-1,) + ys.shape[2:])
         return jax.vmap(lambda y: run(robust, y))(ys), jax.vmap(lambda y: run(plain, y))(ys)
 
-    robust_stat, plain_stat = (np.asarray(a).reshape(len(scales), -1, T) for a in study(jax.random.split(jax.random.key(7), 200)))
+    robust_stat, plain_stat = (
+        np.asarray(a).reshape(len(scales), -1, T)
+        for a in study(jax.random.split(jax.random.key(7), 200))
+    )
     out = {("robust", s): robust_stat[i] for i, s in enumerate(scales)}
     return out | {("plain", s): plain_stat[i] for i, s in enumerate(scales)}
 
@@ -291,10 +341,16 @@ def test_decoupling_conditions_are_checked(model):
         tskf.two_stage_kalman_filter(model, direction, QB * jnp.eye(1), jnp.zeros((4, 1)))
     blind = model._replace(C=jnp.array([[1.0, 0, 0, 0]]), D=jnp.zeros((1, 2)), R=jnp.eye(1))
     with pytest.raises(ValueError, match=r"rank\(C E\)"):
-        tskf.two_stage_kalman_filter(blind, tskf.actuator_direction(blind, 0), QB * jnp.eye(1),
-                                     jnp.array([[0.0], [1.0], [0.0], [0.0]]))
+        tskf.two_stage_kalman_filter(
+            blind,
+            tskf.actuator_direction(blind, 0),
+            QB * jnp.eye(1),
+            jnp.array([[0.0], [1.0], [0.0], [0.0]]),
+        )
     with pytest.raises(ValueError, match="q = 2 unknown inputs"):
-        tskf.two_stage_kalman_filter(blind, tskf.actuator_direction(blind, 0), QB * jnp.eye(1), jnp.eye(4)[:, :2])
+        tskf.two_stage_kalman_filter(
+            blind, tskf.actuator_direction(blind, 0), QB * jnp.eye(1), jnp.eye(4)[:, :2]
+        )
     with pytest.raises(ValueError, match="bias_walk"):
         tskf.two_stage_kalman_filter(model, direction, jnp.eye(2))
     with pytest.raises(ValueError, match="component"):
@@ -305,10 +361,21 @@ def test_bank_is_the_filters_side_by_side(model):
     """The vmapped bank (robust, q = 1): each filter equals the NumPy augmented UMV
     reference for its own fault direction."""
     E = vtol.vtol_unknown_input()
-    directions = [tskf.actuator_direction(model, i) for i in range(2)] + [tskf.sensor_direction(model, j) for j in range(4)]
+    directions = [tskf.actuator_direction(model, i) for i in range(2)] + [
+        tskf.sensor_direction(model, j) for j in range(4)
+    ]
     ys, us = _data(model, seed=5, bias_fn=_sensor_step)
-    bank = tskf.run_tskf_bank(model, tskf.stack_directions(directions), QB * jnp.eye(1), jnp.asarray(0.1 * vtol.X0),
-                              P0 * jnp.eye(4), PB0 * jnp.eye(1), jnp.asarray(ys), jnp.asarray(us), E)
+    bank = tskf.run_tskf_bank(
+        model,
+        tskf.stack_directions(directions),
+        QB * jnp.eye(1),
+        jnp.asarray(0.1 * vtol.X0),
+        P0 * jnp.eye(4),
+        PB0 * jnp.eye(1),
+        jnp.asarray(ys),
+        jnp.asarray(us),
+        E,
+    )
     assert bank.statistic.shape == (6, T)
     for i, direction in enumerate(directions):
         ref = _umv_augmented(model, direction, E, ys, us)
@@ -320,4 +387,6 @@ def test_bank_is_the_filters_side_by_side(model):
     late = np.asarray(bank.statistic[:, 30:]).mean(axis=1)
     assert np.argmin(late) == 4, late
     with pytest.raises(ValueError, match="stack_directions"):
-        tskf.run_tskf_bank(model, directions[0], QB * jnp.eye(1), jnp.zeros(4), jnp.eye(4), jnp.eye(1), ys, us)
+        tskf.run_tskf_bank(
+            model, directions[0], QB * jnp.eye(1), jnp.zeros(4), jnp.eye(4), jnp.eye(1), ys, us
+        )

@@ -11,15 +11,16 @@ stays healthy: the reference behaviour the UKF must match. Where the textbook up
 the textbook update being computed independently in NumPy (Cholesky sigma points, the
 centred moments of the module doc, ``P - K S K^T``).
 """
+
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _problems import rigid_body_data
 
 import jaxfdi
-from _problems import rigid_body_data
 from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 T = 12
@@ -66,10 +67,16 @@ def _run_batch(make):
 
 @pytest.fixture(scope="module")
 def failing_runs():
-    ukf = _run_batch(lambda R_case: jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, rigid_body_observation, Q,
-                                                                   R_case, PARAMS))
-    ekf = _run_batch(lambda R_case: jaxfdi.filters.extended_kalman_filter(rigid_body_transition, rigid_body_observation, Q,
-                                                                  R_case, PARAMS))
+    ukf = _run_batch(
+        lambda R_case: jaxfdi.filters.unscented_kalman_filter(
+            rigid_body_transition, rigid_body_observation, Q, R_case, PARAMS
+        )
+    )
+    ekf = _run_batch(
+        lambda R_case: jaxfdi.filters.extended_kalman_filter(
+            rigid_body_transition, rigid_body_observation, Q, R_case, PARAMS
+        )
+    )
     return ukf, ekf
 
 
@@ -83,15 +90,23 @@ def test_the_failing_cases_defeat_the_textbook_update(failing_runs):
     tiny, huge = 0, 1
     smallest = []
     for k in range(T):
-        _, cov = textbook_update(ukf.predicted_mean[tiny, k], ukf.predicted_cov[tiny, k], YS[k], rigid_body_observation,
-                                 R_TINY, 1e-3)
+        _, cov = textbook_update(
+            ukf.predicted_mean[tiny, k],
+            ukf.predicted_cov[tiny, k],
+            YS[k],
+            rigid_body_observation,
+            R_TINY,
+            1e-3,
+        )
         smallest.append(np.linalg.eigvalsh(cov)[0])
     assert min(smallest) < 0, smallest
     np.testing.assert_allclose(ukf.filtered_cov[tiny, :, 0, 0], 1e-24, rtol=0.02)
     exact = np.linalg.inv(np.linalg.inv(P0_HUGE) + np.linalg.inv(R))
     _, textbook = textbook_update(M0, P0_HUGE, YS[0], rigid_body_observation, R, 1e-3)
     assert np.max(np.abs(textbook - exact)) > np.max(np.abs(exact))
-    np.testing.assert_allclose(ukf.filtered_cov[huge, 0], exact, rtol=0, atol=1e-9 * np.max(np.abs(exact)))
+    np.testing.assert_allclose(
+        ukf.filtered_cov[huge, 0], exact, rtol=0, atol=1e-9 * np.max(np.abs(exact))
+    )
 
 
 @pytest.mark.parametrize("index, name", list(enumerate(FAILING)))
@@ -101,7 +116,7 @@ def test_ukf_stays_positive_definite_where_the_ekf_does(failing_runs, index, nam
     assert ukf.healthy.all(), f"{name}: UKF unhealthy at steps {np.flatnonzero(~ukf.healthy)}"
     for k in range(T):
         for cov in (ukf.filtered_cov[k], ukf.predicted_cov[k]):
-            np.linalg.cholesky(cov)                           # positive definite (raises otherwise)
+            np.linalg.cholesky(cov)  # positive definite (raises otherwise)
             np.testing.assert_allclose(cov, cov.T, rtol=0, atol=1e-15 * np.max(np.abs(cov)))
     # the same estimates as the EKF: the model is mildly nonlinear over one step's spread
     spread = np.sqrt(np.diagonal(ekf.filtered_cov, axis1=1, axis2=2))
@@ -111,32 +126,50 @@ def test_ukf_stays_positive_definite_where_the_ekf_does(failing_runs, index, nam
         assert np.all(ukf.filtered_cov[:, 0, 0] < 1e-20)
 
 
-@pytest.mark.parametrize("h, alpha", [(nonlinear_gyros, 1e-3), (nonlinear_gyros, 1.0)],
-                         ids=["nonlinear alpha 1e-3", "nonlinear alpha 1"])
+@pytest.mark.parametrize(
+    "h, alpha",
+    [(nonlinear_gyros, 1e-3), (nonlinear_gyros, 1.0)],
+    ids=["nonlinear alpha 1e-3", "nonlinear alpha 1"],
+)
 def test_equals_the_textbook_update_where_it_is_sound(h, alpha):
     rng = np.random.default_rng(0)
-    ys = np.stack([np.asarray(h(jnp.asarray(y), None, None)) for y in YS]) + 1e-2 * rng.normal(size=YS.shape)
-    filt = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, h, Q, R, PARAMS, alpha=alpha)
+    ys = np.stack([np.asarray(h(jnp.asarray(y), None, None)) for y in YS]) + 1e-2 * rng.normal(
+        size=YS.shape
+    )
+    filt = jaxfdi.filters.unscented_kalman_filter(
+        rigid_body_transition, h, Q, R, PARAMS, alpha=alpha
+    )
     _, info = jaxfdi.filters.run_filter(filt, filt.init(jnp.asarray(M0), jnp.asarray(P0)), ys, US)
     assert bool(np.all(info.healthy))
     for k in range(T):
-        mean, cov = textbook_update(np.asarray(info.predicted_mean[k]), np.asarray(info.predicted_cov[k]), ys[k], h,
-                                    R, alpha)
-        np.linalg.cholesky(cov)                                   # the textbook update is sound here
+        mean, cov = textbook_update(
+            np.asarray(info.predicted_mean[k]),
+            np.asarray(info.predicted_cov[k]),
+            ys[k],
+            h,
+            R,
+            alpha,
+        )
+        np.linalg.cholesky(cov)  # the textbook update is sound here
         scale = np.max(np.abs(cov))
         np.testing.assert_allclose(info.filtered_cov[k], cov, rtol=0, atol=1e-10 * scale)
-        np.testing.assert_allclose(info.filtered_mean[k], mean, rtol=0, atol=1e-10 * np.max(np.abs(mean)))
+        np.testing.assert_allclose(
+            info.filtered_mean[k], mean, rtol=0, atol=1e-10 * np.max(np.abs(mean))
+        )
 
 
 def test_missing_component_is_skipped_by_the_joseph_like_update():
     """A NaN component neither updates the state nor the covariance: the update equals the
     textbook update on the observed components alone."""
-    filt = jaxfdi.filters.unscented_kalman_filter(rigid_body_transition, nonlinear_gyros, Q, R, PARAMS,
-                                          missing_measurements=True)
+    filt = jaxfdi.filters.unscented_kalman_filter(
+        rigid_body_transition, nonlinear_gyros, Q, R, PARAMS, missing_measurements=True
+    )
     y = np.asarray(nonlinear_gyros(jnp.asarray(YS[0]), None, None)) + 0.01
     y_missing = y.copy()
     y_missing[1] = np.nan
-    post = jax.jit(filt.update)(filt.init(jnp.asarray(M0), jnp.asarray(P0)), jnp.asarray(y_missing), jnp.asarray(US[0]))
+    post = jax.jit(filt.update)(
+        filt.init(jnp.asarray(M0), jnp.asarray(P0)), jnp.asarray(y_missing), jnp.asarray(US[0])
+    )
     kept = [0, 2]
 
     def observed(w, tau, params):

@@ -5,6 +5,7 @@ satellite; the receiver plant reports a DEAD fault on a tracked satellite as tha
 channel (+inf) and keeps NaN for a satellite it does not track. References: the same
 computation on clean data (the record or satellite left out, the pseudorange not
 measured), and tables large enough, which must agree exactly."""
+
 import math
 
 import jax
@@ -12,15 +13,19 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.data import data_path
 from jaxfdi._faults import concat_faults, fault
+from jaxfdi.data import data_path
 from jaxfdi.gnss import geodetic_to_ecef, parity_check, protection_levels, read_rinex_nav
-from jaxfdi.gnss._integrity import geometry_fix, monitor_epoch
+from jaxfdi.gnss._integrity import geometry_fix, monitor_epoch, raim_output
 from jaxfdi.gnss._measurements import elevation_sigma, receiver_plant
-from jaxfdi.gnss._orbits import ephemeris_table, select_orbits, transmission_geometry
+from jaxfdi.gnss._orbits import (
+    ORBIT_PROBLEMS,
+    SPEED_OF_LIGHT,
+    ephemeris_table,
+    select_orbits,
+    transmission_geometry,
+)
 from jaxfdi.gnss._raim import raim_tables
-from jaxfdi.gnss._integrity import raim_output
-from jaxfdi.gnss._orbits import ORBIT_PROBLEMS, SPEED_OF_LIGHT
 
 SITE = geodetic_to_ecef(math.radians(37.5419), math.radians(127.0782), 60.0)
 T = 259200.0 + 2700.0
@@ -41,7 +46,11 @@ def _epoch(table):
     return jnp.where(fix.used & ok, ranges + CLOCK - SPEED_OF_LIGHT * clock, jnp.nan)
 
 
-MONITOR = jax.jit(lambda table, rho, tables: monitor_epoch(*select_orbits(table, T), T, rho, tables, elevation_sigma))
+MONITOR = jax.jit(
+    lambda table, rho, tables: monitor_epoch(
+        *select_orbits(table, T), T, rho, tables, elevation_sigma
+    )
+)
 
 
 def test_tables_smaller_than_the_fix_are_refused_and_larger_ones_agree(ephemerides):
@@ -49,7 +58,9 @@ def test_tables_smaller_than_the_fix_are_refused_and_larger_ones_agree(ephemerid
     rho = _epoch(table)
     exact = MONITOR(table, rho, raim_tables(32))
     assert int(exact.check.dof) >= 2
-    with pytest.raises(ValueError, match=r"tables: built for 8 satellite slots .* raim_tables\(32\)"):
+    with pytest.raises(
+        ValueError, match=r"tables: built for 8 satellite slots .* raim_tables\(32\)"
+    ):
         parity_check(exact.fix, raim_tables(8))
     with pytest.raises(ValueError, match="tables: built for 8"):
         protection_levels(exact.fix, raim_tables(8))
@@ -88,8 +99,11 @@ def test_an_impossible_orbit_is_excluded_alone_with_its_reason(ephemerides):
     got = MONITOR(broken, rho, raim_tables(32))
     want = MONITOR(clean, rho.at[visible[:3]].set(jnp.nan), raim_tables(32))
     assert bool(got.fix.healthy) and np.all(np.isfinite(np.asarray(got.fix.position)))
-    for a, b in ((got.fix.position, want.fix.position), (got.check.statistic, want.check.statistic),
-                 (got.protection.hpl, want.protection.hpl)):
+    for a, b in (
+        (got.fix.position, want.fix.position),
+        (got.check.statistic, want.check.statistic),
+        (got.protection.hpl, want.protection.hpl),
+    ):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-6)
     assert int(got.fix.num_used) == len(visible) - 3
 
@@ -102,14 +116,20 @@ def test_a_dead_pseudorange_alarms_on_its_satellite_and_the_fix_leaves_it_out(ep
     missing = MONITOR(table, rho.at[slot].set(jnp.nan), raim_tables(32))
     np.testing.assert_allclose(dead.fix.position, missing.fix.position, rtol=1e-12)
     decision = raim_output(dead).decision
-    assert bool(decision.alarm) and float(decision.statistic) == np.inf and int(decision.label) == 1 + slot
-    assert int(dead.excluded) == slot                          # left out of the fix: reported as excluded
+    assert (
+        bool(decision.alarm)
+        and float(decision.statistic) == np.inf
+        and int(decision.label) == 1 + slot
+    )
+    assert int(dead.excluded) == slot  # left out of the fix: reported as excluded
     np.testing.assert_array_equal(dead.fix_excluded.position, dead.fix.position)
-    quiet = raim_output(missing).decision                      # NaN: not measured, no evidence
+    quiet = raim_output(missing).decision  # NaN: not measured, no evidence
     assert not bool(quiet.alarm) and int(quiet.label) == 0 and int(missing.excluded) == -1
 
 
-def test_the_receiver_reports_a_dead_tracked_channel_as_inf_and_an_untracked_one_as_nan(ephemerides):
+def test_the_receiver_reports_a_dead_tracked_channel_as_inf_and_an_untracked_one_as_nan(
+    ephemerides,
+):
     """DEAD faults on a tracked slot and on a slot with an orbit below the mask: the plant
     gives +inf on the first (RAIM: alarm, its label, excluded) and NaN on the second (not
     measured: no evidence), every other tracked slot its finite pseudorange."""
@@ -119,12 +139,23 @@ def test_the_receiver_reports_a_dead_tracked_channel_as_inf_and_an_untracked_one
     tracked = np.isfinite(np.asarray(rho))
     slot = int(np.flatnonzero(tracked)[2])
     hidden = int(np.flatnonzero(np.asarray(has_orbit) & ~tracked)[0])
-    plant = receiver_plant(table, T, 1.0, SITE[None], jnp.asarray(tracked)[None], jnp.full((1, 32), 3.0),
-                           fault=concat_faults(fault("dead", "sensor", slot, 0), fault("dead", "sensor", hidden, 0)))
-    _, sensed = plant.measure(plant.init(jnp.asarray([CLOCK, 0.0])), 0, jnp.zeros(0), jax.random.key(3))
+    plant = receiver_plant(
+        table,
+        T,
+        1.0,
+        SITE[None],
+        jnp.asarray(tracked)[None],
+        jnp.full((1, 32), 3.0),
+        fault=concat_faults(fault("dead", "sensor", slot, 0), fault("dead", "sensor", hidden, 0)),
+    )
+    _, sensed = plant.measure(
+        plant.init(jnp.asarray([CLOCK, 0.0])), 0, jnp.zeros(0), jax.random.key(3)
+    )
     y = np.asarray(sensed.measurement)
     assert y[slot] == np.inf and np.isnan(y[hidden])
-    assert np.all(np.isfinite(np.delete(y, slot)[np.delete(tracked, slot)])) and np.all(np.isnan(y[~tracked]))
+    assert np.all(np.isfinite(np.delete(y, slot)[np.delete(tracked, slot)])) and np.all(
+        np.isnan(y[~tracked])
+    )
     result = MONITOR(table, jnp.asarray(y), raim_tables(32))
     decision = raim_output(result).decision
     assert bool(decision.alarm) and int(decision.label) == 1 + slot and int(result.excluded) == slot
@@ -142,8 +173,13 @@ def test_an_epoch_is_as_healthy_as_the_fix_it_delivers(ephemerides):
     result = MONITOR(table, rho.at[slot].add(5e4), raim_tables(32))
     assert not bool(result.fix.healthy) and int(result.excluded) == slot
     assert bool(result.fix_excluded.healthy)
-    np.testing.assert_allclose(np.asarray(result.fix_excluded.position), np.asarray(SITE), atol=1e-3)
+    np.testing.assert_allclose(
+        np.asarray(result.fix_excluded.position), np.asarray(SITE), atol=1e-3
+    )
     assert bool(raim_output(result).healthy)
-    kept = jax.jit(lambda rho: monitor_epoch(*select_orbits(table, T), T, rho, raim_tables(32), elevation_sigma,
-                                             exclude=False))(rho.at[slot].add(5e4))
+    kept = jax.jit(
+        lambda rho: monitor_epoch(
+            *select_orbits(table, T), T, rho, raim_tables(32), elevation_sigma, exclude=False
+        )
+    )(rho.at[slot].add(5e4))
     assert not bool(raim_output(kept).healthy)

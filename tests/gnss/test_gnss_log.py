@@ -16,6 +16,7 @@ pseudoranges Google's and gnss_lib_py's pipelines generated from the same record
   millimetre, so within 1 mm of ours after the epoch's common term.
 - Every log parses; damaged copies name the file and line.
 """
+
 import csv
 import warnings
 
@@ -29,8 +30,15 @@ from jaxfdi.gnss import read_observations
 
 C = 299_792_458.0
 LOGS = ["gsdc2021_Pixel4_GnssLog.txt", "gsdc2023_gnss_log.txt"]
-L1_SIGNALS = {"GPS_L1_CA": "G", "GLO_G1_CA": "R", "GAL_E1_C_P": "E", "QZS_L1_CA": "J", "GPS_L1": "G",
-              "GLO_G1": "R", "GAL_E1": "E"}
+L1_SIGNALS = {
+    "GPS_L1_CA": "G",
+    "GLO_G1_CA": "R",
+    "GAL_E1_C_P": "E",
+    "QZS_L1_CA": "J",
+    "GPS_L1": "G",
+    "GLO_G1": "R",
+    "GAL_E1": "E",
+}
 
 
 def gps_millis(obs):
@@ -48,7 +56,9 @@ def test_every_log_parses(name):
     assert set(obs.code) == {"C1C"}
     measured = np.isfinite(obs.pseudorange)
     assert measured.mean() > 0.9
-    assert np.all((obs.pseudorange[measured] > 1.8e7) & (obs.pseudorange[measured] < 2.9e7))   # 60-100 ms of flight
+    assert np.all(
+        (obs.pseudorange[measured] > 1.8e7) & (obs.pseudorange[measured] < 2.9e7)
+    )  # 60-100 ms of flight
     assert np.all(np.isfinite(obs.cn0[measured]))
 
 
@@ -60,7 +70,9 @@ def test_2023_log_is_googles_raw_pseudoranges_up_to_the_epochs_clock():
     epochs = sorted({int(r["utcTimeMillis"]) for r in rows})
     gps = np.array(epochs) - 315_964_800_000 + 18_000
     tags = gps_millis(obs)
-    assert np.all(np.abs(obs.week * 604_800_000 + obs.time_of_week * 1e3 - gps) < 1.0)     # utcTimeMillis: ms
+    assert np.all(
+        np.abs(obs.week * 604_800_000 + obs.time_of_week * 1e3 - gps) < 1.0
+    )  # utcTimeMillis: ms
     difference = np.full((len(epochs), obs.satellite.size), np.nan)
     for r in rows:
         sat = f"{L1_SIGNALS[r['SignalType']]}{int(r['Svid']):02d}"
@@ -74,8 +86,12 @@ def test_2023_log_is_googles_raw_pseudoranges_up_to_the_epochs_clock():
     assert np.all(np.isnan(obs.pseudorange[:, column(obs, "J03")]))
     finite = np.isfinite(difference)
     common = np.nanmedian(difference, axis=1)
-    np.testing.assert_allclose(difference[finite], np.broadcast_to(common[:, None], difference.shape)[finite],
-                               atol=1e-6, rtol=0)
+    np.testing.assert_allclose(
+        difference[finite],
+        np.broadcast_to(common[:, None], difference.shape)[finite],
+        atol=1e-6,
+        rtol=0,
+    )
     full_bias = {}
     text = data_path("gsdc2023_gnss_log.txt").read_text().splitlines()
     header = next(line[2:].split(",") for line in text if line.startswith("# Raw,"))
@@ -95,43 +111,69 @@ def test_2023_log_is_gnss_lib_pys_pseudoranges_up_to_the_epochs_clock():
     letter = {"gps": "G", "glonass": "R", "galileo": "E"}
     tags = gps_millis(obs)
     difference = np.full(obs.pseudorange.shape, np.nan)
-    for gnss, svid, millis, frequency, rho in zip(nav["gnss_id"], nav["sv_id"], nav["gps_millis"],
-                                                  nav["CarrierFrequencyHz"], nav["raw_pr_m"]):
+    for gnss, svid, millis, frequency, rho in zip(
+        nav["gnss_id"], nav["sv_id"], nav["gps_millis"], nav["CarrierFrequencyHz"], nav["raw_pr_m"]
+    ):
         if gnss not in letter or frequency < 1.5e9:
-            continue                 # QZSS is numbered by vehicle there; L5/E5a is not the code read
+            continue  # QZSS is numbered by vehicle there; L5/E5a is not the code read
         e = int(np.argmin(np.abs(tags - millis)))
         assert abs(tags[e] - millis) < 1.0
-        difference[e, column(obs, f"{letter[gnss]}{int(svid):02d}")] = obs.pseudorange[e, column(
-            obs, f"{letter[gnss]}{int(svid):02d}")] - rho
+        difference[e, column(obs, f"{letter[gnss]}{int(svid):02d}")] = (
+            obs.pseudorange[e, column(obs, f"{letter[gnss]}{int(svid):02d}")] - rho
+        )
     finite = np.isfinite(difference)
     assert finite.sum() == 105
     common = np.nanmedian(difference, axis=1)
-    np.testing.assert_allclose(difference[finite], np.broadcast_to(common[:, None], difference.shape)[finite],
-                               atol=0.02, rtol=0)
+    np.testing.assert_allclose(
+        difference[finite],
+        np.broadcast_to(common[:, None], difference.shape)[finite],
+        atol=0.02,
+        rtol=0,
+    )
 
 
 def test_2021_log_is_the_derived_files_row_one_epoch_later():
     obs = read_observations(data_path("gsdc2021_Pixel4_GnssLog.txt"))
     with open(data_path("gsdc2021_Pixel4_derived.csv"), newline="") as handle:
         rows = list(csv.DictReader(handle))
-    later = [r for r in rows if int(r["millisSinceGpsEpoch"]) == gps_millis(obs)[0] + 1000
-             and r["signalType"] in L1_SIGNALS]
+    later = [
+        r
+        for r in rows
+        if int(r["millisSinceGpsEpoch"]) == gps_millis(obs)[0] + 1000
+        and r["signalType"] in L1_SIGNALS
+    ]
     assert not [r for r in rows if int(r["millisSinceGpsEpoch"]) == gps_millis(obs)[0]]
     letters = {"1": "G", "3": "R", "6": "E"}
-    difference = np.array([obs.pseudorange[0, column(obs, f"{letters[r['constellationType']]}{int(r['svid']):02d}")]
-                           - float(r["rawPrM"]) for r in later])
+    difference = np.array(
+        [
+            obs.pseudorange[
+                0, column(obs, f"{letters[r['constellationType']]}{int(r['svid']):02d}")
+            ]
+            - float(r["rawPrM"])
+            for r in later
+        ]
+    )
     assert difference.size == 20
-    np.testing.assert_allclose(difference, np.median(difference), atol=1e-3, rtol=0)    # two 0.5 mm roundings
+    np.testing.assert_allclose(
+        difference, np.median(difference), atol=1e-3, rtol=0
+    )  # two 0.5 mm roundings
 
 
 def test_first_gps_fix_is_the_approximate_position_in_float64():
     with jax.enable_x64(False):
         obs = read_observations(data_path("gsdc2021_Pixel4_GnssLog.txt"))
-    lat, lon, h = np.radians(37.4235845), np.radians(-122.0941221), -32.830566      # the first GPS Fix record
+    lat, lon, h = (
+        np.radians(37.4235845),
+        np.radians(-122.0941221),
+        -32.830566,
+    )  # the first GPS Fix record
     a, e2 = 6378137.0, 6.69437999014e-3
     n = a / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-    expected = [(n + h) * np.cos(lat) * np.cos(lon), (n + h) * np.cos(lat) * np.sin(lon),
-                (n * (1 - e2) + h) * np.sin(lat)]
+    expected = [
+        (n + h) * np.cos(lat) * np.cos(lon),
+        (n + h) * np.cos(lat) * np.sin(lon),
+        (n * (1 - e2) + h) * np.sin(lat),
+    ]
     np.testing.assert_allclose(obs.approx_position, expected, atol=1e-6, rtol=0)
     assert np.all(np.isnan(read_observations(data_path("gsdc2023_gnss_log.txt")).approx_position))
 
@@ -148,23 +190,36 @@ def damaged(tmp_path, edit):
 
 def field(name, value):
     """An edit that sets one field of the first Raw record."""
+
     def edit(lines, k):
         header = next(line[2:].split(",") for line in lines if line.startswith("# Raw,"))
         fields = lines[k].split(",")
         fields[header.index(name)] = value
-        return lines[:k] + [",".join(fields)] + lines[k + 1:]
+        return lines[:k] + [",".join(fields)] + lines[k + 1 :]
+
     return edit
 
 
-@pytest.mark.parametrize("edit, after, message", [
-    (lambda lines, k: lines[:k] + [lines[k].rsplit(",", 5)[0]] + lines[k + 1:], 0, "expected 37 fields"),
-    (field("CarrierFrequencyHz", "1575420000x"), 0, "could not convert string to float"),
-    (field("Svid", ""), 0, "invalid literal for int"),
-    (field("ConstellationType", "9"), 0, "ConstellationType 9"),
-    (field("FullBiasNanos", "1378148348376188193"), 0, "FullBiasNanos: expected a negative number"),
-    (field("CarrierFrequencyHz", "1300000000"), 0, "CarrierFrequencyHz: expected an L1/E1/G1"),
-    (lambda lines, k: lines[:k] + [lines[k]] + lines[k:], 1, "a second record of G02 C1C"),
-])
+@pytest.mark.parametrize(
+    "edit, after, message",
+    [
+        (
+            lambda lines, k: lines[:k] + [lines[k].rsplit(",", 5)[0]] + lines[k + 1 :],
+            0,
+            "expected 37 fields",
+        ),
+        (field("CarrierFrequencyHz", "1575420000x"), 0, "could not convert string to float"),
+        (field("Svid", ""), 0, "invalid literal for int"),
+        (field("ConstellationType", "9"), 0, "ConstellationType 9"),
+        (
+            field("FullBiasNanos", "1378148348376188193"),
+            0,
+            "FullBiasNanos: expected a negative number",
+        ),
+        (field("CarrierFrequencyHz", "1300000000"), 0, "CarrierFrequencyHz: expected an L1/E1/G1"),
+        (lambda lines, k: lines[:k] + [lines[k]] + lines[k:], 1, "a second record of G02 C1C"),
+    ],
+)
 def test_damaged_log_names_the_file_and_line(tmp_path, edit, after, message):
     path, line = damaged(tmp_path, edit)
     with pytest.raises(ValueError, match=f"log.txt:{line + after}: {message}"):
@@ -172,12 +227,21 @@ def test_damaged_log_names_the_file_and_line(tmp_path, edit, after, message):
 
 
 def test_a_log_without_raw_header_or_records_is_named(tmp_path):
-    path, line = damaged(tmp_path, lambda lines, k: [line for line in lines if not line.startswith("# Raw")])
-    with pytest.raises(ValueError, match=f"log.txt:{line - 1}: a Raw record before the '# Raw,' header"):
+    path, line = damaged(
+        tmp_path, lambda lines, k: [line for line in lines if not line.startswith("# Raw")]
+    )
+    with pytest.raises(
+        ValueError, match=f"log.txt:{line - 1}: a Raw record before the '# Raw,' header"
+    ):
         read_observations(path)
-    path, _ = damaged(tmp_path, lambda lines, k: [line for line in lines if not line.startswith(("# Raw", "Raw,"))])
+    path, _ = damaged(
+        tmp_path,
+        lambda lines, k: [line for line in lines if not line.startswith(("# Raw", "Raw,"))],
+    )
     with pytest.raises(ValueError, match="log.txt:1: expected an Android GnssLogger log"):
         read_observations(path)
-    path, _ = damaged(tmp_path, lambda lines, k: [line for line in lines if not line.startswith("Raw,")])
+    path, _ = damaged(
+        tmp_path, lambda lines, k: [line for line in lines if not line.startswith("Raw,")]
+    )
     with pytest.raises(ValueError, match="log.txt:[0-9]+: no Raw record"):
         read_observations(path)

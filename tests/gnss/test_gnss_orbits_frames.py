@@ -1,5 +1,6 @@
 """Satellite positions and clocks against RTKLIB (pyrtklib: eph2pos / alm2pos / eph2clk),
 WGS-84 conversions and look angles against pymap3d and RTKLIB, DOPs against RTKLIB."""
+
 import math
 
 import jax
@@ -10,10 +11,19 @@ import pyrtklib as rtk
 import pytest
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss import (ecef_to_geodetic, geodetic_to_ecef, orbit_table, read_rinex_nav, read_yuma,
-                         satellite_position)
+from jaxfdi.gnss import (
+    ecef_to_geodetic,
+    geodetic_to_ecef,
+    orbit_table,
+    read_rinex_nav,
+    read_yuma,
+    satellite_position,
+)
 from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, ned_to_ecef
 from jaxfdi.gnss._orbits import (
+    OMEGA_E,
+    SPEED_OF_LIGHT,
+    Orbit,
     almanac_table,
     ephemeris_table,
     satellite_clock,
@@ -21,7 +31,6 @@ from jaxfdi.gnss._orbits import (
     select_orbits,
     transmission_geometry,
 )
-from jaxfdi.gnss._orbits import OMEGA_E, SPEED_OF_LIGHT, Orbit
 from jaxfdi.gnss._positioning import dops
 
 C = 299792458.0
@@ -51,12 +60,30 @@ def record_orbits(ephemerides):
 
 def rtklib_eph(eph, k):
     e = rtk.eph_t()
-    e.sat, e.week, e.iode, e.iodc, e.svh = int(eph.prn[k]), int(eph.week[k]), int(eph.iode[k]), int(eph.iodc[k]), 0
-    e.A, e.e, e.i0, e.OMG0, e.omg, e.M0 = (eph.sqrt_a[k] ** 2, eph.eccentricity[k], eph.i0[k], eph.omega0[k],
-                                           eph.argument_of_perigee[k], eph.m0[k])
+    e.sat, e.week, e.iode, e.iodc, e.svh = (
+        int(eph.prn[k]),
+        int(eph.week[k]),
+        int(eph.iode[k]),
+        int(eph.iodc[k]),
+        0,
+    )
+    e.A, e.e, e.i0, e.OMG0, e.omg, e.M0 = (
+        eph.sqrt_a[k] ** 2,
+        eph.eccentricity[k],
+        eph.i0[k],
+        eph.omega0[k],
+        eph.argument_of_perigee[k],
+        eph.m0[k],
+    )
     e.deln, e.OMGd, e.idot = eph.delta_n[k], eph.omega_dot[k], eph.idot[k]
-    e.crc, e.crs, e.cuc, e.cus, e.cic, e.cis = (eph.crc[k], eph.crs[k], eph.cuc[k], eph.cus[k], eph.cic[k],
-                                                eph.cis[k])
+    e.crc, e.crs, e.cuc, e.cus, e.cic, e.cis = (
+        eph.crc[k],
+        eph.crs[k],
+        eph.cuc[k],
+        eph.cus[k],
+        eph.cic[k],
+        eph.cis[k],
+    )
     e.toes = eph.toe[k]
     e.toe = rtk.gpst2time(int(eph.week[k]), float(eph.toe[k]))
     e.toc = rtk.gpst2time(int(eph.toc_week[k]), float(eph.toc[k]))
@@ -68,9 +95,14 @@ def test_broadcast_positions_and_clocks_match_rtklib(ephemerides, record_orbits)
     """All 418 records at 6 times within +/- 2 h of toe: 1 mm asked, ~1e-7 m found."""
     eph = ephemerides
     times = (eph.week[:, None] - 2086) * 604800.0 + eph.toe[:, None] + OFFSETS[None, :]
-    ours = jax.jit(jax.vmap(lambda t: satellite_position(record_orbits, t), in_axes=1, out_axes=1))(times)
-    clocks = jax.jit(jax.vmap(lambda t: satellite_clock(record_orbits, t, l1_group_delay=False),
-                              in_axes=1, out_axes=1))(times)
+    ours = jax.jit(jax.vmap(lambda t: satellite_position(record_orbits, t), in_axes=1, out_axes=1))(
+        times
+    )
+    clocks = jax.jit(
+        jax.vmap(
+            lambda t: satellite_clock(record_orbits, t, l1_group_delay=False), in_axes=1, out_axes=1
+        )
+    )(times)
     ours, clocks = np.asarray(ours), np.asarray(clocks)
     rs, dts, var = rtk.Arr1Ddouble(3), rtk.Arr1Ddouble(1), rtk.Arr1Ddouble(1)
     worst_pos = worst_clock = 0.0
@@ -78,7 +110,7 @@ def test_broadcast_positions_and_clocks_match_rtklib(ephemerides, record_orbits)
         e = rtklib_eph(eph, k)
         for j, offset in enumerate(OFFSETS):
             t = rtk.gpst2time(int(eph.week[k]), float(eph.toe[k] + offset))
-            rtk.eph2pos(t, e, rs, dts, var)        # clock incl. the relativistic term
+            rtk.eph2pos(t, e, rs, dts, var)  # clock incl. the relativistic term
             worst_pos = max(worst_pos, float(np.max(np.abs(ours[k, j] - [rs[0], rs[1], rs[2]]))))
             worst_clock = max(worst_clock, abs(clocks[k, j] - dts[0]) * C)
     assert worst_pos < 1e-3 and worst_clock < 1e-3, (worst_pos, worst_clock)
@@ -86,9 +118,12 @@ def test_broadcast_positions_and_clocks_match_rtklib(ephemerides, record_orbits)
     t = rtk.gpst2time(int(eph.week[0]), float(eph.toe[0] + 1000.0))
     polynomial = rtk.eph2clk(t, rtklib_eph(eph, 0))
     record0 = jax.tree_util.tree_map(lambda leaf: leaf[:1], record_orbits)
-    assert float(satellite_clock(record0, eph.toe[0] + 1000.0, False)[0]) != pytest.approx(polynomial, abs=1e-12)
+    assert float(satellite_clock(record0, eph.toe[0] + 1000.0, False)[0]) != pytest.approx(
+        polynomial, abs=1e-12
+    )
     assert float(satellite_clock(record0, eph.toe[0] + 1000.0, True)[0]) == pytest.approx(
-        float(satellite_clock(record0, eph.toe[0] + 1000.0, False)[0]) - eph.tgd[0], abs=1e-18)
+        float(satellite_clock(record0, eph.toe[0] + 1000.0, False)[0]) - eph.tgd[0], abs=1e-18
+    )
 
 
 def test_velocity_matches_rtklib_finite_difference(ephemerides, record_orbits):
@@ -109,24 +144,44 @@ def test_almanac_matches_rtklib_and_the_broadcast_orbits(ephemerides):
     table = almanac_table(almanac, include_unhealthy=True)
     rs, dts = rtk.Arr1Ddouble(3), rtk.Arr1Ddouble(1)
     for t in (259200.0 + 3600.0, 503808.0, 600000.0):
-        ours = np.asarray(satellite_position(jax.tree_util.tree_map(lambda x: x[:, 0], table.orbit), t))
-        clocks = np.asarray(satellite_clock(jax.tree_util.tree_map(lambda x: x[:, 0], table.orbit), t, False))
+        ours = np.asarray(
+            satellite_position(jax.tree_util.tree_map(lambda x: x[:, 0], table.orbit), t)
+        )
+        clocks = np.asarray(
+            satellite_clock(jax.tree_util.tree_map(lambda x: x[:, 0], table.orbit), t, False)
+        )
         for s in range(almanac.prn.size):
             a = rtk.alm_t()
-            a.sat, a.week, a.e, a.i0 = int(almanac.prn[s]), 2086, almanac.eccentricity[s], almanac.inclination[s]
-            a.A, a.OMG0, a.omg = almanac.sqrt_a[s] ** 2, almanac.omega0[s], almanac.argument_of_perigee[s]
-            a.M0, a.OMGd, a.f0, a.f1 = almanac.mean_anomaly[s], almanac.omega_dot[s], almanac.af0[s], almanac.af1[s]
+            a.sat, a.week, a.e, a.i0 = (
+                int(almanac.prn[s]),
+                2086,
+                almanac.eccentricity[s],
+                almanac.inclination[s],
+            )
+            a.A, a.OMG0, a.omg = (
+                almanac.sqrt_a[s] ** 2,
+                almanac.omega0[s],
+                almanac.argument_of_perigee[s],
+            )
+            a.M0, a.OMGd, a.f0, a.f1 = (
+                almanac.mean_anomaly[s],
+                almanac.omega_dot[s],
+                almanac.af0[s],
+                almanac.af1[s],
+            )
             a.toas, a.toa = almanac.toa[s], rtk.gpst2time(2086, float(almanac.toa[s]))
             rtk.alm2pos(rtk.gpst2time(2086, t), a, rs, dts)
             np.testing.assert_allclose(ours[s], [rs[0], rs[1], rs[2]], atol=1e-3)
-            assert clocks[s] == pytest.approx(dts[0], abs=1e-15)     # af0 + af1 t_k
+            assert clocks[s] == pytest.approx(dts[0], abs=1e-15)  # af0 + af1 t_k
     # the almanac (TOA 2.8 days later) and the broadcast orbits agree to a few km on 2020-01-01
-    broadcast = orbit_table(ephemerides, 2086)                    # the public path to both tables
+    broadcast = orbit_table(ephemerides, 2086)  # the public path to both tables
     alm_table = orbit_table(almanac, slot_prns=np.arange(1, 33))
     t = 259200.0 + 6 * 3600.0
     (orbit_b, ok_b), (orbit_a, ok_a) = select_orbits(broadcast, t), select_orbits(alm_table, t)
     both = np.asarray(ok_b & ok_a)
-    gap = np.linalg.norm(np.asarray(satellite_position(orbit_b, t) - satellite_position(orbit_a, t)), axis=1)
+    gap = np.linalg.norm(
+        np.asarray(satellite_position(orbit_b, t) - satellite_position(orbit_a, t)), axis=1
+    )
     assert both.sum() == 30 and np.max(gap[both]) < 10e3, np.round(gap[both])
 
 
@@ -134,7 +189,9 @@ def test_orbit_table_is_the_records_table_from_their_first_week(ephemerides):
     """``orbit_table`` of ephemerides, week defaulted, is ``ephemeris_table`` at the records' first GPS week; a
     record set of another kind is refused by name."""
     week = int(np.min(ephemerides.week))
-    jax.tree_util.tree_map(np.testing.assert_array_equal, orbit_table(ephemerides), ephemeris_table(ephemerides, week))
+    jax.tree_util.tree_map(
+        np.testing.assert_array_equal, orbit_table(ephemerides), ephemeris_table(ephemerides, week)
+    )
     with pytest.raises(TypeError, match="^records: expected Ephemerides"):
         orbit_table({"prn": [1]})
 
@@ -142,10 +199,17 @@ def test_orbit_table_is_the_records_table_from_their_first_week(ephemerides):
 def test_select_orbits_takes_the_nearest_valid_record(ephemerides):
     table = ephemeris_table(ephemerides, 2086)
     eph = ephemerides
-    for t in (259200.0 + 100.0, 259200.0 + 40000.0, 259200.0 + 86000.0, 259200.0 + 86400.0 + 8000.0):
+    for t in (
+        259200.0 + 100.0,
+        259200.0 + 40000.0,
+        259200.0 + 86000.0,
+        259200.0 + 86400.0 + 8000.0,
+    ):
         orbit, ok = select_orbits(table, t)
         for s, prn in enumerate(range(1, 33)):
-            rows = np.flatnonzero((eph.prn == prn) & (eph.health == 0) & (np.abs(eph.toe - t) <= 7200.0))
+            rows = np.flatnonzero(
+                (eph.prn == prn) & (eph.health == 0) & (np.abs(eph.toe - t) <= 7200.0)
+            )
             assert bool(ok[s]) == (rows.size > 0)
             if rows.size:
                 best = rows[np.argmin(np.abs(eph.toe[rows] - t))]
@@ -160,11 +224,19 @@ def test_light_time_solution_is_consistent(ephemerides):
     # range is the distance to the position, the position the orbit at t_tx rotated by Omega_e tau
     tau = 262000.0 - np.asarray(t_tx)
     np.testing.assert_allclose(np.asarray(ranges), C * tau, rtol=0, atol=2e-2)
-    np.testing.assert_allclose(np.asarray(ranges), np.linalg.norm(np.asarray(position) - receiver, axis=1), atol=1e-7)
+    np.testing.assert_allclose(
+        np.asarray(ranges), np.linalg.norm(np.asarray(position) - receiver, axis=1), atol=1e-7
+    )
     raw = np.asarray(satellite_position(orbit, t_tx))
     angle = OMEGA_E * tau
-    rotated = np.stack([np.cos(angle) * raw[:, 0] + np.sin(angle) * raw[:, 1],
-                        -np.sin(angle) * raw[:, 0] + np.cos(angle) * raw[:, 1], raw[:, 2]], axis=1)
+    rotated = np.stack(
+        [
+            np.cos(angle) * raw[:, 0] + np.sin(angle) * raw[:, 1],
+            -np.sin(angle) * raw[:, 0] + np.cos(angle) * raw[:, 1],
+            raw[:, 2],
+        ],
+        axis=1,
+    )
     np.testing.assert_allclose(np.asarray(position), rotated, atol=1e-6)
     assert ephemerides_table.prn.shape == (32,)
 
@@ -180,13 +252,17 @@ def test_frames_match_pymap3d_and_rtklib():
     back = np.stack(ecef_to_geodetic(ecef), axis=1)
     ref_lat, ref_lon, ref_h = pymap3d.ecef2geodetic(*ref.T)
     np.testing.assert_allclose(np.degrees(back[:, 0]), ref_lat, atol=1e-9)
-    np.testing.assert_allclose(back[:, 2], ref_h, atol=1e-4)      # 0.1 mm (pymap3d's own iteration tolerance)
+    np.testing.assert_allclose(
+        back[:, 2], ref_h, atol=1e-4
+    )  # 0.1 mm (pymap3d's own iteration tolerance)
     away = np.abs(lat) < 89.0
     np.testing.assert_allclose(np.degrees(back[away, 1]), ref_lon[away], atol=1e-9)
     pos = rtk.Arr1Ddouble(3)
     for k in range(0, 204, 17):
         rtk.ecef2pos(vec(ecef[k]), pos)
-        assert back[k, 0] == pytest.approx(pos[0], abs=1e-11) and back[k, 2] == pytest.approx(pos[2], abs=1e-4)
+        assert back[k, 0] == pytest.approx(pos[0], abs=1e-11) and back[k, 2] == pytest.approx(
+            pos[2], abs=1e-4
+        )
     # NED offsets and look angles
     origin = ecef[-1]
     targets = origin + rng.normal(scale=2e7, size=(50, 3))
@@ -200,8 +276,11 @@ def test_frames_match_pymap3d_and_rtklib():
     np.testing.assert_allclose(np.degrees(np.asarray(az)), ref_az, atol=1e-9)
     azel = rtk.Arr1Ddouble(2)
     for k in range(0, 50, 7):
-        rtk.satazel(vec([math.radians(37.5419), math.radians(127.0782), 60.0]),
-                    vec((targets[k] - origin) / np.linalg.norm(targets[k] - origin)), azel)
+        rtk.satazel(
+            vec([math.radians(37.5419), math.radians(127.0782), 60.0]),
+            vec((targets[k] - origin) / np.linalg.norm(targets[k] - origin)),
+            azel,
+        )
         assert (float(az[k]), float(el[k])) == pytest.approx((azel[0], azel[1]), abs=1e-12)
 
 
@@ -218,6 +297,8 @@ def test_dops_match_rtklib():
         used[slots] = True
         ours = dops(jnp.asarray(geometry), jnp.asarray(used))
         out = rtk.Arr1Ddouble(4)
-        rtk.dops(n, vec(np.stack([az, el], axis=1).ravel()), 0.0, out)    # GDOP, PDOP, HDOP, VDOP
-        np.testing.assert_allclose([ours.gdop, ours.pdop, ours.hdop, ours.vdop], [out[i] for i in range(4)], rtol=1e-10)
+        rtk.dops(n, vec(np.stack([az, el], axis=1).ravel()), 0.0, out)  # GDOP, PDOP, HDOP, VDOP
+        np.testing.assert_allclose(
+            [ours.gdop, ours.pdop, ours.hdop, ours.vdop], [out[i] for i in range(4)], rtol=1e-10
+        )
     assert Orbit._fields[0] == "toe" and SPEED_OF_LIGHT == C

@@ -1,6 +1,7 @@
 """YUMA and RINEX 2 readers: the shipped files against RTKLIB's reader (pyrtklib) and the
 values printed in them, both line endings, both number widths, and clear errors naming
 the line of a damaged record."""
+
 import re
 
 import numpy as np
@@ -27,7 +28,7 @@ def standard_width_copy(text: str) -> str:
             out.append(line)
             header = "END OF HEADER" not in line
             continue
-        values = [f"{float(v):19.12E}" for v in line.split()[7 if line[:2].strip() else 0:]]
+        values = [f"{float(v):19.12E}" for v in line.split()[7 if line[:2].strip() else 0 :]]
         out.append((line[:22] if line[:2].strip() else "   ") + "".join(values))
     return "\n".join(out) + "\n"
 
@@ -49,8 +50,10 @@ def rtklib_nav(tmp_path_factory):
 def test_shipped_files_have_crlf_and_are_read():
     assert b"\r\n" in RINEX.read_bytes() and b"\r\n" in YUMA.read_bytes()
     almanac = read_yuma(YUMA, rollovers=2)
-    assert almanac.prn.size == 31 and 18 not in almanac.prn            # data README: 31 SVs, PRN 18 absent
-    assert almanac.health[almanac.prn == 4][0] == 63 and np.all(almanac.health[almanac.prn != 4] == 0)
+    assert almanac.prn.size == 31 and 18 not in almanac.prn  # data README: 31 SVs, PRN 18 absent
+    assert almanac.health[almanac.prn == 4][0] == 63 and np.all(
+        almanac.health[almanac.prn != 4] == 0
+    )
     assert np.all(almanac.week == 2086) and np.all(almanac.toa == 503808.0)
     first = {f: getattr(almanac, f)[0] for f in almanac._fields}
     assert first["eccentricity"] == 0.9250164032e-2 and first["sqrt_a"] == 5153.594238
@@ -58,7 +61,7 @@ def test_shipped_files_have_crlf_and_are_read():
     mops = read_yuma(MOPS)
     assert mops.prn.size == 24 and np.all(mops.eccentricity == 0.0) and np.all(mops.week == 703)
     np.testing.assert_allclose(mops.inclination, 0.9599310886)
-    assert len(np.unique(np.round(mops.omega0, 6))) == 6                 # 6 planes x 4
+    assert len(np.unique(np.round(mops.omega0, 6))) == 6  # 6 planes x 4
 
 
 def test_line_endings_do_not_matter(ephemerides):
@@ -73,12 +76,36 @@ def test_line_endings_do_not_matter(ephemerides):
 def test_rinex_matches_rtklib_reader_and_both_widths(ephemerides, rtklib_nav):
     nav, standard_path = rtklib_nav
     eph = ephemerides
-    assert nav.n == eph.prn.size == 418 and set(eph.prn) == set(range(1, 33)) and np.all(eph.week == 2086)
-    ours = {(int(p), float(t), int(i)): k for k, (p, t, i) in enumerate(zip(eph.prn, eph.toe, eph.iode))}
-    pairs = [("A", lambda e, k: e.sqrt_a[k] ** 2), ("e", "eccentricity"), ("i0", "i0"), ("OMG0", "omega0"),
-             ("omg", "argument_of_perigee"), ("M0", "m0"), ("deln", "delta_n"), ("OMGd", "omega_dot"),
-             ("idot", "idot"), ("crc", "crc"), ("crs", "crs"), ("cuc", "cuc"), ("cus", "cus"), ("cic", "cic"),
-             ("cis", "cis"), ("f0", "af0"), ("f1", "af1"), ("f2", "af2"), ("svh", "health"), ("iodc", "iodc")]
+    assert (
+        nav.n == eph.prn.size == 418
+        and set(eph.prn) == set(range(1, 33))
+        and np.all(eph.week == 2086)
+    )
+    ours = {
+        (int(p), float(t), int(i)): k for k, (p, t, i) in enumerate(zip(eph.prn, eph.toe, eph.iode))
+    }
+    pairs = [
+        ("A", lambda e, k: e.sqrt_a[k] ** 2),
+        ("e", "eccentricity"),
+        ("i0", "i0"),
+        ("OMG0", "omega0"),
+        ("omg", "argument_of_perigee"),
+        ("M0", "m0"),
+        ("deln", "delta_n"),
+        ("OMGd", "omega_dot"),
+        ("idot", "idot"),
+        ("crc", "crc"),
+        ("crs", "crs"),
+        ("cuc", "cuc"),
+        ("cus", "cus"),
+        ("cic", "cic"),
+        ("cis", "cis"),
+        ("f0", "af0"),
+        ("f1", "af1"),
+        ("f2", "af2"),
+        ("svh", "health"),
+        ("iodc", "iodc"),
+    ]
     for r in range(nav.n):
         e = nav.eph[r]
         k = ours[(e.sat, e.toes, e.iode)]
@@ -86,9 +113,11 @@ def test_rinex_matches_rtklib_reader_and_both_widths(ephemerides, rtklib_nav):
             value = mine(eph, k) if callable(mine) else getattr(eph, mine)[k]
             assert getattr(e, theirs) == pytest.approx(value, rel=1e-12, abs=1e-300), (r, theirs)
         assert e.tgd[0] == pytest.approx(eph.tgd[k], rel=1e-12, abs=1e-300)
-    standard = read_rinex_nav(standard_path)                   # 19-character fields read the same
+    standard = read_rinex_nav(standard_path)  # 19-character fields read the same
     for name in eph._fields:
-        np.testing.assert_allclose(getattr(standard, name), getattr(eph, name), rtol=1e-12, equal_nan=True)
+        np.testing.assert_allclose(
+            getattr(standard, name), getattr(eph, name), rtol=1e-12, equal_nan=True
+        )
 
 
 def test_calendar_to_gps_week():
@@ -107,13 +136,28 @@ def damaged(text: str, line_no: int, new: str | None) -> str:
     return "\n".join(lines)
 
 
-@pytest.mark.parametrize("line_no, new, message", [
-    (4, "Eccentricity:               0.92X0164032E-002\r", r"bad\.txt:4: field 'Eccentricity': expected a finite number"),
-    (2, "ID:                         1.5\r", r"bad\.txt:2: field 'ID': expected a whole number"),
-    (6, "Orbit Inclination(rad):   0.9785563052\r", r"bad\.txt:6: expected 'Key: value' with a YUMA key"),
-    (7, None, r"bad\.txt:1: almanac record starting on this line lacks \['omega_dot'\]"),
-    (5, "Health:                     000\r", r"bad\.txt:5: field 'Health' repeated"),
-])
+@pytest.mark.parametrize(
+    "line_no, new, message",
+    [
+        (
+            4,
+            "Eccentricity:               0.92X0164032E-002\r",
+            r"bad\.txt:4: field 'Eccentricity': expected a finite number",
+        ),
+        (
+            2,
+            "ID:                         1.5\r",
+            r"bad\.txt:2: field 'ID': expected a whole number",
+        ),
+        (
+            6,
+            "Orbit Inclination(rad):   0.9785563052\r",
+            r"bad\.txt:6: expected 'Key: value' with a YUMA key",
+        ),
+        (7, None, r"bad\.txt:1: almanac record starting on this line lacks \['omega_dot'\]"),
+        (5, "Health:                     000\r", r"bad\.txt:5: field 'Health' repeated"),
+    ],
+)
 def test_malformed_yuma_names_the_line(line_no, new, message):
     text = YUMA.read_bytes().decode("ascii")
     with pytest.raises(ValueError, match=message):
@@ -122,8 +166,11 @@ def test_malformed_yuma_names_the_line(line_no, new, message):
 
 def test_malformed_yuma_file_on_disk(tmp_path):
     path = tmp_path / "alm.txt"
-    path.write_bytes(YUMA.read_bytes().replace(b"Mean Anom(rad):             0.2779790776E+001",
-                                               b"Mean Anom(rad):             n/a"))
+    path.write_bytes(
+        YUMA.read_bytes().replace(
+            b"Mean Anom(rad):             0.2779790776E+001", b"Mean Anom(rad):             n/a"
+        )
+    )
     with pytest.raises(ValueError, match=re.escape(f"{path}:11: field 'Mean Anom(rad)'")):
         read_yuma(path)
     path.write_bytes(b"ID: 01\r\n")
@@ -131,20 +178,42 @@ def test_malformed_yuma_file_on_disk(tmp_path):
         read_yuma(path)
 
 
-@pytest.mark.parametrize("line_no, new, message", [
-    (1, "     3.04           N: GNSS NAV DATA    G: GPS              RINEX VERSION / TYPE\r",
-     r"bad\.20n:1: expected a RINEX 2\.x file, got version 3\.04"),
-    (1, "     2              OBSERVATION DATA                        RINEX VERSION / TYPE\r",
-     r"bad\.20n:1: expected file type 'N'"),
-    (5, "     7.200000000000E+01 -1.95625000000OE+01  4.218032840856E-09 -1.483804704890E+00\r",
-     r"bad\.20n:5: broadcast orbit line 1 of PRN 01: expected numbers only, found 'OE'"),
-    (6, "    -9.573996067047E-07  9.235781384632E-03  3.913417458534E-06\r",
-     r"bad\.20n:6: broadcast orbit line 2 of PRN 01 \(cuc, eccentricity, cus, sqrt_a\): expected 4 numbers, got 3"),
-    (12, " 1 20 13  1  2  0  0.0 -2.479893155396E-04 -1.216449163621E-11  0.000000000000E+00\r",
-     r"bad\.20n:12: expected PRN 1-32 and a valid date/time"),
-    (3, "                                                            END OF HEADR        \r",
-     r"bad\.20n:\d+: expected an 'END OF HEADER' line"),
-])
+@pytest.mark.parametrize(
+    "line_no, new, message",
+    [
+        (
+            1,
+            "     3.04           N: GNSS NAV DATA    G: GPS              RINEX VERSION / TYPE\r",
+            r"bad\.20n:1: expected a RINEX 2\.x file, got version 3\.04",
+        ),
+        (
+            1,
+            "     2              OBSERVATION DATA                        RINEX VERSION / TYPE\r",
+            r"bad\.20n:1: expected file type 'N'",
+        ),
+        (
+            5,
+            "     7.200000000000E+01 -1.95625000000OE+01  4.218032840856E-09 -1.483804704890E+00\r",
+            r"bad\.20n:5: broadcast orbit line 1 of PRN 01: expected numbers only, found 'OE'",
+        ),
+        (
+            6,
+            "    -9.573996067047E-07  9.235781384632E-03  3.913417458534E-06\r",
+            r"bad\.20n:6: broadcast orbit line 2 of PRN 01 \(cuc, eccentricity, cus, sqrt_a\): "
+            r"expected 4 numbers, got 3",
+        ),
+        (
+            12,
+            " 1 20 13  1  2  0  0.0 -2.479893155396E-04 -1.216449163621E-11  0.000000000000E+00\r",
+            r"bad\.20n:12: expected PRN 1-32 and a valid date/time",
+        ),
+        (
+            3,
+            "                                                            END OF HEADR        \r",
+            r"bad\.20n:\d+: expected an 'END OF HEADER' line",
+        ),
+    ],
+)
 def test_malformed_rinex_names_the_line(line_no, new, message):
     text = RINEX.read_bytes().decode("ascii")
     with pytest.raises(ValueError, match=message):
@@ -154,6 +223,8 @@ def test_malformed_rinex_names_the_line(line_no, new, message):
 def test_truncated_rinex_record(tmp_path):
     lines = RINEX.read_bytes().split(b"\r\n")
     path = tmp_path / "short.20n"
-    path.write_bytes(b"\r\n".join(lines[:3 + 8 + 5]) + b"\r\n")
-    with pytest.raises(ValueError, match=re.escape(f"{path}:12: record starting here has 5 lines, expected 8")):
+    path.write_bytes(b"\r\n".join(lines[: 3 + 8 + 5]) + b"\r\n")
+    with pytest.raises(
+        ValueError, match=re.escape(f"{path}:12: record starting here has 5 lines, expected 8")
+    ):
         read_rinex_nav(path)

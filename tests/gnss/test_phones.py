@@ -24,6 +24,7 @@ against gnss_lib_py 1.1 (Stanford NavLab), NumPy/SciPy and the files' own fields
 - Bad channels in a padded trace: a NaN channel equals the trace without it, an infinite
   one is a dead channel (flagged, excluded, alarmed), a frozen one is isolated and excluded.
 """
+
 import warnings
 
 import jax
@@ -38,33 +39,52 @@ from jaxfdi.gnss import ecef_to_geodetic, geodetic_to_ecef, monitor_receiver, re
 from jaxfdi.gnss._android import read_android_ground_truth
 from jaxfdi.gnss._integrity import raim_output
 from jaxfdi.gnss._raim import raim_tables
-from jaxfdi.scenarios.gnss_real import PEER_THRESHOLD, PHONE_EXCLUSIONS, PHONES, _peer_navdata, _peer_row, load_phone
+from jaxfdi.scenarios.gnss_real import (
+    PEER_THRESHOLD,
+    PHONE_EXCLUSIONS,
+    PHONES,
+    _peer_navdata,
+    _peer_row,
+    load_phone,
+)
 
 gnss_lib_py = pytest.importorskip("gnss_lib_py")
-from gnss_lib_py.algorithms.snapshot import solve_wls  # noqa: E402
+from gnss_lib_py.algorithms.snapshot import solve_wls  # noqa: E402 (after importorskip)
 from gnss_lib_py.parsers import google_decimeter as glp  # noqa: E402
 
 LETTER = {"gps": "G", "glonass": "R", "qzss": "J", "beidou": "C", "galileo": "E"}
 
 
-@pytest.mark.parametrize("name, parser", [("gsdc2022_device_gnss.csv", glp.AndroidDerived2022),
-                                          ("gsdc2023_device_gnss.csv", glp.AndroidDerived2023)])
+@pytest.mark.parametrize(
+    "name, parser",
+    [
+        ("gsdc2022_device_gnss.csv", glp.AndroidDerived2022),
+        ("gsdc2023_device_gnss.csv", glp.AndroidDerived2023),
+    ],
+)
 def test_device_gnss_files_read_as_gnss_lib_py_reads_them(name, parser):
     ours = read_android(data_path(name))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         nav = parser(str(data_path(name)))
     raw = pd.read_csv(data_path(name))
-    signal = raw["SignalType"].fillna("").to_numpy() != ""       # rows without a signal type are skipped
+    signal = raw["SignalType"].fillna("").to_numpy() != ""  # rows without a signal type are skipped
     nav = nav.copy(cols=np.flatnonzero(signal))
     at = np.searchsorted(ours.gps_millis, np.asarray(nav["gps_millis"]).astype(np.int64))
     assert np.array_equal(ours.gps_millis[at], np.asarray(nav["gps_millis"]).astype(np.int64))
-    names = [f"{LETTER[c]}{s:02d} {t}" for c, s, t in zip(nav["gnss_id"], raw["Svid"][signal], raw["SignalType"][signal])]
+    names = [
+        f"{LETTER[c]}{s:02d} {t}"
+        for c, s, t in zip(nav["gnss_id"], raw["Svid"][signal], raw["SignalType"][signal])
+    ]
     slot = np.array([ours.signal.index(n) for n in names])
     assert len(set(zip(at, slot))) == at.size == np.isfinite(ours.satellite[..., 0]).sum()
     np.testing.assert_array_equal(ours.pseudorange[at, slot], np.asarray(nav["corr_pr_m"]))
-    np.testing.assert_array_equal(ours.satellite[at, slot], np.asarray(nav[["x_sv_m", "y_sv_m", "z_sv_m"]]).T)
-    np.testing.assert_array_equal(ours.wls_position[at], np.asarray(nav[["x_rx_m", "y_rx_m", "z_rx_m"]]).T)
+    np.testing.assert_array_equal(
+        ours.satellite[at, slot], np.asarray(nav[["x_sv_m", "y_sv_m", "z_sv_m"]]).T
+    )
+    np.testing.assert_array_equal(
+        ours.wls_position[at], np.asarray(nav[["x_rx_m", "y_rx_m", "z_rx_m"]]).T
+    )
     np.testing.assert_array_equal(ours.sigma[at, slot], np.asarray(nav["raw_pr_sigma_m"]))
     np.testing.assert_array_equal(ours.cn0[at, slot], np.asarray(nav["cn0_dbhz"]))
 
@@ -81,7 +101,9 @@ def test_derived_2021_files_shift_one_epoch_and_drop_timing_outliers(name):
     flight = received - raw["receivedSvTimeInGpsNanos"].to_numpy() / 1e6
     kept = (flight > 0) & (flight < 300)
     assert 64.0 < np.median(flight[kept]) < 95.0
-    corrected = (raw["rawPrM"] + raw["satClkBiasM"] - raw["isrbM"] - raw["ionoDelayM"] - raw["tropoDelayM"]).to_numpy()
+    corrected = (
+        raw["rawPrM"] + raw["satClkBiasM"] - raw["isrbM"] - raw["ionoDelayM"] - raw["tropoDelayM"]
+    ).to_numpy()
     letters = raw["constellationType"].map({1: "G", 3: "R", 4: "J", 5: "C", 6: "E"})
     names = [f"{c}{s:02d} {t}" for c, s, t in zip(letters, raw["svid"], raw["signalType"])]
     at = np.searchsorted(ours.gps_millis, received[kept])
@@ -95,12 +117,19 @@ def test_derived_2021_files_shift_one_epoch_and_drop_timing_outliers(name):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             nav = glp.AndroidDerived2021(str(data_path(name)))
-        assert np.array_equal(np.unique(np.asarray(nav["gps_millis"])).astype(np.int64), ours.gps_millis[1:])
+        assert np.array_equal(
+            np.unique(np.asarray(nav["gps_millis"])).astype(np.int64), ours.gps_millis[1:]
+        )
 
 
-@pytest.mark.parametrize("name, parser", [("gsdc2021_Pixel4_ground_truth.csv", glp.AndroidGroundTruth2021),
-                                          ("gsdc2022_ground_truth.csv", glp.AndroidGroundTruth2022),
-                                          ("gsdc2023_ground_truth.csv", glp.AndroidGroundTruth2023)])
+@pytest.mark.parametrize(
+    "name, parser",
+    [
+        ("gsdc2021_Pixel4_ground_truth.csv", glp.AndroidGroundTruth2021),
+        ("gsdc2022_ground_truth.csv", glp.AndroidGroundTruth2022),
+        ("gsdc2023_ground_truth.csv", glp.AndroidGroundTruth2023),
+    ],
+)
 def test_ground_truth_reads_as_gnss_lib_py_reads_it(name, parser):
     times, lat_lon_height = read_android_ground_truth(data_path(name))
     with warnings.catch_warnings():
@@ -115,24 +144,52 @@ def test_ground_truth_reads_as_gnss_lib_py_reads_it(name, parser):
         # the hosts' 61 m correction, which gnss_lib_py 1.1.0 applies twice (its heights are
         # the file's less 122 m): compare with its heights put back by one correction
         file_height = pd.read_csv(data_path(name)).sort_values("millisSinceGpsEpoch", kind="stable")
-        np.testing.assert_allclose(height, file_height["heightAboveWgs84EllipsoidM"].to_numpy() - 122.0, atol=1e-9)
+        np.testing.assert_allclose(
+            height, file_height["heightAboveWgs84EllipsoidM"].to_numpy() - 122.0, atol=1e-9
+        )
         height = height + 61.0
-        ecef = np.asarray(geodetic_to_ecef(np.radians(lat_lon_height[:, 0]), np.radians(lat_lon_height[:, 1]), height))
+        ecef = np.asarray(
+            geodetic_to_ecef(
+                np.radians(lat_lon_height[:, 0]), np.radians(lat_lon_height[:, 1]), height
+            )
+        )
     np.testing.assert_allclose(lat_lon_height[:, 2], height, atol=1e-9)
-    measurements = {"gsdc2021": "gsdc2021_Pixel4_derived.csv", "gsdc2022": "gsdc2022_device_gnss.csv",
-                    "gsdc2023": "gsdc2023_device_gnss.csv"}[name[:8]]
+    measurements = {
+        "gsdc2021": "gsdc2021_Pixel4_derived.csv",
+        "gsdc2022": "gsdc2022_device_gnss.csv",
+        "gsdc2023": "gsdc2023_device_gnss.csv",
+    }[name[:8]]
     phone = read_android(data_path(measurements), data_path(name))
     at = np.searchsorted(times, phone.gps_millis)
     assert np.all(times[at] == phone.gps_millis)
     np.testing.assert_allclose(phone.truth, ecef[at], atol=1e-3, rtol=0)
 
 
-@pytest.mark.parametrize("line, edit, message", [
-    (5, lambda row: row.rsplit(",", 3)[0], "gsdc2022_device_gnss.csv:5: list index out of range"),
-    (8, lambda row: row.replace(",1,C,", ",1x,C,", 1), "gsdc2022_device_gnss.csv:8: invalid literal"),
-    (1, lambda row: "a,b,c", "gsdc2022_device_gnss.csv:1: expected a GSDC measurement CSV header"),
-    (9, lambda row: row.replace(",1,C,", ",2,C,", 1), "gsdc2022_device_gnss.csv:9: constellation type 2"),
-])
+@pytest.mark.parametrize(
+    "line, edit, message",
+    [
+        (
+            5,
+            lambda row: row.rsplit(",", 3)[0],
+            "gsdc2022_device_gnss.csv:5: list index out of range",
+        ),
+        (
+            8,
+            lambda row: row.replace(",1,C,", ",1x,C,", 1),
+            "gsdc2022_device_gnss.csv:8: invalid literal",
+        ),
+        (
+            1,
+            lambda row: "a,b,c",
+            "gsdc2022_device_gnss.csv:1: expected a GSDC measurement CSV header",
+        ),
+        (
+            9,
+            lambda row: row.replace(",1,C,", ",2,C,", 1),
+            "gsdc2022_device_gnss.csv:9: constellation type 2",
+        ),
+    ],
+)
 def test_damaged_phone_file_names_the_line(line, edit, message, tmp_path):
     rows = data_path("gsdc2022_device_gnss.csv").read_text().splitlines()
     assert ",1,C," in rows[line - 1] or line in (1, 5)
@@ -157,6 +214,7 @@ def test_truncated_and_repeated_rows_are_named(tmp_path):
 
 def test_monitor_receiver_names_what_it_needs():
     from jaxfdi.gnss import read_observations
+
     with pytest.raises(ValueError, match="ephemerides: expected the navigation file's records"):
         monitor_receiver(read_observations(data_path("07590920.05o")))
     with pytest.raises(TypeError, match="measurements: expected read_observations's Observations"):
@@ -200,7 +258,9 @@ def test_per_constellation_clocks_slope_levels_match_numpy(phone):
     chi-square threshold of ``n - 3 - C`` degrees of freedom (Brown & Chin 1992)."""
     _, trace = phone
     tables = raim_tables(max(len(trace.signal), 5), pfa=1e-3, pmd=1e-3)
-    result = jax.tree_util.tree_map(np.asarray, monitor_receiver(trace, tables=tables, exclude=False))
+    result = jax.tree_util.tree_map(
+        np.asarray, monitor_receiver(trace, tables=tables, exclude=False)
+    )
     membership = trace.clocks()
     assert result.fix.geometry.shape[-1] == 3 + membership.shape[1]
     lam_of = {}
@@ -217,7 +277,9 @@ def test_per_constellation_clocks_slope_levels_match_numpy(phone):
         assert result.check.statistic[k] == pytest.approx(y @ S @ y, rel=1e-8)
         if dof not in lam_of:
             threshold = stats.chi2.isf(1e-3, dof)
-            lam_of[dof] = optimize.brentq(lambda v: stats.ncx2.cdf(threshold, dof, v) - 1e-3, 1e-6, 1e3, xtol=1e-12)
+            lam_of[dof] = optimize.brentq(
+                lambda v: stats.ncx2.cdf(threshold, dof, v) - 1e-3, 1e-6, 1e3, xtol=1e-12
+            )
         lam = lam_of[dof]
         seen = np.diag(S) > 1e-9
         root = np.sqrt(np.where(seen, np.diag(S), 1.0))
@@ -226,8 +288,11 @@ def test_per_constellation_clocks_slope_levels_match_numpy(phone):
         assert result.protection.hpl[k] == pytest.approx(hpl, rel=1e-8)
         assert result.protection.vpl[k] == pytest.approx(vpl, rel=1e-8)
         sigma = result.fix.sigma[k][used]
-        np.testing.assert_allclose(result.protection.minimum_detectable_bias[k][used],
-                                   np.where(seen, sigma * np.sqrt(lam) / root, np.inf), rtol=1e-8)
+        np.testing.assert_allclose(
+            result.protection.minimum_detectable_bias[k][used],
+            np.where(seen, sigma * np.sqrt(lam) / root, np.inf),
+            rtol=1e-8,
+        )
 
 
 def test_a_clock_per_constellation_costs_its_degrees_of_freedom(phone):
@@ -235,7 +300,9 @@ def test_a_clock_per_constellation_costs_its_degrees_of_freedom(phone):
     each = monitor_receiver(trace, exclude=False)
     one = monitor_receiver(trace, clocks="one", exclude=False)
     in_view = np.array([len(set(trace.constellation[u])) for u in np.asarray(each.fix.used)])
-    np.testing.assert_array_equal(np.asarray(one.check.dof) - np.asarray(each.check.dof), in_view - 1)
+    np.testing.assert_array_equal(
+        np.asarray(one.check.dof) - np.asarray(each.check.dof), in_view - 1
+    )
     assert np.asarray(each.fix.clock_bias).shape == (trace.gps_millis.size, trace.clocks().shape[1])
     # a constellation without a used satellite keeps its clock at the start value
     in_use = np.asarray([np.any(trace.clocks()[u], axis=0) for u in np.asarray(each.fix.used)])
@@ -275,7 +342,7 @@ def test_greedy_exclusion_matches_numpy_rounds(phone):
             if not alarm or n < u + 2 or len(dropped) == rounds:
                 break
             s = np.diag(np.eye(n) - h @ np.linalg.solve(h.T @ h, h.T))
-            seen = s > 1e-9            # a satellite alone on its clock has no residual to test
+            seen = s > 1e-9  # a satellite alone on its clock has no residual to test
             normalised = np.where(seen, np.abs(residual) / np.sqrt(np.where(seen, s, 1.0)), 0.0)
             worst = np.flatnonzero(keep)[np.argmax(normalised)]
             dropped.append(worst)
@@ -285,16 +352,22 @@ def test_greedy_exclusion_matches_numpy_rounds(phone):
         assert out.check_excluded.statistic[k] == pytest.approx(statistic, rel=1e-2, abs=1e-6)
         lat, lon, _ = (float(v) for v in ecef_to_geodetic(full.fix.position[k]))
         sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-        ecef_to_ned = np.array([[-sl * co, -sl * so, cl], [-so, co, 0.0], [-cl * co, -cl * so, -sl]])
-        np.testing.assert_allclose(ecef_to_ned @ (out.fix_excluded.position[k] - full.fix.position[k]), step,
-                                   atol=0.05)
+        ecef_to_ned = np.array(
+            [[-sl * co, -sl * so, cl], [-so, co, 0.0], [-cl * co, -cl * so, -sl]]
+        )
+        np.testing.assert_allclose(
+            ecef_to_ned @ (out.fix_excluded.position[k] - full.fix.position[k]), step, atol=0.05
+        )
 
 
 def test_exclude_counts_rounds():
     trace = load_phone("GSDC 2021 Pixel 4")
     one, true = (monitor_receiver(trace, exclude=e) for e in (1, True))
     jax.tree_util.tree_map(np.testing.assert_array_equal, one, true)
-    with pytest.raises(ValueError, match=r"exclude: expected the most satellites to exclude .* in \[0, inf\], got -1"):
+    with pytest.raises(
+        ValueError,
+        match=r"exclude: expected the most satellites to exclude .* in \[0, inf\], got -1",
+    ):
         monitor_receiver(trace, exclude=-1)
     with pytest.raises(TypeError, match="exclude: expected the most satellites to exclude"):
         monitor_receiver(trace, exclude=1.5)
@@ -311,20 +384,43 @@ def test_traces_share_one_program_and_padding_changes_nothing():
     traces = [load_phone(label) for label in PHONES]
     assert len({(t.pseudorange.shape, t.clocks().shape[1]) for t in traces}) == len(traces)
     before = _receiver._monitor_phone._cache_size()
-    padded = [jax.tree_util.tree_map(np.asarray, monitor_receiver(t, exclude=PHONE_EXCLUSIONS)) for t in traces]
-    assert _receiver._monitor_phone._cache_size() - before <= 1      # 0: the file compiled it already
-    longest, shortest = np.argmax([t.gps_millis.size for t in traces]), np.argmin([t.gps_millis.size for t in traces])
+    padded = [
+        jax.tree_util.tree_map(np.asarray, monitor_receiver(t, exclude=PHONE_EXCLUSIONS))
+        for t in traces
+    ]
+    assert _receiver._monitor_phone._cache_size() - before <= 1  # 0: the file compiled it already
+    longest, shortest = (
+        np.argmax([t.gps_millis.size for t in traces]),
+        np.argmin([t.gps_millis.size for t in traces]),
+    )
     for trace, out in ((traces[longest], padded[longest]), (traces[shortest], padded[shortest])):
         slots = len(trace.signal)
-        own = jax.tree_util.tree_map(np.asarray, _receiver._monitor_phone(
-            jnp.asarray(trace.satellite), jnp.asarray(trace.pseudorange), jnp.asarray(trace.sigma),
-            jnp.asarray(trace.clocks()), raim_tables(slots, pfa=1e-3, pmd=1e-3), None, "npa", PHONE_EXCLUSIONS))
+        own = jax.tree_util.tree_map(
+            np.asarray,
+            _receiver._monitor_phone(
+                jnp.asarray(trace.satellite),
+                jnp.asarray(trace.pseudorange),
+                jnp.asarray(trace.sigma),
+                jnp.asarray(trace.clocks()),
+                raim_tables(slots, pfa=1e-3, pmd=1e-3),
+                None,
+                "npa",
+                PHONE_EXCLUSIONS,
+            ),
+        )
         jax.tree_util.tree_map(lambda a, b: np.testing.assert_equal(a.shape, b.shape), out, own)
-        for a, b in ((out.excluded, own.excluded), (out.exclusions, own.exclusions), (out.check.alarm, own.check.alarm),
-                     (out.check.dof, own.check.dof), (out.fix.used, own.fix.used)):
+        for a, b in (
+            (out.excluded, own.excluded),
+            (out.exclusions, own.exclusions),
+            (out.check.alarm, own.check.alarm),
+            (out.check.dof, own.check.dof),
+            (out.fix.used, own.fix.used),
+        ):
             np.testing.assert_array_equal(a, b)
         np.testing.assert_allclose(out.fix.position, own.fix.position, rtol=0, atol=1e-6)
-        np.testing.assert_allclose(out.fix_excluded.position, own.fix_excluded.position, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(
+            out.fix_excluded.position, own.fix_excluded.position, rtol=0, atol=1e-6
+        )
         np.testing.assert_allclose(out.fix.clock_bias, own.fix.clock_bias, rtol=0, atol=1e-6)
         np.testing.assert_allclose(out.protection.hpl, own.protection.hpl, rtol=1e-9)
 
@@ -345,8 +441,10 @@ def test_bad_channels_in_a_padded_trace_are_evidence():
     assert np.abs(np.diff(rho[:, slot])).min() > 500.0
 
     def run(pseudorange):
-        return jax.tree_util.tree_map(np.asarray, monitor_receiver(trace._replace(pseudorange=pseudorange),
-                                                                   exclude=PHONE_EXCLUSIONS))
+        return jax.tree_util.tree_map(
+            np.asarray,
+            monitor_receiver(trace._replace(pseudorange=pseudorange), exclude=PHONE_EXCLUSIONS),
+        )
 
     def edited(value):
         out = rho.copy()
@@ -354,17 +452,33 @@ def test_bad_channels_in_a_padded_trace_are_evidence():
         return out
 
     keep = np.arange(rho.shape[1]) != slot
-    without = jax.tree_util.tree_map(np.asarray, monitor_receiver(trace._replace(
-        signal=tuple(np.asarray(trace.signal)[keep]), constellation=trace.constellation[keep],
-        pseudorange=rho[:, keep], sigma=trace.sigma[:, keep], cn0=trace.cn0[:, keep],
-        satellite=trace.satellite[:, keep]), exclude=PHONE_EXCLUSIONS))
+    without = jax.tree_util.tree_map(
+        np.asarray,
+        monitor_receiver(
+            trace._replace(
+                signal=tuple(np.asarray(trace.signal)[keep]),
+                constellation=trace.constellation[keep],
+                pseudorange=rho[:, keep],
+                sigma=trace.sigma[:, keep],
+                cn0=trace.cn0[:, keep],
+                satellite=trace.satellite[:, keep],
+            ),
+            exclude=PHONE_EXCLUSIONS,
+        ),
+    )
     missing, dead = run(edited(np.nan)), run(edited(np.inf))
     for out in (missing, dead):
-        np.testing.assert_allclose(out.fix.position[1:], without.fix.position[1:], rtol=0, atol=1e-6)
-        np.testing.assert_allclose(out.fix_excluded.position[1:], without.fix_excluded.position[1:], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(
+            out.fix.position[1:], without.fix.position[1:], rtol=0, atol=1e-6
+        )
+        np.testing.assert_allclose(
+            out.fix_excluded.position[1:], without.fix_excluded.position[1:], rtol=0, atol=1e-6
+        )
         assert not out.fix.used[1:, slot].any() and out.fix.used[0, slot]
     assert not missing.dead.any() and not missing.exclusions[:, slot].any()
-    np.testing.assert_array_equal(dead.dead, np.arange(rho.shape[0])[:, None] >= np.where(keep, rho.shape[0], 1))
+    np.testing.assert_array_equal(
+        dead.dead, np.arange(rho.shape[0])[:, None] >= np.where(keep, rho.shape[0], 1)
+    )
     assert dead.exclusions[1:, slot].all()
     decisions = jax.vmap(raim_output)(jax.tree_util.tree_map(jnp.asarray, dead)).decision
     assert decisions.alarm[1:].all() and (decisions.label[1:] == 1 + slot).all()

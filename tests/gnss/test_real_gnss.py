@@ -15,6 +15,7 @@ Debian's ``rnx2rtkp`` and ``convbin`` are built from, which give the same files)
 - RTKLIB refuses exactly the epochs whose GDOP exceeds its limit of 30.
 - Damaged copies of the files fail with the file and line named.
 """
+
 import math
 import re
 from pathlib import Path
@@ -25,11 +26,20 @@ import pyrtklib as rtk
 import pytest
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss._receiver import code_sigma, monitor_receiver, read_observations, receiver_epochs, user_range_accuracy
+from jaxfdi.gnss._receiver import (
+    code_sigma,
+    monitor_receiver,
+    read_observations,
+    receiver_epochs,
+    user_range_accuracy,
+)
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._rinex_obs import parse_rinex_obs
 
-STATIONS = {"0759": (-3976219.5082, 3382372.5671, 3652512.9849), "3040": (-3978242.4348, 3382841.1715, 3649902.7667)}
+STATIONS = {
+    "0759": (-3976219.5082, 3382372.5671, 3652512.9849),
+    "3040": (-3978242.4348, 3382841.1715, 3649902.7667),
+}
 SATELLITES = {"0759": 11, "3040": 12}  # GPS satellites seen in the hour
 FILES = {"0759": "07590920.05", "3040": "30400920.05"}
 MAX_GDOP = 30.0  # RTKLIB's default pos1-maxgdop (valsol)
@@ -57,8 +67,20 @@ def rtklib_positions(station, tmp_path) -> dict[float, np.ndarray]:
     name = rtk.Arr1Dchar(1024)
     for i, c in enumerate(str(out)):
         name[i] = c
-    status = rtk.postpos(rtk.gtime_t(), rtk.gtime_t(), 0.0, 0.0, popt, sopt, fopt,
-                         [str(observation(station)), str(navigation(station))], 2, name, "", "")
+    status = rtk.postpos(
+        rtk.gtime_t(),
+        rtk.gtime_t(),
+        0.0,
+        0.0,
+        popt,
+        sopt,
+        fopt,
+        [str(observation(station)), str(navigation(station))],
+        2,
+        name,
+        "",
+        "",
+    )
     assert status == 0, f"RTKLIB postpos returned {status}"
     solutions = {}
     for line in out.read_text().splitlines():
@@ -66,7 +88,9 @@ def rtklib_positions(station, tmp_path) -> dict[float, np.ndarray]:
             continue
         fields = line.split()
         hour, minute, second = fields[1].split(":")
-        tow = 6 * 86400.0 + int(hour) * 3600 + int(minute) * 60 + float(second)  # 2005-04-02 is a Saturday
+        tow = (
+            6 * 86400.0 + int(hour) * 3600 + int(minute) * 60 + float(second)
+        )  # 2005-04-02 is a Saturday
         solutions[tow] = np.array([float(v) for v in fields[2:5]])
     return solutions
 
@@ -89,8 +113,11 @@ def test_every_real_file_is_read(name):
     assert set(obs.code) == {"C1"} and np.all(np.isnan(obs.cn0))  # no S1 in these files
     seen = np.isfinite(obs.pseudorange)
     assert np.all((obs.pseudorange[seen] > 1.9e7) & (obs.pseudorange[seen] < 2.7e7))
-    counts = [int(line[29:32]) for line in Path(observation(name)).read_text().splitlines()
-              if re.match(r" \d\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d\.\d{7}  0", line)]
+    counts = [
+        int(line[29:32])
+        for line in Path(observation(name)).read_text().splitlines()
+        if re.match(r" \d\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d\.\d{7}  0", line)
+    ]
     assert seen.sum(axis=1).tolist() == counts  # every satellite of each epoch line has a C1
     assert eph.prn.size > 100 and np.all(np.isfinite(eph.ion_alpha)) and np.all(eph.health == 0)
 
@@ -106,7 +133,9 @@ def test_rtklib_rinex3_copy_reads_the_same(name, tmp_path):
     options.rnxver, options.navsys = 303, rtk.SYS_ALL
     options.obstype, options.freqtype, options.ttol = rtk.OBSTYPE_ALL, rtk.FREQTYPE_ALL, 0.005
     copy = tmp_path / "copy.obs"
-    assert rtk.convrnx(rtk.STRFMT_RINEX, options, str(observation(name)), [str(copy)] + [""] * 8) == 1
+    assert (
+        rtk.convrnx(rtk.STRFMT_RINEX, options, str(observation(name)), [str(copy)] + [""] * 8) == 1
+    )
     assert copy.read_text().startswith("     3.03           OBSERVATION DATA")
     two, three = read_observations(observation(name)), read_observations(copy)
     assert three.satellite.tolist() == two.satellite.tolist() and set(three.code) == {"C1C"}
@@ -120,14 +149,19 @@ def test_single_point_positions_match_rtklib(station, tmp_path):
     reference = rtklib_positions(name, tmp_path)
     solved, differences = [], []
     for e, tow in enumerate(obs.time_of_week):
-        match = [t for t in reference if abs(t - tow) < 0.1]  # RTKLIB tags a solution with the corrected time
+        match = [
+            t for t in reference if abs(t - tow) < 0.1
+        ]  # RTKLIB tags a solution with the corrected time
         if match:
             solved.append(e)
             differences.append(np.linalg.norm(result.fix.position[e] - reference[match[0]]))
     assert len(solved) == len(reference) == 115
     assert max(differences) < 1e-3, f"largest difference from RTKLIB {max(differences):.2e} m"
     # RTKLIB refuses the epochs whose GDOP exceeds 30 (the last five: five satellites in a poor geometry)
-    assert sorted(set(range(120)) - set(solved)) == np.flatnonzero(result.fix.dops.gdop > MAX_GDOP).tolist()
+    assert (
+        sorted(set(range(120)) - set(solved))
+        == np.flatnonzero(result.fix.dops.gdop > MAX_GDOP).tolist()
+    )
     assert np.all(result.fix.healthy)
 
 
@@ -136,26 +170,33 @@ def test_errors_from_the_surveyed_position_stay_below_the_protection_levels(stat
     the surveyed position never exceed HPL/VPL (P_fa = P_md = 1e-3), and no epoch alarms."""
     name, _, result = station
     lat, lon = (math.radians(v) for v in (35.16, 139.61))
-    north = np.array([-math.sin(lat) * math.cos(lon), -math.sin(lat) * math.sin(lon), math.cos(lat)])
+    north = np.array(
+        [-math.sin(lat) * math.cos(lon), -math.sin(lat) * math.sin(lon), math.cos(lat)]
+    )
     east = np.array([-math.sin(lon), math.cos(lon), 0.0])
     down = -np.array([math.cos(lat) * math.cos(lon), math.cos(lat) * math.sin(lon), math.sin(lat)])
     error = result.fix.position - np.array(STATIONS[name])
     horizontal, vertical = np.hypot(error @ north, error @ east), np.abs(error @ down)
     assert not result.check.alarm.any()
     assert np.all(horizontal < result.protection.hpl) and np.all(vertical < result.protection.vpl)
-    assert np.median(horizontal) < 1.5 and np.median(vertical) < 3.0  # metre-level single-point fixes
+    assert (
+        np.median(horizontal) < 1.5 and np.median(vertical) < 3.0
+    )  # metre-level single-point fixes
 
 
 def test_weights_are_rtklibs_error_model():
     """RTKLIB's URA of the RINEX accuracy (the smallest table value not below it) and its
     code variance at 30 deg: 2.4^2 + 0.3^2 + 0.3^2 (1 + 1 / sin 30 deg)."""
-    np.testing.assert_array_equal(user_range_accuracy([0.0, 2.0, 2.4, 2.5, 7.0, 1e5, np.nan]),
-                                  [2.4, 2.4, 2.4, 3.4, 9.65, 6144.0, 6144.0])
+    np.testing.assert_array_equal(
+        user_range_accuracy([0.0, 2.0, 2.4, 2.5, 7.0, 1e5, np.nan]),
+        [2.4, 2.4, 2.4, 3.4, 9.65, 6144.0, 6144.0],
+    )
     sigma = float(code_sigma(np.array([2.4]))(np.radians([30.0]))[0])
     assert sigma == pytest.approx(math.sqrt(2.4**2 + 0.09 + 0.09 * 3.0), rel=1e-14)
 
 
 # --- damaged files ----------------------------------------------------------------------
+
 
 def damaged(name: str, line_no: int, new: str | None) -> str:
     lines = Path(observation(name)).read_text().splitlines()
@@ -165,18 +206,43 @@ def damaged(name: str, line_no: int, new: str | None) -> str:
     return "\n".join(lines) + "\n"
 
 
-@pytest.mark.parametrize("line_no, new, message", [
-    (1, "     2.10           N: GPS NAV DATA                         RINEX VERSION / TYPE",
-     ":1: expected a RINEX 2 or 3 observation file"),
-    (12, "     x    L1    C1    L2    P2                              # / TYPES OF OBSERV",
-     ":12: # / TYPES OF OBSERV: expected the number of types"),
-    (17, "", ":1091: expected an 'END OF HEADER' line"),
-    (18, " 05 13  2  0  0  0.0000000  0  8G 3G 7G 8G11G19G20G24G28", ":18: expected a valid epoch date"),
-    (18, " 05  4  2  0  0  0.0000000  0  8G 3G 7G 8G11G19G20G2x", ":18: expected a satellite (A1, I2)"),
-    (19, "  55923622.160    2476x686.375    43647388.2424   24767684.8224", ":19: G03 C1: expected a number"),
-    (20, None, ":20: the epoch of line 18: G08's 1 observation lines are missing"),
-    (27, " 05  4  2  0  0 30.0000000  x  8G 3G 7G 8G11G19G20G24G28", ":27: expected the epoch flag"),
-])
+@pytest.mark.parametrize(
+    "line_no, new, message",
+    [
+        (
+            1,
+            "     2.10           N: GPS NAV DATA                         RINEX VERSION / TYPE",
+            ":1: expected a RINEX 2 or 3 observation file",
+        ),
+        (
+            12,
+            "     x    L1    C1    L2    P2                              # / TYPES OF OBSERV",
+            ":12: # / TYPES OF OBSERV: expected the number of types",
+        ),
+        (17, "", ":1091: expected an 'END OF HEADER' line"),
+        (
+            18,
+            " 05 13  2  0  0  0.0000000  0  8G 3G 7G 8G11G19G20G24G28",
+            ":18: expected a valid epoch date",
+        ),
+        (
+            18,
+            " 05  4  2  0  0  0.0000000  0  8G 3G 7G 8G11G19G20G2x",
+            ":18: expected a satellite (A1, I2)",
+        ),
+        (
+            19,
+            "  55923622.160    2476x686.375    43647388.2424   24767684.8224",
+            ":19: G03 C1: expected a number",
+        ),
+        (20, None, ":20: the epoch of line 18: G08's 1 observation lines are missing"),
+        (
+            27,
+            " 05  4  2  0  0 30.0000000  x  8G 3G 7G 8G11G19G20G24G28",
+            ":27: expected the epoch flag",
+        ),
+    ],
+)
 def test_damaged_observation_file_names_the_line(line_no, new, message, tmp_path):
     path = tmp_path / "damaged.05o"
     path.write_text(damaged("0759", line_no, new))
@@ -186,18 +252,30 @@ def test_damaged_observation_file_names_the_line(line_no, new, message, tmp_path
 
 
 def test_damaged_rinex3_and_bytes_name_the_line(tmp_path):
-    header = ("     3.03           OBSERVATION DATA    M: Mixed            RINEX VERSION / TYPE\n"
-              "G    2 C1C S1C                                              SYS / # / OBS TYPES \n"
-              "                                                            END OF HEADER       \n")
+    header = (
+        "     3.03           OBSERVATION DATA    M: Mixed            RINEX VERSION / TYPE\n"
+        "G    2 C1C S1C                                              SYS / # / OBS TYPES \n"
+        "                                                            END OF HEADER       \n"
+    )
     good = header + "> 2005 04 02 00 00 00.0000000  0  1\nG03  24767686.375          45.000  \n"
     obs = parse_rinex_obs(good, "good.obs")
-    assert obs.satellite.tolist() == ["G03"] and obs.pseudorange[0, 0] == 24767686.375 and obs.cn0[0, 0] == 45.0
+    assert (
+        obs.satellite.tolist() == ["G03"]
+        and obs.pseudorange[0, 0] == 24767686.375
+        and obs.cn0[0, 0] == 45.0
+    )
     cases = [
-        (good.replace("0  1\n", "0  2\n"), ":5: the epoch of line 4 lists 2 satellites, the file ends after 1"),
+        (
+            good.replace("0  1\n", "0  2\n"),
+            ":5: the epoch of line 4 lists 2 satellites, the file ends after 1",
+        ),
         (good.replace("G03  247", "E03  247"), ":5: satellite E03: its system 'E' has no"),
         (good.replace("> 2005", "< 2005"), ":4: expected an epoch line starting with '>'"),
-        (good + "> 2005 04 02 00 00 30.0000000  0  2\nG03  24767686.375\n> 2005 04 02 00 01 00.0000000  0  1\n",
-         ":8: the epoch of line 6 lists 2 satellites, found 1 before the next epoch"),
+        (
+            good
+            + "> 2005 04 02 00 00 30.0000000  0  2\nG03  24767686.375\n> 2005 04 02 00 01 00.0000000  0  1\n",
+            ":8: the epoch of line 6 lists 2 satellites, found 1 before the next epoch",
+        ),
     ]
     for text, message in cases:
         with pytest.raises(ValueError, match=message):

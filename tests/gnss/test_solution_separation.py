@@ -5,6 +5,7 @@ solutions, its variance as ``(S_k - S_0) C (S_k - S_0)^T``, each level by Brent'
 On the GEONET hour (GPS, one clock: the constellation mode is unmonitorable) and on a
 two-clock geometry (the almanac's satellites split into two constellations). And the
 property that the levels never fall below the fault-free ones, on every epoch."""
+
 import jax
 import numpy as np
 import pytest
@@ -12,13 +13,21 @@ import scipy.optimize
 from scipy.stats import norm
 
 from jaxfdi.data import data_path
+from jaxfdi.gnss import read_observations
 from jaxfdi.gnss._positioning import PositionFix, dops
 from jaxfdi.gnss._receiver import monitor_receiver, receiver_epochs
 from jaxfdi.gnss._rinex import read_rinex_nav
-from jaxfdi.gnss import read_observations
-from jaxfdi.gnss._solution_separation import (P_CONSTELLATION, P_FA_HORIZONTAL, P_FA_VERTICAL, P_HMI_HORIZONTAL,
-                                              P_HMI_VERTICAL, P_SATELLITE, fault_free_levels, separate_epochs,
-                                              solution_separation)
+from jaxfdi.gnss._solution_separation import (
+    P_CONSTELLATION,
+    P_FA_HORIZONTAL,
+    P_FA_VERTICAL,
+    P_HMI_HORIZONTAL,
+    P_HMI_VERTICAL,
+    P_SATELLITE,
+    fault_free_levels,
+    separate_epochs,
+    solution_separation,
+)
 
 
 def reference(geometry, sigma, residuals, used, p_const):
@@ -52,17 +61,26 @@ def reference(geometry, sigma, residuals, used, p_const):
             p_nm += prior
             continue
         diff = sk - s0
-        kept.append((sk @ r - x0, np.sqrt(np.diag(sk @ cov @ sk.T)), np.sqrt(np.diag(diff @ cov @ diff.T)), prior))
+        kept.append(
+            (
+                sk @ r - x0,
+                np.sqrt(np.diag(sk @ cov @ sk.T)),
+                np.sqrt(np.diag(diff @ cov @ diff.T)),
+                prior,
+            )
+        )
     count = len(kept)
     k_fa = norm.isf(np.array([P_FA_HORIZONTAL / 4, P_FA_HORIZONTAL / 4, P_FA_VERTICAL / 2]) / count)
     scale = 1.0 - p_nm / (P_HMI_HORIZONTAL + P_HMI_VERTICAL)
     levels = []
     for q, budget in ((0, P_HMI_HORIZONTAL / 2), (1, P_HMI_HORIZONTAL / 2), (2, P_HMI_VERTICAL)):
+
         def excess(pl):
             total = 2 * norm.sf(pl / sig0[q])
             for _, sig, sig_ss, prior in kept:
                 total += prior * norm.sf((pl - k_fa[q] * sig_ss[q]) / sig[q])
             return total - budget * scale
+
         levels.append(scipy.optimize.brentq(excess, 0.0, 1e12, xtol=1e-10, rtol=1e-14))
     thresholds = np.array([k_fa * sig_ss for _, _, sig_ss, _ in kept])
     separations = np.array([dx for dx, _, _, _ in kept])
@@ -72,7 +90,9 @@ def reference(geometry, sigma, residuals, used, p_const):
 @pytest.fixture(scope="module")
 def geonet():
     obs = read_observations(data_path("07590920.05o"))
-    result = monitor_receiver(receiver_epochs(obs, read_rinex_nav(data_path("07590920.05n"))), exclude=False)
+    result = monitor_receiver(
+        receiver_epochs(obs, read_rinex_nav(data_path("07590920.05n"))), exclude=False
+    )
     return jax.tree_util.tree_map(np.asarray, result.fix)
 
 
@@ -85,11 +105,19 @@ def test_levels_match_the_long_way_on_the_geonet_hour(geonet):
     for e in range(0, 120, 7):
         fix = one(geonet, e)
         ours = solution_separation(fix)
-        hpl, vpl, thresholds, separations = reference(fix.geometry, fix.sigma, fix.residuals, fix.used, [P_CONSTELLATION])
+        hpl, vpl, thresholds, separations = reference(
+            fix.geometry, fix.sigma, fix.residuals, fix.used, [P_CONSTELLATION]
+        )
         monitored = np.asarray(ours.monitored)
-        assert monitored.sum() == int(fix.used.sum())  # the singles; the one-constellation mode removes everything
-        np.testing.assert_allclose(np.asarray(ours.threshold)[monitored], thresholds, rtol=1e-9, atol=1e-9)  # metres: 1 nm
-        np.testing.assert_allclose(np.asarray(ours.separation)[monitored], separations, rtol=1e-7, atol=1e-6)  # the fix converged to < 1e-7 m
+        assert monitored.sum() == int(
+            fix.used.sum()
+        )  # the singles; the one-constellation mode removes everything
+        np.testing.assert_allclose(
+            np.asarray(ours.threshold)[monitored], thresholds, rtol=1e-9, atol=1e-9
+        )  # metres: 1 nm
+        np.testing.assert_allclose(
+            np.asarray(ours.separation)[monitored], separations, rtol=1e-7, atol=1e-6
+        )  # the fix converged to < 1e-7 m
         worst = max(worst, abs(float(ours.hpl) / hpl - 1), abs(float(ours.vpl) / vpl - 1))
     assert worst < 1e-9, worst
 
@@ -105,7 +133,7 @@ def test_levels_match_the_long_way_with_two_clocks():
     table = almanac_table(read_yuma(data_path("gps_almanac_2086.yuma.txt")))
     receiver = np.asarray(geodetic_to_ecef(np.radians(37.4), np.radians(-122.2), 30.0))
     rng = np.random.default_rng(3)
-    odd = (np.asarray(table.prn) % 2 == 1)
+    odd = np.asarray(table.prn) % 2 == 1
     checked = 0
     for t in np.arange(503808.0, 503808.0 + 86400.0, 1800.0):
         orbit, available = select_orbits(table, t)
@@ -116,18 +144,36 @@ def test_levels_match_the_long_way_with_two_clocks():
             continue  # a constellation mode would leave too few satellites (unmonitorable at prior 1e-4)
         checked += 1
         los = np.asarray(line_of_sight_ned(receiver, sats))
-        geometry = np.concatenate([-los, odd[:, None], ~odd[:, None]], axis=1).astype(float) * used[:, None]
+        geometry = (
+            np.concatenate([-los, odd[:, None], ~odd[:, None]], axis=1).astype(float)
+            * used[:, None]
+        )
         sigma = np.where(used, rng.uniform(0.5, 2.0, used.size), 1.0)
         residuals = np.where(used, rng.normal(0.0, sigma), 0.0)
-        fix = PositionFix(np.zeros(3), np.zeros(()), residuals, geometry, sigma, used, used.sum(), np.zeros(used.size),
-                          np.zeros(used.size), dops(geometry, used), np.asarray(True))
+        fix = PositionFix(
+            np.zeros(3),
+            np.zeros(()),
+            residuals,
+            geometry,
+            sigma,
+            used,
+            used.sum(),
+            np.zeros(used.size),
+            np.zeros(used.size),
+            dops(geometry, used),
+            np.asarray(True),
+        )
         p_const = np.array([1e-4, 1e-8])
         ours = solution_separation(fix, p_constellation=p_const)
         hpl, vpl, thresholds, _ = reference(geometry, sigma, residuals, used, p_const)
         monitored = np.asarray(ours.monitored)
         assert monitored[-2:].all() and monitored.sum() == used.sum() + 2
-        np.testing.assert_allclose(np.asarray(ours.threshold)[monitored], thresholds, rtol=1e-9, atol=1e-9)  # metres: 1 nm
-        assert float(ours.hpl) == pytest.approx(hpl, rel=1e-9) and float(ours.vpl) == pytest.approx(vpl, rel=1e-9)
+        np.testing.assert_allclose(
+            np.asarray(ours.threshold)[monitored], thresholds, rtol=1e-9, atol=1e-9
+        )  # metres: 1 nm
+        assert float(ours.hpl) == pytest.approx(hpl, rel=1e-9) and float(ours.vpl) == pytest.approx(
+            vpl, rel=1e-9
+        )
     assert checked >= 5
 
 
@@ -135,7 +181,9 @@ def test_levels_never_fall_below_the_fault_free_ones(geonet):
     """On every epoch of the hour (5 to 7 satellites)."""
     ss = jax.vmap(solution_separation)(geonet)
     hff, vff = jax.vmap(fault_free_levels)(geonet)
-    assert np.all(np.asarray(ss.hpl) >= np.asarray(hff)) and np.all(np.asarray(ss.vpl) >= np.asarray(vff))
+    assert np.all(np.asarray(ss.hpl) >= np.asarray(hff)) and np.all(
+        np.asarray(ss.vpl) >= np.asarray(vff)
+    )
     assert np.all(np.isfinite(np.asarray(ss.hpl)[:115]))
 
 
@@ -157,13 +205,20 @@ def test_levels_match_the_long_way_on_phone_epochs(label):
         ours, alone = one(batch, e), solution_separation(fix)
         for field in ("monitored", "alarm", "isolated"):
             np.testing.assert_array_equal(getattr(ours, field), getattr(alone, field))
-        hpl, vpl, thresholds, separations = reference(fix.geometry, fix.sigma, fix.residuals, fix.used,
-                                                      [P_CONSTELLATION] * clocks)
+        hpl, vpl, thresholds, separations = reference(
+            fix.geometry, fix.sigma, fix.residuals, fix.used, [P_CONSTELLATION] * clocks
+        )
         monitored = np.asarray(ours.monitored)
         # a satellite alone on its clock: sigma_ss is 0 here, ~1e-10 m of round-off there
-        np.testing.assert_allclose(np.asarray(ours.threshold)[monitored], thresholds, rtol=1e-8, atol=1e-6)
-        np.testing.assert_allclose(np.asarray(ours.separation)[monitored], separations, rtol=1e-6, atol=1e-6)
-        assert float(ours.hpl) == pytest.approx(hpl, rel=1e-8) and float(ours.vpl) == pytest.approx(vpl, rel=1e-8)
+        np.testing.assert_allclose(
+            np.asarray(ours.threshold)[monitored], thresholds, rtol=1e-8, atol=1e-6
+        )
+        np.testing.assert_allclose(
+            np.asarray(ours.separation)[monitored], separations, rtol=1e-6, atol=1e-6
+        )
+        assert float(ours.hpl) == pytest.approx(hpl, rel=1e-8) and float(ours.vpl) == pytest.approx(
+            vpl, rel=1e-8
+        )
 
 
 def test_the_isolated_mode_is_the_fix_without_the_faulty_satellite():
@@ -180,18 +235,25 @@ def test_the_isolated_mode_is_the_fix_without_the_faulty_satellite():
     rho = np.asarray(epochs.pseudoranges)
     clean = jax.tree_util.tree_map(np.asarray, monitor_receiver(epochs, exclude=False).fix)
     for slot in np.flatnonzero(clean.used[e]):
-        faulty = rho[e:e + 1].copy()
+        faulty = rho[e : e + 1].copy()
         faulty[0, slot] += 100.0
-        trial = epochs._replace(times=epochs.times[e:e + 1], pseudoranges=faulty)
+        trial = epochs._replace(times=epochs.times[e : e + 1], pseudoranges=faulty)
         fix = one(jax.tree_util.tree_map(np.asarray, monitor_receiver(trial, exclude=False).fix), 0)
         ss = solution_separation(fix)
         if not bool(ss.alarm):
             continue
         assert int(ss.isolated) == slot
-        keep = rho[e:e + 1].copy()
+        keep = rho[e : e + 1].copy()
         keep[0, slot] = np.nan
-        refit = one(jax.tree_util.tree_map(np.asarray, monitor_receiver(
-            epochs._replace(times=epochs.times[e:e + 1], pseudoranges=keep), exclude=False).fix), 0)
+        refit = one(
+            jax.tree_util.tree_map(
+                np.asarray,
+                monitor_receiver(
+                    epochs._replace(times=epochs.times[e : e + 1], pseudoranges=keep), exclude=False
+                ).fix,
+            ),
+            0,
+        )
         moved = np.asarray(ecef_to_ned(refit.position, fix.position))
         np.testing.assert_allclose(np.asarray(ss.separation)[slot], moved, rtol=2e-3, atol=1e-2)
         checked += 1

@@ -4,6 +4,7 @@ perfect IMU (drift over the flight stated), a stationary IMU against its closed 
 Schuler oscillation against its textbook period, and the EKF's F (jax.jacfwd of the
 mechanisation) against finite differences of the strapdown step and against the textbook
 blocks."""
+
 import math
 
 import jax
@@ -13,7 +14,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from jaxfdi.gnss import _frames as frames
-from jaxfdi.ins import _earth as earth, _error_state as error_state, _mechanization as mechanization, _trajectory as trajectory
+from jaxfdi.ins import _earth as earth
+from jaxfdi.ins import _error_state as error_state
+from jaxfdi.ins import _mechanization as mechanization
+from jaxfdi.ins import _trajectory as trajectory
 from jaxfdi.models import _rotation as rotation
 
 PARK = (37.5684, 126.8851, 70.0)
@@ -30,7 +34,9 @@ def run_ins():
     @jax.jit
     def run(nav0, samples, bias, dt):
         def body(nav, sample):
-            return mechanization.strapdown_step(nav, sample[:3] - bias[:3], sample[3:] - bias[3:], dt), nav.velocity
+            return mechanization.strapdown_step(
+                nav, sample[:3] - bias[:3], sample[3:] - bias[3:], dt
+            ), nav.velocity
 
         return jax.lax.scan(body, nav0, samples)
 
@@ -54,7 +60,9 @@ def test_radii_of_curvature_are_the_ellipsoid_metric(lat_deg):
     d_lat, d_lon = jax.jacfwd(frames.geodetic_to_ecef, argnums=(0, 1))(lat, lon, h)
     meridian, transverse = earth.radii_of_curvature(jnp.sin(lat))
     assert float(jnp.linalg.norm(d_lat)) == pytest.approx(float(meridian) + h, rel=1e-13)
-    assert float(jnp.linalg.norm(d_lon)) == pytest.approx((float(transverse) + h) * math.cos(lat), rel=1e-13)
+    assert float(jnp.linalg.norm(d_lon)) == pytest.approx(
+        (float(transverse) + h) * math.cos(lat), rel=1e-13
+    )
 
 
 def test_attitude_algebra_matches_scipy():
@@ -68,11 +76,17 @@ def test_attitude_algebra_matches_scipy():
         v = rng.normal(size=3)
         np.testing.assert_allclose(rotation.rotate(q, v), reference.apply(v), atol=1e-14)
         r = rng.normal(size=3)
-        np.testing.assert_allclose(rotation.rotation_vector(rotation.rotation_quaternion(r)),
-                                   Rotation.from_rotvec(r).as_rotvec(), atol=1e-13)
-        small = r / np.linalg.norm(r) * 0.1       # the strapdown step's series, at its stated limit
-        np.testing.assert_allclose(rotation.small_rotation_quaternion(small), rotation.rotation_quaternion(small),
-                                   atol=1e-15)
+        np.testing.assert_allclose(
+            rotation.rotation_vector(rotation.rotation_quaternion(r)),
+            Rotation.from_rotvec(r).as_rotvec(),
+            atol=1e-13,
+        )
+        small = r / np.linalg.norm(r) * 0.1  # the strapdown step's series, at its stated limit
+        np.testing.assert_allclose(
+            rotation.small_rotation_quaternion(small),
+            rotation.rotation_quaternion(small),
+            atol=1e-15,
+        )
 
 
 def test_perfect_imu_follows_the_trajectory(park_flight, run_ins):
@@ -92,15 +106,32 @@ def test_stationary_imu_reads_gravity_and_earth_rate():
     rest = trajectory.stationary(PARK, 1.0, rate=100.0, attitude_deg=(0.0, 0.0, yaw))
     lat = math.radians(PARK[0])
     w_ie = 7.2921151467e-5
-    g = 9.7803253359 * (1 + 0.00193185265241 * math.sin(lat) ** 2) / math.sqrt(
-        1 - 0.00669437999014 * math.sin(lat) ** 2)
-    g *= 1 - 2 / 6378137.0 * (1 + 1 / 298.257223563 * (1 - 2 * math.sin(lat) ** 2)
-                              + w_ie**2 * 6378137.0**2 * 6356752.314245 / 3.986004418e14) * PARK[2]
-    g_north = -8.08e-9 * PARK[2] * math.sin(2 * lat)      # Groves (2013) eq. 2.140
+    g = (
+        9.7803253359
+        * (1 + 0.00193185265241 * math.sin(lat) ** 2)
+        / math.sqrt(1 - 0.00669437999014 * math.sin(lat) ** 2)
+    )
+    g *= (
+        1
+        - 2
+        / 6378137.0
+        * (
+            1
+            + 1 / 298.257223563 * (1 - 2 * math.sin(lat) ** 2)
+            + w_ie**2 * 6378137.0**2 * 6356752.314245 / 3.986004418e14
+        )
+        * PARK[2]
+    )
+    g_north = -8.08e-9 * PARK[2] * math.sin(2 * lat)  # Groves (2013) eq. 2.140
     body = Rotation.from_euler("Z", yaw, degrees=True).inv()
-    np.testing.assert_allclose(rest.imu[:, :3], np.tile(body.apply([-g_north, 0.0, -g]), (100, 1)), atol=1e-12)
-    np.testing.assert_allclose(rest.imu[:, 3:], np.tile(body.apply([w_ie * math.cos(lat), 0.0, -w_ie * math.sin(lat)]),
-                                                        (100, 1)), atol=1e-15)
+    np.testing.assert_allclose(
+        rest.imu[:, :3], np.tile(body.apply([-g_north, 0.0, -g]), (100, 1)), atol=1e-12
+    )
+    np.testing.assert_allclose(
+        rest.imu[:, 3:],
+        np.tile(body.apply([w_ie * math.cos(lat), 0.0, -w_ie * math.sin(lat)]), (100, 1)),
+        atol=1e-15,
+    )
 
 
 def test_schuler_oscillation_has_the_textbook_period(run_ins):
@@ -115,7 +146,9 @@ def test_schuler_oscillation_has_the_textbook_period(run_ins):
     crossings = t[1:][(north[:-1] > 0) & (north[1:] <= 0)]
     rises = t[1:][(north[:-1] < 0) & (north[1:] >= 0)]
     lat = math.radians(PARK[0])
-    meridian = 6378137.0 * (1 - 0.00669437999014) / (1 - 0.00669437999014 * math.sin(lat) ** 2) ** 1.5
+    meridian = (
+        6378137.0 * (1 - 0.00669437999014) / (1 - 0.00669437999014 * math.sin(lat) ** 2) ** 1.5
+    )
     period = 2 * math.pi * math.sqrt((meridian + PARK[2]) / 9.7998)
     assert crossings[0] == pytest.approx(period / 2, rel=2e-3)
     assert rises[0] == pytest.approx(period, rel=2e-3)
@@ -132,6 +165,7 @@ SCALES = jnp.asarray([1.0] * 3 + [0.01] * 3 + [1e-4] * 3 + [1e-3] * 3 + [1e-6] *
 def _transition_by_differences(nav, samples, dt):
     """Central differences of ``len(samples)`` strapdown steps in the error coordinates:
     column i is d(error after) / d(error before) for a perturbation of state i."""
+
     def fly(start, bias):
         def body(n, s):
             return mechanization.strapdown_step(n, s[:3] - bias[:3], s[3:] - bias[3:], dt), None
@@ -155,7 +189,7 @@ def _scaled(matrix):
     return matrix * SCALES[None, :] / SCALES[:, None]
 
 
-@pytest.mark.parametrize("index", [2000, 11000, 16000])   # climbing, turning, straight
+@pytest.mark.parametrize("index", [2000, 11000, 16000])  # climbing, turning, straight
 def test_F_matches_finite_differences_of_the_strapdown_step(park_flight, index):
     """One strapdown step maps errors by ``I + F dt + F^2 dt^2 / 2`` with ``F`` the mean of
     its values at both ends, to O(dt^3): every entry, in units of the typical errors,
@@ -163,9 +197,12 @@ def test_F_matches_finite_differences_of_the_strapdown_step(park_flight, index):
     nav, dt = park_flight.state(index), park_flight.dt
     sample = park_flight.imu[index]
     jacobian = jax.jit(error_state.error_jacobian)
-    F = 0.5 * (jacobian(nav, sample[:3], sample[3:]) + jacobian(park_flight.state(index + 1), sample[:3], sample[3:]))
+    F = 0.5 * (
+        jacobian(nav, sample[:3], sample[3:])
+        + jacobian(park_flight.state(index + 1), sample[:3], sample[3:])
+    )
     expected = jnp.eye(15) + F * dt + F @ F * dt**2 / 2
-    measured = _transition_by_differences(nav, park_flight.imu[index:index + 1], dt)
+    measured = _transition_by_differences(nav, park_flight.imu[index : index + 1], dt)
     assert float(jnp.max(jnp.abs(_scaled(measured - expected)))) < 1e-7
 
 
@@ -177,21 +214,26 @@ def test_epoch_transition_matches_finite_differences_over_one_second(park_flight
     the second, first order in the turn rate: in the turn, an accelerometer bias' effect on
     position is 1 % off, 5e-5 m for 1 mg.)"""
     start = epoch * 100
-    samples = park_flight.imu[start:start + 100]
+    samples = park_flight.imu[start : start + 100]
     nav = park_flight.state(start)
     measured = _transition_by_differences(nav, samples, park_flight.dt)
     mid = park_flight.state(start + 50)
     mean = jnp.mean(samples, axis=0)
-    transition, _ = error_state.discretize(jax.jit(error_state.error_jacobian)(mid, mean[:3], mean[3:]),
-                                           error_state.ImuNoise(1.0, 1.0, 1.0, 1.0), 1.0)
+    transition, _ = error_state.discretize(
+        jax.jit(error_state.error_jacobian)(mid, mean[:3], mean[3:]),
+        error_state.ImuNoise(1.0, 1.0, 1.0, 1.0),
+        1.0,
+    )
     worst = np.unravel_index(int(jnp.argmax(jnp.abs(_scaled(transition - measured)))), (15, 15))
-    assert float(jnp.max(jnp.abs(_scaled(transition - measured)))) < 1e-4, [error_state.STATE_NAMES[i] for i in worst]
+    assert float(jnp.max(jnp.abs(_scaled(transition - measured)))) < 1e-4, [
+        error_state.STATE_NAMES[i] for i in worst
+    ]
 
 
 def test_F_has_the_textbook_blocks(park_flight):
     """The dominant blocks of Groves (2013) eqs. 14.64-14.66 in these error conventions:
     ``dp' = dv``, ``dv' = -[f^n x] psi + C_b^n db_a``, ``psi' = -[w_in^n x] psi + C_b^n db_g``."""
-    index = 11000                                      # in a turn: f^n has a horizontal part
+    index = 11000  # in a turn: f^n has a horizontal part
     nav, sample = park_flight.state(index), park_flight.imu[index]
     F = np.asarray(jax.jit(error_state.error_jacobian)(nav, sample[:3], sample[3:]))
     C = np.asarray(rotation.quaternion_to_dcm(nav.attitude))
@@ -203,7 +245,9 @@ def test_F_has_the_textbook_blocks(park_flight):
     np.testing.assert_allclose(F[3:6, 6:9], -skew, atol=1e-9 * np.abs(f_n).max())
     np.testing.assert_allclose(F[3:6, 9:12], C, atol=1e-12)
     np.testing.assert_allclose(F[6:9, 12:15], C, atol=1e-12)
-    np.testing.assert_allclose(F[6:9, 6:9], -np.asarray(rotation.skew(jnp.asarray(w_in))), atol=1e-12)
+    np.testing.assert_allclose(
+        F[6:9, 6:9], -np.asarray(rotation.skew(jnp.asarray(w_in))), atol=1e-12
+    )
     assert np.all(F[9:] == 0.0)
 
 

@@ -9,6 +9,7 @@
 - Morelli's polynomial typed term by term from the paper's structure, 1e-12;
 - ``jax.jacfwd`` linearisation against central finite differences.
 """
+
 import math
 
 import jax
@@ -19,8 +20,8 @@ from scipy.spatial.transform import Rotation
 
 from jaxfdi.models.f16._aero import table_coefficients
 from jaxfdi.models.f16._dynamics import aero_coefficients, f16_dynamics, f16_params, saturate
-from jaxfdi.models.f16._linearize import flight_modes, linearize, longitudinal
 from jaxfdi.models.f16._engine import power_rate, throttle_gearing, thrust
+from jaxfdi.models.f16._linearize import flight_modes, linearize, longitudinal
 from jaxfdi.models.f16._morelli import polynomial_coefficients
 from jaxfdi.models.f16._tables import lookup1, lookup2, stevens_lewis_data, table_arrays
 
@@ -30,6 +31,7 @@ N = 400
 
 # --- the NumPy reference: the book's Fortran index arithmetic ------------------------
 
+
 def _int(x):
     return np.trunc(x).astype(int)
 
@@ -38,16 +40,16 @@ def ref_alpha(alpha):
     s = 0.2 * alpha
     k = np.clip(_int(s), -1, 8)
     da = s - k
-    return k + 2, k + np.where(da >= 0, 1, -1) + 2, np.abs(da)   # array columns, |DA|
+    return k + 2, k + np.where(da >= 0, 1, -1) + 2, np.abs(da)  # array columns, |DA|
 
 
 def ref_1d(table, alpha):
-    k, l, da = ref_alpha(alpha)  # noqa: E741
+    k, l, da = ref_alpha(alpha)
     return table[..., k] + da * (table[..., l] - table[..., k])
 
 
 def ref_el(table, alpha, el):
-    k, l, da = ref_alpha(alpha)  # noqa: E741
+    k, l, da = ref_alpha(alpha)
     s = el / 12.0
     m = np.clip(_int(s), -1, 1)
     de = s - m
@@ -58,9 +60,9 @@ def ref_el(table, alpha, el):
 
 
 def ref_abs_beta(table, alpha, beta):
-    k, l, da = ref_alpha(alpha)  # noqa: E741
+    k, l, da = ref_alpha(alpha)
     s = 0.2 * np.abs(beta)
-    m = np.clip(_int(s), 1, 5)          # IF (M.EQ.0) M=1; IF (M.GE.6) M=5
+    m = np.clip(_int(s), 1, 5)  # IF (M.EQ.0) M=1; IF (M.GE.6) M=5
     db = s - m
     n = m + np.where(db >= 0, 1, -1)
     v = table[m, k] + da * (table[m, l] - table[m, k])
@@ -69,7 +71,7 @@ def ref_abs_beta(table, alpha, beta):
 
 
 def ref_beta(table, alpha, beta):
-    k, l, da = ref_alpha(alpha)  # noqa: E741
+    k, l, da = ref_alpha(alpha)
     s = 0.1 * beta
     m = np.clip(_int(s), -2, 2)
     db = s - m
@@ -98,11 +100,20 @@ def ref_coefficients(T, alpha, beta, el, ail, rdr, p, q, r, vt, xcg):
     cx = ref_el(T["CX"], alpha, el) + cq * d[0]
     cy = -0.02 * beta + 0.021 * ail / 20 + 0.086 * rdr / 30 + b2v * (d[1] * r + d[2] * p)
     cz = ref_1d(T["CZ"], alpha) * (1 - (beta / 57.3) ** 2) - 0.19 * el / 25 + cq * d[3]
-    cl = (ref_abs_beta(T["CL"], alpha, beta) + ref_beta(T["DLDA"], alpha, beta) * ail / 20
-          + ref_beta(T["DLDR"], alpha, beta) * rdr / 30 + b2v * (d[4] * r + d[5] * p))
+    cl = (
+        ref_abs_beta(T["CL"], alpha, beta)
+        + ref_beta(T["DLDA"], alpha, beta) * ail / 20
+        + ref_beta(T["DLDR"], alpha, beta) * rdr / 30
+        + b2v * (d[4] * r + d[5] * p)
+    )
     cm = ref_el(T["CM"], alpha, el) + cq * d[6] + cz * (0.35 - xcg)
-    cn = (ref_abs_beta(T["CN"], alpha, beta) + ref_beta(T["DNDA"], alpha, beta) * ail / 20
-          + ref_beta(T["DNDR"], alpha, beta) * rdr / 30 + b2v * (d[7] * r + d[8] * p) - cy * (0.35 - xcg) * 11.32 / 30)
+    cn = (
+        ref_abs_beta(T["CN"], alpha, beta)
+        + ref_beta(T["DNDA"], alpha, beta) * ail / 20
+        + ref_beta(T["DNDR"], alpha, beta) * rdr / 30
+        + b2v * (d[7] * r + d[8] * p)
+        - cy * (0.35 - xcg) * 11.32 / 30
+    )
     return np.stack([cx, cy, cz, cl, cm, cn])
 
 
@@ -113,24 +124,40 @@ def ref_derivative(T, x, u, xcg):
     data = stevens_lewis_data()
     mg = data["mass_geometry"]
     mass, g = mg["mass_slug"]["value"], mg["g0_ft_s2"]["value"]
-    J = np.array([[mg["Jxx_slug_ft2"], 0, -mg["Jxz_slug_ft2"]], [0, mg["Jyy_slug_ft2"], 0],
-                  [-mg["Jxz_slug_ft2"], 0, mg["Jzz_slug_ft2"]]])
+    J = np.array(
+        [
+            [mg["Jxx_slug_ft2"], 0, -mg["Jxz_slug_ft2"]],
+            [0, mg["Jyy_slug_ft2"], 0],
+            [-mg["Jxz_slug_ft2"], 0, mg["Jzz_slug_ft2"]],
+        ]
+    )
     tfac = 1 - 0.703e-5 * alt
     temp = 390.0 if alt >= 35000 else 519.0 * tfac
     rho = 2.377e-3 * tfac**4.14
     mach, qbar = vt / math.sqrt(1.4 * 1716.3 * temp), 0.5 * rho * vt**2
     cpow = 64.94 * thtl if thtl <= 0.77 else 217.38 * thtl - 117.38
-    rtau = lambda dp: 1.0 if dp <= 25 else (0.1 if dp >= 50 else 1.9 - 0.036 * dp)  # noqa: E731
+    rtau = lambda dp: 1.0 if dp <= 25 else (0.1 if dp >= 50 else 1.9 - 0.036 * dp)
     if cpow >= 50:
         rate, target = (5.0, cpow) if power >= 50 else (rtau(60 - power), 60.0)
     else:
         rate, target = (5.0, 40.0) if power >= 50 else (rtau(cpow - power), cpow)
-    tidl, tmil, tmax = (ref_thrust_table(T[k], mach, alt) for k in ("thrust_idle", "thrust_military", "thrust_maximum"))
-    thr = tidl + (tmil - tidl) * power / 50 if power < 50 else tmil + (tmax - tmil) * (power - 50) / 50
+    tidl, tmil, tmax = (
+        ref_thrust_table(T[k], mach, alt)
+        for k in ("thrust_idle", "thrust_military", "thrust_maximum")
+    )
+    thr = (
+        tidl + (tmil - tidl) * power / 50
+        if power < 50
+        else tmil + (tmax - tmil) * (power - 50) / 50
+    )
     c = ref_coefficients(T, math.degrees(alpha), math.degrees(beta), el, ail, rdr, p, q, r, vt, xcg)
-    V = vt * np.array([math.cos(alpha) * math.cos(beta), math.sin(beta), math.sin(alpha) * math.cos(beta)])
+    V = vt * np.array(
+        [math.cos(alpha) * math.cos(beta), math.sin(beta), math.sin(alpha) * math.cos(beta)]
+    )
     w = np.array([p, q, r])
-    g_body = g * np.array([-math.sin(theta), math.sin(phi) * math.cos(theta), math.cos(phi) * math.cos(theta)])
+    g_body = g * np.array(
+        [-math.sin(theta), math.sin(phi) * math.cos(theta), math.cos(phi) * math.cos(theta)]
+    )
     force = qbar * 300.0 * c[:3] + np.array([thr, 0, 0])
     V_dot = force / mass + g_body - np.cross(w, V)
     vt_dot = V @ V_dot / vt
@@ -138,12 +165,26 @@ def ref_derivative(T, x, u, xcg):
     beta_dot = (V_dot[1] * vt - V[1] * vt_dot) / (vt**2 * math.cos(beta))
     moment = qbar * 300.0 * np.array([30.0 * c[3], 11.32 * c[4], 30.0 * c[5]])
     w_dot = np.linalg.solve(J, moment - np.cross(w, J @ w + np.array([160.0, 0, 0])))
-    euler_dot = np.linalg.solve(np.array([[1, 0, -math.sin(theta)],
-                                          [0, math.cos(phi), math.sin(phi) * math.cos(theta)],
-                                          [0, -math.sin(phi), math.cos(phi) * math.cos(theta)]]), w)
+    euler_dot = np.linalg.solve(
+        np.array(
+            [
+                [1, 0, -math.sin(theta)],
+                [0, math.cos(phi), math.sin(phi) * math.cos(theta)],
+                [0, -math.sin(phi), math.cos(phi) * math.cos(theta)],
+            ]
+        ),
+        w,
+    )
     ned = Rotation.from_euler("ZYX", [psi, theta, phi]).as_matrix() @ V
-    return np.concatenate([[vt_dot, alpha_dot, beta_dot], euler_dot, w_dot, [ned[0], ned[1], -ned[2]],
-                           [rate * (target - power)]])
+    return np.concatenate(
+        [
+            [vt_dot, alpha_dot, beta_dot],
+            euler_dot,
+            w_dot,
+            [ned[0], ned[1], -ned[2]],
+            [rate * (target - power)],
+        ]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -157,8 +198,13 @@ def tables():
 
 
 def _points():
-    return (RNG.uniform(-22, 58, N), RNG.uniform(-42, 42, N), RNG.uniform(-35, 35, N), RNG.uniform(-25, 25, N),
-            RNG.uniform(-35, 35, N))
+    return (
+        RNG.uniform(-22, 58, N),
+        RNG.uniform(-42, 42, N),
+        RNG.uniform(-35, 35, N),
+        RNG.uniform(-25, 25, N),
+        RNG.uniform(-35, 35, N),
+    )
 
 
 def test_table_lookups_equal_the_books_fortran(params, tables):
@@ -167,22 +213,47 @@ def test_table_lookups_equal_the_books_fortran(params, tables):
     alpha, beta, el, _, _ = _points()
     mach, alt = RNG.uniform(-0.1, 1.3, N), RNG.uniform(-5000, 62000, N)
     a = params.aero
-    look = jax.jit(jax.vmap(lambda al, be, e, m, h: (
-        lookup2(e, a.elevator_deg, al, a.alpha_deg, a.CX), lookup2(e, a.elevator_deg, al, a.alpha_deg, a.CM),
-        lookup1(al, a.alpha_deg, a.CZ), lookup1(al, a.alpha_deg, a.DAMP),
-        jnp.stack([lookup2(be, a.beta_deg, al, a.alpha_deg, t) for t in (a.DLDA, a.DLDR, a.DNDA, a.DNDR)]),
-        jnp.stack([lookup2(m, params.engine.mach, h, params.engine.altitude_ft, t)
-                   for t in (params.engine.idle, params.engine.military, params.engine.maximum)]))))
+    look = jax.jit(
+        jax.vmap(
+            lambda al, be, e, m, h: (
+                lookup2(e, a.elevator_deg, al, a.alpha_deg, a.CX),
+                lookup2(e, a.elevator_deg, al, a.alpha_deg, a.CM),
+                lookup1(al, a.alpha_deg, a.CZ),
+                lookup1(al, a.alpha_deg, a.DAMP),
+                jnp.stack(
+                    [
+                        lookup2(be, a.beta_deg, al, a.alpha_deg, t)
+                        for t in (a.DLDA, a.DLDR, a.DNDA, a.DNDR)
+                    ]
+                ),
+                jnp.stack(
+                    [
+                        lookup2(m, params.engine.mach, h, params.engine.altitude_ft, t)
+                        for t in (params.engine.idle, params.engine.military, params.engine.maximum)
+                    ]
+                ),
+            )
+        )
+    )
     cx, cm, cz, damp, lat, thr = (np.asarray(v) for v in look(alpha, beta, el, mach, alt))
     np.testing.assert_allclose(cx, ref_el(tables["CX"], alpha, el), rtol=0, atol=1e-12)
     np.testing.assert_allclose(cm, ref_el(tables["CM"], alpha, el), rtol=0, atol=1e-12)
     np.testing.assert_allclose(cz, ref_1d(tables["CZ"], alpha), rtol=0, atol=1e-12)
     np.testing.assert_allclose(damp, ref_1d(tables["DAMP"], alpha).T, rtol=0, atol=1e-12)
     for i, name in enumerate(("DLDA", "DLDR", "DNDA", "DNDR")):
-        np.testing.assert_allclose(lat[:, i], ref_beta(tables[name], alpha, beta), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            lat[:, i], ref_beta(tables[name], alpha, beta), rtol=0, atol=1e-12
+        )
     for i, name in enumerate(("thrust_idle", "thrust_military", "thrust_maximum")):
-        np.testing.assert_allclose(thr[:, i], ref_thrust_table(tables[name], mach, alt), rtol=1e-12, atol=1e-12)
-    assert np.any(alpha < -10) and np.any(alpha > 45) and np.any(np.abs(beta) > 30) and np.any(np.abs(el) > 24)
+        np.testing.assert_allclose(
+            thr[:, i], ref_thrust_table(tables[name], mach, alt), rtol=1e-12, atol=1e-12
+        )
+    assert (
+        np.any(alpha < -10)
+        and np.any(alpha > 45)
+        and np.any(np.abs(beta) > 30)
+        and np.any(np.abs(el) > 24)
+    )
 
 
 def test_coefficient_buildup_equals_the_books(params, tables):
@@ -192,10 +263,21 @@ def test_coefficient_buildup_equals_the_books(params, tables):
     p, q, r = RNG.uniform(-1, 1, (3, N))
     vt, xcg = RNG.uniform(150, 900, N), RNG.uniform(0.25, 0.45, N)
     x = np.zeros((N, 13))
-    x[:, 0], x[:, 1], x[:, 2], x[:, 6], x[:, 7], x[:, 8] = vt, np.radians(alpha), np.radians(beta), p, q, r
+    x[:, 0], x[:, 1], x[:, 2], x[:, 6], x[:, 7], x[:, 8] = (
+        vt,
+        np.radians(alpha),
+        np.radians(beta),
+        p,
+        q,
+        r,
+    )
     u = np.stack([np.full(N, 0.5), el, ail, rdr], axis=1)
-    ours = jax.jit(jax.vmap(lambda x, u, c: jnp.stack(aero_coefficients(params._replace(xcg=c), x, u))))(x, u, xcg)
-    ref = ref_coefficients(tables, np.degrees(x[:, 1]), np.degrees(x[:, 2]), el, ail, rdr, p, q, r, vt, xcg)
+    ours = jax.jit(
+        jax.vmap(lambda x, u, c: jnp.stack(aero_coefficients(params._replace(xcg=c), x, u)))
+    )(x, u, xcg)
+    ref = ref_coefficients(
+        tables, np.degrees(x[:, 1]), np.degrees(x[:, 2]), el, ail, rdr, p, q, r, vt, xcg
+    )
     np.testing.assert_allclose(np.asarray(ours), ref.T, rtol=0, atol=1e-12)
 
 
@@ -205,13 +287,27 @@ def test_state_derivative_equals_vector_rigid_body_equations(params, tables):
     and above 50 % power, 1e-10 relative."""
     cases = []
     for power, thtl in ((9.0, 0.14), (45.0, 0.9), (70.0, 0.3), (80.0, 0.95)):
-        x = np.array([RNG.uniform(300, 800), RNG.uniform(-0.1, 0.6), RNG.uniform(-0.3, 0.3), RNG.uniform(-1, 1),
-                      RNG.uniform(-0.8, 0.8), RNG.uniform(-3, 3), *RNG.uniform(-1, 1, 3), 100.0, -50.0,
-                      RNG.uniform(0, 40000), power])
+        x = np.array(
+            [
+                RNG.uniform(300, 800),
+                RNG.uniform(-0.1, 0.6),
+                RNG.uniform(-0.3, 0.3),
+                RNG.uniform(-1, 1),
+                RNG.uniform(-0.8, 0.8),
+                RNG.uniform(-3, 3),
+                *RNG.uniform(-1, 1, 3),
+                100.0,
+                -50.0,
+                RNG.uniform(0, 40000),
+                power,
+            ]
+        )
         u = np.array([thtl, RNG.uniform(-20, 20), RNG.uniform(-20, 20), RNG.uniform(-25, 25)])
         cases.append((x, u, RNG.uniform(0.3, 0.4)))
     xs, us, xcgs = (np.stack(v) for v in zip(*cases))
-    ours = np.asarray(jax.jit(jax.vmap(lambda x, u, c: f16_dynamics(x, u, params._replace(xcg=c))))(xs, us, xcgs))
+    ours = np.asarray(
+        jax.jit(jax.vmap(lambda x, u, c: f16_dynamics(x, u, params._replace(xcg=c))))(xs, us, xcgs)
+    )
     for i, (x, u, xcg) in enumerate(cases):
         ref = ref_derivative(tables, x, u, xcg)
         np.testing.assert_allclose(ours[i], ref, rtol=1e-10, atol=1e-10 * np.max(np.abs(ref)))
@@ -232,41 +328,117 @@ def test_morelli_polynomial_term_by_term(params):
     vt = RNG.uniform(200, 900, N)
     a, b, de, da, dr = alpha, beta, el, ail, rdr
     ph, qh, rh = p * 30 / (2 * vt), q * 11.32 / (2 * vt), r * 30 / (2 * vt)
-    A, B, C, D, E, F, G, Hc, I, Jc, K, L, M, Nn, O, P_, Q_, R_, S = (c[k] for k in "abcdefghijklmnopqrs")
-    cx = (A[0] + A[1] * a + A[2] * de**2 + A[3] * de + A[4] * a * de + A[5] * a**2 + A[6] * a**3
-          + (B[0] + B[1] * a + B[2] * a**2 + B[3] * a**3 + B[4] * a**4) * qh)
-    cy = C[0] * b + C[1] * da + C[2] * dr + (D[0] + D[1] * a + D[2] * a**2 + D[3] * a**3) * ph \
+    A, B, C, D, E, F, G, Hc, I, Jc, K, L, M, Nn, O, P_, Q_, R_, S = (
+        c[k] for k in "abcdefghijklmnopqrs"
+    )
+    cx = (
+        A[0]
+        + A[1] * a
+        + A[2] * de**2
+        + A[3] * de
+        + A[4] * a * de
+        + A[5] * a**2
+        + A[6] * a**3
+        + (B[0] + B[1] * a + B[2] * a**2 + B[3] * a**3 + B[4] * a**4) * qh
+    )
+    cy = (
+        C[0] * b
+        + C[1] * da
+        + C[2] * dr
+        + (D[0] + D[1] * a + D[2] * a**2 + D[3] * a**3) * ph
         + (E[0] + E[1] * a + E[2] * a**2 + E[3] * a**3) * rh
-    cz = ((F[0] + F[1] * a + F[2] * a**2 + F[3] * a**3 + F[4] * a**4) * (1 - b**2) + F[5] * de
-          + (G[0] + G[1] * a + G[2] * a**2 + G[3] * a**3 + G[4] * a**4) * qh)
-    cl = (Hc[0] * b + Hc[1] * a * b + Hc[2] * a**2 * b + Hc[3] * b**2 + Hc[4] * a * b**2 + Hc[5] * a**3 * b
-          + Hc[6] * a**4 * b + Hc[7] * a**2 * b**2 + (I[0] + I[1] * a + I[2] * a**2 + I[3] * a**3) * ph
-          + (Jc[0] + Jc[1] * a + Jc[2] * a**2 + Jc[3] * a**3 + Jc[4] * a**4) * rh
-          + (K[0] + K[1] * a + K[2] * b + K[3] * a**2 + K[4] * a * b + K[5] * a**2 * b + K[6] * a**3) * da
-          + (L[0] + L[1] * a + L[2] * b + L[3] * a * b + L[4] * a**2 * b + L[5] * a**3 * b + L[6] * b**2) * dr)
-    cm = (M[0] + M[1] * a + M[2] * de + M[3] * a * de + M[4] * de**2 + M[5] * a**2 * de + M[6] * de**3
-          + M[7] * a * de**2 + (Nn[0] + Nn[1] * a + Nn[2] * a**2 + Nn[3] * a**3 + Nn[4] * a**4 + Nn[5] * a**5) * qh)
-    cn = (O[0] * b + O[1] * a * b + O[2] * b**2 + O[3] * a * b**2 + O[4] * a**2 * b + O[5] * a**2 * b**2
-          + O[6] * a**3 * b + (P_[0] + P_[1] * a + P_[2] * a**2 + P_[3] * a**3 + P_[4] * a**4) * ph
-          + (Q_[0] + Q_[1] * a + Q_[2] * a**2) * rh
-          + (R_[0] + R_[1] * a + R_[2] * b + R_[3] * a * b + R_[4] * a**2 * b + R_[5] * a**3 * b + R_[6] * a**2
-             + R_[7] * a**3 + R_[8] * b**3 + R_[9] * a * b**3) * da
-          + (S[0] + S[1] * a + S[2] * b + S[3] * a * b + S[4] * a**2 * b + S[5] * a**2) * dr)
-    ours = jax.jit(jax.vmap(lambda *args: jnp.stack(polynomial_coefficients(morelli.aero, *args, 30.0, 11.32))))(
-        *(np.degrees(v) for v in (a, b, de, da, dr)), p, q, r, vt)
-    np.testing.assert_allclose(np.asarray(ours), np.stack([cx, cy, cz, cl, cm, cn]).T, rtol=0, atol=1e-12)
+    )
+    cz = (
+        (F[0] + F[1] * a + F[2] * a**2 + F[3] * a**3 + F[4] * a**4) * (1 - b**2)
+        + F[5] * de
+        + (G[0] + G[1] * a + G[2] * a**2 + G[3] * a**3 + G[4] * a**4) * qh
+    )
+    cl = (
+        Hc[0] * b
+        + Hc[1] * a * b
+        + Hc[2] * a**2 * b
+        + Hc[3] * b**2
+        + Hc[4] * a * b**2
+        + Hc[5] * a**3 * b
+        + Hc[6] * a**4 * b
+        + Hc[7] * a**2 * b**2
+        + (I[0] + I[1] * a + I[2] * a**2 + I[3] * a**3) * ph
+        + (Jc[0] + Jc[1] * a + Jc[2] * a**2 + Jc[3] * a**3 + Jc[4] * a**4) * rh
+        + (K[0] + K[1] * a + K[2] * b + K[3] * a**2 + K[4] * a * b + K[5] * a**2 * b + K[6] * a**3)
+        * da
+        + (
+            L[0]
+            + L[1] * a
+            + L[2] * b
+            + L[3] * a * b
+            + L[4] * a**2 * b
+            + L[5] * a**3 * b
+            + L[6] * b**2
+        )
+        * dr
+    )
+    cm = (
+        M[0]
+        + M[1] * a
+        + M[2] * de
+        + M[3] * a * de
+        + M[4] * de**2
+        + M[5] * a**2 * de
+        + M[6] * de**3
+        + M[7] * a * de**2
+        + (Nn[0] + Nn[1] * a + Nn[2] * a**2 + Nn[3] * a**3 + Nn[4] * a**4 + Nn[5] * a**5) * qh
+    )
+    cn = (
+        O[0] * b
+        + O[1] * a * b
+        + O[2] * b**2
+        + O[3] * a * b**2
+        + O[4] * a**2 * b
+        + O[5] * a**2 * b**2
+        + O[6] * a**3 * b
+        + (P_[0] + P_[1] * a + P_[2] * a**2 + P_[3] * a**3 + P_[4] * a**4) * ph
+        + (Q_[0] + Q_[1] * a + Q_[2] * a**2) * rh
+        + (
+            R_[0]
+            + R_[1] * a
+            + R_[2] * b
+            + R_[3] * a * b
+            + R_[4] * a**2 * b
+            + R_[5] * a**3 * b
+            + R_[6] * a**2
+            + R_[7] * a**3
+            + R_[8] * b**3
+            + R_[9] * a * b**3
+        )
+        * da
+        + (S[0] + S[1] * a + S[2] * b + S[3] * a * b + S[4] * a**2 * b + S[5] * a**2) * dr
+    )
+    ours = jax.jit(
+        jax.vmap(lambda *args: jnp.stack(polynomial_coefficients(morelli.aero, *args, 30.0, 11.32)))
+    )(*(np.degrees(v) for v in (a, b, de, da, dr)), p, q, r, vt)
+    np.testing.assert_allclose(
+        np.asarray(ours), np.stack([cx, cy, cz, cl, cm, cn]).T, rtol=0, atol=1e-12
+    )
     # the fit reproduces the tables it was fitted to, roughly, inside the data range (|beta| < 10 deg)
     x = np.zeros((N, 13))
     x[:, 0], x[:, 1], x[:, 2] = vt, RNG.uniform(-0.15, 0.7, N), RNG.uniform(-0.17, 0.17, N)
     u = np.stack([np.full(N, 0.5), RNG.uniform(-20, 20, N), np.zeros(N), np.zeros(N)], axis=1)
-    both = jax.jit(jax.vmap(lambda x, u: (jnp.stack(aero_coefficients(params, x, u)),
-                                          jnp.stack(aero_coefficients(morelli, x, u)))))(x, u)
-    assert np.max(np.abs(np.asarray(both[0])[:, [0, 2, 4]] - np.asarray(both[1])[:, [0, 2, 4]])) < 0.1
+    both = jax.jit(
+        jax.vmap(
+            lambda x, u: (
+                jnp.stack(aero_coefficients(params, x, u)),
+                jnp.stack(aero_coefficients(morelli, x, u)),
+            )
+        )
+    )(x, u)
+    assert (
+        np.max(np.abs(np.asarray(both[0])[:, [0, 2, 4]] - np.asarray(both[1])[:, [0, 2, 4]])) < 0.1
+    )
 
 
 def test_profiles_apply_their_overrides():
     base, nasa = table_arrays("stevens_lewis_2nd_ed"), table_arrays("nasa_morelli_tm2003_212145")
-    assert base["DAMP"][6, 1] == -0.54 and nasa["DAMP"][6, 1] == -5.4      # Cmq at alpha -5 deg
+    assert base["DAMP"][6, 1] == -0.54 and nasa["DAMP"][6, 1] == -5.4  # Cmq at alpha -5 deg
     assert base["DAMP"][2, 11] == -2.27 and nasa["DAMP"][2, 11] == -0.227  # CYp at 45 deg
     assert np.count_nonzero(base["CL"] != nasa["CL"]) == 18
     bench = table_arrays("aerobench_python")
@@ -280,7 +452,9 @@ def test_linearisation_matches_central_differences(params):
     surface nonzero, away from breakpoints) against central differences."""
     x_trim = np.array([502.0, 0.03691068, 0, 0, 0.03691068, 0, 0, 0, 0, 0, 0, 0, 8.99651])
     u_trim = np.array([0.13853474, -0.75878109, 0, 0])
-    x_gen = np.array([610.0, 0.121, 0.052, 0.31, 0.2, 0.7, 0.11, -0.07, 0.05, 10.0, 20.0, 8000.0, 37.0])
+    x_gen = np.array(
+        [610.0, 0.121, 0.052, 0.31, 0.2, 0.7, 0.11, -0.07, 0.05, 10.0, 20.0, 8000.0, 37.0]
+    )
     u_gen = np.array([0.4, 3.1, -4.3, 6.7])
     jac = jax.jit(lambda x, u: linearize(params, x, u)[:2])
     f = jax.jit(lambda x, u: f16_dynamics(x, u, params))
@@ -308,9 +482,13 @@ def test_modes_at_the_books_trims():
     from jaxfdi.models.f16._trim import level_flight, trim_batch
 
     p = f16_params()
-    xcgs = jnp.array([0.30, 0.35, 0.38, 0.33])  # four, as the flight's trims: one compiled solve for both
+    xcgs = jnp.array(
+        [0.30, 0.35, 0.38, 0.33]
+    )  # four, as the flight's trims: one compiled solve for both
     t = trim_batch(p, level_flight(jnp.full(4, 502.0)), xcgs)
-    models = jax.jit(jax.vmap(lambda x, u, c: linearize(p._replace(xcg=c), x, u)))(t.state, t.control, xcgs)
+    models = jax.jit(jax.vmap(lambda x, u, c: linearize(p._replace(xcg=c), x, u)))(
+        t.state, t.control, xcgs
+    )
     out = {}
     for i, xcg in enumerate((0.30, 0.35, 0.38)):
         model = jax.tree_util.tree_map(lambda a: a[i], models)
@@ -325,9 +503,9 @@ def test_modes_at_the_books_trims():
     assert abs(out[0.35]["phugoid"].roots[0].imag) > 0 and out[0.35]["phugoid"].stable
     sp30 = out[0.30]["short period"]
     assert abs(sp30.roots[0].imag) > 1.0 and 0.5 < sp30.damping_ratio < 0.8
-    sp38 = sorted(r.real for r in out[0.38]["short period"].roots)       # pitch divergence, faster
+    sp38 = sorted(r.real for r in out[0.38]["short period"].roots)  # pitch divergence, faster
     assert sp38[1] > sp35[1] and not out[0.38]["short period"].stable
-    unstable = out[0.35]["short period"].shapes[1]                       # the +0.098 root: pitch attitude and speed
+    unstable = out[0.35]["short period"].shapes[1]  # the +0.098 root: pitch attitude and speed
     assert unstable[2] == 1.0 and unstable[0] > 0.4 and unstable[1] < 0.2
     for modes in out.values():
         assert modes["roll"].roots[0].real < -3.0 and abs(modes["spiral"].roots[0].real) < 0.05
@@ -354,10 +532,14 @@ def test_vmap_grad_float32_and_bad_input(params):
     y64 = f(x, u, 0.35)
     np.testing.assert_allclose(y32, y64, rtol=2e-4, atol=2e-4 * float(jnp.max(jnp.abs(y64))))
     # limits, gearing, lag and the thrust table's corner (one jitted call)
-    limited, gear, lag, mil = jax.jit(lambda: (saturate(jnp.array([1.5, -40.0, 30.0, 0.0]), params),
-                                               throttle_gearing(0.77, params.engine),
-                                               power_rate(50.0, 80.0, params.engine),
-                                               thrust(50.0, 0.0, 0.0, params.engine)))()
+    limited, gear, lag, mil = jax.jit(
+        lambda: (
+            saturate(jnp.array([1.5, -40.0, 30.0, 0.0]), params),
+            throttle_gearing(0.77, params.engine),
+            power_rate(50.0, 80.0, params.engine),
+            thrust(50.0, 0.0, 0.0, params.engine),
+        )
+    )()
     np.testing.assert_allclose(limited, [1.0, -25.0, 21.5, 0.0])
     assert float(gear) == pytest.approx(50.0, abs=0.01)
     assert float(lag) == pytest.approx(5.0 * 30.0)

@@ -1,15 +1,16 @@
 """Engine mode models: structure against hand-built matrices, and the bias modes'
 estimate of a fault's size against the injected value."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxfdi import linear_simulator, simulate
 from jaxfdi._faults import FaultKind, Target, fault
 from jaxfdi.filters import kalman_filter, run_filter
 from jaxfdi.models import engine_model
 from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
-from jaxfdi import linear_simulator, simulate
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +22,9 @@ def test_noise_inflation_modes_structure(engine):
     modes = noise_inflation_modes(engine, jnp.array([10.0, 20.0, 30.0, 40.0, 50.0]), 0.008)
     assert modes.Q.shape == (7, 7, 7) and modes.R.shape == (7, 5, 5)
     g = np.asarray(engine.Gamma[:, 0])
-    np.testing.assert_allclose(modes.Q[1], np.asarray(engine.Q) + 0.008**2 * np.outer(g, g), rtol=1e-14)
+    np.testing.assert_allclose(
+        modes.Q[1], np.asarray(engine.Q) + 0.008**2 * np.outer(g, g), rtol=1e-14
+    )
     for j in range(5):
         R = np.array(engine.R)
         R[j, j] *= 10.0 * (j + 1)
@@ -39,11 +42,13 @@ def test_bias_modes_structure(engine):
     assert modes.Phi.shape == (7, 13, 13) and modes.C.shape == (7, 5, 13)
     normal, actuator, p4 = (jax.tree.map(lambda a, j=j: np.asarray(a[j]), modes) for j in (0, 1, 5))
     np.testing.assert_allclose(normal.Phi[:7, 7:], 0.0)
-    np.testing.assert_allclose(normal.Q[7:, 7:], np.diag(prior))      # every bias reset to its prior
+    np.testing.assert_allclose(normal.Q[7:, 7:], np.diag(prior))  # every bias reset to its prior
     np.testing.assert_allclose(actuator.Phi[:7, 7], engine.Gamma[:, 0], rtol=1e-14)
     np.testing.assert_allclose(actuator.C[:, 7], engine.D[:, 0], rtol=1e-14)
     assert actuator.Phi[7, 7] == 1.0 and actuator.Q[7, 7] == walk[0]
-    np.testing.assert_allclose(p4.C[:, 7:], np.eye(5, 6, k=1) * (np.arange(6) == 4))  # sensor P4 = output 3
+    np.testing.assert_allclose(
+        p4.C[:, 7:], np.eye(5, 6, k=1) * (np.arange(6) == 4)
+    )  # sensor P4 = output 3
     assert p4.Phi[11, 11] == 1.0 and p4.Q[11, 11] == walk[4]
 
 

@@ -1,4 +1,5 @@
 """The classical RK4 step, unrolled and with its stages as a loop, against closed forms."""
+
 import math
 
 import jax
@@ -42,6 +43,7 @@ def test_time_dependent_field_is_simpsons_rule(loop_stages):
 def test_looped_stages_are_the_unrolled_ones_in_value_and_gradient():
     """A nonlinear field (a pendulum with a time-varying torque): both forms give the same
     step and the same gradient to rounding."""
+
     def field(x, t):
         return jnp.stack([x[1], -jnp.sin(x[0]) - 0.1 * x[1] + jnp.cos(3.0 * t)])
 

@@ -2,6 +2,7 @@
 float64 model rounded (``c2d`` exponentiates in float64, then casts), with x64 off as a
 new user has it (a subprocess: the suite runs with x64 on); engine scenarios refuse
 float32 with a clear error; ``c2d`` reports a non-finite discretisation."""
+
 from __future__ import annotations
 
 import json
@@ -13,8 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.models import c2d, engine_model
 from jaxfdi.models import _vtol as vtol
+from jaxfdi.models import c2d, engine_model
 
 _CHILD = r"""
 import json, sys
@@ -52,15 +53,17 @@ json.dump({"models": out, "errors": errors}, sys.stdout)
 def float32_run():
     env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
     env["JAX_PLATFORMS"] = env.get("JAX_PLATFORMS", "cpu")
-    done = subprocess.run([sys.executable, "-c", _CHILD], capture_output=True, text=True, env=env, timeout=300)
+    done = subprocess.run(
+        [sys.executable, "-c", _CHILD], capture_output=True, text=True, env=env, timeout=300
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout)
 
 
 def _float64_models():
     from jaxfdi.models import kitsat3_params
-    from jaxfdi.models._rigid_body import rigid_body_params
     from jaxfdi.models._fault_modes import bias_modes, noise_inflation_modes
+    from jaxfdi.models._rigid_body import rigid_body_params
 
     engine = engine_model(dtype=jnp.float64)
     return {
@@ -88,7 +91,9 @@ def test_every_model_is_finite_float32_and_the_float64_model_rounded(float32_run
             assert np.all(np.isfinite(value)), (name, i)
             ref = np.asarray(ref, np.float64)
             # the float64 model cast to float32 (one rounding, 6e-8), to 1e-6 relative
-            err = np.max(np.abs(value - ref) / np.maximum(np.abs(ref), np.max(np.abs(ref)) * 1e-12 + 1e-300))
+            err = np.max(
+                np.abs(value - ref) / np.maximum(np.abs(ref), np.max(np.abs(ref)) * 1e-12 + 1e-300)
+            )
             assert err < 1e-6, f"{name} leaf {i}: relative error {err:.2e}"
 
 
@@ -96,7 +101,9 @@ def test_engine_model_float32_under_x64_is_the_float64_model_cast():
     f64, f32 = engine_model(), engine_model(dtype=jnp.float32)
     assert f32.Phi.dtype == jnp.float32 and f64.Phi.dtype == jnp.float64
     for name in ("Phi", "Gamma"):
-        np.testing.assert_array_equal(getattr(f32, name), np.asarray(getattr(f64, name)).astype(np.float32))
+        np.testing.assert_array_equal(
+            getattr(f32, name), np.asarray(getattr(f64, name)).astype(np.float32)
+        )
 
 
 def test_engine_scenarios_refuse_float32(float32_run):

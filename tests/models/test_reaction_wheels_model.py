@@ -13,6 +13,7 @@
 * ``allocate_wheel_torques`` against ``numpy.linalg.pinv``; ``slew_reference`` against
   finite differences; the credit isolator against a brute-force loop; bad input.
 """
+
 import math
 
 import jax
@@ -22,21 +23,22 @@ import pytest
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 import jaxfdi
+from jaxfdi._faults import no_fault
 from jaxfdi.control._attitude import allocate_wheel_torques, slew, slew_reference
 from jaxfdi.detection._credits import credit_isolator, hypothesis_credits
 from jaxfdi.detection._dual_filter import dual_filter, system_matrix_det
-from jaxfdi._faults import no_fault
 from jaxfdi.models._reaction_wheels import (
     body_rate_field,
+    delivered_torque,
     kitsat3_params,
     pyramid_axes,
     rate_jacobian,
     spacecraft_step,
     stop_hypotheses,
+    stop_transfer,
     total_momentum,
     wheel_rate_transition,
 )
-from jaxfdi.models._reaction_wheels import delivered_torque, stop_transfer
 from jaxfdi.scenarios.reaction_wheels import estimation_filter, wheel_fault
 
 jax.config.update("jax_enable_x64", True)
@@ -51,6 +53,7 @@ def rel_err(actual, expected):
 
 
 # --- independent NumPy closed forms --------------------------------------------------
+
 
 def np_skew(v):
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
@@ -77,6 +80,7 @@ def random_inertia(rng):
 
 
 # --- shared fixtures -----------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def params():
@@ -139,7 +143,13 @@ def filterpy_ekf(transition, ys, us, m0, P0):
     ekf = RateEKF(3, 3)
     ekf.x, ekf.P = m0.copy(), P0.copy()
     ekf.Q, ekf.R = Q_SIGMA**2 * np.eye(3), GYRO_SIGMA**2 * np.eye(3)
-    out = {"filtered_mean": [], "filtered_cov": [], "predicted_mean": [], "predicted_cov": [], "log_likelihood": []}
+    out = {
+        "filtered_mean": [],
+        "filtered_cov": [],
+        "predicted_mean": [],
+        "predicted_cov": [],
+        "log_likelihood": [],
+    }
     for k in range(len(ys)):
         out["predicted_mean"].append(ekf.x.copy())
         out["predicted_cov"].append(ekf.P.copy())
@@ -161,7 +171,9 @@ def filterpy_ukf(transition, ys, us, m0, P0, dt):
     out = {"filtered_mean": [], "filtered_cov": [], "predicted_mean": [], "log_likelihood": []}
     for k in range(len(ys)):
         out["predicted_mean"].append(ukf.x.copy())
-        ukf.sigmas_f = points.sigma_points(ukf.x, ukf.P)  # jaxfdi redraws the points before the update
+        ukf.sigmas_f = points.sigma_points(
+            ukf.x, ukf.P
+        )  # jaxfdi redraws the points before the update
         ukf.update(ys[k])
         out["filtered_mean"].append(ukf.x.copy())
         out["filtered_cov"].append(ukf.P.copy())
@@ -209,7 +221,9 @@ def test_autodiff_jacobian_equals_closed_form(jac_field, geometry, full_inertia)
             A = np.asarray(jac_field(jnp.asarray(w), jnp.asarray(u), pm))
             A_ref = np_rate_jacobian(w, speeds, I_full, float(p.wheel_inertia), axes, mask)
             err = rel_err(A, A_ref)
-            worst = max(worst, err, rel_err(rate_jacobian(jnp.asarray(w), jnp.asarray(speeds), pm), A_ref))
+            worst = max(
+                worst, err, rel_err(rate_jacobian(jnp.asarray(w), jnp.asarray(speeds), pm), A_ref)
+            )
         # the stop hypotheses actually change A (the mask is not ignored)
         A_stop = np_rate_jacobian(w, speeds, I_full, float(p.wheel_inertia), axes, masks[0])
         A_nom = np_rate_jacobian(w, speeds, I_full, float(p.wheel_inertia), axes, np.ones(N))
@@ -219,6 +233,7 @@ def test_autodiff_jacobian_equals_closed_form(jac_field, geometry, full_inertia)
 
 
 # --- 2. the truth: angular momentum -------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def momentum_run(params):
@@ -242,7 +257,9 @@ def momentum_run(params):
 
 def initial_truth():
     q0 = np.array([0.9, 0.1, -0.3, 0.2])
-    return np.concatenate([q0 / np.linalg.norm(q0), [0.03, -0.02, 0.015], np.array([2000, -2000, 2000, -1500]) * RPM])
+    return np.concatenate(
+        [q0 / np.linalg.norm(q0), [0.03, -0.02, 0.015], np.array([2000, -2000, 2000, -1500]) * RPM]
+    )
 
 
 def test_momentum_conserved_across_a_wheel_stop(params, momentum_run):
@@ -274,7 +291,9 @@ def test_stop_transfer_keeps_body_momentum(params):
         x[7:] = rng.uniform(-3000, 3000, size=4) * RPM
         f = wheel_fault("stop", wheel, 200)
         new = np.asarray(stop_transfer(jnp.asarray(x), f, jnp.asarray(200), params))
-        body = lambda s: inertia @ s[4:7] + np_wheel_momentum(s[7:], 0.000239, pyramid_axes(), np.ones(4))  # noqa: E731
+        body = lambda s: (
+            inertia @ s[4:7] + np_wheel_momentum(s[7:], 0.000239, pyramid_axes(), np.ones(4))
+        )
         err = np.linalg.norm(body(new) - body(x)) / np.linalg.norm(body(x))
         print(f"stop_transfer wheel {wheel}: body momentum rel change {err:.1e}")
         assert err < 1e-14
@@ -322,6 +341,7 @@ def test_wheel_torque_from_rest_has_closed_form(params):
 
 # --- 3. EKF / UKF against filterpy -------------------------------------------------------
 
+
 def test_ekf_equals_filterpy(params, gyro_data, ekf_reference):
     """``estimation_filter(kind='ekf')`` = filterpy's EKF (its predict overridden by the
     same transition, F = jacfwd of the numpy-wrapped transition, H = I) to 1e-8 of
@@ -351,6 +371,7 @@ def test_ukf_equals_filterpy(params, transition, gyro_data):
 
 # --- 4. the dual filter's F -------------------------------------------------------------
 
+
 def test_dual_filter_parameter_equals_numpy(params, transition, gyro_data, ekf_reference):
     """``F[k] = |det A(x_PF[k]) - det A(x_EKF[k|k])|`` against filterpy's EKF for
     ``x_EKF[k|k]``, a NumPy loop ``x_PF[k+1] = f(x_PF[k], u[k])`` from the same start
@@ -363,7 +384,9 @@ def test_dual_filter_parameter_equals_numpy(params, transition, gyro_data, ekf_r
     _, info = jaxfdi.filters.run_filter(dual, dual.init(jnp.asarray(m0), jnp.asarray(P0)), ys, us)
 
     inertia, axes = np.diag([3.118, 3.050, 4.055]), pyramid_axes()
-    det = lambda x, u: np.linalg.det(np_rate_jacobian(x, u[:4], inertia, 0.000239, axes, np.ones(4)))  # noqa: E731
+    det = lambda x, u: np.linalg.det(
+        np_rate_jacobian(x, u[:4], inertia, 0.000239, axes, np.ones(4))
+    )
     x_pf, pf, det_pf, det_est = m0.copy(), [], [], []
     for k in range(len(ys)):
         pf.append(x_pf)
@@ -371,8 +394,12 @@ def test_dual_filter_parameter_equals_numpy(params, transition, gyro_data, ekf_r
         det_est.append(det(ekf_reference["filtered_mean"][k], us[k]))
         x_pf = f(x_pf, us[k])
     det_pf, det_est = np.array(det_pf), np.array(det_est)
-    ref = {"prediction": np.array(pf), "det_prediction": det_pf, "det_estimation": det_est,
-           "detection_parameter": np.abs(det_pf - det_est)}
+    ref = {
+        "prediction": np.array(pf),
+        "det_prediction": det_pf,
+        "det_estimation": det_est,
+        "detection_parameter": np.abs(det_pf - det_est),
+    }
     for name, value in ref.items():
         err = rel_err(getattr(info, name), value)
         print(f"dual filter {name}: {err:.1e}")
@@ -387,6 +414,7 @@ def test_dual_filter_parameter_equals_numpy(params, transition, gyro_data, ekf_r
 
 # --- 5. det A at zero total momentum --------------------------------------------------
 
+
 def test_det_vanishes_at_zero_total_momentum(params, jac_field):
     """``I w + h_w = 0`` gives ``A = -I^-1 [w]x I``, singular: ``|det A| < 1e-14 *
     max|A|^3`` (measured 5.0e-17), while the same rates with a nonzero
@@ -394,12 +422,16 @@ def test_det_vanishes_at_zero_total_momentum(params, jac_field):
     rng = np.random.default_rng(11)
     H = np.asarray(params.wheel_axes)
     Iw, inertia = float(params.wheel_inertia), np.asarray(params.inertia)
-    det = jax.jit(lambda w, u: system_matrix_det(body_rate_field, w, u, params))  # what the dual filter uses
+    det = jax.jit(
+        lambda w, u: system_matrix_det(body_rate_field, w, u, params)
+    )  # what the dual filter uses
     worst = 0.0
     for _ in range(10):
         w = rng.normal(scale=0.05, size=3)
         speeds = np.linalg.lstsq(Iw * H.T, -inertia @ w, rcond=None)[0]  # h_w = -I w
-        speeds += np.array([1.0, -1.0, 1.0, -1.0]) * rng.uniform(-2000, 2000) * RPM  # plus null-space speeds
+        speeds += (
+            np.array([1.0, -1.0, 1.0, -1.0]) * rng.uniform(-2000, 2000) * RPM
+        )  # plus null-space speeds
         u = jnp.asarray(np.concatenate([speeds, np.zeros(4)]))
         A = np.asarray(jac_field(jnp.asarray(w), u, params))
         scale = np.max(np.abs(A)) ** 3
@@ -414,6 +446,7 @@ def test_det_vanishes_at_zero_total_momentum(params, jac_field):
 
 
 # --- 6. torque allocation ---------------------------------------------------------------
+
 
 @pytest.mark.parametrize("axes", [None, np.random.default_rng(3).normal(size=(5, 3))])
 def test_allocation_minimum_norm_and_saturation(axes):
@@ -443,6 +476,7 @@ def test_allocation_minimum_norm_and_saturation(axes):
 
 # --- 7. slew reference ---------------------------------------------------------------------
 
+
 def test_slew_reference_derivatives():
     """``w_ref = theta' e`` and ``alpha_ref = theta'' e`` against central differences
     (h = 1e-3 s: truncation ~2e-9 relative) to 1e-7 of the peak; unit ``q_ref``; zero
@@ -465,7 +499,9 @@ def test_slew_reference_derivatives():
         q, theta, w, a = parts(t)
         assert abs(np.linalg.norm(q) - 1.0) < 1e-15
         np.testing.assert_allclose(q[1:] / np.linalg.norm(q[1:]), axis, atol=1e-14)
-        assert np.linalg.norm(np.cross(w, axis)) < 1e-15 and np.linalg.norm(np.cross(a, axis)) < 1e-15
+        assert (
+            np.linalg.norm(np.cross(w, axis)) < 1e-15 and np.linalg.norm(np.cross(a, axis)) < 1e-15
+        )
         fd_rate = (parts(t + h)[1] - parts(t - h)[1]) / (2 * h)
         fd_acc = (parts(t + h)[2] @ axis - parts(t - h)[2] @ axis) / (2 * h)
         rate_err = max(rate_err, abs(w @ axis - fd_rate) / peak_rate)
@@ -481,6 +517,7 @@ def test_slew_reference_derivatives():
 
 
 # --- 8. credits ---------------------------------------------------------------------------
+
 
 def brute_force_isolator(Fs, threshold, relative, label_offset, confirm_steps):
     candidate, held = -1, 0
@@ -558,6 +595,7 @@ def test_credit_isolator_bad_input():
 
 # --- 9. bad input ------------------------------------------------------------------------
 
+
 def test_bad_input_names_the_argument(params):
     for bad in (np.ones((4, 2)), np.ones(3), np.ones((2, 4, 3))):
         with pytest.raises(ValueError, match=r"^wheel_axes: expected shape \(\*, 3\)"):
@@ -576,7 +614,7 @@ def test_dual_filter_rejects_a_model_of_another_size(params):
     ekf = estimation_filter(params, Q_SIGMA, GYRO_SIGMA)
     with pytest.raises(ValueError, match="estimator"):
         dual_filter(lambda x: x, wheel_rate_transition, body_rate_field, params)
-    bad_field = lambda x, u, p: jnp.concatenate([body_rate_field(x, u, p), jnp.zeros(1)])  # noqa: E731
+    bad_field = lambda x, u, p: jnp.concatenate([body_rate_field(x, u, p), jnp.zeros(1)])
     filt = dual_filter(ekf, wheel_rate_transition, bad_field, params)
     state = filt.init(jnp.zeros(3), 1e-6 * jnp.eye(3))
     with pytest.raises(ValueError, match=r"^field\(x, u, params\): expected shape \(3,\)"):

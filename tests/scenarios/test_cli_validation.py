@@ -6,6 +6,7 @@ test if called (and the engine's method builder by a stub): exit status 2, one l
 stderr naming the option, nothing computed, ``--out`` not created. The output folder is
 checked file by file (names, bytes, modes) before and after. Two subprocess tests signal
 a real ``jaxfdi run engine-chi2`` once it has started its study."""
+
 import json
 import os
 import signal
@@ -27,8 +28,13 @@ def snapshot(folder):
     """Every path under ``folder`` with its bytes and permission bits (None if absent)."""
     if not folder.exists():
         return None
-    return {str(p.relative_to(folder)): (p.read_bytes() if p.is_file() else b"<dir>", p.stat().st_mode & 0o777)
-            for p in sorted(folder.rglob("*"))}
+    return {
+        str(p.relative_to(folder)): (
+            p.read_bytes() if p.is_file() else b"<dir>",
+            p.stat().st_mode & 0o777,
+        )
+        for p in sorted(folder.rglob("*"))
+    }
 
 
 @pytest.fixture
@@ -72,45 +78,129 @@ BAD_OPTIONS = [
     (["run", "engine-chi2", "--methods", "KF"], "--methods", "none: engine-chi2 has one method"),
     (["run", "engine", "--methods", "MM,Kalman"], "--methods", "names among MM; IMM; IMM hand-pi;"),
     (["run", "engine", "--methods", ","], "--methods", "names among MM; IMM;"),
-    (["run", "vtol", "--methods", "raw,chi2"], "--methods", "names among raw; window; MDWT-HT; MDWT-ST"),
-    (["run", "reaction-wheels", "--methods", "fdp,kalman"], "--methods", "names among fdp; nis; credit; likelihood"),
-    (["run", "vtol", "--window", "8"], "--window", "no value: run vtol does not read it (read by engine-chi2)"),
+    (
+        ["run", "vtol", "--methods", "raw,chi2"],
+        "--methods",
+        "names among raw; window; MDWT-HT; MDWT-ST",
+    ),
+    (
+        ["run", "reaction-wheels", "--methods", "fdp,kalman"],
+        "--methods",
+        "names among fdp; nis; credit; likelihood",
+    ),
+    (
+        ["run", "vtol", "--window", "8"],
+        "--window",
+        "no value: run vtol does not read it (read by engine-chi2)",
+    ),
     (["run", "engine", "--pfa", "0.01"], "--pfa", "no value: run engine does not read it"),
-    (["run", "engine-chi2", "--estimator", "ukf"], "--estimator", "no value: run engine-chi2 does not read it"),
+    (
+        ["run", "engine-chi2", "--estimator", "ukf"],
+        "--estimator",
+        "no value: run engine-chi2 does not read it",
+    ),
     (["run", "vtol", "--engage-on", "fdp"], "--engage-on", "no value: run vtol does not read it"),
     (["tune", "engine-imm", "--steps", "0"], "--steps", "an integer in [1,"),
     (["tune", "engine-chi2", "--train-runs", "0"], "--train-runs", "an integer in [1,"),
     (["tune", "engine-imm", "--runs", "0"], "--runs", "an integer in [1,"),
     (["tune", "engine-imm", "--seed", BIG], "--seed", "an integer in [0, 4294967295]"),
     (["tune", "engine-imm", "--selection-runs", "0"], "--selection-runs", "an integer in [1,"),
-    (["tune", "engine-imm", "--detection-weight", "nan"], "--detection-weight", "a finite number >= 0"),
-    (["tune", "engine-imm", "--detection-weight", "-1"], "--detection-weight", "a finite number >= 0"),
-    (["tune", "engine-imm", "--false-alarm-weight", "inf"], "--false-alarm-weight", "a finite number >= 0"),
+    (
+        ["tune", "engine-imm", "--detection-weight", "nan"],
+        "--detection-weight",
+        "a finite number >= 0",
+    ),
+    (
+        ["tune", "engine-imm", "--detection-weight", "-1"],
+        "--detection-weight",
+        "a finite number >= 0",
+    ),
+    (
+        ["tune", "engine-imm", "--false-alarm-weight", "inf"],
+        "--false-alarm-weight",
+        "a finite number >= 0",
+    ),
     (["tune", "engine-chi2", "--delay-weight=-inf"], "--delay-weight", "a finite number >= 0"),
     (["tune", "engine-chi2", "--delay-weight", "nan"], "--delay-weight", "a finite number >= 0"),
-    (["tune", "engine-imm", "--isolation-weight", "-0.5"], "--isolation-weight", "a finite number >= 0"),
-    (["tune", "engine-imm", "--confirm-steps", "0"], "--confirm-steps", "one integer >= 1 or 7 of them"),
-    (["tune", "engine-imm", "--confirm-steps", "3,2"], "--confirm-steps", "one integer >= 1 or 7 of them"),
-    (["tune", "engine-imm", "--confirm-steps", "1,3,3,0,3,3,3"], "--confirm-steps", "one integer >= 1 or 7"),
-    (["tune", "engine-imm", "--design", "zhang-li", "--freeze", "bias_walk"], "--freeze",
-     "parameter names of design zhang-li"),
-    (["tune", "engine-imm", "--freeze", "bias_walk"], "--freeze", "parameter names of design"),  # not in zhang-li
-    (["tune", "engine-imm", "--design", "bias", "--freeze",
-      "bias_prior,bias_walk,initial_mode,mu_threshold,transition"], "--freeze",
-     "at least one parameter of design bias left to train"),
-    (["tune", "engine-chi2", "--windows", "4,0"], "--windows", "integers in [1, 2147483647] separated by commas"),
+    (
+        ["tune", "engine-imm", "--isolation-weight", "-0.5"],
+        "--isolation-weight",
+        "a finite number >= 0",
+    ),
+    (
+        ["tune", "engine-imm", "--confirm-steps", "0"],
+        "--confirm-steps",
+        "one integer >= 1 or 7 of them",
+    ),
+    (
+        ["tune", "engine-imm", "--confirm-steps", "3,2"],
+        "--confirm-steps",
+        "one integer >= 1 or 7 of them",
+    ),
+    (
+        ["tune", "engine-imm", "--confirm-steps", "1,3,3,0,3,3,3"],
+        "--confirm-steps",
+        "one integer >= 1 or 7",
+    ),
+    (
+        ["tune", "engine-imm", "--design", "zhang-li", "--freeze", "bias_walk"],
+        "--freeze",
+        "parameter names of design zhang-li",
+    ),
+    (
+        ["tune", "engine-imm", "--freeze", "bias_walk"],
+        "--freeze",
+        "parameter names of design",
+    ),  # not in zhang-li
+    (
+        [
+            "tune",
+            "engine-imm",
+            "--design",
+            "bias",
+            "--freeze",
+            "bias_prior,bias_walk,initial_mode,mu_threshold,transition",
+        ],
+        "--freeze",
+        "at least one parameter of design bias left to train",
+    ),
+    (
+        ["tune", "engine-chi2", "--windows", "4,0"],
+        "--windows",
+        "integers in [1, 2147483647] separated by commas",
+    ),
     (["tune", "engine-chi2", "--windows", ""], "--windows", "integers in [1,"),
     (["tune", "engine-chi2", "--windows", "2,four"], "--windows", "integers in [1,"),
     (["tune", "engine-chi2", "--windows", "1.5"], "--windows", "integers in [1,"),
-    (["tune", "engine-chi2", "--design", "bias"], "--design", "no value: tune engine-chi2 does not read it"),
-    (["tune", "engine-chi2", "--isolation-weight", "1"], "--isolation-weight", "no value: tune engine-chi2"),
-    (["tune", "engine-chi2", "--select-thresholds"], "--select-thresholds", "no value: tune engine-chi2"),
-    (["tune", "engine-imm", "--windows", "2,4"], "--windows", "no value: tune engine-imm does not read it"),
+    (
+        ["tune", "engine-chi2", "--design", "bias"],
+        "--design",
+        "no value: tune engine-chi2 does not read it",
+    ),
+    (
+        ["tune", "engine-chi2", "--isolation-weight", "1"],
+        "--isolation-weight",
+        "no value: tune engine-chi2",
+    ),
+    (
+        ["tune", "engine-chi2", "--select-thresholds"],
+        "--select-thresholds",
+        "no value: tune engine-chi2",
+    ),
+    (
+        ["tune", "engine-imm", "--windows", "2,4"],
+        "--windows",
+        "no value: tune engine-imm does not read it",
+    ),
 ]
 
 
-@pytest.mark.parametrize("argv, option, what", BAD_OPTIONS, ids=[" ".join(c[0])[:60] for c in BAD_OPTIONS])
-def test_bad_option_exits_2_with_one_line_before_computing(no_compute, tmp_path, capsys, argv, option, what):
+@pytest.mark.parametrize(
+    "argv, option, what", BAD_OPTIONS, ids=[" ".join(c[0])[:60] for c in BAD_OPTIONS]
+)
+def test_bad_option_exits_2_with_one_line_before_computing(
+    no_compute, tmp_path, capsys, argv, option, what
+):
     out = tmp_path / "out"
     assert main([*argv, "--out", str(out)]) == 2
     captured = capsys.readouterr()
@@ -129,7 +219,10 @@ def test_bad_out_exits_2_before_computing(no_compute, tmp_path, capsys, where):
     elif where == "unwritable":  # an existing folder nobody, root included, can create files in
         out, said = "/proc", "expected a writable folder"
     else:
-        out, said = "/proc/jaxfdi-out/results", "expected a writable folder"  # nobody creates folders in /proc
+        out, said = (
+            "/proc/jaxfdi-out/results",
+            "expected a writable folder",
+        )  # nobody creates folders in /proc
     before = snapshot(tmp_path)
     assert main(["run", "engine-chi2", "--out", str(out)]) == 2
     err = capsys.readouterr().err.splitlines()
@@ -144,7 +237,9 @@ def test_wrong_usage_is_argparse_exit_2(no_compute, capsys):
 
 
 def fake_runner(monkeypatch, run, name="fake"):
-    monkeypatch.setitem(cli.RUNNERS, name, cli.Runner(run, "a study that writes files for the test"))
+    monkeypatch.setitem(
+        cli.RUNNERS, name, cli.Runner(run, "a study that writes files for the test")
+    )
 
 
 def write_study(folder):
@@ -167,7 +262,9 @@ def results(tmp_path):
     return out
 
 
-def test_study_files_appear_together_json_last_with_normal_permissions(monkeypatch, results, capsys):
+def test_study_files_appear_together_json_last_with_normal_permissions(
+    monkeypatch, results, capsys
+):
     moves = []
     real_replace = os.replace
 
@@ -191,10 +288,17 @@ def test_study_files_appear_together_json_last_with_normal_permissions(monkeypat
     assert capsys.readouterr().out.splitlines()[-1] == "wrote the fake study"
     assert moves == ["fake-fig.png", "fake-params.npz", "fake.json"]  # JSON last
     after = snapshot(results)
-    assert sorted(after) == ["fake-fig.png", "fake-params.npz", "fake.json", "notes.txt"]  # no temp folder left
+    assert sorted(after) == [
+        "fake-fig.png",
+        "fake-params.npz",
+        "fake.json",
+        "notes.txt",
+    ]  # no temp folder left
     assert after["fake-fig.png"] == (b"\x89PNG new", 0o640) and after["fake-params.npz"][1] == 0o640
     written = json.loads(after["fake.json"][0])
-    assert written.pop("provenance")["command"].startswith("jaxfdi run fake")  # issue 28: every JSON says how
+    assert written.pop("provenance")["command"].startswith(
+        "jaxfdi run fake"
+    )  # issue 28: every JSON says how
     assert written == {"rows": [1.0, None]} and after["fake.json"][1] == 0o640
     assert after["notes.txt"] == (b"mine", 0o600)
 
@@ -213,11 +317,14 @@ def interrupt_with(exc):
     def run(args, folder):
         write_study(folder)
         raise exc
+
     return run
 
 
 @pytest.mark.parametrize("exc, status", [(KeyboardInterrupt(), 130), (RuntimeError("a bug"), None)])
-def test_interrupted_or_failed_study_leaves_out_as_it_was(monkeypatch, results, capsys, exc, status):
+def test_interrupted_or_failed_study_leaves_out_as_it_was(
+    monkeypatch, results, capsys, exc, status
+):
     fake_runner(monkeypatch, interrupt_with(exc))
     before = snapshot(results)
     if status is None:
@@ -225,16 +332,23 @@ def test_interrupted_or_failed_study_leaves_out_as_it_was(monkeypatch, results, 
             main(["run", "fake", "--out", str(results)])
     else:
         assert main(["run", "fake", "--out", str(results)]) == status
-        assert capsys.readouterr().err.strip() == f"jaxfdi: interrupted by SIGINT; {results} left as it was"
+        assert (
+            capsys.readouterr().err.strip()
+            == f"jaxfdi: interrupted by SIGINT; {results} left as it was"
+        )
     assert snapshot(results) == before
 
 
-in_main_thread = pytest.mark.skipif(threading.current_thread() is not threading.main_thread(),
-                                    reason="the CLI handles signals in the main thread only")
+in_main_thread = pytest.mark.skipif(
+    threading.current_thread() is not threading.main_thread(),
+    reason="the CLI handles signals in the main thread only",
+)
 
 
 @in_main_thread
-def test_sigterm_in_process_leaves_out_as_it_was_and_restores_the_handler(monkeypatch, results, capsys):
+def test_sigterm_in_process_leaves_out_as_it_was_and_restores_the_handler(
+    monkeypatch, results, capsys
+):
     def run(args, folder):
         write_study(folder)
         os.kill(os.getpid(), signal.SIGTERM)
@@ -254,6 +368,7 @@ def test_a_signal_dropped_in_a_destructor_is_delivered_again(monkeypatch, result
     """Python runs a handler at the next bytecode, which may be in a ``__del__`` or a gc
     callback (JAX's ``_xla_gc_callback`` is one): the exception raised there is dropped,
     and the study would go on to publish. The CLI delivers it again."""
+
     class SignalledWhileDeleted:
         def __del__(self):
             os.kill(os.getpid(), signal.SIGTERM)
@@ -291,7 +406,9 @@ def test_a_folder_in_the_way_fails_before_any_file_moves(monkeypatch, results):
     assert snapshot(results) == before
 
 
-def test_library_argument_error_is_one_line_exit_2_and_a_bug_a_traceback(monkeypatch, results, capsys):
+def test_library_argument_error_is_one_line_exit_2_and_a_bug_a_traceback(
+    monkeypatch, results, capsys
+):
     """A ValueError from a jaxfdi check (here ``chi2_threshold``'s) is the user's: one
     line, exit 2; one from inside JAX is a bug: the traceback (so is any with --traceback)."""
     import jax.numpy as jnp
@@ -303,7 +420,9 @@ def test_library_argument_error_is_one_line_exit_2_and_a_bug_a_traceback(monkeyp
     before = snapshot(results)
     assert main(["run", "bad-argument", "--out", str(results)]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and err[0].startswith("jaxfdi: pfa: expected a probability in (0, 1), got 1.5"), err
+    assert len(err) == 1 and err[0].startswith(
+        "jaxfdi: pfa: expected a probability in (0, 1), got 1.5"
+    ), err
     with pytest.raises(ValueError, match="pfa"):
         main(["run", "bad-argument", "--traceback", "--out", str(results)])
     with pytest.raises(TypeError):
@@ -313,8 +432,8 @@ def test_library_argument_error_is_one_line_exit_2_and_a_bug_a_traceback(monkeyp
 
 def test_pfa_the_threshold_cannot_represent_exits_2_before_computing(monkeypatch, tmp_path, capsys):
     """The CLI passes any pfa in (0, 1) on; the library decides what it can represent."""
-    from jaxfdi.detection import chi2_threshold
     import jaxfdi.scenarios.engine_chi2 as engine_chi2
+    from jaxfdi.detection import chi2_threshold
 
     pfa = 5e-324  # the smallest float64
     try:
@@ -327,7 +446,11 @@ def test_pfa_the_threshold_cannot_represent_exits_2_before_computing(monkeypatch
     out = tmp_path / "out"
     assert main(["run", "engine-chi2", "--pfa", str(pfa), "--out", str(out)]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and err[0].startswith(f"jaxfdi: {' '.join(refusal.split())}") and not out.exists()
+    assert (
+        len(err) == 1
+        and err[0].startswith(f"jaxfdi: {' '.join(refusal.split())}")
+        and not out.exists()
+    )
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
@@ -343,8 +466,12 @@ def test_signal_mid_run_leaves_out_as_it_was(tmp_path, signum):
     (out / "engine-chi2.json").write_text('{"an": "older study"}\n')
     (out / "keep.txt").write_text("mine")
     before = snapshot(out)
-    proc = subprocess.Popen([sys.executable, "-m", "jaxfdi", "run", "engine-chi2", "--runs", "2", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jaxfdi", "run", "engine-chi2", "--runs", "2", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         deadline = time.monotonic() + 120
         while not any(p.name.startswith(_io.TEMP_PREFIX) for p in out.iterdir()):

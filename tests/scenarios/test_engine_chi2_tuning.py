@@ -3,6 +3,7 @@ fault, 150 steps, windows 1, 2, 4, 8 and 100 held-out runs per fault): against t
 hand-set test (plant Q and R, L = 4, chi2.isf(0.005, 20)) on the same held-out runs the
 tuned test has a lower held-out loss and fewer false alarms; saved parameters are valid
 and reload."""
+
 import json
 import subprocess
 import sys
@@ -22,8 +23,23 @@ def chi2_tuned(tmp_path_factory):
     out = tmp / "out"
     # a fresh process (as test_engine_tuning): the CLI's persistent cache (the run's shared
     # one, see conftest) is on from its first compilation
-    proc = subprocess.run([sys.executable, "-m", "jaxfdi", "tune", "engine-chi2", *SMALL, "--windows", "2,4", "--out", str(out)],
-                          capture_output=True, text=True, timeout=1800)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "jaxfdi",
+            "tune",
+            "engine-chi2",
+            *SMALL,
+            "--windows",
+            "2,4",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, json.loads((out / "engine-chi2-tuning.json").read_text())
 
@@ -35,7 +51,10 @@ def test_tuned_chi2_test_has_lower_held_out_loss_and_fewer_false_alarms(chi2_tun
     assert loss["tuned"] < loss["hand"], loss
     hand = {r["fault"]: r for r in result["hand"]}
     tuned = {r["fault"]: r for r in result["tuned"]}
-    assert tuned["none"]["false_alarm_rate"] < hand["none"]["false_alarm_rate"], (hand["none"], tuned["none"])
+    assert tuned["none"]["false_alarm_rate"] < hand["none"]["false_alarm_rate"], (
+        hand["none"],
+        tuned["none"],
+    )
     raw, parameterization, meta = load_params(out / "engine-chi2-tuned.npz")
     params = constrain(parameterization, raw)
     for name in ("Q", "R"):
@@ -48,4 +67,7 @@ def test_tuned_chi2_test_has_lower_held_out_loss_and_fewer_false_alarms(chi2_tun
 
 def test_tune_rejects_bad_windows(capsys):
     assert main(["tune", "engine-chi2", "--windows", "4,0"]) == 2
-    assert "--windows: expected integers in [1, 2147483647] separated by commas" in capsys.readouterr().err
+    assert (
+        "--windows: expected integers in [1, 2147483647] separated by commas"
+        in capsys.readouterr().err
+    )

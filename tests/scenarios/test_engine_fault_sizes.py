@@ -3,25 +3,31 @@ curves, and what that says about its "0.5 %".
 
 Reference: the paper's Table 3 (GLRT at l_T = 200), and fresh Monte Carlo runs (another
 seed, 100 runs per fault) at the sizes the study settles on."""
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
 from _frames import assert_table_is_the_json
+
 from jaxfdi._faults import stack_faults
+from jaxfdi._metrics import fault_row
+from jaxfdi._study import case_slices, run_study
 from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
 from jaxfdi.scenarios.engine import PAPER_DELAY, engine_spec, fault_size_study
 from jaxfdi.scenarios.engine_chi2 import engine_faults
-from jaxfdi._study import case_slices, run_study
-from jaxfdi._metrics import fault_row
 
 GLRT = "GLRT l_T=200"
 
 
 @pytest.fixture(scope="module")
 def study():
-    return fault_size_study(runs=40, seed=38, fnr=(5.0, 7.0, 9.0, 11.0, 13.0, 17.0),
-                            actuator=(0.5, 1.0, 1.25, 1.5, 2.0, 3.0), methods=(GLRT,))
+    return fault_size_study(
+        runs=40,
+        seed=38,
+        fnr=(5.0, 7.0, 9.0, 11.0, 13.0, 17.0),
+        actuator=(0.5, 1.0, 1.25, 1.5, 2.0, 3.0),
+        methods=(GLRT,),
+    )
 
 
 def test_the_specs_reading_leaves_p2_and_p4_undetected(study):
@@ -29,7 +35,9 @@ def test_the_specs_reading_leaves_p2_and_p4_undetected(study):
     neither P2 nor P4 in any of 40 runs (the paper: 0.058 and 0.042 s)."""
     spec = {r["fault"]: r for r in study.rows if r["case"] == "point" and r["point"] != "grid"}
     assert spec["P2"]["detection_rate"] == 0.0 and spec["P4"]["detection_rate"] == 0.0
-    np.testing.assert_allclose([spec[n]["fnr"] for n in OUTPUT_NAMES], [5.4, 3.398, 11.05, 4.1425, 5.125], rtol=1e-3)
+    np.testing.assert_allclose(
+        [spec[n]["fnr"] for n in OUTPUT_NAMES], [5.4, 3.398, 11.05, 4.1425, 5.125], rtol=1e-3
+    )
 
 
 def test_the_papers_delays_sit_at_about_ten_sigma_for_every_sensor(study):
@@ -41,13 +49,18 @@ def test_the_papers_delays_sit_at_about_ten_sigma_for_every_sensor(study):
     matched = reading["matched_fnr"]
     assert sorted(matched) == sorted(OUTPUT_NAMES)
     assert all(8.0 <= v <= 13.0 for v in matched.values()), matched
-    assert max(reading["spec_reading_fnr"].values()) / min(reading["spec_reading_fnr"].values()) > 3.0
+    assert (
+        max(reading["spec_reading_fnr"].values()) / min(reading["spec_reading_fnr"].values()) > 3.0
+    )
     assert reading["settled_fnr"] in (9.0, 11.0)
 
     sigma = np.sqrt(np.diag(np.asarray(engine_model().R)))
     names, faults = engine_faults(200)
-    cases = [f._replace(magnitude=jnp.asarray(matched[name] * sigma[j - 1], f.magnitude.dtype))
-             for j, (name, f) in enumerate(zip(names, faults)) if name in OUTPUT_NAMES]
+    cases = [
+        f._replace(magnitude=jnp.asarray(matched[name] * sigma[j - 1], f.magnitude.dtype))
+        for j, (name, f) in enumerate(zip(names, faults))
+        if name in OUTPUT_NAMES
+    ]
     spec = engine_spec(methods=[GLRT])
     spec = spec._replace(cases=stack_faults(cases), case_names=tuple(OUTPUT_NAMES))
     runs = 100

@@ -13,30 +13,45 @@ default size).
 The same file runs `--methods` and notebook 02 on the programs the full run compiled
 (the run's shared XLA cache, see conftest; same sizes: 30 runs per fault, 20 figure
 runs), so that the eleven engine monitors are compiled once."""
+
 import json
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+from _notebooks import FAULT_NAMES, images, run_clean, tables
 from scipy import stats
-
-from _notebooks import FAULT_NAMES, images, python3_kernel, run_clean, tables  # noqa: F401 (python3_kernel: a fixture)
 from test_cli import assert_csv_is_the_json
 
 RUNS = 30
 FAULTS = ["actuator", "RPM", "P2", "T2", "P4", "T4"]
 DESIGN = "IMM-bias hand-pi confirm 3"  # the better of the two mode designs (hand-set pi)
 PER_MODE = "IMM-bias hand-pi confirm 3, P2 2"  # the same, P2 confirmed over 2 steps
-METHODS = ["MM", "IMM", "IMM hand-pi", "MM-bias", "IMM-bias", "IMM-bias hand-pi", DESIGN, PER_MODE,
-           "GLRT l_T=200", "GLRT l_T=22.9", "GLRT l_T=22.9 eq. 24"]
+METHODS = [
+    "MM",
+    "IMM",
+    "IMM hand-pi",
+    "MM-bias",
+    "IMM-bias",
+    "IMM-bias hand-pi",
+    DESIGN,
+    PER_MODE,
+    "GLRT l_T=200",
+    "GLRT l_T=22.9",
+    "GLRT l_T=22.9 eq. 24",
+]
 
 
 def run_engine(out, *args):
     """``python -m jaxfdi run engine ... --out out`` in a subprocess (on the run's shared XLA
     cache, see conftest)."""
-    return subprocess.run([sys.executable, "-m", "jaxfdi", "run", "engine", *args, "--out", str(out)],
-                          capture_output=True, text=True, timeout=900)
+    return subprocess.run(
+        [sys.executable, "-m", "jaxfdi", "run", "engine", *args, "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -58,15 +73,26 @@ def test_prints_every_method_and_writes_json_and_figures(engine_run):
             assert rows[(method, fault)]["runs"] == RUNS
     # progress: which structure compiles (k of 5), then the runs
     for k, structure in enumerate(data["config"]["programs"], start=1):
-        assert f"engine: {structure} ({k} of 5): compiling" in proc.stderr or f"({k} of 5): compiled" in proc.stderr
+        assert (
+            f"engine: {structure} ({k} of 5): compiling" in proc.stderr
+            or f"({k} of 5): compiled" in proc.stderr
+        )
     assert "270/270 runs" in proc.stderr or "| 270/270 [" in proc.stderr
     # eleven methods, five programs (MMs and IMMs of each mode design, GLRTs)
     assert sorted(m for ms in data["config"]["programs"].values() for m in ms) == sorted(METHODS)
     assert len(data["config"]["programs"]) == 5
     # the paper's Table 3 beside ours
-    assert rows[("IMM", "actuator")]["paper_delay_s"] == 0.020 and rows[("GLRT l_T=200", "P2")]["paper_delay_s"] == 0.058
+    assert (
+        rows[("IMM", "actuator")]["paper_delay_s"] == 0.020
+        and rows[("GLRT l_T=200", "P2")]["paper_delay_s"] == 0.058
+    )
     assert sorted(p.name for p in out.iterdir()) == [
-        "engine-estimates.png", "engine-glrt.png", "engine-mode-probabilities.png", "engine.csv", "engine.json"]
+        "engine-estimates.png",
+        "engine-glrt.png",
+        "engine-mode-probabilities.png",
+        "engine.csv",
+        "engine.json",
+    ]
     assert_csv_is_the_json(out / "engine.csv", data["rows"])
     for png in out.glob("*.png"):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
@@ -135,7 +161,9 @@ def test_paper_matrix_makes_the_bias_design_raise_false_alarms(engine_run):
     (0.989 vs 0.94): alarms in most fault-free runs, the reason for the hand-set pi."""
     _, _, _, rows = engine_run
     assert rows[("IMM-bias", "none")]["false_alarm_rate"] > 0.5
-    assert rows[("IMM", "P2")]["estimate_median"] is None  # Zhang & Li modes estimate no size (JSON null)
+    assert (
+        rows[("IMM", "P2")]["estimate_median"] is None
+    )  # Zhang & Li modes estimate no size (JSON null)
 
 
 def test_methods_runs_only_those(engine_run, tmp_path):
@@ -144,17 +172,20 @@ def test_methods_runs_only_those(engine_run, tmp_path):
     assert proc.returncode == 0, proc.stderr
     data = json.loads((tmp_path / "out" / "engine.json").read_text())
     assert data["config"]["methods"] == ["GLRT l_T=200"]
-    assert {row["method"] for row in data["rows"]} == {"GLRT l_T=200"} and len(data["rows"]) == len(FAULTS) + 3
+    assert {row["method"] for row in data["rows"]} == {"GLRT l_T=200"} and len(data["rows"]) == len(
+        FAULTS
+    ) + 3
 
 
 def test_engine_imm_glrt_notebook(engine_run, python3_kernel, monkeypatch):
     """Notebook 02 end to end at the CLI run's size (its study compiles to the same programs)."""
-    outputs, text = run_clean("02_engine_imm_glrt.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": str(RUNS)})
+    outputs, text = run_clean(
+        "02_engine_imm_glrt.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": str(RUNS)}
+    )
     assert f"runs per fault: {RUNS}" in text
     assert "paper pi: stationary P(normal)" in text
     assert "theoretical threshold chi2.isf(0.005, 60) = 91.95" in text
-    overview = text[text.index("method  "):].splitlines()
+    overview = text[text.index("method  ") :].splitlines()
     methods = [line.split("  ")[0] for line in overview[2:13]]
     assert methods[:3] == ["MM", "IMM", "IMM hand-pi"] and methods[-1].startswith("GLRT")
     html = tables(outputs)
@@ -163,7 +194,9 @@ def test_engine_imm_glrt_notebook(engine_run, python3_kernel, monkeypatch):
         assert f"<td>{fault}</td>" in html
     table3 = html.split("<table")[2]
     assert "paper_delay_s" in table3 and "delay_mean_s" in table3 and "GLRT l_T=200" in table3
-    assert len(images(outputs)) == 3, f"expected the three study figures, got {len(images(outputs))}"
+    assert len(images(outputs)) == 3, (
+        f"expected the three study figures, got {len(images(outputs))}"
+    )
 
 
 #: one method per grid structure, each a cell that shares its program with others
@@ -179,21 +212,39 @@ def test_methods_as_data_equal_the_methods_run_one_by_one():
     before 'none'): run ``i`` has key ``i`` in both, so the six faults' runs compare."""
     from _compiles import counting_compiles
     from _frames import assert_table_is_the_json
+
     from jaxfdi.scenarios.engine import engine_methods, engine_study, run_method
 
-    runs, seed = 10, 11  # 90 runs: the CLI run's chunk of 64, so the grid programs come from the run's cache
+    runs, seed = (
+        10,
+        11,
+    )  # 90 runs: the CLI run's chunk of 64, so the grid programs come from the run's cache
     faults = slice(0, 6 * runs)
     study = engine_study(runs=runs, seed=seed, methods=SHARED_CELLS)
-    assert_table_is_the_json(study.to_frame(), study.rows)  # the table as a DataFrame: the same numbers
+    assert_table_is_the_json(
+        study.to_frame(), study.rows
+    )  # the table as a DataFrame: the same numbers
     every = engine_methods()
     for name in SHARED_CELLS:
         alone = run_method(every[name], runs, seed)
         grid = study.records[name]
-        for field in ("onset", "first_alarm", "detection_step", "false_alarms", "isolated", "first_label",
-                      "first_unhealthy"):
-            np.testing.assert_array_equal(getattr(grid, field)[faults], getattr(alone, field)[faults],
-                                          err_msg=f"{name} {field}")
-        np.testing.assert_allclose(grid.estimate[faults], alone.estimate[faults], rtol=1e-12, atol=0, equal_nan=True)
+        for field in (
+            "onset",
+            "first_alarm",
+            "detection_step",
+            "false_alarms",
+            "isolated",
+            "first_label",
+            "first_unhealthy",
+        ):
+            np.testing.assert_array_equal(
+                getattr(grid, field)[faults],
+                getattr(alone, field)[faults],
+                err_msg=f"{name} {field}",
+            )
+        np.testing.assert_allclose(
+            grid.estimate[faults], alone.estimate[faults], rtol=1e-12, atol=0, equal_nan=True
+        )
     with counting_compiles() as compiles:
         engine_study(runs=runs, seed=seed + 1, methods=SHARED_CELLS)
     assert compiles == []

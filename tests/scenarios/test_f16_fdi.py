@@ -7,6 +7,7 @@ squares, binomial intervals of the false-alarm and isolation counts. One compile
 closed-loop program (144 flights of 3.2 s, vmapped with the replay condition over the
 batch) serves the closed-loop tests; the other tests replay a recorded sequence.
 """
+
 import math
 
 import jax
@@ -14,13 +15,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.stats
+from _frames import assert_table_is_the_json
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from _frames import assert_table_is_the_json
-
-from jaxfdi import _loop as loop, _stages as stages
-from jaxfdi.detection import _hybrid_psa as hp
+from jaxfdi import _loop as loop
+from jaxfdi import _stages as stages
 from jaxfdi._faults import Target, active_label, apply_faults
+from jaxfdi.detection import _hybrid_psa as hp
 from jaxfdi.filters import run_filter
 from jaxfdi.models.f16._dynamics import f16_dynamics
 from jaxfdi.models.f16._plant import MEASURED_STATES, RATE_OFFSET
@@ -28,8 +29,8 @@ from jaxfdi.models.f16._rates import rate_derivative, rate_model, rate_model_inp
 from jaxfdi.scenarios import f16_fdi as sf
 from jaxfdi.scenarios.f16_flight import dispersions, flight_setup, nominal_dispersion
 
-ONSET = 300          # the paper's 3 s
-STEPS = 320          # closed-loop flights of 3.2 s
+ONSET = 300  # the paper's 3 s
+STEPS = 320  # closed-loop flights of 3.2 s
 PAPER, NEAR, FREE, DEAD = 16, 64, 64, 12
 BATCH = "flights"
 
@@ -45,6 +46,7 @@ def _fly(setup, fdi, keys, disp, cases, follows):
     def one(k, d, c, f):
         out = sf.run_fdi_flight(setup, fdi, k, d, c, f, batch_axis=BATCH)
         return out.fdi.decision, out.healthy
+
     return jax.vmap(one, axis_name=BATCH)(keys, disp, cases, follows)
 
 
@@ -56,7 +58,10 @@ def _cases(dtype):
     (random sensor, FNR 10) and 64 fault-free flights."""
     rng = np.random.default_rng(0)
     cases = [sf.fault_case(dtype=dtype)] * PAPER
-    near = [(int(rng.integers(3)), 45.0 + 90.0 * int(rng.integers(4)) + rng.uniform(-5.0, 5.0)) for _ in range(NEAR)]
+    near = [
+        (int(rng.integers(3)), 45.0 + 90.0 * int(rng.integers(4)) + rng.uniform(-5.0, 5.0))
+        for _ in range(NEAR)
+    ]
     cases += [sf.fault_case("bias", s, 10.0, a, dtype=dtype) for s, a in near]
     cases += [sf.fault_case("none", dtype=dtype)] * FREE
     return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *cases)
@@ -74,15 +79,24 @@ def flights(env):
     # then DEAD flights with a dead rate sensor (4 per sensor), on draws of their own
     dead = sf.fault_case("dead", np.arange(DEAD) % 3, 0.0, 0.0, dtype=setup.x0.dtype)
     keys = jnp.concatenate([keys, jax.random.split(jax.random.key(26), DEAD)])
-    disp = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), disp, dispersions(jax.random.key(27), setup, DEAD))
+    disp = jax.tree_util.tree_map(
+        lambda a, b: jnp.concatenate([a, b]), disp, dispersions(jax.random.key(27), setup, DEAD)
+    )
     cases = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), cases, dead)
     n += DEAD
     follows = jnp.full((n,), hp.FOLLOW["hybrid"], jnp.int32)
-    decision, healthy = jax.tree_util.tree_map(np.asarray, FLY(short, fdi, keys, disp, cases, follows))
+    decision, healthy = jax.tree_util.tree_map(
+        np.asarray, FLY(short, fdi, keys, disp, cases, follows)
+    )
     # the same flights with T_D at P_fa = 1e-3 per step (a statistical check of the FD law in closed loop)
-    loose = fdi._replace(hybrid=fdi.hybrid._replace(
-        detection_threshold=float(setup.sensors.rate_sigma) ** 2 * scipy.stats.chi2.isf(1e-3, 3)))
-    loose_decision, _ = jax.tree_util.tree_map(np.asarray, FLY(short, loose, keys, disp, cases, follows))
+    loose = fdi._replace(
+        hybrid=fdi.hybrid._replace(
+            detection_threshold=float(setup.sensors.rate_sigma) ** 2 * scipy.stats.chi2.isf(1e-3, 3)
+        )
+    )
+    loose_decision, _ = jax.tree_util.tree_map(
+        np.asarray, FLY(short, loose, keys, disp, cases, follows)
+    )
     return decision, healthy, loose_decision, np.asarray(cases.sensor)
 
 
@@ -104,7 +118,9 @@ def test_paper_case_isolates_sensor_1(flights):
     assert decision.suspects[0].tolist() == [True, False, True]
     assert bool(decision.filter_used[0]) and int(decision.hybrid[0]) == 1
     suspects = decision.suspects[paper]
-    assert not np.any(suspects[:, 1])  # sensor 2 never a suspect: the parity lies on the FP1/FP3 line
+    assert not np.any(
+        suspects[:, 1]
+    )  # sensor 2 never a suspect: the parity lies on the FP1/FP3 line
     used = decision.filter_used[paper]
     assert np.all(used == (suspects[:, 0] & suspects[:, 2]))
     assert np.all(decision.hybrid[paper][used] == 1)
@@ -142,9 +158,13 @@ def test_a_dead_rate_sensor_is_detected_isolated_and_excluded_at_its_onset(fligh
     decision, healthy, _, sensor = flights
     dead = slice(PAPER + NEAR + FREE, None)
     assert np.all(healthy[dead])
-    assert np.all(decision.detection_step[dead] == ONSET) and np.all(decision.decision_step[dead] == ONSET)
+    assert np.all(decision.detection_step[dead] == ONSET) and np.all(
+        decision.decision_step[dead] == ONSET
+    )
     assert np.array_equal(decision.suspects[dead], np.eye(3, dtype=bool)[sensor[dead]])
-    assert np.all(decision.psa[dead] == sensor[dead] + 1) and np.all(decision.hybrid[dead] == sensor[dead] + 1)
+    assert np.all(decision.psa[dead] == sensor[dead] + 1) and np.all(
+        decision.hybrid[dead] == sensor[dead] + 1
+    )
     assert not np.any(decision.filter_used[dead])
 
 
@@ -175,16 +195,26 @@ def recorded(env):
     rng = np.random.default_rng(7)
     ys = np.concatenate([x[:, list(MEASURED_STATES)], x[:, 6:9] @ H.T], axis=1)
     ys[:, RATE_OFFSET:] += 0.01 * rng.standard_normal((steps, 6))
-    ys[onset:, RATE_OFFSET:RATE_OFFSET + 2] += 0.1
+    ys[onset:, RATE_OFFSET : RATE_OFFSET + 2] += 0.1
     return jnp.asarray(ys), jnp.asarray(ref.control[:steps]), onset
 
 
 def _replayed(fdi, ys, us, batch_axis=None):
     """The hybrid FDI stage driven by ``run_loop`` over the recorded ``ys`` with the
     recorded controls (a plant that plays them back, a feed-forward controller)."""
-    player = stages.Plant(lambda x0: None, lambda s, k, u, key: (s, ys[k]), lambda s, k, u, key: (s, None))
-    result = loop.run_loop(player, sf.f16_hybrid_fdi(fdi, batch_axis), loop.feedforward(), jnp.zeros(1),
-                           sf.fdi_state0(fdi), jax.random.key(0), exogenous=us, keep_history=True)
+    player = stages.Plant(
+        lambda x0: None, lambda s, k, u, key: (s, ys[k]), lambda s, k, u, key: (s, None)
+    )
+    result = loop.run_loop(
+        player,
+        sf.f16_hybrid_fdi(fdi, batch_axis),
+        loop.feedforward(),
+        jnp.zeros(1),
+        sf.fdi_state0(fdi),
+        jax.random.key(0),
+        exogenous=us,
+        keep_history=True,
+    )
     return result.final[1].decision, result.history.output
 
 
@@ -201,7 +231,9 @@ def test_replayed_ukf_equals_a_fresh_ukf_from_the_buffered_state(env, recorded):
     assert step == onset and int(decision.hybrid) == 1 and bool(decision.filter_used)
     assert np.asarray(decision.suspects).tolist() == [True, False, True]
     trusted = jnp.repeat(~decision.suspects, 2)
-    norms, _ = sf.analytic_residual_trace(fdi, ys, us, step - sf.RESTART_LAG, trusted, sf.RESTART_LAG)
+    norms, _ = sf.analytic_residual_trace(
+        fdi, ys, us, step - sf.RESTART_LAG, trusted, sf.RESTART_LAG
+    )
     np.testing.assert_allclose(decision.analytic_residuals, norms[-1], rtol=1e-12, atol=1e-15)
     assert np.all(np.isnan(np.asarray(out.values.analytic_residuals)[np.arange(len(ys)) != step]))
     # a batch: per-run noise, with the psum condition and without
@@ -228,8 +260,14 @@ def test_ukf_on_the_moment_equations_equals_filterpy(env, recorded):
     m0 = np.linalg.lstsq(H, channels[0], rcond=None)[0]
     P0 = np.asarray(fdi.hybrid.restart_cov)
     T = 40
-    _, info = jax.jit(lambda: run_filter(ukf, ukf.init(jnp.asarray(m0), jnp.asarray(P0)),
-                                         jnp.where(trusted, channels[:T], jnp.nan), inputs[:T]))()
+    _, info = jax.jit(
+        lambda: run_filter(
+            ukf,
+            ukf.init(jnp.asarray(m0), jnp.asarray(P0)),
+            jnp.where(trusted, channels[:T], jnp.nan),
+            inputs[:T],
+        )
+    )()
     f = jax.jit(lambda x, v: rate_transition(x, v, fdi.rates))
     points = MerweScaledSigmaPoints(3, sf.UKF_ALPHA, sf.UKF_BETA, sf.UKF_KAPPA)
     ref = UnscentedKalmanFilter(3, 2, 0.01, hx=lambda x: H[trusted] @ x, fx=None, points=points)
@@ -258,11 +296,15 @@ def test_rate_model_is_the_moment_part_of_the_dynamics(env):
     us = jnp.asarray(np.column_stack([rng.random(32), rng.uniform(-10, 10, (32, 3))]))
     exact = rate_model(params, setup.sensors.rate_axes)
     ys = jnp.concatenate([xs[:, list(MEASURED_STATES)], jnp.zeros((32, 6))], axis=1)
-    ours = jax.vmap(lambda x, y, u: rate_derivative(x[6:9], rate_model_input(y, u), exact))(xs, ys, us)
+    ours = jax.vmap(lambda x, y, u: rate_derivative(x[6:9], rate_model_input(y, u), exact))(
+        xs, ys, us
+    )
     full = jax.vmap(lambda x, u: f16_dynamics(x, u, params)[6:9])(xs, us)
     np.testing.assert_allclose(ours, full, rtol=1e-12, atol=1e-12)
     pitch = rate_model(params, setup.sensors.rate_axes, coefficient_error=(0.0, 0.1, 0.0))
-    moved = jax.vmap(lambda x, y, u: rate_derivative(x[6:9], rate_model_input(y, u), pitch))(xs, ys, us)
+    moved = jax.vmap(lambda x, y, u: rate_derivative(x[6:9], rate_model_input(y, u), pitch))(
+        xs, ys, us
+    )
     np.testing.assert_allclose(moved[:, [0, 2]], full[:, [0, 2]], rtol=1e-12, atol=1e-12)
     assert np.all(np.abs(moved[:, 1] - full[:, 1]) > 0)
 
@@ -280,21 +322,30 @@ def test_sensor_faults_act_on_both_axes_with_their_label_and_size(env):
         out, _ = apply_faults(f, 10, y, Target.SENSOR, jnp.zeros(2))
         delta = np.asarray(out - y)
         axes = [RATE_OFFSET + 2 * sensor, RATE_OFFSET + 2 * sensor + 1]
-        np.testing.assert_allclose(delta[axes], 7.0 * 0.01 * np.sqrt(2) * np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)]),
-                                   rtol=1e-12)
+        np.testing.assert_allclose(
+            delta[axes],
+            7.0 * 0.01 * np.sqrt(2) * np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)]),
+            rtol=1e-12,
+        )
         assert np.sqrt(np.mean(delta[axes] ** 2)) / 0.01 == pytest.approx(7.0)
         assert np.count_nonzero(delta) == 2 and int(active_label(f, 10, 4)) == sensor + 1
         assert int(active_label(f, 9, 4)) == 0
     drift = sf.sensor_fault(sf.fault_case("drift", 1, 10.0, 0.0, onset_s=0.1), sigma)
     out, _ = apply_faults(drift, 110, y, Target.SENSOR, jnp.zeros(2))  # one second after the onset
-    assert float(out[RATE_OFFSET + 2] - y[RATE_OFFSET + 2]) == pytest.approx(10.0 * 0.01 * np.sqrt(2), rel=1e-12)
+    assert float(out[RATE_OFFSET + 2] - y[RATE_OFFSET + 2]) == pytest.approx(
+        10.0 * 0.01 * np.sqrt(2), rel=1e-12
+    )
     scale = sf.sensor_fault(sf.fault_case("scale", 2, 0.5, 90.0, onset_s=0.1), sigma)
     out, _ = apply_faults(scale, 10, y, Target.SENSOR, jnp.zeros(2))
-    np.testing.assert_allclose(out[RATE_OFFSET + 4:], y[RATE_OFFSET + 4:] * np.array([1.0, 1.5]), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        out[RATE_OFFSET + 4 :], y[RATE_OFFSET + 4 :] * np.array([1.0, 1.5]), rtol=1e-12, atol=1e-15
+    )
     stuck = sf.sensor_fault(sf.fault_case("stuck", 0, 0.0, 0.0, onset_s=0.1), sigma)
     _, held = apply_faults(stuck, 10, y, Target.SENSOR, jnp.zeros(2))
     out, _ = apply_faults(stuck, 11, y + 1.0, Target.SENSOR, held)
-    np.testing.assert_allclose(out[RATE_OFFSET:RATE_OFFSET + 2], y[RATE_OFFSET:RATE_OFFSET + 2], rtol=1e-15)
+    np.testing.assert_allclose(
+        out[RATE_OFFSET : RATE_OFFSET + 2], y[RATE_OFFSET : RATE_OFFSET + 2], rtol=1e-15
+    )
 
 
 def test_fault_cases_from_arrays_are_the_cases_one_by_one():
@@ -308,13 +359,20 @@ def test_fault_cases_from_arrays_are_the_cases_one_by_one():
     angle, onset = rng.uniform(0.0, 360.0, 200), rng.uniform(0.0, 10.0, 200)
     cases = sf.fault_case(kinds, sensor, size, angle, onset, dtype=jnp.float64)
     codes = [int(sf.FaultKind.NONE if k == "none" else sf.KINDS[k]) for k in kinds]
-    assert np.asarray(cases.kind).tolist() == codes and np.asarray(cases.sensor).tolist() == sensor.tolist()
+    assert (
+        np.asarray(cases.kind).tolist() == codes
+        and np.asarray(cases.sensor).tolist() == sensor.tolist()
+    )
     assert np.asarray(cases.size).tolist() == size.tolist()
     assert np.asarray(cases.angle).tolist() == [math.radians(a) for a in angle]
     assert np.asarray(cases.onset).tolist() == [int(round(t / sf.DT)) for t in onset]
     assert cases.kind.dtype == jnp.int32 and cases.angle.dtype == jnp.float64
     one = sf.fault_case("drift", 2, 4.0, 30.0, 1.5)
-    assert [np.shape(f) for f in one] == [()] * 5 and int(one.onset) == 150 and int(one.kind) == int(sf.KINDS["drift"])
+    assert (
+        [np.shape(f) for f in one] == [()] * 5
+        and int(one.onset) == 150
+        and int(one.kind) == int(sf.KINDS["drift"])
+    )
     with pytest.raises(ValueError, match=r"^kind: expected one of .*'melt'"):
         sf.fault_case(np.array(["bias", "melt"]), 0, 1.0, 0.0)
 
@@ -329,7 +387,9 @@ def test_exclusion_estimators_and_bad_input(env):
     np.testing.assert_allclose(est[0] @ m, np.linalg.lstsq(H, m, rcond=None)[0], rtol=1e-12)
     for g in range(3):
         keep = [c for c in range(6) if c // 2 != g]
-        np.testing.assert_allclose(est[g + 1] @ m, np.linalg.lstsq(H[keep], m[keep], rcond=None)[0], rtol=1e-12)
+        np.testing.assert_allclose(
+            est[g + 1] @ m, np.linalg.lstsq(H[keep], m[keep], rcond=None)[0], rtol=1e-12
+        )
     assert float(calibration.missed_isolation) <= sf.MISSED_ISOLATION
     with pytest.raises(ValueError, match="follow"):
         hp.hybrid_psa_init(fdi.hybrid, jnp.zeros(8), follow="sometimes")
@@ -359,9 +419,14 @@ def test_verification_statistic_is_the_least_squares_residual_of_the_channels_le
     assert np.isfinite(dead[2]) and np.all(np.isinf(dead[:2]))
     np.testing.assert_allclose(dead[2], fd[2], rtol=1e-12)
     sigma = float(setup.sensors.rate_sigma)
-    np.testing.assert_allclose(float(fdi.hybrid.verification_threshold),
-                               sigma**2 * scipy.stats.chi2.isf(sf.VERIFICATION_PFA, 1), rtol=1e-9)
-    assert np.isinf(float(hp.hybrid_psa_config(fdi.hybrid.space, 0.01, 1.0, 0.5).verification_threshold))
+    np.testing.assert_allclose(
+        float(fdi.hybrid.verification_threshold),
+        sigma**2 * scipy.stats.chi2.isf(sf.VERIFICATION_PFA, 1),
+        rtol=1e-9,
+    )
+    assert np.isinf(
+        float(hp.hybrid_psa_config(fdi.hybrid.space, 0.01, 1.0, 0.5).verification_threshold)
+    )
 
 
 KIND_RUNS = 40
@@ -372,7 +437,9 @@ def kinds():
     """Every fault kind at the paper's size, 40 full flights (15 s) each, flown without FDI,
     under the paper's hybrid rule and under the verified rule (the same draws)."""
     study = sf.fault_kind_study(runs=KIND_RUNS, seed=38)
-    assert_table_is_the_json(study.to_frame(), study.rows)  # the table as a DataFrame: the same numbers
+    assert_table_is_the_json(
+        study.to_frame(), study.rows
+    )  # the table as a DataFrame: the same numbers
     return {(r["kind"], r["follow"]): r for r in study.rows}
 
 
@@ -386,14 +453,22 @@ def test_with_verified_fdi_no_fault_kind_leaves_the_envelope_more_often_than_wit
     for kind in sf.KIND_SIZES:
         none, verified = kinds[(kind, "none")], kinds[(kind, "verified")]
         assert verified["healthy"] == verified["flights"] == KIND_RUNS, kind
-        table = [[verified["envelope_exits"], KIND_RUNS - verified["envelope_exits"]],
-                 [none["envelope_exits"], KIND_RUNS - none["envelope_exits"]]]
+        table = [
+            [verified["envelope_exits"], KIND_RUNS - verified["envelope_exits"]],
+            [none["envelope_exits"], KIND_RUNS - none["envelope_exits"]],
+        ]
         assert scipy.stats.fisher_exact(table, alternative="greater").pvalue > 0.01, (kind, table)
     drift_none, drift = kinds[("drift", "none")], kinds[("drift", "verified")]
-    assert drift["envelope_exit_interval_99"][1] < drift_none["envelope_exit_interval_99"][0], (drift, drift_none)
+    assert drift["envelope_exit_interval_99"][1] < drift_none["envelope_exit_interval_99"][0], (
+        drift,
+        drift_none,
+    )
     stuck_hybrid, stuck = kinds[("stuck", "hybrid")], kinds[("stuck", "verified")]
     assert stuck_hybrid["envelope_exits"] > stuck["envelope_exits"]
-    assert stuck["misisolated_interval_99"][1] < stuck_hybrid["misisolated_interval_99"][0], (stuck, stuck_hybrid)
+    assert stuck["misisolated_interval_99"][1] < stuck_hybrid["misisolated_interval_99"][0], (
+        stuck,
+        stuck_hybrid,
+    )
     assert kinds[("none", "verified")]["envelope_exits"] == 0
 
 
@@ -408,12 +483,20 @@ def test_a_flight_gone_bad_is_an_exit_and_never_a_decision():
     setup, _ = flight_setup()
     onset = 300
     n = 4
-    decision = SimpleNamespace(decision_step=np.full(n, onset + 10), detection_step=np.full(n, onset + 5),
-                               psa=np.array([1, 2, 1, 1]), hybrid=np.array([1, 2, 1, 1]),
-                               verified=np.array([1, 2, 1, 1]), revisions=np.zeros(n, int),
-                               filter_used=np.zeros(n, bool))
-    out = SimpleNamespace(tracking=SimpleNamespace(max_abs=np.zeros((n, len(ERRORS)))),
-                          healthy=np.array([True, True, False, False]), fdi=decision)
+    decision = SimpleNamespace(
+        decision_step=np.full(n, onset + 10),
+        detection_step=np.full(n, onset + 5),
+        psa=np.array([1, 2, 1, 1]),
+        hybrid=np.array([1, 2, 1, 1]),
+        verified=np.array([1, 2, 1, 1]),
+        revisions=np.zeros(n, int),
+        filter_used=np.zeros(n, bool),
+    )
+    out = SimpleNamespace(
+        tracking=SimpleNamespace(max_abs=np.zeros((n, len(ERRORS)))),
+        healthy=np.array([True, True, False, False]),
+        fdi=decision,
+    )
     labels = [("bias", 10.0, "verified")] * n
     (row,) = sf._full_flight_rows(out, labels, np.zeros(n, int), onset, setup)
     assert row["envelope_exits"] == 2 and row["healthy"] == 2

@@ -3,6 +3,7 @@
 One compiled flight (4 flights vmapped, with history) serves every test: the setups
 differ only in their arrays (noise, gains, reference), not in their shapes.
 """
+
 import math
 
 import jax
@@ -13,10 +14,22 @@ import scipy.linalg
 
 from jaxfdi.control._flight import LATERAL_TRACKED, LONGITUDINAL_TRACKED, flight_plan
 from jaxfdi.control._lqr import integral_augmentation
-from jaxfdi.models.f16._dynamics import ALPHA, BETA, H, PHI, Q, THETA, VT
-from jaxfdi.models.f16._linearize import LATERAL_STATES, LONGITUDINAL_DESIGN_STATES, longitudinal, submodel
+from jaxfdi.models.f16._dynamics import ALPHA, BETA, PHI, THETA, VT, H, Q
+from jaxfdi.models.f16._linearize import (
+    LATERAL_STATES,
+    LONGITUDINAL_DESIGN_STATES,
+    longitudinal,
+    submodel,
+)
 from jaxfdi.models.f16._plant import f16_sensors
-from jaxfdi.scenarios.f16_flight import ERRORS, cast_setup, dispersions, flight_setup, nominal_dispersion, run_flights
+from jaxfdi.scenarios.f16_flight import (
+    ERRORS,
+    cast_setup,
+    dispersions,
+    flight_setup,
+    nominal_dispersion,
+    run_flights,
+)
 
 FLIGHTS = 4
 FLY = jax.jit(run_flights, static_argnums=3)
@@ -24,7 +37,9 @@ FLY = jax.jit(run_flights, static_argnums=3)
 
 def _quiet(setup):
     """The same setup without sensor noise and gusts."""
-    zero = jax.tree_util.tree_map(lambda a: 0.0 * a, setup.sensors)._replace(rate_axes=setup.sensors.rate_axes)
+    zero = jax.tree_util.tree_map(lambda a: 0.0 * a, setup.sensors)._replace(
+        rate_axes=setup.sensors.rate_axes
+    )
     return setup._replace(sensors=zero, gust_sigma=0.0 * setup.gust_sigma)
 
 
@@ -45,7 +60,10 @@ def test_paper_flight_is_followed(flight):
     setup, design, _, _, out, hist = flight
     assert bool(jnp.all(out.healthy))
     t = np.arange(hist.state.shape[1]) * 0.01
-    h_cmd, phi_cmd = np.asarray(setup.reference.state[:, H]), np.asarray(setup.reference.state[:, PHI])
+    h_cmd, phi_cmd = (
+        np.asarray(setup.reference.state[:, H]),
+        np.asarray(setup.reference.state[:, PHI]),
+    )
     h_err = hist.state[:, :, H] - h_cmd
     bank_err = np.degrees(hist.state[:, :, PHI] - phi_cmd)
     climb, hold, banked = t < 3.0, t >= 7.0, t >= 7.0
@@ -62,11 +80,17 @@ def test_paper_flight_is_followed(flight):
     # the run's tracking score (folded inside the scan) equals the errors of the history
     score = jax.tree_util.tree_map(np.asarray, out.tracking)
     index = {name: i for i, name in enumerate(ERRORS)}
-    np.testing.assert_allclose(score.max_abs[:, index["altitude_ft"]], np.max(np.abs(h_err), axis=1), rtol=1e-12)
-    np.testing.assert_allclose(score.max_abs[:, index["bank_hold_deg"]], np.max(np.abs(bank_err[:, banked]), axis=1),
-                               rtol=1e-12)
-    np.testing.assert_allclose(score.sum_sq[:, index["altitude_hold_ft"]], np.sum(h_err[:, hold] ** 2, axis=1),
-                               rtol=1e-10)
+    np.testing.assert_allclose(
+        score.max_abs[:, index["altitude_ft"]], np.max(np.abs(h_err), axis=1), rtol=1e-12
+    )
+    np.testing.assert_allclose(
+        score.max_abs[:, index["bank_hold_deg"]],
+        np.max(np.abs(bank_err[:, banked]), axis=1),
+        rtol=1e-12,
+    )
+    np.testing.assert_allclose(
+        score.sum_sq[:, index["altitude_hold_ft"]], np.sum(h_err[:, hold] ** 2, axis=1), rtol=1e-10
+    )
     assert np.all(score.count[:, index["altitude_climb_ft"]] == np.count_nonzero(climb))
 
 
@@ -79,14 +103,24 @@ def test_sas_stabilises_the_unstable_mode(flight):
     setup, design, keys, _, _, _ = flight
     A_lon, _ = longitudinal(design.linear)
     assert np.max(np.linalg.eigvals(np.asarray(A_lon)).real) > 0.05
-    for states, inputs, tracked, gain in ((LONGITUDINAL_DESIGN_STATES, (0, 1), LONGITUDINAL_TRACKED,
-                                           design.design.gains.longitudinal),
-                                          (LATERAL_STATES, (2, 3), LATERAL_TRACKED, design.design.gains.lateral)):
+    for states, inputs, tracked, gain in (
+        (
+            LONGITUDINAL_DESIGN_STATES,
+            (0, 1),
+            LONGITUDINAL_TRACKED,
+            design.design.gains.longitudinal,
+        ),
+        (LATERAL_STATES, (2, 3), LATERAL_TRACKED, design.design.gains.lateral),
+    ):
         A, B = (np.asarray(m) for m in submodel(design.linear, states, inputs))
         n, m = B.shape
         block = scipy.linalg.expm(np.block([[A, B], [np.zeros((m, n + m))]]) * 0.01)
-        A_bar, B_bar, _ = integral_augmentation(block[:n, :n], block[:n, n:], np.eye(n)[list(tracked)], 0.01)
-        radius = np.max(np.abs(np.linalg.eigvals(np.asarray(A_bar) - np.asarray(B_bar) @ np.asarray(gain))))
+        A_bar, B_bar, _ = integral_augmentation(
+            block[:n, :n], block[:n, n:], np.eye(n)[list(tracked)], 0.01
+        )
+        radius = np.max(
+            np.abs(np.linalg.eigvals(np.asarray(A_bar) - np.asarray(B_bar) @ np.asarray(gain)))
+        )
         assert radius < 0.999
     # nonlinear: level flight at the design trim, started 2 ft/s off along the unstable
     # mode's eigenvector, no noise or gusts; trim controls held (zero gains) or the SAS
@@ -98,8 +132,12 @@ def test_sas_stabilises_the_unstable_mode(flight):
     level = _quiet(level)
     start = nominal_dispersion(level, FLIGHTS)._replace(initial=jnp.tile(offset, (FLIGHTS, 1)))
     _, with_sas = FLY(level, keys, start, True)
-    _, held = FLY(level._replace(gains=jax.tree_util.tree_map(jnp.zeros_like, level.gains)), keys, start, True)
-    assert np.all(np.asarray(held.control[0]) == np.asarray(level.u0))    # the open loop holds the trim controls
+    _, held = FLY(
+        level._replace(gains=jax.tree_util.tree_map(jnp.zeros_like, level.gains)), keys, start, True
+    )
+    assert np.all(
+        np.asarray(held.control[0]) == np.asarray(level.u0)
+    )  # the open loop holds the trim controls
     dv_open = np.asarray(held.state[0, :, VT]) - float(level.x0[VT])
     dv_sas = np.asarray(with_sas.state[0, :, VT]) - float(level.x0[VT])
     # open loop: the airspeed error grows at the linear model's rate (from 5 s to 15 s, 2.7x)
@@ -107,7 +145,12 @@ def test_sas_stabilises_the_unstable_mode(flight):
     assert rate == pytest.approx(growth, rel=0.1) and dv_open[-1] < -5.0
     # with the SAS it is gone, and so is the attitude and altitude disturbance
     assert np.max(np.abs(dv_sas[-200:])) < 0.2
-    assert np.max(np.abs(np.degrees(np.asarray(with_sas.state[0, -200:, THETA]) - float(level.x0[THETA])))) < 0.05
+    assert (
+        np.max(
+            np.abs(np.degrees(np.asarray(with_sas.state[0, -200:, THETA]) - float(level.x0[THETA])))
+        )
+        < 0.05
+    )
     assert abs(float(with_sas.state[0, -1, H])) < 2.0
 
 
@@ -119,8 +162,12 @@ def test_float32_and_float64_flights_agree(flight):
     setup, _, keys, disp, _, _ = flight
     quiet = _quiet(setup)
     _, h64 = FLY(quiet, keys, disp, True)
-    _, h32 = FLY(cast_setup(quiet, jnp.float32), keys, jax.tree_util.tree_map(lambda a: a.astype(jnp.float32), disp),
-                 True)
+    _, h32 = FLY(
+        cast_setup(quiet, jnp.float32),
+        keys,
+        jax.tree_util.tree_map(lambda a: a.astype(jnp.float32), disp),
+        True,
+    )
     assert h32.state.dtype == jnp.float32 and bool(jnp.all(jnp.isfinite(h32.state)))
     x64, x32 = np.asarray(h64.state), np.asarray(h32.state, np.float64)
     diff = np.max(np.abs(x64 - x32), axis=(0, 1))
@@ -166,8 +213,10 @@ def test_plant_noise_and_faults(flight):
     np.testing.assert_allclose(noise.std(axis=0), sigma, rtol=0.05)
     before, moved_before = step(keys[0], 299, setup.u0)
     after, moved_after = step(keys[0], 300, setup.u0 + 1.0)
-    assert not np.any(np.asarray(before.sensor_fault)) and not np.any(np.asarray(before.fault_active))
-    np.testing.assert_allclose(after.sensor_fault[RATE_OFFSET:RATE_OFFSET + 2], [0.1, 0.1])
+    assert not np.any(np.asarray(before.sensor_fault)) and not np.any(
+        np.asarray(before.fault_active)
+    )
+    np.testing.assert_allclose(after.sensor_fault[RATE_OFFSET : RATE_OFFSET + 2], [0.1, 0.1])
     assert np.count_nonzero(np.asarray(after.sensor_fault)) == 2 and bool(after.fault_active.all())
     assert float(moved_before.applied_input[1]) == float(setup.u0[1])
     assert float(moved_after.applied_input[1]) == pytest.approx(float(setup.u0[1]) + 1.0)

@@ -1,18 +1,20 @@
 """The real-receiver study (``jaxfdi run gnss-real``) at a reduced size: its CSV table is
 its JSON rows, no epoch of either GEONET hour is misleading for either protection level, its
-fixes are RTKLIB's, RTKLIB's RAIM FDE takes our decision on every injected step, the injected steps at or above the minimum detectable bias are
-detected as often as the slope protection level promises (a binomial test), and on the
-phone traces gnss_lib_py's fault detection takes the same decisions and Google's own fix
-of the Pixel 7 Pro (whose uncertainties are right: ``TS_D / dof`` near 1) is ours."""
+fixes are RTKLIB's, RTKLIB's RAIM FDE takes our decision on every injected step, the injected
+steps at or above the minimum detectable bias are detected as often as the slope protection
+level promises (a binomial test), and on the phone traces gnss_lib_py's fault detection takes
+the same decisions and Google's own fix of the Pixel 7 Pro (whose uncertainties are right:
+``TS_D / dof`` near 1) is ours."""
+
 import json
 import subprocess
 import sys
 
 import pandas as pd
 import pytest
+from _frames import assert_table_is_the_json
 from scipy import stats
 
-from _frames import assert_table_is_the_json
 from jaxfdi.scenarios.gnss_real import PHONE_EXCLUSIONS, PHONES, STEP_SIZES
 
 RUNS = 60
@@ -23,24 +25,55 @@ P_MD = 1e-3
 def study(tmp_path_factory):
     """``jaxfdi run gnss-real --runs 60 --seed 5``: its stdout, rows and output folder."""
     out = tmp_path_factory.mktemp("gnss-real") / "out"
-    proc = subprocess.run([sys.executable, "-m", "jaxfdi", "run", "gnss-real", "--runs", str(RUNS), "--seed", "5",
-                           "--quiet", "--out", str(out)], capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "jaxfdi",
+            "run",
+            "gnss-real",
+            "--runs",
+            str(RUNS),
+            "--seed",
+            "5",
+            "--quiet",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert proc.returncode == 0, proc.stderr
     return proc.stdout, json.loads((out / "gnss-real.json").read_text()), out
 
 
 def test_cli_writes_the_table_its_csv_and_the_stanford_diagrams(study):
     stdout, data, out = study
-    assert "gnss-real: GPS integrity on real receivers" in stdout and "positions station GEONET 0759" in stdout
+    assert (
+        "gnss-real: GPS integrity on real receivers" in stdout
+        and "positions station GEONET 0759" in stdout
+    )
     assert "phones    trace GSDC 2023 Pixel 7 Pro" in stdout
     assert data["config"]["runs"] == RUNS and data["config"]["seed"] == 5
     rows = data["rows"]
-    assert [r["section"] for r in rows] == (["positions"] * 2 + ["step"] * len(STEP_SIZES) + ["ramp"] * 4
-                                            + ["channel"] * 2 + ["phones", "phone-peers"] * len(PHONES))
+    assert [r["section"] for r in rows] == (
+        ["positions"] * 2
+        + ["step"] * len(STEP_SIZES)
+        + ["ramp"] * 4
+        + ["channel"] * 2
+        + ["phones", "phone-peers"] * len(PHONES)
+    )
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
-    assert_table_is_the_json(pd.read_csv(out / "gnss-real.csv", **exact), rows)  # the CSV is to_frame()
+    assert_table_is_the_json(
+        pd.read_csv(out / "gnss-real.csv", **exact), rows
+    )  # the CSV is to_frame()
     assert (out / "gnss-real-stanford.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert sorted(p.name for p in out.iterdir()) == ["gnss-real-stanford.png", "gnss-real.csv", "gnss-real.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "gnss-real-stanford.png",
+        "gnss-real.csv",
+        "gnss-real.json",
+    ]
 
 
 def test_both_hours_have_no_misleading_epoch_and_rtklibs_fixes(study):
@@ -57,13 +90,23 @@ def test_steps_at_or_above_the_minimum_detectable_bias_are_detected(study):
     p > 0.01); and the detection rate grows with the bias."""
     steps = [r for r in study[1]["rows"] if r["section"] == "step"]
     trials = sum(r["runs_at_or_above_mdb"] for r in steps)
-    misses = sum(round(r["runs_at_or_above_mdb"] * (1.0 - r["detection_rate_at_or_above_mdb"]))
-                 for r in steps if r["runs_at_or_above_mdb"])
+    misses = sum(
+        round(r["runs_at_or_above_mdb"] * (1.0 - r["detection_rate_at_or_above_mdb"]))
+        for r in steps
+        if r["runs_at_or_above_mdb"]
+    )
     assert trials >= RUNS
-    assert stats.binomtest(misses, trials, P_MD, alternative="greater").pvalue > 0.01, (misses, trials)
+    assert stats.binomtest(misses, trials, P_MD, alternative="greater").pvalue > 0.01, (
+        misses,
+        trials,
+    )
     rates = [r["detection_rate"] for r in steps]
-    assert rates == sorted(rates) and rates[0] < 0.5 and rates[-1] > 0.9  # a 100 m step can hide in a weak geometry
-    assert all(r["ss_detection_rate"] <= r["detection_rate"] + 0.1 for r in steps)  # SS's budgets are stricter
+    assert (
+        rates == sorted(rates) and rates[0] < 0.5 and rates[-1] > 0.9
+    )  # a 100 m step can hide in a weak geometry
+    assert all(
+        r["ss_detection_rate"] <= r["detection_rate"] + 0.1 for r in steps
+    )  # SS's budgets are stricter
 
 
 def test_rtklibs_raim_fde_takes_our_decision_on_every_injected_step(study):
@@ -83,17 +126,33 @@ def test_phone_rows_agree_with_gnss_lib_py_and_google(study):
     peers = [r for r in rows if r["section"] == "phone-peers"]
     assert sorted(phones) == sorted(PHONES) and len(peers) == len(PHONES)
     for row in peers:
-        assert row["wls_max_difference_m"] < 1e-3 and row["jaxfdi_only"] == 0 and row["gnss_lib_py_only"] == 0
+        assert (
+            row["wls_max_difference_m"] < 1e-3
+            and row["jaxfdi_only"] == 0
+            and row["gnss_lib_py_only"] == 0
+        )
         assert row["explained"] == row["different_exclusion"]
         # greedy rounds: the same excluded signals but where the first round differs, and on
         # at most 2 % of the epochs more (measured 277 of 281 on the Pixel 4 XL)
-        assert row["epochs"] - row["same_exclusion_set"] <= row["different_exclusion"] + 0.02 * row["epochs"]
+        assert (
+            row["epochs"] - row["same_exclusion_set"]
+            <= row["different_exclusion"] + 0.02 * row["epochs"]
+        )
     for row in phones.values():
         assert row["excluded_signals"] <= PHONE_EXCLUSIONS * row["exclusions"]
-        assert row["exclusions"] <= row["parity_alarms"] and row["alarm_after_exclusion"] <= row["parity_alarms"]
+        assert (
+            row["exclusions"] <= row["parity_alarms"]
+            and row["alarm_after_exclusion"] <= row["parity_alarms"]
+        )
     calibrated = phones["GSDC 2023 Pixel 7 Pro"]
-    assert 0.5 < calibrated["statistic_per_dof_median"] < 2.0 and calibrated["google_difference_median_m"] < 0.5
-    assert phones["GSDC 2021 Pixel 4"]["truth_epochs"] == 7 and phones["GSDC 2021 Pixel 4 XL"]["truth_epochs"] == 0
+    assert (
+        0.5 < calibrated["statistic_per_dof_median"] < 2.0
+        and calibrated["google_difference_median_m"] < 0.5
+    )
+    assert (
+        phones["GSDC 2021 Pixel 4"]["truth_epochs"] == 7
+        and phones["GSDC 2021 Pixel 4 XL"]["truth_epochs"] == 0
+    )
 
 
 def test_a_stopped_channel_is_caught_and_its_satellite_excluded(study):
@@ -103,4 +162,6 @@ def test_a_stopped_channel_is_caught_and_its_satellite_excluded(study):
     channel = {r["kind"]: r for r in study[1]["rows"] if r["section"] == "channel"}
     assert channel["dead"]["detection_rate"] == 1.0 and channel["dead"]["exclusion_rate"] == 1.0
     assert channel["dead"]["delay_median_s"] == 0.0
-    assert channel["frozen"]["detection_rate"] == 1.0 and channel["frozen"]["delay_median_s"] == 30.0
+    assert (
+        channel["frozen"]["detection_rate"] == 1.0 and channel["frozen"]["delay_median_s"] == 30.0
+    )

@@ -5,6 +5,7 @@ paper (issue 37), a dead and a frozen channel on the same satellite, against clo
 the dead one alarms at the epoch it dies, the frozen one within the epochs its range rate
 needs to cross the RAIM threshold (orbits, geometry and the chi-square quantile computed
 here with NumPy / SciPy)."""
+
 import json
 import math
 
@@ -12,17 +13,26 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _frames import assert_table_is_the_json
 from scipy import stats
 
-from _frames import assert_table_is_the_json
 from jaxfdi.data import data_path
 from jaxfdi.gnss import geodetic_to_ecef, read_rinex_nav, satellite_position
 from jaxfdi.gnss._measurements import ClockModel, visibility
-from jaxfdi.gnss._orbits import ephemeris_table, satellite_clock, select_orbits
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, ephemeris_table, satellite_clock, select_orbits
 from jaxfdi.gnss._paths import racetrack_ecef
-from jaxfdi.gnss._orbits import SPEED_OF_LIGHT
-from jaxfdi.scenarios.gnss_campus import (DT, MASK_DEG, PARK, PARK_FAULTS, PARK_PATH, START_TOW, TABLE2_FAULTS, WEEK,
-                                          gnss_campus_study, plot_gnss_campus)
+from jaxfdi.scenarios.gnss_campus import (
+    DT,
+    MASK_DEG,
+    PARK,
+    PARK_FAULTS,
+    PARK_PATH,
+    START_TOW,
+    TABLE2_FAULTS,
+    WEEK,
+    gnss_campus_study,
+    plot_gnss_campus,
+)
 
 
 @pytest.fixture(scope="module")
@@ -34,29 +44,40 @@ def test_campus_geometry_not_the_statistic(study):
     campus = study.rows[0]
     assert campus["case"] == "campus"
     high, over = set(campus["hdop_over_4_epochs"]), set(campus["hpl_over_556_epochs"])
-    assert len(high) >= 10 and len(over) >= 8 and over <= high | {e + 1 for e in high} | {e - 1 for e in high}
-    assert {480, 790} <= over                                   # the paper's epochs
-    assert campus["alarm_rate_where_hpl_over"] == 0.0           # the parity test cannot see geometry
-    assert campus["horizontal_error_p95_where_hpl_over_m"] > 3 * campus["horizontal_error_p95_elsewhere_m"]
+    assert (
+        len(high) >= 10
+        and len(over) >= 8
+        and over <= high | {e + 1 for e in high} | {e - 1 for e in high}
+    )
+    assert {480, 790} <= over  # the paper's epochs
+    assert campus["alarm_rate_where_hpl_over"] == 0.0  # the parity test cannot see geometry
+    assert (
+        campus["horizontal_error_p95_where_hpl_over_m"]
+        > 3 * campus["horizontal_error_p95_elsewhere_m"]
+    )
     assert campus["unhealthy_epochs"] == 0 and 0.95 < campus["availability_npa"] < 1.0
     # the satellites the wall hides are "not measured" (NaN), never dead channels: no epoch of
     # the first fault-free run (the series kept) has a dead slot's infinite statistic, and the
     # alarms of both (2 runs x 1000 epochs at P_fa = 1/15000) stay within the binomial 99.9 % bound
     assert np.all(np.isfinite(study.campus["statistic"]))
     alarms = int(round(float(study.campus["alarm_rate"].sum()) * 2))
-    assert alarms <= stats.binom.ppf(0.999, 2 * study.campus["alarm_rate"].size, study.config["pfa"])
+    assert alarms <= stats.binom.ppf(
+        0.999, 2 * study.campus["alarm_rate"].size, study.config["pfa"]
+    )
 
 
 def test_park_faults_detected_isolated_excluded(study):
     park = [r for r in study.rows if r["case"] == "park"]
-    assert len(park) == len(PARK_FAULTS) == 5 and all(r["headline"] and r["unhealthy_runs"] == 0 for r in park)
+    assert len(park) == len(PARK_FAULTS) == 5 and all(
+        r["headline"] and r["unhealthy_runs"] == 0 for r in park
+    )
     assert [r["paper"] for r in park] == ["detected"] * 3 + ["beyond the paper"] * 2
     by_fault = {r["fault"].split()[0]: r for r in park}
     assert by_fault["impulse"]["detected"] == 1.0 and by_fault["bias"]["detected"] == 1.0
     assert by_fault["impulse"]["excluded"] == 1.0 and by_fault["bias"]["isolated"] == 1.0
     assert by_fault["drift"]["detected"] == 1.0 and 10 <= by_fault["drift"]["delay_median_s"] <= 60
     assert float(np.max(study.park["hdop"])) < 1.8 and float(np.max(study.park["hpl"])) < 556.0
-    json.dumps({"config": study.config, "rows": study.rows})      # JSON-ready
+    json.dumps({"config": study.config, "rows": study.rows})  # JSON-ready
     table = study.table()
     assert "Campus" in table and all(name in table for name, *_ in PARK_FAULTS)
     assert table.count("beyond the paper") == 2 and len(TABLE2_FAULTS) == 3
@@ -88,20 +109,28 @@ def _frozen_delay_bound(prn: int, z: float = 4.0) -> tuple[int, int]:
 
     def sky(t, x):
         orbit, _ = select_orbits(table, t)
-        return satellite_position(orbit, t)[slot], satellite_clock(orbit, t)[slot], *visibility(
-            table, t, x, math.radians(MASK_DEG))
+        return (
+            satellite_position(orbit, t)[slot],
+            satellite_clock(orbit, t)[slot],
+            *visibility(table, t, x, math.radians(MASK_DEG)),
+        )
 
     sat, clock, seen, el, az = (np.asarray(a) for a in jax.jit(jax.vmap(sky))(times, path))
     g = np.linalg.norm(sat - np.asarray(path), axis=1) - SPEED_OF_LIGHT * clock
     dg = np.abs(g - g[0])
     h0, h2, c2 = ClockModel().h0, ClockModel().h_minus2, SPEED_OF_LIGHT**2
-    qb, qd = 0.5 * h0 * c2 * DT, 2 * math.pi**2 * h2 * c2 * DT       # Q = [[qb + qd/3, qd/2], [qd/2, qd]] (1 s)
+    qb, qd = (
+        0.5 * h0 * c2 * DT,
+        2 * math.pi**2 * h2 * c2 * DT,
+    )  # Q = [[qb + qd/3, qd/2], [qd/2, qd]] (1 s)
     q00, q01, q11 = qb + qd / 3, qd / 2, qd
     drift = abs(ClockModel().drift) + z * math.sqrt(k0 * q11)
     for j in range(1, steps.size):
         used = seen[j]
         sigma = np.sqrt(9.0 + 9.0 / np.sin(el[j]) ** 2)
-        los = np.stack([np.cos(el[j]) * np.cos(az[j]), np.cos(el[j]) * np.sin(az[j]), -np.sin(el[j])], axis=1)
+        los = np.stack(
+            [np.cos(el[j]) * np.cos(az[j]), np.cos(el[j]) * np.sin(az[j]), -np.sin(el[j])], axis=1
+        )
         h = (np.concatenate([-los, np.ones((los.shape[0], 1))], axis=1) / sigma[:, None])[used]
         s = np.eye(h.shape[0]) - h @ np.linalg.solve(h.T @ h, h.T)
         i = int(np.flatnonzero(np.flatnonzero(used) == slot)[0])
@@ -125,16 +154,20 @@ def test_dead_and_frozen_channels_detected_isolated_excluded(study):
         assert row["runs"] == 2 and row["unhealthy_runs"] == 0
         assert row["detected"] == row["isolated"] == row["excluded"] == 1.0
         assert np.isfinite(row["horizontal_error_after_exclusion_p95_m"])
-        assert row["horizontal_error_after_exclusion_p95_m"] < study.config["horizontal_alert_limit_m"]
+        assert (
+            row["horizontal_error_after_exclusion_p95_m"] < study.config["horizontal_alert_limit_m"]
+        )
     assert dead["delay_median_s"] == dead["delay_p90_s"] == 0.0
     bound, window = _frozen_delay_bound(frozen["prn"])
-    assert bound < window                                    # the derivation: detected within the episode
+    assert bound < window  # the derivation: detected within the episode
     assert 1.0 <= frozen["delay_median_s"] <= frozen["delay_p90_s"] <= bound * DT
 
 
 def test_figures(study, tmp_path):
     paths = plot_gnss_campus(study, tmp_path)
-    assert len(paths) == 3 and all((tmp_path / p.split("/")[-1]).stat().st_size > 10_000 for p in paths)
+    assert len(paths) == 3 and all(
+        (tmp_path / p.split("/")[-1]).stat().st_size > 10_000 for p in paths
+    )
 
 
 def test_the_table_as_a_data_frame_is_the_rows(study):

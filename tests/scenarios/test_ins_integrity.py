@@ -18,16 +18,24 @@ Claims decided statistically, with a fixed seed:
   singular SCST matrix B at the propagators' first reset is reported, never used;
 - the IMU health test isolates a dead and a frozen roll gyro in the onset epoch
   (4 flights each) and is silent on the fault-free flights."""
+
 import json
 
 import numpy as np
 import pytest
+from _frames import assert_table_is_the_json
 from scipy import stats
 
-from _frames import assert_table_is_the_json
 from jaxfdi.ins._integrity import attribute_ins_alarms
-from jaxfdi.scenarios.gps_ins import (PAPER_TABLE3, StudySize, alarms_at, gps_ins_study, ins_decisions, plot_gps_ins,
-                                      thresholds)
+from jaxfdi.scenarios.gps_ins import (
+    PAPER_TABLE3,
+    StudySize,
+    alarms_at,
+    gps_ins_study,
+    ins_decisions,
+    plot_gps_ins,
+    thresholds,
+)
 
 RUNS = 16
 SIZE = StudySize(flight_s=900, onset_s=800, imu_rate=20)
@@ -58,9 +66,11 @@ def test_false_alarms_within_binomial_bounds(study):
         assert row["ks_pvalue_vs_chi2"] > 1e-3, row
         assert row["dof"] == dof
     assert rows["chi2"]["independent_decisions"] == RUNS * (SIZE.flight_s // 10 - 1)
-    for row in rows.values():   # per flight: the same count, beside the design's expectation
+    for row in rows.values():  # per flight: the same count, beside the design's expectation
         np.testing.assert_allclose(row["alarms_per_flight"] * RUNS, row["alarms"])
-        np.testing.assert_allclose(row["design_alarms_per_flight"] * RUNS, row["independent_decisions"] * 0.005)
+        np.testing.assert_allclose(
+            row["design_alarms_per_flight"] * RUNS, row["independent_decisions"] * 0.005
+        )
     assert rows["scst"]["independent_decisions"] >= RUNS * (SIZE.flight_s // 60 - 1) - 2
 
 
@@ -91,20 +101,30 @@ def test_the_operating_curve_is_the_monitor_at_other_thresholds(study):
         for test, limit in limits.items():
             record = getattr(out, test)
             alarms = alarms_at(out.series, test, limit)
-            detection = np.where(alarms[:, onset:].any(axis=1), alarms[:, onset:].argmax(axis=1) + onset, -1)
-            np.testing.assert_array_equal(detection, np.asarray(record.detection_step), err_msg=f"{name} {test}")
-            np.testing.assert_array_equal(alarms[:, :onset].any(axis=1), np.asarray(record.false_alarms) > 0)
+            detection = np.where(
+                alarms[:, onset:].any(axis=1), alarms[:, onset:].argmax(axis=1) + onset, -1
+            )
+            np.testing.assert_array_equal(
+                detection, np.asarray(record.detection_step), err_msg=f"{name} {test}"
+            )
+            np.testing.assert_array_equal(
+                alarms[:, :onset].any(axis=1), np.asarray(record.false_alarms) > 0
+            )
             if name.startswith("table3"):
                 row = table3[float(name.split()[1])]
                 ins = ins_decisions(out.series, test, limit)
                 clean = ~ins[:, :onset].any(axis=1)
                 found = ins[:, onset:].any(axis=1) & clean
                 assert row[f"{test}_clean_runs"] == int(clean.sum())
-                np.testing.assert_allclose(row[f"{test}_mean_s"], np.mean(ins[found, onset:].argmax(axis=1)))
+                np.testing.assert_allclose(
+                    row[f"{test}_mean_s"], np.mean(ins[found, onset:].argmax(axis=1))
+                )
     curve = [r for r in study.rows if r["case"] == "operating-curve"]
     for test in limits:
         points = [r for r in curve if r["test"] == test]
-        assert [r["pfa_per_epoch"] for r in points] == sorted((r["pfa_per_epoch"] for r in points), reverse=True)
+        assert [r["pfa_per_epoch"] for r in points] == sorted(
+            (r["pfa_per_epoch"] for r in points), reverse=True
+        )
         flagged = [r["fault_free_flights_with_an_alarm"] for r in points]
         assert flagged == sorted(flagged, reverse=True), (test, flagged)
         design = next(r for r in points if r["pfa_per_epoch"] == 0.005)
@@ -124,7 +144,9 @@ def test_a_flight_gone_bad_is_counted_apart_in_the_curve_and_the_separation(stud
     results = dict(study.results)
 
     def spoil(out):
-        bad = lambda record: record._replace(first_unhealthy=np.asarray(record.first_unhealthy).copy())  # noqa: E731
+        bad = lambda record: record._replace(
+            first_unhealthy=np.asarray(record.first_unhealthy).copy()
+        )
         out = out._replace(chi2=bad(out.chi2))
         out.chi2.first_unhealthy[0] = 5
         return out
@@ -138,7 +160,9 @@ def test_a_flight_gone_bad_is_counted_apart_in_the_curve_and_the_separation(stud
     assert after[point]["fault_free_unhealthy_flights"] == 1
     assert after[point]["table3"]["60"]["unhealthy_runs"] == 1
     assert after[point]["table3"]["60"]["clean_runs"] <= before[point]["table3"]["60"]["clean_runs"]
-    assert after[("scst", 0.005)]["fault_free_flights"] == RUNS   # only the chi-square record went bad
+    assert (
+        after[("scst", 0.005)]["fault_free_flights"] == RUNS
+    )  # only the chi-square record went bad
     split = separation(results, SIZE)
     assert split["flights"] == 3 * RUNS - 1 and split["unhealthy_flights"] == 1
 
@@ -152,7 +176,7 @@ def test_attribution_against_brute_force():
     expected = np.zeros_like(ins)
     for r in range(5):
         for k in range(200):
-            expected[r, k] = ins[r, k] and not gps[r, max(k - 11, 0):k + 8].any()
+            expected[r, k] = ins[r, k] and not gps[r, max(k - 11, 0) : k + 8].any()
     np.testing.assert_array_equal(got, expected)
     with pytest.raises(ValueError, match="gps_alarms"):
         attribute_ins_alarms(ins, gps[:, :10], 7, 11)
@@ -189,9 +213,13 @@ def test_raim_decisions_and_the_reported_singular_B(study):
     assert raim_alarm[:, 100].all() and not np.any(np.asarray(series.gps_used) & raim_alarm)
     free = study.results["fault-free"].series
     valid, condition = np.asarray(free.scst_valid), np.asarray(free.scst_condition)
-    assert not np.any(valid[:, 0]) and np.isinf(condition[:, 0]).all()   # B = 0 at the first epoch: flagged
-    assert np.all(condition[~valid] > study.config["scst"]["max_condition"])   # invalid only when B is bad
-    assert np.all(np.asarray(free.scst)[~valid] == 0.0)                  # ... and then no decision
+    assert (
+        not np.any(valid[:, 0]) and np.isinf(condition[:, 0]).all()
+    )  # B = 0 at the first epoch: flagged
+    assert np.all(
+        condition[~valid] > study.config["scst"]["max_condition"]
+    )  # invalid only when B is bad
+    assert np.all(np.asarray(free.scst)[~valid] == 0.0)  # ... and then no decision
     assert valid.mean() > 0.9 and row["scst_invalid_epochs"] >= RUNS
 
 
@@ -209,10 +237,15 @@ def test_dead_and_frozen_roll_gyro_isolated_in_the_onset_epoch(study):
         assert row["health_detected"] == 1.0 and row["health_isolated"] == 1.0, (name, row)
         assert row["health_median_s"] == 0.0 and row["health_max_s"] == 0.0, (name, row)
         assert row["health_false_alarm_runs"] == 0 and row["chi2_unhealthy_runs"] == 0, (name, row)
-        assert np.isfinite(np.asarray(study.results[f"imu roll gyro {name}"].series.position_error)).all()
+        assert np.isfinite(
+            np.asarray(study.results[f"imu roll gyro {name}"].series.position_error)
+        ).all()
     free = study.results["fault-free"].health
     assert np.all(np.asarray(free.first_alarm) < 0)
-    assert "IMU health test" in study.table() and "fault-free flights with an IMU health alarm: 0/16" in study.table()
+    assert (
+        "IMU health test" in study.table()
+        and "fault-free flights with an IMU health alarm: 0/16" in study.table()
+    )
 
 
 def test_table_json_and_figures(study, tmp_path):
@@ -224,7 +257,9 @@ def test_table_json_and_figures(study, tmp_path):
     json.dumps({"config": study.config, "rows": study.rows})
     paths = plot_gps_ins(study, tmp_path)
     assert "Operating curve" in text and "closest at P_fa" in text
-    assert len(paths) == 5 and all((tmp_path / p.split("/")[-1]).stat().st_size > 10_000 for p in paths)
+    assert len(paths) == 5 and all(
+        (tmp_path / p.split("/")[-1]).stat().st_size > 10_000 for p in paths
+    )
 
 
 def test_the_table_as_a_data_frame_is_the_rows(study):

@@ -2,21 +2,27 @@
 kernel, one run per case (the programs of ``jaxfdi run f16 --runs 1``: 24 directions per
 sensor plane, 400 optimiser steps; compilation dominates, so fewer would not be cheaper);
 its Table 1 check, printed paper comparison and figures checked."""
+
 import json
 
 import pandas as pd
-
 from _frames import assert_table_is_the_json
-from _notebooks import images, python3_kernel, run_clean, tables  # noqa: F401 (python3_kernel: a fixture)
+from _notebooks import images, run_clean, tables
 
 
 def test_f16_hybrid_notebook(python3_kernel, monkeypatch, tmp_path):
     frame, rows = tmp_path / "frame.pkl", tmp_path / "rows.json"
-    outputs, text = run_clean("06_f16_hybrid_psa_ukf.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": "1", "JAXFDI_NB_OPT_STEPS": "400"},  # the CLI's 400 steps
-                              f"import json\nstudy.to_frame().to_pickle({str(frame)!r})\n"
-                              f"open({str(rows)!r}, 'w').write(json.dumps(study.rows))")
-    assert_table_is_the_json(pd.read_pickle(frame), json.loads(rows.read_text()))  # to_frame() is the rows
+    outputs, text = run_clean(
+        "06_f16_hybrid_psa_ukf.ipynb",
+        python3_kernel,
+        monkeypatch,
+        {"JAXFDI_NB_RUNS": "1", "JAXFDI_NB_OPT_STEPS": "400"},  # the CLI's 400 steps
+        f"import json\nstudy.to_frame().to_pickle({str(frame)!r})\n"
+        f"open({str(rows)!r}, 'w').write(json.dumps(study.rows))",
+    )
+    assert_table_is_the_json(
+        pd.read_pickle(frame), json.loads(rows.read_text())
+    )  # to_frame() is the rows
     assert "runs per case: 1, directions per sensor plane: 24, optimiser steps: 400" in text
     for kind in (1, 2, 3):
         assert f"type {kind}: sensors" in text

@@ -1,11 +1,13 @@
 """Notebook 01 (the engine Kalman filter and its chi-square Monte Carlo) end to end in a
 fresh kernel, 5 runs per fault, and its printed results checked."""
-from _notebooks import FAULT_NAMES, cells_of_column, images, python3_kernel, run_clean, tables  # noqa: F401
+
+from _notebooks import FAULT_NAMES, cells_of_column, images, run_clean, tables
 
 
 def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch, tmp_path):
-    outputs, text = run_clean("01_kalman_monte_carlo.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": "5"})
+    outputs, text = run_clean(
+        "01_kalman_monte_carlo.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": "5"}
+    )
     stderr = "".join(o.text for o in outputs if o.output_type == "stream" and o.name == "stderr")
     assert "Traceback" not in stderr, stderr
     assert "runs per fault: 5" in text  # the kernel saw JAXFDI_NB_RUNS
@@ -20,4 +22,6 @@ def test_kalman_monte_carlo_notebook(python3_kernel, monkeypatch, tmp_path):
     assert "7 rows; .to_frame() for the table" in text  # the result's text form is short
 
     figures = images(outputs)
-    assert len(figures) >= 2, f"expected the run figure and the Monte Carlo figure, got {len(figures)} PNG outputs"
+    assert len(figures) >= 2, (
+        f"expected the run figure and the Monte Carlo figure, got {len(figures)} PNG outputs"
+    )

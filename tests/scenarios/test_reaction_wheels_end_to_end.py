@@ -5,17 +5,23 @@ figures) and notebook 05.
 At 2 runs per case the notebook's study and examples are the CLI's (``wheel_study(runs=2,
 seed=0, calibration_runs=20)``, ``wheel_examples(..., seed=0)``): both run on the run's
 shared XLA compilation cache (conftest), so the closed loops are compiled once."""
+
 import json
 
 import pytest
-
-from _notebooks import images, python3_kernel, run_clean, tables  # noqa: F401 (python3_kernel: a fixture)
-from jaxfdi.scenarios.reaction_wheels import METHODS
+from _notebooks import images, run_clean, tables
 from test_cli import assert_csv_is_the_json, assert_same_as_before, run_cli
 
+from jaxfdi.scenarios.reaction_wheels import METHODS
+
 RUNS = 2
-WHEEL_CASES = ["none"] + [f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain") for w in range(1, 5)]
-CASES = WHEEL_CASES + ["dead g1", "frozen g1"]  # issue 37: the x gyro dead and frozen, after the wheel cases
+WHEEL_CASES = ["none"] + [
+    f"{kind} w{w}" for kind in ("stop", "stuck", "bias", "gain") for w in range(1, 5)
+]
+CASES = WHEEL_CASES + [
+    "dead g1",
+    "frozen g1",
+]  # issue 37: the x gyro dead and frozen, after the wheel cases
 
 
 @pytest.fixture(scope="module")
@@ -30,11 +36,16 @@ def test_reaction_wheels_prints_every_case_and_writes_figures(shared):
     data = json.loads((shared / "out" / "reaction-wheels.json").read_text())
     # the file predates the gyro cases (issue 37): appended after the wheel cases, they leave
     # those runs as they were (run keys and onsets are prefixes of the study's draws)
-    assert_same_as_before("reaction-wheels", {**data, "rows": data["rows"][:len(WHEEL_CASES)]})
+    assert_same_as_before("reaction-wheels", {**data, "rows": data["rows"][: len(WHEEL_CASES)]})
     assert "WARNING" not in proc.stdout and all(row["unhealthy_runs"] == 0 for row in data["rows"])
     assert [row["case"] for row in data["rows"]] == CASES
     for case in CASES:
-        for method in ("dual filter F (paper)", "NIS chi-square", "credit isolator (paper)", "MM likelihood"):
+        for method in (
+            "dual filter F (paper)",
+            "NIS chi-square",
+            "credit isolator (paper)",
+            "MM likelihood",
+        ):
             assert f"\n{case:<10} {method}" in proc.stdout
     for case in ("none", "dead g1", "frozen g1"):
         assert f"\n{case:<10} gyro health test" in proc.stdout
@@ -42,14 +53,19 @@ def test_reaction_wheels_prints_every_case_and_writes_figures(shared):
     assert data["config"]["runs"] == RUNS and data["config"]["calibration_runs"] == 20
     assert data["config"]["fdp_threshold"] > 0
     assert sorted(p.name for p in (shared / "out").iterdir()) == [
-        "reaction-wheels-fig3-5-attitude.png", "reaction-wheels-fig4-6-detection.png",
-        "reaction-wheels-fig8-9-isolation.png", "reaction-wheels.csv", "reaction-wheels.json"]
+        "reaction-wheels-fig3-5-attitude.png",
+        "reaction-wheels-fig4-6-detection.png",
+        "reaction-wheels-fig8-9-isolation.png",
+        "reaction-wheels.csv",
+        "reaction-wheels.json",
+    ]
     assert_csv_is_the_json(shared / "out" / "reaction-wheels.csv", data["rows"], METHODS)
 
 
 def test_reaction_wheels_notebook(shared, python3_kernel, monkeypatch):
-    outputs, text = run_clean("05_reaction_wheels.ipynb", python3_kernel, monkeypatch,
-                              {"JAXFDI_NB_RUNS": str(RUNS)})
+    outputs, text = run_clean(
+        "05_reaction_wheels.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": str(RUNS)}
+    )
     assert f"runs per case: {RUNS}" in text
     difference = float(text.split("AD vs closed-form Jacobian, largest difference: ")[1].split()[0])
     assert difference < 1e-15
@@ -58,8 +74,12 @@ def test_reaction_wheels_notebook(shared, python3_kernel, monkeypatch):
     assert abs(zero_total_det) < 1e-6 * abs(bias_det)
     html = tables(outputs)  # the study as a DataFrame: a row per case and method
     assert html.count("<table") == 1
-    assert html.count("<tr>") == len(CASES) * len(METHODS)  # the body's rows (the header's <tr> has a style)
+    assert html.count("<tr>") == len(CASES) * len(
+        METHODS
+    )  # the body's rows (the header's <tr> has a style)
     for case in CASES:
-        assert html.count(f"<td>{case}</td>") >= len(METHODS), case  # "none" is also the fault-free row's kind
+        assert html.count(f"<td>{case}</td>") >= len(METHODS), (
+            case
+        )  # "none" is also the fault-free row's kind
     assert "Wheel stops (Choi & Park 2009 report" in text
     assert len(images(outputs)) == 3, f"expected Figs. 3/5, 4/6 and 8/9, got {len(images(outputs))}"

@@ -11,6 +11,7 @@ binomial bounds at the stated sizes. One more program, the closed loop with its 
 (``histories``: a stop, a dead and a frozen gyro from step 200, 260 steps), serves the
 UKF comparison and the controller's view.
 """
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -18,10 +19,16 @@ import pytest
 from scipy import stats
 
 from jaxfdi._faults import FaultKind, no_fault
-from jaxfdi.models._reaction_wheels import delivered_torque, kitsat3_params, stop_hypotheses, stop_transfer, wheel_momentum
 from jaxfdi._metrics import binomial_lower_bound
-from jaxfdi.scenarios import reaction_wheels as rw
 from jaxfdi._study import run_study
+from jaxfdi.models._reaction_wheels import (
+    delivered_torque,
+    kitsat3_params,
+    stop_hypotheses,
+    stop_transfer,
+    wheel_momentum,
+)
+from jaxfdi.scenarios import reaction_wheels as rw
 
 CALIBRATION, FREE, PER_WHEEL, PER_GYRO = 80, 40, 10, 2
 STOPS = slice(CALIBRATION + FREE, CALIBRATION + FREE + 4 * PER_WHEEL)
@@ -39,7 +46,9 @@ def batch():
     gyros = rw.case_faults(GYRO_CASES, PER_GYRO, jax.random.key(13))
     faults = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a), free, stops, gyros)
     total = GYROS.stop
-    spec = rw.wheel_spec(design, cases)._replace(cases=faults, case_names=tuple(map(str, range(total))))
+    spec = rw.wheel_spec(design, cases)._replace(
+        cases=faults, case_names=tuple(map(str, range(total)))
+    )
     return design, run_study(spec, runs=1, seed=5).outputs["closed loop"]
 
 
@@ -48,8 +57,16 @@ def histories():
     """EKF closed loops with history, seed 3, 260 steps: a stop of wheel 2, the x gyro dead
     and the y gyro frozen, each from step 200."""
     design = rw.wheel_design()
-    faults = [rw.wheel_fault("stop", 1, ONSET), rw.gyro_fault("dead", 0, ONSET), rw.gyro_fault("frozen", 1, ONSET)]
-    run = jax.jit(jax.vmap(lambda f: rw.run_wheels(design, jax.random.key(3), f, steps=HISTORY_STEPS, history=True)))
+    faults = [
+        rw.wheel_fault("stop", 1, ONSET),
+        rw.gyro_fault("dead", 0, ONSET),
+        rw.gyro_fault("frozen", 1, ONSET),
+    ]
+    run = jax.jit(
+        jax.vmap(
+            lambda f: rw.run_wheels(design, jax.random.key(3), f, steps=HISTORY_STEPS, history=True)
+        )
+    )
     out, hist = run(jax.tree_util.tree_map(lambda *x: jnp.stack(x), *faults))
     return design, jax.tree_util.tree_map(np.asarray, out), jax.tree_util.tree_map(np.asarray, hist)
 
@@ -79,8 +96,13 @@ def test_delivered_torque_follows_each_fault_kind():
 
 def test_only_a_stop_moves_the_wheel_momentum_to_the_body():
     params = kitsat3_params()
-    state = jnp.concatenate([jnp.array([1.0, 0, 0, 0]), jnp.array([0.01, -0.02, 0.005]),
-                             jnp.array([200.0, -180.0, 220.0, -210.0])])
+    state = jnp.concatenate(
+        [
+            jnp.array([1.0, 0, 0, 0]),
+            jnp.array([0.01, -0.02, 0.005]),
+            jnp.array([200.0, -180.0, 220.0, -210.0]),
+        ]
+    )
     for kind in ("stuck", "bias", "gain"):
         f = rw.wheel_fault(kind, 1, 7, 0.1)
         np.testing.assert_array_equal(stop_transfer(state, f, 7, params), state)
@@ -89,7 +111,9 @@ def test_only_a_stop_moves_the_wheel_momentum_to_the_body():
     moved = stop_transfer(state, f, 7, params)
     assert moved[7 + 1] == 0.0
     # the body's rate change is exactly the wheel's momentum I_w Omega a_1 through I^-1
-    dw_expected = np.linalg.solve(np.asarray(params.inertia), 0.000239 * -180.0 * np.asarray(params.wheel_axes[1]))
+    dw_expected = np.linalg.solve(
+        np.asarray(params.inertia), 0.000239 * -180.0 * np.asarray(params.wheel_axes[1])
+    )
     np.testing.assert_allclose(moved[4:7] - state[4:7], dw_expected, rtol=1e-12)
 
 
@@ -110,11 +134,11 @@ def test_fault_free_f_stays_under_the_calibrated_threshold(batch):
     exceedances would reject 'exceedance rate <= 1 %' at the 6 % level (binomial)."""
     _, out = batch
     threshold = rw.FDP_MARGIN * out.max_fault_free_fdp[:CALIBRATION].max()
-    exceed = int(np.sum(out.max_fault_free_fdp[CALIBRATION:CALIBRATION + FREE] > threshold))
+    exceed = int(np.sum(out.max_fault_free_fdp[CALIBRATION : CALIBRATION + FREE] > threshold))
     assert stats.binom.sf(1, FREE, 0.01) < 0.07
     assert exceed <= 1, exceed
     # the NIS test's design rate (chi2, Pfa 1e-5 a step) gives a 0.6 % per-run false-alarm rate
-    nis_false = int(np.sum(out.nis.false_alarms[:CALIBRATION + FREE] > 0))
+    nis_false = int(np.sum(out.nis.false_alarms[: CALIBRATION + FREE] > 0))
     assert nis_false <= 3, nis_false  # P(X >= 4 | n = 120, p = 0.006) = 0.5 %
     assert out.healthy.all()
 
@@ -135,7 +159,11 @@ def test_each_wheel_stop_is_detected_at_once_and_isolated_within_two_seconds(bat
     rates = {}
     for name in ("likelihood", "credit"):
         rec = jax.tree_util.tree_map(lambda leaf: leaf[stops], getattr(out, name))
-        in_time = (rec.detection_step >= 0) & (rec.isolated == wheel + 1) & ((rec.detection_step - onset) * dt <= 2.0)
+        in_time = (
+            (rec.detection_step >= 0)
+            & (rec.isolated == wheel + 1)
+            & ((rec.detection_step - onset) * dt <= 2.0)
+        )
         rates[name] = [float(in_time[wheel == w].mean()) for w in range(4)]
         assert np.all(rec.false_alarms == 0)  # no isolation before the onset
     assert stats.binom.cdf(8, PER_WHEEL, 0.95) < 0.09
@@ -145,7 +173,7 @@ def test_each_wheel_stop_is_detected_at_once_and_isolated_within_two_seconds(bat
 def _gyro_part(out, kind):
     """The batch's runs of ``kind`` on each gyro: (records, gyro axis per run)."""
     first = GYROS.start + GYRO_CASES.index((kind, 0)) * PER_GYRO
-    part = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[first:first + 3 * PER_GYRO], out)
+    part = jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[first : first + 3 * PER_GYRO], out)
     return part, np.repeat(np.arange(3), PER_GYRO)
 
 
@@ -198,7 +226,7 @@ def test_the_gyro_health_test_stays_quiet_without_a_gyro_fault(batch):
     _, out = batch
     per_run = 3 * 600 * rw.HEALTH_PFA
     assert per_run <= 1.8e-4 and 1.0 - (1.0 - per_run) ** 160 < 0.03
-    assert np.all(np.asarray(out.health.first_alarm[:STOPS.stop]) < 0)
+    assert np.all(np.asarray(out.health.first_alarm[: STOPS.stop]) < 0)
 
 
 def test_the_controller_never_flies_on_a_dead_or_frozen_gyro(histories):
@@ -218,7 +246,9 @@ def test_the_controller_never_flies_on_a_dead_or_frozen_gyro(histories):
     assert np.isfinite(hists.controller_rate).all()
     np.testing.assert_array_equal(stop.controller_rate, stop.measurement)
     # dead x gyro: NaN from the onset, the other two flown raw
-    assert np.isnan(dead.measurement[ONSET:, 0]).all() and np.isfinite(dead.measurement[:ONSET]).all()
+    assert (
+        np.isnan(dead.measurement[ONSET:, 0]).all() and np.isfinite(dead.measurement[:ONSET]).all()
+    )
     np.testing.assert_array_equal(dead.controller_rate[:ONSET], dead.measurement[:ONSET])
     np.testing.assert_array_equal(dead.controller_rate[:, 1:], dead.measurement[:, 1:])
     assert np.max(np.abs(dead.controller_rate[ONSET:, 0] - dead.rate[ONSET:, 0])) < 3 * sigma
@@ -232,7 +262,10 @@ def test_the_controller_never_flies_on_a_dead_or_frozen_gyro(histories):
     assert np.max(np.abs(held - frozen.rate[found:, 1])) > 3 * sigma
     # the same runs' records: the health test names the gyro at the onset (dead) and at `found` (frozen)
     assert outs.healthy.all()
-    assert outs.health.detection_step.tolist()[:2] == [-1, ONSET] and outs.health.isolated.tolist() == [-1, 5, 6]
+    assert outs.health.detection_step.tolist()[:2] == [
+        -1,
+        ONSET,
+    ] and outs.health.isolated.tolist() == [-1, 5, 6]
 
 
 def test_the_study_table_has_the_gyro_rows(batch):
@@ -248,25 +281,37 @@ def test_the_study_table_has_the_gyro_rows(batch):
     dt = float(design.params.dt)
     assert rw.study_cases()[-2:] == [("dead", 0), ("frozen", 0)]
     assert rw.wheel_spec(design, rw.study_cases()).case_names[-2:] == ("dead g1", "frozen g1")
-    take = lambda start, n: jax.tree_util.tree_map(lambda leaf: np.asarray(leaf)[start:start + n], out)  # noqa: E731
-    rows = [rw.summarize_case(take(CALIBRATION, FREE), "none", -1, dt),
-            rw.summarize_case(take(STOPS.start, PER_WHEEL), "stop", 0, dt)]
+    take = lambda start, n: jax.tree_util.tree_map(
+        lambda leaf: np.asarray(leaf)[start : start + n], out
+    )
+    rows = [
+        rw.summarize_case(take(CALIBRATION, FREE), "none", -1, dt),
+        rw.summarize_case(take(STOPS.start, PER_WHEEL), "stop", 0, dt),
+    ]
     for kind in ("dead", "frozen"):
         first = GYROS.start + GYRO_CASES.index((kind, 0)) * PER_GYRO
         rows.append(rw.summarize_case(take(first, PER_GYRO), kind, 0, dt))
     assert rows[2]["gyro"] == 0 and rows[2]["wheel"] == -1
     table = rw.WheelStudy({}, rows, out).table()
     cells = {}
-    for line in table.splitlines()[2:]:   # the values, without the intervals and the healthy-run count
+    for line in table.splitlines()[
+        2:
+    ]:  # the values, without the intervals and the healthy-run count
         values = [v for v in line[36:].split() if not v.startswith("[")]
-        cells[(line[:10].strip(), line[11:35].strip())] = values[:-5] + values[-4:] if len(values) > 4 else values[:-1]
+        cells[(line[:10].strip(), line[11:35].strip())] = (
+            values[:-5] + values[-4:] if len(values) > 4 else values[:-1]
+        )
     names = rw.METHOD_NAMES
-    for method in rw.METHODS:  # det isol <=2s FA clean mean med p90 (F: the batch's placeholder F_T alarms early)
+    for method in (
+        rw.METHODS
+    ):  # det isol <=2s FA clean mean med p90 (F: the batch's placeholder F_T alarms early)
         want = ["1.00", "1.00", "1.00", "0.00", "2", "0.00", "0.00", "0.00"]
         got = cells[("dead g1", names[method])]
         assert (got[:2] == want[:2]) if method == "fdp" else (got == want), (method, got)
     frozen = cells[("frozen g1", names["health"])]
-    assert frozen[:5] == ["1.00", "1.00", "1.00", "0.00", "2"] and all(float(v) <= 0.9 for v in frozen[5:]), frozen
+    assert frozen[:5] == ["1.00", "1.00", "1.00", "0.00", "2"] and all(
+        float(v) <= 0.9 for v in frozen[5:]
+    ), frozen
     for method in ("fdp", "nis", "credit", "likelihood"):
         assert cells[("frozen g1", names[method])][1] == "0.00", method
     assert cells[("none", names["health"])] == ["0.00"]  # FA only
@@ -289,8 +334,11 @@ def test_ukf_estimator_agrees_with_the_ekf_on_the_closed_loop(histories):
     and both banks reach the same decisions."""
     design, outs, hists = histories
     f = rw.wheel_fault("stop", 1, ONSET)
-    out_u, hist_u = jax.jit(lambda: rw.run_wheels(design, jax.random.key(3), f, steps=HISTORY_STEPS, estimator="ukf",
-                                                  history=True))()
+    out_u, hist_u = jax.jit(
+        lambda: rw.run_wheels(
+            design, jax.random.key(3), f, steps=HISTORY_STEPS, estimator="ukf", history=True
+        )
+    )()
     out_e, hist_e = _at(outs, 0), _at(hists, 0)
     F_e = np.asarray(hist_e.detection_parameter)
     assert np.max(np.abs(np.asarray(hist_u.detection_parameter) - F_e)) < 1e-6 * np.max(F_e)
@@ -307,15 +355,22 @@ def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table():
     reading), left out of the row's rates, and the table says so; the finite run beside
     it is scored as usual. (Both through the study's closed-loop program, the batch's.)"""
     design = rw.wheel_design()
-    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), rw.wheel_fault("bias", 1, 20, 0.0)._replace(magnitude=jnp.asarray(jnp.nan)),
-                                    rw.wheel_fault("bias", 1, 20, 2e-3))
-    spec = rw.wheel_spec(design, [("bias", 1)])._replace(cases=faults, case_names=("bias NaN w2", "bias w2"))
+    faults = jax.tree_util.tree_map(
+        lambda *x: jnp.stack(x),
+        rw.wheel_fault("bias", 1, 20, 0.0)._replace(magnitude=jnp.asarray(jnp.nan)),
+        rw.wheel_fault("bias", 1, 20, 2e-3),
+    )
+    spec = rw.wheel_spec(design, [("bias", 1)])._replace(
+        cases=faults, case_names=("bias NaN w2", "bias w2")
+    )
     out = run_study(spec, runs=1, seed=0).outputs["closed loop"]
     assert list(out.healthy) == [False, True]
     assert out.nis.first_unhealthy[0] == 21 and out.nis.first_unhealthy[1] == -1
     row = rw.summarize_case(out, "bias", 1, 0.1)
     assert row["unhealthy_runs"] == 1 and row["runs"] == 2
-    only_good = rw.summarize_case(jax.tree_util.tree_map(lambda leaf: leaf[1:], out), "bias", 1, 0.1)
+    only_good = rw.summarize_case(
+        jax.tree_util.tree_map(lambda leaf: leaf[1:], out), "bias", 1, 0.1
+    )
     for method in rw.METHODS:
         np.testing.assert_equal(row[method], only_good[method])  # NaN == NaN here
     table = rw.WheelStudy({}, [row], out).table()
@@ -328,13 +383,19 @@ def test_momentum_patterns_give_the_closed_form_net_wheel_momentum():
     the ``zero`` pattern (+, -, +, -) has ``H^T Omega = 0``."""
     Omega = 2000.0 * rw.RPM
     net, zero = rw.wheel_design(), rw.wheel_design(momentum="zero")
-    np.testing.assert_allclose(wheel_momentum(net.initial_speeds, net.params),
-                               [0.0, 0.0, 4 * 0.000239 * Omega * np.cos(np.radians(45.0))], atol=1e-15)
-    np.testing.assert_allclose(wheel_momentum(zero.initial_speeds, zero.params), np.zeros(3), atol=1e-15)
-    np.testing.assert_allclose(np.abs(np.asarray(net.initial_speeds)), np.full(4, Omega), rtol=1e-15)
+    np.testing.assert_allclose(
+        wheel_momentum(net.initial_speeds, net.params),
+        [0.0, 0.0, 4 * 0.000239 * Omega * np.cos(np.radians(45.0))],
+        atol=1e-15,
+    )
+    np.testing.assert_allclose(
+        wheel_momentum(zero.initial_speeds, zero.params), np.zeros(3), atol=1e-15
+    )
+    np.testing.assert_allclose(
+        np.abs(np.asarray(net.initial_speeds)), np.full(4, Omega), rtol=1e-15
+    )
     with pytest.raises(ValueError, match="momentum"):
         rw.wheel_design(momentum="some")
-
 
 
 def test_binomial_lower_bound_equals_scipys_clopper_pearson():

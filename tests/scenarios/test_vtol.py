@@ -1,17 +1,18 @@
 """Seed 001 VTOL: the robust state estimator, the closed loop and the scenario at reduced
 size (20 runs per case, 40 calibration runs, the paper's 300 steps)."""
+
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _frames import assert_table_is_the_json
 from scipy import stats
 
-from _frames import assert_table_is_the_json
+from jaxfdi._faults import fault_label, no_fault
 from jaxfdi.control._eigenstructure import assign_eigenstructure, scheduled_gain
 from jaxfdi.detection._signature import isolate, location_symptoms
-from jaxfdi._faults import fault_label, no_fault
 from jaxfdi.filters import run_filter, unknown_input_filter
 from jaxfdi.models import _vtol as vtol
 from jaxfdi.models._linear import LinearGaussianModel
@@ -34,6 +35,7 @@ CALIBRATION_RUNS = 40
 
 
 # --- the unbiased minimum-variance (Kitanidis) filter --------------------------------
+
 
 def _kitanidis_reference(Phi, C, Q, R, E, x0, P0, ys):
     """Independent NumPy UMV filter with explicit inverses (Kitanidis 1987, eq. 13); a
@@ -80,9 +82,15 @@ def umv_problem():
             x = Phi @ x + E[:, 0] * d + 0.01 * noise.standard_normal(4)
         return np.array(xs), np.array(ys)
 
-    autonomous = LinearGaussianModel(model.Phi, jnp.zeros((4, 1)), model.C, jnp.zeros((4, 1)), model.Q, model.R)
+    autonomous = LinearGaussianModel(
+        model.Phi, jnp.zeros((4, 1)), model.C, jnp.zeros((4, 1)), model.Q, model.R
+    )
     filt = unknown_input_filter(autonomous, E)
-    run = jax.jit(lambda ys: run_filter(filt, filt.init(jnp.asarray(vtol.X0), jnp.eye(4)), ys, jnp.zeros((T, 1)))[1])
+    run = jax.jit(
+        lambda ys: run_filter(
+            filt, filt.init(jnp.asarray(vtol.X0), jnp.eye(4)), ys, jnp.zeros((T, 1))
+        )[1]
+    )
     del rng
     return model, E, simulate, run
 
@@ -91,8 +99,16 @@ def test_unknown_input_filter_matches_kitanidis_reference(umv_problem):
     model, E, simulate, run = umv_problem
     _, ys = simulate(1.0)
     info = run(jnp.asarray(ys))
-    ref_means, ref_stats = _kitanidis_reference(np.asarray(model.Phi), np.asarray(model.C), np.asarray(model.Q),
-                                                np.asarray(model.R), E, vtol.X0, np.eye(4), ys)
+    ref_means, ref_stats = _kitanidis_reference(
+        np.asarray(model.Phi),
+        np.asarray(model.C),
+        np.asarray(model.Q),
+        np.asarray(model.R),
+        E,
+        vtol.X0,
+        np.eye(4),
+        ys,
+    )
     np.testing.assert_allclose(np.asarray(info.filtered_mean), ref_means, rtol=0, atol=1e-9)
     # the open-loop state grows to 3e6, so each innovation y - C x carries eps |C x| <= 7e-10 of
     # round-off, and the statistic r^T Pi r (Pi: S^-1 projected off F) |2 Pi r| <= 17 times
@@ -110,12 +126,25 @@ def test_unknown_input_filter_leaves_missing_sensors_out_exactly(umv_problem):
     ys[100:200, 2] = np.nan
     ys[50:52, 0] = np.nan
     ys[300, 1] = np.inf
-    autonomous = LinearGaussianModel(model.Phi, jnp.zeros((4, 1)), model.C, jnp.zeros((4, 1)), model.Q, model.R)
+    autonomous = LinearGaussianModel(
+        model.Phi, jnp.zeros((4, 1)), model.C, jnp.zeros((4, 1)), model.Q, model.R
+    )
     filt = unknown_input_filter(autonomous, E, missing_measurements=True)
-    info = jax.jit(lambda ys: run_filter(filt, filt.init(jnp.asarray(vtol.X0), jnp.eye(4)), ys,
-                                         jnp.zeros((ys.shape[0], 1)))[1])(jnp.asarray(ys))
-    ref_means, ref_stats = _kitanidis_reference(np.asarray(model.Phi), np.asarray(model.C), np.asarray(model.Q),
-                                                np.asarray(model.R), E, vtol.X0, np.eye(4), ys)
+    info = jax.jit(
+        lambda ys: run_filter(
+            filt, filt.init(jnp.asarray(vtol.X0), jnp.eye(4)), ys, jnp.zeros((ys.shape[0], 1))
+        )[1]
+    )(jnp.asarray(ys))
+    ref_means, ref_stats = _kitanidis_reference(
+        np.asarray(model.Phi),
+        np.asarray(model.C),
+        np.asarray(model.Q),
+        np.asarray(model.R),
+        E,
+        vtol.X0,
+        np.eye(4),
+        ys,
+    )
     np.testing.assert_allclose(np.asarray(info.filtered_mean), ref_means, rtol=0, atol=1e-9)
     nis = np.asarray(info.nis)
     assert nis[300] == np.inf and np.isnan(np.asarray(info.innovation)[300, 1])
@@ -154,11 +183,14 @@ def test_unknown_input_filter_rejects_undecouplable_input():
 
 # --- closed-loop building blocks -------------------------------------------------------
 
+
 def test_location_symptoms_against_brute_force():
     rng = np.random.default_rng(0)
     location = np.array([0, 1, 2, 0, 1, 2, 2])
     alarms = rng.random((50, 7)) < 0.6
-    expected = np.array([[all(a[f] for f in range(7) if location[f] == loc) for loc in range(3)] for a in alarms])
+    expected = np.array(
+        [[all(a[f] for f in range(7) if location[f] == loc) for loc in range(3)] for a in alarms]
+    )
     np.testing.assert_array_equal(np.asarray(location_symptoms(alarms, location, 3)), expected)
 
 
@@ -207,9 +239,11 @@ def test_other_thresholds_seeds_and_runs_compile_no_new_closed_loop(study):
     paper = jnp.asarray(np.stack([paper_thresholds(filters)] * 2))
     spec = vtol_spec(study.design, paper, vtol_faults())
     again = engine.run_study(spec, RUNS, 0)
-    engine.run_study(vtol_spec(vtol_design()._replace(threshold=paper[0, 3]), paper, vtol_faults()), 3, 7)
+    engine.run_study(
+        vtol_spec(vtol_design()._replace(threshold=paper[0, 3]), paper, vtol_faults()), 3, 7
+    )
     program = montecarlo._compiled(engine._program(spec.structures[0]), False, None, True)
-    assert program._cache_size() == 1   # the study's chunk program, reused by both
+    assert program._cache_size() == 1  # the study's chunk program, reused by both
     first = again.outputs["closed loop"].first_alarm.reshape(study.records.first_alarm.shape)
     np.testing.assert_array_equal(first[..., 0, :], study.records.first_alarm[..., 1, :])
 
@@ -222,7 +256,7 @@ def histories(study):
     cases = vtol_faults()
     faults = stack_faults([f for _, f in cases])
     keys = jax.random.split(jax.random.PRNGKey(0), RUNS)
-    one = lambda f, key: run_closed_loop(study.design, key, f, jnp.asarray(False), 300)  # noqa: E731
+    one = lambda f, key: run_closed_loop(study.design, key, f, jnp.asarray(False), 300)
     run = jax.jit(jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None)))
     return cases, run(faults, keys)
 
@@ -237,7 +271,9 @@ def test_online_decisions_equal_the_offline_mdwt_st(study, histories):
         for r in range(5):
             alarms = method_alarms(h.fdi.statistic[c, r], study.design, thresholds)[3]
             labels = np.asarray(isolate(location_symptoms(alarms, study.design.location, 6)))
-            labels = np.where(h.fdi.health_label[c, r] > 0, h.fdi.health_label[c, r], labels)   # ahead of the bank
+            labels = np.where(
+                h.fdi.health_label[c, r] > 0, h.fdi.health_label[c, r], labels
+            )  # ahead of the bank
             latched = np.asarray(h.fdi.isolated[c, r])
             offline_first = int(np.argmax(labels > 0)) if (labels > 0).any() else -1
             online_first = int(np.argmax(latched > 0)) if (latched > 0).any() else -1
@@ -252,18 +288,24 @@ def test_matched_location_has_the_smallest_statistic(histories, study):
     # fault-free level (the undecoupled disturbance leaks unequally into the filters),
     # and it stays under its calibrated threshold, in >= 95 % of the runs of every kind
     cases, h = histories
-    fault_free = np.asarray(h.fdi.statistic[-1]).mean(axis=(0, 1))                          # (12,)
+    fault_free = np.asarray(h.fdi.statistic[-1]).mean(axis=(0, 1))  # (12,)
     raw_threshold = np.array(list(study.config["thresholds"]["raw"].values()))
     rates = {}
     for c, (name, f) in enumerate(cases[:-1]):
-        if name in HEALTH_CASES:   # every statistic reads the dead or frozen sensor: the health test isolates
+        if (
+            name in HEALTH_CASES
+        ):  # every statistic reads the dead or frozen sensor: the health test isolates
             continue
         start = int(f.onset) + 30
-        mean_stat = np.asarray(h.fdi.statistic[c, :, start:]).mean(axis=1)                  # (runs, 12)
+        mean_stat = np.asarray(h.fdi.statistic[c, :, start:]).mean(axis=1)  # (runs, 12)
         relative = mean_stat / fault_free
-        per_location = np.minimum(relative[:, :6], relative[:, 6:])                       # (runs, 6)
+        per_location = np.minimum(relative[:, :6], relative[:, 6:])  # (runs, 6)
         true_location = int(fault_label(f, 2)) - 1
-        best = np.where(relative[:, true_location] <= relative[:, 6 + true_location], true_location, 6 + true_location)
+        best = np.where(
+            relative[:, true_location] <= relative[:, 6 + true_location],
+            true_location,
+            6 + true_location,
+        )
         rate_smallest = np.mean(np.argmin(per_location, axis=1) == true_location)
         rate_under = np.mean(mean_stat[np.arange(len(best)), best] < raw_threshold[best])
         rates[name] = (rate_smallest, rate_under)
@@ -284,7 +326,9 @@ def test_signature_isolation_of_every_fault_kind(study):
     # right location, never a wrong one
     for row in study.rows[:-1]:
         assert row["methods"]["MDWT-ST|ours"]["isolation_rate"] >= 0.95, row["fault"]
-        assert row["online_isolation_rate"] >= 0.95 and row["online_false_isolation_rate"] == 0.0, row["fault"]
+        assert row["online_isolation_rate"] >= 0.95 and row["online_false_isolation_rate"] == 0.0, (
+            row["fault"]
+        )
 
 
 def test_a1_additive_fault_is_nearly_an_s4_bias_plus_the_decoupled_input(design):
@@ -312,7 +356,9 @@ def _row(study, name):
 
 def test_s3_step_detected_by_mdwt_st_within_eight_steps_without_false_alarm(study):
     row = _row(study, "s3 step 0.7")
-    det = study.records.detection_step[[r["fault"] for r in study.rows].index("s3 step 0.7"), 0, :, 0, 3]
+    det = study.records.detection_step[
+        [r["fault"] for r in study.rows].index("s3 step 0.7"), 0, :, 0, 3
+    ]
     assert np.mean((det >= 120) & (det <= 128)) >= 0.9, det
     # false alarms per run: with CALIBRATION_RUNS * RUN_FALSE_ALARM < 1 the per-run
     # calibration puts each method's thresholds just above the largest of the calibration
@@ -321,7 +367,10 @@ def test_s3_step_detected_by_mdwt_st_within_eight_steps_without_false_alarm(stud
     # runs is then at most Binomial(RUNS, p), p = 1/41 plus the channel-health test's
     # union bound (4 sensors, 120 - 9 windows, pfa each); 1 - 1e-3 quantile
     false_alarm_runs = row["methods"]["MDWT-ST|ours"]["false_alarm_rate"] * RUNS
-    window, pfa = study.config["channel_health_test"]["window"], study.config["channel_health_test"]["pfa_per_window"]
+    window, pfa = (
+        study.config["channel_health_test"]["window"],
+        study.config["channel_health_test"]["pfa_per_window"],
+    )
     p = 1 / (CALIBRATION_RUNS + 1) + 4 * (120 - window + 1) * pfa
     assert false_alarm_runs <= stats.binom.ppf(0.999, RUNS, p), false_alarm_runs
     # per decision alone (Pfa 0.005, 30 decisions before the onset) 30 % of runs had one
@@ -343,12 +392,14 @@ def test_dead_and_frozen_sensor_isolated_with_closed_form_delays(study):
         assert row["unhealthy_runs"] == {"no_ftc": 0, "ftc": 0} and row["runs"] == RUNS, name
         for key, m in row["methods"].items():
             assert m["isolation_rate"] == 1.0, (name, key, m)
-            if key.endswith("|ours"):   # the paper's thresholds alarm before the onset: no clean run to time
+            if key.endswith(
+                "|ours"
+            ):  # the paper's thresholds alarm before the onset: no clean run to time
                 assert m["isolation_delay_median"] == delay, (name, key, m)
         assert row["online_isolation_rate"] == 1.0 and row["online_delay_median"] == delay, name
         assert row["online_false_isolation_rate"] == 0.0, name
         c = [r["fault"] for r in study.rows].index(name)
-        isolated = np.asarray(study.records.isolation_step[c])                      # (ftc, runs, thresholds, methods)
+        isolated = np.asarray(study.records.isolation_step[c])  # (ftc, runs, thresholds, methods)
         # every method: at the health test's step at the latest (the bank may name s3 first)
         assert np.all((isolated >= 100) & (isolated <= 100 + delay)), (name, isolated)
 
@@ -357,8 +408,11 @@ def test_the_controller_never_gets_a_non_finite_estimate(histories):
     """A dead sensor (NaN) never reaches the feedback: the estimator takes its prediction
     for the dead component (``filters._base``) in every run of every case."""
     cases, h = histories
-    assert np.all(np.isfinite(np.asarray(h.fdi.estimate))), [name for c, (name, _) in enumerate(cases)
-                                                             if not np.isfinite(np.asarray(h.fdi.estimate[c])).all()]
+    assert np.all(np.isfinite(np.asarray(h.fdi.estimate))), [
+        name
+        for c, (name, _) in enumerate(cases)
+        if not np.isfinite(np.asarray(h.fdi.estimate[c])).all()
+    ]
     assert np.all(np.isfinite(np.asarray(h.control)))
 
 
@@ -381,7 +435,7 @@ def test_the_health_test_is_silent_on_fault_free_runs(histories, study):
 
 def test_a2_effectiveness_estimate_within_005_after_30_steps(study):
     c = [r["fault"] for r in study.rows].index("a2 effectiveness 0.5")
-    estimate = study.records.bias_estimate[c, 0, :, 0]                  # FTC off, at k = 130
+    estimate = study.records.bias_estimate[c, 0, :, 0]  # FTC off, at k = 130
     assert np.mean(np.abs(estimate - 0.5) < 0.05) >= 0.9, estimate
 
 
@@ -391,8 +445,11 @@ def test_the_loop_holds_v_h_and_leaves_the_unreachable_q_command(histories, stud
     # the q error at the size of the command itself (RMS over k >= 100, within 10 %)
     cases, h = histories
     none = [name for name, _ in cases].index("none")
-    error = np.asarray(study.design.command)[None, None] - np.asarray(h.state[none]) @ np.asarray(study.design.H).T
-    rms = np.sqrt(np.mean(error[:, 100:] ** 2, axis=1))                   # (runs, 2)
+    error = (
+        np.asarray(study.design.command)[None, None]
+        - np.asarray(h.state[none]) @ np.asarray(study.design.H).T
+    )
+    rms = np.sqrt(np.mean(error[:, 100:] ** 2, axis=1))  # (runs, 2)
     assert np.all(rms[:, 0] < 1.0), rms[:, 0]
     np.testing.assert_allclose(rms[:, 1], 5.0, rtol=0.1)
 
@@ -407,14 +464,16 @@ def calm(design):
     cases = dict(vtol_faults())
     faults = stack_faults([cases["s3 step 0.7"], cases["none"]])
     keys = jax.random.split(jax.random.PRNGKey(0), RUNS)
-    one = lambda f, key: run_closed_loop(calm_design, key, f, jnp.asarray(False), 300)  # noqa: E731
+    one = lambda f, key: run_closed_loop(calm_design, key, f, jnp.asarray(False), 300)
     return jax.jit(jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None)))(faults, keys)
 
 
-S3_ADD = 10   # the s3 additive filter (FILTER_NAMES: the six multiplicative, then the six additive)
+S3_ADD = 10  # the s3 additive filter (FILTER_NAMES: the six multiplicative, then the six additive)
 
 
-def test_s3_step_estimate_swings_with_the_undecoupled_disturbance_and_averages_to_the_truth(histories, calm):
+def test_s3_step_estimate_swings_with_the_undecoupled_disturbance_and_averages_to_the_truth(
+    histories, calm
+):
     """Issue 38: the s3 step's estimate "drifting" from 0.86 (k = 150) to 0.50 (k = 299) is
     the undecoupled disturbance 3 sin 10t seen by the s3 filter: over k = 150-299 its
     spectrum peaks at 1 rad per step (10 rad/s x 0.1 s) and its time average is the true
@@ -449,9 +508,13 @@ def test_s3_isolation_waits_because_the_disturbance_raises_the_thresholds(histor
     names = [name for name, _ in cases]
     raw = np.asarray([study.config["thresholds"]["raw"][name] for name in FILTER_NAMES])
     mismatched = [i for i, name in enumerate(FILTER_NAMES) if not name.startswith("s3")]
-    quantile = np.quantile(np.asarray(h.fdi.statistic[names.index("none")])[:, 20:], 0.995, axis=(0, 1))
+    quantile = np.quantile(
+        np.asarray(h.fdi.statistic[names.index("none")])[:, 20:], 0.995, axis=(0, 1)
+    )
     assert np.sum(quantile > 1.5 * chi2) >= 4, quantile
-    under = np.median(np.asarray(h.fdi.statistic[names.index("s3 step 0.7")])[:, 121:160].mean(axis=1), axis=0)
+    under = np.median(
+        np.asarray(h.fdi.statistic[names.index("s3 step 0.7")])[:, 121:160].mean(axis=1), axis=0
+    )
     assert np.sum(under[mismatched] < 0.8 * raw[mismatched]) >= 4, under / raw
     calm_quantile = np.quantile(np.asarray(calm.fdi.statistic[1])[:, 20:], 0.995, axis=(0, 1))
     assert np.all(calm_quantile < 1.1 * chi2), calm_quantile
@@ -482,7 +545,10 @@ def test_study_rows_and_calibration(study):
     # ceiling, and the paper's thresholds fire far more often on the same runs
     none = _row(study, "none")["methods"]
     assert none["MDWT-ST|ours"]["false_alarm_per_decision"] < 0.03
-    assert none["MDWT-ST|paper"]["false_alarm_per_decision"] > none["MDWT-ST|ours"]["false_alarm_per_decision"]
+    assert (
+        none["MDWT-ST|paper"]["false_alarm_per_decision"]
+        > none["MDWT-ST|ours"]["false_alarm_per_decision"]
+    )
 
 
 def test_per_run_calibration_is_the_smallest_scaling_meeting_the_rate(design):
@@ -528,18 +594,34 @@ def test_a_run_that_goes_nan_is_counted_unhealthy_in_the_table(design):
     f = fault("bias", "sensor", 2, 100, 0.7)
     # a NaN sensor is a dead sensor, evidence (the next test); a finite value that
     # overflows the filters' arithmetic (1e250^2) is what makes a run numerically bad
-    faults = jax.tree_util.tree_map(lambda *x: jnp.stack(x), fault("bias", "sensor", 2, 100, 1e250), f,
-                                    no_fault(), no_fault())       # runs 2, 3: the fault-free twins of 0, 1
+    faults = jax.tree_util.tree_map(
+        lambda *x: jnp.stack(x), fault("bias", "sensor", 2, 100, 1e250), f, no_fault(), no_fault()
+    )  # runs 2, 3: the fault-free twins of 0, 1
     keys = jnp.concatenate([jax.random.split(jax.random.PRNGKey(0), 2)] * 2)
-    run = jax.jit(jax.vmap(jax.vmap(lambda f, key, ftc: vtol_run(design, thresholds, key, f, ftc, steps),
-                                    in_axes=(0, 0, None)), in_axes=(None, None, 0)))
-    every = jax.tree_util.tree_map(np.asarray, run(faults, keys, jnp.array([False, True])))   # (ftc, run)
+    run = jax.jit(
+        jax.vmap(
+            jax.vmap(
+                lambda f, key, ftc: vtol_run(design, thresholds, key, f, ftc, steps),
+                in_axes=(0, 0, None),
+            ),
+            in_axes=(None, None, 0),
+        )
+    )
+    every = jax.tree_util.tree_map(
+        np.asarray, run(faults, keys, jnp.array([False, True]))
+    )  # (ftc, run)
     assert every.first_unhealthy.tolist() == [[100, -1, -1, -1], [100, -1, -1, -1]]
     records = jax.tree_util.tree_map(lambda leaf: leaf[:, :2], every)
     twin = every.states[0, 2:]
     row = scenario._summarise("s3 bias", f, records, np.asarray(twin), steps, design.levels)
-    alone = scenario._summarise("s3 bias", f, jax.tree_util.tree_map(lambda leaf: leaf[:, 1:], records),
-                                np.asarray(twin)[1:], steps, design.levels)
+    alone = scenario._summarise(
+        "s3 bias",
+        f,
+        jax.tree_util.tree_map(lambda leaf: leaf[:, 1:], records),
+        np.asarray(twin)[1:],
+        steps,
+        design.levels,
+    )
     assert row["unhealthy_runs"] == {"no_ftc": 1, "ftc": 1} and row["runs"] == 2
     for key in ("methods", "online_isolation_rate", "tracking_error_ftc", "deviation_no_ftc"):
         np.testing.assert_equal(row[key], alone[key])
@@ -566,14 +648,16 @@ def test_sample_sigma_soft_threshold_row_is_the_papers_causal_estimate():
     sigma = np.stack([d1.std(0, ddof=1), d2.std(0, ddof=1)])
     mean = stat.reshape(-1, 4, 12).mean(1)
     c = design.c_mult
-    later = stat.reshape(-1, 4, 12)[SIGMA_WINDOW // 4:]
+    later = stat.reshape(-1, 4, 12)[SIGMA_WINDOW // 4 :]
     # reconstruct by hand: block mean +- shrunk scale-2 detail +- shrunk scale-1 details
-    shrink = lambda x, t: np.sign(x) * np.maximum(np.abs(x) - t, 0.0)  # noqa: E731
+    shrink = lambda x, t: np.sign(x) * np.maximum(np.abs(x) - t, 0.0)
     e1a = shrink((later[:, 0] - later[:, 1]) / 2, c * sigma[0])
     e1b = shrink((later[:, 2] - later[:, 3]) / 2, c * sigma[0])
     e2 = shrink(((later[:, 0] + later[:, 1]) - (later[:, 2] + later[:, 3])) / 4, c * sigma[1])
-    m = mean[SIGMA_WINDOW // 4:]
-    want = np.stack([m + e2 + e1a, m + e2 - e1a, m - e2 + e1b, m - e2 - e1b], axis=1).reshape(-1, 12)
+    m = mean[SIGMA_WINDOW // 4 :]
+    want = np.stack([m + e2 + e1a, m + e2 - e1a, m - e2 + e1b, m - e2 - e1b], axis=1).reshape(
+        -1, 12
+    )
     np.testing.assert_allclose(values[4, SIGMA_WINDOW:], want, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(values[4, :SIGMA_WINDOW], values[3, :SIGMA_WINDOW])
     assert np.any(np.abs(values[4, SIGMA_WINDOW:] - values[3, SIGMA_WINDOW:]) > 1e-6)

@@ -15,16 +15,17 @@ One compiled closed-loop batch (the scenario's plant, ``wheel_fdi`` and controll
   discrepancies ``dw_x = w_PF - w_EKF`` and gradients ``g_x = grad det A_x`` give the
   reasons checked below.
 """
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi.control._attitude import wheel_attitude_controller, wheel_plant
 from jaxfdi._loop import detection_scorer, run_loop
-from jaxfdi.models._reaction_wheels import WheelCommand, filter_input
 from jaxfdi._metrics import binomial_lower_bound
+from jaxfdi.control._attitude import wheel_attitude_controller, wheel_plant
+from jaxfdi.models._reaction_wheels import WheelCommand, filter_input
 from jaxfdi.scenarios import reaction_wheels as rw
 
 RUNS, STEPS, ONSET = 20, 300, 200
@@ -43,17 +44,38 @@ def batch():
 
     def run(f, key, noise):
         fdi = rw.wheel_fdi(design, gyro_health=False)  # noise-free gyros would look frozen to it
-        plant = wheel_plant(params, f, noise * design.gyro_sigma, noise * design.disturbance_sigma,
-                            noise * design.wheel_noise_sigma)
-        controller = wheel_attitude_controller(params, design.gains, design.profile, design.initial_speeds)
+        plant = wheel_plant(
+            params,
+            f,
+            noise * design.gyro_sigma,
+            noise * design.disturbance_sigma,
+            noise * design.wheel_noise_sigma,
+        )
+        controller = wheel_attitude_controller(
+            params, design.gains, design.profile, design.initial_speeds
+        )
         x0 = jnp.concatenate([jnp.array([1.0, 0, 0, 0]), jnp.zeros(3), design.initial_speeds])
-        result = run_loop(plant, fdi, controller, x0, fdi.init(), key, STEPS,
-                          u0=WheelCommand(design.initial_speeds, jnp.zeros(4)),
-                          scorer=detection_scorer(f.onset, lambda out: out.decisions[2], single=True), keep_history=True)
+        result = run_loop(
+            plant,
+            fdi,
+            controller,
+            x0,
+            fdi.init(),
+            key,
+            STEPS,
+            u0=WheelCommand(design.initial_speeds, jnp.zeros(4)),
+            scorer=detection_scorer(f.onset, lambda out: out.decisions[2], single=True),
+            keep_history=True,
+        )
         h = result.history
-        return dict(credit=result.score, y=h.sensed.measurement.rate, engaged=h.output.engaged,
-                    u=jax.vmap(lambda c: filter_input(c, params))(h.control), F=h.output.hypothesis_parameter,
-                    healthy=jnp.all(h.output.healthy))
+        return dict(
+            credit=result.score,
+            y=h.sensed.measurement.rate,
+            engaged=h.output.engaged,
+            u=jax.vmap(lambda c: filter_input(c, params))(h.control),
+            F=h.output.hypothesis_parameter,
+            healthy=jnp.all(h.output.healthy),
+        )
 
     quiet = [rw.wheel_fault("stop", w, ONSET) for w in range(4)]
     noisy = rw.case_faults([("stop", w) for w in range(4)], RUNS, jax.random.key(12))
@@ -70,7 +92,14 @@ def batch():
 I_B = np.diag([3.118, 3.050, 4.055])
 I_W = 0.000239
 _S = np.sqrt(0.5)
-AXES = np.array([[_S * _S, _S * _S, _S], [-_S * _S, _S * _S, _S], [-_S * _S, -_S * _S, _S], [_S * _S, -_S * _S, _S]])
+AXES = np.array(
+    [
+        [_S * _S, _S * _S, _S],
+        [-_S * _S, _S * _S, _S],
+        [-_S * _S, -_S * _S, _S],
+        [_S * _S, -_S * _S, _S],
+    ]
+)
 MASKS = 1.0 - np.eye(4)
 
 
@@ -80,9 +109,11 @@ def skew(v):
 
 def transition(w, u, mask, dt=0.1):
     """RK4 over one step of ``I w' = -w x (I w + h) - h'``, wheel speeds ramping."""
+
     def field(x, t):
         h = I_W * (mask * (u[:4] + t * u[4:])) @ AXES
         return np.linalg.solve(I_B, -np.cross(x, I_B @ x + h) - I_W * (mask * u[4:]) @ AXES)
+
     k1 = field(w, 0)
     k2 = field(w + dt / 2 * k1, dt / 2)
     k3 = field(w + dt / 2 * k2, dt / 2)
@@ -115,16 +146,22 @@ def numpy_bank(y, u, engaged, u0, design, restart, until):
         return transition(m, uk, mask), F @ P @ F.T + q**2 * np.eye(3)
 
     def slaved(m, P, uk):
-        return [(mp, Pp, mp) for mp, Pp in (predict(m, P + widen, uk, mask, q_bank) for mask in MASKS)]
+        return [
+            (mp, Pp, mp) for mp, Pp in (predict(m, P + widen, uk, mask, q_bank) for mask in MASKS)
+        ]
 
-    first = int(np.argmax(engaged))  # engaged: the bank ran on its own at this step (the alarm one step before)
+    first = int(
+        np.argmax(engaged)
+    )  # engaged: the bank ran on its own at this step (the alarm one step before)
     nm, nP = np.zeros(3), float(design.initial_sigma) ** 2 * np.eye(3)
     bank = slaved(nm, nP, u0)
     F, pred, filt = (np.full((until, 4) + s, np.nan) for s in ((), (3,), (3,)))
     for k in range(until):
         nmf, nPf = update(nm, nP, y[k])
         nm, nP = predict(nmf, nPf, u[k], np.ones(4), q_nominal)
-        if k < first - 1:  # until the alarm the bank is re-slaved every step: only its last start matters
+        if (
+            k < first - 1
+        ):  # until the alarm the bank is re-slaved every step: only its last start matters
             bank = slaved(nmf, nPf, u[k]) if k == first - 2 else bank
             continue
         new = []
@@ -133,7 +170,9 @@ def numpy_bank(y, u, engaged, u0, design, restart, until):
             F[k, x] = abs(det_a(p, u[k], MASKS[x]) - det_a(mf, u[k], MASKS[x]))
             pred[k, x], filt[k, x] = p, mf
             start = mf if restart and not engaged[k] else p
-            new.append((*predict(mf, Pf, u[k], MASKS[x], q_bank), transition(start, u[k], MASKS[x])))
+            new.append(
+                (*predict(mf, Pf, u[k], MASKS[x], q_bank), transition(start, u[k], MASKS[x]))
+            )
         bank = new if engaged[k + 1] else slaved(nmf, nPf, u[k])
     return F, pred, filt
 
@@ -147,13 +186,27 @@ def explained(batch):
     for w in range(4):
         alarm = int(np.argmax(out["engaged"][w])) - 1
         for restart in (True, False):
-            F, pred, filt = numpy_bank(out["y"][w], out["u"][w], out["engaged"][w], u0, design, restart, alarm + LAGS[-1] + 1)
+            F, pred, filt = numpy_bank(
+                out["y"][w],
+                out["u"][w],
+                out["engaged"][w],
+                u0,
+                design,
+                restart,
+                alarm + LAGS[-1] + 1,
+            )
             rows = []
             for lag in LAGS:
                 k = alarm + lag
                 dw = pred[k] - filt[k]
-                g = np.array([jacobian(lambda x: np.atleast_1d(det_a(x, out["u"][w][k], MASKS[i])), filt[k, i])[0]
-                              for i in range(4)])
+                g = np.array(
+                    [
+                        jacobian(
+                            lambda x: np.atleast_1d(det_a(x, out["u"][w][k], MASKS[i])), filt[k, i]
+                        )[0]
+                        for i in range(4)
+                    ]
+                )
                 cos = np.sum(g * dw, 1) / np.linalg.norm(g, axis=1) / np.linalg.norm(dw, axis=1)
                 rows.append(dict(F=F[k], dw=np.linalg.norm(dw, axis=1), cos=cos))
             result[w, restart] = dict(alarm=alarm, F=F, rows=rows)
@@ -221,8 +274,10 @@ def test_credit_isolator_rates_per_wheel(batch):
     at = alarm + LAGS[-1]
     assert np.all(at < STEPS), at
     top_late = np.argmin(out["F"][noisy][np.arange(4 * RUNS), at], axis=1) == wheel
-    bounds = {name: [clopper_pearson_lower(int(hit[wheel == w].sum()), RUNS) for w in range(4)]
-              for name, hit in (("isolated", right), ("top_at_4s", top_late))}
+    bounds = {
+        name: [clopper_pearson_lower(int(hit[wheel == w].sum()), RUNS) for w in range(4)]
+        for name, hit in (("isolated", right), ("top_at_4s", top_late))
+    }
     for w in (1, 2, 3):
         assert bounds["isolated"][w] > 0.10, bounds
         assert bounds["top_at_4s"][w] > 0.70, bounds

@@ -1,6 +1,7 @@
 """Tuning: parameterisations (round trips, validity at extremes), losses (finite
 differences, the hard-decision limit against a brute-force count), the optax loop
 (early stopping, save/load) and maximum-likelihood recovery of known Q and R."""
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,11 +14,7 @@ from jaxfdi import tuning
 from jaxfdi.models import LinearGaussianModel
 from jaxfdi.models._fault_modes import noise_inflation_modes
 
-PAPER_PI = np.array([
-    [0.94, 0.03, 0.03],
-    [0.05, 0.95, 0.00],
-    [0.01, 0.00, 0.99],
-])
+PAPER_PI = np.array([[0.94, 0.03, 0.03], [0.05, 0.95, 0.00], [0.01, 0.00, 0.99]])
 
 
 # ---------------------------------------------------------------- parameterisations
@@ -43,7 +40,10 @@ def test_every_transform_round_trips():
     cases = [
         (tuning.stochastic_rows(PAPER_PI > 0), PAPER_PI),
         (tuning.stochastic_rows(), np.full((3, 3), 1 / 3)),
-        (tuning.stochastic_rows(), np.array([[0.9, 0.1, 0.0], [0.0, 1.0, 0.0], [0.2, 0.0, 0.8]])),  # allowed zeros
+        (
+            tuning.stochastic_rows(),
+            np.array([[0.9, 0.1, 0.0], [0.0, 1.0, 0.0], [0.2, 0.0, 0.8]]),
+        ),  # allowed zeros
         (tuning.simplex(), np.array([0.94, 0.01, 0.05, 0.0])),
         (tuning.log_diagonal(), np.diag([1e-8, 1.0, 1e6])),
         (tuning.cholesky_factor(), cov),
@@ -54,14 +54,19 @@ def test_every_transform_round_trips():
         (tuning.unit_interval(), np.array([1e-9, 0.5, 1 - 1e-9])),
     ]
     for t, value in cases:
-        np.testing.assert_allclose(t.forward(t.inverse(jnp.asarray(value))), value, rtol=1e-9, atol=1e-14,
-                                   err_msg=t.name)
+        np.testing.assert_allclose(
+            t.forward(t.inverse(jnp.asarray(value))), value, rtol=1e-9, atol=1e-14, err_msg=t.name
+        )
     raw = rng.normal(size=(4, 4))  # unconstrained -> constrained -> unconstrained
     t = tuning.cholesky_factor()
     np.testing.assert_allclose(t.inverse(t.forward(raw)), np.tril(raw), rtol=1e-10, atol=1e-12)
     for t in (tuning.positive(), jaxfdi.tuning._parameterize.log_scale()):
-        np.testing.assert_allclose(t.inverse(t.forward(jnp.array([-20.0, 0.0, 30.0]))), [-20.0, 0.0, 30.0],
-                                   rtol=1e-9, err_msg=t.name)
+        np.testing.assert_allclose(
+            t.inverse(t.forward(jnp.array([-20.0, 0.0, 30.0]))),
+            [-20.0, 0.0, 30.0],
+            rtol=1e-9,
+            err_msg=t.name,
+        )
 
 
 @pytest.mark.parametrize("scale", [1.0, 10.0])
@@ -78,7 +83,10 @@ def test_partition_constrain_and_bad_names():
     raw = tuning.unconstrain(parameterization, {"pi": PAPER_PI, "h": 2.0})
     train, frozen = jaxfdi.tuning._parameterize.partition(raw, ["h"])
     assert list(train) == ["h"] and list(frozen) == ["pi"]
-    np.testing.assert_allclose(tuning.constrain(parameterization, jaxfdi.tuning._parameterize.merge(train, frozen))["h"], 2.0)
+    np.testing.assert_allclose(
+        tuning.constrain(parameterization, jaxfdi.tuning._parameterize.merge(train, frozen))["h"],
+        2.0,
+    )
     with pytest.raises(ValueError, match="trainable: unknown names"):
         jaxfdi.tuning._parameterize.partition(raw, ["nope"])
     with pytest.raises(ValueError, match="no transform for"):
@@ -92,8 +100,13 @@ def test_partition_constrain_and_bad_names():
 # ---------------------------------------------------------------- losses
 def small_model():
     return LinearGaussianModel(
-        Phi=jnp.array([[0.9, 0.1], [0.0, 0.8]]), Gamma=jnp.array([[0.0], [1.0]]),
-        C=jnp.eye(2), D=jnp.zeros((2, 1)), Q=jnp.diag(jnp.array([0.5, 0.2])), R=jnp.diag(jnp.array([1.0, 0.3])))
+        Phi=jnp.array([[0.9, 0.1], [0.0, 0.8]]),
+        Gamma=jnp.array([[0.0], [1.0]]),
+        C=jnp.eye(2),
+        D=jnp.zeros((2, 1)),
+        Q=jnp.diag(jnp.array([0.5, 0.2])),
+        R=jnp.diag(jnp.array([1.0, 0.3])),
+    )
 
 
 def small_data(num_runs, T, seed):
@@ -106,7 +119,9 @@ def small_data(num_runs, T, seed):
 
 def kf_nll(raw, batch):
     ys, us = batch
-    model = small_model()._replace(Q=jnp.diag(jnp.exp(raw["log_q"])), R=jnp.diag(jnp.exp(raw["log_r"])))
+    model = small_model()._replace(
+        Q=jnp.diag(jnp.exp(raw["log_q"])), R=jnp.diag(jnp.exp(raw["log_r"]))
+    )
     kf = jaxfdi.filters.kalman_filter(model)
 
     def one(y):
@@ -135,9 +150,13 @@ def test_innovation_nll_gradient_matches_finite_differences_and_equals_exact_lik
             blocks[i][j] = C @ cross @ C.T + (np.asarray(model.R) if i == j else 0.0)
     Sigma = np.block(blocks)
     y = np.asarray(ys[0, :T]).ravel()
-    exact = -0.5 * (y @ np.linalg.solve(Sigma, y) + np.linalg.slogdet(Sigma)[1] + y.size * np.log(2 * np.pi))
-    got = -T * kf_nll({"log_q": jnp.log(jnp.diag(model.Q)), "log_r": jnp.log(jnp.diag(model.R))},
-                      (ys[:1, :T], us[:T]))
+    exact = -0.5 * (
+        y @ np.linalg.solve(Sigma, y) + np.linalg.slogdet(Sigma)[1] + y.size * np.log(2 * np.pi)
+    )
+    got = -T * kf_nll(
+        {"log_q": jnp.log(jnp.diag(model.Q)), "log_r": jnp.log(jnp.diag(model.R))},
+        (ys[:1, :T], us[:T]),
+    )
     np.testing.assert_allclose(got, exact, rtol=1e-10)
 
 
@@ -151,14 +170,25 @@ def test_mode_cross_entropy_matches_direct_formula_and_gradients_through_an_imm(
 
     def loss(raw):
         m = noise_inflation_modes(model, jnp.exp(raw["log_inflation"]), 0.5)
-        imm = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, m, pi_t.forward(raw["logits"]))
-        _, info = jaxfdi.filters.run_filter(imm, imm.init(jnp.zeros(2), model.Q, jnp.full(4, 0.25)), ys[0], us)
+        imm = jaxfdi.filters.interacting_multiple_model(
+            jaxfdi.filters.kalman_filter, m, pi_t.forward(raw["logits"])
+        )
+        _, info = jaxfdi.filters.run_filter(
+            imm, imm.init(jnp.zeros(2), model.Q, jnp.full(4, 0.25)), ys[0], us
+        )
         return tuning.mode_cross_entropy(info.log_mode_prob, labels)
 
-    raw = {"logits": jnp.log(jnp.full((4, 4), 0.02) + 0.9 * jnp.eye(4)), "log_inflation": jnp.log(100.0)}
+    raw = {
+        "logits": jnp.log(jnp.full((4, 4), 0.02) + 0.9 * jnp.eye(4)),
+        "log_inflation": jnp.log(100.0),
+    }
     check_grads(loss, (raw,), order=1, modes=["rev"], atol=1e-6, rtol=1e-5)
-    imm = jaxfdi.filters.interacting_multiple_model(jaxfdi.filters.kalman_filter, modes, pi_t.forward(raw["logits"]))
-    _, info = jaxfdi.filters.run_filter(imm, imm.init(jnp.zeros(2), model.Q, jnp.full(4, 0.25)), ys[0], us)
+    imm = jaxfdi.filters.interacting_multiple_model(
+        jaxfdi.filters.kalman_filter, modes, pi_t.forward(raw["logits"])
+    )
+    _, info = jaxfdi.filters.run_filter(
+        imm, imm.init(jnp.zeros(2), model.Q, jnp.full(4, 0.25)), ys[0], us
+    )
     direct = -np.mean(np.log(np.asarray(info.mode_prob)[np.arange(40), np.asarray(labels)] + 1e-12))
     np.testing.assert_allclose(loss(raw), direct, rtol=1e-9)
     with pytest.raises(ValueError, match="true_mode: expected shape"):
@@ -185,11 +215,20 @@ def test_soft_detection_loss_tends_to_the_hard_counts_and_has_correct_gradients(
         statistic[np.abs(statistic - h) < 1e-3] += 0.01  # keep away from the threshold itself
         margin = rng.normal(size=T)  # the label an alarm would carry is wrong where margin > 0
         margin[np.abs(margin) < 1e-3] += 0.01
-        _, parts = tuning.soft_detection_loss(jnp.asarray(statistic), h, onset, temperature=1e-6,
-                                              wrong_label_margin=jnp.asarray(margin))
+        _, parts = tuning.soft_detection_loss(
+            jnp.asarray(statistic),
+            h,
+            onset,
+            temperature=1e-6,
+            wrong_label_margin=jnp.asarray(margin),
+        )
         expected = brute_force_rates(statistic >= h, min(onset, T), margin > 0)
-        np.testing.assert_allclose([parts[k] for k in ("false_alarm", "missed", "delay", "misisolated")], expected,
-                                   atol=1e-6, err_msg=f"trial {trial}")
+        np.testing.assert_allclose(
+            [parts[k] for k in ("false_alarm", "missed", "delay", "misisolated")],
+            expected,
+            atol=1e-6,
+            err_msg=f"trial {trial}",
+        )
     s = jnp.asarray(rng.normal(size=T) + np.where(np.arange(T) >= 30, 1.0, 0.0))
     margin = jnp.asarray(rng.normal(size=T))
 
@@ -229,9 +268,19 @@ def ml_fit():
     def loss(raw, batch):
         return kf_nll({"log_q": raw["Q"], "log_r": raw["R"]}, batch)
 
-    runs = jaxfdi.tuning._train.fixed_batches(train[0], 8, jax.random.key(0))  # mini-batches of 8 of the 16 runs
-    result = tuning.fit(loss, raw0, optax.adam(0.05), lambda step: (runs(step), train[1]), val,
-                        steps=300, eval_every=20, patience=4)
+    runs = jaxfdi.tuning._train.fixed_batches(
+        train[0], 8, jax.random.key(0)
+    )  # mini-batches of 8 of the 16 runs
+    result = tuning.fit(
+        loss,
+        raw0,
+        optax.adam(0.05),
+        lambda step: (runs(step), train[1]),
+        val,
+        steps=300,
+        eval_every=20,
+        patience=4,
+    )
     return result, parameterization
 
 
@@ -248,11 +297,21 @@ def test_maximum_likelihood_recovers_q_and_r_within_ten_percent(ml_fit):
 def test_fit_keeps_the_best_validation_step_and_stops_early():
     """A loss whose training batches pull away from the validation optimum: the returned
     parameters are the best-validation ones, and training stops after `patience`."""
+
     def loss(raw, target):
         return (raw["x"] - target) ** 2
 
-    result = tuning.fit(loss, {"x": jnp.array(0.0), "fixed": jnp.array(5.0)}, optax.sgd(0.1),
-                        lambda step: 3.0, 1.0, steps=200, trainable=["x"], eval_every=1, patience=3)
+    result = tuning.fit(
+        loss,
+        {"x": jnp.array(0.0), "fixed": jnp.array(5.0)},
+        optax.sgd(0.1),
+        lambda step: 3.0,
+        1.0,
+        steps=200,
+        trainable=["x"],
+        eval_every=1,
+        patience=3,
+    )
     h = result.history
     assert h.stopped_early and h.step[-1] < 200
     assert h.val_loss.min() == pytest.approx((float(result.raw["x"]) - 1.0) ** 2)
@@ -261,8 +320,11 @@ def test_fit_keeps_the_best_validation_step_and_stops_early():
 
 @pytest.mark.parametrize("suffix", [".npz", ".json"])
 def test_save_and_load_round_trip_with_the_parameterisation(tmp_path, suffix):
-    parameterization = {"pi": tuning.stochastic_rows(PAPER_PI > 0), "Q": tuning.cholesky_factor(),
-                        "h": tuning.positive(floor=1.0)}
+    parameterization = {
+        "pi": tuning.stochastic_rows(PAPER_PI > 0),
+        "Q": tuning.cholesky_factor(),
+        "h": tuning.positive(floor=1.0),
+    }
     params = {"pi": PAPER_PI, "Q": np.array([[2.0, 0.3], [0.3, 1.0]]), "h": np.array(4.0)}
     raw = tuning.unconstrain(parameterization, params)
     path = tuning.save_params(tmp_path / f"tuned{suffix}", raw, parameterization, {"note": "test"})
@@ -292,7 +354,9 @@ def test_a_corrupted_parameter_file_names_the_file_and_the_problem(tmp_path):
     for name, content in cases.items():
         path = tmp_path / name
         path.write_bytes(content)
-        with pytest.raises(ValueError, match=f"{name}: not a parameter file written by save_params"):
+        with pytest.raises(
+            ValueError, match=f"{name}: not a parameter file written by save_params"
+        ):
             tuning.load_params(path)
     with pytest.raises(ValueError, match="missing field 'parameterization'"):
         tuning.load_params(tmp_path / "missing.json")

@@ -15,6 +15,7 @@ with ``b2v = b / (2 V)`` and the damping derivatives ``CXq ... Cnp`` from ``DAMP
 ``SIGN(1.0, BETA)`` (+1 at 0), and ``|beta|`` is taken on the same branch, so the derivative at ``beta = 0`` is the
 table's slope (``jnp.sign`` would give 0 there and break the linearisation of every symmetric trim).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -36,8 +37,20 @@ class AeroCoefficients(NamedTuple):
     Cn: Array
 
 
-def table_coefficients(tables: AeroTables, alpha_deg: Array, beta_deg: Array, el: Array, ail: Array, rdr: Array,
-                       p: Array, q: Array, r: Array, vt: Array, span: Array, chord: Array) -> AeroCoefficients:
+def table_coefficients(
+    tables: AeroTables,
+    alpha_deg: Array,
+    beta_deg: Array,
+    el: Array,
+    ail: Array,
+    rdr: Array,
+    p: Array,
+    q: Array,
+    r: Array,
+    vt: Array,
+    span: Array,
+    chord: Array,
+) -> AeroCoefficients:
     """Total coefficients of the table model, damping included (module doc)."""
     positive = beta_deg >= 0
     sign = jnp.where(positive, 1.0, -1.0)
@@ -53,12 +66,28 @@ def table_coefficients(tables: AeroTables, alpha_deg: Array, beta_deg: Array, el
     b2v = span * half_over_v
     cq = chord * q * half_over_v
     CX = interpolate2(tables.CX, *e, *a) + cq * damp[0]
-    CY = tables.cy_beta * beta_deg + tables.cy_ail * dail + tables.cy_rdr * drdr + b2v * (damp[1] * r + damp[2] * p)
-    CZ = (interpolate1(tables.CZ, *a) * (1.0 - (beta_deg / tables.cz_beta_factor) ** 2)
-          + tables.cz_el * el / tables.el_norm + cq * damp[3])
-    Cl = (sign * interpolate2(tables.CL, *b_abs, *a) + interpolate2(tables.DLDA, *b, *a) * dail
-          + interpolate2(tables.DLDR, *b, *a) * drdr + b2v * (damp[4] * r + damp[5] * p))
+    CY = (
+        tables.cy_beta * beta_deg
+        + tables.cy_ail * dail
+        + tables.cy_rdr * drdr
+        + b2v * (damp[1] * r + damp[2] * p)
+    )
+    CZ = (
+        interpolate1(tables.CZ, *a) * (1.0 - (beta_deg / tables.cz_beta_factor) ** 2)
+        + tables.cz_el * el / tables.el_norm
+        + cq * damp[3]
+    )
+    Cl = (
+        sign * interpolate2(tables.CL, *b_abs, *a)
+        + interpolate2(tables.DLDA, *b, *a) * dail
+        + interpolate2(tables.DLDR, *b, *a) * drdr
+        + b2v * (damp[4] * r + damp[5] * p)
+    )
     Cm = interpolate2(tables.CM, *e, *a) + cq * damp[6]
-    Cn = (sign * interpolate2(tables.CN, *b_abs, *a) + interpolate2(tables.DNDA, *b, *a) * dail
-          + interpolate2(tables.DNDR, *b, *a) * drdr + b2v * (damp[7] * r + damp[8] * p))
+    Cn = (
+        sign * interpolate2(tables.CN, *b_abs, *a)
+        + interpolate2(tables.DNDA, *b, *a) * dail
+        + interpolate2(tables.DNDR, *b, *a) * drdr
+        + b2v * (damp[7] * r + damp[8] * p)
+    )
     return AeroCoefficients(CX, CY, CZ, Cl, Cm, Cn)

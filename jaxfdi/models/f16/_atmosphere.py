@@ -7,6 +7,7 @@ isothermal layer above 35 000 ft::
 
 (The book uses ``tfac`` in the density at every altitude, as coded here.)
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple

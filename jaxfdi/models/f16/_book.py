@@ -6,6 +6,7 @@ All twenty cases are trimmed in one vmapped solve (``trim_book_cases``). Printed
 (``printed_decimals``): Table 3.6-2 three significant digits, at most three decimals (the data file drops
 trailing zeros: 0.2 is 0.200, -0.09 is -0.090); Table 3.6-3 the data file's digits.
 """
+
 from __future__ import annotations
 
 import math
@@ -20,10 +21,18 @@ from jaxfdi.models.f16._trim import TrimResult, trim_batch, trim_condition
 
 #: where each printed quantity is found: (``"state"`` or ``"control"``, index, to degrees)
 QUANTITIES = {
-    "thtl": ("control", 0, False), "el_deg": ("control", 1, False), "ail_deg": ("control", 2, False),
-    "rdr_deg": ("control", 3, False), "alpha_deg": ("state", 1, True), "alpha_rad": ("state", 1, False),
-    "beta_rad": ("state", 2, False), "phi_rad": ("state", 3, False), "theta_rad": ("state", 4, False),
-    "P_rad_s": ("state", 6, False), "Q_rad_s": ("state", 7, False), "R_rad_s": ("state", 8, False),
+    "thtl": ("control", 0, False),
+    "el_deg": ("control", 1, False),
+    "ail_deg": ("control", 2, False),
+    "rdr_deg": ("control", 3, False),
+    "alpha_deg": ("state", 1, True),
+    "alpha_rad": ("state", 1, False),
+    "beta_rad": ("state", 2, False),
+    "phi_rad": ("state", 3, False),
+    "theta_rad": ("state", 4, False),
+    "P_rad_s": ("state", 6, False),
+    "Q_rad_s": ("state", 7, False),
+    "R_rad_s": ("state", 8, False),
 }
 #: the lateral cells of the level cases of Table 3.6-3, zero by symmetry (the book prints its
 #: optimiser's residue, |value| < 5e-6)
@@ -55,13 +64,25 @@ def book_cases() -> list[BookCase]:
     ref = stevens_lewis_data()["reference_trim_points"]
     cases = []
     for vt, thtl, alpha, el in ref["table_3_6_2_level_flight_sea_level_xcg_0_35"]["rows"]:
-        cases.append(BookCase("3.6-2", f"level {vt:g} ft/s", float(vt), 0.0, 0.35,
-                              {"thtl": thtl, "alpha_deg": alpha, "el_deg": el}))
+        cases.append(
+            BookCase(
+                "3.6-2",
+                f"level {vt:g} ft/s",
+                float(vt),
+                0.0,
+                0.35,
+                {"thtl": thtl, "alpha_deg": alpha, "el_deg": el},
+            )
+        )
     for row in ref["table_3_6_3_VT_502_ft_s_sea_level"]:
         label = row["case"]
         xcg = float(label.split("xcg=")[1])
         turn = 0.3 if label.startswith("coordinated turn 0.3") else 0.0
-        cases.append(BookCase("3.6-3", label, 502.0, turn, xcg, {k: v for k, v in row.items() if k != "case"}))
+        cases.append(
+            BookCase(
+                "3.6-3", label, 502.0, turn, xcg, {k: v for k, v in row.items() if k != "case"}
+            )
+        )
     return cases
 
 
@@ -69,8 +90,13 @@ def trim_book_cases(params: F16Params, cases: list[BookCase] | None = None) -> T
     """Every case trimmed at once (``trim_batch``; sea level, no climb); a stacked ``TrimResult`` (N, ...)."""
     cases = book_cases() if cases is None else cases
     dtype = params.mass.dtype
-    conditions = trim_condition(np.array([c.airspeed for c in cases]), 0.0, 0.0,
-                                np.array([c.turn_rate for c in cases]), dtype=dtype)
+    conditions = trim_condition(
+        np.array([c.airspeed for c in cases]),
+        0.0,
+        0.0,
+        np.array([c.turn_rate for c in cases]),
+        dtype=dtype,
+    )
     return trim_batch(params, conditions, jnp.asarray([c.xcg for c in cases], dtype))
 
 
@@ -102,12 +128,28 @@ def comparison_rows(result: TrimResult, cases: list[BookCase] | None = None) -> 
         for quantity, book_value in case.printed.items():
             value = ours(result, i, quantity)
             half = 0.5 * 10.0 ** (-printed_decimals(book_value, case.table))
-            symmetric = case.table == "3.6-3" and case.turn_rate == 0.0 and quantity in SYMMETRIC_ZEROS
-            cells[quantity] = {"ours": value, "book": book_value, "half_unit": half,
-                               "half_units": abs(value - book_value) / half, "symmetric_zero": symmetric}
-        rows.append({"table": case.table, "case": case.label, "airspeed_ft_s": case.airspeed, "xcg": case.xcg,
-                     "turn_rate_rad_s": case.turn_rate, "cells": cells,
-                     "max_abs_residual": float(np.max(np.abs(np.asarray(result.residual[i])))),
-                     "converged": bool(result.converged[i]), "within_limits": bool(result.within_limits[i]),
-                     "steps": int(result.steps[i])})
+            symmetric = (
+                case.table == "3.6-3" and case.turn_rate == 0.0 and quantity in SYMMETRIC_ZEROS
+            )
+            cells[quantity] = {
+                "ours": value,
+                "book": book_value,
+                "half_unit": half,
+                "half_units": abs(value - book_value) / half,
+                "symmetric_zero": symmetric,
+            }
+        rows.append(
+            {
+                "table": case.table,
+                "case": case.label,
+                "airspeed_ft_s": case.airspeed,
+                "xcg": case.xcg,
+                "turn_rate_rad_s": case.turn_rate,
+                "cells": cells,
+                "max_abs_residual": float(np.max(np.abs(np.asarray(result.residual[i])))),
+                "converged": bool(result.converged[i]),
+                "within_limits": bool(result.within_limits[i]),
+                "steps": int(result.steps[i]),
+            }
+        )
     return rows

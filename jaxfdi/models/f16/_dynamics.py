@@ -20,6 +20,7 @@ cos(beta)``, ``V = VT sin(beta)``, ``W = VT sin(alpha) cos(beta)``::
 shift (fractions of ``cbar``), both aero models: ``Cm += CZ (xcg_ref - xcg)``, ``Cn -= CY (xcg_ref - xcg) cbar / b``.
 ``f16_dynamics`` does not clip (trims are found and checked without it; limits: ``saturate``).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -31,9 +32,20 @@ from jaxfdi import _checks
 from jaxfdi.models.f16._aero import AeroCoefficients, table_coefficients
 from jaxfdi.models.f16._atmosphere import air_data
 from jaxfdi.models.f16._engine import power_rate, throttle_gearing, thrust
-from jaxfdi.models.f16._morelli import MorelliCoefficients, morelli_coefficients_data, polynomial_coefficients
-from jaxfdi.models.f16._tables import (AeroTables, AtmosphereData, EngineData, aero_tables, atmosphere_data,
-                                       engine_data, stevens_lewis_data)
+from jaxfdi.models.f16._morelli import (
+    MorelliCoefficients,
+    morelli_coefficients_data,
+    polynomial_coefficients,
+)
+from jaxfdi.models.f16._tables import (
+    AeroTables,
+    AtmosphereData,
+    EngineData,
+    aero_tables,
+    atmosphere_data,
+    engine_data,
+    stevens_lewis_data,
+)
 
 #: the 13 states, in order: airspeed, angles of attack and sideslip, Euler angles, body rates,
 #: north and east position, altitude, engine power
@@ -81,9 +93,15 @@ class F16Params(NamedTuple):
     control_upper: Array
 
 
-def f16_params(aero: str = "tables", profile: str = "stevens_lewis_2nd_ed", xcg: float = 0.35,
-               mass: float | None = None, jxz: float | None = None, aileron_limit: float | None = None,
-               dtype=None) -> F16Params:
+def f16_params(
+    aero: str = "tables",
+    profile: str = "stevens_lewis_2nd_ed",
+    xcg: float = 0.35,
+    mass: float | None = None,
+    jxz: float | None = None,
+    aileron_limit: float | None = None,
+    dtype=None,
+) -> F16Params:
     """The Stevens & Lewis F-16 (``f16_stevens_lewis.json``).
 
     Args:
@@ -104,31 +122,58 @@ def f16_params(aero: str = "tables", profile: str = "stevens_lewis_2nd_ed", xcg:
         raise ValueError(f"aero: expected 'tables' or 'morelli', got {aero!r}")
     if mass is not None:
         _checks.check_positive("mass", mass, "a positive mass [slug]")
-    _checks.check_scalar("xcg", xcg, 0.0, 1.0, meaning="a centre of gravity in [0, 1] of the mean chord")
+    _checks.check_scalar(
+        "xcg", xcg, 0.0, 1.0, meaning="a centre of gravity in [0, 1] of the mean chord"
+    )
     if aileron_limit is not None:
-        _checks.check_scalar("aileron_limit", aileron_limit, 0.0, 90.0, low_open=True,
-                             meaning="an aileron deflection limit in (0, 90] degrees")
+        _checks.check_scalar(
+            "aileron_limit",
+            aileron_limit,
+            0.0,
+            90.0,
+            low_open=True,
+            meaning="an aileron deflection limit in (0, 90] degrees",
+        )
     if jxz is not None:
         _checks.check_scalar("jxz", jxz, meaning="a finite product of inertia [slug ft^2]")
     dtype = dtype or jnp.result_type(float)
     data = stevens_lewis_data()
     mg, lim = data["mass_geometry"], data["limits"]
-    if jxz is not None and _checks.concrete(jxz) is not None:   # positive definite: Jxx Jzz - Jxz^2 > 0
+    if (
+        jxz is not None and _checks.concrete(jxz) is not None
+    ):  # positive definite: Jxx Jzz - Jxz^2 > 0
         bound = (mg["Jxx_slug_ft2"] * mg["Jzz_slug_ft2"]) ** 0.5
         if not abs(float(_checks.concrete(jxz))) < bound:
-            raise ValueError(f"jxz: expected |Jxz| < sqrt(Jxx Jzz) = {bound:.6g} slug ft^2 (a positive definite "
-                             f"inertia tensor), got {_checks.received(jxz)}")
-    a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
+            raise ValueError(
+                f"jxz: expected |Jxz| < sqrt(Jxx Jzz) = {bound:.6g} slug ft^2 (a positive definite "
+                f"inertia tensor), got {_checks.received(jxz)}"
+            )
+    a = lambda v: jnp.asarray(v, dtype)
     model = aero_tables(profile, dtype) if aero == "tables" else morelli_coefficients_data(dtype)
     ail = lim["aileron_deg"][1] if aileron_limit is None else aileron_limit
     lower = [lim["throttle"][0], lim["elevator_deg"][0], -ail, lim["rudder_deg"][0]]
     upper = [lim["throttle"][1], lim["elevator_deg"][1], ail, lim["rudder_deg"][1]]
-    inertia = [mg["Jxx_slug_ft2"], mg["Jyy_slug_ft2"], mg["Jzz_slug_ft2"], mg["Jxz_slug_ft2"] if jxz is None else jxz]
+    inertia = [
+        mg["Jxx_slug_ft2"],
+        mg["Jyy_slug_ft2"],
+        mg["Jzz_slug_ft2"],
+        mg["Jxz_slug_ft2"] if jxz is None else jxz,
+    ]
     return F16Params(
-        model, engine_data(profile, dtype), atmosphere_data(dtype),
-        a(mg["mass_slug"]["value"] if mass is None else mass), a(inertia), a(mg["S_ft2"]), a(mg["b_ft"]),
-        a(mg["cbar_ft"]), a(mg["xcg_ref_frac_cbar"]), a(xcg), a(mg["hx_engine_angular_momentum_slug_ft2_s"]["value"]),
-        a(mg["g0_ft_s2"]["value"]), a(lower), a(upper),
+        model,
+        engine_data(profile, dtype),
+        atmosphere_data(dtype),
+        a(mg["mass_slug"]["value"] if mass is None else mass),
+        a(inertia),
+        a(mg["S_ft2"]),
+        a(mg["b_ft"]),
+        a(mg["cbar_ft"]),
+        a(mg["xcg_ref_frac_cbar"]),
+        a(xcg),
+        a(mg["hx_engine_angular_momentum_slug_ft2_s"]["value"]),
+        a(mg["g0_ft_s2"]["value"]),
+        a(lower),
+        a(upper),
     )
 
 
@@ -136,18 +181,40 @@ def inertia_constants(inertia: Array) -> tuple[Array, ...]:
     """``c1 .. c9`` of Stevens & Lewis eq. 2.4-6 from ``(Jxx, Jyy, Jzz, Jxz)``."""
     jxx, jyy, jzz, jxz = (inertia[i] for i in range(4))
     gam = jxx * jzz - jxz * jxz
-    return (((jyy - jzz) * jzz - jxz * jxz) / gam, (jxx - jyy + jzz) * jxz / gam, jzz / gam, jxz / gam,
-            (jzz - jxx) / jyy, jxz / jyy, 1.0 / jyy, (jxx * (jxx - jyy) + jxz * jxz) / gam, jxx / gam)
+    return (
+        ((jyy - jzz) * jzz - jxz * jxz) / gam,
+        (jxx - jyy + jzz) * jxz / gam,
+        jzz / gam,
+        jxz / gam,
+        (jzz - jxx) / jyy,
+        jxz / jyy,
+        1.0 / jyy,
+        (jxx * (jxx - jyy) + jxz * jxz) / gam,
+        jxx / gam,
+    )
 
 
-def aero_coefficients(params: F16Params, x: Array, u: Array, gust: Array | None = None) -> AeroCoefficients:
+def aero_coefficients(
+    params: F16Params, x: Array, u: Array, gust: Array | None = None
+) -> AeroCoefficients:
     """Total coefficients at ``params.xcg`` (model by ``params.aero``'s type, plus the c.g. shift);
     ``gust`` (2,): alpha and beta increments (rad) seen by the aerodynamics only."""
     alpha, beta = x[ALPHA], x[BETA]
     if gust is not None:
         alpha, beta = alpha + gust[0], beta + gust[1]
-    args = (alpha * RAD_TO_DEG, beta * RAD_TO_DEG, u[EL], u[AIL], u[RDR], x[P], x[Q], x[R], x[VT], params.span,
-            params.chord)
+    args = (
+        alpha * RAD_TO_DEG,
+        beta * RAD_TO_DEG,
+        u[EL],
+        u[AIL],
+        u[RDR],
+        x[P],
+        x[Q],
+        x[R],
+        x[VT],
+        params.span,
+        params.chord,
+    )
     if isinstance(params.aero, MorelliCoefficients):
         c = polynomial_coefficients(params.aero, *args)
     else:
@@ -156,8 +223,9 @@ def aero_coefficients(params: F16Params, x: Array, u: Array, gust: Array | None 
     return c._replace(Cm=c.Cm + c.CZ * shift, Cn=c.Cn - c.CY * shift * params.chord / params.span)
 
 
-def moment_equations(p: Array, q: Array, r: Array, c: AeroCoefficients, qs: Array,
-                     params: F16Params) -> tuple[Array, Array, Array]:
+def moment_equations(
+    p: Array, q: Array, r: Array, c: AeroCoefficients, qs: Array, params: F16Params
+) -> tuple[Array, Array, Array]:
     """``(P', Q', R')`` (Park et al. 2004, eqs. 34-36; Stevens & Lewis eq. 2.5-16 with ``hx``) from the
     coefficients ``c`` and ``qs = qbar S``; shared with ``models.f16.rates`` (the UKF's model)."""
     c1, c2, c3, c4, c5, c6, c7, c8, c9 = inertia_constants(params.inertia)
@@ -180,7 +248,9 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
     """
     _checks.check_real("x", x, "a real state")
     _checks.check_real("u", u, "real controls")
-    _checks.check_shape("x", x, (13,), "[VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]")
+    _checks.check_shape(
+        "x", x, (13,), "[VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]"
+    )
     _checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
     if gust is not None:
         _checks.check_shape("gust", gust, (2,), "angle-of-attack and sideslip increments, rad")
@@ -216,17 +286,42 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
     p_dot, q_dot, r_dot = moment_equations(p, q, r, c, qs, params)
 
     # navigation: body velocities rotated to north-east-up (Stevens & Lewis eq. 2.5-18)
-    north = (u_b * cth * cpsi + v_b * (sph * sth * cpsi - cph * spsi) + w_b * (cph * sth * cpsi + sph * spsi))
-    east = (u_b * cth * spsi + v_b * (sph * sth * spsi + cph * cpsi) + w_b * (cph * sth * spsi - sph * cpsi))
+    north = (
+        u_b * cth * cpsi
+        + v_b * (sph * sth * cpsi - cph * spsi)
+        + w_b * (cph * sth * cpsi + sph * spsi)
+    )
+    east = (
+        u_b * cth * spsi
+        + v_b * (sph * sth * spsi + cph * cpsi)
+        + w_b * (cph * sth * spsi - sph * cpsi)
+    )
     up = u_b * sth - v_b * sph * cth - w_b * cph * cth
-    return jnp.stack([vt_dot, alpha_dot, beta_dot, phi_dot, theta_dot, psi_dot, p_dot, q_dot, r_dot, north, east, up,
-                      power_dot])
+    return jnp.stack(
+        [
+            vt_dot,
+            alpha_dot,
+            beta_dot,
+            phi_dot,
+            theta_dot,
+            psi_dot,
+            p_dot,
+            q_dot,
+            r_dot,
+            north,
+            east,
+            up,
+            power_dot,
+        ]
+    )
 
 
 def saturate(u: Array, params: F16Params) -> Array:
     """``u`` clipped to the control limits (throttle 0..1, el +-25, ail +-21.5, rdr +-30 deg)."""
     shape = _checks.shape_of(u)
     if not shape or shape[-1] != 4:
-        raise ValueError(f"u: expected controls [thtl, el, ail, rdr] along the last axis, shape (..., 4), got "
-                         f"{shape}")
+        raise ValueError(
+            f"u: expected controls [thtl, el, ail, rdr] along the last axis, shape (..., 4), got "
+            f"{shape}"
+        )
     return jnp.clip(u, params.control_lower, params.control_upper)

@@ -9,6 +9,7 @@
 - Thrust (lbf), bilinear in Mach and altitude (``tables.lookup2``): below 50 % power
   ``T = T_idle + (T_mil - T_idle) P / 50``, above ``T = T_mil + (T_max - T_mil)(P - 50)/50``.
 """
+
 from __future__ import annotations
 
 import jax.numpy as jnp
@@ -19,8 +20,11 @@ from jaxfdi.models.f16._tables import EngineData, lookup2
 
 def throttle_gearing(throttle: Array, engine: EngineData) -> Array:
     """Commanded power ``P_c`` (%) of the throttle setting (0..1)."""
-    return jnp.where(throttle <= engine.gear_break, engine.gear_low * throttle,
-                     engine.gear_high * throttle + engine.gear_offset)
+    return jnp.where(
+        throttle <= engine.gear_break,
+        engine.gear_low * throttle,
+        engine.gear_high * throttle + engine.gear_offset,
+    )
 
 
 def reciprocal_time_constant(dp: Array, engine: EngineData) -> Array:
@@ -33,8 +37,11 @@ def power_rate(power: Array, commanded: Array, engine: EngineData) -> Array:
     """``P'`` (%/s) of the actual power ``P`` towards the commanded ``P_c``."""
     lit = power >= engine.afterburner
     want_lit = commanded >= engine.afterburner
-    target = jnp.where(want_lit, jnp.where(lit, commanded, engine.lit_target),
-                       jnp.where(lit, engine.unlit_target, commanded))
+    target = jnp.where(
+        want_lit,
+        jnp.where(lit, commanded, engine.lit_target),
+        jnp.where(lit, engine.unlit_target, commanded),
+    )
     rate = jnp.where(lit, engine.fast_rate, reciprocal_time_constant(target - power, engine))
     return rate * (target - power)
 

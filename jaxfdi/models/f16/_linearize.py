@@ -14,6 +14,7 @@ unstable, doubling in ``ln 2 / lambda``) and eigenvector magnitudes (``shapes``)
 names mislead; at xcg = 0.35 the unstable root is mostly pitch attitude and airspeed (``theta`` 1, ``VT/V0`` 0.53,
 ``alpha`` 0.14, a phugoid-like divergence), the -1.91 root the short period's alpha and pitch rate.
 """
+
 from __future__ import annotations
 
 import math
@@ -24,8 +25,26 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.models.f16._dynamics import (AIL, ALPHA, BETA, EL, H, PHI, POW, RDR, THETA, THTL, VT, F16Params, P, Q, R,
-                                         STATE_NAMES, CONTROL_NAMES, f16_dynamics)
+from jaxfdi.models.f16._dynamics import (
+    AIL,
+    ALPHA,
+    BETA,
+    CONTROL_NAMES,
+    EL,
+    PHI,
+    POW,
+    RDR,
+    STATE_NAMES,
+    THETA,
+    THTL,
+    VT,
+    F16Params,
+    H,
+    P,
+    Q,
+    R,
+    f16_dynamics,
+)
 
 #: the longitudinal and lateral state and input indices (the 4-state blocks of the modes)
 LONGITUDINAL_STATES = (VT, ALPHA, THETA, Q)
@@ -81,8 +100,11 @@ class Mode(NamedTuple):
             extra = f"wn {self.natural_frequency:.3f} rad/s, zeta {self.damping_ratio:.3f}"
         else:
             slow = max(self.roots, key=lambda r: r.real).real
-            extra = (f"time to double {math.log(2) / slow:.1f} s" if slow > 0 else
-                     f"time constant {self.time_constant:.2f} s")
+            extra = (
+                f"time to double {math.log(2) / slow:.1f} s"
+                if slow > 0
+                else f"time constant {self.time_constant:.2f} s"
+            )
         text = f"{self.name:<15} {roots:<36} {extra}{'' if self.stable else '  UNSTABLE'}"
         if names and self.shapes:
             parts = []
@@ -96,7 +118,11 @@ class Mode(NamedTuple):
 
 
 def _fmt_root(r: complex) -> str:
-    return f"{r.real:.4f}" if r.imag == 0 else f"{r.real:.4f} {'+' if r.imag > 0 else '-'} {abs(r.imag):.4f}j"
+    return (
+        f"{r.real:.4f}"
+        if r.imag == 0
+        else f"{r.real:.4f} {'+' if r.imag > 0 else '-'} {abs(r.imag):.4f}j"
+    )
 
 
 def linearize(params: F16Params, x: Array, u: Array) -> LinearF16:
@@ -111,13 +137,17 @@ def linearize(params: F16Params, x: Array, u: Array) -> LinearF16:
     return LinearF16(A, B, x, u)
 
 
-def submodel(model: LinearF16, states: tuple[int, ...], inputs: tuple[int, ...]) -> tuple[Array, Array]:
+def submodel(
+    model: LinearF16, states: tuple[int, ...], inputs: tuple[int, ...]
+) -> tuple[Array, Array]:
     """``(A[states, states], B[states, inputs])``."""
     s, i = np.asarray(states), np.asarray(inputs)
     return model.A[s[:, None], s[None, :]], model.B[s[:, None], i[None, :]]
 
 
-def longitudinal(model: LinearF16, states: tuple[int, ...] = LONGITUDINAL_STATES) -> tuple[Array, Array]:
+def longitudinal(
+    model: LinearF16, states: tuple[int, ...] = LONGITUDINAL_STATES
+) -> tuple[Array, Array]:
     """The longitudinal block, inputs ``[thtl, el]``."""
     return submodel(model, states, LONGITUDINAL_INPUTS)
 
@@ -175,8 +205,10 @@ def longitudinal_modes(A_lon: Array, airspeed: float = 1.0) -> list[Mode]:
         short, phugoid = roots[order[2:]], roots[order[:2]]
     scale = np.array([airspeed, 1.0, 1.0, 1.0])
     short, phugoid = _pair(short), _pair(phugoid)
-    return [_mode("short period", short, _shapes(A_lon, short, scale)),
-            _mode("phugoid", phugoid, _shapes(A_lon, phugoid, scale))]
+    return [
+        _mode("short period", short, _shapes(A_lon, short, scale)),
+        _mode("phugoid", phugoid, _shapes(A_lon, phugoid, scale)),
+    ]
 
 
 def lateral_modes(A_lat: Array) -> list[Mode]:
@@ -194,9 +226,11 @@ def lateral_modes(A_lat: Array) -> list[Mode]:
         spiral, dutch, roll = roots[order[0]], roots[order[1:3]], roots[order[3]]
     one = np.ones(4)
     dutch = _pair(dutch)
-    return [_mode("roll", [roll], _shapes(A_lat, [roll], one)),
-            _mode("spiral", [spiral], _shapes(A_lat, [spiral], one)),
-            _mode("Dutch roll", dutch, _shapes(A_lat, dutch, one))]
+    return [
+        _mode("roll", [roll], _shapes(A_lat, [roll], one)),
+        _mode("spiral", [spiral], _shapes(A_lat, [spiral], one)),
+        _mode("Dutch roll", dutch, _shapes(A_lat, dutch, one)),
+    ]
 
 
 def _pair(roots: np.ndarray) -> np.ndarray:
@@ -214,7 +248,24 @@ def flight_modes(model: LinearF16) -> list[Mode]:
 
 
 __all__ = [
-    "LinearF16", "Mode", "linearize", "submodel", "longitudinal", "lateral", "longitudinal_modes", "lateral_modes",
-    "flight_modes", "LONGITUDINAL_STATES", "LONGITUDINAL_INPUTS", "LATERAL_STATES", "LATERAL_INPUTS",
-    "LONGITUDINAL_DESIGN_STATES", "STATE_NAMES", "CONTROL_NAMES", "AIL", "RDR", "PHI", "POW",
+    "LinearF16",
+    "Mode",
+    "linearize",
+    "submodel",
+    "longitudinal",
+    "lateral",
+    "longitudinal_modes",
+    "lateral_modes",
+    "flight_modes",
+    "LONGITUDINAL_STATES",
+    "LONGITUDINAL_INPUTS",
+    "LATERAL_STATES",
+    "LATERAL_INPUTS",
+    "LONGITUDINAL_DESIGN_STATES",
+    "STATE_NAMES",
+    "CONTROL_NAMES",
+    "AIL",
+    "RDR",
+    "PHI",
+    "POW",
 ]

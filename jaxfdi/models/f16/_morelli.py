@@ -16,6 +16,7 @@ function ``sum_i c_i m_i(alpha, beta, de, da, dr)``, ``m_i`` monomials (rad); wi
 about ``xcg_ref = 0.35 cbar`` (c.g. shift in ``dynamics``). Damping counted once (AeroBench's
 ``subf16_model`` adds the tables' DAMP on top: twice).
 """
+
 from __future__ import annotations
 
 import functools
@@ -50,7 +51,7 @@ class MorelliCoefficients(NamedTuple):
     i: Array
     j: Array
     k: Array
-    l: Array  # noqa: E741 - the paper's letter
+    l: Array
     m: Array
     n: Array
     o: Array
@@ -80,12 +81,18 @@ def _data() -> tuple[dict, dict]:
         data = json.load(fh)
     coefficients = data["coefficients"]
     if tuple(coefficients) != LETTERS:
-        raise ValueError(f"f16_morelli.json: expected coefficients {LETTERS}, got {tuple(coefficients)}")
-    terms = {letter: tuple(_parse_term(t) for t in coefficients[letter]["terms"]) for letter in LETTERS}
+        raise ValueError(
+            f"f16_morelli.json: expected coefficients {LETTERS}, got {tuple(coefficients)}"
+        )
+    terms = {
+        letter: tuple(_parse_term(t) for t in coefficients[letter]["terms"]) for letter in LETTERS
+    }
     for letter in LETTERS:
         if len(terms[letter]) != len(coefficients[letter]["values"]):
-            raise ValueError(f"f16_morelli.json: coefficient {letter} has {len(terms[letter])} terms and "
-                             f"{len(coefficients[letter]['values'])} values")
+            raise ValueError(
+                f"f16_morelli.json: coefficient {letter} has {len(terms[letter])} terms and "
+                f"{len(coefficients[letter]['values'])} values"
+            )
     return coefficients, terms
 
 
@@ -93,7 +100,9 @@ def morelli_coefficients_data(dtype=None) -> MorelliCoefficients:
     """The 110 coefficients of the data file as a ``MorelliCoefficients`` pytree."""
     dtype = dtype or jnp.result_type(float)
     coefficients, _ = _data()
-    return MorelliCoefficients(*(jnp.asarray(coefficients[letter]["values"], dtype) for letter in LETTERS))
+    return MorelliCoefficients(
+        *(jnp.asarray(coefficients[letter]["values"], dtype) for letter in LETTERS)
+    )
 
 
 def _polynomial(letter: str, values: Array, variables: tuple[Array, ...]) -> Array:
@@ -111,9 +120,20 @@ def _polynomial(letter: str, values: Array, variables: tuple[Array, ...]) -> Arr
     return total
 
 
-def polynomial_coefficients(coef: MorelliCoefficients, alpha_deg: Array, beta_deg: Array, el: Array, ail: Array,
-                            rdr: Array, p: Array, q: Array, r: Array, vt: Array, span: Array,
-                            chord: Array) -> AeroCoefficients:
+def polynomial_coefficients(
+    coef: MorelliCoefficients,
+    alpha_deg: Array,
+    beta_deg: Array,
+    el: Array,
+    ail: Array,
+    rdr: Array,
+    p: Array,
+    q: Array,
+    r: Array,
+    vt: Array,
+    span: Array,
+    chord: Array,
+) -> AeroCoefficients:
     """Total coefficients of Morelli's polynomial model (module doc); the same arguments
     as ``aero.table_coefficients`` (angles in degrees, converted here)."""
     to_rad = jnp.pi / 180.0

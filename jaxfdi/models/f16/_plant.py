@@ -12,6 +12,7 @@ power, rate sensors ``m = H [P, Q, R]`` (``rate_axes``, one row per input axis),
 sigma = 0.01 rad/s; other noise is "an appropriate level" (defaults: ``f16_sensors``). The controller reads a
 ``FlightView`` whose rates an FDI stage selects, e.g. ``(H^T H)^-1 H^T m`` (``rate_estimator``).
 """
+
 from __future__ import annotations
 
 import math
@@ -23,8 +24,22 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.models.f16._dynamics import ALPHA, BETA, H, P, PHI, POW, PSI, R, THETA, VT, F16Params, f16_dynamics, saturate
 from jaxfdi.models._integrate import rk4
+from jaxfdi.models.f16._dynamics import (
+    ALPHA,
+    BETA,
+    PHI,
+    POW,
+    PSI,
+    THETA,
+    VT,
+    F16Params,
+    H,
+    P,
+    R,
+    f16_dynamics,
+    saturate,
+)
 
 #: the components of ``y`` before the rate-sensor axes
 MEASUREMENT_NAMES = ("VT", "alpha", "beta", "phi", "theta", "psi", "h", "pow")
@@ -96,9 +111,15 @@ def skewed_rate_axes(dtype=None) -> Array:
     return jnp.asarray([[s, s, 0], [-s, s, 0], [s, 0, s], [-s, 0, s], [0, s, s], [0, -s, s]], dtype)
 
 
-def f16_sensors(rate_axes: Array | None = None, rate_sigma: float = 0.01, air_data_sigma=(0.5, 1e-3, 1e-3),
-                attitude_sigma=(1e-3, 1e-3, 1e-3), altitude_sigma: float = 2.0, power_sigma: float = 0.1,
-                dtype=None) -> F16Sensors:
+def f16_sensors(
+    rate_axes: Array | None = None,
+    rate_sigma: float = 0.01,
+    air_data_sigma=(0.5, 1e-3, 1e-3),
+    attitude_sigma=(1e-3, 1e-3, 1e-3),
+    altitude_sigma: float = 2.0,
+    power_sigma: float = 0.1,
+    dtype=None,
+) -> F16Sensors:
     """Flight sensors: Park et al.'s rate sensors (0.01 rad/s) by default; our choices (the paper gives only
     the rates'): air data 0.5 ft/s and 1 mrad (0.06 deg), attitude 1 mrad, altitude 2 ft, power 0.1 %.
 
@@ -107,13 +128,21 @@ def f16_sensors(rate_axes: Array | None = None, rate_sigma: float = 0.01, air_da
     """
     dtype = dtype or jnp.result_type(float)
     axes = skewed_rate_axes(dtype) if rate_axes is None else jnp.asarray(rate_axes, dtype)
-    _checks.check_shape("rate_axes", axes, (None, 3), "one body-axis direction per rate-sensor channel")
-    for name, value in (("rate_sigma", rate_sigma), ("air_data_sigma", air_data_sigma),
-                        ("attitude_sigma", attitude_sigma), ("altitude_sigma", altitude_sigma),
-                        ("power_sigma", power_sigma)):
+    _checks.check_shape(
+        "rate_axes", axes, (None, 3), "one body-axis direction per rate-sensor channel"
+    )
+    for name, value in (
+        ("rate_sigma", rate_sigma),
+        ("air_data_sigma", air_data_sigma),
+        ("attitude_sigma", attitude_sigma),
+        ("altitude_sigma", altitude_sigma),
+        ("power_sigma", power_sigma),
+    ):
         _check_sigma(name, value)
-    a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
-    sensors = F16Sensors(axes, a(rate_sigma), a(air_data_sigma), a(attitude_sigma), a(altitude_sigma), a(power_sigma))
+    a = lambda v: jnp.asarray(v, dtype)
+    sensors = F16Sensors(
+        axes, a(rate_sigma), a(air_data_sigma), a(attitude_sigma), a(altitude_sigma), a(power_sigma)
+    )
     _checks.check_shape("air_data_sigma", sensors.air_data_sigma, (3,), "VT, alpha, beta")
     _checks.check_shape("attitude_sigma", sensors.attitude_sigma, (3,), "phi, theta, psi")
     return sensors
@@ -125,14 +154,23 @@ def _check_sigma(name: str, value) -> None:
     _checks.check_finite(name, value, "standard deviations")
     concrete = _checks.concrete(value)
     if concrete is not None and np.any(concrete < 0):
-        raise ValueError(f"{name}: expected standard deviations >= 0, got {_checks.received(concrete)}")
+        raise ValueError(
+            f"{name}: expected standard deviations >= 0, got {_checks.received(concrete)}"
+        )
 
 
 def measurement_cov(sensors: F16Sensors) -> Array:
     """(8 + m_r, 8 + m_r) diagonal covariance of ``y``."""
     m_r = sensors.rate_axes.shape[0]
-    sigma = jnp.concatenate([sensors.air_data_sigma, sensors.attitude_sigma, sensors.altitude_sigma[None],
-                             sensors.power_sigma[None], jnp.broadcast_to(sensors.rate_sigma, (m_r,))])
+    sigma = jnp.concatenate(
+        [
+            sensors.air_data_sigma,
+            sensors.attitude_sigma,
+            sensors.altitude_sigma[None],
+            sensors.power_sigma[None],
+            jnp.broadcast_to(sensors.rate_sigma, (m_r,)),
+        ]
+    )
     return jnp.diag(sigma * sigma)
 
 
@@ -147,8 +185,13 @@ def sampled_transition(substeps: int = 1):
     def transition(xs: Array, u: Array, plant: SampledF16) -> Array:
         x, gust = xs[:13], xs[13:]
         angles, u_sat = gust / x[VT], saturate(u, plant.aircraft)
-        x_next = rk4(lambda x, t: f16_dynamics(x, u_sat, plant.aircraft, angles), x, plant.dt, substeps,
-                     loop_stages=True)
+        x_next = rk4(
+            lambda x, t: f16_dynamics(x, u_sat, plant.aircraft, angles),
+            x,
+            plant.dt,
+            substeps,
+            loop_stages=True,
+        )
         return jnp.concatenate([x_next, plant.gust_decay * gust])
 
     return transition
@@ -156,12 +199,14 @@ def sampled_transition(substeps: int = 1):
 
 def sampled_observation(xs: Array, u: Array, plant: SampledF16) -> Array:
     """``y`` without noise: the measured states and ``H [P, Q, R]``."""
-    return jnp.concatenate([xs[jnp.array(MEASURED_STATES)], plant.rate_axes @ xs[P:R + 1]])
+    return jnp.concatenate([xs[jnp.array(MEASURED_STATES)], plant.rate_axes @ xs[P : R + 1]])
 
 
 def rate_estimator(rate_axes: Array) -> Array:
     """``(H^T H)^-1 H^T`` (3, m_r): the least-squares body rates from every rate channel."""
-    _checks.check_matrix("rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel")
+    _checks.check_matrix(
+        "rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel"
+    )
     return jnp.linalg.solve(rate_axes.T @ rate_axes, rate_axes.T)
 
 

@@ -6,6 +6,7 @@ air data and altitude (taken as known) and the commanded controls. Derivative: `
 2.5-16 with engine momentum) with ``Cl (1 + e_l)``, ``Cm (1 + e_m)``, ``Cn (1 + e_n)`` (the paper's coefficient errors:
 the method needs no exact model); the model's c.g. is the design's, not the flight's.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -14,9 +15,9 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.models.f16._atmosphere import air_data
-from jaxfdi.models.f16._dynamics import H, VT, F16Params, aero_coefficients, moment_equations
 from jaxfdi.models._integrate import rk4
+from jaxfdi.models.f16._atmosphere import air_data
+from jaxfdi.models.f16._dynamics import VT, F16Params, H, aero_coefficients, moment_equations
 
 #: the rate model's input, in order
 RATE_INPUT_NAMES = ("VT", "alpha", "beta", "h", "thtl", "el", "ail", "rdr")
@@ -38,7 +39,9 @@ class RateModel(NamedTuple):
     dt: Array
 
 
-def rate_model(aircraft: F16Params, rate_axes: Array, dt: float = 0.01, coefficient_error=(0.0, 0.0, 0.0)) -> RateModel:
+def rate_model(
+    aircraft: F16Params, rate_axes: Array, dt: float = 0.01, coefficient_error=(0.0, 0.0, 0.0)
+) -> RateModel:
     """The rate model of ``aircraft`` with relative errors ``coefficient_error`` (3,) on ``Cl, Cm, Cn`` (e.g.
     ``(0.1, -0.1, 0.1)``: roll and yaw moments 10 % too large, pitch 10 % too small).
 
@@ -47,8 +50,12 @@ def rate_model(aircraft: F16Params, rate_axes: Array, dt: float = 0.01, coeffici
       of ``rate_transition`` and ``rate_observation``.
     """
     dtype = aircraft.mass.dtype
-    _checks.check_matrix("rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel")
-    _checks.check_matrix("coefficient_error", coefficient_error, (3,), "relative errors of Cl, Cm, Cn")
+    _checks.check_matrix(
+        "rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel"
+    )
+    _checks.check_matrix(
+        "coefficient_error", coefficient_error, (3,), "relative errors of Cl, Cm, Cn"
+    )
     _checks.check_positive("dt", dt, "a positive sample period (s)")
     scale = 1.0 + jnp.asarray(coefficient_error, dtype)
     return RateModel(aircraft, scale, jnp.asarray(rate_axes, dtype), jnp.asarray(dt, dtype))
@@ -59,8 +66,10 @@ def rate_model_input(y: Array, u: Array) -> Array:
     ``[VT, alpha, beta, phi, theta, psi, h, pow, rate channels]``) and the controls ``u`` (4,)."""
     shape = _checks.shape_of(y)
     if len(shape) != 1 or shape[0] < 8:
-        raise ValueError(f"y: expected the F-16's measurement [VT, alpha, beta, phi, theta, psi, h, pow, rate "
-                         f"channels], shape (8 + m_r,), got {shape}")
+        raise ValueError(
+            f"y: expected the F-16's measurement [VT, alpha, beta, phi, theta, psi, h, pow, rate "
+            f"channels], shape (8 + m_r,), got {shape}"
+        )
     _checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
     return jnp.concatenate([y[0:3], y[6:7], jnp.asarray(u, y.dtype)])
 
@@ -70,7 +79,23 @@ def rate_derivative(rates: Array, inputs: Array, model: RateModel) -> Array:
     aircraft = model.aircraft
     vt, alpha, beta, altitude = inputs[0], inputs[1], inputs[2], inputs[3]
     zero = jnp.zeros((), rates.dtype)
-    x = jnp.stack([vt, alpha, beta, zero, zero, zero, rates[0], rates[1], rates[2], zero, zero, altitude, zero])
+    x = jnp.stack(
+        [
+            vt,
+            alpha,
+            beta,
+            zero,
+            zero,
+            zero,
+            rates[0],
+            rates[1],
+            rates[2],
+            zero,
+            zero,
+            altitude,
+            zero,
+        ]
+    )
     c = aero_coefficients(aircraft, x, inputs[4:8])
     scale = model.coefficient_scale
     c = c._replace(Cl=c.Cl * scale[0], Cm=c.Cm * scale[1], Cn=c.Cn * scale[2])
@@ -88,5 +113,12 @@ def rate_observation(rates: Array, inputs: Array, model: RateModel) -> Array:
     return model.rate_axes @ rates
 
 
-__all__ = ["RATE_INPUT_NAMES", "RateModel", "rate_model", "rate_model_input", "rate_derivative", "rate_transition",
-           "rate_observation"]
+__all__ = [
+    "RATE_INPUT_NAMES",
+    "RateModel",
+    "rate_model",
+    "rate_model_input",
+    "rate_derivative",
+    "rate_transition",
+    "rate_observation",
+]

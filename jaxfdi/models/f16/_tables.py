@@ -13,6 +13,7 @@ beyond the ends (``f < 0`` or ``> 1``) linear extrapolation from the end segment
 its 2x2 block with one ``dynamic_slice`` (10x faster under ``vmap`` on CPU than a one-hot product, 10^4
 points). ``CL``, ``CN`` are tabulated against ``|beta|`` and multiplied by ``sign(beta)`` (``aero.py``).
 """
+
 from __future__ import annotations
 
 import functools
@@ -162,8 +163,15 @@ def stevens_lewis_data() -> dict:
 def _grid(values, name: str) -> np.ndarray:
     grid = np.asarray(values, np.float64)
     steps = np.diff(grid)
-    if grid.ndim != 1 or grid.size < 2 or np.any(steps <= 0) or np.ptp(steps) > 1e-9 * abs(steps[0]):
-        raise ValueError(f"{name}: expected a uniform increasing breakpoint grid, got {grid.tolist()}")
+    if (
+        grid.ndim != 1
+        or grid.size < 2
+        or np.any(steps <= 0)
+        or np.ptp(steps) > 1e-9 * abs(steps[0])
+    ):
+        raise ValueError(
+            f"{name}: expected a uniform increasing breakpoint grid, got {grid.tolist()}"
+        )
     return grid
 
 
@@ -183,10 +191,19 @@ def table_arrays(profile: str = "stevens_lewis_2nd_ed") -> dict[str, np.ndarray]
         table = out[cell["table"]]
         index = tuple(cell["index"])
         if not np.isclose(table[index], cell["baseline"]):
-            raise ValueError(f"profile {profile}: {cell['table']}{list(index)} is {table[index]}, expected the "
-                             f"baseline {cell['baseline']} before the override")
+            raise ValueError(
+                f"profile {profile}: {cell['table']}{list(index)} is {table[index]}, expected the "
+                f"baseline {cell['baseline']} before the override"
+            )
         table[index] = cell["value"]
-    for axis in ("alpha_deg", "elevator_deg", "beta_abs_deg", "beta_deg", "thrust_mach", "thrust_altitude_ft"):
+    for axis in (
+        "alpha_deg",
+        "elevator_deg",
+        "beta_abs_deg",
+        "beta_deg",
+        "thrust_mach",
+        "thrust_altitude_ft",
+    ):
         out[axis] = _grid(bp[axis]["values"], axis)
     return out
 
@@ -197,12 +214,21 @@ def aero_tables(profile: str = "stevens_lewis_2nd_ed", dtype=None) -> AeroTables
     t = table_arrays(profile)
     formulas = stevens_lewis_data()["coefficient_formulas"]
     cy, cz = formulas["CY"], formulas["CZ"]
-    a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
+    a = lambda v: jnp.asarray(v, dtype)
     return AeroTables(
-        a(t["alpha_deg"]), a(t["elevator_deg"]), a(t["beta_abs_deg"]), a(t["beta_deg"]),
+        a(t["alpha_deg"]),
+        a(t["elevator_deg"]),
+        a(t["beta_abs_deg"]),
+        a(t["beta_deg"]),
         *(a(t[name]) for name in AERO_TABLES),
-        a(cy["beta_coef_per_deg"]), a(cy["ail_coef"]), a(cy["rdr_coef"]), a(cz["beta_factor_deg"]),
-        a(cz["el_coef"]), a(cy["ail_norm_deg"]), a(cy["rdr_norm_deg"]), a(cz["el_norm_deg"]),
+        a(cy["beta_coef_per_deg"]),
+        a(cy["ail_coef"]),
+        a(cy["rdr_coef"]),
+        a(cz["beta_factor_deg"]),
+        a(cz["el_coef"]),
+        a(cy["ail_norm_deg"]),
+        a(cy["rdr_norm_deg"]),
+        a(cz["el_norm_deg"]),
     )
 
 
@@ -213,12 +239,21 @@ def engine_data(profile: str = "stevens_lewis_2nd_ed", dtype=None) -> EngineData
     eng = stevens_lewis_data()["engine"]
     gear, lag = eng["throttle_gearing"], eng["power_lag"]
     r = lag["rtau"]
-    a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
+    a = lambda v: jnp.asarray(v, dtype)
     return EngineData(
-        a(t["thrust_mach"]), a(t["thrust_altitude_ft"]), a(t["thrust_idle"]), a(t["thrust_military"]),
-        a(t["thrust_maximum"]), a(gear["breakpoint_throttle"]), a(gear["slope_low"]), a(gear["slope_high"]),
-        a(gear["offset_high"]), a(lag["afterburner_threshold_pct"]), a(lag["fast_rate_per_s"]),
-        a(lag["lit_target_pct"]), a(lag["unlit_target_pct"]),
+        a(t["thrust_mach"]),
+        a(t["thrust_altitude_ft"]),
+        a(t["thrust_idle"]),
+        a(t["thrust_military"]),
+        a(t["thrust_maximum"]),
+        a(gear["breakpoint_throttle"]),
+        a(gear["slope_low"]),
+        a(gear["slope_high"]),
+        a(gear["offset_high"]),
+        a(lag["afterburner_threshold_pct"]),
+        a(lag["fast_rate_per_s"]),
+        a(lag["lit_target_pct"]),
+        a(lag["unlit_target_pct"]),
         a([r["dp_low"], r["rtau_low"], r["dp_high"], r["rtau_high"], r["intercept"], r["slope"]]),
     )
 
@@ -227,12 +262,21 @@ def atmosphere_data(dtype=None) -> AtmosphereData:
     """The air data computer's constants."""
     dtype = dtype or jnp.result_type(float)
     atm = stevens_lewis_data()["atmosphere"]
-    keys = ("rho0_slug_ft3", "tfac_slope_per_ft", "T0_rankine", "T_strat_rankine", "strat_alt_ft",
-            "density_exponent", "gamma", "R_ft_lbf_per_slug_R")
+    keys = (
+        "rho0_slug_ft3",
+        "tfac_slope_per_ft",
+        "T0_rankine",
+        "T_strat_rankine",
+        "strat_alt_ft",
+        "density_exponent",
+        "gamma",
+        "R_ft_lbf_per_slug_R",
+    )
     return AtmosphereData(*(jnp.asarray(atm[k], dtype) for k in keys))
 
 
 # --- the book's interpolation -----------------------------------------------------
+
 
 def segment(x: Array, grid: Array) -> tuple[Array, Array]:
     """``(i, f)`` on the uniform ``grid`` (n,): ``i`` (int32) and ``f`` as in the module doc (``f`` outside
@@ -264,7 +308,9 @@ def _grid_size(name: str, grid: Array) -> int:
     """The number of breakpoints of a 1-D grid of at least 2 (trace time)."""
     shape = _checks.shape_of(grid)
     if len(shape) != 1 or shape[0] < 2:
-        raise ValueError(f"{name}: expected a 1-D grid of at least 2 breakpoints, got shape {shape}")
+        raise ValueError(
+            f"{name}: expected a 1-D grid of at least 2 breakpoints, got shape {shape}"
+        )
     return shape[0]
 
 
@@ -273,12 +319,18 @@ def lookup1(x: Array, grid: Array, values: Array) -> Array:
     n = _grid_size("grid", grid)
     shape = _checks.shape_of(values)
     if len(shape) not in (1, 2) or shape[-1] != n:
-        raise ValueError(f"values: expected a table of shape ({n},) or (m, {n}) on the {n}-point grid, got {shape}")
+        raise ValueError(
+            f"values: expected a table of shape ({n},) or (m, {n}) on the {n}-point grid, got {shape}"
+        )
     return interpolate1(values, *segment(x, grid))
 
 
 def lookup2(row: Array, row_grid: Array, col: Array, col_grid: Array, values: Array) -> Array:
     """2-D table lookup ``T(row, col)``, bilinear, extrapolated from the end segments."""
-    _checks.check_shape("values", values, (_grid_size("row_grid", row_grid), _grid_size("col_grid", col_grid)),
-                        "one row per row_grid point, one column per col_grid point")
+    _checks.check_shape(
+        "values",
+        values,
+        (_grid_size("row_grid", row_grid), _grid_size("col_grid", col_grid)),
+        "one row per row_grid point, one column per col_grid point",
+    )
     return interpolate2(values, *segment(row, row_grid), *segment(col, col_grid))

@@ -24,6 +24,7 @@ Residuals ``[VT', alpha', beta', P', Q', R']`` of ``f16_dynamics``: a square sys
 (the book's simplex minimised a weighted sum of squares). Pure JAX: ``jax.vmap`` over conditions (and
 ``params`` leaves such as ``xcg``) trims an envelope in one solve.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -34,9 +35,9 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.models.f16._dynamics import ALPHA, BETA, P, Q, R, VT, F16Params, f16_dynamics
-from jaxfdi.models.f16._engine import throttle_gearing
 from jaxfdi._levenberg_marquardt import levenberg_marquardt
+from jaxfdi.models.f16._dynamics import ALPHA, BETA, VT, F16Params, P, Q, R, f16_dynamics
+from jaxfdi.models.f16._engine import throttle_gearing
 
 #: the trim unknowns, in order
 TRIM_VARIABLES = ("thtl", "el", "ail", "rdr", "alpha", "beta")
@@ -82,17 +83,28 @@ class TrimResult(NamedTuple):
     steps: Array
 
 
-def trim_condition(airspeed, altitude=0.0, climb_angle=0.0, turn_rate=0.0, pull_up_rate=0.0,
-                   dtype=None) -> TrimCondition:
+def trim_condition(
+    airspeed, altitude=0.0, climb_angle=0.0, turn_rate=0.0, pull_up_rate=0.0, dtype=None
+) -> TrimCondition:
     """A ``TrimCondition``; equal-shape arrays give a stack (vmap over axis 0). Checked when concrete:
     ``airspeed`` [ft/s] positive finite, ``altitude`` [ft] in 0-50 000 (the thrust tables' range), climb
     angle in (-pi/2, pi/2) rad, finite angles and rates."""
     dtype = dtype or jnp.result_type(float)
     for name, value, valid, expected in (
-            ("airspeed", airspeed, lambda v: v > 0.0, "a positive finite airspeed [ft/s]"),
-            ("altitude", altitude, lambda v: (v >= 0.0) & (v <= 50000.0), "an altitude in [0, 50000] ft"),
-            ("climb_angle", climb_angle, lambda v: np.abs(v) < 0.5 * np.pi,
-             "a flight-path angle in (-pi/2, pi/2) rad")):
+        ("airspeed", airspeed, lambda v: v > 0.0, "a positive finite airspeed [ft/s]"),
+        (
+            "altitude",
+            altitude,
+            lambda v: (v >= 0.0) & (v <= 50000.0),
+            "an altitude in [0, 50000] ft",
+        ),
+        (
+            "climb_angle",
+            climb_angle,
+            lambda v: np.abs(v) < 0.5 * np.pi,
+            "a flight-path angle in (-pi/2, pi/2) rad",
+        ),
+    ):
         _checks.check_real(name, value)
         concrete = _checks.concrete(value)
         if concrete is not None and not np.all(np.isfinite(concrete) & valid(concrete)):
@@ -100,12 +112,16 @@ def trim_condition(airspeed, altitude=0.0, climb_angle=0.0, turn_rate=0.0, pull_
     for name, value in (("turn_rate", turn_rate), ("pull_up_rate", pull_up_rate)):
         _checks.check_real(name, value)
         _checks.check_finite(name, value)
-    values = [jnp.asarray(v, dtype) for v in (airspeed, altitude, climb_angle, turn_rate, pull_up_rate)]
+    values = [
+        jnp.asarray(v, dtype) for v in (airspeed, altitude, climb_angle, turn_rate, pull_up_rate)
+    ]
     try:
         shape = jnp.broadcast_shapes(*(v.shape for v in values))
     except ValueError:
-        raise ValueError("airspeed, altitude, climb_angle, turn_rate, pull_up_rate: expected arrays that broadcast "
-                         f"together, got shapes {[v.shape for v in values]}") from None
+        raise ValueError(
+            "airspeed, altitude, climb_angle, turn_rate, pull_up_rate: expected arrays that broadcast "
+            f"together, got shapes {[v.shape for v in values]}"
+        ) from None
     return TrimCondition(*(jnp.broadcast_to(v, shape) for v in values))
 
 
@@ -119,14 +135,20 @@ def climb(airspeed, climb_angle, altitude=0.0, dtype=None) -> TrimCondition:
     return trim_condition(airspeed, altitude, climb_angle=climb_angle, dtype=dtype)
 
 
-def coordinated_turn(airspeed, turn_rate, altitude=0.0, climb_angle=0.0, dtype=None) -> TrimCondition:
+def coordinated_turn(
+    airspeed, turn_rate, altitude=0.0, climb_angle=0.0, dtype=None
+) -> TrimCondition:
     """A steady coordinated turn at ``turn_rate`` [rad/s] and ``airspeed`` [ft/s]."""
-    return trim_condition(airspeed, altitude, climb_angle=climb_angle, turn_rate=turn_rate, dtype=dtype)
+    return trim_condition(
+        airspeed, altitude, climb_angle=climb_angle, turn_rate=turn_rate, dtype=dtype
+    )
 
 
 def pull_up(airspeed, pull_up_rate, altitude=0.0, climb_angle=0.0, dtype=None) -> TrimCondition:
     """A steady pull-up at ``pull_up_rate`` [rad/s] and ``airspeed`` [ft/s]."""
-    return trim_condition(airspeed, altitude, climb_angle=climb_angle, pull_up_rate=pull_up_rate, dtype=dtype)
+    return trim_condition(
+        airspeed, altitude, climb_angle=climb_angle, pull_up_rate=pull_up_rate, dtype=dtype
+    )
 
 
 def coordinated_bank(alpha: Array, beta: Array, condition: TrimCondition, gravity: Array) -> Array:
@@ -162,7 +184,23 @@ def trim_point(z: Array, condition: TrimCondition, params: F16Params) -> tuple[A
     r = -theta_dot * jnp.sin(phi) + psi_dot * jnp.cos(phi) * jnp.cos(theta)
     zero = jnp.zeros_like(alpha)
     power = throttle_gearing(thtl, params.engine)
-    x = jnp.stack([condition.airspeed, alpha, beta, phi, theta, zero, p, q, r, zero, zero, condition.altitude, power])
+    x = jnp.stack(
+        [
+            condition.airspeed,
+            alpha,
+            beta,
+            phi,
+            theta,
+            zero,
+            p,
+            q,
+            r,
+            zero,
+            zero,
+            condition.altitude,
+            power,
+        ]
+    )
     return x, z[:4]
 
 
@@ -186,8 +224,13 @@ def initial_guess(condition: TrimCondition, params: F16Params) -> Array:
     return jnp.stack([zero + 0.5, zero, zero, zero, alpha, zero])
 
 
-def trim(params: F16Params, condition: TrimCondition, guess: Array | None = None, max_steps: int = 200,
-         tolerance: float | None = None) -> TrimResult:
+def trim(
+    params: F16Params,
+    condition: TrimCondition,
+    guess: Array | None = None,
+    max_steps: int = 200,
+    tolerance: float | None = None,
+) -> TrimResult:
     """Trim the aircraft at ``condition`` (module doc).
 
     Args:
@@ -203,14 +246,21 @@ def trim(params: F16Params, condition: TrimCondition, guess: Array | None = None
       ``max |residual| <= tolerance``).
     """
     for name, leaf in zip(TrimCondition._fields, condition):
-        _checks.check_shape(f"condition.{name}", leaf, (), "a scalar (vmap over a stack of conditions)")
+        _checks.check_shape(
+            f"condition.{name}", leaf, (), "a scalar (vmap over a stack of conditions)"
+        )
     dtype = params.mass.dtype
     z0 = initial_guess(condition, params) if guess is None else jnp.asarray(guess, dtype)
     _checks.check_shape("guess", z0, (6,), "[thtl, el, ail, rdr, alpha, beta]")
     eps = jnp.finfo(dtype).eps
     tol = 1e3 * eps * params.gravity if tolerance is None else jnp.asarray(tolerance, dtype)
-    solution = levenberg_marquardt(trim_residual, z0, (condition, params), max_steps=max_steps,
-                                   residual_tol=10.0 * eps * params.gravity)
+    solution = levenberg_marquardt(
+        trim_residual,
+        z0,
+        (condition, params),
+        max_steps=max_steps,
+        residual_tol=10.0 * eps * params.gravity,
+    )
     x, u = trim_point(solution.x, condition, params)
     inside = jnp.all((u >= params.control_lower) & (u <= params.control_upper))
     ok = jnp.all(jnp.isfinite(solution.residual)) & (jnp.max(jnp.abs(solution.residual)) <= tol)
@@ -221,5 +271,7 @@ def trim(params: F16Params, condition: TrimCondition, guess: Array | None = None
 def trim_batch(params: F16Params, conditions: TrimCondition, xcg: Array) -> TrimResult:
     """``trim`` of stacked conditions (leaves (N,)) at ``xcg`` (N,), other parameters shared: one vmapped
     solve (compiled per N)."""
-    _checks.check_shape("xcg", xcg, _checks.shape_of(conditions.airspeed)[:1], "one c.g. per condition")
+    _checks.check_shape(
+        "xcg", xcg, _checks.shape_of(conditions.airspeed)[:1], "one c.g. per condition"
+    )
     return jax.vmap(lambda c, x: trim(params._replace(xcg=x), c))(conditions, xcg)

@@ -42,7 +42,7 @@ from jaxfdi._metrics import (
 )
 from jaxfdi._montecarlo import _is_key
 from jaxfdi._stages import FDI, Controller, Plant, Scorer
-from jaxfdi.detection._chi2 import Decision
+from jaxfdi.detection import Decision
 
 
 class LoopTrace(NamedTuple):

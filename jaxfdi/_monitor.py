@@ -20,8 +20,8 @@ from jaxfdi._loop import detection_scorer, feedforward, run_loop
 from jaxfdi._metrics import DetectionRecord, record_init, record_update, step_health
 from jaxfdi._simulate import Actuated, Sensed, Simulator
 from jaxfdi._stages import FDI
-from jaxfdi.detection._chi2 import Detector, flag_dead
-from jaxfdi.filters._base import Filter, FilterInfo
+from jaxfdi.detection import Detector, flag_dead
+from jaxfdi.filters import Filter, FilterInfo
 
 
 class MonitorHistory(NamedTuple):

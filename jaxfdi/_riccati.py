@@ -48,7 +48,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 class DareSolution(NamedTuple):

@@ -35,7 +35,7 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
-from jaxfdi.models._linear import (
+from jaxfdi.models import (
     LinearGaussianModel,
     linear_observation,
     linear_transition,

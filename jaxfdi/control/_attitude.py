@@ -28,7 +28,7 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi._faults import Target, apply_fault
 from jaxfdi._stages import Controller, Plant
-from jaxfdi.models._reaction_wheels import (
+from jaxfdi.models import (
     AttitudeReading,
     SpacecraftParams,
     WheelCommand,
@@ -37,7 +37,7 @@ from jaxfdi.models._reaction_wheels import (
     stop_transfer,
     wheel_momentum,
 )
-from jaxfdi.models._rotation import quaternion_conjugate, quaternion_multiply, rotate
+from jaxfdi.rotation import quaternion_conjugate, quaternion_multiply, rotate
 
 
 class Slew(NamedTuple):

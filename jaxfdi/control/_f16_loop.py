@@ -15,9 +15,9 @@ from jaxfdi import _checks
 from jaxfdi._faults import Target, active_label, apply_faults, as_stack, is_active
 from jaxfdi._simulate import Actuated, Sensed, SimState, check_fault_components
 from jaxfdi._stages import FDI, Plant
-from jaxfdi.models.f16._dynamics import F16Params
-from jaxfdi.models.f16._plant import (
+from jaxfdi.models.f16 import (
     RATE_OFFSET,
+    F16Params,
     F16Sensors,
     SampledF16,
     flight_view,

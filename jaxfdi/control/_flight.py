@@ -36,21 +36,29 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi._stages import Controller
 from jaxfdi.control._lqr import lqr_pi
-from jaxfdi.models._linear import c2d
-from jaxfdi.models.f16._dynamics import AIL, ALPHA, EL, PHI, RDR, THETA, THTL, F16Params, H, P, Q
-from jaxfdi.models.f16._linearize import (
+from jaxfdi.models import c2d
+from jaxfdi.models.f16 import (
+    AIL,
+    ALPHA,
+    EL,
     LATERAL_STATES,
     LONGITUDINAL_DESIGN_STATES,
+    PHI,
+    RDR,
+    THETA,
+    THTL,
+    F16Params,
+    FlightView,
+    H,
     LinearF16,
-    submodel,
-)
-from jaxfdi.models.f16._plant import FlightView
-from jaxfdi.models.f16._trim import (
+    P,
+    Q,
     TrimResult,
     climb,
     coordinated_turn,
     level_flight,
     pull_up,
+    submodel,
     trim_batch,
 )
 

@@ -239,7 +239,12 @@ def flag_dead(decision: Decision, dead: Array, labels: Array | None = None) -> D
     """The one rule for a dead sensor: a step whose input has a non-finite component (``dead`` (m,) bool, e.g.
     ``isnan(info.innovation)``, ``filters._base``) alarms with ``statistic = +inf``, label ``labels[j]`` of the
     first dead channel ``j`` (``labels`` (m,) int, each channel's fault label; ``None``: the detector's own) and
-    estimate NaN. Other steps keep ``decision``."""
+    estimate NaN. Other steps keep ``decision``.
+
+    Returns:
+      the ``Decision`` with its dead steps alarmed (statistic ``+inf``, the dead channel's label,
+      estimate NaN).
+    """
     dead = jnp.asarray(dead, bool)
     if dead.size == 0:
         return decision

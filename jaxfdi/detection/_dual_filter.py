@@ -17,6 +17,7 @@ unchanged for seconds).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import jax
@@ -24,7 +25,10 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter, ModelFunction
+from jaxfdi.filters import Filter
+
+#: ``f(x, u, params) -> (n,)``, a model's transition or its state derivative
+ModelField = Callable[[Array, Array, Any], Array]
 
 
 class DualFilterState(NamedTuple):
@@ -59,13 +63,13 @@ class DualFilterInfo(NamedTuple):
     healthy: Array
 
 
-def system_matrix_det(field: ModelFunction, x: Array, u: Array, params: Any) -> Array:
+def system_matrix_det(field: ModelField, x: Array, u: Array, params: Any) -> Array:
     """``det(dg/dx)`` of the continuous model at ``(x, u)`` (eq. 8 of Choi & Park 2009)."""
     return _linalg.det(jax.jacfwd(field)(x, u, params))
 
 
 def dual_filter(
-    estimator: Filter, transition: ModelFunction, field: ModelFunction, params: Any = None
+    estimator: Filter, transition: ModelField, field: ModelField, params: Any = None
 ) -> Filter:
     """Prediction filter + estimation filter with the fault detection parameter ``F``.
 

@@ -56,7 +56,7 @@ from jaxfdi.detection._chi2 import (
     chi2_threshold,
     flag_dead,
 )
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 #: the threshold Han et al. (2022) use (set by simulation to suppress T4 false alarms, sec. 3.3).
 PAPER_USED_THRESHOLD = 200.0

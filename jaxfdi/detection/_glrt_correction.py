@@ -38,8 +38,8 @@ from jaxfdi.detection._glrt import (
     windowed_engine,
 )
 from jaxfdi.detection._glrt_recursive import recursive_engine
-from jaxfdi.filters._base import Filter
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.filters import Filter
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 class CorrectedGLRTState(NamedTuple):

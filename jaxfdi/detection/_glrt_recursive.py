@@ -41,7 +41,7 @@ from jaxfdi.detection._glrt import (
     glr_from_correlation,
     windowed_engine,
 )
-from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi.models import LinearGaussianModel
 
 
 class RecursiveGLRTState(NamedTuple):

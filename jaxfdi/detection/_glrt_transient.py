@@ -44,7 +44,7 @@ from jaxfdi.detection._glrt import (
     glr_from_correlation,
     whiten_finite,
 )
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 class TransientGLRTState(NamedTuple):

@@ -23,7 +23,7 @@ The controller's view is the least-squares state of the channels left (``exclusi
 decision). ``follow`` picks the decision obeyed (``"verified"``, ``"hybrid"``, ``"psa"``: largest ``FI``,
 ``"none"``: never exclude), an array in the state (one compiled flight for every mode); every decision is reported.
 
-The replay (``filters.history.replay_filter`` over a ``RingBuffer`` of the last ``L`` steps' channels, filter inputs
+The replay (``filters.replay_filter`` over a ``RingBuffer`` of the last ``L`` steps' channels, filter inputs
 and least-squares estimates) is bounded and inside the scan: the hybrid vmaps over Monte Carlo flights. Under
 ``vmap`` ``lax.cond`` computes both branches; with ``batch_axis`` (the ``vmap`` axis name, e.g. in
 ``monte_carlo(..., batched=True)``) the replay runs only at steps where some flight needs it (``psum``): same
@@ -43,7 +43,7 @@ from jaxfdi import _checks
 from jaxfdi._stages import FDI
 from jaxfdi.detection._chi2 import Decision, chi2_threshold
 from jaxfdi.detection._parity import ParitySpace, parity_tests
-from jaxfdi.filters._history import ordered, push, replay_filter, ring_buffer
+from jaxfdi.filters import replay_filter, ring_buffer
 
 #: ``follow`` names and their codes
 FOLLOW = {"none": 0, "psa": 1, "hybrid": 2, "verified": 3}
@@ -322,7 +322,7 @@ def analytic_residuals(
     Args:
       filt: a Gaussian ``Filter`` (state x (n,), measurement all m channels, NaN = not used).
       config: ``hybrid_psa_config(...)``.
-      entries, valid: the history, oldest first, (L, ...), and which entries are stored (``filters.history.ordered``);
+      entries, valid: the history, oldest first, (L, ...), and which entries are stored (``RingBuffer.ordered``);
         restart point ``entries[0]``, its least-squares estimate with covariance ``config.restart_cov``.
       channels: (m,) the current step's channels.
       trusted: (m,) bool, the channels the filter may use.
@@ -397,7 +397,7 @@ def hybrid_psa_fdi(
         need = decide & (count >= 2)
         run = need if batch_axis is None else jax.lax.psum(need.astype(jnp.int32), batch_axis) > 0
         trusted = (config.channel_group < 0) | ~suspects[jnp.clip(config.channel_group, 0, G - 1)]
-        entries, valid = ordered(state.history)
+        entries, valid = state.history.ordered()
         nan_g = jnp.full((G,), jnp.nan, m.dtype)
 
         def replay(_):
@@ -460,7 +460,7 @@ def hybrid_psa_fdi(
             _excluded(d, state.follow),
             ~jnp.isnan(c.statistic) & d.filter_healthy,
         )
-        return state._replace(history=push(state.history, entry)), output
+        return state._replace(history=state.history.push(entry)), output
 
     return FDI(partial(hybrid_psa_init, config), step, observe)
 

@@ -60,7 +60,7 @@ from jaxfdi.detection._glrt import (
     fault_signatures,
     whiten_finite,
 )
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 class KnownChangeState(NamedTuple):

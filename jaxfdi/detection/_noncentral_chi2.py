@@ -106,6 +106,9 @@ def noncentrality_for_missed_detection(threshold, dof, p_md) -> Array:
     below ``threshold`` with probability less than ``p_md``. A test at ``threshold`` on a ``dof``-dof chi-square
     misses a fault of noncentrality ``>= lambda`` with probability ``<= p_md`` (Brown & Chin 1992:
     ``p_bias = sigma sqrt(lambda)``).
+
+    Returns:
+      ``lambda`` (broadcast over the arguments' shapes).
     """
     _checks.check_probability("p_md", p_md)
     dtype = _dtype(threshold, dof, p_md)

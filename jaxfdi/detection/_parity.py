@@ -151,7 +151,11 @@ def parity_vector(space: ParitySpace, measurement: Array) -> Array:
 
 def parity_statistic(parity: Array, valid: Array | None = None) -> Array:
     """``p^T p`` over the last axis, entries outside the mask ``valid`` (e.g. RAIM's unused satellite slots) left
-    out; fault-free and whitened, chi2 with as many dof as valid entries (Potter & Deckert 1973; Brown & Chin 1992)."""
+    out; fault-free and whitened, chi2 with as many dof as valid entries (Potter & Deckert 1973; Brown & Chin 1992).
+
+    Returns:
+      the statistic, ``parity``'s shape without its last axis.
+    """
     squares = jnp.square(jnp.asarray(parity))
     return jnp.sum(squares if valid is None else jnp.where(valid, squares, 0.0), axis=-1)
 

@@ -30,8 +30,7 @@ from jaxfdi.detection._chi2 import Decision, chi2_detector, flag_dead
 from jaxfdi.detection._credits import credit_isolator
 from jaxfdi.detection._dual_filter import DualFilterState, dual_filter
 from jaxfdi.detection._mode_probability import mode_probability_detector
-from jaxfdi.filters._base import Filter, GaussianState
-from jaxfdi.filters._mm import multiple_model
+from jaxfdi.filters import Filter, GaussianState, multiple_model
 
 __all__ = ["TwoStageOutput", "two_stage_isolation"]
 

@@ -7,8 +7,9 @@ filter, optimal or robust to an unknown input, and the unbiased minimum-variance
 from jaxfdi._riccati import solve_discrete_are, steady_state_kalman
 from jaxfdi.filters._base import Filter, FilterInfo, GaussianState, run_filter
 from jaxfdi.filters._ekf import extended_kalman_filter
+from jaxfdi.filters._history import RingBuffer, replay_filter, ring_buffer
 from jaxfdi.filters._imm import interacting_multiple_model
-from jaxfdi.filters._kalman import kalman_filter
+from jaxfdi.filters._kalman import joseph_update, kalman_filter
 from jaxfdi.filters._mm import multiple_model
 from jaxfdi.filters._posterior import init_from_posterior
 from jaxfdi.filters._smoother import rts_smoother
@@ -20,6 +21,10 @@ from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.filters._unknown_input import unknown_input_filter
 
 __all__ = [
+    "joseph_update",
+    "RingBuffer",
+    "ring_buffer",
+    "replay_filter",
     "Filter",
     "FilterInfo",
     "GaussianState",

@@ -15,7 +15,8 @@ from jaxfdi import _checks
 
 
 class RingBuffer(NamedTuple):
-    """The last ``L`` entries of a stream, fixed-size (a pytree: lives in a scan carry).
+    """The last ``L`` entries of a stream, fixed-size (a pytree: lives in a scan carry); built by
+    ``ring_buffer``, appended to by ``push`` and read oldest first by ``ordered``.
 
     Attributes:
       data: pytree, leaves (L, ...)
@@ -29,9 +30,30 @@ class RingBuffer(NamedTuple):
     def length(self) -> int:
         return jax.tree_util.tree_leaves(self.data)[0].shape[0]
 
+    def push(self, entry: Any) -> RingBuffer:
+        """Append ``entry``, overwriting the oldest once full; returns the new buffer."""
+        slot = self.count % self.length
+        data = jax.tree_util.tree_map(
+            lambda store, leaf: store.at[slot].set(leaf), self.data, entry
+        )
+        return RingBuffer(data, self.count + 1)
+
+    def ordered(self) -> tuple[Any, Array]:
+        """``(entries, valid)``: stored entries oldest first (L, ...) and which slots hold one ((L,)
+        bool; fewer than L before the buffer first fills)."""
+        L = self.length
+        start = jnp.where(self.count >= L, self.count % L, 0)
+        index = (start + jnp.arange(L)) % L
+        entries = jax.tree_util.tree_map(lambda store: store[index], self.data)
+        return entries, jnp.arange(L) < jnp.minimum(self.count, L)
+
 
 def ring_buffer(length: int, example: Any) -> RingBuffer:
-    """An empty buffer of ``length`` entries shaped like ``example``."""
+    """An empty buffer of ``length`` entries shaped like ``example``.
+
+    Returns:
+      a ``RingBuffer`` of zeros, ``count`` 0.
+    """
     length = _checks.check_int("length", length, 1, meaning="a positive number of entries")
     data = jax.tree_util.tree_map(
         lambda leaf: jnp.zeros((int(length),) + jnp.shape(leaf), jnp.result_type(leaf)), example
@@ -39,28 +61,15 @@ def ring_buffer(length: int, example: Any) -> RingBuffer:
     return RingBuffer(data, jnp.zeros((), jnp.int32))
 
 
-def push(buffer: RingBuffer, entry: Any) -> RingBuffer:
-    """Append ``entry``, overwriting the oldest once full."""
-    slot = buffer.count % buffer.length
-    data = jax.tree_util.tree_map(lambda store, leaf: store.at[slot].set(leaf), buffer.data, entry)
-    return RingBuffer(data, buffer.count + 1)
-
-
-def ordered(buffer: RingBuffer) -> tuple[Any, Array]:
-    """``(entries, valid)``: stored entries oldest first (L, ...) and which slots hold one ((L,) bool; fewer than L
-    before the buffer first fills)."""
-    L = buffer.length
-    start = jnp.where(buffer.count >= L, buffer.count % L, 0)
-    index = (start + jnp.arange(L)) % L
-    entries = jax.tree_util.tree_map(lambda store: store[index], buffer.data)
-    return entries, jnp.arange(L) < jnp.minimum(buffer.count, L)
-
-
 def replay_filter(
     filt, state: Any, ys: Array, us: Array, valid: Array | None = None
 ) -> tuple[Any, Any]:
-    """Re-run ``filt`` from ``state`` (prior of the first entry) over (L, ...) stored ``ys``, ``us``; ``valid ==
-    False`` steps keep the state. Returns the final state and the (L, ...) infos (fixed-length scan)."""
+    """Re-run ``filt`` from ``state`` (prior of the first entry) over (L, ...) stored ``ys``, ``us``;
+    ``valid == False`` steps keep the state (a fixed-length scan).
+
+    Returns:
+      ``(final_state, infos)``: the state after the last entry and the (L, ...) step infos.
+    """
     ys, us = jnp.asarray(ys), jnp.asarray(us)
     _checks.check_same_length(("ys", "us"), ys, us)
     valid = jnp.ones((ys.shape[0],), bool) if valid is None else jnp.asarray(valid, bool)

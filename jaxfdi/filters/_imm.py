@@ -43,7 +43,7 @@ from jaxfdi.filters._mixture import (
     safe_log,
 )
 from jaxfdi.filters._posterior import posterior_input
-from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi.models import LinearGaussianModel
 
 
 def interacting_multiple_model(

@@ -29,7 +29,7 @@ from jax import Array
 from jaxfdi import _linalg
 from jaxfdi.filters._base import BatchKernel, check_step_inputs, used_innovation
 from jaxfdi.filters._mixture import IMMInfo, IMMState, bayes_mode_update, mixing
-from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi.models import LinearGaussianModel
 
 mm, mv, tr = _linalg.soa_matmul, _linalg.soa_matvec, _linalg.soa_transpose
 

@@ -34,7 +34,7 @@ from jaxfdi.filters._kalman_batch import (
     supports,
 )
 from jaxfdi.filters._parallel import parallel_scan
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 def joseph_update(
@@ -51,9 +51,13 @@ def joseph_update(
 
     With ``missing_measurements`` (static) NaN components of ``y`` are missing: rows of ``H`` zeroed, innovation 0,
     so they neither update the state nor enter the likelihood. Without it the covariance recursion ignores the data,
-    so under ``vmap`` over runs sharing the model and ``P0`` XLA carries one covariance, not one per run (11x faster
-    for 100 engine runs); a non-finite component then updates the mean with a zero innovation and is reported as a
-    dead channel (``_base`` module doc).
+    so under ``vmap`` over runs sharing the model and ``P0`` XLA carries one covariance, not one per run; a
+    non-finite component then updates the mean with a zero innovation and is reported as a dead channel
+    (``_base`` module doc).
+
+    Returns:
+      the step's ``FilterInfo``: predicted and filtered moments, innovation and its covariance,
+      log-likelihood, NIS, observed count and health.
     """
     if missing_measurements:
         mask, y_obs, num_observed = observed_mask(y)

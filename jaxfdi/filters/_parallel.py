@@ -47,7 +47,7 @@ from jaxfdi.filters._base import (
     check_sequences,
     report_dead,
 )
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 class FilteringElement(NamedTuple):

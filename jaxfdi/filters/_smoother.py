@@ -27,7 +27,7 @@ from jaxfdi.filters._parallel import (  # batched transpose, symmetric part, mat
     _mv,
     _sym,
 )
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 class SmootherResult(NamedTuple):

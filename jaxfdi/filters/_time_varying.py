@@ -18,7 +18,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.filters._base import Filter
-from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi.models import LinearGaussianModel
 
 
 class TimedState(NamedTuple):

@@ -46,7 +46,7 @@ from jaxfdi.filters._unknown_input import (
     diffuse_log_likelihood,
     unbiased_minimum_variance_gain,
 )
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 class FaultDirection(NamedTuple):

@@ -35,7 +35,7 @@ from jaxfdi.filters._base import (
     report_dead,
     used_innovation,
 )
-from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
+from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
 def check_decoupling(model: LinearGaussianModel, unknown_input: Array) -> int:

@@ -20,7 +20,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi._stages import FDI
-from jaxfdi.detection._chi2 import Decision, flag_dead
+from jaxfdi.detection import Decision, flag_dead
 from jaxfdi.gnss._atmosphere import Atmosphere
 from jaxfdi.gnss._frames import elevation_azimuth, line_of_sight_ned
 from jaxfdi.gnss._least_squares import masked_qr
@@ -105,6 +105,10 @@ def monitor_epoch(
       transmit: satellite positions and clocks at transmission (``positioning.transmit_states``), if
         known (``orbit`` then unused).
       atmosphere, mask_angle, clocks: as for ``positioning.solve_position``.
+
+    Returns:
+      the epoch's ``EpochIntegrity``: the delivered fix, the parity test, protection levels and
+      what was excluded.
     """
     transmit = transmit_states(orbit, t_receive, pseudoranges) if transmit is None else transmit
     fix = solve_position(
@@ -281,7 +285,11 @@ class RaimOutput(NamedTuple):
 
 def raim_output(result: EpochIntegrity) -> RaimOutput:
     """The epoch's ``RaimOutput``: the test's ``Decision`` labelled ``1 + slot`` of the isolated satellite (-1:
-    alarm, none isolated; a dead slot alarms with its label, ``chi2.flag_dead``) and the delivered solution."""
+    alarm, none isolated; a dead slot alarms with its label, ``chi2.flag_dead``) and the delivered solution.
+
+    Returns:
+      the ``RaimOutput`` (decision, delivered solution).
+    """
     check = result.check
     label = jnp.where(
         check.alarm & (check.isolated >= 0), 1 + check.isolated, jnp.where(check.alarm, -1, 0)

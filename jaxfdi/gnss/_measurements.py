@@ -53,7 +53,14 @@ class Wall(NamedTuple):
 
 class ClockModel(NamedTuple):
     """Receiver oscillator: Allan-variance coefficients (TCXO defaults, Brown & Hwang 2012
-    Table 9.1) and the initial bias [m] and drift [m/s]."""
+    Table 9.1) and the initial bias [m] and drift [m/s].
+
+    Attributes:
+      h0: white frequency noise coefficient (Allan variance) [s]
+      h_minus2: random-walk frequency noise coefficient [1/s]
+      bias: initial clock bias [m]
+      drift: initial clock drift [m/s]
+    """
 
     h0: float = 2e-19
     h_minus2: float = 2e-20
@@ -68,7 +75,11 @@ def elevation_sigma(
     min_elevation: float = math.radians(2.0),
 ) -> Array:
     """``sqrt(a^2 + b^2 / sin^2 el)`` [m]: ``a = zenith``, ``b = slant``; elevations below
-    ``min_elevation`` are taken at it (the satellite is masked anyway)."""
+    ``min_elevation`` are taken at it (the satellite is masked anyway).
+
+    Returns:
+      the pseudorange standard deviation [m], ``elevation``'s shape.
+    """
     _checks.check_scalar("zenith", zenith, 0.0, meaning="a standard deviation >= 0 [m]")
     _checks.check_scalar("slant", slant, 0.0, meaning="a standard deviation >= 0 [m]")
     _checks.check_scalar(
@@ -187,6 +198,9 @@ def receiver_plant(
       sigma: (T, S) pseudorange noise standard deviations [m] (``elevation_sigma``).
       clock: the oscillator (``ClockModel``); ``init`` takes ``[bias, drift]`` anyway.
       fault: sensor ``Fault``(s) on satellite slots (scalar leaves or a stack), or None.
+
+    Returns:
+      a ``Simulator`` whose measurement is the (S,) pseudoranges [m] of each step.
     """
     _checks.check_positive("dt", dt, "a positive epoch interval (s)")
     value = _checks.concrete(sigma)

@@ -28,9 +28,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks
-from jaxfdi.detection._chi2 import chi2_threshold
-from jaxfdi.detection._noncentral_chi2 import noncentrality_for_missed_detection
-from jaxfdi.detection._parity import parity_statistic
+from jaxfdi.detection import chi2_threshold, noncentrality_for_missed_detection, parity_statistic
 from jaxfdi.gnss._least_squares import (
     MaskedQR,
     apply_qt,

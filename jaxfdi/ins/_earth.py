@@ -23,8 +23,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi.gnss._frames import WGS84_A, WGS84_B, WGS84_E2, WGS84_F
-from jaxfdi.gnss._orbits import OMEGA_E
+from jaxfdi.gnss import OMEGA_E, WGS84_A, WGS84_B, WGS84_E2, WGS84_F
 
 #: WGS-84 gravitational constant (with the atmosphere) [m^3/s^2] and normal gravity
 #: at the equator and pole [m/s^2] (NIMA TR8350.2, Tables 3.1 and 3.4)

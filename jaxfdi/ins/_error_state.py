@@ -31,7 +31,7 @@ from jaxfdi import _checks
 from jaxfdi.ins import _mechanization as mechanization
 from jaxfdi.ins._earth import radii_of_curvature
 from jaxfdi.ins._mechanization import NavState
-from jaxfdi.models._rotation import (
+from jaxfdi.rotation import (
     quaternion_conjugate,
     quaternion_multiply,
     rotation_quaternion,

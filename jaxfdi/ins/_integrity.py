@@ -32,15 +32,25 @@ from jax import Array
 
 from jaxfdi import _checks, _linalg
 from jaxfdi._stages import FDI
-from jaxfdi.detection._chi2 import Decision, Detector, WindowState, moving_window_sum
-from jaxfdi.detection._frozen import FrozenState, frozen_channel_detector
-from jaxfdi.filters._base import Filter
-from jaxfdi.gnss import _frames as frames
-from jaxfdi.gnss._integrity import monitor_epoch, raim_output
-from jaxfdi.gnss._measurements import elevation_sigma
-from jaxfdi.gnss._orbits import OrbitTable, select_orbits
-from jaxfdi.gnss._positioning import PositionFix
-from jaxfdi.gnss._raim import RaimTables
+from jaxfdi.detection import (
+    Decision,
+    Detector,
+    FrozenState,
+    WindowState,
+    frozen_channel_detector,
+    moving_window_sum,
+)
+from jaxfdi.filters import Filter
+from jaxfdi.gnss import (
+    OrbitTable,
+    PositionFix,
+    RaimTables,
+    ecef_to_geodetic,
+    elevation_sigma,
+    monitor_epoch,
+    raim_output,
+    select_orbits,
+)
 from jaxfdi.ins import _imu as imu
 from jaxfdi.ins._error_state import STATE_SIZE
 from jaxfdi.ins._loosely_coupled import GpsFix, InsState
@@ -248,7 +258,7 @@ def gps_ins_fdi(
         )
         fix, check, protection = epoch.fix, epoch.check, epoch.protection
         passes = fix.healthy & check.healthy & (check.dof > 0) & ~check.alarm & protection.available
-        lat, lon, height = frames.ecef_to_geodetic(fix.position)
+        lat, lon, height = ecef_to_geodetic(fix.position)
         gps = GpsFix(
             jnp.stack([lat, lon, height]),
             y.velocity,

@@ -27,8 +27,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.filters._base import Filter
-from jaxfdi.filters._kalman import joseph_update
+from jaxfdi.filters import Filter, joseph_update
 from jaxfdi.ins import _error_state as error_state
 from jaxfdi.ins import _mechanization as mechanization
 from jaxfdi.ins._error_state import STATE_SIZE, ImuNoise

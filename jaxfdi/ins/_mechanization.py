@@ -24,7 +24,7 @@ from jax import Array
 
 from jaxfdi import _checks
 from jaxfdi.ins._earth import LocalEarth, local_earth, radii_of_curvature, transport_rate
-from jaxfdi.models._rotation import (
+from jaxfdi.rotation import (
     cross,
     quaternion_conjugate,
     quaternion_multiply,

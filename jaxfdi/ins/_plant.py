@@ -38,9 +38,7 @@ from jaxfdi._faults import (
 )
 from jaxfdi._simulate import SimState
 from jaxfdi._stages import Plant
-from jaxfdi.gnss import _frames as frames
-from jaxfdi.gnss._measurements import ClockModel, receiver_plant
-from jaxfdi.gnss._orbits import OrbitTable
+from jaxfdi.gnss import ClockModel, OrbitTable, geodetic_to_ecef, receiver_plant
 from jaxfdi.ins import _imu as imu
 from jaxfdi.ins._imu import ImuErrors, ImuModel
 from jaxfdi.ins._mechanization import NavState
@@ -198,7 +196,7 @@ def gps_ins_plant(
             f"got targets {targets.tolist()} and components {components.tolist()}"
         )
     positions, velocities, attitudes, true_samples = flight
-    path_ecef = frames.geodetic_to_ecef(positions[:, 0], positions[:, 1], positions[:, 2])
+    path_ecef = geodetic_to_ecef(positions[:, 0], positions[:, 1], positions[:, 2])
     receiver = receiver_plant(table, t0, 1.0, path_ecef, visible, sigma, clock, satellite_fault)
     num_imu_faults = imu_faults.kind.shape[0]
     dt = 1.0 / per_epoch

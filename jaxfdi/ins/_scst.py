@@ -30,7 +30,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import _checks, _linalg
-from jaxfdi.detection._chi2 import Decision
+from jaxfdi.detection import Decision
 
 #: largest accepted condition estimate of the scaled B (float64 solves keep ~6 digits of l); B nears it on
 #: straight legs (nothing learnt on heading and z gyro bias since the reset: their rows nearly dependent)

@@ -23,7 +23,7 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi.ins import _mechanization as mechanization
 from jaxfdi.ins._mechanization import NavState
-from jaxfdi.models._rotation import euler_to_quaternion
+from jaxfdi.rotation import euler_to_quaternion
 
 #: standard gravity used for the coordinated-turn bank angle [m/s^2]
 G0 = 9.80665

@@ -3,10 +3,36 @@
 
 from jaxfdi.models import f16
 from jaxfdi.models._engine import engine_model
-from jaxfdi.models._linear import LinearGaussianModel, c2d, linear_gaussian_model
-from jaxfdi.models._reaction_wheels import kitsat3_params
+from jaxfdi.models._linear import (
+    LinearGaussianModel,
+    c2d,
+    linear_gaussian_model,
+    linear_observation,
+    linear_transition,
+    validate_linear_model,
+)
+from jaxfdi.models._reaction_wheels import (
+    AttitudeReading,
+    SpacecraftParams,
+    WheelCommand,
+    delivered_torque,
+    kitsat3_params,
+    spacecraft_step,
+    stop_transfer,
+    wheel_momentum,
+)
 
 __all__ = [
+    "validate_linear_model",
+    "linear_observation",
+    "linear_transition",
+    "AttitudeReading",
+    "SpacecraftParams",
+    "WheelCommand",
+    "delivered_torque",
+    "spacecraft_step",
+    "stop_transfer",
+    "wheel_momentum",
     "LinearGaussianModel",
     "linear_gaussian_model",
     "c2d",

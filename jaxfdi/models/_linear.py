@@ -84,7 +84,11 @@ def linear_gaussian_model(
 
 def validate_linear_model(model: LinearGaussianModel, name: str = "model") -> tuple[int, int, int]:
     """Check every block of ``model`` (shapes against ``Phi`` and ``C``, real and finite
-    entries, ``Q`` and ``R`` symmetric positive semi-definite); return ``(n, nu, m)``."""
+    entries, ``Q`` and ``R`` symmetric positive semi-definite); return ``(n, nu, m)``.
+
+    Returns:
+      ``(n, nu, m)``: the state, input and measurement sizes.
+    """
     if not isinstance(model, LinearGaussianModel):
         raise TypeError(
             f"{name}: expected a LinearGaussianModel (linear_gaussian_model(Phi, C, Q, R, Gamma, D)), "
@@ -102,12 +106,20 @@ def validate_linear_model(model: LinearGaussianModel, name: str = "model") -> tu
 
 
 def linear_transition(x: Array, u: Array, model: LinearGaussianModel) -> Array:
-    """``Phi x + Gamma u``: a linear model written as a nonlinear ``f(x, u, params)``."""
+    """``Phi x + Gamma u``: a linear model written as a nonlinear ``f(x, u, params)``.
+
+    Returns:
+      the (n,) next state mean ``Phi x + Gamma u``.
+    """
     return model.Phi @ x + model.Gamma @ u
 
 
 def linear_observation(x: Array, u: Array, model: LinearGaussianModel) -> Array:
-    """``C x + D u``: a linear model written as a nonlinear ``h(x, u, params)``."""
+    """``C x + D u``: a linear model written as a nonlinear ``h(x, u, params)``.
+
+    Returns:
+      the (m,) measurement mean ``C x + D u``.
+    """
     return model.C @ x + model.D @ u
 
 

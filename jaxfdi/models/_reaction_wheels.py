@@ -31,7 +31,7 @@ from jax import Array
 from jaxfdi import _checks
 from jaxfdi._faults import FaultKind, Target, apply_fault, is_active
 from jaxfdi.models._integrate import rk4
-from jaxfdi.models._rotation import quaternion_multiply, rotate, skew
+from jaxfdi.rotation import quaternion_multiply, rotate, skew
 
 
 class SpacecraftParams(NamedTuple):
@@ -127,7 +127,11 @@ def stop_hypotheses(params: SpacecraftParams, include_nominal: bool = False) -> 
 
 
 def wheel_momentum(speeds: Array, params: SpacecraftParams) -> Array:
-    """``h_w = I_w H^T (mask * Omega)`` (3,)."""
+    """``h_w = I_w H^T (mask * Omega)`` (3,).
+
+    Returns:
+      the (3,) wheel angular momentum in body axes [N m s].
+    """
     return params.wheel_inertia * (params.wheel_mask * speeds) @ params.wheel_axes
 
 
@@ -201,7 +205,11 @@ def spacecraft_step(
     params: SpacecraftParams,
     substeps: int = 4,
 ) -> Array:
-    """Truth over one sample: torques held, ``substeps`` RK4 steps, quaternion renormalised."""
+    """Truth over one sample: torques held, ``substeps`` RK4 steps, quaternion renormalised.
+
+    Returns:
+      the truth state one sample later (quaternion, body rates, wheel speeds).
+    """
     nxt = rk4(
         lambda x, t: spacecraft_field(x, wheel_torque, external_torque, params),
         state,
@@ -251,7 +259,11 @@ def filter_input(command: WheelCommand, params: SpacecraftParams) -> Array:
 
 def delivered_torque(f, k: Array, command: Array) -> Array:
     """Torques delivered under fault ``f`` (scalar leaves): bias and gain loss act on the command; STOP or
-    STUCK deliver none; sensor faults leave the wheels alone."""
+    STUCK deliver none; sensor faults leave the wheels alone.
+
+    Returns:
+      the (4,) torques the wheels deliver [N m].
+    """
     faulty, _ = apply_fault(f, k, command, Target.ACTUATOR, jnp.zeros((), command.dtype))
     no_torque = (
         is_active(f, k)
@@ -263,7 +275,11 @@ def delivered_torque(f, k: Array, command: Array) -> Array:
 
 
 def stop_transfer(state: Array, f, k: Array, params: SpacecraftParams) -> Array:
-    """At a stop's onset: the wheel's speed -> 0 and its momentum to the body rates."""
+    """At a stop's onset: the wheel's speed -> 0 and its momentum to the body rates.
+
+    Returns:
+      the state with the stopped wheel's momentum moved to the body.
+    """
     speeds = state[7:]
     stopped = (f.kind == FaultKind.STOP) & (f.target == Target.ACTUATOR) & (k == f.onset)
     new_speeds = jnp.where(

@@ -27,7 +27,7 @@ import optax
 from jaxfdi import _checks
 from jaxfdi._io import atomic_write
 from jaxfdi._progress import logger, progress_bar
-from jaxfdi.filters._base import Filter
+from jaxfdi.filters import Filter
 from jaxfdi.tuning._parameterize import (
     Transform,
     constrain,

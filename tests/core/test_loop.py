@@ -14,7 +14,6 @@ from scipy import stats
 import jaxfdi
 from jaxfdi import _loop as loop
 from jaxfdi._monitor import filter_detector
-from jaxfdi.filters import _history as history
 from jaxfdi.filters._time_varying import model_at, time_varying
 from jaxfdi.models import engine_model
 from jaxfdi.models._linear import LinearGaussianModel
@@ -210,15 +209,15 @@ def test_replay_over_the_ring_buffer_equals_the_original_estimates():
 
     def step(state, k, y, u):
         prior, buffer = state
-        buffer = history.push(buffer, (y, u, prior))
+        buffer = buffer.push((y, u, prior))
         post, info = kf.step(prior, y, u)
-        (ys, us, priors), valid = history.ordered(buffer)
+        (ys, us, priors), valid = buffer.ordered()
         start = jax.tree_util.tree_map(lambda leaf: leaf[0], priors)
-        _, replayed = history.replay_filter(kf, start, ys, us, valid)
+        _, replayed = jaxfdi.filters.replay_filter(kf, start, ys, us, valid)
         last = jnp.sum(valid) - 1
         return (post, buffer), (info.filtered_mean, replayed.filtered_mean[last], buffer.count)
 
-    fdi = jaxfdi.FDI(lambda: (prior0, history.ring_buffer(L, example)), step)
+    fdi = jaxfdi.FDI(lambda: (prior0, jaxfdi.filters.ring_buffer(L, example)), step)
     us = jnp.asarray(rng.normal(size=(25, 1)))
     result = loop.run_loop(
         jaxfdi.linear_simulator(model),
@@ -235,24 +234,24 @@ def test_replay_over_the_ring_buffer_equals_the_original_estimates():
     np.testing.assert_array_equal(count, np.arange(1, 26))
     # and the buffer really holds the last L steps, oldest first
     _, buffer = result.final[1]
-    (ys, _, _), valid = history.ordered(buffer)
+    (ys, _, _), valid = buffer.ordered()
     np.testing.assert_array_equal(ys, result.history.sensed.measurement[-L:])
     assert bool(jnp.all(valid))
 
 
 def test_ring_buffer_before_it_fills():
-    buffer = history.ring_buffer(4, jnp.zeros(()))
+    buffer = jaxfdi.filters.ring_buffer(4, jnp.zeros(()))
     for value in (1.0, 2.0):
-        buffer = history.push(buffer, jnp.asarray(value))
-    entries, valid = history.ordered(buffer)
+        buffer = buffer.push(jnp.asarray(value))
+    entries, valid = buffer.ordered()
     np.testing.assert_array_equal(valid, [True, True, False, False])
     np.testing.assert_array_equal(entries[:2], [1.0, 2.0])
     for value in (3.0, 4.0, 5.0, 6.0, 7.0):
-        buffer = history.push(buffer, jnp.asarray(value))
-    entries, valid = history.ordered(buffer)
+        buffer = buffer.push(jnp.asarray(value))
+    entries, valid = buffer.ordered()
     np.testing.assert_array_equal(entries, [4.0, 5.0, 6.0, 7.0])
     with pytest.raises(ValueError, match="length"):
-        history.ring_buffer(0, jnp.zeros(()))
+        jaxfdi.filters.ring_buffer(0, jnp.zeros(()))
 
 
 def test_time_varying_kalman_filter_matches_filterpy_matrix_by_matrix():

@@ -29,7 +29,6 @@ from jaxfdi import _metrics as metrics
 from jaxfdi import control, detection, models, tuning
 from jaxfdi._monitor import filter_detector
 from jaxfdi.control._attitude import slew
-from jaxfdi.filters import _history as history
 from jaxfdi.filters import _time_varying
 from jaxfdi.filters import _tskf as tskf
 from jaxfdi.models import engine_model
@@ -730,8 +729,12 @@ CASES = {
     "run_loop steps zero": (lambda: loop_run(steps=0), V, "steps"),
     "run_loop steps float": (lambda: loop_run(steps=2.5), T_, "steps"),
     "run_loop plant not a plant": (lambda: loop_run(plant=lambda x: x), T_, "plant"),
-    "ring_buffer length zero": (lambda: history.ring_buffer(0, jnp.zeros(2)), V, "length"),
-    "ring_buffer length float": (lambda: history.ring_buffer(3.0, jnp.zeros(2)), T_, "length"),
+    "ring_buffer length zero": (lambda: jaxfdi.filters.ring_buffer(0, jnp.zeros(2)), V, "length"),
+    "ring_buffer length float": (
+        lambda: jaxfdi.filters.ring_buffer(3.0, jnp.zeros(2)),
+        T_,
+        "length",
+    ),
     "state_feedback gain NaN": (lambda: loop.state_feedback(jnp.full((1, 2), jnp.nan)), V, "gain"),
     "detection_scorer estimate_delay negative": (
         lambda: loop.detection_scorer(5, lambda o: o, estimate_delay=-1),
@@ -1651,6 +1654,7 @@ def _receiver(dt=1.0, sigma=jnp.ones((3, 32)), fault=None):
 def _ins():
     import types
 
+    from jaxfdi import rotation
     from jaxfdi.ins import _error_state as error_state
     from jaxfdi.ins import _imu as imu
     from jaxfdi.ins import _integrity as integrity
@@ -1658,7 +1662,6 @@ def _ins():
     from jaxfdi.ins import _mechanization as mechanization
     from jaxfdi.ins import _scst as scst
     from jaxfdi.ins import _trajectory as trajectory
-    from jaxfdi.models import _rotation as rotation
 
     return types.SimpleNamespace(
         error_state=error_state,

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from jaxfdi import rotation
 from jaxfdi.gnss import _frames as frames
 from jaxfdi.ins import _earth as earth
 from jaxfdi.ins import _error_state as error_state
 from jaxfdi.ins import _mechanization as mechanization
 from jaxfdi.ins import _trajectory as trajectory
-from jaxfdi.models import _rotation as rotation
 
 PARK = (37.5684, 126.8851, 70.0)
 

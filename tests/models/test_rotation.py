@@ -1,10 +1,10 @@
-"""``jaxfdi.models._rotation``: the one quaternion algebra of the INS and the spacecraft
+"""``jaxfdi.rotation``: the one quaternion algebra of the INS and the spacecraft
 (Hamilton product, scalar first)."""
 
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi.models import _rotation as rotation
+from jaxfdi import rotation
 
 
 def _unit(v):

@@ -140,7 +140,11 @@ def linearize(params: F16Params, x: Array, u: Array) -> LinearF16:
 def submodel(
     model: LinearF16, states: tuple[int, ...], inputs: tuple[int, ...]
 ) -> tuple[Array, Array]:
-    """``(A[states, states], B[states, inputs])``."""
+    """``(A[states, states], B[states, inputs])``.
+
+    Returns:
+      ``(A_sub, B_sub)``: the (len(states), len(states)) and (len(states), len(inputs)) blocks.
+    """
     s, i = np.asarray(states), np.asarray(inputs)
     return model.A[s[:, None], s[None, :]], model.B[s[:, None], i[None, :]]
 

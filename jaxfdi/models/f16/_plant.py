@@ -160,7 +160,11 @@ def _check_sigma(name: str, value) -> None:
 
 
 def measurement_cov(sensors: F16Sensors) -> Array:
-    """(8 + m_r, 8 + m_r) diagonal covariance of ``y``."""
+    """(8 + m_r, 8 + m_r) diagonal covariance of ``y``.
+
+    Returns:
+      the diagonal measurement covariance ``R``.
+    """
     m_r = sensors.rate_axes.shape[0]
     sigma = jnp.concatenate(
         [
@@ -179,7 +183,11 @@ def sampled_transition(substeps: int = 1):
 
     Rematerialised (``jax.checkpoint``): reverse mode keeps each sample's inputs, not the RK4
     intermediates (memory per step ~ the state, not ~10^4 values). RK4 stages as a loop
-    (``rk4(loop_stages=True)``): the tables compile once, not four times."""
+    (``rk4(loop_stages=True)``): the tables compile once, not four times.
+
+    Returns:
+      the transition function ``f(x_s, u, plant)``.
+    """
 
     @jax.checkpoint
     def transition(xs: Array, u: Array, plant: SampledF16) -> Array:
@@ -198,12 +206,20 @@ def sampled_transition(substeps: int = 1):
 
 
 def sampled_observation(xs: Array, u: Array, plant: SampledF16) -> Array:
-    """``y`` without noise: the measured states and ``H [P, Q, R]``."""
+    """``y`` without noise: the measured states and ``H [P, Q, R]``.
+
+    Returns:
+      the (8 + m_r,) noise-free measurement.
+    """
     return jnp.concatenate([xs[jnp.array(MEASURED_STATES)], plant.rate_axes @ xs[P : R + 1]])
 
 
 def rate_estimator(rate_axes: Array) -> Array:
-    """``(H^T H)^-1 H^T`` (3, m_r): the least-squares body rates from every rate channel."""
+    """``(H^T H)^-1 H^T`` (3, m_r): the least-squares body rates from every rate channel.
+
+    Returns:
+      the (3, m_r) least-squares matrix.
+    """
     _checks.check_matrix(
         "rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel"
     )
@@ -211,5 +227,9 @@ def rate_estimator(rate_axes: Array) -> Array:
 
 
 def flight_view(y: Array, rates: Array) -> FlightView:
-    """The controller's view of ``y`` with the given (selected) body rates."""
+    """The controller's view of ``y`` with the given (selected) body rates.
+
+    Returns:
+      the ``FlightView`` (measured states and the body rates the controller flies on).
+    """
     return FlightView(y[0:3], y[3:6], y[6], y[7], rates)

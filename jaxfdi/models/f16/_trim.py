@@ -126,26 +126,42 @@ def trim_condition(
 
 
 def level_flight(airspeed, altitude=0.0, dtype=None) -> TrimCondition:
-    """Steady wings-level flight at ``airspeed`` [ft/s] and ``altitude`` [ft]."""
+    """Steady wings-level flight at ``airspeed`` [ft/s] and ``altitude`` [ft].
+
+    Returns:
+      the ``TrimCondition`` for ``trim``.
+    """
     return trim_condition(airspeed, altitude, dtype=dtype)
 
 
 def climb(airspeed, climb_angle, altitude=0.0, dtype=None) -> TrimCondition:
-    """A steady climb at ``climb_angle`` [rad] and ``airspeed`` [ft/s]."""
+    """A steady climb at ``climb_angle`` [rad] and ``airspeed`` [ft/s].
+
+    Returns:
+      the ``TrimCondition`` for ``trim``.
+    """
     return trim_condition(airspeed, altitude, climb_angle=climb_angle, dtype=dtype)
 
 
 def coordinated_turn(
     airspeed, turn_rate, altitude=0.0, climb_angle=0.0, dtype=None
 ) -> TrimCondition:
-    """A steady coordinated turn at ``turn_rate`` [rad/s] and ``airspeed`` [ft/s]."""
+    """A steady coordinated turn at ``turn_rate`` [rad/s] and ``airspeed`` [ft/s].
+
+    Returns:
+      the ``TrimCondition`` for ``trim``.
+    """
     return trim_condition(
         airspeed, altitude, climb_angle=climb_angle, turn_rate=turn_rate, dtype=dtype
     )
 
 
 def pull_up(airspeed, pull_up_rate, altitude=0.0, climb_angle=0.0, dtype=None) -> TrimCondition:
-    """A steady pull-up at ``pull_up_rate`` [rad/s] and ``airspeed`` [ft/s]."""
+    """A steady pull-up at ``pull_up_rate`` [rad/s] and ``airspeed`` [ft/s].
+
+    Returns:
+      the ``TrimCondition`` for ``trim``.
+    """
     return trim_condition(
         airspeed, altitude, climb_angle=climb_angle, pull_up_rate=pull_up_rate, dtype=dtype
     )
@@ -270,7 +286,11 @@ def trim(
 @jax.jit
 def trim_batch(params: F16Params, conditions: TrimCondition, xcg: Array) -> TrimResult:
     """``trim`` of stacked conditions (leaves (N,)) at ``xcg`` (N,), other parameters shared: one vmapped
-    solve (compiled per N)."""
+    solve (compiled per N).
+
+    Returns:
+      the ``TrimResult`` with (N, ...) leaves.
+    """
     _checks.check_shape(
         "xcg", xcg, _checks.shape_of(conditions.airspeed)[:1], "one c.g. per condition"
     )

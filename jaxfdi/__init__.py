@@ -6,23 +6,43 @@ the study engine, detection summaries. Then ``filters``, ``detection`` (residual
 ``distributed``; the public API is their ``__all__`` (one documentation page).
 """
 
-from jaxfdi import _version, detection, filters, models
-from jaxfdi._faults import (
-    Fault,
-    FaultKind,
-    concat_faults,
-    fault,
-    fault_group,
-    no_fault,
-    stack_faults,
-)
-from jaxfdi._loop import LoopResult, run_loop, state_feedback
-from jaxfdi._metrics import DetectionRecord, DetectionSummary, summarize_detection
-from jaxfdi._monitor import MonitorResult, monitor
-from jaxfdi._montecarlo import monte_carlo
-from jaxfdi._simulate import linear_simulator, simulate, simulator
-from jaxfdi._stages import FDI, Controller, Plant, Scorer
-from jaxfdi._study import Structure, Study, run_study
+import importlib
+import importlib.util
+from typing import TYPE_CHECKING
+
+from jaxfdi import _version
+
+# what ``__getattr__`` gives, for type checkers and the API page (mkdocstrings reads the source, not the module)
+if TYPE_CHECKING:
+    from jaxfdi import (
+        control,
+        detection,
+        distributed,
+        filters,
+        gnss,
+        ins,
+        models,
+        plotting,
+        scenarios,
+        streaming,
+        tuning,
+    )
+    from jaxfdi._faults import (
+        Fault,
+        FaultKind,
+        concat_faults,
+        fault,
+        fault_group,
+        no_fault,
+        stack_faults,
+    )
+    from jaxfdi._loop import LoopResult, run_loop, state_feedback
+    from jaxfdi._metrics import DetectionRecord, DetectionSummary, summarize_detection
+    from jaxfdi._monitor import MonitorResult, monitor
+    from jaxfdi._montecarlo import monte_carlo
+    from jaxfdi._simulate import linear_simulator, simulate, simulator
+    from jaxfdi._stages import FDI, Controller, Plant, Scorer
+    from jaxfdi._study import Structure, Study, run_study
 
 __version__ = _version.__version__
 
@@ -59,30 +79,49 @@ def enable_compilation_cache(path: str | None = None) -> str:
     return cache
 
 
-_LAZY_SUBMODULES = (
-    "control",
-    "tuning",
-    "gnss",
-    "ins",
-    "scenarios",
-    "plotting",
-    "streaming",
-    "distributed",
-)
+#: the top-level names, by the module that defines them (the ``TYPE_CHECKING`` imports above, which a test holds equal)
+_EXPORTS = {
+    "jaxfdi._faults": (
+        "Fault",
+        "FaultKind",
+        "concat_faults",
+        "fault",
+        "fault_group",
+        "no_fault",
+        "stack_faults",
+    ),
+    "jaxfdi._loop": ("LoopResult", "run_loop", "state_feedback"),
+    "jaxfdi._metrics": ("DetectionRecord", "DetectionSummary", "summarize_detection"),
+    "jaxfdi._monitor": ("MonitorResult", "monitor"),
+    "jaxfdi._montecarlo": ("monte_carlo",),
+    "jaxfdi._simulate": ("linear_simulator", "simulate", "simulator"),
+    "jaxfdi._stages": ("FDI", "Controller", "Plant", "Scorer"),
+    "jaxfdi._study": ("Structure", "Study", "run_study"),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 
 
 def __getattr__(name: str):
-    """The subpackages beyond the core (``control`` and ``tuning`` import optax, ~0.1 s) are imported on first use, not
-    by ``import jaxfdi``."""
-    if name in _LAZY_SUBMODULES:
-        import importlib
-
-        return importlib.import_module(f"jaxfdi.{name}")
-    raise AttributeError(f"module 'jaxfdi' has no attribute {name!r}")
+    """Everything but the version and the two switches is imported on first use (PEP 562), so that ``import jaxfdi``
+    imports no JAX (``jaxfdi --help`` takes no JAX start-up): a top-level name from its module (``_EXPORTS``), a
+    subpackage or module of the package (``jaxfdi.filters``, ``jaxfdi._faults``) by importing it. The value is kept in
+    the package's namespace, so this runs once per name."""
+    if name in _WHERE:
+        value = getattr(importlib.import_module(_WHERE[name]), name)
+    elif (
+        name.isidentifier()
+        and not name.startswith("__")
+        and importlib.util.find_spec(f"{__name__}.{name}") is not None
+    ):
+        value = importlib.import_module(f"{__name__}.{name}")
+    else:
+        raise AttributeError(f"module 'jaxfdi' has no attribute {name!r}")
+    globals()[name] = value
+    return value
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_LAZY_SUBMODULES))
+    return sorted(set(globals()) | set(__all__))
 
 
 __all__ = [

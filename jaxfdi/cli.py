@@ -3,7 +3,9 @@
 Options are checked before anything is computed (``check_options``, then method or parameter names); a bad one: exit
 status 2, one stderr line ``jaxfdi: --option: expected ..., got ...``. Files go to a temporary folder inside ``--out``,
 published together when done (``jaxfdi._io.study_output``); SIGINT, SIGTERM, SIGHUP leave ``--out`` as it was. A new
-scenario is a ``Runner`` in ``RUNNERS`` (tuning target: ``TUNERS``).
+scenario is a ``Runner`` in ``RUNNERS`` (tuning target: ``TUNERS``): its study's module path, help and options; the
+module is imported (``_study``) only when the command runs, so that ``jaxfdi --help``, ``jaxfdi run --help`` and
+``jaxfdi --version`` import no study and no JAX (``import jaxfdi`` imports its names on first use).
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import _thread
 import argparse
 import contextlib
+import importlib
 import linecache
 import logging
 import math
@@ -22,35 +25,23 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Callable, Iterator, NamedTuple, Sequence
+from types import ModuleType
+from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
 import jaxfdi
 from jaxfdi import _io, distributed
 from jaxfdi import _progress as progress
-from jaxfdi._checks import MAX_SEED  # seeds: see its comment
-from jaxfdi.scenarios import engine_chi2_tuning as ct
-from jaxfdi.scenarios import engine_tuning as et
-from jaxfdi.scenarios.engine import engine_method_names, engine_study, plot_engine
-from jaxfdi.scenarios.engine_chi2 import engine_chi2_study, plot_engine_chi2
-from jaxfdi.scenarios.f16_fdi import f16_fdi_study, plot_f16_fdi
-from jaxfdi.scenarios.f16_flight import f16_flight_study, plot_f16_flight
-from jaxfdi.scenarios.gnss_campus import gnss_campus_study, plot_gnss_campus
-from jaxfdi.scenarios.gnss_real import gnss_real_study, plot_gnss_real
-from jaxfdi.scenarios.gps_ins import gps_ins_study, plot_gps_ins
-from jaxfdi.scenarios.reaction_wheels import METHODS as WHEEL_METHODS
-from jaxfdi.scenarios.reaction_wheels import plot_wheels, wheel_design, wheel_examples, wheel_study
-from jaxfdi.scenarios.vtol import METHODS as VTOL_METHODS
-from jaxfdi.scenarios.vtol import plot_vtol, vtol_design, vtol_examples, vtol_study
-from jaxfdi.tuning import constrain, save_params
-from jaxfdi.tuning._parameterize import unconstrain
 
 #: the CLI's messages (jaxfdi._progress.configure_logging sends them to stderr; --quiet drops INFO)
 logger = logging.getLogger("jaxfdi")
 
 #: the largest count an option takes (runs, steps, windows: JAX indexes them in int32)
 MAX_COUNT = 2**31 - 1
+#: the largest seed: ``jaxfdi._checks.MAX_SEED`` (see its comment), written here because ``_checks`` imports JAX (a test
+#: holds the two equal)
+MAX_SEED = 2**32 - 1
 #: integer options: dest -> (lowest, highest)
 INTEGER_RANGES = {
     "runs": (1, MAX_COUNT),
@@ -86,19 +77,22 @@ NUM_ENGINE_MODES = 7
 
 
 class Runner(NamedTuple):
-    """A ``jaxfdi run`` scenario or ``jaxfdi tune`` target.
+    """A ``jaxfdi run`` scenario or ``jaxfdi tune`` target: what argparse and the checks need, and the path of the
+    study's module, imported (``_study``) only when the command runs.
 
     - ``run(args, folder)``: computes, prints tables, writes files into ``folder`` (temporary, published into ``--out``
       when it returns); returns the line naming them under ``--out``.
     - ``options``: the scenario-specific options it reads (dest names of ``RUN_SPECIFIC``/``TUNE_SPECIFIC``; others
-      refused); ``methods``: valid ``--methods`` names (``None``: no ``--methods``); ``check(args)``: further checks
-      needing the scenario's module, raising ``UsageError`` (``expected``)."""
+      refused); ``methods``: the name, in the study's module, of its valid ``--methods`` names (a sequence, or a
+      function returning one; ``None``: no ``--methods``); ``check(args)``: further checks needing the study's module,
+      raising ``UsageError`` (``expected``); ``module``: the study's module (``jaxfdi.scenarios.<study>``)."""
 
     run: Callable[[argparse.Namespace, Path], str]
     help: str
     options: tuple[str, ...] = ()
-    methods: Callable[[], Sequence[str]] | None = None
+    methods: str | None = None
     check: Callable[[argparse.Namespace], None] | None = None
+    module: str | None = None
 
 
 class UsageError(Exception):
@@ -120,6 +114,19 @@ class Terminated(KeyboardInterrupt):
 
 def _flag(dest: str) -> str:
     return "--" + dest.replace("_", "-")
+
+
+def _command(args: argparse.Namespace) -> tuple[str, str]:
+    """``("run", <scenario>)`` or ``("tune", <target>)``: the command ``args`` names."""
+    return ("run", args.scenario) if args.command == "run" else ("tune", args.target)
+
+
+def _study(args: argparse.Namespace) -> ModuleType:
+    """The module of the study that ``args``' command runs (its ``Runner.module`` in ``REGISTRY``), imported now: the
+    CLI's one import inside a function (``tests/core/test_layering.py``), so that building the parser (``--help``,
+    ``--version``) imports no study and no JAX."""
+    kind, name = _command(args)
+    return importlib.import_module(REGISTRY[kind][name].module)
 
 
 def _confirm_steps(text: str):
@@ -156,8 +163,9 @@ def _write_study(
 
 
 def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
+    engine_chi2 = _study(args)
     start = time.perf_counter()
-    result = engine_chi2_study(
+    result = engine_chi2.engine_chi2_study(
         runs=args.runs, seed=args.seed, window=args.window, pfa=args.pfa, progress=not args.quiet
     )
     elapsed = time.perf_counter() - start
@@ -168,7 +176,7 @@ def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
     print(result.table())
 
     def plot(where: Path) -> list[Path]:
-        plot_engine_chi2(result, where / "engine-chi2.png")
+        engine_chi2.plot_engine_chi2(result, where / "engine-chi2.png")
         return [where / "engine-chi2.png"]
 
     return _write_study(result, args, folder, "engine-chi2.json", plot, elapsed)
@@ -198,8 +206,9 @@ def _methods_option(args: argparse.Namespace) -> dict:
 
 
 def _run_engine(args: argparse.Namespace, folder: Path) -> str:
+    engine = _study(args)
     start = time.perf_counter()
-    study = engine_study(
+    study = engine.engine_study(
         runs=args.runs, seed=args.seed, progress=not args.quiet, **_methods_option(args)
     )
     elapsed = time.perf_counter() - start
@@ -218,18 +227,19 @@ def _run_engine(args: argparse.Namespace, folder: Path) -> str:
     )
     print(study.table())
     return _write_study(
-        study, args, folder, "engine.json", lambda where: plot_engine(study, where), elapsed
+        study, args, folder, "engine.json", lambda where: engine.plot_engine(study, where), elapsed
     )
 
 
-def _engine_imm_designs(args: argparse.Namespace) -> list[str]:
+def _engine_imm_designs(et: ModuleType, args: argparse.Namespace) -> list[str]:
     return sorted(et.DESIGNS) if args.design == "all" else [args.design]
 
 
 def _check_engine_imm(args: argparse.Namespace) -> None:
     """``--freeze``: parameter names of every chosen design, leaving one to train."""
+    et = _study(args)
     frozen = tuple(name.strip() for name in args.freeze.split(",") if name.strip())
-    for name in _engine_imm_designs(args):
+    for name in _engine_imm_designs(et, args):
         params = sorted(et.imm_design(name).parameterization)
         unknown = sorted(set(frozen) - set(params))
         if unknown:
@@ -248,6 +258,9 @@ def _check_engine_imm(args: argparse.Namespace) -> None:
 
 
 def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
+    et = _study(args)
+    api = jaxfdi.tuning  # JAX and optax: the package imports it on first use, here
+    constrain, unconstrain, save_params = api.constrain, api.unconstrain, api.save_params
     test_seed = args.seed + 1000
     frozen = args.freeze
     report, paths = {}, []
@@ -257,7 +270,7 @@ def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
         delay=args.delay_weight,
         isolation=args.isolation_weight,
     )
-    for name in _engine_imm_designs(args):
+    for name in _engine_imm_designs(et, args):
         start = time.perf_counter()
         design = et.imm_design(name)
         logger.info("%s: training", name)  # logging: --quiet drops it
@@ -348,6 +361,9 @@ def _tune_engine_imm(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _tune_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
+    ct = _study(args)
+    api = jaxfdi.tuning  # JAX and optax: the package imports it on first use, here
+    constrain, save_params = api.constrain, api.save_params
     start = time.perf_counter()
     windows = args.windows
     weights = ct.Chi2Weights(false_alarm=args.false_alarm_weight, delay=args.delay_weight)
@@ -418,16 +434,17 @@ def _tune_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
 
 
 def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
+    vtol = _study(args)
     start = time.perf_counter()
-    design = vtol_design()
-    study = vtol_study(
+    design = vtol.vtol_design()
+    study = vtol.vtol_study(
         runs=args.runs,
         seed=args.seed,
         design=design,
         progress=not args.quiet,
         **_methods_option(args),
     )
-    examples = vtol_examples(study.design, seed=args.seed)
+    examples = vtol.vtol_examples(study.design, seed=args.seed)
     elapsed = time.perf_counter() - start
     cfg = study.config
     print(
@@ -456,14 +473,15 @@ def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
         args,
         folder,
         "vtol.json",
-        lambda where: plot_vtol(study, examples, study.design, where),
+        lambda where: vtol.plot_vtol(study, examples, study.design, where),
         elapsed,
     )
 
 
 def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
+    wheels = _study(args)
     start = time.perf_counter()
-    study = wheel_study(
+    study = wheels.wheel_study(
         runs=args.runs,
         seed=args.seed,
         calibration_runs=max(20, 2 * args.runs),
@@ -472,8 +490,8 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
         progress=not args.quiet,
         **_methods_option(args),
     )
-    design = wheel_design()._replace(detection_threshold=study.config["fdp_threshold"])
-    examples = wheel_examples(
+    design = wheels.wheel_design()._replace(detection_threshold=study.config["fdp_threshold"])
+    examples = wheels.wheel_examples(
         design, seed=args.seed, estimator=args.estimator, engage_on=args.engage_on
     )
     elapsed = time.perf_counter() - start
@@ -505,28 +523,34 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
         args,
         folder,
         "reaction-wheels.json",
-        lambda where: plot_wheels(study, examples, where),
+        lambda where: wheels.plot_wheels(study, examples, where),
         elapsed,
     )
 
 
 def _study_runner(
-    study: Callable,
+    study: str,
     name: str,
-    plot: Callable,
+    plot: str,
     header: Callable[[dict, argparse.Namespace], str],
     runs: str = "runs",
 ) -> Callable[[argparse.Namespace, Path], str]:
-    """A runner for a study with a one-line header: ``study(<runs>=--runs, seed, progress)``, its header and table
-    printed, its JSON and figures (``plot(study, folder)``) written."""
+    """A runner for a study with a one-line header: the study's module's function ``study`` called as
+    ``study(<runs>=--runs, seed, progress)``, its header and table printed, its JSON and figures (the module's
+    ``plot(study, folder)``) written."""
 
     def run(args: argparse.Namespace, folder: Path) -> str:
+        module = _study(args)
         start = time.perf_counter()
-        result = study(**{runs: args.runs}, seed=args.seed, progress=not args.quiet)
+        result = getattr(module, study)(
+            **{runs: args.runs}, seed=args.seed, progress=not args.quiet
+        )
         elapsed = time.perf_counter() - start
         print(header(result.config, args))
         print(result.table())
-        return _write_study(result, args, folder, name, lambda where: plot(result, where), elapsed)
+        return _write_study(
+            result, args, folder, name, lambda where: getattr(module, plot)(result, where), elapsed
+        )
 
     return run
 
@@ -579,72 +603,86 @@ def _gps_ins_header(cfg: dict, args: argparse.Namespace) -> str:
 
 
 _run_f16_flight = _study_runner(
-    f16_flight_study, "f16-flight.json", plot_f16_flight, _f16_flight_header, "flights"
+    "f16_flight_study", "f16-flight.json", "plot_f16_flight", _f16_flight_header, "flights"
 )
-_run_f16 = _study_runner(f16_fdi_study, "f16.json", plot_f16_fdi, _f16_header)
+_run_f16 = _study_runner("f16_fdi_study", "f16.json", "plot_f16_fdi", _f16_header)
 _run_gnss_campus = _study_runner(
-    gnss_campus_study, "gnss-campus.json", plot_gnss_campus, _gnss_campus_header
+    "gnss_campus_study", "gnss-campus.json", "plot_gnss_campus", _gnss_campus_header
 )
-_run_gps_ins = _study_runner(gps_ins_study, "gps-ins.json", plot_gps_ins, _gps_ins_header)
-_run_gnss_real = _study_runner(gnss_real_study, "gnss-real.json", plot_gnss_real, _gnss_real_header)
+_run_gps_ins = _study_runner("gps_ins_study", "gps-ins.json", "plot_gps_ins", _gps_ins_header)
+_run_gnss_real = _study_runner(
+    "gnss_real_study", "gnss-real.json", "plot_gnss_real", _gnss_real_header
+)
 
 
+#: the registry: ``jaxfdi run <scenario>`` -> its ``Runner`` (help, options, the study's module, imported when it runs)
 RUNNERS = {
     "engine": Runner(
         _run_engine,
         "Han et al. (2022) turbojet: MM, IMM (two fault-mode designs) and windowed GLRT beside "
         "the paper's Table 3",
-        methods=engine_method_names,
+        methods="engine_method_names",
+        module="jaxfdi.scenarios.engine",
     ),
     "engine-chi2": Runner(
         _run_engine_chi2,
         "Han et al. (2022) turbojet: the Kalman-filter chi-square test (--window, --pfa)",
         options=("window", "pfa"),
+        module="jaxfdi.scenarios.engine_chi2",
     ),
     "reaction-wheels": Runner(
         _run_reaction_wheels,
         "Choi & Park (2009) satellite, 4-wheel pyramid: dual filter F, NIS, "
         "credits, MM isolator (--estimator, --engage-on)",
         options=("estimator", "engage_on"),
-        methods=lambda: WHEEL_METHODS,
+        methods="METHODS",
+        module="jaxfdi.scenarios.reaction_wheels",
     ),
     "f16": Runner(
         _run_f16,
         "Park et al. (2004) F-16 rate sensors: parity space with the UKF's analytic redundancy on "
         "demand, the paper's case, direction x magnitude sweep, envelope, sensor layout",
+        module="jaxfdi.scenarios.f16_fdi",
     ),
     "f16-flight": Runner(
         _run_f16_flight,
         "Park et al. (2004) F-16: book trim tables beside ours, modes, LQR SAS with "
         "altitude and bank hold flying the paper's climb and bank turn",
+        module="jaxfdi.scenarios.f16_flight",
     ),
     "gps-ins": Runner(
         _run_gps_ins,
         "Yoo et al. (2010) INS/GPS: 15-state EKF, windowed chi-square and SCST, Table 3 (gyro bias)",
+        module="jaxfdi.scenarios.gps_ins",
     ),
     "gnss-campus": Runner(
         _run_gnss_campus,
         "Yoo et al. (2010) GPS RAIM: campus HDOP/HPL availability with a blocked sky, "
         "park satellite faults detected, isolated and excluded",
+        module="jaxfdi.scenarios.gnss_campus",
     ),
     "gnss-real": Runner(
         _run_gnss_real,
         "GEONET stations (real GPS, one hour): positions beside RTKLIB's, slope and "
         "solution-separation PLs (Stanford diagrams), injected step and ramp faults; "
         "smartphones (every constellation) beside Google and gnss_lib_py",
+        module="jaxfdi.scenarios.gnss_real",
     ),
     "vtol": Runner(
         _run_vtol,
         "Lee & Lyou VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
         "fault-tolerant control",
-        methods=lambda: VTOL_METHODS,
+        methods="METHODS",
+        module="jaxfdi.scenarios.vtol",
     ),
 }
+#: ``jaxfdi tune <target>`` -> its ``Runner``
 TUNERS = {
     "engine-chi2": Runner(
         _tune_engine_chi2,
         "Q, R and the threshold of the engine chi-square test by gradient, window by validation",
         options=("windows",),
+        module="jaxfdi.scenarios.engine_chi2_tuning",
     ),
     "engine-imm": Runner(
         _tune_engine_imm,
@@ -659,8 +697,11 @@ TUNERS = {
             "selection_runs",
         ),
         check=_check_engine_imm,
+        module="jaxfdi.scenarios.engine_tuning",
     ),
 }
+#: the command's kind -> its half of the registry
+REGISTRY = {"run": RUNNERS, "tune": TUNERS}
 #: one line per scenario and tuning target, for ``jaxfdi --help``
 RUN_HELP = {name: runner.help for name, runner in RUNNERS.items()}
 TUNE_HELP = {name: runner.help for name, runner in TUNERS.items()}
@@ -915,7 +956,7 @@ def check_options(args: argparse.Namespace, kind: str, name: str, runner: Runner
     a non-finite or out-of-range real, a malformed list, an unwritable ``--out`` (probe file); fills in the
     scenario-specific defaults. Pure Python: nothing imported, computed or left behind."""
     specific = RUN_SPECIFIC if kind == "run" else TUNE_SPECIFIC
-    registry = RUNNERS if kind == "run" else TUNERS
+    registry = REGISTRY[kind]
     reads = set(runner.options) | ({"methods"} if runner.methods is not None else set())
     for dest, default in specific.items():
         value = getattr(args, dest)
@@ -1039,8 +1080,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "list":
         print("\n".join([*sorted(RUNNERS), *(f"tune {name}" for name in sorted(TUNERS))]))
         return 0
-    kind, name = ("run", args.scenario) if args.command == "run" else ("tune", args.target)
-    runner = (RUNNERS if kind == "run" else TUNERS)[name]
+    kind, name = _command(args)
+    runner = REGISTRY[kind][name]
     try:
         check_options(args, kind, name, runner)
         processes = _process_options(args) if kind == "run" else None
@@ -1054,7 +1095,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with _signals_raise(), _io.recording(argv, args.seed):
             if runner.methods is not None and args.methods is not None:
-                valid = list(runner.methods())
+                names = getattr(_study(args), runner.methods)
+                valid = list(names() if callable(names) else names)
                 chosen, unknown = split_methods(args.methods, valid)
                 if unknown or not chosen:
                     raise expected(

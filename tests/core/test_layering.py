@@ -2,6 +2,12 @@
 the layers (or stays within its own layer), none hides inside a function, and no library module
 imports another subpackage's private module (it imports the subpackage's public name).
 
+Two imports happen at run time, by design, and only these (``importlib.import_module``): the
+CLI imports the study of the command it runs (``jaxfdi.cli._study``, the module path its
+registry names, a study below it), so that ``jaxfdi --help`` imports no study and no JAX; and
+the package imports a top-level name or a submodule on first use (``jaxfdi.__getattr__``,
+PEP 562), so that ``import jaxfdi`` imports no JAX either.
+
 Layers, lowest first: numerics and I/O <- faults and the stage shapes <- models <- Riccati and simulation <-
 filters <- metrics and Monte Carlo <- studies and streaming <- detection <- the loop <-
 monitor, tracking, tuning <- GNSS, control <- INS <- plotting <- scenarios <- CLI and the
@@ -9,11 +15,14 @@ package's front door.
 """
 
 import ast
+import collections
+import importlib.util
 import pathlib
 
 import pytest
 
 import jaxfdi
+from jaxfdi import cli
 
 PACKAGE = pathlib.Path(jaxfdi.__file__).parent
 
@@ -117,6 +126,52 @@ def test_imports_point_down_the_layers(name, path):
         elif LAYERS[unit] > LAYERS[source]:
             bad.append(f"line {line}: {target} (layer {LAYERS[unit]}) from layer {LAYERS[source]}")
     assert bad == []
+
+
+def _run_time_imports(path: pathlib.Path):
+    """The innermost function (None: the module's own code) around each ``importlib.import_module``
+    or ``__import__`` call."""
+    found = []
+
+    def visit(node, function):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.Call):
+                func = child.func
+                called = getattr(func, "attr", None) or getattr(func, "id", None)
+                if called in ("import_module", "__import__"):
+                    found.append(function)
+            inner = (
+                child.name
+                if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef))
+                else function
+            )
+            visit(child, inner)
+
+    visit(ast.parse(path.read_text()), None)
+    return found
+
+
+#: (module, function) -> how many run-time imports it makes: the CLI's study import, the
+#: package's two in ``__getattr__`` (a top-level name's module, a submodule)
+RUN_TIME_IMPORTS = {("jaxfdi.cli", "_study"): 1, ("jaxfdi", "__getattr__"): 2}
+
+
+def test_the_only_run_time_imports_are_the_clis_study_and_the_packages_names():
+    found = collections.Counter(
+        (name, function) for name, path in _modules() for function in _run_time_imports(path)
+    )
+    assert found == collections.Counter(RUN_TIME_IMPORTS)
+
+
+def test_the_cli_registry_names_existing_studies_below_it():
+    """What ``jaxfdi.cli._study`` imports: each registry entry's module, a study of
+    ``jaxfdi.scenarios`` (a layer below the CLI)."""
+    modules = [runner.module for registry in cli.REGISTRY.values() for runner in registry.values()]
+    assert cli.REGISTRY == {"run": cli.RUNNERS, "tune": cli.TUNERS}
+    for module in modules:
+        assert module.startswith("jaxfdi.scenarios."), module
+        assert importlib.util.find_spec(module) is not None, module
+        assert LAYERS[_unit(module)] < LAYERS["cli"], module
 
 
 SUBPACKAGES = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists())

@@ -1,9 +1,12 @@
 """jaxfdi: model-based fault detection and isolation in JAX.
 
-Top level: faults as data, the simulator, the closed loop's stages and scan, the fused monitor, the Monte Carlo driver,
-the study engine, detection summaries. Then ``filters``, ``detection`` (residual tests, isolation), ``models``,
-``control``, ``tuning``, ``gnss``, ``ins``, ``scenarios`` (the papers' studies), ``plotting``, ``streaming``,
-``distributed``; the public API is their ``__all__`` (one documentation page).
+Top level: faults as data, the simulator, the closed loop's stages, scan and scorers, the fused monitor, the Monte Carlo
+driver, the study engine, detection summaries with their intervals. Then ``filters``, ``detection`` (residual tests,
+isolation), ``models``, ``control``, ``tuning``, ``gnss``, ``ins``, ``scenarios`` (the papers' studies), ``plotting``,
+``streaming``, ``distributed``, and the modules ``checks`` and ``rotation``; the public API is their ``__all__`` (one
+documentation page each).
+
+Constants: ``NEVER`` a step beyond any simulation, 2**30: the ``end`` of a fault that never clears.
 """
 
 import importlib
@@ -28,21 +31,60 @@ if TYPE_CHECKING:
         tuning,
     )
     from jaxfdi._faults import (
+        NEVER,
         Fault,
         FaultKind,
+        Target,
+        as_stack,
         concat_faults,
+        episodes,
         fault,
         fault_group,
+        fault_label,
+        is_active,
         no_fault,
+        sensor_labels,
         stack_faults,
     )
-    from jaxfdi._loop import LoopResult, run_loop, state_feedback
-    from jaxfdi._metrics import DetectionRecord, DetectionSummary, summarize_detection
-    from jaxfdi._monitor import MonitorResult, monitor
+    from jaxfdi._frame import results_frame, study_result
+    from jaxfdi._loop import (
+        LoopResult,
+        combine_scorers,
+        detection_scorer,
+        episode_scorer,
+        feedforward,
+        health_scorer,
+        peak_scorer,
+        run_loop,
+        state_feedback,
+    )
+    from jaxfdi._metrics import (
+        DetectionRecord,
+        DetectionSummary,
+        EpisodeRecord,
+        EpisodeSummary,
+        binomial_interval,
+        binomial_lower_bound,
+        cell,
+        delay_statistics,
+        fault_row,
+        rate_cell,
+        rate_interval,
+        record_from_alarms,
+        step_health,
+        summarize_detection,
+        summarize_episodes,
+        unhealthy_rows_warning,
+        unhealthy_warning,
+    )
+    from jaxfdi._monitor import MonitorHistory, MonitorResult, monitor, replay_detector
     from jaxfdi._montecarlo import monte_carlo
-    from jaxfdi._simulate import linear_simulator, simulate, simulator
+    from jaxfdi._progress import status
+    from jaxfdi._riccati import steady_state_kalman
+    from jaxfdi._simulate import Simulator, linear_simulator, simulate, simulator
     from jaxfdi._stages import FDI, Controller, Plant, Scorer
-    from jaxfdi._study import Structure, Study, run_study
+    from jaxfdi._study import Structure, Study, case_slices, run_study
+    from jaxfdi._tracking import TrackingScore, tracked_plant
 
 __version__ = _version.__version__
 
@@ -89,14 +131,53 @@ _EXPORTS = {
         "fault_group",
         "no_fault",
         "stack_faults",
+        "NEVER",
+        "Target",
+        "as_stack",
+        "episodes",
+        "fault_label",
+        "is_active",
+        "sensor_labels",
     ),
-    "jaxfdi._loop": ("LoopResult", "run_loop", "state_feedback"),
-    "jaxfdi._metrics": ("DetectionRecord", "DetectionSummary", "summarize_detection"),
-    "jaxfdi._monitor": ("MonitorResult", "monitor"),
+    "jaxfdi._loop": (
+        "LoopResult",
+        "run_loop",
+        "state_feedback",
+        "combine_scorers",
+        "detection_scorer",
+        "episode_scorer",
+        "feedforward",
+        "health_scorer",
+        "peak_scorer",
+    ),
+    "jaxfdi._metrics": (
+        "DetectionRecord",
+        "DetectionSummary",
+        "summarize_detection",
+        "EpisodeRecord",
+        "EpisodeSummary",
+        "binomial_interval",
+        "binomial_lower_bound",
+        "cell",
+        "delay_statistics",
+        "fault_row",
+        "rate_cell",
+        "rate_interval",
+        "record_from_alarms",
+        "step_health",
+        "summarize_episodes",
+        "unhealthy_rows_warning",
+        "unhealthy_warning",
+    ),
+    "jaxfdi._monitor": ("MonitorResult", "monitor", "MonitorHistory", "replay_detector"),
     "jaxfdi._montecarlo": ("monte_carlo",),
-    "jaxfdi._simulate": ("linear_simulator", "simulate", "simulator"),
+    "jaxfdi._simulate": ("linear_simulator", "simulate", "simulator", "Simulator"),
     "jaxfdi._stages": ("FDI", "Controller", "Plant", "Scorer"),
-    "jaxfdi._study": ("Structure", "Study", "run_study"),
+    "jaxfdi._study": ("Structure", "Study", "run_study", "case_slices"),
+    "jaxfdi._frame": ("results_frame", "study_result"),
+    "jaxfdi._progress": ("status",),
+    "jaxfdi._riccati": ("steady_state_kalman",),
+    "jaxfdi._tracking": ("TrackingScore", "tracked_plant"),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 
@@ -128,31 +209,70 @@ __all__ = [
     # faults and simulation
     "Fault",
     "FaultKind",
+    "Target",
     "fault",
     "fault_group",
     "no_fault",
     "stack_faults",
     "concat_faults",
+    "as_stack",
+    "episodes",
+    "is_active",
+    "fault_label",
+    "sensor_labels",
+    "NEVER",
+    "Simulator",
     "simulator",
     "linear_simulator",
     "simulate",
-    # the closed loop, the monitor, Monte Carlo, studies, summaries
+    "steady_state_kalman",
+    # the closed loop and its scorers, the monitor, tracking
     "Plant",
     "FDI",
     "Controller",
     "Scorer",
     "run_loop",
     "state_feedback",
+    "feedforward",
     "LoopResult",
+    "detection_scorer",
+    "episode_scorer",
+    "health_scorer",
+    "peak_scorer",
+    "combine_scorers",
     "monitor",
     "MonitorResult",
+    "MonitorHistory",
+    "replay_detector",
+    "tracked_plant",
+    "TrackingScore",
+    # Monte Carlo and studies
     "monte_carlo",
     "Study",
     "Structure",
     "run_study",
+    "case_slices",
+    "study_result",
+    "results_frame",
+    "status",
+    # detection records, summaries, rates with their intervals, table cells
     "DetectionRecord",
+    "record_from_alarms",
     "summarize_detection",
     "DetectionSummary",
+    "EpisodeRecord",
+    "summarize_episodes",
+    "EpisodeSummary",
+    "delay_statistics",
+    "step_health",
+    "binomial_interval",
+    "binomial_lower_bound",
+    "rate_interval",
+    "rate_cell",
+    "cell",
+    "fault_row",
+    "unhealthy_warning",
+    "unhealthy_rows_warning",
     # set-up
     "enable_x64",
     "enable_compilation_cache",

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 #: an ``end`` far beyond any simulation: the fault never clears.
 NEVER = 2**30
@@ -57,7 +57,12 @@ class FaultKind(enum.IntEnum):
 
 
 class Target(enum.IntEnum):
-    """Where a fault acts: on an actuator (input) or a sensor (measurement) component."""
+    """Where a fault acts: on an actuator (input) or a sensor (measurement) component.
+
+    Attributes:
+      ACTUATOR: 0, a component of the actuator (input) signal ``u``
+      SENSOR: 1, a component of the sensor (measurement) signal ``y``
+    """
 
     ACTUATOR = 0
     SENSOR = 1
@@ -96,14 +101,14 @@ def _enum_value(name: str, value, enum_type):
         return enum_type[value.upper()]
     if isinstance(value, enum_type):
         return value
-    _checks.check_int_array(
+    checks.check_int_array(
         name, value, meaning=f"one of {expected} (a name, the enum or its integer)"
     )
-    concrete = _checks.concrete(value)
+    concrete = checks.concrete(value)
     if concrete is not None and not np.all(np.isin(concrete, [e.value for e in enum_type])):
         raise ValueError(
             f"{name}: expected one of {expected} (or their integers "
-            f"{[e.value for e in enum_type]}), got {_checks.received(concrete)}"
+            f"{[e.value for e in enum_type]}), got {checks.received(concrete)}"
         )
     return value
 
@@ -122,23 +127,23 @@ def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, l
     """
     kind = _enum_value("kind", kind, FaultKind)
     target = _enum_value("target", target, Target)
-    _checks.check_int_array("component", component, 0, meaning="a component index >= 0")
-    _checks.check_int_array("onset", onset, 0, meaning="a step index >= 0")
-    _checks.check_int_array("end", end, meaning="a step index after the onset")
-    _checks.check_int_array("label", label, -1, meaning="a mode label >= 0, or -1 (derived)")
+    checks.check_int_array("component", component, 0, meaning="a component index >= 0")
+    checks.check_int_array("onset", onset, 0, meaning="a step index >= 0")
+    checks.check_int_array("end", end, meaning="a step index after the onset")
+    checks.check_int_array("label", label, -1, meaning="a mode label >= 0, or -1 (derived)")
     for name, value in (("magnitude", magnitude), ("slope", slope)):
-        _checks.check_real(name, value, "real numbers")
-        _checks.check_finite(name, value)
-    onsets, ends = _checks.concrete(onset), _checks.concrete(end)
+        checks.check_real(name, value, "real numbers")
+        checks.check_finite(name, value)
+    onsets, ends = checks.concrete(onset), checks.concrete(end)
     if onsets is not None and ends is not None and np.any((ends <= onsets) & (onsets < NEVER)):
         raise ValueError(
-            f"end: expected a step after the onset (end > onset), got end {_checks.received(ends)} "
-            f"for onset {_checks.received(onsets)}"
+            f"end: expected a step after the onset (end > onset), got end {checks.received(ends)} "
+            f"for onset {checks.received(onsets)}"
         )
     kinds, sizes, targets = (
-        _checks.concrete(kind),
-        _checks.concrete(magnitude),
-        _checks.concrete(target),
+        checks.concrete(kind),
+        checks.concrete(magnitude),
+        checks.concrete(target),
     )
     if (
         kinds is not None
@@ -156,7 +161,7 @@ def fault(kind, target, component, onset, magnitude=0.0, slope=0.0, end=NEVER, l
         if np.any(loss & ((sizes < 0) | (sizes > 1))):
             raise ValueError(
                 f"magnitude: expected an effectiveness loss in [0, 1] (1 = no effect at all), got "
-                f"{_checks.received(sizes)}"
+                f"{checks.received(sizes)}"
             )
     return Fault(
         kind=jnp.asarray(kind, jnp.int32),
@@ -189,9 +194,9 @@ def fault_group(
     """
     if np.size(components) == 0:
         raise ValueError(
-            f"components: expected shape (G,) with G >= 1, got {_checks.received(components)}"
+            f"components: expected shape (G,) with G >= 1, got {checks.received(components)}"
         )
-    _checks.check_int_array("components", components, 0, meaning="component indices >= 0")
+    checks.check_int_array("components", components, 0, meaning="component indices >= 0")
     components = jnp.asarray(components, jnp.int32)
     if components.ndim != 1 or components.shape[0] < 1:
         raise ValueError(
@@ -199,7 +204,7 @@ def fault_group(
         )
     size = components.shape[0]
     for name, value in (("magnitudes", magnitudes), ("slopes", slopes)):
-        shape = _checks.shape_of(value)
+        shape = checks.shape_of(value)
         if len(shape) not in (0, 1) or (len(shape) == 1 and shape[0] != size):
             raise ValueError(
                 f"{name}: expected a scalar or shape ({size},) like components, got {shape}"
@@ -249,7 +254,7 @@ def concat_faults(*faults: Fault) -> Fault:
     for i, f in enumerate(faults):
         if not isinstance(f, Fault):
             raise TypeError(
-                f"faults: expected Fault arguments (fault, fault_group, ...), got {_checks.received(f)} "
+                f"faults: expected Fault arguments (fault, fault_group, ...), got {checks.received(f)} "
                 f"at position {i}"
             )
     return jax.tree_util.tree_map(
@@ -258,13 +263,21 @@ def concat_faults(*faults: Fault) -> Fault:
 
 
 def is_active(f: Fault, k: Array) -> Array:
-    """Whether fault ``f`` (scalar leaves) acts at step ``k``."""
+    """Whether fault ``f`` (scalar leaves) acts at step ``k``.
+
+    Returns:
+      () bool: ``onset <= k < end`` for a fault of a kind other than NONE; an IMPULSE only at ``k == onset``.
+    """
     live = (f.kind != FaultKind.NONE) & (k >= f.onset) & (k < f.end)
     return jnp.where(f.kind == FaultKind.IMPULSE, live & (k == f.onset), live)
 
 
 def sensor_labels(num_inputs: int, num_sensors: int) -> Array:
-    """(num_sensors,) int: sensor ``j``'s ``fault_label`` ``1 + num_inputs + j``, what a dead ``j`` isolates to."""
+    """(num_sensors,) int: sensor ``j``'s ``fault_label`` ``1 + num_inputs + j``, what a dead ``j`` isolates to.
+
+    Returns:
+      (num_sensors,) int32 array ``[1 + num_inputs, ..., num_inputs + num_sensors]``.
+    """
     return 1 + int(num_inputs) + jnp.arange(int(num_sensors), dtype=jnp.int32)
 
 
@@ -272,6 +285,10 @@ def fault_label(f: Fault, num_inputs: int) -> Array:
     """Integer mode label: 0 no fault, ``1 + i`` actuator i, ``1 + num_inputs + j`` sensor j; an explicit
     ``f.label`` (>= 0, e.g. a ``fault_group``'s) takes precedence. For the engine (one input) this is the mode order
     of Han et al. (2022): normal, actuator, RPM, P2, T2, P4, T4.
+
+    Returns:
+      int32 array of the leaves' shape (() for one fault): 0 for a NONE fault, else ``f.label`` if >= 0, else the
+      label derived from target and component.
     """
     derived = jnp.where(f.target == Target.ACTUATOR, 1 + f.component, 1 + num_inputs + f.component)
     label = jnp.where(jnp.asarray(f.label) >= 0, f.label, derived)
@@ -292,6 +309,10 @@ def episodes(faults: Fault, num_inputs: int) -> tuple[Array, Array, Array]:
     Entry ``i``: fault ``i``'s onset, end (``onset + 1`` for an IMPULSE) and ``fault_label``. NONE faults and
     repeats of an earlier entry's (onset, end, label) (further components of a ``fault_group``) carry
     ``onset = end = NEVER``, label 0. Fixed shapes (jits, vmaps over runs); feeds ``metrics.episode_record_init``.
+
+    Returns:
+      ``(onsets, ends, labels)``: three (F,) int32 arrays (steps, steps, mode labels), F the stack's length (1 for
+      a scalar fault).
     """
     faults = as_stack(faults)
     ends = jnp.where(
@@ -316,7 +337,12 @@ def episodes(faults: Fault, num_inputs: int) -> tuple[Array, Array, Array]:
 
 
 def as_stack(f: Fault) -> Fault:
-    """Leaves (F,): scalar faults become a stack of one; a stack's scalar leaf (hand-built, no ``label``) broadcast."""
+    """Leaves (F,): scalar faults become a stack of one; a stack's scalar leaf (hand-built, no ``label``) broadcast.
+
+    Returns:
+      ``Fault`` whose leaves all have the leading axis F (``f.kind``'s shape, (1,) for a scalar fault); leaves
+      that already have axes are returned as they are.
+    """
     shape = jnp.shape(f.kind) if jnp.ndim(f.kind) else (1,)
     return jax.tree_util.tree_map(
         lambda leaf: jnp.broadcast_to(jnp.asarray(leaf), shape) if jnp.ndim(leaf) == 0 else leaf, f

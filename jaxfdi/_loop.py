@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._metrics import (
     DetectionRecord,
     EpisodeRecord,
@@ -78,7 +78,12 @@ class LoopResult(NamedTuple):
 
 
 def feedforward() -> Controller:
-    """The open-loop controller: ``u[k] = exogenous[k]`` (precomputed inputs)."""
+    """The open-loop controller: ``u[k] = exogenous[k]`` (precomputed inputs).
+
+    Returns:
+      ``Controller(init, step, feedforward=True)`` with no state (``init() -> None``):
+      ``step(None, k, view, exogenous) -> (None, jnp.asarray(exogenous))``, ``view`` unused (``None``).
+    """
     return Controller(
         lambda: None, lambda state, k, view, u: (state, jnp.asarray(u)), feedforward=True
     )
@@ -92,7 +97,7 @@ def state_feedback(gain: Array, reference: Callable[[Array], Array] | None = Non
       ``Controller(init, step)`` (not feed-forward) with no state (``init() -> None``):
       ``step(None, k, view, exogenous) -> (None, u)``, ``u`` (nu,) for a ``gain`` (nu, n) and a view (n,).
     """
-    _checks.check_matrix("gain", gain, (None, None), "K: nu inputs x n states, u = -K x")
+    checks.check_matrix("gain", gain, (None, None), "K: nu inputs x n states, u = -K x")
     gain = jnp.asarray(gain)
 
     def step(state, k, view, exogenous):
@@ -152,19 +157,19 @@ def run_loop(
         if not all(callable(getattr(part, field, None)) for field in needed):
             raise TypeError(
                 f"{name}: expected an object with callable {', '.join(needed)} (a "
-                f"{name.capitalize() if name != 'fdi' else 'FDI'}), got {_checks.received(part)}"
+                f"{name.capitalize() if name != 'fdi' else 'FDI'}), got {checks.received(part)}"
             )
     if not _is_key(key) or (
         jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) and key.shape != ()
     ):
         raise TypeError(
-            f"key: expected one PRNG key (jax.random.key(seed)), got {_checks.received(key)}"
+            f"key: expected one PRNG key (jax.random.key(seed)), got {checks.received(key)}"
         )
     for leaf in jax.tree_util.tree_leaves(exogenous):
         if jnp.ndim(leaf) == 0:
             raise ValueError(
                 f"exogenous: expected (T, ...) leaves with a leading axis of steps, got a scalar leaf "
-                f"{_checks.received(leaf)}"
+                f"{checks.received(leaf)}"
             )
     lengths = {leaf.shape[0] for leaf in jax.tree_util.tree_leaves(exogenous)}
     if len(lengths) > 1:
@@ -177,7 +182,7 @@ def run_loop(
                 "steps: expected the number of steps (no exogenous data to take it from)"
             )
         steps = lengths.pop()
-    steps = _checks.check_int("steps", steps, 1, meaning="a positive number of steps")
+    steps = checks.check_int("steps", steps, 1, meaning="a positive number of steps")
     if lengths and lengths != {steps}:
         raise ValueError(f"exogenous: expected {steps} steps along axis 0, got {sorted(lengths)}")
     if not controller.feedforward and u0 is None:
@@ -254,7 +259,7 @@ def _decisions(value: Any) -> Any:
         if not isinstance(leaf, Decision):
             raise TypeError(
                 f"decisions: expected the output's Decision, or a tuple / dict of Decisions, got "
-                f"{_checks.received(leaf)} in a {type(value).__name__}"
+                f"{checks.received(leaf)} in a {type(value).__name__}"
             )
     return value
 
@@ -318,8 +323,12 @@ def detection_scorer(
       estimate_delay: as for ``monitor``.
       single: ``decisions`` returns one decision: the record is built without tracing a step to find the structure (a
         structure of several is found by one extra trace).
+
+    Returns:
+      ``Scorer`` whose score is a ``DetectionRecord`` (scalar fields) per decision, in the structure ``decisions``
+      returns (one record with ``single=True``); ``LoopResult.score`` after the run.
     """
-    _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
+    checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     dtype = dtype or jnp.result_type(float)
 
     def fold(record: DetectionRecord, k, decision: Decision, good) -> DetectionRecord:
@@ -351,8 +360,12 @@ def episode_scorer(
       episodes: ``(onsets, ends, labels)``, each (E,) (``faults.episodes(fault, nu)``).
       decisions, healthy, single: as for ``detection_scorer``.
       grace: steps after an episode's end still credited to it (``metrics``).
+
+    Returns:
+      ``Scorer`` whose score is an ``EpisodeRecord`` ((E,) episode fields, scalar run fields) per decision, in the
+      structure ``decisions`` returns (one record with ``single=True``).
     """
-    _checks.check_int_array("grace", grace, 0, meaning="a number of steps >= 0")
+    checks.check_int_array("grace", grace, 0, meaning="a number of steps >= 0")
 
     def fold(record: EpisodeRecord, k, decision: Decision, good) -> EpisodeRecord:
         return episode_record_update(record, k, decision.alarm, decision.label, healthy=good)
@@ -371,9 +384,13 @@ def peak_scorer(
     values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None
 ) -> Scorer:
     """Running maxima: ``score[i] = max over the steps k with active(k)[i] of values(output)[i]`` (0 before any such
-    step), e.g. the largest statistic before the onset."""
-    _checks.check_callable("values", values, "a function output -> (n,) values")
-    _checks.check_callable("active", active, "a function k -> (n,) bool")
+    step), e.g. the largest statistic before the onset.
+
+    Returns:
+      ``Scorer`` whose score is an (n,) array (``dtype``, default float) of the running maxima, zeros at the start.
+    """
+    checks.check_callable("values", values, "a function output -> (n,) values")
+    checks.check_callable("active", active, "a function k -> (n,) bool")
     dtype = dtype or jnp.result_type(float)
 
     def init(example):
@@ -386,7 +403,11 @@ def peak_scorer(
 
 
 def health_scorer(healthy: Callable[[Any], Array] | None = None) -> Scorer:
-    """() bool: every step healthy (default: the output's ``healthy`` field)."""
+    """() bool: every step healthy (default: the output's ``healthy`` field).
+
+    Returns:
+      ``Scorer`` whose score is a () bool: True until a step whose ``healthy(output)`` has a False entry.
+    """
     healthy = healthy or (lambda output: output.healthy)
     return Scorer(
         lambda example: jnp.ones((), bool),
@@ -395,7 +416,11 @@ def health_scorer(healthy: Callable[[Any], Array] | None = None) -> Scorer:
 
 
 def combine_scorers(**scorers: Scorer) -> Scorer:
-    """Several scorers side by side; the score is a dict by name."""
+    """Several scorers side by side; the score is a dict by name.
+
+    Returns:
+      ``Scorer`` whose score is ``{name: that scorer's score}``, each updated with the same outputs.
+    """
 
     def init(example):
         return {name: scorer.init(example) for name, scorer in scorers.items()}

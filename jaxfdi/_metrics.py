@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._faults import NEVER
 
 
@@ -67,7 +67,11 @@ class DetectionRecord(NamedTuple):
 
 def step_health(healthy: Array, *values) -> Array:
     """() bool: ``healthy`` and no NaN in any leaf of ``values`` (e.g. ``step_health(info.healthy, statistic)``);
-    an infinite value (a dead sensor's statistic) is evidence, not ill health."""
+    an infinite value (a dead sensor's statistic) is evidence, not ill health.
+
+    Returns:
+      bool array of ``healthy``'s shape (() for a scalar flag): ``healthy`` and no NaN anywhere in ``values``.
+    """
     ok = jnp.asarray(healthy, bool)
     for leaf in jax.tree.leaves(values):
         ok = ok & ~jnp.any(jnp.isnan(jnp.asarray(leaf)))
@@ -76,7 +80,7 @@ def step_health(healthy: Array, *values) -> Array:
 
 def record_init(onset: Array, dtype=None) -> DetectionRecord:
     """An empty record of a run whose fault starts at step ``onset`` (int >= 0; ``faults.NEVER``: fault-free)."""
-    _checks.check_int_array(
+    checks.check_int_array(
         "onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)"
     )
     minus_one = jnp.asarray(-1, jnp.int32)
@@ -106,7 +110,7 @@ def record_update(
 ) -> DetectionRecord:
     """Fold step ``k``'s decision (alarm, label, estimate) into the record; ``healthy`` False marks the run
     unhealthy from ``k`` on (``step_health``)."""
-    _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
+    checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     k = jnp.asarray(k, jnp.int32)
     label = jnp.asarray(label, jnp.int32)
     before = k < record.onset
@@ -142,18 +146,23 @@ def _first_unhealthy(first: Array, k: Array, healthy: Array) -> Array:
 def record_from_alarms(
     alarms: Array, onset: Array, healthy: Array | None = None
 ) -> DetectionRecord:
-    """The same record from a whole (T,) alarm history (and optional (T,) bool ``healthy``) at once."""
-    if _checks._kind(alarms) not in "biu":
+    """The same record from a whole (T,) alarm history (and optional (T,) bool ``healthy``) at once.
+
+    Returns:
+      ``DetectionRecord`` of scalar int32 fields (first alarm, detection step, false alarms, pre-onset steps,
+      first unhealthy step); ``isolated`` and ``first_label`` -1 and ``estimate`` NaN (no labels or estimates).
+    """
+    if checks._kind(alarms) not in "biu":
         raise TypeError(
-            f"alarms: expected a (T,) bool alarm history, got {_checks.received(alarms)}"
+            f"alarms: expected a (T,) bool alarm history, got {checks.received(alarms)}"
         )
-    _checks.check_shape("alarms", alarms, (None,), "a (T,) alarm history")
-    _checks.check_int_array(
+    checks.check_shape("alarms", alarms, (None,), "a (T,) alarm history")
+    checks.check_int_array(
         "onset", onset, 0, meaning="a fault onset step >= 0 (faults.NEVER: fault-free)"
     )
     if healthy is not None:
-        _checks.check_shape(
-            "healthy", healthy, _checks.shape_of(alarms), "one flag per step of alarms"
+        checks.check_shape(
+            "healthy", healthy, checks.shape_of(alarms), "one flag per step of alarms"
         )
     k = jnp.arange(alarms.shape[0])
     before = k < onset
@@ -220,8 +229,8 @@ def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) 
     Returns:
       ``DetectionSummary`` of Python ints and floats; NaN where a rate or delay has no runs.
     """
-    _checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
-    _checks.check_positive("Ts", Ts, "a positive sample period")
+    checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
+    checks.check_positive("Ts", Ts, "a positive sample period")
     seen = np.maximum(np.asarray(record.pre_onset_steps), np.asarray(record.first_alarm) + 1)
     if np.any(seen > horizon):
         raise ValueError(
@@ -263,9 +272,11 @@ def delay_statistics(onset, first_alarm, detection_step, Ts: float = 1.0) -> dic
     """The delay columns from per-run (R,) arrays of faulty runs (host-side, for studies with their own records):
     ``onset``, ``first_alarm`` (anywhere, -1 none), ``detection_step`` (at/after the onset, -1 none).
 
-    Returns ``pre_onset_alarm_rate``, ``clean_runs``, ``delay_runs`` and ``delay_mean``, ``delay_median``,
-    ``delay_p90`` (unit of ``Ts``) over the clean detected runs; NaN where there are none."""
-    _checks.check_positive("Ts", Ts, "a positive sample period")
+    Returns:
+      dict of ``pre_onset_alarm_rate`` (float), ``clean_runs``, ``delay_runs`` (int) and ``delay_mean``,
+      ``delay_median``, ``delay_p90`` (floats, unit of ``Ts``) over the clean detected runs; NaN where there are none.
+    """
+    checks.check_positive("Ts", Ts, "a positive sample period")
     onset, first, detection = (
         np.asarray(a).astype(np.int64).ravel() for a in (onset, first_alarm, detection_step)
     )
@@ -295,7 +306,12 @@ def fault_row(
     ``unhealthy_runs``, ``detection_rate``, ``isolation_rate`` (faulty runs detected with ``record.isolated ==
     label`` / faulty runs; NaN without ``label`` or fault-free), ``false_alarm_rate`` (runs alarming before the onset
     / healthy runs; for faulty runs = ``pre_onset_alarm_rate``), ``pre_onset_alarm_rate``, ``clean_runs``,
-    ``delay_runs``, ``delay_mean_s``, ``delay_median_s``, ``delay_p90_s`` (unit of ``Ts``; as ``DetectionSummary``)."""
+    ``delay_runs``, ``delay_mean_s``, ``delay_median_s``, ``delay_p90_s`` (unit of ``Ts``; as ``DetectionSummary``).
+
+    Returns:
+      dict of those eleven columns, in that order: Python ints (counts) and floats (rates, delays), NaN where a
+      rate or delay has no runs.
+    """
     s = summarize_detection(record, horizon, Ts)
     onset = np.asarray(record.onset)
     healthy = np.broadcast_to(np.asarray(record.first_unhealthy) < 0, onset.shape)
@@ -322,7 +338,12 @@ def fault_row(
 
 def unhealthy_warning(unhealthy: int, runs: int, detail: str = "", what: str = "") -> str:
     """The console line a study prints when runs went numerically bad ("" if none); ``detail`` (e.g. the count
-    per fault) goes in the brackets, ``what`` (e.g. the method) before the count."""
+    per fault) goes in the brackets, ``what`` (e.g. the method) before the count.
+
+    Returns:
+      str: ``"WARNING: <what>: <unhealthy> of <runs> runs went numerically bad (...)"``, or ``""`` when
+      ``unhealthy`` is 0.
+    """
     if not unhealthy:
         return ""
     detail = f": {detail}" if detail else ""
@@ -334,7 +355,12 @@ def unhealthy_warning(unhealthy: int, runs: int, detail: str = "", what: str = "
 
 
 def unhealthy_rows_warning(rows: list[dict], what: str = "") -> str:
-    """``unhealthy_warning`` for table rows (dicts with ``runs``, ``fault``, maybe ``unhealthy_runs``), per fault."""
+    """``unhealthy_warning`` for table rows (dicts with ``runs``, ``fault``, maybe ``unhealthy_runs``), per fault.
+
+    Returns:
+      str: the warning line over all rows, the unhealthy count of each such fault in the brackets; ``""`` when no
+      row has unhealthy runs.
+    """
     bad = [r for r in rows if r.get("unhealthy_runs")]
     return unhealthy_warning(
         sum(r["unhealthy_runs"] for r in bad),
@@ -350,21 +376,21 @@ def confusion_matrix(true_labels: Array, predicted_labels: Array, num_classes: i
     The last column counts negative predictions (nothing isolated). A label outside ``[0, num_classes)`` (true, or
     a prediction >= num_classes) is refused, not dropped: every run counts once.
     """
-    num_classes = _checks.check_int(
+    num_classes = checks.check_int(
         "num_classes", num_classes, 1, meaning="a positive number of classes"
     )
-    _checks.check_int_array("true_labels", true_labels, 0, num_classes - 1, "class labels")
-    _checks.check_int_array(
+    checks.check_int_array("true_labels", true_labels, 0, num_classes - 1, "class labels")
+    checks.check_int_array(
         "predicted_labels",
         predicted_labels,
         None,
         num_classes - 1,
         "class labels (negative: nothing isolated)",
     )
-    if _checks.shape_of(true_labels) != _checks.shape_of(predicted_labels):
+    if checks.shape_of(true_labels) != checks.shape_of(predicted_labels):
         raise ValueError(
-            f"predicted_labels: expected the shape of true_labels {_checks.shape_of(true_labels)}, got "
-            f"{_checks.shape_of(predicted_labels)}"
+            f"predicted_labels: expected the shape of true_labels {checks.shape_of(true_labels)}, got "
+            f"{checks.shape_of(predicted_labels)}"
         )
     true_labels = jnp.asarray(true_labels, jnp.int32)
     predicted = jnp.asarray(predicted_labels, jnp.int32)
@@ -412,8 +438,8 @@ def episode_record_init(onsets: Array, ends: Array, labels: Array, grace: int = 
 
     Window of episode ``e``: ``[onset_e, min(end_e + grace, min{onset_j > onset_e}))``.
     """
-    _checks.check_int_array("grace", grace, 0, meaning="a number of steps >= 0")
-    _checks.check_int_array(
+    checks.check_int_array("grace", grace, 0, meaning="a number of steps >= 0")
+    checks.check_int_array(
         "onsets", onsets, 0, meaning="episode onset steps >= 0 (faults.NEVER: no episode)"
     )
     onsets, ends, labels = (jnp.asarray(a, jnp.int32) for a in (onsets, ends, labels))
@@ -490,8 +516,13 @@ class EpisodeSummary(NamedTuple):
 
 
 def summarize_episodes(records: EpisodeRecord, Ts: float = 1.0) -> EpisodeSummary:
-    """Summarise stacked records (leading run axis R; episode leaves (R, E))."""
-    _checks.check_positive("Ts", Ts, "a positive sample period")
+    """Summarise stacked records (leading run axis R; episode leaves (R, E)).
+
+    Returns:
+      ``EpisodeSummary``: Python ints and floats for the run counts and false-alarm rates, (E,) NumPy arrays per
+      episode (delays in the unit of ``Ts``); NaN where a rate or delay has no runs.
+    """
+    checks.check_positive("Ts", Ts, "a positive sample period")
     onset, label = np.asarray(records.onset), np.asarray(records.label)
     detection, isolated = np.asarray(records.detection_step), np.asarray(records.isolated)
     runs = onset.shape[0]
@@ -533,12 +564,16 @@ def summarize_episodes(records: EpisodeRecord, Ts: float = 1.0) -> EpisodeSummar
 def binomial_interval(trials: int, p: float, level: float = 0.99) -> tuple[int, int]:
     """Central ``level`` interval ``[low, high]`` of a Binomial(``trials``, ``p``) count (``scipy.stats.binom``),
     e.g. the alarm counts of a detector with design false-alarm probability ``p``: ``low`` / ``high`` the smallest
-    k with ``P(X <= k) >= (1 - level) / 2`` / ``>= 1 - (1 - level) / 2``."""
+    k with ``P(X <= k) >= (1 - level) / 2`` / ``>= 1 - (1 - level) / 2``.
+
+    Returns:
+      ``(low, high)``: two ints in ``[0, trials]``, counts.
+    """
     from scipy import stats
 
-    trials = _checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
-    _checks.check_probability("p", p, open_interval=False)
-    _checks.check_probability("level", level)
+    trials = checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
+    checks.check_probability("p", p, open_interval=False)
+    checks.check_probability("level", level)
     tail = (1.0 - level) / 2.0
     return int(stats.binom.ppf(tail, trials, p)), int(stats.binom.ppf(1.0 - tail, trials, p))
 
@@ -554,11 +589,11 @@ def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[flo
     """
     from scipy import stats
 
-    trials = _checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
-    successes = _checks.check_int(
+    trials = checks.check_int("trials", trials, 0, meaning="a number of trials >= 0")
+    successes = checks.check_int(
         "successes", successes, 0, trials, meaning=f"a count in [0, trials = {trials}]"
     )
-    _checks.check_probability("level", level)
+    checks.check_probability("level", level)
     if trials == 0:
         return float("nan"), float("nan")
     tail = (1.0 - level) / 2.0
@@ -582,7 +617,11 @@ def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2)
 
 def rate_cell(rate, trials: int, width: int = 16, digits: int = 2) -> str:
     """``rate_text`` (95 % interval) of ``rate`` over ``trials`` runs, right-aligned in ``width``; ``-`` with no
-    rate (NaN, no runs), blank for ``None`` (a method that does not decide that)."""
+    rate (NaN, no runs), blank for ``None`` (a method that does not decide that).
+
+    Returns:
+      str of at least ``width`` characters, e.g. ``"0.97 [0.93,0.99]"`` (the count is ``round(rate * trials)``).
+    """
     if rate is None:
         return " " * width
     if rate != rate or not trials:
@@ -591,7 +630,11 @@ def rate_cell(rate, trials: int, width: int = 16, digits: int = 2) -> str:
 
 
 def cell(value, spec: str = ".3f", width: int = 0, missing: str = "-") -> str:
-    """``format(value, spec)`` right-aligned in ``width``; ``missing`` for ``None`` or a non-finite number."""
+    """``format(value, spec)`` right-aligned in ``width``; ``missing`` for ``None`` or a non-finite number.
+
+    Returns:
+      str of at least ``width`` characters.
+    """
     absent = value is None or (
         isinstance(value, (int, float, np.number)) and not np.isfinite(value)
     )
@@ -600,7 +643,11 @@ def cell(value, spec: str = ".3f", width: int = 0, missing: str = "-") -> str:
 
 def binomial_lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
     """One-sided Clopper-Pearson lower bound ``B^-1(1 - confidence; k, n-k+1)`` (``rate_interval`` at level
-    ``2 confidence - 1``); 0 when none succeeded, NaN without trials."""
+    ``2 confidence - 1``); 0 when none succeeded, NaN without trials.
+
+    Returns:
+      float in [0, 1]: a bound below the rate ``successes / trials`` at ``confidence``.
+    """
     return _one_sided_interval(successes, trials, confidence)[0]
 
 
@@ -611,7 +658,7 @@ def binomial_upper_bound(successes: int, trials: int, confidence: float = 0.95) 
 
 
 def _one_sided_interval(successes: int, trials: int, confidence: float) -> tuple[float, float]:
-    _checks.check_scalar(
+    checks.check_scalar(
         "confidence",
         confidence,
         0.5,

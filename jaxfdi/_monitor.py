@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._loop import detection_scorer, feedforward, run_loop
 from jaxfdi._metrics import DetectionRecord, record_init, record_update, step_health
 from jaxfdi._simulate import Actuated, Sensed, Simulator
@@ -132,7 +132,7 @@ def monitor(
       ``keep_history=True``, its ``MonitorHistory`` (truth ``Sensed``, ``Actuated``, filter info,
       statistic, alarm, label and estimate, each with a leading time axis T), else ``None``.
     """
-    us = _checks.check_inputs(us)
+    us = checks.check_inputs(us)
     scorer = detection_scorer(
         onset,
         lambda out: out[1],
@@ -175,11 +175,15 @@ def replay_detector(
     bool, the filter's health per step (``info.healthy``): with ``None`` only the
     statistic (NaN: ``metrics.step_health``) marks ``first_unhealthy``; given, the record
     is ``monitor``'s. ``dead`` (T, m) bool, the channels the filter reported dead at each
-    step (``dead_channels``), alarm with ``channel_labels`` as in ``filter_detector``."""
-    _checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
+    step (``dead_channels``), alarm with ``channel_labels`` as in ``filter_detector``.
+
+    Returns:
+      ``DetectionRecord`` (scalar fields) of the T steps, its ``estimate`` of the inputs' dtype.
+    """
+    checks.check_int_array("estimate_delay", estimate_delay, 0, meaning="a number of steps >= 0")
     steps = jnp.arange(jax.tree.leaves(inputs)[0].shape[0])
     healthy = jnp.ones(steps.shape, bool) if healthy is None else jnp.asarray(healthy, bool)
-    _checks.check_shape("healthy", healthy, steps.shape, "one flag per step of inputs (T,)")
+    checks.check_shape("healthy", healthy, steps.shape, "one flag per step of inputs (T,)")
 
     dead = jnp.zeros(steps.shape + (0,), bool) if dead is None else jnp.asarray(dead, bool)
 

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._progress import progress_bar, status
 from jaxfdi.distributed import allgather
 
@@ -142,32 +142,30 @@ def monte_carlo(
       order; with ``summary``, ``(kept, totals)`` (``kept`` stacked likewise, ``totals`` summed over runs, NumPy);
       with ``reduce``, the reducer's final state (merged across processes) instead.
     """
-    _checks.check_callable("run_one", run_one, "a function (key, per_run_slice) -> outputs")
-    num_runs = _checks.check_int("num_runs", num_runs, 1, meaning="a positive number of runs")
+    checks.check_callable("run_one", run_one, "a function (key, per_run_slice) -> outputs")
+    num_runs = checks.check_int("num_runs", num_runs, 1, meaning="a positive number of runs")
     if chunk_size is not None:
-        chunk_size = _checks.check_int(
+        chunk_size = checks.check_int(
             "chunk_size", chunk_size, 1, meaning="a positive number of runs per call"
         )
     if not _is_key(key):
         raise TypeError(
-            f"key: expected a PRNG key (jax.random.key(seed)), got {_checks.received(key)}"
+            f"key: expected a PRNG key (jax.random.key(seed)), got {checks.received(key)}"
         )
     if not (progress is None or isinstance(progress, bool) or callable(progress)):
         raise TypeError(
             f"progress: expected True/False or a callable (done, total, seconds), got "
-            f"{_checks.received(progress)}"
+            f"{checks.received(progress)}"
         )
     if reduce is not None and not all(
         callable(getattr(reduce, name, None)) for name in ("init", "update", "merge")
     ):
         raise TypeError(
             f"reduce: expected a Reducer(init, update, merge) such as streaming.detection_reducer(...), "
-            f"got {_checks.received(reduce)}"
+            f"got {checks.received(reduce)}"
         )
     if summary is not None:
-        _checks.check_callable(
-            "summary", summary, "a function (outputs, weight) -> additive pytree"
-        )
+        checks.check_callable("summary", summary, "a function (outputs, weight) -> additive pytree")
         if reduce is not None:
             raise ValueError("summary: expected None with reduce (one way to fold the outputs)")
     sizes = _num_runs_of(per_run)

@@ -85,7 +85,11 @@ class _LogLines:
 
 def status(message: str) -> None:
     """A progress message (what is compiling, what ran): INFO on the ``"jaxfdi"`` logger, or, when logging is not
-    configured (a plain script or a notebook), one line on stderr."""
+    configured (a plain script or a notebook), one line on stderr.
+
+    Returns:
+      None; it logs or prints ``message``.
+    """
     if logger.hasHandlers():
         logger.info(message)
     else:

@@ -47,7 +47,7 @@ import jax.scipy.linalg as jsl
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.models import LinearGaussianModel, validate_linear_model
 
 
@@ -94,25 +94,25 @@ NO_SOLUTION = "no stabilising solution of the discrete algebraic Riccati equatio
 
 
 def _check_dare(A, B, Q, R, names=("A", "B", "Q", "R")) -> None:
-    n = _checks.check_square(names[0], A, None, "state matrix")
-    _checks.check_matrix(names[1], B, (n, None), "n states x p inputs")
-    p = _checks.shape_of(B)[1]
-    _checks.check_covariance(names[2], Q, n)
-    _checks.check_covariance(names[3], R, p, definite=True)
+    n = checks.check_square(names[0], A, None, "state matrix")
+    checks.check_matrix(names[1], B, (n, None), "n states x p inputs")
+    p = checks.shape_of(B)[1]
+    checks.check_covariance(names[2], Q, n)
+    checks.check_covariance(names[3], R, p, definite=True)
 
 
 def _float_dtype(*arrays):
-    dtype = _checks.float_dtype(*arrays)
+    dtype = checks.float_dtype(*arrays)
     return dtype if jnp.issubdtype(dtype, jnp.floating) else jnp.result_type(float)
 
 
 def _settings(dtype, tol, max_iter) -> tuple[float, int]:
-    max_iter = _checks.check_int(
+    max_iter = checks.check_int(
         "max_iter", max_iter, minimum=1, meaning="a number of doubling steps"
     )
     if tol is None:
         return 100.0 * float(jnp.finfo(dtype).eps), max_iter
-    _checks.check_positive("tol", tol, "a positive relative tolerance (a Python float)")
+    checks.check_positive("tol", tol, "a positive relative tolerance (a Python float)")
     return float(tol), max_iter
 
 

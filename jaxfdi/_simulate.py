@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
 from jaxfdi.models import (
     LinearGaussianModel,
@@ -114,36 +114,36 @@ def per_step(name: str, value: Any, size: int) -> Callable[[Array], Array]:
     """``k -> (size, size)`` from a constant matrix, a (T, size, size) array or a callable
     (checked once at trace time, on step 0)."""
     if callable(value):
-        _checks.check_covariance(f"{name}(0)", value(jnp.asarray(0)), size)
+        checks.check_covariance(f"{name}(0)", value(jnp.asarray(0)), size)
         return value
-    shape = _checks.shape_of(value)
+    shape = checks.shape_of(value)
     if len(shape) == 3:
-        _checks.check_matrix(
+        checks.check_matrix(
             name, value, (None, size, size), f"T per-step ({size}, {size}) covariances"
         )
-        table = _checks.concrete(value)
+        table = checks.concrete(value)
         for k in range(table.shape[0] if table is not None else 0):
-            _checks.check_covariance(f"{name}[{k}]", table[k], size)
+            checks.check_covariance(f"{name}[{k}]", table[k], size)
         value = jnp.asarray(value)
         return lambda k: value[k]
-    _checks.check_covariance(name, value, size)
+    checks.check_covariance(name, value, size)
     value = jnp.asarray(value)
     return lambda k: value
 
 
 def _noise_sqrt(name: str, value: Any, size: int) -> Callable[[Array], Array]:
     """``k -> L`` with ``L L^T`` the step's covariance; computed once when constant."""
-    if callable(value) or len(_checks.shape_of(value)) == 3:
+    if callable(value) or len(checks.shape_of(value)) == 3:
         cov = per_step(name, value, size)
         return lambda k: _linalg.psd_sqrt(cov(k))
-    _checks.check_covariance(name, value, size)
+    checks.check_covariance(name, value, size)
     sqrt = _linalg.psd_sqrt(jnp.asarray(value))
     return lambda k: sqrt
 
 
 def _matrix_size(name: str, value: Any) -> int:
     sample = value(jnp.asarray(0)) if callable(value) else value
-    shape = _checks.shape_of(sample)
+    shape = checks.shape_of(sample)
     if len(shape) not in (2, 3) or shape[-1] != shape[-2]:
         raise ValueError(
             f"{name}: expected a (d, d) covariance, a (T, d, d) array or a callable k -> (d, d), "
@@ -190,12 +190,12 @@ def simulator(
       Actuated)`` with the step's key ``fold_in(key, k)``; ``Simulator.step(state, k, u,
       key)`` is the two with the run's key.
     """
-    _checks.check_callable("f", f, "a plant function f(x, u, params) -> next state")
-    _checks.check_callable("h", h, "a sensor function h(x, u, params) -> measurement")
+    checks.check_callable("f", f, "a plant function f(x, u, params) -> next state")
+    checks.check_callable("h", h, "a sensor function h(x, u, params) -> measurement")
     nw = _matrix_size("Q", Q)
     m = _matrix_size("R", R)
     if noise_gain is not None:
-        _checks.check_matrix(
+        checks.check_matrix(
             "noise_gain", noise_gain, (None, nw), f"n states x {nw} noise inputs (Q is {nw} x {nw})"
         )
         G = jnp.asarray(noise_gain)
@@ -210,7 +210,7 @@ def simulator(
         else _noise_sqrt("input_noise", input_noise, _matrix_size("input_noise", input_noise))
     )
     if available is not None and not callable(available):
-        _checks.check_shape(
+        checks.check_shape(
             "available", available, (None, m), f"T steps x {m} measurement components"
         )
         available_table = jnp.asarray(available, bool)
@@ -218,7 +218,7 @@ def simulator(
     if fault is not None and not isinstance(fault, Fault):
         raise TypeError(
             f"fault: expected a Fault (jaxfdi.fault, fault_group, concat_faults) or None, got "
-            f"{_checks.received(fault)}"
+            f"{checks.received(fault)}"
         )
     faults = as_stack(no_fault() if fault is None else fault)
     if any(jnp.ndim(leaf) != 1 for leaf in faults):
@@ -229,14 +229,14 @@ def simulator(
     plant_h = h if time_varying else (lambda x, u, k, p: h(x, u, p))
 
     def init(x0: Array) -> SimState:
-        _checks.check_real("x0", x0, "a real initial state")
-        _checks.check_shape("x0", x0, (n,), "initial true state")
-        _checks.check_finite("x0", x0, "initial true state")
-        x0 = jnp.asarray(x0, _checks.float_dtype(x0))
+        checks.check_real("x0", x0, "a real initial state")
+        checks.check_shape("x0", x0, (n,), "initial true state")
+        checks.check_finite("x0", x0, "initial true state")
+        x0 = jnp.asarray(x0, checks.float_dtype(x0))
         return SimState(x0, jnp.zeros((num_faults,), x0.dtype))
 
     def measure(sim: SimState, k: Array, u: Array, step_key: Array):
-        _checks.check_shape("u", u, (None,), "one commanded input")
+        checks.check_shape("u", u, (None,), "one commanded input")
         x = sim.state
         _, key_v = jax.random.split(step_key)  # (process, measurement)
         y_clean = plant_h(x, u, k, params) + sqrt_R(k) @ jax.random.normal(key_v, (m,), x.dtype)
@@ -248,7 +248,7 @@ def simulator(
         return SimState(x, held), Sensed(x, y, y - y_clean, active, mode)
 
     def advance(sim: SimState, k: Array, u: Array, step_key: Array):
-        _checks.check_shape("u", u, (None,), "one commanded input")
+        checks.check_shape("u", u, (None,), "one commanded input")
         x = sim.state
         key_w, _ = jax.random.split(step_key)
         check_fault_components(faults, Target.ACTUATOR, u.shape[0])
@@ -271,7 +271,7 @@ def check_fault_components(faults: Fault, target: int, size: int) -> None:
     ``[0, size)``: a fault on a sensor that does not exist would label the run as faulty
     and change nothing."""
     kinds, targets, components = (
-        _checks.concrete(leaf) for leaf in (faults.kind, faults.target, faults.component)
+        checks.concrete(leaf) for leaf in (faults.kind, faults.target, faults.component)
     )
     if kinds is None or targets is None or components is None:
         return
@@ -310,7 +310,7 @@ def simulate(sim: Simulator, x0: Array, us: Array, key: Array) -> tuple[SimState
       (``moved.applied_input`` (T, nu), ``moved.actuator_fault`` (T, nu)) stacked along a leading time axis, as
       ``run_loop`` records them.
     """
-    us = _checks.check_inputs(us)
+    us = checks.check_inputs(us)
     steps = jnp.arange(us.shape[0])
 
     def body(state, ku):

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._montecarlo import _num_runs_of, monte_carlo
 from jaxfdi._progress import status
 
@@ -136,17 +136,21 @@ def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
 
 
 def case_slices(runs, num_cases: int) -> list[slice]:
-    """The run ranges of each case in a case-major output (``runs``: per case, or one count for all)."""
-    num_cases = _checks.check_int("num_cases", num_cases, 0, meaning="a number of cases >= 0")
+    """The run ranges of each case in a case-major output (``runs``: per case, or one count for all).
+
+    Returns:
+      list of ``num_cases`` slices, consecutive from 0: ``output[slices[i]]`` are case ``i``'s runs.
+    """
+    num_cases = checks.check_int("num_cases", num_cases, 0, meaning="a number of cases >= 0")
     try:
         counts = np.broadcast_to(np.asarray(runs, int), (num_cases,))
     except ValueError:
         raise ValueError(
             f"runs: expected one count or {num_cases} counts (one per case), got "
-            f"{_checks.received(runs)}"
+            f"{checks.received(runs)}"
         ) from None
     if np.any(counts < 0):
-        raise ValueError(f"runs: expected counts >= 0, got {_checks.received(runs)}")
+        raise ValueError(f"runs: expected counts >= 0, got {checks.received(runs)}")
     starts = np.concatenate([[0], np.cumsum(counts)])
     return [slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:])]
 
@@ -155,7 +159,7 @@ def _run_counts(runs, num_cases: int) -> tuple[int, ...]:
     """``runs`` (one count, or one per case) as a count per case, each checked positive."""
     if np.ndim(runs) == 0:
         return (
-            _checks.check_int("runs", runs, 1, meaning="a positive number of runs per case"),
+            checks.check_int("runs", runs, 1, meaning="a positive number of runs per case"),
         ) * num_cases
     counts = tuple(runs)
     if len(counts) != num_cases:
@@ -163,14 +167,14 @@ def _run_counts(runs, num_cases: int) -> tuple[int, ...]:
             f"runs: expected one count or {num_cases} counts (one per case), got {len(counts)}"
         )
     return tuple(
-        _checks.check_int(f"runs[{i}]", n, 1, meaning="a positive number of runs")
+        checks.check_int(f"runs[{i}]", n, 1, meaning="a positive number of runs")
         for i, n in enumerate(counts)
     )
 
 
 def _check_study(study: Study) -> int:
     if not isinstance(study, Study):
-        raise TypeError(f"study: expected a jaxfdi.Study, got {_checks.received(study)}")
+        raise TypeError(f"study: expected a jaxfdi.Study, got {checks.received(study)}")
     if callable(study.cases):
         num_cases = len(study.case_names)
     else:
@@ -192,7 +196,7 @@ def _check_study(study: Study) -> int:
     for s in study.structures:
         if not isinstance(s, Structure):
             raise TypeError(
-                f"study.structures: expected Structure entries, got {_checks.received(s)}"
+                f"study.structures: expected Structure entries, got {checks.received(s)}"
             )
         lengths = []
         for a, axis in enumerate(s.axes):
@@ -242,7 +246,7 @@ def run_study(
     num_cases = _check_study(study)
     counts = _run_counts(runs, num_cases)
     runs = counts[0] if np.ndim(runs) == 0 else counts
-    seed = _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
+    seed = checks.check_int("seed", seed, 0, checks.MAX_SEED, "a PRNG seed")
     names = [s.name for s in study.structures]
     if structures is not None and (not structures or set(structures) - set(names)):
         raise ValueError(f"structures: expected names among {names}, got {list(structures)}")

@@ -66,6 +66,11 @@ def tracked_plant(
       size: number of error components ``d``.
       active: ``k -> (size,) bool`` steps scored per component (default: all).
       dtype: dtype of the score (default JAX's default float).
+
+    Returns:
+      ``Plant(init, measure, advance)`` of state ``(plant's state, TrackingScore)``, the score zero at ``init(x0)``;
+      ``measure`` and ``advance`` give ``plant``'s ``sensed`` and ``moved``, ``measure`` folding ``error(k, sensed)``
+      in where ``active(k)``. After ``run_loop`` the score is ``LoopResult.final[0][1]``.
     """
     if int(size) < 1:
         raise ValueError(f"size: expected a positive number of error components, got {size}")

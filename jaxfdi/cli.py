@@ -39,7 +39,7 @@ logger = logging.getLogger("jaxfdi")
 
 #: the largest count an option takes (runs, steps, windows: JAX indexes them in int32)
 MAX_COUNT = 2**31 - 1
-#: the largest seed: ``jaxfdi._checks.MAX_SEED`` (see its comment), written here because ``_checks`` imports JAX (a test
+#: the largest seed: ``jaxfdi.checks.MAX_SEED`` (see its comment), written here because ``checks`` imports JAX (a test
 #: holds the two equal)
 MAX_SEED = 2**32 - 1
 #: integer options: dest -> (lowest, highest)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 __all__ = [
     "quaternion_multiply",
@@ -35,7 +35,7 @@ _SMALL = 1e-10
 
 def _check_leading(name: str, value: Array, size: int, meaning: str) -> None:
     """The components run along axis 0 (trace time): a shorter axis would be read out of bounds, silently clamped."""
-    shape = _checks.shape_of(value)
+    shape = checks.shape_of(value)
     if not shape or shape[0] != size:
         raise ValueError(f"{name}: expected {meaning}, shape ({size}, ...), got {shape}")
 

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._metrics import DetectionRecord, DetectionSummary
 
 __all__ = ["detection_reducer", "detection_summary", "summarize_counts"]
@@ -80,8 +80,8 @@ class Reducer(NamedTuple):
 
 def empty_counts(horizon: int, bin_width: int = 1) -> DetectionCounts:
     """Counts of no runs, for runs ``horizon`` steps long and delay bins ``bin_width`` wide."""
-    horizon = _checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
-    bin_width = _checks.check_int(
+    horizon = checks.check_int("horizon", horizon, 1, meaning="a positive number of steps per run")
+    bin_width = checks.check_int(
         "bin_width", bin_width, 1, meaning="a positive number of steps per delay bin"
     )
     zero = np.zeros((), np.int64)
@@ -205,7 +205,7 @@ def merge_counts(*parts: DetectionCounts) -> DetectionCounts:
         if not isinstance(part, DetectionCounts):
             raise TypeError(
                 f"parts: expected DetectionCounts (streaming.detection_counts), got "
-                f"{_checks.received(part)}"
+                f"{checks.received(part)}"
             )
     first = parts[0]
     for part in parts[1:]:
@@ -228,7 +228,7 @@ def quantile_resolution(counts: DetectionCounts, Ts: float = 1.0) -> float:
 
 def delay_quantile(counts: DetectionCounts, q: float, Ts: float = 1.0) -> float:
     """The ``q`` quantile of the detection delays from the histogram (module doc); NaN if nothing was detected."""
-    _checks.check_scalar("q", q, 0.0, 1.0, meaning="a quantile level in [0, 1]")
+    checks.check_scalar("q", q, 0.0, 1.0, meaning="a quantile level in [0, 1]")
     histogram = np.asarray(counts.delay_histogram, np.int64)
     total = int(histogram.sum())
     if total == 0:
@@ -256,7 +256,7 @@ def summarize_counts(counts: DetectionCounts, Ts: float = 1.0) -> DetectionSumma
       ``DetectionSummary`` of Python ints and floats (delays in the unit of ``Ts``); NaN where a rate or delay has no
       runs.
     """
-    _checks.check_positive("Ts", Ts, "a positive sample period")
+    checks.check_positive("Ts", Ts, "a positive sample period")
     nan = float("nan")
     faulty, detected, scored = (
         int(counts.faulty_runs),

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._faults import Target, apply_fault
 from jaxfdi._stages import Controller, Plant
 from jaxfdi.models import (
@@ -83,13 +83,13 @@ def slew(
       ``Slew`` in ``dtype`` (default float), ``axis`` normalised, ``angle`` in rad.
     """
     dtype = dtype or jnp.result_type(float)
-    _checks.check_matrix("axis", axis, (3,), "rotation axis")
+    checks.check_matrix("axis", axis, (3,), "rotation axis")
     axis = jnp.asarray(axis, dtype)
     if float(jnp.linalg.norm(axis)) == 0.0:
-        raise ValueError(f"axis: expected a non-zero rotation axis, got {_checks.received(axis)}")
-    _checks.check_scalar("angle_deg", angle_deg, meaning="a slew angle in degrees")
-    _checks.check_scalar("start", start, meaning="a start time in seconds")
-    _checks.check_positive("duration", duration, "a positive slew time in seconds")
+        raise ValueError(f"axis: expected a non-zero rotation axis, got {checks.received(axis)}")
+    checks.check_scalar("angle_deg", angle_deg, meaning="a slew angle in degrees")
+    checks.check_scalar("start", start, meaning="a start time in seconds")
+    checks.check_positive("duration", duration, "a positive slew time in seconds")
     return Slew(
         axis / jnp.linalg.norm(axis),
         jnp.asarray(math.radians(angle_deg), dtype),
@@ -104,16 +104,21 @@ def pd_gains(
     damping: float = 0.9,
     max_wheel_torque: float = 0.02,
 ) -> AttitudeGains:
-    """``K_p = I w_n^2``, ``K_d = 2 zeta w_n I`` (decoupled second-order axes)."""
-    _checks.check_covariance(
+    """``K_p = I w_n^2``, ``K_d = 2 zeta w_n I`` (decoupled second-order axes).
+
+    Returns:
+      ``AttitudeGains(kp (3, 3), kd (3, 3), max_wheel_torque ())`` in ``inertia``'s float dtype, the torque limit
+      in N m.
+    """
+    checks.check_covariance(
         "inertia", inertia, 3, definite=True
     )  # symmetric positive definite, like a covariance
-    inertia = jnp.asarray(inertia, _checks.float_dtype(inertia))
-    _checks.check_positive(
+    inertia = jnp.asarray(inertia, checks.float_dtype(inertia))
+    checks.check_positive(
         "natural_frequency", natural_frequency, "a positive natural frequency in rad/s"
     )
-    _checks.check_positive("damping", damping, "a positive damping ratio")
-    _checks.check_positive("max_wheel_torque", max_wheel_torque, "a positive torque limit in N m")
+    checks.check_positive("damping", damping, "a positive damping ratio")
+    checks.check_positive("max_wheel_torque", max_wheel_torque, "a positive torque limit in N m")
     return AttitudeGains(
         inertia * natural_frequency**2,
         2.0 * damping * natural_frequency * inertia,
@@ -122,7 +127,12 @@ def pd_gains(
 
 
 def slew_reference(t: Array, profile: Slew) -> tuple[Array, Array, Array]:
-    """``(q_ref (4,), w_ref (3,), alpha_ref (3,))`` at time ``t``."""
+    """``(q_ref (4,), w_ref (3,), alpha_ref (3,))`` at time ``t``.
+
+    Returns:
+      ``(q_ref, w_ref, alpha_ref)``: the reference quaternion (4,) ``[q0, q_vec]``, rate (3,) [rad/s] and angular
+      acceleration (3,) [rad/s^2]; before ``start`` the identity and zeros, after the slew ``angle`` held and zeros.
+    """
     s = jnp.clip((t - profile.start) / profile.duration, 0.0, 1.0)
     inside = (t >= profile.start) & (t <= profile.start + profile.duration)
     two_pi = 2.0 * jnp.pi
@@ -163,9 +173,9 @@ def control_torque(
 
 def allocate_wheel_torques(torque: Array, wheel_axes: Array, max_wheel_torque: Array) -> Array:
     """Motor torques ``tau`` (N,) with ``-H^T tau = T_c``, minimum norm, saturated by uniform scaling."""
-    _checks.check_shape("torque", torque, (None,), "the commanded body torque (3,)")
-    size = _checks.shape_of(torque)[0]
-    _checks.check_shape("wheel_axes", wheel_axes, (None, size), f"H: N wheels x {size} body axes")
+    checks.check_shape("torque", torque, (None,), "the commanded body torque (3,)")
+    size = checks.shape_of(torque)[0]
+    checks.check_shape("wheel_axes", wheel_axes, (None, size), f"H: N wheels x {size} body axes")
     gram = wheel_axes.T @ wheel_axes
     tau = -wheel_axes @ jnp.linalg.solve(gram, torque)
     peak = jnp.max(jnp.abs(tau))
@@ -177,7 +187,13 @@ def wheel_attitude_controller(
 ) -> Controller:
     """The attitude loop as a ``loop.Controller`` on an ``AttitudeReading`` (``control_torque``,
     ``allocate_wheel_torques``); state: commanded speeds ``Omega_cmd[k+1] = Omega_cmd[k] + dt tau[k] / I_w``.
-    Returns a ``WheelCommand``."""
+    Returns a ``WheelCommand``.
+
+    Returns:
+      ``Controller(init, step)`` (not feed-forward): ``init()`` gives ``initial_speeds`` (N,) [rad/s];
+      ``step(Omega_cmd, k, AttitudeReading, exogenous) -> (Omega_cmd[k+1], WheelCommand(Omega_cmd[k], tau))``,
+      ``tau`` (N,) motor torques [N m], ``exogenous`` unused.
+    """
 
     def step(commanded: Array, k: Array, reading, exogenous):
         t = k * params.dt
@@ -226,6 +242,11 @@ def wheel_plant(
     ``advance(WheelCommand)``: ``delivered_torque`` + white noise ``wheel_noise_sigma``, a stop's momentum
     to the body (``stop_transfer``), one RK4 step with white external torque ``disturbance_sigma``. Draws
     from ``fold_in(key, k)``; state ``(x, held)``: truth ``[q, w, Omega]`` and a STUCK gyro's value.
+
+    Returns:
+      ``Plant(init, measure, advance)``: ``init(x0 (7 + N,)) -> (x0, held)``; ``measure(state, k, command,
+      step_key) -> (state, WheelSensed(x, AttitudeReading))``; ``advance(state, k, WheelCommand, step_key) ->
+      (state, delivered)``, ``delivered`` (N,) the wheel torques applied [N m].
     """
     dtype = params.inertia.dtype
     N = params.wheel_axes.shape[0]
@@ -234,7 +255,7 @@ def wheel_plant(
         return jax.random.split(step_key, 3)  # gyro, disturbance, wheel torque
 
     def init(x0: Array):
-        _checks.check_shape("x0", x0, (7 + N,), "[q (4), w (3), Omega (N)]")
+        checks.check_shape("x0", x0, (7 + N,), "[q (4), w (3), Omega (N)]")
         return jnp.asarray(x0), jnp.zeros((), dtype)
 
     def measure(plant, k: Array, command: WheelCommand, step_key: Array):

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 #: relative singular-value cut-off for null spaces and pseudo-inverses.
 NULL_RTOL = 1e-10
@@ -58,7 +58,12 @@ def effectiveness_input(B: Array, loss: Array) -> Array:
 
 def nominal_eigenstructure(A_bar, B_bar, K_nominal) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues (N,) and eigenvectors (N, N) of the nominal loop ``A_bar - B_bar K_n``
-    (``u = -K_n x``; NumPy, concrete arrays: computed once per design, outside the hot loop)."""
+    (``u = -K_n x``; NumPy, concrete arrays: computed once per design, outside the hot loop).
+
+    Returns:
+      ``(eigenvalues (N,), eigenvectors (N, N))`` as NumPy complex arrays (``np.linalg.eig``: eigenvectors as
+      unit-norm columns), ``assign_eigenstructure``'s targets.
+    """
     closed = np.asarray(A_bar) - np.asarray(B_bar) @ np.asarray(K_nominal)
     return np.linalg.eig(closed)
 
@@ -80,10 +85,10 @@ def assign_eigenstructure(
       ``EigenstructureResult``: real ``K_f`` (p, N), ``V^f`` (N, N), dropped max ``|Im K_f|``, ``cond(V^f)``,
       residual per eigenvalue (N,) (~0 where kept).
     """
-    N = _checks.check_square("A_bar", A_bar, None, "augmented state matrix")
-    _checks.check_shape("B_faulty", B_faulty, (N, None), "N states x p inputs")
-    _checks.check_shape("eigenvalues", eigenvalues, (N,), "nominal closed-loop eigenvalues")
-    _checks.check_shape("eigenvectors", eigenvectors, (N, N), "nominal eigenvectors as columns")
+    N = checks.check_square("A_bar", A_bar, None, "augmented state matrix")
+    checks.check_shape("B_faulty", B_faulty, (N, None), "N states x p inputs")
+    checks.check_shape("eigenvalues", eigenvalues, (N,), "nominal closed-loop eigenvalues")
+    checks.check_shape("eigenvectors", eigenvectors, (N, N), "nominal eigenvectors as columns")
     A_bar = jnp.asarray(A_bar)
     ctype = jnp.result_type(A_bar.dtype, jnp.complex64)
     lam = jnp.asarray(eigenvalues, ctype)
@@ -140,11 +145,16 @@ def effectiveness_gain_schedule(
 ) -> GainSchedule:
     """``assign_eigenstructure`` for each input's loss on a uniform grid over [0, 1], so a loop looks the
     gain up (``scheduled_gain``) instead of ``2 (N + 1)`` SVDs a step: exact at grid points, linear
-    between (smooth in the loss away from 1)."""
-    num_losses = _checks.check_int(
+    between (smooth in the loss away from 1).
+
+    Returns:
+      ``GainSchedule(losses (G,), gains (p, G, p, N), max_residual (p, G))``, ``G = num_losses`` points
+      ``linspace(0, 1)`` in ``A_bar``'s dtype.
+    """
+    num_losses = checks.check_int(
         "num_losses", num_losses, 2, meaning="a number of grid points >= 2 over [0, 1]"
     )
-    p = _checks.shape_of(B_bar)[1]
+    p = checks.shape_of(B_bar)[1]
     losses = jnp.linspace(0.0, 1.0, num_losses, dtype=jnp.asarray(A_bar).dtype)
 
     def one(i, loss):

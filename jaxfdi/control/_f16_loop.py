@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._faults import Target, active_label, apply_faults, as_stack, is_active
 from jaxfdi._simulate import Actuated, Sensed, SimState, check_fault_components
 from jaxfdi._stages import FDI, Plant
@@ -61,15 +61,15 @@ def f16_plant(
       ``measure(state, k, u, step_key) -> (state, Sensed)``, ``y`` (m,); ``advance(state, k, u, step_key)
       -> (state, Actuated)``, ``u`` (4,) ``[thtl, el, ail, rdr]``.
     """
-    substeps = _checks.check_int(
+    substeps = checks.check_int(
         "substeps", substeps, 1, meaning="a positive number of RK4 steps per sample"
     )
-    _checks.check_positive("dt", dt, "a positive sample period (s)")
-    _checks.check_scalar(
+    checks.check_positive("dt", dt, "a positive sample period (s)")
+    checks.check_scalar(
         "gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)"
     )
-    _checks.check_positive("gust_length", gust_length, "a positive gust correlation length (ft)")
-    _checks.check_positive(
+    checks.check_positive("gust_length", gust_length, "a positive gust correlation length (ft)")
+    checks.check_positive(
         "reference_speed", reference_speed, "a positive reference airspeed (ft/s)"
     )
     dtype = aircraft.mass.dtype
@@ -88,7 +88,7 @@ def f16_plant(
     noise_dtype = jnp.float32 if dtype == jnp.float64 else dtype
 
     def init(x0: Array):
-        _checks.check_shape("x0", x0, (15,), "[x (13), w_g, v_g]")
+        checks.check_shape("x0", x0, (15,), "[x (13), w_g, v_g]")
         x0 = jnp.asarray(x0, dtype)
         return SimState(x0, jnp.zeros((num_faults,), dtype))
 
@@ -122,7 +122,12 @@ def f16_plant(
 
 def rate_passthrough_fdi(rate_axes: Array) -> FDI:
     """Fault-free ``loop.FDI``: no detection, least-squares rates of all channels (``init()``, state and output
-    ``None``)."""
+    ``None``).
+
+    Returns:
+      ``FDI(init, step, observe)``: ``init() -> None``; ``observe(None, k, y) -> (None, FlightView)`` with the
+      least-squares body rates (3,) of ``y``'s rate channels; ``step(None, k, y, u) -> (None, None)``.
+    """
     estimator = rate_estimator(
         jnp.asarray(rate_axes)
     )  # once: a solve inside the step costs 4x the flight (vmapped LU)

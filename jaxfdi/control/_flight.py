@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._stages import Controller
 from jaxfdi.control._lqr import lqr_pi
 from jaxfdi.models import c2d
@@ -170,7 +170,11 @@ def flight_plan(
     roll_in: float = 2.0,
     duration: float = 15.0,
 ) -> FlightPlan:
-    """The flight of Park et al. (2004) at the book's 502 ft/s sea-level trim (module doc)."""
+    """The flight of Park et al. (2004) at the book's 502 ft/s sea-level trim (module doc).
+
+    Returns:
+      ``FlightPlan`` of Python floats: speeds in ft/s, altitude in ft, times in s, ``bank_angle`` in rad.
+    """
     for name, value in (
         ("airspeed", airspeed),
         ("altitude", altitude),
@@ -182,7 +186,7 @@ def flight_plan(
         ("roll_in", roll_in),
         ("duration", duration),
     ):
-        _checks.check_scalar(name, value, meaning="a real number")
+        checks.check_scalar(name, value, meaning="a real number")
     if not (airspeed > 0 and duration > 0 and level_off > 0 and roll_in > 0):
         raise ValueError(
             "airspeed, duration, level_off, roll_in: expected positive values, got "
@@ -224,7 +228,12 @@ def default_weights(dtype=None) -> FlightWeights:
     """``bryson_weights`` of: VT 10 ft/s, alpha 2 deg, theta 5 deg, Q 20 deg/s, h 20 ft, pow 30 %, int VT 20 ft, int h
     20 ft s; thtl 0.3, el 5 deg; beta 2 deg, phi 5 deg, P 45 deg/s, R 20 deg/s, int phi 5 deg s; ail 15 deg, rdr 20 deg.
     Chosen on 64 dispersed flights (noise, gusts) for altitude errors < 10 ft, bank errors < 1 deg once rolled in,
-    control noise ~1 deg per sample."""
+    control noise ~1 deg per sample.
+
+    Returns:
+      ``FlightWeights`` in ``dtype`` (default float): longitudinal (8,), longitudinal_input (2,), lateral (5,),
+      lateral_input (2,).
+    """
     deg = math.pi / 180.0
     return bryson_weights(
         [10.0, 2 * deg, 5 * deg, 20 * deg, 20.0, 30.0, 20.0, 20.0],
@@ -243,29 +252,29 @@ def design_flight_control(linear: LinearF16, dt: float, weights: FlightWeights) 
       ``FlightDesign``: ``FlightGains`` (lon (2, 8), lat (2, 5)), each closed loop's spectral radius (2,)
       (< 1 is stable) and the Riccati ``converged`` flags (2,).
     """
-    _checks.check_positive("dt", dt, "a positive sample period (s)")
-    _checks.check_shape(
+    checks.check_positive("dt", dt, "a positive sample period (s)")
+    checks.check_shape(
         "weights.longitudinal",
         weights.longitudinal,
         (8,),
         "VT, alpha, theta, Q, h, pow, int VT, int h",
     )
-    _checks.check_shape("weights.longitudinal_input", weights.longitudinal_input, (2,), "thtl, el")
-    _checks.check_shape("weights.lateral", weights.lateral, (5,), "beta, phi, P, R, int phi")
-    _checks.check_shape("weights.lateral_input", weights.lateral_input, (2,), "ail, rdr")
+    checks.check_shape("weights.longitudinal_input", weights.longitudinal_input, (2,), "thtl, el")
+    checks.check_shape("weights.lateral", weights.lateral, (5,), "beta, phi, P, R, int phi")
+    checks.check_shape("weights.lateral_input", weights.lateral_input, (2,), "ail, rdr")
     for name, low_open in (
         ("longitudinal", False),
         ("longitudinal_input", True),
         ("lateral", False),
         ("lateral_input", True),
     ):
-        value = _checks.concrete(getattr(weights, name))  # traced when differentiated: unchecked
+        value = checks.concrete(getattr(weights, name))  # traced when differentiated: unchecked
         if value is not None and not (
             np.all(np.isfinite(value)) and np.all(value > 0 if low_open else value >= 0)
         ):
             raise ValueError(
                 f"weights.{name}: expected finite LQR weights {'> 0' if low_open else '>= 0'}, got "
-                f"{_checks.received(value)}"
+                f"{checks.received(value)}"
             )
     dtype = weights.longitudinal.dtype
     designs = []
@@ -298,7 +307,12 @@ PULL_UP_LOAD = 2.0
 def plan_trims(params: F16Params, plan: FlightPlan) -> TrimResult:
     """The reference's trims, stacked (4,): level at the initial altitude; climb ``gamma =
     asin(climb_rate / VT)`` half-way up; coordinated turn at the final altitude, rate ``g tan(phi) / VT``;
-    wings-level pull-up at ``PULL_UP_LOAD`` g (pitch rate ``g (n - 1) / VT``), giving alpha and elevator per g."""
+    wings-level pull-up at ``PULL_UP_LOAD`` g (pitch rate ``g (n - 1) / VT``), giving alpha and elevator per g.
+
+    Returns:
+      ``TrimResult`` stacked over the 4 trims (level, climb, turn, pull-up), ``state`` (4, 13) and ``control`` (4, 4),
+      all at ``params.xcg`` (``trim_batch``).
+    """
     dtype = params.mass.dtype
     top = plan.altitude + plan.climb_rate * plan.climb_time
     gamma = math.asin(plan.climb_rate / plan.airspeed)
@@ -320,16 +334,21 @@ def plan_trims(params: F16Params, plan: FlightPlan) -> TrimResult:
 
 def _check_trims(trims: TrimResult) -> None:
     """``trims`` must be ``plan_trims``' stack of 4 (fewer rows would be silently clamped to the last)."""
-    _checks.check_shape(
+    checks.check_shape(
         "trims.state", trims.state, (4, 13), "plan_trims' level, climb, turn and pull-up trims"
     )
-    _checks.check_shape(
+    checks.check_shape(
         "trims.control", trims.control, (4, 4), "plan_trims' level, climb, turn and pull-up trims"
     )
 
 
 def initial_condition(plan: FlightPlan, trims: TrimResult) -> tuple[Array, Array]:
-    """``(x0 (13,), u0 (4,))``: the climb trim at the plan's initial altitude."""
+    """``(x0 (13,), u0 (4,))``: the climb trim at the plan's initial altitude.
+
+    Returns:
+      ``(x0, u0)``: the climb trim's state (13,) with ``h`` set to ``plan.altitude`` [ft], and its controls (4,)
+      ``[thtl, el, ail, rdr]``.
+    """
     _check_trims(trims)
     return trims.state[1].at[H].set(plan.altitude), trims.control[1]
 
@@ -373,7 +392,12 @@ class Profile(NamedTuple):
 
 def commanded_profile(plan: FlightPlan, t: Array) -> Profile:
     """Commanded climb and bank at ``t``: level-off over ``climb_time -/+ level_off/2`` (gaining
-    ``climb_rate x climb_time`` ft in all), roll-in over ``[bank_start, bank_start + roll_in]``."""
+    ``climb_rate x climb_time`` ft in all), roll-in over ``[bank_start, bank_start + roll_in]``.
+
+    Returns:
+      ``Profile`` with ``t``'s shape: segment weights (0-1) and their rates [1/s], commanded altitude [ft] and
+      bank angle [rad].
+    """
     t = jnp.asarray(t)
     start = plan.climb_time - 0.5 * plan.level_off
     s_climb = (t - start) / plan.level_off
@@ -397,9 +421,13 @@ def flight_reference(
     """``x_ref``/``u_ref`` at ``t = k dt``: level trim + climb and turn trims' departures weighted by
     ``commanded_profile``; ``h_ref``, ``phi_ref`` commanded; ``Q += cos(phi) theta_ref'``,
     ``P += phi_ref'``; the level-off's load ``dn = h_cmd'' / (g cos(gamma))`` added to alpha (and theta,
-    ``theta = gamma + alpha``) and to the controls at the pull-up trim's rate per g."""
-    _checks.check_positive("dt", dt, "a positive sample period (s)")
-    _checks.check_int("steps", steps, minimum=1, meaning="a positive number of steps")
+    ``theta = gamma + alpha``) and to the controls at the pull-up trim's rate per g.
+
+    Returns:
+      ``FlightReference(state (T, 13), control (T, 4))``, ``T = steps``, in ``trims``' dtype.
+    """
+    checks.check_positive("dt", dt, "a positive sample period (s)")
+    checks.check_int("steps", steps, minimum=1, meaning="a positive number of steps")
     _check_trims(trims)
     dtype = trims.state.dtype
     t = jnp.arange(int(steps), dtype=dtype) * dt
@@ -440,7 +468,7 @@ def flight_reference(
 def measured_state(view: FlightView) -> tuple[Array, Array]:
     """``(x_lon (6,), x_lat (4,))`` as the controller reads them from the view."""
     for name in ("air_data", "attitude", "rates"):
-        _checks.check_shape(f"view.{name}", getattr(view, name), (3,), "a FlightView field")
+        checks.check_shape(f"view.{name}", getattr(view, name), (3,), "a FlightView field")
     vt, alpha, beta = view.air_data[0], view.air_data[1], view.air_data[2]
     phi, theta = view.attitude[0], view.attitude[1]
     p, q, r = view.rates[0], view.rates[1], view.rates[2]
@@ -455,20 +483,18 @@ def flight_controller(gains: FlightGains, dt: float, lower: Array, upper: Array)
       ``Controller(init, step)`` (not feed-forward): ``init()`` a zero ``FlightControllerState``;
       ``step(state, k, view, (x_ref, u_ref)) -> (state, u)``, ``u`` (4,) ``[thtl, el, ail, rdr]`` in ``[lower, upper]``.
     """
-    _checks.check_positive("dt", dt, "a positive sample period (s)")
-    _checks.check_shape(
+    checks.check_positive("dt", dt, "a positive sample period (s)")
+    checks.check_shape(
         "gains.longitudinal", gains.longitudinal, (2, 8), "u_lon = -K [dx_lon (6); z_lon (2)]"
     )
-    _checks.check_shape(
-        "gains.lateral", gains.lateral, (2, 5), "u_lat = -K [dx_lat (4); z_lat (1)]"
-    )
-    _checks.check_shape("lower", lower, (4,), "control limits thtl, el, ail, rdr")
-    _checks.check_shape("upper", upper, (4,), "control limits thtl, el, ail, rdr")
-    low, high = _checks.concrete(lower), _checks.concrete(upper)
+    checks.check_shape("gains.lateral", gains.lateral, (2, 5), "u_lat = -K [dx_lat (4); z_lat (1)]")
+    checks.check_shape("lower", lower, (4,), "control limits thtl, el, ail, rdr")
+    checks.check_shape("upper", upper, (4,), "control limits thtl, el, ail, rdr")
+    low, high = checks.concrete(lower), checks.concrete(upper)
     if low is not None and high is not None and np.any(np.asarray(low) > np.asarray(high)):
         raise ValueError(
             f"lower: expected control limits below upper (thtl, el, ail, rdr), got lower "
-            f"{_checks.received(low)} and upper {_checks.received(high)}"
+            f"{checks.received(low)} and upper {checks.received(high)}"
         )
 
     lon_idx = jnp.asarray(LONGITUDINAL_DESIGN_STATES)

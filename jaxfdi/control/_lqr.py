@@ -23,7 +23,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._riccati import DareSolution, require_stabilising, solve_discrete_are_info
 
 #: why an LQR design has no stabilising solution
@@ -101,11 +101,11 @@ def integral_augmentation(A: Array, B: Array, H: Array, Ts: float) -> tuple[Arra
       ``(A_bar, B_bar, G)`` in ``A``'s dtype (module doc): (n + g, n + g), (n + g, p), (n + g, g), ``g`` the
       rows of ``H``.
     """
-    n = _checks.check_square("A", A, None, "discrete state matrix")
-    _checks.check_shape("B", B, (n, None), "n states x p inputs")
-    _checks.check_shape("H", H, (None, n), "g tracked outputs x n states")
-    g = _checks.shape_of(H)[0]
-    _checks.check_positive("Ts", Ts, "a positive sample time")
+    n = checks.check_square("A", A, None, "discrete state matrix")
+    checks.check_shape("B", B, (n, None), "n states x p inputs")
+    checks.check_shape("H", H, (None, n), "g tracked outputs x n states")
+    g = checks.shape_of(H)[0]
+    checks.check_positive("Ts", Ts, "a positive sample time")
     A, B, H = (jnp.asarray(a) for a in (A, B, H))
     eye = jnp.eye(g, dtype=A.dtype)
     A_bar = jnp.block([[A, jnp.zeros((n, g), A.dtype)], [-Ts * H, eye]])
@@ -129,8 +129,8 @@ def lqr_pi(
       ``converged``, ``spectral_radius``.
     """
     A_bar, B_bar, G = integral_augmentation(A, B, H, Ts)
-    _checks.check_covariance("Q", Q, A_bar.shape[0])
-    _checks.check_covariance("R", R, B_bar.shape[1], definite=True)
+    checks.check_covariance("Q", Q, A_bar.shape[0])
+    checks.check_covariance("R", R, B_bar.shape[1], definite=True)
     solution, K = _lqr(A_bar, B_bar, Q, R)
     require_stabilising(
         solution, (A, B, H, Q, R, Ts), "A, B, H, Q, R", _PI_NOT_STABILISABLE, allow_marginal

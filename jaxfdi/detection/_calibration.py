@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 __all__ = ["empirical_threshold", "scale_to_run_false_alarm"]
 
@@ -25,8 +25,13 @@ __all__ = ["empirical_threshold", "scale_to_run_false_alarm"]
 def empirical_threshold(values, pfa: float, floor=None) -> np.ndarray:
     """``max(floor, q_{1 - pfa})``: empirical upper ``pfa`` quantile of fault-free decision ``values`` over their
     leading (sample) axis (``numpy.quantile``'s linear interpolation), raised to ``floor`` (the law's threshold,
-    broadcast; ``None``: none). Non-finite values (a bad calibration run) are refused: a NaN threshold never alarms."""
-    _checks.check_probability("pfa", pfa)
+    broadcast; ``None``: none). Non-finite values (a bad calibration run) are refused: a NaN threshold never alarms.
+
+    Returns:
+      NumPy array of ``values``' trailing shape (``values.shape[1:]`` broadcast with ``floor``): the threshold per
+      decision, in the statistic's units.
+    """
+    checks.check_probability("pfa", pfa)
     values = np.asarray(values)
     if values.ndim == 0 or values.shape[0] < 1:
         raise ValueError(f"values: expected samples along a leading axis, got shape {values.shape}")
@@ -54,7 +59,11 @@ def scale_to_run_false_alarm(
     ``scales[g]`` (non-increasing). A group within ``target`` at 1 keeps 1; otherwise ``[1, upper]`` is halved
     ``iterations`` times and its upper end returned (within ``(upper - 1) 2^-iterations`` of the smallest factor, on
     the rate's steps). ``ValueError`` when a group exceeds ``target`` even at ``upper``, or a rate is not in [0, 1] (a
-    NaN from a bad run never meets the target)."""
+    NaN from a bad run never meets the target).
+
+    Returns:
+      (groups,) NumPy float factors in ``[1, upper]`` to multiply each group's thresholds by.
+    """
     if not 0.0 <= target < 1.0:
         raise ValueError(f"target: expected a rate in [0, 1), got {target}")
     if not upper > 1.0:

@@ -16,7 +16,7 @@ import numpy as np
 from jax import Array
 from jax.scipy.special import gammaincc, gammaln, ndtri
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 
 def chi2_threshold(dof, pfa) -> Array:
@@ -40,15 +40,15 @@ def chi2_threshold(dof, pfa) -> Array:
     Raises:
       ValueError: naming ``dof`` or ``pfa`` for a concrete value out of range (e.g. ``pfa`` below ``tiny``).
     """
-    _checks.check_real("dof", dof, "degrees of freedom")
-    _checks.check_finite("dof", dof, "degrees of freedom")
-    dof_value = _checks.concrete(dof)
+    checks.check_real("dof", dof, "degrees of freedom")
+    checks.check_finite("dof", dof, "degrees of freedom")
+    dof_value = checks.concrete(dof)
     if dof_value is not None and np.any(dof_value <= 0):
         raise ValueError(
-            f"dof: expected positive degrees of freedom, got {_checks.received(dof_value)}"
+            f"dof: expected positive degrees of freedom, got {checks.received(dof_value)}"
         )
-    _checks.check_probability("pfa", pfa)
-    dtype = _checks.float_dtype(dof, pfa)
+    checks.check_probability("pfa", pfa)
+    dtype = checks.float_dtype(dof, pfa)
     _check_representable(pfa, dtype)
     return _chi2_isf(jnp.asarray(dof, dtype), jnp.asarray(pfa, dtype))
 
@@ -56,7 +56,7 @@ def chi2_threshold(dof, pfa) -> Array:
 def _check_representable(pfa, dtype, what: str = "pfa") -> None:
     """A concrete ``pfa`` must be a normal number of ``dtype`` below 1 once cast; ``what`` names the probability
     (e.g. a per-test ``pfa / tests``) in the message."""
-    value = _checks.concrete(pfa)
+    value = checks.concrete(pfa)
     if value is None:
         return
     info, name = np.finfo(dtype), np.dtype(dtype).name
@@ -65,11 +65,11 @@ def _check_representable(pfa, dtype, what: str = "pfa") -> None:
         advice = "; a smaller pfa needs float64 (jaxfdi.enable_x64())" if info.bits < 64 else ""
         raise ValueError(
             f"pfa: expected {what} >= {info.tiny:.4g} (np.finfo({name}).tiny, the smallest normal "
-            f"{name}), got {_checks.received(value)}{advice}"
+            f"{name}), got {checks.received(value)}{advice}"
         )
     if np.any(cast >= 1):
         raise ValueError(
-            f"pfa: expected {what} that stays below 1 in {name}, got {_checks.received(value)}"
+            f"pfa: expected {what} that stays below 1 in {name}, got {checks.received(value)}"
         )
 
 
@@ -173,10 +173,10 @@ def moving_window_sum(x: Array, window: int) -> Array:
     Returns:
       array of ``x``'s shape (T, ...): entry ``k`` is ``sum x[max(0, k-window+1)..k]`` (``+inf`` as above).
     """
-    window = _checks.check_int(
+    window = checks.check_int(
         "window", window, minimum=1, meaning="a positive integer number of steps"
     )
-    _checks.check_real("x", x, "real statistics")
+    checks.check_real("x", x, "real statistics")
     return _moving_window_sum(jnp.asarray(x), window)
 
 
@@ -287,11 +287,11 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
       ``Detector(init, step)``: ``init()`` gives a ``WindowState`` (zero (window,) buffer of ``dtype``);
       ``step(state, nis ()) -> (state, Decision)``.
     """
-    window = _checks.check_int(
+    window = checks.check_int(
         "window", window, minimum=1, meaning="a positive integer number of steps"
     )
-    _checks.check_real("threshold", threshold, "a real threshold")
-    _checks.check_finite("threshold", threshold, "a detection threshold")
+    checks.check_real("threshold", threshold, "a real threshold")
+    checks.check_finite("threshold", threshold, "a detection threshold")
     dtype = dtype or jnp.result_type(float)
 
     def init() -> WindowState:

@@ -19,13 +19,17 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.detection._chi2 import Decision, Detector, flag_dead
 from jaxfdi.detection._mode_probability import confirm, confirmation_init
 
 
 def hypothesis_credits(detection_parameters: Array) -> Array:
-    """``C_x = max(F_mean - F_x, 0)`` for ``F`` (..., M) along the last axis (eq. 10)."""
+    """``C_x = max(F_mean - F_x, 0)`` for ``F`` (..., M) along the last axis (eq. 10).
+
+    Returns:
+      (..., M) credits ``C_x >= 0``, ``F``'s shape and units (0 for each hypothesis at or above the mean).
+    """
     detection_parameters = jnp.asarray(detection_parameters)
     mean = jnp.mean(detection_parameters, axis=-1, keepdims=True)
     return jnp.maximum(mean - detection_parameters, 0.0)
@@ -46,9 +50,9 @@ def credit_isolator(
     ``step(state, F) -> (state, Decision)``: statistic the leading (relative) credit, estimate ``F_mean``. A
     non-finite ``F_x`` is evidence: alarm, ``statistic = +inf``, label -1 (which hypothesis is unknown), ``flag_dead``.
     """
-    _checks.check_positive("threshold", threshold, "a positive scalar credit threshold")
-    _checks.check_int("confirm_steps", confirm_steps, 1, meaning="an integer number of steps >= 1")
-    _checks.check_int("label_offset", label_offset, meaning="an integer label offset")
+    checks.check_positive("threshold", threshold, "a positive scalar credit threshold")
+    checks.check_int("confirm_steps", confirm_steps, 1, meaning="an integer number of steps >= 1")
+    checks.check_int("label_offset", label_offset, meaning="an integer label offset")
 
     def step(state, detection_parameters: Array):
         detection_parameters = jnp.asarray(detection_parameters)

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters import Filter
 
 #: ``f(x, u, params) -> (n,)``, a model's transition or its state derivative
@@ -93,9 +93,9 @@ def dual_filter(
         return DualFilterState(estimator.init(mean, cov), jnp.asarray(mean))
 
     def step(state: DualFilterState, y: Array, u: Array) -> tuple[DualFilterState, DualFilterInfo]:
-        n = _checks.shape_of(state.prediction)
+        n = checks.shape_of(state.prediction)
         for name, fn in (("field(x, u, params)", field), ("transition(x, u, params)", transition)):
-            _checks.check_shape(
+            checks.check_shape(
                 name, jax.eval_shape(fn, state.prediction, u, params), n, "the state's shape"
             )
         estimator_state, info = estimator.step(state.estimator, y, u)

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.detection._chi2 import Decision, Detector, chi2_threshold, flag_dead
 
 
@@ -41,9 +41,13 @@ class FrozenState(NamedTuple):
 
 
 def frozen_threshold(window: int, pfa, dtype=None) -> Array:
-    """``chi2.ppf(pfa, L - 1)``, the lower-tail threshold of ``frozen_statistic``."""
-    window = _checks.check_int("window", window, minimum=2, meaning="a window of L >= 2 samples")
-    _checks.check_probability("pfa", pfa)
+    """``chi2.ppf(pfa, L - 1)``, the lower-tail threshold of ``frozen_statistic``.
+
+    Returns:
+      () threshold in ``dtype`` (default float): a window's statistic below it is an alarm.
+    """
+    window = checks.check_int("window", window, minimum=2, meaning="a window of L >= 2 samples")
+    checks.check_probability("pfa", pfa)
     dtype = dtype or jnp.result_type(float)
     return chi2_threshold(jnp.asarray(window - 1, dtype), 1.0 - jnp.asarray(pfa, dtype))
 
@@ -75,21 +79,21 @@ def frozen_channel_detector(
       ``Detector(init, step)``: ``init()`` gives an empty ``FrozenState`` (zero (L, m) buffer in ``sigma``'s float
       dtype); ``step(state, y (m,)) -> (state, Decision)``.
     """
-    _checks.check_real("sigma", sigma, "noise standard deviations")
-    _checks.check_shape("sigma", sigma, (None,), "one noise standard deviation per channel (m,)")
-    _checks.check_finite("sigma", sigma, "noise standard deviations")
-    value = _checks.concrete(sigma)
+    checks.check_real("sigma", sigma, "noise standard deviations")
+    checks.check_shape("sigma", sigma, (None,), "one noise standard deviation per channel (m,)")
+    checks.check_finite("sigma", sigma, "noise standard deviations")
+    value = checks.concrete(sigma)
     if value is not None and not np.all(value > 0):
         raise ValueError(
-            f"sigma: expected positive noise standard deviations, got {_checks.received(value)}"
+            f"sigma: expected positive noise standard deviations, got {checks.received(value)}"
         )
-    m = _checks.shape_of(sigma)[0]
-    window = _checks.check_int("window", window, minimum=2, meaning="a window of L >= 2 samples")
+    m = checks.shape_of(sigma)[0]
+    window = checks.check_int("window", window, minimum=2, meaning="a window of L >= 2 samples")
     if channel_labels is not None:
-        _checks.check_shape(
+        checks.check_shape(
             "channel_labels", channel_labels, (m,), "one fault label per channel, as sigma"
         )
-    dtype = _checks.float_dtype(sigma)
+    dtype = checks.float_dtype(sigma)
     threshold = frozen_threshold(window, pfa, dtype)
     sigma = jnp.asarray(sigma, dtype)
 
@@ -98,7 +102,7 @@ def frozen_channel_detector(
         return FrozenState(jnp.zeros((window, m), dtype), zero, zero)
 
     def step(state: FrozenState, y: Array):
-        _checks.check_shape("y", y, (m,), "one measurement of the m channels")
+        checks.check_shape("y", y, (m,), "one measurement of the m channels")
         y = jnp.asarray(y, dtype)
         buffer = state.buffer.at[state.index].set(y)
         count = jnp.minimum(state.count + 1, window)

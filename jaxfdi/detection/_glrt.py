@@ -46,7 +46,7 @@ import jax.scipy.linalg as jsl
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi._faults import sensor_labels
 from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.detection._chi2 import (
@@ -152,7 +152,7 @@ def fault_signatures(
     """
     n, _, m = validate_linear_model(model)
     window = _check_window(window)
-    _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
+    checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
     _check_directions(directions, n, m)
     dtype = jnp.result_type(gain)
     return step_response(
@@ -231,16 +231,16 @@ def glrt_threshold(pfa, num_directions: int, window: int, method: str = "paper")
     Returns:
       the threshold, of ``pfa``'s shape (() for a scalar) and float dtype.
     """
-    _checks.check_choice("method", method, ("paper", "bonferroni"))
-    _checks.check_probability("pfa", pfa)
-    tests = _checks.check_int(
+    checks.check_choice("method", method, ("paper", "bonferroni"))
+    checks.check_probability("pfa", pfa)
+    tests = checks.check_int(
         "num_directions", num_directions, minimum=1, meaning="a positive number of directions"
     )
     tests *= _check_window(window)
-    dtype = _checks.float_dtype(pfa)
+    dtype = checks.float_dtype(pfa)
     if method == "paper":
         return chi2_threshold(jnp.asarray(tests, dtype), pfa)
-    value = _checks.concrete(pfa)
+    value = checks.concrete(pfa)
     _check_representable(
         None if value is None else value / tests,
         dtype,
@@ -263,7 +263,7 @@ def engine_detector(setup: DetectorSetup, whitener: Array, engine: GLREngine) ->
     channel_labels = sensor_labels(setup.num_inputs, m)
 
     def step(state, innovation: Array):
-        _checks.check_shape(
+        checks.check_shape(
             "innovation", innovation, (m,), "one step's innovation of the fault-blind filter"
         )
         innovation = jnp.asarray(innovation, dtype)
@@ -308,11 +308,17 @@ def detector_setup(
 ) -> DetectorSetup:
     """Check a GLRT detector's arguments (``glrt_detector``) and compute its signatures.
 
-    ``gain`` and ``innovation_cov`` must be the model's steady state (``check_steady_state``)."""
+    ``gain`` and ``innovation_cov`` must be the model's steady state (``check_steady_state``).
+
+    Returns:
+      ``DetectorSetup``: signatures (N, m, d) and ``innovation_cov`` (m, m) in ``gain``'s and ``innovation_cov``'s
+      float dtype, ``threshold`` and ``isolation`` as given, ``num_inputs = nu``,
+      ``sensor_t4 = nu + overlap_sensor % m``.
+    """
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)
-    _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
-    _checks.check_covariance("innovation_cov", innovation_cov, m)
+    checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
+    checks.check_covariance("innovation_cov", innovation_cov, m)
     check_steady_state(model, gain=gain, innovation_cov=innovation_cov)
     _check_decision_args(threshold, isolation, overlap_sensor, m)
     dtype = jnp.result_type(gain, innovation_cov)
@@ -330,7 +336,7 @@ def detector_setup(
 
 
 def _check_decision_args(threshold, isolation: str, overlap_sensor: int, m: int) -> None:
-    value = _checks.concrete(threshold)
+    value = checks.concrete(threshold)
     if value is not None and not (value.shape == () and np.isfinite(value) and value > 0):
         raise ValueError(f"threshold: expected a positive scalar, got {threshold}")
     if isinstance(isolation, str):
@@ -388,8 +394,8 @@ def check_steady_state(
         for name, value in (("gain", gain), ("innovation_cov", innovation_cov), ("cov", cov))
         if value is not None
     }
-    values = {name: _checks.concrete(value) for name, value in given.items()}
-    fixed = [_checks.concrete(a) for a in (model.Phi, model.C, model.Q, model.R)]
+    values = {name: checks.concrete(value) for name, value in given.items()}
+    fixed = [checks.concrete(a) for a in (model.Phi, model.C, model.Q, model.R)]
     if not values or any(v is None for v in values.values()) or any(a is None for a in fixed):
         return
     with jax.ensure_compile_time_eval():  # concrete inputs, also while a caller traces
@@ -458,7 +464,12 @@ def windowed_engine(setup: DetectorSetup) -> tuple[Array, GLREngine]:
 
 def glr_sequence(setup: DetectorSetup, innovations: Array) -> GLRResult:
     """Every direction's windowed GLR at every step of ``innovations`` (T, m): the ``GLRResult`` (T, d) that
-    ``glrt_detector`` maximises over directions (for figures)."""
+    ``glrt_detector`` maximises over directions (for figures).
+
+    Returns:
+      ``GLRResult`` with a leading time axis: ``statistic`` (T, d), ``onset_offset`` (T, d) int32 and ``magnitude``
+      (T, d), the step of the whole window's best onset per direction (a non-finite innovation component taken as 0).
+    """
     whitener, engine = windowed_engine(setup)
     _, result = jax.lax.scan(
         lambda state, e: engine.update(state, whiten_finite(whitener, e)),
@@ -484,27 +495,27 @@ def _paper_isolation(
 
 
 def _check_window(window) -> int:
-    return _checks.check_int(
+    return checks.check_int(
         "window", window, minimum=1, meaning="a positive integer number of steps N"
     )
 
 
 def _check_directions(directions: FaultDirections, n: int, m: int) -> None:
     """Check ``directions`` against ``n`` states and ``m`` outputs (``d`` columns each)."""
-    _checks.check_shape("directions.state", directions.state, (n, None), "n states x d directions")
-    d = _checks.shape_of(directions.state)[1]
-    _checks.check_shape("directions.output", directions.output, (m, d), "m outputs x d directions")
+    checks.check_shape("directions.state", directions.state, (n, None), "n states x d directions")
+    d = checks.shape_of(directions.state)[1]
+    checks.check_shape("directions.output", directions.output, (m, d), "m outputs x d directions")
 
 
 def _check_glr_inputs(innovations, signatures, innovation_cov):
-    _checks.check_shape(
+    checks.check_shape(
         "signatures", signatures, (None, None, None), "(N, m, d) from fault_signatures"
     )
-    N, m, _ = _checks.shape_of(signatures)
-    _checks.check_shape("innovations", innovations, (N, m), "N steps x m outputs, oldest first")
+    N, m, _ = checks.shape_of(signatures)
+    checks.check_shape("innovations", innovations, (N, m), "N steps x m outputs, oldest first")
     dtype = jnp.result_type(innovations, signatures)
     if innovation_cov is not None:
-        _checks.check_covariance("innovation_cov", innovation_cov, m)
+        checks.check_covariance("innovation_cov", innovation_cov, m)
         innovation_cov = jnp.asarray(innovation_cov, dtype)
     return jnp.asarray(innovations, dtype), jnp.asarray(signatures, dtype), innovation_cov
 

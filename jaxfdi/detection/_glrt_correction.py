@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._faults import sensor_labels
 from jaxfdi._riccati import steady_state_kalman
 from jaxfdi.detection._chi2 import Decision, flag_dead
@@ -121,9 +121,9 @@ def corrected_glrt(
     """
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)
-    _checks.check_flag("correct", correct)
-    _checks.check_flag("recursive", recursive)
-    confirm = _checks.check_int(
+    checks.check_flag("correct", correct)
+    checks.check_flag("recursive", recursive)
+    confirm = checks.check_int(
         "confirm",
         confirm,
         minimum=1,
@@ -155,9 +155,9 @@ def corrected_glrt(
     num_directions = g.shape[1]
 
     def init(mean: Array, cov: Array | None = None) -> CorrectedGLRTState:
-        _checks.check_shape("mean", mean, (n,), "the prior mean of x[0]")
+        checks.check_shape("mean", mean, (n,), "the prior mean of x[0]")
         if cov is not None:
-            _checks.check_covariance("cov", cov, n)
+            checks.check_covariance("cov", cov, n)
             check_steady_state(model, cov=cov)
         zero = jnp.zeros((), jnp.int32)
         return CorrectedGLRTState(
@@ -165,8 +165,8 @@ def corrected_glrt(
         )
 
     def step(state: CorrectedGLRTState, y: Array, u: Array):
-        _checks.check_shape("y", y, (m,), "one step's measurement")
-        _checks.check_shape("u", u, (nu,), "one step's input")
+        checks.check_shape("y", y, (m,), "one step's measurement")
+        checks.check_shape("u", u, (nu,), "one step's input")
         y, u = jnp.asarray(y, dtype), jnp.asarray(u, dtype)
         dead = ~jnp.isfinite(y)
         innovation = jnp.where(

@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.detection._chi2 import Detector
 from jaxfdi.detection._glrt import (
     DetectorSetup,
@@ -154,6 +154,6 @@ def glrt_detector(
         actuator_feedthrough,
         overlap_sensor,
     )
-    _checks.check_flag("recursive", recursive)
+    checks.check_flag("recursive", recursive)
     whitener, engine = recursive_engine(setup) if recursive else windowed_engine(setup)
     return engine_detector(setup, whitener, engine)

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi._faults import sensor_labels
 from jaxfdi.detection._chi2 import Detector, flag_dead
 from jaxfdi.detection._glrt import (
@@ -82,10 +82,10 @@ def time_varying_signatures(
     ``kalman_filter(model)`` started at ``prior_cov`` (module docstring's recursion); ``onset`` may be traced (vmap
     over onsets)."""
     n, _, m = validate_linear_model(model)
-    _checks.check_covariance("prior_cov", prior_cov, n)
-    _checks.check_shape("onset", onset, (), "one step index theta")
-    _checks.check_int_array("onset", onset, minimum=0, meaning="a step index theta >= 0")
-    length = _checks.check_int("length", length, minimum=1, meaning="a positive number of lags")
+    checks.check_covariance("prior_cov", prior_cov, n)
+    checks.check_shape("onset", onset, (), "one step index theta")
+    checks.check_int_array("onset", onset, minimum=0, meaning="a step index theta >= 0")
+    length = checks.check_int("length", length, minimum=1, meaning="a positive number of lags")
     _check_directions(directions, n, m)
     dtype = jnp.result_type(model.Phi, prior_cov)
     g, h = jnp.asarray(directions.state, dtype), jnp.asarray(directions.output, dtype)
@@ -142,8 +142,8 @@ def transient_glrt_detector(
     """
     n, nu, m = validate_linear_model(model)
     window = _check_window(window)
-    _checks.check_covariance("prior_cov", prior_cov, n)
-    _checks.check_flag("recursive", recursive)
+    checks.check_covariance("prior_cov", prior_cov, n)
+    checks.check_flag("recursive", recursive)
     _check_decision_args(threshold, isolation, overlap_sensor, m)
     setup = DetectorSetup(None, None, threshold, isolation, nu, nu + int(overlap_sensor) % m)
     dtype = jnp.result_type(model.Phi, prior_cov)
@@ -169,7 +169,7 @@ def transient_glrt_detector(
         )
 
     def step(state: TransientGLRTState, innovation: Array):
-        _checks.check_shape(
+        checks.check_shape(
             "innovation", innovation, (m,), "one step's innovation of the fault-blind filter"
         )
         gain, whitener, P_next = _riccati_step(Phi, C, Q, R, state.cov)

@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._stages import FDI
 from jaxfdi.detection._chi2 import Decision, chi2_threshold
 from jaxfdi.detection._parity import ParitySpace, parity_tests
@@ -194,11 +194,11 @@ def hybrid_psa_config(
     Returns:
       ``HybridPSAConfig`` in ``space.H``'s dtype (channel groups int32; ``T_V = inf`` without verification).
     """
-    _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
-    _checks.check_scalar(
+    checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
+    checks.check_scalar(
         "detection_threshold", detection_threshold, 0.0, low_open=True, meaning="T_D > 0"
     )
-    _checks.check_scalar(
+    checks.check_scalar(
         "isolation_threshold", isolation_threshold, 0.0, 1.0, meaning="T_I in [0, 1]"
     )
     H = space.H
@@ -215,7 +215,7 @@ def hybrid_psa_config(
     if verification_pfa is None or dof < 1:
         verification = jnp.asarray(jnp.inf, dtype)
     else:
-        _checks.check_probability("verification_pfa", verification_pfa)
+        checks.check_probability("verification_pfa", verification_pfa)
         verification = jnp.square(jnp.asarray(sigma, dtype)) * chi2_threshold(
             dof, jnp.asarray(verification_pfa, dtype)
         )
@@ -265,12 +265,12 @@ def hybrid_psa_init(
     Returns:
       ``HybridPSAState``: the state ``hybrid_psa_fdi``'s ``observe`` and ``step`` carry.
     """
-    restart_lag = _checks.check_int("restart_lag", restart_lag, 1, meaning="a number of steps >= 1")
+    restart_lag = checks.check_int("restart_lag", restart_lag, 1, meaning="a number of steps >= 1")
     if isinstance(follow, str):
-        _checks.check_choice("follow", follow, list(FOLLOW))
+        checks.check_choice("follow", follow, list(FOLLOW))
         follow = FOLLOW[follow]
     else:
-        _checks.check_int_array(
+        checks.check_int_array(
             "follow", follow, 0, 3, "a FOLLOW code (0 none, 1 psa, 2 hybrid, 3 verified)"
         )
     dtype = config.space.H.dtype
@@ -375,11 +375,11 @@ def hybrid_psa_fdi(
       HybridPSAOutput)`` reports the step's statistics and ``Decision``s and stores the step for the replay.
     """
     for name, fn in (("channels", channels), ("filter_input", filter_input), ("view", view)):
-        _checks.check_callable(name, fn)
+        checks.check_callable(name, fn)
     if not all(callable(getattr(analytic_filter, f, None)) for f in ("init", "update", "predict")):
         raise TypeError(
             f"analytic_filter: expected a Gaussian Filter with init, update and predict (e.g. "
-            f"unscented_kalman_filter(...)), got {_checks.received(analytic_filter)}"
+            f"unscented_kalman_filter(...)), got {checks.received(analytic_filter)}"
         )
     space = config.space
     G = space.groups.shape[0]

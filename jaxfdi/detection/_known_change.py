@@ -51,7 +51,7 @@ import jax.scipy.linalg as jsl
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi._faults import sensor_labels
 from jaxfdi.detection._chi2 import Decision, Detector, flag_dead
 from jaxfdi.detection._glrt import (
@@ -103,27 +103,27 @@ def known_change_terms(
       innovation_cov: (m, m) steady-state innovation covariance ``S`` (positive definite).
       magnitudes: (d,) known fault sizes ``nu_i`` (finite, non-zero; the sign matters).
     """
-    _checks.check_real("signatures", signatures, "real signatures (N, m, d)")
-    _checks.check_shape(
+    checks.check_real("signatures", signatures, "real signatures (N, m, d)")
+    checks.check_shape(
         "signatures", signatures, (None, None, None), "(N, m, d) from fault_signatures"
     )
-    N, m, d = _checks.shape_of(signatures)
+    N, m, d = checks.shape_of(signatures)
     if N < 1:
         raise ValueError(
             f"signatures: expected a window of N >= 1 lags (shape (N, m, d)), got shape "
-            f"{_checks.shape_of(signatures)}"
+            f"{checks.shape_of(signatures)}"
         )
-    _checks.check_finite("signatures", signatures, "fault signatures")
-    _checks.check_covariance("innovation_cov", innovation_cov, m, definite=True)
-    _checks.check_real("magnitudes", magnitudes, "known fault sizes")
-    _checks.check_shape("magnitudes", magnitudes, (d,), "one known size per fault direction")
-    _checks.check_finite("magnitudes", magnitudes, "known fault sizes")
-    value = _checks.concrete(magnitudes)
+    checks.check_finite("signatures", signatures, "fault signatures")
+    checks.check_covariance("innovation_cov", innovation_cov, m, definite=True)
+    checks.check_real("magnitudes", magnitudes, "known fault sizes")
+    checks.check_shape("magnitudes", magnitudes, (d,), "one known size per fault direction")
+    checks.check_finite("magnitudes", magnitudes, "known fault sizes")
+    value = checks.concrete(magnitudes)
     if value is not None and np.any(value == 0):
         raise ValueError(
-            f"magnitudes: expected non-zero known fault sizes, got {_checks.received(value)}"
+            f"magnitudes: expected non-zero known fault sizes, got {checks.received(value)}"
         )
-    dtype = _checks.float_dtype(signatures, innovation_cov, magnitudes)
+    dtype = checks.float_dtype(signatures, innovation_cov, magnitudes)
     S = _linalg.symmetrize(jnp.asarray(innovation_cov, dtype))
     chol = jsl.cholesky(S, lower=True)
     whitener = jsl.solve_triangular(chol, jnp.eye(m, dtype=dtype), lower=True)
@@ -150,10 +150,10 @@ def known_change_bank(
     ``None``: the bank's own); that component enters as 0, its fault-free mean: recovery with the sensor.
     """
     terms = known_change_terms(signatures, innovation_cov, magnitudes)
-    _checks.check_positive(
+    checks.check_positive(
         "threshold", threshold, "a positive threshold on the log-likelihood ratio"
     )
-    _checks.check_choice("isolation", isolation, ("max", "pairwise"))
+    checks.check_choice("isolation", isolation, ("max", "pairwise"))
     N, m, d = terms.gain.shape
     dtype = terms.drift.dtype
     tail = bool(tail)
@@ -168,7 +168,7 @@ def known_change_bank(
         )
 
     def step(state: KnownChangeState, innovation: Array):
-        _checks.check_shape(
+        checks.check_shape(
             "innovation", innovation, (m,), "one step's innovation of the fault-blind filter"
         )
         innovation = jnp.asarray(innovation, dtype)
@@ -241,11 +241,11 @@ def known_change_detector(
       non-finite component alarms and isolates its sensor.
     """
     n, _, m = validate_linear_model(model)
-    window = _checks.check_int(
+    window = checks.check_int(
         "window", window, minimum=1, meaning="a positive integer number of steps N"
     )
-    _checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
-    _checks.check_covariance("innovation_cov", innovation_cov, m, definite=True)
+    checks.check_shape("gain", gain, (n, m), "n states x m outputs, the measurement-update gain")
+    checks.check_covariance("innovation_cov", innovation_cov, m, definite=True)
     check_steady_state(model, gain=gain, innovation_cov=innovation_cov)
     signatures = fault_signatures(
         model, gain, fault_directions(model, actuator_feedthrough), window
@@ -268,7 +268,7 @@ def known_change_by_onset(
     N-1 = step k (all N onsets allowed): the offline bank statistic (``max`` over axis 0)."""
     terms = known_change_terms(signatures, innovation_cov, magnitudes)
     N, m, d = terms.gain.shape
-    _checks.check_shape("innovations", innovations, (N, m), "N steps x m outputs, oldest first")
+    checks.check_shape("innovations", innovations, (N, m), "N steps x m outputs, oldest first")
     white = jnp.asarray(innovations, terms.drift.dtype) @ terms.whitener.T  # (N, m) by position p
     lag = jnp.arange(N)[None, :] - (N - 1 - jnp.arange(N))[:, None]  # (o, p): p - theta
     gain = jnp.where(

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.detection._chi2 import Decision, Detector
 
 
@@ -37,7 +37,7 @@ def check_confirm_steps(confirm_steps) -> None:
     """``TypeError`` unless integers, ``ValueError`` unless one integer >= 1 or a 1-D sequence of them."""
     if isinstance(confirm_steps, (list, tuple)):
         confirm_steps = np.asarray(confirm_steps)
-    _checks.check_int_array(
+    checks.check_int_array(
         "confirm_steps", confirm_steps, 1, meaning="an integer >= 1, or one per mode (M,)"
     )
     if np.ndim(confirm_steps) > 1 or np.size(confirm_steps) == 0:
@@ -64,15 +64,15 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
       ``Detector(init, step)``: ``init()`` gives the confirmation state ``(candidate label -1, steps held 0)``;
       ``step`` returns ``(state, Decision)``, statistic the top fault mode's probability, label its index.
     """
-    _checks.check_real("threshold", threshold, "a probability mu_T in (0, 1], or one per mode (M,)")
-    value = _checks.concrete(threshold)
+    checks.check_real("threshold", threshold, "a probability mu_T in (0, 1], or one per mode (M,)")
+    value = checks.concrete(threshold)
     if value is not None and not (value.ndim <= 1 and np.all((0.0 < value) & (value <= 1.0))):
         raise ValueError(
             f"threshold: expected a probability mu_T in (0, 1], or one per mode (M,), got {threshold}"
         )
-    _checks.check_int("normal_mode", normal_mode, 0, meaning="the index of the fault-free mode")
+    checks.check_int("normal_mode", normal_mode, 0, meaning="the index of the fault-free mode")
     check_confirm_steps(confirm_steps)
-    if _checks.concrete(confirm_steps) is None:  # traced: data of the compiled program
+    if checks.concrete(confirm_steps) is None:  # traced: data of the compiled program
         steps = jnp.asarray(confirm_steps, jnp.int32)
     else:
         steps = (
@@ -95,12 +95,12 @@ def mode_probability_detector(threshold, normal_mode: int = 0, confirm_steps=1) 
         statistic = fault_prob[label]
         level = jnp.asarray(threshold)
         if level.ndim == 1:
-            _checks.check_shape(
+            checks.check_shape(
                 "threshold", level, mode_prob.shape, "one mu_T per mode, or a scalar"
             )
             level = level[label]
         if np.ndim(steps) == 1:
-            _checks.check_shape(
+            checks.check_shape(
                 "confirm_steps",
                 steps,
                 mode_prob.shape,

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 from jax import Array
 from jax.scipy.special import gammainc, gammaln, ndtri
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 #: terms of the Poisson mixture summed (a window around the mode)
 NUM_TERMS = 256
@@ -86,7 +86,7 @@ def _bisect(increasing, target, low, high):
 
 def ncx2_quantile(p, dof, noncentrality) -> Array:
     """``x`` with ``P(X <= x) = p`` for ``X ~ ncx2(dof, noncentrality)`` (scipy's ``ppf``)."""
-    _checks.check_probability("p", p)
+    checks.check_probability("p", p)
     dtype = _dtype(p, dof, noncentrality)
     return _quantile(
         *jnp.broadcast_arrays(*(jnp.asarray(v, dtype) for v in (p, dof, noncentrality)))
@@ -110,7 +110,7 @@ def noncentrality_for_missed_detection(threshold, dof, p_md) -> Array:
     Returns:
       ``lambda`` (broadcast over the arguments' shapes).
     """
-    _checks.check_probability("p_md", p_md)
+    checks.check_probability("p_md", p_md)
     dtype = _dtype(threshold, dof, p_md)
     return _noncentrality(
         *jnp.broadcast_arrays(*(jnp.asarray(v, dtype) for v in (threshold, dof, p_md)))

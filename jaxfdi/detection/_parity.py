@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.detection._chi2 import chi2_threshold
 
 
@@ -96,22 +96,22 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
       ValueError: for a concrete ``H`` without full column rank, a channel index out of range or used twice, or a
         group whose fault subspace has fewer than ``d`` dimensions (a fault along some direction leaves no parity).
     """
-    _checks.check_matrix("H", H, (None, None), "one measurement row per channel")
-    H = jnp.asarray(H, _checks.float_dtype(H))
+    checks.check_matrix("H", H, (None, None), "one measurement row per channel")
+    H = jnp.asarray(H, checks.float_dtype(H))
     m, n = H.shape
     if m <= n:
         raise ValueError(
             f"H: expected more channels than states (m > n) for a parity space, got shape {H.shape}"
         )
     groups = jnp.arange(m)[:, None] if groups is None else groups
-    _checks.check_int_array("groups", groups, 0, m - 1, "channel indices of H's rows")
+    checks.check_int_array("groups", groups, 0, m - 1, "channel indices of H's rows")
     groups = jnp.asarray(groups, jnp.int32)
     if groups.ndim != 2 or groups.shape[0] < 1 or groups.shape[1] < 1:
         raise ValueError(f"groups: expected shape (G, d) with G, d >= 1, got {groups.shape}")
-    values = _checks.concrete(groups)
+    values = checks.concrete(groups)
     if values is not None and len(np.unique(values)) != values.size:
         raise ValueError(
-            f"groups: expected every channel in at most one group, got {_checks.received(values)}"
+            f"groups: expected every channel in at most one group, got {checks.received(values)}"
         )
     if groups.shape[1] > m - n:
         raise ValueError(
@@ -119,18 +119,18 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
             f"able to fill a subspace of the {m - n}-dimensional parity space), got {groups.shape[1]}"
         )
     U, s, _ = jnp.linalg.svd(H, full_matrices=True)
-    singular = _checks.concrete(s)
+    singular = checks.concrete(s)
     if (
         singular is not None
         and not singular[-1] > 100 * m * np.finfo(singular.dtype).eps * singular[0]
     ):
         raise ValueError(
-            f"H: expected full column rank {n}, got singular values {_checks.received(singular)}"
+            f"H: expected full column rank {n}, got singular values {checks.received(singular)}"
         )
     V = U[:, n:].T
     columns = jnp.moveaxis(V[:, groups], 1, 0)  # (G, q, d)
     bases, spans, _ = jnp.linalg.svd(columns, full_matrices=False)
-    spans = _checks.concrete(spans)
+    spans = checks.concrete(spans)
     if spans is not None:
         tiny = 100 * m * np.finfo(spans.dtype).eps
         bad = np.nonzero(spans[:, -1] <= tiny)[0]
@@ -139,13 +139,17 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
                 f"groups: the fault subspace of group {int(bad[0])} (channels "
                 f"{np.asarray(values)[bad[0]].tolist() if values is not None else '?'}) has fewer than "
                 f"{groups.shape[1]} dimensions: a fault of that sensor along some direction leaves no "
-                f"parity (not enough redundancy); its singular values are {_checks.received(spans[bad[0]])}"
+                f"parity (not enough redundancy); its singular values are {checks.received(spans[bad[0]])}"
             )
     return ParitySpace(H, V, groups, bases)
 
 
 def parity_vector(space: ParitySpace, measurement: Array) -> Array:
-    """``p = V m`` (eq. 4) for ``measurement`` (..., m): (..., q)."""
+    """``p = V m`` (eq. 4) for ``measurement`` (..., m): (..., q).
+
+    Returns:
+      (..., q) parity vector, in the measurement's units (a non-finite channel makes every entry non-finite).
+    """
     return jnp.asarray(measurement) @ space.V.T
 
 
@@ -187,8 +191,13 @@ def parity_tests(space: ParitySpace, measurement: Array) -> tuple[Array, Array]:
 
 
 def detection_threshold(space: ParitySpace, sigma, pfa) -> Array:
-    """``T_D = sigma^2 chi2_isf(q, P_fa)``: fault-free, ``P(FD > T_D) = P_fa`` per sample."""
-    _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
+    """``T_D = sigma^2 chi2_isf(q, P_fa)``: fault-free, ``P(FD > T_D) = P_fa`` per sample.
+
+    Returns:
+      ``T_D`` in ``space.V``'s dtype, the broadcast shape of ``sigma`` and ``pfa`` (() for scalars), in ``sigma``'s
+      units squared.
+    """
+    checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
     q = space.V.shape[0]
     return jnp.square(jnp.asarray(sigma, space.V.dtype)) * chi2_threshold(
         q, jnp.asarray(pfa, space.V.dtype)
@@ -206,7 +215,11 @@ def out_of_subspace(space: ParitySpace, parity: Array) -> Array:
 
 def isolation_functions(space: ParitySpace, parity: Array) -> Array:
     """``FI_g = 1 - ||p - Q_g Q_g^T p|| / ||p||`` (eq. 9), ``parity`` (..., q) -> (..., G). 0 for ``p = 0`` (no
-    evidence); NaN for a non-finite ``p`` (``parity_tests`` isolates a dead channel)."""
+    evidence); NaN for a non-finite ``p`` (``parity_tests`` isolates a dead channel).
+
+    Returns:
+      (..., G) ``FI_g`` in ``[0, 1]``, one per group (1: ``p`` lies in the group's fault subspace).
+    """
     parity = jnp.asarray(parity)
     size = jnp.linalg.norm(parity, axis=-1)[..., None]
     positive = size > 0
@@ -226,7 +239,12 @@ def subspace_cosines(space: ParitySpace) -> Array:
 def subspace_angles(space: ParitySpace) -> Array:
     """(G, G, d) principal angles (rad, smallest first) between every two fault subspaces; 2-D planes in a 3-D
     parity space: ``[0, dihedral angle]``. ``atan2(sin, cos)``, sines from the singular values of
-    ``(I - Q_k Q_k^T) Q_i`` (Knyazev & Argentati 2002): ``arccos`` alone is good to only ``sqrt(eps)`` near 0."""
+    ``(I - Q_k Q_k^T) Q_i`` (Knyazev & Argentati 2002): ``arccos`` alone is good to only ``sqrt(eps)`` near 0.
+
+    Returns:
+      (G, G, d) angles in ``[0, pi/2]`` rad, ``[i, k]`` between ``FS_i`` and ``FS_k``; 0 on the diagonal and along a
+      singular direction.
+    """
     Q = space.fault_bases
     cosines = subspace_cosines(space)
     away = Q[:, None] - jnp.einsum("kqe,kre,ird->ikqd", Q, Q, Q)  # (I - Q_k Q_k^T) Q_i
@@ -251,7 +269,11 @@ def singular_directions(space: ParitySpace) -> SingularDirections:
 def singular_faults(space: ParitySpace) -> Array:
     """(G, G, d): group ``i``'s unit fault (on its ``d`` channels) whose parity lies along the singular direction
     shared with group ``k`` (least squares ``V_i^+ direction``): it cannot be told between ``i`` and ``k``. Sign:
-    first nonzero entry positive; diagonal 0."""
+    first nonzero entry positive; diagonal 0.
+
+    Returns:
+      (G, G, d) unit fault vectors: ``[i, k]`` acts on group ``i``'s ``d`` channels (``space.groups[i]``).
+    """
     columns = jnp.moveaxis(space.V[:, space.groups], 1, 0)  # (G, q, d)
     dirs = singular_directions(space).direction  # (G, G, q)
     faults = jnp.einsum("idq,ikq->ikd", jnp.linalg.pinv(columns), dirs)
@@ -293,11 +315,15 @@ def isolation_threshold(
       detection_threshold: ``T_D`` on ``FD``.
       key: PRNG key.
       samples: number of samples (static).
+
+    Returns:
+      ``IsolationCalibration``: ``T_I`` (), the achieved missed-isolation fraction (), the number of detected samples
+      () and ``samples`` (); ``T_I`` is ``inf`` when no sample is detected.
     """
-    _checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
-    _checks.check_positive("fault_to_noise", fault_to_noise, "a fault-to-noise ratio")
-    _checks.check_probability("missed_isolation", missed_isolation)
-    samples = _checks.check_int("samples", samples, 2, meaning="a number of Monte Carlo samples")
+    checks.check_positive("sigma", sigma, "the channels' noise standard deviation")
+    checks.check_positive("fault_to_noise", fault_to_noise, "a fault-to-noise ratio")
+    checks.check_probability("missed_isolation", missed_isolation)
+    samples = checks.check_int("samples", samples, 2, meaning="a number of Monte Carlo samples")
     dtype = space.V.dtype
     G, d = space.groups.shape
     m = space.H.shape[0]

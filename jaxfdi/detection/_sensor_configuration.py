@@ -30,7 +30,7 @@ import numpy as np
 import optax
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.detection._chi2 import chi2_threshold
 
 
@@ -111,9 +111,14 @@ def _pair_geometry(H: Array, groups: Array) -> tuple[Array, Array, Array]:
 
 
 def isolability(H: Array, groups: Array) -> Isolability:
-    """Fault-subspace geometry of ``H`` ((m, 3)) with sensor ``groups`` ((S, d)) (module doc)."""
-    _checks.check_matrix("H", H, (None, 3), "one input axis per row")
-    return _isolability(jnp.asarray(H, _checks.float_dtype(H)), jnp.asarray(groups, jnp.int32))
+    """Fault-subspace geometry of ``H`` ((m, 3)) with sensor ``groups`` ((S, d)) (module doc).
+
+    Returns:
+      ``Isolability`` in ``H``'s float dtype: dihedral angles (S, S) and their off-diagonal minimum () in rad, the
+      detectabilities (S,) and the isotropy ().
+    """
+    checks.check_matrix("H", H, (None, 3), "one input axis per row")
+    return _isolability(jnp.asarray(H, checks.float_dtype(H)), jnp.asarray(groups, jnp.int32))
 
 
 @jax.jit
@@ -222,7 +227,11 @@ def isolation_rate(
     samples: int = 100_000,
     pfa: float = 1e-6,
 ) -> Array:
-    """Hard Monte Carlo rate of the same draws: detected (``FD > T_D``) and ``argmax FI`` the faulty sensor."""
+    """Hard Monte Carlo rate of the same draws: detected (``FD > T_D``) and ``argmax FI`` the faulty sensor.
+
+    Returns:
+      () the fraction of the ``samples`` draws detected and isolated to the faulty sensor, in [0, 1].
+    """
     _, sensor, statistic, fi = _draws(H, groups, sigma, fault_to_noise, key, samples)
     detected = statistic > _threshold(H, pfa)
     return jnp.mean(detected & (jnp.argmax(fi, axis=1) == sensor))
@@ -253,11 +262,11 @@ def optimize_configuration(
     Returns:
       ``ConfigurationResult`` in ``dtype``; ``best`` () int32 by the objective after the last step.
     """
-    sensors = _checks.check_int("sensors", sensors, 3, meaning="a number of 2-DOF sensors >= 3")
-    starts = _checks.check_int("starts", starts, 1, meaning="a number of random starts")
-    steps = _checks.check_int("steps", steps, 1, meaning="a number of optimiser steps")
-    _checks.check_positive("learning_rate", learning_rate)
-    _checks.check_choice("objective", objective, ["separation", "isolation"])
+    sensors = checks.check_int("sensors", sensors, 3, meaning="a number of 2-DOF sensors >= 3")
+    starts = checks.check_int("starts", starts, 1, meaning="a number of random starts")
+    steps = checks.check_int("steps", steps, 1, meaning="a number of optimiser steps")
+    checks.check_positive("learning_rate", learning_rate)
+    checks.check_choice("objective", objective, ["separation", "isolation"])
     dtype = dtype or jnp.result_type(float)
     return _optimize(
         key,

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 #: isolation result when the symptom vector matches no column (e.g. a transient in
 #: which only some filters have crossed yet, or a fault outside the hypotheses).
@@ -20,7 +20,7 @@ UNMATCHED = -1
 
 def signature_matrix(num_filters: int) -> np.ndarray:
     """(F, F + 1) bool: column 0 "no fault", column ``i + 1`` fault i (all ones but row i)."""
-    num_filters = _checks.check_int(
+    num_filters = checks.check_int(
         "num_filters", num_filters, 1, meaning="a positive number of filters"
     )
     faults = ~np.eye(num_filters, dtype=bool)
@@ -48,11 +48,16 @@ def isolate(symptoms: Array, matrix: Array | None = None) -> Array:
 def location_symptoms(alarms: Array, location: Array, num_locations: int) -> Array:
     """Per-location symptoms (..., L) from per-filter alarms (..., F) for banks with several filters per location
     (e.g. multiplicative and additive hypotheses): set when every filter of the location alarms, so a fault there
-    leaves it clear while one of its hypotheses explains the data."""
-    num_locations = _checks.check_int(
+    leaves it clear while one of its hypotheses explains the data.
+
+    Returns:
+      (..., L) bool: ``True`` where every filter with ``location[f] == l`` alarms (also ``True`` for a location with
+      no filter).
+    """
+    num_locations = checks.check_int(
         "num_locations", num_locations, 1, meaning="a positive number of locations"
     )
-    _checks.check_index("location", location, num_locations, "a location index per filter")
+    checks.check_index("location", location, num_locations, "a location index per filter")
     alarms = jnp.asarray(alarms, bool)
     location = jnp.asarray(location, jnp.int32)
     hit = location[:, None] == jnp.arange(num_locations)[None, :]  # (F, L)

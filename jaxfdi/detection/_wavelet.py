@@ -22,16 +22,16 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 MODES = ("hard", "soft", "none")
 
 
 def _check(statistic: Array, levels: int) -> Array:
-    levels = _checks.check_int(
+    levels = checks.check_int(
         "levels", levels, 1, meaning="an integer M >= 1 (blocks of 2^M samples)"
     )
-    _checks.check_real("statistic", statistic, "a real statistic of shape (T, ...)")
+    checks.check_real("statistic", statistic, "a real statistic of shape (T, ...)")
     statistic = jnp.asarray(statistic)
     if statistic.ndim < 1 or statistic.shape[0] % (2**levels):
         raise ValueError(
@@ -68,7 +68,11 @@ def haar_reconstruct(approx: Array, details: list[Array]) -> Array:
 
 def chi2_detail_sigma(dof: int, levels: int) -> np.ndarray:
     """(M,) standard deviation of the scale-j detail of i.i.d. chi2(dof) samples: ``var(lambda) = 2 dof``, a detail
-    is half a difference of two means of ``2^(j-1)`` samples, so ``sigma_j = sqrt(2 dof / 2^j)``."""
+    is half a difference of two means of ``2^(j-1)`` samples, so ``sigma_j = sqrt(2 dof / 2^j)``.
+
+    Returns:
+      (M,) NumPy float64 ``sigma_j``, ``j = 1..M``, in the statistic's units (``haar_denoise``'s ``sigma``).
+    """
     return np.sqrt(2.0 * dof / 2.0 ** np.arange(1, levels + 1))
 
 
@@ -77,7 +81,7 @@ def sample_detail_sigma(statistic: Array, levels: int, window: int) -> Array:
     blocks within the first ``window`` steps of ``statistic`` (T, ...): Lee and Lyou's sigma, from a fault-free
     calibration window."""
     x = _check(statistic, levels)
-    window = _checks.check_int(
+    window = checks.check_int(
         "window",
         window,
         2**levels,
@@ -94,7 +98,12 @@ def sample_detail_sigma(statistic: Array, levels: int, window: int) -> Array:
 def causal_detail_sigma(statistic: Array, levels: int, window: int, prior_sigma: Array) -> Array:
     """(B, M, ...) per-block sigma: ``prior_sigma`` (M,) or (M, ...) (e.g. the chi-square value) for blocks ending
     inside the calibration window, the window's ``sample_detail_sigma`` from the first block after it (a block
-    never sets its threshold from its own or later samples)."""
+    never sets its threshold from its own or later samples).
+
+    Returns:
+      (B, M, ...) detail standard deviations, ``B = T / 2^M`` blocks, ``...`` the statistic's trailing shape
+      (``haar_denoise``'s per-block ``sigma``).
+    """
     x = _check(statistic, levels)
     estimate = sample_detail_sigma(x, levels, window)
     size = 2**levels
@@ -135,8 +144,8 @@ def haar_denoise(
       the denoised statistic, of ``statistic``'s shape (T, ...): each sample is its block mean plus the
       (thresholded) details (``"hard"``: the block mean alone).
     """
-    _checks.check_choice("mode", mode, MODES)
-    _checks.check_positive("c_mult", c_mult, "a positive multiple of the detail sigma")
+    checks.check_choice("mode", mode, MODES)
+    checks.check_positive("c_mult", c_mult, "a positive multiple of the detail sigma")
     approx, details = haar_decompose(statistic, levels)
     if mode == "hard":
         details = [jnp.zeros_like(d) for d in details]
@@ -171,7 +180,11 @@ def haar_denoise(
 def block_alarms(denoised: Array, threshold: Array, levels: int) -> Array:
     """Once-per-block decisions, (T, ...) like ``denoised``: at each block's last step ``True`` if any reconstructed
     sample of the block reaches ``threshold`` or is not finite (a dead sensor's statistic, spread over its block by
-    the transform, is evidence); ``False`` elsewhere."""
+    the transform, is evidence); ``False`` elsewhere.
+
+    Returns:
+      (T, ...) bool, ``denoised``'s shape: the block's alarm at each block's last step, ``False`` at the others.
+    """
     x = _check(denoised, levels)
     size = 2**levels
     blocks = x.reshape((x.shape[0] // size, size) + x.shape[1:])

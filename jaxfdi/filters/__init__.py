@@ -16,7 +16,14 @@ from jaxfdi.filters._smoother import rts_smoother
 from jaxfdi.filters._sqrt_kalman import sqrt_kalman_filter
 from jaxfdi.filters._sqrt_ukf import sqrt_unscented_kalman_filter
 from jaxfdi.filters._time_varying import time_varying
-from jaxfdi.filters._tskf import actuator_direction, sensor_direction, two_stage_kalman_filter
+from jaxfdi.filters._tskf import (
+    FaultDirection,
+    actuator_direction,
+    sensor_direction,
+    sensor_matrix,
+    stack_directions,
+    two_stage_kalman_filter,
+)
 from jaxfdi.filters._ukf import unscented_kalman_filter
 from jaxfdi.filters._unknown_input import unknown_input_filter
 
@@ -45,4 +52,7 @@ __all__ = [
     "init_from_posterior",
     "solve_discrete_are",
     "steady_state_kalman",
+    "FaultDirection",
+    "sensor_matrix",
+    "stack_directions",
 ]

@@ -23,7 +23,7 @@ from jax.custom_batching import custom_vmap
 from jax.interpreters import partial_eval as pe
 from jax.interpreters.partial_eval import DynamicJaxprTracer
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 
 
 class GaussianState(NamedTuple):
@@ -160,20 +160,20 @@ def check_gaussian(
 ) -> tuple[Array, Array]:
     """A prior ``N(mean, cov)``: real finite ``mean`` (n,), covariance ``cov`` (n, n), returned in one float dtype (an
     integer mean must not make the covariance integer)."""
-    _checks.check_real(names[0], mean, "a real initial state mean")
-    _checks.check_shape(names[0], mean, (n,), "initial state mean")
-    _checks.check_finite(names[0], mean, "initial state mean")
-    _checks.check_covariance(names[1], cov, n)
-    dtype = _checks.float_dtype(mean, cov)
+    checks.check_real(names[0], mean, "a real initial state mean")
+    checks.check_shape(names[0], mean, (n,), "initial state mean")
+    checks.check_finite(names[0], mean, "initial state mean")
+    checks.check_covariance(names[1], cov, n)
+    dtype = checks.float_dtype(mean, cov)
     return jnp.asarray(mean, dtype), jnp.asarray(cov, dtype)
 
 
 def check_step_inputs(y: Array, u: Array, m: int, nu: int | None) -> None:
     """Trace-time checks of one step's measurement and input (real, of the right shape)."""
-    _checks.check_real("y", y, "a real measurement")
-    _checks.check_shape("y", y, (m,), "one measurement; use NaN for a missing one")
-    _checks.check_real("u", u, "a real input")
-    _checks.check_shape("u", u, (nu,), "one input")
+    checks.check_real("y", y, "a real measurement")
+    checks.check_shape("y", y, (m,), "one measurement; use NaN for a missing one")
+    checks.check_real("u", u, "a real input")
+    checks.check_shape("u", u, (nu,), "one input")
 
 
 def check_filter(filt: Any, name: str = "filt") -> None:
@@ -181,16 +181,16 @@ def check_filter(filt: Any, name: str = "filt") -> None:
     if not isinstance(filt, Filter):
         raise TypeError(
             f"{name}: expected a Filter(init, step, ...) such as kalman_filter(model) returns, "
-            f"got {_checks.received(filt)}"
+            f"got {checks.received(filt)}"
         )
 
 
 def check_sequences(ys: Any, us: Any, ys_shape: str, us_shapes: str) -> None:
     """Trace-time checks of a driver's sequences: real (NaN in ``ys``: 'missing'; ``us`` finite when concrete)."""
-    _checks.check_real("ys", ys, f"real measurements of shape {ys_shape}")
+    checks.check_real("ys", ys, f"real measurements of shape {ys_shape}")
     if us is not None:
-        _checks.check_real("us", us, f"real inputs of shape {us_shapes}")
-        _checks.check_finite("us", us, "inputs")
+        checks.check_real("us", us, f"real inputs of shape {us_shapes}")
+        checks.check_finite("us", us, "inputs")
 
 
 def observed_mask(y: Array) -> tuple[Array, Array, Array]:
@@ -282,7 +282,7 @@ def run_filter(
     us = jnp.asarray(us)
     if us.ndim != 2:
         raise ValueError(f"us: expected shape (T, nu), got {tuple(us.shape)}")
-    _checks.check_same_length(("ys", "us"), ys, us)
+    checks.check_same_length(("ys", "us"), ys, us)
     if not any(
         isinstance(leaf, jax.core.Tracer)
         for leaf in jax.tree_util.tree_leaves((init_state, ys, us))
@@ -438,7 +438,7 @@ def _covariance_sees_data(
 
 def _prior_axes(init_state: GaussianState, num_runs: int) -> GaussianState:
     """Which of ``mean``/``cov`` carry a run axis (0) or are shared (None), checked against the run count."""
-    mean_shape, cov_shape = _checks.shape_of(init_state.mean), _checks.shape_of(init_state.cov)
+    mean_shape, cov_shape = checks.shape_of(init_state.mean), checks.shape_of(init_state.cov)
     if len(mean_shape) not in (1, 2) or len(cov_shape) not in (2, 3):
         raise ValueError(
             f"init_state: expected mean (n,) or (N, n) and cov (n, n) or (N, n, n), got shapes "

@@ -11,7 +11,7 @@ from typing import Any
 import jax
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import (
     Filter,
     GaussianState,
@@ -43,21 +43,21 @@ def extended_kalman_filter(
       ``step(state, y (m,), u) -> (GaussianState, FilterInfo)``: Joseph update with ``h``'s Jacobian at the prior
       mean, then prediction with ``f``'s Jacobian at the posterior mean.
     """
-    _checks.check_callable("f", f, "a function f(x, u, params) -> next state")
-    _checks.check_callable("h", h, "a function h(x, u, params) -> measurement")
-    n = _checks.check_covariance("Q", Q)
-    m = _checks.check_covariance("R", R)
+    checks.check_callable("f", f, "a function f(x, u, params) -> next state")
+    checks.check_callable("h", h, "a function h(x, u, params) -> measurement")
+    n = checks.check_covariance("Q", Q)
+    m = checks.check_covariance("R", R)
 
     def update(state: GaussianState, y: Array, u: Array):
         check_step_inputs(y, u, m, None)
         y_pred = h(state.mean, u, params)
-        _checks.check_shape("h(x, u, params)", y_pred, (m,), "one predicted measurement")
+        checks.check_shape("h(x, u, params)", y_pred, (m,), "one predicted measurement")
         H = jax.jacfwd(h)(state.mean, u, params)
         return joseph_update(state.mean, state.cov, y, y_pred, H, R, missing_measurements)
 
     def predict(post: GaussianState, u: Array) -> GaussianState:
         next_mean = f(post.mean, u, params)
-        _checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
+        checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
         F = jax.jacfwd(f)(post.mean, u, params)
         return GaussianState(next_mean, _linalg.symmetrize(F @ post.cov @ F.T + Q))
 

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 
 class RingBuffer(NamedTuple):
@@ -54,7 +54,7 @@ def ring_buffer(length: int, example: Any) -> RingBuffer:
     Returns:
       a ``RingBuffer`` of zeros, ``count`` 0.
     """
-    length = _checks.check_int("length", length, 1, meaning="a positive number of entries")
+    length = checks.check_int("length", length, 1, meaning="a positive number of entries")
     data = jax.tree_util.tree_map(
         lambda leaf: jnp.zeros((int(length),) + jnp.shape(leaf), jnp.result_type(leaf)), example
     )
@@ -71,9 +71,9 @@ def replay_filter(
       ``(final_state, infos)``: the state after the last entry and the (L, ...) step infos.
     """
     ys, us = jnp.asarray(ys), jnp.asarray(us)
-    _checks.check_same_length(("ys", "us"), ys, us)
+    checks.check_same_length(("ys", "us"), ys, us)
     valid = jnp.ones((ys.shape[0],), bool) if valid is None else jnp.asarray(valid, bool)
-    _checks.check_shape("valid", valid, (ys.shape[0],), "one flag per stored step")
+    checks.check_shape("valid", valid, (ys.shape[0],), "one flag per stored step")
 
     def body(s, entry):
         y, u, ok = entry

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.filters._base import Filter
 from jaxfdi.filters._imm_batch import kalman_imm_batch_kernel, supports
 from jaxfdi.filters._kalman import kalman_filter
@@ -68,10 +68,10 @@ def interacting_multiple_model(
       (``imm_batch.supports``) ``run_filter`` runs ``imm_batch.py``'s structure-of-arrays step (same results, 2.5x
       faster than ``vmap`` on 100 engine runs).
     """
-    _checks.check_real("transition", transition, "a real row-stochastic matrix")
+    checks.check_real("transition", transition, "a real row-stochastic matrix")
     transition = jnp.asarray(transition)
     M = transition.shape[0] if transition.ndim == 2 else None
-    _checks.check_shape(
+    checks.check_shape(
         "transition", transition, (M, M), "row-stochastic mode transition matrix pi[i, j]"
     )
     num_modes(mode_params, expected=M)

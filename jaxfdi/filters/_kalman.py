@@ -13,7 +13,7 @@ from functools import partial
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import (
     Filter,
     FilterInfo,
@@ -164,19 +164,19 @@ def _per_run_kalman_filter(model: LinearGaussianModel, missing_measurements: boo
             "kalman_filter(model_of_one_run, missing_measurements=True)"
         )
     model, per_run, num_runs = check_per_run_model(model)
-    n = _checks.shape_of(model.Phi)[-1]
+    n = checks.shape_of(model.Phi)[-1]
 
     def init(mean: Array, cov: Array) -> GaussianState:
         for name, value, shapes in (
             ("mean", mean, ((n,), (num_runs, n))),
             ("cov", cov, ((n, n), (num_runs, n, n))),
         ):
-            _checks.check_real(name, value, "a real prior")
-            _checks.check_finite(name, value, "prior")
-            if _checks.shape_of(value) not in shapes:
+            checks.check_real(name, value, "a real prior")
+            checks.check_finite(name, value, "prior")
+            if checks.shape_of(value) not in shapes:
                 raise ValueError(
                     f"{name}: expected shape {shapes[0]} shared or {shapes[1]} per run, got "
-                    f"{_checks.shape_of(value)}"
+                    f"{checks.shape_of(value)}"
                 )
         dtype = jnp.result_type(model.Phi, mean, cov)
         return GaussianState(jnp.asarray(mean, dtype), jnp.asarray(cov, dtype))

@@ -21,7 +21,7 @@ import math
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import (
     BatchKernel,
     FilterInfo,
@@ -159,7 +159,7 @@ def supports(model: LinearGaussianModel) -> bool:
 
 def per_run_leaves(model: LinearGaussianModel) -> LinearGaussianModel:
     """Which leaves of ``model`` carry a leading run axis (3-D instead of a matrix)."""
-    return LinearGaussianModel(*(len(_checks.shape_of(leaf)) == 3 for leaf in model))
+    return LinearGaussianModel(*(len(checks.shape_of(leaf)) == 3 for leaf in model))
 
 
 def check_per_run_model(
@@ -168,10 +168,10 @@ def check_per_run_model(
     """A model with a run axis on some leaves: ``(model in one float dtype, per_run, N)``; every leaf checked
     against the shared shapes and one ``N``."""
     per_run = per_run_leaves(model)
-    sizes = {_checks.shape_of(leaf)[0] for leaf, batched in zip(model, per_run) if batched}
+    sizes = {checks.shape_of(leaf)[0] for leaf, batched in zip(model, per_run) if batched}
     num_runs = max(sizes)
     for name, leaf in zip(model._fields, model):
-        shape = _checks.shape_of(leaf)
+        shape = checks.shape_of(leaf)
         if len(shape) not in (2, 3):
             raise ValueError(
                 f"model.{name}: expected a matrix, or one per run with a leading axis of "
@@ -190,17 +190,17 @@ def check_per_run_model(
     )
     validate_linear_model(first)
     for name, leaf, batched, ref in zip(model._fields, model, per_run, first):
-        if batched and _checks.shape_of(leaf)[1:] != _checks.shape_of(ref):
+        if batched and checks.shape_of(leaf)[1:] != checks.shape_of(ref):
             raise ValueError(
-                f"model.{name}: expected shape ({num_runs}, *{_checks.shape_of(ref)}), got "
-                f"{_checks.shape_of(leaf)}"
+                f"model.{name}: expected shape ({num_runs}, *{checks.shape_of(ref)}), got "
+                f"{checks.shape_of(leaf)}"
             )
     if not supports(first):
-        n, m = _checks.shape_of(first.Phi)[-1], _checks.shape_of(first.C)[0]
+        n, m = checks.shape_of(first.Phi)[-1], checks.shape_of(first.C)[0]
         raise ValueError(
             f"model: a model per run runs the batch kernel, which takes up to {KERNEL_MAX_STATES} "
             f"states and {_linalg.UNROLL_MAX} outputs, got {n} states and {m} outputs; use "
             "jax.vmap over kalman_filter of each run's model"
         )
-    dtype = _checks.float_dtype(*model)
+    dtype = checks.float_dtype(*model)
     return LinearGaussianModel(*(jnp.asarray(leaf, dtype) for leaf in model)), per_run, num_runs

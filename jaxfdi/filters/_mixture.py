@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import Filter, FilterInfo, GaussianState
 
 
@@ -69,7 +69,7 @@ def num_modes(mode_params: Any, expected: int | None = None) -> int:
         raise ValueError(
             "mode_params: expected a pytree of arrays with a leading mode axis M, got no arrays"
         )
-    shapes = [_checks.shape_of(leaf) for leaf in leaves]
+    shapes = [checks.shape_of(leaf) for leaf in leaves]
     size = expected if expected is not None else (shapes[0][0] if shapes[0] else None)
     for shape in shapes:
         if not shape or shape[0] != size:
@@ -83,7 +83,7 @@ def num_modes(mode_params: Any, expected: int | None = None) -> int:
 
 def check_mode_filter(mode_filter: Callable[[Any], Filter], mode_params: Any) -> None:
     """``mode_filter`` must build a Gaussian filter (with ``update`` and ``predict``)."""
-    _checks.check_callable(
+    checks.check_callable(
         "mode_filter", mode_filter, "a callable params -> Filter (e.g. kalman_filter)"
     )
     filt = mode_filter(first_mode(mode_params))
@@ -103,18 +103,18 @@ def bank_init(
 ) -> IMMState:
     """Per-mode priors from a shared ``(n,), (n, n)`` or per-mode ``(M, n), (M, n, n)`` initial Gaussian, validated
     by the mode filter's own ``init``; ``log mode_prob``."""
-    ndim = len(_checks.shape_of(mean))
-    if ndim not in (1, 2) or (ndim == 2 and _checks.shape_of(mean)[0] != M):
+    ndim = len(checks.shape_of(mean))
+    if ndim not in (1, 2) or (ndim == 2 and checks.shape_of(mean)[0] != M):
         raise ValueError(
-            f"mean: expected shape (n,) shared by the modes or ({M}, n) per mode, got {_checks.shape_of(mean)}"
+            f"mean: expected shape (n,) shared by the modes or ({M}, n) per mode, got {checks.shape_of(mean)}"
         )
     if ndim == 2:
-        _checks.check_shape("cov", cov, (M, None, None), "one covariance per mode")
+        checks.check_shape("cov", cov, (M, None, None), "one covariance per mode")
     axis = 0 if ndim == 2 else None
     prior = jax.vmap(lambda p, m, c: mode_filter(p).init(m, c), in_axes=(0, axis, axis))(
         mode_params, mean, cov
     )
-    _checks.check_shape("mode_prob", mode_prob, (M,), "one prior probability per mode")
+    checks.check_shape("mode_prob", mode_prob, (M,), "one prior probability per mode")
     check_distribution("mode_prob", mode_prob)
     dtype = prior.mean.dtype
     return IMMState(prior.mean, prior.cov, safe_log(jnp.asarray(mode_prob, dtype)))
@@ -122,8 +122,8 @@ def bank_init(
 
 def check_distribution(name: str, prob: Any, axis: int = -1) -> None:
     """Real probabilities; when concrete: finite, non-negative, summing to 1 along ``axis`` (to ``sqrt(eps)``)."""
-    _checks.check_real(name, prob, "real probabilities")
-    value = _checks.concrete(prob)
+    checks.check_real(name, prob, "real probabilities")
+    value = checks.concrete(prob)
     if value is None:
         return
     eps = np.finfo(value.dtype if value.dtype.kind == "f" else np.float64).eps

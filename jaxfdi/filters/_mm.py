@@ -13,7 +13,7 @@ from typing import Any, Callable
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.filters._base import Filter
 from jaxfdi.filters._mixture import (
     IMMInfo,
@@ -52,7 +52,7 @@ def multiple_model(
     """
     M = num_modes(mode_params)
     check_mode_filter(mode_filter, mode_params)
-    value = _checks.concrete(floor)
+    value = checks.concrete(floor)
     if value is not None and not (value.shape == () and 0.0 <= value < 1.0 / M):
         raise ValueError(
             f"floor: expected a scalar probability in [0, 1/M) = [0, {1.0 / M:.4g}), got {floor}"

@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import (
     FilterInfo,
     GaussianState,
@@ -162,19 +162,19 @@ def parallel_scan(
     if not isinstance(init_state, GaussianState):
         raise TypeError(
             f"init_state: expected a GaussianState(mean, cov) (kalman_filter(model).init(m0, P0)), "
-            f"got {_checks.received(init_state)}"
+            f"got {checks.received(init_state)}"
         )
     m0, P0 = check_gaussian(
         init_state.mean, init_state.cov, n, ("init_state.mean", "init_state.cov")
     )
     check_sequences(ys, us, "(T, m)", "(T, nu)")
-    _checks.check_shape("ys", ys, (None, m), "T steps x m outputs")
-    if _checks.shape_of(ys)[0] < 1:
-        raise ValueError(f"ys: expected at least one step, got shape {_checks.shape_of(ys)}")
-    num_steps = _checks.shape_of(ys)[0]
+    checks.check_shape("ys", ys, (None, m), "T steps x m outputs")
+    if checks.shape_of(ys)[0] < 1:
+        raise ValueError(f"ys: expected at least one step, got shape {checks.shape_of(ys)}")
+    num_steps = checks.shape_of(ys)[0]
     if us is None:
         us = jnp.zeros((num_steps, nu))
-    _checks.check_shape("us", us, (num_steps, nu), "T steps x nu inputs, as many steps as ys")
+    checks.check_shape("us", us, (num_steps, nu), "T steps x nu inputs, as many steps as ys")
     dtype = jnp.result_type(m0, P0, ys, *model)
     return _parallel_filter(
         LinearGaussianModel(*(jnp.asarray(a, dtype) for a in model)),

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import FilterInfo
 from jaxfdi.filters._parallel import (  # batched transpose, symmetric part, matrix-vector
     _mT,
@@ -74,7 +74,7 @@ def rts_smoother(
       ``SmootherResult``: smoothed means ``ms_k`` (T, n) and covariances ``Ps_k`` (T, n, n) of ``x_k`` given
       ``y_0..y_{T-1}``, and gains ``G_k`` (T, n, n), zero at the last step.
     """
-    _checks.check_flag("parallel", parallel)
+    checks.check_flag("parallel", parallel)
     Phi, info = _check(model, info)
     smooth = _parallel if parallel else _sequential
     return smooth(
@@ -135,13 +135,13 @@ def _check(model: LinearGaussianModel, info: FilterInfo):
     if not isinstance(info, FilterInfo):
         raise TypeError(
             f"info: expected the FilterInfo of run_filter(kalman_filter(model), ...), got "
-            f"{_checks.received(info)}"
+            f"{checks.received(info)}"
         )
-    _checks.check_shape("info.filtered_mean", info.filtered_mean, (None, n), "T steps x n states")
-    T = _checks.shape_of(info.filtered_mean)[0]
+    checks.check_shape("info.filtered_mean", info.filtered_mean, (None, n), "T steps x n states")
+    T = checks.shape_of(info.filtered_mean)[0]
     for name in ("filtered_cov", "predicted_cov"):
-        _checks.check_shape(f"info.{name}", getattr(info, name), (T, n, n), "T steps x n x n")
-    _checks.check_shape("info.predicted_mean", info.predicted_mean, (T, n), "T steps x n states")
+        checks.check_shape(f"info.{name}", getattr(info, name), (T, n, n), "T steps x n x n")
+    checks.check_shape("info.predicted_mean", info.predicted_mean, (T, n), "T steps x n states")
     if T < 1:
         raise ValueError("info: expected at least one step")
     dtype = jnp.result_type(info.filtered_mean, model.Phi)

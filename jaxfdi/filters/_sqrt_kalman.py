@@ -20,7 +20,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import (
     Filter,
     FilterInfo,
@@ -166,6 +166,6 @@ def check_sqrt_state(state, n: int) -> None:
     if not isinstance(state, SqrtGaussianState):
         raise TypeError(
             f"state: expected a SqrtGaussianState(mean, chol) from the filter's init, got "
-            f"{_checks.received(state)}"
+            f"{checks.received(state)}"
         )
-    _checks.check_shape("state.chol", state.chol, (n, n), "lower triangular factor")
+    checks.check_shape("state.chol", state.chol, (n, n), "lower triangular factor")

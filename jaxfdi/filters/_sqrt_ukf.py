@@ -26,7 +26,7 @@ from typing import Any
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.filters._base import Filter, ModelFunction, check_step_inputs, used_innovation
 from jaxfdi.filters._sqrt_kalman import (
     SqrtGaussianState,
@@ -92,7 +92,7 @@ def sqrt_unscented_kalman_filter(
         # measurement update, in the sigma-point basis (module doc)
         points = factor_sigma_points(state.mean, state.chol, scale, taylor)
         y0, dy = _propagate(points, lambda x: h(x, u, params), taylor)
-        _checks.check_shape("h(x, u, params)", y0, (m,), "one predicted measurement")
+        checks.check_shape("h(x, u, params)", y0, (m,), "one predicted measurement")
         plus, minus = dy[:n], dy[n:]
         linearised = (plus - minus).T / (2.0 * scale)  # H L, (m, n)
         residuals = 0.5 * (plus + minus)  # e_i, (n, m)
@@ -114,7 +114,7 @@ def sqrt_unscented_kalman_filter(
         # time update
         points = factor_sigma_points(mean, chol, scale, taylor)
         x0, dx = _propagate(points, lambda x: f(x, u, params), taylor)
-        _checks.check_shape("f(x, u, params)", x0, (n,), "the next state")
+        checks.check_shape("f(x, u, params)", x0, (n,), "the next state")
         delta_x = w * jnp.sum(dx, axis=0)
         next_mean = x0 + delta_x
         next_chol = tria(

@@ -16,7 +16,7 @@ from typing import Any, Callable, NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.filters._base import Filter
 from jaxfdi.models import LinearGaussianModel
 
@@ -42,10 +42,10 @@ def time_varying(filter_at: Callable[[Array], Filter], start: int = 0) -> Filter
     Returns:
       ``Filter(init, step)``, state ``TimedState(step, inner)``; ``step`` is the step-``k`` filter's (its info).
     """
-    _checks.check_callable(
+    checks.check_callable(
         "filter_at", filter_at, "a function k -> Filter (e.g. lambda k: kalman_filter(at(k)))"
     )
-    start = _checks.check_int("start", start, 0, meaning="the first step's index")
+    start = checks.check_int("start", start, 0, meaning="the first step's index")
 
     def init(*args, **kwargs) -> TimedState:
         return TimedState(
@@ -74,15 +74,15 @@ def model_at(
             raise ValueError(
                 f"{name}: not a LinearGaussianModel field; expected one of {list(fields)}"
             )
-        constant = _checks.shape_of(getattr(model, name))
-        _checks.check_matrix(
+        constant = checks.shape_of(getattr(model, name))
+        checks.check_matrix(
             name, table, (None,) + constant, f"T per-step copies of model.{name} {constant}"
         )
         if name in ("Q", "R"):
-            value = _checks.concrete(table)
+            value = checks.concrete(table)
             for k in range(value.shape[0] if value is not None else 0):
-                _checks.check_covariance(f"{name}[{k}]", value[k], constant[0])
-        lengths.add(_checks.shape_of(table)[0])
+                checks.check_covariance(f"{name}[{k}]", value[k], constant[0])
+        lengths.add(checks.shape_of(table)[0])
     if len(lengths) > 1:
         raise ValueError(
             f"per-step tables: expected the same number of steps T, got {sorted(lengths)}"

@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, report_dead, run_filter
 from jaxfdi.filters._unknown_input import (
     check_decoupling,
@@ -77,8 +77,8 @@ def actuator_direction(
       ``"effectiveness"``, ``state = -Gamma[:, i]`` (n, 1) for ``"additive"``; the other fields zero.
     """
     n, nu, m = validate_linear_model(model)
-    _checks.check_choice("kind", kind, ["effectiveness", "additive"])
-    component = _checks.check_int("component", component, 0, nu - 1, "an input index")
+    checks.check_choice("kind", kind, ["effectiveness", "additive"])
+    component = checks.check_int("component", component, 0, nu - 1, "an input index")
     e = jnp.zeros((nu, 1), model.Phi.dtype).at[component, 0].set(-1.0)
     zeros_m = jnp.zeros((m, 1), model.Phi.dtype)
     if kind == "effectiveness":
@@ -99,8 +99,8 @@ def sensor_direction(
       ``output = e_j`` (m, 1) for ``"additive"``; the other fields zero.
     """
     n, nu, m = validate_linear_model(model)
-    _checks.check_choice("kind", kind, ["scaling", "additive"])
-    component = _checks.check_int("component", component, 0, m - 1, "an output index")
+    checks.check_choice("kind", kind, ["scaling", "additive"])
+    component = checks.check_int("component", component, 0, m - 1, "an output index")
     e = jnp.zeros((m, 1), model.Phi.dtype).at[component, 0].set(1.0)
     zeros = (jnp.zeros((n, 1), model.Phi.dtype), jnp.zeros((nu, 1), model.Phi.dtype))
     if kind == "scaling":
@@ -111,7 +111,12 @@ def sensor_direction(
 
 
 def stack_directions(directions: list[FaultDirection]) -> FaultDirection:
-    """Stack directions with the same bias size along a leading bank axis."""
+    """Stack directions with the same bias size along a leading bank axis.
+
+    Returns:
+      ``FaultDirection`` whose leaves have a leading axis of ``len(directions)``: (B, n, p), (B, nu, p), (B, m, p),
+      (B, m, p).
+    """
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *directions)
 
 
@@ -123,7 +128,12 @@ def actuator_matrix(direction: FaultDirection, model: LinearGaussianModel, u: Ar
 def sensor_matrix(
     direction: FaultDirection, model: LinearGaussianModel, x_hat: Array, u: Array
 ) -> Array:
-    """``Fs[k]`` (m, p) at the state estimate ``x_hat``."""
+    """``Fs[k]`` (m, p) at the state estimate ``x_hat``.
+
+    Returns:
+      (m, p) sensor fault matrix ``output + (C x_hat + D u)[:, None] * output_scaled`` for the (n,) ``x_hat`` and the
+      (nu,) ``u[k]``.
+    """
     y_hat = _linalg.matmul(model.C, x_hat) + _linalg.matmul(model.D, u)
     return direction.output + y_hat[:, None] * direction.output_scaled
 
@@ -203,16 +213,16 @@ def two_stage_kalman_filter(
       ``m - q`` dof under the filter's hypothesis (``m`` outputs, ``q = rank(E)``; 0 without ``unknown_input``).
     """
     n, nu, m = validate_linear_model(model)
-    _checks.check_shape("direction.state", direction.state, (n, None), "n states x p biases")
-    p = _checks.shape_of(direction.state)[1]
-    _checks.check_shape(
+    checks.check_shape("direction.state", direction.state, (n, None), "n states x p biases")
+    p = checks.shape_of(direction.state)[1]
+    checks.check_shape(
         "direction.input_scaled", direction.input_scaled, (nu, p), "nu inputs x p biases"
     )
-    _checks.check_shape("direction.output", direction.output, (m, p), "m outputs x p biases")
-    _checks.check_shape(
+    checks.check_shape("direction.output", direction.output, (m, p), "m outputs x p biases")
+    checks.check_shape(
         "direction.output_scaled", direction.output_scaled, (m, p), "m outputs x p biases"
     )
-    _checks.check_covariance("bias_walk", bias_walk, p)
+    checks.check_covariance("bias_walk", bias_walk, p)
     q = 0 if unknown_input is None else check_decoupling(model, unknown_input)
     dof = m - q
     mm = _linalg.matmul

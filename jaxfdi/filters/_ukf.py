@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import (
     Filter,
     FilterInfo,
@@ -184,20 +184,20 @@ def scaled_transform(f, h, Q, R, alpha, beta, kappa, sigma_differences: str):
     """Check a UKF's arguments at build time; return ``(n, m, alpha, beta, w, scale, use_taylor)``: sizes, static
     scaled-UT parameters as floats, weights (``unscented_weights``), ``sqrt(alpha^2 (n + kappa))`` and whether a
     mean of a given dtype takes Taylor-form differences (``sigma_differences``)."""
-    _checks.check_callable("f", f, "a transition function f(x, u, params)")
-    _checks.check_callable("h", h, "a measurement function h(x, u, params)")
-    n = _checks.check_covariance("Q", Q)
-    m = _checks.check_covariance("R", R)
+    checks.check_callable("f", f, "a transition function f(x, u, params)")
+    checks.check_callable("h", h, "a measurement function h(x, u, params)")
+    n = checks.check_covariance("Q", Q)
+    m = checks.check_covariance("R", R)
     for name, value in (("alpha", alpha), ("beta", beta), ("kappa", kappa)):
-        _checks.check_real(name, value, "a real scalar (static)")
-        if _checks.concrete(value) is None:
+        checks.check_real(name, value, "a real scalar (static)")
+        if checks.concrete(value) is None:
             raise TypeError(
                 f"{name}: expected a Python float (a static scaled-UT parameter), "
-                f"got {_checks.received(value)}"
+                f"got {checks.received(value)}"
             )
-    _checks.check_positive("alpha", alpha, "a positive scalar")
-    _checks.check_scalar("beta", beta, meaning="a real scalar")
-    _checks.check_scalar("kappa", kappa, meaning="a real scalar")
+    checks.check_positive("alpha", alpha, "a positive scalar")
+    checks.check_scalar("beta", beta, meaning="a real scalar")
+    checks.check_scalar("kappa", kappa, meaning="a real scalar")
     alpha, beta, kappa = float(alpha), float(beta), float(kappa)
     if alpha**2 * (n + kappa) <= 0:
         raise ValueError(
@@ -260,7 +260,7 @@ def unscented_kalman_filter(
         points, chol = sigma_points(state.mean, state.cov, scale)
         y0, dy = _propagate(points, lambda x: h(x, u, params), taylor)
         y_pred, Pyy, Pxy = _moments(points, y0, dy, w, cross_w)
-        _checks.check_shape("h(x, u, params)", y_pred, (m,), "one predicted measurement")
+        checks.check_shape("h(x, u, params)", y_pred, (m,), "one predicted measurement")
         S = _linalg.symmetrize(Pyy + R)
         if missing_measurements:
             mask, y_obs, num_observed = observed_mask(y)
@@ -303,7 +303,7 @@ def unscented_kalman_filter(
         next_mean, next_cov, _ = unscented_moments(
             points, lambda x: f(x, u, params), w, cross_w, use_taylor(post.mean)
         )
-        _checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
+        checks.check_shape("f(x, u, params)", next_mean, (n,), "the next state")
         return GaussianState(next_mean, _linalg.symmetrize(next_cov + Q))
 
     return gaussian_filter(n, update, predict)

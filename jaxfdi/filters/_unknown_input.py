@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters._base import (
     Filter,
     FilterInfo,
@@ -42,11 +42,9 @@ def check_decoupling(model: LinearGaussianModel, unknown_input: Array) -> int:
     """Check ``rank(C E) = rank(E) = q <= m`` (Lee & Lyou, eq. 5) and return ``q``; raises a ``ValueError`` naming
     the failed condition; ``E`` must be concrete."""
     n, _, m = validate_linear_model(model)
-    _checks.check_matrix(
-        "unknown_input", unknown_input, (n, None), "E: n states x q unknown inputs"
-    )
-    E = _checks.concrete(unknown_input)
-    C = _checks.concrete(model.C)
+    checks.check_matrix("unknown_input", unknown_input, (n, None), "E: n states x q unknown inputs")
+    E = checks.concrete(unknown_input)
+    C = checks.concrete(model.C)
     if E is None or C is None:
         raise ValueError(
             "unknown_input: E and model.C must be concrete (not traced) to check decoupling"

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 #: WGS-84 semi-major axis [m] and flattening
 WGS84_A = 6378137.0
@@ -92,7 +92,7 @@ def _ecef_to_geodetic(ecef: Array, iterations: int) -> tuple[Array, Array, Array
 
 def _check_points(name: str, points) -> None:
     """(..., 3) coordinates (trace time): another last axis would be read out of bounds silently (clamped)."""
-    shape = _checks.shape_of(points)
+    shape = checks.shape_of(points)
     if not shape or shape[-1] != 3:
         raise ValueError(f"{name}: expected points of shape (..., 3) [m], got {shape}")
 
@@ -110,7 +110,12 @@ def ned_rotation(lat: Array, lon: Array) -> Array:
 
 def ecef_to_ned(ecef: Array, origin_ecef: Array) -> Array:
     """(..., 3) NED [m] of ECEF points relative to ``origin_ecef``: ``R (x - x0)`` with
-    ``R = ned_rotation`` at the origin."""
+    ``R = ned_rotation`` at the origin.
+
+    Returns:
+      (..., 3) north, east, down offsets [m] in the origin's local level frame (WGS-84 geodetic latitude), the
+      broadcast shape of ``ecef`` and ``origin_ecef``.
+    """
     return _local_frame("ecef", ecef, origin_ecef)
 
 

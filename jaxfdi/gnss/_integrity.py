@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._stages import FDI
 from jaxfdi.detection import Decision, flag_dead
 from jaxfdi.gnss._atmosphere import Atmosphere
@@ -64,7 +64,7 @@ def exclusion_rounds(exclude: bool | int) -> int:
     """The number of exclusion rounds ``exclude`` asks for (``True``: 1, ``False``: 0)."""
     if isinstance(exclude, (bool, np.bool_)):
         return int(exclude)
-    return _checks.check_int(
+    return checks.check_int(
         "exclude", exclude, 0, meaning="the most satellites to exclude (or a bool: 1 or none)"
     )
 
@@ -199,20 +199,20 @@ def monitor_epochs(
       ``monitor_epoch``'s with a leading T axis, e.g. ``fix.position`` (T, 3), ``check.alarm`` (T,), ``protection.hpl``
       (T,), ``excluded`` (T,) int (-1: none), ``dead`` (T, S).
     """
-    _checks.check_shape("times", times, (None,), "one time tag per epoch")
-    epochs = _checks.shape_of(times)[0]
-    _checks.check_shape(
+    checks.check_shape("times", times, (None,), "one time tag per epoch")
+    epochs = checks.shape_of(times)[0]
+    checks.check_shape(
         "pseudoranges",
         pseudoranges,
-        (epochs, _checks.shape_of(table.prn)[0]),
+        (epochs, checks.shape_of(table.prn)[0]),
         "T epochs (times') x S slots (table's)",
     )
     if sigma is not None and not callable(sigma):
-        _checks.check_shape(
-            "sigma", sigma, _checks.shape_of(pseudoranges), "one standard deviation per pseudorange"
+        checks.check_shape(
+            "sigma", sigma, checks.shape_of(pseudoranges), "one standard deviation per pseudorange"
         )
     if batch_size is not None:
-        batch_size = _checks.check_int(
+        batch_size = checks.check_int(
             "batch_size", batch_size, 1, meaning="a positive number of epochs per chunk"
         )
 
@@ -232,7 +232,7 @@ def monitor_epochs(
         )
 
     sig = (
-        jnp.zeros(_checks.shape_of(pseudoranges))
+        jnp.zeros(checks.shape_of(pseudoranges))
         if sigma is None or callable(sigma)
         else jnp.asarray(sigma)
     )
@@ -347,7 +347,7 @@ def raim_fdi(
       ``FDI`` with ``init() -> None`` and ``step(state, k, y, u) -> (state, RaimOutput)``, no ``observe``: ``state``
       passed through, ``y`` (S,) pseudoranges [m] (NaN: not measured, inf: dead channel), ``u`` unused.
     """
-    _checks.check_positive("dt", dt, "a positive epoch interval (s)")
+    checks.check_positive("dt", dt, "a positive epoch interval (s)")
 
     def step(state, k, y, u):
         t = t0 + k * dt
@@ -371,7 +371,7 @@ def geometry_fix(
 ) -> PositionFix:
     """The error-free fix of a receiver at ``receiver_ecef`` (3,) at ``t``: true position, zero residuals, satellites
     above ``mask_angle`` [rad], ``sigma(elevation)`` weights (DOPs, protection levels and MDBs depend on these only)."""
-    _checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
+    checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
     orbit, has_orbit = select_orbits(table, t)
     sat = satellite_position(orbit, t)
     receiver_ecef = jnp.asarray(receiver_ecef)
@@ -427,12 +427,17 @@ def availability_grid(
     batch_size: int = 64,
 ) -> GridAvailability:
     """Protection levels and availability for receivers (P, 3) x epochs (T,): ``geometry_fix`` then
-    ``protection_levels``, vmapped over epochs, receivers ``batch_size`` at a time (bounded memory)."""
-    _checks.check_shape(
+    ``protection_levels``, vmapped over epochs, receivers ``batch_size`` at a time (bounded memory).
+
+    Returns:
+      ``GridAvailability`` with leaves (P, T) (receiver by epoch), ``minimum_detectable_bias`` (P, T, S); levels
+      and biases in m.
+    """
+    checks.check_shape(
         "receivers_ecef", receivers_ecef, (None, 3), "P receivers' ECEF positions [m]"
     )
-    _checks.check_shape("times", times, (None,), "T epochs")
-    batch_size = _checks.check_int(
+    checks.check_shape("times", times, (None,), "T epochs")
+    batch_size = checks.check_int(
         "batch_size", batch_size, 1, meaning="a positive number of receivers per chunk"
     )
     times = jnp.asarray(times)

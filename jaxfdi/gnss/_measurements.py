@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
 from jaxfdi._simulate import Actuated, Sensed, SimState, Simulator, check_fault_components
 from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, line_of_sight_ned
@@ -44,7 +44,13 @@ from jaxfdi.gnss._orbits import (
 
 class Wall(NamedTuple):
     """A vertical rectangle: base from ``start`` to ``end`` ((2,) north, east [m] in a local
-    NED frame), from the ground up to ``height`` [m above the frame's origin]."""
+    NED frame), from the ground up to ``height`` [m above the frame's origin].
+
+    Attributes:
+      start: (2,) m, north and east of one end of the base in the walls' NED frame
+      end: (2,) m, north and east of the other end of the base
+      height: () m, the top above the frame's origin (a ray passing lower is blocked)
+    """
 
     start: Array
     end: Array
@@ -80,9 +86,9 @@ def elevation_sigma(
     Returns:
       the pseudorange standard deviation [m], ``elevation``'s shape.
     """
-    _checks.check_scalar("zenith", zenith, 0.0, meaning="a standard deviation >= 0 [m]")
-    _checks.check_scalar("slant", slant, 0.0, meaning="a standard deviation >= 0 [m]")
-    _checks.check_scalar(
+    checks.check_scalar("zenith", zenith, 0.0, meaning="a standard deviation >= 0 [m]")
+    checks.check_scalar("slant", slant, 0.0, meaning="a standard deviation >= 0 [m]")
+    checks.check_scalar(
         "min_elevation",
         min_elevation,
         0.0,
@@ -117,7 +123,12 @@ def sky_geometry(
     table: OrbitTable, t: Array, receiver_ecef: Array
 ) -> tuple[Array, Array, Array, Array]:
     """``(elevation, azimuth, line_of_sight_ned, has_orbit)`` over S slots from ``receiver_ecef`` (3,) at
-    ``t`` (positions at ``t``; light time changes an elevation < 1e-4 rad)."""
+    ``t`` (positions at ``t``; light time changes an elevation < 1e-4 rad).
+
+    Returns:
+      ``(elevation (S,), azimuth (S,), line_of_sight_ned (S, 3), has_orbit (S,))``: angles in rad (azimuth in
+      ``[0, 2 pi)`` clockwise from north), unit receiver-to-satellite vectors, bool slots with a usable orbit.
+    """
     orbit, has_orbit = select_orbits(table, t)
     sat = satellite_position(orbit, t)
     elevation, azimuth = elevation_azimuth(receiver_ecef, sat)
@@ -133,8 +144,12 @@ def visibility(
     walls: tuple[Wall, ...] = (),
 ) -> tuple[Array, Array, Array]:
     """``(visible, elevation, azimuth)`` over the S slots: valid healthy ephemeris, above ``mask_angle`` [rad] and not
-    behind any of ``walls`` (whose NED frame is at ``origin_ecef``)."""
-    _checks.check_scalar(
+    behind any of ``walls`` (whose NED frame is at ``origin_ecef``).
+
+    Returns:
+      ``(visible (S,) bool, elevation (S,), azimuth (S,))``, angles in rad (azimuth clockwise from north).
+    """
+    checks.check_scalar(
         "mask_angle",
         mask_angle,
         -0.5 * math.pi,
@@ -202,23 +217,23 @@ def receiver_plant(
     Returns:
       a ``Simulator`` whose measurement is the (S,) pseudoranges [m] of each step.
     """
-    _checks.check_positive("dt", dt, "a positive epoch interval (s)")
-    value = _checks.concrete(sigma)
+    checks.check_positive("dt", dt, "a positive epoch interval (s)")
+    value = checks.concrete(sigma)
     if value is not None and np.any(value < 0):
         raise ValueError(
-            f"sigma: expected pseudorange standard deviations >= 0 [m], got {_checks.received(value)}"
+            f"sigma: expected pseudorange standard deviations >= 0 [m], got {checks.received(value)}"
         )
     path_ecef, visible, sigma = (
         jnp.asarray(path_ecef),
         jnp.asarray(visible, bool),
         jnp.asarray(sigma),
     )
-    _checks.check_shape("path_ecef", path_ecef, (None, 3), "T ECEF receiver positions")
+    checks.check_shape("path_ecef", path_ecef, (None, 3), "T ECEF receiver positions")
     steps, slots = visible.shape if visible.ndim == 2 else (None, None)
-    _checks.check_shape(
+    checks.check_shape(
         "visible", visible, (path_ecef.shape[0], table.prn.shape[0]), "T steps x S slots"
     )
-    _checks.check_shape("sigma", sigma, (steps, slots), "T steps x S slots")
+    checks.check_shape("sigma", sigma, (steps, slots), "T steps x S slots")
     faults = as_stack(no_fault() if fault is None else fault)
     check_fault_components(faults, Target.SENSOR, table.prn.shape[0])
     num_faults = faults.kind.shape[0]
@@ -226,7 +241,7 @@ def receiver_plant(
     transition = jnp.asarray([[1.0, dt], [0.0, 1.0]], path_ecef.dtype)
 
     def init(x0: Array) -> SimState:
-        _checks.check_shape("x0", x0, (2,), "receiver clock [bias m, drift m/s]")
+        checks.check_shape("x0", x0, (2,), "receiver clock [bias m, drift m/s]")
         x0 = jnp.asarray(x0, path_ecef.dtype)
         return SimState(x0, jnp.zeros((num_faults,), x0.dtype))
 

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides
 from jaxfdi.gnss._yuma import Almanac
 
@@ -260,7 +260,7 @@ def transmission_geometry(
     Returns ``(positions, ranges, t_transmit, clocks)``: (S, 3) positions at transmission in the ECEF
     frame of reception, (S,) ranges [m], (S,) transmission times, (S,) clocks [s] (``satellite_clock``, L1).
     """
-    _checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
+    checks.check_shape("receiver_ecef", receiver_ecef, (3,), "the receiver's ECEF position [m]")
     receiver_ecef = jnp.asarray(receiver_ecef)
     tau = jnp.full(orbit.toe.shape, 0.075, jnp.result_type(receiver_ecef, orbit.toe))
     for _ in range(int(iterations)):
@@ -327,6 +327,10 @@ def ephemeris_table(
       slot_prns: (S,) PRN of each slot (default 1..32: slot ``s`` is PRN ``s + 1``).
       include_unhealthy: keep records whose health word is not 0 (default: dropped).
       dtype: float dtype (default: JAX's default float).
+
+    Returns:
+      ``OrbitTable`` of the S slots, leaves (S, R) padded to the most records a slot holds; each record serves
+      epochs within half its fit interval of ``toe`` (``EPHEMERIS_VALIDITY`` for a fit interval of 4 h or less).
     """
     dtype = dtype or jnp.result_type(float)
     eph = ephemerides
@@ -370,7 +374,12 @@ def almanac_table(
     dtype=None,
 ) -> OrbitTable:
     """An almanac as an ``OrbitTable`` (one record a slot, valid at any time); ``reference_week``
-    defaults to the almanac's, slots to its PRNs in file order."""
+    defaults to the almanac's, slots to its PRNs in file order.
+
+    Returns:
+      ``OrbitTable`` of the S slots, leaves (S, R) (R = 1 unless a PRN repeats), validity ``inf`` (records never
+      expire), no harmonic corrections, ``af0``/``af1`` clocks and no relativistic term.
+    """
     dtype = dtype or jnp.result_type(float)
     alm = almanac
     reference_week = int(alm.week[0]) if reference_week is None else int(reference_week)
@@ -431,7 +440,7 @@ def orbit_table(
     if not isinstance(records, Ephemerides):
         raise TypeError(
             f"records: expected Ephemerides (read_rinex_nav) or an Almanac (read_yuma), got "
-            f"{_checks.received(records)}"
+            f"{checks.received(records)}"
         )
     week = int(np.min(records.week)) if reference_week is None else reference_week
     return ephemeris_table(records, week, slot_prns, include_unhealthy, dtype)

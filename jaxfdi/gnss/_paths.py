@@ -62,5 +62,9 @@ def racetrack_ecef(
     height: float,
     phase: float = 0.0,
 ) -> Array:
-    """(T, 3) ECEF positions of ``racetrack_ned`` about ``origin_ecef``."""
+    """(T, 3) ECEF positions of ``racetrack_ned`` about ``origin_ecef``.
+
+    Returns:
+      (T, 3) ECEF positions [m] at ``times`` [s from the start], ``height`` [m] above the origin on the circuit.
+    """
     return ned_to_ecef(racetrack_ned(times, straight, radius, speed, height, phase), origin_ecef)

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.gnss._atmosphere import Atmosphere, atmosphere_corrections
 from jaxfdi.gnss._frames import ecef_to_geodetic, ned_rotation
 from jaxfdi.gnss._least_squares import apply_qt, leading, masked_qr
@@ -174,7 +174,7 @@ def dops(geometry: Array, used: Array) -> Dops:
       ``sqrt(trace)``, ``sqrt(q_NN + q_EE + q_DD)``, ``sqrt(q_NN + q_EE)``, ``sqrt(q_DD)`` and ``sqrt(q_tt)`` of the
       first clock column (NaN when the used rows do not determine the unknowns: a singular ``H^T H``).
     """
-    _checks.check_shape("used", used, _checks.shape_of(geometry)[:1], "one flag per geometry row")
+    checks.check_shape("used", used, checks.shape_of(geometry)[:1], "one flag per geometry row")
     h = jnp.where(used[:, None], geometry, 0.0)
     absent = _absent_columns(h)
     normal = h.T @ h + jnp.diag(absent.astype(h.dtype))
@@ -251,15 +251,15 @@ def solve_position(
     """
     if solver not in ("normal", "qr"):
         raise ValueError(f"solver: expected 'normal' or 'qr', got {solver!r}")
-    slots = _checks.shape_of(orbit.toe) if hasattr(orbit, "toe") else _checks.shape_of(available)
-    _checks.check_shape("pseudoranges", pseudoranges, slots, "one pseudorange per satellite slot")
-    _checks.check_shape("available", available, slots, "one flag per satellite slot")
+    slots = checks.shape_of(orbit.toe) if hasattr(orbit, "toe") else checks.shape_of(available)
+    checks.check_shape("pseudoranges", pseudoranges, slots, "one pseudorange per satellite slot")
+    checks.check_shape("available", available, slots, "one flag per satellite slot")
     if sigma is not None and not callable(sigma):
-        _checks.check_shape("sigma", sigma, slots, "one standard deviation per satellite slot [m]")
-        value = _checks.concrete(sigma)
+        checks.check_shape("sigma", sigma, slots, "one standard deviation per satellite slot [m]")
+        value = checks.concrete(sigma)
         if value is not None and not np.all(value > 0):
             raise ValueError(
-                f"sigma: expected standard deviations > 0 [m], got {_checks.received(value)}"
+                f"sigma: expected standard deviations > 0 [m], got {checks.received(value)}"
             )
     if mask_angle is not None and not (
         isinstance(mask_angle, (int, float)) and -math.pi / 2 <= mask_angle < math.pi / 2
@@ -268,7 +268,7 @@ def solve_position(
             f"mask_angle: expected an elevation in [-pi/2, pi/2) rad, got {mask_angle!r}"
         )
     if clocks is not None:
-        _checks.check_shape(
+        checks.check_shape(
             "clocks", clocks, (slots[0], None), "(S, C) bool: each slot's receiver clock"
         )
     pseudoranges = jnp.asarray(pseudoranges)
@@ -278,7 +278,7 @@ def solve_position(
     )
     unknown = 3 + membership.shape[1]
     if initial is not None:
-        _checks.check_shape(
+        checks.check_shape(
             "initial", initial, (unknown,), f"[x, y, z] and {unknown - 3} clock(s) [m]"
         )
     measured = jnp.asarray(available, bool) & jnp.isfinite(pseudoranges)

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.gnss._least_squares import MaskedQR, masked_qr, parity_column_norms, thin_q
 from jaxfdi.gnss._positioning import PositionFix
 from jaxfdi.gnss._raim import RaimTables, check_tables, whitened
@@ -88,7 +88,7 @@ def protection_levels(
             )
         hal, val = ALERT_LIMITS[operation]
     else:
-        limits = _checks.concrete(operation)
+        limits = checks.concrete(operation)
         if (
             limits is None
             or limits.shape != (2,)

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.detection import chi2_threshold, noncentrality_for_missed_detection, parity_statistic
 from jaxfdi.gnss._least_squares import (
     MaskedQR,
@@ -84,12 +84,12 @@ class ParityCheck(NamedTuple):
 def paper_threshold(num_visible, pfa, sigma) -> Array:
     """Eq. 8 of Yoo et al. (2010): ``sqrt(2 ln(1/pfa) sigma^2 / (n - 4))`` [m], a bound on the RMS
     parity ``sqrt(p^T p / (n - 4))`` (NaN for ``n <= 4``)."""
-    _checks.check_probability("pfa", pfa)
-    _checks.check_real("sigma", sigma, "a pseudorange standard deviation [m]")
-    value = _checks.concrete(sigma)
+    checks.check_probability("pfa", pfa)
+    checks.check_real("sigma", sigma, "a pseudorange standard deviation [m]")
+    value = checks.concrete(sigma)
     if value is not None and not np.all(value > 0):
         raise ValueError(
-            f"sigma: expected a standard deviation > 0 [m], got {_checks.received(value)}"
+            f"sigma: expected a standard deviation > 0 [m], got {checks.received(value)}"
         )
     dof = jnp.asarray(num_visible) - 4.0
     return jnp.where(
@@ -124,11 +124,11 @@ def raim_tables(
     """
     if rule not in RULES:
         raise ValueError(f"rule: expected one of {list(RULES)}, got {rule!r}")
-    num_slots = _checks.check_int(
+    num_slots = checks.check_int(
         "num_slots", num_slots, 5, meaning="a number of satellite slots (at least 5)"
     )
-    _checks.check_probability("pfa", pfa)
-    _checks.check_probability("pmd", pmd)
+    checks.check_probability("pfa", pfa)
+    checks.check_probability("pmd", pmd)
     dtype = dtype or jnp.result_type(float)
     # computed for a multiple of 32 slots and cut: every receiver of up to 32 (64, ...) slots
     # shares one compiled program of the special functions (entries are elementwise)
@@ -149,7 +149,7 @@ def raim_tables(
 def unknowns(fix: PositionFix) -> int:
     """The fix's geometry columns: 3 position, then one per clock (trace time; >= 4). An epoch's ``u``
     counts only clocks with a used satellite (``MaskedQR.num_pivots``)."""
-    shape = _checks.shape_of(fix.geometry)
+    shape = checks.shape_of(fix.geometry)
     if len(shape) != 2 or shape[1] < 4:
         raise ValueError(
             f"fix.geometry: expected (S, 3 + clocks) with at least one clock column, got shape {shape}"
@@ -160,8 +160,8 @@ def unknowns(fix: PositionFix) -> int:
 def check_tables(tables: RaimTables, fix: PositionFix) -> None:
     """Trace time: ``tables`` must cover every dof (``raim_tables`` of >= S slots); a smaller one would
     silently clamp ``n - u``, giving too small a threshold and protection level."""
-    slots = _checks.shape_of(fix.used)[0]
-    size = _checks.shape_of(tables.threshold)[0]
+    slots = checks.shape_of(fix.used)[0]
+    size = checks.shape_of(tables.threshold)[0]
     unknowns(fix)
     most = slots - 4  # every used satellite on one clock
     if size < most + 1:

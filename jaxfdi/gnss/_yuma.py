@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 
 class Almanac(NamedTuple):
@@ -88,7 +88,7 @@ def parse_yuma(text: str, name: str = "<string>", rollovers: int = 0) -> Almanac
     Raises:
       ValueError: naming ``name`` and the line of a malformed record.
     """
-    rollovers = _checks.check_int(
+    rollovers = checks.check_int(
         "rollovers", rollovers, 0, meaning="a number of 1024-week rollovers >= 0"
     )
     records: list[dict] = []

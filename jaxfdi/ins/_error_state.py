@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.ins import _mechanization as mechanization
 from jaxfdi.ins._earth import radii_of_curvature
 from jaxfdi.ins._mechanization import NavState
@@ -83,7 +83,12 @@ class ImuNoise(NamedTuple):
 
 
 def navigation_error(ins: NavState, truth: NavState) -> Array:
-    """(9,) ``[dp, dv, psi]`` of ``ins`` against ``truth`` (module doc)."""
+    """(9,) ``[dp, dv, psi]`` of ``ins`` against ``truth`` (module doc).
+
+    Returns:
+      (9,) INS minus truth: ``dp`` NED [m] (radii at the INS point), ``dv`` NED [m/s], ``psi`` the attitude error's
+      rotation vector [rad].
+    """
     lat, height = ins.position[0], ins.position[2]
     meridian, transverse = radii_of_curvature(jnp.sin(lat))
     delta = ins.position - truth.position
@@ -97,7 +102,12 @@ def navigation_error(ins: NavState, truth: NavState) -> Array:
 
 
 def correct(ins: NavState, error: Array) -> NavState:
-    """The state whose ``navigation_error`` from ``ins`` is ``error[:9]`` (exact inverse)."""
+    """The state whose ``navigation_error`` from ``ins`` is ``error[:9]`` (exact inverse).
+
+    Returns:
+      ``NavState``: ``ins`` with ``error[:9]`` ``[dp, dv, psi]`` removed (the bias entries ``error[9:]`` unused), its
+      attitude renormalised.
+    """
     lat, height = ins.position[0], ins.position[2]
     meridian, transverse = radii_of_curvature(jnp.sin(lat))
     position = ins.position - jnp.stack(
@@ -156,7 +166,7 @@ def continuous_noise(jacobian: Array, noise: ImuNoise) -> Array:
 
 def discretize(jacobian: Array, noise: ImuNoise, interval: Array) -> tuple[Array, Array]:
     """``(Phi, Q_d)`` over ``interval`` [s] for the interval's mean ``F`` (module doc)."""
-    _checks.check_shape("jacobian", jacobian, (STATE_SIZE, STATE_SIZE), "the error state's F")
+    checks.check_shape("jacobian", jacobian, (STATE_SIZE, STATE_SIZE), "the error state's F")
     eye = jnp.eye(STATE_SIZE, dtype=jacobian.dtype)
     a = jacobian * interval
     a2 = a @ a

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.ins._error_state import ImuNoise
 
 DEG_PER_HOUR = math.radians(1.0) / 3600.0  # rad/s
@@ -80,7 +80,7 @@ def hg1900(accel_scale_ppm: float = 0.0, gyro_scale_ppm: float = 0.0) -> ImuMode
       ``gyro_scale_ppm * 1e-6``.
     """
     for name, value in (("accel_scale_ppm", accel_scale_ppm), ("gyro_scale_ppm", gyro_scale_ppm)):
-        _checks.check_scalar(name, value, 0.0, meaning="a scale-factor sigma >= 0 in ppm")
+        checks.check_scalar(name, value, 0.0, meaning="a scale-factor sigma >= 0 in ppm")
     return ImuModel(
         accel_bias=1.0 * MILLI_G,
         gyro_bias=1.0 * DEG_PER_HOUR,
@@ -104,7 +104,12 @@ def noise_model(model: ImuModel) -> ImuNoise:
 
 
 def draw_errors(key: Array, model: ImuModel, dtype=None) -> ImuErrors:
-    """Turn-on biases and scale factors of one unit."""
+    """Turn-on biases and scale factors of one unit.
+
+    Returns:
+      ``ImuErrors`` in ``dtype`` (default float): (3,) each, zero-mean normal with ``model``'s 1-sigma values,
+      biases in m/s^2 and rad/s.
+    """
     dtype = dtype or jnp.result_type(float)
     z = jax.random.normal(key, (4, 3), dtype)
     return ImuErrors(
@@ -117,7 +122,7 @@ def draw_errors(key: Array, model: ImuModel, dtype=None) -> ImuErrors:
 
 def walk_biases(errors: ImuErrors, key: Array, model: ImuModel, interval: float) -> ImuErrors:
     """The biases after ``interval`` [s] of random walk."""
-    _checks.check_scalar("interval", interval, 0.0, meaning="a duration >= 0 (s)")
+    checks.check_scalar("interval", interval, 0.0, meaning="a duration >= 0 (s)")
     z = jax.random.normal(key, (2, 3), errors.accel_bias.dtype)
     root = math.sqrt(interval)
     return errors._replace(
@@ -128,7 +133,7 @@ def walk_biases(errors: ImuErrors, key: Array, model: ImuModel, interval: float)
 
 def sample_sigma(model: ImuModel, dt: float, dtype=None) -> Array:
     """(6,) white noise of a sample ``dt`` [s] long: ``[VRW] * 3 + [ARW] * 3`` over ``sqrt(dt)``."""
-    _checks.check_positive("dt", dt, "a positive sample interval (s)")
+    checks.check_positive("dt", dt, "a positive sample interval (s)")
     dtype = dtype or jnp.result_type(float)
     return jnp.asarray(
         [model.velocity_random_walk] * 3 + [model.angle_random_walk] * 3, dtype
@@ -139,7 +144,7 @@ def measure(
     true_samples: Array, errors: ImuErrors, key: Array, model: ImuModel, dt: float
 ) -> Array:
     """(n, 6) measured samples of (n, 6) error-free ones (module doc)."""
-    _checks.check_shape(
+    checks.check_shape(
         "true_samples", true_samples, (None, 6), "n samples of [f^b (3), w_ib^b (3)]"
     )
     noise = jax.random.normal(key, true_samples.shape, true_samples.dtype)

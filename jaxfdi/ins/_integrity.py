@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi._stages import FDI
 from jaxfdi.detection import (
     Decision,
@@ -146,7 +146,12 @@ def imu_health_test(
     model: imu.ImuModel, dt: float, window: int = IMU_HEALTH_WINDOW, pfa: float = IMU_HEALTH_PFA
 ) -> Detector:
     """Step 5: ``detection.frozen_channel_detector`` on a (6,) sample ``dt`` [s] long, noise
-    ``imu.sample_sigma``, labels ``1 + channel``."""
+    ``imu.sample_sigma``, labels ``1 + channel``.
+
+    Returns:
+      ``Detector(init, step)``: ``init()`` an empty ``FrozenState`` (zero (window, 6) buffer); ``step(state,
+      sample (6,) [f^b m/s^2, w_ib^b rad/s]) -> (state, Decision)``, label ``1 + channel`` of the most frozen channel.
+    """
     return frozen_channel_detector(
         imu.sample_sigma(model, dt), window, pfa, 1 + jnp.arange(6, dtype=jnp.int32)
     )
@@ -248,7 +253,7 @@ def gps_ins_fdi(
       ``FDI`` with ``step(state, k, y, u) -> (state, GpsInsOutput)``, no ``observe``; ``y`` a
       ``plant.GpsInsMeasurement`` tagged ``t0 + k`` s, ``u`` unused; ``init(nav, cov, ...)`` as ``ins_fdi_init``.
     """
-    _checks.check_positive("velocity_sigma", velocity_sigma, "a velocity standard deviation (m/s)")
+    checks.check_positive("velocity_sigma", velocity_sigma, "a velocity standard deviation (m/s)")
 
     def step(state: GpsInsFdiState, k, y, u):
         t = t0 + k
@@ -284,7 +289,12 @@ def initial_covariance(
     gyro_bias_sigma: float,
     dtype=None,
 ) -> Array:
-    """(15, 15) diagonal ``P0`` from 1-sigma errors [m, m/s, rad, rad, m/s^2, rad/s]."""
+    """(15, 15) diagonal ``P0`` from 1-sigma errors [m, m/s, rad, rad, m/s^2, rad/s].
+
+    Returns:
+      (15, 15) ``diag(sigma^2)`` in ``dtype`` (default float) for ``[dp (3), dv (3), psi_N, psi_E (tilt), psi_D
+      (heading), db_a (3), db_g (3)]``.
+    """
     for name, value in (
         ("position_sigma", position_sigma),
         ("velocity_sigma", velocity_sigma),
@@ -293,7 +303,7 @@ def initial_covariance(
         ("accel_bias_sigma", accel_bias_sigma),
         ("gyro_bias_sigma", gyro_bias_sigma),
     ):
-        _checks.check_scalar(name, value, 0.0, meaning="a standard deviation >= 0")
+        checks.check_scalar(name, value, 0.0, meaning="a standard deviation >= 0")
     dtype = dtype or jnp.result_type(float)
     sigmas = jnp.asarray(
         [position_sigma] * 3
@@ -313,9 +323,13 @@ def attribute_ins_alarms(
     """The INS's own alarms ``(..., T)`` of ``(..., T)`` bool arrays: an alarm at ``k`` is the GPS's when
     ``any(gps[k - holdoff : k + lookahead + 1])`` (``detection.chi2.moving_window_sum``, history padded
     with ``lookahead`` alarm-free epochs). A causal monitor decides at ``k + lookahead``; ``holdoff``
-    covers the filter and SCST propagators settling after an exclusion."""
-    lookahead = _checks.check_int("lookahead", lookahead, 0, meaning="a number of epochs >= 0")
-    holdoff = _checks.check_int("holdoff", holdoff, 0, meaning="a number of epochs >= 0")
+    covers the filter and SCST propagators settling after an exclusion.
+
+    Returns:
+      (..., T) bool: ``ins_alarms`` with the alarms attributed to the GPS cleared.
+    """
+    lookahead = checks.check_int("lookahead", lookahead, 0, meaning="a number of epochs >= 0")
+    holdoff = checks.check_int("holdoff", holdoff, 0, meaning="a number of epochs >= 0")
     ins_alarms, gps_alarms = jnp.asarray(ins_alarms, bool), jnp.asarray(gps_alarms, bool)
     if ins_alarms.shape != gps_alarms.shape:
         raise ValueError(

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.filters import Filter, joseph_update
 from jaxfdi.ins import _error_state as error_state
 from jaxfdi.ins import _mechanization as mechanization
@@ -134,37 +134,37 @@ def loosely_coupled_filter(imu: ImuModel, dt: float, chunks: int = 1) -> Filter:
       epoch's ``NavState``, (15, 15) covariance, (3,) biases, default 0); ``step(state, fix, u) ->
       (state, InsInfo)`` with the epoch's ``GpsFix`` and (n, 6) samples ``u``, state at the next epoch.
     """
-    _checks.check_positive("dt", dt, "the IMU sample interval in seconds")
-    chunks = _checks.check_int(
+    checks.check_positive("dt", dt, "the IMU sample interval in seconds")
+    chunks = checks.check_int(
         "chunks", chunks, 1, meaning="a positive number of Jacobians per epoch"
     )
     if not isinstance(imu, ImuModel):
         raise TypeError(
-            f"imu: expected an ImuModel (e.g. jaxfdi.ins.hg1900()), got {_checks.received(imu)}"
+            f"imu: expected an ImuModel (e.g. jaxfdi.ins.hg1900()), got {checks.received(imu)}"
         )
     for name in ImuNoise._fields:
-        _checks.check_scalar(f"imu.{name}", getattr(imu, name), 0.0, meaning="a noise density >= 0")
+        checks.check_scalar(f"imu.{name}", getattr(imu, name), 0.0, meaning="a noise density >= 0")
     noise = noise_model(imu)
 
     def init(
         nav: NavState, cov: Array, accel_bias: Array | None = None, gyro_bias: Array | None = None
     ) -> InsState:
-        _checks.check_shape("nav.position", nav.position, (3,), "lat, lon [rad], h [m]")
-        _checks.check_shape("nav.velocity", nav.velocity, (3,), "NED velocity")
-        _checks.check_shape("nav.attitude", nav.attitude, (4,), "a unit quaternion")
-        _checks.check_covariance("cov", cov, STATE_SIZE)
-        quaternion = _checks.concrete(nav.attitude)
+        checks.check_shape("nav.position", nav.position, (3,), "lat, lon [rad], h [m]")
+        checks.check_shape("nav.velocity", nav.velocity, (3,), "NED velocity")
+        checks.check_shape("nav.attitude", nav.attitude, (4,), "a unit quaternion")
+        checks.check_covariance("cov", cov, STATE_SIZE)
+        quaternion = checks.concrete(nav.attitude)
         if quaternion is not None and quaternion.dtype.kind == "f":
             tolerance = float(np.sqrt(np.finfo(quaternion.dtype).eps))
             if not abs(float(np.linalg.norm(quaternion)) - 1.0) <= tolerance:
                 raise ValueError(
                     f"nav.attitude: expected a unit quaternion (| |q| - 1 | <= {tolerance:.2g}), got "
-                    f"{_checks.received(quaternion)} of norm {float(np.linalg.norm(quaternion)):.6g}"
+                    f"{checks.received(quaternion)} of norm {float(np.linalg.norm(quaternion)):.6g}"
                 )
         for name, bias in (("accel_bias", accel_bias), ("gyro_bias", gyro_bias)):
             if bias is not None:
-                _checks.check_shape(name, bias, (3,), "an IMU bias estimate per axis")
-        dtype = _checks.float_dtype(nav.position, cov)
+                checks.check_shape(name, bias, (3,), "an IMU bias estimate per axis")
+        dtype = checks.float_dtype(nav.position, cov)
         zero = jnp.zeros((3,), dtype)
         return InsState(
             jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), nav),

@@ -22,7 +22,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.ins._earth import LocalEarth, local_earth, radii_of_curvature, transport_rate
 from jaxfdi.rotation import (
     cross,
@@ -105,7 +105,7 @@ def strapdown_step(
       ValueError: ``specific_force`` or ``angular_rate`` not of shape (3,).
     """
     for name, value in (("specific_force", specific_force), ("angular_rate", angular_rate)):
-        shape = _checks.shape_of(value)
+        shape = checks.shape_of(value)
         if not shape or shape[0] != 3:
             raise ValueError(f"{name}: expected a body-axis vector of shape (3,), got {shape}")
     earth = local_earth(nav.position)

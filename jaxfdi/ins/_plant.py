@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._faults import (
     Fault,
     FaultKind,
@@ -124,8 +124,13 @@ class FlightTables(NamedTuple):
 
 
 def flight_tables(trajectory: Trajectory, epochs: int) -> FlightTables:
-    """The first ``epochs`` GPS epochs (1 Hz) of a flight sampled at an integer IMU rate."""
-    epochs = _checks.check_int("epochs", epochs, 1, meaning="a positive number of GPS epochs")
+    """The first ``epochs`` GPS epochs (1 Hz) of a flight sampled at an integer IMU rate.
+
+    Returns:
+      ``FlightTables``: the truth at each whole second ``t_k = k`` s, (T, 3), (T, 3), (T, 4), and the error-free
+      IMU samples of each second, (T, n, 6), ``n = 1 / trajectory.dt``; ``T = epochs``.
+    """
+    epochs = checks.check_int("epochs", epochs, 1, meaning="a positive number of GPS epochs")
     rate = 1.0 / trajectory.dt
     per_epoch = int(round(rate))
     if abs(rate - per_epoch) > 1e-9 or trajectory.imu.shape[0] < epochs * per_epoch:
@@ -173,15 +178,14 @@ def gps_ins_plant(
       GpsInsSensed)``; ``advance(state, k, u, step_key) -> (state, Actuated)`` moves the receiver clock
       and walks the IMU biases one epoch (``u`` passed through, no actuator fault).
     """
-    _checks.check_shape(
+    checks.check_shape(
         "flight.imu", flight.imu, (None, None, IMU_CHANNELS), "T epochs x n samples x 6"
     )
     per_epoch = flight.imu.shape[1]
-    _checks.check_positive("velocity_sigma", velocity_sigma, "a velocity sigma in m/s")
+    checks.check_positive("velocity_sigma", velocity_sigma, "a velocity sigma in m/s")
     imu_faults = as_stack(no_fault() if imu_fault is None else imu_fault)
     kinds, targets, components = (
-        _checks.concrete(leaf)
-        for leaf in (imu_faults.kind, imu_faults.target, imu_faults.component)
+        checks.concrete(leaf) for leaf in (imu_faults.kind, imu_faults.target, imu_faults.component)
     )
     if (
         kinds is not None

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 from jaxfdi.detection import Decision
 
 #: largest accepted condition estimate of the scaled B (float64 solves keep ~6 digits of l); B nears it on
@@ -117,15 +117,15 @@ def state_chi2_test(
       ``step(state, correction, filtered_cov, transition, process_cov) -> (state, ScstOutput)`` with (n,)
       ``dx[k|k]``, (n, n) ``P[k|k]``, ``Phi_k``, ``Q_k``; the state at ``k + 1``.
     """
-    period = _checks.check_int("period", period, 2, meaning="an even number of epochs >= 2")
+    period = checks.check_int("period", period, 2, meaning="an even number of epochs >= 2")
     if period % 2:
         raise ValueError(
             f"period: expected an even number of epochs (the propagators are half a period apart), "
             f"got {period}"
         )
-    _checks.check_real("threshold", threshold, "a real threshold")
-    _checks.check_finite("threshold", threshold, "a detection threshold")
-    _checks.check_positive("max_condition", max_condition, "a positive condition-number limit")
+    checks.check_real("threshold", threshold, "a real threshold")
+    checks.check_finite("threshold", threshold, "a detection threshold")
+    checks.check_positive("max_condition", max_condition, "a positive condition-number limit")
     offsets = jnp.asarray([0, period // 2])
 
     def init(n: int, dtype=None) -> ScstState:
@@ -144,14 +144,14 @@ def state_chi2_test(
         transition: Array,
         process_cov: Array,
     ):
-        n = _checks.shape_of(state.difference)[-1]
-        _checks.check_shape("correction", correction, (n,), "the filter's correction dx[k|k]")
+        n = checks.shape_of(state.difference)[-1]
+        checks.check_shape("correction", correction, (n,), "the filter's correction dx[k|k]")
         for name, value in (
             ("filtered_cov", filtered_cov),
             ("transition", transition),
             ("process_cov", process_cov),
         ):
-            _checks.check_shape(name, value, (n, n), f"the filter's {n} x {n} matrix")
+            checks.check_shape(name, value, (n, n), f"the filter's {n} x {n} matrix")
         started = state.age >= 0
         difference = jnp.where(started[:, None], state.difference + correction, 0.0)
         cov = jnp.where(started[:, None, None], state.cov, filtered_cov)

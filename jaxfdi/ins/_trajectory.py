@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.ins import _mechanization as mechanization
 from jaxfdi.ins._mechanization import NavState
 from jaxfdi.rotation import euler_to_quaternion
@@ -74,7 +74,7 @@ def _check_start(start) -> None:
     if value is None or not np.all(np.isfinite(value)) or not abs(value[0]) < 90.0:
         raise ValueError(
             f"start: expected (latitude deg in (-90, 90), longitude deg, height m), finite, got "
-            f"{_checks.received(start)}"
+            f"{checks.received(start)}"
         )
 
 
@@ -100,12 +100,12 @@ def fly(
     if legs.ndim != 2 or legs.shape[1] != 4 or np.any(legs[:, 0] <= 0):
         raise ValueError(
             f"legs: expected rows (duration > 0, turn deg/s, climb m/s, accel m/s^2), got "
-            f"{_checks.received(legs)}"
+            f"{checks.received(legs)}"
         )
-    _checks.check_positive("speed", speed, "a positive airspeed in m/s")
-    _checks.check_positive("rate", rate, "a positive IMU rate in Hz")
-    _checks.check_positive("blend", blend, "a positive blending time in s")
-    _checks.check_scalar("heading_deg", heading_deg, meaning="a heading in degrees")
+    checks.check_positive("speed", speed, "a positive airspeed in m/s")
+    checks.check_positive("rate", rate, "a positive IMU rate in Hz")
+    checks.check_positive("blend", blend, "a positive blending time in s")
+    checks.check_scalar("heading_deg", heading_deg, meaning="a heading in degrees")
     _check_start(start)
     dtype = dtype or jnp.result_type(float)
     dt = 1.0 / float(rate)
@@ -188,8 +188,8 @@ def stationary(
     dtype=None,
 ) -> Trajectory:
     """A vehicle at rest at ``start`` for ``duration`` [s] with a fixed roll, pitch, yaw."""
-    _checks.check_scalar("duration", duration, 0.0, meaning="a duration >= 0 in s")
-    _checks.check_positive("rate", rate, "a positive IMU rate in Hz")
+    checks.check_scalar("duration", duration, 0.0, meaning="a duration >= 0 in s")
+    checks.check_positive("rate", rate, "a positive IMU rate in Hz")
     _check_start(start)
     dtype = dtype or jnp.result_type(float)
     steps = int(round(duration * rate))
@@ -206,8 +206,13 @@ _PARK_TURN = (math.pi * 200.0 / 12.0, math.degrees(12.0 / 200.0))
 
 def park_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float]]:
     """Climb 60 m, then racetrack laps (50 s legs, 180 deg turns at 3.4 deg/s), one lap
-    climbing 30 m and one descending, until ``duration`` [s]."""
-    _checks.check_positive("duration", duration, "a positive flight duration in s")
+    climbing 30 m and one descending, until ``duration`` [s].
+
+    Returns:
+      list of legs ``(duration [s], turn rate [deg/s], climb rate [m/s], acceleration [m/s^2])`` (``fly``'s), their
+      durations summing to ``duration`` (the last leg cut short).
+    """
+    checks.check_positive("duration", duration, "a positive flight duration in s")
     legs = [(60.0, 0.0, 1.0, 0.0)]
     lap = 0
     while sum(leg[0] for leg in legs) < duration:
@@ -224,8 +229,13 @@ def park_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float
 
 def manoeuvre_legs(duration: float = 1200.0) -> list[tuple[float, float, float, float]]:
     """S-turns at +-20 deg/s (9 s each), pull-ups and dives at +-8 m/s, +-2 m/s^2 speed
-    changes, until ``duration`` [s]; starts at 25 m/s."""
-    _checks.check_positive("duration", duration, "a positive flight duration in s")
+    changes, until ``duration`` [s]; starts at 25 m/s.
+
+    Returns:
+      list of legs ``(duration [s], turn rate [deg/s], climb rate [m/s], acceleration [m/s^2])``: 20 s straight, then
+      the 58 s pattern repeated, durations summing to ``duration`` (the last leg cut short).
+    """
+    checks.check_positive("duration", duration, "a positive flight duration in s")
     pattern = [
         (9.0, 20.0, 0.0, 0.0),
         (9.0, -20.0, 0.0, 0.0),

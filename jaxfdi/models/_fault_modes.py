@@ -19,27 +19,27 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.models._linear import LinearGaussianModel, validate_linear_model
 
 
 def _per_component(name: str, value, size: int, dtype, positive: bool = False) -> Array:
     """() or (size,) real, finite values, ``>= 0`` (``> 0`` with ``positive``) when concrete, as a (size,) array."""
-    _checks.check_real(name, value, "real values")
-    _checks.check_finite(name, value)
-    concrete = _checks.concrete(value)
+    checks.check_real(name, value, "real values")
+    checks.check_finite(name, value)
+    concrete = checks.concrete(value)
     if concrete is not None and (np.any(concrete <= 0) if positive else np.any(concrete < 0)):
         bound = "> 0" if positive else ">= 0"
         raise ValueError(
             f"{name}: expected values {bound} (a variance factor or a standard deviation), got "
-            f"{_checks.received(concrete)}"
+            f"{checks.received(concrete)}"
         )
     value = (
         jnp.broadcast_to(jnp.asarray(value, dtype), (size,))
         if np.ndim(value) == 0
         else jnp.asarray(value, dtype)
     )
-    _checks.check_shape(name, value, (size,), "one value per component, or a scalar")
+    checks.check_shape(name, value, (size,), "one value per component, or a scalar")
     return value
 
 
@@ -128,7 +128,12 @@ def bias_modes(model: LinearGaussianModel, bias_walk, bias_prior) -> LinearGauss
 def bias_mode_initial_state(
     model: LinearGaussianModel, mean: Array, cov: Array, bias_prior
 ) -> tuple[Array, Array]:
-    """Prior ``(mean, cov)`` of the augmented state ``[x; b]`` for ``bias_modes``."""
+    """Prior ``(mean, cov)`` of the augmented state ``[x; b]`` for ``bias_modes``.
+
+    Returns:
+      ``(mean (n + nu + m,), cov (n + nu + m, n + nu + m))`` in ``model.Phi``'s dtype: ``mean`` then zero biases,
+      ``block_diag(cov, diag(bias_prior))``.
+    """
     n, nu, m = validate_linear_model(model)
     dtype = jnp.result_type(model.Phi)
     prior = _per_component("bias_prior", bias_prior, nu + m, dtype)

@@ -13,7 +13,7 @@ import jax.scipy.linalg as jsl
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 
 class LinearGaussianModel(NamedTuple):
@@ -58,18 +58,18 @@ def linear_gaussian_model(
         kf = kalman_filter(model)
         _, info = run_filter(kf, kf.init(x0, P0), ys)  # us=None
     """
-    n = _checks.check_square("Phi", Phi, None, "state transition")
-    _checks.check_matrix("C", C, (None, n), "m outputs x n states")
-    m = _checks.shape_of(C)[0]
-    dtype = _checks.float_dtype(Phi)
+    n = checks.check_square("Phi", Phi, None, "state transition")
+    checks.check_matrix("C", C, (None, n), "m outputs x n states")
+    m = checks.shape_of(C)[0]
+    dtype = checks.float_dtype(Phi)
     if Gamma is not None:
-        _checks.check_matrix("Gamma", Gamma, (n, None), "n states x nu inputs")
+        checks.check_matrix("Gamma", Gamma, (n, None), "n states x nu inputs")
     Gamma = jnp.zeros((n, 0), dtype) if Gamma is None else jnp.asarray(Gamma, dtype)
     if D is not None:
-        _checks.check_matrix("D", D, (m, Gamma.shape[1]), "m outputs x nu inputs")
+        checks.check_matrix("D", D, (m, Gamma.shape[1]), "m outputs x nu inputs")
     D = jnp.zeros((m, Gamma.shape[1]), dtype) if D is None else jnp.asarray(D, dtype)
-    _checks.check_covariance("Q", Q, n)
-    _checks.check_covariance("R", R, m)
+    checks.check_covariance("Q", Q, n)
+    checks.check_covariance("R", R, m)
     model = LinearGaussianModel(
         jnp.asarray(Phi, dtype),
         Gamma,
@@ -92,16 +92,16 @@ def validate_linear_model(model: LinearGaussianModel, name: str = "model") -> tu
     if not isinstance(model, LinearGaussianModel):
         raise TypeError(
             f"{name}: expected a LinearGaussianModel (linear_gaussian_model(Phi, C, Q, R, Gamma, D)), "
-            f"got {_checks.received(model)}"
+            f"got {checks.received(model)}"
         )
-    n = _checks.check_square(f"{name}.Phi", model.Phi, None, "state transition")
-    _checks.check_matrix(f"{name}.Gamma", model.Gamma, (n, None), "n states x nu inputs")
-    nu = _checks.shape_of(model.Gamma)[1]
-    _checks.check_matrix(f"{name}.C", model.C, (None, n), "m outputs x n states")
-    m = _checks.shape_of(model.C)[0]
-    _checks.check_matrix(f"{name}.D", model.D, (m, nu), "m outputs x nu inputs")
-    _checks.check_covariance(f"{name}.Q", model.Q, n)
-    _checks.check_covariance(f"{name}.R", model.R, m)
+    n = checks.check_square(f"{name}.Phi", model.Phi, None, "state transition")
+    checks.check_matrix(f"{name}.Gamma", model.Gamma, (n, None), "n states x nu inputs")
+    nu = checks.shape_of(model.Gamma)[1]
+    checks.check_matrix(f"{name}.C", model.C, (None, n), "m outputs x n states")
+    m = checks.shape_of(model.C)[0]
+    checks.check_matrix(f"{name}.D", model.D, (m, nu), "m outputs x nu inputs")
+    checks.check_covariance(f"{name}.Q", model.Q, n)
+    checks.check_covariance(f"{name}.R", model.R, m)
     return n, nu, m
 
 
@@ -142,14 +142,14 @@ def c2d(A: Array, B: Array, Ts: float, dtype=None) -> tuple[Array, Array]:
     Returns:
       ``(Phi, Gamma)`` of shapes (n, n) and (n, nu).
     """
-    n = _checks.check_square("A", A, None, "continuous state matrix")
-    _checks.check_matrix("B", B, (n, None), "n states x nu inputs")
-    _checks.check_positive("Ts", Ts, "a positive scalar sample period")
-    ts = _checks.concrete(Ts)
+    n = checks.check_square("A", A, None, "continuous state matrix")
+    checks.check_matrix("B", B, (n, None), "n states x nu inputs")
+    checks.check_positive("Ts", Ts, "a positive scalar sample period")
+    ts = checks.concrete(Ts)
     if dtype is None:
         dtype = jnp.asarray(A).dtype
         dtype = dtype if jnp.issubdtype(dtype, jnp.floating) else jnp.result_type(float)
-    A_value, B_value = _checks.concrete(A), _checks.concrete(B)
+    A_value, B_value = checks.concrete(A), checks.concrete(B)
     if A_value is None or B_value is None or ts is None:  # traced: stay in the caller's dtype
         A = jnp.asarray(A, dtype)
         return _zoh(A, jnp.asarray(B, dtype=dtype), jnp.asarray(Ts, dtype=dtype))

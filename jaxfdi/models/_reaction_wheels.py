@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._faults import FaultKind, Target, apply_fault, is_active
 from jaxfdi.models._integrate import rk4
 from jaxfdi.rotation import quaternion_multiply, rotate, skew
@@ -55,8 +55,8 @@ class SpacecraftParams(NamedTuple):
 def pyramid_axes(beta_deg: float = 45.0, sigma_deg: float = 45.0, dtype=None) -> Array:
     """Eq. 4 of Choi & Park (2009): four wheels on a cone of half-angle ``beta`` about body z, at
     azimuths ``+/-sigma``, ``180 -/+ sigma``; rows are the spin axes."""
-    _checks.check_scalar("beta_deg", beta_deg, meaning="a cone half-angle in degrees")
-    _checks.check_scalar("sigma_deg", sigma_deg, meaning="an azimuth in degrees")
+    checks.check_scalar("beta_deg", beta_deg, meaning="a cone half-angle in degrees")
+    checks.check_scalar("sigma_deg", sigma_deg, meaning="an azimuth in degrees")
     dtype = dtype or jnp.result_type(float)
     sb, cb = math.sin(math.radians(beta_deg)), math.cos(math.radians(beta_deg))
     cs, ss = math.cos(math.radians(sigma_deg)), math.sin(math.radians(sigma_deg))
@@ -84,22 +84,22 @@ def kitsat3_params(
     Returns:
       ``SpacecraftParams`` in ``dtype``, unit ``wheel_axes`` (N = 4 for the pyramid), ``wheel_mask`` ones.
     """
-    _checks.check_positive("dt", dt, "a positive sample period in seconds")
-    _checks.check_positive("wheel_inertia", wheel_inertia, "a positive wheel inertia in kg m^2")
+    checks.check_positive("dt", dt, "a positive sample period in seconds")
+    checks.check_positive("wheel_inertia", wheel_inertia, "a positive wheel inertia in kg m^2")
     dtype = dtype or jnp.result_type(float)
     if wheel_axes is not None:
-        _checks.check_matrix("wheel_axes", wheel_axes, (None, 3), "one spin axis per row")
+        checks.check_matrix("wheel_axes", wheel_axes, (None, 3), "one spin axis per row")
         if np.any(np.linalg.norm(np.asarray(wheel_axes, float), axis=1) == 0):
             raise ValueError(
-                f"wheel_axes: expected non-zero spin axes, got {_checks.received(wheel_axes)}"
+                f"wheel_axes: expected non-zero spin axes, got {checks.received(wheel_axes)}"
             )
     axes = pyramid_axes(dtype=dtype) if wheel_axes is None else jnp.asarray(wheel_axes, dtype)
     axes = axes / jnp.linalg.norm(axes, axis=1, keepdims=True)
-    _checks.check_real("inertia", inertia, "a real body inertia")
+    checks.check_real("inertia", inertia, "a real body inertia")
     if np.ndim(inertia) == 1:
-        _checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
+        checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
         inertia = np.diag(np.asarray(inertia, float))
-    _checks.check_covariance("inertia", inertia, 3, definite=True)  # symmetric positive definite
+    checks.check_covariance("inertia", inertia, 3, definite=True)  # symmetric positive definite
     inertia = jnp.asarray(inertia, dtype)
     return SpacecraftParams(
         inertia,
@@ -115,6 +115,10 @@ def stop_hypotheses(params: SpacecraftParams, include_nominal: bool = False) -> 
 
     Returns ``params`` with a leading hypothesis axis (N, ...), or with ``include_nominal`` (N + 1, ...),
     fault-free first (mode ``1 + i`` = wheel ``i`` stopped, the simulator's label order).
+
+    Returns:
+      ``SpacecraftParams`` whose leaves have a leading hypothesis axis, (N, ...) or (N + 1, ...): ``wheel_mask``
+      ``1 - e_i`` per hypothesis (all ones for the nominal), the other leaves repeated.
     """
     N = params.wheel_axes.shape[0]
     masks = 1.0 - jnp.eye(N, dtype=params.wheel_mask.dtype)
@@ -153,18 +157,26 @@ def rate_derivative(
 def split_input(u: Array, params: SpacecraftParams) -> tuple[Array, Array]:
     """``u = [Omega (N), Omega' (N)]`` -> ``(Omega, Omega')``."""
     N = params.wheel_axes.shape[0]
-    _checks.check_shape("u", u, (2 * N,), f"[wheel speeds ({N}), wheel accelerations ({N})]")
+    checks.check_shape("u", u, (2 * N,), f"[wheel speeds ({N}), wheel accelerations ({N})]")
     return u[:N], u[N:]
 
 
 def body_rate_field(w: Array, u: Array, params: SpacecraftParams) -> Array:
-    """The filters' ``w' = g(w, u)`` at the start of a step; ``dg/dw`` is ``A`` of Choi & Park (2009, eq. 8)."""
+    """The filters' ``w' = g(w, u)`` at the start of a step; ``dg/dw`` is ``A`` of Choi & Park (2009, eq. 8).
+
+    Returns:
+      (3,) body angular acceleration ``w'`` [rad/s^2], without external torque.
+    """
     speeds, accelerations = split_input(u, params)
     return rate_derivative(w, speeds, accelerations, params)
 
 
 def wheel_rate_transition(w: Array, u: Array, params: SpacecraftParams) -> Array:
-    """The filters' ``f``: one RK4 step of the rates with ``Omega(t) = Omega + t Omega'``."""
+    """The filters' ``f``: one RK4 step of the rates with ``Omega(t) = Omega + t Omega'``.
+
+    Returns:
+      (3,) body rates ``w`` [rad/s] one sample ``params.dt`` later.
+    """
     speeds, accelerations = split_input(u, params)
     return rk4(
         lambda x, t: rate_derivative(x, speeds + t * accelerations, accelerations, params),
@@ -174,7 +186,11 @@ def wheel_rate_transition(w: Array, u: Array, params: SpacecraftParams) -> Array
 
 
 def gyro_observation(w: Array, u: Array, params: SpacecraftParams) -> Array:
-    """Three rate gyros on the body axes, ``z = w`` (Choi & Park 2009, eq. 6)."""
+    """Three rate gyros on the body axes, ``z = w`` (Choi & Park 2009, eq. 6).
+
+    Returns:
+      (3,) the noise-free gyro reading, ``w`` itself [rad/s].
+    """
     return w
 
 
@@ -253,7 +269,11 @@ class WheelCommand(NamedTuple):
 
 
 def filter_input(command: WheelCommand, params: SpacecraftParams) -> Array:
-    """The filters' input ``u = [Omega_cmd, tau_cmd / I_w]`` (``wheel_rate_transition``)."""
+    """The filters' input ``u = [Omega_cmd, tau_cmd / I_w]`` (``wheel_rate_transition``).
+
+    Returns:
+      (2N,) ``[Omega_cmd (N) rad/s, Omega'_cmd (N) rad/s^2]``.
+    """
     return jnp.concatenate([command.speeds, command.torque / params.wheel_inertia])
 
 

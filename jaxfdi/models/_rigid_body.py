@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.models._integrate import rk4
 
 
@@ -37,11 +37,11 @@ def rigid_body_params(
     Returns:
       ``RigidBodyParams(inertia (3,) [kg m^2], dt () [s])`` in ``dtype`` (default: JAX's default float).
     """
-    _checks.check_positive("dt", dt, "a positive step in seconds")
-    _checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
+    checks.check_positive("dt", dt, "a positive step in seconds")
+    checks.check_matrix("inertia", inertia, (3,), "the 3 principal moments of inertia")
     if np.any(np.asarray(inertia) <= 0):
         raise ValueError(
-            f"inertia: expected positive principal moments, got {_checks.received(inertia)}"
+            f"inertia: expected positive principal moments, got {checks.received(inertia)}"
         )
     dtype = dtype or jnp.result_type(float)
     return RigidBodyParams(jnp.asarray(inertia, dtype), jnp.asarray(dt, dtype))

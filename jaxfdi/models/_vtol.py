@@ -9,7 +9,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.models._linear import LinearGaussianModel, c2d
 
 A = np.array(
@@ -40,7 +40,12 @@ X0 = np.array([50.0, 1.0, 5.0, 1.0])
 
 def vtol_model(Ts: float = TS, dtype=None):
     """The nominal discrete VTOL model: ``Phi, Gamma`` by zero-order hold, ``C``, ``D = 0``,
-    ``Q = 0.01^2 I``, ``R = 0.1^2 I`` (Lee & Lyou, Section V)."""
+    ``Q = 0.01^2 I``, ``R = 0.1^2 I`` (Lee & Lyou, Section V).
+
+    Returns:
+      ``LinearGaussianModel`` in ``dtype`` (default float), n = 4, nu = 2, m = 4: ``Phi`` (4, 4), ``Gamma`` (4, 2),
+      ``C`` (4, 4), ``D`` (4, 2) zero, ``Q`` and ``R`` (4, 4).
+    """
     dtype = dtype or jnp.result_type(float)
     Phi, Gamma = c2d(A, B, Ts, dtype=dtype)  # float64 inside, then cast
     return LinearGaussianModel(
@@ -55,7 +60,11 @@ def vtol_model(Ts: float = TS, dtype=None):
 
 def vtol_unknown_input(Ts: float = TS, include_disturbance: bool = False, dtype=None):
     """Discrete distribution ``E`` (4, q) of the unknown input: the zero-order-hold image
-    of ``E_c`` (q = 1), and of ``G`` too with ``include_disturbance`` (q = 2)."""
+    of ``E_c`` (q = 1), and of ``G`` too with ``include_disturbance`` (q = 2).
+
+    Returns:
+      (4, q) ``E`` in ``dtype`` (default float): the uncertainty's column, then the disturbance's.
+    """
     dtype = dtype or jnp.result_type(float)
     columns = (
         np.hstack([UNCERTAINTY_INPUT, DISTURBANCE_INPUT])
@@ -68,11 +77,14 @@ def vtol_unknown_input(Ts: float = TS, include_disturbance: bool = False, dtype=
 def vtol_true_plant(Ts: float = TS, uncertainty: float = 1.0, disturbance: float = 1.0, dtype=None):
     """The true plant, discretised exactly: ``A + uncertainty E_c d_c``, the disturbance from an oscillator
     ``w' = [[0, f], [-f, 0]] w`` (``w1 = sin f t``) appended; ``(Phi6, Gamma6, C6)`` for ``[x; w]`` (6,), start
-    ``[x0; 0, 1]``; ``uncertainty`` and ``disturbance`` scale the two terms."""
-    _checks.check_scalar(
-        "uncertainty", uncertainty, meaning="a real scale of the model uncertainty"
-    )
-    _checks.check_scalar("disturbance", disturbance, meaning="a real scale of the disturbance")
+    ``[x0; 0, 1]``; ``uncertainty`` and ``disturbance`` scale the two terms.
+
+    Returns:
+      ``(Phi6 (6, 6), Gamma6 (6, 2), C6 (4, 6))`` in ``dtype`` (default float), ZOH over ``Ts``; ``C6`` reads ``x``
+      only.
+    """
+    checks.check_scalar("uncertainty", uncertainty, meaning="a real scale of the model uncertainty")
+    checks.check_scalar("disturbance", disturbance, meaning="a real scale of the disturbance")
     dtype = dtype or jnp.result_type(float)
     f = DISTURBANCE_FREQUENCY
     A6 = np.zeros((6, 6))

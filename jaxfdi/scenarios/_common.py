@@ -8,7 +8,7 @@ from typing import Any, Callable, Sequence
 
 import jax
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.plotting import save_figure
 
 
@@ -34,12 +34,12 @@ def check_methods(methods: Sequence[str] | None, valid: Sequence[str]) -> tuple[
 
 
 def check_study(runs: int, seed: int, runs_name: str = "runs", **counts: int) -> None:
-    """``runs`` a positive int, ``seed`` an int in [0, ``_checks.MAX_SEED``] = [0, 2^32 - 1], and each further keyword a
+    """``runs`` a positive int, ``seed`` an int in [0, ``checks.MAX_SEED``] = [0, 2^32 - 1], and each further keyword a
     positive count (e.g. ``calibration_runs``, ``steps``)."""
-    _checks.check_int(runs_name, runs, 1, meaning="a positive number of runs")
-    _checks.check_int("seed", seed, 0, _checks.MAX_SEED, "a PRNG seed")
+    checks.check_int(runs_name, runs, 1, meaning="a positive number of runs")
+    checks.check_int("seed", seed, 0, checks.MAX_SEED, "a PRNG seed")
     for name, value in counts.items():
-        _checks.check_int(name, value, 1, meaning="a positive count")
+        checks.check_int(name, value, 1, meaning="a positive count")
 
 
 def figure_saver(out_dir) -> tuple[Callable[[Any, str, str], None], list[str]]:

@@ -35,33 +35,45 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _checks
-from jaxfdi._faults import Fault, fault, fault_label, sensor_labels, stack_faults
-from jaxfdi._frame import study_result
-from jaxfdi._metrics import DetectionRecord, cell, fault_row, rate_cell, unhealthy_rows_warning
-from jaxfdi._monitor import monitor, replay_detector
-from jaxfdi._montecarlo import monte_carlo
-from jaxfdi._riccati import steady_state_kalman
-from jaxfdi._simulate import linear_simulator, simulate
-from jaxfdi._study import Structure, Study, run_study
-from jaxfdi.detection._glrt import (
+from jaxfdi import (
+    DetectionRecord,
+    Fault,
+    Structure,
+    Study,
+    cell,
+    checks,
+    fault,
+    fault_label,
+    fault_row,
+    linear_simulator,
+    monitor,
+    monte_carlo,
+    rate_cell,
+    replay_detector,
+    run_study,
+    sensor_labels,
+    simulate,
+    stack_faults,
+    steady_state_kalman,
+    study_result,
+    unhealthy_rows_warning,
+)
+from jaxfdi.detection import (
     PAPER_USED_THRESHOLD,
     detector_setup,
     glr_sequence,
+    glrt_detector,
     glrt_threshold,
+    mode_probability_detector,
 )
-from jaxfdi.detection._glrt_recursive import glrt_detector
-from jaxfdi.detection._mode_probability import mode_probability_detector
-from jaxfdi.filters import run_filter
-from jaxfdi.filters._imm import interacting_multiple_model
-from jaxfdi.filters._kalman import kalman_filter
-from jaxfdi.filters._mm import multiple_model
-from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
-from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi.filters import interacting_multiple_model, kalman_filter, multiple_model, run_filter
+from jaxfdi.models import ENGINE_OUTPUT_NAMES as OUTPUT_NAMES
+from jaxfdi.models import ENGINE_TS as TS
+from jaxfdi.models import bias_mode_initial_state, bias_modes, engine_model, noise_inflation_modes
 from jaxfdi.plotting import column_subplots, hypothesis_colors
 from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
-from jaxfdi.tuning._train import fixed_batches
+from jaxfdi.tuning import fixed_batches
 
 MODE_NAMES = ("normal", "actuator", "RPM", "P2", "T2", "P4", "T4")
 
@@ -377,7 +389,7 @@ def training_data(
         batch_runs=batch_runs,
         runs_name="train_runs",
     )
-    _checks.check_positive("learning_rate", learning_rate, "a positive learning rate")
+    checks.check_positive("learning_rate", learning_rate, "a positive learning rate")
     train = labelled_runs(train_runs, seed)
     return balanced_batches(train, train_runs, batch_runs, jax.random.key(seed)), labelled_runs(
         val_runs, seed + 1

@@ -20,23 +20,32 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _checks
-from jaxfdi._faults import Fault, fault, no_fault, stack_faults
-from jaxfdi._frame import study_result
-from jaxfdi._metrics import (
+from jaxfdi import (
     DetectionRecord,
+    Fault,
+    MonitorHistory,
+    Structure,
+    Study,
     cell,
+    checks,
+    fault,
     fault_row,
+    linear_simulator,
+    monitor,
+    no_fault,
     rate_cell,
+    run_study,
+    stack_faults,
+    study_result,
     summarize_detection,
     unhealthy_rows_warning,
 )
-from jaxfdi._monitor import MonitorHistory, monitor
-from jaxfdi._simulate import linear_simulator
-from jaxfdi._study import Structure, Study, run_study
-from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
-from jaxfdi.filters._kalman import kalman_filter
-from jaxfdi.models._engine import OUTPUT_NAMES, OUTPUT_OPERATING_POINT, TS, engine_model
+from jaxfdi.detection import chi2_detector, chi2_threshold
+from jaxfdi.filters import kalman_filter
+from jaxfdi.models import ENGINE_OPERATING_POINT as OUTPUT_OPERATING_POINT
+from jaxfdi.models import ENGINE_OUTPUT_NAMES as OUTPUT_NAMES
+from jaxfdi.models import ENGINE_TS as TS
+from jaxfdi.models import engine_model
 from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 
@@ -124,9 +133,9 @@ def engine_chi2_study(
     check_study(
         runs, seed, window=window, **({} if chunk_size is None else {"chunk_size": chunk_size})
     )
-    _checks.check_probability("pfa", pfa)
-    _checks.check_positive("duration", duration, "a positive run length in seconds")
-    _checks.check_scalar(
+    checks.check_probability("pfa", pfa)
+    checks.check_positive("duration", duration, "a positive run length in seconds")
+    checks.check_scalar(
         "onset_time",
         onset_time,
         0.0,
@@ -135,7 +144,7 @@ def engine_chi2_study(
         meaning="a fault onset time in [0, duration) seconds",
     )
     if threshold is not None:
-        _checks.check_positive("threshold", threshold, "a positive chi-square threshold")
+        checks.check_positive("threshold", threshold, "a positive chi-square threshold")
     model = engine_model()
     steps = int(round(duration / TS))
     onset = int(round(onset_time / TS))

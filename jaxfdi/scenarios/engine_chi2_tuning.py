@@ -20,16 +20,14 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxfdi import _checks
-from jaxfdi.detection._chi2 import chi2_threshold, moving_window_sum
-from jaxfdi.filters._base import run_filter
-from jaxfdi.filters._kalman import kalman_filter
-from jaxfdi.models._engine import TS, engine_model
+from jaxfdi import checks, tuning
+from jaxfdi.detection import chi2_threshold, moving_window_sum
+from jaxfdi.filters import kalman_filter, run_filter
+from jaxfdi.models import ENGINE_TS as TS
+from jaxfdi.models import engine_model
 from jaxfdi.scenarios.engine import LabelledRuns, hand_tuned_table, labelled_runs, training_data
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_chi2_study
-from jaxfdi.tuning import _losses as losses
-from jaxfdi.tuning._parameterize import constrain, log_diagonal, log_scale, unconstrain
-from jaxfdi.tuning._train import TrainResult, fit
+from jaxfdi.tuning import TrainResult, constrain, fit, log_diagonal, log_scale, unconstrain
 
 PARAMETERIZATION = {"Q": log_diagonal(), "R": log_diagonal(), "threshold": log_scale()}
 HAND_WINDOW, HAND_PFA = 4, 0.005
@@ -75,7 +73,7 @@ def chi2_loss(
     """Mean over runs of the soft detection loss of the windowed NIS test."""
     log_stat = jnp.log(windowed_nis(params, data.ys, window))
     loss, parts = jax.vmap(
-        lambda s, o: losses.soft_detection_loss(
+        lambda s, o: tuning.soft_detection_loss(
             s,
             jnp.log(params["threshold"]),
             o,
@@ -119,7 +117,7 @@ def tune_engine_chi2(
         raise ValueError(f"windows: expected at least one window length, got {windows!r}")
     steps_per_run = int(round(4.0 / TS))  # labelled_runs' default duration
     for w in windows:
-        _checks.check_int("windows", w, 1, steps_per_run, "window lengths in steps, within a run")
+        checks.check_int("windows", w, 1, steps_per_run, "window lengths in steps, within a run")
     train_batch, val = training_data(train_runs, val_runs, batch_runs, seed, steps, learning_rate)
     results, val_loss = {}, {}
     for window in windows:

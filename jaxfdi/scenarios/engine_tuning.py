@@ -32,16 +32,10 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxfdi._frame import results_frame
-from jaxfdi._metrics import DetectionRecord
-from jaxfdi._monitor import replay_detector
-from jaxfdi._montecarlo import monte_carlo
-from jaxfdi.detection._mode_probability import mode_probability_detector
-from jaxfdi.filters._base import run_filter
-from jaxfdi.filters._imm import interacting_multiple_model
-from jaxfdi.filters._kalman import kalman_filter
-from jaxfdi.models._engine import engine_model
-from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi import DetectionRecord, monte_carlo, replay_detector, results_frame, tuning
+from jaxfdi.detection import mode_probability_detector
+from jaxfdi.filters import interacting_multiple_model, kalman_filter, run_filter
+from jaxfdi.models import bias_mode_initial_state, bias_modes, engine_model, noise_inflation_modes
 from jaxfdi.scenarios.engine import (
     PAPER_TRANSITION,
     EngineSettings,
@@ -57,17 +51,19 @@ from jaxfdi.scenarios.engine import (
     training_data,
 )
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP
-from jaxfdi.tuning import _losses as losses
-from jaxfdi.tuning._parameterize import (
+from jaxfdi.tuning import (
+    TrainResult,
     Transform,
+    checkpointed,
     constrain,
+    fit,
     log_scale,
     simplex,
     stochastic_rows,
+    strongly_typed,
     unconstrain,
     unit_interval,
 )
-from jaxfdi.tuning._train import TrainResult, checkpointed, fit, strongly_typed
 
 TRANSITION_MASK = (PAPER_TRANSITION > 0) | np.eye(len(PAPER_TRANSITION), dtype=bool)
 NUM_FAULTS = len(PAPER_TRANSITION) - 1
@@ -254,7 +250,7 @@ def imm_loss(
     """Mean over runs of the mode cross-entropy plus the weighted soft detection loss of the detector with
     ``confirm_steps`` (an int, or (M,) one per mode as the detector takes it; ``confirmed_probabilities``)."""
     log_mu = mode_log_probs(design, params, data.ys, remat)
-    cross_entropy = jax.vmap(losses.mode_cross_entropy)(log_mu, data.modes)
+    cross_entropy = jax.vmap(tuning.mode_cross_entropy)(log_mu, data.modes)
     fault_mu = confirmed_probabilities(jnp.exp(log_mu[..., 1:]), confirm_steps)  # (R, T, 6)
     # eq. 13, with one mu_T per mode allowed: alarm when some mode's excess over its own threshold is >= 0 (for a scalar
     # mu_T: the largest fault-mode probability >= mu_T)
@@ -266,7 +262,7 @@ def imm_loss(
     correct = jnp.sum(jnp.where(own, excess, 0.0), axis=-1)
     wrong = jnp.max(jnp.where(own, -2.0, excess), axis=-1)
     detection, parts = jax.vmap(
-        lambda s, o, m: losses.soft_detection_loss(
+        lambda s, o, m: tuning.soft_detection_loss(
             s,
             0.0,
             o,
@@ -368,7 +364,7 @@ def evaluate_engine_imm(
     rows = summarize_method(design.method, "IMM", records, runs, us.shape[0])
     test = labelled_runs(runs, seed + 1)
     log_mu = jax.jit(lambda p, y: mode_log_probs(design, p, y))(filter_params(params), test.ys)
-    cross_entropy = float(jnp.mean(jax.vmap(losses.mode_cross_entropy)(log_mu, test.modes)))
+    cross_entropy = float(jnp.mean(jax.vmap(tuning.mode_cross_entropy)(log_mu, test.modes)))
     return rows, cross_entropy
 
 

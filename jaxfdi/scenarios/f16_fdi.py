@@ -32,32 +32,36 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
-from jaxfdi._faults import Fault, FaultKind, Target
-from jaxfdi._frame import study_result
-from jaxfdi._metrics import binomial_interval, rate_interval
-from jaxfdi._study import Structure, Study, run_study
-from jaxfdi.detection import _parity as ps
-from jaxfdi.detection import _sensor_configuration as sc
-from jaxfdi.detection._hybrid_psa import (
+import jaxfdi.detection
+from jaxfdi import (
+    Fault,
+    FaultKind,
+    Structure,
+    Study,
+    Target,
+    binomial_interval,
+    checks,
+    rate_interval,
+    run_study,
+    study_result,
+)
+from jaxfdi.detection import (
     FOLLOW,
     HybridPSAConfig,
+    IsolationCalibration,
+    detection_threshold,
     hybrid_psa_config,
     hybrid_psa_fdi,
     hybrid_psa_init,
-)
-from jaxfdi.detection._parity import (
-    IsolationCalibration,
-    detection_threshold,
     isolation_threshold,
     parity_space,
 )
-from jaxfdi.filters import init_from_posterior, run_filter
-from jaxfdi.filters._ukf import unscented_kalman_filter
-from jaxfdi.models.f16._plant import RATE_OFFSET, flight_view
-from jaxfdi.models.f16._rates import (
+from jaxfdi.filters import init_from_posterior, run_filter, unscented_kalman_filter
+from jaxfdi.models.f16 import (
     RATE_INPUT_NAMES,
+    RATE_OFFSET,
     RateModel,
+    flight_view,
     rate_model,
     rate_model_input,
     rate_observation,
@@ -155,11 +159,11 @@ def fdi_setup(
     """Thresholds (``T_I`` by ``samples`` Monte Carlo draws), the UKF's model and noise."""
     sensors = setup.sensors
     dtype = setup.x0.dtype
-    _checks.check_probability("pfa", pfa)
-    _checks.check_probability("missed_isolation", missed_isolation)
-    _checks.check_positive("design_fnr", design_fnr, "a fault-to-noise ratio")
-    _checks.check_positive("process_std", process_std, "a standard deviation (rad/s)")
-    samples = _checks.check_int("samples", samples, 2, meaning="a number of Monte Carlo samples")
+    checks.check_probability("pfa", pfa)
+    checks.check_probability("missed_isolation", missed_isolation)
+    checks.check_positive("design_fnr", design_fnr, "a fault-to-noise ratio")
+    checks.check_positive("process_std", process_std, "a standard deviation (rad/s)")
+    samples = checks.check_int("samples", samples, 2, meaning="a number of Monte Carlo samples")
     parity_space(sensors.rate_axes, jnp.asarray(SENSOR_GROUPS))  # checks the layout eagerly
     key = jax.random.key(20040) if key is None else key
     hybrid, calibration = _thresholds(
@@ -225,13 +229,13 @@ def fault_case(
     unknown = sorted({str(k) for k in np.ravel(kind)} - set(names))
     if unknown:
         raise ValueError(f"kind: expected one of {names}, got {unknown}")
-    _checks.check_int_array(
+    checks.check_int_array(
         "sensor", np.asarray(sensor), 0, len(SENSOR_GROUPS) - 1, "rate sensor indices"
     )
     onset = np.asarray(onset_s, float)
     if not np.all(np.isfinite(onset) & (onset >= 0)):
         raise ValueError(
-            f"onset_s: expected fault onsets >= 0 s, finite, got {_checks.received(onset)}"
+            f"onset_s: expected fault onsets >= 0 s, finite, got {checks.received(onset)}"
         )
     dtype = dtype or jnp.result_type(float)
     code = np.vectorize(
@@ -422,13 +426,13 @@ def f16_fdi_study(
     )
     sweep_fnr = tuple(float(v) for v in np.atleast_1d(sweep_fnr))
     for v in sweep_fnr:
-        _checks.check_positive("sweep_fnr", v, "positive fault-to-noise ratios")
+        checks.check_positive("sweep_fnr", v, "positive fault-to-noise ratios")
     gust_sigma = GUST_SIGMA if gust_sigma is None else gust_sigma
-    _checks.check_scalar(
+    checks.check_scalar(
         "gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)"
     )
     if chunk_size is not None:
-        _checks.check_int(
+        checks.check_int(
             "chunk_size", chunk_size, 1, meaning="a positive number of flights per call"
         )
     setup, _ = flight_setup(gust_sigma=gust_sigma)
@@ -448,8 +452,12 @@ def f16_fdi_study(
     rows.append(paper_row)
 
     # the sweep (short flights), and the optimised sensor layout checked in the same program
-    optimisation = sc.optimize_configuration(keys[2], steps=optimizer_steps, objective="isolation")
-    separation = sc.optimize_configuration(keys[3], steps=optimizer_steps, objective="separation")
+    optimisation = jaxfdi.detection.optimize_configuration(
+        keys[2], steps=optimizer_steps, objective="isolation"
+    )
+    separation = jaxfdi.detection.optimize_configuration(
+        keys[3], steps=optimizer_steps, objective="separation"
+    )
     optimised_axes = optimisation.axes[optimisation.best]
     optimised_fdi, _ = fdi_setup(
         setup._replace(sensors=setup.sensors._replace(rate_axes=optimised_axes)), key=keys[0]
@@ -564,17 +572,17 @@ def analytic_residual_trace(
     ``sigma^2 (H^T H)^-1``), run ``steps`` on with the ``trusted`` (6,) channels: ``(norms (steps, 3),
     filtered rates (steps, 3))``, ``norms[j] = ||m_i - H_i x_hat||`` per sensor at ``restart + 1 + j``
     (eq. 30; at the decision step, what the FDI's bounded replay computed)."""
-    length = _checks.shape_of(measurement)[0]
-    steps = _checks.check_int("steps", steps, 1, meaning="a positive number of steps")
-    restart = _checks.check_int(
+    length = checks.shape_of(measurement)[0]
+    steps = checks.check_int("steps", steps, 1, meaning="a positive number of steps")
+    restart = checks.check_int(
         "restart",
         restart,
         0,
         length - 1 - steps,
         f"a step of the record (T = {length}) with {steps} steps after it",
     )
-    _checks.check_shape(
-        "trusted", trusted, (_checks.shape_of(fdi.hybrid.space.H)[0],), "one flag per rate channel"
+    checks.check_shape(
+        "trusted", trusted, (checks.shape_of(fdi.hybrid.space.H)[0],), "one flag per rate channel"
     )
     return _residual_trace(
         fdi, jnp.asarray(measurement), jnp.asarray(control), restart, jnp.asarray(trusted), steps
@@ -696,8 +704,8 @@ TABLE_1 = (
 
 
 def _geometry_rows(space, fdi: FDISetup, calibration) -> list[dict]:
-    angles = np.degrees(np.asarray(ps.subspace_angles(space)))
-    faults = np.asarray(ps.singular_faults(space))
+    angles = np.degrees(np.asarray(jaxfdi.detection.subspace_angles(space)))
+    faults = np.asarray(jaxfdi.detection.singular_faults(space))
     H = np.asarray(space.H)
     rows = [
         {
@@ -716,7 +724,9 @@ def _geometry_rows(space, fdi: FDISetup, calibration) -> list[dict]:
             full[list(SENSOR_GROUPS[sensor])] = f
             fi.append(
                 np.asarray(
-                    ps.isolation_functions(space, ps.parity_vector(space, jnp.asarray(full)))
+                    jaxfdi.detection.isolation_functions(
+                        space, jaxfdi.detection.parity_vector(space, jnp.asarray(full))
+                    )
                 ).tolist()
             )
         ours_i, ours_k = faults[i, k], faults[k, i]
@@ -815,9 +825,10 @@ def _configuration_rows(
     }
     rows = []
     for name, H in layouts.items():
-        iso = sc.isolability(H, groups)
+        iso = jaxfdi.detection.isolability(H, groups)
         rates = {
-            str(v): float(sc.isolation_rate(H, groups, sigma, v, key)) for v in (5.0, 10.0, 20.0)
+            str(v): float(jaxfdi.detection.isolation_rate(H, groups, sigma, v, key))
+            for v in (5.0, 10.0, 20.0)
         }
         upper = np.triu_indices(3, 1)
         rows.append(
@@ -1005,7 +1016,7 @@ def fault_kind_study(
     check_study(runs, seed, runs_name="runs")
     follows = tuple(follows)
     for f in follows:
-        _checks.check_choice("follows", f, list(FOLLOW))
+        checks.check_choice("follows", f, list(FOLLOW))
     setup, _ = flight_setup()
     keys = jax.random.split(jax.random.key(seed), 2)
     fdi, _ = fdi_setup(setup, key=keys[0])

@@ -29,13 +29,17 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
-from jaxfdi._frame import study_result
-from jaxfdi._loop import run_loop
-from jaxfdi._study import Structure, Study, run_study
-from jaxfdi._tracking import TrackingScore, tracked_plant
-from jaxfdi.control._f16_loop import f16_plant, rate_passthrough_fdi
-from jaxfdi.control._flight import (
+from jaxfdi import (
+    Structure,
+    Study,
+    TrackingScore,
+    checks,
+    run_loop,
+    run_study,
+    study_result,
+    tracked_plant,
+)
+from jaxfdi.control import (
     LATERAL_TRACKED,
     LONGITUDINAL_TRACKED,
     FlightGains,
@@ -45,38 +49,38 @@ from jaxfdi.control._flight import (
     commanded_profile,
     default_weights,
     design_flight_control,
+    f16_plant,
     flight_controller,
     flight_plan,
     flight_reference,
     initial_condition,
+    integral_augmentation,
     plan_trims,
+    rate_passthrough_fdi,
 )
-from jaxfdi.control._lqr import integral_augmentation
-from jaxfdi.models._linear import c2d
-from jaxfdi.models.f16 import _book as book
-from jaxfdi.models.f16._dynamics import (
+from jaxfdi.models import c2d, f16
+from jaxfdi.models.f16 import (
     ALPHA,
     BETA,
     CONTROL_NAMES,
+    LATERAL_STATES,
+    LONGITUDINAL_DESIGN_STATES,
     PHI,
     STATE_NAMES,
     THETA,
     VT,
     F16Params,
+    F16Sensors,
     H,
     P,
     Q,
     R,
     f16_params,
-)
-from jaxfdi.models.f16._linearize import (
-    LATERAL_STATES,
-    LONGITUDINAL_DESIGN_STATES,
+    f16_sensors,
     flight_modes,
     linearize,
     submodel,
 )
-from jaxfdi.models.f16._plant import F16Sensors, f16_sensors
 from jaxfdi.plotting import column_figure, column_subplots
 from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 
@@ -219,7 +223,7 @@ def flight_setup(
     dtype=None,
 ) -> tuple[FlightSetup, Design]:
     """Trims, linearisation, LQR design and reference of the flight (module doc)."""
-    _checks.check_scalar(
+    checks.check_scalar(
         "gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)"
     )
     dtype = dtype or jnp.result_type(float)
@@ -273,10 +277,10 @@ def run_flight(
     """One closed-loop flight; returns an ``Outcome`` (and a ``FlightHistory``). ``fdi``/``fdi_state0``: a
     ``loop.FDI`` whose ``observe`` returns a ``FlightView``, and its state (default: rate pass-through);
     ``fault``: plant faults (``f16_plant``), e.g. a ``faults.fault_group`` on both axes of a rate sensor."""
-    _checks.check_shape(
+    checks.check_shape(
         "dispersion.initial", dispersion.initial, (13,), "an offset of the 13-state initial state"
     )
-    _checks.check_scalar(
+    checks.check_scalar(
         "dispersion.xcg",
         dispersion.xcg,
         0.0,
@@ -486,19 +490,19 @@ def f16_flight_study(
     (``jaxfdi.enable_x64()``)."""
     require_x64("f16_flight_study")
     check_study(flights, seed, runs_name="flights", sample_flights=sample_flights)
-    _checks.check_scalar(
+    checks.check_scalar(
         "gust_sigma", gust_sigma, 0.0, meaning="a gust standard deviation >= 0 (ft/s)"
     )
     if chunk_size is not None:
-        _checks.check_int(
+        checks.check_int(
             "chunk_size", chunk_size, 1, meaning="a positive number of flights per call"
         )
     setup, design = flight_setup(gust_sigma=gust_sigma)
     params = setup.params
-    cases = book.book_cases()
+    cases = f16.book_cases()
     book_rows = [
         dict(row, section="trim")
-        for row in book.comparison_rows(book.trim_book_cases(params, cases), cases)
+        for row in f16.comparison_rows(f16.trim_book_cases(params, cases), cases)
     ]
     modes = [
         _mode_row(m, "open loop, level 502 ft/s, sea level, xcg 0.35")

@@ -29,22 +29,26 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _faults as flt
-from jaxfdi._frame import study_result
-from jaxfdi._loop import episode_scorer, feedforward, run_loop
-from jaxfdi._metrics import cell, rate_cell, summarize_episodes
-from jaxfdi._progress import status
-from jaxfdi._study import Structure, Study, run_study
+from jaxfdi import (
+    Structure,
+    Study,
+    cell,
+    concat_faults,
+    episode_scorer,
+    episodes,
+    fault,
+    feedforward,
+    gnss,
+    no_fault,
+    rate_cell,
+    run_loop,
+    run_study,
+    status,
+    study_result,
+    summarize_episodes,
+)
 from jaxfdi.data import data_path
-from jaxfdi.gnss import _frames as frames
-from jaxfdi.gnss import _integrity as integrity
-from jaxfdi.gnss import _measurements as measurements
-from jaxfdi.gnss import _orbits as orbits
-from jaxfdi.gnss import _paths as paths
-from jaxfdi.gnss import _raim as raim
-from jaxfdi.gnss import _rinex as rinex
-from jaxfdi.gnss import _yuma as yuma
-from jaxfdi.gnss._protection import ALERT_LIMITS
+from jaxfdi.gnss import ALERT_LIMITS
 from jaxfdi.plotting import column_figure
 from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 
@@ -66,9 +70,7 @@ CHUNK = 1024
 CAMPUS_PATH = (800.0, 140.0, 8.0, 20.0, 400.0 - 8.0 * 170.0)
 PARK_PATH = (600.0, 200.0, 12.0, 60.0, 0.0)
 #: the building beside the campus circuit's east leg (NED about CAMPUS)
-CAMPUS_WALL = measurements.Wall(
-    jnp.asarray([-30.0, 6.0]), jnp.asarray([30.0, 6.0]), jnp.asarray(50.0)
-)
+CAMPUS_WALL = gnss.Wall(jnp.asarray([-30.0, 6.0]), jnp.asarray([30.0, 6.0]), jnp.asarray(50.0))
 #: Table 2 of Yoo et al. (2010) (steps at 1 Hz): (name, kind, onset, end, magnitude, slope per step)
 TABLE2_FAULTS = (
     ("impulse 100 m at 100 s", "impulse", 100, 101, 100.0, 0.0),
@@ -146,13 +148,13 @@ class GnssCampusStudy(NamedTuple):
 
 
 def _case(table, site, path_args, steps, walls=()) -> Case:
-    origin = frames.geodetic_to_ecef(math.radians(site[0]), math.radians(site[1]), site[2])
-    path = paths.racetrack_ecef(jnp.arange(steps) * DT, origin, *path_args)
+    origin = gnss.geodetic_to_ecef(math.radians(site[0]), math.radians(site[1]), site[2])
+    path = gnss.racetrack_ecef(jnp.arange(steps) * DT, origin, *path_args)
     times = START_TOW + jnp.arange(steps) * DT
     visible, elevation, azimuth = jax.vmap(
-        lambda t, x: measurements.visibility(table, t, x, math.radians(MASK_DEG), origin, walls)
+        lambda t, x: gnss.visibility(table, t, x, math.radians(MASK_DEG), origin, walls)
     )(times, path)
-    return Case(origin, path, visible, measurements.elevation_sigma(elevation), elevation, azimuth)
+    return Case(origin, path, visible, gnss.elevation_sigma(elevation), elevation, azimuth)
 
 
 def _run(key, case, sky):
@@ -160,15 +162,15 @@ def _run(key, case, sky):
     ``sky = (table, paths (2, T, 3), visible (2, T, S), sigma (2, T, S))`` with the fault."""
     table, paths, visible, sigma = sky
     c, one_fault = case
-    steps = paths.shape[1]
-    fdi = integrity.raim_fdi(
-        table, START_TOW, DT, raim.raim_tables(table.prn.shape[0]), measurements.elevation_sigma
+    steps = gnss.shape[1]
+    fdi = gnss.raim_fdi(
+        table, START_TOW, DT, gnss.raim_tables(table.prn.shape[0]), gnss.elevation_sigma
     )
-    x0 = jnp.asarray([measurements.ClockModel().bias, measurements.ClockModel().drift])
-    plant = measurements.receiver_plant(
+    x0 = jnp.asarray([gnss.ClockModel().bias, gnss.ClockModel().drift])
+    plant = gnss.receiver_plant(
         table, START_TOW, DT, paths[c], visible[c], sigma[c], fault=one_fault
     )
-    scorer = episode_scorer(flt.episodes(one_fault, 0), lambda o: o.decision, single=True)
+    scorer = episode_scorer(episodes(one_fault, 0), lambda o: o.decision, single=True)
     return run_loop(
         plant,
         fdi,
@@ -184,21 +186,21 @@ def _run(key, case, sky):
 
 
 def _park_fault(slot):
-    return flt.concat_faults(
+    return concat_faults(
         *(
-            flt.fault(kind, "sensor", slot, onset, magnitude, slope, end)
+            fault(kind, "sensor", slot, onset, magnitude, slope, end)
             for _, kind, onset, end, magnitude, slope in PARK_FAULTS
         )
     )
 
 
-def _ephemeris() -> orbits.OrbitTable:
+def _ephemeris() -> gnss.OrbitTable:
     """The day's broadcast orbits (``EPHEMERIS``), times from the start of ``WEEK``; the GPS/INS study's too."""
-    return orbits.ephemeris_table(rinex.read_rinex_nav(data_path(EPHEMERIS)), WEEK)
+    return gnss.ephemeris_table(gnss.read_rinex_nav(data_path(EPHEMERIS)), WEEK)
 
 
 def _horizontal_error(positions, case: Case):
-    ned = frames.ecef_to_ned(positions, case.path)
+    ned = gnss.ecef_to_ned(positions, case.path)
     return np.asarray(jnp.hypot(ned[..., 0], ned[..., 1]))
 
 
@@ -228,9 +230,9 @@ def gnss_campus_study(
         candidates = np.asarray([headline])
     slots = np.repeat(candidates, runs)
     # the cases: the campus fault-free, then each candidate satellite faulted at the park
-    no_fault = flt.concat_faults(*[flt.no_fault()] * len(PARK_FAULTS))
+    fault_free = concat_faults(*[no_fault()] * len(PARK_FAULTS))
     faults = jax.vmap(_park_fault)(jnp.asarray(np.concatenate([[0], candidates])))
-    faults = jax.tree_util.tree_map(lambda f, n: f.at[0].set(n), faults, no_fault)
+    faults = jax.tree_util.tree_map(lambda f, n: f.at[0].set(n), faults, fault_free)
     site = np.concatenate([[0], np.ones(candidates.size, int)])
     names = ("campus",) + tuple(f"park PRN {int(table.prn[s])}" for s in candidates)
     sky = (
@@ -263,8 +265,8 @@ def gnss_campus_study(
         "dt_s": DT,
         "ephemeris": EPHEMERIS,
         "mask_deg": MASK_DEG,
-        "pfa": raim.DEFAULT_PFA,
-        "pmd": raim.DEFAULT_PMD,
+        "pfa": gnss.DEFAULT_PFA,
+        "pmd": gnss.DEFAULT_PMD,
         "threshold_rule": "chi2",
         "horizontal_alert_limit_m": 556.0,
         "sigma_model_m": "sqrt(3^2 + 3^2 / sin^2 el)",
@@ -311,12 +313,12 @@ def _beyond(ephemeris) -> dict:
     LNAV-VNAV availability on a world grid over a day, real almanac and 24-satellite standard constellation
     (geometry)."""
     mask = math.radians(MASK_DEG)
-    tables = raim.raim_tables(int(ephemeris.prn.shape[0]))
-    site = frames.geodetic_to_ecef(math.radians(CAMPUS[0]), math.radians(CAMPUS[1]), CAMPUS[2])
+    tables = gnss.raim_tables(int(ephemeris.prn.shape[0]))
+    site = gnss.geodetic_to_ecef(math.radians(CAMPUS[0]), math.radians(CAMPUS[1]), CAMPUS[2])
     day = START_TOW - 2700.0 + jnp.arange(0.0, 86400.0, MDB_STEP_S)
     mdb = np.asarray(
-        integrity.availability_grid(
-            ephemeris, day, site[None], tables, mask, measurements.elevation_sigma
+        gnss.availability_grid(
+            ephemeris, day, site[None], tables, mask, gnss.elevation_sigma
         ).minimum_detectable_bias[0]
     )
     rows = []
@@ -336,18 +338,18 @@ def _beyond(ephemeris) -> dict:
     lats = np.arange(MAP_LAT[0], MAP_LAT[1] + 1e-9, MAP_LAT[2])
     lons = np.arange(MAP_LON[0], MAP_LON[1] + 1e-9, MAP_LON[2])
     grid_lat, grid_lon = np.meshgrid(lats, lons, indexing="ij")
-    receivers = frames.geodetic_to_ecef(
+    receivers = gnss.geodetic_to_ecef(
         jnp.radians(grid_lat.ravel()), jnp.radians(grid_lon.ravel()), 0.0
     )
     maps = {}
     grid = jax.jit(
-        lambda tab, times: integrity.availability_grid(
-            tab, times, receivers, tables, mask, measurements.elevation_sigma
+        lambda tab, times: gnss.availability_grid(
+            tab, times, receivers, tables, mask, gnss.elevation_sigma
         )
     )
     for name, (file, rollovers) in CONSTELLATIONS.items():
-        almanac = yuma.read_yuma(data_path(file), rollovers)
-        table = orbits.almanac_table(almanac, slot_prns=np.arange(1, 33))
+        almanac = gnss.read_yuma(data_path(file), rollovers)
+        table = gnss.almanac_table(almanac, slot_prns=np.arange(1, 33))
         start = (
             float(np.min(almanac.toa)) - 43200.0
             if name.startswith("RTCA")

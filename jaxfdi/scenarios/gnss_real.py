@@ -43,22 +43,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi._frame import study_result
-from jaxfdi._metrics import rate_interval
-from jaxfdi._progress import status
+from jaxfdi import rate_interval, status, study_result
 from jaxfdi.data import data_path
-from jaxfdi.gnss._android import PhoneEpochs, read_android
-from jaxfdi.gnss._frames import ecef_to_ned
-from jaxfdi.gnss._raim import raim_tables
-from jaxfdi.gnss._receiver import (
+from jaxfdi.gnss import (
     MASK_ANGLE,
+    PhoneEpochs,
     ReceiverEpochs,
+    ecef_to_ned,
     monitor_receiver,
+    raim_tables,
+    read_android,
     read_observations,
+    read_rinex_nav,
     receiver_epochs,
+    separate_epochs,
 )
-from jaxfdi.gnss._rinex import read_rinex_nav
-from jaxfdi.gnss._solution_separation import separate_epochs
 from jaxfdi.plotting import column_subplots, save_figure
 from jaxfdi.scenarios._common import check_study, require_x64
 

@@ -3,7 +3,7 @@
 - Flight: the GPS half's park case (``scenarios.gnss_campus``: Haneul Park, from 2020-01-01 00:45:00 GPST, its orbits
   and receiver), 1200 s: a 60 m climb, then its racetrack (600 m legs, 200 m turns, 12 m/s) with a climb and a descent
   (``ins._trajectory.park_legs``); HG1900-class IMU (``ins.hg1900``) at 100 Hz, receiver at 1 Hz.
-- One run: ``jaxfdi.run_loop`` of the plant ``ins._plant.gps_ins_plant`` (pseudoranges with Table 2's satellite faults,
+- One run: ``run_loop`` of the plant ``ins._plant.gps_ins_plant`` (pseudoranges with Table 2's satellite faults,
   velocity solution, IMU samples with the IMU fault) and the FDI ``ins._integrity.gps_ins_fdi`` (RAIM -> 15-state
   error-state EKF -> windowed chi-square over 10 epochs at 60 dof, 91.95, and Da's SCST at 15 dof, 32.80, two
   propagators reset every ``SCST_PERIOD`` s); Monte Carlo: a ``vmap`` over keys and faults, one compiled program.
@@ -34,34 +34,38 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats as _scipy_stats
 
-from jaxfdi import _faults as flt
-from jaxfdi._frame import study_result
-from jaxfdi._loop import combine_scorers, detection_scorer, episode_scorer, feedforward, run_loop
-from jaxfdi._metrics import (
+import jaxfdi.ins
+from jaxfdi import (
+    NEVER,
+    Fault,
+    Structure,
+    Study,
+    as_stack,
     binomial_interval,
     binomial_lower_bound,
+    case_slices,
+    combine_scorers,
+    concat_faults,
     delay_statistics,
+    detection_scorer,
+    episode_scorer,
+    episodes,
+    fault,
+    feedforward,
+    gnss,
+    no_fault,
     rate_cell,
     rate_interval,
     record_from_alarms,
+    run_loop,
+    run_study,
+    status,
+    study_result,
     summarize_detection,
     summarize_episodes,
 )
-from jaxfdi._progress import status
-from jaxfdi._study import Structure, Study, case_slices, run_study
-from jaxfdi.detection._chi2 import chi2_detector, chi2_threshold
-from jaxfdi.gnss import _frames as frames
-from jaxfdi.gnss import _measurements as measurements
-from jaxfdi.gnss import _orbits as orbits
-from jaxfdi.gnss import _raim as raim
-from jaxfdi.ins import _error_state as error_state
-from jaxfdi.ins import _imu as imu
-from jaxfdi.ins import _integrity as integrity
-from jaxfdi.ins import _plant as plant
-from jaxfdi.ins import _scst as scst
-from jaxfdi.ins import _trajectory as trajectory
-from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
-from jaxfdi.ins._mechanization import NavState
+from jaxfdi.detection import chi2_detector, chi2_threshold
+from jaxfdi.ins import NavState, loosely_coupled_filter
 from jaxfdi.plotting import column_figure
 from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
 
@@ -131,9 +135,9 @@ class World(NamedTuple):
       sigma: (T, S) m, pseudorange noise std
     """
 
-    table: orbits.OrbitTable
-    tables: raim.RaimTables
-    flight: plant.FlightTables
+    table: gnss.OrbitTable
+    tables: gnss.RaimTables
+    flight: jaxfdi.ins.FlightTables
     visible: jax.Array
     sigma: jax.Array
 
@@ -147,8 +151,8 @@ class RunCase(NamedTuple):
       onset: () int, the IMU fault's onset (faults.NEVER when none)
     """
 
-    satellite_fault: flt.Fault
-    imu_fault: flt.Fault
+    satellite_fault: Fault
+    imu_fault: Fault
     onset: jax.Array
 
 
@@ -231,24 +235,24 @@ def thresholds() -> tuple[float, float]:
     with jax.ensure_compile_time_eval():  # concrete numbers, also while a run is traced
         return (
             float(chi2_threshold(6 * CHI2_WINDOW, PFA)),
-            float(chi2_threshold(error_state.STATE_SIZE, PFA)),
+            float(chi2_threshold(jaxfdi.ins.STATE_SIZE, PFA)),
         )
 
 
-def design(model: imu.ImuModel, dt: float):
+def design(model: jaxfdi.ins.ImuModel, dt: float):
     """The filter and the tests of the study: ``(filter, chi2 detector, SCST, IMU health)``."""
     chi2_limit, scst_limit = thresholds()
     return (
         loosely_coupled_filter(model, dt),
         chi2_detector(chi2_limit, CHI2_WINDOW),
-        scst.state_chi2_test(SCST_PERIOD, scst_limit),
-        integrity.imu_health_test(model, dt),
+        jaxfdi.ins.state_chi2_test(SCST_PERIOD, scst_limit),
+        jaxfdi.ins.imu_health_test(model, dt),
     )
 
 
-def initial_covariance(model: imu.ImuModel):
+def initial_covariance(model: jaxfdi.ins.ImuModel):
     p, v, tilt, heading = INITIAL_SIGMA
-    return integrity.initial_covariance(
+    return jaxfdi.ins.initial_covariance(
         p, v, math.radians(tilt), math.radians(heading), model.accel_bias, model.gyro_bias
     )
 
@@ -256,13 +260,13 @@ def initial_covariance(model: imu.ImuModel):
 def _flight(key: jax.Array, case: RunCase, world: World) -> RunOutput:
     """One flight: the loop of plant and FDI, its scores and its traces (the study engine's order: the world is the
     shared data of every run)."""
-    model = imu.hg1900()
+    model = jaxfdi.ins.hg1900()
     epochs, per_epoch = world.flight.imu.shape[:2]
     ins_filter, chi2, test, health = design(model, 1.0 / per_epoch)
-    monitor = integrity.gps_ins_fdi(
+    monitor = jaxfdi.ins.gps_ins_fdi(
         world.table, START_TOW, world.tables, ins_filter, chi2, test, health, VELOCITY_SIGMA
     )
-    gps_ins = plant.gps_ins_plant(
+    gps_ins = jaxfdi.ins.gps_ins_plant(
         world.table,
         START_TOW,
         world.flight,
@@ -274,19 +278,19 @@ def _flight(key: jax.Array, case: RunCase, world: World) -> RunOutput:
         imu_fault=case.imu_fault,
     )
     key_loop, key_imu, key_init = jax.random.split(key, 3)
-    errors = imu.draw_errors(key_imu, model)
+    errors = jaxfdi.ins.draw_errors(key_imu, model)
     cov0 = initial_covariance(model)
     nav_error = jnp.linalg.cholesky(cov0[:9, :9]) @ jax.random.normal(key_init, (9,), cov0.dtype)
     truth0 = NavState(world.flight.position[0], world.flight.velocity[0], world.flight.attitude[0])
     fdi0 = monitor.init(
-        error_state.correct(truth0, -nav_error), cov0
+        jaxfdi.ins.correct(truth0, -nav_error), cov0
     )  # INS = truth + error; biases unknown
-    clock = measurements.ClockModel()
+    clock = gnss.ClockModel()
     scorer = combine_scorers(
         chi2=detection_scorer(case.onset, lambda o: o.chi2, single=True),
         scst=detection_scorer(case.onset, lambda o: o.scst, single=True),
         health=detection_scorer(case.onset, lambda o: o.ins.imu_health, single=True),
-        raim=episode_scorer(flt.episodes(case.satellite_fault, 0), lambda o: o.raim, single=True),
+        raim=episode_scorer(episodes(case.satellite_fault, 0), lambda o: o.raim, single=True),
     )
     result = run_loop(
         gps_ins,
@@ -301,7 +305,7 @@ def _flight(key: jax.Array, case: RunCase, world: World) -> RunOutput:
         keep_history=True,
     )
     out, truth = result.history.output, result.history.sensed.state
-    errors9 = jax.vmap(error_state.navigation_error)(out.nav, truth.nav)
+    errors9 = jax.vmap(jaxfdi.ins.navigation_error)(out.nav, truth.nav)
     errors15 = jnp.concatenate(
         [errors9, truth.accel_bias - out.ins.accel_bias, truth.gyro_bias - out.ins.gyro_bias],
         axis=1,
@@ -348,36 +352,36 @@ def flights_spec(world: World, groups: list[tuple[str, RunCase]], name: str) -> 
 
 
 def build_world(
-    legs, start, speed: float, blend: float, table: orbits.OrbitTable, size: StudySize = PAPER_SIZE
+    legs, start, speed: float, blend: float, table: gnss.OrbitTable, size: StudySize = PAPER_SIZE
 ) -> World:
     """The tables of a flight: truth and IMU per epoch, the sky seen from its path."""
-    flight = plant.flight_tables(
-        trajectory.fly(legs, start, speed, blend=blend, rate=size.imu_rate), size.flight_s
+    flight = jaxfdi.ins.flight_tables(
+        jaxfdi.ins.fly(legs, start, speed, blend=blend, rate=size.imu_rate), size.flight_s
     )
-    path = frames.geodetic_to_ecef(
+    path = gnss.geodetic_to_ecef(
         flight.position[:, 0], flight.position[:, 1], flight.position[:, 2]
     )
     times = START_TOW + jnp.arange(size.flight_s, dtype=path.dtype)
     visible, elevation, _ = jax.vmap(
-        lambda t, x: measurements.visibility(table, t, x, math.radians(MASK_DEG))
+        lambda t, x: gnss.visibility(table, t, x, math.radians(MASK_DEG))
     )(times, path)
     return World(
         table,
-        raim.raim_tables(int(table.prn.shape[0])),
+        gnss.raim_tables(int(table.prn.shape[0])),
         flight,
         visible,
-        measurements.elevation_sigma(elevation),
+        gnss.elevation_sigma(elevation),
     )
 
 
-def receiver_slots(table, flight_s: int = FLIGHT_S) -> orbits.OrbitTable:
+def receiver_slots(table, flight_s: int = FLIGHT_S) -> gnss.OrbitTable:
     """The table cut to the satellites above the mask less 1 deg seen from the park site in the flights' window (both
     flights stay within a few km: < 0.02 deg of elevation); every world then has the same slots (one program)."""
-    site = frames.geodetic_to_ecef(math.radians(PARK[0]), math.radians(PARK[1]), PARK[2])
+    site = gnss.geodetic_to_ecef(math.radians(PARK[0]), math.radians(PARK[1]), PARK[2])
     times = START_TOW + jnp.arange(flight_s, dtype=site.dtype)
-    seen, _, _ = jax.vmap(
-        lambda t: measurements.visibility(table, t, site, math.radians(MASK_DEG - 1.0))
-    )(times)
+    seen, _, _ = jax.vmap(lambda t: gnss.visibility(table, t, site, math.radians(MASK_DEG - 1.0)))(
+        times
+    )
     return jax.tree_util.tree_map(
         lambda leaf: leaf[np.flatnonzero(np.asarray(seen).any(axis=0))], table
     )
@@ -385,9 +389,9 @@ def receiver_slots(table, flight_s: int = FLIGHT_S) -> orbits.OrbitTable:
 
 #: the two flights: legs, start (lat deg, lon deg, h m), speed m/s, blend s
 _FLIGHTS = {
-    "park": (trajectory.park_legs, PARK, 12.0, 5.0),
+    "park": (jaxfdi.ins.park_legs, PARK, 12.0, 5.0),
     "manoeuvre": (
-        trajectory.manoeuvre_legs,
+        jaxfdi.ins.manoeuvre_legs,
         (PARK[0], PARK[1], PARK[2] + MANOEUVRE_HEIGHT),
         25.0,
         2.0,
@@ -408,31 +412,31 @@ def headline_slot(world: World) -> int:
     visible = np.asarray(world.visible)
     candidates = np.flatnonzero(visible.all(axis=0))
     path = world.flight.position[0]
-    origin = frames.geodetic_to_ecef(path[0], path[1], path[2])
-    elevation, _ = measurements.sky_geometry(world.table, START_TOW, origin)[:2]
+    origin = gnss.geodetic_to_ecef(path[0], path[1], path[2])
+    elevation, _ = gnss.sky_geometry(world.table, START_TOW, origin)[:2]
     return int(candidates[np.argmax(np.asarray(elevation)[candidates])])
 
 
-def satellite_faults(slot: int | None, before: int | None = None) -> flt.Fault:
+def satellite_faults(slot: int | None, before: int | None = None) -> Fault:
     """Table 2's three pseudorange episodes on ``slot`` (none when ``None``; only those that end before epoch ``before``
     when given, the others replaced by no fault)."""
     episodes = [
-        flt.no_fault()
+        no_fault()
         if slot is None or (before is not None and end >= before)
-        else flt.fault(kind, "sensor", slot, onset, magnitude, slope, end)
+        else fault(kind, "sensor", slot, onset, magnitude, slope, end)
         for _, kind, onset, end, magnitude, slope in TABLE2_FAULTS
     ]
-    return flt.concat_faults(*episodes)
+    return concat_faults(*episodes)
 
 
 def imu_fault(
     channel: int | None, magnitude: float, onset_s: int = ONSET_S, kind: str = "bias"
-) -> flt.Fault:
+) -> Fault:
     """A fault of ``kind`` (a bias of ``magnitude``; ``"dead"``, ``"stuck"``: the channel NaN or frozen) on one IMU
     channel from ``onset_s`` (none when ``channel`` is ``None``)."""
     if channel is None:
-        return flt.as_stack(flt.no_fault())
-    return flt.as_stack(flt.fault(kind, "sensor", channel, onset_s, magnitude))
+        return as_stack(no_fault())
+    return as_stack(fault(kind, "sensor", channel, onset_s, magnitude))
 
 
 def cases_of(specs, onset_s: int = ONSET_S) -> RunCase:
@@ -442,7 +446,7 @@ def cases_of(specs, onset_s: int = ONSET_S) -> RunCase:
         RunCase(
             satellite_faults(slot, onset_s),
             imu_fault(channel, size, onset_s, *kind),
-            jnp.asarray(flt.NEVER if channel is None else onset_s, jnp.int32),
+            jnp.asarray(NEVER if channel is None else onset_s, jnp.int32),
         )
         for slot, channel, size, *kind in specs
     ]
@@ -472,7 +476,8 @@ def gps_ins_study(
     small = max(int(runs) // 4, 2) if beyond_runs is None else int(beyond_runs)
     groups = [("fault-free", None, None, 0.0, runs)]
     groups += [
-        (f"table3 {b:g} deg/h", slot, ROLL_GYRO, b * imu.DEG_PER_HOUR, runs) for b in TABLE3_DEG_H
+        (f"table3 {b:g} deg/h", slot, ROLL_GYRO, b * jaxfdi.ins.DEG_PER_HOUR, runs)
+        for b in TABLE3_DEG_H
     ]
     groups += [
         (f"imu roll gyro {name}", None, ROLL_GYRO, 0.0, small, kind)
@@ -480,11 +485,12 @@ def gps_ins_study(
     ]
     if beyond:
         groups += [
-            (f"park gyro {b:g} deg/h", None, ROLL_GYRO, b * imu.DEG_PER_HOUR, small)
+            (f"park gyro {b:g} deg/h", None, ROLL_GYRO, b * jaxfdi.ins.DEG_PER_HOUR, small)
             for b in BEYOND_GYRO_DEG_H
         ]
         groups += [
-            (f"park accel {a:g} mg", None, X_ACCEL, a * imu.MILLI_G, small) for a in BEYOND_ACCEL_MG
+            (f"park accel {a:g} mg", None, X_ACCEL, a * jaxfdi.ins.MILLI_G, small)
+            for a in BEYOND_ACCEL_MG
         ]
     worlds = {"park": park}
     plan = [("park", g) for g in groups]
@@ -494,7 +500,13 @@ def gps_ins_study(
         plan += [
             (
                 "manoeuvre",
-                (f"manoeuvre gyro {b:g} deg/h", None, ROLL_GYRO, b * imu.DEG_PER_HOUR, small),
+                (
+                    f"manoeuvre gyro {b:g} deg/h",
+                    None,
+                    ROLL_GYRO,
+                    b * jaxfdi.ins.DEG_PER_HOUR,
+                    small,
+                ),
             )
             for b in TABLE3_DEG_H
         ]
@@ -530,7 +542,7 @@ def gps_ins_study(
 
 
 def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE) -> dict:
-    model = imu.hg1900()
+    model = jaxfdi.ins.hg1900()
     chi2_limit, scst_limit = thresholds()
     return {
         "site_deg_m": PARK,
@@ -547,12 +559,12 @@ def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE
         "paper_size": size == PAPER_SIZE,
         "imu": {
             "model": "HG1900 class (Honeywell tactical-grade brochure values; ins.imu)",
-            "accel_bias_mg": model.accel_bias / imu.MILLI_G,
-            "gyro_bias_deg_h": model.gyro_bias / imu.DEG_PER_HOUR,
+            "accel_bias_mg": model.accel_bias / jaxfdi.ins.MILLI_G,
+            "gyro_bias_deg_h": model.gyro_bias / jaxfdi.ins.DEG_PER_HOUR,
             "vrw_m_s_sqrt_h": model.velocity_random_walk * 60.0,
             "arw_deg_sqrt_h": math.degrees(model.angle_random_walk) * 60.0,
-            "accel_bias_walk_mg_per_h": model.accel_bias_walk * 60.0 / imu.MILLI_G,
-            "gyro_bias_walk_deg_h_per_h": model.gyro_bias_walk * 60.0 / imu.DEG_PER_HOUR,
+            "accel_bias_walk_mg_per_h": model.accel_bias_walk * 60.0 / jaxfdi.ins.MILLI_G,
+            "gyro_bias_walk_deg_h_per_h": model.gyro_bias_walk * 60.0 / jaxfdi.ins.DEG_PER_HOUR,
             "scale_factors": "none (the 15-state filter does not model them)",
         },
         "velocity_sigma_m_s": VELOCITY_SIGMA,
@@ -566,15 +578,15 @@ def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE
             "threshold": chi2_limit,
         },
         "scst": {
-            "dof": error_state.STATE_SIZE,
+            "dof": jaxfdi.ins.STATE_SIZE,
             "pfa": PFA,
             "threshold": scst_limit,
             "period_s": SCST_PERIOD,
-            "max_condition": scst.DEFAULT_MAX_CONDITION,
+            "max_condition": jaxfdi.ins.DEFAULT_MAX_CONDITION,
         },
         "raim": {
-            "pfa": raim.DEFAULT_PFA,
-            "pmd": raim.DEFAULT_PMD,
+            "pfa": gnss.DEFAULT_PFA,
+            "pmd": gnss.DEFAULT_PMD,
             "mask_deg": MASK_DEG,
             "operation": "npa",
         },
@@ -585,8 +597,8 @@ def _config(runs, seed, small, beyond, slot, table, size: StudySize = PAPER_SIZE
         "beyond_gyro_deg_h": list(BEYOND_GYRO_DEG_H) if beyond else [],
         "beyond_accel_mg": list(BEYOND_ACCEL_MG) if beyond else [],
         "imu_health": {
-            "window_samples": integrity.IMU_HEALTH_WINDOW,
-            "pfa_per_window": integrity.IMU_HEALTH_PFA,
+            "window_samples": jaxfdi.ins.IMU_HEALTH_WINDOW,
+            "pfa_per_window": jaxfdi.ins.IMU_HEALTH_PFA,
             "cases": list(IMU_HEALTH_CASES),
             "runs": int(small),
         },
@@ -649,7 +661,7 @@ def ins_decisions(series: Series, test: str, threshold: float) -> np.ndarray:
     """(runs, T) the INS's alarms of ``test`` at ``threshold`` after the GPS/INS separation
     (``integrity.attribute_ins_alarms``), at the epoch of the alarm (issued ``ATTRIBUTION_LOOKAHEAD`` s later)."""
     return np.asarray(
-        integrity.attribute_ins_alarms(
+        jaxfdi.ins.attribute_ins_alarms(
             alarms_at(series, test, threshold),
             raim_alarms(series),
             ATTRIBUTION_LOOKAHEAD,
@@ -664,7 +676,7 @@ def operating_curve(results: dict, size: StudySize = PAPER_SIZE, pfas=OPERATING_
     (``metrics.delay_statistics``) from the separated INS alarms (``ins_decisions``)."""
     free_out = results["fault-free"]
     rows = []
-    for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE)):
+    for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", jaxfdi.ins.STATE_SIZE)):
         # a flight that went numerically bad is counted apart, never as a clean one
         keep = np.asarray(getattr(free_out, test).first_unhealthy) < 0
         free = jax.tree_util.tree_map(lambda a: np.asarray(a)[keep], free_out.series)
@@ -709,7 +721,7 @@ def separation(results: dict, size: StudySize = PAPER_SIZE, pfa: float = PFA) ->
     the confusion counts and the separated flights with their one-sided 95 % lower bound."""
     limits = {
         test: float(_scipy_stats.chi2.isf(pfa, dof))
-        for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", error_state.STATE_SIZE))
+        for test, dof in (("chi2", 6 * CHI2_WINDOW), ("scst", jaxfdi.ins.STATE_SIZE))
     }
     confusion: dict[str, dict[str, int]] = {}
     separated = flights = unhealthy = 0
@@ -813,7 +825,7 @@ def _rows(results: dict, size: StudySize = PAPER_SIZE) -> list:
     chi2_samples, scst_samples = independent_decisions(free.series)
     for name, samples, limit, dof in (
         ("chi2", chi2_samples, chi2_limit, 6 * CHI2_WINDOW),
-        ("scst", scst_samples, scst_limit, error_state.STATE_SIZE),
+        ("scst", scst_samples, scst_limit, jaxfdi.ins.STATE_SIZE),
     ):
         finite = samples[np.isfinite(samples)]
         alarms = int(np.sum(finite > limit))
@@ -949,8 +961,8 @@ def _false_alarms(series: Series, chi2_limit: float, scst_limit: float) -> dict:
 def _alarms_in_gps_windows(series: Series, onset_s: int = ONSET_S) -> dict:
     chi2_limit, scst_limit = thresholds()
     found = {}
-    for fault in TABLE2_FAULTS:
-        name, _, onset, end = fault[:4]
+    for row in TABLE2_FAULTS:
+        name, _, onset, end = row[:4]
         if end >= onset_s:  # not flown (a short study)
             continue
         window = slice(onset, min(end + 60, onset_s))  # the fault and the minute after it
@@ -982,7 +994,7 @@ def _error_row(name: str, series: Series) -> dict:
         "heading_rms_deg": float(np.sqrt(np.mean(attitude[..., 2] ** 2))),
         "gps_used_fraction": float(np.mean(np.asarray(series.gps_used))),
         "nees_mean": float(np.mean(np.asarray(series.nees)[:, settled])),
-        "nees_dof": error_state.STATE_SIZE,
+        "nees_dof": jaxfdi.ins.STATE_SIZE,
     }
 
 
@@ -1091,8 +1103,8 @@ def gps_ins_table(study: GpsInsStudy) -> str:
             )
         )
         lines.append(
-            f"IMU health test (beyond the paper: stuck-at test over {integrity.IMU_HEALTH_WINDOW} samples, "
-            f"P_fa {integrity.IMU_HEALTH_PFA:g} per window and channel; a NaN sample is a dead channel), roll "
+            f"IMU health test (beyond the paper: stuck-at test over {jaxfdi.ins.IMU_HEALTH_WINDOW} samples, "
+            f"P_fa {jaxfdi.ins.IMU_HEALTH_PFA:g} per window and channel; a NaN sample is a dead channel), roll "
             f"gyro from {onset} s, {health[0]['runs']} flights each{quiet}:"
         )
         for row in health:

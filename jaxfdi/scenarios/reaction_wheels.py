@@ -55,29 +55,33 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
-from jaxfdi._faults import (
+from jaxfdi import (
+    FDI,
+    DetectionRecord,
     Fault,
     FaultKind,
+    Structure,
+    Study,
     Target,
-    fault,
-    fault_label,
-    no_fault,
-    sensor_labels,
-    stack_faults,
-)
-from jaxfdi._frame import study_result
-from jaxfdi._loop import combine_scorers, detection_scorer, health_scorer, peak_scorer, run_loop
-from jaxfdi._metrics import (
-    DetectionRecord,
     binomial_lower_bound,
     cell,
+    checks,
+    combine_scorers,
+    detection_scorer,
+    fault,
+    fault_label,
+    health_scorer,
+    no_fault,
+    peak_scorer,
     rate_cell,
+    run_loop,
+    run_study,
+    sensor_labels,
+    stack_faults,
+    study_result,
     unhealthy_warning,
 )
-from jaxfdi._stages import FDI
-from jaxfdi._study import Structure, Study, run_study
-from jaxfdi.control._attitude import (
+from jaxfdi.control import (
     AttitudeGains,
     Slew,
     pd_gains,
@@ -86,14 +90,15 @@ from jaxfdi.control._attitude import (
     wheel_attitude_controller,
     wheel_plant,
 )
-from jaxfdi.detection._chi2 import Decision, chi2_threshold
-from jaxfdi.detection._credits import hypothesis_credits
-from jaxfdi.detection._frozen import frozen_channel_detector
-from jaxfdi.detection._two_stage import two_stage_isolation
-from jaxfdi.filters._base import GaussianState
-from jaxfdi.filters._ekf import extended_kalman_filter
-from jaxfdi.filters._ukf import unscented_kalman_filter
-from jaxfdi.models._reaction_wheels import (
+from jaxfdi.detection import (
+    Decision,
+    chi2_threshold,
+    frozen_channel_detector,
+    hypothesis_credits,
+    two_stage_isolation,
+)
+from jaxfdi.filters import GaussianState, extended_kalman_filter, unscented_kalman_filter
+from jaxfdi.models import (
     SpacecraftParams,
     WheelCommand,
     body_rate_field,
@@ -186,7 +191,7 @@ def wheel_design(
 ) -> WheelDesign:
     """The scenario's defaults (module doc); ``detection_threshold`` ``F_T`` is a placeholder that
     ``wheel_study`` calibrates on fault-free runs; ``momentum``: a key of ``MOMENTUM_PATTERNS``."""
-    _checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
+    checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
     dtype = dtype or jnp.result_type(float)
     params = kitsat3_params(dt=dt, dtype=dtype)
     null = jnp.asarray(MOMENTUM_PATTERNS[momentum], dtype)
@@ -865,9 +870,9 @@ def wheel_study(
     selected = check_methods(methods, METHODS)
     require_x64("wheel_study")
     check_study(runs, seed, calibration_runs=calibration_runs, steps=steps)
-    _checks.check_choice("estimator", estimator, ["ekf", "ukf"])
-    _checks.check_choice("engage_on", engage_on, ["nis", "fdp"])
-    _checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
+    checks.check_choice("estimator", estimator, ["ekf", "ukf"])
+    checks.check_choice("engage_on", engage_on, ["nis", "fdp"])
+    checks.check_choice("momentum", momentum, list(MOMENTUM_PATTERNS))
     design = wheel_design(momentum=momentum)
     kwargs = dict(
         steps=steps,

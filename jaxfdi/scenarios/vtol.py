@@ -40,41 +40,43 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _checks
-from jaxfdi._faults import (
+from jaxfdi import (
     Fault,
     FaultKind,
+    Structure,
+    Study,
     Target,
+    cell,
+    checks,
+    delay_statistics,
     fault,
     fault_label,
     is_active,
+    models,
     no_fault,
-    stack_faults,
-)
-from jaxfdi._frame import study_result
-from jaxfdi._metrics import (
-    cell,
-    delay_statistics,
     rate_cell,
     record_from_alarms,
+    run_study,
+    stack_faults,
     step_health,
+    study_result,
     unhealthy_warning,
 )
-from jaxfdi._study import Structure, Study, run_study
-from jaxfdi.control._eigenstructure import effectiveness_gain_schedule, nominal_eigenstructure
-from jaxfdi.control._lqr import lqr_pi
-from jaxfdi.detection._calibration import empirical_threshold, scale_to_run_false_alarm
-from jaxfdi.detection._chi2 import chi2_threshold, moving_window_sum
-from jaxfdi.detection._frozen import frozen_threshold
-from jaxfdi.detection._signature import isolate, location_symptoms
-from jaxfdi.detection._wavelet import (
+from jaxfdi.control import effectiveness_gain_schedule, lqr_pi, nominal_eigenstructure
+from jaxfdi.detection import (
     block_alarms,
     causal_detail_sigma,
     chi2_detail_sigma,
+    chi2_threshold,
+    empirical_threshold,
+    frozen_threshold,
     haar_denoise,
+    isolate,
+    location_symptoms,
+    moving_window_sum,
+    scale_to_run_false_alarm,
 )
-from jaxfdi.filters._tskf import actuator_direction, sensor_direction, stack_directions
-from jaxfdi.models import _vtol as vtol
+from jaxfdi.filters import actuator_direction, sensor_direction, stack_directions
 from jaxfdi.plotting import column_subplots
 from jaxfdi.scenarios._common import check_methods, check_study, figure_saver, require_x64
 from jaxfdi.scenarios.vtol_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
@@ -111,12 +113,17 @@ def vtol_design(
 ) -> LoopDesign:
     """The closed-loop design of Lee and Lyou's example (see the module docstring)."""
     dtype = dtype or jnp.result_type(float)
-    model = vtol.vtol_model(dtype=dtype)
-    E = vtol.vtol_unknown_input(include_disturbance=decouple_disturbance, dtype=dtype)
-    Phi6, Gamma6, C6 = vtol.vtol_true_plant(dtype=dtype)
+    model = models.vtol_model(dtype=dtype)
+    E = models.vtol_unknown_input(include_disturbance=decouple_disturbance, dtype=dtype)
+    Phi6, Gamma6, C6 = models.vtol_true_plant(dtype=dtype)
     H = jnp.asarray(TRACKED[tracked], dtype)
     pi = lqr_pi(
-        model.Phi, model.Gamma, H, jnp.asarray(LQR_Q, dtype), jnp.asarray(LQR_R, dtype), vtol.TS
+        model.Phi,
+        model.Gamma,
+        H,
+        jnp.asarray(LQR_Q, dtype),
+        jnp.asarray(LQR_R, dtype),
+        models.VTOL_TS,
     )
     lam, V = nominal_eigenstructure(pi.A_bar, pi.B_bar, pi.gain)
     multiplicative = [actuator_direction(model, i, "effectiveness") for i in range(2)]
@@ -130,7 +137,7 @@ def vtol_design(
         plant_Phi=Phi6,
         plant_Gamma=Gamma6,
         plant_C=C6,
-        plant_x0=jnp.asarray(np.r_[vtol.X0, 0.0, 1.0], dtype),
+        plant_x0=jnp.asarray(np.r_[models.VTOL_X0, 0.0, 1.0], dtype),
         H=H,
         command=jnp.asarray(COMMAND, dtype),
         gain=pi.gain,
@@ -147,7 +154,7 @@ def vtol_design(
         detail_sigma=jnp.asarray(chi2_detail_sigma(dof, levels), dtype),
         c_mult=c_mult,
         levels=levels,
-        Ts=vtol.TS,
+        Ts=models.VTOL_TS,
     )
 
 
@@ -160,7 +167,7 @@ def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
     """Every fault kind of the spec, one at a time, and fault-free. Headline cases (the paper's): s3 step
     0.7 from k = 120, a2 effectiveness 0.5 from k = 100. Actuator step/ramp ``u_i - delta`` /
     ``u_i - rho k Ts`` (negative magnitudes here); ramp slopes per second."""
-    Ts = vtol.TS
+    Ts = models.VTOL_TS
     return [
         ("a1 effectiveness 0.3", fault("effectiveness", "actuator", 0, onset, 0.3)),
         ("a2 effectiveness 0.5", fault("effectiveness", "actuator", 1, onset, 0.5)),
@@ -283,7 +290,7 @@ def calibrate_thresholds(
         raise ValueError(
             f"run_false_alarm: expected a rate in [0, 1) or None, got {run_false_alarm}"
         )
-    runs = _checks.check_int("num_runs", runs, 1, meaning="a positive number of calibration runs")
+    runs = checks.check_int("num_runs", runs, 1, meaning="a positive number of calibration runs")
     statistic = Structure(
         "fault-free statistics",
         _loop_program(design, steps, "statistic"),
@@ -706,7 +713,7 @@ def vtol_study(
         "runs_per_case": runs,
         "seed": seed,
         "steps": steps,
-        "Ts": vtol.TS,
+        "Ts": models.VTOL_TS,
         "levels": design.levels,
         "c_mult": design.c_mult,
         "pfa": PFA,

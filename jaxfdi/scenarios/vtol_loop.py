@@ -33,20 +33,23 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg
-from jaxfdi._faults import Fault, FaultKind
-from jaxfdi._loop import run_loop
-from jaxfdi._simulate import Simulator, simulator
-from jaxfdi._stages import FDI
-from jaxfdi.control._closed_loop import Reconfiguration, reconfigurable_pi
-from jaxfdi.control._eigenstructure import GainSchedule
-from jaxfdi.detection._frozen import FrozenState, frozen_channel_detector
-from jaxfdi.detection._signature import isolate, location_symptoms
-from jaxfdi.detection._wavelet import haar_denoise
-from jaxfdi.filters._base import GaussianState
-from jaxfdi.filters._tskf import FaultDirection, sensor_matrix, two_stage_kalman_filter
-from jaxfdi.filters._unknown_input import unknown_input_filter
-from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi import FDI, Fault, FaultKind, Simulator, run_loop, simulator
+from jaxfdi.control import GainSchedule, Reconfiguration, reconfigurable_pi
+from jaxfdi.detection import (
+    FrozenState,
+    frozen_channel_detector,
+    haar_denoise,
+    isolate,
+    location_symptoms,
+)
+from jaxfdi.filters import (
+    FaultDirection,
+    GaussianState,
+    sensor_matrix,
+    two_stage_kalman_filter,
+    unknown_input_filter,
+)
+from jaxfdi.models import LinearGaussianModel
 
 
 class LoopDesign(NamedTuple):
@@ -314,11 +317,10 @@ def true_plant(design: LoopDesign, fault: Fault) -> Simulator:
     model = design.model
     n = model.Phi.shape[0]
     nt = design.plant_Phi.shape[0]
-    mm = _linalg.matmul
     G = jnp.eye(nt, n, dtype=model.Phi.dtype)
     return simulator(
-        lambda x, u, p: mm(design.plant_Phi, x) + mm(design.plant_Gamma, u),
-        lambda x, u, p: mm(design.plant_C, x),
+        lambda x, u, p: design.plant_Phi @ x + design.plant_Gamma @ u,
+        lambda x, u, p: design.plant_C @ x,
         model.Q,
         model.R,
         fault=fault,

@@ -2,16 +2,26 @@
 
 from jaxfdi.tuning._losses import innovation_nll, mode_cross_entropy, soft_detection_loss
 from jaxfdi.tuning._parameterize import (
+    Transform,
     cholesky_factor,
     constrain,
     log_diagonal,
+    log_scale,
     positive,
     simplex,
     stochastic_rows,
     unconstrain,
     unit_interval,
 )
-from jaxfdi.tuning._train import TrainResult, fit, load_params, save_params
+from jaxfdi.tuning._train import (
+    TrainResult,
+    checkpointed,
+    fit,
+    fixed_batches,
+    load_params,
+    save_params,
+    strongly_typed,
+)
 
 __all__ = [
     "fit",
@@ -29,4 +39,9 @@ __all__ = [
     "stochastic_rows",
     "log_diagonal",
     "cholesky_factor",
+    "Transform",
+    "log_scale",
+    "checkpointed",
+    "fixed_batches",
+    "strongly_typed",
 ]

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 
 
 def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e-12) -> Array:
@@ -38,16 +38,16 @@ def mode_cross_entropy(log_mode_prob: Array, true_mode: Array, floor: float = 1e
     Returns:
       () mean over the T steps of ``-log(mu_true + floor)`` [nats], in ``(0, -log(floor)]``, differentiable.
     """
-    _checks.check_scalar(
+    checks.check_scalar(
         "floor", floor, 0.0, 1.0, low_open=True, meaning="a probability floor in (0, 1]"
     )
-    _checks.check_shape(
+    checks.check_shape(
         "log_mode_prob", log_mode_prob, (None, None), "(T, M) log mode probabilities"
     )
     T = log_mode_prob.shape[0]
-    _checks.check_shape("true_mode", true_mode, (T,), "one int mode label per step")
-    _checks.check_int_array(
-        "true_mode", true_mode, 0, _checks.shape_of(log_mode_prob)[1] - 1, "mode labels"
+    checks.check_shape("true_mode", true_mode, (T,), "one int mode label per step")
+    checks.check_int_array(
+        "true_mode", true_mode, 0, checks.shape_of(log_mode_prob)[1] - 1, "mode labels"
     )
     picked = jnp.take_along_axis(
         log_mode_prob, jnp.asarray(true_mode)[:, None].astype(jnp.int32), axis=1
@@ -86,21 +86,21 @@ def soft_detection_loss(
       ``(loss, parts)``; ``parts`` has ``false_alarm``, ``missed`` (probabilities), ``delay`` (expected, steps;
       missed runs count ``T - onset``) and ``misisolated`` (probability) when a margin is given.
     """
-    _checks.check_positive("temperature", temperature, "a positive temperature")
+    checks.check_positive("temperature", temperature, "a positive temperature")
     for name, weight in (
         ("false_alarm_weight", false_alarm_weight),
         ("miss_weight", miss_weight),
         ("delay_weight", delay_weight),
         ("isolation_weight", isolation_weight),
     ):
-        _checks.check_scalar(name, weight, 0.0, meaning="a loss weight >= 0")
-    _checks.check_shape("statistic", statistic, (None,), "(T,) test statistic")
+        checks.check_scalar(name, weight, 0.0, meaning="a loss weight >= 0")
+    checks.check_shape("statistic", statistic, (None,), "(T,) test statistic")
     T = statistic.shape[0]
-    value = _checks.concrete(onset)
+    value = checks.concrete(onset)
     if value is not None and np.any(value < 0):
         raise ValueError(
             f"onset: expected a fault onset step >= 0 (faults.NEVER: fault-free), got "
-            f"{_checks.received(value)}"
+            f"{checks.received(value)}"
         )
     k = jnp.arange(T)
     onset = jnp.minimum(jnp.asarray(onset), T)
@@ -126,7 +126,7 @@ def soft_detection_loss(
         "delay": jnp.where(faulty, delay, 0.0),
     }
     if wrong_label_margin is not None:
-        _checks.check_shape(
+        checks.check_shape(
             "wrong_label_margin",
             wrong_label_margin,
             (T,),
@@ -146,5 +146,5 @@ def innovation_nll(log_likelihood: Array) -> Array:
     Returns:
       () the mean negative log-likelihood per step [nats], ``-mean(log_likelihood)``.
     """
-    _checks.check_shape("log_likelihood", log_likelihood, (None,), "(T,) per-step log-likelihoods")
+    checks.check_shape("log_likelihood", log_likelihood, (None,), "(T,) per-step log-likelihoods")
     return -jnp.mean(log_likelihood)

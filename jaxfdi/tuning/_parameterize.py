@@ -25,11 +25,18 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks, _linalg
+from jaxfdi import _linalg, checks
 
 
 class Transform(NamedTuple):
-    """``forward: unconstrained -> constrained``, its ``inverse``, a name and static options (saved with params)."""
+    """``forward: unconstrained -> constrained``, its ``inverse``, a name and static options (saved with params).
+
+    Attributes:
+      forward: ``forward(raw) -> value``, an unconstrained array to the valid parameter
+      inverse: ``inverse(value) -> raw``, a valid parameter back to its unconstrained array
+      name: str, the transform's key in ``TRANSFORMS`` (what ``save_params`` records)
+      options: dict of the static keyword arguments that rebuild it (``TRANSFORMS[name](**options)``), JSON-able
+    """
 
     forward: Callable[[Array], Array]
     inverse: Callable[[Array], Array]
@@ -49,7 +56,7 @@ def positive(floor: float = 0.0) -> Transform:
       ``Transform`` named ``"positive"``, options ``{"floor": floor}``: ``forward`` maps any-shape arrays
       elementwise above ``floor``, ``inverse`` maps them back to raw reals of the same shape.
     """
-    _checks.check_scalar("floor", floor, 0.0, meaning="a lower bound >= 0")
+    checks.check_scalar("floor", floor, 0.0, meaning="a lower bound >= 0")
 
     def forward(x):
         return floor + jax.nn.softplus(x)
@@ -63,7 +70,12 @@ def positive(floor: float = 0.0) -> Transform:
 
 
 def log_scale() -> Transform:
-    """``p = exp(x)`` elementwise, any shape; inverse ``log p``; a step ``eta`` scales ``p`` by ``exp(eta)``."""
+    """``p = exp(x)`` elementwise, any shape; inverse ``log p``; a step ``eta`` scales ``p`` by ``exp(eta)``.
+
+    Returns:
+      ``Transform`` named ``"log_scale"`` (no options): ``forward`` maps any-shape arrays to positive ones of the
+      same shape, ``inverse`` maps positive arrays back to their logs.
+    """
     return Transform(jnp.exp, lambda p: jnp.log(jnp.asarray(p)), "log_scale", {})
 
 
@@ -97,7 +109,7 @@ def simplex() -> Transform:
 
     def forward(logits):
         logits = jnp.asarray(logits)
-        _checks.check_shape("logits", logits, (None,), "(M,) logits of a probability vector")
+        checks.check_shape("logits", logits, (None,), "(M,) logits of a probability vector")
         return jax.nn.softmax(logits)
 
     def inverse(p):
@@ -116,8 +128,8 @@ def stochastic_rows(mask: Any = None) -> Transform:
       ``Transform`` named ``"stochastic_rows"``, options ``{"mask": mask as nested lists or None}``: ``forward`` maps
       (M, M) logits to a row-stochastic (M, M) matrix (an IMM's transition matrix with its structural zeros).
     """
-    if mask is not None and _checks.shape_of(mask) and np.asarray(mask).dtype != bool:
-        raise TypeError(f"mask: expected a boolean (M, M) array, got {_checks.received(mask)}")
+    if mask is not None and checks.shape_of(mask) and np.asarray(mask).dtype != bool:
+        raise TypeError(f"mask: expected a boolean (M, M) array, got {checks.received(mask)}")
     mask_np = None if mask is None else np.asarray(mask, bool)
     if mask_np is not None:
         if mask_np.ndim != 2 or mask_np.shape[0] != mask_np.shape[1]:
@@ -132,7 +144,7 @@ def stochastic_rows(mask: Any = None) -> Transform:
 
     def forward(logits):
         logits = jnp.asarray(logits)
-        _checks.check_shape("logits", logits, (None, None), "square (M, M) transition logits")
+        checks.check_shape("logits", logits, (None, None), "square (M, M) transition logits")
         ok = allowed(logits.shape)
         if logits.shape != ok.shape:
             raise ValueError(f"logits: expected shape {ok.shape} (the mask's), got {logits.shape}")
@@ -176,7 +188,7 @@ def cholesky_factor() -> Transform:
 
     def forward(raw):
         raw = jnp.asarray(raw)
-        _checks.check_shape("raw", raw, (None, None), "square (n, n) log-Cholesky parameters")
+        checks.check_shape("raw", raw, (None, None), "square (n, n) log-Cholesky parameters")
         L = jnp.tril(raw, -1) + jnp.diag(jnp.exp(jnp.diagonal(raw)))
         return _linalg.symmetrize(L @ L.T)
 

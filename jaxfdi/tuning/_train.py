@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._io import atomic_write
 from jaxfdi._progress import logger, progress_bar
 from jaxfdi.filters import Filter
@@ -70,21 +70,32 @@ class TrainResult(NamedTuple):
 
 
 def checkpointed(filt: Filter) -> Filter:
-    """The same filter with its ``step`` (and its batch kernel's) rematerialised in the reverse pass."""
+    """The same filter with its ``step`` (and its batch kernel's) rematerialised in the reverse pass.
+
+    Returns:
+      ``Filter`` equal to ``filt`` but for ``step`` (and ``batch.step`` when it has a batch kernel) wrapped in
+      ``jax.checkpoint``: the same values, less memory and more compute in the gradient.
+    """
     if getattr(filt, "batch", None) is not None:
         filt = filt._replace(batch=filt.batch._replace(step=jax.checkpoint(filt.batch.step)))
     return filt._replace(step=jax.checkpoint(filt.step))
 
 
 def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[int], Any]:
-    """``step -> batch_size`` runs of ``dataset`` (leading run axis), reshuffled each epoch."""
+    """``step -> batch_size`` runs of ``dataset`` (leading run axis), reshuffled each epoch.
+
+    Returns:
+      ``batch(step) -> pytree`` like ``dataset`` with leaves of leading axis ``batch_size``: slice
+      ``step mod (R // batch_size)`` of epoch ``step // (R // batch_size)``'s permutation (keyed
+      ``fold_in(key, epoch)``) of the R runs; the last ``R mod batch_size`` runs of each permutation are unused.
+    """
     num = {np.shape(leaf)[0] for leaf in jax.tree.leaves(dataset)}
     if len(num) != 1:
         raise ValueError(
             f"dataset: expected every leaf to have the same leading run axis, got sizes {sorted(num)}"
         )
     (num,) = num
-    batch_size = _checks.check_int("batch_size", batch_size, 1, num, "a number of runs per batch")
+    batch_size = checks.check_int("batch_size", batch_size, 1, num, "a number of runs per batch")
     if not 1 <= batch_size <= num:
         raise ValueError(f"batch_size: expected 1..{num} (the dataset's runs), got {batch_size}")
     per_epoch = num // batch_size
@@ -102,7 +113,12 @@ def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[in
 def strongly_typed(tree):
     """``tree`` with every leaf a JAX array of its own dtype, no weak type: a Python-number parameter (or one made
     from it, e.g. ``jnp.full(5, 0.1)``) is weakly typed until one optimiser step, and a jitted function called with
-    both compiles twice (the tuning CLI compiled its step three times per design, ~30 s each on 2 cores)."""
+    both compiles twice (the tuning CLI compiled its step three times per design, ~30 s each on 2 cores).
+
+    Returns:
+      pytree of ``tree``'s structure, each leaf a strongly typed JAX array of its result type (a Python float:
+      the default float dtype).
+    """
     return jax.tree.map(lambda leaf: jnp.asarray(leaf, dtype=jnp.result_type(leaf)), tree)
 
 
@@ -128,11 +144,11 @@ def fit(
       ``TrainResult``: ``raw`` with ``raw0``'s keys (trainable entries at the lowest validation loss, frozen ones
       unchanged); ``history`` of the E evaluations (step 0 first, ``train_loss`` NaN there).
     """
-    _checks.check_callable("loss", loss, "a function (raw params, batch) -> scalar loss")
-    _checks.check_callable("train_batch", train_batch, "a function step -> batch")
-    steps = _checks.check_int("steps", steps, 0, meaning="a number of optimiser steps >= 0")
-    eval_every = _checks.check_int("eval_every", eval_every, 1, meaning="a number of steps >= 1")
-    patience = _checks.check_int("patience", patience, 1, meaning="a number of evaluations >= 1")
+    checks.check_callable("loss", loss, "a function (raw params, batch) -> scalar loss")
+    checks.check_callable("train_batch", train_batch, "a function step -> batch")
+    steps = checks.check_int("steps", steps, 0, meaning="a number of optimiser steps >= 0")
+    eval_every = checks.check_int("eval_every", eval_every, 1, meaning="a number of steps >= 1")
+    patience = checks.check_int("patience", patience, 1, meaning="a number of evaluations >= 1")
     params, frozen = partition(strongly_typed(raw0), list(raw0) if trainable is None else trainable)
     if not params:
         raise ValueError("trainable: expected at least one parameter to train")

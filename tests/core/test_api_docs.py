@@ -1,5 +1,5 @@
 """The public API is explicit and documented: the package, each subpackage and the public
-modules ``rotation``, ``plotting``, ``streaming`` and ``distributed`` define ``__all__`` (a name
+modules ``checks``, ``rotation``, ``plotting``, ``streaming`` and ``distributed`` define ``__all__`` (a name
 is public when a study, a notebook or a user needs it: no cap); every function among them
 documents its result (a ``Returns:`` section), every class its fields or members
 (``Attributes:``) and every constant has a line in its package's docstring; and the API
@@ -14,11 +14,18 @@ import types
 from pathlib import Path
 
 import nbformat
+import numpy as np
 import pytest
 
 import jaxfdi
 
-PUBLIC_MODULES = ["jaxfdi.rotation", "jaxfdi.plotting", "jaxfdi.streaming", "jaxfdi.distributed"]
+PUBLIC_MODULES = [
+    "jaxfdi.checks",
+    "jaxfdi.rotation",
+    "jaxfdi.plotting",
+    "jaxfdi.streaming",
+    "jaxfdi.distributed",
+]
 PACKAGES = (
     ["jaxfdi"]
     + sorted(m.name for m in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi.") if m.ispkg)
@@ -60,9 +67,8 @@ def test_every_public_name_documents_its_result(package):
         doc = own_docstring(obj)
         if isinstance(obj, types.ModuleType):
             ok = bool(doc)
-        elif isinstance(
-            obj, (int, float, tuple)
-        ):  # a constant: its package's docstring says what it is
+        elif isinstance(obj, (int, float, str, tuple, dict, np.ndarray)):
+            # a constant (a number, a name, a table or an array): its package's docstring says what it is
             ok = f"``{name}``" in inspect.getdoc(importlib.import_module(package))
         elif inspect.isclass(obj):
             ok = "\nAttributes:\n" in doc

@@ -15,7 +15,7 @@ from importlib import metadata
 import pytest
 
 import jaxfdi
-from jaxfdi import _checks, cli
+from jaxfdi import checks, cli
 
 #: what a start-up must not import: JAX and the libraries only the studies need
 HEAVY = ("jax", "jaxlib", "optax", "scipy", "matplotlib", "pandas")
@@ -122,4 +122,4 @@ def test_the_lazy_names_are_the_type_checking_imports():
 
 
 def test_the_clis_seed_limit_is_the_librarys():
-    assert cli.MAX_SEED == _checks.MAX_SEED
+    assert cli.MAX_SEED == checks.MAX_SEED

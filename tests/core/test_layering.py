@@ -28,7 +28,7 @@ PACKAGE = pathlib.Path(jaxfdi.__file__).parent
 
 #: unit (a package or a top-level module of jaxfdi) -> layer; lower layers never import higher ones
 LAYERS = {
-    "_checks": 0,
+    "checks": 0,
     "rotation": 0,
     "_linalg": 0,
     "_io": 0,
@@ -65,8 +65,12 @@ LAYERS = {
 
 
 def _unit(dotted: str) -> str:
-    """``jaxfdi.filters._kalman`` -> ``filters``; ``jaxfdi._loop`` -> ``loop``; ``jaxfdi`` -> ``__init__``."""
+    """``jaxfdi.filters._kalman`` -> ``filters``; ``jaxfdi._loop`` -> ``_loop``; ``jaxfdi`` -> ``__init__``;
+    a top-level name, ``jaxfdi.run_loop``, -> the unit of the module the package imports it from on
+    first use (``jaxfdi._WHERE``: ``_loop``)."""
     parts = dotted.split(".")
+    if len(parts) == 2 and parts[1] in jaxfdi._WHERE:
+        return _unit(jaxfdi._WHERE[parts[1]])
     if len(parts) == 1 or not (
         (PACKAGE / parts[1]).is_dir() or (PACKAGE / f"{parts[1]}.py").exists()
     ):
@@ -204,10 +208,9 @@ def _targets(path: pathlib.Path):
             yield from ((node.lineno, a.name) for a in node.names if a.name.startswith("jaxfdi"))
 
 
-#: the library without the studies and the CLI, which still name private modules (not yet held to this)
-LIBRARY = [
-    (n, p) for n, p in _modules() if not n.startswith("jaxfdi.scenarios") and n != "jaxfdi.cli"
-]
+#: the library and the CLI (the studies are held to more: ``test_a_study_imports_only_the_public_api``)
+LIBRARY = [(n, p) for n, p in _modules() if not n.startswith("jaxfdi.scenarios")]
+STUDIES = [(n, p) for n, p in _modules() if n.startswith("jaxfdi.scenarios")]
 
 
 @pytest.mark.parametrize("name,path", LIBRARY, ids=[name for name, _ in LIBRARY])
@@ -216,5 +219,22 @@ def test_no_library_module_imports_another_subpackages_private_module(name, path
         f"line {line}: {target}"
         for line, target in _targets(path)
         if _private_module_of_another_subpackage(name, target)
+    ]
+    assert bad == []
+
+
+def _private(target: str) -> bool:
+    return any(part.startswith("_") for part in target.split(".")[1:])
+
+
+@pytest.mark.parametrize("name,path", STUDIES, ids=[name for name, _ in STUDIES])
+def test_a_study_imports_only_the_public_api(name, path):
+    """The papers' studies are users of the library: from it they import public modules and
+    public names only (``jaxfdi``, ``jaxfdi.filters``, ``jaxfdi.models.f16``, ...), never
+    ``jaxfdi.x._y`` or ``from jaxfdi.x import _y``; among themselves they may share helpers."""
+    bad = [
+        f"line {line}: {target}"
+        for line, target in _targets(path)
+        if not target.startswith("jaxfdi.scenarios") and _private(target)
     ]
     assert bad == []

@@ -118,7 +118,7 @@ WRONG_Y = st.one_of(
         elements=st.floats(-1.0, 1.0),
     ),
     hnp.arrays(np.complex128, (3,), elements=st.complex_numbers(max_magnitude=1.0)),
-)  # (bool is real 0/1 for the library's checks: _checks.check_real)
+)  # (bool is real 0/1 for the library's checks: checks.check_real)
 FILTERS = {
     "kf": kalman_filter(MODEL),
     "kf missing": kalman_filter(MODEL, missing_measurements=True),

@@ -8,14 +8,21 @@ Indices (Stevens & Lewis's names): the states ``VT``, ``ALPHA``, ``BETA``, ``PHI
 rudder) and ``LONGITUDINAL_DESIGN_STATES`` (vt, alpha, theta, q, h, pow) select a linear model's blocks
 (``submodel``); ``RATE_OFFSET`` is the first rate channel in the sampled plant's measurement.
 
+Constants: ``STATE_NAMES`` the 13 states' names, ``("VT", "alpha", "beta", "phi", "theta", "psi", "P", "Q", "R",
+"pn", "pe", "h", "pow")`` (ft/s, rad, rad/s, ft, percent power); ``CONTROL_NAMES`` the 4 controls' names, ``("thtl",
+"el", "ail", "rdr")`` (throttle 0-1, surfaces in deg); ``RATE_INPUT_NAMES`` the rate model's 8 inputs, ``("VT",
+"alpha", "beta", "h", "thtl", "el", "ail", "rdr")``.
+
 References: Stevens & Lewis (2003) *Aircraft Control and Simulation*, 2nd ed. (App. A); Morelli (1998) "Global nonlinear
 parametric modeling with application to F-16 aerodynamics"; Park, Kim, Park & Roh (2004).
 """
 
+from jaxfdi.models.f16._book import book_cases, comparison_rows, trim_book_cases
 from jaxfdi.models.f16._dynamics import (
     AIL,
     ALPHA,
     BETA,
+    CONTROL_NAMES,
     EL,
     PE,
     PHI,
@@ -23,6 +30,7 @@ from jaxfdi.models.f16._dynamics import (
     POW,
     PSI,
     RDR,
+    STATE_NAMES,
     THETA,
     THTL,
     VT,
@@ -39,6 +47,7 @@ from jaxfdi.models.f16._linearize import (
     LATERAL_STATES,
     LONGITUDINAL_DESIGN_STATES,
     LinearF16,
+    flight_modes,
     linearize,
     submodel,
 )
@@ -54,7 +63,14 @@ from jaxfdi.models.f16._plant import (
     sampled_observation,
     sampled_transition,
 )
-from jaxfdi.models.f16._rates import rate_model
+from jaxfdi.models.f16._rates import (
+    RATE_INPUT_NAMES,
+    RateModel,
+    rate_model,
+    rate_model_input,
+    rate_observation,
+    rate_transition,
+)
 from jaxfdi.models.f16._trim import (
     TrimCondition,
     TrimResult,
@@ -112,4 +128,15 @@ __all__ = [
     "linearize",
     "f16_sensors",
     "rate_model",
+    "book_cases",
+    "comparison_rows",
+    "trim_book_cases",
+    "CONTROL_NAMES",
+    "STATE_NAMES",
+    "flight_modes",
+    "RATE_INPUT_NAMES",
+    "RateModel",
+    "rate_model_input",
+    "rate_observation",
+    "rate_transition",
 ]

@@ -60,7 +60,12 @@ class BookCase(NamedTuple):
 
 
 def book_cases() -> list[BookCase]:
-    """The 20 cases of the two tables, Table 3.6-2 first (in its row order)."""
+    """The 20 cases of the two tables, Table 3.6-2 first (in its row order).
+
+    Returns:
+      list of 20 ``BookCase``: 16 level-flight rows of Table 3.6-2, then the 4 rows of Table 3.6-3 (airspeeds in
+      ft/s, turn rates in rad/s, the printed values by quantity name).
+    """
     ref = stevens_lewis_data()["reference_trim_points"]
     cases = []
     for vt, thtl, alpha, el in ref["table_3_6_2_level_flight_sea_level_xcg_0_35"]["rows"]:
@@ -87,7 +92,12 @@ def book_cases() -> list[BookCase]:
 
 
 def trim_book_cases(params: F16Params, cases: list[BookCase] | None = None) -> TrimResult:
-    """Every case trimmed at once (``trim_batch``; sea level, no climb); a stacked ``TrimResult`` (N, ...)."""
+    """Every case trimmed at once (``trim_batch``; sea level, no climb); a stacked ``TrimResult`` (N, ...).
+
+    Returns:
+      ``TrimResult`` with a leading case axis N = ``len(cases)`` (``state`` (N, 13), ``control`` (N, 4), ...), in
+      ``params``' dtype, in the order of ``cases``.
+    """
     cases = book_cases() if cases is None else cases
     dtype = params.mass.dtype
     conditions = trim_condition(
@@ -120,7 +130,13 @@ def ours(result: TrimResult, i: int, quantity: str) -> float:
 
 def comparison_rows(result: TrimResult, cases: list[BookCase] | None = None) -> list[dict]:
     """A JSON-ready row per case: printed quantities beside ours, differences in half last printed digits
-    (``half_units``), trim residual and flags."""
+    (``half_units``), trim residual and flags.
+
+    Returns:
+      list of dicts, one per case: ``table``, ``case``, ``airspeed_ft_s``, ``xcg``, ``turn_rate_rad_s``, ``cells``
+      (quantity -> ``ours``, ``book``, ``half_unit``, ``half_units``, ``symmetric_zero``), ``max_abs_residual``,
+      ``converged``, ``within_limits``, ``steps`` (Python numbers and bools).
+    """
     cases = book_cases() if cases is None else cases
     rows = []
     for i, case in enumerate(cases):

@@ -28,7 +28,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.models.f16._aero import AeroCoefficients, table_coefficients
 from jaxfdi.models.f16._atmosphere import air_data
 from jaxfdi.models.f16._engine import power_rate, throttle_gearing, thrust
@@ -121,12 +121,12 @@ def f16_params(
     if aero not in ("tables", "morelli"):
         raise ValueError(f"aero: expected 'tables' or 'morelli', got {aero!r}")
     if mass is not None:
-        _checks.check_positive("mass", mass, "a positive mass [slug]")
-    _checks.check_scalar(
+        checks.check_positive("mass", mass, "a positive mass [slug]")
+    checks.check_scalar(
         "xcg", xcg, 0.0, 1.0, meaning="a centre of gravity in [0, 1] of the mean chord"
     )
     if aileron_limit is not None:
-        _checks.check_scalar(
+        checks.check_scalar(
             "aileron_limit",
             aileron_limit,
             0.0,
@@ -135,18 +135,18 @@ def f16_params(
             meaning="an aileron deflection limit in (0, 90] degrees",
         )
     if jxz is not None:
-        _checks.check_scalar("jxz", jxz, meaning="a finite product of inertia [slug ft^2]")
+        checks.check_scalar("jxz", jxz, meaning="a finite product of inertia [slug ft^2]")
     dtype = dtype or jnp.result_type(float)
     data = stevens_lewis_data()
     mg, lim = data["mass_geometry"], data["limits"]
     if (
-        jxz is not None and _checks.concrete(jxz) is not None
+        jxz is not None and checks.concrete(jxz) is not None
     ):  # positive definite: Jxx Jzz - Jxz^2 > 0
         bound = (mg["Jxx_slug_ft2"] * mg["Jzz_slug_ft2"]) ** 0.5
-        if not abs(float(_checks.concrete(jxz))) < bound:
+        if not abs(float(checks.concrete(jxz))) < bound:
             raise ValueError(
                 f"jxz: expected |Jxz| < sqrt(Jxx Jzz) = {bound:.6g} slug ft^2 (a positive definite "
-                f"inertia tensor), got {_checks.received(jxz)}"
+                f"inertia tensor), got {checks.received(jxz)}"
             )
     a = lambda v: jnp.asarray(v, dtype)
     model = aero_tables(profile, dtype) if aero == "tables" else morelli_coefficients_data(dtype)
@@ -246,14 +246,12 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
       (13,) ``x'``: ``VT'`` [ft/s^2], angle rates [rad/s], ``P'``, ``Q'``, ``R'`` [rad/s^2], ``pn'``,
       ``pe'``, ``h'`` [ft/s] (north, east, up), ``pow'`` [%/s]; controls not clipped (``saturate``).
     """
-    _checks.check_real("x", x, "a real state")
-    _checks.check_real("u", u, "real controls")
-    _checks.check_shape(
-        "x", x, (13,), "[VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]"
-    )
-    _checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
+    checks.check_real("x", x, "a real state")
+    checks.check_real("u", u, "real controls")
+    checks.check_shape("x", x, (13,), "[VT, alpha, beta, phi, theta, psi, P, Q, R, pn, pe, h, pow]")
+    checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
     if gust is not None:
-        _checks.check_shape("gust", gust, (2,), "angle-of-attack and sideslip increments, rad")
+        checks.check_shape("gust", gust, (2,), "angle-of-attack and sideslip increments, rad")
     vt, alpha, beta, phi, theta, psi, p, q, r = (x[i] for i in range(9))
     altitude, power = x[H], x[POW]
     air = air_data(vt, altitude, params.atmosphere)
@@ -318,7 +316,7 @@ def f16_dynamics(x: Array, u: Array, params: F16Params, gust: Array | None = Non
 
 def saturate(u: Array, params: F16Params) -> Array:
     """``u`` clipped to the control limits (throttle 0..1, el +-25, ail +-21.5, rdr +-30 deg)."""
-    shape = _checks.shape_of(u)
+    shape = checks.shape_of(u)
     if not shape or shape[-1] != 4:
         raise ValueError(
             f"u: expected controls [thtl, el, ail, rdr] along the last axis, shape (..., 4), got "

@@ -24,7 +24,7 @@ import jax
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.models.f16._dynamics import (
     AIL,
     ALPHA,
@@ -131,8 +131,8 @@ def linearize(params: F16Params, x: Array, u: Array) -> LinearF16:
     Returns:
       ``LinearF16(A, B, x, u)`` (``dx' = A dx + B du``).
     """
-    _checks.check_shape("x", x, (13,), "trim state")
-    _checks.check_shape("u", u, (4,), "trim controls")
+    checks.check_shape("x", x, (13,), "trim state")
+    checks.check_shape("u", u, (4,), "trim controls")
     A, B = jax.jacfwd(f16_dynamics, argnums=(0, 1))(x, u, params)
     return LinearF16(A, B, x, u)
 
@@ -193,7 +193,7 @@ def longitudinal_modes(A_lon: Array, airspeed: float = 1.0) -> list[Mode]:
     """Short period and phugoid of the ``[VT, alpha, theta, Q]`` block: two pairs, the faster is the short
     period; a pair and two real roots, the pair is the phugoid unless faster than both (then the short
     period); four real roots, the two largest are the short period."""
-    _checks.check_matrix("A_lon", A_lon, (4, 4), "[VT, alpha, theta, Q] block")
+    checks.check_matrix("A_lon", A_lon, (4, 4), "[VT, alpha, theta, Q] block")
     roots = _canonical(np.linalg.eigvals(np.asarray(A_lon, np.float64)))
     is_complex = np.abs(roots.imag) > 0
     real = roots[~is_complex]
@@ -217,7 +217,7 @@ def longitudinal_modes(A_lon: Array, airspeed: float = 1.0) -> list[Mode]:
 
 def lateral_modes(A_lat: Array) -> list[Mode]:
     """Roll subsidence, spiral and Dutch roll of the (4, 4) ``[beta, phi, P, R]`` block."""
-    _checks.check_matrix("A_lat", A_lat, (4, 4), "[beta, phi, P, R] block")
+    checks.check_matrix("A_lat", A_lat, (4, 4), "[beta, phi, P, R] block")
     roots = _canonical(np.linalg.eigvals(np.asarray(A_lat, np.float64)))
     is_complex = np.abs(roots.imag) > 0
     if np.count_nonzero(is_complex) == 2:
@@ -245,7 +245,12 @@ def _pair(roots: np.ndarray) -> np.ndarray:
 
 
 def flight_modes(model: LinearF16) -> list[Mode]:
-    """The five classical modes about a wings-level trim (module doc)."""
+    """The five classical modes about a wings-level trim (module doc).
+
+    Returns:
+      list of 5 ``Mode`` in the order short period, phugoid, roll, spiral, Dutch roll (Python numbers: roots
+      complex, natural frequencies in rad/s, time constants in s).
+    """
     A_lon, _ = longitudinal(model)
     A_lat, _ = lateral(model)
     return longitudinal_modes(A_lon, float(model.x[VT])) + lateral_modes(A_lat)

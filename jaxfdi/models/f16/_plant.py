@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.models._integrate import rk4
 from jaxfdi.models.f16._dynamics import (
     ALPHA,
@@ -128,7 +128,7 @@ def f16_sensors(
     """
     dtype = dtype or jnp.result_type(float)
     axes = skewed_rate_axes(dtype) if rate_axes is None else jnp.asarray(rate_axes, dtype)
-    _checks.check_shape(
+    checks.check_shape(
         "rate_axes", axes, (None, 3), "one body-axis direction per rate-sensor channel"
     )
     for name, value in (
@@ -143,19 +143,19 @@ def f16_sensors(
     sensors = F16Sensors(
         axes, a(rate_sigma), a(air_data_sigma), a(attitude_sigma), a(altitude_sigma), a(power_sigma)
     )
-    _checks.check_shape("air_data_sigma", sensors.air_data_sigma, (3,), "VT, alpha, beta")
-    _checks.check_shape("attitude_sigma", sensors.attitude_sigma, (3,), "phi, theta, psi")
+    checks.check_shape("air_data_sigma", sensors.air_data_sigma, (3,), "VT, alpha, beta")
+    checks.check_shape("attitude_sigma", sensors.attitude_sigma, (3,), "phi, theta, psi")
     return sensors
 
 
 def _check_sigma(name: str, value) -> None:
     """Real, finite and >= 0 (when concrete): a standard deviation."""
-    _checks.check_real(name, value, "standard deviations")
-    _checks.check_finite(name, value, "standard deviations")
-    concrete = _checks.concrete(value)
+    checks.check_real(name, value, "standard deviations")
+    checks.check_finite(name, value, "standard deviations")
+    concrete = checks.concrete(value)
     if concrete is not None and np.any(concrete < 0):
         raise ValueError(
-            f"{name}: expected standard deviations >= 0, got {_checks.received(concrete)}"
+            f"{name}: expected standard deviations >= 0, got {checks.received(concrete)}"
         )
 
 
@@ -220,7 +220,7 @@ def rate_estimator(rate_axes: Array) -> Array:
     Returns:
       the (3, m_r) least-squares matrix.
     """
-    _checks.check_matrix(
+    checks.check_matrix(
         "rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel"
     )
     return jnp.linalg.solve(rate_axes.T @ rate_axes, rate_axes.T)

@@ -14,7 +14,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.models._integrate import rk4
 from jaxfdi.models.f16._atmosphere import air_data
 from jaxfdi.models.f16._dynamics import VT, F16Params, H, aero_coefficients, moment_equations
@@ -50,27 +50,32 @@ def rate_model(
       of ``rate_transition`` and ``rate_observation``.
     """
     dtype = aircraft.mass.dtype
-    _checks.check_matrix(
+    checks.check_matrix(
         "rate_axes", rate_axes, (None, 3), "one body-axis direction per rate channel"
     )
-    _checks.check_matrix(
+    checks.check_matrix(
         "coefficient_error", coefficient_error, (3,), "relative errors of Cl, Cm, Cn"
     )
-    _checks.check_positive("dt", dt, "a positive sample period (s)")
+    checks.check_positive("dt", dt, "a positive sample period (s)")
     scale = 1.0 + jnp.asarray(coefficient_error, dtype)
     return RateModel(aircraft, scale, jnp.asarray(rate_axes, dtype), jnp.asarray(dt, dtype))
 
 
 def rate_model_input(y: Array, u: Array) -> Array:
     """(8,) the rate model's input from the F-16's measurement ``y`` (``plant``'s layout:
-    ``[VT, alpha, beta, phi, theta, psi, h, pow, rate channels]``) and the controls ``u`` (4,)."""
-    shape = _checks.shape_of(y)
+    ``[VT, alpha, beta, phi, theta, psi, h, pow, rate channels]``) and the controls ``u`` (4,).
+
+    Returns:
+      (8,) ``[VT (ft/s), alpha, beta (rad), h (ft), thtl, el, ail, rdr (deg)]`` (``RATE_INPUT_NAMES``) in ``y``'s
+      dtype.
+    """
+    shape = checks.shape_of(y)
     if len(shape) != 1 or shape[0] < 8:
         raise ValueError(
             f"y: expected the F-16's measurement [VT, alpha, beta, phi, theta, psi, h, pow, rate "
             f"channels], shape (8 + m_r,), got {shape}"
         )
-    _checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
+    checks.check_shape("u", u, (4,), "[thtl, el, ail, rdr]")
     return jnp.concatenate([y[0:3], y[6:7], jnp.asarray(u, y.dtype)])
 
 
@@ -104,12 +109,20 @@ def rate_derivative(rates: Array, inputs: Array, model: RateModel) -> Array:
 
 
 def rate_transition(rates: Array, inputs: Array, model: RateModel) -> Array:
-    """``w[k+1]``: one RK4 step over ``model.dt``, input held (stages a loop: the tables compile once)."""
+    """``w[k+1]``: one RK4 step over ``model.dt``, input held (stages a loop: the tables compile once).
+
+    Returns:
+      (3,) body rates ``[P, Q, R]`` [rad/s] one sample later.
+    """
     return rk4(lambda x, t: rate_derivative(x, inputs, model), rates, model.dt, loop_stages=True)
 
 
 def rate_observation(rates: Array, inputs: Array, model: RateModel) -> Array:
-    """``H w`` (m_r,): the rate channels without noise (``H``: ``rate_axes``, a row per input axis)."""
+    """``H w`` (m_r,): the rate channels without noise (``H``: ``rate_axes``, a row per input axis).
+
+    Returns:
+      (m_r,) noise-free rate-sensor readings [rad/s]; ``inputs`` unused.
+    """
     return model.rate_axes @ rates
 
 

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi.data import data_path
 
 #: cell-override profiles of ``f16_stevens_lewis.json`` (``"stevens_lewis_2nd_ed"`` = the book)
@@ -306,7 +306,7 @@ def interpolate2(values: Array, i: Array, f: Array, j: Array, g: Array) -> Array
 
 def _grid_size(name: str, grid: Array) -> int:
     """The number of breakpoints of a 1-D grid of at least 2 (trace time)."""
-    shape = _checks.shape_of(grid)
+    shape = checks.shape_of(grid)
     if len(shape) != 1 or shape[0] < 2:
         raise ValueError(
             f"{name}: expected a 1-D grid of at least 2 breakpoints, got shape {shape}"
@@ -317,7 +317,7 @@ def _grid_size(name: str, grid: Array) -> int:
 def lookup1(x: Array, grid: Array, values: Array) -> Array:
     """1-D table lookup ``T(x)`` (``values`` (n,) or (m, n): m tables on the same grid)."""
     n = _grid_size("grid", grid)
-    shape = _checks.shape_of(values)
+    shape = checks.shape_of(values)
     if len(shape) not in (1, 2) or shape[-1] != n:
         raise ValueError(
             f"values: expected a table of shape ({n},) or (m, {n}) on the {n}-point grid, got {shape}"
@@ -327,7 +327,7 @@ def lookup1(x: Array, grid: Array, values: Array) -> Array:
 
 def lookup2(row: Array, row_grid: Array, col: Array, col_grid: Array, values: Array) -> Array:
     """2-D table lookup ``T(row, col)``, bilinear, extrapolated from the end segments."""
-    _checks.check_shape(
+    checks.check_shape(
         "values",
         values,
         (_grid_size("row_grid", row_grid), _grid_size("col_grid", col_grid)),

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _checks
+from jaxfdi import checks
 from jaxfdi._levenberg_marquardt import levenberg_marquardt
 from jaxfdi.models.f16._dynamics import ALPHA, BETA, VT, F16Params, P, Q, R, f16_dynamics
 from jaxfdi.models.f16._engine import throttle_gearing
@@ -105,13 +105,13 @@ def trim_condition(
             "a flight-path angle in (-pi/2, pi/2) rad",
         ),
     ):
-        _checks.check_real(name, value)
-        concrete = _checks.concrete(value)
+        checks.check_real(name, value)
+        concrete = checks.concrete(value)
         if concrete is not None and not np.all(np.isfinite(concrete) & valid(concrete)):
-            raise ValueError(f"{name}: expected {expected}, got {_checks.received(concrete)}")
+            raise ValueError(f"{name}: expected {expected}, got {checks.received(concrete)}")
     for name, value in (("turn_rate", turn_rate), ("pull_up_rate", pull_up_rate)):
-        _checks.check_real(name, value)
-        _checks.check_finite(name, value)
+        checks.check_real(name, value)
+        checks.check_finite(name, value)
     values = [
         jnp.asarray(v, dtype) for v in (airspeed, altitude, climb_angle, turn_rate, pull_up_rate)
     ]
@@ -262,12 +262,12 @@ def trim(
       ``max |residual| <= tolerance``).
     """
     for name, leaf in zip(TrimCondition._fields, condition):
-        _checks.check_shape(
+        checks.check_shape(
             f"condition.{name}", leaf, (), "a scalar (vmap over a stack of conditions)"
         )
     dtype = params.mass.dtype
     z0 = initial_guess(condition, params) if guess is None else jnp.asarray(guess, dtype)
-    _checks.check_shape("guess", z0, (6,), "[thtl, el, ail, rdr, alpha, beta]")
+    checks.check_shape("guess", z0, (6,), "[thtl, el, ail, rdr, alpha, beta]")
     eps = jnp.finfo(dtype).eps
     tol = 1e3 * eps * params.gravity if tolerance is None else jnp.asarray(tolerance, dtype)
     solution = levenberg_marquardt(
@@ -291,7 +291,7 @@ def trim_batch(params: F16Params, conditions: TrimCondition, xcg: Array) -> Trim
     Returns:
       the ``TrimResult`` with (N, ...) leaves.
     """
-    _checks.check_shape(
-        "xcg", xcg, _checks.shape_of(conditions.airspeed)[:1], "one c.g. per condition"
+    checks.check_shape(
+        "xcg", xcg, checks.shape_of(conditions.airspeed)[:1], "one c.g. per condition"
     )
     return jax.vmap(lambda c, x: trim(params._replace(xcg=x), c))(conditions, xcg)

@@ -16,9 +16,34 @@ Tolerances (``eps`` of the array's float dtype), relative so that a covariance o
 - symmetry: ``max |X - X^T| <= 1e3 eps max |X|``;
 - PSD: ``lambda_min >= -100 n eps lambda_max`` (eigenvalues of the symmetric part, in float64); positive definite:
   ``lambda_min > 100 n eps lambda_max`` and ``lambda_max > 0``.
+
+A plant, detector or study of one's own checks its arguments with the same functions, so that its errors read alike.
+Constants: ``MAX_SEED`` the largest seed a study or the CLI takes, 2**32 - 1 (its comment says why).
 """
 
 from __future__ import annotations
+
+__all__ = [
+    "MAX_SEED",
+    "received",
+    "shape_of",
+    "check_real",
+    "check_finite",
+    "check_shape",
+    "check_matrix",
+    "check_square",
+    "check_covariance",
+    "check_probability",
+    "check_int",
+    "check_int_array",
+    "check_scalar",
+    "check_positive",
+    "check_index",
+    "check_choice",
+    "check_flag",
+    "check_callable",
+    "check_same_length",
+]
 
 import numbers
 from typing import Any, Iterable
@@ -46,6 +71,11 @@ def concrete(x: Any) -> np.ndarray | None:
 
 
 def shape_of(x: Any) -> tuple[int, ...]:
+    """The shape of any array-like (a Python scalar: ``()``).
+
+    Returns:
+      tuple of int, ``np.shape(x)``.
+    """
     return tuple(np.shape(x))
 
 
@@ -54,7 +84,11 @@ def _fmt(shape: tuple) -> str:
 
 
 def received(value: Any) -> str:
-    """A short description of a received value for an error message."""
+    """A short description of a received value for an error message.
+
+    Returns:
+      str: ``repr`` of a scalar, or the shape, dtype and first entries of an array (a traced one: its shape and dtype).
+    """
     if isinstance(value, jax.core.Tracer):
         return f"a traced array of shape {_fmt(value.shape)} and dtype {value.dtype}"
     if isinstance(value, (str, bool, numbers.Number)) or value is None:
@@ -93,14 +127,22 @@ def _kind(x: Any) -> str:
 
 
 def check_real(name: str, x: Any, meaning: str = "real numbers") -> None:
-    """Raise ``TypeError`` unless ``x`` holds real numbers (float, int or bool)."""
+    """Raise ``TypeError`` unless ``x`` holds real numbers (float, int or bool).
+
+    Returns:
+      None; raises ``TypeError`` naming ``name``, ``meaning`` and what was received.
+    """
     kind = _kind(x)
     if kind not in "fiub":
         raise TypeError(f"{name}: expected {meaning}, got {received(x)} (dtype kind {kind!r})")
 
 
 def check_finite(name: str, x: Any, meaning: str = "") -> None:
-    """Raise ``ValueError`` if concrete ``x`` has a NaN or infinite entry."""
+    """Raise ``ValueError`` if concrete ``x`` has a NaN or infinite entry.
+
+    Returns:
+      None; raises ``ValueError`` naming ``name`` and the first non-finite index (traced ``x`` passes).
+    """
     value = concrete(x)
     if value is None or value.dtype.kind not in "fc":
         return
@@ -133,7 +175,11 @@ def float_dtype(*arrays: Any):
 
 
 def check_shape(name: str, x: Any, expected: tuple, meaning: str = "") -> None:
-    """Raise if ``x`` does not have shape ``expected`` (``None`` entries match anything)."""
+    """Raise if ``x`` does not have shape ``expected`` (``None`` entries match anything).
+
+    Returns:
+      None; raises ``ValueError`` naming ``name``, the expected shape (``*`` for ``None``) and the received one.
+    """
     shape = shape_of(x)
     ok = len(shape) == len(expected) and all(e is None or e == s for e, s in zip(expected, shape))
     if not ok:
@@ -143,14 +189,22 @@ def check_shape(name: str, x: Any, expected: tuple, meaning: str = "") -> None:
 
 
 def check_matrix(name: str, x: Any, expected: tuple, meaning: str = "") -> None:
-    """A real, finite (when concrete) array of shape ``expected``."""
+    """A real, finite (when concrete) array of shape ``expected``.
+
+    Returns:
+      None; raises ``TypeError`` (not real) or ``ValueError`` (shape, non-finite entry).
+    """
     check_real(name, x, f"a real matrix{f' ({meaning})' if meaning else ''}")
     check_shape(name, x, expected, meaning)
     check_finite(name, x, meaning)
 
 
 def check_square(name: str, x: Any, size: int | None = None, meaning: str = "") -> int:
-    """A real, finite (when concrete) square matrix; returns its size."""
+    """A real, finite (when concrete) square matrix, of ``size`` rows when given.
+
+    Returns:
+      int, its size ``n``; raises ``TypeError`` or ``ValueError`` otherwise.
+    """
     shape = shape_of(x)
     check_real(name, x, f"a real square matrix{f' ({meaning})' if meaning else ''}")
     if len(shape) != 2 or shape[0] != shape[1] or (size is not None and shape[0] != size):
@@ -169,7 +223,11 @@ def _eps(value: np.ndarray) -> float:
 
 def check_covariance(name: str, x: Any, size: int | None = None, definite: bool = False) -> int:
     """A covariance: real, square, finite, symmetric, PSD (``definite``: positive definite) by the eigenvalue test
-    with the module doc's tolerances. Returns its size."""
+    with the module doc's tolerances.
+
+    Returns:
+      int, its size ``n``; raises ``ValueError`` naming the failed property (value checks only when concrete).
+    """
     n = check_square(name, x, size, "a covariance")
     value = concrete(x)
     if value is None or n == 0:
@@ -203,7 +261,11 @@ def check_covariance(name: str, x: Any, size: int | None = None, definite: bool 
 
 
 def check_probability(name: str, p: Any, open_interval: bool = True) -> None:
-    """A real probability (scalar or array) in (0, 1) (``open_interval``) or [0, 1]."""
+    """A real probability (scalar or array) in (0, 1) (``open_interval``) or [0, 1].
+
+    Returns:
+      None; raises ``TypeError`` or ``ValueError`` naming the interval (traced ``p`` passes the value check).
+    """
     check_real(name, p, "a probability")
     value = concrete(p)
     if value is None:
@@ -222,7 +284,11 @@ def check_int(
     meaning: str = "an integer",
 ) -> int:
     """A concrete integer count or index (Python/NumPy integer or 0-d integer array; not a bool, not an integral
-    float) in ``[minimum, maximum]``; returned as int."""
+    float) in ``[minimum, maximum]``.
+
+    Returns:
+      int, the value; raises ``TypeError`` (not a concrete integer) or ``ValueError`` (out of range).
+    """
     kind = _kind(value)
     if isinstance(value, jax.core.Tracer):
         raise TypeError(
@@ -246,7 +312,11 @@ def check_int_array(
     meaning: str = "integers",
 ) -> None:
     """Integer entries (any shape; floats refused), within ``[minimum, maximum]`` when concrete (traced integer
-    arrays pass: checked by whoever made them)."""
+    arrays pass: checked by whoever made them).
+
+    Returns:
+      None; raises ``TypeError`` (not integers) or ``ValueError`` (an entry out of range).
+    """
     kind = _kind(value)
     if kind not in "iu":
         raise TypeError(f"{name}: expected {meaning}, got {received(value)}")
@@ -271,7 +341,11 @@ def check_scalar(
     high_open: bool = False,
     meaning: str = "a real scalar",
 ) -> None:
-    """A real finite scalar in ``low .. high`` (open or closed ends) when concrete; a traced scalar passes."""
+    """A real finite scalar in ``low .. high`` (open or closed ends) when concrete; a traced scalar passes.
+
+    Returns:
+      None; raises ``TypeError`` (not real) or ``ValueError`` (not a scalar, not finite, outside the interval).
+    """
     check_real(name, value, meaning)
     if np.ndim(value) != 0:
         raise ValueError(
@@ -295,16 +369,29 @@ def check_scalar(
 
 
 def check_positive(name: str, value: Any, meaning: str = "a positive real scalar") -> None:
+    """``check_scalar`` on ``(0, inf]`` (finite): a positive real scalar.
+
+    Returns:
+      None; raises as ``check_scalar``.
+    """
     check_scalar(name, value, 0.0, low_open=True, meaning=meaning)
 
 
 def check_index(name: str, value: Any, size: int, meaning: str = "an index") -> None:
-    """Integer index (or array of them) in ``[0, size)`` when concrete."""
+    """Integer index (or array of them) in ``[0, size)`` when concrete.
+
+    Returns:
+      None; raises as ``check_int_array``.
+    """
     check_int_array(name, value, 0, size - 1, f"{meaning} in range for size {size}")
 
 
 def check_choice(name: str, value: Any, options: Iterable[Any]) -> None:
-    """``value`` is one of ``options`` (listed in the message)."""
+    """``value`` is one of ``options`` (listed in the message).
+
+    Returns:
+      None; raises ``ValueError`` listing ``options``.
+    """
     options = list(options)
     try:
         ok = value in options
@@ -315,17 +402,31 @@ def check_choice(name: str, value: Any, options: Iterable[Any]) -> None:
 
 
 def check_flag(name: str, value: Any) -> None:
-    """``value`` is a Python ``bool`` (a switch between algorithms, decided at trace time)."""
+    """``value`` is a Python ``bool`` (a switch between algorithms, decided at trace time).
+
+    Returns:
+      None; raises ``TypeError``.
+    """
     if not isinstance(value, bool):
         raise TypeError(f"{name}: expected True or False, got {received(value)}")
 
 
 def check_callable(name: str, value: Any, meaning: str = "a function") -> None:
+    """``value`` is callable.
+
+    Returns:
+      None; raises ``TypeError`` naming ``meaning``.
+    """
     if not callable(value):
         raise TypeError(f"{name}: expected {meaning}, got {received(value)}")
 
 
 def check_same_length(names: tuple[str, str], a: Any, b: Any) -> None:
+    """``a`` and ``b`` have the same leading (time) length ``T``.
+
+    Returns:
+      None; raises ``ValueError`` naming both arguments and their lengths.
+    """
     la, lb = shape_of(a)[:1], shape_of(b)[:1]
     if la != lb:
         raise ValueError(

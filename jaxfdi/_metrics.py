@@ -146,7 +146,8 @@ def _first_unhealthy(first: Array, k: Array, healthy: Array) -> Array:
 def record_from_alarms(
     alarms: Array, onset: Array, healthy: Array | None = None
 ) -> DetectionRecord:
-    """The same record from a whole (T,) alarm history (and optional (T,) bool ``healthy``) at once.
+    """The same record from a whole (T,) alarm history (bool, or integers: nonzero is an alarm; and optional (T,)
+    bool ``healthy``) at once.
 
     Returns:
       ``DetectionRecord`` of scalar int32 fields (first alarm, detection step, false alarms, pre-onset steps,
@@ -164,6 +165,7 @@ def record_from_alarms(
         checks.check_shape(
             "healthy", healthy, checks.shape_of(alarms), "one flag per step of alarms"
         )
+    alarms = jnp.asarray(alarms) != 0  # an integer history: any nonzero entry is an alarm
     k = jnp.arange(alarms.shape[0])
     before = k < onset
     after = alarms & ~before

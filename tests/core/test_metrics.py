@@ -58,6 +58,17 @@ def test_streaming_record_equals_batch_record_equals_brute_force(random_alarms):
         assert tuple(int(x[i]) for x in batch[:5]) == ref
 
 
+def test_an_integer_alarm_history_counts_every_nonzero_step_as_an_alarm(random_alarms):
+    """Integer alarms (a count, a label) are alarms where nonzero, as the brute force reads them;
+    a bitwise ``&`` with the bool masks once dropped even values."""
+    alarms, onsets = random_alarms
+    labels = np.where(alarms, np.random.default_rng(5).integers(1, 7, alarms.shape), 0)
+    batch = jax.vmap(record_from_alarms)(jnp.asarray(labels, jnp.int32), onsets)
+    for i in range(alarms.shape[0]):
+        ref = reference_record([bool(a) for a in labels[i]], int(onsets[i]))
+        assert tuple(int(x[i]) for x in batch[:5]) == ref
+
+
 def test_first_unhealthy_streaming_and_batch_equal_first_bad_step(random_alarms):
     alarms, onsets = random_alarms
     rng = np.random.default_rng(4)

@@ -51,7 +51,7 @@ from bench_f16_flight import numpy_design
 
 from jaxfdi import _io
 from jaxfdi.data import data_path
-from jaxfdi.detection._hybrid_psa import FOLLOW
+from jaxfdi.detection import FOLLOW
 from jaxfdi.scenarios import f16_fdi as sf
 from jaxfdi.scenarios.f16_flight import (
     DT,

@@ -73,9 +73,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import f16_numpy_baseline as baseline
 
 from jaxfdi import _io
-from jaxfdi.control._flight import FlightWeights, design_flight_control
+from jaxfdi.control import FlightWeights, design_flight_control
 from jaxfdi.data import data_path
-from jaxfdi.models.f16._plant import measurement_cov
+from jaxfdi.models.f16 import measurement_cov
 from jaxfdi.scenarios.f16_flight import (
     DT,
     ERRORS,

@@ -46,18 +46,18 @@ import numpy as np
 
 from jaxfdi import _io
 from jaxfdi.data import data_path
-from jaxfdi.gnss import _integrity as integrity
-from jaxfdi.gnss import geodetic_to_ecef, read_rinex_nav
-from jaxfdi.gnss._frames import elevation_azimuth
-from jaxfdi.gnss._orbits import (
+from jaxfdi.gnss import (
     OMEGA_E,
-    SPEED_OF_LIGHT,
     ephemeris_table,
+    geodetic_to_ecef,
+    raim_tables,
+    read_rinex_nav,
     select_orbits,
-    transmission_geometry,
 )
+from jaxfdi.gnss import _integrity as integrity
+from jaxfdi.gnss._frames import elevation_azimuth
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, transmission_geometry
 from jaxfdi.gnss._positioning import transmit_states
-from jaxfdi.gnss._raim import raim_tables
 
 SIGMA = 5.0
 MASK = math.radians(5.0)

@@ -45,10 +45,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, select_orbits
+from jaxfdi.gnss import (
+    monitor_receiver,
+    read_observations,
+    read_rinex_nav,
+    receiver_epochs,
+    select_orbits,
+)
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT
 from jaxfdi.gnss._positioning import transmit_states
-from jaxfdi.gnss._receiver import monitor_receiver, read_observations, receiver_epochs
-from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._solution_separation import solution_separation
 from jaxfdi.scenarios.gnss_real import _peer_navdata, load_phone
 

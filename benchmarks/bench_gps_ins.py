@@ -43,19 +43,16 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _io
-from jaxfdi._loop import combine_scorers, detection_scorer, feedforward, run_loop
-from jaxfdi._stages import Plant
+from jaxfdi import Plant, _io, combine_scorers, detection_scorer, feedforward, run_loop
 from jaxfdi.gnss import _integrity as gnss_integrity
 from jaxfdi.gnss import _measurements as measurements
+from jaxfdi.ins import GpsFix, NavState
 from jaxfdi.ins import _error_state as error_state
 from jaxfdi.ins import _imu as imu
 from jaxfdi.ins import _integrity as integrity
 from jaxfdi.ins import _plant as plant
 from jaxfdi.ins import _scst as scst
 from jaxfdi.ins import _trajectory as trajectory
-from jaxfdi.ins._loosely_coupled import GpsFix
-from jaxfdi.ins._mechanization import NavState
 from jaxfdi.scenarios import gps_ins
 
 VELOCITY_SIGMA = 0.1

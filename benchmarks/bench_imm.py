@@ -38,8 +38,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_filters import cpu_model, rel_diff, time_jax, write_json_atomic
 
 import jaxfdi
-from jaxfdi.models import engine_model
-from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi.models import bias_mode_initial_state, bias_modes, engine_model, noise_inflation_modes
 from jaxfdi.scenarios.engine import PAPER_TRANSITION, EngineSettings
 
 T = 1000

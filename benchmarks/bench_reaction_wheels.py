@@ -61,11 +61,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic
 
 from jaxfdi import _linalg
-from jaxfdi.detection._credits import hypothesis_credits
-from jaxfdi.detection._dual_filter import dual_filter
-from jaxfdi.filters._base import Filter, run_filter
-from jaxfdi.filters._mm import multiple_model
-from jaxfdi.models._reaction_wheels import body_rate_field, stop_hypotheses, wheel_rate_transition
+from jaxfdi.detection import dual_filter, hypothesis_credits
+from jaxfdi.filters import Filter, multiple_model, run_filter
+from jaxfdi.models import body_rate_field, stop_hypotheses, wheel_rate_transition
 from jaxfdi.scenarios.reaction_wheels import (
     estimation_filter,
     run_wheels,

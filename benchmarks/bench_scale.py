@@ -45,7 +45,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_filters import cpu_model, rel_diff, repeat_timing, write_json_atomic
 
 import jaxfdi
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi import steady_state_kalman
 from jaxfdi.detection import glrt_detector
 from jaxfdi.filters import GaussianState, kalman_filter, rts_smoother, run_filter
 from jaxfdi.models import engine_model

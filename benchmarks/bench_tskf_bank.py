@@ -42,13 +42,9 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(__file__))
 from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic
 
-from jaxfdi.control._lqr import lqr_pi
-from jaxfdi.filters._tskf import (
-    actuator_direction,
-    run_tskf_bank,
-    sensor_direction,
-    stack_directions,
-)
+from jaxfdi.control import lqr_pi
+from jaxfdi.filters import actuator_direction, sensor_direction, stack_directions
+from jaxfdi.filters._tskf import run_tskf_bank
 from jaxfdi.models import _vtol as vtol
 from jaxfdi.scenarios.vtol import BIAS_WALK, COMMAND, INIT_BIAS_COV, INIT_COV, LQR_Q, LQR_R, TRACKED
 

@@ -54,14 +54,12 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from jaxfdi import _io
-from jaxfdi._metrics import DetectionRecord, binomial_lower_bound, binomial_upper_bound
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi import DetectionRecord, _io, binomial_lower_bound, steady_state_kalman
+from jaxfdi._metrics import binomial_upper_bound
 from jaxfdi.detection import fault_directions, fault_signatures
 from jaxfdi.detection._glrt import glr_statistic
 from jaxfdi.detection._known_change import known_change_bank
-from jaxfdi.filters._base import run_filter
-from jaxfdi.filters._kalman import kalman_filter
+from jaxfdi.filters import kalman_filter, run_filter
 from jaxfdi.models import engine_model
 from jaxfdi.scenarios import engine_tuning as et
 from jaxfdi.scenarios.engine import EngineSettings, engine_methods, labelled_runs, summarize_method

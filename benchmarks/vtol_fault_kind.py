@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxfdi
-from jaxfdi._faults import stack_faults
+from jaxfdi import stack_faults
 from jaxfdi.scenarios import vtol as sv
 from jaxfdi.scenarios.vtol_loop import is_multiplicative, run_closed_loop
 

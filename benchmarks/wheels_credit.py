@@ -45,12 +45,9 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from jaxfdi import _io
-from jaxfdi._loop import detection_scorer, run_loop
-from jaxfdi._metrics import binomial_lower_bound
-from jaxfdi._montecarlo import monte_carlo
-from jaxfdi.control._attitude import wheel_attitude_controller, wheel_plant
-from jaxfdi.models._reaction_wheels import WheelCommand, filter_input
+from jaxfdi import _io, binomial_lower_bound, detection_scorer, monte_carlo, run_loop
+from jaxfdi.control import wheel_attitude_controller, wheel_plant
+from jaxfdi.models import WheelCommand, filter_input
 from jaxfdi.scenarios import reaction_wheels as rw
 
 #: steps after the engagement at which the credits are examined (0.3 s: the decision

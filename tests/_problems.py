@@ -7,8 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxfdi
-from jaxfdi.models import engine_model
-from jaxfdi.models._linear import linear_observation, linear_transition
+from jaxfdi.models import engine_model, linear_observation, linear_transition
 from jaxfdi.models._rigid_body import (
     rigid_body_observation,
     rigid_body_params,

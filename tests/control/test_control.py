@@ -11,9 +11,14 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from jaxfdi.control import assign_eigenstructure, lqr_gain, lqr_pi
-from jaxfdi.control._eigenstructure import effectiveness_input, nominal_eigenstructure
-from jaxfdi.control._lqr import integral_augmentation
+from jaxfdi.control import (
+    assign_eigenstructure,
+    integral_augmentation,
+    lqr_gain,
+    lqr_pi,
+    nominal_eigenstructure,
+)
+from jaxfdi.control._eigenstructure import effectiveness_input
 from jaxfdi.models import _vtol as vtol
 
 H_PAPER = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0]])  # v_h and q (seed 001, eq. 35)

@@ -17,8 +17,7 @@ from jaxfdi.filters import (
     kalman_filter,
     run_filter,
 )
-from jaxfdi.models import LinearGaussianModel, linear_gaussian_model
-from jaxfdi.models._fault_modes import noise_inflation_modes
+from jaxfdi.models import LinearGaussianModel, linear_gaussian_model, noise_inflation_modes
 
 T = 30
 PHI = np.array([[0.9, 0.1, 0.0], [0.0, 0.8, 0.2], [0.1, 0.0, 0.7]])

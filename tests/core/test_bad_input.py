@@ -13,8 +13,7 @@ import pytest
 
 import jaxfdi
 from jaxfdi.detection import chi2_detector, chi2_threshold, moving_window_sum
-from jaxfdi.models import c2d, engine_model
-from jaxfdi.models._linear import linear_observation, linear_transition
+from jaxfdi.models import c2d, engine_model, linear_observation, linear_transition
 
 MODEL = engine_model()  # n = 7, nu = 1, m = 5
 T = 6

@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi._faults import (
+from jaxfdi import (
     NEVER,
     FaultKind,
-    active_label,
     as_stack,
     concat_faults,
     episodes,
@@ -19,8 +18,10 @@ from jaxfdi._faults import (
     fault_label,
     no_fault,
     stack_faults,
+    summarize_episodes,
 )
-from jaxfdi._metrics import episode_record_init, episode_record_update, summarize_episodes
+from jaxfdi._faults import active_label
+from jaxfdi._metrics import episode_record_init, episode_record_update
 from jaxfdi.models import engine_model
 
 KINDS = ["bias", "ramp", "impulse", "scale", "stuck", "none"]

@@ -7,15 +7,8 @@ import pytest
 from scipy import stats
 
 import jaxfdi
-from jaxfdi._faults import (
-    FaultKind,
-    Target,
-    apply_fault,
-    fault,
-    fault_label,
-    is_active,
-    stack_faults,
-)
+from jaxfdi import FaultKind, Target, fault, fault_label, is_active, stack_faults
+from jaxfdi._faults import apply_fault
 from jaxfdi.models import engine_model
 
 STEPS = np.arange(12)

@@ -7,7 +7,8 @@ import pytest
 from _frames import assert_table_is_the_json
 from scipy import stats
 
-from jaxfdi._frame import results_frame, results_html
+from jaxfdi import results_frame
+from jaxfdi._frame import results_html
 
 ROWS = [
     {

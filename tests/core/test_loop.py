@@ -14,9 +14,9 @@ from scipy import stats
 import jaxfdi
 from jaxfdi import _loop as loop
 from jaxfdi._monitor import filter_detector
-from jaxfdi.filters._time_varying import model_at, time_varying
-from jaxfdi.models import engine_model
-from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi.filters import time_varying
+from jaxfdi.filters._time_varying import model_at
+from jaxfdi.models import LinearGaussianModel, engine_model
 
 T = 60
 ONSET = 30

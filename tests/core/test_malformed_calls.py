@@ -28,13 +28,17 @@ from jaxfdi import _loop as loop
 from jaxfdi import _metrics as metrics
 from jaxfdi import control, detection, models, tuning
 from jaxfdi._monitor import filter_detector
-from jaxfdi.control._attitude import slew
+from jaxfdi.control import slew
 from jaxfdi.filters import _time_varying
 from jaxfdi.filters import _tskf as tskf
-from jaxfdi.models import engine_model
-from jaxfdi.models._linear import linear_observation, linear_transition
+from jaxfdi.models import (
+    engine_model,
+    linear_observation,
+    linear_transition,
+    vtol_model,
+    vtol_true_plant,
+)
 from jaxfdi.models._rigid_body import rigid_body_params
-from jaxfdi.models._vtol import vtol_model, vtol_true_plant
 from jaxfdi.scenarios.engine import engine_study
 from jaxfdi.scenarios.engine_chi2 import engine_chi2_study
 from jaxfdi.scenarios.engine_chi2_tuning import tune_engine_chi2

@@ -6,19 +6,17 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi._faults import NEVER
-from jaxfdi._metrics import (
+from jaxfdi import (
+    NEVER,
     DetectionRecord,
-    confusion_matrix,
     delay_statistics,
     fault_row,
     record_from_alarms,
-    record_init,
-    record_update,
     step_health,
     summarize_detection,
     unhealthy_warning,
 )
+from jaxfdi._metrics import confusion_matrix, record_init, record_update
 from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum
 from jaxfdi.detection._chi2 import normalized_innovation_squared
 

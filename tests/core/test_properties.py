@@ -31,8 +31,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from jaxfdi._faults import fault
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi import fault, steady_state_kalman
 from jaxfdi.detection import _parity as ps
 from jaxfdi.detection import chi2_detector, chi2_threshold, frozen_channel_detector, glrt_detector
 from jaxfdi.filters import (
@@ -43,8 +42,7 @@ from jaxfdi.filters import (
     unknown_input_filter,
     unscented_kalman_filter,
 )
-from jaxfdi.models import engine_model
-from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi.models import LinearGaussianModel, engine_model
 
 SETTINGS = settings(
     max_examples=60,

@@ -8,7 +8,8 @@ import pytest
 import scipy.linalg
 
 import jaxfdi
-from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
+from jaxfdi import steady_state_kalman
+from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info
 from jaxfdi.models import engine_model
 
 RTOL = 1e-9

@@ -27,9 +27,9 @@ import scipy.linalg
 from test_riccati import PROBLEMS
 
 import jaxfdi
-from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info, steady_state_kalman
-from jaxfdi.control import lqr_gain, lqr_pi
-from jaxfdi.control._lqr import integral_augmentation
+from jaxfdi import steady_state_kalman
+from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info
+from jaxfdi.control import integral_augmentation, lqr_gain, lqr_pi
 from jaxfdi.models import _vtol as vtol
 
 #: an unstable mode (1.5) that the input cannot reach

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi import streaming
-from jaxfdi._metrics import DetectionRecord, record_from_alarms, summarize_detection
+from jaxfdi import DetectionRecord, record_from_alarms, streaming, summarize_detection
 
 HORIZON = 400
 

@@ -21,8 +21,8 @@ from _compiles import counting_compiles
 import jaxfdi
 from jaxfdi import _montecarlo as montecarlo
 from jaxfdi import _study as study
-from jaxfdi._faults import fault, no_fault, stack_faults
-from jaxfdi.models._linear import LinearGaussianModel
+from jaxfdi import fault, no_fault, stack_faults
+from jaxfdi.models import LinearGaussianModel
 
 HERE = Path(__file__).resolve().parent
 TESTS = HERE.parent  # the shared helpers (_compiles)

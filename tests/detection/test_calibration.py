@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi.detection._calibration import empirical_threshold, scale_to_run_false_alarm
+from jaxfdi.detection import empirical_threshold, scale_to_run_false_alarm
 
 
 def test_empirical_threshold_estimates_the_laws_quantile_and_keeps_the_floor():

@@ -15,16 +15,20 @@ import pytest
 import scipy.stats
 
 import jaxfdi
-from jaxfdi import simulate
-from jaxfdi._faults import fault
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi import fault, simulate, steady_state_kalman
 from jaxfdi.detection import _parity as ps
-from jaxfdi.detection import chi2_detector, glrt_detector, glrt_threshold, moving_window_sum
+from jaxfdi.detection import (
+    block_alarms,
+    chi2_detector,
+    corrected_glrt,
+    frozen_channel_detector,
+    frozen_threshold,
+    glrt_detector,
+    glrt_threshold,
+    known_change_detector,
+    moving_window_sum,
+)
 from jaxfdi.detection._credits import credit_isolator
-from jaxfdi.detection._frozen import frozen_channel_detector, frozen_threshold
-from jaxfdi.detection._glrt_correction import corrected_glrt
-from jaxfdi.detection._known_change import known_change_detector
-from jaxfdi.detection._wavelet import block_alarms
 from jaxfdi.models import engine_model
 
 T, ONSET, WINDOW, BURST = 120, 60, 10, slice(20, 25)

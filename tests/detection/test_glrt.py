@@ -9,17 +9,16 @@ import pytest
 import scipy.stats
 
 import jaxfdi
-from jaxfdi._riccati import steady_state_kalman
-from jaxfdi.detection import glrt_detector
-from jaxfdi.detection._glrt import (
+from jaxfdi import steady_state_kalman
+from jaxfdi.detection import (
     detector_setup,
     fault_directions,
     fault_signatures,
-    glr_by_onset,
     glr_sequence,
-    glr_statistic,
+    glrt_detector,
     glrt_threshold,
 )
+from jaxfdi.detection._glrt import glr_by_onset, glr_statistic
 from jaxfdi.models import engine_model
 
 WINDOW = 10

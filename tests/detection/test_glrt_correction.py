@@ -14,7 +14,7 @@ import scipy.linalg
 import scipy.stats
 
 import jaxfdi
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi import steady_state_kalman
 from jaxfdi.detection import (
     corrected_glrt,
     fault_directions,

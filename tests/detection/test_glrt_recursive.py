@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi._riccati import steady_state_kalman
-from jaxfdi.detection import glrt_detector, glrt_threshold
-from jaxfdi.detection._glrt import fault_directions, fault_signatures
+from jaxfdi import steady_state_kalman
+from jaxfdi.detection import fault_directions, fault_signatures, glrt_detector, glrt_threshold
 from jaxfdi.models import engine_model
 
 T, ONSET = 90, 40

@@ -6,12 +6,8 @@ import numpy as np
 import pytest
 from scipy import optimize, stats
 
-from jaxfdi.detection import chi2_threshold
-from jaxfdi.detection._noncentral_chi2 import (
-    ncx2_cdf,
-    ncx2_quantile,
-    noncentrality_for_missed_detection,
-)
+from jaxfdi.detection import chi2_threshold, noncentrality_for_missed_detection
+from jaxfdi.detection._noncentral_chi2 import ncx2_cdf, ncx2_quantile
 
 DOF = np.array([1, 2, 3, 5, 8, 12, 20, 30])[:, None, None]
 LAM = np.array([0.0, 0.3, 4.0, 25.0, 60.0, 120.0, 200.0])[None, :, None]

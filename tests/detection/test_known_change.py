@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi import steady_state_kalman
 from jaxfdi.detection import fault_directions, fault_signatures, known_change_detector
 from jaxfdi.detection._known_change import known_change_bank, known_change_by_onset
 from jaxfdi.models import engine_model

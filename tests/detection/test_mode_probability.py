@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.detection._mode_probability import mode_probability_detector
+from jaxfdi.detection import mode_probability_detector
 
 
 def _reference(mu, estimates, threshold, confirm, normal=0):

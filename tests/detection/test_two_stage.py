@@ -17,12 +17,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi.detection import dual_filter
+from jaxfdi.detection import dual_filter, two_stage_isolation
 from jaxfdi.detection._credits import credit_isolator
-from jaxfdi.detection._two_stage import two_stage_isolation
-from jaxfdi.filters._base import GaussianState
-from jaxfdi.filters._ekf import extended_kalman_filter
-from jaxfdi.filters._mm import multiple_model
+from jaxfdi.filters import GaussianState, extended_kalman_filter, multiple_model
 
 DT = 0.05
 

@@ -5,12 +5,8 @@ per-block sigma, and ``haar_denoise`` with per-block sigma equal to the constant
 import numpy as np
 import pytest
 
-from jaxfdi.detection._wavelet import (
-    causal_detail_sigma,
-    chi2_detail_sigma,
-    haar_denoise,
-    sample_detail_sigma,
-)
+from jaxfdi.detection import causal_detail_sigma, chi2_detail_sigma, haar_denoise
+from jaxfdi.detection._wavelet import sample_detail_sigma
 
 
 def numpy_details(x, levels):

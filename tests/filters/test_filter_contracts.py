@@ -17,7 +17,7 @@ import pytest
 from _problems import rigid_body_data
 
 import jaxfdi
-from jaxfdi.models._linear import linear_observation, linear_transition
+from jaxfdi.models import linear_observation, linear_transition
 from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 # ------------------------------------------------------------------ every Filter of the library

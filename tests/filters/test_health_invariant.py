@@ -30,8 +30,8 @@ import pytest
 
 import jaxfdi
 from jaxfdi.filters import _tskf as tskf
-from jaxfdi.filters._time_varying import model_at, time_varying
-from jaxfdi.filters._unknown_input import unknown_input_filter
+from jaxfdi.filters import time_varying, unknown_input_filter
+from jaxfdi.filters._time_varying import model_at
 
 N, M, NU, T = 3, 2, 1, 10
 

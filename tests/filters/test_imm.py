@@ -15,9 +15,8 @@ from jaxfdi.filters import (
     run_filter,
     unscented_kalman_filter,
 )
-from jaxfdi.models import LinearGaussianModel
-from jaxfdi.models._fault_modes import noise_inflation_modes
-from jaxfdi.tuning._train import checkpointed
+from jaxfdi.models import LinearGaussianModel, noise_inflation_modes
+from jaxfdi.tuning import checkpointed
 
 T = 40
 TRANSITION = np.array([[0.90, 0.05, 0.05], [0.10, 0.88, 0.02], [0.05, 0.0, 0.95]])

@@ -18,8 +18,7 @@ from jaxfdi.filters import (
     unscented_kalman_filter,
 )
 from jaxfdi.filters._sqrt_kalman import SqrtGaussianState
-from jaxfdi.models import LinearGaussianModel
-from jaxfdi.models._linear import linear_observation, linear_transition
+from jaxfdi.models import LinearGaussianModel, linear_observation, linear_transition
 from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 
 FIELDS = (

@@ -13,19 +13,23 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi._faults import concat_faults, fault
+from jaxfdi import concat_faults, fault
 from jaxfdi.data import data_path
-from jaxfdi.gnss import geodetic_to_ecef, parity_check, protection_levels, read_rinex_nav
-from jaxfdi.gnss._integrity import geometry_fix, monitor_epoch, raim_output
-from jaxfdi.gnss._measurements import elevation_sigma, receiver_plant
-from jaxfdi.gnss._orbits import (
-    ORBIT_PROBLEMS,
-    SPEED_OF_LIGHT,
+from jaxfdi.gnss import (
+    elevation_sigma,
     ephemeris_table,
+    geodetic_to_ecef,
+    monitor_epoch,
+    parity_check,
+    protection_levels,
+    raim_output,
+    raim_tables,
+    read_rinex_nav,
+    receiver_plant,
     select_orbits,
-    transmission_geometry,
 )
-from jaxfdi.gnss._raim import raim_tables
+from jaxfdi.gnss._integrity import geometry_fix
+from jaxfdi.gnss._orbits import ORBIT_PROBLEMS, SPEED_OF_LIGHT, transmission_geometry
 
 SITE = geodetic_to_ecef(math.radians(37.5419), math.radians(127.0782), 60.0)
 T = 259200.0 + 2700.0

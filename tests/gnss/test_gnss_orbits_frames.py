@@ -12,23 +12,24 @@ import pytest
 
 from jaxfdi.data import data_path
 from jaxfdi.gnss import (
+    OMEGA_E,
+    almanac_table,
     ecef_to_geodetic,
+    ecef_to_ned,
+    ephemeris_table,
     geodetic_to_ecef,
     orbit_table,
     read_rinex_nav,
     read_yuma,
     satellite_position,
+    select_orbits,
 )
-from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, ned_to_ecef
+from jaxfdi.gnss._frames import elevation_azimuth, ned_to_ecef
 from jaxfdi.gnss._orbits import (
-    OMEGA_E,
     SPEED_OF_LIGHT,
     Orbit,
-    almanac_table,
-    ephemeris_table,
     satellite_clock,
     satellite_velocity,
-    select_orbits,
     transmission_geometry,
 )
 from jaxfdi.gnss._positioning import dops

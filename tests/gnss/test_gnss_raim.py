@@ -17,25 +17,25 @@ from jaxfdi import _faults as faults
 from jaxfdi import simulate
 from jaxfdi.data import data_path
 from jaxfdi.gnss import (
+    PositionFix,
+    ecef_to_ned,
+    elevation_sigma,
+    ephemeris_table,
     geodetic_to_ecef,
     monitor_epochs,
     parity_check,
     protection_levels,
+    raim_tables,
     read_rinex_nav,
     read_yuma,
+    receiver_plant,
+    select_orbits,
     solve_position,
 )
-from jaxfdi.gnss._frames import ecef_to_ned
 from jaxfdi.gnss._integrity import geometry_fix
-from jaxfdi.gnss._measurements import elevation_sigma, receiver_plant
-from jaxfdi.gnss._orbits import (
-    SPEED_OF_LIGHT,
-    ephemeris_table,
-    select_orbits,
-    transmission_geometry,
-)
-from jaxfdi.gnss._positioning import PositionFix, dops
-from jaxfdi.gnss._raim import paper_threshold, parity_matrix, raim_tables
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, transmission_geometry
+from jaxfdi.gnss._positioning import dops
+from jaxfdi.gnss._raim import paper_threshold, parity_matrix
 
 N = 2048  # epochs per batched call (one compiled program for every test)
 SITE = geodetic_to_ecef(math.radians(37.5419), math.radians(127.0782), 60.0)

@@ -35,10 +35,15 @@ import pytest
 from scipy import optimize, stats
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss import ecef_to_geodetic, geodetic_to_ecef, monitor_receiver, read_android
+from jaxfdi.gnss import (
+    ecef_to_geodetic,
+    geodetic_to_ecef,
+    monitor_receiver,
+    raim_output,
+    raim_tables,
+    read_android,
+)
 from jaxfdi.gnss._android import read_android_ground_truth
-from jaxfdi.gnss._integrity import raim_output
-from jaxfdi.gnss._raim import raim_tables
 from jaxfdi.scenarios.gnss_real import (
     PEER_THRESHOLD,
     PHONE_EXCLUSIONS,

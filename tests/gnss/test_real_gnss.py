@@ -26,14 +26,8 @@ import pyrtklib as rtk
 import pytest
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss._receiver import (
-    code_sigma,
-    monitor_receiver,
-    read_observations,
-    receiver_epochs,
-    user_range_accuracy,
-)
-from jaxfdi.gnss._rinex import read_rinex_nav
+from jaxfdi.gnss import monitor_receiver, read_observations, read_rinex_nav, receiver_epochs
+from jaxfdi.gnss._receiver import code_sigma, user_range_accuracy
 from jaxfdi.gnss._rinex_obs import parse_rinex_obs
 
 STATIONS = {

@@ -13,10 +13,15 @@ import scipy.optimize
 from scipy.stats import norm
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss import read_observations
-from jaxfdi.gnss._positioning import PositionFix, dops
-from jaxfdi.gnss._receiver import monitor_receiver, receiver_epochs
-from jaxfdi.gnss._rinex import read_rinex_nav
+from jaxfdi.gnss import (
+    PositionFix,
+    monitor_receiver,
+    read_observations,
+    read_rinex_nav,
+    receiver_epochs,
+    separate_epochs,
+)
+from jaxfdi.gnss._positioning import dops
 from jaxfdi.gnss._solution_separation import (
     P_CONSTELLATION,
     P_FA_HORIZONTAL,
@@ -25,7 +30,6 @@ from jaxfdi.gnss._solution_separation import (
     P_HMI_VERTICAL,
     P_SATELLITE,
     fault_free_levels,
-    separate_epochs,
     solution_separation,
 )
 

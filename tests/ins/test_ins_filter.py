@@ -15,14 +15,13 @@ from scipy import stats
 
 import jaxfdi
 from jaxfdi import rotation
+from jaxfdi.ins import GpsFix, NavState
 from jaxfdi.ins import _error_state as error_state
 from jaxfdi.ins import _imu as imu
 from jaxfdi.ins import _loosely_coupled as loosely_coupled
 from jaxfdi.ins import _plant as plant
 from jaxfdi.ins import _scst as scst
 from jaxfdi.ins import _trajectory as trajectory
-from jaxfdi.ins._loosely_coupled import GpsFix
-from jaxfdi.ins._mechanization import NavState
 
 PARK = (37.5684, 126.8851, 70.0)
 

@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from jaxfdi.models.f16 import f16_dynamics, f16_params, flight_modes, linearize
 from jaxfdi.models.f16._aero import table_coefficients
-from jaxfdi.models.f16._dynamics import aero_coefficients, f16_dynamics, f16_params, saturate
+from jaxfdi.models.f16._dynamics import aero_coefficients, saturate
 from jaxfdi.models.f16._engine import power_rate, throttle_gearing, thrust
-from jaxfdi.models.f16._linearize import flight_modes, linearize, longitudinal
+from jaxfdi.models.f16._linearize import longitudinal
 from jaxfdi.models.f16._morelli import polynomial_coefficients
 from jaxfdi.models.f16._tables import lookup1, lookup2, stevens_lewis_data, table_arrays
 

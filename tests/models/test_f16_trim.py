@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from jaxfdi.models.f16 import _book as book
-from jaxfdi.models.f16._dynamics import f16_dynamics, f16_params
+from jaxfdi.models.f16 import f16_dynamics, f16_params, trim_batch
 from jaxfdi.models.f16._tables import stevens_lewis_data
-from jaxfdi.models.f16._trim import TRIM_RESIDUALS, trim_batch, trim_condition, trim_residual
+from jaxfdi.models.f16._trim import TRIM_RESIDUALS, trim_condition, trim_residual
 
 #: cells that are not within half a unit: (case, quantity) -> (bound on |ours - book|, why)
 EXCEPTIONS = {

@@ -6,11 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi import linear_simulator, simulate
-from jaxfdi._faults import FaultKind, Target, fault
+from jaxfdi import FaultKind, Target, fault, linear_simulator, simulate
 from jaxfdi.filters import kalman_filter, run_filter
-from jaxfdi.models import engine_model
-from jaxfdi.models._fault_modes import bias_mode_initial_state, bias_modes, noise_inflation_modes
+from jaxfdi.models import bias_mode_initial_state, bias_modes, engine_model, noise_inflation_modes
 
 
 @pytest.fixture(scope="module")

@@ -23,22 +23,22 @@ import pytest
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 import jaxfdi
-from jaxfdi._faults import no_fault
-from jaxfdi.control._attitude import allocate_wheel_torques, slew, slew_reference
-from jaxfdi.detection._credits import credit_isolator, hypothesis_credits
-from jaxfdi.detection._dual_filter import dual_filter, system_matrix_det
-from jaxfdi.models._reaction_wheels import (
+from jaxfdi import no_fault
+from jaxfdi.control import slew, slew_reference
+from jaxfdi.control._attitude import allocate_wheel_torques
+from jaxfdi.detection import dual_filter, hypothesis_credits
+from jaxfdi.detection._credits import credit_isolator
+from jaxfdi.detection._dual_filter import system_matrix_det
+from jaxfdi.models import (
     body_rate_field,
     delivered_torque,
     kitsat3_params,
-    pyramid_axes,
-    rate_jacobian,
     spacecraft_step,
     stop_hypotheses,
     stop_transfer,
-    total_momentum,
     wheel_rate_transition,
 )
+from jaxfdi.models._reaction_wheels import pyramid_axes, rate_jacobian, total_momentum
 from jaxfdi.scenarios.reaction_wheels import estimation_filter, wheel_fault
 
 jax.config.update("jax_enable_x64", True)

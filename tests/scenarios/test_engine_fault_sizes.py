@@ -9,10 +9,9 @@ import numpy as np
 import pytest
 from _frames import assert_table_is_the_json
 
-from jaxfdi._faults import stack_faults
-from jaxfdi._metrics import fault_row
-from jaxfdi._study import case_slices, run_study
-from jaxfdi.models._engine import OUTPUT_NAMES, TS, engine_model
+from jaxfdi import case_slices, fault_row, run_study, stack_faults
+from jaxfdi.models import engine_model
+from jaxfdi.models._engine import OUTPUT_NAMES, TS
 from jaxfdi.scenarios.engine import PAPER_DELAY, engine_spec, fault_size_study
 from jaxfdi.scenarios.engine_chi2 import engine_faults
 

@@ -18,14 +18,21 @@ import scipy.stats
 from _frames import assert_table_is_the_json
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
+from jaxfdi import Target
 from jaxfdi import _loop as loop
 from jaxfdi import _stages as stages
-from jaxfdi._faults import Target, active_label, apply_faults
+from jaxfdi._faults import active_label, apply_faults
 from jaxfdi.detection import _hybrid_psa as hp
 from jaxfdi.filters import run_filter
-from jaxfdi.models.f16._dynamics import f16_dynamics
-from jaxfdi.models.f16._plant import MEASURED_STATES, RATE_OFFSET
-from jaxfdi.models.f16._rates import rate_derivative, rate_model, rate_model_input, rate_transition
+from jaxfdi.models.f16 import (
+    RATE_OFFSET,
+    f16_dynamics,
+    rate_model,
+    rate_model_input,
+    rate_transition,
+)
+from jaxfdi.models.f16._plant import MEASURED_STATES
+from jaxfdi.models.f16._rates import rate_derivative
 from jaxfdi.scenarios import f16_fdi as sf
 from jaxfdi.scenarios.f16_flight import dispersions, flight_setup, nominal_dispersion
 

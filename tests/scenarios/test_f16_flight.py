@@ -12,16 +12,21 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from jaxfdi.control._flight import LATERAL_TRACKED, LONGITUDINAL_TRACKED, flight_plan
-from jaxfdi.control._lqr import integral_augmentation
-from jaxfdi.models.f16._dynamics import ALPHA, BETA, PHI, THETA, VT, H, Q
-from jaxfdi.models.f16._linearize import (
+from jaxfdi.control import LATERAL_TRACKED, LONGITUDINAL_TRACKED, flight_plan, integral_augmentation
+from jaxfdi.models.f16 import (
+    ALPHA,
+    BETA,
     LATERAL_STATES,
     LONGITUDINAL_DESIGN_STATES,
-    longitudinal,
+    PHI,
+    THETA,
+    VT,
+    H,
+    Q,
+    f16_sensors,
     submodel,
 )
-from jaxfdi.models.f16._plant import f16_sensors
+from jaxfdi.models.f16._linearize import longitudinal
 from jaxfdi.scenarios.f16_flight import (
     ERRORS,
     cast_setup,

@@ -17,10 +17,17 @@ from _frames import assert_table_is_the_json
 from scipy import stats
 
 from jaxfdi.data import data_path
-from jaxfdi.gnss import geodetic_to_ecef, read_rinex_nav, satellite_position
-from jaxfdi.gnss._measurements import ClockModel, visibility
-from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, ephemeris_table, satellite_clock, select_orbits
-from jaxfdi.gnss._paths import racetrack_ecef
+from jaxfdi.gnss import (
+    ClockModel,
+    ephemeris_table,
+    geodetic_to_ecef,
+    racetrack_ecef,
+    read_rinex_nav,
+    satellite_position,
+    select_orbits,
+    visibility,
+)
+from jaxfdi.gnss._orbits import SPEED_OF_LIGHT, satellite_clock
 from jaxfdi.scenarios.gnss_campus import (
     DT,
     MASK_DEG,

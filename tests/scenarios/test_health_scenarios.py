@@ -5,8 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxfdi._faults import NEVER
-from jaxfdi._metrics import DetectionRecord
+from jaxfdi import NEVER, DetectionRecord
 from jaxfdi.models import engine_model
 from jaxfdi.scenarios.engine import EngineStudy, summarize_method
 from jaxfdi.scenarios.engine_chi2 import engine_chi2_study

@@ -26,7 +26,7 @@ import pytest
 from _frames import assert_table_is_the_json
 from scipy import stats
 
-from jaxfdi.ins._integrity import attribute_ins_alarms
+from jaxfdi.ins import attribute_ins_alarms
 from jaxfdi.scenarios.gps_ins import (
     PAPER_TABLE3,
     StudySize,

@@ -18,10 +18,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi._faults import FaultKind, no_fault
-from jaxfdi._metrics import binomial_lower_bound
-from jaxfdi._study import run_study
-from jaxfdi.models._reaction_wheels import (
+from jaxfdi import FaultKind, binomial_lower_bound, no_fault, run_study
+from jaxfdi.models import (
     delivered_torque,
     kitsat3_params,
     stop_hypotheses,

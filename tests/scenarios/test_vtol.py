@@ -10,12 +10,13 @@ import pytest
 from _frames import assert_table_is_the_json
 from scipy import stats
 
-from jaxfdi._faults import fault_label, no_fault
-from jaxfdi.control._eigenstructure import assign_eigenstructure, scheduled_gain
-from jaxfdi.detection._signature import isolate, location_symptoms
+from jaxfdi import fault_label, no_fault
+from jaxfdi.control import assign_eigenstructure
+from jaxfdi.control._eigenstructure import scheduled_gain
+from jaxfdi.detection import isolate, location_symptoms
 from jaxfdi.filters import run_filter, unknown_input_filter
+from jaxfdi.models import LinearGaussianModel
 from jaxfdi.models import _vtol as vtol
-from jaxfdi.models._linear import LinearGaussianModel
 from jaxfdi.scenarios.vtol import (
     FILTER_NAMES,
     HEALTH_CASES,

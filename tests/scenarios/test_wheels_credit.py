@@ -22,10 +22,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from jaxfdi._loop import detection_scorer, run_loop
-from jaxfdi._metrics import binomial_lower_bound
-from jaxfdi.control._attitude import wheel_attitude_controller, wheel_plant
-from jaxfdi.models._reaction_wheels import WheelCommand, filter_input
+from jaxfdi import binomial_lower_bound, detection_scorer, run_loop
+from jaxfdi.control import wheel_attitude_controller, wheel_plant
+from jaxfdi.models import WheelCommand, filter_input
 from jaxfdi.scenarios import reaction_wheels as rw
 
 RUNS, STEPS, ONSET = 20, 300, 200

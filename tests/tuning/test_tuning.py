@@ -11,8 +11,7 @@ from jax.test_util import check_grads
 
 import jaxfdi
 from jaxfdi import tuning
-from jaxfdi.models import LinearGaussianModel
-from jaxfdi.models._fault_modes import noise_inflation_modes
+from jaxfdi.models import LinearGaussianModel, noise_inflation_modes
 
 PAPER_PI = np.array([[0.94, 0.03, 0.03], [0.05, 0.95, 0.00], [0.01, 0.00, 0.99]])
 

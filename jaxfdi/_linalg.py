@@ -7,20 +7,21 @@ answer.
 Small matrices (static ``n <= UNROLL_MAX``) are factorised element by element: the filters' states and outputs
 have a handful of components, vmapped over banks and runs, and on CPU ``jax.scipy.linalg`` lowers to LAPACK calls
 that loop over the batch one 5x5 matrix at a time, while written-out algorithms are element-wise operations XLA
-fuses and vectorises (UKF over 100 runs 2x faster, ``benchmarks/RESULTS.md``). Larger matrices use LAPACK/cuSOLVER.
+fuses and vectorises (faster for the filters' batches, e.g. the UKF over runs, ``benchmarks/bench_filters.py``).
+Larger matrices use LAPACK/cuSOLVER.
 
-Products likewise (``matmul``): XLA:CPU runs each small ``dot`` as a library call (0.5-0.8 us for a 7x7, alone or
-batched); as a sum of ``k`` outer products it is fused code, 4x faster for one 7x7, 8x for a batch of 700 (IMM bank,
-100 runs). Only matrices with every dimension ``<= UNROLL_MAX`` are unrolled: beyond, XLA fuses chains of unrolled
-products into consumers that recompute them (13-state IMM 2.5x slower). Their derivative is one broadcast
-multiply-and-reduce, not the transpose of ``k`` sliced products (``_written_out_matmul``): engine IMM tuning
-gradient 6.0x -> 4.9x its forward pass.
+Products likewise (``matmul``): XLA:CPU runs each small ``dot`` as a library call, whose cost does not shrink with
+the batch; as a sum of ``k`` outer products it is fused code, faster for one small product and more so for the
+filters' batches (IMM banks). Only matrices with every dimension ``<= UNROLL_MAX`` are unrolled: beyond, XLA fuses
+chains of unrolled products into consumers that recompute them (the 13-state IMM got slower). Their derivative is
+one broadcast multiply-and-reduce, not the transpose of ``k`` sliced products (``_written_out_matmul``), which makes
+the engine IMM's tuning gradient cheaper relative to its forward pass.
 
 This pays only for batches. A single sequence (``run_filter`` eager or under ``jit`` alone) has nothing to
-vectorise and the written-out algebra only bloats it (engine KF scan: 13.7k HLO lines, 1.9 s to compile);
-``library_calls()`` makes every helper use ``dot`` and LAPACK while such a trace is made on CPU (1.0k lines, 0.7 s).
-Under ``vmap`` or ``grad``, and on GPU (a cuSOLVER call per small factorisation costs more: engine KF 2.8x slower on
-an H200), the algebra stays written out.
+vectorise and the written-out algebra only bloats it (a much larger program, slower to compile);
+``library_calls()`` makes every helper use ``dot`` and LAPACK while such a trace is made on CPU.
+Under ``vmap`` or ``grad``, and on GPU (a cuSOLVER call per small factorisation costs more than the written-out
+algebra), the algebra stays written out.
 """
 
 from __future__ import annotations
@@ -87,7 +88,7 @@ def _written_out_matmul(a: Array, b: Array) -> Array:
     Differentiated as written, each term ``a[:, j] b[j, :]`` slices its operands and the reverse pass pads every
     slice back to full size (``k`` pads per product). The tangent here, ``sum_j da[:, j, None] * b[None, j, :]``, is
     one broadcast multiply-and-reduce whose transpose is another: no pads. Keeps forward mode (``jvp``, ``jacfwd``),
-    which a ``custom_vjp`` would lose (engine IMM tuning gradient, ``benchmarks/RESULTS.md``).
+    which a ``custom_vjp`` would lose (engine IMM tuning gradient, ``benchmarks/bench_tuning.py``).
     """
     return soa_matmul(a, b)
 
@@ -114,7 +115,7 @@ def materialize(tree):
     """``tree``, computed once and stored (a structure-of-arrays kernel's intermediate).
 
     XLA:CPU fuses cheap element-wise producers into every consumer, so a chain of written-out products or
-    factorisations redoes the inner computation per outer element (13-state models: 4-10x slower);
+    factorisations redoes the inner computation per outer element (13-state models: several times slower);
     ``optimization_barrier`` does not stop it on CPU. A ``lax.cond`` is a fusion boundary: the true branch returns
     ``tree``, the predicate (a bit of the first element's bit pattern OR 1) is always true but unknown to the
     compiler; the false branch (zeros) is never taken. If XLA folded the predicate: same values, only slower.
@@ -347,7 +348,7 @@ def joseph_cov(cov: Array, gain: Array, H: Array, noise_cov: Array) -> Array:
     """Joseph-form covariance ``(I - K H) P (I - K H)^T + K R K^T`` (Bucy & Joseph 1968): PSD for any gain ``K``.
 
     With library calls, the same quadratic form in one block, ``M diag(P, R) M^T`` with ``M = [I - K H, K]``: three
-    ``dot`` calls instead of five (engine KF, one sequence: 5.4 -> 4.6 ms, ``benchmarks/kf_covariance_update.py``).
+    ``dot`` calls instead of five (faster for one sequence, ``benchmarks/kf_covariance_update.py``).
     """
     I_KH = jnp.eye(cov.shape[0], dtype=cov.dtype) - matmul(gain, H)
     if _library():

@@ -82,13 +82,12 @@ def run_keys(key: jax.Array, index: np.ndarray, num_runs: int) -> jax.Array:
     return jax.random.wrap_key_data(bits, impl=jax.random.key_impl(key)) if typed else bits
 
 
-#: runs per chunk by backend (``default_chunk_size``). CPU: 64, where a study's state stays in cache (engine bias
-#: IMMs: 19 s at 16-64 runs per chunk, 26 s at 128-256); a chunk costs ~0.5 ms of dispatch, so very cheap runs want
-#: a larger ``chunk_size`` (10^5 three-draw runs: 1.3 s at 64, 0.5 s at 8192). An accelerator wants wide batches
-#: (bounded by memory: outputs and scratch are per run).
+#: runs per chunk by backend (``default_chunk_size``). CPU: 64, where a study's state stays in cache (wider chunks
+#: slowed the engine's bias IMMs); each chunk costs a dispatch, so very cheap runs want a larger ``chunk_size``. An
+#: accelerator wants wide batches (bounded by memory: outputs and scratch are per run).
 CHUNK_BY_PLATFORM = {"cpu": 64, "gpu": 16384, "cuda": 16384, "rocm": 16384, "tpu": 16384}
 #: the smallest default chunk per device: a smaller study is padded up to it, so its calibration, main runs and a
-#: test's few runs share one program (reaction-wheel closed loop: 16 s to compile, 25-46 ms a padded run on a CPU)
+#: test's few runs share one program (on a CPU a closed loop's compilation costs far more than its padded runs)
 MIN_CHUNK = 64
 
 

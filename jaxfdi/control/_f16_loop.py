@@ -43,7 +43,7 @@ def f16_plant(
     One sample ``dt`` by ``sampled_transition``, ``y`` by ``sampled_observation`` + white noise
     (``measurement_cov``). As ``simulate.simulator`` (``split(step_key)`` into process and measurement keys;
     ``faults.apply_faults`` on ``y`` and ``u``, STUCK values in ``held``), but normal draws in float32, cast
-    (same law; in float64 they cost 1.1 of 3.6 us per flight and step, 10^3 vmapped flights).
+    (same law; in float64 the draws are a large share of a vmapped flight's step).
 
     Args:
       aircraft: ``f16_params(...)``.
@@ -130,7 +130,7 @@ def rate_passthrough_fdi(rate_axes: Array) -> FDI:
     """
     estimator = rate_estimator(
         jnp.asarray(rate_axes)
-    )  # once: a solve inside the step costs 4x the flight (vmapped LU)
+    )  # once: a solve inside the step (vmapped LU) would cost more than the flight
 
     def observe(state, k, y):
         return state, flight_view(y, estimator.astype(y.dtype) @ y[RATE_OFFSET:])

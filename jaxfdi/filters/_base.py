@@ -303,7 +303,7 @@ def run_filter(
 def _one_covariance():
     """The context for tracing one covariance recursion (one sequence, or runs sharing it): on CPU ``dot`` and LAPACK
     (``_linalg.library_calls``); on a GPU the written-out algebra (a cuSOLVER call per 7x7 factorisation made the
-    engine KF 2.8x slower on an H200, ``benchmarks/RESULTS.md``)."""
+    engine KF slower, ``benchmarks/gpu_vmap_filter.py``)."""
     return _linalg.library_calls() if jax.default_backend() == "cpu" else contextlib.nullcontext()
 
 
@@ -458,7 +458,7 @@ def _batch_scan(
     filt: Filter, init_state: Any, ys: Array, us: Array, us_axis, shared: bool, init_axes=None
 ):
     """``vmap`` of the scan over runs; with ``shared`` covariances their recursion is one sequence's
-    (``_one_covariance``: engine KF, 100 runs, compile 0.75 -> 0.33 s, run 11.2 -> 9.7 ms)."""
+    (``_one_covariance``: on CPU a smaller program, faster to compile and to run)."""
     if shared:
         final_axes = GaussianState(0, None)
         info_axes = FilterInfo(
@@ -514,7 +514,7 @@ def kernel_scan(kernel: BatchKernel, init_state: Any, ys: Array, us: Array):
 @partial(jax.jit, static_argnums=0)
 def _scan_filter(filt: Filter, init_state: Any, ys: Array, us: Array) -> tuple[Any, Any]:
     """The scan, compiled once per ``Filter`` eagerly (else retraced every call); inlined under an outer transformation
-    (a nested ``jit`` cost ~15 % on 100 vmapped engine runs)."""
+    (a nested ``jit`` slowed vmapped runs)."""
 
     def body(state, yu):
         return filt.step(state, *yu)

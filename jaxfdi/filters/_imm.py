@@ -65,8 +65,8 @@ def interacting_multiple_model(
       posterior of step -1 (predict-first; ``mode_prob`` the posterior ``mu0``, ``u`` the input before ``y[0]``,
       ``None`` without inputs): mixing and prediction, as ``init_from_posterior(imm, mean, cov, u, mode_prob)``;
       ``step(state, y, u) -> (IMMState, IMMInfo)``. Over ``kalman_filter`` modes up to 16 states
-      (``imm_batch.supports``) ``run_filter`` runs ``imm_batch.py``'s structure-of-arrays step (same results, 2.5x
-      faster than ``vmap`` on 100 engine runs).
+      (``imm_batch.supports``) ``run_filter`` runs ``imm_batch.py``'s structure-of-arrays step (same results, faster
+      than ``vmap`` on CPU).
     """
     checks.check_real("transition", transition, "a real row-stochastic matrix")
     transition = jnp.asarray(transition)

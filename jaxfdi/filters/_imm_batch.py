@@ -12,10 +12,9 @@ CPU speed (100 runs x 7 modes = 700 small covariance recursions a step):
   ``x + K r = x + G w``, ``w = L^-1 r``: the gain is never formed.
 
 Above ``_linalg.UNROLL_MAX`` states (13-state bias design, up to ``KERNEL_MAX_STATES``) XLA:CPU fuses chains of
-written-out products and solves into consumers and recomputes them per element (kernel 3.4x slower than ``vmap`` on
-13 states); ``_linalg.materialize`` stores the gain factor, mode posteriors, mixed covariances and ``Phi P`` once
-each (2.8x faster than ``vmap``). Engine timings (7 modes, 100 runs x 1000 steps, ``benchmarks/bench_imm.py``):
-``benchmarks/RESULTS.md``.
+written-out products and solves into consumers and recomputes them per element (the kernel then loses to ``vmap``
+on 13 states); ``_linalg.materialize`` stores the gain factor, mode posteriors, mixed covariances and ``Phi P`` once
+each (the kernel then beats ``vmap``). Engine timings (7 modes, 100 runs x 1000 steps): ``benchmarks/bench_imm.py``.
 """
 
 from __future__ import annotations

@@ -104,9 +104,9 @@ def kalman_filter(
         do not depend on the data, which makes vmapped Monte Carlo fast (``joseph_update``).
       unroll_factorizations: small Cholesky factorisations and triangular solves written out element by element
         (default; ``_linalg``), fast for *batches* of covariances (IMM modes, per-run covariances). With one
-        covariance for the whole batch (a single sequence, or runs sharing the model) LAPACK is faster, and its
-        gradients much faster: ``False`` on the engine's log-likelihood gradient over 100 runs cut 42 -> 30 ms and
-        compile 4.4 -> 2.0 s (``benchmarks/bench_tuning.py``).
+        covariance for the whole batch (a single sequence, or runs sharing the model) LAPACK (``False``) is faster,
+        and its gradients much faster to run and to compile (the engine's log-likelihood gradient,
+        ``benchmarks/bench_tuning.py``).
 
     ``run_filter`` over runs with their own prior or model runs ``kalman_batch.py``'s structure-of-arrays step; with
     ``missing_measurements=True`` also the associative scan ``run_filter(..., parallel=True)`` (Särkkä and

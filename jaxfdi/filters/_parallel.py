@@ -20,7 +20,7 @@ step 0 conditioning ``N(m0, P0)`` on ``y_0`` (``A = 0``, ``eta = 0``, ``J = 0``)
 and the prefix up to ``k`` is ``N(x_k | y_0..y_k) = N(b, C)``; ``FilterInfo`` follows for all steps at once, equal to
 ``run_filter(kalman_filter(model, missing_measurements=True), ...)`` to round-off. Cost: ~4x the sequential
 arithmetic (n x n solves per combination, ``2T`` combinations) in ``2 log2 T`` rounds: wins on a GPU for long
-sequences, loses on a CPU (``benchmarks/RESULTS.md``).
+sequences, loses on a CPU (``benchmarks/bench_scale.py``).
 
 A dead (non-finite) component of ``y_k`` is left out of its step exactly (rows of ``C_y``, ``R`` dropped) and reported
 as elsewhere (innovation NaN, ``nis = +inf``, ``filters._base.report_dead``); the sequential default's

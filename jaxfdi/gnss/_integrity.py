@@ -191,8 +191,8 @@ def monitor_epochs(
 ) -> EpochIntegrity:
     """``monitor_epoch`` vmapped over epochs: ``times`` (T,), ``pseudoranges`` (T, S) (NaN: not measured; a fixed sigma
     array is (T, S)); ``atmosphere`` (one for all) and ``mask_angle`` as ``positioning.solve_position``. ``batch_size``:
-    chunks of epochs in sequence (``lax.map``), keeping intermediates in cache (~1.7x faster for 10^4-10^5 epochs on CPU
-    at 128, ``benchmarks/bench_gnss_raim.py``); ``None``: all at once.
+    chunks of epochs in sequence (``lax.map``), keeping intermediates in cache (on CPU faster for long runs of epochs,
+    e.g. 128 a chunk, ``benchmarks/bench_gnss_raim.py``); ``None``: all at once.
 
     Returns:
       ``EpochIntegrity`` of the T epochs (each epoch's slot records chosen by ``select_orbits``): every leaf of

@@ -23,8 +23,9 @@ def rk4(
     ``k3 = f(x + h/2 k2, t + h/2)``, ``k4 = f(x + h k3, t + h)``.
 
     ``t``: time since the interval's start; held inputs are closed over by ``field``. ``substeps`` static (``fori_loop``
-    when > 1). ``loop_stages``: the four stages a loop too, ``field`` compiled once (F-16: compiles ~1/3 faster, a batch
-    of 100 flights as fast or faster, a single flight ~2.7x slower; ``benchmarks/RESULTS.md``)."""
+    when > 1). ``loop_stages``: the four stages a loop too, ``field`` compiled once (F-16: compiles faster, a batch
+    of flights runs as fast or faster, a single flight slower by the loop's overhead per step;
+    ``benchmarks/bench_f16_flight.py``)."""
     h = dt / substeps
 
     def unrolled(x, t):

@@ -468,7 +468,7 @@ def _fault_cases(
     x64: bool, health: bool
 ) -> tuple[tuple[str, ...], tuple[float, ...], tuple[int, ...]]:
     """The cases' names, magnitudes (NaN for 'none' and sensor-health cases) and labels, cached per
-    precision and case set (the threshold search summarises thousands of replays; 8 ms a build)."""
+    precision and case set (the threshold search summarises thousands of replays, each needing them)."""
     names, faults = study_faults(0) if health else engine_faults(0)
     sized = [n not in ("none", *HEALTH_CASES) for n in names]
     return (
@@ -807,8 +807,8 @@ def engine_spec(
     ``engine_method_names`` (or ``methods``) in five structures, one compiled program each (MMs and
     IMMs per mode design, GLRTs); methods are cells of a (filter x decision rule) grid, IMMs sharing a
     transition matrix run one filter. Speed-only options: ``kernel`` (default) runs the IMM batch kernel
-    per chunk (2.8x faster on CPU) instead of ``vmap(monitor)``; ``unrolled``: written-out
-    factorisations in the other filters (``benchmarks/bench_studies.py --linalg``).
+    per chunk (faster on CPU: its structure-of-arrays layout) instead of ``vmap(monitor)``; ``unrolled``:
+    written-out factorisations in the other filters (``benchmarks/bench_studies.py --linalg``).
 
     Returns:
       ``Study("engine", cases, case_names, structures)``: the nine cases stacked (the paper's six,

@@ -232,7 +232,7 @@ def flight_setup(
     weights = weights or default_weights(dtype)
     sensors = sensors or f16_sensors(dtype=dtype)
     trims = plan_trims(params, plan)
-    # compiled once (eager, the Jacobians and the Riccati solves dispatch op by op: 3x slower)
+    # compiled once (eager, the Jacobians and the Riccati solves would dispatch op by op)
     linear = _linearize(params, trims.state[0], trims.control[0])
     design = _design(linear, DT, weights)
     radius = np.asarray(design.spectral_radius)

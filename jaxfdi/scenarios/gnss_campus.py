@@ -63,8 +63,8 @@ MASK_DEG = 5.0
 CAMPUS = (37.5419, 127.0782, 60.0)  # deg, deg, m (ellipsoidal)
 PARK = (37.5684, 126.8851, 70.0)
 CAMPUS_STEPS = PARK_STEPS = 1000  # one compiled program for both cases
-#: runs per compiled call: a RAIM step is small, so wide batches amortise the per-step cost (900 runs on the 2-core CPU:
-#: 48 s in one chunk of 900, 59 s in chunks of 64)
+#: runs per compiled call: a RAIM step is small, so wide batches amortise the per-step cost, on a CPU too (whose
+#: default chunk is 64)
 CHUNK = 1024
 #: racetrack (straight, radius, speed, height above the origin, phase)
 CAMPUS_PATH = (800.0, 140.0, 8.0, 20.0, 400.0 - 8.0 * 170.0)

@@ -8,7 +8,7 @@
    sensor fault is isolated;
 3. ``u = -K [x_hat; z]`` (eq. 22), nominal LQR gain, or once an actuator effectiveness loss is isolated the
    eigenstructure-assignment gain for ``B_f = B (I - diag(b))`` at the current ``b`` (eqs. 23-29) from a
-   ``GainSchedule`` tabulated once (solving per step would cost 8x the loop); an additive actuator fault's estimate is
+   ``GainSchedule`` tabulated once (a solve per step would dominate the loop); an additive actuator fault's estimate is
    added to ``u``;
 4. ``z += Ts (r - H x_hat)``; an actuator fault acts on ``u``, the plant moves; the estimator predicts with the input
    the plant is believed to get;

@@ -8,7 +8,7 @@ trained on) or slices of a fixed dataset (``fixed_batches``). Only ``trainable``
 loss unchanged.
 
 Long runs: ``checkpointed(filter)`` wraps a filter's step in ``jax.checkpoint``: the reverse pass recomputes each
-step's internals instead of storing them (memory per step falls to the carried state; benchmarks/RESULTS.md).
+step's internals instead of storing them (memory per step falls to the carried state; ``benchmarks/bench_tuning.py``).
 """
 
 from __future__ import annotations
@@ -113,7 +113,7 @@ def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[in
 def strongly_typed(tree):
     """``tree`` with every leaf a JAX array of its own dtype, no weak type: a Python-number parameter (or one made
     from it, e.g. ``jnp.full(5, 0.1)``) is weakly typed until one optimiser step, and a jitted function called with
-    both compiles twice (the tuning CLI compiled its step three times per design, ~30 s each on 2 cores).
+    both compiles twice (the tuning CLI compiled its step three times per design).
 
     Returns:
       pytree of ``tree``'s structure, each leaf a strongly typed JAX array of its result type (a Python float:

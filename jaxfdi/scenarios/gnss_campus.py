@@ -162,7 +162,7 @@ def _run(key, case, sky):
     ``sky = (table, paths (2, T, 3), visible (2, T, S), sigma (2, T, S))`` with the fault."""
     table, paths, visible, sigma = sky
     c, one_fault = case
-    steps = gnss.shape[1]
+    steps = paths.shape[1]
     fdi = gnss.raim_fdi(
         table, START_TOW, DT, gnss.raim_tables(table.prn.shape[0]), gnss.elevation_sigma
     )

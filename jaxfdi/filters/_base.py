@@ -400,16 +400,21 @@ def _run_batch(
             "shared_covariance: the runs have their own initial covariance, so their covariances "
             "differ; use shared_covariance=False or 'auto'"
         )
-    if filt.batch is not None and (per_run_prior or not filt.batch.per_run_only):
+    empty = (
+        0 in ys.shape[:2]
+    )  # no runs or no steps: vmap's empty results (a kernel indexes its runs)
+    if filt.batch is not None and not empty and (per_run_prior or not filt.batch.per_run_only):
         return _kernel_scan(filt.batch, init_state, ys, us)
     init_axes = init_axes if per_run_prior else None
     per_run_cov = per_run_prior and init_axes.cov is not None
-    u = us[0, 0] if us_axis == 0 else us[0]
+    # one step's measurement and input, for tracing only (a batch may hold no runs or no steps)
+    y = jnp.zeros(ys.shape[2:], ys.dtype)
+    u = jnp.zeros(us.shape[-1:], us.dtype)
     shared = (
         shared_covariance is not False
         and gaussian
         and not per_run_cov
-        and not _covariance_sees_data(filt, init_state, ys[0, 0], u, us_axis == 0)
+        and not _covariance_sees_data(filt, init_state, y, u, us_axis == 0)
     )
     if shared_covariance is True and not shared:
         raise ValueError(
@@ -427,7 +432,10 @@ def _covariance_sees_data(
     mean, cov = (jnp.asarray(leaf) for leaf in prior)
     step = lambda mean, cov, y, u: filt.step(GaussianState(mean, cov), y, u)
     closed, out_shape = jax.make_jaxpr(step, return_shape=True)(
-        mean[0] if mean.ndim == 2 else mean, cov, y, u
+        jnp.zeros(mean.shape[-1:], mean.dtype),
+        cov,
+        y,
+        u,  # one run's mean (tracing only)
     )
     structure = jax.tree.structure(out_shape)
     state, info = jax.tree.unflatten(structure, range(structure.num_leaves))

@@ -348,3 +348,39 @@ def test_imm_kernel_for_ten_states_equals_vmap():
         info._fields + ("final",) * 3, (*info, *final), (*ref_info, *ref_final)
     ):
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, err_msg=name)
+
+
+@pytest.mark.parametrize("empty", [(0, 6), (3, 0)], ids=["no runs", "no steps"])
+@pytest.mark.parametrize("case", ["shared prior", "per-run prior", "imm"])
+def test_an_empty_batch_returns_empty_results(case, empty):
+    """A batch of zero runs or zero steps returns what a batch of one run returns, with the empty axis: every leaf's
+    shape is the one-run leaf's with that axis set to 0 (the batch kernels index their runs, so an empty batch takes
+    vmap's path)."""
+    model = small_model()
+    n, m = model.Phi.shape[0], model.C.shape[0]
+    num_runs, steps = empty
+    if case == "imm":
+        modes = jax.tree.map(lambda *a: jnp.stack(a), model, model._replace(Q=4.0 * model.Q))
+        filt = jaxfdi.filters.interacting_multiple_model(
+            kalman_filter, modes, jnp.array([[0.9, 0.1], [0.2, 0.8]])
+        )
+        prior = lambda runs: filt.init(jnp.zeros(n), jnp.eye(n), jnp.array([0.5, 0.5]))
+    else:
+        filt = kalman_filter(model)
+        per_run = case == "per-run prior"
+        prior = lambda runs: GaussianState(
+            jnp.zeros((runs, n)) if per_run else jnp.zeros(n), jnp.eye(n)
+        )
+
+    def run(runs, T):  # every leaf with its run axis (no shared covariances), info (runs, T, ...)
+        ys, us = jnp.zeros((runs, T, m)), jnp.zeros((T, model.Gamma.shape[1]))
+        return run_filter(filt, prior(runs), ys, us, shared_covariance=False)
+
+    final, info = run(num_runs, steps)
+    ref_final, ref_info = run(2, 6)
+    assert jax.tree.map(jnp.shape, final) == jax.tree.map(
+        lambda leaf: (num_runs,) + leaf.shape[1:], ref_final
+    )
+    assert jax.tree.map(jnp.shape, info) == jax.tree.map(
+        lambda leaf: (num_runs, steps) + leaf.shape[2:], ref_info
+    )

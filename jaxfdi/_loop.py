@@ -383,18 +383,19 @@ def episode_scorer(
 def peak_scorer(
     values: Callable[[Any], Array], active: Callable[[Array], Array], dtype=None
 ) -> Scorer:
-    """Running maxima: ``score[i] = max over the steps k with active(k)[i] of values(output)[i]`` (0 before any such
-    step), e.g. the largest statistic before the onset.
+    """Running maxima: ``score[i] = max over the steps k with active(k)[i] of values(output)[i]`` (``-inf`` before
+    any such step), e.g. the largest statistic before the onset.
 
     Returns:
-      ``Scorer`` whose score is an (n,) array (``dtype``, default float) of the running maxima, zeros at the start.
+      ``Scorer`` whose score is an (n,) array (``dtype``, default float) of the running maxima, ``-inf`` where no
+      step was active.
     """
     checks.check_callable("values", values, "a function output -> (n,) values")
     checks.check_callable("active", active, "a function k -> (n,) bool")
     dtype = dtype or jnp.result_type(float)
 
     def init(example):
-        return jnp.zeros(jax.eval_shape(values, example()).shape, dtype)
+        return jnp.full(jax.eval_shape(values, example()).shape, -jnp.inf, dtype)
 
     def update(score, k, output):
         return jnp.where(active(k), jnp.maximum(score, values(output)), score)
@@ -408,11 +409,23 @@ def health_scorer(healthy: Callable[[Any], Array] | None = None) -> Scorer:
     Returns:
       ``Scorer`` whose score is a () bool: True until a step whose ``healthy(output)`` has a False entry.
     """
-    healthy = healthy or (lambda output: output.healthy)
-    return Scorer(
-        lambda example: jnp.ones((), bool),
-        lambda score, k, output: score & jnp.all(healthy(output)),
-    )
+    if healthy is None:
+
+        def healthy(output):
+            if not hasattr(output, "healthy"):
+                raise TypeError(
+                    "healthy: the loop's output has no 'healthy' field; pass healthy=lambda output: ..., "
+                    f"a function output -> bool, got output {type(output).__name__}"
+                )
+            return output.healthy
+
+    checks.check_callable("healthy", healthy, "a function output -> bool")
+
+    def init(example):
+        jax.eval_shape(healthy, example())  # a missing field is an error now, not inside the loop
+        return jnp.ones((), bool)
+
+    return Scorer(init, lambda score, k, output: score & jnp.all(healthy(output)))
 
 
 def combine_scorers(**scorers: Scorer) -> Scorer:

@@ -489,3 +489,29 @@ def test_episode_scorer_over_a_flight_with_three_fault_episodes(engine):
         assert hits.size, "each episode is large enough to be detected"
     assert int(record.false_alarms) == int(np.sum(alarms & ~inside_any))
     assert int(record.first_unhealthy) == -1
+
+
+def test_peak_scorer_is_the_running_maximum_of_negative_values_too():
+    """``peak_scorer`` against NumPy's masked maximum on values below zero (a log-likelihood, a margin); a
+    channel never active keeps ``-inf``."""
+    rng = np.random.default_rng(3)
+    values = -np.abs(rng.normal(size=(20, 3))) - 1.0
+    active = np.zeros((20, 3), bool)
+    active[5:12, 0], active[::3, 1] = True, True  # channel 2: never active
+    scorer = loop.peak_scorer(lambda out: out, lambda k: jnp.asarray(active)[k])
+    score = scorer.init(lambda: jnp.zeros(3))
+    for k in range(20):
+        score = scorer.update(score, k, jnp.asarray(values[k]))
+    want = np.where(active, values, -np.inf).max(axis=0)
+    np.testing.assert_array_equal(np.asarray(score), want)
+    assert want[0] < 0 and want[2] == -np.inf
+
+
+def test_health_scorer_without_a_healthy_field_names_the_argument():
+    scorer = loop.health_scorer()
+    with pytest.raises(TypeError, match="healthy: the loop's output has no 'healthy' field"):
+        scorer.init(lambda: jnp.zeros(3))
+    explicit = loop.health_scorer(lambda out: jnp.all(jnp.isfinite(out)))
+    score = explicit.init(lambda: jnp.zeros(3))
+    score = explicit.update(score, 0, jnp.array([1.0, jnp.nan, 0.0]))
+    assert not bool(score)

@@ -84,13 +84,14 @@ class _LogLines:
 
 
 def status(message: str) -> None:
-    """A progress message (what is compiling, what ran): INFO on the ``"jaxfdi"`` logger, or, when logging is not
-    configured (a plain script or a notebook), one line on stderr.
+    """A progress message (what is compiling, what ran): INFO on the ``"jaxfdi"`` logger when it has a handler that
+    takes INFO, else (a plain script, a notebook, or ``logging.basicConfig()`` at its default WARNING) one line on
+    stderr: a long run is never silent.
 
     Returns:
       None; it logs or prints ``message``.
     """
-    if logger.hasHandlers():
+    if logger.hasHandlers() and logger.isEnabledFor(logging.INFO):
         logger.info(message)
     else:
         print(message, file=sys.stderr, flush=True)

@@ -166,3 +166,25 @@ def test_a_long_chunk_is_never_silent(caplog, monkeypatch):
     assert reports == [4, 8]
     assert any(m.startswith("slow: running, 0/8 runs done (") for m in running), running
     assert all(m.startswith(("slow: running, 0/8", "slow: running, 4/8")) for m in running), running
+
+
+def test_status_after_basic_config_at_warning_prints_its_line(monkeypatch, capfd):
+    """``logging.basicConfig()`` gives the root a WARNING handler, which drops INFO: ``status`` then prints its
+    line on stderr (a long run is never silent); a handler that takes INFO gets it as a log record."""
+    root = logging.getLogger()
+    handler = logging.StreamHandler(io.StringIO())
+    monkeypatch.setattr(root, "handlers", [handler])
+    monkeypatch.setattr(progress.logger, "level", logging.NOTSET)
+    level = root.level
+    try:
+        root.setLevel(
+            logging.WARNING
+        )  # setLevel, not the attribute: it clears the loggers' level caches
+        progress.status("compiling the engine study")
+        assert "compiling the engine study" in capfd.readouterr().err
+        assert handler.stream.getvalue() == ""
+        root.setLevel(logging.INFO)
+        progress.status("compiled")
+        assert "compiled" in handler.stream.getvalue() and capfd.readouterr().err == ""
+    finally:
+        root.setLevel(level)

@@ -49,6 +49,12 @@ def frozen_threshold(window: int, pfa, dtype=None) -> Array:
     window = checks.check_int("window", window, minimum=2, meaning="a window of L >= 2 samples")
     checks.check_probability("pfa", pfa)
     dtype = dtype or jnp.result_type(float)
+    value, eps = checks.concrete(pfa), np.finfo(dtype).eps
+    if value is not None and np.any(np.asarray(value) < eps):
+        raise ValueError(
+            f"pfa: expected a probability >= {eps:.4g} (np.finfo({np.dtype(dtype).name}).eps: the lower-tail "
+            f"quantile is the upper tail at 1 - pfa, which must differ from 1), got {checks.received(value)}"
+        )
     return chi2_threshold(jnp.asarray(window - 1, dtype), 1.0 - jnp.asarray(pfa, dtype))
 
 

@@ -51,13 +51,24 @@ def location_symptoms(alarms: Array, location: Array, num_locations: int) -> Arr
     leaves it clear while one of its hypotheses explains the data.
 
     Returns:
-      (..., L) bool: ``True`` where every filter with ``location[f] == l`` alarms (also ``True`` for a location with
-      no filter).
+      (..., L) bool: ``True`` where every filter with ``location[f] == l`` alarms.
+
+    Raises:
+      ValueError: naming ``location`` when a location ``0..L-1`` has no filter (its symptom would be set by no
+      evidence).
     """
     num_locations = checks.check_int(
         "num_locations", num_locations, 1, meaning="a positive number of locations"
     )
     checks.check_index("location", location, num_locations, "a location index per filter")
+    value = checks.concrete(location)
+    if value is not None:
+        empty = sorted(set(range(num_locations)) - set(np.asarray(value).ravel().tolist()))
+        if empty:
+            raise ValueError(
+                f"location: expected at least one filter at every location 0..{num_locations - 1}, "
+                f"got none at {empty}"
+            )
     alarms = jnp.asarray(alarms, bool)
     location = jnp.asarray(location, jnp.int32)
     hit = location[:, None] == jnp.arange(num_locations)[None, :]  # (F, L)

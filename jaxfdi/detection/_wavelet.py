@@ -109,10 +109,21 @@ def causal_detail_sigma(statistic: Array, levels: int, window: int, prior_sigma:
     size = 2**levels
     B = x.shape[0] // size
     block_end = (jnp.arange(B) + 1) * size  # a block's decision is made at its last step
-    prior = jnp.broadcast_to(
-        jnp.asarray(prior_sigma, estimate.dtype).reshape((levels,) + (1,) * (estimate.ndim - 1)),
-        estimate.shape,
-    )
+    shape = jnp.shape(prior_sigma)
+    prior = jnp.asarray(prior_sigma, estimate.dtype)
+    if prior.ndim == 0 or prior.shape[0] != levels or prior.ndim > estimate.ndim:
+        raise ValueError(
+            f"prior_sigma: expected shape ({levels},) or ({levels}, ...) broadcasting to the details' "
+            f"{tuple(estimate.shape)}, got {tuple(shape)}"
+        )
+    prior = prior.reshape(prior.shape + (1,) * (estimate.ndim - prior.ndim))
+    try:
+        prior = jnp.broadcast_to(prior, estimate.shape)
+    except ValueError:
+        raise ValueError(
+            f"prior_sigma: expected shape ({levels},) or ({levels}, ...) broadcasting to the details' "
+            f"{tuple(estimate.shape)}, got {tuple(shape)}"
+        ) from None
     after = (block_end > (window // size) * size).reshape((B,) + (1,) * estimate.ndim)
     return jnp.where(after, estimate[None], prior[None])
 

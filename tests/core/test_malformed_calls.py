@@ -663,6 +663,11 @@ CASES = {
         V,
         "num_filters",
     ),
+    "location_symptoms location with no filter": (
+        lambda: jaxfdi.detection.location_symptoms(jnp.ones(4, bool), jnp.array([0, 0, 2, 2]), 3),
+        V,
+        "location",
+    ),
     "location_symptoms num_locations zero": (
         lambda: jaxfdi.detection._signature.location_symptoms(
             jnp.ones(4, bool), jnp.zeros(4, int), 0

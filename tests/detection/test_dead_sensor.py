@@ -178,6 +178,9 @@ def test_frozen_threshold_is_the_lower_chi2_quantile():
             np.testing.assert_allclose(
                 frozen_threshold(window, pfa), scipy.stats.chi2.ppf(pfa, window - 1), rtol=1e-9
             )
+    # below eps, 1 - pfa is 1: the error names pfa and the least value, not the 1.0 it became
+    with pytest.raises(ValueError, match=r"pfa: expected a probability >= 2.22e-16 .* got 1e-17"):
+        frozen_threshold(5, 1e-17)
 
 
 @pytest.mark.parametrize("signal", ["constant", "ramp"])

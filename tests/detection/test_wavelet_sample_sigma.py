@@ -74,3 +74,19 @@ def test_bad_windows_and_sigma_shapes_are_refused_by_name():
         sample_detail_sigma(x, 2, 32)  # longer than the statistic
     with pytest.raises(ValueError, match="sigma"):
         haar_denoise(x, 2, "soft", np.ones((3, 2, 2)))
+
+
+def test_causal_sigma_takes_a_per_channel_prior():
+    """A prior (M, channels), one sigma per scale and channel (channels of different noise), is what the blocks
+    before the window get, channel by channel; a prior of the wrong shape names ``prior_sigma``."""
+    rng = np.random.default_rng(2)
+    x = rng.chisquare(3, size=(40, 3)) * np.array([1.0, 2.0, 4.0])
+    prior = chi2_detail_sigma(3, 2)[:, None] * np.array([1.0, 2.0, 4.0])[None, :]  # (2, 3)
+    sigma = np.asarray(causal_detail_sigma(x, 2, 16, prior))
+    np.testing.assert_array_equal(sigma[:4], np.broadcast_to(prior[None], (4, 2, 3)))
+    np.testing.assert_allclose(
+        sigma[4:], np.broadcast_to(np.asarray(sample_detail_sigma(x, 2, 16))[None], (6, 2, 3))
+    )
+    for bad in (np.ones(3), np.ones((2, 4)), np.ones((2, 3, 1, 1))):
+        with pytest.raises(ValueError, match=r"prior_sigma: expected shape \(2,\) or \(2, ...\)"):
+            causal_detail_sigma(x, 2, 16, bad)

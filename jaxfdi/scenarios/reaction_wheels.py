@@ -1090,9 +1090,8 @@ def plot_wheels(
         f"One run, the stop of wheel {wheel + 1}: the hypothesis bank's F_x, the credits and the "
         "MM's mode probabilities. In this run "
         f"hypothesis {leader} holds the largest credit 8 s after the stop of wheel {wheel + 1}, {agrees}. The "
-        "scalar det A behind F_x discards the direction of the discrepancy (benchmarks/RESULTS.md: the credits "
-        "isolate a wheel-1 stop in 66 % of runs 4 s after engagement); the MM, on the innovation vectors, isolates "
-        "99-100 %."
+        "scalar det A behind F_x discards the direction of the discrepancy; the MM, on the innovation vectors, "
+        "keeps it (the isolation rates of both are in the study's table)."
         if leader
         else "The stop run: the bank was not engaged in the window shown.",
     )

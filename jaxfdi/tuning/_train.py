@@ -70,15 +70,21 @@ class TrainResult(NamedTuple):
 
 
 def checkpointed(filt: Filter) -> Filter:
-    """The same filter with its ``step`` (and its batch kernel's) rematerialised in the reverse pass.
+    """The same filter with its steps rematerialised in the reverse pass.
 
     Returns:
-      ``Filter`` equal to ``filt`` but for ``step`` (and ``batch.step`` when it has a batch kernel) wrapped in
-      ``jax.checkpoint``: the same values, less memory and more compute in the gradient.
+      ``Filter`` equal to ``filt`` but for ``step``, ``update`` and ``predict`` (the halves a multiple-model filter
+      built on it mixes between) and ``batch.step`` wrapped in ``jax.checkpoint`` where present: the same values,
+      less memory and more compute in the gradient.
     """
     if getattr(filt, "batch", None) is not None:
         filt = filt._replace(batch=filt.batch._replace(step=jax.checkpoint(filt.batch.step)))
-    return filt._replace(step=jax.checkpoint(filt.step))
+    halves = {
+        name: jax.checkpoint(getattr(filt, name))
+        for name in ("update", "predict")
+        if getattr(filt, name, None) is not None
+    }
+    return filt._replace(step=jax.checkpoint(filt.step), **halves)
 
 
 def fixed_batches(dataset: Any, batch_size: int, key: jax.Array) -> Callable[[int], Any]:

@@ -384,3 +384,31 @@ def test_checkpointed_filter_gives_the_same_gradient():
 
     q = jnp.log(jnp.array([0.5, 0.2]))
     np.testing.assert_allclose(jax.grad(loss)(q, True), jax.grad(loss)(q, False), rtol=1e-12)
+
+
+def test_checkpointed_mode_filters_rematerialise_inside_an_imm():
+    """An IMM mixes between its modes' ``update`` and ``predict``, not their ``step``: ``checkpointed`` wraps the
+    halves too, so an IMM built from checkpointed modes rematerialises them (a ``checkpoint`` in its step's
+    program) and gives the plain IMM's gradient."""
+    ys, us = small_data(1, 40, 7)
+    model = small_model()
+    # two modes, the second with 9x the process noise, stacked on a leading mode axis
+    mode_params = jax.tree.map(lambda *m: jnp.stack(m), model, model._replace(Q=9.0 * model.Q))
+    pi = jnp.array([[0.95, 0.05], [0.1, 0.9]])
+    kf = jaxfdi.filters.kalman_filter
+    plain = jaxfdi.filters.interacting_multiple_model(kf, mode_params, pi)
+    remat = jaxfdi.filters.interacting_multiple_model(
+        lambda p: jaxfdi.tuning.checkpointed(kf(p)), mode_params, pi
+    )
+    init = (jnp.zeros(2), model.Q, jnp.array([0.5, 0.5]))
+    step_program = str(jax.make_jaxpr(remat.step)(remat.init(*init), ys[0, 0], us[0]))
+    assert "checkpoint" in step_program or "remat" in step_program
+    assert "checkpoint" not in str(jax.make_jaxpr(plain.step)(plain.init(*init), ys[0, 0], us[0]))
+
+    def loss(scale, filt):  # two steps: the second mixes the first's rematerialised posteriors
+        state = filt.init(jnp.zeros(2), model.Q * scale, jnp.array([0.5, 0.5]))
+        state, first = filt.step(state, ys[0, 0], us[0])
+        return first.log_likelihood + filt.step(state, ys[0, 1], us[1])[1].log_likelihood
+
+    grad = jax.jit(jax.grad(loss), static_argnums=1)
+    np.testing.assert_allclose(grad(1.5, remat), grad(1.5, plain), rtol=1e-12)

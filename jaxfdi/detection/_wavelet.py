@@ -109,21 +109,22 @@ def causal_detail_sigma(statistic: Array, levels: int, window: int, prior_sigma:
     size = 2**levels
     B = x.shape[0] // size
     block_end = (jnp.arange(B) + 1) * size  # a block's decision is made at its last step
-    shape = jnp.shape(prior_sigma)
-    prior = jnp.asarray(prior_sigma, estimate.dtype)
-    if prior.ndim == 0 or prior.shape[0] != levels or prior.ndim > estimate.ndim:
+    shape = tuple(
+        jnp.shape(prior_sigma)
+    )  # (M,) or (M, ...): padded on the right, broadcast to the details
+    if not (
+        0 < len(shape) <= estimate.ndim
+        and shape[0] == levels
+        and all(a in (1, b) for a, b in zip(shape[1:], estimate.shape[1:]))
+    ):
         raise ValueError(
             f"prior_sigma: expected shape ({levels},) or ({levels}, ...) broadcasting to the details' "
-            f"{tuple(estimate.shape)}, got {tuple(shape)}"
+            f"{tuple(estimate.shape)}, got {shape}"
         )
-    prior = prior.reshape(prior.shape + (1,) * (estimate.ndim - prior.ndim))
-    try:
-        prior = jnp.broadcast_to(prior, estimate.shape)
-    except ValueError:
-        raise ValueError(
-            f"prior_sigma: expected shape ({levels},) or ({levels}, ...) broadcasting to the details' "
-            f"{tuple(estimate.shape)}, got {tuple(shape)}"
-        ) from None
+    prior = jnp.asarray(prior_sigma, estimate.dtype).reshape(
+        shape + (1,) * (estimate.ndim - len(shape))
+    )
+    prior = jnp.broadcast_to(prior, estimate.shape)
     after = (block_end > (window // size) * size).reshape((B,) + (1,) * estimate.ndim)
     return jnp.where(after, estimate[None], prior[None])
 

@@ -400,9 +400,8 @@ def _run_batch(
             "shared_covariance: the runs have their own initial covariance, so their covariances "
             "differ; use shared_covariance=False or 'auto'"
         )
-    empty = (
-        0 in ys.shape[:2]
-    )  # no runs or no steps: vmap's empty results (a kernel indexes its runs)
+    # no runs or no steps: vmap's path gives empty results (a batch kernel indexes its runs)
+    empty = 0 in ys.shape[:2]
     if filt.batch is not None and not empty and (per_run_prior or not filt.batch.per_run_only):
         return _kernel_scan(filt.batch, init_state, ys, us)
     init_axes = init_axes if per_run_prior else None
@@ -431,12 +430,8 @@ def _covariance_sees_data(
     covariances need; none of mean, ``y``, per-run inputs: shared by all runs with one ``P0`` (linear KF)."""
     mean, cov = (jnp.asarray(leaf) for leaf in prior)
     step = lambda mean, cov, y, u: filt.step(GaussianState(mean, cov), y, u)
-    closed, out_shape = jax.make_jaxpr(step, return_shape=True)(
-        jnp.zeros(mean.shape[-1:], mean.dtype),
-        cov,
-        y,
-        u,  # one run's mean (tracing only)
-    )
+    one_mean = jnp.zeros(mean.shape[-1:], mean.dtype)  # one run's mean, for tracing only
+    closed, out_shape = jax.make_jaxpr(step, return_shape=True)(one_mean, cov, y, u)
     structure = jax.tree.structure(out_shape)
     state, info = jax.tree.unflatten(structure, range(structure.num_leaves))
     covariances = {state.cov, *(getattr(info, name) for name in _COVARIANCE_FIELDS)}

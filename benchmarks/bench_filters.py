@@ -700,7 +700,7 @@ def bench_driver_compile(prob: dict, log, rounds: int = 3) -> list[dict]:
     in turn, ``rounds`` times, caches cleared before each compile, and each keeps its fastest round: the first compile
     in a process also pays JAX's one-time set-up, so a single pass favours whichever driver comes later."""
     from jaxfdi import _linalg
-    from jaxfdi.filters._base import _scan_filter
+    from jaxfdi.filters._driver import _scan_filter
 
     model, m0, P0, ys, us = prob["model"], prob["m0"], prob["P0"], prob["ys"], prob["us"]
     N = ys.shape[0]

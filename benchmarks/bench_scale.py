@@ -405,7 +405,7 @@ def bench_startup(repeats: int, log) -> dict:
     out["ratio_warm_over_filterpy"] = out["jaxfdi_cache_warm"] / out["filterpy"]
     # compile CPU time of the drivers, in this process (caches cleared before each)
     from jaxfdi import _linalg
-    from jaxfdi.filters._base import _scan_filter
+    from jaxfdi.filters._driver import _scan_filter
 
     model, m0, P0, ys, us = prob["model"], prob["m0"], prob["P0"], prob["ys"], prob["us"]
     kf = jaxfdi.filters.kalman_filter(model)

@@ -5,7 +5,8 @@ filter, optimal or robust to an unknown input, and the unbiased minimum-variance
 """
 
 from jaxfdi._riccati import solve_discrete_are, steady_state_kalman
-from jaxfdi.filters._base import Filter, FilterInfo, GaussianState, run_filter
+from jaxfdi.filters._base import Filter, FilterInfo, GaussianState
+from jaxfdi.filters._driver import run_filter
 from jaxfdi.filters._ekf import extended_kalman_filter
 from jaxfdi.filters._history import RingBuffer, replay_filter, ring_buffer
 from jaxfdi.filters._imm import interacting_multiple_model

@@ -40,7 +40,8 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import _linalg, checks
-from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, report_dead, run_filter
+from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, report_dead
+from jaxfdi.filters._driver import run_filter
 from jaxfdi.filters._unknown_input import (
     check_decoupling,
     diffuse_log_likelihood,

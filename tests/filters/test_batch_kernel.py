@@ -140,14 +140,14 @@ def test_vmap_of_run_filter_is_the_kernel_and_differentiates_as_the_scan(data, m
     """``jax.vmap(run_filter)`` over runs with their own prior, the path a user writes,
     runs the kernel (once, not per run) and equals a vmapped plain scan; its reverse-mode
     gradient (the scan's) equals the gradient of the loop over runs."""
-    from jaxfdi.filters import _base
+    from jaxfdi.filters import _driver
 
     ys, us, means, covs = data
     model = small_model()
     kf = kalman_filter(model)
     calls = []
-    kernel = _base.kernel_scan
-    monkeypatch.setattr(_base, "kernel_scan", lambda *a: (calls.append(1), kernel(*a))[1])
+    kernel = _driver.kernel_scan
+    monkeypatch.setattr(_driver, "kernel_scan", lambda *a: (calls.append(1), kernel(*a))[1])
     run = jax.vmap(lambda m0, P0, y, u: run_filter(kf, GaussianState(m0, P0), y, u))
     got = run(jnp.asarray(means), jnp.asarray(covs), ys, us)
     assert len(calls) == 1

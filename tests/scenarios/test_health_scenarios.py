@@ -113,7 +113,7 @@ def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     from jaxfdi._metrics import fault_row
     from jaxfdi._monitor import replay_detector
     from jaxfdi.detection._mode_probability import mode_probability_detector
-    from jaxfdi.filters._base import run_filter
+    from jaxfdi.filters import run_filter
     from jaxfdi.filters._imm import interacting_multiple_model
     from jaxfdi.filters._kalman import kalman_filter
     from jaxfdi.models._fault_modes import noise_inflation_modes

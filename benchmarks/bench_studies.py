@@ -3,16 +3,12 @@ empty XLA cache (cold) and again with the cache it filled (warm), compile and ru
 
     python benchmarks/bench_studies.py                       # the engine study, CLI default size
     python benchmarks/bench_studies.py --studies vtol f16 --cold-only  # each CLI default, cold
-    python benchmarks/bench_studies.py --linalg              # the engine with library calls vs
-                                                             # written-out factorisations
 
 Each case runs in its own subprocess (`JAXFDI_CACHE_DIR` a new temporary folder for the
 cold run, the same folder for the warm run), so nothing is shared with this process.
 Per case: wall seconds of the process, and where the study reports them (the study
 engine's ``config["seconds"]``) the seconds per structure and the XLA compile seconds.
-``--linalg`` runs ``engine_study(unrolled=...)`` both ways (issue 36 item 5: the default
-is the smaller program unless the other wins by 1.5x). Results go to
-``benchmarks/results_studies.json`` (written whole or not at all).
+Results go to ``benchmarks/results_studies.json`` (written whole or not at all).
 """
 
 from __future__ import annotations
@@ -31,17 +27,6 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 from jaxfdi._io import write_json
-
-ENGINE_IN_PROCESS = """
-import json, sys, time
-import jaxfdi
-jaxfdi.enable_x64(); jaxfdi.enable_compilation_cache()
-from jaxfdi.scenarios.engine import engine_study
-start = time.perf_counter()
-study = engine_study(runs={runs}, seed=0, unrolled={unrolled})
-print(json.dumps({{"wall_in_process_s": time.perf_counter() - start, "seconds": study.config["seconds"]}}))
-"""
-
 
 TIMEOUT_S = None  # --timeout
 
@@ -74,14 +59,6 @@ def _study_case(study: str, runs: int | None, cache: str) -> dict:
     return result
 
 
-def _engine_linalg(unrolled: bool, runs: int, cache: str) -> dict:
-    result = _run(
-        [sys.executable, "-c", ENGINE_IN_PROCESS.format(runs=runs, unrolled=unrolled)], cache
-    )
-    result.update(json.loads(result.pop("stdout_tail").strip().splitlines()[-1]))
-    return result
-
-
 def _seconds(case: dict) -> str:
     return (
         f"{case['wall_s']:.1f} s"
@@ -97,9 +74,6 @@ def main() -> None:
     parser.add_argument("--studies", nargs="+", default=["engine"])
     parser.add_argument(
         "--runs", type=int, default=None, help="--runs for every study (default: the CLI's)"
-    )
-    parser.add_argument(
-        "--linalg", action="store_true", help="only the engine's linear-algebra comparison"
     )
     parser.add_argument(
         "--cold-only",
@@ -127,25 +101,16 @@ def main() -> None:
         "date": time.strftime("%Y-%m-%d %H:%M"),
         "cases": {},
     }
-    if args.linalg:
-        for unrolled in (False, True):
-            with tempfile.TemporaryDirectory() as cache:
-                name = f"engine {'written-out' if unrolled else 'library calls'}"
-                cold = _engine_linalg(unrolled, args.runs or 100, cache)
-                warm = _engine_linalg(unrolled, args.runs or 100, cache)
-            report["cases"][name] = {"cold": cold, "warm": warm}
-            print(f"{name}: cold {cold['wall_s']:.1f} s, warm {warm['wall_s']:.1f} s", flush=True)
-    else:
-        for study in args.studies:
-            with tempfile.TemporaryDirectory() as cache:
-                cold = _study_case(study, args.runs, cache)
-                warm = None if args.cold_only else _study_case(study, args.runs, cache)
-            report["cases"][study] = {"runs": args.runs, "cold": cold, "warm": warm}
-            print(
-                f"{study}: cold {_seconds(cold)}"
-                + ("" if warm is None else f", warm {_seconds(warm)}"),
-                flush=True,
-            )
+    for study in args.studies:
+        with tempfile.TemporaryDirectory() as cache:
+            cold = _study_case(study, args.runs, cache)
+            warm = None if args.cold_only else _study_case(study, args.runs, cache)
+        report["cases"][study] = {"runs": args.runs, "cold": cold, "warm": warm}
+        print(
+            f"{study}: cold {_seconds(cold)}"
+            + ("" if warm is None else f", warm {_seconds(warm)}"),
+            flush=True,
+        )
     previous = json.loads(Path(args.out).read_text()) if Path(args.out).exists() else {}
     previous.setdefault("runs", []).append(report)
     write_json(args.out, previous)

@@ -679,12 +679,7 @@ def _stack(items):
 
 @functools.lru_cache(maxsize=16)
 def _structure_runs(
-    steps: int,
-    glr_window: int,
-    bias_estimate_delay: int,
-    glr_estimate_delay: int,
-    unrolled: bool,
-    kernel: bool,
+    steps: int, glr_window: int, bias_estimate_delay: int, glr_estimate_delay: int
 ) -> dict:
     """The structures' run functions (``study.Structure.run``), one object per static setting so studies
     of these sizes reuse their programs. Each returns ``(DetectionRecord, trace)``; the trace (mode
@@ -694,14 +689,8 @@ def _structure_runs(
     x0, P0 = jnp.zeros(7), model.Q
     mu0 = jnp.asarray(PAPER_TRANSITION[0])  # the normal row: P(mode at step 0)
 
-    mode_kf = functools.partial(kalman_filter, unroll_factorizations=unrolled)
-
-    def bank(modes, mixing, imm):
-        return (
-            interacting_multiple_model(mode_kf, modes, mixing)
-            if imm
-            else multiple_model(mode_kf, modes, mixing)
-        )
+    # the MMs and the GLRT's KF run per run under vmap: library calls (LAPACK), the smaller program
+    mode_kf = functools.partial(kalman_filter, unroll_factorizations=False)
 
     def mode_bank(design: str, filt: ZhangLiFilter | BiasFilter):
         """A design's mode models, prior, detector input and estimate delay."""
@@ -719,19 +708,18 @@ def _structure_runs(
             bias_estimate_delay,
         )
 
-    def mode_run(design: str, imm: bool):
+    def mm_run(design: str):
         def run(key, f, filt: ZhangLiFilter | BiasFilter, rule: ModeRule):
             modes, prior, detector_input, delay = mode_bank(design, filt)
             method = Method(
-                bank(modes, filt.mixing, imm),
+                multiple_model(mode_kf, modes, filt.mixing),
                 None,
                 mode_probability_detector(rule.threshold, confirm_steps=rule.confirm_steps),
                 detector_input,
                 delay,
             )
             method = method._replace(init_state=method.filter.init(*prior, mu0))
-            result = run_monitor(method, model, us, key, f, keep_history=imm)
-            return (result.record, result.history.info.mode_prob) if imm else result.record
+            return run_monitor(method, model, us, key, f).record
 
         return run
 
@@ -769,7 +757,7 @@ def _structure_runs(
         False,
         -1,
     )
-    kf = kalman_filter(model, unroll_factorizations=unrolled)
+    kf = kalman_filter(model, unroll_factorizations=False)
     kf0 = kf.init(x0, steady.predicted_cov)  # the GLR signatures assume the steady-state gain
 
     def glrt_run(key, f, rule: GLRTRule):
@@ -787,10 +775,10 @@ def _structure_runs(
         return result.record, glr_sequence(glr_setup, result.history.info.innovation).statistic
 
     return {
-        "MM (Zhang & Li modes)": mode_run("zhang-li", False),
-        "IMM (Zhang & Li modes)": imm_chunk("zhang-li") if kernel else mode_run("zhang-li", True),
-        "MM (bias modes)": mode_run("bias", False),
-        "IMM (bias modes)": imm_chunk("bias") if kernel else mode_run("bias", True),
+        "MM (Zhang & Li modes)": mm_run("zhang-li"),
+        "IMM (Zhang & Li modes)": imm_chunk("zhang-li"),
+        "MM (bias modes)": mm_run("bias"),
+        "IMM (bias modes)": imm_chunk("bias"),
         "GLRT": glrt_run,
     }
 
@@ -800,15 +788,11 @@ def engine_spec(
     methods: list[str] | None = None,
     duration: float = 4.0,
     onset_time: float = 2.0,
-    unrolled: bool = False,
-    kernel: bool = True,
 ) -> Study:
     """The engine study as data (``jaxfdi._study``): the nine ``study_faults`` and every method of
     ``engine_method_names`` (or ``methods``) in five structures, one compiled program each (MMs and
     IMMs per mode design, GLRTs); methods are cells of a (filter x decision rule) grid, IMMs sharing a
-    transition matrix run one filter. Speed-only options: ``kernel`` (default) runs the IMM batch kernel
-    per chunk (faster on CPU: its structure-of-arrays layout) instead of ``vmap(monitor)``; ``unrolled``:
-    written-out factorisations in the other filters (``benchmarks/bench_studies.py --linalg``).
+    transition matrix run one filter, a chunk of runs at a time (``run_filter``'s batch kernel).
 
     Returns:
       ``Study("engine", cases, case_names, structures)``: the nine cases stacked (the paper's six,
@@ -828,12 +812,7 @@ def engine_spec(
         )
     steps, onset = int(round(duration / TS)), int(round(onset_time / TS))
     runs = _structure_runs(
-        steps,
-        settings.glr_window,
-        settings.bias_estimate_delay,
-        settings.glr_estimate_delay,
-        bool(unrolled),
-        bool(kernel),
+        steps, settings.glr_window, settings.bias_estimate_delay, settings.glr_estimate_delay
     )
     hand = sticky_transition(len(MODE_NAMES), settings.to_fault, settings.stay)
     paper_rule = _mode_rule(settings, 1)
@@ -886,7 +865,7 @@ def engine_spec(
                     axes,
                     cells,
                     averaged=name.startswith(("IMM", "GLRT")),
-                    batched=kernel and name.startswith("IMM"),
+                    batched=name.startswith("IMM"),
                 )
             )
     fault_names, faults = study_faults(onset)
@@ -902,8 +881,6 @@ def engine_study(
     onset_time: float = 2.0,
     progress: bool = False,
     chunk_size: int | None = None,
-    unrolled: bool = False,
-    kernel: bool = True,
 ) -> EngineStudy:
     """Run every method (or ``methods``) on the same ``runs`` runs per fault (``engine_spec`` through
     ``study.run_study``: five programs; figure means averaged on the device). Needs float64
@@ -918,7 +895,7 @@ def engine_study(
     """
     require_x64("engine_study (the engine model is stiff)")
     check_study(runs, seed)
-    spec = engine_spec(settings, methods, duration, onset_time, unrolled, kernel)
+    spec = engine_spec(settings, methods, duration, onset_time)
     chosen = [
         m for m in engine_method_names(settings) if any(m in s.methods for s in spec.structures)
     ]

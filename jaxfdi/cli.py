@@ -159,7 +159,8 @@ def _write_study(
     csv = Path(name).with_suffix(".csv")
     _io.atomic_write(folder / csv, lambda tmp: study.to_frame().to_csv(tmp, index=False))
     paths = [str(_named(args, folder, p)) for p in plot(folder)]
-    return f"wrote {Path(args.out) / name}, {Path(args.out) / csv} and {', '.join(paths)} ({elapsed:.1f} s)"
+    written = [str(Path(args.out) / name), str(Path(args.out) / csv), *paths]
+    return f"wrote {', '.join(written[:-1])} and {written[-1]} ({elapsed:.1f} s)"
 
 
 def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
@@ -531,13 +532,13 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
 def _study_runner(
     study: str,
     name: str,
-    plot: str,
-    header: Callable[[dict, argparse.Namespace], str],
+    plot: str | None,
+    header: Callable[[dict, argparse.Namespace], str] | None,
     runs: str = "runs",
 ) -> Callable[[argparse.Namespace, Path], str]:
-    """A runner for a study with a one-line header: the study's module's function ``study`` called as
-    ``study(<runs>=--runs, seed, progress)``, its header and table printed, its JSON and figures (the module's
-    ``plot(study, folder)``) written."""
+    """A runner for a study: the study's module's function ``study`` called as ``study(<runs>=--runs, seed,
+    progress)``, its one-line header (``None``: none; the table says it) and table printed, its JSON, CSV and
+    figures (the module's ``plot(study, folder)``; ``None``: no figures) written."""
 
     def run(args: argparse.Namespace, folder: Path) -> str:
         module = _study(args)
@@ -546,11 +547,15 @@ def _study_runner(
             **{runs: args.runs}, seed=args.seed, progress=not args.quiet
         )
         elapsed = time.perf_counter() - start
-        print(header(result.config, args))
+        if header is not None:
+            print(header(result.config, args))
         print(result.table())
-        return _write_study(
-            result, args, folder, name, lambda where: getattr(module, plot)(result, where), elapsed
+        figures = (
+            (lambda where: [])
+            if plot is None
+            else (lambda where: getattr(module, plot)(result, where))
         )
+        return _write_study(result, args, folder, name, figures, elapsed)
 
     return run
 
@@ -610,6 +615,8 @@ _run_gnss_campus = _study_runner(
     "gnss_campus_study", "gnss-campus.json", "plot_gnss_campus", _gnss_campus_header
 )
 _run_gps_ins = _study_runner("gps_ins_study", "gps-ins.json", "plot_gps_ins", _gps_ins_header)
+_run_engine_fault_sizes = _study_runner("fault_size_study", "engine-fault-sizes.json", None, None)
+_run_f16_fault_kinds = _study_runner("fault_kind_study", "f16-fault-kinds.json", None, None)
 _run_gnss_real = _study_runner(
     "gnss_real_study", "gnss-real.json", "plot_gnss_real", _gnss_real_header
 )
@@ -637,6 +644,18 @@ RUNNERS = {
         options=("estimator", "engage_on"),
         methods="METHODS",
         module="jaxfdi.scenarios.reaction_wheels",
+    ),
+    "engine-fault-sizes": Runner(
+        _run_engine_fault_sizes,
+        "Han et al. (2022) turbojet: each method's delay against the fault's size, and the size at which "
+        "it equals Table 3's",
+        module="jaxfdi.scenarios.engine",
+    ),
+    "f16-fault-kinds": Runner(
+        _run_f16_fault_kinds,
+        "Park et al. (2004) F-16: every rate-sensor fault kind (bias, drift, scale, stuck, dead) in full "
+        "flights under no FDI, the paper's hybrid rule and the verified rule",
+        module="jaxfdi.scenarios.f16_fdi",
     ),
     "f16": Runner(
         _run_f16,

@@ -440,14 +440,22 @@ KIND_RUNS = 40
 
 
 @pytest.fixture(scope="module")
-def kinds():
+def kinds(tmp_path_factory):
     """Every fault kind at the paper's size, 40 full flights (15 s) each, flown without FDI,
-    under the paper's hybrid rule and under the verified rule (the same draws)."""
-    study = sf.fault_kind_study(runs=KIND_RUNS, seed=38)
-    assert_table_is_the_json(
-        study.to_frame(), study.rows
-    )  # the table as a DataFrame: the same numbers
-    return {(r["kind"], r["follow"]): r for r in study.rows}
+    under the paper's hybrid rule and under the verified rule (the same draws), as the
+    paper page's command runs it (``jaxfdi run f16-fault-kinds``, in this process): its JSON
+    is ``fault_kind_study``'s rows, and their table as a DataFrame has the same numbers."""
+    import json
+
+    from jaxfdi import cli
+
+    out = tmp_path_factory.mktemp("f16-fault-kinds")
+    argv = ["run", "f16-fault-kinds", "--runs", str(KIND_RUNS), "--seed", "38", "--quiet"]
+    assert cli.main([*argv, "--out", str(out)]) == 0
+    data = json.loads((out / "f16-fault-kinds.json").read_text())
+    assert data["config"]["runs"] == KIND_RUNS
+    assert_table_is_the_json(sf.F16KindStudy(data["config"], data["rows"]).to_frame(), data["rows"])
+    return {(r["kind"], r["follow"]): r for r in data["rows"]}
 
 
 def test_with_verified_fdi_no_fault_kind_leaves_the_envelope_more_often_than_without(kinds):

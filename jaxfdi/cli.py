@@ -617,6 +617,7 @@ _run_gnss_campus = _study_runner(
 _run_gps_ins = _study_runner("gps_ins_study", "gps-ins.json", "plot_gps_ins", _gps_ins_header)
 _run_engine_fault_sizes = _study_runner("fault_size_study", "engine-fault-sizes.json", None, None)
 _run_f16_fault_kinds = _study_runner("fault_kind_study", "f16-fault-kinds.json", None, None)
+_run_vtol_fault_kind = _study_runner("fault_kind_study", "vtol-fault-kind.json", None, None)
 _run_gnss_real = _study_runner(
     "gnss_real_study", "gnss-real.json", "plot_gnss_real", _gnss_real_header
 )
@@ -692,6 +693,12 @@ RUNNERS = {
         "Lee & Lyou VTOL: robust two-stage KF bank, chi-square/MDWT tests, LQR-PI "
         "fault-tolerant control",
         methods="METHODS",
+        module="jaxfdi.scenarios.vtol",
+    ),
+    "vtol-fault-kind": Runner(
+        _run_vtol_fault_kind,
+        "Lee & Lyou VTOL: can the TSKF bank tell an additive fault from a multiplicative one "
+        "(windowed likelihoods of the two filters at the location, FTC off)",
         module="jaxfdi.scenarios.vtol",
     ),
 }

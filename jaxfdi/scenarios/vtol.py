@@ -34,6 +34,7 @@ Uncertainties" (CITATION.cff).
 from __future__ import annotations
 
 import hashlib
+import time
 from typing import Any, NamedTuple
 
 import jax
@@ -58,6 +59,7 @@ from jaxfdi import (
     record_from_alarms,
     run_study,
     stack_faults,
+    status,
     step_health,
     study_result,
     unhealthy_warning,
@@ -427,7 +429,7 @@ def step_health_series(history: LoopStep) -> jnp.ndarray:
 
 
 #: why the closed loop's "kind right" is 0 on the additive faults
-#: (``python benchmarks/vtol_fault_kind.py``, 20 runs per case, FTC off)
+#: (``jaxfdi run vtol-fault-kind``: ``fault_kind_study``, 20 runs per case, FTC off)
 KIND_NOTE = (
     "kind (additive vs multiplicative): not identifiable for the additive faults under the paper's inputs. At a\n"
     "location the two filters' fault directions differ only by the scaling signal (u_i for an actuator, (C x)_j for\n"
@@ -438,8 +440,133 @@ KIND_NOTE = (
     "of the runs of every additive fault (at most 40 % after subtracting each filter's fault-free mean), while the\n"
     "same raw comparison names every multiplicative fault right in 100 %. So the latched kind is multiplicative, and\n"
     "the FTC, which acts on an additive actuator fault only when its kind is additive, does nothing there (a2 ramp:\n"
-    "the same tracking error with and without FTC). Computation: python benchmarks/vtol_fault_kind.py"
+    "the same tracking error with and without FTC). Computation: jaxfdi run vtol-fault-kind --runs 20"
 )
+
+#: windows (steps after the onset) of ``fault_kind_study``: the closed loop's one-block rule, 1 s, 3 s
+KIND_WINDOWS = (4, 20, 60)
+
+
+@study_result(group="fault")
+class FaultKindStudy(NamedTuple):
+    """Whether the bank tells an additive fault from a multiplicative one (``fault_kind_study``)."""
+
+    config: dict[str, Any]
+    rows: list[dict[str, Any]]
+
+    def table(self) -> str:
+        return fault_kind_table(self)
+
+
+def fault_kind_study(
+    runs: int = 20, seed: int = 0, windows=KIND_WINDOWS, progress: bool = False
+) -> FaultKindStudy:
+    """Can the bank tell an additive fault from a multiplicative one at the isolated location? There its two TSKFs'
+    fault directions are one vector scaled by ``s(k) = u_i(k)`` (actuator) or ``(C x)_j(k)`` (sensor), and the
+    random-walk bias absorbs ``b_k = delta / s(k)``: the kind shows only through the variation of ``s``.
+
+    Per fault case (FTC off, ``runs`` runs, the fault-free case as each filter's baseline) and window ``W`` after the
+    onset: ``cv`` (median over runs of ``std(s) / |mean(s)|``); ``right_kind_rate``, the runs whose own-kind filter
+    has the smaller ``sum lambda`` over the window (``lambda``: its NIS, ``-2 log L`` up to the log-determinant,
+    equal for both within their bias covariance), with the median and quartiles of the margin
+    ``sum lambda_other - sum lambda_own`` (> 0: right); and the same after subtracting each filter's fault-free mean
+    statistic at each step (``_corrected``), as the disturbance leaks into the filters unequally."""
+    require_x64("fault_kind_study")
+    check_study(runs, seed)
+    windows = tuple(int(w) for w in windows)
+    if not windows or min(windows) < 1 or max(windows) > STEPS - ONSET:
+        raise ValueError(
+            f"windows: expected steps after the onset in [1, {STEPS - ONSET}], got {windows}"
+        )
+    design = vtol_design()
+    cases = vtol_faults()  # the fault-free case last: each filter's baseline
+    faults = stack_faults([f for _, f in cases])
+    keys = jax.random.split(jax.random.key(seed), runs)
+    loop = jax.vmap(
+        jax.vmap(
+            lambda f, key: run_closed_loop(design, key, f, jnp.asarray(False), STEPS),
+            in_axes=(None, 0),
+        ),
+        in_axes=(0, None),
+    )
+    if progress:
+        status(f"vtol fault kind: compiling and flying {len(cases)} cases x {runs} runs")
+    start = time.perf_counter()
+    history = jax.tree_util.tree_map(np.asarray, jax.jit(loop)(faults, keys))
+    seconds = time.perf_counter() - start
+    if progress:
+        status(f"vtol fault kind: {len(cases) * runs} closed loops in {seconds:.1f} s")
+    C = np.asarray(design.model.C)
+    baseline = history.fdi.statistic[-1].mean(axis=0)  # (T, F): each filter's fault-free mean
+    rows = []
+    for c, (name, f) in enumerate(cases[:-1]):
+        if name in HEALTH_CASES:  # a dead or frozen sensor has no additive/multiplicative kind
+            continue
+        onset, actuator = int(f.onset), int(f.target) == int(Target.ACTUATOR)
+        location = int(f.component) + (0 if actuator else 2)
+        multiplicative = bool(is_multiplicative(f))
+        half = len(LOCATIONS)  # FILTER_NAMES: the multiplicative filters, then the additive ones
+        own, other = (location, location + half) if multiplicative else (location + half, location)
+        statistic = history.fdi.statistic[c]  # (runs, T, filters)
+        signal = (
+            history.control[c][:, :, location] if actuator else history.state[c] @ C[location - 2]
+        )
+        for w in windows:
+            span = slice(onset, onset + w)
+            part = signal[:, span]
+            cv = np.std(part, axis=1) / np.maximum(np.abs(np.mean(part, axis=1)), 1e-12)
+            margin = statistic[:, span, other].sum(1) - statistic[:, span, own].sum(1)
+            excess = statistic[:, span] - baseline[None, span]
+            corrected = excess[:, :, other].sum(1) - excess[:, :, own].sum(1)
+            rows.append(
+                {
+                    "fault": name,
+                    "kind": "multiplicative" if multiplicative else "additive",
+                    "window": w,
+                    "runs": runs,
+                    "cv_median": float(np.median(cv)),
+                    "right_kind_rate": float(np.mean(margin > 0)),
+                    "margin_median": float(np.median(margin)),
+                    "margin_q1": float(np.percentile(margin, 25)),
+                    "margin_q3": float(np.percentile(margin, 75)),
+                    "right_kind_rate_corrected": float(np.mean(corrected > 0)),
+                    "corrected_median": float(np.median(corrected)),
+                    "corrected_q1": float(np.percentile(corrected, 25)),
+                    "corrected_q3": float(np.percentile(corrected, 75)),
+                }
+            )
+    config = {
+        "runs": runs,
+        "seed": seed,
+        "windows": list(windows),
+        "ftc": False,
+        "seconds": seconds,
+    }
+    return FaultKindStudy(config, rows)
+
+
+def fault_kind_table(study: FaultKindStudy) -> str:
+    """Per fault and window: the scaling signal's variation, the share of runs naming the kind right and the margin,
+    raw and over each filter's fault-free mean."""
+    cfg = study.config
+    head = (
+        f"{'fault':<22} {'kind':<15} {'W':>3} {'cv':>7} {'right':>6} {'margin [q1, q3]':>26}"
+        f" {'right*':>7} {'margin* [q1, q3]':>26}"
+    )
+    lines = [
+        f"VTOL fault kind by windowed likelihood, {cfg['runs']} runs per case, FTC off, seed {cfg['seed']} "
+        "(*: over each filter's fault-free mean statistic)",
+        head,
+        "-" * len(head),
+    ]
+    for r in study.rows:
+        lines.append(
+            f"{r['fault']:<22} {r['kind']:<15} {r['window']:>3} {r['cv_median']:>7.3f} "
+            f"{r['right_kind_rate']:>6.2f} {r['margin_median']:>8.2f} [{r['margin_q1']:>7.1f}, {r['margin_q3']:>7.1f}]"
+            f" {r['right_kind_rate_corrected']:>7.2f} {r['corrected_median']:>8.2f} "
+            f"[{r['corrected_q1']:>7.1f}, {r['corrected_q3']:>7.1f}]"
+        )
+    return "\n".join(lines)
 
 
 PAPER_HEADLINE = {  # Lee & Lyou, Section V: first detection step of the s3 step (onset 120)

@@ -669,3 +669,26 @@ def test_the_table_as_a_data_frame_is_the_rows(study):
     method and case; ``_repr_html_`` renders it for a notebook."""
     assert_table_is_the_json(study.to_frame(), study.rows)
     assert "<table" in study._repr_html_()
+
+
+def test_fault_kind_command_shows_the_kind_is_identifiable_only_for_multiplicative_faults(tmp_path):
+    """``jaxfdi run vtol-fault-kind`` (in this process) on a seed the study's note was not
+    computed on: the raw windowed-likelihood comparison names every multiplicative fault's
+    kind right in every run and every additive fault's in none (the note's claim, why the
+    closed loop latches 'multiplicative'), each a rate of 0 or 1 over 8 runs; against the
+    fault-free baseline no additive fault reaches 3 of 4 runs. The margin's sign is the rate's:
+    its median is > 0 exactly where most runs are right."""
+    import json
+
+    from jaxfdi import cli
+
+    argv = ["run", "vtol-fault-kind", "--runs", "8", "--seed", "7", "--quiet"]
+    assert cli.main([*argv, "--out", str(tmp_path)]) == 0
+    rows = json.loads((tmp_path / "vtol-fault-kind.json").read_text())["rows"]
+    assert {r["window"] for r in rows} == {4, 20, 60} and len(rows) == 8 * 3
+    for r in rows:
+        multiplicative = r["kind"] == "multiplicative"
+        assert r["right_kind_rate"] == (1.0 if multiplicative else 0.0), r
+        assert (r["margin_median"] > 0) == (r["right_kind_rate"] > 0.5), r
+        if not multiplicative:
+            assert r["right_kind_rate_corrected"] < 0.75, r

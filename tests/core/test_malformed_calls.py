@@ -1525,7 +1525,7 @@ def _f16():
 
 
 def _flight_controller(dt=0.01, lower=-jnp.ones(4), upper=jnp.ones(4)):
-    from jaxfdi.control._flight import FlightGains, flight_controller
+    from jaxfdi.control import FlightGains, flight_controller
 
     gains = FlightGains(jnp.zeros((2, 8)), jnp.zeros((2, 5)))
     return flight_controller(gains, dt, lower, upper)
@@ -1533,10 +1533,7 @@ def _flight_controller(dt=0.01, lower=-jnp.ones(4), upper=jnp.ones(4)):
 
 def _raim_fdi(dt=1.0):
     from jaxfdi.data import data_path
-    from jaxfdi.gnss import read_rinex_nav
-    from jaxfdi.gnss._integrity import raim_fdi
-    from jaxfdi.gnss._orbits import ephemeris_table
-    from jaxfdi.gnss._raim import raim_tables
+    from jaxfdi.gnss import ephemeris_table, raim_fdi, raim_tables, read_rinex_nav
 
     table = ephemeris_table(read_rinex_nav(data_path("gps_nav_rinex2_sugl0010.20n")), 2086)
     return raim_fdi(table, 0.0, dt, raim_tables(32))
@@ -1590,7 +1587,7 @@ def _flight_ctrl():
 
 
 def _flight_view(rates=jnp.zeros(3)):
-    from jaxfdi.models.f16._plant import FlightView
+    from jaxfdi.models.f16 import FlightView
 
     return FlightView(jnp.zeros(3), jnp.zeros(3), jnp.zeros(()), jnp.zeros(()), rates)
 
@@ -1685,7 +1682,7 @@ def _ins():
 
 
 def _ins_init(attitude=jnp.array([1.0, 0.0, 0.0, 0.0]), accel_bias=None):
-    from jaxfdi.ins._mechanization import NavState
+    from jaxfdi.ins import NavState
 
     filt = _ins().loosely_coupled.loosely_coupled_filter(_ins().imu.hg1900(), 0.1)
     nav = NavState(jnp.array([0.6, 2.2, 100.0]), jnp.zeros(3), attitude)
@@ -1710,7 +1707,7 @@ def _late_records():
 
 
 def _case_slices(runs, num_cases):
-    from jaxfdi._study import case_slices
+    from jaxfdi import case_slices
 
     return case_slices(runs, num_cases)
 

@@ -192,8 +192,7 @@ def test_unhealthy_runs_are_counted_apart_and_never_scored_clean():
 def nan_run():
     """A KF (no missing_measurements) chi-square monitor (window 2) on the engine fed one
     NaN measurement on sensor 2 at step 20 (a one-step dead sensor), with its history."""
-    from jaxfdi import monitor
-    from jaxfdi._faults import fault, sensor_labels
+    from jaxfdi import fault, monitor, sensor_labels
     from jaxfdi.models import engine_model
 
     model = engine_model()
@@ -407,7 +406,7 @@ def test_binomial_interval_equals_the_brute_force_cdf(trials, p):
     import math
     from fractions import Fraction
 
-    from jaxfdi._metrics import binomial_interval
+    from jaxfdi import binomial_interval
 
     q = Fraction(p).limit_denominator(10**6)
     cdf, acc = [], Fraction(0)

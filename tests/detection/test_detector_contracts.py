@@ -32,7 +32,7 @@ class DetectorCase(NamedTuple):
 def _glrt_setup():
     from _linear_gaussian_cases import small_model
 
-    from jaxfdi._riccati import steady_state_kalman
+    from jaxfdi import steady_state_kalman
 
     model = small_model()
     steady = steady_state_kalman(model)
@@ -115,7 +115,7 @@ def detector_case(request):
 
 
 def test_every_detector_steps_to_a_decision_of_scalars(detector_case):
-    from jaxfdi.detection._chi2 import Decision
+    from jaxfdi.detection import Decision
 
     detector = detector_case.make()
     value = detector_case.stream(np.random.default_rng(0), (1,))[0]

@@ -238,7 +238,7 @@ def _dual_field(x, u, model):
 
 
 def _dual_build(theta, dtype):
-    from jaxfdi.detection._dual_filter import dual_filter
+    from jaxfdi.detection import dual_filter
 
     model, _, _ = _linear_problem()
     scaled = _cast(model, dtype)
@@ -261,8 +261,7 @@ def _corrected_glrt_build(theta, dtype):
 @functools.lru_cache(maxsize=None)
 def _ins_problem():
     """Four GPS epochs of a level INS moving north-east, four IMU samples 0.01 s apart each."""
-    from jaxfdi.ins._loosely_coupled import GpsFix
-    from jaxfdi.ins._mechanization import NavState
+    from jaxfdi.ins import GpsFix, NavState
 
     epochs, per_epoch = 4, 4
     nav = NavState(
@@ -290,7 +289,7 @@ def _ins_problem():
 
 def _ins_build(theta, dtype):
     from jaxfdi.ins import _imu as imu
-    from jaxfdi.ins._loosely_coupled import loosely_coupled_filter
+    from jaxfdi.ins import loosely_coupled_filter
 
     nav, _, _ = _ins_problem()
     filt = loosely_coupled_filter(imu.hg1900(), 0.01)
@@ -312,7 +311,7 @@ def _filter_registry():
         two_stage_kalman_filter,
         unknown_input_filter,
     )
-    from jaxfdi.tuning._train import checkpointed
+    from jaxfdi.tuning import checkpointed
 
     _, ys, us = _linear_problem()
     linear = dict(ys=ys, us=us)

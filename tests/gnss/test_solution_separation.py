@@ -130,9 +130,14 @@ def test_levels_match_the_long_way_with_two_clocks():
     """The almanac's satellites above 5 deg at a point, odd PRNs as one constellation and
     even as another (a second clock column); the constellation modes are then monitored
     with their own priors."""
-    from jaxfdi.gnss import geodetic_to_ecef, read_yuma
+    from jaxfdi.gnss import (
+        almanac_table,
+        geodetic_to_ecef,
+        read_yuma,
+        satellite_position,
+        select_orbits,
+    )
     from jaxfdi.gnss._frames import elevation_azimuth, line_of_sight_ned
-    from jaxfdi.gnss._orbits import almanac_table, satellite_position, select_orbits
 
     table = almanac_table(read_yuma(data_path("gps_almanac_2086.yuma.txt")))
     receiver = np.asarray(geodetic_to_ecef(np.radians(37.4), np.radians(-122.2), 30.0))
@@ -231,7 +236,7 @@ def test_the_isolated_mode_is_the_fix_without_the_faulty_satellite():
     is the least-squares fix re-solved without it, to 0.2 % (the separation is linear at
     the all-in-view fix; the re-solve takes its elevation weights and atmospheric delays
     at its own position, up to 80 m away: 10 cm on 82 m measured)."""
-    from jaxfdi.gnss._frames import ecef_to_ned
+    from jaxfdi.gnss import ecef_to_ned
 
     obs = read_observations(data_path("07590920.05o"))
     epochs = receiver_epochs(obs, read_rinex_nav(data_path("07590920.05n")))

@@ -480,7 +480,7 @@ def test_modes_at_the_books_trims():
     period is an oscillation; at 0.35 the two fastest roots are real, -1.91 and +0.098
     1/s, the unstable one mostly pitch attitude and airspeed; at 0.38 the divergence is
     faster (+0.66 1/s); the lateral modes are alike at all three."""
-    from jaxfdi.models.f16._trim import level_flight, trim_batch
+    from jaxfdi.models.f16 import level_flight, trim_batch
 
     p = f16_params()
     xcgs = jnp.array(

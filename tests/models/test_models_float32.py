@@ -61,8 +61,7 @@ def float32_run():
 
 
 def _float64_models():
-    from jaxfdi.models import kitsat3_params
-    from jaxfdi.models._fault_modes import bias_modes, noise_inflation_modes
+    from jaxfdi.models import bias_modes, kitsat3_params, noise_inflation_modes
     from jaxfdi.models._rigid_body import rigid_body_params
 
     engine = engine_model(dtype=jnp.float64)

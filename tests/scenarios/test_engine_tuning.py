@@ -197,7 +197,7 @@ def test_confirmed_probabilities_reproduce_the_confirming_detector(confirm_steps
     import jax
     import jax.numpy as jnp
 
-    from jaxfdi.detection._mode_probability import mode_probability_detector
+    from jaxfdi.detection import mode_probability_detector
 
     rng = np.random.default_rng(np.sum(confirm_steps))
     mu = rng.dirichlet(np.full(7, 0.3), size=(20, 30))  # (R, T, M), spiky

@@ -195,9 +195,9 @@ def test_plant_noise_and_faults(flight):
     sample std within 5 %: its standard error is 1.1 %), a sensor bias on both axes of
     rate sensor 1 (seed 000's fault) appears in ``y`` from its onset on, and a stuck
     elevator takes the value commanded at its onset (``faults`` holds it afterwards)."""
-    from jaxfdi._faults import concat_faults, fault, fault_group
-    from jaxfdi.control._f16_loop import f16_plant
-    from jaxfdi.models.f16._plant import RATE_OFFSET, measurement_cov
+    from jaxfdi import concat_faults, fault, fault_group
+    from jaxfdi.control import f16_plant
+    from jaxfdi.models.f16 import RATE_OFFSET, measurement_cov
 
     setup = flight[0]
     bias = fault_group("bias", "sensor", (RATE_OFFSET, RATE_OFFSET + 1), 300, (0.1, 0.1))

@@ -108,15 +108,10 @@ def test_a_dead_sensor_is_detected_and_isolated_through_the_imm_kernel():
     the dead-channel rule."""
     import jax
 
-    from jaxfdi import linear_simulator, simulate
-    from jaxfdi._faults import fault, sensor_labels
-    from jaxfdi._metrics import fault_row
-    from jaxfdi._monitor import replay_detector
-    from jaxfdi.detection._mode_probability import mode_probability_detector
-    from jaxfdi.filters import run_filter
-    from jaxfdi.filters._imm import interacting_multiple_model
-    from jaxfdi.filters._kalman import kalman_filter
-    from jaxfdi.models._fault_modes import noise_inflation_modes
+    from jaxfdi import fault, fault_row, linear_simulator, replay_detector, sensor_labels, simulate
+    from jaxfdi.detection import mode_probability_detector
+    from jaxfdi.filters import interacting_multiple_model, kalman_filter, run_filter
+    from jaxfdi.models import noise_inflation_modes
     from jaxfdi.scenarios.engine import PAPER_TRANSITION
 
     model, steps = engine_model(), 80

@@ -204,7 +204,7 @@ def test_gain_schedule_is_the_eigenstructure_assignment(design):
     # exact at the grid points; between them the interpolated gain keeps every nominal
     # eigenvalue of the faulty loop within 1e-3
     schedule = design.schedule
-    from jaxfdi.control._lqr import integral_augmentation
+    from jaxfdi.control import integral_augmentation
 
     A_bar, B_bar, _ = integral_augmentation(design.model.Phi, design.model.Gamma, design.H, vtol.TS)
     lam = np.linalg.eigvals(np.asarray(A_bar) - np.asarray(B_bar) @ np.asarray(design.gain))
@@ -252,7 +252,7 @@ def test_other_thresholds_seeds_and_runs_compile_no_new_closed_loop(study):
 @pytest.fixture(scope="module")
 def histories(study):
     """Full closed-loop histories (FTC off) of every fault case, 20 runs each (same keys as the study)."""
-    from jaxfdi._faults import stack_faults
+    from jaxfdi import stack_faults
 
     cases = vtol_faults()
     faults = stack_faults([f for _, f in cases])
@@ -459,7 +459,7 @@ def test_the_loop_holds_v_h_and_leaves_the_unreachable_q_command(histories, stud
 def calm(design):
     """The s3 step and fault-free runs of ``histories`` (same keys) on the true plant
     without the disturbance ``3 sin 10t`` (its oscillator started at rest)."""
-    from jaxfdi._faults import stack_faults
+    from jaxfdi import stack_faults
 
     calm_design = design._replace(plant_x0=design.plant_x0.at[4:].set(0.0))
     cases = dict(vtol_faults())
@@ -555,7 +555,7 @@ def test_study_rows_and_calibration(study):
 def test_per_run_calibration_is_the_smallest_scaling_meeting_the_rate(design):
     """Brute force on the calibration runs themselves: the scaled thresholds leave at most
     ``run_false_alarm`` of them with a symptom, and any smaller scaling does not."""
-    from jaxfdi._montecarlo import monte_carlo
+    from jaxfdi import monte_carlo
     from jaxfdi.scenarios.vtol import decision_values, runs_with_symptoms
 
     runs, seed, steps = 12, 5, 120

@@ -492,6 +492,9 @@ def main() -> int:
         },
     )
     print(f"wrote {args.out}")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_f16_fdi.json")
     return 0
 
 

@@ -326,6 +326,9 @@ def main() -> int:
         },
     )
     print(f"wrote {args.out}")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_f16_flight.json")
     return 0
 
 

@@ -1196,6 +1196,9 @@ def main(argv=None) -> int:
         f"\nall implementations agree within tolerance: {payload['all_agree']};  "
         f"elapsed {payload['elapsed_s']:.0f} s;  results written to {args.out}"
     )
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results.json")
     return 0 if payload["all_agree"] else 1
 
 

@@ -385,6 +385,9 @@ def main(argv=None) -> int:
     )
     _io.write_json(args.out, summary)
     print(f"wrote {args.out}")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_gnss_raim.json")
     return 0
 
 

@@ -260,6 +260,9 @@ def main() -> None:
         json.dump(results, handle, indent=1)
     os.replace(tmp, args.out)
     print(f"wrote {args.out}")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "gnss_real.json")
 
 
 if __name__ == "__main__":

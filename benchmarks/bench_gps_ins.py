@@ -562,6 +562,9 @@ def main() -> None:
             "realtime_factor": realtime,
         },
     )
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_gps_ins.json")
 
 
 if __name__ == "__main__":

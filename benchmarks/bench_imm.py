@@ -237,6 +237,9 @@ def main(argv=None) -> int:
     }
     write_json_atomic(args.out, result)
     log(f"wrote {args.out}")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_imm.json")
     return 0
 
 

@@ -196,6 +196,9 @@ def main() -> None:
         subprocess.run(
             ["git", "-C", ROOT, "worktree", "remove", "--force", baseline_dir], capture_output=True
         )
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_loop.json")
 
 
 if __name__ == "__main__":

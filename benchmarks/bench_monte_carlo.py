@@ -234,6 +234,9 @@ def main(argv=None) -> int:
         json.dump({"meta": meta, "rows": rows, "all_agree": ok}, fh, indent=1)
     os.replace(tmp, args.out)
     print(f"all agree: {ok}; written {args.out}")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "montecarlo_results.json")
     return 0 if ok else 1
 
 

@@ -510,6 +510,9 @@ def main(argv=None) -> int:
         f"(> cores: other processes shared the CPU)"
     )
     print(f"wrote {args.out} ({time.perf_counter() - t_start:.0f} s in all)")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_reaction_wheels.json")
     return 0
 
 

@@ -591,6 +591,9 @@ def main(argv=None) -> int:
             print()
             print(fmt(payload[name]))
     print(f"\nelapsed {payload['elapsed_s']:.0f} s; written {args.out}")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_scale.json")
     return 0
 
 

@@ -114,6 +114,9 @@ def main() -> None:
     previous = json.loads(Path(args.out).read_text()) if Path(args.out).exists() else {}
     previous.setdefault("runs", []).append(report)
     write_json(args.out, previous)
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_studies.json")
 
 
 if __name__ == "__main__":

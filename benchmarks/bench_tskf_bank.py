@@ -290,6 +290,9 @@ def main(argv=None) -> int:
     )
     print(f"  agreement: numpy vs jaxfdi {agree_np:.1e}, augmented vs optimal TSKF {agree_aug:.1e}")
     print(f"wrote {args.out}")
+    from report import refresh  # RESULTS.md again, only if the JSON went to its default path
+
+    refresh(args.out, "results_tskf_bank.json")
     return 0
 
 

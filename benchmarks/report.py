@@ -5,7 +5,7 @@ the git log of its JSON.
     python benchmarks/report.py           # rewrite RESULTS.md (every bench_*.py does this after writing)
     python benchmarks/report.py --check   # exit 1 if RESULTS.md is not what the JSON renders
 
-Pure Python (no JAX): the test suite checks that RESULTS.md is current (``tests/core/test_benchmarks.py``).
+Pure Python (no JAX): the test suite checks that RESULTS.md is current (``tests/core/test_benchmark_results.py``).
 """
 
 from __future__ import annotations
@@ -45,7 +45,9 @@ def render(folder: Path = HERE) -> str:
         parts.append(f"## {topic.title}\n\n{topic.about}\n")
         for name, data in results.items():
             meta = tables.meta(data)
-            parts.append(f"`{name}`: `{meta['command']}`, {meta['date']}, {meta['machine']}.\n")
+            command = meta["command"]
+            command = command if command.startswith("(") else f"`{command}`"
+            parts.append(f"`{name}`: {command}, {meta['date']}, {meta['machine']}.\n")
         for table in topic.render(results):
             parts.append(table.markdown())
     return "\n".join(parts)
@@ -59,6 +61,16 @@ def write(path: Path = RESULTS) -> Path:
         f.write(text)
     os.replace(tmp, path)
     return path
+
+
+def refresh(out: str | os.PathLike, default: str) -> bool:
+    """After a benchmark wrote its JSON to ``out``: rewrite RESULTS.md if ``out`` is ``benchmarks/<default>``,
+    the script's default path. A run written elsewhere (``--out /tmp/x.json``) leaves the page alone, which
+    would otherwise be rendered again from files that run did not update."""
+    if Path(out).resolve() != HERE / default:
+        return False
+    print(f"wrote {write()}")
+    return True
 
 
 def main(argv=None) -> int:

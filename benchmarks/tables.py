@@ -682,7 +682,8 @@ def _studies(results: dict) -> list[Table]:
                     ("warm, wall", lambda r: _study_wall(r.get("warm")), ""),
                     ("warm, in process", lambda r: r["warm"].get("wall_in_process_s"), s),
                 ],
-                note="`engine_study(unrolled=...)` in a fresh process, cold and warm cache.",
+                note="`engine_study(unrolled=...)` in a fresh process, cold and warm cache: the measurement "
+                "behind the study's library calls (the option and `--linalg` are gone since).",
             )
         )
     return out

@@ -348,7 +348,7 @@ def joseph_cov(cov: Array, gain: Array, H: Array, noise_cov: Array) -> Array:
     """Joseph-form covariance ``(I - K H) P (I - K H)^T + K R K^T`` (Bucy & Joseph 1968): PSD for any gain ``K``.
 
     With library calls, the same quadratic form in one block, ``M diag(P, R) M^T`` with ``M = [I - K H, K]``: three
-    ``dot`` calls instead of five (faster for one sequence, ``benchmarks/kf_covariance_update.py``).
+    ``dot`` calls instead of five.
     """
     I_KH = jnp.eye(cov.shape[0], dtype=cov.dtype) - matmul(gain, H)
     if _library():

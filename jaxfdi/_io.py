@@ -36,7 +36,7 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, Mapping
 
 from jaxfdi._version import __version__
 
@@ -65,6 +65,18 @@ def current_umask() -> int:
 def file_mode() -> int:
     """The permissions of a newly created file: ``0o666 & ~umask``."""
     return 0o666 & ~current_umask()
+
+
+def save_figures(figures: Mapping[str, Any], folder: str | Path) -> list[Path]:
+    """Write each figure of ``figures`` (file name -> ``matplotlib.figure.Figure``, e.g. a study's ``plot_*``
+    captioned by ``plotting.caption_figure``) as a PNG at its own ``dpi`` into ``folder``, each atomically
+    (``atomic_write``). Returns the paths, in order."""
+
+    def png(fig):
+        # savefig's default 'figure' resolution is the one the figure was created with, not fig.dpi
+        return lambda tmp: fig.savefig(tmp, format="png", dpi=fig.dpi)
+
+    return [atomic_write(Path(folder) / name, png(fig)) for name, fig in figures.items()]
 
 
 def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:

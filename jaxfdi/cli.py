@@ -26,7 +26,7 @@ import threading
 import time
 from pathlib import Path
 from types import ModuleType
-from typing import Callable, Iterator, NamedTuple
+from typing import Any, Callable, Iterator, NamedTuple
 
 import numpy as np
 
@@ -150,15 +150,16 @@ def _write_study(
     args: argparse.Namespace,
     folder: Path,
     name: str,
-    plot: Callable[[Path], list[str]],
+    figures: dict[str, Any],
     elapsed: float,
 ) -> str:
     """Write a study's JSON (config, rows, seconds), its CSV table (``study.to_frame()``, with the rates' intervals) and
-    figures; returns the line naming them."""
+    its figures (file name -> captioned ``Figure``, what its ``plot_*`` returns); returns the line naming them."""
+
     _io.write_json(folder / name, {"config": study.config, "rows": study.rows, "seconds": elapsed})
     csv = Path(name).with_suffix(".csv")
     _io.atomic_write(folder / csv, lambda tmp: study.to_frame().to_csv(tmp, index=False))
-    paths = [str(_named(args, folder, p)) for p in plot(folder)]
+    paths = [str(_named(args, folder, p)) for p in _io.save_figures(figures, folder)]
     written = [str(Path(args.out) / name), str(Path(args.out) / csv), *paths]
     return f"wrote {', '.join(written[:-1])} and {written[-1]} ({elapsed:.1f} s)"
 
@@ -175,12 +176,8 @@ def _run_engine_chi2(args: argparse.Namespace, folder: Path) -> str:
         f"window {result.config['window']}, Pfa {result.config['pfa']}, threshold {result.config['threshold']:.2f}"
     )
     print(result.table())
-
-    def plot(where: Path) -> list[Path]:
-        engine_chi2.plot_engine_chi2(result, where / "engine-chi2.png")
-        return [where / "engine-chi2.png"]
-
-    return _write_study(result, args, folder, "engine-chi2.json", plot, elapsed)
+    figures = engine_chi2.plot_engine_chi2(result)
+    return _write_study(result, args, folder, "engine-chi2.json", figures, elapsed)
 
 
 def split_methods(text: str, valid: list[str]) -> tuple[list[str], list[str]]:
@@ -227,9 +224,7 @@ def _run_engine(args: argparse.Namespace, folder: Path) -> str:
         "mean); estimate = median over correctly isolated runs"
     )
     print(study.table())
-    return _write_study(
-        study, args, folder, "engine.json", lambda where: engine.plot_engine(study, where), elapsed
-    )
+    return _write_study(study, args, folder, "engine.json", engine.plot_engine(study), elapsed)
 
 
 def _engine_imm_designs(et: ModuleType, args: argparse.Namespace) -> list[str]:
@@ -470,12 +465,7 @@ def _run_vtol(args: argparse.Namespace, folder: Path) -> str:
     print()
     print(study.headline())
     return _write_study(
-        study,
-        args,
-        folder,
-        "vtol.json",
-        lambda where: vtol.plot_vtol(study, examples, study.design, where),
-        elapsed,
+        study, args, folder, "vtol.json", vtol.plot_vtol(study, examples, study.design), elapsed
     )
 
 
@@ -520,12 +510,7 @@ def _run_reaction_wheels(args: argparse.Namespace, folder: Path) -> str:
     print()
     print(study.headline())
     return _write_study(
-        study,
-        args,
-        folder,
-        "reaction-wheels.json",
-        lambda where: wheels.plot_wheels(study, examples, where),
-        elapsed,
+        study, args, folder, "reaction-wheels.json", wheels.plot_wheels(study, examples), elapsed
     )
 
 
@@ -538,7 +523,7 @@ def _study_runner(
 ) -> Callable[[argparse.Namespace, Path], str]:
     """A runner for a study: the study's module's function ``study`` called as ``study(<runs>=--runs, seed,
     progress)``, its one-line header (``None``: none; the table says it) and table printed, its JSON, CSV and
-    figures (the module's ``plot(study, folder)``; ``None``: no figures) written."""
+    figures (the module's ``plot(study)``; ``None``: no figures) written."""
 
     def run(args: argparse.Namespace, folder: Path) -> str:
         module = _study(args)
@@ -550,11 +535,7 @@ def _study_runner(
         if header is not None:
             print(header(result.config, args))
         print(result.table())
-        figures = (
-            (lambda where: [])
-            if plot is None
-            else (lambda where: getattr(module, plot)(result, where))
-        )
+        figures = {} if plot is None else getattr(module, plot)(result)
         return _write_study(result, args, folder, name, figures, elapsed)
 
     return run

@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import re
 import textwrap
+from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from jaxfdi import _io
+from jaxfdi._io import save_figures
 from jaxfdi._metrics import confusion_matrix
 
 __all__ = [
@@ -333,16 +334,24 @@ def _house_style(fig) -> None:
             text.set_fontsize(SMALL_FONT_PT)
 
 
-def save_figure(fig, path, caption: str, dpi: int = DPI):
-    """Write ``fig`` as a PNG at ``path`` (atomically, ``_io.atomic_write``) in the house style with
-    ``caption`` under it (what it shows, over how many runs, how it differs from the paper's), wrapped
-    to the figure's width; ``ValueError`` if the house rules (``_check_figure``) fail. Returns the path."""
+def save_figure(fig, path, caption: str):
+    """Write ``fig`` as a PNG at ``path`` (atomically, ``_io.atomic_write``) with ``caption`` under it
+    (``caption_figure``). Returns the path."""
+    return save_figures({Path(path).name: caption_figure(fig, caption)}, Path(path).parent)[0]
+
+
+def caption_figure(fig, caption: str):
+    """``fig`` in the house style at the house resolution (``DPI``) with ``caption`` under it (what it
+    shows, over how many runs, how it differs from the paper's), wrapped to the figure's width;
+    ``ValueError`` if the house rules (``_check_figure``) fail. Returns ``fig``, ready to show in a
+    notebook or to write (``save_figures``)."""
     if not isinstance(caption, str) or not caption.strip():
         raise ValueError(
             f"caption: expected a sentence saying what the figure shows, got {caption!r}"
         )
     _check_figure(fig, caption)
     _house_style(fig)
+    fig.set_dpi(DPI)
     width, height = fig.get_size_inches()
     lines = textwrap.wrap(
         " ".join(caption.split()), width=max(int(width * 72 / (0.55 * SMALL_FONT_PT)), 40)
@@ -356,4 +365,4 @@ def save_figure(fig, path, caption: str, dpi: int = DPI):
         engine.set(rect=(0.0, bottom, 1.0, 1.0 - bottom))
     else:
         fig.tight_layout(rect=(0.0, bottom, 1.0, 1.0))
-    return _io.atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
+    return fig

@@ -1,15 +1,14 @@
 """What every scenario study checks before it computes (precision, run counts, seeds and method names), and how its
-figures are written."""
+figures are captioned."""
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import jax
 
 from jaxfdi import checks
-from jaxfdi.plotting import save_figure
+from jaxfdi.plotting import caption_figure
 
 
 def require_x64(study: str) -> None:
@@ -42,12 +41,13 @@ def check_study(runs: int, seed: int, runs_name: str = "runs", **counts: int) ->
         checks.check_int(name, value, 1, meaning="a positive count")
 
 
-def figure_saver(out_dir) -> tuple[Callable[[Any, str, str], None], list[str]]:
-    """``save(fig, name, caption)``, writing ``out_dir / name`` with ``plotting.save_figure`` (house style, caption,
-    atomic), and the list of the paths it wrote, in order (what a study's ``plot_*`` returns)."""
-    paths: list[str] = []
+def figure_collector() -> tuple[Callable[[Any, str, str], None], dict[str, Any]]:
+    """``add(fig, name, caption)``, captioning ``fig`` in the house style (``plotting.caption_figure``) under the file
+    name ``name``, and the dict it fills, in order (what a study's ``plot_*`` returns; ``plotting.save_figures``
+    writes it)."""
+    figures: dict[str, Any] = {}
 
-    def save(fig, name: str, caption: str) -> None:
-        paths.append(str(save_figure(fig, Path(out_dir) / name, caption)))
+    def add(fig, name: str, caption: str) -> None:
+        figures[name] = caption_figure(fig, caption)
 
-    return save, paths
+    return add, figures

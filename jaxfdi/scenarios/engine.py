@@ -71,7 +71,7 @@ from jaxfdi.models import ENGINE_OUTPUT_NAMES as OUTPUT_NAMES
 from jaxfdi.models import ENGINE_TS as TS
 from jaxfdi.models import bias_mode_initial_state, bias_modes, engine_model, noise_inflation_modes
 from jaxfdi.plotting import column_subplots, hypothesis_colors
-from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
+from jaxfdi.scenarios._common import check_study, figure_collector, require_x64
 from jaxfdi.scenarios.engine_chi2 import FUEL_STEP, engine_faults
 from jaxfdi.tuning import fixed_batches
 
@@ -945,11 +945,11 @@ def method_paper(name: str) -> str | None:
     return "GLRT" if name.startswith("GLRT") else ("MM" if name.startswith("MM") else "IMM")
 
 
-def plot_engine(study: EngineStudy, out_dir) -> list[str]:
+def plot_engine(study: EngineStudy) -> dict[str, Any]:
     """Figs. 3-1/3-2 (mode probabilities) and 4 (GLR) of Han et al. (2022) and the magnitude estimates
-    against truth, written atomically; returns the paths."""
+    against truth, captioned; returns them by file name (``plotting.save_figures`` writes them)."""
     cfg = study.config
-    save, paths = figure_saver(out_dir)
+    save, figures = figure_collector()
     t = np.arange(cfg["steps"]) * cfg["Ts"]
     fault_names = engine_faults(0)[0][:-1]
 
@@ -1069,7 +1069,7 @@ def plot_engine(study: EngineStudy, out_dir) -> list[str]:
             "methods that estimate one. The paper reports the GLRT's estimates without numbers and says the IMM "
             "cannot estimate a size; the bias-mode IMMs here do.",
         )
-    return paths
+    return figures
 
 
 # --- the fault-size study ----------------------------------------------------------

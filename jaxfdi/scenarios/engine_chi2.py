@@ -46,7 +46,7 @@ from jaxfdi.models import ENGINE_OPERATING_POINT as OUTPUT_OPERATING_POINT
 from jaxfdi.models import ENGINE_OUTPUT_NAMES as OUTPUT_NAMES
 from jaxfdi.models import ENGINE_TS as TS
 from jaxfdi.models import engine_model
-from jaxfdi.plotting import column_subplots, hypothesis_colors, save_figure
+from jaxfdi.plotting import caption_figure, column_subplots, hypothesis_colors
 from jaxfdi.scenarios._common import check_study, require_x64
 
 FUEL_STEP = 0.01  # kg/s
@@ -246,9 +246,9 @@ def _chi2_run(steps: int, window: int):
     return run
 
 
-def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
-    """Two panels: one run's windowed statistic per fault, and the delay distributions (written atomically at ``path``
-    with its caption)."""
+def plot_engine_chi2(result: EngineChi2Result) -> dict[str, Any]:
+    """Two panels: one run's windowed statistic per fault, and the delay distributions, captioned; returns the figure
+    by file name (``plotting.save_figures`` writes it)."""
     cfg = result.config
     t = np.arange(cfg["steps"]) * cfg["Ts"]
     fig, (ax0, ax1) = column_subplots(3.4, 1, 2)
@@ -282,10 +282,10 @@ def plot_engine_chi2(result: EngineChi2Result, path: str) -> None:
         ylabel="detection delay [s]",
         title=f"{runs} runs per fault, Pfa = {cfg['pfa']}",
     )
-    save_figure(
+    fig = caption_figure(
         fig,
-        path,
         "Left: one run per fault of the Kalman filter's windowed NIS and its threshold. Right: the "
         f"detection delays of the detected runs, {runs} per fault. The paper's Table 3 has no "
         "chi-square test; this is the baseline its MM, IMM and GLRT improve on.",
     )
+    return {"engine-chi2.png": fig}

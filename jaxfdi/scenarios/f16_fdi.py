@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from functools import partial
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -68,7 +68,7 @@ from jaxfdi.models.f16 import (
     rate_transition,
 )
 from jaxfdi.plotting import column_figure, column_subplots
-from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
+from jaxfdi.scenarios._common import check_study, figure_collector, require_x64
 from jaxfdi.scenarios.f16_flight import (
     DT,
     ERRORS,
@@ -1228,10 +1228,10 @@ def study_table(study: F16FDIStudy) -> str:
     return "\n".join(lines)
 
 
-def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
-    """Figs. 5-8 for the paper's case, trajectory, sweep (polar), envelope, sensor arrangement (PNG, written
-    atomically); returns the paths."""
-    save, paths = figure_saver(out_dir)
+def plot_f16_fdi(study: F16FDIStudy) -> dict[str, Any]:
+    """Figs. 5-8 for the paper's case, trajectory, sweep (polar), envelope, sensor arrangement, captioned;
+    returns them by file name (``plotting.save_figures`` writes them)."""
+    save, figures = figure_collector()
     h, cfg, rows = study.history, study.config, study.rows
     deg = 180.0 / math.pi
 
@@ -1419,7 +1419,7 @@ def plot_f16_fdi(study: F16FDIStudy, out_dir) -> list[str]:
         "separation, and their Monte Carlo isolation rate by PSA alone against the paper's arrangement (100,000 "
         "Monte Carlo trials per point, each a random fault seen in one parity step, no flight).",
     )
-    return paths
+    return figures
 
 
 __all__ = [

@@ -82,7 +82,7 @@ from jaxfdi.models.f16 import (
     submodel,
 )
 from jaxfdi.plotting import column_figure, column_subplots
-from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
+from jaxfdi.scenarios._common import check_study, figure_collector, require_x64
 
 #: control period and RK4 step, s
 DT = 0.01
@@ -632,9 +632,10 @@ def study_table(study: F16FlightStudy) -> str:
     return "\n".join(lines)
 
 
-def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
-    """Trajectory and time histories of the sample flights (PNG, atomic); returns the paths."""
-    save, paths = figure_saver(out_dir)
+def plot_f16_flight(study: F16FlightStudy) -> dict[str, Any]:
+    """Trajectory and time histories of the sample flights, captioned; returns them by file name
+    (``plotting.save_figures`` writes them)."""
+    save, figures = figure_collector()
     h = study.history
     t, state, control = h["t"], h["state"], h["control"]
 
@@ -707,4 +708,4 @@ def plot_f16_flight(study: F16FlightStudy, out_dir) -> list[str]:
         "controller flies on, the least-squares fit of the six sensor channels. Beyond the paper, "
         "which flies its aircraft only to feed the rate sensors.",
     )
-    return paths
+    return figures

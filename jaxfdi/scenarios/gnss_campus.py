@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -50,7 +50,7 @@ from jaxfdi import (
 from jaxfdi.data import data_path
 from jaxfdi.gnss import ALERT_LIMITS
 from jaxfdi.plotting import column_figure
-from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
+from jaxfdi.scenarios._common import check_study, figure_collector, require_x64
 
 #: the GNSS studies' table cells say "n/a" where there is no number (they print them in sentences)
 _cell = functools.partial(cell, missing="n/a")
@@ -550,10 +550,10 @@ def _spans(indices) -> str:
     return ", ".join(spans)
 
 
-def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
-    """Sky plot, HDOP / HPL and statistic / threshold (campus and park), MDB over the day and availability maps, as PNG
-    files in ``out_dir``; returns their paths."""
-    save, paths_out = figure_saver(out_dir)
+def plot_gnss_campus(study: GnssCampusStudy) -> dict[str, Any]:
+    """Sky plot, HDOP / HPL and statistic / threshold (campus and park), MDB over the day and availability maps,
+    captioned; returns them by file name (``plotting.save_figures`` writes them)."""
+    save, figures = figure_collector()
     campus = study.campus
     over = np.flatnonzero(campus["hpl"] > 556.0)
     blocked = int(over[0]) if over.size else int(np.argmax(campus["hdop"]))
@@ -675,7 +675,7 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
 
     beyond = study.beyond
     if "mdb" not in beyond:
-        return paths_out
+        return figures
     fig = column_figure(3.8)
     ax = fig.add_subplot(1, 1, 1)
     for slot, prn in enumerate(beyond["prn"]):
@@ -716,4 +716,4 @@ def plot_gnss_campus(study: GnssCampusStudy, out_dir) -> list[str]:
         "RAIM availability (HPL within the alert limit) over the day for the masks and modes shown (beyond the "
         "paper, which reports one run).",
     )
-    return paths_out
+    return figures

@@ -37,7 +37,7 @@ chi-square level), slope protection levels at ``P_md = 1e-3``, exclusion; soluti
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -58,7 +58,7 @@ from jaxfdi.gnss import (
     receiver_epochs,
     separate_epochs,
 )
-from jaxfdi.plotting import column_subplots, save_figure
+from jaxfdi.plotting import caption_figure, column_subplots
 from jaxfdi.scenarios._common import check_study, require_x64
 
 #: station -> RINEX file stem in jaxfdi/data
@@ -645,10 +645,9 @@ def gnss_real_study(
     return GnssRealStudy(config, rows, epochs_out)
 
 
-def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
-    """Stanford diagrams (error vs slope and solution-separation levels, H and V) of both stations, a PNG
-    in ``out_dir``; returns its path."""
-    from pathlib import Path
+def plot_gnss_real(study: GnssRealStudy) -> dict[str, Any]:
+    """Stanford diagrams (error vs slope and solution-separation levels, H and V) of both stations,
+    captioned; returns the figure by file name (``plotting.save_figures`` writes it)."""
 
     fig, axes = column_subplots(6.5, 2, 2)
     count = sum(int((study.epochs[station]["gdop"] <= MAX_GDOP).sum()) for station in STATIONS)
@@ -705,9 +704,8 @@ def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
                 title=f"{axis}, {method}",
             )
     axes[0, 0].legend(fontsize=6, loc="upper left", ncol=2)
-    path = save_figure(
+    fig = caption_figure(
         fig,
-        Path(out_dir) / "gnss-real-stanford.png",
         f"Stanford diagrams of {count} epochs of GEONET stations 0759 and 3040 (one hour at 30 s, "
         "2005-04-02, GDOP <= 30), error from the surveyed position, and of the "
         f"{count_phones} smartphone epochs with ground truth (GSDC 2021-2023, crosses; circled: a "
@@ -715,4 +713,4 @@ def plot_gnss_real(study: GnssRealStudy, out_dir) -> list[str]:
         "solution-separation ones (ARAIM LPV-200 budgets, bottom). A point in the red region "
         "without an alarm is misleading information: the table counts them.",
     )
-    return [str(path)]
+    return {"gnss-real-stanford.png": fig}

@@ -27,7 +27,7 @@ using Low Grade Processor", J. KSAS 38(8):781, doi:10.5139/JKSAS.2010.38.8.781 (
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -67,7 +67,7 @@ from jaxfdi import (
 from jaxfdi.detection import chi2_detector, chi2_threshold
 from jaxfdi.ins import NavState, loosely_coupled_filter
 from jaxfdi.plotting import column_figure
-from jaxfdi.scenarios._common import check_study, figure_saver, require_x64
+from jaxfdi.scenarios._common import check_study, figure_collector, require_x64
 
 # Table 2's three episodes only: the GPS half's dead and frozen channels (700-860 s) come after the IMU onset
 from jaxfdi.scenarios.gnss_campus import (
@@ -1170,11 +1170,11 @@ def gps_ins_table(study: GpsInsStudy) -> str:
     return "\n".join(lines)
 
 
-def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
+def plot_gps_ins(study: GpsInsStudy) -> dict[str, Any]:
     """Statistics vs thresholds (Yoo et al. 2010, Figs. 10-11), RAIM (Figs. 8-9), navigation errors, detection time vs
-    bias size, and Table 3 along the threshold (the operating curve), as PNG files in ``out_dir``; returns their
-    paths."""
-    save, written = figure_saver(out_dir)
+    bias size, and Table 3 along the threshold (the operating curve), captioned; returns them by file name
+    (``plotting.save_figures`` writes them)."""
+    save, figures = figure_collector()
     chi2_limit, scst_limit = thresholds()
 
     t = np.arange(study.config["flight_s"])
@@ -1410,4 +1410,4 @@ def plot_gps_ins(study: GpsInsStudy, out_dir) -> list[str]:
         )
         + f" s (chi-square), against the paper's {PAPER_TABLE3[30.0][0]:g} s.",
     )
-    return written
+    return figures

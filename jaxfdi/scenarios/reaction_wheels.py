@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import NamedTuple, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -110,7 +110,7 @@ from jaxfdi.models import (
     wheel_rate_transition,
 )
 from jaxfdi.plotting import column_subplots, hypothesis_colors
-from jaxfdi.scenarios._common import check_methods, check_study, figure_saver, require_x64
+from jaxfdi.scenarios._common import check_methods, check_study, figure_collector, require_x64
 
 RPM = 2.0 * math.pi / 60.0
 #: steps in the NIS window of the chi-square detector
@@ -959,11 +959,11 @@ def wheel_examples(
 
 
 def plot_wheels(
-    study: WheelStudy, examples: dict[str, WheelHistory], out, wheel: int = 0, onset: int = 200
-) -> list[str]:
+    study: WheelStudy, examples: dict[str, WheelHistory], wheel: int = 0, onset: int = 200
+) -> dict[str, Any]:
     """Figs. 3-9 of Choi and Park (2009) (attitude, F, F_x, credits) and the MM's mode probabilities;
-    returns the paths written (each atomically)."""
-    save, paths = figure_saver(out)
+    captioned; returns them by file name (``plotting.save_figures`` writes them)."""
+    save, figures = figure_collector()
     cfg = study.config
     t = np.arange(cfg["steps"]) * cfg["dt"]
     fault_time = onset * cfg["dt"]
@@ -1095,4 +1095,4 @@ def plot_wheels(
         if leader
         else "The stop run: the bank was not engaged in the window shown.",
     )
-    return paths
+    return figures

@@ -80,7 +80,7 @@ from jaxfdi.detection import (
 )
 from jaxfdi.filters import actuator_direction, sensor_direction, stack_directions
 from jaxfdi.plotting import column_subplots
-from jaxfdi.scenarios._common import check_methods, check_study, figure_saver, require_x64
+from jaxfdi.scenarios._common import check_methods, check_study, figure_collector, require_x64
 from jaxfdi.scenarios.vtol_loop import LoopDesign, LoopStep, is_multiplicative, run_closed_loop
 
 LOCATIONS = ("a1", "a2", "s1", "s2", "s3", "s4")
@@ -975,10 +975,10 @@ def vtol_examples(design: LoopDesign, seed: int = 0, steps: int = STEPS) -> dict
 
 
 def plot_vtol(
-    study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesign, out
-) -> list[str]:
-    """Figs. 3-5 of Lee and Lyou; returns the paths written (each atomically)."""
-    save, paths = figure_saver(out)
+    study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesign
+) -> dict[str, Any]:
+    """Figs. 3-5 of Lee and Lyou, captioned; returns them by file name (``plotting.save_figures`` writes them)."""
+    save, figures = figure_collector()
     cfg = study.config
     t = np.arange(cfg["steps"])
     shown = FILTER_NAMES.index("s1-mult")  # the paper's Fig. 3 shows the s1 filter
@@ -1062,4 +1062,4 @@ def plot_vtol(
         "near 0 and v_v and theta drift: the paper's q = -5 command has no equilibrium (theta integrates q; "
         "docs/papers/vtol.md), so no PI loop tracks it, the fault-free one included.",
     )
-    return paths
+    return figures

@@ -55,7 +55,7 @@ def fake_study(args, folder):
         rows=rows,
         to_frame=lambda: __import__("pandas").DataFrame(rows),
     )
-    return cli._write_study(study, args, folder, "fake.json", lambda where: [], 0.5)
+    return cli._write_study(study, args, folder, "fake.json", {}, 0.5)
 
 
 def test_study_json_written_by_the_cli_carries_provenance(monkeypatch, tmp_path):

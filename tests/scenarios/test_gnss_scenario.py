@@ -171,10 +171,16 @@ def test_dead_and_frozen_channels_detected_isolated_excluded(study):
 
 
 def test_figures(study, tmp_path):
-    paths = plot_gnss_campus(study, tmp_path)
-    assert len(paths) == 3 and all(
-        (tmp_path / p.split("/")[-1]).stat().st_size > 10_000 for p in paths
-    )
+    """The study's figures are captioned ``Figure`` s a notebook shows; ``save_figures`` writes
+    each under its file name."""
+    from matplotlib.figure import Figure
+
+    from jaxfdi.plotting import save_figures
+
+    figures = plot_gnss_campus(study)
+    assert len(figures) == 3 and all(isinstance(f, Figure) for f in figures.values())
+    save_figures(figures, tmp_path)
+    assert all((tmp_path / name).stat().st_size > 10_000 for name in figures)
 
 
 def test_the_table_as_a_data_frame_is_the_rows(study):

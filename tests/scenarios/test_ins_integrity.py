@@ -24,9 +24,11 @@ import json
 import numpy as np
 import pytest
 from _frames import assert_table_is_the_json
+from matplotlib.figure import Figure
 from scipy import stats
 
 from jaxfdi.ins import attribute_ins_alarms
+from jaxfdi.plotting import save_figures
 from jaxfdi.scenarios.gps_ins import (
     PAPER_TABLE3,
     StudySize,
@@ -255,11 +257,12 @@ def test_table_json_and_figures(study, tmp_path):
     assert "RAIM on Table 2's satellite faults" in text and f"from {SIZE.onset_s} s" in text
     assert "reduced size: 900 s flights, IMU 20 Hz" in text
     json.dumps({"config": study.config, "rows": study.rows})
-    paths = plot_gps_ins(study, tmp_path)
+    figures = plot_gps_ins(study)
     assert "Operating curve" in text and "closest at P_fa" in text
-    assert len(paths) == 5 and all(
-        (tmp_path / p.split("/")[-1]).stat().st_size > 10_000 for p in paths
-    )
+    assert len(figures) == 5 and all(isinstance(f, Figure) for f in figures.values())
+    paths = save_figures(figures, tmp_path)
+    assert [p.name for p in paths] == list(figures)
+    assert all((tmp_path / name).stat().st_size > 10_000 for name in figures)
 
 
 def test_the_table_as_a_data_frame_is_the_rows(study):

@@ -5,9 +5,9 @@ Each function draws on ``ax`` if given (returning ``ax.figure``), else on a new
 no backend change, no window, nothing kept in pyplot's registry (Jupyter shows a returned figure as the
 cell's value or with ``display(fig)``; scripts ``fig.savefig(path)``; the CLI selects Agg itself).
 
-Studies' figures keep a house style (``save_figure``): one text column wide at the docs' resolution,
-axes labelled with units, labelled curves in a legend, one colour per hypothesis across panels and
-figures (``hypothesis_colors``), a caption giving the number of runs.
+Studies' figures keep a house style (``caption_figure``; ``save_figures`` writes them): one text
+column wide at the docs' resolution, axes labelled with units, labelled curves in a legend, one colour
+per hypothesis across panels and figures (``hypothesis_colors``), a caption giving the number of runs.
 """
 
 from __future__ import annotations

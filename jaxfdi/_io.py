@@ -70,7 +70,11 @@ def file_mode() -> int:
 def save_figures(figures: Mapping[str, Any], folder: str | Path) -> list[Path]:
     """Write each figure of ``figures`` (file name -> ``matplotlib.figure.Figure``, e.g. a study's ``plot_*``
     captioned by ``plotting.caption_figure``) as a PNG at its own ``dpi`` into ``folder``, each atomically
-    (``atomic_write``). Returns the paths, in order."""
+    (``atomic_write``).
+
+    Returns:
+      The ``pathlib.Path`` s written, in order.
+    """
 
     def png(fig):
         # savefig's default 'figure' resolution is the one the figure was created with, not fig.dpi

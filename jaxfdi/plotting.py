@@ -28,6 +28,9 @@ __all__ = [
     "plot_estimate",
     "plot_delays",
     "plot_confusion",
+    "caption_figure",
+    "save_figure",
+    "save_figures",
 ]
 
 
@@ -335,16 +338,22 @@ def _house_style(fig) -> None:
 
 
 def save_figure(fig, path, caption: str):
-    """Write ``fig`` as a PNG at ``path`` (atomically, ``_io.atomic_write``) with ``caption`` under it
-    (``caption_figure``). Returns the path."""
+    """Write ``fig`` as a PNG at ``path`` (atomically) with ``caption`` under it (``caption_figure``).
+
+    Returns:
+      The ``pathlib.Path`` written.
+    """
     return save_figures({Path(path).name: caption_figure(fig, caption)}, Path(path).parent)[0]
 
 
 def caption_figure(fig, caption: str):
     """``fig`` in the house style at the house resolution (``DPI``) with ``caption`` under it (what it
     shows, over how many runs, how it differs from the paper's), wrapped to the figure's width;
-    ``ValueError`` if the house rules (``_check_figure``) fail. Returns ``fig``, ready to show in a
-    notebook or to write (``save_figures``)."""
+    ``ValueError`` if the house rules (``_check_figure``) fail.
+
+    Returns:
+      ``fig``, ready to show in a notebook or to write (``save_figures``).
+    """
     if not isinstance(caption, str) or not caption.strip():
         raise ValueError(
             f"caption: expected a sentence saying what the figure shows, got {caption!r}"

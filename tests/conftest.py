@@ -62,7 +62,7 @@ HEAVY_FIRST = (
     "test_linalg_batch.py",
     "test_engine_tuning.py",
     "test_f16_fdi.py",
-    "test_notebook_gps_ins.py",
+    "test_ins_integrity.py",
     "test_notebook_f16.py",
     "test_reaction_wheels_end_to_end.py",
     "test_engine_chi2_tuning.py",

@@ -68,7 +68,6 @@ HEAVY_FIRST = (
     "test_engine_chi2_tuning.py",
     "test_tuning.py",
     "test_reaction_wheels_model.py",
-    "test_notebook_vtol.py",
     "test_cli.py",
     "test_notebook_kalman.py",
     "test_gnss_scenario.py",

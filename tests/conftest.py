@@ -62,16 +62,17 @@ HEAVY_FIRST = (
     "test_linalg_batch.py",
     "test_engine_tuning.py",
     "test_f16_fdi.py",
+    "test_vtol.py",
     "test_ins_integrity.py",
     "test_notebook_f16.py",
     "test_reaction_wheels_end_to_end.py",
+    "test_gnss_real.py",
     "test_engine_chi2_tuning.py",
     "test_tuning.py",
     "test_reaction_wheels_model.py",
     "test_cli.py",
     "test_notebook_kalman.py",
     "test_gnss_scenario.py",
-    "test_vtol.py",
     "test_cli_validation.py",
 )
 

@@ -57,22 +57,21 @@ _CACHE_MIN_COMPILE_S = 0.2
 #: the most expensive test files, longest first (seconds on 2 cores; see .ci/run)
 HEAVY_FIRST = (
     "test_engine_scenario.py",
+    "test_f16_fdi.py",
     "test_filter_contracts.py",
     "test_detector_contracts.py",
     "test_linalg_batch.py",
     "test_engine_tuning.py",
-    "test_f16_fdi.py",
-    "test_notebook_gps_ins.py",
-    "test_notebook_f16.py",
+    "test_vtol.py",
+    "test_ins_integrity.py",
     "test_reaction_wheels_end_to_end.py",
+    "test_gnss_real.py",
     "test_engine_chi2_tuning.py",
     "test_tuning.py",
     "test_reaction_wheels_model.py",
-    "test_notebook_vtol.py",
     "test_cli.py",
     "test_notebook_kalman.py",
     "test_gnss_scenario.py",
-    "test_vtol.py",
     "test_cli_validation.py",
 )
 

@@ -4,15 +4,22 @@ fixes are RTKLIB's, RTKLIB's RAIM FDE takes our decision on every injected step,
 steps at or above the minimum detectable bias are detected as often as the slope protection
 level promises (a binomial test), and on the phone traces gnss_lib_py's fault detection takes
 the same decisions and Google's own fix of the Pixel 7 Pro (whose uncertainties are right:
-``TS_D / dof`` near 1) is ours."""
+``TS_D / dof`` near 1) is ours.
+
+Notebook 08 runs last, at the CLI run's 60 trials per case (another seed): the study's
+programs take their shapes from the number of trials only (not the seed), so its study
+cell runs on the programs the CLI run compiled (the run's shared XLA cache, see conftest)
+instead of compiling every section again at a smaller size."""
 
 import json
 import subprocess
 import sys
 
+import _notebooks
 import pandas as pd
 import pytest
 from _frames import assert_table_is_the_json
+from _notebooks import images, run_clean, tables
 from scipy import stats
 
 from jaxfdi.scenarios.gnss_real import PHONE_EXCLUSIONS, PHONES, STEP_SIZES
@@ -165,3 +172,28 @@ def test_a_stopped_channel_is_caught_and_its_satellite_excluded(study):
     assert (
         channel["frozen"]["detection_rate"] == 1.0 and channel["frozen"]["delay_median_s"] == 30.0
     )
+
+
+def test_real_receivers_notebook(study, python3_kernel, monkeypatch):
+    """Notebook 08 (real receivers: GEONET beside RTKLIB, phones beside Google and
+    gnss_lib_py) end to end in a fresh kernel at the CLI run's size (``RUNS`` fault trials
+    per case), its printed results checked against what the data and the peers fix: no
+    GEONET epoch beyond its level, the Pixel 7 Pro's fix within 0.5 m of Google's with its
+    uncertainties right, its raw log read, and the study's tables and the Stanford diagrams
+    rendered. After ``study`` (the fixture), so that its programs are in the run's XLA cache."""
+    # a slack per cell for a cold cache (the test run alone): the study cell compiles every section
+    monkeypatch.setattr(_notebooks, "CELL_TIMEOUT_S", 900)
+    outputs, text = run_clean(
+        "08_real_receivers.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": str(RUNS)}
+    )
+    assert f"fault trials per step size and ramp rate: {RUNS}" in text
+    assert (
+        "station 0759: 115 epochs of GDOP <= 30, 0 alarms; every error below its level: True"
+        in text
+    )
+    html = tables(outputs)
+    assert "ours - Google&#x27;s [m]" in html or "ours - Google's [m]" in html
+    assert "GPS time of week [s]" in html and "J03 [km]" in html  # the raw GnssLogger log's table
+    for heading in ("positions", "step", "ramp", "channel", "phones", "phone-peers"):
+        assert f"<h4>{heading}</h4>" in html, heading
+    assert len(images(outputs)) == 1

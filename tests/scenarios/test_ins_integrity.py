@@ -17,13 +17,20 @@ Claims decided statistically, with a fixed seed:
 - RAIM detects the impulse in every flight and an epoch RAIM rejects is not used; the
   singular SCST matrix B at the propagators' first reset is reported, never used;
 - the IMU health test isolates a dead and a frozen roll gyro in the onset epoch
-  (4 flights each) and is silent on the fault-free flights."""
+  (4 flights each) and is silent on the fault-free flights.
+
+Notebook 07 runs last, at this file's flight size (900 s, IMU fault from 800 s, IMU at
+20 Hz), so that its INS/GPS monitor comes from the program the fixture compiled (the run's
+shared XLA cache, see conftest): ``flights_spec`` compiles one program for every world,
+seed and run count of a size (``monte_carlo`` pads a CPU chunk to 64 runs)."""
 
 import json
 
+import _notebooks
 import numpy as np
 import pytest
 from _frames import assert_table_is_the_json
+from _notebooks import images, run_clean, tables
 from matplotlib.figure import Figure
 from scipy import stats
 
@@ -270,3 +277,42 @@ def test_the_table_as_a_data_frame_is_the_rows(study):
     method and case; ``_repr_html_`` renders it for a notebook."""
     assert_table_is_the_json(study.to_frame(), study.rows)
     assert "<table" in study._repr_html_()
+
+
+def test_gps_ins_integrity_notebook(study, python3_kernel, monkeypatch):
+    """Notebook 07 (seed 002, both halves: GPS RAIM on the campus and in the park, the
+    INS/GPS EKF with the chi-square test and the SCST, Table 3) end to end in a fresh
+    kernel, 2 runs per case, at this file's flight size (``SIZE``; the paper's is the
+    notebook's default), and its printed results checked. After ``study`` (the fixture),
+    so that the Table 3 cell's monitor is already in the run's XLA cache."""
+    # a slack per cell for a cold cache (the test run alone): compiling the whole monitor
+    # (RAIM, EKF, both tests) in a fresh kernel takes about 1.5 CPU-minutes, more than the
+    # shared 300 s per cell on a loaded 2-core machine
+    monkeypatch.setattr(_notebooks, "CELL_TIMEOUT_S", 1200)
+    outputs, text = run_clean(
+        "07_gps_ins_integrity.ipynb",
+        python3_kernel,
+        monkeypatch,
+        {
+            "JAXFDI_NB_RUNS": "2",
+            "JAXFDI_NB_GPS_INS_SIZE": f"{SIZE.flight_s},{SIZE.onset_s},{SIZE.imu_rate}",
+        },
+    )
+    assert (
+        f"runs per case: 2; flights of {SIZE.flight_s} s, IMU fault from {SIZE.onset_s} s, "
+        f"IMU at {SIZE.imu_rate} Hz" in text
+    )
+    html = tables(outputs)  # the two studies as DataFrames, a table per case
+    assert "<h4>campus</h4>" in html and "<td>impulse 100 m at 100 s</td>" in html
+    drift = float(text.split("perfect IMU, 300 s of the park flight: drift ")[1].split()[0])
+    assert drift < 1e-5
+    assert "dv/dpsi = -[f^n x]: True | dv/db_a = C_b^n: True | dpsi/db_g = C_b^n: True" in text
+    assert "<h4>table3</h4>" in html
+    for bias, (chi2, scst) in ((30, (159, 149)), (60, (59, 49)), (90, (44, 39))):
+        line = next(row for row in text.splitlines() if row.startswith(f"{bias:>5g} deg/h"))
+        assert f"({chi2:>3d})" in line and f"({scst:>3d})" in line, line
+    assert "<h4>curve</h4>" in html  # beyond the paper: detection time against the bias size
+    figures = images(outputs)
+    assert len(figures) == 7, (
+        f"expected the GPS half's 2 figures and the INS half's 5, got {len(figures)}"
+    )

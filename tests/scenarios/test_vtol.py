@@ -1,5 +1,10 @@
 """Seed 001 VTOL: the robust state estimator, the closed loop and the scenario at reduced
-size (20 runs per case, 40 calibration runs, the paper's 300 steps)."""
+size (20 runs per case, 40 calibration runs, the paper's 300 steps).
+
+Notebook 04 runs last, on the program the ``study`` fixture compiled (the run's shared
+XLA cache, see conftest): its study is ``vtol_study(runs=5, seed=0, calibration_runs=40)``,
+the fixture's design (same calibration runs and seed, so the same thresholds by value)
+and chunk (``monte_carlo`` pads a CPU chunk to 64 runs), so one closed-loop program."""
 
 from __future__ import annotations
 
@@ -8,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _frames import assert_table_is_the_json
+from _notebooks import images, run_clean, tables
 from scipy import stats
 
 from jaxfdi import fault_label, no_fault
@@ -692,3 +698,25 @@ def test_fault_kind_command_shows_the_kind_is_identifiable_only_for_multiplicati
         assert (r["margin_median"] > 0) == (r["right_kind_rate"] > 0.5), r
         if not multiplicative:
             assert r["right_kind_rate_corrected"] < 0.75, r
+
+
+def test_vtol_notebook(study, python3_kernel, monkeypatch):
+    """Notebook 04 (Lee & Lyou's VTOL: robust TSKF bank, wavelet-denoised tests, FTC) end to
+    end in a fresh kernel, 5 runs per fault, and its printed results checked. After
+    ``study`` (the fixture), so that its closed-loop program is already in the run's XLA
+    cache."""
+    outputs, text = run_clean(
+        "04_vtol_tskf_ftc.ipynb", python3_kernel, monkeypatch, {"JAXFDI_NB_RUNS": "5"}
+    )
+    assert "runs per fault: 5" in text
+    assert (
+        "nominal closed-loop spectral radius: 1.000000" in text
+    )  # the paper's q tracking: eigenvalue 1
+    assert "statistic dof: 3" in text
+    html = tables(outputs)  # the study as a DataFrame: a row per fault and method|thresholds
+    assert html.count("<table") == 1 and "detection_rate_low" in html
+    for name in ("a2 effectiveness 0.5", "s3 step 0.7", "none"):
+        assert html.count(f"<td>{name}</td>") == 10, name  # 5 methods x 2 threshold sets
+    assert "Headline cases beside Lee & Lyou" in text
+    assert "online isolation of the a2 fault (location + 1): 2" in text
+    assert len(images(outputs)) == 2, f"expected Fig. 3 and Figs. 4-5, got {len(images(outputs))}"

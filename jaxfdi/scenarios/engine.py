@@ -949,7 +949,7 @@ def plot_engine(study: EngineStudy) -> dict[str, Any]:
     """Figs. 3-1/3-2 (mode probabilities) and 4 (GLR) of Han et al. (2022) and the magnitude estimates
     against truth, captioned; returns them by file name (``plotting.save_figures`` writes them)."""
     cfg = study.config
-    save, figures = figure_collector()
+    add, figures = figure_collector()
     t = np.arange(cfg["steps"]) * cfg["Ts"]
     fault_names = engine_faults(0)[0][:-1]
 
@@ -989,7 +989,7 @@ def plot_engine(study: EngineStudy) -> dict[str, Any]:
             ax.set_xlabel("time [s]")
         handles, labels = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="outside upper center", ncol=len(labels))
-        save(
+        add(
             fig,
             "engine-mode-probabilities.png",
             f"Mean mode probabilities over {cfg['figure_runs']} runs per fault (Han et al. 2022, Figs. 3-1 "
@@ -1024,7 +1024,7 @@ def plot_engine(study: EngineStudy) -> dict[str, Any]:
             ax.set_xlabel("time [s]")
         handles, labels = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="outside upper center", ncol=5)
-        save(
+        add(
             fig,
             "engine-glrt.png",
             f"Mean GLR per fault direction over {cfg['figure_runs']} runs per fault (Han et al. 2022, Fig. 4, "
@@ -1061,7 +1061,7 @@ def plot_engine(study: EngineStudy) -> dict[str, Any]:
             ax.set_xlabel("estimate / true size")
         for ax in axes[:, 0]:
             ax.set_ylabel("method")
-        save(
+        add(
             fig,
             "engine-estimates.png",
             f"Fault-size estimates over the correctly isolated runs of {runs} runs per fault, divided by the true size "

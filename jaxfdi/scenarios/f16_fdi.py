@@ -1231,7 +1231,7 @@ def study_table(study: F16FDIStudy) -> str:
 def plot_f16_fdi(study: F16FDIStudy) -> dict[str, Any]:
     """Figs. 5-8 for the paper's case, trajectory, sweep (polar), envelope, sensor arrangement, captioned;
     returns them by file name (``plotting.save_figures`` writes them)."""
-    save, figures = figure_collector()
+    add, figures = figure_collector()
     h, cfg, rows = study.history, study.config, study.rows
     deg = 180.0 / math.pi
 
@@ -1289,7 +1289,7 @@ def plot_f16_fdi(study: F16FDIStudy) -> dict[str, Any]:
     fig.suptitle(
         "The case of Park et al. (2004): bias on both axes of sensor 1 from t = 3 s, FNR 10"
     )
-    save(
+    add(
         fig,
         "f16-fdi-paper-case.png",
         "The paper's case (bias of 0.1 rad/s on both axes of sensor 1 from 3 s), one flight, as Park et al. (2004), "
@@ -1311,7 +1311,7 @@ def plot_f16_fdi(study: F16FDIStudy) -> dict[str, Any]:
     ax3.legend(fontsize=8)
     ax.set(xlabel="time [s]", ylabel="deg", title="bank-angle error of the paper's case")
     ax.legend(fontsize=8)
-    save(
+    add(
         fig,
         "f16-fdi-trajectory.png",
         f"The paper's case, one flight per view ({', '.join(FOLLOW)}; the same noise): the "
@@ -1348,7 +1348,7 @@ def plot_f16_fdi(study: F16FDIStudy) -> dict[str, Any]:
         if s == 2:
             handles, labels = ax.get_legend_handles_labels()
             fig.legend(handles, labels, loc="outside upper center", ncol=3)
-    save(
+    add(
         fig,
         "f16-fdi-sweep-polar.png",
         f"Isolation rate (radius) against the fault's direction (angle) in each sensor's plane, "
@@ -1386,7 +1386,7 @@ def plot_f16_fdi(study: F16FDIStudy) -> dict[str, Any]:
         title="Safe envelope with and without FDI",
     )
     ax.legend(fontsize=8)
-    save(
+    add(
         fig,
         "f16-fdi-envelope.png",
         f"Share of full flights within the safe envelope per fault kind and view, {counts} flights per bar "
@@ -1412,7 +1412,7 @@ def plot_f16_fdi(study: F16FDIStudy) -> dict[str, Any]:
         title="Monte Carlo isolation rate of the arrangements",
     )
     axes[1].legend(fontsize=8)
-    save(
+    add(
         fig,
         "f16-fdi-sensor-configuration.png",
         "Beyond the paper: the three sensors' axes chosen by gradient (Adam) for isolation rate or fault-plane "

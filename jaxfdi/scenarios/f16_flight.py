@@ -635,7 +635,7 @@ def study_table(study: F16FlightStudy) -> str:
 def plot_f16_flight(study: F16FlightStudy) -> dict[str, Any]:
     """Trajectory and time histories of the sample flights, captioned; returns them by file name
     (``plotting.save_figures`` writes them)."""
-    save, figures = figure_collector()
+    add, figures = figure_collector()
     h = study.history
     t, state, control = h["t"], h["state"], h["control"]
 
@@ -654,7 +654,7 @@ def plot_f16_flight(study: F16FlightStudy) -> dict[str, Any]:
     )
     ax.set(xlabel="east [ft]", ylabel="north [ft]", title="ground track")
     ax.set_aspect("equal", adjustable="datalim")
-    save(
+    add(
         fig,
         "f16-flight-trajectory.png",
         f"{state.shape[0]} sample flights of the study (dispersed c.g., initial offsets and "
@@ -700,7 +700,7 @@ def plot_f16_flight(study: F16FlightStudy) -> dict[str, Any]:
     axes[3, 1].set(ylabel="controls [deg]", xlabel="time [s]")
     axes[3, 1].legend(fontsize=7)
     fig.suptitle("Park et al. (2004): climb 0-5 s, altitude hold, 30 deg bank turn")
-    save(
+    add(
         fig,
         "f16-flight-time-histories.png",
         f"Time histories of the same {state.shape[0]} flights (the nominal one in blue, the others grey) against "

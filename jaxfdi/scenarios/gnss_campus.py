@@ -553,7 +553,7 @@ def _spans(indices) -> str:
 def plot_gnss_campus(study: GnssCampusStudy) -> dict[str, Any]:
     """Sky plot, HDOP / HPL and statistic / threshold (campus and park), MDB over the day and availability maps,
     captioned; returns them by file name (``plotting.save_figures`` writes them)."""
-    save, figures = figure_collector()
+    add, figures = figure_collector()
     campus = study.campus
     over = np.flatnonzero(campus["hpl"] > 556.0)
     blocked = int(over[0]) if over.size else int(np.argmax(campus["hdop"]))
@@ -579,7 +579,7 @@ def plot_gnss_campus(study: GnssCampusStudy) -> dict[str, Any]:
         ax.set_yticks([0, 30, 60, 90], ["90", "60", "30", "0"])
         ax.set_title(title)
         ax.legend(loc="lower left", fontsize=8)
-    save(
+    add(
         fig,
         "gnss-campus-sky.png",
         "Sky plots of the campus run at two epochs, the start and beside the wall, where the "
@@ -609,7 +609,7 @@ def plot_gnss_campus(study: GnssCampusStudy) -> dict[str, Any]:
         ]
         twin.legend(handles, labels, loc="upper right", fontsize=8)
     ax.set_xlabel("time [s]")
-    save(
+    add(
         fig,
         "gnss-campus-dop-hpl.png",
         f"HDOP and HPL over one run each, campus and park ({campus['hdop'].size} epochs at {DT:g} s; Yoo et al. "
@@ -662,7 +662,7 @@ def plot_gnss_campus(study: GnssCampusStudy) -> dict[str, Any]:
             loc="lower right" if "statistic_excluded" in series else "upper right", fontsize=8
         )
     ax.set_xlabel("time [s]")
-    save(
+    add(
         fig,
         "gnss-campus-statistic.png",
         "The parity test statistic against its threshold over one run each "
@@ -685,7 +685,7 @@ def plot_gnss_campus(study: GnssCampusStudy) -> dict[str, Any]:
     ax.set_xlabel("hours from 2020-01-01 00:00 GPST")
     ax.set_ylabel("minimum detectable bias [m]")
     ax.set_title("MDB of every satellite at the campus, open sky (one line per PRN)")
-    save(
+    add(
         fig,
         "gnss-campus-mdb.png",
         f"Minimal detectable bias of every satellite at the campus with open sky, one line per PRN, over "
@@ -710,7 +710,7 @@ def plot_gnss_campus(study: GnssCampusStudy) -> dict[str, Any]:
         )
         ax.set(title=f"{key[0]}: {key[1]}", xlabel="longitude [deg]", ylabel="latitude [deg]")
         fig.colorbar(image, ax=ax, fraction=0.04, label="availability")
-    save(
+    add(
         fig,
         "gnss-campus-availability.png",
         "RAIM availability (HPL within the alert limit) over the day for the masks and modes shown (beyond the "

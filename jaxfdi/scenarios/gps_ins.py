@@ -1174,7 +1174,7 @@ def plot_gps_ins(study: GpsInsStudy) -> dict[str, Any]:
     """Statistics vs thresholds (Yoo et al. 2010, Figs. 10-11), RAIM (Figs. 8-9), navigation errors, detection time vs
     bias size, and Table 3 along the threshold (the operating curve), captioned; returns them by file name
     (``plotting.save_figures`` writes them)."""
-    save, figures = figure_collector()
+    add, figures = figure_collector()
     chi2_limit, scst_limit = thresholds()
 
     t = np.arange(study.config["flight_s"])
@@ -1201,7 +1201,7 @@ def plot_gps_ins(study: GpsInsStudy) -> dict[str, Any]:
         ax.set_ylabel(f"{field} statistic")
         ax.legend(fontsize=8, loc="upper left")
     ax.set_xlabel("time [s]")
-    save(
+    add(
         fig,
         "gps-ins-statistics.png",
         "One flight per roll-gyro bias: the windowed chi-square and SCST statistics against their thresholds (Yoo "
@@ -1239,7 +1239,7 @@ def plot_gps_ins(study: GpsInsStudy) -> dict[str, Any]:
     )
     ax.legend(fontsize=8)
     ax.set_xlabel("time [s]")
-    save(
+    add(
         fig,
         "gps-ins-raim.png",
         "One flight (the 30 deg/h one above): HDOP and HPL (Yoo et al. 2010, Fig. 8) and RAIM's "
@@ -1276,7 +1276,7 @@ def plot_gps_ins(study: GpsInsStudy) -> dict[str, Any]:
         ax.set_xlabel("time [s]")
         ax.set_title(f"attitude error, {label}")
         ax.legend(fontsize=8)
-    save(
+    add(
         fig,
         "gps-ins-errors.png",
         "Position and attitude errors with the filter's 1-sigma over one flight each, fault-free and with the 60 "
@@ -1337,7 +1337,7 @@ def plot_gps_ins(study: GpsInsStudy) -> dict[str, Any]:
         ax.legend(fontsize=8)
     else:
         ax.text(0.5, 0.5, "not computed (beyond=False)", ha="center", transform=ax.transAxes)
-    save(
+    add(
         fig,
         "gps-ins-detection-times.png",
         f"Mean detection time over the clean flights of {study.config['runs']} flights per bias against the gyro bias "
@@ -1391,7 +1391,7 @@ def plot_gps_ins(study: GpsInsStudy) -> dict[str, Any]:
         title=f"false alarms over {study.config['runs']} fault-free flights",
     )
     right.legend(fontsize=8)
-    save(
+    add(
         fig,
         "gps-ins-operating-curve.png",
         f"Table 3 recomputed at thresholds from P_fa {OPERATING_PFA[0]:g} down to {OPERATING_PFA[-1]:g} per epoch "

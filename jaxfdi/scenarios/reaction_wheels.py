@@ -963,7 +963,7 @@ def plot_wheels(
 ) -> dict[str, Any]:
     """Figs. 3-9 of Choi and Park (2009) (attitude, F, F_x, credits) and the MM's mode probabilities;
     captioned; returns them by file name (``plotting.save_figures`` writes them)."""
-    save, figures = figure_collector()
+    add, figures = figure_collector()
     cfg = study.config
     t = np.arange(cfg["steps"]) * cfg["dt"]
     fault_time = onset * cfg["dt"]
@@ -987,7 +987,7 @@ def plot_wheels(
         if name == "stop":
             for ax in axes[:, col]:
                 ax.axvline(fault_time, color="grey", ls=":", lw=1)
-    save(
+    add(
         fig,
         "reaction-wheels-fig3-5-attitude.png",
         f"One run each: attitude (rotation from the start) and body rates, fault-free and with wheel {wheel + 1} "
@@ -1020,7 +1020,7 @@ def plot_wheels(
     for ax in axes:
         ax.axvline(fault_time, color="grey", ls=":", lw=1)
         ax.legend(fontsize=7)
-    save(
+    add(
         fig,
         "reaction-wheels-fig4-6-detection.png",
         "The same two runs: the dual filter's fault detection parameter F (Choi & Park 2009, "
@@ -1084,7 +1084,7 @@ def plot_wheels(
     else:
         agrees = f"as in {paper}"
     leader = leader if end.size else 0
-    save(
+    add(
         fig,
         "reaction-wheels-fig8-9-isolation.png",
         f"One run, the stop of wheel {wheel + 1}: the hypothesis bank's F_x, the credits and the "

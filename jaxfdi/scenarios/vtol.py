@@ -978,7 +978,7 @@ def plot_vtol(
     study: VTOLStudy, examples: dict[str, LoopStep], design: LoopDesign
 ) -> dict[str, Any]:
     """Figs. 3-5 of Lee and Lyou, captioned; returns them by file name (``plotting.save_figures`` writes them)."""
-    save, figures = figure_collector()
+    add, figures = figure_collector()
     cfg = study.config
     t = np.arange(cfg["steps"])
     shown = FILTER_NAMES.index("s1-mult")  # the paper's Fig. 3 shows the s1 filter
@@ -1012,7 +1012,7 @@ def plot_vtol(
     axes[0].legend(fontsize=7)
     axes[0].set_title("Fig. 3: s3 step 0.7 from k = 120, statistic of filter s1 (run 0)")
     axes[-1].set(xlabel="step k")
-    save(
+    add(
         fig,
         "vtol-fig3-s3-statistics.png",
         "One run: the s1 filter's chi-square statistic under the s3 step, raw and Haar-denoised, as Lee & Lyou's Fig. "
@@ -1033,7 +1033,7 @@ def plot_vtol(
         title="Fig. 4: a2 effectiveness 0.5 from k = 100 (run 0)",
     )
     ax.legend(fontsize=8)
-    save(
+    add(
         fig,
         "vtol-fig4-a2-estimate.png",
         "One run: the a2 filter's effectiveness-loss estimate after a 0.5 loss at k = 100, with and without FTC. "
@@ -1053,7 +1053,7 @@ def plot_vtol(
     axes[1, 0].set(xlabel="step k")
     axes[1, 1].set(xlabel="step k")
     fig.suptitle("Fig. 5: a2 effectiveness 0.5 from k = 100, states (run 0)")
-    save(
+    add(
         fig,
         "vtol-fig5-a2-ftc.png",
         "One run each: the states fault-free, and after the a2 loss with and without FTC (Lee & "

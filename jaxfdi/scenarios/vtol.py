@@ -470,7 +470,8 @@ def fault_kind_study(
     has the smaller ``sum lambda`` over the window (``lambda``: its NIS, ``-2 log L`` up to the log-determinant,
     equal for both within their bias covariance), with the median and quartiles of the margin
     ``sum lambda_other - sum lambda_own`` (> 0: right); and the same after subtracting each filter's fault-free mean
-    statistic at each step (``_corrected``), as the disturbance leaks into the filters unequally."""
+    statistic at each step (``_corrected``), as the disturbance leaks into the filters unequally. A run whose bank went
+    unhealthy (``step_health_series``) is left out of every figure and counted in ``unhealthy_runs``."""
     require_x64("fault_kind_study")
     check_study(runs, seed)
     windows = tuple(int(w) for w in windows)
@@ -497,7 +498,10 @@ def fault_kind_study(
     if progress:
         status(f"vtol fault kind: {len(cases) * runs} closed loops in {seconds:.1f} s")
     C = np.asarray(design.model.C)
-    baseline = history.fdi.statistic[-1].mean(axis=0)  # (T, F): each filter's fault-free mean
+    # a run whose bank went unhealthy (a NaN statistic, a filter's covariance lost) is left out and counted
+    healthy = np.asarray(jax.vmap(jax.vmap(lambda h: jnp.all(step_health_series(h))))(history))
+    fault_free = history.fdi.statistic[-1][healthy[-1]]
+    baseline = fault_free.mean(axis=0)  # (T, F): each filter's fault-free mean over healthy runs
     rows = []
     for c, (name, f) in enumerate(cases[:-1]):
         if name in HEALTH_CASES:  # a dead or frozen sensor has no additive/multiplicative kind
@@ -507,11 +511,25 @@ def fault_kind_study(
         multiplicative = bool(is_multiplicative(f))
         half = len(LOCATIONS)  # FILTER_NAMES: the multiplicative filters, then the additive ones
         own, other = (location, location + half) if multiplicative else (location + half, location)
-        statistic = history.fdi.statistic[c]  # (runs, T, filters)
+        ok = healthy[c]
+        statistic = history.fdi.statistic[c][ok]  # (healthy runs, T, filters)
         signal = (
             history.control[c][:, :, location] if actuator else history.state[c] @ C[location - 2]
-        )
+        )[ok]
         for w in windows:
+            if (
+                not ok.any() or not healthy[-1].any()
+            ):  # nothing to score: no numbers, the count says why
+                rows.append(
+                    {
+                        "fault": name,
+                        "kind": "multiplicative" if multiplicative else "additive",
+                        "window": w,
+                        "runs": runs,
+                        "unhealthy_runs": int(runs - ok.sum()),
+                    }
+                )
+                continue
             span = slice(onset, onset + w)
             part = signal[:, span]
             cv = np.std(part, axis=1) / np.maximum(np.abs(np.mean(part, axis=1)), 1e-12)
@@ -524,6 +542,7 @@ def fault_kind_study(
                     "kind": "multiplicative" if multiplicative else "additive",
                     "window": w,
                     "runs": runs,
+                    "unhealthy_runs": int(runs - ok.sum()),
                     "cv_median": float(np.median(cv)),
                     "right_kind_rate": float(np.mean(margin > 0)),
                     "margin_median": float(np.median(margin)),
@@ -560,13 +579,25 @@ def fault_kind_table(study: FaultKindStudy) -> str:
         "-" * len(head),
     ]
     for r in study.rows:
+        if (
+            "cv_median" not in r
+        ):  # every run of the case (or of the fault-free baseline) went unhealthy
+            lines.append(f"{r['fault']:<22} {r['kind']:<15} {r['window']:>3}  - (no healthy runs)")
+            continue
         lines.append(
             f"{r['fault']:<22} {r['kind']:<15} {r['window']:>3} {r['cv_median']:>7.3f} "
             f"{r['right_kind_rate']:>6.2f} {r['margin_median']:>8.2f} [{r['margin_q1']:>7.1f}, {r['margin_q3']:>7.1f}]"
             f" {r['right_kind_rate_corrected']:>7.2f} {r['corrected_median']:>8.2f} "
             f"[{r['corrected_q1']:>7.1f}, {r['corrected_q3']:>7.1f}]"
         )
-    return "\n".join(lines)
+    first = [r for r in study.rows if r["window"] == cfg["windows"][0]]  # one row per fault
+    bad = [r for r in first if r["unhealthy_runs"]]
+    warning = unhealthy_warning(
+        sum(r["unhealthy_runs"] for r in bad),
+        sum(r["runs"] for r in first),
+        ", ".join(f"{r['fault']} {r['unhealthy_runs']}" for r in bad),
+    )
+    return "\n".join(lines + ([warning] if warning else []))
 
 
 PAPER_HEADLINE = {  # Lee & Lyou, Section V: first detection step of the s3 step (onset 120)

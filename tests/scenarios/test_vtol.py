@@ -35,7 +35,7 @@ from jaxfdi.scenarios.vtol import (
     vtol_run,
     vtol_study,
 )
-from jaxfdi.scenarios.vtol_loop import run_closed_loop
+from jaxfdi.scenarios.vtol_loop import is_multiplicative, run_closed_loop
 
 RUNS = 20
 CALIBRATION_RUNS = 40
@@ -694,6 +694,7 @@ def test_fault_kind_command_shows_the_kind_is_identifiable_only_for_multiplicati
     assert {r["window"] for r in rows} == {4, 20, 60} and len(rows) == 8 * 3
     for r in rows:
         multiplicative = r["kind"] == "multiplicative"
+        assert r["unhealthy_runs"] == 0, r  # every run scored is a healthy one
         assert r["right_kind_rate"] == (1.0 if multiplicative else 0.0), r
         assert (r["margin_median"] > 0) == (r["right_kind_rate"] > 0.5), r
         if not multiplicative:
@@ -720,3 +721,38 @@ def test_vtol_notebook(study, python3_kernel, monkeypatch):
     assert "Headline cases beside Lee & Lyou" in text
     assert "online isolation of the a2 fault (location + 1): 2" in text
     assert len(images(outputs)) == 2, f"expected Fig. 3 and Figs. 4-5, got {len(images(outputs))}"
+
+
+def test_fault_kind_study_leaves_out_and_counts_runs_whose_bank_went_bad(monkeypatch):
+    """A run whose bank statistic turns NaN (here: the runs of the a1 effectiveness fault with
+    an even last key word, counted by brute force from the keys) is left out of every figure
+    and counted in ``unhealthy_runs``, never scored as a wrong or right kind; the other faults'
+    rows are those of the unpatched study on the same keys."""
+    import jaxfdi.scenarios.vtol as sv
+    from jaxfdi import Target
+
+    runs, seed = 8, 7
+    clean = sv.fault_kind_study(runs=runs, seed=seed).rows
+    loop = sv.run_closed_loop
+
+    def poisoned(design, key, f, ftc, steps):
+        out = loop(design, key, f, ftc, steps)
+        a1_effectiveness = (f.target == Target.ACTUATOR) & (f.component == 0) & is_multiplicative(f)
+        bad = a1_effectiveness & (jax.random.key_data(key).ravel()[-1] % 2 == 0)
+        statistic = jnp.where(bad, jnp.nan, out.fdi.statistic)
+        return out._replace(fdi=out.fdi._replace(statistic=statistic))
+
+    monkeypatch.setattr(sv, "run_closed_loop", poisoned)
+    rows = sv.fault_kind_study(runs=runs, seed=seed).rows
+    keys = jax.random.split(jax.random.key(seed), runs)
+    n_bad = int(sum(int(jax.random.key_data(k).ravel()[-1]) % 2 == 0 for k in keys))
+    assert 0 < n_bad < runs
+    for poisoned_row, clean_row in zip(rows, clean, strict=True):
+        if poisoned_row["fault"] == "a1 effectiveness 0.3":
+            assert poisoned_row["unhealthy_runs"] == n_bad
+            for rate in ("right_kind_rate", "right_kind_rate_corrected"):
+                healthy = runs - n_bad  # a rate over the healthy runs: a multiple of 1 / healthy
+                assert np.isclose(poisoned_row[rate] * healthy, round(poisoned_row[rate] * healthy))
+            assert np.isfinite(poisoned_row["margin_median"])
+        else:
+            assert poisoned_row == clean_row

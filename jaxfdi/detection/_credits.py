@@ -8,7 +8,7 @@ the hypothesis matching the plant keeps ``F_x`` small while the others grow. Cre
 isolated to the largest credit once large enough. ``F`` scales with the operating point (rates, wheel momentum, fault
 size), so a scale-free threshold on ``C_x / F_mean`` in ``[0, 1]`` (1: ``F_x = 0``) supplements the paper's one.
 
-Limit (``benchmarks/wheels_credit.py``): ``F_x ~ |g_x . (x_PF - x_EKF)|``, ``g_x = grad det A_x``, sees a
+Limit: ``F_x ~ |g_x . (x_PF - x_EKF)|``, ``g_x = grad det A_x``, sees a
 hypothesis's discrepancy only along ``g_x``; a wrong hypothesis drifting nearly orthogonally to it keeps ``F`` as
 small as the right one's (reaction-wheel pyramid: wheel 1 stopped vs hypothesis 3, the opposite wheel) and noise
 decides. A likelihood bank on the innovation vectors has no such blind direction.

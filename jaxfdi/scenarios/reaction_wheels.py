@@ -350,7 +350,7 @@ def wheel_fdi(
     ``restart_prediction`` (default): at engagement each hypothesis's prediction filter starts from its own EKF's
     posterior, not the nominal filter's predicted mean, which lags a stop's rate jump (``I^-1 I_w Omega_i a_i``, ~0.017
     rad/s): started there, every ``F_x`` is that lag projected on ``grad det A_x`` and the credits rank by geometry,
-    whichever wheel stopped (``benchmarks/wheels_credit.py``). ``False``: from the nominal predicted mean (comparison).
+    whichever wheel stopped. ``False``: from the nominal predicted mean (comparison).
 
     ``observe`` runs the gyro health test on the raw rates
     (``frozen_channel_detector(gyro_sigma, HEALTH_WINDOW, HEALTH_PFA, gyro_labels)``; a NaN sample alarms at once) and
@@ -359,7 +359,7 @@ def wheel_fdi(
     noise that leaves those gyros out. Output: the two stages' ``TwoStageOutput``, the health decision appended fifth to
     ``decisions``, ``healthy`` also covering that filter. ``gyro_health=False`` drops the test and the view (fifth
     decision never alarms; the controller flies on raw readings, NaN included): for plants with gyro noise below
-    ``gyro_sigma`` (noise-free runs of ``tests/scenarios/test_wheels_credit.py``, ``benchmarks/wheels_credit.py``),
+    ``gyro_sigma`` (noise-free runs),
     where the stuck-at test rightly finds every gyro frozen.
     """
     if estimator not in ("ekf", "ukf"):

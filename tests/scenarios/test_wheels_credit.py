@@ -1,6 +1,5 @@
 """Issue 27 items 4 and 8: the paper's credit isolator per wheel, in the momentum-biased
-default (all wheels +2000 rpm), and why it misses wheels (benchmarks/wheels_credit.py
-gives the large-sample table).
+default (all wheels +2000 rpm), and why it misses wheels.
 
 One compiled closed-loop batch (the scenario's plant, ``wheel_fdi`` and controller in
 ``run_loop``): 4 noise-free stops at 20 s (plant noises off, the filters unchanged) and
@@ -257,8 +256,8 @@ def test_opposite_wheels_look_alike_to_det_a(explained):
 def test_credit_isolator_rates_per_wheel(batch):
     """Monte Carlo, RUNS stops per wheel (one-sided 95 % Clopper-Pearson bounds from
     scipy.stats.beta). The isolator decides CONFIRM_STEPS after the banks engage, when the
-    F_x still differ by little more than the noise: benchmarks/wheels_credit.py (100 stops
-    per wheel) measured it naming wheels 1-4 in 27, 54, 56 and 73 % of stops, while the
+    F_x still differ by little more than the noise: a run of 100 stops per wheel
+    (2026-11) measured it naming wheels 1-4 in 27, 54, 56 and 73 % of stops, while the
     largest credit 4 s after the engagement is the right one in 66, 98, 97 and 99 %.
     Claims: for wheels 2-4 the isolator's rate is above 10 % (passes from 5 of 20: P(X < 5)
     < 0.3 % at the measured rates) and the 4 s ranking's above 70 % (from 18 of 20: at a

@@ -49,7 +49,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import f16_numpy_baseline as baseline
 from bench_f16_flight import numpy_design
 
-from jaxfdi import _io
+from jaxfdi._io import files as _io
 from jaxfdi.data import data_path
 from jaxfdi.detection import FOLLOW
 from jaxfdi.scenarios import f16_fdi as sf

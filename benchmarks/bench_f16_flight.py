@@ -72,7 +72,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import f16_numpy_baseline as baseline
 
-from jaxfdi import _io
+from jaxfdi._io import files as _io
 from jaxfdi.control import FlightWeights, design_flight_control
 from jaxfdi.data import data_path
 from jaxfdi.models.f16 import measurement_cov

@@ -699,7 +699,7 @@ def bench_driver_compile(prob: dict, log, rounds: int = 3) -> list[dict]:
     what the plain scan and dynamax return (means, covariances, log-likelihood), and dynamax's. The drivers are compiled
     in turn, ``rounds`` times, caches cleared before each compile, and each keeps its fastest round: the first compile
     in a process also pays JAX's one-time set-up, so a single pass favours whichever driver comes later."""
-    from jaxfdi import _linalg
+    from jaxfdi._numerics import linalg as _linalg
     from jaxfdi.filters._driver import _scan_filter
 
     model, m0, P0, ys, us = prob["model"], prob["m0"], prob["P0"], prob["ys"], prob["us"]

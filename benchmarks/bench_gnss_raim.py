@@ -44,7 +44,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import _io
+from jaxfdi._io import files as _io
 from jaxfdi.data import data_path
 from jaxfdi.gnss import (
     OMEGA_E,

@@ -43,7 +43,8 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import Plant, _io, combine_scorers, detection_scorer, feedforward, run_loop
+from jaxfdi import Plant, combine_scorers, detection_scorer, feedforward, run_loop
+from jaxfdi._io import files as _io
 from jaxfdi.gnss import _integrity as gnss_integrity
 from jaxfdi.gnss import _measurements as measurements
 from jaxfdi.ins import GpsFix, NavState

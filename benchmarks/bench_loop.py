@@ -1,4 +1,4 @@
-"""The shared closed-loop scan (``jaxfdi._loop``, issue 21) against the loops it replaced.
+"""The shared closed-loop scan (``jaxfdi._simulation.loop``, issue 21) against the loops it replaced.
 
 Two workloads, each timed with the current tree and with a baseline commit (default
 f54c9a7, the last commit with the private loops) in the same run:

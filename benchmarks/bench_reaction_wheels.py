@@ -60,7 +60,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_filters import compiled_timing, cpu_model, rel_diff, write_json_atomic
 
-from jaxfdi import _linalg
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.detection import dual_filter, hypothesis_credits
 from jaxfdi.filters import Filter, multiple_model, run_filter
 from jaxfdi.models import body_rate_field, stop_hypotheses, wheel_rate_transition

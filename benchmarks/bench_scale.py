@@ -211,7 +211,7 @@ def _mc_study(T: int):
     threshold = jaxfdi.detection.chi2_threshold(4 * 5, 1e-3)
 
     def run_one(key, size):
-        onset = jnp.where(size > 0, onset_step, jaxfdi._faults.NEVER)
+        onset = jnp.where(size > 0, onset_step, jaxfdi._simulation.faults.NEVER)
         sim = jaxfdi.linear_simulator(model, jaxfdi.fault("bias", "sensor", 3, onset, size))
         kf = jaxfdi.filters.kalman_filter(model)
         detector = jaxfdi.detection.chi2_detector(threshold, 4)
@@ -225,8 +225,8 @@ def _mc_study(T: int):
 def mc_worker(out: str, runs: int, T: int, per_device: int) -> None:
     """One process of ``--mc``: join the others, time the study (first call with
     compilation, then warm), the gather of its records alone, and its streaming summary."""
-    from jaxfdi import _montecarlo as montecarlo
     from jaxfdi import distributed, streaming
+    from jaxfdi._studies import montecarlo
 
     info = distributed.ProcessInfo(
         jax.process_index(), jax.process_count(), jax.local_device_count(), jax.device_count()
@@ -404,7 +404,7 @@ def bench_startup(repeats: int, log) -> dict:
     out = {k: statistics.median(v) for k, v in rows.items()}
     out["ratio_warm_over_filterpy"] = out["jaxfdi_cache_warm"] / out["filterpy"]
     # compile CPU time of the drivers, in this process (caches cleared before each)
-    from jaxfdi import _linalg
+    from jaxfdi._numerics import linalg as _linalg
     from jaxfdi.filters._driver import _scan_filter
 
     model, m0, P0, ys, us = prob["model"], prob["m0"], prob["P0"], prob["ys"], prob["us"]

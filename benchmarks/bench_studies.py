@@ -26,7 +26,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from jaxfdi._io import write_json
+from jaxfdi._io.files import write_json
 
 TIMEOUT_S = None  # --timeout
 

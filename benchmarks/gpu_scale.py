@@ -27,7 +27,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_f16_fdi import fdi_flights, random_cases
 
-from jaxfdi._montecarlo import default_chunk_size
+from jaxfdi._studies.montecarlo import default_chunk_size
 from jaxfdi.detection import FOLLOW
 from jaxfdi.scenarios import f16_fdi as sf
 from jaxfdi.scenarios.f16_flight import GUST_SIGMA, dispersions, flight_setup

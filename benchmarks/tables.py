@@ -147,7 +147,7 @@ def _machine(value: Any) -> str:
 
 def meta(data: dict) -> dict[str, str]:
     """The command, date and machine of one JSON, from whichever of the scripts' layouts it has: top-level keys,
-    a ``meta`` dict, a ``machine`` dict or string, ``provenance`` (``jaxfdi._io.write_json``), or a log of
+    a ``meta`` dict, a ``machine`` dict or string, ``provenance`` (``jaxfdi._io.files.write_json``), or a log of
     ``runs`` each with its own ``date`` and ``machine`` (``bench_studies.py``). A command that is not recorded
     reads as a parenthesis (``report.py`` does not quote it)."""
     inner = data.get("meta") if isinstance(data.get("meta"), dict) else {}

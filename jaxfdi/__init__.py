@@ -30,7 +30,9 @@ if TYPE_CHECKING:
         streaming,
         tuning,
     )
-    from jaxfdi._faults import (
+    from jaxfdi._io.progress import status
+    from jaxfdi._numerics.riccati import steady_state_kalman
+    from jaxfdi._simulation.faults import (
         NEVER,
         Fault,
         FaultKind,
@@ -46,8 +48,7 @@ if TYPE_CHECKING:
         sensor_labels,
         stack_faults,
     )
-    from jaxfdi._frame import results_frame, study_result
-    from jaxfdi._loop import (
+    from jaxfdi._simulation.loop import (
         LoopResult,
         combine_scorers,
         detection_scorer,
@@ -58,7 +59,12 @@ if TYPE_CHECKING:
         run_loop,
         state_feedback,
     )
-    from jaxfdi._metrics import (
+    from jaxfdi._simulation.monitor import MonitorHistory, MonitorResult, monitor, replay_detector
+    from jaxfdi._simulation.simulate import Simulator, linear_simulator, simulate, simulator
+    from jaxfdi._simulation.stages import FDI, Controller, Plant, Scorer
+    from jaxfdi._simulation.tracking import TrackingScore, tracked_plant
+    from jaxfdi._studies.frame import results_frame, study_result
+    from jaxfdi._studies.metrics import (
         DetectionRecord,
         DetectionSummary,
         EpisodeRecord,
@@ -77,14 +83,8 @@ if TYPE_CHECKING:
         unhealthy_rows_warning,
         unhealthy_warning,
     )
-    from jaxfdi._monitor import MonitorHistory, MonitorResult, monitor, replay_detector
-    from jaxfdi._montecarlo import monte_carlo
-    from jaxfdi._progress import status
-    from jaxfdi._riccati import steady_state_kalman
-    from jaxfdi._simulate import Simulator, linear_simulator, simulate, simulator
-    from jaxfdi._stages import FDI, Controller, Plant, Scorer
-    from jaxfdi._study import Structure, Study, case_slices, run_study
-    from jaxfdi._tracking import TrackingScore, tracked_plant
+    from jaxfdi._studies.montecarlo import monte_carlo
+    from jaxfdi._studies.study import Structure, Study, case_slices, run_study
 
 __version__ = _version.__version__
 
@@ -123,7 +123,7 @@ def enable_compilation_cache(path: str | None = None) -> str:
 
 #: the top-level names, by the module that defines them (the ``TYPE_CHECKING`` imports above, which a test holds equal)
 _EXPORTS = {
-    "jaxfdi._faults": (
+    "jaxfdi._simulation.faults": (
         "Fault",
         "FaultKind",
         "concat_faults",
@@ -139,7 +139,7 @@ _EXPORTS = {
         "is_active",
         "sensor_labels",
     ),
-    "jaxfdi._loop": (
+    "jaxfdi._simulation.loop": (
         "LoopResult",
         "run_loop",
         "state_feedback",
@@ -150,7 +150,7 @@ _EXPORTS = {
         "health_scorer",
         "peak_scorer",
     ),
-    "jaxfdi._metrics": (
+    "jaxfdi._studies.metrics": (
         "DetectionRecord",
         "DetectionSummary",
         "summarize_detection",
@@ -169,15 +169,15 @@ _EXPORTS = {
         "unhealthy_rows_warning",
         "unhealthy_warning",
     ),
-    "jaxfdi._monitor": ("MonitorResult", "monitor", "MonitorHistory", "replay_detector"),
-    "jaxfdi._montecarlo": ("monte_carlo",),
-    "jaxfdi._simulate": ("linear_simulator", "simulate", "simulator", "Simulator"),
-    "jaxfdi._stages": ("FDI", "Controller", "Plant", "Scorer"),
-    "jaxfdi._study": ("Structure", "Study", "run_study", "case_slices"),
-    "jaxfdi._frame": ("results_frame", "study_result"),
-    "jaxfdi._progress": ("status",),
-    "jaxfdi._riccati": ("steady_state_kalman",),
-    "jaxfdi._tracking": ("TrackingScore", "tracked_plant"),
+    "jaxfdi._simulation.monitor": ("MonitorResult", "monitor", "MonitorHistory", "replay_detector"),
+    "jaxfdi._studies.montecarlo": ("monte_carlo",),
+    "jaxfdi._simulation.simulate": ("linear_simulator", "simulate", "simulator", "Simulator"),
+    "jaxfdi._simulation.stages": ("FDI", "Controller", "Plant", "Scorer"),
+    "jaxfdi._studies.study": ("Structure", "Study", "run_study", "case_slices"),
+    "jaxfdi._studies.frame": ("results_frame", "study_result"),
+    "jaxfdi._io.progress": ("status",),
+    "jaxfdi._numerics.riccati": ("steady_state_kalman",),
+    "jaxfdi._simulation.tracking": ("TrackingScore", "tracked_plant"),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 
@@ -185,8 +185,8 @@ _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 def __getattr__(name: str):
     """Everything but the version and the two switches is imported on first use (PEP 562), so that ``import jaxfdi``
     imports no JAX (``jaxfdi --help`` takes no JAX start-up): a top-level name from its module (``_EXPORTS``), a
-    subpackage or module of the package (``jaxfdi.filters``, ``jaxfdi._faults``) by importing it. The value is kept in
-    the package's namespace, so this runs once per name."""
+    subpackage or module of the package (``jaxfdi.filters``, ``jaxfdi._simulation.faults``) by importing it. The
+    value is kept in the package's namespace, so this runs once per name."""
     if name in _WHERE:
         value = getattr(importlib.import_module(_WHERE[name]), name)
     elif (

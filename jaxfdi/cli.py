@@ -2,10 +2,10 @@
 
 Options are checked before anything is computed (``check_options``, then method or parameter names); a bad one: exit
 status 2, one stderr line ``jaxfdi: --option: expected ..., got ...``. Files go to a temporary folder inside ``--out``,
-published together when done (``jaxfdi._io.study_output``); SIGINT, SIGTERM, SIGHUP leave ``--out`` as it was. A new
-scenario is a ``Runner`` in ``RUNNERS`` (tuning target: ``TUNERS``): its study's module path, help and options; the
-module is imported (``_study``) only when the command runs, so that ``jaxfdi --help``, ``jaxfdi run --help`` and
-``jaxfdi --version`` import no study and no JAX (``import jaxfdi`` imports its names on first use).
+published together when done (``jaxfdi._io.files.study_output``); SIGINT, SIGTERM, SIGHUP leave ``--out`` as it
+was. A new scenario is a ``Runner`` in ``RUNNERS`` (tuning target: ``TUNERS``): its study's module path, help and
+options; the module is imported (``_study``) only when the command runs, so that ``jaxfdi --help``, ``jaxfdi run
+--help`` and ``jaxfdi --version`` import no study and no JAX (``import jaxfdi`` imports its names on first use).
 """
 
 from __future__ import annotations
@@ -31,10 +31,11 @@ from typing import Any, Callable, Iterator, NamedTuple
 import numpy as np
 
 import jaxfdi
-from jaxfdi import _io, distributed
-from jaxfdi import _progress as progress
+from jaxfdi import distributed
+from jaxfdi._io import files as _io
+from jaxfdi._io import progress
 
-#: the CLI's messages (jaxfdi._progress.configure_logging sends them to stderr; --quiet drops INFO)
+#: the CLI's messages (jaxfdi._io.progress.configure_logging sends them to stderr; --quiet drops INFO)
 logger = logging.getLogger("jaxfdi")
 
 #: the largest count an option takes (runs, steps, windows: JAX indexes them in int32)

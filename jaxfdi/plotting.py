@@ -19,8 +19,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from jaxfdi._io import save_figures
-from jaxfdi._metrics import confusion_matrix
+from jaxfdi._io.files import save_figures
+from jaxfdi._studies.metrics import confusion_matrix
 
 __all__ = [
     "plot_statistic",

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import checks
-from jaxfdi._metrics import DetectionRecord, DetectionSummary
+from jaxfdi._studies.metrics import DetectionRecord, DetectionSummary
 
 __all__ = ["detection_reducer", "detection_summary", "summarize_counts"]
 

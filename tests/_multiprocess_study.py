@@ -24,7 +24,7 @@ def run_one(key, size):
         jnp.diag(jnp.array([1e-3, 1e-2])),
         jnp.diag(jnp.array([0.05, 0.02])),
     )
-    onset = jnp.where(size > 0, ONSET, jaxfdi._faults.NEVER)
+    onset = jnp.where(size > 0, ONSET, jaxfdi._simulation.faults.NEVER)
     sim = jaxfdi.linear_simulator(model, jaxfdi.fault("bias", "sensor", 0, onset, size))
     kf = jaxfdi.filters.kalman_filter(
         model, unroll_factorizations=False

@@ -76,7 +76,7 @@ def engine_false_alarm_study(
             kf.init(jnp.zeros(7), jnp.asarray(P0)),
             us,
             key,
-            jaxfdi._faults.NEVER,
+            jaxfdi._simulation.faults.NEVER,
             keep_history=True,
         )
         return result.record, result.history.statistic[-1]

@@ -12,7 +12,7 @@ the short way), ``dw = w - R(dq)^T w_ref``:
     T_c = I alpha_ref + w x (I w + h_w) - 2 K_p dq_vec - K_d dw,   K_p = I w_n^2,  K_d = 2 zeta w_n I.
 
 The wheels deliver ``-H^T tau``, so ``tau = -H (H^T H)^-1 T_c`` (minimum norm), scaled down as a whole
-(direction kept) if a wheel would exceed ``max_wheel_torque``. Loop parts (``jaxfdi._loop``):
+(direction kept) if a wheel would exceed ``max_wheel_torque``. Loop parts (``jaxfdi._simulation.loop``):
 ``wheel_attitude_controller`` and ``wheel_plant``.
 """
 
@@ -26,8 +26,8 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._faults import Target, apply_fault
-from jaxfdi._stages import Controller, Plant
+from jaxfdi._simulation.faults import Target, apply_fault
+from jaxfdi._simulation.stages import Controller, Plant
 from jaxfdi.models import (
     AttitudeReading,
     SpacecraftParams,

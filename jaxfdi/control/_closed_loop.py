@@ -1,5 +1,5 @@
 """A reconfigurable PI controller for fault-tolerant control (Lee & Lyou, eqs. 22-29), fed a
-``Reconfiguration`` by a ``jaxfdi._loop`` FDI stage (the VTOL loop: ``jaxfdi.scenarios.vtol_loop``).
+``Reconfiguration`` by a ``jaxfdi._simulation.loop`` FDI stage (the VTOL loop: ``jaxfdi.scenarios.vtol_loop``).
 """
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg
-from jaxfdi._stages import Controller
+from jaxfdi._numerics import linalg as _linalg
+from jaxfdi._simulation.stages import Controller
 from jaxfdi.control._eigenstructure import GainSchedule, scheduled_gain
 
 

@@ -1,5 +1,5 @@
-"""The sampled F-16 (``models.f16.plant``) as ``jaxfdi._loop`` stages: the plant with noise, gusts and faults, and the
-fault-free FDI stage that gives the flight controller its ``FlightView`` (Park, Kim, Park & Roh 2004).
+"""The sampled F-16 (``models.f16.plant``) as ``jaxfdi._simulation.loop`` stages: the plant with noise, gusts and
+faults, and the fault-free FDI stage that gives the flight controller its ``FlightView`` (Park, Kim, Park & Roh 2004).
 
 ``rate_passthrough_fdi`` flies the controller on the least-squares rate ``(H^T H)^-1 H^T m`` of all rate channels; an
 isolating FDI stage (Park et al.'s parity space + UKF) returns the same view with its own selected rate.
@@ -12,9 +12,9 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._faults import Target, active_label, apply_faults, as_stack, is_active
-from jaxfdi._simulate import Actuated, Sensed, SimState, check_fault_components
-from jaxfdi._stages import FDI, Plant
+from jaxfdi._simulation.faults import Target, active_label, apply_faults, as_stack, is_active
+from jaxfdi._simulation.simulate import Actuated, Sensed, SimState, check_fault_components
+from jaxfdi._simulation.stages import FDI, Plant
 from jaxfdi.models.f16 import (
     RATE_OFFSET,
     F16Params,

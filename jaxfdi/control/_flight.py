@@ -34,7 +34,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._stages import Controller
+from jaxfdi._simulation.stages import Controller
 from jaxfdi.control._lqr import lqr_pi
 from jaxfdi.models import c2d
 from jaxfdi.models.f16 import (

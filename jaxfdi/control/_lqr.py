@@ -6,7 +6,7 @@ Integral action: ``z[k+1] = z[k] + Ts e``, ``e = r - H x``; the augmented ``x_a 
     A_bar = [[A, 0], [-Ts H, I]],  B_bar = [B; 0],  G = [0; Ts I]
 
 is stabilised by ``u = -K x_a = -[K_p K_I] x_a``, ``K = (R + B^T X B)^-1 B^T X A``, ``X`` the stabilising
-DARE solution (``jaxfdi._riccati``, structure-preserving doubling, verified by residual and closed-loop
+DARE solution (``jaxfdi._numerics.riccati``, structure-preserving doubling, verified by residual and closed-loop
 spectral radius). Sign: ``u = -K x``, closed loop ``A - B K`` (SciPy ``place_poles``, MATLAB and
 python-control ``dlqr``); Lee and Lyou's ``u = K x`` has the negative ``K``.
 
@@ -24,7 +24,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._riccati import DareSolution, require_stabilising, solve_discrete_are_info
+from jaxfdi._numerics.riccati import DareSolution, require_stabilising, solve_discrete_are_info
 
 #: why an LQR design has no stabilising solution
 _NOT_STABILISABLE = (

@@ -46,9 +46,10 @@ import jax.scipy.linalg as jsl
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg, checks
-from jaxfdi._faults import sensor_labels
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
+from jaxfdi._numerics.riccati import steady_state_kalman
+from jaxfdi._simulation.faults import sensor_labels
 from jaxfdi.detection._chi2 import (
     Decision,
     Detector,

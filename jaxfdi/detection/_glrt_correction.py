@@ -25,8 +25,8 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._faults import sensor_labels
-from jaxfdi._riccati import steady_state_kalman
+from jaxfdi._numerics.riccati import steady_state_kalman
+from jaxfdi._simulation.faults import sensor_labels
 from jaxfdi.detection._chi2 import Decision, flag_dead
 from jaxfdi.detection._glrt import (
     _check_window,

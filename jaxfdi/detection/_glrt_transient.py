@@ -29,8 +29,9 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jax import Array
 
-from jaxfdi import _linalg, checks
-from jaxfdi._faults import sensor_labels
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
+from jaxfdi._simulation.faults import sensor_labels
 from jaxfdi.detection._chi2 import Detector, flag_dead
 from jaxfdi.detection._glrt import (
     DetectorSetup,

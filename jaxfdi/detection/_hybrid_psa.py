@@ -1,5 +1,5 @@
 """Hybrid FDI: parity space plus analytic redundancy from a filter restarted on demand (Park, Kim, Park & Roh
-2004, Sec. 2.2), as an ``FDI`` stage of the loop (``jaxfdi._stages``).
+2004, Sec. 2.2), as an ``FDI`` stage of the loop (``jaxfdi._simulation.stages``).
 
 At every step ``k`` (``observe``, before the controller):
 
@@ -40,7 +40,7 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._stages import FDI
+from jaxfdi._simulation.stages import FDI
 from jaxfdi.detection._chi2 import Decision, chi2_threshold
 from jaxfdi.detection._parity import ParitySpace, parity_tests
 from jaxfdi.filters import replay_filter, ring_buffer

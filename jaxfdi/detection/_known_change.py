@@ -51,8 +51,9 @@ import jax.scipy.linalg as jsl
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg, checks
-from jaxfdi._faults import sensor_labels
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
+from jaxfdi._simulation.faults import sensor_labels
 from jaxfdi.detection._chi2 import Decision, Detector, flag_dead
 from jaxfdi.detection._glrt import (
     check_steady_state,

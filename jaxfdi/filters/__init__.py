@@ -4,7 +4,7 @@ Gaussian filters (KF, EKF, UKF), the multiple-model filters built on them (IMM, 
 filter, optimal or robust to an unknown input, and the unbiased minimum-variance filter decoupling an unknown input.
 """
 
-from jaxfdi._riccati import solve_discrete_are, steady_state_kalman
+from jaxfdi._numerics.riccati import solve_discrete_are, steady_state_kalman
 from jaxfdi.filters._base import Filter, FilterInfo, GaussianState
 from jaxfdi.filters._driver import run_filter
 from jaxfdi.filters._ekf import extended_kalman_filter

@@ -18,7 +18,8 @@ from typing import Any, Callable, NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 
 
 class GaussianState(NamedTuple):

@@ -10,7 +10,7 @@ result is the same on every path (to round-off); the paths differ in what they c
   scan to the kernel, so ``jax.vmap(run_filter)`` is as fast as a batch; ``custom_jvp`` keeps the derivative the
   plain scan's (``custom_vmap`` has no transpose rule);
 - **under any other transformation** (``grad``, ``vmap`` without a kernel): the scan inlined, written-out algebra
-  (``jaxfdi._linalg``), which every transformation traces;
+  (``jaxfdi._numerics.linalg``), which every transformation traces;
 - **``parallel=True``**: the filter's associative scan (O(log T) depth), vmapped over a batch;
 - **a batch (N, T, m)**: the filter's ``BatchKernel`` (structure of arrays, the run axis last) when it has one,
   else ``vmap`` of the scan (``_batch_scan``); a Gaussian filter whose covariances see no run's data (``dce`` of
@@ -30,7 +30,8 @@ from jax.custom_batching import custom_vmap
 from jax.interpreters import partial_eval as pe
 from jax.interpreters.partial_eval import DynamicJaxprTracer
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._base import (
     BatchKernel,
     Filter,

@@ -11,7 +11,8 @@ from typing import Any
 import jax
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._base import (
     Filter,
     GaussianState,

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._base import BatchKernel, check_step_inputs, used_innovation
 from jaxfdi.filters._mixture import IMMInfo, IMMState, bayes_mode_update, mixing
 from jaxfdi.models import LinearGaussianModel

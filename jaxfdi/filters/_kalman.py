@@ -13,7 +13,8 @@ from functools import partial
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._base import (
     Filter,
     FilterInfo,

@@ -21,7 +21,8 @@ import math
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._base import (
     BatchKernel,
     FilterInfo,

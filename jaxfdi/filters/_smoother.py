@@ -20,7 +20,8 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._base import FilterInfo
 from jaxfdi.filters._parallel import (  # batched transpose, symmetric part, matrix-vector
     _mT,

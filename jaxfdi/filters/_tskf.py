@@ -39,7 +39,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._base import Filter, check_gaussian, check_step_inputs, report_dead
 from jaxfdi.filters._driver import run_filter
 from jaxfdi.filters._unknown_input import (

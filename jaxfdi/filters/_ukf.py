@@ -35,7 +35,8 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._base import (
     Filter,
     FilterInfo,

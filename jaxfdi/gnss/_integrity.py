@@ -19,7 +19,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._stages import FDI
+from jaxfdi._simulation.stages import FDI
 from jaxfdi.detection import Decision, flag_dead
 from jaxfdi.gnss._atmosphere import Atmosphere
 from jaxfdi.gnss._frames import elevation_azimuth, line_of_sight_ned

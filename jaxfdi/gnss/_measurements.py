@@ -10,7 +10,7 @@ satellite faults, as a plant for the foundation's loop.
   ``Q = c^2 [[h0/2 dt + 2 pi^2 h_-2 dt^3/3, pi^2 h_-2 dt^2], [pi^2 h_-2 dt^2, 2 pi^2 h_-2 dt]]``.
 - **Pseudorange** at the receiver's tags ``t_k = t0 + k dt`` (true time ``t_k - b/c``):
   ``rho_i = |R(tau) r_i(t_k - b/c - tau) - x| + b - c dt_i + sigma_i n_i`` (``orbits.transmission_geometry``).
-- **Faults**: sensor faults (``jaxfdi._faults``), component = slot: impulse, bias, ramp, frozen
+- **Faults**: sensor faults (``jaxfdi._simulation.faults``), component = slot: impulse, bias, ramp, frozen
   (STUCK: onset value held), several episodes per run (``concat_faults``).
 - **Dead and missing**: NaN = not measured (not visible/tracked, a RINEX blank), no evidence; a DEAD
   fault (any non-finite value) on a tracked slot is ``+inf``, the dead channel ``integrity`` alarms on,
@@ -30,8 +30,22 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
-from jaxfdi._simulate import Actuated, Sensed, SimState, Simulator, check_fault_components
+from jaxfdi._simulation.faults import (
+    Fault,
+    Target,
+    active_label,
+    apply_faults,
+    as_stack,
+    is_active,
+    no_fault,
+)
+from jaxfdi._simulation.simulate import (
+    Actuated,
+    Sensed,
+    SimState,
+    Simulator,
+    check_fault_components,
+)
 from jaxfdi.gnss._frames import ecef_to_ned, elevation_azimuth, line_of_sight_ned
 from jaxfdi.gnss._orbits import (
     SPEED_OF_LIGHT,

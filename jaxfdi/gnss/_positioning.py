@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.gnss._atmosphere import Atmosphere, atmosphere_corrections
 from jaxfdi.gnss._frames import ecef_to_geodetic, ned_rotation
 from jaxfdi.gnss._least_squares import apply_qt, leading, masked_qr

@@ -27,7 +27,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.gnss._least_squares import MaskedQR, masked_qr, parity_column_norms, thin_q
 from jaxfdi.gnss._positioning import PositionFix
 from jaxfdi.gnss._raim import RaimTables, check_tables, whitened

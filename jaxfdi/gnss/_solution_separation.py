@@ -31,7 +31,7 @@ import numpy as np
 from jax import Array
 from jax.scipy.special import ndtr, ndtri
 
-from jaxfdi import _linalg
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.gnss._positioning import PositionFix, in_chunks, padded_sizes, padded_to, resized
 from jaxfdi.gnss._raim import whitened
 

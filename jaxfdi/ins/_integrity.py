@@ -30,8 +30,9 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg, checks
-from jaxfdi._stages import FDI
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
+from jaxfdi._simulation.stages import FDI
 from jaxfdi.detection import (
     Decision,
     Detector,

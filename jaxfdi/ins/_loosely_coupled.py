@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters import Filter, joseph_update
 from jaxfdi.ins import _error_state as error_state
 from jaxfdi.ins import _mechanization as mechanization

@@ -26,7 +26,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._faults import (
+from jaxfdi._simulation.faults import (
     Fault,
     FaultKind,
     Target,
@@ -36,8 +36,8 @@ from jaxfdi._faults import (
     is_active,
     no_fault,
 )
-from jaxfdi._simulate import SimState
-from jaxfdi._stages import Plant
+from jaxfdi._simulation.simulate import SimState
+from jaxfdi._simulation.stages import Plant
 from jaxfdi.gnss import ClockModel, OrbitTable, geodetic_to_ecef, receiver_plant
 from jaxfdi.ins import _imu as imu
 from jaxfdi.ins._imu import ImuErrors, ImuModel

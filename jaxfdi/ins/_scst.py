@@ -29,7 +29,8 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.detection import Decision
 
 #: largest accepted condition estimate of the scaled B (float64 solves keep ~6 digits of l); B nears it on

@@ -29,7 +29,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._faults import FaultKind, Target, apply_fault, is_active
+from jaxfdi._simulation.faults import FaultKind, Target, apply_fault, is_active
 from jaxfdi.models._integrate import rk4
 from jaxfdi.rotation import quaternion_multiply, rotate, skew
 

@@ -789,7 +789,7 @@ def engine_spec(
     duration: float = 4.0,
     onset_time: float = 2.0,
 ) -> Study:
-    """The engine study as data (``jaxfdi._study``): the nine ``study_faults`` and every method of
+    """The engine study as data (``jaxfdi._studies.study``): the nine ``study_faults`` and every method of
     ``engine_method_names`` (or ``methods``) in five structures, one compiled program each (MMs and
     IMMs per mode design, GLRTs); methods are cells of a (filter x decision rule) grid, IMMs sharing a
     transition matrix run one filter, a chunk of runs at a time (``run_filter``'s batch kernel).

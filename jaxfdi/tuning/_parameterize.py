@@ -25,7 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg, checks
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
 
 
 class Transform(NamedTuple):

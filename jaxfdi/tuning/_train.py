@@ -25,8 +25,8 @@ import numpy as np
 import optax
 
 from jaxfdi import checks
-from jaxfdi._io import atomic_write
-from jaxfdi._progress import logger, progress_bar
+from jaxfdi._io.files import atomic_write
+from jaxfdi._io.progress import logger, progress_bar
 from jaxfdi.filters import Filter
 from jaxfdi.tuning._parameterize import (
     Transform,

@@ -28,7 +28,11 @@ PUBLIC_MODULES = [
 ]
 PACKAGES = (
     ["jaxfdi"]
-    + sorted(m.name for m in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi.") if m.ispkg)
+    + sorted(
+        m.name
+        for m in pkgutil.walk_packages(jaxfdi.__path__, "jaxfdi.")
+        if m.ispkg and not any(part.startswith("_") for part in m.name.split("."))
+    )
     + PUBLIC_MODULES
 )
 API_PAGE = Path(__file__).resolve().parents[2] / "docs" / "api" / "index.md"

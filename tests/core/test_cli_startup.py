@@ -84,7 +84,7 @@ def test_import_jaxfdi_imports_no_jax_until_a_name_is_used():
         "jaxfdi.Fault; assert 'jax' in sys.modules; print(jaxfdi.Fault.__module__)"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0 and proc.stdout == "jaxfdi._faults\n", proc.stderr
+    assert proc.returncode == 0 and proc.stdout == "jaxfdi._simulation.faults\n", proc.stderr
 
 
 def test_every_public_name_is_its_modules_object_and_listed_by_dir():
@@ -97,7 +97,9 @@ def test_every_public_name_is_its_modules_object_and_listed_by_dir():
         else:
             assert name in ("enable_x64", "enable_compilation_cache"), name
     assert set(jaxfdi.__all__) <= set(dir(jaxfdi))
-    assert jaxfdi._faults is sys.modules["jaxfdi._faults"]  # a module of the package, as before
+    assert (
+        jaxfdi._simulation.faults is sys.modules["jaxfdi._simulation.faults"]
+    )  # a module of the package, as before
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
         jaxfdi.no_such_name
 

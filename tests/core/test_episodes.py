@@ -20,8 +20,8 @@ from jaxfdi import (
     stack_faults,
     summarize_episodes,
 )
-from jaxfdi._faults import active_label
-from jaxfdi._metrics import episode_record_init, episode_record_update
+from jaxfdi._simulation.faults import active_label
+from jaxfdi._studies.metrics import episode_record_init, episode_record_update
 from jaxfdi.models import engine_model
 
 KINDS = ["bias", "ramp", "impulse", "scale", "stuck", "none"]

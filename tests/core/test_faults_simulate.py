@@ -8,7 +8,7 @@ from scipy import stats
 
 import jaxfdi
 from jaxfdi import FaultKind, Target, fault, fault_label, is_active, stack_faults
-from jaxfdi._faults import apply_fault
+from jaxfdi._simulation.faults import apply_fault
 from jaxfdi.models import engine_model
 
 STEPS = np.arange(12)

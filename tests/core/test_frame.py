@@ -1,4 +1,4 @@
-"""Study results as data (``jaxfdi._frame``): tidy rows, the rates' Clopper-Pearson
+"""Study results as data (``jaxfdi._studies.frame``): tidy rows, the rates' Clopper-Pearson
 intervals against SciPy's exact binomial interval, and the HTML a notebook renders."""
 
 import math
@@ -8,7 +8,7 @@ from _frames import assert_table_is_the_json
 from scipy import stats
 
 from jaxfdi import results_frame
-from jaxfdi._frame import results_html
+from jaxfdi._studies.frame import results_html
 
 ROWS = [
     {

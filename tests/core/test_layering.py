@@ -8,10 +8,11 @@ registry names, a study below it), so that ``jaxfdi --help`` imports no study an
 the package imports a top-level name or a submodule on first use (``jaxfdi.__getattr__``,
 PEP 562), so that ``import jaxfdi`` imports no JAX either.
 
-Layers, lowest first: numerics and I/O <- faults and the stage shapes <- models <- Riccati and simulation <-
-filters <- metrics and Monte Carlo <- studies and streaming <- detection <- the loop <-
-monitor, tracking, tuning <- GNSS, control <- INS <- plotting <- scenarios <- CLI and the
-package's front door.
+Layers, lowest first: numerics and I/O <- faults and the stage shapes <- models <- Riccati
+and simulation <- filters <- metrics and Monte Carlo <- studies and streaming <- detection <- the
+loop <- monitor, tracking, tuning <- GNSS, control <- INS <- plotting <- scenarios <- CLI and the
+package's front door. The top level's shared modules live in four private rooms (``_numerics``,
+``_io``, ``_simulation``, ``_studies``); a room spans layers, so each of its modules is a unit.
 """
 
 import ast
@@ -26,32 +27,40 @@ from jaxfdi import cli
 
 PACKAGE = pathlib.Path(jaxfdi.__file__).parent
 
-#: unit (a package or a top-level module of jaxfdi) -> layer; lower layers never import higher ones
+#: the private rooms that group the top level's shared modules; each of their modules is a unit of
+#: its own (a room spans layers: its modules sit between the subpackages), its ``__init__`` layer 0
+ROOMS = ("_numerics", "_io", "_simulation", "_studies")
+
+#: unit (a package, a top-level module or a room's module) -> layer; lower layers never import higher ones
 LAYERS = {
     "checks": 0,
     "rotation": 0,
-    "_linalg": 0,
+    "_numerics": 0,
+    "_numerics.linalg": 0,
     "_io": 0,
+    "_io.files": 0,
+    "_io.progress": 0,
     "_version": 0,
-    "_progress": 0,
     "data": 0,
     "distributed": 0,
-    "_faults": 1,
-    "_levenberg_marquardt": 1,
-    "_stages": 1,
+    "_simulation": 0,
+    "_simulation.faults": 1,
+    "_simulation.stages": 1,
+    "_numerics.levenberg_marquardt": 1,
     "models": 2,
-    "_riccati": 3,
-    "_simulate": 3,
+    "_numerics.riccati": 3,
+    "_simulation.simulate": 3,
     "filters": 4,
-    "_metrics": 5,
-    "_montecarlo": 5,
-    "_frame": 5,
-    "_study": 6,
+    "_studies": 0,
+    "_studies.metrics": 5,
+    "_studies.montecarlo": 5,
+    "_studies.frame": 5,
+    "_studies.study": 6,
     "streaming": 6,
     "detection": 7,
-    "_loop": 8,
-    "_monitor": 9,
-    "_tracking": 9,
+    "_simulation.loop": 8,
+    "_simulation.monitor": 9,
+    "_simulation.tracking": 9,
     "tuning": 9,
     "gnss": 10,
     "control": 10,
@@ -65,10 +74,12 @@ LAYERS = {
 
 
 def _unit(dotted: str) -> str:
-    """``jaxfdi.filters._kalman`` -> ``filters``; ``jaxfdi._loop`` -> ``_loop``; ``jaxfdi`` -> ``__init__``;
-    a top-level name, ``jaxfdi.run_loop``, -> the unit of the module the package imports it from on
-    first use (``jaxfdi._WHERE``: ``_loop``)."""
+    """``jaxfdi.filters._kalman`` -> ``filters``; ``jaxfdi._simulation.loop`` -> ``_simulation.loop``;
+    ``jaxfdi`` -> ``__init__``; a top-level name, ``jaxfdi.run_loop``, -> the unit of the module the
+    package imports it from on first use (``jaxfdi._WHERE``: ``_simulation.loop``)."""
     parts = dotted.split(".")
+    if len(parts) > 2 and parts[1] in ROOMS:
+        return f"{parts[1]}.{parts[2]}"
     if len(parts) == 2 and parts[1] in jaxfdi._WHERE:
         return _unit(jaxfdi._WHERE[parts[1]])
     if len(parts) == 1 or not (
@@ -87,6 +98,11 @@ def _modules():
         yield ".".join(parts), path
 
 
+def _is_module(dotted: str) -> bool:
+    path = PACKAGE.parent.joinpath(*dotted.split("."))
+    return path.with_suffix(".py").exists() or (path / "__init__.py").exists()
+
+
 def _imports(path: pathlib.Path):
     """(line, imported module, inside a function) for every import of a jaxfdi module."""
     tree = ast.parse(path.read_text())
@@ -101,11 +117,13 @@ def _imports(path: pathlib.Path):
             and node.module
             and node.module.split(".")[0] == "jaxfdi"
         ):
-            targets = (
-                [node.module]
-                if node.module != "jaxfdi"
-                else [f"jaxfdi.{a.name}" for a in node.names]
-            )
+            # ``from jaxfdi._studies import metrics`` imports the module ``jaxfdi._studies.metrics``
+            targets = [
+                f"{node.module}.{a.name}" if _is_module(f"{node.module}.{a.name}") else node.module
+                for a in node.names
+            ]
+            if node.module == "jaxfdi":
+                targets = [f"jaxfdi.{a.name}" for a in node.names]
         elif isinstance(node, ast.Import):
             targets = [a.name for a in node.names if a.name.split(".")[0] == "jaxfdi"]
         else:

@@ -1,5 +1,5 @@
-"""Levenberg-Marquardt (``jaxfdi._levenberg_marquardt``, the F-16 trim's solver) against closed forms and SciPy's
-MINPACK."""
+"""Levenberg-Marquardt (``jaxfdi._numerics.levenberg_marquardt``, the F-16 trim's solver) against closed forms and
+SciPy's MINPACK."""
 
 import jax
 import jax.numpy as jnp
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from jaxfdi._levenberg_marquardt import levenberg_marquardt
+from jaxfdi._numerics.levenberg_marquardt import levenberg_marquardt
 
 
 def rosenbrock(x):

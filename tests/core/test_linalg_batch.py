@@ -11,7 +11,7 @@ import scipy.linalg
 from _problems import engine_data, rigid_body_data
 
 import jaxfdi
-from jaxfdi import _linalg
+from jaxfdi._numerics import linalg as _linalg
 from jaxfdi.filters._driver import _covariance_sees_data
 from jaxfdi.models._rigid_body import rigid_body_observation, rigid_body_transition
 

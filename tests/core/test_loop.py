@@ -1,4 +1,4 @@
-"""The closed-loop scan (``jaxfdi._loop``) and the time-varying simulator and filter,
+"""The closed-loop scan (``jaxfdi._simulation.loop``) and the time-varying simulator and filter,
 against independent references: the open-loop pipeline written step by step in Python,
 the closed-form closed-loop response, the original filter run, filterpy driven matrix by
 matrix, and sample statistics."""
@@ -12,8 +12,8 @@ from filterpy.kalman import KalmanFilter
 from scipy import stats
 
 import jaxfdi
-from jaxfdi import _loop as loop
-from jaxfdi._monitor import filter_detector
+from jaxfdi._simulation import loop
+from jaxfdi._simulation.monitor import filter_detector
 from jaxfdi.filters import time_varying
 from jaxfdi.filters._time_varying import model_at
 from jaxfdi.models import LinearGaussianModel, engine_model
@@ -385,7 +385,7 @@ def test_a_dead_sensor_mid_run_is_an_alarm_not_ill_health(engine):
     sim = jaxfdi.linear_simulator(model, available=lambda k, x: jnp.full((5,), k != 40))
     labels = 10 + jnp.arange(5)
     records = []
-    for onset in (ONSET, jaxfdi._faults.NEVER):
+    for onset in (ONSET, jaxfdi._simulation.faults.NEVER):
         result = jaxfdi.monitor(
             sim,
             kf,
@@ -444,13 +444,15 @@ def test_episode_scorer_over_a_flight_with_three_fault_episodes(engine):
     Python from the stored alarm sequence."""
     model, kf, detector, _ = engine
     steps, grace = 150, 3
-    group = jaxfdi._faults.fault_group("bias", "sensor", [1, 3], 20, [25.0, 4.0], end=45, label=9)
-    flight = jaxfdi._faults.concat_faults(
+    group = jaxfdi._simulation.faults.fault_group(
+        "bias", "sensor", [1, 3], 20, [25.0, 4.0], end=45, label=9
+    )
+    flight = jaxfdi._simulation.faults.concat_faults(
         group,
         jaxfdi.fault("bias", "actuator", 0, 70, 2e-3, end=95),
         jaxfdi.fault("ramp", "sensor", 2, 110, 0.0, slope=0.5),
     )
-    onsets, ends, labels = jaxfdi._faults.episodes(flight, 1)
+    onsets, ends, labels = jaxfdi._simulation.faults.episodes(flight, 1)
     us = jnp.full((steps, 1), 0.01)
     result = loop.run_loop(
         jaxfdi.linear_simulator(model, flight),

@@ -24,10 +24,10 @@ import optax
 import pytest
 
 import jaxfdi
-from jaxfdi import _loop as loop
-from jaxfdi import _metrics as metrics
 from jaxfdi import control, detection, models, tuning
-from jaxfdi._monitor import filter_detector
+from jaxfdi._simulation import loop
+from jaxfdi._simulation.monitor import filter_detector
+from jaxfdi._studies import metrics
 from jaxfdi.control import slew
 from jaxfdi.filters import _time_varying
 from jaxfdi.filters import _tskf as tskf
@@ -484,23 +484,25 @@ CASES = {
     "fault end before onset": (lambda: fault(onset=10, end=5), V, "end"),
     "fault label below -1": (lambda: fault(label=-2), V, "label"),
     "fault_group no components": (
-        lambda: jaxfdi._faults.fault_group("bias", "sensor", [], 10, 1.0),
+        lambda: jaxfdi._simulation.faults.fault_group("bias", "sensor", [], 10, 1.0),
         V,
         "components",
     ),
     "fault_group magnitudes length": (
-        lambda: jaxfdi._faults.fault_group("bias", "sensor", [0, 1], 10, [1.0, 2.0, 3.0]),
+        lambda: jaxfdi._simulation.faults.fault_group(
+            "bias", "sensor", [0, 1], 10, [1.0, 2.0, 3.0]
+        ),
         V,
         "magnitudes",
     ),
     "fault_group components float": (
-        lambda: jaxfdi._faults.fault_group("bias", "sensor", [0.5, 1.0], 10, 1.0),
+        lambda: jaxfdi._simulation.faults.fault_group("bias", "sensor", [0.5, 1.0], 10, 1.0),
         T_,
         "components",
     ),
-    "concat_faults none": (lambda: jaxfdi._faults.concat_faults(), V, "faults"),
+    "concat_faults none": (lambda: jaxfdi._simulation.faults.concat_faults(), V, "faults"),
     "concat_faults not a Fault": (
-        lambda: jaxfdi._faults.concat_faults(fault(), (1, 2)),
+        lambda: jaxfdi._simulation.faults.concat_faults(fault(), (1, 2)),
         T_,
         "faults",
     ),
@@ -1775,7 +1777,10 @@ def test_second_audit_valid_neighbours_pass():
     assert np.isfinite(float(_gnss().elevation_sigma(jnp.asarray(0.0))))
     quaternion = _ins().rotation.euler_to_quaternion(0.1, -0.05, 2.0).astype(jnp.float32)
     assert _ins_init(attitude=quaternion).nav.attitude.shape == (4,)  # float32 round-off passes
-    assert int(metrics.record_init(jaxfdi._faults.NEVER).onset) == jaxfdi._faults.NEVER
+    assert (
+        int(metrics.record_init(jaxfdi._simulation.faults.NEVER).onset)
+        == jaxfdi._simulation.faults.NEVER
+    )
     assert (
         int(metrics.record_from_alarms(jnp.array([0, 1, 1]), 1).detection_step) == 1
     )  # 0/1 integer alarms

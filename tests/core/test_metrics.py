@@ -16,7 +16,7 @@ from jaxfdi import (
     summarize_detection,
     unhealthy_warning,
 )
-from jaxfdi._metrics import confusion_matrix, record_init, record_update
+from jaxfdi._studies.metrics import confusion_matrix, record_init, record_update
 from jaxfdi.detection import chi2_detector, first_crossing, moving_window_sum
 from jaxfdi.detection._chi2 import normalized_innovation_squared
 
@@ -423,7 +423,7 @@ def test_rate_interval_is_the_clopper_pearson_beta_quantiles():
     0 and 1 at the ends (SciPy's beta distribution)."""
     from scipy import stats
 
-    from jaxfdi._metrics import rate_interval, rate_text
+    from jaxfdi._studies.metrics import rate_interval, rate_text
 
     for k, n, level in (
         (0, 10, 0.99),
@@ -453,7 +453,7 @@ def test_table_cells_show_a_dash_where_there_is_no_number():
     """``cell``: ``format`` right-aligned, the ``missing`` text for None, NaN and +-inf;
     ``rate_cell``: ``rate_text`` of ``round(rate n)`` of ``n`` right-aligned, ``-`` for a
     NaN rate or no runs, blank for ``None`` (no such rate)."""
-    from jaxfdi._metrics import cell, rate_cell, rate_text
+    from jaxfdi._studies.metrics import cell, rate_cell, rate_text
 
     assert (
         cell(1.23456, ".2f", 7) == "   1.23"
@@ -473,7 +473,7 @@ def test_one_sided_bounds_are_the_beta_quantiles():
     """Lower ``Beta.ppf(1-c; k, n-k+1)``, upper ``Beta.ppf(c; k+1, n-k)``, 0 and 1 at the ends."""
     from scipy import stats
 
-    from jaxfdi._metrics import binomial_lower_bound, binomial_upper_bound
+    from jaxfdi._studies.metrics import binomial_lower_bound, binomial_upper_bound
 
     for k, n, c in ((0, 10, 0.95), (3, 10, 0.95), (10, 10, 0.99), (7, 1000, 0.95)):
         low, high = binomial_lower_bound(k, n, c), binomial_upper_bound(k, n, c)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from jaxfdi import distributed
-from jaxfdi._montecarlo import run_keys
+from jaxfdi._studies.montecarlo import run_keys
 
 TESTS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the shared helpers
 

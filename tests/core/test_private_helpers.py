@@ -16,24 +16,24 @@ _EVERY_FUNCTION = (
 
 #: private module -> why tests import it
 WHY = {
-    "jaxfdi._faults": "the faults' per-step pieces (apply_fault, active_label) the simulator composes, "
+    "jaxfdi._simulation.faults": "the faults' per-step pieces (apply_fault, active_label) the simulator composes, "
     "tested alone where an onset or a sign error shows directly",
-    "jaxfdi._frame": "results_html, a frame as the notebooks show it (a table per group, escaping)",
-    "jaxfdi._io": "the provenance writer every CLI command must go through (a structural test)",
-    "jaxfdi._levenberg_marquardt": "the solver under the trim and the least-squares fixes, against "
+    "jaxfdi._studies.frame": "results_html, a frame as the notebooks show it (a table per group, escaping)",
+    "jaxfdi._io.files": "the provenance writer every CLI command must go through (a structural test)",
+    "jaxfdi._numerics.levenberg_marquardt": "the solver under the trim and the least-squares fixes, against "
     "SciPy on its own problems",
-    "jaxfdi._linalg": "the written-out factorisations against LAPACK, batched or not",
-    "jaxfdi._loop": "the closed loop's step functions, driven one step at a time",
-    "jaxfdi._metrics": "the record's per-step updates and interval helpers behind the studies' rates, "
+    "jaxfdi._numerics.linalg": "the written-out factorisations against LAPACK, batched or not",
+    "jaxfdi._simulation.loop": "the closed loop's step functions, driven one step at a time",
+    "jaxfdi._studies.metrics": "the record's per-step updates and interval helpers behind the studies' rates, "
     "against brute force",
-    "jaxfdi._monitor": "filter_detector, the monitor's fused step, against the filter and the detector "
+    "jaxfdi._simulation.monitor": "filter_detector, the monitor's fused step, against the filter and the detector "
     "run apart",
-    "jaxfdi._montecarlo": "the run keys and chunking the study engine relies on (equal results over "
+    "jaxfdi._studies.montecarlo": "the run keys and chunking the study engine relies on (equal results over "
     "processes and chunk sizes)",
-    "jaxfdi._progress": "the progress line's behaviour under logging and compilation",
-    "jaxfdi._riccati": "the information form of the Riccati solver beside the public one",
-    "jaxfdi._stages": "the stage shapes the F-16 loop composes, checked stage by stage",
-    "jaxfdi._study": "the study engine's slicing of cases and compiled-program sharing",
+    "jaxfdi._io.progress": "the progress line's behaviour under logging and compilation",
+    "jaxfdi._numerics.riccati": "the information form of the Riccati solver beside the public one",
+    "jaxfdi._simulation.stages": "the stage shapes the F-16 loop composes, checked stage by stage",
+    "jaxfdi._studies.study": "the study engine's slicing of cases and compiled-program sharing",
     "jaxfdi.control._attitude": "the wheels' torque allocation against its closed-form pseudo-inverse",
     "jaxfdi.control._eigenstructure": "the gain schedule's interpolation and the effectiveness input, "
     "against a fresh eigenstructure assignment",
@@ -106,6 +106,11 @@ WHY = {
 }
 
 
+def _is_module(dotted: str) -> bool:
+    path = TESTS.parent.joinpath(*dotted.split("."))
+    return path.with_suffix(".py").exists() or (path / "__init__.py").exists()
+
+
 def _private_imports() -> dict[str, set[str]]:
     """Private jaxfdi module -> the test files importing it (``from ... import`` or ``import``)."""
     found: dict[str, set[str]] = {}
@@ -114,7 +119,13 @@ def _private_imports() -> dict[str, set[str]]:
             modules = []
             if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("jaxfdi"):
                 if any(part.startswith("_") for part in node.module.split(".")):
-                    modules.append(node.module)
+                    # ``from jaxfdi._io import files`` imports the module ``jaxfdi._io.files``
+                    modules += [
+                        f"{node.module}.{a.name}"
+                        if _is_module(f"{node.module}.{a.name}")
+                        else node.module
+                        for a in node.names
+                    ]
                 else:  # a private module (or name) of a public package
                     modules += [
                         f"{node.module}.{a.name}" for a in node.names if a.name.startswith("_")

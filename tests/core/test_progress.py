@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import pytest
 
 import jaxfdi
-from jaxfdi import _progress as progress
+from jaxfdi._io import progress
 
 
 def run_one(key, scale):
@@ -107,7 +107,7 @@ def test_compilation_is_announced_and_never_silent(caplog, monkeypatch):
     """A study's first chunk logs 'compiling', a heartbeat while XLA works (every 5 s;
     here 0.05 s), then 'compiled in'; a second study of the same function compiles
     nothing and says nothing of it."""
-    from jaxfdi import _montecarlo as montecarlo
+    from jaxfdi._studies import montecarlo
 
     monkeypatch.setattr(montecarlo._Heartbeat.__init__, "__defaults__", (0.05,))
     caplog.set_level(logging.INFO, logger="jaxfdi")
@@ -141,7 +141,7 @@ def test_a_long_chunk_is_never_silent(caplog, monkeypatch):
     """While a chunk runs longer than the heartbeat's interval (5 s; here 0.05 s) with no
     progress report, the runs done so far are logged; the display's own reports reset
     the silence."""
-    from jaxfdi import _montecarlo as montecarlo
+    from jaxfdi._studies import montecarlo
 
     monkeypatch.setattr(montecarlo._Heartbeat.__init__, "__defaults__", (0.05,))
     caplog.set_level(logging.INFO, logger="jaxfdi")

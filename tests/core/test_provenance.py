@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 import jaxfdi
-from jaxfdi import _io, cli
+from jaxfdi import cli
+from jaxfdi._io import files as _io
 
 FIELDS = {
     "jaxfdi",
@@ -147,26 +148,29 @@ def test_version_option():
 
 # --- a function and its module never share a name ------------------------------------------
 
+#: (public package, the private module defining the function, the function's name)
 FUNCTIONS = [
-    ("jaxfdi", "monitor"),
-    ("jaxfdi", "simulate"),
-    ("jaxfdi.filters", "time_varying"),
-    ("jaxfdi.detection", "dual_filter"),
-    ("jaxfdi.models.f16", "linearize"),
-    ("jaxfdi.models.f16", "trim"),
+    ("jaxfdi", "jaxfdi._simulation.monitor", "monitor"),
+    ("jaxfdi", "jaxfdi._simulation.simulate", "simulate"),
+    ("jaxfdi.filters", "jaxfdi.filters._time_varying", "time_varying"),
+    ("jaxfdi.detection", "jaxfdi.detection._dual_filter", "dual_filter"),
+    ("jaxfdi.models.f16", "jaxfdi.models.f16._linearize", "linearize"),
+    ("jaxfdi.models.f16", "jaxfdi.models.f16._trim", "trim"),
 ]
 
 
-@pytest.mark.parametrize("package,name", FUNCTIONS)
-def test_the_package_attribute_is_the_function_and_its_module_is_private(package, name):
-    """``jaxfdi.monitor`` is the function; its module is ``jaxfdi._monitor``, so no module
+@pytest.mark.parametrize("package,module_name,name", FUNCTIONS, ids=[f[2] for f in FUNCTIONS])
+def test_the_package_attribute_is_the_function_and_its_module_is_private(
+    package, module_name, name
+):
+    """``jaxfdi.monitor`` is the function; its module is ``jaxfdi._simulation.monitor``, so no module
     is shadowed by a function of its name and nothing needs a callable module (a function
     that is not public, ``time_varying``, is its private module's only)."""
     import importlib
 
-    module = importlib.import_module(f"{package}._{name}")
+    module = importlib.import_module(module_name)
     function = getattr(module, name)
-    assert inspect.isfunction(function) and function.__module__ == f"{package}._{name}"
+    assert inspect.isfunction(function) and function.__module__ == module_name
     assert type(module) is types.ModuleType
     public = importlib.import_module(package)
     assert getattr(public, name, function) is function and (name in public.__all__) == hasattr(

@@ -9,7 +9,7 @@ import scipy.linalg
 
 import jaxfdi
 from jaxfdi import steady_state_kalman
-from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info
+from jaxfdi._numerics.riccati import solve_discrete_are, solve_discrete_are_info
 from jaxfdi.models import engine_model
 
 RTOL = 1e-9

@@ -28,7 +28,7 @@ from test_riccati import PROBLEMS
 
 import jaxfdi
 from jaxfdi import steady_state_kalman
-from jaxfdi._riccati import solve_discrete_are, solve_discrete_are_info
+from jaxfdi._numerics.riccati import solve_discrete_are, solve_discrete_are_info
 from jaxfdi.control import integral_augmentation, lqr_gain, lqr_pi
 from jaxfdi.models import _vtol as vtol
 

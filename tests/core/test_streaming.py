@@ -19,7 +19,9 @@ def synthetic_records(num_runs: int, seed: int = 0):
     isolated labels and unhealthy runs; and the true labels."""
     rng = np.random.default_rng(seed)
     onset = np.where(
-        rng.random(num_runs) < 1 / 3, jaxfdi._faults.NEVER, rng.integers(0, HORIZON, num_runs)
+        rng.random(num_runs) < 1 / 3,
+        jaxfdi._simulation.faults.NEVER,
+        rng.integers(0, HORIZON, num_runs),
     )
     faulty = onset < HORIZON
     delay = rng.geometric(0.05, num_runs) - 1
@@ -113,7 +115,7 @@ def test_monte_carlo_reduce_equals_the_records():
         alarms = jax.random.uniform(key, (T,)) < jnp.where(jnp.arange(T) >= onset, 0.3, 0.01)
         return record_from_alarms(alarms, onset)
 
-    onsets = np.where(np.arange(130) % 3 == 0, jaxfdi._faults.NEVER, 20).astype(np.int32)
+    onsets = np.where(np.arange(130) % 3 == 0, jaxfdi._simulation.faults.NEVER, 20).astype(np.int32)
     records = jaxfdi.monte_carlo(run_one, jax.random.key(2), 130, onsets, chunk_size=48)
     counts = jaxfdi.monte_carlo(
         run_one,

@@ -1,4 +1,4 @@
-"""The study engine (``jaxfdi._study``): one program per structure whatever the runs and
+"""The study engine (``jaxfdi._studies.study``): one program per structure whatever the runs and
 seed, methods-as-data equal to the same methods run one by one, on-device per-case
 means equal to host-side means of the same runs, and decisions independent of the chunk
 size and of the device count.
@@ -19,9 +19,8 @@ import pytest
 from _compiles import counting_compiles
 
 import jaxfdi
-from jaxfdi import _montecarlo as montecarlo
-from jaxfdi import _study as study
 from jaxfdi import fault, no_fault, stack_faults
+from jaxfdi._studies import montecarlo, study
 from jaxfdi.models import LinearGaussianModel
 
 HERE = Path(__file__).resolve().parent
@@ -296,7 +295,7 @@ def test_two_devices_give_the_same_decisions(tmp_path):
         jax.config.update("jax_enable_x64", True)
         sys.path[:0] = [{str(HERE)!r}, {str(TESTS)!r}]
         from test_study import toy_study
-        from jaxfdi import _study as study
+        from jaxfdi._studies import study
         assert len(jax.local_devices()) == 2, jax.local_devices()
         r = study.run_study(toy_study(), 25, 9, chunk_size=16)
         np.savez({str(out)!r}, **{{n + "|" + f: np.asarray(getattr(r.outputs[n], f)) for n in r.outputs

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from scipy import optimize, stats
 
-from jaxfdi import _faults as faults
 from jaxfdi import simulate
+from jaxfdi._simulation import faults
 from jaxfdi.data import data_path
 from jaxfdi.gnss import (
     PositionFix,

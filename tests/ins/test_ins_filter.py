@@ -252,7 +252,7 @@ def test_a_stuck_imu_channel_holds_its_onset_sample_and_a_dead_one_is_nan():
     slots = table.prn.shape[0]
     model = imu.hg1900()
     flight = plant.flight_tables(trajectory.stationary(PARK, 4.0, rate=10.0), 3)
-    faults = jaxfdi._faults.concat_faults(
+    faults = jaxfdi._simulation.faults.concat_faults(
         jaxfdi.fault("stuck", "sensor", 3, 1), jaxfdi.fault("dead", "sensor", 5, 2)
     )
     gps_ins = plant.gps_ins_plant(

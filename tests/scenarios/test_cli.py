@@ -87,7 +87,7 @@ DATA = pathlib.Path(__file__).resolve().parents[1] / "data"
 
 def assert_same_as_before(name: str, data: dict) -> None:
     """The study's JSON equals the one its private scan wrote before the scenario moved
-    onto ``jaxfdi._loop`` (``tests/data``): every key it had, integers and strings exactly,
+    onto ``jaxfdi._simulation.loop`` (``tests/data``): every key it had, integers and strings exactly,
     floats to 1e-4 relative; keys added since (``unhealthy_runs``) are not compared. The
     float tolerance is for another CPU, not another algorithm: on an AMD EPYC VM the
     landed commit 2e3097e itself gives a VTOL calibrated threshold 3.5e-9 and a median

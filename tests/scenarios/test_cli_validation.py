@@ -18,7 +18,8 @@ import time
 import numpy as np
 import pytest
 
-from jaxfdi import _io, cli
+from jaxfdi import cli
+from jaxfdi._io import files as _io
 from jaxfdi.cli import main
 
 ENGINE_NAMES = ["MM", "IMM", "IMM hand-pi", "IMM-bias hand-pi confirm 3, P2 2", "GLRT l_T=200"]

@@ -26,9 +26,8 @@ from _notebooks import images, run_clean, tables
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from jaxfdi import Target
-from jaxfdi import _loop as loop
-from jaxfdi import _stages as stages
-from jaxfdi._faults import active_label, apply_faults
+from jaxfdi._simulation import loop, stages
+from jaxfdi._simulation.faults import active_label, apply_faults
 from jaxfdi.detection import _hybrid_psa as hp
 from jaxfdi.filters import run_filter
 from jaxfdi.models.f16 import (

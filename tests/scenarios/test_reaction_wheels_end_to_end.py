@@ -1,5 +1,5 @@
 """Reaction wheels (Choi & Park 2009) end to end: `jaxfdi run reaction-wheels --runs 2`
-(table, JSON equal to the one written before the scenario moved onto `jaxfdi._loop`,
+(table, JSON equal to the one written before the scenario moved onto `jaxfdi._simulation.loop`,
 figures) and notebook 05.
 
 At 2 runs per case the notebook's study and examples are the CLI's (``wheel_study(runs=2,

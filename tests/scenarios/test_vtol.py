@@ -238,8 +238,8 @@ def test_other_thresholds_seeds_and_runs_compile_no_new_closed_loop(study):
     thresholds, and a fresh design of the same value with another seed and run count,
     compile nothing new; the paper-threshold decisions equal the study's own evaluation
     of the same runs against the paper's thresholds."""
-    from jaxfdi import _montecarlo as montecarlo
-    from jaxfdi import _study as engine
+    from jaxfdi._studies import montecarlo
+    from jaxfdi._studies import study as engine
     from jaxfdi.scenarios.vtol import paper_thresholds, vtol_spec
 
     filters = study.design.location.shape[0]

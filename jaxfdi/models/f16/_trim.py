@@ -1,5 +1,5 @@
 """Trim of the F-16 for steady flight: level, climbing, coordinated turn and pull-up (Stevens & Lewis 2003, sec. 3.6),
-solved by Levenberg-Marquardt (``jaxfdi._levenberg_marquardt``).
+solved by Levenberg-Marquardt (``jaxfdi._numerics.levenberg_marquardt``).
 
 A ``TrimCondition`` fixes ``VT``, ``h``, ``gamma``, ``psi'`` and ``theta'``; unknowns
 ``z = [thtl, el, ail, rdr, alpha, beta]``; the rest follows from constraints:
@@ -35,7 +35,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._levenberg_marquardt import levenberg_marquardt
+from jaxfdi._numerics.levenberg_marquardt import levenberg_marquardt
 from jaxfdi.models.f16._dynamics import ALPHA, BETA, VT, F16Params, P, Q, R, f16_dynamics
 from jaxfdi.models.f16._engine import throttle_gearing
 

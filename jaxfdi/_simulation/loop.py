@@ -1,6 +1,6 @@
 """One closed-loop run as one ``lax.scan``: plant -> sensors -> FDI -> controller -> plant.
 
-Every scenario, open or closed loop, is this scan with three parts (types: ``jaxfdi._stages``): a **plant**
+Every scenario, open or closed loop, is this scan with three parts (types: ``jaxfdi._simulation.stages``): a **plant**
 ``(init, measure, advance)`` (a ``Simulator``, or a model's own halves, e.g. the reaction wheels); an **FDI**
 ``(step, observe)`` (estimator, detector, isolator, reconfiguration); a **controller** ``(init, step)``. Step ``k``
 (``Ts`` apart):
@@ -31,7 +31,8 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._metrics import (
+from jaxfdi._simulation.stages import FDI, Controller, Plant, Scorer
+from jaxfdi._studies.metrics import (
     DetectionRecord,
     EpisodeRecord,
     episode_record_init,
@@ -40,8 +41,7 @@ from jaxfdi._metrics import (
     record_update,
     step_health,
 )
-from jaxfdi._montecarlo import _is_key
-from jaxfdi._stages import FDI, Controller, Plant, Scorer
+from jaxfdi._studies.montecarlo import is_key
 from jaxfdi.detection import Decision
 
 
@@ -159,7 +159,7 @@ def run_loop(
                 f"{name}: expected an object with callable {', '.join(needed)} (a "
                 f"{name.capitalize() if name != 'fdi' else 'FDI'}), got {checks.received(part)}"
             )
-    if not _is_key(key) or (
+    if not is_key(key) or (
         jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key) and key.shape != ()
     ):
         raise TypeError(

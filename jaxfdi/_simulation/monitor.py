@@ -16,10 +16,10 @@ import jax.numpy as jnp
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._loop import detection_scorer, feedforward, run_loop
-from jaxfdi._metrics import DetectionRecord, record_init, record_update, step_health
-from jaxfdi._simulate import Actuated, Sensed, Simulator
-from jaxfdi._stages import FDI
+from jaxfdi._simulation.loop import detection_scorer, feedforward, run_loop
+from jaxfdi._simulation.simulate import Actuated, Sensed, Simulator
+from jaxfdi._simulation.stages import FDI
+from jaxfdi._studies.metrics import DetectionRecord, record_init, record_update, step_health
 from jaxfdi.detection import Detector, flag_dead
 from jaxfdi.filters import Filter, FilterInfo
 

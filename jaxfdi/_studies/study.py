@@ -34,8 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxfdi import checks
-from jaxfdi._montecarlo import _num_runs_of, monte_carlo
-from jaxfdi._progress import status
+from jaxfdi._io.progress import status
+from jaxfdi._studies.montecarlo import _num_runs_of, monte_carlo
 
 __all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_slices"]
 

@@ -35,7 +35,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import checks
-from jaxfdi._faults import NEVER
+from jaxfdi._simulation.faults import NEVER
 
 
 class DetectionRecord(NamedTuple):

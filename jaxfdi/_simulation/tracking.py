@@ -12,7 +12,7 @@ from typing import Any, Callable, NamedTuple
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi._stages import Plant
+from jaxfdi._simulation.stages import Plant
 
 
 class TrackingScore(NamedTuple):

@@ -30,7 +30,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from jaxfdi import checks
-from jaxfdi._progress import progress_bar, status
+from jaxfdi._io.progress import progress_bar, status
 from jaxfdi.distributed import allgather
 
 ProgressFn = Callable[[int, int, float], None]
@@ -42,7 +42,8 @@ def _num_runs_of(per_run: Any) -> set[int]:
     }
 
 
-def _is_key(key: Any) -> bool:
+def is_key(key: Any) -> bool:
+    """True for a PRNG key: a typed key or a raw ``uint32[2]`` one."""
     return isinstance(key, jax.Array) and (
         jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
         or (key.dtype == jnp.uint32 and key.shape == (2,))
@@ -147,7 +148,7 @@ def monte_carlo(
         chunk_size = checks.check_int(
             "chunk_size", chunk_size, 1, meaning="a positive number of runs per call"
         )
-    if not _is_key(key):
+    if not is_key(key):
         raise TypeError(
             f"key: expected a PRNG key (jax.random.key(seed)), got {checks.received(key)}"
         )

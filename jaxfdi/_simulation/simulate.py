@@ -20,7 +20,7 @@ and independent of chunking or sharding.
 
 The simulator is a ``Simulator(init, measure, advance)``: ``measure`` reads the
 sensors at step ``k`` and ``advance`` moves the plant with the input applied at ``k``,
-which is what a closed loop needs (``jaxfdi._loop``: the controller acts between the two);
+which is what a closed loop needs (``jaxfdi._simulation.loop``: the controller acts between the two);
 ``step`` is the two together, for open-loop runs (``simulate``).
 """
 
@@ -33,8 +33,17 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from jaxfdi import _linalg, checks
-from jaxfdi._faults import Fault, Target, active_label, apply_faults, as_stack, is_active, no_fault
+from jaxfdi import checks
+from jaxfdi._numerics import linalg as _linalg
+from jaxfdi._simulation.faults import (
+    Fault,
+    Target,
+    active_label,
+    apply_faults,
+    as_stack,
+    is_active,
+    no_fault,
+)
 from jaxfdi.models import (
     LinearGaussianModel,
     linear_observation,

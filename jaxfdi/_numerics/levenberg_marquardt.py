@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
-from jaxfdi import _linalg
+from jaxfdi._numerics import linalg as _linalg
 
 
 class LeastSquaresResult(NamedTuple):

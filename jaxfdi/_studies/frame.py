@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from jaxfdi._metrics import rate_interval
+from jaxfdi._studies.metrics import rate_interval
 
 #: the per-run rates of ``fault_row`` whose intervals the frame adds
 RUN_RATES = (

@@ -1,5 +1,6 @@
 """Gradient-based tuning: parameterisations, differentiable losses, the optax loop."""
 
+from jaxfdi.tuning._imm import ImmData, ImmProblem, evaluate_imm, imm_filter, imm_loss, tune_imm
 from jaxfdi.tuning._losses import innovation_nll, mode_cross_entropy, soft_detection_loss
 from jaxfdi.tuning._parameterize import (
     Transform,
@@ -24,6 +25,12 @@ from jaxfdi.tuning._train import (
 )
 
 __all__ = [
+    "ImmProblem",
+    "ImmData",
+    "imm_filter",
+    "imm_loss",
+    "tune_imm",
+    "evaluate_imm",
     "fit",
     "TrainResult",
     "save_params",

@@ -30,6 +30,17 @@ def test_example_runs_and_detects_the_fault():
     assert bool(np.all(namespace["info"].healthy))
 
 
+def test_example_reports_a_miss_as_no_delay(capsys):
+    """A threshold no statistic reaches: ``first_crossing`` gives -1, the example no delay."""
+    code = re.findall(r"```python\n(.*?)```", README, re.S)[0]
+    threshold = "jaxfdi.detection.chi2_threshold(4 * 5, 0.005)"
+    assert threshold in code
+    namespace = {}
+    exec(compile(code.replace(threshold, 'float("inf")'), "README.md", "exec"), namespace)
+    assert int(namespace["alarm_step"]) == -1 and namespace["delay_s"] is None
+    assert capsys.readouterr().out.strip() == "missed"
+
+
 def test_closed_loop_example_runs_and_holds_the_unstable_plant():
     code = re.findall(r"```python\n(.*?)```", STUDIES_PAGE, re.S)[0]
     namespace = {}

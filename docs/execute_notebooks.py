@@ -33,12 +33,7 @@ TARGET = ROOT / "docs" / "examples"
 SIZES = {
     "01": {"JAXFDI_NB_RUNS": "20"},
     "02": {"JAXFDI_NB_RUNS": "20"},
-    "03": {
-        "JAXFDI_NB_STEPS": "40",
-        "JAXFDI_NB_TRAIN_RUNS": "4",
-        "JAXFDI_NB_RUNS": "20",
-        "JAXFDI_NB_SELECTION_RUNS": "10",
-    },
+    "03": {},  # the size its text states (its defaults)
     "04": {"JAXFDI_NB_RUNS": "10"},
     "05": {"JAXFDI_NB_RUNS": "10"},
     "06": {"JAXFDI_NB_RUNS": "4"},

@@ -1,6 +1,7 @@
 """Progress displays and log messages.
 
-``progress_bar`` makes a progress hook: a ``tqdm.auto`` bar when tqdm is installed, else INFO lines. Messages use the
+``progress_bar`` makes a progress hook: a tqdm bar when tqdm is installed (``tqdm.auto``'s widget in a notebook that
+has ``ipywidgets``, else a text line: ``tqdm.auto`` without ipywidgets warns), else INFO lines. Messages use the
 ``logging`` logger ``"jaxfdi"`` (silence: ``logging.getLogger("jaxfdi").setLevel(logging.WARNING)``); the CLI installs a
 stderr handler (``configure_logging``) and ``--quiet`` turns bars and INFO messages off.
 """
@@ -22,12 +23,23 @@ logger = logging.getLogger("jaxfdi")
 
 
 def tqdm_available() -> bool:
-    """Whether ``tqdm.auto`` can be imported."""
+    """Whether tqdm is installed (importing ``tqdm.auto`` here would warn in a notebook without ipywidgets)."""
     try:
-        import tqdm.auto  # noqa: F401
+        import tqdm  # noqa: F401
     except ImportError:
         return False
     return True
+
+
+def _tqdm_class():
+    """``tqdm.auto.tqdm`` where ipywidgets is installed (a notebook gets a widget), else ``tqdm.std.tqdm``."""
+    try:
+        import ipywidgets  # noqa: F401
+    except ImportError:
+        from tqdm.std import tqdm
+    else:
+        from tqdm.auto import tqdm
+    return tqdm
 
 
 class _Bar:
@@ -40,10 +52,8 @@ class _Bar:
     def __call__(
         self, done: int, total: int, seconds: float = 0.0, postfix: str | None = None
     ) -> None:
-        from tqdm.auto import tqdm
-
         if self.bar is None:
-            self.bar = tqdm(
+            self.bar = _tqdm_class()(
                 total=total, desc=self.description, unit=f" {self.unit}", leave=True, **self.options
             )
         if postfix is not None:
@@ -112,7 +122,7 @@ def progress_bar(
       unit: what is counted (``"runs"``, ``"steps"``).
       interval: without tqdm, the least time between two log lines [s].
       use_tqdm: ``None`` uses tqdm when installed; ``False`` logs lines instead.
-      **tqdm_options: passed to ``tqdm.auto.tqdm`` (e.g. ``file=``, ``disable=``).
+      **tqdm_options: passed to the tqdm bar (e.g. ``file=``, ``disable=``).
 
     Returns:
       A callable for ``monte_carlo(..., progress=...)``; it has ``close()``.

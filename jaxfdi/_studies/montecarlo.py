@@ -178,7 +178,7 @@ def monte_carlo(
     )
     report = (
         progress_bar(label, "runs") if progress is True else (progress or None)
-    )  # tqdm.auto or log lines
+    )  # a tqdm bar or log lines
     rows = _local_rows(devices, chunk) if multiprocess else slice(0, chunk)
 
     state = reduce.init() if reduce is not None else None

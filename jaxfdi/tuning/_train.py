@@ -181,7 +181,7 @@ def fit(
     best, best_val, best_step, bad = params, float(first), 0, 0
     log = {"step": [0], "train": [float("nan")], "val": [best_val]}
     start, stopped = time.perf_counter(), False
-    bar = progress_bar("tuning", "steps") if progress else None  # tqdm.auto, or log lines
+    bar = progress_bar("tuning", "steps") if progress else None  # a tqdm bar, or log lines
     for step in range(1, steps + 1):
         new, new_state, value, finite = update(params, opt_state, train_batch(step - 1))
         if not bool(finite):

@@ -44,6 +44,10 @@ def test_executed_copy_has_outputs_figures_and_no_error(name):
     assert not [
         o for o in outputs if o["output_type"] == "stream" and "Traceback" in "".join(o["text"])
     ]
+    warned = [
+        o for o in outputs if o["output_type"] == "stream" and "Warning" in "".join(o["text"])
+    ]
+    assert not warned, f"{name}: {''.join(warned[0]['text'])[:300]}"
     assert any("image/png" in o.get("data", {}) for o in outputs), f"{name}: no figure"
     meta = copy["metadata"]["jaxfdi_docs"]
     assert meta["source"] == f"notebooks/{name}" and len(meta["source_sha256"]) == 64
@@ -58,11 +62,12 @@ def test_readme_states_the_docs_command_and_ci_runs_it():
     assert re.search(r'^pip install -e "\.\[docs\]" && .*mkdocs build --strict', ci, re.M)
 
 
-def test_concept_pages_code_runs():
-    """The concept pages' Python blocks, in order in one namespace."""
+def test_concept_pages_code_runs(tmp_path, monkeypatch):
+    """The concept pages' Python blocks, in order in one namespace (in a temporary folder: they write files)."""
+    monkeypatch.chdir(tmp_path)
     namespace = {}
     ran = 0
-    for page in ("faults", "filters", "monte-carlo", "detectors", "control", "studies"):
+    for page in ("faults", "filters", "monte-carlo", "detectors", "control", "studies", "tuning"):
         for block in re.findall(
             r"```python\n(.*?)```", (DOCS / "concepts" / f"{page}.md").read_text(), re.S
         ):
@@ -70,7 +75,12 @@ def test_concept_pages_code_runs():
                 continue
             exec(block.replace("1000, jnp.ones(1000)", "16, jnp.ones(16)"), namespace)
             ran += 1
-    assert ran == 8
+    assert ran == 9
+    # tuning.md: the tuned matrix moved from the start towards the generating one; the held-out interval brackets
+    pi = np.asarray(namespace["params"]["transition"])
+    assert abs(pi[0, 1] - 0.04) < abs(0.2 - 0.04) and abs(pi[1, 0] - 0.12) < abs(0.3 - 0.12)
+    scores = namespace["scores"]
+    assert scores["nll_low"] <= scores["nll"] <= scores["nll_high"]
     assert namespace["info"].nis.shape == (50,) and namespace["out"].shape == (16,)
     truth = namespace["truth"]  # faults.md: the bias enters sensor 1 from step 20
     assert truth.measurement.shape == (50, 2) and float(truth.sensor_fault[19, 1]) == 0.0
@@ -200,3 +210,27 @@ def test_notebooks_use_only_the_public_api(name):
             if isinstance(root, ast.Name) and root.id == "jaxfdi":
                 private.append(ast.unparse(node))
     assert private == [], f"{name} reaches into {private}"
+
+
+def test_citation_names_this_version_and_only_what_exists():
+    """CITATION.cff: the package's version and a release date, and every command and module its notes
+    name is one the package has (``jaxfdi list``; an importable attribute)."""
+    import importlib
+
+    import jaxfdi
+    from jaxfdi import cli
+
+    text = (Path(__file__).resolve().parents[2] / "CITATION.cff").read_text()
+    assert re.search(r'^version: "(.*)"$', text, re.M).group(1) == jaxfdi.__version__
+    assert re.search(r'^date-released: "\d{4}-\d\d-\d\d"$', text, re.M)
+    commands = re.findall(r"jaxfdi run ([a-z0-9-]+)", text)
+    assert commands and set(commands) <= set(cli.RUNNERS)
+    for dotted in re.findall(r"\bjaxfdi(?:\.[a-z_0-9]+)+", text):
+        module, _, name = dotted.rpartition(".")
+        try:
+            importlib.import_module(dotted)
+        except ModuleNotFoundError:
+            assert hasattr(importlib.import_module(module), name), dotted
+    assert (
+        "Seed 00" not in text
+    )  # the papers are named by their authors, not by our folder's numbers

@@ -188,3 +188,22 @@ def test_status_after_basic_config_at_warning_prints_its_line(monkeypatch, capfd
         assert "compiled" in handler.stream.getvalue() and capfd.readouterr().err == ""
     finally:
         root.setLevel(level)
+
+
+def test_without_ipywidgets_the_bar_is_a_text_line_and_warns_nothing(monkeypatch):
+    """``tqdm.auto`` in a notebook without ipywidgets picks ``tqdm.notebook``, which warns ("IProgress not found")
+    and cannot draw; the library's bar is then tqdm's text line, with no warning."""
+    import sys
+    import warnings
+
+    import tqdm.std
+
+    monkeypatch.setitem(sys.modules, "ipywidgets", None)  # import ipywidgets -> ImportError
+    for name in ("tqdm.auto", "tqdm.autonotebook"):  # importing them in a notebook is what warns
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    assert progress.tqdm_available() and "tqdm.autonotebook" not in sys.modules
+    assert progress._tqdm_class() is tqdm.std.tqdm
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        bar = progress.progress_bar("runs", "run", use_tqdm=True, file=io.StringIO())
+        bar(3, 3, 0.1)

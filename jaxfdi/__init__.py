@@ -63,7 +63,7 @@ if TYPE_CHECKING:
     from jaxfdi._simulation.simulate import Simulator, linear_simulator, simulate, simulator
     from jaxfdi._simulation.stages import FDI, Controller, Plant, Scorer
     from jaxfdi._simulation.tracking import TrackingScore, tracked_plant
-    from jaxfdi._studies.frame import results_frame, study_result
+    from jaxfdi._studies.frame import results_frame, study_result, text_table
     from jaxfdi._studies.metrics import (
         DetectionRecord,
         DetectionSummary,
@@ -174,7 +174,7 @@ _EXPORTS = {
     "jaxfdi._simulation.simulate": ("linear_simulator", "simulate", "simulator", "Simulator"),
     "jaxfdi._simulation.stages": ("FDI", "Controller", "Plant", "Scorer"),
     "jaxfdi._studies.study": ("Structure", "Study", "run_study", "case_slices"),
-    "jaxfdi._studies.frame": ("results_frame", "study_result"),
+    "jaxfdi._studies.frame": ("results_frame", "study_result", "text_table"),
     "jaxfdi._io.progress": ("status",),
     "jaxfdi._numerics.riccati": ("steady_state_kalman",),
     "jaxfdi._simulation.tracking": ("TrackingScore", "tracked_plant"),
@@ -254,6 +254,7 @@ __all__ = [
     "case_slices",
     "study_result",
     "results_frame",
+    "text_table",
     "status",
     # detection records, summaries, rates with their intervals, table cells
     "DetectionRecord",

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from jaxfdi._studies.metrics import rate_interval
+from jaxfdi._studies.metrics import rate_bounds
 
 #: the per-run rates of ``fault_row`` whose intervals the frame adds
 RUN_RATES = (
@@ -82,22 +82,6 @@ def tidy_rows(rows: list[dict], methods: tuple[str, ...] = ()) -> list[dict]:
     return out
 
 
-def _interval(rate: Any, n: Any, level: float) -> tuple[float, float]:
-    nan = float("nan")
-    if (
-        rate is None
-        or n is None
-        or isinstance(rate, (str, bool))
-        or not math.isfinite(rate)
-        or not n > 0
-    ):
-        return nan, nan
-    count = rate * n
-    if abs(count - round(count)) > 1e-6:
-        return nan, nan
-    return rate_interval(int(round(count)), int(n), level)
-
-
 def results_frame(
     rows: list[dict],
     level: float = 0.95,
@@ -114,9 +98,10 @@ def results_frame(
 
     flat = tidy_rows(rows, methods)
     frame = pd.DataFrame.from_records(flat, columns=list(dict.fromkeys(k for r in flat for k in r)))
+    frame.attrs["row_columns"] = [tuple(r) for r in flat]  # each row's own order, for text_table
     if "runs" not in frame:
         return frame
-    for rate in (r for r in RUN_RATES if r in frame):
+    for rate in (r for r in RUN_RATES if r in frame and f"{r}_low" not in frame):  # not given
         bounds = []
         for row in flat:
             known = unhealthy in row or not any(k.startswith("unhealthy") for k in row)
@@ -125,16 +110,27 @@ def results_frame(
                 if known and row.get("runs") is not None
                 else None
             )
-            bounds.append(_interval(row.get(rate), n, level))
+            bounds.append(rate_bounds(row.get(rate), n, level))
         at = frame.columns.get_loc(rate) + 1
         frame.insert(at, f"{rate}_low", [b[0] for b in bounds])
         frame.insert(at + 1, f"{rate}_high", [b[1] for b in bounds])
     return frame
 
 
+def _display_limits(part) -> dict:
+    """``to_html``'s row and column limits from pandas' ``display.max_rows``/``min_rows``/``max_columns``, as a
+    notebook shows a long ``DataFrame`` (past ``max_rows`` rows, the first and last ``min_rows`` / 2)."""
+    import pandas as pd
+
+    max_rows, min_rows = pd.get_option("display.max_rows"), pd.get_option("display.min_rows")
+    rows = None if not max_rows or len(part) <= max_rows else (min_rows or max_rows)
+    return {"max_rows": rows, "max_cols": pd.get_option("display.max_columns") or None}
+
+
 def results_html(frame, config: dict | None = None, group: str = "section") -> str:
     """The HTML a notebook renders for a study's frame: one table per value of the ``group`` column where the frame has
-    one (only the columns each uses), numbers to four significant digits, ``-`` for none."""
+    one (only the columns each uses), numbers to four significant digits, ``-`` for none; each table within pandas'
+    ``display.max_rows`` and ``display.max_columns``."""
     group = group if group in frame else None
     parts = []
     if config:
@@ -154,12 +150,103 @@ def results_html(frame, config: dict | None = None, group: str = "section") -> s
         if name is not None:
             parts.append(f"<h4>{html.escape(str(name))}</h4>")
             part = part.drop(columns=[group])
+        part = part.dropna(axis=1, how="all")
+        limits = _display_limits(part)
         parts.append(
-            part.dropna(axis=1, how="all").to_html(
-                index=False, na_rep="-", float_format="{:.4g}".format
+            part.to_html(
+                index=False,
+                na_rep="-",
+                float_format="{:.4g}".format,
+                show_dimensions=bool(
+                    limits["max_rows"] or (limits["max_cols"] or 1e9) < part.shape[1]
+                ),
+                **limits,
             )
         )
     return "\n".join(parts)
+
+
+def _text_cell(value, digits: int) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    if isinstance(value, (float, np.floating)):
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def text_table(frame, group: str = "section", width: int = 110, digits: int = 4) -> str:
+    """A study's frame as fixed-width text (what the CLI prints): a block per value of the ``group`` column (its name
+    as a heading) with only the columns it uses; a rate and its interval as one cell ``r [low, high]``; numbers to
+    ``digits`` significant digits, ``-`` for none. A block wider than ``width`` characters is printed transposed: a
+    line per column, a column per row (headed by the block's first column).
+
+    Returns:
+      str, the blocks separated by blank lines.
+    """
+    group = group if group in frame else None
+    parts = (
+        [(None, frame)]
+        if group is None
+        else [
+            (name, part.drop(columns=[group]))
+            for name, part in frame.groupby(group, sort=False, dropna=False)
+        ]
+    )
+    own = frame.attrs.get("row_columns")
+    blocks = []
+    for name, part in parts:
+        part = part.dropna(axis=1, how="all")
+        if own is not None and len(own) == len(
+            frame
+        ):  # the rows' own column order (a rate before its interval)
+            seen = dict.fromkeys(k for i in part.index for k in own[frame.index.get_loc(i)])
+            order = [k for k in seen if k in part]
+            for k in [c for c in part.columns if c not in seen]:  # intervals: after their rate
+                base = k.rsplit("_", 1)[0]
+                order.insert(
+                    order.index(base) + 1 + k.endswith("_high") if base in order else len(order), k
+                )
+            part = part[order]
+        records = part.to_dict("records")
+        columns = []  # (header, cells)
+        for column in part.columns:
+            if column.endswith(("_low", "_high")) and column.rsplit("_", 1)[0] in part:
+                continue
+            cells = [_text_cell(r[column], digits) for r in records]
+            if f"{column}_low" in part and f"{column}_high" in part:
+                rate = column.endswith("rate") or "_rate_" in column  # in [0, 1]: two decimals
+                bound = (lambda v: f"{v:.2f}") if rate else (lambda v: _text_cell(v, digits))
+                cells = [
+                    c
+                    if c == "-" or _text_cell(r[f"{column}_low"], 2) == "-"
+                    else f"{c} [{bound(r[f'{column}_low'])}, {bound(r[f'{column}_high'])}]"
+                    for c, r in zip(cells, records)
+                ]
+            columns.append((str(column), cells))
+        lines = [] if name is None else [str(name)]
+        widths = [max(len(h), *(len(c) for c in cells)) for h, cells in columns]
+        if sum(widths) + 2 * len(widths) <= width or len(records) == 0:
+            lines.append("  ".join(f"{h:>{w}}" for (h, _), w in zip(columns, widths)))
+            lines += [
+                "  ".join(f"{cells[i]:>{w}}" for (_, cells), w in zip(columns, widths))
+                for i in range(len(records))
+            ]
+        else:  # transposed
+            (first, heads), rest = columns[0], columns[1:]
+            label = max(len(first), *(len(h) for h, _ in rest))
+            widths = [
+                max(len(heads[i]), *(len(cells[i]) for _, cells in rest))
+                for i in range(len(records))
+            ]
+            lines.append(
+                f"{first:<{label}}  " + "  ".join(f"{h:>{w}}" for h, w in zip(heads, widths))
+            )
+            lines += [
+                f"{h:<{label}}  " + "  ".join(f"{c:>{w}}" for c, w in zip(cells, widths))
+                for h, cells in rest
+            ]
+        blocks.append("\n".join(line.rstrip() for line in lines))
+    return "\n\n".join(blocks)
 
 
 def study_result(

@@ -27,7 +27,8 @@ by its own label.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import math
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -219,6 +220,29 @@ class DetectionSummary(NamedTuple):
     pre_onset_alarm_rate: float = float("nan")
     clean_runs: int = 0
     delay_runs: int = 0
+
+    def to_frame(self, level: float = 0.95):
+        """The summary as a one-row pandas DataFrame, each run rate beside its two-sided ``level`` Clopper-Pearson
+        interval (``_low``, ``_high``; ``rate_interval``) over its own denominator: ``faulty_runs`` for the detection,
+        missed-detection and pre-onset alarm rates, the healthy runs (``runs - unhealthy_runs``) for the false-alarm
+        rate; NaN where the rate has none. The per-step rate has no interval (its steps are not independent)."""
+        import pandas as pd
+
+        over = {
+            "detection_rate": self.faulty_runs,
+            "missed_detection_rate": self.faulty_runs,
+            "false_alarm_rate": self.runs - self.unhealthy_runs,
+            "pre_onset_alarm_rate": self.faulty_runs,
+        }
+        row = {}
+        for name, value in self._asdict().items():
+            row[name] = value
+            if name in over:
+                row[f"{name}_low"], row[f"{name}_high"] = rate_bounds(value, over[name], level)
+        return pd.DataFrame([row])
+
+    def _repr_html_(self) -> str:
+        return self.to_frame().to_html(index=False, na_rep="-", float_format="{:.4g}".format)
 
 
 def summarize_detection(record: DetectionRecord, horizon: int, Ts: float = 1.0) -> DetectionSummary:
@@ -606,6 +630,23 @@ def rate_interval(successes: int, trials: int, level: float = 0.99) -> tuple[flo
         else float(stats.beta.ppf(1.0 - tail, successes + 1, trials - successes))
     )
     return low, high
+
+
+def rate_bounds(rate: Any, n: Any, level: float) -> tuple[float, float]:
+    """``rate_interval`` of ``rate`` over ``n`` runs; NaN without a rate or runs, or where ``rate * n`` is no count."""
+    nan = float("nan")
+    if (
+        rate is None
+        or n is None
+        or isinstance(rate, (str, bool))
+        or not math.isfinite(rate)
+        or not n > 0
+    ):
+        return nan, nan
+    count = rate * n
+    if abs(count - round(count)) > 1e-6:
+        return nan, nan
+    return rate_interval(int(round(count)), int(n), level)
 
 
 def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2) -> str:

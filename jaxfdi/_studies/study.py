@@ -26,6 +26,8 @@ Example (two thresholds of one chi-square detector on one Kalman filter, one pro
 from __future__ import annotations
 
 import functools
+import html
+import math
 import time
 from typing import Any, Callable, NamedTuple
 
@@ -35,9 +37,19 @@ import numpy as np
 
 from jaxfdi import checks
 from jaxfdi._io.progress import status
+from jaxfdi._studies.frame import RUN_RATES, results_frame, results_html
+from jaxfdi._studies.metrics import DetectionRecord, fault_row, rate_bounds, rate_interval
 from jaxfdi._studies.montecarlo import _num_runs_of, monte_carlo
 
-__all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_slices"]
+__all__ = [
+    "Structure",
+    "Study",
+    "StudyResult",
+    "run_study",
+    "grid_run",
+    "case_slices",
+    "study_rows",
+]
 
 
 class Structure(NamedTuple):
@@ -76,12 +88,18 @@ class Study(NamedTuple):
         a leading axis of all runs (``C * runs`` or the sum of per-case ``runs``), case-major (run ``i``: slice ``i``)
       case_names: tuple of C names, one per case
       structures: tuple of ``Structure``, the methods grouped by compiled program
+      horizon: steps per run, or ``None``; where given, ``StudyResult.to_frame`` scores ``DetectionRecord`` outputs
+      Ts: the sample period, the unit of the table's delays (1.0: delays in steps)
+      labels: each case's fault label (isolation is scored against it), or ``None``
     """
 
     name: str
     cases: Any
     case_names: tuple
     structures: tuple
+    horizon: int | None = None
+    Ts: float = 1.0
+    labels: tuple | None = None
 
 
 class StudyResult(NamedTuple):
@@ -107,6 +125,84 @@ class StudyResult(NamedTuple):
     means: dict
     seconds: dict
     compile_seconds: dict
+    horizon: int | None = None
+    Ts: float = 1.0
+    labels: tuple | None = None
+
+    def to_frame(self, level: float = 0.95):
+        """The result as a pandas DataFrame, one row per method and case (``study_rows``), each run rate beside its
+        two-sided ``level`` Clopper-Pearson interval and each mean beside its normal ``level`` interval (``_low``,
+        ``_high``)."""
+        return results_frame(study_rows(self, level), level)
+
+    def _repr_html_(self) -> str:
+        try:
+            frame = self.to_frame()
+        except ValueError as error:
+            return f"<p>{html.escape(str(error))}</p>"
+        return results_html(frame, {"runs": self.runs, "seed": self.seed})
+
+    def __repr__(self) -> str:
+        return f"StudyResult({self.name!r}, {len(self.outputs)} methods x {len(self.case_names)} cases; .to_frame())"
+
+
+def _mean_columns(name: str, values: np.ndarray, level: float) -> dict:
+    """One case's per-run scalars as columns: bools as the rate ``name`` with its Clopper-Pearson interval, numbers as
+    ``name_mean`` with its normal interval ``mean +- z sd / sqrt(n)`` (a non-finite run makes them NaN)."""
+    n, nan = values.size, float("nan")
+    if values.dtype == bool:
+        low, high = rate_interval(int(values.sum()), n, level) if n else (nan, nan)
+        return {name: float(values.mean()) if n else nan, f"{name}_low": low, f"{name}_high": high}
+    mean = float(values.mean()) if n else nan
+    half = nan
+    if n > 1 and math.isfinite(mean):
+        from scipy import stats
+
+        half = float(stats.norm.ppf(0.5 + level / 2) * values.std(ddof=1) / math.sqrt(n))
+    return {f"{name}_mean": mean, f"{name}_mean_low": mean - half, f"{name}_mean_high": mean + half}
+
+
+def study_rows(result: StudyResult, level: float = 0.95) -> list[dict]:
+    """One row per method and case of ``result``: ``method``, ``case``, then per output leaf: a ``DetectionRecord``
+    scored by ``fault_row`` over ``result.horizon`` steps (delays in the unit of ``Ts``, isolation against the case's
+    label); a per-run bool its rate with the ``level`` Clopper-Pearson interval (``rate_interval``, ``_low``,
+    ``_high``); a per-run number its mean with the normal ``level`` interval. Leaves with more than a run axis
+    (histories) stay in ``outputs``. Raises ``ValueError`` for ``DetectionRecord`` outputs without a horizon.
+
+    Returns:
+      list of dicts, method-major.
+    """
+    slices = case_slices(result.runs, len(result.case_names))
+    rows = []
+    for method, output in result.outputs.items():
+        leaves, _ = jax.tree_util.tree_flatten_with_path(
+            output, is_leaf=lambda x: isinstance(x, DetectionRecord)
+        )
+        for c, (case, part) in enumerate(zip(result.case_names, slices)):
+            row = {"method": method, "case": case}
+            for path, leaf in leaves:
+                name = jax.tree_util.keystr(path, simple=True, separator=".") or "output"
+                if isinstance(leaf, DetectionRecord):
+                    if result.horizon is None:
+                        raise ValueError(
+                            f"horizon: expected the runs' length in steps (Study(..., horizon=)) to score "
+                            f"{method!r}'s DetectionRecord, got None"
+                        )
+                    label = None if result.labels is None else result.labels[c]
+                    record = jax.tree_util.tree_map(lambda x: np.asarray(x)[part], leaf)
+                    scored = {}
+                    for k, v in fault_row(record, result.horizon, result.Ts, label).items():
+                        scored[k] = v
+                        if k in RUN_RATES:  # over the healthy runs
+                            n = record.onset.size - int(np.sum(record.first_unhealthy >= 0))
+                            scored[f"{k}_low"], scored[f"{k}_high"] = rate_bounds(v, n, level)
+                    row.update({f"{name}.{k}" if path else k: v for k, v in scored.items()})
+                    continue
+                values = np.asarray(leaf)
+                if values.ndim == 1:
+                    row.update(_mean_columns(name, values[part], level))
+            rows.append(row)
+    return rows
 
 
 def grid_run(structure: Structure) -> Callable[[jax.Array, Any], Any]:
@@ -192,6 +288,15 @@ def _check_study(study: Study) -> int:
         )
     if not study.structures:
         raise ValueError("study.structures: expected at least one Structure")
+    if study.horizon is not None:
+        checks.check_int(
+            "study.horizon", study.horizon, 1, meaning="a positive number of steps per run"
+        )
+    checks.check_positive("study.Ts", study.Ts, "a positive sample period")
+    if study.labels is not None and len(study.labels) != num_cases:
+        raise ValueError(
+            f"study.labels: expected {num_cases} labels (one per case), got {len(study.labels)}"
+        )
     seen = set()
     for s in study.structures:
         if not isinstance(s, Structure):
@@ -291,7 +396,17 @@ def run_study(
         if progress:
             status(f"{label}: {total} runs in {seconds[structure.name]:.1f} s")
     return StudyResult(
-        study.name, runs, seed, tuple(study.case_names), outputs, means, seconds, compile_seconds
+        study.name,
+        runs,
+        seed,
+        tuple(study.case_names),
+        outputs,
+        means,
+        seconds,
+        compile_seconds,
+        study.horizon,
+        study.Ts,
+        None if study.labels is None else tuple(study.labels),
     )
 
 

@@ -36,14 +36,13 @@ chi-square level), slope protection levels at ``P_md = 1e-3``, exclusion; soluti
 
 from __future__ import annotations
 
-import math
 from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxfdi import rate_interval, status, study_result
+from jaxfdi import rate_interval, status, study_result, text_table
 from jaxfdi.data import data_path
 from jaxfdi.gnss import (
     MASK_ANGLE,
@@ -92,18 +91,8 @@ class GnssRealStudy(NamedTuple):
     epochs: dict
 
     def table(self) -> str:
-        """The rows as text, a block per section."""
-        out = []
-        for row in self.rows:
-            fields = ", ".join(f"{k} {_fmt(v)}" for k, v in row.items() if k != "section")
-            out.append(f"{row['section']:<9} {fields}")
-        return "\n".join(out)
-
-
-def _fmt(value) -> str:
-    if isinstance(value, float):
-        return "-" if not math.isfinite(value) else f"{value:.4g}"
-    return str(value)
+        """The study's frame (``to_frame``) as text: a block per section, transposed where it is wide."""
+        return text_table(self.to_frame(), group="section")
 
 
 def local_errors(position: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

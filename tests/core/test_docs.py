@@ -91,7 +91,7 @@ def test_concept_pages_code_runs(tmp_path, monkeypatch):
     states = np.asarray(namespace["true_states"])
     assert states.shape == (200, 2) and np.max(np.abs(states[-50:])) < 0.1
     # ... and on the same runs a lower threshold detects at least as often (an alarm at 13.8 is one at 9.2)
-    detected = namespace["detected"]
+    detected = namespace["detected"].to_dict()
     assert detected["R x1, 9.2"] >= detected["R x1, 13.8"] and set(detected) == {
         "R x1, 9.2",
         "R x1, 13.8",

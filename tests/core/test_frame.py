@@ -3,11 +3,12 @@ intervals against SciPy's exact binomial interval, and the HTML a notebook rende
 
 import math
 
+import pandas as pd
 import pytest
 from _frames import assert_table_is_the_json
 from scipy import stats
 
-from jaxfdi import results_frame
+from jaxfdi import results_frame, text_table
 from jaxfdi._studies.frame import results_html
 
 ROWS = [
@@ -115,3 +116,59 @@ def test_html_is_one_table_per_section_with_its_own_columns():
     trim = text.split("<h4>tracking</h4>")[0]
     assert "thtl" in trim and "rms" not in trim
     assert results_html(results_frame(ROWS)).count("<table") == 1
+
+
+def test_html_keeps_within_pandas_display_limits():
+    """A long section shows pandas' ``min_rows`` (first and last halves) past ``max_rows``, as a DataFrame does."""
+    rows = [
+        {"section": "long", "case": f"c{i}", **{f"x{j}": float(i + j) for j in range(30)}}
+        for i in range(99)
+    ]
+    with pd.option_context("display.max_rows", 20, "display.min_rows", 6, "display.max_columns", 8):
+        text = results_html(results_frame(rows))
+    body = text.split("<tbody>")[1]
+    assert body.count("<tr>") == 7  # 3 + the "..." row + 3
+    assert (
+        "c0<" in body and "c98<" in body and "c50<" not in body and "99 rows × 31 columns" in text
+    )
+    assert "x29" in text and "x15" not in text  # the first and last columns
+    with pd.option_context("display.max_rows", None, "display.max_columns", None):
+        assert results_html(results_frame(rows)).split("<tbody>")[1].count("<tr>") == 99
+
+
+def test_text_table_is_the_frame_with_intervals_in_one_cell_and_wide_blocks_transposed():
+    rows = [
+        {
+            "section": "faults",
+            "fault": "P2",
+            "runs": 20,
+            "unhealthy_runs": 0,
+            "detection_rate": 0.75,
+        },
+        {
+            "section": "faults",
+            "fault": "T4",
+            "runs": 20,
+            "unhealthy_runs": 0,
+            "detection_rate": 0.0,
+        },
+        {"section": "station", "name": "0759", **{f"error_{j}_m": 0.25 * j for j in range(12)}},
+    ]
+    text = text_table(results_frame(rows), group="section")
+    ci = stats.binomtest(15, 20).proportion_ci(0.95, method="exact")
+    ci0 = stats.binomtest(0, 20).proportion_ci(0.95, method="exact")
+    faults, station = text.split("\n\n")
+    assert faults.splitlines() == [
+        "faults",
+        "fault  runs  unhealthy_runs     detection_rate",
+        f"   P2    20               0  0.75 [{ci.low:.2f}, {ci.high:.2f}]",
+        f"   T4    20               0     0 [{ci0.low:.2f}, {ci0.high:.2f}]",
+    ]
+    lines = (
+        station.splitlines()
+    )  # 13 columns of one row: wider than 110 characters, so a line per column
+    assert (
+        lines[:3] == ["station", "name        0759", "error_0_m      0"]
+        and lines[-1] == "error_11_m  2.75"
+    )
+    assert "-" not in station  # the other section's columns are not this block's

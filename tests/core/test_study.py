@@ -334,3 +334,99 @@ def test_bad_study_is_refused_with_the_argument_named():
         study.run_study({"name": "x"}, 2, 0)
     with pytest.raises(ValueError, match="structures"):
         study.run_study(spec, 2, 0, structures=["no such structure"])
+
+
+def test_result_frame_is_each_method_and_case_scored_by_brute_force():
+    """``StudyResult.to_frame``: a row per method and case; a DetectionRecord scored by ``fault_row`` on that case's
+    runs (checked here by counting the runs by hand) with SciPy's exact intervals; a per-run bool as a rate with its
+    exact interval and a per-run number as its mean with the normal interval; histories left out."""
+    from scipy import stats
+
+    def run(key, f, r_scale, threshold):
+        record, statistic = toy_run(key, f, r_scale, threshold)
+        return {
+            "record": record,
+            "peak": jnp.max(statistic),
+            "late": statistic[-1] > threshold,
+            "trace": statistic,
+        }
+
+    methods = {"R x1 chi2 9.2": (0, 1), "R x1.5 chi2 6.0": (1, 0)}
+    spec = toy_study()._replace(
+        structures=(study.Structure("kf-chi2", run, (R_SCALES, THRESHOLDS), methods),),
+        horizon=T,
+        labels=(1, None),
+    )
+    runs = 40
+    result = jaxfdi.run_study(spec, runs=runs, seed=4)
+    frame = result.to_frame(level=0.9)
+    assert frame[["method", "case"]].values.tolist() == [
+        [m, c] for m in methods for c in ("sensor 1", "none")
+    ]
+    assert not any(c.startswith("trace") for c in frame.columns)
+    for i, (method, case) in enumerate(frame[["method", "case"]].values):
+        out = result.outputs[method]
+        part = slice(0, runs) if case == "sensor 1" else slice(runs, 2 * runs)
+        rec = jax.tree_util.tree_map(lambda x: np.asarray(x)[part], out["record"])
+        row = frame.loc[i]
+        if (
+            case == "sensor 1"
+        ):  # every run faulty from step 30: detected = an alarm at or after the onset
+            k = int(np.sum(rec.detection_step >= 0))
+            assert row["record.detection_rate"] == k / runs
+            ci = stats.binomtest(k, runs).proportion_ci(0.9, method="exact")
+            assert (
+                row["record.detection_rate_low"],
+                row["record.detection_rate_high"],
+            ) == pytest.approx((ci.low, ci.high), rel=1e-12)
+        else:  # fault-free: a false alarm is any alarm in the run
+            k = int(np.sum(rec.first_alarm >= 0))
+            assert row["record.false_alarm_rate"] == k / runs and np.isnan(
+                row["record.detection_rate"]
+            )
+        late = np.asarray(out["late"])[part]
+        ci = stats.binomtest(int(late.sum()), runs).proportion_ci(0.9, method="exact")
+        assert row["late"] == late.mean() and row["late_low"] == pytest.approx(ci.low, rel=1e-12)
+        peak = np.asarray(out["peak"])[part]
+        half = stats.norm.ppf(0.95) * peak.std(ddof=1) / np.sqrt(runs)
+        assert row["peak_mean"] == pytest.approx(peak.mean(), rel=1e-12)
+        assert row["peak_mean_high"] - row["peak_mean"] == pytest.approx(half, rel=1e-9)
+    assert "<table" in result._repr_html_() and "40 runs per case, seed 4" in result._repr_html_()
+    bare = result._replace(horizon=None)
+    with pytest.raises(ValueError, match="horizon: expected the runs' length"):
+        bare.to_frame()
+    assert "horizon: expected" in bare._repr_html_()
+    assert len(repr(result)) < 100
+
+
+def test_detection_summary_frame_has_each_rate_over_its_own_denominator():
+    from scipy import stats
+
+    record = jaxfdi.DetectionRecord(  # 6 runs: 4 faulty (1 unhealthy), 2 fault-free (1 false alarm)
+        onset=np.array([5, 5, 5, 5, 2**30, 2**30]),
+        first_alarm=np.array([6, 2, -1, 7, 3, -1]),
+        detection_step=np.array([6, 7, -1, 7, -1, -1]),
+        false_alarms=np.array([0, 1, 0, 0, 1, 0]),
+        pre_onset_steps=np.array([5, 5, 5, 5, 20, 20]),
+        isolated=np.full(6, -1),
+        first_label=np.full(6, -1),
+        estimate=np.full(6, np.nan),
+        first_unhealthy=np.array([-1, -1, -1, 9, -1, -1]),
+    )
+    summary = jaxfdi.summarize_detection(record, horizon=20)
+    frame = summary.to_frame()
+    assert (
+        frame.shape[0] == 1
+        and frame.loc[0, "faulty_runs"] == 3
+        and frame.loc[0, "detection_rate"] == 2 / 3
+    )
+    for rate, k, n in (
+        ("detection_rate", 2, 3),
+        ("false_alarm_rate", 2, 5),
+        ("pre_onset_alarm_rate", 1, 3),
+    ):
+        ci = stats.binomtest(k, n).proportion_ci(0.95, method="exact")
+        assert (frame.loc[0, f"{rate}_low"], frame.loc[0, f"{rate}_high"]) == pytest.approx(
+            (ci.low, ci.high)
+        )
+    assert "false_alarm_rate_per_step_low" not in frame and "<table" in summary._repr_html_()

@@ -39,6 +39,7 @@ SIZES = {
     "06": {"JAXFDI_NB_RUNS": "4"},
     "07": {"JAXFDI_NB_RUNS": "4"},
     "08": {"JAXFDI_NB_RUNS": "20"},
+    "09": {},  # a recipe: the size its text states
 }
 
 

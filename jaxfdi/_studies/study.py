@@ -165,9 +165,10 @@ def _mean_columns(name: str, values: np.ndarray, level: float) -> dict:
 def study_rows(result: StudyResult, level: float = 0.95) -> list[dict]:
     """One row per method and case of ``result``: ``method``, ``case``, then per output leaf: a ``DetectionRecord``
     scored by ``fault_row`` over ``result.horizon`` steps (delays in the unit of ``Ts``, isolation against the case's
-    label); a per-run bool its rate with the ``level`` Clopper-Pearson interval (``rate_interval``, ``_low``,
-    ``_high``); a per-run number its mean with the normal ``level`` interval. Leaves with more than a run axis
-    (histories) stay in ``outputs``. Raises ``ValueError`` for ``DetectionRecord`` outputs without a horizon.
+    label, NaN for a method that never isolates: ``isolated`` -1 in every run); a per-run bool its rate with the
+    ``level`` Clopper-Pearson interval (``rate_interval``, ``_low``, ``_high``); a per-run number its mean with the
+    normal ``level`` interval. Leaves with more than a run axis (histories) stay in ``outputs``. Raises
+    ``ValueError`` for ``DetectionRecord`` outputs without a horizon.
 
     Returns:
       list of dicts, method-major.
@@ -188,7 +189,10 @@ def study_rows(result: StudyResult, level: float = 0.95) -> list[dict]:
                             f"horizon: expected the runs' length in steps (Study(..., horizon=)) to score "
                             f"{method!r}'s DetectionRecord, got None"
                         )
-                    label = None if result.labels is None else result.labels[c]
+                    isolates = bool(
+                        np.any(np.asarray(leaf.isolated) >= 0)
+                    )  # else a detector that only detects
+                    label = None if result.labels is None or not isolates else result.labels[c]
                     record = jax.tree_util.tree_map(lambda x: np.asarray(x)[part], leaf)
                     scored = {}
                     for k, v in fault_row(record, result.horizon, result.Ts, label).items():

@@ -39,7 +39,9 @@ SIZES = {
     "06": {"JAXFDI_NB_RUNS": "4"},
     "07": {"JAXFDI_NB_RUNS": "4"},
     "08": {"JAXFDI_NB_RUNS": "20"},
-    "09": {},  # a recipe: the size its text states
+    "09": {},  # the recipes: the size their text states
+    "10": {},
+    "11": {},
 }
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from jaxfdi._io.files import save_figures
 from jaxfdi._studies.metrics import confusion_matrix
+from jaxfdi.gnss import integrity_outcomes
 
 __all__ = [
     "plot_statistic",
@@ -28,6 +29,8 @@ __all__ = [
     "plot_estimate",
     "plot_delays",
     "plot_confusion",
+    "stanford_diagram",
+    "stanford_regions",
     "caption_figure",
     "save_figure",
     "save_figures",
@@ -245,6 +248,104 @@ def plot_confusion(
     ax.set_yticks(range(m.shape[0]), names)
     ax.set(xlabel="isolated", ylabel="true")
     fig.colorbar(image, ax=ax, shrink=0.8)
+    return fig
+
+
+def stanford_regions(
+    ax, alert_limit: float | None = None, limits: tuple[float, float] = (0.05, 1e3)
+):
+    """The Stanford diagram's background on log axes ``ax`` over ``limits`` [m] (both axes): the diagonal
+    ``error = PL`` and the misleading region under it, and with an ``alert_limit`` its two lines, the hazardous
+    region (``PL < AL <= error``) and the unavailable one (``PL >= AL``); regions as ``gnss.integrity_outcomes``.
+
+    Returns:
+      ``ax``.
+    """
+    lo, hi = limits
+    if not 0 < lo < hi:
+        raise ValueError(f"limits: expected (low, high) with 0 < low < high [m], got {limits}")
+    x = np.array([lo, hi])
+    ax.fill_between(x, lo, x, color="r", alpha=0.1, lw=0, label="misleading (error > PL)")
+    ax.plot(x, x, "k-", lw=0.8, label="error = PL")
+    if alert_limit is not None and lo < alert_limit < hi:
+        ax.fill_between(
+            [alert_limit, hi],
+            lo,
+            alert_limit,
+            color="r",
+            alpha=0.25,
+            lw=0,
+            label="hazardous (error >= AL)",
+        )
+        ax.fill_between(
+            x, alert_limit, hi, color="0.5", alpha=0.15, lw=0, label="unavailable (PL >= AL)"
+        )
+        ax.axvline(alert_limit, color="k", ls="--", lw=0.6)
+        ax.axhline(alert_limit, color="k", ls="--", lw=0.6)
+    ax.set(xscale="log", yscale="log", xlim=limits, ylim=limits)
+    return ax
+
+
+def stanford_diagram(
+    error,
+    level,
+    *,
+    alert_limit: float | None = None,
+    alarm=None,
+    label: str = "epochs",
+    axis: str = "",
+    ax=None,
+    limits: tuple[float, float] | None = None,
+):
+    """Each epoch's error (x) against its protection level (y) on the Stanford diagram's regions
+    (``stanford_regions``), alarmed epochs circled, and the counts of ``gnss.integrity_outcomes`` in the title.
+
+    Args:
+      error: (E,) absolute position errors [m] on one axis.
+      level: (E,) protection levels [m] on the same axis.
+      alert_limit: the operation's alert limit [m] on that axis (``gnss.ALERT_LIMITS``), or ``None``.
+      alarm: (E,) bool, epochs whose test alarmed, or ``None``.
+      label: the points' legend entry; axis: ``"horizontal"`` or ``"vertical"`` (the axis labels).
+      limits: (low, high) [m] of both axes (points beyond them drawn on the edge); ``None``: the decades of the
+        finite data, from 1 cm at least.
+
+    Returns:
+      The ``matplotlib.figure.Figure``.
+    """
+    error, level = np.asarray(error, float), np.asarray(level, float)
+    counts = integrity_outcomes(error, level, np.inf if alert_limit is None else alert_limit, alarm)
+    finite = np.isfinite(error) & np.isfinite(level) & (error > 0) & (level > 0)
+    if limits is None:
+        values = np.concatenate(
+            [error[finite], level[finite], [] if alert_limit is None else [alert_limit]]
+        )
+        values = values if values.size else np.array([1.0])
+        low = max(values.min(), 1e-2)
+        limits = (10 ** np.floor(np.log10(low)), 10 ** np.ceil(np.log10(values.max())))
+    x, y = np.clip(error, *limits), np.clip(level, *limits)  # beyond the limits: on the edge
+    fig, ax = new_axes(ax, figsize=(4.0, 3.6))
+    stanford_regions(ax, alert_limit, limits)
+    ax.plot(x, y, ".", ms=3, label=f"{label} ({counts.epochs})")
+    if alarm is not None and np.any(alarm):
+        alarm = np.asarray(alarm, bool)
+        ax.plot(
+            x[alarm],
+            y[alarm],
+            "o",
+            ms=6,
+            mfc="none",
+            mec="k",
+            lw=0.5,
+            label=f"alarm ({counts.alarms})",
+        )
+    name = f"{axis} " if axis else ""
+    ax.set(xlabel=f"{name}error [m]", ylabel=f"{name}protection level [m]")
+    ax.set_title(
+        f"nominal {counts.nominal}, MI {counts.misleading + counts.unavailable_misleading}, HMI {counts.hazardous}, "
+        f"unavailable {counts.unavailable + counts.unavailable_misleading}",
+        fontsize="small",
+    )
+    ax.legend(fontsize="x-small", loc="upper left")
     return fig
 
 

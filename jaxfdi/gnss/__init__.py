@@ -6,7 +6,8 @@ orbits), ``frames`` (WGS-84), ``atmosphere`` (Klobuchar, Saastamoinen), ``paths`
 (simulated pseudoranges: visibility masks, noise, faults, receiver plant), ``least_squares`` (masked Householder QR),
 ``positioning`` (WLS, DOPs), ``raim`` (parity test, isolation), ``protection`` (slopes, HPL/VPL, availability),
 ``solution_separation`` (ARAIM's levels), ``integrity`` (one epoch end to end with exclusion, the loop's FDI stage,
-availability over grids), ``receiver`` (a real receiver's epochs: observation files, logs and phones).
+availability over grids), ``receiver`` (a real receiver's epochs: observation files, logs and phones), ``stanford``
+(epochs by region of the Stanford diagram: nominal, misleading, hazardous, unavailable).
 
 Constants: ``WGS84_A`` the semi-major axis [m], ``WGS84_F`` the flattening, ``WGS84_B`` the
 semi-minor axis [m] and ``WGS84_E2`` the first eccentricity squared of the WGS-84 ellipsoid;
@@ -65,6 +66,7 @@ from jaxfdi.gnss._receiver import (
 )
 from jaxfdi.gnss._rinex import read_rinex_nav
 from jaxfdi.gnss._solution_separation import separate_epochs
+from jaxfdi.gnss._stanford import IntegrityOutcomes, integrity_outcomes
 from jaxfdi.gnss._yuma import read_yuma
 
 __all__ = [
@@ -113,4 +115,6 @@ __all__ = [
     "ReceiverEpochs",
     "receiver_epochs",
     "separate_epochs",
+    "integrity_outcomes",
+    "IntegrityOutcomes",
 ]

@@ -49,6 +49,7 @@ from jaxfdi.gnss import (
     PhoneEpochs,
     ReceiverEpochs,
     ecef_to_ned,
+    integrity_outcomes,
     monitor_receiver,
     raim_tables,
     read_android,
@@ -57,7 +58,7 @@ from jaxfdi.gnss import (
     receiver_epochs,
     separate_epochs,
 )
-from jaxfdi.plotting import caption_figure, column_subplots
+from jaxfdi.plotting import caption_figure, column_subplots, stanford_regions
 from jaxfdi.scenarios._common import check_study, require_x64
 
 #: station -> RINEX file stem in jaxfdi/data
@@ -222,8 +223,8 @@ def _position_row(
     hpl, vpl = np.asarray(result.protection.hpl), np.asarray(result.protection.vpl)
     ss_hpl, ss_vpl = np.asarray(separation.hpl), np.asarray(separation.vpl)
 
-    def misleading(error, level):
-        return int(np.sum(scored & ~alarm & (error > level)))
+    def misleading(error, level):  # quiet scored epochs beyond their level (no alert limit)
+        return integrity_outcomes(error[scored], level[scored], alarm=alarm[scored]).misleading
 
     row = {
         "section": "positions",
@@ -676,15 +677,7 @@ def plot_gnss_real(study: GnssRealStudy) -> dict[str, Any]:
                     lw=0.5,
                     label="_alarm" if label != next(iter(phones)) else "parity alarm (phones)",
                 )
-            ax.plot((1.0, 1e3), (1.0, 1e3), "k-", lw=0.8, label="error = PL")
-            ax.fill_between(
-                (1.0, 1e3),
-                (1.0, 1.0),
-                (1.0, 1e3),
-                color="r",
-                alpha=0.1,
-                label="misleading (error > PL)",
-            )
+            stanford_regions(ax, limits=(0.05, 1e5))
             ax.set(
                 xlim=(0.05, 1e3),
                 ylim=(1.0, 1e5),

@@ -146,6 +146,9 @@ def soa_symmetrize(a: Array) -> Array:
 
 def soa_matmul(a: Array, b: Array) -> Array:
     """``a @ b`` per batch element, (p, k, *batch) x (k, q, *batch) -> (p, q, *batch), batch axes broadcast."""
+    if b.shape[0] == 0:  # k = 0 (a model without inputs): the empty sum
+        batch = jnp.broadcast_shapes(a.shape[2:], b.shape[2:])
+        return jnp.zeros((a.shape[0], b.shape[1], *batch), jnp.result_type(a, b))
     total = a[:, 0, None] * b[None, 0]
     for j in range(1, b.shape[0]):
         total = total + a[:, j, None] * b[None, j]
@@ -154,6 +157,9 @@ def soa_matmul(a: Array, b: Array) -> Array:
 
 def soa_matvec(a: Array, x: Array) -> Array:
     """``a @ x`` per batch element: (p, k, *batch) x (k, *batch) -> (p, *batch)."""
+    if x.shape[0] == 0:  # k = 0 (a model without inputs): the empty sum
+        batch = jnp.broadcast_shapes(a.shape[2:], x.shape[1:])
+        return jnp.zeros((a.shape[0], *batch), jnp.result_type(a, x))
     total = a[:, 0] * x[0]
     for j in range(1, x.shape[0]):
         total = total + a[:, j] * x[j]

@@ -82,7 +82,7 @@ def sensor_axes(quaternions: Array) -> Array:
 
 def _inverse_sqrt(gram: Array) -> Array:
     """``gram^-1/2`` of an SPD matrix; 2 x 2 in closed form, ``adj(M + s I) / (s sqrt(tr M + 2 s))``,
-    ``s = sqrt(det M)`` (smooth where ``eigh``'s derivative divides by the eigengap, e.g. at the spec's ``I / 2``)."""
+    ``s = sqrt(det M)`` (smooth where ``eigh``'s derivative divides by the eigengap, e.g. at the paper's ``I / 2``)."""
     if gram.shape[-1] != 2:
         values, vectors = jnp.linalg.eigh(gram)
         return (vectors / jnp.sqrt(values)) @ vectors.T

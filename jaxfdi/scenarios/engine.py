@@ -1,6 +1,6 @@
 """Engine fault diagnosis of Han et al. (2022): MM, IMM (two mode designs) and GLRT on the same runs.
 
-Scenario (Han et al. 2022, as restated in the spec): steady state, 0.01 kg/s fuel step at t = 0 s, one step fault at
+Scenario (Han et al. 2022): steady state, 0.01 kg/s fuel step at t = 0 s, one step fault at
 t = 2 s (actuator 0.0005 kg/s; sensors 0.5 % of their operating point), 4 s at 100 Hz, and a fault-free case. All
 methods see the same runs (noise depends only on the key) and one record: detection = first alarm at or after the onset,
 isolation = its label, false alarm = an alarm before the onset. Delays count only runs with no pre-onset alarm
@@ -995,7 +995,7 @@ def plot_engine(study: EngineStudy) -> dict[str, Any]:
             f"Mean mode probabilities over {cfg['figure_runs']} runs per fault (Han et al. 2022, Figs. 3-1 "
             "and 3-2, show one run), the fault at 2 s, mu_T dashed; the true fault's mode and the normal mode drawn "
             "thick. Sensor faults are 0.5 % of the operating point "
-            "(the spec's reading); at that size P2's fault is 3.4 noise sigmas and its mode rises slowly, "
+            "(the stated sizes); at that size P2's fault is 3.4 noise sigmas and its mode rises slowly, "
             "where the paper's Table 3 has it at once: the paper's faults are about 9-12 sigmas "
             "(docs/papers/engine.md).",
         )
@@ -1029,7 +1029,7 @@ def plot_engine(study: EngineStudy) -> dict[str, Any]:
             "engine-glrt.png",
             f"Mean GLR per fault direction over {cfg['figure_runs']} runs per fault (Han et al. 2022, Fig. 4, "
             "shows one run), with the paper's l_T = 200, the theoretical 91.95 and our Bonferroni threshold. At the "
-            "spec's 0.5 % the P2 and P4 GLRs level off near 50 and 90, below 200, where the paper detects them "
+            "stated 0.5 % the P2 and P4 GLRs level off near 50 and 90, below 200, where the paper detects them "
             "in 0.06 and 0.04 s: its faults are about 9-12 noise sigmas (docs/papers/engine.md).",
         )
 
@@ -1075,7 +1075,7 @@ def plot_engine(study: EngineStudy) -> dict[str, Any]:
 # --- the fault-size study ----------------------------------------------------------
 
 #: sensor faults at these multiples of their noise std (fault-to-noise ratio); the actuator's, same
-#: index, at these multiples of the paper's 5 % of the fuel step; the spec's "0.5 %" of the operating
+#: index, at these multiples of the paper's 5 % of the fuel step; the stated "0.5 %" of the operating
 #: point flown beside (FNR 5.4, 3.4, 11.1, 4.1, 5.1 for RPM, P2, T2, P4, T4)
 SIZE_FNR = (3.0, 5.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 14.0, 17.0, 20.0)
 SIZE_ACTUATOR = (0.5, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0)
@@ -1111,7 +1111,7 @@ def fault_size_study(
     progress: bool = False,
 ) -> FaultSizeStudy:
     """Each method's mean delay (clean runs) against fault size: sensors on fault-to-noise ratios ``fnr``
-    (``k sigma_j``, the output's noise std), the actuator on ``actuator`` (multiples of 0.0005 kg/s), the spec's "0.5 %"
+    (``k sigma_j``, the output's noise std), the actuator on ``actuator`` (multiples of 0.0005 kg/s), the stated "0.5 %"
     beside; per method and fault the size matching Table 3's delay (``_matched_size``), and the GLRT's settled reading:
     the grid FNR nearest the median matched sensor FNR. One ``engine_spec`` study with these cases."""
     require_x64("fault_size_study (the engine model is stiff)")
@@ -1231,7 +1231,7 @@ def fault_size_study(
 
 
 def fault_size_table(study: FaultSizeStudy) -> str:
-    """The delay curves, matched sizes, and Table 3 at the spec's and the settled reading beside the paper."""
+    """The delay curves, matched sizes, and Table 3 at the stated sizes and the settled reading beside the paper."""
     cfg, rows = study.config, study.rows
     lines = [
         f"Delay against fault size, {cfg['runs']} runs per point (mean over the clean runs, s; '-': none detected); "
@@ -1264,14 +1264,14 @@ def fault_size_table(study: FaultSizeStudy) -> str:
     for r in (r for r in rows if r["case"] == "reading"):
         spec = ", ".join(f"{k} {v:.1f}" for k, v in r["spec_reading_fnr"].items())
         lines.append(
-            f'Reading: the spec\'s "0.5 % of the operating point" puts the sensor faults at FNR {spec}; the '
+            f'Reading: the stated "0.5 % of the operating point" puts the sensor faults at FNR {spec}; the '
             f"paper's {r['method']} delays are met at FNR "
             + ", ".join(f"{k} {cell(v, '.1f', 4).strip()}" for k, v in r["matched_fnr"].items())
             + f" (median {r['median_matched_fnr']:.1f}): every sensor fault about {r['settled_fnr']:g} sigma"
         )
         settled = r["settled_fnr"]
         lines.append(
-            f"Table 3 at both readings (mean delay, s): spec's 0.5 % | FNR {settled:g} | paper"
+            f"Table 3 at both readings (mean delay, s): stated 0.5 % | FNR {settled:g} | paper"
         )
         for method in cfg["methods"]:
             cells = []

@@ -1,6 +1,6 @@
 """The engine of Han et al. (2022): Monte Carlo study of the Kalman-filter chi-square detector.
 
-- Scenario (Han et al. 2022, as the spec restates it): steady state, 0.01 kg/s fuel step at t = 0, one step fault at t =
+- Scenario (Han et al. 2022): steady state, 0.01 kg/s fuel step at t = 0, one step fault at t =
   2 s, 4 s at 100 Hz, 100 runs per fault, plus a fault-free case (false-alarm rate).
 - Fault sizes: actuator bias 5 % of the command (0.0005 kg/s); sensor biases 0.5 % of that output's operating point (RPM
   135, P2 16.99, T2 2.21 K, P4 8.285, T4 5.125 K).

@@ -6,7 +6,7 @@ gusts, LQR SAS with altitude and bank hold, climb and bank turn) with a fault on
 sensor (``sensor_fault``: bias, drift, stuck or scale, any direction in the sensor's plane, labelled by
 sensor) and the FDI stage ``detection.hybrid_psa_fdi`` instead of the rate pass-through:
 
-- parity space of the spec's ``H`` (6x3, ``models.f16.skewed_rate_axes``), sensors as groups (``detection.parity``);
+- parity space of the paper's ``H`` (6x3, ``models.f16.skewed_rate_axes``), sensors as groups (``detection.parity``);
   ``T_D`` from ``PFA`` per step, ``T_I`` by Monte Carlo from ``MISSED_ISOLATION`` at ``DESIGN_FNR``;
 - when PSA leaves two suspects, a UKF on moment eqs. 34-36 with coefficient errors (``models.f16.rates``,
   ``COEFFICIENT_ERROR``) restarts ``RESTART_LAG`` steps before the decision from the least-squares rates, updates with
@@ -366,7 +366,7 @@ def _cases(rows: list[tuple], dtype) -> FaultCase:
 
 
 def _layout_fdi(setup: FlightSetup, fdi: FDISetup, layouts: FDISetup | None, index: Array):
-    """The setup and FDI of sensor layout ``index`` (0: the spec's; 1: ``layouts``' second)."""
+    """The setup and FDI of sensor layout ``index`` (0: the paper's; 1: ``layouts``' second)."""
     if layouts is None:
         return setup, fdi
     chosen = jax.tree_util.tree_map(lambda a: a[index], layouts.hybrid)
@@ -1133,7 +1133,7 @@ def study_table(study: F16FDIStudy) -> str:
         "",
     ]
     lines.append(
-        "Table 1 (singular directions of the spec's arrangement; noise-free FI of the type's faults):"
+        "Table 1 (singular directions of the paper's arrangement; noise-free FI of the type's faults):"
     )
     for r in by("table1"):
         lines.append(

@@ -1,7 +1,7 @@
 """The VTOL scenario of Lee and Lyou: robust TSKF bank, wavelet-denoised chi-square tests, signature
 isolation and fault-tolerant control, Monte Carlo over every fault kind.
 
-Setup (Lee & Lyou, Section V, as restated in the spec): VTOL model at ``Ts = 0.1 s``; true plant with
+Setup (Lee & Lyou, Section V): VTOL model at ``Ts = 0.1 s``; true plant with
 airspeed uncertainty (``Delta a32 = 0.5``, ``Delta a34 = 1``) and disturbance ``3 sin 10t`` on ``v_v``;
 ``Q = 0.01^2 I``, ``R = 0.1^2 I``, ``x0 = [50, 1, 5, 1]``, ``P0 = 10 I``, ``P_b0 = 10``, bias random walk
 ``0.2^2``; LQR-PI tracking ``H_r = (v_h, q)``, ``Q = diag(1, 1, 1, 1, 10, 10)``, ``R = I``, ``r = [-50, -5]``.
@@ -166,7 +166,7 @@ ESTIMATE_AFTER = 30  # steps after the onset at which the fault estimate is scor
 
 
 def vtol_faults(onset: int = ONSET) -> list[tuple[str, Fault]]:
-    """Every fault kind of the spec, one at a time, and fault-free. Headline cases (the paper's): s3 step
+    """Every fault kind of the paper, one at a time, and fault-free. Headline cases (the paper's): s3 step
     0.7 from k = 120, a2 effectiveness 0.5 from k = 100. Actuator step/ramp ``u_i - delta`` /
     ``u_i - rho k Ts`` (negative magnitudes here); ramp slopes per second."""
     Ts = models.VTOL_TS

@@ -199,7 +199,7 @@ def test_transformations_and_bad_input(spec):
 
 def test_sensor_arrangement_geometry_and_optimiser(spec):
     """The projector-based isolability (differentiable, no SVD of H) equals the parity
-    space's principal angles on random arrangements; the spec's arrangement has the
+    space's principal angles on random arrangements; the paper's arrangement has the
     largest possible smallest dihedral angle (90 deg) and detectability (0.5), which Adam
     approaches from random starts; quaternion axes are orthonormal pairs."""
     rng = np.random.default_rng(5)

@@ -81,6 +81,21 @@ def test_per_run_prior_equals_vmap_and_filterpy(data):
     assert shared.filtered_cov.shape == (T, 3, 3)
 
 
+def test_a_model_without_inputs_runs_the_kernel(data):
+    """A model with no inputs (``Gamma`` (n, 0), ``us`` (T, 0) or left out): the kernel's ``D u`` and ``Gamma u``
+    are empty sums, and every output equals vmap's (it once raised an IndexError inside the kernel)."""
+    ys, _, means, covs = data
+    model = small_model()
+    model = model._replace(Gamma=jnp.zeros((3, 0)), D=jnp.zeros((2, 0)))
+    kf = kalman_filter(model)
+    prior = GaussianState(jnp.asarray(means), jnp.asarray(covs))
+    no_inputs = np.zeros((T, 0))
+    _assert_same(run_filter(kf, prior, ys), _vmapped(model, None, means, covs, ys, no_inputs))
+    _assert_same(
+        run_filter(kf, prior, ys, no_inputs), _vmapped(model, None, means, covs, ys, no_inputs)
+    )
+
+
 def test_per_run_model_equals_vmap(data):
     """run_filter of kalman_filter with Phi, Q and R per run and shared inputs; then Q alone per run,
     a per-run mean with a shared covariance."""

@@ -41,7 +41,7 @@ def test_the_specs_reading_leaves_p2_and_p4_undetected(study):
 
 def test_the_papers_delays_sit_at_about_ten_sigma_for_every_sensor(study):
     """The paper's GLRT delays are met where every sensor fault is 8-13 noise sigmas
-    (the spec's reading spans 3.4-11), and fresh runs (seed 4242, 100 per fault) at the
+    (the stated sizes span 3.4-11), and fresh runs (seed 4242, 100 per fault) at the
     sizes the study settles on, each sensor's matched FNR, reproduce the paper's delays
     within one sample (0.01 s)."""
     reading = next(r for r in study.rows if r["case"] == "reading")

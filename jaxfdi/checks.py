@@ -38,6 +38,7 @@ __all__ = [
     "check_int_array",
     "check_scalar",
     "check_positive",
+    "check_angle",
     "check_index",
     "check_choice",
     "check_flag",
@@ -365,6 +366,31 @@ def check_scalar(
         )
         raise ValueError(
             f"{name}: expected {meaning}, finite, in {interval}, got {received(value)}"
+        )
+
+
+def check_angle(name: str, value: Any, low: float, high: float, meaning: str = "an angle") -> None:
+    """Real angles in radians within ``[low, high]`` when concrete (a traced value passes); the error says the unit and,
+    for a value that reads as degrees, what it is in radians (a 5 deg mask passed as 5, a latitude of 37.57).
+
+    Returns:
+      None; raises ``TypeError`` (not real) or ``ValueError`` (not finite, or outside the interval).
+    """
+    check_real(name, value, meaning)
+    array = concrete(value)
+    if array is None or array.size == 0:
+        return
+    array = np.asarray(array, float)
+    bad = ~np.isfinite(array) | (array < low) | (array > high)
+    if np.any(bad):
+        first = float(array[bad].flat[0])
+        hint = (
+            f" ({first:g} deg would be {np.deg2rad(first):.4g} rad)"
+            if np.isfinite(first) and np.abs(np.deg2rad(first)) <= max(abs(low), abs(high))
+            else ""
+        )
+        raise ValueError(
+            f"{name}: expected {meaning} in radians, in [{low:.4g}, {high:.4g}], got {received(value)}{hint}"
         )
 
 

@@ -202,6 +202,13 @@ def fault_group(
         raise ValueError(
             f"components: expected shape (G,) with G >= 1, got {tuple(components.shape)}"
         )
+    values = checks.concrete(components)
+    if (
+        values is not None and len(np.unique(values)) != values.size
+    ):  # one fault would be applied twice
+        raise ValueError(
+            f"components: expected each component of the group once, got {checks.received(values)}"
+        )
     size = components.shape[0]
     for name, value in (("magnitudes", magnitudes), ("slopes", slopes)):
         shape = checks.shape_of(value)

@@ -183,6 +183,11 @@ def run_loop(
             )
         steps = lengths.pop()
     steps = checks.check_int("steps", steps, 1, meaning="a positive number of steps")
+    horizon = getattr(plant, "horizon", None)
+    if horizon is not None and steps > horizon:  # the plant would read its tables past their end
+        raise ValueError(
+            f"steps: expected at most the plant's {horizon} steps (its tables' length), got {steps}"
+        )
     if lengths and lengths != {steps}:
         raise ValueError(f"exogenous: expected {steps} steps along axis 0, got {sorted(lengths)}")
     if not controller.feedforward and u0 is None:

@@ -102,11 +102,13 @@ class Simulator(NamedTuple):
       measure: ``measure(state, k, u, step_key) -> (state, Sensed)`` (``u``: the input the
         feed-through sees), with the step's key ``fold_in(key, k)``
       advance: ``advance(state, k, u, step_key) -> (state, Actuated)``, the same key
+      horizon: the most steps it can run (a simulator replaying T steps of tables: T), or ``None`` (unbounded)
     """
 
     init: Callable[[Array], SimState]
     measure: Callable[[SimState, Array, Array, Array], tuple[SimState, Sensed]]
     advance: Callable[[SimState, Array, Array, Array], tuple[SimState, Actuated]]
+    horizon: int | None = None
 
     def step(
         self, sim: SimState, k: Array, u: Array, key: Array

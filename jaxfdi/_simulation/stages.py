@@ -17,11 +17,14 @@ class Plant(NamedTuple):
         or has it as its ``measurement`` field (e.g. ``Sensed``)
       advance: ``advance(state, k, u, step_key) -> (state, moved)``: actuator faults and dynamics with ``u[k]``;
         ``moved`` is kept in the loop's trace (e.g. ``Actuated``)
+      horizon: the most steps the plant can run (a plant replaying T steps of tables: T), or ``None`` (unbounded);
+        ``run_loop`` refuses more
     """
 
     init: Callable[[Array], Any]
     measure: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
     advance: Callable[[Any, Array, Array, Array], tuple[Any, Any]]
+    horizon: int | None = None
 
 
 class FDI(NamedTuple):

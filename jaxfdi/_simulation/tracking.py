@@ -93,4 +93,4 @@ def tracked_plant(
         inner, moved = plant.advance(inner, k, u, step_key)
         return (inner, score), moved
 
-    return Plant(init, measure, advance)
+    return Plant(init, measure, advance, getattr(plant, "horizon", None))

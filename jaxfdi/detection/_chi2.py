@@ -290,8 +290,12 @@ def chi2_detector(threshold, window: int = 1, dtype=None) -> Detector:
     window = checks.check_int(
         "window", window, minimum=1, meaning="a positive integer number of steps"
     )
-    checks.check_real("threshold", threshold, "a real threshold")
-    checks.check_finite("threshold", threshold, "a detection threshold")
+    checks.check_scalar(
+        "threshold",
+        threshold,
+        0.0,
+        meaning="a threshold >= 0 on a sum of NIS values (a negative one alarms at every step)",
+    )
     dtype = dtype or jnp.result_type(float)
 
     def init() -> WindowState:

@@ -81,6 +81,27 @@ class IsolationCalibration(NamedTuple):
     samples: Array
 
 
+def check_groups(groups, m: int) -> Array:
+    """``groups`` as (G, d) int32 channel indices of ``m`` channels, each channel in at most one group (when
+    concrete); ``ValueError`` naming ``groups`` otherwise.
+
+    Returns:
+      the int32 array.
+    """
+    checks.check_int_array(
+        "groups", groups, 0, m - 1, f"channel indices of the {m} channels (H's rows)"
+    )
+    groups = jnp.asarray(groups, jnp.int32)
+    if groups.ndim != 2 or groups.shape[0] < 1 or groups.shape[1] < 1:
+        raise ValueError(f"groups: expected shape (G, d) with G, d >= 1, got {groups.shape}")
+    values = checks.concrete(groups)
+    if values is not None and len(np.unique(values)) != values.size:
+        raise ValueError(
+            f"groups: expected every channel in at most one group, got {checks.received(values)}"
+        )
+    return groups
+
+
 def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
     """The parity space of ``H`` with the sensor ``groups``.
 
@@ -103,16 +124,8 @@ def parity_space(H: Array, groups: Array | None = None) -> ParitySpace:
         raise ValueError(
             f"H: expected more channels than states (m > n) for a parity space, got shape {H.shape}"
         )
-    groups = jnp.arange(m)[:, None] if groups is None else groups
-    checks.check_int_array("groups", groups, 0, m - 1, "channel indices of H's rows")
-    groups = jnp.asarray(groups, jnp.int32)
-    if groups.ndim != 2 or groups.shape[0] < 1 or groups.shape[1] < 1:
-        raise ValueError(f"groups: expected shape (G, d) with G, d >= 1, got {groups.shape}")
+    groups = check_groups(jnp.arange(m)[:, None] if groups is None else groups, m)
     values = checks.concrete(groups)
-    if values is not None and len(np.unique(values)) != values.size:
-        raise ValueError(
-            f"groups: expected every channel in at most one group, got {checks.received(values)}"
-        )
     if groups.shape[1] > m - n:
         raise ValueError(
             f"groups: expected at most q = m - n = {m - n} channels per group (a group's fault must be "
@@ -156,18 +169,20 @@ def parity_vector(space: ParitySpace, measurement: Array) -> Array:
 def parity_statistic(parity: Array, valid: Array | None = None) -> Array:
     """``p^T p`` over the last axis, entries outside the mask ``valid`` (e.g. RAIM's unused satellite slots) left
     out; fault-free and whitened, chi2 with as many dof as valid entries (Potter & Deckert 1973; Brown & Chin 1992).
+    A non-finite valid entry (a dead channel's) makes it ``+inf``: evidence that alarms, never a NaN that compares
+    false with every threshold.
 
     Returns:
       the statistic, ``parity``'s shape without its last axis.
     """
-    squares = jnp.square(jnp.asarray(parity))
+    parity = jnp.asarray(parity)
+    squares = jnp.where(jnp.isfinite(parity), jnp.square(parity), jnp.inf)
     return jnp.sum(squares if valid is None else jnp.where(valid, squares, 0.0), axis=-1)
 
 
 def fault_detection_statistic(parity: Array) -> Array:
-    """``FD = p^T p`` (eq. 8) over the last axis; ``+inf`` for a non-finite parity (dead channel: evidence)."""
-    parity = jnp.asarray(parity)
-    return jnp.where(jnp.all(jnp.isfinite(parity), axis=-1), parity_statistic(parity), jnp.inf)
+    """``FD = p^T p`` (eq. 8) over the last axis (``parity_statistic``: ``+inf`` for a non-finite parity)."""
+    return parity_statistic(parity)
 
 
 def dead_groups(space: ParitySpace, measurement: Array) -> Array:

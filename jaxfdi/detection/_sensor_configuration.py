@@ -32,6 +32,7 @@ from jax import Array
 
 from jaxfdi import checks
 from jaxfdi.detection._chi2 import chi2_threshold
+from jaxfdi.detection._parity import check_groups
 
 
 class Isolability(NamedTuple):
@@ -118,7 +119,8 @@ def isolability(H: Array, groups: Array) -> Isolability:
       detectabilities (S,) and the isotropy ().
     """
     checks.check_matrix("H", H, (None, 3), "one input axis per row")
-    return _isolability(jnp.asarray(H, checks.float_dtype(H)), jnp.asarray(groups, jnp.int32))
+    groups = check_groups(groups, checks.shape_of(H)[0])
+    return _isolability(jnp.asarray(H, checks.float_dtype(H)), groups)
 
 
 @jax.jit

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 from jax import Array
 
+from jaxfdi import checks
 from jaxfdi.detection._chi2 import Decision, chi2_detector, flag_dead
 from jaxfdi.detection._credits import credit_isolator
 from jaxfdi.detection._dual_filter import DualFilterState, dual_filter
@@ -93,6 +94,12 @@ def two_stage_isolation(
     """
     if engage_on not in ("nis", "fdp"):
         raise ValueError(f"engage_on: expected 'nis' or 'fdp', got {engage_on!r}")
+    checks.check_scalar(
+        "detection_threshold",
+        detection_threshold,
+        0.0,
+        meaning="a threshold >= 0 on F = |det A_PF - det A_EKF| (a negative one alarms at every step)",
+    )
     detector = dual_filter(nominal, transition, field, params)
     nis_filter = bank_filter(params)
     nis_test = chi2_detector(nis_threshold, nis_window, jnp.asarray(nis_threshold).dtype)

@@ -10,6 +10,7 @@ Angles are radians; every function takes leading batch axes (``...``).
 
 from __future__ import annotations
 
+import math
 from functools import partial
 
 import jax
@@ -32,6 +33,8 @@ def geodetic_to_ecef(lat: Array, lon: Array, height: Array) -> Array:
     Returns:
       (..., 3) ECEF ``[x, y, z]`` [m], ``...`` the broadcast shape of the inputs.
     """
+    checks.check_angle("lat", lat, -math.pi / 2, math.pi / 2, "a geodetic latitude")
+    checks.check_angle("lon", lon, -2 * math.pi, 2 * math.pi, "a longitude")
     lat, lon, height = jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(height)
     try:
         jnp.broadcast_shapes(lat.shape, lon.shape, height.shape)

@@ -24,6 +24,7 @@ from jaxfdi.detection import Decision, flag_dead
 from jaxfdi.gnss._atmosphere import Atmosphere
 from jaxfdi.gnss._frames import elevation_azimuth, line_of_sight_ned
 from jaxfdi.gnss._least_squares import masked_qr
+from jaxfdi.gnss._measurements import check_mask_angle
 from jaxfdi.gnss._orbits import OrbitTable, satellite_position, select_orbits
 from jaxfdi.gnss._positioning import Dops, PositionFix, dops, solve_position, transmit_states
 from jaxfdi.gnss._protection import ProtectionLevels, protection_levels
@@ -437,6 +438,7 @@ def availability_grid(
         "receivers_ecef", receivers_ecef, (None, 3), "P receivers' ECEF positions [m]"
     )
     checks.check_shape("times", times, (None,), "T epochs")
+    check_mask_angle(mask_angle)
     batch_size = checks.check_int(
         "batch_size", batch_size, 1, meaning="a positive number of receivers per chunk"
     )

@@ -149,6 +149,16 @@ def sky_geometry(
     return elevation, azimuth, line_of_sight_ned(receiver_ecef, sat), has_orbit
 
 
+def check_mask_angle(mask_angle) -> None:
+    """An elevation mask: one angle in radians in ``[-pi/2, pi/2]`` (``ValueError`` naming ``mask_angle`` and the unit
+    otherwise: a mask of 5 deg passed as 5 is refused with its value in radians)."""
+    if np.ndim(mask_angle) != 0:
+        raise ValueError(
+            f"mask_angle: expected one elevation angle, got {checks.received(mask_angle)}"
+        )
+    checks.check_angle("mask_angle", mask_angle, -0.5 * math.pi, 0.5 * math.pi, "an elevation mask")
+
+
 def visibility(
     table: OrbitTable,
     t: Array,
@@ -163,13 +173,7 @@ def visibility(
     Returns:
       ``(visible (S,) bool, elevation (S,), azimuth (S,))``, angles in rad (azimuth clockwise from north).
     """
-    checks.check_scalar(
-        "mask_angle",
-        mask_angle,
-        -0.5 * math.pi,
-        0.5 * math.pi,
-        meaning="an elevation mask in [-pi/2, pi/2] rad",
-    )
+    check_mask_angle(mask_angle)
     if walls and origin_ecef is None:
         raise ValueError(
             "origin_ecef: expected the (3,) ECEF origin of the walls' NED frame, got None"
@@ -282,4 +286,4 @@ def receiver_plant(
         w = noise_sqrt @ jax.random.normal(key_w, (2,), sim.state.dtype)
         return SimState(transition @ sim.state + w, sim.held), Actuated(u, jnp.zeros_like(u))
 
-    return Simulator(init, measure, advance)
+    return Simulator(init, measure, advance, int(visible.shape[0]))

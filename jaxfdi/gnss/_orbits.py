@@ -25,6 +25,7 @@ import numpy as np
 from jax import Array
 
 from jaxfdi import checks
+from jaxfdi.gnss._frames import WGS84_A
 from jaxfdi.gnss._rinex import SECONDS_PER_WEEK, Ephemerides
 from jaxfdi.gnss._yuma import Almanac
 
@@ -118,6 +119,7 @@ ORBIT_PROBLEMS = (
     "a non-finite element",
     "an eccentricity outside [0, 1)",
     "a semi-major axis <= 0",
+    "a perigee inside the Earth (a (1 - e) below the WGS-84 equatorial radius)",
 )
 
 
@@ -125,11 +127,12 @@ def orbit_problem(orbit: Orbit) -> Array:
     """Per record, the first reason it describes no orbit (index into ``ORBIT_PROBLEMS``; 0: none). Such
     a record is excluded alone (Kepler has no solution; it would turn the whole fix NaN)."""
     finite = jnp.all(jnp.stack([jnp.isfinite(jnp.asarray(leaf)) for leaf in orbit]), axis=0)
-    e = jnp.asarray(orbit.eccentricity)
+    e, sqrt_a = jnp.asarray(orbit.eccentricity), jnp.asarray(orbit.sqrt_a)
+    inside = sqrt_a**2 * (1 - e) < WGS84_A
     return jnp.where(
         ~finite,
         1,
-        jnp.where((e < 0) | (e >= 1), 2, jnp.where(jnp.asarray(orbit.sqrt_a) <= 0, 3, 0)),
+        jnp.where((e < 0) | (e >= 1), 2, jnp.where(sqrt_a <= 0, 3, jnp.where(inside, 4, 0))),
     )
 
 

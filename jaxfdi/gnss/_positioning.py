@@ -262,12 +262,12 @@ def solve_position(
             raise ValueError(
                 f"sigma: expected standard deviations > 0 [m], got {checks.received(value)}"
             )
-    if mask_angle is not None and not (
-        isinstance(mask_angle, (int, float)) and -math.pi / 2 <= mask_angle < math.pi / 2
-    ):
-        raise ValueError(
-            f"mask_angle: expected an elevation in [-pi/2, pi/2) rad, got {mask_angle!r}"
-        )
+    if mask_angle is not None:
+        if not isinstance(mask_angle, (int, float)):
+            raise TypeError(
+                f"mask_angle: expected a Python float [rad] or None, got {checks.received(mask_angle)}"
+            )
+        checks.check_angle("mask_angle", mask_angle, -math.pi / 2, math.pi / 2, "an elevation mask")
     if clocks is not None:
         checks.check_shape(
             "clocks", clocks, (slots[0], None), "(S, C) bool: each slot's receiver clock"

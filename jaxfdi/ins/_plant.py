@@ -173,7 +173,7 @@ def gps_ins_plant(
       imu_fault: sensor faults on the IMU's 6 channels (module doc).
 
     Returns:
-      ``Plant(init, measure, advance)``, one step per GPS epoch: ``init((clock0 (2,), ImuErrors))``
+      ``Plant(init, measure, advance, horizon = T)``, one step per GPS epoch: ``init((clock0 (2,), ImuErrors))``
       (``imu.draw_errors``) -> ``GpsInsPlantState``; ``measure(state, k, u, step_key) -> (state,
       GpsInsSensed)``; ``advance(state, k, u, step_key) -> (state, Actuated)`` moves the receiver clock
       and walks the IMU biases one epoch (``u`` passed through, no actuator fault).
@@ -258,4 +258,4 @@ def gps_ins_plant(
         errors = imu.walk_biases(state.imu, jax.random.fold_in(step_key, 9), model, per_epoch * dt)
         return GpsInsPlantState(receiver_state, errors, state.held), moved
 
-    return Plant(init, measure, advance)
+    return Plant(init, measure, advance, flight.imu.shape[0])

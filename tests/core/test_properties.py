@@ -277,3 +277,136 @@ def test_a_fault_is_built_or_refused_by_name(kind, target, component, onset, mag
     assert int(f.component) >= 0 and int(f.onset) >= 0 and np.isfinite(float(f.magnitude))
     assert not (kind == "dead" and target == "actuator")
     assert not (kind == "effectiveness" and not 0.0 <= magnitude <= 1.0)
+
+
+# --- argument classes of "no wrong answer without a flag": thresholds, index groups, units, horizons ---------------
+
+
+@SETTINGS
+@given(threshold=ANY, window=st.integers(1, 4))
+def test_a_chi2_threshold_below_zero_is_refused_by_name(threshold, window):
+    """The windowed NIS sum is never negative: a negative threshold would alarm at every step."""
+    try:
+        chi2_detector(threshold, window)
+    except ValueError as error:
+        assert str(error).startswith("threshold:") and ">= 0" in str(error), error
+        assert not (np.isfinite(threshold) and threshold >= 0)
+        return
+    assert np.isfinite(threshold) and threshold >= 0
+
+
+GROUPS = hnp.arrays(
+    np.int64, st.tuples(st.integers(1, 4), st.integers(1, 2)), elements=st.integers(-1, 7)
+)
+
+
+@SETTINGS
+@given(groups=GROUPS)
+def test_sensor_groups_out_of_range_or_overlapping_are_refused_by_name(groups):
+    """Six channels: a group naming channel 6, a negative one, or a channel twice is refused by the parity space and
+    by the configuration geometry alike; any other grouping is computed."""
+    from jaxfdi.detection import isolability, parity_space
+
+    H = np.array(
+        [
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 1.0],
+            [1.0, 0.0, 1.0],
+        ]
+    )
+    good = bool(np.all((groups >= 0) & (groups < 6)) and len(np.unique(groups)) == groups.size)
+    for build in (lambda: parity_space(H, groups), lambda: isolability(H, groups)):
+        try:
+            build()
+        except ValueError as error:
+            assert str(error).startswith("groups:"), error
+            continue
+        assert good
+
+
+@SETTINGS
+@given(lat=st.floats(-100.0, 100.0), lon=st.floats(-400.0, 400.0))
+def test_an_angle_in_degrees_where_radians_are_expected_is_refused_with_the_unit(lat, lon):
+    """Latitude and longitude in radians: a value in degrees (37.57) is refused naming the argument and the unit; a
+    value in range gives a point on the ellipsoid."""
+    from jaxfdi.gnss import geodetic_to_ecef
+
+    try:
+        xyz = np.asarray(geodetic_to_ecef(lat, lon, 0.0))
+    except ValueError as error:
+        name = str(error).split(":")[0]
+        assert name in ("lat", "lon") and "radians" in str(error), error
+        assert abs(lat) > np.pi / 2 or abs(lon) > 2 * np.pi
+        return
+    assert abs(lat) <= np.pi / 2 and abs(lon) <= 2 * np.pi
+    assert 6356752.0 - 1.0 <= np.linalg.norm(xyz) <= 6378137.0 + 1.0
+
+
+@SETTINGS
+@given(mask=st.floats(-100.0, 100.0))
+def test_an_elevation_mask_outside_radians_is_refused_with_the_unit(mask):
+    """A 5 deg mask passed as 5 is refused by every path that takes a mask, with its value in radians."""
+    from jaxfdi.gnss import availability_grid
+    from jaxfdi.gnss._measurements import check_mask_angle
+
+    try:
+        check_mask_angle(mask)
+    except ValueError as error:
+        assert str(error).startswith("mask_angle:") and "radians" in str(error), error
+        assert abs(mask) > np.pi / 2
+        with pytest.raises(ValueError, match="mask_angle: expected an elevation mask in radians"):
+            availability_grid(None, np.zeros(1), np.zeros((1, 3)), None, mask, None)
+        return
+    assert abs(mask) <= np.pi / 2
+
+
+@SETTINGS
+@given(components=hnp.arrays(np.int64, st.integers(1, 4), elements=st.integers(0, 3)))
+def test_a_fault_group_names_each_component_once(components):
+    """A component given twice would be faulted twice: refused by name; distinct components build the group."""
+    from jaxfdi import fault_group
+
+    try:
+        group = fault_group("bias", "sensor", components, 10, 0.5)
+    except ValueError as error:
+        assert str(error).startswith("components:") and "once" in str(error), error
+        assert len(np.unique(components)) < components.size
+        return
+    assert np.array_equal(np.asarray(group.component), components)
+
+
+@SETTINGS
+@given(parity=hnp.arrays(np.float64, (4,), elements=ANY), valid=hnp.arrays(bool, (4,)))
+def test_a_parity_statistic_with_a_dead_entry_is_inf_never_nan(parity, valid):
+    """A non-finite entry among the valid ones is evidence (+inf, alarms at any threshold); the others are left out;
+    otherwise the statistic is the sum of squares."""
+    from jaxfdi.detection import parity_statistic
+
+    value = float(parity_statistic(parity, valid))
+    used = parity[valid]
+    if np.all(np.isfinite(used)):
+        assert value == pytest.approx(float(np.sum(used**2)), rel=1e-12, abs=0.0)
+    else:
+        assert value == np.inf
+
+
+@SETTINGS
+@given(steps=st.integers(1, 40), horizon=st.integers(1, 30))
+def test_a_plant_is_never_run_past_its_tables(steps, horizon):
+    """A simulator replaying ``horizon`` steps of tables refuses a run of more steps, naming ``steps``; shorter runs
+    run."""
+    import jaxfdi
+
+    sim = jaxfdi.linear_simulator(MODEL)._replace(horizon=horizon)
+    kf = kalman_filter(MODEL)
+    args = (chi2_detector(9.0), jnp.zeros(2), kf.init(jnp.zeros(2), jnp.eye(2)))
+    try:
+        out = jaxfdi.monitor(sim, kf, *args, jnp.zeros((steps, 0)), jax.random.key(0), 5)
+    except ValueError as error:
+        assert str(error).startswith("steps:") and f"plant's {horizon} steps" in str(error), error
+        assert steps > horizon
+        return
+    assert steps <= horizon and int(out.record.onset) == 5

@@ -112,7 +112,10 @@ def test_banks_are_slaved_to_the_nominal_posterior_until_engaged():
 
 
 def test_engaged_banks_run_on_their_own_and_the_credits_decide_from_the_next_step():
-    fdi, (ys, u) = stages(detection_threshold=-1.0, engage_on="fdp"), data()
+    fdi, (ys, u) = (
+        stages(detection_threshold=0.0, engage_on="fdp"),
+        data(),
+    )  # F > 0: engaged at once
     state = fdi.init(jnp.zeros(2), 0.1 * jnp.eye(2), u)
     state, out = fdi.step(state, ys[0], u)
     assert not bool(out.engaged) and bool(state["engaged"])

@@ -112,6 +112,28 @@ def test_an_impossible_orbit_is_excluded_alone_with_its_reason(ephemerides):
     assert int(got.fix.num_used) == len(visible) - 3
 
 
+def test_an_orbit_through_the_earth_gets_one_verdict_from_every_reader(ephemerides):
+    """sqrt(a) = 2000 m^0.5 (a = 4000 km: a perigee inside the Earth) is no orbit a satellite flies: the broadcast
+    table and the almanac table (YUMA) refuse that record alone with the same reason, and every other record stays."""
+    from jaxfdi.gnss import almanac_table, read_yuma
+
+    eph = ephemerides
+    sqrt_a = np.array(eph.sqrt_a, float)
+    sqrt_a[eph.prn == eph.prn[0]] = 2000.0
+    broadcast = ephemeris_table(eph._replace(sqrt_a=sqrt_a), 2086)
+    almanac = read_yuma(data_path("gps_almanac_2086.yuma.txt"))
+    low = np.array(almanac.sqrt_a, float)
+    low[0] = 2000.0
+    table = almanac_table(almanac._replace(sqrt_a=low))
+    for t, prn in ((broadcast, eph.prn[0]), (table, almanac.prn[0])):
+        problem, slots = np.asarray(t.problem), np.asarray(t.prn)
+        assert set(np.unique(problem[slots == prn])) <= {0, 4} and np.any(
+            problem[slots == prn] == 4
+        )
+        assert np.all(problem[slots != prn] == 0), ORBIT_PROBLEMS[4]
+        assert not np.any(np.asarray(t.valid)[slots == prn] & (problem[slots == prn] == 4))
+
+
 def test_a_dead_pseudorange_alarms_on_its_satellite_and_the_fix_leaves_it_out(ephemerides):
     table = ephemeris_table(ephemerides, 2086)
     rho = _epoch(table)

@@ -203,9 +203,7 @@ def fault_group(
             f"components: expected shape (G,) with G >= 1, got {tuple(components.shape)}"
         )
     values = checks.concrete(components)
-    if (
-        values is not None and len(np.unique(values)) != values.size
-    ):  # one fault would be applied twice
+    if values is not None and len(np.unique(values)) != values.size:  # faulted twice
         raise ValueError(
             f"components: expected each component of the group once, got {checks.received(values)}"
         )

@@ -196,9 +196,7 @@ def text_table(frame, group: str = "section", width: int = 110, digits: int = 4)
     blocks = []
     for name, part in parts:
         part = part.dropna(axis=1, how="all")
-        if own is not None and len(own) == len(
-            frame
-        ):  # the rows' own column order (a rate before its interval)
+        if own is not None and len(own) == len(frame):  # the rows' own column order
             seen = dict.fromkeys(k for i in part.index for k in own[frame.index.get_loc(i)])
             order = [k for k in seen if k in part]
             for k in [c for c in part.columns if c not in seen]:  # intervals: after their rate

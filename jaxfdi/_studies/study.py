@@ -41,15 +41,7 @@ from jaxfdi._studies.frame import RUN_RATES, results_frame, results_html
 from jaxfdi._studies.metrics import DetectionRecord, fault_row, rate_bounds, rate_interval
 from jaxfdi._studies.montecarlo import _num_runs_of, monte_carlo
 
-__all__ = [
-    "Structure",
-    "Study",
-    "StudyResult",
-    "run_study",
-    "grid_run",
-    "case_slices",
-    "study_rows",
-]
+__all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_slices"]
 
 
 class Structure(NamedTuple):
@@ -189,9 +181,8 @@ def study_rows(result: StudyResult, level: float = 0.95) -> list[dict]:
                             f"horizon: expected the runs' length in steps (Study(..., horizon=)) to score "
                             f"{method!r}'s DetectionRecord, got None"
                         )
-                    isolates = bool(
-                        np.any(np.asarray(leaf.isolated) >= 0)
-                    )  # else a detector that only detects
+                    # a detector that only detects leaves isolated at -1 in every run
+                    isolates = bool(np.any(np.asarray(leaf.isolated) >= 0))
                     label = None if result.labels is None or not isolates else result.labels[c]
                     record = jax.tree_util.tree_map(lambda x: np.asarray(x)[part], leaf)
                     scored = {}

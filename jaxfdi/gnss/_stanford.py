@@ -9,7 +9,8 @@ counted apart; of the others:
 * hazardously misleading information (HMI): ``PL < AL <= E``;
 * unavailable: ``PL >= AL`` and ``E <= PL``; unavailable and misleading: ``AL <= PL < E``.
 
-With no alert limit (``inf``) every quiet epoch is nominal or misleading.
+An infinite level (too few satellites for a test) is unavailable whatever the limit; with no alert limit (``inf``)
+every other quiet epoch is nominal or misleading.
 """
 
 from __future__ import annotations
@@ -25,14 +26,14 @@ class IntegrityOutcomes(NamedTuple):
     """Counts of epochs by region of the Stanford diagram (module doc); they sum to ``epochs``.
 
     Attributes:
-      epochs: epochs counted (finite error and level)
+      epochs: epochs counted (a finite error and a level, infinite or not)
       alarms: epochs that alarmed (warned: in no region below)
       nominal: ``E <= PL < AL``
       misleading: ``PL < E < AL``
       hazardous: ``PL < AL <= E``
       unavailable: ``E <= PL``, ``PL >= AL``
       unavailable_misleading: ``AL <= PL < E``
-      not_finite: epochs left out: a NaN or infinite error or level (no fix, no level)
+      not_finite: epochs left out: a NaN or infinite error, or a NaN level (no fix)
     """
 
     epochs: int
@@ -78,9 +79,9 @@ def integrity_outcomes(
         raise ValueError(
             f"alarm: expected an (E,) = {error.shape} bool array, got {checks.received(alarm)}"
         )
-    finite = np.isfinite(error) & np.isfinite(level)
+    finite = np.isfinite(error) & ~np.isnan(level)
     quiet = finite & ~alarm
-    available = level < alert_limit
+    available = np.isfinite(level) & (level < alert_limit)
     beyond = error > level
 
     def count(mask):

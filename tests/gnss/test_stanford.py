@@ -22,11 +22,11 @@ def regions_by_hand(error, level, al, alarm):
         0,
     )
     for e, pl, a in zip(error, level, alarm):
-        if not (np.isfinite(e) and np.isfinite(pl)):
+        if not np.isfinite(e) or np.isnan(pl):
             out["not_finite"] += 1
         elif a:
             out["alarms"] += 1
-        elif pl >= al:
+        elif pl >= al:  # an infinite level too: no test, unavailable whatever the limit
             out["unavailable_misleading" if e > pl else "unavailable"] += 1
         elif e <= pl:
             out["nominal"] += 1
@@ -42,14 +42,15 @@ def test_counts_equal_the_regions_classified_one_epoch_at_a_time(alert_limit):
         [1.0, 0.5, 1.5], 400
     )  # ties with AL and PL
     level = rng.choice([5.0, 20.0, 40.0, 80.0], 400)
-    error[:5], level[5:8] = np.nan, np.inf
+    error[:5], level[5:8], level[8] = np.nan, np.inf, np.nan
     alarm = rng.random(400) < 0.1
     counts = gnss.integrity_outcomes(error, level, alert_limit, alarm)
     expected = regions_by_hand(error, level, alert_limit, alarm)
-    assert counts._asdict() == {"epochs": 400 - 8, **expected}
+    assert counts._asdict() == {"epochs": 400 - 6, **expected}
+    assert counts.unavailable + counts.unavailable_misleading >= 3  # the infinite levels
     assert sum(counts) - counts.epochs - counts.not_finite == counts.epochs
     if alert_limit == np.inf:
-        assert counts.hazardous == counts.unavailable == 0
+        assert counts.hazardous == 0 and counts.unavailable + counts.unavailable_misleading <= 3
 
 
 def test_bad_input_names_the_argument():

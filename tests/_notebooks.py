@@ -133,6 +133,15 @@ def run_clean(name: str, kernel: str, monkeypatch, env: dict[str, str], epilogue
     return outputs, "\n".join(_text(o) for o in outputs)
 
 
+#: an epilogue for ``run_clean``: the notebook's ``study`` table without pandas' display limits, printed on one
+#: line after ``FULL `` (what a notebook shows is cut to ``display.max_rows``)
+FULL_TABLE = """
+import pandas as pd
+with pd.option_context("display.max_rows", None, "display.max_columns", None):
+    print("FULL " + " ".join(study._repr_html_().splitlines()))
+"""
+
+
 def tables(outputs) -> str:
     """The HTML of the notebook's DataFrame tables (a study result or a DataFrame as a
     cell's value renders as ``<table class="dataframe">``), joined."""

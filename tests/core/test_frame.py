@@ -172,3 +172,6 @@ def test_text_table_is_the_frame_with_intervals_in_one_cell_and_wide_blocks_tran
         and lines[-1] == "error_11_m  2.75"
     )
     assert "-" not in station  # the other section's columns are not this block's
+    # a count in a column with gaps is a float column in pandas: still printed as the count
+    counts = text_table(results_frame([{"epochs": 12345}, {"epochs": None, "x": 1.5}]))
+    assert counts.splitlines()[1].split() == ["12345", "-"]

@@ -170,7 +170,8 @@ def _text_cell(value, digits: int) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "-"
     if isinstance(value, (float, np.floating)):
-        if float(value).is_integer() and abs(value) < 1e15:  # a count in a column with gaps (floats)
+        # a count in a column with gaps (pandas makes it floats) prints as the count
+        if float(value).is_integer() and abs(value) < 1e15:
             return str(int(value))
         return f"{value:.{digits}g}"
     return str(value)

@@ -649,6 +649,25 @@ def rate_bounds(rate: Any, n: Any, level: float) -> tuple[float, float]:
     return rate_interval(int(round(count)), int(n), level)
 
 
+def mean_interval(values, level: float = 0.95) -> tuple[float, float, float]:
+    """``(mean, low, high)`` of (R,) per-run values: the normal ``level`` interval of the mean over runs,
+    ``mean +- z sd / sqrt(R)`` (``z`` the ``(1 + level) / 2`` normal quantile, ``sd`` with ``ddof = 1``); NaN bounds
+    with fewer than two runs or a non-finite run, NaN mean without runs.
+
+    Returns:
+      three floats.
+    """
+    from scipy import stats
+
+    values = np.asarray(values, float).ravel()
+    nan = float("nan")
+    mean = float(values.mean()) if values.size else nan
+    if values.size < 2 or not math.isfinite(mean):
+        return mean, nan, nan
+    half = float(stats.norm.ppf(0.5 + level / 2) * values.std(ddof=1) / math.sqrt(values.size))
+    return mean, mean - half, mean + half
+
+
 def rate_text(successes: int, trials: int, level: float = 0.95, digits: int = 2) -> str:
     """``"0.97 [0.93,0.99]"``: the rate (``digits`` decimals) and its two-sided Clopper-Pearson ``level`` interval
     (``rate_interval``); ``"-"`` without trials."""

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import functools
 import html
-import math
 import time
 from typing import Any, Callable, NamedTuple
 
@@ -38,7 +37,13 @@ import numpy as np
 from jaxfdi import checks
 from jaxfdi._io.progress import status
 from jaxfdi._studies.frame import RUN_RATES, results_frame, results_html
-from jaxfdi._studies.metrics import DetectionRecord, fault_row, rate_bounds, rate_interval
+from jaxfdi._studies.metrics import (
+    DetectionRecord,
+    fault_row,
+    mean_interval,
+    rate_bounds,
+    rate_interval,
+)
 from jaxfdi._studies.montecarlo import _num_runs_of, monte_carlo
 
 __all__ = ["Structure", "Study", "StudyResult", "run_study", "grid_run", "case_slices"]
@@ -145,13 +150,8 @@ def _mean_columns(name: str, values: np.ndarray, level: float) -> dict:
     if values.dtype == bool:
         low, high = rate_interval(int(values.sum()), n, level) if n else (nan, nan)
         return {name: float(values.mean()) if n else nan, f"{name}_low": low, f"{name}_high": high}
-    mean = float(values.mean()) if n else nan
-    half = nan
-    if n > 1 and math.isfinite(mean):
-        from scipy import stats
-
-        half = float(stats.norm.ppf(0.5 + level / 2) * values.std(ddof=1) / math.sqrt(n))
-    return {f"{name}_mean": mean, f"{name}_mean_low": mean - half, f"{name}_mean_high": mean + half}
+    mean, low, high = mean_interval(values, level)
+    return {f"{name}_mean": mean, f"{name}_mean_low": low, f"{name}_mean_high": high}
 
 
 def study_rows(result: StudyResult, level: float = 0.95) -> list[dict]:

@@ -23,6 +23,7 @@ import numpy as np
 import optax
 
 from jaxfdi import checks
+from jaxfdi._studies.metrics import mean_interval
 from jaxfdi.filters import Filter, interacting_multiple_model, run_filter
 from jaxfdi.tuning._losses import mode_cross_entropy, soft_detection_loss
 from jaxfdi.tuning._parameterize import Transform, constrain, unconstrain
@@ -238,13 +239,8 @@ def evaluate_imm(
             np.logaddexp(picked, math.log(1e-12)), axis=1
         )  # mode_cross_entropy's
         per_run["mode_accuracy"] = np.mean(np.argmax(log_mu, axis=-1) == modes, axis=1)
-    from scipy import stats
-
-    z = float(stats.norm.ppf(0.5 + level / 2))
-    runs = len(per_run["nll"])
-    scores: dict[str, float] = {"runs": runs}
+    scores: dict[str, float] = {"runs": len(per_run["nll"])}
     for name, values in per_run.items():
-        mean = float(np.mean(values))
-        half = z * float(np.std(values, ddof=1)) / math.sqrt(runs) if runs > 1 else float("nan")
-        scores.update({name: mean, f"{name}_low": mean - half, f"{name}_high": mean + half})
+        mean, low, high = mean_interval(values, level)
+        scores.update({name: mean, f"{name}_low": low, f"{name}_high": high})
     return scores
